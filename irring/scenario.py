@@ -1,0 +1,599 @@
+"""Scenario files: YAML → validated, frozen dataclasses.
+
+Inside the code every quantity is SI (metres, radians, seconds); a field named
+``foo_m`` may be written ``foo_m`` or ``foo_mm`` in YAML, ``foo_rad`` as ``foo_rad``
+or ``foo_deg``, ``foo_s`` as ``foo_s`` or ``foo_ms``, converted once here. Unknown
+keys, wrong types and out-of-range values raise :class:`ScenarioError` naming the
+YAML path and what is allowed, so a typo never becomes a silent default.
+
+The schema is documented for users in ``scenarios/README.md``.
+"""
+
+from __future__ import annotations
+
+import collections.abc
+import dataclasses
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+# --------------------------------------------------------------------------- errors
+
+
+class ScenarioError(ValueError):
+    """A scenario file that cannot be used; the message names the YAML path."""
+
+
+def _spec(lo: float | None = None, hi: float | None = None, choices: tuple | None = None,
+          doc: str = "") -> dict:
+    """Field metadata: inclusive SI bounds or allowed choices, and a one-line doc."""
+    return {"lo": lo, "hi": hi, "choices": choices, "doc": doc}
+
+
+def num(default: Any = dataclasses.MISSING, lo: float | None = None, hi: float | None = None,
+        doc: str = "") -> Any:
+    return field(default=default, metadata=_spec(lo, hi, doc=doc))
+
+
+def choice(default: Any, choices: tuple, doc: str = "") -> Any:
+    return field(default=default, metadata=_spec(choices=choices, doc=doc))
+
+
+# --------------------------------------------------------------------------- schema
+# Paper values (../shared/DESIGN.md): 12 sensors, R = 0.15 m, α = 37.8°, 1.8° motor step,
+# belt ratio 0.6 (1.08° per step), motor steps −35 … +35 (71 positions, 75.6° sweep).
+
+SENSOR_MODELS = ("gp2d12", "gp2y0a02", "gp2y0a21", "sonar", "laser")
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    center_m: tuple[float, float]
+    radius_m: float = num(lo=0.002, hi=2.0, doc="cylinder radius")
+    reflectance: float = num(1.0, lo=0.05, hi=1.0, doc="relative IR reflectivity (white paper = 1)")
+
+
+@dataclass(frozen=True)
+class Box:
+    center_m: tuple[float, float]
+    size_m: tuple[float, float]
+    yaw_rad: float = num(0.0, lo=-2 * math.pi, hi=2 * math.pi)
+    reflectance: float = num(1.0, lo=0.05, hi=1.0)
+
+
+@dataclass(frozen=True)
+class Room:
+    outline_m: tuple[tuple[float, float], ...]
+    wall_height_m: float = num(0.30, lo=0.05, hi=3.0)
+    wall_thickness_m: float = num(0.02, lo=0.002, hi=0.5)
+    reflectance: float = num(1.0, lo=0.05, hi=1.0, doc="reflectivity of every wall")
+
+
+@dataclass(frozen=True)
+class Pose:
+    x_m: float
+    y_m: float
+    yaw_rad: float = num(0.0, lo=-2 * math.pi, hi=2 * math.pi)
+
+
+@dataclass(frozen=True)
+class Ring:
+    """A ring design: the paper's by default; other designs change these numbers."""
+
+    sensors: int = num(12, lo=1, hi=72, doc="sensors on the ring")
+    radius_m: float = num(0.15, lo=0.0, hi=1.0, doc="ring radius to the sensor hinge axes")
+    motor_step_rad: float = num(math.radians(1.8), lo=math.radians(0.01), hi=math.radians(45.0))
+    gear: float = num(0.6, lo=0.01, hi=10.0, doc="sensor turn per motor turn (belt ratio)")
+    min_step: int = num(-35, lo=-100000, hi=100000)
+    max_step: int = num(35, lo=-100000, hi=100000)
+    emitter_offset_m: float = num(0.007, lo=0.0, hi=0.05,
+                                  doc="lateral emitter offset d_o from the hinge axis")
+    sensor_height_m: float = num(0.10, lo=0.01, hi=2.0)
+    joint_limit_rad: float = num(math.radians(37.8), lo=0.0, hi=2 * math.pi,
+                                 doc="each sensor hinge's range ±limit")
+
+
+@dataclass(frozen=True)
+class Robot:
+    design: str = choice("rotating12", ("rotating12", "radial12", "rotating1", "laser", "sonar12",
+                                        "custom"))
+    ring: Ring | None = None
+    poses: tuple[Pose, ...] = ()
+
+
+@dataclass(frozen=True)
+class Sensor:
+    model: str = choice("gp2d12", SENSOR_MODELS)
+    max_range_m: float = num(0.624, lo=0.02, hi=30.0,
+                             doc="readings beyond are treated as no return (paper: 624 mm)")
+    adc_bits: int = choice(12, (8, 10, 12, 16))
+    vref_v: float = num(5.0, lo=1.0, hi=10.0)
+
+
+@dataclass(frozen=True)
+class Scan:
+    """How a sweep is taken; these knobs cost hardware time."""
+
+    step_stride: int = num(1, lo=1, hi=64, doc="motor steps between readings")
+    settle_s: float = num(0.0, lo=0.0, hi=5.0, doc="wait at each step before reading")
+    samples: int = num(1, lo=1, hi=64, doc="readings averaged per step")
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    resolution_m: float = num(0.010, lo=0.001, hi=0.5)
+    margin_m: float = num(0.10, lo=0.0, hi=5.0, doc="grid border around the room outline")
+
+
+# ---- effects: one frozen dataclass each; listed under `effects:` to switch them on
+
+
+@dataclass(frozen=True)
+class IncidenceEffect:
+    """a(θ), b(θ) of the sensor curve plus grazing drop-out."""
+
+    max_incidence_rad: float = num(math.radians(70.0), lo=0.0, hi=math.radians(90.0),
+                                   doc="returns at steeper incidence drop out")
+
+
+@dataclass(frozen=True)
+class NoiseEffect:
+    sigma_v: float = num(0.015, lo=0.0, hi=1.0, doc="Gaussian output noise (volts rms)")
+
+
+@dataclass(frozen=True)
+class QuantizationEffect:
+    """Rounds to ADC counts; the bit count is `sensor.adc_bits`."""
+
+
+@dataclass(frozen=True)
+class FoldoverEffect:
+    """Below the peak distance the output falls again."""
+
+
+@dataclass(frozen=True)
+class ReflectanceEffect:
+    """Per-surface reflectivity weakens the return: more noise, shorter reach."""
+
+    min_signal: float = num(0.05, lo=0.0, hi=1.0,
+                            doc="returns weaker than this (reflectance / d² relative to max range)"
+                                " drop out")
+
+
+@dataclass(frozen=True)
+class OutliersEffect:
+    """Beam-model mixture (Thrun et al.): short, random and max-range readings."""
+
+    short_rate: float = num(0.005, lo=0.0, hi=1.0)
+    random_rate: float = num(0.005, lo=0.0, hi=1.0)
+    max_rate: float = num(0.005, lo=0.0, hi=1.0)
+    short_lambda_per_m: float = num(5.0, lo=0.01, hi=1000.0)
+
+
+@dataclass(frozen=True)
+class BeamEffect:
+    """A cone of rays with Gaussian weights, like Webots' aperture / gaussianWidth."""
+
+    aperture_rad: float = num(math.radians(4.0), lo=0.0, hi=math.radians(60.0))
+    rays: int = num(5, lo=2, hi=64)
+    gaussian_width: float = num(0.5, lo=0.01, hi=10.0,
+                                doc="weight σ as a fraction of the half aperture")
+
+
+@dataclass(frozen=True)
+class AveragingEffect:
+    """Averages `scan.samples` readings per step (independent noise per sample)."""
+
+
+@dataclass(frozen=True)
+class BeltDynamicsEffect:
+    timestep_s: float = num(0.0005, lo=1e-5, hi=0.01)
+    belt_timeconst_s: float = num(0.002, lo=1e-4, hi=1.0, doc="equality solref time constant")
+    backlash_rad: float = num(0.0, lo=0.0, hi=math.radians(5.0))
+    step_time_s: float = num(0.004, lo=1e-4, hi=1.0, doc="time the motor takes per step")
+
+
+@dataclass(frozen=True)
+class TimingEffect:
+    period_s: float = num(0.0383, lo=0.001, hi=1.0)
+    jitter_s: float = num(0.0096, lo=0.0, hi=1.0)
+    latency_s: float = num(0.005, lo=0.0, hi=1.0)
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    x_m: float
+    y_m: float
+    yaw_rad: float = num(0.0, lo=-2 * math.pi, hi=2 * math.pi)
+
+
+@dataclass(frozen=True)
+class MotionEffect:
+    path: tuple[Waypoint, ...]
+    speed_m_s: float = num(0.05, lo=0.0, hi=5.0)
+    odometry_sigma_m: float = num(0.0, lo=0.0, hi=1.0, doc="per-metre translational drift σ")
+    odometry_sigma_rad: float = num(0.0, lo=0.0, hi=1.0, doc="per-metre heading drift σ")
+
+
+EFFECTS: dict[str, type] = {
+    "incidence": IncidenceEffect,
+    "noise": NoiseEffect,
+    "quantization": QuantizationEffect,
+    "foldover": FoldoverEffect,
+    "reflectance": ReflectanceEffect,
+    "outliers": OutliersEffect,
+    "beam": BeamEffect,
+    "averaging": AveragingEffect,
+    "belt_dynamics": BeltDynamicsEffect,
+    "timing": TimingEffect,
+    "motion": MotionEffect,
+}
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    room: Room
+    robot: Robot
+    description: str = ""
+    obstacles: tuple[Cylinder | Box, ...] = ()
+    sensor: Sensor = Sensor()
+    scan: Scan = Scan()
+    map: MapSpec = MapSpec()
+    effects: Mapping[str, Any] = field(default_factory=dict)
+    seed: int = num(0, lo=0, hi=2**63 - 1)
+    source: str = ""  # file it was loaded from, for messages
+
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
+
+    @property
+    def ring(self) -> Ring:
+        """The ring design in force (the design's numbers with any `robot.ring` overrides)."""
+        from . import designs  # designs owns the named presets
+
+        return designs.ring_for(self.robot)
+
+
+# --------------------------------------------------------------------------- loader
+
+_UNIT_ALIASES = {"_m": (("_mm", 1e-3),), "_rad": (("_deg", math.pi / 180.0),),
+                 "_s": (("_ms", 1e-3),), "_m_s": (("_mm_s", 1e-3),),
+                 "_per_m": ()}
+_DISPLAY = {"_m": ("_mm", 1e3, "mm"), "_rad": ("_deg", 180 / math.pi, "°"),
+            "_s": ("_ms", 1e3, "ms"), "_v": ("_v", 1.0, "V")}
+
+
+def _suffix(name: str) -> str | None:
+    for suf in ("_m_s", "_per_m", "_m", "_rad", "_s"):
+        if name.endswith(suf):
+            return suf
+    return None
+
+
+def _yaml_keys(name: str) -> list[tuple[str, float]]:
+    """YAML spellings of a dataclass field and the factor to SI."""
+    suf = _suffix(name)
+    keys = [(name, 1.0)]
+    if suf:
+        base = name[: -len(suf)]
+        keys += [(base + alt, f) for alt, f in _UNIT_ALIASES[suf]]
+    return keys
+
+
+def _fmt_range(name: str, lo: float | None, hi: float | None) -> str:
+    suf = _suffix(name)
+    scale, unit = 1.0, ""
+    if suf in ("_m", "_rad", "_s"):
+        _, scale, unit = _DISPLAY[suf]
+    parts = [f"{v * scale:g}" if v is not None else "" for v in (lo, hi)]
+    if lo is not None and hi is not None:
+        return f"{parts[0]} … {parts[1]}{(' ' + unit) if unit else ''}"
+    if lo is not None:
+        return f"≥ {parts[0]}{unit}"
+    return f"≤ {parts[1]}{unit}"
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", str(tp))
+
+
+class _Loader:
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, path: str, msg: str) -> ScenarioError:
+        where = f"{self.source}: " if self.source else ""
+        return ScenarioError(f"{where}{path or '<top>'}: {msg}")
+
+    def dataclass_(self, cls: type, raw: Any, path: str, scale: float = 1.0) -> Any:
+        if raw is None:
+            raw = {}
+        if not isinstance(raw, Mapping):
+            raise self.fail(path, f"expected a mapping of {cls.__name__} fields, got {raw!r}")
+        hints = typing.get_type_hints(cls)
+        allowed: dict[str, tuple[dataclasses.Field, float]] = {}
+        for f in dataclasses.fields(cls):
+            if f.name == "source":
+                continue
+            for key, factor in _yaml_keys(f.name):
+                allowed[key] = (f, factor)
+        kwargs: dict[str, Any] = {}
+        for key, value in raw.items():
+            if key not in allowed:
+                names = ", ".join(sorted(allowed))
+                hint = _close(str(key), allowed)
+                raise self.fail(_join(path, key), f"unknown key{hint}; allowed here: {names}")
+            f, factor = allowed[key]
+            if f.name in kwargs:
+                raise self.fail(_join(path, key), f"{f.name} given twice (in two units)")
+            kwargs[f.name] = self.value(hints[f.name], value, _join(path, key), factor, f)
+        for f in dataclasses.fields(cls):
+            if (f.name not in kwargs and f.default is dataclasses.MISSING
+                    and f.default_factory is dataclasses.MISSING):
+                spellings = " or ".join(k for k, _ in _yaml_keys(f.name))
+                raise self.fail(_join(path, spellings), "required key is missing")
+        try:
+            return cls(**kwargs)
+        except TypeError as exc:  # pragma: no cover - schema bug, not a user error
+            raise self.fail(path, str(exc)) from exc
+
+    def value(self, tp: Any, raw: Any, path: str, factor: float,
+              f: dataclasses.Field | None = None) -> Any:
+        origin = typing.get_origin(tp)
+        args = typing.get_args(tp)
+        meta = f.metadata if f is not None else {}
+        if origin in (typing.Union, types.UnionType):
+            options = [a for a in args if a is not type(None)]
+            if raw is None and type(None) in args:
+                return None
+            if all(dataclasses.is_dataclass(a) for a in options) and len(options) > 1:
+                return self.tagged(options, raw, path)
+            return self.value(options[0], raw, path, factor, f)
+        if dataclasses.is_dataclass(tp):
+            return self.dataclass_(tp, raw, path)
+        if origin is tuple:
+            if not isinstance(raw, (list, tuple)):
+                raise self.fail(path, f"expected a list, got {raw!r}")
+            if len(args) == 2 and args[1] is Ellipsis:
+                return tuple(self.value(args[0], r, f"{path}[{i}]", factor)
+                             for i, r in enumerate(raw))
+            if len(raw) != len(args):
+                raise self.fail(path, f"expected {len(args)} numbers, got {len(raw)}")
+            return tuple(self.value(a, r, f"{path}[{i}]", factor) for i, (a, r) in
+                         enumerate(zip(args, raw)))
+        if origin in (Mapping, dict, collections.abc.Mapping) or tp is Mapping:
+            return self.effects(raw, path)
+        if tp is bool:
+            if not isinstance(raw, bool):
+                raise self.fail(path, f"expected true or false, got {raw!r}")
+            return raw
+        if tp is int:
+            if isinstance(raw, bool) or not isinstance(raw, int):
+                raise self.fail(path, f"expected a whole number, got {raw!r}")
+            self.check(raw, meta, path)
+            return raw
+        if tp is float:
+            if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+                raise self.fail(path, f"expected a number, got {raw!r}")
+            value = float(raw) * factor
+            if not math.isfinite(value):
+                raise self.fail(path, f"expected a finite number, got {raw!r}")
+            self.check(value, meta, path)
+            return value
+        if tp is str:
+            if not isinstance(raw, str):
+                raise self.fail(path, f"expected text, got {raw!r}")
+            self.check(raw, meta, path)
+            return raw
+        raise self.fail(path, f"unsupported type {_type_name(tp)}")  # pragma: no cover
+
+    def check(self, value: Any, meta: Mapping, path: str) -> None:
+        choices = meta.get("choices")
+        if choices is not None and value not in choices:
+            allowed = ", ".join(str(c) for c in choices)
+            raise self.fail(path, f"{value!r} is not allowed; choose one of: {allowed}")
+        lo, hi = meta.get("lo"), meta.get("hi")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            name = path.rsplit(".", 1)[-1]
+            name = name.split("[", 1)[0]
+            si = _si_name(name)
+            raise self.fail(path, f"{_show(value, si)} is out of range; allowed "
+                                  f"{_fmt_range(si, lo, hi)}")
+
+    def tagged(self, options: list[type], raw: Any, path: str) -> Any:
+        by_tag = {cls.__name__.lower(): cls for cls in options}
+        if not isinstance(raw, Mapping) or "type" not in raw:
+            raise self.fail(path, f"expected a mapping with `type:` one of {', '.join(by_tag)}")
+        tag = raw["type"]
+        if tag not in by_tag:
+            raise self.fail(_join(path, "type"),
+                            f"{tag!r} is not allowed; choose one of: {', '.join(by_tag)}")
+        rest = {k: v for k, v in raw.items() if k != "type"}
+        return self.dataclass_(by_tag[tag], rest, path)
+
+    def effects(self, raw: Any, path: str) -> Mapping[str, Any]:
+        if raw is None:
+            return types.MappingProxyType({})
+        if isinstance(raw, list):  # `effects: [noise, quantization]` with default parameters
+            raw = {name: {} for name in raw}
+        if not isinstance(raw, Mapping):
+            raise self.fail(path, f"expected a mapping of effect names, got {raw!r}")
+        out = {}
+        for name, params in raw.items():
+            if name not in EFFECTS:
+                raise self.fail(_join(path, name), "unknown effect" + _close(str(name), EFFECTS) +
+                                f"; allowed: {', '.join(EFFECTS)}")
+            out[name] = self.dataclass_(EFFECTS[name], params, _join(path, name))
+        return types.MappingProxyType(out)
+
+
+def _si_name(yaml_name: str) -> str:
+    for alt_suffix, si in (("_mm_s", "_m_s"), ("_mm", "_m"), ("_deg", "_rad"), ("_ms", "_s")):
+        if yaml_name.endswith(alt_suffix):
+            return yaml_name[: -len(alt_suffix)] + si
+    return yaml_name
+
+
+def _show(value: Any, si_name: str) -> str:
+    suf = _suffix(si_name)
+    if suf in ("_m", "_rad", "_s") and isinstance(value, float):
+        _, scale, unit = _DISPLAY[suf]
+        return f"{value * scale:g} {unit}"
+    return repr(value)
+
+
+def _join(path: str, key: Any) -> str:
+    return f"{path}.{key}" if path else str(key)
+
+
+def _close(word: str, options: Mapping | list) -> str:
+    import difflib
+
+    match = difflib.get_close_matches(word, list(options), n=1)
+    return f" (did you mean `{match[0]}`?)" if match else ""
+
+
+# --------------------------------------------------------------------------- geometry checks
+
+
+def _segments_cross(p1, p2, q1, q2) -> bool:
+    def orient(a, b, c):
+        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+
+    d1, d2 = orient(q1, q2, p1), orient(q1, q2, p2)
+    d3, d4 = orient(p1, p2, q1), orient(p1, p2, q2)
+    return (d1 * d2 < 0) and (d3 * d4 < 0)
+
+
+def point_in_polygon(x: float, y: float, outline: tuple[tuple[float, float], ...]) -> bool:
+    inside = False
+    n = len(outline)
+    for i in range(n):
+        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
+        if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
+            inside = not inside
+    return inside
+
+
+def distance_to_outline(x: float, y: float, outline: tuple[tuple[float, float], ...]) -> float:
+    best = math.inf
+    n = len(outline)
+    for i in range(n):
+        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
+        dx, dy = x2 - x1, y2 - y1
+        t = max(0.0, min(1.0, ((x - x1) * dx + (y - y1) * dy) / (dx * dx + dy * dy)))
+        best = min(best, math.hypot(x - (x1 + t * dx), y - (y1 + t * dy)))
+    return best
+
+
+def _validate_geometry(sc: Scenario, fail) -> None:
+    outline = sc.room.outline_m
+    n = len(outline)
+    if n < 3:
+        raise fail("room.outline_mm", f"needs at least 3 corners, got {n}")
+    for i in range(n):
+        a, b = outline[i], outline[(i + 1) % n]
+        if math.hypot(b[0] - a[0], b[1] - a[1]) < 1e-6:
+            raise fail(f"room.outline_mm[{i}]", "repeats the next corner (zero-length wall)")
+    for i in range(n):
+        for j in range(i + 2, n):
+            if i == 0 and j == n - 1:
+                continue  # neighbours through the closing wall
+            if _segments_cross(outline[i], outline[(i + 1) % n], outline[j], outline[(j + 1) % n]):
+                raise fail("room.outline_mm",
+                           f"walls {i} and {j} cross: the outline must not intersect itself")
+    if not sc.robot.poses:
+        raise fail("robot.poses", "at least one scan pose is required")
+    ring = sc.ring
+    clearance = ring.radius_m + 0.02  # sensors plus their housing
+    for k, pose in enumerate(sc.robot.poses):
+        path = f"robot.poses[{k}]"
+        if not point_in_polygon(pose.x_m, pose.y_m, outline):
+            raise fail(path, f"pose ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm is outside the room")
+        if distance_to_outline(pose.x_m, pose.y_m, outline) < clearance:
+            raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) would be "
+                             f"inside a wall at ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm")
+        for j, ob in enumerate(sc.obstacles):
+            if _obstacle_distance(ob, pose.x_m, pose.y_m) < clearance:
+                raise fail(path, f"the ring would overlap obstacles[{j}]")
+    for j, ob in enumerate(sc.obstacles):
+        if not point_in_polygon(ob.center_m[0], ob.center_m[1], outline):
+            raise fail(f"obstacles[{j}].center_mm", "obstacle centre is outside the room")
+    if ring.min_step > ring.max_step:
+        raise fail("robot.ring.min_step", f"min_step {ring.min_step} > max_step {ring.max_step}")
+
+
+def _obstacle_distance(ob: Cylinder | Box, x: float, y: float) -> float:
+    if isinstance(ob, Cylinder):
+        return math.hypot(x - ob.center_m[0], y - ob.center_m[1]) - ob.radius_m
+    c, s = math.cos(ob.yaw_rad), math.sin(ob.yaw_rad)
+    dx, dy = x - ob.center_m[0], y - ob.center_m[1]
+    lx, ly = c * dx + s * dy, -s * dx + c * dy
+    qx, qy = abs(lx) - ob.size_m[0] / 2, abs(ly) - ob.size_m[1] / 2
+    return math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0)
+
+
+# --------------------------------------------------------------------------- public API
+
+SCENARIO_DIR_ENV = "IRRING_SCENARIOS"
+
+
+def bundled_dir() -> Path:
+    """Folder of the bundled scenarios (works for editable and plain installs)."""
+    from . import resources
+
+    return resources.scenarios_dir()
+
+
+def bundled() -> dict[str, Path]:
+    return {p.stem: p for p in sorted(bundled_dir().glob("*.yaml"))}
+
+
+DEFAULT_SCENARIO = "t_room"
+
+
+def resolve(name_or_path: str | Path) -> Path:
+    """A path, or the name of a bundled scenario (`t_room`)."""
+    p = Path(name_or_path)
+    if p.exists():
+        return p
+    found = bundled()
+    if str(name_or_path) in found:
+        return found[str(name_or_path)]
+    raise ScenarioError(f"{name_or_path}: no such file and no bundled scenario of that name; "
+                        f"bundled: {', '.join(found)}")
+
+
+def parse(raw: Any, source: str = "") -> Scenario:
+    """Validate an already-parsed YAML document."""
+    loader = _Loader(source)
+    if not isinstance(raw, Mapping):
+        raise loader.fail("", "a scenario file must be a mapping (key: value) at the top")
+    sc = loader.dataclass_(Scenario, raw, "")
+    sc = dataclasses.replace(sc, source=source)
+    _validate_geometry(sc, loader.fail)
+    return sc
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load and validate a scenario file (or a bundled scenario by name)."""
+    path = resolve(name_or_path)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ScenarioError(f"{path}: not valid YAML: {exc}") from exc
+    return parse(raw, str(path))
+
+
+def loads(text: str, source: str = "<string>") -> Scenario:
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ScenarioError(f"{source}: not valid YAML: {exc}") from exc
+    return parse(raw, source)
