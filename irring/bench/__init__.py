@@ -1,0 +1,1 @@
+"""Measurements behind `irring bench`; each returns plain dicts of figures."""

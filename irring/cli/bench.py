@@ -1,0 +1,25 @@
+"""`irring bench …`: benchmarks that print measured figures.
+
+Each benchmark is a module ``irring/cli/bench_<name>.py`` with ``register(subparsers)``;
+the measurements themselves live in ``irring/bench/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+
+BENCHES = ("accuracy", "speed", "effects", "estimator")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="benchmarks: what accuracy costs in time, stage speeds",
+                       description="Benchmarks that measure and print figures on this machine.")
+    inner = p.add_subparsers(dest="bench", metavar="BENCH")
+    for name in BENCHES:
+        module = f"{__package__}.bench_{name}"
+        if importlib.util.find_spec(module) is None:
+            continue  # TODO(integration): every listed benchmark exists once all issues land
+        importlib.import_module(module).register(inner)
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
