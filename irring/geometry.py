@@ -1,0 +1,155 @@
+"""The paper's design geometry (§II): blind spot, overlap angle and overlap area.
+
+Analytic, from the paper's equations (restated in ../shared/DESIGN.md):
+
+- Eq. 1, :func:`blind_spot_m`: the largest circular obstacle a fan of rays with angular
+  step Δθ can miss at distance d, ``r = d / (1/sin(Δθ/2) − 1)``.
+- Eq. 2, :func:`overlap_angle_rad`: ``β = acos(R·sin(Φ/2)/D) − π/2 + α − Φ/2``.
+- Eq. 3, :func:`overlap_area_m2`: the area S two neighbouring sensors both sweep.
+
+Measured, from a built MuJoCo model (:func:`overlap_area_mc_m2`): each sensor's swept
+sector has its apex at the sensor's hinge and its edges along the beam at the two sweep
+limits, all read from ``mujoco.MjData`` after posing the ring at its first and last motor
+step — not from R, Φ, α. Monte Carlo counts random points that lie in both sectors of a
+neighbouring pair. If the model puts a hinge or a beam somewhere else than the paper's
+equations assume, the two numbers disagree; that is the point of the check.
+
+All angles are radians, lengths metres, areas m².
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+# Table I of the paper.
+TABLE_I_R_M = 0.15
+TABLE_I_D_M = 0.686
+TABLE_I_PHI_RAD = math.radians(30.0)
+TABLE_I_ALPHA_RAD = math.radians(37.8)
+
+
+# --------------------------------------------------------------------------- analytic
+
+
+def blind_spot_m(distance_m, step_rad):
+    """Eq. 1: radius (m) of the largest circle that can hide between two rays.
+
+    Two rays from one apex, ``step_rad`` apart; a circle at ``distance_m`` from the apex
+    that touches neither has at most this radius. Vectorised; ``step_rad`` = 0 gives 0
+    (a continuous fan misses nothing), a step ≥ π gives ``inf`` (no bound).
+    """
+    d = np.asarray(distance_m, dtype=float)
+    half = np.asarray(step_rad, dtype=float) / 2.0
+    s = np.sin(np.clip(half, 0.0, np.pi / 2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(s > 0, d / (1.0 / np.where(s > 0, s, 1.0) - 1.0), 0.0)
+    r = np.where(half >= np.pi / 2, np.inf, r)
+    return float(r) if r.ndim == 0 else r
+
+
+def overlap_angle_rad(radius_m: float, range_m: float, spacing_rad: float,
+                      alpha_rad: float) -> float:
+    """Eq. 2: β, the angle at a sensor between its sweep edge and the overlap's far corner.
+
+    ``radius_m`` R (ring radius), ``range_m`` D (max range), ``spacing_rad`` Φ (2π/N),
+    ``alpha_rad`` α (each sensor sweeps ±α). β ≤ 0 means the sectors do not overlap.
+    """
+    c = radius_m * math.sin(spacing_rad / 2.0) / range_m
+    if not -1.0 <= c <= 1.0:
+        raise ValueError(f"R·sin(Φ/2) = {radius_m * math.sin(spacing_rad / 2):.4g} m exceeds "
+                         f"the range D = {range_m:.4g} m: neighbouring sensors cannot overlap")
+    return math.acos(c) - math.pi / 2.0 + alpha_rad - spacing_rad / 2.0
+
+
+def overlap_area_m2(radius_m: float, range_m: float, spacing_rad: float,
+                    alpha_rad: float) -> float:
+    """Eq. 3: S (m²), the area seen by both of two neighbouring sensors.
+
+    ``S = 2·[D²·β/2 − ½·D·(R·sin(Φ/2)/cos(π/2 − α + Φ/2))·sin β]``: twice a sector of
+    angle β minus the triangle between the sensor, the crossing point of the two inner
+    sweep edges, and the far corner. 0 when β ≤ 0 (no overlap).
+    """
+    beta = overlap_angle_rad(radius_m, range_m, spacing_rad, alpha_rad)
+    if beta <= 0.0:
+        return 0.0
+    edge_to_crossing_m = (radius_m * math.sin(spacing_rad / 2.0)
+                          / math.cos(math.pi / 2.0 - alpha_rad + spacing_rad / 2.0))
+    return 2.0 * (range_m ** 2 * beta / 2.0 - 0.5 * range_m * edge_to_crossing_m * math.sin(beta))
+
+
+# --------------------------------------------------------------------------- Monte Carlo
+
+
+@dataclass(frozen=True)
+class SweptSectors:
+    """Where each sensor's sweep lies, in the robot's horizontal plane.
+
+    ``apex_xy`` (N, 2) hinge positions (m); ``heading_min_rad`` / ``heading_max_rad`` (N,)
+    beam directions at the first and last motor step, widened by the beam's half-angle
+    where the sensor has a cone (sonar). The sweep runs counter-clockwise from min to max.
+    """
+
+    apex_xy: np.ndarray
+    heading_min_rad: np.ndarray
+    heading_max_rad: np.ndarray
+
+    @property
+    def sensors(self) -> int:
+        return int(self.apex_xy.shape[0])
+
+    @property
+    def width_rad(self) -> np.ndarray:
+        """(N,) angular width of each sweep, in [0, 2π]."""
+        w = np.mod(self.heading_max_rad - self.heading_min_rad, 2 * np.pi)
+        # a sweep whose edges coincide is either a single ray or a full turn
+        full = (np.abs(self.heading_max_rad - self.heading_min_rad) > np.pi) & (w < 1e-9)
+        return np.where(full, 2 * np.pi, w)
+
+
+def in_sector(points_xy: np.ndarray, apex_xy: np.ndarray, heading_min_rad: float,
+              width_rad: float, range_m: float) -> np.ndarray:
+    """(P,) bool: which points lie within ``range_m`` of the apex and inside the sweep."""
+    v = points_xy - apex_xy
+    inside = np.einsum("pi,pi->p", v, v) <= range_m ** 2
+    rel = np.mod(np.arctan2(v[:, 1], v[:, 0]) - heading_min_rad, 2 * np.pi)
+    return inside & (rel <= width_rad + 1e-12)
+
+
+def overlap_area_mc_m2(sectors: SweptSectors, range_m: float, *, samples: int = 400_000,
+                       seed: int = 0) -> tuple[float, float]:
+    """Monte-Carlo area (m²) seen by both sensors of each neighbouring pair, averaged.
+
+    Returns ``(mean_area_m2, standard_error_m2)``. For each pair (k, k+1) random points
+    are drawn uniformly in the box around both sweeps; the share inside both sectors,
+    times the box area, estimates the overlap. Fewer than two sensors: (0, 0).
+    """
+    n = sectors.sensors
+    if n < 2:
+        return 0.0, 0.0
+    rng = np.random.default_rng(seed)
+    widths = sectors.width_rad
+    areas, variances = [], []
+    pairs = [(k, (k + 1) % n) for k in range(n if n > 2 else 1)]
+    for k, j in pairs:  # one loop per pair (≤ 72); the points are vectorised
+        apexes = sectors.apex_xy[[k, j]]
+        lo = apexes.min(axis=0) - range_m
+        hi = apexes.max(axis=0) + range_m
+        box = float(np.prod(hi - lo))
+        pts = lo + rng.random((samples, 2)) * (hi - lo)
+        both = (in_sector(pts, apexes[0], sectors.heading_min_rad[k], widths[k], range_m)
+                & in_sector(pts, apexes[1], sectors.heading_min_rad[j], widths[j], range_m))
+        p = both.mean()
+        areas.append(p * box)
+        variances.append(p * (1 - p) / samples * box ** 2)
+    m = len(areas)
+    return float(np.mean(areas)), float(math.sqrt(sum(variances)) / m)
+
+
+def table_i() -> dict[str, float]:
+    """β (deg) and S (m²) for the paper's Table I, from Eqs. 2 and 3."""
+    beta = overlap_angle_rad(TABLE_I_R_M, TABLE_I_D_M, TABLE_I_PHI_RAD, TABLE_I_ALPHA_RAD)
+    area = overlap_area_m2(TABLE_I_R_M, TABLE_I_D_M, TABLE_I_PHI_RAD, TABLE_I_ALPHA_RAD)
+    return {"beta_deg": math.degrees(beta), "overlap_area_m2": area}
