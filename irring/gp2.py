@@ -1,0 +1,203 @@
+"""Sharp GP2 range-sensor curves (and linear sonar/laser hooks) and the ADC.
+
+The paper's Eq. 10 relates distance and output: ``d = a·V^b`` with a > 0, b < 0 for the
+Sharp parts, where a and b depend on the incidence angle θ between the beam and the
+surface normal. Here V is in volts and d in metres; the estimator's counts form
+``d = a_c·S^b`` follows from :meth:`SensorModel.ab_counts`.
+
+Each part is a YAML file in ``models/sensors/`` holding its source points, the θ = 0 power
+fit with its residuals, and the a(θ), b(θ) table (see that folder's README for where every
+number comes from). Between table rows a and b are interpolated linearly in |θ|; past the
+last row they are held.
+
+Fold-over: below ``peak_distance_m`` a Sharp sensor's output falls again. The model's
+near branch is a straight line from 0 V at contact to the far branch's voltage at the peak
+(an assumption: datasheets only show the far side in detail), so one voltage has two
+distances (:meth:`SensorModel.distances`). Whether a reading folds is the ``foldover``
+effect's business; :meth:`SensorModel.voltage` is always the far branch (Eq. 10), the
+exact inverse of :meth:`SensorModel.distance`.
+
+No return: with nothing in range a GP2 outputs its noise floor; the model uses the far
+branch's voltage at the part's max range (GP2D12: 0.42 V at 0.80 m, within the 0.3–0.4 V
+floor people measure), :attr:`SensorModel.no_return_v`. Inverting it gives exactly
+``max_range_m``, so an estimator treats it as "nothing within range".
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+
+@dataclass(frozen=True, eq=False)
+class SensorModel:
+    """One range sensor's output curve ``d = a(θ)·V^b(θ)`` (Eq. 10; d in m, V in volts)."""
+
+    name: str
+    min_range_m: float           # datasheet measuring range
+    max_range_m: float
+    peak_distance_m: float       # fold-over point; 0 for parts that do not fold
+    theta_rad: np.ndarray        # (T,) table incidence angles, 0 first, increasing
+    a: np.ndarray                # (T,) m·V^-b
+    b: np.ndarray                # (T,)
+    max_incidence_rad: float     # returns at steeper incidence drop out (`incidence` effect)
+    part: str = ""
+    source: str = ""             # file the numbers were read from
+
+    def __post_init__(self) -> None:
+        theta = np.asarray(self.theta_rad, dtype=float)
+        a = np.asarray(self.a, dtype=float)
+        b = np.asarray(self.b, dtype=float)
+        where = f"sensor model {self.name!r}" + (f" ({self.source})" if self.source else "")
+        if not (theta.ndim == a.ndim == b.ndim == 1 and theta.size == a.size == b.size >= 1):
+            raise ValueError(f"{where}: theta, a and b must be 1-D tables of equal length")
+        if theta[0] != 0.0 or np.any(np.diff(theta) <= 0):
+            raise ValueError(f"{where}: the table must start at θ = 0 and increase")
+        if np.any(a <= 0) or np.any(b == 0):
+            raise ValueError(f"{where}: need a > 0 and b ≠ 0 in d = a·V^b")
+        if not 0.0 < self.min_range_m < self.max_range_m:
+            raise ValueError(f"{where}: need 0 < min_range_m < max_range_m")
+        if not 0.0 <= self.peak_distance_m <= self.min_range_m:
+            raise ValueError(f"{where}: peak_distance_m must lie in 0 … min_range_m")
+        for arr in (theta, a, b):
+            arr.setflags(write=False)
+        object.__setattr__(self, "theta_rad", theta)
+        object.__setattr__(self, "a", a)
+        object.__setattr__(self, "b", b)
+
+    # ---- the curve
+
+    @property
+    def a0(self) -> float:
+        return float(self.a[0])
+
+    @property
+    def b0(self) -> float:
+        return float(self.b[0])
+
+    def ab(self, theta_rad=0.0) -> tuple[np.ndarray, np.ndarray]:
+        """a(θ), b(θ) interpolated over |θ| (rad); NaN θ gives NaN."""
+        t = np.abs(theta_rad)
+        return np.interp(t, self.theta_rad, self.a), np.interp(t, self.theta_rad, self.b)
+
+    def voltage(self, d_m, theta_rad=0.0) -> np.ndarray:
+        """Output (V) for distance d (m) at incidence θ (rad): Eq. 10 solved for V, far branch."""
+        a, b = self.ab(theta_rad)
+        return (np.asarray(d_m, dtype=float) / a) ** (1.0 / b)
+
+    def distance(self, v, theta_rad=0.0) -> np.ndarray:
+        """Distance (m) for output v (V) at incidence θ (rad): Eq. 10, far branch."""
+        a, b = self.ab(theta_rad)
+        return a * np.asarray(v, dtype=float) ** b
+
+    @property
+    def no_return_v(self) -> float:
+        """Output with nothing in range: the curve's value at max_range_m (θ = 0)."""
+        return float(self.voltage(self.max_range_m))
+
+    @property
+    def folds(self) -> bool:
+        return self.peak_distance_m > 0.0
+
+    def peak_v(self, theta_rad=0.0) -> np.ndarray:
+        """The highest output (V), reached at peak_distance_m (NaN for parts that do not fold)."""
+        if not self.folds:
+            return np.full(np.shape(theta_rad), np.nan)[()]
+        return self.voltage(self.peak_distance_m, theta_rad)
+
+    def voltage_folded(self, d_m, theta_rad=0.0) -> np.ndarray:
+        """Output (V) with fold-over: below the peak the near branch, else the far branch."""
+        d = np.asarray(d_m, dtype=float)
+        far = self.voltage(d, theta_rad)
+        if not self.folds:
+            return far
+        near = self.peak_v(theta_rad) * (d / self.peak_distance_m)
+        return np.where(d < self.peak_distance_m, near, far)
+
+    def distances(self, v, theta_rad=0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Both distances (near, far) in m that give output v (V); NaN where none exists.
+
+        For a folding part every v in (0, peak] has one distance on each side of the peak.
+        """
+        v = np.asarray(v, dtype=float)
+        far = self.distance(v, theta_rad)
+        if not self.folds:
+            return np.full_like(far, np.nan), far
+        vp = self.peak_v(theta_rad)
+        ok = (v > 0) & (v <= vp)
+        near = np.where(ok, self.peak_distance_m * v / vp, np.nan)
+        return near, np.where(ok, far, np.nan)
+
+    def ab_counts(self, theta_rad=0.0, bits: int = 12, vref_v: float = 5.0):
+        """a_c(θ), b(θ) of ``d = a_c·S^b`` with S in ADC counts (S = V / LSB)."""
+        a, b = self.ab(theta_rad)
+        return a * lsb_v(bits, vref_v) ** b, b
+
+
+# --------------------------------------------------------------------------- ADC
+
+
+def lsb_v(bits: int, vref_v: float) -> float:
+    """Volts per count: vref / 2^bits (MCP3202: code = 4096·V_in / V_ref)."""
+    return vref_v / float(1 << bits)
+
+
+def counts_from_voltage(v, bits: int = 12, vref_v: float = 5.0) -> np.ndarray:
+    """ADC counts for v volts, float (not rounded), clipped to [0, 2^bits − 1].
+
+    Rounding to whole counts is the ``quantization`` effect's job.
+    """
+    return np.clip(np.asarray(v, dtype=float) * (float(1 << bits) / vref_v), 0.0,
+                   float((1 << bits) - 1))
+
+
+def voltage_from_counts(counts, bits: int = 12, vref_v: float = 5.0) -> np.ndarray:
+    """Volts for ADC counts (integer or float), clipped to [0, 2^bits − 1] counts first."""
+    c = np.clip(np.asarray(counts, dtype=float), 0.0, float((1 << bits) - 1))
+    return c * lsb_v(bits, vref_v)
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def sensors_dir() -> Path:
+    from . import resources
+
+    return resources.models_dir() / "sensors"
+
+
+def available() -> tuple[str, ...]:
+    """Names of the bundled sensor models."""
+    return tuple(sorted(p.stem for p in sensors_dir().glob("*.yaml")))
+
+
+def load_sensor(path: str | Path) -> SensorModel:
+    """Read a sensor curve file (the format of ``models/sensors/*.yaml``)."""
+    path = Path(path)
+    raw = yaml.safe_load(path.read_text())
+    try:
+        table = raw["table"]
+        return SensorModel(
+            name=str(raw["name"]), part=str(raw.get("part", "")), source=str(path),
+            min_range_m=float(raw["min_range_m"]), max_range_m=float(raw["max_range_m"]),
+            peak_distance_m=float(raw["peak_distance_m"]),
+            max_incidence_rad=float(np.radians(raw["max_incidence_deg"])),
+            theta_rad=np.radians(np.asarray(table["theta_deg"], dtype=float)),
+            a=np.asarray(table["a"], dtype=float), b=np.asarray(table["b"], dtype=float))
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a sensor curve file (missing or bad {exc}); see "
+                         f"{sensors_dir() / 'README.md'} for the format") from exc
+
+
+@functools.lru_cache(maxsize=None)
+def sensor(name: str) -> SensorModel:
+    """A bundled sensor model by name ('gp2d12', 'gp2y0a21', 'gp2y0a02', 'sonar', 'laser')."""
+    path = sensors_dir() / f"{name}.yaml"
+    if not path.is_file():
+        raise ValueError(f"unknown sensor model {name!r}; available: {', '.join(available())} "
+                         f"(curve files live in {sensors_dir()})")
+    return load_sensor(path)
