@@ -137,8 +137,9 @@ class MapSpec:
 class IncidenceEffect:
     """a(θ), b(θ) of the sensor curve plus grazing drop-out."""
 
-    max_incidence_rad: float = num(math.radians(70.0), lo=0.0, hi=math.radians(90.0),
-                                   doc="returns at steeper incidence drop out")
+    max_incidence_rad: float | None = num(None, lo=0.0, hi=math.radians(90.0),
+                                          doc="returns at steeper incidence drop out "
+                                              "(default: the sensor model's, GP2: 70°, sonar: 20°)")
 
 
 @dataclass(frozen=True)
@@ -160,9 +161,10 @@ class FoldoverEffect:
 class ReflectanceEffect:
     """Per-surface reflectivity weakens the return: more noise, shorter reach."""
 
-    min_signal: float = num(0.05, lo=0.0, hi=1.0,
+    min_signal: float = num(0.2, lo=0.0, hi=1.0,
                             doc="returns weaker than this (reflectance / d² relative to max range)"
-                                " drop out")
+                                " drop out; 0.2 lets 18 % grey card (0.2 of white) reach the "
+                                "sensor's full range, as the GP2 datasheets specify")
 
 
 @dataclass(frozen=True)
