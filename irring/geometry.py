@@ -153,3 +153,95 @@ def table_i() -> dict[str, float]:
     beta = overlap_angle_rad(TABLE_I_R_M, TABLE_I_D_M, TABLE_I_PHI_RAD, TABLE_I_ALPHA_RAD)
     area = overlap_area_m2(TABLE_I_R_M, TABLE_I_D_M, TABLE_I_PHI_RAD, TABLE_I_ALPHA_RAD)
     return {"beta_deg": math.degrees(beta), "overlap_area_m2": area}
+
+
+# --------------------------------------------------------------------------- the built model
+
+
+@dataclass(frozen=True)
+class SensorFrames:
+    """Sensor frames read from MuJoCo at one motor step (world = robot frame, pose 0).
+
+    ``hinge_xyz`` (N, 3) hinge anchors, ``emitter_xyz`` (N, 3) emitter sites,
+    ``beam`` (N, 3) unit beam directions (each emitter site's +z axis).
+    """
+
+    step: int
+    hinge_xyz: np.ndarray
+    emitter_xyz: np.ndarray
+    beam: np.ndarray
+
+    @property
+    def heading_rad(self) -> np.ndarray:
+        return np.arctan2(self.beam[:, 1], self.beam[:, 0])
+
+
+def model_frames(ring_model, step: int) -> SensorFrames:
+    """Pose a compiled ring (``model.RingModel``) at motor ``step`` and read its frames.
+
+    Kinematic: the motor joint at step × motor step, each hinge where its belt equality
+    puts it, then ``mj_kinematics``; nothing here uses R, Φ or α.
+    """
+    import mujoco
+
+    m = ring_model.model
+    d = mujoco.MjData(m)
+    motor = step * ring_model.ring.motor_step_rad
+    d.qpos[ring_model.motor_qpos] = motor
+    d.qpos[ring_model.sensor_qpos] = ring_model.sensor_qpos_for(motor)
+    mujoco.mj_kinematics(m, d)
+    xmat = d.site_xmat[ring_model.emitter_sites].reshape(-1, 3, 3)
+    return SensorFrames(step=step, hinge_xyz=d.xanchor[ring_model.sensor_joints].copy(),
+                        emitter_xyz=d.site_xpos[ring_model.emitter_sites].copy(),
+                        beam=xmat[:, :, 2].copy())
+
+
+def swept_sectors(ring_model, beam_half_angle_rad: float = 0.0) -> SweptSectors:
+    """Each sensor's swept sector from the model: apex at its hinge, edges along its beam at
+    the first and last motor step, widened by the beam's half-angle (a sonar cone)."""
+    ring = ring_model.ring
+    lo = model_frames(ring_model, ring.min_step)
+    hi = model_frames(ring_model, ring.max_step)
+    return SweptSectors(apex_xy=lo.hinge_xyz[:, :2],
+                        heading_min_rad=lo.heading_rad - beam_half_angle_rad,
+                        heading_max_rad=hi.heading_rad + beam_half_angle_rad)
+
+
+def design_report(design, distances_m=(0.25, 0.5, 0.75, 1.0), *, range_m: float | None = None,
+                  samples: int = 400_000, seed: int = 0) -> dict:
+    """Everything ``irring geometry`` prints for a design (``designs.Design``).
+
+    Analytic β and S from the design's numbers (R, Φ = 2π/N, α, D), the Monte-Carlo S from
+    its built MuJoCo model, and Eq. 1's blind spot at ``distances_m`` with the design's
+    ray step. ``range_m`` is D (default: the sensor's design range, Table I's 0.686 m).
+    """
+    from . import model as ring_model_mod
+
+    D = design.sensor.design_range_m if range_m is None else range_m
+    ring = design.ring
+    alpha = design.sweep_half_angle_rad + design.sensor.beam_half_angle_rad
+    if ring.sensors >= 2:
+        beta = overlap_angle_rad(ring.radius_m, D, design.spacing_rad, alpha)
+        area = overlap_area_m2(ring.radius_m, D, design.spacing_rad, alpha)
+    else:
+        beta, area = float("nan"), 0.0  # one sensor has no neighbour to overlap with
+    rm = ring_model_mod.compile_ring(ring)
+    sectors = swept_sectors(rm, design.sensor.beam_half_angle_rad)
+    mc, se = overlap_area_mc_m2(sectors, D, samples=samples, seed=seed)
+    dist = np.asarray(distances_m, dtype=float)
+    step = design.ray_step_rad()
+    return {
+        "design": design.name,
+        "sensors": ring.sensors,
+        "radius_m": ring.radius_m,
+        "spacing_deg": round(math.degrees(design.spacing_rad), 9),
+        "alpha_deg": round(math.degrees(alpha), 9),
+        "range_m": D,
+        "step_deg": round(math.degrees(step), 9),
+        "beta_deg": math.degrees(beta) if math.isfinite(beta) else None,
+        "overlap_area_m2": area,
+        "overlap_area_mc_m2": mc,
+        "overlap_area_mc_stderr_m2": se,
+        "distances_m": dist.tolist(),
+        "blind_spot_m": np.atleast_1d(blind_spot_m(dist, step)).tolist(),
+    }

@@ -97,3 +97,78 @@ def test_monte_carlo_is_deterministic_under_a_seed_and_zero_for_radial_rings():
     radial, _ = g.overlap_area_mc_m2(ideal_sectors(12, 0.15, 0.0), 0.686, samples=20_000)
     assert radial == 0.0
     assert g.overlap_area_mc_m2(ideal_sectors(1, 0.0, math.pi), 0.686) == (0.0, 0.0)
+
+
+# --------------------------------------------------------------------------- the built model
+
+from irring import data, designs  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def paper_model():
+    from irring import model
+
+    return model.compile_ring(designs.PAPER_RING)
+
+
+def test_monte_carlo_from_the_mjcf_frames_agrees_with_table_i(paper_model):
+    sectors = g.swept_sectors(paper_model)
+    mc, se = g.overlap_area_mc_m2(sectors, g.TABLE_I_D_M, samples=200_000, seed=3)
+    analytic = g.table_i()["overlap_area_m2"]
+    assert abs(mc - analytic) / analytic < 0.02
+    assert se / analytic < 0.005          # the 2 % is not lost in sampling noise
+    # the frames really are the paper's: hinges at R, sweep limits ±37.8° off radial
+    rho = np.arange(12) * 30 * DEG
+    np.testing.assert_allclose(np.hypot(*sectors.apex_xy.T), 0.15, atol=1e-9)
+    np.testing.assert_allclose(np.cos(sectors.heading_min_rad - (rho - 37.8 * DEG)), 1, atol=1e-9)
+    np.testing.assert_allclose(sectors.width_rad, 2 * 37.8 * DEG, atol=1e-9)
+
+
+def test_model_frames_follow_the_beam_geometry_convention(paper_model):
+    """Emitters and headings read from MuJoCo equal data.beam_geometry (the one frame
+    convention the estimator uses)."""
+    for step in (-35, 0, 17, 35):
+        f = g.model_frames(paper_model, step)
+        angles = data.sensor_angles_for_steps(designs.PAPER_RING, np.array([step]))
+        xy, heading = data.beam_geometry(designs.PAPER_RING, np.zeros(3), angles,
+                                         designs.PAPER_RING.emitter_offset_m)
+        np.testing.assert_allclose(f.emitter_xyz[:, :2], xy[0], atol=1e-9)
+        np.testing.assert_allclose(np.cos(f.heading_rad - heading[0]), 1, atol=1e-12)
+
+
+def test_monte_carlo_sees_the_model_not_the_formula_inputs():
+    """A model built with another radius gives another area: the MC measures the frames."""
+    from irring import model
+
+    other = model.compile_ring(designs.parametric(12, 0.30, 37.8 * DEG, 1.08 * DEG).ring)
+    mc, _ = g.overlap_area_mc_m2(g.swept_sectors(other), g.TABLE_I_D_M, samples=50_000)
+    assert mc == pytest.approx(g.overlap_area_m2(0.30, 0.686, 30 * DEG, 37.8 * DEG), rel=0.03)
+    assert abs(mc - g.table_i()["overlap_area_m2"]) / g.table_i()["overlap_area_m2"] > 0.05
+
+
+def test_design_report_for_every_named_design():
+    for d in designs.DESIGN_LIST:
+        r = g.design_report(d, distances_m=(0.5, 1.0), samples=20_000)
+        assert set(r) >= {"beta_deg", "overlap_area_m2", "overlap_area_mc_m2", "blind_spot_m"}
+        assert len(r["blind_spot_m"]) == 2
+        if d.name != "rotating12":
+            assert r["overlap_area_m2"] == 0.0 and r["overlap_area_mc_m2"] == 0.0
+    paper = g.design_report(designs.get("rotating12"), samples=20_000)
+    assert paper["beta_deg"] == pytest.approx(19.56, abs=0.01)
+    # Eq. 1 with the ring's 1.08° step: 9.5 mm at 1 m
+    assert paper["blind_spot_m"][-1] == pytest.approx(g.blind_spot_m(1.0, 1.08 * DEG))
+
+
+def test_cli_geometry_json_has_the_contract_keys(capsys):
+    import json
+
+    from irring.cli import main
+
+    assert main(["geometry", "--json", "--samples", "50000", "--distances-mm", "500,1000"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["beta_deg"] == pytest.approx(19.56, abs=0.01)
+    assert out["overlap_area_m2"] == pytest.approx(0.1376, abs=0.0005)
+    assert out["overlap_area_mc_m2"] == pytest.approx(0.1376, rel=0.02)
+    assert out["distances_m"] == [0.5, 1.0] and len(out["blind_spot_m"]) == 2
+    assert main(["geometry", "--design", "radial12", "--samples", "5000"]) == 0
+    assert "0.0000 m²" in capsys.readouterr().out

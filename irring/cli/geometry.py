@@ -1,0 +1,100 @@
+"""`irring geometry`: the paper's design geometry for a ring design (Eqs. 1–3 and Monte Carlo)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+EPILOG = """\
+what it prints:
+  beta_deg            Eq. 2: angle β of the overlap of two neighbouring sweeps (deg)
+  overlap_area_m2     Eq. 3: area S both neighbours see (m²), from R, Φ = 360°/N, α, D
+  overlap_area_mc_m2  the same area counted by Monte Carlo in the BUILT MuJoCo model:
+                      hinge positions and beam directions read at the first and last
+                      motor step (not from R, Φ, α); it agrees with Eq. 3 when the model
+                      is the design the equations describe
+  blind_spot_m        Eq. 1: radius of the largest cylinder that can hide between two
+                      neighbouring rays at each distance (m), with the design's ray step
+
+examples:
+  irring geometry                          the paper's ring (Table I: β 19.56°, S 0.1376 m²)
+  irring geometry --design radial12        the same ring held still: no overlap
+  irring geometry --design all --json      every named design, as JSON
+  irring geometry --range-mm 624           D = 624 mm (the experiments) instead of 686 mm
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from ..designs import DESIGN_BY_NAME
+
+    p = sub.add_parser(
+        "geometry", help="overlap angle/area (Eqs. 2–3, Monte Carlo) and blind spot (Eq. 1)",
+        description="The paper's design geometry for a ring design: the overlap angle β and "
+                    "area S of neighbouring sensors (Eqs. 2–3, and S measured by Monte Carlo "
+                    "from the built MuJoCo model's sensor frames) and the blind spot r(d) "
+                    "(Eq. 1).",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--design", default="rotating12", metavar="NAME",
+                   choices=[*DESIGN_BY_NAME, "all"],
+                   help=f"one of {', '.join(DESIGN_BY_NAME)}, or all (default: rotating12)")
+    p.add_argument("--range-mm", type=float, default=None, metavar="D",
+                   help="max range D in mm for Eqs. 2–3 (default: the sensor's design range, "
+                        "686 mm for the GP2D12 as in Table I)")
+    p.add_argument("--distances-mm", default="250,500,750,1000", metavar="LIST",
+                   help="comma-separated distances in mm for the blind spot "
+                        "(default: 250,500,750,1000)")
+    p.add_argument("--samples", type=int, default=400_000,
+                   help="Monte-Carlo points per neighbouring pair (default: 400000; "
+                        "standard error ≈ 0.2 %% of S)")
+    p.add_argument("--seed", type=int, default=0, help="Monte-Carlo seed (default: 0)")
+    p.add_argument("--json", action="store_true", help="print JSON (one object, or a list "
+                                                       "with --design all)")
+    p.set_defaults(func=run)
+
+
+def _distances(text: str) -> list[float]:
+    try:
+        values = [float(v) * 1e-3 for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise SystemExit(f"irring geometry: error: --distances-mm wants numbers like "
+                         f"250,500,1000; got {text!r}") from None
+    if not values or min(values) <= 0:
+        raise SystemExit("irring geometry: error: --distances-mm needs positive distances")
+    return values
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import designs, geometry
+
+    if args.samples < 1000:
+        raise SystemExit("irring geometry: error: --samples must be ≥ 1000")
+    names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
+    range_m = None if args.range_mm is None else args.range_mm * 1e-3
+    reports = [geometry.design_report(designs.get(n), _distances(args.distances_mm),
+                                      range_m=range_m, samples=args.samples, seed=args.seed)
+               for n in names]
+    if args.json:
+        print(json.dumps(reports if args.design == "all" else reports[0], indent=2))
+        return 0
+    for r in reports:
+        print(_text(r))
+    return 0
+
+
+def _text(r: dict) -> str:
+    beta = "—" if r["beta_deg"] is None else f"{r['beta_deg']:.2f}°"
+    lines = [
+        f"{r['design']}: N = {r['sensors']}, R = {r['radius_m'] * 1e3:g} mm, "
+        f"Φ = {r['spacing_deg']:.4g}°, α = {r['alpha_deg']:.4g}°, D = {r['range_m'] * 1e3:g} mm",
+        f"  overlap angle β (Eq. 2)          {beta}",
+        f"  overlap area S (Eq. 3)           {r['overlap_area_m2']:.4f} m²",
+        f"  overlap area S (Monte Carlo,     {r['overlap_area_mc_m2']:.4f} m² "
+        f"± {r['overlap_area_mc_stderr_m2']:.4f}",
+        "    from the MuJoCo model's frames)",
+        f"  blind spot r (Eq. 1, Δθ = {r['step_deg']:.3g}°):",
+    ]
+    for d, b in zip(r["distances_m"], r["blind_spot_m"]):
+        shown = "unbounded" if not math.isfinite(b) else f"{b * 1e3:.1f} mm"
+        lines.append(f"    at {d * 1e3:6.0f} mm   {shown}")
+    return "\n".join(lines)
