@@ -1,0 +1,101 @@
+"""Analytic 2-D scenes for the estimator tests: walls (segments) and cylinders (circles).
+
+Independent of MuJoCo: true distances and incidence angles by closed-form ray casts, counts
+by a calibration's forward curve (the inverse of Eq. 10). Used where a test needs geometry it
+controls exactly (corners, a thin cylinder, grazing walls); the T-room tests use SimRing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from irring.data import Sweep, beam_geometry, sensor_angles_for_steps
+from irring.estimate import Calibration
+from irring.scenario import Ring
+
+PAPER_RING = Ring()
+
+
+def stand_in_calibration(d_o: float = 0.007, strength: float = 0.25, bits: int = 12,
+                         noise_counts: float = 0.0) -> Calibration:
+    """GP2D12-like power law (d[cm] = 27.728·V^−1.2045) with a(θ) growing as 1 − cos θ."""
+    theta = np.radians(np.arange(0.0, 86.0, 5.0))
+    volts_per_count = 5.0 / (2 ** bits - 1)
+    b = np.full(theta.size, -1.2045)
+    a = 0.27728 * volts_per_count ** b * (1.0 + strength * (1.0 - np.cos(theta)))
+    return Calibration(sensor_model="stand-in", emitter_offset_m=d_o, theta_rad=theta, a=a,
+                       b=b, adc_bits=bits, min_range_m=0.08, max_range_m=0.80,
+                       noise_counts=noise_counts, source="test stand-in")
+
+
+def cast(origin: np.ndarray, heading: np.ndarray, walls=(), circles=()):
+    """Nearest hit of rays (…, 2)/(…) on segments ((x1, y1), (x2, y2)) and circles
+    ((cx, cy), r). Returns distance (inf if none) and incidence angle (rad)."""
+    ox, oy = origin[..., 0], origin[..., 1]
+    ux, uy = np.cos(heading), np.sin(heading)
+    best = np.full(heading.shape, np.inf)
+    inc = np.full(heading.shape, np.nan)
+    for (x1, y1), (x2, y2) in walls:
+        ex, ey = x2 - x1, y2 - y1
+        den = ux * ey - uy * ex
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((x1 - ox) * ey - (y1 - oy) * ex) / den
+            u = ((x1 - ox) * uy - (y1 - oy) * ux) / den
+        hit = (np.abs(den) > 1e-12) & (t > 1e-9) & (u >= 0) & (u <= 1) & (t < best)
+        nx, ny = -ey / math.hypot(ex, ey), ex / math.hypot(ex, ey)
+        cos_t = np.abs(ux * nx + uy * ny)
+        best = np.where(hit, t, best)
+        inc = np.where(hit, np.arccos(np.clip(cos_t, 0, 1)), inc)
+    for (cx, cy), r in circles:
+        fx, fy = ox - cx, oy - cy
+        bq = fx * ux + fy * uy
+        cq = fx * fx + fy * fy - r * r
+        disc = bq * bq - cq
+        with np.errstate(invalid="ignore"):
+            t = -bq - np.sqrt(disc)
+        hit = (disc > 0) & (t > 1e-9) & (t < best)
+        hx, hy = fx + t * ux, fy + t * uy
+        cos_t = np.abs(hx * ux + hy * uy) / r
+        best = np.where(hit, t, best)
+        inc = np.where(hit, np.arccos(np.clip(cos_t, 0, 1)), inc)
+    return best, inc
+
+
+def make_sweep(cal: Calibration, *, walls=(), circles=(), pose=(0.0, 0.0, 0.0),
+               ring: Ring = PAPER_RING, noise_counts: float = 0.0, seed: int = 0,
+               max_range_m: float = 0.624, dtype=float, quantize: bool = False,
+               steps: np.ndarray | None = None):
+    """A Sweep of the scene read through ``cal``'s forward curve; also true d and θ."""
+    if steps is None:
+        steps = np.arange(ring.min_step, ring.max_step + 1)
+    angles = sensor_angles_for_steps(ring, steps)
+    origin, heading = beam_geometry(ring, np.asarray(pose, float), angles, cal.emitter_offset_m)
+    d, inc = cast(origin, heading, walls, circles)
+    in_range = np.isfinite(d) & (d <= cal.max_range_m)
+    counts = np.where(in_range, cal.counts(np.where(in_range, d, 1.0), np.nan_to_num(inc)), 0.0)
+    rng = np.random.default_rng(seed)
+    counts = counts + noise_counts * rng.standard_normal(counts.shape)
+    counts = np.clip(counts, 0, cal.full_scale_counts)
+    if quantize:
+        counts = np.round(counts)
+    sweep = Sweep(steps=np.asarray(steps), sensor_angles=angles.astype(dtype),
+                  counts=counts.astype(dtype), timestamps_s=np.zeros(len(steps)), duration_s=0.0,
+                  pose=np.asarray(pose, float), ring=ring, sensor_model="stand-in",
+                  adc_bits=cal.adc_bits, max_range_m=max_range_m)
+    return sweep, np.where(in_range, d, np.nan), np.where(in_range, inc, np.nan)
+
+
+def rectangle(x0, y0, x1, y1):
+    c = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    return [(c[i], c[(i + 1) % 4]) for i in range(4)]
+
+
+def polygon(corners):
+    return [(corners[i], corners[(i + 1) % len(corners)]) for i in range(len(corners))]
+
+
+T_ROOM = polygon([(0, 0), (2.42, 0), (2.42, 0.9), (1.66, 0.9), (1.66, 1.8), (0.76, 1.8),
+                  (0.76, 0.9), (0, 0.9)])
+T_POSES = [(1.92, 0.45, 0.0), (1.21, 0.45, 0.0), (0.5, 0.45, 0.0), (1.21, 1.35, 0.0)]
