@@ -12,7 +12,7 @@ Named designs (:data:`DESIGNS`):
 ``radial12``    the same ring held still (one reading per sensor, 30° apart)
 ``rotating1``   one GP2D12 at the centre turning 360° in 1.08° steps (an "IR scanner")
 ``laser``       a SICK-like scanner at the centre: 0.5° steps over 360°, 8 m, σ = 5 mm
-``sonar12``     a radial ring of 12 ultrasonic transducers, ±15° cone, nearest echo, 3 m
+``sonar12``     a radial ring of 12 ultrasonic rangers, ±15° cone, nearest echo, 6.45 m
 ==============  ============================================================================
 
 :func:`parametric` makes any other ring (N, radius, sweep angle, step, sensor).
@@ -31,7 +31,7 @@ import types
 from dataclasses import dataclass
 from typing import Mapping
 
-from .scenario import NoiseEffect, Ring, Robot, Scenario, ScenarioError, Sensor
+from .scenario import IncidenceEffect, NoiseEffect, Ring, Robot, Scenario, ScenarioError, Sensor
 
 GP2_PERIOD_S = 0.0383  # GP2 measurement period (datasheet 38.3 ms ± 9.6 ms); == data.GP2_PERIOD_S
 
@@ -79,12 +79,13 @@ SENSORS: dict[str, SensorSpec] = {
     "laser": SensorSpec("laser", max_range_m=8.0, design_range_m=8.0, min_range_m=0.05,
                         noise_sigma_m=0.005, reading_period_s=(2.0 / 75.0) / 720,
                         adc_bits=16, description="SICK LMS200-like scanner, 8 m, σ 5 mm"),
-    # Polaroid 6500-like: main lobe ±15°, 0.15–3 m used indoors, nearest echo; a ring fires
-    # one transducer at a time at 25 Hz (Pioneer-style) to avoid crosstalk.
-    "sonar": SensorSpec("sonar", max_range_m=3.0, design_range_m=3.0, min_range_m=0.15,
+    # MaxBotix LV-MaxSonar-EZ class (the `sonar` curve in models/sensors): 0.15–6.45 m, one
+    # reading per 49 ms (20 Hz); a ring chains its transducers one after another so they do
+    # not hear each other. The ±15° cone is our assumption (12 of them close a 360° ring).
+    "sonar": SensorSpec("sonar", max_range_m=6.45, design_range_m=6.45, min_range_m=0.1524,
                         noise_sigma_m=0.01, beam_half_angle_rad=math.radians(15.0),
-                        reading_period_s=0.040, sequential=True, adc_bits=16,
-                        description="Polaroid-like ultrasonic transducer, ±15° cone, 3 m"),
+                        reading_period_s=0.049, sequential=True, adc_bits=16,
+                        description="MaxBotix LV-EZ-class ultrasonic ranger, ±15° cone, 6.45 m"),
 }
 
 
@@ -305,18 +306,22 @@ def apply(scenario: Scenario, design: Design | str) -> Scenario:
                                effects=types.MappingProxyType(dict(effects)))
 
 
-# Stages that only make sense for a GP2 voltage curve.
+# Stages whose parameters describe a GP2 (volts of noise, an IR beam cone, IR reflectivity,
+# fold-over); a laser or sonar design gets its own instead.
 _GP2_ONLY = ("incidence", "foldover", "noise", "reflectance", "beam")
 
 
 def sensor_effects(design: Design, effects: Mapping) -> dict:
-    """Effects for a non-IR design: the scene's other effects plus the sensor's noise.
+    """Effects for a non-IR design: the scene's sensor-independent effects (quantisation,
+    outliers, averaging, timing, motion, …), grazing drop-out at the sensor's own limit if
+    the scene has drop-out at all, and the design's range noise.
 
     The noise stage works in volts on the sensor's curve (``gp2``); the range noise σ_m the
-    design implies becomes volts through the curve's slope at half range (``noise`` is
-    constant in volts, as for the GP2).
+    design implies becomes volts through the curve's slope (linear for laser and sonar).
     """
     out = {k: v for k, v in effects.items() if k not in _GP2_ONLY}
+    if "incidence" in effects:
+        out["incidence"] = IncidenceEffect()  # max_incidence None: the sensor model's limit
     if design.sensor.noise_sigma_m:
         out["noise"] = NoiseEffect(sigma_v=noise_sigma_v(design))
     return out

@@ -67,7 +67,7 @@ def test_sonar12_has_a_cone_that_closes_the_ring_and_fires_in_turn():
     assert d.ring.sensors == 12 and not d.rotating
     assert d.sensor.beam_half_angle_rad == pytest.approx(15 * DEG)
     assert d.ray_step_rad() == 0.0                  # ±15° cones 30° apart leave no gap
-    assert d.hardware_time_s() == pytest.approx(12 * 0.040)
+    assert d.hardware_time_s() == pytest.approx(12 * 0.049)  # 20 Hz each, in turn
 
 
 def test_hardware_time_matches_the_sweep_duration_for_gp2_rings():
@@ -135,3 +135,21 @@ def test_apply_keeps_the_scene_and_swaps_the_robot():
     assert dict(other.effects) == dict(sc.effects)       # a GP2 ring keeps the scene's effects
     custom = designs.apply(sc, designs.parametric(8, 0.15, 30 * DEG, 1.08 * DEG))
     assert custom.robot.design == "custom" and custom.ring.sensors == 8
+
+
+def test_apply_gives_laser_and_sonar_their_own_sensor_and_noise():
+    from irring import gp2
+
+    sc = load_scenario("t_room_cylinder")
+    for name in ("laser", "sonar12"):
+        d = designs.get(name)
+        other = designs.apply(sc, name)
+        assert other.sensor.model == d.sensor.kind
+        assert other.sensor.max_range_m == d.sensor.max_range_m
+        assert other.sensor.adc_bits == 16
+        # the scene's GP2 noise (volts) became the design's range noise through the curve
+        model = gp2.sensor(d.sensor.kind)
+        sigma_m = other.effects["noise"].sigma_v * model.a0  # linear: d = a·V
+        assert sigma_m == pytest.approx(d.sensor.noise_sigma_m, rel=1e-3)
+        assert other.effects["incidence"].max_incidence_rad is None  # the sensor's own limit
+        assert "quantization" in other.effects
