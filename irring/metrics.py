@@ -1,0 +1,284 @@
+"""Ground truth on the map's grid, and how well a map matches it.
+
+The scenario (room outline, wall thickness, obstacles) is rasterised onto the same cells as
+the map (:func:`ground_truth`); :func:`score` compares a map with it. Definitions, all on
+the grid's cells, with a **1-cell tolerance** (a cell "has X nearby" when X is within its
+3 × 3 neighbourhood):
+
+* **surface cells**: cells crossed by a surface the sensors can see — the room outline
+  (the inner faces of the walls; walls extend ``room.wall_thickness_m`` outward) and
+  obstacle perimeters. **Occupied truth** = surface cells plus the cells whose centre lies
+  in wall or obstacle material. **Free truth** = cells whose centre is inside the room and
+  outside every obstacle, minus surface cells. Cells beyond the walls are neither.
+* **in range** of a pose: the cell centre lies within ``sensor.max_range_m + ring.radius_m``
+  of the pose centre (the farthest a sensor on the ring reaches).
+* **line of sight** from a pose: the straight segment from the pose centre to the cell
+  centre crosses no material cell, except within 1 cell of the target itself.
+* **visible** surface cells: in range and in line of sight of at least one pose.
+* ``occupied_precision``: share of the map's occupied cells that have occupied truth nearby.
+* ``occupied_recall``: share of the visible surface cells that have a map-occupied cell nearby.
+* ``occupied_f1``: their harmonic mean.
+* ``free_accuracy``: share of the map's free cells that have free truth nearby.
+* ``coverage``: share of the *reachable free* cells (free truth, in range and in line of
+  sight of some pose) that the map marks free (no tolerance).
+* ``shadow``: the paper's headline, the wall behind a thin obstacle. *Shadow cells* are wall
+  surface cells in range of some pose, visible from none, and hidden behind an obstacle
+  (the first material on the line of sight is an obstacle's) from at least one pose in range:
+  the cells a ring of radial sensors at the pose centre could not see. ``shadow`` is the share
+  of them with a map-occupied cell nearby; ``None`` when the scene has no shadow cells.
+
+Scores whose denominator is empty are ``None``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mapping import OccupancyGrid, traverse
+from .scenario import Box, Cylinder, Scenario
+
+EXTERIOR = -1   # beyond the walls
+FREE_SPACE = 0  # inside the room, no material at the cell centre
+WALL = 1        # wall material (the label of obstacle j is OBSTACLE0 + j)
+OBSTACLE0 = 2
+
+SCORE_KEYS = ("occupied_precision", "occupied_recall", "occupied_f1", "free_accuracy",
+              "coverage", "shadow")
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """The scenario on the map's cells; all arrays (ny, nx) like ``OccupancyGrid.log_odds``."""
+
+    label: np.ndarray          # int16: EXTERIOR, FREE_SPACE, WALL or OBSTACLE0 + j (cell centre)
+    surface: np.ndarray        # bool: a sensed surface crosses the cell
+    surface_owner: np.ndarray  # int16: WALL or OBSTACLE0 + j for surface cells, else 0
+    occupied: np.ndarray       # bool: surface or material
+    free: np.ndarray           # bool: free space and not surface
+    in_range: np.ndarray       # bool: within max range + ring radius of some pose
+    visible: np.ndarray        # bool: surface cells seen (in range, line of sight) from a pose
+    reachable_free: np.ndarray  # bool: free cells in range and line of sight of some pose
+    shadow: np.ndarray         # bool: wall surface cells hidden behind an obstacle (see module doc)
+    shadow_owner: np.ndarray   # int16: OBSTACLE0 + j casting the shadow (first pose that has it)
+    reach_m: float             # max range + ring radius used for "in range"
+
+
+# --------------------------------------------------------------------------- geometry on cells
+
+
+def _segment_distance(px, py, ax, ay, bx, by) -> np.ndarray:
+    dx, dy = bx - ax, by - ay
+    t = np.clip(((px - ax) * dx + (py - ay) * dy) / (dx * dx + dy * dy), 0.0, 1.0)
+    return np.hypot(px - (ax + t * dx), py - (ay + t * dy))
+
+
+def _inside_polygon(px, py, outline) -> np.ndarray:
+    """Even-odd rule, vectorised over points (one pass per edge)."""
+    inside = np.zeros(np.shape(px), bool)
+    n = len(outline)
+    for i in range(n):
+        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
+        if y1 == y2:
+            continue
+        crosses = (y1 > py) != (y2 > py)
+        x_at = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
+        inside ^= crosses & (px < x_at)
+    return inside
+
+
+def box_corners(box: Box) -> np.ndarray:
+    c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
+    hx, hy = box.size_m[0] / 2, box.size_m[1] / 2
+    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+    return local @ np.array([[c, s], [-s, c]]) + np.asarray(box.center_m)
+
+
+def _inside_obstacle(ob, px, py) -> np.ndarray:
+    if isinstance(ob, Cylinder):
+        return np.hypot(px - ob.center_m[0], py - ob.center_m[1]) <= ob.radius_m
+    c, s = math.cos(ob.yaw_rad), math.sin(ob.yaw_rad)
+    dx, dy = px - ob.center_m[0], py - ob.center_m[1]
+    lx, ly = c * dx + s * dy, -s * dx + c * dy
+    return (np.abs(lx) <= ob.size_m[0] / 2) & (np.abs(ly) <= ob.size_m[1] / 2)
+
+
+def _outline_samples(points: np.ndarray, step_m: float, closed: bool = True) -> np.ndarray:
+    """Points every ``step_m`` along a polyline (including every corner)."""
+    pts = np.asarray(points, float)
+    ends = np.roll(pts, -1, axis=0) if closed else pts[1:]
+    starts = pts if closed else pts[:-1]
+    out = []
+    for a, b in zip(starts, ends):
+        n = max(int(math.ceil(np.hypot(*(b - a)) / step_m)), 1)
+        t = np.arange(n + 1)[:, None] / n
+        out.append(a + t * (b - a))
+    return np.concatenate(out)
+
+
+def _surface_samples(ob, step_m: float) -> np.ndarray:
+    if isinstance(ob, Cylinder):
+        n = max(int(math.ceil(2 * math.pi * ob.radius_m / step_m)), 8)
+        a = np.arange(n) * (2 * math.pi / n)
+        return np.stack([ob.center_m[0] + ob.radius_m * np.cos(a),
+                         ob.center_m[1] + ob.radius_m * np.sin(a)], axis=1)
+    return _outline_samples(box_corners(ob), step_m)
+
+
+def _dilate(mask: np.ndarray) -> np.ndarray:
+    """3 × 3 binary dilation (the 1-cell tolerance)."""
+    p = np.pad(mask, 1)
+    ny, nx = mask.shape
+    out = np.zeros_like(mask)
+    for dy in range(3):
+        for dx in range(3):
+            out |= p[dy:dy + ny, dx:dx + nx]
+    return out
+
+
+def _chebyshev_near(ix, iy, tx, ty) -> np.ndarray:
+    return (np.abs(ix - tx) <= 1) & (np.abs(iy - ty) <= 1)
+
+
+def _sight(grid_shape, origin, res, material_label, pose_xy, targets_ix, targets_iy):
+    """For cells seen from ``pose_xy``: the label of the first material cell on the way
+    (0 when the line of sight is clear). Material within 1 cell of the target is ignored."""
+    cx = origin[0] + (targets_ix + 0.5) * res
+    cy = origin[1] + (targets_iy + 0.5) * res
+    n = len(targets_ix)
+    if n == 0:
+        return np.zeros(0, np.int16)
+    v = traverse(np.full(n, pose_xy[0]), np.full(n, pose_xy[1]), cx, cy, origin, grid_shape, res)
+    lab = material_label[v.iy, v.ix]
+    block = (lab > 0) & ~_chebyshev_near(v.ix, v.iy, targets_ix[v.ray], targets_iy[v.ray])
+    first_label = np.zeros(n, np.int16)
+    hit_rays = v.ray[block]
+    if len(hit_rays):
+        # visits are ordered along each ray, so the first blocking visit per ray comes first
+        rays, first = np.unique(hit_rays, return_index=True)
+        first_label[rays] = lab[block][first]
+    return first_label
+
+
+def _reach_m(scenario: Scenario) -> float:
+    try:
+        radius = scenario.ring.radius_m
+    except ValueError:  # a design without a ring preset (e.g. a scanner at the centre)
+        radius = 0.0
+    return scenario.sensor.max_range_m + radius
+
+
+def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
+    """Rasterise the scenario onto ``grid``'s cells and work out what each pose can see."""
+    res = grid.resolution_m
+    origin = grid.origin_xy_m
+    ny, nx = grid.shape
+    xs, ys = grid.cell_centers()
+    px, py = np.meshgrid(xs, ys)
+    outline = scenario.room.outline_m
+
+    # material at cell centres: walls outward of the outline, obstacles where they stand
+    inside = _inside_polygon(px, py, outline)
+    dist = np.full(px.shape, np.inf)
+    for i in range(len(outline)):
+        (ax, ay), (bx, by) = outline[i], outline[(i + 1) % len(outline)]
+        dist = np.minimum(dist, _segment_distance(px, py, ax, ay, bx, by))
+    eps = 1e-9
+    label = np.full(px.shape, EXTERIOR, np.int16)
+    label[inside] = FREE_SPACE
+    label[~inside & (dist > eps) & (dist <= scenario.room.wall_thickness_m)] = WALL
+    for j, ob in enumerate(scenario.obstacles):
+        label[_inside_obstacle(ob, px, py)] = OBSTACLE0 + j
+
+    # surfaces: sample the outline and obstacle perimeters finely, mark the cells they fall in
+    surface_owner = np.zeros(px.shape, np.int16)
+    step = res / 4
+
+    def mark(samples, owner):
+        ix, iy = grid.cell_of(samples[:, 0], samples[:, 1])
+        ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+        surface_owner[iy[ok], ix[ok]] = owner
+
+    mark(_outline_samples(np.asarray(outline, float), step), WALL)
+    for j, ob in enumerate(scenario.obstacles):
+        mark(_surface_samples(ob, step), OBSTACLE0 + j)
+    surface = surface_owner > 0
+    occupied = surface | (label > 0)
+    free = (label == FREE_SPACE) & ~surface
+
+    # Cells centred on a surface are surface, not material, so lines of sight to a wall end
+    # in its surface row; a material cell is one whose centre is strictly inside material.
+    material = np.where(label > 0, label, 0).astype(np.int16)
+
+    reach = _reach_m(scenario)
+    in_range = np.zeros(px.shape, bool)
+    visible = np.zeros(px.shape, bool)
+    reachable_free = np.zeros(px.shape, bool)
+    hidden_by_obstacle = np.zeros(px.shape, np.int16)
+    candidates = surface | free
+    for pose in scenario.robot.poses:  # a handful of poses; each is vectorised over cells
+        near = candidates & (np.hypot(px - pose.x_m, py - pose.y_m) <= reach)
+        in_range |= near
+        ty, tx = np.nonzero(near)
+        first = _sight((ny, nx), origin, res, material, (pose.x_m, pose.y_m), tx, ty)
+        clear = first == 0
+        visible[ty[clear & surface[ty, tx]], tx[clear & surface[ty, tx]]] = True
+        reachable_free[ty[clear & free[ty, tx]], tx[clear & free[ty, tx]]] = True
+        by_obstacle = (first >= OBSTACLE0) & (surface_owner[ty, tx] == WALL)
+        unset = hidden_by_obstacle[ty, tx] == 0
+        pick = by_obstacle & unset
+        hidden_by_obstacle[ty[pick], tx[pick]] = first[pick]
+    visible &= surface
+    shadow = (surface_owner == WALL) & in_range & ~visible & (hidden_by_obstacle > 0)
+    return GroundTruth(label=label, surface=surface, surface_owner=surface_owner,
+                       occupied=occupied, free=free, in_range=in_range & candidates,
+                       visible=visible, reachable_free=reachable_free, shadow=shadow,
+                       shadow_owner=np.where(shadow, hidden_by_obstacle, 0).astype(np.int16),
+                       reach_m=reach)
+
+
+# --------------------------------------------------------------------------- scores
+
+
+def _share(hit: np.ndarray, of: np.ndarray) -> float | None:
+    n = int(of.sum())
+    return float((hit & of).sum()) / n if n else None
+
+
+def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = None) -> dict:
+    """The six map scores (see the module doc): floats in 0…1, or None when undefined."""
+    if truth is None:
+        truth = ground_truth(scenario, grid)
+    if truth.label.shape != grid.shape:
+        raise ValueError(f"ground truth is {truth.label.shape} cells but the grid is {grid.shape}; "
+                         "build it with ground_truth(scenario, grid) for this grid")
+    cls = grid.classify()
+    occ = cls == 1
+    free = cls == 0
+    occ_near = _dilate(occ)
+    precision = _share(_dilate(truth.occupied), occ)
+    recall = _share(occ_near, truth.visible)
+    if precision is None or recall is None:
+        f1 = None
+    else:
+        f1 = 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
+    return {
+        "occupied_precision": precision,
+        "occupied_recall": recall,
+        "occupied_f1": f1,
+        "free_accuracy": _share(_dilate(truth.free), free),
+        "coverage": _share(free, truth.reachable_free),
+        "shadow": _share(occ_near, truth.shadow),
+    }
+
+
+def shadow_by_obstacle(grid: OccupancyGrid, truth: GroundTruth) -> dict[int, tuple[int, float]]:
+    """Obstacle index → (shadow cells behind it, share of them the map marks occupied)."""
+    occ_near = _dilate(grid.classify() == 1)
+    out = {}
+    for owner in np.unique(truth.shadow_owner[truth.shadow]):
+        cells = truth.shadow_owner == owner
+        out[int(owner) - OBSTACLE0] = (int(cells.sum()), float((occ_near & cells).sum() / cells.sum()))
+    return out
