@@ -100,9 +100,10 @@ class Calibration:
         if abs(theta[0]) > 1e-12 or np.any(np.diff(theta) <= 0) or theta[-1] >= math.pi / 2:
             raise CalibrationError("theta must start at 0 and increase strictly below 90°, got "
                                    f"{np.degrees(theta).round(3).tolist()} deg")
-        if np.any(a <= 0) or np.any(b >= 0):
-            raise CalibrationError("Eq. 10 needs a > 0 and b < 0 at every θ (d falls as the "
-                                   f"reading rises); got a={a.tolist()}, b={b.tolist()}")
+        if np.any(a <= 0) or not (np.all(b < 0) or np.all(b > 0)):
+            raise CalibrationError("Eq. 10 needs a > 0 and b of one sign at every θ (b < 0 for "
+                                   "a Sharp GP2, whose output falls with distance); got "
+                                   f"a={a.tolist()}, b={b.tolist()}")
         if not (0 < self.min_range_m < self.max_range_m) or not math.isfinite(self.max_range_m):
             raise CalibrationError(f"need 0 < min_range_m < max_range_m, got "
                                    f"{self.min_range_m}, {self.max_range_m}")
@@ -151,14 +152,22 @@ class Calibration:
             return np.exp((np.log(d) - log_a) / b)
 
     @property
-    def floor_counts(self) -> float:
-        """Counts at or below this are no return: weaker than any in-range return can be."""
-        return float(np.min(self.counts(self.max_range_m, self.theta_rad)))
+    def falling(self) -> bool:
+        """True for a Sharp GP2 (b < 0: more counts, nearer); False for linear hooks."""
+        return bool(self.b[0] < 0)
+
+    @property
+    def no_return_counts(self) -> float:
+        """Counts of a return at max_range_m square on (a GP2's output with nothing in
+        range); readings within 2σ of it, or beyond it, are no return."""
+        return float(self.counts(self.max_range_m, 0.0))
 
     @property
     def near_counts(self) -> float:
-        """Counts above this lie past the calibrated near end (fold-over side of the peak)."""
-        return float(np.max(self.counts(self.min_range_m, self.theta_rad)))
+        """The near end of the calibrated curve (any θ): a GP2 reading brighter than this
+        lies on the peak or its fold-over side, where one reading has two distances."""
+        near = self.counts(self.min_range_m, self.theta_rad)
+        return float(np.max(near) if self.falling else np.min(near))
 
     def sigma_counts(self) -> float:
         """1-σ count noise including quantisation (one count, uniform)."""
@@ -178,8 +187,7 @@ class Calibration:
         from . import gp2
 
         model = gp2.sensor(sensor_model)
-        volts_per_count = float(gp2.voltage_from_counts(1.0, adc_bits, vref_v)
-                                - gp2.voltage_from_counts(0.0, adc_bits, vref_v))
+        volts_per_count = gp2.lsb_v(adc_bits, vref_v)
         theta = np.asarray(model.theta_rad, dtype=float)
         keep = theta < math.pi / 2
         a_v, b = (np.asarray(v, dtype=float)[keep] for v in (model.a, model.b))
@@ -357,9 +365,9 @@ def fit_curve(counts: Any, distance_m: Any, theta_rad: Any, theta_grid_rad: Any,
         rhs = np.concatenate([rhs, np.zeros(2 * (j - 2))])
     sol, *_ = np.linalg.lstsq(design, rhs, rcond=None)
     log_a, b = sol[:j], sol[j:]
-    if np.any(b >= 0) or not np.all(np.isfinite(sol)):
-        raise CalibrationError(f"fitted b(θ) must be negative everywhere, got {b.round(4)}; "
-                               "are the readings and distances paired correctly?")
+    if not np.all(np.isfinite(sol)) or not (np.all(b < 0) or np.all(b > 0)):
+        raise CalibrationError(f"fitted b(θ) changes sign ({b.round(4)}); are the readings "
+                               "and distances paired correctly?")
     return grid, np.exp(log_a), b
 
 
@@ -407,7 +415,8 @@ class LineOptions:
     min_points: int = 3            # a line usable for θ has at least this many readings …
     min_length_m: float = 0.04     # … spanning at least this length
     max_rms_sigmas: float = 3.0    # … and fits them to within this RMS (in σ)
-    regroup_iterations: int = 3    # regroup in the first iterations, then hold the grouping
+    regroup_iterations: int = 4    # regroup in the first iterations, then hold the grouping
+    adopt_margin_m: float = 0.05   # a reading on no line may join one this far past its ends
 
 
 @dataclass(frozen=True)
@@ -639,9 +648,13 @@ def _classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
     full = cal.full_scale_counts
     reason[ok & (s >= full - 0.5)] = Reason.SATURATED
     ok = reason == Reason.OK
-    reason[ok & (s > cal.near_counts)] = Reason.FOLDOVER_AMBIGUOUS
-    ok = reason == Reason.OK
-    reason[ok & (s <= max(cal.floor_counts, 0.0))] = Reason.NO_RETURN
+    margin = 2.0 * cal.sigma_counts()
+    if cal.falling:
+        reason[ok & (s > cal.near_counts)] = Reason.FOLDOVER_AMBIGUOUS
+        ok = reason == Reason.OK
+        reason[ok & ((s <= cal.no_return_counts + margin) | (s <= 0))] = Reason.NO_RETURN
+    else:  # a linear sensor (sonar/laser hooks): no fold-over, no return reads as max range
+        reason[ok & ((s >= cal.no_return_counts - margin) | (s <= 0))] = Reason.NO_RETURN
     return reason
 
 
@@ -660,8 +673,11 @@ def estimate(sweep: Sweep, calibration: Calibration | None = None, *, max_iterat
 def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                     max_iterations: int = 20, tolerance_rad: float = math.radians(0.1),
                     iterate: bool = True, lines: LineOptions = LineOptions(),
-                    keep_history: bool = False) -> Estimate:
-    """:func:`estimate` that also returns the final lines and (optionally) θ per iteration."""
+                    keep_history: bool = False, damping: bool = True) -> Estimate:
+    """:func:`estimate` that also returns the final lines and (optionally) θ per iteration.
+
+    ``damping=False`` switches the oscillation damping off (to show what it is for).
+    """
     cal = calibration if calibration is not None else Calibration.for_sweep(sweep)
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
@@ -706,16 +722,16 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         usable = live & (d <= 1.5 * max_range)
         if found is None or it < lines.regroup_iterations:
             found = fit_lines(px, py, usable, sigma, steps, lines)
-            label = found.label
-        else:  # held grouping: refit the same readings with their new positions
-            found = _refit(found, px, py, usable)
-            label = found.label
-        good = (label >= 0) & usable
-        good[good] = found.usable[label[good]]
+            line_of = _members(found, usable, cal, s_safe, origin, ux, uy, px, py, sigma, lines)
+        else:  # held grouping: refit the same members at their new positions
+            found = _refit(found, line_of, px, py, usable)
+        good = (line_of >= 0) & usable
+        good[good] = found.usable[line_of[good]]
+        line_of = np.where(good, line_of, -1)
         nx = np.zeros(counts.shape)
         ny = np.zeros(counts.shape)
-        nx[good] = found.normal[label[good], 0]
-        ny[good] = found.normal[label[good], 1]
+        nx[good] = found.normal[line_of[good], 0]
+        ny[good] = found.normal[line_of[good], 1]
         cos_t = np.abs(nx * ux + ny * uy)
         sin_t = np.abs(nx * uy - ny * ux)
         theta_new = np.where(good, np.minimum(np.arctan2(sin_t, cos_t), theta_cap), 0.0)
@@ -723,7 +739,9 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         step = theta_new - theta
         moving = live & (np.abs(step) >= tolerance_rad)
         # damping: an update that reverses the previous one halves the gain
-        flip = moving & (step * last_step < 0)
+        # (a reversal that shrinks fast is ordinary convergence and keeps its gain)
+        flip = moving & (step * last_step < 0) & (np.abs(step) > 0.5 * np.abs(last_step))
+        flip &= damping
         gain = np.where(flip, np.maximum(gain * 0.5, 1.0 / 64.0), np.minimum(gain * 1.25, 1.0))
         applied = gain * step
         theta = np.clip(theta + np.where(live, applied, 0.0), 0.0, theta_cap)
@@ -756,13 +774,74 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     return Estimate(points=points, lines=found, theta_history=tuple(history))
 
 
-def _refit(prev: Lines, px: np.ndarray, py: np.ndarray, usable: np.ndarray) -> Lines:
-    """The same grouping, lines refitted to the moved readings (vectorised by bincount)."""
-    lab = prev.label.reshape(-1)
-    use = (lab >= 0) & usable.reshape(-1)
+def _members(found: Lines, usable: np.ndarray, cal: Calibration, s_safe: np.ndarray,
+             origin: np.ndarray, ux: np.ndarray, uy: np.ndarray, px: np.ndarray,
+             py: np.ndarray, sigma: np.ndarray, opts: LineOptions) -> np.ndarray:
+    """(S, N) line index giving each reading its θ, or −1: a reading keeps its own usable
+    line if it sits on it (within the split threshold; the last readings past a corner
+    often do not), else it may be adopted by another line (:func:`_adopt`)."""
+    label = found.label
+    good = (label >= 0) & usable
+    good[good] = found.usable[label[good]]
+    thr = np.maximum(opts.min_split_m, opts.split_sigmas * sigma)
+    lg = label[good]
+    off = np.abs((px[good] - found.centroid[lg, 0]) * found.normal[lg, 0]
+                 + (py[good] - found.centroid[lg, 1]) * found.normal[lg, 1]) > thr[good]
+    good[good] = ~off
+    line_of = np.where(good, label, -1)
+    return _adopt(line_of, usable & ~good, found, cal, s_safe, origin, ux, uy, px, py, sigma,
+                  opts)
+
+
+def _adopt(line_of: np.ndarray, orphan: np.ndarray, found: Lines, cal: Calibration,
+           s_safe: np.ndarray, origin: np.ndarray, ux: np.ndarray, uy: np.ndarray,
+           px: np.ndarray, py: np.ndarray, sigma: np.ndarray, opts: LineOptions) -> np.ndarray:
+    """Readings on no usable line join one if, read with that line's θ, they land on it.
+
+    These are mostly readings next to a corner, which θ = 0 put off both walls, and the last
+    few readings of a sweep past a corner (the neighbouring sensor sees that wall). Test:
+    every orphan against every usable line at once ((orphans, lines) arrays; both are few):
+    within the split threshold of the line and within ``opts.adopt_margin_m`` of its extent.
+    """
+    usable = np.flatnonzero(found.usable)
+    if not orphan.any() or usable.size == 0:
+        return line_of
+    sel = np.flatnonzero(orphan.reshape(-1))
+    n = found.normal[usable]                                    # (L, 2)
+    u = np.stack([ux.reshape(-1)[sel], uy.reshape(-1)[sel]], axis=-1)   # (M, 2)
+    cos_t = np.abs(u @ n.T)                                     # (M, L)
+    sin_t = np.abs(u[:, 1:2] * n[None, :, 0] - u[:, 0:1] * n[None, :, 1])
+    th = np.minimum(np.arctan2(sin_t, cos_t), cal.max_theta_rad)
+    d = cal.distance(s_safe.reshape(-1)[sel][:, None], th)     # (M, L)
+    o = origin.reshape(-1, 2)[sel]
+    qx = o[:, 0:1] + d * u[:, 0:1] - found.centroid[usable, 0]
+    qy = o[:, 1:2] + d * u[:, 1:2] - found.centroid[usable, 1]
+    thr = np.maximum(opts.min_split_m, opts.split_sigmas * sigma.reshape(-1)[sel])
+    r = np.abs(qx * n[:, 0] + qy * n[:, 1]) / thr[:, None]
+    # extent of each line along its direction, from its end readings
+    dirs = found.direction[usable]
+    sx, sy = px.reshape(-1)[found.start[usable]], py.reshape(-1)[found.start[usable]]
+    ex, ey = px.reshape(-1)[found.end[usable]], py.reshape(-1)[found.end[usable]]
+    t0 = (sx - found.centroid[usable, 0]) * dirs[:, 0] + (sy - found.centroid[usable, 1]) * dirs[:, 1]
+    t1 = (ex - found.centroid[usable, 0]) * dirs[:, 0] + (ey - found.centroid[usable, 1]) * dirs[:, 1]
+    lo, hi = np.minimum(t0, t1) - opts.adopt_margin_m, np.maximum(t0, t1) + opts.adopt_margin_m
+    t = qx * dirs[:, 0] + qy * dirs[:, 1]
+    r = np.where((t >= lo) & (t <= hi) & np.isfinite(r), r, np.inf)
+    best = np.argmin(r, axis=1)
+    ok = r[np.arange(sel.size), best] <= 1.0
+    out = line_of.copy()
+    out.reshape(-1)[sel[ok]] = usable[best[ok]]
+    return out
+
+
+def _refit(prev: Lines, line_of: np.ndarray, px: np.ndarray, py: np.ndarray,
+           usable: np.ndarray) -> Lines:
+    """The same members, lines refitted at their moved positions (vectorised by bincount)."""
     n_lines = prev.normal.shape[0]
     if n_lines == 0:
         return prev
+    lab = line_of.reshape(-1)
+    use = (lab >= 0) & usable.reshape(-1)
     l = lab[use]
     x, y = px.reshape(-1)[use], py.reshape(-1)[use]
     cx, cy = (float(np.mean(x)), float(np.mean(y))) if x.size else (0.0, 0.0)
@@ -774,8 +853,11 @@ def _refit(prev: Lines, px: np.ndarray, py: np.ndarray, usable: np.ndarray) -> L
     n = tot(np.ones_like(x))
     c, normal, direction, lmin, lmax = _tls(tot(x), tot(y), tot(x * x), tot(y * y), tot(x * y), n)
     fitted = n >= 2
+    # keep the previous orientation's sign so normals do not flip between iterations
     normal = np.where(fitted[:, None], normal, prev.normal)
     direction = np.where(fitted[:, None], direction, prev.direction)
-    usable_lines = prev.usable & fitted & (lmax > 0)
-    return replace(prev, centroid=c + np.array([cx, cy]), normal=normal, direction=direction,
-                   rms_m=np.sqrt(lmin), usable=usable_lines)
+    return replace(prev, label=line_of, centroid=np.where(fitted[:, None], c + [cx, cy],
+                                                          prev.centroid),
+                   normal=normal, direction=direction,
+                   rms_m=np.where(fitted, np.sqrt(lmin), prev.rms_m),
+                   usable=prev.usable & fitted & (lmax > 0))
