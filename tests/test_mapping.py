@@ -1,0 +1,235 @@
+"""Occupancy grid: exact traversal on the hard cases, the inverse sensor model, PGM/YAML."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from irring.data import Reason
+from irring.mapping import (FREE, OCCUPIED, PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN, UNKNOWN,
+                            MapperParams, OccupancyGrid, read_pgm, traverse)
+from irring.scenario import load_scenario
+
+from _synthetic import single_ray
+
+
+def cells(*segment, shape=(6, 6), origin=(0.0, 0.0), res=1.0):
+    v = traverse(*[np.array([c], float) for c in segment], origin, shape, res)
+    return list(zip(v.ix.tolist(), v.iy.tolist()))
+
+
+# --------------------------------------------------------------------------- traversal
+
+
+def test_diagonal_through_corners_visits_only_the_diagonal():
+    assert cells(1, 1, 4, 4) == [(1, 1), (2, 2), (3, 3)]
+    assert cells(4, 4, 1, 1) == [(3, 3), (2, 2), (1, 1)]
+    assert cells(0.5, 0.5, 3.5, 3.5) == [(0, 0), (1, 1), (2, 2), (3, 3)]
+
+
+def test_ray_along_a_cell_border_belongs_to_the_cells_above_or_right():
+    assert cells(0, 2, 5, 2) == [(0, 2), (1, 2), (2, 2), (3, 2), (4, 2)]
+    assert cells(5, 2, 0, 2) == [(4, 2), (3, 2), (2, 2), (1, 2), (0, 2)]
+    assert cells(3, 0.2, 3, 2.8) == [(3, 0), (3, 1), (3, 2)]
+    # along the grid's top border: outside the (half-open) grid
+    assert cells(1, 6, 4, 6) == []
+
+
+def test_zero_length_ray_visits_its_one_cell():
+    assert cells(2.3, 2.3, 2.3, 2.3) == [(2, 2)]
+    assert cells(2, 2, 2, 2) == [(2, 2)]
+    assert cells(9, 9, 9, 9) == []
+
+
+def test_end_points_outside_the_grid_are_clipped():
+    assert cells(-3, 2.5, 10, 2.5) == [(i, 2) for i in range(6)]
+    assert cells(-3, -3, -1, -1) == []
+    v = traverse(np.array([-3.0]), np.array([2.5]), np.array([10.0]), np.array([2.5]),
+                 (0, 0), (6, 6), 1.0)
+    assert v.t_enter[0] == pytest.approx(3 / 13) and v.t_exit[-1] == pytest.approx(9 / 13)
+
+
+def test_shallow_ray_steps_in_x_then_y():
+    assert cells(0.5, 0.5, 3.5, 1.5) == [(0, 0), (1, 0), (2, 1), (3, 1)]
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(-3, 9, allow_nan=False).map(lambda v: round(v * 4) / 4), min_size=4,
+                max_size=4) | st.lists(st.floats(-3, 9, allow_nan=False), min_size=4, max_size=4))
+def test_traversal_matches_dense_sampling(seg):
+    """Every cell a dense sample of the segment stays in for more than a point is visited,
+    nothing else is, each once, in order, stepping to a neighbour (8-connected at corners)."""
+    x0, y0, x1, y1 = seg
+    v = traverse(*[np.array([c]) for c in seg], (0, 0), (6, 6), 1.0)
+    got = list(zip(v.ix.tolist(), v.iy.tolist()))
+    assert len(set(got)) == len(got)
+    t = np.linspace(0, 1, 4001)
+    x, y = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
+    inside = (x >= 0) & (x < 6) & (y >= 0) & (y < 6)
+    seen = Counter(zip(np.floor(x[inside]).astype(int).tolist(),
+                       np.floor(y[inside]).astype(int).tolist()))
+    length = math.hypot(x1 - x0, y1 - y0)
+    for cell, n in seen.items():
+        if n > 1 or length == 0:
+            assert cell in got
+    for cell, t0, t1 in zip(got, v.t_enter, v.t_exit):
+        assert t1 >= t0
+        if length > 0 and (t1 - t0) * length > 2e-3:  # long enough for the samples to see it
+            assert cell in seen
+    if len(got) > 1:
+        steps = np.abs(np.diff(np.array(got), axis=0))
+        assert steps.max() <= 1
+        assert np.all(np.diff(v.t_enter) > 0)
+
+
+def test_traversal_is_vectorised_over_rays():
+    rng = np.random.default_rng(0)
+    a = rng.uniform(-1, 7, (500, 4))
+    v = traverse(a[:, 0], a[:, 1], a[:, 2], a[:, 3], (0, 0), (6, 6), 1.0)
+    for r in (0, 17, 499):
+        one = traverse(*[a[r:r + 1, i] for i in range(4)], (0, 0), (6, 6), 1.0)
+        m = v.ray == r
+        assert v.ix[m].tolist() == one.ix.tolist() and v.iy[m].tolist() == one.iy.tolist()
+
+
+# --------------------------------------------------------------------------- grid updates
+
+
+def small_grid(**params):
+    return OccupancyGrid((0.0, 0.0), (40, 60), 0.01, MapperParams(**params))
+
+
+def test_valid_reading_frees_its_ray_and_marks_its_end_point():
+    g = small_grid()
+    for _ in range(3):
+        g.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.005))
+    cls = g.classify()
+    ix, iy = g.cell_of(0.055 + 0.40, 0.205)
+    assert cls[iy, ix] == OCCUPIED
+    assert np.all(cls[iy, 5:ix - 2] == FREE)           # the beam's path, well in front
+    assert np.all(cls[iy, ix + 3:] == UNKNOWN)          # beyond the tail: untouched
+    assert np.all(cls[iy + 2:] == UNKNOWN) and np.all(cls[:iy - 1] == UNKNOWN)
+
+
+def test_gaussian_spread_follows_sigma():
+    """A fuzzier reading spreads its occupied evidence over more cells (paper §IV)."""
+    sharp, fuzzy = small_grid(), small_grid()
+    sharp.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.003))
+    fuzzy.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.02))
+    assert (sharp.log_odds > 0).sum() < (fuzzy.log_odds > 0).sum()
+    ix, iy = sharp.cell_of(0.455, 0.205)
+    assert sharp.log_odds[iy, ix] == pytest.approx(sharp.params.l_occ, abs=0.1)
+
+
+def test_no_return_frees_up_to_max_range_and_marks_nothing():
+    g = small_grid()
+    g.insert(single_ray(0.055, 0.205, 0.0, np.nan, valid=False, reason=Reason.NO_RETURN,
+                        max_range_m=0.3))
+    touched = np.nonzero(g.log_odds[20])[0]
+    assert g.log_odds.max() == 0.0
+    assert touched.min() == 5 and touched.max() == 35      # 0.055 m … 0.355 m
+    assert np.count_nonzero(g.log_odds) == len(touched)
+
+
+@pytest.mark.parametrize("reason", [Reason.OUT_OF_RANGE, Reason.FOLDOVER_AMBIGUOUS,
+                                    Reason.SATURATED, Reason.NOT_CONVERGED, Reason.MISSING])
+def test_other_invalid_readings_change_nothing(reason):
+    g = small_grid()
+    g.insert(single_ray(0.055, 0.205, 0.0, 0.3, valid=False, reason=reason))
+    assert not g.log_odds.any()
+
+
+def test_end_point_outside_the_grid_frees_inside_and_marks_nothing_outside():
+    g = small_grid()
+    g.insert(single_ray(0.055, 0.205, 0.0, 2.0, sigma_m=0.005))
+    assert np.all(g.log_odds[20, 6:] < 0) and g.log_odds.max() == 0.0
+
+
+def test_zero_length_reading_marks_its_cell():
+    g = small_grid()
+    g.insert(single_ray(0.105, 0.105, 0.3, 0.0, sigma_m=0.002))
+    assert g.classify()[10, 10] == OCCUPIED
+
+
+def test_log_odds_saturate_at_the_clamps():
+    g = small_grid(l_min=-2.0, l_max=3.0)
+    for _ in range(50):
+        g.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.005))
+    assert g.log_odds.max() == 3.0 and g.log_odds.min() == -2.0
+    # a clamped cell still turns after enough contrary evidence: the map stays responsive
+    for _ in range(10):
+        g.insert(single_ray(0.055, 0.205, 0.0, 0.55, sigma_m=0.005))
+    ix, iy = g.cell_of(0.455, 0.205)
+    assert g.classify()[iy, ix] == FREE
+
+
+def test_batch_insert_is_order_independent_and_deterministic():
+    sc = load_scenario("t_room")
+    from _synthetic import points_for_pose
+
+    p = points_for_pose(sc, 0, sigma_m="gp2", rng=np.random.default_rng(3))
+    a, b = OccupancyGrid.for_scenario(sc), OccupancyGrid.for_scenario(sc)
+    a.insert(p)
+    flipped = type(p)(**{k: (v[::-1, ::-1] if isinstance(v, np.ndarray) else v)
+                         for k, v in vars(p).items()})
+    b.insert(flipped)
+    np.testing.assert_allclose(a.log_odds, b.log_odds, atol=1e-12)
+
+
+def test_for_scenario_covers_outline_plus_margin_with_walls_through_cell_centres():
+    sc = load_scenario("t_room")
+    g = OccupancyGrid.for_scenario(sc)
+    x0, x1, y0, y1 = g.extent_m
+    assert x0 <= -sc.map.margin_m and x1 >= 2.42 + sc.map.margin_m
+    assert y0 <= -sc.map.margin_m and y1 >= 1.80 + sc.map.margin_m
+    assert g.resolution_m == 0.010
+    xs, ys = g.cell_centers()
+    assert np.min(np.abs(xs - 0.0)) < 1e-9 and np.min(np.abs(ys - 0.9)) < 1e-9
+
+
+# --------------------------------------------------------------------------- map_server export
+
+
+def test_pgm_yaml_follow_map_server_and_reload_to_the_same_grid(tmp_path):
+    g = small_grid()
+    g.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.005))
+    g.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.005))
+    g.origin_xy_m = np.array([-1.25, 0.5])
+    pgm, yml = g.to_pgm(tmp_path / "map.pgm")
+    raw = pgm.read_bytes()
+    assert raw.startswith(b"P5\n# CREATOR: irring 0.010 m/pix\n60 40\n255\n")
+    img = read_pgm(pgm)
+    assert img.shape == (40, 60) and img.dtype == np.uint8
+    assert set(np.unique(img).tolist()) == {PGM_OCCUPIED, PGM_UNKNOWN, PGM_FREE}
+    # top image row is the grid's highest y row
+    cls = g.classify()
+    assert img[40 - 1 - 20, 45] == PGM_OCCUPIED and cls[20, 45] == OCCUPIED
+    meta = yaml.safe_load(yml.read_text())
+    assert meta == {"image": "map.pgm", "mode": "trinary", "resolution": 0.01,
+                    "origin": [-1.25, 0.5, 0.0], "negate": 0, "occupied_thresh": 0.65,
+                    "free_thresh": 0.196}
+    # map_server's own rule on each byte value: p = (255 - v) / 255
+    for v, want in ((PGM_FREE, FREE), (PGM_OCCUPIED, OCCUPIED), (PGM_UNKNOWN, UNKNOWN)):
+        p = (255 - v) / 255
+        got = OCCUPIED if p > 0.65 else FREE if p < 0.196 else UNKNOWN
+        assert got == want
+    back = OccupancyGrid.from_pgm(yml)
+    assert back.shape == g.shape and back.resolution_m == g.resolution_m
+    np.testing.assert_allclose(back.origin_xy_m, g.origin_xy_m)
+    np.testing.assert_array_equal(back.classify(), cls)
+    # and the reloaded grid writes the identical files again
+    pgm2, yml2 = back.to_pgm(tmp_path / "again" / "map.pgm")
+    assert pgm2.read_bytes() == raw and yml2.read_text() == yml.read_text()
+
+
+def test_read_pgm_rejects_other_formats(tmp_path):
+    p = tmp_path / "x.pgm"
+    p.write_bytes(b"P2\n2 1\n255\n0 255\n")
+    with pytest.raises(ValueError, match="P5"):
+        read_pgm(p)

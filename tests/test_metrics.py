@@ -1,0 +1,183 @@
+"""Ground truth and map scores: exact cell counts, perfect and broken maps, the shadow."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from irring.data import Points, Reason
+from irring.mapping import OccupancyGrid
+from irring.metrics import (OBSTACLE0, SCORE_KEYS, WALL, ground_truth, score,
+                            shadow_by_obstacle)
+from irring.scenario import load_scenario
+
+from _synthetic import points_for_pose, ray_distances
+
+
+@pytest.fixture(scope="module")
+def room():
+    sc = load_scenario("t_room")
+    grid = OccupancyGrid.for_scenario(sc)
+    return sc, grid, ground_truth(sc, grid)
+
+
+@pytest.fixture(scope="module")
+def cylinder():
+    sc = load_scenario("t_room_cylinder")
+    grid = OccupancyGrid.for_scenario(sc)
+    return sc, grid, ground_truth(sc, grid)
+
+
+def painted(grid, truth, occupied, free):
+    g = grid.empty_like()
+    g.log_odds[free] = g.params.l_min
+    g.log_odds[occupied] = g.params.l_max
+    return g
+
+
+def test_t_room_outline_rasterises_to_its_perimeter(room):
+    sc, grid, truth = room
+    # 8440 mm of wall through cell centres at 10 mm: one cell per 10 mm, corners shared
+    assert truth.surface.sum() == 844
+    assert np.all(truth.surface_owner[truth.surface] == WALL)
+    # wall material 20 mm thick: two cell rows beyond each face (plus the convex corners)
+    assert not (truth.free & truth.occupied).any()
+    free_area = truth.free.sum() * grid.resolution_m ** 2
+    room_area = 2.42 * 0.9 + 0.9 * 0.9
+    assert free_area == pytest.approx(room_area, rel=0.02)
+
+
+def test_every_t_room_wall_is_seen_from_some_pose(room):
+    """Four poses (paper Fig. 17) reach every wall cell of the T-room."""
+    sc, grid, truth = room
+    assert truth.visible.sum() == truth.surface.sum()
+    assert truth.shadow.sum() == 0
+    assert truth.reach_m == pytest.approx(0.624 + 0.15)
+
+
+def test_perfect_map_scores_one(cylinder):
+    sc, grid, truth = cylinder
+    g = painted(grid, truth, truth.surface, truth.free)
+    s = score(g, sc, truth)
+    assert set(s) == set(SCORE_KEYS)
+    assert all(s[k] == 1.0 for k in SCORE_KEYS)
+
+
+def test_empty_map_scores_zero_or_undefined(cylinder):
+    sc, grid, truth = cylinder
+    s = score(grid.empty_like(), sc, truth)
+    assert s["occupied_precision"] is None and s["occupied_f1"] is None
+    assert s["occupied_recall"] == 0.0 and s["coverage"] == 0.0 and s["shadow"] == 0.0
+    assert s["free_accuracy"] is None
+
+
+def test_one_cell_tolerance_and_not_more(room):
+    sc, grid, truth = room
+    for shift, expect_perfect in ((1, True), (3, False)):
+        occ = np.roll(truth.surface, shift, axis=0)
+        s = score(painted(grid, truth, occ, np.zeros_like(occ)), sc, truth)
+        if expect_perfect:
+            assert s["occupied_precision"] == 1.0 and s["occupied_recall"] == 1.0
+        else:  # horizontal walls moved 3 cells: most of them are wrong and missed
+            assert s["occupied_precision"] < 0.7 and s["occupied_recall"] < 0.7
+
+
+def test_free_accuracy_counts_free_cells_inside_walls_as_wrong(room):
+    sc, grid, truth = room
+    free = truth.free.copy()
+    s_good = score(painted(grid, truth, truth.surface, free), sc, truth)
+    wall_inside = (truth.label == WALL)
+    wall_inside &= ~np.roll(truth.surface, 1, 0) & ~np.roll(truth.surface, -1, 0)
+    wall_inside &= ~np.roll(truth.surface, 1, 1) & ~np.roll(truth.surface, -1, 1)
+    n_bad = int(wall_inside.sum())
+    s_bad = score(painted(grid, truth, truth.surface, free | wall_inside), sc, truth)
+    assert s_good["free_accuracy"] == 1.0
+    # the second row of wall material is 2 cells from free space: beyond the tolerance
+    assert s_bad["free_accuracy"] == pytest.approx(free.sum() / (free.sum() + n_bad), rel=0.02)
+
+
+def test_shadow_cells_lie_behind_the_cylinder_as_seen_from_the_pose(cylinder):
+    sc, grid, truth = cylinder
+    cyl = sc.obstacles[0]
+    pose = sc.robot.poses[0]
+    assert 5 <= truth.shadow.sum() <= 40
+    assert np.all(truth.shadow_owner[truth.shadow] == OBSTACLE0)
+    xs, ys = grid.cell_centers()
+    iy, ix = np.nonzero(truth.shadow)
+    bearing = np.arctan2(ys[iy] - pose.y_m, xs[ix] - pose.x_m)
+    to_cyl = math.atan2(cyl.center_m[1] - pose.y_m, cyl.center_m[0] - pose.x_m)
+    half = math.asin(cyl.radius_m / math.hypot(cyl.center_m[0] - pose.x_m,
+                                                 cyl.center_m[1] - pose.y_m))
+    assert np.all(np.abs(bearing - to_cyl) <= half + 0.02)  # within the shadow cone (+1 cell)
+    dist = np.hypot(xs[ix] - pose.x_m, ys[iy] - pose.y_m)
+    assert np.all(dist <= truth.reach_m)
+    # the corner behind the cylinder: the shadow is on the bottom and right walls there
+    assert np.all((xs[ix] > 2.3) & (ys[iy] < 0.15))
+
+
+def test_rotating_ring_sees_behind_a_thin_cylinder_and_a_centre_scanner_does_not(cylinder):
+    """The paper's headline on exact geometry: sensors offset on the ring look past the
+    table leg; rays from the ring's centre (a radial scanner there) cannot."""
+    sc, grid, truth = cylinder
+    ring = grid.empty_like()
+    ring.insert(points_for_pose(sc, 0))
+    assert score(ring, sc, truth)["shadow"] >= 0.8
+
+    pose = sc.robot.poses[0]
+    heading = np.radians(np.arange(0, 360, 0.25))[None, :]
+    ox = np.full(heading.shape, pose.x_m)
+    oy = np.full(heading.shape, pose.y_m)
+    d = ray_distances(ox, oy, heading, sc)
+    reach = truth.reach_m
+    valid = d <= reach
+    dv = np.where(valid, d, np.nan)
+    centre = grid.empty_like()
+    pts = Points(x=ox + dv * np.cos(heading), y=oy + dv * np.sin(heading), d=dv, theta=dv * 0,
+                 origin_x=ox, origin_y=oy, heading=heading, sigma_m=np.full(d.shape, 0.003),
+                 iterations=np.ones(d.shape, int), valid=valid,
+                 reason=np.where(valid, Reason.OK, Reason.NO_RETURN).astype(np.uint8),
+                 max_range_m=reach)
+    for _ in range(2):
+        centre.insert(pts)
+    s = score(centre, sc, truth)
+    assert s["occupied_recall"] >= 0.95
+    assert s["shadow"] <= 0.25
+    assert shadow_by_obstacle(centre, truth)[0][0] == truth.shadow.sum()
+
+
+def test_synthetic_noisy_scans_meet_the_targets():
+    """With GP2-like range noise and a perfect estimator the mapper reaches the issue's
+    targets on all three bundled scenarios (the sim+estimator version is in test_run)."""
+    for name in ("t_room", "t_room_cylinder", "t_room_three_cylinders"):
+        sc = load_scenario(name)
+        grid = OccupancyGrid.for_scenario(sc)
+        rng = np.random.default_rng(7)
+        for k in range(len(sc.robot.poses)):
+            grid.insert(points_for_pose(sc, k, sigma_m="gp2", rng=rng))
+        s = score(grid, sc)
+        assert s["occupied_f1"] >= 0.95, (name, s)
+        assert s["free_accuracy"] >= 0.99, (name, s)
+        if name == "t_room_cylinder":
+            assert s["shadow"] >= 0.5
+
+
+def test_truth_must_match_the_grid(cylinder):
+    sc, grid, truth = cylinder
+    other = OccupancyGrid(grid.origin_xy_m, (10, 10), grid.resolution_m)
+    with pytest.raises(ValueError, match="ground_truth"):
+        score(other, sc, truth)
+
+
+def test_box_obstacles_rasterise(room):
+    sc, grid, _ = room
+    from irring.scenario import Box
+
+    boxed = dataclasses.replace(sc, obstacles=(Box(center_m=(1.2, 0.45), size_m=(0.1, 0.05),
+                                                   yaw_rad=0.3),))
+    truth = ground_truth(boxed, grid)
+    inside = truth.label == OBSTACLE0
+    assert inside.sum() * grid.resolution_m ** 2 == pytest.approx(0.1 * 0.05, rel=0.15)
+    assert (truth.surface_owner == OBSTACLE0).sum() == pytest.approx(2 * (10 + 5), rel=0.3)
