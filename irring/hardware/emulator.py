@@ -1,0 +1,527 @@
+"""A ring device that speaks the IRR protocol on a pseudo-terminal, backed by the simulator.
+
+    source = SimSource(load_scenario("t_room"))
+    with PtyEmulator(Device(source), link="/tmp/irring") as emu:   # /tmp/irring → /dev/pts/N
+        emu.serve_forever()                                        # or emu.start_thread()
+
+Three layers, each replaceable in tests:
+
+* a *reading source* produces ADC counts: :class:`SimSource` runs ``SimRing`` with the
+  scenario's effects; anything with ``ring``, ``adc_bits``, ``poses`` and
+  ``read(pose_index, steps, samples, settle_s) -> counts (S, N)`` will do;
+* :class:`Device` is the firmware: it answers sentences and produces IRSCN one step at a
+  time, with fault injection (:class:`Faults`) on what it sends; it does no I/O and is driven
+  by ``receive(bytes, now)`` / ``poll(now)``;
+* :class:`PtyEmulator` puts a Device on a pty master (raw mode, non-blocking), symlinks the
+  slave at ``link`` and optionally paces output like a UART at ``baud``.
+
+Reproducibility: the device calls ``source.read`` exactly once per accepted IRSWP, with the
+IRSWP's steps in order, so a host that sweeps a contiguous run in one IRSWP gets exactly
+``SimRing(scenario, seed).sweep(pose_index, steps=...)`` — SimRing seeds its k-th sweep at
+a pose with ``default_rng([seed, pose_index, k])``.
+
+Poses: the emulated robot starts at scenario pose 0; every further IRSWP that covers the
+whole step range (min_step … max_step, either direction) moves it to the next pose (wrapping).
+Partial sweeps — re-sweeps of missing steps — stay at the current pose.
+
+Device clock: with ``realtime`` the wall clock since start; otherwise a virtual clock that
+advances by what the real ring would spend (motor moves, settle, samples × 38.3 ms), so
+IRSCN timestamps and ``Sweep.duration_s`` look like the hardware's even when unthrottled.
+"""
+
+from __future__ import annotations
+
+import errno
+import math
+import os
+import select
+import threading
+import time
+import tty
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from .. import data
+from ..scenario import Ring, Scenario
+from . import protocol as p
+
+FIRMWARE = "irring-emulator-1"
+MOVE_S_PER_STEP = 0.002  # stepper time per motor step (500 steps/s) for IRGTO / reaching `from`
+
+
+class ReadingSource(Protocol):
+    """Where an emulated device's ADC counts come from."""
+
+    ring: Ring
+    adc_bits: int
+    poses: int
+
+    def read(self, pose_index: int, steps: np.ndarray, samples: int,
+             settle_s: float) -> np.ndarray:
+        """(S, N) counts at ``steps`` (in that order) from scan pose ``pose_index``."""
+
+
+class SimSource:
+    """Readings from :class:`irring.sim.SimRing` with the scenario's effects.
+
+    The scenario fixes the physics, including averaging: the host's ``samples`` and
+    ``settle_s`` set the device's timing only (``scan.samples`` applies when the scenario
+    lists the ``averaging`` effect). ``seed`` defaults to ``scenario.seed``.
+    """
+
+    def __init__(self, scenario: Scenario, *, seed: int | None = None):
+        from ..sim import SimRing  # the driver never imports sim; only the emulator does
+
+        self.scenario = scenario
+        self.seed = scenario.seed if seed is None else int(seed)
+        self.sim = SimRing(scenario, seed=self.seed)
+        self.ring = scenario.ring
+        self.adc_bits = scenario.sensor.adc_bits
+        self.poses = len(scenario.robot.poses)
+
+    def read(self, pose_index: int, steps: np.ndarray, samples: int,
+             settle_s: float) -> np.ndarray:
+        return self.sim.sweep(pose_index, steps=np.asarray(steps)).counts
+
+
+@dataclass(frozen=True)
+class Faults:
+    """What goes wrong on the emulated device's output (its input is delivered intact).
+
+    corrupt_rate: probability that each byte sent is replaced by a different random byte.
+    drop_rate: probability that a whole sentence is never sent.
+    stall_after: after this many sentences the device stops answering (reads and ignores
+        input) for ``stall_s`` seconds (default: for good), then aborts its sweep and
+        recovers.
+    disconnect_after: after this many sentences the device closes the port.
+    seed: of the fault generator (independent of the readings' noise).
+    """
+
+    corrupt_rate: float = 0.0
+    drop_rate: float = 0.0
+    stall_after: int | None = None
+    stall_s: float = math.inf
+    disconnect_after: int | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("corrupt_rate", "drop_rate"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"{name} must be 0 … 1, got {value}")
+        for name in ("stall_after", "disconnect_after"):
+            value = getattr(self, name)
+            if value is not None and value < 0:
+                raise ValueError(f"{name} must be ≥ 0 sentences, got {value}")
+
+
+@dataclass
+class DeviceStats:
+    sentences_produced: int = 0  # including dropped ones
+    sentences_dropped: int = 0
+    bytes_sent: int = 0
+    bytes_corrupted: int = 0
+    commands: int = 0
+    commands_rejected: int = 0
+    sweeps: int = 0
+
+
+@dataclass
+class _SweepJob:
+    steps: np.ndarray
+    counts: np.ndarray      # (S, N) int
+    step_s: float           # settle + samples × GP2 period, per step
+    next_index: int = 0
+    due: float = 0.0        # host time the next IRSCN is due (realtime)
+
+
+class Device:
+    """The ring's firmware, emulated: protocol logic and fault injection, no I/O.
+
+    Feed host bytes with :meth:`receive`; collect device bytes with :meth:`poll`, which
+    returns what is due at ``now`` and when to call it again. ``disconnected`` turns true
+    when the device decides to close the port.
+    """
+
+    def __init__(self, source: ReadingSource, *, faults: Faults = Faults(),
+                 realtime: bool = False, firmware: str = FIRMWARE,
+                 clock_start_ms: int = 1000, fixed_pose: int | None = None):
+        self.source = source
+        self.ring = source.ring
+        self.info = p.info_for_ring(self.ring, source.adc_bits, firmware)
+        self.faults = faults
+        self.realtime = realtime
+        self.fixed_pose = fixed_pose
+        self.decoder = p.Decoder()
+        self.stats = DeviceStats()
+        self._rng = np.random.default_rng([faults.seed, 0x1F])
+        self._out: deque[bytes] = deque()
+        self._job: _SweepJob | None = None
+        self._seq = -1                   # last IRSCN seq sent (−1: none yet)
+        self._position = 0               # motor step
+        self._pose = 0
+        self._full_sweeps = 0
+        self._clock_start_ms = clock_start_ms
+        self._virtual_ms = 0.0
+        self._t0: float | None = None
+        self._stall_until: float | None = None
+        self._stall_used = False
+        self._pending_pos: tuple[float, int] | None = None  # (due, step) of an IRGTO
+        self.disconnected = False
+
+    # ---------------------------------------------------------------- clock
+
+    def clock_ms(self, now: float) -> int:
+        if self._t0 is None:
+            self._t0 = now
+        elapsed = (now - self._t0) * 1000.0 if self.realtime else self._virtual_ms
+        return int(self._clock_start_ms + elapsed) % p.CLOCK_MODULO
+
+    @property
+    def pose_index(self) -> int:
+        return self._pose
+
+    # ---------------------------------------------------------------- input
+
+    def receive(self, chunk: bytes, now: float) -> None:
+        if self._t0 is None:
+            self._t0 = now
+        if self.disconnected or self._stalled(now):
+            return  # a hung device hears nothing
+        for item in self.decoder.feed(chunk):
+            self.stats.commands += 1
+            if isinstance(item, p.ProtocolError):
+                self.stats.commands_rejected += 1
+                code = item.fault.device_error_code
+                self._say(p.ErrorReply(code, p.ERROR_TEXT[code]))
+            else:
+                self._handle(item, now)
+
+    def _handle(self, msg: p.AnyMessage, now: float) -> None:
+        if msg.TYPE not in p.HOST_TYPES:
+            self.stats.commands_rejected += 1
+            self._say(p.ErrorReply(p.ERR_UNKNOWN_TYPE, f"{msg.TYPE} is not a command"))
+        elif isinstance(msg, p.Hello):
+            self._say(self.info)
+        elif isinstance(msg, p.Stop):
+            self._job = None  # stop after the step in progress: IRDON with the last seq sent
+            self._say(p.Done(self._seq))
+        elif self._job is not None or self._pending_pos is not None:
+            self.stats.commands_rejected += 1
+            self._say(p.ErrorReply(p.ERR_BUSY, p.ERROR_TEXT[p.ERR_BUSY]))
+        elif isinstance(msg, p.GoTo):
+            if not self._in_range(msg.step):
+                return
+            move_s = abs(msg.step - self._position) * MOVE_S_PER_STEP
+            self._advance(move_s)
+            self._pending_pos = (now + (move_s if self.realtime else 0.0), msg.step)
+        elif isinstance(msg, p.SweepCommand):
+            if not (self._in_range(msg.from_step) and self._in_range(msg.to_step)):
+                return
+            self._start_sweep(msg, now)
+
+    def _in_range(self, step: int) -> bool:
+        if self.info.min_step <= step <= self.info.max_step:
+            return True
+        self.stats.commands_rejected += 1
+        self._say(p.ErrorReply(p.ERR_STEP_RANGE, p.ERROR_TEXT[p.ERR_STEP_RANGE]))
+        return False
+
+    def _start_sweep(self, cmd: p.SweepCommand, now: float) -> None:
+        d = 1 if cmd.to_step >= cmd.from_step else -1
+        steps = np.arange(cmd.from_step, cmd.to_step + d, d)
+        full = {cmd.from_step, cmd.to_step} == {self.info.min_step, self.info.max_step}
+        if full:
+            if self._full_sweeps and self.fixed_pose is None:
+                self._pose = (self._pose + 1) % max(1, self.source.poses)
+            self._full_sweeps += 1
+        pose = self._pose if self.fixed_pose is None else self.fixed_pose
+        settle_s = cmd.settle_ms / 1000.0
+        raw = np.asarray(self.source.read(pose, steps, cmd.samples, settle_s), dtype=float)
+        top = (1 << self.info.adc_bits) - 1
+        # a real ADC reports whole counts in range; NaN (no reading) reads as 0
+        counts = np.clip(np.rint(np.nan_to_num(raw, nan=0.0)), 0, top).astype(np.int64)
+        # Moving to `from_step` costs motor time; the one-step moves inside the sweep happen
+        # within each step's settle time, so a sweep lasts data.hardware_duration_s.
+        move_s = abs(cmd.from_step - self._position) * MOVE_S_PER_STEP
+        step_s = settle_s + cmd.samples * data.GP2_PERIOD_S
+        self._advance(move_s)
+        first_due = now + (move_s + step_s if self.realtime else 0.0)
+        self._job = _SweepJob(steps, counts.reshape(len(steps), -1), step_s, due=first_due)
+        self.stats.sweeps += 1
+
+    def _advance(self, seconds: float) -> None:
+        if not self.realtime:
+            self._virtual_ms += seconds * 1000.0
+
+    # ---------------------------------------------------------------- output
+
+    def poll(self, now: float) -> tuple[bytes, float | None]:
+        """Bytes due by ``now`` (after faults) and the host time of the next due output
+        (None: nothing scheduled; ``now``: call again at once)."""
+        if self._t0 is None:
+            self._t0 = now
+        if self.disconnected:
+            return b"", None
+        if self._stalled(now):
+            self._out.clear()
+            return b"", self._stall_until if math.isfinite(self._stall_until) else None
+        if self._pending_pos is not None and now >= self._pending_pos[0]:
+            self._position = self._pending_pos[1]
+            self._pending_pos = None
+            self._say(p.Position(self._position))
+        job = self._job
+        if job is not None and not self._out and now >= job.due:
+            i = job.next_index
+            self._advance(job.step_s)
+            self._position = int(job.steps[i])
+            self._seq = (self._seq + 1) % p.SEQ_MODULO
+            self._say(p.Scan(self._seq, self._position, self.clock_ms(now),
+                             tuple(int(c) for c in job.counts[i])))
+            job.next_index += 1
+            job.due = now + job.step_s if self.realtime else now
+            if job.next_index == len(job.steps):
+                self._job = None
+                self._say(p.Done(self._seq))
+        out = bytearray()
+        while self._out and not self.disconnected:
+            out += self._transmit(self._out.popleft(), now)
+        nxt = None
+        if self._job is not None:
+            nxt = self._job.due
+        if self._pending_pos is not None:
+            nxt = self._pending_pos[0] if nxt is None else min(nxt, self._pending_pos[0])
+        return bytes(out), nxt
+
+    def _say(self, msg: p.Message) -> None:
+        self._out.append(p.encode(msg))
+
+    def _transmit(self, line: bytes, now: float) -> bytes:
+        """Apply the faults to one sentence on its way out."""
+        f = self.faults
+        k = self.stats.sentences_produced + 1
+        if f.disconnect_after is not None and k > f.disconnect_after:
+            self.disconnected = True
+            self._out.clear()
+            return b""
+        if f.stall_after is not None and k > f.stall_after and not self._stall_used:
+            self._stall_used = True
+            self._stall_until = now + f.stall_s
+            self._out.clear()
+            return b""
+        self.stats.sentences_produced = k
+        if f.drop_rate and self._rng.random() < f.drop_rate:
+            self.stats.sentences_dropped += 1
+            return b""
+        if f.corrupt_rate:
+            buf = np.frombuffer(line, dtype=np.uint8).copy()
+            hit = self._rng.random(buf.size) < f.corrupt_rate
+            if hit.any():
+                buf[hit] ^= self._rng.integers(1, 256, hit.sum(), dtype=np.uint8)
+                self.stats.bytes_corrupted += int(hit.sum())
+                line = buf.tobytes()
+        self.stats.bytes_sent += len(line)
+        return line
+
+    def _stalled(self, now: float) -> bool:
+        if self._stall_until is None:
+            return False
+        if now < self._stall_until:
+            return True
+        # the watchdog fired: the sweep in progress is lost, the device listens again
+        self._stall_until = None
+        self._job = None
+        self._pending_pos = None
+        self.decoder.reset()
+        return False
+
+
+class PtyEmulator:
+    """Runs a :class:`Device` on a pseudo-terminal.
+
+    ``path`` is the slave device (``/dev/pts/N``) a host opens like a serial port; ``link``,
+    if given, is a symlink to it (replaced if it exists). ``baud`` > 0 paces output like a
+    UART at that rate (10 bits per byte); 0 sends as fast as the pty takes it.
+    """
+
+    def __init__(self, device: Device, *, link: str | os.PathLike | None = None,
+                 baud: int = 0):
+        self.device = device
+        self.link = Path(link) if link is not None else None
+        self.baud = int(baud)
+        self.path: str | None = None
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.closed = threading.Event()
+
+    def open(self) -> str:
+        """Create the pty (and the link); returns the slave path."""
+        master, slave = os.openpty()
+        tty.setraw(slave)            # no echo, no CR/LF translation before the host opens it
+        os.set_blocking(master, False)
+        self._master, self._slave = master, slave
+        self.path = os.ttyname(slave)
+        if self.link is not None:
+            if self.link.is_symlink() or self.link.exists():
+                self.link.unlink()
+            self.link.symlink_to(self.path)
+        return self.path
+
+    def __enter__(self) -> PtyEmulator:
+        if self._master is None:
+            self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start_thread(self) -> PtyEmulator:
+        if self._master is None:
+            self.open()
+        self._thread = threading.Thread(target=self.serve_forever, name="irring-emulator",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+        self._close()
+
+    def _close(self) -> None:
+        for fd in (self._master, self._slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._master = self._slave = None
+        if self.link is not None and self.link.is_symlink():
+            try:
+                if os.readlink(self.link) == self.path:
+                    self.link.unlink()
+            except OSError:
+                pass
+        self.closed.set()
+
+    def serve_forever(self) -> None:
+        """Answer the host until :meth:`stop` or the device disconnects."""
+        if self._master is None:
+            self.open()
+        fd, dev = self._master, self.device
+        pending = bytearray()
+        budget_t, budget_sent = time.monotonic(), 0  # UART pacing
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                next_due = None
+                if len(pending) < 256:
+                    chunk, next_due = dev.poll(now)
+                    if not pending:
+                        budget_t, budget_sent = now, 0
+                    pending += chunk
+                if dev.disconnected and not pending:
+                    break
+                allowed = len(pending)
+                if self.baud > 0 and pending:
+                    allowed = int((now - budget_t) * self.baud / 10) - budget_sent
+                    allowed = max(0, min(allowed, len(pending)))
+                wait = 0.05
+                if next_due is not None:
+                    wait = min(wait, max(0.0, next_due - now))
+                if pending and allowed == 0:
+                    wait = min(wait, 10.0 / self.baud)
+                want_write = bool(pending) and allowed > 0
+                r, w, _ = select.select([fd], [fd] if want_write else [], [], wait)
+                if r:
+                    try:
+                        incoming = os.read(fd, 4096)
+                    except BlockingIOError:
+                        incoming = b""
+                    except OSError as exc:
+                        if exc.errno == errno.EIO:  # no slave open: nothing to hear
+                            incoming = b""
+                        else:
+                            raise
+                    if incoming:
+                        dev.receive(incoming, time.monotonic())
+                if w:
+                    try:
+                        n = os.write(fd, bytes(pending[:allowed]))
+                    except BlockingIOError:
+                        n = 0
+                    del pending[:n]
+                    budget_sent += n
+        finally:
+            self._close()
+
+
+class DevicePort:
+    """A pyserial-like port wired straight to a :class:`Device`, in-process: no pty, no
+    thread. ``SerialRing(DevicePort(Device(source)))`` runs the driver against the emulated
+    firmware anywhere (also where ptys do not exist). Output is delivered as soon as the
+    device produces it, so an IRSTP cannot interrupt an unthrottled sweep here."""
+
+    def __init__(self, device: Device, *, name: str = "device://emulator"):
+        self.device = device
+        self.name = name
+        self.timeout: float | None = 0.02
+        self.is_open = True
+        self._buf = bytearray()
+
+    def _pump(self) -> None:
+        now = time.monotonic()
+        for _ in range(100_000):  # everything due now (a sweep step per poll)
+            chunk, due = self.device.poll(now)
+            self._buf += chunk
+            if due is None or due > now:
+                break
+
+    def _check(self) -> None:
+        if not self.is_open:
+            import serial
+
+            raise serial.PortNotOpenError()
+        if self.device.disconnected and not self._buf:
+            import serial
+
+            raise serial.SerialException("device disconnected")
+
+    @property
+    def in_waiting(self) -> int:
+        self._check()
+        self._pump()
+        return len(self._buf)
+
+    def read(self, size: int = 1) -> bytes:
+        deadline = time.monotonic() + (self.timeout or 0.0)
+        while True:
+            self._check()
+            self._pump()
+            if self._buf or time.monotonic() >= deadline:
+                out = bytes(self._buf[:size])
+                del self._buf[:size]
+                return out
+            time.sleep(0.002)
+
+    def write(self, data_: bytes) -> int:
+        self._check()
+        self.device.receive(bytes(data_), time.monotonic())
+        return len(data_)
+
+    def reset_input_buffer(self) -> None:
+        self._pump()
+        self._buf.clear()
+
+    def open(self) -> None:
+        self.is_open = True
+
+    def close(self) -> None:
+        self.is_open = False

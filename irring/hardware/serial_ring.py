@@ -1,0 +1,636 @@
+"""The real ring (or its emulator) over a serial port, returning the same Sweep as SimRing.
+
+    with SerialRing("/dev/ttyUSB0") as ring:          # opens, then IRHLO → IRINF
+        sweep = ring.sweep(resweep=1)                  # data.Sweep; sweep.missing_steps
+        print(ring.last_report.message)
+
+The port is a pyserial URL or path (``/dev/ttyUSB0``, a pty path, ``loop://``,
+``socket://host:port``) opened with ``serial.serial_for_url`` in :meth:`SerialRing.open`, or
+an already-made pyserial port object; the constructor opens nothing (``opener`` is
+injectable). The link is checked sentence by sentence: rejected sentences, gaps in the IRSCN
+sequence, timeouts and disconnects are counted in :attr:`SerialRing.stats`. A step whose
+IRSCN never arrived is left out of the sweep and listed in ``Sweep.missing_steps`` — no
+reading is ever invented. A device that stops answering raises :class:`DeviceTimeout` after
+``timeout_s`` (plus a few IRSTP retries of ``timeout_s`` each), never hangs; a closed port
+raises :class:`DeviceDisconnected`. Both carry the readings received so far in ``.partial``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable
+
+import numpy as np
+import serial
+
+from .. import data
+from ..designs import PAPER_RING
+from ..scenario import Ring
+from . import protocol as p
+
+log = logging.getLogger("irring.hardware")
+
+DEFAULT_BAUD = 115200
+DEFAULT_TIMEOUT_S = 1.0
+
+
+# --------------------------------------------------------------------------- errors
+
+
+class DeviceError(RuntimeError):
+    """The ring cannot be used as asked; the message says what to check."""
+
+
+class HandshakeError(DeviceError):
+    """No usable IRINF answer to IRHLO."""
+
+
+class DeviceRejected(DeviceError):
+    """The device answered a command with IRERR (bad argument, step out of range, …)."""
+
+    def __init__(self, message: str, code: int, text: str):
+        super().__init__(message)
+        self.code, self.text = code, text
+
+
+class LinkLost(DeviceError):
+    """The device went away mid-operation; ``partial`` holds what was received."""
+
+    def __init__(self, message: str, partial: data.Sweep | None = None,
+                 report: SweepReport | None = None):
+        super().__init__(message)
+        self.partial, self.report = partial, report
+
+
+class DeviceTimeout(LinkLost):
+    """The device stopped answering (no sentence for ``timeout_s``, IRSTP retries unanswered)."""
+
+
+class DeviceDisconnected(LinkLost):
+    """The port failed (cable pulled, emulator gone, socket closed)."""
+
+
+# --------------------------------------------------------------------------- reports
+
+
+@dataclass
+class LinkStats:
+    """Counters of everything that went wrong (or right) on the link, cumulative."""
+
+    sentences: int = 0          # decoded and accepted sentences of every type
+    scans: int = 0              # IRSCN accepted into a sweep
+    checksum_failures: int = 0  # sentences dropped for a wrong checksum
+    malformed: int = 0          # sentences dropped for any other framing/field fault
+    ignored_bytes: int = 0      # bytes outside any sentence (line noise)
+    seq_gaps: int = 0           # places where the IRSCN sequence jumped
+    lost_scans: int = 0         # IRSCN the device sent that never arrived intact
+    inconsistent: int = 0       # valid-checksum IRSCN contradicting the sweep, dropped
+    stale: int = 0              # IRSCN left over from an earlier sweep, dropped
+    duplicates: int = 0         # a second IRSCN for a step already read, dropped
+    timeouts: int = 0           # waits of timeout_s with nothing arriving
+    disconnects: int = 0
+    device_errors: int = 0      # IRERR answers received
+    resent_commands: int = 0    # commands sent again after IRERR 1 / busy / timeout
+    resweeps: int = 0           # IRSWP re-issued for missing steps only
+
+    def as_dict(self) -> dict[str, int]:
+        return dataclasses.asdict(self)
+
+    def minus(self, earlier: dict[str, int]) -> dict[str, int]:
+        return {k: v - earlier.get(k, 0) for k, v in self.as_dict().items()}
+
+
+@dataclass(frozen=True)
+class SweepReport:
+    """What happened during one :meth:`SerialRing.sweep` call."""
+
+    requested_steps: tuple[int, ...]
+    received_steps: int
+    missing_steps: tuple[int, ...]
+    link: dict[str, int]          # LinkStats counted during this sweep only
+    complete: bool                # the device ended every pass with IRDON
+    wall_time_s: float            # host time the call took
+    message: str                  # one line for a person
+
+    def as_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _describe_link(link: dict[str, int]) -> str:
+    names = {"checksum_failures": "checksum failures", "malformed": "malformed sentences",
+             "lost_scans": "IRSCN lost", "seq_gaps": "seq gaps", "timeouts": "timeouts",
+             "inconsistent": "inconsistent IRSCN dropped", "stale": "stale IRSCN dropped",
+             "duplicates": "duplicates", "device_errors": "IRERR answers",
+             "resent_commands": "commands resent", "resweeps": "re-sweeps",
+             "disconnects": "disconnects"}
+    parts = [f"{link[k]} {v}" for k, v in names.items() if link.get(k)]
+    return ", ".join(parts) if parts else "clean link"
+
+
+# --------------------------------------------------------------------------- driver
+
+
+def _runs(steps: list[int]) -> list[tuple[int, int]]:
+    """Consecutive runs (±1 per step, one direction) → [(from, to)], in order."""
+    runs: list[tuple[int, int]] = []
+    i = 0
+    while i < len(steps):
+        j = i
+        if j + 1 < len(steps) and abs(steps[j + 1] - steps[j]) == 1:
+            d = steps[j + 1] - steps[j]
+            while j + 1 < len(steps) and steps[j + 1] - steps[j] == d:
+                j += 1
+        runs.append((steps[i], steps[j]))
+        i = j + 1
+    return runs
+
+
+@dataclass
+class _Pass:
+    """Bookkeeping of one IRSWP: which steps it asked for and what arrived."""
+
+    run: tuple[int, int]                 # (from, to) inclusive, either direction
+    got: dict[int, p.Scan] = field(default_factory=dict)
+    done: bool = False
+    done_seq: int | None = None
+
+    @property
+    def expected(self) -> list[int]:
+        lo, hi = self.run
+        d = 1 if hi >= lo else -1
+        return list(range(lo, hi + d, d))
+
+
+class SerialRing:
+    """A ring speaking the IRR protocol over a pyserial port.
+
+    Parameters
+    ----------
+    port: a pyserial URL or device path, or an open/openable pyserial port object.
+    baudrate: UART speed (both ends must agree; 115200 by default).
+    timeout_s: longest silence tolerated while an answer is due, on top of the time the
+        device needs per step (settle + samples × 38.3 ms). After it the driver sends
+        IRSTP up to ``retries`` times before giving up with :class:`DeviceTimeout`.
+    retries: how often a command is repeated after IRERR 1, busy or a timeout.
+    template: the ring design whose numbers the device does not report (radius, emitter
+        offset, sensor height, joint limit); IRINF overrides sensors, step, gear, limits.
+    radius_m / emitter_offset_m: override the template's (paper: 0.15 m / 0.007 m).
+    sensor_model, vref_v, max_range_m: what the Sweep says about the sensors (the device
+        does not report them; take them from your calibration file).
+    opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
+    """
+
+    def __init__(self, port: str | serial.SerialBase, *, baudrate: int = DEFAULT_BAUD,
+                 timeout_s: float = DEFAULT_TIMEOUT_S, retries: int = 2,
+                 template: Ring = PAPER_RING, radius_m: float | None = None,
+                 emitter_offset_m: float | None = None, sensor_model: str = "gp2d12",
+                 vref_v: float = 5.0, max_range_m: float = 0.624,
+                 opener: Callable[..., serial.SerialBase] = serial.serial_for_url):
+        if timeout_s <= 0:
+            raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
+        self.port_name = port if isinstance(port, str) else getattr(port, "name", None) or "port"
+        self._port_arg = port
+        self._port: serial.SerialBase | None = None
+        self.baudrate = baudrate
+        self.timeout_s = float(timeout_s)
+        self.retries = int(retries)
+        self.template = template
+        self.radius_m = radius_m
+        self.emitter_offset_m = emitter_offset_m
+        self.sensor_model, self.vref_v, self.max_range_m = sensor_model, vref_v, max_range_m
+        self.opener = opener
+        self.poll_s = min(0.02, self.timeout_s / 4)
+        self.decoder = p.Decoder()
+        self.stats = LinkStats()
+        self.info: p.Info | None = None
+        self.ring: Ring | None = None
+        self.last_report: SweepReport | None = None
+        self._last_seq: int | None = None  # seq of the device's last IRSCN, from IRDON
+
+    # ---------------------------------------------------------------- lifecycle
+
+    def open(self, handshake: bool = True) -> SerialRing:
+        """Open the port (if given as a URL/path), flush it and, by default, handshake."""
+        if self._port is None:
+            if isinstance(self._port_arg, str):
+                try:
+                    self._port = self.opener(self._port_arg, baudrate=self.baudrate,
+                                             timeout=self.poll_s, write_timeout=self.timeout_s)
+                except (serial.SerialException, OSError, ValueError) as exc:
+                    raise DeviceError(
+                        f"cannot open {self._port_arg}: {exc}. Check the device path (ls "
+                        f"/dev/ttyUSB* /dev/ttyACM*), that you may use it (group dialout), "
+                        f"or start the emulator: irring emulate t_room --link /tmp/irring"
+                    ) from exc
+            else:
+                self._port = self._port_arg
+                if not self._port.is_open:
+                    self._port.open()
+                self._port.timeout = self.poll_s
+            self._flush()
+        if handshake:
+            self.hello()
+        return self
+
+    def close(self) -> None:
+        if self._port is not None:
+            try:
+                self._port.close()
+            except (serial.SerialException, OSError):
+                pass
+            self._port = None
+
+    def __enter__(self) -> SerialRing:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def port(self) -> serial.SerialBase:
+        if self._port is None:
+            raise DeviceError("the port is not open; call open() or use `with SerialRing(...)`")
+        return self._port
+
+    # ---------------------------------------------------------------- I/O
+
+    def _flush(self) -> None:
+        try:
+            self.port.reset_input_buffer()
+        except (serial.SerialException, OSError) as exc:
+            raise self._lost(DeviceDisconnected, f"flushing failed: {exc}") from exc
+        self.decoder.reset()
+
+    def _send(self, msg: p.Message) -> None:
+        line = p.encode(msg)
+        log.debug("host → %r", line)
+        try:
+            self.port.write(line)
+        except serial.SerialTimeoutException as exc:
+            self.stats.timeouts += 1
+            raise self._lost(DeviceTimeout, f"could not send {msg.TYPE} within "
+                                            f"{self.timeout_s:g} s (flow control?)") from exc
+        except (serial.SerialException, OSError) as exc:
+            raise self._lost(DeviceDisconnected, f"write failed: {exc}") from exc
+
+    def _receive(self) -> list[p.AnyMessage]:
+        """Whatever arrives within one poll interval, decoded; rejections are counted."""
+        try:
+            waiting = self.port.in_waiting
+            chunk = self.port.read(waiting if waiting else 1)
+        except (serial.SerialException, OSError) as exc:
+            raise self._lost(DeviceDisconnected, f"read failed: {exc}") from exc
+        if not chunk:
+            return []
+        before = self.decoder.ignored_bytes
+        out = []
+        for item in self.decoder.feed(chunk):
+            if isinstance(item, p.ProtocolError):
+                if item.fault is p.Fault.CHECKSUM_MISMATCH:
+                    self.stats.checksum_failures += 1
+                else:
+                    self.stats.malformed += 1
+                log.debug("dropped: %s", item)
+            else:
+                self.stats.sentences += 1
+                log.debug("device → %r", item)
+                out.append(item)
+        self.stats.ignored_bytes += self.decoder.ignored_bytes - before
+        return out
+
+    def _lost(self, cls: type[LinkLost], what: str, partial: data.Sweep | None = None,
+              report: SweepReport | None = None) -> LinkLost:
+        if cls is DeviceDisconnected:
+            self.stats.disconnects += 1
+            msg = (f"ring on {self.port_name} disconnected ({what}). Check the cable and power; "
+                   f"if you use the emulator, is `irring emulate` still running?")
+        else:
+            msg = (f"ring on {self.port_name} stopped answering ({what}). Check power, cable "
+                   f"and baud rate ({self.baudrate}); reset the board if it hangs.")
+        return cls(msg, partial, report)
+
+    # ---------------------------------------------------------------- handshake
+
+    def hello(self) -> p.Info:
+        """IRHLO → IRINF: learn the ring's geometry; sets :attr:`info` and :attr:`ring`."""
+        tries = self.retries + 1
+        for attempt in range(tries):
+            if attempt:
+                self.stats.resent_commands += 1
+            self._send(p.Hello())
+            deadline = time.monotonic() + self.timeout_s
+            refused = False
+            while not refused and time.monotonic() < deadline:
+                for msg in self._receive():
+                    if isinstance(msg, p.Info):
+                        return self._accept_info(msg)
+                    if isinstance(msg, p.ErrorReply):
+                        # IRERR 1/2: our IRHLO was garbled; 5: a sweep still runs, stop it
+                        self.stats.device_errors += 1
+                        if msg.code == p.ERR_BUSY:
+                            self._send(p.Stop())
+                        refused = True
+            if not refused:
+                self.stats.timeouts += 1
+        raise HandshakeError(
+            f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
+            f"each. Check the port, the baud rate ({self.baudrate}), that the ring is powered "
+            f"and runs IRR protocol v{p.PROTOCOL_VERSION} firmware "
+            f"({self.stats.checksum_failures} checksum failures, "
+            f"{self.stats.ignored_bytes} stray bytes seen).")
+
+    def _accept_info(self, info: p.Info) -> p.Info:
+        if info.proto != p.PROTOCOL_VERSION:
+            raise HandshakeError(f"the device on {self.port_name} speaks IRR protocol "
+                                 f"v{info.proto}; this driver speaks v{p.PROTOCOL_VERSION}")
+        self.info = info
+        self.ring = p.ring_from_info(info, self.template, radius_m=self.radius_m,
+                                     emitter_offset_m=self.emitter_offset_m)
+        log.info("ring %s: %d sensors, %d-bit ADC, %.3f° motor step × %d/%d, steps %d … %d",
+                 info.firmware, info.nsensors, info.adc_bits, info.step_mdeg / 1000,
+                 info.gear_num, info.gear_den, info.min_step, info.max_step)
+        return info
+
+    def _require_info(self) -> p.Info:
+        if self.info is None:
+            raise DeviceError("no handshake yet: call open() (or hello()) before sweeping")
+        return self.info
+
+    # ---------------------------------------------------------------- motion
+
+    def goto(self, step: int) -> int:
+        """Move to motor ``step``; returns the step the device reports (IRPOS)."""
+        info = self._require_info()
+        if not info.min_step <= step <= info.max_step:
+            raise ValueError(f"step {step} is outside the ring's {info.min_step} … "
+                             f"{info.max_step}")
+        for _ in range(self.retries + 1):
+            self._send(p.GoTo(int(step)))
+            msg = self._await((p.Position, p.ErrorReply), self.timeout_s)
+            if isinstance(msg, p.Position):
+                return msg.step
+            if isinstance(msg, p.ErrorReply):
+                self._raise_rejected(msg, f"IRGTO,{step}")
+            self.stats.resent_commands += 1
+        raise self._lost(DeviceTimeout, f"no IRPOS within {self.timeout_s:g} s after IRGTO")
+
+    def stop(self) -> int | None:
+        """Stop a sweep in progress; returns the device's last IRSCN seq (None: no answer)."""
+        for _ in range(self.retries + 1):
+            self._send(p.Stop())
+            msg = self._await((p.Done,), self.timeout_s)
+            if isinstance(msg, p.Done):
+                self._last_seq = msg.seq if msg.seq >= 0 else self._last_seq
+                return msg.seq
+        return None
+
+    def _await(self, kinds: tuple[type, ...], wait_s: float) -> p.AnyMessage | None:
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            for msg in self._receive():
+                if isinstance(msg, p.ErrorReply):
+                    self.stats.device_errors += 1
+                    if msg.code in (p.ERR_BAD_SENTENCE, p.ERR_BUSY) and p.ErrorReply not in kinds:
+                        return None  # our command was garbled or refused: resend
+                if isinstance(msg, kinds):
+                    return msg
+        self.stats.timeouts += 1
+        return None
+
+    def _raise_rejected(self, msg: p.ErrorReply, command: str) -> None:
+        if msg.code in (p.ERR_BAD_SENTENCE, p.ERR_BUSY):
+            return  # retried by the caller
+        raise DeviceRejected(f"the ring rejected {command}: IRERR {msg.code} "
+                             f"({msg.text or p.ERROR_TEXT.get(msg.code, '?')})", msg.code,
+                             msg.text)
+
+    # ---------------------------------------------------------------- sweeping
+
+    def full_range(self) -> np.ndarray:
+        info = self._require_info()
+        return np.arange(info.min_step, info.max_step + 1)
+
+    def sweep(self, steps: Iterable[int] | None = None, *, samples: int = 1,
+              settle_s: float = 0.0, pose: Iterable[float] = (0.0, 0.0, 0.0),
+              resweep: int = 0) -> data.Sweep:
+        """Sweep the ring and return a :class:`data.Sweep` of the readings that arrived.
+
+        steps: motor steps to read, in order (default: min_step … max_step from IRINF).
+            Consecutive steps go out as one IRSWP; other steps as one IRSWP each.
+        samples: readings averaged per step by the device (1–64).
+        settle_s: wait at each step before reading (sent as whole ms).
+        pose: the robot's (x m, y m, yaw rad) for this sweep, stored in the Sweep.
+        resweep: rounds of re-sweeping only the steps still missing.
+
+        Missing steps are absent from ``counts`` and listed in ``missing_steps``;
+        :attr:`last_report` says why. Raises :class:`DeviceTimeout` /
+        :class:`DeviceDisconnected` (with ``.partial``) if the device goes away.
+        """
+        info = self._require_info()
+        req = [int(s) for s in (self.full_range() if steps is None else np.asarray(steps).ravel())]
+        if not req:
+            raise ValueError("no steps to sweep")
+        bad = [s for s in req if not info.min_step <= s <= info.max_step]
+        if bad:
+            raise ValueError(f"steps {bad[:5]} are outside the ring's {info.min_step} … "
+                             f"{info.max_step} (from IRINF)")
+        if len(set(req)) != len(req):
+            raise ValueError("each step may be requested once per sweep")
+        if not 1 <= samples <= p.MAX_SAMPLES:
+            raise ValueError(f"samples must be 1 … {p.MAX_SAMPLES}, got {samples}")
+        settle_ms = int(round(settle_s * 1000))
+        if settle_ms < 0:
+            raise ValueError(f"settle_s must be ≥ 0, got {settle_s}")
+        started = time.monotonic()
+        before = self.stats.as_dict()
+        passes: list[_Pass] = []
+        pose_arr = np.asarray(tuple(pose), dtype=float)
+
+        def build(complete: bool, reason: str) -> tuple[data.Sweep, SweepReport]:
+            sweep = self._assemble(req, passes, samples, settle_ms, pose_arr)
+            report = self._report(req, sweep, before, complete, started, reason)
+            self.last_report = report
+            return sweep, report
+
+        try:
+            for run in _runs(req):
+                passes.append(_Pass(run))
+                self._pass(passes[-1], samples, settle_ms)
+            for _ in range(int(resweep)):
+                got = {s for ps in passes for s in ps.got}
+                missing = [s for s in req if s not in got]
+                if not missing:
+                    break
+                self.stats.resweeps += 1
+                log.info("re-sweeping %d missing steps", len(missing))
+                for run in _runs(missing):
+                    passes.append(_Pass(run))
+                    self._pass(passes[-1], samples, settle_ms)
+        except LinkLost as exc:
+            self._last_seq = None  # the device may still be numbering IRSCN we never saw
+            sweep, report = build(False, "device stopped answering"
+                                  if isinstance(exc, DeviceTimeout) else "device disconnected")
+            exc.partial, exc.report = sweep, report
+            exc.args = (f"{exc} {report.message}",)
+            raise
+        sweep, report = build(all(ps.done for ps in passes), "")
+        if sweep.missing_steps:
+            log.info("%s", report.message)
+        return sweep
+
+    def _pass(self, ps: _Pass, samples: int, settle_ms: int) -> None:
+        """One IRSWP over ``ps.run``, filling ``ps`` as IRSCN arrive (so a LinkLost raised
+        here still leaves what arrived); losses are counted, not raised."""
+        info = self._require_info()
+        lo, hi = ps.run
+        pos_of = {s: i for i, s in enumerate(ps.expected)}
+        # The device numbers IRSCN globally. `hint` (last IRDON + 1) only unmasks stale
+        # IRSCN; `base` (the seq of this pass's first step) comes from the first IRSCN.
+        hint = None if self._last_seq is None else (self._last_seq + 1) % p.SEQ_MODULO
+        base: int | None = None
+        last_seq: int | None = None
+        max_count = (1 << info.adc_bits) - 1
+        per_step_s = settle_ms / 1000 + samples * data.GP2_PERIOD_S
+        # the first IRSCN may need a move from wherever the motor is to `lo`
+        first_wait = self.timeout_s + per_step_s + abs(info.max_step - info.min_step) * 0.005
+        cmd = p.SweepCommand(lo, hi, samples, settle_ms)
+        self._flush()
+        self._send(cmd)
+        deadline = time.monotonic() + first_wait
+        stops = resends = 0
+        while True:
+            msgs = self._receive()
+            now = time.monotonic()
+            if msgs:
+                deadline = now + self.timeout_s + per_step_s
+            for msg in msgs:
+                if isinstance(msg, p.Scan):
+                    if len(msg.counts) != info.nsensors or max(msg.counts) > max_count:
+                        self.stats.inconsistent += 1
+                        continue
+                    pos = pos_of.get(msg.step)
+                    if hint is not None and (msg.seq - hint) % p.SEQ_MODULO >= p.SEQ_MODULO // 2:
+                        self.stats.stale += 1  # numbered before this pass began
+                        continue
+                    if pos is None or (base is not None and (msg.seq - base) % p.SEQ_MODULO != pos):
+                        self.stats.inconsistent += 1  # its step contradicts its seq
+                        continue
+                    if base is None:
+                        base = (msg.seq - pos) % p.SEQ_MODULO
+                    if msg.step in ps.got:
+                        self.stats.duplicates += 1
+                        continue
+                    gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) \
+                        % p.SEQ_MODULO
+                    if gap:
+                        self.stats.seq_gaps += 1
+                        self.stats.lost_scans += gap
+                    last_seq = msg.seq
+                    ps.got[msg.step] = msg
+                    self.stats.scans += 1
+                elif isinstance(msg, p.Done):
+                    if base is None:
+                        base = hint
+                    if msg.seq >= 0 and base is not None:
+                        ahead = (msg.seq - (base - 1 if last_seq is None else last_seq)) \
+                            % p.SEQ_MODULO
+                        if 0 < ahead < p.SEQ_MODULO // 2:  # IRSCN after the last one we got
+                            self.stats.seq_gaps += 1
+                            self.stats.lost_scans += ahead
+                    self._last_seq = msg.seq if msg.seq >= 0 else self._last_seq
+                    ps.done, ps.done_seq = True, msg.seq
+                    return
+                elif isinstance(msg, p.ErrorReply):
+                    self.stats.device_errors += 1
+                    if msg.code == p.ERR_BUSY or (msg.code == p.ERR_BAD_SENTENCE and not ps.got
+                                                  and not stops):
+                        if resends >= self.retries:
+                            raise DeviceRejected(f"the ring kept refusing {p.encode(cmd)!r}: "
+                                                 f"IRERR {msg.code} ({msg.text})", msg.code,
+                                                 msg.text)
+                        resends += 1
+                        self.stats.resent_commands += 1
+                        if msg.code == p.ERR_BUSY:
+                            self.stop()
+                        self._send(cmd)
+                    elif msg.code == p.ERR_BAD_SENTENCE and stops:
+                        self._send(p.Stop())  # our IRSTP was garbled
+                    elif msg.code != p.ERR_BAD_SENTENCE:
+                        self._raise_rejected(msg, p.encode(cmd).decode().strip())
+                # IRPOS / IRINF here are late answers to earlier commands: ignore
+            if now >= deadline:
+                # silence: ask the device to end the sweep; IRDON tells what it sent
+                self.stats.timeouts += 1
+                if stops > self.retries:
+                    received = len(ps.got)
+                    raise self._lost(
+                        DeviceTimeout,
+                        f"no sentence for {self.timeout_s:g} s during IRSWP,{lo},{hi} after "
+                        f"{received} of {len(ps.expected)} steps; {stops} IRSTP unanswered")
+                stops += 1
+                self.stats.resent_commands += 1
+                self._send(p.Stop())
+                deadline = now + self.timeout_s
+
+    def _assemble(self, req: list[int], passes: list[_Pass], samples: int, settle_ms: int,
+                  pose: np.ndarray) -> data.Sweep:
+        info = self.info
+        got: dict[int, p.Scan] = {}
+        for ps in passes:
+            for step, scan in ps.got.items():
+                got.setdefault(step, scan)
+        steps = np.array([s for s in req if s in got], dtype=int)
+        missing = tuple(s for s in req if s not in got)
+        n = info.nsensors
+        counts = np.array([got[s].counts for s in steps], dtype=np.int64).reshape(len(steps), n)
+        # device clock, unwrapped from the first reading of this sweep (ms → s)
+        scans = [sc for ps in passes for sc in ps.got.values()]
+        if scans:
+            t0 = scans[0].t_ms  # the first reading to arrive
+            rel = np.array([(got[s].t_ms - t0) % p.CLOCK_MODULO for s in steps], dtype=float)
+            rel[rel >= p.CLOCK_MODULO // 2] -= p.CLOCK_MODULO  # a reading before the first
+            timestamps = (t0 + rel) / 1000.0
+        else:
+            timestamps = np.zeros(0)
+        duration = sum(self._pass_duration(ps, samples, settle_ms) for ps in passes)
+        return data.Sweep(
+            steps=steps, sensor_angles=data.sensor_angles_for_steps(self.ring, steps),
+            counts=counts, timestamps_s=timestamps, duration_s=duration, pose=pose,
+            ring=self.ring, sensor_model=self.sensor_model, adc_bits=info.adc_bits,
+            vref_v=self.vref_v, max_range_m=self.max_range_m, samples=samples,
+            settle_s=settle_ms / 1000, missing_steps=missing, source=f"serial:{self.port_name}")
+
+    @staticmethod
+    def _pass_duration(ps: _Pass, samples: int, settle_ms: int) -> float:
+        """Device-clock time of one pass: the span between its first and last readings,
+        extended by one mean step interval (the first step's own time, which no timestamp
+        brackets). With fewer than two readings, the nominal hardware time."""
+        if len(ps.got) < 2:
+            return data.hardware_duration_s(len(ps.expected), settle_ms / 1000, samples)
+        pos = {s: i for i, s in enumerate(ps.expected)}
+        first = min(ps.got.values(), key=lambda sc: pos[sc.step])
+        last = max(ps.got.values(), key=lambda sc: pos[sc.step])
+        span_s = ((last.t_ms - first.t_ms) % p.CLOCK_MODULO) / 1000.0
+        per_step = span_s / (pos[last.step] - pos[first.step])
+        return per_step * len(ps.expected)
+
+    def _report(self, req: list[int], sweep: data.Sweep, before: dict[str, int],
+                complete: bool, started: float, reason: str) -> SweepReport:
+        link = self.stats.minus(before)
+        n_req, n_got = len(req), len(sweep.steps)
+        if sweep.missing_steps:
+            shown = ", ".join(map(str, sweep.missing_steps[:12]))
+            more = " …" if len(sweep.missing_steps) > 12 else ""
+            msg = (f"{n_got} of {n_req} steps received; missing steps {shown}{more} "
+                   f"(not invented, left out of the sweep)")
+        else:
+            msg = f"all {n_req} steps received"
+        msg += f"; {_describe_link(link)}"
+        if reason:
+            msg = f"{reason}: {msg}"
+        return SweepReport(tuple(req), n_got, sweep.missing_steps, link, complete,
+                           time.monotonic() - started, msg)

@@ -1,0 +1,358 @@
+"""SerialRing against in-process devices: handshake, sweeps, losses, dead links, misbehaviour.
+
+The device here is the emulator's firmware (``Device``) over an in-process port, fed by a
+small stand-in reading source, or a scripted port for behaviour the emulator never shows.
+The real-pty tests against SimRing are in test_emulator.py.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import serial
+
+from irring import data
+from irring.designs import PAPER_RING
+from irring.hardware import (DeviceDisconnected, DeviceError, DeviceRejected, DeviceTimeout,
+                             HandshakeError, SerialRing)
+from irring.hardware import protocol as p
+from irring.hardware.emulator import Device, DevicePort, Faults
+
+TIMEOUT_S = 0.1
+
+
+class StandInSource:
+    """Deterministic counts that depend on pose, step, sensor and the sweep number."""
+
+    def __init__(self, ring=PAPER_RING, adc_bits=12, poses=4, seed=7):
+        self.ring, self.adc_bits, self.poses, self.seed = ring, adc_bits, poses, seed
+        self.calls: list[tuple[int, tuple[int, ...]]] = []
+
+    def truth(self, pose: int, steps, k: int = 0) -> np.ndarray:
+        rng = np.random.default_rng([self.seed, pose, k])
+        steps = np.asarray(steps)
+        base = 1000 + 20 * steps[:, None] + 100 * np.arange(self.ring.sensors) + 500 * pose
+        return base + rng.integers(0, 50, size=base.shape)
+
+    def read(self, pose_index, steps, samples, settle_s):
+        k = sum(1 for p_, _ in self.calls if p_ == pose_index)
+        self.calls.append((pose_index, tuple(int(s) for s in steps)))
+        return self.truth(pose_index, steps, k)
+
+
+def ring_on(device: Device, **kw) -> SerialRing:
+    kw.setdefault("timeout_s", TIMEOUT_S)
+    return SerialRing(DevicePort(device), **kw).open()
+
+
+def rows_equal(sweep: data.Sweep, truth: np.ndarray, all_steps: np.ndarray) -> bool:
+    idx = [int(np.flatnonzero(all_steps == s)[0]) for s in sweep.steps]
+    return np.array_equal(sweep.counts, truth[idx])
+
+
+# --------------------------------------------------------------------------- construction
+
+
+def test_constructor_opens_nothing_and_open_uses_the_injected_opener():
+    calls = []
+
+    def opener(url, **kw):
+        calls.append((url, kw))
+        return DevicePort(Device(StandInSource()))
+
+    ring = SerialRing("socket://ring.local:7000", opener=opener, timeout_s=0.5, baudrate=57600)
+    assert calls == [] and ring.info is None
+    ring.open()
+    assert calls[0][0] == "socket://ring.local:7000"
+    assert calls[0][1]["baudrate"] == 57600 and calls[0][1]["write_timeout"] == 0.5
+    assert ring.ring == PAPER_RING
+
+
+def test_a_missing_port_is_a_clear_error_naming_the_emulator():
+    ring = SerialRing("/dev/irring-no-such-port")
+    with pytest.raises(DeviceError, match="cannot open /dev/irring-no-such-port.*irring emulate"):
+        ring.open()
+
+
+def test_loop_url_is_opened_through_pyserial_and_an_echo_is_no_ring():
+    # loop:// hands our own IRHLO back: a decodable sentence, but not an IRINF answer
+    started = time.monotonic()
+    with pytest.raises(HandshakeError, match=r"no IRINF answer from loop:// to 2 IRHLO"):
+        SerialRing("loop://", timeout_s=TIMEOUT_S, retries=1).open()
+    assert time.monotonic() - started < 2 * TIMEOUT_S + 0.5
+
+
+def test_handshake_sets_the_geometry_from_irinf_and_the_user_numbers():
+    src = StandInSource(ring=PAPER_RING.__class__(sensors=8, min_step=-20, max_step=10,
+                                                  gear=0.5))
+    ring = ring_on(Device(src), radius_m=0.2, emitter_offset_m=0.01)
+    assert (ring.ring.sensors, ring.ring.gear, ring.ring.min_step, ring.ring.max_step) == \
+        (8, 0.5, -20, 10)
+    assert (ring.ring.radius_m, ring.ring.emitter_offset_m) == (0.2, 0.01)
+    assert ring.info.firmware == "irring-emulator-1"
+
+
+def test_wrong_protocol_version_is_refused():
+    port = ScriptPort(lambda msg: [p.Info(2, 12, 12, 1800, 3, 5, -35, 35, "future")])
+    with pytest.raises(HandshakeError, match="speaks IRR protocol v2"):
+        SerialRing(port, timeout_s=TIMEOUT_S).open()
+
+
+# --------------------------------------------------------------------------- sweeps
+
+
+def test_fault_free_sweep_returns_every_reading_with_geometry_and_device_time():
+    src = StandInSource()
+    ring = ring_on(Device(src))
+    sweep = ring.sweep(pose=(1.0, 2.0, 0.5), samples=2, settle_s=0.010)
+    steps = np.arange(-35, 36)
+    assert np.array_equal(sweep.steps, steps) and sweep.missing_steps == ()
+    assert np.array_equal(sweep.counts, src.truth(0, steps))
+    assert np.allclose(sweep.sensor_angles, data.sensor_angles_for_steps(PAPER_RING, steps))
+    assert np.array_equal(sweep.pose, [1.0, 2.0, 0.5]) and sweep.ring == PAPER_RING
+    assert (sweep.samples, sweep.settle_s, sweep.adc_bits) == (2, 0.010, 12)
+    # the device clock advances by settle + samples × GP2 period per step
+    assert np.allclose(np.diff(sweep.timestamps_s), 0.010 + 2 * data.GP2_PERIOD_S, atol=1.1e-3)
+    assert sweep.duration_s == pytest.approx(data.hardware_duration_s(71, 0.010, 2), abs=2e-3)
+    assert ring.last_report.complete and ring.last_report.message.startswith("all 71 steps")
+
+
+def test_descending_and_non_contiguous_steps_are_read_in_the_order_asked():
+    src = StandInSource()
+    ring = ring_on(Device(src))
+    sweep = ring.sweep(np.arange(10, -11, -1))
+    assert list(sweep.steps) == list(range(10, -11, -1))
+    assert src.calls[-1][1] == tuple(range(10, -11, -1))  # one IRSWP for the whole run
+    strided = ring.sweep([-35, -33, -31, 0])
+    assert list(strided.steps) == [-35, -33, -31, 0]
+    assert [c[1] for c in src.calls[-4:]] == [(-35,), (-33,), (-31,), (0,)]
+
+
+def test_steps_outside_the_ring_are_refused_before_anything_is_sent():
+    ring = ring_on(Device(StandInSource()))
+    with pytest.raises(ValueError, match=r"outside the ring's -35 … 35"):
+        ring.sweep([0, 36])
+    with pytest.raises(ValueError, match="samples must be 1 … 64"):
+        ring.sweep(samples=0)
+
+
+def test_sweep_before_handshake_says_what_to_do():
+    ring = SerialRing(DevicePort(Device(StandInSource())))
+    with pytest.raises(DeviceError, match="open"):
+        ring.sweep()
+
+
+def test_dropped_sentences_leave_steps_missing_never_invented_and_counted():
+    src = StandInSource()
+    ring = ring_on(Device(src, faults=Faults(drop_rate=0.2, seed=1)))
+    steps = np.arange(-35, 36)
+    for k in range(3):
+        sweep = ring.sweep()
+        truth = src.truth(0, steps, k) if k == 0 else None
+        got = set(sweep.steps.tolist())
+        assert got.isdisjoint(sweep.missing_steps)
+        assert got | set(sweep.missing_steps) == set(steps.tolist())
+        assert len(sweep.counts) == len(sweep.steps)
+        if truth is not None:
+            assert rows_equal(sweep, truth, steps)
+            assert 5 < len(sweep.missing_steps) < 30
+        report = ring.last_report
+        assert report.link["lost_scans"] == len(sweep.missing_steps)
+        assert f"{len(sweep.steps)} of 71 steps received" in report.message
+        assert "not invented" in report.message
+
+
+def test_corrupted_bytes_are_dropped_by_checksum_and_counted():
+    src = StandInSource()
+    ring = ring_on(Device(src, faults=Faults(corrupt_rate=0.01, seed=2)), retries=4)
+    sweep = ring.sweep()
+    steps = np.arange(-35, 36)
+    assert rows_equal(sweep, src.truth(0, steps), steps)
+    link = ring.last_report.link
+    assert link["checksum_failures"] + link["malformed"] > 0
+    assert len(sweep.missing_steps) == 71 - len(sweep.steps) > 0
+
+
+def test_resweep_fetches_only_the_missing_steps():
+    src = StandInSource()
+    ring = ring_on(Device(src, faults=Faults(drop_rate=0.2, seed=1)))
+    sweep = ring.sweep(resweep=4)
+    assert len(sweep.missing_steps) < 3
+    first_pass, *again = [c for c in src.calls if c[0] == 0]
+    assert first_pass[1] == tuple(range(-35, 36))
+    resent = {s for _, run in again for s in run}
+    assert resent and len(resent) < 40  # never the whole range again
+    assert ring.last_report.link["resweeps"] >= 1
+
+
+def test_a_stalled_device_is_a_timeout_with_the_partial_sweep_not_a_hang():
+    ring = ring_on(Device(StandInSource(), faults=Faults(stall_after=1 + 30)), retries=1)
+    started = time.monotonic()
+    with pytest.raises(DeviceTimeout) as err:
+        ring.sweep()
+    elapsed = time.monotonic() - started
+    # bound: first wait (timeout + step time + a full move) + (retries + 1) IRSTP waits
+    assert elapsed < TIMEOUT_S + 0.04 + 70 * 0.005 + 2 * TIMEOUT_S + 0.3
+    msg = str(err.value)
+    assert "stopped answering" in msg and "30 of 71 steps received" in msg
+    assert err.value.partial is not None
+    assert list(err.value.partial.steps) == list(range(-35, -5))
+    assert len(err.value.partial.missing_steps) == 41
+    assert ring.stats.timeouts >= 2
+
+
+def test_a_disconnect_mid_sweep_raises_with_the_readings_received():
+    ring = ring_on(Device(StandInSource(), faults=Faults(disconnect_after=1 + 20)))
+    with pytest.raises(DeviceDisconnected, match="disconnected.*20 of 71 steps received") as err:
+        ring.sweep()
+    assert len(err.value.partial.steps) == 20 and ring.stats.disconnects == 1
+
+
+def test_a_silent_device_fails_the_handshake_quickly_with_advice():
+    port = ScriptPort(lambda msg: [])
+    started = time.monotonic()
+    with pytest.raises(HandshakeError, match=r"3 IRHLO of 0.1 s each.*baud rate \(115200\)"):
+        SerialRing(port, timeout_s=TIMEOUT_S).open()
+    assert time.monotonic() - started < 3 * TIMEOUT_S + 0.3
+
+
+def test_seq_and_device_clock_wrap_around():
+    dev = Device(StandInSource(), clock_start_ms=2**32 - 500)
+    dev._seq = 65530  # as if the device had been sweeping for a while
+    ring = ring_on(dev)
+    sweep = ring.sweep()
+    assert len(sweep.steps) == 71 and ring.stats.seq_gaps == 0
+    assert np.all(np.diff(sweep.timestamps_s) > 0)
+    assert sweep.duration_s == pytest.approx(data.hardware_duration_s(71, 0.0, 1), abs=2e-3)
+
+
+def test_goto_and_stop():
+    ring = ring_on(Device(StandInSource()))
+    assert ring.goto(12) == 12
+    assert ring.stop() == -1  # no IRSCN sent yet
+
+
+# --------------------------------------------------------------------------- scripted misbehaviour
+
+
+class ScriptPort:
+    """A port whose device answers each host sentence with ``script(msg)`` (a list of
+    messages or raw bytes)."""
+
+    name = "script://"
+
+    def __init__(self, script):
+        self.script, self.timeout, self.is_open, self._buf = script, 0.01, True, bytearray()
+        self.sent: list[p.Message] = []
+
+    @property
+    def in_waiting(self):
+        return len(self._buf)
+
+    def read(self, size=1):
+        if not self._buf:
+            time.sleep(self.timeout)
+        out = bytes(self._buf[:size])
+        del self._buf[:size]
+        return out
+
+    def write(self, line):
+        msg = p.decode(line)
+        self.sent.append(msg)
+        for item in self.script(msg):
+            self._buf += item if isinstance(item, bytes) else p.encode(item)
+        return len(line)
+
+    def reset_input_buffer(self):
+        self._buf.clear()
+
+    def close(self):
+        self.is_open = False
+
+
+INFO = p.Info(1, 2, 12, 1800, 3, 5, -3, 3, "script")
+
+
+def scripted(on_sweep):
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            return on_sweep(msg)
+        if isinstance(msg, p.Stop):
+            return [p.Done(-1)]
+        return []
+    return script
+
+
+def test_irscn_contradicting_the_sweep_is_dropped_not_trusted():
+    def on_sweep(cmd):
+        return [p.Scan(0, -3, 0, (10, 11)),
+                p.Scan(1, 0, 1, (12, 13)),             # seq 1 must be step -2
+                p.Scan(2, -1, 2, (14, 15, 16)),        # three sensors on a two-sensor ring
+                p.Scan(3, 0, 3, (4096, 1)),            # beyond a 12-bit ADC
+                p.Scan(4, 1, 4, (20, 21)),
+                p.Scan(4, 1, 4, (20, 21)),             # duplicate
+                p.Done(6)]
+    ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
+    sweep = ring.sweep()
+    assert list(sweep.steps) == [-3, 1] and sweep.counts.tolist() == [[10, 11], [20, 21]]
+    assert sweep.missing_steps == (-2, -1, 0, 2, 3)
+    link = ring.last_report.link
+    assert (link["inconsistent"], link["duplicates"]) == (3, 1)
+    assert link["lost_scans"] == 5  # seq 1, 2, 3 dropped or lost, 5 and 6 never arrived
+
+
+def test_stale_irscn_from_an_earlier_sweep_is_dropped():
+    sweeps = []
+
+    def on_sweep(cmd):
+        sweeps.append(cmd)
+        if len(sweeps) == 1:
+            return [p.Scan(i, s, i, (i, i)) for i, s in enumerate(range(-3, 4))] + [p.Done(6)]
+        late = p.Scan(5, 2, 5, (99, 99))  # a leftover of sweep 1 arriving late
+        return [late] + [p.Scan(7 + i, s, i, (i, i)) for i, s in enumerate(range(-3, 4))] \
+            + [p.Done(13)]
+    ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
+    ring.sweep()
+    second = ring.sweep()
+    assert second.counts[:, 0].tolist() == list(range(7)) and second.missing_steps == ()
+    assert ring.last_report.link["stale"] == 1
+
+
+@pytest.mark.parametrize("code,text,exc,match", [
+    (3, "bad argument", DeviceRejected, "IRERR 3"),
+    (4, "step out of range", DeviceRejected, "IRERR 4"),
+])
+def test_device_refusals_are_clear_errors(code, text, exc, match):
+    ring = SerialRing(ScriptPort(scripted(lambda cmd: [p.ErrorReply(code, text)])),
+                      timeout_s=TIMEOUT_S).open()
+    with pytest.raises(exc, match=match):
+        ring.sweep()
+
+
+def test_a_garbled_command_is_sent_again_and_busy_is_stopped_first():
+    answers = iter([[p.ErrorReply(1, "bad sentence")], [p.ErrorReply(5, "busy")],
+                    [p.Scan(i, s, 0, (1, 2)) for i, s in enumerate(range(-3, 4))] + [p.Done(6)]])
+    port = ScriptPort(scripted(lambda cmd: next(answers)))
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    sweep = ring.sweep()
+    assert len(sweep.steps) == 7
+    kinds = [m.TYPE for m in port.sent]
+    assert kinds == ["IRHLO", "IRSWP", "IRSWP", "IRSTP", "IRSWP"]
+    assert ring.last_report.link["resent_commands"] == 2
+
+
+def test_a_lost_irdon_is_recovered_with_irstp():
+    def on_sweep(cmd):
+        return [p.Scan(i, s, 0, (1, 2)) for i, s in enumerate(range(-3, 4))]  # no IRDON
+
+    port = ScriptPort(lambda m: [INFO] if isinstance(m, p.Hello) else
+                      on_sweep(m) if isinstance(m, p.SweepCommand) else
+                      [p.Done(6)] if isinstance(m, p.Stop) else [])
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    sweep = ring.sweep()
+    assert len(sweep.steps) == 7 and ring.last_report.complete
+    assert ring.last_report.link["timeouts"] == 1
