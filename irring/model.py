@@ -1,0 +1,285 @@
+"""MuJoCo models for a ring design and a scenario, built with ``mujoco.MjSpec``.
+
+``models/irring.xml`` is the one template (the paper's ring). A design with other numbers
+(sensor count N, radius, sweep limit, motor step, belt ratio, emitter offset, height) is made
+from it by keeping sensor ``ir_00`` — its body, its belt equality ``belt_00`` and its
+rangefinder ``ir_00_range`` — as the prototype and replicating it N times through the spec.
+A scenario adds a floor, a light, the walls (thin boxes whose inner faces lie exactly on the
+outline polygon) and the obstacles (cylinders and boxes). No XML is templated as text.
+
+Names in the compiled model: chassis (mocap body: the robot pose), motor / ring_motor (hinge
+and position actuator), ir_KK / ir_KK_hinge / ir_KK_emitter / ir_KK_range / belt_KK for
+sensor KK, wall_KK and obstacle_KK. Ray targets (walls and obstacles) are in geom group
+``RAY_GROUP``; the robot's own geoms are in groups 2 (visual) and 3 (collision) and the
+floor in group 1, so a ray cast filtered to ``RAY_GEOMGROUP`` sees only the room.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from . import resources
+from .scenario import Box, Cylinder, Ring, Scenario
+
+TEMPLATE = "irring.xml"
+PROTOTYPE = "ir_00"
+RAY_GROUP = 0                 # geom group of everything a beam can hit (walls, obstacles)
+FLOOR_GROUP = 1
+RAY_GEOMGROUP = np.array([g == RAY_GROUP for g in range(6)], dtype=np.uint8)
+
+WALL_RGBA = (0.93, 0.92, 0.88, 1.0)
+OBSTACLE_RGBA = (0.75, 0.45, 0.2, 1.0)
+
+
+def sensor_name(k: int) -> str:
+    """Name of sensor k's body (``ir_00`` …); its hinge, site, rangefinder and belt follow."""
+    return f"ir_{k:02d}"
+
+
+def template_path() -> Path:
+    return resources.models_dir() / TEMPLATE
+
+
+def _yaw_quat(yaw_rad: float) -> list[float]:
+    return [math.cos(yaw_rad / 2.0), 0.0, 0.0, math.sin(yaw_rad / 2.0)]
+
+
+# --------------------------------------------------------------------------- the robot
+
+
+def ring_spec(ring: Ring) -> mujoco.MjSpec:
+    """The robot of a ring design, from the template: N sensors replicated from ``ir_00``."""
+    spec = mujoco.MjSpec.from_file(str(template_path()))
+    for body in list(spec.bodies):  # their belts and rangefinders go with them
+        if body.name.startswith("ir_") and body.name != PROTOTYPE:
+            spec.delete(body)
+    proto = spec.body(PROTOTYPE)
+    proto_eq = spec.equality("belt_00")
+    proto_rf = spec.sensor("ir_00_range")
+    if proto is None or proto_eq is None or proto_rf is None:
+        raise RuntimeError(f"{template_path()}: the template must define body {PROTOTYPE}, "
+                           "equality belt_00 and rangefinder ir_00_range")
+    chassis = spec.body("chassis")
+
+    spec.copy_during_attach = True
+    holder = chassis.add_frame()  # identity frame: copies keep body-relative poses
+    for k in range(1, ring.sensors):
+        tag = sensor_name(k)
+        body = holder.attach_body(proto, "", f"#{k}")  # a deep copy, with its rangefinder
+        _rename(body, PROTOTYPE, tag)
+        rf = spec.sensor(f"ir_00_range#{k}")
+        rf.name, rf.objname = f"{tag}_range", f"{tag}_emitter"
+        spec.add_equality(name=f"belt_{k:02d}", type=proto_eq.type, objtype=proto_eq.objtype,
+                          name1=f"{tag}_hinge", name2=proto_eq.name2, data=proto_eq.data,
+                          solref=proto_eq.solref, solimp=proto_eq.solimp,
+                          active=proto_eq.active)
+
+    step_lo, step_hi = ring.min_step * ring.motor_step_rad, ring.max_step * ring.motor_step_rad
+    for k in range(ring.sensors):
+        tag = sensor_name(k)
+        rho = 2.0 * math.pi * k / ring.sensors
+        body = spec.body(tag)
+        body.pos = [ring.radius_m * math.cos(rho), ring.radius_m * math.sin(rho),
+                    ring.sensor_height_m]
+        body.quat = _yaw_quat(rho)
+        body.alt.euler = [0.0, 0.0, 0.0]  # the template spells orientation as euler
+        body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+        hinge = spec.joint(f"{tag}_hinge")
+        hinge.range = [-ring.joint_limit_rad, ring.joint_limit_rad]
+        hinge.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+        # the emitter (and its lens) d_o to the right of the hinge: body −y
+        spec.site(f"{tag}_emitter").pos = [0.0, -ring.emitter_offset_m, 0.0]
+        lens = spec.geom(f"{tag}_emitter_lens")
+        lens.pos = [lens.pos[0], -ring.emitter_offset_m, lens.pos[2]]
+        belt = spec.equality(f"belt_{k:02d}")
+        data = np.array(belt.data)
+        data[:5] = [0.0, ring.gear, 0.0, 0.0, 0.0]  # sensor = gear × motor
+        belt.data = data
+
+    motor = spec.actuator("ring_motor")
+    # the motor may be commanded over the design's step range (and never less than ±1 step)
+    motor.ctrlrange = [min(step_lo, -ring.motor_step_rad), max(step_hi, ring.motor_step_rad)]
+    spec.joint("ring_motor").range = [0.0, 0.0]  # unlimited: the sensors carry the limits
+
+    for key in list(spec.keys):  # qpos sizes changed; a fresh home pose
+        spec.delete(key)
+    spec.add_key(name="home", qpos=np.zeros(1 + ring.sensors), ctrl=[0.0],
+                 mpos=[0.0, 0.0, 0.0], mquat=[1.0, 0.0, 0.0, 0.0])
+    spec.modelname = "irring" if ring == Ring() else f"irring_{ring.sensors}"
+    return spec
+
+
+def _rename(body: mujoco.MjsBody, old: str, new: str) -> None:
+    """Give a copied sensor body and its children the names of sensor `new`."""
+    def fix(name: str) -> str:
+        return new + name.split("#", 1)[0][len(old):] if name else name
+
+    body.name = fix(body.name)
+    for kind in ("geom", "site", "joint"):
+        for el in body.find_all(kind):
+            el.name = fix(el.name)
+
+
+# --------------------------------------------------------------------------- the room
+
+
+def add_room(spec: mujoco.MjSpec, scenario: Scenario) -> dict[str, float]:
+    """Add floor, light, walls and obstacles; return geom name → reflectance."""
+    world = spec.worldbody
+    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05],
+                   group=FLOOR_GROUP, rgba=[0.25, 0.3, 0.35, 1.0])
+    xs = [p[0] for p in scenario.room.outline_m]
+    ys = [p[1] for p in scenario.room.outline_m]
+    centre = [(min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2]
+    world.add_light(name="top", pos=[centre[0], centre[1], 3.0], dir=[0, 0, -1],
+                    type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    reflectance: dict[str, float] = {}
+    room = scenario.room
+    for i, (size, pos, yaw) in enumerate(wall_boxes(room.outline_m, room.wall_thickness_m,
+                                                     room.wall_height_m)):
+        name = f"wall_{i:02d}"
+        world.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=size, pos=pos,
+                       quat=_yaw_quat(yaw), group=RAY_GROUP, rgba=WALL_RGBA)
+        reflectance[name] = room.reflectance
+    half_h = room.wall_height_m / 2.0
+    for j, ob in enumerate(scenario.obstacles):
+        name = f"obstacle_{j:02d}"
+        if isinstance(ob, Cylinder):
+            world.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                           size=[ob.radius_m, half_h, 0], pos=[*ob.center_m, half_h],
+                           group=RAY_GROUP, rgba=OBSTACLE_RGBA)
+        elif isinstance(ob, Box):
+            world.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX,
+                           size=[ob.size_m[0] / 2, ob.size_m[1] / 2, half_h],
+                           pos=[*ob.center_m, half_h], quat=_yaw_quat(ob.yaw_rad),
+                           group=RAY_GROUP, rgba=OBSTACLE_RGBA)
+        else:  # pragma: no cover - the schema only has these two
+            raise TypeError(f"obstacles[{j}]: unsupported obstacle {ob!r}")
+        reflectance[name] = ob.reflectance
+    return reflectance
+
+
+def wall_boxes(outline: tuple[tuple[float, float], ...], thickness_m: float,
+               height_m: float) -> list[tuple[list[float], list[float], float]]:
+    """(half sizes, centre, yaw) of one box per wall.
+
+    Each box lies OUTSIDE the room with its inner face exactly on the outline segment, so a
+    beam from inside hits the outline itself. At convex corners a box is lengthened by the
+    thickness to close the outside corner; at reflex (inward) corners it is not, or it would
+    stick into the room.
+    """
+    pts = np.asarray(outline, dtype=float)
+    n = len(pts)
+    area2 = float(np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]))
+    ccw = area2 > 0
+    boxes = []
+    for i in range(n):
+        a, b = pts[i], pts[(i + 1) % n]
+        prev, nxt = pts[i - 1], pts[(i + 2) % n]
+        d = b - a
+        length = float(np.hypot(*d))
+        u = d / length
+        outward = np.array([u[1], -u[0]]) if ccw else np.array([-u[1], u[0]])
+
+        def convex(p, q, r) -> bool:  # is the corner at q convex (turning toward the room)?
+            cross = (q[0] - p[0]) * (r[1] - q[1]) - (q[1] - p[1]) * (r[0] - q[0])
+            return (cross > 0) == ccw
+
+        ext_a = thickness_m if convex(prev, a, b) else 0.0
+        ext_b = thickness_m if convex(a, b, nxt) else 0.0
+        centre = (a + b) / 2 + u * (ext_b - ext_a) / 2 + outward * thickness_m / 2
+        half = [(length + ext_a + ext_b) / 2, thickness_m / 2, height_m / 2]
+        boxes.append((half, [float(centre[0]), float(centre[1]), height_m / 2],
+                      math.atan2(u[1], u[0])))
+    return boxes
+
+
+def scenario_spec(scenario: Scenario) -> tuple[mujoco.MjSpec, dict[str, float]]:
+    """The robot of the scenario's design in its room; also geom name → reflectance."""
+    spec = ring_spec(scenario.ring)
+    spec.modelname = f"irring_{scenario.name}"
+    reflectance = add_room(spec, scenario)
+    return spec, reflectance
+
+
+# --------------------------------------------------------------------------- compiled model
+
+
+@dataclass(frozen=True)
+class RingModel:
+    """A compiled model with every name resolved to ids and addresses once.
+
+    Arrays over sensors are ordered k = 0 … N−1 (``ir_00`` …).
+    """
+
+    model: mujoco.MjModel
+    ring: Ring
+    motor_joint: int          # joint id of ring_motor
+    motor_qpos: int           # its qpos address
+    motor_actuator: int       # actuator id of ring_motor
+    sensor_joints: np.ndarray  # (N,) joint ids of the sensor hinges
+    sensor_qpos: np.ndarray   # (N,) their qpos addresses
+    emitter_sites: np.ndarray  # (N,) site ids of the emitters
+    rangefinder_adr: np.ndarray  # (N,) sensordata address of each rangefinder's block
+    rangefinder_dim: int      # numbers per rangefinder (dist, dir, origin, point, normal)
+    belts: np.ndarray         # (N,) equality ids
+    belt_coef: np.ndarray     # (N, 2): sensor angle = c0 + c1 · motor angle
+    chassis_mocap: int        # mocap index of the chassis (the robot pose)
+    ray_geoms: np.ndarray     # ids of the geoms beams can hit (walls, obstacles)
+    reflectance: np.ndarray   # (ngeom,) reflectance of ray targets; NaN for other geoms
+
+    @property
+    def n_sensors(self) -> int:
+        return len(self.sensor_joints)
+
+    def sensor_qpos_for(self, motor_rad: np.ndarray) -> np.ndarray:
+        """(..., N) sensor hinge angles the belt imposes for motor angles (...,)."""
+        m = np.asarray(motor_rad, dtype=float)[..., None]
+        return self.belt_coef[:, 0] + self.belt_coef[:, 1] * m
+
+
+def compile_ring(ring: Ring) -> RingModel:
+    """The robot alone (no room), e.g. to look at a design's sensor frames."""
+    return _resolve(ring_spec(ring).compile(), ring, {})
+
+
+def build(scenario: Scenario) -> RingModel:
+    """The scenario's MuJoCo model (robot of its design, walls, obstacles)."""
+    spec, reflectance = scenario_spec(scenario)
+    return _resolve(spec.compile(), scenario.ring, reflectance)
+
+
+def _resolve(model: mujoco.MjModel, ring: Ring, reflectance: dict[str, float]) -> RingModel:
+    def jid(name: str) -> int:
+        return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+
+    names = [sensor_name(k) for k in range(ring.sensors)]
+    sensor_joints = np.array([jid(f"{n}_hinge") for n in names], dtype=int)
+    sites = np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{n}_emitter")
+                      for n in names], dtype=int)
+    rfs = np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{n}_range")
+                    for n in names], dtype=int)
+    belts = np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, f"belt_{k:02d}")
+                      for k in range(ring.sensors)], dtype=int)
+    if min(sensor_joints.min(), sites.min(), rfs.min(), belts.min()) < 0:
+        raise RuntimeError("the compiled ring lacks a sensor's hinge, site, rangefinder or belt")
+    motor = jid("ring_motor")
+    chassis = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "chassis")
+    refl = np.full(model.ngeom, np.nan)
+    for name, value in reflectance.items():
+        refl[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)] = value
+    ray_geoms = np.flatnonzero(model.geom_group == RAY_GROUP)
+    return RingModel(
+        model=model, ring=ring, motor_joint=motor, motor_qpos=int(model.jnt_qposadr[motor]),
+        motor_actuator=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, "ring_motor"),
+        sensor_joints=sensor_joints, sensor_qpos=model.jnt_qposadr[sensor_joints].copy(),
+        emitter_sites=sites, rangefinder_adr=model.sensor_adr[rfs].copy(),
+        rangefinder_dim=int(model.sensor_dim[rfs[0]]), belts=belts,
+        belt_coef=model.eq_data[belts, :2].copy(),
+        chassis_mocap=int(model.body_mocapid[chassis]), ray_geoms=ray_geoms,
+        reflectance=refl)

@@ -1,0 +1,33 @@
+"""Shared fixtures: bundled scenarios (loaded once) and their raw YAML for mutating."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+import yaml
+
+from irring import scenario as scenario_lib
+
+
+@pytest.fixture(scope="session")
+def t_room() -> scenario_lib.Scenario:
+    """The paper's inverted-T room, four poses (bundled ``t_room``)."""
+    return scenario_lib.load_scenario("t_room")
+
+
+@pytest.fixture(scope="session")
+def three_cylinders() -> scenario_lib.Scenario:
+    """The T-room with two small and one large cylinder (bundled)."""
+    return scenario_lib.load_scenario("t_room_three_cylinders")
+
+
+@pytest.fixture(scope="session")
+def _t_room_yaml() -> dict:
+    return yaml.safe_load(scenario_lib.resolve("t_room").read_text())
+
+
+@pytest.fixture
+def t_room_raw(_t_room_yaml) -> dict:
+    """A fresh, mutable copy of ``t_room.yaml`` as parsed YAML (change it, then ``parse``)."""
+    return copy.deepcopy(_t_room_yaml)
