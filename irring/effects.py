@@ -133,21 +133,25 @@ class BeamStage(Stage):
         sigma = params.gaussian_width * half
         w = np.exp(-0.5 * (self.off_axis_rad / sigma) ** 2) if sigma > 0 else np.ones(n)
         self.weights = w / w.sum()
-        self._cos = np.cos(self.off_axis_rad)
-        self._sin_c = np.sin(self.off_axis_rad) * np.cos(self.around_rad)
-        self._sin_s = np.sin(self.off_axis_rad) * np.sin(self.around_rad)
+        # ray = cos α · axis + sin α cos ψ · right + sin α sin ψ · up
+        self._coeffs = np.stack([np.cos(self.off_axis_rad),
+                                 np.sin(self.off_axis_rad) * np.cos(self.around_rad),
+                                 np.sin(self.off_axis_rad) * np.sin(self.around_rad)], axis=-1)
 
     def directions(self, direction: np.ndarray) -> np.ndarray:
         """(..., R, 3) unit ray directions around the beam axes ``direction`` (..., 3)."""
         axis = np.asarray(direction, dtype=float)
-        right = np.cross(axis, (0.0, 0.0, 1.0))
-        norm = np.linalg.norm(right, axis=-1, keepdims=True)
-        # a vertical beam has no horizontal "right"; any perpendicular will do there
-        right = np.where(norm > 1e-9, right / np.maximum(norm, 1e-300), (1.0, 0.0, 0.0))
-        up = np.cross(right, axis)
-        return (self._cos[:, None] * axis[..., None, :]
-                + self._sin_c[:, None] * right[..., None, :]
-                + self._sin_s[:, None] * up[..., None, :])
+        ax, ay, az = axis[..., 0], axis[..., 1], axis[..., 2]
+        # right = axis × ẑ, normalised (np.cross is slow on small trailing axes)
+        norm = np.hypot(ax, ay)
+        flat = norm < 1e-9  # a vertical beam has no horizontal "right"; use x̂ there
+        inv = 1.0 / np.where(flat, 1.0, norm)
+        rx, ry = np.where(flat, 1.0, ay * inv), np.where(flat, 0.0, -ax * inv)
+        basis = np.stack([axis,                                                 # (..., 3, 3)
+                          np.stack([rx, ry, np.zeros_like(rx)], axis=-1),
+                          np.stack([ry * az, -rx * az, rx * ay - ry * ax], axis=-1)],  # up
+                         axis=-2)
+        return self._coeffs @ basis  # (R, 3) @ (..., 3, 3) → (..., R, 3)
 
     def rays(self, f: Frame, cast: Callable | None) -> None:
         if cast is None:
