@@ -94,7 +94,7 @@ class SensorModel:
         a, b = self.ab(theta_rad)
         return a * np.asarray(v, dtype=float) ** b
 
-    @property
+    @functools.cached_property
     def no_return_v(self) -> float:
         """Output with nothing in range: the curve's value at max_range_m (θ = 0)."""
         return float(self.voltage(self.max_range_m))
