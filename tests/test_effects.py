@@ -377,3 +377,17 @@ def test_same_seed_same_counts_other_seed_other_noise(base):
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
     assert np.issubdtype(a.dtype, np.integer) and a.shape == (S, N)
+
+
+# --------------------------------------------------------------------------- benchmark
+
+
+def test_bench_effects_reports_every_effect(capsys):
+    import json
+
+    from irring.cli import main
+
+    assert main(["bench", "effects", "--rounds", "1", "--batch", "1", "--json"]) in (0, 1)
+    r = json.loads(capsys.readouterr().out)
+    assert [e["effect"] for e in r["effects"]] == list(effects.STAGE_ORDER)
+    assert r["sweep_shape"] == [S, N] and r["off_budget_pct"] == 2.0
