@@ -32,9 +32,12 @@ IRSCN timestamps and ``Sweep.duration_s`` look like the hardware's even when unt
 from __future__ import annotations
 
 import errno
+import fcntl
 import math
 import os
 import select
+import struct
+import termios
 import threading
 import time
 import tty
@@ -411,6 +414,18 @@ class PtyEmulator:
                 pass
         self.closed.set()
 
+    def _unread(self) -> int:
+        """Bytes sent that the host has not read yet."""
+        raw = fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0")
+        return struct.unpack("i", raw)[0]
+
+    def _linger(self, max_s: float = 1.0) -> None:
+        # Closing the master hangs up the tty and flushes what the host has not read yet;
+        # the sentences before an injected disconnect should still arrive.
+        deadline = time.monotonic() + max_s
+        while self._unread() > 0 and time.monotonic() < deadline and not self._stop.is_set():
+            time.sleep(0.005)
+
     def serve_forever(self) -> None:
         """Answer the host until :meth:`stop` or the device disconnects."""
         if self._master is None:
@@ -428,6 +443,7 @@ class PtyEmulator:
                         budget_t, budget_sent = now, 0
                     pending += chunk
                 if dev.disconnected and not pending:
+                    self._linger()
                     break
                 allowed = len(pending)
                 if self.baud > 0 and pending:

@@ -275,7 +275,7 @@ class SerialRing:
             raise self._lost(DeviceTimeout, f"could not send {msg.TYPE} within "
                                             f"{self.timeout_s:g} s (flow control?)") from exc
         except (serial.SerialException, OSError) as exc:
-            raise self._lost(DeviceDisconnected, f"write failed: {exc}") from exc
+            raise self._lost(DeviceDisconnected, str(exc)) from exc
 
     def _receive(self) -> list[p.AnyMessage]:
         """Whatever arrives within one poll interval, decoded; rejections are counted."""
@@ -283,7 +283,7 @@ class SerialRing:
             waiting = self.port.in_waiting
             chunk = self.port.read(waiting if waiting else 1)
         except (serial.SerialException, OSError) as exc:
-            raise self._lost(DeviceDisconnected, f"read failed: {exc}") from exc
+            raise self._lost(DeviceDisconnected, str(exc)) from exc
         if not chunk:
             return []
         before = self.decoder.ignored_bytes

@@ -1,0 +1,275 @@
+"""The emulated ring: its firmware answers per PROTOCOL.md, and SerialRing over a REAL pty
+gets SimRing's counts exactly — or, under injected faults, a subset of them, never more."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from irring import data
+from irring.hardware import DeviceDisconnected, DeviceTimeout, SerialRing
+from irring.hardware import protocol as p
+from irring.hardware.emulator import Device, Faults, PtyEmulator, SimSource
+from irring.scenario import load_scenario
+from irring.sim import SimRing
+
+TIMEOUT_S = 0.15
+FULL = np.arange(-35, 36)
+
+
+@pytest.fixture(scope="module")
+def t_room():
+    return load_scenario("t_room")
+
+
+class RecordingSource(SimSource):
+    """SimSource that remembers what each IRSWP produced, to prove nothing is invented."""
+
+    def __init__(self, scenario):
+        super().__init__(scenario)
+        self.produced: list[tuple[int, np.ndarray, np.ndarray]] = []
+
+    def read(self, pose_index, steps, samples, settle_s):
+        counts = super().read(pose_index, steps, samples, settle_s)
+        self.produced.append((pose_index, np.asarray(steps).copy(), counts.copy()))
+        return counts
+
+
+def produced_row(source: RecordingSource, step: int, counts_row: np.ndarray) -> bool:
+    """Was this exact row produced for this step by some IRSWP?"""
+    for _, steps, counts in source.produced:
+        hit = np.flatnonzero(steps == step)
+        if hit.size and np.array_equal(counts[hit[0]], counts_row):
+            return True
+    return False
+
+
+@pytest.fixture
+def pty_device(tmp_path):
+    """Start a Device on a real pty (thread) and return the link path; stop it after."""
+    started: list[PtyEmulator] = []
+
+    def start(device: Device, baud: int = 0) -> str:
+        emu = PtyEmulator(device, link=tmp_path / "ttyIRR", baud=baud).start_thread()
+        started.append(emu)
+        return str(tmp_path / "ttyIRR")
+
+    yield start
+    for emu in started:
+        emu.stop()
+
+
+# --------------------------------------------------------------------------- over a real pty
+
+
+def test_fault_free_sweeps_over_a_pty_equal_simring_at_every_pose(t_room, pty_device):
+    link = pty_device(Device(SimSource(t_room)))
+    assert os.path.realpath(link).startswith("/dev/pts/")
+    ref = SimRing(t_room, seed=t_room.seed)
+    with SerialRing(link, timeout_s=TIMEOUT_S) as ring:
+        assert ring.ring == t_room.ring
+        for pose in range(len(t_room.robot.poses)):
+            got = ring.sweep(pose=ref.pose(pose))
+            want = ref.sweep(pose)
+            assert np.array_equal(got.steps, want.steps)
+            assert np.array_equal(got.counts, want.counts)
+            assert got.counts.dtype == want.counts.dtype
+            assert np.allclose(got.sensor_angles, want.sensor_angles)
+            assert got.missing_steps == ()
+            assert got.duration_s == pytest.approx(want.duration_s, abs=2e-3)
+        # a partial sweep is SimRing.sweep(pose, steps=...) at the same pose, next k
+        part = ring.sweep(np.arange(5, -6, -1))
+        assert np.array_equal(part.counts, ref.sweep(3, steps=np.arange(5, -6, -1)).counts)
+        assert ring.stats.checksum_failures == ring.stats.lost_scans == 0
+
+
+def test_lossy_link_over_a_pty_reports_every_missing_step_and_invents_nothing(t_room,
+                                                                             pty_device):
+    source = RecordingSource(t_room)
+    link = pty_device(Device(source, faults=Faults(corrupt_rate=0.01, drop_rate=0.05, seed=5)))
+    with SerialRing(link, timeout_s=TIMEOUT_S, retries=4) as ring:
+        for pose in range(4):
+            sweep = ring.sweep()
+            got = set(sweep.steps.tolist())
+            assert got | set(sweep.missing_steps) == set(FULL.tolist())
+            assert got.isdisjoint(sweep.missing_steps)
+            for step, row in zip(sweep.steps, sweep.counts):
+                assert produced_row(source, step, row)
+            # SimRing's own sweep at this pose, row for row
+            want = SimRing(t_room).sweep(pose)
+            idx = np.searchsorted(want.steps, sweep.steps)
+            assert np.array_equal(sweep.counts, want.counts[idx])
+            assert 0 < len(sweep.missing_steps) < 71
+            assert ring.last_report.link["lost_scans"] >= len(sweep.missing_steps) - 1
+        healed = ring.sweep(resweep=6)
+        assert len(healed.missing_steps) <= 2
+    assert ring.stats.checksum_failures > 0 and ring.stats.seq_gaps > 0
+
+
+def test_faults_gauntlet_corruption_drops_a_stall_and_a_disconnect(t_room, pty_device):
+    """1 % corrupted bytes, 5 % dropped sentences, a 0.6 s stall mid-sweep (the device
+    recovers) and a disconnect mid-sweep: no crash, no hang, every missing step reported."""
+    source = RecordingSource(t_room)
+    faults = Faults(corrupt_rate=0.01, drop_rate=0.05, stall_after=1 + 71 + 30, stall_s=0.6,
+                    disconnect_after=1 + 71 + 1 + 30 + 1 + 40, seed=11)
+    link = pty_device(Device(source, faults=faults))
+    ring = SerialRing(link, timeout_s=TIMEOUT_S, retries=1).open()
+    bound_s = TIMEOUT_S + 0.04 + 70 * 0.005 + (ring.retries + 1) * TIMEOUT_S + 0.5
+    seen_missing: list[tuple[int, ...]] = []
+
+    first = ring.sweep()                       # lossy but complete
+    seen_missing.append(first.missing_steps)
+
+    started = time.monotonic()
+    with pytest.raises(DeviceTimeout, match="stopped answering") as stall:
+        ring.sweep()
+    assert time.monotonic() - started < bound_s
+    partial = stall.value.partial
+    assert 0 < len(partial.steps) <= 30 and len(partial.missing_steps) == 71 - len(partial.steps)
+    assert "missing steps" in str(stall.value)
+    seen_missing.append(partial.missing_steps)
+
+    time.sleep(0.6)                            # the device's watchdog brings it back
+    ring.hello()
+    started = time.monotonic()
+    with pytest.raises(DeviceDisconnected, match="disconnected.*is `irring emulate` still "
+                                                 "running") as cut:
+        ring.sweep()
+    assert time.monotonic() - started < bound_s
+    assert 0 < len(cut.value.partial.steps) < 40   # what arrived before the cable went
+    ring.close()
+    for sweep in (first, partial, cut.value.partial):
+        for step, row in zip(sweep.steps, sweep.counts):
+            assert produced_row(source, step, row)   # nothing invented, nothing misplaced
+        assert set(sweep.steps.tolist()) | set(sweep.missing_steps) == set(FULL.tolist())
+    assert not Path(link).exists()              # the emulator removed its link on disconnect
+
+
+def test_irstp_interrupts_a_realtime_sweep_over_the_pty(t_room, pty_device):
+    link = pty_device(Device(SimSource(t_room), realtime=True), baud=115200)
+    with SerialRing(link, timeout_s=0.5) as ring:
+        ring.port.write(p.encode(p.SweepCommand(-35, 35, 1, 0)))
+        time.sleep(0.3)                        # ~7 steps of 38.3 ms
+        last = ring.stop()
+    assert 3 <= last <= 20
+
+
+# --------------------------------------------------------------------------- firmware logic
+
+
+def talk(device: Device, *lines: bytes) -> list:
+    now = time.monotonic()
+    for line in lines:
+        device.receive(line, now)
+    out = b""
+    for _ in range(1000):
+        chunk, due = device.poll(now)
+        out += chunk
+        if due is None:
+            break
+    return p.Decoder().feed(out)
+
+
+class TinySource:
+    ring = load_scenario("t_room").ring
+    adc_bits, poses = 12, 3
+
+    def __init__(self):
+        self.calls = []
+
+    def read(self, pose_index, steps, samples, settle_s):
+        self.calls.append((pose_index, list(steps)))
+        return np.full((len(steps), 12), 100.0 + pose_index)
+
+
+@pytest.mark.parametrize("line,code", [
+    (b"$IRHLO*51\r\n", 1),                       # bad checksum
+    (b"$IRSWP,1,2\r\n", 1),                      # no checksum
+    (p.encode(p.Done(3)), 2),                    # a device sentence is not a command
+    (b"$IRXYZ*" + b"%02X" % (0x49 ^ 0x52 ^ 0x58 ^ 0x59 ^ 0x5A) + b"\r\n", 2),
+    (b"$IRSWP,-35,35,0,40*" + b"%02X" % p.checksum(b"IRSWP,-35,35,0,40") + b"\r\n", 3),
+    (p.encode(p.SweepCommand(-36, 35)), 4),
+    (p.encode(p.GoTo(99)), 4),
+])
+def test_firmware_answers_bad_commands_with_the_protocols_error_codes(line, code):
+    (reply,) = talk(Device(TinySource()), line)
+    assert isinstance(reply, p.ErrorReply) and reply.code == code
+    assert reply.text == p.ERROR_TEXT[code] or code == 2
+
+
+def test_firmware_hello_goto_busy_and_stop():
+    dev = Device(TinySource(), realtime=True)
+    assert talk(dev, p.encode(p.Hello())) == [p.info_for_ring(TinySource.ring, 12,
+                                                              "irring-emulator-1")]
+    dev.receive(p.encode(p.SweepCommand(-35, 35, 1, 100)), time.monotonic())
+    busy = talk(dev, p.encode(p.GoTo(3)), p.encode(p.SweepCommand(0, 1)))
+    assert [m.code for m in busy] == [5, 5]
+    assert talk(dev, p.encode(p.Stop())) == [p.Done(-1)]
+    assert talk(Device(TinySource()), p.encode(p.GoTo(-7))) == [p.Position(-7)]
+
+
+def test_full_range_sweeps_move_the_robot_to_the_next_pose_partial_ones_do_not():
+    src = TinySource()
+    dev = Device(src)
+    for cmd in [p.SweepCommand(-35, 35), p.SweepCommand(0, 3), p.SweepCommand(35, -35),
+                p.SweepCommand(-35, 35), p.SweepCommand(-35, 35)]:
+        out = talk(dev, p.encode(cmd))
+        assert isinstance(out[-1], p.Done)
+    assert [c[0] for c in src.calls] == [0, 0, 1, 2, 0]  # wraps after the last pose
+    assert src.calls[2][1] == list(range(35, -36, -1))
+
+
+def test_fault_rates_are_what_was_asked():
+    dev = Device(TinySource(), faults=Faults(drop_rate=0.05, corrupt_rate=0.01, seed=3))
+    for _ in range(40):
+        talk(dev, p.encode(p.SweepCommand(-35, 35)))
+    s = dev.stats
+    assert s.sentences_produced == 40 * 72
+    assert s.sentences_dropped / s.sentences_produced == pytest.approx(0.05, abs=0.015)
+    assert s.bytes_corrupted / s.bytes_sent == pytest.approx(0.01, abs=0.003)
+
+
+def test_stall_and_disconnect_happen_after_exactly_n_sentences():
+    dev = Device(TinySource(), faults=Faults(stall_after=10))
+    out = talk(dev, p.encode(p.SweepCommand(-35, 35)))
+    assert len(out) == 10 and talk(dev, p.encode(p.Hello())) == []
+    dev = Device(TinySource(), faults=Faults(disconnect_after=3))
+    assert len(talk(dev, p.encode(p.SweepCommand(-35, 35)))) == 3 and dev.disconnected
+
+
+@pytest.mark.parametrize("kw", [dict(drop_rate=1.5), dict(corrupt_rate=-0.1),
+                                dict(stall_after=-1)])
+def test_fault_settings_are_checked(kw):
+    with pytest.raises(ValueError):
+        Faults(**kw)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def test_irring_emulate_serves_a_link_and_cleans_up_on_sigterm(tmp_path, t_room):
+    link = tmp_path / "irr"
+    proc = subprocess.Popen([sys.executable, "-m", "irring", "emulate", "t_room", "--link",
+                             str(link)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        deadline = time.monotonic() + 20
+        while not link.exists() and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+        assert link.exists(), proc.stderr.read() if proc.poll() is not None else "no link"
+        with SerialRing(str(link), timeout_s=1.0) as ring:
+            sweep = ring.sweep()
+        assert np.array_equal(sweep.counts, SimRing(t_room).sweep(0).counts)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0, err
+    assert "on /dev/pts/" in out and "1 sweeps" in out
+    assert not link.exists()
