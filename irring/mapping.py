@@ -65,7 +65,7 @@ class MapperParams:
     two clear passes make it free (2·l_free < logit 0.196 = −1.41).
     """
 
-    l_occ: float = 1.0            # added to the cell holding a valid end point
+    l_occ: float = 0.85           # added to the cell holding a valid end point
     l_free: float = -0.75         # added to a cell a valid beam clearly passed through
     l_no_return: float = -0.75    # added along a no-return beam, up to the max range
     l_min: float = -4.0           # clamp: the most certain "free"
@@ -349,7 +349,9 @@ class OccupancyGrid:
             dd = d[iv][r]
             sg = sigma[iv][r]
             gap = np.maximum.reduce([s_a - dd, dd - s_b, np.zeros_like(dd)])
-            beyond = 0.5 * (1.0 + _erf((dd - s_b) / (sg * math.sqrt(2.0))))
+            # free evidence only where the whole cell lies in front of the end point
+            beyond = np.where(s_b < dd, 0.5 * (1.0 + _erf((dd - s_b) / (sg * math.sqrt(2.0)))),
+                              0.0)
             w[is_valid] = p.l_free * beyond + p.l_occ * np.exp(-0.5 * (gap / sg) ** 2)
         ny, nx = self.shape
         flat = v.iy * nx + v.ix

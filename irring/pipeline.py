@@ -1,0 +1,343 @@
+"""The main job end to end: scenario → sweeps → estimate → map → scores, timed per stage.
+
+``irring run``, ``replay``, ``compare``, ``bench`` and ``drive`` all go through here, so a map
+is built the same way wherever its sweeps came from:
+
+>>> result = run(load_scenario("t_room"))                 # simulate every pose and map it
+>>> result.scores["occupied_f1"], result.hardware_time_s
+>>> write_outputs(result, "out/t_room")                    # PNG, GIF, PGM+YAML, .npz
+
+:func:`map_sweeps` is the part after the source: hand it sweeps from the simulator or the
+serial ring. One sweep per pose, inserted into the grid in pose order (progressive mapping,
+paper Fig. 17). Compute times are wall-clock seconds per stage on this machine; the hardware
+time is what the real ring would spend (sum of ``Sweep.duration_s``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from .data import Points, Reason, Sweep
+from .mapping import MapperParams, OccupancyGrid, slice_steps
+from .scenario import Scenario
+
+FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
+
+
+def progress_enabled() -> bool:
+    """Progress bars only for a person at a terminal: not when piped, not under CI."""
+    return sys.stderr.isatty() and os.environ.get("CI", "").lower() not in ("true", "1")
+
+
+def _progress(total: int, desc: str, enabled: bool | None):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="pose", leave=False,
+                disable=not (progress_enabled() if enabled is None else enabled))
+
+
+@dataclass
+class MapRun:
+    """Everything one run produced. ``timings_s`` maps stage → seconds (wall clock)."""
+
+    sweeps: list[Sweep]
+    points: list[Points]
+    grid: OccupancyGrid
+    scenario: Scenario | None = None
+    scenario_text: str | None = None     # the YAML the scenario came from (for recordings)
+    calibration_text: str | None = None  # the calibration YAML used (None: nominal curve)
+    seed: int | None = None
+    frames: list[tuple[np.ndarray, int, str]] = field(default_factory=list)
+    truth: Any = None                    # metrics.GroundTruth when scored
+    scores: dict | None = None
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def hardware_time_s(self) -> float:
+        """Seconds the real ring would spend on these sweeps."""
+        return float(sum(s.duration_s for s in self.sweeps))
+
+    @property
+    def compute_time_s(self) -> float:
+        return float(sum(self.timings_s.values()))
+
+    @property
+    def poses(self) -> list[np.ndarray]:
+        return [np.asarray(s.pose, float) for s in self.sweeps]
+
+    def readings(self) -> dict[str, int]:
+        """How many readings: total, valid, and per reason (lower-case Reason names)."""
+        out = {"total": int(sum(p.valid.size for p in self.points)),
+               "valid": int(sum(int(np.count_nonzero(p.valid)) for p in self.points))}
+        for reason in Reason:
+            n = int(sum(int(np.count_nonzero(p.reason == reason)) for p in self.points))
+            if n and reason != Reason.OK:
+                out[reason.name.lower()] = n
+        return out
+
+    def summary(self) -> dict:
+        """The JSON document ``irring run --json`` prints."""
+        sc = self.scenario
+        return {
+            "scenario": sc.name if sc else None,
+            "design": sc.robot.design if sc else None,
+            "poses": len(self.sweeps),
+            "readings": self.readings(),
+            "scores": self.scores,
+            "hardware_time_s": self.hardware_time_s,
+            "compute_time_s": {**{k: float(v) for k, v in self.timings_s.items()},
+                               "total": self.compute_time_s},
+        }
+
+    def recording_meta(self) -> dict:
+        """What ``irring replay`` needs to rebuild this exact map."""
+        return {
+            "scenario": self.scenario.name if self.scenario else None,
+            "scenario_yaml": self.scenario_text,
+            "seed": self.seed,
+            "calibration_yaml": self.calibration_text,
+            "grid": {"origin_xy_m": self.grid.origin_xy_m.tolist(),
+                     "shape": list(self.grid.shape),
+                     "resolution_m": self.grid.resolution_m},
+            "mapper": dataclasses.asdict(self.grid.params),
+        }
+
+
+# --------------------------------------------------------------------------- stages
+
+
+def scenario_text(scenario: Scenario) -> str | None:
+    """The YAML a scenario was loaded from, if it came from a file."""
+    try:
+        return Path(scenario.source).read_text() if scenario.source else None
+    except OSError:
+        return None
+
+
+def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
+    """(Calibration or None, YAML text or None) from a file path or from stored YAML text."""
+    if path_or_text is None:
+        return None, None
+    import yaml
+
+    from .estimate import Calibration
+
+    if is_text:
+        text, source = str(path_or_text), "<recording>"
+    else:
+        text, source = Path(path_or_text).read_text(), str(path_or_text)
+    return Calibration.from_dict(yaml.safe_load(text), source), text
+
+
+def simulate(scenario: Scenario, *, seed: int | None = None,
+             progress: bool | None = None) -> tuple[list[Sweep], float]:
+    """One simulated sweep per scan pose: (sweeps, seconds spent)."""
+    from .sim import SimRing
+
+    t0 = time.perf_counter()
+    sim = SimRing(scenario, seed=seed)
+    sweeps = []
+    with _progress(len(scenario.robot.poses), "simulate", progress) as bar:
+        for k in range(len(scenario.robot.poses)):
+            sweeps.append(sim.sweep(k))
+            bar.update()
+    return sweeps, time.perf_counter() - t0
+
+
+def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
+                    margin_m: float = 0.10, params: MapperParams | None = None) -> OccupancyGrid:
+    """A grid around every emitter and end point (for sweeps without a scenario)."""
+    xs, ys = [], []
+    for p in points:
+        reach = np.where(p.valid, 0.0, p.max_range_m)
+        for x, y in ((p.origin_x, p.origin_y), (p.x, p.y),
+                     (p.origin_x + reach * np.cos(p.heading), p.origin_y + reach * np.sin(p.heading))):
+            xs.append(np.asarray(x, float).ravel())
+            ys.append(np.asarray(y, float).ravel())
+    x = np.concatenate(xs)
+    y = np.concatenate(ys)
+    lo = np.array([np.nanmin(x), np.nanmin(y)]) - margin_m
+    hi = np.array([np.nanmax(x), np.nanmax(y)]) + margin_m
+    origin = np.floor(lo / resolution_m) * resolution_m - resolution_m / 2
+    shape = np.ceil((hi - origin) / resolution_m).astype(int) + 1
+    return OccupancyGrid(origin, (shape[1], shape[0]), resolution_m, params)
+
+
+def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
+               grid: OccupancyGrid | None = None, calibration=None,
+               frames_per_sweep: int = 0, score: bool = True, progress: bool | None = None,
+               estimator: Callable | None = None) -> MapRun:
+    """Estimate and map recorded or live sweeps, in order; score against the scenario if any.
+
+    ``grid`` defaults to the scenario's (or, without one, a grid around the points).
+    ``frames_per_sweep > 0`` keeps animation frames: the map after each part of each sweep
+    (log-odds, poses so far, caption); the map itself is always built one sweep per insert,
+    so it does not depend on the frames asked for.
+    """
+    if estimator is None:
+        from .estimate import estimate as estimator
+    timings = {"estimate": 0.0, "map": 0.0}
+    points: list[Points] = []
+    if grid is None and scenario is not None:
+        grid = OccupancyGrid.for_scenario(scenario)
+    frames: list[tuple[np.ndarray, int, str]] = []
+    with _progress(len(sweeps), "estimate + map", progress) as bar:
+        for sweep in sweeps:
+            t0 = time.perf_counter()
+            points.append(estimator(sweep, calibration))
+            timings["estimate"] += time.perf_counter() - t0
+            bar.update()
+    t0 = time.perf_counter()
+    if grid is None:
+        grid = grid_for_points(points)
+    if frames_per_sweep:
+        frames.append((grid.log_odds.copy(), 0, "before the first sweep"))
+    for k, p in enumerate(points):
+        before = grid.log_odds.copy() if frames_per_sweep else None
+        grid.insert(p)
+        if frames_per_sweep:
+            frames.extend(_sweep_frames(grid, before, p, k, len(points), frames_per_sweep))
+    timings["map"] = time.perf_counter() - t0
+    run = MapRun(sweeps=list(sweeps), points=points, grid=grid, scenario=scenario,
+                 frames=frames, timings_s=timings)
+    if score and scenario is not None:
+        from . import metrics
+
+        t0 = time.perf_counter()
+        run.truth = metrics.ground_truth(scenario, grid)
+        run.scores = metrics.score(grid, scenario, run.truth)
+        run.timings_s["score"] = time.perf_counter() - t0
+    return run
+
+
+def _sweep_frames(grid: OccupancyGrid, before: np.ndarray, points: Points, k: int, n: int,
+                  parts: int) -> list[tuple[np.ndarray, int, str]]:
+    """Frames while sweep k is mapped: the beams of the first 1/parts, 2/parts, … of its steps
+    (clamped like an insert); the last frame is the map after the real insert."""
+    rows = points.valid.shape[0]
+    edges = np.linspace(0, rows, parts + 1).round().astype(int)
+    acc = np.zeros_like(before)
+    out = []
+    for j in range(1, parts):
+        acc += grid.delta(slice_steps(points, slice(edges[j - 1], edges[j])))
+        shown = np.clip(before + acc, grid.params.l_min, grid.params.l_max)
+        out.append((shown, k + 1, f"pose {k + 1} of {n}: sweeping ({j}/{parts})"))
+    out.append((grid.log_odds.copy(), k + 1, f"pose {k + 1} of {n}: done"))
+    return out
+
+
+def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | Path | None = None,
+        frames_per_sweep: int = 0, score: bool = True, progress: bool | None = None,
+        params: MapperParams | None = None) -> MapRun:
+    """Simulate every pose of ``scenario``, estimate, map and score."""
+    calibration, cal_text = load_calibration(calibration_file)
+    sweeps, t_sim = simulate(scenario, seed=seed, progress=progress)
+    result = map_sweeps(sweeps, scenario=scenario,
+                        grid=OccupancyGrid.for_scenario(scenario, params),
+                        calibration=calibration, frames_per_sweep=frames_per_sweep,
+                        score=score, progress=progress)
+    result.timings_s = {"simulate": t_sim, **result.timings_s}
+    result.scenario_text = scenario_text(scenario)
+    result.calibration_text = cal_text
+    result.seed = scenario.seed if seed is None else int(seed)
+    return result
+
+
+def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
+           frames_per_sweep: int = 0, score: bool = True,
+           progress: bool | None = None) -> MapRun:
+    """Map a recording's sweeps again, on the recorded grid, with the recorded calibration
+    (or ``calibration_file``); scored when the recording carries its scenario."""
+    from . import recording as rec
+    from .scenario import loads
+
+    t0 = time.perf_counter()
+    sweeps, meta = rec.load_recording(recording)
+    t_load = time.perf_counter() - t0
+    if not sweeps:
+        raise rec.RecordingError(f"{recording}: holds no sweeps")
+    scenario = None
+    if meta.get("scenario_yaml"):
+        scenario = loads(meta["scenario_yaml"], source=f"{recording} (recorded scenario)")
+    if calibration_file is not None:
+        calibration, cal_text = load_calibration(calibration_file)
+    else:
+        calibration, cal_text = load_calibration(meta.get("calibration_yaml"), is_text=True)
+    grid = None
+    params = MapperParams(**meta["mapper"]) if meta.get("mapper") else None
+    if meta.get("grid"):
+        g = meta["grid"]
+        grid = OccupancyGrid(g["origin_xy_m"], g["shape"], g["resolution_m"], params)
+    elif scenario is not None:
+        grid = OccupancyGrid.for_scenario(scenario, params)
+    result = map_sweeps(sweeps, scenario=scenario, grid=grid, calibration=calibration,
+                        frames_per_sweep=frames_per_sweep, score=score, progress=progress)
+    result.timings_s = {"load": t_load, **result.timings_s}
+    result.scenario_text = meta.get("scenario_yaml")
+    result.calibration_text = cal_text
+    result.seed = meta.get("seed")
+    return result
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+OUTPUT_NAMES = {"map_png": "map.png", "animation": "map_building.gif", "pgm": "map.pgm",
+                "yaml": "map.yaml", "recording": "sweeps.npz"}
+
+
+def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True,
+                  recording: bool = True, title: str | None = None) -> dict[str, Path]:
+    """Write the map PNG, the building animation (if frames were kept), the map_server
+    PGM + YAML and the sweeps recording into ``out_dir``; time it as the "render" stage."""
+    from . import recording as rec
+    from . import render
+
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    sc = result.scenario
+    reach, ring_r = _reach(result)
+    poses = result.poses
+    if title is None:
+        title = _title(result)
+    paths: dict[str, Path] = {}
+    paths["map_png"] = render.save_map_png(out / OUTPUT_NAMES["map_png"], result.grid, sc, poses,
+                                           reach, ring_r, title)
+    if animation and result.frames:
+        paths["animation"] = render.save_animation(out / OUTPUT_NAMES["animation"], result.grid,
+                                                   result.frames, sc, poses, reach, ring_r)
+    paths["pgm"], paths["yaml"] = result.grid.to_pgm(out / OUTPUT_NAMES["pgm"])
+    if recording:
+        paths["recording"] = rec.save_recording(out / OUTPUT_NAMES["recording"], result.sweeps,
+                                                result.recording_meta())
+    result.timings_s["render"] = time.perf_counter() - t0
+    return paths
+
+
+def _reach(result: MapRun) -> tuple[float, float]:
+    ring = result.sweeps[0].ring
+    max_range = (result.scenario.sensor.max_range_m if result.scenario
+                 else result.sweeps[0].max_range_m)
+    return max_range + ring.radius_m, ring.radius_m
+
+
+def _title(result: MapRun) -> str:
+    name = result.scenario.name if result.scenario else "recorded sweeps"
+    s = result.scores
+    if not s:
+        return f"{name}: {len(result.sweeps)} sweep(s)"
+
+    def f(v):
+        return "n/a" if v is None else f"{v:.2f}"
+
+    return (f"{name}: occupied F1 {f(s['occupied_f1'])}, free accuracy {f(s['free_accuracy'])}, "
+            f"coverage {f(s['coverage'])}, shadow {f(s['shadow'])}")
