@@ -522,13 +522,33 @@ def _validate_geometry(sc: Scenario, fail) -> None:
             raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) would be "
                              f"inside a wall at ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm")
         for j, ob in enumerate(sc.obstacles):
-            if _obstacle_distance(ob, pose.x_m, pose.y_m) < clearance:
-                raise fail(path, f"the ring would overlap obstacles[{j}]")
+            gap = _obstacle_distance(ob, pose.x_m, pose.y_m)
+            if gap < clearance:
+                raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) at "
+                                 f"({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm would overlap "
+                                 f"obstacles[{j}] ({type(ob).__name__.lower()} at "
+                                 f"({ob.center_m[0] * 1e3:g}, {ob.center_m[1] * 1e3:g}) mm); "
+                                 f"keep the pose ≥ {clearance * 1e3:g} mm from it")
     for j, ob in enumerate(sc.obstacles):
+        if isinstance(ob, Box) and min(ob.size_m) < 0.002:
+            raise fail(f"obstacles[{j}].size_mm", f"box sides ({ob.size_m[0] * 1e3:g}, "
+                                                  f"{ob.size_m[1] * 1e3:g}) mm must each be ≥ 2 mm")
         if not point_in_polygon(ob.center_m[0], ob.center_m[1], outline):
             raise fail(f"obstacles[{j}].center_mm", "obstacle centre is outside the room")
     if ring.min_step > ring.max_step:
         raise fail("robot.ring.min_step", f"min_step {ring.min_step} > max_step {ring.max_step}")
+    reach = max(abs(ring.min_step), abs(ring.max_step)) * ring.motor_step_rad * ring.gear
+    if reach > ring.joint_limit_rad + 1e-9:
+        raise fail("robot.ring", f"the sweep turns the sensors to ±{math.degrees(reach):g}° "
+                                 f"(steps {ring.min_step} … {ring.max_step} × "
+                                 f"{math.degrees(ring.motor_step_rad):g}° × gear {ring.gear:g}) "
+                                 f"but joint_limit is ±{math.degrees(ring.joint_limit_rad):g}°; "
+                                 f"narrow the steps or raise joint_limit_deg")
+    if ring.sensor_height_m >= sc.room.wall_height_m:
+        raise fail("robot.ring.sensor_height_mm",
+                   f"sensors at {ring.sensor_height_m * 1e3:g} mm would look over the "
+                   f"{sc.room.wall_height_m * 1e3:g} mm walls (and obstacles, which are as tall); "
+                   f"allowed: below room.wall_height_mm")
 
 
 def _obstacle_distance(ob: Cylinder | Box, x: float, y: float) -> float:

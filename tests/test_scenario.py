@@ -1,0 +1,244 @@
+"""Scenario files: the bundled ones are the paper's, units convert once, mistakes are errors.
+
+Every bad file below must fail with a message that names the YAML key path and says what
+is allowed — a typo never becomes a silent default.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import typing
+
+import numpy as np
+import pytest
+import yaml
+
+from irring import designs, resources
+from irring import scenario as S
+from irring.scenario import ScenarioError, load_scenario, loads, parse
+
+
+def _set(raw: dict, path: str, value=None, *, delete: bool = False) -> dict:
+    *parents, last = path.split(".")
+    node = raw
+    for key in parents:
+        node = node[int(key)] if isinstance(node, list) else node[key]
+    if delete:
+        del node[last]
+    else:
+        node[last] = value
+    return raw
+
+
+# (id, how to break t_room.yaml, patterns the message must contain)
+BAD = [
+    ("unknown top-level key", lambda r: _set(r, "rooom", {}),
+     [r"^bad\.yaml: rooom: unknown key", r"did you mean `room`", r"allowed here: .*robot, room"]),
+    ("typo in a nested key", lambda r: _set(r, "room.wall_heigth_mm", 300),
+     [r"room\.wall_heigth_mm: unknown key", r"did you mean `wall_height_mm`",
+      r"allowed here: .*wall_height_mm"]),
+    ("text where a number belongs", lambda r: _set(r, "seed", "abc"),
+     [r"seed: expected a whole number, got 'abc'"]),
+    ("true where a number belongs", lambda r: _set(r, "room.wall_height_mm", True),
+     [r"room\.wall_height_mm: expected a number, got True"]),
+    ("value out of range, in the unit written", lambda r: _set(r, "sensor.max_range_mm", 50000),
+     [r"sensor\.max_range_mm: 50000 mm is out of range; allowed 20 … 30000 mm"]),
+    ("negative radius", lambda r: _set(r, "obstacles", [{"type": "cylinder",
+                                                        "center_mm": [500, 300],
+                                                        "radius_mm": -5}]),
+     [r"obstacles\[0\]\.radius_mm: -5 mm is out of range; allowed 2 … 2000 mm"]),
+    ("not a known sensor", lambda r: _set(r, "sensor.model", "gp2d13"),
+     [r"sensor\.model: 'gp2d13' is not allowed; choose one of: gp2d12, .*laser"]),
+    ("not a known design", lambda r: _set(r, "robot.design", "rotating13"),
+     [r"robot\.design: 'rotating13' is not allowed; choose one of: rotating12, .*custom"]),
+    ("required key missing", lambda r: _set(r, "room.outline_mm", delete=True),
+     [r"room\.outline_m or outline_mm: required key is missing"]),
+    ("self-intersecting outline",
+     lambda r: _set(r, "room.outline_mm", [[0, 0], [2000, 2000], [2000, 0], [0, 2000]]),
+     [r"room\.outline_mm: walls 0 and 2 cross: the outline must not intersect itself"]),
+    ("outline of two corners", lambda r: _set(r, "room.outline_mm", [[0, 0], [2000, 2000]]),
+     [r"room\.outline_mm: needs at least 3 corners, got 2"]),
+    ("a corner with three numbers",
+     lambda r: _set(r, "room.outline_mm", [[0, 0, 0], [2000, 0], [2000, 2000]]),
+     [r"room\.outline_mm\[0\]: expected 2 numbers, got 3"]),
+    ("pose outside the room", lambda r: _set(r, "robot.poses", [{"x_mm": 3000, "y_mm": 450}]),
+     [r"robot\.poses\[0\]: pose \(3000, 450\) mm is outside the room"]),
+    ("pose inside a wall", lambda r: _set(r, "robot.poses", [{"x_mm": 100, "y_mm": 450}]),
+     [r"robot\.poses\[0\]: the ring \(radius 170 mm with housing\) would be inside a wall"]),
+    ("pose on an obstacle",
+     lambda r: _set(r, "obstacles", [{"type": "cylinder", "center_mm": [1950, 450],
+                                      "radius_mm": 30}]),
+     [r"robot\.poses\[0\]: the ring .* would overlap obstacles\[0\] \(cylinder at "
+      r"\(1950, 450\) mm\); keep the pose ≥ 170 mm from it"]),
+    ("obstacle outside the room",
+     lambda r: _set(r, "obstacles", [{"type": "cylinder", "center_mm": [5000, 450],
+                                      "radius_mm": 30}]),
+     [r"obstacles\[0\]\.center_mm: obstacle centre is outside the room"]),
+    ("unknown obstacle type",
+     lambda r: _set(r, "obstacles", [{"type": "sphere", "center_mm": [500, 450],
+                                      "radius_mm": 30}]),
+     [r"obstacles\[0\]\.type: 'sphere' is not allowed; choose one of: cylinder, box"]),
+    ("flat box", lambda r: _set(r, "obstacles", [{"type": "box", "center_mm": [300, 700],
+                                                  "size_mm": [0, 40]}]),
+     [r"obstacles\[0\]\.size_mm: box sides \(0, 40\) mm must each be ≥ 2 mm"]),
+    ("unknown effect", lambda r: _set(r, "effects.nosie", {}),
+     [r"effects\.nosie: unknown effect \(did you mean `noise`\?\); allowed: incidence, noise"]),
+    ("effect parameter out of range", lambda r: _set(r, "effects.noise", {"sigma_v": 5}),
+     [r"effects\.noise\.sigma_v: 5\.0 is out of range; allowed 0 … 1"]),
+    ("a quantity in two units", lambda r: _set(r, "map", {"resolution_mm": 10,
+                                                          "resolution_m": 0.01}),
+     [r"map\.resolution_m: resolution_m given twice \(in two units\)"]),
+    ("no poses", lambda r: _set(r, "robot.poses", []),
+     [r"robot\.poses: at least one scan pose is required"]),
+    ("steps the wrong way round",
+     lambda r: _set(r, "robot", {"design": "custom", "ring": {"min_step": 10, "max_step": -10},
+                                 "poses": r["robot"]["poses"]}),
+     [r"robot\.ring\.min_step: min_step 10 > max_step -10"]),
+    ("sweep past the joint limit",
+     lambda r: _set(r, "robot", {"design": "custom", "ring": {"min_step": -50, "max_step": 50},
+                                 "poses": r["robot"]["poses"]}),
+     [r"robot\.ring: the sweep turns the sensors to ±54° .* joint_limit is ±37\.8°"]),
+    ("sensors above the walls",
+     lambda r: _set(r, "robot", {"design": "custom", "ring": {"sensor_height_mm": 400},
+                                 "poses": r["robot"]["poses"]}),
+     [r"robot\.ring\.sensor_height_mm: sensors at 400 mm would look over the 300 mm walls"]),
+    ("not a number at all", lambda r: _set(r, "room.wall_height_mm", float("nan")),
+     [r"room\.wall_height_mm: expected a finite number, got nan"]),
+    ("a mapping where a list belongs", lambda r: _set(r, "robot.poses", {"x_mm": 1}),
+     [r"robot\.poses: expected a list"]),
+]
+
+
+@pytest.mark.parametrize("case", BAD, ids=[c[0] for c in BAD])
+def test_bad_scenario_gives_a_clear_error(t_room_raw, case):
+    _, mutate, patterns = case
+    with pytest.raises(ScenarioError) as info:
+        parse(mutate(t_room_raw), "bad.yaml")
+    message = str(info.value)
+    assert message.startswith("bad.yaml: ")
+    for pattern in patterns:
+        assert re.search(pattern, message), f"{pattern!r} not in {message!r}"
+
+
+def test_there_are_at_least_ten_kinds_of_mistake():
+    assert len(BAD) >= 10
+
+
+def test_broken_files_name_the_file(tmp_path):
+    with pytest.raises(ScenarioError, match=r"x\.yaml: not valid YAML"):
+        loads("room: [\n", "x.yaml")
+    with pytest.raises(ScenarioError, match=r"a scenario file must be a mapping"):
+        loads("- 1\n- 2\n", "x.yaml")
+    with pytest.raises(ScenarioError, match=r"no such file .* bundled: .*t_room"):
+        load_scenario(tmp_path / "missing.yaml")
+    path = tmp_path / "typo.yaml"
+    path.write_text("name: x\nroom: {outline_mm: [[0, 0], [1000, 0], [1000, 1000]]}\n"
+                    "robot: {poses: [{x_mm: 600, y_mm: 300}]}\nsensr: {}\n")
+    with pytest.raises(ScenarioError, match=rf"^{re.escape(str(path))}: sensr: unknown key"):
+        load_scenario(path)
+
+
+def test_bundled_t_room_is_the_papers():
+    sc = load_scenario("t_room")
+    # a 2420 × 900 mm bar with a 900 × 900 mm stem centred on it: 760 mm shoulders
+    np.testing.assert_allclose(sc.room.outline_m, [(0, 0), (2.42, 0), (2.42, 0.9), (1.66, 0.9),
+                                                   (1.66, 1.8), (0.76, 1.8), (0.76, 0.9), (0, 0.9)],
+                               atol=1e-12)
+    x = [p.x_m for p in sc.robot.poses]
+    y = [p.y_m for p in sc.robot.poses]
+    assert x[0] > x[1] > x[2] and y[0] == y[1] == y[2] < 0.9 < y[3]  # lower R, C, L, top
+    assert x[3] == pytest.approx((0.76 + 1.66) / 2)
+    assert sc.ring == designs.PAPER_RING
+    assert sc.sensor.max_range_m == pytest.approx(0.624)
+    assert sc.map.resolution_m == pytest.approx(0.010)
+    assert set(sc.effects) == {"incidence", "noise", "quantization"}
+
+
+@pytest.mark.parametrize("name", sorted(S.bundled()))
+def test_every_bundled_scenario_loads_and_says_what_the_paper_leaves_open(name):
+    sc = load_scenario(name)
+    assert sc.name == name and sc.description
+    header = S.resolve(name).read_text().split("\nname:")[0]
+    assert "Not given by the paper" in header
+
+
+def test_units_convert_once_at_load(t_room_raw):
+    a = parse(t_room_raw, "a.yaml")
+    t_room_raw["room"] = {"outline_m": [[x / 1e3, y / 1e3] for x, y in
+                                         t_room_raw["room"]["outline_mm"]],
+                          "wall_height_m": 0.3}
+    t_room_raw["robot"]["poses"] = [{"x_m": p["x_mm"] / 1e3, "y_m": p["y_mm"] / 1e3,
+                                     "yaw_rad": 0.0} for p in t_room_raw["robot"]["poses"]]
+    t_room_raw["robot"]["ring"] = {"joint_limit_rad": math.radians(37.8)}
+    t_room_raw["sensor"]["max_range_m"] = t_room_raw["sensor"].pop("max_range_mm") / 1e3
+    b = parse(t_room_raw, "b.yaml")
+    np.testing.assert_allclose(b.room.outline_m, a.room.outline_m, atol=1e-12)
+    assert b.robot.poses == a.robot.poses and b.sensor == a.sensor
+    assert b.ring == a.ring
+    c = loads("name: d\nroom: {outline_mm: [[0, 0], [2000, 0], [2000, 2000]]}\n"
+              "robot: {poses: [{x_mm: 1400, y_mm: 500, yaw_deg: 90}]}\n"
+              "scan: {settle_ms: 40}\n")
+    assert c.robot.poses[0].yaw_rad == pytest.approx(math.pi / 2)
+    assert c.scan.settle_s == pytest.approx(0.04)
+
+
+def test_effects_as_a_list_are_the_defaults(t_room_raw):
+    t_room_raw["effects"] = ["incidence", "noise"]
+    sc = parse(t_room_raw)
+    assert dict(sc.effects) == {"incidence": S.IncidenceEffect(), "noise": S.NoiseEffect()}
+    with pytest.raises(TypeError):
+        sc.effects["foldover"] = S.FoldoverEffect()  # read-only
+
+
+# --------------------------------------------------------------------------- the user docs
+
+README = resources.scenarios_dir() / "README.md"
+
+
+def _yaml_examples() -> list[str]:
+    blocks = re.findall(r"```yaml\n(.*?)```", README.read_text(), flags=re.S)
+    return [b for b in blocks if b.lstrip().startswith("name:")]
+
+
+@pytest.mark.parametrize("text", _yaml_examples(), ids=lambda t: t.split("\n", 1)[0])
+def test_readme_examples_load(text):
+    sc = loads(text, "README example")
+    assert sc.robot.poses
+
+
+def _schema_keys() -> set[str]:
+    classes = [S.Scenario, S.Room, S.Cylinder, S.Box, S.Robot, S.Pose, S.Ring, S.Sensor, S.Scan,
+               S.MapSpec, S.Waypoint, *S.EFFECTS.values()]
+    keys = set(S.EFFECTS)
+    for cls in classes:
+        for f in dataclasses.fields(cls):
+            if f.name != "source":
+                keys.update(k for k, _ in S._yaml_keys(f.name))
+    return keys
+
+
+def test_readme_documents_every_key_in_every_unit():
+    """If this fails, a schema key was added without documenting it in scenarios/README.md."""
+    text = README.read_text()
+    missing = sorted(k for k in _schema_keys() if f"`{k}`" not in text)
+    assert not missing, f"scenarios/README.md does not document: {', '.join(missing)}"
+
+
+def test_readme_defaults_match_the_schema():
+    """Spot checks of the numbers a user is most likely to rely on."""
+    text = README.read_text()
+    for row in ("| `sensors` | whole number | 1 … 72 | 12 |",
+                "| 150 mm |", "| 1.8° |", "| 0.6 |", "| −35, 35 |", "| 7 mm |", "| 37.8° |",
+                "| 624 mm |", "| 10 mm |"):
+        assert row in text, row
+    ring = S.Ring()
+    assert (ring.sensors, ring.radius_m, ring.gear, ring.min_step, ring.max_step) == \
+        (12, 0.15, 0.6, -35, 35)
+    assert ring.emitter_offset_m == 0.007 and math.degrees(ring.joint_limit_rad) == \
+        pytest.approx(37.8) and math.degrees(ring.motor_step_rad) == pytest.approx(1.8)
+    assert S.Sensor().max_range_m == 0.624 and S.MapSpec().resolution_m == 0.010
+    hints = typing.get_type_hints(S.Room)
+    assert hints["outline_m"] == tuple[tuple[float, float], ...]
+    assert yaml.safe_load("a: 1")  # yaml is the format
