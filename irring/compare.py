@@ -162,3 +162,266 @@ def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int 
             lo, hi = (lo, mid) if all_seen(mid) else (mid, hi)
         min_ok[i], max_miss[i] = hi, lo
     return Detection(design.name, dist, min_ok, max_miss, bearings, len(rays))
+
+
+# --------------------------------------------------------------------------- scenes
+
+
+def _estimator_calibration(sweep, scenario):
+    """The nominal calibration for the sweep's sensor, told the scene's noise level."""
+    from .estimate import Calibration
+
+    kw = {}
+    if "noise" in scenario.effects:
+        kw["noise_sigma_v"] = max(scenario.effects["noise"].sigma_v, 1e-4)
+    return Calibration.for_sweep(sweep, **kw)
+
+
+def simulate(scenario, *, seed: int | None = None) -> tuple[list, float, float]:
+    """One sweep per pose, like ``pipeline.simulate``, with the sonar cone when the sensor
+    is a sonar (:func:`irring.rangers.pipeline_for`): (sweeps, build seconds, sweep seconds)."""
+    import time
+
+    from . import rangers, sim
+
+    t0 = time.perf_counter()
+    ring = sim.SimRing(scenario, seed=seed)
+    if scenario.sensor.model == "sonar":
+        ring._pipeline = rangers.pipeline_for(scenario)  # TODO(integration): a public hook
+    t1 = time.perf_counter()
+    sweeps = [ring.sweep(k) for k in range(len(scenario.robot.poses))]
+    return sweeps, t1 - t0, time.perf_counter() - t1
+
+
+def run_scene(scenario, design: Design | str, seed: int | None = None, *,
+              reference=None) -> dict:
+    """One scenario seen by one design: every pose swept, then estimated, mapped and scored
+    exactly as ``irring run`` does (``pipeline.map_sweeps``).
+
+    Two deliberate differences from ``irring run``, both so designs are compared fairly:
+
+    - the estimator's calibration is told the scene's output noise (the ``noise`` effect's
+      σ), as a user who calibrated their sensor would; the datasheet default (15 mV) would
+      blur a laser's 2.5 mV readings into 3 cm wide walls;
+    - the map is scored against the ground truth of ``reference`` (default: the scenario as
+      written, with its own design's reach), so every design is judged on the same cells: a
+      design that cannot reach a wall loses recall and shadow for it instead of having the
+      wall dropped from its exam.
+
+    Returns the six ``metrics.SCORE_KEYS`` plus ``hardware_time_s`` (one 360° view of the
+    design, :meth:`Design.hardware_time_s`), ``hardware_time_total_s`` (all poses),
+    ``compute_time_s`` (sweep + estimate + map per view, wall clock; building the MuJoCo
+    model once is ``setup_time_s``), ``readings`` and ``valid_readings``.
+    """
+    from . import metrics, pipeline
+
+    d = designs_mod.get(design) if isinstance(design, str) else design
+    reference = scenario if reference is None else reference
+    sc = designs_mod.apply(scenario, d)
+    seed = sc.seed if seed is None else seed
+    sweeps, build_s, sim_s = simulate(sc, seed=seed)
+    result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=_estimator_calibration(
+        sweeps[0], sc), score=False, progress=False)
+    scores = metrics.score(result.grid, sc, metrics.ground_truth(reference, result.grid))
+    poses = len(sweeps)
+    scan = sc.scan
+    view_s = d.hardware_time_s(step_stride=scan.step_stride, settle_s=scan.settle_s,
+                               samples=sweeps[0].samples)
+    readings = result.readings()
+    return {
+        "scenario": scenario.name, "design": d.name, "seed": int(seed),
+        **{k: scores[k] for k in metrics.SCORE_KEYS},
+        "hardware_time_s": view_s, "hardware_time_total_s": view_s * poses,
+        "compute_time_s": (sim_s + result.compute_time_s) / poses, "setup_time_s": build_s,
+        "readings": readings["total"], "valid_readings": readings["valid"],
+    }
+
+
+def _mean(values) -> float | None:
+    vals = [v for v in values if v is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) -> list[dict]:
+    """One record per design: run scores averaged over scenarios and seeds (``None`` scores
+    left out of the mean), hardware time of a 360° view, compute time per view, and the
+    detection curve when given."""
+    from .metrics import SCORE_KEYS
+
+    out = []
+    for name in dict.fromkeys(r["design"] for r in runs):
+        mine = [r for r in runs if r["design"] == name]
+        rec = {"design": name,
+               "scenarios": sorted({r["scenario"] for r in mine}),
+               "runs": len(mine)}
+        for k in SCORE_KEYS:
+            rec[k] = _mean(r[k] for r in mine)
+            if k != "shadow":
+                continue
+            vals = [r[k] for r in mine if r[k] is not None]
+            rec["shadow_min"] = float(min(vals)) if vals else None
+        rec["by_scenario"] = {sc: {k: _mean(r[k] for r in mine if r["scenario"] == sc)
+                                   for k in SCORE_KEYS} for sc in rec["scenarios"]}
+        rec["hardware_time_s"] = float(np.mean([r["hardware_time_s"] for r in mine]))
+        rec["compute_time_s"] = float(np.median([r["compute_time_s"] for r in mine]))
+        if detections and name in detections:
+            det = detections[name]
+            rec["detection_distances_m"] = det.distances_m.tolist()
+            rec["min_detectable_radius_m"] = [None if not math.isfinite(v) else float(v)
+                                              for v in det.min_detectable_radius_m]
+        out.append(rec)
+    return out
+
+
+def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=None,
+            bearings: int = 180, progress: bool = False) -> dict:
+    """Run every design on every scenario for ``seeds`` seeds (scenario seed, +1, …).
+
+    Returns ``{"designs": summarise(...), "runs": [...], "detection": {...}}``.
+    """
+    from .scenario import load_scenario
+
+    scs = [load_scenario(s) if isinstance(s, str) else s for s in scenarios]
+    ds = [designs_mod.get(d) if isinstance(d, str) else d for d in design_list]
+    jobs = [(sc, d, sc.seed + k) for sc in scs for d in ds for k in range(seeds)]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(jobs) + len(ds), desc="compare", unit="run", leave=False)
+    runs = []
+    for sc, d, seed in jobs:
+        runs.append(run_scene(sc, d, seed))
+        if bar:
+            bar.update()
+    dist = DEFAULT_DISTANCES_M if detection_distances_m is None else detection_distances_m
+    detections = {}
+    for d in ds:
+        detections[d.name] = detection(d, dist, bearings=bearings)
+        if bar:
+            bar.update()
+    if bar:
+        bar.close()
+    return {"designs": summarise(runs, detections), "runs": runs,
+            "detection_distances_m": list(map(float, dist))}
+
+
+# --------------------------------------------------------------------------- outputs
+
+TABLE_SCORES = ("occupied_f1", "free_accuracy", "coverage", "shadow")
+
+
+def table(records: list[dict]) -> str:
+    """A plain-text table of the per-design records (scores, times, detection)."""
+    dists = records[0].get("detection_distances_m", []) if records else []
+    head = (["design", "F1 occ", "free acc", "coverage", "shadow", "360° view", "compute"]
+            + [f"r@{d * 1e3:.0f}mm" for d in dists])
+    rows = [head]
+    for r in records:
+        row = [r["design"]] + [("—" if r[k] is None else f"{r[k]:.3f}") for k in TABLE_SCORES]
+        row += [_seconds(r["hardware_time_s"]), f"{r['compute_time_s'] * 1e3:.1f} ms"]
+        row += ["miss" if v is None else f"{v * 1e3:.1f}mm"
+                for v in r.get("min_detectable_radius_m", [])]
+        rows.append(row)
+    widths = [max(len(row[i]) for row in rows) for i in range(len(head))]
+    lines = ["  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
+                       enumerate(zip(row, widths))) for row in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def _seconds(s: float) -> str:
+    return f"{s * 1e3:.0f} ms" if s < 1 else f"{s:.2f} s"
+
+
+CSV_KEYS = ("design", "runs", "occupied_precision", "occupied_recall", "occupied_f1",
+            "free_accuracy", "coverage", "shadow", "shadow_min", "hardware_time_s",
+            "compute_time_s")
+
+
+def write_csv(path, rows: list[dict], keys) -> None:
+    import csv
+
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(keys)
+        for r in rows:
+            w.writerow(["" if r.get(k) is None else r.get(k) for k in keys])
+
+
+def chart(result: dict, path) -> None:
+    """Three panels: map scores per design, hardware time per 360° view, and the smallest
+    cylinder each design is sure to see versus distance."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    recs = result["designs"]
+    names = [r["design"] for r in recs]
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.6), gridspec_kw={"width_ratios": [2.2, 1, 1.4]})
+    labels = {"occupied_f1": "occupied F1", "free_accuracy": "free accuracy",
+              "coverage": "coverage", "shadow": "shadow (wall behind a thin post)"}
+    x = np.arange(len(names))
+    w = 0.8 / len(TABLE_SCORES)
+    for i, k in enumerate(TABLE_SCORES):
+        vals = [np.nan if r[k] is None else r[k] for r in recs]
+        xs = x + (i - 1.5) * w
+        ax[0].bar(xs, vals, w, label=labels[k])
+        for xi, v in zip(xs, vals):  # say so where a bar is invisible
+            if not v > 0.005:
+                ax[0].annotate("n/a" if np.isnan(v) else "0", (xi, 0.01), ha="center",
+                               va="bottom", fontsize=7, rotation=90)
+    ax[0].set_xticks(x, names)
+    ax[0].set_ylim(0, 1.0)
+    ax[0].set_ylabel("score (1 = perfect)")
+    scen = sorted({s for r in recs for s in r["scenarios"]})
+    ax[0].set_title(f"Map scores ({', '.join(scen)}; mean of {recs[0]['runs']} runs per design)",
+                    fontsize=9)
+    ax[0].legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncols=4)
+    ax[0].grid(axis="y", alpha=0.3)
+
+    hw = [r["hardware_time_s"] for r in recs]
+    ax[1].bar(x, hw, color="0.4")
+    ax[1].set_yscale("log")
+    ax[1].set_xticks(x, names, rotation=30, ha="right")
+    ax[1].set_ylabel("seconds")
+    ax[1].set_title("Hardware time for one 360° view", fontsize=9)
+    for xi, v in zip(x, hw):
+        ax[1].annotate(_seconds(v), (xi, v), ha="center", va="bottom", fontsize=8)
+    ax[1].grid(axis="y", alpha=0.3)
+
+    dist = np.asarray(result["detection_distances_m"]) * 1e3
+    for r in recs:
+        if "min_detectable_radius_m" not in r:
+            continue
+        y = np.array([np.nan if v is None else v * 1e3 for v in r["min_detectable_radius_m"]])
+        ax[2].plot(dist, y, marker="o", label=r["design"])
+    ax[2].axhline(22, color="k", ls=":", lw=1)
+    ax[2].annotate("table leg, r = 22 mm", (dist[0], 23), fontsize=8)
+    ax[2].set_yscale("log")
+    ax[2].set_xlabel("distance from the robot centre to the cylinder (mm)")
+    ax[2].set_ylabel("smallest cylinder radius seen at every bearing (mm)")
+    ax[2].set_title("Smallest detectable cylinder (missing point: none ≤ 200 mm)", fontsize=9)
+    ax[2].legend(fontsize=8)
+    ax[2].grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_outputs(result: dict, out_dir) -> dict[str, str]:
+    """compare.json, compare.csv (one row per design), runs.csv, compare.png in ``out_dir``."""
+    import json
+    from pathlib import Path
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"json": out / "compare.json", "csv": out / "compare.csv",
+             "runs_csv": out / "runs.csv", "chart": out / "compare.png"}
+    paths["json"].write_text(json.dumps(result, indent=2))
+    write_csv(paths["csv"], result["designs"], CSV_KEYS)
+    if result["runs"]:
+        write_csv(paths["runs_csv"], result["runs"], list(result["runs"][0]))
+    chart(result, paths["chart"])
+    return {k: str(v) for k, v in paths.items()}

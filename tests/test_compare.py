@@ -48,3 +48,76 @@ def test_overlap_beats_a_single_scanner_and_radial_rings_miss_table_legs():
     assert ring.min_detectable_radius_m[2] < 0.01
     # a 22 mm table leg hides between radial beams 30° apart
     assert np.all(radial.min_detectable_radius_m > 0.1)
+
+
+# --------------------------------------------------------------------------- scenes
+
+from irring.metrics import SCORE_KEYS  # noqa: E402
+from irring.scenario import load_scenario  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def cylinder_runs():
+    """t_room_cylinder (paper Fig. 16) seen by three designs, three seeds each."""
+    sc = load_scenario("t_room_cylinder")
+    return {name: [compare.run_scene(sc, name, sc.seed + k) for k in range(3)]
+            for name in ("rotating12", "radial12", "rotating1")}
+
+
+def test_rotating_ring_sees_the_wall_behind_the_table_leg(cylinder_runs):
+    """The paper's Fig. 4 vs Fig. 16 point: overlapping rotating sensors map the wall behind a
+    thin cylinder; a radial ring and a single rotating scanner at the centre do not."""
+    shadow = {n: float(np.mean([r["shadow"] for r in runs])) for n, runs in cylinder_runs.items()}
+    assert shadow["rotating12"] >= 0.4, shadow
+    assert shadow["rotating12"] >= shadow["radial12"] + 0.3, shadow
+    assert shadow["rotating12"] >= shadow["rotating1"] + 0.3, shadow
+
+
+def test_run_records_carry_run_scores_and_hardware_time(cylinder_runs):
+    r = cylinder_runs["rotating12"][0]
+    assert set(SCORE_KEYS) | {"hardware_time_s", "compute_time_s"} <= set(r)
+    assert r["hardware_time_s"] == pytest.approx(71 * 0.0383)
+    assert cylinder_runs["radial12"][0]["hardware_time_s"] == pytest.approx(0.0383)
+    assert cylinder_runs["rotating1"][0]["hardware_time_s"] == pytest.approx(334 * 0.0383)
+    assert r["readings"] == 71 * 12
+    # the same scene and seed give the same map
+    again = compare.run_scene(load_scenario("t_room_cylinder"), "rotating12", r["seed"])
+    assert {k: again[k] for k in SCORE_KEYS} == {k: r[k] for k in SCORE_KEYS}
+
+
+def test_laser_and_sonar_run_through_the_same_pipeline():
+    sc = load_scenario("t_room_cylinder")
+    laser = compare.run_scene(sc, "laser")
+    sonar = compare.run_scene(sc, "sonar12")
+    assert laser["readings"] == 720 and sonar["readings"] == 12
+    assert laser["occupied_f1"] > 0.9               # a fine, accurate scanner maps the room
+    assert sonar["occupied_f1"] < laser["occupied_f1"]  # nearest echo smears azimuth
+    assert laser["hardware_time_s"] < 0.05 and sonar["hardware_time_s"] == pytest.approx(0.588)
+
+
+def test_cli_compare_writes_table_csv_json_and_chart(tmp_path, capsys):
+    import csv
+    import json
+
+    from irring.cli import main
+
+    out = tmp_path / "cmp"
+    argv = ["compare", "--scenario", "t_room_cylinder", "--design", "rotating12", "--design",
+            "radial12", "--seeds", "1", "--bearings", "16", "--distances-mm", "400",
+            "--out", str(out)]
+    assert main(argv + ["--json"]) == 0
+    records = json.loads(capsys.readouterr().out)
+    assert [r["design"] for r in records] == ["rotating12", "radial12"]
+    for r in records:
+        assert set(SCORE_KEYS) | {"hardware_time_s"} <= set(r)
+        assert len(r["min_detectable_radius_m"]) == 1
+    with open(out / "compare.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["design"] for r in rows] == ["rotating12", "radial12"]
+    assert float(rows[0]["hardware_time_s"]) == pytest.approx(2.7193)
+    assert (out / "compare.png").stat().st_size > 10_000
+    assert json.loads((out / "compare.json").read_text())["runs"][0]["scenario"] == \
+        "t_room_cylinder"
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "rotating12" in text and "360° view" in text and "2.72 s" in text
