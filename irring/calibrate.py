@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
 
@@ -101,27 +102,33 @@ class RigReadings:
 
 
 def collect(sweeps: Sequence[Sweep], placement: Placement, sensor: int = 0) -> RigReadings:
-    """Average repeated sweeps of one placement per step (robustly) for one sensor."""
+    """Average repeated sweeps of one placement per step (robustly) for one sensor.
+
+    Sweeps may differ in the steps they carry (a hardware sweep leaves out steps whose
+    readings never arrived, ``Sweep.missing_steps``); readings are matched by step.
+    """
     if not sweeps:
         raise CalibrationError("a placement needs at least one sweep")
-    steps = np.asarray(sweeps[0].steps)
-    for sw in sweeps[1:]:
-        if not np.array_equal(np.asarray(sw.steps), steps):
-            raise CalibrationError("the repeated sweeps of a placement must visit the same steps")
-    counts = np.stack([np.asarray(sw.counts, dtype=float)[:, sensor] for sw in sweeps])  # (R, S)
-    for sw in sweeps:  # a step whose reading never arrived is not a reading
-        if sw.missing_steps:
-            counts[:, np.isin(steps, sw.missing_steps)] = np.nan
-    angle = np.asarray(sweeps[0].sensor_angles, dtype=float)[:, sensor]
-    med = np.nanmedian(counts, axis=0) if counts.shape[0] > 1 else counts[0]
-    mad = np.nanmedian(np.abs(counts - med), axis=0) * 1.4826 if counts.shape[0] > 2 else None
+    steps = np.unique(np.concatenate([np.asarray(sw.steps) for sw in sweeps]))
+    counts = np.full((len(sweeps), steps.size), np.nan)           # (R, S)
+    angle = np.full(steps.size, np.nan)
+    for i, sw in enumerate(sweeps):
+        at = np.searchsorted(steps, np.asarray(sw.steps))
+        counts[i, at] = np.asarray(sw.counts, dtype=float)[:, sensor]
+        angle[at] = np.asarray(sw.sensor_angles, dtype=float)[:, sensor]
+        if sw.missing_steps:  # rows a source kept but marked missing are not readings
+            counts[i, np.isin(steps, sw.missing_steps)] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a step no sweep read stays NaN
+        med = np.nanmedian(counts, axis=0)
+        mad = np.nanmedian(np.abs(counts - med), axis=0) * 1.4826
     keep = np.isfinite(counts)
-    if mad is not None:
-        keep &= np.abs(counts - med) <= 4.0 * np.maximum(mad, 1.0)
+    if len(sweeps) > 2:  # drop outliers (beyond 4 robust σ, at least 4 counts)
+        keep &= np.abs(counts - med) <= 4.0 * np.maximum(np.nan_to_num(mad), 1.0)
     n = keep.sum(axis=0)
     total = np.where(keep, counts, 0.0).sum(axis=0)
     mean = np.where(n > 0, total / np.maximum(n, 1), np.nan)
-    dev = np.where(keep, counts - mean, 0.0)
+    dev = np.where(keep, counts - mean[None, :], 0.0)
     spread = np.where(n > 1, np.sqrt((dev ** 2).sum(axis=0) / np.maximum(n - 1, 1)), np.nan)
     size = steps.size
     return RigReadings(counts=mean, beam_angle_rad=placement.yaw_rad + angle,

@@ -18,10 +18,16 @@ the scene, vectorised over a whole sweep (S steps × N sensors):
 Fallback: a reading on no usable line (a thin cylinder, an isolated return, a line shorter
 than ``LineOptions.min_length_m`` or with fewer than ``min_points`` readings) keeps θ = 0, the
 paper's starting assumption, and its ``sigma_m`` is widened by half the gap between its θ = 0
-and θ = 45° distances. Damping: a reading whose θ update changes sign between iterations (an
-oscillation) has its step gain halved. The line grouping is recomputed in the first
-``LineOptions.regroup_iterations`` iterations and then held, so readings on a corner cannot
-flip between two lines forever.
+and θ = 45° distances.
+
+Damping: a reading whose θ update reverses the previous one without shrinking to half of it
+(an oscillation, not ordinary convergence) has its step gain halved (down to 1/64); the gain
+recovers by ×1.25 per calm iteration. The line grouping is recomputed while some θ still
+moves by more than ``LineOptions.regroup_until_rad`` (at most ``regroup_iterations``
+times) and then held: members keep their line, readings on no line may still join one, so
+readings at a corner cannot flip between two lines forever. Readings still moving after
+``max_iterations`` are NOT_CONVERGED (in the noisy T-room about 0.4 % of readings, where a
+shoulder's convex corner is seen nearly edge-on and its two walls barely differ).
 
 Validity (:class:`irring.data.Reason`): a missing reading (NaN counts or a step in
 ``Sweep.missing_steps``) is MISSING; counts at ADC full scale SATURATED; counts at or below the
@@ -218,7 +224,7 @@ class Calibration:
             "min_range_mm": float(self.min_range_m * 1e3),
             "max_range_mm": float(self.max_range_m * 1e3),
             "noise_counts": float(self.noise_counts),
-            "curve": [{"theta_deg": float(math.degrees(t)), "a": float(a), "b": float(b)}
+            "curve": [{"theta_deg": round(math.degrees(t), 9), "a": float(a), "b": float(b)}
                       for t, a, b in zip(self.theta_rad, self.a, self.b)],
         }
 
@@ -228,7 +234,8 @@ class Calibration:
         header = ("# irring calibration: d[m] = a(θ)·S^b(θ), S in ADC counts (paper Eq. 10);\n"
                   "# emitter offset d_o (paper Eq. 9) in mm; load with "
                   "irring.estimate.Calibration.load\n")
-        path.write_text(header + yaml.safe_dump(self.to_dict(), sort_keys=False))
+        path.write_text(header + yaml.safe_dump(self.to_dict(), sort_keys=False,
+                                                allow_unicode=True), encoding="utf-8")
         return path
 
     @classmethod
@@ -288,7 +295,7 @@ class Calibration:
     def load(cls, path: str | Path) -> Calibration:
         path = Path(path)
         try:
-            raw = yaml.safe_load(path.read_text())
+            raw = yaml.safe_load(path.read_text(encoding="utf-8"))
         except OSError as exc:
             raise CalibrationError(f"{path}: cannot read calibration file: {exc}") from exc
         except yaml.YAMLError as exc:
@@ -415,7 +422,8 @@ class LineOptions:
     min_points: int = 3            # a line usable for θ has at least this many readings …
     min_length_m: float = 0.04     # … spanning at least this length
     max_rms_sigmas: float = 3.0    # … and fits them to within this RMS (in σ)
-    regroup_iterations: int = 4    # regroup in the first iterations, then hold the grouping
+    regroup_iterations: int = 8    # regroup at most this many iterations …
+    regroup_until_rad: float = math.radians(1.0)  # … and only while some θ moves more
     adopt_margin_m: float = 0.05   # a reading on no line may join one this far past its ends
 
 
@@ -715,16 +723,22 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     history = [theta.copy()] if keep_history else []
     found: Lines | None = None
     steps = np.asarray(sweep.steps)
+    regroup = True
     n_iter = max_iterations if iterate else 0
     for it in range(n_iter):
         d, px, py, sigma = points_at(theta)
         # readings far outside the range cannot help a line (but stay for the final check)
         usable = live & (d <= 1.5 * max_range)
-        if found is None or it < lines.regroup_iterations:
+        if regroup:
             found = fit_lines(px, py, usable, sigma, steps, lines)
             line_of = _members(found, usable, cal, s_safe, origin, ux, uy, px, py, sigma, lines)
-        else:  # held grouping: refit the same members at their new positions
+        else:  # held grouping: refit the same members at their new positions; readings on
+            # no line may still join one, but no member leaves (so nothing flip-flops)
             found = _refit(found, line_of, px, py, usable)
+            orphan = usable & (line_of < 0)
+            if orphan.any():
+                line_of = _adopt(line_of, orphan, found, cal, s_safe, origin, ux, uy, px, py,
+                                 sigma, lines)
         good = (line_of >= 0) & usable
         good[good] = found.usable[line_of[good]]
         line_of = np.where(good, line_of, -1)
@@ -753,6 +767,9 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
             history.append(theta.copy())
         if not moving.any():
             break
+        # regroup while θ still moves coarsely, then hold the grouping
+        regroup = regroup and it + 1 < lines.regroup_iterations and \
+            float(np.max(np.abs(applied), initial=0.0)) > lines.regroup_until_rad
 
     d, px, py, sigma = points_at(theta)
     # fallback readings (no line): θ = 0, σ widened by half the spread to θ = 45°
