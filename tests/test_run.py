@@ -1,0 +1,147 @@
+"""`irring run` / `irring replay` end to end: targets on the bundled scenarios, the files
+it writes, exact replay, determinism."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+
+from irring import pipeline  # noqa: E402
+from irring.cli import main  # noqa: E402
+from irring.mapping import OccupancyGrid, read_pgm  # noqa: E402
+from irring.metrics import SCORE_KEYS  # noqa: E402
+from irring.recording import load_recording  # noqa: E402
+from irring.scenario import load_scenario  # noqa: E402
+
+SCENARIOS = ("t_room", "t_room_cylinder", "t_room_three_cylinders")
+
+
+@pytest.fixture(scope="module")
+def runs():
+    return {name: pipeline.run(load_scenario(name), progress=False) for name in SCENARIOS}
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_bundled_scenarios_meet_the_map_targets(runs, name):
+    s = runs[name].scores
+    assert s["occupied_f1"] >= 0.9, s
+    assert s["free_accuracy"] >= 0.95, s
+
+
+def test_the_ring_maps_the_wall_behind_the_table_leg(runs):
+    """Paper Fig. 16: the wall behind the cylinder is seen by the rotating sensors."""
+    assert runs["t_room_cylinder"].scores["shadow"] >= 0.5
+
+
+def test_summary_has_the_documented_keys(runs):
+    r = runs["t_room"]
+    s = r.summary()
+    assert set(s) == {"scenario", "design", "poses", "readings", "scores", "hardware_time_s",
+                      "compute_time_s"}
+    assert s["scenario"] == "t_room" and s["design"] == "rotating12" and s["poses"] == 4
+    assert set(s["scores"]) == set(SCORE_KEYS)
+    assert s["readings"]["total"] == 4 * 71 * 12
+    assert s["readings"]["valid"] + sum(v for k, v in s["readings"].items()
+                                        if k not in ("total", "valid")) == 4 * 71 * 12
+    # four sweeps of 71 steps at one 38.3 ms GP2 period each
+    assert s["hardware_time_s"] == pytest.approx(4 * 71 * 0.0383)
+    assert set(s["compute_time_s"]) >= {"simulate", "estimate", "map", "score", "total"}
+
+
+def test_run_is_deterministic_under_its_seed(runs):
+    sc = load_scenario("t_room_cylinder")
+    again = pipeline.run(sc, progress=False, score=False)
+    assert np.array_equal(again.grid.log_odds, runs["t_room_cylinder"].grid.log_odds)
+    other = pipeline.run(sc, seed=sc.seed + 1, progress=False, score=False)
+    assert not np.array_equal(other.grid.log_odds, again.grid.log_odds)
+
+
+def test_cli_run_writes_every_output_and_replay_reproduces_the_map(tmp_path, capsys):
+    out = tmp_path / "cyl"
+    assert main(["run", "t_room_cylinder", "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["scenario"] == "t_room_cylinder" and summary["poses"] == 1
+    for name in ("map.png", "map_building.gif", "map.pgm", "map.yaml", "sweeps.npz"):
+        assert (out / name).stat().st_size > 0, name
+
+    import imageio.v2 as imageio
+
+    png = imageio.imread(out / "map.png")
+    assert png.ndim == 3 and png.shape[0] > 400 and png.shape[1] > 600
+    gif = imageio.mimread(out / "map_building.gif")
+    assert len(gif) == 1 + pipeline.FRAMES_PER_SWEEP   # empty map, then the sweep in parts
+    assert not np.array_equal(gif[0], gif[-1])
+
+    # the PGM is the map, and reloads to the same cells
+    grid = OccupancyGrid.from_pgm(out / "map.yaml")
+    run = pipeline.run(load_scenario("t_room_cylinder"), progress=False, score=False)
+    np.testing.assert_array_equal(grid.classify(), run.grid.classify())
+    np.testing.assert_allclose(grid.origin_xy_m, run.grid.origin_xy_m)
+
+    # the recording holds the sweeps and what replay needs
+    sweeps, meta = load_recording(out / "sweeps.npz")
+    assert len(sweeps) == 1 and sweeps[0].truth is not None
+    assert meta["scenario"] == "t_room_cylinder" and meta["scenario_yaml"]
+
+    replayed = pipeline.replay(out / "sweeps.npz", progress=False)
+    assert np.array_equal(replayed.grid.log_odds, run.grid.log_odds)
+    assert replayed.scores == summary["scores"]
+
+    rep = tmp_path / "rep"
+    assert main(["replay", str(out / "sweeps.npz"), "--out", str(rep), "--no-animation"]) == 0
+    text = capsys.readouterr().out
+    assert "occupied  F1" in text and "hardware" in text
+    assert (rep / "map.pgm").read_bytes() == (out / "map.pgm").read_bytes()
+    assert not (rep / "map_building.gif").exists()
+
+
+def test_replay_with_another_calibration_changes_the_map(tmp_path):
+    from irring.estimate import Calibration
+
+    sc = load_scenario("t_room_cylinder")
+    base = pipeline.run(sc, progress=False, score=False)
+    pipeline.write_outputs(base, tmp_path / "a", animation=False)
+    cal = Calibration.nominal("gp2d12", sc.ring, emitter_offset_m=0.030)
+    path = cal.save(tmp_path / "cal.yaml")
+    other = pipeline.replay(tmp_path / "a" / "sweeps.npz", calibration_file=path, score=False)
+    assert not np.array_equal(other.grid.log_odds, base.grid.log_odds)
+    # the calibration travels with the new recording, so replaying that one is exact too
+    pipeline.write_outputs(other, tmp_path / "b", animation=False)
+    again = pipeline.replay(tmp_path / "b" / "sweeps.npz", score=False)
+    assert np.array_equal(again.grid.log_odds, other.grid.log_odds)
+
+
+def test_readable_summary_and_bad_input(tmp_path, capsys):
+    assert main(["run", "t_room_cylinder", "--out", str(tmp_path), "--no-animation"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("t_room_cylinder — ")
+    for word in ("occupied  F1", "free      accuracy", "shadow", "hardware 2.7 s", "compute",
+                 "map.pgm"):
+        assert word in text
+    assert main(["run", "no_such_scenario"]) == 2
+    assert "no such file and no bundled scenario" in capsys.readouterr().err
+    assert main(["replay", str(tmp_path / "nothing.npz")]) == 2
+    assert "no such recording" in capsys.readouterr().err
+
+
+def test_progress_bar_only_at_a_terminal(monkeypatch):
+    monkeypatch.setattr("sys.stderr.isatty", lambda: True, raising=False)
+    monkeypatch.setenv("CI", "true")
+    assert not pipeline.progress_enabled()
+    monkeypatch.delenv("CI")
+    assert pipeline.progress_enabled()
+
+
+def test_help_explains_units_defaults_and_examples(capsys):
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = capsys.readouterr().out
+    for word in ("t_room", "./out/<scenario>", "10 mm", "map_server", "examples:", "--seed"):
+        assert word in text
+    with pytest.raises(SystemExit):
+        main(["replay", "--help"])
+    assert "--calibration" in capsys.readouterr().out
