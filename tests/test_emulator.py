@@ -273,3 +273,60 @@ def test_irring_emulate_serves_a_link_and_cleans_up_on_sigterm(tmp_path, t_room)
     assert proc.returncode == 0, err
     assert "on /dev/pts/" in out and "1 sweeps" in out
     assert not link.exists()
+
+
+# --------------------------------------------------------------------------- irring drive
+
+
+def test_irring_drive_on_the_emulator_makes_the_same_map_as_irring_run(tmp_path, t_room,
+                                                                       pty_device, capsys):
+    import json
+
+    from irring.cli import main
+
+    link = pty_device(Device(SimSource(t_room)))
+    assert main(["run", "t_room", "--out", str(tmp_path / "run"), "--no-animation",
+                 "--json"]) == 0
+    ran = json.loads(capsys.readouterr().out)
+    assert main(["drive", "--port", link, "--truth", "t_room", "--out", str(tmp_path / "drive"),
+                 "--no-animation", "--json", "--timeout", "0.5"]) == 0
+    drove = json.loads(capsys.readouterr().out)
+    for name in ("map.pgm", "map.yaml"):
+        assert (tmp_path / "run" / name).read_bytes() == (tmp_path / "drive" / name).read_bytes()
+    assert drove["scores"] == ran["scores"] and drove["readings"] == ran["readings"]
+    assert drove["hardware_time_s"] == pytest.approx(ran["hardware_time_s"], abs=0.01)
+    assert drove["link"]["totals"]["lost_scans"] == 0
+    assert [s["missing_steps"] for s in drove["link"]["sweeps"]] == [[]] * 4
+    # the recording replays to the same map
+    assert main(["replay", str(tmp_path / "drive" / "sweeps.npz"), "--out",
+                 str(tmp_path / "replay"), "--no-animation", "--json"]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "replay" / "map.pgm").read_bytes() == \
+        (tmp_path / "run" / "map.pgm").read_bytes()
+
+
+def test_irring_drive_survives_a_bad_link_and_says_what_was_lost(tmp_path, t_room, pty_device,
+                                                                capsys):
+    import json
+
+    from irring.cli import main
+
+    faults = Faults(corrupt_rate=0.01, drop_rate=0.05, disconnect_after=400, seed=4)
+    link = pty_device(Device(SimSource(t_room), faults=faults))
+    code = main(["drive", "--port", link, "--truth", "t_room", "--out", str(tmp_path),
+                 "--no-animation", "--timeout", str(TIMEOUT_S), "--resweep", "1"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert "disconnected" in err and "missing steps" in err
+    report = json.loads((tmp_path / "link.json").read_text())
+    assert report["error"] and report["totals"]["checksum_failures"] > 0
+    assert 1 <= len(report["sweeps"]) < 4
+    assert (tmp_path / "map.pgm").exists() and (tmp_path / "sweeps.npz").exists()
+    assert "steps missing" in out
+
+
+def test_irring_drive_without_a_device_is_a_clear_error(capsys):
+    from irring.cli import main
+
+    assert main(["drive", "--port", "/dev/irring-none", "--no-animation"]) == 2
+    assert "cannot open /dev/irring-none" in capsys.readouterr().err

@@ -1,0 +1,216 @@
+"""`irring drive --port PORT`: sweep the real ring, estimate and map like `irring run`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+HELP = """\
+Sweep the real ring (or `irring emulate`) over a serial port at one or more poses, then run
+the readings through the same estimator and occupancy-grid mapper as `irring run`.
+
+The ring must speak IRR protocol v1 (PROTOCOL.md). The handshake reads the sensor count,
+ADC bits, motor step, belt ratio and step limits from the device; the ring radius and
+emitter offset, which the device does not report, come from the paper (0.15 m, 7 mm), from
+--calibration (its emitter offset d_o) or from --truth. Steps whose readings were lost on
+the link are re-swept (--resweep) and, if still missing, left out and reported: no reading
+is ever invented.
+
+Writes into --out (default ./out/drive) the same files as `irring run` — map.png,
+map_building.gif, map.pgm + map.yaml (ROS map_server), sweeps.npz (for `irring replay`) —
+plus link.json (per-sweep link report: missing steps, checksum failures, seq gaps, timeouts).
+
+Poses: with --truth the scenario's scan poses are used (and the map is scored against it);
+otherwise give each pose with --pose X_MM,Y_MM,YAW_DEG (default: one pose at the origin).
+Between poses drive waits for Enter when run at a terminal (--no-wait to skip); the emulator
+moves its robot by itself at every full sweep.
+
+Exit status: 0 all poses swept; 1 the device stopped answering or disconnected (what arrived
+is still mapped and written); 2 bad arguments or no device.
+
+examples:
+  irring emulate t_room --link /tmp/irring &           # try it without hardware
+  irring drive --port /tmp/irring --truth t_room        # map + scores, same as `irring run`
+  irring drive --port /dev/ttyUSB0 --calibration my_ring.yaml --pose 500,450,0 --pose 1210,450,0
+  irring drive --port socket://192.168.1.40:7000 --json
+"""
+
+
+def _pose(text: str) -> tuple[float, float, float]:
+    try:
+        parts = [float(v) for v in text.split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) not in (2, 3):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected X_MM,Y_MM[,YAW_DEG], e.g. 500,450,90")
+    x, y, yaw = (parts + [0.0])[:3]
+    return x / 1000.0, y / 1000.0, math.radians(yaw)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("drive", help="sweep the real ring over a serial port, estimate and map",
+                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--port", required=True, metavar="PORT",
+                   help="serial device or pyserial URL: /dev/ttyUSB0, COM3, a pty path, "
+                        "socket://host:port, loop://")
+    p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    p.add_argument("--timeout", type=float, default=1.0, metavar="S",
+                   help="longest silence tolerated while an answer is due, on top of the "
+                        "per-step time, in seconds (default 1.0); a silent device is given up "
+                        "after about 4× this")
+    p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+                   help="calibration YAML from `irring calibrate` (default: the sensor's "
+                        "datasheet curve)")
+    p.add_argument("--truth", default=None, metavar="SCENARIO",
+                   help="scenario the ring is standing in (name or YAML): its poses, sensor "
+                        "settings and room are used, and the map is scored against it")
+    p.add_argument("--poses", type=int, default=None, metavar="N",
+                   help="number of poses to sweep (default: all of --truth's, or of --pose)")
+    p.add_argument("--pose", type=_pose, action="append", default=None,
+                   metavar="X_MM,Y_MM[,YAW_DEG]",
+                   help="robot pose of the next sweep, repeatable (overrides --truth's)")
+    p.add_argument("--samples", type=int, default=None,
+                   help="readings averaged per step by the device, 1–64 (default: --truth's "
+                        "scan.samples with averaging, else 1)")
+    p.add_argument("--settle-ms", type=int, default=None, metavar="MS",
+                   help="wait at each step before reading (default: --truth's, else 0)")
+    p.add_argument("--resweep", type=int, default=2, metavar="K",
+                   help="rounds of re-sweeping only the missing steps (default 2; 0 = never)")
+    p.add_argument("--out", type=Path, default=Path("out") / "drive", metavar="DIR",
+                   help="output folder (default: ./out/drive)")
+    p.add_argument("--json", action="store_true",
+                   help="print a JSON summary on stdout instead of the readable one")
+    p.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    p.add_argument("--no-wait", action="store_true",
+                   help="do not wait for Enter between poses")
+    p.set_defaults(func=run)
+
+
+def _error(msg: str) -> int:
+    print(f"irring drive: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .. import pipeline
+    from ..designs import PAPER_RING
+    from ..hardware import DeviceError, LinkLost, SerialRing
+    from ..mapping import OccupancyGrid
+    from ..scenario import load_scenario
+
+    truth = load_scenario(args.truth) if args.truth else None
+    try:
+        calibration, cal_text = pipeline.load_calibration(args.calibration)
+    except (OSError, ValueError) as exc:
+        return _error(f"calibration {args.calibration}: {exc}")
+
+    # what the device does not report: from the calibration, the truth scenario, the paper
+    template = truth.ring if truth else PAPER_RING
+    sensor = truth.sensor if truth else None
+    sensor_model = (calibration.sensor_model if calibration else
+                    sensor.model if sensor else "gp2d12")
+    vref_v = calibration.vref_v if calibration else sensor.vref_v if sensor else 5.0
+    max_range_m = sensor.max_range_m if sensor else 0.624  # the paper's experiments
+    emitter_offset_m = calibration.emitter_offset_m if calibration else None
+
+    poses = [tuple(p) for p in args.pose] if args.pose else (
+        [(p.x_m, p.y_m, p.yaw_rad) for p in truth.robot.poses] if truth else [(0.0, 0.0, 0.0)])
+    n = args.poses if args.poses is not None else len(poses)
+    if n < 1:
+        return _error("--poses must be at least 1")
+    if n > len(poses):
+        if args.pose or truth:
+            return _error(f"--poses {n} but only {len(poses)} pose(s) known; add --pose "
+                          f"X_MM,Y_MM,YAW_DEG for each")
+        poses = poses * n  # an unmoved robot swept n times
+    samples = args.samples
+    if samples is None:
+        samples = truth.scan.samples if truth and truth.has("averaging") else 1
+    settle_s = (args.settle_ms / 1000.0 if args.settle_ms is not None else
+                truth.scan.settle_s if truth else 0.0)
+
+    ring = SerialRing(args.port, baudrate=args.baud, timeout_s=args.timeout, template=template,
+                      emitter_offset_m=emitter_offset_m, sensor_model=sensor_model,
+                      vref_v=vref_v, max_range_m=max_range_m)
+    say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
+    try:
+        ring.open()
+    except DeviceError as exc:
+        return _error(str(exc))
+    info = ring.info
+    say(f"ring on {args.port}: {info.firmware}, {info.nsensors} sensors, {info.adc_bits}-bit "
+        f"ADC, step {info.step_mdeg / 1000:g}° × {info.gear_num}/{info.gear_den}, steps "
+        f"{info.min_step} … {info.max_step}")
+    if calibration is not None and calibration.adc_bits != info.adc_bits:
+        ring.close()
+        return _error(f"the calibration is for a {calibration.adc_bits}-bit ADC but the ring "
+                      f"reports {info.adc_bits} bits; calibrate this ring (irring calibrate)")
+    if truth is not None and ring.ring != truth.ring:
+        say(f"warning: the device's geometry differs from {truth.name}'s ring; using the "
+            f"device's")
+    stride = truth.scan.step_stride if truth else 1
+    steps = np.arange(info.min_step, info.max_step + 1, stride)
+
+    sweeps, reports, failure = [], [], None
+    interactive = sys.stdin.isatty() and not args.no_wait
+    try:
+        for k in range(n):
+            pose = poses[k]
+            if k and interactive:
+                input(f"move the robot to pose {k + 1} of {n} ({pose[0] * 1e3:.0f} mm, "
+                      f"{pose[1] * 1e3:.0f} mm, {math.degrees(pose[2]):.0f}°) and press Enter ")
+            try:
+                sweep = ring.sweep(steps, samples=samples, settle_s=settle_s, pose=pose,
+                                   resweep=args.resweep)
+            except LinkLost as exc:
+                failure = exc
+                if exc.partial is not None and len(exc.partial.steps):
+                    sweeps.append(exc.partial)
+                    reports.append(exc.report)
+                break
+            sweeps.append(sweep)
+            reports.append(ring.last_report)
+            say(f"pose {k + 1}/{n}: {ring.last_report.message}")
+    finally:
+        ring.close()
+    if failure is not None:
+        print(f"irring drive: {failure}", file=sys.stderr)
+    if not sweeps:
+        print("irring drive: no readings arrived; nothing to map", file=sys.stderr)
+        return 1
+
+    frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
+    grid = OccupancyGrid.for_scenario(truth) if truth is not None else None
+    result = pipeline.map_sweeps(sweeps, scenario=truth, grid=grid, calibration=calibration,
+                                 frames_per_sweep=frames, score=truth is not None)
+    result.scenario_text = pipeline.scenario_text(truth) if truth is not None else None
+    result.calibration_text = cal_text
+    paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation)
+    link = {"port": args.port, "firmware": info.firmware, "totals": ring.stats.as_dict(),
+            "sweeps": [r.as_dict() for r in reports],
+            "error": None if failure is None else str(failure)}
+    paths["link"] = args.out / "link.json"
+    paths["link"].write_text(json.dumps(link, indent=2))
+
+    from .run import summary_lines
+
+    if args.json:
+        summary = result.summary()
+        summary["source"] = f"serial:{args.port}"
+        summary["link"] = link
+        summary["outputs"] = {k: str(v) for k, v in paths.items()}
+        print(json.dumps(summary, indent=2))
+    else:
+        for line in summary_lines(result, paths):
+            print(line)
+        t = ring.stats
+        missing = sum(len(s.missing_steps) for s in sweeps)
+        print(f"  link      {t.scans} steps read, {missing} steps missing; "
+              f"{t.checksum_failures} checksum failures, {t.malformed} malformed, "
+              f"{t.seq_gaps} seq gaps, {t.timeouts} timeouts, {t.resweeps} re-sweeps")
+    return 0 if failure is None else 1
