@@ -6,12 +6,16 @@ into a ``mujoco.batch.Batch`` with one simulation per step, computes the positio
 (kinematics) in one call, reads every emitter site's world frame, and casts all
 steps × sensors rays in one batched ``ray`` call. No Python loop per ray or per step.
 
-Why this path (measured, ``python -m irring.sim`` prints the figures): for the T-room,
-71 × 12 rays, 2-core machine, medians — kinematics for 71 steps by one batched forward
-0.17 ms (the same as 71 ``mj_kinematics`` calls in a Python loop, 0.17 ms, and a third of a
-batched forward that also evaluates the rangefinder sensors, 0.57–0.69 ms); the 852 rays in
-one ``Batch.ray`` call 0.19 ms (a Python loop of ``mj_ray`` 1.2 ms, of ``mj_multiRay`` —
-one origin per call, and every emitter moves — 3.1 ms).
+Why this path (measured by ``python -m irring.sim``; T-room, 71 × 12 = 852 rays, this
+2-core machine, medians of 200): (a) the 12 rangefinder sensors, one simulation per step,
+one batched forward: 0.70 ms for frames and rays together, and a rangefinder cannot skip the
+robot's own geoms; (b) one MjData, ``mj_kinematics`` per step in a Python loop: 0.13 ms for
+the bare calls but ≈ 0.4 ms with each step's joint writes and site frames copied out, against
+0.20 ms for the batched forward used here, which needs no per-step loop; (c) all rays in one ``Batch(model, 1).ray`` call: 0.19 ms raw,
+0.27 ms with our range, incidence and reflectance logic (``cast``); (d) ``mj_multiRay`` casts
+from one origin, and every emitter moves, so one call per ray: 3–7 ms (``mj_ray`` in a Python
+loop: 1.1 ms). Chosen: batched forward for the frames + (c). A whole sweep with the T-room's
+effects (incidence, noise, quantisation) takes ≈ 0.6 ms, its truth ≈ 0.5 ms.
 
 Range logic is ours, not the rangefinder's ``cutoff`` (which clamps every output): a hit
 farther than ``scenario.sensor.max_range_m`` from the emitter is no return (NaN). Beams see
@@ -273,7 +277,9 @@ class SimRing:
 
 
 def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, float]:
-    """Median ms per sweep of the ways to get a sweep's rays out of MuJoCo (see module doc)."""
+    """Median ms per sweep (over ``repeats``) of a whole sweep (``sweep_ms``: truth and the
+    scene's effects), of its truth alone, and of the ways to get a sweep's rays out of MuJoCo
+    (see the module doc). Run ``python -m irring.sim [SCENARIO]``."""
     import time
 
     from .scenario import load_scenario
@@ -304,10 +310,16 @@ def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, floa
     qpos[:, built.sensor_qpos] = angles
     qpos[:, built.motor_qpos] = motor
 
-    def kin_loop():
-        for q in qpos:
+    sites = built.emitter_sites
+    out_o = np.empty(origin.shape)
+    out_z = np.empty(direction.shape)
+
+    def kin_loop():  # what frames() would be with one MjData: write, kinematics, copy out
+        for i, q in enumerate(qpos):
             d.qpos[:] = q
             mujoco.mj_kinematics(m, d)
+            out_o[i] = d.site_xpos[sites]
+            out_z[i] = d.site_xmat[sites][:, 2::3]
 
     # (a) the rangefinder sensors, one simulation per step, batched forward
     rf = mujoco.batch.Batch(m, len(steps), nthread=1)
@@ -337,6 +349,7 @@ def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, floa
     mujoco.mj_kinematics(m, d)
     return {
         "rays": float(len(o)),
+        "sweep_ms": median_ms(lambda: sim.sweep(0)),
         "sweep_truth_ms": median_ms(lambda: sim.truth(0)),
         "frames_batch_forward_ms": median_ms(lambda: sim.frames(angles, pose, motor)),
         "frames_kinematics_loop_ms": median_ms(kin_loop),
@@ -351,5 +364,9 @@ def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, floa
 
 
 if __name__ == "__main__":  # pragma: no cover - a measurement, run by hand
-    for key, value in measure().items():
-        print(f"{key:32s} {value:8.3f}")
+    import sys
+
+    name = sys.argv[1] if len(sys.argv) > 1 else "t_room"
+    print(f"{name}: median ms per sweep of 71 steps × 12 sensors")
+    for key, value in measure(name).items():
+        print(f"  {key:32s} {value:8.3f}")
