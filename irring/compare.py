@@ -229,7 +229,7 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
                                samples=sweeps[0].samples)
     readings = result.readings()
     return {
-        "scenario": scenario.name, "design": d.name, "seed": int(seed),
+        "scenario": scenario.name, "design": d.name, "seed": int(seed), "poses": poses,
         **{k: scores[k] for k in metrics.SCORE_KEYS},
         "hardware_time_s": view_s, "hardware_time_total_s": view_s * poses,
         "compute_time_s": (sim_s + result.compute_time_s) / poses, "setup_time_s": build_s,
@@ -262,6 +262,8 @@ def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) 
             rec["shadow_min"] = float(min(vals)) if vals else None
         rec["by_scenario"] = {sc: {k: _mean(r[k] for r in mine if r["scenario"] == sc)
                                    for k in SCORE_KEYS} for sc in rec["scenarios"]}
+        rec["poses"] = {sc: next(r["poses"] for r in mine if r["scenario"] == sc)
+                        for sc in rec["scenarios"]}
         rec["hardware_time_s"] = float(np.mean([r["hardware_time_s"] for r in mine]))
         rec["compute_time_s"] = float(np.median([r["compute_time_s"] for r in mine]))
         if detections and name in detections:
@@ -350,8 +352,8 @@ def write_csv(path, rows: list[dict], keys) -> None:
 
 
 def chart(result: dict, path) -> None:
-    """Three panels: map scores per design, hardware time per 360° view, and the smallest
-    cylinder each design is sure to see versus distance."""
+    """Four panels: map scores per design, shadow per scenario, hardware time per 360°
+    view, and the smallest cylinder each design is sure to see versus distance."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -359,54 +361,65 @@ def chart(result: dict, path) -> None:
 
     recs = result["designs"]
     names = [r["design"] for r in recs]
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.6), gridspec_kw={"width_ratios": [2.2, 1, 1.4]})
-    labels = {"occupied_f1": "occupied F1", "free_accuracy": "free accuracy",
-              "coverage": "coverage", "shadow": "shadow (wall behind a thin post)"}
     x = np.arange(len(names))
-    w = 0.8 / len(TABLE_SCORES)
-    for i, k in enumerate(TABLE_SCORES):
-        vals = [np.nan if r[k] is None else r[k] for r in recs]
-        xs = x + (i - 1.5) * w
-        ax[0].bar(xs, vals, w, label=labels[k])
-        for xi, v in zip(xs, vals):  # say so where a bar is invisible
-            if not v > 0.005:
-                ax[0].annotate("n/a" if np.isnan(v) else "0", (xi, 0.01), ha="center",
-                               va="bottom", fontsize=7, rotation=90)
-    ax[0].set_xticks(x, names)
-    ax[0].set_ylim(0, 1.0)
-    ax[0].set_ylabel("score (1 = perfect)")
-    scen = sorted({s for r in recs for s in r["scenarios"]})
-    ax[0].set_title(f"Map scores ({', '.join(scen)}; mean of {recs[0]['runs']} runs per design)",
-                    fontsize=9)
-    ax[0].legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncols=4)
-    ax[0].grid(axis="y", alpha=0.3)
+    fig, axes = plt.subplots(2, 2, figsize=(13, 8.5))
+    (a_scores, a_shadow), (a_time, a_det) = axes
+
+    def bars(ax, series: dict[str, list], title: str) -> None:
+        w = 0.8 / max(len(series), 1)
+        for i, (label, vals) in enumerate(series.items()):
+            vals = np.array([np.nan if v is None else v for v in vals], dtype=float)
+            xs = x + (i - (len(series) - 1) / 2) * w
+            ax.bar(xs, vals, w, label=label)
+            for xi, v in zip(xs, vals):  # say so where a bar is invisible
+                if not v > 0.005:
+                    ax.annotate("n/a" if np.isnan(v) else "0", (xi, 0.01), ha="center",
+                                va="bottom", fontsize=7, rotation=90)
+        ax.set_xticks(x, names)
+        ax.set_ylim(0, 1.0)
+        ax.set_ylabel("score (1 = perfect)")
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncols=4)
+        ax.grid(axis="y", alpha=0.3)
+
+    runs = recs[0]["runs"] if recs else 0
+    bars(a_scores, {"occupied F1": [r["occupied_f1"] for r in recs],
+                    "free accuracy": [r["free_accuracy"] for r in recs],
+                    "coverage": [r["coverage"] for r in recs]},
+         f"Map scores, mean over {runs} runs per design (scenarios × seeds)")
+    with_shadow = [sc for sc in (recs[0]["scenarios"] if recs else [])
+                   if any(r["by_scenario"][sc]["shadow"] is not None for r in recs)]
+    bars(a_shadow, {f"{sc} ({recs[0]['poses'][sc]} scan{'s' if recs[0]['poses'][sc] > 1 else ''})":
+                    [r["by_scenario"][sc]["shadow"] for r in recs] for sc in with_shadow},
+         "Shadow: share of the wall behind thin posts that the map shows")
 
     hw = [r["hardware_time_s"] for r in recs]
-    ax[1].bar(x, hw, color="0.4")
-    ax[1].set_yscale("log")
-    ax[1].set_xticks(x, names, rotation=30, ha="right")
-    ax[1].set_ylabel("seconds")
-    ax[1].set_title("Hardware time for one 360° view", fontsize=9)
+    a_time.bar(x, hw, color="0.4")
+    a_time.set_yscale("log")
+    a_time.set_xticks(x, names)
+    a_time.set_ylabel("seconds")
+    a_time.set_title("Hardware time for one 360° view at one pose", fontsize=9)
     for xi, v in zip(x, hw):
-        ax[1].annotate(_seconds(v), (xi, v), ha="center", va="bottom", fontsize=8)
-    ax[1].grid(axis="y", alpha=0.3)
+        a_time.annotate(_seconds(v), (xi, v), ha="center", va="bottom", fontsize=8)
+    a_time.grid(axis="y", alpha=0.3)
 
     dist = np.asarray(result["detection_distances_m"]) * 1e3
     for r in recs:
         if "min_detectable_radius_m" not in r:
             continue
         y = np.array([np.nan if v is None else v * 1e3 for v in r["min_detectable_radius_m"]])
-        ax[2].plot(dist, y, marker="o", label=r["design"])
-    ax[2].axhline(22, color="k", ls=":", lw=1)
-    ax[2].annotate("table leg, r = 22 mm", (dist[0], 23), fontsize=8)
-    ax[2].set_yscale("log")
-    ax[2].set_xlabel("distance from the robot centre to the cylinder (mm)")
-    ax[2].set_ylabel("smallest cylinder radius seen at every bearing (mm)")
-    ax[2].set_title("Smallest detectable cylinder (missing point: none ≤ 200 mm)", fontsize=9)
-    ax[2].legend(fontsize=8)
-    ax[2].grid(alpha=0.3, which="both")
+        a_det.plot(dist, y, marker="o", label=r["design"])
+    a_det.axhline(22, color="k", ls=":", lw=1)
+    a_det.annotate("table leg, r = 22 mm", (dist[0], 24), fontsize=8)
+    a_det.set_yscale("log")
+    a_det.set_xlabel("distance from the robot centre to the cylinder (mm)")
+    a_det.set_ylabel("radius (mm)")
+    a_det.set_title("Smallest cylinder seen at every bearing (no point: none up to 200 mm)",
+                    fontsize=9)
+    a_det.legend(fontsize=8)
+    a_det.grid(alpha=0.3, which="both")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
