@@ -191,6 +191,22 @@ def test_emitter_frames_equal_data_beam_geometry(t_room):
                                                         np.zeros_like(heading)], -1), atol=1e-12)
 
 
+def test_frames_follow_a_pose_per_step(t_room):
+    """A moving robot (the motion effect): each step has its own pose."""
+    sim = SimRing(t_room)
+    steps = np.arange(-35, 36, 5)
+    angles = sensor_angles_for_steps(sim.ring, steps)
+    poses = np.stack([np.linspace(0.5, 1.9, len(steps)), np.full(len(steps), 0.45),
+                      np.linspace(-0.3, 0.4, len(steps))], axis=-1)
+    origin, direction = sim.frames(angles, poses)
+    per_reading = np.repeat(poses[:, None, :], sim.ring.sensors, axis=1)
+    xy, heading = beam_geometry(sim.ring, per_reading, angles, sim.ring.emitter_offset_m)
+    np.testing.assert_allclose(origin[..., :2], xy, atol=1e-12)
+    np.testing.assert_allclose(direction[..., 0], np.cos(heading), atol=1e-12)
+    _, _, truth = sim.truth(0, steps=steps, pose=poses)
+    _assert_matches(sim, truth, angles, per_reading)
+
+
 @pytest.mark.parametrize("design", ["rotating1", "radial12", "laser"])
 def test_other_designs_sweep_with_the_same_frames(t_room_raw, design):
     t_room_raw["robot"]["design"] = design
