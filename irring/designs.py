@@ -69,7 +69,8 @@ class SensorSpec:
 
 SENSORS: dict[str, SensorSpec] = {
     "gp2d12": SensorSpec("gp2d12", max_range_m=0.624, design_range_m=0.686, min_range_m=0.10,
-                         description="Sharp GP2D12, 10–80 cm; paper's limit 624 mm, Table I D 686 mm"),
+                         description="Sharp GP2D12, 10–80 cm; paper's limit 624 mm, "
+                                     "Table I's D 686 mm"),
     "gp2y0a21": SensorSpec("gp2y0a21", max_range_m=0.80, design_range_m=0.80, min_range_m=0.10,
                            description="Sharp GP2Y0A21YK, 10–80 cm"),
     "gp2y0a02": SensorSpec("gp2y0a02", max_range_m=1.50, design_range_m=1.50, min_range_m=0.20,
