@@ -60,6 +60,8 @@ class SensorSpec:
     reading_period_s: float = GP2_PERIOD_S
     sequential: bool = False
     adc_bits: int = 12
+    settles: bool = True   # a stepped sensor waits scan.settle_s per position; a laser's
+                           # mirror turns continuously, so settling does not apply
     description: str = ""
 
     @property
@@ -79,7 +81,7 @@ SENSORS: dict[str, SensorSpec] = {
     # interlaced over two turns, so a 720-reading 360° view takes 2/75 s = 26.7 ms.
     "laser": SensorSpec("laser", max_range_m=8.0, design_range_m=8.0, min_range_m=0.05,
                         noise_sigma_m=0.005, reading_period_s=(2.0 / 75.0) / 720,
-                        adc_bits=16, description="SICK LMS200-like scanner, 8 m, σ 5 mm"),
+                        adc_bits=16, settles=False, description="SICK LMS200-like scanner, 8 m, σ 5 mm"),
     # MaxBotix LV-MaxSonar-EZ class (the `sonar` curve in models/sensors): 0.15–6.45 m, one
     # reading per 49 ms (20 Hz); a ring chains its transducers one after another so they do
     # not hear each other. The ±15° cone is our assumption (12 of them close a 360° ring).
@@ -150,9 +152,10 @@ class Design:
         """Seconds the real device needs for one full 360° view at one pose.
 
         positions × (settle + samples × reading period), × sensors when they fire one at a
-        time. For the GP2 designs this equals ``data.hardware_duration_s`` of a sweep.
+        time (settle not for a laser, whose mirror never stops). For the GP2 designs this
+        equals ``data.hardware_duration_s`` of a sweep.
         """
-        per = settle_s + samples * self.sensor.reading_period_s
+        per = (settle_s if self.sensor.settles else 0.0) + samples * self.sensor.reading_period_s
         fires = self.ring.sensors if self.sensor.sequential else 1
         return float(self.positions(step_stride) * fires * per)
 

@@ -60,6 +60,8 @@ def test_laser_is_a_fine_long_range_scanner():
     assert d.positions() == 720 and math.degrees(d.step_rad) == pytest.approx(0.5)
     assert d.sensor.max_range_m >= 8.0 and d.sensor.noise_sigma_m <= 0.01
     assert d.hardware_time_s() == pytest.approx(2 / 75)  # two mirror turns at 75 Hz
+    assert d.hardware_time_s(settle_s=0.05) == d.hardware_time_s()  # the mirror never stops
+    assert d.hardware_time_s(samples=2) == pytest.approx(4 / 75)
 
 
 def test_sonar12_has_a_cone_that_closes_the_ring_and_fires_in_turn():
