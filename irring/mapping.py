@@ -4,15 +4,18 @@ The paper's map: 10 mm × 10 mm cells; the cells a ray passes are made free, and
 to consider the uncertainty of the sensor information, the Gaussian distribution is used"
 around the end point. Here every reading adds log-odds to the cells its beam crosses:
 
-* a **valid** reading at distance d with 1-σ range uncertainty σ (``Points.sigma_m``) adds,
-  to a cell the beam crosses over [s_a, s_b] metres from the emitter,
+* a **valid** reading at distance d with 1-σ range uncertainty σ (``Points.sigma_m``,
+  floored at ``min_sigma_m``) adds, to a cell the beam crosses over [s_a, s_b] metres from
+  the emitter,
 
-      l_free · P(wall beyond the cell) + l_occ · exp(−gap² / 2σ²)
+      l_free · Φ((d − m − s_b)/σ) [only if s_b < d − m]  +  l_occ · exp(−gap² / 2σ²)
 
-  with P(wall beyond) = Φ((d − s_b)/σ) and gap the distance from d to the cell's interval
-  (0 for the cell holding the end point). Cells well in front get l_free, the end cell gets
-  ≈ l_occ, cells just behind the end point (inside the wall) get a Gaussian tail of l_occ;
-  the beam is followed to d + ``tail_sigmas``·σ;
+  where gap is the distance from d to the cell's interval (0 for the cell holding the end
+  point) and m = ``free_margin_cells`` cells. Cells well in front get l_free, the end cell
+  gets l_occ, cells just behind the end point (inside the surface) a Gaussian tail of l_occ;
+  the beam is followed to d + ``tail_sigmas``·σ. The margin m keeps beams from clearing the
+  cells just in front of their own end point: a curved or slanted surface (a table leg) only
+  partly fills its cells, and beams ending in one cell cross the free corner of the next;
 * a **no-return** reading (``Reason.NO_RETURN``) frees every cell up to the max range along
   its heading (weight ``l_no_return``) and marks nothing;
 * every other invalid reading (out of range, fold-over, saturated, …) changes nothing.
@@ -62,7 +65,8 @@ class MapperParams:
     """The inverse sensor model's knobs (log-odds units; lengths in metres).
 
     Chosen so that one end-point hit makes a cell occupied (l_occ > logit 0.65 = 0.62) and
-    two clear passes make it free (2·l_free < logit 0.196 = −1.41).
+    two clear passes make it free (2·l_free < logit 0.196 = −1.41); tuned on the bundled
+    scenarios (the numbers are in the issue-5 report and `irring run`'s README section).
     """
 
     l_occ: float = 0.85           # added to the cell holding a valid end point
@@ -71,8 +75,9 @@ class MapperParams:
     l_min: float = -4.0           # clamp: the most certain "free"
     l_max: float = 4.0            # clamp: the most certain "occupied"
     tail_sigmas: float = 2.0      # the beam is followed to d + tail_sigmas·σ
-    min_sigma_m: float = 0.002    # floor on a reading's σ (a σ of 0 would be a step function)
+    min_sigma_m: float = 0.005    # floor on a reading's σ: half a 10 mm cell (finer is not resolved)
     default_sigma_m: float = 0.01  # used where a valid reading's sigma_m is NaN
+    free_margin_cells: float = 1.0  # no free evidence within this many cells before the end point
 
     def __post_init__(self) -> None:
         if not (self.l_occ > 0 and self.l_free < 0 and self.l_no_return <= 0):
@@ -124,7 +129,7 @@ def traverse(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
     t0 = np.zeros_like(gx0)
     t1 = np.ones_like(gx0)
     keep = np.isfinite(gx0) & np.isfinite(gy0) & np.isfinite(gx1) & np.isfinite(gy1)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # cells are half-open [i, i+1): a segment along the top/right border lies outside
         for p, q, upper in ((-dx, gx0, False), (dx, nx - gx0, True), (-dy, gy0, False),
                             (dy, ny - gy0, True)):
@@ -350,8 +355,9 @@ class OccupancyGrid:
             sg = sigma[iv][r]
             gap = np.maximum.reduce([s_a - dd, dd - s_b, np.zeros_like(dd)])
             # free evidence only where the whole cell lies in front of the end point
-            beyond = np.where(s_b < dd, 0.5 * (1.0 + _erf((dd - s_b) / (sg * math.sqrt(2.0)))),
-                              0.0)
+            stop = dd - p.free_margin_cells * self.resolution_m
+            beyond = np.where(s_b < stop,
+                              0.5 * (1.0 + _erf((stop - s_b) / (sg * math.sqrt(2.0)))), 0.0)
             w[is_valid] = p.l_free * beyond + p.l_occ * np.exp(-0.5 * (gap / sg) ** 2)
         ny, nx = self.shape
         flat = v.iy * nx + v.ix
