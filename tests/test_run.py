@@ -145,3 +145,10 @@ def test_help_explains_units_defaults_and_examples(capsys):
     with pytest.raises(SystemExit):
         main(["replay", "--help"])
     assert "--calibration" in capsys.readouterr().out
+
+
+def test_ground_truth_can_be_reused_across_runs(runs):
+    first = runs["t_room_cylinder"]
+    again = pipeline.map_sweeps(first.sweeps, scenario=first.scenario, truth=first.truth,
+                                progress=False)
+    assert again.truth is first.truth and again.scores == first.scores
