@@ -356,3 +356,20 @@ def test_a_lost_irdon_is_recovered_with_irstp():
     sweep = ring.sweep()
     assert len(sweep.steps) == 7 and ring.last_report.complete
     assert ring.last_report.link["timeouts"] == 1
+
+
+def test_a_late_irdon_from_an_earlier_exchange_does_not_end_the_next_sweep():
+    sweeps = []
+
+    def on_sweep(cmd):
+        sweeps.append(cmd)
+        n = len(sweeps)
+        scans = [p.Scan(7 * (n - 1) + i, s, i, (n, i)) for i, s in enumerate(range(-3, 4))]
+        late = [p.Done(6)] if n == 2 else []  # the answer to an IRSTP of sweep 1, arriving late
+        return late + scans + [p.Done(7 * n - 1)]
+
+    ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
+    ring.sweep()
+    second = ring.sweep()
+    assert len(second.steps) == 7 and second.counts[:, 0].tolist() == [2] * 7
+    assert ring.last_report.link["stale"] == 1

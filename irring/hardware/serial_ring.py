@@ -36,6 +36,7 @@ log = logging.getLogger("irring.hardware")
 
 DEFAULT_BAUD = 115200
 DEFAULT_TIMEOUT_S = 1.0
+MOVE_ALLOWANCE_S = 0.005  # per motor step the ring may travel before a sweep's first reading
 
 
 # --------------------------------------------------------------------------- errors
@@ -89,7 +90,7 @@ class LinkStats:
     seq_gaps: int = 0           # places where the IRSCN sequence jumped
     lost_scans: int = 0         # IRSCN the device sent that never arrived intact
     inconsistent: int = 0       # valid-checksum IRSCN contradicting the sweep, dropped
-    stale: int = 0              # IRSCN left over from an earlier sweep, dropped
+    stale: int = 0              # IRSCN/IRDON left over from an earlier exchange, dropped
     duplicates: int = 0         # a second IRSCN for a step already read, dropped
     timeouts: int = 0           # waits of timeout_s with nothing arriving
     disconnects: int = 0
@@ -210,6 +211,7 @@ class SerialRing:
         self.ring: Ring | None = None
         self.last_report: SweepReport | None = None
         self._last_seq: int | None = None  # seq of the device's last IRSCN, from IRDON
+        self._position: int | None = None  # motor step last reported (None: unknown)
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -372,6 +374,7 @@ class SerialRing:
             self._send(p.GoTo(int(step)))
             msg = self._await((p.Position, p.ErrorReply), self.timeout_s)
             if isinstance(msg, p.Position):
+                self._position = msg.step
                 return msg.step
             if isinstance(msg, p.ErrorReply):
                 self._raise_rejected(msg, f"IRGTO,{step}")
@@ -472,6 +475,7 @@ class SerialRing:
                     self._pass(passes[-1], samples, settle_ms)
         except LinkLost as exc:
             self._last_seq = None  # the device may still be numbering IRSCN we never saw
+            self._position = None
             sweep, report = build(False, "device stopped answering"
                                   if isinstance(exc, DeviceTimeout) else "device disconnected")
             exc.partial, exc.report = sweep, report
@@ -495,8 +499,10 @@ class SerialRing:
         last_seq: int | None = None
         max_count = (1 << info.adc_bits) - 1
         per_step_s = settle_ms / 1000 + samples * data.GP2_PERIOD_S
-        # the first IRSCN may need a move from wherever the motor is to `lo`
-        first_wait = self.timeout_s + per_step_s + abs(info.max_step - info.min_step) * 0.005
+        # the first IRSCN may need a move to `lo` first (allow 5 ms per motor step)
+        travel = (info.max_step - info.min_step if self._position is None
+                  else abs(lo - self._position))
+        first_wait = self.timeout_s + per_step_s + travel * MOVE_ALLOWANCE_S
         cmd = p.SweepCommand(lo, hi, samples, settle_ms)
         self._flush()
         self._send(cmd)
@@ -507,6 +513,10 @@ class SerialRing:
             now = time.monotonic()
             if msgs:
                 deadline = now + self.timeout_s + per_step_s
+                if len(ps.got) == len(pos_of) and not stops:
+                    # every IRSCN is in: IRDON follows at once unless it was lost, in which
+                    # case IRSTP fetches it sooner than a full timeout would
+                    deadline = now + min(self.timeout_s, max(0.1, 2 * per_step_s))
             for msg in msgs:
                 if isinstance(msg, p.Scan):
                     if len(msg.counts) != info.nsensors or max(msg.counts) > max_count:
@@ -530,9 +540,16 @@ class SerialRing:
                         self.stats.seq_gaps += 1
                         self.stats.lost_scans += gap
                     last_seq = msg.seq
+                    self._position = msg.step
                     ps.got[msg.step] = msg
                     self.stats.scans += 1
                 elif isinstance(msg, p.Done):
+                    if (not stops and not ps.got and hint is not None
+                            and msg.seq == (hint - 1) % p.SEQ_MODULO):
+                        # reports nothing new and we did not ask to stop: the late answer
+                        # to an earlier IRSTP, not the end of this sweep
+                        self.stats.stale += 1
+                        continue
                     if base is None:
                         base = hint
                     if msg.seq >= 0 and base is not None:

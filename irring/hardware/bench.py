@@ -1,0 +1,128 @@
+"""Measured figures for the serial path: `python -m irring.hardware.bench [--json]`.
+
+Runs the emulator on a real pty with the t_room scenario and SerialRing against it:
+
+* host wall time of one full sweep (71 steps × 12 sensors) unthrottled, paced like a UART
+  at 115200 baud, and in real time (GP2 timing + 115200 baud), beside the device-clock
+  duration and bytes on the wire;
+* a lossy link (1 % corrupted bytes, 5 % dropped sentences): share of steps received per
+  sweep, before and after re-sweeping only the missing steps, and the link counters.
+
+Figures depend on this machine; nothing here is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from ..scenario import load_scenario
+from . import SerialRing
+from .emulator import Device, Faults, PtyEmulator, SimSource
+
+
+def _sweep_times(scenario, *, baud: int, realtime: bool, repeats: int) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        link = Path(tmp) / "tty"
+        device = Device(SimSource(scenario), realtime=realtime)
+        with PtyEmulator(device, link=link, baud=baud).start_thread():
+            with SerialRing(str(link), timeout_s=2.0) as ring:
+                walls, durations = [], []
+                for _ in range(repeats):
+                    t0 = time.perf_counter()
+                    sweep = ring.sweep()
+                    walls.append(time.perf_counter() - t0)
+                    durations.append(sweep.duration_s)
+        sent = device.stats.bytes_sent
+    return {"baud": baud or None, "realtime": realtime, "repeats": repeats,
+            "wall_s_median": statistics.median(walls), "wall_s_min": min(walls),
+            "device_duration_s": statistics.median(durations),
+            "bytes_per_sweep": sent / repeats}
+
+
+class _Recorded(SimSource):
+    """Remembers every row the device produced, to count invented readings."""
+
+    def __init__(self, scenario):
+        super().__init__(scenario)
+        self.rows: set[tuple[int, bytes]] = set()
+
+    def read(self, pose_index, steps, samples, settle_s):
+        counts = super().read(pose_index, steps, samples, settle_s)
+        self.rows.update((int(s), c.astype("int64").tobytes()) for s, c in zip(steps, counts))
+        return counts
+
+
+def _lossy(scenario, *, sweeps: int, resweep: int, seed: int) -> dict:
+    faults = Faults(corrupt_rate=0.01, drop_rate=0.05, seed=seed)
+    source = _Recorded(scenario)
+    invented = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        link = Path(tmp) / "tty"
+        device = Device(source, faults=faults)
+        with PtyEmulator(device, link=link).start_thread():
+            with SerialRing(str(link), timeout_s=0.2) as ring:
+                received, walls = [], []
+                for _ in range(sweeps):
+                    t0 = time.perf_counter()
+                    sweep = ring.sweep(resweep=resweep)
+                    walls.append(time.perf_counter() - t0)
+                    received.append(len(sweep.steps) / (len(sweep.steps)
+                                                        + len(sweep.missing_steps)))
+                    invented += sum((int(st), row.astype("int64").tobytes()) not in source.rows
+                                    for st, row in zip(sweep.steps, sweep.counts))
+                stats = ring.stats.as_dict()
+    return {"resweep": resweep, "sweeps": sweeps, "received_share_mean": statistics.mean(received),
+            "received_share_min": min(received), "wall_s_median": statistics.median(walls),
+            "invented_readings": invented, "link": stats}
+
+
+def measure(scenario_name: str = "t_room", quick: bool = False) -> dict:
+    sc = load_scenario(scenario_name)
+    n = 3 if quick else 10
+    return {
+        "scenario": scenario_name,
+        "unthrottled": _sweep_times(sc, baud=0, realtime=False, repeats=n),
+        "uart_115200": _sweep_times(sc, baud=115200, realtime=False, repeats=max(2, n // 3)),
+        "realtime_115200": _sweep_times(sc, baud=115200, realtime=True, repeats=1),
+        "lossy_no_resweep": _lossy(sc, sweeps=n, resweep=0, seed=1),
+        "lossy_resweep_2": _lossy(sc, sweeps=n, resweep=2, seed=1),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m irring.hardware.bench",
+                                 description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--quick", action="store_true", help="fewer repeats")
+    args = ap.parse_args(argv)
+    r = measure(quick=args.quick)
+    if args.json:
+        print(json.dumps(r, indent=2))
+        return 0
+    print(f"one full sweep of {r['scenario']} (71 steps × 12 sensors) over a pty:")
+    for key, label in (("unthrottled", "unthrottled"), ("uart_115200", "115200 baud"),
+                       ("realtime_115200", "real time + 115200 baud")):
+        m = r[key]
+        print(f"  {label:<24} host {m['wall_s_median'] * 1e3:8.1f} ms   device clock "
+              f"{m['device_duration_s']:.3f} s   {m['bytes_per_sweep']:.0f} bytes")
+    for key in ("lossy_no_resweep", "lossy_resweep_2"):
+        m = r[key]
+        link = m["link"]
+        print(f"1 % corrupted bytes + 5 % dropped sentences, resweep={m['resweep']}: "
+              f"{m['received_share_mean'] * 100:.1f} % of steps received (worst "
+              f"{m['received_share_min'] * 100:.1f} %) over {m['sweeps']} sweeps, host "
+              f"{m['wall_s_median'] * 1e3:.0f} ms per sweep; {link['checksum_failures']} "
+              f"checksum failures, {link['malformed']} malformed, {link['lost_scans']} IRSCN "
+              f"lost, {link['timeouts']} timeouts, {m['invented_readings']} rows not produced by "
+              f"the device")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
