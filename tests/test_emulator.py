@@ -16,7 +16,7 @@ import pytest
 from irring import data
 from irring.hardware import DeviceDisconnected, DeviceTimeout, SerialRing
 from irring.hardware import protocol as p
-from irring.hardware.emulator import Device, Faults, PtyEmulator, SimSource
+from irring.hardware.emulator import Device, Faults, PtyEmulator, SimSource, TcpEmulator
 from irring.scenario import load_scenario
 from irring.sim import SimRing
 
@@ -150,6 +150,16 @@ def test_faults_gauntlet_corruption_drops_a_stall_and_a_disconnect(t_room, pty_d
             assert produced_row(source, step, row)   # nothing invented, nothing misplaced
         assert set(sweep.steps.tolist()) | set(sweep.missing_steps) == set(FULL.tolist())
     assert not Path(link).exists()              # the emulator removed its link on disconnect
+
+
+def test_socket_url_reaches_the_emulator_over_tcp_and_a_cut_is_a_disconnect(t_room):
+    with TcpEmulator(Device(SimSource(t_room), faults=Faults(disconnect_after=1 + 72 + 30))
+                     ).start_thread() as emu:
+        with SerialRing(emu.url, timeout_s=TIMEOUT_S) as ring:
+            assert np.array_equal(ring.sweep().counts, SimRing(t_room).sweep(0).counts)
+            with pytest.raises(DeviceDisconnected) as cut:
+                ring.sweep()
+        assert len(cut.value.partial.steps) == 30  # everything sent before the cut arrives
 
 
 def test_irstp_interrupts_a_realtime_sweep_over_the_pty(t_room, pty_device):

@@ -14,6 +14,7 @@ examples:
   irring emulate t_room --link /tmp/irring --realtime   # GP2 timing and a 115200-baud UART
   irring emulate t_room --link /tmp/irring --corrupt-rate 0.01 --drop-rate 0.05
   irring emulate t_room --link /tmp/irring --stall-after 100 --disconnect-after 400
+  irring emulate t_room --tcp 7000                      # then: irring drive --port socket://127.0.0.1:7000
 
 The device speaks IRR protocol v1 (PROTOCOL.md) on /dev/pts/N; any serial program can open
 the --link path (e.g. `python -m serial.tools.miniterm /tmp/irring`, then type $IRHLO*50).
@@ -37,6 +38,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--link", metavar="PATH", default="/tmp/irring",
                    help="symlink to the pty slave for the host to open (default: /tmp/irring; "
                         "an existing link is replaced)")
+    p.add_argument("--tcp", metavar="[HOST:]PORT", default=None,
+                   help="serve on TCP instead of a pty; the host opens socket://HOST:PORT "
+                        "(HOST defaults to 127.0.0.1; PORT 0 picks a free one)")
     p.add_argument("--realtime", action="store_true",
                    help="take as long as the real ring: settle + samples × 38.3 ms per step "
                         "and a UART at --baud (default: as fast as possible, with a virtual "
@@ -67,7 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..hardware.emulator import Device, Faults, PtyEmulator, SimSource
+    from ..hardware.emulator import Device, Faults, PtyEmulator, SimSource, TcpEmulator
     from ..scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
@@ -86,13 +90,22 @@ def run(args: argparse.Namespace) -> int:
     baud = args.baud if args.baud is not None else (115200 if args.realtime else 0)
     source = SimSource(scenario, seed=args.seed)
     device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=args.pose)
-    emu = PtyEmulator(device, link=args.link, baud=baud)
-    path = emu.open()
+    if args.tcp is not None:
+        host, _, port = args.tcp.rpartition(":")
+        try:
+            emu = TcpEmulator(device, host=host or "127.0.0.1", port=int(port), baud=baud)
+            where = emu.open()
+        except (ValueError, OSError) as exc:
+            print(f"irring emulate: error: --tcp {args.tcp}: {exc}", file=sys.stderr)
+            return 2
+    else:
+        emu = PtyEmulator(device, link=args.link, baud=baud)
+        where = f"{emu.open()}, link {args.link}"
     if not args.quiet:
         info = device.info
         print(f"irring emulate: {scenario.name} ring ({info.nsensors} sensors, steps "
-              f"{info.min_step} … {info.max_step}, seed {source.seed}) on {path}, link "
-              f"{args.link}; {'real time' if args.realtime else 'unthrottled'}"
+              f"{info.min_step} … {info.max_step}, seed {source.seed}) on {where}; "
+              f"{'real time' if args.realtime else 'unthrottled'}"
               f"{f', {baud} baud' if baud else ''}. Ctrl-C stops.", flush=True)
     started = time.monotonic()
     previous = signal.signal(signal.SIGTERM, _interrupt)  # `kill` also removes the link

@@ -13,7 +13,9 @@ Three layers, each replaceable in tests:
   time, with fault injection (:class:`Faults`) on what it sends; it does no I/O and is driven
   by ``receive(bytes, now)`` / ``poll(now)``;
 * :class:`PtyEmulator` puts a Device on a pty master (raw mode, non-blocking), symlinks the
-  slave at ``link`` and optionally paces output like a UART at ``baud``.
+  slave at ``link`` and optionally paces output like a UART at ``baud``;
+  :class:`TcpEmulator` serves it at ``socket://HOST:PORT`` instead, and :class:`DevicePort`
+  wires it to the driver in-process (a pyserial-like object, no pty, no thread).
 
 Reproducibility: the device calls ``source.read`` exactly once per accepted IRSWP, with the
 IRSWP's steps in order, so a host that sweeps a contiguous run in one IRSWP gets exactly
@@ -36,6 +38,7 @@ import fcntl
 import math
 import os
 import select
+import socket
 import struct
 import termios
 import threading
@@ -430,53 +433,138 @@ class PtyEmulator:
         """Answer the host until :meth:`stop` or the device disconnects."""
         if self._master is None:
             self.open()
-        fd, dev = self._master, self.device
-        pending = bytearray()
-        budget_t, budget_sent = time.monotonic(), 0  # UART pacing
         try:
-            while not self._stop.is_set():
-                now = time.monotonic()
-                next_due = None
-                if len(pending) < 256:
-                    chunk, next_due = dev.poll(now)
-                    if not pending:
-                        budget_t, budget_sent = now, 0
-                    pending += chunk
-                if dev.disconnected and not pending:
-                    self._linger()
-                    break
-                allowed = len(pending)
-                if self.baud > 0 and pending:
-                    allowed = int((now - budget_t) * self.baud / 10) - budget_sent
-                    allowed = max(0, min(allowed, len(pending)))
-                wait = 0.05
-                if next_due is not None:
-                    wait = min(wait, max(0.0, next_due - now))
-                if pending and allowed == 0:
-                    wait = min(wait, 10.0 / self.baud)
-                want_write = bool(pending) and allowed > 0
-                r, w, _ = select.select([fd], [fd] if want_write else [], [], wait)
-                if r:
-                    try:
-                        incoming = os.read(fd, 4096)
-                    except BlockingIOError:
-                        incoming = b""
-                    except OSError as exc:
-                        if exc.errno == errno.EIO:  # no slave open: nothing to hear
-                            incoming = b""
-                        else:
-                            raise
-                    if incoming:
-                        dev.receive(incoming, time.monotonic())
-                if w:
-                    try:
-                        n = os.write(fd, bytes(pending[:allowed]))
-                    except BlockingIOError:
-                        n = 0
-                    del pending[:n]
-                    budget_sent += n
+            _serve_fd(self._master, self.device, self.baud, self._stop, self._linger)
         finally:
             self._close()
+
+
+def _serve_fd(fd: int, dev: Device, baud: int, stop: threading.Event,
+              before_disconnect=lambda: None) -> str:
+    """Shuttle bytes between a non-blocking fd and ``dev`` until ``stop`` is set ("stop"),
+    the device disconnects ("disconnected") or the peer closes a socket ("eof")."""
+    pending = bytearray()
+    budget_t, budget_sent = time.monotonic(), 0  # UART pacing
+    while not stop.is_set():
+        now = time.monotonic()
+        next_due = None
+        if len(pending) < 256:
+            chunk, next_due = dev.poll(now)
+            if not pending:
+                budget_t, budget_sent = now, 0
+            pending += chunk
+        if dev.disconnected and not pending:
+            before_disconnect()
+            return "disconnected"
+        allowed = len(pending)
+        if baud > 0 and pending:
+            allowed = int((now - budget_t) * baud / 10) - budget_sent
+            allowed = max(0, min(allowed, len(pending)))
+        wait = 0.05
+        if next_due is not None:
+            wait = min(wait, max(0.0, next_due - now))
+        if pending and allowed == 0:
+            wait = min(wait, 10.0 / baud)
+        want_write = bool(pending) and allowed > 0
+        r, w, _ = select.select([fd], [fd] if want_write else [], [], wait)
+        if r:
+            try:
+                incoming = os.read(fd, 4096)
+            except BlockingIOError:
+                incoming = None
+            except OSError as exc:
+                if exc.errno not in (errno.EIO, errno.ECONNRESET):
+                    raise
+                incoming = b"" if exc.errno == errno.ECONNRESET else None
+            if incoming == b"":
+                return "eof"  # a pty never reads b"" here (we hold its slave); a socket closed
+            if incoming:
+                dev.receive(incoming, time.monotonic())
+        if w:
+            try:
+                n = os.write(fd, bytes(pending[:allowed]))
+            except BlockingIOError:
+                n = 0
+            except (BrokenPipeError, ConnectionResetError):
+                return "eof"
+            del pending[:n]
+            budget_sent += n
+    return "stop"
+
+
+class TcpEmulator:
+    """Runs a :class:`Device` on a TCP port, one host connection at a time; the host opens
+    ``socket://HOST:PORT`` (pyserial). The device keeps its state across connections; an
+    injected disconnect closes the connection and ends serving."""
+
+    def __init__(self, device: Device, *, host: str = "127.0.0.1", port: int = 0,
+                 baud: int = 0):
+        self.device = device
+        self.host, self.port, self.baud = host, int(port), int(baud)
+        self._listener: socket.socket | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        return f"socket://{self.host}:{self.port}"
+
+    def open(self) -> str:
+        """Bind and listen (port 0: any free port); returns the pyserial URL."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((self.host, self.port))
+        sock.listen(1)
+        self.port = sock.getsockname()[1]
+        self._listener = sock
+        return self.url
+
+    def __enter__(self) -> TcpEmulator:
+        if self._listener is None:
+            self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start_thread(self) -> TcpEmulator:
+        if self._listener is None:
+            self.open()
+        self._thread = threading.Thread(target=self.serve_forever, name="irring-emulator-tcp",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+        if self._listener is not None:
+            self._listener.close()
+            self._listener = None
+
+    def serve_forever(self) -> None:
+        if self._listener is None:
+            self.open()
+        listener = self._listener
+        try:
+            while not self._stop.is_set() and not self.device.disconnected:
+                ready, _, _ = select.select([listener], [], [], 0.05)
+                if not ready:
+                    continue
+                conn, _ = listener.accept()
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                conn.setblocking(False)
+                try:
+                    _serve_fd(conn.fileno(), self.device, self.baud, self._stop)
+                finally:
+                    try:
+                        conn.shutdown(socket.SHUT_RDWR)  # delivers what was sent, then FIN
+                    except OSError:
+                        pass
+                    conn.close()
+        finally:
+            self.stop(timeout_s=0)
 
 
 class DevicePort:
