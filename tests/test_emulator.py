@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from irring import data
 from irring.hardware import DeviceDisconnected, DeviceTimeout, SerialRing
 from irring.hardware import protocol as p
 from irring.hardware.emulator import Device, Faults, PtyEmulator, SimSource, TcpEmulator

@@ -11,7 +11,6 @@ import time
 
 import numpy as np
 import pytest
-import serial
 
 from irring import data
 from irring.designs import PAPER_RING
@@ -373,3 +372,13 @@ def test_a_late_irdon_from_an_earlier_exchange_does_not_end_the_next_sweep():
     second = ring.sweep()
     assert len(second.steps) == 7 and second.counts[:, 0].tolist() == [2] * 7
     assert ring.last_report.link["stale"] == 1
+
+
+def test_layering_protocol_imports_no_serial_and_the_driver_no_simulator():
+    import subprocess
+    import sys
+
+    code = ("import sys, irring.hardware.protocol; assert 'serial' not in sys.modules; "
+            "import irring.hardware; assert 'serial' in sys.modules; "
+            "assert 'irring.sim' not in sys.modules and 'mujoco' not in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)
