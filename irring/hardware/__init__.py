@@ -1,15 +1,21 @@
 """The real ring over a serial port, and a device emulator that speaks its protocol.
 
-``protocol`` encodes and decodes IRR sentences (pure, no I/O); :class:`SerialRing` drives a
-ring through pyserial and returns the same :class:`irring.data.Sweep` as the simulator;
-``emulator`` is a device on a pseudo-terminal backed by the simulator (import it explicitly:
-it pulls in MuJoCo, the driver does not).
+``protocol`` encodes and decodes IRR sentences (pure, no I/O, no pyserial); :class:`SerialRing`
+drives a ring through pyserial and returns the same :class:`irring.data.Sweep` as the
+simulator; ``emulator`` is a device on a pseudo-terminal backed by the simulator (import it
+explicitly: it pulls in MuJoCo, the driver does not). The driver's names are loaded on first
+use, so ``import irring.hardware.protocol`` needs no pyserial.
 """
 
 from __future__ import annotations
 
-from .serial_ring import (DeviceDisconnected, DeviceError, DeviceRejected, DeviceTimeout,
-                          HandshakeError, LinkLost, LinkStats, SerialRing, SweepReport)
-
 __all__ = ["SerialRing", "SweepReport", "LinkStats", "DeviceError", "DeviceTimeout",
            "DeviceDisconnected", "DeviceRejected", "HandshakeError", "LinkLost"]
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        from . import serial_ring
+
+        return getattr(serial_ring, name)
+    raise AttributeError(f"module 'irring.hardware' has no attribute {name!r}")
