@@ -1,0 +1,486 @@
+"""What accuracy costs in time: the knobs that trade time for accuracy, one at a time.
+
+Every configuration is the scenario as written (the *default*) with ONE knob changed —
+a one-at-a-time study around the default, not a full factorial grid, so interactions between
+knobs (say, coarse steps *and* no iterations) are not measured. Knobs:
+
+=============  ==========================================================================
+``step``       ``scan.step_stride``: read every 1st, 2nd, 4th motor step (1.08°, 2.16°,
+               4.32° between readings); fewer stops, fewer readings
+``samples``    the ``averaging`` effect with ``scan.samples`` readings per step (each its
+               own noise and quantisation, averaged); each sample is one GP2 period
+``settle``     ``scan.settle_s``: wait at each step before reading. The simulator positions
+               the ring kinematically unless the scene has ``belt_dynamics``, so with the
+               bundled scenes this costs hardware time and buys nothing; it is here so a
+               scene with belt dynamics shows what the wait is worth
+``iterations`` the estimator's ``max_iterations`` (0 = the θ = 0 assumption,
+               ``iterate=False``); the default is 20
+``tolerance``  the estimator's convergence tolerance on θ (default 0.1°)
+``resolution`` the map's cell size (default 10 mm, the paper's); scored on ground truth
+               rasterised on the same cells, so the 1-cell tolerance scales with it
+``design``     another ring design (``irring.designs``) with its own sensor, in the same
+               room and poses, scored on the default design's ground truth (like
+               ``irring compare``)
+=============  ==========================================================================
+
+Per configuration, scenario and seed (one *run*: every pose swept, estimated, mapped and
+scored the way ``irring run`` does it, through ``pipeline.map_sweeps``):
+
+accuracy
+    ``range_rmse_m``: RMS of (estimated − true) range over the readings the estimator calls
+    valid and that hit something; ``range_rmse_steep_m``: the same over readings whose true
+    incidence is ≥ 40°; ``valid_share``: share of the readings that hit something which the
+    estimator calls valid; the map scores of ``irring.metrics`` (``occupied_f1``,
+    ``free_accuracy``, ``coverage``, ``shadow``, …).
+cost
+    ``hardware_time_s``: seconds the real ring spends on one 360° view at one pose
+    (``Design.hardware_time_s``: positions × (settle + samples × 38.3 ms));
+    ``compute_ms``: estimator + mapper, milliseconds per sweep on this machine — what the
+    robot's computer spends turning a sweep into the map (the simulator's own time,
+    ``sim_ms``, is the testbed's cost, not the robot's, and is reported apart).
+    ``iterations_mean``: estimator iterations per valid reading, a machine-independent
+    measure of the estimator's work.
+
+Everything but the ``*_ms`` timings is a deterministic function of (scenario, configuration,
+seed): a job rebuilds its ``SimRing`` from the scenario's YAML in whatever process runs it
+(:mod:`irring.bench.executor`), so serial, process-pool and Dask runs agree exactly.
+Per configuration the runs are averaged over scenarios and seeds (timings: median), and the
+*Pareto front* is marked for each cost: a configuration is on it when no other one is at
+least as cheap, at least as good on occupied F1 and range RMSE, and strictly better on one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import types
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room")
+STEEP_RAD = math.radians(40.0)
+DEFAULT_TOLERANCE_RAD = math.radians(0.1)   # estimate()'s default
+DEFAULT_MAX_ITERATIONS = 20                 # estimate()'s default
+
+# What each knob costs, for the table and the chart.
+KNOB_COST = {"default": "", "step": "hardware", "samples": "hardware", "settle": "hardware",
+             "iterations": "compute", "tolerance": "compute", "resolution": "compute",
+             "design": "hardware"}
+KNOBS = tuple(k for k in KNOB_COST if k != "default")
+ACCURACY_KEYS = ("range_rmse_m", "range_rmse_steep_m", "valid_share", "occupied_precision",
+                 "occupied_recall", "occupied_f1", "free_accuracy", "coverage", "shadow")
+TIME_KEYS = ("compute_ms", "estimate_ms", "map_ms", "sim_ms")
+
+
+@dataclass(frozen=True)
+class Config:
+    """The scenario as written, with at most one knob changed (None: the scenario's own)."""
+
+    knob: str = "default"
+    label: str = "default"
+    value: float = 0.0                  # the knob's setting, for ordering (chart, table)
+    step_stride: int | None = None
+    samples: int | None = None          # > 1 switches the averaging effect on
+    settle_s: float | None = None
+    iterate: bool = True
+    max_iterations: int = DEFAULT_MAX_ITERATIONS
+    tolerance_rad: float = DEFAULT_TOLERANCE_RAD
+    resolution_m: float | None = None
+    design: str | None = None
+
+
+def configurations(knobs: Iterable[str] | None = None,
+                   designs: Sequence[str] = ("radial12", "rotating1")) -> list[Config]:
+    """The default configuration, then each knob's other settings (see the module doc)."""
+    knobs = KNOBS if knobs is None else tuple(knobs)
+    unknown = [k for k in knobs if k not in KNOBS]
+    if unknown:
+        raise ValueError(f"unknown knob(s) {unknown}; known: {', '.join(KNOBS)}")
+    step_deg = 1.08
+    out = [Config()]
+    for k in knobs:
+        if k == "step":
+            out += [Config(k, f"step ×{s} ({s * step_deg:.2f}°)", s, step_stride=s) for s in (2, 4)]
+        elif k == "samples":
+            out += [Config(k, f"{n} samples", n, samples=n) for n in (2, 4, 8)]
+        elif k == "settle":
+            out += [Config(k, f"settle {ms} ms", ms, settle_s=ms / 1e3) for ms in (20, 60)]
+        elif k == "iterations":
+            out.append(Config(k, "θ = 0 (no iterations)", 0, iterate=False))
+            out += [Config(k, f"{n} iteration{'s' if n > 1 else ''}", n, max_iterations=n)
+                    for n in (1, 2, 5)]
+        elif k == "tolerance":
+            out.append(Config(k, "tolerance 1°", 1.0, tolerance_rad=math.radians(1.0)))
+        elif k == "resolution":
+            out += [Config(k, f"grid {mm} mm", mm, resolution_m=mm / 1e3) for mm in (5, 20)]
+        elif k == "design":
+            out += [Config(k, name, i + 1, design=name) for i, name in enumerate(designs)]
+    return out
+
+
+def default_value(knob: str, scenario) -> float:
+    """Where the default configuration sits on a knob's axis (for the chart's lines)."""
+    return {"step": scenario.scan.step_stride,
+            "samples": scenario.scan.samples if scenario.has("averaging") else 1,
+            "settle": scenario.scan.settle_s * 1e3, "iterations": DEFAULT_MAX_ITERATIONS,
+            "tolerance": math.degrees(DEFAULT_TOLERANCE_RAD),
+            "resolution": scenario.map.resolution_m * 1e3, "design": 0}.get(knob, 0.0)
+
+
+def apply(scenario, cfg: Config):
+    """The scenario with the configuration's sweep, map and design changes."""
+    from .. import designs
+    from ..scenario import AveragingEffect
+
+    sc = designs.apply(scenario, cfg.design) if cfg.design else scenario
+    scan = {}
+    if cfg.step_stride is not None:
+        scan["step_stride"] = int(cfg.step_stride)
+    if cfg.settle_s is not None:
+        scan["settle_s"] = float(cfg.settle_s)
+    effects = dict(sc.effects)
+    if cfg.samples is not None:
+        scan["samples"] = int(cfg.samples)
+        effects.setdefault("averaging", AveragingEffect())
+    changes: dict[str, Any] = {"scan": dataclasses.replace(sc.scan, **scan),
+                               "effects": types.MappingProxyType(effects)}
+    if cfg.resolution_m is not None:
+        changes["map"] = dataclasses.replace(sc.map, resolution_m=float(cfg.resolution_m))
+    return dataclasses.replace(sc, **changes)
+
+
+# --------------------------------------------------------------------------- one run
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run: everything a worker needs, picklable (the scenario travels as YAML text)."""
+
+    scenario_yaml: str
+    scenario_source: str
+    config: Config
+    seed: int
+
+
+_TRUTH_CACHE: dict[tuple, Any] = {}   # per process: (scenario YAML, cell size) → GroundTruth
+
+
+def _ground_truth(key: tuple, scenario, grid):
+    from .. import metrics
+
+    truth = _TRUTH_CACHE.get(key)
+    if truth is None or truth.label.shape != grid.shape:
+        truth = _TRUTH_CACHE[key] = metrics.ground_truth(scenario, grid)
+    return truth
+
+
+def _calibration(sweep, scenario):
+    """The nominal curve told the scene's output noise (as ``irring compare`` does)."""
+    from ..estimate import Calibration
+
+    kw = {}
+    if "noise" in scenario.effects:
+        kw["noise_sigma_v"] = max(scenario.effects["noise"].sigma_v, 1e-4)
+    return Calibration.for_sweep(sweep, **kw)
+
+
+def _rmse(err: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(err * err))) if err.size else None
+
+
+def run_job(job: Job) -> dict:
+    """Sweep every pose, estimate, map and score one configuration; a plain dict."""
+    import functools
+
+    from .. import compare, designs, metrics, pipeline
+    from ..estimate import estimate
+    from ..mapping import OccupancyGrid
+    from ..scenario import loads
+
+    base = loads(job.scenario_yaml, source=job.scenario_source)
+    cfg = job.config
+    sc = apply(base, cfg)
+    sweeps, _, sim_s = compare.simulate(sc, seed=job.seed)
+    estimator = functools.partial(estimate, max_iterations=cfg.max_iterations,
+                                  tolerance_rad=cfg.tolerance_rad, iterate=cfg.iterate)
+    grid = OccupancyGrid.for_scenario(sc)
+    result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid,
+                                 calibration=_calibration(sweeps[0], sc), score=False,
+                                 progress=False, estimator=estimator)
+    # every configuration is judged on the default design's ground truth, on its own cells
+    reference = apply(base, Config(resolution_m=sc.map.resolution_m))
+    truth = _ground_truth((job.scenario_yaml, sc.map.resolution_m), reference, result.grid)
+    scores = metrics.score(result.grid, reference, truth)
+
+    err, err_steep, iters = [], [], []
+    hits = valid_hits = 0
+    for sw, p in zip(sweeps, result.points):
+        d_true = sw.truth.distance_m
+        hit = np.isfinite(d_true)
+        ok = p.valid & hit
+        hits += int(hit.sum())
+        valid_hits += int(ok.sum())
+        err.append(p.d[ok] - d_true[ok])
+        steep = ok & (sw.truth.incidence_rad >= STEEP_RAD)
+        err_steep.append(p.d[steep] - d_true[steep])
+        iters.append(p.iterations[p.valid])
+    err_all, err_st, it = (np.concatenate(a) for a in (err, err_steep, iters))
+    poses = len(sweeps)
+    view_s = designs.design_for(sc).hardware_time_s(
+        step_stride=sc.scan.step_stride, settle_s=sc.scan.settle_s, samples=sweeps[0].samples)
+    est_ms = result.timings_s["estimate"] * 1e3 / poses
+    map_ms = result.timings_s["map"] * 1e3 / poses
+    return {
+        "scenario": base.name, "knob": cfg.knob, "label": cfg.label, "value": cfg.value,
+        "seed": int(job.seed), "poses": poses,
+        "readings": int(sum(sw.counts.size for sw in sweeps)),
+        "range_rmse_m": _rmse(err_all), "range_rmse_steep_m": _rmse(err_st),
+        "steep_readings": int(err_st.size),
+        "valid_share": valid_hits / hits if hits else None,
+        **{k: scores[k] for k in metrics.SCORE_KEYS},
+        "iterations_mean": float(it.mean()) if it.size else 0.0,
+        "hardware_time_s": float(view_s), "hardware_time_total_s": float(view_s * poses),
+        "compute_ms": est_ms + map_ms, "estimate_ms": est_ms, "map_ms": map_ms,
+        "sim_ms": sim_s * 1e3 / poses,
+    }
+
+
+# --------------------------------------------------------------------------- the study
+
+
+def jobs_for(scenarios: Sequence, configs: Sequence[Config], seeds: int) -> list[Job]:
+    """Every configuration × scenario × seed (seeds: scenario.seed, +1, …)."""
+    from ..pipeline import scenario_text
+    from ..scenario import load_scenario
+
+    out = []
+    for s in scenarios:
+        sc = load_scenario(s) if isinstance(s, str) else s
+        text = scenario_text(sc)
+        if text is None:
+            raise ValueError(f"scenario {sc.name!r} has no YAML source file; jobs carry the "
+                             "scenario as YAML text so any worker can rebuild it")
+        out += [Job(text, sc.source, cfg, sc.seed + k) for cfg in configs for k in range(seeds)]
+    return out
+
+
+def _mean(values) -> float | None:
+    vals = [v for v in values if v is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def summarise(runs: list[dict], by: Sequence[str] = ("knob", "label")) -> list[dict]:
+    """One row per configuration (and whatever else ``by`` names): accuracy averaged over the
+    runs (a None score left out), hardware time averaged, compute times the median."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in runs:
+        groups.setdefault(tuple(r[k] for k in by), []).append(r)
+    rows = []
+    for key, mine in groups.items():
+        row = dict(zip(by, key))
+        row["value"] = mine[0]["value"]
+        row["scenarios"] = sorted({r["scenario"] for r in mine})
+        row["runs"] = len(mine)
+        for k in ACCURACY_KEYS + ("iterations_mean",):
+            row[k] = _mean(r[k] for r in mine)
+        row["hardware_time_s"] = float(np.mean([r["hardware_time_s"] for r in mine]))
+        for k in TIME_KEYS:
+            row[k] = float(np.median([r[k] for r in mine]))
+        rows.append(row)
+    return rows
+
+
+def _better_or_equal(a: dict, b: dict, cost: str) -> tuple[bool, bool]:
+    """(a at least as good as b everywhere, a strictly better somewhere) on cost, F1, RMSE."""
+    worst = {"occupied_f1": -1.0, "range_rmse_m": math.inf}
+    f1a = a["occupied_f1"] if a["occupied_f1"] is not None else worst["occupied_f1"]
+    f1b = b["occupied_f1"] if b["occupied_f1"] is not None else worst["occupied_f1"]
+    ra = a["range_rmse_m"] if a["range_rmse_m"] is not None else worst["range_rmse_m"]
+    rb = b["range_rmse_m"] if b["range_rmse_m"] is not None else worst["range_rmse_m"]
+    ge = a[cost] <= b[cost] and f1a >= f1b and ra <= rb
+    gt = a[cost] < b[cost] or f1a > f1b or ra < rb
+    return ge, gt
+
+
+def mark_pareto(rows: list[dict], costs: Sequence[str] = ("hardware_time_s", "compute_ms")) -> None:
+    """Set ``pareto_<cost>`` on each row: no other row dominates it (see the module doc)."""
+    for cost in costs:
+        for r in rows:
+            r[f"pareto_{cost}"] = not any(
+                all(_better_or_equal(o, r, cost)) for o in rows if o is not r)
+
+
+def measure(scenarios: Sequence = DEFAULT_SCENARIOS, *, seeds: int = 3,
+            configs: Sequence[Config] | None = None, ex=None,
+            progress: Callable[[dict], None] | None = None) -> dict:
+    """Run the study; ``ex`` is a ``concurrent.futures`` executor (default: this process).
+
+    Returns ``{"configs": [...], "by_scenario": [...], "runs": [...], "meta": {...}}``:
+    ``configs`` one row per configuration (mean over scenarios × seeds, Pareto flags),
+    ``by_scenario`` the same per scenario, ``runs`` every run in job order.
+    """
+    from .executor import run_jobs
+
+    configs = configurations() if configs is None else list(configs)
+    jobs = jobs_for(scenarios, configs, seeds)
+    t0 = time.perf_counter()
+    runs = run_jobs(run_job, jobs, ex, progress=progress)
+    wall = time.perf_counter() - t0
+    rows = summarise(runs)
+    mark_pareto(rows)
+    from ..scenario import load_scenario
+
+    first = load_scenario(scenarios[0]) if isinstance(scenarios[0], str) else scenarios[0]
+    default = next((r for r in rows if r["knob"] == "default"), None)
+    return {
+        "configs": rows,
+        "by_scenario": summarise(runs, ("scenario", "knob", "label")),
+        "runs": runs,
+        "meta": {"scenarios": sorted({r["scenario"] for r in runs}), "seeds": seeds,
+                 "jobs": len(jobs), "wall_s": wall,
+                 "default_values": {k: default_value(k, first) for k in KNOBS},
+                 "default": default},
+    }
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def deterministic(run: dict) -> dict:
+    """A run without its wall-clock timings: what must agree whoever ran it."""
+    return {k: v for k, v in run.items() if k not in TIME_KEYS}
+
+
+def _fmt(v, scale: float = 1.0, digits: int = 3) -> str:
+    return "—" if v is None else f"{v * scale:.{digits}f}"
+
+
+def table(rows: list[dict]) -> str:
+    """Plain-text table: one line per configuration."""
+    head = ["knob", "configuration", "hardware s", "compute ms", "RMSE mm", "steep mm",
+            "valid", "F1 occ", "free acc", "shadow", "front"]
+    lines = [head]
+    for r in rows:
+        front = ("hw " if r.get("pareto_hardware_time_s") else "") + \
+                ("cpu" if r.get("pareto_compute_ms") else "")
+        lines.append([r["knob"], r["label"], f"{r['hardware_time_s']:.2f}",
+                      f"{r['compute_ms']:.1f}", _fmt(r["range_rmse_m"], 1e3, 1),
+                      _fmt(r["range_rmse_steep_m"], 1e3, 1), _fmt(r["valid_share"], 1, 2),
+                      _fmt(r["occupied_f1"]), _fmt(r["free_accuracy"]), _fmt(r["shadow"]),
+                      front.strip() or "·"])
+    widths = [max(len(row[i]) for row in lines) for i in range(len(head))]
+    out = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in
+                     enumerate(zip(row, widths))) for row in lines]
+    out.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(out)
+
+
+CSV_KEYS = ("knob", "label", "value", "runs", "hardware_time_s", "compute_ms", "estimate_ms",
+            "map_ms", "sim_ms", "iterations_mean") + ACCURACY_KEYS + \
+           ("pareto_hardware_time_s", "pareto_compute_ms")
+
+
+_COLOURS = {"step": "tab:blue", "samples": "tab:orange", "settle": "tab:brown",
+            "iterations": "tab:green", "tolerance": "tab:olive", "resolution": "tab:purple",
+            "design": "tab:red"}
+
+
+def chart(result: dict, path) -> None:
+    """Accuracy (occupied F1, range RMSE) against hardware time and compute time.
+
+    Each knob is a line through the default configuration (black) and its other settings;
+    a ring marks a configuration on that cost's Pareto front.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = result["configs"]
+    default = next(r for r in rows if r["knob"] == "default")
+    defaults = result["meta"]["default_values"]
+    metrics = (("occupied_f1", "occupied F1 (higher is better)", 1.0),
+               ("range_rmse_m", "range RMSE, mm (lower is better)", 1e3))
+    costs = (("hardware_time_s", "hardware time per 360° scan, s (the real ring)"),
+             ("compute_ms", "compute per sweep, ms (estimator + mapper, this machine)"))
+    fig, axes = plt.subplots(2, 2, figsize=(13, 9))
+    for i, (mk, mlabel, scale) in enumerate(metrics):
+        for j, (ck, clabel) in enumerate(costs):
+            ax = axes[i, j]
+            for knob, colour in _COLOURS.items():
+                mine = [r for r in rows if r["knob"] == knob]
+                if not mine:
+                    continue
+                pts = sorted(mine + [dict(default, value=defaults.get(knob, 0))],
+                             key=lambda r: r["value"])
+                xs = [r[ck] for r in pts]
+                ys = [np.nan if r[mk] is None else r[mk] * scale for r in pts]
+                style = ":" if knob == "design" else "-"
+                ax.plot(xs, ys, style, color=colour, lw=1.2, alpha=0.8, label=knob)
+                for r in mine:
+                    if r[mk] is None:
+                        continue
+                    x, y = r[ck], r[mk] * scale
+                    ax.plot([x], [y], "o", color=colour, ms=5)
+                    if r.get(f"pareto_{ck}"):
+                        ax.plot([x], [y], "o", mfc="none", mec="k", ms=11, mew=1.2)
+                    ax.annotate(_short(r), (x, y), fontsize=7, xytext=(4, 3),
+                                textcoords="offset points", color=colour)
+            if default[mk] is not None:
+                x, y = default[ck], default[mk] * scale
+                ax.plot([x], [y], "s", color="k", ms=7, zorder=5, label="default")
+                if default.get(f"pareto_{ck}"):
+                    ax.plot([x], [y], "o", mfc="none", mec="k", ms=13, mew=1.2)
+            ax.set_xscale("log")
+            ax.set_xlabel(clabel)
+            ax.set_ylabel(mlabel)
+            ax.grid(alpha=0.3, which="both")
+            if i == 0 and j == 0:
+                ax.legend(fontsize=8, loc="lower right")
+    meta = result["meta"]
+    fig.suptitle(f"What accuracy costs in time — one knob at a time around the default; "
+                 f"{', '.join(meta['scenarios'])}, {meta['seeds']} seed(s) each; "
+                 f"ring = Pareto front for that cost", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _short(r: dict) -> str:
+    k, v = r["knob"], r["value"]
+    if k == "step":
+        return f"×{v:g}"
+    if k == "samples":
+        return f"{v:g} smp"
+    if k == "settle":
+        return f"{v:g} ms"
+    if k == "iterations":
+        return "θ=0" if v == 0 else f"{v:g} it"
+    if k == "tolerance":
+        return f"tol {v:g}°"
+    if k == "resolution":
+        return f"{v:g} mm"
+    return r["label"]
+
+
+def write_outputs(result: dict, out_dir) -> dict[str, str]:
+    """accuracy.json (everything), accuracy.csv (one row per configuration), runs.csv,
+    accuracy.png (the chart) in ``out_dir``."""
+    import json
+    from pathlib import Path
+
+    from ..compare import write_csv
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"json": out / "accuracy.json", "csv": out / "accuracy.csv",
+             "runs_csv": out / "runs.csv", "chart": out / "accuracy.png"}
+    paths["json"].write_text(json.dumps(result, indent=2))
+    write_csv(paths["csv"], result["configs"], CSV_KEYS)
+    if result["runs"]:
+        write_csv(paths["runs_csv"], result["runs"], list(result["runs"][0]))
+    chart(result, paths["chart"])
+    return {k: str(v) for k, v in paths.items()}
