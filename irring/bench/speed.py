@@ -1,0 +1,229 @@
+"""How fast each stage of a sweep is, against raw MuJoCo and against the real ring.
+
+One sweep of the scenario's ring at one pose (71 steps × 12 sensors for the paper's) goes
+through every stage ``irring run`` runs per sweep:
+
+=================  =======================================================================
+``kinematics``     ``SimRing.frames``: emitter positions and beam directions of every step
+                   from one batched MuJoCo forward (position stage)
+``rays``           ``SimRing.cast`` on those rays: one batched MuJoCo ray call plus our
+                   range, incidence and reflectance logic
+``effect: <name>`` each effect of the scene, timed inside the effects pipeline
+``effects core``   the pipeline's own always-on work (voltage curve, volts → counts, the
+                   no-return fill): the whole pipeline minus its effects
+``estimator``      ``estimate`` (the paper's iterative estimator, Table II), calibrated once
+``mapper``         ``OccupancyGrid.insert`` of the sweep's points
+=================  =======================================================================
+
+In the same run, ``raw_mujoco_ms`` is the same batched ray call on the same rays with none of
+our code around it (``mujoco.batch.Batch.ray``, as ``SimRing`` calls it); ``ray_vs_raw_ratio``
+= ``ray_ms`` / ``raw_mujoco_ms``. ``sweep_ms`` is the median of the whole chain per sweep
+(``SimRing.sweep`` → ``estimate`` → ``insert``, fresh noise every sweep), ``sweeps_per_s``
+its inverse, and ``realtime_factor`` = the sweep's hardware time (what the real ring spends,
+steps × (settle + samples × 38.3 ms)) / ``sweep_ms``.
+
+Method: every round times each stage once, in turn (interleaved, so a busy moment on the
+machine hits all stages alike); figures are medians over rounds. The garbage collector is off
+while timing (as ``timeit`` does). Scoring against ground truth is not a per-sweep stage and
+is left out.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import platform
+import time
+from typing import Callable
+
+import numpy as np
+
+TARGETS = {"sweep_ms": 2.0, "ray_vs_raw_ratio": 1.5, "realtime_factor": 1000.0}
+
+
+class _Timed:
+    """A stage phase method that adds its wall time to a shared tally."""
+
+    def __init__(self, fn: Callable, tally: dict, name: str):
+        self.fn, self.tally, self.name = fn, tally, name
+
+    def __call__(self, *args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return self.fn(*args, **kwargs)
+        finally:
+            self.tally[self.name] = self.tally.get(self.name, 0.0) + time.perf_counter() - t0
+
+
+def timed_pipeline(scenario, tally: dict):
+    """The scenario's effects pipeline with every stage's phase methods timed into
+    ``tally`` (stage name → seconds, accumulated)."""
+    from ..effects import PHASES, Pipeline
+    from ..rangers import pipeline_for
+
+    plain = pipeline_for(scenario)
+    stages = []
+    for st in plain.stages:
+        for phase in PHASES:
+            fn = getattr(st, phase, None)
+            if fn is not None:  # an instance attribute shadows the method for this stage only
+                setattr(st, phase, _Timed(fn, tally, st.name))
+        stages.append(st)
+    return Pipeline(plain.setup, tuple(stages))
+
+
+def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | None = None,
+            warmup: int = 5) -> dict:
+    """Time every stage of a sweep of ``scenario`` (a loaded Scenario); plain figures."""
+    import mujoco
+    import mujoco.batch
+
+    from .. import model as model_lib
+    from ..estimate import Calibration, estimate
+    from ..mapping import OccupancyGrid
+    from ..rangers import pipeline_for
+    from ..sim import SimRing
+
+    if rounds < 1:
+        raise ValueError(f"rounds must be ≥ 1, got {rounds}")
+    sim = SimRing(scenario, seed=seed)
+    if scenario.sensor.model == "sonar":  # as irring.compare does
+        sim._pipeline = pipeline_for(scenario)  # TODO(integration): SimRing(pipeline=…) hook
+    steps = sim.default_steps()
+    motor = steps * sim.ring.motor_step_rad
+    angles = sim.built.sensor_qpos_for(motor)
+    pose = sim.pose(pose_index)
+    origin, direction = sim.frames(angles, pose, motor)
+    o = np.ascontiguousarray(origin.reshape(-1, 3))
+    u = np.ascontiguousarray(direction.reshape(-1, 3))
+    raw = mujoco.batch.Batch(sim.model, 1, nthread=1)
+    group = model_lib.RAY_GEOMGROUP
+
+    tally: dict[str, float] = {}
+    pipe = timed_pipeline(scenario, tally)
+    _, _, truth = sim.truth(pose_index)
+    sweep = sim.sweep(pose_index)
+    cal = Calibration.for_sweep(sweep)
+    points = estimate(sweep, cal)
+    grid = OccupancyGrid.for_scenario(scenario)
+    chain_grid = OccupancyGrid.for_scenario(scenario)
+    rng = np.random.default_rng(0 if seed is None else seed)
+
+    def chain():
+        p = estimate(sim.sweep(pose_index), cal)
+        chain_grid.insert(p)
+        return p
+
+    plain_stages: dict[str, Callable] = {
+        "kinematics": lambda: sim.frames(angles, pose, motor),
+        "rays": lambda: sim.cast(origin, direction),
+        "raw_mujoco": lambda: raw.ray(o[None], u[None], geomgroup=group, normal=True),
+        "sim_sweep": lambda: sim.sweep(pose_index),
+        "estimator": lambda: estimate(sweep, cal),
+        "mapper": lambda: grid.insert(points),
+    }
+    samples: dict[str, list[float]] = {k: [] for k in
+                                       (*plain_stages, "effects", "sweep")}
+    effect_samples: dict[str, list[float]] = {s.name: [] for s in pipe.stages}
+    iterations: list[int] = []
+    gc_was = gc.isenabled()
+    gc.disable()
+    try:
+        for r in range(warmup + rounds):
+            keep = r >= warmup
+            for name, fn in plain_stages.items():
+                t0 = time.perf_counter()
+                fn()
+                dt = time.perf_counter() - t0
+                if keep:
+                    samples[name].append(dt)
+            tally.clear()
+            t0 = time.perf_counter()
+            pipe.run(truth, rng, cast=sim.cast)
+            dt = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            p = chain()
+            dchain = time.perf_counter() - t0
+            if keep:
+                samples["effects"].append(dt)
+                for name in effect_samples:
+                    effect_samples[name].append(tally.get(name, 0.0))
+                samples["sweep"].append(dchain)
+                iterations.append(int(p.iterations.max(initial=0)))
+    finally:
+        if gc_was:
+            gc.enable()
+
+    def ms(xs) -> float:
+        return float(np.median(xs) * 1e3)
+
+    effects_ms = {name: ms(v) for name, v in effect_samples.items()}
+    core = [t - sum(effect_samples[n][i] for n in effect_samples)
+            for i, t in enumerate(samples["effects"])]
+    stages = [{"stage": "kinematics", "ms": ms(samples["kinematics"])},
+              {"stage": "rays", "ms": ms(samples["rays"])}]
+    stages += [{"stage": f"effect: {name}", "ms": v} for name, v in effects_ms.items()]
+    stages += [{"stage": "effects core", "ms": ms(core)},
+               {"stage": "estimator", "ms": ms(samples["estimator"])},
+               {"stage": "mapper", "ms": ms(samples["mapper"])}]
+    sweep_ms = ms(samples["sweep"])
+    ray_ms, raw_ms = ms(samples["rays"]), ms(samples["raw_mujoco"])
+    hw_s = float(sweep.duration_s)
+    out = {
+        "scenario": scenario.name,
+        "effects": list(pipe.names),
+        "steps": int(len(steps)), "sensors": int(sim.ring.sensors), "rays": int(len(o)),
+        "rounds": rounds,
+        "sweep_ms": sweep_ms,
+        "sweep_ms_p90": float(np.percentile(samples["sweep"], 90) * 1e3),
+        "stages": stages,
+        "stages_sum_ms": float(sum(s["ms"] for s in stages)),
+        "sim_sweep_ms": ms(samples["sim_sweep"]),
+        "effects_ms": ms(samples["effects"]),
+        "ray_ms": ray_ms,
+        "raw_mujoco_ms": raw_ms,
+        "ray_vs_raw_ratio": ray_ms / raw_ms,
+        "estimator_iterations_median": float(np.median(iterations)),
+        "sweeps_per_s": 1e3 / sweep_ms,
+        "hardware_time_s": hw_s,
+        "realtime_factor": hw_s / (sweep_ms / 1e3),
+        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
+                    "python": platform.python_version(), "mujoco": mujoco.__version__,
+                    "numpy": np.__version__},
+    }
+    out["targets"] = {
+        "sweep_ms": {"target": f"≤ {TARGETS['sweep_ms']:g} ms", "value": sweep_ms,
+                     "met": sweep_ms <= TARGETS["sweep_ms"]},
+        "ray_vs_raw_ratio": {"target": f"≤ {TARGETS['ray_vs_raw_ratio']:g}×",
+                             "value": out["ray_vs_raw_ratio"],
+                             "met": out["ray_vs_raw_ratio"] <= TARGETS["ray_vs_raw_ratio"]},
+        "realtime_factor": {"target": f"≥ {TARGETS['realtime_factor']:g}×",
+                            "value": out["realtime_factor"],
+                            "met": out["realtime_factor"] >= TARGETS["realtime_factor"]},
+    }
+    return out
+
+
+def report(r: dict) -> str:
+    """The human-readable lines ``irring bench speed`` prints."""
+    lines = [f"{r['scenario']}: one sweep of {r['steps']} steps × {r['sensors']} sensors = "
+             f"{r['rays']} rays, effects {', '.join(r['effects']) or 'none'}; median of "
+             f"{r['rounds']} rounds, ms per sweep",
+             f"  {'stage':<24}{'ms':>9}{'share':>8}"]
+    total = r["stages_sum_ms"]
+    for s in r["stages"]:
+        lines.append(f"  {s['stage']:<24}{s['ms']:9.3f}{100 * s['ms'] / total:7.1f}%")
+    lines += [
+        f"  {'sum of stage medians':<24}{total:9.3f}",
+        f"whole sweep (sim → estimate → map)  {r['sweep_ms']:8.3f} ms median "
+        f"(p90 {r['sweep_ms_p90']:.3f}); simulator alone {r['sim_sweep_ms']:.3f} ms",
+        f"rays: ours {r['ray_ms']:.3f} ms, raw MuJoCo batched ray call {r['raw_mujoco_ms']:.3f} ms "
+        f"→ {r['ray_vs_raw_ratio']:.2f}×",
+        f"sweeps per second {r['sweeps_per_s']:.0f}; hardware time {r['hardware_time_s']:.2f} s "
+        f"per sweep → real-time factor {r['realtime_factor']:.0f}×",
+        "targets:"]
+    for key, t in r["targets"].items():
+        v = t["value"]
+        lines.append(f"  {key:<18}{t['target']:>10}   {v:10.3f}   "
+                     f"{'met' if t['met'] else 'MISSED'}")
+    return "\n".join(lines)
