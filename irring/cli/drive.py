@@ -155,6 +155,11 @@ def run(args: argparse.Namespace) -> int:
             f"device's")
     stride = truth.scan.step_stride if truth else 1
     steps = np.arange(info.min_step, info.max_step + 1, stride)
+    if stride > 1:
+        # IRSWP reads every step it passes, so every Nth step costs one IRSWP each; an
+        # emulator only moves its robot on full-range sweeps and stays at one pose then
+        say(f"note: {truth.name} reads every {stride}th step: one IRSWP per step (with "
+            f"`irring emulate`, pick each pose with --pose)")
 
     sweeps, reports, failure = [], [], None
     interactive = sys.stdin.isatty() and not args.no_wait
