@@ -7,7 +7,9 @@ results do not depend on who ran them:
 * ``executor(workers=1)``: in this process, one job after another (no pickling at all);
 * ``executor(workers=N)``: a local process pool of N workers (``forkserver`` start method on
   POSIX: workers fork from a clean server process, never from this one, which may hold
-  threads — a Dask client, tqdm's monitor — that a plain ``fork`` would copy mid-flight);
+  threads — a Dask client, tqdm's monitor — that a plain ``fork`` would copy mid-flight;
+  so, as with any ``spawn``/``forkserver`` pool, a script that starts one needs the
+  ``if __name__ == "__main__":`` guard);
 * ``executor(dask="tcp://host:8786")``: a Dask cluster through
   ``dask.distributed.Client(address).get_executor()`` (optional extra ``irring[dask]``).
   Workers need ``irring`` installed; jobs carry their scenario as YAML text, so a worker

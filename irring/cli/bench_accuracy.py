@@ -24,9 +24,10 @@ what it measures per configuration (mean over scenarios × seeds; timings: media
               sim_ms in the CSV/JSON: the testbed's cost, not the robot's)
   RMSE mm     estimated − true range over the readings called valid; steep: true
               incidence ≥ 40°; valid: share of the readings with a true return called valid
-  F1 occ, free acc, shadow, …   the map scores of `irring run`
+  F1 occ, coverage, free acc, shadow   the map scores of `irring run`
   front       on the Pareto front for hardware time (hw) / compute time (cpu): nothing
-              else is as cheap and at least as good on both occupied F1 and range RMSE
+              else is as cheap and at least as good on occupied F1, coverage and range
+              RMSE
 
 Runs go through a local process pool (--workers) or a Dask cluster (--dask); results other
 than the timings are identical whoever runs them. Compute times are measured inside the

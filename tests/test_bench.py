@@ -1,0 +1,186 @@
+"""Benchmarks: the accuracy-vs-time directions, identical results on every executor, and the
+speed benchmark's figures (no timed assertions: speed is printed by `irring bench speed`)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from irring.bench import accuracy, executor, speed
+from irring.scenario import load_scenario
+
+SMALL = [accuracy.Config(),
+         accuracy.Config("step", "step ×4", 4, step_stride=4),
+         accuracy.Config("samples", "4 samples", 4, samples=4),
+         accuracy.Config("iterations", "θ = 0", 0, iterate=False)]
+
+
+@pytest.fixture(scope="module")
+def small_grid() -> dict:
+    """The one-pose cylinder room, four configurations × 2 seeds, in this process."""
+    return accuracy.measure(["t_room_cylinder"], seeds=2, configs=SMALL)
+
+
+def _row(result: dict, label: str) -> dict:
+    return next(r for r in result["configs"] if r["label"] == label)
+
+
+def test_finer_steps_cost_hardware_time_and_buy_coverage_and_shadow(small_grid):
+    d, coarse = _row(small_grid, "default"), _row(small_grid, "step ×4")
+    # 71 stops of one 38.3 ms reading vs 18 stops
+    assert d["hardware_time_s"] == pytest.approx(71 * 0.0383)
+    assert coarse["hardware_time_s"] == pytest.approx(18 * 0.0383)
+    # beams 4.32° apart leave the cells between them unmapped and miss more of the wall
+    # behind the table leg
+    assert d["coverage"] > coarse["coverage"] + 0.3
+    assert d["occupied_recall"] > coarse["occupied_recall"]
+    assert d["occupied_f1"] > coarse["occupied_f1"]
+    assert d["shadow"] >= coarse["shadow"]
+
+
+def test_more_samples_cost_hardware_time_and_buy_range_accuracy(small_grid):
+    d, avg = _row(small_grid, "default"), _row(small_grid, "4 samples")
+    assert avg["hardware_time_s"] == pytest.approx(4 * d["hardware_time_s"])
+    # averaging 4 independent readings halves the noise σ; the range error follows
+    assert avg["range_rmse_m"] < 0.8 * d["range_rmse_m"]
+    assert avg["occupied_f1"] >= d["occupied_f1"]
+
+
+def test_iterations_cost_compute_and_buy_accuracy_at_steep_incidence(small_grid):
+    d, flat = _row(small_grid, "default"), _row(small_grid, "θ = 0")
+    assert flat["hardware_time_s"] == d["hardware_time_s"]   # same readings
+    # the estimator's work (a machine-independent measure of its compute time)
+    assert flat["iterations_mean"] == 0 and d["iterations_mean"] > 2
+    assert d["range_rmse_steep_m"] < 0.5 * flat["range_rmse_steep_m"]
+    assert d["occupied_f1"] > flat["occupied_f1"] + 0.1
+
+
+def test_every_run_is_recorded_with_costs_and_scores(small_grid):
+    runs = small_grid["runs"]
+    assert len(runs) == len(SMALL) * 2
+    assert [r["seed"] for r in runs[:2]] == [2, 3]           # scenario seed, +1
+    for r in runs:
+        assert r["compute_ms"] == pytest.approx(r["estimate_ms"] + r["map_ms"])
+        assert 0 < r["valid_share"] <= 1 and r["range_rmse_m"] > 0
+    keys = {accuracy.front_key(c, m) for c in accuracy.COSTS for m in accuracy.FRONT_METRICS}
+    assert all(keys <= set(row) for row in small_grid["configs"])
+
+
+def test_pareto_front_keeps_only_undominated_configurations():
+    def row(name, hw, f1, valid=1.0):
+        return {"label": name, "hardware_time_s": hw, "compute_ms": 1.0, "occupied_f1": f1,
+                "coverage": 0.5, "range_rmse_m": 0.01, "valid_share": valid}
+
+    rows = [row("fast", 1.0, 0.5), row("slow-better", 4.0, 0.9), row("slow-worse", 5.0, 0.8),
+            row("tie-worse", 1.0, 0.4), row("none", 0.5, None)]
+    accuracy.mark_pareto(rows)
+    on = {r["label"] for r in rows if r["front_hw_f1"]}
+    assert on == {"fast", "slow-better"}
+    few = [row("ok", 1.0, 0.5), row("few-valid", 0.5, 0.5, valid=0.1)]
+    few[1]["range_rmse_m"] = 0.001
+    accuracy.mark_pareto(few)
+    # an RMSE over a tenth of the readings does not win the RMSE front
+    assert not few[1]["front_hw_rmse"] and few[0]["front_hw_rmse"]
+    assert accuracy.fronts(few[1]) == "hw:f1,cov cpu:f1,cov"
+
+
+def test_configurations_vary_one_knob_at_a_time():
+    configs = accuracy.configurations()
+    assert configs[0] == accuracy.Config()
+    assert {c.knob for c in configs[1:]} == set(accuracy.KNOBS)
+    base = load_scenario("t_room")
+    for c in configs[1:]:
+        sc = accuracy.apply(base, c)
+        changed = {name for name in ("scan", "map", "effects", "robot", "sensor")
+                   if getattr(sc, name) != getattr(base, name)}
+        assert len(changed) <= 2, (c, changed)               # samples: scan + averaging
+    with pytest.raises(ValueError, match="unknown knob"):
+        accuracy.configurations(["speed"])
+
+
+# --------------------------------------------------------------------------- scaling out
+
+TINY = [accuracy.Config(), accuracy.Config("step", "step ×4", 4, step_stride=4)]
+
+
+@pytest.fixture(scope="module")
+def serial_tiny() -> list[dict]:
+    result = accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY)
+    return [accuracy.deterministic(r) for r in result["runs"]]
+
+
+def test_process_pool_gives_identical_results(serial_tiny):
+    with executor.executor(workers=2) as ex:
+        assert isinstance(ex, executor.ProcessPoolExecutor)
+        result = accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY, ex=ex)
+    assert [accuracy.deterministic(r) for r in result["runs"]] == serial_tiny
+
+
+def test_dask_cluster_gives_identical_results(serial_tiny):
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, \
+            executor.executor(dask=cluster.scheduler_address) as ex:
+        result = accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY, ex=ex)
+    assert [accuracy.deterministic(r) for r in result["runs"]] == serial_tiny
+
+
+def _square(x: int) -> int:
+    if x < 0:
+        raise ValueError("negative")
+    return x * x
+
+
+def test_run_jobs_keeps_job_order_and_raises_the_jobs_error():
+    seen = []
+    assert executor.run_jobs(_square, [3, 1, 2], progress=seen.append) == [9, 1, 4]
+    assert seen == [9, 1, 4]
+    with executor.executor(workers=1) as ex:
+        assert isinstance(ex, executor.SerialExecutor)
+        with pytest.raises(ValueError, match="negative"):
+            executor.run_jobs(_square, [1, -1], ex)
+
+
+# --------------------------------------------------------------------------- speed
+
+
+def test_speed_reports_every_stage_and_the_ratios():
+    r = speed.measure(load_scenario("t_room"), rounds=3, warmup=1)
+    names = [s["stage"] for s in r["stages"]]
+    assert names == ["kinematics", "rays", "effect: incidence", "effect: noise",
+                     "effect: quantization", "effects core", "estimator", "mapper"]
+    assert (r["steps"], r["sensors"], r["rays"]) == (71, 12, 852)
+    assert all(s["ms"] >= 0 for s in r["stages"])
+    assert r["ray_vs_raw_ratio"] == pytest.approx(r["ray_ms"] / r["raw_mujoco_ms"])
+    assert r["realtime_factor"] == pytest.approx(71 * 0.0383 / (r["sweep_ms"] / 1e3))
+    assert r["sweeps_per_s"] == pytest.approx(1e3 / r["sweep_ms"])
+    assert set(r["targets"]) == {"sweep_ms", "ray_vs_raw_ratio", "realtime_factor"}
+    json.dumps(r)                                             # plain figures only
+
+
+def test_timed_pipeline_gives_the_same_counts_as_the_plain_one():
+    import numpy as np
+
+    from irring.effects import Pipeline
+    from irring.sim import SimRing
+
+    sc = load_scenario("t_room")
+    sim = SimRing(sc)
+    _, _, truth = sim.truth(0)
+    tally: dict = {}
+    timed = speed.timed_pipeline(sc, tally).run(truth, np.random.default_rng(5), cast=sim.cast)
+    plain = Pipeline.from_scenario(sc).run(truth, np.random.default_rng(5), cast=sim.cast)
+    np.testing.assert_array_equal(timed, plain)
+    assert set(tally) == {"incidence", "noise", "quantization"}
+    assert all(math.isfinite(v) and v >= 0 for v in tally.values())
+
+
+def test_cli_speed_json(capsys):
+    from irring.cli import main
+
+    assert main(["bench", "speed", "--rounds", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("sweep_ms", "ray_ms", "raw_mujoco_ms", "ray_vs_raw_ratio", "realtime_factor"):
+        assert out[key] > 0
