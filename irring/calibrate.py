@@ -161,25 +161,32 @@ def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = 12, vref_
     base = np.isfinite(r.counts) & (r.counts > 0.5) & (r.counts < full - 0.5) & \
         (np.abs(r.beam_angle_rad) < math.radians(89.0))
     d_o = float(emitter_offset_guess_m)
-    cal = None
+    # the datasheet curve says what "nothing there" reads until our own curve can say it
+    cal = dataclasses.replace(Calibration.nominal(sensor_model, None, adc_bits, vref_v),
+                              noise_counts=noise)
+    steepest = None
     for _ in range(_ROUNDS):
         d_true = r.true_distance(d_o)
         use = base & (d_true >= min_range_m) & (d_true <= max_range_m)
-        if cal is not None:  # drop returns that read as "nothing there" (dropped out)
-            use &= r.counts > cal.no_return_counts + 3.0 * cal.sigma_counts() \
-                if cal.falling else r.counts < cal.no_return_counts - 3.0 * cal.sigma_counts()
+        # drop returns that read as "nothing there" (dropped out past the incidence limit)
+        floor = 3.0 * cal.sigma_counts()
+        use &= (r.counts > cal.no_return_counts + floor) if cal.falling else \
+            (r.counts < cal.no_return_counts - floor)
         theta, a, b = fit_curve(r.counts[use], d_true[use], r.beam_angle_rad[use],
                                 theta_grid_rad)
         cal = Calibration(sensor_model=sensor_model, emitter_offset_m=d_o, theta_rad=theta,
                           a=a, b=b, adc_bits=adc_bits, vref_v=vref_v, min_range_m=min_range_m,
-                          max_range_m=max_range_m, noise_counts=noise, source=source)
+                          max_range_m=max_range_m, noise_counts=noise, source=source,
+                          max_incidence_rad=steepest)
+        # the steepest incidence that still returned (past it the sensor drops out)
+        steepest = min(float(np.max(np.abs(r.beam_angle_rad[use]))), math.radians(89.0))
         off = use & r.offset
         if not off.any():
             raise CalibrationError("no usable readings from the offset placements (ψ = 0); "
                                    "d_o cannot be determined")
         d_meas = cal.distance(r.counts[off], r.beam_angle_rad[off])
         d_o = emitter_offset_from_wall(d_meas, r.beam_angle_rad[off], r.wall_distance_m[off])
-    return dataclasses.replace(cal, emitter_offset_m=d_o)
+    return dataclasses.replace(cal, emitter_offset_m=d_o, max_incidence_rad=steepest)
 
 
 # --------------------------------------------------------------------------- simulated rig

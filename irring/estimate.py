@@ -56,6 +56,8 @@ from .scenario import Ring
 CALIBRATION_FORMAT = 1  # version written into calibration files
 _SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
 _FALLBACK_SPREAD_RAD = math.radians(45.0)
+_PINNED_RAD = math.radians(2.0)  # a line most readings meet within this of the drop-out angle
+#                                  is a runaway, not a wall (see _drop_steep)
 
 
 # --------------------------------------------------------------------------- calibration
@@ -82,6 +84,8 @@ class Calibration:
     0), interpolated linearly in (log a, b) over |θ| and held at the ends. ``emitter_offset_m``
     is d_o (paper Fig. 7, Eq. 9). The curve is trusted on [min_range_m, max_range_m].
     ``noise_counts`` is the 1-σ reading noise in counts (for ``Points.sigma_m``).
+    ``max_incidence_rad``: returns steeper than this drop out (default: the table's end), so
+    a line that would put a reading beyond it is not that reading's surface.
     """
 
     sensor_model: str
@@ -95,6 +99,7 @@ class Calibration:
     max_range_m: float = 0.80
     noise_counts: float = 0.0
     source: str = ""
+    max_incidence_rad: float | None = None
 
     def __post_init__(self) -> None:
         theta = _frozen(self.theta_rad, "theta")
@@ -118,6 +123,11 @@ class Calibration:
                                    "plausible d_o (|d_o| < 0.1 m)")
         if not (math.isfinite(self.noise_counts) and self.noise_counts >= 0):
             raise CalibrationError(f"noise_counts must be ≥ 0, got {self.noise_counts!r}")
+        if self.max_incidence_rad is None:
+            object.__setattr__(self, "max_incidence_rad", float(theta[-1]) or math.pi / 2 - 1e-3)
+        if not 0.0 < self.max_incidence_rad < math.pi / 2:
+            raise CalibrationError(f"max_incidence must lie in (0°, 90°), got "
+                                   f"{math.degrees(self.max_incidence_rad):g}°")
         object.__setattr__(self, "theta_rad", theta)
         object.__setattr__(self, "a", a)
         object.__setattr__(self, "b", b)
@@ -204,6 +214,8 @@ class Calibration:
                    adc_bits=int(adc_bits), vref_v=float(vref_v),
                    min_range_m=float(model.min_range_m), max_range_m=float(model.max_range_m),
                    noise_counts=float(noise_sigma_v) / volts_per_count,
+                   max_incidence_rad=float(min(model.max_incidence_rad, theta[keep][-1]
+                                               if theta[keep][-1] > 0 else math.pi / 2 - 1e-3)),
                    source=f"nominal {model.name} datasheet curve")
 
     @classmethod
@@ -224,6 +236,7 @@ class Calibration:
             "min_range_mm": float(self.min_range_m * 1e3),
             "max_range_mm": float(self.max_range_m * 1e3),
             "noise_counts": float(self.noise_counts),
+            "max_incidence_deg": round(math.degrees(self.max_incidence_rad), 9),
             "curve": [{"theta_deg": round(math.degrees(t), 9), "a": float(a), "b": float(b)}
                       for t, a, b in zip(self.theta_rad, self.a, self.b)],
         }
@@ -246,7 +259,8 @@ class Calibration:
         if not isinstance(raw, Mapping):
             raise fail("<top>", "a calibration file must be a mapping")
         known = {"irring_calibration", "sensor_model", "source", "emitter_offset_mm", "adc_bits",
-                 "vref_v", "min_range_mm", "max_range_mm", "noise_counts", "curve"}
+                 "vref_v", "min_range_mm", "max_range_mm", "noise_counts", "curve",
+                 "max_incidence_deg"}
         for key in raw:
             if key not in known:
                 raise fail(str(key), f"unknown key; allowed: {', '.join(sorted(known))}")
@@ -287,6 +301,8 @@ class Calibration:
                        min_range_m=number("min_range_mm", 100.0) * 1e-3,
                        max_range_m=number("max_range_mm", 800.0) * 1e-3,
                        noise_counts=number("noise_counts", 0.0),
+                       max_incidence_rad=(math.radians(number("max_incidence_deg"))
+                                          if "max_incidence_deg" in raw else None),
                        source=str(raw.get("source", "")))
         except CalibrationError as exc:
             raise CalibrationError(f"{source}: {exc}") from None
@@ -420,11 +436,15 @@ class LineOptions:
     min_split_m: float = 0.010     # … and at least this far
     gap_m: float = 0.15            # consecutive readings farther apart start a new polyline
     min_points: int = 3            # a line usable for θ has at least this many readings …
-    min_length_m: float = 0.04     # … spanning at least this length
+    min_length_m: float = 0.08     # … spanning at least this length
     max_rms_sigmas: float = 3.0    # … and fits them to within this RMS (in σ)
     regroup_iterations: int = 8    # regroup at most this many iterations …
     regroup_until_rad: float = math.radians(1.0)  # … and only while some θ moves more
     adopt_margin_m: float = 0.05   # a reading on no line may join one this far past its ends
+    corner_window: int = 4         # readings this close to a corner may change line …
+    corner_sigmas: float = 0.5     # … if another line fits them this many σ better
+    incidence_margin_rad: float = math.radians(5.0)  # a line meeting a beam this far past
+    #                                                  the drop-out angle is not its surface
 
 
 @dataclass(frozen=True)
@@ -526,7 +546,9 @@ def fit_lines(x: np.ndarray, y: np.ndarray, ok: np.ndarray, sigma_m: np.ndarray,
     run_end = np.concatenate([brk - 1, [k - 1]])
 
     starts, ends = _split(px, py, thr, run_start, run_end)
+    starts, ends = _refine_corners(px, py, starts, ends)
     starts, ends = _merge(px, py, thr, starts, ends)
+    starts, ends = _refine_corners(px, py, starts, ends)
 
     mom = _Moments(px, py)
     centroid, normal, direction, lmin, lmax, npts = mom.fit(starts, ends)
@@ -587,6 +609,38 @@ def _split(px, py, thr, starts, ends):
         at = np.minimum.reduceat(cand, starts)[split]
         starts = np.sort(np.concatenate([starts, at]))
         ends = np.sort(np.concatenate([ends, at]))
+    return starts, ends
+
+
+def _refine_corners(px, py, starts, ends, window: int = 5, rounds: int = 2):
+    """Move each corner shared by two pieces to where the two TLS lines fit best.
+
+    The end-point fit splits at the reading farthest from the chord, which for a corner near
+    the end of a polyline, or seen at a slant, is a few readings off the true corner. Each
+    shared corner is tried at up to ``window`` readings either side (keeping ≥ 2 readings per
+    piece) and put where the summed squared perpendicular residuals of the two pieces are
+    least; all corners at once, from prefix sums.
+    """
+    mom = _Moments(px, py)
+    for _ in range(rounds):
+        j = np.flatnonzero(starts[1:] == ends[:-1])       # piece j and j + 1 share a corner
+        if j.size == 0:
+            break
+        lo, v, hi = starts[j], ends[j], ends[j + 1]
+        cand = v[:, None] + np.arange(-window, window + 1)[None, :]      # (P, K)
+        ok = (cand >= lo[:, None] + 1) & (cand <= hi[:, None] - 1)
+        c = np.where(ok, cand, v[:, None])
+        *_, lmin_a, _, n_a = mom.fit(np.broadcast_to(lo[:, None], c.shape).ravel(), c.ravel())
+        *_, lmin_b, _, n_b = mom.fit(c.ravel(), np.broadcast_to(hi[:, None], c.shape).ravel())
+        cost = (lmin_a * n_a + lmin_b * n_b).reshape(c.shape)
+        cost = np.where(ok, cost, np.inf)
+        best = c[np.arange(j.size), np.argmin(cost, axis=1)]
+        if np.array_equal(best, v):
+            break
+        ends = ends.copy()
+        starts = starts.copy()
+        ends[j] = best
+        starts[j + 1] = best
     return starts, ends
 
 
@@ -704,7 +758,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     live = reason == Reason.OK
     s_safe = np.where(live, counts, 1.0)
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
-    theta_cap = min(cal.max_theta_rad, math.radians(89.0))
+    theta_cap = cal.max_incidence_rad
+    theta_reject = theta_cap + lines.incidence_margin_rad
     sig_counts = cal.sigma_counts()
 
     def points_at(theta):
@@ -723,6 +778,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     history = [theta.copy()] if keep_history else []
     found: Lines | None = None
     steps = np.asarray(sweep.steps)
+    scan, _ = _scan_order(steps, counts.shape[1])
     regroup = True
     n_iter = max_iterations if iterate else 0
     for it in range(n_iter):
@@ -731,24 +787,20 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         usable = live & (d <= 1.5 * max_range)
         if regroup:
             found = fit_lines(px, py, usable, sigma, steps, lines)
-            line_of = _members(found, usable, cal, s_safe, origin, ux, uy, px, py, sigma, lines)
-        else:  # held grouping: refit the same members at their new positions; readings on
-            # no line may still join one, but no member leaves (so nothing flip-flops)
+            line_of = _members(found, usable, px, py, sigma, lines)
+            line_of = _settle_corners(line_of, found, scan, cal, s_safe, origin, ux, uy, px,
+                                      py, sigma, theta_reject, lines)
+        else:  # held grouping: the same members refitted at their new positions
             found = _refit(found, line_of, px, py, usable)
-            orphan = usable & (line_of < 0)
-            if orphan.any():
-                line_of = _adopt(line_of, orphan, found, cal, s_safe, origin, ux, uy, px, py,
-                                 sigma, lines)
-        good = (line_of >= 0) & usable
-        good[good] = found.usable[line_of[good]]
-        line_of = np.where(good, line_of, -1)
-        nx = np.zeros(counts.shape)
-        ny = np.zeros(counts.shape)
-        nx[good] = found.normal[line_of[good], 0]
-        ny[good] = found.normal[line_of[good], 1]
-        cos_t = np.abs(nx * ux + ny * uy)
-        sin_t = np.abs(nx * uy - ny * ux)
-        theta_new = np.where(good, np.minimum(np.arctan2(sin_t, cos_t), theta_cap), 0.0)
+        found, line_of = _drop_steep(found, line_of, usable, ux, uy, theta_cap, theta_reject)
+        # readings on no line may join one (while held: join, never leave, so no flip-flop)
+        orphan = usable & (line_of < 0)
+        if orphan.any():
+            line_of = _adopt(line_of, orphan, found, cal, s_safe, origin, ux, uy, px, py,
+                             sigma, theta_reject, lines)
+        good = line_of >= 0
+        theta_line = _incidence(found, line_of, ux, uy)
+        theta_new = np.where(good, np.minimum(theta_line, theta_cap), 0.0)
         on_line = good
         step = theta_new - theta
         moving = live & (np.abs(step) >= tolerance_rad)
@@ -788,15 +840,16 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         origin_x=np.array(origin[..., 0]), origin_y=np.array(origin[..., 1]),
         heading=np.array(heading), sigma_m=np.where(valid, sigma, nan),
         iterations=iterations, valid=valid, reason=reason, max_range_m=max_range)
+    if found is not None:  # labels: the line each reading took θ from (−1: none)
+        found = replace(found, label=np.where(on_line, line_of, -1))
     return Estimate(points=points, lines=found, theta_history=tuple(history))
 
 
-def _members(found: Lines, usable: np.ndarray, cal: Calibration, s_safe: np.ndarray,
-             origin: np.ndarray, ux: np.ndarray, uy: np.ndarray, px: np.ndarray,
-             py: np.ndarray, sigma: np.ndarray, opts: LineOptions) -> np.ndarray:
+def _members(found: Lines, usable: np.ndarray, px: np.ndarray, py: np.ndarray,
+             sigma: np.ndarray, opts: LineOptions) -> np.ndarray:
     """(S, N) line index giving each reading its θ, or −1: a reading keeps its own usable
-    line if it sits on it (within the split threshold; the last readings past a corner
-    often do not), else it may be adopted by another line (:func:`_adopt`)."""
+    line only if it sits on it (within the split threshold; the last readings past a
+    corner often do not)."""
     label = found.label
     good = (label >= 0) & usable
     good[good] = found.usable[label[good]]
@@ -805,49 +858,159 @@ def _members(found: Lines, usable: np.ndarray, cal: Calibration, s_safe: np.ndar
     off = np.abs((px[good] - found.centroid[lg, 0]) * found.normal[lg, 0]
                  + (py[good] - found.centroid[lg, 1]) * found.normal[lg, 1]) > thr[good]
     good[good] = ~off
-    line_of = np.where(good, label, -1)
-    return _adopt(line_of, usable & ~good, found, cal, s_safe, origin, ux, uy, px, py, sigma,
-                  opts)
+    return np.where(good, label, -1)
 
 
-def _adopt(line_of: np.ndarray, orphan: np.ndarray, found: Lines, cal: Calibration,
-           s_safe: np.ndarray, origin: np.ndarray, ux: np.ndarray, uy: np.ndarray,
-           px: np.ndarray, py: np.ndarray, sigma: np.ndarray, opts: LineOptions) -> np.ndarray:
-    """Readings on no usable line join one if, read with that line's θ, they land on it.
+def _settle_corners(line_of: np.ndarray, found: Lines, scan: np.ndarray, cal: Calibration,
+                    s_safe: np.ndarray, origin: np.ndarray, ux: np.ndarray, uy: np.ndarray,
+                    px: np.ndarray, py: np.ndarray, sigma: np.ndarray, theta_reject: float,
+                    opts: LineOptions) -> np.ndarray:
+    """Readings at the ends of their run go to whichever line explains them best.
 
-    These are mostly readings next to a corner, which θ = 0 put off both walls, and the last
-    few readings of a sweep past a corner (the neighbouring sensor sees that wall). Test:
-    every orphan against every usable line at once ((orphans, lines) arrays; both are few):
-    within the split threshold of the line and within ``opts.adopt_margin_m`` of its extent.
+    Near a corner both walls' lines pass close to the first readings past it, and a reading
+    read with the wrong wall's θ can land on that wall's extension (a self-consistent but
+    wrong answer). Each reading within ``opts.corner_window`` readings of either end of its
+    run (same line, same sensor, consecutive in the scan) is re-read with every usable
+    line's θ (see :func:`_fit_to_lines`) and put on the line it then lies closest to.
+    """
+    m = scan.size
+    if m == 0 or not found.usable.any():
+        return line_of
+    n_sensors = line_of.shape[1]
+    seq = line_of.reshape(-1)[scan]
+    sens = scan % n_sensors
+    at = np.arange(m)
+    new_run = np.ones(m, dtype=bool)
+    new_run[1:] = (seq[1:] != seq[:-1]) | (sens[1:] != sens[:-1])
+    run_start = np.maximum.accumulate(np.where(new_run, at, 0))
+    end_run = np.ones(m, dtype=bool)
+    end_run[:-1] = new_run[1:]
+    run_end = np.minimum.accumulate(np.where(end_run, at, m - 1)[::-1])[::-1]
+    edge = (seq >= 0) & (np.minimum(at - run_start, run_end - at) < opts.corner_window)
+    if not edge.any():
+        return line_of
+    idx = scan[edge]
+    lines_idx, r, _ = _fit_to_lines(idx, found, cal, s_safe, origin, ux, uy, px, py,
+                                    theta_reject, opts, own=seq[edge])
+    best = np.argmin(r, axis=1)
+    rows = np.arange(idx.size)
+    own_col = np.searchsorted(lines_idx, seq[edge])
+    own_ok = (own_col < lines_idx.size) & (lines_idx[np.minimum(own_col, lines_idx.size - 1)]
+                                          == seq[edge])
+    r_own = np.where(own_ok, r[rows, np.minimum(own_col, lines_idx.size - 1)], np.inf)
+    # switch only for a clear gain (noise alone must not shuffle readings between lines)
+    sig = sigma.reshape(-1)[idx]
+    thr = np.maximum(opts.min_split_m, opts.split_sigmas * sig)
+    ok = (r[rows, best] <= thr) & (r[rows, best] < r_own - opts.corner_sigmas * sig)
+    out = line_of.copy()
+    out.reshape(-1)[idx[ok]] = lines_idx[best[ok]]
+    return out
+
+
+def _fit_to_lines(idx: np.ndarray, found: Lines, cal: Calibration, s_safe: np.ndarray,
+                  origin: np.ndarray, ux: np.ndarray, uy: np.ndarray, px: np.ndarray,
+                  py: np.ndarray, theta_reject: float, opts: LineOptions,
+                  own: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Readings ``idx`` (flat) against every usable line, each reading re-read with that
+    line's θ: returns (line indices (L,), |perpendicular residual| (U, L), θ (U, L)).
+
+    A line counts only if the reading's point lies within ``opts.adopt_margin_m`` of the
+    line's extent (its own line, ``own``, always counts) and the beam meets it no steeper than
+    ``theta_reject``; other entries are inf.
     """
     usable = np.flatnonzero(found.usable)
-    if not orphan.any() or usable.size == 0:
-        return line_of
-    sel = np.flatnonzero(orphan.reshape(-1))
-    n = found.normal[usable]                                    # (L, 2)
-    u = np.stack([ux.reshape(-1)[sel], uy.reshape(-1)[sel]], axis=-1)   # (M, 2)
-    cos_t = np.abs(u @ n.T)                                     # (M, L)
+    n = found.normal[usable]                                            # (L, 2)
+    u = np.stack([ux.reshape(-1)[idx], uy.reshape(-1)[idx]], axis=-1)   # (U, 2)
+    cos_t = np.abs(u @ n.T)                                             # (U, L)
     sin_t = np.abs(u[:, 1:2] * n[None, :, 0] - u[:, 0:1] * n[None, :, 1])
-    th = np.minimum(np.arctan2(sin_t, cos_t), cal.max_theta_rad)
-    d = cal.distance(s_safe.reshape(-1)[sel][:, None], th)     # (M, L)
-    o = origin.reshape(-1, 2)[sel]
-    qx = o[:, 0:1] + d * u[:, 0:1] - found.centroid[usable, 0]
-    qy = o[:, 1:2] + d * u[:, 1:2] - found.centroid[usable, 1]
-    thr = np.maximum(opts.min_split_m, opts.split_sigmas * sigma.reshape(-1)[sel])
-    r = np.abs(qx * n[:, 0] + qy * n[:, 1]) / thr[:, None]
+    th = np.arctan2(sin_t, cos_t)
+    d = cal.distance(s_safe.reshape(-1)[idx][:, None], np.minimum(th, cal.max_incidence_rad))
+    o = origin.reshape(-1, 2)[idx]
+    c = found.centroid[usable]
+    qx = o[:, 0:1] + d * u[:, 0:1] - c[:, 0]
+    qy = o[:, 1:2] + d * u[:, 1:2] - c[:, 1]
+    r = np.abs(qx * n[:, 0] + qy * n[:, 1])
     # extent of each line along its direction, from its end readings
     dirs = found.direction[usable]
     sx, sy = px.reshape(-1)[found.start[usable]], py.reshape(-1)[found.start[usable]]
     ex, ey = px.reshape(-1)[found.end[usable]], py.reshape(-1)[found.end[usable]]
-    t0 = (sx - found.centroid[usable, 0]) * dirs[:, 0] + (sy - found.centroid[usable, 1]) * dirs[:, 1]
-    t1 = (ex - found.centroid[usable, 0]) * dirs[:, 0] + (ey - found.centroid[usable, 1]) * dirs[:, 1]
-    lo, hi = np.minimum(t0, t1) - opts.adopt_margin_m, np.maximum(t0, t1) + opts.adopt_margin_m
+    t0 = (sx - c[:, 0]) * dirs[:, 0] + (sy - c[:, 1]) * dirs[:, 1]
+    t1 = (ex - c[:, 0]) * dirs[:, 0] + (ey - c[:, 1]) * dirs[:, 1]
+    lo = np.minimum(t0, t1) - opts.adopt_margin_m
+    hi = np.maximum(t0, t1) + opts.adopt_margin_m
     t = qx * dirs[:, 0] + qy * dirs[:, 1]
-    r = np.where((t >= lo) & (t <= hi) & np.isfinite(r), r, np.inf)
+    near = (t >= lo) & (t <= hi)
+    if own is not None:
+        near |= usable[None, :] == own[:, None]
+    r = np.where(near & np.isfinite(r) & (th <= theta_reject), r, np.inf)
+    return usable, r, th
+
+
+def _incidence(found: Lines, line_of: np.ndarray, ux: np.ndarray, uy: np.ndarray
+               ) -> np.ndarray:
+    """(S, N) angle between each reading's beam and its line's normal (0 off any line)."""
+    on = line_of >= 0
+    nx = np.zeros(line_of.shape)
+    ny = np.zeros(line_of.shape)
+    nx[on] = found.normal[line_of[on], 0]
+    ny[on] = found.normal[line_of[on], 1]
+    return np.where(on, np.arctan2(np.abs(nx * uy - ny * ux), np.abs(nx * ux + ny * uy)), 0.0)
+
+
+def _drop_steep(found: Lines, line_of: np.ndarray, usable: np.ndarray, ux: np.ndarray,
+                uy: np.ndarray, theta_cap: float, theta_reject: float
+                ) -> tuple[Lines, np.ndarray]:
+    """A line the beam would meet past the drop-out angle cannot be what it saw.
+
+    A reading whose line it meets steeper than ``theta_reject`` leaves it. A line that most
+    of its readings meet at or past the drop-out angle ``theta_cap`` (less 2°) is not a
+    surface: a radial streak (readings off a thin cylinder's edge, stretched along the
+    beams by θ = 0) or a runaway (θ up → d down → the line turns radial → θ up, which a
+    curve whose a(θ) falls with θ allows on a cylinder's face). A real wall that steep would
+    return nothing. Such a line is dropped (for good while the grouping is held).
+    """
+    good = (line_of >= 0) & usable
+    good[good] = found.usable[line_of[good]]
+    line_of = np.where(good, line_of, -1)
+    theta_line = _incidence(found, line_of, ux, uy)
+    steep = good & (theta_line > theta_reject)
+    # readings pinned at the drop-out angle are as suspect: a real wall that steep returns
+    # nothing, while a runaway (θ up → d down → the line turns radial → θ up) ends there
+    pinned = good & (theta_line >= theta_cap - _PINNED_RAD)
+    if pinned.any():
+        n_lines = found.normal.shape[0]
+        frac = (np.bincount(line_of[pinned], minlength=n_lines)
+                / np.maximum(np.bincount(line_of[good], minlength=n_lines), 1))
+        streak = frac > 0.5
+        if streak.any():
+            found = replace(found, usable=found.usable & ~streak)
+            good[good] = ~streak[line_of[good]]
+    good &= ~steep
+    return found, np.where(good, line_of, -1)
+
+
+def _adopt(line_of: np.ndarray, orphan: np.ndarray, found: Lines, cal: Calibration,
+           s_safe: np.ndarray, origin: np.ndarray, ux: np.ndarray, uy: np.ndarray,
+           px: np.ndarray, py: np.ndarray, sigma: np.ndarray, theta_reject: float,
+           opts: LineOptions) -> np.ndarray:
+    """Readings on no usable line join one if, read with that line's θ, they land on it.
+
+    These are mostly readings next to a corner, which θ = 0 put off both walls, and the last
+    few readings of a sweep past a corner (the neighbouring sensor sees that wall). Every
+    orphan is tried against every usable line at once ((orphans, lines) arrays; both are
+    few): it joins the nearest within the split threshold and near the line's extent.
+    """
+    if not orphan.any() or not found.usable.any():
+        return line_of
+    sel = np.flatnonzero(orphan.reshape(-1))
+    lines_idx, r, _ = _fit_to_lines(sel, found, cal, s_safe, origin, ux, uy, px, py,
+                                    theta_reject, opts)
+    thr = np.maximum(opts.min_split_m, opts.split_sigmas * sigma.reshape(-1)[sel])
+    r = r / thr[:, None]
     best = np.argmin(r, axis=1)
     ok = r[np.arange(sel.size), best] <= 1.0
     out = line_of.copy()
-    out.reshape(-1)[sel[ok]] = usable[best[ok]]
+    out.reshape(-1)[sel[ok]] = lines_idx[best[ok]]
     return out
 
 

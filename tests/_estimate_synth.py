@@ -67,13 +67,15 @@ def make_sweep(cal: Calibration, *, walls=(), circles=(), pose=(0.0, 0.0, 0.0),
                ring: Ring = PAPER_RING, noise_counts: float = 0.0, seed: int = 0,
                max_range_m: float = 0.624, dtype=float, quantize: bool = False,
                steps: np.ndarray | None = None):
-    """A Sweep of the scene read through ``cal``'s forward curve; also true d and θ."""
+    """A Sweep of the scene read through ``cal``'s forward curve; also true d and θ (NaN
+    where nothing returns: no hit, beyond the curve's range or past its drop-out angle)."""
     if steps is None:
         steps = np.arange(ring.min_step, ring.max_step + 1)
     angles = sensor_angles_for_steps(ring, steps)
     origin, heading = beam_geometry(ring, np.asarray(pose, float), angles, cal.emitter_offset_m)
     d, inc = cast(origin, heading, walls, circles)
-    in_range = np.isfinite(d) & (d <= cal.max_range_m)
+    # like the `incidence` effect: past the calibration's drop-out angle nothing returns
+    in_range = np.isfinite(d) & (d <= cal.max_range_m) & (inc <= cal.max_incidence_rad)
     counts = np.where(in_range, cal.counts(np.where(in_range, d, 1.0), np.nan_to_num(inc)), 0.0)
     rng = np.random.default_rng(seed)
     counts = counts + noise_counts * rng.standard_normal(counts.shape)
