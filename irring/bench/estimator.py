@@ -50,8 +50,10 @@ def measure(scenario, *, sweeps_per_pose: int = 5, min_theta_deg: float = 40.0,
     for pose in range(len(scenario.robot.poses)):
         for _ in range(sweeps_per_pose):
             sw = sim.sweep(pose)
-            if cal is None:
-                cal = Calibration.for_sweep(sw)
+            if cal is None:  # the datasheet curve, told the scene's output noise
+                noise = scenario.effects.get("noise")
+                cal = Calibration.for_sweep(
+                    sw, noise_sigma_v=max(noise.sigma_v, 1e-4) if noise else 1e-4)
             t0 = time.perf_counter()
             p = estimate(sw, cal, max_iterations=max_iterations)
             times.append(time.perf_counter() - t0)
