@@ -322,6 +322,7 @@ class GuidedCalibration:
              "wall; angles are the turn of the robot (or the wall) so the sensor's radial "
              "direction meets the wall's normal at that angle.")
         parts = []
+        doubtful: list[int] = []   # placements kept although their reading looked wrong
         for k, placement in enumerate(self.placements, start=1):
             while True:
                 answer = self.prompt(f"[{k}/{n}] Place {placement.describe(self.sensor)}. "
@@ -340,17 +341,23 @@ class GuidedCalibration:
                         "r to retake, Enter to keep: ").strip().lower()
                     if again == "r":
                         continue
+                    doubtful.append(k)
                 parts.append(collect(sweeps, placement, self.sensor))
                 show(f"[{k}/{n}] read {len(sweeps)} sweeps")
                 break
         if not any(p.offset.any() for p in parts):
             raise CalibrationError("no offset placement (wall square to the sensor) was read; "
                                    "d_o needs at least one")
-        cal = solve(RigReadings.concat(parts), sensor_model=self.sensor_model,
-                    adc_bits=self.adc_bits, vref_v=self.vref_v,
-                    emitter_offset_guess_m=self.emitter_offset_guess_m,
-                    source=f"guided calibration of the real ring, sensor {self.sensor}, "
-                           f"{len(parts)} placements × {self.sweeps} sweeps")
+        try:
+            cal = solve(RigReadings.concat(parts), sensor_model=self.sensor_model,
+                        adc_bits=self.adc_bits, vref_v=self.vref_v,
+                        emitter_offset_guess_m=self.emitter_offset_guess_m,
+                        source=f"guided calibration of the real ring, sensor {self.sensor}, "
+                               f"{len(parts)} placements × {self.sweeps} sweeps")
+        except CalibrationError as exc:
+            hint = (f"; placements {', '.join(map(str, doubtful))} read far from the nominal "
+                    "curve: was the wall where it was asked to be?" if doubtful else "")
+            raise CalibrationError(f"{exc}{hint}") from exc
         show(f"d_o = {cal.emitter_offset_m * 1e3:.2f} mm; a(0) = {cal.a[0]:.4g}, "
              f"b(0) = {cal.b[0]:.4f}; θ table up to {math.degrees(cal.max_theta_rad):.0f}°; "
              f"noise {cal.noise_counts:.1f} counts")

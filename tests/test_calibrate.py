@@ -274,3 +274,16 @@ def test_irring_calibrate_reports_a_bad_port(tmp_path, capsys):
     assert code == 1
     assert "cannot open" in capsys.readouterr().err
     assert not (tmp_path / "x.yaml").exists()
+
+
+def test_guided_calibration_blames_the_placement_when_nothing_fits(t_room):
+    """Readings of a room instead of the requested walls (what `irring emulate` serves):
+    no curve fits, and the error says which placements already looked wrong."""
+    from irring.sim import SimRing
+
+    sim = SimRing(t_room)
+    user = FakeUser(SimulatedRig(t_room))
+    g = GuidedCalibration(read_sweep=lambda: sim.sweep(0), prompt=user.prompt, show=user.show,
+                          sensor_model="gp2d12", sweeps=1)
+    with pytest.raises(CalibrationError, match="was the wall where it was asked to be"):
+        g.run()
