@@ -16,6 +16,10 @@ knobs (say, coarse steps *and* no iterations) are not measured. Knobs:
 ``iterations`` the estimator's ``max_iterations`` (0 = the θ = 0 assumption,
                ``iterate=False``); the default is 20
 ``tolerance``  the estimator's convergence tolerance on θ (default 0.1°)
+``regroup``    how many iterations the estimator may regroup the end points into lines
+               (``LineOptions.regroup_iterations``, default 8) before it holds the grouping;
+               each regrouping is a split-and-merge over the whole sweep, the estimator's
+               most expensive step
 ``resolution`` the map's cell size (default 10 mm, the paper's); scored on ground truth
                rasterised on the same cells, so the 1-cell tolerance scales with it
 ``design``     another ring design (``irring.designs``) with its own sensor, in the same
@@ -36,10 +40,12 @@ cost
     ``hardware_time_s``: seconds the real ring spends on one 360° view at one pose
     (``Design.hardware_time_s``: positions × (settle + samples × 38.3 ms));
     ``compute_ms``: estimator + mapper, milliseconds per sweep on this machine — what the
-    robot's computer spends turning a sweep into the map (the least of three timings per
-    run; the simulator's own time, ``sim_ms``, is the testbed's cost, not the robot's, and
-    is reported apart). Configurations that do the same computing (the default and the
-    settle times, say) differ on this axis only by timing noise, a few per cent.
+    robot's computer spends turning a sweep into the map. It is CPU time of the thread
+    that runs the job (the least of three timings per run), so workers sharing the cores do
+    not inflate it; configurations that do the same computing (the default and the settle
+    times, say) still differ on this axis by a few per cent of timing noise. The
+    simulator's own time, ``sim_ms`` (wall clock), is the testbed's cost, not the robot's,
+    and is reported apart.
     ``iterations_mean``: estimator iterations per valid reading, a machine-independent
     measure of the estimator's work.
 
@@ -71,7 +77,8 @@ DEFAULT_MAX_ITERATIONS = 20                 # estimate()'s default
 
 # What each knob costs, for the table and the chart.
 KNOB_COST = {"default": "", "step": "hardware", "samples": "hardware", "settle": "hardware",
-             "iterations": "compute", "tolerance": "compute", "resolution": "compute",
+             "iterations": "compute", "tolerance": "compute", "regroup": "compute",
+             "resolution": "compute",
              "design": "hardware"}
 KNOBS = tuple(k for k in KNOB_COST if k != "default")
 ACCURACY_KEYS = ("range_rmse_m", "range_rmse_steep_m", "valid_share", "occupied_precision",
@@ -93,6 +100,7 @@ class Config:
     iterate: bool = True
     max_iterations: int = DEFAULT_MAX_ITERATIONS
     tolerance_rad: float = DEFAULT_TOLERANCE_RAD
+    regroup_iterations: int | None = None   # LineOptions.regroup_iterations (None: default)
     resolution_m: float | None = None
     design: str | None = None
 
@@ -119,6 +127,8 @@ def configurations(knobs: Iterable[str] | None = None,
                     for n in (1, 2, 5)]
         elif k == "tolerance":
             out.append(Config(k, "tolerance 1°", 1.0, tolerance_rad=math.radians(1.0)))
+        elif k == "regroup":
+            out += [Config(k, f"regroup {n}×", n, regroup_iterations=n) for n in (1, 2, 4)]
         elif k == "resolution":
             out += [Config(k, f"grid {mm} mm", mm, resolution_m=mm / 1e3) for mm in (5, 20)]
         elif k == "design":
@@ -128,10 +138,13 @@ def configurations(knobs: Iterable[str] | None = None,
 
 def default_value(knob: str, scenario) -> float:
     """Where the default configuration sits on a knob's axis (for the chart's lines)."""
+    from ..estimate import LineOptions
+
     return {"step": scenario.scan.step_stride,
             "samples": scenario.scan.samples if scenario.has("averaging") else 1,
             "settle": scenario.scan.settle_s * 1e3, "iterations": DEFAULT_MAX_ITERATIONS,
             "tolerance": math.degrees(DEFAULT_TOLERANCE_RAD),
+            "regroup": LineOptions().regroup_iterations,
             "resolution": scenario.map.resolution_m * 1e3, "design": 0}.get(knob, 0.0)
 
 
@@ -196,22 +209,23 @@ def _rmse(err: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(err * err))) if err.size else None
 
 
-def _compute_time(sweeps, result, estimator, grid) -> tuple[float, float]:
-    """Seconds the estimator and the mapper take for all sweeps: the least of
-    ``TIMING_REPEATS`` runs (``map_sweeps``' own and repeats on fresh grids), since the
-    least is the figure a busy machine disturbs least."""
-    est, mapper = [result.timings_s["estimate"]], [result.timings_s["map"]]
-    cal = _calibration(sweeps[0], result.scenario)
-    for _ in range(TIMING_REPEATS - 1):
+def _compute_time(sweeps, scenario, estimator, grid) -> tuple[float, float]:
+    """CPU seconds the estimator and the mapper take for all sweeps, the least of
+    ``TIMING_REPEATS`` runs on fresh grids. CPU time of this thread, not wall time: while
+    workers share the cores with each other and with whatever else runs, a job's wall time
+    grows with the load, its CPU time hardly at all."""
+    cal = _calibration(sweeps[0], scenario)
+    est, mapper = [], []
+    for _ in range(TIMING_REPEATS):
         t_est = t_map = 0.0
         g = grid.empty_like()
         for sw in sweeps:
-            t0 = time.perf_counter()
+            t0 = time.thread_time()
             p = estimator(sw, cal)
-            t1 = time.perf_counter()
+            t1 = time.thread_time()
             g.insert(p)
             t_est += t1 - t0
-            t_map += time.perf_counter() - t1
+            t_map += time.thread_time() - t1
         est.append(t_est)
         mapper.append(t_map)
     return min(est), min(mapper)
@@ -222,7 +236,7 @@ def run_job(job: Job) -> dict:
     import functools
 
     from .. import compare, designs, metrics, pipeline
-    from ..estimate import estimate
+    from ..estimate import LineOptions, estimate
     from ..mapping import OccupancyGrid
     from ..scenario import loads
 
@@ -230,8 +244,11 @@ def run_job(job: Job) -> dict:
     cfg = job.config
     sc = apply(base, cfg)
     sweeps, _, sim_s = compare.simulate(sc, seed=job.seed)
+    lines = LineOptions() if cfg.regroup_iterations is None else \
+        LineOptions(regroup_iterations=cfg.regroup_iterations)
     estimator = functools.partial(estimate, max_iterations=cfg.max_iterations,
-                                  tolerance_rad=cfg.tolerance_rad, iterate=cfg.iterate)
+                                  tolerance_rad=cfg.tolerance_rad, iterate=cfg.iterate,
+                                  lines=lines)
     grid = OccupancyGrid.for_scenario(sc)
     result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid,
                                  calibration=_calibration(sweeps[0], sc), score=False,
@@ -257,7 +274,7 @@ def run_job(job: Job) -> dict:
     poses = len(sweeps)
     view_s = designs.design_for(sc).hardware_time_s(
         step_stride=sc.scan.step_stride, settle_s=sc.scan.settle_s, samples=sweeps[0].samples)
-    est_s, map_s = _compute_time(sweeps, result, estimator, grid)
+    est_s, map_s = _compute_time(sweeps, sc, estimator, grid)
     est_ms, map_ms = est_s * 1e3 / poses, map_s * 1e3 / poses
     return {
         "scenario": base.name, "knob": cfg.knob, "label": cfg.label, "value": cfg.value,
@@ -433,8 +450,8 @@ CSV_KEYS = ("knob", "label", "value", "runs", "hardware_time_s", "compute_ms", "
 
 
 _COLOURS = {"step": "tab:blue", "samples": "tab:orange", "settle": "tab:brown",
-            "iterations": "tab:green", "tolerance": "tab:olive", "resolution": "tab:purple",
-            "design": "tab:red"}
+            "iterations": "tab:green", "tolerance": "tab:olive", "regroup": "tab:cyan",
+            "resolution": "tab:purple", "design": "tab:red"}
 
 
 def chart(result: dict, path) -> None:
@@ -449,6 +466,7 @@ def chart(result: dict, path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     rows = result["configs"]
     default = next(r for r in rows if r["knob"] == "default")
@@ -457,7 +475,7 @@ def chart(result: dict, path) -> None:
                ("cov", "coverage of the free area (higher is better)", 1.0),
                ("rmse", "range RMSE, mm (lower is better)", 1e3))
     costs = (("hw", "hardware time per 360° scan, s (what the real ring spends)"),
-             ("cpu", "compute per sweep, ms (estimator + mapper, this machine)"))
+             ("cpu", "compute per sweep, ms CPU (estimator + mapper, this machine)"))
     fig, axes = plt.subplots(len(metrics), 2, figsize=(13, 12.5))
     for i, (metric, mlabel, scale) in enumerate(metrics):
         mk = FRONT_METRICS[metric][0]
@@ -499,6 +517,9 @@ def chart(result: dict, path) -> None:
             if np.isfinite(y):
                 ax.plot([x], [y], "s", color="k", ms=7, zorder=5, label="default")
             ax.set_xscale("log")
+            ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+            ax.xaxis.set_minor_formatter(NullFormatter())
             ax.set_xlabel(clabel)
             ax.set_ylabel(mlabel)
             ax.grid(alpha=0.3, which="both")
@@ -525,6 +546,8 @@ def _short(r: dict) -> str:
         return "θ=0" if v == 0 else f"{v:g} it"
     if k == "tolerance":
         return f"tol {v:g}°"
+    if k == "regroup":
+        return f"rg {v:g}"
     if k == "resolution":
         return f"{v:g} mm"
     return r["label"]

@@ -15,13 +15,16 @@ configurations (one knob changed at a time around the scenario as written, the "
   iterations  estimator: θ = 0 (no iterations), at most 1 / 2 / 5 iterations (default 20;
               readings still moving at the cap are dropped as not converged)
   tolerance   estimator convergence tolerance 1° (default 0.1°)
+  regroup     estimator regroups the end points into lines in at most 1 / 2 / 4 iterations
+              (default 8), then holds the grouping; each regrouping is its costliest step
   resolution  map cells of 5 / 20 mm (default 10 mm)
   design      radial12 (the ring held still), rotating1 (one GP2 turning at the centre)
 
 what it measures per configuration (mean over scenarios × seeds; timings: median):
   hardware s  seconds the real ring spends on one 360° view at one pose
-  compute ms  estimator + mapper per sweep on this machine (the simulator's own time is
-              sim_ms in the CSV/JSON: the testbed's cost, not the robot's)
+  compute ms  estimator + mapper per sweep on this machine, CPU time (so parallel
+              workers do not inflate it); the simulator's own time is sim_ms in the
+              CSV/JSON: the testbed's cost, not the robot's
   RMSE mm     estimated − true range over the readings called valid; steep: true
               incidence ≥ 40°; valid: share of the readings with a true return called valid
   F1 occ, coverage, free acc, shadow   the map scores of `irring run`
@@ -30,8 +33,7 @@ what it measures per configuration (mean over scenarios × seeds; timings: media
               RMSE
 
 Runs go through a local process pool (--workers) or a Dask cluster (--dask); results other
-than the timings are identical whoever runs them. Compute times are measured inside the
-workers, so with more workers than free cores they grow.
+than the timings are identical whoever runs them.
 
 writes to DIR: accuracy.json (everything), accuracy.csv (one row per configuration),
 runs.csv (one row per run), accuracy.png (accuracy vs hardware time and vs compute time).
@@ -50,7 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "accuracy", help="what accuracy costs in hardware time and compute time",
         description="Vary the knobs that trade time for accuracy (sensor step, samples per "
-                    "step, settle time, estimator iterations and tolerance, grid resolution, "
+                    "step, settle time, estimator iterations, tolerance and regrouping, grid "
+                    "resolution, "
                     "design), one at a time around the scenario's default; record accuracy "
                     "against hardware time and compute time, mark the Pareto front, write "
                     "CSV/JSON and a chart.",
