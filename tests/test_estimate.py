@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 
 import numpy as np
 import pytest
@@ -25,7 +26,9 @@ from irring.estimate import (Calibration, CalibrationError, LineOptions,
                              fit_lines)
 from irring.scenario import Ring
 
-HARD = settings(max_examples=200, deadline=None,
+# Hundreds of generated cases per hard case, the same ones every run so CI is reproducible;
+# IRRING_EXPLORE=1 draws fresh ones (how the cases these tests pin down were found).
+HARD = settings(max_examples=200, deadline=None, derandomize=not os.environ.get("IRRING_EXPLORE"),
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 NOMINAL = Calibration.nominal("gp2d12", PAPER_RING)
 STAND_IN = stand_in_calibration()
