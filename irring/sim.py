@@ -20,6 +20,11 @@ effects (incidence, noise, quantisation) takes ≈ 0.6 ms, its truth ≈ 0.5 ms.
 Range logic is ours, not the rangefinder's ``cutoff`` (which clamps every output): a hit
 farther than ``scenario.sensor.max_range_m`` from the emitter is no return (NaN). Beams see
 only the room (geom group ``model.RAY_GROUP``: walls and obstacles), never the robot.
+
+A scene that lists ``belt_dynamics``, ``timing`` or ``motion`` asks where and when each
+reading was taken from :class:`irring.dynamics.Dynamics` (belt physics stepped by MuJoCo,
+the GP2 clocks, the robot's drive) and casts from there; every other scene never steps
+physics and never builds that module's objects.
 """
 
 from __future__ import annotations
@@ -78,7 +83,10 @@ class SimRing:
 
     Attributes: ``model`` (``mujoco.MjModel``), ``data`` (an ``MjData`` for callers who step
     physics), ``built`` (:class:`irring.model.RingModel`: ids and addresses), ``scenario``,
-    ``ring``, ``pipeline`` (the scene's :class:`irring.effects.Pipeline`, built on first use).
+    ``ring``, ``pipeline`` (the scene's :class:`irring.effects.Pipeline`, built on first use),
+    ``dynamics`` (:class:`irring.dynamics.Dynamics` when the scene lists ``belt_dynamics``,
+    ``timing`` or ``motion``, else None), ``n_sweeps`` (sweeps the scene takes: one per
+    scan pose, or with ``motion`` back to back along the path).
     """
 
     def __init__(self, scenario: Scenario, *, seed: int | None = None):
@@ -97,6 +105,11 @@ class SimRing:
         self._rays = mujoco.batch.Batch(self.model, 1, nthread=1)
         self._pipeline = None
         self._sweeps: dict[int, int] = {}
+        self.dynamics = None  # irring.dynamics.Dynamics, only for scenes that need it
+        from . import dynamics as dynamics_lib
+
+        if dynamics_lib.uses_dynamics(scenario):
+            self.dynamics = dynamics_lib.Dynamics(scenario, self.built, self.seed)
 
     # ------------------------------------------------------------------ set-up and state
 
@@ -112,7 +125,19 @@ class SimRing:
         """Forget the sweep counters (and take a new seed if given)."""
         if seed is not None:
             self.seed = int(seed)
+            if self.dynamics is not None:  # clocks and odometry come from the seed
+                from .dynamics import Dynamics
+
+                self.dynamics = Dynamics(self.scenario, self.built, self.seed)
         self._sweeps.clear()
+
+    @property
+    def n_sweeps(self) -> int:
+        """Sweeps the scene takes: one per scan pose; with ``motion``, back to back until the
+        robot reaches the end of its path. ``sweep(k)`` for k in range(n_sweeps)."""
+        if self.dynamics is None:
+            return len(self.scenario.robot.poses)
+        return self.dynamics.n_sweeps(self.default_steps())
 
     def pose(self, pose_index: int = 0) -> np.ndarray:
         """(3,) x m, y m, yaw rad of the scenario's scan pose ``pose_index``."""
@@ -156,16 +181,27 @@ class SimRing:
         """Emitter positions and unit beam directions, (S, N, 3) each, from MuJoCo kinematics.
 
         ``sensor_angles`` (S, N) rad are the sensor hinge angles; ``pose`` is (3,) for the
-        whole sweep or (S, 3) per step (x m, y m, yaw rad); ``motor_rad`` (S,) only positions
+        whole sweep, (S, 3) per step or (S, N, 3) per reading (x m, y m, yaw rad: a moving
+        robot whose sensors measure at different instants); ``motor_rad`` (S,) only positions
         the motor pulley (the beams do not depend on it).
         """
         angles = np.asarray(sensor_angles, dtype=float)
         n_steps = angles.shape[0]
+        pose = np.asarray(pose, dtype=float)
+        if pose.ndim == 3:
+            # the chassis is rigid: frames in the robot frame, then each reading's own pose
+            origin, direction = self.frames(angles, np.zeros(3), motor_rad)
+            c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
+            for v, shift in ((origin, True), (direction, False)):
+                x, y = v[..., 0].copy(), v[..., 1]
+                v[..., 0] = c * x - s * y + (pose[..., 0] if shift else 0.0)
+                v[..., 1] = s * x + c * y + (pose[..., 1] if shift else 0.0)
+            return origin, direction
         batch, qpos, mpos, mquat, site_xpos, site_xmat = self._kin_batch(n_steps)
         built = self.built
         qpos[:, built.sensor_qpos] = angles
         qpos[:, built.motor_qpos] = 0.0 if motor_rad is None else motor_rad
-        pose = np.broadcast_to(np.asarray(pose, dtype=float), (n_steps, 3))
+        pose = np.broadcast_to(pose, (n_steps, 3))
         m = built.chassis_mocap
         mpos[:, m, :2] = pose[:, :2]
         mpos[:, m, 2] = 0.0
@@ -254,7 +290,15 @@ class SimRing:
         (``pipeline.run(truth, rng, cast=self.cast)``); ``duration_s`` is the time the real
         ring would need (steps × (settle + samples × 38.3 ms)); ``timestamps_s[i]`` is when
         step i's reading is complete, from the start of the sweep.
+
+        With ``belt_dynamics``, ``timing`` or ``motion`` the readings are cast from where
+        and when :meth:`irring.dynamics.Dynamics.plan` says they were taken, the sweep's
+        times include the moves (see that module), ``sensor_angles`` stay the commanded
+        angles, and with ``motion`` ``pose_index`` is the sweep's index along the drive
+        (0 … ``n_sweeps`` − 1) and ``reading_poses`` carries the odometry pose of each read.
         """
+        if self.dynamics is not None:
+            return self._dynamic_sweep(pose_index, steps)
         pose = self.pose(pose_index)
         pose_index = pose_index % len(self.scenario.robot.poses)
         steps, angles, truth = self.truth(pose_index, steps=steps)
@@ -273,6 +317,42 @@ class SimRing:
                      adc_bits=sensor.adc_bits, vref_v=sensor.vref_v,
                      max_range_m=sensor.max_range_m, samples=samples, settle_s=scan.settle_s,
                      truth=truth, source="sim")
+
+    def _dynamic_sweep(self, index: int, steps: np.ndarray | None) -> Sweep:
+        """A sweep whose readings physics, the GP2 clocks or the drive placed."""
+        dyn = self.dynamics
+        steps = self.default_steps() if steps is None else self._check_steps(steps)
+        if dyn.motion is not None:
+            n = self.n_sweeps
+            if not -n <= index < n:
+                raise IndexError(f"sweep {index} is out of range: scenario "
+                                 f"{self.scenario.name!r} drives its path in {n} sweep(s), "
+                                 f"0 … {n - 1}")
+            index %= n
+            pose = None
+        else:
+            pose = self.pose(index)
+            index %= len(self.scenario.robot.poses)
+        k = self._sweeps.get(index, 0)
+        self._sweeps[index] = k + 1
+        plan = dyn.plan(index, steps, k, pose)
+        sched = plan.schedule
+        origin, direction = self.frames(plan.sensor_rad, plan.pose)
+        hits = self._cast_unit(origin.reshape(-1, 3), direction.reshape(-1, 3), self.max_range_m,
+                               origin.shape[:-1])
+        truth = Truth(distance_m=hits.distance_m, incidence_rad=hits.incidence_rad,
+                      hit_point=hits.hit_point, origin=origin, direction=direction,
+                      geom_id=hits.geom_id, reflectance=hits.reflectance)
+        rng = np.random.default_rng([self.seed, index, k])
+        counts = self.pipeline.run(truth, rng, cast=self.cast)
+        scan, sensor = self.scenario.scan, self.scenario.sensor
+        samples = scan.samples if self.scenario.has("averaging") else 1
+        return Sweep(steps=steps, sensor_angles=plan.commanded_rad, counts=counts,
+                     timestamps_s=sched.done_s.copy(), duration_s=sched.duration_s,
+                     pose=plan.sweep_pose, ring=self.ring, sensor_model=sensor.model,
+                     adc_bits=sensor.adc_bits, vref_v=sensor.vref_v,
+                     max_range_m=sensor.max_range_m, samples=samples, settle_s=scan.settle_s,
+                     truth=truth, reading_poses=plan.reading_poses, source="sim")
 
 
 # ---------------------------------------------------------------------- measurement

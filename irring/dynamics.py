@@ -1,0 +1,682 @@
+"""Where and when the ring reads: belt and stepper physics, GP2 timing, a moving robot.
+
+A kinematic sweep (``irring.sim``) puts every sensor exactly where the motor step says and
+reads it at once. Three effects change *where and when* a reading is taken (not the
+signal, which stays the effects pipeline's business):
+
+``belt_dynamics``
+    The stepper is a position actuator (``ring_motor``) whose target follows a
+    minimum-jerk profile from one full step (1.8°) to the next: a microstepping driver's
+    smooth move, ``step_time_s`` per full step (a move of n steps takes n·step_time_s, so
+    the peak speed is 1.875·step/step_time_s whatever n; peak acceleration
+    5.77·step/step_time_s² for one step). The sensors follow through the belt, modelled
+    as one spring-damper per sensor between its hinge and the motor pulley (a fixed tendon
+    ``belt_KK`` = ``ir_KK_hinge`` − gear·``ring_motor``): stiffness K = I/τ² and damping
+    2·√(K·I) for the sensor's inertia I about its hinge and τ = ``belt_timeconst_s``
+    (critically damped, the template's ``solref="τ 1"``); ``backlash_rad`` is a dead
+    band of that width in the spring. MuJoCo steps this physics (RK4, ``timestep_s``)
+    and a reading is taken where physics has put the sensor: lag and overshoot show up as
+    angle errors. Why a spring and not the template's equality constraint: a soft
+    equality's violation scales with the time step (0.012 rad at 1 ms, 0.005 at 0.5 ms,
+    0.0024 at 0.25 ms after one step), so it is a numerical artefact, not a compliance;
+    the spring's is physics and converges (``models/README.md``).
+``timing``
+    Each GP2 measures on its own clock, every ``period_s`` ± ``jitter_s`` (a part's
+    period, drawn once per sensor from the seed, uniform in that band) at a random phase,
+    and its output holds the last measurement from ``latency_s`` after it was taken. The
+    ADC read at time r therefore returns the measurement taken at the last instant m of
+    that sensor's clock with m + latency ≤ r, with the sensor where it was at m
+    (:class:`SensorClocks`). The same rule is MuJoCo's periodic, delayed sensor
+    (``interval``, ``delay``); ``tests/test_dynamics.py`` checks the two agree.
+``motion``
+    The robot drives ``path`` at ``speed_m_s`` while sweeping back to back
+    (:class:`Path`). The truth takes each reading from the real pose at its measurement
+    instant; ``Sweep.reading_poses`` carries the odometry pose at the read, which drifts
+    with ``odometry_sigma_m`` / ``odometry_sigma_rad`` per metre driven (a random walk
+    in the robot frame, :class:`Odometry`).
+
+The firmware's timeline of a sweep (:func:`schedule`), seconds from its start, the ring at
+rest at the first step: step i moves for Δ_i·step_time_s (Δ_i whole steps from the
+previous step; nothing for the first), waits ``scan.settle_s``, then reads the ADC
+``samples`` times one nominal GP2 period (38.3 ms) apart. Without ``timing`` the
+simulator's sensor measures instantly at the first read, and each reading is charged one
+GP2 period of hardware time, as for kinematic sweeps (``data.hardware_duration_s``): the
+next move starts ``samples`` periods after the first read. With ``timing`` the value is
+the GP2's last finished measurement and nothing is waited beyond ``settle_s`` (and the
+periods between averaged reads), so a sweep can be faster than the sensor and smear;
+``settle_s`` ≥ the slowest period + latency (52.9 ms) guarantees a measurement taken
+after the move. With averaging every sample is taken to see the first sample's geometry.
+
+Assumptions, stated once: each sweep starts with the ring at rest at its first step (the
+firmware rewinds after a sweep; the rewind is not simulated, with backlash the sensors
+rest at the side the rewind left them); without ``belt_dynamics`` the belt is rigid and a
+move still takes ``BeltDynamicsEffect().step_time_s`` (4 ms) per step. With ``motion``,
+sweep j starts at j × (sweep duration + rewind), the rewind moving back over the sweep's
+steps and waiting one GP2 period; without it every sweep starts at t = 0 and draws fresh
+clock phases.
+
+Randomness: clock periods ``default_rng([seed, TIMING_STREAM])``; per-sweep clock phases
+``default_rng([seed, sweep, k, TIMING_STREAM])`` (k-th sweep at that pose); odometry
+``default_rng([seed, ODOMETRY_STREAM])`` for the whole path.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import mujoco
+import mujoco.batch
+import numpy as np
+
+from . import model as model_lib
+from .data import GP2_PERIOD_S, ring_angles
+from .scenario import (BeltDynamicsEffect, MotionEffect, Ring, Scenario, ScenarioError,
+                       TimingEffect, distance_to_outline, point_in_polygon)
+
+TIMING_STREAM = 0x7469   # "ti": seeds the GP2 clocks
+ODOMETRY_STREAM = 0x6F64  # "od": seeds the odometry drift
+DYNAMIC_EFFECTS = ("belt_dynamics", "timing", "motion")
+_PATH_SAMPLE_M = 0.005     # odometry / clearance resolution along the path
+
+# Physics of the ring alone: no contacts, no rangefinders (beams are cast by sim.SimRing).
+_PHYSICS_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR | mujoco.mjtDisableBit.mjDSBL_CONTACT)
+
+
+def uses_dynamics(scenario: Scenario) -> bool:
+    """Does the scene list any effect that needs this module (and may step physics)?"""
+    return any(scenario.has(name) for name in DYNAMIC_EFFECTS)
+
+
+def min_jerk(s: np.ndarray) -> np.ndarray:
+    """Minimum-jerk position 0 → 1 for phase s (clipped to 0 … 1): 10s³ − 15s⁴ + 6s⁵."""
+    s = np.clip(s, 0.0, 1.0)
+    return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+# --------------------------------------------------------------------------- the timeline
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The firmware's timeline of one sweep; times in seconds from the sweep's start.
+
+    ``command_s[i]`` the move to ``steps[i]`` starts, lasting ``move_s[i]`` (0 for the
+    first step: the ring starts there at rest); ``read_s[i, j]`` the j-th ADC read of
+    step i; ``done_s[i]`` when step i's reading is complete (``Sweep.timestamps_s``).
+    """
+
+    steps: np.ndarray        # (S,) motor steps
+    motor_rad: np.ndarray    # (S,) commanded motor angle of each step
+    command_s: np.ndarray    # (S,)
+    move_s: np.ndarray       # (S,)
+    read_s: np.ndarray       # (S, samples)
+    done_s: np.ndarray       # (S,)
+    duration_s: float        # the sweep's hardware time (= done_s[-1])
+    step_time_s: float
+    rewind_s: float          # from the sweep's end to the next sweep's start (motion)
+
+    def motor_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Commanded motor angle (rad) at times ``t_s`` (any shape): the move profiles."""
+        t = np.asarray(t_s, dtype=float)
+        i = np.clip(np.searchsorted(self.command_s, t, side="right") - 1, 0, len(self.steps) - 1)
+        start = self.motor_rad[np.maximum(i - 1, 0)]
+        move = self.move_s[i]
+        phase = np.where(move > 0, (t - self.command_s[i]) / np.where(move > 0, move, 1.0), 1.0)
+        return start + (self.motor_rad[i] - start) * min_jerk(phase)
+
+
+def schedule(steps: np.ndarray, ring: Ring, *, settle_s: float = 0.0, samples: int = 1,
+             step_time_s: float = BeltDynamicsEffect().step_time_s, timing: bool = False,
+             period_s: float = GP2_PERIOD_S) -> Schedule:
+    """The timeline of a sweep over ``steps`` (see the module doc for the firmware's rules)."""
+    steps = np.asarray(steps, dtype=np.int64)
+    motor = steps * ring.motor_step_rad
+    delta = np.abs(np.diff(steps, prepend=steps[:1]))
+    move = delta * float(step_time_s)
+    # time from the first read to the next command: an ideal (untimed) sensor is charged a
+    # GP2 period per sample; a timed one costs only the waits between averaged reads
+    after_first = (samples if not timing else samples - 1) * period_s
+    per_step = move + settle_s + after_first
+    command = np.concatenate([[0.0], np.cumsum(per_step)[:-1]])
+    first = command + move + settle_s
+    read = first[:, None] + period_s * np.arange(samples)[None, :]
+    done = first + after_first if not timing else read[:, -1]
+    span = abs(int(steps[-1]) - int(steps[0]))
+    return Schedule(steps=steps, motor_rad=motor, command_s=command, move_s=move, read_s=read,
+                    done_s=done, duration_s=float(done[-1]), step_time_s=float(step_time_s),
+                    rewind_s=span * float(step_time_s) + period_s)
+
+
+# --------------------------------------------------------------------------- ring motion
+
+
+def _hermite(t_grid_dt: float, q: np.ndarray, v: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """Cubic Hermite interpolation of columns q, v (T, N) sampled every dt from t = 0, at
+    times ``t_s`` (..., N) (column k at t_s[..., k]); clamped to the samples' span."""
+    n = q.shape[0]
+    x = np.clip(np.asarray(t_s, dtype=float) / t_grid_dt, 0.0, n - 1.0)
+    i = np.minimum(np.floor(x).astype(np.int64), n - 2)
+    u = x - i
+    col = np.arange(q.shape[1])
+    q0, q1 = q[i, col], q[i + 1, col]
+    v0, v1 = v[i, col] * t_grid_dt, v[i + 1, col] * t_grid_dt
+    u2, u3 = u * u, u * u * u
+    return ((2 * u3 - 3 * u2 + 1) * q0 + (u3 - 2 * u2 + u) * v0 + (-2 * u3 + 3 * u2) * q1
+            + (u3 - u2) * v1)
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """The ring's physics over one sweep, sampled every ``dt_s`` from t = 0 (rest).
+
+    ``sensor_rad`` / ``sensor_vel`` (T, N) hinge angles and rates; ``motor_rad`` /
+    ``motor_vel`` (T,); ``gear`` (N,) belt ratios (sensor = gear × motor when the belt is
+    unstretched). ``warnings``: MuJoCo's warning counters summed over the run.
+    """
+
+    dt_s: float
+    motor_rad: np.ndarray
+    motor_vel: np.ndarray
+    sensor_rad: np.ndarray
+    sensor_vel: np.ndarray
+    gear: np.ndarray
+    offset: np.ndarray
+    warnings: int = 0
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return self.dt_s * np.arange(len(self.motor_rad))
+
+    @property
+    def stretch_rad(self) -> np.ndarray:
+        """(T, N) belt coupling error: sensor − (offset + gear × motor), rad at the sensor."""
+        return self.sensor_rad - (self.offset + self.gear * self.motor_rad[:, None])
+
+    def sensors_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Sensor angles (S, N) at times (S, N) (column k = sensor k); cubic Hermite between
+        samples (its error ~ dt⁴, far below the integrator's), clamped to the run."""
+        return _hermite(self.dt_s, self.sensor_rad, self.sensor_vel, t_s)
+
+
+@dataclass(frozen=True)
+class RigidRing:
+    """Without ``belt_dynamics``: the sensors follow the commanded profile exactly."""
+
+    schedule: Schedule
+    built: model_lib.RingModel
+
+    def sensors_at(self, t_s: np.ndarray) -> np.ndarray:
+        t = np.asarray(t_s, dtype=float)
+        motor = self.schedule.motor_at(t)
+        coef = self.built.belt_coef
+        return coef[:, 0] + coef[:, 1] * motor
+
+
+def physics_spec(ring: Ring, params: BeltDynamicsEffect,
+                 spec: mujoco.MjSpec | None = None) -> mujoco.MjSpec:
+    """The ring's spec (``model.ring_spec`` unless given) with the belt as spring-dampers.
+
+    Each equality ``belt_KK`` is replaced by a fixed tendon of the same name,
+    ``ir_KK_hinge − gear·ring_motor`` (its length is the belt's stretch at the sensor), with
+    a dead band ±backlash/2 in its spring; stiffness and damping are set on the compiled
+    model by :func:`tune_belt` (they need the sensors' inertia). RK4 at ``timestep_s``.
+    """
+    spec = model_lib.ring_spec(ring) if spec is None else spec
+    half = params.backlash_rad / 2.0
+    for k in range(ring.sensors):
+        eq = spec.equality(f"belt_{k:02d}")
+        gear = float(eq.data[1])
+        spec.delete(eq)
+        tendon = spec.add_tendon(name=f"belt_{k:02d}", springlength=[-half, half])
+        tendon.wrap_joint(f"{model_lib.sensor_name(k)}_hinge", 1.0)
+        tendon.wrap_joint("ring_motor", -gear)
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_RK4
+    spec.option.timestep = params.timestep_s
+    return spec
+
+
+def tune_belt(model: mujoco.MjModel, params: BeltDynamicsEffect) -> np.ndarray:
+    """Set each belt tendon's stiffness I/τ² and critical damping 2√(K·I); return K (N·m/rad).
+
+    I is the sensor's inertia about its hinge (body + armature), from MuJoCo's mass matrix.
+    """
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    full = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, full)
+    tau = params.belt_timeconst_s
+    stiff = np.zeros(model.ntendon)
+    for t in range(model.ntendon):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_TENDON, t) or ""
+        if not name.startswith("belt_"):
+            continue
+        sensor = int(name[5:])
+        joint = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT,
+                                  f"{model_lib.sensor_name(sensor)}_hinge")
+        dof = model.jnt_dofadr[joint]
+        inertia = full[dof, dof]
+        stiff[t] = inertia / tau ** 2
+        model.tendon_stiffness[t] = stiff[t]
+        model.tendon_damping[t] = 2.0 * math.sqrt(stiff[t] * inertia)
+    return stiff
+
+
+class BeltPhysics:
+    """The ring alone (no room) stepped by MuJoCo with the belt as spring-dampers.
+
+    ``run(schedule)`` rolls one sweep out from rest at its first step and returns its
+    :class:`Trajectory`; the actuator's target at each physics step is the commanded
+    profile at the step's midpoint. Raises ``RuntimeError`` on a MuJoCo warning or a
+    non-finite state (with what to change).
+    """
+
+    def __init__(self, ring: Ring, params: BeltDynamicsEffect, *, nthread: int = 1):
+        self.ring = ring
+        self.params = params
+        self.model = physics_spec(ring, params).compile()
+        self.model.opt.disableflags |= _PHYSICS_OFF
+        self.stiffness = tune_belt(self.model, params)
+        m = self.model
+        self.motor_qpos = int(m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT,
+                                                              "ring_motor")])
+        joints = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT,
+                                    f"{model_lib.sensor_name(k)}_hinge")
+                  for k in range(ring.sensors)]
+        self.sensor_qpos = m.jnt_qposadr[joints].copy()
+        self.motor_dof = int(m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT,
+                                                            "ring_motor")])
+        self.sensor_dof = m.jnt_dofadr[joints].copy()
+        tendons = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, f"belt_{k:02d}")
+                   for k in range(ring.sensors)]
+        # belt_KK = hinge − gear·motor: the gear from the tendon's motor coefficient
+        self.gear = np.array([-m.wrap_prm[m.tendon_adr[t] + 1] for t in tendons])
+        self.offset = np.zeros(ring.sensors)
+        self.nthread = nthread
+        self._batches: dict[int, mujoco.batch.Batch] = {}
+
+    @property
+    def dt_s(self) -> float:
+        return float(self.model.opt.timestep)
+
+    def _batch(self, nsim: int) -> mujoco.batch.Batch:
+        batch = self._batches.get(nsim)
+        if batch is None:
+            batch = mujoco.batch.Batch(self.model, nsim, nthread=self.nthread)
+            self._batches[nsim] = batch
+        return batch
+
+    def rest_offset(self, steps: np.ndarray) -> np.ndarray:
+        """(N,) belt stretch at rest before a sweep over ``steps``: with backlash the rewind
+        (opposite to the sweep's first move) leaves each sensor at that side of the gap."""
+        steps = np.asarray(steps)
+        direction = np.sign(steps[-1] - steps[0]) if len(steps) > 1 else 0
+        return np.full(self.ring.sensors, direction * self.params.backlash_rad / 2.0)
+
+    def start(self, batch: mujoco.batch.Batch, motor_rad: np.ndarray,
+              stretch_rad: np.ndarray) -> None:
+        """Put every simulation of ``batch`` at rest: motor angles (nsim,), stretch (N,)."""
+        batch.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
+        qpos, qvel, ctrl = batch.bind("qpos"), batch.bind("qvel"), batch.bind("ctrl")
+        motor = np.asarray(motor_rad, dtype=float)
+        qpos[:, self.motor_qpos] = motor
+        qpos[:, self.sensor_qpos] = self.gear * motor[:, None] + stretch_rad
+        qvel[:] = 0.0
+        ctrl[:, 0] = motor
+
+    def controls(self, sched: Schedule, duration_s: float | None = None) -> np.ndarray:
+        """(T,) actuator targets for the physics steps covering ``duration_s`` (default: the
+        sweep), each the commanded profile at the step's midpoint (second order in dt)."""
+        end = sched.duration_s if duration_s is None else duration_s
+        n = int(math.ceil(end / self.dt_s - 1e-9)) + 1
+        return sched.motor_at((np.arange(n) + 0.5) * self.dt_s)
+
+    def roll(self, batch: mujoco.batch.Batch, ctrl: np.ndarray) -> dict:
+        """Step every simulation through its targets ``ctrl`` (nsim, T); record qpos, qvel."""
+        out = batch.rollout(ctrl.shape[1], ctrl[..., None], record=("qpos", "qvel"))
+        warned = int(batch.warning[..., 1].sum())  # mjWarningStat: (lastinfo, number)
+        if warned or not (np.isfinite(out["qpos"]).all() and np.isfinite(out["qvel"]).all()):
+            raise RuntimeError(
+                f"belt physics went unstable (MuJoCo warnings: {warned}); lower "
+                f"belt_dynamics.timestep_ms (now {self.dt_s * 1e3:g} ms) or raise "
+                f"belt_timeconst_ms (now {self.params.belt_timeconst_s * 1e3:g} ms)")
+        return out
+
+    def run(self, sched: Schedule, *, duration_s: float | None = None) -> Trajectory:
+        """One sweep from rest at its first step, through ``duration_s`` (default its end)."""
+        ctrl = self.controls(sched, duration_s)[None]
+        batch = self._batch(1)
+        offset = self.rest_offset(sched.steps)
+        self.start(batch, sched.motor_rad[:1], offset)
+        q0 = batch.bind("qpos")[0].copy()
+        out = self.roll(batch, ctrl)
+        qpos = np.concatenate([q0[None], out["qpos"][0]])
+        qvel = np.concatenate([np.zeros((1, self.model.nv)), out["qvel"][0]])
+        return Trajectory(dt_s=self.dt_s, motor_rad=qpos[:, self.motor_qpos],
+                          motor_vel=qvel[:, self.motor_dof],
+                          sensor_rad=qpos[:, self.sensor_qpos],
+                          sensor_vel=qvel[:, self.sensor_dof], gear=self.gear,
+                          offset=self.offset)
+
+    def endurance(self, steps: np.ndarray, n_sweeps: int, *, chunk: int = 50) -> dict:
+        """Sweep back and forth ``n_sweeps`` times in one continuous run, never resting: each
+        sweep moves step to step every ``step_time_s`` and reads at each arrival (a timed
+        sweep with no settle, the belt's hardest duty), the next starting where the last
+        ended. Returns per-sweep maxima over every physics step of |belt stretch|
+        (``stretch_rad``, (n_sweeps,)) and over the reads of |sensor − commanded|
+        (``read_error_rad``), the physics steps run and MuJoCo's warning count (a warning
+        or a non-finite state raises, see :meth:`roll`)."""
+        steps = np.asarray(steps, dtype=np.int64)
+        ring = self.ring
+        up = schedule(steps, ring, step_time_s=self.params.step_time_s, timing=True)
+        down = schedule(steps[::-1], ring, step_time_s=self.params.step_time_s, timing=True)
+        per = int(round(up.duration_s / self.dt_s))
+        if abs(per * self.dt_s - up.duration_s) > 1e-9:
+            raise ValueError("a sweep must last a whole number of physics steps here; its "
+                             f"{up.duration_s:g} s is not a multiple of {self.dt_s:g} s")
+        mid = (np.arange(per) + 0.5) * self.dt_s
+        legs = (up.motor_at(mid), down.motor_at(mid))
+        reads = [np.rint(s.read_s[:, 0] / self.dt_s).astype(np.int64) for s in (up, down)]
+        commanded = [s.motor_rad[:, None] * self.gear for s in (up, down)]
+        batch = self._batch(1)
+        self.start(batch, up.motor_rad[:1], np.zeros(ring.sensors))
+        stretch = np.zeros(n_sweeps)
+        read_err = np.zeros(n_sweeps)
+        q_prev = batch.bind("qpos")[0].copy()
+        done = 0
+        while done < n_sweeps:
+            n = min(chunk, n_sweeps - done)
+            ctrl = np.concatenate([legs[(done + j) % 2] for j in range(n)])[None]
+            qpos = self.roll(batch, ctrl)["qpos"][0]
+            qpos = np.concatenate([q_prev[None], qpos])      # sample i at i·dt from the chunk
+            q_prev = qpos[-1].copy()
+            motor, sensor = qpos[:, self.motor_qpos], qpos[:, self.sensor_qpos]
+            belt = np.abs(sensor - self.gear * motor[:, None]).max(axis=1)
+            for j in range(n):
+                leg = (done + j) % 2
+                a = j * per
+                stretch[done + j] = belt[a:a + per + 1].max()
+                at = sensor[a + reads[leg]]
+                read_err[done + j] = np.abs(at - commanded[leg]).max()
+            done += n
+        return {"stretch_rad": stretch, "read_error_rad": read_err,
+                "physics_steps": n_sweeps * per, "warnings": int(batch.warning[..., 1].sum())}
+
+
+# --------------------------------------------------------------------------- GP2 clocks
+
+
+@dataclass(frozen=True)
+class SensorClocks:
+    """Each GP2's measurement clock: sensor k measures at ``phase_s[k] + n·period_s[k]``
+    and its output holds that measurement from ``latency_s`` later (seconds)."""
+
+    period_s: np.ndarray   # (N,)
+    phase_s: np.ndarray    # (N,) in [0, period)
+    latency_s: float
+
+    @staticmethod
+    def periods(params: TimingEffect, n: int, seed: int) -> np.ndarray:
+        """(N,) each part's period, uniform in period ± jitter (drawn once from the seed)."""
+        rng = np.random.default_rng([seed, TIMING_STREAM])
+        lo = max(params.period_s - params.jitter_s, 1e-4)
+        return rng.uniform(lo, params.period_s + params.jitter_s, n)
+
+    @classmethod
+    def draw(cls, params: TimingEffect, periods_s: np.ndarray,
+             rng: np.random.Generator) -> SensorClocks:
+        return cls(period_s=periods_s, phase_s=rng.uniform(0.0, 1.0, len(periods_s)) * periods_s,
+                   latency_s=params.latency_s)
+
+    def measured_at(self, read_s: np.ndarray) -> np.ndarray:
+        """When the measurement an ADC read at ``read_s`` (..., N) returns was taken."""
+        r = np.asarray(read_s, dtype=float) - self.latency_s - self.phase_s
+        return self.phase_s + self.period_s * np.floor(r / self.period_s)
+
+
+# --------------------------------------------------------------------------- motion
+
+
+def _unwrap_yaw(yaws: np.ndarray) -> np.ndarray:
+    """Yaws turned the short way between consecutive waypoints."""
+    step = np.angle(np.exp(1j * np.diff(yaws)))
+    return np.concatenate([[yaws[0]], yaws[0] + np.cumsum(step)])
+
+
+@dataclass(frozen=True)
+class Path:
+    """The robot's drive: straight segments between waypoints at constant speed; yaw turns
+    linearly along each segment (the short way); a segment that only turns takes no time.
+    ``pose_at(t)`` past the end stays at the last waypoint."""
+
+    xy_m: np.ndarray       # (W, 2)
+    yaw_rad: np.ndarray    # (W,) unwrapped
+    arc_m: np.ndarray      # (W,) arc length at each waypoint
+    speed_m_s: float
+
+    @classmethod
+    def from_effect(cls, motion: MotionEffect) -> Path:
+        xy = np.array([[w.x_m, w.y_m] for w in motion.path], dtype=float)
+        yaw = _unwrap_yaw(np.array([w.yaw_rad for w in motion.path], dtype=float))
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+        return cls(xy_m=xy, yaw_rad=yaw, arc_m=arc, speed_m_s=float(motion.speed_m_s))
+
+    @property
+    def length_m(self) -> float:
+        return float(self.arc_m[-1])
+
+    @property
+    def duration_s(self) -> float:
+        return self.length_m / self.speed_m_s if self.speed_m_s > 0 and self.length_m > 0 else 0.0
+
+    def pose_at_arc(self, s_m: np.ndarray) -> np.ndarray:
+        """(..., 3) poses at arc lengths ``s_m`` (...,)."""
+        s = np.clip(np.asarray(s_m, dtype=float), 0.0, self.length_m)
+        if len(self.arc_m) == 1 or self.length_m == 0:
+            last = np.array([*self.xy_m[-1], self.yaw_rad[-1]])
+            return np.broadcast_to(last, s.shape + (3,)).copy()
+        # the last waypoint at a given arc (a turn in place jumps to its end yaw)
+        i = np.clip(np.searchsorted(self.arc_m, s, side="right") - 1, 0, len(self.arc_m) - 2)
+        seg = self.arc_m[i + 1] - self.arc_m[i]
+        u = np.where(seg > 0, (s - self.arc_m[i]) / np.where(seg > 0, seg, 1.0), 1.0)
+        xy = self.xy_m[i] + (self.xy_m[i + 1] - self.xy_m[i]) * u[..., None]
+        yaw = self.yaw_rad[i] + (self.yaw_rad[i + 1] - self.yaw_rad[i]) * u
+        return np.concatenate([xy, yaw[..., None]], axis=-1)
+
+    def pose_at(self, t_s: np.ndarray) -> np.ndarray:
+        """(..., 3) true pose (x m, y m, yaw rad) at times ``t_s`` from the drive's start."""
+        return self.pose_at_arc(np.asarray(t_s, dtype=float) * self.speed_m_s)
+
+    def check_clearance(self, scenario: Scenario) -> None:
+        """Raise ScenarioError where the ring (radius + 20 mm housing) would touch a wall or
+        an obstacle along the path (the loader checks scan poses, not paths)."""
+        from .scenario import _obstacle_distance
+
+        clearance = scenario.ring.radius_m + 0.02
+        n = max(2, int(math.ceil(self.length_m / _PATH_SAMPLE_M)) + 1)
+        s = np.linspace(0.0, self.length_m, n)
+        poses = self.pose_at_arc(s)
+        outline = scenario.room.outline_m
+        for (x, y, _), arc in zip(poses, s):
+            gaps = [distance_to_outline(x, y, outline)] + [_obstacle_distance(ob, x, y)
+                                                           for ob in scenario.obstacles]
+            if not point_in_polygon(x, y, outline) or min(gaps) < clearance:
+                seg = int(np.clip(np.searchsorted(self.arc_m, arc, side="right") - 1, 0,
+                                  max(len(self.arc_m) - 2, 0)))
+                raise ScenarioError(
+                    f"{scenario.source or scenario.name}: effects.motion.path[{seg}] → "
+                    f"[{seg + 1}]: at ({x * 1e3:.0f}, {y * 1e3:.0f}) mm the ring (radius "
+                    f"{clearance * 1e3:g} mm with housing) would hit a wall or obstacle; "
+                    f"add a waypoint that keeps ≥ {clearance * 1e3:g} mm clear")
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """Dead reckoning along a :class:`Path`: the true increments every ≤ 5 mm, each with
+    Gaussian noise in the robot frame (σ² = sigma_m²·ds per axis, sigma_rad²·ds in yaw),
+    integrated from the true start pose. Zero sigmas give the true path exactly."""
+
+    path: Path
+    arc_m: np.ndarray     # (K,) sample arcs
+    pose: np.ndarray      # (K, 3) odometry pose at each
+
+    @classmethod
+    def along(cls, path: Path, sigma_m: float, sigma_rad: float,
+              rng: np.random.Generator) -> Odometry:
+        n = max(2, int(math.ceil(path.length_m / _PATH_SAMPLE_M)) + 1)
+        arc = np.unique(np.concatenate([np.linspace(0.0, path.length_m, n), path.arc_m]))
+        true = path.pose_at_arc(arc)
+        if sigma_m == 0 and sigma_rad == 0:
+            return cls(path=path, arc_m=arc, pose=true)
+        d = np.diff(true, axis=0)
+        c, s = np.cos(true[:-1, 2]), np.sin(true[:-1, 2])
+        fwd = c * d[:, 0] + s * d[:, 1]          # robot-frame increments
+        left = -s * d[:, 0] + c * d[:, 1]
+        ds = np.hypot(d[:, 0], d[:, 1])
+        fwd = fwd + rng.standard_normal(len(ds)) * sigma_m * np.sqrt(ds)
+        left = left + rng.standard_normal(len(ds)) * sigma_m * np.sqrt(ds)
+        dyaw = d[:, 2] + rng.standard_normal(len(ds)) * sigma_rad * np.sqrt(ds)
+        yaw = true[0, 2] + np.concatenate([[0.0], np.cumsum(dyaw)])
+        cy, sy = np.cos(yaw[:-1]), np.sin(yaw[:-1])
+        x = true[0, 0] + np.concatenate([[0.0], np.cumsum(cy * fwd - sy * left)])
+        y = true[0, 1] + np.concatenate([[0.0], np.cumsum(sy * fwd + cy * left)])
+        return cls(path=path, arc_m=arc, pose=np.stack([x, y, yaw], axis=-1))
+
+    def pose_at(self, t_s: np.ndarray) -> np.ndarray:
+        """(..., 3) odometry pose at times ``t_s``."""
+        s = np.clip(np.asarray(t_s, dtype=float) * self.path.speed_m_s, 0.0, self.path.length_m)
+        return np.stack([np.interp(s, self.arc_m, self.pose[:, j]) for j in range(3)], axis=-1)
+
+
+# --------------------------------------------------------------------------- per sweep
+
+
+@dataclass(frozen=True)
+class ReadingPlan:
+    """Where and when each reading of one sweep was taken (all times from its start).
+
+    ``sensor_rad`` (S, N): the true hinge angles at the measurement instants
+    ``measured_s`` (S, N); ``pose`` (S, N, 3) the true robot pose then, or (3,) for a
+    robot that stands; ``reading_poses`` (S, N, 3) what odometry says at the reads
+    (motion only); ``sweep_pose`` (3,) the sweep's pose (odometry at its first read);
+    ``start_s`` the sweep's start on the drive's clock.
+    """
+
+    schedule: Schedule
+    commanded_rad: np.ndarray
+    sensor_rad: np.ndarray
+    measured_s: np.ndarray
+    pose: np.ndarray
+    reading_poses: np.ndarray | None
+    sweep_pose: np.ndarray
+    start_s: float = 0.0
+    trajectory: Trajectory | None = field(default=None, repr=False)
+
+    @property
+    def angle_error_rad(self) -> np.ndarray:
+        """(S, N) true − commanded sensor angle at the measurement (lag, overshoot, smear)."""
+        return self.sensor_rad - self.commanded_rad
+
+
+class Dynamics:
+    """What ``SimRing`` asks for a scene with ``belt_dynamics``, ``timing`` or ``motion``:
+    :meth:`plan` says where and when each reading of a sweep was taken."""
+
+    def __init__(self, scenario: Scenario, built: model_lib.RingModel, seed: int):
+        self.scenario = scenario
+        self.built = built
+        self.seed = int(seed)
+        self.belt: BeltDynamicsEffect | None = scenario.effects.get("belt_dynamics")
+        self.timing: TimingEffect | None = scenario.effects.get("timing")
+        self.motion: MotionEffect | None = scenario.effects.get("motion")
+        self.step_time_s = (self.belt or BeltDynamicsEffect()).step_time_s
+        self._physics: BeltPhysics | None = None
+        self.periods_s = (SensorClocks.periods(self.timing, built.n_sensors, self.seed)
+                          if self.timing else None)
+        self.path = self.odometry = None
+        self.clocks = None
+        if self.motion is not None:
+            self.path = Path.from_effect(self.motion)
+            self.path.check_clearance(scenario)
+            self.odometry = Odometry.along(self.path, self.motion.odometry_sigma_m,
+                                           self.motion.odometry_sigma_rad,
+                                           np.random.default_rng([self.seed, ODOMETRY_STREAM]))
+            if self.timing:  # one continuous clock for the whole drive
+                self.clocks = SensorClocks.draw(self.timing, self.periods_s,
+                                                np.random.default_rng([self.seed, TIMING_STREAM, 1]))
+
+    @property
+    def physics(self) -> BeltPhysics:
+        if self._physics is None:
+            self._physics = BeltPhysics(self.scenario.ring, self.belt)
+        return self._physics
+
+    def schedule(self, steps: np.ndarray) -> Schedule:
+        scan = self.scenario.scan
+        samples = scan.samples if self.scenario.has("averaging") else 1
+        return schedule(steps, self.scenario.ring, settle_s=scan.settle_s, samples=samples,
+                        step_time_s=self.step_time_s, timing=self.timing is not None)
+
+    def n_sweeps(self, steps: np.ndarray) -> int:
+        """Sweeps the scene takes: one per scan pose, or with motion, back to back until the
+        robot reaches the end of its path (at least one)."""
+        if self.path is None:
+            return len(self.scenario.robot.poses)
+        sched = self.schedule(steps)
+        cycle = sched.duration_s + sched.rewind_s
+        return max(1, int(math.ceil(self.path.duration_s / cycle - 1e-12)))
+
+    def plan(self, index: int, steps: np.ndarray, count: int = 0,
+             pose: np.ndarray | None = None) -> ReadingPlan:
+        """Where and when sweep ``index`` (a scan pose, or with motion the index-th sweep of
+        the drive) read; ``count`` is how many sweeps this index had before (fresh clock
+        phases per static sweep); ``pose`` the standing robot's pose (static scenes)."""
+        sched = self.schedule(steps)
+        commanded = self.built.sensor_qpos_for(sched.motor_rad)
+        traj = None
+        if self.belt is not None:
+            traj = self.physics.run(sched)
+            ring_motion = traj
+        else:
+            ring_motion = RigidRing(sched, self.built)
+        n = self.built.n_sensors
+        first_read = np.broadcast_to(sched.read_s[:, :1], (len(sched.steps), n))
+        start = 0.0
+        if self.path is not None:
+            start = index * (sched.duration_s + sched.rewind_s)
+        if self.timing is not None:
+            clocks = self.clocks
+            if clocks is None:
+                clocks = SensorClocks.draw(self.timing, self.periods_s, np.random.default_rng(
+                    [self.seed, index, count, TIMING_STREAM]))
+            measured = clocks.measured_at(start + first_read) - start
+        else:
+            measured = np.array(first_read)
+        sensor = ring_motion.sensors_at(measured)
+        if self.path is not None:
+            true_pose = self.path.pose_at(start + measured)
+            reading_poses = self.odometry.pose_at(start + first_read)
+            sweep_pose = reading_poses[0, 0].copy()
+        else:
+            true_pose = np.asarray(pose, dtype=float)
+            reading_poses = None
+            sweep_pose = true_pose
+        return ReadingPlan(schedule=sched, commanded_rad=commanded, sensor_rad=sensor,
+                           measured_s=measured, pose=true_pose, reading_poses=reading_poses,
+                           sweep_pose=sweep_pose, start_s=start, trajectory=traj)
+
+
+# --------------------------------------------------------------------------- diagnostics
+
+
+def heading_error(sweep) -> np.ndarray:
+    """(S, N) rad: true beam heading − the heading the estimator assumes (from
+    ``sensor_angles`` and ``reading_poses`` or ``pose``), wrapped to ±π. Needs ``truth``."""
+    if sweep.truth is None:
+        raise ValueError("heading_error needs a simulated sweep (one with truth)")
+    d = sweep.truth.direction
+    true = np.arctan2(d[..., 1], d[..., 0])
+    pose = sweep.reading_poses if sweep.reading_poses is not None else sweep.pose
+    yaw = np.asarray(pose, dtype=float)[..., 2]
+    assumed = yaw + ring_angles(sweep.ring) + np.asarray(sweep.sensor_angles)
+    return np.angle(np.exp(1j * (true - assumed)))
