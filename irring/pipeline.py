@@ -139,14 +139,15 @@ def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
 
 def simulate(scenario: Scenario, *, seed: int | None = None,
              progress: bool | None = None) -> tuple[list[Sweep], float]:
-    """One simulated sweep per scan pose: (sweeps, seconds spent)."""
+    """One simulated sweep per scan pose (with ``motion``: back to back along the path):
+    (sweeps, seconds spent)."""
     from .sim import SimRing
 
     t0 = time.perf_counter()
     sim = SimRing(scenario, seed=seed)
     sweeps = []
-    with _progress(len(scenario.robot.poses), "simulate", progress) as bar:
-        for k in range(len(scenario.robot.poses)):
+    with _progress(sim.n_sweeps, "simulate", progress) as bar:
+        for k in range(sim.n_sweeps):
             sweeps.append(sim.sweep(k))
             bar.update()
     return sweeps, time.perf_counter() - t0
