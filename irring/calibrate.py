@@ -227,7 +227,7 @@ class SimulatedRig:
 
     def scenario_for_rig(self):
         """The generated rig scene: one pose per placement, sensor range = the model's."""
-        from .scenario import Pose, Room
+        from .scenario import Pose
 
         sc = self.scenario
         s = self.ROOM_M

@@ -494,7 +494,8 @@ class _Moments:
     TLS line in O(1). Coordinates are centred first so small spreads keep their digits."""
 
     def __init__(self, px: np.ndarray, py: np.ndarray):
-        self.cx, self.cy = float(np.mean(px)) if px.size else 0.0, float(np.mean(py)) if py.size else 0.0
+        self.cx = float(np.mean(px)) if px.size else 0.0
+        self.cy = float(np.mean(py)) if py.size else 0.0
         x, y = px - self.cx, py - self.cy
         cols = np.stack([np.ones_like(x), x, y, x * x, y * y, x * y])
         self.cum = np.concatenate([np.zeros((6, 1)), np.cumsum(cols, axis=1)], axis=1)
