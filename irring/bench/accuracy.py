@@ -116,7 +116,8 @@ def configurations(knobs: Iterable[str] | None = None,
     out = [Config()]
     for k in knobs:
         if k == "step":
-            out += [Config(k, f"step ×{s} ({s * step_deg:.2f}°)", s, step_stride=s) for s in (2, 4)]
+            out += [Config(k, f"step ×{s} ({s * step_deg:.2f}°)", s, step_stride=s)
+                    for s in (2, 4)]
         elif k == "samples":
             out += [Config(k, f"{n} samples", n, samples=n) for n in (2, 4, 8)]
         elif k == "settle":

@@ -25,9 +25,9 @@ steps × (settle + samples × 38.3 ms)) / ``sweep_ms``.
 Method: every round times each stage once, in a shuffled order (interleaved, so a busy
 moment on the machine hits all stages alike and no stage always runs right after the
 cache-clearing estimator and mapper); our ray stage and the raw call each run once untimed,
-then alternate three times per round, so both are timed in the same cache state. Figures are medians over rounds. The garbage collector is off
-while timing (as ``timeit`` does). Scoring against ground truth is not a per-sweep stage and
-is left out.
+then alternate three times per round, so both are timed in the same cache state. Figures
+are medians over rounds. The garbage collector is off while timing (as ``timeit`` does).
+Scoring against ground truth is not a per-sweep stage and is left out.
 """
 
 from __future__ import annotations
