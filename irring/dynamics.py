@@ -55,9 +55,11 @@ sweep j starts at j × (sweep duration + rewind), the rewind moving back over th
 steps and waiting one GP2 period; without it every sweep starts at t = 0 and draws fresh
 clock phases.
 
-Randomness: clock periods ``default_rng([seed, TIMING_STREAM])``; per-sweep clock phases
-``default_rng([seed, sweep, k, TIMING_STREAM])`` (k-th sweep at that pose); odometry
-``default_rng([seed, ODOMETRY_STREAM])`` for the whole path.
+Randomness: clock periods ``default_rng([seed, TIMING_STREAM])``; clock phases per static
+sweep ``default_rng([seed, pose, k, TIMING_STREAM])`` (the k-th sweep at that pose), or
+once for a drive ``default_rng([seed, TIMING_STREAM, 1])``; odometry
+``default_rng([seed, ODOMETRY_STREAM])`` for the whole path. The signal effects keep
+``SimRing``'s ``default_rng([seed, sweep, k])``.
 """
 
 from __future__ import annotations
@@ -602,8 +604,8 @@ class Dynamics:
                                            self.motion.odometry_sigma_rad,
                                            np.random.default_rng([self.seed, ODOMETRY_STREAM]))
             if self.timing:  # one continuous clock for the whole drive
-                self.clocks = SensorClocks.draw(self.timing, self.periods_s,
-                                                np.random.default_rng([self.seed, TIMING_STREAM, 1]))
+                rng = np.random.default_rng([self.seed, TIMING_STREAM, 1])
+                self.clocks = SensorClocks.draw(self.timing, self.periods_s, rng)
 
     @property
     def physics(self) -> BeltPhysics:

@@ -1,0 +1,257 @@
+"""What the belt, the GP2's clock and a moving robot do to the readings, in numbers.
+
+Each function returns plain figures (``irring bench dynamics`` prints them, the tests in
+``tests/test_dynamics.py`` assert on them):
+
+- :func:`coupling`: the belt's stretch over many back-and-forth sweeps without rest
+  (``BeltPhysics.endurance``): max over every physics step and at the reads, per sweep,
+  MuJoCo warnings.
+- :func:`convergence`: one sweep at time step dt and dt/2 for the same scene: the largest
+  change of a true sensor angle, a true distance and an ADC count.
+- :func:`settling`: a T-room sweep with belt and timing at several ``scan.settle_s``:
+  hardware time per sweep and the readings' angle error (true − commanded sensor angle at
+  the measurement), rms and max.
+- :func:`mujoco_clocks`: the same sweep's readings from MuJoCo's own periodic, delayed
+  rangefinders (``interval``, ``delay``) against :class:`~irring.dynamics.SensorClocks`.
+- :func:`motion`: occupied F1 of the static four-scan T-room, of static scans at the
+  moving run's sweep positions, and of the moving run with perfect and with the bundled
+  odometry (``t_room_moving``).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import time
+import types
+
+import mujoco
+import numpy as np
+import yaml
+
+from .. import dynamics as dyn
+from .. import model as model_lib
+from ..scenario import BeltDynamicsEffect, Ring, Scenario, load_scenario, parse, resolve
+
+SETTLE_S = (0.0, 0.010, 0.020, 0.0383, 0.0529, 0.075)
+
+
+def variant(name: str, *, effects: dict | None = None, drop: tuple = (), scan: dict | None = None,
+            motion: dict | None = None, poses: list | None = None) -> Scenario:
+    """A bundled scenario with effects added/replaced/dropped, its scan block replaced and
+    motion keys changed (spell them as the file does, e.g. ``odometry_sigma_mm``)."""
+    raw = yaml.safe_load(resolve(name).read_text())
+    raw = copy.deepcopy(raw)
+    raw.setdefault("effects", {})
+    for key in drop:
+        raw["effects"].pop(key, None)
+    raw["effects"].update(effects or {})
+    if scan is not None:
+        raw["scan"] = scan
+    if motion:
+        raw["effects"]["motion"] = {**raw["effects"]["motion"], **motion}
+    if poses is not None:
+        raw["robot"]["poses"] = poses
+    return parse(raw, f"{name} (variant)")
+
+
+def coupling(n_sweeps: int = 1000, params: BeltDynamicsEffect | None = None,
+             ring: Ring | None = None) -> dict:
+    """The belt over ``n_sweeps`` continuous back-and-forth sweeps (see the module doc)."""
+    ring = ring or Ring()
+    physics = dyn.BeltPhysics(ring, params or BeltDynamicsEffect())
+    t0 = time.perf_counter()
+    r = physics.endurance(np.arange(ring.min_step, ring.max_step + 1), n_sweeps)
+    return {"sweeps": n_sweeps, "physics_steps": r["physics_steps"],
+            "timestep_s": physics.dt_s, "stretch_max_rad": float(r["stretch_rad"].max()),
+            "stretch_first_rad": float(r["stretch_rad"][0]),
+            "stretch_last_rad": float(r["stretch_rad"][-1]),
+            "read_error_max_rad": float(r["read_error_rad"].max()),
+            "stretch_per_sweep_rad": r["stretch_rad"], "warnings": r["warnings"],
+            "compute_s": time.perf_counter() - t0}
+
+
+def _sweep_at(scenario: Scenario, timestep_s: float, seed: int):
+    from ..sim import SimRing
+
+    effects = dict(scenario.effects)
+    effects["belt_dynamics"] = dataclasses.replace(effects["belt_dynamics"], timestep_s=timestep_s)
+    sc = dataclasses.replace(scenario, effects=types.MappingProxyType(effects))
+    sim = SimRing(sc, seed=seed)
+    plan = sim.dynamics.plan(0, sim.default_steps(), 0, sim.pose(0))
+    return plan, sim.sweep(0)
+
+
+def convergence(scenario: Scenario, timestep_s: float | None = None, seed: int = 1) -> dict:
+    """One sweep of ``scenario`` (which lists belt_dynamics) at dt and at dt/2: the largest
+    change of a true sensor angle, a true distance, an ADC count."""
+    dt = timestep_s or scenario.effects["belt_dynamics"].timestep_s
+    (pa, sa), (pb, sb) = _sweep_at(scenario, dt, seed), _sweep_at(scenario, dt / 2, seed)
+    da = np.asarray(sa.truth.distance_m)
+    db = np.asarray(sb.truth.distance_m)
+    both = np.isfinite(da) & np.isfinite(db)
+    return {"timestep_s": dt, "angle_rad": float(np.abs(pa.sensor_rad - pb.sensor_rad).max()),
+            "distance_m": float(np.abs(da - db)[both].max()),
+            "hit_changed": int(np.count_nonzero(np.isfinite(da) != np.isfinite(db))),
+            "counts": float(np.abs(np.asarray(sa.counts, float)
+                                   - np.asarray(sb.counts, float)).max()),
+            "angle_error_rms_rad": float(np.sqrt(np.mean(pa.angle_error_rad ** 2)))}
+
+
+def settling(effects: dict, settles_s=SETTLE_S, seed: int = 1, name: str = "t_room") -> list[dict]:
+    """Angle error and hardware time of one sweep at each settle time (pose 0 of ``name``)."""
+    from ..sim import SimRing
+
+    rows = []
+    for settle in settles_s:
+        sc = variant(name, effects=effects, scan={"settle_s": settle})
+        sim = SimRing(sc, seed=seed)
+        plan = sim.dynamics.plan(0, sim.default_steps(), 0, sim.pose(0))
+        err = plan.angle_error_rad
+        rows.append({"settle_s": settle, "hardware_s": plan.schedule.duration_s,
+                     "angle_error_rms_rad": float(np.sqrt(np.mean(err ** 2))),
+                     "angle_error_max_rad": float(np.abs(err).max())})
+    return rows
+
+
+def mujoco_clocks(scenario: Scenario, seed: int = 3) -> dict:
+    """Readings of one timed sweep from MuJoCo's periodic, delayed rangefinders vs ours.
+
+    The scene must list ``belt_dynamics`` and ``timing``. Each sensor gets a period on the
+    physics grid and a phase a quarter step off it, MuJoCo's rangefinders the same
+    ``interval`` and ``delay`` (the latency, on the grid), and their histories the rest
+    pose's reading (the GP2 measured before the sweep started). MuJoCo computes a periodic
+    sensor at the first time step at or after each due instant, so ours is evaluated there
+    too for ``agree_quantized`` (share of readings within 1 µm; same physics, same clock
+    rule: it should be 1) while ``agree`` / ``max_diff_m`` compare with the simulator's own
+    continuous instants (they differ by at most one time step of motion). ``stale_m``: how
+    far the timed readings are from instantaneous ones (mean).
+    """
+    from ..sim import SimRing
+
+    sim = SimRing(scenario, seed=seed)
+    dynamics = sim.dynamics
+    physics = dynamics.physics
+    dt = physics.dt_s
+    timing = dynamics.timing
+    n = sim.built.n_sensors
+    period = np.maximum(np.round(dynamics.periods_s / dt), 2) * dt
+    phase = (np.floor(np.random.default_rng([seed, 7]).uniform(0, 1, n) * period / dt)
+             + 0.25) * dt
+    latency = np.round(timing.latency_s / dt) * dt
+    clocks = dyn.SensorClocks(period_s=period, phase_s=phase, latency_s=latency)
+    steps = sim.default_steps()
+    sched = dynamics.schedule(steps)
+    traj = physics.run(sched)
+    first = np.broadcast_to(sched.read_s[:, :1], (len(steps), n))
+    measured = clocks.measured_at(first)
+
+    def distances(t_s):
+        origin, direction = sim.frames(traj.sensors_at(t_s), sim.pose(0))
+        return sim.cast(origin, direction).distance_m
+
+    ours = distances(measured)
+    ours_q = distances(np.ceil(measured / dt - 1e-9) * dt)
+
+    spec, _ = model_lib.scenario_spec(scenario)
+    spec = dyn.physics_spec(scenario.ring, dynamics.belt, spec)
+    nsample = int(np.ceil(latency / period.min())) + 2
+    for k in range(n):
+        rf = spec.sensor(f"{model_lib.sensor_name(k)}_range")
+        rf.nsample = nsample
+        rf.interval = [period[k], phase[k] - period[k]]   # MuJoCo: last computed before t = 0
+        rf.delay = latency
+    m = spec.compile()
+    dyn.tune_belt(m, dynamics.belt)
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    d = mujoco.MjData(m)
+
+    def jid(name):
+        return m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)]
+
+    sensors = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR,
+                                 f"{model_lib.sensor_name(k)}_range") for k in range(n)]
+    motor, hinges = jid("ring_motor"), [jid(f"{model_lib.sensor_name(k)}_hinge")
+                                        for k in range(n)]
+    d.qpos[motor] = sched.motor_rad[0]
+    d.qpos[hinges] = physics.gear * sched.motor_rad[0]
+    d.ctrl[0] = sched.motor_rad[0]
+    pose = sim.pose(0)
+    chassis = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "chassis")]
+    d.mocap_pos[chassis] = [pose[0], pose[1], 0.0]
+    d.mocap_quat[chassis] = [np.cos(pose[2] / 2), 0.0, 0.0, np.sin(pose[2] / 2)]
+    # the rest pose's reading fills each history (computed undelayed, then restored)
+    saved = m.sensor_delay.copy(), m.sensor_interval.copy()
+    m.sensor_delay[:], m.sensor_interval[:] = 0.0, 0.0
+    mujoco.mj_forward(m, d)
+    rest = [d.sensordata[m.sensor_adr[s]:m.sensor_adr[s] + m.sensor_dim[s]].copy()
+            for s in sensors]
+    m.sensor_delay[:], m.sensor_interval[:] = saved
+    for k, s in enumerate(sensors):
+        mujoco.mj_initSensorHistory(m, d, s, None, np.tile(rest[k], (nsample, 1)),
+                                    phase[k] - period[k])
+    reads = {int(i): j for j, i in enumerate(np.rint(sched.read_s[:, 0] / dt).astype(int))}
+    theirs = np.full((len(steps), n), np.nan)
+    adr = m.sensor_adr[sensors]
+    for i, u in enumerate(physics.controls(sched)):
+        d.ctrl[0] = u
+        mujoco.mj_step(m, d)   # sensordata now describes time i·dt
+        if i in reads:
+            theirs[reads[i]] = d.sensordata[adr]
+    warnings = int(sum(w.number for w in d.warning))
+    ok = np.isfinite(ours) & np.isfinite(ours_q)
+    diff = np.abs(theirs - ours)[ok]
+    instant = sim.truth(0)[2].distance_m
+    both = ok & np.isfinite(instant)
+    return {"readings": int(ok.sum()), "agree": float(np.mean(diff < 1e-6)),
+            "agree_quantized": float(np.mean(np.abs(theirs - ours_q)[ok] < 1e-6)),
+            "max_diff_m": float(diff.max()), "warnings": warnings,
+            "stale_m": float(np.mean(np.abs(ours - instant)[both])), "timestep_s": dt}
+
+
+def motion(seeds=(1,)) -> dict:
+    """Occupied F1 (mean over ``seeds``): static t_room, static scans where the moving run's
+    sweeps were (mid-sweep true poses), the moving run with perfect and bundled odometry."""
+    from .. import pipeline
+    from ..sim import SimRing
+
+    perfect = variant("t_room_moving", motion={"odometry_sigma_mm": 0, "odometry_sigma_deg": 0})
+    sim = SimRing(perfect)
+    steps = sim.default_steps()
+    mid = [sim.dynamics.plan(k, steps).pose[len(steps) // 2, 0] for k in range(sim.n_sweeps)]
+    along = variant("t_room_moving", drop=dyn.DYNAMIC_EFFECTS,
+                    poses=[{"x_m": float(p[0]), "y_m": float(p[1]), "yaw_rad": float(p[2])}
+                           for p in mid])
+    runs = {"static_t_room": load_scenario("t_room"), "static_along_path": along,
+            "moving_perfect_odometry": perfect, "moving_bundled": load_scenario("t_room_moving")}
+    out: dict = {"seeds": list(seeds), "sweeps": {}}
+    for key, sc in runs.items():
+        f1, hw = [], 0.0
+        for seed in seeds:
+            r = pipeline.run(sc, seed=seed, progress=False)
+            f1.append(r.scores["occupied_f1"])
+            hw = r.hardware_time_s
+            out["sweeps"][key] = len(r.sweeps)
+        out[key] = float(np.mean(f1))
+        out[f"{key}_hardware_s"] = hw
+    return out
+
+
+def measure(*, sweeps: int = 1000, seeds=(1,), with_motion: bool = True) -> dict:
+    """Everything above with the defaults (what ``irring bench dynamics`` prints)."""
+    belt_timing = {"belt_dynamics": {}, "timing": {}}
+    fast = variant("t_room", effects=belt_timing, scan={"settle_s": 0.0})
+    belt_only = variant("t_room", effects={"belt_dynamics": {}}, scan={"settle_s": 0.0})
+    out = {
+        "coupling": coupling(sweeps),
+        "convergence": [dict(convergence(sc), scene=label) for label, sc in
+                        (("belt, settle 0", belt_only), ("belt + timing, settle 0", fast))],
+        "settling_belt_timing": settling(belt_timing),
+        "settling_belt": settling({"belt_dynamics": {}}, (0.0, 0.005, 0.010, 0.020)),
+        "settling_timing": settling({"timing": {}}),
+        "mujoco_clocks": mujoco_clocks(fast),
+    }
+    out["coupling"].pop("stretch_per_sweep_rad")
+    if with_motion:
+        out["motion"] = motion(seeds)
+    return out

@@ -1,0 +1,312 @@
+"""Belt and stepper physics, GP2 timing and a moving robot (irring/dynamics.py).
+
+Documented figures (models/README.md, irring/dynamics.py), measured by
+``irring bench dynamics`` and held here:
+
+- belt stretch (sensor − 0.6 × motor) ≤ STRETCH_BOUND_RAD = 0.007 rad at every physics step
+  over 1000 back-and-forth sweeps without rest (measured 0.0064), no MuJoCo warnings, no NaN;
+- halving the 0.5 ms time step moves a true sensor angle by < ANGLE_TOL_RAD = 1e-4 rad and a
+  true distance by < DIST_TOL_M = 0.1 mm (measured 1e-5 rad, 5 µm) and no ADC count;
+- belt + timing, settle 0: angle error rms 0.13 rad (readings ~6 steps stale); settle 52.9 ms
+  (slowest GP2 period + latency): 2.6e-4 rad; 75 ms: 1e-7 rad.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import mujoco.batch
+import mujoco.rollout
+import numpy as np
+import pytest
+
+from irring import dynamics as D
+from irring import pipeline
+from irring.bench import dynamics as bench
+from irring.data import Sweep, beam_geometry
+from irring.estimate import estimate
+from irring.scenario import (BeltDynamicsEffect, Ring, ScenarioError, TimingEffect,
+                             load_scenario)
+from irring.sim import SimRing
+
+STRETCH_BOUND_RAD = 0.007
+ANGLE_TOL_RAD = 1e-4
+DIST_TOL_M = 1e-4
+P_SLOW_S = 0.0383 + 0.0096 + 0.005  # slowest GP2 period + output latency
+
+
+def timed(settle_s: float, effects=None):
+    return bench.variant("t_room", effects=effects or {"belt_dynamics": {}, "timing": {}},
+                         scan={"settle_s": settle_s})
+
+
+# --------------------------------------------------------------------------- off means off
+
+
+def test_a_scene_without_these_effects_never_steps_physics(monkeypatch, t_room):
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a static scene stepped physics")
+
+    for owner, name in ((mujoco, "mj_step"), (mujoco, "mj_step1"), (mujoco, "mj_step2"),
+                        (mujoco.batch.Batch, "step"), (mujoco.batch.Batch, "rollout"),
+                        (mujoco.rollout, "rollout"), (D, "BeltPhysics"), (D, "Dynamics")):
+        monkeypatch.setattr(owner, name, forbidden)
+    sim = SimRing(t_room)
+    assert sim.dynamics is None and sim.n_sweeps == 4
+    sweep = sim.sweep(0)
+    assert sweep.reading_poses is None
+    assert pipeline.run(t_room, progress=False).scores["occupied_f1"] > 0.9
+
+
+def test_only_listed_effects_change_anything(t_room):
+    """Belt alone keeps the pose; timing alone steps no physics and stays kinematic."""
+    sim = SimRing(timed(0.0, {"timing": {}}))
+    assert sim.dynamics._physics is None
+    sim.sweep(0)
+    assert sim.dynamics._physics is None  # a rigid belt needs no physics
+    sweep = SimRing(timed(0.02, {"belt_dynamics": {}})).sweep(0)
+    assert sweep.reading_poses is None and np.array_equal(sweep.pose, SimRing(t_room).pose(0))
+
+
+# --------------------------------------------------------------------------- the timeline
+
+
+def test_schedule_charges_moves_settle_and_periods():
+    ring = Ring()
+    steps = np.arange(-35, 36, 2)
+    untimed = D.schedule(steps, ring, settle_s=0.01, samples=2)
+    # untimed sensor: each reading costs a GP2 period, as for kinematic sweeps, plus moves
+    per = 2 * 0.004 + 0.01 + 2 * 0.0383
+    np.testing.assert_allclose(np.diff(untimed.done_s), per)
+    assert untimed.done_s[0] == pytest.approx(0.01 + 2 * 0.0383)
+    np.testing.assert_allclose(untimed.read_s[:, 1] - untimed.read_s[:, 0], 0.0383)
+    timed_ = D.schedule(steps, ring, settle_s=0.01, samples=2, timing=True)
+    # timed sensor: only the waits the firmware makes (move, settle, between two samples)
+    np.testing.assert_allclose(np.diff(timed_.done_s), 2 * 0.004 + 0.01 + 0.0383)
+    assert timed_.duration_s < untimed.duration_s
+
+
+def test_moves_follow_a_minimum_jerk_profile():
+    sched = D.schedule(np.array([0, 1, 3]), Ring(), settle_s=0.005, step_time_s=0.004)
+    step = Ring().motor_step_rad
+    t = np.linspace(sched.command_s[1], sched.command_s[1] + 0.004, 4001)
+    motor = sched.motor_at(t)
+    assert motor[0] == pytest.approx(0.0, abs=1e-15) and motor[-1] == pytest.approx(step)
+    speed = np.gradient(motor, t)
+    assert np.all(speed >= -1e-9)
+    assert speed.max() == pytest.approx(1.875 * step / 0.004, rel=1e-3)
+    # two steps take twice as long at the same peak speed
+    t2 = np.linspace(sched.command_s[2], sched.command_s[2] + 0.008, 8001)
+    assert sched.move_s[2] == pytest.approx(0.008)
+    assert np.gradient(sched.motor_at(t2), t2).max() == pytest.approx(1.875 * step / 0.004,
+                                                                      rel=1e-3)
+    # at rest between moves
+    assert sched.motor_at(sched.read_s[1, 0]) == pytest.approx(step)
+
+
+# --------------------------------------------------------------------------- belt physics
+
+
+def test_belt_stretch_stays_bounded_over_1000_sweeps():
+    """1000 back-and-forth sweeps in one run, never resting (each 1.8° step in 4 ms, read on
+    arrival): the hardest duty for the belt; slower sweeps only add rest in which the
+    stretch decays (next test). 560 000 RK4 steps of 0.5 ms."""
+    r = bench.coupling(1000)
+    stretch = r["stretch_per_sweep_rad"]
+    assert r["warnings"] == 0 and np.all(np.isfinite(stretch))
+    assert stretch.max() < STRETCH_BOUND_RAD, stretch.max()
+    assert stretch.max() > 0.001  # the belt does stretch: a real compliance, not rigid
+    # steady: no growth from the second sweep on (the first starts from rest)
+    np.testing.assert_allclose(stretch[1:], stretch[1], rtol=1e-6)
+    assert r["read_error_max_rad"] < 0.02  # the sensors lag a 4-ms step by < 1.2°
+
+
+def test_belt_lag_decays_with_settle_time():
+    rows = bench.settling({"belt_dynamics": {}}, (0.0, 0.020, 0.1))
+    assert 0.005 < rows[0]["angle_error_rms_rad"] < 0.02     # read on arrival: ~0.7° behind
+    assert rows[1]["angle_error_max_rad"] < 1e-4              # 20 ms later
+    assert rows[2]["angle_error_max_rad"] < 1e-9
+    assert rows[0]["hardware_s"] < rows[1]["hardware_s"] < rows[2]["hardware_s"]
+
+
+@pytest.mark.parametrize("settle_s", [0.0, 0.010])
+def test_halving_the_timestep_changes_readings_by_less_than_the_tolerance(settle_s):
+    """Belt and timing on, so measurements fall mid-move too; same seed, dt 0.5 vs 0.25 ms."""
+    r = bench.convergence(timed(settle_s))
+    assert r["angle_rad"] < ANGLE_TOL_RAD, r
+    assert r["distance_m"] < DIST_TOL_M and r["hit_changed"] == 0, r
+    assert r["counts"] == 0, r
+    assert r["angle_error_rms_rad"] > 100 * ANGLE_TOL_RAD  # the effect itself is far larger
+
+
+def test_backlash_leaves_an_error_that_settling_cannot_remove():
+    half = math.radians(1.0) / 2
+    slack = bench.settling({"belt_dynamics": {"backlash_deg": 1.0}}, (0.1,))[0]
+    tight = bench.settling({"belt_dynamics": {}}, (0.1,))[0]
+    assert tight["angle_error_max_rad"] < 1e-9
+    assert half / 4 < slack["angle_error_max_rad"] <= half + 1e-4
+
+
+def test_unstable_physics_says_what_to_change(monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes MUJOCO_LOG.TXT on a warning
+    sim = SimRing(bench.variant("t_room", effects={"belt_dynamics": {"timestep_ms": 10}}))
+    with pytest.raises(RuntimeError, match=r"timestep_ms .*10 ms.*belt_timeconst_ms"):
+        sim.sweep(0)
+
+
+# --------------------------------------------------------------------------- GP2 timing
+
+
+def test_a_read_returns_the_last_measurement_whose_output_is_valid():
+    periods = D.SensorClocks.periods(TimingEffect(), 12, seed=4)
+    assert np.all((periods >= 0.0383 - 0.0096) & (periods <= 0.0383 + 0.0096))
+    assert np.array_equal(periods, D.SensorClocks.periods(TimingEffect(), 12, seed=4))
+    clocks = D.SensorClocks.draw(TimingEffect(), periods, np.random.default_rng(0))
+    reads = np.linspace(0.0, 1.0, 2001)[:, None] + np.zeros(12)
+    m = clocks.measured_at(reads)
+    # on the sensor's clock, output valid by the read, and the next one not yet valid
+    n = (m - clocks.phase_s) / clocks.period_s
+    np.testing.assert_allclose(n, np.round(n), atol=1e-9)
+    assert np.all(m + clocks.latency_s <= reads + 1e-12)
+    assert np.all(m + clocks.period_s + clocks.latency_s > reads)
+
+
+def test_fast_sweep_smears_and_settling_one_sensor_period_removes_it():
+    rows = {r["settle_s"]: r for r in bench.settling({"belt_dynamics": {}, "timing": {}},
+                                                     (0.0, P_SLOW_S, 0.075))}
+    fast, settled, rested = rows[0.0], rows[P_SLOW_S], rows[0.075]
+    print(f"\nbelt + timing: settle 0: {fast['angle_error_rms_rad']:.3e} rad rms in "
+          f"{fast['hardware_s']:.2f} s; settle {P_SLOW_S * 1e3:.1f} ms: "
+          f"{settled['angle_error_rms_rad']:.3e} rad rms in {settled['hardware_s']:.2f} s; "
+          f"75 ms: {rested['angle_error_rms_rad']:.3e} rad")
+    step = Ring().motor_step_rad * Ring().gear
+    assert fast["angle_error_rms_rad"] > 3 * step            # readings several steps stale
+    assert settled["angle_error_rms_rad"] < 0.03 * fast["angle_error_rms_rad"]
+    assert settled["angle_error_max_rad"] < step / 5          # belt still ringing a little
+    assert rested["angle_error_max_rad"] < 1e-5
+    assert fast["hardware_s"] < settled["hardware_s"] / 10    # what the accuracy costs
+
+
+def test_mujoco_periodic_delayed_rangefinders_agree_with_the_clock_model():
+    r = bench.mujoco_clocks(timed(0.0))
+    assert r["warnings"] == 0 and r["readings"] > 500
+    assert r["agree_quantized"] == 1.0, r            # same rule on MuJoCo's step grid
+    assert r["max_diff_m"] < 0.003, r                # ≤ one 0.5 ms step of motion otherwise
+    assert r["stale_m"] > 0.005                      # and timing matters at all
+
+
+def test_timing_is_reproducible_and_fresh_per_sweep():
+    sc = timed(0.0, {"timing": {}, "noise": {}})
+    a, b = SimRing(sc, seed=5), SimRing(sc, seed=5)
+    s1, s2 = a.sweep(0), a.sweep(0)
+    assert np.array_equal(s1.counts, b.sweep(0).counts)
+    assert not np.array_equal(s1.truth.direction, s2.truth.direction)  # new clock phases
+
+
+# --------------------------------------------------------------------------- motion
+
+
+def test_frames_take_a_pose_per_reading(t_room):
+    sim = SimRing(t_room)
+    steps = sim.default_steps()
+    angles = sim.built.sensor_qpos_for(steps * sim.ring.motor_step_rad)
+    rng = np.random.default_rng(1)
+    n = len(steps)
+    per_step = np.column_stack([rng.uniform(0.5, 1.9, n), rng.uniform(0.3, 0.6, n),
+                                rng.uniform(-3, 3, n)])
+    o1, d1 = sim.frames(angles, per_step)
+    o2, d2 = sim.frames(angles, np.repeat(per_step[:, None], sim.ring.sensors, axis=1))
+    np.testing.assert_allclose(o2, o1, atol=1e-12)
+    np.testing.assert_allclose(d2, d1, atol=1e-12)
+
+
+def _perfect_moving(drop=()):
+    return bench.variant("t_room_moving", drop=drop,
+                         motion={"odometry_sigma_mm": 0, "odometry_sigma_deg": 0})
+
+
+def test_every_reading_carries_its_pose_and_the_estimator_uses_it():
+    sim = SimRing(_perfect_moving(drop=("belt_dynamics", "timing")))
+    n = sim.n_sweeps
+    assert n > 4
+    sweep = sim.sweep(n // 2)
+    poses = sweep.reading_poses
+    assert poses.shape == sweep.counts.shape + (3,)
+    assert np.ptp(poses[:, 0, 0]) + np.ptp(poses[:, 0, 1]) > 0.05  # it moved during the sweep
+    origin, _ = beam_geometry(sweep.ring, poses, sweep.sensor_angles, sweep.ring.emitter_offset_m)
+    np.testing.assert_allclose(origin, sweep.truth.origin[..., :2], atol=1e-9)
+    pts = estimate(sweep)
+    np.testing.assert_allclose(pts.origin_x, sweep.truth.origin[..., 0], atol=1e-9)
+    # the same counts read as if standing at the sweep's pose would put points elsewhere
+    frozen = estimate(Sweep(**{**sweep.__dict__, "reading_poses": None}))
+    ok = pts.valid & frozen.valid
+    assert np.nanmax(np.hypot(pts.x - frozen.x, pts.y - frozen.y)[ok]) > 0.05
+    with pytest.raises(IndexError, match="drives its path in"):
+        sim.sweep(n)
+
+
+def test_perfect_odometry_maps_as_well_as_static_scans():
+    """Same sweep positions, standing vs driving through them: occupied F1 within 0.02.
+    (Against t_room's four scans the moving run has more sweeps, and the mapper's precision
+    falls with the number of sweeps whether the robot moves or not: irring bench dynamics.)"""
+    moving_sc = _perfect_moving()
+    moving = pipeline.run(moving_sc, progress=False)
+    sim = SimRing(moving_sc)
+    steps = sim.default_steps()
+    mid = [sim.dynamics.plan(k, steps).pose[len(steps) // 2, 0] for k in range(sim.n_sweeps)]
+    static = pipeline.run(bench.variant(
+        "t_room_moving", drop=D.DYNAMIC_EFFECTS,
+        poses=[{"x_m": float(p[0]), "y_m": float(p[1]), "yaw_rad": float(p[2])} for p in mid]),
+        progress=False)
+    f1_m, f1_s = moving.scores["occupied_f1"], static.scores["occupied_f1"]
+    print(f"\noccupied F1: moving {f1_m:.3f}, static at the same places {f1_s:.3f}")
+    assert len(moving.sweeps) == len(static.sweeps)
+    assert abs(f1_m - f1_s) <= 0.02
+    assert moving.scores["free_accuracy"] >= 0.95
+
+
+def test_odometry_noise_degrades_the_map_gracefully():
+    f1 = []
+    for mm, deg in ((0, 0), (5, 0.5), (100, 10), (1000, 57)):
+        sc = bench.variant("t_room_moving", drop=("belt_dynamics",),
+                           motion={"odometry_sigma_mm": mm, "odometry_sigma_deg": deg})
+        run = pipeline.run(sc, progress=False)
+        assert all(np.all(np.isfinite(s.reading_poses)) for s in run.sweeps)
+        f1.append(run.scores["occupied_f1"])
+    assert f1[0] - 0.15 < f1[1] <= f1[0] + 0.01   # good odometry: a modest loss
+    assert f1[2] < f1[1] and f1[3] < f1[1]        # bad odometry: a bad map, still a map
+
+
+def test_odometry_drift_has_the_stated_sigma_per_metre():
+    path = D.Path(xy_m=np.array([[0.0, 0.0], [1.0, 0.0]]), yaw_rad=np.zeros(2),
+                  arc_m=np.array([0.0, 1.0]), speed_m_s=0.1)
+    ends = np.array([D.Odometry.along(path, 0.02, 0.0, np.random.default_rng(s)).pose[-1]
+                     for s in range(400)])
+    assert np.std(ends[:, 0]) == pytest.approx(0.02, rel=0.15)
+    assert np.std(ends[:, 1]) == pytest.approx(0.02, rel=0.15)
+    turned = np.array([D.Odometry.along(path, 0.0, 0.05, np.random.default_rng(s)).pose[-1]
+                       for s in range(400)])
+    assert np.std(turned[:, 2]) == pytest.approx(0.05, rel=0.15)
+    exact = D.Odometry.along(path, 0.0, 0.0, np.random.default_rng(0))
+    np.testing.assert_allclose(exact.pose_at(np.array([0.0, 5.0, 99.0])),
+                               [[0, 0, 0], [0.5, 0, 0], [1, 0, 0]], atol=1e-12)
+
+
+def test_a_path_through_a_wall_is_an_error_naming_the_segment(t_room_raw):
+    from irring.scenario import parse
+
+    t_room_raw["effects"]["motion"] = {"path": [{"x_mm": 1920, "y_mm": 450},
+                                                {"x_mm": 500, "y_mm": 450},
+                                                {"x_mm": 1210, "y_mm": 1350}]}
+    with pytest.raises(ScenarioError, match=r"motion\.path\[1\] → \[2\].*hit a wall"):
+        SimRing(parse(t_room_raw, "bad.yaml"))
+
+
+def test_bundled_moving_scenario_runs_and_maps():
+    sc = load_scenario("t_room_moving")
+    assert {"belt_dynamics", "timing", "motion"} <= set(sc.effects)
+    assert isinstance(sc.effects["belt_dynamics"], BeltDynamicsEffect)
+    run = pipeline.run(sc, progress=False)
+    assert run.scores["occupied_f1"] > 0.7 and run.scores["free_accuracy"] > 0.95
+    assert run.hardware_time_s == pytest.approx(sum(s.duration_s for s in run.sweeps))
