@@ -10,7 +10,7 @@ import argparse
 import importlib
 import importlib.util
 
-BENCHES = ("accuracy", "speed", "effects", "estimator")
+BENCHES = ("accuracy", "speed", "effects", "estimator", "dynamics")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
