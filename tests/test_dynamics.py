@@ -303,10 +303,14 @@ def test_a_path_through_a_wall_is_an_error_naming_the_segment(t_room_raw):
         SimRing(parse(t_room_raw, "bad.yaml"))
 
 
-def test_bundled_moving_scenario_runs_and_maps():
+def test_bundled_moving_scenario_maps_and_replays_exactly(tmp_path):
     sc = load_scenario("t_room_moving")
     assert {"belt_dynamics", "timing", "motion"} <= set(sc.effects)
     assert isinstance(sc.effects["belt_dynamics"], BeltDynamicsEffect)
     run = pipeline.run(sc, progress=False)
     assert run.scores["occupied_f1"] > 0.7 and run.scores["free_accuracy"] > 0.95
     assert run.hardware_time_s == pytest.approx(sum(s.duration_s for s in run.sweeps))
+    # the recording keeps each reading's pose, so replay rebuilds the very same map
+    paths = pipeline.write_outputs(run, tmp_path, animation=False)
+    again = pipeline.replay(paths["recording"], progress=False)
+    assert np.array_equal(again.grid.log_odds, run.grid.log_odds)
