@@ -76,20 +76,22 @@ def pose_quat(yaw_rad: np.ndarray) -> np.ndarray:
 class SimRing:
     """The scenario's ring in its room, swept kinematically.
 
-    ``SimRing(scenario, seed=None)``: ``seed`` defaults to ``scenario.seed``. The k-th sweep
-    at pose p draws its noise from ``np.random.default_rng([seed, p, k])``, so a fresh
-    ``SimRing`` with the same scenario and seed reproduces every sweep; :meth:`reset`
+    ``SimRing(scenario, seed=None, pipeline=None)``: ``seed`` defaults to ``scenario.seed``;
+    ``pipeline`` (an :class:`irring.effects.Pipeline`) defaults to
+    ``rangers.pipeline_for(scenario)``: the scene's effects, with the sonar cone for a sonar.
+    The k-th sweep at pose p draws its noise from ``np.random.default_rng([seed, p, k])``, so
+    a fresh ``SimRing`` with the same scenario and seed reproduces every sweep; :meth:`reset`
     forgets the sweep counters.
 
     Attributes: ``model`` (``mujoco.MjModel``), ``data`` (an ``MjData`` for callers who step
     physics), ``built`` (:class:`irring.model.RingModel`: ids and addresses), ``scenario``,
-    ``ring``, ``pipeline`` (the scene's :class:`irring.effects.Pipeline`, built on first use),
+    ``ring``, ``pipeline`` (the scene's effects pipeline, built on first use unless given),
     ``dynamics`` (:class:`irring.dynamics.Dynamics` when the scene lists ``belt_dynamics``,
     ``timing`` or ``motion``, else None), ``n_sweeps`` (sweeps the scene takes: one per
     scan pose, or with ``motion`` back to back along the path).
     """
 
-    def __init__(self, scenario: Scenario, *, seed: int | None = None):
+    def __init__(self, scenario: Scenario, *, seed: int | None = None, pipeline=None):
         self.scenario = scenario
         self.ring = scenario.ring
         self.built = model_lib.build(scenario)
@@ -103,7 +105,7 @@ class SimRing:
         self._kin_model.opt.disableflags |= _KINEMATICS_ONLY
         self._kin: dict[int, tuple] = {}  # number of steps → (batch, bound arrays)
         self._rays = mujoco.batch.Batch(self.model, 1, nthread=1)
-        self._pipeline = None
+        self._pipeline = pipeline
         self._sweeps: dict[int, int] = {}
         self.dynamics = None  # irring.dynamics.Dynamics, only for scenes that need it
         from . import dynamics as dynamics_lib
@@ -116,9 +118,9 @@ class SimRing:
     @property
     def pipeline(self):
         if self._pipeline is None:
-            from .effects import Pipeline  # the effects stage is its own module
+            from .rangers import pipeline_for  # the scene's effects, a sonar's cone included
 
-            self._pipeline = Pipeline.from_scenario(self.scenario)
+            self._pipeline = pipeline_for(self.scenario)
         return self._pipeline
 
     def reset(self, seed: int | None = None) -> None:
