@@ -8,7 +8,7 @@ Arrays are shaped ``(steps, sensors)``; units are SI.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

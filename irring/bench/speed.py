@@ -84,14 +84,11 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
     from .. import model as model_lib
     from ..estimate import Calibration, estimate
     from ..mapping import OccupancyGrid
-    from ..rangers import pipeline_for
     from ..sim import SimRing
 
     if rounds < 1:
         raise ValueError(f"rounds must be ≥ 1, got {rounds}")
     sim = SimRing(scenario, seed=seed)
-    if scenario.sensor.model == "sonar":  # as irring.compare does
-        sim._pipeline = pipeline_for(scenario)  # TODO(integration): SimRing(pipeline=…) hook
     steps = sim.default_steps()
     motor = steps * sim.ring.motor_step_rad
     angles = sim.built.sensor_qpos_for(motor)
