@@ -26,9 +26,9 @@ probability 0.65, *free* below 0.196 and *unknown* in between — the thresholds
 map_server uses, so the PGM export and the grid agree.
 
 Ray traversal (:func:`traverse`) is Amanatides & Woo's exact voxel walk, vectorised over all
-rays at once: each ray's x- and y-border crossings are generated as flat arrays, sorted per
-ray, and the cell after each crossing follows from a cumulative count. No Python loop runs
-per ray or per cell.
+rays at once: every ray is walked column by column along its major axis (one or two cells
+per column), all columns of all rays laid out in flat arrays. No Python loop runs per ray or
+per cell. An insert touches only the box of cells its beams can reach.
 
 Frames: the grid's origin is the world (x, y) of the *corner* of cell (0, 0); row ``iy``
 grows with y, column ``ix`` with x; ``log_odds[iy, ix]``.
@@ -58,6 +58,11 @@ PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN = 254, 0, 205
 # Crossings closer than this (in cells) are the same point: a ray through a cell corner
 # does not visit the two side cells it only touches.
 _TOUCH_CELLS = 1e-9
+# Clipped segments shorter than this visit just the cell they start in.
+_SHORT_CELLS = 4 * _TOUCH_CELLS
+# A valid beam's cells more than this many σ (plus the free margin) in front of its end point
+# get l_free exactly: Φ(8) = 1 − 6e-16 and exp(−8²/2) = 1.3e-14.
+_NEAR_SIGMAS = 8.0
 
 
 @dataclass(frozen=True)
@@ -107,24 +112,48 @@ class Visits:
     t_exit: np.ndarray
 
 
-def traverse(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
-    """Every grid cell each segment (x0, y0) → (x1, y1) (metres) crosses, exactly.
+@dataclass
+class _Walk:
+    """A batch of segments walked column by column along each one's major axis.
 
-    Vectorised Amanatides–Woo: segments are clipped to the grid (Liang–Barsky), then each
-    segment's border crossings are listed, sorted and counted. Conventions for the hard
-    cases: a segment running exactly along a cell border belongs to the cells above / right
-    of it (``floor``); a segment through a cell corner does not visit the two cells it only
-    touches; a zero-length segment visits the one cell holding it; parts outside the grid
-    are dropped.
+    Kept ray r (``rays[r]`` indexes the input) has ``count[r]`` columns, numbered
+    ``first[r]`` … ``first[r] + count[r] − 1`` in the flat per-column arrays. In each column
+    the segment visits the cell it enters in (slot A, minor index ``a``) and, if it crosses a
+    minor-axis border inside the column, the cell after it (slot B, index ``z``; ``two``).
+    Cells it stays in for less than ``_TOUCH_CELLS`` (corner touches) are not visits: ``a``
+    and ``z`` are taken that far inside the column, and a first or last column the clipped
+    segment barely enters has ``flat_a`` = ``dummy`` and no slot B.
+    ``flat`` = ix·stride_x + iy·stride_y + offset, as float holding exact integers.
     """
-    ny, nx = int(shape[0]), int(shape[1])
-    res = float(resolution_m)
-    gx0 = (np.asarray(x0, dtype=float).ravel() - origin_xy_m[0]) / res
-    gy0 = (np.asarray(y0, dtype=float).ravel() - origin_xy_m[1]) / res
-    gx1 = (np.asarray(x1, dtype=float).ravel() - origin_xy_m[0]) / res
-    gy1 = (np.asarray(y1, dtype=float).ravel() - origin_xy_m[1]) / res
-    dx, dy = gx1 - gx0, gy1 - gy0
 
+    rays: np.ndarray
+    count: np.ndarray
+    first: np.ndarray
+    a: np.ndarray          # per column: minor-axis index of slot A (float)
+    z: np.ndarray          # per column: minor-axis index of slot B (= a when there is none)
+    two: np.ndarray        # per column: slot B is a visit
+    flat_a: np.ndarray
+    flat_b: np.ndarray     # meaningful where ``two``
+    short: np.ndarray      # per ray: shorter than a few touch lengths, one cell
+    t0: np.ndarray         # per ray: clipped part of the segment, as fractions of it
+    t1: np.ndarray
+    t_col0: np.ndarray     # per ray: t where the line enters column 0 (may be < t0)
+    t_col: np.ndarray      # per ray: t per column (1/|major extent|; 0 for short rays)
+    q0: np.ndarray         # per ray: minor coordinate (cells) at t = 0 …
+    dq: np.ndarray         # … and its change over the whole segment
+
+
+def _walk(gx0, gy0, gx1, gy1, nx: int, ny: int, stride_x: float, stride_y: float,
+          offset: float, dummy: float) -> _Walk:
+    """The column walk behind :func:`traverse` and the mapper; coordinates in cell units
+    relative to the grid's corner, grid [0, nx) × [0, ny).
+
+    Each segment is walked along its major axis (|Δ| largest), so a column holds one or two
+    of its cells (|slope| ≤ 1). All columns of all segments are laid out flat with their
+    ray's parameters repeated, so the work is a fixed number of array operations; a column's
+    minor coordinate is affine in its flat number, so nothing is accumulated along a ray.
+    """
+    dx, dy = gx1 - gx0, gy1 - gy0
     # Liang–Barsky clip to [0, nx] × [0, ny] in cell units, keeping the segment's own t.
     t0 = np.zeros_like(gx0)
     t1 = np.ones_like(gx0)
@@ -136,89 +165,151 @@ def traverse(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
             parallel = p == 0
             keep &= ~(parallel & ((q <= 0) if upper else (q < 0)))
             r = q / p
-            enter = ~parallel & (p < 0)
-            leave = ~parallel & (p > 0)
-            t0 = np.where(enter, np.maximum(t0, r), t0)
-            t1 = np.where(leave, np.minimum(t1, r), t1)
-    length_all = np.hypot(dx, dy)
+            t0 = np.where(~parallel & (p < 0), np.maximum(t0, r), t0)
+            t1 = np.where(~parallel & (p > 0), np.minimum(t1, r), t1)
+    length = np.hypot(dx, dy)
     # a segment that only touches the grid's border has no visits; a zero-length one inside has one
-    keep &= (t0 <= t1) & (((t1 - t0) * length_all >= _TOUCH_CELLS) | (length_all < _TOUCH_CELLS))
+    keep &= (t0 <= t1) & (((t1 - t0) * length >= _TOUCH_CELLS) | (length < _TOUCH_CELLS))
     rays = np.flatnonzero(keep)
-    gx0, gy0, dx, dy, t0, t1 = (a[rays] for a in (gx0, gy0, dx, dy, t0, t1))
+    if len(rays) < len(keep):
+        gx0, gy0, dx, dy, t0, t1, length = (a[rays] for a in (gx0, gy0, dx, dy, t0, t1, length))
 
-    ixs = np.clip(np.floor(gx0 + t0 * dx), 0, nx - 1).astype(np.int64)
-    iys = np.clip(np.floor(gy0 + t0 * dy), 0, ny - 1).astype(np.int64)
-    ixe = np.clip(np.floor(gx0 + t1 * dx), 0, nx - 1).astype(np.int64)
-    iye = np.clip(np.floor(gy0 + t1 * dy), 0, ny - 1).astype(np.int64)
-    sx = np.where(ixe >= ixs, 1, -1)
-    sy = np.where(iye >= iys, 1, -1)
-    ncx = np.abs(ixe - ixs)
-    ncy = np.abs(iye - iys)
+    xmaj = np.abs(dx) >= np.abs(dy)
+    p0 = np.where(xmaj, gx0, gy0)
+    q0 = np.where(xmaj, gy0, gx0)
+    dp = np.where(xmaj, dx, dy)
+    dq = np.where(xmaj, dy, dx)
+    last_col = np.where(xmaj, nx - 1, ny - 1)
+    cs = np.clip(np.floor(p0 + t0 * dp), 0, last_col)
+    ce = np.clip(np.floor(p0 + t1 * dp), 0, last_col)
+    short = (t1 - t0) * length < _SHORT_CELLS
+    back = dp < 0
+    count = np.where(short, 1, np.abs(ce - cs) + 1).astype(np.intp)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_col = np.where(short, 0.0, 1.0 / np.abs(dp))
+        # the touch length along the minor axis, signed with the direction of travel
+        tol_q = np.where(short | (length == 0), 0.0, _TOUCH_CELLS * dq / length)
+    # the line enters column 0 at the border p = cs (forwards) or cs + 1 (backwards)
+    t_col0 = np.where(short, 0.0, (cs + back - p0) * np.where(back, -t_col, t_col))
+    qk = t_col * dq              # minor coordinate change per column
+    step_p = np.where(back, -1.0, 1.0) * np.where(xmaj, stride_x, stride_y)
+    stride_q = np.where(xmaj, stride_y, stride_x)
 
-    def crossings(start, step, count, g0, d):
-        """Ray id, t and axis flag of every border crossing along one axis."""
-        rid = np.repeat(np.arange(len(count)), count)
-        first = np.cumsum(count) - count
-        j = np.arange(int(count.sum())) - np.repeat(first, count)
-        border = start[rid] + np.where(step[rid] > 0, j + 1, -j)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (border - g0[rid]) / d[rid]
-        return rid, t
+    first = np.cumsum(count) - count
+    total = int(first[-1] + count[-1]) if len(count) else 0
+    # column j of the flat layout enters at minor coordinate q_base + j·qk, its cell's
+    # major-axis part of flat is p_base + j·step_p
+    per_col = np.repeat(np.stack([q0 + t_col0 * dq - first * qk, qk, tol_q, stride_q,
+                                  cs * np.where(xmaj, stride_x, stride_y) + offset
+                                  - first * step_p, step_p]), count, axis=1)
+    j = _arange(total + 1)
+    q_in = per_col[0] + j[:-1] * per_col[1]
+    q_out = per_col[0] + j[1:] * per_col[1]
+    # the first and last columns start / end where the clipped segment does
+    last = first + count - 1
+    q_in[first] = q0 + t0 * dq
+    q_out[last] = q0 + t1 * dq
+    q_out[first[short]] = q_in[first[short]]      # a very short segment: its start cell only
+    # slot A is where the segment is a touch length into the column, B a touch length before
+    # its end; |slope| ≤ 1 puts them in the same or neighbouring rows
+    a = np.floor(q_in + per_col[2])
+    z = np.floor(np.subtract(q_out, per_col[2], out=q_out), out=q_out)
+    flat_a = a * per_col[3]
+    flat_a += per_col[4]
+    flat_a += j[:-1] * per_col[5]
+    two = z != a
+    flat_b = (z - a) * per_col[3]
+    flat_b += flat_a
+    # first / last columns the clipped segment barely enters (it starts or ends on their border)
+    with np.errstate(invalid="ignore"):
+        first_len = (np.minimum(t_col0 + t_col, t1) - t0) * length
+        last_len = (t1 - np.maximum(t_col0 + (count - 1) * t_col, t0)) * length
+    touch = np.concatenate([first[(first_len < _TOUCH_CELLS) & ~short],
+                            last[(last_len < _TOUCH_CELLS) & ~short]])
+    flat_a[touch] = dummy
+    two[touch] = False
+    return _Walk(rays=rays, count=count, first=first, a=a, z=z, two=two, flat_a=flat_a,
+                 flat_b=flat_b, short=short, t0=t0, t1=t1, t_col0=t_col0, t_col=t_col,
+                 q0=q0, dq=dq)
 
-    rx, tx = crossings(ixs, sx, ncx, gx0, dx)
-    ry, ty = crossings(iys, sy, ncy, gy0, dy)
-    tx = np.clip(tx, t0[rx], t1[rx])
-    ty = np.clip(ty, t0[ry], t1[ry])
-    # Merge each ray's x- and y-crossings: keys 2·ray + t are already sorted within each
-    # list, so a stable sort of the two runs is one linear merge (timsort); on a tie — a cell
-    # corner — the x-crossing goes first.
-    keys = np.concatenate([2.0 * rx + tx, 2.0 * ry + ty])
-    rank = np.empty(len(keys), np.int64)
-    rank[np.argsort(keys, kind="stable")] = np.arange(len(keys))
-    mx, my = rank[:len(rx)], rank[len(rx):]
 
-    # Lay out each ray's visits: its start cell, then one cell after each crossing; the
-    # merged crossing m of ray r lands in slot m + r + 1.
-    n = len(rays)
-    ncross = ncx + ncy
-    first = np.cumsum(ncross + 1) - (ncross + 1)
-    total = int((ncross + 1).sum())
-    ray = np.repeat(np.arange(n), ncross + 1)
-    slot_x = mx + rx + 1
-    slot_y = my + ry + 1
-    stepx = np.zeros(total, np.int64)
-    stepy = np.zeros(total, np.int64)
-    stepx[slot_x] = 1
-    stepy[slot_y] = 1
-    cx = np.cumsum(stepx)
-    cy = np.cumsum(stepy)
-    # cumulative counts restart at each ray's start slot
-    cx -= np.repeat(cx[first], ncross + 1)
-    cy -= np.repeat(cy[first], ncross + 1)
-    ix = ixs[ray] + sx[ray] * cx
-    iy = iys[ray] + sy[ray] * cy
-    t_enter = np.empty(total)
-    t_enter[first] = t0
-    t_enter[slot_x] = tx
-    t_enter[slot_y] = ty
-    t_exit = np.empty(total)
-    t_exit[:-1] = t_enter[1:]
-    last = first + ncross
-    t_exit[last] = t1
+_ARANGE = np.arange(0.0)
 
-    # Drop corner touches and zero-length entries, but keep one cell for a zero-length ray.
-    length_cells = np.hypot(dx, dy)[ray]
-    touching = (t_exit - t_enter) * length_cells < _TOUCH_CELLS
-    only = np.repeat(ncross == 0, ncross + 1)
-    keep_visit = ~touching | only
-    if np.any(touching & ~only):
-        # a ray whose every visit is a touch (it lies in one cell border corner) keeps its first
-        kept_per_ray = np.bincount(ray[keep_visit], minlength=n)
-        keep_visit[first[kept_per_ray == 0]] = True
-    ix = np.clip(ix[keep_visit], 0, nx - 1)
-    iy = np.clip(iy[keep_visit], 0, ny - 1)
-    return Visits(ray=rays[ray[keep_visit]], ix=ix, iy=iy, t_enter=t_enter[keep_visit],
-                  t_exit=t_exit[keep_visit])
+
+def _arange(n: int) -> np.ndarray:
+    """0.0, 1.0, … n − 1 as a view of one cached array (grown as needed, read-only)."""
+    global _ARANGE
+    if len(_ARANGE) < n:
+        _ARANGE = np.arange(float(max(n, 2 * len(_ARANGE), 1 << 16)))
+        _ARANGE.flags.writeable = False
+    return _ARANGE[:n]
+
+
+def _slot_t(w: _Walk, cols: np.ndarray, ray: np.ndarray):
+    """(t where slot A is entered, t of the A→B crossing or the column's exit, t of the
+    column's exit) for columns ``cols`` of ``w`` and their rays (indices into w.rays)."""
+    k = cols - w.first[ray]
+    t_col0, t_col = w.t_col0[ray], w.t_col[ray]
+    t_in = np.maximum(t_col0 + k * t_col, w.t0[ray])
+    t_out = np.minimum(t_col0 + (k + 1.0) * t_col, w.t1[ray])
+    short = w.short[ray]
+    if np.any(short):
+        t_in = np.where(short, w.t0[ray], t_in)
+        t_out = np.where(short, w.t1[ray], t_out)
+    a, z = w.a[cols], w.z[cols]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_cross = np.clip((np.maximum(a, z) - w.q0[ray]) / w.dq[ray], t_in, t_out)
+    return t_in, np.where(w.two[cols], t_cross, t_out), t_out
+
+
+def traverse(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
+    """Every grid cell each segment (x0, y0) → (x1, y1) (metres) crosses, exactly.
+
+    Vectorised Amanatides–Woo: segments are clipped to the grid (Liang–Barsky), then walked
+    column by column along their major axis, all at once (see :func:`_walk`). Conventions
+    for the hard cases: a segment running exactly along a cell border belongs to the cells
+    above / right of it (``floor``); a segment through a cell corner does not visit the two
+    cells it only touches (nor any cell it stays in for less than 1e-9 cells); a zero-length
+    segment visits the one cell holding it; parts outside the grid are dropped.
+    """
+    ny, nx = int(shape[0]), int(shape[1])
+    res = float(resolution_m)
+    g = [(np.asarray(v, dtype=float).ravel() - origin_xy_m[i % 2]) / res
+         for i, v in enumerate((x0, y0, x1, y1))]
+    # batches of ~2^16 columns keep the flat column numbers (and rounding in them) small
+    with np.errstate(invalid="ignore"):
+        cols = np.minimum(np.maximum(np.abs(g[2] - g[0]), np.abs(g[3] - g[1])), nx + ny) + 2
+    ends = np.cumsum(np.where(np.isfinite(cols), cols, 0))
+    cuts = np.searchsorted(ends, np.arange(1, int(ends[-1] // _BATCH_COLUMNS) + 1)
+                           * _BATCH_COLUMNS) if len(ends) else []
+    parts = [_traverse(*[v[lo:hi] for v in g], nx, ny) for lo, hi in
+             zip([0, *cuts], [*cuts, len(cols)]) if hi > lo] or [_traverse(*g, nx, ny)]
+    starts = np.cumsum([0] + [hi - lo for lo, hi in zip([0, *cuts], [*cuts, len(cols)])
+                              if hi > lo])
+    return Visits(*(np.concatenate([getattr(v, f) + (s if f == "ray" else 0)
+                                    for v, s in zip(parts, starts)])
+                    for f in ("ray", "ix", "iy", "t_enter", "t_exit")))
+
+
+_BATCH_COLUMNS = 1 << 16
+
+
+def _traverse(gx0, gy0, gx1, gy1, nx: int, ny: int) -> Visits:
+    """:func:`traverse` for one batch, in cell units."""
+    # flat indices on the grid padded by one cell, so a rounding step off the edge is caught
+    width = nx + 2
+    w = _walk(gx0, gy0, gx1, gy1, nx, ny, 1.0, float(width), float(width + 1), -1.0)
+    ray = np.repeat(np.arange(len(w.rays)), w.count)
+    t_in, t_mid, t_out = _slot_t(w, np.arange(len(w.a)), ray)
+    keep = np.stack([w.flat_a >= 0, w.two], axis=1).ravel()
+    flat = np.stack([w.flat_a, w.flat_b], axis=1).ravel()[keep].astype(np.int64)
+    ix = flat % width - 1
+    iy = flat // width - 1
+    inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+    pick = np.flatnonzero(keep)[inside]
+    return Visits(ray=w.rays[np.repeat(ray, 2)[pick]], ix=ix[inside], iy=iy[inside],
+                  t_enter=np.stack([t_in, t_mid], axis=1).ravel()[pick],
+                  t_exit=np.stack([t_mid, t_out], axis=1).ravel()[pick])
 
 
 # --------------------------------------------------------------------------- the grid
@@ -307,69 +398,136 @@ class OccupancyGrid:
 
     # ---- updates
 
-    def delta(self, points: Points) -> np.ndarray:
-        """The log-odds change (ny, nx) the readings in ``points`` would add (before clamping)."""
+    def _box_delta(self, points: Points) -> tuple[np.ndarray, int, int] | None:
+        """The log-odds change of ``points`` on the box of cells their beams can touch:
+        (change (h, w), ix, iy of the box's first cell), or None when no beam is mapped.
+
+        Work and memory scale with the beams, not the grid: one column walk over all beams,
+        one ``bincount`` over the box. A valid beam's cells well in front of its end point
+        (where Φ and the Gaussian are 1 and 0 to 1e-14) get ``l_free`` as a constant; only
+        the cells within ``_NEAR_SIGMAS``·σ + margin of the end point are weighed exactly.
+        """
         p = self.params
+        res = self.resolution_m
         ox = np.asarray(points.origin_x, float).ravel()
         oy = np.asarray(points.origin_y, float).ravel()
         heading = np.asarray(points.heading, float).ravel()
         reason = np.asarray(points.reason).ravel()
         ex = np.asarray(points.x, float).ravel()
         ey = np.asarray(points.y, float).ravel()
-        valid = (np.asarray(points.valid, bool).ravel() & np.isfinite(ex) & np.isfinite(ey)
-                 & np.isfinite(ox) & np.isfinite(oy))
-        sigma = np.asarray(points.sigma_m, float).ravel()
-        sigma = np.where(np.isfinite(sigma), sigma, p.default_sigma_m)
-        sigma = np.maximum(sigma, p.min_sigma_m)
+        finite_o = np.isfinite(ox) & np.isfinite(oy)
+        valid = np.asarray(points.valid, bool).ravel() & np.isfinite(ex) & np.isfinite(ey) & finite_o
+        iv = np.flatnonzero(valid)
+        nr = np.flatnonzero(~valid & (reason == Reason.NO_RETURN) & finite_o & np.isfinite(heading))
+        if len(iv) + len(nr) == 0:
+            return None
 
         # valid beams: emitter → end point, continued tail_sigmas·σ into the surface
-        vx, vy = ex - ox, ey - oy
+        sigma = np.asarray(points.sigma_m, float).ravel()[iv]
+        sigma = np.maximum(np.where(np.isfinite(sigma), sigma, p.default_sigma_m), p.min_sigma_m)
+        vx, vy = ex[iv] - ox[iv], ey[iv] - oy[iv]
         d = np.hypot(vx, vy)
-        ux = np.where(d > 0, vx / np.where(d > 0, d, 1.0), np.cos(heading))
-        uy = np.where(d > 0, vy / np.where(d > 0, d, 1.0), np.sin(heading))
+        hv = heading[iv]
+        pos = d > 0
+        ux = np.where(pos, vx / np.where(pos, d, 1.0), np.cos(hv))
+        uy = np.where(pos, vy / np.where(pos, d, 1.0), np.sin(hv))
         ux = np.where(np.isfinite(ux), ux, 0.0)
         uy = np.where(np.isfinite(uy), uy, 0.0)
         length = d + p.tail_sigmas * sigma
-        iv = np.flatnonzero(valid)
-
         # no-return beams: emitter → max range along the heading
-        nr = np.flatnonzero(~valid & (reason == Reason.NO_RETURN) & np.isfinite(ox)
-                            & np.isfinite(oy) & np.isfinite(heading))
         rmax = float(points.max_range_m)
-
         x0 = np.concatenate([ox[iv], ox[nr]])
         y0 = np.concatenate([oy[iv], oy[nr]])
-        x1 = np.concatenate([ox[iv] + ux[iv] * length[iv], ox[nr] + rmax * np.cos(heading[nr])])
-        y1 = np.concatenate([oy[iv] + uy[iv] * length[iv], oy[nr] + rmax * np.sin(heading[nr])])
-        seg_len = np.concatenate([length[iv], np.full(len(nr), rmax)])
-        v = traverse(x0, y0, x1, y1, self.origin_xy_m, self.shape, self.resolution_m)
+        x1 = np.concatenate([x0[:len(iv)] + ux * length, ox[nr] + rmax * np.cos(heading[nr])])
+        y1 = np.concatenate([y0[:len(iv)] + uy * length, oy[nr] + rmax * np.sin(heading[nr])])
+        gx0 = (x0 - self.origin_xy_m[0]) / res
+        gy0 = (y0 - self.origin_xy_m[1]) / res
+        gx1 = (x1 - self.origin_xy_m[0]) / res
+        gy1 = (y1 - self.origin_xy_m[1]) / res
 
-        nv = len(iv)
-        is_valid = v.ray < nv
-        w = np.full(len(v.ray), p.l_no_return)
-        if np.any(is_valid):
-            r = v.ray[is_valid]
-            s_a = v.t_enter[is_valid] * seg_len[r]
-            s_b = v.t_exit[is_valid] * seg_len[r]
-            dd = d[iv][r]
-            sg = sigma[iv][r]
-            gap = np.maximum.reduce([s_a - dd, dd - s_b, np.zeros_like(dd)])
-            # free evidence only where the whole cell lies in front of the end point
-            stop = dd - p.free_margin_cells * self.resolution_m
-            beyond = np.where(s_b < stop,
-                              0.5 * (1.0 + _erf((stop - s_b) / (sg * math.sqrt(2.0)))), 0.0)
-            w[is_valid] = p.l_free * beyond + p.l_occ * np.exp(-0.5 * (gap / sg) ** 2)
+        # the beams' bounding box on the grid, padded by one cell for rounding at its edges
         ny, nx = self.shape
-        flat = v.iy * nx + v.ix
-        return np.bincount(flat, weights=w, minlength=ny * nx).reshape(ny, nx)
+        bx0, bx1 = (int(min(max(v, 0.0), nx - 1.0)) for v in
+                    (np.floor(min(gx0.min(), gx1.min())), np.floor(max(gx0.max(), gx1.max()))))
+        by0, by1 = (int(min(max(v, 0.0), ny - 1.0)) for v in
+                    (np.floor(min(gy0.min(), gy1.min())), np.floor(max(gy0.max(), gy1.max()))))
+        bw, bh = bx1 - bx0 + 3, by1 - by0 + 3
+        size = bw * bh
+        w = _walk(gx0, gy0, gx1, gy1, nx, ny, 1.0, float(bw), float(bw * (1 - by0) + 1 - bx0),
+                  float(size))   # dropped slots go to one spare bin past the box
+
+        # every visit first gets its beam's constant (l_free or l_no_return) …
+        kv = int(np.searchsorted(w.rays, len(iv)))     # kept valid beams come first
+        cv = int(w.first[kv]) if kv < len(w.rays) else len(w.a)
+        flat = np.concatenate([w.flat_a, np.compress(w.two, w.flat_b)]).astype(np.intp)
+        if p.l_no_return == p.l_free:
+            acc = np.bincount(flat, minlength=size + 1) * p.l_free
+        else:
+            wts = np.full(len(flat), p.l_no_return)
+            wts[:cv] = p.l_free
+            wts[len(w.a):len(w.a) + int(np.count_nonzero(w.two[:cv]))] = p.l_free
+            acc = np.bincount(flat, wts, minlength=size + 1)
+
+        # … then the columns near each valid end point get the exact model minus l_free
+        if kv:
+            rv = w.rays[:kv]
+            dk, sk, lk = d[rv], sigma[rv], length[rv]
+            count = w.count[:kv]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t_far = (dk - p.free_margin_cells * res - _NEAR_SIGMAS * sk) / lk
+                n_far = np.floor((t_far - w.t_col0[:kv]) / w.t_col[:kv]) - 1.0
+            n_far = np.where(np.isfinite(n_far), np.clip(n_far, 0, count), 0).astype(np.intp)
+            n_near = count - n_far
+            ends = np.cumsum(n_near)
+            ray = np.repeat(np.arange(kv), n_near)
+            cols = np.arange(int(ends[-1])) + np.repeat(w.first[:kv] + n_far - ends + n_near, n_near)
+            t_in, t_mid, t_out = _slot_t(w, cols, ray)
+            scale = (lk / sk)[ray]          # z = (s − d)/σ = t·L/σ − d/σ
+            shift = (dk / sk)[ray]
+            mu = (p.free_margin_cells * res / sk)[ray]
+            z_in, z_mid, z_out = (t * scale - shift for t in (t_in, t_mid, t_out))
+            fa = w.flat_a[cols]
+            ka, kb = fa != size, w.two[cols]
+            extra = np.concatenate([self._weight(z_in, z_mid, mu)[ka],
+                                    self._weight(z_mid, z_out, mu)[kb]]) - p.l_free
+            where = np.concatenate([fa[ka], w.flat_b[cols][kb]]).astype(np.intp)
+            acc += np.bincount(where, extra, minlength=size + 1)
+        return acc[:size].reshape(bh, bw), bx0 - 1, by0 - 1
+
+    def _weight(self, z_a: np.ndarray, z_b: np.ndarray, mu: np.ndarray) -> np.ndarray:
+        """Log-odds for a cell a valid beam crosses from z_a to z_b, in σ from its end point
+        (the module doc's formula); ``mu`` = the free margin in σ."""
+        p = self.params
+        gap = np.maximum(np.maximum(z_a, -z_b), 0.0)
+        # free evidence only where the whole cell lies in front of the end point
+        y = -(z_b + mu)
+        beyond = np.where(y > 0, 0.5 * (1.0 + _erf(y * (1.0 / math.sqrt(2.0)))), 0.0)
+        return p.l_free * beyond + p.l_occ * np.exp(-0.5 * gap * gap)
+
+    def delta(self, points: Points) -> np.ndarray:
+        """The log-odds change (ny, nx) the readings in ``points`` would add (before clamping)."""
+        out = np.zeros(self.shape)
+        box = self._box_delta(points)
+        if box is not None:
+            change, ix, iy = box
+            out[iy + 1:iy + change.shape[0] - 1, ix + 1:ix + change.shape[1] - 1] = change[1:-1, 1:-1]
+        return out
 
     def apply(self, delta: np.ndarray) -> None:
-        """Add a log-odds change and clamp."""
+        """Add a log-odds change (ny, nx) and clamp."""
         np.clip(self.log_odds + delta, self.params.l_min, self.params.l_max, out=self.log_odds)
 
     def insert(self, points: Points) -> None:
-        """Add one batch of readings (typically a sweep) to the map."""
-        self.apply(self.delta(points))
+        """Add one batch of readings (typically a sweep) to the map; only the cells its beams
+        can reach are touched."""
+        box = self._box_delta(points)
+        if box is None:
+            return
+        change, ix, iy = box
+        h, w = change.shape
+        view = self.log_odds[iy + 1:iy + h - 1, ix + 1:ix + w - 1]
+        view += change[1:-1, 1:-1]
+        np.clip(view, self.params.l_min, self.params.l_max, out=view)
 
     # ---- reading the map
 
