@@ -602,7 +602,29 @@ def parse(raw: Any, source: str = "") -> Scenario:
         raise loader.fail("", "a scenario file must be a mapping (key: value) at the top")
     sc = loader.dataclass_(Scenario, raw, "")
     sc = dataclasses.replace(sc, source=source)
+    sc = _sensor_for_design(sc, raw, loader.fail)
     _validate_geometry(sc, loader.fail)
+    return sc
+
+
+def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
+    """A design that carries a non-IR sensor (laser, sonar12) brings its sensor block when the
+    file names no sensor model; naming a different kind of sensor is an error, never a silent
+    GP2D12 default under a laser's name."""
+    from . import designs  # designs owns what each design carries
+
+    if sc.robot.design not in designs.DESIGN_BY_NAME:
+        return sc
+    design = designs.get(sc.robot.design)
+    if design.sensor.is_ir:
+        return sc
+    sensor_raw = raw.get("sensor") or {}
+    if "model" not in sensor_raw:
+        return designs.apply(sc, design)
+    if sc.sensor.model != design.sensor.kind:
+        raise fail("sensor.model", f"{sc.sensor.model!r} does not fit design "
+                                   f"{sc.robot.design!r}, which carries a {design.sensor.kind!r} "
+                                   f"sensor; use model: {design.sensor.kind} or leave `model` out")
     return sc
 
 

@@ -192,6 +192,19 @@ def test_effects_as_a_list_are_the_defaults(t_room_raw):
         sc.effects["foldover"] = S.FoldoverEffect()  # read-only
 
 
+@pytest.mark.parametrize("design, kind", [("laser", "laser"), ("sonar12", "sonar")])
+def test_a_non_ir_design_brings_its_own_sensor(t_room_raw, design, kind):
+    t_room_raw["robot"]["design"] = design
+    t_room_raw.pop("sensor", None)
+    sc = parse(t_room_raw)
+    assert sc.sensor.model == kind
+    assert sc.sensor.max_range_m > 1.0  # not the GP2D12's 0.624 m
+    t_room_raw["sensor"] = {"model": "gp2d12"}
+    with pytest.raises(ScenarioError, match=r"sensor\.model: 'gp2d12' does not fit design "
+                                            f"'{design}'.*model: {kind}"):
+        parse(t_room_raw)
+
+
 # --------------------------------------------------------------------------- the user docs
 
 README = resources.scenarios_dir() / "README.md"
