@@ -11,7 +11,7 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from irring.data import Reason
+from irring.data import Points, Reason
 from irring.mapping import (FREE, OCCUPIED, PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN, UNKNOWN,
                             MapperParams, OccupancyGrid, read_pgm, traverse)
 from irring.scenario import load_scenario
@@ -180,6 +180,99 @@ def test_batch_insert_is_order_independent_and_deterministic():
                          for k, v in vars(p).items()})
     b.insert(flipped)
     np.testing.assert_allclose(a.log_odds, b.log_odds, atol=1e-12)
+
+
+def reference_delta(grid, points):
+    """The module doc's inverse sensor model, visit by visit on :func:`traverse` (slow, plain)."""
+    p = grid.params
+    valid = points.valid.ravel()
+    no_return = ~valid & (points.reason.ravel() == Reason.NO_RETURN)
+    ox, oy, hd = points.origin_x.ravel(), points.origin_y.ravel(), points.heading.ravel()
+    d = np.hypot(points.x.ravel() - ox, points.y.ravel() - oy)
+    sigma = np.maximum(np.nan_to_num(points.sigma_m.ravel(), nan=p.default_sigma_m), p.min_sigma_m)
+    length = np.where(valid, d + p.tail_sigmas * sigma, points.max_range_m)
+    ux = np.where(valid & (d > 0), (points.x.ravel() - ox) / np.where(d > 0, d, 1), np.cos(hd))
+    uy = np.where(valid & (d > 0), (points.y.ravel() - oy) / np.where(d > 0, d, 1), np.sin(hd))
+    use = np.flatnonzero(valid | no_return)
+    v = traverse(ox[use], oy[use], ox[use] + ux[use] * length[use], oy[use] + uy[use] * length[use],
+                 grid.origin_xy_m, grid.shape, grid.resolution_m)
+    r = use[v.ray]
+    s_a, s_b = v.t_enter * length[r], v.t_exit * length[r]
+    gap = np.maximum(np.maximum(s_a - d[r], d[r] - s_b), 0.0)
+    stop = d[r] - p.free_margin_cells * grid.resolution_m
+    phi = np.array([0.5 * (1 + math.erf(z / math.sqrt(2))) for z in (stop - s_b) / sigma[r]])
+    w = np.where(valid[r], p.l_free * np.where(s_b < stop, phi, 0.0)
+                 + p.l_occ * np.exp(-0.5 * (gap / sigma[r]) ** 2), p.l_no_return)
+    out = np.zeros(grid.shape)
+    np.add.at(out, (v.iy, v.ix), w)
+    return out
+
+
+def random_points(rng, n, *, box=(0.6, 0.4), max_range_m=0.3):
+    """Readings from random emitters: valid end points (some beyond the grid), no-returns,
+    and other invalid readings."""
+    ox, oy = rng.uniform(-0.05, box[0] + 0.05, n), rng.uniform(-0.05, box[1] + 0.05, n)
+    heading = rng.uniform(-np.pi, np.pi, n)
+    d = rng.uniform(0.0, max_range_m, n)
+    kind = rng.choice([Reason.OK, Reason.NO_RETURN, Reason.OUT_OF_RANGE], n, p=[0.7, 0.2, 0.1])
+    valid = kind == Reason.OK
+    dd = np.where(valid, d, np.nan)
+    sigma = np.where(rng.random(n) < 0.1, np.nan, rng.uniform(0.001, 0.03, n))
+    return Points(x=ox + dd * np.cos(heading), y=oy + dd * np.sin(heading), d=dd,
+                  theta=np.zeros(n), origin_x=ox, origin_y=oy, heading=heading, sigma_m=sigma,
+                  iterations=np.ones(n, int), valid=valid, reason=kind.astype(np.uint8),
+                  max_range_m=max_range_m)
+
+
+@pytest.mark.parametrize("params", [{}, {"l_no_return": -0.3, "tail_sigmas": 3.0},
+                                    {"free_margin_cells": 0.0, "min_sigma_m": 0.002}])
+def test_insert_follows_the_documented_model_visit_by_visit(params):
+    """The fast insert (row runs, near-end columns, float32 weights) against the formula
+    evaluated on every traverse() visit: equal to the weights' float32 precision."""
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        g = small_grid(**params)
+        pts = random_points(rng, 400)
+        want = np.clip(reference_delta(g, pts), g.params.l_min, g.params.l_max)
+        g.insert(pts)
+        np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
+        assert np.array_equal(g.log_odds != 0, want != 0)   # the same cells, no stray ones
+
+
+def test_insert_follows_the_reference_through_cell_corners_and_along_borders():
+    """Beams on exact diagonals and cell borders, starting and ending on corners: the runs
+    and near-end columns keep traverse()'s rules (corner touches are no visits)."""
+    starts = [(x, y) for x in (2.0, 2.5, 3.0) for y in (2.0, 2.5, 3.0)]
+    angles = np.radians(np.arange(0, 360, 45))
+    lengths = (4.0, 4 * math.sqrt(2), 3.5, 0.0)
+    rows = [(x, y, a, r) for x, y in starts for a in angles for r in lengths]
+    x, y, a, r = (np.array(v) for v in zip(*rows))
+    n = len(x)
+    for reason in (Reason.NO_RETURN, Reason.OK):
+        for max_range in (4.0, 4 * math.sqrt(2)):
+            ok = reason == Reason.OK
+            d = np.where(ok, r, np.nan)
+            pts = Points(x=x + d * np.cos(a), y=y + d * np.sin(a), d=d, theta=np.zeros(n),
+                         origin_x=x, origin_y=y, heading=a, sigma_m=np.full(n, 0.3),
+                         iterations=np.ones(n, int), valid=np.full(n, ok),
+                         reason=np.full(n, reason, np.uint8), max_range_m=max_range)
+            g = OccupancyGrid((0.0, 0.0), (8, 9), 1.0, MapperParams(min_sigma_m=0.3))
+            g.insert(pts)
+            want = np.clip(reference_delta(g, pts), g.params.l_min, g.params.l_max)
+            np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
+            assert np.array_equal(g.log_odds != 0, want != 0)
+
+
+def test_insert_matches_the_reference_on_a_t_room_sweep():
+    sc = load_scenario("t_room")
+    from _synthetic import points_for_pose
+
+    for pose in range(len(sc.robot.poses)):
+        p = points_for_pose(sc, pose, sigma_m="gp2", rng=np.random.default_rng(pose))
+        g = OccupancyGrid.for_scenario(sc)
+        g.insert(p)
+        want = np.clip(reference_delta(g, p), g.params.l_min, g.params.l_max)
+        np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
 
 
 def test_for_scenario_covers_outline_plus_margin_with_walls_through_cell_centres():
