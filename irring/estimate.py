@@ -15,19 +15,35 @@ the scene, vectorised over a whole sweep (S steps × N sensors):
 5. θ_new = angle between each reading's beam and the normal of its line;
 6. repeat from 2 until |θ_new − θ| < ε for every reading, or ``max_iterations``.
 
+Schedule (how steps 2–6 are repeated; the work goes where it changes the answer):
+
+- *grouping* (step 4 in full) at θ = 0: split-and-merge, corners refined, then each reading
+  judged against its piece's line (it must lie on it), readings near a corner re-read with
+  every nearby line's θ and put on the line that explains them clearly best, lines the beams
+  would meet past the drop-out angle dropped, readings on no line adopted by a line they land
+  on when re-read with its θ. θ is then taken from the members' own TLS lines;
+- *held iterations*: the members stay, so every member's θ follows from its line's direction
+  a (θ_i = |π/2 − |h_i − a||); one iteration fits all lines at once (prefix sums over the
+  members sorted by line) and moves a. The plain step is Table II's a ← G(a); with damping on
+  (the default) it is a secant step on G(a) − a per line, its gain held to [1/64, 8]: it damps
+  an oscillation (G' < 0) and speeds up a slow contraction, and stays plain where G' ≥ 1;
+- *regrouping*: once θ has settled coarsely (every step < ``regroup_until_rad``), and in any
+  case after the first convergence, the readings are grouped again at their straightened
+  positions: the pieces are kept, their corners refined again and membership judged afresh.
+  This repeats while it changes who belongs where (not back to the grouping before), within
+  the first ``regroup_iterations`` iterations;
+- *membership checks*: when the held iterations settle, the members are checked once more at
+  their final positions (a wall ends at its corner: a reading on a line beyond its
+  intersection with the next piece's line moves across if it fits there; drop-outs;
+  adoptions), and iterated again if that changed anything.
+
+Readings still moving after ``max_iterations`` are NOT_CONVERGED (in the noisy T-room about
+0.3 % of readings, mostly where a shoulder's convex corner is seen nearly edge-on).
+
 Fallback: a reading on no usable line (a thin cylinder, an isolated return, a line shorter
 than ``LineOptions.min_length_m`` or with fewer than ``min_points`` readings) keeps θ = 0, the
 paper's starting assumption, and its ``sigma_m`` is widened by half the gap between its θ = 0
 and θ = 45° distances.
-
-Damping: a reading whose θ update reverses the previous one without shrinking to half of it
-(an oscillation, not ordinary convergence) has its step gain halved (down to 1/64); the gain
-recovers by ×1.25 per calm iteration. The line grouping is recomputed while some θ still
-moves by more than ``LineOptions.regroup_until_rad`` (at most ``regroup_iterations``
-times) and then held: members keep their line, readings on no line may still join one, so
-readings at a corner cannot flip between two lines forever. Readings still moving after
-``max_iterations`` are NOT_CONVERGED (in the noisy T-room about 0.4 % of readings, where a
-shoulder's convex corner is seen nearly edge-on and its two walls barely differ).
 
 Validity (:class:`irring.data.Reason`): a missing reading (NaN counts or a step in
 ``Sweep.missing_steps``) is MISSING; counts at ADC full scale SATURATED; counts at or below the
@@ -55,7 +71,9 @@ from .scenario import Ring
 
 CALIBRATION_FORMAT = 1  # version written into calibration files
 _SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
+_FINE_CELLS = 1 << 16  # cells of the fine (log a, b) table over 0 … 90°
 _FALLBACK_SPREAD_RAD = math.radians(45.0)
+_MAX_GAIN = 8.0      # the held iteration's secant step at most 8× the plain one
 _PINNED_RAD = math.radians(2.0)  # a line most readings meet within this of the drop-out angle
 #                                  is a runaway, not a wall (see _drop_steep)
 
@@ -132,6 +150,15 @@ class Calibration:
         object.__setattr__(self, "a", a)
         object.__setattr__(self, "b", b)
         object.__setattr__(self, "_log_a", np.log(a))
+        object.__setattr__(self, "_levels", (self.full_scale_counts, self.near_counts,
+                                             self.no_return_counts, self.sigma_counts(),
+                                             self.falling))
+        # (log a, b) on a fine θ grid for the estimator's loop, looked up at the nearest
+        # node (a take instead of a search): θ off by ≤ 1.2e-5 rad, d by < 1e-4 relative
+        fine = np.linspace(0.0, math.pi / 2, _FINE_CELLS + 1)
+        object.__setattr__(self, "_fine", (_FINE_CELLS / (math.pi / 2),
+                                           np.interp(fine, theta, np.log(a)),
+                                           np.interp(fine, theta, b)))
 
     # ---- the curve
 
@@ -438,8 +465,8 @@ class LineOptions:
     min_points: int = 3            # a line usable for θ has at least this many readings …
     min_length_m: float = 0.08     # … spanning at least this length
     max_rms_sigmas: float = 3.0    # … and fits them to within this RMS (in σ)
-    regroup_iterations: int = 8    # regroup at most this many iterations …
-    regroup_until_rad: float = math.radians(1.0)  # … and only while some θ moves more
+    regroup_iterations: int = 8    # regroup only within the first this many iterations …
+    regroup_until_rad: float = math.radians(1.0)  # … each time θ has settled to within this
     adopt_margin_m: float = 0.05   # a reading on no line may join one this far past its ends
     corner_window: int = 4         # readings this close to a corner may change line …
     corner_sigmas: float = 0.5     # … if another line fits them this many σ better
@@ -463,49 +490,347 @@ class Lines:
     end: np.ndarray
 
 
-def _scan_order(steps: np.ndarray, n_sensors: int) -> np.ndarray:
+def _scan_order(steps: np.ndarray, n_sensors: int) -> tuple[np.ndarray, int]:
     """Flat indices into (S, N) arrays, sensor-major, each sensor's readings by step."""
     order = np.argsort(np.asarray(steps), kind="stable")
     s = len(order)
     return (order[None, :] * n_sensors + np.arange(n_sensors)[:, None]).reshape(-1), s
 
 
-def _tls(sx, sy, sxx, syy, sxy, n):
-    """Total-least-squares line from summed moments (arrays). Returns centroid, normal,
-    direction, λ_min, λ_max (variances along the normal / the line)."""
-    n = np.maximum(n, 1)
-    mx, my = sx / n, sy / n
-    cxx = np.maximum(sxx / n - mx * mx, 0.0)
-    cyy = np.maximum(syy / n - my * my, 0.0)
-    cxy = sxy / n - mx * my
-    half = 0.5 * (cxx - cyy)
-    root = np.hypot(half, cxy)
-    mean = 0.5 * (cxx + cyy)
-    lam_min = np.maximum(mean - root, 0.0)
-    lam_max = mean + root
-    alpha = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)  # major axis: exact for vertical lines
-    direction = np.stack([np.cos(alpha), np.sin(alpha)], axis=-1)
-    normal = np.stack([-np.sin(alpha), np.cos(alpha)], axis=-1)
-    return np.stack([mx, my], axis=-1), normal, direction, lam_min, lam_max
+_WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
+
+
+def _tls(n, t):
+    """Total-least-squares lines from summed centred moments t = (Σx, Σy, Σx², Σy², Σxy)
+    over n points (arrays): mean offset (mx, my), direction angle α ∈ (−π/2, π/2] (exact for
+    vertical lines), λ_min, λ_max (variances across / along the line)."""
+    inv = 1.0 / np.maximum(n, 1)
+    mx = t[0] * inv
+    my = t[1] * inv
+    cxx = t[2] * inv
+    cxx -= mx * mx
+    np.maximum(cxx, 0.0, out=cxx)
+    cyy = t[3] * inv
+    cyy -= my * my
+    np.maximum(cyy, 0.0, out=cyy)
+    cxy2 = t[4] * inv
+    cxy2 -= mx * my
+    cxy2 *= 2.0
+    dif = cxx - cyy
+    root = np.hypot(dif, cxy2)
+    root *= 0.5
+    mean = cxx + cyy
+    mean *= 0.5
+    alpha = np.arctan2(cxy2, dif)
+    alpha *= 0.5
+    lmin = mean - root
+    np.maximum(lmin, 0.0, out=lmin)
+    mean += root
+    return mx, my, alpha, lmin, mean
+
+
+def _tls_angle(n, t):
+    """(mx, my, α) of :func:`_tls` only."""
+    mx = t[0] / n
+    my = t[1] / n
+    sxy = t[4] - t[0] * my
+    dif = (t[2] - t[0] * mx) - (t[3] - t[1] * my)
+    alpha = np.arctan2(sxy + sxy, dif)
+    alpha *= 0.5
+    return mx, my, alpha
+
+
+def _rss(n, t):
+    """Summed squared perpendicular residuals of each range's TLS line (for comparisons)."""
+    sx, sy, sxx, syy, sxy = t
+    inv = 1.0 / n
+    cxx = sxx - sx * sx * inv
+    cyy = syy - sy * sy * inv
+    cxy = sxy - sx * sy * inv
+    cxy += cxy
+    out = cxx + cyy
+    out -= np.hypot(cxx - cyy, cxy)
+    return out
 
 
 class _Moments:
-    """Prefix sums of x, y, x², y², xy over a flat point sequence: any contiguous range's
-    TLS line in O(1). Coordinates are centred first so small spreads keep their digits."""
+    """Prefix sums of x, y, x², y², xy over an ordered point sequence: any contiguous range's
+    TLS line in O(1). Coordinates are centred on (cx, cy) so small spreads keep their digits.
+    (Residual sums from :func:`_rss` come out doubled; only their order matters.)"""
 
-    def __init__(self, px: np.ndarray, py: np.ndarray):
-        self.cx = float(np.mean(px)) if px.size else 0.0
-        self.cy = float(np.mean(py)) if py.size else 0.0
-        x, y = px - self.cx, py - self.cy
-        cols = np.stack([np.ones_like(x), x, y, x * x, y * y, x * y])
-        self.cum = np.concatenate([np.zeros((6, 1)), np.cumsum(cols, axis=1)], axis=1)
+    __slots__ = ("cum", "cx", "cy")
 
-    def fit(self, start: np.ndarray, end: np.ndarray):
-        """TLS over inclusive ranges [start, end]."""
-        tot = self.cum[:, end + 1] - self.cum[:, start]
-        c, normal, direction, lmin, lmax = _tls(tot[1], tot[2], tot[3], tot[4], tot[5], tot[0])
-        c = c + np.array([self.cx, self.cy])
-        return c, normal, direction, lmin, lmax, tot[0]
+    def __init__(self, px: np.ndarray, py: np.ndarray, cx: float, cy: float):
+        self.cx, self.cy = cx, cy
+        cum = np.zeros((5, px.size + 1))
+        m = cum[:, 1:]
+        np.subtract(px, cx, out=m[0])
+        np.subtract(py, cy, out=m[1])
+        np.multiply(m[0], m[0], out=m[2])
+        np.multiply(m[1], m[1], out=m[3])
+        np.multiply(m[0], m[1], out=m[4])
+        m.cumsum(axis=1, out=m)
+        self.cum = cum
+
+    def sums(self, lo: np.ndarray, hi: np.ndarray):
+        """(n, t) over the inclusive ranges [lo, hi]."""
+        c = self.cum
+        n = (hi - lo).astype(float)
+        n += 1.0
+        t = c.take(hi + 1, axis=1)
+        t -= c.take(lo, axis=1)
+        return n, t
+
+
+def _owner(starts: np.ndarray, k: int) -> np.ndarray:
+    """Piece of each of k points: the last piece starting at or before it (so a corner
+    shared by two pieces goes to the right one). ``starts`` ascending, the first 0."""
+    mark = np.zeros(k, dtype=np.intp)
+    mark[starts[1:]] = 1
+    return mark.cumsum()
+
+
+def _lengths(first: np.ndarray, total: int) -> np.ndarray:
+    """Lengths of the runs starting at ``first`` (ascending) in a sequence of ``total``."""
+    n = np.empty(first.size)
+    np.subtract(first[1:], first[:-1], out=n[:-1])
+    n[-1] = total - first[-1]
+    return n
+
+
+def _split(px, py, inv_thr, starts, ends):
+    """Iterative end-point fit on every piece at once: a piece splits at the reading farthest
+    from its chord while that lies more than the threshold off. Pieces share their corner."""
+    k = px.size
+    while True:
+        o = _owner(starts, k)
+        ax, ay = px.take(starts), py.take(starts)
+        dx = px.take(ends)
+        dx -= ax
+        dy = py.take(ends)
+        dy -= ay
+        chord = np.hypot(dx, dy)
+        closed = chord < 1e-12
+        any_closed = closed.any()
+        if any_closed:  # a piece whose ends meet: distance from its end point instead
+            closed &= ends - starts >= 2
+            any_closed = closed.any()
+            chord[closed] = 1.0
+            dx[closed] = dy[closed] = 0.0
+            np.maximum(chord, 1e-300, out=chord)
+        dx /= chord
+        dy /= chord
+        c0 = dx * ay
+        c0 -= dy * ax
+        dist = dx.take(o) * py
+        dist -= dy.take(o) * px
+        dist -= c0.take(o)
+        np.abs(dist, out=dist)
+        if any_closed:
+            far = closed.take(o)
+            dist[far] = np.hypot(px[far] - ax.take(o[far]), py[far] - ay.take(o[far]))
+        dist *= inv_thr
+        dist[starts] = 0.0
+        dist[ends] = 0.0
+        best = np.maximum.reduceat(dist, starts)
+        split = best > 1.0
+        if not split.any():
+            return starts, ends
+        hit = ((dist == best.take(o)) & split.take(o)).nonzero()[0]
+        ho = o.take(hit)
+        first = np.ones(hit.size, dtype=bool)
+        np.not_equal(ho[1:], ho[:-1], out=first[1:])
+        at = hit[first]
+        starts = np.concatenate([starts, at])
+        starts.sort()
+        ends = np.concatenate([ends, at])
+        ends.sort()
+
+
+def _refine_corners(mom: _Moments, starts, ends, rounds: int = 2):
+    """Move each corner shared by two pieces to where the two TLS lines fit best.
+
+    The end-point fit splits at the reading farthest from the chord, which for a corner near
+    the end of a polyline, or seen at a slant, is a few readings off the true corner. Each
+    shared corner is tried at up to 5 readings either side (keeping ≥ 2 readings per piece)
+    and put where the summed squared perpendicular residuals of the two pieces are least;
+    all corners at once, from prefix sums. Two corners moving towards each other must leave
+    ≥ 2 readings between them, else both stay.
+    """
+    cum = mom.cum
+    for _ in range(rounds):
+        j = (starts[1:] == ends[:-1]).nonzero()[0]       # piece j and j + 1 share a corner
+        if j.size == 0:
+            break
+        lo, v, hi = starts.take(j), ends.take(j), ends.take(j + 1)
+        c = v[:, None] + _WINDOW
+        bad = (c <= lo[:, None]) | (c >= hi[:, None])
+        c[bad] = np.broadcast_to(v[:, None], c.shape)[bad]
+        # prefix sums at each candidate: left piece [lo, c], right piece [c, hi]
+        at_c1 = cum.take(c + 1, axis=1)                           # (5, P, w)
+        left = at_c1 - cum.take(lo, axis=1)[:, :, None]
+        right = cum.take(hi + 1, axis=1)[:, :, None] - cum.take(c, axis=1)
+        cost = _rss((c - lo[:, None] + 1).astype(float), left)
+        cost += _rss((hi[:, None] - c + 1).astype(float), right)
+        cost[bad] = np.inf
+        best = c[np.arange(j.size), cost.argmin(axis=1)]
+        if (best == v).all():
+            break
+        new_ends, new_starts = ends.copy(), starts.copy()
+        new_ends[j] = best
+        new_starts[j + 1] = best
+        short = (new_ends - new_starts < 1) & (ends - starts >= 1)
+        if short.any():
+            best = np.where(short.take(j) | short.take(j + 1), v, best)
+            new_ends[j] = best
+            new_starts[j + 1] = best
+        starts, ends = new_starts, new_ends
+    return starts, ends
+
+
+def _merge(mom: _Moments, px, py, inv_thr, starts, ends):
+    """Merge adjacent pieces (sharing a corner) whose joint TLS line fits every reading
+    within its threshold; cheapest joins first, non-overlapping joins per round."""
+    k = px.size
+    for _ in range(starts.size):
+        j = (starts[1:] == ends[:-1]).nonzero()[0]  # piece j with piece j+1
+        if j.size == 0:
+            break
+        m = j.size
+        mx, my, alpha = _tls_angle(*mom.sums(starts.take(j), ends.take(j + 1)))
+        # the joint line of each candidate pair, plus a null line (residual 0) at index m
+        line = np.zeros((3, m + 1))
+        nx, ny, c0 = line
+        np.sin(alpha, out=nx[:m])
+        np.negative(nx[:m], out=nx[:m])
+        np.cos(alpha, out=ny[:m])
+        mx += mom.cx
+        my += mom.cy
+        np.multiply(nx[:m], mx, out=c0[:m])
+        c0[:m] += ny[:m] * my
+        pair_of = np.full(starts.size + 1, m)
+        pair_of[j] = np.arange(m)
+        o = _owner(starts, k)
+        # each reading against the joint line of the pair where its piece is the left one,
+        # then of the pair where it is the right one
+        both = pair_of.take(np.stack([o, o - 1]))                          # (2, k)
+        nl = line.take(both, axis=1)                                        # (3, 2, k)
+        r = nl[0] * px
+        r += nl[1] * py
+        r -= nl[2]
+        np.abs(r, out=r)
+        r *= inv_thr
+        w = np.maximum.reduceat(r, starts, axis=1)
+        worst = np.maximum(w[0].take(j), w[1].take(j + 1))
+        ok = worst <= 1.0
+        if not ok.any():
+            break
+        # choose joins that are the cheapest among their neighbours (so none overlap)
+        cost = worst
+        cost[~ok] = np.inf
+        adj = j[1:] == j[:-1] + 1
+        pick = ok.copy()
+        pick[1:] &= ~(adj & (cost[:-1] <= cost[1:]))
+        pick[:-1] &= ~(adj & (cost[1:] < cost[:-1]))
+        jj = j[pick]
+        keep = np.ones(starts.size, dtype=bool)
+        keep[jj + 1] = False
+        ends = ends.copy()
+        ends[jj] = ends[jj + 1]
+        starts, ends = starts[keep], ends[keep]
+    return starts, ends
+
+
+@dataclass
+class _Pieces:
+    """The split-and-merge result over the usable points (indices into their compact order)
+    and each piece's TLS line; ``owner`` (U,) is the piece each point joins."""
+
+    starts: np.ndarray
+    ends: np.ndarray
+    brk: np.ndarray          # polyline starts the segmentation began from (for reuse)
+    owner: np.ndarray
+    cx: np.ndarray           # (L,) centroid, world
+    cy: np.ndarray
+    alpha: np.ndarray        # (L,) direction angle in [0, π)
+    lmin: np.ndarray
+    lmax: np.ndarray
+    n_points: np.ndarray
+    length_m: np.ndarray
+    usable: np.ndarray
+
+
+def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | None = None
+             ) -> _Pieces:
+    """Split-and-merge over ordered points (one sensor's readings by step form polylines,
+    broken where consecutive readings are more than ``gap_m`` apart), corners refined.
+
+    With ``prev`` from the same polylines (a regroup once θ has straightened the points)
+    its pieces are kept and only their corners are refined: splitting anew would mostly
+    repeat them, and the pieces of the first grouping are the better start (measured on the
+    T-room: regrouping by corner refinement alone gives the smaller range error)."""
+    k = px.size
+    brk = np.ones(k, dtype=bool)
+    if k > 1:
+        dx, dy = px[1:] - px[:-1], py[1:] - py[:-1]
+        np.greater(dx * dx + dy * dy, opts.gap_m ** 2, out=brk[1:])
+        brk[1:] |= sensor[1:] != sensor[:-1]
+    mom = _Moments(px, py, *centre)
+    if prev is not None and prev.brk.size == k and (prev.brk == brk).all():
+        starts, ends = _refine_corners(mom, prev.starts, prev.ends)
+    else:
+        inv_thr = 1.0 / thr
+        first = brk.nonzero()[0]
+        last = np.empty_like(first)
+        last[:-1] = first[1:] - 1
+        last[-1] = k - 1
+        starts, ends = _split(px, py, inv_thr, first, last)
+        starts, ends = _merge(mom, px, py, inv_thr, starts, ends)
+        starts, ends = _refine_corners(mom, starts, ends)
+    return _piece_lines(mom, px, py, thr, starts, ends, brk, opts)
+
+
+def _piece_lines(mom: _Moments, px, py, thr, starts, ends, brk, opts: LineOptions) -> _Pieces:
+    """Each piece's TLS line, who owns the corners, and which lines are good enough."""
+    mx, my, alpha, lmin, lmax = _tls(*mom.sums(starts, ends))
+    cx, cy = mx + mom.cx, my + mom.cy
+    nx, ny = -np.sin(alpha), np.cos(alpha)
+    o = _owner(starts, px.size)
+    # a corner shared with the previous piece joins the nearer line
+    j = (starts[1:] == ends[:-1]).nonzero()[0]
+    if j.size:
+        at = starts.take(j + 1)
+        x, y = px.take(at), py.take(at)
+        r_own = np.abs((x - cx.take(j + 1)) * nx.take(j + 1) + (y - cy.take(j + 1)) * ny.take(j + 1))
+        r_alt = np.abs((x - cx.take(j)) * nx.take(j) + (y - cy.take(j)) * ny.take(j))
+        nearer = r_alt < r_own
+        o[at[nearer]] = j[nearer]
+    ext = np.abs((px.take(ends) - px.take(starts)) * ny + (py.take(ends) - py.take(starts)) * -nx)
+    n_pts = np.bincount(o, minlength=starts.size)
+    mean_sig = np.bincount(o, weights=thr, minlength=starts.size) / (
+        opts.split_sigmas * np.maximum(n_pts, 1))
+    usable = ((n_pts >= opts.min_points) & (ext >= opts.min_length_m) & (lmax > 0)
+              & (np.sqrt(lmin) <= opts.max_rms_sigmas * np.maximum(mean_sig, 1e-6))
+              & np.isfinite(alpha))
+    alpha[alpha < 0] += math.pi
+    return _Pieces(starts=starts, ends=ends, brk=brk, owner=o, cx=cx, cy=cy, alpha=alpha,
+                   lmin=lmin, lmax=lmax, n_points=n_pts, length_m=ext, usable=usable)
+
+
+def _lines_record(pieces: _Pieces | None, label: np.ndarray, index: np.ndarray) -> Lines:
+    """Public :class:`Lines` from pieces; ``index`` maps compact point order → flat (S, N)."""
+    if pieces is None or pieces.starts.size == 0:
+        z2, z1 = np.zeros((0, 2)), np.zeros(0)
+        return Lines(label=label, centroid=z2, normal=z2, direction=z2,
+                     n_points=np.zeros(0, int), length_m=z1, rms_m=z1,
+                     usable=np.zeros(0, bool), start=np.zeros(0, int), end=np.zeros(0, int))
+    a = pieces.alpha
+    direction = np.stack([np.cos(a), np.sin(a)], axis=-1)
+    return Lines(label=label, centroid=np.stack([pieces.cx, pieces.cy], axis=-1),
+                 normal=np.stack([-direction[:, 1], direction[:, 0]], axis=-1),
+                 direction=direction, n_points=pieces.n_points, length_m=pieces.length_m,
+                 rms_m=np.sqrt(pieces.lmin), usable=pieces.usable.copy(),
+                 start=index[pieces.starts], end=index[pieces.ends])
 
 
 def fit_lines(x: np.ndarray, y: np.ndarray, ok: np.ndarray, sigma_m: np.ndarray,
@@ -521,169 +846,24 @@ def fit_lines(x: np.ndarray, y: np.ndarray, ok: np.ndarray, sigma_m: np.ndarray,
     nearer to.
     """
     x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
     shape = x.shape
     n_steps, n_sensors = shape
     if steps is None:
         steps = np.arange(n_steps)
     flat, _ = _scan_order(steps, n_sensors)
     okf = np.asarray(ok, dtype=bool).reshape(-1)[flat]
-    okf &= np.isfinite(x.reshape(-1)[flat]) & np.isfinite(np.asarray(y, float).reshape(-1)[flat])
-    idx = flat[okf]                                   # original flat index of each kept point
-    px = x.reshape(-1)[idx]
-    py = np.asarray(y, dtype=float).reshape(-1)[idx]
-    thr = np.maximum(options.min_split_m,
-                     options.split_sigmas * np.nan_to_num(
-                         np.asarray(sigma_m, float).reshape(-1)[idx], nan=0.0, posinf=1.0))
-    sensor = idx % n_sensors
-    k = px.size
+    okf &= np.isfinite(x.reshape(-1)[flat]) & np.isfinite(y.reshape(-1)[flat])
+    idx = flat[okf]
     label = np.full(n_steps * n_sensors, -1, dtype=int)
-    if k == 0:
-        return _empty_lines(label.reshape(shape))
-
-    # polylines: new one at a sensor change or a jump
-    jump = np.hypot(np.diff(px), np.diff(py)) > options.gap_m
-    brk = np.flatnonzero((np.diff(sensor) != 0) | jump) + 1
-    run_start = np.concatenate([[0], brk])
-    run_end = np.concatenate([brk - 1, [k - 1]])
-
-    starts, ends = _split(px, py, thr, run_start, run_end)
-    starts, ends = _refine_corners(px, py, starts, ends)
-    starts, ends = _merge(px, py, thr, starts, ends)
-    starts, ends = _refine_corners(px, py, starts, ends)
-
-    mom = _Moments(px, py)
-    centroid, normal, direction, lmin, lmax, npts = mom.fit(starts, ends)
-    seg = np.arange(k)
-    owner = np.searchsorted(starts, seg, side="right") - 1   # shared corners → right piece
-    # a corner shared with the previous piece joins the nearer line
-    shared = np.zeros(k, dtype=bool)
-    prev_end = np.full(k, -1)
-    shared_idx = starts[1:][starts[1:] == ends[:-1]]
-    shared[shared_idx] = True
-    prev_end[shared_idx] = np.flatnonzero(starts[1:] == ends[:-1])
-    pts = np.stack([px, py], axis=-1)
-    r_own = np.abs(np.einsum("ij,ij->i", pts - centroid[owner], normal[owner]))
-    alt = np.where(shared, prev_end, owner)
-    r_alt = np.abs(np.einsum("ij,ij->i", pts - centroid[alt], normal[alt]))
-    owner = np.where(shared & (r_alt < r_own), alt, owner)
-
-    ext = np.einsum("ij,ij->i", pts[ends] - pts[starts], direction)
-    rms = np.sqrt(lmin)
-    n_pts = np.bincount(owner, minlength=starts.size)
-    mean_sig = np.bincount(owner, weights=thr / options.split_sigmas, minlength=starts.size)
-    mean_sig = mean_sig / np.maximum(n_pts, 1)
-    usable = ((n_pts >= options.min_points) & (np.abs(ext) >= options.min_length_m)
-              & (lmax > 0) & (rms <= options.max_rms_sigmas * np.maximum(mean_sig, 1e-6))
-              & np.all(np.isfinite(normal), axis=-1))
-    label[idx] = owner
-    return Lines(label=label.reshape(shape), centroid=centroid, normal=normal,
-                 direction=direction, n_points=n_pts, length_m=np.abs(ext), rms_m=rms,
-                 usable=usable, start=idx[starts], end=idx[ends])
-
-
-def _empty_lines(label: np.ndarray) -> Lines:
-    z2, z1 = np.zeros((0, 2)), np.zeros(0)
-    return Lines(label=label, centroid=z2, normal=z2, direction=z2,
-                 n_points=np.zeros(0, int), length_m=z1, rms_m=z1,
-                 usable=np.zeros(0, bool), start=np.zeros(0, int), end=np.zeros(0, int))
-
-
-def _split(px, py, thr, starts, ends):
-    """Iterative end-point fit on every piece at once. Pieces share their corner reading."""
-    k = px.size
-    idx = np.arange(k)
-    for _ in range(k):  # each round splits ≥ 1 piece or stops; bounded by the point count
-        owner = np.searchsorted(starts, idx, side="right") - 1
-        s, e = starts[owner], ends[owner]
-        ax, ay = px[s], py[s]
-        dx, dy = px[e] - ax, py[e] - ay
-        chord = np.hypot(dx, dy)
-        cross = np.abs(dx * (py - ay) - dy * (px - ax))
-        dist = np.where(chord > 1e-12, cross / np.maximum(chord, 1e-12),
-                        np.hypot(px - ax, py - ay))
-        score = np.where((idx > s) & (idx < e), dist / thr, 0.0)
-        best = np.maximum.reduceat(score, starts)
-        split = best > 1.0
-        if not split.any():
-            break
-        cand = np.where(score >= best[owner] * (1 - 1e-12), idx, k)
-        at = np.minimum.reduceat(cand, starts)[split]
-        starts = np.sort(np.concatenate([starts, at]))
-        ends = np.sort(np.concatenate([ends, at]))
-    return starts, ends
-
-
-def _refine_corners(px, py, starts, ends, window: int = 5, rounds: int = 2):
-    """Move each corner shared by two pieces to where the two TLS lines fit best.
-
-    The end-point fit splits at the reading farthest from the chord, which for a corner near
-    the end of a polyline, or seen at a slant, is a few readings off the true corner. Each
-    shared corner is tried at up to ``window`` readings either side (keeping ≥ 2 readings per
-    piece) and put where the summed squared perpendicular residuals of the two pieces are
-    least; all corners at once, from prefix sums.
-    """
-    mom = _Moments(px, py)
-    for _ in range(rounds):
-        j = np.flatnonzero(starts[1:] == ends[:-1])       # piece j and j + 1 share a corner
-        if j.size == 0:
-            break
-        lo, v, hi = starts[j], ends[j], ends[j + 1]
-        cand = v[:, None] + np.arange(-window, window + 1)[None, :]      # (P, K)
-        ok = (cand >= lo[:, None] + 1) & (cand <= hi[:, None] - 1)
-        c = np.where(ok, cand, v[:, None])
-        *_, lmin_a, _, n_a = mom.fit(np.broadcast_to(lo[:, None], c.shape).ravel(), c.ravel())
-        *_, lmin_b, _, n_b = mom.fit(c.ravel(), np.broadcast_to(hi[:, None], c.shape).ravel())
-        cost = (lmin_a * n_a + lmin_b * n_b).reshape(c.shape)
-        cost = np.where(ok, cost, np.inf)
-        best = c[np.arange(j.size), np.argmin(cost, axis=1)]
-        if np.array_equal(best, v):
-            break
-        ends = ends.copy()
-        starts = starts.copy()
-        ends[j] = best
-        starts[j + 1] = best
-    return starts, ends
-
-
-def _merge(px, py, thr, starts, ends):
-    """Merge adjacent pieces (sharing a corner) whose joint TLS line fits every reading
-    within its threshold; cheapest joins first, non-overlapping joins per round."""
-    k = px.size
-    idx = np.arange(k)
-    mom = _Moments(px, py)
-    for _ in range(starts.size):
-        joinable = np.flatnonzero(starts[1:] == ends[:-1])  # piece j with piece j+1
-        if joinable.size == 0:
-            break
-        c, n, *_ = mom.fit(starts[joinable], ends[joinable + 1])
-        # worst normalised residual of each candidate union
-        pair_of = np.full(starts.size, -1)
-        pair_of[joinable] = np.arange(joinable.size)
-        owner = np.searchsorted(starts, idx, side="right") - 1
-        worst = np.zeros(joinable.size)
-        for piece_shift in (0, 1):  # readings of the left piece, then of the right piece
-            p = pair_of[np.clip(owner - piece_shift, 0, None)]
-            use = (p >= 0) & (owner - piece_shift >= 0)
-            r = np.abs((px[use] - c[p[use], 0]) * n[p[use], 0]
-                       + (py[use] - c[p[use], 1]) * n[p[use], 1]) / thr[use]
-            np.maximum.at(worst, p[use], r)
-        ok = worst <= 1.0
-        if not ok.any():
-            break
-        # choose joins that are the cheapest among their neighbours (so none overlap)
-        cost = np.where(ok, worst, np.inf)
-        left = np.concatenate([[np.inf], cost[:-1]])
-        right = np.concatenate([cost[1:], [np.inf]])
-        adjacent_left = np.concatenate([[False], joinable[1:] == joinable[:-1] + 1])
-        adjacent_right = np.concatenate([joinable[1:] == joinable[:-1] + 1, [False]])
-        pick = ok & ~(adjacent_left & (left <= cost)) & ~(adjacent_right & (right < cost))
-        j = joinable[pick]
-        keep = np.ones(starts.size, dtype=bool)
-        keep[j + 1] = False
-        new_ends = ends.copy()
-        new_ends[j] = ends[j + 1]
-        starts, ends = starts[keep], new_ends[keep]
-    return starts, ends
+    if idx.size == 0:
+        return _lines_record(None, label.reshape(shape), idx)
+    px, py = x.reshape(-1)[idx], y.reshape(-1)[idx]
+    thr = np.maximum(options.min_split_m, options.split_sigmas * np.nan_to_num(
+        np.asarray(sigma_m, float).reshape(-1)[idx], nan=0.0, posinf=1.0))
+    pieces = _segment(px, py, thr, idx % n_sensors, options, (float(px.mean()), float(py.mean())))
+    label[idx] = pieces.owner
+    return _lines_record(pieces, label.reshape(shape), idx)
 
 
 # --------------------------------------------------------------------------- estimation
@@ -699,25 +879,22 @@ class Estimate:
 
 
 def _classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
-    """Reasons decided by the counts alone (before any distance is computed)."""
-    reason = np.zeros(counts.shape, dtype=np.uint8)
+    """Reasons decided by the counts alone (before any distance is computed). Assigned from
+    the weakest claim up, so MISSING > SATURATED > FOLDOVER_AMBIGUOUS > NO_RETURN."""
+    full, near, no_return, sigma, falling = cal._levels
     s = counts
-    finite = np.isfinite(s)
-    reason[~finite] = Reason.MISSING
+    reason = np.zeros(s.shape, dtype=np.uint8)
+    margin = 2.0 * sigma
+    if falling:
+        reason[(s <= no_return + margin) | (s <= 0)] = Reason.NO_RETURN
+        reason[s > near] = Reason.FOLDOVER_AMBIGUOUS
+    else:  # a linear sensor (sonar/laser hooks): no fold-over, no return reads as max range
+        reason[(s >= no_return - margin) | (s <= 0)] = Reason.NO_RETURN
+    reason[s >= full - 0.5] = Reason.SATURATED
+    reason[~np.isfinite(s)] = Reason.MISSING
     if sweep.missing_steps:
         rows = np.isin(np.asarray(sweep.steps), np.asarray(sweep.missing_steps))
         reason[rows, :] = Reason.MISSING
-    ok = reason == Reason.OK
-    full = cal.full_scale_counts
-    reason[ok & (s >= full - 0.5)] = Reason.SATURATED
-    ok = reason == Reason.OK
-    margin = 2.0 * cal.sigma_counts()
-    if cal.falling:
-        reason[ok & (s > cal.near_counts)] = Reason.FOLDOVER_AMBIGUOUS
-        ok = reason == Reason.OK
-        reason[ok & ((s <= cal.no_return_counts + margin) | (s <= 0))] = Reason.NO_RETURN
-    else:  # a linear sensor (sonar/laser hooks): no fold-over, no return reads as max range
-        reason[ok & ((s >= cal.no_return_counts - margin) | (s <= 0))] = Reason.NO_RETURN
     return reason
 
 
@@ -733,13 +910,447 @@ def estimate(sweep: Sweep, calibration: Calibration | None = None, *, max_iterat
                            tolerance_rad=tolerance_rad, iterate=iterate, lines=lines).points
 
 
+def _incidence(hm: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Angle between beams (heading mod π) and the normals of lines at direction angle α
+    (in [0, π)): with δ = h − α, cos θ = |sin δ|, so θ = |π/2 − |δ||."""
+    return np.abs(_HALF_PI - np.abs(hm - alpha))
+
+
+_HALF_PI = math.pi / 2
+_INV_PI = 1.0 / math.pi
+
+
+class _Sweep:
+    """One sweep's live readings in scan order (sensor by sensor, by step), and the
+    calibration's curve, for the loop: everything per reading that θ does not change."""
+
+    def __init__(self, cal: Calibration, counts, origin, heading, live, steps, opts,
+                 max_range, tolerance_rad):
+        n_sensors = counts.shape[1]
+        scan, _ = _scan_order(steps, n_sensors)
+        pos = np.flatnonzero(live.reshape(-1).take(scan))    # places in the scan order
+        self.index = sel = scan.take(pos)                     # flat (S, N) index of each
+        self.k = sel.size
+        self.sensor = sel % n_sensors
+        # runs for the corner check break at a sensor change or a reading that is not live
+        self.run_brk = np.ones(self.k, dtype=bool)
+        if self.k > 1:
+            self.run_brk[1:] = (self.sensor[1:] != self.sensor[:-1]) | (pos[1:] != pos[:-1] + 1)
+        self.counts = counts.reshape(-1).take(sel)
+        self.log_s = np.log(self.counts)
+        self.ox = origin[..., 0].reshape(-1).take(sel)
+        self.oy = origin[..., 1].reshape(-1).take(sel)
+        h = heading.reshape(-1).take(sel)
+        self.ux, self.uy = np.cos(h), np.sin(h)
+        self.hm = h - math.pi * np.floor(h / math.pi)         # heading mod π
+        self.centre = ((float(self.ox.mean()), float(self.oy.mean())) if self.k else (0.0, 0.0))
+        self.at = np.arange(self.k)
+        self.cal = cal
+        self.sig_s = cal._levels[3] / self.counts             # σ_d = |b|·d·σ_S/S
+        self.inv_h, self.la_t, self.b_t = cal._fine
+        self.opts = opts
+        self.max_range = max_range
+        self.cap = cal.max_incidence_rad
+        self.reject = self.cap + opts.incidence_margin_rad
+        self.tol = tolerance_rad
+
+    def ab(self, theta: np.ndarray):
+        """log a(θ), b(θ) from the fine table (θ in [0, π/2])."""
+        i = (theta * self.inv_h + 0.5).astype(np.intp)
+        return self.la_t.take(i), self.b_t.take(i)
+
+    def points(self, theta: np.ndarray):
+        """d, x, y, σ of every live reading at incidence θ."""
+        la, b = self.ab(theta)
+        d = np.exp(la + b * self.log_s)
+        sigma = np.maximum(np.abs(b) * d * self.sig_s, _SIGMA_FLOOR_M)
+        return d, self.ox + d * self.ux, self.oy + d * self.uy, sigma
+
+    def thresholds(self, sigma: np.ndarray) -> np.ndarray:
+        return np.maximum(self.opts.min_split_m, self.opts.split_sigmas * sigma)
+
+
+class _Grouping:
+    """The lines of the current iteration and which reading takes θ from which line."""
+
+    def __init__(self, sw: _Sweep, pieces: _Pieces, uidx: np.ndarray | None):
+        self.sw = sw
+        self.pieces = pieces
+        self.uidx = uidx                 # compact index of each usable point (None: all)
+        self.cx, self.cy = pieces.cx.copy(), pieces.cy.copy()
+        self.alpha = pieces.alpha.copy()
+        self.usable = pieces.usable.copy()
+        self.first = pieces.starts if uidx is None else uidx.take(pieces.starts)
+        self.last = pieces.ends if uidx is None else uidx.take(pieces.ends)
+        self.n_lines = pieces.starts.size
+        self.label = np.full(sw.k, -1, dtype=np.intp)   # line of each live reading
+        self._tab = None
+
+    # ---- membership
+
+    def members(self, usable, px, py, thr) -> None:
+        """Each reading keeps its own usable line only if it sits on it (within the split
+        threshold; the last readings past a corner often do not)."""
+        own = self.pieces.owner
+        a = self.alpha.take(own)
+        if self.uidx is None:
+            x, y, t = px, py, thr
+        else:
+            x, y, t = px.take(self.uidx), py.take(self.uidx), thr.take(self.uidx)
+        r = np.abs((y - self.cy.take(own)) * np.cos(a) - (x - self.cx.take(own)) * np.sin(a))
+        ok = (r <= t) & self.usable.take(own)
+        lab = np.where(ok, own, -1)
+        if self.uidx is None:
+            self.label = lab
+        else:
+            self.label = np.full(self.sw.k, -1, dtype=np.intp)
+            self.label[self.uidx] = lab
+
+    def table(self, px, py):
+        """The usable lines for re-reading: (indices, α, centroid x, y, direction x, y,
+        extent along the line from its end readings ± adopt_margin_m, column of each line)."""
+        if self._tab is None:
+            use = self.usable.nonzero()[0]
+            a, cx, cy = self.alpha.take(use), self.cx.take(use), self.cy.take(use)
+            dx, dy = np.cos(a), np.sin(a)
+            f, l = self.first.take(use), self.last.take(use)
+            t0 = (px.take(f) - cx) * dx + (py.take(f) - cy) * dy
+            t1 = (px.take(l) - cx) * dx + (py.take(l) - cy) * dy
+            m = self.sw.opts.adopt_margin_m
+            col = np.full(self.n_lines + 1, -1)
+            col[use] = np.arange(use.size)
+            self._tab = (use, a, cx, cy, dx, dy, np.minimum(t0, t1) - m, np.maximum(t0, t1) + m,
+                         col)
+        return self._tab
+
+    def fit_to(self, idx, px, py, own=None):
+        """Readings ``idx`` against every usable line, each re-read with that line's θ:
+        (line indices (L,), |perpendicular residual| (U, L)). A line counts only if the
+        reading lands within ``adopt_margin_m`` of its extent (its own line, ``own``, always
+        counts) and the beam meets it no steeper than the rejection angle; else inf."""
+        sw = self.sw
+        use, a, cx, cy, dx, dy, lo, hi, col = self.table(px, py)
+        th = _incidence(sw.hm.take(idx)[:, None], a)                      # (U, L)
+        la, b = sw.ab(np.minimum(th, sw.cap))
+        d = np.exp(la + b * sw.log_s.take(idx)[:, None])
+        qx = d * sw.ux.take(idx)[:, None]
+        qx += sw.ox.take(idx)[:, None] - cx
+        qy = d * sw.uy.take(idx)[:, None]
+        qy += sw.oy.take(idx)[:, None] - cy
+        r = np.abs(qy * dx - qx * dy)
+        t = qx * dx + qy * dy
+        far = (t < lo) | (t > hi)
+        if own is not None:
+            far[np.arange(idx.size), col.take(own)] = False
+        far |= th > sw.reject
+        r[far] = np.inf
+        return use, r
+
+    def settle_corners(self, px, py, sigma, thr) -> None:
+        """Readings at the ends of their run go to whichever line explains them best.
+
+        Near a corner both walls' lines pass close to the first readings past it, and a
+        reading read with the wrong wall's θ can land on that wall's extension (a
+        self-consistent but wrong answer). Each reading within ``corner_window`` readings of
+        either end of its run (same line, same sensor, consecutive in the scan) is re-read
+        with every usable line's θ (see :meth:`fit_to`) and put on the line it then lies
+        closest to, if that is clearly better than its own.
+        """
+        sw = self.sw
+        k = sw.k
+        if k == 0 or not self.usable.any():
+            return
+        seq = self.label
+        at = sw.at
+        new_run = sw.run_brk.copy()
+        new_run[1:] |= seq[1:] != seq[:-1]
+        run_start = np.maximum.accumulate(np.where(new_run, at, 0))
+        end_run = np.ones(k, dtype=bool)
+        end_run[:-1] = new_run[1:]
+        run_end = np.minimum.accumulate(np.where(end_run, at, k - 1)[::-1])[::-1]
+        edge = (np.minimum(at - run_start, run_end - at) < sw.opts.corner_window) & (seq >= 0)
+        idx = edge.nonzero()[0]
+        if idx.size == 0:
+            return
+        own = seq.take(idx)
+        use, r = self.fit_to(idx, px, py, own=own)
+        rows = np.arange(idx.size)
+        best = r.argmin(axis=1)
+        r_best = r[rows, best]
+        r_own = r[rows, self._tab[8].take(own)]
+        # switch only for a clear gain (noise alone must not shuffle readings between lines)
+        ok = (r_best <= thr.take(idx)) & (r_best < r_own - sw.opts.corner_sigmas * sigma.take(idx))
+        if ok.any():
+            seq = seq.copy()
+            seq[idx[ok]] = use.take(best[ok])
+            self.label = seq
+
+    def corner_sides(self, px, py, thr) -> None:
+        """A wall ends at its corner: a reading on a line beyond the corner it shares with
+        the next piece of the same sweep (past the two lines' intersection) is not on it.
+
+        Next to a corner a reading read with the wrong wall's θ lands on that wall's
+        extension, self-consistently, and fits both lines about as well; where it lands
+        tells them apart. Such a reading moves to the line across the corner if, read with
+        that line's θ, it lies on it (within the split threshold) and on its side.
+        """
+        pc = self.pieces
+        j = ((pc.starts[1:] == pc.ends[:-1]) & self.usable[:-1] & self.usable[1:]).nonzero()[0]
+        if j.size == 0:
+            return
+        a0, a1 = self.alpha.take(j), self.alpha.take(j + 1)
+        ok = np.abs(np.sin(a1 - a0)) > 0.5      # lines meeting at > 30°: a real corner
+        if not ok.any():
+            return
+        j, a0, a1 = j[ok], a0[ok], a1[ok]
+        m = j.size
+        # both sides of every corner: the line, the other line, directions
+        line = np.concatenate([j, j + 1])
+        other = np.concatenate([j + 1, j])
+        aa = np.concatenate([a0, a1])
+        dx, dy = np.cos(aa), np.sin(aa)
+        cx, cy = self.cx.take(line), self.cy.take(line)
+        # intersection X = c0 + s·d0 with (X − c1) × d1 = 0
+        s0 = (((cx[m:] - cx[:m]) * dy[m:] - (cy[m:] - cy[:m]) * dx[m:])
+              / (dx[:m] * dy[m:] - dy[:m] * dx[m:]))
+        X = cx[:m] + s0 * dx[:m]
+        Y = cy[:m] + s0 * dy[:m]
+        X = np.concatenate([X, X])
+        Y = np.concatenate([Y, Y])
+        bulk = np.sign((cx - X) * dx + (cy - Y) * dy)   # the side each line's readings are on
+        pos = np.full(self.n_lines, -1)
+        pos[line] = np.arange(line.size)   # a line with corners at both ends: one of them
+        lab = self.label
+        c = pos.take(lab)                  # lab −1 → pos[−1]: the last line's entry or −1
+        c[lab < 0] = -1
+        mem = (c >= 0).nonzero()[0]
+        if mem.size == 0:
+            return
+        c = c.take(mem)
+        beyond = ((px.take(mem) - X.take(c)) * dx.take(c)
+                  + (py.take(mem) - Y.take(c)) * dy.take(c)) * bulk.take(c) < 0
+        if not beyond.any():
+            return
+        mem, c = mem[beyond], c[beyond]
+        tgt = other.take(c)
+        _, r = self.fit_to(mem, px, py)
+        col = self._tab[8].take(tgt)
+        move = (col >= 0) & (r[np.arange(mem.size), col] <= thr.take(mem))
+        if not move.any():
+            return
+        # read with the target's θ the reading must land on the target's side of the corner
+        mem, c, tgt = mem[move], c[move], tgt[move]
+        sw = self.sw
+        c2 = (c + m) % (2 * m)                       # the target's entry (the other side)
+        th = _incidence(sw.hm.take(mem), aa.take(c2))
+        la, b = sw.ab(np.minimum(th, sw.cap))
+        d = np.exp(la + b * sw.log_s.take(mem))
+        side = ((sw.ox.take(mem) + d * sw.ux.take(mem) - X.take(c2)) * dx.take(c2)
+                + (sw.oy.take(mem) + d * sw.uy.take(mem) - Y.take(c2)) * dy.take(c2))
+        ok = side * bulk.take(c2) >= 0
+        if ok.any():
+            lab = lab.copy()
+            lab[mem[ok]] = tgt[ok]
+            self.label = lab
+
+    def drop_steep(self, usable) -> None:
+        """A line the beam would meet past the drop-out angle cannot be what it saw.
+
+        A reading whose line it meets steeper than the rejection angle leaves it. A line that
+        most of its readings meet at or past the drop-out angle (less 2°) is not a surface: a
+        radial streak (readings off a thin cylinder's edge, stretched along the beams by
+        θ = 0) or a runaway (θ up → d down → the line turns radial → θ up, which a curve whose
+        a(θ) falls with θ allows on a cylinder's face). A real wall that steep would return
+        nothing. Such a line is dropped.
+        """
+        sw = self.sw
+        label = self.label
+        lab = np.maximum(label, 0)
+        good = (label >= 0) & self.usable.take(lab)
+        if usable is not None:
+            good &= usable
+        theta_line = _incidence(sw.hm, self.alpha.take(lab))
+        pinned = good & (theta_line >= sw.cap - _PINNED_RAD)
+        if pinned.any():
+            frac = (np.bincount(lab[pinned], minlength=self.n_lines)
+                    / np.maximum(np.bincount(lab[good], minlength=self.n_lines), 1))
+            streak = frac > 0.5
+            if streak.any():
+                self.usable &= ~streak
+                self._tab = None
+                good &= ~streak.take(lab)
+        good &= theta_line <= sw.reject
+        if not good.all():
+            self.label = np.where(good, label, -1)
+
+    def adopt(self, usable, px, py, thr) -> None:
+        """Readings on no usable line join one if, read with that line's θ, they land on it.
+
+        These are mostly readings next to a corner, which θ = 0 put off both walls, and the
+        last few readings of a sweep past a corner (the neighbouring sensor sees that wall).
+        Every orphan is tried against every usable line at once ((orphans, lines) arrays;
+        both are few): it joins the nearest within the split threshold and near the line's
+        extent.
+        """
+        orphan = self.label < 0
+        if usable is not None:
+            orphan &= usable
+        sel = orphan.nonzero()[0]
+        if sel.size == 0 or not self.usable.any():
+            return
+        use, r = self.fit_to(sel, px, py)
+        r /= thr.take(sel)[:, None]
+        best = r.argmin(axis=1)
+        ok = r[np.arange(sel.size), best] <= 1.0
+        if ok.any():
+            self.label = self.label.copy()
+            self.label[sel[ok]] = use.take(best[ok])
+
+    def refit(self, usable, px, py) -> None:
+        """The same members, lines refitted at their moved positions; a line left with
+        fewer than two members keeps its fit but gives θ no more."""
+        lab = self.label
+        on = lab >= 0
+        if usable is not None:
+            on &= usable
+        mem = on.nonzero()[0]
+        self._tab = None
+        if mem.size == 0:
+            self.usable[:] = False
+            return
+        l = lab.take(mem)
+        order = l.argsort(kind="stable")
+        mem, l = mem.take(order), l.take(order)
+        new = np.empty(l.size, dtype=bool)
+        new[0] = True
+        np.not_equal(l[1:], l[:-1], out=new[1:])
+        first = new.nonzero()[0]
+        lines = l.take(first)
+        cx0, cy0 = self.sw.centre
+        buf = np.empty((5, mem.size))
+        np.subtract(px.take(mem), cx0, out=buf[0])
+        np.subtract(py.take(mem), cy0, out=buf[1])
+        np.multiply(buf[0], buf[0], out=buf[2])
+        np.multiply(buf[1], buf[1], out=buf[3])
+        np.multiply(buf[0], buf[1], out=buf[4])
+        n = _lengths(first, mem.size)
+        t = np.add.reduceat(buf, first, axis=1)
+        mx, my, alpha = _tls_angle(n, t)
+        # a line needs two members with some spread (all coincident: no direction)
+        fitted = (n >= 2) & ((t[2] - t[0] * mx) + (t[3] - t[1] * my) > 0)
+        keep = np.zeros(self.n_lines, dtype=bool)
+        keep[lines[fitted]] = True
+        lf = lines[fitted]
+        self.cx = self.cx.copy()
+        self.cy = self.cy.copy()
+        self.alpha = self.alpha.copy()
+        self.cx[lf] = mx[fitted] + cx0
+        self.cy[lf] = my[fitted] + cy0
+        alpha = alpha[fitted]
+        alpha[alpha < 0] += math.pi
+        self.alpha[lf] = alpha
+        self.usable &= keep
+
+    def theta_new(self):
+        """(θ from each reading's line, capped (0 off any line), θ of the line uncapped)."""
+        sw = self.sw
+        on = self.label >= 0
+        theta_line = np.where(on, _incidence(sw.hm, self.alpha.take(np.maximum(self.label, 0))),
+                              0.0)
+        return np.minimum(theta_line, sw.cap), theta_line
+
+
+class _Held:
+    """The iteration with held membership, in line order: each line's members' θ follow from
+    one direction angle a (θ_i = |π/2 − |h_i − a||), so a step is: points at θ(a) → TLS
+    angle G(a) of every line at once (np.add.reduceat over the members sorted by line) →
+    new a. With ``secant`` the step is a safeguarded secant step on G(a) − a per line."""
+
+    def __init__(self, sw: _Sweep, grouping: _Grouping, theta: np.ndarray, secant: bool):
+        label = grouping.label
+        mem = (label >= 0).nonzero()[0]
+        lm = label.take(mem)
+        order = np.argsort(lm, kind="stable")
+        self.perm = perm = mem.take(order)
+        lm = lm.take(order)
+        self.km = km = perm.size
+        new = np.ones(km, dtype=bool)
+        np.not_equal(lm[1:], lm[:-1], out=new[1:])
+        self.lstart = new.nonzero()[0]
+        self.line = lm.take(self.lstart)                 # grouping line index of each slot
+        self.slot = new.cumsum() - 1
+        self.n = _lengths(self.lstart, km)
+        lone = self.n < 2                                 # a lone member keeps its line's θ
+        self.lone = lone if lone.any() else None
+        cx0, cy0 = sw.centre
+        self.hm = sw.hm.take(perm)
+        self.log_s = sw.log_s.take(perm)
+        self.ox, self.oy = sw.ox.take(perm) - cx0, sw.oy.take(perm) - cy0
+        self.ux, self.uy = sw.ux.take(perm), sw.uy.take(perm)
+        self.buf = np.empty((5, km))
+        self.a = grouping.alpha.take(self.line)
+        self.theta = theta.take(perm)
+        self.sw = sw
+        self.secant = secant
+        self.a_prev = self.g_prev = None
+
+    def fit(self):
+        """Fit every line to its members' points at the current θ: returns (members' step
+        θ_new − θ, θ of their lines uncapped)."""
+        sw = self.sw
+        la, b = sw.ab(self.theta)
+        d = np.exp(la + b * self.log_s)
+        buf = self.buf
+        x, y = buf[0], buf[1]
+        np.multiply(d, self.ux, out=x)
+        x += self.ox
+        np.multiply(d, self.uy, out=y)
+        y += self.oy
+        np.multiply(x, x, out=buf[2])
+        np.multiply(y, y, out=buf[3])
+        np.multiply(x, y, out=buf[4])
+        _, _, g_out = _tls_angle(self.n, np.add.reduceat(buf, self.lstart, axis=1))
+        g_out[g_out < 0.0] += math.pi
+        if self.lone is not None:
+            g_out[self.lone] = self.a[self.lone]
+        self.g_out = g_out
+        theta_line = _incidence(self.hm, g_out.take(self.slot))
+        return np.minimum(theta_line, sw.cap) - self.theta, theta_line
+
+    def advance(self) -> None:
+        """The next a: the plain step a ← G(a), or (``secant``) a secant step towards the
+        root of g(a) = G(a) − a from this and the previous iteration, its gain held to
+        [1/64, 8]: below 1 it damps an oscillation (G' < 0), above 1 it speeds up a slow
+        contraction (0 < G' < 1); where G' ≥ 1 (a runaway) the step stays plain."""
+        g = self.g_out - self.a
+        g -= math.pi * np.rint(g * _INV_PI)
+        a = self.a
+        if self.secant and self.a_prev is not None:
+            da = a - self.a_prev
+            da -= math.pi * np.rint(da * _INV_PI)
+            dg = self.g_prev - g
+            # gain −1/slope with slope = (g − g_prev)/da: only where the slope is negative
+            ok = dg * da > 0.0
+            gain = np.ones_like(g)
+            gain[ok] = np.minimum(np.maximum(da[ok] / dg[ok], 1.0 / 64.0), _MAX_GAIN)
+            self.a_prev, self.g_prev = a, g
+            a = a + gain * g
+        else:
+            self.a_prev, self.g_prev = a, g
+            a = a + g
+        a -= math.pi * np.floor(a * _INV_PI)
+        self.a = a
+        self.theta = np.minimum(_incidence(self.hm, a.take(self.slot)), self.sw.cap)
+
+
 def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                     max_iterations: int = 20, tolerance_rad: float = math.radians(0.1),
                     iterate: bool = True, lines: LineOptions = LineOptions(),
                     keep_history: bool = False, damping: bool = True) -> Estimate:
     """:func:`estimate` that also returns the final lines and (optionally) θ per iteration.
 
-    ``damping=False`` switches the oscillation damping off (to show what it is for).
+    ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
+    Table II (to show what the control is for).
     """
     cal = calibration if calibration is not None else Calibration.for_sweep(sweep)
     if max_iterations < 1:
@@ -753,292 +1364,168 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                                     cal.emitter_offset_m)
     origin = np.broadcast_to(origin, counts.shape + (2,))
     heading = np.broadcast_to(heading, counts.shape)
-    ux, uy = np.cos(heading), np.sin(heading)
+    shape = counts.shape
 
     reason = _classify(counts, sweep, cal)
     live = reason == Reason.OK
-    s_safe = np.where(live, counts, 1.0)
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
-    theta_cap = cal.max_incidence_rad
-    theta_reject = theta_cap + lines.incidence_margin_rad
-    sig_counts = cal.sigma_counts()
-
-    def points_at(theta):
-        d = cal.distance(s_safe, theta)
-        _, b = cal.ab(theta)
-        sigma = np.maximum(np.abs(b) * d * sig_counts / s_safe, _SIGMA_FLOOR_M)
-        return d, origin[..., 0] + d * ux, origin[..., 1] + d * uy, sigma
-
-    theta = np.zeros(counts.shape)
-    gain = np.ones(counts.shape)
-    last_step = np.zeros(counts.shape)
-    iterations = np.zeros(counts.shape, dtype=np.int32)
-    moving = np.zeros(counts.shape, dtype=bool)
-    was_moving = np.ones(counts.shape, dtype=bool)
-    on_line = np.zeros(counts.shape, dtype=bool)
-    history = [theta.copy()] if keep_history else []
-    found: Lines | None = None
-    steps = np.asarray(sweep.steps)
-    scan, _ = _scan_order(steps, counts.shape[1])
-    regroup = True
-    n_iter = max_iterations if iterate else 0
-    for it in range(n_iter):
-        d, px, py, sigma = points_at(theta)
-        # readings far outside the range cannot help a line (but stay for the final check)
-        usable = live & (d <= 1.5 * max_range)
-        if regroup:
-            found = fit_lines(px, py, usable, sigma, steps, lines)
-            line_of = _members(found, usable, px, py, sigma, lines)
-            line_of = _settle_corners(line_of, found, scan, cal, s_safe, origin, ux, uy, px,
-                                      py, sigma, theta_reject, lines)
-        else:  # held grouping: the same members refitted at their new positions
-            found = _refit(found, line_of, px, py, usable)
-        found, line_of = _drop_steep(found, line_of, usable, ux, uy, theta_cap, theta_reject)
-        # readings on no line may join one (while held: join, never leave, so no flip-flop)
-        orphan = usable & (line_of < 0)
-        if orphan.any():
-            line_of = _adopt(line_of, orphan, found, cal, s_safe, origin, ux, uy, px, py,
-                             sigma, theta_reject, lines)
-        good = line_of >= 0
-        theta_line = _incidence(found, line_of, ux, uy)
-        theta_new = np.where(good, np.minimum(theta_line, theta_cap), 0.0)
-        on_line = good
-        step = theta_new - theta
-        moving = live & (np.abs(step) >= tolerance_rad)
-        # damping: an update that reverses the previous one halves the gain
-        # (a reversal that shrinks fast is ordinary convergence and keeps its gain)
-        flip = moving & (step * last_step < 0) & (np.abs(step) > 0.5 * np.abs(last_step))
-        flip &= damping
-        gain = np.where(flip, np.maximum(gain * 0.5, 1.0 / 64.0), np.minimum(gain * 1.25, 1.0))
-        applied = gain * step
-        theta = np.clip(theta + np.where(live, applied, 0.0), 0.0, theta_cap)
-        last_step = np.where(moving, step, 0.0)
-        # a reading's count: iterations until its θ stopped moving (the confirming one included)
-        iterations = np.where(moving | was_moving, it + 1, iterations).astype(np.int32)
-        was_moving = moving
+    sw = _Sweep(cal, counts, origin, heading, live, np.asarray(sweep.steps), lines, max_range,
+                tolerance_rad)
+    k = sw.k
+    theta = np.zeros(k)
+    last_moving = np.full(k, -1)        # last iteration in which each reading's θ moved
+    history = [np.zeros(shape)] if keep_history else []
+    grouping: _Grouping | None = None
+    pieces: _Pieces | None = None
+    held: _Held | None = None
+    on_line = np.zeros(k, dtype=bool)
+    n_its = 0
+    regroups = 0
+    regroup_changed = True
+    older = None          # the labels two groupings ago
+    mode = "regroup"
+    it = 0
+    settled = False
+    while it < (max_iterations if iterate and k else 0):
+        checked = False
+        if mode != "inner":
+            # a membership pass: regroup (split-and-merge anew), or check the members
+            checked = True
+            if held is not None:
+                theta[held.perm] = held.theta
+            d, px, py, sigma = sw.points(theta)
+            thr = sw.thresholds(sigma)
+            # readings far outside the range cannot help a line (but stay for the final check)
+            usable = d <= 1.5 * max_range
+            use_mask = None if bool(usable.all()) else usable
+            before = None if grouping is None else grouping.label
+            if mode == "regroup":
+                uidx = None if use_mask is None else usable.nonzero()[0]
+                parts = (px, py, thr, sw.sensor) if uidx is None else (
+                    px.take(uidx), py.take(uidx), thr.take(uidx), sw.sensor.take(uidx))
+                pieces = _segment(*parts, lines, sw.centre, pieces)
+                grouping = _Grouping(sw, pieces, uidx)
+                grouping.members(usable, px, py, thr)
+                grouping.settle_corners(px, py, sigma, thr)
+                regroups += 1
+            else:  # the same members, refitted where they now are
+                grouping.refit(use_mask, px, py)
+                grouping.corner_sides(px, py, thr)
+            grouping.drop_steep(use_mask)
+            grouping.adopt(use_mask, px, py, thr)
+            changed = before is None or not np.array_equal(before, grouping.label)
+            # θ from the members' own lines (as the held iterations fit them), so an unchanged
+            # grouping leaves θ where it was
+            if mode == "regroup" or changed:
+                grouping.refit(use_mask, px, py)
+            elif settled:
+                break          # the members stand and their lines did not move: done
+            if mode == "regroup":
+                # regroup again only while that changes who belongs where, and not back to
+                # the grouping before (readings at a corner flipping between two lines)
+                regroup_changed = changed and not (
+                    older is not None and np.array_equal(older, grouping.label))
+                older = before
+            mode = "inner"
+            if changed or held is None:  # a plain step from the new grouping
+                theta_new, _ = grouping.theta_new()
+                moving = np.abs(theta_new - theta) >= tolerance_rad
+                theta = theta_new
+                on_line = grouping.label >= 0
+                last_moving[moving] = it
+                it += 1
+                if keep_history:
+                    history.append(_scatter(theta, sw.index, shape, 0.0))
+                if not moving.any():
+                    break
+                held = _Held(sw, grouping, theta, secant=damping)
+                continue
+            # unchanged: this iteration is an ordinary held step
+        step, theta_line = held.fit()
+        hot = theta_line >= sw.cap - _PINNED_RAD
+        if not checked and hot.any() and _needs_drop(held, hot, theta_line, sw):
+            mode = "member"      # some member left its line: redo this iteration as a check
+            continue
+        moving = np.abs(step) >= tolerance_rad
+        last_moving[held.perm[moving]] = it
+        held.advance()
+        it += 1
+        settled = not moving.any()
         if keep_history:
-            history.append(theta.copy())
+            history.append(_scatter(theta, sw.index, shape, 0.0, held))
         if not moving.any():
-            break
-        # regroup while θ still moves coarsely, then hold the grouping
-        regroup = regroup and it + 1 < lines.regroup_iterations and \
-            float(np.max(np.abs(applied), initial=0.0)) > lines.regroup_until_rad
+            if regroups == 1 and it < lines.regroup_iterations:
+                mode = "regroup"   # settled once: split-and-merge the straightened points again
+            elif checked:
+                break
+            else:
+                mode = "member"    # settled: a last look at who belongs where
+        elif (regroup_changed and it < lines.regroup_iterations
+              and float(np.max(np.abs(step))) < lines.regroup_until_rad):
+            mode = "regroup"       # θ has settled coarsely: group the straightened points again
+    n_its = it
+    if held is not None:
+        theta[held.perm] = held.theta
 
-    d, px, py, sigma = points_at(theta)
-    # fallback readings (no line): θ = 0, σ widened by half the spread to θ = 45°
-    d45 = cal.distance(s_safe, np.full(counts.shape, _FALLBACK_SPREAD_RAD))
-    sigma = np.where(on_line | (not iterate), sigma,
-                     np.hypot(sigma, 0.5 * np.abs(d45 - d)))
-    bad_range = live & ((d > max_range) | (d < cal.min_range_m) | ~np.isfinite(d))
-    reason[bad_range] = Reason.OUT_OF_RANGE
-    reason[live & ~bad_range & moving] = Reason.NOT_CONVERGED
+    # final points with the exact curve
+    s = sw.counts
+    d = cal.distance(s, theta)
+    _, b = cal.ab(theta)
+    sigma = np.maximum(np.abs(b) * d * sw.sig_s, _SIGMA_FLOOR_M)
+    px, py = sw.ox + d * sw.ux, sw.oy + d * sw.uy
+    if iterate:  # fallback readings (no line): θ = 0, σ widened by half the spread to θ = 45°
+        off = (~on_line).nonzero()[0]
+        if off.size:
+            d45 = cal.distance(s.take(off), _FALLBACK_SPREAD_RAD)
+            sigma[off] = np.hypot(sigma.take(off), 0.5 * np.abs(d45 - d.take(off)))
+
+    iterations = np.minimum(last_moving + 2, n_its)
+    moving_at_end = last_moving == n_its - 1 if n_its else np.zeros(k, dtype=bool)
+    bad_range = (d > max_range) | (d < cal.min_range_m) | ~np.isfinite(d)
+    why = np.where(bad_range, np.uint8(Reason.OUT_OF_RANGE),
+                   np.where(moving_at_end, np.uint8(Reason.NOT_CONVERGED), np.uint8(Reason.OK)))
+    why = np.where(np.isfinite(px) & np.isfinite(py) & np.isfinite(sigma) | (why != Reason.OK),
+                   why, np.uint8(Reason.OUT_OF_RANGE))
+    reason.reshape(-1)[sw.index] = why
     valid = reason == Reason.OK
-    valid &= np.isfinite(px) & np.isfinite(py) & np.isfinite(sigma) & np.isfinite(theta)
+    it_out = np.full(shape, 1 if iterate else 0, dtype=np.int32)
+    it_out.reshape(-1)[sw.index] = iterations
     nan = np.nan
     points = Points(
-        x=np.where(valid, px, nan), y=np.where(valid, py, nan), d=np.where(valid, d, nan),
-        theta=np.where(valid, theta, nan),
+        x=_scatter(px, sw.index, shape, nan, mask=valid),
+        y=_scatter(py, sw.index, shape, nan, mask=valid),
+        d=_scatter(d, sw.index, shape, nan, mask=valid),
+        theta=_scatter(theta, sw.index, shape, nan, mask=valid),
         origin_x=np.array(origin[..., 0]), origin_y=np.array(origin[..., 1]),
-        heading=np.array(heading), sigma_m=np.where(valid, sigma, nan),
-        iterations=iterations, valid=valid, reason=reason, max_range_m=max_range)
-    if found is not None:  # labels: the line each reading took θ from (−1: none)
-        found = replace(found, label=np.where(on_line, line_of, -1))
+        heading=np.array(heading), sigma_m=_scatter(sigma, sw.index, shape, nan, mask=valid),
+        iterations=it_out, valid=valid, reason=reason, max_range_m=max_range)
+    found = None
+    if grouping is not None:  # labels: the line each reading took θ from (−1: none)
+        label = np.full(shape, -1, dtype=int)
+        label.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
+        pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
+                                         alpha=grouping.alpha, usable=grouping.usable)
+        index = sw.index if grouping.uidx is None else sw.index.take(grouping.uidx)
+        found = _lines_record(pieces_out, label, index)
     return Estimate(points=points, lines=found, theta_history=tuple(history))
 
 
-def _members(found: Lines, usable: np.ndarray, px: np.ndarray, py: np.ndarray,
-             sigma: np.ndarray, opts: LineOptions) -> np.ndarray:
-    """(S, N) line index giving each reading its θ, or −1: a reading keeps its own usable
-    line only if it sits on it (within the split threshold; the last readings past a
-    corner often do not)."""
-    label = found.label
-    good = (label >= 0) & usable
-    good[good] = found.usable[label[good]]
-    thr = np.maximum(opts.min_split_m, opts.split_sigmas * sigma)
-    lg = label[good]
-    off = np.abs((px[good] - found.centroid[lg, 0]) * found.normal[lg, 0]
-                 + (py[good] - found.centroid[lg, 1]) * found.normal[lg, 1]) > thr[good]
-    good[good] = ~off
-    return np.where(good, label, -1)
+def _needs_drop(held: _Held, hot, theta_line, sw: _Sweep) -> bool:
+    """Whether a member now meets its line past the rejection angle, or most of a line's
+    members sit at the drop-out angle (a streak or runaway, see _Grouping.drop_steep)."""
+    if (theta_line > sw.reject).any():
+        return True
+    n_hot = np.bincount(held.slot[hot], minlength=held.n.size)
+    return bool((n_hot > 0.5 * held.n).any())
 
 
-def _settle_corners(line_of: np.ndarray, found: Lines, scan: np.ndarray, cal: Calibration,
-                    s_safe: np.ndarray, origin: np.ndarray, ux: np.ndarray, uy: np.ndarray,
-                    px: np.ndarray, py: np.ndarray, sigma: np.ndarray, theta_reject: float,
-                    opts: LineOptions) -> np.ndarray:
-    """Readings at the ends of their run go to whichever line explains them best.
-
-    Near a corner both walls' lines pass close to the first readings past it, and a reading
-    read with the wrong wall's θ can land on that wall's extension (a self-consistent but
-    wrong answer). Each reading within ``opts.corner_window`` readings of either end of its
-    run (same line, same sensor, consecutive in the scan) is re-read with every usable
-    line's θ (see :func:`_fit_to_lines`) and put on the line it then lies closest to.
-    """
-    m = scan.size
-    if m == 0 or not found.usable.any():
-        return line_of
-    n_sensors = line_of.shape[1]
-    seq = line_of.reshape(-1)[scan]
-    sens = scan % n_sensors
-    at = np.arange(m)
-    new_run = np.ones(m, dtype=bool)
-    new_run[1:] = (seq[1:] != seq[:-1]) | (sens[1:] != sens[:-1])
-    run_start = np.maximum.accumulate(np.where(new_run, at, 0))
-    end_run = np.ones(m, dtype=bool)
-    end_run[:-1] = new_run[1:]
-    run_end = np.minimum.accumulate(np.where(end_run, at, m - 1)[::-1])[::-1]
-    edge = (seq >= 0) & (np.minimum(at - run_start, run_end - at) < opts.corner_window)
-    if not edge.any():
-        return line_of
-    idx = scan[edge]
-    lines_idx, r, _ = _fit_to_lines(idx, found, cal, s_safe, origin, ux, uy, px, py,
-                                    theta_reject, opts, own=seq[edge])
-    best = np.argmin(r, axis=1)
-    rows = np.arange(idx.size)
-    own_col = np.searchsorted(lines_idx, seq[edge])
-    own_ok = (own_col < lines_idx.size) & (lines_idx[np.minimum(own_col, lines_idx.size - 1)]
-                                          == seq[edge])
-    r_own = np.where(own_ok, r[rows, np.minimum(own_col, lines_idx.size - 1)], np.inf)
-    # switch only for a clear gain (noise alone must not shuffle readings between lines)
-    sig = sigma.reshape(-1)[idx]
-    thr = np.maximum(opts.min_split_m, opts.split_sigmas * sig)
-    ok = (r[rows, best] <= thr) & (r[rows, best] < r_own - opts.corner_sigmas * sig)
-    out = line_of.copy()
-    out.reshape(-1)[idx[ok]] = lines_idx[best[ok]]
+def _scatter(values, index, shape, fill, held: _Held | None = None, mask=None):
+    """Compact per-reading values back into an (S, N) array (``fill`` elsewhere)."""
+    out = np.full(shape, fill)
+    if held is not None:
+        values = values.copy()
+        values[held.perm] = held.theta
+    out.reshape(-1)[index] = values
+    if mask is not None:
+        out[~mask] = fill
     return out
-
-
-def _fit_to_lines(idx: np.ndarray, found: Lines, cal: Calibration, s_safe: np.ndarray,
-                  origin: np.ndarray, ux: np.ndarray, uy: np.ndarray, px: np.ndarray,
-                  py: np.ndarray, theta_reject: float, opts: LineOptions,
-                  own: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Readings ``idx`` (flat) against every usable line, each reading re-read with that
-    line's θ: returns (line indices (L,), |perpendicular residual| (U, L), θ (U, L)).
-
-    A line counts only if the reading's point lies within ``opts.adopt_margin_m`` of the
-    line's extent (its own line, ``own``, always counts) and the beam meets it no steeper than
-    ``theta_reject``; other entries are inf.
-    """
-    usable = np.flatnonzero(found.usable)
-    n = found.normal[usable]                                            # (L, 2)
-    u = np.stack([ux.reshape(-1)[idx], uy.reshape(-1)[idx]], axis=-1)   # (U, 2)
-    cos_t = np.abs(u @ n.T)                                             # (U, L)
-    sin_t = np.abs(u[:, 1:2] * n[None, :, 0] - u[:, 0:1] * n[None, :, 1])
-    th = np.arctan2(sin_t, cos_t)
-    d = cal.distance(s_safe.reshape(-1)[idx][:, None], np.minimum(th, cal.max_incidence_rad))
-    o = origin.reshape(-1, 2)[idx]
-    c = found.centroid[usable]
-    qx = o[:, 0:1] + d * u[:, 0:1] - c[:, 0]
-    qy = o[:, 1:2] + d * u[:, 1:2] - c[:, 1]
-    r = np.abs(qx * n[:, 0] + qy * n[:, 1])
-    # extent of each line along its direction, from its end readings
-    dirs = found.direction[usable]
-    sx, sy = px.reshape(-1)[found.start[usable]], py.reshape(-1)[found.start[usable]]
-    ex, ey = px.reshape(-1)[found.end[usable]], py.reshape(-1)[found.end[usable]]
-    t0 = (sx - c[:, 0]) * dirs[:, 0] + (sy - c[:, 1]) * dirs[:, 1]
-    t1 = (ex - c[:, 0]) * dirs[:, 0] + (ey - c[:, 1]) * dirs[:, 1]
-    lo = np.minimum(t0, t1) - opts.adopt_margin_m
-    hi = np.maximum(t0, t1) + opts.adopt_margin_m
-    t = qx * dirs[:, 0] + qy * dirs[:, 1]
-    near = (t >= lo) & (t <= hi)
-    if own is not None:
-        near |= usable[None, :] == own[:, None]
-    r = np.where(near & np.isfinite(r) & (th <= theta_reject), r, np.inf)
-    return usable, r, th
-
-
-def _incidence(found: Lines, line_of: np.ndarray, ux: np.ndarray, uy: np.ndarray
-               ) -> np.ndarray:
-    """(S, N) angle between each reading's beam and its line's normal (0 off any line)."""
-    on = line_of >= 0
-    nx = np.zeros(line_of.shape)
-    ny = np.zeros(line_of.shape)
-    nx[on] = found.normal[line_of[on], 0]
-    ny[on] = found.normal[line_of[on], 1]
-    return np.where(on, np.arctan2(np.abs(nx * uy - ny * ux), np.abs(nx * ux + ny * uy)), 0.0)
-
-
-def _drop_steep(found: Lines, line_of: np.ndarray, usable: np.ndarray, ux: np.ndarray,
-                uy: np.ndarray, theta_cap: float, theta_reject: float
-                ) -> tuple[Lines, np.ndarray]:
-    """A line the beam would meet past the drop-out angle cannot be what it saw.
-
-    A reading whose line it meets steeper than ``theta_reject`` leaves it. A line that most
-    of its readings meet at or past the drop-out angle ``theta_cap`` (less 2°) is not a
-    surface: a radial streak (readings off a thin cylinder's edge, stretched along the
-    beams by θ = 0) or a runaway (θ up → d down → the line turns radial → θ up, which a
-    curve whose a(θ) falls with θ allows on a cylinder's face). A real wall that steep would
-    return nothing. Such a line is dropped (for good while the grouping is held).
-    """
-    good = (line_of >= 0) & usable
-    good[good] = found.usable[line_of[good]]
-    line_of = np.where(good, line_of, -1)
-    theta_line = _incidence(found, line_of, ux, uy)
-    steep = good & (theta_line > theta_reject)
-    # readings pinned at the drop-out angle are as suspect: a real wall that steep returns
-    # nothing, while a runaway (θ up → d down → the line turns radial → θ up) ends there
-    pinned = good & (theta_line >= theta_cap - _PINNED_RAD)
-    if pinned.any():
-        n_lines = found.normal.shape[0]
-        frac = (np.bincount(line_of[pinned], minlength=n_lines)
-                / np.maximum(np.bincount(line_of[good], minlength=n_lines), 1))
-        streak = frac > 0.5
-        if streak.any():
-            found = replace(found, usable=found.usable & ~streak)
-            good[good] = ~streak[line_of[good]]
-    good &= ~steep
-    return found, np.where(good, line_of, -1)
-
-
-def _adopt(line_of: np.ndarray, orphan: np.ndarray, found: Lines, cal: Calibration,
-           s_safe: np.ndarray, origin: np.ndarray, ux: np.ndarray, uy: np.ndarray,
-           px: np.ndarray, py: np.ndarray, sigma: np.ndarray, theta_reject: float,
-           opts: LineOptions) -> np.ndarray:
-    """Readings on no usable line join one if, read with that line's θ, they land on it.
-
-    These are mostly readings next to a corner, which θ = 0 put off both walls, and the last
-    few readings of a sweep past a corner (the neighbouring sensor sees that wall). Every
-    orphan is tried against every usable line at once ((orphans, lines) arrays; both are
-    few): it joins the nearest within the split threshold and near the line's extent.
-    """
-    if not orphan.any() or not found.usable.any():
-        return line_of
-    sel = np.flatnonzero(orphan.reshape(-1))
-    lines_idx, r, _ = _fit_to_lines(sel, found, cal, s_safe, origin, ux, uy, px, py,
-                                    theta_reject, opts)
-    thr = np.maximum(opts.min_split_m, opts.split_sigmas * sigma.reshape(-1)[sel])
-    r = r / thr[:, None]
-    best = np.argmin(r, axis=1)
-    ok = r[np.arange(sel.size), best] <= 1.0
-    out = line_of.copy()
-    out.reshape(-1)[sel[ok]] = lines_idx[best[ok]]
-    return out
-
-
-def _refit(prev: Lines, line_of: np.ndarray, px: np.ndarray, py: np.ndarray,
-           usable: np.ndarray) -> Lines:
-    """The same members, lines refitted at their moved positions (vectorised by bincount)."""
-    n_lines = prev.normal.shape[0]
-    if n_lines == 0:
-        return prev
-    lab = line_of.reshape(-1)
-    use = (lab >= 0) & usable.reshape(-1)
-    l = lab[use]
-    x, y = px.reshape(-1)[use], py.reshape(-1)[use]
-    cx, cy = (float(np.mean(x)), float(np.mean(y))) if x.size else (0.0, 0.0)
-    x, y = x - cx, y - cy
-
-    def tot(w):
-        return np.bincount(l, weights=w, minlength=n_lines)
-
-    n = tot(np.ones_like(x))
-    c, normal, direction, lmin, lmax = _tls(tot(x), tot(y), tot(x * x), tot(y * y), tot(x * y), n)
-    fitted = n >= 2
-    # keep the previous orientation's sign so normals do not flip between iterations
-    normal = np.where(fitted[:, None], normal, prev.normal)
-    direction = np.where(fitted[:, None], direction, prev.direction)
-    return replace(prev, label=line_of, centroid=np.where(fitted[:, None], c + [cx, cy],
-                                                          prev.centroid),
-                   normal=normal, direction=direction,
-                   rms_m=np.where(fitted, np.sqrt(lmin), prev.rms_m),
-                   usable=prev.usable & fitted & (lmax > 0))
