@@ -30,8 +30,9 @@ Schedule (how steps 2–6 are repeated; the work goes where it changes the answe
 - *regrouping*: once θ has settled coarsely (every step < ``regroup_until_rad``), and in any
   case after the first convergence, the readings are grouped again at their straightened
   positions: the pieces are kept, their corners refined again and membership judged afresh.
-  This repeats while it changes who belongs where (not back to the grouping before), within
-  the first ``regroup_iterations`` iterations;
+  This repeats while it changes who belongs where (not back to the grouping before), up to
+  ``regroup_iterations`` groupings in all (the one at θ = 0 included; a third or later only
+  within the first 8 iterations, so late regroups cannot keep a corner from settling);
 - *membership checks*: when the held iterations settle, the members are checked once more at
   their final positions (a wall ends at its corner: a reading on a line beyond its
   intersection with the next piece's line moves across if it fits there; drop-outs;
@@ -74,6 +75,7 @@ CALIBRATION_FORMAT = 1  # version written into calibration files
 _SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
 _FINE_CELLS = 1 << 16  # cells of the fine (log a, b) table over 0 … 90°
 _FALLBACK_NODES = 8   # quadrature nodes for the fallback σ (see _fallback_spread)
+_REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
 _MAX_GAIN = 8.0      # the held iteration's secant step at most 8× the plain one
 _PINNED_RAD = math.radians(2.0)  # a line most readings meet within this of the drop-out angle
 #                                  is a runaway, not a wall (see _drop_steep)
@@ -466,8 +468,8 @@ class LineOptions:
     min_points: int = 3            # a line usable for θ has at least this many readings …
     min_length_m: float = 0.08     # … spanning at least this length
     max_rms_sigmas: float = 3.0    # … and fits them to within this RMS (in σ)
-    regroup_iterations: int = 8    # regroup only within the first this many iterations …
-    regroup_until_rad: float = math.radians(1.0)  # … each time θ has settled to within this
+    regroup_iterations: int = 3    # group the readings into lines at most this often …
+    regroup_until_rad: float = math.radians(1.0)  # … again once θ has settled to this
     adopt_margin_m: float = 0.05   # a reading on no line may join one this far past its ends
     corner_window: int = 4         # readings this close to a corner may change line …
     corner_sigmas: float = 0.5     # … if another line fits them this many σ better
@@ -929,7 +931,7 @@ class _Sweep:
                  max_range, tolerance_rad):
         n_sensors = counts.shape[1]
         scan, _ = _scan_order(steps, n_sensors)
-        pos = np.flatnonzero(live.reshape(-1).take(scan))    # places in the scan order
+        pos = live.reshape(-1).take(scan).nonzero()[0]      # places in the scan order
         self.index = sel = scan.take(pos)                     # flat (S, N) index of each
         self.k = sel.size
         self.sensor = sel % n_sensors
@@ -944,7 +946,8 @@ class _Sweep:
         h = heading.reshape(-1).take(sel)
         self.ux, self.uy = np.cos(h), np.sin(h)
         self.hm = h - math.pi * np.floor(h / math.pi)         # heading mod π
-        self.centre = ((float(self.ox.mean()), float(self.oy.mean())) if self.k else (0.0, 0.0))
+        self.centre = ((float(self.ox.sum()) / self.k, float(self.oy.sum()) / self.k) if self.k
+                       else (0.0, 0.0))
         self.at = np.arange(self.k)
         self.cal = cal
         self.sig_s = cal._levels[3] / self.counts             # σ_d = |b|·d·σ_S/S
@@ -1455,13 +1458,14 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         if keep_history:
             history.append(_scatter(theta, sw.index, shape, 0.0, held))
         if not moving.any():
-            if regroups == 1 and it < lines.regroup_iterations:
+            if regroups == 1 and regroups < lines.regroup_iterations:
                 mode = "regroup"   # settled once: split-and-merge the straightened points again
             elif checked:
                 break
             else:
                 mode = "member"    # settled: a last look at who belongs where
-        elif (regroup_changed and it < lines.regroup_iterations
+        elif (regroup_changed and regroups < lines.regroup_iterations
+              and (regroups == 1 or it < _REGROUP_WINDOW)
               and float(np.max(np.abs(step))) < lines.regroup_until_rad):
             mode = "regroup"       # θ has settled coarsely: group the straightened points again
     n_its = it
