@@ -75,6 +75,12 @@ _SHORT_CELLS = 4 * _TOUCH_CELLS
 # A valid beam's cells more than this many σ (plus the free margin) in front of its end point
 # get exactly l_free: the model there is l_free·Φ(4.5) + l_occ·exp(−4.5²/2), within 4e-5 of it.
 _NEAR_SIGMAS = 4.5
+# When their weights differ, no-return beams are counted in units of 2^20 beside valid ones.
+_NR_BITS = 20
+_NR_UNIT = float(1 << _NR_BITS)
+# Beams reaching farther than this many cells from the grid's corner are not mapped (their
+# numbers would swamp the cell arithmetic; 1e9 cells is 10 000 km at 10 mm).
+_FAR_CELLS = 1e9
 
 
 @dataclass(frozen=True)
@@ -133,8 +139,9 @@ class _Rays:
     xmaj: np.ndarray     # the major axis is x (|Δx| ≥ |Δy|), so |slope| ≤ 1
     p0: np.ndarray       # start and extent along the major …
     dp: np.ndarray
-    q0: np.ndarray       # … and the minor axis
-    dq: np.ndarray
+    q0: np.ndarray       # … and the minor axis, q0 from q_ref: minor coordinates are kept
+    dq: np.ndarray       # small, so a touch length (1e-9 cells × slope) stays representable
+    q_ref: np.ndarray    # (floor of the start's minor coordinate) even for a beam along a border
     t0: np.ndarray       # the part inside the grid, as fractions of the segment
     t1: np.ndarray
     length: np.ndarray   # of the whole segment (cells)
@@ -170,10 +177,9 @@ def _clip(e: np.ndarray, nx: int, ny: int, inside: bool = False) -> _Rays:
         gx0, gy0, dx, dy = e
         p = np.stack([-dx, dx, -dy, dy])
         q = np.stack([gx0, nx - gx0, gy0, ny - gy0])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r = q / p
-            t0 = np.maximum(np.where(p < 0, r, -np.inf).max(axis=0), 0.0)
-            t1 = np.minimum(np.where(p > 0, r, np.inf).min(axis=0), 1.0)
+        r = q / p
+        t0 = np.maximum(np.where(p < 0, r, -np.inf).max(axis=0), 0.0)
+        t1 = np.minimum(np.where(p > 0, r, np.inf).min(axis=0), 1.0)
         # cells are half-open [i, i+1): a segment along the top/right border lies outside
         outside = (p == 0) & ((q < 0) | ((q == 0) & _UPPER_BORDER))
         keep = ~outside.any(axis=0) & np.isfinite(length) & np.isfinite(gx0) & np.isfinite(gy0)
@@ -184,10 +190,11 @@ def _clip(e: np.ndarray, nx: int, ny: int, inside: bool = False) -> _Rays:
             e, t0, t1, length = e[:, rays], t0[rays], t1[rays], length[rays]
     xmaj = np.abs(e[2]) >= np.abs(e[3])
     p0, q0, dp, dq = np.where(xmaj, e, e[_SWAP])
+    q_ref = np.floor(q0)
+    q0 -= q_ref                                       # exact: the fractional part
     last = np.where(xmaj, nx - 1, ny - 1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tol = _TOUCH_CELLS / length
-        t_col = 1.0 / np.abs(dp)
+    tol = _TOUCH_CELLS / length
+    t_col = 1.0 / np.abs(dp)
     short = (t1 - t0) * length < _SHORT_CELLS
     if short.any():
         tol[short] = 0.0
@@ -198,13 +205,12 @@ def _clip(e: np.ndarray, nx: int, ny: int, inside: bool = False) -> _Rays:
     ce = _clamp(np.floor(p0 + dp - tol_p if inside else p0 + t1 * dp - tol_p), 0, last)
     back = dp < 0
     # the line enters column cs at the border p = cs (forwards) or cs + 1 (backwards)
-    with np.errstate(invalid="ignore"):
-        t_col0 = (cs + back - p0) * np.where(back, -t_col, t_col)
+    t_col0 = (cs + back - p0) * np.where(back, -t_col, t_col)
     if short is not None:
         ce[short] = cs[short]
         t_col[short] = 0.0
         t_col0[short] = 0.0
-    return _Rays(rays=rays, xmaj=xmaj, p0=p0, dp=dp, q0=q0, dq=dq, t0=t0, t1=t1,
+    return _Rays(rays=rays, xmaj=xmaj, p0=p0, dp=dp, q0=q0, dq=dq, q_ref=q_ref, t0=t0, t1=t1,
                  length=length, short=short, cs=cs,
                  count=(np.abs(ce - cs) + 1).astype(np.intp), t_col=t_col, t_col0=t_col0,
                  tol_p=tol_p, tol_q=tol * dq, last=last)
@@ -250,15 +256,15 @@ def _columns(rr: _Rays, sel, k_lo, stride_x: float, stride_y: float, offset: flo
     np.add(per[1], uc, out=per[2])                     # … and left
     np.subtract(rr.t0[sel] * scale, shift, out=per[4])  # the clipped part, in u
     np.subtract(rr.t1[sel] * scale, shift, out=per[5])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        dq_u = np.divide(dq, scale, out=per[8])         # minor coordinate per u
-        cross = np.where(dq != 0, scale / dq, 0.0)     # u of minor border b: b·cross + cross0
+    dq_u = np.divide(dq, scale, out=per[8])         # minor coordinate per u
+    cross = scale / dq                                 # u of minor border b: b·cross + cross0
+    cross[~np.isfinite(cross)] = 0.0                   # (a segment too flat to cross one)
     q_u0 = q0 + shift * dq_u                           # minor coordinate at u = 0
     np.add(q_u0, tol_q, out=per[6])                    # slot A: a touch length in, …
     np.subtract(q_u0, tol_q, out=per[7])               # … slot B: a touch length before the end
     stride_p = np.where(xm, stride_x, stride_y)
     per[9] = np.where(xm, stride_y, stride_x)
-    np.add(rr.cs[sel] * stride_p, offset, out=per[10])
+    np.add(rr.cs[sel] * stride_p + rr.q_ref[sel] * per[9], offset, out=per[10])
     np.copyto(per[11], np.where(rr.dp[sel] < 0, -stride_p, stride_p))
     per[12] = cross
     np.negative(q_u0 * cross, out=per[13])
@@ -290,22 +296,21 @@ def _columns(rr: _Rays, sel, k_lo, stride_x: float, stride_y: float, offset: flo
     return _Cols(n=n, two=two, flat_a=flat_a, flat_b=flat_b, u_in=u_in, u_mid=u_mid, u_out=u_out)
 
 
-def _runs(rr: _Rays, t_end: np.ndarray, ok: np.ndarray, block: np.ndarray | None,
-          box: tuple[int, int, int, int]) -> tuple[np.ndarray, int]:
+def _runs(rr: _Rays, t_end: np.ndarray, ok: np.ndarray, unit: np.ndarray,
+          box: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Segments from t0 to ``t_end`` (those with ``ok``, each at least ``_SHORT_CELLS``
-    long) as row runs: (indices, split) of difference entries, +1 below ``split`` and −1 at
-    ``split`` + index; the cumulative sum of the differences along the major axis counts,
-    per cell, the segments visiting it (same touch rule as :func:`_columns`).
+    long) as row runs: (indices, weights) of a difference array whose cumulative sum along
+    the major axis adds ``unit`` (per segment) to every cell the segment visits (same touch
+    rule as :func:`_columns`). Excluded segments point at index 2·size (a spare bin).
 
     In every minor-axis row a segment (|slope| ≤ 1) visits one contiguous run of columns;
     runs begin and end where it crosses minor-axis borders, so the work is per crossing, not
     per cell. box = (ix0, iy0, width, height): the cells, padded by one on every side.
-    Index layout: ``block`` (per segment; None = 0) picks a pair of boxes, x-major segments
-    in the first as rows y × columns x, y-major ones in the second as rows x × columns y.
+    Index layout: x-major segments in the box as rows y × columns x, y-major ones after it
+    as rows x × columns y.
     """
     ix0, iy0, bw, bh = box
     size = bw * bh
-    split = 2 * size * (int(block.max()) + 1 if block is not None and len(block) else 1)
     xm, p0, dp, q0, dq, t0, tol_p, tol_q = (rr.xmaj, rr.p0, rr.dp, rr.q0, rr.dq, rr.t0,
                                             rr.tol_p, rr.tol_q)
     fwd = dp >= 0
@@ -313,50 +318,51 @@ def _runs(rr: _Rays, t_end: np.ndarray, ok: np.ndarray, block: np.ndarray | None
     up = dq > 0
     # last column and first / last row, a touch length inside the piece
     ce = _clamp(np.floor(p0 + t_end * dp - tol_p), 0, rr.last)
-    m_s = np.floor(q0 + t0 * dq + tol_q)
+    m_s = np.floor(q0 + t0 * dq + tol_q)                       # (from q_ref)
     m_e = np.floor(q0 + t_end * dq - tol_q)
     k = np.abs(m_e - m_s)                                       # minor-axis borders crossed
     # index = row·row_stride + column + base (row and column in grid cells)
     row_stride = np.where(xm, float(bw), float(bh))
     base = np.where(xm, (1.0 - iy0) * bw + (1.0 - ix0), size + (1.0 - ix0) * bh + (1.0 - iy0))
-    if block is not None:
-        base += block * (2.0 * size)
+    base += rr.q_ref * row_stride
     row0 = m_s * row_stride
     row0 += base
-    # a run's first cell counts +1 and the cell after its last −1: moving forwards that is
-    # the start and past the end, backwards the end and past the start
-    starts = row0 + rr.cs + back * (split + 1)
-    ends = m_e * row_stride + base + ce + fwd * (split + 1)
+    # a run's first cell gets +unit and the cell after its last −unit: moving forwards that
+    # is the start and past the end, backwards the end and past the start
+    starts = row0 + rr.cs + back
+    ends = m_e * row_stride + base + ce + fwd
+    w = np.where(fwd, unit, -unit)
     if not ok.all():
-        starts[~ok] = ends[~ok] = 2 * split
+        starts[~ok] = ends[~ok] = 2 * size
         k[~ok] = 0
     k = k.astype(np.intp)
     # crossing i (of border m_s + up ± i) at p = p_cross + i·p_step: the run before it ends
     # at floor(p ∓ tol), the one after begins at floor(p ± tol)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        slope = np.where(dq != 0, dp / dq, 0.0)
+    slope = dp / dq
+    slope[~np.isfinite(slope)] = 0.0                  # (a segment too flat to cross a row)
     p_cross = p0 + (m_s + up - q0) * slope
     row_step = np.where(up, row_stride, -row_stride)
     per = np.empty((7, len(k)))
     first = np.cumsum(k)
     np.subtract(k, first, out=per[0])
-    np.add(row0, fwd * split, out=per[1])
-    np.add(row0 + row_step, back * split, out=per[2])
-    np.add(p_cross - tol_p, fwd, out=per[3])
-    np.add(p_cross + tol_p, back, out=per[4])
-    np.copyto(per[5], np.where(up, slope, -slope))
-    per[6] = row_step
+    np.add(p_cross - tol_p, fwd, out=per[1])
+    np.add(p_cross + tol_p, back, out=per[2])
+    np.copyto(per[3], np.where(up, slope, -slope))
+    per[4] = row0
+    per[5] = row_step
+    per[6] = w
     per = np.repeat(per, k, axis=1)
     i = _arange(per.shape[1]) + per[0]
-    ip = i * per[5]
-    i *= per[6]
-    before = np.floor(per[3] + ip)
-    before += per[1]
+    ip = i * per[3]
+    i *= per[5]
+    i += per[4]                                        # the row before crossing i
+    before = np.floor(per[1] + ip)
     before += i
-    after = np.floor(np.add(per[4], ip, out=ip), out=ip)
-    after += per[2]
+    after = np.floor(np.add(per[2], ip, out=ip), out=ip)
     after += i
-    return np.concatenate([starts, ends, before, after]), split
+    after += per[5]
+    return (np.concatenate([starts, ends, before, after]),
+            np.concatenate([w, -w, -per[6], per[6]]))
 
 
 _ARANGE = np.arange(0.0)
@@ -383,14 +389,18 @@ def traverse(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
     visit the two cells it only touches (nor any cell it stays in for less than 1e-9 cells);
     a zero-length segment visits the one cell holding it; parts outside the grid are dropped.
     """
+    with np.errstate(all="ignore"):   # non-finite and degenerate segments are handled explicitly
+        return _traverse_batches(x0, y0, x1, y1, origin_xy_m, shape, resolution_m)
+
+
+def _traverse_batches(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
     ny, nx = int(shape[0]), int(shape[1])
     res = float(resolution_m)
     g = [(np.asarray(v, dtype=float).ravel() - origin_xy_m[i % 2]) / res
          for i, v in enumerate((x0, y0, x1, y1))]
     e = np.stack([g[0], g[1], g[2] - g[0], g[3] - g[1]])
     # batches of ~2^16 columns bound the memory for many long segments
-    with np.errstate(invalid="ignore"):
-        cols = np.minimum(np.maximum(np.abs(e[2]), np.abs(e[3])), nx + ny) + 2
+    cols = np.minimum(np.maximum(np.abs(e[2]), np.abs(e[3])), nx + ny) + 2
     ends = np.cumsum(np.where(np.isfinite(cols), cols, 0))
     cuts = list(np.searchsorted(ends, np.arange(1, int(ends[-1] // _BATCH_COLUMNS) + 1)
                                 * _BATCH_COLUMNS)) if len(ends) else []
@@ -517,6 +527,10 @@ class OccupancyGrid:
     # ---- updates
 
     def _box_delta(self, points: Points) -> tuple[np.ndarray, int, int] | None:
+        with np.errstate(all="ignore"):   # non-finite and degenerate beams are handled explicitly
+            return self._beams_delta(points)
+
+    def _beams_delta(self, points: Points) -> tuple[np.ndarray, int, int] | None:
         """The log-odds change of ``points`` on the box of cells their beams can reach:
         (change (h, w), ix, iy of its corner cell), or None when no beam is mapped. The box
         has a border of one cell beyond the beams (zero there).
@@ -553,8 +567,7 @@ class OccupancyGrid:
         vy = np.subtract(ey[iv], oy[iv], out=e[3, :nv])
         d = np.sqrt(vx * vx + vy * vy)
         length = d + p.tail_sigmas * sigma
-        with np.errstate(divide="ignore", invalid="ignore"):
-            stretch = length / d
+        stretch = length / d
         if nv and not d.min() > 0:   # an end point on its emitter: along the heading
             at = d == 0
             hx, hy = np.cos(heading[iv]), np.sin(heading[iv])
@@ -568,15 +581,25 @@ class OccupancyGrid:
         np.multiply(np.cos(h), rmax, out=e[2, nv:])
         np.multiply(np.sin(h), rmax, out=e[3, nv:])
         e *= 1.0 / res
+        if not np.abs(e).max() < _FAR_CELLS:   # overflowed or absurd numbers: not mapped
+            keep = (np.abs(e) < _FAR_CELLS).all(axis=0)
+            e, d, sigma, length = e[:, keep], d[keep[:nv]], sigma[keep[:nv]], length[keep[:nv]]
+            nv = len(d)
+            if not e.shape[1]:
+                return None
 
-        # the beams' bounding box on the grid, and a border of one cell for the runs' ends
+        # the beams' bounding box on the grid, one cell wider on every side (an end point a
+        # rounding step from a border may lie in the next cell), and a border of one cell
+        # beyond that for the runs' ends
         ny, nx = self.shape
         tips = e[:2] + e[2:]
         lo_x, lo_y = np.minimum(e[:2], tips).min(axis=1).tolist()
         hi_x, hi_y = np.maximum(e[:2], tips).max(axis=1).tolist()
         inside = lo_x >= 0 and lo_y >= 0 and hi_x < nx and hi_y < ny
-        bx0, bx1 = (int(min(max(math.floor(v), 0), nx - 1)) for v in (lo_x, hi_x))
-        by0, by1 = (int(min(max(math.floor(v), 0), ny - 1)) for v in (lo_y, hi_y))
+        bx0, by0 = max(math.floor(lo_x) - 1, 0), max(math.floor(lo_y) - 1, 0)
+        bx1, by1 = min(math.floor(hi_x) + 1, nx - 1), min(math.floor(hi_y) + 1, ny - 1)
+        if bx0 > bx1 or by0 > by1:
+            return None
         bw, bh = bx1 - bx0 + 3, by1 - by0 + 3
         size = bw * bh
         rr = _clip(e, nx, ny, inside)
@@ -590,26 +613,31 @@ class OccupancyGrid:
         # but the shortest, are counted as runs
         margin_m = p.free_margin_cells * res
         t_col0, t_col = rr.t_col0[:kv], rr.t_col[:kv]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            n_far = np.floor(((d - margin_m - _NEAR_SIGMAS * sigma) / length - t_col0) / t_col)
+        n_far = np.floor(((d - margin_m - _NEAR_SIGMAS * sigma) / length - t_col0) / t_col)
         n_far = _clamp(n_far, 0.0, rr.count[:kv])
         if rr.short is not None:
             n_far[rr.short[:kv]] = 0.0
-        t_end = np.concatenate([t_col0 + n_far * t_col, rr.t1[kv:]])
+        # (a beam leaving the grid may have only far columns: they end where it leaves)
+        t_end = np.concatenate([np.minimum(t_col0 + n_far * t_col, rr.t1[:kv]), rr.t1[kv:]])
         ok = (t_end - rr.t0) * rr.length >= _SHORT_CELLS
         n_far[~ok[:kv]] = 0.0
         n_far = n_far.astype(np.intp)
+        # visits counted exactly (integers in float64): valid beams 1, no-return beams 2^20
         same = p.l_no_return == p.l_free
-        block = None if same else (np.arange(len(ok)) >= kv).astype(float)
-        entries, split = _runs(rr, t_end, ok, block, (bx0, by0, bw, bh))
-        # (float → int32 converts ~4× faster than → int64; indices stay far below 2^31)
-        counts = np.bincount(entries.astype(np.int32), minlength=2 * split + 1)
-        counts = np.subtract(counts[:split], counts[split:2 * split])
-        change = None
-        for j, weight in enumerate((p.l_free,) if same else (p.l_free, p.l_no_return)):
-            c = counts[2 * j * size:(2 * j + 1) * size].reshape(bh, bw).cumsum(axis=1)
-            c += counts[(2 * j + 1) * size:(2 * j + 2) * size].reshape(bw, bh).cumsum(axis=1).T
-            change = c * weight if change is None else change + c * weight
+        unit = np.ones(len(ok))
+        if not same:
+            unit[kv:] = _NR_UNIT
+        entries, weights = _runs(rr, t_end, ok, unit, (bx0, by0, bw, bh))
+        diff = np.bincount(entries.astype(np.int32), weights, minlength=2 * size + 1)
+        diff = diff[:2 * size].astype(np.int64)
+        counts = diff[:size].reshape(bh, bw).cumsum(axis=1)
+        counts += diff[size:].reshape(bw, bh).cumsum(axis=1).T
+        if same:
+            change = counts * p.l_free
+        else:
+            n_nr = counts >> _NR_BITS
+            change = (counts - (n_nr << _NR_BITS)) * p.l_free
+            change += n_nr * p.l_no_return
 
         offset = float(bw * (1 - by0) + 1 - bx0)
         if kv:   # the near-end columns of valid beams, in σ from the end point (u = (s − d)/σ)

@@ -151,6 +151,17 @@ def test_end_point_outside_the_grid_frees_inside_and_marks_nothing_outside():
     assert np.all(g.log_odds[20, 6:] < 0) and g.log_odds.max() == 0.0
 
 
+def test_slanted_beam_leaving_the_grid_frees_only_the_cells_inside():
+    """A valid beam whose end point lies beyond the grid: everything inside is in front of
+    it (free evidence, walked as runs), and the runs stop at the grid's edge."""
+    g = small_grid()
+    pts = single_ray(0.105, 0.105, math.radians(35), 0.9, sigma_m=0.005)
+    g.insert(pts)
+    want = np.clip(reference_delta(g, pts), g.params.l_min, g.params.l_max)
+    np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
+    assert g.log_odds.max() == 0.0 and (g.log_odds < 0).sum() >= 40
+
+
 def test_zero_length_reading_marks_its_cell():
     g = small_grid()
     g.insert(single_ray(0.105, 0.105, 0.3, 0.0, sigma_m=0.002))
@@ -244,7 +255,8 @@ def test_insert_follows_the_reference_through_cell_corners_and_along_borders():
     and near-end columns keep traverse()'s rules (corner touches are no visits)."""
     starts = [(x, y) for x in (2.0, 2.5, 3.0) for y in (2.0, 2.5, 3.0)]
     angles = np.radians(np.arange(0, 360, 45))
-    lengths = (4.0, 4 * math.sqrt(2), 3.5, 0.0)
+    # valid readings end where no cell border lies at d − margin (the weight has a step there)
+    lengths = (4.2, 4 * math.sqrt(2), 3.7)
     rows = [(x, y, a, r) for x, y in starts for a in angles for r in lengths]
     x, y, a, r = (np.array(v) for v in zip(*rows))
     n = len(x)
