@@ -88,6 +88,44 @@ def test_traversal_matches_dense_sampling(seg):
         assert np.all(np.diff(v.t_enter) > 0)
 
 
+def _exact_cells(x0, y0, x1, y1, touch=1e-9):
+    """The cells a segment crosses, in rational arithmetic (unit cells at the origin; pieces
+    shorter than ``touch`` cells are corner touches)."""
+    from fractions import Fraction as F
+
+    gx0, gy0, dx, dy = F(x0), F(y0), F(x1) - F(x0), F(y1) - F(y0)
+    ts = {F(0), F(1)}
+    for g0, d in ((gx0, dx), (gy0, dy)):
+        if d:
+            lo, hi = sorted((g0, g0 + d))
+            ts |= {(b - g0) / d for b in range(math.floor(lo), math.ceil(hi) + 1)
+                   if 0 <= (b - g0) / d <= 1}
+    ts = sorted(ts)
+    length = math.hypot(float(dx), float(dy))
+    out = []
+    for a, b in zip(ts, ts[1:]):
+        if float(b - a) * length >= touch:
+            m = (a + b) / 2
+            cell = (math.floor(gx0 + m * dx), math.floor(gy0 + m * dy))
+            if 0 <= cell[0] < 6 and 0 <= cell[1] < 6 and (not out or out[-1] != cell):
+                out.append(cell)
+    return out
+
+
+def test_traversal_is_exact_for_beams_along_cell_borders():
+    """Headings at multiples of 45° carry rounding (cos 90° = 6e-17): a beam starting on a
+    border drifts off it by 1e-16 cells. The cells must follow that drift exactly."""
+    rng = np.random.default_rng(5)
+    angle = np.radians(rng.integers(0, 8, 400) * 45.0)
+    start = rng.integers(0, 7, (400, 2)) + rng.choice([0.0, 0.5], (400, 2))
+    length = rng.choice([1.0, 2.5, 4.0, 4 * math.sqrt(2), 0.3], 400)
+    end = start + length[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
+    v = traverse(start[:, 0], start[:, 1], end[:, 0], end[:, 1], (0, 0), (6, 6), 1.0)
+    for r in range(400):
+        got = list(zip(v.ix[v.ray == r].tolist(), v.iy[v.ray == r].tolist()))
+        assert got == _exact_cells(*start[r], *end[r]), (start[r], end[r])
+
+
 def test_traversal_is_vectorised_over_rays():
     rng = np.random.default_rng(0)
     a = rng.uniform(-1, 7, (500, 4))
@@ -115,6 +153,26 @@ def test_valid_reading_frees_its_ray_and_marks_its_end_point():
     assert np.all(cls[iy, 5:ix - 2] == FREE)           # the beam's path, well in front
     assert np.all(cls[iy, ix + 3:] == UNKNOWN)          # beyond the tail: untouched
     assert np.all(cls[iy + 2:] == UNKNOWN) and np.all(cls[:iy - 1] == UNKNOWN)
+
+
+def test_one_clean_pass_frees_and_a_hit_outweighs_a_pass():
+    """The default numbers (module doc): one valid beam marks the cells it clearly crossed
+    free; a cell holding an end point stays occupied after one beam passes through it and is
+    not made free by two; a no-return beam is half a clean pass."""
+    g = small_grid()
+    g.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.005))
+    ix, iy = g.cell_of(0.455, 0.205)
+    cls = g.classify()
+    assert np.all(cls[iy, 6:ix - 2] == FREE) and cls[iy, ix] == OCCUPIED
+    g.insert(single_ray(0.055, 0.205, 0.0, 0.55, sigma_m=0.005))     # passes through the hit
+    assert g.classify()[iy, ix] == OCCUPIED
+    g.insert(single_ray(0.055, 0.205, 0.0, 0.55, sigma_m=0.005))
+    assert g.classify()[iy, ix] == UNKNOWN
+    nr = small_grid()
+    for expect in (UNKNOWN, FREE):
+        nr.insert(single_ray(0.055, 0.205, 0.0, np.nan, valid=False, reason=Reason.NO_RETURN,
+                             max_range_m=0.3))
+        assert np.all(nr.classify()[20, 6:35] == expect)
 
 
 def test_gaussian_spread_follows_sigma():
