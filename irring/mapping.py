@@ -656,10 +656,9 @@ class OccupancyGrid:
         counts += diff[size:].reshape(bw, bh).cumsum(axis=1).T
         if same:
             change = counts * p.l_free
-        else:
-            n_nr = counts >> _NR_BITS
-            change = (counts - (n_nr << _NR_BITS)) * p.l_free
-            change += n_nr * p.l_no_return
+        else:   # counts = valid + 2^20·no-return visits
+            change = counts * p.l_free
+            change += (counts >> _NR_BITS) * (p.l_no_return - _NR_UNIT * p.l_free)
 
         offset = float(bw * (1 - by0) + 1 - bx0)
         if kv:   # the near-end columns of valid beams, in σ from the end point (u = (s − d)/σ)
