@@ -57,6 +57,45 @@ def test_iterations_cost_compute_and_buy_accuracy_at_steep_incidence(small_grid)
     assert d["occupied_f1"] > flat["occupied_f1"] + 0.1
 
 
+SETTLE = [accuracy.Config("settle", f"settle {ms} ms (belt+timing)", ms, settle_s=ms / 1e3,
+                          dynamics=True) for ms in (0, 20, 60)]
+
+
+@pytest.fixture(scope="module")
+def settle_grid() -> dict:
+    """The cylinder room with the belt's swing and the GP2's clock simulated, 3 settle times."""
+    return accuracy.measure(["t_room_cylinder"], seeds=2, configs=SETTLE)
+
+
+def test_settling_under_belt_and_timing_costs_hardware_time_and_buys_accuracy(settle_grid):
+    rows = [_row(settle_grid, c.label) for c in SETTLE]
+    hw = [r["hardware_time_s"] for r in rows]
+    angle = [r["angle_error_rms_rad"] for r in rows]
+    assert hw == sorted(hw) and hw[0] < hw[-1]                 # waiting is hardware time
+    # 71 moves of 4 ms each, plus the wait at every stop
+    assert hw[0] == pytest.approx(71 * 0.004, rel=0.05)
+    assert hw[-1] == pytest.approx(71 * (0.004 + 0.060), rel=0.05)
+    # the belt swings and the GP2 reports a stale measurement: the wait buys the beam angle …
+    assert angle[0] > 0.05 and angle[1] < 0.5 * angle[0] and angle[2] < 1e-3
+    # … and with it the range, the end points and the map
+    assert rows[2]["range_rmse_m"] < rows[0]["range_rmse_m"]
+    assert rows[2]["point_rmse_m"] < 0.5 * rows[0]["point_rmse_m"]
+    assert rows[2]["occupied_f1"] > rows[0]["occupied_f1"] + 0.1
+    # a different simulation of the room: never on (or dominating) a Pareto front
+    assert all(accuracy.fronts(r) == "·" for r in rows)
+
+
+def test_settle_configurations_add_belt_dynamics_and_timing():
+    base = load_scenario("t_room")
+    settle = [c for c in accuracy.configurations(["settle"]) if c.knob == "settle"]
+    assert [c.value for c in settle] == list(accuracy.SETTLE_MS)
+    for c in settle:
+        sc = accuracy.apply(base, c)
+        assert "belt+timing" in c.label and sc.has("belt_dynamics") and sc.has("timing")
+        assert sc.scan.settle_s == pytest.approx(c.value / 1e3)
+    assert not accuracy.apply(base, accuracy.Config()).has("timing")
+
+
 def test_every_run_is_recorded_with_costs_and_scores(small_grid):
     runs = small_grid["runs"]
     assert len(runs) == len(SMALL) * 2

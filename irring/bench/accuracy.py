@@ -9,17 +9,23 @@ knobs (say, coarse steps *and* no iterations) are not measured. Knobs:
                4.32° between readings); fewer stops, fewer readings
 ``samples``    the ``averaging`` effect with ``scan.samples`` readings per step (each its
                own noise and quantisation, averaged); each sample is one GP2 period
-``settle``     ``scan.settle_s``: wait at each step before reading. The simulator positions
-               the ring kinematically unless the scene has ``belt_dynamics``, so with the
-               bundled scenes this costs hardware time and buys nothing; it is here so a
-               scene with belt dynamics shows what the wait is worth
+``settle``     ``scan.settle_s``: wait at each step before reading (0, 20, 40, 60 ms). A wait
+               only matters when the ring's motion and the GP2's clock are simulated, so
+               these configurations run the scene with ``belt_dynamics`` and ``timing``
+               added (label "settle 40 ms (belt+timing)", ``dynamics`` True): the belt
+               still swings after a step and each GP2 reports its last measurement, taken
+               on its own 38.3 ms clock, so a short wait reads at the wrong angle
+               (``angle_error_rms_rad``) and the range error and map follow. Their hardware
+               time is the timed schedule's (moves + settle + the firmware's waits; a GP2
+               period is not charged per reading), so it is not comparable 1:1 with the
+               kinematic default's steps × 38.3 ms
 ``iterations`` the estimator's ``max_iterations`` (0 = the θ = 0 assumption,
                ``iterate=False``); the default is 20
 ``tolerance``  the estimator's convergence tolerance on θ (default 0.1°)
-``regroup``    how many iterations the estimator may regroup the end points into lines
-               (``LineOptions.regroup_iterations``, default 8) before it holds the grouping;
-               each regrouping is a split-and-merge over the whole sweep, the estimator's
-               most expensive step
+``regroup``    how many times the estimator may group the end points into lines
+               (``LineOptions.regroup_iterations``, default 3; 1, 2 and 6 here) before it
+               holds the grouping for the remaining iterations; each grouping is a pass
+               over the whole sweep, the estimator's most expensive step
 ``resolution`` the map's cell size (default 10 mm, the paper's); scored on ground truth
                rasterised on the same cells, so the 1-cell tolerance scales with it
 ``design``     another ring design (``irring.designs``) with its own sensor, in the same
@@ -33,7 +39,9 @@ scored the way ``irring run`` does it, through ``pipeline.map_sweeps``):
 accuracy
     ``range_rmse_m``: RMS of (estimated − true) range over the readings the estimator calls
     valid and that hit something; ``range_rmse_steep_m``: the same over readings whose true
-    incidence is ≥ 40°; ``valid_share``: share of the readings that hit something which the
+    incidence is ≥ 40°; ``point_rmse_m``: RMS distance of the estimated end point from the
+    true hit point (where a wrong beam angle shows: the range can be right along the real
+    beam while the point is drawn along the assumed one); ``valid_share``: share of the readings that hit something which the
     estimator calls valid; the map scores of ``irring.metrics`` (``occupied_f1``,
     ``free_accuracy``, ``coverage``, ``shadow``, …).
 cost
@@ -48,6 +56,10 @@ cost
     and is reported apart.
     ``iterations_mean``: estimator iterations per valid reading, a machine-independent
     measure of the estimator's work.
+dynamics (belt+timing configurations only, else None)
+    ``angle_error_rms_rad``: RMS over the readings of the true − assumed beam heading
+    (``dynamics.heading_error``): what the belt's swing and the sensor's stale clock cost
+    before any estimator sees a count.
 
 Everything but the ``*_ms`` timings is a deterministic function of (scenario, configuration,
 seed): a job rebuilds its ``SimRing`` from the scenario's YAML in whatever process runs it
@@ -81,9 +93,10 @@ KNOB_COST = {"default": "", "step": "hardware", "samples": "hardware", "settle":
              "resolution": "compute",
              "design": "hardware"}
 KNOBS = tuple(k for k in KNOB_COST if k != "default")
-ACCURACY_KEYS = ("range_rmse_m", "range_rmse_steep_m", "valid_share", "occupied_precision",
+ACCURACY_KEYS = ("range_rmse_m", "range_rmse_steep_m", "point_rmse_m", "valid_share", "occupied_precision",
                  "occupied_recall", "occupied_f1", "free_accuracy", "coverage", "shadow")
 TIME_KEYS = ("compute_ms", "estimate_ms", "map_ms", "sim_ms")
+SETTLE_MS = (0, 20, 40, 60)   # settle configurations, all with belt_dynamics + timing
 TIMING_REPEATS = 3   # estimator + mapper timed this many times per run; the least is kept
 
 
@@ -103,6 +116,7 @@ class Config:
     regroup_iterations: int | None = None   # LineOptions.regroup_iterations (None: default)
     resolution_m: float | None = None
     design: str | None = None
+    dynamics: bool = False              # add belt_dynamics + timing (their defaults)
 
 
 def configurations(knobs: Iterable[str] | None = None,
@@ -121,7 +135,9 @@ def configurations(knobs: Iterable[str] | None = None,
         elif k == "samples":
             out += [Config(k, f"{n} samples", n, samples=n) for n in (2, 4, 8)]
         elif k == "settle":
-            out += [Config(k, f"settle {ms} ms", ms, settle_s=ms / 1e3) for ms in (20, 60)]
+            # a wait only matters with the belt's swing and the GP2's clock simulated
+            out += [Config(k, f"settle {ms} ms (belt+timing)", ms, settle_s=ms / 1e3,
+                           dynamics=True) for ms in SETTLE_MS]
         elif k == "iterations":
             out.append(Config(k, "θ = 0 (no iterations)", 0, iterate=False))
             out += [Config(k, f"{n} iteration{'s' if n > 1 else ''}", n, max_iterations=n)
@@ -129,7 +145,7 @@ def configurations(knobs: Iterable[str] | None = None,
         elif k == "tolerance":
             out.append(Config(k, "tolerance 1°", 1.0, tolerance_rad=math.radians(1.0)))
         elif k == "regroup":
-            out += [Config(k, f"regroup {n}×", n, regroup_iterations=n) for n in (1, 2, 4)]
+            out += [Config(k, f"regroup {n}×", n, regroup_iterations=n) for n in (1, 2, 6)]
         elif k == "resolution":
             out += [Config(k, f"grid {mm} mm", mm, resolution_m=mm / 1e3) for mm in (5, 20)]
         elif k == "design":
@@ -152,7 +168,7 @@ def default_value(knob: str, scenario) -> float:
 def apply(scenario, cfg: Config):
     """The scenario with the configuration's sweep, map and design changes."""
     from .. import designs
-    from ..scenario import AveragingEffect
+    from ..scenario import AveragingEffect, BeltDynamicsEffect, TimingEffect
 
     sc = designs.apply(scenario, cfg.design) if cfg.design else scenario
     scan = {}
@@ -164,6 +180,9 @@ def apply(scenario, cfg: Config):
     if cfg.samples is not None:
         scan["samples"] = int(cfg.samples)
         effects.setdefault("averaging", AveragingEffect())
+    if cfg.dynamics:
+        effects.setdefault("belt_dynamics", BeltDynamicsEffect())
+        effects.setdefault("timing", TimingEffect())
     changes: dict[str, Any] = {"scan": dataclasses.replace(sc.scan, **scan),
                                "effects": types.MappingProxyType(effects)}
     if cfg.resolution_m is not None:
@@ -236,7 +255,7 @@ def run_job(job: Job) -> dict:
     """Sweep every pose, estimate, map and score one configuration; a plain dict."""
     import functools
 
-    from .. import compare, designs, metrics, pipeline
+    from .. import compare, designs, dynamics, metrics, pipeline
     from ..estimate import LineOptions, estimate
     from ..mapping import OccupancyGrid
     from ..scenario import loads
@@ -259,7 +278,7 @@ def run_job(job: Job) -> dict:
     truth = _ground_truth((job.scenario_yaml, sc.map.resolution_m), reference, result.grid)
     scores = metrics.score(result.grid, reference, truth)
 
-    err, err_steep, iters = [], [], []
+    err, err_steep, iters, err_pt = [], [], [], []
     hits = valid_hits = 0
     for sw, p in zip(sweeps, result.points):
         d_true = sw.truth.distance_m
@@ -268,13 +287,23 @@ def run_job(job: Job) -> dict:
         hits += int(hit.sum())
         valid_hits += int(ok.sum())
         err.append(p.d[ok] - d_true[ok])
+        hp = sw.truth.hit_point
+        err_pt.append(np.hypot(p.x[ok] - hp[..., 0][ok], p.y[ok] - hp[..., 1][ok]))
         steep = ok & (sw.truth.incidence_rad >= STEEP_RAD)
         err_steep.append(p.d[steep] - d_true[steep])
         iters.append(p.iterations[p.valid])
-    err_all, err_st, it = (np.concatenate(a) for a in (err, err_steep, iters))
+    err_all, err_st, it, e_pt = (np.concatenate(a) for a in (err, err_steep, iters, err_pt))
     poses = len(sweeps)
-    view_s = designs.design_for(sc).hardware_time_s(
-        step_stride=sc.scan.step_stride, settle_s=sc.scan.settle_s, samples=sweeps[0].samples)
+    if cfg.dynamics:
+        # the timed schedule (moves, settle, firmware waits): one sweep is one 360° view
+        view_s = float(np.mean([sw.duration_s for sw in sweeps]))
+        heading = np.concatenate([dynamics.heading_error(sw).ravel() for sw in sweeps])
+        angle_rms = float(np.sqrt(np.mean(heading ** 2)))
+    else:
+        view_s = designs.design_for(sc).hardware_time_s(
+            step_stride=sc.scan.step_stride, settle_s=sc.scan.settle_s,
+            samples=sweeps[0].samples)
+        angle_rms = None
     est_s, map_s = _compute_time(sweeps, sc, estimator, grid)
     est_ms, map_ms = est_s * 1e3 / poses, map_s * 1e3 / poses
     return {
@@ -282,10 +311,12 @@ def run_job(job: Job) -> dict:
         "seed": int(job.seed), "poses": poses,
         "readings": int(sum(sw.counts.size for sw in sweeps)),
         "range_rmse_m": _rmse(err_all), "range_rmse_steep_m": _rmse(err_st),
+        "point_rmse_m": _rmse(e_pt),
         "steep_readings": int(err_st.size),
         "valid_share": valid_hits / hits if hits else None,
         **{k: scores[k] for k in metrics.SCORE_KEYS},
         "iterations_mean": float(it.mean()) if it.size else 0.0,
+        "dynamics": bool(cfg.dynamics), "angle_error_rms_rad": angle_rms,
         "hardware_time_s": float(view_s), "hardware_time_total_s": float(view_s * poses),
         "compute_ms": est_ms + map_ms, "estimate_ms": est_ms, "map_ms": map_ms,
         "sim_ms": sim_s * 1e3 / poses,
@@ -328,8 +359,9 @@ def summarise(runs: list[dict], by: Sequence[str] = ("knob", "label")) -> list[d
         row["value"] = mine[0]["value"]
         row["scenarios"] = sorted({r["scenario"] for r in mine})
         row["runs"] = len(mine)
-        for k in ACCURACY_KEYS + ("iterations_mean",):
-            row[k] = _mean(r[k] for r in mine)
+        row["dynamics"] = bool(mine[0].get("dynamics", False))
+        for k in ACCURACY_KEYS + ("iterations_mean", "angle_error_rms_rad"):
+            row[k] = _mean(r.get(k) for r in mine)
         row["hardware_time_s"] = float(np.mean([r["hardware_time_s"] for r in mine]))
         for k in TIME_KEYS:
             row[k] = float(np.median([r[k] for r in mine]))
@@ -353,14 +385,17 @@ def front_key(cost: str, metric: str) -> str:
 
 def _eligible(r: dict, metric: str) -> bool:
     key, _ = FRONT_METRICS[metric]
-    if r[key] is None:
+    if r[key] is None or r.get("dynamics"):
+        # belt+timing rows simulate more than the others (and charge hardware time by the
+        # timed schedule): a different experiment in the same room, kept off the fronts
         return False
     return metric != "rmse" or (r["valid_share"] or 0.0) >= MIN_VALID_SHARE_FOR_RMSE
 
 
 def mark_pareto(rows: list[dict]) -> None:
     """Set ``front_<cost>_<metric>`` on each row: True when no other row is at least as cheap
-    and at least as accurate on that measure, and strictly better on one of the two."""
+    and at least as accurate on that measure, and strictly better on one of the two. Rows
+    simulated with belt+timing (``dynamics``) are never on a front and never dominate."""
     for cost, ck in COSTS.items():
         for metric, (mk, higher) in FRONT_METRICS.items():
             sign = 1.0 if higher else -1.0
@@ -428,13 +463,15 @@ def _fmt(v, scale: float = 1.0, digits: int = 3) -> str:
 
 def table(rows: list[dict]) -> str:
     """Plain-text table: one line per configuration."""
-    head = ["knob", "configuration", "hardware s", "compute ms", "RMSE mm", "steep mm",
-            "valid", "F1 occ", "coverage", "free acc", "shadow", "front"]
+    head = ["knob", "configuration", "hardware s", "compute ms", "angle mrad", "RMSE mm",
+            "steep mm", "point mm", "valid", "F1 occ", "coverage", "free acc", "shadow", "front"]
     lines = [head]
     for r in rows:
         lines.append([r["knob"], r["label"], f"{r['hardware_time_s']:.2f}",
-                      f"{r['compute_ms']:.1f}", _fmt(r["range_rmse_m"], 1e3, 1),
-                      _fmt(r["range_rmse_steep_m"], 1e3, 1), _fmt(r["valid_share"], 1, 2),
+                      f"{r['compute_ms']:.1f}", _fmt(r.get("angle_error_rms_rad"), 1e3, 2),
+                      _fmt(r["range_rmse_m"], 1e3, 1),
+                      _fmt(r["range_rmse_steep_m"], 1e3, 1), _fmt(r["point_rmse_m"], 1e3, 1),
+                      _fmt(r["valid_share"], 1, 2),
                       _fmt(r["occupied_f1"]), _fmt(r["coverage"]), _fmt(r["free_accuracy"]),
                       _fmt(r["shadow"]),
                       fronts(r)])
@@ -445,8 +482,9 @@ def table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
-CSV_KEYS = ("knob", "label", "value", "runs", "hardware_time_s", "compute_ms", "estimate_ms",
-            "map_ms", "sim_ms", "iterations_mean") + ACCURACY_KEYS + \
+CSV_KEYS = ("knob", "label", "value", "dynamics", "runs", "hardware_time_s", "compute_ms",
+            "estimate_ms", "map_ms", "sim_ms", "iterations_mean", "angle_error_rms_rad") + \
+           ACCURACY_KEYS + \
            tuple(front_key(c, m) for c in COSTS for m in FRONT_METRICS)
 
 
@@ -459,7 +497,8 @@ def chart(result: dict, path) -> None:
     """Accuracy (occupied F1, coverage, range RMSE) against hardware and compute time.
 
     Each knob is a line through the default configuration (black square) and its other
-    settings (designs are points); the grey staircase is that panel's Pareto front and a
+    settings (designs are points); the settle knob, simulated with belt+timing, is a dashed
+    line through its own settings and not through the default; the grey staircase is that panel's Pareto front and a
     ring marks the configurations on it. A hollow point: the estimator called less than
     half the returns valid, so its RMSE describes few readings.
     """
@@ -483,6 +522,7 @@ def chart(result: dict, path) -> None:
         for j, (cost, clabel) in enumerate(costs):
             ck = COSTS[cost]
             ax = axes[i, j]
+            notes: list[tuple] = []
 
             def xy(r):
                 return r[ck], (np.nan if r[mk] is None else r[mk] * scale)
@@ -497,21 +537,24 @@ def chart(result: dict, path) -> None:
                 mine = [r for r in rows if r["knob"] == knob]
                 if not mine:
                     continue
+                dyn = any(r.get("dynamics") for r in mine)
                 if knob != "design":
-                    line = sorted(mine + [dict(default, value=defaults.get(knob, 0))],
-                                  key=lambda r: r["value"])
+                    # a belt+timing line is a different simulation: not through the default
+                    extra = [] if dyn else [dict(default, value=defaults.get(knob, 0))]
+                    line = sorted(mine + extra, key=lambda r: r["value"])
                     lx, ly = zip(*(xy(r) for r in line))
-                    ax.plot(lx, ly, "-", color=colour, lw=1.2, alpha=0.8, label=knob)
+                    ax.plot(lx, ly, "--" if dyn else "-", color=colour, lw=1.2, alpha=0.8,
+                            label=f"{knob} (belt+timing)" if dyn else knob)
                 for r in mine:
                     x, y = xy(r)
                     if not np.isfinite(y):
                         continue
-                    few = metric == "rmse" and not _eligible(r, "rmse")
+                    few = metric == "rmse" and \
+                        (r["valid_share"] or 0.0) < MIN_VALID_SHARE_FOR_RMSE
                     ax.plot([x], [y], "o", color=colour, ms=5,
                             mfc="none" if few else colour,
                             label="design" if knob == "design" and r is mine[0] else None)
-                    ax.annotate(_short(r), (x, y), fontsize=7, xytext=(4, 3),
-                                textcoords="offset points", color=colour)
+                    notes.append((x, y, _short(r), colour))
             for r in front:
                 ax.plot(*xy(r), "o", mfc="none", mec="k", ms=11, mew=1.0, zorder=6)
             x, y = xy(default)
@@ -521,6 +564,7 @@ def chart(result: dict, path) -> None:
             ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
             ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
             ax.xaxis.set_minor_formatter(NullFormatter())
+            _annotate(ax, notes)
             ax.set_xlabel(clabel)
             ax.set_ylabel(mlabel)
             ax.grid(alpha=0.3, which="both")
@@ -535,6 +579,39 @@ def chart(result: dict, path) -> None:
     plt.close(fig)
 
 
+# label offsets tried in turn (points); a label that fits none is left off (its point
+# sits on or next to a labelled one: same settings give the same result, e.g. tolerance 1°)
+_OFFSETS = ((4, 3), (4, -10), (-6, 6), (-6, -12), (4, 12), (4, -19))
+
+
+def _annotate(ax, notes: list[tuple]) -> None:
+    """Label points without letting labels overlap each other or run off the axes."""
+    ax.autoscale_view()
+    ax.figure.canvas.draw()   # fix the limits (log axes) so data → pixels is final
+    bbox = ax.get_window_extent()
+    taken: list[tuple[float, float, float, float]] = []
+    px = ax.figure.dpi / 72.0
+    # the extreme points first: they are the ones a reader looks for
+    for x, y, text, colour in notes:
+        if not (np.isfinite(x) and np.isfinite(y)):
+            continue
+        X, Y = ax.transData.transform((x, y))
+        w, h = 4.3 * len(text) * px, 8.0 * px
+        for dx, dy in _OFFSETS:
+            x0 = X + dx * px - (w if dx < 0 else 0)
+            y0 = Y + dy * px
+            box = (x0, y0, x0 + w, y0 + h)
+            inside = bbox.x0 <= box[0] and box[2] <= bbox.x1 and bbox.y0 <= box[1] \
+                and box[3] <= bbox.y1
+            if inside and not any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3]
+                                  and b[1] < box[3] for b in taken):
+                taken.append(box)
+                ax.annotate(text, (x, y), fontsize=7, xytext=(dx, dy),
+                            textcoords="offset points", color=colour,
+                            ha="right" if dx < 0 else "left", va="bottom")
+                break
+
+
 def _short(r: dict) -> str:
     k, v = r["knob"], r["value"]
     if k == "step":
@@ -542,7 +619,7 @@ def _short(r: dict) -> str:
     if k == "samples":
         return f"{v:g} smp"
     if k == "settle":
-        return f"{v:g} ms"
+        return f"{v:g} ms" + (" b+t" if r.get("dynamics") else "")
     if k == "iterations":
         return "θ=0" if v == 0 else f"{v:g} it"
     if k == "tolerance":

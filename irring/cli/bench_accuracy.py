@@ -10,13 +10,15 @@ EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):
   step        read every 2nd / 4th motor step (2.16°, 4.32°) instead of every 1.08° step
   samples     average 2 / 4 / 8 readings per step (the averaging effect; 38.3 ms each)
-  settle      wait 20 / 60 ms at each step (the simulator is kinematic unless the scene
-              has belt_dynamics, so with the bundled scenes this buys nothing)
+  settle      wait 0 / 20 / 40 / 60 ms at each step, with belt_dynamics + timing added to the
+              scene (a wait only matters when the belt's swing and the GP2's clock are
+              simulated); hardware time is then the timed schedule's; these rows are kept
+              off the Pareto fronts and drawn as a dashed line
   iterations  estimator: θ = 0 (no iterations), at most 1 / 2 / 5 iterations (default 20;
               readings still moving at the cap are dropped as not converged)
   tolerance   estimator convergence tolerance 1° (default 0.1°)
-  regroup     estimator regroups the end points into lines in at most 1 / 2 / 4 iterations
-              (default 8), then holds the grouping; each regrouping is its costliest step
+  regroup     estimator groups the end points into lines at most 1 / 2 / 6 times (default 3),
+              then holds the grouping; each grouping is its costliest step
   resolution  map cells of 5 / 20 mm (default 10 mm)
   design      radial12 (the ring held still), rotating1 (one GP2 turning at the centre)
 
@@ -25,8 +27,10 @@ what it measures per configuration (mean over scenarios × seeds; timings: media
   compute ms  estimator + mapper per sweep on this machine, CPU time (so parallel
               workers do not inflate it); the simulator's own time is sim_ms in the
               CSV/JSON: the testbed's cost, not the robot's
+  angle mrad  belt+timing rows: RMS of true − assumed beam heading at the measurement
   RMSE mm     estimated − true range over the readings called valid; steep: true
-              incidence ≥ 40°; valid: share of the readings with a true return called valid
+              incidence ≥ 40°; point: end point to true hit point; valid: share of the
+              readings with a true return called valid
   F1 occ, coverage, free acc, shadow   the map scores of `irring run`
   front       on the Pareto front for hardware time (hw) / compute time (cpu): nothing
               else is as cheap and at least as good on occupied F1, coverage and range
