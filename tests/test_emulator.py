@@ -144,7 +144,9 @@ def test_faults_gauntlet_corruption_drops_a_stall_and_a_disconnect(t_room, pty_d
                                                  "running") as cut:
         ring.sweep()
     assert time.monotonic() - started < bound_s
-    assert 0 < len(cut.value.partial.steps) < 40   # what arrived before the cable went
+    # what arrived before the cable went (the stall's queued replies may use up the sentences
+    # before the cut, so none arriving is possible; the stall above pins partial sweeps)
+    assert len(cut.value.partial.steps) < 40
     ring.close()
     for sweep in (first, partial, cut.value.partial):
         for step, row in zip(sweep.steps, sweep.counts):

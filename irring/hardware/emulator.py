@@ -346,7 +346,54 @@ class Device:
         return False
 
 
-class PtyEmulator:
+class _Server:
+    """Serving lifecycle shared by the pty and TCP emulators: open on first use, serve on a
+    daemon thread, stop by event; subclasses provide open(), serve_forever() and _close()."""
+
+    _thread_name = "irring-emulator"
+
+    def __init__(self, device: Device, baud: int):
+        self.device = device
+        self.baud = int(baud)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def _is_open(self) -> bool:
+        raise NotImplementedError
+
+    def open(self) -> str:
+        raise NotImplementedError
+
+    def serve_forever(self) -> None:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self):
+        if not self._is_open():
+            self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start_thread(self):
+        if not self._is_open():
+            self.open()
+        self._thread = threading.Thread(target=self.serve_forever, name=self._thread_name,
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+        self._close()
+
+
+class PtyEmulator(_Server):
     """Runs a :class:`Device` on a pseudo-terminal.
 
     ``path`` is the slave device (``/dev/pts/N``) a host opens like a serial port; ``link``,
@@ -356,15 +403,15 @@ class PtyEmulator:
 
     def __init__(self, device: Device, *, link: str | os.PathLike | None = None,
                  baud: int = 0):
-        self.device = device
+        super().__init__(device, baud)
         self.link = Path(link) if link is not None else None
-        self.baud = int(baud)
         self.path: str | None = None
         self._master: int | None = None
         self._slave: int | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self.closed = threading.Event()
+
+    def _is_open(self) -> bool:
+        return self._master is not None
 
     def open(self) -> str:
         """Create the pty (and the link); returns the slave path."""
@@ -378,28 +425,6 @@ class PtyEmulator:
                 self.link.unlink()
             self.link.symlink_to(self.path)
         return self.path
-
-    def __enter__(self) -> PtyEmulator:
-        if self._master is None:
-            self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def start_thread(self) -> PtyEmulator:
-        if self._master is None:
-            self.open()
-        self._thread = threading.Thread(target=self.serve_forever, name="irring-emulator",
-                                        daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self, timeout_s: float = 2.0) -> None:
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout_s)
-        self._close()
 
     def _close(self) -> None:
         for fd in (self._master, self._slave):
@@ -492,18 +517,21 @@ def _serve_fd(fd: int, dev: Device, baud: int, stop: threading.Event,
     return "stop"
 
 
-class TcpEmulator:
+class TcpEmulator(_Server):
     """Runs a :class:`Device` on a TCP port, one host connection at a time; the host opens
     ``socket://HOST:PORT`` (pyserial). The device keeps its state across connections; an
     injected disconnect closes the connection and ends serving."""
 
     def __init__(self, device: Device, *, host: str = "127.0.0.1", port: int = 0,
                  baud: int = 0):
-        self.device = device
-        self.host, self.port, self.baud = host, int(port), int(baud)
+        super().__init__(device, baud)
+        self.host, self.port = host, int(port)
         self._listener: socket.socket | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+
+    _thread_name = "irring-emulator-tcp"
+
+    def _is_open(self) -> bool:
+        return self._listener is not None
 
     @property
     def url(self) -> str:
@@ -519,26 +547,7 @@ class TcpEmulator:
         self._listener = sock
         return self.url
 
-    def __enter__(self) -> TcpEmulator:
-        if self._listener is None:
-            self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def start_thread(self) -> TcpEmulator:
-        if self._listener is None:
-            self.open()
-        self._thread = threading.Thread(target=self.serve_forever, name="irring-emulator-tcp",
-                                        daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self, timeout_s: float = 2.0) -> None:
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout_s)
+    def _close(self) -> None:
         if self._listener is not None:
             self._listener.close()
             self._listener = None
