@@ -369,6 +369,7 @@ def _runs(rr: _Rays, t_end: np.ndarray, ok: np.ndarray, unit: np.ndarray,
     row_step = np.where(up, row_stride, -row_stride)
     per = np.empty((7, len(k)))
     first = np.cumsum(k)
+    nk = int(first[-1]) if len(k) else 0
     np.subtract(k, first, out=per[0])
     np.add(p_cross - tol_p, fwd, out=per[1])
     np.add(p_cross + tol_p, back, out=per[2])
@@ -381,13 +382,24 @@ def _runs(rr: _Rays, t_end: np.ndarray, ok: np.ndarray, unit: np.ndarray,
     ip = i * per[3]
     i *= per[5]
     i += per[4]                                        # the row before crossing i
-    before = np.floor(per[1] + ip)
+    # written straight into the outputs: starts, ends, before, after
+    m = len(k)
+    entries = np.empty(2 * (m + nk))
+    weights = np.empty(2 * (m + nk))
+    entries[:m] = starts
+    entries[m:2 * m] = ends
+    weights[:m] = w
+    np.negative(w, out=weights[m:2 * m])
+    before = np.add(per[1], ip, out=entries[2 * m:2 * m + nk])
+    np.floor(before, out=before)
     before += i
-    after = np.floor(np.add(per[2], ip, out=ip), out=ip)
+    after = np.add(per[2], ip, out=entries[2 * m + nk:])
+    np.floor(after, out=after)
     after += i
     after += per[5]
-    return (np.concatenate([starts, ends, before, after]),
-            np.concatenate([w, -w, -per[6], per[6]]))
+    np.negative(per[6], out=weights[2 * m:2 * m + nk])
+    weights[2 * m + nk:] = per[6]
+    return entries, weights
 
 
 _ARANGE = np.arange(0.0)
@@ -654,9 +666,11 @@ class OccupancyGrid:
             unit[kv:] = _NR_UNIT
         entries, weights = _runs(rr, t_end, ok, unit, (bx0, by0, bw, bh))
         diff = np.bincount(entries.astype(np.int32), weights, minlength=2 * size + 1)
-        diff = diff[:2 * size].astype(np.int64)
-        counts = diff[:size].reshape(bh, bw).cumsum(axis=1)
-        counts += diff[size:].reshape(bw, bh).cumsum(axis=1).T
+        # one flat cumsum is the per-row one: every run starts and ends in its own row (the
+        # box's border cells hold the run ends), so each row's entries sum to zero
+        runs = diff.astype(np.int64)
+        np.cumsum(runs, out=runs)
+        counts = runs[:size].reshape(bh, bw) + runs[size:2 * size].reshape(bw, bh).T
         if same:
             change = counts * p.l_free
         else:   # counts = valid + 2^20·no-return visits
