@@ -668,7 +668,9 @@ class OccupancyGrid:
         diff = np.bincount(entries.astype(np.int32), weights, minlength=2 * size + 1)
         # one flat cumsum is the per-row one: every run starts and ends in its own row (the
         # box's border cells hold the run ends), so each row's entries sum to zero
-        runs = diff.astype(np.int64)
+        # (int32 while every sum fits: no bin or count exceeds twice the beams' units)
+        small = 2 * len(ok) * (1.0 if same else _NR_UNIT) < 2.0 ** 31
+        runs = diff.astype(np.int32 if small else np.int64)
         np.cumsum(runs, out=runs)
         counts = runs[:size].reshape(bh, bw) + runs[size:2 * size].reshape(bw, bh).T
         if same:
