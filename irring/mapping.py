@@ -63,9 +63,12 @@ border crossing, not per cell); only the last few columns of a valid beam are wa
 cell and weighed with the formula above, in float32. Both follow :func:`traverse`'s rules
 exactly (the same cells; tests compare them visit by visit); the weights differ from the
 formula by < 1e-4 log-odds (the constant part is within 4e-5 of it, erfc is A&S 7.1.25).
-One T-room sweep (852 readings, 10 mm cells) takes ~0.62 ms on the 2-core reference machine
-(it was ~3.0 ms with a sort-based traversal and per-visit weights over the whole grid);
-about half of that is a fixed cost of ~150 numpy calls and box-sized passes.
+One T-room sweep (852 readings, 10 mm cells) takes ~0.58 ms warm on the 2-core reference
+machine (~0.7–0.85 ms inside ``irring bench speed``, whose other stages evict the caches; it
+was ~3.0 ms with a sort-based traversal and per-visit weights over the whole grid). What is
+left is mostly per-call numpy overhead — ~150 calls on arrays of a few hundred to a few
+thousand entries (clip ~50 µs, runs ~140, near-end columns and weights ~170) — and a few
+box-sized passes (bincount, cumsum, weights, clamp ~130 µs).
 
 Frames: the grid's origin is the world (x, y) of the *corner* of cell (0, 0); row ``iy``
 grows with y, column ``ix`` with x; ``log_odds[iy, ix]``.
