@@ -274,34 +274,28 @@ def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) 
 
 
 def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=None,
-            bearings: int = 180, progress: bool = False) -> dict:
+            bearings: int = 180, progress: bool | None = False) -> dict:
     """Run every design on every scenario for ``seeds`` seeds (scenario seed, +1, …).
+    ``progress``: show a bar (None: only at a terminal, see ``pipeline.progress_enabled``).
 
     Returns ``{"designs": summarise(...), "runs": [...], "detection": {...}}``.
     """
+    from .pipeline import progress_bar
     from .scenario import load_scenario
 
     scs = [load_scenario(s) if isinstance(s, str) else s for s in scenarios]
     ds = [designs_mod.get(d) if isinstance(d, str) else d for d in design_list]
     jobs = [(sc, d, sc.seed + k) for sc in scs for d in ds for k in range(seeds)]
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(jobs) + len(ds), desc="compare", unit="run", leave=False)
-    runs = []
-    for sc, d, seed in jobs:
-        runs.append(run_scene(sc, d, seed))
-        if bar:
-            bar.update()
     dist = DEFAULT_DISTANCES_M if detection_distances_m is None else detection_distances_m
+    runs = []
     detections = {}
-    for d in ds:
-        detections[d.name] = detection(d, dist, bearings=bearings)
-        if bar:
+    with progress_bar(len(jobs) + len(ds), "compare", progress, unit="run") as bar:
+        for sc, d, seed in jobs:
+            runs.append(run_scene(sc, d, seed))
             bar.update()
-    if bar:
-        bar.close()
+        for d in ds:
+            detections[d.name] = detection(d, dist, bearings=bearings)
+            bar.update()
     return {"designs": summarise(runs, detections), "runs": runs,
             "detection_distances_m": list(map(float, dist))}
 

@@ -37,10 +37,12 @@ def progress_enabled() -> bool:
     return sys.stderr.isatty() and os.environ.get("CI", "").lower() not in ("true", "1")
 
 
-def _progress(total: int, desc: str, enabled: bool | None):
+def progress_bar(total: int, desc: str, enabled: bool | None = None, *, unit: str = "pose"):
+    """The one progress bar (tqdm, context manager): shown when ``enabled``, or when None
+    as :func:`progress_enabled` decides; a disabled bar's ``update`` costs nothing."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="pose", leave=False,
+    return tqdm(total=total, desc=desc, unit=unit, leave=False,
                 disable=not (progress_enabled() if enabled is None else enabled))
 
 
@@ -146,7 +148,7 @@ def simulate(scenario: Scenario, *, seed: int | None = None,
     t0 = time.perf_counter()
     sim = SimRing(scenario, seed=seed)
     sweeps = []
-    with _progress(sim.n_sweeps, "simulate", progress) as bar:
+    with progress_bar(sim.n_sweeps, "simulate", progress) as bar:
         for k in range(sim.n_sweeps):
             sweeps.append(sim.sweep(k))
             bar.update()
@@ -191,7 +193,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     if grid is None and scenario is not None:
         grid = OccupancyGrid.for_scenario(scenario)
     frames: list[tuple[np.ndarray, int, str]] = []
-    with _progress(len(sweeps), "estimate + map", progress) as bar:
+    with progress_bar(len(sweeps), "estimate + map", progress) as bar:
         for sweep in sweeps:
             t0 = time.perf_counter()
             points.append(estimator(sweep, calibration))
