@@ -177,20 +177,6 @@ def _estimator_calibration(sweep, scenario):
     return Calibration.for_sweep(sweep, **kw)
 
 
-def simulate(scenario, *, seed: int | None = None) -> tuple[list, float, float]:
-    """The sweeps of ``pipeline.simulate`` with the model build timed apart from the sweeps
-    (compute time per sweep excludes the one-off build): (sweeps, build s, sweep s)."""
-    import time
-
-    from . import sim
-
-    t0 = time.perf_counter()
-    ring = sim.SimRing(scenario, seed=seed)
-    t1 = time.perf_counter()
-    sweeps = [ring.sweep(k) for k in range(ring.n_sweeps)]
-    return sweeps, t1 - t0, time.perf_counter() - t1
-
-
 def run_scene(scenario, design: Design | str, seed: int | None = None, *,
               reference=None) -> dict:
     """One scenario seen by one design: every pose swept, then estimated, mapped and scored
@@ -217,7 +203,8 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
     reference = scenario if reference is None else reference
     sc = designs_mod.apply(scenario, d)
     seed = sc.seed if seed is None else seed
-    sweeps, build_s, sim_s = simulate(sc, seed=seed)
+    sim_s: dict[str, float] = {}
+    sweeps, _ = pipeline.simulate(sc, seed=seed, progress=False, timings=sim_s)
     result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=_estimator_calibration(
         sweeps[0], sc), score=False, progress=False)
     scores = metrics.score(result.grid, sc, metrics.ground_truth(reference, result.grid))
@@ -230,7 +217,8 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
         "scenario": scenario.name, "design": d.name, "seed": int(seed), "poses": poses,
         **{k: scores[k] for k in metrics.SCORE_KEYS},
         "hardware_time_s": view_s, "hardware_time_total_s": view_s * poses,
-        "compute_time_s": (sim_s + result.compute_time_s) / poses, "setup_time_s": build_s,
+        "compute_time_s": (sim_s["sweeps"] + result.compute_time_s) / poses,
+        "setup_time_s": sim_s["build"],
         "readings": readings["total"], "valid_readings": readings["valid"],
     }
 
