@@ -187,10 +187,6 @@ class Device:
         elapsed = (now - self._t0) * 1000.0 if self.realtime else self._virtual_ms
         return int(self._clock_start_ms + elapsed) % p.CLOCK_MODULO
 
-    @property
-    def pose_index(self) -> int:
-        return self._pose
-
     # ---------------------------------------------------------------- input
 
     def receive(self, chunk: bytes, now: float) -> None:
@@ -254,7 +250,7 @@ class Device:
         # Moving to `from_step` costs motor time; the one-step moves inside the sweep happen
         # within each step's settle time, so a sweep lasts data.hardware_duration_s.
         move_s = abs(cmd.from_step - self._position) * MOVE_S_PER_STEP
-        step_s = settle_s + cmd.samples * data.GP2_PERIOD_S
+        step_s = data.hardware_duration_s(1, settle_s, cmd.samples)
         self._advance(move_s)
         first_due = now + (move_s + step_s if self.realtime else 0.0)
         self._job = _SweepJob(steps, counts.reshape(len(steps), -1), step_s, due=first_due)
@@ -408,7 +404,6 @@ class PtyEmulator(_Server):
         self.path: str | None = None
         self._master: int | None = None
         self._slave: int | None = None
-        self.closed = threading.Event()
 
     def _is_open(self) -> bool:
         return self._master is not None
@@ -440,7 +435,6 @@ class PtyEmulator(_Server):
                     self.link.unlink()
             except OSError:
                 pass
-        self.closed.set()
 
     def _unread(self) -> int:
         """Bytes sent that the host has not read yet."""

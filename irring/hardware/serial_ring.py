@@ -497,7 +497,7 @@ class SerialRing:
         base: int | None = None
         last_seq: int | None = None
         max_count = (1 << info.adc_bits) - 1
-        per_step_s = settle_ms / 1000 + samples * data.GP2_PERIOD_S
+        per_step_s = data.hardware_duration_s(1, settle_ms / 1000, samples)
         # the first IRSCN may need a move to `lo` first (allow 5 ms per motor step)
         travel = (info.max_step - info.min_step if self._position is None
                   else abs(lo - self._position))
