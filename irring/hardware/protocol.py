@@ -274,7 +274,8 @@ def encode(msg: Message, *, check: bool = True) -> bytes:
     return line
 
 
-def _bounds(msg: Message | type[Message], i: int) -> tuple[int, int]:
+def _bounds(msg: Message | type[Message], i: int) -> tuple[int, int] | str:
+    """Field ``i``'s kind: its (lo, hi) bounds, or TEXT."""
     spec = msg.SPEC
     if i < len(spec):
         return spec[i]
@@ -335,7 +336,7 @@ def _parse_fields(cls: type[Message], raw: list[bytes], line: bytes) -> list:
         raise ProtocolError(Fault.FIELD_COUNT, line, f"{cls.TYPE} takes {want}, got {len(raw)}")
     values: list = []
     for i, text in enumerate(raw):
-        kind = cls.SPEC[i] if i < n_spec else Scan.COUNT
+        kind = _bounds(cls, i)
         if kind == TEXT:
             values.append(text.decode("ascii"))  # characters were checked above
             continue
@@ -429,6 +430,8 @@ class Decoder:
 # IRINF carries the motor step in millidegrees and the belt ratio as a fraction; these map
 # it to and from the project's Ring (SI units). Pure arithmetic, no I/O.
 
+GEAR_MAX_DENOMINATOR = 10_000
+
 
 def ring_from_info(info: Info, template: Ring, *, radius_m: float | None = None,
                    emitter_offset_m: float | None = None) -> Ring:
@@ -450,9 +453,6 @@ def ring_from_info(info: Info, template: Ring, *, radius_m: float | None = None,
     if emitter_offset_m is not None:
         changes["emitter_offset_m"] = float(emitter_offset_m)
     return dataclasses.replace(template, **changes)
-
-
-GEAR_MAX_DENOMINATOR = 10_000
 
 
 def info_for_ring(ring: Ring, adc_bits: int, firmware: str) -> Info:
