@@ -100,7 +100,6 @@ def run(args: argparse.Namespace) -> int:
     from .. import pipeline
     from ..designs import PAPER_RING
     from ..hardware import DeviceError, LinkLost, SerialRing
-    from ..mapping import OccupancyGrid
     from ..scenario import load_scenario
 
     truth = load_scenario(args.truth) if args.truth else None
@@ -190,8 +189,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
 
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
-    grid = OccupancyGrid.for_scenario(truth) if truth is not None else None
-    result = pipeline.map_sweeps(sweeps, scenario=truth, grid=grid, calibration=calibration,
+    result = pipeline.map_sweeps(sweeps, scenario=truth, calibration=calibration,
                                  frames_per_sweep=frames, score=truth is not None)
     result.scenario_text = pipeline.scenario_text(truth) if truth is not None else None
     result.calibration_text = cal_text
@@ -202,17 +200,11 @@ def run(args: argparse.Namespace) -> int:
     paths["link"] = args.out / "link.json"
     paths["link"].write_text(json.dumps(link, indent=2))
 
-    from .run import summary_lines
+    from .run import report
 
-    if args.json:
-        summary = result.summary()
-        summary["source"] = f"serial:{args.port}"
-        summary["link"] = link
-        summary["outputs"] = {k: str(v) for k, v in paths.items()}
-        print(json.dumps(summary, indent=2))
-    else:
-        for line in summary_lines(result, paths):
-            print(line)
+    report(result, paths, as_json=args.json,
+           extra={"source": f"serial:{args.port}", "link": link})
+    if not args.json:
         t = ring.stats
         missing = sum(len(s.missing_steps) for s in sweeps)
         print(f"  link      {t.scans} steps read, {missing} steps missing; "

@@ -64,10 +64,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def report(result, paths: dict, *, as_json: bool) -> None:
-    """Print the run's summary: JSON, or a few readable lines (shared with replay)."""
+def report(result, paths: dict, *, as_json: bool, extra: dict | None = None) -> None:
+    """Print the run's summary: JSON (plus ``extra`` keys), or a few readable lines (shared
+    with replay and drive)."""
     summary = result.summary()
     if as_json:
+        summary.update(extra or {})
         summary["outputs"] = {k: str(v) for k, v in paths.items()}
         print(json.dumps(summary, indent=2))
         return
