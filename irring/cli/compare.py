@@ -66,18 +66,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .. import compare, designs
+    from ._common import distances_mm
 
     if args.seeds < 1:
         raise SystemExit("irring compare: error: --seeds must be ≥ 1")
     if args.bearings < 8:
         raise SystemExit("irring compare: error: --bearings must be ≥ 8")
-    try:
-        dist = [float(v) * 1e-3 for v in args.distances_mm.split(",") if v.strip()]
-    except ValueError:
-        raise SystemExit(f"irring compare: error: --distances-mm wants numbers like 250,500; "
-                         f"got {args.distances_mm!r}") from None
-    if not dist or min(dist) <= 0:
-        raise SystemExit("irring compare: error: --distances-mm needs positive distances")
+    dist = distances_mm(args.distances_mm, "compare")
     scenarios = args.scenario or list(DEFAULT_SCENARIOS)
     names = args.design or list(designs.DESIGN_BY_NAME)
     from ..pipeline import progress_enabled

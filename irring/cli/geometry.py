@@ -53,26 +53,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _distances(text: str) -> list[float]:
-    try:
-        values = [float(v) * 1e-3 for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise SystemExit(f"irring geometry: error: --distances-mm wants numbers like "
-                         f"250,500,1000; got {text!r}") from None
-    if not values or min(values) <= 0:
-        raise SystemExit("irring geometry: error: --distances-mm needs positive distances")
-    return values
-
-
 def run(args: argparse.Namespace) -> int:
     from .. import designs, geometry
+    from ._common import distances_mm
 
     if args.samples < 1000:
         raise SystemExit("irring geometry: error: --samples must be ≥ 1000")
     names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
     range_m = None if args.range_mm is None else args.range_mm * 1e-3
-    reports = [geometry.design_report(designs.get(n), _distances(args.distances_mm),
-                                      range_m=range_m, samples=args.samples, seed=args.seed)
+    distances_m = distances_mm(args.distances_mm, "geometry")
+    reports = [geometry.design_report(designs.get(n), distances_m, range_m=range_m,
+                                      samples=args.samples, seed=args.seed)
                for n in names]
     if args.json:
         print(json.dumps(reports if args.design == "all" else reports[0], indent=2))
