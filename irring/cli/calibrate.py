@@ -89,12 +89,10 @@ def run(args: argparse.Namespace) -> int:
                               sensor_model=scenario.sensor.model, vref_v=scenario.sensor.vref_v,
                               max_range_m=scenario.sensor.max_range_m)
             try:
-                with ring:
-                    adc_bits = ring.info.adc_bits if ring.info is not None else \
-                        scenario.sensor.adc_bits
+                with ring:  # the handshake sets ring.info (or raises)
                     guided = GuidedCalibration(
                         read_sweep=lambda: ring.sweep(resweep=1), prompt=input, show=print,
-                        sensor_model=scenario.sensor.model, adc_bits=adc_bits,
+                        sensor_model=scenario.sensor.model, adc_bits=ring.info.adc_bits,
                         vref_v=scenario.sensor.vref_v, sensor=args.sensor,
                         sweeps=args.sweeps or 4,
                         emitter_offset_guess_m=scenario.ring.emitter_offset_m)
