@@ -1,43 +1,123 @@
-"""Synthetic readings from exact geometry, for mapper and metrics tests.
+"""Synthetic readings from exact geometry, for the estimator, mapper and metrics tests.
 
-An analytic 2-D ray caster (room outline segments and cylinders) stands in for the
-simulator and the estimator: it gives the `Points` a perfect estimator would produce for the
-ring's real beam geometry, plus optional Gaussian range noise. Independent of irring.sim.
+One analytic 2-D ray caster (:func:`cast`: walls as segments, cylinders as circles, giving
+distance and incidence) stands in for MuJoCo. On it:
+
+- :func:`make_sweep`: a ``Sweep`` of an analytic scene, counts by a calibration's forward
+  curve (the inverse of Eq. 10), for estimator tests that need geometry they control
+  exactly (corners, a thin cylinder, grazing walls); the T-room tests use SimRing;
+- :func:`points_for_pose`: the ``Points`` a perfect estimator would produce for a
+  scenario's pose and the ring's real beam geometry, plus optional Gaussian range noise,
+  for the mapper and metrics tests.
+
+Independent of irring.sim.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from irring.data import Points, Reason, beam_geometry, sensor_angles_for_steps
-from irring.scenario import Cylinder, Scenario
+from irring.data import Points, Reason, Sweep, beam_geometry, sensor_angles_for_steps
+from irring.designs import PAPER_RING
+from irring.estimate import Calibration
+from irring.scenario import Cylinder, Ring, Scenario
+
+def stand_in_calibration(d_o: float = 0.007, strength: float = 0.25, bits: int = 12,
+                         noise_counts: float = 0.0) -> Calibration:
+    """GP2D12-like power law (d[cm] = 27.728·V^−1.2045) with a(θ) growing as 1 − cos θ."""
+    theta = np.radians(np.arange(0.0, 86.0, 5.0))
+    volts_per_count = 5.0 / (2 ** bits - 1)
+    b = np.full(theta.size, -1.2045)
+    a = 0.27728 * volts_per_count ** b * (1.0 + strength * (1.0 - np.cos(theta)))
+    return Calibration(sensor_model="stand-in", emitter_offset_m=d_o, theta_rad=theta, a=a,
+                       b=b, adc_bits=bits, min_range_m=0.08, max_range_m=0.80,
+                       noise_counts=noise_counts, source="test stand-in")
+
+
+def cast(origin: np.ndarray, heading: np.ndarray, walls=(), circles=()):
+    """Nearest hit of rays (…, 2)/(…) on segments ((x1, y1), (x2, y2)) and circles
+    ((cx, cy), r). Returns distance (inf if none) and incidence angle (rad)."""
+    ox, oy = origin[..., 0], origin[..., 1]
+    ux, uy = np.cos(heading), np.sin(heading)
+    best = np.full(heading.shape, np.inf)
+    inc = np.full(heading.shape, np.nan)
+    for (x1, y1), (x2, y2) in walls:
+        ex, ey = x2 - x1, y2 - y1
+        den = ux * ey - uy * ex
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((x1 - ox) * ey - (y1 - oy) * ex) / den
+            u = ((x1 - ox) * uy - (y1 - oy) * ux) / den
+        hit = (np.abs(den) > 1e-12) & (t > 1e-9) & (u >= 0) & (u <= 1) & (t < best)
+        nx, ny = -ey / math.hypot(ex, ey), ex / math.hypot(ex, ey)
+        cos_t = np.abs(ux * nx + uy * ny)
+        best = np.where(hit, t, best)
+        inc = np.where(hit, np.arccos(np.clip(cos_t, 0, 1)), inc)
+    for (cx, cy), r in circles:
+        fx, fy = ox - cx, oy - cy
+        bq = fx * ux + fy * uy
+        cq = fx * fx + fy * fy - r * r
+        disc = bq * bq - cq
+        with np.errstate(invalid="ignore"):
+            t = -bq - np.sqrt(disc)
+        hit = (disc > 0) & (t > 1e-9) & (t < best)
+        hx, hy = fx + t * ux, fy + t * uy
+        cos_t = np.abs(hx * ux + hy * uy) / r
+        best = np.where(hit, t, best)
+        inc = np.where(hit, np.arccos(np.clip(cos_t, 0, 1)), inc)
+    return best, inc
+
+
+def make_sweep(cal: Calibration, *, walls=(), circles=(), pose=(0.0, 0.0, 0.0),
+               ring: Ring = PAPER_RING, noise_counts: float = 0.0, seed: int = 0,
+               max_range_m: float = 0.624, dtype=float, quantize: bool = False,
+               steps: np.ndarray | None = None):
+    """A Sweep of the scene read through ``cal``'s forward curve; also true d and θ (NaN
+    where nothing returns: no hit, beyond the curve's range or past its drop-out angle)."""
+    if steps is None:
+        steps = np.arange(ring.min_step, ring.max_step + 1)
+    angles = sensor_angles_for_steps(ring, steps)
+    origin, heading = beam_geometry(ring, np.asarray(pose, float), angles, cal.emitter_offset_m)
+    d, inc = cast(origin, heading, walls, circles)
+    # like the `incidence` effect: past the calibration's drop-out angle nothing returns
+    in_range = np.isfinite(d) & (d <= cal.max_range_m) & (inc <= cal.max_incidence_rad)
+    counts = np.where(in_range, cal.counts(np.where(in_range, d, 1.0), np.nan_to_num(inc)), 0.0)
+    rng = np.random.default_rng(seed)
+    counts = counts + noise_counts * rng.standard_normal(counts.shape)
+    counts = np.clip(counts, 0, cal.full_scale_counts)
+    if quantize:
+        counts = np.round(counts)
+    sweep = Sweep(steps=np.asarray(steps), sensor_angles=angles.astype(dtype),
+                  counts=counts.astype(dtype), timestamps_s=np.zeros(len(steps)), duration_s=0.0,
+                  pose=np.asarray(pose, float), ring=ring, sensor_model="stand-in",
+                  adc_bits=cal.adc_bits, max_range_m=max_range_m)
+    return sweep, np.where(in_range, d, np.nan), np.where(in_range, inc, np.nan)
+
+
+def rectangle(x0, y0, x1, y1):
+    c = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    return [(c[i], c[(i + 1) % 4]) for i in range(4)]
+
+
+def polygon(corners):
+    return [(corners[i], corners[(i + 1) % len(corners)]) for i in range(len(corners))]
+
+
+T_ROOM = polygon([(0, 0), (2.42, 0), (2.42, 0.9), (1.66, 0.9), (1.66, 1.8), (0.76, 1.8),
+                  (0.76, 0.9), (0, 0.9)])
+T_POSES = [(1.92, 0.45, 0.0), (1.21, 0.45, 0.0), (0.5, 0.45, 0.0), (1.21, 1.35, 0.0)]
 
 
 def ray_distances(ox, oy, heading, scenario: Scenario) -> np.ndarray:
-    """Distance (m) from each origin along each heading to the first wall or cylinder."""
-    ux, uy = np.cos(heading), np.sin(heading)
-    best = np.full(np.shape(ox), np.inf)
-    outline = scenario.room.outline_m
-    for i in range(len(outline)):
-        (ax, ay), (bx, by) = outline[i], outline[(i + 1) % len(outline)]
-        ex, ey = bx - ax, by - ay
-        den = ux * ey - uy * ex
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((ax - ox) * ey - (ay - oy) * ex) / den
-            s = ((ax - ox) * uy - (ay - oy) * ux) / den
-        ok = (np.abs(den) > 1e-12) & (t > 0) & (s >= 0) & (s <= 1)
-        best = np.where(ok & (t < best), t, best)
-    for ob in scenario.obstacles:
-        assert isinstance(ob, Cylinder)
-        cx, cy = ox - ob.center_m[0], oy - ob.center_m[1]
-        b = cx * ux + cy * uy
-        c = cx * cx + cy * cy - ob.radius_m ** 2
-        disc = b * b - c
-        with np.errstate(invalid="ignore"):
-            t = -b - np.sqrt(disc)
-        ok = (disc >= 0) & (t > 0)
-        best = np.where(ok & (t < best), t, best)
-    return best
+    """Distance (m) from each origin along each heading to the first wall or cylinder of a
+    scenario (inf where nothing is hit)."""
+    assert all(isinstance(ob, Cylinder) for ob in scenario.obstacles)
+    ox, oy, heading = np.broadcast_arrays(ox, oy, np.asarray(heading, dtype=float))
+    origin = np.stack([ox, oy], axis=-1)
+    d, _ = cast(origin, heading, polygon(scenario.room.outline_m),
+                [(ob.center_m, ob.radius_m) for ob in scenario.obstacles])
+    return d
 
 
 def gp2_sigma_m(d_m):

@@ -1,7 +1,7 @@
 """The calibration data type, Eq. 9/10 fits, line grouping and the iterative estimator.
 
 Hard cases use hypothesis (hundreds of generated cases each) on analytic scenes
-(tests/_estimate_synth.py: walls and cylinders, counts from a calibration's forward curve);
+(tests/_synthetic.py: walls and cylinders, counts from a calibration's forward curve);
 the T-room claim uses the real SimRing.
 """
 
@@ -17,8 +17,8 @@ import yaml
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from _estimate_synth import (PAPER_RING, T_POSES, T_ROOM, make_sweep, rectangle,
-                             stand_in_calibration)
+from _synthetic import (PAPER_RING, T_POSES, T_ROOM, make_sweep, rectangle,
+                        stand_in_calibration)
 from irring import gp2
 from irring.data import Reason, beam_geometry, sensor_angles_for_steps
 from irring.estimate import (Calibration, CalibrationError, LineOptions,
