@@ -23,15 +23,21 @@ THETA_DEG = list(range(0, 90, 5))  # 0 … 85°; beyond the last entry a, b are 
 A_EXP = 0.30
 B_SLOPE = -0.10
 
+# The GP2D12 datasheet points (distance m → output V). The GP2Y0A21 is the same 10–80 cm
+# class: its fixed fit is checked against these same points.
+GP2D12_POINTS = dict(
+    distance_m=[0.10, 0.12, 0.14, 0.16, 0.18, 0.20, 0.30, 0.35, 0.40, 0.45, 0.50, 0.60, 0.70,
+                0.75, 0.80],
+    voltage_v=[2.450, 2.125, 1.860, 1.660, 1.520, 1.380, 0.975, 0.850, 0.760, 0.680, 0.620,
+               0.540, 0.480, 0.450, 0.420],
+)
+
 SPECS = {
     "gp2d12": dict(
         part="Sharp GP2D12",
         source="datasheet-derived points listed in DESIGN.md (mV → cm)",
         min_range_m=0.10, max_range_m=0.80, peak_distance_m=0.09, max_incidence_deg=70.0,
-        distance_m=[0.10, 0.12, 0.14, 0.16, 0.18, 0.20, 0.30, 0.35, 0.40, 0.45, 0.50, 0.60,
-                    0.70, 0.75, 0.80],
-        voltage_v=[2.450, 2.125, 1.860, 1.660, 1.520, 1.380, 0.975, 0.850, 0.760, 0.680, 0.620,
-                   0.540, 0.480, 0.450, 0.420],
+        **GP2D12_POINTS,
         notes="Peak (fold-over) at 9 cm: the datasheet curve tops out near 2.6–2.7 V at 8–9 cm; "
               "the fitted branch gives 2.71 V there.",
     ),
@@ -41,10 +47,7 @@ SPECS = {
                "residuals against the GP2D12 datasheet points",
         min_range_m=0.10, max_range_m=0.80, peak_distance_m=0.07, max_incidence_deg=70.0,
         fixed_fit=(0.27728, -1.2045),
-        distance_m=[0.10, 0.12, 0.14, 0.16, 0.18, 0.20, 0.30, 0.35, 0.40, 0.45, 0.50, 0.60,
-                    0.70, 0.75, 0.80],
-        voltage_v=[2.450, 2.125, 1.860, 1.660, 1.520, 1.380, 0.975, 0.850, 0.760, 0.680, 0.620,
-                   0.540, 0.480, 0.450, 0.420],
+        **GP2D12_POINTS,
         notes="Peak at 7 cm (datasheet: ~3.1 V at 6–7 cm; the fit gives 3.13 V at 7 cm).",
     ),
     "gp2y0a02": dict(
