@@ -36,12 +36,12 @@ from typing import Callable
 import numpy as np
 
 from .. import gp2
-from ..data import Truth
+from ..data import Truth, beam_geometry, sensor_angles_for_steps
+from ..designs import PAPER_RING
 from ..effects import STAGE_ORDER, Pipeline
 from ..scenario import (EFFECTS, IncidenceEffect, NoiseEffect, OutliersEffect,
                         ReflectanceEffect, Scenario)
 
-S_STEPS, N_SENSORS = 71, 12
 OFF_BUDGET = 0.02
 
 # Parameters under which a stage is built but changes nothing (or next to nothing).
@@ -104,12 +104,11 @@ class RoundRoom:
 def synthetic_truth(cast: RoundRoom | None = None) -> Truth:
     """The paper ring's 71 × 12 sweep at the room's centre, cast with ``cast``."""
     cast = cast or RoundRoom()
-    rho = np.arange(N_SENSORS) * 2 * math.pi / N_SENSORS
-    phi = np.radians(np.arange(-35, 36) * 1.08)
-    heading = rho[None, :] + phi[:, None]
-    hinge = 0.15 * np.stack([np.cos(rho), np.sin(rho)], axis=-1)[None, :, :]
-    emitter = hinge + 0.007 * np.stack([np.sin(heading), -np.cos(heading)], axis=-1)
-    origin = np.concatenate([emitter, np.full(heading.shape + (1,), 0.10)], axis=-1)
+    ring = PAPER_RING
+    angles = sensor_angles_for_steps(ring, np.arange(ring.min_step, ring.max_step + 1))
+    emitter, heading = beam_geometry(ring, np.zeros(3), angles, ring.emitter_offset_m)
+    origin = np.concatenate([emitter, np.full(heading.shape + (1,), ring.sensor_height_m)],
+                            axis=-1)
     direction = np.stack([np.cos(heading), np.sin(heading), np.zeros_like(heading)], axis=-1)
     h = cast(origin, direction)
     return Truth(distance_m=h.distance_m, incidence_rad=h.incidence_rad, hit_point=h.hit_point,
