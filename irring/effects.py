@@ -46,8 +46,6 @@ from .scenario import (AveragingEffect, BeamEffect, FoldoverEffect, IncidenceEff
 STAGE_ORDER = ("beam", "incidence", "reflectance", "foldover", "averaging", "outliers", "noise",
                "quantization")
 PHASES = ("rays", "returns", "fold", "combine", "expand", "sample", "adc", "reduce")
-# Effects that are not signal stages (the simulator's business).
-NOT_SIGNAL = ("belt_dynamics", "timing", "motion")
 
 
 @dataclass(frozen=True)
@@ -79,7 +77,6 @@ class Frame:
     theta: Any = 0.0              # θ the curve uses: 0 unless the incidence stage sets it
     v: np.ndarray | None = None   # voltage
     noise_scale: Any = 1.0        # multiplies the noise σ (reflectance stage)
-    ray_weights: np.ndarray | None = None  # (R,) Gaussian aperture weights, sum 1
 
 
 class Stage:
@@ -163,7 +160,6 @@ class BeamStage(Stage):
         f.d = np.asarray(hits.distance_m, dtype=float)
         f.incidence = np.asarray(hits.incidence_rad, dtype=float)
         f.reflectance = np.asarray(hits.reflectance, dtype=float)
-        f.ray_weights = self.weights
 
     def combine(self, f: Frame) -> np.ndarray:
         rho = np.where(np.isnan(f.reflectance), 1.0, f.reflectance)
