@@ -173,27 +173,27 @@ class Calibration:
     def max_theta_rad(self) -> float:
         return float(self.theta_rad[-1])
 
+    def _log_ab(self, theta_rad: Any) -> tuple[np.ndarray, np.ndarray]:
+        """log a(θ), b(θ) at |θ|: linear in (log a, b), held beyond the table."""
+        t = np.abs(np.asarray(theta_rad, dtype=float))
+        return np.interp(t, self.theta_rad, self._log_a), np.interp(t, self.theta_rad, self.b)
+
     def ab(self, theta_rad: Any) -> tuple[np.ndarray, np.ndarray]:
         """a(θ), b(θ) at |θ|: linear in (log a, b), held beyond the table."""
-        t = np.abs(np.asarray(theta_rad, dtype=float))
-        log_a = np.interp(t, self.theta_rad, self._log_a)
-        return np.exp(log_a), np.interp(t, self.theta_rad, self.b)
+        log_a, b = self._log_ab(theta_rad)
+        return np.exp(log_a), b
 
     def distance(self, counts: Any, theta_rad: Any = 0.0) -> np.ndarray:
         """Eq. 10: metres from counts (> 0) at incidence θ; vectorised."""
         s = np.asarray(counts, dtype=float)
-        t = np.abs(np.asarray(theta_rad, dtype=float))
-        log_a = np.interp(t, self.theta_rad, self._log_a)
-        b = np.interp(t, self.theta_rad, self.b)
+        log_a, b = self._log_ab(theta_rad)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.exp(log_a + b * np.log(s))
 
     def counts(self, distance_m: Any, theta_rad: Any = 0.0) -> np.ndarray:
         """The inverse of Eq. 10: the counts a return at ``distance_m`` and θ gives."""
         d = np.asarray(distance_m, dtype=float)
-        t = np.abs(np.asarray(theta_rad, dtype=float))
-        log_a = np.interp(t, self.theta_rad, self._log_a)
-        b = np.interp(t, self.theta_rad, self.b)
+        log_a, b = self._log_ab(theta_rad)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.exp((np.log(d) - log_a) / b)
 
@@ -493,11 +493,10 @@ class Lines:
     end: np.ndarray
 
 
-def _scan_order(steps: np.ndarray, n_sensors: int) -> tuple[np.ndarray, int]:
+def _scan_order(steps: np.ndarray, n_sensors: int) -> np.ndarray:
     """Flat indices into (S, N) arrays, sensor-major, each sensor's readings by step."""
     order = np.argsort(np.asarray(steps), kind="stable")
-    s = len(order)
-    return (order[None, :] * n_sensors + np.arange(n_sensors)[:, None]).reshape(-1), s
+    return (order[None, :] * n_sensors + np.arange(n_sensors)[:, None]).reshape(-1)
 
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
@@ -854,7 +853,7 @@ def fit_lines(x: np.ndarray, y: np.ndarray, ok: np.ndarray, sigma_m: np.ndarray,
     n_steps, n_sensors = shape
     if steps is None:
         steps = np.arange(n_steps)
-    flat, _ = _scan_order(steps, n_sensors)
+    flat = _scan_order(steps, n_sensors)
     okf = np.asarray(ok, dtype=bool).reshape(-1)[flat]
     okf &= np.isfinite(x.reshape(-1)[flat]) & np.isfinite(y.reshape(-1)[flat])
     idx = flat[okf]
@@ -927,10 +926,9 @@ class _Sweep:
     """One sweep's live readings in scan order (sensor by sensor, by step), and the
     calibration's curve, for the loop: everything per reading that θ does not change."""
 
-    def __init__(self, cal: Calibration, counts, origin, heading, live, steps, opts,
-                 max_range, tolerance_rad):
+    def __init__(self, cal: Calibration, counts, origin, heading, live, steps, opts):
         n_sensors = counts.shape[1]
-        scan, _ = _scan_order(steps, n_sensors)
+        scan = _scan_order(steps, n_sensors)
         pos = live.reshape(-1).take(scan).nonzero()[0]      # places in the scan order
         self.index = sel = scan.take(pos)                     # flat (S, N) index of each
         self.k = sel.size
@@ -953,10 +951,8 @@ class _Sweep:
         self.sig_s = cal._levels[3] / self.counts             # σ_d = |b|·d·σ_S/S
         self.inv_h, self.la_t, self.b_t = cal._fine
         self.opts = opts
-        self.max_range = max_range
         self.cap = cal.max_incidence_rad
         self.reject = self.cap + opts.incidence_margin_rad
-        self.tol = tolerance_rad
 
     def ab(self, theta: np.ndarray):
         """log a(θ), b(θ) from the fine table (θ in [0, π/2])."""
@@ -992,7 +988,7 @@ class _Grouping:
 
     # ---- membership
 
-    def members(self, usable, px, py, thr) -> None:
+    def members(self, px, py, thr) -> None:
         """Each reading keeps its own usable line only if it sits on it (within the split
         threshold; the last readings past a corner often do not)."""
         own = self.pieces.owner
@@ -1373,8 +1369,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     reason = _classify(counts, sweep, cal)
     live = reason == Reason.OK
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
-    sw = _Sweep(cal, counts, origin, heading, live, np.asarray(sweep.steps), lines, max_range,
-                tolerance_rad)
+    sw = _Sweep(cal, counts, origin, heading, live, np.asarray(sweep.steps), lines)
     k = sw.k
     theta = np.zeros(k)
     last_moving = np.full(k, -1)        # last iteration in which each reading's θ moved
@@ -1383,7 +1378,6 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     pieces: _Pieces | None = None
     held: _Held | None = None
     on_line = np.zeros(k, dtype=bool)
-    n_its = 0
     regroups = 0
     regroup_changed = True
     older = None          # the labels two groupings ago
@@ -1409,7 +1403,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                     px.take(uidx), py.take(uidx), thr.take(uidx), sw.sensor.take(uidx))
                 pieces = _segment(*parts, lines, sw.centre, pieces)
                 grouping = _Grouping(sw, pieces, uidx)
-                grouping.members(usable, px, py, thr)
+                grouping.members(px, py, thr)
                 grouping.settle_corners(px, py, sigma, thr)
                 regroups += 1
             else:  # the same members, refitted where they now are
@@ -1474,8 +1468,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
 
     # final points with the exact curve
     s = sw.counts
-    d = cal.distance(s, theta)
-    _, b = cal.ab(theta)
+    log_a, b = cal._log_ab(theta)
+    d = np.exp(log_a + b * sw.log_s)
     sigma = np.maximum(np.abs(b) * d * sw.sig_s, _SIGMA_FLOOR_M)
     px, py = sw.ox + d * sw.ux, sw.oy + d * sw.uy
     if iterate:  # fallback readings (no line): θ = 0, σ widened by θ's unknown
