@@ -43,6 +43,13 @@ DEFAULT_THETA_GRID_RAD = np.radians(np.arange(0.0, 86.0, 5.0))
 _ROUNDS = 3
 
 
+def wall_reading_m(wall_distance_m, beam_angle_rad, emitter_offset_m: float):
+    """Eq. 5 with the beam angle h off the wall normal: the distance a beam travels to a wall
+    ``wall_distance_m`` from its hinge axis, d = y / cos h − d_o·tan h (m; arrays broadcast)."""
+    h = np.asarray(beam_angle_rad, dtype=float)
+    return wall_distance_m / np.cos(h) - emitter_offset_m * np.tan(h)
+
+
 @dataclass(frozen=True)
 class Placement:
     """Where the wall goes: ``wall_distance_m`` perpendicular from the sensor's hinge axis,
@@ -96,9 +103,8 @@ class RigReadings:
                      for f in dataclasses.fields(cls)))
 
     def true_distance(self, emitter_offset_m: float) -> np.ndarray:
-        """Eq. 5 with the beam angle h off the wall normal: d = y / cos h − d_o·tan h."""
-        h = self.beam_angle_rad
-        return self.wall_distance_m / np.cos(h) - emitter_offset_m * np.tan(h)
+        """The distance each reading's beam travels to the wall (:func:`wall_reading_m`)."""
+        return wall_reading_m(self.wall_distance_m, self.beam_angle_rad, emitter_offset_m)
 
 
 def collect(sweeps: Sequence[Sweep], placement: Placement, sensor: int = 0) -> RigReadings:
@@ -157,13 +163,13 @@ def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = 12, vref_
     r = readings
     spread = r.spread_counts[np.isfinite(r.spread_counts) & (r.repeats > 1)]
     noise = float(np.sqrt(np.mean(spread ** 2))) if spread.size else 0.0
-    full = 2.0 ** adc_bits - 1.0
-    base = np.isfinite(r.counts) & (r.counts > 0.5) & (r.counts < full - 0.5) & \
-        (np.abs(r.beam_angle_rad) < math.radians(89.0))
-    d_o = float(emitter_offset_guess_m)
     # the datasheet curve says what "nothing there" reads until our own curve can say it
     cal = dataclasses.replace(Calibration.nominal(sensor_model, None, adc_bits, vref_v),
                               noise_counts=noise)
+    full = cal.full_scale_counts
+    base = np.isfinite(r.counts) & (r.counts > 0.5) & (r.counts < full - 0.5) & \
+        (np.abs(r.beam_angle_rad) < math.radians(89.0))
+    d_o = float(emitter_offset_guess_m)
     steepest = None
     for _ in range(_ROUNDS):
         d_true = r.true_distance(d_o)
@@ -311,7 +317,7 @@ class GuidedCalibration:
         angles = np.asarray(sweep.sensor_angles, dtype=float)[:, self.sensor]
         i = int(np.argmin(np.abs(angles)))
         h = placement.yaw_rad + angles[i]
-        d = placement.wall_distance_m / math.cos(h) - self.emitter_offset_guess_m * math.tan(h)
+        d = wall_reading_m(placement.wall_distance_m, h, self.emitter_offset_guess_m)
         got = float(np.asarray(sweep.counts, dtype=float)[i, self.sensor])
         return float(self._nominal.counts(d, h)), got
 
