@@ -31,9 +31,9 @@ import types
 from dataclasses import dataclass
 from typing import Mapping
 
+from .data import GP2_PERIOD_S
 from .scenario import IncidenceEffect, NoiseEffect, Ring, Robot, Scenario, ScenarioError, Sensor
 
-GP2_PERIOD_S = 0.0383  # GP2 measurement period (datasheet 38.3 ms ± 9.6 ms); == data.GP2_PERIOD_S
 
 # --------------------------------------------------------------------------- sensors
 

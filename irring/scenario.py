@@ -50,6 +50,10 @@ def choice(default: Any, choices: tuple, doc: str = "") -> Any:
 
 SENSOR_MODELS = ("gp2d12", "gp2y0a02", "gp2y0a21", "sonar", "laser")
 
+# GP2 measurement period (datasheet: 38.3 ms ± 9.6 ms); one sample costs one period.
+# Its home is here, below data (which re-exports it), so the timing default can use it.
+GP2_PERIOD_S = 0.0383
+
 
 @dataclass(frozen=True)
 class Cylinder:
@@ -205,7 +209,7 @@ class BeltDynamicsEffect:
 
 @dataclass(frozen=True)
 class TimingEffect:
-    period_s: float = num(0.0383, lo=0.001, hi=1.0)
+    period_s: float = num(GP2_PERIOD_S, lo=0.001, hi=1.0)
     jitter_s: float = num(0.0096, lo=0.0, hi=1.0)
     latency_s: float = num(0.005, lo=0.0, hi=1.0)
 
