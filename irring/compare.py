@@ -167,7 +167,7 @@ def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int 
 # --------------------------------------------------------------------------- scenes
 
 
-def _estimator_calibration(sweep, scenario):
+def estimator_calibration(sweep, scenario):
     """The nominal calibration for the sweep's sensor, told the scene's noise level."""
     from .estimate import Calibration
 
@@ -205,7 +205,7 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
     seed = sc.seed if seed is None else seed
     sim_s: dict[str, float] = {}
     sweeps, _ = pipeline.simulate(sc, seed=seed, progress=False, timings=sim_s)
-    result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=_estimator_calibration(
+    result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=estimator_calibration(
         sweeps[0], sc), score=False, progress=False)
     scores = metrics.score(result.grid, sc, metrics.ground_truth(reference, result.grid))
     poses = len(sweeps)
@@ -223,7 +223,8 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
     }
 
 
-def _mean(values) -> float | None:
+def mean_of(values) -> float | None:
+    """Mean of the values that are not None (None when there are none)."""
     vals = [v for v in values if v is not None]
     return float(np.mean(vals)) if vals else None
 
@@ -241,12 +242,12 @@ def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) 
                "scenarios": sorted({r["scenario"] for r in mine}),
                "runs": len(mine)}
         for k in SCORE_KEYS:
-            rec[k] = _mean(r[k] for r in mine)
+            rec[k] = mean_of(r[k] for r in mine)
             if k != "shadow":
                 continue
             vals = [r[k] for r in mine if r[k] is not None]
             rec["shadow_min"] = float(min(vals)) if vals else None
-        rec["by_scenario"] = {sc: {k: _mean(r[k] for r in mine if r["scenario"] == sc)
+        rec["by_scenario"] = {sc: {k: mean_of(r[k] for r in mine if r["scenario"] == sc)
                                    for k in SCORE_KEYS} for sc in rec["scenarios"]}
         rec["poses"] = {sc: next(r["poses"] for r in mine if r["scenario"] == sc)
                         for sc in rec["scenarios"]}
@@ -403,18 +404,25 @@ def chart(result: dict, path) -> None:
     plt.close(fig)
 
 
-def write_outputs(result: dict, out_dir) -> dict[str, str]:
-    """compare.json, compare.csv (one row per design), runs.csv, compare.png in ``out_dir``."""
+def write_study(out_dir, name: str, result: dict, rows: list[dict], keys, draw) -> dict[str, str]:
+    """A study's files in ``out_dir``: <name>.json (all of ``result``), <name>.csv (``rows``
+    with columns ``keys``), runs.csv (``result["runs"]``, if any) and <name>.png
+    (``draw(result, path)``)."""
     import json
     from pathlib import Path
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"json": out / "compare.json", "csv": out / "compare.csv",
-             "runs_csv": out / "runs.csv", "chart": out / "compare.png"}
+    paths = {"json": out / f"{name}.json", "csv": out / f"{name}.csv",
+             "runs_csv": out / "runs.csv", "chart": out / f"{name}.png"}
     paths["json"].write_text(json.dumps(result, indent=2))
-    write_csv(paths["csv"], result["designs"], CSV_KEYS)
+    write_csv(paths["csv"], rows, keys)
     if result["runs"]:
         write_csv(paths["runs_csv"], result["runs"], list(result["runs"][0]))
-    chart(result, paths["chart"])
+    draw(result, paths["chart"])
     return {k: str(v) for k, v in paths.items()}
+
+
+def write_outputs(result: dict, out_dir) -> dict[str, str]:
+    """compare.json, compare.csv (one row per design), runs.csv, compare.png in ``out_dir``."""
+    return write_study(out_dir, "compare", result, result["designs"], CSV_KEYS, chart)

@@ -82,6 +82,8 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from ..compare import estimator_calibration, mean_of, write_study
+
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room")
 STEEP_RAD = math.radians(40.0)
 DEFAULT_TOLERANCE_RAD = math.radians(0.1)   # estimate()'s default
@@ -215,16 +217,6 @@ def _ground_truth(key: tuple, scenario, grid):
     return truth
 
 
-def _calibration(sweep, scenario):
-    """The nominal curve told the scene's output noise (as ``irring compare`` does)."""
-    from ..estimate import Calibration
-
-    kw = {}
-    if "noise" in scenario.effects:
-        kw["noise_sigma_v"] = max(scenario.effects["noise"].sigma_v, 1e-4)
-    return Calibration.for_sweep(sweep, **kw)
-
-
 def _rmse(err: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(err * err))) if err.size else None
 
@@ -234,7 +226,7 @@ def _compute_time(sweeps, scenario, estimator, grid) -> tuple[float, float]:
     ``TIMING_REPEATS`` runs on fresh grids. CPU time of this thread, not wall time: while
     workers share the cores with each other and with whatever else runs, a job's wall time
     grows with the load, its CPU time hardly at all."""
-    cal = _calibration(sweeps[0], scenario)
+    cal = estimator_calibration(sweeps[0], scenario)
     est, mapper = [], []
     for _ in range(TIMING_REPEATS):
         t_est = t_map = 0.0
@@ -272,7 +264,7 @@ def run_job(job: Job) -> dict:
                                   lines=lines)
     grid = OccupancyGrid.for_scenario(sc)
     result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid,
-                                 calibration=_calibration(sweeps[0], sc), score=False,
+                                 calibration=estimator_calibration(sweeps[0], sc), score=False,
                                  progress=False, estimator=estimator)
     # every configuration is judged on the default design's ground truth, on its own cells
     reference = apply(base, Config(resolution_m=sc.map.resolution_m))
@@ -343,11 +335,6 @@ def jobs_for(scenarios: Sequence, configs: Sequence[Config], seeds: int) -> list
     return out
 
 
-def _mean(values) -> float | None:
-    vals = [v for v in values if v is not None]
-    return float(np.mean(vals)) if vals else None
-
-
 def summarise(runs: list[dict], by: Sequence[str] = ("knob", "label")) -> list[dict]:
     """One row per configuration (and whatever else ``by`` names): accuracy averaged over the
     runs (a None score left out), hardware time averaged, compute times the median."""
@@ -362,7 +349,7 @@ def summarise(runs: list[dict], by: Sequence[str] = ("knob", "label")) -> list[d
         row["runs"] = len(mine)
         row["dynamics"] = bool(mine[0].get("dynamics", False))
         for k in ACCURACY_KEYS + ("iterations_mean", "angle_error_rms_rad"):
-            row[k] = _mean(r.get(k) for r in mine)
+            row[k] = mean_of(r.get(k) for r in mine)
         row["hardware_time_s"] = float(np.mean([r["hardware_time_s"] for r in mine]))
         for k in TIME_KEYS:
             row[k] = float(np.median([r[k] for r in mine]))
@@ -635,18 +622,4 @@ def _short(r: dict) -> str:
 def write_outputs(result: dict, out_dir) -> dict[str, str]:
     """accuracy.json (everything), accuracy.csv (one row per configuration), runs.csv,
     accuracy.png (the chart) in ``out_dir``."""
-    import json
-    from pathlib import Path
-
-    from ..compare import write_csv
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {"json": out / "accuracy.json", "csv": out / "accuracy.csv",
-             "runs_csv": out / "runs.csv", "chart": out / "accuracy.png"}
-    paths["json"].write_text(json.dumps(result, indent=2))
-    write_csv(paths["csv"], result["configs"], CSV_KEYS)
-    if result["runs"]:
-        write_csv(paths["runs_csv"], result["runs"], list(result["runs"][0]))
-    chart(result, paths["chart"])
-    return {k: str(v) for k, v in paths.items()}
+    return write_study(out_dir, "accuracy", result, result["configs"], CSV_KEYS, chart)
