@@ -614,9 +614,8 @@ class Dynamics:
         return self._physics
 
     def schedule(self, steps: np.ndarray) -> Schedule:
-        scan = self.scenario.scan
-        samples = scan.samples if self.scenario.has("averaging") else 1
-        return schedule(steps, self.scenario.ring, settle_s=scan.settle_s, samples=samples,
+        return schedule(steps, self.scenario.ring, settle_s=self.scenario.scan.settle_s,
+                        samples=self.scenario.samples_per_step,
                         step_time_s=self.step_time_s, timing=self.timing is not None)
 
     def n_sweeps(self, steps: np.ndarray) -> int:

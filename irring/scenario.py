@@ -262,6 +262,12 @@ class Scenario:
         return effect in self.effects
 
     @property
+    def samples_per_step(self) -> int:
+        """Readings taken (and GP2 periods spent) per step: ``scan.samples`` when the scene
+        averages, else 1."""
+        return self.scan.samples if self.has("averaging") else 1
+
+    @property
     def ring(self) -> Ring:
         """The ring design in force (the design's numbers with any `robot.ring` overrides)."""
         from . import designs  # designs owns the named presets

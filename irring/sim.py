@@ -276,14 +276,16 @@ class SimRing:
         motor = steps * self.ring.motor_step_rad
         angles = self.built.sensor_qpos_for(motor)
         pose = self.pose(pose_index) if pose is None else np.asarray(pose, dtype=float)
-        origin, direction = self.frames(angles, pose, motor)
+        return steps, angles, self._truth_at(*self.frames(angles, pose, motor))
+
+    def _truth_at(self, origin: np.ndarray, direction: np.ndarray) -> Truth:
+        """The :class:`Truth` of beams from emitter frames (S, N, 3) each."""
         # site z axes are unit already: skip cast()'s normalisation
         hits = self._cast_unit(origin.reshape(-1, 3), direction.reshape(-1, 3), self.max_range_m,
                                origin.shape[:-1])
-        truth = Truth(distance_m=hits.distance_m, incidence_rad=hits.incidence_rad,
-                      hit_point=hits.hit_point, origin=origin, direction=direction,
-                      geom_id=hits.geom_id, reflectance=hits.reflectance)
-        return steps, angles, truth
+        return Truth(distance_m=hits.distance_m, incidence_rad=hits.incidence_rad,
+                     hit_point=hits.hit_point, origin=origin, direction=direction,
+                     geom_id=hits.geom_id, reflectance=hits.reflectance)
 
     def sweep(self, pose_index: int = 0, *, steps: np.ndarray | None = None) -> Sweep:
         """One sweep at the scenario's pose ``pose_index``: counts, angles, truth.
@@ -303,22 +305,12 @@ class SimRing:
             return self._dynamic_sweep(pose_index, steps)
         pose = self.pose(pose_index)
         pose_index = pose_index % len(self.scenario.robot.poses)
-        steps, angles, truth = self.truth(pose_index, steps=steps)
-        k = self._sweeps.get(pose_index, 0)
-        self._sweeps[pose_index] = k + 1
-        rng = np.random.default_rng([self.seed, pose_index, k])
-        counts = self.pipeline.run(truth, rng, cast=self.cast)
-        scan = self.scenario.scan
-        samples = scan.samples if self.scenario.has("averaging") else 1
-        per_step = hardware_duration_s(1, scan.settle_s, samples)
-        sensor = self.scenario.sensor
-        return Sweep(steps=steps, sensor_angles=angles, counts=counts,
-                     timestamps_s=per_step * np.arange(1, len(steps) + 1),
-                     duration_s=hardware_duration_s(len(steps), scan.settle_s, samples),
-                     pose=pose, ring=self.ring, sensor_model=sensor.model,
-                     adc_bits=sensor.adc_bits, vref_v=sensor.vref_v,
-                     max_range_m=sensor.max_range_m, samples=samples, settle_s=scan.settle_s,
-                     truth=truth, source="sim")
+        steps, angles, truth = self.truth(pose_index, steps=steps, pose=pose)
+        per_step = hardware_duration_s(1, self.scenario.scan.settle_s,
+                                       self.scenario.samples_per_step)
+        return self._finish(pose_index, self._count(pose_index), steps, angles, truth,
+                            timestamps_s=per_step * np.arange(1, len(steps) + 1),
+                            duration_s=per_step * len(steps), pose=pose)
 
     def _dynamic_sweep(self, index: int, steps: np.ndarray | None) -> Sweep:
         """A sweep whose readings physics, the GP2 clocks or the drive placed."""
@@ -335,26 +327,34 @@ class SimRing:
         else:
             pose = self.pose(index)
             index %= len(self.scenario.robot.poses)
+        k = self._count(index)
+        plan = dyn.plan(index, steps, k, pose)
+        truth = self._truth_at(*self.frames(plan.sensor_rad, plan.pose))
+        return self._finish(index, k, steps, plan.commanded_rad, truth,
+                            timestamps_s=plan.schedule.done_s.copy(),
+                            duration_s=plan.schedule.duration_s, pose=plan.sweep_pose,
+                            reading_poses=plan.reading_poses)
+
+    def _count(self, index: int) -> int:
+        """How many sweeps ``index`` had before this one (counting this one)."""
         k = self._sweeps.get(index, 0)
         self._sweeps[index] = k + 1
-        plan = dyn.plan(index, steps, k, pose)
-        sched = plan.schedule
-        origin, direction = self.frames(plan.sensor_rad, plan.pose)
-        hits = self._cast_unit(origin.reshape(-1, 3), direction.reshape(-1, 3), self.max_range_m,
-                               origin.shape[:-1])
-        truth = Truth(distance_m=hits.distance_m, incidence_rad=hits.incidence_rad,
-                      hit_point=hits.hit_point, origin=origin, direction=direction,
-                      geom_id=hits.geom_id, reflectance=hits.reflectance)
+        return k
+
+    def _finish(self, index: int, k: int, steps: np.ndarray, angles: np.ndarray, truth: Truth,
+                *, timestamps_s: np.ndarray, duration_s: float, pose: np.ndarray,
+                reading_poses: np.ndarray | None = None) -> Sweep:
+        """The k-th sweep at ``index``: counts from the scene's effects, drawing noise from
+        ``default_rng([seed, index, k])``, and the :class:`Sweep` around them."""
         rng = np.random.default_rng([self.seed, index, k])
         counts = self.pipeline.run(truth, rng, cast=self.cast)
         scan, sensor = self.scenario.scan, self.scenario.sensor
-        samples = scan.samples if self.scenario.has("averaging") else 1
-        return Sweep(steps=steps, sensor_angles=plan.commanded_rad, counts=counts,
-                     timestamps_s=sched.done_s.copy(), duration_s=sched.duration_s,
-                     pose=plan.sweep_pose, ring=self.ring, sensor_model=sensor.model,
-                     adc_bits=sensor.adc_bits, vref_v=sensor.vref_v,
-                     max_range_m=sensor.max_range_m, samples=samples, settle_s=scan.settle_s,
-                     truth=truth, reading_poses=plan.reading_poses, source="sim")
+        return Sweep(steps=steps, sensor_angles=angles, counts=counts, timestamps_s=timestamps_s,
+                     duration_s=float(duration_s), pose=pose, ring=self.ring,
+                     sensor_model=sensor.model, adc_bits=sensor.adc_bits, vref_v=sensor.vref_v,
+                     max_range_m=sensor.max_range_m, samples=self.scenario.samples_per_step,
+                     settle_s=scan.settle_s, truth=truth, reading_poses=reading_poses,
+                     source="sim")
 
 
 # ---------------------------------------------------------------------- measurement
