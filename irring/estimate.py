@@ -60,6 +60,7 @@ Units: metres, radians, ADC counts.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -1352,7 +1353,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
     Table II (to show what the control is for).
     """
-    cal = calibration if calibration is not None else Calibration.for_sweep(sweep)
+    cal = calibration if calibration is not None else _nominal_for(
+        sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
     counts = np.asarray(sweep.counts, dtype=float)
@@ -1507,6 +1509,15 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         index = sw.index if grouping.uidx is None else sw.index.take(grouping.uidx)
         found = _lines_record(pieces_out, label, index)
     return Estimate(points=points, lines=found, theta_history=tuple(history))
+
+
+@functools.lru_cache(maxsize=16)
+def _nominal_for(sensor_model: str, ring: Ring | None, adc_bits: int, vref_v: float
+                 ) -> Calibration:
+    """:meth:`Calibration.for_sweep`'s calibration, built once per sensor/ring/ADC: building
+    one (its fine θ table) takes longer than estimating a sweep, and ``irring run`` without
+    a calibration file estimates every sweep with the default."""
+    return Calibration.nominal(sensor_model, ring, adc_bits, vref_v)
 
 
 def _fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.ndarray:
