@@ -174,7 +174,7 @@ class Trajectory:
 
     ``sensor_rad`` / ``sensor_vel`` (T, N) hinge angles and rates; ``motor_rad`` /
     ``motor_vel`` (T,); ``gear`` (N,) belt ratios (sensor = gear × motor when the belt is
-    unstretched). ``warnings``: MuJoCo's warning counters summed over the run.
+    unstretched). A run that warned never becomes one (:meth:`BeltPhysics.roll` raises).
     """
 
     dt_s: float
@@ -183,8 +183,6 @@ class Trajectory:
     sensor_rad: np.ndarray
     sensor_vel: np.ndarray
     gear: np.ndarray
-    offset: np.ndarray
-    warnings: int = 0
 
     @property
     def t_s(self) -> np.ndarray:
@@ -192,8 +190,8 @@ class Trajectory:
 
     @property
     def stretch_rad(self) -> np.ndarray:
-        """(T, N) belt coupling error: sensor − (offset + gear × motor), rad at the sensor."""
-        return self.sensor_rad - (self.offset + self.gear * self.motor_rad[:, None])
+        """(T, N) belt coupling error: sensor − gear × motor, rad at the sensor."""
+        return self.sensor_rad - self.gear * self.motor_rad[:, None]
 
     def sensors_at(self, t_s: np.ndarray) -> np.ndarray:
         """Sensor angles (S, N) at times (S, N) (column k = sensor k); cubic Hermite between
@@ -293,7 +291,6 @@ class BeltPhysics:
                    for k in range(ring.sensors)]
         # belt_KK = hinge − gear·motor: the gear from the tendon's motor coefficient
         self.gear = np.array([-m.wrap_prm[m.tendon_adr[t] + 1] for t in tendons])
-        self.offset = np.zeros(ring.sensors)
         self.nthread = nthread
         self._batches: dict[int, mujoco.batch.Batch] = {}
 
@@ -357,8 +354,7 @@ class BeltPhysics:
         return Trajectory(dt_s=self.dt_s, motor_rad=qpos[:, self.motor_qpos],
                           motor_vel=qvel[:, self.motor_dof],
                           sensor_rad=qpos[:, self.sensor_qpos],
-                          sensor_vel=qvel[:, self.sensor_dof], gear=self.gear,
-                          offset=self.offset)
+                          sensor_vel=qvel[:, self.sensor_dof], gear=self.gear)
 
     def endurance(self, steps: np.ndarray, n_sweeps: int, *, chunk: int = 50) -> dict:
         """Sweep back and forth ``n_sweeps`` times in one continuous run, never resting: each
