@@ -676,10 +676,8 @@ class OccupancyGrid:
         runs = diff.astype(np.int32 if small else np.int64)
         np.cumsum(runs, out=runs)
         counts = runs[:size].reshape(bh, bw) + runs[size:2 * size].reshape(bw, bh).T
-        if same:
-            change = counts * p.l_free
-        else:   # counts = valid + 2^20·no-return visits
-            change = counts * p.l_free
+        change = counts * p.l_free
+        if not same:   # counts = valid + 2^20·no-return visits
             change += (counts >> _NR_BITS) * (p.l_no_return - _NR_UNIT * p.l_free)
 
         offset = float(bw * (1 - by0) + 1 - bx0)
@@ -763,12 +761,6 @@ class OccupancyGrid:
         out[prob > OCCUPIED_THRESH] = OCCUPIED
         out[prob < FREE_THRESH] = FREE
         return out
-
-    def occupied(self) -> np.ndarray:
-        return self.classify() == OCCUPIED
-
-    def free(self) -> np.ndarray:
-        return self.classify() == FREE
 
     # ---- ROS map_server export
 

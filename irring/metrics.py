@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mapping import OccupancyGrid, traverse
+from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
 from .scenario import Box, Cylinder, Scenario
 
 EXTERIOR = -1   # beyond the walls
@@ -255,8 +255,8 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
         raise ValueError(f"ground truth is {truth.label.shape} cells but the grid is {grid.shape}; "
                          "build it with ground_truth(scenario, grid) for this grid")
     cls = grid.classify()
-    occ = cls == 1
-    free = cls == 0
+    occ = cls == OCCUPIED
+    free = cls == FREE
     occ_near = _dilate(occ)
     precision = _share(_dilate(truth.occupied), occ)
     recall = _share(occ_near, truth.visible)
@@ -276,7 +276,7 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
 
 def shadow_by_obstacle(grid: OccupancyGrid, truth: GroundTruth) -> dict[int, tuple[int, float]]:
     """Obstacle index → (shadow cells behind it, share of them the map marks occupied)."""
-    occ_near = _dilate(grid.classify() == 1)
+    occ_near = _dilate(grid.classify() == OCCUPIED)
     out = {}
     for owner in np.unique(truth.shadow_owner[truth.shadow]):
         cells = truth.shadow_owner == owner

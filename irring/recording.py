@@ -63,8 +63,6 @@ def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> P
                 scalars["has_truth"] = value is not None
             elif f.name == "ring":
                 scalars["ring"] = dataclasses.asdict(value)
-            elif value is None:
-                scalars[f.name] = None
             else:
                 scalars[f.name] = value
         # floats go through repr, which round-trips exactly
@@ -90,7 +88,9 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
         if fmt != FORMAT:
             raise RecordingError(f"{path}: recording format {fmt!r}; this irring reads {FORMAT!r}")
         meta = json.loads(str(npz["meta"]))
-        keys = sorted({name.split("/", 1)[0] for name in npz.files if name.startswith("sweep")})
+        # by number: from sweep1000 on, names no longer sort as text (sweep1000 < sweep101)
+        keys = sorted({name.split("/", 1)[0] for name in npz.files if name.startswith("sweep")},
+                      key=lambda k: int(k[len("sweep"):]))
         sweeps = [_load_sweep(npz, key, path) for key in keys]
     return sweeps, meta
 
