@@ -86,7 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..bench import accuracy
     from ..bench.executor import executor
-    from ..pipeline import progress_enabled
+    from ..pipeline import progress_bar
 
     if args.seeds < 1:
         raise SystemExit("irring bench accuracy: error: --seeds must be ≥ 1")
@@ -94,11 +94,8 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit("irring bench accuracy: error: --workers must be ≥ 1")
     scenarios = args.scenario or list(accuracy.DEFAULT_SCENARIOS)
     configs = accuracy.configurations(args.knob)
-    from tqdm import tqdm
-
     total = len(configs) * len(scenarios) * args.seeds
-    with tqdm(total=total, desc="bench accuracy", unit="run", leave=False,
-              disable=not progress_enabled()) as bar, \
+    with progress_bar(total, "bench accuracy", unit="run") as bar, \
             executor(args.workers, args.dask) as ex:
         result = accuracy.measure(scenarios, seeds=args.seeds, configs=configs, ex=ex,
                                   progress=lambda _: bar.update())
