@@ -164,6 +164,11 @@ class _Pass:
         d = 1 if hi >= lo else -1
         return list(range(lo, hi + d, d))
 
+    @property
+    def index(self) -> dict[int, int]:
+        """step → its place in the pass."""
+        return {s: i for i, s in enumerate(self.expected)}
+
 
 class SerialRing:
     """A ring speaking the IRR protocol over a pyserial port.
@@ -490,7 +495,7 @@ class SerialRing:
         here still leaves what arrived); losses are counted, not raised."""
         info = self._require_info()
         lo, hi = ps.run
-        pos_of = {s: i for i, s in enumerate(ps.expected)}
+        pos_of = ps.index
         # The device numbers IRSCN globally. `hint` (last IRDON + 1) only unmasks stale
         # IRSCN; `base` (the seq of this pass's first step) comes from the first IRSCN.
         hint = None if self._last_seq is None else (self._last_seq + 1) % p.SEQ_MODULO
@@ -627,7 +632,7 @@ class SerialRing:
         brackets). With fewer than two readings, the nominal hardware time."""
         if len(ps.got) < 2:
             return data.hardware_duration_s(len(ps.expected), settle_ms / 1000, samples)
-        pos = {s: i for i, s in enumerate(ps.expected)}
+        pos = ps.index
         first = min(ps.got.values(), key=lambda sc: pos[sc.step])
         last = max(ps.got.values(), key=lambda sc: pos[sc.step])
         span_s = ((last.t_ms - first.t_ms) % p.CLOCK_MODULO) / 1000.0
