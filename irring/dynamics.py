@@ -589,6 +589,7 @@ class Dynamics:
         self.motion: MotionEffect | None = scenario.effects.get("motion")
         self.step_time_s = (self.belt or BeltDynamicsEffect()).step_time_s
         self._physics: BeltPhysics | None = None
+        self._timelines: dict[bytes, tuple[Schedule, Trajectory | None]] = {}
         self.periods_s = (SensorClocks.periods(self.timing, built.n_sensors, self.seed)
                           if self.timing else None)
         self.path = self.odometry = None
@@ -614,6 +615,22 @@ class Dynamics:
                         samples=self.scenario.samples_per_step,
                         step_time_s=self.step_time_s, timing=self.timing is not None)
 
+    def timeline(self, steps: np.ndarray) -> tuple[Schedule, Trajectory | None]:
+        """The schedule of a sweep over ``steps`` and, with ``belt_dynamics``, its physics.
+
+        Every sweep over the same steps starts at rest at its first step, so both are the
+        same each time: they are computed once (the physics is nearly all of a belt sweep's
+        cost) and shared, read-only, by every plan over these steps.
+        """
+        steps = np.asarray(steps, dtype=np.int64)
+        key = steps.tobytes()
+        cached = self._timelines.get(key)
+        if cached is None:
+            sched = self.schedule(steps)
+            cached = (sched, self.physics.run(sched) if self.belt is not None else None)
+            self._timelines[key] = cached
+        return cached
+
     def n_sweeps(self, steps: np.ndarray) -> int:
         """Sweeps the scene takes: one per scan pose, or with motion, back to back until the
         robot reaches the end of its path (at least one)."""
@@ -628,14 +645,9 @@ class Dynamics:
         """Where and when sweep ``index`` (a scan pose, or with motion the index-th sweep of
         the drive) read; ``count`` is how many sweeps this index had before (fresh clock
         phases per static sweep); ``pose`` the standing robot's pose (static scenes)."""
-        sched = self.schedule(steps)
+        sched, traj = self.timeline(steps)
         commanded = self.built.sensor_qpos_for(sched.motor_rad)
-        traj = None
-        if self.belt is not None:
-            traj = self.physics.run(sched)
-            ring_motion = traj
-        else:
-            ring_motion = RigidRing(sched, self.built)
+        ring_motion = traj if traj is not None else RigidRing(sched, self.built)
         n = self.built.n_sensors
         first_read = np.broadcast_to(sched.read_s[:, :1], (len(sched.steps), n))
         start = 0.0

@@ -105,6 +105,26 @@ def test_moves_follow_a_minimum_jerk_profile():
     assert sched.motor_at(sched.read_s[1, 0]) == pytest.approx(step)
 
 
+def test_belt_physics_runs_once_per_step_list_and_changes_no_reading(monkeypatch):
+    """Every sweep over the same steps starts at rest, so its physics is run once and reused;
+    the sweeps read exactly what a fresh physics run gives."""
+    sc = timed(0.0, {"belt_dynamics": {"backlash_deg": 1.0}, "timing": {}})
+    steps = np.arange(-3, 4)
+    runs = []
+    run = D.BeltPhysics.run
+    monkeypatch.setattr(D.BeltPhysics, "run", lambda self, *a, **k: runs.append(1) or run(
+        self, *a, **k))
+    cached, fresh = SimRing(sc), SimRing(sc)
+    for pose in (0, 1, 0):
+        a = cached.sweep(pose, steps=steps)
+        fresh.dynamics._timelines.clear()
+        b = fresh.sweep(pose, steps=steps)
+        assert np.array_equal(a.counts, b.counts, equal_nan=True)
+        assert np.array_equal(a.truth.direction, b.truth.direction)
+    cached.sweep(0)  # other steps: their own physics
+    assert len(runs) == 1 + 3 + 1
+
+
 # --------------------------------------------------------------------------- belt physics
 
 
