@@ -54,7 +54,6 @@ class SensorSpec:
     kind: str
     max_range_m: float
     design_range_m: float
-    min_range_m: float
     noise_sigma_m: float | None = None
     beam_half_angle_rad: float = 0.0
     reading_period_s: float = GP2_PERIOD_S
@@ -68,24 +67,31 @@ class SensorSpec:
     def is_ir(self) -> bool:
         return self.kind.startswith("gp2")
 
+    @property
+    def min_range_m(self) -> float:
+        """Readings nearer than this are not trusted: the sensor curve's own (``gp2``)."""
+        from . import gp2  # the curve's owner
+
+        return gp2.sensor(self.kind).min_range_m
+
 
 SENSORS: dict[str, SensorSpec] = {
-    "gp2d12": SensorSpec("gp2d12", max_range_m=0.624, design_range_m=0.686, min_range_m=0.10,
+    "gp2d12": SensorSpec("gp2d12", max_range_m=0.624, design_range_m=0.686,
                          description="Sharp GP2D12, 10–80 cm; paper's limit 624 mm, "
                                      "Table I's D 686 mm"),
-    "gp2y0a21": SensorSpec("gp2y0a21", max_range_m=0.80, design_range_m=0.80, min_range_m=0.10,
+    "gp2y0a21": SensorSpec("gp2y0a21", max_range_m=0.80, design_range_m=0.80,
                            description="Sharp GP2Y0A21YK, 10–80 cm"),
-    "gp2y0a02": SensorSpec("gp2y0a02", max_range_m=1.50, design_range_m=1.50, min_range_m=0.20,
+    "gp2y0a02": SensorSpec("gp2y0a02", max_range_m=1.50, design_range_m=1.50,
                            description="Sharp GP2Y0A02YK0F, 20–150 cm"),
     # SICK LMS200-like: 8 m (mm mode), σ ≈ 5 mm; its mirror turns at 75 Hz and 0.5° steps are
     # interlaced over two turns, so a 720-reading 360° view takes 2/75 s = 26.7 ms.
-    "laser": SensorSpec("laser", max_range_m=8.0, design_range_m=8.0, min_range_m=0.05,
+    "laser": SensorSpec("laser", max_range_m=8.0, design_range_m=8.0,
                         noise_sigma_m=0.005, reading_period_s=(2.0 / 75.0) / 720,
                         adc_bits=16, settles=False, description="SICK LMS200-like scanner, 8 m, σ 5 mm"),
     # MaxBotix LV-MaxSonar-EZ class (the `sonar` curve in models/sensors): 0.15–6.45 m, one
     # reading per 49 ms (20 Hz); a ring chains its transducers one after another so they do
     # not hear each other. The ±15° cone is our assumption (12 of them close a 360° ring).
-    "sonar": SensorSpec("sonar", max_range_m=6.45, design_range_m=6.45, min_range_m=0.1524,
+    "sonar": SensorSpec("sonar", max_range_m=6.45, design_range_m=6.45,
                         noise_sigma_m=0.01, beam_half_angle_rad=math.radians(15.0),
                         reading_period_s=0.049, sequential=True, adc_bits=16,
                         description="MaxBotix LV-EZ-class ultrasonic ranger, ±15° cone, 6.45 m"),

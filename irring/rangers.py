@@ -10,7 +10,7 @@ sensor model's grazing limit (``gp2.sensor('sonar').max_incidence_rad``, 20°), 
 pipeline's physical order (it *is* the sonar's beam), so it runs first.
 
 :func:`pipeline_for` is the scene's pipeline with this stage added when the scene's sensor
-is a sonar; ``irring.compare`` uses it. A laser needs nothing extra: its thin beam is the
+is a sonar; it is ``SimRing``'s default pipeline. A laser needs nothing extra: its thin beam is the
 default single ray and its linear curve is ``gp2.sensor('laser')``.
 """
 
