@@ -98,7 +98,6 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .. import pipeline
-    from ..designs import PAPER_RING
     from ..hardware import DeviceError, LinkLost, SerialRing
     from ..scenario import load_scenario
 
@@ -108,14 +107,15 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         return _error(f"calibration {args.calibration}: {exc}")
 
-    # what the device does not report: from the calibration, the truth scenario, the paper
-    template = truth.ring if truth else PAPER_RING
-    sensor = truth.sensor if truth else None
-    sensor_model = (calibration.sensor_model if calibration else
-                    sensor.model if sensor else "gp2d12")
-    vref_v = calibration.vref_v if calibration else sensor.vref_v if sensor else 5.0
-    max_range_m = sensor.max_range_m if sensor else 0.624  # the paper's experiments
-    emitter_offset_m = calibration.emitter_offset_m if calibration else None
+    # what the device does not report: the calibration's numbers over the truth scenario's
+    # over SerialRing's defaults (the paper's ring and GP2D12)
+    known: dict = {}
+    if truth:
+        known.update(template=truth.ring, sensor_model=truth.sensor.model,
+                     vref_v=truth.sensor.vref_v, max_range_m=truth.sensor.max_range_m)
+    if calibration:
+        known.update(sensor_model=calibration.sensor_model, vref_v=calibration.vref_v,
+                     emitter_offset_m=calibration.emitter_offset_m)
 
     poses = [tuple(p) for p in args.pose] if args.pose else (
         [(p.x_m, p.y_m, p.yaw_rad) for p in truth.robot.poses] if truth else [(0.0, 0.0, 0.0)])
@@ -133,9 +133,7 @@ def run(args: argparse.Namespace) -> int:
     settle_s = (args.settle_ms / 1000.0 if args.settle_ms is not None else
                 truth.scan.settle_s if truth else 0.0)
 
-    ring = SerialRing(args.port, baudrate=args.baud, timeout_s=args.timeout, template=template,
-                      emitter_offset_m=emitter_offset_m, sensor_model=sensor_model,
-                      vref_v=vref_v, max_range_m=max_range_m)
+    ring = SerialRing(args.port, baudrate=args.baud, timeout_s=args.timeout, **known)
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
     try:
         ring.open()
