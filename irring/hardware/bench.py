@@ -18,6 +18,7 @@ import json
 import statistics
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..scenario import load_scenario
@@ -25,19 +26,26 @@ from . import SerialRing
 from .emulator import Device, Faults, PtyEmulator, SimSource
 
 
-def _sweep_times(scenario, *, baud: int, realtime: bool, repeats: int) -> dict:
+@contextmanager
+def _driver_on_pty(device: Device, *, timeout_s: float, baud: int = 0):
+    """SerialRing (opened) on ``device`` served on a pty in a thread; both closed after."""
     with tempfile.TemporaryDirectory() as tmp:
         link = Path(tmp) / "tty"
-        device = Device(SimSource(scenario), realtime=realtime)
-        with PtyEmulator(device, link=link, baud=baud).start_thread():
-            with SerialRing(str(link), timeout_s=2.0) as ring:
-                walls, durations = [], []
-                for _ in range(repeats):
-                    t0 = time.perf_counter()
-                    sweep = ring.sweep()
-                    walls.append(time.perf_counter() - t0)
-                    durations.append(sweep.duration_s)
-        sent = device.stats.bytes_sent
+        with PtyEmulator(device, link=link, baud=baud).start_thread(), \
+                SerialRing(str(link), timeout_s=timeout_s) as ring:
+            yield ring
+
+
+def _sweep_times(scenario, *, baud: int, realtime: bool, repeats: int) -> dict:
+    device = Device(SimSource(scenario), realtime=realtime)
+    with _driver_on_pty(device, timeout_s=2.0, baud=baud) as ring:
+        walls, durations = [], []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            sweep = ring.sweep()
+            walls.append(time.perf_counter() - t0)
+            durations.append(sweep.duration_s)
+    sent = device.stats.bytes_sent
     return {"baud": baud or None, "realtime": realtime, "repeats": repeats,
             "wall_s_median": statistics.median(walls), "wall_s_min": min(walls),
             "device_duration_s": statistics.median(durations),
@@ -61,21 +69,16 @@ def _lossy(scenario, *, sweeps: int, resweep: int, seed: int) -> dict:
     faults = Faults(corrupt_rate=0.01, drop_rate=0.05, seed=seed)
     source = _Recorded(scenario)
     invented = 0
-    with tempfile.TemporaryDirectory() as tmp:
-        link = Path(tmp) / "tty"
-        device = Device(source, faults=faults)
-        with PtyEmulator(device, link=link).start_thread():
-            with SerialRing(str(link), timeout_s=0.2) as ring:
-                received, walls = [], []
-                for _ in range(sweeps):
-                    t0 = time.perf_counter()
-                    sweep = ring.sweep(resweep=resweep)
-                    walls.append(time.perf_counter() - t0)
-                    received.append(len(sweep.steps) / (len(sweep.steps)
-                                                        + len(sweep.missing_steps)))
-                    invented += sum((int(st), row.astype("int64").tobytes()) not in source.rows
-                                    for st, row in zip(sweep.steps, sweep.counts))
-                stats = ring.stats.as_dict()
+    with _driver_on_pty(Device(source, faults=faults), timeout_s=0.2) as ring:
+        received, walls = [], []
+        for _ in range(sweeps):
+            t0 = time.perf_counter()
+            sweep = ring.sweep(resweep=resweep)
+            walls.append(time.perf_counter() - t0)
+            received.append(len(sweep.steps) / (len(sweep.steps) + len(sweep.missing_steps)))
+            invented += sum((int(st), row.astype("int64").tobytes()) not in source.rows
+                            for st, row in zip(sweep.steps, sweep.counts))
+        stats = ring.stats.as_dict()
     return {"resweep": resweep, "sweeps": sweeps, "received_share_mean": statistics.mean(received),
             "received_share_min": min(received), "wall_s_median": statistics.median(walls),
             "invented_readings": invented, "link": stats}
