@@ -215,7 +215,6 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (Hello, SweepCommand, GoTo, Stop, Info, Scan, Done, Position,
                               ErrorReply)}
 HOST_TYPES = frozenset({"IRHLO", "IRSWP", "IRGTO", "IRSTP"})
-DEVICE_TYPES = frozenset({"IRINF", "IRSCN", "IRDON", "IRPOS", "IRERR"})
 
 
 # --------------------------------------------------------------------------- encode
@@ -440,11 +439,10 @@ def ring_from_info(info: Info, template: Ring, *, radius_m: float | None = None,
     not report them) unless given. Where IRINF agrees with the template to the protocol's
     resolution, the template's exact float is kept so equal designs compare equal."""
     step_rad = math.radians(info.step_mdeg / 1000.0)
-    if round(math.degrees(template.motor_step_rad) * 1000) == info.step_mdeg:
+    if _step_mdeg(template.motor_step_rad) == info.step_mdeg:
         step_rad = template.motor_step_rad
     gear = info.gear_num / info.gear_den
-    if Fraction(template.gear).limit_denominator(GEAR_MAX_DENOMINATOR) == \
-            Fraction(info.gear_num, info.gear_den):
+    if _gear_fraction(template.gear) == Fraction(info.gear_num, info.gear_den):
         gear = template.gear
     changes: dict = dict(sensors=info.nsensors, motor_step_rad=step_rad, gear=gear,
                          min_step=info.min_step, max_step=info.max_step)
@@ -458,7 +456,16 @@ def ring_from_info(info: Info, template: Ring, *, radius_m: float | None = None,
 def info_for_ring(ring: Ring, adc_bits: int, firmware: str) -> Info:
     """The IRINF a device with this ring sends (step rounded to 0.001°, belt ratio to a
     fraction with denominator ≤ 10 000)."""
-    gear = Fraction(ring.gear).limit_denominator(GEAR_MAX_DENOMINATOR)
-    return Info(PROTOCOL_VERSION, ring.sensors, adc_bits,
-                round(math.degrees(ring.motor_step_rad) * 1000), gear.numerator,
-                gear.denominator, ring.min_step, ring.max_step, firmware)
+    gear = _gear_fraction(ring.gear)
+    return Info(PROTOCOL_VERSION, ring.sensors, adc_bits, _step_mdeg(ring.motor_step_rad),
+                gear.numerator, gear.denominator, ring.min_step, ring.max_step, firmware)
+
+
+def _step_mdeg(step_rad: float) -> int:
+    """A motor step as IRINF carries it: whole millidegrees."""
+    return round(math.degrees(step_rad) * 1000)
+
+
+def _gear_fraction(gear: float) -> Fraction:
+    """A belt ratio as IRINF carries it: a fraction with denominator ≤ 10 000."""
+    return Fraction(gear).limit_denominator(GEAR_MAX_DENOMINATOR)
