@@ -308,8 +308,8 @@ class SerialRing:
         self.stats.ignored_bytes += self.decoder.ignored_bytes - before
         return out
 
-    def _lost(self, cls: type[LinkLost], what: str, partial: data.Sweep | None = None,
-              report: SweepReport | None = None) -> LinkLost:
+    def _lost(self, cls: type[LinkLost], what: str) -> LinkLost:
+        """The error for a lost link; sweep() attaches the partial sweep and report."""
         if cls is DeviceDisconnected:
             self.stats.disconnects += 1
             msg = (f"ring on {self.port_name} disconnected ({what}). Check the cable and power; "
@@ -317,7 +317,7 @@ class SerialRing:
         else:
             msg = (f"ring on {self.port_name} stopped answering ({what}). Check power, cable "
                    f"and baud rate ({self.baudrate}); reset the board if it hangs.")
-        return cls(msg, partial, report)
+        return cls(msg)
 
     # ---------------------------------------------------------------- handshake
 
