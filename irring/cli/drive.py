@@ -129,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         poses = poses * n  # an unmoved robot swept n times
     samples = args.samples
     if samples is None:
-        samples = truth.scan.samples if truth and truth.has("averaging") else 1
+        samples = truth.samples_per_step if truth else 1
     settle_s = (args.settle_ms / 1000.0 if args.settle_ms is not None else
                 truth.scan.settle_s if truth else 0.0)
 
