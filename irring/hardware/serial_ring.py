@@ -156,7 +156,6 @@ class _Pass:
     run: tuple[int, int]                 # (from, to) inclusive, either direction
     got: dict[int, p.Scan] = field(default_factory=dict)
     done: bool = False
-    done_seq: int | None = None
 
     @property
     def expected(self) -> list[int]:
@@ -563,7 +562,7 @@ class SerialRing:
                             self.stats.seq_gaps += 1
                             self.stats.lost_scans += ahead
                     self._last_seq = msg.seq if msg.seq >= 0 else self._last_seq
-                    ps.done, ps.done_seq = True, msg.seq
+                    ps.done = True
                     return
                 elif isinstance(msg, p.ErrorReply):
                     self.stats.device_errors += 1
