@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room_three_cylinders", "t_room")
 
@@ -91,5 +90,5 @@ def run(args: argparse.Namespace) -> int:
     print("r@d: smallest cylinder radius seen at every bearing at distance d (miss: none ≤ "
           "200 mm); times: one 360° view")
     for kind, path in paths.items():
-        print(f"  {kind:<9}{path}", file=sys.stdout)
+        print(f"  {kind:<9}{path}")
     return 0
