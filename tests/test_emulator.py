@@ -343,3 +343,17 @@ def test_irring_drive_without_a_device_is_a_clear_error(capsys):
 
     assert main(["drive", "--port", "/dev/irring-none", "--no-animation"]) == 2
     assert "cannot open /dev/irring-none" in capsys.readouterr().err
+
+
+def test_a_moving_scene_is_emulated_sweep_by_sweep_but_not_driven(capsys):
+    """The emulator replays a whole drive (11 sweeps for t_room_moving, not its 4 listed
+    poses); `drive --truth` refuses it, since IRR v1 carries no pose to map it with."""
+    from irring.cli import main
+
+    moving = load_scenario("t_room_moving")
+    source = SimSource(moving)
+    assert source.poses == SimRing(moving).n_sweeps > len(moving.robot.poses)
+    assert main(["drive", "--port", "loop://", "--truth", "t_room_moving"]) == 2
+    err = capsys.readouterr().err
+    assert "--truth t_room_moving: the scenario drives while scanning (`motion`)" in err
+    assert "irring run" in err

@@ -102,6 +102,10 @@ def run(args: argparse.Namespace) -> int:
     from ..scenario import load_scenario
 
     truth = load_scenario(args.truth) if args.truth else None
+    if truth is not None and truth.has("motion"):
+        return _error(f"--truth {args.truth}: the scenario drives while scanning (`motion`), but "
+                      "IRR v1 reports no robot pose, so a moving scan cannot be mapped from the "
+                      "link; map it with `irring run` instead")
     try:
         calibration, cal_text = pipeline.load_calibration(args.calibration)
     except (OSError, ValueError) as exc:

@@ -87,7 +87,7 @@ class SimSource:
         self.sim = SimRing(scenario, seed=self.seed)
         self.ring = scenario.ring
         self.adc_bits = scenario.sensor.adc_bits
-        self.poses = len(scenario.robot.poses)
+        self.poses = self.sim.n_sweeps  # a moving scene replays its whole drive, sweep by sweep
 
     def read(self, pose_index: int, steps: np.ndarray, samples: int,
              settle_s: float) -> np.ndarray:
