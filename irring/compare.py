@@ -178,7 +178,7 @@ def estimator_calibration(sweep, scenario):
 
 
 def run_scene(scenario, design: Design | str, seed: int | None = None, *,
-              reference=None) -> dict:
+              reference=None, truth_cache: dict | None = None) -> dict:
     """One scenario seen by one design: every pose swept, then estimated, mapped and scored
     exactly as ``irring run`` does (``pipeline.map_sweeps``).
 
@@ -195,7 +195,8 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
     Returns the six ``metrics.SCORE_KEYS`` plus ``hardware_time_s`` (one 360° view of the
     design, :meth:`Design.hardware_time_s`), ``hardware_time_total_s`` (all poses),
     ``compute_time_s`` (sweep + estimate + map per view, wall clock; building the MuJoCo
-    model once is ``setup_time_s``), ``readings`` and ``valid_readings``.
+    model once is ``setup_time_s``), ``readings`` and ``valid_readings``. ``truth_cache``
+    (a dict the caller keeps) reuses the reference's rasterised ground truth across calls.
     """
     from . import metrics, pipeline
 
@@ -207,7 +208,14 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
     sweeps, _ = pipeline.simulate(sc, seed=seed, progress=False, timings=sim_s)
     result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=estimator_calibration(
         sweeps[0], sc), score=False, progress=False)
-    scores = metrics.score(result.grid, sc, metrics.ground_truth(reference, result.grid))
+    grid = result.grid
+    key = (id(reference), grid.shape, tuple(grid.origin_xy_m), grid.resolution_m)
+    truth = None if truth_cache is None else truth_cache.get(key)
+    if truth is None:  # the same reference on the same grid for every design and seed
+        truth = metrics.ground_truth(reference, grid)
+        if truth_cache is not None:
+            truth_cache[key] = truth
+    scores = metrics.score(grid, sc, truth)
     poses = len(sweeps)
     scan = sc.scan
     view_s = d.hardware_time_s(step_stride=scan.step_stride, settle_s=scan.settle_s,
@@ -279,8 +287,9 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
     runs = []
     detections = {}
     with progress_bar(len(jobs) + len(ds), "compare", progress, unit="run") as bar:
+        truths: dict = {}  # keyed by id() of scenarios `scs` keeps alive
         for sc, d, seed in jobs:
-            runs.append(run_scene(sc, d, seed))
+            runs.append(run_scene(sc, d, seed, truth_cache=truths))
             bar.update()
         for d in ds:
             detections[d.name] = detection(d, dist, bearings=bearings)

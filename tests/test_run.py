@@ -12,7 +12,7 @@ pytest.importorskip("mujoco")
 
 from irring import pipeline  # noqa: E402
 from irring.cli import main  # noqa: E402
-from irring.mapping import OccupancyGrid, read_pgm  # noqa: E402
+from irring.mapping import OccupancyGrid  # noqa: E402
 from irring.metrics import SCORE_KEYS  # noqa: E402
 from irring.recording import load_recording  # noqa: E402
 from irring.scenario import load_scenario  # noqa: E402

@@ -160,7 +160,7 @@ def default_value(knob: str, scenario) -> float:
     from ..estimate import LineOptions
 
     return {"step": scenario.scan.step_stride,
-            "samples": scenario.scan.samples if scenario.has("averaging") else 1,
+            "samples": scenario.samples_per_step,
             "settle": scenario.scan.settle_s * 1e3, "iterations": DEFAULT_MAX_ITERATIONS,
             "tolerance": math.degrees(DEFAULT_TOLERANCE_RAD),
             "regroup": LineOptions().regroup_iterations,
