@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import mujoco
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -189,6 +190,33 @@ def test_emitter_frames_equal_data_beam_geometry(t_room):
         np.testing.assert_allclose(origin[..., 2], sim.ring.sensor_height_m, atol=1e-12)
         np.testing.assert_allclose(direction, np.stack([np.cos(heading), np.sin(heading),
                                                         np.zeros_like(heading)], -1), atol=1e-12)
+
+
+def test_kept_robot_frames_equal_mujoco_at_the_pose(t_room):
+    """A static scene reuses the robot-frame frames: placing them at a pose equals MuJoCo's
+    own forward with the chassis at that pose, and a caller writing into what it got back
+    cannot change the next sweep's frames."""
+    sim = SimRing(t_room)
+    steps = sim.default_steps()
+    angles = sensor_angles_for_steps(sim.ring, steps)
+    pose = np.array([1.1, 0.35, 2.2])
+    d = mujoco.MjData(sim.model)
+    m = sim.built.chassis_mocap
+    d.mocap_pos[m] = [pose[0], pose[1], 0.0]
+    d.mocap_quat[m] = [np.cos(pose[2] / 2), 0.0, 0.0, np.sin(pose[2] / 2)]
+    want_o, want_d = np.empty(angles.shape + (3,)), np.empty(angles.shape + (3,))
+    sites = sim.built.emitter_sites
+    for i, a in enumerate(angles):
+        d.qpos[sim.built.sensor_qpos] = a
+        mujoco.mj_kinematics(sim.model, d)
+        want_o[i], want_d[i] = d.site_xpos[sites], d.site_xmat[sites][:, 2::3]
+    first = sim.frames(angles, pose)
+    first[0][:] = np.nan
+    again = sim.frames(angles, pose)
+    fresh = sim.frames(angles, pose, reuse=False)
+    for got in (again, fresh):
+        np.testing.assert_allclose(got[0], want_o, atol=1e-12)
+        np.testing.assert_allclose(got[1], want_d, atol=1e-12)
 
 
 def test_frames_follow_a_pose_per_step(t_room):
