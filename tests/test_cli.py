@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from irring import scenario
-from irring.cli import COMMANDS, main
+from irring.cli import COMMANDS, build_parser, main
 from irring.cli.bench import BENCHES
 
 
@@ -42,3 +42,76 @@ def test_an_unknown_scenario_names_the_bundled_ones(capsys):
     err = capsys.readouterr().err
     assert "t_rooom: no such file and no bundled scenario of that name" in err
     assert "t_room_cylinder" in err
+
+
+# Every range-checked option: a bad value is a usage error (argparse's exit 2, usage line,
+# the option, what was given and what is allowed), never exit 1, which means a failed run.
+BAD_VALUES = [
+    (["bench", "accuracy", "--seeds", "0"], "--seeds", "must be ≥ 1, got 0"),
+    (["bench", "accuracy", "--workers", "0"], "--workers", "must be ≥ 1, got 0"),
+    (["bench", "dynamics", "--sweeps", "0"], "--sweeps", "must be ≥ 1, got 0"),
+    (["bench", "effects", "--rounds", "0"], "--rounds", "must be ≥ 1, got 0"),
+    (["bench", "effects", "--batch", "-3"], "--batch", "must be ≥ 1, got -3"),
+    (["bench", "effects", "--samples", "0"], "--samples", "must be ≥ 1, got 0"),
+    (["bench", "estimator", "--sweeps", "0"], "--sweeps", "must be ≥ 1, got 0"),
+    (["bench", "estimator", "--max-iterations", "0"], "--max-iterations", "must be ≥ 1, got 0"),
+    (["bench", "speed", "--rounds", "0"], "--rounds", "must be ≥ 1, got 0"),
+    (["bench", "speed", "--rounds", "many"], "--rounds", "must be an integer ≥ 1, got 'many'"),
+    (["calibrate", "--sweeps", "0"], "--sweeps", "must be ≥ 1, got 0"),
+    (["compare", "--seeds", "0"], "--seeds", "must be ≥ 1, got 0"),
+    (["compare", "--bearings", "7"], "--bearings", "must be ≥ 8, got 7"),
+    (["compare", "--distances-mm", "250,0"], "--distances-mm",
+     "must be one or more positive distances in mm, like 250,500,1000; got '250,0'"),
+    (["compare", "--distances-mm", ","], "--distances-mm",
+     "must be one or more positive distances in mm, like 250,500,1000; got ','"),
+    (["geometry", "--distances-mm", "250,abc"], "--distances-mm",
+     "must be positive distances in mm separated by commas, like 250,500,1000; got '250,abc'"),
+    (["geometry", "--samples", "999"], "--samples", "must be ≥ 1000, got 999"),
+]
+
+
+@pytest.mark.parametrize("argv, option, message", BAD_VALUES,
+                         ids=[" ".join(argv) for argv, _, _ in BAD_VALUES])
+def test_an_out_of_range_value_is_a_usage_error(argv, option, message, capsys):
+    command = " ".join(argv[:-2])
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"usage: irring {command}")
+    assert f"irring {command}: error: argument {option}: {message}" in err
+
+
+def test_the_boundary_values_are_accepted():
+    parse = build_parser().parse_args
+    assert parse(["bench", "accuracy", "--seeds", "1", "--workers", "1"]).workers == 1
+    assert parse(["bench", "dynamics", "--sweeps", "1"]).sweeps == 1
+    args = parse(["bench", "effects", "--rounds", "1", "--batch", "1", "--samples", "1"])
+    assert (args.rounds, args.batch, args.samples) == (1, 1, 1)
+    args = parse(["bench", "estimator", "--sweeps", "1", "--max-iterations", "1"])
+    assert (args.sweeps, args.max_iterations) == (1, 1)
+    assert parse(["bench", "speed", "--rounds", "1"]).rounds == 1
+    assert parse(["calibrate", "--sweeps", "1"]).sweeps == 1
+    args = parse(["compare", "--seeds", "1", "--bearings", "8", "--distances-mm", "0.5, 300"])
+    assert (args.seeds, args.bearings) == (1, 8)
+    assert args.distances_mm == pytest.approx([0.0005, 0.3])
+    assert parse(["geometry", "--samples", "1000"]).samples == 1000
+
+
+def test_the_default_distances_are_parsed_to_metres():
+    parse = build_parser().parse_args
+    assert parse(["geometry"]).distances_mm == pytest.approx([0.25, 0.5, 0.75, 1.0])
+    assert parse(["compare"]).distances_mm == pytest.approx([0.25, 0.35, 0.45, 0.55, 0.65, 0.75])
+    assert parse(["bench", "accuracy"]).workers is None
+    assert parse(["calibrate"]).sweeps is None
+
+
+@pytest.mark.parametrize("argv, option, message", BAD_VALUES,
+                         ids=[" ".join(argv) for argv, _, _ in BAD_VALUES])
+def test_help_states_the_allowed_range(argv, option, message, capsys):
+    with pytest.raises(SystemExit):
+        main([*argv[:-2], "--help"])
+    blocks = capsys.readouterr().out.split("\n  --")
+    block = " ".join(next(b for b in blocks if b.startswith(option[2:] + " ")).split())
+    allowed = ("≥ " + message.split("≥ ")[1].split(",")[0]) if "≥" in message else "positive"
+    assert allowed in block

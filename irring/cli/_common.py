@@ -1,16 +1,45 @@
-"""Argument parsing shared by several subcommands (not a subcommand itself)."""
+"""Argument parsing shared by several subcommands (not a subcommand itself).
+
+The helpers here are argparse ``type=`` callables: a bad value raises
+``argparse.ArgumentTypeError``, so argparse prints the usage line and
+``irring COMMAND: error: argument --OPTION: …`` and exits 2, like any other bad
+argument (exit 1 is left for runs that fail).
+"""
 
 from __future__ import annotations
 
+import argparse
+import math
+from collections.abc import Callable
 
-def distances_mm(text: str, command: str) -> list[float]:
-    """``--distances-mm`` "250,500,1000" (mm) → metres; exits with ``irring COMMAND: error:``
-    unless it holds at least one number and all are positive."""
+
+def at_least(low: int) -> Callable[[str], int]:
+    """A ``type=`` for an integer option that must be ≥ ``low``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"must be an integer ≥ {low}, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be ≥ {low}, got {value}")
+        return value
+
+    parse.__name__ = f"int ≥ {low}"
+    return parse
+
+
+def distances_mm(text: str) -> list[float]:
+    """A ``type=`` for ``--distances-mm`` "250,500,1000" (mm) → metres: at least one
+    number, all positive and finite."""
     try:
         values = [float(v) * 1e-3 for v in text.split(",") if v.strip()]
     except ValueError:
-        raise SystemExit(f"irring {command}: error: --distances-mm wants numbers like "
-                         f"250,500,1000; got {text!r}") from None
-    if not values or min(values) <= 0:
-        raise SystemExit(f"irring {command}: error: --distances-mm needs positive distances")
+        raise argparse.ArgumentTypeError(
+            f"must be positive distances in mm separated by commas, like 250,500,1000; "
+            f"got {text!r}") from None
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(
+            f"must be one or more positive distances in mm, like 250,500,1000; got {text!r}")
     return values

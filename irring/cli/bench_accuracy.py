@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from ._common import at_least
+
 EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):
   step        read every 2nd / 4th motor step (2.16°, 4.32°) instead of every 1.08° step
@@ -68,11 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--knob", action="append", choices=KNOBS, metavar="K",
                    help="knob to vary; repeat for several (default: all: " + ", ".join(KNOBS)
                         + ")")
-    p.add_argument("--seeds", type=int, default=3,
+    p.add_argument("--seeds", type=at_least(1), default=3, metavar="N",
                    help="runs per configuration and scenario, seeds scenario.seed, +1, … "
-                        "(default: 3)")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="local worker processes (default: one per CPU; 1 = in this process)")
+                        "(≥ 1; default: 3)")
+    p.add_argument("--workers", type=at_least(1), default=None, metavar="N",
+                   help="local worker processes (≥ 1; default: one per CPU; 1 = in this "
+                        "process)")
     p.add_argument("--dask", metavar="ADDRESS", default=None,
                    help="run on a Dask cluster at ADDRESS (e.g. tcp://host:8786) instead of "
                         "local processes; needs pip install 'irring[dask]'")
@@ -88,10 +91,6 @@ def run(args: argparse.Namespace) -> int:
     from ..bench.executor import executor
     from ..pipeline import progress_bar
 
-    if args.seeds < 1:
-        raise SystemExit("irring bench accuracy: error: --seeds must be ≥ 1")
-    if args.workers is not None and args.workers < 1:
-        raise SystemExit("irring bench accuracy: error: --workers must be ≥ 1")
     scenarios = args.scenario or list(accuracy.DEFAULT_SCENARIOS)
     configs = accuracy.configurations(args.knob)
     total = len(configs) * len(scenarios) * args.seeds

@@ -6,6 +6,8 @@ import argparse
 import json
 import math
 
+from ._common import at_least
+
 EPILOG = """\
 what it prints (the paper's ring in the T-room, pose 0 unless said; angles at the sensor):
   belt        stretch (sensor − 0.6 × motor) over --sweeps back-and-forth sweeps without
@@ -39,8 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "readings, how settle time trades hardware time for angle error, "
                     "MuJoCo's own sensor timing against irring's, and maps made on the move.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--sweeps", type=int, default=1000,
-                   help="back-and-forth sweeps for the belt figures (default: 1000)")
+    p.add_argument("--sweeps", type=at_least(1), default=1000, metavar="N",
+                   help="back-and-forth sweeps for the belt figures (≥ 1; default: 1000)")
     p.add_argument("--seeds", type=int, nargs="+", default=[1], metavar="SEED",
                    help="seeds for the motion figures, averaged (default: 1)")
     p.add_argument("--no-motion", action="store_true", help="skip the mapping runs")
@@ -55,8 +57,6 @@ def _deg(x: float) -> str:
 def run(args: argparse.Namespace) -> int:
     from ..bench.dynamics import measure
 
-    if args.sweeps < 1:
-        raise SystemExit("irring bench dynamics: error: --sweeps must be ≥ 1")
     r = measure(sweeps=args.sweeps, seeds=tuple(args.seeds), with_motion=not args.no_motion)
     if args.json:
         print(json.dumps(r, indent=2))

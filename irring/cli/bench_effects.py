@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from ._common import at_least
+
 EPILOG = """\
 what it prints (µs per 71 × 12 sweep, median over rounds; no MuJoCo involved):
   alone      the effect on its own, minus the ideal pipeline (no effects)
@@ -35,12 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="scenario whose sensor block (model, ADC bits) is used; its effects "
                         "are replaced (default: t_room)")
-    p.add_argument("--samples", type=int, default=4,
-                   help="scan.samples for the averaging effect (default: 4)")
-    p.add_argument("--rounds", type=int, default=25,
-                   help="timing rounds; the median over rounds is reported (default: 25)")
-    p.add_argument("--batch", type=int, default=40,
-                   help="sweeps per configuration per round (default: 40)")
+    p.add_argument("--samples", type=at_least(1), default=4, metavar="N",
+                   help="scan.samples for the averaging effect (≥ 1; default: 4)")
+    p.add_argument("--rounds", type=at_least(1), default=25, metavar="N",
+                   help="timing rounds; the median over rounds is reported (≥ 1; default: 25)")
+    p.add_argument("--batch", type=at_least(1), default=40, metavar="N",
+                   help="sweeps per configuration per round (≥ 1; default: 40)")
     p.add_argument("--seed", type=int, default=0, help="noise seed (default: 0)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=run)
@@ -54,9 +56,6 @@ def run(args: argparse.Namespace) -> int:
     from ..bench.effects import measure
     from ..scenario import load_scenario
 
-    if args.rounds < 1 or args.batch < 1 or args.samples < 1:
-        raise SystemExit("irring bench effects: error: --rounds, --batch and --samples must "
-                         "be ≥ 1")
     r = measure(load_scenario(args.scenario), samples=args.samples, rounds=args.rounds,
                 batch=args.batch, seed=args.seed)
     if args.json:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from ._common import at_least
+
 EPILOG = """\
 what it prints (range errors against the simulator's true distance from the emitter):
   steep       readings with true incidence ≥ --min-theta that both estimates call valid;
@@ -34,13 +36,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="bundled scenario name or YAML path (default: t_room, noise on)")
-    p.add_argument("--sweeps", type=int, default=5,
-                   help="sweeps per pose, fresh noise each (default: 5)")
+    p.add_argument("--sweeps", type=at_least(1), default=5, metavar="N",
+                   help="sweeps per pose, fresh noise each (≥ 1; default: 5)")
     p.add_argument("--min-theta", type=float, default=40.0, metavar="DEG",
                    help="true incidence (degrees) from which a reading counts as steep "
                         "(default: 40)")
-    p.add_argument("--max-iterations", type=int, default=20,
-                   help="iteration cap of the estimator (default: 20)")
+    p.add_argument("--max-iterations", type=at_least(1), default=20, metavar="N",
+                   help="iteration cap of the estimator (≥ 1; default: 20)")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--calibration", metavar="FILE",
                        help="calibration YAML (from `irring calibrate`); default: the sensor's "
@@ -58,9 +60,6 @@ def run(args: argparse.Namespace) -> int:
     from ..estimate import Calibration
     from ..scenario import load_scenario
 
-    if args.sweeps < 1 or args.max_iterations < 1:
-        raise SystemExit("irring bench estimator: error: --sweeps and --max-iterations must "
-                         "be ≥ 1")
     scenario = load_scenario(args.scenario)
     cal = None
     if args.calibration:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from ._common import at_least
+
 EPILOG = """\
 stages (ms per sweep, median over rounds, each round times every stage once in turn):
   kinematics      emitter frames of every step from one batched MuJoCo forward
@@ -41,8 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="bundled scenario name or YAML path (default: t_room)")
     p.add_argument("--pose", type=int, default=0, help="scan pose index (default: 0)")
-    p.add_argument("--rounds", type=int, default=200,
-                   help="timing rounds; medians over rounds are reported (default: 200)")
+    p.add_argument("--rounds", type=at_least(1), default=200, metavar="N",
+                   help="timing rounds; medians over rounds are reported (≥ 1; default: 200)")
     p.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
     p.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
@@ -53,8 +55,6 @@ def run(args: argparse.Namespace) -> int:
     from ..bench.speed import measure, report
     from ..scenario import load_scenario
 
-    if args.rounds < 1:
-        raise SystemExit("irring bench speed: error: --rounds must be ≥ 1")
     r = measure(load_scenario(args.scenario), rounds=args.rounds, pose_index=args.pose,
                 seed=args.seed)
     print(json.dumps(r, indent=2) if args.json else report(r))

@@ -6,6 +6,8 @@ import argparse
 import math
 import sys
 
+from ._common import at_least
+
 EPILOG = """\
 what it does:
   A flat wall is put in front of one sensor at known distances and angles; the readings
@@ -52,8 +54,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="serial speed with --port (default: 115200)")
     p.add_argument("--sensor", type=int, default=0,
                    help="which sensor faces the wall (default: 0)")
-    p.add_argument("--sweeps", type=int, default=None,
-                   help="sweeps per placement, averaged (default: 8 simulated, 4 real)")
+    p.add_argument("--sweeps", type=at_least(1), default=None, metavar="N",
+                   help="sweeps per placement, averaged (≥ 1; default: 8 simulated, 4 real)")
     p.add_argument("--seed", type=int, default=None,
                    help="noise seed of the simulated rig (default: the scenario's)")
     p.set_defaults(func=run)
@@ -71,8 +73,6 @@ def run(args: argparse.Namespace) -> int:
     from ..scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
-    if args.sweeps is not None and args.sweeps < 1:
-        raise SystemExit("irring calibrate: error: --sweeps must be ≥ 1")
     try:
         if args.port is None:
             rig = SimulatedRig(scenario, sensor=args.sensor, sweeps=args.sweeps or 8,

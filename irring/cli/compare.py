@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from ._common import at_least, distances_mm
+
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room_three_cylinders", "t_room")
 
 EPILOG = """\
@@ -48,16 +50,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--design", action="append", metavar="D", choices=list(DESIGN_BY_NAME),
                    help="design name; repeat for several (default: all: "
                         + ", ".join(DESIGN_BY_NAME) + ")")
-    p.add_argument("--seeds", type=int, default=3,
-                   help="runs per scenario and design, seeds scenario.seed, +1, … (default: 3)")
+    p.add_argument("--seeds", type=at_least(1), default=3, metavar="N",
+                   help="runs per scenario and design, seeds scenario.seed, +1, … "
+                        "(≥ 1; default: 3)")
     p.add_argument("--out", default="out/compare", metavar="DIR",
                    help="output folder (default: out/compare)")
-    p.add_argument("--distances-mm", default="250,350,450,550,650,750", metavar="LIST",
-                   help="distances (mm, robot centre to cylinder) for the detection curve "
-                        "(default: 250,350,450,550,650,750)")
-    p.add_argument("--bearings", type=int, default=180,
+    p.add_argument("--distances-mm", type=distances_mm, default="250,350,450,550,650,750",
+                   metavar="LIST",
+                   help="comma-separated positive distances (mm, robot centre to cylinder) "
+                        "for the detection curve (default: 250,350,450,550,650,750)")
+    p.add_argument("--bearings", type=at_least(8), default=180, metavar="N",
                    help="cylinder bearings tried per distance, over one symmetry period of "
-                        "the design (default: 180)")
+                        "the design (≥ 8; default: 180)")
     p.add_argument("--json", action="store_true",
                    help="print one JSON record per design instead of the table")
     p.set_defaults(func=run)
@@ -65,18 +69,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .. import compare, designs
-    from ._common import distances_mm
-
-    if args.seeds < 1:
-        raise SystemExit("irring compare: error: --seeds must be ≥ 1")
-    if args.bearings < 8:
-        raise SystemExit("irring compare: error: --bearings must be ≥ 8")
-    dist = distances_mm(args.distances_mm, "compare")
     scenarios = args.scenario or list(DEFAULT_SCENARIOS)
     names = args.design or list(designs.DESIGN_BY_NAME)
     from ..pipeline import progress_enabled
 
-    result = compare.compare(scenarios, names, args.seeds, detection_distances_m=dist,
+    result = compare.compare(scenarios, names, args.seeds, detection_distances_m=args.distances_mm,
                              bearings=args.bearings,
                              progress=progress_enabled() and not args.json)
     paths = compare.write_outputs(result, args.out)

@@ -6,6 +6,8 @@ import argparse
 import json
 import math
 
+from ._common import at_least, distances_mm
+
 EPILOG = """\
 what it prints:
   beta_deg            Eq. 2: angle β of the overlap of two neighbouring sweeps (deg)
@@ -41,11 +43,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--range-mm", type=float, default=None, metavar="D",
                    help="max range D in mm for Eqs. 2–3 (default: the sensor's design range, "
                         "686 mm for the GP2D12 as in Table I)")
-    p.add_argument("--distances-mm", default="250,500,750,1000", metavar="LIST",
-                   help="comma-separated distances in mm for the blind spot "
+    p.add_argument("--distances-mm", type=distances_mm, default="250,500,750,1000",
+                   metavar="LIST",
+                   help="comma-separated positive distances in mm for the blind spot "
                         "(default: 250,500,750,1000)")
-    p.add_argument("--samples", type=int, default=400_000,
-                   help="Monte-Carlo points per neighbouring pair (default: 400000; "
+    p.add_argument("--samples", type=at_least(1000), default=400_000, metavar="N",
+                   help="Monte-Carlo points per neighbouring pair (≥ 1000; default: 400000; "
                         "standard error ≈ 0.2 %% of S)")
     p.add_argument("--seed", type=int, default=0, help="Monte-Carlo seed (default: 0)")
     p.add_argument("--json", action="store_true", help="print JSON (one object, or a list "
@@ -55,14 +58,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .. import designs, geometry
-    from ._common import distances_mm
-
-    if args.samples < 1000:
-        raise SystemExit("irring geometry: error: --samples must be ≥ 1000")
     names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
     range_m = None if args.range_mm is None else args.range_mm * 1e-3
-    distances_m = distances_mm(args.distances_mm, "geometry")
-    reports = [geometry.design_report(designs.get(n), distances_m, range_m=range_m,
+    reports = [geometry.design_report(designs.get(n), args.distances_mm, range_m=range_m,
                                       samples=args.samples, seed=args.seed)
                for n in names]
     if args.json:
