@@ -5,8 +5,8 @@ irring/mapping.py's module doc explains the rules (touch lengths, clipping) and 
 sensor model; this is their one implementation:
 
 * :func:`walk` lists every cell a batch of segments visits (``mapping.traverse``);
-* :func:`beams_delta` sums one batch of readings' log-odds on the box of cells their beams
-  reach (``OccupancyGrid.insert`` / ``delta``), :func:`add_clamped` adds such a box to a grid.
+* :func:`add_beams` adds one batch of readings' log-odds to a grid and clamps the box of
+  cells their beams reach (``OccupancyGrid.insert``; ``delta`` on a zero grid, unclamped).
 
 One call does a whole batch: a loop per segment and column in C, numpy only allocates.
 Units are grid cells from the grid's corner. A segment is clipped to the grid (Liang–Barsky),
@@ -329,36 +329,41 @@ cdef inline double weight(double z_a, double z_b, double mu, double l_occ,
     return w
 
 
-def beams_delta(const double[::1] origin_x, const double[::1] origin_y,
-                const double[::1] heading, const double[::1] x, const double[::1] y,
-                const double[::1] sigma_m, const unsigned char[::1] valid,
-                const unsigned char[::1] no_return, double max_range_m, double grid_x,
-                double grid_y, double res, long nx, long ny, params):
-    """The log-odds change of one batch of readings (flat arrays, metres; ``valid`` and
-    ``no_return`` as uint8) on the box of cells their beams reach: (change (h, w), ix, iy of
-    the box's corner cell), or None when no beam is mapped. Summed, not clamped.
+def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[::1] origin_y,
+              const double[::1] heading, const double[::1] x, const double[::1] y,
+              const double[::1] sigma_m, const unsigned char[::1] valid,
+              const unsigned char[::1] no_return, double max_range_m, double grid_x,
+              double grid_y, double res, params, double lo, double hi):
+    """Add the log-odds of one batch of readings (flat arrays, metres; ``valid`` and
+    ``no_return`` as uint8) to the grid ``log_odds`` (ny, nx; its cell (0, 0) has its corner
+    at (grid_x, grid_y)), then clamp the box of cells their beams can reach to [lo, hi]
+    (±inf: no clamp). Work and memory scale with the beams, not the grid. Returns whether
+    any beam was mapped (if none, nothing is touched).
 
     Valid readings (with finite end point and emitter) are walked from the emitter to
     tail_sigmas·σ behind the end point, no-return readings (finite emitter and heading) to
     the max range along the heading; every other reading changes nothing. Cells a beam
     crosses at constant weight (a no-return beam; a valid beam up to NEAR_SIGMAS·σ before its
     free margin) are counted as row runs, exactly (integers); only a valid beam's columns
-    after that are walked cell by cell and weighed with the model.
+    after that are walked cell by cell and weighed with the model. Those weights go into the
+    grid as they come, the counts' log-odds in one pass over the box at the end, which also
+    clamps: the batch's updates are summed before clamping.
     """
     cdef double l_occ = params.l_occ, l_free = params.l_free, l_nr = params.l_no_return
     cdef double tail = params.tail_sigmas, min_sigma = params.min_sigma_m
     cdef double default_sigma = params.default_sigma_m
     cdef double margin_m = params.free_margin_cells * res
+    cdef long ny = log_odds.shape[0], nx = log_odds.shape[1]
     cdef Py_ssize_t n = origin_x.shape[0], i, j, nb = 0, nv = 0, kept = 0
     cdef long k, ix, iy, n_far, bx0, by0, bx1, by1, bw, bh
     cdef double inv = 1.0 / res, ox, oy, vx, vy, d, sigma, length, stretch, hx, hy
     cdef double lo_x = INFINITY, lo_y = INFINITY, hi_x = -INFINITY, hi_y = -INFINITY
     cdef double a, z, u_in, u_mid, u_out, mu, far, t_end
     cdef long long run, count
+    cdef double v
     cdef long long NR_UNIT = (<long long>1) << 32    # no-return visits, counted beside valid ones
     cdef long long LOW = NR_UNIT - 1
     cdef double* e
-    cdef double* box
     cdef long long* rx
     cdef long long* ry
     cdef long long* row
@@ -420,21 +425,18 @@ def beams_delta(const double[::1] origin_x, const double[::1] origin_y,
                 nb += 1
                 nv += is_valid
     if nb == 0:
-        return None
+        return False
     # the beams' bounding box on the grid, one cell wider on every side (an end point a
     # rounding step from a border may lie in the next cell)
     bx0, by0 = max(<long>ffloor(lo_x) - 1, 0), max(<long>ffloor(lo_y) - 1, 0)
     bx1, by1 = min(<long>ffloor(hi_x) + 1, nx - 1), min(<long>ffloor(hi_y) + 1, ny - 1)
     if bx0 > bx1 or by0 > by1:
-        return None
+        return False
     bw, bh = bx1 - bx0 + 1, by1 - by0 + 1
-    change = np.zeros((bh, bw))
     # visit counts as difference arrays (valid + 2^32·no-return): x-major beams' runs along
     # the rows (bh × (bw + 1)), y-major beams' down the columns ((bh + 1) × bw)
     runs_a = np.zeros(bh * (bw + 1) + (bh + 1) * bw, np.int64)
-    cdef double[:, ::1] change_v = change
     cdef long long[::1] runs_v = runs_a
-    box = &change_v[0, 0]
     rx = &runs_v[0]
     ry = rx + bh * (bw + 1)
     with nogil:
@@ -447,14 +449,14 @@ def beams_delta(const double[::1] origin_x, const double[::1] origin_y,
                 if not s.short:
                     add_runs(&s, s.t1, NR_UNIT, bx0, by0, bw, bh, rx, ry)
                 elif cell(&s, 0, ffloor(s.q0 + s.t0 * s.dq), bx0, bx1, by0, by1, &ix, &iy):
-                    box[(iy - by0) * bw + ix - bx0] += l_nr
+                    log_odds[iy, ix] += l_nr
                 continue
             d, sigma, length = e[4], e[5], e[6]
             # the columns entirely before NEAR_SIGMAS·σ in front of the free margin: runs
             n_far = 0
             if not s.short:
                 far = ffloor(((d - margin_m - NEAR_SIGMAS * sigma) / length - s.t_col0)
-                            / s.t_col)
+                             / s.t_col)
                 far = dmin(dmax(far, 0.0), s.count)
                 # (a beam leaving the grid may have only far columns: they end where it leaves)
                 t_end = dmin(s.t_col0 + far * s.t_col, s.t1)
@@ -462,45 +464,32 @@ def beams_delta(const double[::1] origin_x, const double[::1] origin_y,
                     n_far = <long>far
                     add_runs(&s, t_end, 1, bx0, by0, bw, bh, rx, ry)
             # the rest cell by cell, in u = (s − d)/σ: σ from the end point along the beam
+            # (added to the grid now, clamped below with the rest)
             columns(&s, length / sigma, d / sigma, &c)
             mu = margin_m / sigma
             for k in range(n_far, s.count):
                 two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
                 if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
-                    box[(iy - by0) * bw + ix - bx0] += weight(u_in, u_mid, mu, l_occ, l_free)
+                    log_odds[iy, ix] += weight(u_in, u_mid, mu, l_occ, l_free)
                 if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
-                    box[(iy - by0) * bw + ix - bx0] += weight(u_mid, u_out, mu, l_occ, l_free)
-        # the runs' cumulative sums (down the columns, then along each row) give the counts
-        for iy in range(1, bh + 1):
-            for ix in range(bw):
-                ry[iy * bw + ix] += ry[(iy - 1) * bw + ix]
-        for iy in range(bh):
-            row = rx + iy * (bw + 1)
-            run = 0
-            for ix in range(bw):
-                run += row[ix]
-                row[ix] = run
-            col = ry + iy * bw
-            out = box + iy * bw
-            for ix in range(bw):
-                count = row[ix] + col[ix]
-                out[ix] += (<double>(<int>(count & LOW)) * l_free
-                            + <double>(<int>(count >> 32)) * l_nr)
-    if kept == 0:
-        return None
-    return change, bx0, by0
-
-
-def add_clamped(double[:, :] log_odds, const double[:, ::1] change, long ix, long iy,
-                double lo, double hi):
-    """log_odds[iy:iy + h, ix:ix + w] += change (h, w), then clamped to [lo, hi]."""
-    cdef Py_ssize_t i, j
-    cdef double v
-    if not (0 <= iy and iy + change.shape[0] <= log_odds.shape[0]
-            and 0 <= ix and ix + change.shape[1] <= log_odds.shape[1]):
-        raise ValueError("the change box does not fit in the grid")
-    with nogil:
-        for i in range(change.shape[0]):
-            for j in range(change.shape[1]):
-                v = log_odds[iy + i, ix + j] + change[i, j]
-                log_odds[iy + i, ix + j] = lo if v < lo else (hi if v > hi else v)
+                    log_odds[iy, ix] += weight(u_mid, u_out, mu, l_occ, l_free)
+        if kept:
+            # the runs' cumulative sums (down the columns, then along each row) give the
+            # counts; add their log-odds and clamp
+            for iy in range(1, bh + 1):
+                for ix in range(bw):
+                    ry[iy * bw + ix] += ry[(iy - 1) * bw + ix]
+            for iy in range(bh):
+                row = rx + iy * (bw + 1)
+                run = 0
+                for ix in range(bw):
+                    run += row[ix]
+                    row[ix] = run
+                col = ry + iy * bw
+                out = &log_odds[by0 + iy, bx0]
+                for ix in range(bw):
+                    count = row[ix] + col[ix]
+                    v = out[ix] + (<double>(<int>(count & LOW)) * l_free
+                                   + <double>(<int>(count >> 32)) * l_nr)
+                    out[ix] = lo if v < lo else (hi if v > hi else v)
+    return kept > 0

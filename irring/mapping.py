@@ -76,7 +76,7 @@ call: ~0.32 ms there, was ~0.7–0.9, as its other stages evict the caches).
 Where the time goes (kernel variants with one part left out): ~0.03 ms clipping and setting
 up the beams, ~0.055 the runs (~13 k border crossings), ~0.02 their cumulative sums, ~0.08
 the ~4 800 near-end cells (walk, and two exps each), ~0.03 the Python side, allocation and
-the clamped add.
+the clamped add of the counts.
 
 Frames: the grid's origin is the world (x, y) of the *corner* of cell (0, 0); row ``iy``
 grows with y, column ``ix`` with x; ``log_odds[iy, ix]``.
@@ -253,26 +253,22 @@ class OccupancyGrid:
 
     # ---- updates
 
-    def _box_delta(self, points: Points) -> tuple[np.ndarray, int, int] | None:
-        """The log-odds change of ``points`` on the box of cells their beams can reach:
-        (change (h, w), ix, iy of its corner cell), or None when no beam is mapped (the
-        kernel's ``beams_delta``). Work and memory scale with the beams, not the grid."""
-        ny, nx = self.shape
-        return _traverse.beams_delta(
-            _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
+    def _add(self, log_odds: np.ndarray, points: Points, lo: float, hi: float) -> None:
+        """Add the log-odds of ``points`` to ``log_odds`` (this grid's shape, float64,
+        C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
+        ``add_beams``). Work and memory scale with the beams, not the grid."""
+        _traverse.add_beams(
+            log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
             _flat(points.x), _flat(points.y), _flat(points.sigma_m),
             np.asarray(points.valid, bool).ravel().view(np.uint8),
             (np.asarray(points.reason).ravel() == _NO_RETURN).view(np.uint8),
             float(points.max_range_m), float(self.origin_xy_m[0]), float(self.origin_xy_m[1]),
-            self.resolution_m, nx, ny, self.params)
+            self.resolution_m, self.params, lo, hi)
 
     def delta(self, points: Points) -> np.ndarray:
         """The log-odds change (ny, nx) the readings in ``points`` would add (before clamping)."""
         out = np.zeros(self.shape)
-        box = self._box_delta(points)
-        if box is not None:
-            change, ix, iy = box
-            out[iy:iy + change.shape[0], ix:ix + change.shape[1]] = change
+        self._add(out, points, -np.inf, np.inf)
         return out
 
     def apply(self, delta: np.ndarray) -> None:
@@ -282,10 +278,8 @@ class OccupancyGrid:
     def insert(self, points: Points) -> None:
         """Add one batch of readings (typically a sweep) to the map; only the cells its beams
         can reach are touched."""
-        box = self._box_delta(points)
-        if box is None:
-            return
-        _traverse.add_clamped(self.log_odds, *box, self.params.l_min, self.params.l_max)
+        self.log_odds = np.ascontiguousarray(self.log_odds, dtype=float)   # (as the kernel wants)
+        self._add(self.log_odds, points, self.params.l_min, self.params.l_max)
 
     # ---- reading the map
 

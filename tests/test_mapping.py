@@ -387,7 +387,8 @@ def test_batches_with_nothing_to_map_change_nothing():
 
 
 def test_insert_takes_float32_and_non_contiguous_readings():
-    """The kernel wants flat float64 arrays; insert converts at the boundary."""
+    """The kernel wants flat float64 arrays and a C-ordered grid; insert converts at the
+    boundary."""
     pts = random_points(np.random.default_rng(4), 300)
     f32 = Points(**{k: (v.astype(np.float32) if isinstance(v, np.ndarray) and v.dtype == float
                         else v) for k, v in vars(pts).items()})
@@ -396,6 +397,7 @@ def test_insert_takes_float32_and_non_contiguous_readings():
     strided = Points(**{k: (np.repeat(v, 2)[::2] if isinstance(v, np.ndarray) else v)
                         for k, v in vars(as_f64).items()})
     a, b, c = small_grid(), small_grid(), small_grid()
+    c.log_odds = np.asfortranarray(c.log_odds)
     a.insert(f32)
     b.insert(as_f64)
     c.insert(strided)
