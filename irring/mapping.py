@@ -49,26 +49,34 @@ l_free −0.75, 2σ tail, one-cell margin) → these: occupied F1 0.968/0.981/0.
 shadow behind the table leg 1.00 → 1.00. A radial ring (radial12: 12 fixed beams per pose)
 goes from coverage 0.00 to 0.03 — its beams now show as free lines.
 
-Ray traversal (:func:`traverse`) is Amanatides & Woo's exact voxel walk, vectorised over all
-rays at once: every ray is walked column by column along its major axis (one or two cells
-per column), all columns of all rays laid out in flat arrays. No Python loop runs per ray or
-per cell.
+Ray traversal (:func:`traverse`) is Amanatides & Woo's exact voxel walk, compiled: the one
+implementation of the walk and of the update below is the Cython kernel irring/_traverse.pyx
+(one call per batch, a C loop per ray and column). Every ray is clipped to the grid and
+walked column by column along its major axis (one or two cells per column); each column is
+computed from its number, so nothing accumulates along a ray.
 
 An insert works on the box of cells its beams reach, never on the whole grid, and splits
 each beam where its weight stops being constant: a no-return beam, and a valid beam up to
-``_NEAR_SIGMAS`` (4.5) σ before its free margin, add one constant per cell, so they go in as
+4.5 σ (``NEAR_SIGMAS``) before its free margin, add one constant per cell, so they go in as
 *row runs* (in each minor-axis row a beam visits a contiguous run of cells: +1 at the run's
-start, −1 past its end, one ``bincount`` and an integer ``cumsum`` along the rows — work per
-border crossing, not per cell); only the last few columns of a valid beam are walked cell by
-cell and weighed with the formula above, in float32. Both follow :func:`traverse`'s rules
-exactly (the same cells; tests compare them visit by visit); the weights differ from the
-formula by < 1e-4 log-odds (the constant part is within 4e-5 of it, erfc is A&S 7.1.25).
-One T-room sweep (852 readings, 10 mm cells) takes ~0.58 ms warm on the 2-core reference
-machine (~0.7–0.85 ms inside ``irring bench speed``, whose other stages evict the caches; it
-was ~3.0 ms with a sort-based traversal and per-visit weights over the whole grid). What is
-left is mostly per-call numpy overhead — ~150 calls on arrays of a few hundred to a few
-thousand entries (clip ~50 µs, runs ~140, near-end columns and weights ~170) — and a few
-box-sized passes (bincount, cumsum, weights, clamp ~130 µs).
+start, −1 past its end, then an integer cumulative sum along the rows — work per border
+crossing, not per cell); only the last few columns of a valid beam are walked cell by cell
+and weighed with the formula above. Both follow :func:`traverse`'s rules exactly (the same
+cells; tests compare them visit by visit); the weights differ from the formula by < 1e-4
+log-odds (the constant part is within 4e-5 of it; erfc is Abramowitz & Stegun 7.1.25, to
+2.5e-5: one exp, where libc's erfc takes three times as long).
+
+Speed: one T-room sweep (852 readings, 10 mm cells) inserts in ~0.24 ms median on the 2-core
+reference machine, against ~0.62 ms for the vectorised numpy version it replaces (~150 numpy
+calls per insert; it weighed in float32, so maps differ by ≤ 1.2e-6 log-odds over every
+bundled scene and seeds 0–4, with identical PGMs and scores) and ~3.0 ms for the sort-based
+traversal before that. Measured by timing ``OccupancyGrid.insert`` on 20 fresh t_room
+sweeps at pose 0, median of 300 (the mapper stage of ``irring bench speed`` times the same
+call: ~0.32 ms there, was ~0.7–0.9, as its other stages evict the caches).
+Where the time goes (kernel variants with one part left out): ~0.03 ms clipping and setting
+up the beams, ~0.055 the runs (~13 k border crossings), ~0.02 their cumulative sums, ~0.08
+the ~4 800 near-end cells (walk, and two exps each), ~0.03 the Python side, allocation and
+the clamped add of the counts.
 
 Frames: the grid's origin is the world (x, y) of the *corner* of cell (0, 0); row ``iy``
 grows with y, column ``ix`` with x; ``log_odds[iy, ix]``.
@@ -77,12 +85,12 @@ grows with y, column ``ix`` with x; ``log_odds[iy, ix]``.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from . import _traverse
 from .data import Points, Reason
 
 FREE = 0
@@ -95,20 +103,6 @@ FREE_THRESH = 0.196
 # Byte values map_saver writes (free 254, occupied 0, unknown 205).
 PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN = 254, 0, 205
 
-# Crossings closer than this (in cells) are the same point: a ray through a cell corner
-# does not visit the two side cells it only touches.
-_TOUCH_CELLS = 1e-9
-# Clipped segments shorter than this visit just the cell they start in.
-_SHORT_CELLS = 4 * _TOUCH_CELLS
-# A valid beam's cells more than this many σ (plus the free margin) in front of its end point
-# get exactly l_free: the model there is l_free·Φ(4.5) + l_occ·exp(−4.5²/2), within 4e-5 of it.
-_NEAR_SIGMAS = 4.5
-# When their weights differ, no-return beams are counted in units of 2^20 beside valid ones.
-_NR_BITS = 20
-_NR_UNIT = float(1 << _NR_BITS)
-# Beams reaching farther than this many cells from the grid's corner are not mapped (their
-# numbers would swamp the cell arithmetic; 1e9 cells is 10 000 km at 10 mm).
-_FAR_CELLS = 1e9
 # (a plain int: comparing an array with the IntEnum member takes numpy's slow path)
 _NO_RETURN = int(Reason.NO_RETURN)
 
@@ -158,339 +152,32 @@ class Visits:
     t_exit: np.ndarray
 
 
-@dataclass
-class _Rays:
-    """Segments clipped to the grid and split into their major (p) and minor (q) axis; cell
-    units from the grid's corner. Every array has one entry per kept segment."""
-
-    rays: np.ndarray | None  # indices of the kept input segments (ascending); None: all
-    xmaj: np.ndarray     # the major axis is x (|Δx| ≥ |Δy|), so |slope| ≤ 1
-    p0: np.ndarray       # start and extent along the major …
-    dp: np.ndarray
-    q0: np.ndarray       # … and the minor axis, q0 from q_ref: minor coordinates are kept
-    dq: np.ndarray       # small, so a touch length (1e-9 cells × slope) stays representable
-    q_ref: np.ndarray    # (floor of the start's minor coordinate) even for a beam along a border
-    t0: np.ndarray       # the part inside the grid, as fractions of the segment
-    t1: np.ndarray
-    length: np.ndarray   # of the whole segment (cells)
-    short: np.ndarray | None  # inside part shorter than _SHORT_CELLS (None: none is)
-    cs: np.ndarray       # the first column walked (major-axis cell index) …
-    count: np.ndarray    # … and how many
-    t_col: np.ndarray    # t per column, 1/|dp|
-    t_col0: np.ndarray   # t where the line enters column cs
-    tol_p: np.ndarray    # a touch length along the major / minor axis, signed like dp / dq
-    tol_q: np.ndarray    # (0 for short segments)
-    last: np.ndarray     # the last column index of the grid along the major axis
-
-
-_SWAP = [1, 0, 3, 2]
-
-
-def _clip(e: np.ndarray, nx: int, ny: int, inside: bool = False) -> _Rays:
-    """Segments e = (x0, y0, Δx, Δy) (4, n) in cells, clipped to [0, nx) × [0, ny)
-    (Liang–Barsky, all four borders at once) and split into major and minor axis.
-    ``inside``: the caller knows every end point lies in the grid (nothing to clip).
-
-    The columns walked start and end a touch length inside the clipped part, so a first or
-    last column the segment barely enters (it starts or ends on its border) is not walked.
-    A segment shorter than a few touch lengths visits just the cell it starts in.
-    """
-    length = np.sqrt(e[2] * e[2] + e[3] * e[3])
-    n = e.shape[1]
-    rays = None
-    if inside:
-        t0 = np.zeros(n)
-        t1 = np.ones(n)
-    else:
-        gx0, gy0, dx, dy = e
-        p = np.stack([-dx, dx, -dy, dy])
-        q = np.stack([gx0, nx - gx0, gy0, ny - gy0])
-        r = q / p
-        t0 = np.maximum(np.where(p < 0, r, -np.inf).max(axis=0), 0.0)
-        t1 = np.minimum(np.where(p > 0, r, np.inf).min(axis=0), 1.0)
-        # cells are half-open [i, i+1): a segment along the top/right border lies outside
-        outside = (p == 0) & ((q < 0) | ((q == 0) & _UPPER_BORDER))
-        keep = ~outside.any(axis=0) & np.isfinite(length) & np.isfinite(gx0) & np.isfinite(gy0)
-        # a segment only touching the grid's border has no visits; a zero-length one inside has one
-        keep &= (t0 <= t1) & (((t1 - t0) * length >= _TOUCH_CELLS) | (length < _TOUCH_CELLS))
-        if not keep.all():
-            rays = np.flatnonzero(keep)
-            e, t0, t1, length = e[:, rays], t0[rays], t1[rays], length[rays]
-    xmaj = np.abs(e[2]) >= np.abs(e[3])
-    p0, q0, dp, dq = np.where(xmaj, e, e[_SWAP])
-    q_ref = np.floor(q0)
-    q0 -= q_ref                                       # exact: the fractional part
-    last = np.where(xmaj, nx - 1, ny - 1)
-    tol = _TOUCH_CELLS / length
-    t_col = 1.0 / np.abs(dp)
-    short = (t1 - t0) * length < _SHORT_CELLS
-    if short.any():
-        tol[short] = 0.0
-    else:
-        short = None
-    tol_p = tol * dp
-    cs = _clamp(np.floor(p0 + tol_p if inside else p0 + t0 * dp + tol_p), 0, last)
-    ce = _clamp(np.floor(p0 + dp - tol_p if inside else p0 + t1 * dp - tol_p), 0, last)
-    back = dp < 0
-    # the line enters column cs at the border p = cs (forwards) or cs + 1 (backwards)
-    t_col0 = (cs + back - p0) * np.where(back, -t_col, t_col)
-    if short is not None:
-        ce[short] = cs[short]
-        t_col[short] = 0.0
-        t_col0[short] = 0.0
-    return _Rays(rays=rays, xmaj=xmaj, p0=p0, dp=dp, q0=q0, dq=dq, q_ref=q_ref, t0=t0, t1=t1,
-                 length=length, short=short, cs=cs,
-                 count=(np.abs(ce - cs) + 1).astype(np.intp), t_col=t_col, t_col0=t_col0,
-                 tol_p=tol_p, tol_q=tol * dq, last=last)
-
-
-_UPPER_BORDER = np.array([[False], [True], [False], [True]])  # rows of _clip's p and q
-
-
-@dataclass
-class _Cols:
-    """Cells of some columns of some segments (see :func:`_columns`), one entry per column."""
-
-    n: np.ndarray        # columns per selected segment (they come in segment order)
-    two: np.ndarray      # the column has a slot B
-    flat_a: np.ndarray   # float holding exact integers
-    flat_b: np.ndarray   # meaningful where ``two``
-    u_in: np.ndarray     # u (= t·scale − shift) where slot A is entered …
-    u_mid: np.ndarray    # … where it is left (the A→B crossing, or the column's exit) …
-    u_out: np.ndarray    # … and where the segment leaves the column
-
-
-def _columns(rr: _Rays, sel, k_lo, stride_x: float, stride_y: float, offset: float,
-             scale=1.0, shift=0.0) -> _Cols:
-    """The cells of columns k_lo … count − 1 of segments ``sel`` (a slice or indices into
-    ``rr``), walked along the major axis: in each column the segment is in slot A's cell
-    and, if it crosses a minor-axis border there, in slot B's after it (|slope| ≤ 1: at most
-    one). Cells it stays in for less than ``_TOUCH_CELLS`` (corner touches) are not visits:
-    A and B are taken that far inside the column. flat = ix·stride_x + iy·stride_y + offset.
-    Positions along a segment come as u = t·scale − shift (per segment; scale > 0).
-
-    All columns of all segments are laid out flat with their segment's parameters repeated;
-    a column's borders are affine in its number, so nothing accumulates along a ray.
-    """
-    xm, dq, q0, t_col, t_col0 = rr.xmaj[sel], rr.dq[sel], rr.q0[sel], rr.t_col[sel], rr.t_col0[sel]
-    tol_q = rr.tol_q[sel]
-    n = rr.count[sel] - k_lo
-    first = np.cumsum(n)
-    first -= n
-    per = np.empty((14, len(n)))
-    np.subtract(k_lo, first, out=per[0])
-    uc = np.multiply(t_col, scale, out=per[3])
-    np.subtract(t_col0 * scale, shift, out=per[1])     # u where column 0 is entered …
-    np.add(per[1], uc, out=per[2])                     # … and left
-    np.subtract(rr.t0[sel] * scale, shift, out=per[4])  # the clipped part, in u
-    np.subtract(rr.t1[sel] * scale, shift, out=per[5])
-    dq_u = np.divide(dq, scale, out=per[8])         # minor coordinate per u
-    cross = scale / dq                                 # u of minor border b: b·cross + cross0
-    cross[~np.isfinite(cross)] = 0.0                   # (a segment too flat to cross one)
-    q_u0 = q0 + shift * dq_u                           # minor coordinate at u = 0
-    np.add(q_u0, tol_q, out=per[6])                    # slot A: a touch length in, …
-    np.subtract(q_u0, tol_q, out=per[7])               # … slot B: a touch length before the end
-    stride_p = np.where(xm, stride_x, stride_y)
-    per[9] = np.where(xm, stride_y, stride_x)
-    np.add(rr.cs[sel] * stride_p + rr.q_ref[sel] * per[9], offset, out=per[10])
-    np.copyto(per[11], np.where(rr.dp[sel] < 0, -stride_p, stride_p))
-    per[12] = cross
-    np.negative(q_u0 * cross, out=per[13])
-    short = rr.short[sel] if rr.short is not None else None
-    if short is not None and short.any():             # the start cell only, whole segment
-        per[1][short] = -np.inf
-        per[2][short] = np.inf
-        per[6][short] = per[7][short] = (q0 + rr.t0[sel] * dq)[short]
-        per[8][short] = 0.0
-        per[12][short] = per[13][short] = 0.0
-    per = np.repeat(per, n, axis=1)
-    k = _arange(per.shape[1]) + per[0]
-    u_in = np.maximum(per[1] + k * per[3], per[4])
-    u_out = per[2] + k * per[3]
-    np.minimum(u_out, per[5], out=u_out)
-    a = np.floor(per[6] + u_in * per[8])
-    z = np.floor(per[7] + u_out * per[8])
-    two = z != a
-    u_cross = np.maximum(a, z)                         # the border between A and B
-    u_cross *= per[12]
-    u_cross += per[13]
-    u_mid = np.where(two, _clamp(u_cross, u_in, u_out), u_out)
-    flat_a = a * per[9]
-    flat_a += per[10]
-    flat_a += k * per[11]
-    flat_b = np.subtract(z, a, out=z)
-    flat_b *= per[9]
-    flat_b += flat_a
-    return _Cols(n=n, two=two, flat_a=flat_a, flat_b=flat_b, u_in=u_in, u_mid=u_mid, u_out=u_out)
-
-
-def _runs(rr: _Rays, t_end: np.ndarray, ok: np.ndarray, unit: np.ndarray,
-          box: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Segments from t0 to ``t_end`` (those with ``ok``, each at least ``_SHORT_CELLS``
-    long) as row runs: (indices, weights) of a difference array whose cumulative sum along
-    the major axis adds ``unit`` (per segment) to every cell the segment visits (same touch
-    rule as :func:`_columns`). Excluded segments point at index 2·size (a spare bin).
-
-    In every minor-axis row a segment (|slope| ≤ 1) visits one contiguous run of columns;
-    runs begin and end where it crosses minor-axis borders, so the work is per crossing, not
-    per cell. box = (ix0, iy0, width, height): the cells, padded by one on every side.
-    Index layout: x-major segments in the box as rows y × columns x, y-major ones after it
-    as rows x × columns y.
-    """
-    ix0, iy0, bw, bh = box
-    size = bw * bh
-    xm, p0, dp, q0, dq, t0, tol_p, tol_q = (rr.xmaj, rr.p0, rr.dp, rr.q0, rr.dq, rr.t0,
-                                            rr.tol_p, rr.tol_q)
-    fwd = dp >= 0
-    back = ~fwd
-    up = dq > 0
-    # last column and first / last row, a touch length inside the piece
-    ce = _clamp(np.floor(p0 + t_end * dp - tol_p), 0, rr.last)
-    m_s = np.floor(q0 + t0 * dq + tol_q)                       # (from q_ref)
-    m_e = np.floor(q0 + t_end * dq - tol_q)
-    k = np.abs(m_e - m_s)                                       # minor-axis borders crossed
-    # index = row·row_stride + column + base (row and column in grid cells)
-    row_stride = np.where(xm, float(bw), float(bh))
-    base = np.where(xm, (1.0 - iy0) * bw + (1.0 - ix0), size + (1.0 - ix0) * bh + (1.0 - iy0))
-    base += rr.q_ref * row_stride
-    row0 = m_s * row_stride
-    row0 += base
-    # a run's first cell gets +unit and the cell after its last −unit: moving forwards that
-    # is the start and past the end, backwards the end and past the start
-    starts = row0 + rr.cs + back
-    ends = m_e * row_stride + base + ce + fwd
-    w = np.where(fwd, unit, -unit)
-    if not ok.all():
-        starts[~ok] = ends[~ok] = 2 * size
-        k[~ok] = 0
-    k = k.astype(np.intp)
-    # crossing i (of border m_s + up ± i) at p = p_cross + i·p_step: the run before it ends
-    # at floor(p ∓ tol), the one after begins at floor(p ± tol)
-    slope = dp / dq
-    slope[~np.isfinite(slope)] = 0.0                  # (a segment too flat to cross a row)
-    p_cross = p0 + (m_s + up - q0) * slope
-    row_step = np.where(up, row_stride, -row_stride)
-    per = np.empty((7, len(k)))
-    first = np.cumsum(k)
-    nk = int(first[-1]) if len(k) else 0
-    np.subtract(k, first, out=per[0])
-    np.add(p_cross - tol_p, fwd, out=per[1])
-    np.add(p_cross + tol_p, back, out=per[2])
-    np.copyto(per[3], np.where(up, slope, -slope))
-    per[4] = row0
-    per[5] = row_step
-    per[6] = w
-    per = np.repeat(per, k, axis=1)
-    i = _arange(per.shape[1]) + per[0]
-    ip = i * per[3]
-    i *= per[5]
-    i += per[4]                                        # the row before crossing i
-    # written straight into the outputs: starts, ends, before, after
-    m = len(k)
-    entries = np.empty(2 * (m + nk))
-    weights = np.empty(2 * (m + nk))
-    entries[:m] = starts
-    entries[m:2 * m] = ends
-    weights[:m] = w
-    np.negative(w, out=weights[m:2 * m])
-    before = np.add(per[1], ip, out=entries[2 * m:2 * m + nk])
-    np.floor(before, out=before)
-    before += i
-    after = np.add(per[2], ip, out=entries[2 * m + nk:])
-    np.floor(after, out=after)
-    after += i
-    after += per[5]
-    np.negative(per[6], out=weights[2 * m:2 * m + nk])
-    weights[2 * m + nk:] = per[6]
-    return entries, weights
-
-
-_ARANGE = np.arange(0.0)
-# np.clip's ufunc, without the Python wrapper around it (~2 µs a call)
-_clamp = getattr(np, "_core", getattr(np, "core", None)).umath.clip
-
-
-def _arange(n: int) -> np.ndarray:
-    """0.0, 1.0, … n − 1 as a view of one cached array (grown as needed, read-only)."""
-    global _ARANGE
-    if len(_ARANGE) < n:
-        _ARANGE = np.arange(float(max(n, 2 * len(_ARANGE), 1 << 16)))
-        _ARANGE.flags.writeable = False
-    return _ARANGE[:n]
-
-
 def traverse(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
     """Every grid cell each segment (x0, y0) → (x1, y1) (metres) crosses, exactly.
 
-    Vectorised Amanatides–Woo: segments are clipped to the grid (Liang–Barsky), then walked
-    column by column along their major axis, all at once (see :func:`_columns`).
+    Amanatides–Woo in the compiled walk (irring/_traverse.pyx, shared with
+    :meth:`OccupancyGrid.insert`): segments are clipped to the grid (Liang–Barsky), then
+    walked column by column along their major axis.
     Conventions for the hard cases: a segment running exactly along a cell border belongs
     to the cells above / right of it (``floor``); a segment through a cell corner does not
     visit the two cells it only touches (nor any cell it stays in for less than 1e-9 cells);
     a zero-length segment visits the one cell holding it; parts outside the grid are dropped.
     """
-    with np.errstate(all="ignore"):   # non-finite and degenerate segments are handled explicitly
-        return _traverse_batches(x0, y0, x1, y1, origin_xy_m, shape, resolution_m)
-
-
-def _traverse_batches(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
     ny, nx = int(shape[0]), int(shape[1])
     res = float(resolution_m)
-    g = [(np.asarray(v, dtype=float).ravel() - origin_xy_m[i % 2]) / res
-         for i, v in enumerate((x0, y0, x1, y1))]
-    e = np.stack([g[0], g[1], g[2] - g[0], g[3] - g[1]])
-    # batches of ~2^16 columns bound the memory for many long segments
-    cols = np.minimum(np.maximum(np.abs(e[2]), np.abs(e[3])), nx + ny) + 2
-    ends = np.cumsum(np.where(np.isfinite(cols), cols, 0))
-    cuts = list(np.searchsorted(ends, np.arange(1, int(ends[-1] // _BATCH_COLUMNS) + 1)
-                                * _BATCH_COLUMNS)) if len(ends) else []
-    bounds = [(lo, hi) for lo, hi in zip([0, *cuts], [*cuts, len(cols)]) if hi > lo] or [(0, 0)]
-    parts = [_traverse(e[:, lo:hi], nx, ny) for lo, hi in bounds]
-    return Visits(*(np.concatenate([getattr(v, f) + (lo if f == "ray" else 0)
-                                    for v, (lo, _) in zip(parts, bounds)])
-                    for f in ("ray", "ix", "iy", "t_enter", "t_exit")))
-
-
-_BATCH_COLUMNS = 1 << 16
-
-
-def _traverse(e: np.ndarray, nx: int, ny: int) -> Visits:
-    """:func:`traverse` for one batch, e = (x0, y0, Δx, Δy) in cells."""
-    rr = _clip(e, nx, ny)
-    # flat indices on the grid padded by one cell, so a rounding step off the edge is caught
-    width = nx + 2
-    c = _columns(rr, slice(None), 0, 1.0, float(width), float(width + 1))
-    keep = np.stack([np.ones(len(c.two), bool), c.two], axis=1).ravel()
-    flat = np.stack([c.flat_a, c.flat_b], axis=1).ravel()[keep].astype(np.int64)
-    ix = flat % width - 1
-    iy = flat // width - 1
-    inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
-    pick = np.flatnonzero(keep)[inside]
-    ray = np.repeat(np.arange(len(c.n)), 2 * c.n)[pick]
-    return Visits(ray=ray if rr.rays is None else rr.rays[ray], ix=ix[inside], iy=iy[inside],
-                  t_enter=np.stack([c.u_in, c.u_mid], axis=1).ravel()[pick],
-                  t_exit=np.stack([c.u_mid, c.u_out], axis=1).ravel()[pick])
+    with np.errstate(all="ignore"):   # non-finite segments are dropped by the walk
+        g = [(np.asarray(v, dtype=float).ravel() - origin_xy_m[i % 2]) / res
+             for i, v in enumerate((x0, y0, x1, y1))]
+        dx, dy = g[2] - g[0], g[3] - g[1]
+    return Visits(*_traverse.walk(g[0], g[1], dx, dy, nx, ny))
 
 
 # --------------------------------------------------------------------------- the grid
 
 
-def _erfc_pos(x: np.ndarray) -> np.ndarray:
-    """erfc(x) for x ≥ 0 to 2.5e-5 (Abramowitz & Stegun 7.1.25), in x's dtype; numpy has no
-    erf and scipy is not a dependency."""
-    c = x.dtype.type
-    t = c(0.47047) * x
-    t += c(1.0)
-    np.reciprocal(t, out=t)
-    poly = c(0.7478556) * t
-    poly += c(-0.0958798)
-    poly *= t
-    poly += c(0.3480242)
-    poly *= t
-    e = np.square(x)
-    np.negative(e, out=e)
-    poly *= np.exp(e, out=e)
-    return poly
+def _flat(values) -> np.ndarray:
+    """A flat float64 C-contiguous array (a view where it already is one), for the kernel."""
+    return np.ascontiguousarray(values, dtype=float).ravel()
 
 
 class OccupancyGrid:
@@ -566,171 +253,22 @@ class OccupancyGrid:
 
     # ---- updates
 
-    def _box_delta(self, points: Points) -> tuple[np.ndarray, int, int] | None:
-        with np.errstate(all="ignore"):   # non-finite and degenerate beams are handled explicitly
-            return self._beams_delta(points)
-
-    def _beams_delta(self, points: Points) -> tuple[np.ndarray, int, int] | None:
-        """The log-odds change of ``points`` on the box of cells their beams can reach:
-        (change (h, w), ix, iy of its corner cell), or None when no beam is mapped. The box
-        has a border of one cell beyond the beams (zero there).
-
-        Work and memory scale with the beams, not the grid. Cells a beam crosses at constant
-        weight (a no-return beam; a valid beam more than ``_NEAR_SIGMAS``·σ + margin in front
-        of its end point) are counted as row runs; only the columns after that are weighed
-        with the model, cell by cell.
-        """
-        p = self.params
-        res = self.resolution_m
-        ox = np.asarray(points.origin_x, float).ravel()
-        oy = np.asarray(points.origin_y, float).ravel()
-        heading = np.asarray(points.heading, float).ravel()
-        ex = np.asarray(points.x, float).ravel()
-        ey = np.asarray(points.y, float).ravel()
-        finite_o = np.isfinite(ox + oy)
-        valid = np.asarray(points.valid, bool).ravel() & np.isfinite(ex + ey) & finite_o
-        iv = np.flatnonzero(valid)
-        nr = np.flatnonzero(~valid & (np.asarray(points.reason).ravel() == _NO_RETURN)
-                            & finite_o & np.isfinite(heading))
-        nv = len(iv)
-        nb = nv + len(nr)
-        if nb == 0:
-            return None
-        # valid beams: emitter → end point, continued tail_sigmas·σ into the surface
-        sigma = np.asarray(points.sigma_m, float).ravel()[iv]
-        sigma = np.maximum(np.where(np.isfinite(sigma), sigma, p.default_sigma_m), p.min_sigma_m)
-        e = np.empty((4, nb))        # beams in cells: x0, y0, Δx, Δy
-        both = np.concatenate([iv, nr])
-        np.subtract(ox[both], self.origin_xy_m[0], out=e[0])
-        np.subtract(oy[both], self.origin_xy_m[1], out=e[1])
-        vx = np.subtract(ex[iv], ox[iv], out=e[2, :nv])
-        vy = np.subtract(ey[iv], oy[iv], out=e[3, :nv])
-        d = np.sqrt(vx * vx + vy * vy)
-        length = d + p.tail_sigmas * sigma
-        stretch = length / d
-        if nv and not d.min() > 0:   # an end point on its emitter: along the heading
-            at = d == 0
-            hx, hy = np.cos(heading[iv]), np.sin(heading[iv])
-            vx[at] = np.where(np.isfinite(hx), hx, 0.0)[at]
-            vy[at] = np.where(np.isfinite(hy), hy, 0.0)[at]
-            stretch[at] = length[at]
-        e[2:, :nv] *= stretch
-        # no-return beams: emitter → max range along the heading
-        h = heading[nr]
-        rmax = float(points.max_range_m)
-        np.multiply(np.cos(h), rmax, out=e[2, nv:])
-        np.multiply(np.sin(h), rmax, out=e[3, nv:])
-        e *= 1.0 / res
-        if not np.abs(e).max() < _FAR_CELLS:   # overflowed or absurd numbers: not mapped
-            keep = (np.abs(e) < _FAR_CELLS).all(axis=0)
-            e, d, sigma, length = e[:, keep], d[keep[:nv]], sigma[keep[:nv]], length[keep[:nv]]
-            nv = len(d)
-            if not e.shape[1]:
-                return None
-
-        # the beams' bounding box on the grid, one cell wider on every side (an end point a
-        # rounding step from a border may lie in the next cell), and a border of one cell
-        # beyond that for the runs' ends
-        ny, nx = self.shape
-        tips = e[:2] + e[2:]
-        lo_x, lo_y = np.minimum(e[:2], tips).min(axis=1).tolist()
-        hi_x, hi_y = np.maximum(e[:2], tips).max(axis=1).tolist()
-        inside = lo_x >= 0 and lo_y >= 0 and hi_x < nx and hi_y < ny
-        bx0, by0 = max(math.floor(lo_x) - 1, 0), max(math.floor(lo_y) - 1, 0)
-        bx1, by1 = min(math.floor(hi_x) + 1, nx - 1), min(math.floor(hi_y) + 1, ny - 1)
-        if bx0 > bx1 or by0 > by1:
-            return None
-        bw, bh = bx1 - bx0 + 3, by1 - by0 + 3
-        size = bw * bh
-        rr = _clip(e, nx, ny, inside)
-        if not len(rr.t0):
-            return None
-        kv = nv if rr.rays is None else int(np.searchsorted(rr.rays, nv))  # valid beams first
-        if rr.rays is not None:
-            d, sigma, length = d[rr.rays[:kv]], sigma[rr.rays[:kv]], length[rr.rays[:kv]]
-
-        # a valid beam's columns in front of its near-end part, and every no-return beam
-        # but the shortest, are counted as runs
-        margin_m = p.free_margin_cells * res
-        t_col0, t_col = rr.t_col0[:kv], rr.t_col[:kv]
-        n_far = np.floor(((d - margin_m - _NEAR_SIGMAS * sigma) / length - t_col0) / t_col)
-        n_far = _clamp(n_far, 0.0, rr.count[:kv])
-        if rr.short is not None:
-            n_far[rr.short[:kv]] = 0.0
-        # (a beam leaving the grid may have only far columns: they end where it leaves)
-        t_end = np.concatenate([np.minimum(t_col0 + n_far * t_col, rr.t1[:kv]), rr.t1[kv:]])
-        ok = (t_end - rr.t0) * rr.length >= _SHORT_CELLS
-        n_far[~ok[:kv]] = 0.0
-        n_far = n_far.astype(np.intp)
-        # visits counted exactly (integers in float64): valid beams 1, no-return beams 2^20
-        same = p.l_no_return == p.l_free
-        unit = np.ones(len(ok))
-        if not same:
-            unit[kv:] = _NR_UNIT
-        entries, weights = _runs(rr, t_end, ok, unit, (bx0, by0, bw, bh))
-        diff = np.bincount(entries.astype(np.int32), weights, minlength=2 * size + 1)
-        # one flat cumsum is the per-row one: every run starts and ends in its own row (the
-        # box's border cells hold the run ends), so each row's entries sum to zero
-        # (int32 while every sum fits: no bin or count exceeds twice the beams' units)
-        small = 2 * len(ok) * (1.0 if same else _NR_UNIT) < 2.0 ** 31
-        runs = diff.astype(np.int32 if small else np.int64)
-        np.cumsum(runs, out=runs)
-        counts = runs[:size].reshape(bh, bw) + runs[size:2 * size].reshape(bw, bh).T
-        change = counts * p.l_free
-        if not same:   # counts = valid + 2^20·no-return visits
-            change += (counts >> _NR_BITS) * (p.l_no_return - _NR_UNIT * p.l_free)
-
-        offset = float(bw * (1 - by0) + 1 - bx0)
-        if kv:   # the near-end columns of valid beams, in σ from the end point (u = (s − d)/σ)
-            c = _columns(rr, slice(0, kv), n_far, 1.0, float(bw), offset,
-                         scale=length / sigma, shift=d / sigma)
-            kb = np.flatnonzero(c.two)
-            mu = np.repeat(margin_m / sigma, c.n)
-            w = self._weight(np.concatenate([c.u_in, c.u_mid[kb]]),
-                             np.concatenate([c.u_mid, c.u_out[kb]]),
-                             np.concatenate([mu, mu[kb]]))
-            cells = np.concatenate([c.flat_a, c.flat_b[kb]]).astype(np.int32)
-            change += np.bincount(cells, w, minlength=size).reshape(bh, bw)
-        if rr.short is not None and rr.short[kv:].any():
-            # no-return beams clipped to a few touch lengths: their start cell
-            short = kv + np.flatnonzero(rr.short[kv:])
-            c = _columns(rr, short, 0, 1.0, float(bw), offset)
-            change += (np.bincount(c.flat_a.astype(np.intp), minlength=size).reshape(bh, bw)
-                       * p.l_no_return)
-        return change, bx0 - 1, by0 - 1
-
-    def _weight(self, z_a: np.ndarray, z_b: np.ndarray, mu: np.ndarray) -> np.ndarray:
-        """Log-odds for a cell a valid beam crosses from z_a to z_b, in σ from its end point
-        (the module doc's formula); ``mu`` = the free margin in σ. In float32 (to ~1e-5)."""
-        p = self.params
-        f32 = np.float32
-        z_b = z_b.astype(f32)
-        # occupied: l_occ·exp(−gap²/2), gap = how far the cell's [z_a, z_b] is from 0
-        gap = np.maximum(z_a.astype(f32), np.negative(z_b))
-        np.maximum(gap, f32(0), out=gap)
-        occ = np.square(gap, out=gap)
-        occ *= f32(-0.5)
-        np.exp(occ, out=occ)
-        occ *= f32(p.l_occ)
-        # free: l_free·Φ(y) for y = −(z_b + mu) > 0 (the whole cell in front of the margin),
-        # Φ(y) = 1 − erfc(y/√2)/2
-        y = np.add(z_b, mu, out=z_b, casting="unsafe")
-        y *= f32(-1.0 / math.sqrt(2.0))
-        in_front = y > 0
-        free = _erfc_pos(np.maximum(y, f32(0), out=y))
-        free *= f32(-0.5 * p.l_free)
-        free += f32(p.l_free)
-        free *= in_front
-        occ += free
-        return occ
+    def _add(self, log_odds: np.ndarray, points: Points, lo: float, hi: float) -> None:
+        """Add the log-odds of ``points`` to ``log_odds`` (this grid's shape, float64,
+        C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
+        ``add_beams``). Work and memory scale with the beams, not the grid."""
+        _traverse.add_beams(
+            log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
+            _flat(points.x), _flat(points.y), _flat(points.sigma_m),
+            np.asarray(points.valid, bool).ravel().view(np.uint8),
+            (np.asarray(points.reason).ravel() == _NO_RETURN).view(np.uint8),
+            float(points.max_range_m), float(self.origin_xy_m[0]), float(self.origin_xy_m[1]),
+            self.resolution_m, self.params, lo, hi)
 
     def delta(self, points: Points) -> np.ndarray:
         """The log-odds change (ny, nx) the readings in ``points`` would add (before clamping)."""
         out = np.zeros(self.shape)
-        box = self._box_delta(points)
-        if box is not None:
-            change, ix, iy = box
-            out[iy + 1:iy + change.shape[0] - 1, ix + 1:ix + change.shape[1] - 1] = change[1:-1, 1:-1]
+        self._add(out, points, -np.inf, np.inf)
         return out
 
     def apply(self, delta: np.ndarray) -> None:
@@ -740,13 +278,8 @@ class OccupancyGrid:
     def insert(self, points: Points) -> None:
         """Add one batch of readings (typically a sweep) to the map; only the cells its beams
         can reach are touched."""
-        box = self._box_delta(points)
-        if box is None:
-            return
-        change, ix, iy = box
-        h, w = change.shape
-        view = self.log_odds[iy + 1:iy + h - 1, ix + 1:ix + w - 1]
-        _clamp(np.add(view, change[1:-1, 1:-1]), self.params.l_min, self.params.l_max, out=view)
+        self.log_odds = np.ascontiguousarray(self.log_odds, dtype=float)   # (as the kernel wants)
+        self._add(self.log_odds, points, self.params.l_min, self.params.l_max)
 
     # ---- reading the map
 

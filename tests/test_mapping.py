@@ -55,6 +55,13 @@ def test_end_points_outside_the_grid_are_clipped():
     assert v.t_enter[0] == pytest.approx(3 / 13) and v.t_exit[-1] == pytest.approx(9 / 13)
 
 
+def test_non_finite_segments_have_no_visits_and_leave_the_others_alone():
+    v = traverse(np.array([np.nan, 1.0, 1.0, 1e300, 0.5]), np.array([1.0, np.inf, 1.0, 1.0, 0.5]),
+                 np.array([3.0, 3.0, np.nan, -1e300, 3.5]), np.array([1.0, 1.0, 1.0, 1.0, 0.5]),
+                 (0, 0), (6, 6), 1.0)
+    assert v.ray.tolist() == [4] * 4 and v.ix.tolist() == [0, 1, 2, 3]
+
+
 def test_shallow_ray_steps_in_x_then_y():
     assert cells(0.5, 0.5, 3.5, 1.5) == [(0, 0), (1, 0), (2, 1), (3, 1)]
 
@@ -296,8 +303,9 @@ def random_points(rng, n, *, box=(0.6, 0.4), max_range_m=0.3):
 @pytest.mark.parametrize("params", [{}, {"l_no_return": -0.3, "tail_sigmas": 3.0},
                                     {"free_margin_cells": 0.0, "min_sigma_m": 0.002}])
 def test_insert_follows_the_documented_model_visit_by_visit(params):
-    """The fast insert (row runs, near-end columns, float32 weights) against the formula
-    evaluated on every traverse() visit: equal to the weights' float32 precision."""
+    """The fast insert (row runs, near-end columns, A&S erfc) against the formula evaluated
+    on every traverse() visit: equal to the documented 1e-4 (erfc to 2.5e-5, the constant
+    part to 4e-5)."""
     rng = np.random.default_rng(7)
     for _ in range(3):
         g = small_grid(**params)
@@ -343,6 +351,59 @@ def test_insert_matches_the_reference_on_a_t_room_sweep():
         g.insert(p)
         want = np.clip(reference_delta(g, p), g.params.l_min, g.params.l_max)
         np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
+
+
+def test_grid_much_smaller_than_the_beams_reach_follows_the_reference():
+    """Beams start and end outside a 4 × 5-cell grid, pass through it or miss it: only the
+    cells inside change, as the formula on traverse() says."""
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        pts = random_points(rng, 400)
+        g = OccupancyGrid((0.25, 0.15), (4, 5), 0.01)
+        g.insert(pts)
+        want = np.clip(reference_delta(g, pts), g.params.l_min, g.params.l_max)
+        np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
+        assert np.array_equal(g.log_odds != 0, want != 0) and (want != 0).any()
+
+
+def test_batches_with_nothing_to_map_change_nothing():
+    """No readings, only invalid ones with NaN end points and emitters, or beams that all
+    miss the grid: insert and delta leave every cell at its value."""
+    rng = np.random.default_rng(2)
+    empty = random_points(rng, 0)
+    invalid = random_points(rng, 50)
+    invalid.valid[:] = False
+    invalid.reason[:] = Reason.OUT_OF_RANGE
+    invalid.x[::2] = invalid.origin_x[::3] = np.nan
+    missing = random_points(rng, 50)
+    missing.origin_x[:] += 5.0                         # 5 m to the right of the 0.6 m grid
+    missing.x[:] += 5.0
+    for pts in (empty, invalid, missing):
+        g = small_grid()
+        g.log_odds[3, 4] = 1.25
+        g.insert(pts)
+        assert np.count_nonzero(g.log_odds) == 1 and g.log_odds[3, 4] == 1.25
+        assert not g.delta(pts).any()
+
+
+def test_insert_takes_float32_and_non_contiguous_readings():
+    """The kernel wants flat float64 arrays and a C-ordered grid; insert converts at the
+    boundary."""
+    pts = random_points(np.random.default_rng(4), 300)
+    f32 = Points(**{k: (v.astype(np.float32) if isinstance(v, np.ndarray) and v.dtype == float
+                        else v) for k, v in vars(pts).items()})
+    as_f64 = Points(**{k: (v.astype(float) if isinstance(v, np.ndarray) and v.dtype == np.float32
+                           else v) for k, v in vars(f32).items()})
+    strided = Points(**{k: (np.repeat(v, 2)[::2] if isinstance(v, np.ndarray) else v)
+                        for k, v in vars(as_f64).items()})
+    a, b, c = small_grid(), small_grid(), small_grid()
+    c.log_odds = np.asfortranarray(c.log_odds)
+    a.insert(f32)
+    b.insert(as_f64)
+    c.insert(strided)
+    assert a.log_odds.any()
+    np.testing.assert_array_equal(a.log_odds, b.log_odds)
+    np.testing.assert_array_equal(c.log_odds, b.log_odds)
 
 
 def test_for_scenario_covers_outline_plus_margin_with_walls_through_cell_centres():
