@@ -23,6 +23,7 @@ first NaN if any); groupings by line are stable. The build must not fuse a·b + 
 rounding (``-ffp-contract=off``; x86-64's default code has no FMA anyway).
 """
 
+cimport cython
 import numpy as np
 
 from libc.math cimport cos, fabs, floor, hypot, isfinite, rint, sin, sqrt
@@ -143,6 +144,56 @@ cdef inline Py_ssize_t _argmin(const double* r, Py_ssize_t n) noexcept nogil:
     return best
 
 
+cdef inline double _fine_x(Py_ssize_t c, Py_ssize_t top, double step) noexcept nogil:
+    """np.linspace(0, π/2, top + 1)[c]: c·step, the last node π/2 itself."""
+    return HALF_PI if c == top else c * step
+
+
+cdef inline double _interp_at(double x, Py_ssize_t j, const double* xp, const double* fp,
+                              const double* slope, Py_ssize_t n) noexcept nogil:
+    """np.interp(x, xp, fp) given j, the last of the n nodes xp at or below x (−1: none):
+    held at the ends, fp[j] on a node, else slope·(x − xp[j]) + fp[j] with
+    slope = (fp[j+1] − fp[j]) / (xp[j+1] − xp[j])."""
+    if j < 0:
+        return fp[0]
+    if j >= n - 1:
+        return fp[n - 1]
+    if x == xp[j]:
+        return fp[j]
+    return slope[j] * (x - xp[j]) + fp[j]
+
+
+cdef void _slopes(const double[::1] xp, const double[::1] fp, double[::1] out) noexcept:
+    cdef Py_ssize_t j
+    for j in range(xp.shape[0] - 1):
+        out[j] = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+
+
+def fine_table_is_interp(const double[::1] xp, const double[::1] log_a, const double[::1] b,
+                         const double[:, ::1] table):
+    """Whether the calibration's fine table (rows log a, b at np.linspace(0, π/2, cells + 1),
+    by np.interp over the nodes ``xp``) equals, bit for bit at every row, what
+    :meth:`Sweep.look` computes from the nodes. Then the estimator computes its look-ups
+    instead of reading the 1 MB table, whose rows are mostly cache misses; if not (another
+    numpy rounding the interpolation differently), it reads the table."""
+    cdef Py_ssize_t n = xp.shape[0], top = table.shape[0] - 1, c, j = -1
+    cdef double x, step = HALF_PI / top
+    if n < 1 or top < 1:
+        return False
+    sa_arr, sb_arr = _empty(max(n - 1, 1)), _empty(max(n - 1, 1))
+    cdef double[::1] sa = sa_arr, sb = sb_arr
+    _slopes(xp, log_a, sa)
+    _slopes(xp, b, sb)
+    for c in range(top + 1):
+        x = _fine_x(c, top, step)
+        while j + 1 < n and xp[j + 1] <= x:
+            j += 1
+        if (_interp_at(x, j, &xp[0], &log_a[0], &sa[0], n) != table[c, 0]
+                or _interp_at(x, j, &xp[0], &b[0], &sb[0], n) != table[c, 1]):
+            return False
+    return True
+
+
 def classify(const double[::1] counts, unsigned char[::1] reason, double full, double near,
              double no_return, double sigma, bint falling):
     """Reasons decided by the counts alone (before any distance is computed), into
@@ -185,6 +236,7 @@ def same(const Py_ssize_t[::1] a, const Py_ssize_t[::1] b):
 # --------------------------------------------------------------------------- the readings
 
 
+@cython.final
 cdef class Sweep:
     """One sweep's live readings in scan order (sensor by sensor, by step), and the
     calibration's curve, for the loop: everything per reading that θ does not change.
@@ -199,8 +251,14 @@ cdef class Sweep:
     cdef readonly object index, sensor, centre, log_s
     cdef readonly object d, px, py, sigma, thr
     cdef readonly double cap, reject
-    cdef const double[::1] la_t, b_t
-    cdef double[::1] counts, ls, ox, oy, ux, uy, hm, sig_s
+    cdef const double[:, ::1] ab_t
+    # the calibration's nodes, for computing the fine table's rows (see look)
+    cdef bint exact
+    cdef Py_ssize_t n_nodes
+    cdef double step
+    cdef double[::1] xp, fa, fb, sa, sb
+    cdef Py_ssize_t[::1] bucket
+    cdef double[::1] ls, ox, oy, ux, uy, hm, sig_s
     cdef Py_ssize_t[::1] ix
     cdef unsigned char[::1] run_brk
     cdef double[::1] _d, _px, _py, _sigma, _thr
@@ -209,6 +267,15 @@ cdef class Sweep:
     cdef double inv_h, cx0, cy0, min_split, split_sigmas, adopt_margin, corner_sigmas
     cdef double pinned, floor_m
     cdef Py_ssize_t corner_window, top
+    # scratch for the kernels (each uses it within one call): index rows of k + 1, value
+    # rows of k, a flag row, and a growing buffer for re-read distances (numpy's exp needs
+    # an array)
+    cdef Py_ssize_t[:, ::1] iscr
+    cdef double[:, ::1] dscr
+    cdef object dscr_obj
+    cdef unsigned char[::1] flag
+    cdef object rr_obj
+    cdef double[::1] rr_th
 
     def __init__(self, cal, opts, const double[::1] counts, const double[::1] origin,
                  const double[::1] heading, const unsigned char[::1] reason,
@@ -216,26 +283,23 @@ cdef class Sweep:
                  double pinned_rad):
         """``counts``, ``heading`` (S·N,), ``origin`` (S·N·2,) flat in (S, N) order,
         ``reason`` the counts' verdicts (live: OK), ``scan`` the flat scan order;
-        ``floor_m`` the smallest σ, ``pinned_rad`` (see drop_steep)."""
+        ``floor_m`` the smallest σ, ``pinned_rad`` (see Grouping.drop_steep)."""
         cdef Py_ssize_t total = scan.shape[0], p, f, j, k = 0, prev = -2
         cdef double c, h, sigma_counts = cal._levels[3]
         for p in range(total):
             if reason[scan[p]] == R_OK:
                 k += 1
         self.k = k
-        self.index = _empty(k, dtype=_intp)
-        self.sensor = _empty(k, dtype=_intp)
-        self.ix = self.index
-        cdef Py_ssize_t[::1] sn = self.sensor
+        ints = _empty((2, k), dtype=_intp)
+        self.index, self.sensor = ints[0], ints[1]
+        cdef Py_ssize_t[:, ::1] iv = ints
+        self.ix = iv[0]
+        cdef Py_ssize_t[::1] sn = iv[1]
         self.run_brk = _empty(k, dtype=_uint8)
-        counts_c = _empty(k)
-        self.counts = counts_c
-        self.ox = _empty(k)
-        self.oy = _empty(k)
-        self.ux = _empty(k)
-        self.uy = _empty(k)
-        self.hm = _empty(k)
-        self.sig_s = _empty(k)
+        rows = _empty((7, k))
+        cdef double[:, ::1] rv = rows
+        cdef double[::1] cc = rv[0]
+        self.ox, self.oy, self.ux, self.uy, self.hm, self.sig_s = rv[1], rv[2], rv[3], rv[4], rv[5], rv[6]
         j = 0
         for p in range(total):
             f = scan[p]
@@ -246,7 +310,7 @@ cdef class Sweep:
             self.run_brk[j] = j == 0 or sn[j] != sn[j - 1] or p != prev + 1
             prev = p
             c = counts[f]
-            self.counts[j] = c
+            cc[j] = c
             self.sig_s[j] = sigma_counts / c        # σ_d = |b|·d·σ_S/S
             self.ox[j] = origin[2 * f]
             self.oy[j] = origin[2 * f + 1]
@@ -255,18 +319,19 @@ cdef class Sweep:
             self.uy[j] = sin(h)
             self.hm[j] = h - PI * floor(h / PI)     # heading mod π
             j += 1
-        self.log_s = _log(counts_c)
+        self.log_s = _log(rows[0])
         self.ls = self.log_s
-        if k:
-            self.centre = (float(np.asarray(self.ox).sum()) / k,
-                           float(np.asarray(self.oy).sum()) / k)
+        if k:   # numpy's sum (pairwise, in blocks of its buffer size)
+            self.centre = (float(rows[1].sum()) / k, float(rows[2].sum()) / k)
         else:
             self.centre = (0.0, 0.0)
         self.cx0, self.cy0 = self.centre
-        self.inv_h, la_t, b_t = cal._fine
-        self.la_t = la_t
-        self.b_t = b_t
-        self.top = self.la_t.shape[0] - 1
+        self.inv_h, ab_t, self.exact = cal._fine
+        self.ab_t = ab_t
+        self.top = self.ab_t.shape[0] - 1
+        self.step = HALF_PI / self.top
+        if self.exact:
+            self._nodes(cal)
         self.cap = cal.max_incidence_rad
         self.reject = self.cap + opts.incidence_margin_rad
         self.min_split = opts.min_split_m
@@ -277,6 +342,67 @@ cdef class Sweep:
         self.floor_m = floor_m
         self.pinned = pinned_rad
         self.all_usable = True
+        self.iscr = _empty((5, k + 1), dtype=_intp)
+        self.dscr_obj = _empty((7, k))
+        self.dscr = self.dscr_obj
+        self.flag = _empty(k, dtype=_uint8)
+        self.rr_obj = _empty(0)
+        self.rr_th = _empty(0)
+
+    cdef void _nodes(self, cal):
+        """The calibration's nodes and slopes, and for every 256 rows of the fine table the
+        interval their first row falls in."""
+        cdef Py_ssize_t n, q, j = -1
+        cdef double x
+        nodes = _empty((5, cal.theta_rad.shape[0]))
+        nodes[0], nodes[1], nodes[2] = cal.theta_rad, cal._log_a, cal.b
+        cdef double[:, ::1] nv = nodes
+        self.xp, self.fa, self.fb, self.sa, self.sb = nv[0], nv[1], nv[2], nv[3], nv[4]
+        n = self.n_nodes = nv.shape[1]
+        _slopes(self.xp, self.fa, self.sa)
+        _slopes(self.xp, self.fb, self.sb)
+        self.bucket = _empty((self.top >> 8) + 1, dtype=_intp)
+        for q in range(self.bucket.shape[0]):
+            x = _fine_x(q << 8, self.top, self.step)
+            while j + 1 < n and self.xp[j + 1] <= x:
+                j += 1
+            self.bucket[q] = j
+
+    cdef inline void look(self, double theta, double* la, double* b) noexcept nogil:
+        """log a(θ), b(θ) at the fine table's node nearest θ (see :meth:`cell`): computed
+        from the calibration's nodes exactly as the table was built (np.interp at
+        np.linspace nodes; the calibration checked every row, see fine_table_is_interp),
+        else read from the table."""
+        cdef Py_ssize_t c = self.cell(theta), j, n = self.n_nodes
+        cdef double x
+        if not self.exact:
+            la[0] = self.ab_t[c, 0]
+            b[0] = self.ab_t[c, 1]
+            return
+        x = _fine_x(c, self.top, self.step)
+        j = self.bucket[c >> 8]
+        while j + 1 < n and self.xp[j + 1] <= x:
+            j += 1
+        la[0] = _interp_at(x, j, &self.xp[0], &self.fa[0], &self.sa[0], n)
+        b[0] = _interp_at(x, j, &self.xp[0], &self.fb[0], &self.sb[0], n)
+
+    cdef void curve(self, double theta, double* la, double* b) noexcept nogil:
+        """log a(θ), b(θ) of the calibration (linear in |θ| between its nodes, held at the
+        ends): Calibration._log_ab's np.interp, the same computation as :meth:`look` (only
+        with ``exact``)."""
+        cdef Py_ssize_t j, n = self.n_nodes
+        cdef double x = fabs(theta)
+        if x != x:
+            la[0] = b[0] = x
+            return
+        j = <Py_ssize_t>_min(x * self.inv_h, <double>self.top) >> 8
+        j = self.bucket[j]
+        while j >= 0 and self.xp[j] > x:
+            j -= 1
+        while j + 1 < n and self.xp[j + 1] <= x:
+            j += 1
+        la[0] = _interp_at(x, j, &self.xp[0], &self.fa[0], &self.sa[0], n)
+        b[0] = _interp_at(x, j, &self.xp[0], &self.fb[0], &self.sb[0], n)
 
     cdef inline Py_ssize_t cell(self, double theta) noexcept nogil:
         """The fine (log a, b) table's node nearest θ ∈ [0, π/2] (θ·cells/(π/2) + 0.5,
@@ -286,25 +412,31 @@ cdef class Sweep:
             return <Py_ssize_t>x
         return self.top if x >= 0.0 else 0
 
+    cdef object rr(self, Py_ssize_t n):
+        """The re-read buffer's first n entries as an array (grown when needed; ``rr_th``
+        grows with it)."""
+        if self.rr_obj.shape[0] < n:
+            self.rr_obj = _empty(2 * n)
+            self.rr_th = _empty(2 * n)
+        return self.rr_obj[:n]
+
     def place(self, const double[::1] theta, double max_use_m):
         """Every live reading at incidence θ: d, end point, σ and split threshold (new arrays
         ``d``, ``px``, ``py``, ``sigma``, ``thr``); readings farther than ``max_use_m`` cannot
         help a line (but stay for the final check). Returns the indices of the rest, or None
         when that is all of them."""
-        cdef Py_ssize_t i, c, k = self.k, n_use = 0
-        cdef double dv, s
-        d = _empty(k)
-        b_arr = _empty(k)
-        self.d, self.px, self.py, self.sigma, self.thr = d, _empty(k), _empty(k), _empty(k), _empty(k)
-        self._d, self._px, self._py, self._sigma, self._thr = (self.d, self.px, self.py,
-                                                               self.sigma, self.thr)
+        cdef Py_ssize_t i, k = self.k, n_use = 0
+        cdef double dv, s, la
+        rows = _empty((5, k))
+        self.d, self.px, self.py, self.sigma, self.thr = rows
+        cdef double[:, ::1] rv = rows
+        self._d, self._px, self._py, self._sigma, self._thr = rv[0], rv[1], rv[2], rv[3], rv[4]
         self.usable = _empty(k, dtype=_uint8)
-        cdef double[::1] b = b_arr
+        cdef double[::1] b = self.dscr[0]
         for i in range(k):
-            c = self.cell(theta[i])
-            b[i] = self.b_t[c]
-            self._d[i] = self.la_t[c] + self.b_t[c] * self.ls[i]
-        _exp(d, d)
+            self.look(theta[i], &la, &b[i])
+            self._d[i] = la + b[i] * self.ls[i]
+        _exp(self.d, self.d)
         for i in range(k):
             dv = self._d[i]
             self._px[i] = self.ox[i] + dv * self.ux[i]
@@ -339,64 +471,67 @@ cdef class Sweep:
                 o[self.ix[held.perm_[i]]] = held.theta[i]
         return out
 
-    def finish(self, const double[::1] theta, const double[::1] la, const double[::1] b,
-               const unsigned char[::1] on_line, const Py_ssize_t[::1] last_moving,
-               Py_ssize_t n_its, bint iterate, const double[::1] spread_la,
-               const double[::1] spread_b, double max_range_m, double min_range_m,
+    def finish(self, const double[::1] theta, on_line, const Py_ssize_t[::1] last_moving,
+               Py_ssize_t n_its, bint iterate, cal, double max_range_m,
                unsigned char[::1] reason):
-        """Final points with the exact curve (``la``, ``b``: log a(θ), b(θ) of each live
-        reading) and reasons; returns flat (S·N,) arrays x, y, d, θ, σ (NaN where not valid)
-        and iterations (int32), and writes each live reading's reason into ``reason`` (flat,
-        S·N; the others keep theirs).
+        """Final points with the exact curve (Calibration's log a(θ), b(θ): see
+        :meth:`curve`; ``cal._log_ab`` where the fine table check failed) and reasons; returns flat (S·N,) arrays x, y, d, θ, σ (NaN where not valid),
+        iterations (int32) and valid, and writes each live reading's reason into ``reason``
+        (flat, S·N; the others keep theirs).
 
         With ``iterate`` a reading on no line (``on_line`` 0) keeps θ = 0 and its σ is
         widened by the RMS error of the θ = 0 distance over the incidences a round surface
         gives: ``spread_la``, ``spread_b`` are log a, b at the quadrature nodes (see
-        ``estimate._fallback_spread``). A reading still moving in the last iteration is
+        ``estimate._fallback_nodes``). A reading still moving in the last iteration is
         NOT_CONVERGED; a distance outside [min, max] range or a non-finite point is
         OUT_OF_RANGE."""
         cdef Py_ssize_t i, j, f, k = self.k, size = reason.shape[0]
-        cdef Py_ssize_t nodes = spread_la.shape[0], n_off = 0, o
+        cdef Py_ssize_t nodes, n_off = 0, o
         cdef double dv, s, px, py
         cdef unsigned char why
-        d_arr = _empty(k)
-        sg_arr = _empty(k)
-        cdef double[::1] d = d_arr, sg = sg_arr
+        cdef double[::1] d = self.dscr[0], sg = self.dscr[1], e, la, b
+        cdef const unsigned char[::1] on = on_line
+        cdef const double[::1] spread_la, spread_b
+        spread_la, spread_b = cal._spread
+        cdef double min_range_m = cal.min_range_m
+        d_arr = self.dscr_obj[0]
+        if self.exact:
+            la, b = self.dscr[2], self.dscr[3]
+            for i in range(k):
+                self.curve(theta[i], &la[i], &b[i])
+        else:
+            la, b = cal._log_ab(np.asarray(theta))
         for i in range(k):
             d[i] = la[i] + b[i] * self.ls[i]
         _exp(d_arr, d_arr)
         for i in range(k):
             sg[i] = _max(fabs(b[i]) * d[i] * self.sig_s[i], self.floor_m)
-            if iterate and not on_line[i]:
+            if iterate and not on[i]:
                 n_off += 1
-        cdef double[::1] e
+        nodes = spread_la.shape[0]
         if n_off:
-            # fallback readings: σ widened by θ's unknown (spread over the nodes)
-            e_arr = _empty(n_off * nodes)
+            # fallback readings: σ widened by θ's unknown (the spread over the nodes)
+            e_arr = self.rr(n_off * nodes)
             e = e_arr
             o = 0
             for i in range(k):
-                if not on_line[i]:
+                if not on[i]:
                     for j in range(nodes):
                         e[o * nodes + j] = spread_la[j] + spread_b[j] * self.ls[i]
                     o += 1
             _exp(e_arr, e_arr)
             o = 0
             for i in range(k):
-                if not on_line[i]:
+                if not on[i]:
                     for j in range(nodes):
                         s = e[o * nodes + j] - d[i]
                         e[o * nodes + j] = s * s
-                    s = (0.0 + _pairwise(&e[o * nodes], nodes)) / nodes
+                    s = (0.0 + _pairwise(&e[o * nodes], nodes)) / nodes   # np.mean
                     sg[i] = hypot(sg[i], sqrt(s))
                     o += 1
-        x_out = np.full(size, NAN)
-        y_out = np.full(size, NAN)
-        d_out = np.full(size, NAN)
-        t_out = np.full(size, NAN)
-        s_out = np.full(size, NAN)
+        out = np.full((5, size), NAN)
         it_out = np.full(size, 1 if iterate else 0, dtype=np.int32)
-        cdef double[::1] xo = x_out, yo = y_out, do = d_out, to = t_out, so = s_out
+        cdef double[:, ::1] ov = out
         cdef int[::1] io = it_out
         for i in range(k):
             f = self.ix[i]
@@ -414,17 +549,22 @@ cdef class Sweep:
                 why = R_OK
             reason[f] = why
             if why == R_OK:
-                xo[f] = px
-                yo[f] = py
-                do[f] = dv
-                to[f] = theta[i]
-                so[f] = sg[i]
-        return x_out, y_out, d_out, t_out, s_out, it_out
+                ov[0, f] = px
+                ov[1, f] = py
+                ov[2, f] = dv
+                ov[3, f] = theta[i]
+                ov[4, f] = sg[i]
+        valid = _empty(size, dtype=np.bool_)
+        cdef unsigned char[::1] ok = valid.view(_uint8)
+        for f in range(size):
+            ok[f] = reason[f] == R_OK
+        return out[0], out[1], out[2], out[3], out[4], it_out, valid
 
 
 # --------------------------------------------------------------------------- membership
 
 
+@cython.final
 cdef class Grouping:
     """The lines of the current iteration and which reading takes θ from which line.
 
@@ -447,23 +587,31 @@ cdef class Grouping:
     cdef Py_ssize_t n_use
     cdef Py_ssize_t[::1] t_use, t_col
     cdef double[::1] t_a, t_cx, t_cy, t_dx, t_dy, t_lo, t_hi
+    # per-line scratch (refit: p, q → arctan2; members: cos, sin)
+    cdef double[:, ::1] lscr
+    cdef object p_obj, q_obj
 
     def __init__(self, Sweep sw, pieces, uidx):
+        cdef Py_ssize_t l, n
         self.sw = sw
         self.pieces = pieces
         self.uidx = uidx
-        self.cx = np.array(pieces.cx, dtype=float)
-        self.cy = np.array(pieces.cy, dtype=float)
-        self.alpha = np.array(pieces.alpha, dtype=float)
-        self.usable = np.array(pieces.usable, dtype=bool)
-        self._cx, self._cy, self._alpha = self.cx, self.cy, self.alpha
-        self._usable = self.usable.view(_uint8)
         starts = np.asarray(pieces.starts, dtype=_intp)
         ends = np.asarray(pieces.ends, dtype=_intp)
         self.starts, self.ends = starts, ends
         self.owner = np.asarray(pieces.owner, dtype=_intp)
-        cdef Py_ssize_t n = starts.shape[0]
+        n = self.starts.shape[0]
         self.n_lines = n
+        lines = _empty((3, n))
+        self.cx, self.cy, self.alpha = lines
+        cdef double[:, ::1] lv = lines
+        self._cx, self._cy, self._alpha = lv[0], lv[1], lv[2]
+        cdef const double[:] src
+        for l, v in enumerate((pieces.cx, pieces.cy, pieces.alpha)):
+            src = np.asarray(v, dtype=float)
+            lv[l, :] = src
+        self.usable = np.array(pieces.usable, dtype=bool)
+        self._usable = self.usable.view(_uint8)
         if uidx is None:
             self.first, self.last = starts, ends
         else:
@@ -472,10 +620,16 @@ cdef class Grouping:
         self.label = np.full(sw.k, -1, dtype=_intp)
         self._label = self.label
         self.tab_ok = False
-        self.t_use = _empty(n, dtype=_intp)
-        self.t_col = _empty(n + 1, dtype=_intp)
-        self.t_a, self.t_cx, self.t_cy = _empty(n), _empty(n), _empty(n)
-        self.t_dx, self.t_dy, self.t_lo, self.t_hi = _empty(n), _empty(n), _empty(n), _empty(n)
+        tab_i = _empty((2, n + 1), dtype=_intp)
+        cdef Py_ssize_t[:, ::1] ti = tab_i
+        self.t_use, self.t_col = ti[0], ti[1]
+        tab = _empty((7, n))
+        cdef double[:, ::1] tv = tab
+        self.t_a, self.t_cx, self.t_cy, self.t_dx = tv[0], tv[1], tv[2], tv[3]
+        self.t_dy, self.t_lo, self.t_hi = tv[4], tv[5], tv[6]
+        scr = _empty((5, n))
+        self.lscr = scr
+        self.p_obj, self.q_obj = scr[0], scr[1]
 
     cdef bint _any_usable(self):
         cdef Py_ssize_t l
@@ -513,16 +667,17 @@ cdef class Grouping:
         self.n_use = j
         self.tab_ok = True
 
-    cdef tuple _reread(self, Py_ssize_t[::1] idx, Py_ssize_t[::1] cols):
+    cdef double[::1] _reread(self, Py_ssize_t[::1] idx, Py_ssize_t[::1] cols):
         """Distances of readings ``idx`` re-read with the θ of usable line columns ``cols``
-        (None: every usable line, (U, L) row-major), and those θ (uncapped)."""
+        (None: every usable line, (U, L) row-major); those θ (uncapped) go to ``sw.rr_th``.
+        A line the beam meets past the rejection angle cannot take the reading: its
+        distance is not needed (set to 1)."""
         cdef Sweep sw = self.sw
         cdef Py_ssize_t U = idx.shape[0], L = self.n_use if cols is None else 1
-        cdef Py_ssize_t u, j, i, c, col
-        cdef double hm, ls, t
-        d_arr = _empty(U * L)
-        th_arr = _empty(U * L)
-        cdef double[::1] d = d_arr, th = th_arr
+        cdef Py_ssize_t u, j, i, col
+        cdef double hm, ls, t, la, b
+        d_arr = sw.rr(U * L)
+        cdef double[::1] d = d_arr, th = sw.rr_th
         for u in range(U):
             i = idx[u]
             hm, ls = sw.hm[i], sw.ls[i]
@@ -530,27 +685,35 @@ cdef class Grouping:
                 col = j if cols is None else cols[u]
                 t = _incidence(hm, self.t_a[col])
                 th[u * L + j] = t
-                c = sw.cell(_min(t, sw.cap))
-                d[u * L + j] = sw.la_t[c] + sw.b_t[c] * ls
+                if t > sw.reject:
+                    d[u * L + j] = 0.0
+                    continue
+                sw.look(_min(t, sw.cap), &la, &b)
+                d[u * L + j] = la + b * ls
         _exp(d_arr, d_arr)
-        return d_arr, th_arr
+        return d
 
-    cdef inline double _resid(self, Py_ssize_t i, Py_ssize_t j, double d, double th, bint own):
-        """|Perpendicular residual| of reading i re-read onto usable line column j (``d``,
-        ``th`` from :meth:`_reread`): inf unless it lands within adopt_margin_m of the line's
-        extent (its own line always counts) and the beam meets the line no steeper than the
-        rejection angle."""
+    cdef void _residuals(self, Py_ssize_t i, Py_ssize_t first, Py_ssize_t n,
+                         const double* d, const double* th, Py_ssize_t own, double* r) noexcept:
+        """|Perpendicular residual| of reading i re-read onto usable line columns
+        ``first`` … ``first + n − 1`` (distances ``d``, θ ``th`` from :meth:`_reread`) into
+        ``r``: inf unless it lands within adopt_margin_m of the line's extent (its ``own``
+        column always counts) and the beam meets the line no steeper than the rejection
+        angle."""
         cdef Sweep sw = self.sw
-        cdef double qx = d * sw.ux[i] + (sw.ox[i] - self.t_cx[j])
-        cdef double qy = d * sw.uy[i] + (sw.oy[i] - self.t_cy[j])
-        cdef double r = fabs(qy * self.t_dx[j] - qx * self.t_dy[j])
-        cdef double t = qx * self.t_dx[j] + qy * self.t_dy[j]
-        cdef bint far = (t < self.t_lo[j]) or (t > self.t_hi[j])
-        if own:
-            far = False
-        if th > sw.reject:
-            far = True
-        return INF if far else r
+        cdef double ux = sw.ux[i], uy = sw.uy[i], ox = sw.ox[i], oy = sw.oy[i]
+        cdef double reject = sw.reject, qx, qy, t, dx, dy
+        cdef Py_ssize_t j, col
+        for j in range(n):
+            col = first + j
+            dx, dy = self.t_dx[col], self.t_dy[col]
+            qx = d[j] * ux + (ox - self.t_cx[col])
+            qy = d[j] * uy + (oy - self.t_cy[col])
+            t = qx * dx + qy * dy
+            if th[j] > reject or (col != own and (t < self.t_lo[col] or t > self.t_hi[col])):
+                r[j] = INF
+            else:
+                r[j] = fabs(qy * dx - qx * dy)
 
     # ---- membership
 
@@ -559,15 +722,17 @@ cdef class Grouping:
         threshold; the last readings past a corner often do not)."""
         cdef Sweep sw = self.sw
         cdef Py_ssize_t u, i, o
-        cdef double a, r
+        cdef double r
         cdef bint all_points = self.uidx is None
+        cdef double[::1] ca = self.lscr[2], sa = self.lscr[3]
+        for o in range(self.n_lines):
+            ca[o], sa[o] = cos(self._alpha[o]), sin(self._alpha[o])
         for i in range(sw.k):
             self._label[i] = -1
         for u in range(self.owner.shape[0]):
             o = self.owner[u]
             i = u if all_points else self._uidx[u]
-            a = self._alpha[o]
-            r = fabs((sw._py[i] - self._cy[o]) * cos(a) - (sw._px[i] - self._cx[o]) * sin(a))
+            r = fabs((sw._py[i] - self._cy[o]) * ca[o] - (sw._px[i] - self._cx[o]) * sa[o])
             if r <= sw._thr[i] and self._usable[o]:
                 self._label[i] = o
 
@@ -586,9 +751,7 @@ cdef class Grouping:
         cdef Py_ssize_t k = sw.k, i, u, j, U = 0, start = 0, end, own, best, L
         if k == 0 or not self._any_usable():
             return
-        idx_arr = _empty(k, dtype=_intp)
-        end_arr = _empty(k, dtype=_intp)
-        cdef Py_ssize_t[::1] idx = idx_arr, run_end = end_arr
+        cdef Py_ssize_t[::1] idx = sw.iscr[0], run_end = sw.iscr[1]
         cdef Py_ssize_t[::1] lab = self._label
         # runs: broken at a sensor change, a reading not live, or a change of line
         end = k - 1
@@ -606,15 +769,11 @@ cdef class Grouping:
             return
         self._table()
         L = self.n_use
-        d_arr, th_arr = self._reread(idx[:U], None)
-        cdef double[::1] d = d_arr, th = th_arr
-        row_arr = _empty(L)
-        cdef double[::1] row = row_arr
+        cdef double[::1] d = self._reread(idx[:U], None), th = sw.rr_th, row = sw.dscr[0]
         for u in range(U):
             i = idx[u]
             own = self.t_col[lab[i]]
-            for j in range(L):
-                row[j] = self._resid(i, j, d[u * L + j], th[u * L + j], j == own)
+            self._residuals(i, 0, L, &d[u * L], &th[u * L], own, &row[0])
             best = _argmin(&row[0], L)
             if row[best] <= sw._thr[i] and row[best] < row[own] - sw.corner_sigmas * sw._sigma[i]:
                 lab[i] = self.t_use[best]
@@ -626,16 +785,15 @@ cdef class Grouping:
         Next to a corner a reading read with the wrong wall's θ lands on that wall's
         extension, self-consistently, and fits both lines about as well; where it lands
         tells them apart. Such a reading moves to the line across the corner if, read with
-        that line's θ, it lies on it (within the split threshold, see :meth:`_resid`) and on
+        that line's θ, it lies on it (within the split threshold, see :meth:`_residuals`) and on
         its side. Only corners where the lines meet at > 30° count.
         """
         cdef Sweep sw = self.sw
-        cdef Py_ssize_t n = self.n_lines, l, m = 0, q, p, i, c, c2, U = 0, M = 0
-        cdef double a0, a1, s0, side
+        cdef Py_ssize_t n = self.n_lines, l, m = 0, q, p, i, c, c2, u, U = 0, M = 0
+        cdef double s0, side, cxa, cya, cxb, cyb, v
         if n < 2:
             return
-        corner_arr = _empty(n, dtype=_intp)
-        cdef Py_ssize_t[::1] corner = corner_arr
+        cdef Py_ssize_t[::1] corner = sw.iscr[0]
         for l in range(n - 1):
             if (self.starts[l + 1] == self.ends[l] and self._usable[l] and self._usable[l + 1]
                     and fabs(sin(self._alpha[l + 1] - self._alpha[l])) > 0.5):
@@ -646,17 +804,17 @@ cdef class Grouping:
         # both sides of every corner (entry p < m: the left line, p ≥ m: the right line):
         # the line, the other line, direction, the lines' intersection, the side its
         # readings are on
-        line_arr, other_arr = _empty(2 * m, dtype=_intp), _empty(2 * m, dtype=_intp)
-        cdef Py_ssize_t[::1] line = line_arr, other = other_arr
-        dx_arr, dy_arr, X_arr, Y_arr, bulk_arr = (_empty(2 * m), _empty(2 * m), _empty(2 * m),
-                                                  _empty(2 * m), _empty(2 * m))
-        cdef double[::1] dx = dx_arr, dy = dy_arr, X = X_arr, Y = Y_arr, bulk = bulk_arr
+        ints = _empty((3, 2 * m), dtype=_intp)
+        vals = _empty((5, 2 * m))
+        cdef Py_ssize_t[:, ::1] iv = ints
+        cdef double[:, ::1] vv = vals
+        cdef Py_ssize_t[::1] line = iv[0], other = iv[1]
+        cdef double[::1] dx = vv[0], dy = vv[1], X = vv[2], Y = vv[3], bulk = vv[4]
         for q in range(m):
             line[q], line[m + q] = corner[q], corner[q] + 1
             other[q], other[m + q] = corner[q] + 1, corner[q]
         for p in range(2 * m):
             dx[p], dy[p] = cos(self._alpha[line[p]]), sin(self._alpha[line[p]])
-        cdef double cxa, cya, cxb, cyb, v
         for q in range(m):
             # intersection X = c0 + s·d0 with (X − c1) × d1 = 0
             cxa, cya = self._cx[line[q]], self._cy[line[q]]
@@ -669,13 +827,12 @@ cdef class Grouping:
         for p in range(2 * m):
             v = ((self._cx[line[p]] - X[p]) * dx[p] + (self._cy[line[p]] - Y[p]) * dy[p])
             bulk[p] = (1.0 if v > 0 else -1.0 if v < 0 else 0.0) if v == v else v   # np.sign
-        pos_arr = np.full(n, -1, dtype=_intp)
-        cdef Py_ssize_t[::1] pos = pos_arr       # a line with corners at both ends: the last
+        cdef Py_ssize_t[::1] pos = sw.iscr[1]    # a line with corners at both ends: the last
+        for l in range(n):
+            pos[l] = -1
         for p in range(2 * m):
             pos[line[p]] = p
-        cdef Py_ssize_t[::1] lab = self._label
-        mem_arr, ent_arr = _empty(sw.k, dtype=_intp), _empty(sw.k, dtype=_intp)
-        cdef Py_ssize_t[::1] mem = mem_arr, ent = ent_arr
+        cdef Py_ssize_t[::1] lab = self._label, mem = sw.iscr[2], ent = sw.iscr[3]
         for i in range(sw.k):
             if lab[i] < 0:
                 continue
@@ -690,9 +847,7 @@ cdef class Grouping:
             return
         # read with the target's θ the reading must lie on the target line ...
         self._table()
-        cols_arr, sel_arr, cent_arr = (_empty(U, dtype=_intp), _empty(U, dtype=_intp),
-                                       _empty(U, dtype=_intp))
-        cdef Py_ssize_t[::1] cols = cols_arr, sel = sel_arr, cent = cent_arr
+        cdef Py_ssize_t[::1] cols = sw.iscr[4], sel = sw.iscr[0], cent = sw.iscr[1]
         for u in range(U):
             c = self.t_col[other[ent[u]]]
             if c >= 0:
@@ -700,11 +855,12 @@ cdef class Grouping:
                 M += 1
         if M == 0:
             return
-        d_arr, th_arr = self._reread(sel[:M], cols[:M])
-        cdef double[::1] d = d_arr, th = th_arr
+        cdef double[::1] d = self._reread(sel[:M], cols[:M]), th = sw.rr_th
+        cdef double r
         for u in range(M):
             i = sel[u]
-            if not self._resid(i, cols[u], d[u], th[u], False) <= sw._thr[i]:
+            self._residuals(i, cols[u], 1, &d[u], &th[u], -1, &r)
+            if not r <= sw._thr[i]:
                 continue
             # ... and on the target's side of the corner
             c2 = (cent[u] + m) % (2 * m)
@@ -728,12 +884,9 @@ cdef class Grouping:
         cdef Py_ssize_t[::1] lab = self._label
         cdef double hot = sw.cap - sw.pinned
         cdef bint any_pinned = False, any_streak = False
+        cdef unsigned char[::1] good = sw.flag
+        cdef double[::1] tl = sw.dscr[0]
         cdef Py_ssize_t[::1] n_pin, n_good
-        cdef unsigned char[::1] streak
-        good_arr = _empty(k, dtype=_uint8)
-        tl_arr = _empty(k)
-        cdef unsigned char[::1] good = good_arr
-        cdef double[::1] tl = tl_arr
         for i in range(k):
             l = lab[i] if lab[i] > 0 else 0
             good[i] = lab[i] >= 0 and self._usable[l] and (sw.all_usable or sw.usable[i])
@@ -741,25 +894,23 @@ cdef class Grouping:
             if good[i] and tl[i] >= hot:
                 any_pinned = True
         if any_pinned:
-            n_pin = np.zeros(n, dtype=_intp)
-            n_good = np.zeros(n, dtype=_intp)
-            streak = np.zeros(n, dtype=_uint8)
+            n_pin, n_good = sw.iscr[0], sw.iscr[1]
+            for l in range(n):
+                n_pin[l] = n_good[l] = 0
             for i in range(k):
                 if good[i]:
                     n_good[lab[i]] += 1
                     if tl[i] >= hot:
                         n_pin[lab[i]] += 1
             for l in range(n):
-                if <double>n_pin[l] / <double>max(n_good[l], 1) > 0.5:
-                    streak[l] = 1
+                if <double>n_pin[l] / <double>max(n_good[l], 1) > 0.5:   # a streak
+                    self._usable[l] = 0
+                    n_pin[l] = -1
                     any_streak = True
             if any_streak:
-                for l in range(n):
-                    if streak[l]:
-                        self._usable[l] = 0
                 self.tab_ok = False
                 for i in range(k):
-                    if good[i] and streak[lab[i]]:
+                    if good[i] and n_pin[lab[i]] < 0:
                         good[i] = 0
         for i in range(k):
             if not (good[i] and tl[i] <= sw.reject):
@@ -775,9 +926,7 @@ cdef class Grouping:
         """
         cdef Sweep sw = self.sw
         cdef Py_ssize_t i, j, u, U = 0, L, best
-        cdef Py_ssize_t[::1] lab = self._label
-        sel_arr = _empty(sw.k, dtype=_intp)
-        cdef Py_ssize_t[::1] sel = sel_arr
+        cdef Py_ssize_t[::1] lab = self._label, sel = sw.iscr[0]
         for i in range(sw.k):
             if lab[i] < 0 and (sw.all_usable or sw.usable[i]):
                 sel[U] = i
@@ -786,14 +935,12 @@ cdef class Grouping:
             return
         self._table()
         L = self.n_use
-        d_arr, th_arr = self._reread(sel[:U], None)
-        cdef double[::1] d = d_arr, th = th_arr
-        row_arr = _empty(L)
-        cdef double[::1] row = row_arr
+        cdef double[::1] d = self._reread(sel[:U], None), th = sw.rr_th, row = sw.dscr[0]
         for u in range(U):
             i = sel[u]
+            self._residuals(i, 0, L, &d[u * L], &th[u * L], -1, &row[0])
             for j in range(L):
-                row[j] = self._resid(i, j, d[u * L + j], th[u * L + j], False) / sw._thr[i]
+                row[j] = row[j] / sw._thr[i]
             best = _argmin(&row[0], L)
             if row[best] <= 1.0:
                 lab[i] = self.t_use[best]
@@ -804,12 +951,12 @@ cdef class Grouping:
         than two members, or all of them at one point, keeps its fit but gives θ no more."""
         cdef Sweep sw = self.sw
         cdef Py_ssize_t i, l, n = self.n_lines, M = 0, s, c
-        cdef Py_ssize_t[::1] lab = self._label
+        cdef Py_ssize_t[::1] lab = self._label, start = sw.iscr[0], fill = sw.iscr[1]
         cdef double x, y, t0, t1, t2, t3, t4, cnt, mx, my, sxy, a
         self.tab_ok = False
         # members grouped by line, in reading order within a line (a stable sort)
-        start_arr = np.zeros(n + 1, dtype=_intp)
-        cdef Py_ssize_t[::1] start = start_arr
+        for l in range(n + 1):
+            start[l] = 0
         for i in range(sw.k):
             if lab[i] >= 0 and (sw.all_usable or sw.usable[i]):
                 start[lab[i] + 1] += 1
@@ -820,10 +967,8 @@ cdef class Grouping:
             return
         for l in range(n):
             start[l + 1] += start[l]
-        buf_arr = _empty((5, M))
-        cdef double[:, ::1] buf = buf_arr
-        fill_arr = start_arr[:n].copy()
-        cdef Py_ssize_t[::1] fill = fill_arr
+            fill[l] = start[l]
+        cdef double[:, ::1] buf = sw.dscr[2:7]
         for i in range(sw.k):
             if lab[i] >= 0 and (sw.all_usable or sw.usable[i]):
                 s = fill[lab[i]]
@@ -831,9 +976,8 @@ cdef class Grouping:
                 x = sw._px[i] - sw.cx0
                 y = sw._py[i] - sw.cy0
                 buf[0, s], buf[1, s], buf[2, s], buf[3, s], buf[4, s] = x, y, x * x, y * y, x * y
-        p_arr, q_arr, spread_arr, mx_arr, my_arr = (_empty(n), _empty(n), _empty(n),
-                                                    _empty(n), _empty(n))
-        cdef double[::1] p = p_arr, q = q_arr, spread = spread_arr, mxs = mx_arr, mys = my_arr
+        cdef double[::1] p = self.lscr[0], q = self.lscr[1], spread = self.lscr[2]
+        cdef double[::1] mxs = self.lscr[3], mys = self.lscr[4]
         for l in range(n):
             s, c = start[l], start[l + 1] - start[l]
             if c == 0:
@@ -852,7 +996,7 @@ cdef class Grouping:
             q[l] = (t2 - t0 * mx) - (t3 - t1 * my)
             spread[l] = (t2 - t0 * mx) + (t3 - t1 * my)
             mxs[l], mys[l] = mx, my
-        _arctan2(p_arr, q_arr, p_arr)
+        _arctan2(self.p_obj, self.q_obj, self.p_obj)
         for l in range(n):
             c = start[l + 1] - start[l]
             # a line needs two members with some spread (all coincident: no direction)
@@ -889,6 +1033,7 @@ cdef class Grouping:
 # --------------------------------------------------------------------------- held iterations
 
 
+@cython.final
 cdef class Held:
     """The iteration with held membership, in line order: each line's members' θ follow from
     one direction angle a (θ_i = |π/2 − |h_i − a||), so a step is: points at θ(a) → TLS
@@ -906,16 +1051,17 @@ cdef class Held:
     cdef double[::1] n, hm, ls, ox, oy, ux, uy, a, theta, a_prev, g_prev, g, p, q, step, tl, e
     cdef double[:, ::1] buf
     cdef unsigned char[::1] lone
-    cdef object e_arr, p_arr, q_arr, g_arr
-    cdef bint secant, has_prev
-    cdef double max_gain
+    cdef object e_obj, p_obj, q_obj, g_obj
+    cdef bint secant, has_prev, any_hot, any_reject, moving
+    cdef double max_gain, biggest
 
     def __init__(self, Sweep sw, Grouping grouping, const double[::1] theta, bint secant,
                  double max_gain):
         cdef Py_ssize_t i, l, s, km = 0, nl = 0, n_all = grouping.n_lines
-        cdef Py_ssize_t[::1] lab = grouping._label
-        start_arr = np.zeros(n_all + 1, dtype=_intp)
-        cdef Py_ssize_t[::1] start = start_arr
+        cdef double la, b
+        cdef Py_ssize_t[::1] lab = grouping._label, start = sw.iscr[0], slot_of = sw.iscr[1]
+        for l in range(n_all + 1):
+            start[l] = 0
         for i in range(sw.k):
             if lab[i] >= 0:
                 start[lab[i] + 1] += 1
@@ -929,23 +1075,23 @@ cdef class Held:
         self.secant = secant
         self.max_gain = max_gain
         self.has_prev = False
-        self.perm = _empty(km, dtype=_intp)
-        self.perm_ = self.perm
-        self.slot = _empty(km, dtype=_intp)
+        ints = _empty((2, km), dtype=_intp)
+        self.perm = ints[0]
+        cdef Py_ssize_t[:, ::1] iv = ints
+        self.perm_, self.slot = iv[0], iv[1]
         self.lstart = _empty(nl, dtype=_intp)
-        self.n, self.a, self.g = _empty(nl), _empty(nl), _empty(nl)
-        self.a_prev, self.g_prev = _empty(nl), _empty(nl)
         self.lone = _empty(nl, dtype=_uint8)
-        self.p_arr, self.q_arr, self.g_arr = _empty(nl), _empty(nl), _empty(nl)
-        self.p, self.q, self.g = self.p_arr, self.q_arr, self.g_arr
-        self.hm, self.ls, self.ox, self.oy = _empty(km), _empty(km), _empty(km), _empty(km)
-        self.ux, self.uy, self.theta = _empty(km), _empty(km), _empty(km)
-        self.step, self.tl = _empty(km), _empty(km)
-        self.e_arr = _empty(km)
-        self.e = self.e_arr
-        self.buf = _empty((5, km))
-        slot_of_arr = _empty(n_all, dtype=_intp)
-        cdef Py_ssize_t[::1] slot_of = slot_of_arr
+        per_line = _empty((7, nl))
+        cdef double[:, ::1] lv = per_line
+        self.n, self.a, self.a_prev, self.g_prev = lv[0], lv[1], lv[2], lv[3]
+        self.p, self.q, self.g = lv[4], lv[5], lv[6]
+        self.p_obj, self.q_obj, self.g_obj = per_line[4], per_line[5], per_line[6]
+        per_member = _empty((15, km))
+        cdef double[:, ::1] mv = per_member
+        self.hm, self.ls, self.ox, self.oy, self.ux = mv[0], mv[1], mv[2], mv[3], mv[4]
+        self.uy, self.theta, self.step, self.tl, self.e = mv[5], mv[6], mv[7], mv[8], mv[9]
+        self.buf = mv[10:15]
+        self.e_obj = per_member[9]
         s = 0
         for l in range(n_all):
             if start[l + 1] > start[l]:
@@ -967,6 +1113,8 @@ cdef class Held:
             self.ox[s], self.oy[s] = sw.ox[i] - sw.cx0, sw.oy[i] - sw.cy0
             self.ux[s], self.uy[s] = sw.ux[i], sw.uy[i]
             self.theta[s] = theta[i]
+            sw.look(theta[i], &la, &b)
+            self.e[s] = la + b * sw.ls[i]
 
     def put_theta(self, double[::1] theta):
         """The members' current θ into the sweep's θ (live readings)."""
@@ -974,16 +1122,17 @@ cdef class Held:
         for i in range(self.km):
             theta[self.perm_[i]] = self.theta[i]
 
-    cdef void _fit(self):
-        """Fit every line to its members' points at the current θ: the lines' angles G(a)
-        (``g``), the θ of each member's line uncapped (``tl``) and its step θ_new − θ."""
+    cdef void _fit(self, double tolerance_rad):
+        """Fit every line to its members' points at the current θ (``e`` holds the exponent
+        of Eq. 10 there): the lines' angles G(a) (``g``), the θ of each member's line
+        uncapped (``tl``) and its step θ_new − θ; flags whether any member is hot (within
+        ``pinned_rad`` of the drop-out angle) or past the rejection angle, whether any step
+        is ≥ ``tolerance_rad`` and the largest |step|."""
         cdef Sweep sw = self.sw
-        cdef Py_ssize_t i, l, c, s, m
-        cdef double x, y, t0, t1, t2, t3, t4, mx, my, sxy, ga
-        for i in range(self.km):
-            c = sw.cell(self.theta[i])
-            self.e[i] = sw.la_t[c] + sw.b_t[c] * self.ls[i]
-        _exp(self.e_arr, self.e_arr)
+        cdef Py_ssize_t i, l, s, m
+        cdef double x, y, t0, t1, t2, t3, t4, mx, my, sxy, ga, tl, step
+        cdef double hot = sw.cap - sw.pinned
+        _exp(self.e_obj, self.e_obj)
         for i in range(self.km):
             x = self.e[i] * self.ux[i] + self.ox[i]
             y = self.e[i] * self.uy[i] + self.oy[i]
@@ -1002,7 +1151,7 @@ cdef class Held:
             sxy = t4 - t0 * my
             self.p[l] = sxy + sxy
             self.q[l] = (t2 - t0 * mx) - (t3 - t1 * my)
-        _arctan2(self.p_arr, self.q_arr, self.g_arr)
+        _arctan2(self.p_obj, self.q_obj, self.g_obj)
         for l in range(self.n_lines):
             ga = self.g[l] * 0.5
             if ga < 0.0:
@@ -1010,26 +1159,30 @@ cdef class Held:
             if self.lone[l]:
                 ga = self.a[l]
             self.g[l] = ga
+        self.any_hot = self.any_reject = self.moving = False
+        self.biggest = 0.0
         for i in range(self.km):
-            self.tl[i] = _incidence(self.hm[i], self.g[self.slot[i]])
-            self.step[i] = _min(self.tl[i], sw.cap) - self.theta[i]
+            tl = _incidence(self.hm[i], self.g[self.slot[i]])
+            self.tl[i] = tl
+            step = _min(tl, sw.cap) - self.theta[i]
+            self.step[i] = step
+            if tl >= hot:
+                self.any_hot = True
+                if tl > sw.reject:
+                    self.any_reject = True
+            if fabs(step) >= tolerance_rad:
+                self.moving = True
+            self.biggest = _max(fabs(step), self.biggest)
 
-    cdef bint _needs_drop(self):
-        """Whether a member now meets its line past the rejection angle, or most of a line's
-        members sit at the drop-out angle (a streak or runaway, see Grouping.drop_steep)."""
+    cdef bint _most_hot(self):
+        """Whether most of a line's members sit at the drop-out angle (a streak or runaway,
+        see Grouping.drop_steep)."""
         cdef Sweep sw = self.sw
         cdef Py_ssize_t i, l
         cdef double hot = sw.cap - sw.pinned
-        cdef bint any_hot = False
-        for i in range(self.km):
-            if self.tl[i] >= hot:
-                any_hot = True
-                if self.tl[i] > sw.reject:
-                    return True
-        if not any_hot:
-            return False
-        n_hot_arr = np.zeros(self.n_lines, dtype=_intp)
-        cdef Py_ssize_t[::1] n_hot = n_hot_arr
+        cdef Py_ssize_t[::1] n_hot = sw.iscr[0]
+        for l in range(self.n_lines):
+            n_hot[l] = 0
         for i in range(self.km):
             if self.tl[i] >= hot:
                 n_hot[self.slot[i]] += 1
@@ -1038,15 +1191,17 @@ cdef class Held:
                 return True
         return False
 
-    cdef void _advance(self):
-        """The next a: the plain step a ← G(a), or (``secant``) a secant step towards the
-        root of g(a) = G(a) − a from this and the previous iteration, its gain held to
-        [1/64, max_gain]: below 1 it damps an oscillation (G' < 0), above 1 it speeds up a
-        slow contraction (0 < G' < 1); where G' ≥ 1 (a runaway) the step stays plain.
-        Angles are compared mod π."""
+    cdef void _advance(self, Py_ssize_t it, Py_ssize_t[::1] last_moving,
+                       double tolerance_rad):
+        """Members that moved get ``last_moving`` ← ``it``; then the next a: the plain step
+        a ← G(a), or (``secant``) a secant step towards the root of g(a) = G(a) − a from
+        this and the previous iteration, its gain held to [1/64, max_gain]: below 1 it damps
+        an oscillation (G' < 0), above 1 it speeds up a slow contraction (0 < G' < 1); where
+        G' ≥ 1 (a runaway) the step stays plain. Angles are compared mod π. The members' θ
+        follow (capped at the drop-out angle), and the exponent of Eq. 10 at them."""
         cdef Sweep sw = self.sw
         cdef Py_ssize_t i, l
-        cdef double g, a, da, dg, gain
+        cdef double g, a, da, dg, gain, t, la, b
         for l in range(self.n_lines):
             a = self.a[l]
             g = self.g[l] - a
@@ -1068,7 +1223,12 @@ cdef class Held:
             self.a[l] = a
         self.has_prev = True
         for i in range(self.km):
-            self.theta[i] = _min(_incidence(self.hm[i], self.a[self.slot[i]]), sw.cap)
+            if fabs(self.step[i]) >= tolerance_rad:
+                last_moving[self.perm_[i]] = it
+            t = _min(_incidence(self.hm[i], self.a[self.slot[i]]), sw.cap)
+            self.theta[i] = t
+            sw.look(t, &la, &b)
+            self.e[i] = la + b * self.ls[i]
 
     def run(self, Py_ssize_t it, Py_ssize_t limit, double tolerance_rad, bint checked,
             Py_ssize_t[::1] last_moving, Py_ssize_t regroup_before, double regroup_until_rad,
@@ -1088,30 +1248,20 @@ cdef class Held:
         last iteration taken settled (None if none was taken); ``checked``: whether that
         iteration was the checked one.
         """
-        cdef Py_ssize_t i
-        cdef bint moving, was_checked = checked
-        cdef double s, biggest
+        cdef bint was_checked = checked
         settled = None
         while it < limit:
-            self._fit()
-            if not checked and self._needs_drop():
+            self._fit(tolerance_rad)
+            if not checked and self.any_hot and (self.any_reject or self._most_hot()):
                 return CHECK, it, settled, was_checked
-            moving = False
-            biggest = 0.0
-            for i in range(self.km):
-                s = fabs(self.step[i])
-                if s >= tolerance_rad:
-                    last_moving[self.perm_[i]] = it
-                    moving = True
-                biggest = _max(s, biggest)
-            self._advance()
+            self._advance(it, last_moving, tolerance_rad)
             it += 1
             was_checked = checked
             checked = False
-            settled = not moving
-            if not moving:
+            settled = not self.moving
+            if not self.moving:
                 return SETTLED, it, settled, was_checked
-            if it < regroup_before and biggest < regroup_until_rad:
+            if it < regroup_before and self.biggest < regroup_until_rad:
                 return REGROUP, it, settled, was_checked
             if one_step:
                 return STEPPED, it, settled, was_checked

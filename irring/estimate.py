@@ -159,11 +159,15 @@ class Calibration:
                                              self.no_return_counts, self.sigma_counts(),
                                              self.falling))
         # (log a, b) on a fine θ grid for the estimator's loop, looked up at the nearest
-        # node (a take instead of a search): θ off by ≤ 1.2e-5 rad, d by < 1e-4 relative
+        # node (no search): θ off by ≤ 1.2e-5 rad, d by < 1e-4 relative. The estimator
+        # recomputes rows from the nodes where that gives the table bit for bit (checked
+        # here for every row), sparing the cache a 1 MB table
         fine = np.linspace(0.0, math.pi / 2, _FINE_CELLS + 1)
-        object.__setattr__(self, "_fine", (_FINE_CELLS / (math.pi / 2),
-                                           np.interp(fine, theta, np.log(a)),
-                                           np.interp(fine, theta, b)))
+        table = np.stack([np.interp(fine, theta, self._log_a), np.interp(fine, theta, b)],
+                         axis=1)
+        object.__setattr__(self, "_fine", (_FINE_CELLS / (math.pi / 2), table,
+                                           _iterate.fine_table_is_interp(theta, self._log_a,
+                                                                         b, table)))
         object.__setattr__(self, "_spread", _fallback_nodes(self))
 
     # ---- the curve
@@ -904,8 +908,8 @@ def estimate(sweep: Sweep, calibration: Calibration | None = None, *, max_iterat
     ``calibration`` defaults to :meth:`Calibration.for_sweep` (the datasheet curve).
     ``iterate=False`` gives the θ = 0 assumption (Eq. 10 with a(0), b(0)).
     """
-    return estimate_detail(sweep, calibration, max_iterations=max_iterations,
-                           tolerance_rad=tolerance_rad, iterate=iterate, lines=lines).points
+    return _estimate(sweep, calibration, max_iterations, tolerance_rad, iterate, lines,
+                     keep_history=False, damping=True, detail=False).points
 
 
 def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
@@ -915,9 +919,17 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     """:func:`estimate` that also returns the final lines and (optionally) θ per iteration.
 
     ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
-    Table II (to show what the control is for). The phases run as compiled kernels
-    (:mod:`irring._iterate`); this function is the schedule of the module docstring.
+    Table II (to show what the control is for).
     """
+    return _estimate(sweep, calibration, max_iterations, tolerance_rad, iterate, lines,
+                     keep_history=keep_history, damping=damping, detail=True)
+
+
+def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int,
+              tolerance_rad: float, iterate: bool, lines: LineOptions, *, keep_history: bool,
+              damping: bool, detail: bool) -> Estimate:
+    """The estimator: this function is the schedule of the module docstring, its phases run
+    as compiled kernels (:mod:`irring._iterate`). ``detail``: also the final lines."""
     cal = calibration if calibration is not None else _nominal_for(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
     if max_iterations < 1:
@@ -929,8 +941,10 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     pose = sweep.reading_poses if sweep.reading_poses is not None else sweep.pose
     origin, heading = beam_geometry(sweep.ring, np.asarray(pose, dtype=float), angles,
                                     cal.emitter_offset_m)
-    origin = np.broadcast_to(origin, counts.shape + (2,))
-    heading = np.broadcast_to(heading, counts.shape)
+    if origin.shape != counts.shape + (2,):
+        origin = np.broadcast_to(origin, counts.shape + (2,))
+    if heading.shape != counts.shape:
+        heading = np.broadcast_to(heading, counts.shape)
     shape = counts.shape
 
     reason = _classify(counts, sweep, cal)
@@ -1032,19 +1046,17 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
 
     # final points with the exact curve; fallback readings (no line): θ = 0, σ widened by
     # θ's unknown (see _fallback_nodes)
-    log_a, b = cal._log_ab(theta)
-    x, y, d, theta_out, sigma, it_out = sw.finish(
-        theta, log_a, b, on_line, last_moving, n_its, iterate, *cal._spread, max_range,
-        cal.min_range_m, reason.reshape(-1))
-    valid = reason == Reason.OK
+    x, y, d, theta_out, sigma, it_out, valid = sw.finish(
+        theta, on_line, last_moving, n_its, iterate, cal, max_range, reason.reshape(-1))
     points = Points(
         x=x.reshape(shape), y=y.reshape(shape), d=d.reshape(shape),
         theta=theta_out.reshape(shape),
         origin_x=np.array(origin[..., 0]), origin_y=np.array(origin[..., 1]),
         heading=np.array(heading), sigma_m=sigma.reshape(shape),
-        iterations=it_out.reshape(shape), valid=valid, reason=reason, max_range_m=max_range)
+        iterations=it_out.reshape(shape), valid=valid.reshape(shape), reason=reason,
+        max_range_m=max_range)
     found = None
-    if grouping is not None:  # labels: the line each reading took θ from (−1: none)
+    if detail and grouping is not None:  # labels: the line each reading took θ from (−1: none)
         label = np.full(shape, -1, dtype=int)
         label.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
         pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
