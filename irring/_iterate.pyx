@@ -592,44 +592,44 @@ cdef class Grouping:
     cdef object p_obj, q_obj
 
     def __init__(self, Sweep sw, pieces, uidx):
-        cdef Py_ssize_t l, n
+        cdef Py_ssize_t l, i, n
         self.sw = sw
         self.pieces = pieces
         self.uidx = uidx
-        starts = np.asarray(pieces.starts, dtype=_intp)
-        ends = np.asarray(pieces.ends, dtype=_intp)
-        self.starts, self.ends = starts, ends
+        self.starts = np.asarray(pieces.starts, dtype=_intp)
+        self.ends = np.asarray(pieces.ends, dtype=_intp)
         self.owner = np.asarray(pieces.owner, dtype=_intp)
         n = self.starts.shape[0]
         self.n_lines = n
-        lines = _empty((3, n))
-        self.cx, self.cy, self.alpha = lines
-        cdef double[:, ::1] lv = lines
-        self._cx, self._cy, self._alpha = lv[0], lv[1], lv[2]
+        # rows: cx, cy, alpha | the re-reading table (7) | per-line scratch (5)
+        blk = _empty((15, n))
+        self.cx, self.cy, self.alpha = blk[0], blk[1], blk[2]
+        cdef double[:, ::1] bv = blk
+        self._cx, self._cy, self._alpha = bv[0], bv[1], bv[2]
+        self.t_a, self.t_cx, self.t_cy, self.t_dx = bv[3], bv[4], bv[5], bv[6]
+        self.t_dy, self.t_lo, self.t_hi = bv[7], bv[8], bv[9]
+        self.lscr = bv[10:15]
+        self.p_obj, self.q_obj = blk[10], blk[11]
         cdef const double[:] src
         for l, v in enumerate((pieces.cx, pieces.cy, pieces.alpha)):
             src = np.asarray(v, dtype=float)
-            lv[l, :] = src
+            for i in range(n):
+                bv[l, i] = src[i]
         self.usable = np.array(pieces.usable, dtype=bool)
         self._usable = self.usable.view(_uint8)
-        if uidx is None:
-            self.first, self.last = starts, ends
-        else:
+        ints = _empty((4, n + 1), dtype=_intp)
+        cdef Py_ssize_t[:, ::1] iv = ints
+        self.t_use, self.t_col, self.first, self.last = iv[0], iv[1], iv[2], iv[3]
+        if uidx is not None:
             self._uidx = uidx
-            self.first, self.last = uidx.take(starts), uidx.take(ends)
-        self.label = np.full(sw.k, -1, dtype=_intp)
+        for l in range(n):
+            self.first[l] = self.starts[l] if uidx is None else self._uidx[self.starts[l]]
+            self.last[l] = self.ends[l] if uidx is None else self._uidx[self.ends[l]]
+        self.label = _empty(sw.k, dtype=_intp)
         self._label = self.label
+        for i in range(sw.k):
+            self._label[i] = -1
         self.tab_ok = False
-        tab_i = _empty((2, n + 1), dtype=_intp)
-        cdef Py_ssize_t[:, ::1] ti = tab_i
-        self.t_use, self.t_col = ti[0], ti[1]
-        tab = _empty((7, n))
-        cdef double[:, ::1] tv = tab
-        self.t_a, self.t_cx, self.t_cy, self.t_dx = tv[0], tv[1], tv[2], tv[3]
-        self.t_dy, self.t_lo, self.t_hi = tv[4], tv[5], tv[6]
-        scr = _empty((5, n))
-        self.lscr = scr
-        self.p_obj, self.q_obj = scr[0], scr[1]
 
     cdef bint _any_usable(self):
         cdef Py_ssize_t l
