@@ -19,8 +19,12 @@ SIMD versions differ from libm's in the last bit, and a last bit can flip a thre
 cos, sin, hypot, sqrt, floor and rint are libm's, as numpy's are; sums repeat numpy's
 pairwise summation (np.add.reduceat and np.mean sum a segment of more than 8 terms with 8
 accumulators, not one after another); minima pick the first index as argmin does (the
-first NaN if any); groupings by line are stable. The build must not fuse a·b + c into one
-rounding (``-ffp-contract=off``; x86-64's default code has no FMA anyway).
+first NaN if any); groupings by line are stable. The (log a, b) look-ups compute the
+calibration's fine-table rows from its nodes, which the calibration checked to equal the
+table row by row (:func:`fine_table_is_interp`; else the table is read): in a real run
+segmentation evicts the 1 MB table between phases, so reading it was mostly cache misses.
+The build must not fuse a·b + c into one rounding (``-ffp-contract=off``; x86-64's
+default code has no FMA anyway).
 """
 
 cimport cython

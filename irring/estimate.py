@@ -23,7 +23,7 @@ Schedule (how steps 2–6 are repeated; the work goes where it changes the answe
   would meet past the drop-out angle dropped, readings on no line adopted by a line they land
   on when re-read with its θ. θ is then taken from the members' own TLS lines;
 - *held iterations*: the members stay, so every member's θ follows from its line's direction
-  a (θ_i = |π/2 − |h_i − a||); one iteration fits all lines at once (prefix sums over the
+  a (θ_i = |π/2 − |h_i − a||); one iteration fits all lines at once (sums over the
   members sorted by line) and moves a. The plain step is Table II's a ← G(a); with damping on
   (the default) it is a secant step on G(a) − a per line, its gain held to [1/64, 8]: it damps
   an oscillation (G' < 0) and speeds up a slow contraction, and stays plain where G' ≥ 1;
@@ -37,6 +37,11 @@ Schedule (how steps 2–6 are repeated; the work goes where it changes the answe
   their final positions (a wall ends at its corner: a reading on a line beyond its
   intersection with the next piece's line moves across if it fits there; drop-outs;
   adoptions), and iterated again if that changed anything.
+
+Speed: the loop (everything but the segmentation, ``_segment``) runs as compiled kernels in
+``irring/_iterate.pyx`` with the same answers bit for bit: outside segmentation a t_room
+sweep takes ~0.5 ms instead of ~2.0 ms (median; segmentation ~0.8 ms), and
+``irring bench estimator`` reports 1.6 ms per sweep instead of 3.1–3.5 ms.
 
 Readings still moving after ``max_iterations`` are NOT_CONVERGED (in the noisy T-room about
 0.3 % of readings, mostly where a shoulder's convex corner is seen nearly edge-on).
