@@ -280,6 +280,7 @@ cdef class Sweep:
     cdef unsigned char[::1] flag
     cdef object rr_obj
     cdef double[::1] rr_th
+    cdef Py_ssize_t[::1] snap
 
     def __init__(self, cal, opts, const double[::1] counts, const double[::1] origin,
                  const double[::1] heading, const unsigned char[::1] reason,
@@ -346,12 +347,13 @@ cdef class Sweep:
         self.floor_m = floor_m
         self.pinned = pinned_rad
         self.all_usable = True
-        self.iscr = _empty((5, k + 1), dtype=_intp)
+        self.iscr = _empty((6, k + 1), dtype=_intp)
         self.dscr_obj = _empty((7, k))
         self.dscr = self.dscr_obj
         self.flag = _empty(k, dtype=_uint8)
         self.rr_obj = _empty(0)
         self.rr_th = _empty(0)
+        self.snap = self.iscr[5]     # Grouping.check's labels before
 
     cdef void _nodes(self, cal):
         """The calibration's nodes and slopes, and for every 256 rows of the fine table the
@@ -721,7 +723,7 @@ cdef class Grouping:
 
     # ---- membership
 
-    def members(self):
+    cdef void members(self):
         """Each reading keeps its own usable line only if it sits on it (within the split
         threshold; the last readings past a corner often do not)."""
         cdef Sweep sw = self.sw
@@ -740,7 +742,7 @@ cdef class Grouping:
             if r <= sw._thr[i] and self._usable[o]:
                 self._label[i] = o
 
-    def settle_corners(self):
+    cdef void settle_corners(self):
         """Readings at the ends of their run go to whichever line explains them best.
 
         Near a corner both walls' lines pass close to the first readings past it, and a
@@ -782,7 +784,7 @@ cdef class Grouping:
             if row[best] <= sw._thr[i] and row[best] < row[own] - sw.corner_sigmas * sw._sigma[i]:
                 lab[i] = self.t_use[best]
 
-    def corner_sides(self):
+    cdef void corner_sides(self):
         """A wall ends at its corner: a reading on a line beyond the corner it shares with
         the next piece of the same sweep (past the two lines' intersection) is not on it.
 
@@ -873,7 +875,7 @@ cdef class Grouping:
             if side * bulk[c2] >= 0:
                 lab[i] = other[cent[u]]
 
-    def drop_steep(self):
+    cdef void drop_steep(self):
         """A line the beam would meet past the drop-out angle cannot be what it saw.
 
         A reading whose line it meets steeper than the rejection angle leaves it. A line that
@@ -920,7 +922,7 @@ cdef class Grouping:
             if not (good[i] and tl[i] <= sw.reject):
                 lab[i] = -1
 
-    def adopt(self):
+    cdef void adopt(self):
         """Readings on no usable line join one if, read with that line's θ, they land on it.
 
         These are mostly readings next to a corner, which θ = 0 put off both walls, and the
@@ -949,7 +951,7 @@ cdef class Grouping:
             if row[best] <= 1.0:
                 lab[i] = self.t_use[best]
 
-    def refit(self):
+    cdef void refit(self):
         """The same members, lines refitted at their moved positions (total least squares,
         the members in line order, sums about the sweep's centre); a line left with fewer
         than two members, or all of them at one point, keeps its fit but gives θ no more."""
@@ -1013,6 +1015,41 @@ cdef class Grouping:
                 self._alpha[l] = a
             else:
                 self._usable[l] = 0
+
+    def regroup(self, before):
+        """The membership pass of a new grouping: :meth:`members`, :meth:`settle_corners`,
+        :meth:`drop_steep`, :meth:`adopt`, then every line refitted to its members
+        (:meth:`refit`), so θ comes from the members' own lines. Returns whether the labels
+        differ from ``before`` (the previous grouping's; None: there was none)."""
+        self.members()
+        self.settle_corners()
+        self.drop_steep()
+        self.adopt()
+        changed = before is None or not same(before, self.label)
+        self.refit()
+        return changed
+
+    def check(self):
+        """The membership check at the readings' new places: the lines refitted where their
+        members now are (:meth:`refit`), then :meth:`corner_sides`, :meth:`drop_steep`,
+        :meth:`adopt`; if that changed who belongs where, the lines are refitted to their new
+        members. Returns whether it changed."""
+        cdef Py_ssize_t i
+        cdef Py_ssize_t[::1] snap = self.sw.snap
+        cdef bint changed = False
+        for i in range(self.sw.k):
+            snap[i] = self._label[i]
+        self.refit()
+        self.corner_sides()
+        self.drop_steep()
+        self.adopt()
+        for i in range(self.sw.k):
+            if snap[i] != self._label[i]:
+                changed = True
+                break
+        if changed:
+            self.refit()
+        return changed
 
     def plain_step(self, double[::1] theta, Py_ssize_t[::1] last_moving,
                    unsigned char[::1] on_line, Py_ssize_t it, double tolerance_rad):

@@ -982,34 +982,24 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                 held.put_theta(theta)
             # readings far outside the range cannot help a line (but stay for the final check)
             uidx = sw.place(theta, 1.5 * max_range)
-            before = None if grouping is None else grouping.label.copy()
             if mode == "regroup":
                 parts = (sw.px, sw.py, sw.thr, sw.sensor)
                 if uidx is not None:
                     parts = tuple(v.take(uidx) for v in parts)
+                before = None if grouping is None else grouping.label
                 pieces = _segment(*parts, lines, sw.centre, pieces)
                 grouping = _iterate.Grouping(sw, pieces, uidx)
-                grouping.members()
-                grouping.settle_corners()
+                changed = grouping.regroup(before)
                 regroups += 1
-            else:  # the same members, refitted where they now are
-                grouping.refit()
-                grouping.corner_sides()
-            grouping.drop_steep()
-            grouping.adopt()
-            changed = before is None or not _iterate.same(before, grouping.label)
-            # θ from the members' own lines (as the held iterations fit them), so an unchanged
-            # grouping leaves θ where it was
-            if mode == "regroup" or changed:
-                grouping.refit()
-            elif settled:
-                break          # the members stand and their lines did not move: done
-            if mode == "regroup":
                 # regroup again only while that changes who belongs where, and not back to
                 # the grouping before (readings at a corner flipping between two lines)
                 regroup_changed = changed and not (
                     older is not None and _iterate.same(older, grouping.label))
                 older = before
+            else:  # the same members, refitted where they now are, checked again
+                changed = grouping.check()
+                if not changed and settled:
+                    break      # the members stand and their lines did not move: done
             mode = "inner"
             if changed or held is None:  # a plain step from the new grouping
                 moving = grouping.plain_step(theta, last_moving, on_line, it, tolerance_rad)
