@@ -511,18 +511,6 @@ def _scan_order(steps: np.ndarray, n_sensors: int) -> np.ndarray:
     return (order[None, :] * n_sensors + np.arange(n_sensors)[:, None]).reshape(-1)
 
 
-def _tls_angle(n, t):
-    """Total-least-squares lines from summed centred moments t = (Σx, Σy, Σx², Σy², Σxy)
-    over n points (arrays): mean offset (mx, my) and direction angle α ∈ (−π/2, π/2]."""
-    mx = t[0] / n
-    my = t[1] / n
-    sxy = t[4] - t[0] * my
-    dif = (t[2] - t[0] * mx) - (t[3] - t[1] * my)
-    alpha = np.arctan2(sxy + sxy, dif)
-    alpha *= 0.5
-    return mx, my, alpha
-
-
 @dataclass
 class _Pieces:
     """The split-and-merge result over the usable points (indices into their compact order)
