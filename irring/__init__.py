@@ -1,7 +1,19 @@
 """irring: a MuJoCo testbed for the rotating IR range-sensor ring of Park, Baek & Lee (2005)."""
 
-from .data import Points, Reason, Sweep, Truth
-from .scenario import Scenario, ScenarioError, load_scenario
+from importlib.util import find_spec as _find_spec
+
+# The estimator and mapper run compiled kernels (irring/_*.pyx) that pip builds at install;
+# a source tree used without installing has only their sources.
+_KERNELS = ("_iterate", "_lines", "_traverse")
+_unbuilt = [k for k in _KERNELS if _find_spec(f"{__name__}.{k}") is None]
+if _unbuilt:
+    raise ImportError(
+        f"irring's compiled kernels {', '.join(_unbuilt)} are not built: install irring with "
+        f"`pip install .` (or `pip install -e .` in a checkout); pip compiles them with the "
+        f"machine's C compiler (Debian: apt install build-essential python3-dev)")
+
+from .data import Points, Reason, Sweep, Truth  # noqa: E402
+from .scenario import Scenario, ScenarioError, load_scenario  # noqa: E402
 
 __all__ = ["Points", "Reason", "Scenario", "ScenarioError", "Sweep", "Truth", "load_scenario",
            "SimRing"]
