@@ -72,6 +72,18 @@ cdef inline double _rss(double n, const double* lo, const double* hi) noexcept n
     return t - hypot(d, c)
 
 
+cdef inline idx_t _shared_corners(const idx_t* S, const idx_t* E, idx_t P,
+                                  idx_t* cand) noexcept nogil:
+    """The pieces j < P − 1 whose end is the next one's start (the corner the two share: the
+    places a merge or a corner move can happen) into ``cand``, in order; returns how many."""
+    cdef idx_t j, m = 0
+    for j in range(P - 1):
+        if S[j + 1] == E[j]:
+            cand[m] = j
+            m += 1
+    return m
+
+
 # ---------------------------------------------------------------------------- split
 
 
@@ -167,11 +179,7 @@ cdef idx_t _merge(const double* px, const double* py, const double* inv_thr, idx
     for p in range(P):
         flag[p] = 0                        # bit 0 (1): W[p] is known; bit 2 (4): p joins p + 1
     for rnd in range(rounds):
-        m = 0
-        for j in range(P - 1):
-            if S[j + 1] == E[j]:
-                cand[m] = j
-                m += 1
+        m = _shared_corners(S, E, P, cand)
         if m == 0:
             break
         # the joint lines not known yet: moments, then their angles in one arctan2
@@ -363,11 +371,7 @@ cdef void _refine_corners(const double* cum, idx_t* S, idx_t* E, idx_t P, int ro
     cdef bint moved, short_any
     cdef idx_t* sn
     for rnd in range(rounds):
-        m = 0
-        for j in range(P - 1):
-            if S[j + 1] == E[j]:
-                cand[m] = j
-                m += 1
+        m = _shared_corners(S, E, P, cand)
         if m == 0:
             break
         moved = False
@@ -415,10 +419,13 @@ cdef void _refine_corners(const double* cum, idx_t* S, idx_t* E, idx_t P, int ro
 # ---------------------------------------------------------------------------- entry point
 
 
-cdef void* _data(obj, Py_buffer* view, Py_ssize_t n, Py_ssize_t itemsize, const char* codes,
-                 bint writable) except NULL:
+cdef void* _data(obj, Py_buffer* views, int* held, Py_ssize_t n, Py_ssize_t itemsize,
+                 const char* codes, bint writable) except NULL:
     """Data of a C-contiguous array of n items (one of the format ``codes``), through the
-    plain buffer protocol: a typed memoryview would cost ~0.3 µs per new array here."""
+    plain buffer protocol: a typed memoryview would cost ~0.3 µs per new array here. The
+    buffer goes to views[held[0]] and held[0] counts it only once it is acquired and checked,
+    so the caller releases views[:held[0]] on every path, an error's included."""
+    cdef Py_buffer* view = views + held[0]
     PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT
                        | (PyBUF_WRITABLE if writable else 0))
     cdef const char* f = view.format
@@ -431,9 +438,28 @@ cdef void* _data(obj, Py_buffer* view, Py_ssize_t n, Py_ssize_t itemsize, const 
         PyBuffer_Release(view)
         raise TypeError(f"expected {n} contiguous items of format {codes.decode()!r} "
                         f"and size {itemsize}, got {obj!r:.60}")
+    held[0] += 1
     if view.buf == NULL:                     # an empty array: any non-null pointer will do
         return <void*> view
     return view.buf
+
+
+cdef bint _tiles(const idx_t* S, const idx_t* E, idx_t P, idx_t k) noexcept nogil:
+    """Whether the pieces [S[p], E[p]] tile readings 0 … k − 1 as every result's do: in
+    order from the first reading to the last, each starting on the reading after its
+    predecessor or on its end (their shared corner; the predecessor then has ≥ 2 readings).
+    Reused pieces must: the rest indexes by them unchecked (each reading's owner, P ≤ k)."""
+    cdef idx_t p
+    if P == 0:
+        return k == 0
+    if S[0] != 0 or E[P - 1] != k - 1:
+        return False
+    for p in range(P):
+        if E[p] < S[p]:
+            return False
+        if p and not (S[p] == E[p - 1] + 1 or (S[p] == E[p - 1] and E[p - 1] > S[p - 1])):
+            return False
+    return True
 
 
 cdef const char* _ANY_INT = b"lqn"          # numpy's intp on LP64 ('l') or LLP64 ('q')
@@ -448,13 +474,14 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
     intp. A new polyline starts at a sensor change or where consecutive points are more
     than sqrt(gap2) apart. The moments' prefix sums are centred on (cx, cy), so small
     spreads keep their digits. With prev_* (the starts, ends and polyline starts ``brk`` of
-    an earlier result) over the same polylines only the corners are refined. Returns
+    an earlier result) over the same polylines only the corners are refined (pieces that do
+    not tile the points are a ValueError); over other polylines they are ignored. Returns
     (starts, ends, brk, owner, cx, cy, alpha, lmin, lmax, n_points, length_m, usable) as
     ``irring.estimate._Pieces`` holds them.
     """
-    cdef Py_buffer vx, vy, vt, vs, vps, vpe, vpb, vq
-    cdef int held = 0                       # bit per buffer acquired
-    cdef idx_t k = len(px_arr), cap = k + 1, i, P = 0, p, nprev = 0
+    cdef Py_buffer views[8]                 # px, py, thr, sensor, prev_* (3), q
+    cdef int held = 0                       # how many of them are acquired
+    cdef idx_t k = len(px_arr), cap = k + 1, i, P = 0, p, nprev = 0, nbrk = 0
     cdef const double* px
     cdef const double* py
     cdef const double* thr
@@ -485,24 +512,19 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
     cdef double* c
     cdef bint reuse
     try:
-        px = <const double*> _data(px_arr, &vx, k, 8, b"d", False)
-        held |= 1
-        py = <const double*> _data(py_arr, &vy, k, 8, b"d", False)
-        held |= 2
-        thr = <const double*> _data(thr_arr, &vt, k, 8, b"d", False)
-        held |= 4
-        sensor = <const idx_t*> _data(sensor_arr, &vs, k, sizeof(idx_t), _ANY_INT, False)
-        held |= 8
+        px = <const double*> _data(px_arr, views, &held, k, 8, b"d", False)
+        py = <const double*> _data(py_arr, views, &held, k, 8, b"d", False)
+        thr = <const double*> _data(thr_arr, views, &held, k, 8, b"d", False)
+        sensor = <const idx_t*> _data(sensor_arr, views, &held, k, sizeof(idx_t), _ANY_INT,
+                                      False)
         if prev_starts is not None:
             nprev = len(prev_starts)
-            ps = <const idx_t*> _data(prev_starts, &vps, nprev, sizeof(idx_t), _ANY_INT, False)
-            held |= 16
-            pe = <const idx_t*> _data(prev_ends, &vpe, nprev, sizeof(idx_t), _ANY_INT, False)
-            held |= 32
-            pb = <const unsigned char*> _data(prev_brk, &vpb, len(prev_brk), 1, b"?", False)
-            held |= 64
-            if nprev > k:
-                raise ValueError("prev_starts do not fit the points")
+            nbrk = len(prev_brk)
+            ps = <const idx_t*> _data(prev_starts, views, &held, nprev, sizeof(idx_t), _ANY_INT,
+                                      False)
+            pe = <const idx_t*> _data(prev_ends, views, &held, nprev, sizeof(idx_t), _ANY_INT,
+                                      False)
+            pb = <const unsigned char*> _data(prev_brk, views, &held, nbrk, 1, b"?", False)
         # scratch: prefix sums (5 per point and one row of zeros), 1/thr, merge's join costs
         # and joint-line centres; piece starts/ends and their copies, corner and join lists,
         # refinement's memo (4 per corner), the split's stack; polyline starts, merge flags
@@ -554,19 +576,20 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
                 c = cum + (i + 1) * NM
                 c[0], c[1], c[2], c[3], c[4] = s0, s1, s2, s3, s4
 
-        reuse = pb != NULL and vpb.len == k
+        # an earlier result is reused only over the same polylines (else it is of other points)
+        reuse = pb != NULL and nbrk == k
         if reuse:
             for i in range(k):
                 if (pb[i] != 0) != (brk[i] != 0):
                     reuse = False
                     break
         if reuse:
+            if not _tiles(ps, pe, nprev, k):
+                raise ValueError("prev_starts, prev_ends are not pieces of these points")
             P = nprev
             for p in range(P):
                 S[p] = ps[p]
                 E[p] = pe[p]
-                if not (0 <= S[p] <= E[p] < k and (p == 0 or S[p] >= E[p - 1])):
-                    raise ValueError("prev_starts, prev_ends are not pieces of these points")
         elif k:
             for i in range(k):
                 inv_thr[i] = 1.0 / thr[i]
@@ -574,8 +597,7 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
         if k and not reuse:
             # the buffer numpy's arctan2 works in: rows 2·sxy, dif, angle of the joins
             q_arr = np.zeros((3, P))
-            q = <double*> _data(q_arr, &vq, 3 * P, 8, b"d", True)
-            held |= 128
+            q = <double*> _data(q_arr, views, &held, 3 * P, 8, b"d", True)
             P = _merge(px, py, inv_thr, k, cum, cx, cy, S, E, P, cand, qj, flag, W, cost,
                        qmx, qmy, q, q_arr[0], q_arr[1], q_arr[2])
         _refine_corners(cum, S, E, P, 2, cand, qj, S2, E2, seen)
@@ -583,22 +605,8 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
                             min_points, min_length_m, max_rms_sigmas)
     finally:
         free(mem)
-        if held & 1:
-            PyBuffer_Release(&vx)
-        if held & 2:
-            PyBuffer_Release(&vy)
-        if held & 4:
-            PyBuffer_Release(&vt)
-        if held & 8:
-            PyBuffer_Release(&vs)
-        if held & 16:
-            PyBuffer_Release(&vps)
-        if held & 32:
-            PyBuffer_Release(&vpe)
-        if held & 64:
-            PyBuffer_Release(&vpb)
-        if held & 128:
-            PyBuffer_Release(&vq)
+        for i in range(held):
+            PyBuffer_Release(&views[i])
 
 
 cdef tuple _piece_lines(const double* px, const double* py, const double* thr, idx_t k,
@@ -612,7 +620,7 @@ cdef tuple _piece_lines(const double* px, const double* py, const double* thr, i
     max_rms_sigmas of their mean σ (thr / split_sigmas). The outputs are views of three
     blocks (integers, floats, flags); the angles come from numpy's arctan2 over two spare
     rows of the float block."""
-    cdef Py_buffer vi, vf, vb
+    cdef Py_buffer views[3]
     cdef int held = 0
     cdef idx_t p, i, at, lo, hi
     cdef double n, inv, mx, my, cxx, cyy, cxy2, dif, root, mean, alpha, nx, ny, x, y
@@ -636,12 +644,9 @@ cdef tuple _piece_lines(const double* px, const double* py, const double* thr, i
     fblk = np.empty((8, P))     # cx, cy, alpha, lmin, lmax, length_m; 2·cxy, dif (spare)
     bblk = np.empty(k + P, dtype=bool)             # brk, usable
     try:
-        iv = <idx_t*> _data(iblk, &vi, 3 * P + k, sizeof(idx_t), _ANY_INT, True)
-        held = 1
-        f = <double*> _data(fblk, &vf, 8 * P, 8, b"d", True)
-        held = 2
-        bv = <unsigned char*> _data(bblk, &vb, k + P, 1, b"?", True)
-        held = 3
+        iv = <idx_t*> _data(iblk, views, &held, 3 * P + k, sizeof(idx_t), _ANY_INT, True)
+        f = <double*> _data(fblk, views, &held, 8 * P, 8, b"d", True)
+        bv = <unsigned char*> _data(bblk, views, &held, k + P, 1, b"?", True)
         npts, owner = iv + 2 * P, iv + 3 * P
         fcx, fcy, fal, flmin, flmax, flen = f, f + P, f + 2 * P, f + 3 * P, f + 4 * P, f + 5 * P
         f2c, fdif = f + 6 * P, f + 7 * P
@@ -724,11 +729,7 @@ cdef tuple _piece_lines(const double* px, const double* py, const double* thr, i
             if alpha < 0:
                 fal[p] = alpha + M_PI
     finally:
-        if held >= 1:
-            PyBuffer_Release(&vi)
-        if held >= 2:
-            PyBuffer_Release(&vf)
-        if held >= 3:
-            PyBuffer_Release(&vb)
+        for i in range(held):
+            PyBuffer_Release(&views[i])
     return (iblk[:P], iblk[P:2 * P], bblk[:k], iblk[3 * P:], fblk[0], fblk[1], alpha_arr,
             fblk[3], fblk[4], iblk[2 * P:3 * P], fblk[5], bblk[k:])

@@ -201,28 +201,44 @@ cdef inline bint cell(const Seg* s, long k, double minor, long x_lo, long x_hi, 
     return True
 
 
-def walk(const double[::1] x0, const double[::1] y0, const double[::1] dx,
-         const double[::1] dy, long nx, long ny):
-    """Every cell each segment (x0, y0) + t·(dx, dy) (cells from the grid's corner) visits in
-    [0, nx) × [0, ny): (ray, ix, iy, t_enter, t_exit), ordered by segment, then along it."""
-    cdef Py_ssize_t n = x0.shape[0], j, m = 0
+cdef Py_ssize_t _visits(const double[::1] x0, const double[::1] y0, const double[::1] dx,
+                        const double[::1] dy, long nx, long ny, Py_ssize_t* ray,
+                        Py_ssize_t* vx, Py_ssize_t* vy, double* t_enter,
+                        double* t_exit) noexcept nogil:
+    """How many cells the segments visit (see :func:`walk`), and if ``ray`` is not NULL the
+    visits themselves, written to the five arrays: walk counts them first to size those."""
+    cdef Py_ssize_t j, m = 0
     cdef long k, ix, iy
     cdef Seg s
     cdef Cols c
     cdef double a, z, u_in, u_mid, u_out
     cdef bint two
+    for j in range(x0.shape[0]):
+        if not clip(x0[j], y0[j], dx[j], dy[j], nx, ny, &s):
+            continue
+        columns(&s, 1.0, 0.0, &c)
+        for k in range(s.count):
+            two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
+            if cell(&s, k, a, 0, nx - 1, 0, ny - 1, &ix, &iy):
+                if ray != NULL:
+                    ray[m], vx[m], vy[m], t_enter[m], t_exit[m] = j, ix, iy, u_in, u_mid
+                m += 1
+            if two and cell(&s, k, z, 0, nx - 1, 0, ny - 1, &ix, &iy):
+                if ray != NULL:
+                    ray[m], vx[m], vy[m], t_enter[m], t_exit[m] = j, ix, iy, u_mid, u_out
+                m += 1
+    return m
+
+
+def walk(const double[::1] x0, const double[::1] y0, const double[::1] dx,
+         const double[::1] dy, long nx, long ny):
+    """Every cell each segment (x0, y0) + t·(dx, dy) (cells from the grid's corner) visits in
+    [0, nx) × [0, ny): (ray, ix, iy, t_enter, t_exit), ordered by segment, then along it."""
+    cdef Py_ssize_t n = x0.shape[0], m
     if y0.shape[0] != n or dx.shape[0] != n or dy.shape[0] != n:
         raise ValueError("x0, y0, dx, dy must have the same length")
-    with nogil:                                        # count the visits, …
-        for j in range(n):
-            if not clip(x0[j], y0[j], dx[j], dy[j], nx, ny, &s):
-                continue
-            columns(&s, 1.0, 0.0, &c)
-            for k in range(s.count):
-                two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
-                m += cell(&s, k, a, 0, nx - 1, 0, ny - 1, &ix, &iy)
-                if two:
-                    m += cell(&s, k, z, 0, nx - 1, 0, ny - 1, &ix, &iy)
+    with nogil:
+        m = _visits(x0, y0, dx, dy, nx, ny, NULL, NULL, NULL, NULL, NULL)
     ray_a = np.empty(m, np.intp)
     ix_a = np.empty(m, np.intp)
     iy_a = np.empty(m, np.intp)
@@ -230,20 +246,9 @@ def walk(const double[::1] x0, const double[::1] y0, const double[::1] dx,
     exit_a = np.empty(m)
     cdef Py_ssize_t[::1] ray = ray_a, vx = ix_a, vy = iy_a
     cdef double[::1] t_enter = enter_a, t_exit = exit_a
-    m = 0
-    with nogil:                                        # … then write them
-        for j in range(n):
-            if not clip(x0[j], y0[j], dx[j], dy[j], nx, ny, &s):
-                continue
-            columns(&s, 1.0, 0.0, &c)
-            for k in range(s.count):
-                two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
-                if cell(&s, k, a, 0, nx - 1, 0, ny - 1, &ix, &iy):
-                    ray[m], vx[m], vy[m], t_enter[m], t_exit[m] = j, ix, iy, u_in, u_mid
-                    m += 1
-                if two and cell(&s, k, z, 0, nx - 1, 0, ny - 1, &ix, &iy):
-                    ray[m], vx[m], vy[m], t_enter[m], t_exit[m] = j, ix, iy, u_mid, u_out
-                    m += 1
+    if m:
+        with nogil:
+            _visits(x0, y0, dx, dy, nx, ny, &ray[0], &vx[0], &vy[0], &t_enter[0], &t_exit[0])
     return ray_a, ix_a, iy_a, enter_a, exit_a
 
 

@@ -9,6 +9,7 @@ checked against recorded reference outputs, not here, since the numpy code is go
 
 from __future__ import annotations
 
+import array
 import math
 import os
 
@@ -18,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from irring import _lines
-from irring.estimate import LineOptions, _segment
+from irring.estimate import LineOptions, _Pieces, _segment
 
 OPTS = LineOptions()
 HARD = settings(max_examples=200, deadline=None, derandomize=not os.environ.get("IRRING_EXPLORE"),
@@ -90,6 +91,35 @@ def test_regrouping_keeps_the_pieces_and_moves_corners_only():
     assert other.brk.nonzero()[0].tolist() == [0, 30]
 
 
+def test_a_grouping_with_more_pieces_than_the_points_is_split_afresh():
+    """The estimator regroups fewer points when some move out of range; an earlier grouping
+    with more pieces than there are points now is of other polylines, not an error (the
+    kernel raised ValueError here)."""
+    t = np.arange(40)
+    x, y = t * 0.02, np.where(t % 2, 0.05, 0.0)         # a zigzag: a piece per leg
+    first = seg(x, y)
+    assert first.starts.size > 5
+    again = seg(x[:5], y[:5], prev=first)
+    fresh = seg(x[:5], y[:5])
+    for name in ("starts", "ends", "owner", "alpha", "usable"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(fresh, name))
+
+
+@pytest.mark.parametrize("starts, ends", [([], []), ([5], [19]), ([0, 12], [12, 15]),
+                                          ([0, 3, 3], [3, 3, 19]), ([0, 9], [10, 19])])
+def test_previous_pieces_that_do_not_tile_the_points_are_refused(starts, ends):
+    """Reused pieces must tile the points (from the first to the last, each starting on
+    its predecessor's end or the reading after): the kernel reads and writes per-piece
+    arrays through the owner of every reading, and pieces that leave a reading without one
+    made it write out of bounds (a crash, or a corrupted heap)."""
+    x, y = np.linspace(0, 0.4, 20), np.zeros(20)
+    first = seg(x, y)
+    bad = _Pieces(**{**vars(first), "starts": np.array(starts, np.intp),
+                     "ends": np.array(ends, np.intp)})
+    with pytest.raises(ValueError, match="not pieces of these points"):
+        seg(x, y, prev=bad)
+
+
 def test_inputs_are_converted_once_and_checked_by_the_kernel():
     x = np.linspace(0, 0.3, 12)
     y = 0.2 * x
@@ -103,6 +133,42 @@ def test_inputs_are_converted_once_and_checked_by_the_kernel():
     with pytest.raises(TypeError):
         _lines.segment(x, y[:11], np.full(12, 0.01), np.zeros(12, np.intp),
                        0.0225, 0.0, 0.0, None, None, None, 4.0, 3, 0.08, 3.0)
+
+
+def test_the_kernel_releases_every_buffer_it_took_on_every_path():
+    """It takes its arrays' buffers by hand (PyObject_GetBuffer); an array.array cannot grow
+    while one is held, so growing each afterwards shows it was released: after a result,
+    after a reuse, and after each kind of error part-way through taking them."""
+    def arr(values, code):
+        return array.array(code, [v.item() for v in np.asarray(values)])
+
+    def free(*arrays):
+        for a in arrays:
+            a.append(a[0])
+            a.pop()
+        return True
+
+    k = 20
+    x, y, thr = arr(np.linspace(0, 0.4, k), "d"), arr(np.zeros(k), "d"), arr(np.full(k, 0.01), "d")
+    sensor = arr(np.zeros(k, np.intp), "q")
+    args = (0.0225, 0.2, 0.0)
+    tail = (4.0, 3, 0.08, 3.0)
+    out = _lines.segment(x, y, thr, sensor, *args, None, None, None, *tail)
+    assert free(x, y, thr, sensor)
+    starts, ends, brk = arr(out[0], "q"), arr(out[1], "q"), out[2].copy()
+    _lines.segment(x, y, thr, sensor, *args, starts, ends, brk, *tail)
+    assert free(x, y, thr, sensor, starts, ends)
+    with pytest.raises(TypeError):
+        _lines.segment(x, y, thr, arr(np.zeros(k, np.intp), "i"), *args, None, None, None, *tail)
+    assert free(x, y, thr)
+    short = arr(out[1], "q")
+    short[-1] -= 1
+    with pytest.raises(ValueError):
+        _lines.segment(x, y, thr, sensor, *args, starts, short, brk, *tail)
+    assert free(x, y, thr, sensor, starts, short)
+    with pytest.raises(TypeError):
+        _lines.segment(x, y, thr, sensor, *args, starts, ends, brk.view(np.int8), *tail)
+    assert free(x, y, thr, sensor, starts, ends)
 
 
 @st.composite
