@@ -25,6 +25,11 @@ table row by row (:func:`fine_table_is_interp`; else the table is read): in a re
 segmentation evicts the 1 MB table between phases, so reading it was mostly cache misses.
 The build must not fuse a·b + c into one rounding (``-ffp-contract=off``; x86-64's
 default code has no FMA anyway).
+
+Indexing is unchecked (boundscheck off), so the entry points check what they index
+through: :class:`Sweep` the sizes and the scan order, :class:`Grouping` the pieces (no
+more pieces than points: the scratch rows hold one entry per live reading), the methods
+taking per-reading arrays their length. A label of −1 (no line) is never used as an index.
 """
 
 cimport cython
@@ -133,6 +138,27 @@ cdef inline double _segment_sum(const double* a, Py_ssize_t n) noexcept nogil:
     return a[0] + _pairwise(a + 1, n - 1)
 
 
+cdef inline double _tls(const double* m, Py_ssize_t row, Py_ssize_t c, double cnt,
+                        double* p, double* q, double* mx, double* my) noexcept nogil:
+    """Total least squares over c ≥ 1 points from their moments (rows x, y, x², y², xy,
+    ``row`` apart from ``m`` on; cnt = c as a double), each summed as np.add.reduceat does:
+    the mean (mx, my), and p = 2·Sxy, q = Sxx − Syy, whose arctan2(p, q)/2 is the line's
+    direction angle. Returns Sxx + Syy (0: the points coincide). The refit and the held
+    iterations both fit lines this way; one copy keeps them the same bit for bit."""
+    cdef double t0 = _segment_sum(m, c)
+    cdef double t1 = _segment_sum(m + row, c)
+    cdef double t2 = _segment_sum(m + 2 * row, c)
+    cdef double t3 = _segment_sum(m + 3 * row, c)
+    cdef double t4 = _segment_sum(m + 4 * row, c)
+    cdef double sxy
+    mx[0] = t0 / cnt
+    my[0] = t1 / cnt
+    sxy = t4 - t0 * my[0]
+    p[0] = sxy + sxy
+    q[0] = (t2 - t0 * mx[0]) - (t3 - t1 * my[0])
+    return (t2 - t0 * mx[0]) + (t3 - t1 * my[0])
+
+
 cdef inline Py_ssize_t _argmin(const double* r, Py_ssize_t n) noexcept nogil:
     """np.argmin of n ≥ 1 values: the first minimum, or the first NaN if there is one."""
     cdef Py_ssize_t j, best = 0
@@ -146,6 +172,14 @@ cdef inline Py_ssize_t _argmin(const double* r, Py_ssize_t n) noexcept nogil:
         elif r[j] != r[j]:
             return j
     return best
+
+
+cdef int _per_reading(Py_ssize_t n, Py_ssize_t k, str name) except -1:
+    """Refuse an array with fewer than one entry per live reading: the kernels index
+    without bounds checks."""
+    if n < k:
+        raise ValueError(f"{name} has {n} entries for {k} live readings")
+    return 0
 
 
 cdef inline double _fine_x(Py_ssize_t c, Py_ssize_t top, double step) noexcept nogil:
@@ -168,6 +202,8 @@ cdef inline double _interp_at(double x, Py_ssize_t j, const double* xp, const do
 
 
 cdef void _slopes(const double[::1] xp, const double[::1] fp, double[::1] out) noexcept:
+    """Each interval's slope (fp[j+1] − fp[j]) / (xp[j+1] − xp[j]) into out[j], computed once
+    as np.interp computes it, for :func:`_interp_at`."""
     cdef Py_ssize_t j
     for j in range(xp.shape[0] - 1):
         out[j] = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
@@ -181,9 +217,12 @@ def fine_table_is_interp(const double[::1] xp, const double[::1] log_a, const do
     instead of reading the 1 MB table, whose rows are mostly cache misses; if not (another
     numpy rounding the interpolation differently), it reads the table."""
     cdef Py_ssize_t n = xp.shape[0], top = table.shape[0] - 1, c, j = -1
-    cdef double x, step = HALF_PI / top
+    cdef double x, step
     if n < 1 or top < 1:
         return False
+    if not (log_a.shape[0] == b.shape[0] == n and table.shape[1] == 2):
+        raise ValueError("need log a and b at every node and a (cells + 1, 2) table")
+    step = HALF_PI / top
     sa_arr, sb_arr = _empty(max(n - 1, 1)), _empty(max(n - 1, 1))
     cdef double[::1] sa = sa_arr, sb = sb_arr
     _slopes(xp, log_a, sa)
@@ -209,6 +248,8 @@ def classify(const double[::1] counts, unsigned char[::1] reason, double full, d
     cdef Py_ssize_t i
     cdef double s, margin = 2.0 * sigma
     cdef unsigned char r
+    if reason.shape[0] != counts.shape[0]:
+        raise ValueError("classify needs one reason per count")
     for i in range(counts.shape[0]):
         s = counts[i]
         r = R_OK
@@ -251,7 +292,7 @@ cdef class Sweep:
     :meth:`place` puts the readings at a θ (``d``, ``px``, ``py``, ``sigma``, ``thr``).
     """
 
-    cdef readonly Py_ssize_t k
+    cdef readonly Py_ssize_t k, size
     cdef readonly object index, sensor, centre, log_s
     cdef readonly object d, px, py, sigma, thr
     cdef readonly double cap, reject
@@ -272,8 +313,8 @@ cdef class Sweep:
     cdef double pinned, floor_m
     cdef Py_ssize_t corner_window, top
     # scratch for the kernels (each uses it within one call): index rows of k + 1, value
-    # rows of k, a flag row, and a growing buffer for re-read distances (numpy's exp needs
-    # an array)
+    # rows of k, a flag row, and a growing buffer (rr: re-read distances with their θ in
+    # rr_th, or finish's quadrature terms; numpy's exp needs an array)
     cdef Py_ssize_t[:, ::1] iscr
     cdef double[:, ::1] dscr
     cdef object dscr_obj
@@ -288,13 +329,25 @@ cdef class Sweep:
                  double pinned_rad):
         """``counts``, ``heading`` (S·N,), ``origin`` (S·N·2,) flat in (S, N) order,
         ``reason`` the counts' verdicts (live: OK), ``scan`` the flat scan order;
-        ``floor_m`` the smallest σ, ``pinned_rad`` (see Grouping.drop_steep)."""
-        cdef Py_ssize_t total = scan.shape[0], p, f, j, k = 0, prev = -2
+        ``floor_m`` the smallest σ, ``pinned_rad`` (see Grouping.drop_steep). Raises
+        ValueError unless the sizes agree and ``scan`` indexes within them (every kernel
+        indexes unchecked through ``index``)."""
+        cdef Py_ssize_t total = scan.shape[0], size = reason.shape[0], p, f, j, k = 0
+        cdef Py_ssize_t prev = -2
         cdef double c, h, sigma_counts = cal._levels[3]
+        if not (counts.shape[0] == heading.shape[0] == size == total
+                and origin.shape[0] == 2 * size):
+            raise ValueError(f"counts, heading, reason, scan ({counts.shape[0]}, "
+                             f"{heading.shape[0]}, {size}, {total}) need one entry per "
+                             f"reading, origin ({origin.shape[0]}) two")
         for p in range(total):
-            if reason[scan[p]] == R_OK:
+            f = scan[p]
+            if f < 0 or f >= size:
+                raise ValueError(f"scan[{p}] = {f} is not a reading (0 … {size - 1})")
+            if reason[f] == R_OK:
                 k += 1
         self.k = k
+        self.size = size
         ints = _empty((2, k), dtype=_intp)
         self.index, self.sensor = ints[0], ints[1]
         cdef Py_ssize_t[:, ::1] iv = ints
@@ -304,7 +357,8 @@ cdef class Sweep:
         rows = _empty((7, k))
         cdef double[:, ::1] rv = rows
         cdef double[::1] cc = rv[0]
-        self.ox, self.oy, self.ux, self.uy, self.hm, self.sig_s = rv[1], rv[2], rv[3], rv[4], rv[5], rv[6]
+        self.ox, self.oy, self.ux, self.uy = rv[1], rv[2], rv[3], rv[4]
+        self.hm, self.sig_s = rv[5], rv[6]
         j = 0
         for p in range(total):
             f = scan[p]
@@ -353,7 +407,9 @@ cdef class Sweep:
         self.flag = _empty(k, dtype=_uint8)
         self.rr_obj = _empty(0)
         self.rr_th = _empty(0)
-        self.snap = self.iscr[5]     # Grouping.check's labels before
+        # Grouping.check's labels from before: it calls kernels that use rows 0-4 in
+        # between, so the snapshot needs a row of its own
+        self.snap = self.iscr[5]
 
     cdef void _nodes(self, cal):
         """The calibration's nodes and slopes, and for every 256 rows of the fine table the
@@ -433,6 +489,7 @@ cdef class Sweep:
         when that is all of them."""
         cdef Py_ssize_t i, k = self.k, n_use = 0
         cdef double dv, s, la
+        _per_reading(theta.shape[0], k, "theta")
         rows = _empty((5, k))
         self.d, self.px, self.py, self.sigma, self.thr = rows
         cdef double[:, ::1] rv = rows
@@ -464,40 +521,44 @@ cdef class Sweep:
                 n_use += 1
         return uidx
 
-    def scatter_theta(self, Py_ssize_t size, const double[::1] theta, Held held=None):
-        """θ of every live reading into a flat array of ``size`` (0 elsewhere); members of
+    def scatter_theta(self, const double[::1] theta, Held held=None):
+        """θ of every live reading into a flat (S·N,) array (0 elsewhere); members of
         ``held`` at its current θ. For ``Estimate.theta_history``."""
         cdef Py_ssize_t i
-        out = np.zeros(size)
+        _per_reading(theta.shape[0], self.k, "theta")
+        out = np.zeros(self.size)
         cdef double[::1] o = out
         for i in range(self.k):
             o[self.ix[i]] = theta[i]
         if held is not None:
             for i in range(held.km):
-                o[self.ix[held.perm_[i]]] = held.theta[i]
+                o[self.ix[held.perm[i]]] = held.theta[i]
         return out
 
-    def finish(self, const double[::1] theta, on_line, const Py_ssize_t[::1] last_moving,
-               Py_ssize_t n_its, bint iterate, cal, double max_range_m,
-               unsigned char[::1] reason):
+    def finish(self, const double[::1] theta, const unsigned char[::1] on,
+               const Py_ssize_t[::1] last_moving, Py_ssize_t n_its, bint iterate, cal,
+               double max_range_m, unsigned char[::1] reason):
         """Final points with the exact curve (Calibration's log a(θ), b(θ): see
-        :meth:`curve`; ``cal._log_ab`` where the fine table check failed) and reasons; returns flat (S·N,) arrays x, y, d, θ, σ (NaN where not valid),
-        iterations (int32) and valid, and writes each live reading's reason into ``reason``
-        (flat, S·N; the others keep theirs).
+        :meth:`curve`; ``cal._log_ab`` where the fine table check failed) and reasons.
+        Returns flat (S·N,) arrays x, y, d, θ, σ (NaN where not valid), iterations (int32)
+        and valid, and writes each live reading's reason into ``reason`` (flat, S·N; the
+        others keep theirs). ``theta``, ``on`` (on a line), ``last_moving``: per live reading.
 
-        With ``iterate`` a reading on no line (``on_line`` 0) keeps θ = 0 and its σ is
-        widened by the RMS error of the θ = 0 distance over the incidences a round surface
-        gives: ``spread_la``, ``spread_b`` are log a, b at the quadrature nodes (see
+        With ``iterate`` a reading on no line (``on`` 0) keeps θ = 0 and its σ is widened
+        by the RMS error of the θ = 0 distance over the incidences a round surface gives
+        (``cal._spread``: log a, b at the quadrature nodes, see
         ``estimate._fallback_nodes``). A reading still moving in the last iteration is
         NOT_CONVERGED; a distance outside [min, max] range or a non-finite point is
         OUT_OF_RANGE."""
-        cdef Py_ssize_t i, j, f, k = self.k, size = reason.shape[0]
+        cdef Py_ssize_t i, j, f, k = self.k, size = self.size
         cdef Py_ssize_t nodes, n_off = 0, o
         cdef double dv, s, px, py
         cdef unsigned char why
         cdef double[::1] d = self.dscr[0], sg = self.dscr[1], e, la, b
-        cdef const unsigned char[::1] on = on_line
         cdef const double[::1] spread_la, spread_b
+        if reason.shape[0] != size or min(theta.shape[0], on.shape[0], last_moving.shape[0]) < k:
+            raise ValueError("finish needs reason per reading (S·N) and theta, on, "
+                             "last_moving per live reading")
         spread_la, spread_b = cal._spread
         cdef double min_range_m = cal.min_range_m
         d_arr = self.dscr_obj[0]
@@ -598,7 +659,12 @@ cdef class Grouping:
     cdef object p_obj, q_obj
 
     def __init__(self, Sweep sw, pieces, uidx):
-        cdef Py_ssize_t l, i, n
+        """The pieces' lines copied into one block (refit moves them in place; the pieces
+        stay as segmentation left them, for the next regroup to refine), each piece's first
+        and last reading as live indices (the extents :meth:`_table` reads), no labels yet
+        (:meth:`members` gives them). Raises ValueError if the pieces do not fit the
+        points: every method indexes through them unchecked."""
+        cdef Py_ssize_t l, i, n, n_points = sw.k if uidx is None else len(uidx)
         self.sw = sw
         self.pieces = pieces
         self.uidx = uidx
@@ -607,6 +673,17 @@ cdef class Grouping:
         self.owner = np.asarray(pieces.owner, dtype=_intp)
         n = self.starts.shape[0]
         self.n_lines = n
+        if not (self.ends.shape[0] == len(pieces.cx) == len(pieces.cy) == len(pieces.alpha)
+                == len(pieces.usable) == n <= n_points == self.owner.shape[0] <= sw.k):
+            # (no more pieces than points: the scratch rows hold one entry per reading)
+            raise ValueError("pieces: one line per piece, one owner per point needed")
+        for l in range(n):
+            if not 0 <= self.starts[l] <= self.ends[l] < n_points:
+                raise ValueError(f"piece {l} ({self.starts[l]} … {self.ends[l]}) is not "
+                                 f"within the {n_points} points")
+        for i in range(n_points):
+            if not 0 <= self.owner[i] < n:
+                raise ValueError(f"point {i}'s owner {self.owner[i]} is not a piece")
         # rows: cx, cy, alpha | the re-reading table (7) | per-line scratch (5)
         blk = _empty((15, n))
         self.cx, self.cy, self.alpha = blk[0], blk[1], blk[2]
@@ -638,6 +715,7 @@ cdef class Grouping:
         self.tab_ok = False
 
     cdef bint _any_usable(self):
+        """Whether any line can give θ (re-reading needs one)."""
         cdef Py_ssize_t l
         for l in range(self.n_lines):
             if self._usable[l]:
@@ -853,6 +931,7 @@ cdef class Grouping:
             return
         # read with the target's θ the reading must lie on the target line ...
         self._table()
+        # (rows 0 and 1 are free again: corner and pos are done with)
         cdef Py_ssize_t[::1] cols = sw.iscr[4], sel = sw.iscr[0], cent = sw.iscr[1]
         for u in range(U):
             c = self.t_col[other[ent[u]]]
@@ -894,11 +973,14 @@ cdef class Grouping:
         cdef double[::1] tl = sw.dscr[0]
         cdef Py_ssize_t[::1] n_pin, n_good
         for i in range(k):
-            l = lab[i] if lab[i] > 0 else 0
-            good[i] = lab[i] >= 0 and self._usable[l] and (sw.all_usable or sw.usable[i])
-            tl[i] = _incidence(sw.hm[i], self._alpha[l])
-            if good[i] and tl[i] >= hot:
-                any_pinned = True
+            # tl only where good: a reading on no line has no angle to look up (and with
+            # no lines at all there is no line 0 either)
+            l = lab[i]
+            good[i] = l >= 0 and self._usable[l] and (sw.all_usable or sw.usable[i])
+            if good[i]:
+                tl[i] = _incidence(sw.hm[i], self._alpha[l])
+                if tl[i] >= hot:
+                    any_pinned = True
         if any_pinned:
             n_pin, n_good = sw.iscr[0], sw.iscr[1]
             for l in range(n):
@@ -958,7 +1040,7 @@ cdef class Grouping:
         cdef Sweep sw = self.sw
         cdef Py_ssize_t i, l, n = self.n_lines, M = 0, s, c
         cdef Py_ssize_t[::1] lab = self._label, start = sw.iscr[0], fill = sw.iscr[1]
-        cdef double x, y, t0, t1, t2, t3, t4, cnt, mx, my, sxy, a
+        cdef double x, y, a
         self.tab_ok = False
         # members grouped by line, in reading order within a line (a stable sort)
         for l in range(n + 1):
@@ -975,6 +1057,7 @@ cdef class Grouping:
             start[l + 1] += start[l]
             fill[l] = start[l]
         cdef double[:, ::1] buf = sw.dscr[2:7]
+        cdef Py_ssize_t row = buf.strides[0] // sizeof(double)
         for i in range(sw.k):
             if lab[i] >= 0 and (sw.all_usable or sw.usable[i]):
                 s = fill[lab[i]]
@@ -989,19 +1072,7 @@ cdef class Grouping:
             if c == 0:
                 p[l] = q[l] = 0.0
                 continue
-            cnt = <double>c
-            t0 = _segment_sum(&buf[0, s], c)
-            t1 = _segment_sum(&buf[1, s], c)
-            t2 = _segment_sum(&buf[2, s], c)
-            t3 = _segment_sum(&buf[3, s], c)
-            t4 = _segment_sum(&buf[4, s], c)
-            mx = t0 / cnt
-            my = t1 / cnt
-            sxy = t4 - t0 * my
-            p[l] = sxy + sxy
-            q[l] = (t2 - t0 * mx) - (t3 - t1 * my)
-            spread[l] = (t2 - t0 * mx) + (t3 - t1 * my)
-            mxs[l], mys[l] = mx, my
+            spread[l] = _tls(&buf[0, s], row, c, <double>c, &p[l], &q[l], &mxs[l], &mys[l])
         _arctan2(self.p_obj, self.q_obj, self.p_obj)
         for l in range(n):
             c = start[l + 1] - start[l]
@@ -1060,6 +1131,8 @@ cdef class Grouping:
         cdef Py_ssize_t i, l
         cdef double t
         cdef bint moving = False
+        _per_reading(min(theta.shape[0], last_moving.shape[0], on_line.shape[0]), sw.k,
+                     "theta, last_moving or on_line")
         for i in range(sw.k):
             l = self._label[i]
             t = _min(_incidence(sw.hm[i], self._alpha[l]), sw.cap) if l >= 0 else 0.0
@@ -1087,19 +1160,32 @@ cdef class Held:
 
     cdef Sweep sw
     cdef readonly Py_ssize_t km, n_lines
-    cdef readonly object perm
-    cdef Py_ssize_t[::1] perm_, slot, lstart
-    cdef double[::1] n, hm, ls, ox, oy, ux, uy, a, theta, a_prev, g_prev, g, p, q, step, tl, e
-    cdef double[:, ::1] buf
+    # per member (km, in line order): its live index, its line's slot; hm, ls, ox, oy, ux,
+    # uy copied from the sweep (origins about its centre); θ, the step θ_new − θ, its line's
+    # θ uncapped (tl); e: Eq. 10's exponent log d at θ, which _fit turns into d in place
+    cdef Py_ssize_t[::1] perm, slot
+    cdef double[::1] hm, ls, ox, oy, ux, uy, theta, step, tl, e
+    # per line with members (n_lines): first member, count (a double: it divides the
+    # sums), whether it has one member only, a and G(a) now and before, arctan2's p and q
+    cdef Py_ssize_t[::1] lstart
+    cdef double[::1] n, a, a_prev, g_prev, g, p, q
     cdef unsigned char[::1] lone
-    cdef object e_obj, p_obj, q_obj, g_obj
+    cdef double[:, ::1] buf         # _fit's moments (x, y, x², y², xy) per member
+    cdef object e_obj, p_obj, q_obj, g_obj   # arrays under e, p, q, g for numpy's exp/arctan2
     cdef bint secant, has_prev, any_hot, any_reject, moving
     cdef double max_gain, biggest
 
     def __init__(self, Sweep sw, Grouping grouping, const double[::1] theta, bint secant,
                  double max_gain):
+        """The grouping's members (readings with a label) sorted by line, stably (a counting
+        sort: reading order within a line, as the sums need), with what the iterations read
+        per member copied next to each other; lines without members get no slot. Each
+        line's a starts at the grouping's α, each member at its θ (live readings)."""
         cdef Py_ssize_t i, l, s, km = 0, nl = 0, n_all = grouping.n_lines
         cdef double la, b
+        _per_reading(theta.shape[0], sw.k, "theta")
+        if grouping.sw is not sw:
+            raise ValueError("the grouping is of another sweep")
         cdef Py_ssize_t[::1] lab = grouping._label, start = sw.iscr[0], slot_of = sw.iscr[1]
         for l in range(n_all + 1):
             start[l] = 0
@@ -1117,9 +1203,8 @@ cdef class Held:
         self.max_gain = max_gain
         self.has_prev = False
         ints = _empty((2, km), dtype=_intp)
-        self.perm = ints[0]
         cdef Py_ssize_t[:, ::1] iv = ints
-        self.perm_, self.slot = iv[0], iv[1]
+        self.perm, self.slot = iv[0], iv[1]
         self.lstart = _empty(nl, dtype=_intp)
         self.lone = _empty(nl, dtype=_uint8)
         per_line = _empty((7, nl))
@@ -1148,7 +1233,7 @@ cdef class Held:
                 continue
             s = start[l]
             start[l] += 1
-            self.perm_[s] = i
+            self.perm[s] = i
             self.slot[s] = slot_of[l]
             self.hm[s], self.ls[s] = sw.hm[i], sw.ls[i]
             self.ox[s], self.oy[s] = sw.ox[i] - sw.cx0, sw.oy[i] - sw.cy0
@@ -1160,8 +1245,9 @@ cdef class Held:
     def put_theta(self, double[::1] theta):
         """The members' current θ into the sweep's θ (live readings)."""
         cdef Py_ssize_t i
+        _per_reading(theta.shape[0], self.sw.k, "theta")
         for i in range(self.km):
-            theta[self.perm_[i]] = self.theta[i]
+            theta[self.perm[i]] = self.theta[i]
 
     cdef void _fit(self, double tolerance_rad):
         """Fit every line to its members' points at the current θ (``e`` holds the exponent
@@ -1170,8 +1256,8 @@ cdef class Held:
         ``pinned_rad`` of the drop-out angle) or past the rejection angle, whether any step
         is ≥ ``tolerance_rad`` and the largest |step|."""
         cdef Sweep sw = self.sw
-        cdef Py_ssize_t i, l, s, m
-        cdef double x, y, t0, t1, t2, t3, t4, mx, my, sxy, ga, tl, step
+        cdef Py_ssize_t i, l, row = self.buf.strides[0] // sizeof(double)
+        cdef double x, y, mx, my, ga, tl, step
         cdef double hot = sw.cap - sw.pinned
         _exp(self.e_obj, self.e_obj)
         for i in range(self.km):
@@ -1180,18 +1266,8 @@ cdef class Held:
             self.buf[0, i], self.buf[1, i] = x, y
             self.buf[2, i], self.buf[3, i], self.buf[4, i] = x * x, y * y, x * y
         for l in range(self.n_lines):
-            s = self.lstart[l]
-            m = <Py_ssize_t>self.n[l]
-            t0 = _segment_sum(&self.buf[0, s], m)
-            t1 = _segment_sum(&self.buf[1, s], m)
-            t2 = _segment_sum(&self.buf[2, s], m)
-            t3 = _segment_sum(&self.buf[3, s], m)
-            t4 = _segment_sum(&self.buf[4, s], m)
-            mx = t0 / self.n[l]
-            my = t1 / self.n[l]
-            sxy = t4 - t0 * my
-            self.p[l] = sxy + sxy
-            self.q[l] = (t2 - t0 * mx) - (t3 - t1 * my)
+            _tls(&self.buf[0, self.lstart[l]], row, <Py_ssize_t>self.n[l], self.n[l],
+                 &self.p[l], &self.q[l], &mx, &my)
         _arctan2(self.p_obj, self.q_obj, self.g_obj)
         for l in range(self.n_lines):
             ga = self.g[l] * 0.5
@@ -1265,7 +1341,7 @@ cdef class Held:
         self.has_prev = True
         for i in range(self.km):
             if fabs(self.step[i]) >= tolerance_rad:
-                last_moving[self.perm_[i]] = it
+                last_moving[self.perm[i]] = it
             t = _min(_incidence(self.hm[i], self.a[self.slot[i]]), sw.cap)
             self.theta[i] = t
             sw.look(t, &la, &b)
@@ -1290,6 +1366,7 @@ cdef class Held:
         iteration was the checked one.
         """
         cdef bint was_checked = checked
+        _per_reading(last_moving.shape[0], self.sw.k, "last_moving")
         settled = None
         while it < limit:
             self._fit(tolerance_rad)

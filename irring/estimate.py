@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import functools
 import math
+import operator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
@@ -670,11 +671,19 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     as compiled kernels (:mod:`irring._iterate`). ``detail``: also the final lines."""
     cal = calibration if calibration is not None else _nominal_for(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
+    # the kernels take a C integer: a float would fail only once an iteration needs it
+    max_iterations = operator.index(max_iterations)
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
     counts = np.ascontiguousarray(sweep.counts, dtype=float)
     if counts.ndim != 2:
         raise ValueError(f"sweep.counts must be (steps, sensors), got shape {counts.shape}")
+    steps = np.asarray(sweep.steps)
+    if steps.shape != counts.shape[:1]:
+        # the scan order indexes the readings by step: more steps than rows would read and
+        # write past the arrays, fewer would leave readings unestimated but marked OK
+        raise ValueError(f"sweep.steps must have one entry per row of sweep.counts "
+                         f"{counts.shape}, got shape {steps.shape}")
     angles = np.asarray(sweep.sensor_angles, dtype=float)
     pose = sweep.reading_poses if sweep.reading_poses is not None else sweep.pose
     origin, heading = beam_geometry(sweep.ring, np.asarray(pose, dtype=float), angles,
@@ -689,7 +698,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
     sw = _iterate.Sweep(cal, lines, counts.reshape(-1), np.ascontiguousarray(origin).reshape(-1),
                         np.ascontiguousarray(heading).reshape(-1), reason.reshape(-1),
-                        _scan_order(np.asarray(sweep.steps), shape[1]), shape[1],
+                        _scan_order(steps, shape[1]), shape[1],
                         _SIGMA_FLOOR_M, _PINNED_RAD)
     k = sw.k
     theta = np.zeros(k)
@@ -720,6 +729,11 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                 if uidx is not None:
                     parts = tuple(v.take(uidx) for v in parts)
                 before = None if grouping is None else grouping.label
+                if pieces is not None and pieces.brk.size != parts[0].size:
+                    # θ moved readings across the usable range, so the last pieces index
+                    # other points: split afresh (segmentation refines earlier pieces only
+                    # over the same points, and refuses more pieces than points)
+                    pieces = None
                 pieces = _segment(*parts, lines, sw.centre, pieces)
                 grouping = _iterate.Grouping(sw, pieces, uidx)
                 changed = grouping.regroup(before)
@@ -738,7 +752,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                 moving = grouping.plain_step(theta, last_moving, on_line, it, tolerance_rad)
                 it += 1
                 if keep_history:
-                    history.append(sw.scatter_theta(counts.size, theta).reshape(shape))
+                    history.append(sw.scatter_theta(theta).reshape(shape))
                 if not moving:
                     break
                 held = _iterate.Held(sw, grouping, theta, damping, _MAX_GAIN)
@@ -751,14 +765,14 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
             regroup_before = limit + 1 if regroups == 1 else _REGROUP_WINDOW
         status, it, last_settled, was_checked = held.run(
             it, limit, tolerance_rad, checked, last_moving, regroup_before,
-            lines.regroup_until_rad, keep_history)
+            lines.regroup_until_rad, one_step=keep_history)  # a history records every step
         if last_settled is not None:
             settled = last_settled
         if status == _iterate.CHECK:
             mode = "member"      # some member left its line: redo this iteration as a check
             continue
         if keep_history:
-            history.append(sw.scatter_theta(counts.size, theta, held).reshape(shape))
+            history.append(sw.scatter_theta(theta, held).reshape(shape))
         if status == _iterate.SETTLED:
             if regroups == 1 and regroups < lines.regroup_iterations:
                 mode = "regroup"   # settled once: split-and-merge the straightened points again

@@ -12,11 +12,13 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from _synthetic import PAPER_RING, make_sweep, rectangle, stand_in_calibration
 from irring import _iterate
 from irring.data import Reason
-from irring.estimate import Calibration, estimate, estimate_detail
+from irring.estimate import Calibration, LineOptions, estimate, estimate_detail
 
 NOMINAL = Calibration.nominal("gp2d12", PAPER_RING)
 FIELDS = ("x", "y", "d", "theta", "sigma_m", "iterations", "valid", "reason")
@@ -90,5 +92,95 @@ def test_history_follows_the_iterations():
     v = p.valid
     np.testing.assert_array_equal(h[-1][v], p.theta[v])
     same = estimate(sweep, NOMINAL)
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(p, f), getattr(same, f), err_msg=f)
+
+
+def test_steps_must_match_the_rows_of_counts():
+    """The scan order indexes the readings by step, and the kernels index through it
+    unchecked: one step too many read and wrote past the arrays (heap corruption), too few
+    left readings unestimated yet marked OK with NaN points. Both are refused up front."""
+    sweep, _, _ = make_sweep(NOMINAL, walls=rectangle(-0.4, -0.4, 0.4, 0.4))
+    for steps in (sweep.steps[:-5], np.append(sweep.steps, sweep.steps[-1] + 1)):
+        with pytest.raises(ValueError, match="sweep.steps"):
+            estimate(dataclasses.replace(sweep, steps=steps), NOMINAL)
+
+
+def test_scan_order_outside_the_readings_is_refused():
+    """The kernels' own guard (estimate checks first, but nothing else stands between a
+    caller and unchecked indexing): a scan index past the readings is a ValueError."""
+    sweep, _, _ = make_sweep(NOMINAL, walls=rectangle(-0.4, -0.4, 0.4, 0.4))
+    counts = np.ascontiguousarray(sweep.counts, dtype=float).reshape(-1)
+    n = counts.size
+    reason = np.zeros(n, dtype=np.uint8)
+    scan = np.arange(n, dtype=np.intp)
+    scan[-1] = n
+    with pytest.raises(ValueError, match="scan"):
+        _iterate.Sweep(NOMINAL, LineOptions(), counts, np.zeros(2 * n), np.zeros(n), reason,
+                       scan, 12, 0.001, 0.03)
+
+
+def test_readings_leaving_the_usable_range_between_groupings():
+    """A regroup splits the readings still within 1.5 × max range. Here a calibration whose
+    a(θ) grows with θ puts the only two usable readings (an oblique wall; the rest lie
+    beyond range) out of it once they take their line's θ, so the regroup has no points:
+    the first grouping's pieces cannot be refined on them (the segmentation refused them
+    with a ValueError), and no line is left (no line 0 to look at either)."""
+    cal = stand_in_calibration(strength=1.0)
+    sweep, _, inc = make_sweep(cal, walls=[((-2.0, 0.45), (2.0, 0.45))])
+    s, n = 35, 5
+    assert np.radians(55) < inc[s, n] < np.radians(65)
+    counts = np.zeros(np.shape(sweep.counts))
+    counts[s:s + 2, n] = sweep.counts[s:s + 2, n]
+    d0 = cal.distance(counts[s:s + 2, n], 0.0)
+    sweep = dataclasses.replace(sweep, counts=counts, max_range_m=float(d0.max()) * 1.05 / 1.5)
+    est = estimate_detail(sweep, cal, lines=LineOptions(min_points=2, min_length_m=0.0),
+                          keep_history=True)
+    assert est.lines is not None and est.lines.normal.shape == (0, 2)
+    # θ went to the wall's (so the points moved out of range), then back to 0 off any line
+    seen = np.array([h[s:s + 2, n] for h in est.theta_history])
+    np.testing.assert_allclose(seen.max(axis=0), inc[s:s + 2, n], atol=np.radians(0.5))
+    assert np.all(seen[-1] == 0.0) and not est.points.valid.any()
+
+
+def test_max_iterations_must_be_an_integer():
+    """A float count reached the kernels only once a held iteration ran, so it failed on
+    some sweeps and not others; now it fails on every sweep."""
+    sweep, _, _ = make_sweep(NOMINAL, walls=rectangle(-0.4, -0.4, 0.4, 0.4))
+    counts = np.zeros(np.shape(sweep.counts))
+    counts[10, 3] = sweep.counts[10, 3]     # one reading: no line, no held iteration
+    with pytest.raises(TypeError):
+        estimate(dataclasses.replace(sweep, counts=counts), NOMINAL, max_iterations=5.0)
+    assert estimate(sweep, NOMINAL, max_iterations=np.int32(5)).valid.any()
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2 ** 16), keep=st.floats(0.0, 1.0),
+       max_iterations=st.sampled_from([1, 2, 3, 20]),
+       max_range_m=st.sampled_from([0.15, 0.3, 0.624]),
+       min_points=st.integers(1, 3))
+def test_sparse_sweeps_keep_the_contract(seed, keep, max_iterations, max_range_m, min_points):
+    """Sweeps thinned to a few readings (gaps, NaN, a short max range, a curve whose a(θ)
+    grows so readings leave the usable range as θ grows) at any iteration limit: valid
+    points are finite, no reading takes more iterations than allowed, and recording the θ
+    history changes nothing."""
+    cal = stand_in_calibration(strength=1.0)
+    rng = np.random.default_rng(seed)
+    x0, y0 = -rng.uniform(0.2, 0.7, 2)
+    x1, y1 = rng.uniform(0.2, 0.7, 2)
+    sweep, _, _ = make_sweep(cal, walls=rectangle(x0, y0, x1, y1), noise_counts=1.0, seed=seed,
+                             pose=(0.0, 0.0, rng.uniform(-3, 3)), max_range_m=max_range_m)
+    counts = np.array(sweep.counts)
+    counts[rng.random(counts.shape) > keep] = 0.0
+    counts[rng.random(counts.shape) < 0.05] = np.nan
+    sweep = dataclasses.replace(sweep, counts=counts)
+    opts = LineOptions(min_points=min_points, min_length_m=0.02)
+    est = estimate_detail(sweep, cal, max_iterations=max_iterations, lines=opts,
+                          keep_history=True)
+    p = est.points
+    v = p.valid
+    assert np.all(np.isfinite(p.x[v]) & np.isfinite(p.y[v]) & np.isfinite(p.sigma_m[v]))
+    assert p.iterations.max() <= max_iterations and len(est.theta_history) <= max_iterations + 1
+    same = estimate(sweep, cal, max_iterations=max_iterations, lines=opts)
     for f in FIELDS:
         np.testing.assert_array_equal(getattr(p, f), getattr(same, f), err_msg=f)
