@@ -706,7 +706,6 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     on_line = np.zeros(k, dtype=np.uint8)        # took θ from a line in the last plain step
     history = [np.zeros(shape)] if keep_history else []
     grouping: _iterate.Grouping | None = None
-    pieces: _Pieces | None = None
     held: _iterate.Held | None = None
     regroups = 0
     regroup_changed = True
@@ -729,12 +728,11 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                 if uidx is not None:
                     parts = tuple(v.take(uidx) for v in parts)
                 before = None if grouping is None else grouping.label
-                if pieces is not None and pieces.brk.size != parts[0].size:
-                    # θ moved readings across the usable range, so the last pieces index
-                    # other points: split afresh (segmentation refines earlier pieces only
-                    # over the same points, and refuses more pieces than points)
-                    pieces = None
-                pieces = _segment(*parts, lines, sw.centre, pieces)
+                # the last grouping's pieces are refined where they are of the same
+                # polylines; once θ moved readings across the usable range they are of
+                # other points, and the segmentation splits afresh by itself
+                pieces = _segment(*parts, lines, sw.centre,
+                                  None if grouping is None else grouping.pieces)
                 grouping = _iterate.Grouping(sw, pieces, uidx)
                 changed = grouping.regroup(before)
                 regroups += 1
