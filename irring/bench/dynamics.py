@@ -20,7 +20,6 @@ Each function returns plain figures (``irring bench dynamics`` prints them, the 
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import time
 import types
@@ -41,7 +40,6 @@ def variant(name: str, *, effects: dict | None = None, drop: tuple = (), scan: d
     """A bundled scenario with effects added/replaced/dropped, its scan block replaced and
     motion keys changed (spell them as the file does, e.g. ``odometry_sigma_mm``)."""
     raw = yaml.safe_load(resolve(name).read_text())
-    raw = copy.deepcopy(raw)
     raw.setdefault("effects", {})
     for key in drop:
         raw["effects"].pop(key, None)
