@@ -76,7 +76,7 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
-from . import _iterate, _lines
+from . import _iterate, _lines, gp2
 from .data import Points, Reason, Sweep, beam_geometry
 from .scenario import Ring
 
@@ -103,6 +103,12 @@ def _frozen(a: Any, name: str) -> np.ndarray:
         raise CalibrationError(f"{name}: every value must be finite, got {arr}")
     arr.setflags(write=False)
     return arr
+
+
+def _table_end(theta: np.ndarray) -> float:
+    """The drop-out angle a curve table implies by itself: its last row (a table of the
+    θ = 0 row alone: just short of 90°)."""
+    return float(theta[-1]) or math.pi / 2 - 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,7 +160,7 @@ class Calibration:
         if not (math.isfinite(self.noise_counts) and self.noise_counts >= 0):
             raise CalibrationError(f"noise_counts must be ≥ 0, got {self.noise_counts!r}")
         if self.max_incidence_rad is None:
-            object.__setattr__(self, "max_incidence_rad", float(theta[-1]) or math.pi / 2 - 1e-3)
+            object.__setattr__(self, "max_incidence_rad", _table_end(theta))
         if not 0.0 < self.max_incidence_rad < math.pi / 2:
             raise CalibrationError(f"max_incidence must lie in (0°, 90°), got "
                                    f"{math.degrees(self.max_incidence_rad):g}°")
@@ -241,25 +247,20 @@ class Calibration:
                 noise_sigma_v: float = 0.015) -> Calibration:
         """The datasheet calibration from ``irring.gp2``'s tables, for an uncalibrated ring.
 
-        ``d = a_V·V^b`` with V = k·S (k volts per count) becomes ``d = (a_V·k^b)·S^b``.
+        ``d = a_V·V^b`` with V = k·S (k volts per count) becomes ``d = (a_V·k^b)·S^b``
+        (:meth:`irring.gp2.SensorModel.ab_counts` at the table's rows below 90°).
         d_o comes from ``emitter_offset_m``, else the ring design's, else 7 mm.
         """
-        from . import gp2
-
         model = gp2.sensor(sensor_model)
-        volts_per_count = gp2.lsb_v(adc_bits, vref_v)
-        theta = np.asarray(model.theta_rad, dtype=float)
-        keep = theta < math.pi / 2
-        a_v, b = (np.asarray(v, dtype=float)[keep] for v in (model.a, model.b))
+        theta = model.theta_rad[model.theta_rad < math.pi / 2]
+        a, b = model.ab_counts(theta, adc_bits, vref_v)   # np.interp at its nodes: the rows
         if emitter_offset_m is None:
             emitter_offset_m = ring.emitter_offset_m if ring is not None else 0.007
         return cls(sensor_model=model.name, emitter_offset_m=float(emitter_offset_m),
-                   theta_rad=theta[keep], a=a_v * volts_per_count ** b, b=b,
-                   adc_bits=int(adc_bits), vref_v=float(vref_v),
+                   theta_rad=theta, a=a, b=b, adc_bits=int(adc_bits), vref_v=float(vref_v),
                    min_range_m=float(model.min_range_m), max_range_m=float(model.max_range_m),
-                   noise_counts=float(noise_sigma_v) / volts_per_count,
-                   max_incidence_rad=float(min(model.max_incidence_rad, theta[keep][-1]
-                                               if theta[keep][-1] > 0 else math.pi / 2 - 1e-3)),
+                   noise_counts=float(noise_sigma_v) / gp2.lsb_v(adc_bits, vref_v),
+                   max_incidence_rad=min(model.max_incidence_rad, _table_end(theta)),
                    source=f"nominal {model.name} datasheet curve")
 
     @classmethod
