@@ -221,12 +221,11 @@ def _rmse(err: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(err * err))) if err.size else None
 
 
-def _compute_time(sweeps, scenario, estimator, grid) -> tuple[float, float]:
-    """CPU seconds the estimator and the mapper take for all sweeps, the least of
-    ``TIMING_REPEATS`` runs on fresh grids. CPU time of this thread, not wall time: while
-    workers share the cores with each other and with whatever else runs, a job's wall time
-    grows with the load, its CPU time hardly at all."""
-    cal = estimator_calibration(sweeps[0], scenario)
+def _compute_time(sweeps, cal, estimator, grid) -> tuple[float, float]:
+    """CPU seconds the estimator (with calibration ``cal``) and the mapper take for all
+    sweeps, the least of ``TIMING_REPEATS`` runs on fresh grids. CPU time of this thread, not
+    wall time: while workers share the cores with each other and with whatever else runs, a
+    job's wall time grows with the load, its CPU time hardly at all."""
     est, mapper = [], []
     for _ in range(TIMING_REPEATS):
         t_est = t_map = 0.0
@@ -263,8 +262,8 @@ def run_job(job: Job) -> dict:
                                   tolerance_rad=cfg.tolerance_rad, iterate=cfg.iterate,
                                   lines=lines)
     grid = OccupancyGrid.for_scenario(sc)
-    result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid,
-                                 calibration=estimator_calibration(sweeps[0], sc), score=False,
+    cal = estimator_calibration(sweeps[0], sc)
+    result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid, calibration=cal, score=False,
                                  progress=False, estimator=estimator)
     # every configuration is judged on the default design's ground truth, on its own cells
     reference = apply(base, Config(resolution_m=sc.map.resolution_m))
@@ -297,7 +296,7 @@ def run_job(job: Job) -> dict:
             step_stride=sc.scan.step_stride, settle_s=sc.scan.settle_s,
             samples=sweeps[0].samples)
         angle_rms = None
-    est_s, map_s = _compute_time(sweeps, sc, estimator, grid)
+    est_s, map_s = _compute_time(sweeps, cal, estimator, grid)
     est_ms, map_ms = est_s * 1e3 / poses, map_s * 1e3 / poses
     return {
         "scenario": base.name, "knob": cfg.knob, "label": cfg.label, "value": cfg.value,
