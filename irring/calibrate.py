@@ -35,6 +35,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
+from . import gp2
 from .data import Sweep
 from .estimate import Calibration, CalibrationError, emitter_offset_from_wall, fit_curve
 from .scenario import Ring
@@ -154,18 +155,15 @@ def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = 12, vref_
     datasheet range) and it is not within 3σ of the no-return level (a dropped return reads
     as that level, not as its distance).
     """
-    if min_range_m is None or max_range_m is None:
-        from . import gp2
-
-        model = gp2.sensor(sensor_model)
-        min_range_m = model.min_range_m if min_range_m is None else min_range_m
-        max_range_m = model.max_range_m if max_range_m is None else max_range_m
     r = readings
     spread = r.spread_counts[np.isfinite(r.spread_counts) & (r.repeats > 1)]
     noise = float(np.sqrt(np.mean(spread ** 2))) if spread.size else 0.0
-    # the datasheet curve says what "nothing there" reads until our own curve can say it
+    # the datasheet curve says what "nothing there" reads until our own curve can say it,
+    # and its range is the default
     cal = dataclasses.replace(Calibration.nominal(sensor_model, None, adc_bits, vref_v),
                               noise_counts=noise)
+    min_range_m = cal.min_range_m if min_range_m is None else min_range_m
+    max_range_m = cal.max_range_m if max_range_m is None else max_range_m
     full = cal.full_scale_counts
     base = np.isfinite(r.counts) & (r.counts > 0.5) & (r.counts < full - 0.5) & \
         (np.abs(r.beam_angle_rad) < math.radians(89.0))
@@ -207,8 +205,6 @@ class SimulatedRig:
 
     def __init__(self, scenario, *, sensor: int = 0, sweeps: int = 8, seed: int | None = None,
                  placements: Sequence[Placement] | None = None):
-        from . import gp2
-
         self.scenario = scenario
         self.sensor = int(sensor)
         self.sweeps = int(sweeps)
@@ -266,7 +262,6 @@ class SimulatedRig:
         sc = self.scenario
         return solve(self.readings(), sensor_model=sc.sensor.model,
                      adc_bits=sc.sensor.adc_bits, vref_v=sc.sensor.vref_v,
-                     min_range_m=self.model.min_range_m, max_range_m=self.model.max_range_m,
                      theta_grid_rad=theta_grid_rad,
                      source=f"simulated rig ({sc.name}: {', '.join(sc.effects) or 'no effects'}; "
                             f"{len(self.placements)} placements × {self.sweeps} sweeps, "
@@ -296,8 +291,6 @@ class GuidedCalibration:
                  adc_bits: int = 12, vref_v: float = 5.0, sensor: int = 0, sweeps: int = 4,
                  placements: Sequence[Placement] | None = None,
                  emitter_offset_guess_m: float = 0.007):
-        from . import gp2
-
         self.read_sweep = read_sweep
         self.prompt = prompt
         self.show = show
