@@ -32,6 +32,7 @@ physics and never builds that module's objects.
 from __future__ import annotations
 
 import copy
+import functools
 from dataclasses import dataclass
 
 import mujoco
@@ -111,6 +112,12 @@ class SimRing:
         self._rays = mujoco.batch.Batch(self.model, 1, nthread=1)
         self._pipeline = pipeline
         self._sweeps: dict[int, int] = {}
+        # what every full static sweep needs and only the scenario decides, worked out once:
+        # its steps and the belt's sensor angles for them (handed out as copies), and the
+        # hardware time of one step
+        steps = self.default_steps()
+        self._full_sweep = (steps, self.built.sensor_qpos_for(steps * self.ring.motor_step_rad))
+        self._step_s = hardware_duration_s(1, scenario.scan.settle_s, scenario.samples_per_step)
         self.dynamics = None  # irring.dynamics.Dynamics, only for scenes that need it
         from . import dynamics as dynamics_lib
 
@@ -137,10 +144,12 @@ class SimRing:
                 self.dynamics = Dynamics(self.scenario, self.built, self.seed)
         self._sweeps.clear()
 
-    @property
+    @functools.cached_property
     def n_sweeps(self) -> int:
         """Sweeps the scene takes: one per scan pose; with ``motion``, back to back until the
-        robot reaches the end of its path. ``sweep(k)`` for k in range(n_sweeps)."""
+        robot reaches the end of its path. ``sweep(k)`` for k in range(n_sweeps). The scene
+        alone decides it (not the seed), so it is worked out once: a moving sweep checks its
+        index against it."""
         if self.dynamics is None:
             return len(self.scenario.robot.poses)
         return self.dynamics.n_sweeps(self.default_steps())
@@ -292,9 +301,11 @@ class SimRing:
 
         ``pose`` overrides the scenario's pose ``pose_index``: (3,) or per step (S, 3).
         """
-        steps = self.default_steps() if steps is None else self._check_steps(steps)
-        motor = steps * self.ring.motor_step_rad
-        angles = self.built.sensor_qpos_for(motor)
+        if steps is None:
+            steps, angles = (a.copy() for a in self._full_sweep)
+        else:
+            steps = self._check_steps(steps)
+            angles = self.built.sensor_qpos_for(steps * self.ring.motor_step_rad)
         pose = self.pose(pose_index) if pose is None else np.asarray(pose, dtype=float)
         return steps, angles, self._truth_at(*self.frames(angles, pose))
 
@@ -326,11 +337,9 @@ class SimRing:
         pose = self.pose(pose_index)
         pose_index = pose_index % len(self.scenario.robot.poses)
         steps, angles, truth = self.truth(pose_index, steps=steps, pose=pose)
-        per_step = hardware_duration_s(1, self.scenario.scan.settle_s,
-                                       self.scenario.samples_per_step)
         return self._finish(pose_index, self._count(pose_index), steps, angles, truth,
-                            timestamps_s=per_step * np.arange(1, len(steps) + 1),
-                            duration_s=per_step * len(steps), pose=pose)
+                            timestamps_s=self._step_s * np.arange(1, len(steps) + 1),
+                            duration_s=self._step_s * len(steps), pose=pose)
 
     def _dynamic_sweep(self, index: int, steps: np.ndarray | None) -> Sweep:
         """A sweep whose readings physics, the GP2 clocks or the drive placed."""
