@@ -202,20 +202,29 @@ class OccupancyGrid:
     # ---- construction
 
     @classmethod
-    def for_scenario(cls, scenario, params: MapperParams | None = None) -> OccupancyGrid:
-        """A grid covering the room outline plus ``scenario.map.margin_m`` on every side.
+    def covering(cls, lo_xy_m, hi_xy_m, resolution_m: float = 0.010,
+                 params: MapperParams | None = None) -> OccupancyGrid:
+        """A grid covering the box ``lo_xy_m`` … ``hi_xy_m`` (world (x, y), metres).
 
         The origin is shifted by half a cell so walls on round coordinates (multiples of
         the resolution) run through cell centres rather than along cell borders — a wall's
-        surface then lies in one row of cells instead of on the fence between two.
+        surface then lies in one row of cells instead of on the fence between two. A box
+        edge on a round coordinate counts as on it despite round-off (−0.1 / 0.01 is
+        −10.000000000000002), so it gets no extra row of cells.
         """
-        res = scenario.map.resolution_m
-        outline = np.asarray(scenario.room.outline_m, dtype=float)
-        lo = outline.min(axis=0) - scenario.map.margin_m
-        hi = outline.max(axis=0) + scenario.map.margin_m
-        origin = np.floor(lo / res + 1e-9) * res - res / 2
-        shape = np.ceil((hi - origin) / res - 1e-9).astype(int) + 1
+        res = float(resolution_m)
+        origin = np.floor(np.asarray(lo_xy_m, dtype=float) / res + 1e-9) * res - res / 2
+        shape = np.ceil((np.asarray(hi_xy_m, dtype=float) - origin) / res - 1e-9).astype(int) + 1
         return cls(origin, (shape[1], shape[0]), res, params)
+
+    @classmethod
+    def for_scenario(cls, scenario, params: MapperParams | None = None) -> OccupancyGrid:
+        """A grid covering the room outline plus ``scenario.map.margin_m`` on every side
+        (:meth:`covering`: walls on round coordinates run through cell centres)."""
+        outline = np.asarray(scenario.room.outline_m, dtype=float)
+        return cls.covering(outline.min(axis=0) - scenario.map.margin_m,
+                            outline.max(axis=0) + scenario.map.margin_m,
+                            scenario.map.resolution_m, params)
 
     def copy(self) -> OccupancyGrid:
         other = OccupancyGrid(self.origin_xy_m, self.shape, self.resolution_m, self.params)

@@ -162,7 +162,8 @@ def simulate(scenario: Scenario, *, seed: int | None = None, progress: bool | No
 
 def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
                     margin_m: float = 0.10, params: MapperParams | None = None) -> OccupancyGrid:
-    """A grid around every emitter and end point (for sweeps without a scenario)."""
+    """A grid around every emitter and end point, ``margin_m`` beyond them (for sweeps
+    without a scenario; laid out as :meth:`OccupancyGrid.covering` lays out every grid)."""
     xs, ys = [], []
     for p in points:
         reach = np.where(p.valid, 0.0, p.max_range_m)
@@ -172,11 +173,9 @@ def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
             ys.append(np.asarray(y, float).ravel())
     x = np.concatenate(xs)
     y = np.concatenate(ys)
-    lo = np.array([np.nanmin(x), np.nanmin(y)]) - margin_m
-    hi = np.array([np.nanmax(x), np.nanmax(y)]) + margin_m
-    origin = np.floor(lo / resolution_m) * resolution_m - resolution_m / 2
-    shape = np.ceil((hi - origin) / resolution_m).astype(int) + 1
-    return OccupancyGrid(origin, (shape[1], shape[0]), resolution_m, params)
+    return OccupancyGrid.covering(np.array([np.nanmin(x), np.nanmin(y)]) - margin_m,
+                                  np.array([np.nanmax(x), np.nanmax(y)]) + margin_m,
+                                  resolution_m, params)
 
 
 def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,

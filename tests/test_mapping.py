@@ -417,6 +417,30 @@ def test_for_scenario_covers_outline_plus_margin_with_walls_through_cell_centres
     assert np.min(np.abs(xs - 0.0)) < 1e-9 and np.min(np.abs(ys - 0.9)) < 1e-9
 
 
+def test_a_grid_around_points_is_laid_out_like_the_scenario_grid_of_their_box():
+    """pipeline.grid_for_points and for_scenario lay out a box the same way: readings whose
+    emitters and end points span a room's outline get that room's grid, half a cell and the
+    margin beyond it, with no extra row where round-off puts the box's edge a hair below a
+    cell border (0.3 − 0.1 m is 19.999999999999996 cells)."""
+    import dataclasses
+
+    from irring.pipeline import grid_for_points
+
+    base = load_scenario("t_room")
+    outline = tuple((x + 0.3, y + 0.3) for x, y in base.room.outline_m)
+    sc = dataclasses.replace(base, room=dataclasses.replace(base.room, outline_m=outline))
+    corners = np.array(outline, float).T[:, None, :]
+    n = corners.shape[2]
+    pts = Points(x=corners[0], y=corners[1], d=np.zeros((1, n)), theta=np.zeros((1, n)),
+                 origin_x=corners[0], origin_y=corners[1], heading=np.zeros((1, n)),
+                 sigma_m=np.full((1, n), 0.01), iterations=np.ones((1, n), int),
+                 valid=np.ones((1, n), bool), reason=np.zeros((1, n), np.uint8))
+    g = grid_for_points([pts], sc.map.resolution_m, sc.map.margin_m)
+    want = OccupancyGrid.for_scenario(sc)
+    assert g.shape == want.shape
+    np.testing.assert_array_equal(g.origin_xy_m, want.origin_xy_m)
+    np.testing.assert_allclose(g.origin_xy_m, [0.3 - 0.1 - 0.005] * 2, atol=1e-12)
+
 # --------------------------------------------------------------------------- map_server export
 
 
