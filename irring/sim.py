@@ -118,6 +118,8 @@ class SimRing:
         steps = self.default_steps()
         self._full_sweep = (steps, self.built.sensor_qpos_for(steps * self.ring.motor_step_rad))
         self._step_s = hardware_duration_s(1, scenario.scan.settle_s, scenario.samples_per_step)
+        # reflectance by geom id with a NaN at the end, where a miss's id −1 reads
+        self._reflectance = np.append(self.built.reflectance, np.nan)
         self.dynamics = None  # irring.dynamics.Dynamics, only for scenes that need it
         from . import dynamics as dynamics_lib
 
@@ -288,7 +290,7 @@ class SimRing:
         incidence = np.arctan2(np.sqrt(np.maximum(1.0 - cos * cos, 0.0)), cos)
         point = o + u * distance[:, None]
         geom = np.where(miss, -1, gid)
-        refl = np.where(miss, np.nan, self.built.reflectance[gid])  # gid −1 reads the last geom
+        refl = self._reflectance[geom]  # a miss (−1) reads the appended NaN
         return RayHits(distance_m=distance.reshape(lead), incidence_rad=incidence.reshape(lead),
                        hit_point=point.reshape(lead + (3,)), geom_id=geom.reshape(lead),
                        reflectance=refl.reshape(lead))
