@@ -102,6 +102,19 @@ class Stage:
         return f"{type(self).__name__}({self.params!r})"
 
 
+def cast_from_emitters(truth: Truth, directions: np.ndarray, cast: Callable | None, what: str):
+    """RayHits of the rays ``directions`` (S, N, R, 3) from each reading's emitter, in one
+    ``cast`` call (the ``rays`` phase of a stage that replaces the single ray by several).
+
+    The origins go to ``cast`` as a read-only broadcast view: ``SimRing.cast`` copies them
+    once as it flattens them. ``what`` starts the error raised when no ``cast`` was given.
+    """
+    if cast is None:
+        raise ValueError(f"{what}: pass cast= to Pipeline.run (SimRing passes its batched ray "
+                         f"caster SimRing.cast)")
+    return cast(np.broadcast_to(truth.origin[..., None, :], directions.shape), directions)
+
+
 # --------------------------------------------------------------------------- stages
 
 
@@ -151,12 +164,8 @@ class BeamStage(Stage):
         return self._coeffs @ basis  # (R, 3) @ (..., 3, 3) → (..., R, 3)
 
     def rays(self, f: Frame, cast: Callable | None) -> None:
-        if cast is None:
-            raise ValueError("the beam effect casts extra rays: pass cast= to Pipeline.run "
-                             "(SimRing passes its batched ray caster SimRing.cast)")
-        directions = self.directions(f.truth.direction)
-        origins = np.broadcast_to(f.truth.origin[..., None, :], directions.shape).copy()
-        hits = cast(origins, directions)
+        hits = cast_from_emitters(f.truth, self.directions(f.truth.direction), cast,
+                                  "the beam effect casts extra rays")
         f.d = np.asarray(hits.distance_m, dtype=float)
         f.incidence = np.asarray(hits.incidence_rad, dtype=float)
         f.reflectance = np.asarray(hits.reflectance, dtype=float)

@@ -64,12 +64,8 @@ class SonarConeStage(Stage):
         return out
 
     def rays(self, f: Frame, cast: Callable | None) -> None:
-        if cast is None:
-            raise ValueError("the sonar cone casts a fan of rays: pass cast= to Pipeline.run "
-                             "(SimRing passes SimRing.cast)")
-        directions = self.directions(f.truth.direction)
-        origins = np.broadcast_to(f.truth.origin[..., None, :], directions.shape).copy()
-        hits = cast(origins, directions)
+        hits = effects.cast_from_emitters(f.truth, self.directions(f.truth.direction), cast,
+                                          "the sonar cone casts a fan of rays")
         inc = np.asarray(hits.incidence_rad, dtype=float)
         d = np.asarray(hits.distance_m, dtype=float)
         f.d = np.where(inc > self.max_incidence_rad, np.nan, d)  # no specular echo back
