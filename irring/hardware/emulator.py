@@ -82,7 +82,6 @@ class SimSource:
     def __init__(self, scenario: Scenario, *, seed: int | None = None):
         from ..sim import SimRing  # the driver never imports sim; only the emulator does
 
-        self.scenario = scenario
         self.seed = scenario.seed if seed is None else int(seed)
         self.sim = SimRing(scenario, seed=self.seed)
         self.ring = scenario.ring
@@ -157,8 +156,7 @@ class Device:
                  realtime: bool = False, firmware: str = FIRMWARE,
                  clock_start_ms: int = 1000, fixed_pose: int | None = None):
         self.source = source
-        self.ring = source.ring
-        self.info = p.info_for_ring(self.ring, source.adc_bits, firmware)
+        self.info = p.info_for_ring(source.ring, source.adc_bits, firmware)
         self.faults = faults
         self.realtime = realtime
         self.fixed_pose = fixed_pose
