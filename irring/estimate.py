@@ -168,20 +168,33 @@ class Calibration:
         object.__setattr__(self, "a", a)
         object.__setattr__(self, "b", b)
         object.__setattr__(self, "_log_a", np.log(a))
-        object.__setattr__(self, "_levels", (self.full_scale_counts, self.near_counts,
-                                             self.no_return_counts, self.sigma_counts(),
-                                             self.falling))
-        # (log a, b) on a fine θ grid for the estimator's loop, looked up at the nearest
-        # node (no search): θ off by ≤ 1.2e-5 rad, d by < 1e-4 relative. The estimator
-        # recomputes rows from the nodes where that gives the table bit for bit (checked
-        # here for every row), sparing the cache a 1 MB table
+
+    # ---- what the estimator reads per sweep, built on its first sweep (a calibration that
+    # is only fitted, saved or shown never needs them: the fine table takes ~3 ms)
+
+    @functools.cached_property
+    def _levels(self) -> tuple[float, float, float, float, bool]:
+        """The count levels ``_iterate.classify`` judges readings by, and σ of a count."""
+        return (self.full_scale_counts, self.near_counts, self.no_return_counts,
+                self.sigma_counts(), self.falling)
+
+    @functools.cached_property
+    def _fine(self) -> tuple[float, np.ndarray, bool]:
+        """(log a, b) on a fine θ grid for the estimator's loop, looked up at the nearest
+        node (no search): θ off by ≤ 1.2e-5 rad, d by < 1e-4 relative. Returned with the
+        grid's cells per radian and whether the kernels may recompute each row from the
+        nodes (they give the table bit for bit: checked here for every row), sparing the
+        cache the 1 MB table."""
         fine = np.linspace(0.0, math.pi / 2, _FINE_CELLS + 1)
-        table = np.stack([np.interp(fine, theta, self._log_a), np.interp(fine, theta, b)],
-                         axis=1)
-        object.__setattr__(self, "_fine", (_FINE_CELLS / (math.pi / 2), table,
-                                           _iterate.fine_table_is_interp(theta, self._log_a,
-                                                                         b, table)))
-        object.__setattr__(self, "_spread", _fallback_nodes(self))
+        table = np.stack([np.interp(fine, self.theta_rad, self._log_a),
+                          np.interp(fine, self.theta_rad, self.b)], axis=1)
+        return (_FINE_CELLS / (math.pi / 2), table,
+                _iterate.fine_table_is_interp(self.theta_rad, self._log_a, self.b, table))
+
+    @functools.cached_property
+    def _spread(self) -> tuple[np.ndarray, np.ndarray]:
+        """log a, b at the fallback σ's quadrature nodes (see :func:`_fallback_nodes`)."""
+        return _fallback_nodes(self)
 
     # ---- the curve
 
@@ -810,9 +823,9 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
 @functools.lru_cache(maxsize=16)
 def _nominal_for(sensor_model: str, ring: Ring | None, adc_bits: int, vref_v: float
                  ) -> Calibration:
-    """:meth:`Calibration.for_sweep`'s calibration, built once per sensor/ring/ADC: building
-    one (its fine θ table) takes longer than estimating a sweep, and ``irring run`` without
-    a calibration file estimates every sweep with the default."""
+    """:meth:`Calibration.for_sweep`'s calibration, built once per sensor/ring/ADC: its fine θ
+    table (built on its first sweep) takes longer than estimating a sweep, and ``irring run``
+    without a calibration file estimates every sweep with the default."""
     return Calibration.nominal(sensor_model, ring, adc_bits, vref_v)
 
 
