@@ -179,12 +179,14 @@ def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
 
 
 def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
-               grid: OccupancyGrid | None = None, calibration=None,
-               frames_per_sweep: int = 0, score: bool = True, progress: bool | None = None,
-               estimator: Callable | None = None, truth=None) -> MapRun:
+               grid: OccupancyGrid | None = None, params: MapperParams | None = None,
+               calibration=None, frames_per_sweep: int = 0, score: bool = True,
+               progress: bool | None = None, estimator: Callable | None = None,
+               truth=None) -> MapRun:
     """Estimate and map recorded or live sweeps, in order; score against the scenario if any.
 
-    ``grid`` defaults to the scenario's (or, without one, a grid around the points).
+    ``grid`` defaults to the scenario's (or, without one, a grid around the points), with
+    the mapper ``params`` (a given grid has its own).
     ``frames_per_sweep > 0`` keeps animation frames: the map after each part of each sweep
     (log-odds, poses so far, caption); the map itself is always built one sweep per insert,
     so it does not depend on the frames asked for. ``truth``: a ``metrics.GroundTruth`` of
@@ -195,7 +197,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     timings = {"estimate": 0.0, "map": 0.0}
     points: list[Points] = []
     if grid is None and scenario is not None:
-        grid = OccupancyGrid.for_scenario(scenario)
+        grid = OccupancyGrid.for_scenario(scenario, params)
     frames: list[tuple[np.ndarray, int, str]] = []
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:
         for sweep in sweeps:
@@ -205,7 +207,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
             bar.update()
     t0 = time.perf_counter()
     if grid is None:
-        grid = grid_for_points(points)
+        grid = grid_for_points(points, params=params)
     if frames_per_sweep:
         frames.append((grid.log_odds.copy(), 0, "before the first sweep"))
     for k, p in enumerate(points):
@@ -248,10 +250,8 @@ def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | 
     """Simulate every pose of ``scenario``, estimate, map and score."""
     calibration, cal_text = load_calibration(calibration_file)
     sweeps, t_sim = simulate(scenario, seed=seed, progress=progress)
-    result = map_sweeps(sweeps, scenario=scenario,
-                        grid=OccupancyGrid.for_scenario(scenario, params),
-                        calibration=calibration, frames_per_sweep=frames_per_sweep,
-                        score=score, progress=progress)
+    result = map_sweeps(sweeps, scenario=scenario, params=params, calibration=calibration,
+                        frames_per_sweep=frames_per_sweep, score=score, progress=progress)
     result.timings_s = {"simulate": t_sim, **result.timings_s}
     result.scenario_text = scenario_text(scenario)
     result.calibration_text = cal_text
@@ -284,10 +284,9 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
     if meta.get("grid"):
         g = meta["grid"]
         grid = OccupancyGrid(g["origin_xy_m"], g["shape"], g["resolution_m"], params)
-    elif scenario is not None:
-        grid = OccupancyGrid.for_scenario(scenario, params)
-    result = map_sweeps(sweeps, scenario=scenario, grid=grid, calibration=calibration,
-                        frames_per_sweep=frames_per_sweep, score=score, progress=progress)
+    result = map_sweeps(sweeps, scenario=scenario, grid=grid, params=params,
+                        calibration=calibration, frames_per_sweep=frames_per_sweep,
+                        score=score, progress=progress)
     result.timings_s = {"load": t_load, **result.timings_s}
     result.scenario_text = meta.get("scenario_yaml")
     result.calibration_text = cal_text

@@ -152,3 +152,21 @@ def test_ground_truth_can_be_reused_across_runs(runs):
     again = pipeline.map_sweeps(first.sweeps, scenario=first.scenario, truth=first.truth,
                                 progress=False)
     assert again.truth is first.truth and again.scores == first.scores
+
+
+def test_replay_maps_with_the_recorded_mapper_params_on_any_grid(runs, tmp_path):
+    """A recording that names its mapper numbers but no grid or scenario (written by hand,
+    or by another tool) is mapped with those numbers on a grid around its points."""
+    import dataclasses
+
+    from irring.mapping import MapperParams
+    from irring.recording import save_recording
+
+    params = MapperParams(l_occ=1.0, l_max=2.0)
+    sweeps = runs["t_room_cylinder"].sweeps
+    path = save_recording(tmp_path / "bare.npz", sweeps, {"mapper": dataclasses.asdict(params)})
+    replayed = pipeline.replay(path, progress=False)
+    assert replayed.grid.params == params and replayed.scores is None
+    want = pipeline.map_sweeps(sweeps, params=params, progress=False)
+    assert np.array_equal(replayed.grid.log_odds, want.grid.log_odds)
+    assert replayed.grid.log_odds.max() == 2.0
