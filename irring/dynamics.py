@@ -72,7 +72,7 @@ import mujoco.batch
 import numpy as np
 
 from . import model as model_lib
-from .data import GP2_PERIOD_S, ring_angles
+from .data import GP2_PERIOD_S, beam_geometry
 from .scenario import (BeltDynamicsEffect, MotionEffect, Ring, Scenario, ScenarioError,
                        TimingEffect, distance_to_outline, point_in_polygon)
 
@@ -686,6 +686,5 @@ def heading_error(sweep) -> np.ndarray:
     d = sweep.truth.direction
     true = np.arctan2(d[..., 1], d[..., 0])
     pose = sweep.reading_poses if sweep.reading_poses is not None else sweep.pose
-    yaw = np.asarray(pose, dtype=float)[..., 2]
-    assumed = yaw + ring_angles(sweep.ring) + np.asarray(sweep.sensor_angles)
+    _, assumed = beam_geometry(sweep.ring, pose, np.asarray(sweep.sensor_angles), 0.0)
     return np.angle(np.exp(1j * (true - assumed)))
