@@ -31,7 +31,7 @@ import types
 from dataclasses import dataclass
 from typing import Mapping
 
-from .data import GP2_PERIOD_S
+from .data import GP2_PERIOD_S, hardware_duration_s
 from .scenario import IncidenceEffect, NoiseEffect, Ring, Robot, Scenario, ScenarioError, Sensor
 
 
@@ -158,12 +158,13 @@ class Design:
         """Seconds the real device needs for one full 360° view at one pose.
 
         positions × (settle + samples × reading period), × sensors when they fire one at a
-        time (settle not for a laser, whose mirror never stops). For the GP2 designs this
-        equals ``data.hardware_duration_s`` of a sweep.
+        time (settle not for a laser, whose mirror never stops): ``data.hardware_duration_s``
+        over those readings with the sensor's period.
         """
-        per = (settle_s if self.sensor.settles else 0.0) + samples * self.sensor.reading_period_s
         fires = self.ring.sensors if self.sensor.sequential else 1
-        return float(self.positions(step_stride) * fires * per)
+        return hardware_duration_s(self.positions(step_stride) * fires,
+                                   settle_s if self.sensor.settles else 0.0, samples,
+                                   self.sensor.reading_period_s)
 
     # ---- what the simulator needs
     def sensor_block(self, base: Sensor | None = None) -> Sensor:
