@@ -51,13 +51,16 @@ def design_rays(design: Design, step_stride: int = 1) -> Rays:
     position and beam direction is one ray. A sensor with a beam cone contributes a fan of
     rays every ``CONE_RAY_STEP_RAD`` across the cone.
     """
+    import mujoco
+
     from . import geometry, model
 
     rm = model.compile_ring(design.ring)
+    data = mujoco.MjData(rm.model)  # one, re-posed at every step
     steps = range(design.ring.min_step, design.ring.max_step + 1, step_stride)
     origins, headings = [], []
     for s in steps:  # one kinematics call per motor position; the rays are arrays
-        f = geometry.model_frames(rm, s)
+        f = geometry.model_frames(rm, s, data)
         origins.append(f.emitter_xyz[:, :2])
         headings.append(f.heading_rad)
     o = np.concatenate(origins)

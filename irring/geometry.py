@@ -176,16 +176,18 @@ class SensorFrames:
         return np.arctan2(self.beam[:, 1], self.beam[:, 0])
 
 
-def model_frames(ring_model, step: int) -> SensorFrames:
+def model_frames(ring_model, step: int, data=None) -> SensorFrames:
     """Pose a compiled ring (``model.RingModel``) at motor ``step`` and read its frames.
 
     Kinematic: the motor joint at step × motor step, each hinge where its belt equality
-    puts it, then ``mj_kinematics``; nothing here uses R, Φ or α.
+    puts it, then ``mj_kinematics``; nothing here uses R, Φ or α. ``data``: an ``MjData``
+    of the model to pose (a fresh one by default; allocating it costs ~100× the
+    kinematics, so a caller posing many steps passes one).
     """
     import mujoco
 
     m = ring_model.model
-    d = mujoco.MjData(m)
+    d = mujoco.MjData(m) if data is None else data
     motor = step * ring_model.ring.motor_step_rad
     d.qpos[ring_model.motor_qpos] = motor
     d.qpos[ring_model.sensor_qpos] = ring_model.sensor_qpos_for(motor)
