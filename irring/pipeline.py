@@ -208,13 +208,15 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     t0 = time.perf_counter()
     if grid is None:
         grid = grid_for_points(points, params=params)
+    n = len(points)
     if frames_per_sweep:
         frames.append((grid.log_odds.copy(), 0, "before the first sweep"))
     for k, p in enumerate(points):
-        before = grid.log_odds.copy() if frames_per_sweep else None
+        if frames_per_sweep:
+            frames.extend(_sweeping_frames(grid, p, k, n, frames_per_sweep))
         grid.insert(p)
         if frames_per_sweep:
-            frames.extend(_sweep_frames(grid, before, p, k, len(points), frames_per_sweep))
+            frames.append((grid.log_odds.copy(), k + 1, f"pose {k + 1} of {n}: done"))
     timings["map"] = time.perf_counter() - t0
     run = MapRun(sweeps=list(sweeps), points=points, grid=grid, scenario=scenario,
                  frames=frames, timings_s=timings)
@@ -228,19 +230,19 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     return run
 
 
-def _sweep_frames(grid: OccupancyGrid, before: np.ndarray, points: Points, k: int, n: int,
-                  parts: int) -> list[tuple[np.ndarray, int, str]]:
-    """Frames while sweep k is mapped: the beams of the first 1/parts, 2/parts, … of its steps
-    (clamped like an insert); the last frame is the map after the real insert."""
+def _sweeping_frames(grid: OccupancyGrid, points: Points, k: int, n: int,
+                     parts: int) -> list[tuple[np.ndarray, int, str]]:
+    """Frames while sweep k is mapped, before it is inserted into ``grid``: the beams of the
+    first 1/parts, 2/parts, … of its steps (clamped like an insert); the frame after them
+    is the map after the real insert."""
     rows = points.valid.shape[0]
     edges = np.linspace(0, rows, parts + 1).round().astype(int)
-    acc = np.zeros_like(before)
+    acc = np.zeros(grid.shape)
     out = []
     for j in range(1, parts):
         acc += grid.delta(slice_steps(points, slice(edges[j - 1], edges[j])))
-        shown = np.clip(before + acc, grid.params.l_min, grid.params.l_max)
+        shown = np.clip(grid.log_odds + acc, grid.params.l_min, grid.params.l_max)
         out.append((shown, k + 1, f"pose {k + 1} of {n}: sweeping ({j}/{parts})"))
-    out.append((grid.log_odds.copy(), k + 1, f"pose {k + 1} of {n}: done"))
     return out
 
 
