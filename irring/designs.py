@@ -252,12 +252,13 @@ def parametric(sensors: int, radius_m: float, sweep_half_angle_rad: float, step_
 
 
 def _check_ring(ring: Ring) -> None:
-    """The same bounds the scenario loader enforces, for rings made in code."""
+    """The scenario loader's own bounds check (a ``ScenarioError``, a ``ValueError``, in the
+    loader's words and units), for rings made in code."""
+    from .scenario import _Loader
+
+    loader = _Loader("")
     for f in dataclasses.fields(Ring):
-        lo, hi = f.metadata.get("lo"), f.metadata.get("hi")
-        v = getattr(ring, f.name)
-        if (lo is not None and v < lo) or (hi is not None and v > hi):
-            raise ValueError(f"ring.{f.name} = {v:g} is out of range; allowed {lo:g} … {hi:g}")
+        loader.check(getattr(ring, f.name), f.metadata, f"ring.{f.name}")
 
 
 # --------------------------------------------------------------------------- scenarios
