@@ -119,7 +119,7 @@ def symmetry_period_rad(design: Design, step_stride: int = 1) -> float:
     single sensor turning a full circle at the centre."""
     ring = design.ring
     if ring.sensors > 1:
-        return 2.0 * math.pi / ring.sensors
+        return design.spacing_rad
     if design.rotating and design.positions(step_stride) * design.step_rad * step_stride \
             >= 2.0 * math.pi - 1e-9:
         return design.step_rad * step_stride
