@@ -292,17 +292,9 @@ class OccupancyGrid:
 
     # ---- reading the map
 
-    def probability(self) -> np.ndarray:
-        """P(occupied) per cell, (ny, nx)."""
-        return 1.0 / (1.0 + np.exp(-self.log_odds))
-
     def classify(self) -> np.ndarray:
         """int8 (ny, nx): OCCUPIED (1), FREE (0) or UNKNOWN (−1), with map_server's thresholds."""
-        prob = self.probability()
-        out = np.full(self.shape, UNKNOWN, np.int8)
-        out[prob > OCCUPIED_THRESH] = OCCUPIED
-        out[prob < FREE_THRESH] = FREE
-        return out
+        return classify(self.log_odds)
 
     # ---- ROS map_server export
 
@@ -361,6 +353,16 @@ class OccupancyGrid:
         lo[p < free] = grid.params.l_min
         grid.log_odds = np.flipud(lo).copy()
         return grid
+
+
+def classify(log_odds: np.ndarray) -> np.ndarray:
+    """int8 cells of a log-odds array (a grid's, or an animation frame's): OCCUPIED (1), FREE
+    (0) or UNKNOWN (−1), with map_server's thresholds."""
+    prob = 1.0 / (1.0 + np.exp(-log_odds))              # P(occupied)
+    out = np.full(np.shape(log_odds), UNKNOWN, np.int8)
+    out[prob > OCCUPIED_THRESH] = OCCUPIED
+    out[prob < FREE_THRESH] = FREE
+    return out
 
 
 def read_pgm(path) -> np.ndarray:

@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .mapping import FREE, OCCUPIED, OccupancyGrid
+from .mapping import FREE, OCCUPIED, OccupancyGrid, classify
 
 UNKNOWN_RGB = (0.75, 0.75, 0.75)
 FREE_RGB = (1.0, 1.0, 1.0)
@@ -157,19 +157,17 @@ def save_animation(path, grid: OccupancyGrid, frames: Sequence[tuple[np.ndarray,
     """Write a GIF of the map being built.
 
     ``frames``: (log-odds (ny, nx), poses scanned so far, caption) per frame; the last frame
-    is held ``hold_s`` seconds. Cells are classified with the grid's thresholds.
+    is held ``hold_s`` seconds. Cells are classified as the map's (:func:`mapping.classify`).
     """
     import imageio.v2 as imageio
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig = MapFigure(grid, scenario, poses, reach_m, ring_radius_m, "")
-    probe = grid.empty_like()
     images = []
     try:
         for log_odds, shown, caption in frames:
-            probe.log_odds = log_odds
-            fig.update(probe.classify(), shown, caption)
+            fig.update(classify(log_odds), shown, caption)
             images.append(fig.rgb())
     finally:
         fig.close()
