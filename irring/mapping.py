@@ -226,11 +226,6 @@ class OccupancyGrid:
                             outline.max(axis=0) + scenario.map.margin_m,
                             scenario.map.resolution_m, params)
 
-    def copy(self) -> OccupancyGrid:
-        other = OccupancyGrid(self.origin_xy_m, self.shape, self.resolution_m, self.params)
-        other.log_odds = self.log_odds.copy()
-        return other
-
     def empty_like(self) -> OccupancyGrid:
         return OccupancyGrid(self.origin_xy_m, self.shape, self.resolution_m, self.params)
 
@@ -279,10 +274,6 @@ class OccupancyGrid:
         out = np.zeros(self.shape)
         self._add(out, points, -np.inf, np.inf)
         return out
-
-    def apply(self, delta: np.ndarray) -> None:
-        """Add a log-odds change (ny, nx) and clamp."""
-        np.clip(self.log_odds + delta, self.params.l_min, self.params.l_max, out=self.log_odds)
 
     def insert(self, points: Points) -> None:
         """Add one batch of readings (typically a sweep) to the map; only the cells its beams
