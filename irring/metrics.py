@@ -105,13 +105,11 @@ def _inside_obstacle(ob, px, py) -> np.ndarray:
     return (np.abs(lx) <= ob.size_m[0] / 2) & (np.abs(ly) <= ob.size_m[1] / 2)
 
 
-def _outline_samples(points: np.ndarray, step_m: float, closed: bool = True) -> np.ndarray:
-    """Points every ``step_m`` along a polyline (including every corner)."""
+def _outline_samples(points: np.ndarray, step_m: float) -> np.ndarray:
+    """Points every ``step_m`` along a closed polygon (including every corner)."""
     pts = np.asarray(points, float)
-    ends = np.roll(pts, -1, axis=0) if closed else pts[1:]
-    starts = pts if closed else pts[:-1]
     out = []
-    for a, b in zip(starts, ends):
+    for a, b in zip(pts, np.roll(pts, -1, axis=0)):
         n = max(int(math.ceil(np.hypot(*(b - a)) / step_m)), 1)
         t = np.arange(n + 1)[:, None] / n
         out.append(a + t * (b - a))
@@ -213,9 +211,8 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     material = np.where(label > 0, label, 0).astype(np.int16)
 
     reach = _reach_m(scenario)
-    in_range = np.zeros(px.shape, bool)
-    visible = np.zeros(px.shape, bool)
-    reachable_free = np.zeros(px.shape, bool)
+    in_range = np.zeros(px.shape, bool)   # surface and free cells in range of some pose …
+    seen = np.zeros(px.shape, bool)       # … and in its line of sight
     hidden_by_obstacle = np.zeros(px.shape, np.int16)
     candidates = surface | free
     for pose in scenario.robot.poses:  # a handful of poses; each is vectorised over cells
@@ -224,17 +221,16 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
         ty, tx = np.nonzero(near)
         first = _sight((ny, nx), origin, res, material, (pose.x_m, pose.y_m), tx, ty)
         clear = first == 0
-        visible[ty[clear & surface[ty, tx]], tx[clear & surface[ty, tx]]] = True
-        reachable_free[ty[clear & free[ty, tx]], tx[clear & free[ty, tx]]] = True
+        seen[ty[clear], tx[clear]] = True
         by_obstacle = (first >= OBSTACLE0) & (surface_owner[ty, tx] == WALL)
         unset = hidden_by_obstacle[ty, tx] == 0
         pick = by_obstacle & unset
         hidden_by_obstacle[ty[pick], tx[pick]] = first[pick]
-    visible &= surface
+    visible = seen & surface
     shadow = (surface_owner == WALL) & in_range & ~visible & (hidden_by_obstacle > 0)
     return GroundTruth(label=label, surface=surface, surface_owner=surface_owner,
-                       occupied=occupied, free=free, in_range=in_range & candidates,
-                       visible=visible, reachable_free=reachable_free, shadow=shadow,
+                       occupied=occupied, free=free, in_range=in_range,
+                       visible=visible, reachable_free=seen & free, shadow=shadow,
                        shadow_owner=np.where(shadow, hidden_by_obstacle, 0).astype(np.int16),
                        reach_m=reach)
 
