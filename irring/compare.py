@@ -171,13 +171,13 @@ def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int 
 
 
 def estimator_calibration(sweep, scenario):
-    """The nominal calibration for the sweep's sensor, told the scene's noise level."""
+    """The nominal calibration for the sweep's sensor, told the scene's output noise, as a
+    user who calibrated their sensor would measure it: the ``noise`` effect's σ, or none
+    (0.1 mV, the floor) when the scene adds no noise."""
     from .estimate import Calibration
 
-    kw = {}
-    if "noise" in scenario.effects:
-        kw["noise_sigma_v"] = max(scenario.effects["noise"].sigma_v, 1e-4)
-    return Calibration.for_sweep(sweep, **kw)
+    noise = scenario.effects.get("noise")
+    return Calibration.for_sweep(sweep, noise_sigma_v=max(noise.sigma_v if noise else 0.0, 1e-4))
 
 
 def run_scene(scenario, design: Design | str, seed: int | None = None, *,

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from ..compare import estimator_calibration
 from ..data import Reason
 from ..estimate import Calibration, estimate
 
@@ -51,9 +52,7 @@ def measure(scenario, *, sweeps_per_pose: int = 5, min_theta_deg: float = 40.0,
         for _ in range(sweeps_per_pose):
             sw = sim.sweep(pose)
             if cal is None:  # the datasheet curve, told the scene's output noise
-                noise = scenario.effects.get("noise")
-                cal = Calibration.for_sweep(
-                    sw, noise_sigma_v=max(noise.sigma_v, 1e-4) if noise else 1e-4)
+                cal = estimator_calibration(sw, scenario)
             t0 = time.perf_counter()
             p = estimate(sw, cal, max_iterations=max_iterations)
             times.append(time.perf_counter() - t0)
