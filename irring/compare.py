@@ -212,12 +212,9 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
     result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=estimator_calibration(
         sweeps[0], sc), score=False, progress=False)
     grid = result.grid
-    key = (id(reference), grid.shape, tuple(grid.origin_xy_m), grid.resolution_m)
-    truth = None if truth_cache is None else truth_cache.get(key)
-    if truth is None:  # the same reference on the same grid for every design and seed
-        truth = metrics.ground_truth(reference, grid)
-        if truth_cache is not None:
-            truth_cache[key] = truth
+    # the same reference on the same grid for every design and seed
+    truth = (metrics.ground_truth(reference, grid) if truth_cache is None
+             else metrics.cached_ground_truth(reference, grid, truth_cache, id(reference)))
     scores = metrics.score(grid, sc, truth)
     poses = len(sweeps)
     scan = sc.scan

@@ -205,16 +205,7 @@ class Job:
     seed: int
 
 
-_TRUTH_CACHE: dict[tuple, Any] = {}   # per process: (scenario YAML, cell size) → GroundTruth
-
-
-def _ground_truth(key: tuple, scenario, grid):
-    from .. import metrics
-
-    truth = _TRUTH_CACHE.get(key)
-    if truth is None or truth.label.shape != grid.shape:
-        truth = _TRUTH_CACHE[key] = metrics.ground_truth(scenario, grid)
-    return truth
+_TRUTH_CACHE: dict[tuple, Any] = {}   # per process: the reference's GroundTruth per grid
 
 
 def _rmse(err: np.ndarray) -> float | None:
@@ -267,7 +258,7 @@ def run_job(job: Job) -> dict:
                                  progress=False, estimator=estimator)
     # every configuration is judged on the default design's ground truth, on its own cells
     reference = apply(base, Config(resolution_m=sc.map.resolution_m))
-    truth = _ground_truth((job.scenario_yaml, sc.map.resolution_m), reference, result.grid)
+    truth = metrics.cached_ground_truth(reference, result.grid, _TRUTH_CACHE, job.scenario_yaml)
     scores = metrics.score(result.grid, reference, truth)
 
     err, err_steep, iters, err_pt = [], [], [], []
