@@ -248,12 +248,14 @@ def _sweeping_frames(grid: OccupancyGrid, points: Points, k: int, n: int,
 
 def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | Path | None = None,
         frames_per_sweep: int = 0, score: bool = True, progress: bool | None = None,
-        params: MapperParams | None = None) -> MapRun:
-    """Simulate every pose of ``scenario``, estimate, map and score."""
+        params: MapperParams | None = None, estimator: Callable | None = None) -> MapRun:
+    """Simulate every pose of ``scenario``, estimate, map and score (``estimator``: as
+    :func:`map_sweeps` takes it)."""
     calibration, cal_text = load_calibration(calibration_file)
     sweeps, t_sim = simulate(scenario, seed=seed, progress=progress)
     result = map_sweeps(sweeps, scenario=scenario, params=params, calibration=calibration,
-                        frames_per_sweep=frames_per_sweep, score=score, progress=progress)
+                        frames_per_sweep=frames_per_sweep, score=score, progress=progress,
+                        estimator=estimator)
     result.timings_s = {"simulate": t_sim, **result.timings_s}
     result.scenario_text = scenario_text(scenario)
     result.calibration_text = cal_text

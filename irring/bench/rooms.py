@@ -1,0 +1,141 @@
+"""Map scores on a set of rooms, with the scene's effects and with an ideal sensor.
+
+Every room goes through ``pipeline.run`` (the path of ``irring run``) twice: as written
+(the bundled rooms: incidence, 15 mV noise, 12-bit quantization) and with an *ideal sensor*:
+the scene with none of the sensor-signal effects (:data:`SIGNAL_EFFECTS`; where and when the
+ring reads — belt, timing, motion — is kept). An ideal sensor must never map worse.
+
+Besides the six map scores (``metrics.SCORE_KEYS``) each run reports the end points'
+error: the RMS distance between each valid reading's estimated end point and the
+simulator's true hit point (``point_rms_m``), and beside it the same readings' end points
+read as if every surface were square on (θ = 0, Eq. 10 with a(0), b(0):
+``point_rms_theta0_m``), over the readings both estimates call valid and that hit something.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+from pathlib import Path
+
+import numpy as np
+
+from ..metrics import SCORE_KEYS
+from ..scenario import Scenario, ScenarioError, load_scenario
+
+# The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
+# these unless given others.
+ROOMS = ("l_room", "corridor_table", "angled_walls", "posts", "box_room", "big_room",
+         "narrow_room", "t_room", "t_room_cylinder", "t_room_three_cylinders")
+
+# Effects that change the signal a sensor reports; the ideal sensor has none of them.
+SIGNAL_EFFECTS = ("incidence", "noise", "quantization", "foldover", "reflectance", "outliers",
+                  "beam", "averaging")
+
+# Must-show targets of issue 13 for the scene's own effects (the ideal sensor: ≥ those).
+TARGETS = {"occupied_f1": 0.93, "occupied_precision": 0.90, "free_accuracy": 0.99}
+
+VARIANTS = ("effects", "ideal")
+
+
+def ideal(scenario: Scenario) -> Scenario:
+    """The scenario with an ideal sensor: every signal effect removed, the rest kept."""
+    kept = {k: v for k, v in scenario.effects.items() if k not in SIGNAL_EFFECTS}
+    return dataclasses.replace(scenario, effects=types.MappingProxyType(kept))
+
+
+def _rms(x: np.ndarray) -> float | None:
+    return float(math.sqrt(np.mean(x * x))) if x.size else None
+
+
+def point_errors(sweep, points, points_theta0) -> tuple[np.ndarray, np.ndarray]:
+    """End-point errors (m) of the readings both estimates call valid and that hit a
+    surface: (iterative, θ = 0), each against the simulator's true hit point."""
+    truth = sweep.truth
+    hx, hy = truth.hit_point[..., 0], truth.hit_point[..., 1]
+    m = points.valid & points_theta0.valid & np.isfinite(hx) & np.isfinite(hy)
+    return (np.hypot(points.x[m] - hx[m], points.y[m] - hy[m]),
+            np.hypot(points_theta0.x[m] - hx[m], points_theta0.y[m] - hy[m]))
+
+
+def score_room(scenario: Scenario, seed: int | None = None) -> dict:
+    """One room, one seed, as written: the six map scores, ``point_rms_m``,
+    ``point_rms_theta0_m`` (None when no reading qualifies), ``readings``, ``valid``."""
+    from .. import pipeline
+    from ..estimate import estimate
+
+    theta0 = []
+
+    def both(sweep, calibration):  # θ = 0 with the very calibration the run estimates with
+        theta0.append(estimate(sweep, calibration, iterate=False))
+        return estimate(sweep, calibration)
+
+    run = pipeline.run(scenario, seed=seed, progress=False, estimator=both)
+    errs, errs0 = [], []
+    for sweep, pts, p0 in zip(run.sweeps, run.points, theta0):
+        e, e0 = point_errors(sweep, pts, p0)
+        errs.append(e)
+        errs0.append(e0)
+    readings = run.readings()
+    return {**{k: run.scores[k] for k in SCORE_KEYS},
+            "point_rms_m": _rms(np.concatenate(errs)),
+            "point_rms_theta0_m": _rms(np.concatenate(errs0)),
+            "readings": readings["total"], "valid": readings["valid"]}
+
+
+def _mean(values: list) -> float | None:
+    vals = [v for v in values if v is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def resolve_rooms(names_or_paths) -> list[Scenario]:
+    """Scenarios from bundled names, YAML paths, or folders (every ``*.yaml`` in them)."""
+    out = []
+    for item in names_or_paths:
+        path = Path(item)
+        if path.is_dir():
+            files = sorted(path.glob("*.yaml"))
+            if not files:
+                raise ScenarioError(f"{item}: the folder holds no *.yaml scenario")
+            out.extend(load_scenario(f) for f in files)
+        else:
+            out.append(load_scenario(item))
+    return out
+
+
+def measure(scenarios: list[Scenario], n_seeds: int = 1, *,
+            progress: bool | None = None) -> list[dict]:
+    """Per room: ``name``, ``source``, and for each of :data:`VARIANTS` the mean over
+    ``n_seeds`` seeds (the scenario's own seed, +1, …) of every figure of :func:`score_room`, plus
+    ``misses``: the targets (:data:`TARGETS`) the room's scene misses, and the scores on
+    which the ideal sensor is worse than the scene's (``ideal_worse``)."""
+    from ..pipeline import progress_bar
+
+    rows = []
+    with progress_bar(len(scenarios) * n_seeds * 2, "rooms", progress, unit="run") as bar:
+        for sc in scenarios:
+            seeds = [sc.seed + k for k in range(n_seeds)]
+            row = {"name": sc.name, "source": sc.source}
+            for variant, scene in (("effects", sc), ("ideal", ideal(sc))):
+                runs = []
+                for seed in seeds:
+                    runs.append(score_room(scene, seed))
+                    bar.update()
+                row[variant] = {k: _mean([r[k] for r in runs]) for k in runs[0]}
+            row["misses"] = {k: row["effects"][k] for k, lim in TARGETS.items()
+                             if row["effects"][k] is None or row["effects"][k] < lim}
+            row["ideal_worse"] = _ideal_worse(row["effects"], row["ideal"])
+            rows.append(row)
+    return rows
+
+
+def _ideal_worse(noisy: dict, ideal_: dict) -> list[str]:
+    """Scores (higher is better) and RMS (lower is better) where the ideal sensor loses,
+    beyond round-off of the means (1e-9)."""
+    worse = [k for k in SCORE_KEYS
+             if noisy[k] is not None and (ideal_[k] is None or ideal_[k] < noisy[k] - 1e-9)]
+    if (noisy["point_rms_m"] is not None and ideal_["point_rms_m"] is not None
+            and ideal_["point_rms_m"] > noisy["point_rms_m"] + 1e-9):
+        worse.append("point_rms_m")
+    return worse

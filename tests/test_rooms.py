@@ -1,0 +1,106 @@
+"""The room set (scenarios/) and `irring bench rooms`: what it scores, on rooms written here."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from irring import scenario as S
+from irring.bench import rooms
+from irring.cli import main
+from irring.sim import SimRing
+
+# A room of our own, not in scenarios/: a 1.03 × 0.81 m room with one post.
+SMALL_ROOM = """\
+name: tiny_post
+seed: 5
+room:
+  outline_mm: [[0, 0], [1030, 0], [1030, 810], [0, 810]]
+obstacles:
+  - {type: cylinder, center_mm: [810, 230], radius_mm: 24}
+robot:
+  poses:
+    - {x_mm: 470, y_mm: 390}
+effects: [incidence, noise, quantization]
+"""
+
+
+def test_room_set_is_bundled_and_every_room_differs_from_the_t_room():
+    names = set(S.bundled())
+    assert set(rooms.ROOMS) <= names
+    new = [n for n in rooms.ROOMS if not n.startswith("t_room")]
+    assert len(new) >= 6
+    t_outline = S.load_scenario("t_room").room.outline_m
+    for name in new:
+        sc = S.load_scenario(name)
+        assert sc.room.outline_m != t_outline
+        assert set(sc.effects) == {"incidence", "noise", "quantization"}   # the default effects
+
+
+def test_ideal_drops_only_the_signal_effects():
+    moving = S.load_scenario("t_room_moving")
+    ideal = rooms.ideal(moving)
+    assert not set(ideal.effects) & set(rooms.SIGNAL_EFFECTS)
+    assert set(ideal.effects) == set(moving.effects) - set(rooms.SIGNAL_EFFECTS)
+    assert {"motion", "belt_dynamics", "timing"} <= set(ideal.effects)
+    assert ideal.room == moving.room and ideal.robot == moving.robot
+
+
+def test_point_errors_are_distances_to_the_true_hit_of_readings_both_call_valid():
+    sc = S.load_scenario("narrow_room")
+    sweep = SimRing(sc).sweep(0)
+    hit = sweep.truth.hit_point
+    shape = sweep.counts.shape
+    valid = np.isfinite(hit[..., 0])
+    from irring.data import Points
+
+    def points(dx, dy, ok):
+        return Points(x=hit[..., 0] + dx, y=hit[..., 1] + dy, d=np.zeros(shape),
+                      theta=np.zeros(shape), origin_x=np.zeros(shape), origin_y=np.zeros(shape),
+                      heading=np.zeros(shape), sigma_m=np.zeros(shape),
+                      iterations=np.zeros(shape, int), valid=ok, reason=np.zeros(shape, np.uint8))
+
+    theta0_ok = valid.copy()
+    theta0_ok[::3] = False                              # θ = 0 calls a third of the rows invalid
+    e, e0 = rooms.point_errors(sweep, points(0.003, -0.004, valid), points(0.0, 0.021, theta0_ok))
+    assert e.size == e0.size == int((valid & theta0_ok).sum()) > 100
+    np.testing.assert_allclose(e, 0.005)
+    np.testing.assert_allclose(e0, 0.021)
+
+
+def test_cli_scores_bundled_and_own_rooms_with_and_without_effects(tmp_path, capsys):
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "tiny_post.yaml").write_text(SMALL_ROOM)
+    out = tmp_path / "bench"
+    assert main(["bench", "rooms", "narrow_room", str(own), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "narrow_room" in text and "tiny_post" in text and "ideal" in text
+    rows = json.loads((out / "rooms.json").read_text())
+    assert [r["name"] for r in rows] == ["narrow_room", "tiny_post"]
+    with open(out / "rooms.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert [(r["room"], r["sensor"]) for r in table] == [
+        ("narrow_room", "effects"), ("narrow_room", "ideal"),
+        ("tiny_post", "effects"), ("tiny_post", "ideal")]
+    for r in rows:
+        for variant in rooms.VARIANTS:
+            fig = r[variant]
+            assert 0 <= fig["occupied_f1"] <= 1 and fig["valid"] <= fig["readings"]
+            assert fig["readings"] == 71 * 12 * len(S.load_scenario(
+                r["source"] if r["name"] == "tiny_post" else r["name"]).robot.poses)
+        # misses: exactly the targets the scene's own run falls short of
+        want = {k for k, lim in rooms.TARGETS.items() if r["effects"][k] < lim}
+        assert set(r["misses"]) == want
+    # the post hides a bit of wall from the one pose: shadow is defined there, not in narrow_room
+    assert rows[1]["effects"]["shadow"] is not None and rows[0]["effects"]["shadow"] is None
+    # θ = 0 ignores the incidence the scene simulates: its end points are worse
+    assert rows[0]["effects"]["point_rms_theta0_m"] > 2 * rows[0]["effects"]["point_rms_m"]
+
+
+def test_cli_names_a_folder_without_rooms(tmp_path, capsys):
+    assert main(["bench", "rooms", str(tmp_path)]) == 2
+    assert f"{tmp_path}: the folder holds no *.yaml scenario" in capsys.readouterr().err
