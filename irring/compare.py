@@ -170,27 +170,14 @@ def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int 
 # --------------------------------------------------------------------------- scenes
 
 
-def estimator_calibration(sweep, scenario):
-    """The nominal calibration for the sweep's sensor, told the scene's output noise, as a
-    user who calibrated their sensor would measure it: the ``noise`` effect's σ, or none
-    (0.1 mV, the floor) when the scene adds no noise."""
-    from .estimate import Calibration
-
-    noise = scenario.effects.get("noise")
-    return Calibration.for_sweep(sweep, noise_sigma_v=max(noise.sigma_v if noise else 0.0, 1e-4))
-
-
 def run_scene(scenario, design: Design | str, seed: int | None = None, *,
               reference=None, truth_cache: dict | None = None) -> dict:
     """One scenario seen by one design: every pose swept, then estimated, mapped and scored
     exactly as ``irring run`` does (``pipeline.map_sweeps``).
 
-    Two deliberate differences from ``irring run``, both so designs are compared fairly:
-
-    - the estimator's calibration is told the scene's output noise (the ``noise`` effect's
-      σ), as a user who calibrated their sensor would; the datasheet default (15 mV) would
-      blur a laser's 2.5 mV readings into 3 cm wide walls;
-    - the map is scored against the ground truth of ``reference`` (default: the scenario as
+    The estimator reads each design with the calibration of what its scene simulates
+    (``pipeline.scene_calibration``, as ``irring run`` does). One deliberate difference from
+    ``irring run``, so designs are compared fairly: the map is scored against the ground truth of ``reference`` (default: the scenario as
       written, with its own design's reach), so every design is judged on the same cells: a
       design that cannot reach a wall loses recall and shadow for it instead of having the
       wall dropped from its exam.
@@ -209,8 +196,8 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
     seed = sc.seed if seed is None else seed
     sim_s: dict[str, float] = {}
     sweeps, _ = pipeline.simulate(sc, seed=seed, progress=False, timings=sim_s)
-    result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=estimator_calibration(
-        sweeps[0], sc), score=False, progress=False)
+    result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=pipeline.scene_calibration(
+        sc)[0], score=False, progress=False)
     grid = result.grid
     # the same reference on the same grid for every design and seed
     truth = (metrics.ground_truth(reference, grid) if truth_cache is None

@@ -277,6 +277,30 @@ class Calibration:
                    source=f"nominal {model.name} datasheet curve")
 
     @classmethod
+    def for_scene(cls, scenario: Any) -> Calibration:
+        """The calibration of what a simulated scene simulates (docs/calibration.md): the
+        scene's sensor curve and ADC; a(θ), b(θ) and the drop-out angle only with the
+        ``incidence`` effect (without it the readings do not depend on θ: the θ = 0 row
+        alone, no drop-out); the ``noise`` effect's σ (0.1 mV floor without it)."""
+        model = gp2.sensor(scenario.sensor.model)
+        sensor = scenario.sensor
+        noise = scenario.effects.get("noise")
+        cal = cls.nominal(model.name, scenario.ring, sensor.adc_bits, sensor.vref_v,
+                          noise_sigma_v=max(noise.sigma_v if noise else 0.0, 1e-4))
+        effects = ", ".join(scenario.effects) or "none"
+        incidence = scenario.effects.get("incidence")
+        if incidence is None:
+            return replace(cal, theta_rad=cal.theta_rad[:1], a=cal.a[:1], b=cal.b[:1],
+                           max_incidence_rad=None,
+                           source=f"{model.name} curve as scene {scenario.name!r} simulates it "
+                                  f"(effects: {effects}; no incidence: a, b independent of θ)")
+        limit = incidence.max_incidence_rad
+        return replace(cal, max_incidence_rad=min(
+            model.max_incidence_rad if limit is None else limit, _table_end(cal.theta_rad)),
+            source=f"{model.name} curve as scene {scenario.name!r} simulates it "
+                   f"(effects: {effects})")
+
+    @classmethod
     def for_sweep(cls, sweep: Sweep, **kwargs: Any) -> Calibration:
         """The nominal calibration matching a sweep's sensor model, ADC and ring."""
         return cls.nominal(sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v, **kwargs)
@@ -299,14 +323,17 @@ class Calibration:
                       for t, a, b in zip(self.theta_rad, self.a, self.b)],
         }
 
-    def save(self, path: str | Path) -> Path:
-        """Write a YAML calibration file (mm and degrees for people, d = a·S^b, S in counts)."""
-        path = Path(path)
+    def to_yaml(self) -> str:
+        """The calibration file's text (mm and degrees for people, d = a·S^b, S in counts)."""
         header = ("# irring calibration: d[m] = a(θ)·S^b(θ), S in ADC counts (paper Eq. 10);\n"
                   "# emitter offset d_o (paper Eq. 9) in mm; load with "
                   "irring.estimate.Calibration.load\n")
-        path.write_text(header + yaml.safe_dump(self.to_dict(), sort_keys=False,
-                                                allow_unicode=True), encoding="utf-8")
+        return header + yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True)
+
+    def save(self, path: str | Path) -> Path:
+        """Write :meth:`to_yaml` to a file."""
+        path = Path(path)
+        path.write_text(self.to_yaml(), encoding="utf-8")
         return path
 
     @classmethod

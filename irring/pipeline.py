@@ -139,6 +139,15 @@ def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
     return Calibration.from_dict(yaml.safe_load(text), source), text
 
 
+def scene_calibration(scenario: Scenario):
+    """(Calibration, YAML text) the estimator reads a simulated scene with: the one path
+    for ``run``, ``compare``, ``bench`` and ``replay`` (docs/calibration.md)."""
+    from .estimate import Calibration
+
+    cal = Calibration.for_scene(scenario)
+    return cal, cal.to_yaml()
+
+
 def simulate(scenario: Scenario, *, seed: int | None = None, progress: bool | None = None,
              timings: dict[str, float] | None = None) -> tuple[list[Sweep], float]:
     """One simulated sweep per scan pose (with ``motion``: back to back along the path):
@@ -250,8 +259,10 @@ def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | 
         frames_per_sweep: int = 0, score: bool = True, progress: bool | None = None,
         params: MapperParams | None = None, estimator: Callable | None = None) -> MapRun:
     """Simulate every pose of ``scenario``, estimate, map and score (``estimator``: as
-    :func:`map_sweeps` takes it)."""
-    calibration, cal_text = load_calibration(calibration_file)
+    :func:`map_sweeps` takes it), with the calibration in ``calibration_file`` or else the
+    scene's (:func:`scene_calibration`)."""
+    calibration, cal_text = (load_calibration(calibration_file) if calibration_file is not None
+                             else scene_calibration(scenario))
     sweeps, t_sim = simulate(scenario, seed=seed, progress=progress)
     result = map_sweeps(sweeps, scenario=scenario, params=params, calibration=calibration,
                         frames_per_sweep=frames_per_sweep, score=score, progress=progress,
@@ -281,8 +292,10 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
         scenario = loads(meta["scenario_yaml"], source=f"{recording} (recorded scenario)")
     if calibration_file is not None:
         calibration, cal_text = load_calibration(calibration_file)
-    else:
+    elif meta.get("calibration_yaml") or scenario is None:
         calibration, cal_text = load_calibration(meta.get("calibration_yaml"), is_text=True)
+    else:  # a simulated recording from before runs recorded the scene's calibration
+        calibration, cal_text = scene_calibration(scenario)
     grid = None
     params = MapperParams(**meta["mapper"]) if meta.get("mapper") else None
     if meta.get("grid"):

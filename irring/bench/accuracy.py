@@ -82,7 +82,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from ..compare import estimator_calibration, mean_of, write_study
+from ..compare import mean_of, write_study
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room")
 STEEP_RAD = math.radians(40.0)
@@ -253,7 +253,7 @@ def run_job(job: Job) -> dict:
                                   tolerance_rad=cfg.tolerance_rad, iterate=cfg.iterate,
                                   lines=lines)
     grid = OccupancyGrid.for_scenario(sc)
-    cal = estimator_calibration(sweeps[0], sc)
+    cal = pipeline.scene_calibration(sc)[0]
     result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid, calibration=cal, score=False,
                                  progress=False, estimator=estimator)
     # every configuration is judged on the default design's ground truth, on its own cells

@@ -25,7 +25,6 @@ import time
 
 import numpy as np
 
-from ..compare import estimator_calibration
 from ..data import Reason
 from ..estimate import Calibration, estimate
 
@@ -38,6 +37,7 @@ def measure(scenario, *, sweeps_per_pose: int = 5, min_theta_deg: float = 40.0,
             calibration: Calibration | None = None, seed: int | None = None,
             max_iterations: int = 20) -> dict:
     """Run the comparison on ``scenario`` (a loaded Scenario); return plain figures."""
+    from .. import pipeline
     from ..sim import SimRing
 
     sim = SimRing(scenario, seed=seed)
@@ -51,8 +51,8 @@ def measure(scenario, *, sweeps_per_pose: int = 5, min_theta_deg: float = 40.0,
     for pose in range(len(scenario.robot.poses)):
         for _ in range(sweeps_per_pose):
             sw = sim.sweep(pose)
-            if cal is None:  # the datasheet curve, told the scene's output noise
-                cal = estimator_calibration(sw, scenario)
+            if cal is None:  # the calibration of what the scene simulates
+                cal = pipeline.scene_calibration(scenario)[0]
             t0 = time.perf_counter()
             p = estimate(sw, cal, max_iterations=max_iterations)
             times.append(time.perf_counter() - t0)
