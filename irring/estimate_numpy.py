@@ -1,0 +1,979 @@
+"""The estimator's oracle: the whole algorithm of :mod:`irring.estimate` in plain numpy.
+
+This is the readable statement of the estimator (the paper's Table II plus every addition:
+split-and-merge grouping with corner refinement, membership, corner settling, drop-out
+checks, adoption, held iterations with the secant step control, regroups, the final points
+with the fallback σ). The compiled kernels (``irring/_lines.pyx``, ``irring/_iterate.pyx``)
+are an optimisation of exactly this code, and ``tests/test_estimate_oracle.py`` holds them
+to it with hypothesis (the tolerance is stated there). An algorithm change goes here first;
+the kernels follow. The schedule and every phase are described in :mod:`irring.estimate`'s
+module docstring; the comments here say why, step by step.
+
+Not for speed: ~3 ms per t_room sweep against ~0.5 ms for the kernels (bound by numpy's
+per-call overhead on ~850 readings).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from .data import Points, Reason, Sweep, beam_geometry
+from .estimate import (_FALLBACK_NODES, _MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M,
+                       Calibration, Estimate, LineOptions, _lines_record, _nominal_for, _Pieces,
+                       _scan_order)
+
+_WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
+
+
+def _tls(n, t):
+    """Total-least-squares lines from summed centred moments t = (Σx, Σy, Σx², Σy², Σxy)
+    over n points (arrays): mean offset (mx, my), direction angle α ∈ (−π/2, π/2] (exact for
+    vertical lines), λ_min, λ_max (variances across / along the line)."""
+    inv = 1.0 / np.maximum(n, 1)
+    mx = t[0] * inv
+    my = t[1] * inv
+    cxx = t[2] * inv
+    cxx -= mx * mx
+    np.maximum(cxx, 0.0, out=cxx)
+    cyy = t[3] * inv
+    cyy -= my * my
+    np.maximum(cyy, 0.0, out=cyy)
+    cxy2 = t[4] * inv
+    cxy2 -= mx * my
+    cxy2 *= 2.0
+    dif = cxx - cyy
+    root = np.hypot(dif, cxy2)
+    root *= 0.5
+    mean = cxx + cyy
+    mean *= 0.5
+    alpha = np.arctan2(cxy2, dif)
+    alpha *= 0.5
+    lmin = mean - root
+    np.maximum(lmin, 0.0, out=lmin)
+    mean += root
+    return mx, my, alpha, lmin, mean
+
+
+def _tls_angle(n, t):
+    """(mx, my, α) of :func:`_tls` only."""
+    mx = t[0] / n
+    my = t[1] / n
+    sxy = t[4] - t[0] * my
+    dif = (t[2] - t[0] * mx) - (t[3] - t[1] * my)
+    alpha = np.arctan2(sxy + sxy, dif)
+    alpha *= 0.5
+    return mx, my, alpha
+
+
+def _rss(n, t):
+    """Summed squared perpendicular residuals of each range's TLS line (for comparisons)."""
+    sx, sy, sxx, syy, sxy = t
+    inv = 1.0 / n
+    cxx = sxx - sx * sx * inv
+    cyy = syy - sy * sy * inv
+    cxy = sxy - sx * sy * inv
+    cxy += cxy
+    out = cxx + cyy
+    out -= np.hypot(cxx - cyy, cxy)
+    return out
+
+
+class _Moments:
+    """Prefix sums of x, y, x², y², xy over an ordered point sequence: any contiguous range's
+    TLS line in O(1). Coordinates are centred on (cx, cy) so small spreads keep their digits.
+    (Residual sums from :func:`_rss` come out doubled; only their order matters.)"""
+
+    __slots__ = ("cum", "cx", "cy")
+
+    def __init__(self, px: np.ndarray, py: np.ndarray, cx: float, cy: float):
+        self.cx, self.cy = cx, cy
+        cum = np.zeros((5, px.size + 1))
+        m = cum[:, 1:]
+        np.subtract(px, cx, out=m[0])
+        np.subtract(py, cy, out=m[1])
+        np.multiply(m[0], m[0], out=m[2])
+        np.multiply(m[1], m[1], out=m[3])
+        np.multiply(m[0], m[1], out=m[4])
+        m.cumsum(axis=1, out=m)
+        self.cum = cum
+
+    def sums(self, lo: np.ndarray, hi: np.ndarray):
+        """(n, t) over the inclusive ranges [lo, hi]."""
+        c = self.cum
+        n = (hi - lo).astype(float)
+        n += 1.0
+        t = c.take(hi + 1, axis=1)
+        t -= c.take(lo, axis=1)
+        return n, t
+
+
+def _owner(starts: np.ndarray, k: int) -> np.ndarray:
+    """Piece of each of k points: the last piece starting at or before it (so a corner
+    shared by two pieces goes to the right one). ``starts`` ascending, the first 0."""
+    mark = np.zeros(k, dtype=np.intp)
+    mark[starts[1:]] = 1
+    return mark.cumsum()
+
+
+def _lengths(first: np.ndarray, total: int) -> np.ndarray:
+    """Lengths of the runs starting at ``first`` (ascending) in a sequence of ``total``."""
+    n = np.empty(first.size)
+    np.subtract(first[1:], first[:-1], out=n[:-1])
+    n[-1] = total - first[-1]
+    return n
+
+
+def _split(px, py, inv_thr, starts, ends):
+    """Iterative end-point fit on every piece at once: a piece splits at the reading farthest
+    from its chord while that lies more than the threshold off. Pieces share their corner."""
+    k = px.size
+    while True:
+        o = _owner(starts, k)
+        ax, ay = px.take(starts), py.take(starts)
+        dx = px.take(ends)
+        dx -= ax
+        dy = py.take(ends)
+        dy -= ay
+        chord = np.hypot(dx, dy)
+        closed = chord < 1e-12
+        any_closed = closed.any()
+        if any_closed:  # a piece whose ends meet: distance from its end point instead
+            closed &= ends - starts >= 2
+            any_closed = closed.any()
+            chord[closed] = 1.0
+            dx[closed] = dy[closed] = 0.0
+            np.maximum(chord, 1e-300, out=chord)
+        dx /= chord
+        dy /= chord
+        c0 = dx * ay
+        c0 -= dy * ax
+        dist = dx.take(o) * py
+        dist -= dy.take(o) * px
+        dist -= c0.take(o)
+        np.abs(dist, out=dist)
+        if any_closed:
+            far = closed.take(o)
+            dist[far] = np.hypot(px[far] - ax.take(o[far]), py[far] - ay.take(o[far]))
+        dist *= inv_thr
+        dist[starts] = 0.0
+        dist[ends] = 0.0
+        best = np.maximum.reduceat(dist, starts)
+        split = best > 1.0
+        if not split.any():
+            return starts, ends
+        hit = ((dist == best.take(o)) & split.take(o)).nonzero()[0]
+        ho = o.take(hit)
+        first = np.ones(hit.size, dtype=bool)
+        np.not_equal(ho[1:], ho[:-1], out=first[1:])
+        at = hit[first]
+        starts = np.concatenate([starts, at])
+        starts.sort()
+        ends = np.concatenate([ends, at])
+        ends.sort()
+
+
+def _refine_corners(mom: _Moments, starts, ends, rounds: int = 2):
+    """Move each corner shared by two pieces to where the two TLS lines fit best.
+
+    The end-point fit splits at the reading farthest from the chord, which for a corner near
+    the end of a polyline, or seen at a slant, is a few readings off the true corner. Each
+    shared corner is tried at up to 5 readings either side (keeping ≥ 2 readings per piece)
+    and put where the summed squared perpendicular residuals of the two pieces are least;
+    all corners at once, from prefix sums. Two corners moving towards each other must leave
+    ≥ 2 readings between them, else both stay.
+    """
+    cum = mom.cum
+    for _ in range(rounds):
+        j = (starts[1:] == ends[:-1]).nonzero()[0]       # piece j and j + 1 share a corner
+        if j.size == 0:
+            break
+        lo, v, hi = starts.take(j), ends.take(j), ends.take(j + 1)
+        c = v[:, None] + _WINDOW
+        bad = (c <= lo[:, None]) | (c >= hi[:, None])
+        c[bad] = np.broadcast_to(v[:, None], c.shape)[bad]
+        # prefix sums at each candidate: left piece [lo, c], right piece [c, hi]
+        at_c1 = cum.take(c + 1, axis=1)                           # (5, P, w)
+        left = at_c1 - cum.take(lo, axis=1)[:, :, None]
+        right = cum.take(hi + 1, axis=1)[:, :, None] - cum.take(c, axis=1)
+        cost = _rss((c - lo[:, None] + 1).astype(float), left)
+        cost += _rss((hi[:, None] - c + 1).astype(float), right)
+        cost[bad] = np.inf
+        best = c[np.arange(j.size), cost.argmin(axis=1)]
+        if (best == v).all():
+            break
+        new_ends, new_starts = ends.copy(), starts.copy()
+        new_ends[j] = best
+        new_starts[j + 1] = best
+        short = (new_ends - new_starts < 1) & (ends - starts >= 1)
+        if short.any():
+            best = np.where(short.take(j) | short.take(j + 1), v, best)
+            new_ends[j] = best
+            new_starts[j + 1] = best
+        starts, ends = new_starts, new_ends
+    return starts, ends
+
+
+def _merge(mom: _Moments, px, py, inv_thr, starts, ends):
+    """Merge adjacent pieces (sharing a corner) whose joint TLS line fits every reading
+    within its threshold; cheapest joins first, non-overlapping joins per round."""
+    k = px.size
+    for _ in range(starts.size):
+        j = (starts[1:] == ends[:-1]).nonzero()[0]  # piece j with piece j+1
+        if j.size == 0:
+            break
+        m = j.size
+        mx, my, alpha = _tls_angle(*mom.sums(starts.take(j), ends.take(j + 1)))
+        # the joint line of each candidate pair, plus a null line (residual 0) at index m
+        line = np.zeros((3, m + 1))
+        nx, ny, c0 = line
+        np.sin(alpha, out=nx[:m])
+        np.negative(nx[:m], out=nx[:m])
+        np.cos(alpha, out=ny[:m])
+        mx += mom.cx
+        my += mom.cy
+        np.multiply(nx[:m], mx, out=c0[:m])
+        c0[:m] += ny[:m] * my
+        pair_of = np.full(starts.size + 1, m)
+        pair_of[j] = np.arange(m)
+        o = _owner(starts, k)
+        # each reading against the joint line of the pair where its piece is the left one,
+        # then of the pair where it is the right one
+        both = pair_of.take(np.stack([o, o - 1]))                          # (2, k)
+        nl = line.take(both, axis=1)                                        # (3, 2, k)
+        r = nl[0] * px
+        r += nl[1] * py
+        r -= nl[2]
+        np.abs(r, out=r)
+        r *= inv_thr
+        w = np.maximum.reduceat(r, starts, axis=1)
+        worst = np.maximum(w[0].take(j), w[1].take(j + 1))
+        ok = worst <= 1.0
+        if not ok.any():
+            break
+        # choose joins that are the cheapest among their neighbours (so none overlap)
+        cost = worst
+        cost[~ok] = np.inf
+        adj = j[1:] == j[:-1] + 1
+        pick = ok.copy()
+        pick[1:] &= ~(adj & (cost[:-1] <= cost[1:]))
+        pick[:-1] &= ~(adj & (cost[1:] < cost[:-1]))
+        jj = j[pick]
+        keep = np.ones(starts.size, dtype=bool)
+        keep[jj + 1] = False
+        ends = ends.copy()
+        ends[jj] = ends[jj + 1]
+        starts, ends = starts[keep], ends[keep]
+    return starts, ends
+
+
+def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | None = None
+             ) -> _Pieces:
+    """Split-and-merge over ordered points (one sensor's readings by step form polylines,
+    broken where consecutive readings are more than ``gap_m`` apart), corners refined.
+
+    With ``prev`` from the same polylines (a regroup once θ has straightened the points)
+    its pieces are kept and only their corners are refined: splitting anew would mostly
+    repeat them, and the pieces of the first grouping are the better start (measured on the
+    T-room: regrouping by corner refinement alone gives the smaller range error)."""
+    k = px.size
+    brk = np.ones(k, dtype=bool)
+    if k > 1:
+        dx, dy = px[1:] - px[:-1], py[1:] - py[:-1]
+        np.greater(dx * dx + dy * dy, opts.gap_m ** 2, out=brk[1:])
+        brk[1:] |= sensor[1:] != sensor[:-1]
+    mom = _Moments(px, py, *centre)
+    if prev is not None and prev.brk.size == k and (prev.brk == brk).all():
+        starts, ends = _refine_corners(mom, prev.starts, prev.ends)
+    else:
+        inv_thr = 1.0 / thr
+        first = brk.nonzero()[0]
+        last = np.empty_like(first)
+        last[:-1] = first[1:] - 1
+        last[-1] = k - 1
+        starts, ends = _split(px, py, inv_thr, first, last)
+        starts, ends = _merge(mom, px, py, inv_thr, starts, ends)
+        starts, ends = _refine_corners(mom, starts, ends)
+    return _piece_lines(mom, px, py, thr, starts, ends, brk, opts)
+
+
+def _piece_lines(mom: _Moments, px, py, thr, starts, ends, brk, opts: LineOptions) -> _Pieces:
+    """Each piece's TLS line, who owns the corners, and which lines are good enough."""
+    mx, my, alpha, lmin, lmax = _tls(*mom.sums(starts, ends))
+    cx, cy = mx + mom.cx, my + mom.cy
+    nx, ny = -np.sin(alpha), np.cos(alpha)
+    o = _owner(starts, px.size)
+    # a corner shared with the previous piece joins the nearer line
+    j = (starts[1:] == ends[:-1]).nonzero()[0]
+    if j.size:
+        at = starts.take(j + 1)
+        x, y = px.take(at), py.take(at)
+        r_own = np.abs((x - cx.take(j + 1)) * nx.take(j + 1) + (y - cy.take(j + 1)) * ny.take(j + 1))
+        r_alt = np.abs((x - cx.take(j)) * nx.take(j) + (y - cy.take(j)) * ny.take(j))
+        nearer = r_alt < r_own
+        o[at[nearer]] = j[nearer]
+    ext = np.abs((px.take(ends) - px.take(starts)) * ny + (py.take(ends) - py.take(starts)) * -nx)
+    n_pts = np.bincount(o, minlength=starts.size)
+    mean_sig = np.bincount(o, weights=thr, minlength=starts.size) / (
+        opts.split_sigmas * np.maximum(n_pts, 1))
+    usable = ((n_pts >= opts.min_points) & (ext >= opts.min_length_m) & (lmax > 0)
+              & (np.sqrt(lmin) <= opts.max_rms_sigmas * np.maximum(mean_sig, 1e-6))
+              & np.isfinite(alpha))
+    alpha[alpha < 0] += math.pi
+    return _Pieces(starts=starts, ends=ends, brk=brk, owner=o, cx=cx, cy=cy, alpha=alpha,
+                   lmin=lmin, lmax=lmax, n_points=n_pts, length_m=ext, usable=usable)
+
+
+def classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
+    """Reasons decided by the counts alone (before any distance is computed). Assigned from
+    the weakest claim up, so MISSING > SATURATED > FOLDOVER_AMBIGUOUS > NO_RETURN."""
+    full, near, no_return, sigma, falling = cal._levels
+    s = counts
+    reason = np.zeros(s.shape, dtype=np.uint8)
+    margin = 2.0 * sigma
+    if falling:
+        reason[(s <= no_return + margin) | (s <= 0)] = Reason.NO_RETURN
+        reason[s > near] = Reason.FOLDOVER_AMBIGUOUS
+    else:  # a linear sensor (sonar/laser hooks): no fold-over, no return reads as max range
+        reason[(s >= no_return - margin) | (s <= 0)] = Reason.NO_RETURN
+    reason[s >= full - 0.5] = Reason.SATURATED
+    reason[~np.isfinite(s)] = Reason.MISSING
+    if sweep.missing_steps:
+        rows = np.isin(np.asarray(sweep.steps), np.asarray(sweep.missing_steps))
+        reason[rows, :] = Reason.MISSING
+    return reason
+
+
+
+def _incidence(hm: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Angle between beams (heading mod π) and the normals of lines at direction angle α
+    (in [0, π)): with δ = h − α, cos θ = |sin δ|, so θ = |π/2 − |δ||."""
+    return np.abs(_HALF_PI - np.abs(hm - alpha))
+
+
+_HALF_PI = math.pi / 2
+_INV_PI = 1.0 / math.pi
+
+
+class _Sweep:
+    """One sweep's live readings in scan order (sensor by sensor, by step), and the
+    calibration's curve, for the loop: everything per reading that θ does not change."""
+
+    def __init__(self, cal: Calibration, counts, origin, heading, live, steps, opts):
+        n_sensors = counts.shape[1]
+        scan = _scan_order(steps, n_sensors)
+        pos = live.reshape(-1).take(scan).nonzero()[0]      # places in the scan order
+        self.index = sel = scan.take(pos)                     # flat (S, N) index of each
+        self.k = sel.size
+        self.sensor = sel % n_sensors
+        # runs for the corner check break at a sensor change or a reading that is not live
+        self.run_brk = np.ones(self.k, dtype=bool)
+        if self.k > 1:
+            self.run_brk[1:] = (self.sensor[1:] != self.sensor[:-1]) | (pos[1:] != pos[:-1] + 1)
+        self.counts = counts.reshape(-1).take(sel)
+        self.log_s = np.log(self.counts)
+        self.ox = origin[..., 0].reshape(-1).take(sel)
+        self.oy = origin[..., 1].reshape(-1).take(sel)
+        h = heading.reshape(-1).take(sel)
+        self.ux, self.uy = np.cos(h), np.sin(h)
+        self.hm = h - math.pi * np.floor(h / math.pi)         # heading mod π
+        self.centre = ((float(self.ox.sum()) / self.k, float(self.oy.sum()) / self.k) if self.k
+                       else (0.0, 0.0))
+        self.at = np.arange(self.k)
+        self.cal = cal
+        self.sig_s = cal._levels[3] / self.counts             # σ_d = |b|·d·σ_S/S
+        self.inv_h, table, _ = cal._fine
+        self.la_t, self.b_t = table[:, 0].copy(), table[:, 1].copy()
+        self.opts = opts
+        self.cap = cal.max_incidence_rad
+        self.reject = self.cap + opts.incidence_margin_rad
+
+    def ab(self, theta: np.ndarray):
+        """log a(θ), b(θ) from the fine table (θ in [0, π/2])."""
+        i = (theta * self.inv_h + 0.5).astype(np.intp)
+        return self.la_t.take(i), self.b_t.take(i)
+
+    def points(self, theta: np.ndarray):
+        """d, x, y, σ of every live reading at incidence θ."""
+        la, b = self.ab(theta)
+        d = np.exp(la + b * self.log_s)
+        sigma = np.maximum(np.abs(b) * d * self.sig_s, _SIGMA_FLOOR_M)
+        return d, self.ox + d * self.ux, self.oy + d * self.uy, sigma
+
+    def thresholds(self, sigma: np.ndarray) -> np.ndarray:
+        return np.maximum(self.opts.min_split_m, self.opts.split_sigmas * sigma)
+
+
+class _Grouping:
+    """The lines of the current iteration and which reading takes θ from which line."""
+
+    def __init__(self, sw: _Sweep, pieces: _Pieces, uidx: np.ndarray | None):
+        self.sw = sw
+        self.pieces = pieces
+        self.uidx = uidx                 # compact index of each usable point (None: all)
+        self.cx, self.cy = pieces.cx.copy(), pieces.cy.copy()
+        self.alpha = pieces.alpha.copy()
+        self.usable = pieces.usable.copy()
+        self.first = pieces.starts if uidx is None else uidx.take(pieces.starts)
+        self.last = pieces.ends if uidx is None else uidx.take(pieces.ends)
+        self.n_lines = pieces.starts.size
+        self.label = np.full(sw.k, -1, dtype=np.intp)   # line of each live reading
+        self._tab = None
+
+    # ---- membership
+
+    def members(self, px, py, thr) -> None:
+        """Each reading keeps its own usable line only if it sits on it (within the split
+        threshold; the last readings past a corner often do not)."""
+        own = self.pieces.owner
+        a = self.alpha.take(own)
+        if self.uidx is None:
+            x, y, t = px, py, thr
+        else:
+            x, y, t = px.take(self.uidx), py.take(self.uidx), thr.take(self.uidx)
+        r = np.abs((y - self.cy.take(own)) * np.cos(a) - (x - self.cx.take(own)) * np.sin(a))
+        ok = (r <= t) & self.usable.take(own)
+        lab = np.where(ok, own, -1)
+        if self.uidx is None:
+            self.label = lab
+        else:
+            self.label = np.full(self.sw.k, -1, dtype=np.intp)
+            self.label[self.uidx] = lab
+
+    def table(self, px, py):
+        """The usable lines for re-reading: (indices, α, centroid x, y, direction x, y,
+        extent along the line from its end readings ± adopt_margin_m, column of each line)."""
+        if self._tab is None:
+            use = self.usable.nonzero()[0]
+            a, cx, cy = self.alpha.take(use), self.cx.take(use), self.cy.take(use)
+            dx, dy = np.cos(a), np.sin(a)
+            f, l = self.first.take(use), self.last.take(use)
+            t0 = (px.take(f) - cx) * dx + (py.take(f) - cy) * dy
+            t1 = (px.take(l) - cx) * dx + (py.take(l) - cy) * dy
+            m = self.sw.opts.adopt_margin_m
+            col = np.full(self.n_lines + 1, -1)
+            col[use] = np.arange(use.size)
+            self._tab = (use, a, cx, cy, dx, dy, np.minimum(t0, t1) - m, np.maximum(t0, t1) + m,
+                         col)
+        return self._tab
+
+    def fit_to(self, idx, px, py, own=None):
+        """Readings ``idx`` against every usable line, each re-read with that line's θ:
+        (line indices (L,), |perpendicular residual| (U, L)). A line counts only if the
+        reading lands within ``adopt_margin_m`` of its extent (its own line, ``own``, always
+        counts) and the beam meets it no steeper than the rejection angle; else inf."""
+        sw = self.sw
+        use, a, cx, cy, dx, dy, lo, hi, col = self.table(px, py)
+        th = _incidence(sw.hm.take(idx)[:, None], a)                      # (U, L)
+        la, b = sw.ab(np.minimum(th, sw.cap))
+        d = np.exp(la + b * sw.log_s.take(idx)[:, None])
+        qx = d * sw.ux.take(idx)[:, None]
+        qx += sw.ox.take(idx)[:, None] - cx
+        qy = d * sw.uy.take(idx)[:, None]
+        qy += sw.oy.take(idx)[:, None] - cy
+        r = np.abs(qy * dx - qx * dy)
+        t = qx * dx + qy * dy
+        far = (t < lo) | (t > hi)
+        if own is not None:
+            far[np.arange(idx.size), col.take(own)] = False
+        far |= th > sw.reject
+        r[far] = np.inf
+        return use, r
+
+    def settle_corners(self, px, py, sigma, thr) -> None:
+        """Readings at the ends of their run go to whichever line explains them best.
+
+        Near a corner both walls' lines pass close to the first readings past it, and a
+        reading read with the wrong wall's θ can land on that wall's extension (a
+        self-consistent but wrong answer). Each reading within ``corner_window`` readings of
+        either end of its run (same line, same sensor, consecutive in the scan) is re-read
+        with every usable line's θ (see :meth:`fit_to`) and put on the line it then lies
+        closest to, if that is clearly better than its own.
+        """
+        sw = self.sw
+        k = sw.k
+        if k == 0 or not self.usable.any():
+            return
+        seq = self.label
+        at = sw.at
+        new_run = sw.run_brk.copy()
+        new_run[1:] |= seq[1:] != seq[:-1]
+        run_start = np.maximum.accumulate(np.where(new_run, at, 0))
+        end_run = np.ones(k, dtype=bool)
+        end_run[:-1] = new_run[1:]
+        run_end = np.minimum.accumulate(np.where(end_run, at, k - 1)[::-1])[::-1]
+        edge = (np.minimum(at - run_start, run_end - at) < sw.opts.corner_window) & (seq >= 0)
+        idx = edge.nonzero()[0]
+        if idx.size == 0:
+            return
+        own = seq.take(idx)
+        use, r = self.fit_to(idx, px, py, own=own)
+        rows = np.arange(idx.size)
+        best = r.argmin(axis=1)
+        r_best = r[rows, best]
+        r_own = r[rows, self._tab[8].take(own)]
+        # switch only for a clear gain (noise alone must not shuffle readings between lines)
+        ok = (r_best <= thr.take(idx)) & (r_best < r_own - sw.opts.corner_sigmas * sigma.take(idx))
+        if ok.any():
+            seq = seq.copy()
+            seq[idx[ok]] = use.take(best[ok])
+            self.label = seq
+
+    def corner_sides(self, px, py, thr) -> None:
+        """A wall ends at its corner: a reading on a line beyond the corner it shares with
+        the next piece of the same sweep (past the two lines' intersection) is not on it.
+
+        Next to a corner a reading read with the wrong wall's θ lands on that wall's
+        extension, self-consistently, and fits both lines about as well; where it lands
+        tells them apart. Such a reading moves to the line across the corner if, read with
+        that line's θ, it lies on it (within the split threshold) and on its side.
+        """
+        pc = self.pieces
+        j = ((pc.starts[1:] == pc.ends[:-1]) & self.usable[:-1] & self.usable[1:]).nonzero()[0]
+        if j.size == 0:
+            return
+        a0, a1 = self.alpha.take(j), self.alpha.take(j + 1)
+        ok = np.abs(np.sin(a1 - a0)) > 0.5      # lines meeting at > 30°: a real corner
+        if not ok.any():
+            return
+        j, a0, a1 = j[ok], a0[ok], a1[ok]
+        m = j.size
+        # both sides of every corner: the line, the other line, directions
+        line = np.concatenate([j, j + 1])
+        other = np.concatenate([j + 1, j])
+        aa = np.concatenate([a0, a1])
+        dx, dy = np.cos(aa), np.sin(aa)
+        cx, cy = self.cx.take(line), self.cy.take(line)
+        # intersection X = c0 + s·d0 with (X − c1) × d1 = 0
+        s0 = (((cx[m:] - cx[:m]) * dy[m:] - (cy[m:] - cy[:m]) * dx[m:])
+              / (dx[:m] * dy[m:] - dy[:m] * dx[m:]))
+        X = cx[:m] + s0 * dx[:m]
+        Y = cy[:m] + s0 * dy[:m]
+        X = np.concatenate([X, X])
+        Y = np.concatenate([Y, Y])
+        bulk = np.sign((cx - X) * dx + (cy - Y) * dy)   # the side each line's readings are on
+        pos = np.full(self.n_lines, -1)
+        pos[line] = np.arange(line.size)   # a line with corners at both ends: one of them
+        lab = self.label
+        c = pos.take(lab)                  # lab −1 → pos[−1]: the last line's entry or −1
+        c[lab < 0] = -1
+        mem = (c >= 0).nonzero()[0]
+        if mem.size == 0:
+            return
+        c = c.take(mem)
+        beyond = ((px.take(mem) - X.take(c)) * dx.take(c)
+                  + (py.take(mem) - Y.take(c)) * dy.take(c)) * bulk.take(c) < 0
+        if not beyond.any():
+            return
+        mem, c = mem[beyond], c[beyond]
+        tgt = other.take(c)
+        _, r = self.fit_to(mem, px, py)
+        col = self._tab[8].take(tgt)
+        move = (col >= 0) & (r[np.arange(mem.size), col] <= thr.take(mem))
+        if not move.any():
+            return
+        # read with the target's θ the reading must land on the target's side of the corner
+        mem, c, tgt = mem[move], c[move], tgt[move]
+        sw = self.sw
+        c2 = (c + m) % (2 * m)                       # the target's entry (the other side)
+        th = _incidence(sw.hm.take(mem), aa.take(c2))
+        la, b = sw.ab(np.minimum(th, sw.cap))
+        d = np.exp(la + b * sw.log_s.take(mem))
+        side = ((sw.ox.take(mem) + d * sw.ux.take(mem) - X.take(c2)) * dx.take(c2)
+                + (sw.oy.take(mem) + d * sw.uy.take(mem) - Y.take(c2)) * dy.take(c2))
+        ok = side * bulk.take(c2) >= 0
+        if ok.any():
+            lab = lab.copy()
+            lab[mem[ok]] = tgt[ok]
+            self.label = lab
+
+    def drop_steep(self, usable) -> None:
+        """A line the beam would meet past the drop-out angle cannot be what it saw.
+
+        A reading whose line it meets steeper than the rejection angle leaves it. A line that
+        most of its readings meet at or past the drop-out angle (less 2°) is not a surface: a
+        radial streak (readings off a thin cylinder's edge, stretched along the beams by
+        θ = 0) or a runaway (θ up → d down → the line turns radial → θ up, which a curve whose
+        a(θ) falls with θ allows on a cylinder's face). A real wall that steep would return
+        nothing. Such a line is dropped.
+        """
+        sw = self.sw
+        label = self.label
+        lab = np.maximum(label, 0)
+        good = (label >= 0) & self.usable.take(lab)
+        if usable is not None:
+            good &= usable
+        theta_line = _incidence(sw.hm, self.alpha.take(lab))
+        pinned = good & (theta_line >= sw.cap - _PINNED_RAD)
+        if pinned.any():
+            frac = (np.bincount(lab[pinned], minlength=self.n_lines)
+                    / np.maximum(np.bincount(lab[good], minlength=self.n_lines), 1))
+            streak = frac > 0.5
+            if streak.any():
+                self.usable &= ~streak
+                self._tab = None
+                good &= ~streak.take(lab)
+        good &= theta_line <= sw.reject
+        if not good.all():
+            self.label = np.where(good, label, -1)
+
+    def adopt(self, usable, px, py, thr) -> None:
+        """Readings on no usable line join one if, read with that line's θ, they land on it.
+
+        These are mostly readings next to a corner, which θ = 0 put off both walls, and the
+        last few readings of a sweep past a corner (the neighbouring sensor sees that wall).
+        Every orphan is tried against every usable line at once ((orphans, lines) arrays;
+        both are few): it joins the nearest within the split threshold and near the line's
+        extent.
+        """
+        orphan = self.label < 0
+        if usable is not None:
+            orphan &= usable
+        sel = orphan.nonzero()[0]
+        if sel.size == 0 or not self.usable.any():
+            return
+        use, r = self.fit_to(sel, px, py)
+        r /= thr.take(sel)[:, None]
+        best = r.argmin(axis=1)
+        ok = r[np.arange(sel.size), best] <= 1.0
+        if ok.any():
+            self.label = self.label.copy()
+            self.label[sel[ok]] = use.take(best[ok])
+
+    def refit(self, usable, px, py) -> None:
+        """The same members, lines refitted at their moved positions; a line left with
+        fewer than two members keeps its fit but gives θ no more."""
+        lab = self.label
+        on = lab >= 0
+        if usable is not None:
+            on &= usable
+        mem = on.nonzero()[0]
+        self._tab = None
+        if mem.size == 0:
+            self.usable[:] = False
+            return
+        l = lab.take(mem)
+        order = l.argsort(kind="stable")
+        mem, l = mem.take(order), l.take(order)
+        new = np.empty(l.size, dtype=bool)
+        new[0] = True
+        np.not_equal(l[1:], l[:-1], out=new[1:])
+        first = new.nonzero()[0]
+        lines = l.take(first)
+        cx0, cy0 = self.sw.centre
+        buf = np.empty((5, mem.size))
+        np.subtract(px.take(mem), cx0, out=buf[0])
+        np.subtract(py.take(mem), cy0, out=buf[1])
+        np.multiply(buf[0], buf[0], out=buf[2])
+        np.multiply(buf[1], buf[1], out=buf[3])
+        np.multiply(buf[0], buf[1], out=buf[4])
+        n = _lengths(first, mem.size)
+        t = np.add.reduceat(buf, first, axis=1)
+        mx, my, alpha = _tls_angle(n, t)
+        # a line needs two members with some spread (all coincident: no direction)
+        fitted = (n >= 2) & ((t[2] - t[0] * mx) + (t[3] - t[1] * my) > 0)
+        keep = np.zeros(self.n_lines, dtype=bool)
+        keep[lines[fitted]] = True
+        lf = lines[fitted]
+        self.cx = self.cx.copy()
+        self.cy = self.cy.copy()
+        self.alpha = self.alpha.copy()
+        self.cx[lf] = mx[fitted] + cx0
+        self.cy[lf] = my[fitted] + cy0
+        alpha = alpha[fitted]
+        alpha[alpha < 0] += math.pi
+        self.alpha[lf] = alpha
+        self.usable &= keep
+
+    def theta_new(self):
+        """(θ from each reading's line, capped (0 off any line), θ of the line uncapped)."""
+        sw = self.sw
+        on = self.label >= 0
+        theta_line = np.where(on, _incidence(sw.hm, self.alpha.take(np.maximum(self.label, 0))),
+                              0.0)
+        return np.minimum(theta_line, sw.cap), theta_line
+
+
+class _Held:
+    """The iteration with held membership, in line order: each line's members' θ follow from
+    one direction angle a (θ_i = |π/2 − |h_i − a||), so a step is: points at θ(a) → TLS
+    angle G(a) of every line at once (np.add.reduceat over the members sorted by line) →
+    new a. With ``secant`` the step is a safeguarded secant step on G(a) − a per line."""
+
+    def __init__(self, sw: _Sweep, grouping: _Grouping, theta: np.ndarray, secant: bool):
+        label = grouping.label
+        mem = (label >= 0).nonzero()[0]
+        lm = label.take(mem)
+        order = np.argsort(lm, kind="stable")
+        self.perm = perm = mem.take(order)
+        lm = lm.take(order)
+        self.km = km = perm.size
+        new = np.ones(km, dtype=bool)
+        np.not_equal(lm[1:], lm[:-1], out=new[1:])
+        self.lstart = new.nonzero()[0]
+        self.line = lm.take(self.lstart)                 # grouping line index of each slot
+        self.slot = new.cumsum() - 1
+        self.n = _lengths(self.lstart, km)
+        lone = self.n < 2                                 # a lone member keeps its line's θ
+        self.lone = lone if lone.any() else None
+        cx0, cy0 = sw.centre
+        self.hm = sw.hm.take(perm)
+        self.log_s = sw.log_s.take(perm)
+        self.ox, self.oy = sw.ox.take(perm) - cx0, sw.oy.take(perm) - cy0
+        self.ux, self.uy = sw.ux.take(perm), sw.uy.take(perm)
+        self.buf = np.empty((5, km))
+        self.a = grouping.alpha.take(self.line)
+        self.theta = theta.take(perm)
+        self.sw = sw
+        self.secant = secant
+        self.a_prev = self.g_prev = None
+
+    def fit(self):
+        """Fit every line to its members' points at the current θ: returns (members' step
+        θ_new − θ, θ of their lines uncapped)."""
+        sw = self.sw
+        la, b = sw.ab(self.theta)
+        d = np.exp(la + b * self.log_s)
+        buf = self.buf
+        x, y = buf[0], buf[1]
+        np.multiply(d, self.ux, out=x)
+        x += self.ox
+        np.multiply(d, self.uy, out=y)
+        y += self.oy
+        np.multiply(x, x, out=buf[2])
+        np.multiply(y, y, out=buf[3])
+        np.multiply(x, y, out=buf[4])
+        _, _, g_out = _tls_angle(self.n, np.add.reduceat(buf, self.lstart, axis=1))
+        g_out[g_out < 0.0] += math.pi
+        if self.lone is not None:
+            g_out[self.lone] = self.a[self.lone]
+        self.g_out = g_out
+        theta_line = _incidence(self.hm, g_out.take(self.slot))
+        return np.minimum(theta_line, sw.cap) - self.theta, theta_line
+
+    def advance(self) -> None:
+        """The next a: the plain step a ← G(a), or (``secant``) a secant step towards the
+        root of g(a) = G(a) − a from this and the previous iteration, its gain held to
+        [1/64, 8]: below 1 it damps an oscillation (G' < 0), above 1 it speeds up a slow
+        contraction (0 < G' < 1); where G' ≥ 1 (a runaway) the step stays plain."""
+        g = self.g_out - self.a
+        g -= math.pi * np.rint(g * _INV_PI)
+        a = self.a
+        if self.secant and self.a_prev is not None:
+            da = a - self.a_prev
+            da -= math.pi * np.rint(da * _INV_PI)
+            dg = self.g_prev - g
+            # gain −1/slope with slope = (g − g_prev)/da: only where the slope is negative
+            ok = dg * da > 0.0
+            gain = np.ones_like(g)
+            gain[ok] = np.minimum(np.maximum(da[ok] / dg[ok], 1.0 / 64.0), _MAX_GAIN)
+            self.a_prev, self.g_prev = a, g
+            a = a + gain * g
+        else:
+            self.a_prev, self.g_prev = a, g
+            a = a + g
+        a -= math.pi * np.floor(a * _INV_PI)
+        self.a = a
+        self.theta = np.minimum(_incidence(self.hm, a.take(self.slot)), self.sw.cap)
+
+
+def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
+                    max_iterations: int = 20, tolerance_rad: float = math.radians(0.1),
+                    iterate: bool = True, lines: LineOptions = LineOptions(),
+                    keep_history: bool = False, damping: bool = True) -> Estimate:
+    """:func:`estimate` that also returns the final lines and (optionally) θ per iteration.
+
+    ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
+    Table II (to show what the control is for).
+    """
+    cal = calibration if calibration is not None else _nominal_for(
+        sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
+    if max_iterations < 1:
+        raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
+    counts = np.asarray(sweep.counts, dtype=float)
+    if counts.ndim != 2:
+        raise ValueError(f"sweep.counts must be (steps, sensors), got shape {counts.shape}")
+    angles = np.asarray(sweep.sensor_angles, dtype=float)
+    pose = sweep.reading_poses if sweep.reading_poses is not None else sweep.pose
+    origin, heading = beam_geometry(sweep.ring, np.asarray(pose, dtype=float), angles,
+                                    cal.emitter_offset_m)
+    origin = np.broadcast_to(origin, counts.shape + (2,))
+    heading = np.broadcast_to(heading, counts.shape)
+    shape = counts.shape
+
+    reason = classify(counts, sweep, cal)
+    live = reason == Reason.OK
+    max_range = min(float(sweep.max_range_m), cal.max_range_m)
+    sw = _Sweep(cal, counts, origin, heading, live, np.asarray(sweep.steps), lines)
+    k = sw.k
+    theta = np.zeros(k)
+    last_moving = np.full(k, -1)        # last iteration in which each reading's θ moved
+    history = [np.zeros(shape)] if keep_history else []
+    grouping: _Grouping | None = None
+    pieces: _Pieces | None = None
+    held: _Held | None = None
+    on_line = np.zeros(k, dtype=bool)
+    regroups = 0
+    regroup_changed = True
+    older = None          # the labels two groupings ago
+    mode = "regroup"
+    it = 0
+    settled = False
+    while it < (max_iterations if iterate and k else 0):
+        checked = False
+        if mode != "inner":
+            # a membership pass: regroup (split-and-merge anew), or check the members
+            checked = True
+            if held is not None:
+                theta[held.perm] = held.theta
+            d, px, py, sigma = sw.points(theta)
+            thr = sw.thresholds(sigma)
+            # readings far outside the range cannot help a line (but stay for the final check)
+            usable = d <= 1.5 * max_range
+            use_mask = None if bool(usable.all()) else usable
+            before = None if grouping is None else grouping.label
+            if mode == "regroup":
+                uidx = None if use_mask is None else usable.nonzero()[0]
+                parts = (px, py, thr, sw.sensor) if uidx is None else (
+                    px.take(uidx), py.take(uidx), thr.take(uidx), sw.sensor.take(uidx))
+                pieces = _segment(*parts, lines, sw.centre, pieces)
+                grouping = _Grouping(sw, pieces, uidx)
+                grouping.members(px, py, thr)
+                grouping.settle_corners(px, py, sigma, thr)
+                regroups += 1
+            else:  # the same members, refitted where they now are
+                grouping.refit(use_mask, px, py)
+                grouping.corner_sides(px, py, thr)
+            grouping.drop_steep(use_mask)
+            grouping.adopt(use_mask, px, py, thr)
+            changed = before is None or not np.array_equal(before, grouping.label)
+            # θ from the members' own lines (as the held iterations fit them), so an unchanged
+            # grouping leaves θ where it was
+            if mode == "regroup" or changed:
+                grouping.refit(use_mask, px, py)
+            elif settled:
+                break          # the members stand and their lines did not move: done
+            if mode == "regroup":
+                # regroup again only while that changes who belongs where, and not back to
+                # the grouping before (readings at a corner flipping between two lines)
+                regroup_changed = changed and not (
+                    older is not None and np.array_equal(older, grouping.label))
+                older = before
+            mode = "inner"
+            if changed or held is None:  # a plain step from the new grouping
+                theta_new, _ = grouping.theta_new()
+                moving = np.abs(theta_new - theta) >= tolerance_rad
+                theta = theta_new
+                on_line = grouping.label >= 0
+                last_moving[moving] = it
+                it += 1
+                if keep_history:
+                    history.append(_scatter(theta, sw.index, shape, 0.0))
+                if not moving.any():
+                    break
+                held = _Held(sw, grouping, theta, secant=damping)
+                continue
+            # unchanged: this iteration is an ordinary held step
+        step, theta_line = held.fit()
+        hot = theta_line >= sw.cap - _PINNED_RAD
+        if not checked and hot.any() and _needs_drop(held, hot, theta_line, sw):
+            mode = "member"      # some member left its line: redo this iteration as a check
+            continue
+        moving = np.abs(step) >= tolerance_rad
+        last_moving[held.perm[moving]] = it
+        held.advance()
+        it += 1
+        settled = not moving.any()
+        if keep_history:
+            history.append(_scatter(theta, sw.index, shape, 0.0, held))
+        if not moving.any():
+            if regroups == 1 and regroups < lines.regroup_iterations:
+                mode = "regroup"   # settled once: split-and-merge the straightened points again
+            elif checked:
+                break
+            else:
+                mode = "member"    # settled: a last look at who belongs where
+        elif (regroup_changed and regroups < lines.regroup_iterations
+              and (regroups == 1 or it < _REGROUP_WINDOW)
+              and float(np.max(np.abs(step))) < lines.regroup_until_rad):
+            mode = "regroup"       # θ has settled coarsely: group the straightened points again
+    n_its = it
+    if held is not None:
+        theta[held.perm] = held.theta
+
+    # final points with the exact curve
+    s = sw.counts
+    log_a, b = cal._log_ab(theta)
+    d = np.exp(log_a + b * sw.log_s)
+    sigma = np.maximum(np.abs(b) * d * sw.sig_s, _SIGMA_FLOOR_M)
+    px, py = sw.ox + d * sw.ux, sw.oy + d * sw.uy
+    if iterate:  # fallback readings (no line): θ = 0, σ widened by θ's unknown
+        off = (~on_line).nonzero()[0]
+        if off.size:
+            sigma[off] = np.hypot(sigma.take(off), _fallback_spread(cal, s.take(off),
+                                                                     d.take(off)))
+
+    iterations = np.minimum(last_moving + 2, n_its)
+    moving_at_end = last_moving == n_its - 1 if n_its else np.zeros(k, dtype=bool)
+    bad_range = (d > max_range) | (d < cal.min_range_m) | ~np.isfinite(d)
+    why = np.where(bad_range, np.uint8(Reason.OUT_OF_RANGE),
+                   np.where(moving_at_end, np.uint8(Reason.NOT_CONVERGED), np.uint8(Reason.OK)))
+    why = np.where(np.isfinite(px) & np.isfinite(py) & np.isfinite(sigma) | (why != Reason.OK),
+                   why, np.uint8(Reason.OUT_OF_RANGE))
+    reason.reshape(-1)[sw.index] = why
+    valid = reason == Reason.OK
+    it_out = np.full(shape, 1 if iterate else 0, dtype=np.int32)
+    it_out.reshape(-1)[sw.index] = iterations
+    nan = np.nan
+    points = Points(
+        x=_scatter(px, sw.index, shape, nan, mask=valid),
+        y=_scatter(py, sw.index, shape, nan, mask=valid),
+        d=_scatter(d, sw.index, shape, nan, mask=valid),
+        theta=_scatter(theta, sw.index, shape, nan, mask=valid),
+        origin_x=np.array(origin[..., 0]), origin_y=np.array(origin[..., 1]),
+        heading=np.array(heading), sigma_m=_scatter(sigma, sw.index, shape, nan, mask=valid),
+        iterations=it_out, valid=valid, reason=reason, max_range_m=max_range)
+    found = None
+    if grouping is not None:  # labels: the line each reading took θ from (−1: none)
+        label = np.full(shape, -1, dtype=int)
+        label.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
+        pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
+                                         alpha=grouping.alpha, usable=grouping.usable)
+        index = sw.index if grouping.uidx is None else sw.index.take(grouping.uidx)
+        found = _lines_record(pieces_out, label, index)
+    return Estimate(points=points, lines=found, theta_history=tuple(history))
+
+
+
+def _fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.ndarray:
+    """RMS range error of reading ``counts`` with θ = 0 (giving ``d0``) when the true θ is
+    unknown: θ as a beam meets a round surface at a uniformly random offset (sin θ uniform
+    up to the drop-out angle; most such readings are thin obstacles), by 8-point quadrature.
+    The θ = 0 distance is the longest the reading can mean, so the error is one-sided and
+    grows steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
+    u = (np.arange(_FALLBACK_NODES) + 0.5) / _FALLBACK_NODES * math.sin(cal.max_incidence_rad)
+    err = cal.distance(counts[:, None], np.arcsin(u)) - d0[:, None]
+    return np.sqrt(np.mean(err * err, axis=1))
+
+
+def _needs_drop(held: _Held, hot, theta_line, sw: _Sweep) -> bool:
+    """Whether a member now meets its line past the rejection angle, or most of a line's
+    members sit at the drop-out angle (a streak or runaway, see _Grouping.drop_steep)."""
+    if (theta_line > sw.reject).any():
+        return True
+    n_hot = np.bincount(held.slot[hot], minlength=held.n.size)
+    return bool((n_hot > 0.5 * held.n).any())
+
+
+def _scatter(values, index, shape, fill, held: _Held | None = None, mask=None):
+    """Compact per-reading values back into an (S, N) array (``fill`` elsewhere)."""
+    out = np.full(shape, fill)
+    if held is not None:
+        values = values.copy()
+        values[held.perm] = held.theta
+    out.reshape(-1)[index] = values
+    if mask is not None:
+        out[~mask] = fill
+    return out
