@@ -16,12 +16,13 @@ time is what the real ring would spend (sum of ``Sweep.duration_s``).
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -33,14 +34,24 @@ FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itse
 
 
 def progress_enabled() -> bool:
-    """Progress bars only for a person at a terminal: not when piped, not under CI."""
-    return sys.stderr.isatty() and os.environ.get("CI", "").lower() not in ("true", "1")
+    """Progress bars only for a person: at a terminal or in a notebook, not when piped,
+    not under CI."""
+    if os.environ.get("CI", "").lower() in ("true", "1"):
+        return False
+    return sys.stderr.isatty() or _in_notebook()
+
+
+def _in_notebook() -> bool:
+    shell = sys.modules.get("IPython")
+    ip = shell.get_ipython() if shell is not None and hasattr(shell, "get_ipython") else None
+    return ip is not None and "IPKernelApp" in getattr(ip, "config", {})
 
 
 def progress_bar(total: int, desc: str, enabled: bool | None = None, *, unit: str = "pose"):
-    """The one progress bar (tqdm, context manager): shown when ``enabled``, or when None
-    as :func:`progress_enabled` decides; a disabled bar's ``update`` costs nothing."""
-    from tqdm import tqdm
+    """The one progress bar (tqdm.auto: a widget in a notebook, text at a terminal; a
+    context manager): shown when ``enabled``, or when None as :func:`progress_enabled`
+    decides; a disabled bar's ``update`` costs nothing."""
+    from tqdm.auto import tqdm
 
     return tqdm(total=total, desc=desc, unit=unit, leave=False,
                 disable=not (progress_enabled() if enabled is None else enabled))
@@ -57,7 +68,7 @@ class MapRun:
     scenario_text: str | None = None     # the YAML the scenario came from (for recordings)
     calibration_text: str | None = None  # the calibration YAML used (None: nominal curve)
     seed: int | None = None
-    frames: list[tuple[np.ndarray, int, str]] = field(default_factory=list)
+    frames_per_sweep: int = 0            # animation frames per sweep write_outputs draws
     truth: Any = None                    # metrics.GroundTruth when scored
     scores: dict | None = None
     timings_s: dict[str, float] = field(default_factory=dict)
@@ -98,6 +109,14 @@ class MapRun:
             "compute_time_s": {**{k: float(v) for k, v in self.timings_s.items()},
                                "total": self.compute_time_s},
         }
+
+    def _repr_png_(self) -> bytes:
+        """The map picture (as map.png, smaller), so a notebook shows a MapRun inline."""
+        from . import render
+
+        reach, ring_r = _reach(self) if self.sweeps else (None, 0.15)
+        return render.MapFigure(self.grid, self.scenario, self.poses, reach, ring_r,
+                                _title(self)).png_bytes()
 
     def recording_meta(self) -> dict:
         """What ``irring replay`` needs to rebuild this exact map."""
@@ -196,10 +215,10 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
 
     ``grid`` defaults to the scenario's (or, without one, a grid around the points), with
     the mapper ``params`` (a given grid has its own).
-    ``frames_per_sweep > 0`` keeps animation frames: the map after each part of each sweep
-    (log-odds, poses so far, caption); the map itself is always built one sweep per insert,
-    so it does not depend on the frames asked for. ``truth``: a ``metrics.GroundTruth`` of
-    this scenario on this grid's cells, to reuse across many runs (it takes ~0.1–0.5 s).
+    ``frames_per_sweep > 0`` asks :func:`write_outputs` for an animation with that many
+    frames per sweep (:func:`building_frames` replays the inserts; no frame is kept).
+    ``truth``: a ``metrics.GroundTruth`` of this scenario on this grid's cells, to reuse
+    across many runs (it takes ~0.1–0.5 s).
     """
     if estimator is None:
         from .estimate import estimate as estimator
@@ -207,7 +226,6 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     points: list[Points] = []
     if grid is None and scenario is not None:
         grid = OccupancyGrid.for_scenario(scenario, params)
-    frames: list[tuple[np.ndarray, int, str]] = []
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:
         for sweep in sweeps:
             t0 = time.perf_counter()
@@ -217,18 +235,11 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     t0 = time.perf_counter()
     if grid is None:
         grid = grid_for_points(points, params=params)
-    n = len(points)
-    if frames_per_sweep:
-        frames.append((grid.log_odds.copy(), 0, "before the first sweep"))
-    for k, p in enumerate(points):
-        if frames_per_sweep:
-            frames.extend(_sweeping_frames(grid, p, k, n, frames_per_sweep))
+    for p in points:
         grid.insert(p)
-        if frames_per_sweep:
-            frames.append((grid.log_odds.copy(), k + 1, f"pose {k + 1} of {n}: done"))
     timings["map"] = time.perf_counter() - t0
     run = MapRun(sweeps=list(sweeps), points=points, grid=grid, scenario=scenario,
-                 frames=frames, timings_s=timings)
+                 frames_per_sweep=int(frames_per_sweep), timings_s=timings)
     if score and scenario is not None:
         from . import metrics
 
@@ -239,20 +250,47 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     return run
 
 
-def _sweeping_frames(grid: OccupancyGrid, points: Points, k: int, n: int,
-                     parts: int) -> list[tuple[np.ndarray, int, str]]:
-    """Frames while sweep k is mapped, before it is inserted into ``grid``: the beams of the
-    first 1/parts, 2/parts, … of its steps (clamped like an insert); the frame after them
-    is the map after the real insert."""
-    rows = points.valid.shape[0]
-    edges = np.linspace(0, rows, parts + 1).round().astype(int)
-    acc = np.zeros(grid.shape)
-    out = []
-    for j in range(1, parts):
-        acc += grid.delta(slice_steps(points, slice(edges[j - 1], edges[j])))
-        shown = np.clip(grid.log_odds + acc, grid.params.l_min, grid.params.l_max)
-        out.append((shown, k + 1, f"pose {k + 1} of {n}: sweeping ({j}/{parts})"))
-    return out
+MAX_FRAMES = 400  # a longer animation is thinned (fewer parts per sweep, then fewer sweeps)
+
+
+def frame_plan(n_sweeps: int, frames_per_sweep: int) -> tuple[int, int, int]:
+    """(parts per sweep, sweep stride, frames): every ``stride``-th sweep (and the last) is
+    shown in ``parts`` frames, so a long run's animation stays within :data:`MAX_FRAMES`."""
+    parts = max(1, int(frames_per_sweep))
+    if 1 + n_sweeps * parts > MAX_FRAMES:
+        parts = 1
+    stride = max(1, math.ceil(n_sweeps / (MAX_FRAMES - 2)))
+    shown = len(range(stride - 1, n_sweeps - 1, stride)) + (n_sweeps > 0)
+    return parts, stride, 1 + shown * parts
+
+
+def building_frames(result: MapRun, frames_per_sweep: int | None = None
+                    ) -> Iterator[tuple[np.ndarray, int, str]]:
+    """The map being built, frame by frame, as (cell classes (ny, nx) int8, poses scanned
+    so far, caption): the sweeps' points inserted again into an empty grid like the
+    result's, so no frame is held; the last frame is the result's map. A sweep shown in
+    p parts first shows the beams of its first 1/p, 2/p, … of steps (clamped like an insert),
+    then the map after its insert. :func:`frame_plan` says how many frames come."""
+    from .mapping import classify
+
+    n = len(result.points)
+    parts, stride, _ = frame_plan(n, result.frames_per_sweep if frames_per_sweep is None
+                                  else frames_per_sweep)
+    grid = result.grid.empty_like()
+    yield grid.classify(), 0, "before the first sweep"
+    for k, p in enumerate(result.points):
+        shown = (k + 1) % stride == 0 or k == n - 1
+        if shown and parts > 1:
+            rows = p.valid.shape[0]
+            edges = np.linspace(0, rows, parts + 1).round().astype(int)
+            acc = np.zeros(grid.shape)
+            for j in range(1, parts):
+                acc += grid.delta(slice_steps(p, slice(edges[j - 1], edges[j])))
+                lo = np.clip(grid.log_odds + acc, grid.params.l_min, grid.params.l_max)
+                yield classify(lo), k + 1, f"pose {k + 1} of {n}: sweeping ({j}/{parts})"
+        grid.insert(p)
+        if shown:
+            yield grid.classify(), k + 1, f"pose {k + 1} of {n}: done"
 
 
 def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | Path | None = None,
@@ -320,10 +358,11 @@ OUTPUT_NAMES = {"map_png": "map.png", "animation": "map_building.gif", "pgm": "m
 
 def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True,
                   recording: bool = True, title: str | None = None) -> dict[str, Path]:
-    """Write the map PNG, the building animation (if frames were kept), the map_server
-    PGM + YAML and the sweeps recording into ``out_dir``; time it as the "render" stage."""
+    """Write the map PNG, the building animation (if the run asked for frames), the
+    map_server PGM + YAML and the sweeps recording into ``out_dir``; time it as the
+    "render" stage."""
     from . import recording as rec
-    from . import render
+    from . import render   # (loads matplotlib: before the clock, as irring loads MuJoCo)
 
     t0 = time.perf_counter()
     out = Path(out_dir)
@@ -334,11 +373,15 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     if title is None:
         title = _title(result)
     paths: dict[str, Path] = {}
-    paths["map_png"] = render.save_map_png(out / OUTPUT_NAMES["map_png"], result.grid, sc, poses,
-                                           reach, ring_r, title)
-    if animation and result.frames:
-        paths["animation"] = render.save_animation(out / OUTPUT_NAMES["animation"], result.grid,
-                                                   result.frames, sc, poses, reach, ring_r)
+    png = out / OUTPUT_NAMES["map_png"]
+    if animation and result.frames_per_sweep and result.points:
+        n_frames = frame_plan(len(result.points), result.frames_per_sweep)[2]
+        gif = render.save_animation(out / OUTPUT_NAMES["animation"], result.grid,
+                                    building_frames(result), n_frames, sc, poses, reach,
+                                    ring_r, png_path=png, title=title)
+        paths["map_png"], paths["animation"] = png, gif
+    else:
+        paths["map_png"] = render.save_map_png(png, result.grid, sc, poses, reach, ring_r, title)
     paths["pgm"], paths["yaml"] = result.grid.to_pgm(out / OUTPUT_NAMES["pgm"])
     if recording:
         paths["recording"] = rec.save_recording(out / OUTPUT_NAMES["recording"], result.sweeps,

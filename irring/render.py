@@ -4,17 +4,33 @@ The picture shows the map's three cell states (unknown grey, free white, occupie
 the ground truth (walls and obstacles as blue outlines), each scan pose (a red ring of the
 robot's radius with its number), and the sensor reach around each pose (dashed orange
 circle: max range + ring radius), with a legend, a scale bar and axes in metres.
-Matplotlib runs headless (Agg); animations are GIFs written with imageio.
+
+Matplotlib draws on its own Agg canvas (never pyplot), so the caller's backend and figures
+are left alone. The animation is drawn by matplotlib once — the static overlay, each pose's
+marks, each caption — and its frames are composed from the grid raster with numpy, quantised
+to one palette and streamed to the GIF writer (Pillow), never held as a list.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
-from .mapping import FREE, OCCUPIED, OccupancyGrid, classify
+# loaded with the module, not per picture: pipeline.write_outputs imports this module before
+# it starts the render stage's clock, as the other stages' modules load with irring
+from matplotlib import font_manager
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import to_rgb
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle, Patch, Polygon
+from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+from PIL import Image, ImageDraw, ImageFont
+
+from .mapping import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 
 UNKNOWN_RGB = (0.75, 0.75, 0.75)
 FREE_RGB = (1.0, 1.0, 1.0)
@@ -22,41 +38,80 @@ OCCUPIED_RGB = (0.0, 0.0, 0.0)
 TRUTH_COLOR = "#1f6fd1"
 POSE_COLOR = "#d62728"
 RANGE_COLOR = "#ff8c00"
+# each cell class's colour, indexed by class - _CLASS0 (the classes are consecutive ints)
+_CLASS0 = min(UNKNOWN, FREE, OCCUPIED)
+_CLASS_RGB = np.array([{UNKNOWN: UNKNOWN_RGB, FREE: FREE_RGB, OCCUPIED: OCCUPIED_RGB}[c]
+                       for c in range(_CLASS0, _CLASS0 + 3)])
+
+
+def figure(width_in: float, height_in: float, dpi: float = 100):
+    """A matplotlib Figure on its own Agg canvas: no pyplot, so drawing it neither switches
+    the caller's backend (a notebook's inline one) nor adds to pyplot's open figures."""
+    fig = Figure(figsize=(width_in, height_in), dpi=dpi)
+    FigureCanvasAgg(fig)
+    return fig
 
 
 def map_rgb(classes: np.ndarray) -> np.ndarray:
     """(ny, nx, 3) float image of a classified grid (row 0 = lowest y)."""
-    img = np.empty(classes.shape + (3,))
-    img[:] = UNKNOWN_RGB
-    img[classes == FREE] = FREE_RGB
-    img[classes == OCCUPIED] = OCCUPIED_RGB
-    return img
+    return _CLASS_RGB[np.asarray(classes, np.intp) - _CLASS0]
 
 
-def _plt():
-    import matplotlib
+def label_offsets(poses: Sequence, ring_radius_m: float, extent: Sequence[float],
+                  label_m: float) -> list[tuple[float, float]]:
+    """Where each pose's number goes, as an offset from the pose (metres).
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+    Inside its own ring when no other ring comes near (the classic look); otherwise outside
+    it, in the first direction whose label clears every ring and every label placed so far
+    (poses close together, as a moving scan's sweeps are), so numbers never sit on each
+    other. ``label_m``: the size of a label's box in metres.
+    """
+    xy = np.array([[float(p[0]), float(p[1])] for p in poses]).reshape(-1, 2)
+    r = ring_radius_m
+    inside = (0.0, r * 0.35 + label_m / 2)
+    placed: list[np.ndarray] = []
+    out = []
+    x0, x1, y0, y1 = extent
+    dirs = [(0, 1), (0, -1), (1, 0), (-1, 0), (0.71, 0.71), (-0.71, 0.71), (0.71, -0.71),
+            (-0.71, -0.71)]
+    for k, c in enumerate(xy):
+        others = np.delete(xy, k, axis=0)
+        crowded = others.size and np.min(np.hypot(*(others - c).T)) < 2 * r + label_m
+        if not crowded:
+            out.append(inside)
+            placed.append(c + inside)
+            continue
+        best, best_cost = None, np.inf
+        for dx, dy in dirs:
+            off = np.array([dx, dy]) * (r + 0.6 * label_m)
+            p = c + off
+            cost = 0.0
+            if others.size:   # overlap with any ring (a label may touch its own)
+                cost += np.sum(np.maximum(0, r + label_m / 2 - np.hypot(*(others - p).T)))
+            if placed:
+                d = np.abs(np.array(placed) - p)
+                cost += np.sum(np.all(d < label_m, axis=1)) * label_m
+            if not (x0 < p[0] < x1 and y0 < p[1] < y1):
+                cost += label_m
+            if cost < best_cost - 1e-12:
+                best, best_cost = off, cost
+        out.append((float(best[0]), float(best[1])))
+        placed.append(c + best)
+    return out
 
 
 class MapFigure:
-    """One figure reused for every frame: static overlays drawn once, the map image updated."""
+    """The map picture: the map image, the static overlays, and each pose's marks."""
 
     def __init__(self, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
                  reach_m: float | None = None, ring_radius_m: float = 0.15, title: str = "",
-                 width_in: float = 8.0):
-        plt = _plt()
-        from matplotlib.lines import Line2D
-        from matplotlib.patches import Circle, Patch, Polygon
+                 width_in: float = 8.0, dpi: float = 100):
 
         x0, x1, y0, y1 = grid.extent_m
         aspect = (y1 - y0) / (x1 - x0)
-        self.fig, self.ax = plt.subplots(figsize=(width_in, width_in * aspect * 0.9 + 1.5),
-                                         dpi=100)
-        ax = self.ax
+        self.fig = figure(width_in, width_in * aspect * 0.9 + 1.5, dpi)
+        self.grid_shape = grid.shape
+        ax = self.ax = self.fig.add_subplot()
         self.image = ax.imshow(map_rgb(grid.classify()), origin="lower",
                                extent=grid.extent_m, interpolation="nearest", zorder=0)
         handles = [Patch(facecolor=UNKNOWN_RGB, edgecolor="k", lw=0.5, label="unknown"),
@@ -65,8 +120,8 @@ class MapFigure:
         if scenario is not None:
             ax.add_patch(Polygon(np.asarray(scenario.room.outline_m), closed=True, fill=False,
                                  ec=TRUTH_COLOR, lw=1.0, alpha=0.8, zorder=3))
-            from .scenario import Cylinder
             from .metrics import box_corners
+            from .scenario import Cylinder
 
             for ob in scenario.obstacles:
                 if isinstance(ob, Cylinder):
@@ -77,14 +132,19 @@ class MapFigure:
                                          ec=TRUTH_COLOR, lw=1.0, zorder=3))
             handles.append(Line2D([], [], color=TRUTH_COLOR, lw=1.2,
                                   label="true walls / obstacles"))
+        # a label's box: 10 pt bold digits, as metres on this figure
+        m_per_in = (x1 - x0) / (width_in * 0.8)
+        label_m = 10 / 72 * 1.6 * m_per_in
+        offsets = label_offsets(poses, ring_radius_m, grid.extent_m, label_m)
         self.pose_artists = []
         for k, pose in enumerate(poses):
             x, y = float(pose[0]), float(pose[1])
+            dx, dy = offsets[k]
             arts = [ax.add_patch(Circle((x, y), ring_radius_m, fill=False, ec=POSE_COLOR,
                                         lw=1.5, zorder=4)),
                     ax.plot([x], [y], "+", color=POSE_COLOR, ms=8, mew=1.5, zorder=4)[0],
-                    ax.text(x, y + ring_radius_m * 0.35, str(k + 1), color=POSE_COLOR,
-                            ha="center", va="bottom", fontsize=10, weight="bold", zorder=5)]
+                    ax.text(x + dx, y + dy, str(k + 1), color=POSE_COLOR, ha="center",
+                            va="center", fontsize=10, weight="bold", zorder=5, clip_on=True)]
             if reach_m:
                 arts.append(ax.add_patch(Circle((x, y), reach_m, fill=False, ec=RANGE_COLOR,
                                                 lw=1.0, ls="--", zorder=4)))
@@ -104,10 +164,13 @@ class MapFigure:
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
                   fontsize=8, frameon=False)
         self.title = ax.set_title(title, fontsize=10)
-        self.fig.tight_layout()
+        # fixed margins (inches) where tight_layout would measure every label (a third of
+        # the drawing's cost): tick labels and y label left, title top, x label and legend
+        h_in = self.fig.get_figheight()
+        self.fig.subplots_adjust(left=0.8 / width_in, right=1 - 0.15 / width_in,
+                                 top=1 - 0.4 / h_in, bottom=1.3 / h_in)
 
     def _scale_bar(self, x0, x1, y0, y1) -> None:
-        from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
         bar = 0.5 if x1 - x0 > 1.5 else 0.1
         self.ax.add_artist(AnchoredSizeBar(self.ax.transData, bar, f"{bar * 1000:.0f} mm",
@@ -115,65 +178,296 @@ class MapFigure:
                                            size_vertical=(y1 - y0) * 0.008, frameon=True,
                                            fontproperties={"size": 8}))
 
-    def update(self, classes: np.ndarray, poses_shown: int | None = None,
-               title: str | None = None) -> None:
-        self.image.set_data(map_rgb(classes))
-        if poses_shown is not None:
-            for k, arts in enumerate(self.pose_artists):
-                for a in arts:
-                    a.set_visible(k < poses_shown)
-        if title is not None:
-            self.title.set_text(title)
-
-    def rgb(self) -> np.ndarray:
-        self.fig.canvas.draw()
-        return np.asarray(self.fig.canvas.buffer_rgba())[..., :3].copy()
-
-    def save(self, path) -> Path:
+    def save(self, path, dpi: float | None = None) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        self.fig.savefig(path, dpi=110, bbox_inches="tight")
+        self.fig.savefig(path, dpi=dpi or PNG_DPI, bbox_inches="tight")
         return path
 
-    def close(self) -> None:
-        _plt().close(self.fig)
+    def png_bytes(self, dpi: float = 80) -> bytes:
+        import io
+
+        buf = io.BytesIO()
+        self.fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+        return buf.getvalue()
 
 
 def save_map_png(path, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
                  reach_m: float | None = None, ring_radius_m: float = 0.15,
                  title: str = "") -> Path:
     """Write the map picture (see the module doc) to ``path``."""
-    fig = MapFigure(grid, scenario, poses, reach_m, ring_radius_m, title)
-    try:
-        return fig.save(path)
-    finally:
-        fig.close()
+    return MapFigure(grid, scenario, poses, reach_m, ring_radius_m, title).save(path)
 
 
-def save_animation(path, grid: OccupancyGrid, frames: Sequence[tuple[np.ndarray, int, str]],
-                   scenario=None, poses: Sequence = (), reach_m: float | None = None,
-                   ring_radius_m: float = 0.15, frame_s: float = 0.25,
-                   hold_s: float = 2.0) -> Path:
-    """Write a GIF of the map being built.
+# --------------------------------------------------------------------------- animation
 
-    ``frames``: (log-odds (ny, nx), poses scanned so far, caption) per frame; the last frame
-    is held ``hold_s`` seconds. Cells are classified as the map's (:func:`mapping.classify`).
+PNG_DPI = 110
+
+
+class _Layer:
+    """Straight-alpha RGBA pixels of one drawn artist group, kept sparse: flat pixel
+    indices into the frame and their (n, 4) float32 colours (0 … 1)."""
+
+    __slots__ = ("index", "rgba")
+
+    def __init__(self, buf: np.ndarray, box: tuple[int, int, int, int]):
+        r0, r1, c0, c1 = box
+        patch = buf[r0:r1, c0:c1]
+        rr, cc = np.nonzero(patch[..., 3])
+        self.index = (rr + r0) * buf.shape[1] + (cc + c0)
+        self.rgba = patch[rr, cc].astype(np.float32) / 255.0
+
+
+class MapAnimator:
+    """Frames of a map being built, and the final map picture, composed with numpy from
+    one matplotlib drawing.
+
+    The figure is drawn once without the map, on a transparent canvas: that is the overlay
+    (axes, outlines, legend, scale bar) with each pixel's opacity; the map goes under it
+    inside the axes, the figure's white outside. Each pose's marks are drawn once, alone,
+    on the cleared canvas. A frame is the map's cells, upsampled by index, under the overlay
+    and the poses shown so far, with a caption; colours go through one palette, so a frame
+    is an index image (one byte a pixel).
     """
-    import imageio.v2 as imageio
 
+    def __init__(self, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
+                 reach_m: float | None = None, ring_radius_m: float = 0.15,
+                 dpi: float = PNG_DPI):
+        mf = MapFigure(grid, scenario, poses, reach_m, ring_radius_m, "", dpi=dpi)
+        self._mf = mf
+        canvas = mf.fig.canvas
+        hidden = [mf.fig.patch, mf.ax.patch, mf.image] + [a for arts in mf.pose_artists
+                                                          for a in arts]
+        for a in hidden:
+            a.set_visible(False)
+        canvas.draw()
+        layer = np.asarray(canvas.buffer_rgba()).astype(np.float32)
+        self.height, self.width = layer.shape[:2]
+        n = self.height * self.width
+        alpha = layer[..., 3].reshape(n) / 255.0
+        over = layer[..., :3].reshape(n, 3) * alpha[:, None]
+        # the map lies under the overlay inside the image's box, the figure's white outside
+        ny, nx = grid.shape
+        x0, x1, y0, y1 = grid.extent_m
+        (dx0, dy0), (dx1, dy1) = mf.ax.transData.transform([(x0, y0), (x1, y1)])
+        cx = (np.arange(self.width) + 0.5 - dx0) / (dx1 - dx0) * nx
+        cy = (self.height - np.arange(self.height) - 0.5 - dy0) / (dy1 - dy0) * ny
+        inside = (((cy >= 0) & (cy < ny))[:, None] & ((cx >= 0) & (cx < nx))[None, :]).ravel()
+        over[~inside] += (1 - alpha[~inside])[:, None] * 255
+        alpha[~inside] = 1.0
+        self._over, self._alpha = over, alpha
+        # which cell each pixel shows (nearest, as imshow draws it), as a flat cell index
+        rows = np.clip(np.floor(cy), 0, ny - 1).astype(np.intp)
+        cols = np.clip(np.floor(cx), 0, nx - 1).astype(np.intp)
+        self._cell = (rows[:, None] * nx + cols[None, :]).ravel()
+
+        self._renderer = canvas.get_renderer()
+        self._poses = []
+        for arts in mf.pose_artists:
+            self._renderer.clear()
+            for a in arts:
+                a.set_visible(True)
+                mf.ax.draw_artist(a)
+                a.set_visible(False)
+            self._poses.append(_Layer(np.asarray(self._renderer.buffer_rgba()),
+                                      self._box(arts)))
+        self._font = None
+        self._caption_box = None
+        self._palette, self._lut = self._make_palette()
+        self._t0, self._d1, self._d2 = (np.zeros(n, np.uint8) for _ in range(3))
+        self._set_tables(np.arange(n))
+        self._shown = 0
+
+    def _box(self, artists) -> tuple[int, int, int, int]:
+        """(row0, row1, col0, col1) of the pixels the artists can touch, with a margin."""
+        boxes = [a.get_window_extent(self._renderer) for a in artists]
+        x0 = min(b.x0 for b in boxes) - 3
+        x1 = max(b.x1 for b in boxes) + 3
+        y0 = min(b.y0 for b in boxes) - 3
+        y1 = max(b.y1 for b in boxes) + 3
+        h, w = self.height, self.width
+        return (max(0, int(h - y1)), min(h, int(math.ceil(h - y0))),
+                max(0, int(x0)), min(w, int(math.ceil(x1))))
+
+    # ---- colours
+
+    def _make_palette(self) -> tuple[bytes, np.ndarray]:
+        """One 256-colour palette for every frame (from the picture with every pose shown,
+        in all three cell colours, plus a grey ramp for captions), and a 32³ RGB → index
+        lookup table (nearest colour, worked out once). The map's and the
+        overlay's own colours are in it exactly."""
+        over, alpha = self._over.copy(), self._alpha.copy()
+        for layer in self._poses:
+            _composite(over, alpha, layer)
+        # every pixel the overlay blends with the map, and every 50th of the others
+        keep = ((alpha > 0) & (alpha < 1)) | (np.arange(alpha.size) % 50 == 0)
+        over, alpha = over[keep], alpha[keep]
+        samples = [over + (1 - alpha)[:, None] * (np.array(c) * 255) for c in _CLASS_RGB]
+        ramp = np.repeat(np.linspace(0, 255, 256)[:, None], 3, axis=1)
+        rgb = (np.concatenate(samples + [ramp] * 16) + 0.5).clip(0, 255).astype(np.uint8)
+        exact = [_CLASS_RGB * 255] + [np.array(to_rgb(c)) * 255
+                                      for c in (TRUTH_COLOR, POSE_COLOR, RANGE_COLOR)]
+        exact = np.vstack(exact).round().astype(np.uint8)
+        found = Image.fromarray(rgb.reshape(1, -1, 3)).quantize(
+            256 - len(exact), method=Image.Quantize.MEDIANCUT).getpalette()
+        pal = np.vstack([exact, np.array(found, np.uint8).reshape(-1, 3)])[:256]
+        levels = np.round(np.arange(32) * 255 / 31).astype(np.uint8)
+        cube = np.stack(np.meshgrid(levels, levels, levels, indexing="ij"), -1)
+        cube = cube.reshape(-1, 3).astype(np.float32)
+        p = pal.astype(np.float32)
+        # nearest by |c - p|² = |p|² - 2 c·p (+ |c|², the same for every p): one product
+        lut = ((p * p).sum(1)[None, :] - 2 * cube @ p.T).argmin(1).astype(np.uint8)
+        return pal.tobytes().ljust(256 * 3, b"\0"), lut
+
+    def _index(self, rgb: np.ndarray) -> np.ndarray:
+        """Palette indices of RGB colours (…, 3), 0 … 255."""
+        q = (np.clip(rgb, 0, 255) * (31 / 255) + 0.5).astype(np.intp)
+        return self._lut[(q[..., 0] * 32 + q[..., 1]) * 32 + q[..., 2]]
+
+    def _set_tables(self, i: np.ndarray) -> None:
+        """Palette index of pixels ``i`` for each cell class under the overlay, kept as the
+        unknown colour plus modular (uint8) steps to the free and occupied ones. Only the
+        pixels the overlay blends need a look-up per class."""
+        over, alpha = self._over[i], self._alpha[i]
+        t = np.empty((3, i.size), np.uint8)
+        bare, opaque = alpha == 0, alpha == 1
+        mixed = ~(bare | opaque)
+        t[:, opaque] = self._index(over[opaque])
+        for k, c in enumerate(_CLASS_RGB):
+            t[k, bare] = self._index(np.array(c) * 255)
+            t[k, mixed] = self._index(over[mixed] + (1 - alpha[mixed])[:, None] * (c * 255))
+        self._t0[i], self._d1[i], self._d2[i] = t[0], t[1] - t[0], t[2] - t[0]
+
+    # ---- frames
+
+    def _show_poses(self, n: int) -> None:
+        while self._shown < n:
+            layer = self._poses[self._shown]
+            _composite(self._over, self._alpha, layer)
+            self._set_tables(layer.index)
+            self._shown += 1
+
+    def frame(self, classes: np.ndarray, poses_shown: int, caption: str) -> np.ndarray:
+        """(height, width) palette indices: cells (int8 classes, (ny, nx)), the first
+        ``poses_shown`` poses (never fewer than an earlier frame showed), the caption."""
+        self._show_poses(poses_shown)
+        c = np.take((np.asarray(classes) - _CLASS0).astype(np.uint8).ravel(), self._cell)
+        out = self._t0 + self._d1 * (c == 1) + self._d2 * (c == 2)
+        out = out.reshape(self.height, self.width)
+        if caption:
+            self._caption(out, classes, caption)
+        return out
+
+    def _under(self, classes, r0, r1, c0, c1) -> tuple[np.ndarray, np.ndarray]:
+        """RGB (0 … 255) of a box of the picture as composed so far, and its flat indices."""
+        flat = np.arange(r0, r1)[:, None] * self.width + np.arange(c0, c1)[None, :]
+        cls = np.take((np.asarray(classes) - _CLASS0).astype(np.intp).ravel(), self._cell[flat])
+        return self._over[flat] + (1 - self._alpha[flat])[..., None] * (_CLASS_RGB[cls] * 255), flat
+
+    def _caption(self, out: np.ndarray, classes, caption: str) -> None:
+        """Write the caption where the title goes, drawn by FreeType through Pillow in
+        matplotlib's own title font and size (matplotlib's text layout would cost more
+        than the rest of the frame)."""
+        font, (x, y), ink = self._title_font()
+        left, top, right, bottom = font.getbbox(caption, anchor="ms")
+        box = (max(0, int(y + top) - 2), min(self.height, int(math.ceil(y + bottom)) + 2),
+               max(0, int(x + left) - 2), min(self.width, int(math.ceil(x + right)) + 2))
+        if self._caption_box is not None:   # the union, so a shorter caption clears a longer
+            b = self._caption_box
+            box = (min(box[0], b[0]), max(box[1], b[1]), min(box[2], b[2]), max(box[3], b[3]))
+        self._caption_box = r0, r1, c0, c1 = box
+        mask = Image.new("L", (c1 - c0, r1 - r0), 0)
+        ImageDraw.Draw(mask).text((x - c0, y - r0), caption, fill=255, font=font, anchor="ms")
+        a = np.asarray(mask, np.float32)[..., None] / 255.0
+        under, _ = self._under(classes, r0, r1, c0, c1)
+        out[r0:r1, c0:c1] = self._index(ink * a + under * (1 - a))
+
+    def _title_font(self):
+        """(Pillow font, the title's centre and baseline in pixels, its RGB 0 … 255): the
+        title's own font file and size; its place found by laying out one title."""
+        if self._font is None:
+
+            title = self._mf.title
+            title.set_text("pose 0")
+            ext = title.get_window_extent(self._renderer)
+            _, _, descent = self._renderer.get_text_width_height_descent(
+                "pose 0", title.get_fontproperties(), ismath=False)
+            title.set_text("")
+            px = title.get_fontsize() * self._mf.fig.dpi / 72
+            font = ImageFont.truetype(font_manager.findfont(title.get_fontproperties()), px)
+            xy = ((ext.x0 + ext.x1) / 2, self.height - (ext.y0 + descent))
+            self._font = font, xy, np.array(to_rgb(title.get_color()), np.float32) * 255
+        return self._font
+
+    def palette_image(self, indices: np.ndarray):
+        """A frame as a Pillow palette image."""
+        img = Image.frombytes("P", (self.width, self.height), np.ascontiguousarray(indices))
+        img.putpalette(self._palette)
+        return img
+
+    def save_png(self, path, classes: np.ndarray, title: str = "") -> Path:
+        """The map picture (:func:`save_map_png`'s) of ``classes`` with every pose and
+        ``title``, composed like a frame in full colour (the title drawn by matplotlib)
+        and cut to the figure's tight box, as ``savefig(bbox_inches="tight")`` would."""
+        mf = self._mf
+        over, alpha = self._over.copy(), self._alpha.copy()
+        for layer in self._poses[self._shown:]:
+            _composite(over, alpha, layer)
+        c = np.take((np.asarray(classes) - _CLASS0).astype(np.intp).ravel(), self._cell)
+        rgb = over + (1 - alpha)[:, None] * (_CLASS_RGB[c] * 255)
+        for arts in mf.pose_artists:
+            for a in arts:
+                a.set_visible(True)
+        if title:
+            mf.title.set_text(title)
+            self._renderer.clear()
+            mf.ax.draw_artist(mf.title)
+            t = _Layer(np.asarray(self._renderer.buffer_rgba()), self._box([mf.title]))
+            a = t.rgba[:, 3:]
+            rgb[t.index] = t.rgba[:, :3] * 255 * a + rgb[t.index] * (1 - a)
+        dpi = mf.fig.dpi
+        box = mf.fig.get_tightbbox(self._renderer).padded(0.1)
+        r0, r1 = (max(0, int(round(self.height - box.y1 * dpi))),
+                  min(self.height, int(round(self.height - box.y0 * dpi))))
+        c0, c1 = max(0, int(round(box.x0 * dpi))), min(self.width, int(round(box.x1 * dpi)))
+        img = (rgb.reshape(self.height, self.width, 3)[r0:r1, c0:c1] + 0.5).astype(np.uint8)
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(img).save(path, format="PNG", dpi=(dpi, dpi))
+        return path
+
+
+def _composite(over: np.ndarray, alpha: np.ndarray, layer: _Layer) -> None:
+    """Put a straight-alpha layer over a premultiplied (over 0 … 255, alpha) image, in place."""
+    i, c = layer.index, layer.rgba
+    a = c[:, 3]
+    over[i] = c[:, :3] * 255 * a[:, None] + over[i] * (1 - a)[:, None]
+    alpha[i] = a + alpha[i] * (1 - a)
+
+
+def save_animation(path, grid: OccupancyGrid,
+                   frames: Iterable[tuple[np.ndarray, int, str]], n_frames: int,
+                   scenario=None, poses: Sequence = (), reach_m: float | None = None,
+                   ring_radius_m: float = 0.15, frame_s: float = 0.25, hold_s: float = 2.0,
+                   png_path=None, title: str = "") -> Path:
+    """Write a GIF of the map being built, streaming the frames to the writer.
+
+    ``frames``: an iterable (e.g. a generator) of (cell classes (ny, nx) int8, poses scanned
+    so far, caption), ``n_frames`` of them; the last is held ``hold_s`` seconds. With
+    ``png_path``, also the map picture of ``grid`` with ``title`` (as :func:`save_map_png`
+    draws it), from the same drawing.
+    """
+    if n_frames < 1:
+        raise ValueError(f"an animation needs at least one frame, got n_frames={n_frames}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig = MapFigure(grid, scenario, poses, reach_m, ring_radius_m, "")
-    images = []
-    try:
-        for log_odds, shown, caption in frames:
-            fig.update(classify(log_odds), shown, caption)
-            images.append(fig.rgb())
-    finally:
-        fig.close()
-    durations = [frame_s] * len(images)
-    if durations:
-        durations[-1] = hold_s
-    # imageio's pillow GIF writer takes durations in milliseconds
-    imageio.mimsave(path, images, format="GIF", duration=[d * 1000 for d in durations], loop=0)
+    anim = MapAnimator(grid, scenario, poses, reach_m, ring_radius_m)
+    images = (anim.palette_image(anim.frame(*f)) for f in frames)
+    first = next(images)
+    durations = [round(frame_s * 1000)] * n_frames
+    durations[-1] = round(hold_s * 1000)
+    first.save(path, format="GIF", save_all=True, append_images=images, duration=durations,
+               loop=0, optimize=False)
+    if png_path is not None:
+        anim.save_png(png_path, grid.classify(), title)
     return path
