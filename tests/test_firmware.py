@@ -1,0 +1,386 @@
+"""The reference firmware (firmware/, C): its host build serves the same core on a real pty,
+and SerialRing, the Python protocol module and `irring drive` must get exactly what
+firmware/README.md promises; the AVR image must fit the ATmega328P and hit 115200 baud."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial
+
+from irring.designs import PAPER_RING
+from irring.hardware import DeviceRejected, SerialRing
+from irring.hardware import protocol as p
+
+ROOT = Path(__file__).resolve().parents[1]
+FIRMWARE = ROOT / "firmware"
+HOST = FIRMWARE / "build" / "irring-host"
+SPEED = 20            # the host device's clock runs 20× wall time: a full sweep ≈ 0.15 s
+TIMEOUT_S = 0.5
+SAMPLE_PERIOD_MS, STEP_MS = 39, 2  # firmware/core/irr_config.h
+
+
+def count(step, sensor):
+    """The host build's synthetic reading (firmware/README.md, "Host build")."""
+    return 400 + 97 * np.asarray(sensor) + 7 * (np.asarray(step) + 35)
+
+
+def counts_for(steps) -> np.ndarray:
+    steps = np.asarray(steps)
+    return count(steps[:, None], np.arange(12)[None, :])
+
+
+@pytest.fixture(scope="session")
+def host_binary() -> Path:
+    if shutil.which("make") is None or shutil.which("cc") is None:
+        pytest.skip("make and a C compiler are needed to build firmware/ (.ci/run installs them)")
+    subprocess.run(["make", "-s", "-C", str(FIRMWARE), "host"], check=True,
+                   capture_output=True, timeout=120)
+    return HOST
+
+
+@pytest.fixture
+def device(host_binary, tmp_path):
+    """Start irring-host on a pty; returns a function giving its link path."""
+    procs: list[subprocess.Popen] = []
+
+    def start(speed: float = SPEED) -> str:
+        link = tmp_path / f"ttyIRR{len(procs)}"
+        proc = subprocess.Popen([str(host_binary), "--link", str(link), "--speed", str(speed)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        procs.append(proc)
+        line = proc.stdout.readline().decode()
+        assert "serving IRR v1 on /dev/pts/" in line and link.is_symlink(), line
+        return str(link)
+
+    yield start
+    for proc in procs:
+        proc.terminate()
+        proc.wait(timeout=5)
+        assert proc.returncode == 0, proc.stderr.read().decode()
+
+
+class Raw:
+    """A raw serial conversation with the device: send bytes, collect decoded sentences."""
+
+    def __init__(self, link: str):
+        self.port = serial.serial_for_url(link, baudrate=115200, timeout=0.02)
+        self.decoder = p.Decoder()
+        self.lines: list[bytes] = []
+
+    def send(self, data: bytes) -> None:
+        self.port.write(data)
+
+    def read_until(self, done, wait_s: float = 2.0) -> list:
+        """Sentences until done(list of messages) is true (or wait_s passes)."""
+        got: list = []
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and not done(got):
+            chunk = self.port.read(4096)
+            self.lines += re.findall(rb"\$[^$]*?\r\n", chunk)
+            got += self.decoder.feed(chunk)
+        return got
+
+    def ask(self, data: bytes, n: int = 1, wait_s: float = 1.0) -> list:
+        self.send(data)
+        return self.read_until(lambda got: len(got) >= n, wait_s)
+
+    def quiet(self, wait_s: float = 0.15) -> list:
+        """Whatever else arrives within wait_s (expected: nothing)."""
+        return self.read_until(lambda got: False, wait_s)
+
+    def close(self) -> None:
+        self.port.close()
+
+
+@pytest.fixture
+def raw(device):
+    conn = Raw(device())
+    yield conn
+    conn.close()
+
+
+# --------------------------------------------------------------------------- SerialRing
+
+
+def test_handshake_reports_the_papers_ring(device):
+    with SerialRing(device(), timeout_s=TIMEOUT_S) as ring:
+        info = ring.info
+        assert info == p.info_for_ring(PAPER_RING, 12, info.firmware)
+        assert (info.nsensors, info.adc_bits, info.step_mdeg, info.gear_num, info.gear_den,
+                info.min_step, info.max_step) == (12, 12, 1800, 3, 5, -35, 35)
+        assert info.firmware.startswith("irring-fw-")
+        assert ring.ring == PAPER_RING
+
+
+def test_full_sweep_has_every_step_with_the_documented_counts_and_honest_timing(device):
+    settle_ms, samples = 7, 3
+    with SerialRing(device(), timeout_s=TIMEOUT_S) as ring:
+        sweep = ring.sweep(samples=samples, settle_s=settle_ms / 1000)
+        assert np.array_equal(sweep.steps, np.arange(-35, 36))
+        assert sweep.missing_steps == ()
+        assert np.array_equal(sweep.counts, counts_for(sweep.steps))
+        report = ring.last_report
+        assert report.complete and report.link["lost_scans"] == 0
+        assert report.link["seq_gaps"] == 0 and report.link["malformed"] == 0
+        # device clock: each step costs at least a motor step, the settle and the samples
+        dt_ms = np.diff(sweep.timestamps_s) * 1000
+        floor = STEP_MS + settle_ms + samples * SAMPLE_PERIOD_MS
+        assert dt_ms.min() >= floor - 1e-6
+        assert np.median(dt_ms) < 2 * floor  # lag on a loaded machine is ×SPEED in device ms
+
+
+@pytest.mark.parametrize("samples", [1, 2, 4])
+def test_averaging_undoes_the_per_sample_dither(device, samples):
+    # sample j reads count + (0, -1, +1, -1, …)[j]: only a true average returns count
+    with SerialRing(device(), timeout_s=TIMEOUT_S) as ring:
+        sweep = ring.sweep(steps=[4, 5, 6], samples=samples)
+        assert np.array_equal(sweep.counts, counts_for([4, 5, 6]))
+
+
+def test_sub_ranges_in_both_directions_and_scattered_steps(device):
+    with SerialRing(device(), timeout_s=TIMEOUT_S) as ring:
+        down = ring.sweep(steps=np.arange(12, -5, -1))
+        assert np.array_equal(down.steps, np.arange(12, -5, -1))
+        assert np.array_equal(down.counts, counts_for(down.steps))
+        assert np.all(np.diff(down.timestamps_s) > 0)  # read in the order asked
+        up = ring.sweep(steps=np.arange(-30, -21))
+        assert np.array_equal(up.counts, counts_for(np.arange(-30, -21)))
+        scattered = [33, -17, 2, 3, 35]  # three IRSWP: 33; -17; 2…3; 35
+        got = ring.sweep(steps=scattered)
+        assert list(got.steps) == scattered and got.missing_steps == ()
+        assert np.array_equal(got.counts, counts_for(scattered))
+
+
+def test_goto_moves_the_motor_that_the_readings_come_from(device):
+    with SerialRing(device(), timeout_s=TIMEOUT_S) as ring:
+        assert ring.goto(-23) == -23
+        assert ring.goto(31) == 31
+        # the host HAL's readings follow its motor counter: a sweep at 31 reads step 31
+        one = ring.sweep(steps=[31])
+        assert np.array_equal(one.counts, counts_for([31]))
+
+
+def test_stop_mid_sweep_ends_it_with_the_last_seq_sent(raw):
+    raw.send(p.encode(p.SweepCommand(-35, 35, 1, 100)))  # 71 × 141 ms device time
+    first = raw.read_until(lambda got: len(got) >= 3)
+    assert len(first) >= 3 and all(isinstance(m, p.Scan) for m in first)
+    raw.send(p.encode(p.Stop()))
+    rest = raw.read_until(lambda got: any(isinstance(m, p.Done) for m in got))
+    scans = first + [m for m in rest if isinstance(m, p.Scan)]
+    done = [m for m in rest if isinstance(m, p.Done)]
+    assert len(done) == 1 and done[0].seq == scans[-1].seq
+    assert [s.seq for s in scans] == list(range(len(scans)))
+    assert [s.step for s in scans] == list(range(-35, -35 + len(scans)))
+    assert len(scans) < 10
+    assert raw.quiet() == []  # stopped: no further IRSCN
+    # idle again: a new command is accepted, and seq carries on where it stopped
+    answer = raw.ask(p.encode(p.SweepCommand(0, 1, 1, 0)), n=3)
+    assert [m.seq for m in answer[:2]] == [scans[-1].seq + 1, scans[-1].seq + 2]
+    assert answer[2] == p.Done(scans[-1].seq + 2)
+
+
+def test_stop_when_idle_reports_none_sent_and_serial_ring_stop_works(device):
+    conn = Raw(device())
+    assert conn.ask(p.encode(p.Stop())) == [p.Done(-1)]
+    conn.close()
+    with SerialRing(device(), timeout_s=TIMEOUT_S) as ring:
+        ring.sweep(steps=[0, 1])
+        assert ring.stop() == 1
+
+
+# --------------------------------------------------------------------------- every IRERR
+
+
+def line(body: str) -> bytes:
+    return b"$" + body.encode() + b"*%02X\r\n" % p.checksum(body.encode())
+
+
+BAD = {
+    1: [b"$IRHLO*51\r\n",                      # wrong checksum
+        b"$IRGTO,7*5c\r\n",                     # lower-case checksum (5C is right)
+        line("IRHLO")[:-2] + b"\n",            # no \r
+        line("IRGTO,5").replace(b"*", b""),     # no `*`
+        line("IRGTO,x"), line("IRGTO,1.5"), line("IRGTO,+3"), line("IRGTO,-"),
+        line("IRGTO,"), line("IRGTO"), line("IRHLO,1"), line("IRSWP,-3,,1,0"),
+        line("IRSWP,1,2,3"), line("IRSWP,1,2,3,4,5"), line("IRhlo"), line("XYHLO"),
+        line("IRHLOX"), line("IRGT\tO,1"), line("IRSWP,0,x,0,0")],
+    2: [line("IRXYZ"), line("IRSCN,0,1,2,3"), line("IRPOS,3"), line("IRDON,-1"),
+        line("IRINF,1,12,12,1800,3,5,-35,35,other")],
+    3: [line("IRSWP,0,1,0,0"), line("IRSWP,0,1,65,0"), line("IRSWP,0,1,1,-1"),
+        line("IRGTO,2147483648"), line("IRGTO,-2147483649"),
+        line("IRGTO,99999999999999999999"), line("IRSWP,0,0,0,x")],
+    4: [line("IRGTO,36"), line("IRGTO,-36"), line("IRSWP,-36,0,1,0"), line("IRSWP,0,36,1,0"),
+        line("IRGTO,-2147483648"), line("IRSWP,2147483647,0,64,2147483647")],
+}
+
+
+def reference_codes(data: bytes) -> list[int]:
+    """The IRERR codes the Python reference device would answer a byte stream with."""
+    codes = []
+    for item in p.Decoder().feed(data):
+        if isinstance(item, p.ProtocolError):
+            codes.append(item.fault.device_error_code)
+        elif item.TYPE not in p.HOST_TYPES:
+            codes.append(p.ERR_UNKNOWN_TYPE)
+        elif isinstance(item, (p.GoTo, p.SweepCommand)):
+            steps = [item.step] if isinstance(item, p.GoTo) else [item.from_step, item.to_step]
+            if any(not -35 <= s <= 35 for s in steps):
+                codes.append(p.ERR_STEP_RANGE)
+    return codes
+
+
+@pytest.mark.parametrize("code", sorted(BAD))
+def test_each_bad_command_gets_its_irerr_code_like_the_reference(raw, code):
+    for bad in BAD[code]:
+        assert reference_codes(bad) == [code], bad  # the Python reference agrees
+        got = raw.ask(bad)
+        assert got == [p.ErrorReply(code, p.ERROR_TEXT[code])], bad
+    assert raw.quiet() == []
+    assert raw.ask(p.encode(p.GoTo(-1))) == [p.Position(-1)]  # nothing stuck
+
+
+def test_busy_while_sweeping_then_accepted_after(raw):
+    raw.send(p.encode(p.SweepCommand(-35, 35, 1, 100)))
+    assert isinstance(raw.read_until(lambda got: got)[0], p.Scan)
+    got = raw.ask(p.encode(p.GoTo(3)) + p.encode(p.SweepCommand(0, 1, 1, 0)) +
+                  p.encode(p.Hello()), n=3)
+    got = [m for m in got if not isinstance(m, p.Scan)]
+    assert got[:2] == [p.ErrorReply(5, "busy")] * 2
+    assert isinstance(got[2], p.Info)  # IRHLO is answered mid-sweep
+    raw.send(p.encode(p.Stop()))
+    raw.read_until(lambda got: any(isinstance(m, p.Done) for m in got))
+    assert raw.ask(p.encode(p.GoTo(3))) == [p.Position(3)]
+
+
+def test_garbage_and_over_long_lines(raw):
+    rng = np.random.default_rng(16)
+    noise = bytes(rng.integers(0, 256, 3000, dtype=np.uint8))
+    # noise without `$` is ignored entirely: the next command is answered alone
+    quiet_noise = noise.replace(b"$", b"")
+    assert raw.ask(quiet_noise + p.encode(p.Hello()), n=1)[0].TYPE == "IRINF"
+    assert raw.quiet() == []
+    # noise with `$`: every fragment is answered exactly as the Python reference decides
+    stream = noise + b"\r\n" + p.encode(p.GoTo(2))
+    want = reference_codes(stream)
+    assert want.count(1) > 3  # the seed does make fragments
+    got = raw.ask(stream, n=len(want) + 1, wait_s=3.0)
+    assert [m.code for m in got[:-1]] == want and got[-1] == p.Position(2)
+    # length: 128 bytes from `$` to `\n` is allowed, 129 is not (and answered once)
+    for n_zeros, ok in ((128 - len(line("IRGTO,5")), True), (129 - len(line("IRGTO,5")), False)):
+        sentence = line("IRGTO," + "0" * n_zeros + "5")
+        assert len(sentence) == (128 if ok else 129)
+        assert raw.ask(sentence) == ([p.Position(5)] if ok else [p.ErrorReply(1, "bad sentence")])
+    assert raw.ask(b"$IRGTO," + b"1" * 5000 + b"\r\n" + p.encode(p.Hello()), n=2)[:1] == \
+        [p.ErrorReply(1, "bad sentence")]
+    assert raw.quiet() == []
+
+
+def test_checksum_vectors_of_the_protocol_document(raw):
+    doc = (ROOT / "docs" / "protocol.md").read_text()
+    example = doc.split("## Example", 1)[1]
+    vectors = {who: [m.encode() for m in re.findall(rf"^{who}:\s+(\$.*?\*[0-9A-F]{{2}})", example, re.M)]
+               for who in ("host", "device")}
+    assert len(vectors["host"]) == 3 and len(vectors["device"]) == 5
+    for v in vectors["device"]:
+        # a device sentence with a right checksum is a well-formed non-command: IRERR 2;
+        # the same with the checksum's last digit changed is a bad sentence: IRERR 1
+        assert raw.ask(v + b"\r\n") == [p.ErrorReply(2, "unknown type")], v
+        wrong = v[:-1] + (b"0" if v[-1:] != b"0" else b"1")
+        assert raw.ask(wrong + b"\r\n") == [p.ErrorReply(1, "bad sentence")], wrong
+    hello, sweep, goto = vectors["host"]
+    assert raw.ask(hello + b"\r\n")[0].TYPE == "IRINF"
+    got = raw.ask(sweep + b"\r\n", n=72, wait_s=5.0)  # $IRSWP,-35,35,1,40
+    assert [m.step for m in got[:-1]] == list(range(-35, 36)) and got[-1] == p.Done(70)
+    # the device's own answer to `$IRGTO,99*6B` is the document's line, byte for byte
+    raw.lines.clear()
+    assert raw.ask(goto + b"\r\n") == [p.ErrorReply(4, "step out of range")]
+    assert raw.lines == [vectors["device"][-1] + b"\r\n"]
+
+
+def test_device_sentences_decode_with_the_python_protocol(raw):
+    raw.ask(p.encode(p.Hello()))
+    raw.ask(p.encode(p.SweepCommand(35, 33, 64, 0)), n=4, wait_s=5.0)
+    assert raw.lines and all(p.encode(p.decode(ln)) == ln for ln in raw.lines)
+
+
+# --------------------------------------------------------------------------- irring drive
+
+
+def test_irring_drive_maps_from_the_c_firmware(device, tmp_path, capsys):
+    from irring.cli import main
+
+    out = tmp_path / "drive"
+    rc = main(["drive", "--port", device(), "--out", str(out), "--no-animation", "--no-wait",
+               "--json", "--timeout", str(TIMEOUT_S), "--samples", "2"])
+    assert rc == 0
+    assert (out / "map.png").stat().st_size > 0 and (out / "map.pgm").exists()
+    link = json.loads((out / "link.json").read_text())
+    assert link["firmware"].startswith("irring-fw-")
+    assert link["totals"]["scans"] == 71 and link["sweeps"][0]["missing_steps"] == []
+    with np.load(out / "sweeps.npz") as z:
+        counts = [z[k] for k in z.files if "counts" in k]
+    assert counts and np.array_equal(counts[0], counts_for(np.arange(-35, 36)))
+
+
+# --------------------------------------------------------------------------- the AVR image
+
+
+def test_uart_divisor_for_115200_baud_at_16_mhz(host_binary):
+    """UBRR and rate error (the same C macros the AVR build uses) against a Python oracle,
+    and within the budget docs/protocol.md states."""
+    make = (FIRMWARE / "Makefile").read_text()
+    f_cpu = int(re.search(r"^F_CPU\s*\?=\s*(\d+)", make, re.M)[1])
+    baud = int(re.search(r"^BAUD\s*\?=\s*(\d+)", make, re.M)[1])
+    assert (f_cpu, baud) == (16_000_000, 115_200)
+    tol = float(re.search(r"within ±([\d.]+) %", (ROOT / "docs" / "protocol.md").read_text())[1])
+
+    def oracle(div):
+        ubrr = round(f_cpu / (div * baud)) - 1
+        return ubrr, f_cpu / (div * (ubrr + 1)) / baud - 1
+
+    assert abs(oracle(16)[1]) * 100 > tol  # normal speed (UBRR 8) is −3.5 %: not good enough
+    ubrr, err = oracle(8)
+    assert (ubrr, round(err * 100, 2)) == (16, 2.12)
+    report = subprocess.run([str(host_binary), "--baud", str(f_cpu), str(baud)],
+                            capture_output=True, text=True)
+    fields = dict(kv.split("=") for kv in report.stdout.split())
+    assert report.returncode == 0 and fields["u2x"] == "1" and int(fields["ubrr"]) == ubrr
+    assert int(fields["error_ppm"]) == int(err * 1e6) and abs(err) * 100 <= tol
+    # a clock that cannot make the rate is refused
+    bad = subprocess.run([str(host_binary), "--baud", "8000000", "115200"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 1 and "ok=0" in bad.stdout
+
+
+def avr_build(*args: str) -> subprocess.CompletedProcess:
+    if shutil.which("avr-gcc") is None:
+        pytest.skip("avr-gcc is not installed (.ci/run installs gcc-avr avr-libc)")
+    return subprocess.run(["make", "-s", "-C", str(FIRMWARE), "avr", *args],
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_avr_image_fits_the_atmega328p_with_room_to_spare():
+    build = avr_build()
+    assert build.returncode == 0, build.stderr
+    text = build.stdout
+    flash = re.search(r"Program:\s+(\d+) bytes \(([\d.]+)% Full\)", text)
+    ram = re.search(r"Data:\s+(\d+) bytes \(([\d.]+)% Full\)", text)
+    assert flash and ram, text
+    assert float(flash[2]) <= 75.0 and float(ram[2]) <= 60.0, text
+    hex_file = FIRMWARE / "build" / "irring-atmega328p.hex"
+    assert hex_file.exists() and hex_file.read_text().startswith(":")
+
+
+def test_avr_build_refuses_a_clock_outside_the_baud_budget():
+    build = avr_build("F_CPU=8000000", "MCU=atmega328p", "BUILD=build/bad-clock")
+    assert build.returncode != 0
+    assert "baud" in build.stderr.lower()
