@@ -384,3 +384,43 @@ def test_avr_build_refuses_a_clock_outside_the_baud_budget():
     build = avr_build("F_CPU=8000000", "MCU=atmega328p", "BUILD=build/bad-clock")
     assert build.returncode != 0
     assert "baud" in build.stderr.lower()
+
+
+# --------------------------------------------------------------------------- simavr
+
+
+def test_the_avr_image_itself_in_simavr_answers_serial_ring(tmp_path):
+    """The very ELF one flashes, run in simavr with six simulated MCP3202 on its SPI pins and
+    a stepper counting its STEP/DIR edges (firmware/sim/irring_simavr.c): SerialRing gets
+    the synthetic counts of the steps it asked for, so UART, SPI, chip selects and stepping
+    all work as wired. simavr runs at roughly real speed, so the sweeps are short."""
+    if shutil.which("avr-gcc") is None or not Path("/usr/include/simavr/sim_avr.h").exists():
+        pytest.skip("needs gcc-avr and libsimavr-dev (.ci/run installs them)")
+    build = subprocess.run(["make", "-s", "-C", str(FIRMWARE), "sim"], capture_output=True,
+                           text=True, timeout=300)
+    assert build.returncode == 0, build.stderr
+    link = tmp_path / "ttySIM"
+    proc = subprocess.Popen([str(FIRMWARE / "build" / "irring-simavr"), "--link", str(link),
+                             str(FIRMWARE / "build" / "irring-atmega328p.elf")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        for text in iter(proc.stdout.readline, b""):
+            if b"serving on" in text:
+                break
+        with SerialRing(str(link), timeout_s=2.0) as ring:
+            assert ring.info == p.info_for_ring(PAPER_RING, 12, ring.info.firmware)
+            up = ring.sweep(steps=[-3, -2, -1], samples=2)
+            assert np.array_equal(up.counts, counts_for([-3, -2, -1]))
+            assert ring.goto(6) == 6
+            down = ring.sweep(steps=[5, 4])
+            assert np.array_equal(down.counts, counts_for([5, 4]))
+            # the AVR's Timer0 clock: a step, then each sample one GP2 period after the last
+            assert np.diff(up.timestamps_s).min() * 1000 >= STEP_MS + 2 * SAMPLE_PERIOD_MS
+            assert np.diff(down.timestamps_s).min() * 1000 >= STEP_MS + SAMPLE_PERIOD_MS
+        conn = Raw(str(link))
+        assert conn.ask(line("IRGTO,36"), wait_s=3.0) == [p.ErrorReply(4, "step out of range")]
+        conn.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    assert proc.returncode == 0, proc.stderr.read().decode()

@@ -109,8 +109,12 @@ uint32_t hal_millis(void)
 
 /* ------------------------------------------------------------------ UART */
 
-#define RX_SIZE 32   /* powers of two; an IRSCN (≤ 93 bytes) is queued in pieces */
+#ifndef RX_SIZE
+#define RX_SIZE 32   /* powers of two, ≤ 256; an IRSCN (≤ 93 bytes) is queued in pieces */
+#endif
+#ifndef TX_SIZE
 #define TX_SIZE 64
+#endif
 static volatile uint8_t rx_buf[RX_SIZE], tx_buf[TX_SIZE];
 static volatile uint8_t rx_head, rx_tail, tx_head, tx_tail;
 

@@ -197,16 +197,27 @@ void irr_out_begin(uint8_t type)
         out_byte((uint8_t)out_types[type][i]);
 }
 
+/* Decimal digits by subtracting powers of ten: an AVR has no divider, and a 32-bit
+ * division per digit cost each IRSCN ~1 ms of the ATmega328P's time (measured in simavr). */
+static const IRR_FLASH uint32_t pow10[] = {1000000000UL, 100000000UL, 10000000UL, 1000000UL,
+                                           100000UL, 10000UL, 1000UL, 100UL, 10UL};
+
 static void out_digits(uint32_t v)
 {
-    char digits[10];
-    uint8_t n = 0;
-    do {
-        digits[n++] = (char)('0' + v % 10);
-        v /= 10;
-    } while (v);
-    while (n)
-        out_byte((uint8_t)digits[--n]);
+    uint8_t i, started = 0;
+    for (i = 0; i < sizeof pow10 / sizeof pow10[0]; i++) {
+        uint32_t p = pow10[i];
+        uint8_t d = 0;
+        while (v >= p) {
+            v -= p;
+            d++;
+        }
+        if (d || started) {
+            out_byte((uint8_t)('0' + d));
+            started = 1;
+        }
+    }
+    out_byte((uint8_t)('0' + v));
 }
 
 void irr_out_uint(uint32_t v)

@@ -7,8 +7,8 @@
  *
  * Host HAL: the clock is the monotonic clock × --speed (the device's t_ms, settle and
  * sample waits run that much faster than wall time); the motor is a counter; sensor k at
- * motor step s, sample j reads irr_host_count(s, k) + (0, −1, +1, −1, +1, … )[j], a dither
- * that averages (rounded half up) back to exactly irr_host_count(s, k) for every sample
+ * motor step s, sample j reads irr_synthetic_count(s, k) + (0, −1, +1, −1, … )[j], a dither
+ * that averages (rounded half up) back to exactly irr_synthetic_count(s, k) for every sample
  * count but leaves the last sample off by one: a device that forgot to average shows. */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -25,12 +25,8 @@
 #include "irr_baud.h"
 #include "irr_device.h"
 #include "irr_hal.h"
+#include "irr_synthetic.h"
 
-/* The synthetic room: documented in firmware/README.md ("Host build"). */
-static uint16_t irr_host_count(int32_t step, uint8_t sensor)
-{
-    return (uint16_t)(400 + 97 * sensor + 7 * (step - IRR_MIN_STEP));
-}
 
 /* ------------------------------------------------------------------ host HAL */
 
@@ -70,7 +66,7 @@ void hal_read_sensors(uint8_t sample, uint16_t counts[IRR_SENSORS])
 {
     int dither = sample == 0 ? 0 : (sample % 2 ? -1 : 1);
     for (uint8_t k = 0; k < IRR_SENSORS; k++)
-        counts[k] = (uint16_t)(irr_host_count(motor, k) + dither);
+        counts[k] = (uint16_t)(irr_synthetic_count(motor, k) + dither);
 }
 
 /* ------------------------------------------------------------------ serving */
