@@ -312,6 +312,17 @@ def test_device_sentences_decode_with_the_python_protocol(raw):
     assert raw.lines and all(p.encode(p.decode(ln)) == ln for ln in raw.lines)
 
 
+def test_stdio_mode_answers_and_finishes_the_sweep_before_exiting(host_binary):
+    commands = p.encode(p.Hello()) + p.encode(p.SweepCommand(2, -1, 1, 0)) + line("IRGTO,9x")
+    run = subprocess.run([str(host_binary), "--stdio", "--speed", "50"], input=commands,
+                         capture_output=True, timeout=10)
+    got = p.Decoder().feed(run.stdout)
+    assert run.returncode == 0 and got[0].TYPE == "IRINF"
+    # the bad IRGTO arrived during the sweep and is answered at once; the sweep still ends
+    assert got[1] == p.ErrorReply(1, "bad sentence")
+    assert [m.step for m in got[2:6]] == [2, 1, 0, -1] and got[6] == p.Done(3)
+
+
 # --------------------------------------------------------------------------- irring drive
 
 
@@ -378,6 +389,22 @@ def test_avr_image_fits_the_atmega328p_with_room_to_spare():
     assert float(flash[2]) <= 75.0 and float(ram[2]) <= 60.0, text
     hex_file = FIRMWARE / "build" / "irring-atmega328p.hex"
     assert hex_file.exists() and hex_file.read_text().startswith(":")
+
+
+def test_the_papers_atmega8535_image_fits_with_stack_to_spare():
+    build = avr_build("MCU=atmega8535")
+    assert build.returncode == 0, build.stderr
+    flash = int(re.search(r"Program:\s+(\d+) bytes", build.stdout)[1])
+    ram = int(re.search(r"Data:\s+(\d+) bytes", build.stdout)[1])
+    assert flash <= 0.75 * 8192 and 512 - ram >= 160, build.stdout  # stack needs ~100 B
+
+
+def test_flash_calls_avrdude_with_the_port_given():
+    dry = subprocess.run(["make", "-n", "-C", str(FIRMWARE), "flash", "PORT=/dev/ttyACM7",
+                          "PROGRAMMER=usbasp"], capture_output=True, text=True)
+    cmd = [ln for ln in dry.stdout.splitlines() if ln.startswith("avrdude")]
+    assert cmd == ["avrdude -p atmega328p -c usbasp -P /dev/ttyACM7 -b 115200 "
+                   "-U flash:w:build/irring-atmega328p.hex:i"]
 
 
 def test_avr_build_refuses_a_clock_outside_the_baud_budget():
