@@ -5,7 +5,6 @@ firmware/README.md promises; the AVR image must fit the ATmega328P and hit 11520
 from __future__ import annotations
 
 import json
-import os
 import re
 import shutil
 import subprocess
@@ -17,7 +16,7 @@ import pytest
 import serial
 
 from irring.designs import PAPER_RING
-from irring.hardware import DeviceRejected, SerialRing
+from irring.hardware import SerialRing
 from irring.hardware import protocol as p
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,7 +24,9 @@ FIRMWARE = ROOT / "firmware"
 HOST = FIRMWARE / "build" / "irring-host"
 SPEED = 20            # the host device's clock runs 20× wall time: a full sweep ≈ 0.15 s
 TIMEOUT_S = 0.5
-SAMPLE_PERIOD_MS, STEP_MS = 39, 2  # firmware/core/irr_config.h
+_CONFIG = (FIRMWARE / "core" / "irr_config.h").read_text()
+SAMPLE_PERIOD_MS, STEP_MS = (int(re.search(rf"#define IRR_{name}\s+(\d+)", _CONFIG)[1])
+                             for name in ("SAMPLE_PERIOD_MS", "STEP_MS"))
 
 
 def count(step, sensor):
