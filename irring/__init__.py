@@ -2,9 +2,9 @@
 
 from importlib.util import find_spec as _find_spec
 
-# The estimator and mapper run compiled kernels (irring/_*.pyx) that pip builds at install;
+# The estimator and mapper run compiled kernels (irring/*/_*.pyx) that pip builds at install;
 # a source tree used without installing has only their sources.
-_KERNELS = ("_iterate", "_lines", "_traverse")
+_KERNELS = ("estimation._iterate", "estimation._lines", "maps._traverse")
 _unbuilt = [k for k in _KERNELS if _find_spec(f"{__name__}.{k}") is None]
 if _unbuilt:
     raise ImportError(
@@ -22,7 +22,7 @@ __all__ = ["Points", "Reason", "Scenario", "ScenarioError", "Sweep", "Truth", "l
 def __getattr__(name: str):
     # SimRing pulls in MuJoCo; import it only when asked for.
     if name == "SimRing":
-        from .sim import SimRing
+        from .simulation.sim import SimRing
 
         return SimRing
     raise AttributeError(f"module 'irring' has no attribute {name!r}")

@@ -27,7 +27,7 @@ from typing import Any, Callable, Iterator, Sequence
 import numpy as np
 
 from .data import Points, Reason, Sweep
-from .mapping import MapperParams, OccupancyGrid, slice_steps
+from .maps.mapping import MapperParams, OccupancyGrid, slice_steps
 from .scenario import Scenario
 
 FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
@@ -112,7 +112,7 @@ class MapRun:
 
     def _repr_png_(self) -> bytes:
         """The map picture (as map.png, smaller), so a notebook shows a MapRun inline."""
-        from . import render
+        from .maps import render
 
         reach, ring_r = _reach(self) if self.sweeps else (None, 0.15)
         return render.MapFigure(self.grid, self.scenario, self.poses, reach, ring_r,
@@ -149,7 +149,7 @@ def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
         return None, None
     import yaml
 
-    from .estimate import Calibration
+    from .estimation.estimate import Calibration
 
     if is_text:
         text, source = str(path_or_text), "<recording>"
@@ -161,7 +161,7 @@ def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
 def scene_calibration(scenario: Scenario):
     """(Calibration, YAML text) the estimator reads a simulated scene with: the one path
     for ``run``, ``compare``, ``bench`` and ``replay`` (docs/calibration.md)."""
-    from .estimate import Calibration
+    from .estimation.estimate import Calibration
 
     cal = Calibration.for_scene(scenario)
     return cal, cal.to_yaml()
@@ -172,7 +172,7 @@ def simulate(scenario: Scenario, *, seed: int | None = None, progress: bool | No
     """One simulated sweep per scan pose (with ``motion``: back to back along the path):
     (sweeps, seconds spent). ``timings``, if given, gets that time split into "build" (the
     one-off MuJoCo model) and "sweeps", for per-sweep costs that exclude the build."""
-    from .sim import SimRing
+    from .simulation.sim import SimRing
 
     t0 = time.perf_counter()
     sim = SimRing(scenario, seed=seed)
@@ -221,7 +221,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     across many runs (it takes ~0.1–0.5 s).
     """
     if estimator is None:
-        from .estimate import estimate as estimator
+        from .estimation.estimate import estimate as estimator
     timings = {"estimate": 0.0, "map": 0.0}
     points: list[Points] = []
     if grid is None and scenario is not None:
@@ -241,7 +241,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     run = MapRun(sweeps=list(sweeps), points=points, grid=grid, scenario=scenario,
                  frames_per_sweep=int(frames_per_sweep), timings_s=timings)
     if score and scenario is not None:
-        from . import metrics
+        from .maps import metrics
 
         t0 = time.perf_counter()
         run.truth = truth if truth is not None else metrics.ground_truth(scenario, grid)
@@ -271,7 +271,7 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
     result's, so no frame is held; the last frame is the result's map. A sweep shown in
     p parts first shows the beams of its first 1/p, 2/p, … of steps (clamped like an insert),
     then the map after its insert. :func:`frame_plan` says how many frames come."""
-    from .mapping import classify
+    from .maps.mapping import classify
 
     n = len(result.points)
     parts, stride, _ = frame_plan(n, result.frames_per_sweep if frames_per_sweep is None
@@ -362,7 +362,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     map_server PGM + YAML and the sweeps recording into ``out_dir``; time it as the
     "render" stage."""
     from . import recording as rec
-    from . import render   # (loads matplotlib: before the clock, as irring loads MuJoCo)
+    from .maps import render   # (loads matplotlib: before the clock, as irring loads MuJoCo)
 
     t0 = time.perf_counter()
     out = Path(out_dir)

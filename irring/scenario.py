@@ -201,7 +201,7 @@ class BeltDynamicsEffect:
     timestep_s: float = num(0.0005, lo=1e-5, hi=0.01)
     belt_timeconst_s: float = num(0.002, lo=1e-4, hi=1.0,
                                   doc="belt spring time constant τ: stiffness = sensor inertia / τ²,"
-                                      " critically damped (irring/dynamics.py)")
+                                      " critically damped (irring/simulation/dynamics.py)")
     backlash_rad: float = num(0.0, lo=0.0, hi=math.radians(5.0), doc="dead band in the belt")
     step_time_s: float = num(0.004, lo=1e-4, hi=1.0,
                              doc="time the motor takes per 1.8° step (minimum-jerk move)")

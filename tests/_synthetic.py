@@ -10,7 +10,7 @@ distance and incidence) stands in for MuJoCo. On it:
   scenario's pose and the ring's real beam geometry, plus optional Gaussian range noise,
   for the mapper and metrics tests.
 
-Independent of irring.sim.
+Independent of irring.simulation.sim.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 
 from irring.data import Points, Reason, Sweep, beam_geometry, sensor_angles_for_steps
 from irring.designs import PAPER_RING
-from irring.estimate import Calibration
+from irring.estimation.estimate import Calibration
 from irring.scenario import Cylinder, Ring, Scenario
 
 def stand_in_calibration(d_o: float = 0.007, strength: float = 0.25, bits: int = 12,

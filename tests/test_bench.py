@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from irring.bench import accuracy, executor, speed
+from irring.studies import accuracy, executor, speed
 from irring.scenario import load_scenario
 
 SMALL = [accuracy.Config(),
@@ -203,8 +203,8 @@ def test_speed_reports_every_stage_and_the_ratios():
 def test_timed_pipeline_gives_the_same_counts_as_the_plain_one():
     import numpy as np
 
-    from irring.effects import Pipeline
-    from irring.sim import SimRing
+    from irring.simulation.effects import Pipeline
+    from irring.simulation.sim import SimRing
 
     sc = load_scenario("t_room")
     sim = SimRing(sc)

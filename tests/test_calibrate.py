@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from irring import gp2
-from irring.calibrate import (CalibrationAborted, GuidedCalibration, Placement, RigReadings,
+from irring.estimation.calibrate import (CalibrationAborted, GuidedCalibration, Placement, RigReadings,
                               SimulatedRig, collect, default_placements, solve)
 from irring.data import Sweep
-from irring.estimate import Calibration, CalibrationError
+from irring.estimation.estimate import Calibration, CalibrationError
 from irring.scenario import Ring
 
 
@@ -100,7 +100,7 @@ def test_rig_places_the_wall_where_it_says(t_room):
 def test_rig_calibration_serves_the_estimator(t_room, rig_cal, tmp_path):
     """A calibration from the rig, saved and loaded, still halves the steep-incidence error
     on the T-room (the estimator never sees the simulator's own tables)."""
-    from irring.bench.estimator import measure
+    from irring.studies.estimator import measure
 
     cal = Calibration.load(rig_cal.save(tmp_path / "cal.yaml"))
     r = measure(t_room, sweeps_per_pose=2, calibration=cal)
@@ -279,7 +279,7 @@ def test_irring_calibrate_reports_a_bad_port(tmp_path, capsys):
 def test_guided_calibration_blames_the_placement_when_nothing_fits(t_room):
     """Readings of a room instead of the requested walls (what `irring emulate` serves):
     no curve fits, and the error says which placements already looked wrong."""
-    from irring.sim import SimRing
+    from irring.simulation.sim import SimRing
 
     sim = SimRing(t_room)
     user = FakeUser(SimulatedRig(t_room))

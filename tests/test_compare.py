@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from irring import compare, designs, geometry
+from irring.studies import compare, geometry
+from irring import designs
 
 DEG = math.pi / 180
 
@@ -52,7 +53,7 @@ def test_overlap_beats_a_single_scanner_and_radial_rings_miss_table_legs():
 
 # --------------------------------------------------------------------------- scenes
 
-from irring.metrics import SCORE_KEYS  # noqa: E402
+from irring.maps.metrics import SCORE_KEYS  # noqa: E402
 from irring.scenario import load_scenario  # noqa: E402
 
 

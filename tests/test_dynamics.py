@@ -1,6 +1,6 @@
-"""Belt and stepper physics, GP2 timing and a moving robot (irring/dynamics.py).
+"""Belt and stepper physics, GP2 timing and a moving robot (irring/simulation/dynamics.py).
 
-Documented figures (models/README.md, irring/dynamics.py), measured by
+Documented figures (models/README.md, irring/simulation/dynamics.py), measured by
 ``irring bench dynamics`` and held here:
 
 - belt stretch (sensor − 0.6 × motor) ≤ STRETCH_BOUND_RAD = 0.007 rad at every physics step
@@ -21,14 +21,14 @@ import mujoco.rollout
 import numpy as np
 import pytest
 
-from irring import dynamics as D
+from irring.simulation import dynamics as D
 from irring import pipeline
-from irring.bench import dynamics as bench
+from irring.studies import dynamics as bench
 from irring.data import Sweep, beam_geometry
-from irring.estimate import estimate
+from irring.estimation.estimate import estimate
 from irring.scenario import (BeltDynamicsEffect, Ring, ScenarioError, TimingEffect,
                              load_scenario)
-from irring.sim import SimRing
+from irring.simulation.sim import SimRing
 
 STRETCH_BOUND_RAD = 0.007
 ANGLE_TOL_RAD = 1e-4

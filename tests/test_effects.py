@@ -9,9 +9,10 @@ import types
 import numpy as np
 import pytest
 
-from irring import effects, gp2
+from irring.simulation import effects
+from irring import gp2
 from irring.data import Truth, hardware_duration_s
-from irring.effects import Pipeline
+from irring.simulation.effects import Pipeline
 from irring.scenario import (EFFECTS, BeamEffect, IncidenceEffect, NoiseEffect, OutliersEffect,
                              ReflectanceEffect, TimingEffect, load_scenario)
 

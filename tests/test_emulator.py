@@ -17,7 +17,7 @@ from irring.hardware import DeviceDisconnected, DeviceTimeout, SerialRing
 from irring.hardware import protocol as p
 from irring.hardware.emulator import Device, Faults, PtyEmulator, SimSource, TcpEmulator
 from irring.scenario import load_scenario
-from irring.sim import SimRing
+from irring.simulation.sim import SimRing
 
 TIMEOUT_S = 0.4  # generous: the device is a thread and CI may be loaded; a hang is still caught
 FULL = np.arange(-35, 36)

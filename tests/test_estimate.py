@@ -21,7 +21,7 @@ from _synthetic import (PAPER_RING, T_POSES, T_ROOM, make_sweep, rectangle,
                         stand_in_calibration)
 from irring import gp2
 from irring.data import Reason, beam_geometry, sensor_angles_for_steps
-from irring.estimate import (Calibration, CalibrationError, LineOptions,
+from irring.estimation.estimate import (Calibration, CalibrationError, LineOptions,
                              emitter_offset_from_wall, estimate, estimate_detail, fit_curve,
                              fit_lines)
 from irring.scenario import Ring
@@ -565,7 +565,7 @@ def test_estimate_rejects_bad_arguments():
 def test_t_room_iterative_halves_the_steep_incidence_error(t_room):
     """Paper's claim, in simulation with noise on: for readings with θ ≥ 40° the iterative
     estimator's range RMSE is at most half that of the θ = 0 assumption."""
-    from irring.bench.estimator import measure
+    from irring.studies.estimator import measure
 
     assert {"noise", "incidence"} <= set(t_room.effects)
     r = measure(t_room, sweeps_per_pose=3)
@@ -619,7 +619,7 @@ def test_corner_behind_the_cylinder_is_read_on_its_walls(cylinder_room):
     On every seed those readings take θ from the walls and land within a few cm. (An earlier
     version left all seven NOT_CONVERGED on some seeds and read others with the θ = 0
     fallback, 7–9 cm long, which cost the map the wall behind the leg.)"""
-    from irring.sim import SimRing
+    from irring.simulation.sim import SimRing
 
     rows = slice(53, 60)
     for seed in range(10):

@@ -1,4 +1,4 @@
-"""The estimator's compiled kernels (irring/_iterate.pyx) at the edges the numpy code handled,
+"""The estimator's compiled kernels (irring/estimation/_iterate.pyx) at the edges the numpy code handled,
 and their two ways of reading the calibration curve giving the same answer.
 
 The kernels replicate the numpy estimator bit for bit (checked against recorded outputs of
@@ -16,9 +16,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from _synthetic import PAPER_RING, make_sweep, rectangle, stand_in_calibration
-from irring import _iterate
+from irring.estimation import _iterate
 from irring.data import Reason
-from irring.estimate import Calibration, LineOptions, estimate, estimate_detail
+from irring.estimation.estimate import Calibration, LineOptions, estimate, estimate_detail
 
 NOMINAL = Calibration.nominal("gp2d12", PAPER_RING)
 FIELDS = ("x", "y", "d", "theta", "sigma_m", "iterations", "valid", "reason")

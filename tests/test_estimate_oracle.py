@@ -1,5 +1,5 @@
-"""The compiled estimator (irring/_lines.pyx, irring/_iterate.pyx) against its numpy oracle
-(irring/estimate_numpy.py), on scenes hypothesis draws: walls, corners, posts, noise,
+"""The compiled estimator (irring/estimation/_lines.pyx, irring/estimation/_iterate.pyx) against its numpy oracle
+(irring/estimation/estimate_numpy.py), on scenes hypothesis draws: walls, corners, posts, noise,
 gaps, curves whose a(θ) grows, any line options and iteration limit.
 
 Tolerance: reasons, validity and iteration counts equal exactly; every float within
@@ -17,9 +17,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
-from irring import estimate_numpy as oracle
+from irring.estimation import estimate_numpy as oracle
 from irring.data import Reason
-from irring.estimate import LineOptions, estimate_detail
+from irring.estimation.estimate import LineOptions, estimate_detail
 
 TOL = 1e-9
 FLOATS = ("x", "y", "d", "theta", "sigma_m")

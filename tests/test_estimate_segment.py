@@ -1,5 +1,5 @@
 """Line segmentation (split-and-merge, corners, TLS lines) of the compiled kernel
-irring/_lines.pyx behind irring.estimate._segment: edge cases, structural invariants of its
+irring/estimation/_lines.pyx behind irring.estimation.estimate._segment: edge cases, structural invariants of its
 pieces on generated polylines, TLS lines against an independent eigen-decomposition, and
 the tie-breaking it shares with the numpy code it replaced.
 
@@ -18,8 +18,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from irring import _lines
-from irring.estimate import LineOptions, _Pieces, _segment
+from irring.estimation import _lines
+from irring.estimation.estimate import LineOptions, _Pieces, _segment
 
 OPTS = LineOptions()
 HARD = settings(max_examples=200, deadline=None, derandomize=not os.environ.get("IRRING_EXPLORE"),

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from irring import geometry as g
+from irring.studies import geometry as g
 
 DEG = math.pi / 180
 
@@ -106,7 +106,7 @@ from irring import data, designs  # noqa: E402
 
 @pytest.fixture(scope="module")
 def paper_model():
-    from irring import model
+    from irring.simulation import model
 
     return model.compile_ring(designs.PAPER_RING)
 
@@ -138,7 +138,7 @@ def test_model_frames_follow_the_beam_geometry_convention(paper_model):
 
 def test_monte_carlo_sees_the_model_not_the_formula_inputs():
     """A model built with another radius gives another area: the MC measures the frames."""
-    from irring import model
+    from irring.simulation import model
 
     other = model.compile_ring(designs.parametric(12, 0.30, 37.8 * DEG, 1.08 * DEG).ring)
     mc, _ = g.overlap_area_mc_m2(g.swept_sectors(other), g.TABLE_I_D_M, samples=50_000)

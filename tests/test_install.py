@@ -19,6 +19,6 @@ def test_unbuilt_kernels_name_themselves_and_the_fix(tmp_path):
                           capture_output=True, text=True, timeout=60)
     assert done.returncode != 0
     last = done.stderr.strip().splitlines()[-1]
-    assert last.startswith("ImportError: irring's compiled kernels _iterate, _lines, _traverse "
-                           "are not built")
+    assert last.startswith("ImportError: irring's compiled kernels estimation._iterate, "
+                           "estimation._lines, maps._traverse are not built")
     assert "pip install ." in last and "C compiler" in last

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from irring.data import Points, Reason
-from irring.mapping import (FREE, OCCUPIED, PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN, UNKNOWN,
+from irring.maps.mapping import (FREE, OCCUPIED, PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN, UNKNOWN,
                             MapperParams, OccupancyGrid, read_pgm, traverse)
 from irring.scenario import load_scenario
 

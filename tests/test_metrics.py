@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from irring.data import Points, Reason
-from irring.mapping import OccupancyGrid
-from irring.metrics import (OBSTACLE0, SCORE_KEYS, WALL, ground_truth, score,
+from irring.maps.mapping import OccupancyGrid
+from irring.maps.metrics import (OBSTACLE0, SCORE_KEYS, WALL, ground_truth, score,
                             shadow_by_obstacle)
 from irring.scenario import load_scenario
 

@@ -14,7 +14,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from irring import designs, model, resources, scenario
+from irring import designs, resources, scenario
+from irring.simulation import model
 from irring.data import beam_geometry
 from irring.scenario import Ring
 

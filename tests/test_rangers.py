@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from irring import designs, effects, gp2, rangers
+from irring import designs, gp2
+from irring.simulation import effects, rangers
 from irring.data import Truth
 from irring.scenario import load_scenario
 

@@ -102,7 +102,7 @@ def test_simulated_sweep_round_trips(tmp_path):
     """A real SimRing sweep (truth included) comes back identical."""
     pytest.importorskip("mujoco")
     from irring.scenario import load_scenario
-    from irring.sim import SimRing
+    from irring.simulation.sim import SimRing
 
     sweep = SimRing(load_scenario("t_room_cylinder")).sweep(0)
     back, _ = load_recording(save_recording(tmp_path / "s.npz", [sweep]))

@@ -9,7 +9,8 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from irring import pipeline, render  # noqa: E402
+from irring import pipeline  # noqa: E402
+from irring.maps import render  # noqa: E402
 from irring.scenario import load_scenario  # noqa: E402
 
 

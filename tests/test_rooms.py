@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from irring import scenario as S
-from irring.bench import rooms
+from irring.studies import rooms
 from irring.cli import main
-from irring.sim import SimRing
+from irring.simulation.sim import SimRing
 
 # A room of our own, not in scenarios/: a 1.03 × 0.81 m room with one post.
 SMALL_ROOM = """\

@@ -12,8 +12,8 @@ pytest.importorskip("mujoco")
 
 from irring import pipeline  # noqa: E402
 from irring.cli import main  # noqa: E402
-from irring.mapping import OccupancyGrid  # noqa: E402
-from irring.metrics import SCORE_KEYS  # noqa: E402
+from irring.maps.mapping import OccupancyGrid  # noqa: E402
+from irring.maps.metrics import SCORE_KEYS  # noqa: E402
 from irring.recording import load_recording  # noqa: E402
 from irring.scenario import load_scenario  # noqa: E402
 
@@ -100,7 +100,7 @@ def test_cli_run_writes_every_output_and_replay_reproduces_the_map(tmp_path, cap
 
 
 def test_replay_with_another_calibration_changes_the_map(tmp_path):
-    from irring.estimate import Calibration
+    from irring.estimation.estimate import Calibration
 
     sc = load_scenario("t_room_cylinder")
     base = pipeline.run(sc, progress=False, score=False)
@@ -159,7 +159,7 @@ def test_replay_maps_with_the_recorded_mapper_params_on_any_grid(runs, tmp_path)
     or by another tool) is mapped with those numbers on a grid around its points."""
     import dataclasses
 
-    from irring.mapping import MapperParams
+    from irring.maps.mapping import MapperParams
     from irring.recording import save_recording
 
     params = MapperParams(l_occ=1.0, l_max=2.0)

@@ -9,8 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from irring import compare, pipeline
-from irring.estimate import Calibration, estimate
+from irring.studies import compare
+from irring import pipeline
+from irring.estimation.estimate import Calibration, estimate
 from irring.scenario import loads
 
 # a 1.5 × 0.7 m room of our own (not bundled), two poses off the centre line

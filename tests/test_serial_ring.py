@@ -380,5 +380,5 @@ def test_layering_protocol_imports_no_serial_and_the_driver_no_simulator():
 
     code = ("import sys, irring.hardware.protocol; assert 'serial' not in sys.modules; "
             "from irring.hardware import SerialRing; assert 'serial' in sys.modules; "
-            "assert 'irring.sim' not in sys.modules and 'mujoco' not in sys.modules")
+            "assert 'irring.simulation.sim' not in sys.modules and 'mujoco' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from irring import Sweep, designs, scenario
 from irring.data import beam_geometry, sensor_angles_for_steps
 from irring.scenario import Cylinder
-from irring.sim import RayHits, SimRing
+from irring.simulation.sim import RayHits, SimRing
 
 TOL_M = 1e-6
 TOL_RAD = 1e-6
@@ -279,7 +279,7 @@ def test_sweep_steps_are_checked(t_room):
 def test_same_seed_same_sweeps_and_noise_differs_between_sweeps(t_room):
     """A fresh SimRing with the same seed reproduces every sweep; consecutive sweeps at a
     pose draw fresh noise; reset() starts the sequence again."""
-    pytest.importorskip("irring.effects")
+    pytest.importorskip("irring.simulation.effects")
     a, b = SimRing(t_room), SimRing(t_room)
     first = [a.sweep(0).counts, a.sweep(0).counts, a.sweep(3).counts]
     second = [b.sweep(0).counts, b.sweep(0).counts, b.sweep(3).counts]

@@ -1,7 +1,7 @@
 """`irring bench …`: benchmarks that print measured figures.
 
 Each benchmark is a module ``irring/cli/bench_<name>.py`` with ``register(subparsers)``;
-the measurements themselves live in ``irring/bench/``.
+the measurements themselves live in ``irring/studies/``.
 """
 
 from __future__ import annotations

@@ -53,7 +53,7 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..bench.accuracy import DEFAULT_SCENARIOS, KNOBS
+    from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
 
     p = sub.add_parser(
         "accuracy", help="what accuracy costs in hardware time and compute time",
@@ -87,8 +87,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bench import accuracy
-    from ..bench.executor import executor
+    from ..studies import accuracy
+    from ..studies.executor import executor
     from ..pipeline import progress_bar
 
     scenarios = args.scenario or list(accuracy.DEFAULT_SCENARIOS)

@@ -55,7 +55,7 @@ def _deg(x: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bench.dynamics import measure
+    from ..studies.dynamics import measure
 
     r = measure(sweeps=args.sweeps, seeds=tuple(args.seeds), with_motion=not args.no_motion)
     if args.json:

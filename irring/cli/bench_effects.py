@@ -53,7 +53,7 @@ def _fmt(x: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bench.effects import measure
+    from ..studies.effects import measure
     from ..scenario import load_scenario
 
     r = measure(load_scenario(args.scenario), samples=args.samples, rounds=args.rounds,

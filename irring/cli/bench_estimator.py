@@ -56,8 +56,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bench.estimator import measure
-    from ..estimate import Calibration
+    from ..studies.estimator import measure
+    from ..estimation.estimate import Calibration
     from ..scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     if args.calibration:
         cal = Calibration.load(args.calibration)
     elif args.rig:
-        from ..calibrate import SimulatedRig
+        from ..estimation.calibrate import SimulatedRig
 
         cal = SimulatedRig(scenario).calibrate()
     r = measure(scenario, sweeps_per_pose=args.sweeps, min_theta_deg=args.min_theta,

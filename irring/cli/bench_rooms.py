@@ -62,7 +62,7 @@ COLUMNS = (("occupied_f1", "F1", 1, 3), ("occupied_precision", "prec", 1, 3),
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bench.rooms import ROOMS, measure, resolve_rooms
+    from ..studies.rooms import ROOMS, measure, resolve_rooms
 
     scenarios = resolve_rooms(args.rooms or ROOMS)
     rows = measure(scenarios, args.seeds)

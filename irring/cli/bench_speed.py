@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bench.speed import measure, report
+    from ..studies.speed import measure, report
     from ..scenario import load_scenario
 
     r = measure(load_scenario(args.scenario), rounds=args.rounds, pose_index=args.pose,

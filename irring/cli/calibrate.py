@@ -22,7 +22,7 @@ what it does:
                   at the end. Enter: read; s: skip the placement; q: quit.
 
   The file is YAML (distances in mm, angles in degrees); pass it to the estimator with
-  `irring run --calibration FILE` or irring.estimate.Calibration.load(FILE). Without a
+  `irring run --calibration FILE` or irring.estimation.estimate.Calibration.load(FILE). Without a
   calibration file the estimator uses the sensor's datasheet curve.
 
 examples:
@@ -68,8 +68,8 @@ def _summary(cal) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..calibrate import CalibrationAborted, GuidedCalibration, SimulatedRig
-    from ..estimate import CalibrationError
+    from ..estimation.calibrate import CalibrationAborted, GuidedCalibration, SimulatedRig
+    from ..estimation.estimate import CalibrationError
     from ..scenario import load_scenario
 
     scenario = load_scenario(args.scenario)

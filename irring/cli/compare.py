@@ -68,7 +68,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import compare, designs
+    from ..studies import compare
+    from .. import designs
     scenarios = args.scenario or list(DEFAULT_SCENARIOS)
     names = args.design or list(designs.DESIGN_BY_NAME)
     from ..pipeline import progress_enabled

@@ -57,7 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import designs, geometry
+    from .. import designs
+    from ..studies import geometry
     names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
     range_m = None if args.range_mm is None else args.range_mm * 1e-3
     reports = [geometry.design_report(designs.get(n), args.distances_mm, range_m=range_m,

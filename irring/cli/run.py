@@ -18,7 +18,7 @@ Writes into --out (default ./out/<scenario>):
   map.pgm, map.yaml  the map for ROS map_server (free 254, occupied 0, unknown 205)
   sweeps.npz         the sweeps, for `irring replay`
 
-Scores (0 … 1, 1-cell tolerance; see irring/metrics.py): occupied precision / recall / F1,
+Scores (0 … 1, 1-cell tolerance; see irring/maps/metrics.py): occupied precision / recall / F1,
 free accuracy, coverage of the free area the poses can reach, and shadow (share of the wall
 behind obstacles that is mapped). Hardware time is what the real ring would spend (71 steps
 × 38.3 ms per sweep by default); compute time is this machine's, per stage.

@@ -72,7 +72,7 @@ class ReadingSource(Protocol):
 
 
 class SimSource:
-    """Readings from :class:`irring.sim.SimRing` with the scenario's effects.
+    """Readings from :class:`irring.simulation.sim.SimRing` with the scenario's effects.
 
     The scenario fixes the physics, including averaging: the host's ``samples`` and
     ``settle_s`` set the device's timing only (``scan.samples`` applies when the scenario
@@ -80,7 +80,7 @@ class SimSource:
     """
 
     def __init__(self, scenario: Scenario, *, seed: int | None = None):
-        from ..sim import SimRing  # the driver never imports sim; only the emulator does
+        from ..simulation.sim import SimRing  # the driver never imports sim; only the emulator does
 
         self.seed = scenario.seed if seed is None else int(seed)
         self.sim = SimRing(scenario, seed=self.seed)

@@ -50,7 +50,7 @@ shadow behind the table leg 1.00 → 1.00. A radial ring (radial12: 12 fixed bea
 goes from coverage 0.00 to 0.03 — its beams now show as free lines.
 
 Ray traversal (:func:`traverse`) is Amanatides & Woo's exact voxel walk, compiled: the one
-implementation of the walk and of the update below is the Cython kernel irring/_traverse.pyx
+implementation of the walk and of the update below is the Cython kernel irring/maps/_traverse.pyx
 (one call per batch, a C loop per ray and column). Every ray is clipped to the grid and
 walked column by column along its major axis (one or two cells per column); each column is
 computed from its number, so nothing accumulates along a ray.
@@ -91,7 +91,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _traverse
-from .data import Points, Reason
+from ..data import Points, Reason
 
 FREE = 0
 OCCUPIED = 1
@@ -155,7 +155,7 @@ class Visits:
 def traverse(x0, y0, x1, y1, origin_xy_m, shape, resolution_m) -> Visits:
     """Every grid cell each segment (x0, y0) → (x1, y1) (metres) crosses, exactly.
 
-    Amanatides–Woo in the compiled walk (irring/_traverse.pyx, shared with
+    Amanatides–Woo in the compiled walk (irring/maps/_traverse.pyx, shared with
     :meth:`OccupancyGrid.insert`): segments are clipped to the grid (Liang–Barsky), then
     walked column by column along their major axis.
     Conventions for the hard cases: a segment running exactly along a cell border belongs

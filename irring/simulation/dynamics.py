@@ -1,6 +1,6 @@
 """Where and when the ring reads: belt and stepper physics, GP2 timing, a moving robot.
 
-A kinematic sweep (``irring.sim``) puts every sensor exactly where the motor step says and
+A kinematic sweep (``irring.simulation.sim``) puts every sensor exactly where the motor step says and
 reads it at once. Three effects change *where and when* a reading is taken (not the
 signal, which stays the effects pipeline's business):
 
@@ -72,8 +72,8 @@ import mujoco.batch
 import numpy as np
 
 from . import model as model_lib
-from .data import GP2_PERIOD_S, beam_geometry
-from .scenario import (BeltDynamicsEffect, MotionEffect, Ring, Scenario, ScenarioError,
+from ..data import GP2_PERIOD_S, beam_geometry
+from ..scenario import (BeltDynamicsEffect, MotionEffect, Ring, Scenario, ScenarioError,
                        TimingEffect, distance_to_outline, point_in_polygon)
 
 TIMING_STREAM = 0x7469   # "ti": seeds the GP2 clocks
@@ -488,7 +488,7 @@ class Path:
     def check_clearance(self, scenario: Scenario) -> None:
         """Raise ScenarioError where the ring (radius + 20 mm housing) would touch a wall or
         an obstacle along the path (the loader checks scan poses, not paths)."""
-        from .scenario import _obstacle_distance
+        from ..scenario import _obstacle_distance
 
         clearance = scenario.ring.radius_m + 0.02
         n = max(2, int(math.ceil(self.length_m / _PATH_SAMPLE_M)) + 1)

@@ -62,8 +62,8 @@ class _Timed:
 def timed_pipeline(scenario, tally: dict):
     """The scenario's effects pipeline with every stage's phase methods timed into
     ``tally`` (stage name → seconds, accumulated)."""
-    from ..effects import PHASES, Pipeline
-    from ..rangers import pipeline_for
+    from ..simulation.effects import PHASES, Pipeline
+    from ..simulation.rangers import pipeline_for
 
     plain = pipeline_for(scenario)
     stages = []
@@ -82,10 +82,10 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
     import mujoco
     import mujoco.batch
 
-    from .. import model as model_lib
-    from ..estimate import Calibration, estimate
-    from ..mapping import OccupancyGrid
-    from ..sim import SimRing
+    from ..simulation import model as model_lib
+    from ..estimation.estimate import Calibration, estimate
+    from ..maps.mapping import OccupancyGrid
+    from ..simulation.sim import SimRing
 
     if rounds < 1:
         raise ValueError(f"rounds must be ≥ 1, got {rounds}")

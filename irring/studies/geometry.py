@@ -217,7 +217,7 @@ def design_report(design, distances_m=(0.25, 0.5, 0.75, 1.0), *, range_m: float 
     its built MuJoCo model, and Eq. 1's blind spot at ``distances_m`` with the design's
     ray step. ``range_m`` is D (default: the sensor's design range, Table I's 0.686 m).
     """
-    from . import model as ring_model_mod
+    from ..simulation import model as ring_model_mod
 
     D = design.sensor.design_range_m if range_m is None else range_m
     ring = design.ring

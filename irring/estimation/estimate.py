@@ -38,9 +38,9 @@ Schedule (how steps 2–6 are repeated; the work goes where it changes the answe
   intersection with the next piece's line moves across if it fits there; drop-outs;
   adoptions), and iterated again if that changed anything.
 
-Speed: the segmentation runs as one compiled call (``irring/_lines.pyx``) and the loop as
-compiled kernels (``irring/_iterate.pyx``). The algorithm's readable statement is the numpy
-oracle :mod:`irring.estimate_numpy` (~2,500 numpy calls per sweep, bound by per-call
+Speed: the segmentation runs as one compiled call (``irring/estimation/_lines.pyx``) and the loop as
+compiled kernels (``irring/estimation/_iterate.pyx``). The algorithm's readable statement is the numpy
+oracle :mod:`irring.estimation.estimate_numpy` (~2,500 numpy calls per sweep, bound by per-call
 overhead); the kernels are tested against it (``tests/test_estimate_oracle.py``), and an
 algorithm change goes into the oracle first. A t_room
 sweep now takes 0.47 ms instead of ~3.1 ms (segmentation 0.8 → 0.04 ms, the rest 2.1 →
@@ -78,9 +78,10 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
-from . import _iterate, _lines, gp2
-from .data import Points, Reason, Sweep, beam_geometry
-from .scenario import Ring
+from . import _iterate, _lines
+from .. import gp2
+from ..data import Points, Reason, Sweep, beam_geometry
+from ..scenario import Ring
 
 CALIBRATION_FORMAT = 1  # version written into calibration files
 _SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
@@ -329,7 +330,7 @@ class Calibration:
         """The calibration file's text (mm and degrees for people, d = a·S^b, S in counts)."""
         header = ("# irring calibration: d[m] = a(θ)·S^b(θ), S in ADC counts (paper Eq. 10);\n"
                   "# emitter offset d_o (paper Eq. 9) in mm; load with "
-                  "irring.estimate.Calibration.load\n")
+                  "irring.estimation.estimate.Calibration.load\n")
         return header + yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True)
 
     def save(self, path: str | Path) -> Path:
@@ -579,7 +580,7 @@ def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | Non
              ) -> _Pieces:
     """Split-and-merge over ordered points (one sensor's readings by step form polylines,
     broken where consecutive readings are more than ``gap_m`` apart), corners refined, and
-    each piece's TLS line: one call of the compiled kernel ``irring._lines.segment``.
+    each piece's TLS line: one call of the compiled kernel ``irring.estimation._lines.segment``.
 
     - split: iterative end-point fit (Douglas–Peucker) of every polyline: a piece splits at
       the reading farthest from its chord while that lies more than its threshold ``thr``
@@ -598,7 +599,7 @@ def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | Non
     repeat them, and the pieces of the first grouping are the better start (measured on the
     T-room: regrouping by corner refinement alone gives the smaller range error).
 
-    The kernel gives the numpy version's answers bit for bit (irring/_lines.pyx says how)
+    The kernel gives the numpy version's answers bit for bit (irring/estimation/_lines.pyx says how)
     in ~1/17 of its time: 0.77–0.85 → 0.044–0.064 ms per t_room sweep."""
     f = np.ascontiguousarray
     return _Pieces(*_lines.segment(
@@ -711,7 +712,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
               tolerance_rad: float, iterate: bool, lines: LineOptions, *, keep_history: bool,
               damping: bool, detail: bool) -> Estimate:
     """The estimator: this function is the schedule of the module docstring, its phases run
-    as compiled kernels (:mod:`irring._iterate`). ``detail``: also the final lines."""
+    as compiled kernels (:mod:`irring.estimation._iterate`). ``detail``: also the final lines."""
     cal = calibration if calibration is not None else _nominal_for(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
     # the kernels take a C integer: a float would fail only once an iteration needs it

@@ -2,8 +2,8 @@
 
 An ultrasonic ranger hears the *nearest echo* anywhere in its cone, and a smooth surface
 only echoes back when it faces the transducer (specular reflection). :class:`SonarConeStage`
-is an :class:`irring.effects.Stage` that does this inside the effects
-:class:`~irring.effects.Pipeline`: in the ``rays`` phase it casts a horizontal fan across
+is an :class:`irring.simulation.effects.Stage` that does this inside the effects
+:class:`~irring.simulation.effects.Pipeline`: in the ``rays`` phase it casts a horizontal fan across
 the cone (``SimRing.cast``), drops rays that meet their surface more obliquely than the
 sensor model's grazing limit (``gp2.sensor('sonar').max_incidence_rad``, 20°), and in the
 ``combine`` phase reports the nearest remaining echo. It takes the ``beam`` slot of the
@@ -91,7 +91,7 @@ def pipeline_for(scenario, cone: SonarCone | None = None) -> Pipeline:
     base = Pipeline.from_scenario(scenario)
     if scenario.sensor.model != "sonar":
         return base
-    from .designs import sensor_spec
+    from ..designs import sensor_spec
 
     if cone is None:
         cone = SonarCone(half_angle_rad=sensor_spec("sonar").beam_half_angle_rad)

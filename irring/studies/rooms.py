@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..metrics import SCORE_KEYS
+from ..maps.metrics import SCORE_KEYS
 from ..scenario import Scenario, ScenarioError, load_scenario
 
 # The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
@@ -63,7 +63,7 @@ def score_room(scenario: Scenario, seed: int | None = None) -> dict:
     """One room, one seed, as written: the six map scores, ``point_rms_m``,
     ``point_rms_theta0_m`` (None when no reading qualifies), ``readings``, ``valid``."""
     from .. import pipeline
-    from ..estimate import estimate
+    from ..estimation.estimate import estimate
 
     theta0 = []
 

@@ -2,7 +2,7 @@
 
 A synthetic 71 × 12 sweep (the paper's ring, R = 0.15 m, ±37.8°, in a round room of
 radius 0.70 m with one grey post) goes through pipelines built with
-:meth:`~irring.effects.Pipeline.from_scenario`; no MuJoCo is involved. The ``beam`` stage
+:meth:`~irring.simulation.effects.Pipeline.from_scenario`; no MuJoCo is involved. The ``beam`` stage
 casts its extra rays with :class:`RoundRoom`, an analytic caster standing in for
 ``SimRing.cast``. Its hits are computed once and replayed, so the figures are the
 pipeline's own work; casting the rays is the simulator's cost (MuJoCo's in a real run),
@@ -38,7 +38,7 @@ import numpy as np
 from .. import gp2
 from ..data import Truth, beam_geometry, sensor_angles_for_steps
 from ..designs import PAPER_RING
-from ..effects import STAGE_ORDER, Pipeline
+from ..simulation.effects import STAGE_ORDER, Pipeline
 from ..scenario import (EFFECTS, IncidenceEffect, NoiseEffect, OutliersEffect,
                         ReflectanceEffect, Scenario)
 

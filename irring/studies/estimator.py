@@ -1,7 +1,7 @@
 """The iterative estimator (paper Table II) against the θ = 0 assumption, on simulated sweeps.
 
 For every pose of the scenario, ``sweeps_per_pose`` sweeps (fresh noise each) go through
-:func:`irring.estimate.estimate` twice: iterating (a(θ), b(θ) at the estimated incidence)
+:func:`irring.estimation.estimate.estimate` twice: iterating (a(θ), b(θ) at the estimated incidence)
 and with ``iterate=False`` (Eq. 10 with a(0), b(0) for every reading). The range error is
 the estimated distance minus the simulator's true distance from the emitter.
 
@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from ..data import Reason
-from ..estimate import Calibration, estimate
+from ..estimation.estimate import Calibration, estimate
 
 
 def _rmse(x: np.ndarray) -> float:
@@ -38,7 +38,7 @@ def measure(scenario, *, sweeps_per_pose: int = 5, min_theta_deg: float = 40.0,
             max_iterations: int = 20) -> dict:
     """Run the comparison on ``scenario`` (a loaded Scenario); return plain figures."""
     from .. import pipeline
-    from ..sim import SimRing
+    from ..simulation.sim import SimRing
 
     sim = SimRing(scenario, seed=seed)
     cal = calibration

@@ -12,7 +12,7 @@ Each function returns plain figures (``irring bench dynamics`` prints them, the 
   hardware time per sweep and the readings' angle error (true − commanded sensor angle at
   the measurement), rms and max.
 - :func:`mujoco_clocks`: the same sweep's readings from MuJoCo's own periodic, delayed
-  rangefinders (``interval``, ``delay``) against :class:`~irring.dynamics.SensorClocks`.
+  rangefinders (``interval``, ``delay``) against :class:`~irring.simulation.dynamics.SensorClocks`.
 - :func:`motion`: occupied F1 of the static four-scan T-room, of static scans at the
   moving run's sweep positions, and of the moving run with perfect and with the bundled
   odometry (``t_room_moving``).
@@ -28,8 +28,8 @@ import mujoco
 import numpy as np
 import yaml
 
-from .. import dynamics as dyn
-from .. import model as model_lib
+from ..simulation import dynamics as dyn
+from ..simulation import model as model_lib
 from ..scenario import BeltDynamicsEffect, Ring, Scenario, load_scenario, parse, resolve
 
 SETTLE_S = (0.0, 0.010, 0.020, 0.0383, 0.0529, 0.075)
@@ -70,7 +70,7 @@ def coupling(n_sweeps: int = 1000, params: BeltDynamicsEffect | None = None,
 
 
 def _sweep_at(scenario: Scenario, timestep_s: float, seed: int):
-    from ..sim import SimRing
+    from ..simulation.sim import SimRing
 
     effects = dict(scenario.effects)
     effects["belt_dynamics"] = dataclasses.replace(effects["belt_dynamics"], timestep_s=timestep_s)
@@ -98,7 +98,7 @@ def convergence(scenario: Scenario, timestep_s: float | None = None, seed: int =
 
 def settling(effects: dict, settles_s=SETTLE_S, seed: int = 1, name: str = "t_room") -> list[dict]:
     """Angle error and hardware time of one sweep at each settle time (pose 0 of ``name``)."""
-    from ..sim import SimRing
+    from ..simulation.sim import SimRing
 
     rows = []
     for settle in settles_s:
@@ -125,7 +125,7 @@ def mujoco_clocks(scenario: Scenario, seed: int = 3) -> dict:
     continuous instants (they differ by at most one time step of motion). ``stale_m``: how
     far the timed readings are from instantaneous ones (mean).
     """
-    from ..sim import SimRing
+    from ..simulation.sim import SimRing
 
     sim = SimRing(scenario, seed=seed)
     dynamics = sim.dynamics
@@ -211,7 +211,7 @@ def motion(seeds=(1,)) -> dict:
     """Occupied F1 (mean over ``seeds``): static t_room, static scans where the moving run's
     sweeps were (mid-sweep true poses), the moving run with perfect and bundled odometry."""
     from .. import pipeline
-    from ..sim import SimRing
+    from ..simulation.sim import SimRing
 
     perfect = variant("t_room_moving", motion={"odometry_sigma_mm": 0, "odometry_sigma_deg": 0})
     sim = SimRing(perfect)

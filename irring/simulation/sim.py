@@ -8,7 +8,7 @@ pose, and casts all steps × sensors rays in one batched ``ray`` call. No Python
 or per step. The chassis is rigid, so the frames are computed in the robot frame and kept
 for the last few distinct angle sets: a static scene's sweeps reuse them (0.22 → 0.03 ms).
 
-Why this path (measured by ``python -m irring.sim``; T-room, 71 × 12 = 852 rays, this
+Why this path (measured by ``python -m irring.simulation.sim``; T-room, 71 × 12 = 852 rays, this
 2-core machine, medians of 200): (a) the 12 rangefinder sensors, one simulation per step,
 one batched forward: 0.70 ms for frames and rays together, and a rangefinder cannot skip the
 robot's own geoms; (b) one MjData, ``mj_kinematics`` per step in a Python loop: 0.13 ms for
@@ -24,7 +24,7 @@ farther than ``scenario.sensor.max_range_m`` from the emitter is no return (NaN)
 only the room (geom group ``model.RAY_GROUP``: walls and obstacles), never the robot.
 
 A scene that lists ``belt_dynamics``, ``timing`` or ``motion`` asks where and when each
-reading was taken from :class:`irring.dynamics.Dynamics` (belt physics stepped by MuJoCo,
+reading was taken from :class:`irring.simulation.dynamics.Dynamics` (belt physics stepped by MuJoCo,
 the GP2 clocks, the robot's drive) and casts from there; every other scene never steps
 physics and never builds that module's objects.
 """
@@ -40,8 +40,8 @@ import mujoco.batch
 import numpy as np
 
 from . import model as model_lib
-from .data import Sweep, Truth, hardware_duration_s
-from .scenario import Scenario
+from ..data import Sweep, Truth, hardware_duration_s
+from ..scenario import Scenario
 
 _POS = mujoco.mjtStage.mjSTAGE_POS
 # Kinematic positioning needs only frames: no contacts, constraints, sensors or actuators.
@@ -81,16 +81,16 @@ class SimRing:
     """The scenario's ring in its room, swept kinematically.
 
     ``SimRing(scenario, seed=None, pipeline=None)``: ``seed`` defaults to ``scenario.seed``;
-    ``pipeline`` (an :class:`irring.effects.Pipeline`) defaults to
+    ``pipeline`` (an :class:`irring.simulation.effects.Pipeline`) defaults to
     ``rangers.pipeline_for(scenario)``: the scene's effects, with the sonar cone for a sonar.
     The k-th sweep at pose p draws its noise from ``np.random.default_rng([seed, p, k])``, so
     a fresh ``SimRing`` with the same scenario and seed reproduces every sweep; :meth:`reset`
     forgets the sweep counters.
 
     Attributes: ``model`` (``mujoco.MjModel``), ``data`` (an ``MjData`` for callers who step
-    physics), ``built`` (:class:`irring.model.RingModel`: ids and addresses), ``scenario``,
+    physics), ``built`` (:class:`irring.simulation.model.RingModel`: ids and addresses), ``scenario``,
     ``ring``, ``pipeline`` (the scene's effects pipeline, built on first use unless given),
-    ``dynamics`` (:class:`irring.dynamics.Dynamics` when the scene lists ``belt_dynamics``,
+    ``dynamics`` (:class:`irring.simulation.dynamics.Dynamics` when the scene lists ``belt_dynamics``,
     ``timing`` or ``motion``, else None), ``n_sweeps`` (sweeps the scene takes: one per
     scan pose, or with ``motion`` back to back along the path).
     """
@@ -120,7 +120,7 @@ class SimRing:
         self._step_s = hardware_duration_s(1, scenario.scan.settle_s, scenario.samples_per_step)
         # reflectance by geom id with a NaN at the end, where a miss's id −1 reads
         self._reflectance = np.append(self.built.reflectance, np.nan)
-        self.dynamics = None  # irring.dynamics.Dynamics, only for scenes that need it
+        self.dynamics = None  # irring.simulation.dynamics.Dynamics, only for scenes that need it
         from . import dynamics as dynamics_lib
 
         if dynamics_lib.uses_dynamics(scenario):
@@ -329,7 +329,7 @@ class SimRing:
         step i's reading is complete, from the start of the sweep.
 
         With ``belt_dynamics``, ``timing`` or ``motion`` the readings are cast from where
-        and when :meth:`irring.dynamics.Dynamics.plan` says they were taken, the sweep's
+        and when :meth:`irring.simulation.dynamics.Dynamics.plan` says they were taken, the sweep's
         times include the moves (see that module), ``sensor_angles`` stay the commanded
         angles, and with ``motion`` ``pose_index`` is the sweep's index along the drive
         (0 … ``n_sweeps`` − 1) and ``reading_poses`` carries the odometry pose of each read.
@@ -394,10 +394,10 @@ class SimRing:
 def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, float]:
     """Median ms per sweep (over ``repeats``) of a whole sweep (``sweep_ms``: truth and the
     scene's effects), of its truth alone, and of the ways to get a sweep's rays out of MuJoCo
-    (see the module doc). Run ``python -m irring.sim [SCENARIO]``."""
+    (see the module doc). Run ``python -m irring.simulation.sim [SCENARIO]``."""
     import time
 
-    from .scenario import load_scenario
+    from ..scenario import load_scenario
 
     sim = SimRing(load_scenario(scenario_name))
     built, m = sim.built, sim.model

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
-from .scenario import Box, Cylinder, Scenario
+from ..scenario import Box, Cylinder, Scenario
 
 EXTERIOR = -1   # beyond the walls
 FREE_SPACE = 0  # inside the room, no material at the cell centre

@@ -42,7 +42,7 @@ accuracy
     incidence is ≥ 40°; ``point_rmse_m``: RMS distance of the estimated end point from the
     true hit point (where a wrong beam angle shows: the range can be right along the real
     beam while the point is drawn along the assumed one); ``valid_share``: share of the readings that hit something which the
-    estimator calls valid; the map scores of ``irring.metrics`` (``occupied_f1``,
+    estimator calls valid; the map scores of ``irring.maps.metrics`` (``occupied_f1``,
     ``free_accuracy``, ``coverage``, ``shadow``, …).
 cost
     ``hardware_time_s``: seconds the real ring spends on one 360° view at one pose
@@ -63,7 +63,7 @@ dynamics (belt+timing configurations only, else None)
 
 Everything but the ``*_ms`` timings is a deterministic function of (scenario, configuration,
 seed): a job rebuilds its ``SimRing`` from the scenario's YAML in whatever process runs it
-(:mod:`irring.bench.executor`), so serial, process-pool and Dask runs agree exactly.
+(:mod:`irring.studies.executor`), so serial, process-pool and Dask runs agree exactly.
 Per configuration the runs are averaged over scenarios and seeds (timings: median), and
 *Pareto fronts* are marked for each cost (hardware ``hw``, compute ``cpu``) against each
 accuracy measure (occupied F1 ``f1``, coverage ``cov``, range RMSE ``rmse``): a
@@ -82,7 +82,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from ..compare import mean_of, write_study
+from .compare import mean_of, write_study
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room")
 STEEP_RAD = math.radians(40.0)
@@ -157,7 +157,7 @@ def configurations(knobs: Iterable[str] | None = None,
 
 def default_value(knob: str, scenario) -> float:
     """Where the default configuration sits on a knob's axis (for the chart's lines)."""
-    from ..estimate import LineOptions
+    from ..estimation.estimate import LineOptions
 
     return {"step": scenario.scan.step_stride,
             "samples": scenario.samples_per_step,
@@ -237,9 +237,11 @@ def run_job(job: Job) -> dict:
     """Sweep every pose, estimate, map and score one configuration; a plain dict."""
     import functools
 
-    from .. import designs, dynamics, metrics, pipeline
-    from ..estimate import LineOptions, estimate
-    from ..mapping import OccupancyGrid
+    from .. import designs, pipeline
+    from ..simulation import dynamics
+    from ..maps import metrics
+    from ..estimation.estimate import LineOptions, estimate
+    from ..maps.mapping import OccupancyGrid
     from ..scenario import loads
 
     base = loads(job.scenario_yaml, source=job.scenario_source)

@@ -1,7 +1,7 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Compiled kernels of the occupancy grid: its cell walk and its per-sweep update.
 
-irring/mapping.py's module doc explains the rules (touch lengths, clipping) and the inverse
+irring/maps/mapping.py's module doc explains the rules (touch lengths, clipping) and the inverse
 sensor model; this is their one implementation:
 
 * :func:`walk` lists every cell a batch of segments visits (``mapping.traverse``);

@@ -121,7 +121,7 @@ class MapFigure:
             ax.add_patch(Polygon(np.asarray(scenario.room.outline_m), closed=True, fill=False,
                                  ec=TRUTH_COLOR, lw=1.0, alpha=0.8, zorder=3))
             from .metrics import box_corners
-            from .scenario import Cylinder
+            from ..scenario import Cylinder
 
             for ob in scenario.obstacles:
                 if isinstance(ob, Cylinder):

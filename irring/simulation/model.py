@@ -23,8 +23,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from . import resources
-from .scenario import Box, Cylinder, Ring, Scenario
+from .. import resources
+from ..scenario import Box, Cylinder, Ring, Scenario
 
 TEMPLATE = "irring.xml"
 PROTOTYPE = "ir_00"

@@ -10,14 +10,14 @@ true distance ``d = y / cos h − d_o·tan h`` and incidence θ = |h|.
 - Offset placements (ψ = 0, a few y): d_o by Eq. 9 over readings on both sides of the
   normal. The θ-dependent curve error is even in h and tan h is odd, so it cancels.
 - Curve placements (ψ = 0°, 25°, 50°; distances across the range): a(θ), b(θ) by least
-  squares in log–log space (:func:`irring.estimate.fit_curve`) against the true distances.
+  squares in log–log space (:func:`irring.estimation.estimate.fit_curve`) against the true distances.
 - d_o and the curve are solved alternately (three rounds; each barely moves the other).
 
 Each placement is read ``sweeps`` times; per step the readings are averaged (after
 dropping any beyond 4 robust σ, e.g. outliers), and their spread gives the noise σ in
 counts that the estimator uses for ``Points.sigma_m``.
 
-:class:`SimulatedRig` reads placements from :class:`irring.sim.SimRing` in a generated
+:class:`SimulatedRig` reads placements from :class:`irring.simulation.sim.SimRing` in a generated
 4 m × 4 m room with the scenario's ring, sensor and effects (minus ``motion``).
 :class:`GuidedCalibration` walks a person through the same placements on the real ring:
 ``prompt`` (like :func:`input`) and ``show`` (like :func:`print`) are the user interface and
@@ -35,10 +35,10 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from . import gp2
-from .data import Sweep
+from .. import gp2
+from ..data import Sweep
 from .estimate import Calibration, CalibrationError, emitter_offset_from_wall, fit_curve
-from .scenario import Ring
+from ..scenario import Ring
 
 DEFAULT_THETA_GRID_RAD = np.radians(np.arange(0.0, 86.0, 5.0))
 _ROUNDS = 3
@@ -198,7 +198,7 @@ def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = 12, vref_
 
 class SimulatedRig:
     """The calibration rig in simulation: the scenario's ring and sensor in front of one wall
-    of a generated 4 m × 4 m room, read through :class:`irring.sim.SimRing` with the
+    of a generated 4 m × 4 m room, read through :class:`irring.simulation.sim.SimRing` with the
     scenario's effects. ``sweeps`` repeated sweeps per placement (fresh noise each)."""
 
     ROOM_M = 4.0
@@ -229,7 +229,7 @@ class SimulatedRig:
 
     def scenario_for_rig(self):
         """The generated rig scene: one pose per placement, sensor range = the model's."""
-        from .scenario import Pose
+        from ..scenario import Pose
 
         sc = self.scenario
         s = self.ROOM_M
@@ -246,7 +246,7 @@ class SimulatedRig:
     @property
     def sim(self):
         if self._sim is None:
-            from .sim import SimRing
+            from ..simulation.sim import SimRing
 
             self._sim = SimRing(self.scenario_for_rig(), seed=self.seed)
         return self._sim

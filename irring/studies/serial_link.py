@@ -1,4 +1,4 @@
-"""Measured figures for the serial path: `python -m irring.hardware.bench [--json]`.
+"""Measured figures for the serial path: `python -m irring.studies.serial_link [--json]`.
 
 Runs the emulator on a real pty with the t_room scenario and SerialRing against it:
 
@@ -22,8 +22,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..scenario import load_scenario
-from . import SerialRing
-from .emulator import Device, Faults, PtyEmulator, SimSource
+from ..hardware import SerialRing
+from ..hardware.emulator import Device, Faults, PtyEmulator, SimSource
 
 
 @contextmanager
@@ -98,7 +98,7 @@ def measure(scenario_name: str = "t_room", quick: bool = False) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m irring.hardware.bench",
+    ap = argparse.ArgumentParser(prog="python -m irring.studies.serial_link",
                                  description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--json", action="store_true")

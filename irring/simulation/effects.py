@@ -37,9 +37,9 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from . import gp2
-from .data import Truth
-from .scenario import (AveragingEffect, BeamEffect, FoldoverEffect, IncidenceEffect,
+from .. import gp2
+from ..data import Truth
+from ..scenario import (AveragingEffect, BeamEffect, FoldoverEffect, IncidenceEffect,
                        NoiseEffect, OutliersEffect, QuantizationEffect, ReflectanceEffect)
 
 # The order stages run in (by their first phase); also the order of Pipeline.stages.

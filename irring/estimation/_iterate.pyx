@@ -1,6 +1,6 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 # distutils: extra_compile_args = -ffp-contract=off
-"""Compiled kernels for the iteration of the Table II estimator (see :mod:`irring.estimate`,
+"""Compiled kernels for the iteration of the Table II estimator (see :mod:`irring.estimation.estimate`,
 whose module docstring explains the algorithm and whose ``estimate_detail`` runs the loop).
 
 The loop works on one sweep's live readings (~850) and its lines (~30). Written with numpy it
@@ -37,7 +37,7 @@ import numpy as np
 
 from libc.math cimport cos, fabs, floor, hypot, isfinite, rint, sin, sqrt
 
-from .data import Reason
+from ..data import Reason
 
 cdef object _exp = np.exp
 cdef object _log = np.log

@@ -1,12 +1,12 @@
-"""The estimator's oracle: the whole algorithm of :mod:`irring.estimate` in plain numpy.
+"""The estimator's oracle: the whole algorithm of :mod:`irring.estimation.estimate` in plain numpy.
 
 This is the readable statement of the estimator (the paper's Table II plus every addition:
 split-and-merge grouping with corner refinement, membership, corner settling, drop-out
 checks, adoption, held iterations with the secant step control, regroups, the final points
-with the fallback σ). The compiled kernels (``irring/_lines.pyx``, ``irring/_iterate.pyx``)
+with the fallback σ). The compiled kernels (``irring/estimation/_lines.pyx``, ``irring/estimation/_iterate.pyx``)
 are an optimisation of exactly this code, and ``tests/test_estimate_oracle.py`` holds them
 to it with hypothesis (the tolerance is stated there). An algorithm change goes here first;
-the kernels follow. The schedule and every phase are described in :mod:`irring.estimate`'s
+the kernels follow. The schedule and every phase are described in :mod:`irring.estimation.estimate`'s
 module docstring; the comments here say why, step by step.
 
 Not for speed: ~3 ms per t_room sweep against ~0.5 ms for the kernels (bound by numpy's
@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .data import Points, Reason, Sweep, beam_geometry
+from ..data import Points, Reason, Sweep, beam_geometry
 from .estimate import (_FALLBACK_NODES, _MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M,
                        Calibration, Estimate, LineOptions, _lines_record, _nominal_for, _Pieces,
                        _scan_order)

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import designs as designs_mod
-from .designs import Design
+from .. import designs as designs_mod
+from ..designs import Design
 
 DEFAULT_DISTANCES_M = (0.25, 0.35, 0.45, 0.55, 0.65, 0.75)
 CONE_RAY_STEP_RAD = math.radians(0.25)  # fan spacing used to stand in for a sonar cone
@@ -53,7 +53,8 @@ def design_rays(design: Design, step_stride: int = 1) -> Rays:
     """
     import mujoco
 
-    from . import geometry, model
+    from . import geometry
+    from ..simulation import model
 
     rm = model.compile_ring(design.ring)
     data = mujoco.MjData(rm.model)  # one, re-posed at every step
@@ -75,7 +76,7 @@ def design_rays(design: Design, step_stride: int = 1) -> Rays:
 
 
 def _incidence_limit_rad(design: Design) -> float:
-    from . import gp2
+    from .. import gp2
 
     return float(gp2.sensor(design.sensor.kind).max_incidence_rad)
 
@@ -188,7 +189,8 @@ def run_scene(scenario, design: Design | str, seed: int | None = None, *,
     model once is ``setup_time_s``), ``readings`` and ``valid_readings``. ``truth_cache``
     (a dict the caller keeps) reuses the reference's rasterised ground truth across calls.
     """
-    from . import metrics, pipeline
+    from ..maps import metrics
+    from .. import pipeline
 
     d = designs_mod.get(design) if isinstance(design, str) else design
     reference = scenario if reference is None else reference
@@ -228,7 +230,7 @@ def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) 
     """One record per design: run scores averaged over scenarios and seeds (``None`` scores
     left out of the mean), hardware time of a 360° view, compute time per view, and the
     detection curve when given."""
-    from .metrics import SCORE_KEYS
+    from ..maps.metrics import SCORE_KEYS
 
     out = []
     for name in dict.fromkeys(r["design"] for r in runs):
@@ -264,8 +266,8 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
 
     Returns ``{"designs": summarise(...), "runs": [...], "detection": {...}}``.
     """
-    from .pipeline import progress_bar
-    from .scenario import load_scenario
+    from ..pipeline import progress_bar
+    from ..scenario import load_scenario
 
     scs = [load_scenario(s) if isinstance(s, str) else s for s in scenarios]
     ds = [designs_mod.get(d) if isinstance(d, str) else d for d in design_list]

@@ -1,1 +1,0 @@
-"""Measurements behind `irring bench`; each returns plain dicts of figures."""
