@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import serial
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 
 from irring.designs import PAPER_RING
 from irring.hardware import SerialRing
@@ -213,12 +215,17 @@ BAD = {
         line("IRGTO,x"), line("IRGTO,1.5"), line("IRGTO,+3"), line("IRGTO,-"),
         line("IRGTO,"), line("IRGTO"), line("IRHLO,1"), line("IRSWP,-3,,1,0"),
         line("IRSWP,1,2,3"), line("IRSWP,1,2,3,4,5"), line("IRhlo"), line("XYHLO"),
-        line("IRHLOX"), line("IRGT\tO,1"), line("IRSWP,0,x,0,0")],
+        line("IRHLOX"), line("IRGT\tO,1"), line("IRSWP,0,x,0,0"),
+        # device sentences are checked like any other before they are refused
+        line("IRSCN,0,1,2"), line("IRERR"), line("IRERR,1,a,b"), line("IRPOS,x")],
     2: [line("IRXYZ"), line("IRSCN,0,1,2,3"), line("IRPOS,3"), line("IRDON,-1"),
+        line("IRSCN,65535,-2147483648,4294967295,0,4294967295"), line("IRERR,99"),
         line("IRINF,1,12,12,1800,3,5,-35,35,other")],
     3: [line("IRSWP,0,1,0,0"), line("IRSWP,0,1,65,0"), line("IRSWP,0,1,1,-1"),
         line("IRGTO,2147483648"), line("IRGTO,-2147483649"),
-        line("IRGTO,99999999999999999999"), line("IRSWP,0,0,0,x")],
+        line("IRGTO,99999999999999999999"), line("IRSWP,0,0,0,x"),
+        line("IRDON,65536"), line("IRSCN,0,1,-2,3"), line("IRERR,0,x"),
+        line("IRINF,1,12,12,1800,3,5,35,-35,fw")],  # min_step > max_step
     4: [line("IRGTO,36"), line("IRGTO,-36"), line("IRSWP,-36,0,1,0"), line("IRSWP,0,36,1,0"),
         line("IRGTO,-2147483648"), line("IRSWP,2147483647,0,64,2147483647")],
 }
@@ -247,6 +254,40 @@ def test_each_bad_command_gets_its_irerr_code_like_the_reference(raw, code):
         assert got == [p.ErrorReply(code, p.ERROR_TEXT[code])], bad
     assert raw.quiet() == []
     assert raw.ask(p.encode(p.GoTo(-1))) == [p.Position(-1)]  # nothing stuck
+
+
+_TOKENS = st.sampled_from(["0", "-1", "35", "-36", "64", "65", "2147483648", "", "x", "1.5",
+                           "+3", "-", "007", "-0", "99999999999"])
+_TYPES = st.sampled_from(["IRHLO", "IRSTP", "IRGTO", "IRSWP", "IRINF", "IRSCN", "IRDON",
+                          "IRPOS", "IRERR", "IRXYZ", "irgto", "IRGT", "IRGTOO", "XRGTO", ""])
+
+
+@st.composite
+def _sentence(draw) -> bytes:
+    """Mostly well-framed sentences with plausible and implausible fields, sometimes broken."""
+    body = ",".join([draw(_TYPES)] + draw(st.lists(_TOKENS, max_size=10))).encode()
+    if draw(st.booleans()):
+        body = body.replace(b",", draw(st.sampled_from([b",", b", ", b"\t", b"*", b"$"])), 1)
+    cs = b"%02X" % p.checksum(body)
+    cs = draw(st.sampled_from([cs, cs.lower(), b"00", cs[:1], b""]))
+    end = draw(st.sampled_from([b"\r\n", b"\r\n", b"\n", b""]))
+    noise = draw(st.binary(max_size=3).filter(lambda b: b"$" not in b))
+    return noise + b"$" + body + b"*" + cs + end
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(_sentence(), min_size=1, max_size=6))
+def test_c_parser_rejects_exactly_what_the_python_reference_rejects(host_binary, sentences):
+    stream = b"".join(sentences) + b"\r\n"
+    # no motion command that would be accepted: the device never gets busy here
+    assume(not any(isinstance(m, (p.GoTo, p.SweepCommand)) and
+                   all(-35 <= s <= 35 for s in ([m.step] if isinstance(m, p.GoTo)
+                                                else [m.from_step, m.to_step]))
+                   for m in p.Decoder().feed(stream)))
+    run = subprocess.run([str(host_binary), "--stdio"], input=stream, capture_output=True,
+                         timeout=10)
+    got = [m.code for m in p.Decoder().feed(run.stdout) if isinstance(m, p.ErrorReply)]
+    assert got == reference_codes(stream)
 
 
 def test_busy_while_sweeping_then_accepted_after(raw):

@@ -77,12 +77,53 @@ static int8_t hex_digit(uint8_t c)
     return -1;                          /* lower case is not allowed */
 }
 
-/* Parse the decimal integer in s[0 … n-1] (optional leading `-`). Returns IRR_OK,
- * IRR_ERR_SENTENCE (not an integer) or IRR_ERR_ARGUMENT (outside int32). */
-static uint8_t parse_int(const uint8_t *s, uint8_t n, int32_t *out)
+/* Field kinds of every sentence type, as in irring/hardware/protocol.py (SPEC): the device
+ * validates a device-type sentence it receives like any other before answering IRERR 2, so
+ * it answers exactly what the reference device answers. */
+enum {
+    K_ANY = 'a',      /* any 32-bit integer (a motor step) */
+    K_SAMPLES = 'n',  /* 1 … 64 */
+    K_SETTLE = 's',   /* 0 … 2^31 − 1 */
+    K_PROTO = 'p',    /* 1 … 65535 */
+    K_NSENS = 'k',    /* 1 … 4096 */
+    K_BITS = 'b',     /* 1 … 32 */
+    K_MDEG = 'm',     /* 1 … 360000 */
+    K_POSITIVE = 'q', /* 1 … 2^31 − 1 */
+    K_SEQ = 'e',      /* 0 … 65535 */
+    K_DONE = 'd',     /* −1 … 65535 */
+    K_U32 = 'u',      /* 0 … 2^32 − 1 (t_ms, counts) */
+    K_CODE = 'c',     /* 1 … 99 */
+    K_TEXT = 't'
+};
+
+typedef struct {
+    char name[3];     /* after "IR" */
+    uint8_t type;     /* IRR_HLO … for commands, IRR_NONE for device sentences */
+    uint8_t min, max; /* field count; the last kind repeats up to max */
+    char kinds[10];
+} irr_spec_t;
+
+#define SPEC_INF 4
+static const IRR_FLASH irr_spec_t specs[] = {
+    {{'H', 'L', 'O'}, IRR_HLO, 0, 0, ""},
+    {{'S', 'W', 'P'}, IRR_SWP, 4, 4, "aans"},
+    {{'G', 'T', 'O'}, IRR_GTO, 1, 1, "a"},
+    {{'S', 'T', 'P'}, IRR_STP, 0, 0, ""},
+    {{'I', 'N', 'F'}, IRR_NONE, 9, 9, "pkbmqqaat"},
+    {{'S', 'C', 'N'}, IRR_NONE, 4, 255, "eauu"},
+    {{'D', 'O', 'N'}, IRR_NONE, 1, 1, "d"},
+    {{'P', 'O', 'S'}, IRR_NONE, 1, 1, "a"},
+    {{'E', 'R', 'R'}, IRR_NONE, 1, 2, "ct"},
+};
+
+/* Parse the decimal integer in s[0 … n-1] (optional leading `-`) and check it against
+ * `kind`. Returns IRR_OK (value in *out when it fits 32 bits signed), IRR_ERR_SENTENCE (not
+ * an integer) or IRR_ERR_ARGUMENT (outside the kind's range). */
+static uint8_t parse_field(const uint8_t *s, uint8_t n, uint8_t kind, int32_t *out)
 {
     uint8_t neg = 0, i = 0, big = 0;
     uint32_t mag = 0;
+    int32_t lo, hi;
     if (n && s[0] == '-') {
         neg = 1;
         i = 1;
@@ -90,23 +131,45 @@ static uint8_t parse_int(const uint8_t *s, uint8_t n, int32_t *out)
     if (i == n)
         return IRR_ERR_SENTENCE;
     for (; i < n; i++) {
-        if (s[i] < '0' || s[i] > '9')
+        uint8_t d = (uint8_t)(s[i] - '0');
+        if (d > 9)
             return IRR_ERR_SENTENCE;
-        if (mag > 214748364UL || (mag == 214748364UL && (uint8_t)(s[i] - '0') > 8))
+        if (mag > 429496729UL || (mag == 429496729UL && d > 5))
             big = 1;                    /* keep scanning: a later non-digit is still malformed */
         else
-            mag = mag * 10 + (uint8_t)(s[i] - '0');
+            mag = mag * 10 + d;
     }
-    if (big || mag > (neg ? 2147483648UL : 2147483647UL))
+    if (neg && mag == 0)
+        neg = 0;                        /* "-0" is 0 */
+    if (big)
         return IRR_ERR_ARGUMENT;
+    if (kind == K_U32)
+        return neg ? IRR_ERR_ARGUMENT : IRR_OK;
+    if (mag > (neg ? 2147483648UL : 2147483647UL))
+        return IRR_ERR_ARGUMENT;        /* beyond 32 bits signed: outside every other kind */
     *out = neg ? (int32_t)(0 - mag) : (int32_t)mag;
-    return IRR_OK;
+    switch (kind) {
+    case K_SAMPLES: lo = 1; hi = IRR_MAX_SAMPLES; break;
+    case K_SETTLE: lo = 0; hi = 2147483647L; break;
+    case K_PROTO: lo = 1; hi = 65535L; break;
+    case K_NSENS: lo = 1; hi = 4096; break;
+    case K_BITS: lo = 1; hi = 32; break;
+    case K_MDEG: lo = 1; hi = 360000L; break;
+    case K_POSITIVE: lo = 1; hi = 2147483647L; break;
+    case K_SEQ: lo = 0; hi = 65535L; break;
+    case K_DONE: lo = -1; hi = 65535L; break;
+    case K_CODE: lo = 1; hi = 99; break;
+    default: return IRR_OK;             /* K_ANY */
+    }
+    return *out >= lo && *out <= hi ? IRR_OK : IRR_ERR_ARGUMENT;
 }
 
 void irr_decode(const uint8_t *line, uint8_t len, irr_cmd_t *cmd)
 {
-    uint8_t star, i, nf, want, start;
+    uint8_t star, i, nf, start, n_specs = sizeof specs / sizeof specs[0];
     int8_t hi, lo;
+    int32_t value = 0, inf_min = 0;
+    const IRR_FLASH irr_spec_t *spec = 0;
     cmd->type = IRR_NONE;
     cmd->error = IRR_ERR_SENTENCE;
     if (len < 4 || line[0] != '$' || line[len - 2] != '\r' || line[len - 1] != '\n')
@@ -130,49 +193,49 @@ void irr_decode(const uint8_t *line, uint8_t len, irr_cmd_t *cmd)
     for (i = 3; i < 6; i++)
         if (line[i] < 'A' || line[i] > 'Z')
             return;
-    if (line[3] == 'H' && line[4] == 'L' && line[5] == 'O') {
-        cmd->type = IRR_HLO;
-        want = 0;
-    } else if (line[3] == 'S' && line[4] == 'W' && line[5] == 'P') {
-        cmd->type = IRR_SWP;
-        want = 4;
-    } else if (line[3] == 'G' && line[4] == 'T' && line[5] == 'O') {
-        cmd->type = IRR_GTO;
-        want = 1;
-    } else if (line[3] == 'S' && line[4] == 'T' && line[5] == 'P') {
-        cmd->type = IRR_STP;
-        want = 0;
-    } else {                            /* device sentences are not commands either */
+    for (i = 0; i < n_specs; i++)
+        if (specs[i].name[0] == line[3] && specs[i].name[1] == line[4] &&
+            specs[i].name[2] == line[5])
+            spec = &specs[i];
+    if (!spec) {
         cmd->error = IRR_ERR_TYPE;
         return;
     }
-    nf = 0;                             /* count the fields: one per `,` */
-    for (i = 6; i < star; i++)
+    nf = star > 6 ? 1 : 0;              /* count the fields: one after each `,` */
+    for (i = 7; i < star; i++)
         if (line[i] == ',')
             nf++;
-    if (nf != want) {
-        cmd->type = IRR_NONE;
+    if (nf < spec->min || nf > spec->max)
         return;
-    }
     start = 7;
-    for (nf = 0; nf < want; nf++) {     /* field by field, in order, like the reference */
-        uint8_t end = start, e;
+    for (i = 0; i < nf; i++) {          /* field by field, in order, like the reference */
+        uint8_t end = start, e = IRR_OK, k = 0, kind;
+        while (spec->kinds[k + 1] && k < i)
+            k++;                        /* the last kind repeats */
+        kind = (uint8_t)spec->kinds[k];
         while (end < star && line[end] != ',')
             end++;
-        e = parse_int(line + start, (uint8_t)(end - start), &cmd->arg[nf]);
-        if (e == IRR_OK && cmd->type == IRR_SWP) {
-            if (nf == 2 && (cmd->arg[2] < 1 || cmd->arg[2] > IRR_MAX_SAMPLES))
-                e = IRR_ERR_ARGUMENT;
-            if (nf == 3 && cmd->arg[3] < 0)
-                e = IRR_ERR_ARGUMENT;
-        }
+        if (kind != K_TEXT)
+            e = parse_field(line + start, (uint8_t)(end - start), kind, &value);
         if (e != IRR_OK) {
-            cmd->type = IRR_NONE;
             cmd->error = e;
+            return;
+        }
+        if (i < 4)
+            cmd->arg[i] = value;
+        if (i == 6)
+            inf_min = value;
+        if (i == 7 && spec == &specs[SPEC_INF] && inf_min > value) {
+            cmd->error = IRR_ERR_ARGUMENT;  /* IRINF with min_step > max_step */
             return;
         }
         start = (uint8_t)(end + 1);
     }
+    if (spec->type == IRR_NONE) {
+        cmd->error = IRR_ERR_TYPE;      /* a well-formed device sentence: not a command */
+        return;
+    }
+    cmd->type = spec->type;
     cmd->error = IRR_OK;
 }
 
