@@ -49,6 +49,7 @@ def choice(default: Any, choices: tuple, doc: str = "") -> Any:
 # belt ratio 0.6 (1.08° per step), motor steps −35 … +35 (71 positions, 75.6° sweep).
 
 SENSOR_MODELS = ("gp2d12", "gp2y0a02", "gp2y0a21", "sonar", "laser")
+HOUSING_M = 0.02  # the sensors' housing reaches this far beyond the ring radius
 
 # GP2 measurement period (datasheet: 38.3 ms ± 9.6 ms); one sample costs one period.
 # Its home is here, below data (which re-exports it), so the timing default can use it.
@@ -526,7 +527,7 @@ def _validate_geometry(sc: Scenario, fail) -> None:
     if not sc.robot.poses:
         raise fail("robot.poses", "at least one scan pose is required")
     ring = sc.ring
-    clearance = ring.radius_m + 0.02  # sensors plus their housing
+    clearance = ring.radius_m + HOUSING_M  # sensors plus their housing
     for k, pose in enumerate(sc.robot.poses):
         path = f"robot.poses[{k}]"
         if not point_in_polygon(pose.x_m, pose.y_m, outline):

@@ -45,8 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="iteration cap of the estimator (≥ 1; default: 20)")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--calibration", metavar="FILE",
-                       help="calibration YAML (from `irring calibrate`); default: the sensor's "
-                            "nominal datasheet curve")
+                       help="calibration YAML (from `irring calibrate`); default: what the "
+                            "scene simulates (docs/calibration.md)")
     group.add_argument("--rig", action="store_true",
                        help="calibrate on the simulated rig with the scenario's effects first")
     p.add_argument("--seed", type=int, default=None,

@@ -8,7 +8,8 @@ from pathlib import Path
 HELP = """\
 Run recorded sweeps (a sweeps.npz from `irring run` or `irring drive`, simulated or from the
 real ring) through the estimator and mapper again, on the grid they were first mapped on.
-With the recorded calibration (or none: the datasheet curve) the map is identical to the
+With the recorded calibration (`irring run` records the scene's; none: the datasheet curve,
+or for an older simulated recording the recorded scene's) the map is identical to the
 original run's; pass --calibration to see what another calibration makes of the same counts.
 Scores are computed when the recording carries its scenario (simulated runs do).
 

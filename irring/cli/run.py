@@ -43,8 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None,
                    help="noise seed (default: the scenario's `seed`)")
     p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
-                   help="calibration YAML from `irring calibrate` (default: the sensor's "
-                        "datasheet curve)")
+                   help="calibration YAML from `irring calibrate` (default: what the scene "
+                        "simulates: its sensor curve, a(θ), b(θ) only with `incidence`, its "
+                        "noise; docs/calibration.md)")
     p.add_argument("--no-animation", action="store_true",
                    help="skip the GIF (saves about a second)")
     p.set_defaults(func=run)

@@ -73,7 +73,7 @@ import math
 import operator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 import yaml
@@ -81,7 +81,7 @@ import yaml
 from . import _iterate, _lines
 from .. import gp2
 from ..data import Points, Reason, Sweep, beam_geometry
-from ..scenario import Ring
+from ..scenario import HOUSING_M, Ring
 
 CALIBRATION_FORMAT = 1  # version written into calibration files
 _SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
@@ -125,6 +125,10 @@ class Calibration:
     ``noise_counts`` is the 1-σ reading noise in counts (for ``Points.sigma_m``).
     ``max_incidence_rad``: returns steeper than this drop out (default: the table's end), so
     a line that would put a reading beyond it is not that reading's surface.
+    ``peak_distance_m`` > 0: the sensor folds over below this distance (its output falls
+    again, linearly to 0 at contact, as ``irring.gp2`` models it), so every reading may lie
+    on either branch and the estimator resolves the branch (:func:`resolve_foldover`); 0:
+    readings are trusted on the far branch down to ``min_range_m``.
     """
 
     sensor_model: str
@@ -139,6 +143,7 @@ class Calibration:
     noise_counts: float = 0.0
     source: str = ""
     max_incidence_rad: float | None = None
+    peak_distance_m: float = 0.0
 
     def __post_init__(self) -> None:
         theta = _frozen(self.theta_rad, "theta")
@@ -160,6 +165,10 @@ class Calibration:
         if not (math.isfinite(self.emitter_offset_m) and abs(self.emitter_offset_m) < 0.1):
             raise CalibrationError(f"emitter_offset_m {self.emitter_offset_m!r} is not a "
                                    "plausible d_o (|d_o| < 0.1 m)")
+        if not (math.isfinite(self.peak_distance_m)
+                and 0.0 <= self.peak_distance_m < self.min_range_m):
+            raise CalibrationError(f"peak_distance_m must lie in 0 … min_range_m "
+                                   f"({self.min_range_m}), got {self.peak_distance_m!r}")
         if not (math.isfinite(self.noise_counts) and self.noise_counts >= 0):
             raise CalibrationError(f"noise_counts must be ≥ 0, got {self.noise_counts!r}")
         if self.max_incidence_rad is None:
@@ -255,6 +264,17 @@ class Calibration:
         """1-σ count noise including quantisation (one count, uniform)."""
         return math.sqrt(self.noise_counts ** 2 + 1.0 / 12.0)
 
+    @property
+    def folds(self) -> bool:
+        """Whether readings may lie on the fold-over (near) branch."""
+        return self.peak_distance_m > 0.0 and self.falling
+
+    def near_distance(self, counts: Any, theta_rad: Any = 0.0) -> np.ndarray:
+        """The near-branch distance of ``counts`` at θ: the output rises linearly from 0 at
+        contact to the far branch's value at ``peak_distance_m``."""
+        peak = self.counts(self.peak_distance_m, theta_rad)
+        return self.peak_distance_m * np.asarray(counts, dtype=float) / peak
+
     # ---- construction
 
     @classmethod
@@ -284,12 +304,15 @@ class Calibration:
         """The calibration of what a simulated scene simulates (docs/calibration.md): the
         scene's sensor curve and ADC; a(θ), b(θ) and the drop-out angle only with the
         ``incidence`` effect (without it the readings do not depend on θ: the θ = 0 row
-        alone, no drop-out); the ``noise`` effect's σ (0.1 mV floor without it)."""
+        alone, no drop-out); the ``noise`` effect's σ (0.1 mV floor without it); the fold-over
+        peak only with the ``foldover`` effect."""
         model = gp2.sensor(scenario.sensor.model)
         sensor = scenario.sensor
         noise = scenario.effects.get("noise")
         cal = cls.nominal(model.name, scenario.ring, sensor.adc_bits, sensor.vref_v,
                           noise_sigma_v=max(noise.sigma_v if noise else 0.0, 1e-4))
+        if "foldover" in scenario.effects and model.folds:
+            cal = replace(cal, peak_distance_m=float(model.peak_distance_m))
         effects = ", ".join(scenario.effects) or "none"
         incidence = scenario.effects.get("incidence")
         if incidence is None:
@@ -322,6 +345,7 @@ class Calibration:
             "max_range_mm": float(self.max_range_m * 1e3),
             "noise_counts": float(self.noise_counts),
             "max_incidence_deg": round(math.degrees(self.max_incidence_rad), 9),
+            "peak_distance_mm": float(self.peak_distance_m * 1e3),
             "curve": [{"theta_deg": round(math.degrees(t), 9), "a": float(a), "b": float(b)}
                       for t, a, b in zip(self.theta_rad, self.a, self.b)],
         }
@@ -348,7 +372,7 @@ class Calibration:
             raise fail("<top>", "a calibration file must be a mapping")
         known = {"irring_calibration", "sensor_model", "source", "emitter_offset_mm", "adc_bits",
                  "vref_v", "min_range_mm", "max_range_mm", "noise_counts", "curve",
-                 "max_incidence_deg"}
+                 "max_incidence_deg", "peak_distance_mm"}
         for key in raw:
             if key not in known:
                 raise fail(str(key), f"unknown key; allowed: {', '.join(sorted(known))}")
@@ -389,6 +413,7 @@ class Calibration:
                        min_range_m=number("min_range_mm", 100.0) * 1e-3,
                        max_range_m=number("max_range_mm", 800.0) * 1e-3,
                        noise_counts=number("noise_counts", 0.0),
+                       peak_distance_m=number("peak_distance_mm", 0.0) * 1e-3,
                        max_incidence_rad=(math.radians(number("max_incidence_deg"))
                                           if "max_incidence_deg" in raw else None),
                        source=str(raw.get("source", "")))
@@ -710,11 +735,19 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
 
 def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int,
               tolerance_rad: float, iterate: bool, lines: LineOptions, *, keep_history: bool,
-              damping: bool, detail: bool) -> Estimate:
+              damping: bool, detail: bool, hold: np.ndarray | None = None,
+              snap: bool = True) -> Estimate:
     """The estimator: this function is the schedule of the module docstring, its phases run
-    as compiled kernels (:mod:`irring.estimation._iterate`). ``detail``: also the final lines."""
+    as compiled kernels (:mod:`irring.estimation._iterate`). ``detail``: also the final lines.
+    ``hold`` (S, N): readings kept out (FOLDOVER_AMBIGUOUS); None with a folding
+    calibration: resolve the fold-over first (:func:`resolve_foldover`). ``snap``: line
+    members' end points onto their lines (:func:`snap_to_lines`)."""
     cal = calibration if calibration is not None else _nominal_for(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
+    if hold is None and cal.folds and iterate:
+        return resolve_foldover(lambda held, full, snap: _estimate(
+            sweep, cal, max_iterations, tolerance_rad, iterate, lines, keep_history=keep_history,
+            damping=damping, detail=full, hold=held, snap=snap), sweep, cal, detail)
     # the kernels take a C integer: a float would fail only once an iteration needs it
     max_iterations = operator.index(max_iterations)
     if max_iterations < 1:
@@ -739,6 +772,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     shape = counts.shape
 
     reason = _classify(counts, sweep, cal)
+    if hold is not None:
+        reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
     sw = _iterate.Sweep(cal, lines, counts.reshape(-1), np.ascontiguousarray(origin).reshape(-1),
                         np.ascontiguousarray(heading).reshape(-1), reason.reshape(-1),
@@ -839,6 +874,10 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         heading=np.array(heading), sigma_m=sigma.reshape(shape),
         iterations=it_out.reshape(shape), valid=valid.reshape(shape), reason=reason,
         max_range_m=max_range)
+    if grouping is not None and snap:   # end points of line members onto their lines
+        member = np.full(shape, -1, dtype=np.intp)
+        member.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
+        points = snap_to_lines(points, member, cal.min_range_m)
     found = None
     if detail and grouping is not None:  # labels: the line each reading took θ from (−1: none)
         label = np.full(shape, -1, dtype=int)
@@ -848,6 +887,245 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         index = sw.index if grouping.uidx is None else sw.index.take(grouping.uidx)
         found = _lines_record(pieces_out, label, index)
     return Estimate(points=points, lines=found, theta_history=tuple(history))
+
+
+# --------------------------------------------------------------------------- end points on lines
+
+_SNAP_SIGMAS = 2.0   # a member moves onto its line if that is within 2σ of its distance …
+_SNAP_MIN = 10       # … and the line has at least 10 members (short lines are less sure)
+
+
+def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Points:
+    """End points of the readings on a line put where their beams meet it.
+
+    ``member`` (S, N): the line each reading took θ from (−1: none). Each line is fitted
+    (total least squares) to its valid members' final end points; a member's end point
+    moves along its beam to the line if that is within 2σ of its distance. The line
+    averages the noise of all its members, so a wall seen at 13 mm RMS per reading comes
+    out a few mm thick; a reading the line does not explain keeps its own distance, and
+    none leaves [``min_range_m``, ``points.max_range_m``]."""
+    on = points.valid & (member >= 0)
+    if not on.any():
+        return points
+    lab = member[on]
+    ids, g, n = np.unique(lab, return_inverse=True, return_counts=True)
+    x, y = points.x[on], points.y[on]
+    mx, my = np.bincount(g, x) / n, np.bincount(g, y) / n
+    u, v = x - mx[g], y - my[g]
+    suu, svv, suv = (np.bincount(g, w) for w in (u * u, v * v, u * v))
+    alpha = 0.5 * np.arctan2(2.0 * suv, suu - svv)
+    nx, ny = -np.sin(alpha), np.cos(alpha)
+    h = points.heading[on]
+    ox, oy = points.origin_x[on], points.origin_y[on]
+    un = np.cos(h) * nx[g] + np.sin(h) * ny[g]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((mx[g] - ox) * nx[g] + (my[g] - oy) * ny[g]) / un
+    d = points.d[on]
+    ok = ((n[g] >= _SNAP_MIN) & np.isfinite(t) & (np.abs(t - d) <= _SNAP_SIGMAS * points.sigma_m[on])
+          & (t >= min_range_m) & (t <= points.max_range_m))
+    if not ok.any():
+        return points
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d")}
+    d_new = np.where(ok, t, d)
+    out["d"][on] = d_new
+    out["x"][on] = ox + d_new * np.cos(h)
+    out["y"][on] = oy + d_new * np.sin(h)
+    return replace(points, **out)
+
+
+# --------------------------------------------------------------------------- fold-over
+
+_FOLD_BLOCK_M = 0.25   # a known wall blocks a beam this far past its readings' ends …
+_FOLD_ON_M = 0.10      # … and a reading lies on it this far past them
+
+
+def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: Sweep,
+                     cal: Calibration, detail: bool) -> Estimate:
+    """Estimate a sweep of a folding sensor: every reading has a far-branch distance (Eq. 10)
+    and a near one (:meth:`Calibration.near_distance`, below the peak); pick the branch
+    from what the rest of the sweep says, or flag FOLDOVER_AMBIGUOUS.
+
+    ``run(hold, detail, snap)`` is the estimator with the readings ``hold`` kept out. Three
+    steps (docs/foldover.md has the geometry and the measured outcome):
+
+    1. the whole sweep estimated on the far branch: walls give lines (a near wall's readings
+       read far give a curve, which the lines of the neighbouring sensors contradict);
+    2. each reading judged against those lines (:func:`_fold_branches`): far if its far end
+       point lies on another sensor's line and no line blocks its beam before it, while its
+       near end point lies on none; near if a line blocks the beam before the far end point
+       and its near end point lies on a line; certainly far if its near end point would lie
+       inside the ring's housing; else ambiguous;
+    3. the sweep estimated again without the near and ambiguous readings; the near readings
+       get their near distance at the incidence of the line they lie on.
+    """
+    # the judging pass reads each end point on its own (not snapped onto its line)
+    first = run(np.zeros(np.shape(sweep.counts), dtype=bool), True, False)
+    near, far, d_fold, theta_fold, sigma_fold = _fold_branches(first, sweep, cal)
+    ambiguous = (d_fold == 0) & ~far
+    ambiguous &= (first.points.reason == Reason.OK) | (first.points.reason == Reason.NOT_CONVERGED)
+    second = run(near | ambiguous, True, True)
+    p = second.points
+    # near readings, and far ones the second pass found on no line (its neighbours held
+    # out): the distance at the incidence of the line that decided their branch
+    lost = p.valid & (second.lines.label < 0)
+    put = near | (far & lost & (d_fold > 0))
+    # … and far ones on a line in the first pass only: that pass's reading
+    q = first.points
+    keep = lost & ~put & q.valid & (first.lines.label >= 0)
+    # a reading both passes read, differently: which lines it belongs to depended on how
+    # its neighbours were read; it cannot be decided
+    differ = (p.valid & q.valid & ~put & ~keep
+              & (np.abs(p.d - q.d) > np.maximum(0.03, 3.0 * np.fmax(p.sigma_m, q.sigma_m))))
+    if put.any() or keep.any() or differ.any():
+        x, y, d, theta, sigma = (np.array(v) for v in (p.x, p.y, p.d, p.theta, p.sigma_m))
+        d[put], theta[put], sigma[put] = d_fold[put], theta_fold[put], sigma_fold[put]
+        x[put] = p.origin_x[put] + d_fold[put] * np.cos(p.heading[put])
+        y[put] = p.origin_y[put] + d_fold[put] * np.sin(p.heading[put])
+        for mine, theirs in ((x, q.x), (y, q.y), (d, q.d), (theta, q.theta), (sigma, q.sigma_m)):
+            mine[keep] = theirs[keep]
+        valid, reason, iterations = p.valid.copy(), p.reason.copy(), p.iterations.copy()
+        valid[near], reason[near], iterations[near] = True, Reason.OK, 1
+        valid[differ], reason[differ] = False, Reason.FOLDOVER_AMBIGUOUS
+        for v in (x, y, d, theta, sigma):
+            v[differ] = np.nan
+        p = replace(p, x=x, y=y, d=d, theta=theta, sigma_m=sigma, valid=valid, reason=reason,
+                    iterations=iterations)
+    return replace(second, points=p, lines=second.lines if detail else None)
+
+
+def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
+    """(near, far, d, θ, σ), all (S, N), from the far-branch estimate ``first`` (see
+    :func:`resolve_foldover`); vectorised over (readings, lines). ``far`` includes the
+    readings whose near end point would lie inside the housing; d > 0 where a line decided
+    the branch: the distance on that branch at that line's incidence (0 elsewhere)."""
+    p, found = first.points, first.lines
+    shape = p.valid.shape
+    counts = np.asarray(sweep.counts, dtype=float)
+    live = (p.reason == Reason.OK) | (p.reason == Reason.NOT_CONVERGED)
+    ox, oy, h = p.origin_x, p.origin_y, p.heading
+    pose = np.asarray(sweep.reading_poses if sweep.reading_poses is not None else sweep.pose,
+                      dtype=float)
+    # the farthest the near branch can put a reading (its peak counts are lowest at the
+    # steepest θ): inside the housing even there, the reading is on the far branch
+    rows = cal.theta_rad[cal.theta_rad <= cal.max_incidence_rad]
+    far_near = cal.peak_distance_m * counts / float(np.min(cal.counts(cal.peak_distance_m, rows)))
+    hx, hy = ox + far_near * np.cos(h), oy + far_near * np.sin(h)
+    housing = np.hypot(hx - pose[..., 0], hy - pose[..., 1]) < sweep.ring.radius_m + HOUSING_M
+    cand = live & ~housing
+    if not cand.any():
+        return np.zeros(shape, bool), housing & live, *(np.zeros(shape) for _ in range(3))
+    idx = cand.reshape(-1).nonzero()[0]
+    s = counts.reshape(-1)[idx]
+    o = np.stack([ox.reshape(-1)[idx], oy.reshape(-1)[idx]], axis=1)       # (A, 2)
+    u = np.stack([np.cos(h.reshape(-1)[idx]), np.sin(h.reshape(-1)[idx])], axis=1)
+    own = found.label.reshape(-1)[idx] if found is not None else np.full(idx.size, -1)
+    n_sensors = shape[1]
+    sensor = idx % n_sensors
+    # the lines with the extent of their valid members along them
+    use = (np.zeros(0, dtype=int) if found is None else found.usable.nonzero()[0])
+    lab = found.label.reshape(-1) if found is not None else np.zeros(0, int)
+    member = (lab >= 0) & p.valid.reshape(-1)
+    if use.size:
+        c, e, nrm = found.centroid[use], found.direction[use], found.normal[use]
+        col = np.full(found.usable.size, -1)
+        col[use] = np.arange(use.size)
+        mcol = col[lab[member]]
+        keep = mcol >= 0
+        mx, my = p.x.reshape(-1)[member][keep], p.y.reshape(-1)[member][keep]
+        mcol = mcol[keep]
+        along = (mx - c[mcol, 0]) * e[mcol, 0] + (my - c[mcol, 1]) * e[mcol, 1]
+        lo = np.full(use.size, np.inf)
+        hi = np.full(use.size, -np.inf)
+        np.minimum.at(lo, mcol, along)
+        np.maximum.at(hi, mcol, along)
+        # a line one sensor alone saw may be a wrong-branch curve cut into pieces (or a few
+        # readings at the peak, where both branches meet, with a poor direction): only lines
+        # two sensors agree on judge other readings
+        msensor = member.nonzero()[0][keep] % n_sensors
+        pairs = np.unique(mcol * n_sensors + msensor)
+        trusted = np.bincount(pairs // n_sensors, minlength=use.size) >= 2
+        line_sensor = found.start[use] % n_sensors
+    else:
+        c = e = nrm = np.zeros((0, 2))
+        lo = hi = np.zeros(0)
+        trusted = np.zeros(0, bool)
+        line_sensor = np.zeros(0, int)
+    # a wall ends at a corner: a line's extension stops where it meets another trusted line
+    # (past a box's corner its extension would cut the beams that graze the next face)
+    lo_b, hi_b = _clip_at_corners(c, e, lo, hi)
+    # every candidate's beam against every line: crossing distance t, incidence there
+    un = u @ nrm.T                                                          # (A, L)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((c[None, :, 0] - o[:, None, 0]) * nrm[None, :, 0]
+             + (c[None, :, 1] - o[:, None, 1]) * nrm[None, :, 1]) / un
+    t = np.where(np.abs(un) > 1e-9, t, np.inf)
+    ahead = np.isfinite(t) & (t > 0)
+    t = np.where(ahead, t, 0.0)
+    qx = o[:, None, 0] + t * u[:, None, 0] - c[None, :, 0]
+    qy = o[:, None, 1] + t * u[:, None, 1] - c[None, :, 1]
+    along = qx * e[None, :, 0] + qy * e[None, :, 1]
+    # each reading's own line is where its far end point lies: it blocks nothing
+    other = (use[None, :] != own[:, None]) & trusted[None, :]
+    block_span = ahead & other & (along >= lo_b) & (along <= hi_b)
+    on_span = ahead & other & (along >= lo - _FOLD_ON_M) & (along <= hi + _FOLD_ON_M)
+    theta_l = np.arccos(np.clip(np.abs(un), 0.0, 1.0))
+    seen = theta_l <= cal.max_incidence_rad
+    sig_s = cal.sigma_counts() / s                                          # relative
+    s2 = s[:, None]
+    d_far = cal.distance(s2, theta_l)
+    d_near = cal.near_distance(s2, theta_l)
+    tol_far = np.maximum(0.02, 3.0 * np.abs(cal.ab(theta_l)[1]) * d_far * sig_s[:, None])
+    tol_near = np.maximum(0.008, 3.0 * d_near * sig_s[:, None])
+    # the shortest far distance the reading can mean (its θ unknown) and the nearest near one
+    far_min = np.minimum(cal.distance(s, 0.0), cal.distance(s, cal.max_incidence_rad))
+    near_min = cal.near_distance(s, 0.0)
+    blocked_far = (block_span & (t < far_min[:, None] - tol_far)).any(axis=1)
+    blocked_near = (block_span & (t < near_min[:, None] - tol_near)).any(axis=1)
+    near_fit = np.where(on_span & seen, np.abs(t - d_near) / tol_near, np.inf)
+    near_on = (near_fit <= 1.0).any(axis=1)
+    far_fit = np.where(on_span & seen & (line_sensor[None, :] != sensor[:, None]),
+                       np.abs(t - d_far) / tol_far, np.inf)
+    is_near = blocked_far & near_on & ~blocked_near
+    is_far = ~blocked_far & (far_fit <= 1.0).any(axis=1) & ~near_on
+    near, far = np.zeros(shape, bool), housing & live
+    near.reshape(-1)[idx] = is_near
+    far.reshape(-1)[idx] = is_far
+    out = [np.zeros(shape) for _ in range(3)]
+    if use.size and (is_near | is_far).any():
+        rows = np.arange(idx.size)
+        pick_n = (rows, np.argmin(near_fit, axis=1))
+        pick_f = (rows, np.argmin(far_fit, axis=1))
+        dist = np.where(is_near, d_near[pick_n], np.where(is_far, d_far[pick_f], 0.0))
+        theta = np.where(is_near, theta_l[pick_n], np.where(is_far, theta_l[pick_f], 0.0))
+        slope = np.where(is_near, 1.0, np.abs(cal.ab(theta)[1]))     # |d ln d / d ln S|
+        out[0].reshape(-1)[idx] = dist
+        out[1].reshape(-1)[idx] = theta
+        out[2].reshape(-1)[idx] = np.where(dist > 0, np.maximum(slope * dist * sig_s,
+                                                                 _SIGMA_FLOOR_M), 0.0)
+    return near, far, out[0], out[1], out[2]
+
+
+def _clip_at_corners(c, e, lo, hi):
+    """Each line's span extended by ``_FOLD_BLOCK_M`` either way, but not past the point where
+    it meets another line's extended span (a corner, 10 mm beyond it)."""
+    lo_b, hi_b = lo - _FOLD_BLOCK_M, hi + _FOLD_BLOCK_M
+    if c.shape[0] < 2:
+        return lo_b, hi_b
+    # intersection of line i with line j, as a coordinate along i (a) and along j (b)
+    den = e[:, None, 0] * e[None, :, 1] - e[:, None, 1] * e[None, :, 0]       # e_i × e_j
+    dx = c[None, :, 0] - c[:, None, 0]
+    dy = c[None, :, 1] - c[:, None, 1]
+    ok = np.abs(den) > 0.1                    # lines meeting at < ~6° make no corner
+    den = np.where(ok, den, 1.0)
+    a = (dx * e[None, :, 1] - dy * e[None, :, 0]) / den
+    b = (dx * e[:, None, 1] - dy * e[:, None, 0]) / den
+    corner = (ok & (b >= lo_b[None, :]) & (b <= hi_b[None, :])
+              & ~np.eye(c.shape[0], dtype=bool))
+    high = corner & (a > hi[:, None]) & (a < hi_b[:, None])
+    low = corner & (a < lo[:, None]) & (a > lo_b[:, None])
+    hi_b = np.minimum(hi_b, np.where(high, a + 0.01, np.inf).min(axis=1))
+    lo_b = np.maximum(lo_b, np.where(low, a - 0.01, -np.inf).max(axis=1))
+    return lo_b, hi_b
 
 
 @functools.lru_cache(maxsize=16)

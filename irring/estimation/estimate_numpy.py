@@ -23,7 +23,7 @@ import numpy as np
 from ..data import Points, Reason, Sweep, beam_geometry
 from .estimate import (_FALLBACK_NODES, _MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M,
                        Calibration, Estimate, LineOptions, _lines_record, _nominal_for, _Pieces,
-                       _scan_order)
+                       _scan_order, resolve_foldover, snap_to_lines)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -782,14 +782,23 @@ class _Held:
 def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                     max_iterations: int = 20, tolerance_rad: float = math.radians(0.1),
                     iterate: bool = True, lines: LineOptions = LineOptions(),
-                    keep_history: bool = False, damping: bool = True) -> Estimate:
-    """:func:`estimate` that also returns the final lines and (optionally) θ per iteration.
+                    keep_history: bool = False, damping: bool = True,
+                    hold: np.ndarray | None = None, snap: bool = True) -> Estimate:
+    """:func:`irring.estimation.estimate.estimate_detail` in numpy (always with the lines).
 
     ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
-    Table II (to show what the control is for).
+    Table II (to show what the control is for). ``hold`` (S, N): readings kept out
+    (FOLDOVER_AMBIGUOUS); None with a folding calibration: the fold-over is resolved first
+    (:func:`irring.estimation.estimate.resolve_foldover`, numpy shared with the kernel path).
+    ``snap``: line members' end points onto their lines (:func:`irring.estimation.estimate.snap_to_lines`).
     """
     cal = calibration if calibration is not None else _nominal_for(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
+    if hold is None and cal.folds and iterate:
+        return resolve_foldover(lambda held, _detail, snap_: estimate_detail(
+            sweep, cal, max_iterations=max_iterations, tolerance_rad=tolerance_rad,
+            iterate=iterate, lines=lines, keep_history=keep_history, damping=damping,
+            hold=held, snap=snap_), sweep, cal, True)
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
     counts = np.asarray(sweep.counts, dtype=float)
@@ -804,6 +813,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     shape = counts.shape
 
     reason = classify(counts, sweep, cal)
+    if hold is not None:
+        reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
     live = reason == Reason.OK
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
     sw = _Sweep(cal, counts, origin, heading, live, np.asarray(sweep.steps), lines)
@@ -935,6 +946,10 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         origin_x=np.array(origin[..., 0]), origin_y=np.array(origin[..., 1]),
         heading=np.array(heading), sigma_m=_scatter(sigma, sw.index, shape, nan, mask=valid),
         iterations=it_out, valid=valid, reason=reason, max_range_m=max_range)
+    if grouping is not None and snap:   # end points of line members onto their lines
+        member = np.full(shape, -1, dtype=np.intp)
+        member.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
+        points = snap_to_lines(points, member, cal.min_range_m)
     found = None
     if grouping is not None:  # labels: the line each reading took θ from (−1: none)
         label = np.full(shape, -1, dtype=int)

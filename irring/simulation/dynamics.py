@@ -73,8 +73,8 @@ import numpy as np
 
 from . import model as model_lib
 from ..data import GP2_PERIOD_S, beam_geometry
-from ..scenario import (BeltDynamicsEffect, MotionEffect, Ring, Scenario, ScenarioError,
-                       TimingEffect, distance_to_outline, point_in_polygon)
+from ..scenario import (HOUSING_M, BeltDynamicsEffect, MotionEffect, Ring, Scenario,
+                        ScenarioError, TimingEffect, distance_to_outline, point_in_polygon)
 
 TIMING_STREAM = 0x7469   # "ti": seeds the GP2 clocks
 ODOMETRY_STREAM = 0x6F64  # "od": seeds the odometry drift
@@ -490,7 +490,7 @@ class Path:
         an obstacle along the path (the loader checks scan poses, not paths)."""
         from ..scenario import _obstacle_distance
 
-        clearance = scenario.ring.radius_m + 0.02
+        clearance = scenario.ring.radius_m + HOUSING_M
         n = max(2, int(math.ceil(self.length_m / _PATH_SAMPLE_M)) + 1)
         s = np.linspace(0.0, self.length_m, n)
         poses = self.pose_at_arc(s)

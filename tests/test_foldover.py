@@ -1,0 +1,152 @@
+"""Fold-over resolved, not trusted (issue 13 item 2): below the GP2's peak distance one
+reading has two distances; the estimator picks the branch from the rest of the sweep or
+flags FOLDOVER_AMBIGUOUS, and never leaves a valid reading on the wrong branch."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from irring import mapping, pipeline
+from irring.data import Reason
+from irring.estimation.estimate import Calibration, estimate, resolve_foldover
+from irring.scenario import HOUSING_M, distance_to_outline, loads, point_in_polygon
+
+# a room of our own with a slanted wall, a post and a turned box; every pose as close to a
+# wall as the housing allows (ring 150 mm + 20 mm housing: 171 mm)
+ROOM = """
+name: fold_room
+seed: 7
+room:
+  outline_mm: [[0, 0], [1400, 0], [1400, 600], [900, 1100], [0, 1100]]
+obstacles:
+  - {type: cylinder, center_mm: [700, 420], radius_mm: 25}
+  - {type: box, center_mm: [350, 800], size_mm: [200, 120], yaw_deg: 30}
+robot:
+  poses:
+    - {x_mm: 171, y_mm: 171}
+    - {x_mm: 700, y_mm: 171}
+    - {x_mm: 1229, y_mm: 300}
+    - {x_mm: 171, y_mm: 500}
+    - {x_mm: 1010, y_mm: 700}
+sensor: {model: gp2d12, max_range_mm: 624}
+"""
+OUTLINE = [(0, 0), (1.4, 0), (1.4, 0.6), (0.9, 1.1), (0, 1.1)]
+
+
+def run(effects: str):
+    sc = loads(ROOM + f"effects: {effects}\n", source="<test>")
+    sweeps, _ = pipeline.simulate(sc, progress=False)
+    cal = pipeline.scene_calibration(sc)[0]
+    return sc, sweeps, cal, [estimate(sw, cal) for sw in sweeps]
+
+
+@pytest.fixture(scope="module", params=["[foldover]", "[incidence, noise, quantization, foldover]"])
+def folded(request):
+    return run(request.param)
+
+
+def test_the_scene_calibration_folds_only_with_the_foldover_effect():
+    assert pipeline.scene_calibration(loads(ROOM + "effects: [foldover]\n"))[0] \
+        .peak_distance_m == pytest.approx(0.09)
+    cal = pipeline.scene_calibration(loads(ROOM + "effects: [incidence]\n"))[0]
+    assert cal.peak_distance_m == 0.0 and not cal.folds
+    # the peak survives a calibration file
+    folded = Calibration.for_scene(loads(ROOM + "effects: [foldover]\n"))
+    assert Calibration.from_dict(folded.to_dict()).peak_distance_m == pytest.approx(0.09)
+    with pytest.raises(ValueError, match="peak_distance_m must lie in 0 … min_range_m"):
+        Calibration.nominal().__class__(**{**_fields(folded), "peak_distance_m": 0.2})
+
+
+def _fields(cal):
+    import dataclasses
+    return {f.name: getattr(cal, f.name) for f in dataclasses.fields(cal)}
+
+
+def test_no_valid_reading_lies_more_than_100_mm_from_its_true_hit(folded):
+    _, sweeps, _, points = folded
+    worst = 0.0
+    for sw, p in zip(sweeps, points):
+        hit = sw.truth.hit_point[..., :2]
+        assert np.all(np.isfinite(hit[..., 0][p.valid])), "a valid reading where nothing was hit"
+        err = np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[p.valid]
+        worst = max(worst, float(err.max()))
+    assert worst < 0.100
+
+
+def test_near_readings_are_resolved_onto_the_near_branch_and_the_rest_flagged(folded):
+    _, sweeps, cal, points = folded
+    near_valid = flagged = truly_near = 0
+    for sw, p in zip(sweeps, points):
+        d_true = sw.truth.distance_m
+        near = p.valid & (p.d < cal.peak_distance_m)
+        near_valid += int(near.sum())
+        # a reading put on the near branch was really that close: closer than the peak, or
+        # within 15 mm past it, where both branches give distances within 20 mm of each other
+        assert np.all(d_true[near] < cal.peak_distance_m + 0.015)
+        np.testing.assert_allclose(p.d[near], d_true[near], atol=0.02)
+        truly_near += int(np.sum(d_true < cal.peak_distance_m))
+        flagged += int(np.sum(p.reason == Reason.FOLDOVER_AMBIGUOUS))
+        assert np.all(np.isfinite(p.x[p.valid]) & np.isfinite(p.sigma_m[p.valid]))
+    # most close readings are recovered, and what cannot be decided is said so
+    assert near_valid > 0.3 * truly_near > 100
+    assert flagged > 100
+
+
+def test_walls_are_never_mapped_outside_the_room(folded):
+    """The map of the fold-over readings: no occupied cell more than 80 mm outside the room
+    and at most 1 % of them more than 50 mm out (a wall's thickness in the map with 15 mV
+    noise is ±2σ ≈ ±40 mm at 0.5 m); before, close walls read far were drawn up to 424 mm
+    outside."""
+    sc, sweeps, cal, _ = folded
+    grid = pipeline.map_sweeps(sweeps, scenario=sc, calibration=cal, score=False,
+                               progress=False).grid
+    iy, ix = np.nonzero(mapping.classify(grid.log_odds) == mapping.OCCUPIED)
+    x = grid.origin_xy_m[0] + (ix + 0.5) * grid.resolution_m
+    y = grid.origin_xy_m[1] + (iy + 0.5) * grid.resolution_m
+    assert ix.size > 300
+    out = np.array([0.0 if point_in_polygon(a, b, OUTLINE) else distance_to_outline(a, b, OUTLINE)
+                    for a, b in zip(x, y)])
+    assert out.max() < 0.08
+    assert np.sum(out > 0.05) <= 0.01 * out.size
+
+
+def test_without_fold_resolution_the_close_wall_is_read_far(folded):
+    """What the resolution is for: the same counts read on the far branch alone (the
+    calibration without its peak) put close walls hundreds of mm away."""
+    _, sweeps, cal, _ = folded
+    import dataclasses
+    trusting = dataclasses.replace(cal, peak_distance_m=0.0)
+    sw = sweeps[0]
+    p = estimate(sw, trusting)
+    hit = sw.truth.hit_point[..., :2]
+    err = np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[p.valid & np.isfinite(hit[..., 0])]
+    assert err.max() > 0.3
+
+
+def test_a_reading_whose_near_end_would_sit_in_the_housing_is_far():
+    """With nothing near, the sweep's readings are judged by the housing alone: a far
+    wall at 0.5–0.6 m has its near alternative (≈ 20 mm) inside the ring's housing."""
+    sc, sweeps, cal, points = run("[foldover]")
+    far = near_alt_inside = 0
+    for sw, p in zip(sweeps, points):
+        d_true = sw.truth.distance_m
+        sel = p.valid & (d_true > 0.55)
+        far += int(sel.sum())
+        near_alt = cal.near_distance(sw.counts[sel])
+        near_alt_inside += int(np.sum(near_alt < HOUSING_M + 0.008))
+    assert far > 0 and near_alt_inside > 0
+
+
+def test_resolve_foldover_is_the_one_statement_for_both_estimators(folded):
+    from irring.estimation import estimate_numpy
+
+    _, sweeps, cal, points = folded
+    slow = estimate_numpy.estimate_detail(sweeps[1], cal).points
+    for f in ("x", "y", "d", "theta", "sigma_m"):
+        np.testing.assert_allclose(getattr(slow, f), getattr(points[1], f), atol=1e-9,
+                                   rtol=0, err_msg=f)
+    np.testing.assert_array_equal(slow.reason, points[1].reason)
+    assert callable(resolve_foldover)
