@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from irring import mapping, pipeline
+from irring import pipeline
+from irring.maps import mapping
 from irring.data import Reason
 from irring.estimation.estimate import Calibration, estimate, resolve_foldover
 from irring.scenario import HOUSING_M, distance_to_outline, loads, point_in_polygon

@@ -55,13 +55,21 @@ paper's starting assumption. Its θ is unknown, so its ``sigma_m`` includes the 
 the θ = 0 distance over the incidences a round surface gives (sin θ uniform up to the
 drop-out angle): ≈ 17 / 39 / 63 mm at 0.2 / 0.4 / 0.6 m on the GP2D12 curve.
 
+End points: a reading that took θ from a line of ≥ 10 members is put where its beam meets
+that line (refitted to the members' final end points) when that lies within 2σ of its own
+distance (:func:`snap_to_lines`): the line averages its members' noise.
+
+Fold-over: with a calibration that folds (``peak_distance_m`` > 0) every reading may lie on
+the near branch too; :func:`resolve_foldover` picks the branch from the sweep's lines or
+flags FOLDOVER_AMBIGUOUS (docs/foldover.md).
+
 Validity (:class:`irring.data.Reason`): a missing reading (NaN counts or a step in
 ``Sweep.missing_steps``) is MISSING; counts at ADC full scale SATURATED; counts at or below the
 weakest count any in-range return can give (the noise floor) NO_RETURN; counts brighter than
-the calibrated near end of the curve FOLDOVER_AMBIGUOUS (below the peak distance one voltage
-has two distances); a final distance outside [min_range, max_range] OUT_OF_RANGE; a reading
-whose θ still moved by ≥ ε after ``max_iterations`` NOT_CONVERGED. A valid reading never
-carries NaN or inf.
+the calibrated near end of the curve, or whose branch a folding calibration cannot decide,
+FOLDOVER_AMBIGUOUS (below the peak distance one voltage has two distances); a final
+distance outside [min_range, max_range] OUT_OF_RANGE; a reading whose θ still moved by ≥ ε
+after ``max_iterations`` NOT_CONVERGED. A valid reading never carries NaN or inf.
 
 Units: metres, radians, ADC counts.
 """
@@ -904,32 +912,41 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
     averages the noise of all its members, so a wall seen at 13 mm RMS per reading comes
     out a few mm thick; a reading the line does not explain keeps its own distance, and
     none leaves [``min_range_m``, ``points.max_range_m``]."""
-    on = points.valid & (member >= 0)
-    if not on.any():
+    on = (points.valid & (member >= 0)).reshape(-1).nonzero()[0]
+    if on.size == 0:
         return points
-    lab = member[on]
-    ids, g, n = np.unique(lab, return_inverse=True, return_counts=True)
-    x, y = points.x[on], points.y[on]
-    mx, my = np.bincount(g, x) / n, np.bincount(g, y) / n
-    u, v = x - mx[g], y - my[g]
-    suu, svv, suv = (np.bincount(g, w) for w in (u * u, v * v, u * v))
-    alpha = 0.5 * np.arctan2(2.0 * suv, suu - svv)
+    g = member.reshape(-1).take(on)              # line indices: small, so bincount directly
+    x, y = points.x.reshape(-1).take(on), points.y.reshape(-1).take(on)
+    n = np.bincount(g)
+    keep = n >= _SNAP_MIN
+    if not keep.any():
+        return points
+    nn = np.maximum(n, 1)
+    mx, my = np.bincount(g, x) / nn, np.bincount(g, y) / nn
+    u, v = x - mx.take(g), y - my.take(g)
+    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v), np.bincount(g, u * u)
+                             - np.bincount(g, v * v))
     nx, ny = -np.sin(alpha), np.cos(alpha)
-    h = points.heading[on]
-    ox, oy = points.origin_x[on], points.origin_y[on]
-    un = np.cos(h) * nx[g] + np.sin(h) * ny[g]
+    h = points.heading.reshape(-1).take(on)
+    ch, sh = np.cos(h), np.sin(h)
+    ngx, ngy = nx.take(g), ny.take(g)
+    un = ch * ngx + sh * ngy
+    ox, oy = points.origin_x.reshape(-1).take(on), points.origin_y.reshape(-1).take(on)
+    # the line through the members' centroid: t along the beam to it (members offset by u, v)
+    rel = u * ngx + v * ngy                      # each member's signed offset from its line
+    d = points.d.reshape(-1).take(on)
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((mx[g] - ox) * nx[g] + (my[g] - oy) * ny[g]) / un
-    d = points.d[on]
-    ok = ((n[g] >= _SNAP_MIN) & np.isfinite(t) & (np.abs(t - d) <= _SNAP_SIGMAS * points.sigma_m[on])
+        t = d - rel / un
+    ok = (keep.take(g) & np.isfinite(t)
+          & (np.abs(t - d) <= _SNAP_SIGMAS * points.sigma_m.reshape(-1).take(on))
           & (t >= min_range_m) & (t <= points.max_range_m))
     if not ok.any():
         return points
+    at, t = on[ok], t[ok]
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d")}
-    d_new = np.where(ok, t, d)
-    out["d"][on] = d_new
-    out["x"][on] = ox + d_new * np.cos(h)
-    out["y"][on] = oy + d_new * np.sin(h)
+    out["d"].reshape(-1)[at] = t
+    out["x"].reshape(-1)[at] = ox[ok] + t * ch[ok]
+    out["y"].reshape(-1)[at] = oy[ok] + t * sh[ok]
     return replace(points, **out)
 
 
