@@ -11,8 +11,8 @@ import importlib
 import sys
 
 # Subcommand modules, in the order `irring --help` lists them.
-COMMANDS = ("run", "replay", "scenarios", "calibrate", "emulate", "drive", "geometry", "compare",
-            "bench")
+COMMANDS = ("run", "replay", "view", "scenarios", "calibrate", "emulate", "drive", "geometry",
+            "compare", "bench")
 
 DESCRIPTION = """\
 irring: a MuJoCo testbed for the rotating infrared range-sensor ring of

@@ -1,0 +1,72 @@
+"""`irring view`: the MuJoCo scene rendered offscreen with no display — walls, beams and hit
+marks where they must be — and clear errors for a bad pose or step."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+
+from irring import view  # noqa: E402
+from irring.cli import main  # noqa: E402
+from irring.scenario import load_scenario  # noqa: E402
+
+
+def _offscreen_or_skip():
+    try:
+        view.gl_backend()
+    except RuntimeError as exc:     # .ci/run installs libosmesa6; a bare machine may lack it
+        pytest.skip(str(exc))
+
+
+def test_cli_writes_a_picture_headless_and_leaves_no_mujoco_log(tmp_path, monkeypatch, capsys):
+    _offscreen_or_skip()
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", "t_room", "--out", "view.png", "--size", "640x480"]) == 0
+    assert "9 of 12 beams hit within 624 mm" in capsys.readouterr().out
+    from PIL import Image
+
+    img = np.asarray(Image.open(tmp_path / "view.png").convert("RGB"), int)
+    assert img.shape == (480, 640, 3) and img.std() > 20
+    green = (img[..., 1] > 150) & (img[..., 0] < 100) & (img[..., 2] < 120)
+    assert np.count_nonzero(green) > 300          # the beams
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["view.png"]   # no MUJOCO_LOG.TXT
+    # without --out and without a display: the picture goes to out/<scenario>/view.png
+    assert main(["view", "t_room_cylinder", "--step", "-35", "--size", "320x240"]) == 0
+    assert (tmp_path / "out" / "t_room_cylinder" / "view.png").stat().st_size > 0
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
+def test_each_hit_is_marked_or_behind_a_wall_never_on_bare_floor():
+    _offscreen_or_skip()
+    scene = view.SceneView(load_scenario("t_room_cylinder"), pose=0, step=10)
+    b = scene.beams
+    # the true ranges at step 10: the table leg at 0.30 m, walls, three beams with no return
+    assert np.count_nonzero(np.isnan(b.distance_m)) == 3
+    img = view.render(scene, 800, 600).astype(int)
+    px = np.round(scene.last_camera(b.hits)).astype(int)
+    inside = (px[:, 0] >= 1) & (px[:, 0] < 799) & (px[:, 1] >= 1) & (px[:, 1] < 599)
+    assert inside.all()
+    colours = np.array([img[r - 1:r + 2, c - 1:c + 2].reshape(-1, 3).mean(0) for c, r in px])
+    red = (colours[:, 0] > 180) & (colours[:, 1] < 90) & (colours[:, 2] < 90)
+    # a wall face is neutral grey; the floor is blue-grey (its blue well above its red)
+    floor = colours[:, 2] - colours[:, 0] > 15
+    assert np.count_nonzero(red) >= 4 and not floor.any()
+    # a point of bare floor between the ring and the leg is floor-coloured
+    x, y, _ = scene.sim.pose(0)
+    (c, r), = np.round(scene.last_camera([[x - 0.3, y + 0.25, 0.0]])).astype(int)
+    assert img[r, c, 2] - img[r, c, 0] > 15
+
+
+def test_bad_pose_or_step_names_what_is_allowed(capsys):
+    assert main(["view", "t_room", "--pose", "5", "--out", "x.png"]) == 2
+    assert "--pose 5 is out of range: scenario 't_room' has 4 scan pose(s), 1 … 4" in \
+        capsys.readouterr().err
+    assert main(["view", "t_room", "--step", "36", "--out", "x.png"]) == 2
+    assert "motor step 36 is out of range: the ring turns from step -35 to 35" in \
+        capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["view", "t_room", "--pose", "0"])
