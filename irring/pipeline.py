@@ -357,10 +357,12 @@ OUTPUT_NAMES = {"map_png": "map.png", "animation": "map_building.gif", "pgm": "m
 
 
 def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True,
-                  recording: bool = True, title: str | None = None) -> dict[str, Path]:
+                  recording: bool = True, title: str | None = None,
+                  mcap: str | Path | None = None) -> dict[str, Path]:
     """Write the map PNG, the building animation (if the run asked for frames), the
     map_server PGM + YAML and the sweeps recording into ``out_dir``; time it as the
-    "render" stage."""
+    "render" stage. ``mcap``: also write the run there as MCAP (``mcap_export``; the
+    "mcap" stage), which needs the ``mcap`` extra."""
     from . import recording as rec
     from .maps import render   # (loads matplotlib: before the clock, as irring loads MuJoCo)
 
@@ -387,6 +389,12 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
         paths["recording"] = rec.save_recording(out / OUTPUT_NAMES["recording"], result.sweeps,
                                                 result.recording_meta())
     result.timings_s["render"] = time.perf_counter() - t0
+    if mcap is not None:
+        from .mcap_export import write_mcap
+
+        t0 = time.perf_counter()
+        paths["mcap"] = write_mcap(result, mcap)
+        result.timings_s["mcap"] = time.perf_counter() - t0
     return paths
 
 

@@ -43,3 +43,13 @@ def distances_mm(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(
             f"must be one or more positive distances in mm, like 250,500,1000; got {text!r}")
     return values
+
+
+def add_mcap_option(parser: argparse.ArgumentParser) -> None:
+    """``--mcap FILE``: the run as MCAP for Foxglove / rosbag2 (irring/mcap_export.py)."""
+    from pathlib import Path
+
+    parser.add_argument("--mcap", type=Path, default=None, metavar="FILE",
+                        help="also write the run as MCAP with ROS 2 messages (each sweep's "
+                             "end points, the ring pose on /tf, the map, the true outline), "
+                             "for Foxglove or rosbag2; needs pip install 'irring[mcap]'")

@@ -51,6 +51,8 @@ def _pose(text: str) -> tuple[float, float, float]:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ._common import add_mcap_option
+
     p = sub.add_parser("drive", help="sweep the real ring over a serial port, estimate and map",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--port", required=True, metavar="PORT",
@@ -84,6 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true",
                    help="print a JSON summary on stdout instead of the readable one")
     p.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    add_mcap_option(p)
     p.add_argument("--no-wait", action="store_true",
                    help="do not wait for Enter between poses")
     p.set_defaults(func=run)
@@ -195,7 +198,8 @@ def run(args: argparse.Namespace) -> int:
                                  frames_per_sweep=frames, score=truth is not None)
     result.scenario_text = pipeline.scenario_text(truth) if truth is not None else None
     result.calibration_text = cal_text
-    paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation)
+    paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation,
+                                   mcap=args.mcap)
     link = {"port": args.port, "firmware": info.firmware, "totals": ring.stats.as_dict(),
             "sweeps": [r.as_dict() for r in reports],
             "error": None if failure is None else str(failure)}

@@ -23,6 +23,8 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ._common import add_mcap_option
+
     p = sub.add_parser("replay", help="estimate and map a recording (.npz) again",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("recording", type=Path, metavar="RECORDING",
@@ -33,6 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output folder (default: ./out/<recording folder>-replay)")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    add_mcap_option(p)
     p.set_defaults(func=run)
 
 
@@ -56,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         stem = args.recording.resolve().parent.name if args.recording.stem == "sweeps" \
             else args.recording.stem
         out = Path("out") / f"{stem}-replay"
-    paths = pipeline.write_outputs(result, out, animation=not args.no_animation)
+    paths = pipeline.write_outputs(result, out, animation=not args.no_animation,
+                                   mcap=args.mcap)
     report(result, paths, as_json=args.json)
     return 0

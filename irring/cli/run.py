@@ -31,6 +31,8 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ._common import add_mcap_option
+
     p = sub.add_parser("run", help="map a scenario: simulate, estimate, map, score, draw",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
@@ -48,6 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "noise; docs/calibration.md)")
     p.add_argument("--no-animation", action="store_true",
                    help="skip the GIF (saves about a second)")
+    add_mcap_option(p)
     p.set_defaults(func=run)
 
 
@@ -60,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.run(scenario, seed=args.seed, calibration_file=args.calibration,
                           frames_per_sweep=frames)
-    paths = pipeline.write_outputs(result, out, animation=not args.no_animation)
+    paths = pipeline.write_outputs(result, out, animation=not args.no_animation,
+                                   mcap=args.mcap)
     report(result, paths, as_json=args.json)
     return 0
 
@@ -112,5 +116,6 @@ def summary_lines(result, paths: dict) -> list[str]:
                  f"compute {t['total']:.2f} s ({stages})")
     if paths:
         folder = Path(next(iter(paths.values()))).parent
-        lines.append(f"  wrote     {folder}/: " + ", ".join(Path(p).name for p in paths.values()))
+        lines.append(f"  wrote     {folder}/: " + ", ".join(
+            Path(p).name if Path(p).parent == folder else str(p) for p in paths.values()))
     return lines

@@ -1,0 +1,187 @@
+"""A run as an MCAP file of standard ROS 2 messages, for Foxglove and rosbag2 tools.
+
+Topics (all in the ``map`` frame; times are the real ring's: sweep k ends at the sum of the
+hardware durations of sweeps 0 … k):
+
+- ``/tf`` (``tf2_msgs/msg/TFMessage``): the ring's pose ``map`` → ``base_link`` per sweep;
+- ``/irring/points`` (``sensor_msgs/msg/PointCloud2``): each sweep's valid end points, one
+  message per sweep, fields x, y, z (float32, m; z = 0) and range (float32, m: the
+  estimated distance d);
+- ``/map`` (``nav_msgs/msg/OccupancyGrid``): the final map, once, after the last sweep
+  (0 … 100 % occupied, −1 for cells no beam reached);
+- ``/truth/outline`` and ``/truth/obstacles`` (``geometry_msgs/msg/PolygonStamped``): the
+  room's true outline and each obstacle's (a cylinder as a 32-gon), when there is a
+  scenario.
+
+Needs the ``mcap`` extra (``pip install 'irring[mcap]'``: the ``mcap`` writer and
+``mcap-ros2-support``'s CDR encoder); the message definitions below are ROS 2's own.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+FRAME = "map"
+ROBOT_FRAME = "base_link"
+
+_SEP = "=" * 80
+
+_TIME = "int32 sec\nuint32 nanosec"
+_HEADER = "builtin_interfaces/Time stamp\nstring frame_id"
+_QUATERNION = "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1"
+_POINT = "float64 x\nfloat64 y\nfloat64 z"
+
+
+def _msgdef(main: str, *deps: tuple[str, str]) -> str:
+    return "\n".join([main] + [f"{_SEP}\nMSG: {name}\n{text}" for name, text in deps])
+
+
+_COMMON = (("std_msgs/Header", _HEADER), ("builtin_interfaces/Time", _TIME))
+
+MSGDEFS = {
+    "sensor_msgs/msg/PointCloud2": _msgdef(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\n"
+        "bool is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense",
+        *_COMMON,
+        ("sensor_msgs/PointField",
+         "uint8 INT8=1\nuint8 UINT8=2\nuint8 INT16=3\nuint8 UINT16=4\nuint8 INT32=5\n"
+         "uint8 UINT32=6\nuint8 FLOAT32=7\nuint8 FLOAT64=8\n"
+         "string name\nuint32 offset\nuint8 datatype\nuint32 count")),
+    "tf2_msgs/msg/TFMessage": _msgdef(
+        "geometry_msgs/TransformStamped[] transforms",
+        ("geometry_msgs/TransformStamped",
+         "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform"),
+        *_COMMON,
+        ("geometry_msgs/Transform",
+         "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation"),
+        ("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z"),
+        ("geometry_msgs/Quaternion", _QUATERNION)),
+    "nav_msgs/msg/OccupancyGrid": _msgdef(
+        "std_msgs/Header header\nnav_msgs/MapMetaData info\nint8[] data",
+        *_COMMON,
+        ("nav_msgs/MapMetaData",
+         "builtin_interfaces/Time map_load_time\nfloat32 resolution\nuint32 width\n"
+         "uint32 height\ngeometry_msgs/Pose origin"),
+        ("geometry_msgs/Pose", "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation"),
+        ("geometry_msgs/Point", _POINT),
+        ("geometry_msgs/Quaternion", _QUATERNION)),
+    "geometry_msgs/msg/PolygonStamped": _msgdef(
+        "std_msgs/Header header\ngeometry_msgs/Polygon polygon",
+        *_COMMON,
+        ("geometry_msgs/Polygon", "geometry_msgs/Point32[] points"),
+        ("geometry_msgs/Point32", "float32 x\nfloat32 y\nfloat32 z")),
+}
+
+_FLOAT32 = 7
+CYLINDER_SIDES = 32
+
+
+def _import():
+    try:
+        from mcap_ros2.writer import Writer
+    except ImportError:
+        raise ImportError("writing MCAP needs the mcap extra: pip install 'irring[mcap]' "
+                          "(the mcap and mcap-ros2-support packages)") from None
+    return Writer
+
+
+def _stamp(t_ns: int) -> dict:
+    return {"sec": int(t_ns // 1_000_000_000), "nanosec": int(t_ns % 1_000_000_000)}
+
+
+def _header(t_ns: int) -> dict:
+    return {"stamp": _stamp(t_ns), "frame_id": FRAME}
+
+
+def _yaw_quaternion(yaw: float) -> dict:
+    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}
+
+
+def point_cloud(points, t_ns: int) -> dict:
+    """A PointCloud2 of one sweep's valid end points (x, y, z = 0, range; float32)."""
+    valid = np.asarray(points.valid, bool)
+    x = np.asarray(points.x, float)[valid]
+    y = np.asarray(points.y, float)[valid]
+    rng = np.asarray(points.d, float)[valid]
+    cloud = np.zeros(x.size, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("range", "<f4")])
+    cloud["x"], cloud["y"], cloud["range"] = x, y, rng
+    fields = [{"name": n, "offset": 4 * i, "datatype": _FLOAT32, "count": 1}
+              for i, n in enumerate(cloud.dtype.names)]
+    return {"header": _header(t_ns), "height": 1, "width": int(x.size), "fields": fields,
+            "is_bigendian": False, "point_step": cloud.itemsize,
+            "row_step": cloud.itemsize * int(x.size), "data": cloud.tobytes(),
+            "is_dense": True}
+
+
+def occupancy_grid(grid, t_ns: int) -> dict:
+    """The map as nav_msgs/OccupancyGrid: row-major from the origin cell, 0 … 100 % occupied,
+    −1 for cells whose log-odds never moved."""
+    lo = grid.log_odds
+    data = np.round(100.0 / (1.0 + np.exp(-lo))).astype(np.int8)
+    data[lo == 0] = -1
+    ny, nx = grid.shape
+    return {"header": _header(t_ns),
+            "info": {"map_load_time": _stamp(t_ns), "resolution": float(grid.resolution_m),
+                     "width": int(nx), "height": int(ny),
+                     "origin": {"position": {"x": float(grid.origin_xy_m[0]),
+                                             "y": float(grid.origin_xy_m[1]), "z": 0.0},
+                                "orientation": _yaw_quaternion(0.0)}},
+            "data": data.ravel().tolist()}
+
+
+def _polygon(xy, t_ns: int) -> dict:
+    return {"header": _header(t_ns),
+            "polygon": {"points": [{"x": float(x), "y": float(y), "z": 0.0} for x, y in xy]}}
+
+
+def _obstacle_outline(ob) -> np.ndarray:
+    from .metrics import box_corners
+    from .scenario import Cylinder
+
+    if isinstance(ob, Cylinder):
+        a = np.linspace(0, 2 * np.pi, CYLINDER_SIDES, endpoint=False)
+        return np.c_[ob.center_m[0] + ob.radius_m * np.cos(a),
+                     ob.center_m[1] + ob.radius_m * np.sin(a)]
+    return np.asarray(box_corners(ob))
+
+
+def write_mcap(result, path) -> Path:
+    """Write ``result`` (a :class:`pipeline.MapRun`) to ``path`` as MCAP (see the module doc).
+    Raises ImportError naming the extra when the mcap packages are missing."""
+    Writer = _import()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    t_ns, ends = 0, []
+    for s in result.sweeps:
+        t_ns += int(round(s.duration_s * 1e9))
+        ends.append(t_ns)
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        schemas = {name: writer.register_msgdef(name, text) for name, text in MSGDEFS.items()}
+        sc = result.scenario
+        if sc is not None:
+            writer.write_message("/truth/outline", schemas["geometry_msgs/msg/PolygonStamped"],
+                                 _polygon(sc.room.outline_m, 0), log_time=0, publish_time=0)
+            for ob in sc.obstacles:
+                writer.write_message("/truth/obstacles",
+                                     schemas["geometry_msgs/msg/PolygonStamped"],
+                                     _polygon(_obstacle_outline(ob), 0), log_time=0,
+                                     publish_time=0)
+        for k, (sweep, points, t) in enumerate(zip(result.sweeps, result.points, ends)):
+            x, y, yaw = (float(v) for v in np.asarray(sweep.pose, float)[:3])
+            tf = {"transforms": [{"header": _header(t), "child_frame_id": ROBOT_FRAME,
+                                  "transform": {"translation": {"x": x, "y": y, "z": 0.0},
+                                                "rotation": _yaw_quaternion(yaw)}}]}
+            writer.write_message("/tf", schemas["tf2_msgs/msg/TFMessage"], tf, log_time=t,
+                                 publish_time=t, sequence=k)
+            writer.write_message("/irring/points", schemas["sensor_msgs/msg/PointCloud2"],
+                                 point_cloud(points, t), log_time=t, publish_time=t,
+                                 sequence=k)
+        writer.write_message("/map", schemas["nav_msgs/msg/OccupancyGrid"],
+                             occupancy_grid(result.grid, t_ns), log_time=t_ns,
+                             publish_time=t_ns)
+        writer.finish()
+    return path

@@ -1,0 +1,85 @@
+"""`--mcap`: a run as ROS 2 messages in MCAP, read back with the mcap reader: one point cloud
+and one transform per sweep, the map, the true outline — the numbers the run holds."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+pytest.importorskip("mcap_ros2")
+
+from mcap.reader import make_reader  # noqa: E402
+from mcap_ros2.decoder import DecoderFactory  # noqa: E402
+
+from irring import pipeline  # noqa: E402
+from irring.cli import main  # noqa: E402
+from irring.recording import load_recording  # noqa: E402
+
+
+def _messages(path):
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        out = {}
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            out.setdefault(channel.topic, []).append((schema.name, message, decoded))
+    return summary, out
+
+
+def test_run_writes_one_message_per_sweep_the_map_and_the_truth(tmp_path):
+    out = tmp_path / "room"
+    assert main(["run", "t_room_three_cylinders", "--out", str(out), "--no-animation",
+                 "--mcap", str(tmp_path / "run.mcap")]) == 0
+    summary, msgs = _messages(tmp_path / "run.mcap")
+    assert summary.statistics.message_count == 4 + 4 + 1 + 1 + 3
+    sweeps, _ = load_recording(out / "sweeps.npz")
+    run = pipeline.replay(out / "sweeps.npz", progress=False)
+
+    clouds = msgs["/irring/points"]
+    assert len(clouds) == len(sweeps) == 4
+    t = 0
+    for (schema, message, cloud), sweep, points in zip(clouds, sweeps, run.points):
+        assert schema == "sensor_msgs/msg/PointCloud2" and cloud.header.frame_id == "map"
+        t += round(sweep.duration_s * 1e9)        # stamped when the real ring would finish
+        assert message.log_time == t == cloud.header.stamp.sec * 10**9 + cloud.header.stamp.nanosec
+        xyz = np.frombuffer(bytes(cloud.data), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
+                                                      ("range", "<f4")])
+        assert cloud.width == xyz.size == np.count_nonzero(points.valid)
+        assert [f.name for f in cloud.fields] == ["x", "y", "z", "range"]
+        np.testing.assert_allclose(xyz["x"], points.x[points.valid], atol=1e-6)
+        np.testing.assert_allclose(xyz["y"], points.y[points.valid], atol=1e-6)
+
+    tfs = msgs["/tf"]
+    assert len(tfs) == 4 and tfs[0][0] == "tf2_msgs/msg/TFMessage"
+    for (_, _, tf), sweep in zip(tfs, sweeps):
+        (tr,) = tf.transforms
+        assert (tr.header.frame_id, tr.child_frame_id) == ("map", "base_link")
+        x, y, yaw = sweep.pose
+        assert (tr.transform.translation.x, tr.transform.translation.y) == pytest.approx((x, y))
+        assert 2 * math.atan2(tr.transform.rotation.z, tr.transform.rotation.w) == \
+            pytest.approx(yaw, abs=1e-12)
+
+    ((schema, _, grid),) = msgs["/map"]
+    ny, nx = run.grid.shape
+    assert schema == "nav_msgs/msg/OccupancyGrid" and (grid.info.width, grid.info.height) == (nx, ny)
+    assert grid.info.resolution == pytest.approx(run.grid.resolution_m)
+    assert (grid.info.origin.position.x, grid.info.origin.position.y) == \
+        pytest.approx(tuple(run.grid.origin_xy_m))
+    cells = np.array(grid.data, np.int8).reshape(ny, nx)
+    classes = run.grid.classify()
+    # map_server's thresholds (occupied above 0.65, free below 0.196), in whole percent
+    assert np.all(cells[classes == 1] >= 65) and np.all((cells[classes == 0] >= 0) &
+                                                        (cells[classes == 0] <= 20))
+    assert np.all(cells[run.grid.log_odds == 0] == -1)
+
+    ((_, _, outline),) = msgs["/truth/outline"]
+    room = run.scenario.room.outline_m
+    np.testing.assert_allclose([(p.x, p.y) for p in outline.polygon.points], room, atol=1e-6)
+    obstacles = msgs["/truth/obstacles"]
+    assert len(obstacles) == len(run.scenario.obstacles) == 3
+    ob = run.scenario.obstacles[0]
+    pts = np.array([(p.x, p.y) for p in obstacles[0][2].polygon.points])
+    np.testing.assert_allclose(np.hypot(*(pts - ob.center_m).T), ob.radius_m, rtol=1e-5)
