@@ -482,10 +482,6 @@ def chart(result: dict, path) -> None:
     ring marks the configurations on it. A hollow point: the estimator called less than
     half the returns valid, so its RMSE describes few readings.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     rows = result["configs"]
@@ -496,7 +492,10 @@ def chart(result: dict, path) -> None:
                ("rmse", "range RMSE, mm (lower is better)", 1e3))
     costs = (("hw", "hardware time per 360° scan, s (what the real ring spends)"),
              ("cpu", "compute per sweep, ms CPU (estimator + mapper, this machine)"))
-    fig, axes = plt.subplots(len(metrics), 2, figsize=(13, 12.5))
+    from ..render import figure   # no pyplot: the caller's matplotlib backend stays as it is
+
+    fig = figure(13, 12.5)
+    axes = fig.subplots(len(metrics), 2)
     for i, (metric, mlabel, scale) in enumerate(metrics):
         mk = FRONT_METRICS[metric][0]
         for j, (cost, clabel) in enumerate(costs):
@@ -556,7 +555,6 @@ def chart(result: dict, path) -> None:
                  fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 # label offsets tried in turn (points); a label that fits none is left off (its point

@@ -333,15 +333,13 @@ def write_csv(path, rows: list[dict], keys) -> None:
 def chart(result: dict, path) -> None:
     """Four panels: map scores per design, shadow per scenario, hardware time per 360°
     view, and the smallest cylinder each design is sure to see versus distance."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .render import figure   # no pyplot: the caller's matplotlib backend stays as it is
 
     recs = result["designs"]
     names = [r["design"] for r in recs]
     x = np.arange(len(names))
-    fig, axes = plt.subplots(2, 2, figsize=(13, 8.5))
+    fig = figure(13, 8.5)
+    axes = fig.subplots(2, 2)
     (a_scores, a_shadow), (a_time, a_det) = axes
 
     def bars(ax, series: dict[str, list], title: str) -> None:
@@ -399,7 +397,6 @@ def chart(result: dict, path) -> None:
     a_det.grid(alpha=0.3, which="both")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def write_study(out_dir, name: str, result: dict, rows: list[dict], keys, draw) -> dict[str, str]:
