@@ -113,13 +113,22 @@ def test_a_maprun_shows_its_map_inline(t_room_run):
 
 
 def test_pose_numbers_clear_each_other_when_poses_crowd():
-    # eleven sweeps 10 cm apart along a line, as a moving scan makes: rings overlap
-    poses = [(0.3 + 0.1 * k, 0.5 + 0.02 * (k % 2)) for k in range(11)]
+    # eleven sweeps 10 cm apart along a line and back, as a moving scan makes: rings overlap
+    poses = [(0.3 + 0.1 * k, 0.5 + 0.02 * (k % 2)) for k in range(8)] + \
+        [(0.95 - 0.1 * k, 0.51) for k in range(3)]
+    assert render.crowded(poses, 0.15)
     label = 0.06
     offsets = render.label_offsets(poses, 0.15, (0, 2, 0, 1.2), label)
-    centres = np.array(poses) + np.array(offsets)
-    gaps = np.abs(centres[:, None] - centres[None]).max(axis=2) + np.eye(11) * 9
-    assert gaps.min() >= label * 0.99
-    # alone, a pose keeps its number inside its ring, above the centre
-    (dx, dy), = render.label_offsets([(1.0, 0.7)], 0.15, (0, 2, 0, 1.2), label)
+    assert offsets[0] is not None and offsets[-1] is not None   # where it starts and ends
+    shown = [k for k, o in enumerate(offsets) if o is not None]
+    assert 4 <= len(shown) < 11          # the poses retraced go unnumbered
+    centres = np.array([np.add(poses[k], offsets[k]) for k in shown])
+    gaps = np.abs(centres[:, None] - centres[None]).max(axis=2) + np.eye(len(shown)) * 9
+    assert gaps.min() >= label * 0.99    # no number on another
+    dots = np.abs(centres[:, None] - np.array(poses)[None]).max(axis=2)
+    assert dots.min() >= label * 0.6     # nor on a pose
+    # apart, a pose keeps its number inside its ring, above the centre
+    apart = [(1.0, 0.7), (0.4, 0.3)]
+    assert not render.crowded(apart, 0.15)
+    (dx, dy), _ = render.label_offsets(apart, 0.15, (0, 2, 0, 1.2), label)
     assert dx == 0 and 0 < dy < 0.15

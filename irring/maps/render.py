@@ -3,7 +3,9 @@
 The picture shows the map's three cell states (unknown grey, free white, occupied black),
 the ground truth (walls and obstacles as blue outlines), each scan pose (a red ring of the
 robot's radius with its number), and the sensor reach around each pose (dashed orange
-circle: max range + ring radius), with a legend, a scale bar and axes in metres.
+circle: max range + ring radius), with a legend, a scale bar and axes in metres. Poses
+whose rings would overlap (a moving scan, a dense survey) are drawn as a path of dots
+instead, numbered where a number has room.
 
 Matplotlib draws on its own Agg canvas (never pyplot), so the caller's backend and figures
 are left alone. The animation is drawn by matplotlib once — the static overlay, each pose's
@@ -57,46 +59,48 @@ def map_rgb(classes: np.ndarray) -> np.ndarray:
     return _CLASS_RGB[np.asarray(classes, np.intp) - _CLASS0]
 
 
-def label_offsets(poses: Sequence, ring_radius_m: float, extent: Sequence[float],
-                  label_m: float) -> list[tuple[float, float]]:
-    """Where each pose's number goes, as an offset from the pose (metres).
+def crowded(poses: Sequence, ring_radius_m: float) -> bool:
+    """True when two poses' rings overlap (a moving scan's sweeps, a dense survey): the
+    picture then draws the poses as a numbered path instead of rings and reach circles."""
+    xy = np.array([[float(p[0]), float(p[1])] for p in poses]).reshape(-1, 2)
+    if len(xy) < 2:
+        return False
+    d = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1)) + np.eye(len(xy)) * 1e9
+    return bool(d.min() < 2 * ring_radius_m)
 
-    Inside its own ring when no other ring comes near (the classic look); otherwise outside
-    it, in the first direction whose label clears every ring and every label placed so far
-    (poses close together, as a moving scan's sweeps are), so numbers never sit on each
-    other. ``label_m``: the size of a label's box in metres.
+
+def label_offsets(poses: Sequence, ring_radius_m: float, extent: Sequence[float],
+                  label_m: float) -> list[tuple[float, float] | None]:
+    """Where each pose's number goes, as an offset from the pose (metres), or None for no
+    number.
+
+    Apart (not :func:`crowded`): inside each ring, above its centre. Crowded: beside the
+    pose, in the first of eight directions whose label clears every pose and every label
+    placed so far, the first and last pose first; a pose with no such place goes unnumbered,
+    so numbers never sit on each other or on the path. ``label_m``: a label box's size (m).
     """
     xy = np.array([[float(p[0]), float(p[1])] for p in poses]).reshape(-1, 2)
-    r = ring_radius_m
-    inside = (0.0, r * 0.35 + label_m / 2)
-    placed: list[np.ndarray] = []
-    out = []
+    n = len(xy)
+    if not crowded(poses, ring_radius_m):
+        return [(0.0, ring_radius_m * 0.35 + label_m / 2)] * n
     x0, x1, y0, y1 = extent
-    dirs = [(0, 1), (0, -1), (1, 0), (-1, 0), (0.71, 0.71), (-0.71, 0.71), (0.71, -0.71),
-            (-0.71, -0.71)]
-    for k, c in enumerate(xy):
-        others = np.delete(xy, k, axis=0)
-        crowded = others.size and np.min(np.hypot(*(others - c).T)) < 2 * r + label_m
-        if not crowded:
-            out.append(inside)
-            placed.append(c + inside)
-            continue
-        best, best_cost = None, np.inf
-        for dx, dy in dirs:
-            off = np.array([dx, dy]) * (r + 0.6 * label_m)
-            p = c + off
-            cost = 0.0
-            if others.size:   # overlap with any ring (a label may touch its own)
-                cost += np.sum(np.maximum(0, r + label_m / 2 - np.hypot(*(others - p).T)))
-            if placed:
-                d = np.abs(np.array(placed) - p)
-                cost += np.sum(np.all(d < label_m, axis=1)) * label_m
-            if not (x0 < p[0] < x1 and y0 < p[1] < y1):
-                cost += label_m
-            if cost < best_cost - 1e-12:
-                best, best_cost = off, cost
-        out.append((float(best[0]), float(best[1])))
-        placed.append(c + best)
+    dirs = np.array([(0, 1), (0, -1), (1, 0), (-1, 0), (0.71, 0.71), (-0.71, 0.71),
+                     (0.71, -0.71), (-0.71, -0.71)]) * 0.75 * label_m
+    out: list[tuple[float, float] | None] = [None] * n
+    placed: list[np.ndarray] = []
+    for k in [0, n - 1] + list(range(1, n - 1)):
+        for off in dirs:
+            p = xy[k] + off
+            if not (x0 + label_m / 2 < p[0] < x1 - label_m / 2 and
+                    y0 + label_m / 2 < p[1] < y1 - label_m / 2):
+                continue
+            if np.any(np.all(np.abs(xy - p) < label_m * 0.6, axis=1)):
+                continue         # on a pose dot
+            if placed and np.any(np.all(np.abs(np.array(placed) - p) < label_m, axis=1)):
+                continue         # on another number
+            out[k] = (float(off[0]), float(off[1]))
+            placed.append(p)
+            break
     return out
 
 
@@ -132,27 +136,41 @@ class MapFigure:
                                          ec=TRUTH_COLOR, lw=1.0, zorder=3))
             handles.append(Line2D([], [], color=TRUTH_COLOR, lw=1.2,
                                   label="true walls / obstacles"))
-        # a label's box: 10 pt bold digits, as metres on this figure
+        # a label's box: 8 pt bold digits (crowded poses), as metres on this figure
         m_per_in = (x1 - x0) / (width_in * 0.8)
-        label_m = 10 / 72 * 1.6 * m_per_in
+        label_m = 8 / 72 * 2.0 * m_per_in
         offsets = label_offsets(poses, ring_radius_m, grid.extent_m, label_m)
         self.pose_artists = []
+        self.crowded = crowded(poses, ring_radius_m)
         for k, pose in enumerate(poses):
             x, y = float(pose[0]), float(pose[1])
-            dx, dy = offsets[k]
-            arts = [ax.add_patch(Circle((x, y), ring_radius_m, fill=False, ec=POSE_COLOR,
-                                        lw=1.5, zorder=4)),
-                    ax.plot([x], [y], "+", color=POSE_COLOR, ms=8, mew=1.5, zorder=4)[0],
-                    ax.text(x + dx, y + dy, str(k + 1), color=POSE_COLOR, ha="center",
-                            va="center", fontsize=10, weight="bold", zorder=5, clip_on=True)]
-            if reach_m:
-                arts.append(ax.add_patch(Circle((x, y), reach_m, fill=False, ec=RANGE_COLOR,
-                                                lw=1.0, ls="--", zorder=4)))
+            if self.crowded:       # a numbered path: a dot per pose, a line from the last
+                arts = [ax.plot([x], [y], "o", color=POSE_COLOR, ms=3, zorder=4)[0]]
+                if k:
+                    px, py = float(poses[k - 1][0]), float(poses[k - 1][1])
+                    arts.append(ax.plot([px, x], [py, y], "-", color=POSE_COLOR, lw=0.8,
+                                        alpha=0.7, zorder=4)[0])
+            else:
+                arts = [ax.add_patch(Circle((x, y), ring_radius_m, fill=False, ec=POSE_COLOR,
+                                            lw=1.5, zorder=4)),
+                        ax.plot([x], [y], "+", color=POSE_COLOR, ms=8, mew=1.5, zorder=4)[0]]
+                if reach_m:
+                    arts.append(ax.add_patch(Circle((x, y), reach_m, fill=False,
+                                                    ec=RANGE_COLOR, lw=1.0, ls="--",
+                                                    zorder=4)))
+            if offsets[k] is not None:
+                dx, dy = offsets[k]
+                arts.append(ax.text(x + dx, y + dy, str(k + 1), color=POSE_COLOR,
+                                    ha="center", va="center", weight="bold", zorder=5,
+                                    fontsize=8 if self.crowded else 10, clip_on=True))
             self.pose_artists.append(arts)
-        if len(poses):
+        if len(poses) and self.crowded:
+            handles.append(Line2D([], [], color=POSE_COLOR, marker="o", ms=3, lw=0.8,
+                                  label="scan poses in order (numbered where room)"))
+        elif len(poses):
             handles.append(Line2D([], [], color=POSE_COLOR, marker="o", ls="", mfc="none",
                                   ms=9, mew=1.5, label="ring at scan pose (number = order)"))
-        if reach_m and len(poses):
+        if reach_m and len(poses) and not self.crowded:
             handles.append(Line2D([], [], color=RANGE_COLOR, ls="--", lw=1.0,
                                   label=f"sensor reach ({reach_m * 1000:.0f} mm)"))
         ax.set_xlim(x0, x1)
@@ -268,9 +286,10 @@ class MapAnimator:
             for a in arts:
                 a.set_visible(True)
                 mf.ax.draw_artist(a)
+            box = self._box(arts)      # (a hidden text has no extent)
+            for a in arts:
                 a.set_visible(False)
-            self._poses.append(_Layer(np.asarray(self._renderer.buffer_rgba()),
-                                      self._box(arts)))
+            self._poses.append(_Layer(np.asarray(self._renderer.buffer_rgba()), box))
         self._font = None
         self._caption_box = None
         self._palette, self._lut = self._make_palette()
