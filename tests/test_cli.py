@@ -115,3 +115,14 @@ def test_help_states_the_allowed_range(argv, option, message, capsys):
     block = " ".join(next(b for b in blocks if b.startswith(option[2:] + " ")).split())
     allowed = ("≥ " + message.split("≥ ")[1].split(",")[0]) if "≥" in message else "positive"
     assert allowed in block
+
+
+def test_version_prints_the_installed_package_version(capsys):
+    from importlib.metadata import version
+
+    from irring.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"irring {version('irring')}"

@@ -122,3 +122,24 @@ def test_cli_compare_writes_table_csv_json_and_chart(tmp_path, capsys):
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "rotating12" in text and "360° view" in text and "2.72 s" in text
+
+
+def test_table_prints_the_shadow_of_one_scan_and_of_four_scans():
+    from irring import compare as compare_mod
+
+    def rec(name, one, four):
+        scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": 0.7}
+        return {"design": name, **scores, "hardware_time_s": 2.72, "compute_time_s": 0.004,
+                "scenarios": ["t_room", "t_room_cylinder", "t_room_three_cylinders"],
+                "poses": {"t_room": 4, "t_room_cylinder": 1, "t_room_three_cylinders": 4},
+                "by_scenario": {"t_room": {**scores, "shadow": None},
+                                "t_room_cylinder": {**scores, "shadow": one},
+                                "t_room_three_cylinders": {**scores, "shadow": four}}}
+
+    text = compare_mod.table([rec("rotating12", 1.0, 0.53), rec("laser", 0.15, 0.875)])
+    head, _, ring, laser, legend = text.splitlines()
+    assert "shadow 1 scan" in head and "shadow 4 scans" in head
+    assert head.index("shadow 1 scan") < head.index("shadow 4 scans")
+    assert "1.00" in ring.split() and "0.53" in ring.split()
+    assert "0.15" in laser.split() and "0.88" in laser.split()
+    assert legend == "shadow 1 scan: t_room_cylinder, shadow 4 scans: t_room_three_cylinders"

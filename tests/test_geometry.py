@@ -172,3 +172,31 @@ def test_cli_geometry_json_has_the_contract_keys(capsys):
     assert out["distances_m"] == [0.5, 1.0] and len(out["blind_spot_m"]) == 2
     assert main(["geometry", "--design", "radial12", "--samples", "5000"]) == 0
     assert "0.0000 m²" in capsys.readouterr().out
+
+
+def test_geometry_and_compare_agree_on_the_sonar_rings_blind_spot(capsys):
+    import json
+
+    from irring import compare, designs
+    from irring.cli import main
+
+    assert main(["geometry", "--design", "sonar12", "--json", "--samples", "1000",
+                 "--distances-mm", "500,1000"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["blind_spot_m"] == [0.0, 0.0]        # Eq. 1: the ±15° cones touch
+    det = compare.detection(designs.get("sonar12"), [0.5, 1.0])
+    assert report["blind_spot_rays_m"] == det.min_detectable_radius_m.tolist()
+    assert 0.09 < report["blind_spot_rays_m"][0] < 0.13   # yet posts of ~11 cm hide
+    assert main(["geometry", "--design", "sonar12", "--samples", "1000",
+                 "--distances-mm", "500"]) == 0
+    text = capsys.readouterr().out
+    assert "Eq. 1: 0.0 mm; rays: posts up to 112 mm hide" in text
+
+
+def test_a_negative_overlap_angle_is_printed_as_the_gap_it_is(capsys):
+    from irring.cli import main
+
+    assert main(["geometry", "--design", "radial12", "--samples", "1000"]) == 0
+    text = capsys.readouterr().out
+    assert "none: neighbouring sweeps 18.24° apart (Eq. 2 gives -18.24°)" in text
+    assert "rays:" not in text                          # a pencil beam: Eq. 1 is the answer

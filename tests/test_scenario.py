@@ -255,3 +255,16 @@ def test_readme_defaults_match_the_schema():
     hints = typing.get_type_hints(S.Room)
     assert hints["outline_m"] == tuple[tuple[float, float], ...]
     assert yaml.safe_load("a: 1")  # yaml is the format
+
+
+def test_the_scenarios_readme_table_lists_every_bundled_scenario():
+    """scenarios/README.md's table: one row per bundled file, with its poses and obstacles."""
+    text = (resources.scenarios_dir() / "README.md").read_text()
+    rows = {m.group(1): (m.group(2), m.group(3)) for m in re.finditer(
+        r"^\| `(\w+)\.yaml` \| [^|]+ \| (\d+) \| (\d+|–) \|$", text, flags=re.MULTILINE)}
+    bundled = S.bundled()
+    assert sorted(rows) == sorted(bundled)
+    for name, (poses, obstacles) in rows.items():
+        sc = load_scenario(bundled[name])
+        assert int(poses) == len(sc.robot.poses), name
+        assert (0 if obstacles == "–" else int(obstacles)) == len(sc.obstacles), name

@@ -10,7 +10,8 @@ from ._common import at_least, distances_mm
 
 EPILOG = """\
 what it prints:
-  beta_deg            Eq. 2: angle β of the overlap of two neighbouring sweeps (deg)
+  beta_deg            Eq. 2: angle β of the overlap of two neighbouring sweeps (deg);
+                      negative when they do not meet (its size is then the gap)
   overlap_area_m2     Eq. 3: area S both neighbours see (m²), from R, Φ = 360°/N, α, D
   overlap_area_mc_m2  the same area counted by Monte Carlo in the BUILT MuJoCo model:
                       hinge positions and beam directions read at the first and last
@@ -18,6 +19,8 @@ what it prints:
                       is the design the equations describe
   blind_spot_m        Eq. 1: radius of the largest cylinder that can hide between two
                       neighbouring rays at each distance (m), with the design's ray step
+  blind_spot_rays_m   for a sensor with a beam cone (sonar12): the same from the design's
+                      rays as `irring compare` casts them (null for a pencil beam)
 
 examples:
   irring geometry                          the paper's ring (Table I: β 19.56°, S 0.1376 m²)
@@ -73,7 +76,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _text(r: dict) -> str:
-    beta = "—" if r["beta_deg"] is None else f"{r['beta_deg']:.2f}°"
+    if r["beta_deg"] is None:
+        beta = "— (one sensor: no neighbour)"
+    elif r["beta_deg"] < 0:   # Eq. 2 goes negative when the sweeps do not meet
+        beta = f"none: neighbouring sweeps {-r['beta_deg']:.2f}° apart (Eq. 2 gives {r['beta_deg']:.2f}°)"
+    else:
+        beta = f"{r['beta_deg']:.2f}°"
     lines = [
         f"{r['design']}: N = {r['sensors']}, R = {r['radius_m'] * 1e3:g} mm, "
         f"Φ = {r['spacing_deg']:.4g}°, α = {r['alpha_deg']:.4g}°, D = {r['range_m'] * 1e3:g} mm",
@@ -84,7 +92,16 @@ def _text(r: dict) -> str:
         "    from the MuJoCo model's frames)",
         f"  blind spot r (Eq. 1, Δθ = {r['step_deg']:.3g}°):",
     ]
-    for d, b in zip(r["distances_m"], r["blind_spot_m"]):
+    rays = r.get("blind_spot_rays_m")
+    if rays is not None:
+        lines[-1] += ("  [the cones touch on paper; from the model's rays, as "
+                      "irring compare: an echo returns only near square to a ray]")
+    for k, (d, b) in enumerate(zip(r["distances_m"], r["blind_spot_m"])):
         shown = "unbounded" if not math.isfinite(b) else f"{b * 1e3:.1f} mm"
+        if rays is not None:
+            v = rays[k]
+            shown = f"Eq. 1: {shown}; rays: " + (
+                "not even a 200 mm post is seen at every bearing" if not math.isfinite(v)
+                else f"posts up to {v * 1e3:.0f} mm hide")
         lines.append(f"    at {d * 1e3:6.0f} mm   {shown}")
     return "\n".join(lines)

@@ -295,11 +295,21 @@ TABLE_SCORES = ("occupied_f1", "free_accuracy", "coverage", "shadow")
 def table(records: list[dict]) -> str:
     """A plain-text table of the per-design records (scores, times, detection)."""
     dists = records[0].get("detection_distances_m", []) if records else []
-    head = (["design", "F1 occ", "free acc", "coverage", "shadow", "360° view", "compute"]
-            + [f"r@{d * 1e3:.0f}mm" for d in dists])
+    # the shadow of each scene with something to hide behind, by its number of scans (one
+    # scan shows what the rotating sensors see past a post; several, what other poses add)
+    shadowed = [sc for sc in (records[0]["scenarios"] if records else [])
+                if any(r["by_scenario"][sc]["shadow"] is not None for r in records)]
+    scans = {sc: records[0]["poses"][sc] for sc in shadowed}
+    by_count = len(set(scans.values())) == len(scans)
+    shadow_head = [f"shadow {n} scan{'s' if n > 1 else ''}" if by_count else f"shadow {sc}"
+                   for sc, n in scans.items()]
+    head = (["design", "F1 occ", "free acc", "coverage", "shadow"] + shadow_head
+            + ["360° view", "compute"] + [f"r@{d * 1e3:.0f}mm" for d in dists])
     rows = [head]
     for r in records:
         row = [r["design"]] + [("—" if r[k] is None else f"{r[k]:.3f}") for k in TABLE_SCORES]
+        row += ["—" if r["by_scenario"][sc]["shadow"] is None
+                else f"{r['by_scenario'][sc]['shadow']:.2f}" for sc in shadowed]
         row += [_seconds(r["hardware_time_s"]), f"{r['compute_time_s'] * 1e3:.1f} ms"]
         row += ["miss" if v is None else f"{v * 1e3:.1f}mm"
                 for v in r.get("min_detectable_radius_m", [])]
@@ -308,6 +318,8 @@ def table(records: list[dict]) -> str:
     lines = ["  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
                        enumerate(zip(row, widths))) for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
+    if shadowed and by_count:
+        lines.append(", ".join(f"{h}: {sc}" for h, sc in zip(shadow_head, shadowed)))
     return "\n".join(lines)
 
 

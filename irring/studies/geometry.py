@@ -246,4 +246,18 @@ def design_report(design, distances_m=(0.25, 0.5, 0.75, 1.0), *, range_m: float 
         "overlap_area_mc_stderr_m2": se,
         "distances_m": dist.tolist(),
         "blind_spot_m": np.atleast_1d(blind_spot_m(dist, step)).tolist(),
+        "blind_spot_rays_m": _blind_spot_from_rays(design, dist),
     }
+
+
+def _blind_spot_from_rays(design, dist: np.ndarray) -> list[float] | None:
+    """For a sensor with a beam cone: the largest post that hides, from the design's rays as
+    ``irring compare`` casts them (its detection curve); None for a pencil beam, where Eq. 1
+    is the answer. A cone closes Eq. 1's gaps on paper, but an echo returns only from a
+    surface near square to a ray, so posts hide between cones after all."""
+    if design.sensor.beam_half_angle_rad <= 0:
+        return None
+    from .compare import detection
+
+    det = detection(design, dist)
+    return [float(v) for v in det.min_detectable_radius_m]
