@@ -390,7 +390,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
                                                 result.recording_meta())
     result.timings_s["render"] = time.perf_counter() - t0
     if mcap is not None:
-        from .mcap_export import write_mcap
+        from .maps.mcap_export import write_mcap
 
         t0 = time.perf_counter()
         paths["mcap"] = write_mcap(result, mcap)

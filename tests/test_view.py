@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from irring import view  # noqa: E402
+from irring.simulation import view  # noqa: E402
 from irring.cli import main  # noqa: E402
 from irring.scenario import load_scenario  # noqa: E402
 

@@ -46,7 +46,7 @@ def distances_mm(text: str) -> list[float]:
 
 
 def add_mcap_option(parser: argparse.ArgumentParser) -> None:
-    """``--mcap FILE``: the run as MCAP for Foxglove / rosbag2 (irring/mcap_export.py)."""
+    """``--mcap FILE``: the run as MCAP for Foxglove / rosbag2 (irring/maps/mcap_export.py)."""
     from pathlib import Path
 
     parser.add_argument("--mcap", type=Path, default=None, metavar="FILE",

@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from .. import view
+    from ..simulation import view
     from ..scenario import DEFAULT_SCENARIO, load_scenario
 
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)

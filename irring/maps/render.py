@@ -32,7 +32,9 @@ from matplotlib.patches import Circle, Patch, Polygon
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 from PIL import Image, ImageDraw, ImageFont
 
+from ..scenario import Cylinder
 from .mapping import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from .metrics import box_corners
 
 UNKNOWN_RGB = (0.75, 0.75, 0.75)
 FREE_RGB = (1.0, 1.0, 1.0)
@@ -124,9 +126,6 @@ class MapFigure:
         if scenario is not None:
             ax.add_patch(Polygon(np.asarray(scenario.room.outline_m), closed=True, fill=False,
                                  ec=TRUTH_COLOR, lw=1.0, alpha=0.8, zorder=3))
-            from .metrics import box_corners
-            from ..scenario import Cylinder
-
             for ob in scenario.obstacles:
                 if isinstance(ob, Cylinder):
                     ax.add_patch(Circle(ob.center_m, ob.radius_m, fill=False, ec=TRUTH_COLOR,

@@ -492,7 +492,7 @@ def chart(result: dict, path) -> None:
                ("rmse", "range RMSE, mm (lower is better)", 1e3))
     costs = (("hw", "hardware time per 360° scan, s (what the real ring spends)"),
              ("cpu", "compute per sweep, ms CPU (estimator + mapper, this machine)"))
-    from ..render import figure   # no pyplot: the caller's matplotlib backend stays as it is
+    from ..maps.render import figure   # no pyplot: the caller's matplotlib backend stays as it is
 
     fig = figure(13, 12.5)
     axes = fig.subplots(len(metrics), 2)

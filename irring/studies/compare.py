@@ -345,7 +345,7 @@ def write_csv(path, rows: list[dict], keys) -> None:
 def chart(result: dict, path) -> None:
     """Four panels: map scores per design, shadow per scenario, hardware time per 360°
     view, and the smallest cylinder each design is sure to see versus distance."""
-    from .render import figure   # no pyplot: the caller's matplotlib backend stays as it is
+    from ..maps.render import figure   # no pyplot: the caller's matplotlib backend stays as it is
 
     recs = result["designs"]
     names = [r["design"] for r in recs]

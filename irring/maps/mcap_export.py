@@ -24,6 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..scenario import Cylinder
+from .metrics import box_corners
+
 FRAME = "map"
 ROBOT_FRAME = "base_link"
 
@@ -138,9 +141,6 @@ def _polygon(xy, t_ns: int) -> dict:
 
 
 def _obstacle_outline(ob) -> np.ndarray:
-    from .metrics import box_corners
-    from .scenario import Cylinder
-
     if isinstance(ob, Cylinder):
         a = np.linspace(0, 2 * np.pi, CYLINDER_SIDES, endpoint=False)
         return np.c_[ob.center_m[0] + ob.radius_m * np.cos(a),

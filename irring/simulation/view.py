@@ -21,7 +21,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from .scenario import Scenario
+from ..scenario import Scenario
 from .sim import SimRing
 
 BEAM_RGBA = (0.1, 0.85, 0.2, 1.0)      # a beam that returns: emitter → hit
