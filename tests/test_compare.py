@@ -125,7 +125,7 @@ def test_cli_compare_writes_table_csv_json_and_chart(tmp_path, capsys):
 
 
 def test_table_prints_the_shadow_of_one_scan_and_of_four_scans():
-    from irring import compare as compare_mod
+    from irring.studies import compare as compare_mod
 
     def rec(name, one, four):
         scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": 0.7}

@@ -177,7 +177,8 @@ def test_cli_geometry_json_has_the_contract_keys(capsys):
 def test_geometry_and_compare_agree_on_the_sonar_rings_blind_spot(capsys):
     import json
 
-    from irring import compare, designs
+    from irring import designs
+    from irring.studies import compare
     from irring.cli import main
 
     assert main(["geometry", "--design", "sonar12", "--json", "--samples", "1000",
