@@ -45,3 +45,37 @@ def test_grazing_walls_within_10_mm_and_three_times_better_than_theta_zero():
     rms, rms0 = (float(np.sqrt(np.mean(e[steep] ** 2))) for e in (err, err0))
     assert rms <= 0.010
     assert rms0 >= 3.0 * rms
+
+
+def test_line_members_sit_on_their_line_with_the_sigma_the_line_gives():
+    """snap_to_lines: on a noisy wall of our own (12 counts rms, ~15 mV) the members' end points move
+    onto the wall's line: ≥ 2× closer to the true hits than read on their own, never by
+    more than 3σ of their own reading, and their new σ is what the line knows (errors/σ
+    RMS between 0.5 and 1.6, where keeping the reading's own σ would overstate it: < 0.6)."""
+    import math
+
+    from _synthetic import make_sweep, stand_in_calibration
+    from irring.estimation.estimate import LineOptions, _estimate
+
+    cal = stand_in_calibration(noise_counts=12.0)
+    wall = [((-1.0, 0.36), (1.0, 0.36)), ((0.42, -1.0), (0.42, 1.0))]
+    z_own, z_line, e_own, e_line = [], [], [], []
+    for seed in range(4):
+        sweep, d_true, _ = make_sweep(cal, walls=wall, pose=(0.0, 0.0, 0.3 * seed),
+                                      noise_counts=12.0, seed=seed, quantize=True)
+        args = (sweep, cal, 20, math.radians(0.1), True, LineOptions())
+        own = _estimate(*args, keep_history=False, damping=True, detail=True, snap=False)
+        snapped = _estimate(*args, keep_history=False, damping=True, detail=True, snap=True)
+        p, q = own.points, snapped.points
+        on = p.valid & q.valid & (own.lines.label >= 0)
+        moved = on & (p.d != q.d)
+        assert moved.sum() > 100
+        assert np.all(np.abs(q.d - p.d)[moved] <= 3.0 * p.sigma_m[moved] + 1e-12)
+        assert np.all(q.sigma_m[moved] <= p.sigma_m[moved])
+        e_own.append((p.d - d_true)[moved])
+        e_line.append((q.d - d_true)[moved])
+        z_own.append(((q.d - d_true) / p.sigma_m)[moved])   # snapped, with its old σ
+        z_line.append(((q.d - d_true) / q.sigma_m)[moved])
+    rms = [float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for v in (e_own, e_line, z_own, z_line)]
+    assert rms[1] * 2.0 <= rms[0]
+    assert 0.5 <= rms[3] <= 1.6 and rms[2] < 0.6

@@ -68,7 +68,7 @@ def test_the_ideal_sensor_reads_exactly_and_maps_no_worse_than_the_noisy_one():
         errs[name] = np.sqrt(np.mean(np.concatenate(e) ** 2))
     # the ideal curve read with its own calibration: end points within float round-off
     assert errs["ideal"] < 1e-6
-    assert 0.003 < errs["noisy"] < 0.012
+    assert 0.0005 < errs["noisy"] < 0.012      # noise, and θ still to be found
     runs = {name: pipeline.run(sc, progress=False) for name, sc in
             (("ideal", ideal), ("noisy", noisy))}
     for key in ("occupied_f1", "occupied_precision", "occupied_recall", "free_accuracy"):

@@ -56,7 +56,7 @@ the θ = 0 distance over the incidences a round surface gives (sin θ uniform up
 drop-out angle): ≈ 17 / 39 / 63 mm at 0.2 / 0.4 / 0.6 m on the GP2D12 curve.
 
 End points: a reading that took θ from a line of ≥ 10 members is put where its beam meets
-that line (refitted to the members' final end points) when that lies within 2σ of its own
+that line (refitted to the members' final end points) when that lies within 3σ of its own
 distance (:func:`snap_to_lines`): the line averages its members' noise.
 
 Fold-over: with a calibration that folds (``peak_distance_m`` > 0) every reading may lie on
@@ -899,8 +899,9 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
 
 # --------------------------------------------------------------------------- end points on lines
 
-_SNAP_SIGMAS = 2.0   # a member moves onto its line if that is within 2σ of its distance …
+_SNAP_SIGMAS = 3.0   # a member moves onto its line if that is within 3σ of its distance …
 _SNAP_MIN = 10       # … and the line has at least 10 members (short lines are less sure)
+_SNAP_OWN = 0.5      # share of a member's own σ kept in its σ on the line
 
 
 def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Points:
@@ -908,10 +909,11 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
 
     ``member`` (S, N): the line each reading took θ from (−1: none). Each line is fitted
     (total least squares) to its valid members' final end points; a member's end point
-    moves along its beam to the line if that is within 2σ of its distance. The line
+    moves along its beam to the line if that is within 3σ of its distance. The line
     averages the noise of all its members, so a wall seen at 13 mm RMS per reading comes
     out a few mm thick; a reading the line does not explain keeps its own distance, and
-    none leaves [``min_range_m``, ``points.max_range_m``]."""
+    none leaves [``min_range_m``, ``points.max_range_m``]. A moved reading's σ is the
+    line's uncertainty where its beam meets it, with half its own σ added in quadrature."""
     on = (points.valid & (member >= 0)).reshape(-1).nonzero()[0]
     if on.size == 0:
         return points
@@ -927,6 +929,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
     alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v), np.bincount(g, u * u)
                              - np.bincount(g, v * v))
     nx, ny = -np.sin(alpha), np.cos(alpha)
+    along = u * np.cos(alpha).take(g) + v * np.sin(alpha).take(g)
     h = points.heading.reshape(-1).take(on)
     ch, sh = np.cos(h), np.sin(h)
     ngx, ngy = nx.take(g), ny.take(g)
@@ -942,8 +945,21 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
           & (t >= min_range_m) & (t <= points.max_range_m))
     if not ok.any():
         return points
+    # σ of a point on the line: the fitted line's own uncertainty where the beam meets it
+    # (its offset, rms²/n, and its angle, growing with the distance s from the centroid:
+    # rms²·s²/(n·var_along)), along the beam
+    var_perp = np.bincount(g, rel * rel) / nn
+    var_along = np.maximum(np.bincount(g, along * along) / nn, 1e-12)
+    perp2 = var_perp.take(g) / nn.take(g) * (1.0 + along * along / var_along.take(g))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sigma_line = np.sqrt(perp2) / np.abs(un)
     at, t = on[ok], t[ok]
-    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d")}
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "sigma_m")}
+    # plus half the reading's own σ: the line is a model, a wall's end or a slightly
+    # wrong θ moves a member off it (with none, 4 % of T-room members lie beyond 3σ)
+    own = points.sigma_m.reshape(-1)[at]
+    out["sigma_m"].reshape(-1)[at] = np.maximum(np.hypot(sigma_line[ok], _SNAP_OWN * own),
+                                                _SIGMA_FLOOR_M)
     out["d"].reshape(-1)[at] = t
     out["x"].reshape(-1)[at] = ox[ok] + t * ch[ok]
     out["y"].reshape(-1)[at] = oy[ok] + t * sh[ok]

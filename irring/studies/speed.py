@@ -83,7 +83,8 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
     import mujoco.batch
 
     from ..simulation import model as model_lib
-    from ..estimation.estimate import Calibration, estimate
+    from ..estimation.estimate import estimate
+    from ..pipeline import scene_calibration
     from ..maps.mapping import OccupancyGrid
     from ..simulation.sim import SimRing
 
@@ -104,7 +105,7 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
     pipe = timed_pipeline(scenario, tally)
     _, _, truth = sim.truth(pose_index)
     sweep = sim.sweep(pose_index)
-    cal = Calibration.for_sweep(sweep)
+    cal = scene_calibration(scenario)[0]   # as irring run reads the scene
     points = estimate(sweep, cal)
     grid = OccupancyGrid.for_scenario(scenario)
     chain_grid = OccupancyGrid.for_scenario(scenario)
