@@ -12,7 +12,7 @@ import sys
 
 # Subcommand modules, in the order `irring --help` lists them.
 COMMANDS = ("run", "replay", "view", "scenarios", "calibrate", "emulate", "drive", "geometry",
-            "compare", "bench")
+            "compare", "study", "bench")
 
 DESCRIPTION = """\
 irring: a MuJoCo testbed for the rotating infrared range-sensor ring of
@@ -51,11 +51,12 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from ..studies.executor import ExecutorError
     from ..scenario import ScenarioError
 
     try:
         return int(args.func(args) or 0)
-    except ScenarioError as exc:
+    except (ScenarioError, ExecutorError) as exc:
         print(f"irring: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -1,8 +1,10 @@
 """Scaling out: run independent jobs through a ``concurrent.futures`` executor.
 
-One function, :func:`run_jobs`, maps a picklable module-level function over picklable jobs
-on whichever executor it is given and returns the results in job order, so the caller's
-results do not depend on who ran them:
+:func:`stream` maps a picklable module-level function over picklable jobs on whichever
+executor it is given and yields each result as it finishes, with a bounded number in flight
+(what ``irring study`` writes row by row); :func:`run_jobs` collects them in job order, so the
+caller's results do not depend on who ran them. Every multi-run command (``irring study``,
+``compare``, ``bench accuracy``) runs on one of these executors:
 
 * ``executor(workers=1)``: in this process, one job after another (no pickling at all);
 * ``executor(workers=N)``: a local process pool of N workers (``forkserver`` start method on
@@ -23,9 +25,10 @@ be pickled), so the same job gives the same result in any process.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import multiprocessing
 import os
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterator, Sequence
 
 
@@ -54,6 +57,32 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+class ExecutorError(RuntimeError):
+    """An executor that cannot start (no Dask installed, scheduler unreachable): one line."""
+
+
+DASK_CONNECT_TIMEOUT_S = 3.0
+
+
+def dask_client(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S):
+    """A ``dask.distributed.Client`` connected to ``address``, or :class:`ExecutorError`
+    within about ``timeout_s`` seconds saying why not."""
+    try:
+        from dask.distributed import Client
+    except ImportError:  # pragma: no cover - depends on the install
+        raise ExecutorError("--dask needs the optional extra: pip install 'irring[dask]'") \
+            from None
+    try:
+        return Client(address, timeout=f"{timeout_s}s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        why = " ".join(str(exc).split()) or type(exc).__name__
+        if len(why) > 160:
+            why = why[:157] + "…"
+        raise ExecutorError(f"cannot reach the Dask scheduler at {address!r}: {why}; is "
+                            "`dask scheduler` running there, and is the address "
+                            "tcp://HOST:PORT?") from None
+
+
 @contextlib.contextmanager
 def executor(workers: int | None = 1, dask: str | Any | None = None) -> Iterator[Executor]:
     """An executor for :func:`run_jobs`, shut down on exit.
@@ -61,15 +90,11 @@ def executor(workers: int | None = 1, dask: str | Any | None = None) -> Iterator
     ``dask``: a scheduler address (``"tcp://…:8786"``) or a ``dask.distributed.Client``
     (used as is, not closed); it wins over ``workers``. Otherwise ``workers`` ≤ 1 runs in
     this process and ``workers`` > 1 starts a local process pool (None: one per CPU).
+    An unreachable scheduler raises :class:`ExecutorError` within a few seconds.
     """
     if dask is not None:
-        try:
-            from dask.distributed import Client
-        except ImportError as exc:  # pragma: no cover - depends on the install
-            raise RuntimeError("--dask needs the optional extra: pip install 'irring[dask]'") \
-                from exc
-        own = not isinstance(dask, Client)
-        client = Client(dask) if own else dask
+        own = isinstance(dask, str)
+        client = dask_client(dask) if own else dask
         try:
             yield client.get_executor()
         finally:
@@ -88,6 +113,52 @@ def executor(workers: int | None = 1, dask: str | Any | None = None) -> Iterator
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+def capacity(ex: Executor | None) -> int:
+    """How many jobs ``ex`` runs at once (1 in this process; a Dask cluster's threads)."""
+    if ex is None or isinstance(ex, SerialExecutor):
+        return 1
+    if isinstance(ex, ProcessPoolExecutor):
+        return int(ex._max_workers)
+    client = getattr(ex, "_client", None)   # dask.distributed's ClientExecutor
+    if client is not None:
+        try:
+            return max(1, sum(client.nthreads().values()))
+        except Exception:  # noqa: BLE001 - a guess for the window only
+            return 8
+    return default_workers()
+
+
+def stream(fn: Callable[[Any], Any], jobs: Sequence[Any], ex: Executor | None = None, *,
+           window: int | None = None) -> Iterator[tuple[int, Any]]:
+    """``(index, fn(jobs[index]))`` as each job finishes, on ``ex`` (default: this process).
+
+    At most ``window`` jobs are submitted and not yet collected (default: twice
+    :func:`capacity`), so memory does not grow with the number of jobs and a study that
+    is stopped loses only those. The first job that raises makes this raise, after
+    cancelling the jobs not yet started; so does closing the generator early.
+    """
+    if ex is None or isinstance(ex, SerialExecutor):  # one at a time, so progress moves
+        for i, job in enumerate(jobs):
+            yield i, fn(job)
+        return
+    window = max(1, window or 2 * capacity(ex))
+    pending: dict[Future, int] = {}
+    todo = iter(enumerate(jobs))
+    try:
+        while True:
+            for i, job in itertools.islice(todo, window - len(pending)):
+                pending[ex.submit(fn, job)] = i
+            if not pending:
+                return
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for f in sorted(finished, key=pending.get):
+                i = pending.pop(f)
+                yield i, f.result()
+    finally:
+        for f in pending:
+            f.cancel()
+
+
 def run_jobs(fn: Callable[[Any], Any], jobs: Sequence[Any], ex: Executor | None = None, *,
              progress: Callable[[Any], None] | None = None) -> list[Any]:
     """``[fn(job) for job in jobs]`` on ``ex`` (default: in this process), in job order.
@@ -96,23 +167,9 @@ def run_jobs(fn: Callable[[Any], Any], jobs: Sequence[Any], ex: Executor | None 
     Dask. ``progress(result)`` is called as each job finishes (in completion order). The
     first job that raises makes this raise, after cancelling the jobs not yet started.
     """
-    if ex is None or isinstance(ex, SerialExecutor):  # one at a time, so progress moves
-        results = []
-        for job in jobs:
-            results.append(fn(job))
-            if progress is not None:
-                progress(results[-1])
-        return results
-    futures = [ex.submit(fn, job) for job in jobs]
-    index = {f: i for i, f in enumerate(futures)}
-    results: list[Any] = [None] * len(futures)
-    try:
-        for f in as_completed(futures):
-            results[index[f]] = f.result()
-            if progress is not None:
-                progress(results[index[f]])
-    except BaseException:
-        for f in futures:
-            f.cancel()
-        raise
+    results: list[Any] = [None] * len(jobs)
+    for i, result in stream(fn, jobs, ex):
+        results[i] = result
+        if progress is not None:
+            progress(result)
     return results

@@ -1,0 +1,626 @@
+"""Design studies: a grid of designs × scenarios × seeds × knobs, run on any executor.
+
+A study file (YAML, :func:`load_study`) names the grid; :func:`run_study` runs every point
+through :func:`irring.studies.accuracy.run_job` (sweep every pose, estimate, map, score — the
+``irring run`` path, every design judged on the scenario's own ground truth) on the executor
+it is given, and appends one row per run to ``results.csv`` as each finishes (flushed, so a
+killed study loses only the runs in flight). ``resume=True`` skips the points already in the
+file. When every point is done the file is rewritten in grid order (:func:`grid`), so its
+rows do not depend on which run finished first; the timing columns (:data:`TIMING_COLUMNS`)
+are the only ones that differ between two runs of the same study. Then the summary: per
+configuration (design × knob values) the mean and spread of each score, and a chart of
+accuracy against hardware time with the Pareto front marked.
+
+Errors in a study file raise :class:`StudyError` (a ``ScenarioError``), one line naming the
+file, the key and what is allowed, as scenario files do.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import difflib
+import itertools
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from ..scenario import Scenario, ScenarioError
+
+# knob → (type, lowest, highest, what it sets); the scenario's value when the study has none
+KNOBS: Mapping[str, tuple[type, float, float, str]] = {
+    "step_stride": (int, 1, 64, "scan.step_stride: motor steps between readings"),
+    "samples": (int, 1, 64, "readings averaged per step (the averaging effect)"),
+    "settle_ms": (float, 0.0, 5000.0, "scan.settle_s in ms: wait at each step before reading"),
+}
+TOP_KEYS = ("designs", "scenarios", "seeds", "knobs")
+PARAMETRIC_KEYS = ("sensors", "radius_mm", "sweep_half_angle_deg", "step_deg")
+PARAMETRIC_OPTIONAL = ("sensor", "name")
+
+KEY_COLUMNS = ("design", "scenario", "step_stride", "samples", "settle_ms", "seed")
+DESIGN_COLUMNS = ("sensor", "sensors", "radius_mm", "sweep_half_angle_deg", "step_deg")
+SCORE_COLUMNS = ("occupied_precision", "occupied_recall", "occupied_f1", "free_accuracy",
+                 "coverage", "shadow", "range_rmse_m", "range_rmse_steep_m", "point_rmse_m",
+                 "valid_share")
+COST_COLUMNS = ("hardware_time_s", "hardware_time_total_s")
+TIMING_COLUMNS = ("compute_ms", "estimate_ms", "map_ms", "sim_ms", "run_s", "worker_peak_mb")
+META_COLUMNS = ("poses", "readings", "iterations_mean", "irring_version")
+COLUMNS = (KEY_COLUMNS + DESIGN_COLUMNS + SCORE_COLUMNS + COST_COLUMNS + TIMING_COLUMNS
+           + META_COLUMNS)
+RESULTS = "results.csv"
+
+
+_SEED_MAX = next(f.metadata["hi"] for f in dataclasses.fields(Scenario) if f.name == "seed")
+
+
+class StudyError(ScenarioError):
+    """A study file, or a results file, that cannot be used; one line naming the key."""
+
+
+# --------------------------------------------------------------------------- the study file
+
+
+@dataclass(frozen=True)
+class DesignSpec:
+    """One design of the grid: a named design, or a parametric ring."""
+
+    label: str
+    name: str | None = None            # a named design (designs.DESIGN_BY_NAME)
+    params: tuple = ()                 # parametric: ((key, value), …) in PARAMETRIC_KEYS order
+    sensor: str = "gp2d12"
+
+    def build(self):
+        """The :class:`irring.designs.Design` (a named one, or ``designs.parametric``)."""
+        from .. import designs
+
+        if self.name is not None:
+            return designs.get(self.name)
+        p = dict(self.params)
+        return designs.parametric(int(p["sensors"]), p["radius_mm"] / 1e3,
+                                  math.radians(p["sweep_half_angle_deg"]),
+                                  math.radians(p["step_deg"]), self.sensor, name=self.label)
+
+
+@dataclass(frozen=True)
+class Study:
+    """A parsed study file. ``seeds``: explicit seeds, or None for ``seed_count`` seeds
+    from each scenario's own (scenario.seed, +1, …)."""
+
+    designs: tuple[DesignSpec, ...]
+    scenarios: tuple[str, ...]
+    seeds: tuple[int, ...] | None = None
+    seed_count: int = 1
+    knobs: tuple[tuple[str, tuple], ...] = ()
+    source: str = ""
+
+
+def _fail(source: str, path: str, msg: str) -> StudyError:
+    where = f"{source}: " if source else ""
+    return StudyError(f"{where}{path or '<top>'}: {msg}")
+
+
+def _unknown(source: str, path: str, key: Any, allowed: Sequence[str]) -> StudyError:
+    match = difflib.get_close_matches(str(key), list(allowed), n=1)
+    hint = f" (did you mean `{match[0]}`?)" if match else ""
+    return _fail(source, f"{path}.{key}" if path else str(key),
+                 f"unknown key{hint}; allowed here: {', '.join(allowed)}")
+
+
+def _list(source: str, path: str, raw: Any, what: str) -> list:
+    if isinstance(raw, (str, int, float, Mapping)) and not isinstance(raw, bool):
+        raw = [raw]
+    if not isinstance(raw, list) or not raw:
+        raise _fail(source, path, f"expected a non-empty list of {what}, got {raw!r}")
+    return raw
+
+
+def _number(source: str, path: str, raw: Any, tp: type, lo: float, hi: float) -> float | int:
+    ok = isinstance(raw, (int, float)) and not isinstance(raw, bool)
+    if ok and tp is int and isinstance(raw, float):
+        ok = raw.is_integer()
+    span = f"{lo:g} … {hi:g}" if tp is float else f"{int(lo)} … {int(hi)}"
+    if not ok or not math.isfinite(raw):
+        kind = "an integer" if tp is int else "a number"
+        raise _fail(source, path, f"expected {kind} in {span}, got {raw!r}")
+    if not lo <= raw <= hi:
+        raise _fail(source, path, f"{raw!r} is out of range; allowed {span}")
+    return tp(raw)
+
+
+def _design(source: str, path: str, raw: Any) -> DesignSpec:
+    from .. import designs
+
+    if isinstance(raw, str):
+        if raw not in designs.DESIGN_BY_NAME:
+            raise _fail(source, path, f"{raw!r} is not a named design; choose one of: "
+                        f"{', '.join(designs.DESIGN_BY_NAME)}, or give a parametric ring "
+                        f"{{{', '.join(PARAMETRIC_KEYS)}}}")
+        return DesignSpec(raw, name=raw)
+    if not isinstance(raw, Mapping):
+        raise _fail(source, path, f"expected a design name or a mapping "
+                    f"{{{', '.join(PARAMETRIC_KEYS)}}}, got {raw!r}")
+    allowed = PARAMETRIC_KEYS + PARAMETRIC_OPTIONAL
+    for key in raw:
+        if key not in allowed:
+            raise _unknown(source, path, key, allowed)
+    for key in PARAMETRIC_KEYS:
+        if key not in raw:
+            raise _fail(source, f"{path}.{key}", "required key is missing")
+    limits = {"sensors": (int, 1, 64), "radius_mm": (float, 0.0, 1000.0),
+              "sweep_half_angle_deg": (float, 0.0, 180.0), "step_deg": (float, 0.01, 90.0)}
+    params = tuple((k, _number(source, f"{path}.{k}", raw[k], *limits[k]))
+                   for k in PARAMETRIC_KEYS)
+    sensor = raw.get("sensor", "gp2d12")
+    if sensor not in designs.SENSORS:
+        raise _fail(source, f"{path}.sensor", f"{sensor!r} is not allowed; choose one of: "
+                    f"{', '.join(designs.SENSORS)}")
+    p = dict(params)
+    label = raw.get("name") or (f"ring{p['sensors']}_r{p['radius_mm']:g}_"
+                                f"a{p['sweep_half_angle_deg']:g}_s{p['step_deg']:g}"
+                                + ("" if sensor == "gp2d12" else f"_{sensor}"))
+    if not isinstance(label, str) or not label.strip():
+        raise _fail(source, f"{path}.name", f"expected a non-empty text, got {label!r}")
+    spec = DesignSpec(str(label), params=params, sensor=sensor)
+    try:
+        spec.build()
+    except ValueError as exc:  # the ring's own bounds check, in the loader's words
+        raise _fail(source, path, str(exc)) from None
+    return spec
+
+
+def parse_study(raw: Any, source: str = "") -> Study:
+    """Validate a parsed study document (see the module doc); raises :class:`StudyError`."""
+    from ..scenario import load_scenario
+
+    if not isinstance(raw, Mapping):
+        raise _fail(source, "", "a study file must be a mapping with keys "
+                    + ", ".join(TOP_KEYS))
+    for key in raw:
+        if key not in TOP_KEYS:
+            raise _unknown(source, "", key, TOP_KEYS)
+    for key in ("designs", "scenarios"):
+        if key not in raw:
+            raise _fail(source, key, "required key is missing")
+    designs = tuple(_design(source, f"designs[{i}]", d)
+                    for i, d in enumerate(_list(source, "designs", raw["designs"], "designs")))
+    labels = [d.label for d in designs]
+    for i, label in enumerate(labels):
+        if label in labels[:i]:
+            raise _fail(source, f"designs[{i}]", f"design {label!r} is listed twice")
+    scenarios = []
+    for i, s in enumerate(_list(source, "scenarios", raw["scenarios"], "scenario names or paths")):
+        path = f"scenarios[{i}]"
+        if not isinstance(s, str):
+            raise _fail(source, path, f"expected a bundled scenario name or a YAML path, got {s!r}")
+        if not os.path.isabs(s) and source and not Path(s).exists() \
+                and (Path(source).parent / s).exists():
+            s = str(Path(source).parent / s)   # a path relative to the study file
+        try:
+            load_scenario(s)
+        except ScenarioError as exc:
+            raise _fail(source, path, str(exc)) from None
+        if s in scenarios:
+            raise _fail(source, path, f"scenario {s!r} is listed twice")
+        scenarios.append(s)
+    seeds, count = None, 1
+    raw_seeds = raw.get("seeds", 1)
+    if isinstance(raw_seeds, int) and not isinstance(raw_seeds, bool):
+        count = _number(source, "seeds", raw_seeds, int, 1, 100000)
+    else:
+        seeds = tuple(_number(source, f"seeds[{i}]", s, int, 0, _SEED_MAX)
+                      for i, s in enumerate(_list(source, "seeds", raw_seeds, "seeds")))
+        if len(set(seeds)) != len(seeds):
+            raise _fail(source, "seeds", f"a seed is listed twice: {list(seeds)}")
+    knobs_raw = raw.get("knobs") or {}
+    if not isinstance(knobs_raw, Mapping):
+        raise _fail(source, "knobs", f"expected a mapping of knob → list of values "
+                    f"({', '.join(KNOBS)}), got {knobs_raw!r}")
+    knobs = []
+    for key, values in knobs_raw.items():
+        if key not in KNOBS:
+            raise _unknown(source, "knobs", key, tuple(KNOBS))
+        tp, lo, hi, _ = KNOBS[key]
+        vals = tuple(_number(source, f"knobs.{key}[{i}]", v, tp, lo, hi)
+                     for i, v in enumerate(_list(source, f"knobs.{key}", values, "values")))
+        if len(set(vals)) != len(vals):
+            raise _fail(source, f"knobs.{key}", f"a value is listed twice: {list(vals)}")
+        knobs.append((key, vals))
+    return Study(designs, tuple(scenarios), seeds, count, tuple(knobs), source)
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and validate a study file; raises :class:`StudyError` naming the bad key."""
+    import yaml
+
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as exc:
+        raise StudyError(f"{path}: cannot read the study file: {exc.strerror or exc}") from None
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise StudyError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from None
+    return parse_study(raw, str(path))
+
+
+# --------------------------------------------------------------------------- the grid
+
+
+@dataclass(frozen=True)
+class Point:
+    """One run of the grid. ``key`` identifies it in results.csv (the KEY_COLUMNS as text)."""
+
+    design: DesignSpec
+    scenario: str
+    step_stride: int
+    samples: int
+    settle_ms: float
+    seed: int
+
+    @property
+    def key(self) -> tuple[str, ...]:
+        return (self.design.label, self.scenario, str(self.step_stride), str(self.samples),
+                repr(float(self.settle_ms)), str(self.seed))
+
+
+def grid(study: Study) -> list[Point]:
+    """Every point in grid order: designs, then scenarios, then knob values (in the file's
+    order, last fastest), then seeds. Knobs the study leaves out take the scenario's values."""
+    from ..scenario import load_scenario
+
+    names = [k for k, _ in study.knobs]
+    combos = list(itertools.product(*[v for _, v in study.knobs]))
+    out = []
+    for d in study.designs:
+        for s in study.scenarios:
+            sc = load_scenario(s)
+            own = {"step_stride": sc.scan.step_stride, "samples": sc.samples_per_step,
+                   "settle_ms": sc.scan.settle_s * 1e3}
+            seeds = study.seeds or tuple(sc.seed + k for k in range(study.seed_count))
+            for combo in combos:
+                k = {**own, **dict(zip(names, combo))}
+                out += [Point(d, s, int(k["step_stride"]), int(k["samples"]),
+                              float(k["settle_ms"]), int(seed)) for seed in seeds]
+    return out
+
+
+@dataclass(frozen=True)
+class Task:
+    """What a worker gets for one point: the scenario as YAML text (no files needed)."""
+
+    point: Point
+    scenario_yaml: str
+    scenario_source: str
+
+
+def tasks_for(points: Iterable[Point]) -> list[Task]:
+    from ..pipeline import scenario_text
+    from ..scenario import load_scenario
+
+    texts: dict[str, tuple[str, str]] = {}
+    out = []
+    for p in points:
+        if p.scenario not in texts:
+            sc = load_scenario(p.scenario)
+            texts[p.scenario] = (scenario_text(sc), sc.source)
+        out.append(Task(p, *texts[p.scenario]))
+    return out
+
+
+_VERSION: str | None = None
+
+
+def _version() -> str:
+    global _VERSION
+    if _VERSION is None:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            _VERSION = version("irring")
+        except PackageNotFoundError:  # pragma: no cover - running from a bare checkout
+            _VERSION = "unknown"
+    return _VERSION
+
+
+def _peak_mb() -> float:
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not on POSIX
+        return float("nan")
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # KiB on Linux
+
+
+def run_point(task: Task) -> dict:
+    """One run of the grid (module level, so any executor can ship it): the row for
+    results.csv, every column of :data:`COLUMNS`."""
+    import time
+
+    from . import accuracy
+
+    t0 = time.perf_counter()
+    p = task.point
+    design = p.design.build()
+    cfg = accuracy.Config("study", p.design.label, step_stride=p.step_stride,
+                          samples=p.samples, settle_s=p.settle_ms / 1e3, design=design)
+    r = accuracy.run_job(accuracy.Job(task.scenario_yaml, task.scenario_source, cfg, p.seed))
+    ring = design.ring
+    row = dict(zip(KEY_COLUMNS, (p.design.label, p.scenario, p.step_stride, p.samples,
+                                 float(p.settle_ms), p.seed)))
+    row.update(sensor=design.sensor.kind, sensors=ring.sensors,
+               radius_mm=ring.radius_m * 1e3,
+               sweep_half_angle_deg=math.degrees(max(abs(ring.min_step), abs(ring.max_step))
+                                                 * ring.motor_step_rad * ring.gear),
+               step_deg=math.degrees(ring.motor_step_rad * ring.gear))
+    row.update({k: r.get(k) for k in SCORE_COLUMNS + COST_COLUMNS})
+    row.update({k: r[k] for k in ("compute_ms", "estimate_ms", "map_ms", "sim_ms",
+                                  "poses", "readings", "iterations_mean")})
+    row["run_s"] = time.perf_counter() - t0
+    row["worker_peak_mb"] = _peak_mb()
+    row["irring_version"] = _version()
+    return {k: row[k] for k in COLUMNS}
+
+
+# --------------------------------------------------------------------------- results.csv
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return repr(v)   # round-trips exactly
+    return str(v)
+
+
+def read_results(path: str | Path, *, repair: bool = False) -> list[dict[str, str]]:
+    """The rows of a results.csv as text. A last line cut short by a kill is dropped (and,
+    with ``repair``, cut from the file). Raises :class:`StudyError` if the columns are not
+    this version's."""
+    p = Path(path)
+    data = p.read_bytes()
+    if data and not data.endswith(b"\n"):
+        data = data[: data.rfind(b"\n") + 1]
+        if repair:
+            with open(p, "r+b") as fh:
+                fh.truncate(len(data))
+    lines = data.decode().splitlines()
+    if not lines:
+        return []
+    reader = csv.reader(lines)
+    header = tuple(next(reader))
+    if header != COLUMNS:
+        raise StudyError(f"{p}: its columns are not the ones this irring writes ({len(header)} "
+                         f"columns, expected {len(COLUMNS)}: {', '.join(COLUMNS[:6])}, …); "
+                         "choose another --out, or move the file away to start afresh")
+    rows = []
+    for i, cells in enumerate(reader, start=2):
+        if len(cells) != len(COLUMNS):
+            raise StudyError(f"{p}: line {i} has {len(cells)} cells, expected {len(COLUMNS)}; "
+                             "the file was edited or damaged")
+        rows.append(dict(zip(COLUMNS, cells)))
+    return rows
+
+
+def row_key(row: Mapping[str, Any]) -> tuple[str, ...]:
+    """A row's grid point as text (the same as :attr:`Point.key`)."""
+    return (str(row["design"]), str(row["scenario"]), str(row["step_stride"]),
+            str(row["samples"]), repr(float(row["settle_ms"])), str(row["seed"]))
+
+
+def _write_sorted(path: Path, rows: list[dict[str, str]]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(COLUMNS)
+        for r in rows:
+            w.writerow([r[k] for k in COLUMNS])
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def _write_parquet(csv_path: Path) -> Path | None:
+    """results.parquet beside results.csv, if pyarrow is installed (columns typed)."""
+    try:
+        import pyarrow.csv as pa_csv
+        import pyarrow.parquet as pq
+    except ImportError:
+        return None
+    out = csv_path.with_suffix(".parquet")
+    pq.write_table(pa_csv.read_csv(csv_path), out)
+    return out
+
+
+# --------------------------------------------------------------------------- running
+
+
+def run_study(study: Study | Sequence[Point], out_dir: str | Path, ex=None, *,
+              resume: bool = False, progress: Callable[[dict], None] | None = None,
+              on_start: Callable[[int, int], None] | None = None) -> dict:
+    """Run every point not yet in ``out_dir/results.csv``, appending each row as it finishes,
+    then rewrite the file in grid order and write the summary (:func:`write_summary`).
+
+    ``ex``: a ``concurrent.futures`` executor (default: this process). An existing file with
+    rows is an error unless ``resume``. ``on_start(done, todo)`` is told the counts before the
+    first run; ``progress(row)`` after each. Returns ``{"rows": [...], "done_before": n,
+    "ran": m, "paths": {...}}``; rows are text, in grid order.
+    """
+    from .executor import stream
+
+    points = grid(study) if isinstance(study, Study) else list(study)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / RESULTS
+    existing = read_results(path, repair=resume) if path.exists() else []
+    if existing and not resume:
+        raise StudyError(f"{path}: already holds {len(existing)} run(s); pass --resume to run "
+                         "only the missing ones, or choose another --out")
+    done = {row_key(r) for r in existing}
+    todo = [p for p in points if p.key not in done]
+    if on_start is not None:
+        on_start(len(points) - len(todo), len(todo))
+    new_file = not existing
+    with open(path, "w" if new_file else "a", newline="") as fh:
+        w = csv.writer(fh)
+        if new_file:
+            w.writerow(COLUMNS)
+            fh.flush()
+        for _, row in stream(run_point, tasks_for(todo), ex):
+            w.writerow([_cell(row[k]) for k in COLUMNS])
+            fh.flush()   # a killed study keeps every finished row
+            if progress is not None:
+                progress(row)
+    rows = read_results(path)
+    order = {p.key: i for i, p in enumerate(points)}
+    # grid order; rows of points no longer in the study are kept, after the grid's
+    rows.sort(key=lambda r: order.get(row_key(r), len(order)))
+    _write_sorted(path, rows)
+    paths = {"results": str(path)}
+    pq = _write_parquet(path)
+    if pq is not None:
+        paths["parquet"] = str(pq)
+    in_grid = [r for r in rows if row_key(r) in order]
+    paths.update(write_summary(in_grid, out, [k for k, _ in getattr(study, "knobs", ())]))
+    return {"rows": rows, "done_before": len(points) - len(todo), "ran": len(todo),
+            "paths": paths}
+
+
+# --------------------------------------------------------------------------- summary
+
+SUMMARY_SCORES = ("occupied_f1", "occupied_precision", "occupied_recall", "free_accuracy",
+                  "coverage", "shadow", "range_rmse_m", "point_rmse_m", "valid_share")
+
+
+def _num(v: str) -> float | None:
+    return float(v) if v not in ("", None) else None
+
+
+def summarise(rows: Sequence[Mapping[str, str]], by: Sequence[str] = ("design",)) -> list[dict]:
+    """One record per configuration (the values of ``by``; rows in grid order): ``runs``,
+    per score the mean (``<score>``) and sample standard deviation (``<score>_std``) over the
+    runs where it is defined, ``hardware_time_s`` (mean), ``compute_ms`` (median), and the
+    Pareto flags of :func:`irring.studies.accuracy.mark_pareto`."""
+    from .accuracy import mark_pareto
+
+    groups: dict[tuple, list[Mapping[str, str]]] = {}
+    for r in rows:
+        groups.setdefault(tuple(r[k] for k in by), []).append(r)
+    out = []
+    for key, mine in groups.items():
+        rec: dict[str, Any] = dict(zip(by, key))
+        rec["runs"] = len(mine)
+        rec["scenarios"] = sorted({r["scenario"] for r in mine})
+        for k in SUMMARY_SCORES:
+            vals = np.array([v for v in (_num(r[k]) for r in mine) if v is not None])
+            rec[k] = float(vals.mean()) if vals.size else None
+            rec[f"{k}_std"] = float(vals.std(ddof=1)) if vals.size > 1 else (
+                0.0 if vals.size else None)
+        rec["hardware_time_s"] = float(np.mean([float(r["hardware_time_s"]) for r in mine]))
+        rec["compute_ms"] = float(np.median([float(r["compute_ms"]) for r in mine]))
+        rec["dynamics"] = False
+        out.append(rec)
+    mark_pareto(out)
+    return out
+
+
+def _label(rec: Mapping[str, Any], by: Sequence[str]) -> str:
+    short = {"step_stride": "stride", "samples": "samples", "settle_ms": "settle"}
+    parts = [str(rec["design"])] + [f"{short[k]} {rec[k]}" for k in by if k != "design"]
+    return ", ".join(parts)
+
+
+def table(records: Sequence[Mapping[str, Any]], by: Sequence[str] = ("design",)) -> str:
+    """Plain-text summary: per configuration the mean ± spread of the main scores."""
+    head = ["configuration", "runs", "F1 occ", "coverage", "free acc", "shadow", "RMSE mm",
+            "hardware", "compute", "front"]
+    rows = [head]
+
+    def pm(r, k, scale=1.0, digits=3):
+        m, s = r[k], r[f"{k}_std"]
+        return "—" if m is None else f"{m * scale:.{digits}f} ± {s * scale:.{digits}f}"
+
+    for r in records:
+        front = [m for m in ("f1", "cov", "rmse") if r.get(f"front_hw_{m}")]
+        rows.append([_label(r, by), str(r["runs"]), pm(r, "occupied_f1"), pm(r, "coverage"),
+                     pm(r, "free_accuracy"), pm(r, "shadow"), pm(r, "range_rmse_m", 1e3, 1),
+                     f"{r['hardware_time_s']:.2f} s", f"{r['compute_ms']:.2f} ms",
+                     ",".join(front) or "·"])
+    widths = [max(len(row[i]) for row in rows) for i in range(len(head))]
+    lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in
+                       enumerate(zip(row, widths))) for row in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
+          by: Sequence[str] = ("design",)) -> None:
+    """Occupied F1 and coverage against hardware time per 360° view (log scale), one point
+    per configuration with its spread over runs (±1 sd), the Pareto front drawn as a
+    staircase and its points ringed. Drawn with the Agg canvas directly: the caller's
+    matplotlib backend is left alone."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 5.2))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 2)
+    for ax, (metric, title) in zip(axes, (("f1", "occupied F1"), ("cov", "coverage"))):
+        key = {"f1": "occupied_f1", "cov": "coverage"}[metric]
+        recs = [r for r in records if r[key] is not None]
+        for i, r in enumerate(recs):
+            ax.errorbar(r["hardware_time_s"], r[key], yerr=r[f"{key}_std"], fmt="o",
+                        color=f"C{i % 10}", capsize=3, label=_label(r, by))
+        front = sorted((r for r in recs if r.get(f"front_hw_{metric}")),
+                       key=lambda r: r["hardware_time_s"])
+        if front:
+            xs = [r["hardware_time_s"] for r in front]
+            ys = [r[key] for r in front]
+            ax.step(xs + [max(r["hardware_time_s"] for r in recs) * 1.5], ys + [ys[-1]],
+                    where="post", color="0.35", lw=1.5, ls="--", zorder=0,
+                    label="Pareto front")
+            ax.scatter(xs, ys, s=180, facecolors="none", edgecolors="k", lw=1.5, zorder=3)
+        ax.set_xscale("log")
+        ax.set_xlabel("hardware time per 360° view (s, log scale)")
+        ax.set_ylabel(f"{title} (mean ± 1 sd over runs)")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3, which="both")
+        ax.set_title(f"{title} against hardware time; ringed: on the Pareto front", fontsize=9)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="center right", fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0, 0.78, 1))
+    fig.savefig(path, dpi=100)
+
+
+SUMMARY_CSV_KEYS = ("runs", "hardware_time_s", "compute_ms") + tuple(
+    c for k in SUMMARY_SCORES for c in (k, f"{k}_std")) + (
+    "front_hw_f1", "front_hw_cov", "front_hw_rmse")
+
+
+def write_summary(rows: Sequence[Mapping[str, str]], out_dir: str | Path,
+                  knobs: Sequence[str] = ()) -> dict[str, str]:
+    """summary.csv and summary.json (one record per configuration: design and the knobs
+    the study varies) and study.png (the chart) in ``out_dir``."""
+    from .compare import write_csv
+
+    out = Path(out_dir)
+    by = ("design",) + tuple(knobs)
+    records = summarise(rows, by)
+    paths = {"summary_csv": out / "summary.csv", "summary_json": out / "summary.json",
+             "chart": out / "study.png"}
+    write_csv(paths["summary_csv"], records, by + SUMMARY_CSV_KEYS)
+    paths["summary_json"].write_text(json.dumps({"by": list(by), "configurations": records},
+                                                indent=2))
+    chart(records, paths["chart"], by)
+    return {k: str(v) for k, v in paths.items()}
+
+
+def summary_records(out_dir: str | Path) -> tuple[list[str], list[dict]]:
+    """(by, records) from a written summary.json."""
+    data = json.loads((Path(out_dir) / "summary.json").read_text())
+    return data["by"], data["configurations"]
+

@@ -1,0 +1,296 @@
+"""`irring study`: the grid, its file's errors, identical rows on every executor, resuming
+after a kill, and the summary."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from irring.studies import executor, study
+from irring.cli import main
+
+# A room of our own: an L-shaped room (x ≠ y everywhere), one post, one pose off-centre.
+ROOM = """\
+name: l_room_post
+seed: 7
+room:
+  outline_mm: [[0, 0], [1300, 0], [1300, 700], [600, 700], [600, 1100], [0, 1100]]
+obstacles:
+  - {type: cylinder, center_mm: [980, 260], radius_mm: 30}
+robot:
+  design: rotating12
+  poses:
+    - {x_mm: 720, y_mm: 380, yaw_deg: 10}
+sensor: {model: gp2d12, max_range_mm: 624}
+effects:
+  incidence: {}
+  noise: {sigma_v: 0.012}
+  quantization: {}
+map: {resolution_mm: 10}
+"""
+
+STUDY = """\
+designs: [rotating12, {sensors: 7, radius_mm: 110, sweep_half_angle_deg: 30, step_deg: 2.16}]
+scenarios: [l_room_post.yaml]
+seeds: [3, 11]
+knobs: {step_stride: [1, 3]}
+"""
+
+
+def write(tmp: Path, text: str = STUDY, name: str = "s.yaml") -> Path:
+    (tmp / "l_room_post.yaml").write_text(ROOM)
+    p = tmp / name
+    p.write_text(text)
+    return p
+
+
+def deterministic(rows) -> list[tuple]:
+    """Rows without the columns that time this machine."""
+    keep = [c for c in study.COLUMNS if c not in study.TIMING_COLUMNS]
+    return [tuple(r[c] for c in keep) for r in rows]
+
+
+# --------------------------------------------------------------------------- the grid
+
+
+def test_grid_is_every_combination_in_grid_order(tmp_path):
+    s = study.load_study(write(tmp_path))
+    points = study.grid(s)
+    assert len(points) == 2 * 1 * 2 * 2
+    assert [(p.design.label, p.step_stride, p.seed) for p in points] == [
+        ("rotating12", 1, 3), ("rotating12", 1, 11), ("rotating12", 3, 3), ("rotating12", 3, 11),
+        ("ring7_r110_a30_s2.16", 1, 3), ("ring7_r110_a30_s2.16", 1, 11),
+        ("ring7_r110_a30_s2.16", 3, 3), ("ring7_r110_a30_s2.16", 3, 11)]
+    # knobs the study leaves out keep the scenario's values; the path is the study file's
+    assert {(p.samples, p.settle_ms) for p in points} == {(1, 0.0)}
+    assert points[0].scenario == str(tmp_path / "l_room_post.yaml")
+    assert len({p.key for p in points}) == len(points)
+
+
+def test_a_seed_count_counts_from_each_scenarios_own_seed(tmp_path):
+    s = study.load_study(write(tmp_path, "designs: [radial12]\nscenarios: [l_room_post.yaml, "
+                                          "t_room]\nseeds: 3\n"))
+    assert [(Path(p.scenario).stem, p.seed) for p in study.grid(s)] == [
+        ("l_room_post", 7), ("l_room_post", 8), ("l_room_post", 9),
+        ("t_room", 1), ("t_room", 2), ("t_room", 3)]
+
+
+def test_a_parametric_design_is_the_ring_it_names(tmp_path):
+    s = study.load_study(write(tmp_path))
+    d = s.designs[1].build()
+    assert d.ring.sensors == 7
+    assert d.ring.radius_m == pytest.approx(0.110)
+    assert d.ring.motor_step_rad * d.ring.gear == pytest.approx(math.radians(2.16))
+    assert (d.ring.min_step, d.ring.max_step) == (-14, 14)      # 30° / 2.16° = 13.9 → 14 steps
+
+
+# --------------------------------------------------------------------------- file errors
+
+BAD = [
+    ("designs: [rotating12]\nscenarios: [t_room]\nseed: [1]\n",
+     r"s\.yaml: seed: unknown key \(did you mean `seeds`\?\); allowed here: designs, "
+     r"scenarios, seeds, knobs"),
+    ("scenarios: [t_room]\n", r"s\.yaml: designs: required key is missing"),
+    ("designs: [rotating13]\nscenarios: [t_room]\n",
+     r"designs\[0\]: 'rotating13' is not a named design; choose one of: rotating12, radial12"),
+    ("designs: [{sensors: 8, radius_mm: 120, step_deg: 1}]\nscenarios: [t_room]\n",
+     r"designs\[0\]\.sweep_half_angle_deg: required key is missing"),
+    ("designs: [{sensors: 8, radius_mm: 1200, sweep_half_angle_deg: 40, step_deg: 1}]\n"
+     "scenarios: [t_room]\n", r"designs\[0\]\.radius_mm: 1200 is out of range; allowed 0 … 1000"),
+    ("designs: [{sensors: 8.5, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1}]\n"
+     "scenarios: [t_room]\n", r"designs\[0\]\.sensors: expected an integer in 1 … 64, got 8\.5"),
+    ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, "
+     "sensor: lidar}]\nscenarios: [t_room]\n",
+     r"designs\[0\]\.sensor: 'lidar' is not allowed; choose one of: gp2d12"),
+    ("designs: [radial12, radial12]\nscenarios: [t_room]\n",
+     r"designs\[1\]: design 'radial12' is listed twice"),
+    ("designs: [radial12]\nscenarios: [no_such_room]\n",
+     r"scenarios\[0\]: no_such_room: no such file and no bundled scenario"),
+    ("designs: [radial12]\nscenarios: [t_room]\nseeds: [1, -2]\n",
+     r"seeds\[1\]: -2 is out of range; allowed 0 … 9223372036854775807"),
+    ("designs: [radial12]\nscenarios: [t_room]\nknobs: {stride: [1, 2]}\n",
+     r"knobs\.stride: unknown key \(did you mean `step_stride`\?\); allowed here: step_stride, "
+     r"samples, settle_ms"),
+    ("designs: [radial12]\nscenarios: [t_room]\nknobs: {samples: [1, 65]}\n",
+     r"knobs\.samples\[1\]: 65 is out of range; allowed 1 … 64"),
+    ("designs: [radial12]\nscenarios: [t_room]\nknobs: {settle_ms: [0, fast]}\n",
+     r"knobs\.settle_ms\[1\]: expected a number in 0 … 5000, got 'fast'"),
+    ("designs: []\nscenarios: [t_room]\n", r"designs: expected a non-empty list of designs"),
+    ("- rotating12\n", r"<top>: a study file must be a mapping"),
+    ("designs: [radial12\n", r"s\.yaml: not valid YAML"),
+]
+
+
+@pytest.mark.parametrize("text, message", BAD)
+def test_a_bad_study_file_is_one_line_naming_the_key(tmp_path, capsys, text, message):
+    p = write(tmp_path, text)
+    with pytest.raises(study.StudyError, match=message):
+        study.load_study(p)
+    assert main(["study", str(p), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("irring: error: ") and err.count("\n") == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_existing_results_file_is_kept_unless_resumed(tmp_path):
+    p = write(tmp_path, "designs: [radial12]\nscenarios: [l_room_post.yaml]\n")
+    out = tmp_path / "out"
+    study.run_study(study.load_study(p), out)
+    before = (out / study.RESULTS).read_text()
+    with pytest.raises(study.StudyError, match=r"already holds 1 run\(s\); pass --resume"):
+        study.run_study(study.load_study(p), out)
+    assert (out / study.RESULTS).read_text() == before
+    (out / study.RESULTS).write_text("design,scenario,seed\nradial12,x,1\n")
+    with pytest.raises(study.StudyError, match=r"its columns are not the ones"):
+        study.run_study(study.load_study(p), out, resume=True)
+
+
+# --------------------------------------------------------------------------- executors
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> tuple[Path, list[dict]]:
+    """The small study run in this process: the reference rows."""
+    tmp = tmp_path_factory.mktemp("study")
+    p = write(tmp)
+    result = study.run_study(study.load_study(p), tmp / "serial")
+    return p, result["rows"]
+
+
+def test_rows_are_runs_in_grid_order_with_every_score(small):
+    p, rows = small
+    assert [study.row_key(r) for r in rows] == [pt.key for pt in study.grid(study.load_study(p))]
+    r = rows[0]
+    assert float(r["hardware_time_s"]) == pytest.approx(71 * 0.0383)
+    assert float(rows[2]["hardware_time_s"]) == pytest.approx(24 * 0.0383)   # stride 3: 24 stops
+    for k in study.SCORE_COLUMNS:
+        assert r[k] != "", k
+    assert 0.8 < float(r["occupied_f1"]) <= 1.0
+    assert r["irring_version"] and float(r["compute_ms"]) > 0
+    # a seed changes the noise and so the scores
+    assert rows[0]["range_rmse_m"] != rows[1]["range_rmse_m"]
+
+
+def test_process_pool_and_dask_give_the_serial_rows(small, tmp_path):
+    p, serial = small
+    with executor.executor(workers=2) as ex:
+        pool = study.run_study(study.load_study(p), tmp_path / "pool", ex)["rows"]
+    assert deterministic(pool) == deterministic(serial)
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, \
+            executor.executor(dask=cluster.scheduler_address) as ex:
+        dask_rows = study.run_study(study.load_study(p), tmp_path / "dask", ex)["rows"]
+    assert deterministic(dask_rows) == deterministic(serial)
+
+
+def test_a_killed_study_resumes_to_the_uninterrupted_rows(small, tmp_path):
+    p, serial = small
+    out = tmp_path / "out"
+    results = out / study.RESULTS
+    cmd = [sys.executable, "-m", "irring", "study", str(p), "--out", str(out), "--workers", "1"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if results.exists() and results.read_text().count("\n") >= 1 + 3:
+                break
+            time.sleep(0.01)
+        assert proc.poll() is None, "the study finished before it could be killed"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    kept = study.read_results(results)
+    assert 3 <= len(kept) < len(serial)
+    # a row being written when the kill came: cut short, dropped on resume
+    with open(results, "a") as fh:
+        fh.write("rotating12,half a row")
+    assert main(["study", str(p), "--out", str(out), "--resume", "--workers", "1"]) == 0
+    final = study.read_results(results)
+    assert deterministic(final) == deterministic(serial)
+    assert [r["compute_ms"] for r in final if study.row_key(r) in
+            {study.row_key(k) for k in kept}] == [r["compute_ms"] for r in kept]
+
+
+def test_an_unreachable_scheduler_is_one_line_within_seconds():
+    import socket
+
+    pytest.importorskip("dask.distributed")
+    with socket.socket() as s:                      # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    t0 = time.monotonic()
+    with pytest.raises(executor.ExecutorError,
+                       match=rf"cannot reach the Dask scheduler at 'tcp://127.0.0.1:{port}'"):
+        with executor.executor(dask=f"tcp://127.0.0.1:{port}"):
+            pass
+    assert time.monotonic() - t0 < 20          # Dask's own default waits 30 s
+
+
+class _Recording(executor.Executor):
+    """Runs each job at submit, like a pool whose workers are instant, and counts submits."""
+
+    def __init__(self):
+        self.submitted = 0
+
+    def submit(self, fn, /, *args):
+        from concurrent.futures import Future
+
+        self.submitted += 1
+        f = Future()
+        f.set_result(fn(*args))
+        return f
+
+
+def test_stream_keeps_a_bounded_window_and_run_jobs_the_job_order():
+    ex = _Recording()
+    ahead = []
+    for n, (i, r) in enumerate(executor.stream(abs, list(range(-10, 0)), ex, window=3)):
+        assert r == abs(i - 10)
+        ahead.append(ex.submitted - n)
+    assert ex.submitted == 10 and max(ahead) == 3       # never more than 3 uncollected
+    assert executor.run_jobs(abs, [-3, 1, -2], _Recording()) == [3, 1, 2]
+
+
+# --------------------------------------------------------------------------- summary
+
+
+def _row(design: str, f1: float, hw: float, seed: int) -> dict:
+    r = {c: "" for c in study.COLUMNS}
+    r.update(design=design, scenario="x", step_stride="1", samples="1", settle_ms="0.0",
+             seed=str(seed), occupied_f1=repr(f1), coverage=repr(f1 / 2),
+             hardware_time_s=repr(hw), compute_ms="1.0", valid_share="0.9",
+             range_rmse_m="0.01")
+    return r
+
+
+def test_summary_is_mean_and_sd_per_design_with_the_pareto_front(tmp_path):
+    rows = [_row("slow_good", 0.9, 3.0, 1), _row("slow_good", 0.7, 3.0, 2),
+            _row("fast_bad", 0.3, 0.5, 1), _row("fast_bad", 0.4, 0.5, 2),
+            _row("dominated", 0.5, 4.0, 1), _row("dominated", 0.6, 4.0, 2)]
+    recs = {r["design"]: r for r in study.summarise(rows)}
+    assert recs["slow_good"]["occupied_f1"] == pytest.approx(0.8)
+    assert recs["slow_good"]["occupied_f1_std"] == pytest.approx(math.sqrt(0.02))
+    assert recs["fast_bad"]["coverage"] == pytest.approx(0.175)
+    assert recs["slow_good"]["shadow"] is None                  # no shadow in any run
+    assert [n for n, r in recs.items() if r["front_hw_f1"]] == ["slow_good", "fast_bad"]
+
+
+def test_the_chart_leaves_the_users_backend_alone(tmp_path):
+    import matplotlib
+
+    matplotlib.use("svg")
+    recs = study.summarise([_row("a", 0.9, 3.0, 1), _row("b", 0.3, 0.5, 1)])
+    study.chart(recs, tmp_path / "c.png")
+    assert matplotlib.get_backend() == "svg"
+    assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
