@@ -16,7 +16,8 @@ what it measures, per design (mean over scenarios × seeds):
                       ground truth (the scene as written, with its own design's reach);
                       shadow = share of the wall behind thin posts that the map shows
   hardware_time_s     seconds the real device needs for one 360° view at one pose
-  compute_time_s      simulate + estimate + map per view on this machine (median)
+  compute_time_s      simulate + estimate + map per view on this machine (median; the
+                      estimator's and mapper's CPU time, the simulator's wall time)
   min_detectable_radius_m
                       smallest cylinder seen at every bearing, per distance from the
                       robot centre (rays read from each design's built MuJoCo model)
@@ -33,6 +34,7 @@ examples:
   irring compare                                        every design, the three T-rooms, 3 seeds
   irring compare --scenario t_room_cylinder --design rotating12 --design radial12
   irring compare --seeds 1 --json > designs.json
+  irring compare --dask tcp://scheduler:8786            the same runs on a Dask cluster
 """
 
 
@@ -62,21 +64,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bearings", type=at_least(8), default=180, metavar="N",
                    help="cylinder bearings tried per distance, over one symmetry period of "
                         "the design (≥ 8; default: 180)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=at_least(1), default=None, metavar="N",
+                       help="local worker processes (≥ 1; default: one per CPU; 1 = in this "
+                            "process)")
+    where.add_argument("--dask", metavar="ADDRESS", default=None,
+                       help="run on the Dask cluster whose scheduler is at ADDRESS "
+                            "(tcp://host:8786); needs pip install 'irring[dask]'")
     p.add_argument("--json", action="store_true",
                    help="print one JSON record per design instead of the table")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies import compare
     from .. import designs
-    scenarios = args.scenario or list(DEFAULT_SCENARIOS)
-    names = args.design or list(designs.DESIGN_BY_NAME)
+    from ..studies import compare
+    from ..studies.executor import executor
     from ..pipeline import progress_enabled
 
-    result = compare.compare(scenarios, names, args.seeds, detection_distances_m=args.distances_mm,
-                             bearings=args.bearings,
-                             progress=progress_enabled() and not args.json)
+    scenarios = args.scenario or list(DEFAULT_SCENARIOS)
+    names = args.design or list(designs.DESIGN_BY_NAME)
+    with executor(args.workers, args.dask) as ex:
+        result = compare.compare(scenarios, names, args.seeds,
+                                 detection_distances_m=args.distances_mm, bearings=args.bearings,
+                                 progress=progress_enabled() and not args.json, ex=ex)
     paths = compare.write_outputs(result, args.out)
     if args.json:
         print(json.dumps(result["designs"], indent=2))

@@ -197,12 +197,15 @@ def apply(scenario, cfg: Config):
 
 @dataclass(frozen=True)
 class Job:
-    """One run: everything a worker needs, picklable (the scenario travels as YAML text)."""
+    """One run: everything a worker needs, picklable (the scenario travels as YAML text).
+    ``scenario``: a Scenario object instead of the text, for a run in this process only
+    (a scenario made in code has no file; its ground truth is not cached)."""
 
-    scenario_yaml: str
+    scenario_yaml: str | None
     scenario_source: str
     config: Config
     seed: int
+    scenario: Any = None
 
 
 _TRUTH_CACHE: dict[tuple, Any] = {}   # per process: the reference's GroundTruth per grid
@@ -244,7 +247,8 @@ def run_job(job: Job) -> dict:
     from ..maps.mapping import OccupancyGrid
     from ..scenario import loads
 
-    base = loads(job.scenario_yaml, source=job.scenario_source)
+    base = job.scenario if job.scenario is not None else \
+        loads(job.scenario_yaml, source=job.scenario_source)
     cfg = job.config
     sc = apply(base, cfg)
     sim_s: dict[str, float] = {}
@@ -260,7 +264,8 @@ def run_job(job: Job) -> dict:
                                  progress=False, estimator=estimator)
     # every configuration is judged on the default design's ground truth, on its own cells
     reference = apply(base, Config(resolution_m=sc.map.resolution_m))
-    truth = metrics.cached_ground_truth(reference, result.grid, _TRUTH_CACHE, job.scenario_yaml)
+    truth = (metrics.ground_truth(reference, result.grid) if job.scenario_yaml is None else
+             metrics.cached_ground_truth(reference, result.grid, _TRUTH_CACHE, job.scenario_yaml))
     scores = metrics.score(result.grid, reference, truth)
 
     err, err_steep, iters, err_pt = [], [], [], []

@@ -171,53 +171,47 @@ def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int 
 # --------------------------------------------------------------------------- scenes
 
 
-def run_scene(scenario, design: Design | str, seed: int | None = None, *,
-              reference=None, truth_cache: dict | None = None) -> dict:
+def run_scene(scenario, design: Design | str, seed: int | None = None) -> dict:
     """One scenario seen by one design: every pose swept, then estimated, mapped and scored
-    exactly as ``irring run`` does (``pipeline.map_sweeps``).
+    as ``irring run`` does — one run of a study (:func:`irring.studies.study.run_point`), in
+    this process.
 
     The estimator reads each design with the calibration of what its scene simulates
     (``pipeline.scene_calibration``, as ``irring run`` does). One deliberate difference from
-    ``irring run``, so designs are compared fairly: the map is scored against the ground truth of ``reference`` (default: the scenario as
-      written, with its own design's reach), so every design is judged on the same cells: a
-      design that cannot reach a wall loses recall and shadow for it instead of having the
-      wall dropped from its exam.
+    ``irring run``, so designs are compared fairly: the map is scored against the ground
+    truth of the scenario as written (with its own design's reach), so every design is
+    judged on the same cells: a design that cannot reach a wall loses recall and shadow for
+    it instead of having the wall dropped from its exam.
 
     Returns the six ``metrics.SCORE_KEYS`` plus ``hardware_time_s`` (one 360° view of the
     design, :meth:`Design.hardware_time_s`), ``hardware_time_total_s`` (all poses),
-    ``compute_time_s`` (sweep + estimate + map per view, wall clock; building the MuJoCo
-    model once is ``setup_time_s``), ``readings`` and ``valid_readings``. ``truth_cache``
-    (a dict the caller keeps) reuses the reference's rasterised ground truth across calls.
+    ``compute_time_s`` (sweep + estimate + map per view) and ``readings``.
     """
-    from ..maps import metrics
-    from .. import pipeline
+    from . import study
 
     d = designs_mod.get(design) if isinstance(design, str) else design
-    reference = scenario if reference is None else reference
-    sc = designs_mod.apply(scenario, d)
-    seed = sc.seed if seed is None else seed
-    sim_s: dict[str, float] = {}
-    sweeps, _ = pipeline.simulate(sc, seed=seed, progress=False, timings=sim_s)
-    result = pipeline.map_sweeps(sweeps, scenario=sc, calibration=pipeline.scene_calibration(
-        sc)[0], score=False, progress=False)
-    grid = result.grid
-    # the same reference on the same grid for every design and seed
-    truth = (metrics.ground_truth(reference, grid) if truth_cache is None
-             else metrics.cached_ground_truth(reference, grid, truth_cache, id(reference)))
-    scores = metrics.score(grid, sc, truth)
-    poses = len(sweeps)
-    scan = sc.scan
-    view_s = d.hardware_time_s(step_stride=scan.step_stride, settle_s=scan.settle_s,
-                               samples=sweeps[0].samples)
-    readings = result.readings()
-    return {
-        "scenario": scenario.name, "design": d.name, "seed": int(seed), "poses": poses,
-        **{k: scores[k] for k in metrics.SCORE_KEYS},
-        "hardware_time_s": view_s, "hardware_time_total_s": view_s * poses,
-        "compute_time_s": (sim_s["sweeps"] + result.compute_time_s) / poses,
-        "setup_time_s": sim_s["build"],
-        "readings": readings["total"], "valid_readings": readings["valid"],
-    }
+    p = _point(scenario, d, scenario.seed if seed is None else seed)
+    # the scenario object itself: it may differ from its file
+    task = study.Task(p, None, scenario.source, scenario)
+    return _record(study.run_point(task), scenario.name)
+
+
+def _point(scenario, design: Design, seed: int):
+    from . import study
+
+    return study.point(study.DesignSpec(design.name, design=design), scenario, seed)
+
+
+def _record(row: dict, scenario_name: str) -> dict:
+    """A study row as compare's run record."""
+    from ..maps.metrics import SCORE_KEYS
+
+    return {"scenario": scenario_name, "design": row["design"], "seed": row["seed"],
+            "poses": row["poses"], **{k: row[k] for k in SCORE_KEYS},
+            "hardware_time_s": row["hardware_time_s"],
+            "hardware_time_total_s": row["hardware_time_total_s"],
+            "compute_time_s": (row["sim_ms"] + row["compute_ms"]) / 1e3,
+            "readings": row["readings"]}
 
 
 def mean_of(values) -> float | None:
@@ -260,26 +254,30 @@ def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) 
 
 
 def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=None,
-            bearings: int = 180, progress: bool | None = False) -> dict:
-    """Run every design on every scenario for ``seeds`` seeds (scenario seed, +1, …).
+            bearings: int = 180, progress: bool | None = False, ex=None) -> dict:
+    """Run every design on every scenario for ``seeds`` seeds (scenario seed, +1, …): a
+    predefined study, run on ``ex`` (a ``concurrent.futures`` executor from
+    :func:`irring.bench.executor.executor`; default: this process).
     ``progress``: show a bar (None: only at a terminal, see ``pipeline.progress_enabled``).
 
     Returns ``{"designs": summarise(...), "runs": [...], "detection": {...}}``.
     """
+    from . import study
+    from .executor import run_jobs
     from ..pipeline import progress_bar
     from ..scenario import load_scenario
 
     scs = [load_scenario(s) if isinstance(s, str) else s for s in scenarios]
     ds = [designs_mod.get(d) if isinstance(d, str) else d for d in design_list]
-    jobs = [(sc, d, sc.seed + k) for sc in scs for d in ds for k in range(seeds)]
+    points = [_point(sc, d, sc.seed + k) for sc in scs for d in ds for k in range(seeds)]
+    names = [sc.name for sc in scs for d in ds for k in range(seeds)]
     dist = DEFAULT_DISTANCES_M if detection_distances_m is None else detection_distances_m
-    runs = []
     detections = {}
-    with progress_bar(len(jobs) + len(ds), "compare", progress, unit="run") as bar:
-        truths: dict = {}  # keyed by id() of scenarios `scs` keeps alive
-        for sc, d, seed in jobs:
-            runs.append(run_scene(sc, d, seed, truth_cache=truths))
-            bar.update()
+    with progress_bar(len(points) + len(ds), "compare", progress, unit="run") as bar:
+        tasks = study.tasks_for(points, {p.scenario: sc for p, sc in zip(
+            points, [sc for sc in scs for d in ds for k in range(seeds)])})
+        rows = run_jobs(study.run_point, tasks, ex, progress=lambda _: bar.update())
+        runs = [_record(r, name) for r, name in zip(rows, names)]
         for d in ds:
             detections[d.name] = detection(d, dist, bearings=bearings)
             bar.update()

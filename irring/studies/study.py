@@ -73,11 +73,14 @@ class DesignSpec:
     name: str | None = None            # a named design (designs.DESIGN_BY_NAME)
     params: tuple = ()                 # parametric: ((key, value), …) in PARAMETRIC_KEYS order
     sensor: str = "gp2d12"
+    design: Any = None                 # or a Design made in code (what compare() is given)
 
     def build(self):
         """The :class:`irring.designs.Design` (a named one, or ``designs.parametric``)."""
         from .. import designs
 
+        if self.design is not None:
+            return self.design
         if self.name is not None:
             return designs.get(self.name)
         p = dict(self.params)
@@ -269,6 +272,24 @@ class Point:
                 repr(float(self.settle_ms)), str(self.seed))
 
 
+def own_knobs(scenario) -> dict[str, float]:
+    """The knob values a scenario runs with as written."""
+    return {"step_stride": scenario.scan.step_stride, "samples": scenario.samples_per_step,
+            "settle_ms": scenario.scan.settle_s * 1e3}
+
+
+def point(design: DesignSpec, scenario, seed: int, **knobs) -> Point:
+    """One grid point of ``scenario`` (a name, a path, or a Scenario: its file, or its name
+    when it has none); knobs not given take the scenario's values."""
+    from ..scenario import load_scenario
+
+    sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
+    label = str(scenario) if isinstance(scenario, (str, Path)) else (sc.source or sc.name)
+    k = {**own_knobs(sc), **knobs}
+    return Point(design, label, int(k["step_stride"]), int(k["samples"]),
+                 float(k["settle_ms"]), int(seed))
+
+
 def grid(study: Study) -> list[Point]:
     """Every point in grid order: designs, then scenarios, then knob values (in the file's
     order, last fastest), then seeds. Knobs the study leaves out take the scenario's values."""
@@ -280,35 +301,38 @@ def grid(study: Study) -> list[Point]:
     for d in study.designs:
         for s in study.scenarios:
             sc = load_scenario(s)
-            own = {"step_stride": sc.scan.step_stride, "samples": sc.samples_per_step,
-                   "settle_ms": sc.scan.settle_s * 1e3}
             seeds = study.seeds or tuple(sc.seed + k for k in range(study.seed_count))
-            for combo in combos:
-                k = {**own, **dict(zip(names, combo))}
-                out += [Point(d, s, int(k["step_stride"]), int(k["samples"]),
-                              float(k["settle_ms"]), int(seed)) for seed in seeds]
+            out += [point(d, s, seed, **dict(zip(names, combo)))
+                    for combo in combos for seed in seeds]
     return out
 
 
 @dataclass(frozen=True)
 class Task:
-    """What a worker gets for one point: the scenario as YAML text (no files needed)."""
+    """What a worker gets for one point: the scenario as YAML text (no files needed).
+    ``scenario``: the Scenario itself instead, for a run in this process only."""
 
     point: Point
-    scenario_yaml: str
+    scenario_yaml: str | None
     scenario_source: str
+    scenario: Any = None
 
 
-def tasks_for(points: Iterable[Point]) -> list[Task]:
+def tasks_for(points: Iterable[Point], scenarios: Mapping[str, Any] | None = None) -> list[Task]:
+    """A task per point; its scenario loaded from ``point.scenario``, or taken from
+    ``scenarios`` (label → Scenario). One made in code, without a file, travels as itself
+    and can only run in this process."""
     from ..pipeline import scenario_text
     from ..scenario import load_scenario
 
-    texts: dict[str, tuple[str, str]] = {}
+    scenarios = dict(scenarios or {})
+    texts: dict[str, tuple] = {}
     out = []
     for p in points:
         if p.scenario not in texts:
-            sc = load_scenario(p.scenario)
-            texts[p.scenario] = (scenario_text(sc), sc.source)
+            sc = scenarios.get(p.scenario) or load_scenario(p.scenario)
+            text = scenario_text(sc)
+            texts[p.scenario] = (text, sc.source, sc if text is None else None)
         out.append(Task(p, *texts[p.scenario]))
     return out
 
@@ -341,14 +365,24 @@ def run_point(task: Task) -> dict:
     results.csv, every column of :data:`COLUMNS`."""
     import time
 
+    from ..scenario import loads
     from . import accuracy
 
     t0 = time.perf_counter()
     p = task.point
     design = p.design.build()
-    cfg = accuracy.Config("study", p.design.label, step_stride=p.step_stride,
-                          samples=p.samples, settle_s=p.settle_ms / 1e3, design=design)
-    r = accuracy.run_job(accuracy.Job(task.scenario_yaml, task.scenario_source, cfg, p.seed))
+    # a knob at the scenario's own value is left alone, so `step_stride: [1]` is the
+    # scenario as written, run for run
+    base = task.scenario if task.scenario is not None else \
+        loads(task.scenario_yaml, source=task.scenario_source)
+    own = own_knobs(base)
+    knobs = {k: (None if getattr(p, k) == own[k] else getattr(p, k)) for k in KNOBS}
+    cfg = accuracy.Config("study", p.design.label, step_stride=knobs["step_stride"],
+                          samples=knobs["samples"],
+                          settle_s=None if knobs["settle_ms"] is None else knobs["settle_ms"] / 1e3,
+                          design=design)
+    r = accuracy.run_job(accuracy.Job(task.scenario_yaml, task.scenario_source, cfg, p.seed,
+                                      base if task.scenario_yaml is None else None))
     ring = design.ring
     row = dict(zip(KEY_COLUMNS, (p.design.label, p.scenario, p.step_stride, p.samples,
                                  float(p.settle_ms), p.seed)))

@@ -1,0 +1,79 @@
+"""How ``irring study`` scales: wall time and runs per second on 1 and on N local workers, and
+peak memory as the grid grows.
+
+The grid is every named design × the three T-rooms × seeds 1 … S (5 × 3 × 20 = 300 runs by
+default), run through :func:`irring.studies.study.run_study` exactly as ``irring study`` runs
+it (rows streamed to a results.csv in a temporary folder, summary and chart included). Wall
+time counts everything from the executor's start to the chart. Memory: the largest peak
+resident set of any worker (each row carries its worker's ``ru_maxrss``) and this process's
+own peak, for a small and a ten times larger grid.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import tempfile
+import time
+from pathlib import Path
+from typing import Sequence
+
+SCENARIOS = ("t_room", "t_room_cylinder", "t_room_three_cylinders")
+
+
+def study_for(seeds: int):
+    """Every named design × the three T-rooms × seeds 1 … ``seeds``."""
+    from .. import designs
+    from .study import DesignSpec, Study
+
+    return Study(tuple(DesignSpec(n, name=n) for n in designs.DESIGN_BY_NAME), SCENARIOS,
+                 seeds=tuple(range(1, seeds + 1)))
+
+
+def _timed(seeds: int, workers: int, out: Path) -> dict:
+    from .executor import executor
+    from .study import run_study
+
+    t0 = time.perf_counter()
+    with executor(workers) as ex:
+        rows = run_study(study_for(seeds), out, ex)["rows"]
+    wall = time.perf_counter() - t0
+    run_s = sorted(float(r["run_s"]) for r in rows)
+    return {"runs": len(rows), "workers": workers, "wall_s": wall, "runs_per_s": len(rows) / wall,
+            "run_s_median": run_s[len(run_s) // 2], "run_s_max": run_s[-1],
+            "worker_peak_mb": max(float(r["worker_peak_mb"]) for r in rows),
+            "parent_peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+
+
+def measure(seeds: int = 20, workers: Sequence[int] = (1, 2),
+            memory_seeds: Sequence[int] = (4, 40), memory_workers: int = 2) -> dict:
+    """Time the ``seeds`` grid on each worker count, then peak memory on each grid of
+    ``memory_seeds``. Returns plain figures (see :func:`report`)."""
+    load_before = os.getloadavg()
+    speed, memory = [], []
+    with tempfile.TemporaryDirectory(prefix="irring-scaling-") as tmp:
+        for i, w in enumerate(workers):
+            speed.append(_timed(seeds, w, Path(tmp) / f"speed{i}"))
+        for i, s in enumerate(memory_seeds):
+            memory.append(_timed(s, memory_workers, Path(tmp) / f"memory{i}"))
+    base = speed[0]["wall_s"] if speed else None
+    for r in speed:
+        r["speedup"] = base / r["wall_s"]
+    return {"grid": f"{len(study_for(1).designs)} designs × {len(SCENARIOS)} rooms × seeds",
+            "speed": speed, "memory": memory, "cpus": os.cpu_count(),
+            "load_before": list(load_before), "load_after": list(os.getloadavg())}
+
+
+def report(r: dict) -> str:
+    lines = [f"{r['grid']}; {r['cpus']} CPUs, load average before "
+             f"{r['load_before'][0]:.1f}, after {r['load_after'][0]:.1f}"]
+    for s in r["speed"]:
+        lines.append(f"  {s['runs']} runs, {s['workers']} worker(s): {s['wall_s']:.1f} s, "
+                     f"{s['runs_per_s']:.1f} runs/s, speed-up {s['speedup']:.2f}× over the "
+                     f"first; per run median {s['run_s_median'] * 1e3:.0f} ms, max "
+                     f"{s['run_s_max'] * 1e3:.0f} ms")
+    for m in r["memory"]:
+        lines.append(f"  {m['runs']} runs, {m['workers']} workers: peak memory per worker "
+                     f"{m['worker_peak_mb']:.0f} MB, this process {m['parent_peak_mb']:.0f} MB "
+                     f"({m['wall_s']:.1f} s)")
+    return "\n".join(lines)
