@@ -294,3 +294,13 @@ def test_the_chart_leaves_the_users_backend_alone(tmp_path):
     study.chart(recs, tmp_path / "c.png")
     assert matplotlib.get_backend() == "svg"
     assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_parquet_holds_the_csv_rows_typed(small):
+    pq = pytest.importorskip("pyarrow.parquet")
+    p, rows = small
+    table = pq.read_table(p.parent / "serial" / "results.parquet")
+    assert table.column_names == list(study.COLUMNS)
+    assert table.num_rows == len(rows)
+    assert table.column("occupied_f1").to_pylist() == [float(r["occupied_f1"]) for r in rows]
+    assert table.column("seed").to_pylist() == [int(r["seed"]) for r in rows]

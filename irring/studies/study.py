@@ -594,39 +594,54 @@ def table(records: Sequence[Mapping[str, Any]], by: Sequence[str] = ("design",))
 def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
           by: Sequence[str] = ("design",)) -> None:
     """Occupied F1 and coverage against hardware time per 360° view (log scale), one point
-    per configuration with its spread over runs (±1 sd), the Pareto front drawn as a
-    staircase and its points ringed. Drawn with the Agg canvas directly: the caller's
-    matplotlib backend is left alone."""
+    per configuration with its spread over runs (±1 sd): colour the design, marker the knob
+    values. The Pareto front is drawn as a staircase and its points ringed. Drawn with the
+    Agg canvas directly: the caller's matplotlib backend is left alone."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
 
+    knobs = [k for k in by if k != "design"]
+    designs = list(dict.fromkeys(r["design"] for r in records))
+    combos = list(dict.fromkeys(tuple(r[k] for k in knobs) for r in records))
+    markers = "osD^v<>phX*"
+    colour = {d: f"C{i % 10}" for i, d in enumerate(designs)}
+    marker = {c: markers[i % len(markers)] for i, c in enumerate(combos)}
     fig = Figure(figsize=(12, 5.2))
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, 2)
-    for ax, (metric, title) in zip(axes, (("f1", "occupied F1"), ("cov", "coverage"))):
-        key = {"f1": "occupied_f1", "cov": "coverage"}[metric]
+    for ax, (metric, key, title) in zip(axes, (("f1", "occupied_f1", "occupied F1"),
+                                               ("cov", "coverage", "coverage"))):
         recs = [r for r in records if r[key] is not None]
-        for i, r in enumerate(recs):
-            ax.errorbar(r["hardware_time_s"], r[key], yerr=r[f"{key}_std"], fmt="o",
-                        color=f"C{i % 10}", capsize=3, label=_label(r, by))
+        for r in recs:
+            ax.errorbar(r["hardware_time_s"], r[key], yerr=r[f"{key}_std"],
+                        fmt=marker[tuple(r[k] for k in knobs)], color=colour[r["design"]],
+                        capsize=3, ms=6)
         front = sorted((r for r in recs if r.get(f"front_hw_{metric}")),
                        key=lambda r: r["hardware_time_s"])
         if front:
             xs = [r["hardware_time_s"] for r in front]
             ys = [r[key] for r in front]
-            ax.step(xs + [max(r["hardware_time_s"] for r in recs) * 1.5], ys + [ys[-1]],
-                    where="post", color="0.35", lw=1.5, ls="--", zorder=0,
-                    label="Pareto front")
-            ax.scatter(xs, ys, s=180, facecolors="none", edgecolors="k", lw=1.5, zorder=3)
+            right = max(r["hardware_time_s"] for r in recs) * 1.5
+            ax.step(xs + [right], ys + [ys[-1]], where="post", color="0.35", lw=1.2, ls="--",
+                    zorder=0)
+            ax.scatter(xs, ys, s=200, facecolors="none", edgecolors="k", lw=1.3, zorder=3)
         ax.set_xscale("log")
         ax.set_xlabel("hardware time per 360° view (s, log scale)")
         ax.set_ylabel(f"{title} (mean ± 1 sd over runs)")
-        ax.set_ylim(-0.02, 1.02)
+        ax.set_ylim(-0.02, 1.05)
         ax.grid(alpha=0.3, which="both")
-        ax.set_title(f"{title} against hardware time; ringed: on the Pareto front", fontsize=9)
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="center right", fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0, 0.78, 1))
+        ax.set_title(f"{title} against hardware time (dashed: Pareto front, ringed: on it)",
+                     fontsize=9)
+    handles = [Line2D([], [], color=colour[d], marker="o", ls="", label=d) for d in designs]
+    if knobs:
+        short = {"step_stride": "stride", "samples": "samples", "settle_ms": "settle ms"}
+        handles += [Line2D([], [], color="k", marker=marker[c], ls="", mfc="none",
+                           label=", ".join(f"{short[k]} {v}" for k, v in zip(knobs, c)))
+                    for c in combos]
+    handles.append(Line2D([], [], color="0.35", ls="--", label="Pareto front"))
+    fig.legend(handles=handles, loc="center right", fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0, 0.84, 1))
     fig.savefig(path, dpi=100)
 
 
