@@ -53,3 +53,15 @@ def add_mcap_option(parser: argparse.ArgumentParser) -> None:
                         help="also write the run as MCAP with ROS 2 messages (each sweep's "
                              "end points, the ring pose on /tf, the map, the true outline), "
                              "for Foxglove or rosbag2; needs pip install 'irring[mcap]'")
+
+
+def add_executor_options(p: argparse.ArgumentParser) -> None:
+    """``--workers N`` or ``--dask ADDRESS``: where a multi-run command runs its runs
+    (``irring.bench.executor.executor(args.workers, args.dask)``)."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=at_least(1), default=None, metavar="N",
+                       help="local worker processes (≥ 1; default: one per CPU; 1 = in this "
+                            "process)")
+    where.add_argument("--dask", metavar="ADDRESS", default=None,
+                       help="run on the Dask cluster whose scheduler is at ADDRESS "
+                            "(tcp://host:8786) instead; needs pip install 'irring[dask]'")

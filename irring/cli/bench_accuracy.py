@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ._common import at_least
+from ._common import add_executor_options, at_least
 
 EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):
@@ -73,12 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=at_least(1), default=3, metavar="N",
                    help="runs per configuration and scenario, seeds scenario.seed, +1, … "
                         "(≥ 1; default: 3)")
-    p.add_argument("--workers", type=at_least(1), default=None, metavar="N",
-                   help="local worker processes (≥ 1; default: one per CPU; 1 = in this "
-                        "process)")
-    p.add_argument("--dask", metavar="ADDRESS", default=None,
-                   help="run on a Dask cluster at ADDRESS (e.g. tcp://host:8786) instead of "
-                        "local processes; needs pip install 'irring[dask]'")
+    add_executor_options(p)
     p.add_argument("--out", default="out/bench_accuracy", metavar="DIR",
                    help="output folder (default: out/bench_accuracy)")
     p.add_argument("--json", action="store_true",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from ._common import at_least, distances_mm
+from ._common import add_executor_options, at_least, distances_mm
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room_three_cylinders", "t_room")
 
@@ -64,13 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bearings", type=at_least(8), default=180, metavar="N",
                    help="cylinder bearings tried per distance, over one symmetry period of "
                         "the design (≥ 8; default: 180)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=at_least(1), default=None, metavar="N",
-                       help="local worker processes (≥ 1; default: one per CPU; 1 = in this "
-                            "process)")
-    where.add_argument("--dask", metavar="ADDRESS", default=None,
-                       help="run on the Dask cluster whose scheduler is at ADDRESS "
-                            "(tcp://host:8786); needs pip install 'irring[dask]'")
+    add_executor_options(p)
     p.add_argument("--json", action="store_true",
                    help="print one JSON record per design instead of the table")
     p.set_defaults(func=run)

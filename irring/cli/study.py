@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from ._common import at_least
+from ._common import add_executor_options
 
 EPILOG = """\
 the study file (YAML):
@@ -51,13 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", metavar="FILE.yaml", help="the study file (see below)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder (default: out/<file name without .yaml>)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=at_least(1), default=None, metavar="N",
-                       help="local worker processes (≥ 1; default: one per CPU; 1 = in this "
-                            "process)")
-    where.add_argument("--dask", metavar="ADDRESS", default=None,
-                       help="run on the Dask cluster whose scheduler is at ADDRESS "
-                            "(tcp://host:8786); needs pip install 'irring[dask]'")
+    add_executor_options(p)
     p.add_argument("--resume", action="store_true",
                    help="keep the runs already in DIR/results.csv and run only the others")
     p.add_argument("--json", action="store_true",
