@@ -12,8 +12,9 @@ grid: every named design × t_room, t_room_cylinder, t_room_three_cylinders × s
 run as `irring study` runs it (rows streamed to a temporary results.csv, summary, chart).
 
 prints, per worker count: wall time (executor start to chart), runs per second, speed-up
-over the first count, median and longest run; then, for a small and a larger grid, the
-largest peak memory of any worker and of this process (flat memory: the two agree).
+over the first count, median and longest run; then, for a small and a ten times larger
+grid, each run by `irring study` in a fresh process, the peak memory of that process and of
+its largest worker (flat memory: the two grids agree).
 The load average before and after says how busy the machine was.
 
 examples:
