@@ -57,7 +57,7 @@ def add_mcap_option(parser: argparse.ArgumentParser) -> None:
 
 def add_executor_options(p: argparse.ArgumentParser) -> None:
     """``--workers N`` or ``--dask ADDRESS``: where a multi-run command runs its runs
-    (``irring.bench.executor.executor(args.workers, args.dask)``)."""
+    (``irring.studies.executor.executor(args.workers, args.dask)``)."""
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=at_least(1), default=None, metavar="N",
                        help="local worker processes (≥ 1; default: one per CPU; 1 = in this "

@@ -257,7 +257,7 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
             bearings: int = 180, progress: bool | None = False, ex=None) -> dict:
     """Run every design on every scenario for ``seeds`` seeds (scenario seed, +1, …): a
     predefined study, run on ``ex`` (a ``concurrent.futures`` executor from
-    :func:`irring.bench.executor.executor`; default: this process).
+    :func:`irring.studies.executor.executor`; default: this process).
     ``progress``: show a bar (None: only at a terminal, see ``pipeline.progress_enabled``).
 
     Returns ``{"designs": summarise(...), "runs": [...], "detection": {...}}``.
