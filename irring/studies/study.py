@@ -365,7 +365,6 @@ def run_point(task: Task) -> dict:
     results.csv, every column of :data:`COLUMNS`."""
     import time
 
-    from ..scenario import loads
     from . import accuracy
 
     t0 = time.perf_counter()
@@ -374,7 +373,7 @@ def run_point(task: Task) -> dict:
     # a knob at the scenario's own value is left alone, so `step_stride: [1]` is the
     # scenario as written, run for run
     base = task.scenario if task.scenario is not None else \
-        loads(task.scenario_yaml, source=task.scenario_source)
+        accuracy.scenario_from_text(task.scenario_yaml, task.scenario_source)
     own = own_knobs(base)
     knobs = {k: (None if getattr(p, k) == own[k] else getattr(p, k)) for k in KNOBS}
     cfg = accuracy.Config("study", p.design.label, step_stride=knobs["step_stride"],
