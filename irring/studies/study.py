@@ -594,11 +594,11 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
           by: Sequence[str] = ("design",)) -> None:
     """Occupied F1 and coverage against hardware time per 360° view (log scale), one point
     per configuration with its spread over runs (±1 sd): colour the design, marker the knob
-    values. The Pareto front is drawn as a staircase and its points ringed. Drawn with the
-    Agg canvas directly: the caller's matplotlib backend is left alone."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    values. The Pareto front is drawn as a staircase and its points ringed. Drawn on
+    ``render.figure`` (no pyplot): the caller's matplotlib backend is left alone."""
     from matplotlib.lines import Line2D
+
+    from ..maps.render import figure
 
     knobs = [k for k in by if k != "design"]
     designs = list(dict.fromkeys(r["design"] for r in records))
@@ -606,8 +606,7 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
     markers = "osD^v<>phX*"
     colour = {d: f"C{i % 10}" for i, d in enumerate(designs)}
     marker = {c: markers[i % len(markers)] for i, c in enumerate(combos)}
-    fig = Figure(figsize=(12, 5.2))
-    FigureCanvasAgg(fig)
+    fig = figure(12, 5.2)
     axes = fig.subplots(1, 2)
     for ax, (metric, key, title) in zip(axes, (("f1", "occupied_f1", "occupied F1"),
                                                ("cov", "coverage", "coverage"))):
