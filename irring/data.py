@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -136,3 +137,49 @@ def beam_geometry(ring: Ring, pose: np.ndarray, sensor_angles: np.ndarray,
     ox = hx + emitter_offset_m * np.sin(heading)
     oy = hy - emitter_offset_m * np.cos(heading)
     return np.stack(np.broadcast_arrays(ox, oy), axis=-1), heading
+
+
+def as_pose(pose: Any) -> np.ndarray:
+    """(3,) x m, y m, yaw rad from a scenario ``Pose`` or a sequence (x, y[, yaw]).
+
+    Raises ValueError naming what was given when it is neither."""
+    if hasattr(pose, "x_m"):
+        return np.array([pose.x_m, pose.y_m, pose.yaw_rad], dtype=float)
+    try:
+        arr = np.asarray(pose, dtype=float).ravel()
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.size not in (2, 3) or not np.isfinite(arr).all():
+        raise ValueError(f"a pose is (x m, y m[, yaw rad]) or a scenario Pose, got {pose!r}")
+    return np.append(arr, 0.0) if arr.size == 2 else arr
+
+
+@runtime_checkable
+class RingSource(Protocol):
+    """Anything that sweeps a ring: the simulator (``SimRing``), the real ring over a serial
+    port (``SerialRing``), a fake in a test. ``pipeline.acquire`` drives any of them.
+
+    ``sweep(pose, *, steps=None)`` takes one sweep with the robot at ``pose`` — (x m, y m,
+    yaw rad) or a scenario ``Pose`` (a simulator also takes a scan-pose index) — over
+    ``steps`` (motor steps in order; None: the source's full sweep) and returns a
+    :class:`Sweep`; steps whose readings never arrived are listed in ``missing_steps``, never
+    invented. A source that goes away mid-sweep raises :class:`SourceLost`. ``close()``
+    releases it; as a context manager it opens on entry and closes on exit.
+    """
+
+    def sweep(self, pose: Any, *, steps: np.ndarray | None = None) -> Sweep: ...
+
+    def close(self) -> None: ...
+
+    def __enter__(self) -> Any: ...
+
+    def __exit__(self, *exc: object) -> Any: ...
+
+
+class SourceLost(RuntimeError):
+    """The source went away mid-sweep; ``partial`` holds the :class:`Sweep` of what arrived
+    (None if nothing did) and ``report`` the source's account of it, if it keeps one."""
+
+    def __init__(self, message: str, partial: Sweep | None = None, report: Any = None):
+        super().__init__(message)
+        self.partial, self.report = partial, report

@@ -7,8 +7,9 @@ is built the same way wherever its sweeps came from:
 >>> result.scores["occupied_f1"], result.hardware_time_s
 >>> write_outputs(result, "out/t_room")                    # PNG, GIF, PGM+YAML, .npz
 
-:func:`map_sweeps` is the part after the source: hand it sweeps from the simulator or the
-serial ring. One sweep per pose, inserted into the grid in pose order (progressive mapping,
+:func:`acquire` sweeps any source (``SimRing``, ``SerialRing``: a ``data.RingSource``) at
+each pose; :func:`map_sweeps` is the part after the source: hand it sweeps from the
+simulator or the serial ring. One sweep per pose, inserted into the grid in pose order (progressive mapping,
 paper Fig. 17). Compute times are wall-clock seconds per stage on this machine; the hardware
 time is what the real ring would spend (sum of ``Sweep.duration_s``).
 """
@@ -22,11 +23,11 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from .data import Points, Reason, Sweep
+from .data import Points, Reason, RingSource, SourceLost, Sweep
 from .maps.mapping import MapperParams, OccupancyGrid, slice_steps
 from .scenario import Scenario
 
@@ -167,25 +168,77 @@ def scene_calibration(scenario: Scenario):
     return cal, cal.to_yaml()
 
 
-def simulate(scenario: Scenario, *, seed: int | None = None, progress: bool | None = None,
-             timings: dict[str, float] | None = None) -> tuple[list[Sweep], float]:
-    """One simulated sweep per scan pose (with ``motion``: back to back along the path):
-    (sweeps, seconds spent). ``timings``, if given, gets that time split into "build" (the
-    one-off MuJoCo model) and "sweeps", for per-sweep costs that exclude the build."""
+@dataclass
+class Acquisition:
+    """What :func:`acquire` got: one sweep per pose swept, in order.
+
+    ``reports[i]`` is the source's account of sweep i when it keeps one (``SerialRing``:
+    its :class:`~irring.hardware.SweepReport`), else None. ``error`` is the
+    :class:`~irring.data.SourceLost` that ended the acquisition early (its partial sweep,
+    if any readings arrived, is the last of ``sweeps``), None when every pose was swept.
+    ``seconds``: wall-clock time spent sweeping.
+    """
+
+    sweeps: list[Sweep] = field(default_factory=list)
+    reports: list[Any] = field(default_factory=list)
+    error: Exception | None = None
+    seconds: float = 0.0
+
+    @property
+    def complete(self) -> bool:
+        """Every pose swept, with every step's readings."""
+        return self.error is None and not any(s.missing_steps for s in self.sweeps)
+
+
+def acquire(source: RingSource, poses: Iterable, *, steps: np.ndarray | None = None,
+            progress: bool | None = None, before: Callable[[int, Any], None] | None = None,
+            after: Callable[[int, Sweep, Any], None] | None = None) -> Acquisition:
+    """One sweep of ``source`` (a :class:`~irring.data.RingSource`: ``SimRing``,
+    ``SerialRing``, …) at each of ``poses``, in order → :class:`Acquisition`.
+
+    ``poses``: what ``source.sweep`` takes — (x m, y m, yaw rad), scenario ``Pose`` s, or a
+    simulator's scan-pose indices. ``steps``: motor steps of every sweep (None: the
+    source's full sweep). ``before(k, pose)`` is called before sweeping pose k (e.g. to
+    wait while a person moves the robot), ``after(k, sweep, report)`` after it.
+    A source lost mid-sweep (:class:`~irring.data.SourceLost`) ends the acquisition
+    without raising: what arrived is kept and the error is in ``Acquisition.error``.
+    """
+    poses = list(poses)
+    out = Acquisition()
+    t0 = time.perf_counter()
+    with progress_bar(len(poses), "sweep", progress) as bar:
+        for k, pose in enumerate(poses):
+            if before is not None:
+                before(k, pose)
+            try:
+                sweep = source.sweep(pose, steps=steps)
+            except SourceLost as exc:
+                out.error = exc
+                if exc.partial is not None and len(exc.partial.steps):
+                    out.sweeps.append(exc.partial)
+                    out.reports.append(exc.report)
+                break
+            report = getattr(source, "last_report", None)
+            out.sweeps.append(sweep)
+            out.reports.append(report)
+            if after is not None:
+                after(k, sweep, report)
+            bar.update()
+    out.seconds = time.perf_counter() - t0
+    return out
+
+
+def simulated(scenario: Scenario, *, seed: int | None = None, progress: bool | None = None
+              ) -> tuple[Acquisition, float]:
+    """Every sweep the scene takes (one per scan pose; with ``motion`` back to back along
+    its drive), acquired from a new ``SimRing``: (acquisition, seconds building the MuJoCo
+    model)."""
     from .simulation.sim import SimRing
 
     t0 = time.perf_counter()
-    sim = SimRing(scenario, seed=seed)
-    t1 = time.perf_counter()
-    sweeps = []
-    with progress_bar(sim.n_sweeps, "simulate", progress) as bar:
-        for k in range(sim.n_sweeps):
-            sweeps.append(sim.sweep(k))
-            bar.update()
-    t2 = time.perf_counter()
-    if timings is not None:
-        timings.update(build=t1 - t0, sweeps=t2 - t1)
-    return sweeps, t2 - t0
+    with SimRing(scenario, seed=seed) as sim:
+        build_s = time.perf_counter() - t0
+        return acquire(sim, range(sim.n_sweeps), progress=progress), build_s
 
 
 def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
@@ -301,11 +354,11 @@ def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | 
     scene's (:func:`scene_calibration`)."""
     calibration, cal_text = (load_calibration(calibration_file) if calibration_file is not None
                              else scene_calibration(scenario))
-    sweeps, t_sim = simulate(scenario, seed=seed, progress=progress)
-    result = map_sweeps(sweeps, scenario=scenario, params=params, calibration=calibration,
+    acq, build_s = simulated(scenario, seed=seed, progress=progress)
+    result = map_sweeps(acq.sweeps, scenario=scenario, params=params, calibration=calibration,
                         frames_per_sweep=frames_per_sweep, score=score, progress=progress,
                         estimator=estimator)
-    result.timings_s = {"simulate": t_sim, **result.timings_s}
+    result.timings_s = {"simulate": build_s + acq.seconds, **result.timings_s}
     result.scenario_text = scenario_text(scenario)
     result.calibration_text = cal_text
     result.seed = scenario.seed if seed is None else int(seed)

@@ -15,9 +15,11 @@ import pytest
 
 from irring.hardware import DeviceDisconnected, DeviceTimeout, SerialRing
 from irring.hardware import protocol as p
-from irring.hardware.emulator import Device, Faults, PtyEmulator, SimSource, TcpEmulator
+from irring.hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
 from irring.scenario import load_scenario
 from irring.simulation.sim import SimRing
+
+from _fake_source import FakeSource
 
 TIMEOUT_S = 0.4  # generous: the device is a thread and CI may be loaded; a hang is still caught
 FULL = np.arange(-35, 36)
@@ -28,17 +30,17 @@ def t_room():
     return load_scenario("t_room")
 
 
-class RecordingSource(SimSource):
-    """SimSource that remembers what each IRSWP produced, to prove nothing is invented."""
+class RecordingSource(SimRing):
+    """SimRing that remembers what each IRSWP produced, to prove nothing is invented."""
 
     def __init__(self, scenario):
         super().__init__(scenario)
         self.produced: list[tuple[int, np.ndarray, np.ndarray]] = []
 
-    def read(self, pose_index, steps, samples, settle_s):
-        counts = super().read(pose_index, steps, samples, settle_s)
-        self.produced.append((pose_index, np.asarray(steps).copy(), counts.copy()))
-        return counts
+    def sweep(self, pose=0, *, steps=None):
+        sweep = super().sweep(pose, steps=steps)
+        self.produced.append((pose, sweep.steps.copy(), sweep.counts.copy()))
+        return sweep
 
 
 def produced_row(source: RecordingSource, step: int, counts_row: np.ndarray) -> bool:
@@ -69,7 +71,7 @@ def pty_device(tmp_path):
 
 
 def test_fault_free_sweeps_over_a_pty_equal_simring_at_every_pose(t_room, pty_device):
-    link = pty_device(Device(SimSource(t_room)))
+    link = pty_device(Device(SimRing(t_room)))
     assert os.path.realpath(link).startswith("/dev/pts/")
     ref = SimRing(t_room, seed=t_room.seed)
     with SerialRing(link, timeout_s=TIMEOUT_S) as ring:
@@ -84,7 +86,7 @@ def test_fault_free_sweeps_over_a_pty_equal_simring_at_every_pose(t_room, pty_de
             assert got.missing_steps == ()
             assert got.duration_s == pytest.approx(want.duration_s, abs=2e-3)
         # a partial sweep is SimRing.sweep(pose, steps=...) at the same pose, next k
-        part = ring.sweep(np.arange(5, -6, -1))
+        part = ring.sweep(steps=np.arange(5, -6, -1))
         assert np.array_equal(part.counts, ref.sweep(3, steps=np.arange(5, -6, -1)).counts)
         assert ring.stats.checksum_failures == ring.stats.lost_scans == 0
 
@@ -156,7 +158,7 @@ def test_faults_gauntlet_corruption_drops_a_stall_and_a_disconnect(t_room, pty_d
 
 
 def test_socket_url_reaches_the_emulator_over_tcp_and_a_cut_is_a_disconnect(t_room):
-    with TcpEmulator(Device(SimSource(t_room), faults=Faults(disconnect_after=1 + 72 + 30))
+    with TcpEmulator(Device(SimRing(t_room), faults=Faults(disconnect_after=1 + 72 + 30))
                      ).start_thread() as emu:
         with SerialRing(emu.url, timeout_s=TIMEOUT_S) as ring:
             assert np.array_equal(ring.sweep().counts, SimRing(t_room).sweep(0).counts)
@@ -166,7 +168,7 @@ def test_socket_url_reaches_the_emulator_over_tcp_and_a_cut_is_a_disconnect(t_ro
 
 
 def test_irstp_interrupts_a_realtime_sweep_over_the_pty(t_room, pty_device):
-    link = pty_device(Device(SimSource(t_room), realtime=True), baud=115200)
+    link = pty_device(Device(SimRing(t_room), realtime=True), baud=115200)
     with SerialRing(link, timeout_s=0.5) as ring:
         ring.port.write(p.encode(p.SweepCommand(-35, 35, 1, 0)))
         time.sleep(0.3)                        # ~7 steps of 38.3 ms
@@ -190,16 +192,12 @@ def talk(device: Device, *lines: bytes) -> list:
     return p.Decoder().feed(out)
 
 
-class TinySource:
+class TinySource(FakeSource):
     ring = load_scenario("t_room").ring
-    adc_bits, poses = 12, 3
 
     def __init__(self):
-        self.calls = []
-
-    def read(self, pose_index, steps, samples, settle_s):
-        self.calls.append((pose_index, list(steps)))
-        return np.full((len(steps), 12), 100.0 + pose_index)
+        super().__init__(lambda pose, steps, k: np.full((len(steps), 12), 100.0 + pose),
+                         ring=self.ring, poses=3)
 
 
 @pytest.mark.parametrize("line,code", [
@@ -236,7 +234,7 @@ def test_full_range_sweeps_move_the_robot_to_the_next_pose_partial_ones_do_not()
         out = talk(dev, p.encode(cmd))
         assert isinstance(out[-1], p.Done)
     assert [c[0] for c in src.calls] == [0, 0, 1, 2, 0]  # wraps after the last pose
-    assert src.calls[2][1] == list(range(35, -36, -1))
+    assert src.calls[2][1] == tuple(range(35, -36, -1))
 
 
 def test_fault_rates_are_what_was_asked():
@@ -297,7 +295,7 @@ def test_irring_drive_on_the_emulator_makes_the_same_map_as_irring_run(tmp_path,
 
     from irring.cli import main
 
-    link = pty_device(Device(SimSource(t_room)))
+    link = pty_device(Device(SimRing(t_room)))
     assert main(["run", "t_room", "--out", str(tmp_path / "run"), "--no-animation",
                  "--json"]) == 0
     ran = json.loads(capsys.readouterr().out)
@@ -325,7 +323,7 @@ def test_irring_drive_survives_a_bad_link_and_says_what_was_lost(tmp_path, t_roo
     from irring.cli import main
 
     faults = Faults(corrupt_rate=0.01, drop_rate=0.05, disconnect_after=400, seed=4)
-    link = pty_device(Device(SimSource(t_room), faults=faults))
+    link = pty_device(Device(SimRing(t_room), faults=faults))
     code = main(["drive", "--port", link, "--truth", "t_room", "--out", str(tmp_path),
                  "--no-animation", "--timeout", str(TIMEOUT_S), "--resweep", "1"])
     out, err = capsys.readouterr()
@@ -351,8 +349,7 @@ def test_a_moving_scene_is_emulated_sweep_by_sweep_but_not_driven(capsys):
     from irring.cli import main
 
     moving = load_scenario("t_room_moving")
-    source = SimSource(moving)
-    assert source.poses == SimRing(moving).n_sweeps > len(moving.robot.poses)
+    assert Device(SimRing(moving)).poses == SimRing(moving).n_sweeps > len(moving.robot.poses)
     assert main(["drive", "--port", "loop://", "--truth", "t_room_moving"]) == 2
     err = capsys.readouterr().err
     assert "--truth t_room_moving: the scenario drives while scanning (`motion`)" in err

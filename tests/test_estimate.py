@@ -644,7 +644,7 @@ def test_shadow_behind_the_cylinder_is_mapped_on_every_seed(cylinder_room):
 
     truth = None
     for seed in range(10):
-        sweeps, _ = pipeline.simulate(cylinder_room, seed=seed, progress=False)
+        sweeps = pipeline.simulated(cylinder_room, seed=seed, progress=False)[0].sweeps
         run = pipeline.map_sweeps(sweeps, scenario=cylinder_room, progress=False, truth=truth)
         truth = run.truth
         assert run.scores["shadow"] >= 0.5, (seed, run.scores)

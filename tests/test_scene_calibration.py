@@ -57,7 +57,7 @@ def test_the_ideal_sensor_reads_exactly_and_maps_no_worse_than_the_noisy_one():
     ideal, noisy = scene("{}"), scene("[incidence, noise, quantization]")
     errs = {}
     for name, sc in (("ideal", ideal), ("noisy", noisy)):
-        sweeps, _ = pipeline.simulate(sc, progress=False)
+        sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
         cal = pipeline.scene_calibration(sc)[0]
         e = []
         for sw in sweeps:

@@ -19,26 +19,23 @@ from irring.hardware import (DeviceDisconnected, DeviceError, DeviceRejected, De
 from irring.hardware import protocol as p
 from irring.hardware.emulator import Device, DevicePort, Faults
 
+from _fake_source import FakeSource
+
 TIMEOUT_S = 0.1
 
 
-class StandInSource:
+class StandInSource(FakeSource):
     """Deterministic counts that depend on pose, step, sensor and the sweep number."""
 
     def __init__(self, ring=PAPER_RING, adc_bits=12, poses=4, seed=7):
-        self.ring, self.adc_bits, self.poses, self.seed = ring, adc_bits, poses, seed
-        self.calls: list[tuple[int, tuple[int, ...]]] = []
+        self.seed = seed
+        super().__init__(self.truth, ring=ring, adc_bits=adc_bits, poses=poses)
 
     def truth(self, pose: int, steps, k: int = 0) -> np.ndarray:
         rng = np.random.default_rng([self.seed, pose, k])
         steps = np.asarray(steps)
         base = 1000 + 20 * steps[:, None] + 100 * np.arange(self.ring.sensors) + 500 * pose
         return base + rng.integers(0, 50, size=base.shape)
-
-    def read(self, pose_index, steps, samples, settle_s):
-        k = sum(1 for p_, _ in self.calls if p_ == pose_index)
-        self.calls.append((pose_index, tuple(int(s) for s in steps)))
-        return self.truth(pose_index, steps, k)
 
 
 def ring_on(device: Device, **kw) -> SerialRing:
@@ -121,10 +118,10 @@ def test_fault_free_sweep_returns_every_reading_with_geometry_and_device_time():
 def test_descending_and_non_contiguous_steps_are_read_in_the_order_asked():
     src = StandInSource()
     ring = ring_on(Device(src))
-    sweep = ring.sweep(np.arange(10, -11, -1))
+    sweep = ring.sweep(steps=np.arange(10, -11, -1))
     assert list(sweep.steps) == list(range(10, -11, -1))
     assert src.calls[-1][1] == tuple(range(10, -11, -1))  # one IRSWP for the whole run
-    strided = ring.sweep([-35, -33, -31, 0])
+    strided = ring.sweep(steps=[-35, -33, -31, 0])
     assert list(strided.steps) == [-35, -33, -31, 0]
     assert [c[1] for c in src.calls[-4:]] == [(-35,), (-33,), (-31,), (0,)]
 
@@ -132,9 +129,16 @@ def test_descending_and_non_contiguous_steps_are_read_in_the_order_asked():
 def test_steps_outside_the_ring_are_refused_before_anything_is_sent():
     ring = ring_on(Device(StandInSource()))
     with pytest.raises(ValueError, match=r"outside the ring's -35 … 35"):
-        ring.sweep([0, 36])
+        ring.sweep(steps=[0, 36])
     with pytest.raises(ValueError, match="samples must be 1 … 64"):
         ring.sweep(samples=0)
+    # the first argument is the pose (RingSource), not the steps of the old signature
+    with pytest.raises(ValueError, match=r"a pose is \(x m, y m\[, yaw rad\]\).*got \[-3, -2, -1, 0\]"):
+        ring.sweep([-3, -2, -1, 0])
+    with pytest.raises(ValueError, match="resweep must be ≥ 0 rounds, got -1"):
+        SerialRing("loop://", resweep=-1)
+    with pytest.raises(ValueError, match="settle_s must be ≥ 0, got -0.002"):
+        SerialRing("loop://", settle_s=-0.002)
 
 
 def test_sweep_before_handshake_says_what_to_do():

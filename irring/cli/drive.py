@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .. import pipeline
-    from ..hardware import DeviceError, LinkLost, SerialRing
+    from ..hardware import DeviceError, SerialRing
     from ..scenario import load_scenario
 
     truth = load_scenario(args.truth) if args.truth else None
@@ -140,7 +140,11 @@ def run(args: argparse.Namespace) -> int:
     settle_s = (args.settle_ms / 1000.0 if args.settle_ms is not None else
                 truth.scan.settle_s if truth else 0.0)
 
-    ring = SerialRing(args.port, baudrate=args.baud, timeout_s=args.timeout, **known)
+    try:
+        ring = SerialRing(args.port, baudrate=args.baud, timeout_s=args.timeout,
+                          samples=samples, settle_s=settle_s, resweep=args.resweep, **known)
+    except ValueError as exc:
+        return _error(str(exc))
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
     try:
         ring.open()
@@ -165,28 +169,17 @@ def run(args: argparse.Namespace) -> int:
         say(f"note: {truth.name} reads every {stride}th step: one IRSWP per step (with "
             f"`irring emulate`, pick each pose with --pose)")
 
-    sweeps, reports, failure = [], [], None
-    interactive = sys.stdin.isatty() and not args.no_wait
+    def move(k: int, pose) -> None:
+        if k and sys.stdin.isatty() and not args.no_wait:
+            input(f"move the robot to pose {k + 1} of {n} ({pose[0] * 1e3:.0f} mm, "
+                  f"{pose[1] * 1e3:.0f} mm, {math.degrees(pose[2]):.0f}°) and press Enter ")
+
     try:
-        for k in range(n):
-            pose = poses[k]
-            if k and interactive:
-                input(f"move the robot to pose {k + 1} of {n} ({pose[0] * 1e3:.0f} mm, "
-                      f"{pose[1] * 1e3:.0f} mm, {math.degrees(pose[2]):.0f}°) and press Enter ")
-            try:
-                sweep = ring.sweep(steps, samples=samples, settle_s=settle_s, pose=pose,
-                                   resweep=args.resweep)
-            except LinkLost as exc:
-                failure = exc
-                if exc.partial is not None and len(exc.partial.steps):
-                    sweeps.append(exc.partial)
-                    reports.append(exc.report)
-                break
-            sweeps.append(sweep)
-            reports.append(ring.last_report)
-            say(f"pose {k + 1}/{n}: {ring.last_report.message}")
+        acq = pipeline.acquire(ring, poses[:n], steps=steps, progress=False, before=move,
+                               after=lambda k, _, r: say(f"pose {k + 1}/{n}: {r.message}"))
     finally:
         ring.close()
+    sweeps, failure = acq.sweeps, acq.error
     if failure is not None:
         print(f"irring drive: {failure}", file=sys.stderr)
     if not sweeps:
@@ -201,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
     paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation,
                                    mcap=args.mcap)
     link = {"port": args.port, "firmware": info.firmware, "totals": ring.stats.as_dict(),
-            "sweeps": [r.as_dict() for r in reports],
+            "sweeps": [r.as_dict() for r in acq.reports],
             "error": None if failure is None else str(failure)}
     paths["link"] = args.out / "link.json"
     paths["link"].write_text(json.dumps(link, indent=2))

@@ -71,8 +71,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..hardware.emulator import Device, Faults, PtyEmulator, SimSource, TcpEmulator
+    from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
     from ..scenario import load_scenario
+    from ..simulation.sim import SimRing
 
     scenario = load_scenario(args.scenario)
     try:
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
               f"poses 0 … {n_poses - 1}", file=sys.stderr)
         return 2
     baud = args.baud if args.baud is not None else (115200 if args.realtime else 0)
-    source = SimSource(scenario, seed=args.seed)
+    source = SimRing(scenario, seed=args.seed)
     device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=args.pose)
     if args.tcp is not None:
         host, _, port = args.tcp.rpartition(":")

@@ -1,14 +1,14 @@
 """A ring device that speaks the IRR protocol on a pseudo-terminal, backed by the simulator.
 
-    source = SimSource(load_scenario("t_room"))
-    with PtyEmulator(Device(source), link="/tmp/irring") as emu:   # /tmp/irring → /dev/pts/N
+    sim = SimRing(load_scenario("t_room"))
+    with PtyEmulator(Device(sim), link="/tmp/irring") as emu:      # /tmp/irring → /dev/pts/N
         emu.serve_forever()                                        # or emu.start_thread()
 
 Three layers, each replaceable in tests:
 
-* a *reading source* produces ADC counts: :class:`SimSource` runs ``SimRing`` with the
-  scenario's effects; anything with ``ring``, ``adc_bits``, ``poses`` and
-  ``read(pose_index, steps, samples, settle_s) -> counts (S, N)`` will do;
+* a *source* produces the readings: any :class:`irring.data.RingSource` with ``ring``,
+  ``adc_bits`` and ``n_sweeps`` (the poses its robot visits), such as
+  :class:`irring.simulation.sim.SimRing` with the scenario's effects;
 * :class:`Device` is the firmware: it answers sentences and produces IRSCN one step at a
   time, with fault injection (:class:`Faults`) on what it sends; it does no I/O and is driven
   by ``receive(bytes, now)`` / ``poll(now)``;
@@ -17,14 +17,18 @@ Three layers, each replaceable in tests:
   :class:`TcpEmulator` serves it at ``socket://HOST:PORT`` instead, and :class:`DevicePort`
   wires it to the driver in-process (a pyserial-like object, no pty, no thread).
 
-Reproducibility: the device calls ``source.read`` exactly once per accepted IRSWP, with the
-IRSWP's steps in order, so a host that sweeps a contiguous run in one IRSWP gets exactly
-``SimRing(scenario, seed).sweep(pose_index, steps=...)`` — SimRing seeds its k-th sweep at
-a pose with ``default_rng([seed, pose_index, k])``.
+Reproducibility: the device calls ``source.sweep(pose_index, steps=...)`` exactly once per
+accepted IRSWP, with the IRSWP's steps in order, so a host that sweeps a contiguous run in
+one IRSWP gets exactly ``SimRing(scenario, seed).sweep(pose_index, steps=...)`` — SimRing
+seeds its k-th sweep at a pose with ``default_rng([seed, pose_index, k])`` — as whole ADC
+counts (a scene without the ``quantization`` effect gives fractional counts; the device
+rounds them).
 
 Poses: the emulated robot starts at scenario pose 0; every further IRSWP that covers the
 whole step range (min_step … max_step, either direction) moves it to the next pose (wrapping).
-Partial sweeps — re-sweeps of missing steps — stay at the current pose.
+Partial sweeps — re-sweeps of missing steps — stay at the current pose. The host's
+``samples`` and ``settle_s`` set the device's timing only: the scenario fixes the physics
+(averaging applies when it lists the ``averaging`` effect).
 
 Device clock: with ``realtime`` the wall clock since start; otherwise a virtual clock that
 advances by what the real ring would spend (motor moves, settle, samples × 38.3 ms), so
@@ -47,50 +51,14 @@ import tty
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 
 from .. import data
-from ..scenario import Ring, Scenario
 from . import protocol as p
 
 FIRMWARE = "irring-emulator-1"
 MOVE_S_PER_STEP = 0.002  # stepper time per motor step (500 steps/s) for IRGTO / reaching `from`
-
-
-class ReadingSource(Protocol):
-    """Where an emulated device's ADC counts come from."""
-
-    ring: Ring
-    adc_bits: int
-    poses: int
-
-    def read(self, pose_index: int, steps: np.ndarray, samples: int,
-             settle_s: float) -> np.ndarray:
-        """(S, N) counts at ``steps`` (in that order) from scan pose ``pose_index``."""
-
-
-class SimSource:
-    """Readings from :class:`irring.simulation.sim.SimRing` with the scenario's effects.
-
-    The scenario fixes the physics, including averaging: the host's ``samples`` and
-    ``settle_s`` set the device's timing only (``scan.samples`` applies when the scenario
-    lists the ``averaging`` effect). ``seed`` defaults to ``scenario.seed``.
-    """
-
-    def __init__(self, scenario: Scenario, *, seed: int | None = None):
-        from ..simulation.sim import SimRing  # the driver never imports sim; only the emulator does
-
-        self.seed = scenario.seed if seed is None else int(seed)
-        self.sim = SimRing(scenario, seed=self.seed)
-        self.ring = scenario.ring
-        self.adc_bits = scenario.sensor.adc_bits
-        self.poses = self.sim.n_sweeps  # a moving scene replays its whole drive, sweep by sweep
-
-    def read(self, pose_index: int, steps: np.ndarray, samples: int,
-             settle_s: float) -> np.ndarray:
-        return self.sim.sweep(pose_index, steps=np.asarray(steps)).counts
 
 
 @dataclass(frozen=True)
@@ -152,11 +120,12 @@ class Device:
     when the device decides to close the port.
     """
 
-    def __init__(self, source: ReadingSource, *, faults: Faults = Faults(),
+    def __init__(self, source: data.RingSource, *, faults: Faults = Faults(),
                  realtime: bool = False, firmware: str = FIRMWARE,
                  clock_start_ms: int = 1000, fixed_pose: int | None = None):
         self.source = source
         self.info = p.info_for_ring(source.ring, source.adc_bits, firmware)
+        self.poses = max(1, int(source.n_sweeps))  # the robot visits source poses 0 … poses-1
         self.faults = faults
         self.realtime = realtime
         self.fixed_pose = fixed_pose
@@ -237,11 +206,11 @@ class Device:
         full = {cmd.from_step, cmd.to_step} == {self.info.min_step, self.info.max_step}
         if full:
             if self._full_sweeps and self.fixed_pose is None:
-                self._pose = (self._pose + 1) % max(1, self.source.poses)
+                self._pose = (self._pose + 1) % self.poses
             self._full_sweeps += 1
         pose = self._pose if self.fixed_pose is None else self.fixed_pose
         settle_s = cmd.settle_ms / 1000.0
-        raw = np.asarray(self.source.read(pose, steps, cmd.samples, settle_s), dtype=float)
+        raw = np.asarray(self.source.sweep(pose, steps=steps).counts, dtype=float)
         top = (1 << self.info.adc_bits) - 1
         # a real ADC reports whole counts in range; NaN (no reading) reads as 0
         counts = np.clip(np.rint(np.nan_to_num(raw, nan=0.0)), 0, top).astype(np.int64)

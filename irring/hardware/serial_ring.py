@@ -1,7 +1,7 @@
 """The real ring (or its emulator) over a serial port, returning the same Sweep as SimRing.
 
     with SerialRing("/dev/ttyUSB0") as ring:          # opens, then IRHLO → IRINF
-        sweep = ring.sweep(resweep=1)                  # data.Sweep; sweep.missing_steps
+        sweep = ring.sweep((0.5, 0.45, 0.0))           # data.Sweep; sweep.missing_steps
         print(ring.last_report.message)
 
 The port is a pyserial URL or path (``/dev/ttyUSB0``, a pty path, ``loop://``,
@@ -57,13 +57,9 @@ class DeviceRejected(DeviceError):
         self.code, self.text = code, text
 
 
-class LinkLost(DeviceError):
-    """The device went away mid-operation; ``partial`` holds what was received."""
-
-    def __init__(self, message: str, partial: data.Sweep | None = None,
-                 report: SweepReport | None = None):
-        super().__init__(message)
-        self.partial, self.report = partial, report
+class LinkLost(DeviceError, data.SourceLost):
+    """The device went away mid-operation; ``partial`` holds what was received, ``report``
+    the :class:`SweepReport` of the sweep it cut short."""
 
 
 class DeviceTimeout(LinkLost):
@@ -134,6 +130,15 @@ def _describe_link(link: dict[str, int]) -> str:
 # --------------------------------------------------------------------------- driver
 
 
+def _check_settings(samples: int, settle_s: float, resweep: int) -> None:
+    if not 1 <= samples <= p.MAX_SAMPLES:
+        raise ValueError(f"samples must be 1 … {p.MAX_SAMPLES}, got {samples}")
+    if not settle_s >= 0:
+        raise ValueError(f"settle_s must be ≥ 0, got {settle_s}")
+    if resweep < 0:
+        raise ValueError(f"resweep must be ≥ 0 rounds, got {resweep}")
+
+
 def _runs(steps: list[int]) -> list[tuple[int, int]]:
     """Consecutive runs (±1 per step, one direction) → [(from, to)], in order."""
     runs: list[tuple[int, int]] = []
@@ -185,17 +190,25 @@ class SerialRing:
     radius_m / emitter_offset_m: override the template's (paper: 0.15 m / 0.007 m).
     sensor_model, vref_v, max_range_m: what the Sweep says about the sensors (the device
         does not report them; take them from your calibration file).
+    samples, settle_s, resweep: how :meth:`sweep` sweeps unless told otherwise: readings
+        averaged per step by the device (1–64), wait at each step before reading (s), rounds
+        of re-sweeping only the steps still missing.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
+
+    A :class:`irring.data.RingSource`: ``pipeline.acquire`` drives it as it drives SimRing.
     """
 
     def __init__(self, port: str | serial.SerialBase, *, baudrate: int = DEFAULT_BAUD,
                  timeout_s: float = DEFAULT_TIMEOUT_S, retries: int = 2,
                  template: Ring = PAPER_RING, radius_m: float | None = None,
                  emitter_offset_m: float | None = None, sensor_model: str = "gp2d12",
-                 vref_v: float = 5.0, max_range_m: float = 0.624,
+                 vref_v: float = 5.0, max_range_m: float = 0.624, samples: int = 1,
+                 settle_s: float = 0.0, resweep: int = 0,
                  opener: Callable[..., serial.SerialBase] = serial.serial_for_url):
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
+        _check_settings(samples, settle_s, resweep)
+        self.samples, self.settle_s, self.resweep = int(samples), float(settle_s), int(resweep)
         self.port_name = port if isinstance(port, str) else getattr(port, "name", None) or "port"
         self._port_arg = port
         self._port: serial.SerialBase | None = None
@@ -420,17 +433,18 @@ class SerialRing:
         info = self._require_info()
         return np.arange(info.min_step, info.max_step + 1)
 
-    def sweep(self, steps: Iterable[int] | None = None, *, samples: int = 1,
-              settle_s: float = 0.0, pose: Iterable[float] = (0.0, 0.0, 0.0),
-              resweep: int = 0) -> data.Sweep:
+    def sweep(self, pose: Any = (0.0, 0.0, 0.0), *, steps: Iterable[int] | None = None,
+              samples: int | None = None, settle_s: float | None = None,
+              resweep: int | None = None) -> data.Sweep:
         """Sweep the ring and return a :class:`data.Sweep` of the readings that arrived.
 
+        pose: where the robot stands, (x m, y m, yaw rad) or a scenario ``Pose``; the ring
+            cannot know it, so it is stored in the Sweep as given.
         steps: motor steps to read, in order (default: min_step … max_step from IRINF).
             Consecutive steps go out as one IRSWP; other steps as one IRSWP each.
-        samples: readings averaged per step by the device (1–64).
-        settle_s: wait at each step before reading (sent as whole ms).
-        pose: the robot's (x m, y m, yaw rad) for this sweep, stored in the Sweep.
-        resweep: rounds of re-sweeping only the steps still missing.
+        samples, settle_s, resweep: this sweep's, instead of the ring's settings
+            (readings averaged per step, 1–64; wait at each step, sent as whole ms; rounds of
+            re-sweeping only the steps still missing).
 
         Missing steps are absent from ``counts`` and listed in ``missing_steps``;
         :attr:`last_report` says why. Raises :class:`DeviceTimeout` /
@@ -446,15 +460,15 @@ class SerialRing:
                              f"{info.max_step} (from IRINF)")
         if len(set(req)) != len(req):
             raise ValueError("each step may be requested once per sweep")
-        if not 1 <= samples <= p.MAX_SAMPLES:
-            raise ValueError(f"samples must be 1 … {p.MAX_SAMPLES}, got {samples}")
+        samples = self.samples if samples is None else samples
+        settle_s = self.settle_s if settle_s is None else settle_s
+        resweep = self.resweep if resweep is None else resweep
+        _check_settings(samples, settle_s, resweep)
         settle_ms = int(round(settle_s * 1000))
-        if settle_ms < 0:
-            raise ValueError(f"settle_s must be ≥ 0, got {settle_s}")
+        pose_arr = data.as_pose(pose)
         started = time.monotonic()
         before = self.stats.as_dict()
         passes: list[_Pass] = []
-        pose_arr = np.asarray(tuple(pose), dtype=float)
 
         def build(complete: bool, reason: str) -> tuple[data.Sweep, SweepReport]:
             sweep = self._assemble(req, passes, samples, settle_ms, pose_arr)

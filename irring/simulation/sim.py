@@ -40,7 +40,7 @@ import mujoco.batch
 import numpy as np
 
 from . import model as model_lib
-from ..data import Sweep, Truth, hardware_duration_s
+from ..data import Sweep, Truth, as_pose, hardware_duration_s
 from ..scenario import Scenario
 
 _POS = mujoco.mjtStage.mjSTAGE_POS
@@ -85,7 +85,9 @@ class SimRing:
     ``rangers.pipeline_for(scenario)``: the scene's effects, with the sonar cone for a sonar.
     The k-th sweep at pose p draws its noise from ``np.random.default_rng([seed, p, k])``, so
     a fresh ``SimRing`` with the same scenario and seed reproduces every sweep; :meth:`reset`
-    forgets the sweep counters.
+    forgets the sweep counters. A :class:`irring.data.RingSource`: ``pipeline.acquire``
+    drives it as it drives the real ring (``close`` releases nothing; MuJoCo's memory goes
+    with the object).
 
     Attributes: ``model`` (``mujoco.MjModel``), ``data`` (an ``MjData`` for callers who step
     physics), ``built`` (:class:`irring.simulation.model.RingModel`: ids and addresses), ``scenario``,
@@ -104,6 +106,7 @@ class SimRing:
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
         mujoco.mj_forward(self.model, self.data)
         self.max_range_m = float(scenario.sensor.max_range_m)
+        self.adc_bits = int(scenario.sensor.adc_bits)
         self.seed = int(scenario.seed if seed is None else seed)
         self._kin_model = copy.copy(self.model)
         self._kin_model.opt.disableflags |= _KINEMATICS_ONLY
@@ -135,6 +138,15 @@ class SimRing:
 
             self._pipeline = pipeline_for(self.scenario)
         return self._pipeline
+
+    def close(self) -> None:
+        """Nothing to release (a RingSource closes; a simulator holds no device)."""
+
+    def __enter__(self) -> SimRing:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def reset(self, seed: int | None = None) -> None:
         """Forget the sweep counters (and take a new seed if given)."""
@@ -320,8 +332,28 @@ class SimRing:
                      hit_point=hits.hit_point, origin=origin, direction=direction,
                      geom_id=hits.geom_id, reflectance=hits.reflectance)
 
-    def sweep(self, pose_index: int = 0, *, steps: np.ndarray | None = None) -> Sweep:
-        """One sweep at the scenario's pose ``pose_index``: counts, angles, truth.
+    def _where(self, pose) -> tuple[int, np.ndarray | None]:
+        """(noise stream index, pose (3,) or None: the scene's) of a ``sweep`` argument."""
+        if isinstance(pose, (int, np.integer)) and not isinstance(pose, bool):
+            return int(pose), None
+        xyz = as_pose(pose)
+        if self.dynamics is not None and self.dynamics.motion is not None:
+            raise ValueError(f"scenario {self.scenario.name!r} drives while it scans "
+                             f"(`motion`): sweep it by index along its drive, 0 … "
+                             f"{self.n_sweeps - 1}, not at a pose ({pose!r})")
+        for k, p in enumerate(self.scenario.robot.poses):
+            if np.array_equal(xyz, (p.x_m, p.y_m, p.yaw_rad)):
+                return k, None
+        # a pose the scenario does not list: its own stream, keyed by its coordinates' bits
+        return (1 << 64) + int.from_bytes(xyz.tobytes(), "little"), xyz
+
+    def sweep(self, pose=0, *, steps: np.ndarray | None = None) -> Sweep:
+        """One sweep with the robot at ``pose``: counts, angles, truth.
+
+        ``pose`` is the index of one of the scenario's scan poses, or a pose — (x m, y m,
+        yaw rad) or a scenario ``Pose`` — anywhere in the room: one of the scenario's reads
+        with that pose's noise stream (the same sweeps as by its index), any other with its
+        own. ``steps``: motor steps in order (default: :meth:`default_steps`).
 
         ``counts`` come from the scene's effects pipeline
         (``pipeline.run(truth, rng, cast=self.cast)``); ``duration_s`` is the time the real
@@ -331,20 +363,26 @@ class SimRing:
         With ``belt_dynamics``, ``timing`` or ``motion`` the readings are cast from where
         and when :meth:`irring.simulation.dynamics.Dynamics.plan` says they were taken, the sweep's
         times include the moves (see that module), ``sensor_angles`` stay the commanded
-        angles, and with ``motion`` ``pose_index`` is the sweep's index along the drive
+        angles, and with ``motion`` ``pose`` is the sweep's index along the drive
         (0 … ``n_sweeps`` − 1) and ``reading_poses`` carries the odometry pose of each read.
         """
+        pose_index, at = self._where(pose)
         if self.dynamics is not None:
-            return self._dynamic_sweep(pose_index, steps)
-        pose = self.pose(pose_index)
-        pose_index = pose_index % len(self.scenario.robot.poses)
-        steps, angles, truth = self.truth(pose_index, steps=steps, pose=pose)
+            return self._dynamic_sweep(pose_index, steps, at)
+        if at is None:
+            pose = self.pose(pose_index)
+            pose_index = pose_index % len(self.scenario.robot.poses)
+        else:
+            pose = at
+        steps, angles, truth = self.truth(steps=steps, pose=pose)
         return self._finish(pose_index, self._count(pose_index), steps, angles, truth,
                             timestamps_s=self._step_s * np.arange(1, len(steps) + 1),
                             duration_s=self._step_s * len(steps), pose=pose)
 
-    def _dynamic_sweep(self, index: int, steps: np.ndarray | None) -> Sweep:
-        """A sweep whose readings physics, the GP2 clocks or the drive placed."""
+    def _dynamic_sweep(self, index: int, steps: np.ndarray | None,
+                       at: np.ndarray | None = None) -> Sweep:
+        """A sweep whose readings physics, the GP2 clocks or the drive placed (``at``: a
+        pose the scenario does not list, ``index`` its stream)."""
         dyn = self.dynamics
         steps = self.default_steps() if steps is None else self._check_steps(steps)
         if dyn.motion is not None:
@@ -355,6 +393,8 @@ class SimRing:
                                  f"0 … {n - 1}")
             index %= n
             pose = None
+        elif at is not None:
+            pose = at
         else:
             pose = self.pose(index)
             index %= len(self.scenario.robot.poses)

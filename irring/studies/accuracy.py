@@ -258,8 +258,8 @@ def run_job(job: Job) -> dict:
         scenario_from_text(job.scenario_yaml, job.scenario_source)
     cfg = job.config
     sc = apply(base, cfg)
-    sim_s: dict[str, float] = {}
-    sweeps, _ = pipeline.simulate(sc, seed=job.seed, progress=False, timings=sim_s)
+    acq, _ = pipeline.simulated(sc, seed=job.seed, progress=False)
+    sweeps = acq.sweeps
     lines = LineOptions() if cfg.regroup_iterations is None else \
         LineOptions(regroup_iterations=cfg.regroup_iterations)
     estimator = functools.partial(estimate, max_iterations=cfg.max_iterations,
@@ -316,7 +316,7 @@ def run_job(job: Job) -> dict:
         "dynamics": bool(cfg.dynamics), "angle_error_rms_rad": angle_rms,
         "hardware_time_s": float(view_s), "hardware_time_total_s": float(view_s * poses),
         "compute_ms": est_ms + map_ms, "estimate_ms": est_ms, "map_ms": map_ms,
-        "sim_ms": sim_s["sweeps"] * 1e3 / poses,
+        "sim_ms": acq.seconds * 1e3 / poses,
     }
 
 

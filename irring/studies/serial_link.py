@@ -23,7 +23,8 @@ from pathlib import Path
 
 from ..scenario import load_scenario
 from ..hardware import SerialRing
-from ..hardware.emulator import Device, Faults, PtyEmulator, SimSource
+from ..hardware.emulator import Device, Faults, PtyEmulator
+from ..simulation.sim import SimRing
 
 
 @contextmanager
@@ -37,7 +38,7 @@ def _driver_on_pty(device: Device, *, timeout_s: float, baud: int = 0):
 
 
 def _sweep_times(scenario, *, baud: int, realtime: bool, repeats: int) -> dict:
-    device = Device(SimSource(scenario), realtime=realtime)
+    device = Device(SimRing(scenario), realtime=realtime)
     with _driver_on_pty(device, timeout_s=2.0, baud=baud) as ring:
         walls, durations = [], []
         for _ in range(repeats):
@@ -52,17 +53,18 @@ def _sweep_times(scenario, *, baud: int, realtime: bool, repeats: int) -> dict:
             "bytes_per_sweep": sent / repeats}
 
 
-class _Recorded(SimSource):
+class _Recorded(SimRing):
     """Remembers every row the device produced, to count invented readings."""
 
     def __init__(self, scenario):
         super().__init__(scenario)
         self.rows: set[tuple[int, bytes]] = set()
 
-    def read(self, pose_index, steps, samples, settle_s):
-        counts = super().read(pose_index, steps, samples, settle_s)
-        self.rows.update((int(s), c.astype("int64").tobytes()) for s, c in zip(steps, counts))
-        return counts
+    def sweep(self, pose=0, *, steps=None):
+        sweep = super().sweep(pose, steps=steps)
+        self.rows.update((int(s), c.astype("int64").tobytes())
+                         for s, c in zip(sweep.steps, sweep.counts))
+        return sweep
 
 
 def _lossy(scenario, *, sweeps: int, resweep: int, seed: int) -> dict:
