@@ -39,7 +39,7 @@ OUTLINE = [(0, 0), (1.4, 0), (1.4, 0.6), (0.9, 1.1), (0, 1.1)]
 
 def run(effects: str):
     sc = loads(ROOM + f"effects: {effects}\n", source="<test>")
-    sweeps, _ = pipeline.simulate(sc, progress=False)
+    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
     cal = pipeline.scene_calibration(sc)[0]
     return sc, sweeps, cal, [estimate(sw, cal) for sw in sweeps]
 

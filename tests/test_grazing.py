@@ -30,7 +30,7 @@ def test_grazing_walls_within_10_mm_and_three_times_better_than_theta_zero():
     cal = pipeline.scene_calibration(sc)[0]
     err, err0, inc = [], [], []
     for seed in (0, 1):
-        sweeps, _ = pipeline.simulate(sc, seed=seed, progress=False)
+        sweeps = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps
         for sw in sweeps:
             p, p0 = estimate(sw, cal), estimate(sw, cal, iterate=False)
             hit = sw.truth.hit_point[..., :2]
