@@ -304,3 +304,21 @@ def test_parquet_holds_the_csv_rows_typed(small):
     assert table.num_rows == len(rows)
     assert table.column("occupied_f1").to_pylist() == [float(r["occupied_f1"]) for r in rows]
     assert table.column("seed").to_pylist() == [int(r["seed"]) for r in rows]
+
+
+def test_ctrl_c_says_how_many_runs_are_kept_and_how_to_resume(small, tmp_path, monkeypatch,
+                                                              capsys):
+    p, rows = small
+    out = tmp_path / "out"
+    out.mkdir()
+    lines = (p.parent / "serial" / study.RESULTS).read_text().splitlines(keepends=True)
+    (out / study.RESULTS).write_text("".join(lines[:3]))           # header + 2 finished runs
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(study, "run_study", interrupted)
+    assert main(["study", str(p), "--out", str(out), "--workers", "1", "--resume"]) == 130
+    err = capsys.readouterr().err
+    assert err == (f"irring: study interrupted; 2 finished run(s) kept in {out / study.RESULTS}: "
+                   "run the same command with --resume to run the rest\n")

@@ -77,9 +77,18 @@ def run(args: argparse.Namespace) -> int:
         counts.update(done=done, todo=todo)
         bar.reset(total=todo)
 
-    with bar, executor(args.workers, args.dask) as ex:
-        result = study.run_study(spec, out, ex, resume=args.resume, on_start=start,
-                                 progress=lambda _: bar.update())
+    try:
+        with bar, executor(args.workers, args.dask) as ex:
+            result = study.run_study(spec, out, ex, resume=args.resume, on_start=start,
+                                     progress=lambda _: bar.update())
+    except KeyboardInterrupt:
+        import sys
+
+        path = out / study.RESULTS
+        kept = len(study.read_results(path)) if path.exists() else 0
+        print(f"irring: study interrupted; {kept} finished run(s) kept in {path}: run the same "
+              "command with --resume to run the rest", file=sys.stderr)
+        return 130
     wall = time.perf_counter() - t0
     by, records = study.summary_records(out)
     if args.json:
