@@ -15,6 +15,7 @@ to one palette and streamed to the GIF writer (Pillow), never held as a list.
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -291,7 +292,7 @@ class MapAnimator:
             self._poses.append(_Layer(np.asarray(self._renderer.buffer_rgba()), box))
         self._font = None
         self._caption_box = None
-        self._palette, self._lut = self._make_palette()
+        self._palette, self._lut = _palette()
         self._t0, self._d1, self._d2 = (np.zeros(n, np.uint8) for _ in range(3))
         self._set_tables()
         self._shown = 0
@@ -308,34 +309,6 @@ class MapAnimator:
                 max(0, int(x0)), min(w, int(math.ceil(x1))))
 
     # ---- colours
-
-    def _make_palette(self) -> tuple[bytes, np.ndarray]:
-        """One 256-colour palette for every frame (from the picture with every pose shown,
-        in all three cell colours, plus a grey ramp for captions), and a 32³ RGB → index
-        lookup table (nearest colour, worked out once). The map's and the
-        overlay's own colours are in it exactly."""
-        over, alpha = self._over.copy(), self._alpha.copy()
-        for layer in self._poses:
-            _composite(over, alpha, layer)
-        # every pixel the overlay blends with the map, and every 50th of the others
-        keep = ((alpha > 0) & (alpha < 1)) | (np.arange(alpha.size) % 50 == 0)
-        over, alpha = over[keep], alpha[keep]
-        samples = [over + (1 - alpha)[:, None] * (np.array(c) * 255) for c in _CLASS_RGB]
-        ramp = np.repeat(np.linspace(0, 255, 256)[:, None], 3, axis=1)
-        rgb = (np.concatenate(samples + [ramp] * 16) + 0.5).clip(0, 255).astype(np.uint8)
-        exact = [_CLASS_RGB * 255] + [np.array(to_rgb(c)) * 255
-                                      for c in (TRUTH_COLOR, POSE_COLOR, RANGE_COLOR)]
-        exact = np.vstack(exact).round().astype(np.uint8)
-        found = Image.fromarray(rgb.reshape(1, -1, 3)).quantize(
-            256 - len(exact), method=Image.Quantize.MEDIANCUT).getpalette()
-        pal = np.vstack([exact, np.array(found, np.uint8).reshape(-1, 3)])[:256]
-        levels = np.round(np.arange(32) * 255 / 31).astype(np.uint8)
-        cube = np.stack(np.meshgrid(levels, levels, levels, indexing="ij"), -1)
-        cube = cube.reshape(-1, 3).astype(np.float32)
-        p = pal.astype(np.float32)
-        # nearest by |c - p|² = |p|² - 2 c·p (+ |c|², the same for every p): one product
-        lut = ((p * p).sum(1)[None, :] - 2 * cube @ p.T).argmin(1).astype(np.uint8)
-        return pal.tobytes().ljust(256 * 3, b"\0"), lut
 
     def _index(self, rgb: np.ndarray) -> np.ndarray:
         """Palette indices of RGB colours (…, 3), 0 … 255."""
@@ -459,6 +432,29 @@ class MapAnimator:
         # zlib level 3: a third of the default level's time for a file ~10 % larger
         Image.fromarray(img).save(path, format="PNG", dpi=(dpi, dpi), compress_level=3)
         return path
+
+
+@functools.lru_cache(maxsize=1)
+def _palette() -> tuple[bytes, np.ndarray]:
+    """The one 256-colour palette of every frame, and its 32³ RGB → index lookup table.
+
+    Every colour a frame can show is a cell colour (unknown, free, occupied, or the figure's
+    white) under at most one ink (black text and axes, the truth, pose and reach colours)
+    at some coverage: those blends, 17 coverages each, are the palette; a pixel where two
+    inks cross takes the nearest. Worked out once, whatever the scene.
+    """
+    bases = np.vstack([_CLASS_RGB, [1.0, 1.0, 1.0]]) * 255
+    inks = np.array([(0.0, 0.0, 0.0)] + [to_rgb(c) for c in
+                                          (TRUTH_COLOR, POSE_COLOR, RANGE_COLOR)]) * 255
+    cover = np.linspace(0, 1, 17)[:, None, None, None]
+    blends = cover * inks[None, :, None] + (1 - cover) * bases[None, None, :]
+    pal = np.unique(np.round(blends.reshape(-1, 3)).astype(np.uint8), axis=0)[:256]
+    levels = np.round(np.arange(32) * 255 / 31).astype(np.float32)
+    cube = np.stack(np.meshgrid(levels, levels, levels, indexing="ij"), -1).reshape(-1, 3)
+    p = pal.astype(np.float32)
+    # nearest by |c - p|² = |p|² - 2 c·p (+ |c|², the same for every p): one product
+    lut = ((p * p).sum(1)[None, :] - 2 * cube @ p.T).argmin(1).astype(np.uint8)
+    return pal.tobytes().ljust(256 * 3, b"\0"), lut
 
 
 def _composite(over: np.ndarray, alpha: np.ndarray, layer: _Layer) -> None:
