@@ -132,3 +132,16 @@ def test_pose_numbers_clear_each_other_when_poses_crowd():
     assert not render.crowded(apart, 0.15)
     (dx, dy), _ = render.label_offsets(apart, 0.15, (0, 2, 0, 1.2), label)
     assert dx == 0 and 0 < dy < 0.15
+
+
+def test_render_bench_times_fresh_processes_and_counts_the_frames():
+    from irring.studies import render_bench
+
+    with pytest.raises(ValueError, match="repeats must be ≥ 1, got 0"):
+        render_bench.measure("t_room_cylinder", repeats=0)
+    r = render_bench.measure("t_room_cylinder", repeats=1)
+    assert (r["poses"], r["frames"]) == (1, 1 + pipeline.FRAMES_PER_SWEEP)
+    assert r["cpu_render_s"] > 0 and r["cpu_make_map_s"] > 0
+    assert r["render_vs_make_map_cpu"] == r["cpu_render_s"] / r["cpu_make_map_s"]
+    assert 50 < r["peak_memory_mb"] < 1024
+    assert "render / making the map: cpu" in render_bench.report(r)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES = ("accuracy", "speed", "effects", "estimator", "dynamics", "rooms", "study")
+BENCHES = ("accuracy", "speed", "effects", "estimator", "dynamics", "rooms", "study", "render")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -1,0 +1,93 @@
+"""What drawing a run costs: the render stage (map.png, the GIF, map.pgm, the recording)
+against the stages that make the map (simulate, estimate, map, score), in CPU and wall
+seconds, and the peak memory — each repeat a fresh process, as ``irring run`` is.
+
+CPU time (``time.process_time``) is the process's own work, the figure to compare on a
+machine other jobs share; wall time is what a user waits for.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+KEYS = ("cpu_make_map_s", "wall_make_map_s", "cpu_render_s", "wall_render_s",
+        "cpu_load_render_s", "wall_command_s", "cpu_command_s", "peak_memory_mb")
+
+
+def one_run(scenario_name: str) -> dict:
+    """One ``irring run`` in this process, timed by part (the body of each repeat)."""
+    c0, w0 = time.process_time(), time.perf_counter()
+    from .. import pipeline
+    from ..scenario import load_scenario
+
+    scenario = load_scenario(scenario_name)
+    c1, w1 = time.process_time(), time.perf_counter()
+    result = pipeline.run(scenario, frames_per_sweep=pipeline.FRAMES_PER_SWEEP, progress=False)
+    c2, w2 = time.process_time(), time.perf_counter()
+    from ..maps import render  # noqa: F401  (write_outputs loads it before its clock)
+
+    c3, w3 = time.process_time(), time.perf_counter()
+    with tempfile.TemporaryDirectory() as out:
+        pipeline.write_outputs(result, out)
+    c4, w4 = time.process_time(), time.perf_counter()
+    peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return {"scenario": scenario.name, "poses": len(result.sweeps),
+            "frames": pipeline.frame_plan(len(result.sweeps), pipeline.FRAMES_PER_SWEEP)[2],
+            "cpu_make_map_s": c2 - c1, "wall_make_map_s": w2 - w1,
+            "cpu_load_render_s": c3 - c2, "cpu_render_s": c4 - c3, "wall_render_s": w4 - w3,
+            "cpu_command_s": c4 - c0, "wall_command_s": w4 - w0,
+            "peak_memory_mb": peak_kb / 1024, "stages_wall_s": result.timings_s}
+
+
+def measure(scenario_name: str, repeats: int = 5) -> dict:
+    """``repeats`` fresh processes each running :func:`one_run`; medians of every figure
+    (peak memory: the largest). Raises ValueError for repeats < 1."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be ≥ 1, got {repeats}")
+    runs = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = subprocess.run([sys.executable, "-m", __name__, scenario_name], check=True,
+                             capture_output=True, text=True)
+        run = json.loads(out.stdout)
+        run["wall_process_s"] = time.perf_counter() - t   # interpreter start included
+        runs.append(run)
+    med = {k: statistics.median(r[k] for r in runs) for k in KEYS + ("wall_process_s",)}
+    med["peak_memory_mb"] = max(r["peak_memory_mb"] for r in runs)
+    return {"scenario": runs[0]["scenario"], "poses": runs[0]["poses"],
+            "frames": runs[0]["frames"], "repeats": repeats, **med,
+            "render_vs_make_map_cpu": med["cpu_render_s"] / med["cpu_make_map_s"],
+            "render_vs_make_map_wall": med["wall_render_s"] / med["wall_make_map_s"],
+            "wall_process_all_s": [r["wall_process_s"] for r in runs],
+            "load_average": list(os.getloadavg())}
+
+
+def report(r: dict) -> str:
+    walls = ", ".join(f"{v:.2f}" for v in r["wall_process_all_s"])
+    return "\n".join([
+        f"render bench: {r['scenario']} ({r['poses']} poses, {r['frames']} animation frames), "
+        f"median of {r['repeats']} fresh processes",
+        f"  making the map (simulate, estimate, map, score): cpu {r['cpu_make_map_s']:.2f} s, "
+        f"wall {r['wall_make_map_s']:.2f} s",
+        f"  render (map.png, GIF, PGM, recording):           cpu {r['cpu_render_s']:.2f} s, "
+        f"wall {r['wall_render_s']:.2f} s",
+        f"  render / making the map: cpu {r['render_vs_make_map_cpu']:.2f}×, wall "
+        f"{r['render_vs_make_map_wall']:.2f}× (target ≤ 2×)",
+        f"  loading matplotlib and Pillow (before the render clock): cpu "
+        f"{r['cpu_load_render_s']:.2f} s",
+        f"  whole command: cpu {r['cpu_command_s']:.2f} s; wall {r['wall_process_s']:.2f} s "
+        f"with the interpreter's start (each: {walls}; target ≤ 1.5 s)",
+        f"  peak memory: {r['peak_memory_mb']:.0f} MB (target ≤ 1024 MB); load average "
+        + " ".join(f"{v:.2f}" for v in r["load_average"]),
+    ])
+
+
+if __name__ == "__main__":   # one repeat: `python -m irring.studies.render_bench SCENARIO`
+    print(json.dumps(one_run(sys.argv[1])))
