@@ -882,18 +882,26 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         heading=np.array(heading), sigma_m=sigma.reshape(shape),
         iterations=it_out.reshape(shape), valid=valid.reshape(shape), reason=reason,
         max_range_m=max_range)
-    if grouping is not None and snap:   # end points of line members onto their lines
-        member = np.full(shape, -1, dtype=np.intp)
-        member.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
-        points = snap_to_lines(points, member, cal.min_range_m)
+    return _finish(points, grouping, on_line, sw.index, cal, snap, detail, history)
+
+
+def _finish(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration, snap: bool,
+            detail: bool, history: list) -> Estimate:
+    """The estimate from the final points and grouping (either estimator's): line members
+    onto their lines (:func:`snap_to_lines`) and, with ``detail``, the :class:`Lines`."""
+    if grouping is None:
+        return Estimate(points=points, lines=None, theta_history=tuple(history))
+    shape = points.valid.shape
+    label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
+    label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
+    if snap:
+        points = snap_to_lines(points, label, cal.min_range_m)
     found = None
-    if detail and grouping is not None:  # labels: the line each reading took θ from (−1: none)
-        label = np.full(shape, -1, dtype=int)
-        label.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
+    if detail:
         pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                              alpha=grouping.alpha, usable=grouping.usable)
-        index = sw.index if grouping.uidx is None else sw.index.take(grouping.uidx)
-        found = _lines_record(pieces_out, label, index)
+        used = index if grouping.uidx is None else index.take(grouping.uidx)
+        found = _lines_record(pieces_out, label, used)
     return Estimate(points=points, lines=found, theta_history=tuple(history))
 
 

@@ -16,14 +16,13 @@ per-call overhead on ~850 readings).
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
 from ..data import Points, Reason, Sweep, beam_geometry
 from .estimate import (_FALLBACK_NODES, _MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M,
-                       Calibration, Estimate, LineOptions, _lines_record, _nominal_for, _Pieces,
-                       _scan_order, resolve_foldover, snap_to_lines)
+                       Calibration, Estimate, LineOptions, _finish, _nominal_for, _Pieces,
+                       _scan_order, resolve_foldover)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -790,7 +789,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     Table II (to show what the control is for). ``hold`` (S, N): readings kept out
     (FOLDOVER_AMBIGUOUS); None with a folding calibration: the fold-over is resolved first
     (:func:`irring.estimation.estimate.resolve_foldover`, numpy shared with the kernel path).
-    ``snap``: line members' end points onto their lines (:func:`irring.estimation.estimate.snap_to_lines`).
+    ``snap``: line members' end points onto their lines
+    (:func:`irring.estimation.estimate.snap_to_lines`).
     """
     cal = calibration if calibration is not None else _nominal_for(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
@@ -946,19 +946,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         origin_x=np.array(origin[..., 0]), origin_y=np.array(origin[..., 1]),
         heading=np.array(heading), sigma_m=_scatter(sigma, sw.index, shape, nan, mask=valid),
         iterations=it_out, valid=valid, reason=reason, max_range_m=max_range)
-    if grouping is not None and snap:   # end points of line members onto their lines
-        member = np.full(shape, -1, dtype=np.intp)
-        member.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
-        points = snap_to_lines(points, member, cal.min_range_m)
-    found = None
-    if grouping is not None:  # labels: the line each reading took θ from (−1: none)
-        label = np.full(shape, -1, dtype=int)
-        label.reshape(-1)[sw.index] = np.where(on_line, grouping.label, -1)
-        pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
-                                         alpha=grouping.alpha, usable=grouping.usable)
-        index = sw.index if grouping.uidx is None else sw.index.take(grouping.uidx)
-        found = _lines_record(pieces_out, label, index)
-    return Estimate(points=points, lines=found, theta_history=tuple(history))
+    return _finish(points, grouping, on_line, sw.index, cal, snap, True, history)
 
 
 
