@@ -30,7 +30,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,6 +54,10 @@ class SensorModel:
         where = f"sensor model {self.name!r}" + (f" ({self.source})" if self.source else "")
         if not (theta.ndim == a.ndim == b.ndim == 1 and theta.size == a.size == b.size >= 1):
             raise ValueError(f"{where}: theta, a and b must be 1-D tables of equal length")
+        if not all(np.all(np.isfinite(v)) for v in (theta, a, b, self.min_range_m,
+                                                       self.max_range_m, self.peak_distance_m,
+                                                       self.max_incidence_rad)):
+            raise ValueError(f"{where}: every number must be finite")
         if theta[0] != 0.0 or np.any(np.diff(theta) <= 0):
             raise ValueError(f"{where}: the table must start at θ = 0 and increase")
         if np.any(a <= 0) or np.any(b == 0):
@@ -177,8 +180,10 @@ def available() -> tuple[str, ...]:
 
 def load_sensor(path: str | Path) -> SensorModel:
     """Read a sensor curve file (the format of ``models/sensors/*.yaml``)."""
+    from . import safe_yaml
+
     path = Path(path)
-    raw = yaml.safe_load(path.read_text())
+    raw = safe_yaml.load_file(path, "sensor curve file")
     try:
         table = raw["table"]
         return SensorModel(
@@ -188,9 +193,10 @@ def load_sensor(path: str | Path) -> SensorModel:
             max_incidence_rad=float(np.radians(raw["max_incidence_deg"])),
             theta_rad=np.radians(np.asarray(table["theta_deg"], dtype=float)),
             a=np.asarray(table["a"], dtype=float), b=np.asarray(table["b"], dtype=float))
-    except (KeyError, TypeError) as exc:
-        raise ValueError(f"{path}: not a sensor curve file (missing or bad {exc}); see "
-                         f"{sensors_dir() / 'README.md'} for the format") from exc
+    except (KeyError, TypeError, ValueError) as exc:
+        why = f"missing or bad {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise safe_yaml.InputError(f"{path}: not a sensor curve file ({why}); see "
+                                   f"{sensors_dir() / 'README.md'} for the format") from None
 
 
 @functools.lru_cache(maxsize=None)

@@ -28,7 +28,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from .data import Points, Reason, RingSource, SourceLost, Sweep
-from .maps.mapping import MapperParams, OccupancyGrid, slice_steps
+from .maps.mapping import MapperParams, OccupancyGrid, check_scenario_grid, slice_steps
 from .scenario import Scenario
 
 FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
@@ -148,15 +148,22 @@ def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
     """(Calibration or None, YAML text or None) from a file path or from stored YAML text."""
     if path_or_text is None:
         return None, None
-    import yaml
-
-    from .estimation.estimate import Calibration
+    from . import safe_yaml
+    from .estimation.estimate import Calibration, CalibrationError
 
     if is_text:
-        text, source = str(path_or_text), "<recording>"
+        text, source = str(path_or_text), "<recording's calibration>"
     else:
-        text, source = Path(path_or_text).read_text(), str(path_or_text)
-    return Calibration.from_dict(yaml.safe_load(text), source), text
+        source = str(path_or_text)
+        try:
+            text = safe_yaml.read_text(path_or_text, "calibration file")
+        except safe_yaml.InputError as exc:
+            raise CalibrationError(str(exc)) from None
+    try:
+        raw = safe_yaml.load(text, source)
+    except safe_yaml.InputError as exc:
+        raise CalibrationError(str(exc)) from None
+    return Calibration.from_dict(raw, source), text
 
 
 def scene_calibration(scenario: Scenario):
@@ -352,6 +359,7 @@ def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | 
     """Simulate every pose of ``scenario``, estimate, map and score (``estimator``: as
     :func:`map_sweeps` takes it), with the calibration in ``calibration_file`` or else the
     scene's (:func:`scene_calibration`)."""
+    check_scenario_grid(scenario)   # refuse a grid too big for memory before the work
     calibration, cal_text = (load_calibration(calibration_file) if calibration_file is not None
                              else scene_calibration(scenario))
     acq, build_s = simulated(scenario, seed=seed, progress=progress)

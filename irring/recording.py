@@ -15,18 +15,22 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
+import zipfile
+import zlib
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from .data import Sweep, Truth
+from .errors import InputError, brief
 from .scenario import Ring
 
 FORMAT = "irring-recording/1"
 
 
-class RecordingError(ValueError):
+class RecordingError(InputError):
     """A file that is not an irring recording, or a damaged one."""
 
 
@@ -70,49 +74,246 @@ def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> P
     return path
 
 
+# Bounds checked before anything sized by the file is allocated.
+MAX_FILE_BYTES = 2 * 2**30        # the .npz on disk
+MAX_ARRAY_BYTES = 512 * 2**20     # one array, uncompressed
+MAX_TEXT_CHARS = 8 * 2**20        # meta / scalars JSON, the embedded scenario
+MAX_SWEEPS = 10_000
+MAX_STEPS = 100_000               # readings per sensor in one sweep
+
+_SWEEP_ARRAYS = {  # name: (dimensions, kinds allowed, finite required)
+    "steps": ("S", "iu", True), "sensor_angles": ("SN", "f", True), "counts": ("SN", "iuf", True),
+    "timestamps_s": ("S", "iuf", True), "pose": ("3", "iuf", True),
+    "reading_poses": ("SN3", "f", True),
+}
+_TRUTH_ARRAYS = {"distance_m": "SN", "incidence_rad": "SN", "hit_point": "SN3", "origin": "SN3",
+                 "direction": "SN3", "geom_id": "SN", "reflectance": "SN"}
+
+
+def _npy_header(zf: zipfile.ZipFile, info: zipfile.ZipInfo, fail) -> tuple[tuple, np.dtype]:
+    """(shape, dtype) of a .npy member from its header alone; refuses pickled objects and
+    arrays whose size does not match the member's."""
+    with zf.open(info) as f:
+        version = np.lib.format.read_magic(f)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(f)
+        else:
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(f)
+        header = f.tell()
+    if dtype.hasobject or dtype.kind not in "biufcU":
+        raise fail(f"{info.filename[:-4]}: holds {dtype} data; a recording holds numbers and text")
+    nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if nbytes > MAX_ARRAY_BYTES:
+        raise fail(f"{info.filename[:-4]}: an array of shape {shape} ({nbytes / 2**20:.0f} MB) "
+                   f"is larger than any recording holds (at most {MAX_ARRAY_BYTES // 2**20} MB)")
+    if info.file_size != header + nbytes:
+        raise fail(f"{info.filename[:-4]}: truncated or damaged ({info.file_size} bytes for an "
+                   f"array of shape {shape})")
+    return shape, dtype
+
+
 def load_recording(path) -> tuple[list[Sweep], dict]:
-    """Read a recording: (sweeps, meta)."""
+    """Read a recording: (sweeps, meta). Raises :class:`RecordingError` (one line naming the
+    file and the entry) for anything that is not a well-formed recording of this format:
+    every array's shape and dtype is checked from the zip's headers before it is read, and
+    every value against the schema (finite numbers, counts within the ADC's range, registry
+    names) before it is used."""
     path = Path(path)
+
+    def fail(msg: str) -> RecordingError:
+        return RecordingError(f"{path}: {msg}")
+
     try:
-        npz = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise RecordingError(f"{path}: no such recording") from None
-    except (OSError, ValueError) as exc:
-        raise RecordingError(f"{path}: not an irring recording (.npz): {exc}") from None
-    with npz:
-        if "format" not in npz.files:
-            raise RecordingError(f"{path}: not an irring recording (no 'format' entry)")
-        fmt = str(npz["format"])
-        if fmt != FORMAT:
-            raise RecordingError(f"{path}: recording format {fmt!r}; this irring reads {FORMAT!r}")
-        meta = json.loads(str(npz["meta"]))
-        # by number: from sweep1000 on, names no longer sort as text (sweep1000 < sweep101)
-        keys = sorted({name.split("/", 1)[0] for name in npz.files if name.startswith("sweep")},
-                      key=lambda k: int(k[len("sweep"):]))
-        sweeps = [_load_sweep(npz, key, path) for key in keys]
-    return sweeps, meta
+        if path.is_dir():
+            raise fail("is a folder; expected a sweeps .npz recording")
+        if not path.exists():
+            raise fail("no such recording")
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise fail(f"{path.stat().st_size / 2**30:.1f} GB is larger than any recording")
+        with zipfile.ZipFile(path) as zf:
+            infos = {i.filename: i for i in zf.infolist()}
+            if "format.npy" not in infos:
+                raise fail("not an irring recording (no 'format' entry)")
+            headers = {name[:-4]: _npy_header(zf, info, fail) for name, info in infos.items()
+                       if name.endswith(".npy")}
+        with np.load(path, allow_pickle=False) as npz:
+            return _read(npz, headers, fail)
+    except RecordingError:
+        raise
+    except (zipfile.BadZipFile, zlib.error, EOFError, ValueError, OSError, KeyError,
+            UnicodeError, RecursionError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        raise fail(f"not an irring recording (.npz), or a damaged one: {brief(why)[1:-1]}") from None
 
 
-def _load_sweep(npz, key: str, path: Path) -> Sweep:
-    scalars = json.loads(str(npz[f"{key}/scalars"]))
-    has_truth = scalars.pop("has_truth", False)
-    kwargs: dict[str, Any] = {}
-    for f in dataclasses.fields(Sweep):
-        name = f"{key}/{f.name}"
-        if name in npz.files:
-            kwargs[f.name] = npz[name]
-        elif f.name == "ring":
-            kwargs["ring"] = Ring(**scalars.pop("ring"))
-        elif f.name == "truth":
-            if has_truth:
-                kwargs["truth"] = Truth(**{tf.name: npz[f"{key}/truth/{tf.name}"]
-                                           for tf in dataclasses.fields(Truth)})
-        elif f.name in scalars:
-            value = scalars.pop(f.name)
-            if f.name == "missing_steps":
-                value = tuple(value)
-            kwargs[f.name] = value
+def _text(npz, headers: dict, name: str, fail) -> str:
+    shape, dtype = headers.get(name, (None, None))
+    if shape != () or dtype.kind != "U" or dtype.itemsize // 4 > MAX_TEXT_CHARS:
+        raise fail(f"{name}: expected one text entry of at most {MAX_TEXT_CHARS} characters")
+    return str(npz[name])
+
+
+def _json(npz, headers: dict, name: str, fail) -> dict:
+    try:
+        value = json.loads(_text(npz, headers, name, fail))
+    except (ValueError, RecursionError):
+        raise fail(f"{name}: not valid JSON") from None
+    if not isinstance(value, dict):
+        raise fail(f"{name}: expected a JSON object, got {brief(value)}")
+    return value
+
+
+def _read(npz, headers: dict, fail) -> tuple[list[Sweep], dict]:
+    fmt = _text(npz, headers, "format", fail)
+    if fmt != FORMAT:
+        raise fail(f"recording format {brief(fmt)}; this irring reads {FORMAT!r}")
+    meta = _json(npz, headers, "meta", fail)
+    _check_meta(meta, fail)
+    keys = set()
+    for name in headers:
+        head = name.split("/", 1)[0]
+        if name in ("format", "meta"):
+            continue
+        if not (head.startswith("sweep") and head[5:].isdigit()):
+            raise fail(f"{brief(name)}: unknown entry; a recording holds format, meta and "
+                       f"sweepNNN/…")
+        keys.add(head)
+    if len(keys) > MAX_SWEEPS:
+        raise fail(f"{len(keys)} sweeps; at most {MAX_SWEEPS}")
+    # by number: from sweep1000 on, names no longer sort as text (sweep1000 < sweep101)
+    order = sorted(keys, key=lambda k: int(k[len("sweep"):]))
+    return [_load_sweep(npz, headers, key, fail) for key in order], meta
+
+
+def _finite(value: Any, lo: float, hi: float) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and math.isfinite(value) and lo <= value <= hi)
+
+
+def _check_meta(meta: dict, fail) -> None:
+    for key in ("scenario_yaml", "calibration_yaml", "scenario"):
+        if meta.get(key) is not None and not isinstance(meta[key], str):
+            raise fail(f"meta.{key}: expected text, got {brief(meta[key])}")
+    seed = meta.get("seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise fail(f"meta.seed: expected a whole number ≥ 0, got {brief(seed)}")
+    grid = meta.get("grid")
+    if grid is not None:
+        from .maps.mapping import check_grid_size
+
+        ok = (isinstance(grid, dict) and set(grid) == {"origin_xy_m", "shape", "resolution_m"}
+              and isinstance(grid["shape"], list) and len(grid["shape"]) == 2
+              and all(isinstance(v, int) and not isinstance(v, bool) and v >= 1
+                      for v in grid["shape"])
+              and isinstance(grid["origin_xy_m"], list) and len(grid["origin_xy_m"]) == 2
+              and all(_finite(v, -1e6, 1e6) for v in grid["origin_xy_m"])
+              and _finite(grid["resolution_m"], 1e-4, 10.0))
+        if not ok:
+            raise fail("meta.grid: expected origin_xy_m [x, y] (finite m), shape [rows, "
+                       "columns] (whole numbers ≥ 1), resolution_m 0.0001 … 10")
+        check_grid_size(*grid["shape"], grid["resolution_m"], f"{fail('').args[0]}meta.grid")
+    mapper = meta.get("mapper")
+    if mapper is not None:
+        from .maps.mapping import MapperParams
+
+        names = {f.name for f in dataclasses.fields(MapperParams)}
+        if (not isinstance(mapper, dict) or not set(mapper) <= names
+                or not all(_finite(v, -1e3, 1e3) for v in mapper.values())):
+            raise fail(f"meta.mapper: expected finite numbers for {', '.join(sorted(names))}")
+        try:
+            MapperParams(**mapper)
+        except ValueError as exc:
+            raise fail(f"meta.mapper: {exc}") from None
+
+
+def _array(npz, headers: dict, name: str, dims: str, kinds: str, sizes: dict, fail,
+           finite: bool = True) -> np.ndarray:
+    shape, dtype = headers[name]
+    if dtype.kind not in kinds:
+        want = {"i": "integers", "u": "integers", "f": "real numbers"}
+        raise fail(f"{name}: holds {dtype}; expected "
+                   f"{' or '.join(sorted({want[k] for k in kinds}))}")
+    if len(shape) != len(dims):
+        raise fail(f"{name}: shape {shape}; expected {len(dims)} dimension(s) ({dims})")
+    for d, n in zip(dims, shape):
+        expect = 3 if d == "3" else sizes.setdefault(d, n)
+        if n != expect:
+            raise fail(f"{name}: shape {shape} does not match the sweep's "
+                       f"{sizes.get('S')} steps × {sizes.get('N')} sensors")
+    arr = npz[name]
+    if finite and arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        raise fail(f"{name}: holds NaN or infinite values")
+    return arr
+
+
+def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
+    from .scenario import SENSOR_MODELS, ScenarioError, _Loader
+
+    scalars = _json(npz, headers, f"{key}/scalars", fail)
+    known = {f.name for f in dataclasses.fields(Sweep)} | {"has_truth"}
+    for name in scalars:
+        if name not in known:
+            raise fail(f"{key}/scalars: unknown field {brief(name)}")
+    for name in headers:
+        if name.startswith(key + "/") and name != f"{key}/scalars":
+            rest = name[len(key) + 1:]
+            if rest not in _SWEEP_ARRAYS and rest.removeprefix("truth/") not in _TRUTH_ARRAYS:
+                raise fail(f"{brief(name)[1:-1]}: unknown entry")
+    try:
+        ring = _Loader(f"{fail('').args[0]}{key}").dataclass_(Ring, scalars.get("ring"), "ring")
+    except ScenarioError as exc:
+        raise RecordingError(str(exc)) from None
+    sizes = {"N": ring.sensors}
+    kwargs: dict[str, Any] = {"ring": ring}
+    for name, (dims, kinds, finite) in _SWEEP_ARRAYS.items():
+        full = f"{key}/{name}"
+        if full not in headers:
+            if name == "reading_poses":
+                continue
+            raise fail(f"{full}: missing")
+        kwargs[name] = _array(npz, headers, full, dims, kinds, sizes, fail, finite)
+    if not 1 <= sizes["S"] <= MAX_STEPS:
+        raise fail(f"{key}/steps: {sizes['S']} steps; a sweep has 1 … {MAX_STEPS}")
+
+    def scalar(name: str, ok: Callable[[Any], bool], allowed: str, default: Any = None) -> Any:
+        value = scalars.get(name, default)
+        if not ok(value):
+            raise fail(f"{key}/scalars.{name}: {brief(value)} is not allowed; {allowed}")
+        return value
+
+    def whole(lo: int, hi: int) -> Callable[[Any], bool]:
+        return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
+
+    kwargs["sensor_model"] = scalar("sensor_model", lambda v: v in SENSOR_MODELS,
+                                    f"one of {', '.join(SENSOR_MODELS)}", "gp2d12")
+    bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, 24), "a whole number 1 … 24", 12)
+    kwargs["vref_v"] = scalar("vref_v", lambda v: _finite(v, 0.1, 50.0), "0.1 … 50 V", 5.0)
+    kwargs["max_range_m"] = scalar("max_range_m", lambda v: _finite(v, 0.001, 100.0),
+                                   "0.001 … 100 m", 0.624)
+    kwargs["samples"] = scalar("samples", whole(1, 64), "a whole number 1 … 64", 1)
+    kwargs["settle_s"] = scalar("settle_s", lambda v: _finite(v, 0.0, 60.0), "0 … 60 s", 0.0)
+    kwargs["duration_s"] = scalar("duration_s", lambda v: _finite(v, 0.0, 1e7),
+                                  "a finite number of seconds ≥ 0")
+    kwargs["source"] = scalar("source", lambda v: isinstance(v, str) and len(v) <= 200,
+                              "a short text", "sim")
+    missing = scalar("missing_steps", lambda v: isinstance(v, list) and len(v) <= MAX_STEPS
+                     and all(whole(-2**31, 2**31)(s) for s in v),
+                     "a list of whole-number steps", [])
+    kwargs["missing_steps"] = tuple(missing)
+    counts = kwargs["counts"]
+    if counts.size and (counts.min() < 0 or counts.max() > 2 ** bits - 1):
+        raise fail(f"{key}/counts: readings {counts.min():g} … {counts.max():g} lie outside a "
+                   f"{bits}-bit ADC's 0 … {2 ** bits - 1}")
+    if scalar("has_truth", lambda v: isinstance(v, bool), "true or false", False):
+        truth = {}
+        for name, dims in _TRUTH_ARRAYS.items():
+            full = f"{key}/truth/{name}"
+            if full not in headers:
+                raise fail(f"{full}: missing (has_truth is set)")
+            truth[name] = _array(npz, headers, full, dims, "iuf" if name == "geom_id" else "f",
+                                 sizes, fail, finite=name in ("origin", "direction"))
+        kwargs["truth"] = Truth(**truth)
     try:
         return Sweep(**kwargs)
-    except TypeError as exc:
-        raise RecordingError(f"{path}: {key} is incomplete: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise fail(f"{key} is incomplete: {exc}") from None

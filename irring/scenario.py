@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
 
 # --------------------------------------------------------------------------- errors
 
@@ -597,9 +596,9 @@ DEFAULT_SCENARIO = "t_room"
 def resolve(name_or_path: str | Path) -> Path:
     """A path, or the name of a bundled scenario (`t_room`)."""
     p = Path(name_or_path)
-    if p.exists():
-        return p
     found = bundled()
+    if p.exists() and not (p.is_dir() and str(name_or_path) in found):  # `--out t_room` made a folder
+        return p
     if str(name_or_path) in found:
         return found[str(name_or_path)]
     raise ScenarioError(f"{name_or_path}: no such file and no bundled scenario of that name; "
@@ -641,17 +640,21 @@ def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load and validate a scenario file (or a bundled scenario by name)."""
+    from . import safe_yaml
+
     path = resolve(name_or_path)
     try:
-        raw = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ScenarioError(f"{path}: not valid YAML: {exc}") from exc
+        raw = safe_yaml.load_file(path, "scenario file")
+    except safe_yaml.InputError as exc:
+        raise ScenarioError(str(exc)) from None
     return parse(raw, str(path))
 
 
 def loads(text: str, source: str = "<string>") -> Scenario:
+    from . import safe_yaml
+
     try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ScenarioError(f"{source}: not valid YAML: {exc}") from exc
+        raw = safe_yaml.load(text, source)
+    except safe_yaml.InputError as exc:
+        raise ScenarioError(str(exc)) from None
     return parse(raw, source)

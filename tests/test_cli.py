@@ -38,7 +38,7 @@ def test_scenarios_lists_every_bundled_scenario_and_marks_the_default(capsys):
 
 
 def test_an_unknown_scenario_names_the_bundled_ones(capsys):
-    assert main(["run", "t_rooom", "--out", "/nonexistent/never-written"]) == 2
+    assert main(["run", "t_rooom", "--out", "/nonexistent/never-written"]) == 1
     err = capsys.readouterr().err
     assert "t_rooom: no such file and no bundled scenario of that name" in err
     assert "t_room_cylinder" in err

@@ -29,7 +29,7 @@ def make_sweep(rng, *, truth=True, moving=False, counts_dtype=np.float64, **kw) 
                   geom_id=rng.integers(-1, 9, (S, N)).astype(np.int32),
                   reflectance=rng.random((S, N)))
     return Sweep(steps=np.arange(-3, 4), sensor_angles=rng.normal(size=(S, N)),
-                 counts=(rng.random((S, N)) * 4095).astype(counts_dtype),
+                 counts=(rng.random((S, N)) * (2 ** kw.get("adc_bits", 12) - 1)).astype(counts_dtype),
                  timestamps_s=np.cumsum(rng.random(S)), duration_s=0.1 + rng.random(),
                  pose=rng.normal(size=3), ring=ring, truth=t,
                  reading_poses=rng.normal(size=(S, N, 3)) if moving else None, **kw)
@@ -55,7 +55,8 @@ def test_round_trip_is_lossless(tmp_path):
                                           missing_steps=(2, 3), counts_dtype=np.uint16,
                                           sensor_model="gp2y0a02", adc_bits=10, samples=4,
                                           settle_s=0.0123456789)]
-    meta = {"scenario": "x", "seed": 5, "grid": {"origin_xy_m": [-0.105, 1 / 3]}}
+    meta = {"scenario": "x", "seed": 5, "grid": {"origin_xy_m": [-0.105, 1 / 3], "shape": [3, 5],
+                                             "resolution_m": 0.01}}
     path = save_recording(tmp_path / "rec", sweeps, meta)
     assert path.suffix == ".npz"
     back, meta_back = load_recording(path)

@@ -102,5 +102,5 @@ def test_cli_scores_bundled_and_own_rooms_with_and_without_effects(tmp_path, cap
 
 
 def test_cli_names_a_folder_without_rooms(tmp_path, capsys):
-    assert main(["bench", "rooms", str(tmp_path)]) == 2
+    assert main(["bench", "rooms", str(tmp_path)]) == 1
     assert f"{tmp_path}: the folder holds no *.yaml scenario" in capsys.readouterr().err

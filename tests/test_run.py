@@ -122,9 +122,9 @@ def test_readable_summary_and_bad_input(tmp_path, capsys):
     for word in ("occupied  F1", "free      accuracy", "shadow", "hardware 2.7 s", "compute",
                  "map.pgm"):
         assert word in text
-    assert main(["run", "no_such_scenario"]) == 2
+    assert main(["run", "no_such_scenario"]) == 1
     assert "no such file and no bundled scenario" in capsys.readouterr().err
-    assert main(["replay", str(tmp_path / "nothing.npz")]) == 2
+    assert main(["replay", str(tmp_path / "nothing.npz")]) == 1
     assert "no such recording" in capsys.readouterr().err
 
 

@@ -127,7 +127,7 @@ def test_there_are_at_least_ten_kinds_of_mistake():
 
 
 def test_broken_files_name_the_file(tmp_path):
-    with pytest.raises(ScenarioError, match=r"x\.yaml: not valid YAML"):
+    with pytest.raises(ScenarioError, match=r"x\.yaml: line 2: not valid YAML"):
         loads("room: [\n", "x.yaml")
     with pytest.raises(ScenarioError, match=r"a scenario file must be a mapping"):
         loads("- 1\n- 2\n", "x.yaml")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import traceback
 
 # Subcommand modules, in the order `irring --help` lists them.
 COMMANDS = ("run", "replay", "view", "scenarios", "calibrate", "emulate", "drive", "geometry",
@@ -25,11 +26,21 @@ Start with `irring run` (the default scenario, t_room) and look at the map
 it writes; `irring scenarios` lists the bundled scenarios."""
 
 
+EPILOG = """\
+exit status: 0 done; 1 bad input file (scenario, recording, calibration); 2 bad option or
+argument; 3 the device failed (no answer, disconnected, error replies, no progress); 4 an
+output could not be written; 5 refused as too big for memory; 70 internal error (a bug);
+130 interrupted. Errors are one line; --debug (anywhere on the line, or IRRING_DEBUG=1)
+adds the traceback."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="irring", description=DESCRIPTION,
+        prog="irring", description=DESCRIPTION, epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"irring {_version()}")
+    parser.add_argument("--debug", action="store_true",
+                        help="print the traceback of an error (also: IRRING_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"{__name__}.{name}").register(sub)
@@ -46,22 +57,38 @@ def _version() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
-    from ..studies.executor import ExecutorError
-    from ..scenario import ScenarioError
+    """Run one `irring` command; every failure ends as one line on stderr and an exit
+    status (irring.errors), with a traceback only under --debug or IRRING_DEBUG=1."""
+    from .. import errors
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or errors.debug_requested()
+    argv = [a for a in argv if a != "--debug"]
+    command = "irring"
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return errors.USAGE
+        command = f"irring {args.command}"
         return int(args.func(args) or 0)
-    except (ScenarioError, ExecutorError) as exc:
-        print(f"irring: error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
-        print("irring: interrupted", file=sys.stderr)
-        return 130
+        if debug:
+            traceback.print_exc()
+        print(f"{command}: interrupted", file=sys.stderr)
+        return errors.INTERRUPTED
+    except SystemExit:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - the one place every error becomes a line
+        if debug:
+            traceback.print_exc()
+        status, message = errors.describe(exc)
+        try:
+            print(f"{command}: error: {message}", file=sys.stderr)
+        except (OSError, ValueError):  # stderr itself is gone
+            pass
+        return status
 
 
 if __name__ == "__main__":  # pragma: no cover

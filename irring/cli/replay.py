@@ -40,19 +40,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import sys
-
     from .. import pipeline
-    from ..recording import RecordingError
     from .run import report
 
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
-    try:
-        result = pipeline.replay(args.recording, calibration_file=args.calibration,
-                                 frames_per_sweep=frames)
-    except (RecordingError, OSError) as exc:
-        print(f"irring replay: error: {exc}", file=sys.stderr)
-        return 2
+    result = pipeline.replay(args.recording, calibration_file=args.calibration,
+                             frames_per_sweep=frames)
     if args.out is not None:
         out = args.out
     else:

@@ -122,6 +122,12 @@ def _table_end(theta: np.ndarray) -> float:
     return float(theta[-1]) or math.pi / 2 - 1e-3
 
 
+def _source_text(value: Any, fail) -> str:
+    if not isinstance(value, str) or len(value) > 4096:
+        raise fail("source", "expected a line of text (at most 4096 characters)")
+    return value
+
+
 @dataclass(frozen=True, eq=False)
 class Calibration:
     """Everything the estimator needs to turn ADC counts into distances.
@@ -392,11 +398,22 @@ class Calibration:
             if key not in raw:
                 raise fail(key, "required key is missing")
 
-        def number(key: str, default: float | None = None) -> float:
+        from ..errors import brief
+        from ..scenario import SENSOR_MODELS
+
+        def number(key: str, default: float | None = None, lo: float = -math.inf,
+                   hi: float = math.inf) -> float:
             value = raw.get(key, default)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise fail(key, f"expected a number, got {value!r}")
+                raise fail(key, f"expected a number, got {brief(value)}")
+            if not (math.isfinite(value) and lo <= value <= hi):
+                raise fail(key, f"{brief(value)} is out of range; allowed {lo:g} … {hi:g}")
             return float(value)
+
+        model = raw["sensor_model"]
+        if model not in SENSOR_MODELS:
+            raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
+                                       f"{', '.join(SENSOR_MODELS)}")
 
         curve = raw["curve"]
         if not isinstance(curve, list) or not curve:
@@ -404,39 +421,46 @@ class Calibration:
         rows = []
         for i, row in enumerate(curve):
             if not isinstance(row, Mapping) or set(row) != {"theta_deg", "a", "b"}:
-                raise fail(f"curve[{i}]", f"expected keys theta_deg, a, b; got {row!r}")
-            try:
-                rows.append([float(row["theta_deg"]), float(row["a"]), float(row["b"])])
-            except (TypeError, ValueError):
-                raise fail(f"curve[{i}]", f"expected numbers, got {row!r}") from None
+                raise fail(f"curve[{i}]", f"expected keys theta_deg, a, b; got {brief(row)}")
+            values = [row["theta_deg"], row["a"], row["b"]]
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and math.isfinite(v) for v in values):
+                raise fail(f"curve[{i}]", f"expected finite numbers, got {brief(row)}")
+            rows.append([float(v) for v in values])
         table = np.array(rows)
+        # a GP2's output falls with distance (b < 0); the linear laser/sonar curves rise
+        falling = str(model).startswith("gp2")
+        if np.any(table[:, 2] >= 0) if falling else np.any(table[:, 2] <= 0):
+            raise fail("curve", f"a {model} curve d = a·S^b needs b "
+                                f"{'< 0 (output falls with distance)' if falling else '> 0'} "
+                                f"at every θ; got b = {brief(table[:, 2].tolist())}")
         bits = raw.get("adc_bits", 12)
         if isinstance(bits, bool) or not isinstance(bits, int) or not 1 <= bits <= 24:
             raise fail("adc_bits", f"expected a whole number 1 … 24, got {bits!r}")
         try:
-            return cls(sensor_model=str(raw["sensor_model"]),
-                       emitter_offset_m=number("emitter_offset_mm") * 1e-3,
+            return cls(sensor_model=str(model),
+                       emitter_offset_m=number("emitter_offset_mm", hi=100.0, lo=-100.0) * 1e-3,
                        theta_rad=np.radians(table[:, 0]), a=table[:, 1], b=table[:, 2],
-                       adc_bits=bits, vref_v=number("vref_v", 5.0),
-                       min_range_m=number("min_range_mm", 100.0) * 1e-3,
-                       max_range_m=number("max_range_mm", 800.0) * 1e-3,
-                       noise_counts=number("noise_counts", 0.0),
-                       peak_distance_m=number("peak_distance_mm", 0.0) * 1e-3,
+                       adc_bits=bits, vref_v=number("vref_v", 5.0, 0.1, 50.0),
+                       min_range_m=number("min_range_mm", 100.0, 0.0, 1e5) * 1e-3,
+                       max_range_m=number("max_range_mm", 800.0, 0.0, 1e5) * 1e-3,
+                       noise_counts=number("noise_counts", 0.0, 0.0, 1e7),
+                       peak_distance_m=number("peak_distance_mm", 0.0, 0.0, 1e5) * 1e-3,
                        max_incidence_rad=(math.radians(number("max_incidence_deg"))
                                           if "max_incidence_deg" in raw else None),
-                       source=str(raw.get("source", "")))
+                       source=_source_text(raw.get("source", ""), fail))
         except CalibrationError as exc:
             raise CalibrationError(f"{source}: {exc}") from None
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:
+        from .. import safe_yaml
+
         path = Path(path)
         try:
-            raw = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise CalibrationError(f"{path}: cannot read calibration file: {exc}") from exc
-        except yaml.YAMLError as exc:
-            raise CalibrationError(f"{path}: not valid YAML: {exc}") from exc
+            raw = safe_yaml.load_file(path, "calibration file")
+        except safe_yaml.InputError as exc:
+            raise CalibrationError(str(exc)) from None
         return cls.from_dict(raw, str(path))
 
 

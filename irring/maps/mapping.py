@@ -85,6 +85,7 @@ grows with y, column ``ix`` with x; ``log_odds[iy, ix]``.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -180,6 +181,47 @@ def _flat(values) -> np.ndarray:
     return np.ascontiguousarray(values, dtype=float).ravel()
 
 
+# A run keeps ~60 bytes per cell (log-odds, ground-truth labels and distances, the picture's
+# RGBA raster and a palette frame); 25 M cells (a 50 m × 50 m room at 10 mm) is ~1.5 GB.
+MAX_GRID_CELLS = 25_000_000
+BYTES_PER_CELL = 60
+
+
+def check_grid_size(ny: int, nx: int, resolution_m: float, where: str = "the map") -> None:
+    """Raise :class:`irring.errors.TooBig` (before anything is allocated) for a grid of more
+    than :data:`MAX_GRID_CELLS` cells, naming the memory it would need."""
+    cells = int(ny) * int(nx)
+    if cells > MAX_GRID_CELLS:
+        from ..errors import TooBig
+
+        scale = math.sqrt(cells / MAX_GRID_CELLS)
+        raise TooBig(f"{where}: a grid of {ny:,} × {nx:,} cells of {resolution_m * 1e3:g} mm "
+                     f"would need about {cells * BYTES_PER_CELL / 1e9:.1f} GB; at most "
+                     f"{MAX_GRID_CELLS:,} cells (~{MAX_GRID_CELLS * BYTES_PER_CELL / 1e9:.1f} GB) "
+                     f"are mapped: use coarser cells (map.resolution_mm ≥ "
+                     f"{math.ceil(resolution_m * 1e3 * scale)}) or a smaller room")
+
+
+def _layout(lo_xy_m, hi_xy_m, resolution_m: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """(origin, (ny, nx)) of :meth:`OccupancyGrid.covering`."""
+    res = float(resolution_m)
+    origin = np.floor(np.asarray(lo_xy_m, dtype=float) / res + 1e-9) * res - res / 2
+    shape = np.ceil((np.asarray(hi_xy_m, dtype=float) - origin) / res - 1e-9).astype(int) + 1
+    return origin, (int(shape[1]), int(shape[0]))
+
+
+def _scenario_box(scenario) -> tuple[np.ndarray, np.ndarray]:
+    outline = np.asarray(scenario.room.outline_m, dtype=float)
+    return (outline.min(axis=0) - scenario.map.margin_m,
+            outline.max(axis=0) + scenario.map.margin_m)
+
+
+def check_scenario_grid(scenario) -> None:
+    """:func:`check_grid_size` for the grid :meth:`OccupancyGrid.for_scenario` would build."""
+    _, (ny, nx) = _layout(*_scenario_box(scenario), scenario.map.resolution_m)
+    check_grid_size(ny, nx, scenario.map.resolution_m, f"{scenario.source or scenario.name}")
+
+
 class OccupancyGrid:
     """A 2-D log-odds occupancy grid (paper §IV).
 
@@ -194,6 +236,7 @@ class OccupancyGrid:
         ny, nx = (int(s) for s in shape)
         if ny < 1 or nx < 1:
             raise ValueError(f"shape must be at least 1 × 1 cells, got {tuple(shape)}")
+        check_grid_size(ny, nx, resolution_m)
         self.origin_xy_m = np.asarray(origin_xy_m, dtype=float).reshape(2).copy()
         self.resolution_m = float(resolution_m)
         self.params = params or MapperParams()
@@ -212,19 +255,14 @@ class OccupancyGrid:
         edge on a round coordinate counts as on it despite round-off (−0.1 / 0.01 is
         −10.000000000000002), so it gets no extra row of cells.
         """
-        res = float(resolution_m)
-        origin = np.floor(np.asarray(lo_xy_m, dtype=float) / res + 1e-9) * res - res / 2
-        shape = np.ceil((np.asarray(hi_xy_m, dtype=float) - origin) / res - 1e-9).astype(int) + 1
-        return cls(origin, (shape[1], shape[0]), res, params)
+        origin, shape = _layout(lo_xy_m, hi_xy_m, resolution_m)
+        return cls(origin, shape, resolution_m, params)
 
     @classmethod
     def for_scenario(cls, scenario, params: MapperParams | None = None) -> OccupancyGrid:
         """A grid covering the room outline plus ``scenario.map.margin_m`` on every side
         (:meth:`covering`: walls on round coordinates run through cell centres)."""
-        outline = np.asarray(scenario.room.outline_m, dtype=float)
-        return cls.covering(outline.min(axis=0) - scenario.map.margin_m,
-                            outline.max(axis=0) + scenario.map.margin_m,
-                            scenario.map.resolution_m, params)
+        return cls.covering(*_scenario_box(scenario), scenario.map.resolution_m, params)
 
     def empty_like(self) -> OccupancyGrid:
         return OccupancyGrid(self.origin_xy_m, self.shape, self.resolution_m, self.params)
@@ -326,10 +364,10 @@ class OccupancyGrid:
         ``negate: 1``; occupied above occupied_thresh, free below free_thresh); occupied
         cells get ``l_max``, free ``l_min``, unknown 0.
         """
-        import yaml
+        from .. import safe_yaml
 
         yaml_path = Path(yaml_path)
-        meta = yaml.safe_load(yaml_path.read_text())
+        meta = safe_yaml.load_file(yaml_path, "map_server YAML")
         missing = {"image", "resolution", "origin", "negate", "occupied_thresh",
                    "free_thresh"} - set(meta or {})
         if missing:

@@ -26,7 +26,7 @@ import types
 
 import mujoco
 import numpy as np
-import yaml
+from .. import safe_yaml
 
 from ..simulation import dynamics as dyn
 from ..simulation import model as model_lib
@@ -39,7 +39,7 @@ def variant(name: str, *, effects: dict | None = None, drop: tuple = (), scan: d
             motion: dict | None = None, poses: list | None = None) -> Scenario:
     """A bundled scenario with effects added/replaced/dropped, its scan block replaced and
     motion keys changed (spell them as the file does, e.g. ``odometry_sigma_mm``)."""
-    raw = yaml.safe_load(resolve(name).read_text())
+    raw = safe_yaml.load_file(resolve(name), "scenario file")
     raw.setdefault("effects", {})
     for key in drop:
         raw["effects"].pop(key, None)

@@ -238,17 +238,12 @@ def parse_study(raw: Any, source: str = "") -> Study:
 
 def load_study(path: str | Path) -> Study:
     """Read and validate a study file; raises :class:`StudyError` naming the bad key."""
-    import yaml
+    from .. import safe_yaml
 
-    p = Path(path)
     try:
-        text = p.read_text()
-    except OSError as exc:
-        raise StudyError(f"{path}: cannot read the study file: {exc.strerror or exc}") from None
-    try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise StudyError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from None
+        raw = safe_yaml.load_file(path, "study file")
+    except safe_yaml.InputError as exc:
+        raise StudyError(str(exc)) from None
     return parse_study(raw, str(path))
 
 

@@ -1,0 +1,123 @@
+"""What a failed `irring` command tells its user: one line and an exit status.
+
+Every error a user can cause is one of the classes below (or a ``ValueError`` subclass the
+schema modules raise: ``ScenarioError``, ``RecordingError``, ``CalibrationError``); the
+command's top-level handler (:func:`describe`) turns it, or anything unexpected, into one
+printable line and a status:
+
+====  =====================================================================
+0     done
+1     bad input: a scenario, recording, calibration or sensor-curve file
+2     bad usage: an option or argument (argparse's own status)
+3     the device: no answer, disconnected, error replies, no progress
+4     an output could not be written (``--out`` not a writable folder, disk full)
+5     refused up front as too big for memory (the message says what it would need)
+70    an internal error (a bug: please report it with ``--debug``'s traceback)
+130   interrupted (Ctrl-C)
+====  =====================================================================
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import reprlib
+
+OK, INPUT, USAGE, DEVICE, OUTPUT, TOO_BIG, INTERNAL, INTERRUPTED = 0, 1, 2, 3, 4, 5, 70, 130
+
+DEBUG_ENV = "IRRING_DEBUG"   # set to 1 for a traceback with every error
+MAX_MESSAGE = 400            # characters of an error line
+
+
+class IrringError(Exception):
+    """An error the user can fix; ``status`` is the exit status it ends the command with."""
+
+    status = INPUT
+
+
+class InputError(IrringError, ValueError):
+    """A file (or its contents) that irring cannot use."""
+
+
+class UsageError(IrringError, ValueError):
+    status = USAGE
+
+
+class OutputError(IrringError, OSError):
+    status = OUTPUT
+
+
+class TooBig(IrringError, ValueError):
+    """Work whose memory would exceed the budget, refused before allocating it."""
+
+    status = TOO_BIG
+
+
+_repr = reprlib.Repr()
+_repr.maxstring = _repr.maxother = 60
+_repr.maxlist = _repr.maxtuple = _repr.maxdict = _repr.maxset = 6
+_repr.maxlevel = 3
+
+
+def brief(value: object) -> str:
+    """A bounded, printable repr of a value from a file, for an error message."""
+    return printable(_repr.repr(value))
+
+
+def printable(text: str, limit: int = MAX_MESSAGE) -> str:
+    """``text`` on one line, control characters (terminal escapes) shown escaped, cut to
+    ``limit`` characters."""
+    text = str(text)
+    if len(text) > 4 * limit:
+        text = text[:4 * limit]
+    out = []
+    for ch in text:
+        if ch in "\n\r\t":
+            out.append(" ")
+        elif ch.isprintable():
+            out.append(ch)
+        else:
+            out.append(ch.encode("unicode_escape").decode("ascii"))
+    line = " ".join("".join(out).split())
+    return line if len(line) <= limit else line[:limit - 1] + "…"
+
+
+def debug_requested() -> bool:
+    return os.environ.get(DEBUG_ENV, "").strip() not in ("", "0", "false", "no")
+
+
+def describe(exc: BaseException) -> tuple[int, str]:
+    """(exit status, one-line message) for an exception that ended a command."""
+    from .estimation.estimate import CalibrationError
+    from .recording import RecordingError
+    from .scenario import ScenarioError
+
+    if isinstance(exc, IrringError):
+        return exc.status, printable(str(exc))
+    if isinstance(exc, (ScenarioError, RecordingError, CalibrationError)):
+        return INPUT, printable(str(exc))
+    from .studies.executor import ExecutorError
+
+    if isinstance(exc, ExecutorError):   # no Dask, scheduler unreachable: the --dask option
+        return USAGE, printable(str(exc))
+    if isinstance(exc, MemoryError):
+        return TOO_BIG, ("ran out of memory; the input asks for more than this machine has "
+                         "(make the room, grid or number of poses smaller)")
+    if isinstance(exc, RecursionError):
+        return INPUT, "the input is nested too deeply to read"
+    try:  # the serial stack is optional at import time for the simulation commands
+        from .hardware import DeviceError
+        import serial
+
+        if isinstance(exc, (DeviceError, serial.SerialException)):
+            return DEVICE, printable(str(exc) or type(exc).__name__)
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        why = exc.strerror or str(exc)
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):
+            return OUTPUT, printable(f"{where}{why}")
+        return INPUT, printable(f"{where}{why}")
+    return INTERNAL, printable(f"internal error ({type(exc).__name__}: {exc}); rerun with "
+                               f"--debug (or {DEBUG_ENV}=1) for the traceback and please report it")

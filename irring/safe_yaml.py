@@ -1,0 +1,117 @@
+"""The one YAML reader for every file a user hands irring (scenarios, calibrations, sensor
+curves, the scenario inside a recording, study files).
+
+PyYAML's ``safe_load`` builds no objects, but it still lets the last of two equal keys win
+silently, expands aliases (a 562-byte "billion laughs" file grows to gigabytes) and recurses
+once per nesting level. :func:`load` refuses all three, and :func:`read_text` refuses what
+is not a readable UTF-8 file of sane size, each with one line naming the file and the line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .errors import InputError, brief
+
+MAX_DEPTH = 64             # nesting levels; irring's deepest schema uses 5
+MAX_BYTES = 8 * 2**20      # a scenario with 100k outline corners is ~3 MB
+
+
+class YamlError(InputError):
+    """A YAML text irring refuses to read; the message names the source and line."""
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader without aliases, duplicate keys or unbounded nesting."""
+
+    def __init__(self, stream: str, source: str):
+        super().__init__(stream)
+        self.source = source
+        self.depth = 0
+
+    def fail(self, mark: Any, msg: str) -> YamlError:
+        line = f"line {mark.line + 1}: " if mark is not None else ""
+        return YamlError(f"{self.source}: {line}{msg}")
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise self.fail(event.start_mark, f"YAML aliases (*{brief(event.anchor)[1:-1]}) are "
+                                              "not allowed; write the value out")
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            raise self.fail(self.peek_event().start_mark,
+                            f"nested more than {MAX_DEPTH} levels deep")
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen: dict = {}
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.get(key)
+                except TypeError:
+                    raise self.fail(key_node.start_mark, "a mapping key must be a plain value, "
+                                                         f"got {brief(key)}") from None
+                if first is not None:
+                    raise self.fail(key_node.start_mark,
+                                    f"key {brief(key)} given twice (first on line {first + 1})")
+                seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep=deep)
+
+
+def load(text: str, source: str = "<string>") -> Any:
+    """Parse one YAML document strictly: no aliases, no duplicate keys, at most
+    :data:`MAX_DEPTH` levels. Raises :class:`YamlError` naming ``source`` and the line."""
+    if not isinstance(text, str):
+        raise YamlError(f"{source}: expected YAML text, got {type(text).__name__}")
+    loader = _StrictLoader(text, source)
+    try:
+        return loader.get_single_data()
+    except YamlError:
+        raise
+    except yaml.MarkedYAMLError as exc:
+        raise loader.fail(exc.problem_mark, f"not valid YAML: {exc.problem or exc}") from None
+    except yaml.YAMLError as exc:
+        raise YamlError(f"{source}: not valid YAML: {brief(str(exc))}") from None
+    except RecursionError:
+        raise YamlError(f"{source}: nested too deeply to read") from None
+    finally:
+        loader.dispose()
+
+
+def read_text(path: str | Path, what: str = "file", max_bytes: int = MAX_BYTES) -> str:
+    """The UTF-8 text of a file a user named; :class:`InputError` (one line naming the path)
+    for a missing file, a folder, an unreadable or oversized file or bytes that are not
+    UTF-8."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            raise InputError(f"{path}: is a folder; expected a {what}")
+        if not path.exists():
+            raise InputError(f"{path}: no such {what}")
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise InputError(f"{path}: {size / 2**20:.1f} MB is too big for a {what} "
+                             f"(at most {max_bytes / 2**20:g} MB)")
+        data = path.read_bytes()[:max_bytes + 1]
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise InputError(f"{path}: line {line}: not UTF-8 text (byte {exc.start}); save the "
+                         f"{what} as UTF-8") from None
+
+
+def load_file(path: str | Path, what: str = "file") -> Any:
+    """:func:`read_text` then :func:`load`."""
+    return load(read_text(path, what), str(path))
