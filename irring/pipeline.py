@@ -419,17 +419,40 @@ OUTPUT_NAMES = {"map_png": "map.png", "animation": "map_building.gif", "pgm": "m
 
 def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True,
                   recording: bool = True, title: str | None = None,
+                  extra_files: dict[str, tuple[str, str]] | None = None,
                   mcap: str | Path | None = None) -> dict[str, Path]:
     """Write the map PNG, the building animation (if the run asked for frames), the
-    map_server PGM + YAML and the sweeps recording into ``out_dir``; time it as the
-    "render" stage. ``mcap``: also write the run there as MCAP (``mcap_export``; the
-    "mcap" stage), which needs the ``mcap`` extra."""
-    from . import recording as rec
-    from .maps import render   # (loads matplotlib: before the clock, as irring loads MuJoCo)
+    map_server PGM + YAML, the sweeps recording and ``extra_files`` ({key: (file name,
+    text)}) into ``out_dir``, all together (:class:`irring.outputs.OutputSet`: an
+    interrupted or failed write leaves the folder as it was); time it as the "render"
+    stage. ``mcap``: also write the run there as MCAP (``mcap_export``; the "mcap" stage),
+    which needs the ``mcap`` extra."""
+    from .maps import render  # noqa: F401 (loads matplotlib: before the clock, as irring loads MuJoCo)
+    from .outputs import OutputSet
 
     t0 = time.perf_counter()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    target = OutputSet(out_dir)
+    with target as tmp:
+        paths = _write_into(result, tmp, animation=animation, recording=recording, title=title)
+        for key, (name, text) in (extra_files or {}).items():
+            paths[key] = tmp / name
+            paths[key].write_text(text, encoding="utf-8")
+    result.timings_s["render"] = time.perf_counter() - t0
+    paths = {key: target.out / Path(p).name for key, p in paths.items()}
+    if mcap is not None:
+        from .maps.mcap_export import write_mcap
+
+        t0 = time.perf_counter()
+        paths["mcap"] = write_mcap(result, mcap)
+        result.timings_s["mcap"] = time.perf_counter() - t0
+    return paths
+
+
+def _write_into(result: MapRun, out: Path, *, animation: bool, recording: bool,
+                title: str | None) -> dict[str, Path]:
+    from . import recording as rec
+    from .maps import render
+
     sc = result.scenario
     reach, ring_r = _reach(result)
     poses = result.poses
@@ -449,13 +472,6 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     if recording:
         paths["recording"] = rec.save_recording(out / OUTPUT_NAMES["recording"], result.sweeps,
                                                 result.recording_meta())
-    result.timings_s["render"] = time.perf_counter() - t0
-    if mcap is not None:
-        from .maps.mcap_export import write_mcap
-
-        t0 = time.perf_counter()
-        paths["mcap"] = write_mcap(result, mcap)
-        result.timings_s["mcap"] = time.perf_counter() - t0
     return paths
 
 

@@ -435,8 +435,21 @@ class _Loader:
     def effects(self, raw: Any, path: str) -> Mapping[str, Any]:
         if raw is None:
             return types.MappingProxyType({})
-        if isinstance(raw, list):  # `effects: [noise, quantization]` with default parameters
-            raw = {name: {} for name in raw}
+        if isinstance(raw, list):  # `effects: [noise, {beam: {rays: 3}}]`: defaults or a mapping
+            listed: dict = {}
+            for i, item in enumerate(raw):
+                if isinstance(item, Mapping) and len(item) == 1:
+                    (name, params), = item.items()
+                elif isinstance(item, str):
+                    name, params = item, {}
+                else:
+                    raise self.fail(f"{path}[{i}]", "expected an effect name or a one-key mapping "
+                                                    "{name: {parameters}}")
+                if not isinstance(name, str) or name in listed:
+                    raise self.fail(f"{path}[{i}]", f"effect {name!r} listed twice" if
+                                    isinstance(name, str) else "expected an effect name")
+                listed[name] = params
+            raw = listed
         if not isinstance(raw, Mapping):
             raise self.fail(path, f"expected a mapping of effect names, got {raw!r}")
         out = {}
@@ -611,10 +624,33 @@ def parse(raw: Any, source: str = "") -> Scenario:
     if not isinstance(raw, Mapping):
         raise loader.fail("", "a scenario file must be a mapping (key: value) at the top")
     sc = loader.dataclass_(Scenario, raw, "")
+    if not sc.name.strip() or len(sc.name) > 200:
+        raise loader.fail("name", "expected a name of 1 … 200 characters")
+    for key, text in (("name", sc.name), ("description", sc.description)):
+        if any(not (ch.isprintable() or ch in "\n\t") for ch in text):
+            raise loader.fail(key, "control characters (terminal escapes) are not allowed")
     sc = dataclasses.replace(sc, source=source)
     sc = _sensor_for_design(sc, raw, loader.fail)
     _validate_geometry(sc, loader.fail)
+    _validate_effects(sc, loader.fail)
     return sc
+
+
+def _validate_effects(sc: Scenario, fail) -> None:
+    """What the schema's per-field bounds cannot say: knobs that only act with an effect,
+    and a motion path that goes somewhere."""
+    if sc.scan.samples != 1 and not sc.has("averaging"):
+        raise fail("scan.samples", f"{sc.scan.samples} readings per step are averaged only "
+                                   "with the `averaging` effect (and would be charged in "
+                                   "hardware time for nothing); add `averaging` to effects or "
+                                   "leave scan.samples out")
+    motion = sc.effects.get("motion")
+    if motion is not None:
+        if len(motion.path) < 2:
+            raise fail("effects.motion.path", f"needs at least 2 waypoints to drive along, got "
+                                              f"{len(motion.path)}")
+        if motion.speed_m_s <= 0:
+            raise fail("effects.motion.speed_mm_s", "must be > 0 to drive the path")
 
 
 def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:

@@ -271,7 +271,7 @@ def test_irring_calibrate_reports_a_bad_port(tmp_path, capsys):
 
     code = main(["calibrate", "--port", str(tmp_path / "no-such-tty"), "--out",
                  str(tmp_path / "x.yaml")])
-    assert code == 1
+    assert code == 3
     assert "cannot open" in capsys.readouterr().err
     assert not (tmp_path / "x.yaml").exists()
 

@@ -327,7 +327,7 @@ def test_irring_drive_survives_a_bad_link_and_says_what_was_lost(tmp_path, t_roo
     code = main(["drive", "--port", link, "--truth", "t_room", "--out", str(tmp_path),
                  "--no-animation", "--timeout", str(TIMEOUT_S), "--resweep", "1"])
     out, err = capsys.readouterr()
-    assert code == 1
+    assert code == 3
     assert "disconnected" in err and "missing steps" in err
     report = json.loads((tmp_path / "link.json").read_text())
     assert report["error"] and report["totals"]["checksum_failures"] > 0
@@ -339,7 +339,7 @@ def test_irring_drive_survives_a_bad_link_and_says_what_was_lost(tmp_path, t_roo
 def test_irring_drive_without_a_device_is_a_clear_error(capsys):
     from irring.cli import main
 
-    assert main(["drive", "--port", "/dev/irring-none", "--no-animation"]) == 2
+    assert main(["drive", "--port", "/dev/irring-none", "--no-animation"]) == 3
     assert "cannot open /dev/irring-none" in capsys.readouterr().err
 
 

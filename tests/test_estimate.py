@@ -92,7 +92,8 @@ def test_nominal_counts_scale_with_adc_bits():
 
 
 def test_calibration_yaml_round_trip(tmp_path):
-    cal = dataclasses.replace(STAND_IN, noise_counts=7.25, source="round × trip")
+    cal = dataclasses.replace(STAND_IN, sensor_model="gp2y0a21", noise_counts=7.25,
+                              source="round × trip")
     path = cal.save(tmp_path / "cal.yaml")
     text = path.read_text(encoding="utf-8")
     assert "emitter_offset_mm: 7.0" in text and "theta_deg: 15.0" in text
@@ -110,7 +111,15 @@ def test_calibration_yaml_round_trip(tmp_path):
     (lambda r: r.update(irring_calibration=7), "expected format 1"),
     (lambda r: r.pop("emitter_offset_mm"), "emitter_offset_mm: required"),
     (lambda r: r.update(emitter_offset_mm="seven"), "expected a number"),
-    (lambda r: r["curve"][1].update(b=0.5), "b of one sign"),
+    (lambda r: r["curve"][1].update(b=0.5), "a gp2d12 curve d = a"),
+    (lambda r: [row.update(b=-row["b"]) for row in r["curve"]], "needs b < 0"),  # rising
+    (lambda r: r.update(sensor_model="gp2d99"), "sensor_model: 'gp2d99' is not a sensor model"),
+    (lambda r: r.update(vref_v=0), "vref_v: 0 is out of range; allowed 0.1 … 50"),
+    (lambda r: r.update(vref_v=float("nan")), "vref_v: nan is out of range"),
+    (lambda r: r.update(vref_v=float("inf")), "vref_v: inf is out of range"),
+    (lambda r: r.update(vref_v=-5), "vref_v: -5 is out of range"),
+    (lambda r: r["curve"][0].update(a=float("nan")), "curve[0]: expected finite numbers"),
+    (lambda r: r.update(source=["x"] * 10), "source: expected a line of text"),
     (lambda r: r["curve"][0].update(theta_deg=3.0), "theta must start at 0"),
     (lambda r: r["curve"].reverse(), "theta must start at 0"),
     (lambda r: r["curve"][2].pop("a"), "curve[2]: expected keys"),
@@ -119,6 +128,7 @@ def test_calibration_yaml_round_trip(tmp_path):
 ])
 def test_calibration_file_errors_name_the_key(tmp_path, mutate, message):
     raw = STAND_IN.to_dict()
+    raw["sensor_model"] = "gp2d12"   # the stand-in's own name is no registry name
     mutate(raw)
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(raw))
@@ -127,7 +137,7 @@ def test_calibration_file_errors_name_the_key(tmp_path, mutate, message):
 
 
 def test_calibration_load_reports_missing_file_and_bad_yaml(tmp_path):
-    with pytest.raises(CalibrationError, match="cannot read"):
+    with pytest.raises(CalibrationError, match="no such calibration file"):
         Calibration.load(tmp_path / "nope.yaml")
     (tmp_path / "bad.yaml").write_text("curve: [")
     with pytest.raises(CalibrationError, match="not valid YAML"):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from pathlib import Path
 
 from ._common import at_least
 
@@ -71,8 +72,14 @@ def _summary(cal) -> str:
 def run(args: argparse.Namespace) -> int:
     from ..estimation.calibrate import CalibrationAborted, GuidedCalibration, SimulatedRig
     from ..estimation.estimate import CalibrationError
+    from .. import errors
+    from ..outputs import check_out
     from ..scenario import load_scenario
 
+    out = Path(args.out)
+    if out.is_dir():  # `--out DIR`: the file goes inside, not over the folder
+        out = out / "calibration.yaml"
+    check_out(out.parent)
     scenario = load_scenario(args.scenario)
     try:
         if args.port is None:
@@ -100,17 +107,17 @@ def run(args: argparse.Namespace) -> int:
                     cal = guided.run()
             except DeviceError as exc:
                 print(f"irring calibrate: error: {exc}", file=sys.stderr)
-                return 1
+                return errors.DEVICE
     except CalibrationAborted as exc:
         print(f"irring calibrate: {exc}; nothing written", file=sys.stderr)
         return 1
     except (CalibrationError, ValueError) as exc:
-        print(f"irring calibrate: error: {exc}", file=sys.stderr)
-        return 2
+        print(f"irring calibrate: error: {errors.printable(str(exc))}", file=sys.stderr)
+        return errors.INPUT
     except EOFError:
         print("irring calibrate: input ended; nothing written", file=sys.stderr)
         return 1
-    path = cal.save(args.out)
+    path = cal.save(out)
     print(_summary(cal))
     print(f"wrote {path}")
     return 0

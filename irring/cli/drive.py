@@ -28,8 +28,9 @@ otherwise give each pose with --pose X_MM,Y_MM,YAW_DEG (default: one pose at the
 Between poses drive waits for Enter when run at a terminal (--no-wait to skip); the emulator
 moves its robot by itself at every full sweep.
 
-Exit status: 0 all poses swept; 1 the device stopped answering or disconnected (what arrived
-is still mapped and written); 2 bad arguments or no device.
+Exit status: 0 all poses swept; 3 no device, or it stopped answering, disconnected or made
+no progress (what arrived is still mapped and written); 2 bad arguments; 1 a bad --truth or
+--calibration file.
 
 examples:
   irring emulate t_room --link /tmp/irring &           # try it without hardware
@@ -104,6 +105,10 @@ def run(args: argparse.Namespace) -> int:
     from ..hardware import DeviceError, SerialRing
     from ..scenario import load_scenario
 
+    from .. import errors
+    from ..outputs import check_out
+
+    check_out(args.out)
     truth = load_scenario(args.truth) if args.truth else None
     if truth is not None and truth.has("motion"):
         return _error(f"--truth {args.truth}: the scenario drives while scanning (`motion`), but "
@@ -149,7 +154,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         ring.open()
     except DeviceError as exc:
-        return _error(str(exc))
+        _error(str(exc))
+        return errors.DEVICE
     info = ring.info
     say(f"ring on {args.port}: {info.firmware}, {info.nsensors} sensors, {info.adc_bits}-bit "
         f"ADC, step {info.step_mdeg / 1000:g}° × {info.gear_num}/{info.gear_den}, steps "
@@ -184,20 +190,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"irring drive: {failure}", file=sys.stderr)
     if not sweeps:
         print("irring drive: no readings arrived; nothing to map", file=sys.stderr)
-        return 1
+        return errors.DEVICE
 
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.map_sweeps(sweeps, scenario=truth, calibration=calibration,
                                  frames_per_sweep=frames, score=truth is not None)
     result.scenario_text = pipeline.scenario_text(truth) if truth is not None else None
     result.calibration_text = cal_text
-    paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation,
-                                   mcap=args.mcap)
     link = {"port": args.port, "firmware": info.firmware, "totals": ring.stats.as_dict(),
             "sweeps": [r.as_dict() for r in acq.reports],
             "error": None if failure is None else str(failure)}
-    paths["link"] = args.out / "link.json"
-    paths["link"].write_text(json.dumps(link, indent=2))
+    paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation,
+                                   mcap=args.mcap,
+                                   extra_files={"link": ("link.json", json.dumps(link, indent=2))})
 
     from .run import report
 
@@ -209,4 +214,4 @@ def run(args: argparse.Namespace) -> int:
         print(f"  link      {t.scans} steps read, {missing} steps missing; "
               f"{t.checksum_failures} checksum failures, {t.malformed} malformed, "
               f"{t.seq_gaps} seq gaps, {t.timeouts} timeouts, {t.resweeps} re-sweeps")
-    return 0 if failure is None else 1
+    return 0 if failure is None else errors.DEVICE

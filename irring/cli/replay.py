@@ -41,17 +41,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .. import pipeline
+    from ..outputs import check_out, safe_name
     from .run import report
 
-    frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
-    result = pipeline.replay(args.recording, calibration_file=args.calibration,
-                             frames_per_sweep=frames)
     if args.out is not None:
         out = args.out
     else:
         stem = args.recording.resolve().parent.name if args.recording.stem == "sweeps" \
             else args.recording.stem
-        out = Path("out") / f"{stem}-replay"
+        out = Path("out") / f"{safe_name(stem, 'recording')}-replay"
+    check_out(out)
+    frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
+    result = pipeline.replay(args.recording, calibration_file=args.calibration,
+                             frames_per_sweep=frames)
     paths = pipeline.write_outputs(result, out, animation=not args.no_animation,
                                    mcap=args.mcap)
     report(result, paths, as_json=args.json)

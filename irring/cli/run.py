@@ -56,10 +56,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .. import pipeline
+    from ..outputs import check_out, safe_name
     from ..scenario import DEFAULT_SCENARIO, load_scenario
 
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
-    out = args.out if args.out is not None else Path("out") / scenario.name
+    out = check_out(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.run(scenario, seed=args.seed, calibration_file=args.calibration,
                           frames_per_sweep=frames)

@@ -373,9 +373,9 @@ class Calibration:
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`to_yaml` to a file."""
-        path = Path(path)
-        path.write_text(self.to_yaml(), encoding="utf-8")
-        return path
+        from ..outputs import write_text_atomic
+
+        return write_text_atomic(path, self.to_yaml())
 
     @classmethod
     def from_dict(cls, raw: Any, source: str = "<dict>") -> Calibration:
@@ -784,6 +784,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     max_iterations = operator.index(max_iterations)
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
+    if not (math.isfinite(tolerance_rad) and tolerance_rad > 0):
+        raise ValueError(f"tolerance_rad must be a finite angle > 0, got {tolerance_rad}")
     counts = np.ascontiguousarray(sweep.counts, dtype=float)
     if counts.ndim != 2:
         raise ValueError(f"sweep.counts must be (steps, sensors), got shape {counts.shape}")

@@ -1,0 +1,158 @@
+"""Output folders written all at once: a run's files appear together or not at all.
+
+:func:`check_out` refuses a bad ``--out`` before any work (a file, an unwritable place);
+:class:`OutputSet` writes a run's files into a hidden sibling folder of ``--out`` and moves
+them in together when all are written, so Ctrl-C, a full disk or a crash leaves the previous
+run's files untouched, and two runs into one folder leave one run's set, never a mix.
+:func:`safe_name` turns a scenario name into one folder name that stays inside its parent.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import tempfile
+from pathlib import Path
+
+from .errors import OutputError, printable
+
+# every file a run may write: a folder holding only these (and our temporaries) is ours to swap
+RUN_FILES = frozenset({"map.png", "map_building.gif", "map.pgm", "map.yaml", "sweeps.npz",
+                       "link.json", "map.mcap"})
+_TEMP_PREFIX = ".irring-"
+
+
+def safe_name(name: str, default: str = "scenario") -> str:
+    """``name`` as a single folder name: letters, digits, ``._-`` kept, anything else
+    (``/``, ``..``, control characters, spaces) replaced by ``_``; never empty, ``.`` or
+    ``..``, at most 80 characters."""
+    text = re.sub(r"[^A-Za-z0-9._-]+", "_", str(name))[:80].strip("._") or default
+    return text
+
+
+def check_out(out: str | Path, option: str = "--out") -> Path:
+    """``out`` if it can become a folder of outputs: an existing writable folder, or a path
+    whose nearest existing parent is a writable folder. Raises :class:`OutputError` naming
+    the option."""
+    out = Path(out)
+    shown = printable(str(out))
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{option} {shown}: is a file; expected a folder for the outputs")
+    probe = out
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise OutputError(f"{option} {shown}: {printable(str(probe))} is a file, so the folder "
+                          "cannot be made")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise OutputError(f"{option} {shown}: {printable(str(probe))} is not writable")
+    return out
+
+
+class OutputSet:
+    """The files of one run, written under :attr:`tmp` and moved into ``out`` by
+    :meth:`commit`.
+
+    Use as a context manager: on leaving without an exception the set is committed, on an
+    exception (or Ctrl-C) the temporaries are removed and ``out`` is left as it was.
+    """
+
+    def __init__(self, out: str | Path, option: str = "--out"):
+        self.out = check_out(out, option)
+        self.tmp: Path | None = None
+
+    def __enter__(self) -> Path:
+        parent = self.out.absolute().parent
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+            self.tmp = Path(tempfile.mkdtemp(prefix=f"{_TEMP_PREFIX}{safe_name(self.out.name)}-",
+                                             dir=parent))
+        except OSError as exc:
+            raise OutputError(f"--out {printable(str(self.out))}: cannot write there: "
+                              f"{exc.strerror or exc}") from None
+        return self.tmp
+
+    def __exit__(self, kind, exc, tb) -> None:
+        if kind is None:
+            try:
+                self.commit()
+            finally:
+                self.discard()
+        else:
+            self.discard()
+
+    def discard(self) -> None:
+        if self.tmp is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            self.tmp = None
+
+    def commit(self) -> None:
+        """Move the written files into ``out``: the whole folder is swapped when ``out`` holds
+        nothing but a run's files; otherwise each file is renamed in (after the work, each an
+        atomic rename) and a previous run's files this run did not write are removed."""
+        assert self.tmp is not None
+        out = self.out
+        try:
+            if not out.exists():
+                try:
+                    os.rename(self.tmp, out)
+                    self.tmp = None
+                    return
+                except OSError:
+                    if not out.is_dir():
+                        raise
+            if all(p.name in RUN_FILES for p in out.iterdir()) and self._swap():
+                return
+            written = {p.name for p in self.tmp.iterdir()}
+            for name in sorted(RUN_FILES - written):
+                stale = out / name
+                if stale.is_file():
+                    stale.unlink()
+            for name in sorted(written):
+                os.replace(self.tmp / name, out / name)
+        except OSError as exc:
+            raise OutputError(f"--out {printable(str(out))}: cannot move the outputs in: "
+                              f"{exc.strerror or exc}") from None
+
+
+    def _swap(self) -> bool:
+        """Replace the folder ``out`` by the written one; False when that cannot be done
+        (``out`` is the working folder or a mount point, or another run got there first)."""
+        out = self.out.absolute()
+        if out == Path.cwd() or os.path.ismount(out):
+            return False
+        old = Path(tempfile.mkdtemp(prefix=f"{_TEMP_PREFIX}old-", dir=out.parent))
+        try:
+            os.rename(out, old / "previous")
+        except OSError:
+            shutil.rmtree(old, ignore_errors=True)
+            return False
+        try:
+            os.rename(self.tmp, out)
+            self.tmp = None
+            return True
+        except OSError:
+            if not out.exists():
+                os.rename(old / "previous", out)
+            return False
+        finally:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to a temporary file beside ``path`` and rename it over
+    ``path``: a reader sees the old file or the new one, never half of one."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f"{_TEMP_PREFIX}{safe_name(path.name)}-",
+                               dir=path.absolute().parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
