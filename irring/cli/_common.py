@@ -65,3 +65,41 @@ def add_executor_options(p: argparse.ArgumentParser) -> None:
     where.add_argument("--dask", metavar="ADDRESS", default=None,
                        help="run on the Dask cluster whose scheduler is at ADDRESS "
                             "(tcp://host:8786) instead; needs pip install 'irring[dask]'")
+
+
+def between(low: int, high: int) -> Callable[[str], int]:
+    """A ``type=`` for an integer option that must lie in ``low`` … ``high``."""
+
+    def parse(text: str) -> int:
+        value = at_least(low)(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be {low} … {high}, got {value}")
+        return value
+
+    parse.__name__ = f"int {low} … {high}"
+    return parse
+
+
+def positive_seconds(text: str) -> float:
+    """A ``type=`` for a finite time in seconds > 0 (``--timeout``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and 0 < value <= 3600):
+        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0 and ≤ 3600, "
+                                         f"got {text!r}")
+    return value
+
+
+def host_port(text: str) -> tuple[str, int]:
+    """A ``type=`` for ``[HOST:]PORT`` (PORT 0 … 65535; HOST defaults to 127.0.0.1)."""
+    host, _, port = text.rpartition(":")
+    try:
+        number = int(port)
+    except ValueError:
+        number = -1
+    if not 0 <= number <= 65535:
+        raise argparse.ArgumentTypeError(f"expected [HOST:]PORT with PORT 0 … 65535, "
+                                         f"got {text!r}")
+    return host.strip("[]") or "127.0.0.1", number

@@ -8,6 +8,8 @@ import math
 import sys
 from pathlib import Path
 
+from ._common import between, positive_seconds
+
 HELP = """\
 Sweep the real ring (or `irring emulate`) over a serial port at one or more poses, then run
 the readings through the same estimator and occupancy-grid mapper as `irring run`.
@@ -45,8 +47,9 @@ def _pose(text: str) -> tuple[float, float, float]:
         parts = [float(v) for v in text.split(",")]
     except ValueError:
         parts = []
-    if len(parts) not in (2, 3):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected X_MM,Y_MM[,YAW_DEG], e.g. 500,450,90")
+    if len(parts) not in (2, 3) or not all(math.isfinite(v) and abs(v) <= 1e6 for v in parts):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected X_MM,Y_MM[,YAW_DEG] as finite "
+                                         f"numbers (|value| ≤ 1e6), e.g. 500,450,90")
     x, y, yaw = (parts + [0.0])[:3]
     return x / 1000.0, y / 1000.0, math.radians(yaw)
 
@@ -59,8 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", required=True, metavar="PORT",
                    help="serial device or pyserial URL: /dev/ttyUSB0, COM3, a pty path, "
                         "socket://host:port, loop://")
-    p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
-    p.add_argument("--timeout", type=float, default=1.0, metavar="S",
+    p.add_argument("--baud", type=between(1, 10_000_000), default=115200,
+                   help="baud rate (default 115200)")
+    p.add_argument("--timeout", type=positive_seconds, default=1.0, metavar="S",
                    help="longest silence tolerated while an answer is due, on top of the "
                         "per-step time, in seconds (default 1.0); a silent device is given up "
                         "after about 4× this")
@@ -70,17 +74,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--truth", default=None, metavar="SCENARIO",
                    help="scenario the ring is standing in (name or YAML): its poses, sensor "
                         "settings and room are used, and the map is scored against it")
-    p.add_argument("--poses", type=int, default=None, metavar="N",
+    p.add_argument("--poses", type=between(1, 100_000), default=None, metavar="N",
                    help="number of poses to sweep (default: all of --truth's, or of --pose)")
     p.add_argument("--pose", type=_pose, action="append", default=None,
                    metavar="X_MM,Y_MM[,YAW_DEG]",
                    help="robot pose of the next sweep, repeatable (overrides --truth's)")
-    p.add_argument("--samples", type=int, default=None,
+    p.add_argument("--samples", type=between(1, 64), default=None,
                    help="readings averaged per step by the device, 1–64 (default: --truth's "
                         "scan.samples with averaging, else 1)")
-    p.add_argument("--settle-ms", type=int, default=None, metavar="MS",
+    p.add_argument("--settle-ms", type=between(0, 60_000), default=None, metavar="MS",
                    help="wait at each step before reading (default: --truth's, else 0)")
-    p.add_argument("--resweep", type=int, default=2, metavar="K",
+    p.add_argument("--resweep", type=between(0, 100), default=2, metavar="K",
                    help="rounds of re-sweeping only the missing steps (default 2; 0 = never)")
     p.add_argument("--out", type=Path, default=Path("out") / "drive", metavar="DIR",
                    help="output folder (default: ./out/drive)")

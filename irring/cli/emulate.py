@@ -8,6 +8,8 @@ import signal
 import sys
 import time
 
+from ._common import between, host_port
+
 EPILOG = """\
 examples:
   irring emulate t_room --link /tmp/irring              # then: irring drive --port /tmp/irring
@@ -38,14 +40,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--link", metavar="PATH", default="/tmp/irring",
                    help="symlink to the pty slave for the host to open (default: /tmp/irring; "
                         "an existing link is replaced)")
-    p.add_argument("--tcp", metavar="[HOST:]PORT", default=None,
+    p.add_argument("--tcp", metavar="[HOST:]PORT", default=None, type=host_port,
                    help="serve on TCP instead of a pty; the host opens socket://HOST:PORT "
                         "(HOST defaults to 127.0.0.1; PORT 0 picks a free one)")
     p.add_argument("--realtime", action="store_true",
                    help="take as long as the real ring: settle + samples × 38.3 ms per step "
                         "and a UART at --baud (default: as fast as possible, with a virtual "
                         "device clock that still advances by the hardware time)")
-    p.add_argument("--baud", type=int, default=None, metavar="BAUD",
+    p.add_argument("--baud", type=between(0, 10_000_000), default=None, metavar="BAUD",
                    help="pace output like a UART at BAUD bit/s, 10 bits per byte "
                         "(default: 115200 with --realtime, else unthrottled; 0 = unthrottled)")
     p.add_argument("--corrupt-rate", type=float, default=0.0, metavar="P",
@@ -92,16 +94,26 @@ def run(args: argparse.Namespace) -> int:
     source = SimRing(scenario, seed=args.seed)
     device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=args.pose)
     if args.tcp is not None:
-        host, _, port = args.tcp.rpartition(":")
+        host, port = args.tcp
+        if not _loopback(host):
+            print(f"irring emulate: warning: --tcp {host}:{port} serves the ring to every "
+                  f"machine that can reach {host}, with no authentication; use 127.0.0.1 to "
+                  f"keep it on this machine", file=sys.stderr)
         try:
-            emu = TcpEmulator(device, host=host or "127.0.0.1", port=int(port), baud=baud)
+            emu = TcpEmulator(device, host=host, port=port, baud=baud)
             where = emu.open()
-        except (ValueError, OSError) as exc:
-            print(f"irring emulate: error: --tcp {args.tcp}: {exc}", file=sys.stderr)
+        except (ValueError, OSError, OverflowError) as exc:
+            print(f"irring emulate: error: --tcp {host}:{port}: "
+                  f"{getattr(exc, 'strerror', None) or exc}", file=sys.stderr)
             return 2
     else:
         emu = PtyEmulator(device, link=args.link, baud=baud)
-        where = f"{emu.open()}, link {args.link}"
+        try:
+            where = f"{emu.open()}, link {args.link}"
+        except OSError as exc:
+            print(f"irring emulate: error: --link {args.link}: {exc.strerror or exc}",
+                  file=sys.stderr)
+            return 2
     if not args.quiet:
         info = device.info
         print(f"irring emulate: {scenario.name} ring ({info.nsensors} sensors, steps "
@@ -125,6 +137,17 @@ def run(args: argparse.Namespace) -> int:
               f"{s.sentences_produced} sentences ({s.sentences_dropped} dropped, "
               f"{s.bytes_corrupted} bytes corrupted)", flush=True)
     return 0
+
+
+def _loopback(host: str) -> bool:
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def _interrupt(signum: int, frame: object) -> None:

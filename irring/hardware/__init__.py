@@ -10,7 +10,7 @@ use, so ``import irring.hardware.protocol`` needs no pyserial.
 from __future__ import annotations
 
 __all__ = ["SerialRing", "SweepReport", "LinkStats", "DeviceError", "DeviceTimeout",
-           "DeviceDisconnected", "DeviceRejected", "HandshakeError", "LinkLost"]
+           "DeviceDisconnected", "DeviceRejected", "HandshakeError", "LinkLost", "NoReadings"]
 
 
 def __getattr__(name: str):

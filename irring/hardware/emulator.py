@@ -383,10 +383,28 @@ class PtyEmulator(_Server):
         self._master, self._slave = master, slave
         self.path = os.ttyname(slave)
         if self.link is not None:
-            if self.link.is_symlink() or self.link.exists():
-                self.link.unlink()
-            self.link.symlink_to(self.path)
+            try:
+                self._make_link()
+            except OSError:
+                self._close()
+                raise
         return self.path
+
+    def _make_link(self) -> None:
+        """Point ``link`` at the pty: a new symlink, or one that replaces an old symlink in a
+        single rename; anything else at that path (a file, a folder) is left alone."""
+        link = self.link
+        if link.exists() and not link.is_symlink():
+            raise FileExistsError(errno.EEXIST, f"{link} exists and is not a symlink; not "
+                                                "replacing it (remove it or pick another --link)")
+        tmp = link.with_name(f".{link.name}.{os.getpid()}.link")
+        tmp.unlink(missing_ok=True)
+        os.symlink(self.path, tmp)
+        try:
+            os.replace(tmp, link)
+        except OSError:
+            tmp.unlink(missing_ok=True)
+            raise
 
     def _close(self) -> None:
         for fd in (self._master, self._slave):

@@ -41,6 +41,16 @@ MOVE_ALLOWANCE_S = 0.005  # per motor step the ring may travel before a sweep's 
 # --------------------------------------------------------------------------- errors
 
 
+# Bounds on what a device may announce in IRINF (the scenario schema's ring bounds; an
+# IRSCN of 72 counts no longer fits a 128-byte sentence anyway)
+MAX_SENSORS = 72
+MAX_ADC_BITS = 24
+MAX_STEP_SPAN = 100_000
+# a sweep pass that makes no progress (no new step) for this many timeouts is given up,
+# whatever else the device keeps sending
+NO_PROGRESS_TIMEOUTS = 3
+
+
 class DeviceError(RuntimeError):
     """The ring cannot be used as asked; the message says what to check."""
 
@@ -60,6 +70,10 @@ class DeviceRejected(DeviceError):
 class LinkLost(DeviceError, data.SourceLost):
     """The device went away mid-operation; ``partial`` holds what was received, ``report``
     the :class:`SweepReport` of the sweep it cut short."""
+
+
+class NoReadings(LinkLost):
+    """A sweep ended without a single step arriving (``partial`` holds the empty sweep)."""
 
 
 class DeviceTimeout(LinkLost):
@@ -87,6 +101,7 @@ class LinkStats:
     inconsistent: int = 0       # valid-checksum IRSCN contradicting the sweep, dropped
     stale: int = 0              # IRSCN/IRDON left over from an earlier exchange, dropped
     duplicates: int = 0         # a second IRSCN for a step already read, dropped
+    out_of_order: int = 0       # IRSCN that arrived after a later one (kept; not a loss)
     timeouts: int = 0           # waits of timeout_s with nothing arriving
     disconnects: int = 0
     device_errors: int = 0      # IRERR answers received
@@ -365,6 +380,24 @@ class SerialRing:
         if info.proto != p.PROTOCOL_VERSION:
             raise HandshakeError(f"the device on {self.port_name} speaks IRR protocol "
                                  f"v{info.proto}; this driver speaks v{p.PROTOCOL_VERSION}")
+        # sizes the host allocates by: refuse what no ring has before trusting them
+        span = info.max_step - info.min_step + 1
+        gear = info.gear_num / info.gear_den
+        for ok, what in ((1 <= info.nsensors <= MAX_SENSORS, f"{info.nsensors} sensors "
+                                                              f"(1 … {MAX_SENSORS})"),
+                         (1 <= info.adc_bits <= MAX_ADC_BITS, f"a {info.adc_bits}-bit ADC "
+                                                               f"(1 … {MAX_ADC_BITS})"),
+                         (span <= MAX_STEP_SPAN and max(abs(info.min_step), abs(info.max_step))
+                          <= MAX_STEP_SPAN, f"steps {info.min_step} … {info.max_step} (at "
+                                            f"most {MAX_STEP_SPAN} steps, |step| ≤ "
+                                            f"{MAX_STEP_SPAN})"),
+                         (10 <= info.step_mdeg <= 45_000, f"a motor step of "
+                                                          f"{info.step_mdeg / 1000:g}° "
+                                                          f"(0.01 … 45°)"),
+                         (0.01 <= gear <= 10, f"a belt ratio of {gear:g} (0.01 … 10)")):
+            if not ok:
+                raise HandshakeError(f"the device on {self.port_name} announces {what}; "
+                                     f"no ring has that, so its IRINF is not trusted")
         self.info = info
         self.ring = p.ring_from_info(info, self.template, radius_m=self.radius_m,
                                      emitter_offset_m=self.emitter_offset_m)
@@ -499,6 +532,9 @@ class SerialRing:
             exc.args = (f"{exc} {report.message}",)
             raise
         sweep, report = build(all(ps.done for ps in passes), "")
+        if not len(sweep.steps):
+            raise NoReadings(f"the ring on {self.port_name} ended the sweep but no step of it "
+                             f"arrived intact: {report.message}", sweep, report)
         if sweep.missing_steps:
             log.info("%s", report.message)
         return sweep
@@ -525,15 +561,20 @@ class SerialRing:
         self._send(cmd)
         deadline = time.monotonic() + first_wait
         stops = resends = 0
+        # Deadlines move on progress only (a new step, IRDON): a device that keeps talking
+        # without progress (repeated IRSCN, endless IRPOS) is treated like a silent one.
+        stalled_since = time.monotonic()
+        stall_limit = first_wait + NO_PROGRESS_TIMEOUTS * (self.timeout_s + per_step_s)
         while True:
+            had = len(ps.got)
             msgs = self._receive()
             now = time.monotonic()
-            if msgs:
-                deadline = now + self.timeout_s + per_step_s
-                if len(ps.got) == len(pos_of) and not stops:
-                    # every IRSCN is in: IRDON follows at once unless it was lost, in which
-                    # case IRSTP fetches it sooner than a full timeout would
-                    deadline = now + min(self.timeout_s, max(0.1, 2 * per_step_s))
+            if now - stalled_since > stall_limit:
+                raise self._lost(
+                    DeviceTimeout,
+                    f"no progress for {now - stalled_since:.1f} s during IRSWP,{lo},{hi}: "
+                    f"{len(ps.got)} of {len(ps.expected)} steps arrived, "
+                    f"{self.stats.sentences} sentences in all")
             for msg in msgs:
                 if isinstance(msg, p.Scan):
                     if len(msg.counts) != info.nsensors or max(msg.counts) > max_count:
@@ -553,10 +594,13 @@ class SerialRing:
                         continue
                     gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) \
                         % p.SEQ_MODULO
-                    if gap:
-                        self.stats.seq_gaps += 1
-                        self.stats.lost_scans += gap
-                    last_seq = msg.seq
+                    if gap >= p.SEQ_MODULO // 2:
+                        self.stats.out_of_order += 1   # an earlier IRSCN, late: no loss
+                    else:
+                        if gap:
+                            self.stats.seq_gaps += 1
+                            self.stats.lost_scans += gap
+                        last_seq = msg.seq
                     self._position = msg.step
                     ps.got[msg.step] = msg
                     self.stats.scans += 1
@@ -596,6 +640,13 @@ class SerialRing:
                     elif msg.code != p.ERR_BAD_SENTENCE:
                         self._raise_rejected(msg, p.encode(cmd).decode().strip())
                 # IRPOS / IRINF here are late answers to earlier commands: ignore
+            if len(ps.got) > had:
+                stalled_since = now
+                deadline = now + self.timeout_s + per_step_s
+                if len(ps.got) == len(pos_of) and not stops:
+                    # every IRSCN is in: IRDON follows at once unless it was lost, in which
+                    # case IRSTP fetches it sooner than a full timeout would
+                    deadline = now + min(self.timeout_s, max(0.1, 2 * per_step_s))
             if now >= deadline:
                 # silence: ask the device to end the sweep; IRDON tells what it sent
                 self.stats.timeouts += 1
