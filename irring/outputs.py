@@ -27,8 +27,9 @@ def safe_name(name: str, default: str = "scenario") -> str:
     """``name`` as a single folder name: letters, digits, ``._-`` kept, anything else
     (``/``, ``..``, control characters, spaces) replaced by ``_``; never empty, ``.`` or
     ``..``, at most 80 characters."""
-    text = re.sub(r"[^A-Za-z0-9._-]+", "_", str(name))[:80].strip("._") or default
-    return text
+    text = re.sub(r"[^A-Za-z0-9._-]+", "_", str(name))
+    text = re.sub(r"_+", "_", re.sub(r"\.\.+", "_", text))
+    return text[:80].strip("._") or default
 
 
 def check_out(out: str | Path, option: str = "--out") -> Path:

@@ -24,7 +24,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .data import Sweep, Truth
-from .errors import InputError, brief
+from .errors import InputError, IrringError, brief
 from .scenario import Ring
 
 FORMAT = "irring-recording/1"
@@ -138,7 +138,7 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
                        if name.endswith(".npy")}
         with np.load(path, allow_pickle=False) as npz:
             return _read(npz, headers, fail)
-    except RecordingError:
+    except IrringError:   # RecordingError, TooBig
         raise
     except (zipfile.BadZipFile, zlib.error, EOFError, ValueError, OSError, KeyError,
             UnicodeError, RecursionError) as exc:

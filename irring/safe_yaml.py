@@ -72,19 +72,26 @@ def load(text: str, source: str = "<string>") -> Any:
     :data:`MAX_DEPTH` levels. Raises :class:`YamlError` naming ``source`` and the line."""
     if not isinstance(text, str):
         raise YamlError(f"{source}: expected YAML text, got {type(text).__name__}")
-    loader = _StrictLoader(text, source)
+    loader = None
     try:
+        loader = _StrictLoader(text, source)   # (its reader refuses control characters)
         return loader.get_single_data()
     except YamlError:
         raise
+    except yaml.reader.ReaderError as exc:
+        raise YamlError(f"{source}: character {brief(exc.character)} at position "
+                        f"{exc.position} is not allowed in YAML (control characters are "
+                        "not)") from None
     except yaml.MarkedYAMLError as exc:
-        raise loader.fail(exc.problem_mark, f"not valid YAML: {exc.problem or exc}") from None
+        where = f"line {exc.problem_mark.line + 1}: " if exc.problem_mark else ""
+        raise YamlError(f"{source}: {where}not valid YAML: {brief(exc.problem or str(exc))[1:-1]}") from None
     except yaml.YAMLError as exc:
         raise YamlError(f"{source}: not valid YAML: {brief(str(exc))}") from None
     except RecursionError:
         raise YamlError(f"{source}: nested too deeply to read") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def read_text(path: str | Path, what: str = "file", max_bytes: int = MAX_BYTES) -> str:

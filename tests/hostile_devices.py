@@ -1,0 +1,240 @@
+"""Misbehaving ring devices on a pty, for the hostile-input tests (issue 15).
+
+Each behaviour answers the host's commands the way a broken board, a bad cable or a hostile
+peer might: floods, trickles, wrong sizes, error replies, silence, disconnects. They are
+written from the protocol (docs/protocol.md), not from the driver's code.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+import tty
+
+from irring.hardware import protocol as p
+
+SENSORS, MIN_STEP, MAX_STEP, BITS = 12, -2, 2, 12
+
+
+def line(body: str) -> bytes:
+    """One sentence with a correct checksum, whatever its fields say."""
+    return f"${body}*{p.checksum(body.encode()):02X}\r\n".encode()
+
+
+def info(sensors=SENSORS, bits=BITS, lo=MIN_STEP, hi=MAX_STEP, step_mdeg=1800) -> bytes:
+    return line(f"IRINF,1,{sensors},{bits},{step_mdeg},3,5,{lo},{hi},hostile")
+
+
+def counts_for(step: int, n: int = SENSORS) -> list[int]:
+    """The counts a well-behaved hostile device sends at ``step`` (known to the test)."""
+    return [(500 + 37 * k + 11 * step) % 4096 for k in range(n)]
+
+
+def scan(seq: int, step: int, n: int = SENSORS) -> bytes:
+    return line(f"IRSCN,{seq},{step},{1000 + seq},{','.join(map(str, counts_for(step, n)))}")
+
+
+class HostileDevice:
+    """A pty whose far end runs ``behaviour(device, command)`` for each decoded command.
+
+    ``behaviour`` may call :meth:`send` and :meth:`chatter` (a background stream until the
+    device is closed). ``link`` is the slave path the host opens.
+    """
+
+    def __init__(self, behaviour):
+        self.behaviour = behaviour
+        self.master, slave = os.openpty()
+        tty.setraw(slave)
+        self.slave = slave
+        self.link = os.ttyname(slave)
+        self.closed = threading.Event()
+        self.seq = 0
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def send(self, data: bytes) -> None:
+        if not self.closed.is_set():
+            try:
+                os.write(self.master, data)
+            except OSError:
+                self.closed.set()
+
+    def chatter(self, make, every_s: float) -> None:
+        """Send ``make()`` every ``every_s`` seconds until closed, in the background."""
+        def loop():
+            while not self.closed.wait(every_s):
+                self.send(make())
+        threading.Thread(target=loop, daemon=True).start()
+
+    def hang_up(self) -> None:
+        self.closed.set()
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    def _serve(self) -> None:
+        decoder = p.Decoder()
+        os.set_blocking(self.master, True)
+        while not self.closed.is_set():
+            try:
+                data = os.read(self.master, 256)
+            except OSError:
+                return
+            if not data:
+                return
+            for item in decoder.feed(data):
+                if isinstance(item, p.ProtocolError):
+                    continue
+                if self.closed.is_set():
+                    return
+                self.behaviour(self, item)
+
+    def close(self) -> None:
+        self.hang_up()
+
+
+# --------------------------------------------------------------------------- behaviours
+
+
+def _hello(dev, cmd) -> bool:
+    if isinstance(cmd, p.Hello):
+        dev.send(info())
+        return True
+    return False
+
+
+def good(dev, cmd):
+    """A correct device: every step, in order, then IRDON."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand):
+        for step in range(cmd.from_step, cmd.to_step + 1) if cmd.from_step <= cmd.to_step else \
+                range(cmd.from_step, cmd.to_step - 1, -1):
+            dev.send(scan(dev.seq, step))
+            dev.seq += 1
+        dev.send(line(f"IRDON,{dev.seq - 1}"))
+    elif isinstance(cmd, p.Stop):
+        dev.send(line(f"IRDON,{dev.seq - 1}"))
+    elif isinstance(cmd, p.GoTo):
+        dev.send(line(f"IRPOS,{cmd.step}"))
+
+
+def silent(dev, cmd):
+    """Answers nothing at all."""
+
+
+def silent_after_hello(dev, cmd):
+    _hello(dev, cmd)
+
+
+def disconnect_on_sweep(dev, cmd):
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand):
+        dev.send(scan(dev.seq, cmd.from_step))
+        dev.hang_up()
+
+
+def flood_irpos(dev, cmd):
+    """After IRSWP: endless valid IRPOS, never a reading (and IRSTP ignored)."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
+        dev.flooding = True
+        dev.chatter(lambda: line("IRPOS,0"), 0.002)
+
+
+def repeat_irscn(dev, cmd):
+    """After IRSWP: the first step's IRSCN, again and again."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
+        dev.flooding = True
+        first = scan(dev.seq, cmd.from_step)
+        dev.chatter(lambda: first, 0.005)
+
+
+def sentence_every_quarter_second(dev, cmd):
+    """After IRSWP: one valid but useless sentence every 0.25 s, forever."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
+        dev.flooding = True
+        dev.chatter(lambda: line("IRINF,1,12,12,1800,3,5,-2,2,hostile"), 0.25)
+
+
+def trickle(dev, cmd):
+    """A correct sweep sent one byte every millisecond: slow, but every step arrives."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand):
+        data = b"".join(scan(dev.seq + i, s) for i, s in
+                        enumerate(range(cmd.from_step, cmd.to_step + 1)))
+        dev.seq += cmd.to_step - cmd.from_step + 1
+        data += line(f"IRDON,{dev.seq - 1}")
+
+        def drip():
+            for k in range(len(data)):
+                if dev.closed.is_set():
+                    return
+                dev.send(data[k:k + 1])
+                time.sleep(0.001)
+        threading.Thread(target=drip, daemon=True).start()
+    elif isinstance(cmd, p.Stop):
+        pass
+
+
+def out_of_order(dev, cmd):
+    """Every step, seq consistent with its step, but sent last step first."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand):
+        steps = list(range(cmd.from_step, cmd.to_step + 1))
+        base = dev.seq
+        for i in reversed(range(len(steps))):
+            dev.send(scan(base + i, steps[i]))
+        dev.seq += len(steps)
+        dev.send(line(f"IRDON,{dev.seq - 1}"))
+
+
+def wrong_sensor_count(dev, cmd):
+    """IRSCN with 11 counts on a ring that announced 12, then IRDON."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, (p.SweepCommand, p.Stop)):
+        if isinstance(cmd, p.SweepCommand):
+            for step in range(cmd.from_step, cmd.to_step + 1):
+                dev.send(scan(dev.seq, step, n=SENSORS - 1))
+                dev.seq += 1
+        dev.send(line(f"IRDON,{dev.seq - 1}"))
+
+
+def done_without_steps(dev, cmd):
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, (p.SweepCommand, p.Stop)):
+        dev.send(line(f"IRDON,{dev.seq - 1}"))
+
+
+def error_reply(code: int):
+    def behaviour(dev, cmd):
+        if _hello(dev, cmd):
+            return
+        if isinstance(cmd, (p.SweepCommand, p.GoTo)):
+            dev.send(line(f"IRERR,{code},{p.ERROR_TEXT.get(code, 'no')}"))
+        elif isinstance(cmd, p.Stop):
+            dev.send(line(f"IRDON,{dev.seq - 1}"))
+    behaviour.__name__ = f"irerr_{code}"
+    return behaviour
+
+
+def announces(**kw):
+    """IRINF with out-of-bounds sizes."""
+    def behaviour(dev, cmd):
+        if isinstance(cmd, p.Hello):
+            dev.send(info(**kw))
+    behaviour.__name__ = "announces_" + "_".join(f"{k}{v}" for k, v in kw.items())
+    return behaviour

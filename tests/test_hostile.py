@@ -1,0 +1,442 @@
+"""Bad input never crashes, hangs or loses data (issue 15).
+
+Hypothesis over scenario YAML, recordings and calibration files, and a set of hostile pty
+devices: every outcome is a value or the input's own error class (one line, no traceback,
+the right exit status), nothing hangs, nothing is written for a failed run, and no reading
+is invented. `tests/hostile_corpus.py` holds the hand-written corpus the README's table
+counts.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import io
+import json
+import math
+import os
+import time
+import zipfile
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import hostile_devices as hd
+from irring import pipeline, safe_yaml
+from irring.cli import main
+from irring.data import Sweep
+from irring.errors import TooBig
+from irring.estimation.estimate import Calibration, CalibrationError
+from irring.hardware import DeviceError, NoReadings, SerialRing
+from irring.recording import RecordingError, load_recording, save_recording
+from irring.scenario import Ring, ScenarioError, loads, resolve
+
+FUZZ = settings(max_examples=60, deadline=None, derandomize=True,
+                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+
+T_ROOM = yaml.safe_load(resolve("t_room").read_text())
+
+# --------------------------------------------------------------------------- YAML reader
+
+
+@pytest.mark.parametrize("text, message", [
+    ("a: 1\nb: 2\na: 3\n", "line 3: key 'a' given twice (first on line 1)"),
+    ("a: &x [1, 2]\nb: *x\n", "line 2: YAML aliases (*x) are not allowed"),
+    ("[" * 10_000 + "]" * 10_000, "nested more than 64 levels deep"),
+    ("? [1, 2]\n: 3\n", "a mapping key must be a plain value"),
+    ("a: [1, 2\n", "line 2: not valid YAML"),
+])
+def test_strict_yaml_refuses_what_safe_load_lets_through(text, message):
+    with pytest.raises(safe_yaml.YamlError, match=message.replace("*", r"\*").replace(
+            "(", r"\(").replace(")", r"\)").replace("[", r"\[")):
+        safe_yaml.load(text, "f.yaml")
+
+
+def test_billion_laughs_is_refused_at_once():
+    bomb = 'a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]\n' + "".join(
+        f"{c}: &{c} [{','.join(['*' + p] * 9)}]\n" for p, c in zip("abcdefgh", "bcdefghi"))
+    t0 = time.monotonic()
+    for load in (lambda: loads(bomb, "bomb.yaml"),
+                 lambda: pipeline.load_calibration(bomb, is_text=True)):
+        with pytest.raises((ScenarioError, CalibrationError), match="aliases"):
+            load()
+    assert time.monotonic() - t0 < 1.0
+
+
+def test_non_utf8_and_folders_name_the_file(tmp_path):
+    bad = tmp_path / "latin1.yaml"
+    bad.write_bytes("name: Küche\n".encode("latin-1"))
+    with pytest.raises(safe_yaml.InputError, match=r"latin1\.yaml: line 1: not UTF-8"):
+        safe_yaml.load_file(bad, "scenario file")
+    with pytest.raises(safe_yaml.InputError, match="is a folder; expected a scenario file"):
+        safe_yaml.load_file(tmp_path, "scenario file")
+
+
+# --------------------------------------------------------------------------- scenarios
+
+_VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**12, 10**12),
+                    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=12),
+                    st.lists(st.integers(-5, 5000), max_size=4),
+                    st.dictionaries(st.text(max_size=6), st.integers(), max_size=3))
+
+
+def _paths(node, prefix=()):
+    yield prefix
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _paths(v, prefix + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _paths(v, prefix + (i,))
+
+
+T_ROOM_PATHS = [p for p in _paths(T_ROOM) if p]
+
+
+@FUZZ
+@given(edits=st.lists(st.tuples(st.sampled_from(T_ROOM_PATHS), _VALUES), min_size=1,
+                      max_size=3))
+def test_any_edit_of_a_scenario_loads_or_is_a_scenario_error(edits):
+    raw = copy.deepcopy(T_ROOM)
+    for path, value in edits:
+        node = raw
+        try:
+            for key in path[:-1]:
+                node = node[key]
+            node[path[-1]] = value
+        except (KeyError, IndexError, TypeError):
+            continue
+    text = yaml.safe_dump(raw, allow_unicode=True)
+    try:
+        sc = loads(text, "fuzz.yaml")
+    except ScenarioError as exc:
+        assert "\n" not in str(exc).strip() or "fuzz.yaml" in str(exc)
+        return
+    assert sc.room.outline_m and sc.robot.poses       # accepted means usable
+    assert all(math.isfinite(v) for xy in sc.room.outline_m for v in xy)
+
+
+@FUZZ
+@given(text=st.text(max_size=300))
+def test_any_text_is_a_scenario_or_a_scenario_error(text):
+    try:
+        loads(text, "fuzz.yaml")
+    except ScenarioError:
+        pass
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda r: r.setdefault("scan", {}).update(samples=4), "scan.samples: 4 readings per step are "
+                                                           "averaged only with the `averaging`"),
+    (lambda r: r.update(effects=[{"noise": {}}, "quantization"]), None),   # accepted
+    (lambda r: r.update(effects=[{"noise": {}}, "noise"]), "effect 'noise' listed twice"),
+    (lambda r: r.update(effects={"motion": {"path": []}}), "effects.motion.path: needs at least 2"),
+    (lambda r: r.update(name="\x1b[31mred"), "name: control characters"),
+    (lambda r: r.update(name=""), "name: expected a name of 1"),
+])
+def test_silently_accepted_scenarios_are_now_errors(change, message):
+    raw = copy.deepcopy(T_ROOM)
+    change(raw)
+    text = yaml.safe_dump(raw, allow_unicode=True)
+    if message is None:
+        assert loads(text, "x.yaml").has("noise")
+        return
+    with pytest.raises(ScenarioError, match=message.replace("(", r"\(").replace(".", r"\.")):
+        loads(text, "x.yaml")
+
+
+# --------------------------------------------------------------------------- recordings
+
+
+def _sweep(rng, n_steps=5, sensors=4, bits=12) -> Sweep:
+    ring = Ring(sensors=sensors, min_step=-2, max_step=2)
+    steps = np.arange(-2, -2 + n_steps)
+    return Sweep(steps=steps, sensor_angles=np.zeros((n_steps, sensors)) + 0.01 * steps[:, None],
+                 counts=rng.integers(0, 2 ** bits, (n_steps, sensors)),
+                 timestamps_s=np.arange(n_steps) * 0.04, duration_s=0.2,
+                 pose=np.array([0.5, 0.4, 0.1]), ring=ring, adc_bits=bits)
+
+
+@pytest.fixture(scope="module")
+def good_recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("rec") / "sweeps.npz"
+    save_recording(path, [_sweep(np.random.default_rng(3))], {"seed": 3})
+    return path.read_bytes()
+
+
+def _rewrite(data: bytes, member: str, array) -> bytes:
+    """The recording with one member replaced by ``array`` (any dtype or shape)."""
+    src = zipfile.ZipFile(io.BytesIO(data))
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w") as dst:
+        for info in src.infolist():
+            if info.filename == member + ".npy":
+                buf = io.BytesIO()
+                np.lib.format.write_array(buf, np.asarray(array), allow_pickle=True)
+                dst.writestr(info.filename, buf.getvalue())
+            else:
+                dst.writestr(info, src.read(info))
+    return out.getvalue()
+
+
+def _scalars(data: bytes, **changes) -> bytes:
+    src = zipfile.ZipFile(io.BytesIO(data))
+    buf = io.BytesIO(src.read("sweep000/scalars.npy"))
+    scalars = json.loads(str(np.lib.format.read_array(buf)))
+    scalars.update(changes)
+    return _rewrite(data, "sweep000/scalars", np.array(json.dumps(scalars)))
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: d[: len(d) // 2], "not an irring recording"),
+    (lambda d: _rewrite(d, "sweep000/counts", np.array([object()], dtype=object)),
+     "holds object data"),
+    (lambda d: _rewrite(d, "sweep000/counts", -np.ones((5, 4), int)), "lie outside a 12-bit ADC"),
+    (lambda d: _rewrite(d, "sweep000/counts", np.ones((5, 4), bool)), "holds bool"),
+    (lambda d: _rewrite(d, "sweep000/counts", np.ones((5, 4), complex)), "holds complex"),
+    (lambda d: _rewrite(d, "sweep000/counts", np.ones((5, 3), int)), "does not match"),
+    (lambda d: _rewrite(d, "sweep000/sensor_angles", np.full((5, 4), np.nan)), "NaN or infinite"),
+    (lambda d: _scalars(d, adc_bits=0), "adc_bits: 0 is not allowed"),
+    (lambda d: _scalars(d, adc_bits=64), "adc_bits: 64 is not allowed"),
+    (lambda d: _scalars(d, max_range_m=float("nan")), "max_range_m: nan is not allowed"),
+    (lambda d: _scalars(d, samples=True), "samples: True is not allowed"),
+    (lambda d: _scalars(d, sensor_model="gp2zz"), "sensor_model: 'gp2zz' is not allowed"),
+    (lambda d: _scalars(d, ring={"sensors": 0}), "ring.sensors: 0 is out of range"),
+    (lambda d: _rewrite(d, "meta", np.array(json.dumps(
+        {"grid": {"origin_xy_m": [0, 0], "shape": [200000, 200000], "resolution_m": 0.01}}))),
+     "200,000 × 200,000 cells of 10 mm would need about 2400.0 GB"),
+    (lambda d: _rewrite(d, "meta", np.array("[" * 100_000)), "meta: not valid JSON"),
+])
+def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, message):
+    path = tmp_path / "bad.npz"
+    path.write_bytes(make(good_recording))
+    with pytest.raises((RecordingError, TooBig),
+                       match=message.replace("(", r"\(").replace(".", r"\.")):
+        load_recording(path)
+
+
+@FUZZ
+@given(flips=st.lists(st.tuples(st.integers(0, 10**6), st.integers(1, 255)), min_size=1,
+                      max_size=4),
+       cut=st.one_of(st.none(), st.integers(0, 10**6)))
+def test_damaged_recordings_load_exactly_or_fail_cleanly(tmp_path_factory, good_recording,
+                                                         flips, cut):
+    data = bytearray(good_recording)
+    for pos, mask in flips:
+        data[pos % len(data)] ^= mask
+    if cut is not None:
+        data = data[: cut % len(data)]
+    path = tmp_path_factory.mktemp("fz") / "x.npz"
+    path.write_bytes(bytes(data))
+    try:
+        sweeps, _ = load_recording(path)
+    except RecordingError:
+        return
+    # what loads is what was written: a flip that survives CRC and checks changes nothing
+    ref = _sweep(np.random.default_rng(3))
+    assert len(sweeps) == 1 and np.array_equal(sweeps[0].counts, ref.counts)
+
+
+# --------------------------------------------------------------------------- calibrations
+
+
+@FUZZ
+@given(key=st.sampled_from(["sensor_model", "emitter_offset_mm", "adc_bits", "vref_v",
+                            "min_range_mm", "max_range_mm", "noise_counts", "curve", "source",
+                            "max_incidence_deg", "irring_calibration", "extra"]),
+       value=_VALUES)
+def test_any_edit_of_a_calibration_loads_or_is_a_calibration_error(key, value):
+    from irring import gp2
+
+    raw = _CAL.to_dict()
+    raw[key] = value
+    try:
+        cal = Calibration.from_dict(safe_yaml.load(yaml.safe_dump(raw), "c.yaml"), "c.yaml")
+    except CalibrationError:
+        return
+    assert cal.sensor_model in gp2.available() and 0.1 <= cal.vref_v <= 50
+    assert np.all(cal.b < 0)   # a GP2's curve falls
+
+
+_CAL = Calibration.for_scene(loads(yaml.safe_dump(T_ROOM), "t_room.yaml"))
+
+
+# --------------------------------------------------------------------------- devices
+
+TIMEOUT_S = 0.15
+
+
+def _sweep_on(behaviour, **ring_kw):
+    dev = hd.HostileDevice(behaviour)
+    ring = SerialRing(dev.link, timeout_s=TIMEOUT_S, **ring_kw)
+    t0 = time.monotonic()
+    try:
+        with ring:
+            return ring.sweep(resweep=1), time.monotonic() - t0
+    finally:
+        dev.close()
+
+
+@pytest.mark.parametrize("behaviour, error", [
+    (hd.silent, "no IRINF answer"),
+    (hd.silent_after_hello, "stopped answering"),
+    (hd.disconnect_on_sweep, "disconnected|stopped answering"),
+    (hd.flood_irpos, "stopped answering|no progress"),
+    (hd.repeat_irscn, "stopped answering|no progress"),
+    (hd.sentence_every_quarter_second, "stopped answering|no progress"),
+    (hd.done_without_steps, "no step of it arrived"),
+    (hd.wrong_sensor_count, "no step of it arrived"),
+    (hd.error_reply(3), "IRERR 3"),
+    (hd.error_reply(4), "IRERR 4"),
+    (hd.error_reply(5), "kept refusing|IRERR 5"),
+    (hd.announces(sensors=4096), "announces 4096 sensors"),
+    (hd.announces(bits=32), "announces a 32-bit ADC"),
+    (hd.announces(lo=-2**31 + 1, hi=2**31 - 1), "announces steps"),
+])
+def test_a_hostile_device_is_a_clear_error_within_a_bounded_time(behaviour, error):
+    t0 = time.monotonic()
+    with pytest.raises(DeviceError, match=error) as caught:
+        _sweep_on(behaviour)
+    took = time.monotonic() - t0
+    assert took < 30 * TIMEOUT_S + 1.0, took          # never a hang
+    partial = getattr(caught.value, "partial", None)
+    if partial is not None:                            # no invented reading
+        for step, row in zip(partial.steps, partial.counts):
+            assert list(row) == hd.counts_for(int(step))
+
+
+@pytest.mark.parametrize("behaviour", [hd.trickle, hd.out_of_order, hd.good])
+def test_slow_or_reordered_devices_deliver_exactly_what_they_sent(behaviour):
+    sweep, _ = _sweep_on(behaviour)
+    assert list(sweep.steps) == list(range(hd.MIN_STEP, hd.MAX_STEP + 1))
+    assert sweep.missing_steps == ()
+    for step, row in zip(sweep.steps, sweep.counts):
+        assert list(row) == hd.counts_for(int(step))
+
+
+def test_out_of_order_scans_are_not_counted_as_millions_lost():
+    dev = hd.HostileDevice(hd.out_of_order)
+    try:
+        with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:
+            ring.sweep()
+            assert ring.stats.lost_scans <= 5 and ring.stats.out_of_order == 4
+    finally:
+        dev.close()
+
+
+@pytest.mark.parametrize("behaviour", [hd.flood_irpos, hd.done_without_steps, hd.error_reply(4)])
+def test_drive_on_a_hostile_device_exits_3_with_one_line_and_writes_nothing(
+        tmp_path, capsys, behaviour):
+    dev = hd.HostileDevice(behaviour)
+    out = tmp_path / "out"
+    try:
+        code = main(["drive", "--port", dev.link, "--timeout", str(TIMEOUT_S), "--no-wait",
+                     "--no-animation", "--out", str(out)])
+    finally:
+        dev.close()
+    err = capsys.readouterr().err
+    assert code == 3, err
+    assert "Traceback" not in err
+    assert not out.exists() and list(tmp_path.iterdir()) == []   # no partial output
+
+
+# --------------------------------------------------------------------------- command line
+
+
+@pytest.mark.parametrize("argv, status, message", [
+    (["drive", "--port", "x", "--timeout", "0"], 2, "--timeout: must be a number of seconds > 0"),
+    (["drive", "--port", "x", "--samples", "65"], 2, "--samples: must be 1 … 64"),
+    (["drive", "--port", "x", "--pose", "nan,nan"], 2, "--pose: 'nan,nan': expected"),
+    (["emulate", "--baud", "-100"], 2, "--baud: must be ≥ 0"),
+    (["emulate", "--tcp", "127.0.0.1:99999"], 2, "PORT 0 … 65535"),
+])
+def test_bad_options_are_usage_errors(capsys, argv, status, message):
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == status
+    assert message in capsys.readouterr().err
+
+
+def test_emulate_link_never_replaces_a_regular_file(tmp_path, capsys):
+    target = tmp_path / "precious.txt"
+    target.write_text("keep me")
+    assert main(["emulate", "t_room", "--link", str(target), "--quiet"]) == 2
+    assert target.read_text() == "keep me"
+    assert "is not a symlink; not replacing it" in capsys.readouterr().err
+
+
+def test_out_naming_a_file_is_refused_before_the_work(tmp_path, capsys):
+    target = tmp_path / "file"
+    target.write_text("x")
+    t0 = time.monotonic()
+    assert main(["run", "t_room", "--out", str(target), "--no-animation"]) == 4
+    assert time.monotonic() - t0 < 2.0       # before simulating
+    assert "is a file; expected a folder" in capsys.readouterr().err
+    assert target.read_text() == "x"
+
+
+def test_a_scenario_name_never_leaves_the_out_parent(tmp_path, monkeypatch, capsys):
+    raw = copy.deepcopy(T_ROOM)
+    raw["name"] = "../../escape/../x y"
+    (tmp_path / "evil.yaml").write_text(yaml.safe_dump(raw))
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "evil.yaml", "--no-animation"]) == 0
+    made = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert made == ["escape_x_y"]
+    assert sorted(os.listdir(tmp_path)) == ["evil.yaml", "out"]
+
+
+def test_an_interrupted_run_leaves_the_previous_outputs_whole(tmp_path, monkeypatch):
+    from irring.maps import render
+
+    out = tmp_path / "run"
+    assert main(["run", "t_room_cylinder", "--out", str(out), "--no-animation"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(render, "save_map_png", interrupted)
+    assert main(["run", "t_room_cylinder", "--out", str(out), "--no-animation",
+                 "--seed", "9"]) == 130
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]   # no temporaries left
+
+
+def test_a_room_too_big_for_memory_is_refused_up_front(tmp_path, capsys):
+    raw = copy.deepcopy(T_ROOM)
+    raw["room"]["outline_mm"] = [[0, 0], [100_000, 0], [100_000, 100_000], [0, 100_000]]
+    (tmp_path / "big.yaml").write_text(yaml.safe_dump(raw))
+    assert main(["run", str(tmp_path / "big.yaml"), "--out", str(tmp_path / "o")]) == 5
+    err = capsys.readouterr().err
+    assert "would need about 6.0 GB" in err and "map.resolution_mm ≥ 21" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_unexpected_exception_is_one_line_unless_debug(monkeypatch, capsys):
+    from irring.cli import scenarios
+
+    def boom(args):
+        raise ZeroDivisionError("\x1b[2J" + "x" * 10_000)
+
+    monkeypatch.setattr(scenarios, "run", boom)
+    monkeypatch.delenv("IRRING_DEBUG", raising=False)
+    assert main(["scenarios"]) == 70
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and len(err) < 500 and "\x1b" not in err
+    assert err.startswith("irring scenarios: error: internal error (ZeroDivisionError: \\x1b[2J")
+    assert main(["scenarios", "--debug"]) == 70
+    assert "Traceback" in capsys.readouterr().err
+
+
+def test_dataclass_fields_of_sweep_are_all_checked():
+    """A new Sweep field must get a rule in the recording schema (not pass unchecked)."""
+    from irring import recording
+
+    checked = set(recording._SWEEP_ARRAYS) | {"ring", "truth", "sensor_model", "adc_bits",
+                                              "vref_v", "max_range_m", "samples", "settle_s",
+                                              "duration_s", "source", "missing_steps"}
+    assert {f.name for f in dataclasses.fields(Sweep)} <= checked
