@@ -125,7 +125,8 @@ BAD = [
      r"knobs\.settle_ms\[1\]: expected a number in 0 … 5000, got 'fast'"),
     ("designs: []\nscenarios: [t_room]\n", r"designs: expected a non-empty list of designs"),
     ("- rotating12\n", r"<top>: a study file must be a mapping"),
-    ("designs: [radial12\n", r"s\.yaml: not valid YAML"),
+    ("designs: [radial12\n", r"s\.yaml: line 2: not valid YAML"),
+    ("designs: [radial12]\ndesigns: [laser]\n", r"s\.yaml: line 2: key .designs. given twice"),
 ]
 
 
@@ -134,9 +135,9 @@ def test_a_bad_study_file_is_one_line_naming_the_key(tmp_path, capsys, text, mes
     p = write(tmp_path, text)
     with pytest.raises(study.StudyError, match=message):
         study.load_study(p)
-    assert main(["study", str(p), "--out", str(tmp_path / "out")]) == 2
+    assert main(["study", str(p), "--out", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err
-    assert err.startswith("irring: error: ") and err.count("\n") == 1, err
+    assert err.startswith("irring study: error: ") and err.count("\n") == 1, err
     assert not (tmp_path / "out").exists()
 
 
