@@ -105,12 +105,10 @@ def _error(msg: str) -> int:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .. import pipeline
+    from .. import errors, pipeline
     from ..hardware import DeviceError, SerialRing
-    from ..scenario import load_scenario
-
-    from .. import errors
     from ..outputs import check_out
+    from ..scenario import load_scenario
 
     check_out(args.out)
     truth = load_scenario(args.truth) if args.truth else None
