@@ -17,7 +17,6 @@ import dataclasses
 import json
 import math
 import zipfile
-import zlib
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -134,15 +133,18 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
             infos = {i.filename: i for i in zf.infolist()}
             if "format.npy" not in infos:
                 raise fail("not an irring recording (no 'format' entry)")
-            headers = {name[:-4]: _npy_header(zf, info, fail) for name, info in infos.items()
-                       if name.endswith(".npy")}
+            for name in infos:
+                if not name.endswith(".npy"):
+                    raise fail(f"{brief(name)}: unknown entry; a recording holds .npy arrays")
+            headers = {name[:-4]: _npy_header(zf, info, fail) for name, info in infos.items()}
         with np.load(path, allow_pickle=False) as npz:
             return _read(npz, headers, fail)
     except IrringError:   # RecordingError, TooBig
         raise
-    except (zipfile.BadZipFile, zlib.error, EOFError, ValueError, OSError, KeyError,
-            UnicodeError, RecursionError) as exc:
-        why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+    except Exception as exc:  # noqa: BLE001 - zipfile/zlib/numpy fail on damaged bytes in
+        # many ways (BadZipFile, zlib.error, NotImplementedError for a flipped version or
+        # flag, RuntimeError "encrypted", IndexError, EOFError, …): all mean a damaged file
+        why = getattr(exc, "strerror", None) or f"{type(exc).__name__}: {exc}"
         raise fail(f"not an irring recording (.npz), or a damaged one: {brief(why)[1:-1]}") from None
 
 
@@ -178,8 +180,8 @@ def _read(npz, headers: dict, fail) -> tuple[list[Sweep], dict]:
             raise fail(f"{brief(name)}: unknown entry; a recording holds format, meta and "
                        f"sweepNNN/…")
         keys.add(head)
-    if len(keys) > MAX_SWEEPS:
-        raise fail(f"{len(keys)} sweeps; at most {MAX_SWEEPS}")
+    if not 1 <= len(keys) <= MAX_SWEEPS:
+        raise fail(f"holds {len(keys)} sweeps; a recording holds 1 … {MAX_SWEEPS}")
     # by number: from sweep1000 on, names no longer sort as text (sweep1000 < sweep101)
     order = sorted(keys, key=lambda k: int(k[len("sweep"):]))
     return [_load_sweep(npz, headers, key, fail) for key in order], meta
