@@ -91,8 +91,10 @@ def test_near_readings_are_resolved_onto_the_near_branch_and_the_rest_flagged(fo
         truly_near += int(np.sum(d_true < cal.peak_distance_m))
         flagged += int(np.sum(p.reason == Reason.FOLDOVER_AMBIGUOUS))
         assert np.all(np.isfinite(p.x[p.valid]) & np.isfinite(p.sigma_m[p.valid]))
-    # most close readings are recovered, and what cannot be decided is said so
-    assert near_valid > 0.3 * truly_near > 100
+    # most close readings are recovered, and what cannot be decided is said so (on the near
+    # branch the counts fall to the no-return level too: those within RETURN_SIGMAS of it,
+    # ~8 % of the close readings, are too weak to tell from noise)
+    assert near_valid > 0.27 * truly_near > 100
     assert flagged > 100
 
 

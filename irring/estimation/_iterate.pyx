@@ -238,15 +238,16 @@ def fine_table_is_interp(const double[::1] xp, const double[::1] log_a, const do
 
 
 def classify(const double[::1] counts, unsigned char[::1] reason, double full, double near,
-             double no_return, double sigma, bint falling):
+             double no_return, double margin, double weak, bint falling):
     """Reasons decided by the counts alone (before any distance is computed), into
     ``reason`` (zeros on entry). Assigned from the weakest claim up, so MISSING > SATURATED >
     FOLDOVER_AMBIGUOUS > NO_RETURN: a GP2 (``falling``) reading at or below the noise floor
-    (2σ above the no-return level) is NO_RETURN, one brighter than the curve's near end
+    (``margin`` counts above the no-return level) is NO_RETURN, one up to ``weak`` counts
+    above it OUT_OF_RANGE (too weak to tell from noise), one brighter than the curve's near end
     FOLDOVER_AMBIGUOUS; a linear sensor's (sonar/laser hooks) no return reads as max range
     and it has no fold-over; full scale is SATURATED, NaN MISSING."""
     cdef Py_ssize_t i
-    cdef double s, margin = 2.0 * sigma
+    cdef double s
     cdef unsigned char r
     if reason.shape[0] != counts.shape[0]:
         raise ValueError("classify needs one reason per count")
@@ -254,6 +255,8 @@ def classify(const double[::1] counts, unsigned char[::1] reason, double full, d
         s = counts[i]
         r = R_OK
         if falling:
+            if s <= no_return + weak:
+                r = R_OUT_OF_RANGE
             if s <= no_return + margin or s <= 0:
                 r = R_NO_RETURN
             if s > near:

@@ -64,10 +64,11 @@ the near branch too; :func:`resolve_foldover` picks the branch from the sweep's 
 flags FOLDOVER_AMBIGUOUS (docs/foldover.md).
 
 Validity (:class:`irring.data.Reason`): a missing reading (NaN counts or a step in
-``Sweep.missing_steps``) is MISSING; counts at ADC full scale SATURATED; counts at or below the
-weakest count any in-range return can give (the noise floor) NO_RETURN; counts brighter than
-the calibrated near end of the curve, or whose branch a folding calibration cannot decide,
-FOLDOVER_AMBIGUOUS (below the peak distance one voltage has two distances); a final
+``Sweep.missing_steps``) is MISSING; counts at ADC full scale SATURATED; counts within
+``NO_RETURN_SIGMAS`` of the calibration's count noise above the no-return level NO_RETURN, and
+up to ``RETURN_SIGMAS`` above it OUT_OF_RANGE (too weak to tell from noise); counts brighter
+than the calibrated near end of the curve, or whose branch a folding calibration cannot
+decide, FOLDOVER_AMBIGUOUS (below the peak distance one voltage has two distances); a final
 distance outside [min_range, max_range] OUT_OF_RANGE; a reading whose θ still moved by ≥ ε
 after ``max_iterations`` NOT_CONVERGED. A valid reading never carries NaN or inf.
 
@@ -93,6 +94,14 @@ from ..scenario import HOUSING_M, Ring
 
 CALIBRATION_FORMAT = 1  # version written into calibration files
 _SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
+# Count σ above the no-return level: at or below NO_RETURN_SIGMAS a reading saw nothing (its
+# beam frees the cells up to the max range); above RETURN_SIGMAS it is a return, with a
+# one-sided Gaussian tail of 1e-4, so one reading in 10 000 that saw nothing passes for one
+# (a T-room sweep has ~400 of them; at 2σ, 2.3 % did, each a valid point at the curve's far
+# end, 100-300 mm in front of a wall beyond the range). Between, it is too weak to tell noise
+# from a far, steep surface: OUT_OF_RANGE, neither mapped nor freed.
+NO_RETURN_SIGMAS = 2.0
+RETURN_SIGMAS = 3.72
 _FINE_CELLS = 1 << 16  # cells of the fine (log a, b) table over 0 … 90°
 _FALLBACK_NODES = 8   # quadrature nodes for the fallback σ (see _fallback_nodes)
 _REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
@@ -264,8 +273,21 @@ class Calibration:
     @property
     def no_return_counts(self) -> float:
         """Counts of a return at max_range_m square on (a GP2's output with nothing in
-        range); readings within 2σ of it, or beyond it, are no return."""
+        range); readings within :attr:`no_return_margin_counts` of it, or beyond it, are no
+        return."""
         return float(self.counts(self.max_range_m, 0.0))
+
+    @property
+    def no_return_margin_counts(self) -> float:
+        """Up to this many counts past :attr:`no_return_counts` a reading is no return;
+        ``NO_RETURN_SIGMAS`` count σ (the noise this calibration knows)."""
+        return NO_RETURN_SIGMAS * self.sigma_counts()
+
+    @property
+    def return_margin_counts(self) -> float:
+        """From this many counts past :attr:`no_return_counts` a reading is a return
+        (``RETURN_SIGMAS`` count σ); between the two margins it is OUT_OF_RANGE."""
+        return RETURN_SIGMAS * self.sigma_counts()
 
     @property
     def near_counts(self) -> float:
@@ -730,10 +752,10 @@ class Estimate:
 def _classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
     """Reasons decided by the counts alone (before any distance is computed; see
     ``_iterate.classify``), and MISSING for the steps the hardware never delivered."""
-    full, near, no_return, sigma, falling = cal._levels
+    full, near, no_return, _, falling = cal._levels
     reason = np.zeros(counts.shape, dtype=np.uint8)
-    _iterate.classify(counts.reshape(-1), reason.reshape(-1), full, near, no_return, sigma,
-                      falling)
+    _iterate.classify(counts.reshape(-1), reason.reshape(-1), full, near, no_return,
+                      cal.no_return_margin_counts, cal.return_margin_counts, falling)
     if sweep.missing_steps:
         rows = np.isin(np.asarray(sweep.steps), np.asarray(sweep.missing_steps))
         reason[rows, :] = Reason.MISSING

@@ -328,11 +328,12 @@ def _piece_lines(mom: _Moments, px, py, thr, starts, ends, brk, opts: LineOption
 def classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
     """Reasons decided by the counts alone (before any distance is computed). Assigned from
     the weakest claim up, so MISSING > SATURATED > FOLDOVER_AMBIGUOUS > NO_RETURN."""
-    full, near, no_return, sigma, falling = cal._levels
+    full, near, no_return, _, falling = cal._levels
     s = counts
     reason = np.zeros(s.shape, dtype=np.uint8)
-    margin = 2.0 * sigma
+    margin = cal.no_return_margin_counts
     if falling:
+        reason[s <= no_return + cal.return_margin_counts] = Reason.OUT_OF_RANGE   # too weak
         reason[(s <= no_return + margin) | (s <= 0)] = Reason.NO_RETURN
         reason[s > near] = Reason.FOLDOVER_AMBIGUOUS
     else:  # a linear sensor (sonar/laser hooks): no fold-over, no return reads as max range
