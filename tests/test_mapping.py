@@ -183,13 +183,20 @@ def test_one_clean_pass_frees_and_a_hit_outweighs_a_pass():
 
 
 def test_gaussian_spread_follows_sigma():
-    """A fuzzier reading spreads its occupied evidence over more cells (paper §IV)."""
-    sharp, fuzzy = small_grid(), small_grid()
-    sharp.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.003))
-    fuzzy.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.02))
-    assert (sharp.log_odds > 0).sum() < (fuzzy.log_odds > 0).sum()
-    ix, iy = sharp.cell_of(0.455, 0.205)
-    assert sharp.log_odds[iy, ix] == pytest.approx(sharp.params.l_occ, abs=0.1)
+    """A fuzzier reading spreads its occupied evidence over more cells (paper §IV; followed
+    2σ into the surface to see it) and adds less to its end cell: l_occ up to occ_sigma_m
+    (5 mm), l_occ·5 mm/σ beyond, never less than l_occ_min."""
+    grids = {s: small_grid(tail_sigmas=2.0) for s in (0.003, 0.006, 0.04)}
+    for sigma, g in grids.items():
+        g.insert(single_ray(0.055, 0.205, 0.0, 0.4049, sigma_m=sigma))
+    ix, iy = grids[0.003].cell_of(0.4599, 0.205)
+    end = {s: g.log_odds[iy, ix] for s, g in grids.items()}
+    p = grids[0.003].params
+    assert end[0.003] == pytest.approx(p.l_occ, abs=1e-3)
+    assert end[0.006] == pytest.approx(p.l_occ * 0.005 / 0.006, abs=1e-3)     # 2.08
+    assert end[0.04] == pytest.approx(p.l_occ_min, abs=1e-3)                  # not 0.31
+    spread = [(g.log_odds > 0).sum() for g in grids.values()]
+    assert spread[0] < spread[1] < spread[2]
 
 
 def test_no_return_frees_up_to_max_range_and_marks_nothing():
@@ -277,8 +284,10 @@ def reference_delta(grid, points):
     gap = np.maximum(np.maximum(s_a - d[r], d[r] - s_b), 0.0)
     stop = d[r] - p.free_margin_cells * grid.resolution_m
     phi = np.array([0.5 * (1 + math.erf(z / math.sqrt(2))) for z in (stop - s_b) / sigma[r]])
+    # a hit σ-weighted: l_occ up to occ_sigma_m, l_occ·occ_sigma_m/σ beyond, never below l_occ_min
+    l_hit = np.maximum(min(p.l_occ_min, p.l_occ), p.l_occ * np.minimum(1.0, p.occ_sigma_m / sigma[r]))
     w = np.where(valid[r], p.l_free * np.where(s_b < stop, phi, 0.0)
-                 + p.l_occ * np.exp(-0.5 * (gap / sigma[r]) ** 2), p.l_no_return)
+                 + l_hit * np.exp(-0.5 * (gap / sigma[r]) ** 2), p.l_no_return)
     out = np.zeros(grid.shape)
     np.add.at(out, (v.iy, v.ix), w)
     return out
@@ -301,7 +310,10 @@ def random_points(rng, n, *, box=(0.6, 0.4), max_range_m=0.3):
 
 
 @pytest.mark.parametrize("params", [{}, {"l_no_return": -0.3, "tail_sigmas": 3.0},
-                                    {"free_margin_cells": 0.0, "min_sigma_m": 0.002}])
+                                    {"free_margin_cells": 0.0, "min_sigma_m": 0.002},
+                                    {"occ_sigma_m": 0.012, "l_occ_min": 0.0, "tail_sigmas": 0.5},
+                                    {"occ_sigma_m": 0.003, "l_occ_min": 2.5},
+                                    {"l_occ": 1.0, "l_occ_min": 1.7}])
 def test_insert_follows_the_documented_model_visit_by_visit(params):
     """The fast insert (row runs, near-end columns, A&S erfc) against the formula evaluated
     on every traverse() visit: equal to the documented 1e-4 (erfc to 2.5e-5, the constant

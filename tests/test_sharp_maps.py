@@ -8,11 +8,15 @@ import math
 
 import numpy as np
 
-from _synthetic import make_sweep
+from _synthetic import make_sweep, points_for_pose
+from irring import pipeline
+from irring import scenario as S
 from irring.data import Reason
 from irring.designs import PAPER_RING
 from irring.estimation.estimate import RETURN_SIGMAS, Calibration, estimate
 from irring.estimation.estimate_numpy import classify as classify_numpy
+from irring.maps.mapping import OCCUPIED, MapperParams, OccupancyGrid
+from irring.scenario import loads
 
 
 def _noise_only_sweep(cal: Calibration, offset_sigmas: float, seed: int):
@@ -54,3 +58,96 @@ def test_the_threshold_follows_the_calibrations_noise_and_oracle_agrees():
     assert np.all(estimate(sweep, noisy).reason == Reason.OUT_OF_RANGE)
     # 3σ above the level at 2 mV is a return from ~0.7 m: the curve's calibrated far end
     assert math.isfinite(float(quiet.distance(level)))
+
+
+# --------------------------------------------------------------------------- σ-weighted map
+
+WALL_ROOM = """\
+name: wall_13mm
+room:
+  outline_mm: [[0, 0], [1310, 0], [1310, 870], [0, 870]]
+robot:
+  poses:
+    - {x_mm: 560, y_mm: 430}
+"""
+
+
+def _wall_profile(params: MapperParams, seeds=range(5)) -> dict[int, float]:
+    """Share of the columns 0.30-0.82 m along the bottom wall (y = 0; 0.43 m from the pose)
+    occupied at each row offset from the surface row (+: into the room), after one sweep of
+    end points scattered by 13 mm RMS along their beams, each carrying σ = 13 mm."""
+    sc = loads(WALL_ROOM)
+    out: dict[int, float] = {}
+    for seed in seeds:
+        g = OccupancyGrid.for_scenario(sc, params)
+        g.insert(points_for_pose(sc, 0, sigma_m=0.013, rng=np.random.default_rng(seed)))
+        occ = g.classify() == OCCUPIED
+        xs, ys = g.cell_centers()
+        cols = (xs > 0.30) & (xs < 0.82)
+        for row, y in enumerate(ys):
+            k = round(y / g.resolution_m)
+            if -8 <= k <= 8:
+                out[k] = out.get(k, 0.0) + occ[row, cols].mean() / len(seeds)
+    return out
+
+
+def test_a_wall_read_at_13mm_rms_comes_out_thin_and_without_spurs():
+    new = _wall_profile(MapperParams())
+    old = _wall_profile(MapperParams(occ_sigma_m=1.0, l_occ_min=0.0, tail_sigmas=0.5))
+    thickness = sum(new.values())
+    assert 2.5 < thickness < 3.2 < 3.8 < sum(old.values())          # 3.0 cells against 4.0
+    assert new[0] > 0.8 and new[-1] > 0.6                           # the surface and behind it
+    # in front of the surface: one cell mostly; two cells in front 17 % (was 47 %), three
+    # hardly ever (0.4 %, was 5 %)
+    assert new[2] < 0.22 < 0.4 < old[2] and new[3] < 0.01 < old[3]
+    assert all(v == 0.0 for k, v in new.items() if k >= 4 or k <= -5)
+
+
+def test_walls_of_a_room_come_out_one_or_two_cells_thick():
+    """big_room's bottom wall beside the first pose (x 0.25-0.80 m, 0.46 m away), as `irring
+    run` maps it (3 seeds): the surface row occupied, ≤ 2 cells across on average, no cell two
+    or more in front of it (no spurs into the room)."""
+    sc = S.load_scenario("big_room")
+    share: dict[int, float] = {}
+    for seed in range(3):
+        run = pipeline.run(sc, seed=sc.seed + seed, score=False, progress=False)
+        occ = run.grid.classify() == OCCUPIED
+        xs, ys = run.grid.cell_centers()
+        cols = (xs > 0.25) & (xs < 0.80)
+        for row, y in enumerate(ys):
+            k = round(y / run.grid.resolution_m)
+            if -8 <= k <= 8:
+                share[k] = share.get(k, 0.0) + occ[row, cols].mean() / 3
+    assert share[0] > 0.95
+    assert sum(share.values()) <= 2.1
+    assert sum(v for k, v in share.items() if k >= 2) <= 0.03
+
+
+def test_sigma_weighted_hits_follow_the_numpy_reference_on_a_room_sweep():
+    """The kernel against tests/test_mapping.py's visit-by-visit formula on real estimates
+    (σ from the estimator, 3-60 mm) of a room of our own: within the documented 2e-4."""
+    from test_mapping import reference_delta
+
+    sc = S.load_scenario("box_room")
+    run = pipeline.run(sc, score=False, progress=False)
+    for pts in run.points:
+        sig = pts.sigma_m[pts.valid]
+        assert sig.min() < 0.005 < 0.0078 < sig.max()              # all three regimes of l_hit
+        g = OccupancyGrid.for_scenario(sc)
+        got = g.delta(pts)
+        np.testing.assert_allclose(got, reference_delta(g, pts), atol=2e-4)
+
+
+def test_posts_of_15_to_40mm_come_out_round_and_in_place():
+    """The `posts` room (six posts, 15-40 mm): around every post the map's occupied cells lie
+    on it or within 30 mm outside it (no radial streak), and there are some (it is seen)."""
+    sc = S.load_scenario("posts")
+    run = pipeline.run(sc, progress=False)
+    occ = run.grid.classify() == OCCUPIED
+    xs, ys = run.grid.cell_centers()
+    X, Y = np.meshgrid(xs, ys)
+    for ob in sc.obstacles:
+        dist = np.hypot(X - ob.center_m[0], Y - ob.center_m[1])
+        near = occ & (dist < ob.radius_m + 0.12)
+        assert near.sum() >= 5, ob
+        assert (dist[near] - ob.radius_m).max() <= 0.030, ob

@@ -357,6 +357,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef double l_occ = params.l_occ, l_free = params.l_free, l_nr = params.l_no_return
     cdef double tail = params.tail_sigmas, min_sigma = params.min_sigma_m
     cdef double default_sigma = params.default_sigma_m
+    cdef double occ_sigma = params.occ_sigma_m, l_occ_min = params.l_occ_min, l_hit
     cdef double margin_m = params.free_margin_cells * res
     cdef long ny = log_odds.shape[0], nx = log_odds.shape[1]
     cdef Py_ssize_t n = origin_x.shape[0], i, j, nb = 0, nv = 0, kept = 0
@@ -472,12 +473,15 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
             # (added to the grid now, clamped below with the rest)
             columns(&s, length / sigma, d / sigma, &c)
             mu = margin_m / sigma
+            # a reading k times as uncertain as occ_sigma spreads 1/k of a hit over k times
+            # the length, but adds at least l_occ_min (or l_occ, if that is less)
+            l_hit = dmax(dmin(l_occ_min, l_occ), l_occ * dmin(1.0, occ_sigma / sigma))
             for k in range(n_far, s.count):
                 two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
                 if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
-                    log_odds[iy, ix] += weight(u_in, u_mid, mu, l_occ, l_free)
+                    log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_free)
                 if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
-                    log_odds[iy, ix] += weight(u_mid, u_out, mu, l_occ, l_free)
+                    log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_free)
         if kept:
             # the runs' cumulative sums (down the columns, then along each row) give the
             # counts; add their log-odds and clamp
