@@ -16,8 +16,9 @@ configurations (one knob changed at a time around the scenario as written, the "
               scene (a wait only matters when the belt's swing and the GP2's clock are
               simulated); hardware time is then the timed schedule's; these rows are kept
               off the Pareto fronts and drawn as a dashed line
-  iterations  estimator: θ = 0 (no iterations), at most 1 / 2 / 5 iterations (default 20;
-              readings still moving at the cap are dropped as not converged)
+  iterations  estimator: θ = 0 (no iterations), at most 1 / 2 / 5 iterations (default 20);
+              a capped run shows the estimate after k iterations: readings still moving
+              are kept at the θ they reached
   tolerance   estimator convergence tolerance 1° (default 0.1°)
   regroup     estimator groups the end points into lines at most 1 / 2 / 6 times (default 3),
               then holds the grouping; each grouping is its costliest step

@@ -540,7 +540,7 @@ cdef class Sweep:
 
     def finish(self, const double[::1] theta, const unsigned char[::1] on,
                const Py_ssize_t[::1] last_moving, Py_ssize_t n_its, bint iterate, cal,
-               double max_range_m, unsigned char[::1] reason):
+               double max_range_m, unsigned char[::1] reason, bint keep_moving=False):
         """Final points with the exact curve (Calibration's log a(θ), b(θ): see
         :meth:`curve`; ``cal._log_ab`` where the fine table check failed) and reasons.
         Returns flat (S·N,) arrays x, y, d, θ, σ (NaN where not valid), iterations (int32)
@@ -551,8 +551,8 @@ cdef class Sweep:
         by the RMS error of the θ = 0 distance over the incidences a round surface gives
         (``cal._spread``: log a, b at the quadrature nodes, see
         ``estimate._fallback_nodes``). A reading still moving in the last iteration is
-        NOT_CONVERGED; a distance outside [min, max] range or a non-finite point is
-        OUT_OF_RANGE."""
+        NOT_CONVERGED (with ``keep_moving``: valid, at its last θ); a distance outside
+        [min, max] range or a non-finite point is OUT_OF_RANGE."""
         cdef Py_ssize_t i, j, f, k = self.k, size = self.size
         cdef Py_ssize_t nodes, n_off = 0, o
         cdef double dv, s, px, py
@@ -611,7 +611,7 @@ cdef class Sweep:
             io[f] = <int>min(last_moving[i] + 2, n_its)
             if dv > max_range_m or dv < min_range_m or not isfinite(dv):
                 why = R_OUT_OF_RANGE
-            elif n_its and last_moving[i] == n_its - 1:
+            elif n_its and last_moving[i] == n_its - 1 and not keep_moving:
                 why = R_NOT_CONVERGED
             elif not (isfinite(px) and isfinite(py) and isfinite(sg[i])):
                 why = R_OUT_OF_RANGE

@@ -764,33 +764,38 @@ def _classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
 
 def estimate(sweep: Sweep, calibration: Calibration | None = None, *, max_iterations: int = 20,
              tolerance_rad: float = math.radians(0.1), iterate: bool = True,
-             lines: LineOptions = LineOptions()) -> Points:
+             lines: LineOptions = LineOptions(), keep_unconverged: bool = False) -> Points:
     """Counts → end points by the iterative estimation of Table II (see the module doc).
 
     ``calibration`` defaults to :meth:`Calibration.for_sweep` (the datasheet curve).
     ``iterate=False`` gives the θ = 0 assumption (Eq. 10 with a(0), b(0)).
+    ``keep_unconverged``: readings still moving after ``max_iterations`` are valid at the θ
+    they reached (the estimate after k iterations) instead of NOT_CONVERGED.
     """
     return _estimate(sweep, calibration, max_iterations, tolerance_rad, iterate, lines,
-                     keep_history=False, damping=True, detail=False).points
+                     keep_history=False, damping=True, detail=False,
+                     keep_unconverged=keep_unconverged).points
 
 
 def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                     max_iterations: int = 20, tolerance_rad: float = math.radians(0.1),
                     iterate: bool = True, lines: LineOptions = LineOptions(),
-                    keep_history: bool = False, damping: bool = True) -> Estimate:
+                    keep_history: bool = False, damping: bool = True,
+                    keep_unconverged: bool = False) -> Estimate:
     """:func:`estimate` that also returns the final lines and (optionally) θ per iteration.
 
     ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
     Table II (to show what the control is for).
     """
     return _estimate(sweep, calibration, max_iterations, tolerance_rad, iterate, lines,
-                     keep_history=keep_history, damping=damping, detail=True)
+                     keep_history=keep_history, damping=damping, detail=True,
+                     keep_unconverged=keep_unconverged)
 
 
 def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int,
               tolerance_rad: float, iterate: bool, lines: LineOptions, *, keep_history: bool,
               damping: bool, detail: bool, hold: np.ndarray | None = None,
-              snap: bool = True) -> Estimate:
+              snap: bool = True, keep_unconverged: bool = False) -> Estimate:
     """The estimator: this function is the schedule of the module docstring, its phases run
     as compiled kernels (:mod:`irring.estimation._iterate`). ``detail``: also the final lines.
     ``hold`` (S, N): readings kept out (FOLDOVER_AMBIGUOUS); None with a folding
@@ -801,7 +806,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     if hold is None and cal.folds and iterate:
         return resolve_foldover(lambda held, full, snap: _estimate(
             sweep, cal, max_iterations, tolerance_rad, iterate, lines, keep_history=keep_history,
-            damping=damping, detail=full, hold=held, snap=snap), sweep, cal, detail)
+            damping=damping, detail=full, hold=held, snap=snap,
+            keep_unconverged=keep_unconverged), sweep, cal, detail)
     # the kernels take a C integer: a float would fail only once an iteration needs it
     max_iterations = operator.index(max_iterations)
     if max_iterations < 1:
@@ -922,7 +928,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     # final points with the exact curve; fallback readings (no line): θ = 0, σ widened by
     # θ's unknown (see _fallback_nodes)
     x, y, d, theta_out, sigma, it_out, valid = sw.finish(
-        theta, on_line, last_moving, n_its, iterate, cal, max_range, reason.reshape(-1))
+        theta, on_line, last_moving, n_its, iterate, cal, max_range, reason.reshape(-1),
+        keep_unconverged)
     points = Points(
         x=x.reshape(shape), y=y.reshape(shape), d=d.reshape(shape),
         theta=theta_out.reshape(shape),

@@ -783,7 +783,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                     max_iterations: int = 20, tolerance_rad: float = math.radians(0.1),
                     iterate: bool = True, lines: LineOptions = LineOptions(),
                     keep_history: bool = False, damping: bool = True,
-                    hold: np.ndarray | None = None, snap: bool = True) -> Estimate:
+                    hold: np.ndarray | None = None, snap: bool = True,
+                    keep_unconverged: bool = False) -> Estimate:
     """:func:`irring.estimation.estimate.estimate_detail` in numpy (always with the lines).
 
     ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
@@ -791,7 +792,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     (FOLDOVER_AMBIGUOUS); None with a folding calibration: the fold-over is resolved first
     (:func:`irring.estimation.estimate.resolve_foldover`, numpy shared with the kernel path).
     ``snap``: line members' end points onto their lines
-    (:func:`irring.estimation.estimate.snap_to_lines`).
+    (:func:`irring.estimation.estimate.snap_to_lines`). ``keep_unconverged``: readings
+    still moving at the cap valid at their last θ.
     """
     cal = calibration if calibration is not None else _nominal_for(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
@@ -799,7 +801,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         return resolve_foldover(lambda held, _detail, snap_: estimate_detail(
             sweep, cal, max_iterations=max_iterations, tolerance_rad=tolerance_rad,
             iterate=iterate, lines=lines, keep_history=keep_history, damping=damping,
-            hold=held, snap=snap_), sweep, cal, True)
+            hold=held, snap=snap_, keep_unconverged=keep_unconverged), sweep, cal, True)
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
     counts = np.asarray(sweep.counts, dtype=float)
@@ -928,7 +930,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                                                                      d.take(off)))
 
     iterations = np.minimum(last_moving + 2, n_its)
-    moving_at_end = last_moving == n_its - 1 if n_its else np.zeros(k, dtype=bool)
+    moving_at_end = last_moving == n_its - 1 if n_its and not keep_unconverged \
+        else np.zeros(k, dtype=bool)
     bad_range = (d > max_range) | (d < cal.min_range_m) | ~np.isfinite(d)
     why = np.where(bad_range, np.uint8(Reason.OUT_OF_RANGE),
                    np.where(moving_at_end, np.uint8(Reason.NOT_CONVERGED), np.uint8(Reason.OK)))

@@ -20,7 +20,9 @@ knobs (say, coarse steps *and* no iterations) are not measured. Knobs:
                period is not charged per reading), so it is not comparable 1:1 with the
                kinematic default's steps × 38.3 ms
 ``iterations`` the estimator's ``max_iterations`` (0 = the θ = 0 assumption,
-               ``iterate=False``); the default is 20
+               ``iterate=False``); the default is 20. A capped run reports the estimate
+               after k iterations (``keep_unconverged``: readings still moving are valid
+               at the θ they reached), not just the readings that settled
 ``tolerance``  the estimator's convergence tolerance on θ (default 0.1°)
 ``regroup``    how many times the estimator may group the end points into lines
                (``LineOptions.regroup_iterations``, default 3; 1, 2 and 6 here) before it
@@ -264,7 +266,7 @@ def run_job(job: Job) -> dict:
         LineOptions(regroup_iterations=cfg.regroup_iterations)
     estimator = functools.partial(estimate, max_iterations=cfg.max_iterations,
                                   tolerance_rad=cfg.tolerance_rad, iterate=cfg.iterate,
-                                  lines=lines)
+                                  lines=lines, keep_unconverged=cfg.knob == "iterations")
     grid = OccupancyGrid.for_scenario(sc)
     cal = pipeline.scene_calibration(sc)[0]
     result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid, calibration=cal, score=False,
