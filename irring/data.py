@@ -99,6 +99,7 @@ class Points:
     valid: np.ndarray         # bool
     reason: np.ndarray        # uint8 of Reason
     max_range_m: float = 0.624
+    cone_half_angle_rad: float = 0.0  # > 0: each reading is an echo from anywhere in this cone
 
     def reasons(self) -> dict[str, int]:
         """How many readings fell into each reason."""

@@ -289,7 +289,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:
         for sweep in sweeps:
             t0 = time.perf_counter()
-            points.append(estimator(sweep, calibration))
+            points.append(_with_cone(estimator(sweep, calibration), sweep))
             timings["estimate"] += time.perf_counter() - t0
             bar.update()
     t0 = time.perf_counter()
@@ -308,6 +308,16 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
         run.scores = metrics.score(grid, scenario, run.truth)
         run.timings_s["score"] = time.perf_counter() - t0
     return run
+
+
+def _with_cone(points: Points, sweep: Sweep) -> Points:
+    """The points of a sweep whose sensor hears an echo anywhere in a cone (the sonar's)
+    marked with that cone, so the mapper draws arcs (mapping.cone_fan)."""
+    from .designs import SENSORS
+
+    spec = SENSORS.get(sweep.sensor_model)
+    half = spec.beam_half_angle_rad if spec is not None else 0.0
+    return dataclasses.replace(points, cone_half_angle_rad=half) if half > 0 else points
 
 
 MAX_FRAMES = 400  # a longer animation is thinned (fewer parts per sweep, then fewer sweeps)
