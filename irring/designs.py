@@ -1,8 +1,8 @@
 """Ring designs a designer can compare, all built from the one MJCF ring template.
 
-A :class:`Design` is a :class:`~irring.scenario.Ring` (where the sensors sit and how they
-turn) plus the sensor it carries (:class:`SensorSpec`: kind, max range, noise, beam cone,
-reading period). The simulator builds every design's MuJoCo model from ``models/irring.xml``
+A :class:`Design` is a :class:`~irring.core.Ring` (where the sensors sit and how they
+turn) plus the sensor it carries (a :class:`~irring.core.SensorSpec` from
+:data:`irring.gp2.SENSORS`). The simulator builds every design's MuJoCo model from ``models/irring.xml``
 with the ring's numbers; nothing here writes MJCF.
 
 Named designs (:data:`DESIGNS`):
@@ -31,78 +31,8 @@ import types
 from dataclasses import dataclass
 from typing import Mapping
 
-from .data import GP2_PERIOD_S, hardware_duration_s
-from .scenario import IncidenceEffect, NoiseEffect, Ring, Robot, Scenario, ScenarioError, Sensor
-
-
-# --------------------------------------------------------------------------- sensors
-
-
-@dataclass(frozen=True)
-class SensorSpec:
-    """What a sensor kind implies for a design. Lengths m, angles rad, times s.
-
-    ``max_range_m``: readings beyond are no return (the scenario's ``sensor.max_range_m``).
-    ``design_range_m``: D of the paper's Eqs. 2–3 (Table I uses 0.686 m for the GP2D12,
-    the experiments 0.624 m). ``noise_sigma_m``: 1-σ range noise the sensor implies, or
-    None when the scenario's own effects (volts, for GP2 curves) govern.
-    ``beam_half_angle_rad``: cone half-angle (0 for a pencil beam). ``reading_period_s``:
-    time one reading costs. ``sequential``: sensors fire one after another (sonar
-    crosstalk) instead of all at once (the IR ring's ADCs read the 12 sensors together).
-    """
-
-    kind: str
-    max_range_m: float
-    design_range_m: float
-    noise_sigma_m: float | None = None
-    beam_half_angle_rad: float = 0.0
-    reading_period_s: float = GP2_PERIOD_S
-    sequential: bool = False
-    adc_bits: int = 12
-    settles: bool = True   # a stepped sensor waits scan.settle_s per position; a laser's
-                           # mirror turns continuously, so settling does not apply
-    description: str = ""
-
-    @property
-    def is_ir(self) -> bool:
-        return self.kind.startswith("gp2")
-
-    @property
-    def min_range_m(self) -> float:
-        """Readings nearer than this are not trusted: the sensor curve's own (``gp2``)."""
-        from . import gp2  # the curve's owner
-
-        return gp2.sensor(self.kind).min_range_m
-
-
-SENSORS: dict[str, SensorSpec] = {
-    "gp2d12": SensorSpec("gp2d12", max_range_m=0.624, design_range_m=0.686,
-                         description="Sharp GP2D12, 10–80 cm; paper's limit 624 mm, "
-                                     "Table I's D 686 mm"),
-    "gp2y0a21": SensorSpec("gp2y0a21", max_range_m=0.80, design_range_m=0.80,
-                           description="Sharp GP2Y0A21YK, 10–80 cm"),
-    "gp2y0a02": SensorSpec("gp2y0a02", max_range_m=1.50, design_range_m=1.50,
-                           description="Sharp GP2Y0A02YK0F, 20–150 cm"),
-    # SICK LMS200-like: 8 m (mm mode), σ ≈ 5 mm; its mirror turns at 75 Hz and 0.5° steps are
-    # interlaced over two turns, so a 720-reading 360° view takes 2/75 s = 26.7 ms.
-    "laser": SensorSpec("laser", max_range_m=8.0, design_range_m=8.0,
-                        noise_sigma_m=0.005, reading_period_s=(2.0 / 75.0) / 720,
-                        adc_bits=16, settles=False, description="SICK LMS200-like scanner, 8 m, σ 5 mm"),
-    # MaxBotix LV-MaxSonar-EZ class (the `sonar` curve in models/sensors): 0.15–6.45 m, one
-    # reading per 49 ms (20 Hz); a ring chains its transducers one after another so they do
-    # not hear each other. The ±15° cone is our assumption (12 of them close a 360° ring).
-    "sonar": SensorSpec("sonar", max_range_m=6.45, design_range_m=6.45,
-                        noise_sigma_m=0.01, beam_half_angle_rad=math.radians(15.0),
-                        reading_period_s=0.049, sequential=True, adc_bits=16,
-                        description="MaxBotix LV-EZ-class ultrasonic ranger, ±15° cone, 6.45 m"),
-}
-
-
-def sensor_spec(kind: str) -> SensorSpec:
-    try:
-        return SENSORS[kind]
-    except KeyError:
-        raise ValueError(f"unknown sensor kind {kind!r}; known: {', '.join(SENSORS)}") from None
+from .core import Ring, SensorSpec, bounds_error, hardware_duration_s
+from .gp2 import SENSORS, sensor_spec
 
 
 # --------------------------------------------------------------------------- designs
@@ -158,24 +88,13 @@ class Design:
         """Seconds the real device needs for one full 360° view at one pose.
 
         positions × (settle + samples × reading period), × sensors when they fire one at a
-        time (settle not for a laser, whose mirror never stops): ``data.hardware_duration_s``
+        time (settle not for a laser, whose mirror never stops): ``core.hardware_duration_s``
         over those readings with the sensor's period.
         """
         fires = self.ring.sensors if self.sensor.sequential else 1
         return hardware_duration_s(self.positions(step_stride) * fires,
                                    settle_s if self.sensor.settles else 0.0, samples,
                                    self.sensor.reading_period_s)
-
-    # ---- what the simulator needs
-    def sensor_block(self, base: Sensor | None = None) -> Sensor:
-        """The scenario ``sensor:`` block for this design (ADC settings kept from ``base``
-        for IR sensors)."""
-        if self.sensor.is_ir and base is not None:
-            return dataclasses.replace(base, model=self.sensor.kind,
-                                       max_range_m=self.sensor.max_range_m)
-        vref = base.vref_v if base is not None else 5.0
-        return Sensor(model=self.sensor.kind, max_range_m=self.sensor.max_range_m,
-                      adc_bits=self.sensor.adc_bits, vref_v=vref)
 
 
 PAPER_RING = Ring()  # the paper's: 12 sensors, R = 0.15 m, ±35 motor steps of 1.8°, gear 0.6
@@ -252,99 +171,9 @@ def parametric(sensors: int, radius_m: float, sweep_half_angle_rad: float, step_
 
 
 def _check_ring(ring: Ring) -> None:
-    """The scenario loader's own bounds check (a ``ScenarioError``, a ``ValueError``, in the
-    loader's words and units), for rings made in code."""
-    from .scenario import _Loader
-
-    loader = _Loader("")
+    """The bounds the scenario loader checks (a ``ValueError`` in the loader's words and
+    units), for rings made in code."""
     for f in dataclasses.fields(Ring):
-        loader.check(getattr(ring, f.name), f.metadata, f"ring.{f.name}")
-
-
-# --------------------------------------------------------------------------- scenarios
-
-
-def _overrides(ring: Ring) -> dict:
-    """Fields of a scenario's ``robot.ring`` that differ from the paper's ring."""
-    return {f.name: getattr(ring, f.name) for f in dataclasses.fields(Ring)
-            if getattr(ring, f.name) != getattr(PAPER_RING, f.name)}
-
-
-def ring_for(robot: Robot) -> Ring:
-    """The ring a robot uses.
-
-    ``design: custom`` takes ``robot.ring`` as written (fields left out keep the paper's
-    values). A named design takes that design's ring, and any ``robot.ring`` field that
-    differs from the paper's value replaces the design's (so ``design: radial12`` with
-    ``ring: {sensors: 8}`` is a still ring of 8).
-    """
-    if robot.design == "custom":
-        if robot.ring is None:
-            raise ScenarioError("robot.ring: required when robot.design is custom; give the "
-                                "ring's numbers (sensors, radius_mm, min_step, max_step, …)")
-        return robot.ring
-    ring = get(robot.design).ring
-    if robot.ring is not None:
-        ring = dataclasses.replace(ring, **_overrides(robot.ring))
-    return ring
-
-
-def design_for(scenario: Scenario) -> Design:
-    """The design a scenario runs: its named design with its ring and sensor model."""
-    ring = scenario.ring
-    if scenario.robot.design in DESIGN_BY_NAME and ring == get(scenario.robot.design).ring \
-            and scenario.sensor.model == get(scenario.robot.design).sensor.kind:
-        return get(scenario.robot.design)
-    spec = dataclasses.replace(sensor_spec(scenario.sensor.model),
-                               max_range_m=scenario.sensor.max_range_m)
-    return Design(scenario.robot.design, ring, spec, "from the scenario")
-
-
-def apply(scenario: Scenario, design: Design | str) -> Scenario:
-    """The same scene (room, obstacles, poses, map, seed) seen by another design.
-
-    The robot's ring and design name, and the ``sensor:`` block, become the design's. For
-    GP2 designs the scenario's effects stay as they are; for laser and sonar the GP2-specific
-    stages (incidence curves, fold-over, volts of noise) are replaced by the design's own
-    range noise, so each design is simulated with the sensor it would carry.
-    """
-    d = get(design) if isinstance(design, str) else design
-    robot_design = d.name if d.name in DESIGN_BY_NAME else "custom"
-    robot = dataclasses.replace(scenario.robot, design=robot_design,
-                                ring=None if robot_design != "custom" else d.ring)
-    sensor = d.sensor_block(scenario.sensor)
-    effects = scenario.effects if d.sensor.is_ir else sensor_effects(d, scenario.effects)
-    return dataclasses.replace(scenario, robot=robot, sensor=sensor,
-                               effects=types.MappingProxyType(dict(effects)))
-
-
-# Stages whose parameters describe a GP2 (volts of noise, an IR beam cone, IR reflectivity,
-# fold-over); a laser or sonar design gets its own instead.
-_GP2_ONLY = ("incidence", "foldover", "noise", "reflectance", "beam")
-
-
-def sensor_effects(design: Design, effects: Mapping) -> dict:
-    """Effects for a non-IR design: the scene's sensor-independent effects (quantisation,
-    outliers, averaging, timing, motion, …), grazing drop-out at the sensor's own limit if
-    the scene has drop-out at all, and the design's range noise.
-
-    The noise stage works in volts on the sensor's curve (``gp2``); the range noise σ_m the
-    design implies becomes volts through the curve's slope (linear for laser and sonar).
-    """
-    out = {k: v for k, v in effects.items() if k not in _GP2_ONLY}
-    if "incidence" in effects:
-        out["incidence"] = IncidenceEffect()  # max_incidence None: the sensor model's limit
-    if design.sensor.noise_sigma_m:
-        out["noise"] = NoiseEffect(sigma_v=noise_sigma_v(design))
-    return out
-
-
-def noise_sigma_v(design: Design) -> float:
-    """Volts of output noise that give the design's range σ at half its max range."""
-    from . import gp2  # the curve's owner; laser/sonar curves live there
-
-    model = gp2.sensor(design.sensor.kind)
-    d = 0.5 * design.sensor.max_range_m
-    h = 1e-3 * d
-    slope = abs(float(model.voltage(d + h) - model.voltage(d - h)) / (2 * h))  # V per m
-    return float(min(max(design.sensor.noise_sigma_m * slope, 0.0), 1.0))
+        why = bounds_error(getattr(ring, f.name), f.metadata, f"ring.{f.name}")
+        if why is not None:
+            raise ValueError(f"ring.{f.name}: {why}")

@@ -26,10 +26,14 @@ floor people measure), :attr:`SensorModel.no_return_v`. Inverting it gives exact
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from . import resources
+from .core import ADC_BITS, DESIGN_RANGE_M, MAX_RANGE_M, VREF_V, SensorSpec
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,7 +139,7 @@ class SensorModel:
         near = np.where(ok, self.peak_distance_m * v / vp, np.nan)
         return near, np.where(ok, far, np.nan)
 
-    def ab_counts(self, theta_rad=0.0, bits: int = 12, vref_v: float = 5.0):
+    def ab_counts(self, theta_rad=0.0, bits: int = ADC_BITS, vref_v: float = VREF_V):
         """a_c(θ), b(θ) of ``d = a_c·S^b`` with S in ADC counts (S = V / LSB)."""
         a, b = self.ab(theta_rad)
         return a * lsb_v(bits, vref_v) ** b, b
@@ -149,7 +153,7 @@ def lsb_v(bits: int, vref_v: float) -> float:
     return vref_v / float(1 << bits)
 
 
-def counts_from_voltage(v, bits: int = 12, vref_v: float = 5.0) -> np.ndarray:
+def counts_from_voltage(v, bits: int = ADC_BITS, vref_v: float = VREF_V) -> np.ndarray:
     """ADC counts for v volts, float (not rounded), clipped to [0, 2^bits − 1].
 
     Rounding to whole counts is the ``quantization`` effect's job.
@@ -158,7 +162,7 @@ def counts_from_voltage(v, bits: int = 12, vref_v: float = 5.0) -> np.ndarray:
                    float((1 << bits) - 1))
 
 
-def voltage_from_counts(counts, bits: int = 12, vref_v: float = 5.0) -> np.ndarray:
+def voltage_from_counts(counts, bits: int = ADC_BITS, vref_v: float = VREF_V) -> np.ndarray:
     """Volts for ADC counts (integer or float), clipped to [0, 2^bits − 1] counts first."""
     c = np.clip(np.asarray(counts, dtype=float), 0.0, float((1 << bits) - 1))
     return c * lsb_v(bits, vref_v)
@@ -168,8 +172,6 @@ def voltage_from_counts(counts, bits: int = 12, vref_v: float = 5.0) -> np.ndarr
 
 
 def sensors_dir() -> Path:
-    from . import resources
-
     return resources.models_dir() / "sensors"
 
 
@@ -207,3 +209,37 @@ def sensor(name: str) -> SensorModel:
         raise ValueError(f"unknown sensor model {name!r}; available: {', '.join(available())} "
                          f"(curve files live in {sensors_dir()})")
     return load_sensor(path)
+
+
+# --------------------------------------------------------------------------- registry
+# Every sensor kind a scenario or design may name: what it implies for a design (SensorSpec);
+# its curve is models/sensors/<kind>.yaml (:func:`sensor`).
+
+SENSORS: dict[str, SensorSpec] = {
+    "gp2d12": SensorSpec("gp2d12", max_range_m=MAX_RANGE_M, design_range_m=DESIGN_RANGE_M,
+                         description="Sharp GP2D12, 10–80 cm; paper's limit 624 mm, "
+                                     "Table I's D 686 mm"),
+    "gp2y0a21": SensorSpec("gp2y0a21", max_range_m=0.80, design_range_m=0.80,
+                           description="Sharp GP2Y0A21YK, 10–80 cm"),
+    "gp2y0a02": SensorSpec("gp2y0a02", max_range_m=1.50, design_range_m=1.50,
+                           description="Sharp GP2Y0A02YK0F, 20–150 cm"),
+    # SICK LMS200-like: 8 m (mm mode), σ ≈ 5 mm; its mirror turns at 75 Hz and 0.5° steps are
+    # interlaced over two turns, so a 720-reading 360° view takes 2/75 s = 26.7 ms.
+    "laser": SensorSpec("laser", max_range_m=8.0, design_range_m=8.0,
+                        noise_sigma_m=0.005, reading_period_s=(2.0 / 75.0) / 720,
+                        adc_bits=16, settles=False, description="SICK LMS200-like scanner, 8 m, σ 5 mm"),
+    # MaxBotix LV-MaxSonar-EZ class (the `sonar` curve in models/sensors): 0.15–6.45 m, one
+    # reading per 49 ms (20 Hz); a ring chains its transducers one after another so they do
+    # not hear each other. The ±15° cone is our assumption (12 of them close a 360° ring).
+    "sonar": SensorSpec("sonar", max_range_m=6.45, design_range_m=6.45,
+                        noise_sigma_m=0.01, beam_half_angle_rad=math.radians(15.0),
+                        reading_period_s=0.049, sequential=True, adc_bits=16,
+                        description="MaxBotix LV-EZ-class ultrasonic ranger, ±15° cone, 6.45 m"),
+}
+
+
+def sensor_spec(kind: str) -> SensorSpec:
+    try:
+        return SENSORS[kind]
+    except KeyError:
+        raise ValueError(f"unknown sensor kind {kind!r}; known: {', '.join(SENSORS)}") from None

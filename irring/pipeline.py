@@ -7,7 +7,7 @@ is built the same way wherever its sweeps came from:
 >>> result.scores["occupied_f1"], result.hardware_time_s
 >>> write_outputs(result, "out/t_room")                    # PNG, GIF, PGM+YAML, .npz
 
-:func:`acquire` sweeps any source (``SimRing``, ``SerialRing``: a ``data.RingSource``) at
+:func:`acquire` sweeps any source (``SimRing``, ``SerialRing``: a ``core.RingSource``) at
 each pose; :func:`map_sweeps` is the part after the source: hand it sweeps from the
 simulator or the serial ring. One sweep per pose, inserted into the grid in pose order (progressive mapping,
 paper Fig. 17). Compute times are wall-clock seconds per stage on this machine; the hardware
@@ -27,7 +27,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from .data import Points, Reason, RingSource, SourceLost, Sweep
+from .core import Points, Reason, RingSource, SourceLost, Sweep
 from .maps.mapping import MapperParams, OccupancyGrid, check_scenario_grid, slice_steps
 from .scenario import Scenario
 
@@ -181,7 +181,7 @@ class Acquisition:
 
     ``reports[i]`` is the source's account of sweep i when it keeps one (``SerialRing``:
     its :class:`~irring.hardware.SweepReport`), else None. ``error`` is the
-    :class:`~irring.data.SourceLost` that ended the acquisition early (its partial sweep,
+    :class:`~irring.core.SourceLost` that ended the acquisition early (its partial sweep,
     if any readings arrived, is the last of ``sweeps``), None when every pose was swept.
     ``seconds``: wall-clock time spent sweeping.
     """
@@ -200,14 +200,14 @@ class Acquisition:
 def acquire(source: RingSource, poses: Iterable, *, steps: np.ndarray | None = None,
             progress: bool | None = None, before: Callable[[int, Any], None] | None = None,
             after: Callable[[int, Sweep, Any], None] | None = None) -> Acquisition:
-    """One sweep of ``source`` (a :class:`~irring.data.RingSource`: ``SimRing``,
+    """One sweep of ``source`` (a :class:`~irring.core.RingSource`: ``SimRing``,
     ``SerialRing``, …) at each of ``poses``, in order → :class:`Acquisition`.
 
     ``poses``: what ``source.sweep`` takes — (x m, y m, yaw rad), scenario ``Pose`` s, or a
     simulator's scan-pose indices. ``steps``: motor steps of every sweep (None: the
     source's full sweep). ``before(k, pose)`` is called before sweeping pose k (e.g. to
     wait while a person moves the robot), ``after(k, sweep, report)`` after it.
-    A source lost mid-sweep (:class:`~irring.data.SourceLost`) ends the acquisition
+    A source lost mid-sweep (:class:`~irring.core.SourceLost`) ends the acquisition
     without raising: what arrived is kept and the error is in ``Acquisition.error``.
     """
     poses = list(poses)

@@ -1,8 +1,8 @@
 """Sweeps saved to and loaded from a compressed ``.npz`` file, losslessly.
 
-Everything a :class:`~irring.data.Sweep` holds survives the round trip bit for bit: the
+Everything a :class:`~irring.core.Sweep` holds survives the round trip bit for bit: the
 arrays with their dtypes, the scalars, the :class:`~irring.scenario.Ring`, the optional
-:class:`~irring.data.Truth` and per-reading poses. A JSON ``meta`` dict rides along (the
+:class:`~irring.core.Truth` and per-reading poses. A JSON ``meta`` dict rides along (the
 scenario text, seed, grid and calibration used), so ``irring replay`` can rebuild the same
 map. The file holds no pickles (``allow_pickle=False``), so loading one is safe.
 
@@ -22,9 +22,10 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .data import Sweep, Truth
+from . import gp2
+from .core import Ring, Sweep, Truth
 from .errors import InputError, IrringError, brief
-from .scenario import Ring
+from .scenario import ScenarioError, load_dataclass
 
 FORMAT = "irring-recording/1"
 
@@ -249,8 +250,6 @@ def _array(npz, headers: dict, name: str, dims: str, kinds: str, sizes: dict, fa
 
 
 def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
-    from .scenario import SENSOR_MODELS, ScenarioError, _Loader
-
     scalars = _json(npz, headers, f"{key}/scalars", fail)
     known = {f.name for f in dataclasses.fields(Sweep)} | {"has_truth"}
     for name in scalars:
@@ -262,7 +261,7 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
             if rest not in _SWEEP_ARRAYS and rest.removeprefix("truth/") not in _TRUTH_ARRAYS:
                 raise fail(f"{brief(name)[1:-1]}: unknown entry")
     try:
-        ring = _Loader(f"{fail('').args[0]}{key}").dataclass_(Ring, scalars.get("ring"), "ring")
+        ring = load_dataclass(Ring, scalars.get("ring"), "ring", f"{fail('').args[0]}{key}")
     except ScenarioError as exc:
         raise RecordingError(str(exc)) from None
     sizes = {"N": ring.sensors}
@@ -286,8 +285,8 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
     def whole(lo: int, hi: int) -> Callable[[Any], bool]:
         return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
 
-    kwargs["sensor_model"] = scalar("sensor_model", lambda v: v in SENSOR_MODELS,
-                                    f"one of {', '.join(SENSOR_MODELS)}", "gp2d12")
+    kwargs["sensor_model"] = scalar("sensor_model", lambda v: v in gp2.SENSORS,
+                                    f"one of {', '.join(gp2.SENSORS)}", "gp2d12")
     bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, 24), "a whole number 1 … 24", 12)
     kwargs["vref_v"] = scalar("vref_v", lambda v: _finite(v, 0.1, 50.0), "0.1 … 50 V", 5.0)
     kwargs["max_range_m"] = scalar("max_range_m", lambda v: _finite(v, 0.001, 100.0),

@@ -1,7 +1,9 @@
-"""Where the bundled models and scenarios live, for editable and plain installs alike.
+"""What the installation provides: the bundled models and scenarios, the compiled kernels.
 
-A wheel carries them inside the package (``irring/_data``, see pyproject.toml); a source
-checkout keeps them at the repository's top level.
+A wheel carries models and scenarios inside the package (``irring/_data``, see
+pyproject.toml); a source checkout keeps them at the repository's top level. A source tree
+never installed lacks the compiled kernels: :class:`MissingKernel` stands in for one and
+raises the ImportError that says how to build it when it is used.
 """
 
 from __future__ import annotations
@@ -25,3 +27,16 @@ def models_dir() -> Path:
 
 def scenarios_dir() -> Path:
     return _find("scenarios")
+
+
+class MissingKernel:
+    """Stands in for a compiled kernel (irring/*/_*.pyx) that is not built; using it raises."""
+
+    def __init__(self, name: str):
+        self._name = name
+
+    def __getattr__(self, attr: str):
+        raise ImportError(
+            f"irring's compiled kernel {self._name} is not built: install irring with "
+            f"`pip install .` (or `pip install -e .` in a checkout); pip compiles it with the "
+            f"machine's C compiler (Debian: apt install build-essential python3-dev)")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import collections.abc
 import dataclasses
+import difflib
 import math
 import types
 import typing
@@ -21,6 +22,12 @@ from pathlib import Path
 from typing import Any, Mapping
 
 
+from . import designs, gp2, resources
+from .core import (ADC_BITS, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, VREF_V, Box, Cylinder,
+                   Pose, Ring, Room, bounds_error, choice, distance_to_outline, inside_outline, num,
+                   obstacle_distance, unit_suffix)
+from .designs import Design
+
 # --------------------------------------------------------------------------- errors
 
 
@@ -28,95 +35,21 @@ class ScenarioError(ValueError):
     """A scenario file that cannot be used; the message names the YAML path."""
 
 
-def _spec(lo: float | None = None, hi: float | None = None, choices: tuple | None = None,
-          doc: str = "") -> dict:
-    """Field metadata: inclusive SI bounds or allowed choices, and a one-line doc."""
-    return {"lo": lo, "hi": hi, "choices": choices, "doc": doc}
-
-
-def num(default: Any = dataclasses.MISSING, lo: float | None = None, hi: float | None = None,
-        doc: str = "") -> Any:
-    return field(default=default, metadata=_spec(lo, hi, doc=doc))
-
-
-def choice(default: Any, choices: tuple, doc: str = "") -> Any:
-    return field(default=default, metadata=_spec(choices=choices, doc=doc))
-
-
 # --------------------------------------------------------------------------- schema
-# Paper values (../shared/DESIGN.md): 12 sensors, R = 0.15 m, α = 37.8°, 1.8° motor step,
-# belt ratio 0.6 (1.08° per step), motor steps −35 … +35 (71 positions, 75.6° sweep).
-
-SENSOR_MODELS = ("gp2d12", "gp2y0a02", "gp2y0a21", "sonar", "laser")
-HOUSING_M = 0.02  # the sensors' housing reaches this far beyond the ring radius
-
-# GP2 measurement period (datasheet: 38.3 ms ± 9.6 ms); one sample costs one period.
-# Its home is here, below data (which re-exports it), so the timing default can use it.
-GP2_PERIOD_S = 0.0383
-
-
-@dataclass(frozen=True)
-class Cylinder:
-    center_m: tuple[float, float]
-    radius_m: float = num(lo=0.002, hi=2.0, doc="cylinder radius")
-    reflectance: float = num(1.0, lo=0.05, hi=1.0, doc="relative IR reflectivity (white paper = 1)")
-
-
-@dataclass(frozen=True)
-class Box:
-    center_m: tuple[float, float]
-    size_m: tuple[float, float]
-    yaw_rad: float = num(0.0, lo=-2 * math.pi, hi=2 * math.pi)
-    reflectance: float = num(1.0, lo=0.05, hi=1.0)
-
-
-@dataclass(frozen=True)
-class Room:
-    outline_m: tuple[tuple[float, float], ...]
-    wall_height_m: float = num(0.30, lo=0.05, hi=3.0)
-    wall_thickness_m: float = num(0.02, lo=0.002, hi=0.5)
-    reflectance: float = num(1.0, lo=0.05, hi=1.0, doc="reflectivity of every wall")
-
-
-@dataclass(frozen=True)
-class Pose:
-    x_m: float
-    y_m: float
-    yaw_rad: float = num(0.0, lo=-2 * math.pi, hi=2 * math.pi)
-
-
-@dataclass(frozen=True)
-class Ring:
-    """A ring design: the paper's by default; other designs change these numbers."""
-
-    sensors: int = num(12, lo=1, hi=72, doc="sensors on the ring")
-    radius_m: float = num(0.15, lo=0.0, hi=1.0, doc="ring radius to the sensor hinge axes")
-    motor_step_rad: float = num(math.radians(1.8), lo=math.radians(0.01), hi=math.radians(45.0))
-    gear: float = num(0.6, lo=0.01, hi=10.0, doc="sensor turn per motor turn (belt ratio)")
-    min_step: int = num(-35, lo=-100000, hi=100000)
-    max_step: int = num(35, lo=-100000, hi=100000)
-    emitter_offset_m: float = num(0.007, lo=0.0, hi=0.05,
-                                  doc="lateral emitter offset d_o from the hinge axis")
-    sensor_height_m: float = num(0.10, lo=0.01, hi=2.0)
-    joint_limit_rad: float = num(math.radians(37.8), lo=0.0, hi=2 * math.pi,
-                                 doc="each sensor hinge's range ±limit")
-
-
 @dataclass(frozen=True)
 class Robot:
-    design: str = choice("rotating12", ("rotating12", "radial12", "rotating1", "laser", "sonar12",
-                                        "custom"))
+    design: str = choice("rotating12", (*designs.DESIGN_BY_NAME, "custom"))
     ring: Ring | None = None
     poses: tuple[Pose, ...] = ()
 
 
 @dataclass(frozen=True)
 class Sensor:
-    model: str = choice("gp2d12", SENSOR_MODELS)
-    max_range_m: float = num(0.624, lo=0.02, hi=30.0,
+    model: str = choice("gp2d12", tuple(gp2.SENSORS))
+    max_range_m: float = num(MAX_RANGE_M, lo=0.02, hi=30.0,
                              doc="readings beyond are treated as no return (paper: 624 mm)")
-    adc_bits: int = choice(12, (8, 10, 12, 16))
-    vref_v: float = num(5.0, lo=1.0, hi=10.0)
+    adc_bits: int = choice(ADC_BITS, (8, 10, 12, 16))
+    vref_v: float = num(VREF_V, lo=1.0, hi=10.0)
 
 
 @dataclass(frozen=True)
@@ -270,9 +203,7 @@ class Scenario:
     @property
     def ring(self) -> Ring:
         """The ring design in force (the design's numbers with any `robot.ring` overrides)."""
-        from . import designs  # designs owns the named presets
-
-        return designs.ring_for(self.robot)
+        return ring_for(self.robot)
 
 
 # --------------------------------------------------------------------------- loader
@@ -280,38 +211,14 @@ class Scenario:
 _UNIT_ALIASES = {"_m": (("_mm", 1e-3),), "_rad": (("_deg", math.pi / 180.0),),
                  "_s": (("_ms", 1e-3),), "_m_s": (("_mm_s", 1e-3),),
                  "_per_m": ()}
-_DISPLAY = {"_m": ("_mm", 1e3, "mm"), "_rad": ("_deg", 180 / math.pi, "°"),
-            "_s": ("_ms", 1e3, "ms"), "_v": ("_v", 1.0, "V")}
-
-
-def _suffix(name: str) -> str | None:
-    for suf in ("_m_s", "_per_m", "_m", "_rad", "_s"):
-        if name.endswith(suf):
-            return suf
-    return None
-
-
 def _yaml_keys(name: str) -> list[tuple[str, float]]:
     """YAML spellings of a dataclass field and the factor to SI."""
-    suf = _suffix(name)
+    suf = unit_suffix(name)
     keys = [(name, 1.0)]
     if suf:
         base = name[: -len(suf)]
         keys += [(base + alt, f) for alt, f in _UNIT_ALIASES[suf]]
     return keys
-
-
-def _fmt_range(name: str, lo: float | None, hi: float | None) -> str:
-    suf = _suffix(name)
-    scale, unit = 1.0, ""
-    if suf in ("_m", "_rad", "_s"):
-        _, scale, unit = _DISPLAY[suf]
-    parts = [f"{v * scale:g}" if v is not None else "" for v in (lo, hi)]
-    if lo is not None and hi is not None:
-        return f"{parts[0]} … {parts[1]}{(' ' + unit) if unit else ''}"
-    if lo is not None:
-        return f"≥ {parts[0]}{unit}"
-    return f"≤ {parts[1]}{unit}"
 
 
 def _type_name(tp: Any) -> str:
@@ -409,17 +316,9 @@ class _Loader:
         raise self.fail(path, f"unsupported type {_type_name(tp)}")  # pragma: no cover
 
     def check(self, value: Any, meta: Mapping, path: str) -> None:
-        choices = meta.get("choices")
-        if choices is not None and value not in choices:
-            allowed = ", ".join(str(c) for c in choices)
-            raise self.fail(path, f"{value!r} is not allowed; choose one of: {allowed}")
-        lo, hi = meta.get("lo"), meta.get("hi")
-        if (lo is not None and value < lo) or (hi is not None and value > hi):
-            name = path.rsplit(".", 1)[-1]
-            name = name.split("[", 1)[0]
-            si = _si_name(name)
-            raise self.fail(path, f"{_show(value, si)} is out of range; allowed "
-                                  f"{_fmt_range(si, lo, hi)}")
+        why = bounds_error(value, meta, path)
+        if why is not None:
+            raise self.fail(path, why)
 
     def tagged(self, options: list[type], raw: Any, path: str) -> Any:
         by_tag = {cls.__name__.lower(): cls for cls in options}
@@ -461,19 +360,10 @@ class _Loader:
         return types.MappingProxyType(out)
 
 
-def _si_name(yaml_name: str) -> str:
-    for alt_suffix, si in (("_mm_s", "_m_s"), ("_mm", "_m"), ("_deg", "_rad"), ("_ms", "_s")):
-        if yaml_name.endswith(alt_suffix):
-            return yaml_name[: -len(alt_suffix)] + si
-    return yaml_name
-
-
-def _show(value: Any, si_name: str) -> str:
-    suf = _suffix(si_name)
-    if suf in ("_m", "_rad", "_s") and isinstance(value, float):
-        _, scale, unit = _DISPLAY[suf]
-        return f"{value * scale:g} {unit}"
-    return repr(value)
+def load_dataclass(cls: type, raw: Any, path: str, source: str = "") -> Any:
+    """A schema dataclass (a :class:`Ring`, …) from parsed YAML or JSON, checked as the loader
+    checks a scenario; raises ScenarioError naming ``source`` and ``path``."""
+    return _Loader(source).dataclass_(cls, raw, path)
 
 
 def _join(path: str, key: Any) -> str:
@@ -481,8 +371,6 @@ def _join(path: str, key: Any) -> str:
 
 
 def _close(word: str, options: Mapping | list) -> str:
-    import difflib
-
     match = difflib.get_close_matches(word, list(options), n=1)
     return f" (did you mean `{match[0]}`?)" if match else ""
 
@@ -497,27 +385,6 @@ def _segments_cross(p1, p2, q1, q2) -> bool:
     d1, d2 = orient(q1, q2, p1), orient(q1, q2, p2)
     d3, d4 = orient(p1, p2, q1), orient(p1, p2, q2)
     return (d1 * d2 < 0) and (d3 * d4 < 0)
-
-
-def point_in_polygon(x: float, y: float, outline: tuple[tuple[float, float], ...]) -> bool:
-    inside = False
-    n = len(outline)
-    for i in range(n):
-        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
-        if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
-            inside = not inside
-    return inside
-
-
-def distance_to_outline(x: float, y: float, outline: tuple[tuple[float, float], ...]) -> float:
-    best = math.inf
-    n = len(outline)
-    for i in range(n):
-        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
-        dx, dy = x2 - x1, y2 - y1
-        t = max(0.0, min(1.0, ((x - x1) * dx + (y - y1) * dy) / (dx * dx + dy * dy)))
-        best = min(best, math.hypot(x - (x1 + t * dx), y - (y1 + t * dy)))
-    return best
 
 
 def _validate_geometry(sc: Scenario, fail) -> None:
@@ -542,13 +409,13 @@ def _validate_geometry(sc: Scenario, fail) -> None:
     clearance = ring.radius_m + HOUSING_M  # sensors plus their housing
     for k, pose in enumerate(sc.robot.poses):
         path = f"robot.poses[{k}]"
-        if not point_in_polygon(pose.x_m, pose.y_m, outline):
+        if not inside_outline(pose.x_m, pose.y_m, outline):
             raise fail(path, f"pose ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm is outside the room")
         if distance_to_outline(pose.x_m, pose.y_m, outline) < clearance:
             raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) would be "
                              f"inside a wall at ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm")
         for j, ob in enumerate(sc.obstacles):
-            gap = _obstacle_distance(ob, pose.x_m, pose.y_m)
+            gap = obstacle_distance(ob, pose.x_m, pose.y_m)
             if gap < clearance:
                 raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) at "
                                  f"({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm would overlap "
@@ -559,7 +426,7 @@ def _validate_geometry(sc: Scenario, fail) -> None:
         if isinstance(ob, Box) and min(ob.size_m) < 0.002:
             raise fail(f"obstacles[{j}].size_mm", f"box sides ({ob.size_m[0] * 1e3:g}, "
                                                   f"{ob.size_m[1] * 1e3:g}) mm must each be ≥ 2 mm")
-        if not point_in_polygon(ob.center_m[0], ob.center_m[1], outline):
+        if not inside_outline(ob.center_m[0], ob.center_m[1], outline):
             raise fail(f"obstacles[{j}].center_mm", "obstacle centre is outside the room")
     if ring.min_step > ring.max_step:
         raise fail("robot.ring.min_step", f"min_step {ring.min_step} > max_step {ring.max_step}")
@@ -577,25 +444,10 @@ def _validate_geometry(sc: Scenario, fail) -> None:
                    f"allowed: below room.wall_height_mm")
 
 
-def _obstacle_distance(ob: Cylinder | Box, x: float, y: float) -> float:
-    if isinstance(ob, Cylinder):
-        return math.hypot(x - ob.center_m[0], y - ob.center_m[1]) - ob.radius_m
-    c, s = math.cos(ob.yaw_rad), math.sin(ob.yaw_rad)
-    dx, dy = x - ob.center_m[0], y - ob.center_m[1]
-    lx, ly = c * dx + s * dy, -s * dx + c * dy
-    qx, qy = abs(lx) - ob.size_m[0] / 2, abs(ly) - ob.size_m[1] / 2
-    return math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0)
-
-
 # --------------------------------------------------------------------------- public API
-
-SCENARIO_DIR_ENV = "IRRING_SCENARIOS"
-
 
 def bundled_dir() -> Path:
     """Folder of the bundled scenarios (works for editable and plain installs)."""
-    from . import resources
-
     return resources.scenarios_dir()
 
 
@@ -657,8 +509,6 @@ def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
     """A design that carries a non-IR sensor (laser, sonar12) brings its sensor block when the
     file names no sensor model; naming a different kind of sensor is an error, never a silent
     GP2D12 default under a laser's name."""
-    from . import designs  # designs owns what each design carries
-
     if sc.robot.design not in designs.DESIGN_BY_NAME:
         return sc
     design = designs.get(sc.robot.design)
@@ -666,7 +516,7 @@ def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
         return sc
     sensor_raw = raw.get("sensor") or {}
     if "model" not in sensor_raw:
-        return designs.apply(sc, design)
+        return apply_design(sc, design)
     if sc.sensor.model != design.sensor.kind:
         raise fail("sensor.model", f"{sc.sensor.model!r} does not fit design "
                                    f"{sc.robot.design!r}, which carries a {design.sensor.kind!r} "
@@ -694,3 +544,101 @@ def loads(text: str, source: str = "<string>") -> Scenario:
     except safe_yaml.InputError as exc:
         raise ScenarioError(str(exc)) from None
     return parse(raw, source)
+
+
+# --------------------------------------------------------------------------- designs in scenes
+
+
+def sensor_block(design: Design, base: Sensor | None = None) -> Sensor:
+    """The scenario ``sensor:`` block for a design (ADC settings kept from ``base`` for IR
+    sensors)."""
+    if design.sensor.is_ir and base is not None:
+        return dataclasses.replace(base, model=design.sensor.kind,
+                                   max_range_m=design.sensor.max_range_m)
+    vref = base.vref_v if base is not None else VREF_V
+    return Sensor(model=design.sensor.kind, max_range_m=design.sensor.max_range_m,
+                  adc_bits=design.sensor.adc_bits, vref_v=vref)
+
+
+def _overrides(ring: Ring) -> dict:
+    """Fields of a scenario's ``robot.ring`` that differ from the paper's ring."""
+    return {f.name: getattr(ring, f.name) for f in dataclasses.fields(Ring)
+            if getattr(ring, f.name) != getattr(designs.PAPER_RING, f.name)}
+
+
+def ring_for(robot: Robot) -> Ring:
+    """The ring a robot uses.
+
+    ``design: custom`` takes ``robot.ring`` as written (fields left out keep the paper's
+    values). A named design takes that design's ring, and any ``robot.ring`` field that
+    differs from the paper's value replaces the design's (so ``design: radial12`` with
+    ``ring: {sensors: 8}`` is a still ring of 8).
+    """
+    if robot.design == "custom":
+        if robot.ring is None:
+            raise ScenarioError("robot.ring: required when robot.design is custom; give the "
+                                "ring's numbers (sensors, radius_mm, min_step, max_step, …)")
+        return robot.ring
+    ring = designs.get(robot.design).ring
+    if robot.ring is not None:
+        ring = dataclasses.replace(ring, **_overrides(robot.ring))
+    return ring
+
+
+def design_for(scenario: Scenario) -> Design:
+    """The design a scenario runs: its named design with its ring and sensor model."""
+    ring = scenario.ring
+    named = designs.DESIGN_BY_NAME.get(scenario.robot.design)
+    if named is not None and ring == named.ring and scenario.sensor.model == named.sensor.kind:
+        return named
+    spec = dataclasses.replace(gp2.sensor_spec(scenario.sensor.model),
+                               max_range_m=scenario.sensor.max_range_m)
+    return Design(scenario.robot.design, ring, spec, "from the scenario")
+
+
+def apply_design(scenario: Scenario, design: Design | str) -> Scenario:
+    """The same scene (room, obstacles, poses, map, seed) seen by another design.
+
+    The robot's ring and design name, and the ``sensor:`` block, become the design's. For
+    GP2 designs the scenario's effects stay as they are; for laser and sonar the GP2-specific
+    stages (incidence curves, fold-over, volts of noise) are replaced by the design's own
+    range noise, so each design is simulated with the sensor it would carry.
+    """
+    d = designs.get(design) if isinstance(design, str) else design
+    robot_design = d.name if d.name in designs.DESIGN_BY_NAME else "custom"
+    robot = dataclasses.replace(scenario.robot, design=robot_design,
+                                ring=None if robot_design != "custom" else d.ring)
+    sensor = sensor_block(d, scenario.sensor)
+    effects = scenario.effects if d.sensor.is_ir else sensor_effects(d, scenario.effects)
+    return dataclasses.replace(scenario, robot=robot, sensor=sensor,
+                               effects=types.MappingProxyType(dict(effects)))
+
+
+# Stages whose parameters describe a GP2 (volts of noise, an IR beam cone, IR reflectivity,
+# fold-over); a laser or sonar design gets its own instead.
+_GP2_ONLY = ("incidence", "foldover", "noise", "reflectance", "beam")
+
+
+def sensor_effects(design: Design, effects: Mapping) -> dict:
+    """Effects for a non-IR design: the scene's sensor-independent effects (quantisation,
+    outliers, averaging, timing, motion, …), grazing drop-out at the sensor's own limit if
+    the scene has drop-out at all, and the design's range noise.
+
+    The noise stage works in volts on the sensor's curve (``gp2``); the range noise σ_m the
+    design implies becomes volts through the curve's slope (linear for laser and sonar).
+    """
+    out = {k: v for k, v in effects.items() if k not in _GP2_ONLY}
+    if "incidence" in effects:
+        out["incidence"] = IncidenceEffect()  # max_incidence None: the sensor model's limit
+    if design.sensor.noise_sigma_m:
+        out["noise"] = NoiseEffect(sigma_v=noise_sigma_v(design))
+    return out
+
+
+def noise_sigma_v(design: Design) -> float:
+    """Volts of output noise that give the design's range σ at half its max range."""
+    model = gp2.sensor(design.sensor.kind)
+    d = 0.5 * design.sensor.max_range_m
+    h = 1e-3 * d
+    slope = abs(float(model.voltage(d + h) - model.voltage(d - h)) / (2 * h))  # V per m
+    return float(min(max(design.sensor.noise_sigma_m * slope, 0.0), 1.0))

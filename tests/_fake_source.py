@@ -1,4 +1,4 @@
-"""A fake :class:`irring.data.RingSource` for tests: counts from a function, no MuJoCo.
+"""A fake :class:`irring.core.RingSource` for tests: counts from a function, no MuJoCo.
 
 The emulated firmware reads it by scan-pose index, ``pipeline.acquire`` by world pose; it
 records every call so a test can say which sweeps were asked for, in which order.
@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from irring.data import Sweep, as_pose, hardware_duration_s, sensor_angles_for_steps
+from irring.core import Sweep, as_pose, hardware_duration_s, sensor_angles_for_steps
 from irring.designs import PAPER_RING
 
 
@@ -30,7 +30,7 @@ class FakeSource:
         self.lose_after = 0               # steps that arrive before it is lost
 
     def sweep(self, pose=0, *, steps=None) -> Sweep:
-        from irring.data import SourceLost
+        from irring.core import SourceLost
 
         steps = np.arange(self.ring.min_step, self.ring.max_step + 1) if steps is None \
             else np.asarray(steps)

@@ -19,10 +19,11 @@ import math
 
 import numpy as np
 
-from irring.data import Points, Reason, Sweep, beam_geometry, sensor_angles_for_steps
+from irring.core import Points, Reason, Sweep, beam_geometry, sensor_angles_for_steps
 from irring.designs import PAPER_RING
 from irring.estimation.estimate import Calibration
-from irring.scenario import Cylinder, Ring, Scenario
+from irring.core import Cylinder, Ring
+from irring.scenario import Scenario
 
 def stand_in_calibration(d_o: float = 0.007, strength: float = 0.25, bits: int = 12,
                          noise_counts: float = 0.0) -> Calibration:

@@ -14,9 +14,9 @@ import pytest
 from irring import gp2
 from irring.estimation.calibrate import (CalibrationAborted, GuidedCalibration, Placement, RigReadings,
                               SimulatedRig, collect, default_placements, solve)
-from irring.data import Sweep
+from irring.core import Sweep
 from irring.estimation.estimate import Calibration, CalibrationError
-from irring.scenario import Ring
+from irring.core import Ring
 
 
 @pytest.fixture(scope="module")

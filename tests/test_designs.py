@@ -7,8 +7,9 @@ import math
 
 import pytest
 
-from irring import data, designs
-from irring.scenario import Ring, ScenarioError, load_scenario, loads
+from irring import core, designs, scenario
+from irring.core import Ring
+from irring.scenario import ScenarioError, load_scenario, loads
 
 DEG = math.pi / 180
 
@@ -78,8 +79,7 @@ def test_hardware_time_matches_the_sweep_duration_for_gp2_rings():
         for stride, settle, samples in ((1, 0.0, 1), (2, 0.01, 4)):
             n = d.positions(stride)
             assert d.hardware_time_s(step_stride=stride, settle_s=settle, samples=samples) == \
-                pytest.approx(data.hardware_duration_s(n, settle, samples))
-    assert designs.GP2_PERIOD_S == data.GP2_PERIOD_S
+                pytest.approx(core.hardware_duration_s(n, settle, samples))
     # the trade a designer makes: the rotating ring pays 71 readings for its overlap
     assert designs.get("rotating12").hardware_time_s() == pytest.approx(71 * 0.0383)
 
@@ -126,16 +126,16 @@ def test_custom_design_takes_the_ring_as_written_and_needs_one():
 
 def test_apply_keeps_the_scene_and_swaps_the_robot():
     sc = load_scenario("t_room_cylinder")
-    assert designs.design_for(sc).name == "rotating12"
-    other = designs.apply(sc, "radial12")
+    assert scenario.design_for(sc).name == "rotating12"
+    other = scenario.apply_design(sc, "radial12")
     assert other.ring == designs.get("radial12").ring
     assert other.robot.design == "radial12"
-    assert designs.design_for(other).name == "radial12"
+    assert scenario.design_for(other).name == "radial12"
     for f in ("room", "obstacles", "map", "seed", "scan"):
         assert getattr(other, f) == getattr(sc, f)
     assert other.robot.poses == sc.robot.poses
     assert dict(other.effects) == dict(sc.effects)       # a GP2 ring keeps the scene's effects
-    custom = designs.apply(sc, designs.parametric(8, 0.15, 30 * DEG, 1.08 * DEG))
+    custom = scenario.apply_design(sc, designs.parametric(8, 0.15, 30 * DEG, 1.08 * DEG))
     assert custom.robot.design == "custom" and custom.ring.sensors == 8
 
 
@@ -145,7 +145,7 @@ def test_apply_gives_laser_and_sonar_their_own_sensor_and_noise():
     sc = load_scenario("t_room_cylinder")
     for name in ("laser", "sonar12"):
         d = designs.get(name)
-        other = designs.apply(sc, name)
+        other = scenario.apply_design(sc, name)
         assert other.sensor.model == d.sensor.kind
         assert other.sensor.max_range_m == d.sensor.max_range_m
         assert other.sensor.adc_bits == 16

@@ -24,10 +24,10 @@ import pytest
 from irring.simulation import dynamics as D
 from irring import pipeline
 from irring.studies import dynamics as bench
-from irring.data import Sweep, beam_geometry
+from irring.core import Sweep, beam_geometry
 from irring.estimation.estimate import estimate
-from irring.scenario import (BeltDynamicsEffect, Ring, ScenarioError, TimingEffect,
-                             load_scenario)
+from irring.core import Ring
+from irring.scenario import BeltDynamicsEffect, ScenarioError, TimingEffect, load_scenario
 from irring.simulation.sim import SimRing
 
 STRETCH_BOUND_RAD = 0.007

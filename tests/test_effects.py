@@ -11,7 +11,7 @@ import pytest
 
 from irring.simulation import effects
 from irring import gp2
-from irring.data import Truth, hardware_duration_s
+from irring.core import Truth, hardware_duration_s
 from irring.simulation.effects import Pipeline
 from irring.scenario import (EFFECTS, BeamEffect, IncidenceEffect, NoiseEffect, OutliersEffect,
                              ReflectanceEffect, TimingEffect, load_scenario)

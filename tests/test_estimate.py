@@ -20,11 +20,11 @@ from hypothesis import strategies as st
 from _synthetic import (PAPER_RING, T_POSES, T_ROOM, make_sweep, rectangle,
                         stand_in_calibration)
 from irring import gp2
-from irring.data import Reason, beam_geometry, sensor_angles_for_steps
+from irring.core import Reason, beam_geometry, sensor_angles_for_steps
 from irring.estimation.estimate import (Calibration, CalibrationError, LineOptions,
                              emitter_offset_from_wall, estimate, estimate_detail, fit_curve,
                              fit_lines)
-from irring.scenario import Ring
+from irring.core import Ring
 
 # Hundreds of generated cases per hard case, the same ones every run so CI is reproducible;
 # IRRING_EXPLORE=1 draws fresh ones (how the cases these tests pin down were found).
@@ -158,7 +158,7 @@ def test_eq9_recovers_the_emitter_offset_from_eq5_readings(d_o, y, phi):
 
 
 def test_eq9_agrees_with_the_frame_convention():
-    """Readings cast along data.beam_geometry against a wall y from the hinge obey Eq. 5."""
+    """Readings cast along core.beam_geometry against a wall y from the hinge obey Eq. 5."""
     steps = np.arange(-35, 36)
     angles = sensor_angles_for_steps(ONE, steps)
     origin, heading = beam_geometry(ONE, np.zeros(3), angles, 0.0123)

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
 from irring.estimation import estimate_numpy as oracle
-from irring.data import Reason
+from irring.core import Reason
 from irring.estimation.estimate import LineOptions, estimate_detail
 
 TOL = 1e-9

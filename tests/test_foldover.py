@@ -11,9 +11,10 @@ import pytest
 
 from irring import pipeline
 from irring.maps import mapping
-from irring.data import Reason
+from irring.core import Reason
 from irring.estimation.estimate import Calibration, estimate, resolve_foldover
-from irring.scenario import HOUSING_M, distance_to_outline, loads, point_in_polygon
+from irring.core import HOUSING_M, distance_to_outline, inside_outline
+from irring.scenario import loads
 
 # a room of our own with a slanted wall, a post and a turned box; every pose as close to a
 # wall as the housing allows (ring 150 mm + 20 mm housing: 171 mm)
@@ -110,7 +111,7 @@ def test_walls_are_never_mapped_outside_the_room(folded):
     x = grid.origin_xy_m[0] + (ix + 0.5) * grid.resolution_m
     y = grid.origin_xy_m[1] + (iy + 0.5) * grid.resolution_m
     assert ix.size > 300
-    out = np.array([0.0 if point_in_polygon(a, b, OUTLINE) else distance_to_outline(a, b, OUTLINE)
+    out = np.array([0.0 if inside_outline(a, b, OUTLINE) else distance_to_outline(a, b, OUTLINE)
                     for a, b in zip(x, y)])
     assert out.max() < 0.08
     assert np.sum(out > 0.05) <= 0.01 * out.size

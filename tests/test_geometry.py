@@ -101,7 +101,7 @@ def test_monte_carlo_is_deterministic_under_a_seed_and_zero_for_radial_rings():
 
 # --------------------------------------------------------------------------- the built model
 
-from irring import data, designs  # noqa: E402
+from irring import core, designs  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -125,12 +125,12 @@ def test_monte_carlo_from_the_mjcf_frames_agrees_with_table_i(paper_model):
 
 
 def test_model_frames_follow_the_beam_geometry_convention(paper_model):
-    """Emitters and headings read from MuJoCo equal data.beam_geometry (the one frame
+    """Emitters and headings read from MuJoCo equal core.beam_geometry (the one frame
     convention the estimator uses)."""
     for step in (-35, 0, 17, 35):
         f = g.model_frames(paper_model, step)
-        angles = data.sensor_angles_for_steps(designs.PAPER_RING, np.array([step]))
-        xy, heading = data.beam_geometry(designs.PAPER_RING, np.zeros(3), angles,
+        angles = core.sensor_angles_for_steps(designs.PAPER_RING, np.array([step]))
+        xy, heading = core.beam_geometry(designs.PAPER_RING, np.zeros(3), angles,
                                          designs.PAPER_RING.emitter_offset_m)
         np.testing.assert_allclose(f.emitter_xyz[:, :2], xy[0], atol=1e-9)
         np.testing.assert_allclose(np.cos(f.heading_rad - heading[0]), 1, atol=1e-12)

@@ -27,12 +27,13 @@ from hypothesis import strategies as st
 import hostile_devices as hd
 from irring import pipeline, safe_yaml
 from irring.cli import main
-from irring.data import Sweep
+from irring.core import Sweep
 from irring.errors import TooBig
 from irring.estimation.estimate import Calibration, CalibrationError
 from irring.hardware import DeviceError, NoReadings, SerialRing
 from irring.recording import RecordingError, load_recording, save_recording
-from irring.scenario import Ring, ScenarioError, loads, resolve
+from irring.core import Ring
+from irring.scenario import ScenarioError, loads, resolve
 
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])

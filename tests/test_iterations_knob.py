@@ -8,7 +8,7 @@ import pytest
 
 from irring import pipeline
 from irring import scenario as S
-from irring.data import Reason
+from irring.core import Reason
 from irring.estimation import estimate_numpy as oracle
 from irring.estimation.estimate import estimate, estimate_detail
 from irring.simulation.sim import SimRing

@@ -11,7 +11,7 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from irring.data import Points, Reason
+from irring.core import Points, Reason
 from irring.maps.mapping import (FREE, OCCUPIED, PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN, UNKNOWN,
                             MapperParams, OccupancyGrid, read_pgm, traverse)
 from irring.scenario import load_scenario

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from irring.data import Points, Reason
+from irring.core import Points, Reason
 from irring.maps.mapping import OccupancyGrid
 from irring.maps.metrics import (OBSTACLE0, SCORE_KEYS, WALL, ground_truth, score,
                             shadow_by_obstacle)
@@ -173,7 +173,7 @@ def test_truth_must_match_the_grid(cylinder):
 
 def test_box_obstacles_rasterise(room):
     sc, grid, _ = room
-    from irring.scenario import Box
+    from irring.core import Box
 
     boxed = dataclasses.replace(sc, obstacles=(Box(center_m=(1.2, 0.45), size_m=(0.1, 0.05),
                                                    yaw_rad=0.3),))

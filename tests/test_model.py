@@ -16,8 +16,8 @@ import pytest
 
 from irring import designs, resources, scenario
 from irring.simulation import model
-from irring.data import beam_geometry
-from irring.scenario import Ring
+from irring import core
+from irring.core import Ring, beam_geometry
 
 MODELS = resources.models_dir()
 PAPER = designs.PAPER_RING
@@ -74,7 +74,7 @@ def test_every_named_design_builds_from_the_template_and_steps(name):
 
 def test_template_is_the_papers_ring():
     """irring.xml itself (what the viewer opens): 12 sensors, 30° apart, R = 0.15 m, ±37.8°,
-    belt polycoef 0.6, d_o = 7 mm; its emitter frames are data.beam_geometry's."""
+    belt polycoef 0.6, d_o = 7 mm; its emitter frames are core.beam_geometry's."""
     m = mujoco.MjModel.from_xml_path(str(MODELS / "irring.xml"))
     d = mujoco.MjData(m)
     names = [f"ir_{k:02d}" for k in range(12)]
@@ -191,7 +191,7 @@ def test_walls_have_their_inner_faces_on_the_outline_whichever_way_it_winds():
             # inner face: the box's face plane nearest the room contains the wall segment
             offset = np.dot(np.subtract(centre[:2], a), n)
             assert abs(offset) == pytest.approx(0.01, abs=1e-12)
-            assert scenario.point_in_polygon(*(np.add(a, b) / 2 - n * np.sign(offset) * 0.005), pts)
+            assert core.inside_outline(*(np.add(a, b) / 2 - n * np.sign(offset) * 0.005), pts)
             assert half[2] == pytest.approx(0.15) and centre[2] == pytest.approx(0.15)
         # walls are lengthened by the thickness at each convex corner; the two walls meeting
         # at the reflex corner (1, 1) of the L are not, or they would stick into the room

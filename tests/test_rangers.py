@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from irring import designs, gp2
+from irring import gp2, scenario
 from irring.simulation import effects, rangers
-from irring.data import Truth
+from irring.core import Truth
 from irring.scenario import load_scenario
 
 DEG = math.pi / 180
@@ -95,7 +95,7 @@ def test_a_post_inside_the_cone_is_heard_first_whatever_its_bearing():
 def test_pipeline_for_adds_the_cone_only_for_sonar():
     sc = load_scenario("t_room_cylinder")
     assert "beam" not in rangers.pipeline_for(sc).names
-    sonar = rangers.pipeline_for(designs.apply(sc, "sonar12"))
+    sonar = rangers.pipeline_for(scenario.apply_design(sc, "sonar12"))
     assert isinstance(sonar.stages[0], rangers.SonarConeStage)
     assert sonar.stages[0].offsets_rad[-1] == pytest.approx(15 * DEG)
     with pytest.raises(ValueError, match="pass cast="):

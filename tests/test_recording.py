@@ -10,9 +10,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from irring.data import Sweep, Truth
+from irring.core import Sweep, Truth
 from irring.recording import FORMAT, RecordingError, load_recording, save_recording
-from irring.scenario import Ring
+from irring.core import Ring
 
 
 def make_sweep(rng, *, truth=True, moving=False, counts_dtype=np.float64, **kw) -> Sweep:

@@ -55,7 +55,7 @@ def test_point_errors_are_distances_to_the_true_hit_of_readings_both_call_valid(
     hit = sweep.truth.hit_point
     shape = sweep.counts.shape
     valid = np.isfinite(hit[..., 0])
-    from irring.data import Points
+    from irring.core import Points
 
     def points(dx, dy, ok):
         return Points(x=hit[..., 0] + dx, y=hit[..., 1] + dy, d=np.zeros(shape),

@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from irring import data
+from irring import core
 from irring.designs import PAPER_RING
 from irring.hardware import (DeviceDisconnected, DeviceError, DeviceRejected, DeviceTimeout,
                              HandshakeError, SerialRing)
@@ -43,7 +43,7 @@ def ring_on(device: Device, **kw) -> SerialRing:
     return SerialRing(DevicePort(device), **kw).open()
 
 
-def rows_equal(sweep: data.Sweep, truth: np.ndarray, all_steps: np.ndarray) -> bool:
+def rows_equal(sweep: core.Sweep, truth: np.ndarray, all_steps: np.ndarray) -> bool:
     idx = [int(np.flatnonzero(all_steps == s)[0]) for s in sweep.steps]
     return np.array_equal(sweep.counts, truth[idx])
 
@@ -106,12 +106,12 @@ def test_fault_free_sweep_returns_every_reading_with_geometry_and_device_time():
     steps = np.arange(-35, 36)
     assert np.array_equal(sweep.steps, steps) and sweep.missing_steps == ()
     assert np.array_equal(sweep.counts, src.truth(0, steps))
-    assert np.allclose(sweep.sensor_angles, data.sensor_angles_for_steps(PAPER_RING, steps))
+    assert np.allclose(sweep.sensor_angles, core.sensor_angles_for_steps(PAPER_RING, steps))
     assert np.array_equal(sweep.pose, [1.0, 2.0, 0.5]) and sweep.ring == PAPER_RING
     assert (sweep.samples, sweep.settle_s, sweep.adc_bits) == (2, 0.010, 12)
     # the device clock advances by settle + samples × GP2 period per step
-    assert np.allclose(np.diff(sweep.timestamps_s), 0.010 + 2 * data.GP2_PERIOD_S, atol=1.1e-3)
-    assert sweep.duration_s == pytest.approx(data.hardware_duration_s(71, 0.010, 2), abs=2e-3)
+    assert np.allclose(np.diff(sweep.timestamps_s), 0.010 + 2 * core.GP2_PERIOD_S, atol=1.1e-3)
+    assert sweep.duration_s == pytest.approx(core.hardware_duration_s(71, 0.010, 2), abs=2e-3)
     assert ring.last_report.complete and ring.last_report.message.startswith("all 71 steps")
 
 
@@ -228,7 +228,7 @@ def test_seq_and_device_clock_wrap_around():
     sweep = ring.sweep()
     assert len(sweep.steps) == 71 and ring.stats.seq_gaps == 0
     assert np.all(np.diff(sweep.timestamps_s) > 0)
-    assert sweep.duration_s == pytest.approx(data.hardware_duration_s(71, 0.0, 1), abs=2e-3)
+    assert sweep.duration_s == pytest.approx(core.hardware_duration_s(71, 0.0, 1), abs=2e-3)
 
 
 def test_goto_and_stop():

@@ -11,7 +11,7 @@ import numpy as np
 from _synthetic import make_sweep, points_for_pose
 from irring import pipeline
 from irring import scenario as S
-from irring.data import Reason
+from irring.core import Reason
 from irring.designs import PAPER_RING
 from irring.estimation.estimate import RETURN_SIGMAS, Calibration, estimate
 from irring.estimation.estimate_numpy import classify as classify_numpy

@@ -1,7 +1,7 @@
 """SimRing against geometry worked out by hand: ray–segment and ray–circle intersections.
 
 The analytic side never touches MuJoCo: emitter positions and headings come from
-``data.beam_geometry`` (the frame convention), hits from the outline polygon and the
+``core.beam_geometry`` (the frame convention), hits from the outline polygon and the
 cylinders' circles. The simulator must agree to 1e-6 m and 1e-6 rad, including the rays
 that hit nothing and the hits beyond the sensor's max range (both NaN).
 """
@@ -18,8 +18,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from irring import Sweep, designs, scenario
-from irring.data import beam_geometry, sensor_angles_for_steps
-from irring.scenario import Cylinder
+from irring.core import beam_geometry, sensor_angles_for_steps
+from irring.core import Cylinder
 from irring.simulation.sim import RayHits, SimRing
 
 TOL_M = 1e-6
@@ -179,7 +179,7 @@ def test_cast_max_range_is_ours_and_directions_need_not_be_unit(t_room):
 
 
 def test_emitter_frames_equal_data_beam_geometry(t_room):
-    """MuJoCo's emitter sites (positions and beam axes) are exactly data.beam_geometry's."""
+    """MuJoCo's emitter sites (positions and beam axes) are exactly core.beam_geometry's."""
     sim = SimRing(t_room)
     steps = sim.default_steps()
     angles = sensor_angles_for_steps(sim.ring, steps)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from irring import pipeline
-from irring.data import RingSource, SourceLost
+from irring.core import RingSource, SourceLost
 from irring.hardware import DeviceDisconnected, SerialRing
 from irring.hardware.emulator import Device, Faults, PtyEmulator
 from irring.scenario import load_scenario, loads

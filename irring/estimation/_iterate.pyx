@@ -37,7 +37,7 @@ import numpy as np
 
 from libc.math cimport cos, fabs, floor, hypot, isfinite, rint, sin, sqrt
 
-from ..data import Reason
+from ..core import Reason
 
 cdef object _exp = np.exp
 cdef object _log = np.log

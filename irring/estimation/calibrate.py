@@ -21,7 +21,7 @@ counts that the estimator uses for ``Points.sigma_m``.
 4 m × 4 m room with the scenario's ring, sensor and effects (minus ``motion``).
 :class:`GuidedCalibration` walks a person through the same placements on the real ring:
 ``prompt`` (like :func:`input`) and ``show`` (like :func:`print`) are the user interface and
-``read_sweep()`` returns one :class:`irring.data.Sweep` from the hardware, so the procedure
+``read_sweep()`` returns one :class:`irring.core.Sweep` from the hardware, so the procedure
 can be tested without either.
 """
 
@@ -36,9 +36,9 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from .. import gp2
-from ..data import Sweep
+from ..core import Sweep
 from .estimate import Calibration, CalibrationError, emitter_offset_from_wall, fit_curve
-from ..scenario import Ring
+from ..core import Ring
 
 DEFAULT_THETA_GRID_RAD = np.radians(np.arange(0.0, 86.0, 5.0))
 _ROUNDS = 3
@@ -229,7 +229,7 @@ class SimulatedRig:
 
     def scenario_for_rig(self):
         """The generated rig scene: one pose per placement, sensor range = the model's."""
-        from ..scenario import Pose
+        from ..core import Pose
 
         sc = self.scenario
         s = self.ROOM_M

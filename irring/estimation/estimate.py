@@ -7,7 +7,7 @@ the scene, vectorised over a whole sweep (S steps × N sensors):
 
 1. assume θ = 0 for every reading;
 2. d from Eq. 10 with a(θ), b(θ) of the :class:`Calibration`;
-3. end points from d, the sensor angle and the emitter offset d_o (``data.beam_geometry``);
+3. end points from d, the sensor angle and the emitter offset d_o (``core.beam_geometry``);
 4. group the end points into lines: per sensor the readings are ordered by sensor angle, so
    each sensor's sweep is a polyline; it is split at its corners (iterative end-point fit,
    i.e. Douglas–Peucker, with a noise-scaled threshold) and adjacent collinear pieces are
@@ -63,7 +63,7 @@ Fold-over: with a calibration that folds (``peak_distance_m`` > 0) every reading
 the near branch too; :func:`resolve_foldover` picks the branch from the sweep's lines or
 flags FOLDOVER_AMBIGUOUS (docs/foldover.md).
 
-Validity (:class:`irring.data.Reason`): a missing reading (NaN counts or a step in
+Validity (:class:`irring.core.Reason`): a missing reading (NaN counts or a step in
 ``Sweep.missing_steps``) is MISSING; counts at ADC full scale SATURATED; counts within
 ``NO_RETURN_SIGMAS`` of the calibration's count noise above the no-return level NO_RETURN, and
 up to ``RETURN_SIGMAS`` above it OUT_OF_RANGE (too weak to tell from noise); counts brighter
@@ -87,10 +87,19 @@ from typing import Any, Callable, Mapping
 import numpy as np
 import yaml
 
-from . import _iterate, _lines
 from .. import gp2
-from ..data import Points, Reason, Sweep, beam_geometry
-from ..scenario import HOUSING_M, Ring
+from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
+from ..errors import brief
+from ..resources import MissingKernel
+
+try:
+    from . import _iterate
+except ImportError:  # a source tree never installed: the estimator fails when it is used
+    _iterate = MissingKernel("estimation._iterate")
+try:
+    from . import _lines
+except ImportError:
+    _lines = MissingKernel("estimation._lines")
 
 CALIBRATION_FORMAT = 1  # version written into calibration files
 _SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
@@ -420,9 +429,6 @@ class Calibration:
             if key not in raw:
                 raise fail(key, "required key is missing")
 
-        from ..errors import brief
-        from ..scenario import SENSOR_MODELS
-
         def number(key: str, default: float | None = None, lo: float = -math.inf,
                    hi: float = math.inf) -> float:
             value = raw.get(key, default)
@@ -433,9 +439,9 @@ class Calibration:
             return float(value)
 
         model = raw["sensor_model"]
-        if model not in SENSOR_MODELS:
+        if model not in gp2.SENSORS:
             raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
-                                       f"{', '.join(SENSOR_MODELS)}")
+                                       f"{', '.join(gp2.SENSORS)}")
 
         curve = raw["curve"]
         if not isinstance(curve, list) or not curve:

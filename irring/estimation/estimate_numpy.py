@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from ..data import Points, Reason, Sweep, beam_geometry
+from ..core import Points, Reason, Sweep, beam_geometry
 from .estimate import (_FALLBACK_NODES, _MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M,
                        Calibration, Estimate, LineOptions, _finish, _nominal_for, _Pieces,
                        _scan_order, resolve_foldover)

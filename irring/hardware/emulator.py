@@ -6,7 +6,7 @@
 
 Three layers, each replaceable in tests:
 
-* a *source* produces the readings: any :class:`irring.data.RingSource` with ``ring``,
+* a *source* produces the readings: any :class:`irring.core.RingSource` with ``ring``,
   ``adc_bits`` and ``n_sweeps`` (the poses its robot visits), such as
   :class:`irring.simulation.sim.SimRing` with the scenario's effects;
 * :class:`Device` is the firmware: it answers sentences and produces IRSCN one step at a
@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import data
+from .. import core
 from . import protocol as p
 
 FIRMWARE = "irring-emulator-1"
@@ -120,7 +120,7 @@ class Device:
     when the device decides to close the port.
     """
 
-    def __init__(self, source: data.RingSource, *, faults: Faults = Faults(),
+    def __init__(self, source: core.RingSource, *, faults: Faults = Faults(),
                  realtime: bool = False, firmware: str = FIRMWARE,
                  clock_start_ms: int = 1000, fixed_pose: int | None = None):
         self.source = source
@@ -215,9 +215,9 @@ class Device:
         # a real ADC reports whole counts in range; NaN (no reading) reads as 0
         counts = np.clip(np.rint(np.nan_to_num(raw, nan=0.0)), 0, top).astype(np.int64)
         # Moving to `from_step` costs motor time; the one-step moves inside the sweep happen
-        # within each step's settle time, so a sweep lasts data.hardware_duration_s.
+        # within each step's settle time, so a sweep lasts core.hardware_duration_s.
         move_s = abs(cmd.from_step - self._position) * MOVE_S_PER_STEP
-        step_s = data.hardware_duration_s(1, settle_s, cmd.samples)
+        step_s = core.hardware_duration_s(1, settle_s, cmd.samples)
         self._advance(move_s)
         first_due = now + (move_s + step_s if self.realtime else 0.0)
         self._job = _SweepJob(steps, counts.reshape(len(steps), -1), step_s, due=first_due)

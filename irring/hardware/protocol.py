@@ -27,7 +27,7 @@ from dataclasses import dataclass, fields
 from fractions import Fraction
 from typing import ClassVar, Union
 
-from ..scenario import Ring
+from ..core import Ring
 
 PROTOCOL_VERSION = 1
 MAX_SENTENCE_BYTES = 128  # from `$` to `\n` inclusive

@@ -1,7 +1,7 @@
 """The real ring (or its emulator) over a serial port, returning the same Sweep as SimRing.
 
     with SerialRing("/dev/ttyUSB0") as ring:          # opens, then IRHLO → IRINF
-        sweep = ring.sweep((0.5, 0.45, 0.0))           # data.Sweep; sweep.missing_steps
+        sweep = ring.sweep((0.5, 0.45, 0.0))           # core.Sweep; sweep.missing_steps
         print(ring.last_report.message)
 
 The port is a pyserial URL or path (``/dev/ttyUSB0``, a pty path, ``loop://``,
@@ -26,9 +26,9 @@ from typing import Any, Callable, Iterable
 import numpy as np
 import serial
 
-from .. import data
+from .. import core
 from ..designs import PAPER_RING
-from ..scenario import Ring
+from ..core import Ring
 from . import protocol as p
 
 log = logging.getLogger("irring.hardware")
@@ -67,7 +67,7 @@ class DeviceRejected(DeviceError):
         self.code, self.text = code, text
 
 
-class LinkLost(DeviceError, data.SourceLost):
+class LinkLost(DeviceError, core.SourceLost):
     """The device went away mid-operation; ``partial`` holds what was received, ``report``
     the :class:`SweepReport` of the sweep it cut short."""
 
@@ -210,7 +210,7 @@ class SerialRing:
         of re-sweeping only the steps still missing.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
 
-    A :class:`irring.data.RingSource`: ``pipeline.acquire`` drives it as it drives SimRing.
+    A :class:`irring.core.RingSource`: ``pipeline.acquire`` drives it as it drives SimRing.
     """
 
     def __init__(self, port: str | serial.SerialBase, *, baudrate: int = DEFAULT_BAUD,
@@ -468,8 +468,8 @@ class SerialRing:
 
     def sweep(self, pose: Any = (0.0, 0.0, 0.0), *, steps: Iterable[int] | None = None,
               samples: int | None = None, settle_s: float | None = None,
-              resweep: int | None = None) -> data.Sweep:
-        """Sweep the ring and return a :class:`data.Sweep` of the readings that arrived.
+              resweep: int | None = None) -> core.Sweep:
+        """Sweep the ring and return a :class:`core.Sweep` of the readings that arrived.
 
         pose: where the robot stands, (x m, y m, yaw rad) or a scenario ``Pose``; the ring
             cannot know it, so it is stored in the Sweep as given.
@@ -498,12 +498,12 @@ class SerialRing:
         resweep = self.resweep if resweep is None else resweep
         _check_settings(samples, settle_s, resweep)
         settle_ms = int(round(settle_s * 1000))
-        pose_arr = data.as_pose(pose)
+        pose_arr = core.as_pose(pose)
         started = time.monotonic()
         before = self.stats.as_dict()
         passes: list[_Pass] = []
 
-        def build(complete: bool, reason: str) -> tuple[data.Sweep, SweepReport]:
+        def build(complete: bool, reason: str) -> tuple[core.Sweep, SweepReport]:
             sweep = self._assemble(req, passes, samples, settle_ms, pose_arr)
             report = self._report(req, sweep, before, complete, started, reason)
             self.last_report = report
@@ -551,7 +551,7 @@ class SerialRing:
         base: int | None = None
         last_seq: int | None = None
         max_count = (1 << info.adc_bits) - 1
-        per_step_s = data.hardware_duration_s(1, settle_ms / 1000, samples)
+        per_step_s = core.hardware_duration_s(1, settle_ms / 1000, samples)
         # the first IRSCN may need a move to `lo` first (allow 5 ms per motor step)
         travel = (info.max_step - info.min_step if self._position is None
                   else abs(lo - self._position))
@@ -662,7 +662,7 @@ class SerialRing:
                 deadline = now + self.timeout_s
 
     def _assemble(self, req: list[int], passes: list[_Pass], samples: int, settle_ms: int,
-                  pose: np.ndarray) -> data.Sweep:
+                  pose: np.ndarray) -> core.Sweep:
         info = self.info
         got: dict[int, p.Scan] = {}
         for ps in passes:
@@ -682,8 +682,8 @@ class SerialRing:
         else:
             timestamps = np.zeros(0)
         duration = sum(self._pass_duration(ps, samples, settle_ms) for ps in passes)
-        return data.Sweep(
-            steps=steps, sensor_angles=data.sensor_angles_for_steps(self.ring, steps),
+        return core.Sweep(
+            steps=steps, sensor_angles=core.sensor_angles_for_steps(self.ring, steps),
             counts=counts, timestamps_s=timestamps, duration_s=duration, pose=pose,
             ring=self.ring, sensor_model=self.sensor_model, adc_bits=info.adc_bits,
             vref_v=self.vref_v, max_range_m=self.max_range_m, samples=samples,
@@ -695,7 +695,7 @@ class SerialRing:
         extended by one mean step interval (the first step's own time, which no timestamp
         brackets). With fewer than two readings, the nominal hardware time."""
         if len(ps.got) < 2:
-            return data.hardware_duration_s(len(ps.expected), settle_ms / 1000, samples)
+            return core.hardware_duration_s(len(ps.expected), settle_ms / 1000, samples)
         pos = ps.index
         first = min(ps.got.values(), key=lambda sc: pos[sc.step])
         last = max(ps.got.values(), key=lambda sc: pos[sc.step])
@@ -703,7 +703,7 @@ class SerialRing:
         per_step = span_s / (pos[last.step] - pos[first.step])
         return per_step * len(ps.expected)
 
-    def _report(self, req: list[int], sweep: data.Sweep, before: dict[str, int],
+    def _report(self, req: list[int], sweep: core.Sweep, before: dict[str, int],
                 complete: bool, started: float, reason: str) -> SweepReport:
         link = self.stats.minus(before)
         n_req, n_got = len(req), len(sweep.steps)

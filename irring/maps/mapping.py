@@ -120,8 +120,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _traverse
-from ..data import Points, Reason
+from ..core import Points, Reason
+from ..resources import MissingKernel
+
+try:
+    from . import _traverse
+except ImportError:  # a source tree never installed: the mapper fails when it is used
+    _traverse = MissingKernel("maps._traverse")
 
 FREE = 0
 OCCUPIED = 1

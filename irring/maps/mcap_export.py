@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scenario import Cylinder
-from .metrics import box_corners
+from ..core import Cylinder, box_corners
+
 
 FRAME = "map"
 ROBOT_FRAME = "base_link"

@@ -38,7 +38,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
-from ..scenario import Box, Cylinder, Scenario
+from ..core import (Cylinder, box_corners, inside_obstacle, inside_outline,
+                    segment_distance)
+from ..scenario import Scenario
 
 EXTERIOR = -1   # beyond the walls
 FREE_SPACE = 0  # inside the room, no material at the cell centre
@@ -67,42 +69,6 @@ class GroundTruth:
 
 
 # --------------------------------------------------------------------------- geometry on cells
-
-
-def _segment_distance(px, py, ax, ay, bx, by) -> np.ndarray:
-    dx, dy = bx - ax, by - ay
-    t = np.clip(((px - ax) * dx + (py - ay) * dy) / (dx * dx + dy * dy), 0.0, 1.0)
-    return np.hypot(px - (ax + t * dx), py - (ay + t * dy))
-
-
-def _inside_polygon(px, py, outline) -> np.ndarray:
-    """Even-odd rule, vectorised over points (one pass per edge)."""
-    inside = np.zeros(np.shape(px), bool)
-    n = len(outline)
-    for i in range(n):
-        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
-        if y1 == y2:
-            continue
-        crosses = (y1 > py) != (y2 > py)
-        x_at = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
-        inside ^= crosses & (px < x_at)
-    return inside
-
-
-def box_corners(box: Box) -> np.ndarray:
-    c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
-    hx, hy = box.size_m[0] / 2, box.size_m[1] / 2
-    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-    return local @ np.array([[c, s], [-s, c]]) + np.asarray(box.center_m)
-
-
-def _inside_obstacle(ob, px, py) -> np.ndarray:
-    if isinstance(ob, Cylinder):
-        return np.hypot(px - ob.center_m[0], py - ob.center_m[1]) <= ob.radius_m
-    c, s = math.cos(ob.yaw_rad), math.sin(ob.yaw_rad)
-    dx, dy = px - ob.center_m[0], py - ob.center_m[1]
-    lx, ly = c * dx + s * dy, -s * dx + c * dy
-    return (np.abs(lx) <= ob.size_m[0] / 2) & (np.abs(ly) <= ob.size_m[1] / 2)
 
 
 def _outline_samples(points: np.ndarray, step_m: float) -> np.ndarray:
@@ -178,17 +144,17 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     outline = scenario.room.outline_m
 
     # material at cell centres: walls outward of the outline, obstacles where they stand
-    inside = _inside_polygon(px, py, outline)
+    inside = inside_outline(px, py, outline)
     dist = np.full(px.shape, np.inf)
     for i in range(len(outline)):
         (ax, ay), (bx, by) = outline[i], outline[(i + 1) % len(outline)]
-        dist = np.minimum(dist, _segment_distance(px, py, ax, ay, bx, by))
+        dist = np.minimum(dist, segment_distance(px, py, ax, ay, bx, by))
     eps = 1e-9
     label = np.full(px.shape, EXTERIOR, np.int16)
     label[inside] = FREE_SPACE
     label[~inside & (dist > eps) & (dist <= scenario.room.wall_thickness_m)] = WALL
     for j, ob in enumerate(scenario.obstacles):
-        label[_inside_obstacle(ob, px, py)] = OBSTACLE0 + j
+        label[inside_obstacle(ob, px, py)] = OBSTACLE0 + j
 
     # surfaces: sample the outline and obstacle perimeters finely, mark the cells they fall in
     surface_owner = np.zeros(px.shape, np.int16)

@@ -33,9 +33,8 @@ from matplotlib.patches import Circle, Patch, Polygon
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 from PIL import Image, ImageDraw, ImageFont
 
-from ..scenario import Cylinder
+from ..core import Cylinder, box_corners
 from .mapping import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from .metrics import box_corners
 
 UNKNOWN_RGB = (0.75, 0.75, 0.75)
 FREE_RGB = (1.0, 1.0, 1.0)

@@ -40,7 +40,7 @@ rest at the first step: step i moves for Δ_i·step_time_s (Δ_i whole steps fro
 previous step; nothing for the first), waits ``scan.settle_s``, then reads the ADC
 ``samples`` times one nominal GP2 period (38.3 ms) apart. Without ``timing`` the
 simulator's sensor measures instantly at the first read, and each reading is charged one
-GP2 period of hardware time, as for kinematic sweeps (``data.hardware_duration_s``): the
+GP2 period of hardware time, as for kinematic sweeps (``core.hardware_duration_s``): the
 next move starts ``samples`` periods after the first read. With ``timing`` the value is
 the GP2's last finished measurement and nothing is waited beyond ``settle_s`` (and the
 periods between averaged reads), so a sweep can be faster than the sensor and smear;
@@ -72,9 +72,9 @@ import mujoco.batch
 import numpy as np
 
 from . import model as model_lib
-from ..data import GP2_PERIOD_S, beam_geometry
-from ..scenario import (HOUSING_M, BeltDynamicsEffect, MotionEffect, Ring, Scenario,
-                        ScenarioError, TimingEffect, distance_to_outline, point_in_polygon)
+from ..core import (GP2_PERIOD_S, HOUSING_M, Ring, beam_geometry, distance_to_outline,
+                   inside_outline, obstacle_distance)
+from ..scenario import BeltDynamicsEffect, MotionEffect, Scenario, ScenarioError, TimingEffect
 
 TIMING_STREAM = 0x7469   # "ti": seeds the GP2 clocks
 ODOMETRY_STREAM = 0x6F64  # "od": seeds the odometry drift
@@ -488,17 +488,15 @@ class Path:
     def check_clearance(self, scenario: Scenario) -> None:
         """Raise ScenarioError where the ring (radius + 20 mm housing) would touch a wall or
         an obstacle along the path (the loader checks scan poses, not paths)."""
-        from ..scenario import _obstacle_distance
-
         clearance = scenario.ring.radius_m + HOUSING_M
         n = max(2, int(math.ceil(self.length_m / _PATH_SAMPLE_M)) + 1)
         s = np.linspace(0.0, self.length_m, n)
         poses = self.pose_at_arc(s)
         outline = scenario.room.outline_m
         for (x, y, _), arc in zip(poses, s):
-            gaps = [distance_to_outline(x, y, outline)] + [_obstacle_distance(ob, x, y)
+            gaps = [distance_to_outline(x, y, outline)] + [obstacle_distance(ob, x, y)
                                                            for ob in scenario.obstacles]
-            if not point_in_polygon(x, y, outline) or min(gaps) < clearance:
+            if not inside_outline(x, y, outline) or min(gaps) < clearance:
                 seg = int(np.clip(np.searchsorted(self.arc_m, arc, side="right") - 1, 0,
                                   max(len(self.arc_m) - 2, 0)))
                 raise ScenarioError(

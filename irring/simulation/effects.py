@@ -22,7 +22,7 @@ part in one or more of these phases (``Pipeline.run``):
 10. ``reduce``  averaging: mean of the samples (rounded again when quantised)
 
 Hardware time: averaging ``scan.samples`` readings costs ``samples`` GP2 periods per step,
-which is what ``data.hardware_duration_s`` charges; without the ``averaging`` effect a step
+which is what ``core.hardware_duration_s`` charges; without the ``averaging`` effect a step
 takes one reading (samples = 1) whatever ``scan.samples`` says.
 
 The ``belt_dynamics``, ``timing`` and ``motion`` effects change where and when the ring
@@ -38,7 +38,7 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 
 from .. import gp2
-from ..data import Truth
+from ..core import Truth
 from ..scenario import (AveragingEffect, BeamEffect, FoldoverEffect, IncidenceEffect,
                        NoiseEffect, OutliersEffect, QuantizationEffect, ReflectanceEffect)
 

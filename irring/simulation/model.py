@@ -24,7 +24,8 @@ import mujoco
 import numpy as np
 
 from .. import resources
-from ..scenario import Box, Cylinder, Ring, Scenario
+from ..core import Box, Cylinder, Ring
+from ..scenario import Scenario
 
 TEMPLATE = "irring.xml"
 PROTOTYPE = "ir_00"

@@ -91,7 +91,7 @@ def pipeline_for(scenario, cone: SonarCone | None = None) -> Pipeline:
     base = Pipeline.from_scenario(scenario)
     if scenario.sensor.model != "sonar":
         return base
-    from ..designs import sensor_spec
+    from ..gp2 import sensor_spec
 
     if cone is None:
         cone = SonarCone(half_angle_rad=sensor_spec("sonar").beam_half_angle_rad)

@@ -40,7 +40,7 @@ import mujoco.batch
 import numpy as np
 
 from . import model as model_lib
-from ..data import Sweep, Truth, as_pose, hardware_duration_s
+from ..core import Sweep, Truth, as_pose, hardware_duration_s
 from ..scenario import Scenario
 
 _POS = mujoco.mjtStage.mjSTAGE_POS
@@ -85,7 +85,7 @@ class SimRing:
     ``rangers.pipeline_for(scenario)``: the scene's effects, with the sonar cone for a sonar.
     The k-th sweep at pose p draws its noise from ``np.random.default_rng([seed, p, k])``, so
     a fresh ``SimRing`` with the same scenario and seed reproduces every sweep; :meth:`reset`
-    forgets the sweep counters. A :class:`irring.data.RingSource`: ``pipeline.acquire``
+    forgets the sweep counters. A :class:`irring.core.RingSource`: ``pipeline.acquire``
     drives it as it drives the real ring (``close`` releases nothing; MuJoCo's memory goes
     with the object).
 

@@ -85,6 +85,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from .. import scenario as scenario_lib
 from .compare import mean_of, write_study
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room")
@@ -172,10 +173,9 @@ def default_value(knob: str, scenario) -> float:
 
 def apply(scenario, cfg: Config):
     """The scenario with the configuration's sweep, map and design changes."""
-    from .. import designs
     from ..scenario import AveragingEffect, BeltDynamicsEffect, TimingEffect
 
-    sc = designs.apply(scenario, cfg.design) if cfg.design else scenario
+    sc = scenario_lib.apply_design(scenario, cfg.design) if cfg.design else scenario
     scan = {}
     if cfg.step_stride is not None:
         scan["step_stride"] = int(cfg.step_stride)
@@ -251,7 +251,7 @@ def _compute_time(sweeps, cal, estimator, grid) -> tuple[float, float]:
 def run_job(job: Job) -> dict:
     """Sweep every pose, estimate, map and score one configuration; a plain dict."""
 
-    from .. import designs, pipeline
+    from .. import pipeline
     from ..simulation import dynamics
     from ..maps import metrics
     from ..estimation.estimate import LineOptions, estimate
@@ -299,7 +299,7 @@ def run_job(job: Job) -> dict:
         heading = np.concatenate([dynamics.heading_error(sw).ravel() for sw in sweeps])
         angle_rms = float(np.sqrt(np.mean(heading ** 2)))
     else:
-        view_s = designs.design_for(sc).hardware_time_s(
+        view_s = scenario_lib.design_for(sc).hardware_time_s(
             step_stride=sc.scan.step_stride, settle_s=sc.scan.settle_s,
             samples=sweeps[0].samples)
         angle_rms = None

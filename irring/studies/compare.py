@@ -12,7 +12,7 @@ Two kinds of result, per design:
    geometry of the design; Eq. 1 is its closed form for a fan from one point.
 2. **Scenes** (:func:`compare`): the scenario run through the whole pipeline of
    ``irring run`` (sweeps → estimator → occupancy grid → scores) with each design in place
-   of the scenario's (:func:`irring.designs.apply`), for several seeds: occupied F1, free
+   of the scenario's (:func:`irring.scenario.apply_design`), for several seeds: occupied F1, free
    accuracy, coverage, shadow, hardware time of a 360° view, compute time.
 """
 
@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import designs as designs_mod
+from .. import gp2
 from ..designs import Design
 
 DEFAULT_DISTANCES_M = (0.25, 0.35, 0.45, 0.55, 0.65, 0.75)
@@ -76,7 +77,6 @@ def design_rays(design: Design, step_stride: int = 1) -> Rays:
 
 
 def _incidence_limit_rad(design: Design) -> float:
-    from .. import gp2
 
     return float(gp2.sensor(design.sensor.kind).max_incidence_rad)
 
@@ -142,7 +142,7 @@ def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int 
     b = (np.arange(bearings) + 0.5) / bearings * period
     unit = np.c_[np.cos(b), np.sin(b)]
     sens = design.sensor
-    kw = dict(min_range_m=sens.min_range_m, max_range_m=sens.max_range_m,
+    kw = dict(min_range_m=gp2.sensor(sens.kind).min_range_m, max_range_m=sens.max_range_m,
               max_incidence_rad=_incidence_limit_rad(design))
     dist = np.asarray(distances_m, dtype=float)
     min_ok = np.full(len(dist), np.inf)

@@ -30,7 +30,8 @@ from .. import safe_yaml
 
 from ..simulation import dynamics as dyn
 from ..simulation import model as model_lib
-from ..scenario import BeltDynamicsEffect, Ring, Scenario, load_scenario, parse, resolve
+from ..core import Ring
+from ..scenario import BeltDynamicsEffect, Scenario, load_scenario, parse, resolve
 
 SETTLE_S = (0.0, 0.010, 0.020, 0.0383, 0.0529, 0.075)
 

@@ -36,7 +36,7 @@ from typing import Callable
 import numpy as np
 
 from .. import gp2
-from ..data import Truth, beam_geometry, sensor_angles_for_steps
+from ..core import Truth, beam_geometry, sensor_angles_for_steps
 from ..designs import PAPER_RING
 from ..simulation.effects import STAGE_ORDER, Pipeline
 from ..scenario import (EFFECTS, IncidenceEffect, NoiseEffect, OutliersEffect,

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from ..data import Reason
+from ..core import Reason
 from ..estimation.estimate import Calibration, estimate
 
 

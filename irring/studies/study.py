@@ -30,6 +30,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .. import designs, gp2
 from ..scenario import Scenario, ScenarioError
 
 # knob → (type, lowest, highest, what it sets); the scenario's value when the study has none
@@ -77,8 +78,7 @@ class DesignSpec:
 
     def build(self):
         """The :class:`irring.designs.Design` (a named one, or ``designs.parametric``)."""
-        from .. import designs
-
+    
         if self.design is not None:
             return self.design
         if self.name is not None:
@@ -159,9 +159,9 @@ def _design(source: str, path: str, raw: Any) -> DesignSpec:
     params = tuple((k, _number(source, f"{path}.{k}", raw[k], *limits[k]))
                    for k in PARAMETRIC_KEYS)
     sensor = raw.get("sensor", "gp2d12")
-    if sensor not in designs.SENSORS:
+    if sensor not in gp2.SENSORS:
         raise _fail(source, f"{path}.sensor", f"{sensor!r} is not allowed; choose one of: "
-                    f"{', '.join(designs.SENSORS)}")
+                    f"{', '.join(gp2.SENSORS)}")
     p = dict(params)
     label = raw.get("name") or (f"ring{p['sensors']}_r{p['radius_mm']:g}_"
                                 f"a{p['sweep_half_angle_deg']:g}_s{p['step_deg']:g}"

@@ -1,0 +1,416 @@
+"""The types every stage shares and the paper's constants, in numpy alone.
+
+A source (simulator, serial ring) makes a :class:`Sweep`; the estimator turns it into
+:class:`Points`; the mapper reads those. :class:`Ring` is where the sensors sit and how they
+turn, :class:`SensorSpec` what a sensor kind implies, :class:`Room`, :class:`Cylinder`,
+:class:`Box` and :class:`Pose` the scene. Arrays are shaped ``(steps, sensors)``; units SI.
+Contract: imports numpy and no other irring module (tests/test_imports.py); the numbers are
+the paper's (docs/paper.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+# --------------------------------------------------------------------------- paper constants
+
+MAX_RANGE_M = 0.624     # GP2D12 range the paper's experiments trust (Table I's D is 0.686 m)
+DESIGN_RANGE_M = 0.686  # D of Eqs. 2-3 in Table I
+ADC_BITS = 12           # MCP3202
+VREF_V = 5.0
+GP2_PERIOD_S = 0.0383   # GP2 measurement period (datasheet 38.3 ms ± 9.6 ms); one sample, one period
+
+# --------------------------------------------------------------------------- field bounds
+# A field's metadata holds its inclusive SI bounds or allowed choices; the scenario loader
+# checks YAML against them and designs check rings made in code.
+
+
+def num(default: Any = dataclasses.MISSING, lo: float | None = None, hi: float | None = None,
+        doc: str = "") -> Any:
+    """A numeric dataclass field with inclusive SI bounds."""
+    return field(default=default, metadata={"lo": lo, "hi": hi, "choices": None, "doc": doc})
+
+
+def choice(default: Any, choices: tuple, doc: str = "") -> Any:
+    """A dataclass field that takes one of ``choices``."""
+    return field(default=default, metadata={"lo": None, "hi": None, "choices": choices,
+                                            "doc": doc})
+
+
+_DISPLAY = {"_m": ("_mm", 1e3, "mm"), "_rad": ("_deg", 180 / math.pi, "°"),
+            "_s": ("_ms", 1e3, "ms"), "_v": ("_v", 1.0, "V")}
+
+
+def unit_suffix(name: str) -> str | None:
+    """The SI suffix of a field name (``_m``, ``_rad``, ``_s``, ``_m_s``, ``_per_m``)."""
+    for suf in ("_m_s", "_per_m", "_m", "_rad", "_s"):
+        if name.endswith(suf):
+            return suf
+    return None
+
+
+def si_name(yaml_name: str) -> str:
+    """The SI field name of a YAML spelling (``radius_mm`` → ``radius_m``)."""
+    for alt_suffix, si in (("_mm_s", "_m_s"), ("_mm", "_m"), ("_deg", "_rad"), ("_ms", "_s")):
+        if yaml_name.endswith(alt_suffix):
+            return yaml_name[: -len(alt_suffix)] + si
+    return yaml_name
+
+
+def _fmt_range(name: str, lo: float | None, hi: float | None) -> str:
+    suf = unit_suffix(name)
+    scale, unit = 1.0, ""
+    if suf in ("_m", "_rad", "_s"):
+        _, scale, unit = _DISPLAY[suf]
+    parts = [f"{v * scale:g}" if v is not None else "" for v in (lo, hi)]
+    if lo is not None and hi is not None:
+        return f"{parts[0]} … {parts[1]}{(' ' + unit) if unit else ''}"
+    if lo is not None:
+        return f"≥ {parts[0]}{unit}"
+    return f"≤ {parts[1]}{unit}"
+
+
+def _show(value: Any, si: str) -> str:
+    suf = unit_suffix(si)
+    if suf in ("_m", "_rad", "_s") and isinstance(value, float):
+        _, scale, unit = _DISPLAY[suf]
+        return f"{value * scale:g} {unit}"
+    return repr(value)
+
+
+def bounds_error(value: Any, meta: Any, path: str) -> str | None:
+    """Why ``value`` breaks the field metadata ``meta`` (None if it does not); ``path`` names
+    the field (its last part, in YAML or SI spelling, sets the display unit)."""
+    choices = meta.get("choices")
+    if choices is not None and value not in choices:
+        allowed = ", ".join(str(c) for c in choices)
+        return f"{value!r} is not allowed; choose one of: {allowed}"
+    lo, hi = meta.get("lo"), meta.get("hi")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        si = si_name(path.rsplit(".", 1)[-1].split("[", 1)[0])
+        return f"{_show(value, si)} is out of range; allowed {_fmt_range(si, lo, hi)}"
+    return None
+
+
+# --------------------------------------------------------------------------- ring, sensor, scene
+
+
+@dataclass(frozen=True)
+class Ring:
+    """A ring design: the paper's by default (12 sensors, R = 0.15 m, ±35 motor steps of
+    1.8° through a 0.6 belt, d_o = 7 mm); other designs change these numbers."""
+
+    sensors: int = num(12, lo=1, hi=72, doc="sensors on the ring")
+    radius_m: float = num(0.15, lo=0.0, hi=1.0, doc="ring radius to the sensor hinge axes")
+    motor_step_rad: float = num(math.radians(1.8), lo=math.radians(0.01), hi=math.radians(45.0))
+    gear: float = num(0.6, lo=0.01, hi=10.0, doc="sensor turn per motor turn (belt ratio)")
+    min_step: int = num(-35, lo=-100000, hi=100000)
+    max_step: int = num(35, lo=-100000, hi=100000)
+    emitter_offset_m: float = num(0.007, lo=0.0, hi=0.05,
+                                  doc="lateral emitter offset d_o from the hinge axis")
+    sensor_height_m: float = num(0.10, lo=0.01, hi=2.0)
+    joint_limit_rad: float = num(math.radians(37.8), lo=0.0, hi=2 * math.pi,
+                                 doc="each sensor hinge's range ±limit")
+
+
+HOUSING_M = 0.02  # the sensors' housing reaches this far beyond the ring radius
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """What a sensor kind implies for a design. Lengths m, angles rad, times s.
+
+    ``max_range_m``: readings beyond are no return. ``design_range_m``: D of Eqs. 2–3.
+    ``noise_sigma_m``: 1-σ range noise the sensor implies, or None when the scene's own
+    effects (volts, for GP2 curves) govern. ``beam_half_angle_rad``: cone half-angle (0: a
+    pencil beam). ``reading_period_s``: time one reading costs. ``sequential``: sensors fire
+    one after another (sonar crosstalk) instead of all at once. ``settles``: waits
+    ``scan.settle_s`` per position (a laser's mirror never stops).
+    """
+
+    kind: str
+    max_range_m: float
+    design_range_m: float
+    noise_sigma_m: float | None = None
+    beam_half_angle_rad: float = 0.0
+    reading_period_s: float = GP2_PERIOD_S
+    sequential: bool = False
+    adc_bits: int = ADC_BITS
+    settles: bool = True
+    description: str = ""
+
+    @property
+    def is_ir(self) -> bool:
+        return self.kind.startswith("gp2")
+
+
+@dataclass(frozen=True)
+class Pose:
+    x_m: float
+    y_m: float
+    yaw_rad: float = num(0.0, lo=-2 * math.pi, hi=2 * math.pi)
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    center_m: tuple[float, float]
+    radius_m: float = num(lo=0.002, hi=2.0, doc="cylinder radius")
+    reflectance: float = num(1.0, lo=0.05, hi=1.0, doc="relative IR reflectivity (white paper = 1)")
+
+
+@dataclass(frozen=True)
+class Box:
+    center_m: tuple[float, float]
+    size_m: tuple[float, float]
+    yaw_rad: float = num(0.0, lo=-2 * math.pi, hi=2 * math.pi)
+    reflectance: float = num(1.0, lo=0.05, hi=1.0)
+
+
+@dataclass(frozen=True)
+class Room:
+    outline_m: tuple[tuple[float, float], ...]
+    wall_height_m: float = num(0.30, lo=0.05, hi=3.0)
+    wall_thickness_m: float = num(0.02, lo=0.002, hi=0.5)
+    reflectance: float = num(1.0, lo=0.05, hi=1.0, doc="reflectivity of every wall")
+
+
+# --------------------------------------------------------------------------- room geometry
+# Vectorised over points: px, py broadcast together; an outline is the room's corners in order.
+
+
+def segment_distance(px, py, ax, ay, bx, by) -> np.ndarray:
+    """Distance (m) from points to the segment a–b."""
+    dx, dy = bx - ax, by - ay
+    t = np.clip(((px - ax) * dx + (py - ay) * dy) / (dx * dx + dy * dy), 0.0, 1.0)
+    return np.hypot(px - (ax + t * dx), py - (ay + t * dy))
+
+
+def inside_outline(px, py, outline) -> np.ndarray:
+    """Points inside a closed outline (even-odd rule, one pass per edge)."""
+    inside = np.zeros(np.broadcast(px, py).shape, bool)
+    n = len(outline)
+    for i in range(n):
+        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
+        if y1 == y2:
+            continue
+        crosses = (y1 > py) != (y2 > py)
+        x_at = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
+        inside ^= crosses & (px < x_at)
+    return inside
+
+
+def distance_to_outline(px, py, outline) -> np.ndarray:
+    """Distance (m) from points to the nearest wall of a closed outline."""
+    n = len(outline)
+    return np.min([segment_distance(px, py, *outline[i], *outline[(i + 1) % n])
+                   for i in range(n)], axis=0)
+
+
+def box_corners(box: Box) -> np.ndarray:
+    """(4, 2) corners of a box, counter-clockwise."""
+    c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
+    hx, hy = box.size_m[0] / 2, box.size_m[1] / 2
+    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+    return local @ np.array([[c, s], [-s, c]]) + np.asarray(box.center_m)
+
+
+def _box_local(ob: Box, px, py):
+    c, s = math.cos(ob.yaw_rad), math.sin(ob.yaw_rad)
+    dx, dy = px - ob.center_m[0], py - ob.center_m[1]
+    return c * dx + s * dy, -s * dx + c * dy
+
+
+def inside_obstacle(ob: Cylinder | Box, px, py) -> np.ndarray:
+    """Points inside (or on) an obstacle."""
+    if isinstance(ob, Cylinder):
+        return np.hypot(px - ob.center_m[0], py - ob.center_m[1]) <= ob.radius_m
+    lx, ly = _box_local(ob, px, py)
+    return (np.abs(lx) <= ob.size_m[0] / 2) & (np.abs(ly) <= ob.size_m[1] / 2)
+
+
+def obstacle_distance(ob: Cylinder | Box, px, py) -> np.ndarray:
+    """Signed distance (m) from points to an obstacle's surface (negative inside)."""
+    if isinstance(ob, Cylinder):
+        return np.hypot(px - ob.center_m[0], py - ob.center_m[1]) - ob.radius_m
+    lx, ly = _box_local(ob, px, py)
+    qx, qy = np.abs(lx) - ob.size_m[0] / 2, np.abs(ly) - ob.size_m[1] / 2
+    return np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)) + np.minimum(np.maximum(qx, qy), 0.0)
+
+
+# --------------------------------------------------------------------------- sweeps and points
+
+
+def hardware_duration_s(n_steps: int, settle_s: float, samples: int,
+                        period_s: float = GP2_PERIOD_S) -> float:
+    """Seconds the real ring spends on a sweep: steps × (settle + samples × period)."""
+    return float(n_steps) * (settle_s + samples * period_s)
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth of a simulated sweep, per reading (absent for hardware)."""
+
+    distance_m: np.ndarray   # (S, N) from the emitter; NaN: nothing within max range
+    incidence_rad: np.ndarray  # (S, N) between ray and surface normal; NaN where no hit
+    hit_point: np.ndarray    # (S, N, 3) world; NaN where no hit
+    origin: np.ndarray       # (S, N, 3) emitter position, world
+    direction: np.ndarray    # (S, N, 3) unit beam direction, world
+    geom_id: np.ndarray      # (S, N) int, −1 where no hit
+    reflectance: np.ndarray  # (S, N) of the surface hit; NaN where no hit
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """One sweep of the ring: ADC counts and where the sensors pointed.
+
+    ``sensor_angles[s, k]`` is sensor k's angle (rad, CCW from above) off its radial
+    direction at step ``steps[s]``. ``pose`` is the robot pose (x m, y m, yaw rad) of the
+    sweep; ``reading_poses`` (S, N, 3) is set only when the robot moved during it.
+    """
+
+    steps: np.ndarray            # (S,) motor step indices
+    sensor_angles: np.ndarray    # (S, N) rad
+    counts: np.ndarray           # (S, N) ADC counts (float unless quantised)
+    timestamps_s: np.ndarray     # (S,) when each step was read (device clock for hardware)
+    duration_s: float            # hardware time of the sweep
+    pose: np.ndarray             # (3,)
+    ring: Ring
+    sensor_model: str = "gp2d12"
+    adc_bits: int = ADC_BITS
+    vref_v: float = VREF_V
+    max_range_m: float = MAX_RANGE_M
+    samples: int = 1
+    settle_s: float = 0.0
+    truth: Truth | None = None
+    reading_poses: np.ndarray | None = None   # (S, N, 3) when the robot moves
+    missing_steps: tuple[int, ...] = ()       # steps requested whose readings never arrived
+    source: str = "sim"
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.counts.shape
+
+
+class Reason(enum.IntEnum):
+    """Why a reading is invalid (OK when it is valid)."""
+
+    OK = 0
+    NO_RETURN = 1          # counts at or below the noise floor: nothing within range
+    OUT_OF_RANGE = 2       # a distance outside the sensor's calibrated range
+    FOLDOVER_AMBIGUOUS = 3  # counts above the curve's peak region: two distances possible
+    SATURATED = 4          # ADC at full scale
+    NOT_CONVERGED = 5      # iterative estimation did not settle
+    MISSING = 6            # the reading never arrived (hardware)
+
+
+@dataclass(frozen=True)
+class Points:
+    """Estimated end points of every reading of a sweep, in the world frame.
+
+    All arrays (S, N). ``origin_*`` is the emitter, ``heading`` the world beam direction;
+    for invalid readings x, y, d, theta are NaN and ``reason`` says why.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    d: np.ndarray
+    theta: np.ndarray
+    origin_x: np.ndarray
+    origin_y: np.ndarray
+    heading: np.ndarray
+    sigma_m: np.ndarray       # 1-σ range uncertainty of the reading
+    iterations: np.ndarray    # int
+    valid: np.ndarray         # bool
+    reason: np.ndarray        # uint8 of Reason
+    max_range_m: float = MAX_RANGE_M
+    cone_half_angle_rad: float = 0.0  # > 0: each reading is an echo from anywhere in this cone
+
+    def reasons(self) -> dict[str, int]:
+        """How many readings fell into each reason."""
+        values, counts = np.unique(self.reason, return_counts=True)
+        return {Reason(int(v)).name.lower(): int(c) for v, c in zip(values, counts)}
+
+
+def ring_angles(ring: Ring) -> np.ndarray:
+    """(N,) radial direction of each sensor in the robot frame: sensor k at k·2π/N."""
+    return np.arange(ring.sensors) * (2.0 * np.pi / ring.sensors)
+
+
+def sensor_angles_for_steps(ring: Ring, steps: np.ndarray) -> np.ndarray:
+    """(S, N) commanded sensor angles: step × motor step × belt ratio, the same for all."""
+    angle = np.asarray(steps, dtype=float) * ring.motor_step_rad * ring.gear
+    return np.repeat(angle[:, None], ring.sensors, axis=1)
+
+
+def beam_geometry(ring: Ring, pose: np.ndarray, sensor_angles: np.ndarray,
+                  emitter_offset_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Emitter positions (S, N, 2) and world beam headings (S, N) for a sweep.
+
+    Frames (the one convention, shared by the MJCF model and the estimator): sensor k's
+    hinge sits at radius R along robot angle ρ_k = k·2π/N; its beam points along
+    h = yaw + ρ_k + φ (φ = sensor angle, CCW positive); the emitter sits d_o to the right of
+    the hinge, at hinge + d_o·(sin h, −cos h). Against a wall at perpendicular distance y
+    from the hinge this gives the paper's Eq. 5, d = −d_o·tan φ + y / cos φ.
+    ``pose`` is (3,) or, for a moving robot, (S, N, 3).
+    """
+    pose = np.asarray(pose, dtype=float)
+    x, y, yaw = pose[..., 0], pose[..., 1], pose[..., 2]
+    rho = yaw + ring_angles(ring)
+    heading = rho + sensor_angles
+    hx = x + ring.radius_m * np.cos(rho)
+    hy = y + ring.radius_m * np.sin(rho)
+    ox = hx + emitter_offset_m * np.sin(heading)
+    oy = hy - emitter_offset_m * np.cos(heading)
+    return np.stack(np.broadcast_arrays(ox, oy), axis=-1), heading
+
+
+def as_pose(pose: Any) -> np.ndarray:
+    """(3,) x m, y m, yaw rad from a scenario ``Pose`` or a sequence (x, y[, yaw]).
+
+    Raises ValueError naming what was given when it is neither."""
+    if hasattr(pose, "x_m"):
+        return np.array([pose.x_m, pose.y_m, pose.yaw_rad], dtype=float)
+    try:
+        arr = np.asarray(pose, dtype=float).ravel()
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.size not in (2, 3) or not np.isfinite(arr).all():
+        raise ValueError(f"a pose is (x m, y m[, yaw rad]) or a scenario Pose, got {pose!r}")
+    return np.append(arr, 0.0) if arr.size == 2 else arr
+
+
+@runtime_checkable
+class RingSource(Protocol):
+    """Anything that sweeps a ring: the simulator (``SimRing``), the real ring over a serial
+    port (``SerialRing``), a fake in a test. ``pipeline.acquire`` drives any of them.
+
+    ``sweep(pose, *, steps=None)`` takes one sweep with the robot at ``pose`` — (x m, y m,
+    yaw rad) or a scenario ``Pose`` (a simulator also takes a scan-pose index) — over
+    ``steps`` (motor steps in order; None: the source's full sweep) and returns a
+    :class:`Sweep`; steps whose readings never arrived are listed in ``missing_steps``, never
+    invented. A source that goes away mid-sweep raises :class:`SourceLost`. ``close()``
+    releases it; as a context manager it opens on entry and closes on exit.
+    """
+
+    def sweep(self, pose: Any, *, steps: np.ndarray | None = None) -> Sweep: ...
+
+    def close(self) -> None: ...
+
+    def __enter__(self) -> Any: ...
+
+    def __exit__(self, *exc: object) -> Any: ...
+
+
+class SourceLost(RuntimeError):
+    """The source went away mid-sweep; ``partial`` holds the :class:`Sweep` of what arrived
+    (None if nothing did) and ``report`` the source's account of it, if it keeps one."""
+
+    def __init__(self, message: str, partial: Sweep | None = None, report: Any = None):
+        super().__init__(message)
+        self.partial, self.report = partial, report

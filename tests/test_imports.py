@@ -1,0 +1,137 @@
+"""The import structure: no cycle, a numpy-only core, and what imports without pyyaml or the
+compiled kernels (a source tree never installed, a firmware author's machine)."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import irring
+
+PACKAGE = Path(irring.__file__).parent
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _top_level_imports(path: Path, modules: set[str]) -> set[str]:
+    """irring modules a file imports when it is imported (not those inside functions)."""
+    name = _module_name(path)
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    out = set()
+    tree = ast.parse(path.read_text())
+    nodes = list(tree.body)
+    while nodes:  # module level, including try/if blocks, but not function or class bodies
+        node = nodes.pop()
+        if isinstance(node, (ast.Try, ast.If)):
+            nodes += node.body + node.orelse + getattr(node, "handlers", []) + \
+                getattr(node, "finalbody", [])
+        elif isinstance(node, ast.ExceptHandler):
+            nodes += node.body
+        elif isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name.split(".")[0] == "irring"}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] != "irring":
+                continue
+            for alias in node.names:  # `from pkg import submodule` imports the submodule
+                sub = f"{target}.{alias.name}"
+                out.add(sub if sub in modules else target)
+    return out & modules
+
+
+def _graph() -> dict[str, set[str]]:
+    paths = [p for p in PACKAGE.rglob("*.py") if "_data" not in p.parts]
+    modules = {_module_name(p) for p in paths}
+    return {_module_name(p): _top_level_imports(p, modules) - {_module_name(p)} for p in paths}
+
+
+def test_the_import_graph_has_no_cycle():
+    graph = _graph()
+    assert graph["irring.scenario"] >= {"irring.core", "irring.designs"}  # the parser sees edges
+    state: dict[str, int] = {}
+
+    def visit(node, trail):
+        state[node] = 1
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                raise AssertionError("import cycle: " + " -> ".join(trail + [node, nxt]))
+            if nxt not in state:
+                visit(nxt, trail + [node])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [])
+
+
+def test_core_imports_numpy_and_nothing_else_of_irring():
+    assert _graph()["irring.core"] == set()
+    tree = ast.parse((PACKAGE / "core.py").read_text())
+    imported = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)
+                for a in n.names}
+    imported |= {n.module.split(".")[0] for n in ast.walk(tree)
+                 if isinstance(n, ast.ImportFrom) and n.module and not n.level}
+    assert not any(isinstance(n, ast.ImportFrom) and n.level for n in ast.walk(tree))
+    assert imported - set(sys.stdlib_module_names) == {"numpy"}
+
+
+# Refuses the compiled kernels (and pyyaml unless allowed), as on a machine without them.
+_BLOCKER = textwrap.dedent("""
+    import sys
+
+    class Block:
+        def find_spec(self, name, path=None, target=None):
+            if (BLOCK_YAML and name.split(".")[0] == "yaml") or name.rsplit(".", 1)[-1] in (
+                    "_iterate", "_lines", "_traverse"):
+                raise ImportError(f"blocked: {name}")
+            return None
+
+    sys.meta_path.insert(0, Block())
+""")
+
+
+def _run_blocked(code: str, *, block_yaml: bool = True) -> subprocess.CompletedProcess:
+    script = f"BLOCK_YAML = {block_yaml}\n" + _BLOCKER + textwrap.dedent(code)
+    return subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_protocol_core_and_data_classes_import_without_pyyaml_or_kernels():
+    done = _run_blocked("""
+        import irring, irring.core, irring.hardware.protocol
+        from irring import Points, Reason, Sweep, Truth
+        from irring.hardware.protocol import Hello
+        assert "yaml" not in sys.modules
+        assert not [m for m in sys.modules if m.endswith(("_iterate", "_lines", "_traverse"))]
+        print(sorted(m for m in sys.modules if m.startswith("irring")))
+    """)
+    assert done.returncode == 0, done.stderr
+    assert "irring.scenario" not in done.stdout and "irring.core" in done.stdout
+
+
+def test_without_kernels_the_estimator_fails_only_when_used_and_names_the_fix():
+    done = _run_blocked("""
+        import numpy as np
+        from irring import load_scenario, pipeline          # imports fine without kernels
+        from irring.estimation.estimate import Calibration, estimate
+        from irring.simulation.sim import SimRing
+        sweep = SimRing(load_scenario("t_room")).sweep(0)   # the simulator needs none
+        try:
+            estimate(sweep, Calibration.nominal())
+        except ImportError as exc:
+            print(exc)
+    """, block_yaml=False)
+    assert done.returncode == 0, done.stderr
+    last = done.stdout.strip().splitlines()[-1]
+    assert last.startswith("irring's compiled kernel estimation.") and "is not built" in last
+    assert "pip install ." in last and "C compiler" in last
