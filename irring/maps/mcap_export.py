@@ -26,7 +26,6 @@ import numpy as np
 
 from ..core import Cylinder, box_corners
 
-
 FRAME = "map"
 ROBOT_FRAME = "base_link"
 
