@@ -8,6 +8,7 @@ written from the protocol (docs/protocol.md), not from the driver's code.
 from __future__ import annotations
 
 import os
+import select
 import threading
 import time
 import tty
@@ -46,17 +47,23 @@ class HostileDevice:
         self.behaviour = behaviour
         self.master, slave = os.openpty()
         tty.setraw(slave)
+        os.set_blocking(self.master, False)   # a full pty drops bytes, like a UART overrun
         self.slave = slave
         self.link = os.ttyname(slave)
         self.closed = threading.Event()
+        self._fd_lock = threading.Lock()   # no write to an fd number close() gave back
         self.seq = 0
         self._thread = threading.Thread(target=self._serve, daemon=True)
         self._thread.start()
 
     def send(self, data: bytes) -> None:
-        if not self.closed.is_set():
+        with self._fd_lock:
+            if self.closed.is_set():
+                return
             try:
                 os.write(self.master, data)
+            except BlockingIOError:
+                pass                      # nobody reads: the bytes are lost
             except OSError:
                 self.closed.set()
 
@@ -68,21 +75,34 @@ class HostileDevice:
         threading.Thread(target=loop, daemon=True).start()
 
     def hang_up(self) -> None:
-        self.closed.set()
-        for fd in (self.master, self.slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        """Close the pty (the host sees a disconnect); safe from any thread."""
+        with self._fd_lock:
+            if self.master < 0:
+                return
+            self.closed.set()
+            for fd in (self.master, self.slave):
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+            self.master = self.slave = -1
 
     def _serve(self) -> None:
         decoder = p.Decoder()
-        os.set_blocking(self.master, True)
         while not self.closed.is_set():
-            try:
-                data = os.read(self.master, 256)
-            except OSError:
-                return
+            with self._fd_lock:
+                if self.closed.is_set():
+                    return
+                ready, _, _ = select.select([self.master], [], [], 0)
+                try:
+                    data = os.read(self.master, 256) if ready else None
+                except BlockingIOError:
+                    data = None
+                except OSError:
+                    return
+            if data is None:
+                time.sleep(0.002)
+                continue
             if not data:
                 return
             for item in decoder.feed(data):
@@ -94,6 +114,8 @@ class HostileDevice:
 
     def close(self) -> None:
         self.hang_up()
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout=1.0)
 
 
 # --------------------------------------------------------------------------- behaviours
@@ -138,32 +160,26 @@ def disconnect_on_sweep(dev, cmd):
         dev.hang_up()
 
 
-def flood_irpos(dev, cmd):
-    """After IRSWP: endless valid IRPOS, never a reading (and IRSTP ignored)."""
-    if _hello(dev, cmd):
-        return
-    if isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
-        dev.flooding = True
-        dev.chatter(lambda: line("IRPOS,0"), 0.002)
+def _after_sweep_keep_sending(make, every_s: float, doc: str):
+    """A behaviour that answers IRHLO, then after the first IRSWP sends ``make(dev, cmd)``'s
+    bytes every ``every_s`` seconds forever (IRSTP ignored)."""
+    def behaviour(dev, cmd):
+        if _hello(dev, cmd):
+            return
+        if isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
+            dev.flooding = True
+            data = make(dev, cmd)
+            dev.chatter(lambda: data, every_s)
+    behaviour.__doc__ = doc
+    return behaviour
 
 
-def repeat_irscn(dev, cmd):
-    """After IRSWP: the first step's IRSCN, again and again."""
-    if _hello(dev, cmd):
-        return
-    if isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
-        dev.flooding = True
-        first = scan(dev.seq, cmd.from_step)
-        dev.chatter(lambda: first, 0.005)
-
-
-def sentence_every_quarter_second(dev, cmd):
-    """After IRSWP: one valid but useless sentence every 0.25 s, forever."""
-    if _hello(dev, cmd):
-        return
-    if isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
-        dev.flooding = True
-        dev.chatter(lambda: line("IRINF,1,12,12,1800,3,5,-2,2,hostile"), 0.25)
+flood_irpos = _after_sweep_keep_sending(lambda dev, cmd: line("IRPOS,0"), 0.002,
+                                        "endless valid IRPOS, never a reading")
+repeat_irscn = _after_sweep_keep_sending(lambda dev, cmd: scan(dev.seq, cmd.from_step), 0.005,
+                                         "the first step's IRSCN, again and again")
+sentence_every_quarter_second = _after_sweep_keep_sending(
+    lambda dev, cmd: info(), 0.25, "one valid but useless sentence every 0.25 s")
 
 
 def trickle(dev, cmd):

@@ -189,9 +189,10 @@ def run(args: argparse.Namespace) -> int:
         ring.close()
     sweeps, failure = acq.sweeps, acq.error
     if failure is not None:
-        print(f"irring drive: {failure}", file=sys.stderr)
+        print(f"irring drive: error: {errors.printable(str(failure), 2000)}", file=sys.stderr)
     if not sweeps:
-        print("irring drive: no readings arrived; nothing to map", file=sys.stderr)
+        print("irring drive: error: no readings arrived; nothing to map (nothing written)",
+              file=sys.stderr)
         return errors.DEVICE
 
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
