@@ -235,7 +235,9 @@ def run_case(argv: list[str], cwd: Path, device=None) -> tuple[str, str]:
             dev.close()
     err = done.stderr.strip().splitlines()
     last = err[-1] if err else ""
-    new = [p for p in set(_tree(cwd)) - before if not p.startswith("out")]
+    outs = ["out"] + [os.path.relpath(b, cwd) for a, b in zip(argv, argv[1:]) if a == "--out"]
+    new = [p for p in set(_tree(cwd)) - before
+           if not any(p == o or p.startswith(o + os.sep) for o in outs)]
     if new:
         return "escaped", f"wrote {sorted(new)[:3]}"
     if "Traceback" in done.stderr or done.returncode == 70:
