@@ -4,7 +4,8 @@ Documented figures (models/README.md, irring/simulation/dynamics.py), measured b
 ``irring bench dynamics`` and held here:
 
 - belt stretch (sensor − 0.6 × motor) ≤ STRETCH_BOUND_RAD = 0.007 rad at every physics step
-  over 1000 back-and-forth sweeps without rest (measured 0.0064), no MuJoCo warnings, no NaN;
+  over back-and-forth sweeps without rest (measured 0.0064; steady from the second sweep),
+  no MuJoCo warnings, no NaN;
 - halving the 0.5 ms time step moves a true sensor angle by < ANGLE_TOL_RAD = 1e-4 rad and a
   true distance by < DIST_TOL_M = 0.1 mm (measured 1e-5 rad, 5 µm) and no ADC count;
 - belt + timing, settle 0: angle error rms 0.13 rad (readings ~6 steps stale); settle 52.9 ms
@@ -128,17 +129,17 @@ def test_belt_physics_runs_once_per_step_list_and_changes_no_reading(monkeypatch
 # --------------------------------------------------------------------------- belt physics
 
 
-def test_belt_stretch_stays_bounded_over_1000_sweeps():
-    """1000 back-and-forth sweeps in one run, never resting (each 1.8° step in 4 ms, read on
-    arrival): the hardest duty for the belt; slower sweeps only add rest in which the
-    stretch decays (next test). 560 000 RK4 steps of 0.5 ms."""
-    r = bench.coupling(1000)
+def test_belt_stretch_is_bounded_and_steady_from_the_second_sweep():
+    """Back-and-forth sweeps in one run, never resting (each 1.8° step in 4 ms, read on
+    arrival): the hardest duty for the belt; slower sweeps only add rest in which the stretch
+    decays (next test). The first sweep starts from rest; from the second on every sweep
+    starts in the same state, so the second and third stretch alike and so would the 1000th."""
+    r = bench.coupling(3)
     stretch = r["stretch_per_sweep_rad"]
-    assert r["warnings"] == 0 and np.all(np.isfinite(stretch))
+    assert r["warnings"] == 0 and np.all(np.isfinite(stretch)) and stretch.shape == (3,)
     assert stretch.max() < STRETCH_BOUND_RAD, stretch.max()
     assert stretch.max() > 0.001  # the belt does stretch: a real compliance, not rigid
-    # steady: no growth from the second sweep on (the first starts from rest)
-    np.testing.assert_allclose(stretch[1:], stretch[1], rtol=1e-6)
+    np.testing.assert_allclose(stretch[2], stretch[1], rtol=1e-6)
     assert r["read_error_max_rad"] < 0.02  # the sensors lag a 4-ms step by < 1.2°
 
 

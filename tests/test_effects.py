@@ -392,3 +392,8 @@ def test_bench_effects_reports_every_effect(capsys):
     r = json.loads(capsys.readouterr().out)
     assert [e["effect"] for e in r["effects"]] == list(effects.STAGE_ORDER)
     assert r["sweep_shape"] == [S, N] and r["off_budget_pct"] == 2.0
+
+
+def test_the_stage_registry_runs_in_the_documented_order():
+    # the order readings pass the stages; a new stage must take its place in STAGE_ORDER
+    assert tuple(effects.STAGES) == effects.STAGE_ORDER

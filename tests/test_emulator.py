@@ -1,4 +1,4 @@
-"""The emulated ring: its firmware answers per PROTOCOL.md, and SerialRing over a REAL pty
+"""The emulated ring: its firmware answers per docs/protocol.md, and SerialRing over a REAL pty
 gets SimRing's counts exactly — or, under injected faults, a subset of them, never more."""
 
 from __future__ import annotations

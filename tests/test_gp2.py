@@ -52,7 +52,7 @@ def test_gp2d12_fit_matches_datasheet_points_to_about_a_centimetre():
     res = d - m.distance(v)
     assert np.sqrt(np.mean(res ** 2)) < 0.006
     assert np.max(np.abs(res)) < 0.015
-    # DESIGN.md: ≈ 2.4 V at 10 cm, ≈ 0.4 V at 80 cm
+    # docs/paper.md: ≈ 2.4 V at 10 cm, ≈ 0.4 V at 80 cm
     assert m.voltage(0.10) == pytest.approx(2.45, abs=0.05)
     assert m.voltage(0.80) == pytest.approx(0.42, abs=0.02)
 

@@ -493,3 +493,16 @@ def test_read_pgm_rejects_other_formats(tmp_path):
     p.write_bytes(b"P2\n2 1\n255\n0 255\n")
     with pytest.raises(ValueError, match="P5"):
         read_pgm(p)
+
+
+def test_cell_of_and_cell_centres_take_each_axis_from_its_own_origin():
+    # origin x != y and a non-square grid: swapping the axes anywhere moves every answer
+    g = OccupancyGrid((-0.30, 0.12), (7, 11), 0.05)
+    ix, iy = g.cell_of(np.array([-0.30, -0.26, 0.249]), np.array([0.12, 0.171, 0.469]))
+    assert ix.tolist() == [0, 0, 10] and iy.tolist() == [0, 1, 6]
+    ix, iy = g.cell_of(-0.301, 0.119)                        # just outside both low edges
+    assert (int(ix), int(iy)) == (-1, -1)
+    x, y = g.cell_centers()
+    assert x.shape == (11,) and y.shape == (7,)
+    assert x[0] == pytest.approx(-0.275) and y[0] == pytest.approx(0.145)
+    assert y[-1] == pytest.approx(0.12 + 6.5 * 0.05)

@@ -1,4 +1,4 @@
-"""IRR protocol v1: PROTOCOL.md's test vectors, every malformed kind, stream resync."""
+"""IRR protocol v1: docs/protocol.md's test vectors, every malformed kind, stream resync."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from irring.designs import PAPER_RING
 from irring.hardware import protocol as p
 
-# PROTOCOL.md, section "Example", copied verbatim (host and device lines).
+# docs/protocol.md, section "Example", copied verbatim (host and device lines).
 EXAMPLE = [
     b"$IRHLO*50",
     b"$IRINF,1,12,12,1800,3,5,-35,35,atmega8535-1.0*77",
@@ -21,8 +21,8 @@ EXAMPLE = [
     b"$IRDON,70*75",
     b"$IRERR,4,step out of range*40",
 ]
-# PROTOCOL.md also shows `$IRGTO,99*73`, but XOR("IRGTO,99") is 0x6B: the page's one wrong
-# checksum. A correct receiver must drop that line; the corrected line round-trips.
+# The first specification showed `$IRGTO,99*73`, but XOR("IRGTO,99") is 0x6B; docs/protocol.md
+# prints the corrected line. A correct receiver drops the old one; the corrected one round-trips.
 EXAMPLE_BAD_GTO = b"$IRGTO,99*73"
 EXAMPLE_GTO_FIXED = b"$IRGTO,99*6B"
 

@@ -386,3 +386,21 @@ def test_layering_protocol_imports_no_serial_and_the_driver_no_simulator():
             "from irring.hardware import SerialRing; assert 'serial' in sys.modules; "
             "assert 'irring.simulation.sim' not in sys.modules and 'mujoco' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("retries", [0, 3])
+def test_a_silent_device_gets_exactly_retries_plus_one_irstp_before_the_timeout(retries):
+    # three readings, then nothing more, not even to IRSTP: the first IRSTP and then
+    # `retries` repeats of it, each after its own timeout, and then DeviceTimeout
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            return [p.Scan(i, s, i, (10, 11)) for i, s in enumerate(range(msg.from_step, msg.from_step + 3))]
+        return []
+
+    port = ScriptPort(script)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S, retries=retries).open()
+    with pytest.raises(DeviceTimeout, match=rf"; {retries + 1} IRSTP unanswered"):
+        ring.sweep()
+    assert [m.TYPE for m in port.sent].count("IRSTP") == retries + 1

@@ -14,7 +14,7 @@ HELP = """\
 Sweep the real ring (or `irring emulate`) over a serial port at one or more poses, then run
 the readings through the same estimator and occupancy-grid mapper as `irring run`.
 
-The ring must speak IRR protocol v1 (PROTOCOL.md). The handshake reads the sensor count,
+The ring must speak IRR protocol v1 (docs/protocol.md). The handshake reads the sensor count,
 ADC bits, motor step, belt ratio and step limits from the device; the ring radius and
 emitter offset, which the device does not report, come from the paper (0.15 m, 7 mm), from
 --calibration (its emitter offset d_o) or from --truth. Steps whose readings were lost on

@@ -18,7 +18,7 @@ examples:
   irring emulate t_room --link /tmp/irring --stall-after 100 --disconnect-after 400
   irring emulate t_room --tcp 7000                      # then: irring drive --port socket://127.0.0.1:7000
 
-The device speaks IRR protocol v1 (PROTOCOL.md) on /dev/pts/N; any serial program can open
+The device speaks IRR protocol v1 (docs/protocol.md) on /dev/pts/N; any serial program can open
 the --link path (e.g. `python -m serial.tools.miniterm /tmp/irring`, then type $IRHLO*50).
 Readings come from the scenario's simulated ring and effects with the scenario's seed, so a
 fault-free full sweep equals `SimRing(scenario).sweep(pose)`. The robot starts at the

@@ -1,6 +1,6 @@
 """IRR serial protocol version 1: pure encode/decode of sentences (no serial I/O here).
 
-The protocol is specified in ``PROTOCOL.md`` (shared with firmware authors). A sentence is
+The protocol is specified in ``docs/protocol.md`` (shared with firmware authors). A sentence is
 
     $<TYPE>[,<field>]*<CS>\\r\\n
 
@@ -14,7 +14,7 @@ at most :data:`MAX_SENTENCE_BYTES` bytes from ``$`` to ``\\n`` inclusive.
   resynchronises at the next ``$`` after garbage, returning messages and rejections alike
   (a receiver counts rejections; it never raises on what the wire delivers).
 
-Messages are frozen dataclasses, one per sentence type; field ranges follow PROTOCOL.md.
+Messages are frozen dataclasses, one per sentence type; field ranges follow docs/protocol.md.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ CLOCK_MODULO = 1 << 32    # the device clock (ms) wraps at 2³²
 MAX_SAMPLES = 64
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
 
-# Error codes a device answers with (PROTOCOL.md, IRERR).
+# Error codes a device answers with (docs/protocol.md, IRERR).
 ERR_BAD_SENTENCE = 1
 ERR_UNKNOWN_TYPE = 2
 ERR_BAD_ARGUMENT = 3

@@ -198,7 +198,8 @@ class SerialRing:
     baudrate: UART speed (both ends must agree; 115200 by default).
     timeout_s: longest silence tolerated while an answer is due, on top of the time the
         device needs per step (settle + samples × 38.3 ms). After it the driver sends
-        IRSTP up to ``retries`` times before giving up with :class:`DeviceTimeout`.
+        IRSTP and repeats it up to ``retries`` times (``retries + 1`` in all, each with its
+        own ``timeout_s``) before giving up with :class:`DeviceTimeout`.
     retries: how often a command is repeated after IRERR 1, busy or a timeout.
     template: the ring design whose numbers the device does not report (radius, emitter
         offset, sensor height, joint limit); IRINF overrides sensors, step, gear, limits.

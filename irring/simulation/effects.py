@@ -311,7 +311,6 @@ class QuantizationStage(Stage):
 STAGES: dict[str, type[Stage]] = {cls.name: cls for cls in (
     BeamStage, IncidenceStage, ReflectanceStage, FoldoverStage, AveragingStage, OutliersStage,
     NoiseStage, QuantizationStage)}
-assert tuple(STAGES) == STAGE_ORDER
 
 
 # --------------------------------------------------------------------------- pipeline

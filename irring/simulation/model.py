@@ -220,15 +220,11 @@ class RingModel:
 
     model: mujoco.MjModel
     ring: Ring
-    motor_joint: int          # joint id of ring_motor
     motor_qpos: int           # its qpos address
     motor_actuator: int       # actuator id of ring_motor
     sensor_joints: np.ndarray  # (N,) joint ids of the sensor hinges
     sensor_qpos: np.ndarray   # (N,) their qpos addresses
     emitter_sites: np.ndarray  # (N,) site ids of the emitters
-    rangefinder_adr: np.ndarray  # (N,) sensordata address of each rangefinder's block
-    rangefinder_dim: int      # numbers per rangefinder (dist, dir, origin, point, normal)
-    belts: np.ndarray         # (N,) equality ids
     belt_coef: np.ndarray     # (N, 2): sensor angle = c0 + c1 · motor angle
     chassis_mocap: int        # mocap index of the chassis (the robot pose)
     ray_geoms: np.ndarray     # ids of the geoms beams can hit (walls, obstacles)
@@ -276,11 +272,9 @@ def _resolve(model: mujoco.MjModel, ring: Ring, reflectance: dict[str, float]) -
         refl[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)] = value
     ray_geoms = np.flatnonzero(model.geom_group == RAY_GROUP)
     return RingModel(
-        model=model, ring=ring, motor_joint=motor, motor_qpos=int(model.jnt_qposadr[motor]),
+        model=model, ring=ring, motor_qpos=int(model.jnt_qposadr[motor]),
         motor_actuator=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, "ring_motor"),
         sensor_joints=sensor_joints, sensor_qpos=model.jnt_qposadr[sensor_joints].copy(),
-        emitter_sites=sites, rangefinder_adr=model.sensor_adr[rfs].copy(),
-        rangefinder_dim=int(model.sensor_dim[rfs[0]]), belts=belts,
-        belt_coef=model.eq_data[belts, :2].copy(),
+        emitter_sites=sites, belt_coef=model.eq_data[belts, :2].copy(),
         chassis_mocap=int(model.body_mocapid[chassis]), ray_geoms=ray_geoms,
         reflectance=refl)

@@ -1,6 +1,6 @@
 """The paper's design geometry (§II): blind spot, overlap angle and overlap area.
 
-Analytic, from the paper's equations (restated in ../shared/DESIGN.md):
+Analytic, from the paper's equations (restated in docs/paper.md):
 
 - Eq. 1, :func:`blind_spot_m`: the largest circular obstacle a fan of rays with angular
   step Δθ can miss at distance d, ``r = d / (1/sin(Δθ/2) − 1)``.

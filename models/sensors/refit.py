@@ -35,7 +35,7 @@ GP2D12_POINTS = dict(
 SPECS = {
     "gp2d12": dict(
         part="Sharp GP2D12",
-        source="datasheet-derived points listed in DESIGN.md (mV → cm)",
+        source="datasheet-derived points listed in docs/paper.md (mV → cm)",
         min_range_m=0.10, max_range_m=0.80, peak_distance_m=0.09, max_incidence_deg=70.0,
         **GP2D12_POINTS,
         notes="Peak (fold-over) at 9 cm: the datasheet curve tops out near 2.6–2.7 V at 8–9 cm; "
@@ -52,7 +52,7 @@ SPECS = {
     ),
     "gp2y0a02": dict(
         part="Sharp GP2Y0A02YK0F",
-        source="points from public simulator data listed in DESIGN.md (m → V); the 0.15 m point "
+        source="points from public simulator data listed in docs/paper.md (m → V); the 0.15 m point "
                "sits on the rounded peak and is kept out of the fit",
         min_range_m=0.20, max_range_m=1.50, peak_distance_m=0.15, max_incidence_deg=70.0,
         distance_m=[0.20, 0.30, 0.40, 0.50, 0.60, 0.80, 1.00, 1.20, 1.50],
