@@ -1,7 +1,7 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 # distutils: extra_compile_args = -ffp-contract=off
-"""Compiled kernels for the iteration of the Table II estimator (see :mod:`irring.estimation.estimate`,
-whose module docstring explains the algorithm and whose ``estimate_detail`` runs the loop).
+"""Compiled kernels for the iteration of the Table II estimator (docs/estimator.md explains
+the algorithm; :func:`irring.estimation.estimate.estimate_detail` runs the loop).
 
 The loop works on one sweep's live readings (~850) and its lines (~30). Written with numpy it
 made ~1,500 calls per sweep, bound by per-call overhead; here each phase is one call:

@@ -1,78 +1,6 @@
 """Calibration and the paper's iterative range estimator (Park, Baek & Lee 2005, Table II).
 
-A Sharp GP2 reading S (ADC counts) gives the distance by Eq. 10, ``d = a(θ)·S^b(θ)``, but
-the coefficients depend on the incidence angle θ between the beam and the surface normal,
-which a single reading cannot tell. The estimator of Table II recovers θ from the shape of
-the scene, vectorised over a whole sweep (S steps × N sensors):
-
-1. assume θ = 0 for every reading;
-2. d from Eq. 10 with a(θ), b(θ) of the :class:`Calibration`;
-3. end points from d, the sensor angle and the emitter offset d_o (``core.beam_geometry``);
-4. group the end points into lines: per sensor the readings are ordered by sensor angle, so
-   each sensor's sweep is a polyline; it is split at its corners (iterative end-point fit,
-   i.e. Douglas–Peucker, with a noise-scaled threshold) and adjacent collinear pieces are
-   merged again; every piece gets a total-least-squares line (vertical lines are fine);
-5. θ_new = angle between each reading's beam and the normal of its line;
-6. repeat from 2 until |θ_new − θ| < ε for every reading, or ``max_iterations``.
-
-Schedule (how steps 2–6 are repeated; the work goes where it changes the answer):
-
-- *grouping* (step 4 in full) at θ = 0: split-and-merge, corners refined, then each reading
-  judged against its piece's line (it must lie on it), readings near a corner re-read with
-  every nearby line's θ and put on the line that explains them clearly best, lines the beams
-  would meet past the drop-out angle dropped, readings on no line adopted by a line they land
-  on when re-read with its θ. θ is then taken from the members' own TLS lines;
-- *held iterations*: the members stay, so every member's θ follows from its line's direction
-  a (θ_i = |π/2 − |h_i − a||); one iteration fits all lines at once (sums over the
-  members sorted by line) and moves a. The plain step is Table II's a ← G(a); with damping on
-  (the default) it is a secant step on G(a) − a per line, its gain held to [1/64, 8]: it damps
-  an oscillation (G' < 0) and speeds up a slow contraction, and stays plain where G' ≥ 1;
-- *regrouping*: once θ has settled coarsely (every step < ``regroup_until_rad``), and in any
-  case after the first convergence, the readings are grouped again at their straightened
-  positions: the pieces are kept, their corners refined again and membership judged afresh.
-  This repeats while it changes who belongs where (not back to the grouping before), up to
-  ``regroup_iterations`` groupings in all (the one at θ = 0 included; a third or later only
-  within the first 8 iterations, so late regroups cannot keep a corner from settling);
-- *membership checks*: when the held iterations settle, the members are checked once more at
-  their final positions (a wall ends at its corner: a reading on a line beyond its
-  intersection with the next piece's line moves across if it fits there; drop-outs;
-  adoptions), and iterated again if that changed anything.
-
-Speed: the segmentation runs as one compiled call (``irring/estimation/_lines.pyx``) and the loop as
-compiled kernels (``irring/estimation/_iterate.pyx``). The algorithm's readable statement is the numpy
-oracle :mod:`irring.estimation.estimate_numpy` (~2,500 numpy calls per sweep, bound by per-call
-overhead); the kernels are tested against it (``tests/test_estimate_oracle.py``), and an
-algorithm change goes into the oracle first. A t_room
-sweep now takes 0.47 ms instead of ~3.1 ms (segmentation 0.8 → 0.04 ms, the rest 2.1 →
-0.45 ms): the estimator stage of ``irring bench speed``, median of 200.
-
-Readings still moving after ``max_iterations`` are NOT_CONVERGED (in the noisy T-room about
-0.3 % of readings, mostly where a shoulder's convex corner is seen nearly edge-on).
-
-Fallback: a reading on no usable line (a thin cylinder, an isolated return, a line shorter
-than ``LineOptions.min_length_m`` or with fewer than ``min_points`` readings) keeps θ = 0, the
-paper's starting assumption. Its θ is unknown, so its ``sigma_m`` includes the RMS error of
-the θ = 0 distance over the incidences a round surface gives (sin θ uniform up to the
-drop-out angle): ≈ 17 / 39 / 63 mm at 0.2 / 0.4 / 0.6 m on the GP2D12 curve.
-
-End points: a reading that took θ from a line of ≥ 10 members is put where its beam meets
-that line (refitted to the members' final end points) when that lies within 3σ of its own
-distance (:func:`snap_to_lines`): the line averages its members' noise.
-
-Fold-over: with a calibration that folds (``peak_distance_m`` > 0) every reading may lie on
-the near branch too; :func:`resolve_foldover` picks the branch from the sweep's lines or
-flags FOLDOVER_AMBIGUOUS (docs/foldover.md).
-
-Validity (:class:`irring.core.Reason`): a missing reading (NaN counts or a step in
-``Sweep.missing_steps``) is MISSING; counts at ADC full scale SATURATED; counts within
-``NO_RETURN_SIGMAS`` of the calibration's count noise above the no-return level NO_RETURN, and
-up to ``RETURN_SIGMAS`` above it OUT_OF_RANGE (too weak to tell from noise); counts brighter
-than the calibrated near end of the curve, or whose branch a folding calibration cannot
-decide, FOLDOVER_AMBIGUOUS (below the peak distance one voltage has two distances); a final
-distance outside [min_range, max_range] OUT_OF_RANGE; a reading whose θ still moved by ≥ ε
-after ``max_iterations`` NOT_CONVERGED. A valid reading never carries NaN or inf.
-
-Units: metres, radians, ADC counts.
+How it works, its assumptions and measured figures: docs/estimator.md.
 """
 
 from __future__ import annotations
@@ -771,7 +699,7 @@ def _classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
 def estimate(sweep: Sweep, calibration: Calibration | None = None, *, max_iterations: int = 20,
              tolerance_rad: float = math.radians(0.1), iterate: bool = True,
              lines: LineOptions = LineOptions(), keep_unconverged: bool = False) -> Points:
-    """Counts → end points by the iterative estimation of Table II (see the module doc).
+    """Counts → end points by the iterative estimation of Table II (see docs/estimator.md).
 
     ``calibration`` defaults to :meth:`Calibration.for_sweep` (the datasheet curve).
     ``iterate=False`` gives the θ = 0 assumption (Eq. 10 with a(0), b(0)).
@@ -802,7 +730,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
               tolerance_rad: float, iterate: bool, lines: LineOptions, *, keep_history: bool,
               damping: bool, detail: bool, hold: np.ndarray | None = None,
               snap: bool = True, keep_unconverged: bool = False) -> Estimate:
-    """The estimator: this function is the schedule of the module docstring, its phases run
+    """The estimator: this function is the schedule of docs/estimator.md, its phases run
     as compiled kernels (:mod:`irring.estimation._iterate`). ``detail``: also the final lines.
     ``hold`` (S, N): readings kept out (FOLDOVER_AMBIGUOUS); None with a folding
     calibration: resolve the fold-over first (:func:`resolve_foldover`). ``snap``: line

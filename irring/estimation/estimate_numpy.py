@@ -6,11 +6,11 @@ checks, adoption, held iterations with the secant step control, regroups, the fi
 with the fallback σ). The compiled kernels (``irring/estimation/_lines.pyx``, ``irring/estimation/_iterate.pyx``)
 are an optimisation of exactly this code, and ``tests/test_estimate_oracle.py`` holds them
 to it with hypothesis (the tolerance is stated there). An algorithm change goes here first;
-the kernels follow. The schedule and every phase are described in :mod:`irring.estimation.estimate`'s
-module docstring; the comments here say why, step by step.
+the kernels follow. The schedule and every phase are described in docs/estimator.md; the
+comments here say why, step by step.
 
-Not for speed: ~3 ms per t_room sweep against ~0.5 ms for the kernels (bound by numpy's
-per-call overhead on ~850 readings).
+Not for speed: numpy's per-call overhead on ~850 readings makes it several times slower than
+the kernels.
 """
 
 from __future__ import annotations

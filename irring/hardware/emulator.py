@@ -1,38 +1,6 @@
 """A ring device that speaks the IRR protocol on a pseudo-terminal, backed by the simulator.
 
-    sim = SimRing(load_scenario("t_room"))
-    with PtyEmulator(Device(sim), link="/tmp/irring") as emu:      # /tmp/irring → /dev/pts/N
-        emu.serve_forever()                                        # or emu.start_thread()
-
-Three layers, each replaceable in tests:
-
-* a *source* produces the readings: any :class:`irring.core.RingSource` with ``ring``,
-  ``adc_bits`` and ``n_sweeps`` (the poses its robot visits), such as
-  :class:`irring.simulation.sim.SimRing` with the scenario's effects;
-* :class:`Device` is the firmware: it answers sentences and produces IRSCN one step at a
-  time, with fault injection (:class:`Faults`) on what it sends; it does no I/O and is driven
-  by ``receive(bytes, now)`` / ``poll(now)``;
-* :class:`PtyEmulator` puts a Device on a pty master (raw mode, non-blocking), symlinks the
-  slave at ``link`` and optionally paces output like a UART at ``baud``;
-  :class:`TcpEmulator` serves it at ``socket://HOST:PORT`` instead, and :class:`DevicePort`
-  wires it to the driver in-process (a pyserial-like object, no pty, no thread).
-
-Reproducibility: the device calls ``source.sweep(pose_index, steps=...)`` exactly once per
-accepted IRSWP, with the IRSWP's steps in order, so a host that sweeps a contiguous run in
-one IRSWP gets exactly ``SimRing(scenario, seed).sweep(pose_index, steps=...)`` — SimRing
-seeds its k-th sweep at a pose with ``default_rng([seed, pose_index, k])`` — as whole ADC
-counts (a scene without the ``quantization`` effect gives fractional counts; the device
-rounds them).
-
-Poses: the emulated robot starts at scenario pose 0; every further IRSWP that covers the
-whole step range (min_step … max_step, either direction) moves it to the next pose (wrapping).
-Partial sweeps — re-sweeps of missing steps — stay at the current pose. The host's
-``samples`` and ``settle_s`` set the device's timing only: the scenario fixes the physics
-(averaging applies when it lists the ``averaging`` effect).
-
-Device clock: with ``realtime`` the wall clock since start; otherwise a virtual clock that
-advances by what the real ring would spend (motor moves, settle, samples × 38.3 ms), so
-IRSCN timestamps and ``Sweep.duration_s`` look like the hardware's even when unthrottled.
+How it works, its assumptions and measured figures: docs/emulator.md.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Compiled kernels of the occupancy grid: its cell walk and its per-sweep update.
 
-irring/maps/mapping.py's module doc explains the rules (touch lengths, clipping) and the inverse
+docs/mapping.md explains the rules (touch lengths, clipping) and the inverse
 sensor model; this is their one implementation:
 
 * :func:`walk` lists every cell a batch of segments visits (``mapping.traverse``);
@@ -317,7 +317,7 @@ cdef inline void add_runs(const Seg* s, double t_end, long long unit, long bx0, 
 cdef inline double weight(double z_a, double z_b, double mu, double l_occ,
                           double l_free) noexcept nogil:
     """Log-odds for a cell a valid beam crosses from z_a to z_b, in σ from its end point (the
-    model in mapping.py's module doc); ``mu`` = the free margin in σ."""
+    model in docs/mapping.md); ``mu`` = the free margin in σ."""
     cdef double gap, w, y, t
     # occupied: l_occ·exp(−gap²/2), gap = how far the cell's [z_a, z_b] is from 0
     gap = dmax(dmax(z_a, -z_b), 0.0)

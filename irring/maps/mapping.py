@@ -1,114 +1,6 @@
 """Log-odds occupancy grid built from estimated end points (paper §IV, after Elfes 1989).
 
-The paper's map: 10 mm × 10 mm cells; the cells a ray passes are made free, and "in order
-to consider the uncertainty of the sensor information, the Gaussian distribution is used"
-around the end point. Here every reading adds log-odds to the cells its beam crosses:
-
-* a **valid** reading at distance d with 1-σ range uncertainty σ (``Points.sigma_m``,
-  floored at ``min_sigma_m``) adds, to a cell the beam crosses over [s_a, s_b] metres from
-  the emitter,
-
-      l_free · Φ((d − m − s_b)/σ) [only if s_b < d − m]  +  l_hit · exp(−gap² / 2σ²),
-      l_hit = max(min(l_occ_min, l_occ), l_occ · min(1, σ_occ / σ))
-
-  where gap is the distance from d to the cell's interval (0 for the cell holding the end
-  point), m = ``free_margin_cells`` cells and σ_occ = ``occ_sigma_m``. Cells well in front
-  get l_free, the end cell gets l_hit, cells just behind the end point (inside the surface) a
-  Gaussian tail of it; the beam is followed to d + ``tail_sigmas``·σ. The hit is **weighed by
-  the reading's σ**: a reading k times as uncertain as σ_occ adds 1/k of l_occ, spread over k
-  times the length (the same evidence in all), so a wall is drawn where many readings agree,
-  not as the union of every noisy one; but never less than ``l_occ_min``, so a lone far
-  reading (the wall behind a table leg) still marks its cell until a beam says otherwise.
-  The margin m keeps beams from clearing the
-  cells just in front of their own end point: a curved or slanted surface (a table leg) only
-  partly fills its cells, and beams ending in one cell cross the free corner of the next;
-* a **no-return** reading (``Reason.NO_RETURN``) frees every cell up to the max range along
-  its heading (weight ``l_no_return``) and marks nothing;
-* every other invalid reading (out of range, fold-over, saturated, …) changes nothing.
-
-A reading from a sensor with a wide cone (``Points.cone_half_angle_rad`` > 0, the sonar's
-±15°) says only that the nearest echo came from *somewhere* on an arc of its cone. It is
-mapped Moravec–Elfes style (:func:`cone_fan`): as a fan of rays ``cone_step_rad`` apart
-across the cone, each ending on the arc, weighed with the ``cone_*`` parameters: a hit
-``cone_l_occ`` = 1.25 (half a sharp hit: arcs from several readings agree only where the
-surface is), a pass ``cone_l_free`` = −0.5 (three to mark a cell free: a smooth surface
-inside the cone facing away echoes elsewhere and is passed silently) and no return
-``cone_l_no_return`` = 0 (silence only says that nothing faced the transducer). Placing the
-echo on the cone's axis instead drew sonar12 walls where they are not (`irring compare`:
-occupied F1 0.06 on the T-rooms).
-
-The updates of one :meth:`OccupancyGrid.insert` are summed, added, then clamped to
-[``l_min``, ``l_max``] so no cell becomes too certain to change. A cell is *occupied* above
-probability 0.65 (log-odds > 0.62), *free* below 0.196 (log-odds < −1.41) and *unknown* in
-between — the thresholds ROS map_server uses, so the PGM export and the grid agree.
-
-The default numbers (:class:`MapperParams`) and what they do to a cell:
-
-* ``l_free`` = −1.5: **one clean pass marks a cell free** (p = 0.18). A user reads a light
-  cell as "a beam went through here"; a design whose beams rarely overlap (a radial ring)
-  then shows its beams instead of nothing. Cells within a few σ of the end point get less
-  (l_free·Φ) and may stay unknown: there the beam does not say much.
-* ``l_occ`` = 2.5: one sharp hit (σ ≤ ``occ_sigma_m`` = 5 mm, half a cell) marks a cell
-  occupied (p = 0.92) and **outweighs a passing beam**: hit + pass = 1.0 (occupied), hit +
-  two passes = −0.5 (unknown, not free); two hits reach the clamp (4) and take four clean
-  passes to turn free. A hit of σ ≥ 7.8 mm adds ``l_occ_min`` = 1.6 (p = 0.83): still
-  occupied alone, but one passing beam (−1.5) turns it unknown.
-* ``l_no_return`` = −0.75: a beam that saw nothing counts **half a clean pass** (two make a
-  cell free). A missing return is weaker evidence — a dark, shiny or grazing surface gives
-  none either — and at full weight such beams cleared cells behind walls.
-* ``tail_sigmas`` = 0.25 and ``free_margin_cells`` = 0.5: the occupied evidence reaches a
-  quarter σ into the surface and beams clear cells up to half a cell before their own end
-  point (with a 2σ tail and a one-cell margin the stronger hits thickened walls: occupied
-  precision 0.94–0.97 → 0.85–0.89).
-
-σ-weighted hits (``occ_sigma_m``, ``l_occ_min``; tail 0.5 → 0.25), against every hit
-weighing l_occ, measured with the estimator that puts line members on their lines: on the
-ten bundled rooms and five held-out ones (not in the repository; `irring bench rooms`, one
-seed each) occupied precision min/mean 0.821/0.943 → 0.923/0.974, F1 0.884/0.960 →
-0.924/0.974; on the T-rooms over seeds 0–2 (T-room / cylinder / three cylinders) F1
-0.978/0.982/0.977 → 0.983/0.990/0.984, shadow 1.00 → 1.00 and 0.52 → 0.52. Walls of
-big_room (seeds 0–2): 2.3 → 2.0 occupied cells across. End points scattered by 13 mm RMS and
-left so (one synthetic sweep from 0.43 m, tests/test_sharp_maps.py): 4.0 → 3.0 cells, the
-cell two in front of the surface occupied in 17 % of the columns instead of 47 %.
-
-Earlier, measured on the bundled scenes (simulated, estimated and mapped as `irring run` does; mean
-of seeds 0–2; T-room / cylinder / three cylinders), previous two-pass defaults (l_occ 0.85,
-l_free −0.75, 2σ tail, one-cell margin) → these: occupied F1 0.968/0.981/0.974 →
-0.971/0.969/0.972, free accuracy 1.00 → 1.00, coverage 0.898/0.846/0.894 → 0.909/0.859/0.906,
-shadow behind the table leg 1.00 → 1.00. A radial ring (radial12: 12 fixed beams per pose)
-goes from coverage 0.00 to 0.03 — its beams now show as free lines.
-
-Ray traversal (:func:`traverse`) is Amanatides & Woo's exact voxel walk, compiled: the one
-implementation of the walk and of the update below is the Cython kernel irring/maps/_traverse.pyx
-(one call per batch, a C loop per ray and column). Every ray is clipped to the grid and
-walked column by column along its major axis (one or two cells per column); each column is
-computed from its number, so nothing accumulates along a ray.
-
-An insert works on the box of cells its beams reach, never on the whole grid, and splits
-each beam where its weight stops being constant: a no-return beam, and a valid beam up to
-4.5 σ (``NEAR_SIGMAS``) before its free margin, add one constant per cell, so they go in as
-*row runs* (in each minor-axis row a beam visits a contiguous run of cells: +1 at the run's
-start, −1 past its end, then an integer cumulative sum along the rows — work per border
-crossing, not per cell); only the last few columns of a valid beam are walked cell by cell
-and weighed with the formula above. Both follow :func:`traverse`'s rules exactly (the same
-cells; tests compare them visit by visit); the weights differ from the formula by < 1e-4
-log-odds (the constant part is within 4e-5 of it; erfc is Abramowitz & Stegun 7.1.25, to
-2.5e-5: one exp, where libc's erfc takes three times as long).
-
-Speed: one T-room sweep (852 readings, 10 mm cells) inserts in ~0.24 ms median on the 2-core
-reference machine, against ~0.62 ms for the vectorised numpy version it replaces (~150 numpy
-calls per insert; it weighed in float32, so maps differ by ≤ 1.2e-6 log-odds over every
-bundled scene and seeds 0–4, with identical PGMs and scores) and ~3.0 ms for the sort-based
-traversal before that. Measured by timing ``OccupancyGrid.insert`` on 20 fresh t_room
-sweeps at pose 0, median of 300 (the mapper stage of ``irring bench speed`` times the same
-call: ~0.32 ms there, was ~0.7–0.9, as its other stages evict the caches).
-Where the time goes (kernel variants with one part left out): ~0.03 ms clipping and setting
-up the beams, ~0.055 the runs (~13 k border crossings), ~0.02 their cumulative sums, ~0.08
-the ~4 800 near-end cells (walk, and two exps each), ~0.03 the Python side, allocation and
-the clamped add of the counts.
-
-Frames: the grid's origin is the world (x, y) of the *corner* of cell (0, 0); row ``iy``
-grows with y, column ``ix`` with x; ``log_odds[iy, ix]``.
+How it works, its assumptions and measured figures: docs/mapping.md.
 """
 
 from __future__ import annotations
@@ -144,7 +36,7 @@ _NO_RETURN = int(Reason.NO_RETURN)
 
 @dataclass(frozen=True)
 class MapperParams:
-    """The inverse sensor model's knobs (log-odds units; lengths in metres). The module doc
+    """The inverse sensor model's knobs (log-odds units; lengths in metres). docs/mapping.md
     says what the defaults do to a cell: one clean pass marks it free, one end-point hit
     marks it occupied and outweighs a pass, a no-return beam counts half a clean pass.
     """

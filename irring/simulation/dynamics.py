@@ -1,65 +1,6 @@
 """Where and when the ring reads: belt and stepper physics, GP2 timing, a moving robot.
 
-A kinematic sweep (``irring.simulation.sim``) puts every sensor exactly where the motor step says and
-reads it at once. Three effects change *where and when* a reading is taken (not the
-signal, which stays the effects pipeline's business):
-
-``belt_dynamics``
-    The stepper is a position actuator (``ring_motor``) whose target follows a
-    minimum-jerk profile from one full step (1.8°) to the next: a microstepping driver's
-    smooth move, ``step_time_s`` per full step (a move of n steps takes n·step_time_s, so
-    the peak speed is 1.875·step/step_time_s whatever n; peak acceleration
-    5.77·step/step_time_s² for one step). The sensors follow through the belt, modelled
-    as one spring-damper per sensor between its hinge and the motor pulley (a fixed tendon
-    ``belt_KK`` = ``ir_KK_hinge`` − gear·``ring_motor``): stiffness K = I/τ² and damping
-    2·√(K·I) for the sensor's inertia I about its hinge and τ = ``belt_timeconst_s``
-    (critically damped, the template's ``solref="τ 1"``); ``backlash_rad`` is a dead
-    band of that width in the spring. MuJoCo steps this physics (RK4, ``timestep_s``)
-    and a reading is taken where physics has put the sensor: lag and overshoot show up as
-    angle errors. Why a spring and not the template's equality constraint: a soft
-    equality's violation scales with the time step (0.012 rad at 1 ms, 0.005 at 0.5 ms,
-    0.0024 at 0.25 ms after one step), so it is a numerical artefact, not a compliance;
-    the spring's is physics and converges (``models/README.md``).
-``timing``
-    Each GP2 measures on its own clock, every ``period_s`` ± ``jitter_s`` (a part's
-    period, drawn once per sensor from the seed, uniform in that band) at a random phase,
-    and its output holds the last measurement from ``latency_s`` after it was taken. The
-    ADC read at time r therefore returns the measurement taken at the last instant m of
-    that sensor's clock with m + latency ≤ r, with the sensor where it was at m
-    (:class:`SensorClocks`). The same rule is MuJoCo's periodic, delayed sensor
-    (``interval``, ``delay``); ``tests/test_dynamics.py`` checks the two agree.
-``motion``
-    The robot drives ``path`` at ``speed_m_s`` while sweeping back to back
-    (:class:`Path`). The truth takes each reading from the real pose at its measurement
-    instant; ``Sweep.reading_poses`` carries the odometry pose at the read, which drifts
-    with ``odometry_sigma_m`` / ``odometry_sigma_rad`` per metre driven (a random walk
-    in the robot frame, :class:`Odometry`).
-
-The firmware's timeline of a sweep (:func:`schedule`), seconds from its start, the ring at
-rest at the first step: step i moves for Δ_i·step_time_s (Δ_i whole steps from the
-previous step; nothing for the first), waits ``scan.settle_s``, then reads the ADC
-``samples`` times one nominal GP2 period (38.3 ms) apart. Without ``timing`` the
-simulator's sensor measures instantly at the first read, and each reading is charged one
-GP2 period of hardware time, as for kinematic sweeps (``core.hardware_duration_s``): the
-next move starts ``samples`` periods after the first read. With ``timing`` the value is
-the GP2's last finished measurement and nothing is waited beyond ``settle_s`` (and the
-periods between averaged reads), so a sweep can be faster than the sensor and smear;
-``settle_s`` ≥ the slowest period + latency (52.9 ms) guarantees a measurement taken
-after the move. With averaging every sample is taken to see the first sample's geometry.
-
-Assumptions, stated once: each sweep starts with the ring at rest at its first step (the
-firmware rewinds after a sweep; the rewind is not simulated, with backlash the sensors
-rest at the side the rewind left them); without ``belt_dynamics`` the belt is rigid and a
-move still takes ``BeltDynamicsEffect().step_time_s`` (4 ms) per step. With ``motion``,
-sweep j starts at j × (sweep duration + rewind), the rewind moving back over the sweep's
-steps and waiting one GP2 period; without it every sweep starts at t = 0 and draws fresh
-clock phases.
-
-Randomness: clock periods ``default_rng([seed, TIMING_STREAM])``; clock phases per static
-sweep ``default_rng([seed, pose, k, TIMING_STREAM])`` (the k-th sweep at that pose), or
-once for a drive ``default_rng([seed, TIMING_STREAM, 1])``; odometry
-``default_rng([seed, ODOMETRY_STREAM])`` for the whole path. The signal effects keep
-``SimRing``'s ``default_rng([seed, sweep, k])``.
+How it works, its assumptions and measured figures: docs/dynamics.md.
 """
 
 from __future__ import annotations

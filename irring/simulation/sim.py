@@ -1,32 +1,6 @@
 """The simulated ring: move the sensors kinematically, cast MuJoCo rays, make a :class:`Sweep`.
 
-A sweep visits the motor steps of the ring (−35 … +35 for the paper's). For all steps at
-once it writes every sensor's hinge angle (the motor's through the belt ratio) into a
-``mujoco.batch.Batch`` with one simulation per step, computes the position stage
-(kinematics) in one call, reads every emitter site's frame, places the frames at the robot's
-pose, and casts all steps × sensors rays in one batched ``ray`` call. No Python loop per ray
-or per step. The chassis is rigid, so the frames are computed in the robot frame and kept
-for the last few distinct angle sets: a static scene's sweeps reuse them (0.22 → 0.03 ms).
-
-Why this path (measured by ``python -m irring.simulation.sim``; T-room, 71 × 12 = 852 rays, this
-2-core machine, medians of 200): (a) the 12 rangefinder sensors, one simulation per step,
-one batched forward: 0.70 ms for frames and rays together, and a rangefinder cannot skip the
-robot's own geoms; (b) one MjData, ``mj_kinematics`` per step in a Python loop: 0.13 ms for
-the bare calls but ≈ 0.4 ms with each step's joint writes and site frames copied out, against
-0.20 ms for the batched forward used here, which needs no per-step loop; (c) all rays in one ``Batch(model, 1).ray`` call: 0.19 ms raw,
-0.27 ms with our range, incidence and reflectance logic (``cast``); (d) ``mj_multiRay`` casts
-from one origin, and every emitter moves, so one call per ray: 3–7 ms (``mj_ray`` in a Python
-loop: 1.1 ms). Chosen: batched forward for the frames + (c). A whole sweep with the T-room's
-effects (incidence, noise, quantisation) takes ≈ 0.4 ms, its truth ≈ 0.3 ms.
-
-Range logic is ours, not the rangefinder's ``cutoff`` (which clamps every output): a hit
-farther than ``scenario.sensor.max_range_m`` from the emitter is no return (NaN). Beams see
-only the room (geom group ``model.RAY_GROUP``: walls and obstacles), never the robot.
-
-A scene that lists ``belt_dynamics``, ``timing`` or ``motion`` asks where and when each
-reading was taken from :class:`irring.simulation.dynamics.Dynamics` (belt physics stepped by MuJoCo,
-the GP2 clocks, the robot's drive) and casts from there; every other scene never steps
-physics and never builds that module's objects.
+How it works, its assumptions and measured figures: docs/simulation.md.
 """
 
 from __future__ import annotations
@@ -434,7 +408,7 @@ class SimRing:
 def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, float]:
     """Median ms per sweep (over ``repeats``) of a whole sweep (``sweep_ms``: truth and the
     scene's effects), of its truth alone, and of the ways to get a sweep's rays out of MuJoCo
-    (see the module doc). Run ``python -m irring.simulation.sim [SCENARIO]``."""
+    (see docs/simulation.md). Run ``python -m irring.simulation.sim [SCENARIO]``."""
     import time
 
     from ..scenario import load_scenario

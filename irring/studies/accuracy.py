@@ -1,76 +1,6 @@
 """What accuracy costs in time: the knobs that trade time for accuracy, one at a time.
 
-Every configuration is the scenario as written (the *default*) with ONE knob changed —
-a one-at-a-time study around the default, not a full factorial grid, so interactions between
-knobs (say, coarse steps *and* no iterations) are not measured. Knobs:
-
-=============  ==========================================================================
-``step``       ``scan.step_stride``: read every 1st, 2nd, 4th motor step (1.08°, 2.16°,
-               4.32° between readings); fewer stops, fewer readings
-``samples``    the ``averaging`` effect with ``scan.samples`` readings per step (each its
-               own noise and quantisation, averaged); each sample is one GP2 period
-``settle``     ``scan.settle_s``: wait at each step before reading (0, 20, 40, 60 ms). A wait
-               only matters when the ring's motion and the GP2's clock are simulated, so
-               these configurations run the scene with ``belt_dynamics`` and ``timing``
-               added (label "settle 40 ms (belt+timing)", ``dynamics`` True): the belt
-               still swings after a step and each GP2 reports its last measurement, taken
-               on its own 38.3 ms clock, so a short wait reads at the wrong angle
-               (``angle_error_rms_rad``) and the range error and map follow. Their hardware
-               time is the timed schedule's (moves + settle + the firmware's waits; a GP2
-               period is not charged per reading), so it is not comparable 1:1 with the
-               kinematic default's steps × 38.3 ms
-``iterations`` the estimator's ``max_iterations`` (0 = the θ = 0 assumption,
-               ``iterate=False``); the default is 20. A capped run reports the estimate
-               after k iterations (``keep_unconverged``: readings still moving are valid
-               at the θ they reached), not just the readings that settled
-``tolerance``  the estimator's convergence tolerance on θ (default 0.1°)
-``regroup``    how many times the estimator may group the end points into lines
-               (``LineOptions.regroup_iterations``, default 3; 1, 2 and 6 here) before it
-               holds the grouping for the remaining iterations; each grouping is a pass
-               over the whole sweep, the estimator's most expensive step
-``resolution`` the map's cell size (default 10 mm, the paper's); scored on ground truth
-               rasterised on the same cells, so the 1-cell tolerance scales with it
-``design``     another ring design (``irring.designs``) with its own sensor, in the same
-               room and poses, scored on the default design's ground truth (like
-               ``irring compare``)
-=============  ==========================================================================
-
-Per configuration, scenario and seed (one *run*: every pose swept, estimated, mapped and
-scored the way ``irring run`` does it, through ``pipeline.map_sweeps``):
-
-accuracy
-    ``range_rmse_m``: RMS of (estimated − true) range over the readings the estimator calls
-    valid and that hit something; ``range_rmse_steep_m``: the same over readings whose true
-    incidence is ≥ 40°; ``point_rmse_m``: RMS distance of the estimated end point from the
-    true hit point (where a wrong beam angle shows: the range can be right along the real
-    beam while the point is drawn along the assumed one); ``valid_share``: share of the readings that hit something which the
-    estimator calls valid; the map scores of ``irring.maps.metrics`` (``occupied_f1``,
-    ``free_accuracy``, ``coverage``, ``shadow``, …).
-cost
-    ``hardware_time_s``: seconds the real ring spends on one 360° view at one pose
-    (``Design.hardware_time_s``: positions × (settle + samples × 38.3 ms));
-    ``compute_ms``: estimator + mapper, milliseconds per sweep on this machine — what the
-    robot's computer spends turning a sweep into the map. It is CPU time of the thread
-    that runs the job (the least of three timings per run), so workers sharing the cores do
-    not inflate it; configurations that do the same computing (the default and the settle
-    times, say) still differ on this axis by a few per cent of timing noise. The
-    simulator's own time, ``sim_ms`` (wall clock), is the testbed's cost, not the robot's,
-    and is reported apart.
-    ``iterations_mean``: estimator iterations per valid reading, a machine-independent
-    measure of the estimator's work.
-dynamics (belt+timing configurations only, else None)
-    ``angle_error_rms_rad``: RMS over the readings of the true − assumed beam heading
-    (``dynamics.heading_error``): what the belt's swing and the sensor's stale clock cost
-    before any estimator sees a count.
-
-Everything but the ``*_ms`` timings is a deterministic function of (scenario, configuration,
-seed): a job rebuilds its ``SimRing`` from the scenario's YAML in whatever process runs it
-(:mod:`irring.studies.executor`), so serial, process-pool and Dask runs agree exactly.
-Per configuration the runs are averaged over scenarios and seeds (timings: median), and
-*Pareto fronts* are marked for each cost (hardware ``hw``, compute ``cpu``) against each
-accuracy measure (occupied F1 ``f1``, coverage ``cov``, range RMSE ``rmse``): a
-configuration is on a front when no other one is at least as cheap and at least as
-accurate, and strictly better on one of the two — the best accuracy that much time buys.
+How it works, its assumptions and measured figures: docs/accuracy.md.
 """
 
 from __future__ import annotations
@@ -127,7 +57,7 @@ class Config:
 
 def configurations(knobs: Iterable[str] | None = None,
                    designs: Sequence[str] = ("radial12", "rotating1")) -> list[Config]:
-    """The default configuration, then each knob's other settings (see the module doc)."""
+    """The default configuration, then each knob's other settings (see docs/accuracy.md)."""
     knobs = KNOBS if knobs is None else tuple(knobs)
     unknown = [k for k in knobs if k not in KNOBS]
     if unknown:

@@ -1,34 +1,6 @@
 """How fast each stage of a sweep is, against raw MuJoCo and against the real ring.
 
-One sweep of the scenario's ring at one pose (71 steps × 12 sensors for the paper's) goes
-through every stage ``irring run`` runs per sweep:
-
-=================  =======================================================================
-``kinematics``     ``SimRing.frames``: emitter positions and beam directions of every step,
-                   placed at the pose from the robot-frame frames a static scene keeps (one
-                   batched MuJoCo forward per angle set: ``kinematics_mujoco_ms``, also timed)
-``rays``           ``SimRing.cast`` on those rays: one batched MuJoCo ray call plus our
-                   range, incidence and reflectance logic
-``effect: <name>`` each effect of the scene, timed inside the effects pipeline
-``effects core``   the pipeline's own always-on work (voltage curve, volts → counts, the
-                   no-return fill): the whole pipeline minus its effects
-``estimator``      ``estimate`` (the paper's iterative estimator, Table II), calibrated once
-``mapper``         ``OccupancyGrid.insert`` of the sweep's points
-=================  =======================================================================
-
-In the same run, ``raw_mujoco_ms`` is the same batched ray call on the same rays with none of
-our code around it (``mujoco.batch.Batch.ray``, as ``SimRing`` calls it); ``ray_vs_raw_ratio``
-= ``ray_ms`` / ``raw_mujoco_ms``. ``sweep_ms`` is the median of the whole chain per sweep
-(``SimRing.sweep`` → ``estimate`` → ``insert``, fresh noise every sweep), ``sweeps_per_s``
-its inverse, and ``realtime_factor`` = the sweep's hardware time (what the real ring spends,
-steps × (settle + samples × 38.3 ms)) / ``sweep_ms``.
-
-Method: every round times each stage once, in a shuffled order (interleaved, so a busy
-moment on the machine hits all stages alike and no stage always runs right after the
-cache-clearing estimator and mapper); our ray stage and the raw call each run once untimed,
-then alternate three times per round, so both are timed in the same cache state. Figures
-are medians over rounds. The garbage collector is off while timing (as ``timeit`` does).
-Scoring against ground truth is not a per-sweep stage and is left out.
+How it works, its assumptions and measured figures: docs/speed.md.
 """
 
 from __future__ import annotations
