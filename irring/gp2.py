@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import resources
+from . import resources, safe_yaml
 from .core import ADC_BITS, DESIGN_RANGE_M, MAX_RANGE_M, VREF_V, SensorSpec
 
 
@@ -182,8 +182,6 @@ def available() -> tuple[str, ...]:
 
 def load_sensor(path: str | Path) -> SensorModel:
     """Read a sensor curve file (the format of ``models/sensors/*.yaml``)."""
-    from . import safe_yaml
-
     path = Path(path)
     raw = safe_yaml.load_file(path, "sensor curve file")
     try:

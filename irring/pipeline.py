@@ -27,9 +27,13 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from . import recording as rec, safe_yaml
 from .core import Points, Reason, RingSource, SourceLost, Sweep
-from .maps.mapping import MapperParams, OccupancyGrid, check_scenario_grid, slice_steps
-from .scenario import Scenario
+from .estimation.estimate import Calibration, CalibrationError
+from .gp2 import SENSORS
+from .maps.mapping import MapperParams, OccupancyGrid, check_scenario_grid, classify, slice_steps
+from .outputs import OutputSet
+from .scenario import Scenario, loads
 
 FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
 
@@ -148,9 +152,6 @@ def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
     """(Calibration or None, YAML text or None) from a file path or from stored YAML text."""
     if path_or_text is None:
         return None, None
-    from . import safe_yaml
-    from .estimation.estimate import Calibration, CalibrationError
-
     if is_text:
         text, source = str(path_or_text), "<recording's calibration>"
     else:
@@ -169,8 +170,6 @@ def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
 def scene_calibration(scenario: Scenario):
     """(Calibration, YAML text) the estimator reads a simulated scene with: the one path
     for ``run``, ``compare``, ``bench`` and ``replay`` (docs/calibration.md)."""
-    from .estimation.estimate import Calibration
-
     cal = Calibration.for_scene(scenario)
     return cal, cal.to_yaml()
 
@@ -313,8 +312,6 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
 def _with_cone(points: Points, sweep: Sweep) -> Points:
     """The points of a sweep whose sensor hears an echo anywhere in a cone (the sonar's)
     marked with that cone, so the mapper draws arcs (mapping.cone_fan)."""
-    from .designs import SENSORS
-
     spec = SENSORS.get(sweep.sensor_model)
     half = spec.beam_half_angle_rad if spec is not None else 0.0
     return dataclasses.replace(points, cone_half_angle_rad=half) if half > 0 else points
@@ -341,8 +338,6 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
     result's, so no frame is held; the last frame is the result's map. A sweep shown in
     p parts first shows the beams of its first 1/p, 2/p, … of steps (clamped like an insert),
     then the map after its insert. :func:`frame_plan` says how many frames come."""
-    from .maps.mapping import classify
-
     n = len(result.points)
     parts, stride, _ = frame_plan(n, result.frames_per_sweep if frames_per_sweep is None
                                   else frames_per_sweep)
@@ -388,9 +383,6 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
            progress: bool | None = None) -> MapRun:
     """Map a recording's sweeps again, on the recorded grid, with the recorded calibration
     (or ``calibration_file``); scored when the recording carries its scenario."""
-    from . import recording as rec
-    from .scenario import loads
-
     t0 = time.perf_counter()
     sweeps, meta = rec.load_recording(recording)
     t_load = time.perf_counter() - t0
@@ -437,8 +429,8 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     interrupted or failed write leaves the folder as it was); time it as the "render"
     stage. ``mcap``: also write the run there as MCAP (``mcap_export``; the "mcap" stage),
     which needs the ``mcap`` extra."""
-    from .maps import render  # noqa: F401 (loads matplotlib: before the clock, as irring loads MuJoCo)
-    from .outputs import OutputSet
+    from .maps import \
+        render  # noqa: F401 (loads matplotlib: before the clock, as irring loads MuJoCo)
 
     t0 = time.perf_counter()
     target = OutputSet(out_dir)
@@ -460,7 +452,6 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
 
 def _write_into(result: MapRun, out: Path, *, animation: bool, recording: bool,
                 title: str | None) -> dict[str, Path]:
-    from . import recording as rec
     from .maps import render
 
     sc = result.scenario

@@ -21,10 +21,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-
-from . import designs, gp2, resources
-from .core import (ADC_BITS, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, VREF_V, Box, Cylinder,
-                   Pose, Ring, Room, bounds_error, choice, distance_to_outline, inside_outline, num,
+from . import designs, gp2, resources, safe_yaml
+from .core import (ADC_BITS, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, VREF_V, Box, Cylinder, Pose,
+                   Ring, Room, bounds_error, choice, distance_to_outline, inside_outline, num,
                    obstacle_distance, unit_suffix)
 from .designs import Design
 
@@ -526,8 +525,6 @@ def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load and validate a scenario file (or a bundled scenario by name)."""
-    from . import safe_yaml
-
     path = resolve(name_or_path)
     try:
         raw = safe_yaml.load_file(path, "scenario file")
@@ -537,8 +534,6 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
 
 
 def loads(text: str, source: str = "<string>") -> Scenario:
-    from . import safe_yaml
-
     try:
         raw = safe_yaml.load(text, source)
     except safe_yaml.InputError as exc:

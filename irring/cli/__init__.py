@@ -10,6 +10,9 @@ import argparse
 import importlib
 import sys
 import traceback
+from importlib.metadata import PackageNotFoundError, version
+
+from .. import errors
 
 # Subcommand modules, in the order `irring --help` lists them.
 COMMANDS = ("run", "replay", "view", "scenarios", "calibrate", "emulate", "drive", "geometry",
@@ -48,8 +51,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return version("irring")
     except PackageNotFoundError:   # a source tree used without installing
@@ -59,8 +60,6 @@ def _version() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run one `irring` command; every failure ends as one line on stderr and an exit
     status (irring.errors), with a traceback only under --debug or IRRING_DEBUG=1."""
-    from .. import errors
-
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or errors.debug_requested()
     argv = [a for a in argv if a != "--debug"]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable
+from pathlib import Path
 
 
 def at_least(low: int) -> Callable[[str], int]:
@@ -47,8 +48,6 @@ def distances_mm(text: str) -> list[float]:
 
 def add_mcap_option(parser: argparse.ArgumentParser) -> None:
     """``--mcap FILE``: the run as MCAP for Foxglove / rosbag2 (irring/maps/mcap_export.py)."""
-    from pathlib import Path
-
     parser.add_argument("--mcap", type=Path, default=None, metavar="FILE",
                         help="also write the run as MCAP with ROS 2 messages (each sweep's "
                              "end points, the ring pose on /tf, the map, the true outline), "

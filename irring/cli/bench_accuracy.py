@@ -6,6 +6,10 @@ import argparse
 import json
 from pathlib import Path
 
+from ..pipeline import progress_bar
+from ..studies import accuracy
+from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
+from ..studies.executor import executor
 from ._common import add_executor_options, at_least
 
 EPILOG = """\
@@ -54,8 +58,6 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
-
     p = sub.add_parser(
         "accuracy", help="what accuracy costs in hardware time and compute time",
         description="Vary the knobs that trade time for accuracy (sensor step, samples per "
@@ -83,10 +85,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies import accuracy
-    from ..studies.executor import executor
-    from ..pipeline import progress_bar
-
     scenarios = args.scenario or list(accuracy.DEFAULT_SCENARIOS)
     configs = accuracy.configurations(args.knob)
     total = len(configs) * len(scenarios) * args.seeds

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..scenario import load_scenario
+from ..studies.effects import measure
 from ._common import at_least
 
 EPILOG = """\
@@ -53,9 +55,6 @@ def _fmt(x: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies.effects import measure
-    from ..scenario import load_scenario
-
     r = measure(load_scenario(args.scenario), samples=args.samples, rounds=args.rounds,
                 batch=args.batch, seed=args.seed)
     if args.json:

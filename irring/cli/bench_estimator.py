@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..estimation.estimate import Calibration
+from ..scenario import load_scenario
+from ..studies.estimator import measure
 from ._common import at_least
 
 EPILOG = """\
@@ -56,10 +59,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies.estimator import measure
-    from ..estimation.estimate import Calibration
-    from ..scenario import load_scenario
-
     scenario = load_scenario(args.scenario)
     cal = None
     if args.calibration:

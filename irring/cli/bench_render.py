@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..studies.render_bench import measure, report
 from ._common import at_least
 
 EPILOG = """\
@@ -35,8 +36,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies.render_bench import measure, report
-
     r = measure(args.scenario, repeats=args.repeats)
     print(json.dumps(r, indent=2) if args.json else report(r))
     return 0

@@ -7,6 +7,7 @@ import csv
 import json
 from pathlib import Path
 
+from ..studies.rooms import ROOMS, measure, resolve_rooms
 from ._common import at_least
 
 EPILOG = """\
@@ -62,8 +63,6 @@ COLUMNS = (("occupied_f1", "F1", 1, 3), ("occupied_precision", "prec", 1, 3),
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies.rooms import ROOMS, measure, resolve_rooms
-
     scenarios = resolve_rooms(args.rooms or ROOMS)
     rows = measure(scenarios, args.seeds)
     out = Path(args.out)

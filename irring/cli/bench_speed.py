@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..scenario import load_scenario
+from ..studies.speed import measure, report
 from ._common import at_least
 
 EPILOG = """\
@@ -52,9 +54,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies.speed import measure, report
-    from ..scenario import load_scenario
-
     r = measure(load_scenario(args.scenario), rounds=args.rounds, pose_index=args.pose,
                 seed=args.seed)
     print(json.dumps(r, indent=2) if args.json else report(r))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..studies.scaling import measure, report
 from ._common import at_least
 
 EPILOG = """\
@@ -41,8 +42,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies.scaling import measure, report
-
     r = measure(args.seeds, args.workers or (1, 2), args.memory_seeds or (4, 40))
     print(json.dumps(r, indent=2) if args.json else report(r))
     return 0

@@ -7,6 +7,11 @@ import math
 import sys
 from pathlib import Path
 
+from .. import errors
+from ..estimation.calibrate import CalibrationAborted, GuidedCalibration, SimulatedRig
+from ..estimation.estimate import CalibrationError
+from ..outputs import check_out
+from ..scenario import load_scenario
 from ._common import at_least
 
 EPILOG = """\
@@ -70,12 +75,6 @@ def _summary(cal) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..estimation.calibrate import CalibrationAborted, GuidedCalibration, SimulatedRig
-    from ..estimation.estimate import CalibrationError
-    from .. import errors
-    from ..outputs import check_out
-    from ..scenario import load_scenario
-
     out = Path(args.out)
     if out.is_dir():  # `--out DIR`: the file goes inside, not over the folder
         out = out / "calibration.yaml"

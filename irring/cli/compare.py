@@ -5,6 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 
+from .. import designs
+from ..designs import DESIGN_BY_NAME
+from ..pipeline import progress_enabled
+from ..studies import compare
+from ..studies.executor import executor
 from ._common import add_executor_options, at_least, distances_mm
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room_three_cylinders", "t_room")
@@ -39,8 +44,6 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..designs import DESIGN_BY_NAME
-
     p = sub.add_parser("compare", help="compare ring designs on simulated scenes",
                        description="Compare ring designs: each design sweeps, estimates and "
                                    "maps the same scenes (as `irring run` does) over several "
@@ -71,11 +74,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import designs
-    from ..studies import compare
-    from ..studies.executor import executor
-    from ..pipeline import progress_enabled
-
     scenarios = args.scenario or list(DEFAULT_SCENARIOS)
     names = args.design or list(designs.DESIGN_BY_NAME)
     with executor(args.workers, args.dask) as ex:

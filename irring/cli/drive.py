@@ -8,7 +8,14 @@ import math
 import sys
 from pathlib import Path
 
-from ._common import between, positive_seconds
+import numpy as np
+
+from .. import errors, pipeline
+from ..hardware import DeviceError, SerialRing
+from ..outputs import check_out
+from ..scenario import load_scenario
+from ._common import add_mcap_option, between, positive_seconds
+from .run import report
 
 HELP = """\
 Sweep the real ring (or `irring emulate`) over a serial port at one or more poses, then run
@@ -55,8 +62,6 @@ def _pose(text: str) -> tuple[float, float, float]:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ._common import add_mcap_option
-
     p = sub.add_parser("drive", help="sweep the real ring over a serial port, estimate and map",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--port", required=True, metavar="PORT",
@@ -103,13 +108,6 @@ def _error(msg: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from .. import errors, pipeline
-    from ..hardware import DeviceError, SerialRing
-    from ..outputs import check_out
-    from ..scenario import load_scenario
-
     check_out(args.out)
     truth = load_scenario(args.truth) if args.truth else None
     if truth is not None and truth.has("motion"):
@@ -207,7 +205,6 @@ def run(args: argparse.Namespace) -> int:
                                    mcap=args.mcap,
                                    extra_files={"link": ("link.json", json.dumps(link, indent=2))})
 
-    from .run import report
 
     report(result, paths, as_json=args.json,
            extra={"source": f"serial:{args.port}", "link": link})

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import math
 import signal
 import sys
 import time
 
+from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
+from ..scenario import load_scenario
 from ._common import between, host_port
 
 EPILOG = """\
@@ -73,8 +76,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
-    from ..scenario import load_scenario
     from ..simulation.sim import SimRing
 
     scenario = load_scenario(args.scenario)
@@ -140,8 +141,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _loopback(host: str) -> bool:
-    import ipaddress
-
     if host == "localhost":
         return True
     try:

@@ -6,6 +6,9 @@ import argparse
 import json
 import math
 
+from .. import designs
+from ..designs import DESIGN_BY_NAME
+from ..studies import geometry
 from ._common import at_least, distances_mm
 
 EPILOG = """\
@@ -31,8 +34,6 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..designs import DESIGN_BY_NAME
-
     p = sub.add_parser(
         "geometry", help="overlap angle/area (Eqs. 2–3, Monte Carlo) and blind spot (Eq. 1)",
         description="The paper's design geometry for a ring design: the overlap angle β and "
@@ -60,8 +61,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import designs
-    from ..studies import geometry
     names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
     range_m = None if args.range_mm is None else args.range_mm * 1e-3
     reports = [geometry.design_report(designs.get(n), args.distances_mm, range_m=range_m,

@@ -5,6 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .. import pipeline
+from ..outputs import check_out, safe_name
+from ._common import add_mcap_option
+from .run import report
+
 HELP = """\
 Run recorded sweeps (a sweeps.npz from `irring run` or `irring drive`, simulated or from the
 real ring) through the estimator and mapper again, on the grid they were first mapped on.
@@ -23,8 +28,6 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ._common import add_mcap_option
-
     p = sub.add_parser("replay", help="estimate and map a recording (.npz) again",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("recording", type=Path, metavar="RECORDING",
@@ -40,10 +43,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import pipeline
-    from ..outputs import check_out, safe_name
-    from .run import report
-
     if args.out is not None:
         out = args.out
     else:

@@ -6,6 +6,11 @@ import argparse
 import json
 from pathlib import Path
 
+from .. import pipeline
+from ..outputs import check_out, safe_name
+from ..scenario import DEFAULT_SCENARIO, load_scenario
+from ._common import add_mcap_option
+
 HELP = """\
 Simulate one sweep of the ring at each of the scenario's scan poses, turn the ADC counts
 into end points with the paper's iterative estimator, build the occupancy grid pose by pose
@@ -31,8 +36,6 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ._common import add_mcap_option
-
     p = sub.add_parser("run", help="map a scenario: simulate, estimate, map, score, draw",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
@@ -55,10 +58,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import pipeline
-    from ..outputs import check_out, safe_name
-    from ..scenario import DEFAULT_SCENARIO, load_scenario
-
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
     out = check_out(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from .. import scenario
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("scenarios", help="list the bundled scenarios, one line each",
@@ -13,8 +15,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import scenario
-
     rows = []
     for name, path in scenario.bundled().items():
         sc = scenario.load_scenario(path)

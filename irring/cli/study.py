@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
+from pathlib import Path
 
+from ..pipeline import progress_bar, progress_enabled
+from ..studies import study
+from ..studies.executor import executor
 from ._common import add_executor_options
 
 EPILOG = """\
@@ -60,13 +65,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import time
-    from pathlib import Path
-
-    from ..studies import study
-    from ..studies.executor import executor
-    from ..pipeline import progress_bar, progress_enabled
-
     spec = study.load_study(args.file)
     out = Path(args.out) if args.out else Path("out") / Path(args.file).stem
     t0 = time.perf_counter()

@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+
+from ..scenario import DEFAULT_SCENARIO, load_scenario
+from ._common import at_least
 
 HELP = """\
 Show the scenario's MuJoCo scene: the room, the obstacles, the ring at one scan pose and
@@ -22,8 +26,6 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ._common import at_least
-
     p = sub.add_parser("view", help="picture (or live viewer) of the MuJoCo scene with beams",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
@@ -41,10 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import sys
-
     from ..simulation import view
-    from ..scenario import DEFAULT_SCENARIO, load_scenario
 
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
     try:

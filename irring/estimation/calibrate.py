@@ -36,9 +36,8 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from .. import gp2
-from ..core import Sweep
+from ..core import Pose, Ring, Sweep
 from .estimate import Calibration, CalibrationError, emitter_offset_from_wall, fit_curve
-from ..core import Ring
 
 DEFAULT_THETA_GRID_RAD = np.radians(np.arange(0.0, 86.0, 5.0))
 _ROUNDS = 3
@@ -229,8 +228,6 @@ class SimulatedRig:
 
     def scenario_for_rig(self):
         """The generated rig scene: one pose per placement, sensor range = the model's."""
-        from ..core import Pose
-
         sc = self.scenario
         s = self.ROOM_M
         poses = tuple(Pose(*self.robot_pose(p)) for p in self.placements)

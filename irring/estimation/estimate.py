@@ -15,9 +15,10 @@ from typing import Any, Callable, Mapping
 import numpy as np
 import yaml
 
-from .. import gp2
+from .. import gp2, safe_yaml
 from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
 from ..errors import brief
+from ..outputs import write_text_atomic
 from ..resources import MissingKernel
 
 try:
@@ -332,8 +333,6 @@ class Calibration:
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`to_yaml` to a file."""
-        from ..outputs import write_text_atomic
-
         return write_text_atomic(path, self.to_yaml())
 
     @classmethod
@@ -410,8 +409,6 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:
-        from .. import safe_yaml
-
         path = Path(path)
         try:
             raw = safe_yaml.load_file(path, "calibration file")

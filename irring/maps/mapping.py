@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import safe_yaml
 from ..core import Points, Reason
 from ..resources import MissingKernel
 
@@ -311,8 +312,6 @@ class OccupancyGrid:
         ``negate: 1``; occupied above occupied_thresh, free below free_thresh); occupied
         cells get ``l_max``, free ``l_min``, unknown 0.
         """
-        from .. import safe_yaml
-
         yaml_path = Path(yaml_path)
         meta = safe_yaml.load_file(yaml_path, "map_server YAML")
         missing = {"image", "resolution", "origin", "negate", "occupied_thresh",

@@ -16,12 +16,12 @@ to one palette and streamed to the GIF writer (Pillow), never held as a list.
 from __future__ import annotations
 
 import functools
+import io
 import math
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
-
 # loaded with the module, not per picture: pipeline.write_outputs imports this module before
 # it starts the render stage's clock, as the other stages' modules load with irring
 from matplotlib import font_manager
@@ -202,8 +202,6 @@ class MapFigure:
         return path
 
     def png_bytes(self, dpi: float = 80) -> bytes:
-        import io
-
         buf = io.BytesIO()
         self.fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
         return buf.getvalue()

@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..gp2 import sensor_spec
 from . import effects
 from .effects import Frame, Pipeline, Setup, Stage
 
@@ -91,7 +92,6 @@ def pipeline_for(scenario, cone: SonarCone | None = None) -> Pipeline:
     base = Pipeline.from_scenario(scenario)
     if scenario.sensor.model != "sonar":
         return base
-    from ..gp2 import sensor_spec
 
     if cone is None:
         cone = SonarCone(half_angle_rad=sensor_spec("sonar").beam_half_angle_rad)

@@ -7,15 +7,16 @@ from __future__ import annotations
 
 import copy
 import functools
+import time
 from dataclasses import dataclass
 
 import mujoco
 import mujoco.batch
 import numpy as np
 
-from . import model as model_lib
 from ..core import Sweep, Truth, as_pose, hardware_duration_s
-from ..scenario import Scenario
+from ..scenario import Scenario, load_scenario
+from . import model as model_lib
 
 _POS = mujoco.mjtStage.mjSTAGE_POS
 # Kinematic positioning needs only frames: no contacts, constraints, sensors or actuators.
@@ -409,10 +410,6 @@ def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, floa
     """Median ms per sweep (over ``repeats``) of a whole sweep (``sweep_ms``: truth and the
     scene's effects), of its truth alone, and of the ways to get a sweep's rays out of MuJoCo
     (see docs/simulation.md). Run ``python -m irring.simulation.sim [SCENARIO]``."""
-    import time
-
-    from ..scenario import load_scenario
-
     sim = SimRing(load_scenario(scenario_name))
     built, m = sim.built, sim.model
     steps = sim.default_steps()

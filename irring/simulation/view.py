@@ -14,6 +14,7 @@ import contextlib
 import ctypes.util
 import math
 import os
+import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -256,8 +257,6 @@ def has_display() -> bool:
 def play(view: SceneView, step_s: float = 0.05) -> None:
     """The interactive MuJoCo viewer (passive) playing the sweep back and forth, beams
     drawn, until its window is closed."""
-    import time
-
     import mujoco.viewer
 
     ring = view.sim.ring

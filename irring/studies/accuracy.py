@@ -15,8 +15,14 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from .. import scenario as scenario_lib
+from .. import pipeline, scenario as scenario_lib
+from ..estimation.estimate import LineOptions, estimate
+from ..maps import metrics
+from ..maps.mapping import OccupancyGrid
+from ..pipeline import scenario_text
+from ..scenario import AveragingEffect, BeltDynamicsEffect, TimingEffect, load_scenario, loads
 from .compare import mean_of, write_study
+from .executor import run_jobs
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room")
 STEEP_RAD = math.radians(40.0)
@@ -91,8 +97,6 @@ def configurations(knobs: Iterable[str] | None = None,
 
 def default_value(knob: str, scenario) -> float:
     """Where the default configuration sits on a knob's axis (for the chart's lines)."""
-    from ..estimation.estimate import LineOptions
-
     return {"step": scenario.scan.step_stride,
             "samples": scenario.samples_per_step,
             "settle": scenario.scan.settle_s * 1e3, "iterations": DEFAULT_MAX_ITERATIONS,
@@ -103,8 +107,6 @@ def default_value(knob: str, scenario) -> float:
 
 def apply(scenario, cfg: Config):
     """The scenario with the configuration's sweep, map and design changes."""
-    from ..scenario import AveragingEffect, BeltDynamicsEffect, TimingEffect
-
     sc = scenario_lib.apply_design(scenario, cfg.design) if cfg.design else scenario
     scan = {}
     if cfg.step_stride is not None:
@@ -148,8 +150,6 @@ _TRUTH_CACHE: dict[tuple, Any] = {}   # per process: the reference's GroundTruth
 def scenario_from_text(text: str, source: str):
     """The scenario a job carries, parsed once per process: YAML parsing cost ~40 % of a
     run when every run parsed it again (a Scenario is frozen, so runs can share it)."""
-    from ..scenario import loads
-
     return loads(text, source=source)
 
 
@@ -181,11 +181,7 @@ def _compute_time(sweeps, cal, estimator, grid) -> tuple[float, float]:
 def run_job(job: Job) -> dict:
     """Sweep every pose, estimate, map and score one configuration; a plain dict."""
 
-    from .. import pipeline
     from ..simulation import dynamics
-    from ..maps import metrics
-    from ..estimation.estimate import LineOptions, estimate
-    from ..maps.mapping import OccupancyGrid
     base = job.scenario if job.scenario is not None else \
         scenario_from_text(job.scenario_yaml, job.scenario_source)
     cfg = job.config
@@ -257,9 +253,6 @@ def run_job(job: Job) -> dict:
 
 def jobs_for(scenarios: Sequence, configs: Sequence[Config], seeds: int) -> list[Job]:
     """Every configuration × scenario × seed (seeds: scenario.seed, +1, …)."""
-    from ..pipeline import scenario_text
-    from ..scenario import load_scenario
-
     out = []
     for s in scenarios:
         sc = load_scenario(s) if isinstance(s, str) else s
@@ -349,8 +342,6 @@ def measure(scenarios: Sequence = DEFAULT_SCENARIOS, *, seeds: int = 3,
     ``configs`` one row per configuration (mean over scenarios × seeds, Pareto flags),
     ``by_scenario`` the same per scenario, ``runs`` every run in job order.
     """
-    from .executor import run_jobs
-
     configs = configurations() if configs is None else list(configs)
     jobs = jobs_for(scenarios, configs, seeds)
     t0 = time.perf_counter()
@@ -358,7 +349,6 @@ def measure(scenarios: Sequence = DEFAULT_SCENARIOS, *, seeds: int = 3,
     wall = time.perf_counter() - t0
     rows = summarise(runs)
     mark_pareto(rows)
-    from ..scenario import load_scenario
 
     first = load_scenario(scenarios[0]) if isinstance(scenarios[0], str) else scenarios[0]
     default = next((r for r in rows if r["knob"] == "default"), None)
@@ -436,7 +426,7 @@ def chart(result: dict, path) -> None:
                ("rmse", "range RMSE, mm (lower is better)", 1e3))
     costs = (("hw", "hardware time per 360° scan, s (what the real ring spends)"),
              ("cpu", "compute per sweep, ms CPU (estimator + mapper, this machine)"))
-    from ..maps.render import figure   # no pyplot: the caller's matplotlib backend stays as it is
+    from ..maps.render import figure  # no pyplot: the caller's matplotlib backend stays as it is
 
     fig = figure(13, 12.5)
     axes = fig.subplots(len(metrics), 2)

@@ -26,12 +26,11 @@ import types
 
 import mujoco
 import numpy as np
-from .. import safe_yaml
 
-from ..simulation import dynamics as dyn
-from ..simulation import model as model_lib
+from .. import pipeline, safe_yaml
 from ..core import Ring
 from ..scenario import BeltDynamicsEffect, Scenario, load_scenario, parse, resolve
+from ..simulation import dynamics as dyn, model as model_lib
 
 SETTLE_S = (0.0, 0.010, 0.020, 0.0383, 0.0529, 0.075)
 
@@ -211,7 +210,6 @@ def mujoco_clocks(scenario: Scenario, seed: int = 3) -> dict:
 def motion(seeds=(1,)) -> dict:
     """Occupied F1 (mean over ``seeds``): static t_room, static scans where the moving run's
     sweeps were (mid-sweep true poses), the moving run with perfect and bundled odometry."""
-    from .. import pipeline
     from ..simulation.sim import SimRing
 
     perfect = variant("t_room_moving", motion={"odometry_sigma_mm": 0, "odometry_sigma_deg": 0})

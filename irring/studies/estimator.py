@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from .. import pipeline
 from ..core import Reason
 from ..estimation.estimate import Calibration, estimate
 
@@ -37,7 +38,6 @@ def measure(scenario, *, sweeps_per_pose: int = 5, min_theta_deg: float = 40.0,
             calibration: Calibration | None = None, seed: int | None = None,
             max_iterations: int = 20) -> dict:
     """Run the comparison on ``scenario`` (a loaded Scenario); return plain figures."""
-    from .. import pipeline
     from ..simulation.sim import SimRing
 
     sim = SimRing(scenario, seed=seed)

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .compare import detection
+
 # Table I of the paper.
 TABLE_I_R_M = 0.15
 TABLE_I_D_M = 0.686
@@ -257,7 +259,6 @@ def _blind_spot_from_rays(design, dist: np.ndarray) -> list[float] | None:
     surface near square to a ray, so posts hide between cones after all."""
     if design.sensor.beam_half_angle_rad <= 0:
         return None
-    from .compare import detection
 
     det = detection(design, dist)
     return [float(v) for v in det.min_detectable_radius_m]

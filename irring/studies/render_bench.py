@@ -17,6 +17,9 @@ import sys
 import tempfile
 import time
 
+from .. import pipeline
+from ..scenario import load_scenario
+
 KEYS = ("cpu_make_map_s", "wall_make_map_s", "cpu_render_s", "wall_render_s",
         "cpu_load_render_s", "wall_command_s", "cpu_command_s", "peak_memory_mb")
 
@@ -24,9 +27,6 @@ KEYS = ("cpu_make_map_s", "wall_make_map_s", "cpu_render_s", "wall_render_s",
 def one_run(scenario_name: str) -> dict:
     """One ``irring run`` in this process, timed by part (the body of each repeat)."""
     c0, w0 = time.process_time(), time.perf_counter()
-    from .. import pipeline
-    from ..scenario import load_scenario
-
     scenario = load_scenario(scenario_name)
     c1, w1 = time.process_time(), time.perf_counter()
     result = pipeline.run(scenario, frames_per_sweep=pipeline.FRAMES_PER_SWEEP, progress=False)

@@ -21,7 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import pipeline
+from ..estimation.estimate import estimate
 from ..maps.metrics import SCORE_KEYS
+from ..pipeline import progress_bar
 from ..scenario import Scenario, ScenarioError, load_scenario
 
 # The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
@@ -62,9 +65,6 @@ def point_errors(sweep, points, points_theta0) -> tuple[np.ndarray, np.ndarray]:
 def score_room(scenario: Scenario, seed: int | None = None) -> dict:
     """One room, one seed, as written: the six map scores, ``point_rms_m``,
     ``point_rms_theta0_m`` (None when no reading qualifies), ``readings``, ``valid``."""
-    from .. import pipeline
-    from ..estimation.estimate import estimate
-
     theta0 = []
 
     def both(sweep, calibration):  # θ = 0 with the very calibration the run estimates with
@@ -110,8 +110,6 @@ def measure(scenarios: list[Scenario], n_seeds: int = 1, *,
     ``n_seeds`` seeds (the scenario's own seed, +1, …) of every figure of :func:`score_room`, plus
     ``misses``: the targets (:data:`TARGETS`) the room's scene misses, and the scores on
     which the ideal sensor is worse than the scene's (``ideal_worse``)."""
-    from ..pipeline import progress_bar
-
     rows = []
     with progress_bar(len(scenarios) * n_seeds * 2, "rooms", progress, unit="run") as bar:
         for sc in scenarios:

@@ -12,27 +12,27 @@ resident set and the largest of its workers' (each row carries its worker's ``ru
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Sequence
+
+from .. import designs
+from .executor import executor
+from .study import DesignSpec, Study, read_results, run_study
 
 SCENARIOS = ("t_room", "t_room_cylinder", "t_room_three_cylinders")
 
 
 def study_for(seeds: int):
     """Every named design × the three T-rooms × seeds 1 … ``seeds``."""
-    from .. import designs
-    from .study import DesignSpec, Study
-
     return Study(tuple(DesignSpec(n, name=n) for n in designs.DESIGN_BY_NAME), SCENARIOS,
                  seeds=tuple(range(1, seeds + 1)))
 
 
 def _timed(seeds: int, workers: int, out: Path) -> dict:
-    from .executor import executor
-    from .study import run_study
-
     t0 = time.perf_counter()
     with executor(workers) as ex:
         rows = run_study(study_for(seeds), out, ex)["rows"]
@@ -54,11 +54,6 @@ sys.exit(code)
 def _memory(seeds: int, workers: int, tmp: Path) -> dict:
     """Peak memory of ``irring study`` on the ``seeds`` grid, in a fresh process (so nothing
     measured before counts): its own peak and its largest worker's."""
-    import subprocess
-    import sys
-
-    from .study import read_results
-
     s = study_for(seeds)
     (tmp / "study.yaml").write_text(f"designs: [{', '.join(d.label for d in s.designs)}]\n"
                                     f"scenarios: [{', '.join(s.scenarios)}]\n"

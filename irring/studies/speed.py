@@ -13,6 +13,12 @@ from typing import Callable
 
 import numpy as np
 
+from ..estimation.estimate import estimate
+from ..maps.mapping import OccupancyGrid
+from ..pipeline import scene_calibration
+from ..simulation.effects import PHASES, Pipeline
+from ..simulation.rangers import pipeline_for
+
 TARGETS = {"sweep_ms": 2.0, "ray_vs_raw_ratio": 1.5, "realtime_factor": 1000.0}
 RAY_PAIRS = 3   # per round: our ray stage and the raw call, alternating
 
@@ -34,9 +40,6 @@ class _Timed:
 def timed_pipeline(scenario, tally: dict):
     """The scenario's effects pipeline with every stage's phase methods timed into
     ``tally`` (stage name → seconds, accumulated)."""
-    from ..simulation.effects import PHASES, Pipeline
-    from ..simulation.rangers import pipeline_for
-
     plain = pipeline_for(scenario)
     stages = []
     for st in plain.stages:
@@ -55,9 +58,6 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
     import mujoco.batch
 
     from ..simulation import model as model_lib
-    from ..estimation.estimate import estimate
-    from ..pipeline import scene_calibration
-    from ..maps.mapping import OccupancyGrid
     from ..simulation.sim import SimRing
 
     if rounds < 1:

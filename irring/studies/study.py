@@ -24,14 +24,20 @@ import itertools
 import json
 import math
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .. import designs, gp2
-from ..scenario import Scenario, ScenarioError
+from .. import designs, gp2, safe_yaml
+from ..pipeline import scenario_text
+from ..scenario import Scenario, ScenarioError, load_scenario
+from . import accuracy
+from .accuracy import mark_pareto
+from .compare import write_csv
+from .executor import stream
 
 # knob → (type, lowest, highest, what it sets); the scenario's value when the study has none
 KNOBS: Mapping[str, tuple[type, float, float, str]] = {
@@ -136,8 +142,6 @@ def _number(source: str, path: str, raw: Any, tp: type, lo: float, hi: float) ->
 
 
 def _design(source: str, path: str, raw: Any) -> DesignSpec:
-    from .. import designs
-
     if isinstance(raw, str):
         if raw not in designs.DESIGN_BY_NAME:
             raise _fail(source, path, f"{raw!r} is not a named design; choose one of: "
@@ -178,8 +182,6 @@ def _design(source: str, path: str, raw: Any) -> DesignSpec:
 
 def parse_study(raw: Any, source: str = "") -> Study:
     """Validate a parsed study document (see the module doc); raises :class:`StudyError`."""
-    from ..scenario import load_scenario
-
     if not isinstance(raw, Mapping):
         raise _fail(source, "", "a study file must be a mapping with keys "
                     + ", ".join(TOP_KEYS))
@@ -238,8 +240,6 @@ def parse_study(raw: Any, source: str = "") -> Study:
 
 def load_study(path: str | Path) -> Study:
     """Read and validate a study file; raises :class:`StudyError` naming the bad key."""
-    from .. import safe_yaml
-
     try:
         raw = safe_yaml.load_file(path, "study file")
     except safe_yaml.InputError as exc:
@@ -276,8 +276,6 @@ def own_knobs(scenario) -> dict[str, float]:
 def point(design: DesignSpec, scenario, seed: int, **knobs) -> Point:
     """One grid point of ``scenario`` (a name, a path, or a Scenario: its file, or its name
     when it has none); knobs not given take the scenario's values."""
-    from ..scenario import load_scenario
-
     sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
     label = str(scenario) if isinstance(scenario, (str, Path)) else (sc.source or sc.name)
     k = {**own_knobs(sc), **knobs}
@@ -288,8 +286,6 @@ def point(design: DesignSpec, scenario, seed: int, **knobs) -> Point:
 def grid(study: Study) -> list[Point]:
     """Every point in grid order: designs, then scenarios, then knob values (in the file's
     order, last fastest), then seeds. Knobs the study leaves out take the scenario's values."""
-    from ..scenario import load_scenario
-
     names = [k for k, _ in study.knobs]
     combos = list(itertools.product(*[v for _, v in study.knobs]))
     out = []
@@ -317,9 +313,6 @@ def tasks_for(points: Iterable[Point], scenarios: Mapping[str, Any] | None = Non
     """A task per point; its scenario loaded from ``point.scenario``, or taken from
     ``scenarios`` (label → Scenario). One made in code, without a file, travels as itself
     and can only run in this process."""
-    from ..pipeline import scenario_text
-    from ..scenario import load_scenario
-
     scenarios = dict(scenarios or {})
     texts: dict[str, tuple] = {}
     out = []
@@ -358,10 +351,6 @@ def _peak_mb() -> float:
 def run_point(task: Task) -> dict:
     """One run of the grid (module level, so any executor can ship it): the row for
     results.csv, every column of :data:`COLUMNS`."""
-    import time
-
-    from . import accuracy
-
     t0 = time.perf_counter()
     p = task.point
     design = p.design.build()
@@ -478,8 +467,6 @@ def run_study(study: Study | Sequence[Point], out_dir: str | Path, ex=None, *,
     first run; ``progress(row)`` after each. Returns ``{"rows": [...], "done_before": n,
     "ran": m, "paths": {...}}``; rows are text, in grid order.
     """
-    from .executor import stream
-
     points = grid(study) if isinstance(study, Study) else list(study)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -533,8 +520,6 @@ def summarise(rows: Sequence[Mapping[str, str]], by: Sequence[str] = ("design",)
     per score the mean (``<score>``) and sample standard deviation (``<score>_std``) over the
     runs where it is defined, ``hardware_time_s`` (mean), ``compute_ms`` (median), and the
     Pareto flags of :func:`irring.studies.accuracy.mark_pareto`."""
-    from .accuracy import mark_pareto
-
     groups: dict[tuple, list[Mapping[str, str]]] = {}
     for r in rows:
         groups.setdefault(tuple(r[k] for k in by), []).append(r)
@@ -647,8 +632,6 @@ def write_summary(rows: Sequence[Mapping[str, str]], out_dir: str | Path,
                   knobs: Sequence[str] = ()) -> dict[str, str]:
     """summary.csv and summary.json (one record per configuration: design and the knobs
     the study varies) and study.png (the chart) in ``out_dir``."""
-    from .compare import write_csv
-
     out = Path(out_dir)
     by = ("design",) + tuple(knobs)
     records = summarise(rows, by)
