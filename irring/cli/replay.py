@@ -23,7 +23,7 @@ map.png, map_building.gif, map.pgm + map.yaml (ROS map_server), and sweeps.npz.
 
 examples:
   irring replay out/t_room/sweeps.npz
-  irring replay out/t_room/sweeps.npz --calibration my_ring.yaml --out /tmp/recal
+  irring replay out/t_room/sweeps.npz --calibration my_ring.yaml --out out/recal
 """
 
 

@@ -30,8 +30,9 @@ behind obstacles that is mapped). Hardware time is what the real ring would spen
 
 examples:
   irring run                                  # the default scenario, t_room
-  irring run t_room_cylinder --out /tmp/cyl   # a bundled scenario by name
+  irring run t_room_cylinder --out out/cyl    # a bundled scenario by name
   irring run my_room.yaml --json              # your own scenario file; JSON on stdout
+  irring run t_room --mcap out/t_room.mcap    # also as MCAP for Foxglove / rosbag2
 """
 
 
@@ -52,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "simulates: its sensor curve, a(θ), b(θ) only with `incidence`, its "
                         "noise; docs/calibration.md)")
     p.add_argument("--no-animation", action="store_true",
-                   help="skip the GIF (saves about a second)")
+                   help="skip the GIF")
     add_mcap_option(p)
     p.set_defaults(func=run)
 
