@@ -44,7 +44,7 @@ def counts_for(steps) -> np.ndarray:
 @pytest.fixture(scope="session")
 def host_binary() -> Path:
     if shutil.which("make") is None or shutil.which("cc") is None:
-        pytest.skip("make and a C compiler are needed to build firmware/ (.ci/run installs them)")
+        pytest.skip("make and a C compiler are needed to build firmware/ (bash .ci/system-deps installs them)")
     subprocess.run(["make", "-s", "-C", str(FIRMWARE), "host"], check=True,
                    capture_output=True, timeout=120)
     return HOST
@@ -416,7 +416,7 @@ def test_uart_divisor_for_115200_baud_at_16_mhz(host_binary):
 
 def avr_build(*args: str) -> subprocess.CompletedProcess:
     if shutil.which("avr-gcc") is None:
-        pytest.skip("avr-gcc is not installed (.ci/run installs gcc-avr avr-libc)")
+        pytest.skip("avr-gcc is not installed (bash .ci/system-deps installs gcc-avr avr-libc)")
     return subprocess.run(["make", "-s", "-C", str(FIRMWARE), "avr", *args],
                           capture_output=True, text=True, timeout=300)
 
@@ -464,7 +464,7 @@ def test_the_avr_image_itself_in_simavr_answers_serial_ring(tmp_path):
     the synthetic counts of the steps it asked for, so UART, SPI, chip selects and stepping
     all work as wired. simavr runs at roughly real speed, so the sweeps are short."""
     if shutil.which("avr-gcc") is None or not Path("/usr/include/simavr/sim_avr.h").exists():
-        pytest.skip("needs gcc-avr and libsimavr-dev (.ci/run installs them)")
+        pytest.skip("needs gcc-avr and libsimavr-dev (bash .ci/system-deps installs them)")
     build = subprocess.run(["make", "-s", "-C", str(FIRMWARE), "sim"], capture_output=True,
                            text=True, timeout=300)
     assert build.returncode == 0, build.stderr

@@ -16,7 +16,7 @@ from irring.scenario import load_scenario  # noqa: E402
 def _offscreen_or_skip():
     try:
         view.gl_backend()
-    except RuntimeError as exc:     # .ci/run installs libosmesa6; a bare machine may lack it
+    except RuntimeError as exc:     # .ci/system-deps installs libosmesa6; a bare machine may lack it
         pytest.skip(str(exc))
 
 
