@@ -359,6 +359,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef double default_sigma = params.default_sigma_m
     cdef double occ_sigma = params.occ_sigma_m, l_occ_min = params.l_occ_min, l_hit
     cdef double margin_m = params.free_margin_cells * res
+    cdef double hold_sigma = params.hold_sigma_m, l_pass
     cdef long ny = log_odds.shape[0], nx = log_odds.shape[1]
     cdef Py_ssize_t n = origin_x.shape[0], i, j, nb = 0, nv = 0, kept = 0
     cdef long k, ix, iy, n_far, bx0, by0, bx1, by1, bw, bh
@@ -375,6 +376,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef long long* row
     cdef long long* col
     cdef double* out
+    cdef unsigned char* held
     cdef Seg s
     cdef Cols c
     cdef bint two, is_valid
@@ -384,10 +386,11 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
         raise ValueError("every array of the readings needs the same length")
     if n >= 1 << 31:
         raise ValueError("at most 2^31 − 1 readings per insert (the cell counts are 32-bit)")
-    beams_a = np.empty((max(n, 1), 7))
+    beams_a = np.empty((max(n, 1), 9))
     cdef double[:, ::1] beams = beams_a
     with nogil:
-        # the mapped beams in cells, valid ones first: x0, y0, Δx, Δy, d (m), σ (m), length (m)
+        # the mapped beams in cells, valid ones first: x0, y0, Δx, Δy, d (m), σ (m), length (m),
+        # and for valid ones the end point's cell coordinates (as mapping.cell_of: (x − x_g)/res)
         for pass_ in range(2):
             is_valid = pass_ == 0
             for i in range(n):
@@ -412,6 +415,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                         stretch = length
                     e[2], e[3] = vx * stretch * inv, vy * stretch * inv
                     e[4], e[5], e[6] = d, sigma, length
+                    e[7], e[8] = (x[i] - grid_x) / res, (y[i] - grid_y) / res
                 else:
                     if valid[i] and isfinite(x[i] + y[i]) or not no_return[i] \
                             or not isfinite(heading[i]):
@@ -445,7 +449,17 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef long long[::1] runs_v = runs_a
     rx = &runs_v[0]
     ry = rx + bh * (bw + 1)
+    # cells of the box holding a sharp end point (σ ≤ hold_sigma): no free evidence from this batch
+    held_a = np.zeros(bh * bw, np.uint8)
+    cdef unsigned char[::1] held_v = held_a
+    held = &held_v[0]
     with nogil:
+        for j in range(nv):
+            e = &beams[j, 0]
+            if e[5] <= hold_sigma and fabs(e[7]) < FAR_CELLS and fabs(e[8]) < FAR_CELLS:
+                ix, iy = lfloor(e[7]) - bx0, lfloor(e[8]) - by0
+                if 0 <= ix < bw and 0 <= iy < bh:
+                    held[iy * bw + ix] = 1
         for j in range(nb):
             e = &beams[j, 0]
             if not clip(e[0], e[1], e[2], e[3], nx, ny, &s):
@@ -454,7 +468,8 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
             if j >= nv:                                # no-return: l_no_return on every cell
                 if not s.short:
                     add_runs(&s, s.t1, NR_UNIT, bx0, by0, bw, bh, rx, ry)
-                elif cell(&s, 0, ffloor(s.q0 + s.t0 * s.dq), bx0, bx1, by0, by1, &ix, &iy):
+                elif cell(&s, 0, ffloor(s.q0 + s.t0 * s.dq), bx0, bx1, by0, by1, &ix, &iy) \
+                        and not held[(iy - by0) * bw + ix - bx0]:
                     log_odds[iy, ix] += l_nr
                 continue
             d, sigma, length = e[4], e[5], e[6]
@@ -479,9 +494,11 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
             for k in range(n_far, s.count):
                 two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
                 if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
-                    log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_free)
+                    l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free
+                    log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_pass)
                 if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
-                    log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_free)
+                    l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free
+                    log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_pass)
         if kept:
             # the runs' cumulative sums (down the columns, then along each row) give the
             # counts; add their log-odds and clamp
@@ -498,6 +515,8 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                 out = &log_odds[by0 + iy, bx0]
                 for ix in range(bw):
                     count = row[ix] + col[ix]
+                    if held[iy * bw + ix]:
+                        count = 0
                     v = out[ix] + (<double>(<int>(count & LOW)) * l_free
                                    + <double>(<int>(count >> 32)) * l_nr)
                     out[ix] = lo if v < lo else (hi if v > hi else v)

@@ -53,6 +53,7 @@ class MapperParams:
     free_margin_cells: float = 0.5  # no free evidence within this many cells before the end point
     occ_sigma_m: float = 0.005    # a hit with σ above this weighs l_occ·occ_sigma_m/σ …
     l_occ_min: float = 1.6        # … but at least this (a lone far hit still marks its cell)
+    hold_sigma_m: float = 0.005   # a cell holding an end point of σ ≤ this is not freed by its batch
     # readings from a wide cone (Points.cone_half_angle_rad > 0: sonar), mapped as arcs
     cone_step_rad: float = math.radians(1.0)  # spacing of the fan of rays across the cone
     cone_l_occ: float = 1.25      # a hit on the arc
@@ -70,6 +71,8 @@ class MapperParams:
                 and self.cone_l_no_return <= 0):
             raise ValueError("need cone_step_rad > 0, cone_l_occ > 0, cone_l_free < 0 and "
                              "cone_l_no_return ≤ 0")
+        if not self.hold_sigma_m >= 0:
+            raise ValueError(f"need hold_sigma_m ≥ 0, got {self.hold_sigma_m}")
         if not (self.occ_sigma_m > 0 and self.l_occ_min >= 0):
             raise ValueError(f"need occ_sigma_m > 0 and l_occ_min ≥ 0, got "
                              f"{self.occ_sigma_m}, {self.l_occ_min}")
@@ -246,7 +249,8 @@ class OccupancyGrid:
             points = cone_fan(points, params.cone_step_rad)
             params = dataclasses.replace(params, l_occ=params.cone_l_occ,
                                          l_free=params.cone_l_free,
-                                         l_no_return=params.cone_l_no_return)
+                                         l_no_return=params.cone_l_no_return,
+                                         hold_sigma_m=0.0)   # an arc is no sharp end point
         _traverse.add_beams(
             log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
             _flat(points.x), _flat(points.y), _flat(points.sigma_m),
