@@ -2,10 +2,10 @@
 
 import importlib
 
-from .core import Points, Reason, Sweep, Truth
+from .core import Points, Reason, RingSource, Sweep, Truth
 
-__all__ = ["Points", "Reason", "Scenario", "ScenarioError", "Sweep", "Truth", "load_scenario",
-           "SimRing"]
+__all__ = ["Points", "Reason", "RingSource", "Scenario", "ScenarioError", "Sweep", "Truth",
+           "load_scenario", "SimRing"]
 
 # Loaded when first asked for: the scenario names need pyyaml and SimRing MuJoCo, which the
 # core types and the serial protocol (irring.hardware.protocol) do without.
