@@ -68,7 +68,7 @@ def test_the_same_acquisition_maps_the_simulator_and_the_emulated_device_byte_fo
     counts the device sends: every sweep and every map byte agree."""
     link = pty_link(Device(SimRing(t_room)))
     sim, sim_map = acquire_and_map(SimRing(t_room), t_room, tmp_path / "sim")
-    dev, dev_map = acquire_and_map(SerialRing(link, timeout_s=0.5), t_room, tmp_path / "dev")
+    dev, dev_map = acquire_and_map(SerialRing(link, timeout_s=2.0), t_room, tmp_path / "dev")
     assert dev.error is None and sim.error is None and dev.complete
     assert len(sim.sweeps) == len(dev.sweeps) == 4
     for s, d in zip(sim.sweeps, dev.sweeps):
@@ -90,7 +90,7 @@ def test_without_quantisation_the_device_sends_the_simulators_counts_rounded(pty
     assert "quantization" not in room.effects and "noise" in room.effects
     link = pty_link(Device(SimRing(room)))
     sim, _ = acquire_and_map(SimRing(room), room, tmp_path / "sim")
-    dev, dev_map = acquire_and_map(SerialRing(link, timeout_s=0.5), room, tmp_path / "dev")
+    dev, dev_map = acquire_and_map(SerialRing(link, timeout_s=2.0), room, tmp_path / "dev")
     (s,), (d,) = sim.sweeps, dev.sweeps
     frac = s.counts - np.floor(s.counts)
     assert np.count_nonzero((frac > 0.01) & (frac < 0.99)) > 100  # really fractional
@@ -148,7 +148,7 @@ def test_acquire_hands_serialrings_sweep_reports_over_and_reports_a_pulled_cable
                                                                                 pty_link):
     # 1 IRINF + 72 sentences per full sweep: the cable goes 30 readings into pose 2
     link = pty_link(Device(SimRing(t_room), faults=Faults(disconnect_after=1 + 72 + 30)))
-    with SerialRing(link, timeout_s=0.5) as ring:
+    with SerialRing(link, timeout_s=2.0) as ring:
         got = pipeline.acquire(ring, t_room.robot.poses, progress=False)
     assert isinstance(got.error, DeviceDisconnected)
     assert [len(s.steps) for s in got.sweeps] == [71, 30]
