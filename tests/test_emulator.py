@@ -255,6 +255,45 @@ def test_stall_and_disconnect_happen_after_exactly_n_sentences():
     assert len(talk(dev, p.encode(p.SweepCommand(-35, 35)))) == 3 and dev.disconnected
 
 
+
+def test_the_pty_counts_bytes_as_unread_the_moment_they_are_written():
+    # The kernel moves pty output to the host's side from a work queue; FIONREAD alone
+    # reads 0 until it has run (~40 % of the time), so the linger before an injected
+    # disconnect ended early and the hang-up threw away what the host had not read yet
+    # (test_source's pulled cable got 2 of its 30 readings under load).
+    late = 0
+    for _ in range(2000):  # a fresh pty each time: its first push is the one that lags
+        emu = PtyEmulator(Device(TinySource()))
+        emu.open()
+        try:
+            os.write(emu._master, b"x" * 100)
+            late += emu._unread() != 100
+        finally:
+            emu._close()
+    assert late == 0
+
+
+def test_a_host_that_reads_late_still_gets_every_sentence_before_a_disconnect():
+    for _ in range(5):
+        with PtyEmulator(Device(TinySource(), faults=Faults(disconnect_after=3))) as emu:
+            emu.start_thread()
+            fd = os.open(emu.path, os.O_RDWR | os.O_NOCTTY)
+            try:
+                os.write(fd, p.encode(p.SweepCommand(-35, 35)))
+                time.sleep(0.15)   # the device has sent its 3 sentences and wants to hang up
+                got = b""
+                while True:
+                    try:
+                        chunk = os.read(fd, 4096)
+                    except OSError:  # EIO: the device hung up
+                        break
+                    if not chunk:
+                        break
+                    got += chunk
+            finally:
+                os.close(fd)
+        assert len(p.Decoder().feed(got)) == 3
+
 @pytest.mark.parametrize("kw", [dict(drop_rate=1.5), dict(corrupt_rate=-0.1),
                                 dict(stall_after=-1)])
 def test_fault_settings_are_checked(kw):

@@ -391,6 +391,9 @@ class PtyEmulator(_Server):
 
     def _unread(self) -> int:
         """Bytes sent that the host has not read yet."""
+        # The kernel hands pty output to the slave from a work queue; FIONREAD alone may
+        # read 0 before it ran, while polling the slave waits for it to finish.
+        select.select([self._slave], [], [], 0)
         raw = fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0")
         return struct.unpack("i", raw)[0]
 
