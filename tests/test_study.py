@@ -238,6 +238,47 @@ def test_an_unreachable_scheduler_is_one_line_within_seconds():
     assert time.monotonic() - t0 < 20          # Dask's own default waits 30 s
 
 
+
+@pytest.mark.parametrize("answer", [b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n",
+                                    b"", None])
+def test_a_server_that_is_not_a_scheduler_is_one_line_within_seconds(answer):
+    """The dashboard's port (8787, HTTP) for the scheduler's, or anything else listening:
+    Dask reads the reply as a frame length (an HTTP reply asks for 3 EiB: MemoryError)."""
+    import socket
+    import threading
+
+    pytest.importorskip("dask.distributed")
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen()
+    port = srv.getsockname()[1]
+    held = []
+
+    def serve():
+        while True:
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                return
+            if answer is None:      # accepts and says nothing
+                held.append(conn)
+                continue
+            conn.sendall(answer)
+            conn.close()
+
+    threading.Thread(target=serve, daemon=True).start()
+    t0 = time.monotonic()
+    try:
+        with pytest.raises(executor.ExecutorError,
+                           match=rf"cannot reach the Dask scheduler at 'tcp://127.0.0.1:{port}'"):
+            with executor.executor(dask=f"tcp://127.0.0.1:{port}"):
+                pass
+    finally:
+        srv.close()
+        for c in held:
+            c.close()
+    assert time.monotonic() - t0 < 20
+
 class _Recording(executor.Executor):
     """Runs each job at submit, like a pool whose workers are instant, and counts submits."""
 

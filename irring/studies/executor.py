@@ -28,6 +28,7 @@ import contextlib
 import itertools
 import multiprocessing
 import os
+import threading
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterator, Sequence
 
@@ -66,21 +67,50 @@ DASK_CONNECT_TIMEOUT_S = 3.0
 
 def dask_client(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S):
     """A ``dask.distributed.Client`` connected to ``address``, or :class:`ExecutorError`
-    within about ``timeout_s`` seconds saying why not."""
+    within about ``timeout_s`` + 2 seconds saying why not (also when what answers there
+    is not a Dask scheduler)."""
     try:
         from dask.distributed import Client
     except ImportError:  # pragma: no cover - depends on the install
         raise ExecutorError("--dask needs the optional extra: pip install 'irring[dask]'") \
             from None
-    try:
-        return Client(address, timeout=f"{timeout_s}s")
-    except (OSError, TimeoutError, ValueError) as exc:
+    # Dask's timeout covers the TCP connect, not its handshake: a server that accepts and
+    # never answers would hang here, and one that answers something else (an HTTP port)
+    # has its reply read as a frame length (a MemoryError), hence a thread and a deadline.
+    box: dict[str, Any] = {}
+    late = threading.Event()
+
+    def connect() -> None:
+        try:
+            box["client"] = Client(address, timeout=f"{timeout_s}s")
+        except BaseException as exc:  # noqa: BLE001 - reported by the caller below
+            box["error"] = exc
+        if late.is_set() and "client" in box:
+            box["client"].close()
+
+    thread = threading.Thread(target=connect, name="irring-dask-connect", daemon=True)
+    thread.start()
+    wait_s = timeout_s + 2.0  # the TCP connect, then the handshake
+    thread.join(wait_s)
+    if "client" in box:
+        return box["client"]
+    exc = box.get("error")
+    if exc is None:
+        late.set()
+        why = (f"connected, but no Dask handshake within {wait_s:g} s (is that the "
+               "scheduler's port, not its dashboard's?)")
+    elif isinstance(exc, (OSError, TimeoutError, ValueError)):
         why = " ".join(str(exc).split()) or type(exc).__name__
-        if len(why) > 160:
-            why = why[:157] + "…"
-        raise ExecutorError(f"cannot reach the Dask scheduler at {address!r}: {why}; is "
-                            "`dask scheduler` running there, and is the address "
-                            "tcp://HOST:PORT?") from None
+    elif isinstance(exc, Exception):
+        why = (f"what answers there does not speak Dask's protocol ({type(exc).__name__}; "
+               "the dashboard's port instead of the scheduler's?)")
+    else:
+        raise exc
+    if len(why) > 160:
+        why = why[:157] + "…"
+    raise ExecutorError(f"cannot reach the Dask scheduler at {address!r}: {why}; is "
+                        "`dask scheduler` running there, and is the address "
+                        "tcp://HOST:PORT?") from None
 
 
 @contextlib.contextmanager
