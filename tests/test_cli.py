@@ -3,6 +3,8 @@ clear errors for bad input."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from irring import scenario
@@ -126,3 +128,21 @@ def test_version_prints_the_installed_package_version(capsys):
         main(["--version"])
     assert exc.value.code == 0
     assert capsys.readouterr().out.strip() == f"irring {version('irring')}"
+
+
+def test_the_docs_a_user_is_sent_to_exist(capsys):
+    """README and every command's --help name files of this repository that exist."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    texts = {"README.md": (root / "README.md").read_text()}
+    for name in COMMANDS:
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        texts[f"irring {name} --help"] = capsys.readouterr().out
+    named = {(where, doc) for where, text in texts.items()
+             for doc in re.findall(r"(?<![\w/.])((?:[\w-]+/)*[\w-]+\.md)\b", text)}
+    # a bare name (README's layout map lists docs/'s files by name) may sit in a folder
+    missing = sorted((w, d) for w, d in named if not (root / d).exists()
+                     and ("/" in d or not any(root.glob(f"*/{d}"))))
+    assert missing == []
