@@ -154,6 +154,15 @@ def test_an_existing_results_file_is_kept_unless_resumed(tmp_path):
         study.run_study(study.load_study(p), out, resume=True)
 
 
+
+def test_an_out_folder_that_cannot_be_one_is_one_line(tmp_path, capsys):
+    p = write(tmp_path, "designs: [radial12]\nscenarios: [l_room_post.yaml]\n")
+    (tmp_path / "a file").write_text("mine")
+    assert main(["study", str(p), "--out", str(tmp_path / "a file"), "--workers", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "a file: cannot write the study's results there" in err and "Traceback" not in err
+    assert (tmp_path / "a file").read_text() == "mine"
+
 # --------------------------------------------------------------------------- executors
 
 

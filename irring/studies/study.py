@@ -469,7 +469,11 @@ def run_study(study: Study | Sequence[Point], out_dir: str | Path, ex=None, *,
     """
     points = grid(study) if isinstance(study, Study) else list(study)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise StudyError(f"{out}: cannot write the study's results there: "
+                         f"{exc.strerror or exc}") from None
     path = out / RESULTS
     existing = read_results(path, repair=resume) if path.exists() else []
     if existing and not resume:
