@@ -1,9 +1,11 @@
 """Output folders written all at once: a run's files appear together or not at all.
 
 :func:`check_out` refuses a bad ``--out`` before any work (a file, an unwritable place);
-:class:`OutputSet` writes a run's files into a hidden sibling folder of ``--out`` and moves
-them in together when all are written, so Ctrl-C, a full disk or a crash leaves the previous
-run's files untouched, and two runs into one folder leave one run's set, never a mix.
+:class:`OutputSet` writes a command's files into a hidden sibling folder of ``--out`` and
+moves them in together when all are written, so Ctrl-C, a full disk or a crash leaves the
+previous run's files untouched, and two runs into one folder leave one run's set, never a mix.
+Every command that writes a folder of outputs (run, replay, drive, compare, the benchmarks,
+a study's summary) goes through it, naming the files it may write.
 :func:`safe_name` turns a scenario name into one folder name that stays inside its parent.
 """
 
@@ -17,7 +19,7 @@ from pathlib import Path
 
 from .errors import OutputError, printable
 
-# every file a run may write: a folder holding only these (and our temporaries) is ours to swap
+# every file `irring run/replay/drive` may write: a folder holding only these is ours to swap
 RUN_FILES = frozenset({"map.png", "map_building.gif", "map.pgm", "map.yaml", "sweeps.npz",
                        "link.json", "map.mcap"})
 _TEMP_PREFIX = ".irring-"
@@ -57,12 +59,18 @@ class OutputSet:
     """The files of one run, written under :attr:`tmp` and moved into ``out`` by
     :meth:`commit`.
 
-    Use as a context manager: on leaving without an exception the set is committed, on an
-    exception (or Ctrl-C) the temporaries are removed and ``out`` is left as it was.
+    ``files``: the names the command may write (default: :data:`RUN_FILES`). A previous
+    run's file of these names that this run does not write is removed, so the folder holds
+    one run's set; a folder holding only these names is swapped whole; other files in
+    ``out`` (a study's results.csv, the user's own) are kept. Use as a context manager: on
+    leaving without an exception the set is committed, on an exception (or Ctrl-C) the
+    temporaries are removed and ``out`` is left as it was. Raises :class:`OutputError`.
     """
 
-    def __init__(self, out: str | Path, option: str = "--out"):
+    def __init__(self, out: str | Path, option: str = "--out", files=RUN_FILES):
         self.out = check_out(out, option)
+        self.option = option
+        self.files = frozenset(files)
         self.tmp: Path | None = None
 
     def __enter__(self) -> Path:
@@ -72,8 +80,8 @@ class OutputSet:
             self.tmp = Path(tempfile.mkdtemp(prefix=f"{_TEMP_PREFIX}{safe_name(self.out.name)}-",
                                              dir=parent))
         except OSError as exc:
-            raise OutputError(f"--out {printable(str(self.out))}: cannot write there: "
-                              f"{exc.strerror or exc}") from None
+            raise OutputError(f"{self.option} {printable(str(self.out))}: cannot write "
+                              f"there: {exc.strerror or exc}") from None
         return self.tmp
 
     def __exit__(self, kind, exc, tb) -> None:
@@ -105,18 +113,18 @@ class OutputSet:
                 except OSError:
                     if not out.is_dir():
                         raise
-            if all(p.name in RUN_FILES for p in out.iterdir()) and self._swap():
+            if all(p.name in self.files for p in out.iterdir()) and self._swap():
                 return
             written = {p.name for p in self.tmp.iterdir()}
-            for name in sorted(RUN_FILES - written):
+            for name in sorted(self.files - written):
                 stale = out / name
                 if stale.is_file():
                     stale.unlink()
             for name in sorted(written):
                 os.replace(self.tmp / name, out / name)
         except OSError as exc:
-            raise OutputError(f"--out {printable(str(out))}: cannot move the outputs in: "
-                              f"{exc.strerror or exc}") from None
+            raise OutputError(f"{self.option} {printable(str(out))}: cannot move the outputs "
+                              f"in: {exc.strerror or exc}") from None
 
 
     def _swap(self) -> bool:

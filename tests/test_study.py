@@ -158,9 +158,10 @@ def test_an_existing_results_file_is_kept_unless_resumed(tmp_path):
 def test_an_out_folder_that_cannot_be_one_is_one_line(tmp_path, capsys):
     p = write(tmp_path, "designs: [radial12]\nscenarios: [l_room_post.yaml]\n")
     (tmp_path / "a file").write_text("mine")
-    assert main(["study", str(p), "--out", str(tmp_path / "a file"), "--workers", "1"]) == 1
-    err = capsys.readouterr().err
-    assert "a file: cannot write the study's results there" in err and "Traceback" not in err
+    assert main(["study", str(p), "--out", str(tmp_path / "a file"), "--workers", "1"]) == 4
+    err = capsys.readouterr().err   # checked before any run: the output status, 4
+    assert "a file: is a file; expected a folder for the outputs" in err
+    assert "Traceback" not in err
     assert (tmp_path / "a file").read_text() == "mine"
 
 # --------------------------------------------------------------------------- executors

@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from ..outputs import check_out
 from ..pipeline import progress_bar
 from ..studies import accuracy
 from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
@@ -87,6 +88,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     scenarios = args.scenario or list(accuracy.DEFAULT_SCENARIOS)
     configs = accuracy.configurations(args.knob)
+    check_out(args.out)
     total = len(configs) * len(scenarios) * args.seeds
     with progress_bar(total, "bench accuracy", unit="run") as bar, \
             executor(args.workers, args.dask) as ex:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-from pathlib import Path
 
+from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, measure, resolve_rooms
 from ._common import at_least
 
@@ -62,19 +62,22 @@ COLUMNS = (("occupied_f1", "F1", 1, 3), ("occupied_precision", "prec", 1, 3),
            ("point_rms_m", "pt mm", 1e3, 1), ("point_rms_theta0_m", "θ=0 mm", 1e3, 1))
 
 
+OUTPUT_FILES = ("rooms.json", "rooms.csv")
+
+
 def run(args: argparse.Namespace) -> int:
     scenarios = resolve_rooms(args.rooms or ROOMS)
+    out = check_out(args.out)
     rows = measure(scenarios, args.seeds)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "rooms.json").write_text(json.dumps(rows, indent=2))
-    with open(out / "rooms.csv", "w", newline="") as fh:
-        w = csv.writer(fh)
-        keys = [c[0] for c in COLUMNS]
-        w.writerow(["room", "sensor", *keys])
-        for r in rows:
-            for variant in ("effects", "ideal"):
-                w.writerow([r["name"], variant, *(r[variant][k] for k in keys)])
+    with OutputSet(out, files=OUTPUT_FILES) as tmp:
+        (tmp / "rooms.json").write_text(json.dumps(rows, indent=2))
+        with open(tmp / "rooms.csv", "w", newline="") as fh:
+            w = csv.writer(fh)
+            keys = [c[0] for c in COLUMNS]
+            w.writerow(["room", "sensor", *keys])
+            for r in rows:
+                for variant in ("effects", "ideal"):
+                    w.writerow([r["name"], variant, *(r[variant][k] for k in keys)])
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0

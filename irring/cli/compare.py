@@ -7,6 +7,7 @@ import json
 
 from .. import designs
 from ..designs import DESIGN_BY_NAME
+from ..outputs import check_out
 from ..pipeline import progress_enabled
 from ..studies import compare
 from ..studies.executor import executor
@@ -76,6 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     scenarios = args.scenario or list(DEFAULT_SCENARIOS)
     names = args.design or list(designs.DESIGN_BY_NAME)
+    check_out(args.out)
     with executor(args.workers, args.dask) as ex:
         result = compare.compare(scenarios, names, args.seeds,
                                  detection_distances_m=args.distances_mm, bearings=args.bearings,

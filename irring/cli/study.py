@@ -7,6 +7,7 @@ import json
 import time
 from pathlib import Path
 
+from ..outputs import check_out, safe_name
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
 from ..studies.executor import executor
@@ -66,7 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     spec = study.load_study(args.file)
-    out = Path(args.out) if args.out else Path("out") / Path(args.file).stem
+    out = check_out(args.out if args.out else Path("out") / safe_name(Path(args.file).stem))
     t0 = time.perf_counter()
     bar = progress_bar(0, "study", progress_enabled() and not args.json, unit="run")
     counts = {}

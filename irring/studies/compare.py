@@ -18,6 +18,7 @@ Two kinds of result, per design:
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 
@@ -26,6 +27,7 @@ import numpy as np
 from .. import designs as designs_mod
 from .. import gp2
 from ..designs import Design
+from ..outputs import OutputSet
 
 DEFAULT_DISTANCES_M = (0.25, 0.35, 0.45, 0.55, 0.65, 0.75)
 CONE_RAY_STEP_RAD = math.radians(0.25)  # fan spacing used to stand in for a sonar cone
@@ -409,23 +411,28 @@ def chart(result: dict, path) -> None:
     fig.savefig(path, dpi=100)
 
 
-def write_study(out_dir, name: str, result: dict, rows: list[dict], keys, draw) -> dict[str, str]:
-    """A study's files in ``out_dir``: <name>.json (all of ``result``), <name>.csv (``rows``
-    with columns ``keys``), runs.csv (``result["runs"]``, if any) and <name>.png
-    (``draw(result, path)``)."""
-    import json
-    from pathlib import Path
+def study_files(name: str) -> tuple[str, ...]:
+    """The files :func:`write_study` may write for the study ``name``."""
+    return f"{name}.json", f"{name}.csv", "runs.csv", f"{name}.png"
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {"json": out / f"{name}.json", "csv": out / f"{name}.csv",
-             "runs_csv": out / "runs.csv", "chart": out / f"{name}.png"}
-    paths["json"].write_text(json.dumps(result, indent=2))
-    write_csv(paths["csv"], rows, keys)
-    if result["runs"]:
-        write_csv(paths["runs_csv"], result["runs"], list(result["runs"][0]))
-    draw(result, paths["chart"])
-    return {k: str(v) for k, v in paths.items()}
+
+def write_study(out_dir, name: str, result: dict, rows: list[dict], keys, draw) -> dict[str, str]:
+    """A study's files in ``out_dir``, all together (:class:`irring.outputs.OutputSet`: a
+    failed or interrupted write leaves the folder as it was): <name>.json (all of
+    ``result``), <name>.csv (``rows`` with columns ``keys``), runs.csv (``result["runs"]``,
+    if any) and <name>.png (``draw(result, path)``). Raises ``OutputError``."""
+    target = OutputSet(out_dir, files=study_files(name))
+    with target as tmp:
+        paths = dict(zip(("json", "csv", "runs_csv", "chart"),
+                         (tmp / f for f in study_files(name))))
+        paths["json"].write_text(json.dumps(result, indent=2))
+        write_csv(paths["csv"], rows, keys)
+        if result["runs"]:
+            write_csv(paths["runs_csv"], result["runs"], list(result["runs"][0]))
+        else:
+            del paths["runs_csv"]
+        draw(result, paths["chart"])
+    return {k: str(target.out / p.name) for k, p in paths.items()}
 
 
 def write_outputs(result: dict, out_dir) -> dict[str, str]:

@@ -32,6 +32,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
+from ..outputs import OutputSet
 from ..pipeline import scenario_text
 from ..scenario import Scenario, ScenarioError, load_scenario
 from . import accuracy
@@ -632,20 +633,25 @@ SUMMARY_CSV_KEYS = ("runs", "hardware_time_s", "compute_ms") + tuple(
     "front_hw_f1", "front_hw_cov", "front_hw_rmse")
 
 
+SUMMARY_FILES = {"summary_csv": "summary.csv", "summary_json": "summary.json",
+                 "chart": "study.png"}
+
+
 def write_summary(rows: Sequence[Mapping[str, str]], out_dir: str | Path,
                   knobs: Sequence[str] = ()) -> dict[str, str]:
     """summary.csv and summary.json (one record per configuration: design and the knobs
-    the study varies) and study.png (the chart) in ``out_dir``."""
-    out = Path(out_dir)
+    the study varies) and study.png (the chart) in ``out_dir``, all together
+    (:class:`irring.outputs.OutputSet`; results.csv beside them is left alone)."""
     by = ("design",) + tuple(knobs)
     records = summarise(rows, by)
-    paths = {"summary_csv": out / "summary.csv", "summary_json": out / "summary.json",
-             "chart": out / "study.png"}
-    write_csv(paths["summary_csv"], records, by + SUMMARY_CSV_KEYS)
-    paths["summary_json"].write_text(json.dumps({"by": list(by), "configurations": records},
-                                                indent=2))
-    chart(records, paths["chart"], by)
-    return {k: str(v) for k, v in paths.items()}
+    target = OutputSet(out_dir, files=SUMMARY_FILES.values())
+    with target as tmp:
+        paths = {k: tmp / name for k, name in SUMMARY_FILES.items()}
+        write_csv(paths["summary_csv"], records, by + SUMMARY_CSV_KEYS)
+        paths["summary_json"].write_text(json.dumps({"by": list(by), "configurations": records},
+                                                    indent=2))
+        chart(records, paths["chart"], by)
+    return {k: str(target.out / name) for k, name in SUMMARY_FILES.items()}
 
 
 def summary_records(out_dir: str | Path) -> tuple[list[str], list[dict]]:

@@ -1,0 +1,170 @@
+"""Outputs are atomic and --out is checked first (issue 15) for the study commands:
+`irring compare`, `irring bench accuracy`, `irring bench rooms` and `irring study`'s summary.
+(`irring run` has its own in test_hostile.py.)"""
+
+from __future__ import annotations
+
+import errno
+import importlib
+import os
+
+import pytest
+from matplotlib.figure import Figure
+
+from irring.cli import main
+from irring.outputs import OutputSet
+from irring.studies import compare
+
+# A room of our own: 0.93 × 0.71 m, one post off-centre, one pose (x ≠ y everywhere).
+ROOM = """\
+name: post_box
+seed: 4
+room:
+  outline_mm: [[0, 0], [930, 0], [930, 710], [0, 710]]
+obstacles:
+  - {type: cylinder, center_mm: [690, 210], radius_mm: 26}
+robot:
+  poses:
+    - {x_mm: 410, y_mm: 330, yaw_deg: 7}
+effects: [incidence, noise, quantization]
+"""
+
+STUDY = "designs: [radial12]\nscenarios: [post_box.yaml]\nseeds: 1\n"
+
+# each command: the argv before --out (given the folder holding ROOM/STUDY), and the module
+# attribute the command calls to do the runs
+COMMANDS = {
+    "compare": (lambda d: ["compare", "--scenario", str(d / "post_box.yaml"), "--design",
+                           "radial12", "--seeds", "1", "--bearings", "8", "--distances-mm",
+                           "400"], "irring.studies.compare", "compare"),
+    "bench accuracy": (lambda d: ["bench", "accuracy", "--scenario", str(d / "post_box.yaml"),
+                                  "--knob", "tolerance", "--seeds", "1", "--workers", "1"],
+                       "irring.studies.accuracy", "measure"),
+    "bench rooms": (lambda d: ["bench", "rooms", str(d / "post_box.yaml")],
+                    "irring.cli.bench_rooms", "measure"),
+    "study": (lambda d: ["study", str(d / "s.yaml"), "--workers", "1"], "irring.studies.study",
+              "run_study"),
+}
+
+
+@pytest.fixture
+def inputs(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    (d / "post_box.yaml").write_text(ROOM)
+    (d / "s.yaml").write_text(STUDY)
+    return d
+
+
+def _snapshot(folder):
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def _never(*a, **k):
+    raise AssertionError("the runs started before --out was checked")
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_out_naming_a_file_is_refused_before_any_run(command, inputs, tmp_path, monkeypatch,
+                                                      capsys):
+    argv, name, runner = COMMANDS[command]
+    module = importlib.import_module(name)
+    monkeypatch.setattr(module, runner, _never)
+    target = tmp_path / "taken.txt"
+    target.write_text("keep")
+    assert main(argv(inputs) + ["--out", str(target)]) == 4
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"--out {target}: is a file; expected a folder for the outputs" in err
+    assert target.read_text() == "keep"
+    # a folder below a file cannot be made either
+    assert main(argv(inputs) + ["--out", str(target / "sub")]) == 4
+    assert f"{target} is a file, so the folder cannot be made" in capsys.readouterr().err
+    assert sorted(os.listdir(tmp_path)) == ["in", "taken.txt"]
+
+
+def _full_disk(*a, **k):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_a_failed_write_leaves_the_earlier_outputs_byte_identical(command, inputs, tmp_path,
+                                                                  monkeypatch, capsys):
+    argv, name, runner = COMMANDS[command]
+    module = importlib.import_module(name)
+    out = tmp_path / "out"
+    real, results = getattr(module, runner), []
+
+    def remember(*a, **k):
+        results.append(real(*a, **k))
+        return results[-1]
+
+    monkeypatch.setattr(module, runner, remember)
+    assert main(argv(inputs) + ["--out", str(out)]) == 0
+    before = _snapshot(out)
+    if command == "study":
+        assert set(before) == {"results.csv", "summary.csv", "summary.json", "study.png"}
+        # a second seed on --resume: one more row streamed to results.csv, a new summary
+        (inputs / "s.yaml").write_text(STUDY.replace("seeds: 1", "seeds: 2"))
+        argv_again = argv(inputs) + ["--resume"]
+    else:   # the first run's result, told apart: every file of the set would change
+        again = ([dict(r, again=True) for r in results[0]] if command == "bench rooms"
+                 else dict(results[0], again=True))
+        monkeypatch.setattr(module, runner, lambda *a, **k: again)
+        argv_again = argv(inputs)
+    capsys.readouterr()
+    if command == "bench rooms":   # no chart: the disk fills while writing rooms.csv
+        import csv
+
+        monkeypatch.setattr(csv, "writer", _full_disk)
+    else:
+        monkeypatch.setattr(Figure, "savefig", _full_disk)
+    assert main(argv_again + ["--out", str(out)]) == 4
+    assert "No space left on device" in capsys.readouterr().err
+    after = _snapshot(out)
+    if command == "study":   # the checkpoint streams on (and keeps both rows)
+        assert after.pop("results.csv").count(b"\n") == before.pop("results.csv").count(b"\n") + 1
+    assert after == before
+    assert sorted(os.listdir(tmp_path)) == ["in", "out"]   # no temporaries left
+    monkeypatch.undo()
+    if command != "study":   # and the set is whole after a write that succeeds
+        monkeypatch.setattr(module, runner, lambda *a, **k: results[0])
+        assert main(argv(inputs) + ["--out", str(out)]) == 0
+        assert set(_snapshot(out)) == set(before)
+
+
+def test_an_output_set_replaces_its_own_files_and_keeps_the_others(tmp_path):
+    out = tmp_path / "study"
+    out.mkdir()
+    (out / "results.csv").write_bytes(b"streamed rows\n")
+    (out / "summary.csv").write_text("old summary")
+    (out / "study.png").write_text("old chart")
+    files = ("summary.csv", "summary.json", "study.png")
+
+    with pytest.raises(KeyboardInterrupt):
+        with OutputSet(out, files=files) as tmp:
+            (tmp / "summary.csv").write_text("new summary")
+            raise KeyboardInterrupt
+    assert _snapshot(out) == {"results.csv": b"streamed rows\n", "study.png": b"old chart",
+                              "summary.csv": b"old summary"}
+
+    with OutputSet(out, files=files) as tmp:   # this run writes no chart
+        (tmp / "summary.csv").write_text("new summary")
+        (tmp / "summary.json").write_text("{}")
+    # the old chart is not left beside the new summary; the checkpoint is untouched
+    assert _snapshot(out) == {"results.csv": b"streamed rows\n", "summary.csv": b"new summary",
+                              "summary.json": b"{}"}
+    assert sorted(os.listdir(tmp_path)) == ["study"]
+
+
+def test_a_folder_of_only_the_sets_files_is_swapped_whole(tmp_path):
+    out = tmp_path / "cmp"
+    out.mkdir()
+    (out / "compare.png").write_text("old")
+    (out / "runs.csv").write_text("old runs")
+    inode = out.stat().st_ino
+    with OutputSet(out, files=compare.study_files("compare")) as tmp:
+        (tmp / "compare.json").write_text("[]")
+    assert _snapshot(out) == {"compare.json": b"[]"}
+    assert out.stat().st_ino != inode          # one rename: no moment with a mix of runs
+    assert sorted(os.listdir(tmp_path)) == ["cmp"]
