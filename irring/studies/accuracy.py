@@ -16,7 +16,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from .. import pipeline, scenario as scenario_lib
-from ..estimation.estimate import LineOptions, estimate
+from ..estimation.estimate import Calibration, LineOptions, estimate
 from ..maps import metrics
 from ..maps.mapping import OccupancyGrid
 from ..pipeline import scenario_text
@@ -194,7 +194,7 @@ def run_job(job: Job) -> dict:
                                   tolerance_rad=cfg.tolerance_rad, iterate=cfg.iterate,
                                   lines=lines, keep_unconverged=cfg.knob == "iterations")
     grid = OccupancyGrid.for_scenario(sc)
-    cal = pipeline.scene_calibration(sc)[0]
+    cal = Calibration.for_scene(sc)
     result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid, calibration=cal, score=False,
                                  progress=False, estimator=estimator)
     # every configuration is judged on the default design's ground truth, on its own cells

@@ -25,7 +25,6 @@ import time
 
 import numpy as np
 
-from .. import pipeline
 from ..core import Reason
 from ..estimation.estimate import Calibration, estimate
 
@@ -52,7 +51,7 @@ def measure(scenario, *, sweeps_per_pose: int = 5, min_theta_deg: float = 40.0,
         for _ in range(sweeps_per_pose):
             sw = sim.sweep(pose)
             if cal is None:  # the calibration of what the scene simulates
-                cal = pipeline.scene_calibration(scenario)[0]
+                cal = Calibration.for_scene(scenario)
             t0 = time.perf_counter()
             p = estimate(sw, cal, max_iterations=max_iterations)
             times.append(time.perf_counter() - t0)

@@ -13,9 +13,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..estimation.estimate import estimate
+from ..estimation.estimate import Calibration, estimate
 from ..maps.mapping import OccupancyGrid
-from ..pipeline import scene_calibration
 from ..simulation.effects import PHASES, Pipeline
 from ..simulation.rangers import pipeline_for
 
@@ -77,7 +76,7 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
     pipe = timed_pipeline(scenario, tally)
     _, _, truth = sim.truth(pose_index)
     sweep = sim.sweep(pose_index)
-    cal = scene_calibration(scenario)[0]   # as irring run reads the scene
+    cal = Calibration.for_scene(scenario)   # as irring run reads the scene
     points = estimate(sweep, cal)
     grid = OccupancyGrid.for_scenario(scenario)
     chain_grid = OccupancyGrid.for_scenario(scenario)
