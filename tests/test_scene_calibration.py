@@ -90,12 +90,12 @@ def test_run_records_the_scene_calibration_and_replay_uses_it(tmp_path):
 
 def test_compare_reads_each_design_with_its_scene_calibration(monkeypatch):
     seen = []
-    real = pipeline.scene_calibration
+    real = Calibration.for_scene
 
     def spy(sc):
         seen.append(sc.sensor.model)
         return real(sc)
 
-    monkeypatch.setattr(pipeline, "scene_calibration", spy)
+    monkeypatch.setattr(Calibration, "for_scene", staticmethod(spy))
     compare.run_scene(scene("[noise]"), "laser")
     assert seen == ["laser"]
