@@ -56,10 +56,30 @@ def progress_bar(total: int, desc: str, enabled: bool | None = None, *, unit: st
     """The one progress bar (tqdm.auto: a widget in a notebook, text at a terminal; a
     context manager): shown when ``enabled``, or when None as :func:`progress_enabled`
     decides; a disabled bar's ``update`` costs nothing."""
+    if not (progress_enabled() if enabled is None else enabled):
+        return _NoBar()          # (tqdm.auto takes ~30 ms to import: not for a hidden bar)
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, leave=False,
-                disable=not (progress_enabled() if enabled is None else enabled))
+    return tqdm(total=total, desc=desc, unit=unit, leave=False)
+
+
+class _NoBar:
+    """A hidden progress bar: the part of tqdm's interface irring uses, doing nothing."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def reset(self, total: int | None = None) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
 
 
 @dataclass

@@ -8,6 +8,7 @@ raises the ImportError that says how to build it when it is used.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 _PACKAGE = Path(__file__).resolve().parent
@@ -19,6 +20,18 @@ def _find(name: str) -> Path:
             return candidate
     raise FileNotFoundError(f"irring's bundled '{name}' folder is missing; reinstall irring "
                             f"(looked in {_PACKAGE / '_data'} and {_PACKAGE.parent})")
+
+
+@functools.lru_cache(maxsize=1)
+def installed_version() -> str:
+    """irring's installed version, or "unknown (not installed)" for a bare source tree."""
+    # importlib.metadata costs ~20 ms at start-up: loaded when a version is asked for
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("irring")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
 
 
 def models_dir() -> Path:

@@ -146,3 +146,37 @@ def test_the_docs_a_user_is_sent_to_exist(capsys):
     missing = sorted((w, d) for w, d in named if not (root / d).exists()
                      and ("/" in d or not any(root.glob(f"*/{d}"))))
     assert missing == []
+
+
+def test_a_command_loads_only_its_own_module():
+    """Building the parser imports no subcommand; `irring run` parses without loading
+    what other commands need (the studies, the serial link, Dask, matplotlib charts)."""
+    import subprocess
+    import sys
+
+    code = """
+import sys
+from irring.cli import build_parser
+parser = build_parser()
+print(sorted(m for m in sys.modules if m.startswith("irring.cli.") and m != "irring.cli._common"))
+args = parser.parse_args(["run", "t_room", "--seed", "3"])
+print(args.seed, args.func.__module__)
+print(sorted(m for m in sys.modules if m.startswith(("irring.cli.", "irring.studies",
+      "irring.hardware", "serial", "dask", "matplotlib", "importlib.metadata"))))
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [
+        "[]", "3 irring.cli.run", "['irring.cli._common', 'irring.cli.run']"]
+
+
+def test_bench_loads_only_the_benchmark_asked_for():
+    import sys
+
+    parser = build_parser()
+    before = {m for m in sys.modules if m.startswith("irring.cli.bench_")}
+    args = parser.parse_args(["bench", "render", "--repeats", "2"])
+    loaded = {m for m in sys.modules if m.startswith("irring.cli.bench_")} - before
+    assert args.repeats == 2 and args.func.__module__ == "irring.cli.bench_render"
+    assert loaded <= {"irring.cli.bench_render"}

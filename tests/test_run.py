@@ -136,6 +136,22 @@ def test_progress_bar_only_at_a_terminal(monkeypatch):
     assert pipeline.progress_enabled()
 
 
+def test_a_hidden_progress_bar_does_not_load_tqdm():
+    import subprocess
+    import sys
+
+    code = ("import sys; from irring import pipeline\n"
+            "with pipeline.progress_bar(3, 'x', False) as bar:\n"
+            "    bar.update(); bar.reset(total=5)\n"
+            "print('tqdm' in sys.modules)\n"
+            "with pipeline.progress_bar(3, 'x', True) as bar:\n"
+            "    bar.update(2); print(bar.n, 'tqdm' in sys.modules)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["False", "2", "True"]
+
+
 def test_help_explains_units_defaults_and_examples(capsys):
     with pytest.raises(SystemExit):
         main(["run", "--help"])

@@ -1,22 +1,35 @@
 """The `irring` command. Each subcommand lives in its own module under irring/cli/.
 
-A module registers itself with ``register(subparsers)``, which adds a parser whose
-``func(args) -> int`` does the work. Nothing below the cli imports it.
+A module's ``register(parser)`` gives its parser the long help, the arguments and a
+``func(args) -> int`` that does the work; it is imported only when that subcommand is
+parsed or its help printed (``_common.LazyParser``), so `irring run` loads no other
+subcommand's dependencies. Nothing below the cli imports it.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 import traceback
-from importlib.metadata import PackageNotFoundError, version
 
 from .. import errors
+from ..resources import installed_version
+from ._common import add_subcommands
 
-# Subcommand modules, in the order `irring --help` lists them.
-COMMANDS = ("run", "replay", "view", "scenarios", "calibrate", "emulate", "drive", "geometry",
-            "compare", "study", "bench")
+# Subcommand modules → one-line help, in the order `irring --help` lists them.
+COMMANDS = {
+    "run": "map a scenario: simulate, estimate, map, score, draw",
+    "replay": "estimate and map a recording (.npz) again",
+    "view": "picture (or live viewer) of the MuJoCo scene with beams",
+    "scenarios": "list the bundled scenarios, one line each",
+    "calibrate": "measure d_o and the sensor curve a(θ), b(θ); write a YAML file",
+    "emulate": "a simulated ring device on a pseudo-terminal (try `drive` without hardware)",
+    "drive": "sweep the real ring over a serial port, estimate and map",
+    "geometry": "overlap angle/area (Eqs. 2–3, Monte Carlo) and blind spot (Eq. 1)",
+    "compare": "compare ring designs on simulated scenes",
+    "study": "run a grid of designs × scenarios × seeds × knobs (resumable)",
+    "bench": "benchmarks: what accuracy costs in time, stage speeds",
+}
 
 DESCRIPTION = """\
 irring: a MuJoCo testbed for the rotating infrared range-sensor ring of
@@ -41,20 +54,24 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="irring", description=DESCRIPTION, epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--version", action="version", version=f"irring {_version()}")
+    parser.add_argument("--version", action=_Version,
+                        help="show program's version number and exit")
     parser.add_argument("--debug", action="store_true",
                         help="print the traceback of an error (also: IRRING_DEBUG=1)")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMANDS:
-        importlib.import_module(f"{__name__}.{name}").register(sub)
+    add_subcommands(parser, "command", "COMMAND", COMMANDS, lambda name: f"{__name__}.{name}")
     return parser
 
 
-def _version() -> str:
-    try:
-        return version("irring")
-    except PackageNotFoundError:   # a source tree used without installing
-        return "unknown (not installed)"
+class _Version(argparse.Action):
+    """argparse's "version" action, asking for the version only when --version is given."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                 help=None):
+        super().__init__(option_strings, dest, nargs=0, default=default, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"irring {installed_version()}")
+        parser.exit()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,17 +1,63 @@
 """Argument parsing shared by several subcommands (not a subcommand itself).
 
-The helpers here are argparse ``type=`` callables: a bad value raises
-``argparse.ArgumentTypeError``, so argparse prints the usage line and
-``irring COMMAND: error: argument --OPTION: …`` and exits 2, like any other bad
-argument (exit 1 is left for runs that fail).
+The ``type=`` callables here raise ``argparse.ArgumentTypeError`` on a bad value, so
+argparse prints the usage line and ``irring COMMAND: error: argument --OPTION: …`` and
+exits 2, like any other bad argument (exit 1 is left for runs that fail).
+:class:`LazyParser` lets ``irring X`` import only subcommand X's module.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
 from collections.abc import Callable
 from pathlib import Path
+
+
+class LazyParser(argparse.ArgumentParser):
+    """A subcommand's parser that imports its module and lets it ``register(self)`` (long
+    help, arguments, ``func``) the first time it parses, or prints help or usage: building
+    ``irring``'s parser then costs one line of help per subcommand, and ``irring run`` does
+    not load what ``irring study`` or ``irring drive`` need (Dask, pyserial, …)."""
+
+    module: str | None = None
+
+    def _load(self) -> None:
+        if self.module is not None:
+            name, self.module = self.module, None
+            importlib.import_module(name).register(self)
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._load()
+        return super().parse_known_args(args, namespace)
+
+    def format_usage(self) -> str:
+        self._load()
+        return super().format_usage()
+
+    def format_help(self) -> str:
+        self._load()
+        return super().format_help()
+
+
+def add_subcommands(parser: argparse.ArgumentParser, dest: str, metavar: str,
+                    commands: dict[str, str], module: Callable[[str], str]):
+    """Subparsers ``commands`` (name → one-line help), each a :class:`LazyParser` filled in
+    by module ``module(name)``; returns the subparsers action."""
+    sub = parser.add_subparsers(dest=dest, metavar=metavar, parser_class=LazyParser)
+    for name, help_line in commands.items():
+        sub.add_parser(name, help=help_line).module = module(name)
+    return sub
+
+
+def describe(p: argparse.ArgumentParser, description: str, epilog: str | None = None, *,
+             raw: bool = True) -> None:
+    """Set a subcommand's long help (its one-line help is where it is listed);
+    ``raw``: print the texts with their own line breaks."""
+    p.description, p.epilog = description, epilog
+    if raw:
+        p.formatter_class = argparse.RawDescriptionHelpFormatter
 
 
 def at_least(low: int) -> Callable[[str], int]:

@@ -1,21 +1,30 @@
 """`irring bench …`: benchmarks that print measured figures.
 
-Each benchmark is a module ``irring/cli/bench_<name>.py`` with ``register(subparsers)``;
-the measurements themselves live in ``irring/studies/``.
+Each benchmark is a module ``irring/cli/bench_<name>.py`` with ``register(parser)``,
+imported only when that benchmark runs; the measurements live in ``irring/studies/``.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 
-BENCHES = ("accuracy", "speed", "effects", "estimator", "dynamics", "rooms", "study", "render")
+from ._common import add_subcommands, describe
+
+# name → one-line help, in the order `irring bench --help` lists them
+BENCHES = {
+    "accuracy": "what accuracy costs in hardware time and compute time",
+    "speed": "time per sweep of each stage, vs raw MuJoCo and vs the real ring",
+    "effects": "cost of each sensor effect per sweep; an effect that is off costs ~0",
+    "estimator": "iterative estimator vs θ = 0: range RMSE at steep incidence",
+    "dynamics": "belt stretch, physics convergence, settle time vs angle error, mapping on "
+                "the move",
+    "rooms": "map scores on a set of rooms, scene effects vs an ideal sensor",
+    "study": "how `irring study` scales: runs/s on 1 and N workers, memory",
+    "render": "cost of the map pictures vs making the map; peak memory",
+}
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bench", help="benchmarks: what accuracy costs in time, stage speeds",
-                       description="Benchmarks that measure and print figures on this machine.")
-    inner = p.add_subparsers(dest="bench", metavar="BENCH")
-    for name in BENCHES:
-        importlib.import_module(f"{__package__}.bench_{name}").register(inner)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Benchmarks that measure and print figures on this machine.", raw=False)
+    add_subcommands(p, "bench", "BENCH", BENCHES, lambda name: f"{__package__}.bench_{name}")
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])

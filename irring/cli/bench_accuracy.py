@@ -11,7 +11,7 @@ from ..pipeline import progress_bar
 from ..studies import accuracy
 from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
 from ..studies.executor import executor
-from ._common import add_executor_options, at_least
+from ._common import add_executor_options, at_least, describe
 
 EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):
@@ -58,16 +58,14 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "accuracy", help="what accuracy costs in hardware time and compute time",
-        description="Vary the knobs that trade time for accuracy (sensor step, samples per "
-                    "step, settle time, estimator iterations, tolerance and regrouping, grid "
-                    "resolution, "
-                    "design), one at a time around the scenario's default; record accuracy "
-                    "against hardware time and compute time, mark the Pareto front, write "
-                    "CSV/JSON and a chart.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Vary the knobs that trade time for accuracy (sensor step, samples per "
+             "step, settle time, estimator iterations, tolerance and regrouping, grid "
+             "resolution, "
+             "design), one at a time around the scenario's default; record accuracy "
+             "against hardware time and compute time, mark the Pareto front, write "
+             "CSV/JSON and a chart.",
+             EPILOG)
     p.add_argument("--scenario", action="append", metavar="S",
                    help="bundled scenario name or YAML path; repeat for several (default: "
                         + ", ".join(DEFAULT_SCENARIOS) + ")")

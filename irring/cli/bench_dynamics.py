@@ -6,7 +6,7 @@ import argparse
 import json
 import math
 
-from ._common import at_least
+from ._common import at_least, describe
 
 EPILOG = """\
 what it prints (the paper's ring in the T-room, pose 0 unless said; angles at the sensor):
@@ -32,15 +32,12 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "dynamics", help="belt stretch, physics convergence, settle time vs angle error, "
-                         "mapping on the move",
-        description="Measure what belt_dynamics, timing and motion do: the belt's stretch "
-                    "over many sweeps, whether halving the physics time step changes the "
-                    "readings, how settle time trades hardware time for angle error, "
-                    "MuJoCo's own sensor timing against irring's, and maps made on the move.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Measure what belt_dynamics, timing and motion do: the belt's stretch "
+             "over many sweeps, whether halving the physics time step changes the "
+             "readings, how settle time trades hardware time for angle error, "
+             "MuJoCo's own sensor timing against irring's, and maps made on the move.",
+             EPILOG)
     p.add_argument("--sweeps", type=at_least(1), default=1000, metavar="N",
                    help="back-and-forth sweeps for the belt figures (≥ 1; default: 1000)")
     p.add_argument("--seeds", type=int, nargs="+", default=[1], metavar="SEED",

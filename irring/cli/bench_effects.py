@@ -7,7 +7,7 @@ import json
 
 from ..scenario import load_scenario
 from ..studies.effects import measure
-from ._common import at_least
+from ._common import at_least, describe
 
 EPILOG = """\
 what it prints (µs per 71 × 12 sweep, median over rounds; no MuJoCo involved):
@@ -29,13 +29,11 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "effects", help="cost of each sensor effect per sweep; an effect that is off costs ~0",
-        description="Time the effects pipeline on a synthetic 71 × 12 sweep of the paper's "
-                    "ring: each effect alone and within the full pipeline, and what the "
-                    "effects that are off cost (they are not built).",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Time the effects pipeline on a synthetic 71 × 12 sweep of the paper's "
+             "ring: each effect alone and within the full pipeline, and what the "
+             "effects that are off cost (they are not built).",
+             EPILOG)
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="scenario whose sensor block (model, ADC bits) is used; its effects "
                         "are replaced (default: t_room)")

@@ -8,7 +8,7 @@ import json
 from ..estimation.estimate import Calibration
 from ..scenario import load_scenario
 from ..studies.estimator import measure
-from ._common import at_least
+from ._common import at_least, describe
 
 EPILOG = """\
 what it prints (range errors against the simulator's true distance from the emitter):
@@ -29,14 +29,12 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "estimator", help="iterative estimator vs θ = 0: range RMSE at steep incidence",
-        description="Sweep every pose of a scenario in simulation and compare the paper's "
-                    "iterative estimator (Table II) with reading every return as if it were "
-                    "square on (θ = 0): range RMSE against the true distance for readings at "
-                    "steep incidence, and how many iterations it took.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Sweep every pose of a scenario in simulation and compare the paper's "
+             "iterative estimator (Table II) with reading every return as if it were "
+             "square on (θ = 0): range RMSE against the true distance for readings at "
+             "steep incidence, and how many iterations it took.",
+             EPILOG)
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="bundled scenario name or YAML path (default: t_room, noise on)")
     p.add_argument("--sweeps", type=at_least(1), default=5, metavar="N",

@@ -6,7 +6,7 @@ import argparse
 import json
 
 from ..studies.render_bench import measure, report
-from ._common import at_least
+from ._common import at_least, describe
 
 EPILOG = """\
 Runs the scenario end to end (simulate, estimate, map, score) and writes its outputs
@@ -22,11 +22,10 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("render", help="cost of the map pictures vs making the map; peak memory",
-                       description="CPU and wall seconds of the render stage against the "
-                                   "stages that make the map, and peak memory.",
-                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "CPU and wall seconds of the render stage against the "
+             "stages that make the map, and peak memory.",
+             EPILOG)
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="bundled scenario name or YAML path (default: t_room)")
     p.add_argument("--repeats", type=at_least(1), default=5, metavar="N",

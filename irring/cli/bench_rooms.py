@@ -8,7 +8,7 @@ import json
 
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, measure, resolve_rooms
-from ._common import at_least
+from ._common import at_least, describe
 
 EPILOG = """\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have
@@ -33,14 +33,12 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "rooms", help="map scores on a set of rooms, scene effects vs an ideal sensor",
-        description="Run every room of a set through `irring run`'s path (simulate, estimate, "
-                    "map, score), once with the scene's effects and once with an ideal sensor, "
-                    "and print per room occupied F1, precision, recall, free accuracy, "
-                    "coverage, shadow and the end points' RMS error beside θ = 0's.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Run every room of a set through `irring run`'s path (simulate, estimate, "
+             "map, score), once with the scene's effects and once with an ideal sensor, "
+             "and print per room occupied F1, precision, recall, free accuracy, "
+             "coverage, shadow and the end points' RMS error beside θ = 0's.",
+             EPILOG)
     p.add_argument("rooms", nargs="*", metavar="ROOM",
                    help="bundled scenario names, YAML files or folders of them "
                         "(default: the room set and the T-rooms)")

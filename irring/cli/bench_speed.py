@@ -7,7 +7,7 @@ import json
 
 from ..scenario import load_scenario
 from ..studies.speed import measure, report
-from ._common import at_least
+from ._common import at_least, describe
 
 EPILOG = """\
 stages (ms per sweep, median over rounds, each round times every stage once in turn):
@@ -35,13 +35,11 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "speed", help="time per sweep of each stage, vs raw MuJoCo and vs the real ring",
-        description="Median time per sweep of every stage (ray casts, each effect, "
-                    "estimator, mapper), raw MuJoCo on the same rays, sweeps per second and "
-                    "the real-time factor against the ring's hardware time.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Median time per sweep of every stage (ray casts, each effect, "
+             "estimator, mapper), raw MuJoCo on the same rays, sweeps per second and "
+             "the real-time factor against the ring's hardware time.",
+             EPILOG)
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="bundled scenario name or YAML path (default: t_room)")
     p.add_argument("--pose", type=int, default=0, help="scan pose index (default: 0)")

@@ -6,7 +6,7 @@ import argparse
 import json
 
 from ..studies.scaling import measure, report
-from ._common import at_least
+from ._common import at_least, describe
 
 EPILOG = """\
 grid: every named design × t_room, t_room_cylinder, t_room_three_cylinders × seeds 1 … S,
@@ -24,12 +24,10 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "study", help="how `irring study` scales: runs/s on 1 and N workers, memory",
-        description="Time a grid of designs × rooms × seeds on 1 and on N local workers, "
-                    "and measure peak memory on a small and a larger grid.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Time a grid of designs × rooms × seeds on 1 and on N local workers, "
+             "and measure peak memory on a small and a larger grid.",
+             EPILOG)
     p.add_argument("--seeds", type=at_least(1), default=20, metavar="S",
                    help="seeds per design and room for the timing (default: 20, 300 runs)")
     p.add_argument("--workers", type=at_least(1), action="append", metavar="N",

@@ -12,7 +12,7 @@ from ..estimation.calibrate import CalibrationAborted, GuidedCalibration, Simula
 from ..estimation.estimate import CalibrationError
 from ..outputs import check_out
 from ..scenario import load_scenario
-from ._common import at_least
+from ._common import at_least, describe
 
 EPILOG = """\
 what it does:
@@ -42,13 +42,11 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "calibrate", help="measure d_o and the sensor curve a(θ), b(θ); write a YAML file",
-        description="Calibrate the ring for the estimator: the emitter offset d_o (paper "
-                    "Eq. 9) and the curve d = a(θ)·S^b(θ) (Eq. 10) from readings against a "
-                    "flat wall, on the simulated rig (default) or on the real ring (--port).",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Calibrate the ring for the estimator: the emitter offset d_o (paper "
+             "Eq. 9) and the curve d = a(θ)·S^b(θ) (Eq. 10) from readings against a "
+             "flat wall, on the simulated rig (default) or on the real ring (--port).",
+             EPILOG)
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="scenario whose ring, sensor model, ADC and effects are used "
                         "(default: t_room)")

@@ -11,7 +11,7 @@ from ..outputs import check_out
 from ..pipeline import progress_enabled
 from ..studies import compare
 from ..studies.executor import executor
-from ._common import add_executor_options, at_least, distances_mm
+from ._common import add_executor_options, at_least, describe, distances_mm
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room_three_cylinders", "t_room")
 
@@ -44,12 +44,11 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("compare", help="compare ring designs on simulated scenes",
-                       description="Compare ring designs: each design sweeps, estimates and "
-                                   "maps the same scenes (as `irring run` does) over several "
-                                   "seeds; prints a table and writes CSV/JSON and a chart.",
-                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Compare ring designs: each design sweeps, estimates and "
+             "maps the same scenes (as `irring run` does) over several "
+             "seeds; prints a table and writes CSV/JSON and a chart.",
+             EPILOG)
     p.add_argument("--scenario", action="append", metavar="S",
                    help="bundled scenario name or YAML path; repeat for several (default: "
                         + ", ".join(DEFAULT_SCENARIOS) + ")")

@@ -14,7 +14,7 @@ from .. import errors, pipeline
 from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..scenario import load_scenario
-from ._common import add_mcap_option, between, positive_seconds
+from ._common import add_mcap_option, between, describe, positive_seconds
 from .run import report
 
 HELP = """\
@@ -61,9 +61,8 @@ def _pose(text: str) -> tuple[float, float, float]:
     return x / 1000.0, y / 1000.0, math.radians(yaw)
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("drive", help="sweep the real ring over a serial port, estimate and map",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, HELP)
     p.add_argument("--port", required=True, metavar="PORT",
                    help="serial device or pyserial URL: /dev/ttyUSB0, COM3, a pty path, "
                         "socket://host:port, loop://")

@@ -11,7 +11,7 @@ import time
 
 from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
 from ..scenario import load_scenario
-from ._common import between, host_port
+from ._common import between, describe, host_port
 
 EPILOG = """\
 examples:
@@ -29,15 +29,12 @@ scenario's first pose; each further full-range sweep moves it to the next pose. 
 on what the device sends."""
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "emulate", help="a simulated ring device on a pseudo-terminal (try `drive` without "
-                        "hardware)",
-        description="Run an emulated ring device that speaks the IRR serial protocol on a "
-                    "pseudo-terminal, with readings from the scenario's simulation and "
-                    "optional fault injection. Runs until Ctrl-C (or the injected "
-                    "disconnect).",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Run an emulated ring device that speaks the IRR serial protocol on a "
+             "pseudo-terminal, with readings from the scenario's simulation and "
+             "optional fault injection. Runs until Ctrl-C (or the injected "
+             "disconnect).",
+             EPILOG)
     p.add_argument("scenario", nargs="?", default="t_room",
                    help="bundled scenario name or YAML path (default: t_room)")
     p.add_argument("--link", metavar="PATH", default="/tmp/irring",

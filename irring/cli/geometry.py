@@ -9,7 +9,7 @@ import math
 from .. import designs
 from ..designs import DESIGN_BY_NAME
 from ..studies import geometry
-from ._common import at_least, distances_mm
+from ._common import at_least, describe, distances_mm
 
 EPILOG = """\
 what it prints:
@@ -33,14 +33,12 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "geometry", help="overlap angle/area (Eqs. 2–3, Monte Carlo) and blind spot (Eq. 1)",
-        description="The paper's design geometry for a ring design: the overlap angle β and "
-                    "area S of neighbouring sensors (Eqs. 2–3, and S measured by Monte Carlo "
-                    "from the built MuJoCo model's sensor frames) and the blind spot r(d) "
-                    "(Eq. 1).",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "The paper's design geometry for a ring design: the overlap angle β and "
+             "area S of neighbouring sensors (Eqs. 2–3, and S measured by Monte Carlo "
+             "from the built MuJoCo model's sensor frames) and the blind spot r(d) "
+             "(Eq. 1).",
+             EPILOG)
     p.add_argument("--design", default="rotating12", metavar="NAME",
                    choices=[*DESIGN_BY_NAME, "all"],
                    help=f"one of {', '.join(DESIGN_BY_NAME)}, or all (default: rotating12)")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .. import pipeline
 from ..outputs import check_out, safe_name
-from ._common import add_mcap_option
+from ._common import add_mcap_option, describe
 from .run import report
 
 HELP = """\
@@ -27,9 +27,8 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("replay", help="estimate and map a recording (.npz) again",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, HELP)
     p.add_argument("recording", type=Path, metavar="RECORDING",
                    help="a sweeps .npz written by `irring run` or `irring drive`")
     p.add_argument("--calibration", type=Path, default=None, metavar="FILE",

@@ -9,7 +9,7 @@ from pathlib import Path
 from .. import pipeline
 from ..outputs import check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import add_mcap_option
+from ._common import add_mcap_option, describe
 
 HELP = """\
 Simulate one sweep of the ring at each of the scenario's scan poses, turn the ADC counts
@@ -36,9 +36,8 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("run", help="map a scenario: simulate, estimate, map, score, draw",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, HELP)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
                    help="bundled scenario name or YAML path (default: t_room; "
                         "`irring scenarios` lists them)")

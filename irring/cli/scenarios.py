@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 
 from .. import scenario
+from ._common import describe
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("scenarios", help="list the bundled scenarios, one line each",
-                       description="List the bundled scenarios (name, poses, obstacles, "
-                                   "description). Pass a name or a YAML path to other commands.")
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "List the bundled scenarios (name, poses, obstacles, "
+             "description). Pass a name or a YAML path to other commands.", raw=False)
     p.set_defaults(func=run)
 
 

@@ -11,7 +11,7 @@ from ..outputs import check_out, safe_name
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
 from ..studies.executor import executor
-from ._common import add_executor_options
+from ._common import add_executor_options, describe
 
 EPILOG = """\
 the study file (YAML):
@@ -46,14 +46,12 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "study", help="run a grid of designs × scenarios × seeds × knobs (resumable)",
-        description="Run every design of a study file on every scenario, seed and knob "
-                    "setting; stream one row per run to DIR/results.csv, then summarise "
-                    "(mean and spread per configuration) and chart accuracy against hardware "
-                    "time with the Pareto front.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Run every design of a study file on every scenario, seed and knob "
+             "setting; stream one row per run to DIR/results.csv, then summarise "
+             "(mean and spread per configuration) and chart accuracy against hardware "
+             "time with the Pareto front.",
+             EPILOG)
     p.add_argument("file", metavar="FILE.yaml", help="the study file (see below)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder (default: out/<file name without .yaml>)")

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import at_least
+from ._common import at_least, describe
 
 HELP = """\
 Show the scenario's MuJoCo scene: the room, the obstacles, the ring at one scan pose and
@@ -25,9 +25,8 @@ examples:
 """
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("view", help="picture (or live viewer) of the MuJoCo scene with beams",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, HELP)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
                    help="bundled scenario name or YAML path (default: t_room)")
     p.add_argument("--pose", type=at_least(1), default=1, metavar="K",

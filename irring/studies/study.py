@@ -34,6 +34,7 @@ import numpy as np
 from .. import designs, gp2, safe_yaml
 from ..outputs import OutputSet
 from ..pipeline import scenario_text
+from ..resources import installed_version
 from ..scenario import Scenario, ScenarioError, load_scenario
 from . import accuracy
 from .accuracy import mark_pareto
@@ -326,21 +327,6 @@ def tasks_for(points: Iterable[Point], scenarios: Mapping[str, Any] | None = Non
     return out
 
 
-_VERSION: str | None = None
-
-
-def _version() -> str:
-    global _VERSION
-    if _VERSION is None:
-        from importlib.metadata import PackageNotFoundError, version
-
-        try:
-            _VERSION = version("irring")
-        except PackageNotFoundError:  # pragma: no cover - running from a bare checkout
-            _VERSION = "unknown"
-    return _VERSION
-
-
 def _peak_mb() -> float:
     try:
         import resource
@@ -380,7 +366,7 @@ def run_point(task: Task) -> dict:
                                   "poses", "readings", "iterations_mean")})
     row["run_s"] = time.perf_counter() - t0
     row["worker_peak_mb"] = _peak_mb()
-    row["irring_version"] = _version()
+    row["irring_version"] = installed_version()
     return {k: row[k] for k in COLUMNS}
 
 
