@@ -180,3 +180,28 @@ def test_bench_loads_only_the_benchmark_asked_for():
     loaded = {m for m in sys.modules if m.startswith("irring.cli.bench_")} - before
     assert args.repeats == 2 and args.func.__module__ == "irring.cli.bench_render"
     assert loaded <= {"irring.cli.bench_render"}
+
+
+@pytest.mark.parametrize("users_gl", [None, "osmesa"])
+def test_commands_that_draw_nothing_with_mujoco_skip_its_opengl_library(users_gl):
+    """MuJoCo loads GLFW on import unless MUJOCO_GL says not to: only `irring view` draws
+    with OpenGL. The user's own MUJOCO_GL stays as it was, and so does the environment."""
+    import os
+    import subprocess
+    import sys
+
+    pytest.importorskip("mujoco")
+    code = """
+import contextlib, io, os, sys
+from irring.cli import main
+with contextlib.redirect_stdout(io.StringIO()):
+    assert main(["geometry", "--samples", "1000", "--distances-mm", "500"]) == 0
+print("mujoco" in sys.modules, "glfw" in sys.modules, os.environ.get("MUJOCO_GL"))
+"""
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    if users_gl:
+        env["MUJOCO_GL"] = users_gl
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["True", "False", str(users_gl)]

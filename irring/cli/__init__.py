@@ -9,6 +9,8 @@ subcommand's dependencies. Nothing below the cli imports it.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
 import traceback
 
@@ -88,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
             parser.print_help()
             return errors.USAGE
         command = f"irring {args.command}"
-        return int(args.func(args) or 0)
+        with _no_opengl(args.command != "view"):
+            return int(args.func(args) or 0)
     except KeyboardInterrupt:
         if debug:
             traceback.print_exc()
@@ -105,6 +108,20 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, ValueError):  # stderr itself is gone
             pass
         return status
+
+
+@contextlib.contextmanager
+def _no_opengl(applies: bool):
+    """Importing MuJoCo loads an OpenGL library (GLFW, ~40 ms of CPU) unless MUJOCO_GL says
+    not to; only `irring view` draws with it. A MUJOCO_GL of the user's own is kept."""
+    if not applies or "MUJOCO_GL" in os.environ or "mujoco" in sys.modules:
+        yield
+        return
+    os.environ["MUJOCO_GL"] = "disable"
+    try:
+        yield
+    finally:
+        os.environ.pop("MUJOCO_GL", None)
 
 
 if __name__ == "__main__":  # pragma: no cover
