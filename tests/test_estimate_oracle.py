@@ -1,5 +1,5 @@
 """The compiled estimator (irring/estimation/_lines.pyx, irring/estimation/_iterate.pyx) against its numpy oracle
-(irring/estimation/estimate_numpy.py), on scenes hypothesis draws: walls, corners, posts, noise,
+(irring/estimation/estimate_numpy.py), on scenes hypothesis draws: walls, corners, posts, a turned box, noise,
 gaps, curves whose a(θ) grows, any line options and iteration limit.
 
 Tolerance: reasons, validity and iteration counts equal exactly; every float within
@@ -46,7 +46,7 @@ def assert_agree(sweep, cal, **kw):
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2 ** 20),
-       room=st.sampled_from(["box", "wedge", "posts"]),
+       room=st.sampled_from(["box", "wedge", "posts", "crate"]),
        strength=st.sampled_from([0.0, 0.25, 1.0]),
        noise=st.sampled_from([0.0, 0.5, 3.0]),
        keep=st.floats(0.3, 1.0),
@@ -61,6 +61,12 @@ def test_kernels_agree_with_the_numpy_oracle(seed, room, strength, noise, keep, 
     walls, circles = rectangle(x0, y0, x1, y1), []
     if room == "wedge":   # a slanted wall cutting a corner off: a 3-wall corner at odd angles
         walls = polygon([(x0, y0), (x1, y0), (x1, 0.5 * y1), (0.3 * x1, y1), (x0, y1)])
+    elif room == "crate":  # a turned box in the room: range jumps at its corners
+        cx, cy, turn = 0.7 * x1, 0.6 * y0, rng.uniform(0, math.pi)
+        c, s_ = math.cos(turn), math.sin(turn)
+        walls = walls + polygon([(cx + c * u - s_ * v, cy + s_ * u + c * v)
+                                 for u, v in ((-0.045, -0.025), (0.045, -0.025),
+                                              (0.045, 0.025), (-0.045, 0.025))])
     elif room == "posts":
         circles = [((0.5 * x1, 0.6 * y1), rng.uniform(0.005, 0.04)),
                    ((0.6 * x0, 0.4 * y0), rng.uniform(0.005, 0.04))]

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
 from .estimate import (_FALLBACK_NODES, _MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M,
-                       Calibration, Estimate, LineOptions, _finish, _nominal_for, _Pieces,
+                       Calibration, Estimate, LineOptions, _chains, _finish, _nominal_for, _Pieces,
                        _scan_order, resolve_foldover)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
@@ -376,7 +376,7 @@ class _Sweep:
         self.log_s = np.log(self.counts)
         self.ox = origin[..., 0].reshape(-1).take(sel)
         self.oy = origin[..., 1].reshape(-1).take(sel)
-        h = heading.reshape(-1).take(sel)
+        self.h = h = heading.reshape(-1).take(sel)
         self.ux, self.uy = np.cos(h), np.sin(h)
         self.hm = h - math.pi * np.floor(h / math.pi)         # heading mod π
         self.centre = ((float(self.ox.sum()) / self.k, float(self.oy.sum()) / self.k) if self.k
@@ -832,6 +832,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     regroups = 0
     regroup_changed = True
     older = None          # the labels two groupings ago
+    chains = None         # polyline ids (_chains)
     mode = "regroup"
     it = 0
     settled = False
@@ -850,8 +851,12 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
             before = None if grouping is None else grouping.label
             if mode == "regroup":
                 uidx = None if use_mask is None else usable.nonzero()[0]
-                parts = (px, py, thr, sw.sensor) if uidx is None else (
-                    px.take(uidx), py.take(uidx), thr.take(uidx), sw.sensor.take(uidx))
+                # polylines break at a sensor change and at range jumps (occlusion edges),
+                # found at θ = 0 and kept: later groupings then refine the same polylines
+                if chains is None:
+                    chains = _chains(d, sigma, sw.h, sw.sensor, sw.reject, lines.jump_sigmas)
+                parts = (px, py, thr, chains) if uidx is None else (
+                    px.take(uidx), py.take(uidx), thr.take(uidx), chains.take(uidx))
                 pieces = _segment(*parts, lines, sw.centre, pieces)
                 grouping = _Grouping(sw, pieces, uidx)
                 grouping.members(px, py, thr)
