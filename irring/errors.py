@@ -1,9 +1,10 @@
 """What a failed `irring` command tells its user: one line and an exit status.
 
-Every error a user can cause is one of the classes below (or a ``ValueError`` subclass the
-schema modules raise: ``ScenarioError``, ``RecordingError``, ``CalibrationError``); the
-command's top-level handler (:func:`describe`) turns it, or anything unexpected, into one
-printable line and a status:
+Every error a user can cause derives from :class:`IrringError` (a scenario, recording or
+calibration file: :class:`InputError`; the device: :class:`DeviceError`; ...), whose
+``status`` is its exit status; the command's top-level handler (:func:`describe`) turns it,
+or anything unexpected, into one printable line and a status. This module imports nothing of
+irring, so every module can raise these.
 
 ====  =====================================================================
 0     done
@@ -22,6 +23,7 @@ from __future__ import annotations
 import errno
 import os
 import reprlib
+import sys
 
 OK, INPUT, USAGE, DEVICE, OUTPUT, TOO_BIG, INTERNAL, INTERRUPTED = 0, 1, 2, 3, 4, 5, 70, 130
 
@@ -41,6 +43,12 @@ class InputError(IrringError, ValueError):
 
 class UsageError(IrringError, ValueError):
     status = USAGE
+
+
+class DeviceError(IrringError, RuntimeError):
+    """The ring cannot be used as asked; the message says what to check."""
+
+    status = DEVICE
 
 
 class OutputError(IrringError, OSError):
@@ -88,31 +96,16 @@ def debug_requested() -> bool:
 
 def describe(exc: BaseException) -> tuple[int, str]:
     """(exit status, one-line message) for an exception that ended a command."""
-    from .estimation.estimate import CalibrationError
-    from .recording import RecordingError
-    from .scenario import ScenarioError
-
     if isinstance(exc, IrringError):
-        return exc.status, printable(str(exc))
-    if isinstance(exc, (ScenarioError, RecordingError, CalibrationError)):
-        return INPUT, printable(str(exc))
-    from .studies.executor import ExecutorError
-
-    if isinstance(exc, ExecutorError):   # no Dask, scheduler unreachable: the --dask option
-        return USAGE, printable(str(exc))
+        return exc.status, printable(str(exc) or type(exc).__name__)
     if isinstance(exc, MemoryError):
         return TOO_BIG, ("ran out of memory; the input asks for more than this machine has "
                          "(make the room, grid or number of poses smaller)")
     if isinstance(exc, RecursionError):
         return INPUT, "the input is nested too deeply to read"
-    try:  # the serial stack is optional at import time for the simulation commands
-        from .hardware import DeviceError
-        import serial
-
-        if isinstance(exc, (DeviceError, serial.SerialException)):
-            return DEVICE, printable(str(exc) or type(exc).__name__)
-    except ImportError:  # pragma: no cover
-        pass
+    serial = sys.modules.get("serial")  # not imported: then no pyserial error can be raised
+    if serial is not None and isinstance(exc, serial.SerialException):
+        return DEVICE, printable(str(exc) or type(exc).__name__)
     if isinstance(exc, OSError):
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         why = exc.strerror or str(exc)

@@ -26,11 +26,12 @@ from .core import (ADC_BITS, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, VREF_V, Box, 
                    Ring, Room, bounds_error, choice, distance_to_outline, inside_outline, num,
                    obstacle_distance, unit_suffix)
 from .designs import Design
+from .errors import InputError
 
 # --------------------------------------------------------------------------- errors
 
 
-class ScenarioError(ValueError):
+class ScenarioError(InputError):
     """A scenario file that cannot be used; the message names the YAML path."""
 
 

@@ -6,10 +6,17 @@ from __future__ import annotations
 import re
 
 import pytest
+import serial
 
-from irring import scenario
+from irring import errors, scenario
 from irring.cli import COMMANDS, build_parser, main
 from irring.cli.bench import BENCHES
+from irring.estimation.estimate import CalibrationError
+from irring.hardware import DeviceTimeout, HandshakeError
+from irring.recording import RecordingError
+from irring.scenario import ScenarioError
+from irring.studies.executor import ExecutorError
+from irring.studies.study import StudyError
 
 
 def test_no_command_prints_help_and_fails(capsys):
@@ -205,3 +212,27 @@ print("mujoco" in sys.modules, "glfw" in sys.modules, os.environ.get("MUJOCO_GL"
                           timeout=120, env=env)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["True", "False", str(users_gl)]
+
+
+def test_every_user_error_is_one_line_with_its_exit_status():
+    """Each module's error derives from irring.errors, which maps it to a status without
+    importing the module (errors imports nothing of irring)."""
+    cases = [(ScenarioError("room.yaml: walls: expected a list"), errors.INPUT),
+             (StudyError("s.yaml: seeds: expected ≥ 1"), errors.INPUT),
+             (RecordingError("x.npz: not an irring recording"), errors.INPUT),
+             (CalibrationError("c.yaml: curve: too few points"), errors.INPUT),
+             (ExecutorError("no Dask: pip install 'irring[dask]'"), errors.USAGE),
+             (HandshakeError("no IRINF answer\non /dev/ttyUSB0"), errors.DEVICE),
+             (DeviceTimeout(""), errors.DEVICE),
+             (serial.SerialException("port gone"), errors.DEVICE),
+             (errors.TooBig("a 90000 × 80000 grid"), errors.TOO_BIG),
+             (KeyError("x"), errors.INTERNAL)]
+    got = [errors.describe(exc) for exc, _ in cases]
+    assert [status for status, _ in got] == [status for _, status in cases]
+    assert got[5][1] == "no IRINF answer on /dev/ttyUSB0"   # one line
+    assert got[6][1] == "DeviceTimeout"                      # never an empty line
+    assert got[0][1] == "room.yaml: walls: expected a list"
+    assert got[-1][1].startswith("internal error (KeyError: 'x'); rerun with --debug")
+    # still the built-in kinds callers catch
+    assert isinstance(cases[0][0], ValueError) and isinstance(cases[3][0], ValueError)
+    assert isinstance(cases[4][0], RuntimeError) and isinstance(cases[5][0], RuntimeError)

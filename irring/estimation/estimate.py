@@ -17,7 +17,7 @@ import yaml
 
 from .. import gp2, safe_yaml
 from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
-from ..errors import brief
+from ..errors import InputError, brief
 from ..outputs import write_text_atomic
 from ..resources import MissingKernel
 
@@ -51,7 +51,7 @@ _PINNED_RAD = math.radians(2.0)  # a line most readings meet within this of the 
 # --------------------------------------------------------------------------- calibration
 
 
-class CalibrationError(ValueError):
+class CalibrationError(InputError):
     """Calibration data that cannot determine a parameter, or a bad calibration file."""
 
 

@@ -28,6 +28,7 @@ import serial
 
 from .. import core
 from ..designs import PAPER_RING
+from ..errors import DeviceError
 from ..core import Ring
 from . import protocol as p
 
@@ -49,10 +50,6 @@ MAX_STEP_SPAN = 100_000
 # a sweep pass that makes no progress (no new step) for this many timeouts is given up,
 # whatever else the device keeps sending
 NO_PROGRESS_TIMEOUTS = 3
-
-
-class DeviceError(RuntimeError):
-    """The ring cannot be used as asked; the message says what to check."""
 
 
 class HandshakeError(DeviceError):

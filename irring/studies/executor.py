@@ -32,6 +32,8 @@ import threading
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterator, Sequence
 
+from ..errors import UsageError
+
 
 class SerialExecutor(Executor):
     """Runs each job at ``submit`` in the calling process: the reference for the others."""
@@ -58,7 +60,7 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-class ExecutorError(RuntimeError):
+class ExecutorError(UsageError, RuntimeError):
     """An executor that cannot start (no Dask installed, scheduler unreachable): one line."""
 
 
