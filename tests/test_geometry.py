@@ -174,18 +174,17 @@ def test_cli_geometry_json_has_the_contract_keys(capsys):
     assert "0.0000 m²" in capsys.readouterr().out
 
 
-def test_geometry_and_compare_agree_on_the_sonar_rings_blind_spot(capsys):
+def test_geometry_prints_the_sonar_rings_blind_spot_from_its_rays(capsys):
     import json
 
     from irring import designs
-    from irring.studies import compare
     from irring.cli import main
 
     assert main(["geometry", "--design", "sonar12", "--json", "--samples", "1000",
                  "--distances-mm", "500,1000"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["blind_spot_m"] == [0.0, 0.0]        # Eq. 1: the ±15° cones touch
-    det = compare.detection(designs.get("sonar12"), [0.5, 1.0])
+    det = g.detection(designs.get("sonar12"), [0.5, 1.0])
     assert report["blind_spot_rays_m"] == det.min_detectable_radius_m.tolist()
     assert 0.09 < report["blind_spot_rays_m"][0] < 0.13   # yet posts of ~11 cm hide
     assert main(["geometry", "--design", "sonar12", "--samples", "1000",

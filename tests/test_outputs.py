@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 
 from irring.cli import main
 from irring.outputs import OutputSet
-from irring.studies import compare
+from irring.studies import report
 
 # A room of our own: 0.93 × 0.71 m, one post off-centre, one pose (x ≠ y everywhere).
 ROOM = """\
@@ -163,7 +163,7 @@ def test_a_folder_of_only_the_sets_files_is_swapped_whole(tmp_path):
     (out / "compare.png").write_text("old")
     (out / "runs.csv").write_text("old runs")
     inode = out.stat().st_ino
-    with OutputSet(out, files=compare.study_files("compare")) as tmp:
+    with OutputSet(out, files=report.study_files("compare")) as tmp:
         (tmp / "compare.json").write_text("[]")
     assert _snapshot(out) == {"compare.json": b"[]"}
     assert out.stat().st_ino != inode          # one rename: no moment with a mix of runs

@@ -21,7 +21,7 @@ from ..maps import metrics
 from ..maps.mapping import OccupancyGrid
 from ..pipeline import scenario_text
 from ..scenario import AveragingEffect, BeltDynamicsEffect, TimingEffect, load_scenario, loads
-from .compare import mean_of, write_study
+from .report import mean_of, write_study
 from .executor import run_jobs
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room")

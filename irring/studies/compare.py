@@ -1,174 +1,23 @@
-"""Compare ring designs by simulation: what each one sees, misses, and costs.
-
-Two kinds of result, per design:
-
-1. **Detection** (:func:`detection`): the smallest cylinder each design is sure to see at a
-   given distance from the robot centre, over all bearings. The beams are the design's
-   actual rays — emitter positions and directions read from its built MuJoCo model at
-   every motor step of a full view (a sonar's ±15° cone as a fan of rays) — intersected
-   with circles exactly. A cylinder counts as seen when some ray hits it within the
-   sensor's working range (min … max) at an incidence the sensor still answers (GP2 70°,
-   sonar 20°, laser 85°, the sensor model's limits). Open space, no noise: this is the
-   geometry of the design; Eq. 1 is its closed form for a fan from one point.
-2. **Scenes** (:func:`compare`): the scenario run through the whole pipeline of
-   ``irring run`` (sweeps → estimator → occupancy grid → scores) with each design in place
-   of the scenario's (:func:`irring.scenario.apply_design`), for several seeds: occupied F1, free
-   accuracy, coverage, shadow, hardware time of a 360° view, compute time.
-"""
+"""Compare ring designs on simulated scenes: each design in place of the scenario's, run
+through ``irring run``'s pipeline for several seeds and scored on the scenario's own ground
+truth, beside its detection curve (:func:`irring.studies.geometry.detection`). How designs
+are judged: docs/designs.md."""
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from .. import designs as designs_mod
-from .. import gp2
 from ..designs import Design
-from ..outputs import OutputSet
-
-DEFAULT_DISTANCES_M = (0.25, 0.35, 0.45, 0.55, 0.65, 0.75)
-CONE_RAY_STEP_RAD = math.radians(0.25)  # fan spacing used to stand in for a sonar cone
-
-
-# --------------------------------------------------------------------------- rays
-
-
-@dataclass(frozen=True)
-class Rays:
-    """Every ray of one full view, robot at the origin facing +x. (M, 2) arrays, metres."""
-
-    origin: np.ndarray
-    direction: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.origin)
-
-
-def design_rays(design: Design, step_stride: int = 1) -> Rays:
-    """The rays of a full view of ``design``, read from its built MuJoCo model.
-
-    The ring is posed at each motor step (``geometry.model_frames``); each emitter's
-    position and beam direction is one ray. A sensor with a beam cone contributes a fan of
-    rays every ``CONE_RAY_STEP_RAD`` across the cone.
-    """
-    import mujoco
-
-    from . import geometry
-    from ..simulation import model
-
-    rm = model.compile_ring(design.ring)
-    data = mujoco.MjData(rm.model)  # one, re-posed at every step
-    steps = range(design.ring.min_step, design.ring.max_step + 1, step_stride)
-    origins, headings = [], []
-    for s in steps:  # one kinematics call per motor position; the rays are arrays
-        f = geometry.model_frames(rm, s, data)
-        origins.append(f.emitter_xyz[:, :2])
-        headings.append(f.heading_rad)
-    o = np.concatenate(origins)
-    h = np.concatenate(headings)
-    half = design.sensor.beam_half_angle_rad
-    if half > 0:
-        k = int(math.ceil(half / CONE_RAY_STEP_RAD))
-        offsets = np.linspace(-half, half, 2 * k + 1)
-        o = np.repeat(o, len(offsets), axis=0)
-        h = (h[:, None] + offsets[None, :]).ravel()
-    return Rays(o, np.c_[np.cos(h), np.sin(h)])
-
-
-def _incidence_limit_rad(design: Design) -> float:
-
-    return float(gp2.sensor(design.sensor.kind).max_incidence_rad)
-
-
-def seen(rays: Rays, centres: np.ndarray, radius_m: float, *, min_range_m: float,
-         max_range_m: float, max_incidence_rad: float) -> np.ndarray:
-    """(B,) bool: is a cylinder of ``radius_m`` at each of ``centres`` (B, 2) hit by a ray
-    within [min_range_m, max_range_m] at incidence ≤ ``max_incidence_rad``?"""
-    rel = centres[:, None, :] - rays.origin[None, :, :]            # (B, M, 2)
-    along = np.einsum("bmi,mi->bm", rel, rays.direction)           # to the foot of the centre
-    across = rel[..., 1] * rays.direction[:, 0] - rel[..., 0] * rays.direction[:, 1]
-    p = np.abs(across) / radius_m                                  # sin(incidence) where hit
-    with np.errstate(invalid="ignore"):
-        t = along - radius_m * np.sqrt(1.0 - p ** 2)              # distance to the surface
-    hit = (p <= math.sin(max_incidence_rad)) & (t >= min_range_m) & (t <= max_range_m)
-    return hit.any(axis=1)
-
-
-@dataclass(frozen=True)
-class Detection:
-    """Per distance (from the robot centre to the cylinder's near side, m): the smallest
-    cylinder radius (m) seen at every bearing (``inf``: not even ``MAX_RADIUS_M``), and the
-    largest radius found missed at some bearing (0: none)."""
-
-    design: str
-    distances_m: np.ndarray
-    min_detectable_radius_m: np.ndarray
-    max_missed_radius_m: np.ndarray
-    bearings: int
-    rays: int
-
-
-MIN_RADIUS_M = 0.001
-MAX_RADIUS_M = 0.2
-_COARSE_RADII_M = np.geomspace(MIN_RADIUS_M, MAX_RADIUS_M, 25)   # ~25 % apart
-_BISECTIONS = 8                                                  # then ≈ 0.1 % apart
-
-
-def symmetry_period_rad(design: Design, step_stride: int = 1) -> float:
-    """Bearing period over which the design's rays repeat: 2π/N for a ring, one step for a
-    single sensor turning a full circle at the centre."""
-    ring = design.ring
-    if ring.sensors > 1:
-        return design.spacing_rad
-    if design.rotating and design.positions(step_stride) * design.step_rad * step_stride \
-            >= 2.0 * math.pi - 1e-9:
-        return design.step_rad * step_stride
-    return 2.0 * math.pi
-
-
-def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int = 360,
-              step_stride: int = 1, rays: Rays | None = None) -> Detection:
-    """Smallest detectable cylinder radius versus distance for ``design`` (see module doc).
-
-    ``bearings`` cylinder positions are spread over one symmetry period of the design, half
-    a spacing off the rays' own symmetry, so the worst place (between two beams) is
-    sampled. A radius is "detected" when it is seen at every bearing. Radii 1 … 200 mm are
-    tried ~25 % apart; the boundary between the largest missed and the next detected one
-    is then bisected (assumes one boundary in that bracket).
-    """
-    rays = design_rays(design, step_stride) if rays is None else rays
-    period = symmetry_period_rad(design, step_stride)
-    b = (np.arange(bearings) + 0.5) / bearings * period
-    unit = np.c_[np.cos(b), np.sin(b)]
-    sens = design.sensor
-    kw = dict(min_range_m=gp2.sensor(sens.kind).min_range_m, max_range_m=sens.max_range_m,
-              max_incidence_rad=_incidence_limit_rad(design))
-    dist = np.asarray(distances_m, dtype=float)
-    min_ok = np.full(len(dist), np.inf)
-    max_miss = np.zeros(len(dist))
-    for i, d in enumerate(dist):
-        def all_seen(r: float) -> bool:
-            return bool(seen(rays, unit * (d + r), r, **kw).all())
-
-        ok = np.array([all_seen(r) for r in _COARSE_RADII_M])
-        missed = np.flatnonzero(~ok)
-        if missed.size == 0:
-            min_ok[i] = _COARSE_RADII_M[0]
-            continue
-        j = missed[-1]
-        if j + 1 == len(_COARSE_RADII_M):
-            max_miss[i] = _COARSE_RADII_M[j]
-            continue
-        lo, hi = _COARSE_RADII_M[j], _COARSE_RADII_M[j + 1]
-        for _ in range(_BISECTIONS):
-            mid = math.sqrt(lo * hi)
-            lo, hi = (lo, mid) if all_seen(mid) else (mid, hi)
-        min_ok[i], max_miss[i] = hi, lo
-    return Detection(design.name, dist, min_ok, max_miss, bearings, len(rays))
-
+from ..maps.metrics import SCORE_KEYS
+from ..pipeline import progress_bar
+from ..scenario import load_scenario
+from . import study
+from .executor import run_jobs
+from .geometry import DEFAULT_DISTANCES_M, Detection, detection
+from .report import mean_of, write_study
 
 # --------------------------------------------------------------------------- scenes
 
@@ -189,8 +38,6 @@ def run_scene(scenario, design: Design | str, seed: int | None = None) -> dict:
     design, :meth:`Design.hardware_time_s`), ``hardware_time_total_s`` (all poses),
     ``compute_time_s`` (sweep + estimate + map per view) and ``readings``.
     """
-    from . import study
-
     d = designs_mod.get(design) if isinstance(design, str) else design
     p = _point(scenario, d, scenario.seed if seed is None else seed)
     # the scenario object itself: it may differ from its file
@@ -199,15 +46,11 @@ def run_scene(scenario, design: Design | str, seed: int | None = None) -> dict:
 
 
 def _point(scenario, design: Design, seed: int):
-    from . import study
-
     return study.point(study.DesignSpec(design.name, design=design), scenario, seed)
 
 
 def _record(row: dict, scenario_name: str) -> dict:
     """A study row as compare's run record."""
-    from ..maps.metrics import SCORE_KEYS
-
     return {"scenario": scenario_name, "design": row["design"], "seed": row["seed"],
             "poses": row["poses"], **{k: row[k] for k in SCORE_KEYS},
             "hardware_time_s": row["hardware_time_s"],
@@ -216,18 +59,10 @@ def _record(row: dict, scenario_name: str) -> dict:
             "readings": row["readings"]}
 
 
-def mean_of(values) -> float | None:
-    """Mean of the values that are not None (None when there are none)."""
-    vals = [v for v in values if v is not None]
-    return float(np.mean(vals)) if vals else None
-
-
 def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) -> list[dict]:
     """One record per design: run scores averaged over scenarios and seeds (``None`` scores
     left out of the mean), hardware time of a 360° view, compute time per view, and the
     detection curve when given."""
-    from ..maps.metrics import SCORE_KEYS
-
     out = []
     for name in dict.fromkeys(r["design"] for r in runs):
         mine = [r for r in runs if r["design"] == name]
@@ -264,11 +99,6 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
 
     Returns ``{"designs": summarise(...), "runs": [...], "detection": {...}}``.
     """
-    from . import study
-    from .executor import run_jobs
-    from ..pipeline import progress_bar
-    from ..scenario import load_scenario
-
     scs = [load_scenario(s) if isinstance(s, str) else s for s in scenarios]
     ds = [designs_mod.get(d) if isinstance(d, str) else d for d in design_list]
     points = [_point(sc, d, sc.seed + k) for sc in scs for d in ds for k in range(seeds)]
@@ -330,16 +160,6 @@ def _seconds(s: float) -> str:
 CSV_KEYS = ("design", "runs", "occupied_precision", "occupied_recall", "occupied_f1",
             "free_accuracy", "coverage", "shadow", "shadow_min", "hardware_time_s",
             "compute_time_s")
-
-
-def write_csv(path, rows: list[dict], keys) -> None:
-    import csv
-
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(keys)
-        for r in rows:
-            w.writerow(["" if r.get(k) is None else r.get(k) for k in keys])
 
 
 def chart(result: dict, path) -> None:
@@ -409,30 +229,6 @@ def chart(result: dict, path) -> None:
     a_det.grid(alpha=0.3, which="both")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-
-
-def study_files(name: str) -> tuple[str, ...]:
-    """The files :func:`write_study` may write for the study ``name``."""
-    return f"{name}.json", f"{name}.csv", "runs.csv", f"{name}.png"
-
-
-def write_study(out_dir, name: str, result: dict, rows: list[dict], keys, draw) -> dict[str, str]:
-    """A study's files in ``out_dir``, all together (:class:`irring.outputs.OutputSet`: a
-    failed or interrupted write leaves the folder as it was): <name>.json (all of
-    ``result``), <name>.csv (``rows`` with columns ``keys``), runs.csv (``result["runs"]``,
-    if any) and <name>.png (``draw(result, path)``). Raises ``OutputError``."""
-    target = OutputSet(out_dir, files=study_files(name))
-    with target as tmp:
-        paths = dict(zip(("json", "csv", "runs_csv", "chart"),
-                         (tmp / f for f in study_files(name))))
-        paths["json"].write_text(json.dumps(result, indent=2))
-        write_csv(paths["csv"], rows, keys)
-        if result["runs"]:
-            write_csv(paths["runs_csv"], result["runs"], list(result["runs"][0]))
-        else:
-            del paths["runs_csv"]
-        draw(result, paths["chart"])
-    return {k: str(target.out / p.name) for k, p in paths.items()}
 
 
 def write_outputs(result: dict, out_dir) -> dict[str, str]:

@@ -1,21 +1,7 @@
-"""The paper's design geometry (§II): blind spot, overlap angle and overlap area.
-
-Analytic, from the paper's equations (restated in docs/paper.md):
-
-- Eq. 1, :func:`blind_spot_m`: the largest circular obstacle a fan of rays with angular
-  step Δθ can miss at distance d, ``r = d / (1/sin(Δθ/2) − 1)``.
-- Eq. 2, :func:`overlap_angle_rad`: ``β = acos(R·sin(Φ/2)/D) − π/2 + α − Φ/2``.
-- Eq. 3, :func:`overlap_area_m2`: the area S two neighbouring sensors both sweep.
-
-Measured, from a built MuJoCo model (:func:`overlap_area_mc_m2`): each sensor's swept
-sector has its apex at the sensor's hinge and its edges along the beam at the two sweep
-limits, all read from ``mujoco.MjData`` after posing the ring at its first and last motor
-step — not from R, Φ, α. Monte Carlo counts random points that lie in both sectors of a
-neighbouring pair. If the model puts a hinge or a beam somewhere else than the paper's
-equations assume, the two numbers disagree; that is the point of the check.
-
-All angles are radians, lengths metres, areas m².
-"""
+"""The paper's design geometry (§II): blind spot (Eq. 1), overlap angle (Eq. 2) and overlap
+area (Eq. 3), and the same measured on a design's built MuJoCo model (Monte-Carlo overlap,
+the smallest cylinder its rays see). Angles in radians, lengths in metres, areas in m².
+The equations and what the measurements check: docs/designs.md."""
 
 from __future__ import annotations
 
@@ -24,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compare import detection
+from .. import gp2
+from ..designs import Design
 
 # Table I of the paper.
 TABLE_I_R_M = 0.15
@@ -186,7 +173,7 @@ def model_frames(ring_model, step: int, data=None) -> SensorFrames:
     of the model to pose (a fresh one by default; allocating it costs ~100× the
     kinematics, so a caller posing many steps passes one).
     """
-    import mujoco
+    import mujoco   # deferred: the equations above need only numpy
 
     m = ring_model.model
     d = mujoco.MjData(m) if data is None else data
@@ -219,7 +206,7 @@ def design_report(design, distances_m=(0.25, 0.5, 0.75, 1.0), *, range_m: float 
     its built MuJoCo model, and Eq. 1's blind spot at ``distances_m`` with the design's
     ray step. ``range_m`` is D (default: the sensor's design range, Table I's 0.686 m).
     """
-    from ..simulation import model as ring_model_mod
+    from ..simulation import model as ring_model_mod   # deferred: loads MuJoCo
 
     D = design.sensor.design_range_m if range_m is None else range_m
     ring = design.ring
@@ -259,6 +246,142 @@ def _blind_spot_from_rays(design, dist: np.ndarray) -> list[float] | None:
     surface near square to a ray, so posts hide between cones after all."""
     if design.sensor.beam_half_angle_rad <= 0:
         return None
-
     det = detection(design, dist)
     return [float(v) for v in det.min_detectable_radius_m]
+
+
+# --------------------------------------------------------------------------- detection
+
+DEFAULT_DISTANCES_M = (0.25, 0.35, 0.45, 0.55, 0.65, 0.75)
+CONE_RAY_STEP_RAD = math.radians(0.25)  # fan spacing used to stand in for a sonar cone
+
+
+@dataclass(frozen=True)
+class Rays:
+    """Every ray of one full view, robot at the origin facing +x. (M, 2) arrays, metres."""
+
+    origin: np.ndarray
+    direction: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.origin)
+
+
+def design_rays(design: Design, step_stride: int = 1) -> Rays:
+    """The rays of a full view of ``design``, read from its built MuJoCo model.
+
+    The ring is posed at each motor step (:func:`model_frames`); each emitter's
+    position and beam direction is one ray. A sensor with a beam cone contributes a fan of
+    rays every ``CONE_RAY_STEP_RAD`` across the cone.
+    """
+    import mujoco   # deferred: the equations above need only numpy
+    from ..simulation import model as ring_model_mod   # deferred: loads MuJoCo
+
+    rm = ring_model_mod.compile_ring(design.ring)
+    data = mujoco.MjData(rm.model)  # one, re-posed at every step
+    steps = range(design.ring.min_step, design.ring.max_step + 1, step_stride)
+    origins, headings = [], []
+    for s in steps:  # one kinematics call per motor position; the rays are arrays
+        f = model_frames(rm, s, data)
+        origins.append(f.emitter_xyz[:, :2])
+        headings.append(f.heading_rad)
+    o = np.concatenate(origins)
+    h = np.concatenate(headings)
+    half = design.sensor.beam_half_angle_rad
+    if half > 0:
+        k = int(math.ceil(half / CONE_RAY_STEP_RAD))
+        offsets = np.linspace(-half, half, 2 * k + 1)
+        o = np.repeat(o, len(offsets), axis=0)
+        h = (h[:, None] + offsets[None, :]).ravel()
+    return Rays(o, np.c_[np.cos(h), np.sin(h)])
+
+
+def _incidence_limit_rad(design: Design) -> float:
+    return float(gp2.sensor(design.sensor.kind).max_incidence_rad)
+
+
+def seen(rays: Rays, centres: np.ndarray, radius_m: float, *, min_range_m: float,
+         max_range_m: float, max_incidence_rad: float) -> np.ndarray:
+    """(B,) bool: is a cylinder of ``radius_m`` at each of ``centres`` (B, 2) hit by a ray
+    within [min_range_m, max_range_m] at incidence ≤ ``max_incidence_rad``?"""
+    rel = centres[:, None, :] - rays.origin[None, :, :]            # (B, M, 2)
+    along = np.einsum("bmi,mi->bm", rel, rays.direction)           # to the foot of the centre
+    across = rel[..., 1] * rays.direction[:, 0] - rel[..., 0] * rays.direction[:, 1]
+    p = np.abs(across) / radius_m                                  # sin(incidence) where hit
+    with np.errstate(invalid="ignore"):
+        t = along - radius_m * np.sqrt(1.0 - p ** 2)              # distance to the surface
+    hit = (p <= math.sin(max_incidence_rad)) & (t >= min_range_m) & (t <= max_range_m)
+    return hit.any(axis=1)
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Per distance (from the robot centre to the cylinder's near side, m): the smallest
+    cylinder radius (m) seen at every bearing (``inf``: not even ``MAX_RADIUS_M``), and the
+    largest radius found missed at some bearing (0: none)."""
+
+    design: str
+    distances_m: np.ndarray
+    min_detectable_radius_m: np.ndarray
+    max_missed_radius_m: np.ndarray
+    bearings: int
+    rays: int
+
+
+MIN_RADIUS_M = 0.001
+MAX_RADIUS_M = 0.2
+_COARSE_RADII_M = np.geomspace(MIN_RADIUS_M, MAX_RADIUS_M, 25)   # ~25 % apart
+_BISECTIONS = 8                                                  # then ≈ 0.1 % apart
+
+
+def symmetry_period_rad(design: Design, step_stride: int = 1) -> float:
+    """Bearing period over which the design's rays repeat: 2π/N for a ring, one step for a
+    single sensor turning a full circle at the centre."""
+    ring = design.ring
+    if ring.sensors > 1:
+        return design.spacing_rad
+    if design.rotating and design.positions(step_stride) * design.step_rad * step_stride \
+            >= 2.0 * math.pi - 1e-9:
+        return design.step_rad * step_stride
+    return 2.0 * math.pi
+
+
+def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int = 360,
+              step_stride: int = 1, rays: Rays | None = None) -> Detection:
+    """Smallest detectable cylinder radius versus distance for ``design``.
+
+    ``bearings`` cylinder positions are spread over one symmetry period of the design, half
+    a spacing off the rays' own symmetry, so the worst place (between two beams) is
+    sampled. A radius is "detected" when it is seen at every bearing. Radii 1 … 200 mm are
+    tried ~25 % apart; the boundary between the largest missed and the next detected one
+    is then bisected (assumes one boundary in that bracket).
+    """
+    rays = design_rays(design, step_stride) if rays is None else rays
+    period = symmetry_period_rad(design, step_stride)
+    b = (np.arange(bearings) + 0.5) / bearings * period
+    unit = np.c_[np.cos(b), np.sin(b)]
+    sens = design.sensor
+    kw = dict(min_range_m=gp2.sensor(sens.kind).min_range_m, max_range_m=sens.max_range_m,
+              max_incidence_rad=_incidence_limit_rad(design))
+    dist = np.asarray(distances_m, dtype=float)
+    min_ok = np.full(len(dist), np.inf)
+    max_miss = np.zeros(len(dist))
+    for i, d in enumerate(dist):
+        def all_seen(r: float) -> bool:
+            return bool(seen(rays, unit * (d + r), r, **kw).all())
+
+        ok = np.array([all_seen(r) for r in _COARSE_RADII_M])
+        missed = np.flatnonzero(~ok)
+        if missed.size == 0:
+            min_ok[i] = _COARSE_RADII_M[0]
+            continue
+        j = missed[-1]
+        if j + 1 == len(_COARSE_RADII_M):
+            max_miss[i] = _COARSE_RADII_M[j]
+            continue
+        lo, hi = _COARSE_RADII_M[j], _COARSE_RADII_M[j + 1]
+        for _ in range(_BISECTIONS):
+            mid = math.sqrt(lo * hi)
+            lo, hi = (lo, mid) if all_seen(mid) else (mid, hi)
+        min_ok[i], max_miss[i] = hi, lo
+    return Detection(design.name, dist, min_ok, max_miss, bearings, len(rays))

@@ -38,7 +38,7 @@ from ..resources import installed_version
 from ..scenario import Scenario, ScenarioError, load_scenario
 from . import accuracy
 from .accuracy import mark_pareto
-from .compare import write_csv
+from .report import write_csv
 from .executor import stream
 
 # knob → (type, lowest, highest, what it sets); the scenario's value when the study has none

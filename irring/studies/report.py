@@ -1,0 +1,50 @@
+"""The files a study writes (JSON, CSV tables, a chart, all together) and the mean its
+tables show."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+
+from ..outputs import OutputSet
+
+
+def mean_of(values) -> float | None:
+    """Mean of the values that are not None (None when there are none)."""
+    vals = [v for v in values if v is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def write_csv(path, rows: list[dict], keys) -> None:
+    """``rows`` as CSV with the columns ``keys`` (a missing or None value: an empty cell)."""
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(keys)
+        for r in rows:
+            w.writerow(["" if r.get(k) is None else r.get(k) for k in keys])
+
+
+def study_files(name: str) -> tuple[str, ...]:
+    """The files :func:`write_study` may write for the study ``name``."""
+    return f"{name}.json", f"{name}.csv", "runs.csv", f"{name}.png"
+
+
+def write_study(out_dir, name: str, result: dict, rows: list[dict], keys, draw) -> dict[str, str]:
+    """A study's files in ``out_dir``, all together (:class:`irring.outputs.OutputSet`: a
+    failed or interrupted write leaves the folder as it was): <name>.json (all of
+    ``result``), <name>.csv (``rows`` with columns ``keys``), runs.csv (``result["runs"]``,
+    if any) and <name>.png (``draw(result, path)``). Raises ``OutputError``."""
+    target = OutputSet(out_dir, files=study_files(name))
+    with target as tmp:
+        paths = dict(zip(("json", "csv", "runs_csv", "chart"),
+                         (tmp / f for f in study_files(name))))
+        paths["json"].write_text(json.dumps(result, indent=2))
+        write_csv(paths["csv"], rows, keys)
+        if result["runs"]:
+            write_csv(paths["runs_csv"], result["runs"], list(result["runs"][0]))
+        else:
+            del paths["runs_csv"]
+        draw(result, paths["chart"])
+    return {k: str(target.out / p.name) for k, p in paths.items()}
