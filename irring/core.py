@@ -330,6 +330,10 @@ class Points:
     reason: np.ndarray        # uint8 of Reason
     max_range_m: float = MAX_RANGE_M
     cone_half_angle_rad: float = 0.0  # > 0: each reading is an echo from anywhere in this cone
+    # (S, N) or None: how far a NO_RETURN reading's beam is known free, where a surface of
+    # the sweep explains the silence (it meets it past the drop-out angle); NaN or None: to
+    # max_range_m
+    reach_m: np.ndarray | None = None
 
     def reasons(self) -> dict[str, int]:
         """How many readings fell into each reason."""

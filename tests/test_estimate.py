@@ -643,6 +643,36 @@ def test_a_wall_seen_past_a_box_corner_is_read_on_its_own_line():
     assert np.mean(err > 0.05) < 0.10
 
 
+@pytest.mark.parametrize("noise", [0.0, 12.3])
+def test_silent_beams_grazing_a_cabinet_do_not_free_its_inside(noise):
+    """A 500 × 80 mm cabinet whose long face one sweep sees as a line and other beams of
+    the same sweep graze past the drop-out angle (no return). Those silent beams are known
+    free only up to the face (``Points.reach_m``): no cell inside the cabinet is mapped
+    free on any seed, where at full length (reach dropped) 17–22 were."""
+    from irring.maps.mapping import FREE, OccupancyGrid
+
+    cal = dataclasses.replace(NOMINAL, noise_counts=max(noise, 0.3))
+    box = (0.25, 0.10, 0.75, 0.18)
+    walls = rectangle(-0.55, -0.45, 0.95, 0.62) + rectangle(*box)
+    for seed in range(4):
+        sweep, _, _ = make_sweep(cal, walls=walls, pose=(0.0, -0.12, 0.3), noise_counts=noise,
+                                 seed=seed, quantize=noise > 0)
+        p = estimate(sweep, cal)
+        silent = p.reason == Reason.NO_RETURN
+        assert np.isfinite(p.reach_m[silent]).sum() >= 10
+        assert not np.isfinite(p.reach_m[~silent]).any()
+        inside_free = []
+        for pts in (p, dataclasses.replace(p, reach_m=None)):
+            g = OccupancyGrid.covering((-0.6, -0.5), (1.0, 0.7), 0.01)
+            g.insert(pts)
+            xs, ys = g.cell_centers()
+            x, y = np.meshgrid(xs, ys)
+            inside = ((x > box[0] + 0.01) & (x < box[2] - 0.01) & (y > box[1] + 0.01)
+                      & (y < box[3] - 0.01))
+            inside_free.append(int((g.classify()[inside] == FREE).sum()))
+        assert inside_free[0] == 0 and inside_free[1] >= 10, (seed, inside_free)
+
+
 @pytest.fixture(scope="module")
 def cylinder_room():
     from irring.scenario import load_scenario

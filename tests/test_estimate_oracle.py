@@ -34,6 +34,9 @@ def assert_agree(sweep, cal, **kw):
     for f in FLOATS:
         np.testing.assert_allclose(getattr(fast.points, f), getattr(slow.points, f), rtol=0,
                                    atol=TOL, err_msg=f)
+    assert (fast.points.reach_m is None) == (slow.points.reach_m is None)
+    if fast.points.reach_m is not None:
+        np.testing.assert_allclose(fast.points.reach_m, slow.points.reach_m, rtol=0, atol=TOL)
     assert (fast.lines is None) == (slow.lines is None)
     if fast.lines is not None:
         np.testing.assert_array_equal(fast.lines.label, slow.lines.label)

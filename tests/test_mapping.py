@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import Counter
 
@@ -259,6 +260,26 @@ def test_no_return_frees_up_to_max_range_and_marks_nothing():
     assert np.count_nonzero(g.log_odds) == len(touched)
 
 
+@pytest.mark.parametrize("reach, last", [(0.17, 22), (np.nan, 35), (0.5, 35), (0.0, None),
+                                         (-0.1, None)])
+def test_no_return_frees_only_up_to_its_reach(reach, last):
+    """A silent beam a surface explains (``Points.reach_m``) frees cells only up to its
+    reach (0.055 + 0.17 m: the cell at 0.2249 m is column 22); a reach beyond the max range
+    or NaN leaves the max range, and one ≤ 0 maps nothing."""
+    g = small_grid()
+    p = single_ray(0.055, 0.205, 0.0, np.nan, valid=False, reason=Reason.NO_RETURN,
+                   max_range_m=0.3)
+    g.insert(dataclasses.replace(p, reach_m=np.array([[reach]])))
+    touched = np.nonzero(g.log_odds[20])[0]
+    assert g.log_odds.max() == 0.0
+    if last is None:
+        assert touched.size == 0
+    else:
+        assert touched.min() == 5 and touched.max() == last
+        np.testing.assert_allclose(g.log_odds[20, touched], g.params.l_no_return)
+    assert np.count_nonzero(g.log_odds) == len(touched)
+
+
 @pytest.mark.parametrize("reason", [Reason.OUT_OF_RANGE, Reason.FOLDOVER_AMBIGUOUS,
                                     Reason.SATURATED, Reason.NOT_CONVERGED, Reason.MISSING])
 def test_other_invalid_readings_change_nothing(reason):
@@ -323,7 +344,13 @@ def reference_delta(grid, points):
     ox, oy, hd = points.origin_x.ravel(), points.origin_y.ravel(), points.heading.ravel()
     d = np.hypot(points.x.ravel() - ox, points.y.ravel() - oy)
     sigma = np.maximum(np.nan_to_num(points.sigma_m.ravel(), nan=p.default_sigma_m), p.min_sigma_m)
-    length = np.where(valid, d + p.tail_sigmas * sigma, points.max_range_m)
+    # a silent beam ends at its reach where that is finite and shorter (≤ 0: not mapped)
+    reach = (np.full(valid.size, np.nan) if points.reach_m is None
+             else np.asarray(points.reach_m, float).ravel())
+    explained = np.isfinite(reach) & (reach < points.max_range_m)
+    no_return &= ~(explained & (reach <= 0))
+    length = np.where(valid, d + p.tail_sigmas * sigma,
+                      np.where(explained, reach, points.max_range_m))
     ux = np.where(valid & (d > 0), (points.x.ravel() - ox) / np.where(d > 0, d, 1), np.cos(hd))
     uy = np.where(valid & (d > 0), (points.y.ravel() - oy) / np.where(d > 0, d, 1), np.sin(hd))
     use = np.flatnonzero(valid | no_return)
@@ -360,10 +387,12 @@ def random_points(rng, n, *, box=(0.6, 0.4), max_range_m=0.3):
     valid = kind == Reason.OK
     dd = np.where(valid, d, np.nan)
     sigma = np.where(rng.random(n) < 0.1, np.nan, rng.uniform(0.001, 0.03, n))
+    # some silent beams explained by a surface: known free only to their reach
+    reach = np.where(rng.random(n) < 0.5, rng.uniform(-0.02, 1.2 * max_range_m, n), np.nan)
     return Points(x=ox + dd * np.cos(heading), y=oy + dd * np.sin(heading), d=dd,
                   theta=np.zeros(n), origin_x=ox, origin_y=oy, heading=heading, sigma_m=sigma,
                   iterations=np.ones(n, int), valid=valid, reason=kind.astype(np.uint8),
-                  max_range_m=max_range_m)
+                  max_range_m=max_range_m, reach_m=reach)
 
 
 @pytest.mark.parametrize("params", [{}, {"l_no_return": -0.3, "tail_sigmas": 3.0},

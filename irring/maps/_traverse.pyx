@@ -337,8 +337,9 @@ cdef inline double weight(double z_a, double z_b, double mu, double l_occ,
 def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[::1] origin_y,
               const double[::1] heading, const double[::1] x, const double[::1] y,
               const double[::1] sigma_m, const unsigned char[::1] valid,
-              const unsigned char[::1] no_return, double max_range_m, double grid_x,
-              double grid_y, double res, params, double lo, double hi):
+              const unsigned char[::1] no_return, const double[::1] reach_m,
+              double max_range_m, double grid_x, double grid_y, double res, params,
+              double lo, double hi):
     """Add the log-odds of one batch of readings (flat arrays, metres; ``valid`` and
     ``no_return`` as uint8) to the grid ``log_odds`` (ny, nx; its cell (0, 0) has its corner
     at (grid_x, grid_y)), then clamp the box of cells their beams can reach to [lo, hi]
@@ -347,7 +348,8 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
 
     Valid readings (with finite end point and emitter) are walked from the emitter to
     tail_sigmas·σ behind the end point, no-return readings (finite emitter and heading) to
-    the max range along the heading; every other reading changes nothing. Cells a beam
+    the max range along the heading, or to ``reach_m`` where that is finite and shorter (a
+    surface explains the silence; ≤ 0: not at all); every other reading changes nothing. Cells a beam
     crosses at constant weight (a no-return beam; a valid beam up to NEAR_SIGMAS·σ before its
     free margin) are counted as row runs, exactly (integers); only a valid beam's columns
     after that are walked cell by cell and weighed with the model. Those weights go into the
@@ -382,7 +384,8 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef bint two, is_valid
     cdef int pass_
     if not (origin_y.shape[0] == heading.shape[0] == x.shape[0] == y.shape[0]
-            == sigma_m.shape[0] == valid.shape[0] == no_return.shape[0] == n):
+            == sigma_m.shape[0] == valid.shape[0] == no_return.shape[0]
+            == reach_m.shape[0] == n):
         raise ValueError("every array of the readings needs the same length")
     if n >= 1 << 31:
         raise ValueError("at most 2^31 − 1 readings per insert (the cell counts are 32-bit)")
@@ -420,9 +423,14 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                     if valid[i] and isfinite(x[i] + y[i]) or not no_return[i] \
                             or not isfinite(heading[i]):
                         continue
-                    # emitter → max range along the heading
-                    e[2] = cos(heading[i]) * max_range_m * inv
-                    e[3] = sin(heading[i]) * max_range_m * inv
+                    # emitter → max range (or its reach) along the heading
+                    length = max_range_m
+                    if isfinite(reach_m[i]) and reach_m[i] < length:
+                        if reach_m[i] <= 0:
+                            continue
+                        length = reach_m[i]
+                    e[2] = cos(heading[i]) * length * inv
+                    e[3] = sin(heading[i]) * length * inv
                 e[0], e[1] = (ox - grid_x) * inv, (oy - grid_y) * inv
                 # overflowed or absurd numbers are not mapped
                 if not (fabs(e[0]) < FAR_CELLS and fabs(e[1]) < FAR_CELLS

@@ -256,6 +256,8 @@ class OccupancyGrid:
             _flat(points.x), _flat(points.y), _flat(points.sigma_m),
             np.asarray(points.valid, bool).ravel().view(np.uint8),
             (np.asarray(points.reason).ravel() == _NO_RETURN).view(np.uint8),
+            _flat(np.full(np.shape(points.valid), np.nan) if points.reach_m is None
+                  else points.reach_m),
             float(points.max_range_m), float(self.origin_xy_m[0]), float(self.origin_xy_m[1]),
             self.resolution_m, params, lo, hi)
 
@@ -389,7 +391,8 @@ def cone_fan(points: Points, step_rad: float) -> Points:
         points, x=ox + d * np.cos(heading), y=oy + d * np.sin(heading), d=d,
         theta=fan(points.theta), origin_x=ox, origin_y=oy, heading=heading,
         sigma_m=fan(points.sigma_m), iterations=fan(points.iterations), valid=fan(points.valid),
-        reason=fan(points.reason), cone_half_angle_rad=0.0)
+        reason=fan(points.reason), cone_half_angle_rad=0.0,
+        reach_m=None if points.reach_m is None else fan(points.reach_m))
 
 
 def slice_steps(points: Points, rows: slice) -> Points:
