@@ -29,9 +29,11 @@ import numpy as np
 
 from . import recording as rec, safe_yaml
 from .core import Points, Reason, RingSource, SourceLost, Sweep
-from .estimation.estimate import Calibration, CalibrationError
+from .estimation.estimate import Calibration, CalibrationError, estimate
 from .gp2 import SENSORS
+from .maps import metrics
 from .maps.mapping import MapperParams, OccupancyGrid, check_scenario_grid, classify, slice_steps
+from .maps.mcap_export import write_mcap
 from .outputs import OutputSet
 from .scenario import Scenario, loads
 
@@ -57,8 +59,8 @@ def progress_bar(total: int, desc: str, enabled: bool | None = None, *, unit: st
     context manager): shown when ``enabled``, or when None as :func:`progress_enabled`
     decides; a disabled bar's ``update`` costs nothing."""
     if not (progress_enabled() if enabled is None else enabled):
-        return _NoBar()          # (tqdm.auto takes ~30 ms to import: not for a hidden bar)
-    from tqdm.auto import tqdm
+        return _NoBar()
+    from tqdm.auto import tqdm   # deferred: tqdm, only for a bar that is shown
 
     return tqdm(total=total, desc=desc, unit=unit, leave=False)
 
@@ -137,7 +139,7 @@ class MapRun:
 
     def _repr_png_(self) -> bytes:
         """The map picture (as map.png, smaller), so a notebook shows a MapRun inline."""
-        from .maps import render
+        from .maps import render   # deferred: matplotlib, only for a picture
 
         reach, ring_r = _reach(self) if self.sweeps else (None, 0.15)
         return render.MapFigure(self.grid, self.scenario, self.poses, reach, ring_r,
@@ -259,7 +261,7 @@ def simulated(scenario: Scenario, *, seed: int | None = None, progress: bool | N
     """Every sweep the scene takes (one per scan pose; with ``motion`` back to back along
     its drive), acquired from a new ``SimRing``: (acquisition, seconds building the MuJoCo
     model)."""
-    from .simulation.sim import SimRing
+    from .simulation.sim import SimRing   # deferred: MuJoCo; replay and drive simulate nothing
 
     t0 = time.perf_counter()
     with SimRing(scenario, seed=seed) as sim:
@@ -299,8 +301,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     ``truth``: a ``metrics.GroundTruth`` of this scenario on this grid's cells, to reuse
     across many runs (it takes ~0.1–0.5 s).
     """
-    if estimator is None:
-        from .estimation.estimate import estimate as estimator
+    estimator = estimate if estimator is None else estimator
     timings = {"estimate": 0.0, "map": 0.0}
     points: list[Points] = []
     if grid is None and scenario is not None:
@@ -320,8 +321,6 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     run = MapRun(sweeps=list(sweeps), points=points, grid=grid, scenario=scenario,
                  frames_per_sweep=int(frames_per_sweep), timings_s=timings)
     if score and scenario is not None:
-        from .maps import metrics
-
         t0 = time.perf_counter()
         run.truth = truth if truth is not None else metrics.ground_truth(scenario, grid)
         run.scores = metrics.score(grid, scenario, run.truth)
@@ -449,8 +448,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     interrupted or failed write leaves the folder as it was); time it as the "render"
     stage. ``mcap``: also write the run there as MCAP (``mcap_export``; the "mcap" stage),
     which needs the ``mcap`` extra."""
-    from .maps import \
-        render  # noqa: F401 (loads matplotlib: before the clock, as irring loads MuJoCo)
+    from .maps import render  # noqa: F401  # deferred: matplotlib, loaded before the clock
 
     t0 = time.perf_counter()
     target = OutputSet(out_dir)
@@ -462,8 +460,6 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     result.timings_s["render"] = time.perf_counter() - t0
     paths = {key: target.out / Path(p).name for key, p in paths.items()}
     if mcap is not None:
-        from .maps.mcap_export import write_mcap
-
         t0 = time.perf_counter()
         paths["mcap"] = write_mcap(result, mcap)
         result.timings_s["mcap"] = time.perf_counter() - t0
@@ -472,7 +468,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
 
 def _write_into(result: MapRun, out: Path, *, animation: bool, recording: bool,
                 title: str | None) -> dict[str, Path]:
-    from .maps import render
+    from .maps import render   # deferred: matplotlib, only for the pictures
 
     sc = result.scenario
     reach, ring_r = _reach(result)

@@ -25,6 +25,7 @@ import numpy as np
 from . import gp2
 from .core import Ring, Sweep, Truth
 from .errors import InputError, IrringError, brief
+from .maps.mapping import MapperParams, check_grid_size
 from .scenario import ScenarioError, load_dataclass
 
 FORMAT = "irring-recording/1"
@@ -202,8 +203,6 @@ def _check_meta(meta: dict, fail) -> None:
         raise fail(f"meta.seed: expected a whole number ≥ 0, got {brief(seed)}")
     grid = meta.get("grid")
     if grid is not None:
-        from .maps.mapping import check_grid_size
-
         ok = (isinstance(grid, dict) and set(grid) == {"origin_xy_m", "shape", "resolution_m"}
               and isinstance(grid["shape"], list) and len(grid["shape"]) == 2
               and all(isinstance(v, int) and not isinstance(v, bool) and v >= 1
@@ -217,8 +216,6 @@ def _check_meta(meta: dict, fail) -> None:
         check_grid_size(*grid["shape"], grid["resolution_m"], f"{fail('').args[0]}meta.grid")
     mapper = meta.get("mapper")
     if mapper is not None:
-        from .maps.mapping import MapperParams
-
         names = {f.name for f in dataclasses.fields(MapperParams)}
         if (not isinstance(mapper, dict) or not set(mapper) <= names
                 or not all(_finite(v, -1e3, 1e3) for v in mapper.values())):

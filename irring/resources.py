@@ -25,7 +25,7 @@ def _find(name: str) -> Path:
 @functools.lru_cache(maxsize=1)
 def installed_version() -> str:
     """irring's installed version, or "unknown (not installed)" for a bare source tree."""
-    # importlib.metadata costs ~20 ms at start-up: loaded when a version is asked for
+    # deferred: importlib.metadata is slow to import; only --version and a study's rows ask
     from importlib.metadata import PackageNotFoundError, version
 
     try:

@@ -187,3 +187,83 @@ def test_without_kernels_the_estimator_fails_only_when_used_and_names_the_fix():
     last = done.stdout.strip().splitlines()[-1]
     assert last.startswith("irring's compiled kernel estimation.") and "is not built" in last
     assert "pip install ." in last and "C compiler" in last
+
+
+# What a function may import instead of its module: a package that is slow to load, needs a
+# display or hardware library, or is optional (by dotted-name prefix), and an irring module
+# only when it loads one of them. Anything else belongs at the top of the file.
+DEFERRABLE = ("mujoco", "matplotlib", "PIL", "imageio", "dask", "distributed", "mcap",
+              "mcap_ros2", "tqdm", "serial", "pyarrow", "importlib.metadata")
+
+
+def _external(node: ast.Import | ast.ImportFrom) -> set[str]:
+    """The other packages one statement imports, by dotted name (`import a.b` → a.b)."""
+    if isinstance(node, ast.Import):
+        return {a.name for a in node.names if a.name.split(".")[0] != "irring"}
+    if node.level or (node.module or "").split(".")[0] == "irring":
+        return set()
+    return {node.module} | {f"{node.module}.{a.name}" for a in node.names}
+
+
+def _deferrable(names: set[str]) -> set[str]:
+    return {n for n in names if any(n == d or n.startswith(d + ".") for d in DEFERRABLE)}
+
+
+def _function_level_imports() -> list[tuple[str, int, bool, set[str]]]:
+    """Every import inside a function or class of irring: (module, line, whether a
+    ``# deferred:`` comment explains it, the slow or optional packages it alone loads)."""
+    modules = _modules()
+    paths = {_module_name(p): p for p in _paths()}
+    trees = {m: ast.parse(p.read_text()) for m, p in paths.items()}
+    top = {m: [n for n in _module_level(t) if isinstance(n, (ast.Import, ast.ImportFrom))]
+           for m, t in trees.items()}
+
+    def loads(module: str, seen: set[str]) -> set[str]:   # other packages, transitively
+        if module in seen or module not in top:
+            return set()
+        seen.add(module)
+        out = set()
+        for node in top[module]:
+            out |= _external(node)
+            for target in _targets(node, _package_of(paths[module]), modules) & modules:
+                out |= loads(target, seen)
+        return out
+
+    found = []
+    for module, tree in trees.items():
+        lines = paths[module].read_text().splitlines()
+        at_top = loads(module, set())
+        module_level = set(map(id, top[module]))
+        bodies = [getattr(n, f) for n in ast.walk(tree) for f in ("body", "orelse", "finalbody")
+                  if isinstance(getattr(n, f, None), list)]
+        for body in bodies:
+            group: list[ast.stmt] = []
+            for stmt in [*body, None]:   # runs of consecutive imports share one comment
+                if isinstance(stmt, (ast.Import, ast.ImportFrom)) and id(stmt) not in module_level:
+                    group.append(stmt)
+                    continue
+                if group:
+                    first, last = group[0].lineno, group[-1].end_lineno
+                    said = any("# deferred:" in line for line in lines[first - 2:last])
+                    for node in group:
+                        brought = _external(node)
+                        for target in _targets(node, _package_of(paths[module]), modules):
+                            brought |= loads(target, set()) if target in modules else set()
+                        found.append((module, node.lineno, said,
+                                      _deferrable(brought) - _deferrable(at_top)))
+                group = []
+    return found
+
+
+def test_an_import_inside_a_function_defers_a_slow_or_optional_package_and_says_so():
+    """Function-level imports stay the exception: each one loads something slow, optional
+    or display-bound that its module does not already load, and a `# deferred:` comment
+    says why. Anything else is hoisted, so the dodges cannot silently grow back."""
+    found = _function_level_imports()
+    by_place = {(m, min(d) if d else None) for m, _, _, d in found}
+    assert ("irring.pipeline", "tqdm.auto") in by_place           # the parser sees them, and
+    assert ("irring.studies.executor", "dask.distributed") in by_place   # what each loads
+    needless = [f"{m}:{line}" for m, line, _, brings in found if not brings]
+    unexplained = [f"{m}:{line}" for m, line, said, _ in found if not said]
+    assert needless == [], "import these at the top of the file (nothing slow or optional)"
+    assert unexplained == [], "say why with a '# deferred: …' comment on or above the import"

@@ -52,7 +52,7 @@ def _deg(x: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..studies.dynamics import measure
+    from ..studies.dynamics import measure   # deferred: loads MuJoCo, which --help does not need
 
     r = measure(sweeps=args.sweeps, seeds=tuple(args.seeds), with_motion=not args.no_motion)
     if args.json:

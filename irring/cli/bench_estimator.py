@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..estimation.calibrate import SimulatedRig
 from ..estimation.estimate import Calibration
 from ..scenario import load_scenario
 from ..studies.estimator import measure
@@ -62,8 +63,6 @@ def run(args: argparse.Namespace) -> int:
     if args.calibration:
         cal = Calibration.load(args.calibration)
     elif args.rig:
-        from ..estimation.calibrate import SimulatedRig
-
         cal = SimulatedRig(scenario).calibrate()
     r = measure(scenario, sweeps_per_pose=args.sweeps, min_theta_deg=args.min_theta,
                 calibration=cal, seed=args.seed, max_iterations=args.max_iterations)

@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{len(rig.placements)} placements × {rig.sweeps} sweeps")
             cal = rig.calibrate()
         else:
-            from ..hardware.serial_ring import DeviceError, SerialRing
+            from ..hardware.serial_ring import SerialRing   # deferred: loads pyserial
 
             ring = SerialRing(args.port, baudrate=args.baud,
                               emitter_offset_m=scenario.ring.emitter_offset_m,
@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
                         sweeps=args.sweeps or 4,
                         emitter_offset_guess_m=scenario.ring.emitter_offset_m)
                     cal = guided.run()
-            except DeviceError as exc:
+            except errors.DeviceError as exc:
                 print(f"irring calibrate: error: {exc}", file=sys.stderr)
                 return errors.DEVICE
     except CalibrationAborted as exc:

@@ -73,7 +73,7 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..simulation.sim import SimRing
+    from ..simulation.sim import SimRing   # deferred: loads MuJoCo, which --help does not need
 
     scenario = load_scenario(args.scenario)
     try:

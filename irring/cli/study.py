@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -79,8 +80,6 @@ def run(args: argparse.Namespace) -> int:
             result = study.run_study(spec, out, ex, resume=args.resume, on_start=start,
                                      progress=lambda _: bar.update())
     except KeyboardInterrupt:
-        import sys
-
         path = out / study.RESULTS
         kept = len(study.read_results(path)) if path.exists() else 0
         print(f"irring: study interrupted; {kept} finished run(s) kept in {path}: run the same "

@@ -42,7 +42,7 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..simulation import view
+    from ..simulation import view   # deferred: loads MuJoCo, which --help does not need
 
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
     try:

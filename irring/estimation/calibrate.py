@@ -243,7 +243,7 @@ class SimulatedRig:
     @property
     def sim(self):
         if self._sim is None:
-            from ..simulation.sim import SimRing
+            from ..simulation.sim import SimRing   # deferred: MuJoCo; the real ring needs none
 
             self._sim = SimRing(self.scenario_for_rig(), seed=self.seed)
         return self._sim

@@ -15,7 +15,7 @@ __all__ = ["SerialRing", "SweepReport", "LinkStats", "DeviceError", "DeviceTimeo
 
 def __getattr__(name: str):
     if name in __all__:
-        from . import serial_ring
+        from . import serial_ring   # deferred: pyserial; the protocol codec does without it
 
         return getattr(serial_ring, name)
     raise AttributeError(f"module 'irring.hardware' has no attribute {name!r}")

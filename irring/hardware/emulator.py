@@ -549,11 +549,11 @@ class DevicePort:
 
     def _check(self) -> None:
         if not self.is_open:
-            import serial
+            import serial   # deferred: pyserial; the pty and TCP emulators do without it
 
             raise serial.PortNotOpenError()
         if self.device.disconnected and not self._buf:
-            import serial
+            import serial   # deferred: pyserial; the pty and TCP emulators do without it
 
             raise serial.SerialException("device disconnected")
 

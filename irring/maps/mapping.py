@@ -14,6 +14,7 @@ import numpy as np
 
 from .. import safe_yaml
 from ..core import Points, Reason
+from ..errors import TooBig
 from ..resources import MissingKernel
 
 try:
@@ -136,8 +137,6 @@ def check_grid_size(ny: int, nx: int, resolution_m: float, where: str = "the map
     than :data:`MAX_GRID_CELLS` cells, naming the memory it would need."""
     cells = int(ny) * int(nx)
     if cells > MAX_GRID_CELLS:
-        from ..errors import TooBig
-
         scale = math.sqrt(cells / MAX_GRID_CELLS)
         raise TooBig(f"{where}: a grid of {ny:,} × {nx:,} cells of {resolution_m * 1e3:g} mm "
                      f"would need about {cells * BYTES_PER_CELL / 1e9:.1f} GB; at most "

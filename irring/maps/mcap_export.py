@@ -83,7 +83,7 @@ CYLINDER_SIDES = 32
 
 def _import():
     try:
-        from mcap_ros2.writer import Writer
+        from mcap_ros2.writer import Writer   # deferred: optional (the mcap extra)
     except ImportError:
         raise ImportError("writing MCAP needs the mcap extra: pip install 'irring[mcap]' "
                           "(the mcap and mcap-ros2-support packages)") from None

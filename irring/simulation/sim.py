@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import sys
 import time
 from dataclasses import dataclass
 
@@ -16,7 +17,9 @@ import numpy as np
 
 from ..core import Sweep, Truth, as_pose, hardware_duration_s
 from ..scenario import Scenario, load_scenario
+from . import dynamics as dynamics_lib
 from . import model as model_lib
+from .rangers import pipeline_for
 
 _POS = mujoco.mjtStage.mjSTAGE_POS
 # Kinematic positioning needs only frames: no contacts, constraints, sensors or actuators.
@@ -99,8 +102,6 @@ class SimRing:
         # reflectance by geom id with a NaN at the end, where a miss's id −1 reads
         self._reflectance = np.append(self.built.reflectance, np.nan)
         self.dynamics = None  # irring.simulation.dynamics.Dynamics, only for scenes that need it
-        from . import dynamics as dynamics_lib
-
         if dynamics_lib.uses_dynamics(scenario):
             self.dynamics = dynamics_lib.Dynamics(scenario, self.built, self.seed)
 
@@ -109,9 +110,7 @@ class SimRing:
     @property
     def pipeline(self):
         if self._pipeline is None:
-            from .rangers import pipeline_for  # the scene's effects, a sonar's cone included
-
-            self._pipeline = pipeline_for(self.scenario)
+            self._pipeline = pipeline_for(self.scenario)  # its effects, a sonar's cone included
         return self._pipeline
 
     def close(self) -> None:
@@ -128,9 +127,7 @@ class SimRing:
         if seed is not None:
             self.seed = int(seed)
             if self.dynamics is not None:  # clocks and odometry come from the seed
-                from .dynamics import Dynamics
-
-                self.dynamics = Dynamics(self.scenario, self.built, self.seed)
+                self.dynamics = dynamics_lib.Dynamics(self.scenario, self.built, self.seed)
         self._sweeps.clear()
 
     @functools.cached_property
@@ -491,8 +488,6 @@ def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, floa
 
 
 if __name__ == "__main__":  # pragma: no cover - a measurement, run by hand
-    import sys
-
     name = sys.argv[1] if len(sys.argv) > 1 else "t_room"
     print(f"{name}: median ms per sweep of 71 steps × 12 sensors")
     for key, value in measure(name).items():

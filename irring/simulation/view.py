@@ -156,9 +156,9 @@ def gl_backend() -> str:
 def _gl_context(width: int, height: int):
     backend = gl_backend()
     if backend == "egl":
-        from mujoco.egl import GLContext
+        from mujoco.egl import GLContext   # deferred: only the chosen backend can load
     else:
-        from mujoco.osmesa import GLContext
+        from mujoco.osmesa import GLContext   # deferred: only the chosen backend can load
     return GLContext(width, height)
 
 
@@ -239,7 +239,7 @@ class _Projection:
 
 
 def save_png(view: SceneView, path, width: int = 1280, height: int = 960) -> Path:
-    from PIL import Image
+    from PIL import Image   # deferred: Pillow, only to save a picture
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -257,7 +257,7 @@ def has_display() -> bool:
 def play(view: SceneView, step_s: float = 0.05) -> None:
     """The interactive MuJoCo viewer (passive) playing the sweep back and forth, beams
     drawn, until its window is closed."""
-    import mujoco.viewer
+    import mujoco.viewer   # deferred: loads GLFW, which needs a display
 
     ring = view.sim.ring
     steps = list(range(ring.min_step, ring.max_step + 1))

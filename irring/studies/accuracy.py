@@ -180,8 +180,7 @@ def _compute_time(sweeps, cal, estimator, grid) -> tuple[float, float]:
 
 def run_job(job: Job) -> dict:
     """Sweep every pose, estimate, map and score one configuration; a plain dict."""
-
-    from ..simulation import dynamics
+    from ..simulation import dynamics   # deferred: loads MuJoCo; a study file is read without it
     base = job.scenario if job.scenario is not None else \
         scenario_from_text(job.scenario_yaml, job.scenario_source)
     cfg = job.config
@@ -416,7 +415,7 @@ def chart(result: dict, path) -> None:
     ring marks the configurations on it. A hollow point: the estimator called less than
     half the returns valid, so its RMSE describes few readings.
     """
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter   # deferred: chart only
 
     rows = result["configs"]
     default = next(r for r in rows if r["knob"] == "default")
@@ -426,7 +425,7 @@ def chart(result: dict, path) -> None:
                ("rmse", "range RMSE, mm (lower is better)", 1e3))
     costs = (("hw", "hardware time per 360° scan, s (what the real ring spends)"),
              ("cpu", "compute per sweep, ms CPU (estimator + mapper, this machine)"))
-    from ..maps.render import figure  # no pyplot: the caller's matplotlib backend stays as it is
+    from ..maps.render import figure  # deferred: matplotlib (no pyplot: the backend stays)
 
     fig = figure(13, 12.5)
     axes = fig.subplots(len(metrics), 2)

@@ -165,7 +165,7 @@ CSV_KEYS = ("design", "runs", "occupied_precision", "occupied_recall", "occupied
 def chart(result: dict, path) -> None:
     """Four panels: map scores per design, shadow per scenario, hardware time per 360°
     view, and the smallest cylinder each design is sure to see versus distance."""
-    from ..maps.render import figure   # no pyplot: the caller's matplotlib backend stays as it is
+    from ..maps.render import figure  # deferred: matplotlib (no pyplot: the backend stays)
 
     recs = result["designs"]
     names = [r["design"] for r in recs]

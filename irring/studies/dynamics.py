@@ -31,6 +31,7 @@ from .. import pipeline, safe_yaml
 from ..core import Ring
 from ..scenario import BeltDynamicsEffect, Scenario, load_scenario, parse, resolve
 from ..simulation import dynamics as dyn, model as model_lib
+from ..simulation.sim import SimRing
 
 SETTLE_S = (0.0, 0.010, 0.020, 0.0383, 0.0529, 0.075)
 
@@ -70,8 +71,6 @@ def coupling(n_sweeps: int = 1000, params: BeltDynamicsEffect | None = None,
 
 
 def _sweep_at(scenario: Scenario, timestep_s: float, seed: int):
-    from ..simulation.sim import SimRing
-
     effects = dict(scenario.effects)
     effects["belt_dynamics"] = dataclasses.replace(effects["belt_dynamics"], timestep_s=timestep_s)
     sc = dataclasses.replace(scenario, effects=types.MappingProxyType(effects))
@@ -98,8 +97,6 @@ def convergence(scenario: Scenario, timestep_s: float | None = None, seed: int =
 
 def settling(effects: dict, settles_s=SETTLE_S, seed: int = 1, name: str = "t_room") -> list[dict]:
     """Angle error and hardware time of one sweep at each settle time (pose 0 of ``name``)."""
-    from ..simulation.sim import SimRing
-
     rows = []
     for settle in settles_s:
         sc = variant(name, effects=effects, scan={"settle_s": settle})
@@ -125,8 +122,6 @@ def mujoco_clocks(scenario: Scenario, seed: int = 3) -> dict:
     continuous instants (they differ by at most one time step of motion). ``stale_m``: how
     far the timed readings are from instantaneous ones (mean).
     """
-    from ..simulation.sim import SimRing
-
     sim = SimRing(scenario, seed=seed)
     dynamics = sim.dynamics
     physics = dynamics.physics
@@ -210,8 +205,6 @@ def mujoco_clocks(scenario: Scenario, seed: int = 3) -> dict:
 def motion(seeds=(1,)) -> dict:
     """Occupied F1 (mean over ``seeds``): static t_room, static scans where the moving run's
     sweeps were (mid-sweep true poses), the moving run with perfect and bundled odometry."""
-    from ..simulation.sim import SimRing
-
     perfect = variant("t_room_moving", motion={"odometry_sigma_mm": 0, "odometry_sigma_deg": 0})
     sim = SimRing(perfect)
     steps = sim.default_steps()

@@ -37,7 +37,7 @@ def measure(scenario, *, sweeps_per_pose: int = 5, min_theta_deg: float = 40.0,
             calibration: Calibration | None = None, seed: int | None = None,
             max_iterations: int = 20) -> dict:
     """Run the comparison on ``scenario`` (a loaded Scenario); return plain figures."""
-    from ..simulation.sim import SimRing
+    from ..simulation.sim import SimRing   # deferred: loads MuJoCo, which --help does not need
 
     sim = SimRing(scenario, seed=seed)
     cal = calibration

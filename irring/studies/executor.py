@@ -72,7 +72,7 @@ def dask_client(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S):
     within about ``timeout_s`` + 2 seconds saying why not (also when what answers there
     is not a Dask scheduler)."""
     try:
-        from dask.distributed import Client
+        from dask.distributed import Client   # deferred: optional (the dask extra)
     except ImportError:  # pragma: no cover - depends on the install
         raise ExecutorError("--dask needs the optional extra: pip install 'irring[dask]'") \
             from None

@@ -31,7 +31,7 @@ def one_run(scenario_name: str) -> dict:
     c1, w1 = time.process_time(), time.perf_counter()
     result = pipeline.run(scenario, frames_per_sweep=pipeline.FRAMES_PER_SWEEP, progress=False)
     c2, w2 = time.process_time(), time.perf_counter()
-    from ..maps import render  # noqa: F401  (write_outputs loads it before its clock)
+    from ..maps import render  # noqa: F401  # deferred: loading it is a part this times
 
     c3, w3 = time.process_time(), time.perf_counter()
     with tempfile.TemporaryDirectory() as out:

@@ -53,6 +53,7 @@ def timed_pipeline(scenario, tally: dict):
 def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | None = None,
             warmup: int = 5) -> dict:
     """Time every stage of a sweep of ``scenario`` (a loaded Scenario); plain figures."""
+    # deferred: MuJoCo and the modules that load it, which --help does not need
     import mujoco
     import mujoco.batch
 

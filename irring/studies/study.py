@@ -29,6 +29,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
+try:
+    import resource
+except ImportError:  # pragma: no cover - not on POSIX
+    resource = None
+
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
@@ -328,9 +333,7 @@ def tasks_for(points: Iterable[Point], scenarios: Mapping[str, Any] | None = Non
 
 
 def _peak_mb() -> float:
-    try:
-        import resource
-    except ImportError:  # pragma: no cover - not on POSIX
+    if resource is None:  # pragma: no cover - not on POSIX
         return float("nan")
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # KiB on Linux
 
@@ -431,7 +434,7 @@ def _write_sorted(path: Path, rows: list[dict[str, str]]) -> None:
 def _write_parquet(csv_path: Path) -> Path | None:
     """results.parquet beside results.csv, if pyarrow is installed (columns typed)."""
     try:
-        import pyarrow.csv as pa_csv
+        import pyarrow.csv as pa_csv   # deferred: optional, not a dependency
         import pyarrow.parquet as pq
     except ImportError:
         return None
@@ -567,6 +570,7 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
     per configuration with its spread over runs (±1 sd): colour the design, marker the knob
     values. The Pareto front is drawn as a staircase and its points ringed. Drawn on
     ``render.figure`` (no pyplot): the caller's matplotlib backend is left alone."""
+    # deferred: matplotlib, only for the chart
     from matplotlib.lines import Line2D
 
     from ..maps.render import figure
