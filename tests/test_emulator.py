@@ -304,11 +304,12 @@ def test_fault_settings_are_checked(kw):
 # --------------------------------------------------------------------------- CLI
 
 
-def test_irring_emulate_serves_a_link_and_cleans_up_on_sigterm(tmp_path, t_room):
-    link = tmp_path / "irr"
-    proc = subprocess.Popen([sys.executable, "-m", "irring", "emulate", "t_room", "--link",
-                             str(link)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+@pytest.mark.parametrize("given", [True, False], ids=["--link", "default ./ring.pty"])
+def test_irring_emulate_serves_a_link_and_cleans_up_on_sigterm(tmp_path, t_room, given):
+    link = tmp_path / ("irr" if given else "ring.pty")
+    proc = subprocess.Popen([sys.executable, "-m", "irring", "emulate", "t_room"]
+                            + (["--link", str(link)] if given else []), cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 20
         while not link.exists() and time.monotonic() < deadline and proc.poll() is None:
@@ -353,6 +354,23 @@ def test_irring_drive_on_the_emulator_makes_the_same_map_as_irring_run(tmp_path,
     capsys.readouterr()
     assert (tmp_path / "replay" / "map.pgm").read_bytes() == \
         (tmp_path / "run" / "map.pgm").read_bytes()
+
+
+def test_irring_drive_without_truth_says_which_ring_it_mapped_with(tmp_path, t_room,
+                                                                 pty_device, capsys):
+    """No scenario names the design: the summary says so and gives the ring the map was
+    made with (the device's 12 sensors and ±37.8° turn, the paper's radius), never "?"."""
+    from irring.cli import main
+
+    link = pty_device(Device(SimRing(t_room)))
+    assert main(["drive", "--port", link, "--pose", "500,450,0", "--out", str(tmp_path),
+                 "--no-animation", "--timeout", "0.5"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    head = lines.index(f"sweeps from serial:{link}")
+    assert lines[head + 1].startswith(
+        "  design not named (no scenario; mapped as 12 gp2d12 sensors on R 150 mm, turning "
+        "±37.8°), 1 pose(s), 852 readings: ")
+    assert lines[head + 2] == "  (no ground truth: not scored)"
 
 
 def test_irring_drive_survives_a_bad_link_and_says_what_was_lost(tmp_path, t_room, pty_device,

@@ -1,7 +1,7 @@
 /* irring-host: the firmware core on a pseudo-terminal, for tests and for trying the host
  * side without a board.
  *
- *   irring-host --link /tmp/irring [--speed 20]   serve on a pty, symlinked at /tmp/irring
+ *   irring-host --link ring.pty [--speed 20]   serve on a pty, symlinked at ./ring.pty
  *   irring-host --stdio                           commands on stdin, answers on stdout
  *   irring-host --baud F_CPU BAUD                 print the UART divisor and its rate error
  *

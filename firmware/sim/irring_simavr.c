@@ -1,6 +1,6 @@
 /* irring-simavr: the AVR image itself, run in simavr, on a pseudo-terminal.
  *
- *   irring-simavr --link /tmp/irring build/irring-atmega328p.elf
+ *   irring-simavr --link ring.pty build/irring-atmega328p.elf
  *
  * A simulated board around the simulated MCU: six MCP3202 on the SPI bus, selected by
  * PC0 … PC5 as wired in firmware/README.md, answering the synthetic counts of

@@ -36,8 +36,8 @@ examples:
   irring calibrate                                  simulated rig, t_room's sensor and effects
   irring calibrate --scenario my_room.yaml --out my_cal.yaml
   irring calibrate --port /dev/ttyUSB0 --out ring.yaml
-  irring emulate t_room --link /tmp/irring &        then
-  irring calibrate --port /tmp/irring              (checks the I/O only: the emulator shows
+  irring emulate t_room &                           then
+  irring calibrate --port ring.pty                 (checks the I/O only: the emulator shows
                                                     its scene, not your wall)
 """
 

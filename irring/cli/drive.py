@@ -42,10 +42,10 @@ no progress (what arrived is still mapped and written); 2 bad arguments; 1 a bad
 --calibration file.
 
 examples:
-  irring emulate t_room --link /tmp/irring &           # try it without hardware
-  irring drive --port /tmp/irring --truth t_room        # map + scores, same as `irring run`
+  irring emulate t_room &                               # try it without hardware (ring.pty)
+  irring drive --port ring.pty --truth t_room           # map + scores, same as `irring run`
   irring drive --port /dev/ttyUSB0 --calibration my_ring.yaml --pose 500,450,0 --pose 1210,450,0
-  irring drive --port socket://192.168.1.40:7000 --json
+  irring drive --port socket://ring.local:PORT --json   # a ring on the network
 """
 
 

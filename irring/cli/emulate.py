@@ -13,16 +13,20 @@ from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
 from ..scenario import load_scenario
 from ._common import between, describe, host_port
 
+DEFAULT_LINK = "ring.pty"
+
 EPILOG = """\
 examples:
-  irring emulate t_room --link /tmp/irring              # then: irring drive --port /tmp/irring
-  irring emulate t_room --link /tmp/irring --realtime   # GP2 timing and a 115200-baud UART
-  irring emulate t_room --link /tmp/irring --corrupt-rate 0.01 --drop-rate 0.05
-  irring emulate t_room --link /tmp/irring --stall-after 100 --disconnect-after 400
-  irring emulate t_room --tcp 7000                      # then: irring drive --port socket://127.0.0.1:7000
+  irring emulate t_room                           # then: irring drive --port ring.pty
+  irring emulate t_room --realtime                # GP2 timing and a 115200-baud UART
+  irring emulate t_room --corrupt-rate 0.01 --drop-rate 0.05
+  irring emulate t_room --stall-after 100 --disconnect-after 400
+  irring emulate t_room_cylinder --link ring2.pty # a second device beside the first
+  irring emulate t_room --tcp 0                   # a free TCP port; it prints which, then:
+                                                  #   irring drive --port socket://127.0.0.1:PORT
 
 The device speaks IRR protocol v1 (docs/protocol.md) on /dev/pts/N; any serial program can open
-the --link path (e.g. `python -m serial.tools.miniterm /tmp/irring`, then type $IRHLO*50).
+the --link path (e.g. `python -m serial.tools.miniterm ring.pty`, then type $IRHLO*50).
 Readings come from the scenario's simulated ring and effects with the scenario's seed, so a
 fault-free full sweep equals `SimRing(scenario).sweep(pose)`. The robot starts at the
 scenario's first pose; each further full-range sweep moves it to the next pose. Faults act
@@ -37,9 +41,10 @@ def register(p: argparse.ArgumentParser) -> None:
              EPILOG)
     p.add_argument("scenario", nargs="?", default="t_room",
                    help="bundled scenario name or YAML path (default: t_room)")
-    p.add_argument("--link", metavar="PATH", default="/tmp/irring",
-                   help="symlink to the pty slave for the host to open (default: /tmp/irring; "
-                        "an existing link is replaced)")
+    p.add_argument("--link", metavar="PATH", default=DEFAULT_LINK,
+                   help=f"symlink to the pty slave for the host to open (default: {DEFAULT_LINK} "
+                        "in the current folder; an existing symlink is replaced, any other "
+                        "file refused; removed when the emulator stops)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", default=None, type=host_port,
                    help="serve on TCP instead of a pty; the host opens socket://HOST:PORT "
                         "(HOST defaults to 127.0.0.1; PORT 0 picks a free one)")

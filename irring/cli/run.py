@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from .. import pipeline
@@ -82,6 +83,19 @@ def report(result, paths: dict, *, as_json: bool, extra: dict | None = None) -> 
         print(line)
 
 
+def _unnamed_ring(result) -> str:
+    """The ring the sweeps were mapped with, when no scenario names its design (the real
+    ring without --truth): what the device reported and what was assumed for the rest."""
+    if not result.sweeps:
+        return "unknown (no scenario, no sweeps)"
+    sw = result.sweeps[0]
+    ring = sw.ring
+    turn = math.degrees(max(abs(ring.min_step), abs(ring.max_step)) * ring.motor_step_rad
+                        * ring.gear)
+    return (f"not named (no scenario; mapped as {ring.sensors} {sw.sensor_model} sensors on "
+            f"R {ring.radius_m * 1000:g} mm, turning ±{turn:.1f}°)")
+
+
 def _f(v, digits: int = 3) -> str:
     return "n/a" if v is None else f"{v:.{digits}f}"
 
@@ -90,15 +104,17 @@ def summary_lines(result, paths: dict) -> list[str]:
     s = result.summary()
     sc = result.scenario
     lines = []
-    head = s["scenario"] or "recorded sweeps"
+    source = result.sweeps[0].source if result.sweeps else ""
+    head = s["scenario"] or (f"sweeps from {source}" if source else "recorded sweeps")
     if sc is not None and sc.description:
         head += f" — {sc.description}"
     lines.append(head)
     r = s["readings"]
     invalid = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in r.items()
                         if k not in ("total", "valid"))
-    lines.append(f"  design {s['design'] or '?'}, {s['poses']} pose(s), {r['total']} readings: "
-                 f"{r['valid']} valid" + (f" ({invalid})" if invalid else ""))
+    lines.append(f"  design {s['design'] or _unnamed_ring(result)}, {s['poses']} pose(s), "
+                 f"{r['total']} readings: {r['valid']} valid"
+                 + (f" ({invalid})" if invalid else ""))
     sc_ = s["scores"]
     if sc_:
         lines.append(f"  occupied  F1 {_f(sc_['occupied_f1'])}  (precision "

@@ -255,7 +255,7 @@ class SerialRing:
                     raise DeviceError(
                         f"cannot open {self._port_arg}: {exc}. Check the device path (ls "
                         f"/dev/ttyUSB* /dev/ttyACM*), that you may use it (group dialout), "
-                        f"or start the emulator: irring emulate t_room --link /tmp/irring"
+                        f"or start the emulator: irring emulate t_room (then --port ring.pty)"
                     ) from exc
             else:
                 self._port = self._port_arg
