@@ -6,15 +6,20 @@ moves them in together when all are written, so Ctrl-C, a full disk or a crash l
 previous run's files untouched, and two runs into one folder leave one run's set, never a mix.
 Every command that writes a folder of outputs (run, replay, drive, compare, the benchmarks,
 a study's summary) goes through it, naming the files it may write.
-:func:`safe_name` turns a scenario name into one folder name that stays inside its parent.
+:func:`atomic_file` does the same for one file written in place (--mcap, a study's
+results.parquet, a calibration). :func:`safe_name` turns a scenario name into one folder
+name that stays inside its parent.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+import secrets
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 from .errors import OutputError, printable
@@ -77,8 +82,7 @@ class OutputSet:
         parent = self.out.absolute().parent
         try:
             parent.mkdir(parents=True, exist_ok=True)
-            self.tmp = Path(tempfile.mkdtemp(prefix=f"{_TEMP_PREFIX}{safe_name(self.out.name)}-",
-                                             dir=parent))
+            self.tmp = _hidden_sibling(self.out.absolute(), folder=True)
         except OSError as exc:
             raise OutputError(f"{self.option} {printable(str(self.out))}: cannot write "
                               f"there: {exc.strerror or exc}") from None
@@ -151,17 +155,41 @@ class OutputSet:
             shutil.rmtree(old, ignore_errors=True)
 
 
-def write_text_atomic(path: str | Path, text: str) -> Path:
-    """Write ``text`` (UTF-8) to a temporary file beside ``path`` and rename it over
-    ``path``: a reader sees the old file or the new one, never half of one."""
+def _hidden_sibling(path: Path, *, folder: bool) -> Path:
+    """A new, empty hidden file or folder beside ``path``, made with the modes any file the
+    user makes gets (umask applied: tempfile's are private, and would stay so once renamed
+    into place)."""
+    for _ in range(100):
+        tmp = path.parent / f"{_TEMP_PREFIX}{safe_name(path.name)}-{secrets.token_hex(4)}"
+        try:
+            if folder:
+                os.mkdir(tmp, 0o777)
+            else:
+                os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            return tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free temporary name beside {path}")
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | Path) -> Iterator[Path]:
+    """A hidden temporary file beside ``path`` to write, renamed over ``path`` when the
+    block ends without an exception and removed when it ends with one: a reader (or the
+    user after Ctrl-C, a full disk, a crash of the writer) sees the old file or the whole
+    new one, never part of one."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f"{_TEMP_PREFIX}{safe_name(path.name)}-",
-                               dir=path.absolute().parent)
+    tmp = _hidden_sibling(path.absolute(), folder=False)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+        yield tmp
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    return path
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through :func:`atomic_file`."""
+    with atomic_file(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)

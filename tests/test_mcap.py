@@ -4,6 +4,7 @@ and one transform per sweep, the map, the true outline — the numbers the run h
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from irring import pipeline  # noqa: E402
 from irring.cli import main  # noqa: E402
 from irring.recording import load_recording  # noqa: E402
+from irring.scenario import load_scenario  # noqa: E402
 
 
 def _messages(path):
@@ -83,3 +85,38 @@ def test_run_writes_one_message_per_sweep_the_map_and_the_truth(tmp_path):
     ob = run.scenario.obstacles[0]
     pts = np.array([(p.x, p.y) for p in obstacles[0][2].polygon.points])
     np.testing.assert_allclose(np.hypot(*(pts - ob.center_m).T), ob.radius_m, rtol=1e-5)
+
+
+def test_a_failed_mcap_write_leaves_no_partial_file(tmp_path, monkeypatch):
+    """The MCAP is written beside its place and renamed in when whole: a failure after half
+    the messages leaves the earlier file byte for byte, and no temporary behind."""
+    from irring.maps import mcap_export
+
+    run = pipeline.run(load_scenario("t_room"), progress=False)
+    target = tmp_path / "run.mcap"
+    target.write_bytes(b"an earlier run's file")
+    real, calls = mcap_export.point_cloud, []
+
+    def failing(points, t):
+        calls.append(t)
+        if len(calls) == 2:       # the first sweep's messages are already in the file
+            raise OSError(28, "No space left on device")
+        return real(points, t)
+
+    monkeypatch.setattr(mcap_export, "point_cloud", failing)
+    with pytest.raises(OSError, match="No space left"):
+        mcap_export.write_mcap(run, target)
+    assert target.read_bytes() == b"an earlier run's file"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.mcap"]
+
+    monkeypatch.setattr(mcap_export, "point_cloud", real)
+    mcap_export.write_mcap(run, tmp_path / "new.mcap")
+    summary, msgs = _messages(tmp_path / "new.mcap")
+    assert len(msgs["/irring/points"]) == 4 and len(msgs["/map"]) == 1
+    assert (tmp_path / "new.mcap").stat().st_mode & 0o777 == 0o666 & ~_umask()
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

@@ -168,3 +168,19 @@ def test_a_folder_of_only_the_sets_files_is_swapped_whole(tmp_path):
     assert _snapshot(out) == {"compare.json": b"[]"}
     assert out.stat().st_ino != inode          # one rename: no moment with a mix of runs
     assert sorted(os.listdir(tmp_path)) == ["cmp"]
+
+
+def test_outputs_get_the_modes_the_users_files_get(tmp_path):
+    """The hidden folder a set is written in becomes the output folder: made as any folder
+    of the user's is (umask applied), not private as tempfile's are."""
+    from irring.outputs import write_text_atomic
+
+    mask = os.umask(0o027)
+    try:
+        with OutputSet(tmp_path / "new") as tmp:
+            (tmp / "map.yaml").write_text("image: map.pgm\n")
+        write_text_atomic(tmp_path / "cal.yaml", "a: 1\n")
+    finally:
+        os.umask(mask)
+    assert (tmp_path / "new").stat().st_mode & 0o777 == 0o750
+    assert (tmp_path / "cal.yaml").stat().st_mode & 0o777 == 0o640

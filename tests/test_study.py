@@ -358,6 +358,35 @@ def test_parquet_holds_the_csv_rows_typed(small):
     assert table.column("seed").to_pylist() == [int(r["seed"]) for r in rows]
 
 
+def test_a_failed_parquet_write_leaves_the_earlier_file(tmp_path, monkeypatch):
+    """results.parquet is written beside its place and renamed in when whole (pyarrow
+    stood in for by a writer that fails half-way, so this runs without pyarrow too)."""
+    import types
+
+    csv_path = tmp_path / study.RESULTS
+    csv_path.write_text("design,seed\nradial12,3\n")
+    parquet = tmp_path / "results.parquet"
+    parquet.write_bytes(b"last study's table")
+
+    def write_table(table, where):
+        Path(where).write_bytes(b"PAR1 half a table")
+        if table == "fail":
+            raise OSError(28, "No space left on device")
+
+    reads = iter(["fail", "table"])
+    fake_csv = types.SimpleNamespace(read_csv=lambda path: next(reads))
+    monkeypatch.setitem(sys.modules, "pyarrow", types.ModuleType("pyarrow"))
+    monkeypatch.setitem(sys.modules, "pyarrow.csv", fake_csv)
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet",
+                        types.SimpleNamespace(write_table=write_table))
+    with pytest.raises(OSError, match="No space left"):
+        study._write_parquet(csv_path)
+    assert parquet.read_bytes() == b"last study's table"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [study.RESULTS, "results.parquet"]
+    assert study._write_parquet(csv_path) == parquet
+    assert parquet.read_bytes() == b"PAR1 half a table"
+
+
 def test_ctrl_c_says_how_many_runs_are_kept_and_how_to_resume(small, tmp_path, monkeypatch,
                                                               capsys):
     p, rows = small

@@ -13,6 +13,8 @@ hardware durations of sweeps 0 … k):
   room's true outline and each obstacle's (a cylinder as a 32-gon), when there is a
   scenario.
 
+The file is written beside its place and renamed in when complete (``outputs.atomic_file``).
+
 Needs the ``mcap`` extra (``pip install 'irring[mcap]'``: the ``mcap`` writer and
 ``mcap-ros2-support``'s CDR encoder); the message definitions below are ROS 2's own.
 """
@@ -25,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import Cylinder, box_corners
+from ..outputs import atomic_file
 
 FRAME = "map"
 ROBOT_FRAME = "base_link"
@@ -157,7 +160,7 @@ def write_mcap(result, path) -> Path:
     for s in result.sweeps:
         t_ns += int(round(s.duration_s * 1e9))
         ends.append(t_ns)
-    with open(path, "wb") as f:
+    with atomic_file(path) as tmp, open(tmp, "wb") as f:
         writer = Writer(f)
         schemas = {name: writer.register_msgdef(name, text) for name, text in MSGDEFS.items()}
         sc = result.scenario

@@ -37,7 +37,7 @@ except ImportError:  # pragma: no cover - not on POSIX
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
-from ..outputs import OutputSet
+from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
 from ..resources import installed_version
 from ..scenario import Scenario, ScenarioError, load_scenario
@@ -439,7 +439,8 @@ def _write_parquet(csv_path: Path) -> Path | None:
     except ImportError:
         return None
     out = csv_path.with_suffix(".parquet")
-    pq.write_table(pa_csv.read_csv(csv_path), out)
+    with atomic_file(out) as tmp:
+        pq.write_table(pa_csv.read_csv(csv_path), tmp)
     return out
 
 
