@@ -338,6 +338,20 @@ def test_summary_is_mean_and_sd_per_design_with_the_pareto_front(tmp_path):
     assert [n for n, r in recs.items() if r["front_hw_f1"]] == ["slow_good", "fast_bad"]
 
 
+def test_the_shadow_is_averaged_over_the_rooms_that_have_one_and_says_so():
+    """Three runs, the shadow defined in two (a room with a post, 0.5 and 0.8) and not in
+    the third (nothing hidden): the mean is 0.65 and the table says `in 2/3`."""
+    rows = [_row("ring", 0.9, 3.0, s) for s in (1, 2, 3)]
+    rows[0]["shadow"], rows[2]["shadow"] = "0.5", "0.8"
+    rows.append(_row("other", 0.8, 2.0, 1))
+    rows[-1]["shadow"] = "0.25"
+    recs = study.summarise(rows)
+    assert recs[0]["shadow"] == pytest.approx(0.65) and recs[0]["shadow_runs"] == 2
+    lines = study.table(recs).splitlines()
+    assert "0.650 ± 0.212 in 2/3" in lines[2]
+    assert "0.250 ± 0.000" in lines[3] and " in 1/1" not in lines[3]   # all runs: no note
+
+
 def test_the_chart_leaves_the_users_backend_alone(tmp_path):
     import matplotlib
 

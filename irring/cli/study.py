@@ -38,6 +38,7 @@ writes to DIR:
                   irring version. Only the timing columns differ between two runs of a study.
   results.parquet the same, if pyarrow is installed
   summary.csv/.json  per configuration (design × knob values): mean and sd of each score
+                  (shadow over the runs in rooms that hide wall behind an obstacle: shadow_runs)
   study.png       occupied F1 and coverage against hardware time, Pareto front marked
 
 examples:
@@ -96,8 +97,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(result['rows'])} run(s) in {out / study.RESULTS}: ran {ran} in {wall:.1f} s"
           f"{rate}{kept}")
     print(study.table(records, by))
-    print("mean ± sd over scenarios × seeds; front: on the Pareto front of hardware time "
-          "against occupied F1 (f1), coverage (cov), range RMSE (rmse)")
+    print("mean ± sd over scenarios × seeds; shadow only over the runs in rooms that hide "
+          "wall behind an obstacle (in k/n: k of the n runs; —: none); front: on the Pareto "
+          "front of hardware time against occupied F1 (f1), coverage (cov), range RMSE (rmse)")
     for kind, path in result["paths"].items():
         print(f"  {kind:<13}{path}")
     return 0

@@ -513,8 +513,9 @@ def _num(v: str) -> float | None:
 def summarise(rows: Sequence[Mapping[str, str]], by: Sequence[str] = ("design",)) -> list[dict]:
     """One record per configuration (the values of ``by``; rows in grid order): ``runs``,
     per score the mean (``<score>``) and sample standard deviation (``<score>_std``) over the
-    runs where it is defined, ``hardware_time_s`` (mean), ``compute_ms`` (median), and the
-    Pareto flags of :func:`irring.studies.accuracy.mark_pareto`."""
+    runs where it is defined, ``shadow_runs`` (how many: shadow is defined only in rooms
+    with wall hidden behind an obstacle), ``hardware_time_s`` (mean), ``compute_ms``
+    (median), and the Pareto flags of :func:`irring.studies.accuracy.mark_pareto`."""
     groups: dict[tuple, list[Mapping[str, str]]] = {}
     for r in rows:
         groups.setdefault(tuple(r[k] for k in by), []).append(r)
@@ -528,6 +529,8 @@ def summarise(rows: Sequence[Mapping[str, str]], by: Sequence[str] = ("design",)
             rec[k] = float(vals.mean()) if vals.size else None
             rec[f"{k}_std"] = float(vals.std(ddof=1)) if vals.size > 1 else (
                 0.0 if vals.size else None)
+            if k == "shadow":
+                rec["shadow_runs"] = int(vals.size)
         rec["hardware_time_s"] = float(np.mean([float(r["hardware_time_s"]) for r in mine]))
         rec["compute_ms"] = float(np.median([float(r["compute_ms"]) for r in mine]))
         rec["dynamics"] = False
@@ -542,8 +545,16 @@ def _label(rec: Mapping[str, Any], by: Sequence[str]) -> str:
     return ", ".join(parts)
 
 
+def _share(rec: Mapping[str, Any]) -> str:
+    """" in k/n" when the shadow is defined in only k of a configuration's n runs."""
+    k = rec.get("shadow_runs", rec["runs"])
+    return f" in {k}/{rec['runs']}" if 0 < k < rec["runs"] else ""
+
+
 def table(records: Sequence[Mapping[str, Any]], by: Sequence[str] = ("design",)) -> str:
-    """Plain-text summary: per configuration the mean ± spread of the main scores."""
+    """Plain-text summary: per configuration the mean ± spread of the main scores; the
+    shadow's mean is over the runs in rooms that hide wall behind an obstacle, and says
+    over how many when that is not all of them (``in k/n``)."""
     head = ["configuration", "runs", "F1 occ", "coverage", "free acc", "shadow", "RMSE mm",
             "hardware", "compute", "front"]
     rows = [head]
@@ -555,7 +566,8 @@ def table(records: Sequence[Mapping[str, Any]], by: Sequence[str] = ("design",))
     for r in records:
         front = [m for m in ("f1", "cov", "rmse") if r.get(f"front_hw_{m}")]
         rows.append([_label(r, by), str(r["runs"]), pm(r, "occupied_f1"), pm(r, "coverage"),
-                     pm(r, "free_accuracy"), pm(r, "shadow"), pm(r, "range_rmse_m", 1e3, 1),
+                     pm(r, "free_accuracy"), pm(r, "shadow") + _share(r),
+                     pm(r, "range_rmse_m", 1e3, 1),
                      f"{r['hardware_time_s']:.2f} s", f"{r['compute_ms']:.2f} ms",
                      ",".join(front) or "·"])
     widths = [max(len(row[i]) for row in rows) for i in range(len(head))]
@@ -621,7 +633,7 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
 
 SUMMARY_CSV_KEYS = ("runs", "hardware_time_s", "compute_ms") + tuple(
     c for k in SUMMARY_SCORES for c in (k, f"{k}_std")) + (
-    "front_hw_f1", "front_hw_cov", "front_hw_rmse")
+    "shadow_runs", "front_hw_f1", "front_hw_cov", "front_hw_rmse")
 
 
 SUMMARY_FILES = {"summary_csv": "summary.csv", "summary_json": "summary.json",
