@@ -83,14 +83,17 @@ def main(argv: list[str] | None = None) -> int:
     debug = "--debug" in argv or errors.debug_requested()
     argv = [a for a in argv if a != "--debug"]
     command = "irring"
+    # the first word that is not an option names the subcommand (before parsing: a
+    # subcommand's module may load MuJoCo when it is imported)
+    word = next((a for a in argv if not a.startswith("-")), "")
     try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
-        if not getattr(args, "func", None):
-            parser.print_help()
-            return errors.USAGE
-        command = f"irring {args.command}"
-        with _no_opengl(args.command != "view"):
+        with _no_opengl(word != "view"):
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            if not getattr(args, "func", None):
+                parser.print_help()
+                return errors.USAGE
+            command = f"irring {args.command}"
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         if debug:
