@@ -145,7 +145,7 @@ def test_render_bench_times_fresh_processes_and_counts_the_frames():
     assert r["render_vs_make_map_cpu"] == r["cpu_render_s"] / r["cpu_make_map_s"]
     assert 50 < r["peak_memory_mb"] < 1024
     assert "render / making the map: cpu" in render_bench.report(r)
-    # the command as a user runs it: it costs more than its own work in one process
-    assert len(r["wall_irring_run_all_s"]) == 1
-    assert r["wall_irring_run_s"] > r["wall_command_s"] and r["cpu_irring_run_s"] > 0
+    # the command as a user runs it: that work plus the interpreter, imports and parser
+    assert len(r["wall_irring_run_all_s"]) == 1 and r["wall_irring_run_s"] > 0
+    assert r["cpu_irring_run_s"] > r["cpu_make_map_s"] + r["cpu_render_s"]
     assert "whole command `irring run t_room_cylinder`: wall" in render_bench.report(r)
