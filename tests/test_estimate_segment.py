@@ -91,6 +91,37 @@ def test_regrouping_keeps_the_pieces_and_moves_corners_only():
     assert other.brk.nonzero()[0].tolist() == [0, 30]
 
 
+def test_a_regroup_splits_anew_only_the_polylines_a_range_jump_cuts():
+    """Regrouping with polylines that changed (a range jump found at the straightened θ cuts
+    one): the unchanged polyline keeps the earlier pieces (here a corner the points no
+    longer show: split afresh it would be one piece), the cut one is split anew; the numpy
+    oracle gives the same pieces."""
+    from irring.estimation import estimate_numpy
+
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 0.3, 31)
+    x = np.r_[t, 0.6 + 0.01 * np.arange(40)]
+    y = np.r_[np.zeros(31), np.full(40, 0.5)] + rng.normal(0, 1e-4, 71)
+    kinked = y.copy()
+    kinked[15:31] += 0.5 * (t[15:] - t[15])          # sensor 0 bent at its reading 15
+    sensor = np.r_[np.zeros(31, np.intp), np.ones(40, np.intp)]
+    first = seg(x, kinked, sensor=sensor)
+    assert first.starts.tolist() == [0, 15, 31]
+    chains = np.r_[sensor[:51], np.full(20, 2, np.intp)]   # sensor 1 cut at its reading 20
+    again = seg(x, y, sensor=chains, prev=first)
+    assert again.brk.nonzero()[0].tolist() == [0, 31, 51]
+    # the kept corner is refined (it may move by up to 5 readings), not dropped
+    assert again.starts.size == 4 and 10 <= again.starts[1] <= 20
+    assert again.starts[[0, 2, 3]].tolist() == [0, 31, 51]
+    fresh = seg(x, y, sensor=chains)
+    assert fresh.starts.tolist() == [0, 31, 51]
+    thr = np.full(71, 0.01)
+    oracle = estimate_numpy._segment(x, y, thr, chains, OPTS, (float(x.mean()), float(y.mean())),
+                                     first)
+    np.testing.assert_array_equal(oracle.starts, again.starts)
+    np.testing.assert_array_equal(oracle.ends, again.ends)
+
+
 def test_a_grouping_with_more_pieces_than_the_points_is_split_afresh():
     """The estimator regroups fewer points when some move out of range; an earlier grouping
     with more pieces than there are points now is of other polylines, not an error (the

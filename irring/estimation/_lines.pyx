@@ -462,6 +462,48 @@ cdef bint _tiles(const idx_t* S, const idx_t* E, idx_t P, idx_t k) noexcept nogi
     return True
 
 
+cdef idx_t _keep_unchanged(const unsigned char* brk, const unsigned char* pb, idx_t k,
+                           const idx_t* ps, const idx_t* pe, idx_t nprev, idx_t* S, idx_t* E,
+                           idx_t P, idx_t* S2, idx_t* E2) noexcept nogil:
+    """Pieces (into S, E; returns their count): the earlier result's (ps, pe) in every
+    polyline of ``brk`` that it had too (same first and last reading, by ``pb``), the fresh
+    ones (S, E, P) in the others; both in order. (estimate_numpy._keep_unchanged)"""
+    cdef idx_t a = 0, b, i, p = 0, q = 0, n = 0
+    cdef bint same
+    while a < k:
+        b = a + 1
+        while b < k and not brk[b]:
+            b += 1
+        # [a, b) is a polyline; the same one before if it started at a and ended at b − 1
+        same = pb[a] != 0 and (b == k or pb[b] != 0)
+        i = a + 1
+        while same and i < b:
+            if pb[i]:
+                same = False
+            i += 1
+        if same:
+            while p < nprev and ps[p] < a:
+                p += 1
+            while p < nprev and ps[p] < b:
+                S2[n] = ps[p]
+                E2[n] = pe[p]
+                n += 1
+                p += 1
+        else:
+            while q < P and S[q] < a:
+                q += 1
+            while q < P and S[q] < b:
+                S2[n] = S[q]
+                E2[n] = E[q]
+                n += 1
+                q += 1
+        a = b
+    for i in range(n):
+        S[i] = S2[i]
+        E[i] = E2[i]
+    return n
+
+
 cdef const char* _ANY_INT = b"lqn"          # numpy's intp on LP64 ('l') or LLP64 ('q')
 
 
@@ -475,7 +517,8 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
     than sqrt(gap2) apart. The moments' prefix sums are centred on (cx, cy), so small
     spreads keep their digits. With prev_* (the starts, ends and polyline starts ``brk`` of
     an earlier result) over the same polylines only the corners are refined (pieces that do
-    not tile the points are a ValueError); over other polylines they are ignored. Returns
+    not tile the points are a ValueError); where the polylines differ (as many points), the
+    polylines that are the same keep the earlier pieces and the others are split anew. Returns
     (starts, ends, brk, owner, cx, cy, alpha, lmin, lmax, n_points, length_m, usable) as
     ``irring.estimation.estimate._Pieces`` holds them.
     """
@@ -600,6 +643,12 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
             q = <double*> _data(q_arr, views, &held, 3 * P, 8, b"d", True)
             P = _merge(px, py, inv_thr, k, cum, cx, cy, S, E, P, cand, qj, flag, W, cost,
                        qmx, qmy, q, q_arr[0], q_arr[1], q_arr[2])
+        if k and not reuse and pb != NULL and nbrk == k:
+            # polylines the same as in the earlier result keep its pieces (a range jump
+            # found at a regroup re-splits only the polylines it cuts)
+            if not _tiles(ps, pe, nprev, k):
+                raise ValueError("prev_starts, prev_ends are not pieces of these points")
+            P = _keep_unchanged(brk, pb, k, ps, pe, nprev, S, E, P, S2, E2)
         _refine_corners(cum, S, E, P, 2, cand, qj, S2, E2, seen)
         return _piece_lines(px, py, thr, k, cum, cx, cy, S, E, P, brk, split_sigmas,
                             min_points, min_length_m, max_rms_sigmas)

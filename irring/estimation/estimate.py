@@ -533,7 +533,7 @@ class LineOptions:
     split_sigmas: float = 4.0      # split where a point lies this many σ off the chord …
     min_split_m: float = 0.010     # … and at least this far
     gap_m: float = 0.15            # consecutive readings farther apart start a new polyline …
-    jump_sigmas: float = 3.0       # … as do a sensor's readings whose ranges jump (_chains)
+    jump_sigmas: float = 3.5       # … as do a sensor's readings whose ranges jump (_chains)
     min_points: int = 3            # a line usable for θ has at least this many readings …
     min_length_m: float = 0.08     # … spanning at least this length
     max_rms_sigmas: float = 3.0    # … and fits them to within this RMS (in σ)
@@ -608,7 +608,9 @@ def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | Non
     With ``prev`` from the same polylines (a regroup once θ has straightened the points)
     its pieces are kept and only their corners are refined: splitting anew would mostly
     repeat them, and the pieces of the first grouping are the better start (measured on the
-    T-room: regrouping by corner refinement alone gives the smaller range error).
+    T-room: regrouping by corner refinement alone gives the smaller range error). Where a
+    range jump now cuts some polylines (``_chains``), only those are split anew; the others
+    keep ``prev``'s pieces.
 
     The kernel gives the numpy version's answers bit for bit (irring/estimation/_lines.pyx says how)
     in ~1/17 of its time: 0.77–0.85 → 0.044–0.064 ms per t_room sweep."""
@@ -799,7 +801,6 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                         _SIGMA_FLOOR_M, _PINNED_RAD)
     k = sw.k
     scan_heading = np.ascontiguousarray(heading).reshape(-1).take(sw.index)
-    chains = None
     theta = np.zeros(k)
     last_moving = np.full(k, -1, dtype=np.intp)  # last iteration in which each θ moved
     on_line = np.zeros(k, dtype=np.uint8)        # took θ from a line in the last plain step
@@ -823,9 +824,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
             # readings far outside the range cannot help a line (but stay for the final check)
             uidx = sw.place(theta, 1.5 * max_range)
             if mode == "regroup":
-                if chains is None:  # the polylines of the first grouping (θ = 0) stay
-                    chains = _chains(sw.d, sw.sigma, scan_heading, sw.sensor, sw.reject,
-                                     lines.jump_sigmas)
+                chains = _chains(sw.d, sw.sigma, scan_heading, sw.sensor, sw.reject,
+                                 lines.jump_sigmas)
                 parts = (sw.px, sw.py, sw.thr, chains)
                 if uidx is not None:
                     parts = tuple(v.take(uidx) for v in parts)

@@ -294,8 +294,31 @@ def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | Non
         last[-1] = k - 1
         starts, ends = _split(px, py, inv_thr, first, last)
         starts, ends = _merge(mom, px, py, inv_thr, starts, ends)
+        if prev is not None and prev.brk.size == k:
+            starts, ends = _keep_unchanged(prev, brk, starts, ends)
         starts, ends = _refine_corners(mom, starts, ends)
     return _piece_lines(mom, px, py, thr, starts, ends, brk, opts)
+
+
+def _keep_unchanged(prev: _Pieces, brk, starts, ends):
+    """The pieces of polylines that are the same as in ``prev`` (same first and last point)
+    from ``prev``, the fresh ``starts``/``ends`` elsewhere: a range jump found at a regroup
+    re-splits only the polylines it cuts (split anew at half-settled θ, the others lost
+    corners a held-out room's first grouping had found)."""
+    k = brk.size
+    first = brk.nonzero()[0]
+    stop = np.append(first[1:], k)
+    pfirst = prev.brk.nonzero()[0]
+    pstop = np.append(pfirst[1:], k)
+    at = np.minimum(np.searchsorted(pfirst, first), pfirst.size - 1)
+    same = (pfirst.take(at) == first) & (pstop.take(at) == stop)
+    line = np.cumsum(brk) - 1                     # polyline of each point
+    keep_prev = same.take(line.take(prev.starts))
+    keep_new = ~same.take(line.take(starts))
+    s = np.concatenate([prev.starts[keep_prev], starts[keep_new]])
+    e = np.concatenate([prev.ends[keep_prev], ends[keep_new]])
+    order = np.argsort(s, kind="stable")
+    return s.take(order), e.take(order)
 
 
 def _piece_lines(mom: _Moments, px, py, thr, starts, ends, brk, opts: LineOptions) -> _Pieces:
@@ -832,7 +855,6 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     regroups = 0
     regroup_changed = True
     older = None          # the labels two groupings ago
-    chains = None         # polyline ids (_chains)
     mode = "regroup"
     it = 0
     settled = False
@@ -851,10 +873,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
             before = None if grouping is None else grouping.label
             if mode == "regroup":
                 uidx = None if use_mask is None else usable.nonzero()[0]
-                # polylines break at a sensor change and at range jumps (occlusion edges),
-                # found at θ = 0 and kept: later groupings then refine the same polylines
-                if chains is None:
-                    chains = _chains(d, sigma, sw.h, sw.sensor, sw.reject, lines.jump_sigmas)
+                # polylines break at a sensor change and at range jumps (occlusion edges)
+                chains = _chains(d, sigma, sw.h, sw.sensor, sw.reject, lines.jump_sigmas)
                 parts = (px, py, thr, chains) if uidx is None else (
                     px.take(uidx), py.take(uidx), thr.take(uidx), chains.take(uidx))
                 pieces = _segment(*parts, lines, sw.centre, pieces)
