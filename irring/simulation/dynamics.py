@@ -239,7 +239,8 @@ class BeltPhysics:
     def dt_s(self) -> float:
         return float(self.model.opt.timestep)
 
-    def _batch(self, nsim: int) -> mujoco.batch.Batch:
+    def batch(self, nsim: int) -> mujoco.batch.Batch:
+        """A ``mujoco.batch.Batch`` of ``nsim`` simulations of the belt model (kept, reused)."""
         batch = self._batches.get(nsim)
         if batch is None:
             batch = mujoco.batch.Batch(self.model, nsim, nthread=self.nthread)
@@ -285,7 +286,7 @@ class BeltPhysics:
     def run(self, sched: Schedule, *, duration_s: float | None = None) -> Trajectory:
         """One sweep from rest at its first step, through ``duration_s`` (default its end)."""
         ctrl = self.controls(sched, duration_s)[None]
-        batch = self._batch(1)
+        batch = self.batch(1)
         offset = self.rest_offset(sched.steps)
         self.start(batch, sched.motor_rad[:1], offset)
         q0 = batch.bind("qpos")[0].copy()
@@ -296,50 +297,6 @@ class BeltPhysics:
                           motor_vel=qvel[:, self.motor_dof],
                           sensor_rad=qpos[:, self.sensor_qpos],
                           sensor_vel=qvel[:, self.sensor_dof], gear=self.gear)
-
-    def endurance(self, steps: np.ndarray, n_sweeps: int, *, chunk: int = 50) -> dict:
-        """Sweep back and forth ``n_sweeps`` times in one continuous run, never resting: each
-        sweep moves step to step every ``step_time_s`` and reads at each arrival (a timed
-        sweep with no settle, the belt's hardest duty), the next starting where the last
-        ended. Returns per-sweep maxima over every physics step of |belt stretch|
-        (``stretch_rad``, (n_sweeps,)) and over the reads of |sensor − commanded|
-        (``read_error_rad``), the physics steps run and MuJoCo's warning count (a warning
-        or a non-finite state raises, see :meth:`roll`)."""
-        steps = np.asarray(steps, dtype=np.int64)
-        ring = self.ring
-        up = schedule(steps, ring, step_time_s=self.params.step_time_s, timing=True)
-        down = schedule(steps[::-1], ring, step_time_s=self.params.step_time_s, timing=True)
-        per = int(round(up.duration_s / self.dt_s))
-        if abs(per * self.dt_s - up.duration_s) > 1e-9:
-            raise ValueError("a sweep must last a whole number of physics steps here; its "
-                             f"{up.duration_s:g} s is not a multiple of {self.dt_s:g} s")
-        mid = (np.arange(per) + 0.5) * self.dt_s
-        legs = (up.motor_at(mid), down.motor_at(mid))
-        reads = [np.rint(s.read_s[:, 0] / self.dt_s).astype(np.int64) for s in (up, down)]
-        commanded = [s.motor_rad[:, None] * self.gear for s in (up, down)]
-        batch = self._batch(1)
-        self.start(batch, up.motor_rad[:1], np.zeros(ring.sensors))
-        stretch = np.zeros(n_sweeps)
-        read_err = np.zeros(n_sweeps)
-        q_prev = batch.bind("qpos")[0].copy()
-        done = 0
-        while done < n_sweeps:
-            n = min(chunk, n_sweeps - done)
-            ctrl = np.concatenate([legs[(done + j) % 2] for j in range(n)])[None]
-            qpos = self.roll(batch, ctrl)["qpos"][0]
-            qpos = np.concatenate([q_prev[None], qpos])      # sample i at i·dt from the chunk
-            q_prev = qpos[-1].copy()
-            motor, sensor = qpos[:, self.motor_qpos], qpos[:, self.sensor_qpos]
-            belt = np.abs(sensor - self.gear * motor[:, None]).max(axis=1)
-            for j in range(n):
-                leg = (done + j) % 2
-                a = j * per
-                stretch[done + j] = belt[a:a + per + 1].max()
-                at = sensor[a + reads[leg]]
-                read_err[done + j] = np.abs(at - commanded[leg]).max()
-            done += n
-        return {"stretch_rad": stretch, "read_error_rad": read_err,
-                "physics_steps": n_sweeps * per, "warnings": int(batch.warning[..., 1].sum())}
 
 
 # --------------------------------------------------------------------------- GP2 clocks

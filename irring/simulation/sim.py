@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import copy
 import functools
-import sys
-import time
 from dataclasses import dataclass
 
 import mujoco
@@ -16,7 +14,7 @@ import mujoco.batch
 import numpy as np
 
 from ..core import Sweep, Truth, as_pose, hardware_duration_s
-from ..scenario import Scenario, load_scenario
+from ..scenario import Scenario
 from . import dynamics as dynamics_lib
 from . import model as model_lib
 from .rangers import pipeline_for
@@ -398,97 +396,3 @@ class SimRing:
                      max_range_m=sensor.max_range_m, samples=self.scenario.samples_per_step,
                      settle_s=scan.settle_s, truth=truth, reading_poses=reading_poses,
                      source="sim")
-
-
-# ---------------------------------------------------------------------- measurement
-
-
-def measure(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, float]:
-    """Median ms per sweep (over ``repeats``) of a whole sweep (``sweep_ms``: truth and the
-    scene's effects), of its truth alone, and of the ways to get a sweep's rays out of MuJoCo
-    (see docs/simulation.md). Run ``python -m irring.simulation.sim [SCENARIO]``."""
-    sim = SimRing(load_scenario(scenario_name))
-    built, m = sim.built, sim.model
-    steps = sim.default_steps()
-    motor = steps * sim.ring.motor_step_rad
-    angles = built.sensor_qpos_for(motor)
-    pose = sim.pose(0)
-    origin, direction = sim.frames(angles, pose)
-    o, u = origin.reshape(-1, 3), direction.reshape(-1, 3)
-
-    def median_ms(fn, n=repeats) -> float:
-        fn()
-        times = []
-        for _ in range(n):
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-        return float(np.median(times) * 1e3)
-
-    # (b) one MjData, mj_kinematics per step
-    d = mujoco.MjData(m)
-    d.mocap_pos[built.chassis_mocap] = [pose[0], pose[1], 0.0]
-    d.mocap_quat[built.chassis_mocap] = pose_quat(pose[2])
-    qpos = np.zeros((len(steps), m.nq))
-    qpos[:, built.sensor_qpos] = angles
-    qpos[:, built.motor_qpos] = motor
-
-    sites = built.emitter_sites
-    out_o = np.empty(origin.shape)
-    out_z = np.empty(direction.shape)
-
-    def kin_loop():  # what frames() would be with one MjData: write, kinematics, copy out
-        for i, q in enumerate(qpos):
-            d.qpos[:] = q
-            mujoco.mj_kinematics(m, d)
-            out_o[i] = d.site_xpos[sites]
-            out_z[i] = d.site_xmat[sites][:, 2::3]
-
-    # (a) the rangefinder sensors, one simulation per step, batched forward
-    rf = mujoco.batch.Batch(m, len(steps), nthread=1)
-    rf.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
-    rf.bind("mocap_pos")[:, built.chassis_mocap] = [pose[0], pose[1], 0.0]
-    rf.bind("mocap_quat")[:, built.chassis_mocap] = pose_quat(pose[2])
-
-    def rangefinders():
-        rf.bind("qpos")[:] = qpos
-        rf.forward(stage=_POS)
-        return rf.bind("sensordata")
-
-    geomid = np.zeros(1, np.int32)
-    normal = np.zeros(3)
-    dist1 = np.zeros(1)
-
-    def ray_loop():
-        for i in range(len(o)):
-            mujoco.mj_ray(m, d, o[i], u[i], model_lib.RAY_GEOMGROUP, 1, -1, geomid, normal)
-
-    def multiray_loop():
-        for i in range(len(o)):
-            mujoco.mj_multiRay(m, d, o[i], u[i], model_lib.RAY_GEOMGROUP, 1, -1, geomid, dist1,
-                               normal, 1, 1e9)
-
-    raw = sim._rays
-    mujoco.mj_kinematics(m, d)
-    return {
-        "rays": float(len(o)),
-        "sweep_ms": median_ms(lambda: sim.sweep(0)),
-        "sweep_truth_ms": median_ms(lambda: sim.truth(0)),
-        "frames_batch_forward_ms": median_ms(lambda: sim.frames(angles, pose, reuse=False)),
-        "frames_cached_ms": median_ms(lambda: sim.frames(angles, pose)),
-        "frames_kinematics_loop_ms": median_ms(kin_loop),
-        "rangefinders_batch_forward_ms": median_ms(rangefinders),
-        "cast_ms": median_ms(lambda: sim.cast(origin, direction)),
-        "raw_batch_ray_ms": median_ms(lambda: raw.ray(o[None], u[None],
-                                                      geomgroup=model_lib.RAY_GEOMGROUP,
-                                                      normal=True)),
-        "mj_ray_loop_ms": median_ms(ray_loop, 50),
-        "mj_multiray_loop_ms": median_ms(multiray_loop, 50),
-    }
-
-
-if __name__ == "__main__":  # pragma: no cover - a measurement, run by hand
-    name = sys.argv[1] if len(sys.argv) > 1 else "t_room"
-    print(f"{name}: median ms per sweep of 71 steps × 12 sensors")
-    for key, value in measure(name).items():
-        print(f"  {key:32s} {value:8.3f}")

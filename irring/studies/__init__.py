@@ -1,2 +1,3 @@
 """Studies: design comparison (compare), the paper's geometry (geometry) and every benchmark
-behind `irring bench` and `python -m irring.studies.serial_link`; each returns plain figures."""
+behind `irring bench`, `python -m irring.studies.serial_link` and `python -m
+irring.studies.speed`; each returns plain figures."""

@@ -4,7 +4,7 @@ Each function returns plain figures (``irring bench dynamics`` prints them, the 
 ``tests/test_dynamics.py`` assert on them):
 
 - :func:`coupling`: the belt's stretch over many back-and-forth sweeps without rest
-  (``BeltPhysics.endurance``): max over every physics step and at the reads, per sweep,
+  (:func:`endurance`): max over every physics step and at the reads, per sweep,
   MuJoCo warnings.
 - :func:`convergence`: one sweep at time step dt and dt/2 for the same scene: the largest
   change of a true sensor angle, a true distance and an ADC count.
@@ -60,7 +60,7 @@ def coupling(n_sweeps: int = 1000, params: BeltDynamicsEffect | None = None,
     ring = ring or Ring()
     physics = dyn.BeltPhysics(ring, params or BeltDynamicsEffect())
     t0 = time.perf_counter()
-    r = physics.endurance(np.arange(ring.min_step, ring.max_step + 1), n_sweeps)
+    r = endurance(physics, np.arange(ring.min_step, ring.max_step + 1), n_sweeps)
     return {"sweeps": n_sweeps, "physics_steps": r["physics_steps"],
             "timestep_s": physics.dt_s, "stretch_max_rad": float(r["stretch_rad"].max()),
             "stretch_first_rad": float(r["stretch_rad"][0]),
@@ -68,6 +68,52 @@ def coupling(n_sweeps: int = 1000, params: BeltDynamicsEffect | None = None,
             "read_error_max_rad": float(r["read_error_rad"].max()),
             "stretch_per_sweep_rad": r["stretch_rad"], "warnings": r["warnings"],
             "compute_s": time.perf_counter() - t0}
+
+
+def endurance(physics: dyn.BeltPhysics, steps: np.ndarray, n_sweeps: int, *,
+              chunk: int = 50) -> dict:
+    """Sweep back and forth ``n_sweeps`` times in one continuous run, never resting: each
+    sweep moves step to step every ``step_time_s`` and reads at each arrival (a timed sweep
+    with no settle, the belt's hardest duty), the next starting where the last ended.
+    Returns per-sweep maxima over every physics step of |belt stretch| (``stretch_rad``,
+    (n_sweeps,)) and over the reads of |sensor − commanded| (``read_error_rad``), the physics
+    steps run and MuJoCo's warning count (a warning or a non-finite state raises, see
+    :meth:`~irring.simulation.dynamics.BeltPhysics.roll`)."""
+    steps = np.asarray(steps, dtype=np.int64)
+    ring, dt_s = physics.ring, physics.dt_s
+    up = dyn.schedule(steps, ring, step_time_s=physics.params.step_time_s, timing=True)
+    down = dyn.schedule(steps[::-1], ring, step_time_s=physics.params.step_time_s, timing=True)
+    per = int(round(up.duration_s / dt_s))
+    if abs(per * dt_s - up.duration_s) > 1e-9:
+        raise ValueError("a sweep must last a whole number of physics steps here; its "
+                         f"{up.duration_s:g} s is not a multiple of {dt_s:g} s")
+    mid = (np.arange(per) + 0.5) * dt_s
+    legs = (up.motor_at(mid), down.motor_at(mid))
+    reads = [np.rint(s.read_s[:, 0] / dt_s).astype(np.int64) for s in (up, down)]
+    commanded = [s.motor_rad[:, None] * physics.gear for s in (up, down)]
+    batch = physics.batch(1)
+    physics.start(batch, up.motor_rad[:1], np.zeros(ring.sensors))
+    stretch = np.zeros(n_sweeps)
+    read_err = np.zeros(n_sweeps)
+    q_prev = batch.bind("qpos")[0].copy()
+    done = 0
+    while done < n_sweeps:
+        n = min(chunk, n_sweeps - done)
+        ctrl = np.concatenate([legs[(done + j) % 2] for j in range(n)])[None]
+        qpos = physics.roll(batch, ctrl)["qpos"][0]
+        qpos = np.concatenate([q_prev[None], qpos])      # sample i at i·dt from the chunk
+        q_prev = qpos[-1].copy()
+        motor, sensor = qpos[:, physics.motor_qpos], qpos[:, physics.sensor_qpos]
+        belt = np.abs(sensor - physics.gear * motor[:, None]).max(axis=1)
+        for j in range(n):
+            leg = (done + j) % 2
+            a = j * per
+            stretch[done + j] = belt[a:a + per + 1].max()
+            at = sensor[a + reads[leg]]
+            read_err[done + j] = np.abs(at - commanded[leg]).max()
+        done += n
+    return {"stretch_rad": stretch, "read_error_rad": read_err,
+            "physics_steps": n_sweeps * per, "warnings": int(batch.warning[..., 1].sum())}
 
 
 def _sweep_at(scenario: Scenario, timestep_s: float, seed: int):
