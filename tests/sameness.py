@@ -125,18 +125,24 @@ def normalise_text(text: str) -> str:
         masked = [(a, b, h) for a, b, h in masked if "compute" in h or h == "front"]
         for j in range(i + 1, len(lines)):
             row = out[j]
-            if not row.strip() or _ruler_spans(row):
-                break
+            gaps = [(spans[k][1], spans[k + 1][0]) for k in range(len(spans) - 1)]
+            if not row.strip() or _ruler_spans(row) or any(row[a:b].strip() for a, b in gaps):
+                break   # the table ended: a row is blank between its columns
             for a, b, h in masked:
                 cell = row[a:b]
-                cell = re.sub(r"cpu:\S*", "cpu:*", cell) if h == "front" else "<time>"
+                if h == "front":   # keep the hardware-time fronts, drop the compute ones
+                    kept = [t for t in cell.split() if not t.startswith("cpu:") and t != "·"]
+                    cell = " ".join(kept) or "·"
+                else:
+                    cell = "<time>"
                 row = row[:a] + cell + row[b:]
             out[j] = row
     text = "\n".join(out)
     text = re.sub(r"compute [\d.]+ s \([^)]*\)", "compute <time>", text)
     text = re.sub(r"ran (\d+) in [\d.]+ s, [\d.]+ runs/s", r"ran \1 in <time>", text)
     text = re.sub(r"(\d+) runs in [\d.]+ s", r"\1 runs in <time>", text)
-    return "\n".join(re.sub(r" {2,}", " ", ln).rstrip() for ln in text.splitlines())
+    return "\n".join("<ruler>" if _ruler_spans(ln) else re.sub(r" {2,}", " ", ln).rstrip()
+                     for ln in text.splitlines())
 
 
 def normalise_stdout(text: str) -> str:
@@ -159,22 +165,32 @@ def normalise_csv(text: str) -> str:
     return buf.getvalue()
 
 
-def describe_files(path: Path) -> list[str]:
+def collect_files(path: Path) -> dict[str, dict]:
+    """What a command wrote: JSON/CSV text (normalised when compared), else a SHA-256."""
     files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
-    out = []
+    out = {}
     for f in files:
-        name = f.name
+        if f.name.endswith((".json", ".csv")):
+            out[f.name] = {"text": f.read_text()}
+        else:
+            out[f.name] = {"sha256": hashlib.sha256(f.read_bytes()).hexdigest()}
+    return out
+
+
+def describe_files(files: dict[str, dict]) -> list[str]:
+    out = []
+    for name, f in files.items():
         if name.endswith(".json"):
-            out.append(f"--- {name}\n" + json.dumps(_mask(json.loads(f.read_text())), indent=1,
+            out.append(f"--- {name}\n" + json.dumps(_mask(json.loads(f["text"])), indent=1,
                                                     sort_keys=True))
         elif name.endswith(".csv"):
-            out.append(f"--- {name}\n" + normalise_csv(f.read_text()))
+            out.append(f"--- {name}\n" + normalise_csv(f["text"]))
         elif name in TIMED_CHARTS:
             out.append(f"--- {name}: chart with compute time, not compared")
         elif name.endswith(HASHED):
-            out.append(f"--- {name} sha256 {hashlib.sha256(f.read_bytes()).hexdigest()}")
+            out.append(f"--- {name} sha256 {f['sha256']}")
         else:
-            out.append(f"--- {name}: {f.stat().st_size} bytes, not compared")
+            out.append(f"--- {name}: not compared")
     return out
 
 
@@ -210,11 +226,13 @@ def _emulated_calibration(tree: Path, work: Path) -> subprocess.CompletedProcess
 
 
 def record(tree: Path, dest: Path) -> Path:
-    """Run every command with the code in ``tree``; write ``dest/record.txt``."""
+    """Run every command with the code in ``tree``; write what they printed and wrote to
+    ``dest/record.json`` (raw: masking happens when records are compared) and the
+    normalised text to ``dest/record.txt``."""
     dest.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="sameness-"))
     (work / "tiny.yaml").write_text(STUDY)
-    sections = []
+    runs = []
     commands = list(COMMON) + [
         (f"run {name} (bundled map)", ["run", name, "--out", f"o/maps/{name}", "--json",
                                        "--no-animation"], f"o/maps/{name}")
@@ -222,27 +240,35 @@ def record(tree: Path, dest: Path) -> Path:
     try:
         for name, argv, written in commands:
             print(f"  {name}", file=sys.stderr, flush=True)
-            p = _irring(tree, work, argv)
-            sections.append(_section(name, argv, p, work, written))
+            runs.append(_run_record(name, argv, _irring(tree, work, argv), work, written))
         p = _emulated_calibration(tree, work)
-        sections.append(_section("calibrate --port (emulator)", ["calibrate", "--port"], p,
-                                 work, "o/cal_emu.yaml"))
+        runs.append(_run_record("calibrate --port (emulator)", ["calibrate", "--port"], p,
+                                work, "o/cal_emu.yaml"))
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    path = dest / "record.txt"
-    path.write_text("\n".join(sections) + "\n")
-    return path
+    (dest / "record.json").write_text(json.dumps(runs, indent=1))
+    (dest / "record.txt").write_text(normalise_record(runs))
+    return dest
 
 
-def _section(name, argv, p, work, written) -> str:
-    body = [f"### {name}: irring {' '.join(argv)}", f"exit {p.returncode}",
-            normalise_stdout(p.stdout)]
-    if p.stderr.strip():   # a warning names the file and line it came from: code moves
-        err = re.sub(r"\S*/irring/(\S+\.py):\d+:", r"irring/\1:<line>:", p.stderr)
-        body.append("stderr: " + normalise_text(_strip_progress(err)))
-    if written and (work / written).exists():
-        body.extend(describe_files(work / written))
-    return "\n".join(body)
+def _run_record(name, argv, p, work, written) -> dict:
+    return {"name": name, "argv": argv, "exit": p.returncode, "stdout": p.stdout,
+            "stderr": p.stderr,
+            "files": collect_files(work / written) if written and (work / written).exists()
+            else {}}
+
+
+def normalise_record(runs: list[dict]) -> str:
+    sections = []
+    for r in runs:
+        body = [f"### {r['name']}: irring {' '.join(r['argv'])}", f"exit {r['exit']}",
+                normalise_stdout(r["stdout"])]
+        if r["stderr"].strip():   # a warning names the file and line it came from: code moves
+            err = re.sub(r"\S*/irring/(\S+\.py):\d+:", r"irring/\1:<line>:", r["stderr"])
+            body.append("stderr: " + normalise_text(_strip_progress(err)))
+        body.extend(describe_files(r["files"]))
+        sections.append("\n".join(body))
+    return "\n".join(sections) + "\n"
 
 
 def _strip_progress(text: str) -> str:
@@ -252,8 +278,10 @@ def _strip_progress(text: str) -> str:
 
 
 def diff(a: Path, b: Path) -> int:
-    la = (a / "record.txt" if a.is_dir() else a).read_text().splitlines()
-    lb = (b / "record.txt" if b.is_dir() else b).read_text().splitlines()
+    """Print the differences of two records (masked as :func:`normalise_record` says);
+    0 when they are the same."""
+    la, lb = (normalise_record(json.loads((d / "record.json").read_text())).splitlines()
+              for d in (a, b))
     lines = list(difflib.unified_diff(la, lb, str(a), str(b), lineterm="", n=2))
     if lines:
         print("\n".join(lines))
