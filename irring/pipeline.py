@@ -27,9 +27,10 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from . import recording as rec, safe_yaml
+from . import recording as rec
 from .core import Points, Reason, RingSource, SourceLost, Sweep
-from .estimation.estimate import Calibration, CalibrationError, estimate
+from .estimation.calibration import load_calibration, scene_calibration
+from .estimation.estimate import estimate
 from .gp2 import SENSORS
 from .maps import metrics
 from .maps.mapping import MapperParams, OccupancyGrid, check_scenario_grid, classify, slice_steps
@@ -168,32 +169,6 @@ def scenario_text(scenario: Scenario) -> str | None:
         return Path(scenario.source).read_text() if scenario.source else None
     except OSError:
         return None
-
-
-def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False):
-    """(Calibration or None, YAML text or None) from a file path or from stored YAML text."""
-    if path_or_text is None:
-        return None, None
-    if is_text:
-        text, source = str(path_or_text), "<recording's calibration>"
-    else:
-        source = str(path_or_text)
-        try:
-            text = safe_yaml.read_text(path_or_text, "calibration file")
-        except safe_yaml.InputError as exc:
-            raise CalibrationError(str(exc)) from None
-    try:
-        raw = safe_yaml.load(text, source)
-    except safe_yaml.InputError as exc:
-        raise CalibrationError(str(exc)) from None
-    return Calibration.from_dict(raw, source), text
-
-
-def scene_calibration(scenario: Scenario):
-    """(Calibration, YAML text) the estimator reads a simulated scene with: the one path
-    for ``run``, ``compare``, ``bench`` and ``replay`` (docs/calibration.md)."""
-    cal = Calibration.for_scene(scenario)
-    return cal, cal.to_yaml()
 
 
 @dataclass

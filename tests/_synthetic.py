@@ -21,7 +21,7 @@ import numpy as np
 
 from irring.core import Points, Reason, Sweep, beam_geometry, sensor_angles_for_steps
 from irring.designs import PAPER_RING
-from irring.estimation.estimate import Calibration
+from irring.estimation.calibration import Calibration
 from irring.core import Cylinder, Ring
 from irring.scenario import Scenario
 

@@ -150,7 +150,7 @@ def recordings(good: bytes) -> dict:
 
 
 def calibrations() -> dict:
-    from irring.estimation.estimate import Calibration
+    from irring.estimation.calibration import Calibration
     from irring.scenario import loads
 
     base = Calibration.for_scene(loads(T_ROOM, "t_room.yaml")).to_dict()

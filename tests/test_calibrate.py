@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from irring import gp2
-from irring.estimation.calibrate import (CalibrationAborted, GuidedCalibration, Placement, RigReadings,
-                              SimulatedRig, collect, default_placements, solve)
+from irring.estimation.calibration import (Calibration, CalibrationAborted, CalibrationError,
+                                      GuidedCalibration, Placement, RigReadings, SimulatedRig,
+                                      collect, default_placements, solve)
 from irring.core import Sweep
-from irring.estimation.estimate import Calibration, CalibrationError
 from irring.core import Ring
 
 

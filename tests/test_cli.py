@@ -11,7 +11,7 @@ import serial
 from irring import errors, scenario
 from irring.cli import COMMANDS, build_parser, main
 from irring.cli.bench import BENCHES
-from irring.estimation.estimate import CalibrationError
+from irring.estimation.calibration import CalibrationError
 from irring.hardware import DeviceTimeout, HandshakeError
 from irring.recording import RecordingError
 from irring.scenario import ScenarioError

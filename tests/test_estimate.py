@@ -21,9 +21,9 @@ from _synthetic import (PAPER_RING, T_POSES, T_ROOM, make_sweep, rectangle,
                         stand_in_calibration)
 from irring import gp2
 from irring.core import Reason, beam_geometry, sensor_angles_for_steps
-from irring.estimation.estimate import (Calibration, CalibrationError, LineOptions,
-                             emitter_offset_from_wall, estimate, estimate_detail, fit_curve,
-                             fit_lines)
+from irring.estimation.calibration import (Calibration, CalibrationError,
+                                      emitter_offset_from_wall, fit_curve)
+from irring.estimation.estimate import LineOptions, estimate, estimate_detail, fit_lines
 from irring.core import Ring
 
 # Hundreds of generated cases per hard case, the same ones every run so CI is reproducible;

@@ -18,7 +18,8 @@ from hypothesis import strategies as st
 from _synthetic import PAPER_RING, make_sweep, rectangle, stand_in_calibration
 from irring.estimation import _iterate
 from irring.core import Reason
-from irring.estimation.estimate import Calibration, LineOptions, estimate, estimate_detail
+from irring.estimation.calibration import Calibration
+from irring.estimation.estimate import LineOptions, estimate, estimate_detail
 
 NOMINAL = Calibration.nominal("gp2d12", PAPER_RING)
 FIELDS = ("x", "y", "d", "theta", "sigma_m", "iterations", "valid", "reason")

@@ -12,7 +12,8 @@ import pytest
 from irring import pipeline
 from irring.maps import mapping
 from irring.core import Reason
-from irring.estimation.estimate import Calibration, estimate, resolve_foldover
+from irring.estimation.calibration import Calibration, scene_calibration
+from irring.estimation.estimate import estimate, resolve_foldover
 from irring.core import HOUSING_M, distance_to_outline, inside_outline
 from irring.scenario import loads
 
@@ -41,7 +42,7 @@ OUTLINE = [(0, 0), (1.4, 0), (1.4, 0.6), (0.9, 1.1), (0, 1.1)]
 def run(effects: str):
     sc = loads(ROOM + f"effects: {effects}\n", source="<test>")
     sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
-    cal = pipeline.scene_calibration(sc)[0]
+    cal = scene_calibration(sc)[0]
     return sc, sweeps, cal, [estimate(sw, cal) for sw in sweeps]
 
 
@@ -51,9 +52,9 @@ def folded(request):
 
 
 def test_the_scene_calibration_folds_only_with_the_foldover_effect():
-    assert pipeline.scene_calibration(loads(ROOM + "effects: [foldover]\n"))[0] \
+    assert scene_calibration(loads(ROOM + "effects: [foldover]\n"))[0] \
         .peak_distance_m == pytest.approx(0.09)
-    cal = pipeline.scene_calibration(loads(ROOM + "effects: [incidence]\n"))[0]
+    cal = scene_calibration(loads(ROOM + "effects: [incidence]\n"))[0]
     assert cal.peak_distance_m == 0.0 and not cal.folds
     # the peak survives a calibration file
     folded = Calibration.for_scene(loads(ROOM + "effects: [foldover]\n"))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from irring import pipeline
+from irring.estimation.calibration import scene_calibration
 from irring.estimation.estimate import estimate
 from irring.scenario import loads
 
@@ -27,7 +28,7 @@ effects: [incidence, noise, quantization]
 
 def test_grazing_walls_within_10_mm_and_three_times_better_than_theta_zero():
     sc = loads(CORRIDOR, source="<test>")
-    cal = pipeline.scene_calibration(sc)[0]
+    cal = scene_calibration(sc)[0]
     err, err0, inc = [], [], []
     for seed in (0, 1):
         sweeps = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps

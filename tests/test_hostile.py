@@ -25,11 +25,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import hostile_devices as hd
-from irring import pipeline, safe_yaml
+from irring import safe_yaml
 from irring.cli import main
 from irring.core import Sweep
 from irring.errors import TooBig
-from irring.estimation.estimate import Calibration, CalibrationError
+from irring.estimation.calibration import Calibration, CalibrationError, load_calibration
 from irring.hardware import DeviceError, NoReadings, SerialRing
 from irring.recording import RecordingError, load_recording, save_recording
 from irring.core import Ring
@@ -61,7 +61,7 @@ def test_billion_laughs_is_refused_at_once():
         f"{c}: &{c} [{','.join(['*' + p] * 9)}]\n" for p, c in zip("abcdefgh", "bcdefghi"))
     t0 = time.monotonic()
     for load in (lambda: loads(bomb, "bomb.yaml"),
-                 lambda: pipeline.load_calibration(bomb, is_text=True)):
+                 lambda: load_calibration(bomb, is_text=True)):
         with pytest.raises((ScenarioError, CalibrationError), match="aliases"):
             load()
     assert time.monotonic() - t0 < 1.0

@@ -175,7 +175,8 @@ def test_without_kernels_the_estimator_fails_only_when_used_and_names_the_fix():
     done = _run_blocked("""
         import numpy as np
         from irring import load_scenario, pipeline          # imports fine without kernels
-        from irring.estimation.estimate import Calibration, estimate
+        from irring.estimation.calibration import Calibration
+        from irring.estimation.estimate import estimate
         from irring.simulation.sim import SimRing
         sweep = SimRing(load_scenario("t_room")).sweep(0)   # the simulator needs none
         try:

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from irring import pipeline
 from irring import scenario as S
 from irring.core import Reason
+from irring.estimation.calibration import scene_calibration
 from irring.estimation import estimate_numpy as oracle
 from irring.estimation.estimate import estimate, estimate_detail
 from irring.simulation.sim import SimRing
@@ -20,7 +20,7 @@ def l_room_sweeps():
     sc = S.load_scenario("l_room")
     sim = SimRing(sc)
     return sc, [sim.sweep(k) for k in range(len(sc.robot.poses))], \
-        pipeline.scene_calibration(sc)[0]
+        scene_calibration(sc)[0]
 
 
 def _err(sweep, p):

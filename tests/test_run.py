@@ -100,7 +100,7 @@ def test_cli_run_writes_every_output_and_replay_reproduces_the_map(tmp_path, cap
 
 
 def test_replay_with_another_calibration_changes_the_map(tmp_path):
-    from irring.estimation.estimate import Calibration
+    from irring.estimation.calibration import Calibration
 
     sc = load_scenario("t_room_cylinder")
     base = pipeline.run(sc, progress=False, score=False)

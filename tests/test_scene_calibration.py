@@ -11,7 +11,8 @@ import pytest
 
 from irring.studies import compare
 from irring import pipeline
-from irring.estimation.estimate import Calibration, estimate
+from irring.estimation.calibration import Calibration, scene_calibration
+from irring.estimation.estimate import estimate
 from irring.scenario import loads
 
 # a 1.5 × 0.7 m room of our own (not bundled), two poses off the centre line
@@ -58,7 +59,7 @@ def test_the_ideal_sensor_reads_exactly_and_maps_no_worse_than_the_noisy_one():
     errs = {}
     for name, sc in (("ideal", ideal), ("noisy", noisy)):
         sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
-        cal = pipeline.scene_calibration(sc)[0]
+        cal = scene_calibration(sc)[0]
         e = []
         for sw in sweeps:
             p = estimate(sw, cal)

@@ -13,7 +13,8 @@ from irring import pipeline
 from irring import scenario as S
 from irring.core import Reason
 from irring.designs import PAPER_RING
-from irring.estimation.estimate import RETURN_SIGMAS, Calibration, estimate
+from irring.estimation.calibration import RETURN_SIGMAS, Calibration
+from irring.estimation.estimate import estimate
 from irring.estimation.estimate_numpy import classify as classify_numpy
 from irring.maps.mapping import OCCUPIED, MapperParams, OccupancyGrid
 from irring.scenario import loads

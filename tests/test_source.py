@@ -13,6 +13,7 @@ import pytest
 
 from irring import pipeline
 from irring.core import RingSource, SourceLost
+from irring.estimation.calibration import scene_calibration
 from irring.hardware import DeviceDisconnected, SerialRing
 from irring.hardware.emulator import Device, Faults, PtyEmulator
 from irring.scenario import load_scenario, loads
@@ -57,7 +58,7 @@ def acquire_and_map(source, scenario, out: Path) -> tuple[pipeline.Acquisition, 
     with source:
         got = pipeline.acquire(source, scenario.robot.poses, progress=False)
     result = pipeline.map_sweeps(got.sweeps, scenario=scenario,
-                                 calibration=pipeline.scene_calibration(scenario)[0],
+                                 calibration=scene_calibration(scenario)[0],
                                  progress=False)
     return got, map_bytes(result, out)
 
@@ -97,7 +98,7 @@ def test_without_quantisation_the_device_sends_the_simulators_counts_rounded(pty
     assert np.array_equal(d.counts, np.rint(s.counts)) and np.abs(d.counts - s.counts).max() <= 0.5
     rounded = [dataclasses.replace(s, counts=np.rint(s.counts).astype(np.int64))]
     result = pipeline.map_sweeps(rounded, scenario=room,
-                                 calibration=pipeline.scene_calibration(room)[0], progress=False)
+                                 calibration=scene_calibration(room)[0], progress=False)
     assert map_bytes(result, tmp_path / "rounded") == dev_map
 
 

@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..estimation.calibrate import SimulatedRig
-from ..estimation.estimate import Calibration
+from ..estimation.calibration import Calibration, SimulatedRig
 from ..scenario import load_scenario
 from ..studies.estimator import measure
 from ._common import at_least, describe

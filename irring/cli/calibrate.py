@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 from .. import errors
-from ..estimation.calibrate import CalibrationAborted, GuidedCalibration, SimulatedRig
-from ..estimation.estimate import CalibrationError
+from ..estimation.calibration import (CalibrationAborted, CalibrationError, GuidedCalibration,
+                                      SimulatedRig)
 from ..outputs import check_out
 from ..scenario import load_scenario
 from ._common import at_least, describe

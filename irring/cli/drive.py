@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import errors, pipeline
+from ..estimation.calibration import load_calibration
 from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..scenario import load_scenario
@@ -114,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
                       "IRR v1 reports no robot pose, so a moving scan cannot be mapped from the "
                       "link; map it with `irring run` instead")
     try:
-        calibration, cal_text = pipeline.load_calibration(args.calibration)
+        calibration, cal_text = load_calibration(args.calibration)
     except (OSError, ValueError) as exc:
         return _error(f"calibration {args.calibration}: {exc}")
 

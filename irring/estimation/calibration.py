@@ -1,43 +1,564 @@
-"""Calibrating a ring: emitter offset d_o (paper Eq. 9) and the curve a(θ), b(θ) (Eq. 10).
+"""Calibration: what the estimator needs to turn ADC counts into distances, in one home.
 
-One procedure serves the simulator and the real ring; only where readings come from
-differs. A flat wall is placed in front of one sensor (``sensor``, 0 by default) at a known
-perpendicular distance y from the sensor's hinge axis, turned so that the sensor's radial
-direction meets the wall normal at a known angle ψ. A sweep then gives readings at beam
-angles h = ψ + φ off the wall normal, where the geometry (Eq. 5 with h for φ) gives the
-true distance ``d = y / cos h − d_o·tan h`` and incidence θ = |h|.
+:class:`Calibration` (d_o and the curve a(θ), b(θ) of paper Eqs. 9–10) and its files; the
+calibration of a simulated scene (:meth:`Calibration.for_scene`, :func:`scene_calibration`)
+and of an uncalibrated ring (:meth:`Calibration.nominal`); the fits (:func:`fit_curve`,
+:func:`emitter_offset_from_wall`); and the procedure that measures one, below.
 
-- Offset placements (ψ = 0, a few y): d_o by Eq. 9 over readings on both sides of the
-  normal. The θ-dependent curve error is even in h and tan h is odd, so it cancels.
-- Curve placements (ψ = 0°, 25°, 50°; distances across the range): a(θ), b(θ) by least
-  squares in log–log space (:func:`irring.estimation.estimate.fit_curve`) against the true distances.
-- d_o and the curve are solved alternately (three rounds; each barely moves the other).
-
-Each placement is read ``sweeps`` times; per step the readings are averaged (after
-dropping any beyond 4 robust σ, e.g. outliers), and their spread gives the noise σ in
-counts that the estimator uses for ``Points.sigma_m``.
-
-:class:`SimulatedRig` reads placements from :class:`irring.simulation.sim.SimRing` in a generated
-4 m × 4 m room with the scenario's ring, sensor and effects (minus ``motion``).
-:class:`GuidedCalibration` walks a person through the same placements on the real ring:
-``prompt`` (like :func:`input`) and ``show`` (like :func:`print`) are the user interface and
-``read_sweep()`` returns one :class:`irring.core.Sweep` from the hardware, so the procedure
-can be tested without either.
+How the procedure works and which calibration each command reads with: docs/calibration.md.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import warnings
-from dataclasses import dataclass
-from typing import Callable, Iterable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
+import yaml
 
-from .. import gp2
+from .. import gp2, safe_yaml
 from ..core import Pose, Ring, Sweep
-from .estimate import Calibration, CalibrationError, emitter_offset_from_wall, fit_curve
+from ..errors import InputError, brief
+from ..outputs import write_text_atomic
+from ..resources import MissingKernel
+
+try:
+    from . import _iterate
+except ImportError:  # a source tree never installed: the estimator fails when it is used
+    _iterate = MissingKernel("estimation._iterate")
+
+CALIBRATION_FORMAT = 1  # version written into calibration files
+# Count σ above the no-return level: at or below NO_RETURN_SIGMAS a reading saw nothing (its
+# beam frees the cells up to the max range); above RETURN_SIGMAS it is a return, with a
+# one-sided Gaussian tail of 1e-4, so one reading in 10 000 that saw nothing passes for one
+# (a T-room sweep has ~400 of them; at 2σ, 2.3 % did, each a valid point at the curve's far
+# end, 100-300 mm in front of a wall beyond the range). Between, it is too weak to tell noise
+# from a far, steep surface: OUT_OF_RANGE, neither mapped nor freed.
+NO_RETURN_SIGMAS = 2.0
+RETURN_SIGMAS = 3.72
+_FINE_CELLS = 1 << 16  # cells of the fine (log a, b) table over 0 … 90°
+_FALLBACK_NODES = 8   # quadrature nodes for the fallback σ (see _fallback_nodes)
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+class CalibrationError(InputError):
+    """Calibration data that cannot determine a parameter, or a bad calibration file."""
+
+
+def _frozen(a: Any, name: str) -> np.ndarray:
+    arr = np.array(a, dtype=float).reshape(-1)
+    if not np.all(np.isfinite(arr)):
+        raise CalibrationError(f"{name}: every value must be finite, got {arr}")
+    arr.setflags(write=False)
+    return arr
+
+
+def _table_end(theta: np.ndarray) -> float:
+    """The drop-out angle a curve table implies by itself: its last row (a table of the
+    θ = 0 row alone: just short of 90°)."""
+    return float(theta[-1]) or math.pi / 2 - 1e-3
+
+
+def _source_text(value: Any, fail) -> str:
+    if not isinstance(value, str) or len(value) > 4096:
+        raise fail("source", "expected a line of text (at most 4096 characters)")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """Everything the estimator needs to turn ADC counts into distances.
+
+    ``d[m] = a(θ)·S^b(θ)`` (paper Eq. 10) with S in ADC counts of an ``adc_bits`` converter at
+    ``vref_v``; ``a``, ``b`` tabulated at incidence angles ``theta_rad`` (ascending, the first
+    0), interpolated linearly in (log a, b) over |θ| and held at the ends. ``emitter_offset_m``
+    is d_o (paper Fig. 7, Eq. 9). The curve is trusted on [min_range_m, max_range_m].
+    ``noise_counts`` is the 1-σ reading noise in counts (for ``Points.sigma_m``).
+    ``max_incidence_rad``: returns steeper than this drop out (default: the table's end), so
+    a line that would put a reading beyond it is not that reading's surface.
+    ``peak_distance_m`` > 0: the sensor folds over below this distance (its output falls
+    again, linearly to 0 at contact, as ``irring.gp2`` models it), so every reading may lie
+    on either branch and the estimator resolves the branch (:func:`resolve_foldover`); 0:
+    readings are trusted on the far branch down to ``min_range_m``.
+    """
+
+    sensor_model: str
+    emitter_offset_m: float
+    theta_rad: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    adc_bits: int = 12
+    vref_v: float = 5.0
+    min_range_m: float = 0.10
+    max_range_m: float = 0.80
+    noise_counts: float = 0.0
+    source: str = ""
+    max_incidence_rad: float | None = None
+    peak_distance_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        theta = _frozen(self.theta_rad, "theta")
+        a = _frozen(self.a, "a")
+        b = _frozen(self.b, "b")
+        if not (theta.size == a.size == b.size) or theta.size == 0:
+            raise CalibrationError(f"theta, a and b need the same non-zero length, got "
+                                   f"{theta.size}, {a.size}, {b.size}")
+        if abs(theta[0]) > 1e-12 or np.any(np.diff(theta) <= 0) or theta[-1] >= math.pi / 2:
+            raise CalibrationError("theta must start at 0 and increase strictly below 90°, got "
+                                   f"{np.degrees(theta).round(3).tolist()} deg")
+        if np.any(a <= 0) or not (np.all(b < 0) or np.all(b > 0)):
+            raise CalibrationError("Eq. 10 needs a > 0 and b of one sign at every θ (b < 0 for "
+                                   "a Sharp GP2, whose output falls with distance); got "
+                                   f"a={a.tolist()}, b={b.tolist()}")
+        if not (0 < self.min_range_m < self.max_range_m) or not math.isfinite(self.max_range_m):
+            raise CalibrationError(f"need 0 < min_range_m < max_range_m, got "
+                                   f"{self.min_range_m}, {self.max_range_m}")
+        if not (math.isfinite(self.emitter_offset_m) and abs(self.emitter_offset_m) < 0.1):
+            raise CalibrationError(f"emitter_offset_m {self.emitter_offset_m!r} is not a "
+                                   "plausible d_o (|d_o| < 0.1 m)")
+        if not (math.isfinite(self.peak_distance_m)
+                and 0.0 <= self.peak_distance_m < self.min_range_m):
+            raise CalibrationError(f"peak_distance_m must lie in 0 … min_range_m "
+                                   f"({self.min_range_m}), got {self.peak_distance_m!r}")
+        if not (math.isfinite(self.noise_counts) and self.noise_counts >= 0):
+            raise CalibrationError(f"noise_counts must be ≥ 0, got {self.noise_counts!r}")
+        if self.max_incidence_rad is None:
+            object.__setattr__(self, "max_incidence_rad", _table_end(theta))
+        if not 0.0 < self.max_incidence_rad < math.pi / 2:
+            raise CalibrationError(f"max_incidence must lie in (0°, 90°), got "
+                                   f"{math.degrees(self.max_incidence_rad):g}°")
+        object.__setattr__(self, "theta_rad", theta)
+        object.__setattr__(self, "a", a)
+        object.__setattr__(self, "b", b)
+        object.__setattr__(self, "_log_a", np.log(a))
+
+    # ---- what the estimator reads per sweep, built on its first sweep (a calibration that
+    # is only fitted, saved or shown never needs them: the fine table takes ~3 ms)
+
+    @functools.cached_property
+    def _levels(self) -> tuple[float, float, float, float, bool]:
+        """The count levels ``_iterate.classify`` judges readings by, and σ of a count."""
+        return (self.full_scale_counts, self.near_counts, self.no_return_counts,
+                self.sigma_counts(), self.falling)
+
+    @functools.cached_property
+    def _fine(self) -> tuple[float, np.ndarray, bool]:
+        """(log a, b) on a fine θ grid for the estimator's loop, looked up at the nearest
+        node (no search): θ off by ≤ 1.2e-5 rad, d by < 1e-4 relative. Returned with the
+        grid's cells per radian and whether the kernels may recompute each row from the
+        nodes (they give the table bit for bit: checked here for every row), sparing the
+        cache the 1 MB table."""
+        fine = np.linspace(0.0, math.pi / 2, _FINE_CELLS + 1)
+        table = np.stack([np.interp(fine, self.theta_rad, self._log_a),
+                          np.interp(fine, self.theta_rad, self.b)], axis=1)
+        return (_FINE_CELLS / (math.pi / 2), table,
+                _iterate.fine_table_is_interp(self.theta_rad, self._log_a, self.b, table))
+
+    @functools.cached_property
+    def _spread(self) -> tuple[np.ndarray, np.ndarray]:
+        """log a, b at the fallback σ's quadrature nodes (see :func:`_fallback_nodes`)."""
+        return _fallback_nodes(self)
+
+    # ---- the curve
+
+    @property
+    def full_scale_counts(self) -> float:
+        return float(2 ** self.adc_bits - 1)
+
+    @property
+    def max_theta_rad(self) -> float:
+        return float(self.theta_rad[-1])
+
+    def _log_ab(self, theta_rad: Any) -> tuple[np.ndarray, np.ndarray]:
+        """log a(θ), b(θ) at |θ|: linear in (log a, b), held beyond the table."""
+        t = np.abs(np.asarray(theta_rad, dtype=float))
+        return np.interp(t, self.theta_rad, self._log_a), np.interp(t, self.theta_rad, self.b)
+
+    def ab(self, theta_rad: Any) -> tuple[np.ndarray, np.ndarray]:
+        """a(θ), b(θ) at |θ|: linear in (log a, b), held beyond the table."""
+        log_a, b = self._log_ab(theta_rad)
+        return np.exp(log_a), b
+
+    def distance(self, counts: Any, theta_rad: Any = 0.0) -> np.ndarray:
+        """Eq. 10: metres from counts (> 0) at incidence θ; vectorised."""
+        s = np.asarray(counts, dtype=float)
+        log_a, b = self._log_ab(theta_rad)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.exp(log_a + b * np.log(s))
+
+    def counts(self, distance_m: Any, theta_rad: Any = 0.0) -> np.ndarray:
+        """The inverse of Eq. 10: the counts a return at ``distance_m`` and θ gives."""
+        d = np.asarray(distance_m, dtype=float)
+        log_a, b = self._log_ab(theta_rad)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.exp((np.log(d) - log_a) / b)
+
+    @property
+    def falling(self) -> bool:
+        """True for a Sharp GP2 (b < 0: more counts, nearer); False for linear hooks."""
+        return bool(self.b[0] < 0)
+
+    @property
+    def no_return_counts(self) -> float:
+        """Counts of a return at max_range_m square on (a GP2's output with nothing in
+        range); readings within :attr:`no_return_margin_counts` of it, or beyond it, are no
+        return."""
+        return float(self.counts(self.max_range_m, 0.0))
+
+    @property
+    def no_return_margin_counts(self) -> float:
+        """Up to this many counts past :attr:`no_return_counts` a reading is no return;
+        ``NO_RETURN_SIGMAS`` count σ (the noise this calibration knows)."""
+        return NO_RETURN_SIGMAS * self.sigma_counts()
+
+    @property
+    def return_margin_counts(self) -> float:
+        """From this many counts past :attr:`no_return_counts` a reading is a return
+        (``RETURN_SIGMAS`` count σ); between the two margins it is OUT_OF_RANGE."""
+        return RETURN_SIGMAS * self.sigma_counts()
+
+    @property
+    def near_counts(self) -> float:
+        """The near end of the calibrated curve (any θ): a GP2 reading brighter than this
+        lies on the peak or its fold-over side, where one reading has two distances."""
+        near = self.counts(self.min_range_m, self.theta_rad)
+        return float(np.max(near) if self.falling else np.min(near))
+
+    def sigma_counts(self) -> float:
+        """1-σ count noise including quantisation (one count, uniform)."""
+        return math.sqrt(self.noise_counts ** 2 + 1.0 / 12.0)
+
+    @property
+    def folds(self) -> bool:
+        """Whether readings may lie on the fold-over (near) branch."""
+        return self.peak_distance_m > 0.0 and self.falling
+
+    def near_distance(self, counts: Any, theta_rad: Any = 0.0) -> np.ndarray:
+        """The near-branch distance of ``counts`` at θ: the output rises linearly from 0 at
+        contact to the far branch's value at ``peak_distance_m``."""
+        peak = self.counts(self.peak_distance_m, theta_rad)
+        return self.peak_distance_m * np.asarray(counts, dtype=float) / peak
+
+    # ---- construction
+
+    @classmethod
+    def nominal(cls, sensor_model: str = "gp2d12", ring: Ring | None = None, adc_bits: int = 12,
+                vref_v: float = 5.0, *, emitter_offset_m: float | None = None,
+                noise_sigma_v: float = 0.015) -> Calibration:
+        """The datasheet calibration from ``irring.gp2``'s tables, for an uncalibrated ring.
+
+        ``d = a_V·V^b`` with V = k·S (k volts per count) becomes ``d = (a_V·k^b)·S^b``
+        (:meth:`irring.gp2.SensorModel.ab_counts` at the table's rows below 90°).
+        d_o comes from ``emitter_offset_m``, else the ring design's, else 7 mm.
+        """
+        model = gp2.sensor(sensor_model)
+        theta = model.theta_rad[model.theta_rad < math.pi / 2]
+        a, b = model.ab_counts(theta, adc_bits, vref_v)   # np.interp at its nodes: the rows
+        if emitter_offset_m is None:
+            emitter_offset_m = ring.emitter_offset_m if ring is not None else 0.007
+        return cls(sensor_model=model.name, emitter_offset_m=float(emitter_offset_m),
+                   theta_rad=theta, a=a, b=b, adc_bits=int(adc_bits), vref_v=float(vref_v),
+                   min_range_m=float(model.min_range_m), max_range_m=float(model.max_range_m),
+                   noise_counts=float(noise_sigma_v) / gp2.lsb_v(adc_bits, vref_v),
+                   max_incidence_rad=min(model.max_incidence_rad, _table_end(theta)),
+                   source=f"nominal {model.name} datasheet curve")
+
+    @classmethod
+    def for_scene(cls, scenario: Any) -> Calibration:
+        """The calibration of what a simulated scene simulates (docs/calibration.md): the
+        scene's sensor curve and ADC; a(θ), b(θ) and the drop-out angle only with the
+        ``incidence`` effect (without it the readings do not depend on θ: the θ = 0 row
+        alone, no drop-out); the ``noise`` effect's σ (0.1 mV floor without it); the fold-over
+        peak only with the ``foldover`` effect."""
+        model = gp2.sensor(scenario.sensor.model)
+        sensor = scenario.sensor
+        noise = scenario.effects.get("noise")
+        cal = cls.nominal(model.name, scenario.ring, sensor.adc_bits, sensor.vref_v,
+                          noise_sigma_v=max(noise.sigma_v if noise else 0.0, 1e-4))
+        if "foldover" in scenario.effects and model.folds:
+            cal = replace(cal, peak_distance_m=float(model.peak_distance_m))
+        effects = ", ".join(scenario.effects) or "none"
+        incidence = scenario.effects.get("incidence")
+        if incidence is None:
+            return replace(cal, theta_rad=cal.theta_rad[:1], a=cal.a[:1], b=cal.b[:1],
+                           max_incidence_rad=None,
+                           source=f"{model.name} curve as scene {scenario.name!r} simulates it "
+                                  f"(effects: {effects}; no incidence: a, b independent of θ)")
+        limit = incidence.max_incidence_rad
+        return replace(cal, max_incidence_rad=min(
+            model.max_incidence_rad if limit is None else limit, _table_end(cal.theta_rad)),
+            source=f"{model.name} curve as scene {scenario.name!r} simulates it "
+                   f"(effects: {effects})")
+
+    @classmethod
+    def for_sweep(cls, sweep: Sweep, **kwargs: Any) -> Calibration:
+        """The nominal calibration matching a sweep's sensor model, ADC and ring."""
+        return cls.nominal(sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v, **kwargs)
+
+    # ---- files
+
+    def to_dict(self) -> dict:
+        return {
+            "irring_calibration": CALIBRATION_FORMAT,
+            "sensor_model": self.sensor_model,
+            "source": self.source,
+            "emitter_offset_mm": float(self.emitter_offset_m * 1e3),
+            "adc_bits": int(self.adc_bits),
+            "vref_v": float(self.vref_v),
+            "min_range_mm": float(self.min_range_m * 1e3),
+            "max_range_mm": float(self.max_range_m * 1e3),
+            "noise_counts": float(self.noise_counts),
+            "max_incidence_deg": round(math.degrees(self.max_incidence_rad), 9),
+            "peak_distance_mm": float(self.peak_distance_m * 1e3),
+            "curve": [{"theta_deg": round(math.degrees(t), 9), "a": float(a), "b": float(b)}
+                      for t, a, b in zip(self.theta_rad, self.a, self.b)],
+        }
+
+    def to_yaml(self) -> str:
+        """The calibration file's text (mm and degrees for people, d = a·S^b, S in counts)."""
+        header = ("# irring calibration: d[m] = a(θ)·S^b(θ), S in ADC counts (paper Eq. 10);\n"
+                  "# emitter offset d_o (paper Eq. 9) in mm; load with "
+                  "irring.estimation.estimate.Calibration.load\n")
+        return header + yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True)
+
+    def save(self, path: str | Path) -> Path:
+        """Write :meth:`to_yaml` to a file."""
+        return write_text_atomic(path, self.to_yaml())
+
+    @classmethod
+    def from_dict(cls, raw: Any, source: str = "<dict>") -> Calibration:
+        def fail(key: str, msg: str) -> CalibrationError:
+            return CalibrationError(f"{source}: {key}: {msg}")
+
+        if not isinstance(raw, Mapping):
+            raise fail("<top>", "a calibration file must be a mapping")
+        known = {"irring_calibration", "sensor_model", "source", "emitter_offset_mm", "adc_bits",
+                 "vref_v", "min_range_mm", "max_range_mm", "noise_counts", "curve",
+                 "max_incidence_deg", "peak_distance_mm"}
+        for key in raw:
+            if key not in known:
+                raise fail(str(key), f"unknown key; allowed: {', '.join(sorted(known))}")
+        version = raw.get("irring_calibration")
+        if version != CALIBRATION_FORMAT:
+            raise fail("irring_calibration", f"expected format {CALIBRATION_FORMAT}, got "
+                                             f"{version!r} (is this an irring calibration file?)")
+        for key in ("sensor_model", "emitter_offset_mm", "curve"):
+            if key not in raw:
+                raise fail(key, "required key is missing")
+
+        def number(key: str, default: float | None = None, lo: float = -math.inf,
+                   hi: float = math.inf) -> float:
+            value = raw.get(key, default)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise fail(key, f"expected a number, got {brief(value)}")
+            if not (math.isfinite(value) and lo <= value <= hi):
+                raise fail(key, f"{brief(value)} is out of range; allowed {lo:g} … {hi:g}")
+            return float(value)
+
+        model = raw["sensor_model"]
+        if model not in gp2.SENSORS:
+            raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
+                                       f"{', '.join(gp2.SENSORS)}")
+
+        curve = raw["curve"]
+        if not isinstance(curve, list) or not curve:
+            raise fail("curve", "expected a non-empty list of {theta_deg, a, b}")
+        rows = []
+        for i, row in enumerate(curve):
+            if not isinstance(row, Mapping) or set(row) != {"theta_deg", "a", "b"}:
+                raise fail(f"curve[{i}]", f"expected keys theta_deg, a, b; got {brief(row)}")
+            values = [row["theta_deg"], row["a"], row["b"]]
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and math.isfinite(v) for v in values):
+                raise fail(f"curve[{i}]", f"expected finite numbers, got {brief(row)}")
+            rows.append([float(v) for v in values])
+        table = np.array(rows)
+        # a GP2's output falls with distance (b < 0); the linear laser/sonar curves rise
+        falling = str(model).startswith("gp2")
+        if np.any(table[:, 2] >= 0) if falling else np.any(table[:, 2] <= 0):
+            raise fail("curve", f"a {model} curve d = a·S^b needs b "
+                                f"{'< 0 (output falls with distance)' if falling else '> 0'} "
+                                f"at every θ; got b = {brief(table[:, 2].tolist())}")
+        bits = raw.get("adc_bits", 12)
+        if isinstance(bits, bool) or not isinstance(bits, int) or not 1 <= bits <= 24:
+            raise fail("adc_bits", f"expected a whole number 1 … 24, got {bits!r}")
+        try:
+            return cls(sensor_model=str(model),
+                       emitter_offset_m=number("emitter_offset_mm", hi=100.0, lo=-100.0) * 1e-3,
+                       theta_rad=np.radians(table[:, 0]), a=table[:, 1], b=table[:, 2],
+                       adc_bits=bits, vref_v=number("vref_v", 5.0, 0.1, 50.0),
+                       min_range_m=number("min_range_mm", 100.0, 0.0, 1e5) * 1e-3,
+                       max_range_m=number("max_range_mm", 800.0, 0.0, 1e5) * 1e-3,
+                       noise_counts=number("noise_counts", 0.0, 0.0, 1e7),
+                       peak_distance_m=number("peak_distance_mm", 0.0, 0.0, 1e5) * 1e-3,
+                       max_incidence_rad=(math.radians(number("max_incidence_deg"))
+                                          if "max_incidence_deg" in raw else None),
+                       source=_source_text(raw.get("source", ""), fail))
+        except CalibrationError as exc:
+            raise CalibrationError(f"{source}: {exc}") from None
+
+    @classmethod
+    def load(cls, path: str | Path) -> Calibration:
+        """A calibration file (:meth:`save`, ``irring calibrate``); :class:`CalibrationError`
+        naming the file when it cannot be read or is not a calibration."""
+        return load_calibration(Path(path))[0]
+
+
+def _fallback_nodes(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
+    """log a(θ), b(θ) at the nodes of the fallback σ's quadrature.
+
+    A reading on no line keeps θ = 0 (the paper's starting assumption, giving d0). Its θ is
+    unknown, so its σ includes the RMS error of reading its counts S with θ = 0 when the true
+    θ is that of a beam meeting a round surface at a uniformly random offset (sin θ uniform
+    up to the drop-out angle; most such readings are thin obstacles), by 8-point quadrature:
+    sqrt(mean_j (a(θ_j)·S^b(θ_j) − d0)²), summed by ``_iterate.Sweep.finish``. The θ = 0
+    distance is the longest the reading can mean, so the error is one-sided and grows
+    steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
+    u = (np.arange(_FALLBACK_NODES) + 0.5) / _FALLBACK_NODES * math.sin(cal.max_incidence_rad)
+    return cal._log_ab(np.arcsin(u))
+
+
+def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False
+                     ) -> tuple[Calibration | None, str | None]:
+    """(Calibration or None, YAML text or None) from a file path or from stored YAML text."""
+    if path_or_text is None:
+        return None, None
+    if is_text:
+        text, source = str(path_or_text), "<recording's calibration>"
+    else:
+        source = str(path_or_text)
+        try:
+            text = safe_yaml.read_text(path_or_text, "calibration file")
+        except safe_yaml.InputError as exc:
+            raise CalibrationError(str(exc)) from None
+    try:
+        raw = safe_yaml.load(text, source)
+    except safe_yaml.InputError as exc:
+        raise CalibrationError(str(exc)) from None
+    return Calibration.from_dict(raw, source), text
+
+
+def scene_calibration(scenario: Any) -> tuple[Calibration, str]:
+    """(Calibration, YAML text) the estimator reads a simulated scene with: the one path
+    for ``run``, ``compare``, ``bench`` and ``replay`` (docs/calibration.md)."""
+    cal = Calibration.for_scene(scenario)
+    return cal, cal.to_yaml()
+
+
+# --------------------------------------------------------------------------- fitting
+
+
+def emitter_offset_from_wall(distance_m: Any, sensor_angle_rad: Any,
+                             wall_distance_m: Any) -> float:
+    """d_o by paper Eq. 9 from readings against a flat wall facing the sensor.
+
+    ``d_o = Σ(y_i·tan φ_i / cos φ_i − d_i·tan φ_i) / Σ tan² φ_i`` with d_i the measured
+    distance, φ_i the beam's angle off the wall normal and y_i the wall's perpendicular
+    distance from the hinge axis (arrays broadcast together; NaN readings are ignored).
+    Raises :class:`CalibrationError` when Σ tan² φ ≈ 0: readings straight at the wall do not
+    depend on d_o.
+    """
+    d, phi, y = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in
+                                      (distance_m, sensor_angle_rad, wall_distance_m)))
+    ok = np.isfinite(d) & np.isfinite(phi) & np.isfinite(y) & (np.abs(phi) < 1.5)
+    tan = np.tan(phi[ok])
+    den = float(np.sum(tan * tan))
+    if ok.sum() == 0 or den < 1e-6 * max(int(ok.sum()), 1):
+        raise CalibrationError(
+            f"cannot determine the emitter offset d_o: Σ tan²φ = {den:.3g} over {int(ok.sum())} "
+            "readings. Readings taken straight at the wall (φ ≈ 0) do not depend on d_o; sweep "
+            "the sensor across angles on both sides of the wall normal (e.g. ±35 motor steps).")
+    num = float(np.sum(y[ok] * tan / np.cos(phi[ok]) - d[ok] * tan))
+    return num / den
+
+
+def fit_curve(counts: Any, distance_m: Any, theta_rad: Any, theta_grid_rad: Any,
+              *, min_readings: int = 6, smoothing: float = 1e-6
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """a(θ), b(θ) of Eq. 10 by least squares in log–log space.
+
+    Model: ``log d = log a(θ) + b(θ)·log S`` with log a and b piecewise linear in |θ| over
+    ``theta_grid_rad`` (the same interpolation :class:`Calibration` uses), so readings at
+    any incidence count, and readings exactly at the grid angles reduce to one straight-line
+    fit per angle. Grid angles with fewer than ``min_readings`` readings' worth of support are
+    dropped (θ = 0 must stay). A tiny curvature penalty keeps sparse tables well posed.
+    Returns (theta_rad, a, b) of the kept grid angles.
+    """
+    s, d, t = (np.asarray(v, dtype=float).reshape(-1) for v in (counts, distance_m, theta_rad))
+    if not (s.size == d.size == t.size):
+        raise CalibrationError("counts, distance_m and theta_rad need the same length")
+    ok = np.isfinite(s) & np.isfinite(d) & np.isfinite(t) & (s > 0) & (d > 0)
+    s, d, t = s[ok], d[ok], np.abs(t[ok])
+    grid = np.asarray(theta_grid_rad, dtype=float).reshape(-1)
+    if grid.size == 0 or grid[0] != 0.0 or np.any(np.diff(grid) <= 0):
+        raise CalibrationError("theta grid must start at 0 and increase strictly")
+    grid, t_sel = _supported_grid(grid, t, min_readings)
+    s, d, t = s[t_sel], d[t_sel], t[t_sel]
+    if s.size < 2 or np.ptp(np.log(s)) < 1e-6:
+        raise CalibrationError(f"need readings at ≥ 2 different distances to fit a and b; got "
+                               f"{s.size} usable readings")
+    w = _hat_weights(t, grid)                       # (M, J)
+    ls = np.log(s)
+    design = np.hstack([w, w * ls[:, None]])         # unknowns: log a_j, b_j
+    rhs = np.log(d)
+    j = grid.size
+    if j >= 3:  # second differences of log a and of b, scaled to the data's weight
+        d2 = np.zeros((j - 2, j))
+        idx = np.arange(j - 2)
+        d2[idx, idx], d2[idx, idx + 1], d2[idx, idx + 2] = 1.0, -2.0, 1.0
+        lam = math.sqrt(smoothing * s.size)
+        reg = np.zeros((2 * (j - 2), 2 * j))
+        reg[: j - 2, :j] = lam * d2
+        reg[j - 2:, j:] = lam * d2 * float(np.mean(np.abs(ls)))
+        design = np.vstack([design, reg])
+        rhs = np.concatenate([rhs, np.zeros(2 * (j - 2))])
+    sol, *_ = np.linalg.lstsq(design, rhs, rcond=None)
+    log_a, b = sol[:j], sol[j:]
+    if not np.all(np.isfinite(sol)) or not (np.all(b < 0) or np.all(b > 0)):
+        raise CalibrationError(f"fitted b(θ) changes sign ({b.round(4)}); are the readings "
+                               "and distances paired correctly?")
+    return grid, np.exp(log_a), b
+
+
+def _hat_weights(t: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """(M, J) linear-interpolation weights of |θ| over the grid, held at the ends."""
+    tc = np.clip(t, grid[0], grid[-1])
+    if grid.size == 1:
+        return np.ones((t.size, 1))
+    k = np.clip(np.searchsorted(grid, tc, side="right") - 1, 0, grid.size - 2)
+    frac = (tc - grid[k]) / (grid[k + 1] - grid[k])
+    w = np.zeros((t.size, grid.size))
+    rows = np.arange(t.size)
+    w[rows, k] = 1.0 - frac
+    w[rows, k + 1] += frac
+    return w
+
+
+def _supported_grid(grid: np.ndarray, t: np.ndarray, min_readings: int
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Drop grid angles the data barely touch; keep readings inside the kept span."""
+    while True:
+        support = _hat_weights(t, grid).sum(axis=0)
+        weak = support < min_readings
+        if not weak.any():
+            break
+        if weak[0]:
+            raise CalibrationError(
+                f"too few readings near θ = 0 ({support[0]:.1f} < {min_readings}); the "
+                "calibration needs readings with the beam square to the wall")
+        worst = int(np.argmin(np.where(weak, support, np.inf)))
+        grid = np.delete(grid, worst)
+    return grid, t <= grid[-1] + 1e-9
+
+
+# --------------------------------------------------------------------------- the procedure
 
 DEFAULT_THETA_GRID_RAD = np.radians(np.arange(0.0, 86.0, 5.0))
 _ROUNDS = 3

@@ -20,9 +20,10 @@ import math
 import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
-from .estimate import (_FALLBACK_NODES, _MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M,
-                       Calibration, Estimate, LineOptions, _chains, _finish, _nominal_for, _Pieces,
-                       _scan_order, resolve_foldover)
+from .calibration import _FALLBACK_NODES, Calibration
+from .estimate import (_MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M, Estimate,
+                       LineOptions, _chains, _finish, _nominal_for, _Pieces, _scan_order,
+                       resolve_foldover)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 

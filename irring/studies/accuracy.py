@@ -16,7 +16,8 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from .. import pipeline, scenario as scenario_lib
-from ..estimation.estimate import Calibration, LineOptions, estimate
+from ..estimation.calibration import Calibration
+from ..estimation.estimate import LineOptions, estimate
 from ..maps import metrics
 from ..maps.mapping import OccupancyGrid
 from ..pipeline import scenario_text

@@ -28,7 +28,7 @@ def run_scene(scenario, design: Design | str, seed: int | None = None) -> dict:
     this process.
 
     The estimator reads each design with the calibration of what its scene simulates
-    (``pipeline.scene_calibration``, as ``irring run`` does). One deliberate difference from
+    (``calibration.scene_calibration``, as ``irring run`` does). One deliberate difference from
     ``irring run``, so designs are compared fairly: the map is scored against the ground
     truth of the scenario as written (with its own design's reach), so every design is
     judged on the same cells: a design that cannot reach a wall loses recall and shadow for

@@ -26,7 +26,8 @@ import time
 import numpy as np
 
 from ..core import Reason
-from ..estimation.estimate import Calibration, estimate
+from ..estimation.calibration import Calibration
+from ..estimation.estimate import estimate
 
 
 def _rmse(x: np.ndarray) -> float:

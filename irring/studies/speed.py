@@ -15,7 +15,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..estimation.estimate import Calibration, estimate
+from ..estimation.calibration import Calibration
+from ..estimation.estimate import estimate
 from ..maps.mapping import OccupancyGrid
 from ..scenario import load_scenario
 from ..simulation.effects import PHASES, Pipeline
