@@ -246,9 +246,16 @@ def record(tree: Path, dest: Path) -> Path:
                                 work, "o/cal_emu.yaml"))
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    (dest / "record.json").write_text(json.dumps(runs, indent=1))
-    (dest / "record.txt").write_text(normalise_record(runs))
+    (dest / "record.json").write_text(json.dumps({"tree": str(tree), "runs": runs}, indent=1))
+    (dest / "record.txt").write_text(normalise_record(_load(dest)))
     return dest
+
+
+def _load(dest: Path) -> list[dict]:
+    """A record's runs, the source tree's path (bundled scenarios name it) as <tree>."""
+    raw = json.loads((dest / "record.json").read_text())
+    text = json.dumps(raw["runs"]).replace(raw["tree"], "<tree>")
+    return json.loads(text)
 
 
 def _run_record(name, argv, p, work, written) -> dict:
@@ -280,8 +287,7 @@ def _strip_progress(text: str) -> str:
 def diff(a: Path, b: Path) -> int:
     """Print the differences of two records (masked as :func:`normalise_record` says);
     0 when they are the same."""
-    la, lb = (normalise_record(json.loads((d / "record.json").read_text())).splitlines()
-              for d in (a, b))
+    la, lb = (normalise_record(_load(d)).splitlines() for d in (a, b))
     lines = list(difflib.unified_diff(la, lb, str(a), str(b), lineterm="", n=2))
     if lines:
         print("\n".join(lines))
