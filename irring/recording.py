@@ -23,7 +23,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import gp2
-from .core import Ring, Sweep, Truth
+from .core import ADC_BITS, MAX_RANGE_M, VREF_V, Ring, Sweep, Truth
 from .errors import InputError, IrringError, brief
 from .maps.mapping import MapperParams, check_grid_size
 from .scenario import ScenarioError, load_dataclass
@@ -284,10 +284,10 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
 
     kwargs["sensor_model"] = scalar("sensor_model", lambda v: v in gp2.SENSORS,
                                     f"one of {', '.join(gp2.SENSORS)}", "gp2d12")
-    bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, 24), "a whole number 1 … 24", 12)
-    kwargs["vref_v"] = scalar("vref_v", lambda v: _finite(v, 0.1, 50.0), "0.1 … 50 V", 5.0)
+    bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, 24), "a whole number 1 … 24", ADC_BITS)
+    kwargs["vref_v"] = scalar("vref_v", lambda v: _finite(v, 0.1, 50.0), "0.1 … 50 V", VREF_V)
     kwargs["max_range_m"] = scalar("max_range_m", lambda v: _finite(v, 0.001, 100.0),
-                                   "0.001 … 100 m", 0.624)
+                                   "0.001 … 100 m", MAX_RANGE_M)
     kwargs["samples"] = scalar("samples", whole(1, 64), "a whole number 1 … 64", 1)
     kwargs["settle_s"] = scalar("settle_s", lambda v: _finite(v, 0.0, 60.0), "0 … 60 s", 0.0)
     kwargs["duration_s"] = scalar("duration_s", lambda v: _finite(v, 0.0, 1e7),

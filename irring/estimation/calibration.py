@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 
 from .. import gp2, safe_yaml
-from ..core import Pose, Ring, Sweep
+from ..core import ADC_BITS, VREF_V, Pose, Ring, Sweep
 from ..errors import InputError, brief
 from ..outputs import write_text_atomic
 from ..resources import MissingKernel
@@ -94,8 +94,8 @@ class Calibration:
     theta_rad: np.ndarray
     a: np.ndarray
     b: np.ndarray
-    adc_bits: int = 12
-    vref_v: float = 5.0
+    adc_bits: int = ADC_BITS
+    vref_v: float = VREF_V
     min_range_m: float = 0.10
     max_range_m: float = 0.80
     noise_counts: float = 0.0
@@ -249,20 +249,20 @@ class Calibration:
     # ---- construction
 
     @classmethod
-    def nominal(cls, sensor_model: str = "gp2d12", ring: Ring | None = None, adc_bits: int = 12,
-                vref_v: float = 5.0, *, emitter_offset_m: float | None = None,
+    def nominal(cls, sensor_model: str = "gp2d12", ring: Ring | None = None,
+                adc_bits: int = ADC_BITS, vref_v: float = VREF_V, *, emitter_offset_m: float | None = None,
                 noise_sigma_v: float = 0.015) -> Calibration:
         """The datasheet calibration from ``irring.gp2``'s tables, for an uncalibrated ring.
 
         ``d = a_V·V^b`` with V = k·S (k volts per count) becomes ``d = (a_V·k^b)·S^b``
         (:meth:`irring.gp2.SensorModel.ab_counts` at the table's rows below 90°).
-        d_o comes from ``emitter_offset_m``, else the ring design's, else 7 mm.
+        d_o comes from ``emitter_offset_m``, else the ring design's, else the paper ring's.
         """
         model = gp2.sensor(sensor_model)
         theta = model.theta_rad[model.theta_rad < math.pi / 2]
         a, b = model.ab_counts(theta, adc_bits, vref_v)   # np.interp at its nodes: the rows
         if emitter_offset_m is None:
-            emitter_offset_m = ring.emitter_offset_m if ring is not None else 0.007
+            emitter_offset_m = (ring or Ring()).emitter_offset_m
         return cls(sensor_model=model.name, emitter_offset_m=float(emitter_offset_m),
                    theta_rad=theta, a=a, b=b, adc_bits=int(adc_bits), vref_v=float(vref_v),
                    min_range_m=float(model.min_range_m), max_range_m=float(model.max_range_m),
@@ -386,14 +386,14 @@ class Calibration:
             raise fail("curve", f"a {model} curve d = a·S^b needs b "
                                 f"{'< 0 (output falls with distance)' if falling else '> 0'} "
                                 f"at every θ; got b = {brief(table[:, 2].tolist())}")
-        bits = raw.get("adc_bits", 12)
+        bits = raw.get("adc_bits", ADC_BITS)
         if isinstance(bits, bool) or not isinstance(bits, int) or not 1 <= bits <= 24:
             raise fail("adc_bits", f"expected a whole number 1 … 24, got {bits!r}")
         try:
             return cls(sensor_model=str(model),
                        emitter_offset_m=number("emitter_offset_mm", hi=100.0, lo=-100.0) * 1e-3,
                        theta_rad=np.radians(table[:, 0]), a=table[:, 1], b=table[:, 2],
-                       adc_bits=bits, vref_v=number("vref_v", 5.0, 0.1, 50.0),
+                       adc_bits=bits, vref_v=number("vref_v", VREF_V, 0.1, 50.0),
                        min_range_m=number("min_range_mm", 100.0, 0.0, 1e5) * 1e-3,
                        max_range_m=number("max_range_mm", 800.0, 0.0, 1e5) * 1e-3,
                        noise_counts=number("noise_counts", 0.0, 0.0, 1e7),
@@ -664,8 +664,9 @@ def collect(sweeps: Sequence[Sweep], placement: Placement, sensor: int = 0) -> R
                        offset=np.full(size, placement.purpose == "offset"))
 
 
-def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = 12, vref_v: float = 5.0,
-          min_range_m: float | None = None, max_range_m: float | None = None,
+def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = ADC_BITS,
+          vref_v: float = VREF_V, min_range_m: float | None = None,
+          max_range_m: float | None = None,
           theta_grid_rad: np.ndarray = DEFAULT_THETA_GRID_RAD, emitter_offset_guess_m: float = 0.0,
           source: str = "") -> Calibration:
     """d_o (Eq. 9) and a(θ), b(θ) (Eq. 10) from a rig's readings, solved alternately.
@@ -806,9 +807,9 @@ class GuidedCalibration:
 
     def __init__(self, *, read_sweep: Callable[[], Sweep], prompt: Callable[[str], str] = input,
                  show: Callable[[str], None] = print, sensor_model: str = "gp2d12",
-                 adc_bits: int = 12, vref_v: float = 5.0, sensor: int = 0, sweeps: int = 4,
-                 placements: Sequence[Placement] | None = None,
-                 emitter_offset_guess_m: float = 0.007):
+                 adc_bits: int = ADC_BITS, vref_v: float = VREF_V, sensor: int = 0,
+                 sweeps: int = 4, placements: Sequence[Placement] | None = None,
+                 emitter_offset_guess_m: float = Ring().emitter_offset_m):
         self.read_sweep = read_sweep
         self.prompt = prompt
         self.show = show

@@ -215,7 +215,7 @@ class SerialRing:
                  timeout_s: float = DEFAULT_TIMEOUT_S, retries: int = 2,
                  template: Ring = PAPER_RING, radius_m: float | None = None,
                  emitter_offset_m: float | None = None, sensor_model: str = "gp2d12",
-                 vref_v: float = 5.0, max_range_m: float = 0.624, samples: int = 1,
+                 vref_v: float = core.VREF_V, max_range_m: float = core.MAX_RANGE_M, samples: int = 1,
                  settle_s: float = 0.0, resweep: int = 0,
                  opener: Callable[..., serial.SerialBase] = serial.serial_for_url):
         if timeout_s <= 0:

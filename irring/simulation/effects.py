@@ -38,7 +38,7 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 
 from .. import gp2
-from ..core import Truth
+from ..core import ADC_BITS, VREF_V, Truth
 from ..scenario import (AveragingEffect, BeamEffect, FoldoverEffect, IncidenceEffect,
                        NoiseEffect, OutliersEffect, QuantizationEffect, ReflectanceEffect)
 
@@ -53,8 +53,8 @@ class Setup:
     """What every stage may need to know about the sensor and the ADC."""
 
     model: gp2.SensorModel
-    adc_bits: int = 12
-    vref_v: float = 5.0
+    adc_bits: int = ADC_BITS
+    vref_v: float = VREF_V
     samples: int = 1              # scan.samples (used by `averaging` only)
     foldover: bool = False        # the scene folds readings below the peak
     quantized: bool = False       # the scene rounds to whole counts
@@ -347,8 +347,8 @@ class Pipeline:
                                 for name in STAGE_ORDER if name in effects))
 
     @classmethod
-    def ideal(cls, model: str | gp2.SensorModel = "gp2d12", adc_bits: int = 12,
-              vref_v: float = 5.0) -> Pipeline:
+    def ideal(cls, model: str | gp2.SensorModel = "gp2d12", adc_bits: int = ADC_BITS,
+              vref_v: float = VREF_V) -> Pipeline:
         """No effects: the noise-free curve value in float counts."""
         m = gp2.sensor(model) if isinstance(model, str) else model
         return cls(Setup(model=m, adc_bits=adc_bits, vref_v=vref_v))

@@ -36,7 +36,7 @@ from typing import Callable
 import numpy as np
 
 from .. import gp2
-from ..core import Truth, beam_geometry, sensor_angles_for_steps
+from ..core import MAX_RANGE_M, Truth, beam_geometry, sensor_angles_for_steps
 from ..designs import PAPER_RING
 from ..simulation.effects import STAGE_ORDER, Pipeline
 from ..scenario import (EFFECTS, IncidenceEffect, NoiseEffect, OutliersEffect,
@@ -62,7 +62,7 @@ class RoundRoom:
 
     def __init__(self, room_radius_m: float = 0.70, post_xy_m=(0.45, 0.12),
                  post_radius_m: float = 0.04, post_reflectance: float = 0.3,
-                 max_range_m: float = 0.624):
+                 max_range_m: float = MAX_RANGE_M):
         self.room_radius_m = room_radius_m
         self.post = np.array(post_xy_m, dtype=float)
         self.post_radius_m = post_radius_m
