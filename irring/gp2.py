@@ -211,28 +211,34 @@ def sensor(name: str) -> SensorModel:
 
 # --------------------------------------------------------------------------- registry
 # Every sensor kind a scenario or design may name: what it implies for a design (SensorSpec);
-# its curve is models/sensors/<kind>.yaml (:func:`sensor`).
+# its curve is models/sensors/<kind>.yaml (:func:`sensor`), whose range a design uses (the
+# paper's GP2D12 excepted: the range its experiments trust and Table I's D, from core).
+
+
+def _curve_range(kind: str) -> dict:
+    rng = sensor(kind).max_range_m
+    return {"max_range_m": rng, "design_range_m": rng}
+
 
 SENSORS: dict[str, SensorSpec] = {
     "gp2d12": SensorSpec("gp2d12", max_range_m=MAX_RANGE_M, design_range_m=DESIGN_RANGE_M,
-                         description="Sharp GP2D12, 10–80 cm; paper's limit 624 mm, "
-                                     "Table I's D 686 mm"),
-    "gp2y0a21": SensorSpec("gp2y0a21", max_range_m=0.80, design_range_m=0.80,
-                           description="Sharp GP2Y0A21YK, 10–80 cm"),
-    "gp2y0a02": SensorSpec("gp2y0a02", max_range_m=1.50, design_range_m=1.50,
-                           description="Sharp GP2Y0A02YK0F, 20–150 cm"),
-    # SICK LMS200-like: 8 m (mm mode), σ ≈ 5 mm; its mirror turns at 75 Hz and 0.5° steps are
+                         description="Sharp GP2D12; the paper's range limit and Table I's D"),
+    "gp2y0a21": SensorSpec("gp2y0a21", **_curve_range("gp2y0a21"),
+                           description="Sharp GP2Y0A21YK"),
+    "gp2y0a02": SensorSpec("gp2y0a02", **_curve_range("gp2y0a02"),
+                           description="Sharp GP2Y0A02YK0F"),
+    # SICK LMS200-like (mm mode): σ ≈ 5 mm; its mirror turns at 75 Hz and 0.5° steps are
     # interlaced over two turns, so a 720-reading 360° view takes 2/75 s = 26.7 ms.
-    "laser": SensorSpec("laser", max_range_m=8.0, design_range_m=8.0,
+    "laser": SensorSpec("laser", **_curve_range("laser"),
                         noise_sigma_m=0.005, reading_period_s=(2.0 / 75.0) / 720,
-                        adc_bits=16, settles=False, description="SICK LMS200-like scanner, 8 m, σ 5 mm"),
-    # MaxBotix LV-MaxSonar-EZ class (the `sonar` curve in models/sensors): 0.15–6.45 m, one
-    # reading per 49 ms (20 Hz); a ring chains its transducers one after another so they do
+                        adc_bits=16, settles=False, description="SICK LMS200-like scanner"),
+    # MaxBotix LV-MaxSonar-EZ class (the `sonar` curve in models/sensors): one reading per
+    # 49 ms (20 Hz); a ring chains its transducers one after another so they do
     # not hear each other. The ±15° cone is our assumption (12 of them close a 360° ring).
-    "sonar": SensorSpec("sonar", max_range_m=6.45, design_range_m=6.45,
+    "sonar": SensorSpec("sonar", **_curve_range("sonar"),
                         noise_sigma_m=0.01, beam_half_angle_rad=math.radians(15.0),
                         reading_period_s=0.049, sequential=True, adc_bits=16,
-                        description="MaxBotix LV-EZ-class ultrasonic ranger, ±15° cone, 6.45 m"),
+                        description="MaxBotix LV-EZ-class ultrasonic ranger, ±15° cone"),
 }
 
 
