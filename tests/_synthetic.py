@@ -23,7 +23,7 @@ from irring.core import Points, Reason, Sweep, beam_geometry, sensor_angles_for_
 from irring.designs import PAPER_RING
 from irring.estimation.calibration import Calibration
 from irring.core import Cylinder, Ring
-from irring.scenario import Scenario
+from irring.scenario import Scenario, load_scenario
 
 def stand_in_calibration(d_o: float = 0.007, strength: float = 0.25, bits: int = 12,
                          noise_counts: float = 0.0) -> Calibration:
@@ -105,9 +105,9 @@ def polygon(corners):
     return [(corners[i], corners[(i + 1) % len(corners)]) for i in range(len(corners))]
 
 
-T_ROOM = polygon([(0, 0), (2.42, 0), (2.42, 0.9), (1.66, 0.9), (1.66, 1.8), (0.76, 1.8),
-                  (0.76, 0.9), (0, 0.9)])
-T_POSES = [(1.92, 0.45, 0.0), (1.21, 0.45, 0.0), (0.5, 0.45, 0.0), (1.21, 1.35, 0.0)]
+_T = load_scenario("t_room")   # the paper's T-room, as bundled: its walls and scan poses
+T_ROOM = polygon(_T.room.outline_m)
+T_POSES = [(p.x_m, p.y_m, p.yaw_rad) for p in _T.robot.poses]
 
 
 def ray_distances(ox, oy, heading, scenario: Scenario) -> np.ndarray:

@@ -38,8 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
-from ..core import (Cylinder, box_corners, inside_obstacle, inside_outline,
-                    segment_distance)
+from ..core import (Cylinder, box_corners, distance_to_outline, inside_obstacle,
+                    inside_outline)
 from ..scenario import Scenario
 
 EXTERIOR = -1   # beyond the walls
@@ -145,10 +145,7 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
 
     # material at cell centres: walls outward of the outline, obstacles where they stand
     inside = inside_outline(px, py, outline)
-    dist = np.full(px.shape, np.inf)
-    for i in range(len(outline)):
-        (ax, ay), (bx, by) = outline[i], outline[(i + 1) % len(outline)]
-        dist = np.minimum(dist, segment_distance(px, py, ax, ay, bx, by))
+    dist = distance_to_outline(px, py, outline)
     eps = 1e-9
     label = np.full(px.shape, EXTERIOR, np.int16)
     label[inside] = FREE_SPACE
