@@ -22,9 +22,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from . import designs, gp2, resources, safe_yaml
-from .core import (ADC_BITS, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, VREF_V, Box, Cylinder, Pose,
-                   Ring, Room, bounds_error, choice, distance_to_outline, inside_outline, num,
-                   obstacle_distance, unit_suffix)
+from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, VREF_V, Box,
+                   Cylinder, Pose, Ring, Room, bounds_error, choice, distance_to_outline,
+                   inside_outline, num, obstacle_distance, unit_suffix)
 from .designs import Design
 from .errors import InputError
 
@@ -411,12 +411,13 @@ def _validate_geometry(sc: Scenario, fail) -> None:
         path = f"robot.poses[{k}]"
         if not inside_outline(pose.x_m, pose.y_m, outline):
             raise fail(path, f"pose ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm is outside the room")
-        if distance_to_outline(pose.x_m, pose.y_m, outline) < clearance:
+        if distance_to_outline(pose.x_m, pose.y_m, outline) < clearance - GEOMETRY_TOL_M:
             raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) would be "
-                             f"inside a wall at ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm")
+                             f"inside a wall at ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm; "
+                             f"keep the pose ≥ {clearance * 1e3:g} mm from every wall")
         for j, ob in enumerate(sc.obstacles):
             gap = obstacle_distance(ob, pose.x_m, pose.y_m)
-            if gap < clearance:
+            if gap < clearance - GEOMETRY_TOL_M:
                 raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) at "
                                  f"({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm would overlap "
                                  f"obstacles[{j}] ({type(ob).__name__.lower()} at "

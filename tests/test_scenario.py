@@ -271,3 +271,44 @@ def test_the_scenarios_readme_table_lists_every_bundled_scenario():
         sc = load_scenario(bundled[name])
         assert int(poses) == len(sc.robot.poses), name
         assert (0 if obstacles == "–" else int(obstacles)) == len(sc.obstacles), name
+
+
+def _hall(poses, obstacles=()) -> dict:
+    """A 1400 × 1200 mm room (asymmetric) with the paper's ring at ``poses``."""
+    return {"name": "edge", "room": {"outline_mm": [[0, 0], [1400, 0], [1400, 1200], [0, 1200]]},
+            "robot": {"poses": [{"x_mm": x, "y_mm": y} for x, y in poses]},
+            "obstacles": list(obstacles)}
+
+
+# Surfaces exactly 170 mm (ring radius + housing) from the pose: what the message allows.
+AT_THE_LIMIT = {
+    "post east": _hall([(700, 600)], [{"type": "cylinder", "center_mm": [890, 600],
+                                       "radius_mm": 20}]),
+    "post south": _hall([(700, 600)], [{"type": "cylinder", "center_mm": [700, 405],
+                                        "radius_mm": 25}]),
+    "box face west": _hall([(700, 600)], [{"type": "box", "center_mm": [510, 600],
+                                           "size_mm": [40, 90]}]),
+    "walls north-east": _hall([(1230, 1030)]),
+    "wall west": _hall([(170, 610)]),
+}
+
+
+@pytest.mark.parametrize("name", AT_THE_LIMIT)
+def test_a_surface_exactly_at_the_housing_is_allowed(name):
+    sc = parse(AT_THE_LIMIT[name], "edge.yaml")
+    assert len(sc.robot.poses) == 1
+
+
+@pytest.mark.parametrize("name, raw, pattern", [
+    ("post 0.01 mm inside", _hall([(700, 600)], [{"type": "cylinder", "center_mm": [700, 405.01],
+                                                  "radius_mm": 25}]),
+     r"edge\.yaml: robot\.poses\[0\]: the ring \(radius 170 mm with housing\) at \(700, 600\) mm "
+     r"would overlap obstacles\[0\] \(cylinder at \(700, 405\.01\) mm\); keep the pose ≥ 170 mm "
+     r"from it$"),
+    ("wall 0.01 mm inside", _hall([(1230.01, 600)]),
+     r"edge\.yaml: robot\.poses\[0\]: the ring \(radius 170 mm with housing\) would be inside a "
+     r"wall at \(1230\.01, 600\) mm; keep the pose ≥ 170 mm from every wall$"),
+])
+def test_a_surface_just_inside_the_housing_is_refused(name, raw, pattern):
+    with pytest.raises(ScenarioError, match=pattern):
+        parse(raw, "edge.yaml")
