@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from irring import designs, resources, scenario
+from irring.scenario import parse as parse_scene
 from irring.simulation import model
 from irring import core
 from irring.core import Ring, beam_geometry
@@ -251,3 +252,29 @@ def test_rangefinders_never_see_the_robot_over_a_sweep():
         d.qpos[hinges] = 0.6 * d.qpos[motor]
         mujoco.mj_forward(m, d)
         np.testing.assert_array_equal(d.sensordata[dist], -1.0)
+
+
+@pytest.mark.parametrize("effects", [{"noise": {"sigma_v": 0.015}, "quantization": {}},
+                                     {"belt_dynamics": {"backlash_deg": 0.5}}],
+                         ids=["noise", "belt dynamics"])
+def test_a_ring_held_by_joint_limit_zero_reads_as_radial12(effects):
+    # joint_limit_deg: 0 with steps 0 … 0 is what a user writes for a still ring; MuJoCo
+    # refuses a [0, 0] hinge range (irring run died with an internal error, exit 70)
+    from irring import pipeline
+
+    def scene(ring: dict):
+        return parse_scene({"name": "held", "seed": 17,
+                            "room": {"outline_mm": [[0, 0], [900, 0], [900, 700], [0, 700]]},
+                            "robot": {"design": "radial12", "ring": ring,
+                                      "poses": [{"x_mm": 430, "y_mm": 360}]},
+                            "effects": effects})
+
+    held_scene = scene({"min_step": 0, "max_step": 0, "joint_limit_deg": 0})
+    assert held_scene.ring.joint_limit_rad == 0.0
+    assert scene({}).ring.joint_limit_rad == pytest.approx(math.radians(37.8))
+    held, free = pipeline.run(held_scene), pipeline.run(scene({}))
+    (a,), (b,) = held.sweeps, free.sweeps
+    assert a.counts.shape == (1, 12)
+    np.testing.assert_array_equal(a.counts, b.counts)
+    assert np.abs(a.sensor_angles).max() <= model.HELD_HINGE_RAD
+    assert held.readings()["valid"] == free.readings()["valid"] == 12

@@ -35,6 +35,9 @@ RAY_GEOMGROUP = np.array([g == RAY_GROUP for g in range(6)], dtype=np.uint8)
 
 WALL_RGBA = (0.93, 0.92, 0.88, 1.0)
 OBSTACLE_RGBA = (0.75, 0.45, 0.2, 1.0)
+# joint_limit 0 is a ring held still (steps 0 … 0); MuJoCo refuses a hinge range [0, 0], so a
+# held hinge gets ±this: no sweep turns it (the loader refuses steps past the limit).
+HELD_HINGE_RAD = 1e-6
 
 
 def sensor_name(k: int) -> str:
@@ -91,7 +94,8 @@ def ring_spec(ring: Ring) -> mujoco.MjSpec:
         body.alt.euler = [0.0, 0.0, 0.0]  # the template spells orientation as euler
         body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
         hinge = spec.joint(f"{tag}_hinge")
-        hinge.range = [-ring.joint_limit_rad, ring.joint_limit_rad]
+        limit = max(ring.joint_limit_rad, HELD_HINGE_RAD)
+        hinge.range = [-limit, limit]
         hinge.limited = mujoco.mjtLimited.mjLIMITED_TRUE
         # the emitter (and its lens) d_o to the right of the hinge: body −y
         spec.site(f"{tag}_emitter").pos = [0.0, -ring.emitter_offset_m, 0.0]
