@@ -104,3 +104,36 @@ def test_cli_scores_bundled_and_own_rooms_with_and_without_effects(tmp_path, cap
 def test_cli_names_a_folder_without_rooms(tmp_path, capsys):
     assert main(["bench", "rooms", str(tmp_path)]) == 1
     assert f"{tmp_path}: the folder holds no *.yaml scenario" in capsys.readouterr().err
+
+
+def test_cli_scores_the_other_rooms_when_one_file_is_bad_or_too_big(tmp_path, capsys):
+    rooms_dir = tmp_path / "rooms"
+    rooms_dir.mkdir()
+    (rooms_dir / "a_bad.yaml").write_text(SMALL_ROOM.replace("radius_mm: 24", "radius_mm: -24"))
+    huge = SMALL_ROOM.replace("name: tiny_post", "name: huge").replace(
+        "[[0, 0], [1030, 0], [1030, 810], [0, 810]]",
+        "[[0, 0], [9030, 0], [9030, 7810], [0, 7810]]") + "map: {resolution_mm: 1}\n"
+    (rooms_dir / "b_huge.yaml").write_text(huge)
+    (rooms_dir / "c_tiny_post.yaml").write_text(SMALL_ROOM)
+    out = tmp_path / "bench"
+    assert main(["bench", "rooms", str(rooms_dir), "--out", str(out)]) == 1
+    captured = capsys.readouterr()
+    bad_line = (f"{rooms_dir / 'a_bad.yaml'}: obstacles[0].radius_mm: -24 mm is out of range; "
+                "allowed 2 … 2000 mm")
+    assert captured.err == (f"irring bench rooms: error: 2 of 3 room(s) not scored; "
+                            f"{bad_line}\n")
+    lines = captured.out.splitlines()
+    assert lines[1] == f"a_bad      error: {bad_line}"
+    assert lines[2].startswith(f"huge       error: {rooms_dir / 'b_huge.yaml'}: a grid of 8,012 × "
+                               "9,232 cells of 1 mm")
+    assert lines[3].startswith("tiny_post  effects ")
+    assert lines[-1].startswith("3 rooms, 1 seed(s) each: 2 not scored (error), ")
+    rows = json.loads((out / "rooms.json").read_text())
+    assert [(r["name"], r.get("status")) for r in rows] == [
+        ("a_bad", 1), ("huge", 5), ("tiny_post", None)]
+    assert rows[2]["effects"]["readings"] == 71 * 12
+    with open(out / "rooms.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert [(r["room"], r["sensor"], r["error"] == "") for r in table] == [
+        ("a_bad", "", False), ("huge", "", False), ("tiny_post", "effects", True),
+        ("tiny_post", "ideal", True)]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import sys
 
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, measure, resolve_rooms
@@ -25,6 +26,8 @@ without any sensor-signal effect; belt, timing and motion are kept):
                   accuracy ≥ 0.99; "ideal<" lists scores where the ideal sensor is worse
 
 Figures are means over --seeds seeds (the first is the scenario's own seed + 0).
+A room file that cannot be loaded or run is listed with its error and the others are scored;
+the command then ends with that error's exit status (1 for a bad file).
 
 examples:
   irring bench rooms                          the room set (scenarios/) and the T-rooms
@@ -67,22 +70,39 @@ def run(args: argparse.Namespace) -> int:
     scenarios = resolve_rooms(args.rooms or ROOMS)
     out = check_out(args.out)
     rows = measure(scenarios, args.seeds)
+    failed = [r for r in rows if "error" in r]
     with OutputSet(out, files=OUTPUT_FILES) as tmp:
         (tmp / "rooms.json").write_text(json.dumps(rows, indent=2))
         with open(tmp / "rooms.csv", "w", newline="") as fh:
             w = csv.writer(fh)
             keys = [c[0] for c in COLUMNS]
-            w.writerow(["room", "sensor", *keys])
+            w.writerow(["room", "sensor", *keys, "error"])
             for r in rows:
+                if "error" in r:
+                    w.writerow([r["name"], "", *("" for _ in keys), r["error"]])
+                    continue
                 for variant in ("effects", "ideal"):
-                    w.writerow([r["name"], variant, *(r[variant][k] for k in keys)])
+                    w.writerow([r["name"], variant, *(r[variant][k] for k in keys), ""])
     if args.json:
         print(json.dumps(rows, indent=2))
-        return 0
+    else:
+        _print_table(rows, args.seeds, out)
+    if failed:  # the table has the rest; the status says that not every room was scored
+        first = failed[0]
+        print(f"irring bench rooms: error: {len(failed)} of {len(rows)} room(s) not scored; "
+              f"{first['error']}", file=sys.stderr)
+        return first["status"]
+    return 0
+
+
+def _print_table(rows: list[dict], seeds: int, out) -> None:
     width = max(len(r["name"]) for r in rows)
     head = "".join(f"{label:>8}" for _, label, _, _ in COLUMNS)
     print(f"{'room':<{width}}  {'sensor':<8}{head}  misses")
     for r in rows:
+        if "error" in r:
+            print(f"{r['name']:<{width}}  error: {r['error']}")
+            continue
         for variant in ("effects", "ideal"):
             vals = "".join(f"{_f(r[variant][k], s, d):>8}" for k, _, s, d in COLUMNS)
             note = ""
@@ -93,8 +113,10 @@ def run(args: argparse.Namespace) -> int:
                     note += ("; " if note else "") + "ideal< " + ", ".join(r["ideal_worse"])
             name = r["name"] if variant == "effects" else ""
             print(f"{name:<{width}}  {variant:<8}{vals}  {note}")
-    n_miss = sum(bool(r["misses"]) for r in rows)
-    n_worse = sum(bool(r["ideal_worse"]) for r in rows)
-    print(f"{len(rows)} rooms, {args.seeds} seed(s) each: {n_miss} miss a target, "
+    scored = [r for r in rows if "error" not in r]
+    n_miss = sum(bool(r["misses"]) for r in scored)
+    n_worse = sum(bool(r["ideal_worse"]) for r in scored)
+    n_failed = len(rows) - len(scored)
+    failed = f"{n_failed} not scored (error), " if n_failed else ""
+    print(f"{len(rows)} rooms, {seeds} seed(s) each: {failed}{n_miss} miss a target, "
           f"{n_worse} where the ideal sensor is worse somewhere; wrote {out}/rooms.json, rooms.csv")
-    return 0

@@ -16,16 +16,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import traceback
 import types
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .. import pipeline
+from .. import errors, pipeline
 from ..estimation.estimate import estimate
 from ..maps.metrics import SCORE_KEYS
 from ..pipeline import progress_bar
-from ..scenario import Scenario, ScenarioError, load_scenario
+from ..scenario import Scenario, ScenarioError, load_scenario, resolve
 
 # The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
 # these unless given others.
@@ -89,43 +91,83 @@ def _mean(values: list) -> float | None:
     return float(np.mean(vals)) if vals else None
 
 
-def resolve_rooms(names_or_paths) -> list[Scenario]:
-    """Scenarios from bundled names, YAML paths, or folders (every ``*.yaml`` in them)."""
-    out = []
+@dataclass(frozen=True)
+class Unusable:
+    """A room that could not be scored: its name, file, the exit status and one-line
+    message ``irring run`` would end with (:func:`errors.describe`)."""
+
+    name: str
+    source: str
+    status: int
+    message: str
+
+
+def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
+    """Scenarios from bundled names, YAML paths, or folders (every ``*.yaml`` in them).
+
+    A name that is no file and no bundled scenario, or a folder without ``*.yaml``, raises
+    ScenarioError before any work; a file that does not load is an :class:`Unusable` entry,
+    so one bad room in a folder does not stop the others."""
+    paths = []
     for item in names_or_paths:
         path = Path(item)
         if path.is_dir():
             files = sorted(path.glob("*.yaml"))
             if not files:
                 raise ScenarioError(f"{item}: the folder holds no *.yaml scenario")
-            out.extend(load_scenario(f) for f in files)
+            paths.extend(files)
         else:
-            out.append(load_scenario(item))
+            paths.append(resolve(item))
+    out: list[Scenario | Unusable] = []
+    for path in paths:
+        try:
+            out.append(load_scenario(path))
+        except ScenarioError as exc:
+            status, line = errors.describe(exc)
+            out.append(Unusable(path.stem, str(path), status, line))
     return out
 
 
-def measure(scenarios: list[Scenario], n_seeds: int = 1, *,
+def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
             progress: bool | None = None) -> list[dict]:
     """Per room: ``name``, ``source``, and for each of :data:`VARIANTS` the mean over
     ``n_seeds`` seeds (the scenario's own seed, +1, …) of every figure of :func:`score_room`, plus
     ``misses``: the targets (:data:`TARGETS`) the room's scene misses, and the scores on
-    which the ideal sensor is worse than the scene's (``ideal_worse``)."""
+    which the ideal sensor is worse than the scene's (``ideal_worse``). A room that cannot be
+    loaded or run (an :class:`Unusable`, or an error in its run) is a row with ``error`` (the
+    one-line message) and ``status`` (the exit status ``irring run`` would give) instead."""
     rows = []
     with progress_bar(len(scenarios) * n_seeds * 2, "rooms", progress, unit="run") as bar:
         for sc in scenarios:
-            seeds = [sc.seed + k for k in range(n_seeds)]
-            row = {"name": sc.name, "source": sc.source}
-            for variant, scene in (("effects", sc), ("ideal", ideal(sc))):
-                runs = []
-                for seed in seeds:
-                    runs.append(score_room(scene, seed))
-                    bar.update()
-                row[variant] = {k: _mean([r[k] for r in runs]) for k in runs[0]}
-            row["misses"] = {k: row["effects"][k] for k, lim in TARGETS.items()
-                             if row["effects"][k] is None or row["effects"][k] < lim}
-            row["ideal_worse"] = _ideal_worse(row["effects"], row["ideal"])
-            rows.append(row)
+            if isinstance(sc, Unusable):
+                rows.append({"name": sc.name, "source": sc.source, "error": sc.message,
+                             "status": sc.status})
+                bar.update(2 * n_seeds)
+                continue
+            try:
+                rows.append(_measure_room(sc, n_seeds, bar))
+            except Exception as exc:  # noqa: BLE001 - one room's failure is that room's row
+                if errors.debug_requested():
+                    traceback.print_exc()
+                status, line = errors.describe(exc)
+                rows.append({"name": sc.name, "source": sc.source, "error": line,
+                             "status": status})
     return rows
+
+
+def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
+    seeds = [sc.seed + k for k in range(n_seeds)]
+    row = {"name": sc.name, "source": sc.source}
+    for variant, scene in (("effects", sc), ("ideal", ideal(sc))):
+        runs = []
+        for seed in seeds:
+            runs.append(score_room(scene, seed))
+            bar.update()
+        row[variant] = {k: _mean([r[k] for r in runs]) for k in runs[0]}
+    row["misses"] = {k: row["effects"][k] for k, lim in TARGETS.items()
+                     if row["effects"][k] is None or row["effects"][k] < lim}
+    row["ideal_worse"] = _ideal_worse(row["effects"], row["ideal"])
+    return row
 
 
 def _ideal_worse(noisy: dict, ideal_: dict) -> list[str]:
