@@ -69,7 +69,8 @@ def test_perfect_map_scores_one(cylinder):
 def test_empty_map_scores_zero_or_undefined(cylinder):
     sc, grid, truth = cylinder
     s = score(grid.empty_like(), sc, truth)
-    assert s["occupied_precision"] is None and s["occupied_f1"] is None
+    # walls to see and none mapped: F1 0 (a miss), though precision has nothing to judge
+    assert s["occupied_precision"] is None and s["occupied_f1"] == 0.0
     assert s["occupied_recall"] == 0.0 and s["coverage"] == 0.0 and s["shadow"] == 0.0
     assert s["free_accuracy"] is None
 

@@ -12,6 +12,7 @@ from irring import scenario as S
 from irring.studies import rooms
 from irring.cli import main
 from irring.simulation.sim import SimRing
+from irring.maps.metrics import SCORE_KEYS as S_KEYS
 
 # A room of our own, not in scenarios/: a 1.03 × 0.81 m room with one post.
 SMALL_ROOM = """\
@@ -137,3 +138,51 @@ def test_cli_scores_the_other_rooms_when_one_file_is_bad_or_too_big(tmp_path, ca
     assert [(r["room"], r["sensor"], r["error"] == "") for r in table] == [
         ("a_bad", "", False), ("huge", "", False), ("tiny_post", "effects", True),
         ("tiny_post", "ideal", True)]
+
+
+# Walls 2.3–2.9 m from the pose, beyond the GP2D12's 624 mm + ring: nothing to see.
+EMPTY_HALL = """\
+name: empty_hall
+seed: 11
+room:
+  outline_mm: [[0, 0], [5300, 0], [5300, 4700], [0, 4700]]
+robot:
+  poses:
+    - {x_mm: 2610, y_mm: 2390}
+effects: [incidence, noise, quantization]
+"""
+
+# 500 mm cells in a 900 × 700 mm room: every cell holds wall, none can be free.
+COARSE = """\
+name: coarse
+seed: 9
+room:
+  outline_mm: [[0, 0], [900, 0], [900, 700], [0, 700]]
+robot:
+  poses:
+    - {x_mm: 440, y_mm: 360}
+map: {resolution_mm: 500}
+effects: [incidence, noise, quantization]
+"""
+
+
+def test_undefined_scores_are_neither_misses_nor_losses():
+    hall, coarse = S.loads(EMPTY_HALL, "hall.yaml"), S.loads(COARSE, "coarse.yaml")
+    rows = rooms.measure([hall, coarse], 1, progress=False)
+    for variant in rooms.VARIANTS:
+        fig = rows[0][variant]
+        assert fig["valid"] == 0 and fig["readings"] == 71 * 12
+        assert (fig["occupied_f1"], fig["occupied_precision"], fig["occupied_recall"]) == (
+            None, None, None)
+        assert fig["free_accuracy"] == 1.0 and fig["coverage"] > 0.5
+        assert rows[1][variant]["free_accuracy"] is None
+        assert rows[1][variant]["occupied_f1"] == 1.0
+    assert [(r["misses"], r["ideal_worse"]) for r in rows] == [({}, []), ({}, [])]
+
+
+def test_the_ideal_sensor_loses_only_on_scores_both_define():
+    assert rooms._ideal_worse({**dict.fromkeys(S_KEYS, 0.5), "point_rms_m": None},
+                              {**dict.fromkeys(S_KEYS, None), "point_rms_m": None}) == []
+    assert rooms._ideal_worse({**dict.fromkeys(S_KEYS, 0.5), "point_rms_m": None},
+                              {**dict.fromkeys(S_KEYS, 0.6), "shadow": 0.4,
+                               "point_rms_m": None}) == ["shadow"]

@@ -24,6 +24,8 @@ without any sensor-signal effect; belt, timing and motion are kept):
   θ=0 mm          the same readings read as if square on (Eq. 10 with a(0), b(0))
   misses          targets missed by the scene's run: F1 ≥ 0.93, precision ≥ 0.90, free
                   accuracy ≥ 0.99; "ideal<" lists scores where the ideal sensor is worse
+  n/a             nothing to score: no wall within reach (F1, precision, recall), no cell
+                  mapped free (free); never counted as a miss or a loss
 
 Figures are means over --seeds seeds (the first is the scenario's own seed + 0).
 A room file that cannot be loaded or run is listed with its error and the others are scored;
@@ -107,8 +109,7 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
             vals = "".join(f"{_f(r[variant][k], s, d):>8}" for k, _, s, d in COLUMNS)
             note = ""
             if variant == "effects":
-                note = ", ".join(f"{k} {v:.3f}" if v is not None else k
-                                 for k, v in r["misses"].items())
+                note = ", ".join(f"{k} {v:.3f}" for k, v in r["misses"].items())
                 if r["ideal_worse"]:
                     note += ("; " if note else "") + "ideal< " + ", ".join(r["ideal_worse"])
             name = r["name"] if variant == "effects" else ""

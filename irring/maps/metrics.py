@@ -17,7 +17,8 @@ the grid's cells, with a **1-cell tolerance** (a cell "has X nearby" when X is w
 * **visible** surface cells: in range and in line of sight of at least one pose.
 * ``occupied_precision``: share of the map's occupied cells that have occupied truth nearby.
 * ``occupied_recall``: share of the visible surface cells that have a map-occupied cell nearby.
-* ``occupied_f1``: their harmonic mean.
+* ``occupied_f1``: their harmonic mean; 0 when there were visible surface cells and the map
+  marks none occupied (recall 0, precision undefined), undefined when nothing was visible.
 * ``free_accuracy``: share of the map's free cells that have free truth nearby.
 * ``coverage``: share of the *reachable free* cells (free truth, in range and in line of
   sight of some pose) that the map marks free (no tolerance).
@@ -27,7 +28,9 @@ the grid's cells, with a **1-cell tolerance** (a cell "has X nearby" when X is w
   the cells a ring of radial sensors at the pose centre could not see. ``shadow`` is the share
   of them with a map-occupied cell nearby; ``None`` when the scene has no shadow cells.
 
-Scores whose denominator is empty are ``None``.
+Scores whose denominator is empty are ``None``: nothing to score (a hall whose walls are all
+beyond the sensors' reach has no visible surface; a map of cells too coarse to be free has no
+free cell to judge). ``None`` is reported as n/a, never as a miss or a loss.
 """
 
 from __future__ import annotations
@@ -231,8 +234,10 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
     occ_near = _dilate(occ)
     precision = _share(_dilate(truth.occupied), occ)
     recall = _share(occ_near, truth.visible)
-    if precision is None or recall is None:
+    if recall is None:
         f1 = None
+    elif precision is None:   # walls to see, none mapped
+        f1 = 0.0
     else:
         f1 = 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
     return {

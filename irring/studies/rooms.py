@@ -132,8 +132,9 @@ def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
             progress: bool | None = None) -> list[dict]:
     """Per room: ``name``, ``source``, and for each of :data:`VARIANTS` the mean over
     ``n_seeds`` seeds (the scenario's own seed, +1, …) of every figure of :func:`score_room`, plus
-    ``misses``: the targets (:data:`TARGETS`) the room's scene misses, and the scores on
-    which the ideal sensor is worse than the scene's (``ideal_worse``). A room that cannot be
+    ``misses``: the targets (:data:`TARGETS`) the room's scene misses (an undefined score,
+    nothing to score, is none), and the scores on which the ideal sensor is worse than the
+    scene's (``ideal_worse``). A room that cannot be
     loaded or run (an :class:`Unusable`, or an error in its run) is a row with ``error`` (the
     one-line message) and ``status`` (the exit status ``irring run`` would give) instead."""
     rows = []
@@ -165,16 +166,17 @@ def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
             bar.update()
         row[variant] = {k: _mean([r[k] for r in runs]) for k in runs[0]}
     row["misses"] = {k: row["effects"][k] for k, lim in TARGETS.items()
-                     if row["effects"][k] is None or row["effects"][k] < lim}
+                     if row["effects"][k] is not None and row["effects"][k] < lim}
     row["ideal_worse"] = _ideal_worse(row["effects"], row["ideal"])
     return row
 
 
 def _ideal_worse(noisy: dict, ideal_: dict) -> list[str]:
     """Scores (higher is better) and RMS (lower is better) where the ideal sensor loses,
-    beyond round-off of the means (1e-9)."""
+    beyond round-off of the means (1e-9); a score undefined for either (nothing to score,
+    ``metrics``) is no loss."""
     worse = [k for k in SCORE_KEYS
-             if noisy[k] is not None and (ideal_[k] is None or ideal_[k] < noisy[k] - 1e-9)]
+             if noisy[k] is not None and ideal_[k] is not None and ideal_[k] < noisy[k] - 1e-9]
     if (noisy["point_rms_m"] is not None and ideal_["point_rms_m"] is not None
             and ideal_["point_rms_m"] > noisy["point_rms_m"] + 1e-9):
         worse.append("point_rms_m")
