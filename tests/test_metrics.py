@@ -7,9 +7,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from irring.core import Points, Reason
 from irring.maps.mapping import OccupancyGrid
+from irring.maps import metrics
 from irring.maps.metrics import (OBSTACLE0, SCORE_KEYS, WALL, ground_truth, score,
                             shadow_by_obstacle)
 from irring.scenario import load_scenario
@@ -182,3 +185,37 @@ def test_box_obstacles_rasterise(room):
     inside = truth.label == OBSTACLE0
     assert inside.sum() * grid.resolution_m ** 2 == pytest.approx(0.1 * 0.05, rel=0.15)
     assert (truth.surface_owner == OBSTACLE0).sum() == pytest.approx(2 * (10 + 5), rel=0.3)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), fill=st.floats(0.0, 0.4),
+       res=st.sampled_from([0.001, 0.01, 0.037]),
+       pose=st.tuples(st.one_of(st.floats(-0.2, 1.3), st.integers(-3, 34).map(lambda k: k / 31)),
+                      st.one_of(st.floats(-0.2, 1.1), st.integers(-2, 25).map(lambda k: k / 23))))
+def test_compiled_line_of_sight_is_its_numpy_oracle(seed, fill, res, pose):
+    # random material (labels 1 … 4) on a 23 × 31 grid, every cell a target, the pose
+    # anywhere: inside, outside the grid, on cell borders
+    rng = np.random.default_rng(seed)
+    shape = (23, 31)
+    label = np.where(rng.random(shape) < fill, rng.integers(1, 5, shape), 0).astype(np.int16)
+    origin = (-0.013, 0.029)
+    pose_xy = (origin[0] + pose[0] * shape[1] * res, origin[1] + pose[1] * shape[0] * res)
+    ty, tx = np.nonzero(np.ones(shape, bool))
+    fast = metrics._sight(shape, origin, res, label, pose_xy, tx, ty)
+    slow = metrics._sight_oracle(shape, origin, res, label, pose_xy, tx, ty)
+    np.testing.assert_array_equal(fast, slow)
+
+
+@pytest.mark.parametrize("name", ["t_room_three_cylinders", "box_room", "posts"])
+def test_compiled_line_of_sight_matches_the_oracle_on_rooms(name):
+    sc = load_scenario(name)
+    grid = OccupancyGrid.for_scenario(sc)
+    truth = ground_truth(sc, grid)
+    material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
+    ty, tx = np.nonzero(truth.surface | truth.free)
+    for pose in sc.robot.poses:
+        args = (grid.shape, grid.origin_xy_m, grid.resolution_m, material,
+                (pose.x_m, pose.y_m), tx, ty)
+        first = metrics._sight(*args)
+        np.testing.assert_array_equal(first, metrics._sight_oracle(*args))
+        assert 0 < (first > 0).sum() < len(first)     # some lines blocked, not all

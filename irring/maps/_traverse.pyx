@@ -529,3 +529,45 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                                    + <double>(<int>(count >> 32)) * l_nr)
                     out[ix] = lo if v < lo else (hi if v > hi else v)
     return kept > 0
+
+
+def first_material(const double[::1] x0, const double[::1] y0, const double[::1] dx,
+                   const double[::1] dy, const short[:, ::1] label, const Py_ssize_t[::1] tx,
+                   const Py_ssize_t[::1] ty):
+    """Per segment j, the ``label`` (> 0: material) of the first cell it visits, walking as
+    :func:`walk` does, that is not within one cell (Chebyshev) of its target cell
+    (tx[j], ty[j]); 0 when there is none. The walk stops there: a line-of-sight test over
+    many cells without listing every visit (``metrics`` ground truth; its numpy oracle is
+    ``metrics._sight_oracle``)."""
+    cdef Py_ssize_t n = x0.shape[0], j
+    cdef long nx = label.shape[1], ny = label.shape[0], k, ix, iy
+    cdef Seg s
+    cdef Cols c
+    cdef double a, z, u_in, u_mid, u_out
+    cdef bint two
+    cdef short lab
+    if (y0.shape[0] != n or dx.shape[0] != n or dy.shape[0] != n or tx.shape[0] != n
+            or ty.shape[0] != n):
+        raise ValueError("x0, y0, dx, dy, tx, ty must have the same length")
+    out_a = np.zeros(n, np.int16)
+    cdef short[::1] out = out_a
+    with nogil:
+        for j in range(n):
+            if not clip(x0[j], y0[j], dx[j], dy[j], nx, ny, &s):
+                continue
+            columns(&s, 1.0, 0.0, &c)
+            for k in range(s.count):
+                two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
+                if cell(&s, k, a, 0, nx - 1, 0, ny - 1, &ix, &iy):
+                    lab = label[iy, ix]
+                    if lab > 0 and (ix - tx[j] > 1 or tx[j] - ix > 1 or iy - ty[j] > 1
+                                    or ty[j] - iy > 1):
+                        out[j] = lab
+                        break
+                if two and cell(&s, k, z, 0, nx - 1, 0, ny - 1, &ix, &iy):
+                    lab = label[iy, ix]
+                    if lab > 0 and (ix - tx[j] > 1 or tx[j] - ix > 1 or iy - ty[j] > 1
+                                    or ty[j] - iy > 1):
+                        out[j] = lab
+                        break
+    return out_a

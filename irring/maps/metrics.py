@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
+from .mapping import FREE, OCCUPIED, OccupancyGrid, _traverse, traverse  # kernel or its stand-in
 from ..core import (Cylinder, box_corners, distance_to_outline, inside_obstacle,
                     inside_outline)
 from ..scenario import Scenario
@@ -111,7 +111,27 @@ def _chebyshev_near(ix, iy, tx, ty) -> np.ndarray:
 
 def _sight(grid_shape, origin, res, material_label, pose_xy, targets_ix, targets_iy):
     """For cells seen from ``pose_xy``: the label of the first material cell on the way
-    (0 when the line of sight is clear). Material within 1 cell of the target is ignored."""
+    (0 when the line of sight is clear). Material within 1 cell of the target is ignored.
+
+    The compiled walk stops at that cell and lists no visits (``_traverse.first_material``;
+    :func:`_sight_oracle` is the readable statement it is tested against; docs/mapping.md)."""
+    n = len(targets_ix)
+    if n == 0:
+        return np.zeros(0, np.int16)
+    # in cells from the grid's corner, computed as traverse computes them (the same walk)
+    x0 = np.full(n, (pose_xy[0] - origin[0]) / res)
+    y0 = np.full(n, (pose_xy[1] - origin[1]) / res)
+    dx = (origin[0] + (targets_ix + 0.5) * res - origin[0]) / res - x0
+    dy = (origin[1] + (targets_iy + 0.5) * res - origin[1]) / res - y0
+    return _traverse.first_material(x0, y0, dx, dy,
+                                    np.ascontiguousarray(material_label, np.int16),
+                                    np.ascontiguousarray(targets_ix, np.intp),
+                                    np.ascontiguousarray(targets_iy, np.intp))
+
+
+def _sight_oracle(grid_shape, origin, res, material_label, pose_xy, targets_ix, targets_iy):
+    """:func:`_sight` in numpy: every visit of every line of sight (:func:`traverse`), then the
+    first blocking one per line."""
     cx = origin[0] + (targets_ix + 0.5) * res
     cy = origin[1] + (targets_iy + 0.5) * res
     n = len(targets_ix)
