@@ -1,11 +1,10 @@
 """The types every stage shares and the paper's constants, in numpy alone.
 
-A source (simulator, serial ring) makes a :class:`Sweep`; the estimator turns it into
-:class:`Points`; the mapper reads those. :class:`Ring` is where the sensors sit and how they
-turn, :class:`SensorSpec` what a sensor kind implies, :class:`Room`, :class:`Cylinder`,
-:class:`Box` and :class:`Pose` the scene. Arrays are shaped ``(steps, sensors)``; units SI.
-Contract: imports numpy and no other irring module (tests/test_imports.py); the numbers are
-the paper's (docs/paper.md).
+A source makes a :class:`Sweep` (arrays shaped ``(steps, sensors)``, SI units), the
+estimator turns it into :class:`Points`, the mapper reads those; :class:`Ring`,
+:class:`SensorSpec`, :class:`Room`, :class:`Cylinder`, :class:`Box` and :class:`Pose`
+describe the ring and the scene. Imports numpy and no other irring module
+(tests/test_imports.py); the numbers are the paper's (docs/paper.md).
 """
 
 from __future__ import annotations

@@ -1,26 +1,10 @@
-"""Ring designs a designer can compare, all built from the one MJCF ring template.
+"""Ring designs a designer can compare (:data:`DESIGNS`: rotating12, radial12, rotating1,
+laser, sonar12; :func:`parametric` for any other), all built from the one MJCF template.
 
-A :class:`Design` is a :class:`~irring.core.Ring` (where the sensors sit and how they
-turn) plus the sensor it carries (a :class:`~irring.core.SensorSpec` from
-:data:`irring.gp2.SENSORS`). The simulator builds every design's MuJoCo model from ``models/irring.xml``
-with the ring's numbers; nothing here writes MJCF.
-
-Named designs (:data:`DESIGNS`):
-
-==============  ============================================================================
-``rotating12``  the paper's ring: 12 GP2D12 on R = 0.15 m, each turning ±37.8° in 1.08° steps
-``radial12``    the same ring held still (one reading per sensor, 30° apart)
-``rotating1``   one GP2D12 at the centre turning 360° in 1.08° steps (an "IR scanner")
-``laser``       a SICK-like scanner at the centre: 0.5° steps over 360°, 8 m, σ = 5 mm
-``sonar12``     a radial ring of 12 ultrasonic rangers, ±15° cone, nearest echo, 6.45 m
-==============  ============================================================================
-
-:func:`parametric` makes any other ring (N, radius, sweep angle, step, sensor).
-
-A scenario names a design with ``robot.design`` and may give ``robot.ring`` numbers; see
-:func:`ring_for` for how the two combine. :func:`apply` turns any scenario into the same
-scene seen by another design (ring, sensor block and sensor effects), which is what
-``irring compare`` runs.
+A :class:`Design` is a :class:`~irring.core.Ring` plus the sensor it carries. A scenario
+names one with ``robot.design`` (:func:`irring.scenario.ring_for`), and
+:func:`irring.scenario.apply_design` shows a scene as another design sees it. Nothing here
+writes MJCF. The named designs: docs/designs.md.
 """
 
 from __future__ import annotations

@@ -1,21 +1,9 @@
 """What a failed `irring` command tells its user: one line and an exit status.
 
-Every error a user can cause derives from :class:`IrringError` (a scenario, recording or
-calibration file: :class:`InputError`; the device: :class:`DeviceError`; ...), whose
-``status`` is its exit status; the command's top-level handler (:func:`describe`) turns it,
-or anything unexpected, into one printable line and a status. This module imports nothing of
-irring, so every module can raise these.
-
-====  =====================================================================
-0     done
-1     bad input: a scenario, recording, calibration or sensor-curve file
-2     bad usage: an option or argument (argparse's own status)
-3     the device: no answer, disconnected, error replies, no progress
-4     an output could not be written (``--out`` not a writable folder, disk full)
-5     refused up front as too big for memory (the message says what it would need)
-70    an internal error (a bug: please report it with ``--debug``'s traceback)
-130   interrupted (Ctrl-C)
-====  =====================================================================
+Every error a user can cause derives from :class:`IrringError`, whose ``status`` is the
+command's exit status (the constants below); :func:`describe` turns it, or anything
+unexpected, into one printable line and a status. Imports nothing of irring, so any module
+can raise these.
 """
 
 from __future__ import annotations
@@ -25,7 +13,14 @@ import os
 import reprlib
 import sys
 
-OK, INPUT, USAGE, DEVICE, OUTPUT, TOO_BIG, INTERNAL, INTERRUPTED = 0, 1, 2, 3, 4, 5, 70, 130
+OK = 0             # done
+INPUT = 1          # bad input: a scenario, recording, calibration or sensor-curve file
+USAGE = 2          # bad usage: an option or argument (argparse's own status)
+DEVICE = 3         # the device: no answer, disconnected, error replies, no progress
+OUTPUT = 4         # an output could not be written (--out not a writable folder, disk full)
+TOO_BIG = 5        # refused up front as too big for memory (the message says what it needs)
+INTERNAL = 70      # an internal error (a bug: please report it with --debug's traceback)
+INTERRUPTED = 130  # interrupted (Ctrl-C)
 
 DEBUG_ENV = "IRRING_DEBUG"   # set to 1 for a traceback with every error
 MAX_MESSAGE = 400            # characters of an error line

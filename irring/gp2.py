@@ -1,26 +1,7 @@
-"""Sharp GP2 range-sensor curves (and linear sonar/laser hooks) and the ADC.
-
-The paper's Eq. 10 relates distance and output: ``d = a·V^b`` with a > 0, b < 0 for the
-Sharp parts, where a and b depend on the incidence angle θ between the beam and the
-surface normal. Here V is in volts and d in metres; the estimator's counts form
-``d = a_c·S^b`` follows from :meth:`SensorModel.ab_counts`.
-
-Each part is a YAML file in ``models/sensors/`` holding its source points, the θ = 0 power
-fit with its residuals, and the a(θ), b(θ) table (see that folder's README for where every
-number comes from). Between table rows a and b are interpolated linearly in |θ|; past the
-last row they are held.
-
-Fold-over: below ``peak_distance_m`` a Sharp sensor's output falls again. The model's
-near branch is a straight line from 0 V at contact to the far branch's voltage at the peak
-(an assumption: datasheets only show the far side in detail), so one voltage has two
-distances (:meth:`SensorModel.distances`). Whether a reading folds is the ``foldover``
-effect's business; :meth:`SensorModel.voltage` is always the far branch (Eq. 10), the
-exact inverse of :meth:`SensorModel.distance`.
-
-No return: with nothing in range a GP2 outputs its noise floor; the model uses the far
-branch's voltage at the part's max range (GP2D12: 0.42 V at 0.80 m, within the 0.3–0.4 V
-floor people measure), :attr:`SensorModel.no_return_v`. Inverting it gives exactly
-``max_range_m``, so an estimator treats it as "nothing within range".
+"""Sensor kinds, their curves and the ADC: :data:`SENSORS` (the Sharp GP2 parts, sonar, laser)
+and each kind's curve from ``models/sensors/<kind>.yaml`` (:func:`sensor`): paper Eq. 10,
+``d = a·V^b`` (volts, metres) with a, b depending on the incidence θ. The model's fold-over
+and no-return: docs/sensors.md.
 """
 
 from __future__ import annotations

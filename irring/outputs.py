@@ -1,14 +1,11 @@
 """Output folders written all at once: a run's files appear together or not at all.
 
-:func:`check_out` refuses a bad ``--out`` before any work (a file, an unwritable place);
-:class:`OutputSet` writes a command's files into a hidden sibling folder of ``--out`` and
-moves them in together when all are written, so Ctrl-C, a full disk or a crash leaves the
-previous run's files untouched, and two runs into one folder leave one run's set, never a mix.
-Every command that writes a folder of outputs (run, replay, drive, compare, the benchmarks,
-a study's summary) goes through it, naming the files it may write.
-:func:`atomic_file` does the same for one file written in place (--mcap, a study's
-results.parquet, a calibration). :func:`safe_name` turns a scenario name into one folder
-name that stays inside its parent.
+:func:`check_out` refuses a bad ``--out`` before any work; :class:`OutputSet` writes a
+command's files into a hidden sibling folder of ``--out`` and moves them in together, so
+Ctrl-C, a full disk or a crash leaves the previous files untouched and two runs into one
+folder leave one run's set, never a mix; :func:`atomic_file` does the same for one file
+(--mcap, a study's results.parquet, a calibration). Every command's outputs go through them;
+:func:`safe_name` makes a scenario name one folder name inside its parent.
 """
 
 from __future__ import annotations

@@ -1,17 +1,12 @@
 """The main job end to end: scenario → sweeps → estimate → map → scores, timed per stage.
 
-``irring run``, ``replay``, ``compare``, ``bench`` and ``drive`` all go through here, so a map
-is built the same way wherever its sweeps came from:
+>>> result = run(load_scenario("t_room"))     # simulate every pose, estimate, map, score
+>>> write_outputs(result, "out/t_room")        # PNG, GIF, PGM+YAML, .npz
 
->>> result = run(load_scenario("t_room"))                 # simulate every pose and map it
->>> result.scores["occupied_f1"], result.hardware_time_s
->>> write_outputs(result, "out/t_room")                    # PNG, GIF, PGM+YAML, .npz
-
-:func:`acquire` sweeps any source (``SimRing``, ``SerialRing``: a ``core.RingSource``) at
-each pose; :func:`map_sweeps` is the part after the source: hand it sweeps from the
-simulator or the serial ring. One sweep per pose, inserted into the grid in pose order (progressive mapping,
-paper Fig. 17). Compute times are wall-clock seconds per stage on this machine; the hardware
-time is what the real ring would spend (sum of ``Sweep.duration_s``).
+:func:`acquire` sweeps any ``core.RingSource`` at each pose and :func:`map_sweeps` inserts
+the sweeps into the grid in pose order, so ``irring run``, ``replay``, ``compare``, ``bench``
+and ``drive`` build a map the same way. Compute times are this machine's wall seconds per
+stage; hardware time is what the real ring would spend (sum of ``Sweep.duration_s``).
 """
 
 from __future__ import annotations
@@ -274,7 +269,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     ``frames_per_sweep > 0`` asks :func:`write_outputs` for an animation with that many
     frames per sweep (:func:`building_frames` replays the inserts; no frame is kept).
     ``truth``: a ``metrics.GroundTruth`` of this scenario on this grid's cells, to reuse
-    across many runs (it takes ~0.1–0.5 s).
+    across many runs (rasterising it costs more than mapping).
     """
     estimator = estimate if estimator is None else estimator
     timings = {"estimate": 0.0, "map": 0.0}

@@ -1,14 +1,6 @@
-"""Sweeps saved to and loaded from a compressed ``.npz`` file, losslessly.
-
-Everything a :class:`~irring.core.Sweep` holds survives the round trip bit for bit: the
-arrays with their dtypes, the scalars, the :class:`~irring.scenario.Ring`, the optional
-:class:`~irring.core.Truth` and per-reading poses. A JSON ``meta`` dict rides along (the
-scenario text, seed, grid and calibration used), so ``irring replay`` can rebuild the same
-map. The file holds no pickles (``allow_pickle=False``), so loading one is safe.
-
-Layout (one zip member per array): ``meta`` (JSON text), ``format`` (version),
-``sweep000/counts``, ``sweep000/truth/distance_m``, … and ``sweep000/scalars`` (JSON text
-of the sweep's non-array fields, including the ring).
+"""Sweeps saved to and loaded from a compressed ``.npz`` file, losslessly and without pickles
+(loading one is safe), with a JSON ``meta`` (scenario text, seed, grid, calibration) from
+which ``irring replay`` rebuilds the same map. The file layout: docs/recording.md.
 """
 
 from __future__ import annotations

@@ -1,12 +1,9 @@
-"""Scenario files: YAML → validated, frozen dataclasses.
+"""Scenario files: YAML → validated, frozen dataclasses (the schema: scenarios/README.md).
 
-Inside the code every quantity is SI (metres, radians, seconds); a field named
-``foo_m`` may be written ``foo_m`` or ``foo_mm`` in YAML, ``foo_rad`` as ``foo_rad``
-or ``foo_deg``, ``foo_s`` as ``foo_s`` or ``foo_ms``, converted once here. Unknown
-keys, wrong types and out-of-range values raise :class:`ScenarioError` naming the
-YAML path and what is allowed, so a typo never becomes a silent default.
-
-The schema is documented for users in ``scenarios/README.md``.
+Inside the code every quantity is SI; YAML may write ``foo_m`` as ``foo_mm``, ``foo_rad`` as
+``foo_deg`` and ``foo_s`` as ``foo_ms``, converted once here. Unknown keys, wrong types and
+out-of-range values raise :class:`ScenarioError` naming the YAML path and what is allowed,
+so a typo never becomes a silent default.
 """
 
 from __future__ import annotations

@@ -115,8 +115,8 @@ def main(argv: list[str] | None = None) -> int:
 
 @contextlib.contextmanager
 def _no_opengl(applies: bool):
-    """Importing MuJoCo loads an OpenGL library (GLFW, ~40 ms of CPU) unless MUJOCO_GL says
-    not to; only `irring view` draws with it. A MUJOCO_GL of the user's own is kept."""
+    """Importing MuJoCo loads an OpenGL library (GLFW) unless MUJOCO_GL says not to;
+    only `irring view` draws with it. A MUJOCO_GL of the user's own is kept."""
     if not applies or "MUJOCO_GL" in os.environ or "mujoco" in sys.modules:
         yield
         return

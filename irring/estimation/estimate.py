@@ -126,7 +126,7 @@ def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | Non
     keep ``prev``'s pieces.
 
     The kernel gives the numpy version's answers bit for bit (irring/estimation/_lines.pyx says how)
-    in ~1/17 of its time: 0.77–0.85 → 0.044–0.064 ms per t_room sweep."""
+    in a fraction of its time (measured: docs/estimator.md, "Speed")."""
     f = np.ascontiguousarray
     return _Pieces(*_lines.segment(
         f(px, dtype=float), f(py, dtype=float), f(thr, dtype=float), f(sensor, dtype=np.intp),

@@ -1,16 +1,6 @@
-"""The estimator's oracle: the whole algorithm of :mod:`irring.estimation.estimate` in plain numpy.
-
-This is the readable statement of the estimator (the paper's Table II plus every addition:
-split-and-merge grouping with corner refinement, membership, corner settling, drop-out
-checks, adoption, held iterations with the secant step control, regroups, the final points
-with the fallback σ). The compiled kernels (``irring/estimation/_lines.pyx``, ``irring/estimation/_iterate.pyx``)
-are an optimisation of exactly this code, and ``tests/test_estimate_oracle.py`` holds them
-to it with hypothesis (the tolerance is stated there). An algorithm change goes here first;
-the kernels follow. The schedule and every phase are described in docs/estimator.md; the
-comments here say why, step by step.
-
-Not for speed: numpy's per-call overhead on ~850 readings makes it several times slower than
-the kernels.
+"""The estimator's oracle: the whole algorithm of :mod:`irring.estimation.estimate` in plain
+numpy, the readable statement its compiled kernels are held to (tests/test_estimate_oracle.py).
+An algorithm change goes here first; it is not for speed. The schedule: docs/estimator.md.
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """The real ring over a serial port, and a device emulator that speaks its protocol.
 
-``protocol`` encodes and decodes IRR sentences (pure, no I/O, no pyserial); :class:`SerialRing`
-drives a ring through pyserial and returns the same :class:`irring.core.Sweep` as the
-simulator; ``emulator`` is a device on a pseudo-terminal backed by the simulator (import it
-explicitly: it pulls in MuJoCo, the driver does not). The driver's names are loaded on first
-use, so ``import irring.hardware.protocol`` needs no pyserial.
+``protocol`` encodes and decodes IRR sentences (pure, no I/O, no pyserial);
+:class:`SerialRing` drives a ring through pyserial and returns the same
+:class:`irring.core.Sweep` as the simulator; ``emulator`` is a device on a pseudo-terminal
+backed by the simulator (import it explicitly). The driver's names load on first use, so
+``import irring.hardware.protocol`` needs no pyserial.
 """
 
 from __future__ import annotations

@@ -1,20 +1,9 @@
-"""IRR serial protocol version 1: pure encode/decode of sentences (no serial I/O here).
+"""IRR serial protocol version 1 (docs/protocol.md): pure encode/decode of sentences, no I/O.
 
-The protocol is specified in ``docs/protocol.md`` (shared with firmware authors). A sentence is
-
-    $<TYPE>[,<field>]*<CS>\\r\\n
-
-with ``<CS>`` two upper-case hex digits, the XOR of every byte between ``$`` and ``*``, and
-at most :data:`MAX_SENTENCE_BYTES` bytes from ``$`` to ``\\n`` inclusive.
-
-* :func:`encode` turns a typed message into the bytes of one sentence;
-* :func:`decode` turns the bytes of one sentence into a typed message, or raises
-  :class:`ProtocolError` whose :class:`Fault` says what was wrong;
-* :class:`Decoder` cuts a byte stream into sentences, ignores bytes outside sentences and
-  resynchronises at the next ``$`` after garbage, returning messages and rejections alike
-  (a receiver counts rejections; it never raises on what the wire delivers).
-
-Messages are frozen dataclasses, one per sentence type; field ranges follow docs/protocol.md.
+:func:`encode` makes one sentence's bytes from a typed message (a frozen dataclass per
+sentence type); :func:`decode` parses one or raises :class:`ProtocolError` naming its
+:class:`Fault`; :class:`Decoder` cuts a byte stream into messages and rejections, never
+raising on what the wire delivers.
 """
 
 from __future__ import annotations

@@ -2,17 +2,10 @@
 
     with SerialRing("/dev/ttyUSB0") as ring:          # opens, then IRHLO → IRINF
         sweep = ring.sweep((0.5, 0.45, 0.0))           # core.Sweep; sweep.missing_steps
-        print(ring.last_report.message)
 
-The port is a pyserial URL or path (``/dev/ttyUSB0``, a pty path, ``loop://``,
-``socket://host:port``) opened with ``serial.serial_for_url`` in :meth:`SerialRing.open`, or
-an already-made pyserial port object; the constructor opens nothing (``opener`` is
-injectable). The link is checked sentence by sentence: rejected sentences, gaps in the IRSCN
-sequence, timeouts and disconnects are counted in :attr:`SerialRing.stats`. A step whose
-IRSCN never arrived is left out of the sweep and listed in ``Sweep.missing_steps`` — no
-reading is ever invented. A device that stops answering raises :class:`DeviceTimeout` after
-``timeout_s`` (plus a few IRSTP retries of ``timeout_s`` each), never hangs; a closed port
-raises :class:`DeviceDisconnected`. Both carry the readings received so far in ``.partial``.
+A step that never arrived is listed in ``Sweep.missing_steps``, never invented; a silent
+device raises :class:`DeviceTimeout`, a closed port :class:`DeviceDisconnected`, both
+holding ``.partial``. Ports, link checks and counters: docs/protocol.md.
 """
 
 from __future__ import annotations

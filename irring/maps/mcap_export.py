@@ -1,22 +1,7 @@
-"""A run as an MCAP file of standard ROS 2 messages, for Foxglove and rosbag2 tools.
-
-Topics (all in the ``map`` frame; times are the real ring's: sweep k ends at the sum of the
-hardware durations of sweeps 0 … k):
-
-- ``/tf`` (``tf2_msgs/msg/TFMessage``): the ring's pose ``map`` → ``base_link`` per sweep;
-- ``/irring/points`` (``sensor_msgs/msg/PointCloud2``): each sweep's valid end points, one
-  message per sweep, fields x, y, z (float32, m; z = 0) and range (float32, m: the
-  estimated distance d);
-- ``/map`` (``nav_msgs/msg/OccupancyGrid``): the final map, once, after the last sweep
-  (0 … 100 % occupied, −1 for cells no beam reached);
-- ``/truth/outline`` and ``/truth/obstacles`` (``geometry_msgs/msg/PolygonStamped``): the
-  room's true outline and each obstacle's (a cylinder as a 32-gon), when there is a
-  scenario.
-
-The file is written beside its place and renamed in when complete (``outputs.atomic_file``).
-
-Needs the ``mcap`` extra (``pip install 'irring[mcap]'``: the ``mcap`` writer and
-``mcap-ros2-support``'s CDR encoder); the message definitions below are ROS 2's own.
+"""A run as an MCAP file of standard ROS 2 messages (``/tf``, ``/irring/points``, ``/map``,
+``/truth/*``) for Foxglove and rosbag2 tools, written whole or not at all
+(``outputs.atomic_file``); needs the ``mcap`` extra. Topics, frames and times:
+docs/mapping.md.
 """
 
 from __future__ import annotations

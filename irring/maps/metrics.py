@@ -1,36 +1,7 @@
-"""Ground truth on the map's grid, and how well a map matches it.
-
-The scenario (room outline, wall thickness, obstacles) is rasterised onto the same cells as
-the map (:func:`ground_truth`); :func:`score` compares a map with it. Definitions, all on
-the grid's cells, with a **1-cell tolerance** (a cell "has X nearby" when X is within its
-3 × 3 neighbourhood):
-
-* **surface cells**: cells crossed by a surface the sensors can see — the room outline
-  (the inner faces of the walls; walls extend ``room.wall_thickness_m`` outward) and
-  obstacle perimeters. **Occupied truth** = surface cells plus the cells whose centre lies
-  in wall or obstacle material. **Free truth** = cells whose centre is inside the room and
-  outside every obstacle, minus surface cells. Cells beyond the walls are neither.
-* **in range** of a pose: the cell centre lies within ``sensor.max_range_m + ring.radius_m``
-  of the pose centre (the farthest a sensor on the ring reaches).
-* **line of sight** from a pose: the straight segment from the pose centre to the cell
-  centre crosses no material cell, except within 1 cell of the target itself.
-* **visible** surface cells: in range and in line of sight of at least one pose.
-* ``occupied_precision``: share of the map's occupied cells that have occupied truth nearby.
-* ``occupied_recall``: share of the visible surface cells that have a map-occupied cell nearby.
-* ``occupied_f1``: their harmonic mean; 0 when there were visible surface cells and the map
-  marks none occupied (recall 0, precision undefined), undefined when nothing was visible.
-* ``free_accuracy``: share of the map's free cells that have free truth nearby.
-* ``coverage``: share of the *reachable free* cells (free truth, in range and in line of
-  sight of some pose) that the map marks free (no tolerance).
-* ``shadow``: the paper's headline, the wall behind a thin obstacle. *Shadow cells* are wall
-  surface cells in range of some pose, visible from none, and hidden behind an obstacle
-  (the first material on the line of sight is an obstacle's) from at least one pose in range:
-  the cells a ring of radial sensors at the pose centre could not see. ``shadow`` is the share
-  of them with a map-occupied cell nearby; ``None`` when the scene has no shadow cells.
-
-Scores whose denominator is empty are ``None``: nothing to score (a hall whose walls are all
-beyond the sensors' reach has no visible surface; a map of cells too coarse to be free has no
-free cell to judge). ``None`` is reported as n/a, never as a miss or a loss.
+"""Ground truth on the map's grid (:func:`ground_truth`) and how well a map matches it
+(:func:`score`: occupied precision, recall and F1, free accuracy, coverage, shadow; 0 … 1
+with a 1-cell tolerance; None, reported as n/a, where a score's denominator is empty). The
+definitions: docs/mapping.md.
 """
 
 from __future__ import annotations
@@ -227,8 +198,8 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
 def cached_ground_truth(scenario: Scenario, grid: OccupancyGrid, cache: dict,
                         key) -> GroundTruth:
     """:func:`ground_truth`, kept in ``cache`` (a dict the caller owns) under ``key`` (what
-    identifies the scenario) and the grid's cells: rasterising takes ~0.1–0.5 s, and studies
-    judge many runs on the same scenario and cells."""
+    identifies the scenario) and the grid's cells: rasterising costs more than scoring, and
+    studies judge many runs on the same scenario and cells."""
     full = (key, grid.shape, tuple(grid.origin_xy_m), grid.resolution_m)
     truth = cache.get(full)
     if truth is None:

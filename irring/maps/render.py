@@ -1,16 +1,6 @@
-"""Pictures of maps: a PNG of the final map and an animation of the map being built.
-
-The picture shows the map's three cell states (unknown grey, free white, occupied black),
-the ground truth (walls and obstacles as blue outlines), each scan pose (a red ring of the
-robot's radius with its number), and the sensor reach around each pose (dashed orange
-circle: max range + ring radius), with a legend, a scale bar and axes in metres. Poses
-whose rings would overlap (a moving scan, a dense survey) are drawn as a path of dots
-instead, numbered where a number has room.
-
-Matplotlib draws on its own Agg canvas (never pyplot), so the caller's backend and figures
-are left alone. The animation is drawn by matplotlib once — the static overlay, each pose's
-marks, each caption — and its frames are composed from the grid raster with numpy, quantised
-to one palette and streamed to the GIF writer (Pillow), never held as a list.
+"""Pictures of maps: a PNG of the final map and a GIF of it being built, drawn on
+matplotlib's own Agg canvas (never pyplot: the caller's backend and figures are left alone).
+What the pictures show and how the GIF is streamed: docs/mapping.md.
 """
 
 from __future__ import annotations

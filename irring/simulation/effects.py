@@ -1,32 +1,9 @@
 """From true ranges to the ADC counts the real ring would report, one effect per stage.
 
-A scene lists the effects it wants under ``effects:``; :meth:`Pipeline.from_scenario`
-constructs a stage for each of those and nothing else, so an effect that is off is not
-built, not called, and draws no random numbers. With no effects the pipeline returns the
-ideal curve value in float counts: ``counts_from_voltage(model.voltage(d))``.
-
-Stages run in a fixed physical order, whatever order the scene lists them in; each takes
-part in one or more of these phases (``Pipeline.run``):
-
-1. ``rays``     beam: replace the single ray by a cone of ``rays`` rays (extra ray casts)
-2. ``returns``  incidence: a(θ), b(θ) and grazing drop-out; reflectance: weak returns drop
-                out and the rest get noisier
-3. curve        (always) far-branch voltage of Eq. 10 at θ (θ = 0 unless ``incidence``)
-4. ``fold``     foldover: below the peak distance, the falling near branch
-5. ``combine``  beam: light-weighted mean of the rays' voltages; otherwise (always) a
-                dropped or missing return becomes the sensor's no-return voltage
-6. ``expand``   averaging: ``scan.samples`` independent samples per step
-7. ``sample``   outliers (beam-model mixture), then noise (Gaussian volts), per sample
-8. counts       (always) volts → float counts, clipped to the ADC's range
-9. ``adc``      quantization: round to whole counts (integers)
-10. ``reduce``  averaging: mean of the samples (rounded again when quantised)
-
-Hardware time: averaging ``scan.samples`` readings costs ``samples`` GP2 periods per step,
-which is what ``core.hardware_duration_s`` charges; without the ``averaging`` effect a step
-takes one reading (samples = 1) whatever ``scan.samples`` says.
-
-The ``belt_dynamics``, ``timing`` and ``motion`` effects change where and when the ring
-reads, not the signal; the simulator handles them and this pipeline ignores them.
+:meth:`Pipeline.from_scenario` builds a stage for each effect the scene lists and nothing
+else (an effect that is off is not built, not called and draws no random numbers); stages
+run in a fixed physical order, whatever order the scene lists them in. With no effects the
+result is the ideal curve in float counts. The order and phases: docs/simulation.md.
 """
 
 from __future__ import annotations

@@ -1,17 +1,7 @@
-"""MuJoCo models for a ring design and a scenario, built with ``mujoco.MjSpec``.
-
-``models/irring.xml`` is the one template (the paper's ring). A design with other numbers
-(sensor count N, radius, sweep limit, motor step, belt ratio, emitter offset, height) is made
-from it by keeping sensor ``ir_00`` — its body, its belt equality ``belt_00`` and its
-rangefinder ``ir_00_range`` — as the prototype and replicating it N times through the spec.
-A scenario adds a floor, a light, the walls (thin boxes whose inner faces lie exactly on the
-outline polygon) and the obstacles (cylinders and boxes). No XML is templated as text.
-
-Names in the compiled model: chassis (mocap body: the robot pose), motor / ring_motor (hinge
-and position actuator), ir_KK / ir_KK_hinge / ir_KK_emitter / ir_KK_range / belt_KK for
-sensor KK, wall_KK and obstacle_KK. Ray targets (walls and obstacles) are in geom group
-``RAY_GROUP``; the robot's own geoms are in groups 2 (visual) and 3 (collision) and the
-floor in group 1, so a ray cast filtered to ``RAY_GEOMGROUP`` sees only the room.
+"""MuJoCo models for a ring design and a scenario, built with ``mujoco.MjSpec`` from the one
+template ``models/irring.xml`` (no XML is templated as text). Ray targets are in geom group
+``RAY_GROUP``, so a ray cast filtered to ``RAY_GEOMGROUP`` sees only the room. How a ring is
+replicated, and the compiled model's names: docs/simulation.md.
 """
 
 from __future__ import annotations

@@ -1,17 +1,7 @@
-"""Sensor behaviour the GP2 pipeline lacks, for the non-IR designs (``sonar12``).
-
-An ultrasonic ranger hears the *nearest echo* anywhere in its cone, and a smooth surface
-only echoes back when it faces the transducer (specular reflection). :class:`SonarConeStage`
-is an :class:`irring.simulation.effects.Stage` that does this inside the effects
-:class:`~irring.simulation.effects.Pipeline`: in the ``rays`` phase it casts a horizontal fan across
-the cone (``SimRing.cast``), drops rays that meet their surface more obliquely than the
-sensor model's grazing limit (``gp2.sensor('sonar').max_incidence_rad``, 20°), and in the
-``combine`` phase reports the nearest remaining echo. It takes the ``beam`` slot of the
-pipeline's physical order (it *is* the sonar's beam), so it runs first.
-
-:func:`pipeline_for` is the scene's pipeline with this stage added when the scene's sensor
-is a sonar; it is ``SimRing``'s default pipeline. A laser needs nothing extra: its thin beam is the
-default single ray and its linear curve is ``gp2.sensor('laser')``.
+"""Sensor behaviour the GP2 pipeline lacks, for the non-IR designs: :class:`SonarConeStage`
+(the nearest echo in a cone, only from surfaces facing the transducer) in the effects
+pipeline's ``beam`` slot, and :func:`pipeline_for`, a scene's pipeline with it added for a
+sonar (``SimRing``'s default). How the cone is cast: docs/simulation.md.
 """
 
 from __future__ import annotations

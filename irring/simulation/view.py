@@ -1,11 +1,9 @@
-"""The scenario's MuJoCo scene as a picture: room, obstacles, the ring at one scan pose and
-motor step, its beams to where they hit (hits marked), or the interactive viewer playing
-the sweep.
+"""The scenario's MuJoCo scene as a picture (room, obstacles, the ring at one pose and motor
+step, its beams to where they hit) or the interactive viewer playing the sweep.
 
-Offscreen pictures need no display: OSMesa (Debian ``libosmesa6``) or an EGL context
-(``libegl1`` with Mesa's driver); ``MUJOCO_GL=egl`` or ``osmesa`` picks one, else OSMesa
-if it is installed. MuJoCo's warnings go to Python's
-``warnings`` instead of a ``MUJOCO_LOG.TXT`` in the working directory.
+Offscreen pictures need no display: OSMesa (``libosmesa6``) or EGL (``libegl1``), as
+``MUJOCO_GL`` says, else OSMesa if installed. MuJoCo's warnings go to Python's ``warnings``
+instead of a ``MUJOCO_LOG.TXT`` in the working directory.
 """
 
 from __future__ import annotations

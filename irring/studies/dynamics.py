@@ -1,21 +1,7 @@
-"""What the belt, the GP2's clock and a moving robot do to the readings, in numbers.
-
-Each function returns plain figures (``irring bench dynamics`` prints them, the tests in
-``tests/test_dynamics.py`` assert on them):
-
-- :func:`coupling`: the belt's stretch over many back-and-forth sweeps without rest
-  (:func:`endurance`): max over every physics step and at the reads, per sweep,
-  MuJoCo warnings.
-- :func:`convergence`: one sweep at time step dt and dt/2 for the same scene: the largest
-  change of a true sensor angle, a true distance and an ADC count.
-- :func:`settling`: a T-room sweep with belt and timing at several ``scan.settle_s``:
-  hardware time per sweep and the readings' angle error (true − commanded sensor angle at
-  the measurement), rms and max.
-- :func:`mujoco_clocks`: the same sweep's readings from MuJoCo's own periodic, delayed
-  rangefinders (``interval``, ``delay``) against :class:`~irring.simulation.dynamics.SensorClocks`.
-- :func:`motion`: occupied F1 of the static four-scan T-room, of static scans at the
-  moving run's sweep positions, and of the moving run with perfect and with the bundled
-  odometry (``t_room_moving``).
+"""What the belt, the GP2's clock and a moving robot do to the readings, in numbers:
+:func:`coupling`, :func:`convergence`, :func:`settling`, :func:`mujoco_clocks` and
+:func:`motion` return plain figures (``irring bench dynamics`` prints them,
+tests/test_dynamics.py asserts on them). What each measures: docs/dynamics.md.
 """
 
 from __future__ import annotations

@@ -1,28 +1,7 @@
-"""What each effect costs per sweep, and that an effect that is off costs nothing.
-
-A synthetic 71 × 12 sweep (the paper's ring, R = 0.15 m, ±37.8°, in a round room of
-radius 0.70 m with one grey post) goes through pipelines built with
-:meth:`~irring.simulation.effects.Pipeline.from_scenario`; no MuJoCo is involved. The ``beam`` stage
-casts its extra rays with :class:`RoundRoom`, an analytic caster standing in for
-``SimRing.cast``. Its hits are computed once and replayed, so the figures are the
-pipeline's own work; casting the rays is the simulator's cost (MuJoCo's in a real run),
-and the stand-in's time for one batch is reported as ``fake_cast_us`` for scale.
-
-Timing: each configuration runs ``batch`` sweeps back to back, configurations take turns
-for ``rounds`` rounds (so drift hits all alike), and the figure is the median over rounds
-of the per-sweep time, in µs.
-
-Figures (all per sweep):
-
-- ``full_us``: all eight signal effects on; ``ideal_us``: none (the plain curve).
-- per effect: ``alone_us`` = (ideal + the effect) − ideal; ``in_full_us`` = full − (full
-  without it); ``neutral_us`` = cost of the stage built with do-nothing parameters (σ = 0,
-  zero rates, …), i.e. what switching an effect off by its parameters would still cost.
-- ``off_us``: what an effect that is off costs. It is not built, so the only trace it
-  could leave is the pipeline's fixed dispatch (empty phase loops) that every effect
-  shares: ideal pipeline − the bare curve (``model.voltage`` → no-return fill → counts)
-  written out by hand. ``off_pct_of_full`` is that as a share of the full sweep; the
-  claim is ≤ 2 %.
+"""What each effect costs per sweep, and that an effect that is off costs nothing: a synthetic
+71 × 12 sweep of the paper's ring through pipelines built with
+:meth:`~irring.simulation.effects.Pipeline.from_scenario`, no MuJoCo (:class:`RoundRoom`
+stands in for the ray casts). Figures in µs per sweep, defined in docs/speed.md.
 """
 
 from __future__ import annotations

@@ -1,21 +1,6 @@
-"""The iterative estimator (paper Table II) against the θ = 0 assumption, on simulated sweeps.
-
-For every pose of the scenario, ``sweeps_per_pose`` sweeps (fresh noise each) go through
-:func:`irring.estimation.estimate.estimate` twice: iterating (a(θ), b(θ) at the estimated incidence)
-and with ``iterate=False`` (Eq. 10 with a(0), b(0) for every reading). The range error is
-the estimated distance minus the simulator's true distance from the emitter.
-
-Figures:
-
-- ``steep``: readings whose true incidence is ≥ ``min_theta_deg`` (40° by default) and
-  that both estimates report valid. The θ = 0 estimate calls its worst readings out of
-  range (it puts them past max range), so this set flatters θ = 0; the claim (iterative
-  RMSE ≤ ½ the θ = 0 RMSE) is made on it.
-- ``steep_all``: the same readings with a return that the iterative estimate reports
-  valid, the θ = 0 distance taken even where it calls the reading out of range.
-- ``all``: every reading both report valid, any incidence.
-- iterations per valid reading (mean, median, 95th percentile, max), readings that did
-  not converge, and the estimator's time per sweep (median, ms).
+"""The iterative estimator (paper Table II) against the θ = 0 assumption on simulated sweeps:
+range RMSE at steep incidence and overall, iterations per reading, time per sweep
+(``irring bench estimator``). Which readings each figure counts: docs/estimator.md.
 """
 
 from __future__ import annotations

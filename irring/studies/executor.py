@@ -1,25 +1,8 @@
-"""Scaling out: run independent jobs through a ``concurrent.futures`` executor.
-
-:func:`stream` maps a picklable module-level function over picklable jobs on whichever
-executor it is given and yields each result as it finishes, with a bounded number in flight
-(what ``irring study`` writes row by row); :func:`run_jobs` collects them in job order, so the
-caller's results do not depend on who ran them. Every multi-run command (``irring study``,
-``compare``, ``bench accuracy``) runs on one of these executors:
-
-* ``executor(workers=1)``: in this process, one job after another (no pickling at all);
-* ``executor(workers=N)``: a local process pool of N workers (``forkserver`` start method on
-  POSIX: workers fork from a clean server process, never from this one, which may hold
-  threads — a Dask client, tqdm's monitor — that a plain ``fork`` would copy mid-flight;
-  so, as with any ``spawn``/``forkserver`` pool, a script that starts one needs the
-  ``if __name__ == "__main__":`` guard);
-* ``executor(dask="tcp://host:8786")``: a Dask cluster through
-  ``dask.distributed.Client(address).get_executor()`` (optional extra ``irring[dask]``).
-  Workers need ``irring`` installed; jobs carry their scenario as YAML text, so a worker
-  needs no access to this machine's files.
-
-Determinism is the job's business: a job must carry everything it needs (scenario text,
-configuration, seed) and build its own state (a ``SimRing`` holds MuJoCo objects that cannot
-be pickled), so the same job gives the same result in any process.
+"""Scaling out: run independent jobs in this process, a local process pool or a Dask cluster
+(:func:`executor`), streamed as they finish (:func:`stream`) or collected in job order
+(:func:`run_jobs`). A job is a picklable module-level function applied to a picklable job
+that carries everything it needs, so it gives the same result in any process. Start
+methods, Dask and determinism: docs/studies.md.
 """
 
 from __future__ import annotations

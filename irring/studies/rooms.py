@@ -1,15 +1,6 @@
-"""Map scores on a set of rooms, with the scene's effects and with an ideal sensor.
-
-Every room goes through ``pipeline.run`` (the path of ``irring run``) twice: as written
-(the bundled rooms: incidence, 15 mV noise, 12-bit quantization) and with an *ideal sensor*:
-the scene with none of the sensor-signal effects (:data:`SIGNAL_EFFECTS`; where and when the
-ring reads — belt, timing, motion — is kept). An ideal sensor must never map worse.
-
-Besides the six map scores (``metrics.SCORE_KEYS``) each run reports the end points'
-error: the RMS distance between each valid reading's estimated end point and the
-simulator's true hit point (``point_rms_m``), and beside it the same readings' end points
-read as if every surface were square on (θ = 0, Eq. 10 with a(0), b(0):
-``point_rms_theta0_m``), over the readings both estimates call valid and that hit something.
+"""Map scores on a set of rooms, with the scene's effects and with an ideal sensor (none of
+:data:`SIGNAL_EFFECTS`), and the end points' RMS error beside θ = 0's (``irring bench
+rooms``). An ideal sensor must never map worse. The figures: docs/studies.md.
 """
 
 from __future__ import annotations

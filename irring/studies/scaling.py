@@ -1,12 +1,6 @@
-"""How ``irring study`` scales: wall time and runs per second on 1 and on N local workers, and
-peak memory as the grid grows.
-
-The grid is every named design × the three T-rooms × seeds 1 … S (5 × 3 × 20 = 300 runs by
-default), run through :func:`irring.studies.study.run_study` exactly as ``irring study`` runs
-it (rows streamed to a results.csv in a temporary folder, summary and chart included). Wall
-time counts everything from the executor's start to the chart. Memory: for a small and a ten
-times larger grid, each run by ``irring study`` in a fresh process, that process's peak
-resident set and the largest of its workers' (each row carries its worker's ``ru_maxrss``).
+"""How ``irring study`` scales: wall time and runs per second on 1 and N local workers, and
+peak memory as the grid grows (``irring bench study``). The grid and what is timed:
+docs/studies.md.
 """
 
 from __future__ import annotations

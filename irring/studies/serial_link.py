@@ -1,14 +1,7 @@
-"""Measured figures for the serial path: `python -m irring.studies.serial_link [--json]`.
-
-Runs the emulator on a real pty with the t_room scenario and SerialRing against it:
-
-* host wall time of one full sweep (71 steps × 12 sensors) unthrottled, paced like a UART
-  at 115200 baud, and in real time (GP2 timing + 115200 baud), beside the device-clock
-  duration and bytes on the wire;
-* a lossy link (1 % corrupted bytes, 5 % dropped sentences): share of steps received per
-  sweep, before and after re-sweeping only the missing steps, and the link counters.
-
-Figures depend on this machine; nothing here is asserted.
+"""Measured figures for the serial path (``python -m irring.studies.serial_link [--json]``):
+the emulator on a real pty with SerialRing against it, unthrottled, paced like a UART and
+in real time, and on a lossy link. Nothing here is asserted. What is measured:
+docs/emulator.md.
 """
 
 from __future__ import annotations

@@ -1,18 +1,8 @@
-"""Design studies: a grid of designs × scenarios × seeds × knobs, run on any executor.
-
-A study file (YAML, :func:`load_study`) names the grid; :func:`run_study` runs every point
-through :func:`irring.studies.accuracy.run_job` (sweep every pose, estimate, map, score — the
-``irring run`` path, every design judged on the scenario's own ground truth) on the executor
-it is given, and appends one row per run to ``results.csv`` as each finishes (flushed, so a
-killed study loses only the runs in flight). ``resume=True`` skips the points already in the
-file. When every point is done the file is rewritten in grid order (:func:`grid`), so its
-rows do not depend on which run finished first; the timing columns (:data:`TIMING_COLUMNS`)
-are the only ones that differ between two runs of the same study. Then the summary: per
-configuration (design × knob values) the mean and spread of each score, and a chart of
-accuracy against hardware time with the Pareto front marked.
-
-Errors in a study file raise :class:`StudyError` (a ``ScenarioError``), one line naming the
-file, the key and what is allowed, as scenario files do.
+"""Design studies: a grid of designs × scenarios × seeds × knobs from a YAML study file
+(:func:`load_study`), every point run as ``irring run`` runs on any executor
+(:func:`run_study`), one row per run appended to ``results.csv`` as it finishes (resumable),
+then a summary per configuration and a chart. A bad study file raises :class:`StudyError`
+(a ``ScenarioError``). Row order, resume and timing columns: docs/studies.md.
 """
 
 from __future__ import annotations
