@@ -648,8 +648,9 @@ def test_silent_beams_grazing_a_cabinet_do_not_free_its_inside(noise):
     """A 500 × 80 mm cabinet whose long face one sweep sees as a line and other beams of
     the same sweep graze past the drop-out angle (no return). Those silent beams are known
     free only up to the face (``Points.reach_m``): no cell inside the cabinet is mapped
-    free on any seed, where at full length (reach dropped) 17–22 were."""
-    from irring.maps.mapping import FREE, OccupancyGrid
+    free on any seed, where at full length (reach dropped, and the mapper's own stop at
+    occupied cells off) 17–22 were."""
+    from irring.maps.mapping import FREE, MapperParams, OccupancyGrid
 
     cal = dataclasses.replace(NOMINAL, noise_counts=max(noise, 0.3))
     box = (0.25, 0.10, 0.75, 0.18)
@@ -662,8 +663,10 @@ def test_silent_beams_grazing_a_cabinet_do_not_free_its_inside(noise):
         assert np.isfinite(p.reach_m[silent]).sum() >= 10
         assert not np.isfinite(p.reach_m[~silent]).any()
         inside_free = []
-        for pts in (p, dataclasses.replace(p, reach_m=None)):
-            g = OccupancyGrid.covering((-0.6, -0.5), (1.0, 0.7), 0.01)
+        for pts, params in ((p, MapperParams()),
+                            (dataclasses.replace(p, reach_m=None),
+                             MapperParams(no_return_stop=math.inf))):
+            g = OccupancyGrid.covering((-0.6, -0.5), (1.0, 0.7), 0.01, params)
             g.insert(pts)
             xs, ys = g.cell_centers()
             x, y = np.meshgrid(xs, ys)

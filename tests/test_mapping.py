@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from irring.core import Points, Reason
+from irring.maps import mapping_numpy
 from irring.maps.mapping import (FREE, OCCUPIED, PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN, UNKNOWN,
                             MapperParams, OccupancyGrid, read_pgm, traverse)
 from irring.scenario import load_scenario
@@ -236,8 +237,9 @@ def test_ideal_sensor_keeps_the_table_legs_edge_cells():
 def test_gaussian_spread_follows_sigma():
     """A fuzzier reading spreads its occupied evidence over more cells (paper §IV; followed
     2σ into the surface to see it) and adds less to its end cell: l_occ up to occ_sigma_m
-    (5 mm), l_occ·5 mm/σ beyond, never less than l_occ_min."""
-    grids = {s: small_grid(tail_sigmas=2.0) for s in (0.003, 0.006, 0.04)}
+    (5 mm), l_occ·5 mm/σ beyond, never less than l_occ_min up to lone_sigma_m (30 mm),
+    l_occ_min·30 mm/σ beyond."""
+    grids = {s: small_grid(tail_sigmas=2.0) for s in (0.003, 0.006, 0.02, 0.04)}
     for sigma, g in grids.items():
         g.insert(single_ray(0.055, 0.205, 0.0, 0.4049, sigma_m=sigma))
     ix, iy = grids[0.003].cell_of(0.4599, 0.205)
@@ -245,9 +247,10 @@ def test_gaussian_spread_follows_sigma():
     p = grids[0.003].params
     assert end[0.003] == pytest.approx(p.l_occ, abs=1e-3)
     assert end[0.006] == pytest.approx(p.l_occ * 0.005 / 0.006, abs=1e-3)     # 2.08
-    assert end[0.04] == pytest.approx(p.l_occ_min, abs=1e-3)                  # not 0.31
+    assert end[0.02] == pytest.approx(p.l_occ_min, abs=1e-3)                  # not 0.62
+    assert end[0.04] == pytest.approx(p.l_occ_min * 0.03 / 0.04, abs=1e-3)    # 1.2
     spread = [(g.log_odds > 0).sum() for g in grids.values()]
-    assert spread[0] < spread[1] < spread[2]
+    assert spread[0] < spread[1] < spread[2] < spread[3]
 
 
 def test_no_return_frees_up_to_max_range_and_marks_nothing():
@@ -278,6 +281,92 @@ def test_no_return_frees_only_up_to_its_reach(reach, last):
         assert touched.min() == 5 and touched.max() == last
         np.testing.assert_allclose(g.log_odds[20, touched], g.params.l_no_return)
     assert np.count_nonzero(g.log_odds) == len(touched)
+
+
+def test_no_return_stops_at_the_first_cell_the_map_holds_occupied():
+    """A no-return beam frees the cells before the first cell above no_return_stop (1.7: a
+    sharp hit, not a lone uncertain one) and nothing from there on: a surface at grazing
+    incidence returns nothing, and the beam must not carve through it."""
+    nr = single_ray(0.055, 0.205, 0.0, np.nan, valid=False, reason=Reason.NO_RETURN,
+                    max_range_m=0.3)
+    for prior, cleared in ((2.5, 20), (1.6, 31), (-1.0, 31)):
+        g = small_grid()
+        g.log_odds[20, 25] = prior                          # x 0.25-0.26 m
+        g.insert(nr)
+        changed = np.flatnonzero(g.log_odds[20] != np.where(np.arange(60) == 25, prior, 0.0))
+        assert len(changed) == cleared, (prior, changed)   # columns 5-24, or 5-35 through it
+        assert np.all(g.log_odds[20, changed] == pytest.approx(
+            np.where(changed == 25, prior, 0.0) + g.params.l_no_return))
+    through = small_grid(no_return_stop=math.inf)
+    through.log_odds[20, 25] = 4.0
+    through.insert(nr)
+    assert np.count_nonzero(through.log_odds[20] < 0) == 30 and through.log_odds[20, 25] == 3.25
+
+
+def test_no_return_grazing_a_box_seen_in_the_same_sweep_leaves_the_box_alone():
+    """Sharp readings of one sweep mark a box's face (x = 0.30 m); a no-return beam of the
+    same sweep crosses that face into the box: it frees the cells in front of the face (the
+    exact cells traverse() lists before it) and none inside; without the stop it would free
+    a streak inside the box."""
+    box = (slice(10, 30), slice(30, 51))                     # y 0.10-0.30, x 0.30-0.51 m
+    hits = [single_ray(0.055, 0.105 + 0.01 * k, 0.0, 0.25, sigma_m=0.003) for k in range(20)]
+    heading = math.atan2(0.12, 0.40)                          # from (0.055, 0.055): 17° up
+    nr = single_ray(0.055, 0.055, heading, np.nan, valid=False, reason=Reason.NO_RETURN)
+    sweep = _batch(*hits, nr)
+    g, through = small_grid(), small_grid(no_return_stop=math.inf)
+    for grid in (g, through):
+        grid.insert(sweep)
+    assert np.all(g.log_odds[box][:, 1:] == 0.0)              # the box behind its face column
+    assert (through.log_odds[box][:, 1:] < 0).sum() >= 15
+    # where they differ: the beam's cells from the face on, l_no_return each (none in the
+    # face's cells that hold a sharp end point)
+    reach = 0.055 + nr.max_range_m * np.array([math.cos(heading), math.sin(heading)])
+    v = traverse([0.055], [0.055], [reach[0]], [reach[1]], g.origin_xy_m, g.shape, 0.01)
+    first = np.flatnonzero(g.log_odds[v.iy, v.ix] > g.params.no_return_stop)[0]
+    assert v.ix[first] == 30 and 10 <= v.iy[first] < 30      # it stopped at the face
+    beyond = {(y, x) for y, x in zip(v.iy[first:].tolist(), v.ix[first:].tolist()) if x != 30}
+    diff = through.log_odds - g.log_odds
+    assert {(int(y), int(x)) for y, x in zip(*np.nonzero(diff))} == beyond
+    assert np.all(diff[np.nonzero(diff)] == pytest.approx(g.params.l_no_return))
+
+
+def test_exact_cells_cleared_and_marked_for_a_known_beam():
+    """One beam along row 20 from x = 0.055 m to an end point at 0.455 m (cell 45): with
+    σ 5 mm columns 5-43 turn free (cell 43 ends 1σ before the free margin: −1.5·Φ(2) + a
+    hit tail of 0.03 = −1.44 < −1.41) and 44-45 occupied (44 ends 1σ before the end point:
+    2.5·e^−½ = 1.52); with σ 40 mm (a θ = 0 fallback's) the reading weighs 30/40 of one:
+    the cells well in front get exactly −1.125, none turns free, and the end cell gets
+    1.6·0.75 = 1.2."""
+    sharp = small_grid()
+    sharp.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.005))
+    cls = sharp.classify()[20]
+    assert np.flatnonzero(cls == FREE).tolist() == list(range(5, 44))
+    assert np.flatnonzero(cls == OCCUPIED).tolist() == [44, 45]
+    assert np.count_nonzero(sharp.log_odds) == 41
+    vague = small_grid()
+    vague.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.04))
+    assert np.all(vague.classify() != FREE)
+    assert vague.log_odds[20, 5:20] == pytest.approx(np.full(15, -1.5 * 0.75), abs=1e-4)
+    assert vague.log_odds[20, 45] == pytest.approx(1.6 * 0.75, abs=1e-4)
+    twice = small_grid()
+    for _ in range(2):
+        twice.insert(single_ray(0.055, 0.205, 0.0, 0.40, sigma_m=0.04))
+    assert np.all(twice.classify()[20, 5:25] == FREE)        # two agreeing ones do clear
+
+
+def test_a_vague_reading_past_a_box_face_frees_no_cell_inside_the_box():
+    """A reading that overshoots a box face by 100 mm with σ 40 mm (a θ = 0 fallback at
+    65°, as in a kitchen's island seen from the side): the box's cells on its beam get at most 0.75 of a pass and are
+    not freed, though the map knew nothing of the box; the same end point claimed with
+    σ 10 mm frees 7 of the 10 cells between the face and it (the σ is what the mapper
+    trusts)."""
+    face_x = 0.30
+    for sigma, freed_inside in ((0.04, 0), (0.01, 7)):
+        g = small_grid()
+        g.insert(single_ray(0.055, 0.205, 0.0, face_x - 0.055 + 0.10, sigma_m=sigma))
+        ix_face = g.cell_of(face_x, 0.205)[0]
+        inside = g.classify()[20, ix_face:]
+        assert np.count_nonzero(inside == FREE) == freed_inside, sigma
 
 
 @pytest.mark.parametrize("reason", [Reason.OUT_OF_RANGE, Reason.FOLDOVER_AMBIGUOUS,
@@ -337,44 +426,10 @@ def test_batch_insert_is_order_independent_and_deterministic():
 
 
 def reference_delta(grid, points):
-    """The module doc's inverse sensor model, visit by visit on :func:`traverse` (slow, plain)."""
-    p = grid.params
-    valid = points.valid.ravel()
-    no_return = ~valid & (points.reason.ravel() == Reason.NO_RETURN)
-    ox, oy, hd = points.origin_x.ravel(), points.origin_y.ravel(), points.heading.ravel()
-    d = np.hypot(points.x.ravel() - ox, points.y.ravel() - oy)
-    sigma = np.maximum(np.nan_to_num(points.sigma_m.ravel(), nan=p.default_sigma_m), p.min_sigma_m)
-    # a silent beam ends at its reach where that is finite and shorter (≤ 0: not mapped)
-    reach = (np.full(valid.size, np.nan) if points.reach_m is None
-             else np.asarray(points.reach_m, float).ravel())
-    explained = np.isfinite(reach) & (reach < points.max_range_m)
-    no_return &= ~(explained & (reach <= 0))
-    length = np.where(valid, d + p.tail_sigmas * sigma,
-                      np.where(explained, reach, points.max_range_m))
-    ux = np.where(valid & (d > 0), (points.x.ravel() - ox) / np.where(d > 0, d, 1), np.cos(hd))
-    uy = np.where(valid & (d > 0), (points.y.ravel() - oy) / np.where(d > 0, d, 1), np.sin(hd))
-    use = np.flatnonzero(valid | no_return)
-    v = traverse(ox[use], oy[use], ox[use] + ux[use] * length[use], oy[use] + uy[use] * length[use],
-                 grid.origin_xy_m, grid.shape, grid.resolution_m)
-    r = use[v.ray]
-    s_a, s_b = v.t_enter * length[r], v.t_exit * length[r]
-    gap = np.maximum(np.maximum(s_a - d[r], d[r] - s_b), 0.0)
-    stop = d[r] - p.free_margin_cells * grid.resolution_m
-    phi = np.array([0.5 * (1 + math.erf(z / math.sqrt(2))) for z in (stop - s_b) / sigma[r]])
-    # a hit σ-weighted: l_occ up to occ_sigma_m, l_occ·occ_sigma_m/σ beyond, never below l_occ_min
-    l_hit = np.maximum(min(p.l_occ_min, p.l_occ), p.l_occ * np.minimum(1.0, p.occ_sigma_m / sigma[r]))
-    # cells holding a sharp end point (σ ≤ hold_sigma_m) take no free evidence from the batch
-    held = np.zeros(grid.shape, bool)
-    sharp = valid & (sigma <= p.hold_sigma_m) & np.isfinite(points.x.ravel() + points.y.ravel())
-    hx, hy = grid.cell_of(points.x.ravel()[sharp], points.y.ravel()[sharp])
-    inside = (hx >= 0) & (hx < grid.shape[1]) & (hy >= 0) & (hy < grid.shape[0])
-    held[hy[inside], hx[inside]] = True
-    free = ~held[v.iy, v.ix]
-    w = np.where(valid[r], p.l_free * np.where((s_b < stop) & free, phi, 0.0)
-                 + l_hit * np.exp(-0.5 * (gap / sigma[r]) ** 2), p.l_no_return * free)
-    out = np.zeros(grid.shape)
-    np.add.at(out, (v.iy, v.ix), w)
-    return out
+    """The documented inverse sensor model on a zero grid, unclamped: the numpy oracle
+    (irring/maps/mapping_numpy.py), visit by visit on :func:`traverse`."""
+    return mapping_numpy.add(np.zeros(grid.shape), points, grid.origin_xy_m, grid.resolution_m,
+                             grid.params)
 
 
 def random_points(rng, n, *, box=(0.6, 0.4), max_range_m=0.3):

@@ -344,34 +344,37 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     ``no_return`` as uint8) to the grid ``log_odds`` (ny, nx; its cell (0, 0) has its corner
     at (grid_x, grid_y)), then clamp the box of cells their beams can reach to [lo, hi]
     (±inf: no clamp). Work and memory scale with the beams, not the grid. Returns whether
-    any beam was mapped (if none, nothing is touched).
+    any beam was mapped (if none, nothing is touched). The numpy oracle of this function is
+    irring/maps/mapping_numpy.py.
 
     Valid readings (with finite end point and emitter) are walked from the emitter to
-    tail_sigmas·σ behind the end point, no-return readings (finite emitter and heading) to
-    the max range along the heading, or to ``reach_m`` where that is finite and shorter (a
-    surface explains the silence; ≤ 0: not at all); every other reading changes nothing. Cells a beam
-    crosses at constant weight (a no-return beam; a valid beam up to NEAR_SIGMAS·σ before its
-    free margin) are counted as row runs, exactly (integers); only a valid beam's columns
-    after that are walked cell by cell and weighed with the model. Those weights go into the
-    grid as they come, the counts' log-odds in one pass over the box at the end, which also
-    clamps: the batch's updates are summed before clamping.
+    tail_sigmas·σ behind the end point: the columns up to NEAR_SIGMAS·σ before the point
+    where the free evidence stops (constant weight l_free) are counted as row runs, exactly
+    (integers), the rest walked cell by cell and weighed with the model; all of it goes into
+    the grid unclamped. Then no-return readings (finite emitter and heading) are walked cell
+    by cell along the heading to the max range, or to ``reach_m`` where that is finite and
+    shorter (a surface explains the silence; ≤ 0: not at all), or to the first cell whose
+    log-odds (the grid's plus this batch's valid readings') exceed ``no_return_stop`` (+inf:
+    never), and add l_no_return to the cells before it. Every other reading changes nothing.
+    The clamp comes last: the batch's updates are summed before clamping.
     """
     cdef double l_occ = params.l_occ, l_free = params.l_free, l_nr = params.l_no_return
     cdef double tail = params.tail_sigmas, min_sigma = params.min_sigma_m
     cdef double default_sigma = params.default_sigma_m
     cdef double occ_sigma = params.occ_sigma_m, l_occ_min = params.l_occ_min, l_hit
     cdef double margin_m = params.free_margin_cells * res
-    cdef double hold_sigma = params.hold_sigma_m, l_pass
+    cdef double free_sigmas = params.free_sigmas, stop_m
+    cdef double stop_at = params.no_return_stop, lone_sigma = params.lone_sigma_m
+    cdef double hold_sigma = params.hold_sigma_m, l_pass, trust
     cdef long ny = log_odds.shape[0], nx = log_odds.shape[1]
     cdef Py_ssize_t n = origin_x.shape[0], i, j, nb = 0, nv = 0, kept = 0
     cdef long k, ix, iy, n_far, bx0, by0, bx1, by1, bw, bh
     cdef double inv = 1.0 / res, ox, oy, vx, vy, d, sigma, length, stretch, hx, hy
     cdef double lo_x = INFINITY, lo_y = INFINITY, hi_x = -INFINITY, hi_y = -INFINITY
     cdef double a, z, u_in, u_mid, u_out, mu, far, t_end
-    cdef long long run, count
+    cdef long long run
+    cdef int* passes
     cdef double v
-    cdef long long NR_UNIT = (<long long>1) << 32    # no-return visits, counted beside valid ones
-    cdef long long LOW = NR_UNIT - 1
     cdef double* e
     cdef long long* rx
     cdef long long* ry
@@ -451,7 +454,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     if bx0 > bx1 or by0 > by1:
         return False
     bw, bh = bx1 - bx0 + 1, by1 - by0 + 1
-    # visit counts as difference arrays (valid + 2^32·no-return): x-major beams' runs along
+    # valid beams' clean passes as difference arrays: x-major beams' runs along
     # the rows (bh × (bw + 1)), y-major beams' down the columns ((bh + 1) × bw)
     runs_a = np.zeros(bh * (bw + 1) + (bh + 1) * bw, np.int64)
     cdef long long[::1] runs_v = runs_a
@@ -461,6 +464,10 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     held_a = np.zeros(bh * bw, np.uint8)
     cdef unsigned char[::1] held_v = held_a
     held = &held_v[0]
+    # no-return passes per cell of the box
+    passes_a = np.zeros(bh * bw, np.intc)
+    cdef int[::1] passes_v = passes_a
+    passes = &passes_v[0]
     with nogil:
         for j in range(nv):
             e = &beams[j, 0]
@@ -468,23 +475,22 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                 ix, iy = lfloor(e[7]) - bx0, lfloor(e[8]) - by0
                 if 0 <= ix < bw and 0 <= iy < bh:
                     held[iy * bw + ix] = 1
-        for j in range(nb):
+        for j in range(nv):                            # valid beams
             e = &beams[j, 0]
             if not clip(e[0], e[1], e[2], e[3], nx, ny, &s):
                 continue
             kept += 1
-            if j >= nv:                                # no-return: l_no_return on every cell
-                if not s.short:
-                    add_runs(&s, s.t1, NR_UNIT, bx0, by0, bw, bh, rx, ry)
-                elif cell(&s, 0, ffloor(s.q0 + s.t0 * s.dq), bx0, bx1, by0, by1, &ix, &iy) \
-                        and not held[(iy - by0) * bw + ix - bx0]:
-                    log_odds[iy, ix] += l_nr
-                continue
             d, sigma, length = e[4], e[5], e[6]
-            # the columns entirely before NEAR_SIGMAS·σ in front of the free margin: runs
+            # no free evidence within stop_m in front of the end point: the margin, and
+            # free_sigmas times the σ beyond the floor (an uncertain reading clears less)
+            stop_m = margin_m + free_sigmas * (sigma - min_sigma)
+            # the columns entirely before NEAR_SIGMAS·σ in front of stop_m: runs
+            # a reading more uncertain than lone_sigma weighs lone_sigma/σ of a hit and of a
+            # pass: all its columns are weighed cell by cell (the runs count whole passes)
+            trust = dmin(1.0, lone_sigma / sigma)
             n_far = 0
-            if not s.short:
-                far = ffloor(((d - margin_m - NEAR_SIGMAS * sigma) / length - s.t_col0)
+            if trust == 1.0 and not s.short:
+                far = ffloor(((d - stop_m - NEAR_SIGMAS * sigma) / length - s.t_col0)
                              / s.t_col)
                 far = dmin(dmax(far, 0.0), s.count)
                 # (a beam leaving the grid may have only far columns: they end where it leaves)
@@ -495,38 +501,59 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
             # the rest cell by cell, in u = (s − d)/σ: σ from the end point along the beam
             # (added to the grid now, clamped below with the rest)
             columns(&s, length / sigma, d / sigma, &c)
-            mu = margin_m / sigma
+            mu = stop_m / sigma
             # a reading k times as uncertain as occ_sigma spreads 1/k of a hit over k times
             # the length, but adds at least l_occ_min (or l_occ, if that is less)
-            l_hit = dmax(dmin(l_occ_min, l_occ), l_occ * dmin(1.0, occ_sigma / sigma))
+            l_hit = dmax(dmin(l_occ_min, l_occ) * trust, l_occ * dmin(1.0, occ_sigma / sigma))
             for k in range(n_far, s.count):
                 two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
                 if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
-                    l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free
+                    l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
                     log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_pass)
                 if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
-                    l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free
+                    l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
                     log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_pass)
         if kept:
-            # the runs' cumulative sums (down the columns, then along each row) give the
-            # counts; add their log-odds and clamp
+            # the runs' cumulative sums (down the columns, then along each row) count the
+            # valid beams' clean passes: add their l_free (none in held cells), unclamped
             for iy in range(1, bh + 1):
                 for ix in range(bw):
                     ry[iy * bw + ix] += ry[(iy - 1) * bw + ix]
             for iy in range(bh):
                 row = rx + iy * (bw + 1)
+                col = ry + iy * bw
+                out = &log_odds[by0 + iy, bx0]
                 run = 0
                 for ix in range(bw):
                     run += row[ix]
-                    row[ix] = run
-                col = ry + iy * bw
+                    if not held[iy * bw + ix]:
+                        out[ix] += <double>(run + col[ix]) * l_free
+        for j in range(nv, nb):                        # no-return beams
+            e = &beams[j, 0]
+            if not clip(e[0], e[1], e[2], e[3], nx, ny, &s):
+                continue
+            kept += 1
+            # l_no_return on every cell up to the first one the map, with this batch's valid
+            # readings, holds occupied (a surface at grazing incidence returns nothing)
+            columns(&s, 1.0, 0.0, &c)
+            for k in range(s.count):
+                two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
+                if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
+                    if log_odds[iy, ix] > stop_at:
+                        break
+                    passes[(iy - by0) * bw + ix - bx0] += 1
+                if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
+                    if log_odds[iy, ix] > stop_at:
+                        break
+                    passes[(iy - by0) * bw + ix - bx0] += 1
+        if kept:
+            # the no-return passes' log-odds (none in held cells), then the clamp
+            for iy in range(bh):
                 out = &log_odds[by0 + iy, bx0]
                 for ix in range(bw):
-                    count = row[ix] + col[ix]
-                    if held[iy * bw + ix]:
-                        count = 0
-                    v = out[ix] + (<double>(<int>(count & LOW)) * l_free
-                                   + <double>(<int>(count >> 32)) * l_nr)
+                    v = out[ix]
+                    if not held[iy * bw + ix]:
+                        v += passes[iy * bw + ix] * l_nr
                     out[ix] = lo if v < lo else (hi if v > hi else v)
     return kept > 0
 

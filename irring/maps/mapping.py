@@ -45,15 +45,18 @@ class MapperParams:
 
     l_occ: float = 2.5            # added to the cell holding a valid end point
     l_free: float = -1.5          # added to a cell a valid beam clearly passed through
-    l_no_return: float = -0.75    # added along a no-return beam, up to the max range
+    l_no_return: float = -0.75    # added along a no-return beam, up to the max range …
+    no_return_stop: float = 1.7   # … or to the first cell above this (> a lone l_occ_min hit)
     l_min: float = -4.0           # clamp: the most certain "free"
     l_max: float = 4.0            # clamp: the most certain "occupied"
     tail_sigmas: float = 0.25     # the beam is followed to d + tail_sigmas·σ
     min_sigma_m: float = 0.005    # floor on a reading's σ: half a 10 mm cell (finer is not resolved)
     default_sigma_m: float = 0.01  # used where a valid reading's sigma_m is NaN
     free_margin_cells: float = 0.5  # no free evidence within this many cells before the end point
+    free_sigmas: float = 0.0      # … nor within this many σ before that (an uncertain reading clears less)
     occ_sigma_m: float = 0.005    # a hit with σ above this weighs l_occ·occ_sigma_m/σ …
-    l_occ_min: float = 1.6        # … but at least this (a lone far hit still marks its cell)
+    l_occ_min: float = 1.6        # … but at least this (a lone far hit still marks its cell) …
+    lone_sigma_m: float = 0.03    # a reading of σ above this weighs lone_sigma_m/σ (hit and pass)
     hold_sigma_m: float = 0.005   # a cell holding an end point of σ ≤ this is not freed by its batch
     # readings from a wide cone (Points.cone_half_angle_rad > 0: sonar), mapped as arcs
     cone_step_rad: float = math.radians(1.0)  # spacing of the fan of rays across the cone
@@ -72,6 +75,11 @@ class MapperParams:
                 and self.cone_l_no_return <= 0):
             raise ValueError("need cone_step_rad > 0, cone_l_occ > 0, cone_l_free < 0 and "
                              "cone_l_no_return ≤ 0")
+        if not (math.isfinite(self.free_sigmas) and self.free_sigmas >= 0):
+            raise ValueError(f"need a finite free_sigmas ≥ 0, got {self.free_sigmas}")
+        if math.isnan(self.no_return_stop):
+            raise ValueError("no_return_stop must be a log-odds value or inf (never stop), "
+                             "got nan")
         if not self.hold_sigma_m >= 0:
             raise ValueError(f"need hold_sigma_m ≥ 0, got {self.hold_sigma_m}")
         if not (self.occ_sigma_m > 0 and self.l_occ_min >= 0):
@@ -243,13 +251,7 @@ class OccupancyGrid:
         C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
         ``add_beams``). Work and memory scale with the beams, not the grid. Readings from a
         cone go in as :func:`cone_fan` with the ``cone_*`` weights."""
-        params = self.params
-        if points.cone_half_angle_rad > 0:
-            points = cone_fan(points, params.cone_step_rad)
-            params = dataclasses.replace(params, l_occ=params.cone_l_occ,
-                                         l_free=params.cone_l_free,
-                                         l_no_return=params.cone_l_no_return,
-                                         hold_sigma_m=0.0)   # an arc is no sharp end point
+        points, params = mapped_beams(points, self.params)
         _traverse.add_beams(
             log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
             _flat(points.x), _flat(points.y), _flat(points.sigma_m),
@@ -261,10 +263,11 @@ class OccupancyGrid:
             self.resolution_m, params, lo, hi)
 
     def delta(self, points: Points) -> np.ndarray:
-        """The log-odds change (ny, nx) the readings in ``points`` would add (before clamping)."""
-        out = np.zeros(self.shape)
+        """The log-odds change (ny, nx) the readings in ``points`` would add to this grid
+        (before clamping; no-return beams stop at cells this grid holds occupied)."""
+        out = np.array(self.log_odds, dtype=float, order="C")
         self._add(out, points, -np.inf, np.inf)
-        return out
+        return out - self.log_odds
 
     def insert(self, points: Points) -> None:
         """Add one batch of readings (typically a sweep) to the map; only the cells its beams
@@ -392,6 +395,17 @@ def cone_fan(points: Points, step_rad: float) -> Points:
         sigma_m=fan(points.sigma_m), iterations=fan(points.iterations), valid=fan(points.valid),
         reason=fan(points.reason), cone_half_angle_rad=0.0,
         reach_m=None if points.reach_m is None else fan(points.reach_m))
+
+
+def mapped_beams(points: Points, params: MapperParams) -> tuple[Points, MapperParams]:
+    """The pencil beams a batch of readings is mapped as, and the weights they take:
+    readings from a wide cone (``cone_half_angle_rad`` > 0) as :func:`cone_fan` with the
+    ``cone_*`` weights (an arc holds no cell: no sharp end point), others as they are."""
+    if points.cone_half_angle_rad > 0:
+        return cone_fan(points, params.cone_step_rad), dataclasses.replace(
+            params, l_occ=params.cone_l_occ, l_free=params.cone_l_free,
+            l_no_return=params.cone_l_no_return, hold_sigma_m=0.0)
+    return points, params
 
 
 def slice_steps(points: Points, rows: slice) -> Points:

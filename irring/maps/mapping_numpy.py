@@ -1,0 +1,97 @@
+"""The occupancy grid's update in plain numpy: the oracle of the compiled ``add_beams``.
+
+Slow and readable: every cell a beam crosses (:func:`~irring.maps.mapping.traverse`) gets
+the inverse sensor model of docs/mapping.md, evaluated with ``math.erf``. The kernel
+(irring/maps/_traverse.pyx) computes the same update with row runs and an approximate erfc;
+tests/test_mapping_oracle.py holds them to the tolerance stated there.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..core import Points, Reason
+from .mapping import MapperParams, mapped_beams, traverse
+
+
+def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
+        params: MapperParams, lo: float = -np.inf, hi: float = np.inf) -> np.ndarray:
+    """``log_odds`` (ny, nx) after one batch of readings, clamped to [lo, hi] (a new array).
+
+    As :meth:`OccupancyGrid.insert` (with ``lo, hi`` its clamps) and :meth:`~OccupancyGrid.delta`
+    (a zero grid, no clamp); readings from a wide cone go in as their fan of rays. The kernel
+    clamps only the box of cells its beams reach; on a grid already inside [lo, hi] that is
+    the same.
+    """
+    points, p = mapped_beams(points, params)
+    shape = np.shape(log_odds)
+    res = float(resolution_m)
+    ox, oy = points.origin_x.ravel().astype(float), points.origin_y.ravel().astype(float)
+    px, py = points.x.ravel().astype(float), points.y.ravel().astype(float)
+    hd = points.heading.ravel().astype(float)
+    with np.errstate(invalid="ignore"):
+        valid = points.valid.ravel().astype(bool) & np.isfinite(px + py) & np.isfinite(ox + oy)
+        no_return = (~valid & (points.reason.ravel() == int(Reason.NO_RETURN))
+                     & np.isfinite(ox + oy) & np.isfinite(hd))
+
+    # cells holding a sharp end point (σ ≤ hold_sigma_m) take no free evidence from the batch
+    sigma = np.maximum(np.nan_to_num(points.sigma_m.ravel().astype(float),
+                                     nan=p.default_sigma_m), p.min_sigma_m)
+    held = np.zeros(shape, bool)
+    hx = np.floor((px[valid] - origin_xy_m[0]) / res)
+    hy = np.floor((py[valid] - origin_xy_m[1]) / res)
+    sharp = sigma[valid] <= p.hold_sigma_m
+    inside = sharp & (hx >= 0) & (hx < shape[1]) & (hy >= 0) & (hy < shape[0])
+    held[hy[inside].astype(int), hx[inside].astype(int)] = True
+
+    # valid beams: emitter → end point, continued tail_sigmas·σ into the surface
+    vi = np.flatnonzero(valid)
+    d = np.hypot(px[vi] - ox[vi], py[vi] - oy[vi])
+    s = sigma[vi]
+    length = d + p.tail_sigmas * s
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ux = np.where(d > 0, (px[vi] - ox[vi]) / d, np.cos(hd[vi]))
+        uy = np.where(d > 0, (py[vi] - oy[vi]) / d, np.sin(hd[vi]))
+    ux, uy = np.nan_to_num(ux), np.nan_to_num(uy)
+    v = traverse(ox[vi], oy[vi], ox[vi] + ux * length, oy[vi] + uy * length,
+                 origin_xy_m, shape, res)
+    r = v.ray
+    s_a, s_b = v.t_enter * length[r], v.t_exit * length[r]
+    # the hit: σ-weighted (l_occ up to occ_sigma_m, l_occ·occ_sigma_m/σ beyond, at least
+    # l_occ_min), Gaussian in the gap between the cell and the end point
+    trust = np.minimum(1.0, p.lone_sigma_m / s)
+    l_hit = np.maximum(min(p.l_occ_min, p.l_occ) * trust,
+                       p.l_occ * np.minimum(1.0, p.occ_sigma_m / s))
+    gap = np.maximum(np.maximum(s_a - d[r], d[r] - s_b), 0.0)
+    w_hit = l_hit[r] * np.exp(-0.5 * (gap / s[r]) ** 2)
+    # the pass: l_free·Φ((stop − s_b)/σ) where the cell ends before the free evidence stops,
+    # the free margin plus free_sigmas × the σ beyond the floor in front of the end point
+    stop = d - p.free_margin_cells * res - p.free_sigmas * (s - p.min_sigma_m)
+    z = (stop[r] - s_b) / s[r]
+    phi = np.array([0.5 * (1.0 + math.erf(q / math.sqrt(2.0))) for q in z])
+    w_free = p.l_free * trust[r] * np.where((s_b < stop[r]) & ~held[v.iy, v.ix], phi, 0.0)
+    out = np.array(log_odds, dtype=float)
+    np.add.at(out, (v.iy, v.ix), w_hit + w_free)
+
+    # no-return beams: along the heading to the max range, or to the first cell whose
+    # log-odds (the grid's with this batch's valid readings) exceed no_return_stop; none in
+    # held cells
+    # (or to its reach_m, where the estimator found a surface that explains the silence and
+    # that is shorter; a reach ≤ 0 maps nothing)
+    reach = (np.full(px.size, np.nan) if points.reach_m is None
+             else np.asarray(points.reach_m, float).ravel())
+    explained = np.isfinite(reach) & (reach < points.max_range_m)
+    ni = np.flatnonzero(no_return & ~(explained & (reach <= 0)))
+    far = np.where(explained, reach, float(points.max_range_m))[ni]
+    v = traverse(ox[ni], oy[ni], ox[ni] + np.cos(hd[ni]) * far, oy[ni] + np.sin(hd[ni]) * far,
+                 origin_xy_m, shape, res)
+    blocked = out[v.iy, v.ix] > p.no_return_stop
+    before = np.ones(len(v.ray), bool)
+    for ray in np.unique(v.ray[blocked]):
+        first = np.flatnonzero((v.ray == ray) & blocked)[0]   # visits run along the ray
+        before[first:np.searchsorted(v.ray, ray, side="right")] = False
+    keep = before & ~held[v.iy, v.ix]
+    np.add.at(out, (v.iy[keep], v.ix[keep]), p.l_no_return)
+    return np.clip(out, lo, hi)
