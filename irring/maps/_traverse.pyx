@@ -6,7 +6,7 @@ sensor model; this is their one implementation:
 
 * :func:`walk` lists every cell a batch of segments visits (``mapping.traverse``);
 * :func:`add_beams` adds one batch of readings' log-odds to a grid and clamps the box of
-  cells their beams reach (``OccupancyGrid.insert``; ``delta`` on a zero grid, unclamped).
+  cells their beams reach (``OccupancyGrid.insert``; ``delta``: the same, unclamped).
 
 One call does a whole batch: a loop per segment and column in C, numpy only allocates.
 Units are grid cells from the grid's corner. A segment is clipped to the grid (Liang–Barsky),
