@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import math
 
 import numpy as np
@@ -42,6 +43,18 @@ def test_table_row_zero_is_the_log_log_fit_of_the_files_points(name):
     assert np.allclose(res, raw["fit"]["residual_m"], atol=6e-5)
     assert float(np.sqrt(np.mean(res ** 2))) == pytest.approx(raw["fit"]["rms_residual_m"],
                                                              abs=6e-5)
+
+
+def test_the_curve_files_are_what_refit_writes_with_the_calibration_fit():
+    """models/sensors/refit.py fits each part's points with the calibration's Eq. 10 fit
+    (irring.estimation.calibration.fit_curve) and renders every bundled file byte for byte:
+    no file was edited by hand past its generator."""
+    spec = importlib.util.spec_from_file_location("refit", gp2.sensors_dir() / "refit.py")
+    refit = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(refit)
+    assert set(refit.SPECS) == set(ALL)
+    for name, part in refit.SPECS.items():
+        assert refit.render(name, part) == (gp2.sensors_dir() / f"{name}.yaml").read_text(), name
 
 
 def test_gp2d12_fit_matches_datasheet_points_to_about_a_centimetre():

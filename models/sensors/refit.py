@@ -2,19 +2,22 @@
 
 Run from the repository root:  python models/sensors/refit.py
 It fits d = a·V^b (paper Eq. 10) to each part's datasheet points by least squares on
-log d = log a + b·log V, then tabulates a(θ), b(θ) with the incidence model stated in
+log d = log a + b·log V (``irring.estimation.calibration.fit_curve``, the fit
+``irring calibrate`` makes), then tabulates a(θ), b(θ) with the incidence model stated in
 README.md, and rewrites <name>.yaml. irring itself only reads the YAML files; the test
 tests/test_gp2.py checks that they still match their points.
 """
 
 from __future__ import annotations
 
-import math
+import sys
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parents[1]))   # this checkout's irring, installed or not
+from irring.estimation.calibration import fit_curve  # noqa: E402
 THETA_DEG = list(range(0, 90, 5))  # 0 … 85°; beyond the last entry a, b are held constant
 
 # Incidence model (README.md): a(θ) = a0·cos(θ)^A_EXP, b(θ) = b0·(1 + B_SLOPE·(1 − cos θ)).
@@ -83,9 +86,11 @@ SPECS = {
 
 
 def fit_power_law(distance_m, voltage_v) -> tuple[float, float]:
-    """Least-squares a, b of d = a·V^b in log-log space (d in metres, V in volts)."""
-    b, log_a = np.polyfit(np.log(voltage_v), np.log(distance_m), 1)
-    return float(math.exp(log_a)), float(b)
+    """Least-squares a, b of d = a·V^b in log-log space (d in metres, V in volts): the
+    calibration's Eq. 10 fit at θ = 0 alone, with volts for counts."""
+    v = np.asarray(voltage_v, dtype=float)
+    _, a, b = fit_curve(v, distance_m, np.zeros_like(v), [0.0])
+    return float(a[0]), float(b[0])
 
 
 def tables(a0: float, b0: float, flat: bool) -> tuple[list[float], list[float]]:
