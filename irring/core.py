@@ -23,6 +23,7 @@ MAX_RANGE_M = 0.624     # GP2D12 range the paper's experiments trust (Table I's 
 DESIGN_RANGE_M = 0.686  # D of Eqs. 2-3 in Table I
 ADC_BITS = 12           # MCP3202
 VREF_V = 5.0
+SENSOR_MODEL = "gp2d12"  # the paper's sensor, Sharp GP2D12 (models/sensors/gp2d12.yaml)
 GP2_PERIOD_S = 0.0383   # GP2 measurement period (datasheet 38.3 ms ± 9.6 ms); one sample, one period
 
 # --------------------------------------------------------------------------- field bounds
@@ -283,7 +284,7 @@ class Sweep:
     duration_s: float            # hardware time of the sweep
     pose: np.ndarray             # (3,)
     ring: Ring
-    sensor_model: str = "gp2d12"
+    sensor_model: str = SENSOR_MODEL
     adc_bits: int = ADC_BITS
     vref_v: float = VREF_V
     max_range_m: float = MAX_RANGE_M

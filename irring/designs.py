@@ -15,7 +15,7 @@ import types
 from dataclasses import dataclass
 from typing import Mapping
 
-from .core import Ring, SensorSpec, bounds_error, hardware_duration_s
+from .core import SENSOR_MODEL, Ring, SensorSpec, bounds_error, hardware_duration_s
 from .gp2 import SENSORS, sensor_spec
 
 
@@ -86,14 +86,15 @@ PAPER_RING = Ring()  # the paper's: 12 sensors, R = 0.15 m, ±35 motor steps of 
 _LASER_STEP_RAD = math.radians(0.5)
 
 DESIGN_LIST: tuple[Design, ...] = (
-    Design("rotating12", PAPER_RING, SENSORS["gp2d12"],
+    Design("rotating12", PAPER_RING, SENSORS[SENSOR_MODEL],
            "the paper's ring: 12 GP2D12 on R = 0.15 m, each turning ±37.8° in 1.08° steps"),
-    Design("radial12", dataclasses.replace(PAPER_RING, min_step=0, max_step=0), SENSORS["gp2d12"],
+    Design("radial12", dataclasses.replace(PAPER_RING, min_step=0, max_step=0),
+           SENSORS[SENSOR_MODEL],
            "the paper's ring held still: 12 GP2D12, one reading each, 30° apart"),
     Design("rotating1",
            # 334 positions × 1.08° = 360.7°: the last step closes the circle
            Ring(sensors=1, radius_m=0.0, min_step=0, max_step=333, joint_limit_rad=2 * math.pi),
-           SENSORS["gp2d12"], "one GP2D12 at the centre turning 360° in 1.08° steps"),
+           SENSORS[SENSOR_MODEL], "one GP2D12 at the centre turning 360° in 1.08° steps"),
     Design("laser",
            Ring(sensors=1, radius_m=0.0, motor_step_rad=_LASER_STEP_RAD, gear=1.0, min_step=0,
                 max_step=719, emitter_offset_m=0.0, joint_limit_rad=2 * math.pi),
@@ -120,8 +121,8 @@ def get(name: str) -> Design:
 
 
 def parametric(sensors: int, radius_m: float, sweep_half_angle_rad: float, step_rad: float,
-               sensor: str = "gp2d12", *, gear: float = 0.6, name: str = "custom",
-               emitter_offset_m: float | None = None) -> Design:
+               sensor: str = SENSOR_MODEL, *, gear: float = PAPER_RING.gear,
+               name: str = "custom", emitter_offset_m: float | None = None) -> Design:
     """Any ring: ``sensors`` on ``radius_m``, each sweeping ±``sweep_half_angle_rad`` in
     ``step_rad`` sensor steps (0 half-angle: a radial ring), carrying ``sensor``.
 

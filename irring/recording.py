@@ -15,7 +15,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import gp2
-from .core import ADC_BITS, MAX_RANGE_M, VREF_V, Ring, Sweep, Truth
+from .core import ADC_BITS, MAX_RANGE_M, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth
 from .errors import InputError, IrringError, brief
 from .maps.mapping import MapperParams, check_grid_size
 from .scenario import ScenarioError, load_dataclass
@@ -275,7 +275,7 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
         return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
 
     kwargs["sensor_model"] = scalar("sensor_model", lambda v: v in gp2.SENSORS,
-                                    f"one of {', '.join(gp2.SENSORS)}", "gp2d12")
+                                    f"one of {', '.join(gp2.SENSORS)}", SENSOR_MODEL)
     bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, 24), "a whole number 1 … 24", ADC_BITS)
     kwargs["vref_v"] = scalar("vref_v", lambda v: _finite(v, 0.1, 50.0), "0.1 … 50 V", VREF_V)
     kwargs["max_range_m"] = scalar("max_range_m", lambda v: _finite(v, 0.001, 100.0),

@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from . import designs, gp2, resources, safe_yaml
-from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, VREF_V, Box,
-                   Cylinder, Pose, Ring, Room, bounds_error, choice, distance_to_outline,
-                   inside_outline, num, obstacle_distance, unit_suffix)
+from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, SENSOR_MODEL,
+                   VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
+                   distance_to_outline, inside_outline, num, obstacle_distance, unit_suffix)
 from .designs import Design
 from .errors import InputError
 
@@ -42,7 +42,7 @@ class Robot:
 
 @dataclass(frozen=True)
 class Sensor:
-    model: str = choice("gp2d12", tuple(gp2.SENSORS))
+    model: str = choice(SENSOR_MODEL, tuple(gp2.SENSORS))
     max_range_m: float = num(MAX_RANGE_M, lo=0.02, hi=30.0,
                              doc="readings beyond are treated as no return (paper: 624 mm)")
     adc_bits: int = choice(ADC_BITS, (8, 10, 12, 16))

@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 
 from .. import gp2, safe_yaml
-from ..core import ADC_BITS, VREF_V, Pose, Ring, Sweep
+from ..core import ADC_BITS, SENSOR_MODEL, VREF_V, Pose, Ring, Sweep
 from ..errors import InputError, brief
 from ..outputs import write_text_atomic
 from ..resources import MissingKernel
@@ -249,7 +249,7 @@ class Calibration:
     # ---- construction
 
     @classmethod
-    def nominal(cls, sensor_model: str = "gp2d12", ring: Ring | None = None,
+    def nominal(cls, sensor_model: str = SENSOR_MODEL, ring: Ring | None = None,
                 adc_bits: int = ADC_BITS, vref_v: float = VREF_V, *, emitter_offset_m: float | None = None,
                 noise_sigma_v: float = 0.015) -> Calibration:
         """The datasheet calibration from ``irring.gp2``'s tables, for an uncalibrated ring.
@@ -806,7 +806,7 @@ class GuidedCalibration:
     """
 
     def __init__(self, *, read_sweep: Callable[[], Sweep], prompt: Callable[[str], str] = input,
-                 show: Callable[[str], None] = print, sensor_model: str = "gp2d12",
+                 show: Callable[[str], None] = print, sensor_model: str = SENSOR_MODEL,
                  adc_bits: int = ADC_BITS, vref_v: float = VREF_V, sensor: int = 0,
                  sweeps: int = 4, placements: Sequence[Placement] | None = None,
                  emitter_offset_guess_m: float = Ring().emitter_offset_m):

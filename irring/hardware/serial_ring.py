@@ -207,7 +207,7 @@ class SerialRing:
     def __init__(self, port: str | serial.SerialBase, *, baudrate: int = DEFAULT_BAUD,
                  timeout_s: float = DEFAULT_TIMEOUT_S, retries: int = 2,
                  template: Ring = PAPER_RING, radius_m: float | None = None,
-                 emitter_offset_m: float | None = None, sensor_model: str = "gp2d12",
+                 emitter_offset_m: float | None = None, sensor_model: str = core.SENSOR_MODEL,
                  vref_v: float = core.VREF_V, max_range_m: float = core.MAX_RANGE_M, samples: int = 1,
                  settle_s: float = 0.0, resweep: int = 0,
                  opener: Callable[..., serial.SerialBase] = serial.serial_for_url):

@@ -15,7 +15,7 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 
 from .. import gp2
-from ..core import ADC_BITS, VREF_V, Truth
+from ..core import ADC_BITS, SENSOR_MODEL, VREF_V, Truth
 from ..scenario import (AveragingEffect, BeamEffect, FoldoverEffect, IncidenceEffect,
                        NoiseEffect, OutliersEffect, QuantizationEffect, ReflectanceEffect)
 
@@ -324,7 +324,7 @@ class Pipeline:
                                 for name in STAGE_ORDER if name in effects))
 
     @classmethod
-    def ideal(cls, model: str | gp2.SensorModel = "gp2d12", adc_bits: int = ADC_BITS,
+    def ideal(cls, model: str | gp2.SensorModel = SENSOR_MODEL, adc_bits: int = ADC_BITS,
               vref_v: float = VREF_V) -> Pipeline:
         """No effects: the noise-free curve value in float counts."""
         m = gp2.sensor(model) if isinstance(model, str) else model

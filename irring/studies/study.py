@@ -27,6 +27,7 @@ except ImportError:  # pragma: no cover - not on POSIX
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
+from ..core import SENSOR_MODEL
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
 from ..resources import installed_version
@@ -76,7 +77,7 @@ class DesignSpec:
     label: str
     name: str | None = None            # a named design (designs.DESIGN_BY_NAME)
     params: tuple = ()                 # parametric: ((key, value), …) in PARAMETRIC_KEYS order
-    sensor: str = "gp2d12"
+    sensor: str = SENSOR_MODEL
     design: Any = None                 # or a Design made in code (what compare() is given)
 
     def build(self):
@@ -159,14 +160,14 @@ def _design(source: str, path: str, raw: Any) -> DesignSpec:
               "sweep_half_angle_deg": (float, 0.0, 180.0), "step_deg": (float, 0.01, 90.0)}
     params = tuple((k, _number(source, f"{path}.{k}", raw[k], *limits[k]))
                    for k in PARAMETRIC_KEYS)
-    sensor = raw.get("sensor", "gp2d12")
+    sensor = raw.get("sensor", SENSOR_MODEL)
     if sensor not in gp2.SENSORS:
         raise _fail(source, f"{path}.sensor", f"{sensor!r} is not allowed; choose one of: "
                     f"{', '.join(gp2.SENSORS)}")
     p = dict(params)
     label = raw.get("name") or (f"ring{p['sensors']}_r{p['radius_mm']:g}_"
                                 f"a{p['sweep_half_angle_deg']:g}_s{p['step_deg']:g}"
-                                + ("" if sensor == "gp2d12" else f"_{sensor}"))
+                                + ("" if sensor == SENSOR_MODEL else f"_{sensor}"))
     if not isinstance(label, str) or not label.strip():
         raise _fail(source, f"{path}.name", f"expected a non-empty text, got {label!r}")
     spec = DesignSpec(str(label), params=params, sensor=sensor)
