@@ -219,3 +219,62 @@ def test_compiled_line_of_sight_matches_the_oracle_on_rooms(name):
         first = metrics._sight(*args)
         np.testing.assert_array_equal(first, metrics._sight_oracle(*args))
         assert 0 < (first > 0).sum() < len(first)     # some lines blocked, not all
+
+
+def _on_beam(pose, ring, k, sensor_angle_rad, t_m):
+    """The point sensor k of ``ring`` at ``pose`` ranges at ``t_m`` when turned by the angle."""
+    rho = pose.yaw_rad + 2 * math.pi * k / ring.sensors
+    psi = rho + sensor_angle_rad
+    d_o = ring.emitter_offset_m
+    return (pose.x_m + ring.radius_m * math.cos(rho) + d_o * math.sin(psi) + t_m * math.cos(psi),
+            pose.y_m + ring.radius_m * math.sin(rho) - d_o * math.cos(psi) + t_m * math.sin(psi))
+
+
+def test_measurable_is_the_sensors_interval_from_the_ring_within_its_sweep():
+    from irring.core import Pose
+    from irring.designs import PAPER_RING
+
+    pose, k = Pose(0.43, 0.31, 0.3), 4
+    ranging = (PAPER_RING, 0.10, 0.624, -math.radians(37.8), math.radians(37.8))
+    cases = {  # (sensor angle, distance along the beam) → measurable
+        (0.0, 0.10 + 1e-6): True, (0.0, 0.10 - 1e-6): False,      # GP2D12's 100 mm minimum
+        (0.0, 0.624 - 1e-6): True, (0.0, 0.624 + 1e-6): False,    # the scene's max range
+        (math.radians(37.7), 0.31): True,                         # within the ±37.8° sweep
+    }
+    for (angle, t), want in cases.items():
+        x, y = _on_beam(pose, PAPER_RING, k, angle, t)
+        assert metrics._measurable(np.array([x]), np.array([y]), pose, *ranging)[0] == want, (
+            angle, t)
+    # 190 mm from the centre between two sensors: 60 mm from both hinges, too far round for
+    # the others (97° off radial): wall beside the ring no sensor can range
+    rho = pose.yaw_rad + 2 * math.pi * (k + 0.5) / 12
+    x, y = pose.x_m + 0.19 * math.cos(rho), pose.y_m + 0.19 * math.sin(rho)
+    assert not metrics._measurable(np.array([x]), np.array([y]), pose, *ranging)[0]
+
+
+# A pose 190 mm from the west wall (and 230 mm from the south one), another in the open.
+CORNER_190 = """\
+name: corner190
+seed: 21
+room:
+  outline_mm: [[0, 0], [1300, 0], [1300, 1000], [0, 1000]]
+robot:
+  poses:
+    - {x_mm: 190, y_mm: 230}
+    - {x_mm: 820, y_mm: 560}
+"""
+
+
+def test_wall_too_close_to_range_is_not_counted_as_visible():
+    # the ideal sensor cannot map wall nearer than 100 mm to every sensor that could point
+    # at it; counting it made even the ideal ring's recall 0.917 here
+    from irring import pipeline
+    from irring.scenario import loads
+
+    sc = loads(CORNER_190, "corner190.yaml")
+    grid = OccupancyGrid.for_scenario(sc)
+    truth = ground_truth(sc, grid)
+    assert int(truth.visible.sum()) == 400
+    run = pipeline.run(sc, progress=False)
+    assert run.scores["occupied_recall"] >= 0.995
+    assert run.scores["occupied_precision"] == 1.0

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mapping import FREE, OCCUPIED, OccupancyGrid, _traverse, traverse  # kernel or its stand-in
-from ..core import (Cylinder, box_corners, distance_to_outline, inside_obstacle,
+from .. import gp2
+from ..core import (Cylinder, Ring, box_corners, distance_to_outline, inside_obstacle,
                     inside_outline)
 from ..scenario import Scenario
 
@@ -128,6 +129,39 @@ def _reach_m(scenario: Scenario) -> float:
     return scenario.sensor.max_range_m + radius
 
 
+def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float]:
+    """(ring, min and max range m, sensor angles lo and hi rad) of what a sensor can range:
+    the sensor model's measuring interval and the ring's sweep, widened to at least ± half
+    the sensor spacing (see :func:`_measurable`)."""
+    try:
+        ring = scenario.ring
+    except ValueError:  # a design without a ring preset: one sensor at the centre, any way
+        ring = Ring(sensors=1, radius_m=0.0, emitter_offset_m=0.0)
+    turn = ring.motor_step_rad * ring.gear
+    lo, hi = ring.min_step * turn, ring.max_step * turn
+    half = math.pi / ring.sensors
+    return (ring, gp2.sensor(scenario.sensor.model).min_range_m, scenario.sensor.max_range_m,
+            min(lo, -half), max(hi, half))
+
+
+def _measurable(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: float,
+                a_hi: float) -> np.ndarray:
+    """Points (m) some sensor of ``ring`` at ``pose`` could range: sensor k, its hinge at
+    the ring radius, turned to the angle that puts the point on its beam (the emitter d_o
+    to the beam's right) within [a_lo, a_hi] of radial, finds it at a distance within
+    [d_min, d_max] of the emitter."""
+    ok = np.zeros(np.shape(px), bool)
+    d_o = ring.emitter_offset_m
+    for k in range(ring.sensors):
+        rho = pose.yaw_rad + 2.0 * math.pi * k / ring.sensors
+        vx = px - (pose.x_m + ring.radius_m * math.cos(rho))
+        vy = py - (pose.y_m + ring.radius_m * math.sin(rho))
+        t = np.sqrt(np.maximum(vx * vx + vy * vy - d_o * d_o, 0.0))  # along the beam
+        turn = np.arctan2(vy, vx) + np.arctan2(d_o, t) - rho - a_lo   # from the sweep's start
+        ok |= (t >= d_min) & (t <= d_max) & (np.mod(turn, 2.0 * math.pi) <= a_hi - a_lo)
+    return ok
+
+
 def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     """Rasterise the scenario onto ``grid``'s cells and work out what each pose can see."""
     res = grid.resolution_m
@@ -168,12 +202,14 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     material = np.where(label > 0, label, 0).astype(np.int16)
 
     reach = _reach_m(scenario)
+    ranging = _ranging(scenario)
     in_range = np.zeros(px.shape, bool)   # surface and free cells in range of some pose …
     seen = np.zeros(px.shape, bool)       # … and in its line of sight
     hidden_by_obstacle = np.zeros(px.shape, np.int16)
-    candidates = surface | free
+    sy, sx = np.nonzero(surface)
     for pose in scenario.robot.poses:  # a handful of poses; each is vectorised over cells
-        near = candidates & (np.hypot(px - pose.x_m, py - pose.y_m) <= reach)
+        near = free & (np.hypot(px - pose.x_m, py - pose.y_m) <= reach)
+        near[sy, sx] = _measurable(px[sy, sx], py[sy, sx], pose, *ranging)
         in_range |= near
         ty, tx = np.nonzero(near)
         first = _sight((ny, nx), origin, res, material, (pose.x_m, pose.y_m), tx, ty)
