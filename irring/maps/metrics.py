@@ -39,6 +39,7 @@ class GroundTruth:
     visible: np.ndarray        # bool: surface cells seen (in range, line of sight) from a pose
     reachable_free: np.ndarray  # bool: free cells in range and line of sight of some pose
     shadow: np.ndarray         # bool: wall surface cells hidden behind an obstacle (see module doc)
+    shadow_ranged: np.ndarray  # bool: shadow cells a sensor could range along a clear line
     shadow_owner: np.ndarray   # int16: OBSTACLE0 + j casting the shadow (first pose that has it)
     reach_m: float             # max range + ring radius used for "in range"
 
@@ -82,8 +83,9 @@ def _chebyshev_near(ix, iy, tx, ty) -> np.ndarray:
 
 
 def _sight(grid_shape, origin, res, material_label, pose_xy, targets_ix, targets_iy):
-    """For cells seen from ``pose_xy``: the label of the first material cell on the way
-    (0 when the line of sight is clear). Material within 1 cell of the target is ignored.
+    """For cells seen from ``pose_xy`` (m; or one point per cell, two arrays): the label of
+    the first material cell on the way (0 when the line of sight is clear). Material within
+    1 cell of the target is ignored.
 
     The compiled walk stops at that cell and lists no visits (``_traverse.first_material``;
     :func:`_sight_oracle` is the readable statement it is tested against; docs/mapping.md)."""
@@ -91,8 +93,8 @@ def _sight(grid_shape, origin, res, material_label, pose_xy, targets_ix, targets
     if n == 0:
         return np.zeros(0, np.int16)
     # in cells from the grid's corner, computed as traverse computes them (the same walk)
-    x0 = np.full(n, (pose_xy[0] - origin[0]) / res)
-    y0 = np.full(n, (pose_xy[1] - origin[1]) / res)
+    x0 = np.ascontiguousarray(np.broadcast_to((np.asarray(pose_xy[0]) - origin[0]) / res, n))
+    y0 = np.ascontiguousarray(np.broadcast_to((np.asarray(pose_xy[1]) - origin[1]) / res, n))
     dx = (origin[0] + (targets_ix + 0.5) * res - origin[0]) / res - x0
     dy = (origin[1] + (targets_iy + 0.5) * res - origin[1]) / res - y0
     return _traverse.first_material(x0, y0, dx, dy,
@@ -109,7 +111,8 @@ def _sight_oracle(grid_shape, origin, res, material_label, pose_xy, targets_ix, 
     n = len(targets_ix)
     if n == 0:
         return np.zeros(0, np.int16)
-    v = traverse(np.full(n, pose_xy[0]), np.full(n, pose_xy[1]), cx, cy, origin, grid_shape, res)
+    v = traverse(np.broadcast_to(pose_xy[0], n), np.broadcast_to(pose_xy[1], n), cx, cy, origin,
+                 grid_shape, res)
     lab = material_label[v.iy, v.ix]
     block = (lab > 0) & ~_chebyshev_near(v.ix, v.iy, targets_ix[v.ray], targets_iy[v.ray])
     first_label = np.zeros(n, np.int16)
@@ -144,22 +147,52 @@ def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float]:
             min(lo, -half), max(hi, half))
 
 
-def _measurable(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: float,
-                a_hi: float) -> np.ndarray:
-    """Points (m) some sensor of ``ring`` at ``pose`` could range: sensor k, its hinge at
-    the ring radius, turned to the angle that puts the point on its beam (the emitter d_o
-    to the beam's right) within [a_lo, a_hi] of radial, finds it at a distance within
-    [d_min, d_max] of the emitter."""
-    ok = np.zeros(np.shape(px), bool)
+def _sensor_views(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: float,
+                  a_hi: float):
+    """Per sensor k of ``ring`` at ``pose``: (can, ex, ey) for points (m): whether sensor k,
+    its hinge at the ring radius, turned to the angle that puts the point on its beam (the
+    emitter d_o to the beam's right) within [a_lo, a_hi] of radial, finds it at a distance
+    within [d_min, d_max] of the emitter; and where that emitter then is."""
     d_o = ring.emitter_offset_m
     for k in range(ring.sensors):
         rho = pose.yaw_rad + 2.0 * math.pi * k / ring.sensors
-        vx = px - (pose.x_m + ring.radius_m * math.cos(rho))
-        vy = py - (pose.y_m + ring.radius_m * math.sin(rho))
+        hx = pose.x_m + ring.radius_m * math.cos(rho)
+        hy = pose.y_m + ring.radius_m * math.sin(rho)
+        vx, vy = px - hx, py - hy
         t = np.sqrt(np.maximum(vx * vx + vy * vy - d_o * d_o, 0.0))  # along the beam
-        turn = np.arctan2(vy, vx) + np.arctan2(d_o, t) - rho - a_lo   # from the sweep's start
-        ok |= (t >= d_min) & (t <= d_max) & (np.mod(turn, 2.0 * math.pi) <= a_hi - a_lo)
+        psi = np.arctan2(vy, vx) + np.arctan2(d_o, t)                 # the beam's heading
+        can = ((t >= d_min) & (t <= d_max)
+               & (np.mod(psi - rho - a_lo, 2.0 * math.pi) <= a_hi - a_lo))
+        yield can, hx + d_o * np.sin(psi), hy - d_o * np.cos(psi)
+
+
+def _measurable(px, py, pose, *ranging) -> np.ndarray:
+    """Points (m) some sensor of the ring at ``pose`` could range (:func:`_sensor_views`;
+    ``ranging`` from :func:`_ranging`)."""
+    ok = np.zeros(np.shape(px), bool)
+    for can, _, _ in _sensor_views(px, py, pose, *ranging):
+        ok |= can
     return ok
+
+
+def _ranged_in_sight(scenario: Scenario, grid: OccupancyGrid, material: np.ndarray,
+                     cells: np.ndarray, ranging) -> np.ndarray:
+    """The ``cells`` (bool, on the grid) some sensor of some pose could range along a clear
+    line from its emitter (no material on the way but within 1 cell of the cell)."""
+    ty, tx = np.nonzero(cells)
+    xs, ys = grid.cell_centers()
+    px, py = xs[tx], ys[ty]
+    ok = np.zeros(len(tx), bool)
+    for pose in scenario.robot.poses:
+        for can, ex, ey in _sensor_views(px, py, pose, *ranging):
+            ask = can & ~ok
+            if ask.any():
+                first = _sight(grid.shape, grid.origin_xy_m, grid.resolution_m, material,
+                               (ex[ask], ey[ask]), tx[ask], ty[ask])
+                ok[np.flatnonzero(ask)[first == 0]] = True
+    out = np.zeros(cells.shape, bool)
+    out[ty[ok], tx[ok]] = True
+    return out
 
 
 def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
@@ -221,9 +254,11 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
         hidden_by_obstacle[ty[pick], tx[pick]] = first[pick]
     visible = seen & surface
     shadow = (surface_owner == WALL) & in_range & ~visible & (hidden_by_obstacle > 0)
+    shadow_ranged = _ranged_in_sight(scenario, grid, material, shadow, ranging)
     return GroundTruth(label=label, surface=surface, surface_owner=surface_owner,
                        occupied=occupied, free=free, in_range=in_range,
                        visible=visible, reachable_free=seen & free, shadow=shadow,
+                       shadow_ranged=shadow_ranged,
                        shadow_owner=np.where(shadow, hidden_by_obstacle, 0).astype(np.int16),
                        reach_m=reach)
 
@@ -248,13 +283,22 @@ def _share(hit: np.ndarray, of: np.ndarray) -> float | None:
     return float((hit & of).sum()) / n if n else None
 
 
-def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = None) -> dict:
-    """The six map scores (see the module doc): floats in 0…1, or None when undefined."""
+def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = None, *,
+          mapped_by: Scenario | None = None) -> dict:
+    """The six map scores (see the module doc): floats in 0…1, or None when undefined.
+
+    ``mapped_by``: the scene as the ring that made the map saw it, when that is not
+    ``scenario`` (a design judged on another design's ground truth): the shadow cells it
+    gets credit for are those its own sensors could range."""
     if truth is None:
         truth = ground_truth(scenario, grid)
     if truth.label.shape != grid.shape:
         raise ValueError(f"ground truth is {truth.label.shape} cells but the grid is {grid.shape}; "
                          "build it with ground_truth(scenario, grid) for this grid")
+    ranged = truth.shadow_ranged
+    if mapped_by is not None and mapped_by is not scenario:
+        material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
+        ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow, _ranging(mapped_by))
     cls = grid.classify()
     occ = cls == OCCUPIED
     free = cls == FREE
@@ -273,13 +317,14 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
         "occupied_f1": f1,
         "free_accuracy": _share(_dilate(truth.free), free),
         "coverage": _share(free, truth.reachable_free),
-        "shadow": _share(occ_near, truth.shadow),
+        "shadow": _share(occ_near & ranged, truth.shadow),
     }
 
 
 def shadow_by_obstacle(grid: OccupancyGrid, truth: GroundTruth) -> dict[int, tuple[int, float]]:
-    """Obstacle index → (shadow cells behind it, share of them the map marks occupied)."""
-    occ_near = _dilate(grid.classify() == OCCUPIED)
+    """Obstacle index → (shadow cells behind it, share of them the map marks occupied, as
+    ``shadow`` counts them)."""
+    occ_near = _dilate(grid.classify() == OCCUPIED) & truth.shadow_ranged
     out = {}
     for owner in np.unique(truth.shadow_owner[truth.shadow]):
         cells = truth.shadow_owner == owner

@@ -201,7 +201,7 @@ def run_job(job: Job) -> dict:
     reference = apply(base, Config(resolution_m=sc.map.resolution_m))
     truth = (metrics.ground_truth(reference, result.grid) if job.scenario_yaml is None else
              metrics.cached_ground_truth(reference, result.grid, _TRUTH_CACHE, job.scenario_yaml))
-    scores = metrics.score(result.grid, reference, truth)
+    scores = metrics.score(result.grid, reference, truth, mapped_by=sc)
 
     err, err_steep, iters, err_pt = [], [], [], []
     hits = valid_hits = 0
