@@ -100,7 +100,7 @@ DESIGN_LIST: tuple[Design, ...] = (
                 max_step=719, emitter_offset_m=0.0, joint_limit_rad=2 * math.pi),
            SENSORS["laser"], "SICK-like scanner at the centre: 0.5° steps over 360°, 8 m"),
     Design("sonar12",
-           # held still; the hinge keeps the template's ±37.8° limit (a zero range won't compile)
+           # held still (steps 0 … 0); the hinge keeps the template's ±37.8° limit
            Ring(sensors=12, radius_m=0.15, min_step=0, max_step=0, emitter_offset_m=0.0),
            SENSORS["sonar"], "radial ring of 12 ultrasonic transducers, ±15° cone, nearest echo"),
 )
@@ -143,7 +143,7 @@ def parametric(sensors: int, radius_m: float, sweep_half_angle_rad: float, step_
     else:
         half = round(sweep_half_angle_rad / step_rad)
         lo, hi = -half, half
-        limit = max(half, 1) * step_rad  # MuJoCo needs a non-empty hinge range
+        limit = max(half, 1) * step_rad  # ±1 step when radial (0 builds too: HELD_HINGE_RAD)
     if emitter_offset_m is None:
         emitter_offset_m = PAPER_RING.emitter_offset_m if spec.is_ir else 0.0
     ring = Ring(sensors=sensors, radius_m=radius_m, motor_step_rad=step_rad / gear, gear=gear,
