@@ -17,7 +17,7 @@ import numpy as np
 from . import gp2
 from .core import ADC_BITS, MAX_RANGE_M, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth
 from .errors import InputError, IrringError, brief
-from .maps.mapping import MapperParams, check_grid_size
+from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
 from .scenario import ScenarioError, load_dataclass
 
 FORMAT = "irring-recording/1"
@@ -210,8 +210,10 @@ def _check_meta(meta: dict, fail) -> None:
     if mapper is not None:
         names = {f.name for f in dataclasses.fields(MapperParams)}
         if (not isinstance(mapper, dict) or not set(mapper) <= names
-                or not all(_finite(v, -1e3, 1e3) for v in mapper.values())):
-            raise fail(f"meta.mapper: expected finite numbers for {', '.join(sorted(names))}")
+                or not all(_finite(v, -1e3, 1e3) or (k in OFF_AT_INFINITY and v == math.inf)
+                           for k, v in mapper.items())):
+            raise fail(f"meta.mapper: expected finite numbers for {', '.join(sorted(names))} "
+                       f"({', '.join(OFF_AT_INFINITY)} may also be inf: off)")
         try:
             MapperParams(**mapper)
         except ValueError as exc:

@@ -648,3 +648,16 @@ def test_cell_of_and_cell_centres_take_each_axis_from_its_own_origin():
     assert x.shape == (11,) and y.shape == (7,)
     assert x[0] == pytest.approx(-0.275) and y[0] == pytest.approx(0.145)
     assert y[-1] == pytest.approx(0.12 + 6.5 * 0.05)
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"free_sigmas": -0.5}, "finite free_sigmas ≥ 0, got -0.5"),
+    ({"free_sigmas": math.inf}, "finite free_sigmas ≥ 0, got inf"),
+    ({"lone_sigma_m": 0.0}, r"lone_sigma_m > 0 \(inf: off\), got 0.0"),
+    ({"lone_sigma_m": math.nan}, r"lone_sigma_m > 0 \(inf: off\), got nan"),
+    ({"no_return_stop": math.nan}, "no_return_stop must be a log-odds value or inf"),
+])
+def test_mapper_params_refuse_bad_free_space_knobs_by_name(bad, message):
+    with pytest.raises(ValueError, match=message):
+        MapperParams(**bad)
+    MapperParams(no_return_stop=-math.inf, lone_sigma_m=math.inf)   # the extremes are allowed

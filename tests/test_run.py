@@ -170,6 +170,31 @@ def test_ground_truth_can_be_reused_across_runs(runs):
     assert again.truth is first.truth and again.scores == first.scores
 
 
+def test_a_recording_keeps_mapper_rules_turned_off_with_inf(runs, tmp_path):
+    """no_return_stop and lone_sigma_m are off at +inf: a recording of such a run replays
+    with them off (the same map), and inf anywhere else is refused, naming the two."""
+    import dataclasses
+    import math
+
+    from irring.errors import InputError
+    from irring.maps.mapping import MapperParams
+    from irring.recording import save_recording
+
+    params = MapperParams(no_return_stop=math.inf, lone_sigma_m=math.inf)
+    sweeps = runs["t_room_cylinder"].sweeps
+    path = save_recording(tmp_path / "off.npz", sweeps, {"mapper": dataclasses.asdict(params)})
+    replayed = pipeline.replay(path, progress=False)
+    assert replayed.grid.params == params
+    want = pipeline.map_sweeps(sweeps, params=params, progress=False)
+    assert np.array_equal(replayed.grid.log_odds, want.grid.log_odds)
+    assert not np.array_equal(want.grid.log_odds,
+                              pipeline.map_sweeps(sweeps, progress=False).grid.log_odds)
+    bad = dict(dataclasses.asdict(MapperParams()), l_occ=math.inf)
+    path = save_recording(tmp_path / "bad.npz", sweeps, {"mapper": bad})
+    with pytest.raises(InputError, match="no_return_stop, lone_sigma_m may also be inf"):
+        pipeline.replay(path, progress=False)
+
+
 def test_replay_maps_with_the_recorded_mapper_params_on_any_grid(runs, tmp_path):
     """A recording that names its mapper numbers but no grid or scenario (written by hand,
     or by another tool) is mapped with those numbers on a grid around its points."""

@@ -36,6 +36,11 @@ PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN = 254, 0, 205
 _NO_RETURN = int(Reason.NO_RETURN)
 
 
+# MapperParams knobs whose +inf turns their rule off (never stop a silent beam; no reading
+# weighs less for its σ): the one non-finite value a recording's mapper numbers may hold.
+OFF_AT_INFINITY = ("no_return_stop", "lone_sigma_m")
+
+
 @dataclass(frozen=True)
 class MapperParams:
     """The inverse sensor model's knobs (log-odds units; lengths in metres). docs/mapping.md
@@ -77,6 +82,8 @@ class MapperParams:
                              "cone_l_no_return ≤ 0")
         if not (math.isfinite(self.free_sigmas) and self.free_sigmas >= 0):
             raise ValueError(f"need a finite free_sigmas ≥ 0, got {self.free_sigmas}")
+        if not self.lone_sigma_m > 0:
+            raise ValueError(f"need lone_sigma_m > 0 (inf: off), got {self.lone_sigma_m}")
         if math.isnan(self.no_return_stop):
             raise ValueError("no_return_stop must be a log-odds value or inf (never stop), "
                              "got nan")
