@@ -106,6 +106,21 @@ def test_calibration_yaml_round_trip(tmp_path):
         np.testing.assert_allclose(getattr(back, f), getattr(cal, f), rtol=1e-12)
 
 
+@pytest.mark.parametrize("model, range_m", [("gp2d12", (0.10, 0.80)), ("gp2y0a02", (0.20, 1.50)),
+                                            ("sonar", (0.1524, 6.45))])
+def test_a_calibration_file_without_its_range_trusts_its_sensor_curves(tmp_path, model, range_m):
+    raw = STAND_IN.to_dict()
+    raw.update(sensor_model=model, source=model)
+    if model == "sonar":   # a rising curve (b > 0)
+        for row in raw["curve"]:
+            row["b"] = -row["b"]
+    del raw["min_range_mm"], raw["max_range_mm"]
+    path = tmp_path / "cal.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    cal = Calibration.load(path)
+    assert (cal.min_range_m, cal.max_range_m) == pytest.approx(range_m, rel=1e-12)
+
+
 @pytest.mark.parametrize("mutate, message", [
     (lambda r: r.update(colour="red"), "colour: unknown key"),
     (lambda r: r.update(irring_calibration=7), "expected format 1"),

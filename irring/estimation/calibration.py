@@ -43,6 +43,8 @@ NO_RETURN_SIGMAS = 2.0
 RETURN_SIGMAS = 3.72
 _FINE_CELLS = 1 << 16  # cells of the fine (log a, b) table over 0 … 90°
 _FALLBACK_NODES = 8   # quadrature nodes for the fallback σ (see _fallback_nodes)
+# the paper's sensor curve (models/sensors/gp2d12.yaml): a calibration's default range
+_PAPER_CURVE = gp2.sensor(SENSOR_MODEL)
 
 
 # --------------------------------------------------------------------------- calibration
@@ -96,8 +98,8 @@ class Calibration:
     b: np.ndarray
     adc_bits: int = ADC_BITS
     vref_v: float = VREF_V
-    min_range_m: float = 0.10
-    max_range_m: float = 0.80
+    min_range_m: float = _PAPER_CURVE.min_range_m
+    max_range_m: float = _PAPER_CURVE.max_range_m
     noise_counts: float = 0.0
     source: str = ""
     max_incidence_rad: float | None = None
@@ -387,6 +389,8 @@ class Calibration:
                                 f"{'< 0 (output falls with distance)' if falling else '> 0'} "
                                 f"at every θ; got b = {brief(table[:, 2].tolist())}")
         bits = raw.get("adc_bits", ADC_BITS)
+        curve = gp2.sensor(str(model))   # a file without its range trusts its curve's
+        curve_mm = (curve.min_range_m * 1e3, curve.max_range_m * 1e3)
         if isinstance(bits, bool) or not isinstance(bits, int) or not 1 <= bits <= 24:
             raise fail("adc_bits", f"expected a whole number 1 … 24, got {bits!r}")
         try:
@@ -394,8 +398,8 @@ class Calibration:
                        emitter_offset_m=number("emitter_offset_mm", hi=100.0, lo=-100.0) * 1e-3,
                        theta_rad=np.radians(table[:, 0]), a=table[:, 1], b=table[:, 2],
                        adc_bits=bits, vref_v=number("vref_v", VREF_V, 0.1, 50.0),
-                       min_range_m=number("min_range_mm", 100.0, 0.0, 1e5) * 1e-3,
-                       max_range_m=number("max_range_mm", 800.0, 0.0, 1e5) * 1e-3,
+                       min_range_m=number("min_range_mm", curve_mm[0], 0.0, 1e5) * 1e-3,
+                       max_range_m=number("max_range_mm", curve_mm[1], 0.0, 1e5) * 1e-3,
                        noise_counts=number("noise_counts", 0.0, 0.0, 1e7),
                        peak_distance_m=number("peak_distance_mm", 0.0, 0.0, 1e5) * 1e-3,
                        max_incidence_rad=(math.radians(number("max_incidence_deg"))
@@ -588,7 +592,8 @@ class Placement:
                 f"rotation axis, {turn}")
 
 
-def default_placements(min_range_m: float = 0.10, max_range_m: float = 0.80,
+def default_placements(min_range_m: float = _PAPER_CURVE.min_range_m,
+                       max_range_m: float = _PAPER_CURVE.max_range_m,
                        yaws_deg: Sequence[float] = (0.0, 25.0, 50.0), distances: int = 8,
                        offset_distances_m: Sequence[float] = (0.15, 0.20, 0.25, 0.30)
                        ) -> list[Placement]:
