@@ -636,7 +636,7 @@ def test_fallback_sigma_covers_the_unknown_incidence():
 def test_a_wall_seen_past_a_box_corner_is_read_on_its_own_line():
     """A counter 90 mm deep along a wall (a galley): sensors 7 and 8 sweep along the wall,
     then jump 110 mm nearer onto the counter's top face past its corner. Those wall
-    readings are a polyline of their own (the range jump breaks it, ``_chains``), so they
+    readings are a polyline of their own (the range jump breaks it, ``polyline_ids``), so they
     take θ from the wall: over 20 noisy sweeps (15 mV, as the bundled scenes) the median
     range error is < 15 mm and < 10 % are more than 50 mm off. (Joined to the counter's
     face within the 0.15 m gap, the median was 63 mm and 59 % were beyond 50 mm.)"""

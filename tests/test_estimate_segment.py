@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from irring.estimation import _lines
-from irring.estimation.estimate import LineOptions, _Pieces, _segment
+from irring.estimation.estimate import LineOptions, Pieces, _segment
 
 OPTS = LineOptions()
 HARD = settings(max_examples=200, deadline=None, derandomize=not os.environ.get("IRRING_EXPLORE"),
@@ -145,7 +145,7 @@ def test_previous_pieces_that_do_not_tile_the_points_are_refused(starts, ends):
     made it write out of bounds (a crash, or a corrupted heap)."""
     x, y = np.linspace(0, 0.4, 20), np.zeros(20)
     first = seg(x, y)
-    bad = _Pieces(**{**vars(first), "starts": np.array(starts, np.intp),
+    bad = Pieces(**{**vars(first), "starts": np.array(starts, np.intp),
                      "ends": np.array(ends, np.intp)})
     with pytest.raises(ValueError, match="not pieces of these points"):
         seg(x, y, prev=bad)

@@ -268,3 +268,20 @@ def test_an_import_inside_a_function_defers_a_slow_or_optional_package_and_says_
     unexplained = [f"{m}:{line}" for m, line, said, _ in found if not said]
     assert needless == [], "import these at the top of the file (nothing slow or optional)"
     assert unexplained == [], "say why with a '# deferred: …' comment on or above the import"
+
+
+def test_no_module_imports_another_modules_private_name():
+    """A name two modules share is public in its home (the numpy oracle and the estimator
+    share constants and helpers); a leading underscore means "this module only"."""
+    modules = _modules()
+    private = []
+    for path in _paths():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.names:
+                targets = _targets(node, _package_of(path), modules)
+                if not any(t.split(".")[0] == "irring" for t in targets):
+                    continue
+                private += [f"{_module_name(path)}:{node.lineno} {a.name}" for a in node.names
+                            if a.name.startswith("_") and not a.name.startswith("__")
+                            and not any(t.endswith("." + a.name) for t in targets)]  # a kernel
+    assert private == []

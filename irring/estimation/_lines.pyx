@@ -4,7 +4,7 @@
 :func:`segment` does all of it over ordered end points: polylines → iterative end-point fit
 (split) → merge of collinear neighbours → corner refinement → each piece's TLS line, who
 owns the corners, which lines are usable. ``irring.estimation.estimate._segment`` wraps it into
-``_Pieces``; the algorithm is explained there and next to each phase below.
+``Pieces``; the algorithm is explained there and next to each phase below.
 
 Same answers as the numpy code it replaced, bit for bit: the same operations in the same
 order (prefix sums accumulate sequentially, residuals and moments are formed term by term
@@ -520,7 +520,7 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
     not tile the points are a ValueError); where the polylines differ (as many points), the
     polylines that are the same keep the earlier pieces and the others are split anew. Returns
     (starts, ends, brk, owner, cx, cy, alpha, lmin, lmax, n_points, length_m, usable) as
-    ``irring.estimation.estimate._Pieces`` holds them.
+    ``irring.estimation.estimate.Pieces`` holds them.
     """
     cdef Py_buffer views[8]                 # px, py, thr, sensor, prev_* (3), q
     cdef int held = 0                       # how many of them are acquired

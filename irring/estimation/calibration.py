@@ -42,7 +42,7 @@ CALIBRATION_FORMAT = 1  # version written into calibration files
 NO_RETURN_SIGMAS = 2.0
 RETURN_SIGMAS = 3.72
 _FINE_CELLS = 1 << 16  # cells of the fine (log a, b) table over 0 … 90°
-_FALLBACK_NODES = 8   # quadrature nodes for the fallback σ (see _fallback_nodes)
+FALLBACK_NODES = 8   # quadrature nodes for the fallback σ (see _fallback_nodes)
 # the paper's sensor curve (models/sensors/gp2d12.yaml): a calibration's default range
 _PAPER_CURVE = gp2.sensor(SENSOR_MODEL)
 
@@ -425,7 +425,7 @@ def _fallback_nodes(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
     sqrt(mean_j (a(θ_j)·S^b(θ_j) − d0)²), summed by ``_iterate.Sweep.finish``. The θ = 0
     distance is the longest the reading can mean, so the error is one-sided and grows
     steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
-    u = (np.arange(_FALLBACK_NODES) + 0.5) / _FALLBACK_NODES * math.sin(cal.max_incidence_rad)
+    u = (np.arange(FALLBACK_NODES) + 0.5) / FALLBACK_NODES * math.sin(cal.max_incidence_rad)
     return cal._log_ab(np.arcsin(u))
 
 

@@ -29,10 +29,10 @@ try:
 except ImportError:
     _lines = MissingKernel("estimation._lines")
 
-_SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
-_REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
-_MAX_GAIN = 8.0      # the held iteration's secant step at most 8× the plain one
-_PINNED_RAD = math.radians(2.0)  # a line most readings meet within this of the drop-out angle
+SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
+REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
+MAX_GAIN = 8.0      # the held iteration's secant step at most 8× the plain one
+PINNED_RAD = math.radians(2.0)  # a line most readings meet within this of the drop-out angle
 #                                  is a runaway, not a wall (see _drop_steep)
 
 
@@ -46,7 +46,7 @@ class LineOptions:
     split_sigmas: float = 4.0      # split where a point lies this many σ off the chord …
     min_split_m: float = 0.010     # … and at least this far
     gap_m: float = 0.15            # consecutive readings farther apart start a new polyline …
-    jump_sigmas: float = 3.5       # … as do a sensor's readings whose ranges jump (_chains)
+    jump_sigmas: float = 3.5       # … as do a sensor's readings whose ranges jump (polyline_ids)
     min_points: int = 3            # a line usable for θ has at least this many readings …
     min_length_m: float = 0.08     # … spanning at least this length
     max_rms_sigmas: float = 3.0    # … and fits them to within this RMS (in σ)
@@ -75,14 +75,14 @@ class Lines:
     end: np.ndarray
 
 
-def _scan_order(steps: np.ndarray, n_sensors: int) -> np.ndarray:
+def scan_order(steps: np.ndarray, n_sensors: int) -> np.ndarray:
     """Flat indices into (S, N) arrays, sensor-major, each sensor's readings by step."""
     order = np.argsort(np.asarray(steps), kind="stable")
     return (order[None, :] * n_sensors + np.arange(n_sensors)[:, None]).reshape(-1)
 
 
 @dataclass
-class _Pieces:
+class Pieces:
     """The split-and-merge result over the usable points (indices into their compact order)
     and each piece's TLS line; ``owner`` (U,) is the piece each point joins."""
 
@@ -100,8 +100,8 @@ class _Pieces:
     usable: np.ndarray
 
 
-def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | None = None
-             ) -> _Pieces:
+def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: Pieces | None = None
+             ) -> Pieces:
     """Split-and-merge over ordered points (one sensor's readings by step form polylines,
     broken where consecutive readings are more than ``gap_m`` apart), corners refined, and
     each piece's TLS line: one call of the compiled kernel ``irring.estimation._lines.segment``.
@@ -122,21 +122,21 @@ def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | Non
     its pieces are kept and only their corners are refined: splitting anew would mostly
     repeat them, and the pieces of the first grouping are the better start (measured on the
     T-room: regrouping by corner refinement alone gives the smaller range error). Where a
-    range jump now cuts some polylines (``_chains``), only those are split anew; the others
+    range jump now cuts some polylines (``polyline_ids``), only those are split anew; the others
     keep ``prev``'s pieces.
 
     The kernel gives the numpy version's answers bit for bit (irring/estimation/_lines.pyx says how)
     in a fraction of its time (measured: docs/estimator.md, "Speed")."""
     f = np.ascontiguousarray
-    return _Pieces(*_lines.segment(
+    return Pieces(*_lines.segment(
         f(px, dtype=float), f(py, dtype=float), f(thr, dtype=float), f(sensor, dtype=np.intp),
         opts.gap_m ** 2, float(centre[0]), float(centre[1]),
         *((None, None, None) if prev is None else (prev.starts, prev.ends, prev.brk)),
         opts.split_sigmas, opts.min_points, opts.min_length_m, opts.max_rms_sigmas))
 
 
-def _chains(d: np.ndarray, sigma: np.ndarray, heading: np.ndarray, sensor: np.ndarray,
-            reject_rad: float, sigmas: float) -> np.ndarray:
+def polyline_ids(d: np.ndarray, sigma: np.ndarray, heading: np.ndarray, sensor: np.ndarray,
+                 reject_rad: float, sigmas: float) -> np.ndarray:
     """Polyline ids of readings in scan order: a new one at a sensor change or at a *range
     jump*, where consecutive readings of a sensor differ in range by more than one surface
     could make them (readings on one plane at incidence θ change range by d·tanθ per
@@ -159,7 +159,7 @@ def _chains(d: np.ndarray, sigma: np.ndarray, heading: np.ndarray, sensor: np.nd
     return np.cumsum(cut)
 
 
-def _lines_record(pieces: _Pieces | None, label: np.ndarray, index: np.ndarray) -> Lines:
+def _lines_record(pieces: Pieces | None, label: np.ndarray, index: np.ndarray) -> Lines:
     """Public :class:`Lines` from pieces; ``index`` maps compact point order → flat (S, N)."""
     if pieces is None or pieces.starts.size == 0:
         z2, z1 = np.zeros((0, 2)), np.zeros(0)
@@ -193,7 +193,7 @@ def fit_lines(x: np.ndarray, y: np.ndarray, ok: np.ndarray, sigma_m: np.ndarray,
     n_steps, n_sensors = shape
     if steps is None:
         steps = np.arange(n_steps)
-    flat = _scan_order(steps, n_sensors)
+    flat = scan_order(steps, n_sensors)
     okf = np.asarray(ok, dtype=bool).reshape(-1)[flat]
     okf &= np.isfinite(x.reshape(-1)[flat]) & np.isfinite(y.reshape(-1)[flat])
     idx = flat[okf]
@@ -272,7 +272,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     ``hold`` (S, N): readings kept out (FOLDOVER_AMBIGUOUS); None with a folding
     calibration: resolve the fold-over first (:func:`resolve_foldover`). ``snap``: line
     members' end points onto their lines (:func:`snap_to_lines`)."""
-    cal = calibration if calibration is not None else _nominal_for(
+    cal = calibration if calibration is not None else nominal_calibration(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
     if hold is None and cal.folds and iterate:
         return resolve_foldover(lambda held, full, snap: _estimate(
@@ -310,8 +310,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
     sw = _iterate.Sweep(cal, lines, counts.reshape(-1), np.ascontiguousarray(origin).reshape(-1),
                         np.ascontiguousarray(heading).reshape(-1), reason.reshape(-1),
-                        _scan_order(steps, shape[1]), shape[1],
-                        _SIGMA_FLOOR_M, _PINNED_RAD)
+                        scan_order(steps, shape[1]), shape[1],
+                        SIGMA_FLOOR_M, PINNED_RAD)
     k = sw.k
     scan_heading = np.ascontiguousarray(heading).reshape(-1).take(sw.index)
     theta = np.zeros(k)
@@ -337,8 +337,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
             # readings far outside the range cannot help a line (but stay for the final check)
             uidx = sw.place(theta, 1.5 * max_range)
             if mode == "regroup":
-                chains = _chains(sw.d, sw.sigma, scan_heading, sw.sensor, sw.reject,
-                                 lines.jump_sigmas)
+                chains = polyline_ids(sw.d, sw.sigma, scan_heading, sw.sensor, sw.reject,
+                                      lines.jump_sigmas)
                 parts = (sw.px, sw.py, sw.thr, chains)
                 if uidx is not None:
                     parts = tuple(v.take(uidx) for v in parts)
@@ -368,14 +368,14 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                     history.append(sw.scatter_theta(theta).reshape(shape))
                 if not moving:
                     break
-                held = _iterate.Held(sw, grouping, theta, damping, _MAX_GAIN)
+                held = _iterate.Held(sw, grouping, theta, damping, MAX_GAIN)
                 continue
             # unchanged: this iteration is an ordinary held step
         # held iterations until they settle, a regroup or a membership check is due
         if not (regroup_changed and regroups < lines.regroup_iterations):
             regroup_before = -1
         else:  # a third or later grouping only early on
-            regroup_before = limit + 1 if regroups == 1 else _REGROUP_WINDOW
+            regroup_before = limit + 1 if regroups == 1 else REGROUP_WINDOW
         status, it, last_settled, was_checked = held.run(
             it, limit, tolerance_rad, checked, last_moving, regroup_before,
             lines.regroup_until_rad, one_step=keep_history)  # a history records every step
@@ -411,11 +411,11 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         heading=np.array(heading), sigma_m=sigma.reshape(shape),
         iterations=it_out.reshape(shape), valid=valid.reshape(shape), reason=reason,
         max_range_m=max_range)
-    return _finish(points, grouping, on_line, sw.index, cal, snap, detail, history)
+    return final_estimate(points, grouping, on_line, sw.index, cal, snap, detail, history)
 
 
-def _finish(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration, snap: bool,
-            detail: bool, history: list) -> Estimate:
+def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration,
+                   snap: bool, detail: bool, history: list) -> Estimate:
     """The estimate from the final points and grouping (either estimator's): line members
     onto their lines (:func:`snap_to_lines`) and, with ``detail``, the :class:`Lines`."""
     if grouping is None:
@@ -561,7 +561,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
     # wrong θ moves a member off it (with none, 4 % of T-room members lie beyond 3σ)
     own = points.sigma_m.reshape(-1)[at]
     out["sigma_m"].reshape(-1)[at] = np.maximum(np.hypot(sigma_line[ok], _SNAP_OWN * own),
-                                                _SIGMA_FLOOR_M)
+                                                SIGMA_FLOOR_M)
     out["d"].reshape(-1)[at] = t
     out["x"].reshape(-1)[at] = ox[ok] + t * ch[ok]
     out["y"].reshape(-1)[at] = oy[ok] + t * sh[ok]
@@ -736,7 +736,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         out[0].reshape(-1)[idx] = dist
         out[1].reshape(-1)[idx] = theta
         out[2].reshape(-1)[idx] = np.where(dist > 0, np.maximum(slope * dist * sig_s,
-                                                                 _SIGMA_FLOOR_M), 0.0)
+                                                                 SIGMA_FLOOR_M), 0.0)
     return near, far, out[0], out[1], out[2]
 
 
@@ -764,8 +764,8 @@ def _clip_at_corners(c, e, lo, hi):
 
 
 @functools.lru_cache(maxsize=16)
-def _nominal_for(sensor_model: str, ring: Ring | None, adc_bits: int, vref_v: float
-                 ) -> Calibration:
+def nominal_calibration(sensor_model: str, ring: Ring | None, adc_bits: int, vref_v: float
+                        ) -> Calibration:
     """:meth:`Calibration.for_sweep`'s calibration, built once per sensor/ring/ADC: its fine θ
     table (built on its first sweep) takes longer than estimating a sweep, and ``irring run``
     without a calibration file estimates every sweep with the default."""

@@ -10,10 +10,10 @@ import math
 import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
-from .calibration import _FALLBACK_NODES, Calibration
-from .estimate import (_MAX_GAIN, _PINNED_RAD, _REGROUP_WINDOW, _SIGMA_FLOOR_M, Estimate,
-                       LineOptions, _chains, _finish, _nominal_for, _Pieces, _scan_order,
-                       resolve_foldover)
+from .calibration import FALLBACK_NODES, Calibration
+from .estimate import (MAX_GAIN, PINNED_RAD, REGROUP_WINDOW, SIGMA_FLOOR_M, Estimate,
+                       LineOptions, Pieces, final_estimate, nominal_calibration, polyline_ids,
+                       resolve_foldover, scan_order)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -259,8 +259,8 @@ def _merge(mom: _Moments, px, py, inv_thr, starts, ends):
     return starts, ends
 
 
-def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | None = None
-             ) -> _Pieces:
+def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: Pieces | None = None
+             ) -> Pieces:
     """Split-and-merge over ordered points (one sensor's readings by step form polylines,
     broken where consecutive readings are more than ``gap_m`` apart), corners refined.
 
@@ -291,7 +291,7 @@ def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: _Pieces | Non
     return _piece_lines(mom, px, py, thr, starts, ends, brk, opts)
 
 
-def _keep_unchanged(prev: _Pieces, brk, starts, ends):
+def _keep_unchanged(prev: Pieces, brk, starts, ends):
     """The pieces of polylines that are the same as in ``prev`` (same first and last point)
     from ``prev``, the fresh ``starts``/``ends`` elsewhere: a range jump found at a regroup
     re-splits only the polylines it cuts (split anew at half-settled θ, the others lost
@@ -312,7 +312,7 @@ def _keep_unchanged(prev: _Pieces, brk, starts, ends):
     return s.take(order), e.take(order)
 
 
-def _piece_lines(mom: _Moments, px, py, thr, starts, ends, brk, opts: LineOptions) -> _Pieces:
+def _piece_lines(mom: _Moments, px, py, thr, starts, ends, brk, opts: LineOptions) -> Pieces:
     """Each piece's TLS line, who owns the corners, and which lines are good enough."""
     mx, my, alpha, lmin, lmax = _tls(*mom.sums(starts, ends))
     cx, cy = mx + mom.cx, my + mom.cy
@@ -335,7 +335,7 @@ def _piece_lines(mom: _Moments, px, py, thr, starts, ends, brk, opts: LineOption
               & (np.sqrt(lmin) <= opts.max_rms_sigmas * np.maximum(mean_sig, 1e-6))
               & np.isfinite(alpha))
     alpha[alpha < 0] += math.pi
-    return _Pieces(starts=starts, ends=ends, brk=brk, owner=o, cx=cx, cy=cy, alpha=alpha,
+    return Pieces(starts=starts, ends=ends, brk=brk, owner=o, cx=cx, cy=cy, alpha=alpha,
                    lmin=lmin, lmax=lmax, n_points=n_pts, length_m=ext, usable=usable)
 
 
@@ -377,7 +377,7 @@ class _Sweep:
 
     def __init__(self, cal: Calibration, counts, origin, heading, live, steps, opts):
         n_sensors = counts.shape[1]
-        scan = _scan_order(steps, n_sensors)
+        scan = scan_order(steps, n_sensors)
         pos = live.reshape(-1).take(scan).nonzero()[0]      # places in the scan order
         self.index = sel = scan.take(pos)                     # flat (S, N) index of each
         self.k = sel.size
@@ -413,7 +413,7 @@ class _Sweep:
         """d, x, y, σ of every live reading at incidence θ."""
         la, b = self.ab(theta)
         d = np.exp(la + b * self.log_s)
-        sigma = np.maximum(np.abs(b) * d * self.sig_s, _SIGMA_FLOOR_M)
+        sigma = np.maximum(np.abs(b) * d * self.sig_s, SIGMA_FLOOR_M)
         return d, self.ox + d * self.ux, self.oy + d * self.uy, sigma
 
     def thresholds(self, sigma: np.ndarray) -> np.ndarray:
@@ -423,7 +423,7 @@ class _Sweep:
 class _Grouping:
     """The lines of the current iteration and which reading takes θ from which line."""
 
-    def __init__(self, sw: _Sweep, pieces: _Pieces, uidx: np.ndarray | None):
+    def __init__(self, sw: _Sweep, pieces: Pieces, uidx: np.ndarray | None):
         self.sw = sw
         self.pieces = pieces
         self.uidx = uidx                 # compact index of each usable point (None: all)
@@ -620,7 +620,7 @@ class _Grouping:
         if usable is not None:
             good &= usable
         theta_line = _incidence(sw.hm, self.alpha.take(lab))
-        pinned = good & (theta_line >= sw.cap - _PINNED_RAD)
+        pinned = good & (theta_line >= sw.cap - PINNED_RAD)
         if pinned.any():
             frac = (np.bincount(lab[pinned], minlength=self.n_lines)
                     / np.maximum(np.bincount(lab[good], minlength=self.n_lines), 1))
@@ -782,7 +782,7 @@ class _Held:
             # gain −1/slope with slope = (g − g_prev)/da: only where the slope is negative
             ok = dg * da > 0.0
             gain = np.ones_like(g)
-            gain[ok] = np.minimum(np.maximum(da[ok] / dg[ok], 1.0 / 64.0), _MAX_GAIN)
+            gain[ok] = np.minimum(np.maximum(da[ok] / dg[ok], 1.0 / 64.0), MAX_GAIN)
             self.a_prev, self.g_prev = a, g
             a = a + gain * g
         else:
@@ -809,7 +809,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     (:func:`irring.estimation.estimate.snap_to_lines`). ``keep_unconverged``: readings
     still moving at the cap valid at their last θ.
     """
-    cal = calibration if calibration is not None else _nominal_for(
+    cal = calibration if calibration is not None else nominal_calibration(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
     if hold is None and cal.folds and iterate:
         return resolve_foldover(lambda held, _detail, snap_: estimate_detail(
@@ -840,7 +840,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     last_moving = np.full(k, -1)        # last iteration in which each reading's θ moved
     history = [np.zeros(shape)] if keep_history else []
     grouping: _Grouping | None = None
-    pieces: _Pieces | None = None
+    pieces: Pieces | None = None
     held: _Held | None = None
     on_line = np.zeros(k, dtype=bool)
     regroups = 0
@@ -865,7 +865,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
             if mode == "regroup":
                 uidx = None if use_mask is None else usable.nonzero()[0]
                 # polylines break at a sensor change and at range jumps (occlusion edges)
-                chains = _chains(d, sigma, sw.h, sw.sensor, sw.reject, lines.jump_sigmas)
+                chains = polyline_ids(d, sigma, sw.h, sw.sensor, sw.reject, lines.jump_sigmas)
                 parts = (px, py, thr, chains) if uidx is None else (
                     px.take(uidx), py.take(uidx), thr.take(uidx), chains.take(uidx))
                 pieces = _segment(*parts, lines, sw.centre, pieces)
@@ -907,7 +907,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                 continue
             # unchanged: this iteration is an ordinary held step
         step, theta_line = held.fit()
-        hot = theta_line >= sw.cap - _PINNED_RAD
+        hot = theta_line >= sw.cap - PINNED_RAD
         if not checked and hot.any() and _needs_drop(held, hot, theta_line, sw):
             mode = "member"      # some member left its line: redo this iteration as a check
             continue
@@ -926,7 +926,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
             else:
                 mode = "member"    # settled: a last look at who belongs where
         elif (regroup_changed and regroups < lines.regroup_iterations
-              and (regroups == 1 or it < _REGROUP_WINDOW)
+              and (regroups == 1 or it < REGROUP_WINDOW)
               and float(np.max(np.abs(step))) < lines.regroup_until_rad):
             mode = "regroup"       # θ has settled coarsely: group the straightened points again
     n_its = it
@@ -937,7 +937,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     s = sw.counts
     log_a, b = cal._log_ab(theta)
     d = np.exp(log_a + b * sw.log_s)
-    sigma = np.maximum(np.abs(b) * d * sw.sig_s, _SIGMA_FLOOR_M)
+    sigma = np.maximum(np.abs(b) * d * sw.sig_s, SIGMA_FLOOR_M)
     px, py = sw.ox + d * sw.ux, sw.oy + d * sw.uy
     if iterate:  # fallback readings (no line): θ = 0, σ widened by θ's unknown
         off = (~on_line).nonzero()[0]
@@ -966,7 +966,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         origin_x=np.array(origin[..., 0]), origin_y=np.array(origin[..., 1]),
         heading=np.array(heading), sigma_m=_scatter(sigma, sw.index, shape, nan, mask=valid),
         iterations=it_out, valid=valid, reason=reason, max_range_m=max_range)
-    return _finish(points, grouping, on_line, sw.index, cal, snap, True, history)
+    return final_estimate(points, grouping, on_line, sw.index, cal, snap, True, history)
 
 
 
@@ -976,7 +976,7 @@ def _fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np
     up to the drop-out angle; most such readings are thin obstacles), by 8-point quadrature.
     The θ = 0 distance is the longest the reading can mean, so the error is one-sided and
     grows steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
-    u = (np.arange(_FALLBACK_NODES) + 0.5) / _FALLBACK_NODES * math.sin(cal.max_incidence_rad)
+    u = (np.arange(FALLBACK_NODES) + 0.5) / FALLBACK_NODES * math.sin(cal.max_incidence_rad)
     err = cal.distance(counts[:, None], np.arcsin(u)) - d0[:, None]
     return np.sqrt(np.mean(err * err, axis=1))
 
