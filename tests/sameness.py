@@ -342,10 +342,8 @@ def main(argv=None) -> int:
         print("recording the working tree", file=sys.stderr)
         b = record(ROOT, keep / "tree")
         return diff(a, b)
-    finally:
-        shutil.rmtree(tmp / "ref", ignore_errors=True)
-        if not args.keep:
-            shutil.rmtree(tmp, ignore_errors=True)
+    finally:   # the records live in --keep when given, else in tmp
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":
