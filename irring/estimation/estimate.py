@@ -572,6 +572,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
 
 _FOLD_BLOCK_M = 0.25   # a known wall blocks a beam this far past its readings' ends …
 _FOLD_ON_M = 0.10      # … and a reading lies on it this far past them
+_FOLD_ANCHOR = 2       # a line decides "far" once this many of its members are certainly far
 
 
 def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: Sweep,
@@ -604,13 +605,21 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     # out): the distance at the incidence of the line that decided their branch
     lost = p.valid & (second.lines.label < 0)
     put = near | (far & lost & (d_fold > 0))
-    # … and far ones on a line in the first pass only: that pass's reading
     q = first.points
-    keep = lost & ~put & q.valid & (first.lines.label >= 0)
+    on_first = q.valid & (first.lines.label >= 0)
+
+    def apart(d1, s1, d2, s2):
+        return np.abs(d1 - d2) > np.maximum(0.03, 3.0 * np.fmax(s1, s2))
+
+    # … unless the first pass read it on a line of its own elsewhere: the line that decided
+    # the branch may be a wall behind the one its beam meets; it cannot be decided
+    torn = put & ~near & on_first & apart(d_fold, sigma_fold, q.d, q.sigma_m)
+    put &= ~torn
+    # … and far ones on a line in the first pass only: that pass's reading
+    keep = lost & ~put & ~torn & on_first
     # a reading both passes read, differently: which lines it belongs to depended on how
     # its neighbours were read; it cannot be decided
-    differ = (p.valid & q.valid & ~put & ~keep
-              & (np.abs(p.d - q.d) > np.maximum(0.03, 3.0 * np.fmax(p.sigma_m, q.sigma_m))))
+    differ = torn | (p.valid & q.valid & ~put & ~keep & apart(p.d, p.sigma_m, q.d, q.sigma_m))
     if put.any() or keep.any() or differ.any():
         x, y, d, theta, sigma = (np.array(v) for v in (p.x, p.y, p.d, p.theta, p.sigma_m))
         d[put], theta[put], sigma[put] = d_fold[put], theta_fold[put], sigma_fold[put]
@@ -680,7 +689,11 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         pairs = np.unique(mcol * n_sensors + msensor)
         trusted = np.bincount(pairs // n_sensors, minlength=use.size) >= 2
         line_sensor = found.start[use] % n_sensors
+        # certainly far members: their near end point would lie inside the housing
+        anchored = np.bincount(mcol[housing.reshape(-1)[member.nonzero()[0][keep]]],
+                               minlength=use.size) >= _FOLD_ANCHOR
     else:
+        anchored = np.zeros(0, bool)
         c = e = nrm = np.zeros((0, 2))
         lo = hi = np.zeros(0)
         trusted = np.zeros(0, bool)
@@ -718,10 +731,27 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     blocked_near = (block_span & (t < near_min[:, None] - tol_near)).any(axis=1)
     near_fit = np.where(on_span & seen, np.abs(t - d_near) / tol_near, np.inf)
     near_on = (near_fit <= 1.0).any(axis=1)
-    far_fit = np.where(on_span & seen & (line_sensor[None, :] != sensor[:, None]),
-                       np.abs(t - d_far) / tol_far, np.inf)
     is_near = blocked_far & near_on & ~blocked_near
-    is_far = ~blocked_far & (far_fit <= 1.0).any(axis=1) & ~near_on
+    # a near end point on a trusted line anywhere along it (a wall runs on past the stretch
+    # seen far: where it passes a sensor closely, only sensors further round see it far)
+    # leaves the near branch possible
+    near_any = (ahead & other & seen & (np.abs(t - d_near) <= tol_near)).any(axis=1)
+    can_far = ~blocked_far & ~near_on & ~near_any
+    fit_far = np.where(on_span & seen & (line_sensor[None, :] != sensor[:, None]),
+                       np.abs(t - d_far) / tol_far, np.inf)
+    # Two sensors agreeing on a line is no proof it is seen far: two neighbours close to one
+    # surface both read it far, and their far end points (curves) can fit one line behind it.
+    # A line decides "far" only once it is anchored: _FOLD_ANCHOR members certainly far (near
+    # end point inside the housing, or decided far on an anchored line), spread line to line.
+    ocol = np.where(own >= 0, col[np.maximum(own, 0)], -1) if use.size else own
+    while True:
+        far_fit = np.where(anchored[None, :], fit_far, np.inf)
+        is_far = can_far & (far_fit <= 1.0).any(axis=1)
+        sel = is_far & (ocol >= 0)
+        more = anchored | (np.bincount(ocol[sel], minlength=use.size) >= _FOLD_ANCHOR)
+        if np.array_equal(more, anchored):
+            break
+        anchored = more
     near, far = np.zeros(shape, bool), housing & live
     near.reshape(-1)[idx] = is_near
     far.reshape(-1)[idx] = is_far
