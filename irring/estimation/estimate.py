@@ -587,10 +587,11 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     1. the whole sweep estimated on the far branch: walls give lines (a near wall's readings
        read far give a curve, which the lines of the neighbouring sensors contradict);
     2. each reading judged against those lines (:func:`_fold_branches`): far if its far end
-       point lies on another sensor's line and no line blocks its beam before it, while its
-       near end point lies on none; near if a line blocks the beam before the far end point
-       and its near end point lies on a line; certainly far if its near end point would lie
-       inside the ring's housing; else ambiguous;
+       point lies on another sensor's anchored line (two members certainly far) and no line
+       blocks its beam before it, while its near end point lies on no line nor any line's
+       extension; near if a line blocks the beam before the far end point and its near end
+       point lies on a line; certainly far if its near end point would lie inside the
+       ring's housing; else ambiguous;
     3. the sweep estimated again without the near and ambiguous readings; the near readings
        get their near distance at the incidence of the line they lie on.
     """
