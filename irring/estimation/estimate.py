@@ -635,6 +635,11 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
             v[differ] = np.nan
         p = replace(p, x=x, y=y, d=d, theta=theta, sigma_m=sigma, valid=valid, reason=reason,
                     iterations=iterations)
+    # a silent beam is known free only to the nearest line either pass explains it by: the
+    # second pass lacks the lines of the readings it held out
+    if q.reach_m is not None:
+        reach = q.reach_m if p.reach_m is None else np.fmin(p.reach_m, q.reach_m)
+        p = replace(p, reach_m=reach)
     return replace(second, points=p, lines=second.lines if detail else None)
 
 
