@@ -236,3 +236,18 @@ def test_every_user_error_is_one_line_with_its_exit_status():
     # still the built-in kinds callers catch
     assert isinstance(cases[0][0], ValueError) and isinstance(cases[3][0], ValueError)
     assert isinstance(cases[4][0], RuntimeError) and isinstance(cases[5][0], RuntimeError)
+
+
+def test_a_reader_that_stops_early_ends_the_command_quietly():
+    """`irring geometry --design all | head -1`: when the reader has gone, the command stops
+    with status 4 (an output not written) and no error line or traceback on stderr."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "irring", "geometry", "--design", "all",
+                             "--samples", "1000"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()                    # before it prints: every write finds no reader
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 4
+    assert err == b""

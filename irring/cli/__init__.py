@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import select
 import sys
 import traceback
 
@@ -106,11 +107,27 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             traceback.print_exc()
         status, message = errors.describe(exc)
+        if isinstance(exc, BrokenPipeError) and _stdout_gone():
+            # the reader left (`irring geometry | head`): an output not written, said by the
+            # status alone, as other tools do; what stdout still buffers goes nowhere
+            # instead of failing again at exit
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return errors.OUTPUT
         try:
             print(f"{command}: error: {message}", file=sys.stderr)
         except (OSError, ValueError):  # stderr itself is gone
             pass
         return status
+
+
+def _stdout_gone() -> bool:
+    """True when stdout is a pipe whose reader has closed it."""
+    try:
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):   # no poll(), no real stdout
+        return False
 
 
 @contextlib.contextmanager
