@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from . import designs, gp2, resources, safe_yaml
-from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, SENSOR_MODEL,
-                   VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
+from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, SEED_MAX,
+                   SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
                    distance_to_outline, inside_outline, num, obstacle_distance, unit_suffix)
 from .designs import Design
 from .errors import InputError
@@ -185,7 +185,7 @@ class Scenario:
     scan: Scan = Scan()
     map: MapSpec = MapSpec()
     effects: Mapping[str, Any] = field(default_factory=dict)
-    seed: int = num(0, lo=0, hi=2**63 - 1)
+    seed: int = num(0, lo=0, hi=SEED_MAX)
     source: str = ""  # file it was loaded from, for messages
 
     def has(self, effect: str) -> bool:

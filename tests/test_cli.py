@@ -76,6 +76,18 @@ BAD_VALUES = [
     (["geometry", "--distances-mm", "250,abc"], "--distances-mm",
      "must be positive distances in mm separated by commas, like 250,500,1000; got '250,abc'"),
     (["geometry", "--samples", "999"], "--samples", "must be ≥ 1000, got 999"),
+    # every seed option takes what a scenario's seed: takes, 0 … 2**63 - 1
+    (["run", "--seed", "-3"], "--seed", "must be 0 … 9223372036854775807, got -3"),
+    (["geometry", "--seed", "-1"], "--seed", "must be 0 … 9223372036854775807, got -1"),
+    (["bench", "speed", "--seed", "-1"], "--seed", "must be 0 … 9223372036854775807, got -1"),
+    (["bench", "estimator", "--seed", "-7"], "--seed", "must be 0 … 9223372036854775807, got -7"),
+    (["bench", "effects", "--seed", "9223372036854775808"], "--seed",
+     "must be 0 … 9223372036854775807, got 9223372036854775808"),
+    (["calibrate", "--seed", "-1"], "--seed", "must be 0 … 9223372036854775807, got -1"),
+    (["emulate", "--seed", "-2"], "--seed", "must be 0 … 9223372036854775807, got -2"),
+    (["bench", "dynamics", "--seeds", "-4"], "--seeds", "must be 0 … 9223372036854775807, got -4"),
+    (["emulate", "--fault-seed", "x"], "--fault-seed",
+     "must be an integer 0 … 9223372036854775807, got 'x'"),
 ]
 
 
@@ -105,6 +117,8 @@ def test_the_boundary_values_are_accepted():
     assert (args.seeds, args.bearings) == (1, 8)
     assert args.distances_mm == pytest.approx([0.0005, 0.3])
     assert parse(["geometry", "--samples", "1000"]).samples == 1000
+    assert parse(["run", "t_room", "--seed", "0"]).seed == 0
+    assert parse(["emulate", "--fault-seed", str(2**63 - 1)]).fault_seed == 2**63 - 1
 
 
 def test_the_default_distances_are_parsed_to_metres():
@@ -122,7 +136,12 @@ def test_help_states_the_allowed_range(argv, option, message, capsys):
         main([*argv[:-2], "--help"])
     blocks = capsys.readouterr().out.split("\n  --")
     block = " ".join(next(b for b in blocks if b.startswith(option[2:] + " ")).split())
-    allowed = ("≥ " + message.split("≥ ")[1].split(",")[0]) if "≥" in message else "positive"
+    if "must be 0 … " in message or "integer 0 … " in message:
+        allowed = "≥ 0"                                   # a seed: 0 … 2**63 - 1
+    elif "≥" in message:
+        allowed = "≥ " + message.split("≥ ")[1].split(",")[0]
+    else:
+        allowed = "positive"
     assert allowed in block
 
 

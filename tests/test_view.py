@@ -70,3 +70,23 @@ def test_bad_pose_or_step_names_what_is_allowed(capsys):
         capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["view", "t_room", "--pose", "0"])
+
+
+def test_out_without_png_is_a_folder_and_an_unwritable_out_exits_4(tmp_path, monkeypatch, capsys):
+    _offscreen_or_skip()
+    monkeypatch.chdir(tmp_path)
+    assert main(["view", "t_room", "--out", "pics", "--size", "48x32"]) == 0
+    assert capsys.readouterr().out.startswith("wrote pics/view.png: t_room, pose 1")
+    from PIL import Image
+
+    assert Image.open(tmp_path / "pics" / "view.png").size == (48, 32)
+    (tmp_path / "afile").write_text("mine")
+    (tmp_path / "d.png").mkdir()
+    for out, why in [("a.jpg", "--out a.jpg: a picture is written as PNG"),
+                     ("afile/x.png", "--out afile: is a file"),
+                     ("d.png", "--out d.png: is a folder")]:
+        assert main(["view", "t_room", "--out", out, "--size", "48x32"]) == 4, out
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and why in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "d.png", "pics"]
+    assert (tmp_path / "afile").read_text() == "mine" and not any((tmp_path / "d.png").iterdir())

@@ -14,6 +14,8 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
+from ..core import SEED_MAX
+
 
 class LazyParser(argparse.ArgumentParser):
     """A subcommand's parser that imports its module and lets it ``register(self)`` (long
@@ -75,6 +77,18 @@ def at_least(low: int) -> Callable[[str], int]:
 
     parse.__name__ = f"int ≥ {low}"
     return parse
+
+
+def seed(text: str) -> int:
+    """A ``type=`` for a seed option: an integer 0 … core.SEED_MAX, as a scenario's ``seed:``."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be an integer 0 … {SEED_MAX}, got {text!r}") from None
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"must be 0 … {SEED_MAX}, got {value}")
+    return value
 
 
 def distances_mm(text: str) -> list[float]:

@@ -6,7 +6,7 @@ import argparse
 import json
 import math
 
-from ._common import at_least, describe
+from ._common import at_least, describe, seed
 
 EPILOG = """\
 what it prints (the paper's ring in the T-room, pose 0 unless said; angles at the sensor):
@@ -40,8 +40,8 @@ def register(p: argparse.ArgumentParser) -> None:
              EPILOG)
     p.add_argument("--sweeps", type=at_least(1), default=1000, metavar="N",
                    help="back-and-forth sweeps for the belt figures (≥ 1; default: 1000)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[1], metavar="SEED",
-                   help="seeds for the motion figures, averaged (default: 1)")
+    p.add_argument("--seeds", type=seed, nargs="+", default=[1], metavar="SEED",
+                   help="seeds ≥ 0 for the motion figures, averaged (default: 1)")
     p.add_argument("--no-motion", action="store_true", help="skip the mapping runs")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=run)

@@ -7,7 +7,7 @@ import json
 
 from ..scenario import load_scenario
 from ..studies.effects import measure
-from ._common import at_least, describe
+from ._common import at_least, describe, seed
 
 EPILOG = """\
 what it prints (µs per 71 × 12 sweep, median over rounds; no MuJoCo involved):
@@ -43,7 +43,7 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="timing rounds; the median over rounds is reported (≥ 1; default: 25)")
     p.add_argument("--batch", type=at_least(1), default=40, metavar="N",
                    help="sweeps per configuration per round (≥ 1; default: 40)")
-    p.add_argument("--seed", type=int, default=0, help="noise seed (default: 0)")
+    p.add_argument("--seed", type=seed, default=0, help="noise seed ≥ 0 (default: 0)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=run)
 

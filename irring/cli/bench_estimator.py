@@ -8,7 +8,7 @@ import json
 from ..estimation.calibration import Calibration, SimulatedRig
 from ..scenario import load_scenario
 from ..studies.estimator import measure
-from ._common import at_least, describe
+from ._common import at_least, describe, seed
 
 EPILOG = """\
 what it prints (range errors against the simulator's true distance from the emitter):
@@ -50,8 +50,8 @@ def register(p: argparse.ArgumentParser) -> None:
                             "scene simulates (docs/calibration.md)")
     group.add_argument("--rig", action="store_true",
                        help="calibrate on the simulated rig with the scenario's effects first")
-    p.add_argument("--seed", type=int, default=None,
-                   help="noise seed (default: the scenario's)")
+    p.add_argument("--seed", type=seed, default=None,
+                   help="noise seed ≥ 0 (default: the scenario's)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=run)
 

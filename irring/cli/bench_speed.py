@@ -7,7 +7,7 @@ import json
 
 from ..scenario import load_scenario
 from ..studies.speed import measure, report
-from ._common import at_least, describe
+from ._common import at_least, describe, seed
 
 EPILOG = """\
 stages (ms per sweep, median over rounds, each round times every stage once in turn):
@@ -45,7 +45,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pose", type=int, default=0, help="scan pose index (default: 0)")
     p.add_argument("--rounds", type=at_least(1), default=200, metavar="N",
                    help="timing rounds; medians over rounds are reported (≥ 1; default: 200)")
-    p.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
+    p.add_argument("--seed", type=seed, default=None, help="noise seed ≥ 0 (default: the scenario's)")
     p.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=run)

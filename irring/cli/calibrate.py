@@ -12,7 +12,7 @@ from ..estimation.calibration import (CalibrationAborted, CalibrationError, Guid
                                       SimulatedRig)
 from ..outputs import check_out
 from ..scenario import load_scenario
-from ._common import at_least, describe
+from ._common import at_least, describe, seed
 
 EPILOG = """\
 what it does:
@@ -61,8 +61,8 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="which sensor faces the wall (default: 0)")
     p.add_argument("--sweeps", type=at_least(1), default=None, metavar="N",
                    help="sweeps per placement, averaged (≥ 1; default: 8 simulated, 4 real)")
-    p.add_argument("--seed", type=int, default=None,
-                   help="noise seed of the simulated rig (default: the scenario's)")
+    p.add_argument("--seed", type=seed, default=None,
+                   help="noise seed ≥ 0 of the simulated rig (default: the scenario's)")
     p.set_defaults(func=run)
 
 

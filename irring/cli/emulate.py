@@ -11,7 +11,7 @@ import time
 
 from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
 from ..scenario import load_scenario
-from ._common import between, describe, host_port
+from ._common import between, describe, host_port, seed
 
 DEFAULT_LINK = "ring.pty"
 
@@ -66,10 +66,10 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="with --stall-after: recover after S seconds (default: never)")
     p.add_argument("--disconnect-after", type=int, default=None, metavar="N",
                    help="close the port after N sentences (a pulled cable)")
-    p.add_argument("--seed", type=int, default=None,
-                   help="noise seed of the readings (default: the scenario's seed)")
-    p.add_argument("--fault-seed", type=int, default=0,
-                   help="seed of the fault injection (default 0)")
+    p.add_argument("--seed", type=seed, default=None,
+                   help="noise seed ≥ 0 of the readings (default: the scenario's seed)")
+    p.add_argument("--fault-seed", type=seed, default=0,
+                   help="seed ≥ 0 of the fault injection (default 0)")
     p.add_argument("--pose", type=int, default=None, metavar="INDEX",
                    help="stay at scenario pose INDEX instead of moving on after each full "
                         "sweep")

@@ -9,7 +9,7 @@ import math
 from .. import designs
 from ..designs import DESIGN_BY_NAME
 from ..studies import geometry
-from ._common import at_least, describe, distances_mm
+from ._common import at_least, describe, distances_mm, seed
 
 EPILOG = """\
 what it prints:
@@ -52,7 +52,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--samples", type=at_least(1000), default=400_000, metavar="N",
                    help="Monte-Carlo points per neighbouring pair (≥ 1000; default: 400000; "
                         "standard error ≈ 0.2 %% of S)")
-    p.add_argument("--seed", type=int, default=0, help="Monte-Carlo seed (default: 0)")
+    p.add_argument("--seed", type=seed, default=0, help="Monte-Carlo seed ≥ 0 (default: 0)")
     p.add_argument("--json", action="store_true", help="print JSON (one object, or a list "
                                                        "with --design all)")
     p.set_defaults(func=run)

@@ -10,7 +10,7 @@ from pathlib import Path
 from .. import pipeline
 from ..outputs import check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import add_mcap_option, describe
+from ._common import add_mcap_option, describe, seed
 
 HELP = """\
 Simulate one sweep of the ring at each of the scenario's scan poses, turn the ADC counts
@@ -46,8 +46,8 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="output folder (default: ./out/<scenario>)")
     p.add_argument("--json", action="store_true",
                    help="print a JSON summary on stdout instead of the readable one")
-    p.add_argument("--seed", type=int, default=None,
-                   help="noise seed (default: the scenario's `seed`)")
+    p.add_argument("--seed", type=seed, default=None,
+                   help="noise seed ≥ 0 (default: the scenario's `seed`)")
     p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
                    help="calibration YAML from `irring calibrate` (default: what the scene "
                         "simulates: its sensor curve, a(θ), b(θ) only with `incidence`, its "

@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..errors import OutputError
+from ..outputs import atomic_file, check_out
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ._common import at_least, describe
 
@@ -35,7 +37,8 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="motor step, within the ring's limits (the paper's ring: -35 … 35; "
                         "default: 0, the sensors facing outwards)")
     p.add_argument("--out", type=Path, default=None, metavar="FILE.png",
-                   help="write the picture here instead of opening the viewer")
+                   help="write the picture here instead of opening the viewer (a name "
+                        "without .png is a folder: view.png inside it)")
     p.add_argument("--size", default="1280x960", metavar="WxH",
                    help="picture size in pixels (default: 1280x960)")
     p.set_defaults(func=run)
@@ -66,14 +69,44 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None and view.has_display():
         view.play(scene)
         return 0
-    out = args.out if args.out is not None else Path("out") / scenario.name / "view.png"
+    out = picture_path(args.out if args.out is not None else Path("out") / scenario.name)
     try:
-        path = view.save_png(scene, out, width, height)
+        image = view.render(scene, width, height)
     except RuntimeError as exc:
         print(f"irring view: error: {exc}", file=sys.stderr)
         return 1
+    path = write_png(image, out)
     b = scene.beams
     print(f"wrote {path}: {scenario.name}, pose {args.pose}, motor step {scene.step}; "
           f"{int(b.hits.shape[0])} of {b.distance_m.size} beams hit within "
           f"{b.max_range_m * 1000:.0f} mm")
     return 0
+
+
+def picture_path(out: Path) -> Path:
+    """The PNG ``--out`` names: the file itself when it ends in .png, else view.png in that
+    folder. Checked before any rendering. Raises OutputError (a suffix other than .png, a
+    folder that cannot be made or written)."""
+    if out.suffix.lower() == ".png":
+        if out.is_dir():
+            raise OutputError(f"--out {out}: is a folder; name a .png file or the folder "
+                              "without .png")
+        check_out(out.parent)
+        return out
+    if out.suffix and not out.is_dir():
+        raise OutputError(f"--out {out}: a picture is written as PNG; name a .png file or a "
+                          "folder (view.png inside it)")
+    return check_out(out) / "view.png"
+
+
+def write_png(image, path: Path) -> Path:
+    """``image`` (H×W×3 uint8) to ``path`` as PNG, whole or not at all. Raises OutputError."""
+    from PIL import Image   # deferred: Pillow, only to save a picture
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_file(path) as tmp:
+            Image.fromarray(image).save(tmp, format="PNG")
+    except OSError as exc:
+        raise OutputError(f"--out {path}: {exc.strerror or exc}") from exc
+    return path

@@ -236,15 +236,6 @@ class _Projection:
         return np.stack([col, row], axis=1)
 
 
-def save_png(view: SceneView, path, width: int = 1280, height: int = 960) -> Path:
-    from PIL import Image   # deferred: Pillow, only to save a picture
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(render(view, width, height)).save(path)
-    return path
-
-
 # --------------------------------------------------------------------------- interactive
 
 
