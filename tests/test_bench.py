@@ -198,6 +198,11 @@ def test_speed_reports_every_stage_and_the_ratios():
     assert r["realtime_factor"] == pytest.approx(71 * 0.0383 / (r["sweep_ms"] / 1e3))
     assert r["sweeps_per_s"] == pytest.approx(1e3 / r["sweep_ms"])
     assert set(r["targets"]) == {"sweep_ms", "ray_vs_raw_ratio", "realtime_factor"}
+    # how busy the machine was, before and after, as the report prints it
+    before, after = r["machine"]["load_before"], r["machine"]["load_after"]
+    assert len(before) == len(after) == 3 and min(before + after) >= 0
+    line = next(x for x in speed.report(r).splitlines() if x.startswith("load average"))
+    assert f"before {before[0]:.2f} {before[1]:.2f} {before[2]:.2f} and after {after[0]:.2f}" in line
     json.dumps(r)                                             # plain figures only
 
 
