@@ -79,18 +79,6 @@ def at_least(low: int) -> Callable[[str], int]:
     return parse
 
 
-def seed(text: str) -> int:
-    """A ``type=`` for a seed option: an integer 0 … core.SEED_MAX, as a scenario's ``seed:``."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"must be an integer 0 … {SEED_MAX}, got {text!r}") from None
-    if not 0 <= value <= SEED_MAX:
-        raise argparse.ArgumentTypeError(f"must be 0 … {SEED_MAX}, got {value}")
-    return value
-
-
 def distances_mm(text: str) -> list[float]:
     """A ``type=`` for ``--distances-mm`` "250,500,1000" (mm) → metres: at least one
     number, all positive and finite."""
@@ -137,6 +125,10 @@ def between(low: int, high: int) -> Callable[[str], int]:
 
     parse.__name__ = f"int {low} … {high}"
     return parse
+
+
+# a seed option takes what a scenario's seed: takes
+seed = between(0, SEED_MAX)
 
 
 def positive_seconds(text: str) -> float:
