@@ -9,6 +9,7 @@ raises the ImportError that says how to build it when it is used.
 from __future__ import annotations
 
 import functools
+import importlib
 from pathlib import Path
 
 _PACKAGE = Path(__file__).resolve().parent
@@ -53,3 +54,12 @@ class MissingKernel:
             f"irring's compiled kernel {self._name} is not built: install irring with "
             f"`pip install .` (or `pip install -e .` in a checkout); pip compiles it with the "
             f"machine's C compiler (Debian: apt install build-essential python3-dev)")
+
+
+def kernel(name: str):
+    """The compiled module ``irring.<name>`` (e.g. "maps._traverse"), or a MissingKernel
+    that raises when used: a source tree never installed still imports."""
+    try:
+        return importlib.import_module(f"irring.{name}")
+    except ImportError:
+        return MissingKernel(name)

@@ -25,12 +25,9 @@ from .. import gp2, safe_yaml
 from ..core import ADC_BITS, SENSOR_MODEL, VREF_V, Pose, Ring, Sweep
 from ..errors import InputError, brief
 from ..outputs import write_text_atomic
-from ..resources import MissingKernel
+from ..resources import kernel
 
-try:
-    from . import _iterate
-except ImportError:  # a source tree never installed: the estimator fails when it is used
-    _iterate = MissingKernel("estimation._iterate")
+_iterate = kernel("estimation._iterate")
 
 CALIBRATION_FORMAT = 1  # version written into calibration files
 # Count σ above the no-return level: at or below NO_RETURN_SIGMAS a reading saw nothing (its

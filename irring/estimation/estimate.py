@@ -15,19 +15,13 @@ from typing import Callable
 import numpy as np
 
 from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
-from ..resources import MissingKernel
+from ..resources import kernel
 # Calibration is the estimator's input; calibration files name it here
 # (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import Calibration
 
-try:
-    from . import _iterate
-except ImportError:  # a source tree never installed: the estimator fails when it is used
-    _iterate = MissingKernel("estimation._iterate")
-try:
-    from . import _lines
-except ImportError:
-    _lines = MissingKernel("estimation._lines")
+_iterate = kernel("estimation._iterate")
+_lines = kernel("estimation._lines")
 
 SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
 REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations

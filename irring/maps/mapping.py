@@ -15,12 +15,9 @@ import numpy as np
 from .. import safe_yaml
 from ..core import Points, Reason
 from ..errors import TooBig
-from ..resources import MissingKernel
+from ..resources import kernel
 
-try:
-    from . import _traverse
-except ImportError:  # a source tree never installed: the mapper fails when it is used
-    _traverse = MissingKernel("maps._traverse")
+_traverse = kernel("maps._traverse")
 
 FREE = 0
 OCCUPIED = 1

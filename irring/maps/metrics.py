@@ -15,13 +15,10 @@ from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
 from .. import gp2
 from ..core import (Cylinder, Ring, box_corners, distance_to_outline, inside_obstacle,
                     inside_outline)
-from ..resources import MissingKernel
+from ..resources import kernel
 from ..scenario import Scenario
 
-try:
-    from . import _traverse
-except ImportError:  # a source tree never installed: ground truth fails when it is used
-    _traverse = MissingKernel("maps._traverse")
+_traverse = kernel("maps._traverse")
 
 EXTERIOR = -1   # beyond the walls
 FREE_SPACE = 0  # inside the room, no material at the cell centre
