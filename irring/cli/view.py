@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import OutputError
-from ..outputs import atomic_file, check_out
+from ..outputs import atomic_file, check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ._common import at_least, describe
 
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None and view.has_display():
         view.play(scene)
         return 0
-    out = picture_path(args.out if args.out is not None else Path("out") / scenario.name)
+    out = picture_path(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
     try:
         image = view.render(scene, width, height)
     except RuntimeError as exc:

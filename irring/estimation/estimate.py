@@ -422,8 +422,12 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                          alpha=grouping.alpha, usable=grouping.usable)
     used = index if grouping.uidx is None else index.take(grouping.uidx)
+    silent = bool((points.reason == Reason.NO_RETURN).any())
+    if not (detail or silent):     # no silent beam to explain, no lines asked for
+        return Estimate(points=points, lines=None, theta_history=tuple(history))
     found = _lines_record(pieces_out, label, used)
-    points = replace(points, reach_m=no_return_reach(points, found, cal))
+    if silent:
+        points = replace(points, reach_m=no_return_reach(points, found, cal))
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 

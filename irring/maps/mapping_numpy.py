@@ -21,9 +21,9 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     """``log_odds`` (ny, nx) after one batch of readings, clamped to [lo, hi] (a new array).
 
     As :meth:`OccupancyGrid.insert` (with ``lo, hi`` its clamps) and :meth:`~OccupancyGrid.delta`
-    (a zero grid, no clamp); readings from a wide cone go in as their fan of rays. The kernel
-    clamps only the box of cells its beams reach; on a grid already inside [lo, hi] that is
-    the same.
+    (the grid as it is, no clamp: silent beams stop at its cells); readings from a wide cone
+    go in as their fan of rays. The kernel clamps only the box of cells its beams reach; on a
+    grid already inside [lo, hi] that is the same.
     """
     points, p = mapped_beams(points, params)
     shape = np.shape(log_odds)

@@ -299,7 +299,9 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
         raise ValueError(f"ground truth is {truth.label.shape} cells but the grid is {grid.shape}; "
                          "build it with ground_truth(scenario, grid) for this grid")
     ranged = truth.shadow_ranged
-    if mapped_by is not None and mapped_by is not scenario:
+    if (mapped_by is not None and mapped_by is not scenario
+            and (_ranging(mapped_by), mapped_by.robot.poses)
+            != (_ranging(scenario), scenario.robot.poses)):   # another ring or other poses
         material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
         ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow, _ranging(mapped_by))
     cls = grid.classify()

@@ -15,7 +15,6 @@ import os
 import time
 import warnings
 from dataclasses import dataclass
-from pathlib import Path
 
 import mujoco
 import numpy as np

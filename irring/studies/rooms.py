@@ -19,6 +19,7 @@ from ..estimation.estimate import estimate
 from ..maps.metrics import SCORE_KEYS
 from ..pipeline import progress_bar
 from ..scenario import Scenario, ScenarioError, load_scenario, resolve
+from .report import mean_of
 
 # The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
 # these unless given others.
@@ -75,11 +76,6 @@ def score_room(scenario: Scenario, seed: int | None = None) -> dict:
             "point_rms_m": _rms(np.concatenate(errs)),
             "point_rms_theta0_m": _rms(np.concatenate(errs0)),
             "readings": readings["total"], "valid": readings["valid"]}
-
-
-def _mean(values: list) -> float | None:
-    vals = [v for v in values if v is not None]
-    return float(np.mean(vals)) if vals else None
 
 
 @dataclass(frozen=True)
@@ -155,7 +151,7 @@ def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
         for seed in seeds:
             runs.append(score_room(scene, seed))
             bar.update()
-        row[variant] = {k: _mean([r[k] for r in runs]) for k in runs[0]}
+        row[variant] = {k: mean_of([r[k] for r in runs]) for k in runs[0]}
     row["misses"] = {k: row["effects"][k] for k, lim in TARGETS.items()
                      if row["effects"][k] is not None and row["effects"][k] < lim}
     row["ideal_worse"] = _ideal_worse(row["effects"], row["ideal"])

@@ -8,7 +8,6 @@ then a summary per configuration and a chart. A bad study file raises :class:`St
 from __future__ import annotations
 
 import csv
-import dataclasses
 import difflib
 import itertools
 import json
@@ -27,7 +26,7 @@ except ImportError:  # pragma: no cover - not on POSIX
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
-from ..core import SENSOR_MODEL
+from ..core import SEED_MAX, SENSOR_MODEL
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
 from ..resources import installed_version
@@ -60,7 +59,6 @@ COLUMNS = (KEY_COLUMNS + DESIGN_COLUMNS + SCORE_COLUMNS + COST_COLUMNS + TIMING_
 RESULTS = "results.csv"
 
 
-_SEED_MAX = next(f.metadata["hi"] for f in dataclasses.fields(Scenario) if f.name == "seed")
 
 
 class StudyError(ScenarioError):
@@ -215,7 +213,7 @@ def parse_study(raw: Any, source: str = "") -> Study:
     if isinstance(raw_seeds, int) and not isinstance(raw_seeds, bool):
         count = _number(source, "seeds", raw_seeds, int, 1, 100000)
     else:
-        seeds = tuple(_number(source, f"seeds[{i}]", s, int, 0, _SEED_MAX)
+        seeds = tuple(_number(source, f"seeds[{i}]", s, int, 0, SEED_MAX)
                       for i, s in enumerate(_list(source, "seeds", raw_seeds, "seeds")))
         if len(set(seeds)) != len(seeds):
             raise _fail(source, "seeds", f"a seed is listed twice: {list(seeds)}")
