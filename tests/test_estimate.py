@@ -23,7 +23,8 @@ from irring import gp2
 from irring.core import Reason, beam_geometry, sensor_angles_for_steps
 from irring.estimation.calibration import (Calibration, CalibrationError,
                                       emitter_offset_from_wall, fit_curve)
-from irring.estimation.estimate import LineOptions, estimate, estimate_detail, fit_lines
+from irring.estimation.estimate import (LineOptions, estimate, estimate_detail, fit_lines,
+                                        no_return_reach)
 from irring.core import Ring
 
 # Hundreds of generated cases per hard case, the same ones every run so CI is reproducible;
@@ -689,6 +690,25 @@ def test_silent_beams_grazing_a_cabinet_do_not_free_its_inside(noise):
                       & (y < box[3] - 0.01))
             inside_free.append(int((g.classify()[inside] == FREE).sum()))
         assert inside_free[0] == 0 and inside_free[1] >= 10, (seed, inside_free)
+
+
+def test_silent_beams_take_the_callers_incidence_margin():
+    """``LineOptions.incidence_margin_rad`` decides which lines explain a silent beam: in the
+    cabinet scene above, a 20° margin (lines met ≥ 50° count, the drop-out angle being 70°)
+    explains 24 silent beams where the default 5° explains 14 of the same sweep's, and the
+    estimator's ``reach_m`` is that of the margin it was given (it used the default's)."""
+    cal = dataclasses.replace(NOMINAL, noise_counts=0.3)
+    walls = rectangle(-0.55, -0.45, 0.95, 0.62) + rectangle(0.25, 0.10, 0.75, 0.18)
+    sweep, _, _ = make_sweep(cal, walls=walls, pose=(0.0, -0.12, 0.3))
+    wide = LineOptions(incidence_margin_rad=math.radians(20.0))
+    est = estimate_detail(sweep, cal, lines=wide)
+    p = est.points
+    mine = no_return_reach(p, est.lines, cal, wide)
+    default = no_return_reach(p, est.lines, cal, LineOptions())
+    np.testing.assert_array_equal(p.reach_m, mine)
+    assert np.isfinite(mine).sum() == 24 and np.isfinite(default).sum() == 14
+    # the wider margin only adds beams; where both explain one, the nearest line may differ
+    assert not (np.isfinite(default) & ~np.isfinite(mine)).any()
 
 
 @pytest.fixture(scope="module")

@@ -782,3 +782,130 @@ cdef tuple _piece_lines(const double* px, const double* py, const double* thr, i
             PyBuffer_Release(&views[i])
     return (iblk[:P], iblk[P:2 * P], bblk[:k], iblk[3 * P:], fblk[0], fblk[1], alpha_arr,
             fblk[3], fblk[4], iblk[2 * P:3 * P], fblk[5], bblk[k:])
+
+
+# --------------------------------------------------------------------------- silent beams
+
+def no_return_reach(const double[::1] heading, const double[::1] ox, const double[::1] oy,
+                    const double[::1] x, const double[::1] y, const idx_t[::1] label,
+                    const unsigned char[::1] valid, const unsigned char[::1] reason,
+                    unsigned char no_return, const double[:, ::1] centroid,
+                    const double[:, ::1] direction, const double[:, ::1] normal,
+                    const unsigned char[::1] usable, idx_t min_members, double clear_m,
+                    double block_m, double corner_min_sin, double corner_past_m,
+                    double cos_limit, double max_range):
+    """How far each silent beam is known free: ``irring.estimation.estimate_numpy.no_return_reach``
+    (the statement and the why) in one pass: the same operations in the same order, the
+    beam's cos and sin libm's (numpy's agree with them, see the top of this file).
+
+    Per reading (K,) float64 / intp / uint8, flat: heading, origin ox, oy, end point x, y, line
+    label (−1: none), valid, reason (``no_return``: a silent beam). Per line (L,): centroid,
+    direction, normal (L, 2) and usable. Lines with ≥ ``min_members`` valid members explain
+    beams; their span is the members' extent plus ``block_m``, clipped ``corner_past_m`` past
+    a corner (``irring.estimation.estimate.clip_at_corners``). Returns reach (K,) (NaN: to
+    the max range) or None when no beam is explained; a label ≥ L is a ValueError."""
+    cdef idx_t K = heading.shape[0], L = usable.shape[0], U = 0, i, j, l, u, v
+    cdef double along, den, dx, dy, a, b, ux, uy, un, gap, cos_inc, t, s, stop
+    cdef bint found = False
+    if not (ox.shape[0] == oy.shape[0] == x.shape[0] == y.shape[0] == label.shape[0]
+            == valid.shape[0] == reason.shape[0] == K):
+        raise ValueError("per-reading arrays differ in length")
+    if not (centroid.shape[0] == direction.shape[0] == normal.shape[0] == L
+            and centroid.shape[1] == direction.shape[1] == normal.shape[1] == 2):
+        raise ValueError("line arrays must be (L, 2) for the L usable flags")
+    for i in range(K):
+        if label[i] >= L:
+            raise ValueError(f"line label {label[i]} of reading {i}: only {L} lines")
+    n_mem = np.zeros(L, dtype=np.intp)
+    col = np.full(L, -1, dtype=np.intp)
+    cdef idx_t[::1] nm = n_mem, cl = col
+    for i in range(K):
+        if label[i] >= 0 and valid[i]:
+            nm[label[i]] += 1
+    for l in range(L):
+        if usable[l] and nm[l] >= min_members:
+            cl[l] = U
+            U += 1
+    if U == 0:
+        return None
+    spans = np.empty((6, U))
+    use_arr = np.empty(U, dtype=np.intp)
+    cdef double[:, ::1] sp = spans
+    cdef double[::1] lo = sp[0], hi = sp[1], lo_b0 = sp[2], hi_b0 = sp[3], lo_b = sp[4], hi_b = sp[5]
+    cdef idx_t[::1] use = use_arr
+    for l in range(L):
+        if cl[l] >= 0:
+            use[cl[l]] = l
+    for u in range(U):
+        lo[u] = INFINITY
+        hi[u] = -INFINITY
+    # the members' extent along each line (NaN propagates as numpy's minimum.at does)
+    for i in range(K):
+        if label[i] < 0 or not valid[i]:
+            continue
+        u = cl[label[i]]
+        if u < 0:
+            continue
+        l = label[i]
+        along = (x[i] - centroid[l, 0]) * direction[l, 0] + (y[i] - centroid[l, 1]) * direction[l, 1]
+        if along < lo[u] or along != along:
+            if lo[u] == lo[u]:
+                lo[u] = along
+        if along > hi[u] or along != along:
+            if hi[u] == hi[u]:
+                hi[u] = along
+    # spans clipped at corners: where line u meets line v's (unclipped) span
+    for u in range(U):
+        lo_b0[u] = lo[u] - block_m
+        hi_b0[u] = hi[u] + block_m
+        lo_b[u] = lo_b0[u]
+        hi_b[u] = hi_b0[u]
+    if U >= 2:
+        for u in range(U):
+            i = use[u]
+            for v in range(U):
+                if v == u:
+                    continue
+                j = use[v]
+                den = direction[i, 0] * direction[j, 1] - direction[i, 1] * direction[j, 0]
+                if not fabs(den) > corner_min_sin:
+                    continue
+                dx = centroid[j, 0] - centroid[i, 0]
+                dy = centroid[j, 1] - centroid[i, 1]
+                b = (dx * direction[i, 1] - dy * direction[i, 0]) / den
+                if not (b >= lo_b0[v] and b <= hi_b0[v]):
+                    continue
+                a = (dx * direction[j, 1] - dy * direction[j, 0]) / den
+                if a > hi[u] and a < hi_b0[u] and a + corner_past_m < hi_b[u]:
+                    hi_b[u] = a + corner_past_m
+                if a < lo[u] and a > lo_b0[u] and a - corner_past_m > lo_b[u]:
+                    lo_b[u] = a - corner_past_m
+    # each silent beam stops clear_m (across the line) before the first line that explains it
+    reach_arr = np.full(K, NAN)
+    cdef double[::1] reach = reach_arr
+    for i in range(K):
+        if reason[i] != no_return:
+            continue
+        ux = cos(heading[i])
+        uy = sin(heading[i])
+        stop = INFINITY
+        for u in range(U):
+            l = use[u]
+            un = ux * normal[l, 0] + uy * normal[l, 1]
+            cos_inc = fabs(un)
+            if not (cos_inc > 1e-9 and cos_inc <= cos_limit):
+                continue
+            gap = (centroid[l, 0] - ox[i]) * normal[l, 0] + (centroid[l, 1] - oy[i]) * normal[l, 1]
+            t = gap / un
+            if not (isfinite(t) and t > 0 and t <= max_range):
+                continue
+            along = ((ox[i] + t * ux - centroid[l, 0]) * direction[l, 0]
+                     + (oy[i] + t * uy - centroid[l, 1]) * direction[l, 1])
+            if along >= lo_b[u] and along <= hi_b[u]:
+                s = t - clear_m / cos_inc
+                if s < stop:
+                    stop = s
+        if stop < INFINITY:
+            reach[i] = stop if stop > 0.0 else 0.0
+            found = True
+    return reach_arr if found else None

@@ -405,13 +405,16 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         heading=np.array(heading), sigma_m=sigma.reshape(shape),
         iterations=it_out.reshape(shape), valid=valid.reshape(shape), reason=reason,
         max_range_m=max_range)
-    return final_estimate(points, grouping, on_line, sw.index, cal, snap, detail, history)
+    return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, detail, history)
 
 
 def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration,
-                   snap: bool, detail: bool, history: list) -> Estimate:
+                   options: LineOptions, snap: bool, detail: bool, history: list,
+                   reach: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's): line members
-    onto their lines (:func:`snap_to_lines`) and, with ``detail``, the :class:`Lines`."""
+    onto their lines (:func:`snap_to_lines`), each silent beam's reach (``reach``: the
+    compiled :func:`no_return_reach` or the oracle's) and, with ``detail``, the
+    :class:`Lines`."""
     if grouping is None:
         return Estimate(points=points, lines=None, theta_history=tuple(history))
     shape = points.valid.shape
@@ -427,74 +430,88 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         return Estimate(points=points, lines=None, theta_history=tuple(history))
     found = _lines_record(pieces_out, label, used)
     if silent:
-        points = replace(points, reach_m=no_return_reach(points, found, cal))
+        points = replace(points, reach_m=(reach or no_return_reach)(points, found, cal, options))
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 
 
 # --------------------------------------------------------------------------- silent beams
 
-_REACH_MIN_MEMBERS = 5      # a line explains silent beams with at least this many members …
-_REACH_CLEAR_M = 0.01       # … which stop this far (across the line) before meeting it
+REACH_MIN_MEMBERS = 5      # a line explains silent beams with at least this many members …
+REACH_CLEAR_M = 0.01       # … which stop this far (across the line) before meeting it
 
 
-def no_return_reach(points: Points, lines: Lines, cal: Calibration) -> np.ndarray | None:
-    """How far each NO_RETURN beam is known free (S, N; NaN: to the max range), from the
-    sweep's lines.
+def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
+                    options: LineOptions) -> np.ndarray | None:
+    """How far each NO_RETURN beam is known free (S, N, m; NaN: to the max range; None: no
+    silent beam meets a line that explains it), from the sweep's lines ``found``.
 
-    A GP2 returns nothing from a surface met past its drop-out angle, so a silent beam only
-    says "no surface I could have seen": one grazing a box's face passes into the box, and
-    a few such beams at full length mapped the inside of boxes free (free accuracy 0.980 in
-    a held-out kitchen). A silent beam that meets a usable line (≥ 5 valid members; its
-    members' extent plus 0.25 m, not past a corner: ``_clip_at_corners``) within its range
-    at an incidence the sensor would drop out at (≥ the drop-out angle less
-    ``LineOptions.incidence_margin_rad``) is explained by it: it is known free only to where
-    it comes within 10 mm of that line. A line met at a smaller incidence is not what the
-    beam saw (it would have returned), so it explains nothing."""
-    nr = (points.reason == Reason.NO_RETURN).reshape(-1).nonzero()[0]
-    if nr.size == 0 or lines is None or lines.usable.size == 0:
+    A silent beam is stopped 10 mm before the first usable line of ≥ 5 valid members it
+    meets within range, inside that line's span (members' extent plus 0.25 m, not past a
+    corner), at an incidence ≥ the drop-out angle less ``options.incidence_margin_rad``.
+    One compiled call (``irring.estimation._lines.no_return_reach``); the readable statement
+    and the why: :func:`irring.estimation.estimate_numpy.no_return_reach`."""
+    if found is None or found.usable.size == 0:
         return None
-    lab = lines.label.reshape(-1)
-    member = (lab >= 0) & points.valid.reshape(-1)
-    n_mem = np.bincount(lab[member], minlength=lines.usable.size)
-    use = (lines.usable & (n_mem >= _REACH_MIN_MEMBERS)).nonzero()[0]
-    if use.size == 0:
-        return None
-    c, e, nrm = lines.centroid[use], lines.direction[use], lines.normal[use]
-    col = np.full(lines.usable.size, -1)
+    f = np.ascontiguousarray
+    flat = [f(a, dtype=float).reshape(-1) for a in (points.heading, points.origin_x,
+                                                     points.origin_y, points.x, points.y)]
+    reach = _lines.no_return_reach(
+        *flat, f(found.label, dtype=np.intp).reshape(-1),
+        f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
+        f(points.reason, dtype=np.uint8).reshape(-1), int(Reason.NO_RETURN),
+        f(found.centroid, dtype=float), f(found.direction, dtype=float),
+        f(found.normal, dtype=float), f(found.usable, dtype=bool).view(np.uint8),
+        REACH_MIN_MEMBERS, REACH_CLEAR_M, _FOLD_BLOCK_M, _CORNER_MIN_SIN, _CORNER_PAST_M,
+        reach_cos_limit(cal, options), float(points.max_range_m))
+    return None if reach is None else reach.reshape(points.valid.shape)
+
+
+def reach_cos_limit(cal: Calibration, options: LineOptions) -> float:
+    """A silent beam meeting a line with |cos incidence| at most this would have dropped out
+    there: the drop-out angle less ``options.incidence_margin_rad``."""
+    return math.cos(cal.max_incidence_rad - options.incidence_margin_rad)
+
+
+def member_spans(points: Points, found: Lines, use: np.ndarray):
+    """The valid members of the lines ``use`` (indices into ``found``) and their extent.
+
+    Returns (col, at, mcol, lo, hi): ``col`` (L,) each line's position in ``use`` (−1: not
+    used); ``at`` the members' flat (S·N) indices and ``mcol`` their line's position; ``lo``,
+    ``hi`` (len(use),) the least and greatest member coordinate along each line from its
+    centroid (m; ±inf for a line without valid members)."""
+    lab = found.label.reshape(-1)
+    at = ((lab >= 0) & points.valid.reshape(-1)).nonzero()[0]
+    col = np.full(found.usable.size, -1)
     col[use] = np.arange(use.size)
-    mcol = col[lab[member]]
+    mcol = col[lab[at]]
     keep = mcol >= 0
-    mcol = mcol[keep]
-    mx, my = points.x.reshape(-1)[member][keep], points.y.reshape(-1)[member][keep]
+    at, mcol = at[keep], mcol[keep]
+    c, e = found.centroid[use], found.direction[use]
+    mx, my = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
     along = (mx - c[mcol, 0]) * e[mcol, 0] + (my - c[mcol, 1]) * e[mcol, 1]
     lo = np.full(use.size, np.inf)
     hi = np.full(use.size, -np.inf)
     np.minimum.at(lo, mcol, along)
     np.maximum.at(hi, mcol, along)
-    lo_b, hi_b = _clip_at_corners(c, e, lo, hi)
-    h = points.heading.reshape(-1)[nr]
-    ux, uy = np.cos(h), np.sin(h)
-    ox, oy = points.origin_x.reshape(-1)[nr], points.origin_y.reshape(-1)[nr]
-    un = ux[:, None] * nrm[None, :, 0] + uy[:, None] * nrm[None, :, 1]          # (B, L)
+    return col, at, mcol, lo, hi
+
+
+def beam_crossings(ox, oy, ux, uy, c, e, nrm):
+    """Beams (B,) from (ox, oy) along unit (ux, uy) against lines (L,) through centroids
+    ``c`` along unit ``e`` with unit normals ``nrm``; all (B, L): ``un`` = beam · normal
+    (|un| = cos incidence), ``t`` the distance along the beam to the line where it lies ahead
+    (else 0), ``ahead``, and ``along`` the crossing's coordinate along the line from ``c``."""
+    un = ux[:, None] * nrm[None, :, 0] + uy[:, None] * nrm[None, :, 1]
     gap = ((c[None, :, 0] - ox[:, None]) * nrm[None, :, 0]
            + (c[None, :, 1] - oy[:, None]) * nrm[None, :, 1])               # emitter → line
     with np.errstate(divide="ignore", invalid="ignore"):
         t = gap / un
-    cos_inc = np.abs(un)
-    grazing = cos_inc <= math.cos(cal.max_incidence_rad - LineOptions.incidence_margin_rad)
-    ok = grazing & (cos_inc > 1e-9) & np.isfinite(t) & (t > 0) & (t <= points.max_range_m)
-    t = np.where(ok, t, 0.0)
-    qa = ((ox[:, None] + t * ux[:, None] - c[None, :, 0]) * e[None, :, 0]
-          + (oy[:, None] + t * uy[:, None] - c[None, :, 1]) * e[None, :, 1])
-    ok &= (qa >= lo_b[None, :]) & (qa <= hi_b[None, :])
-    # the beam stops where it comes within _REACH_CLEAR_M of the line
-    stop = np.where(ok, t - _REACH_CLEAR_M / np.where(ok, cos_inc, 1.0), np.inf).min(axis=1)
-    if not np.isfinite(stop).any():
-        return None
-    reach = np.full(points.valid.size, np.nan)
-    reach[nr] = np.where(np.isfinite(stop), np.maximum(stop, 0.0), np.nan)
-    return reach.reshape(points.valid.shape)
+    ahead = (np.abs(un) > 1e-9) & np.isfinite(t) & (t > 0)
+    t = np.where(ahead, t, 0.0)
+    along = ((ox[:, None] + t * ux[:, None] - c[None, :, 0]) * e[None, :, 0]
+             + (oy[:, None] + t * uy[:, None] - c[None, :, 1]) * e[None, :, 1])
+    return un, t, ahead, along
 
 
 # --------------------------------------------------------------------------- end points on lines
@@ -571,6 +588,8 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
 _FOLD_BLOCK_M = 0.25   # a known wall blocks a beam this far past its readings' ends …
 _FOLD_ON_M = 0.10      # … and a reading lies on it this far past them
 _FOLD_ANCHOR = 2       # a line decides "far" once this many of its members are certainly far
+_CORNER_MIN_SIN = 0.1  # lines crossing at under ~6° (sine of the angle) make no corner …
+_CORNER_PAST_M = 0.01  # … a line's span ends this far past the corner it meets
 
 
 def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: Sweep,
@@ -664,37 +683,23 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         return np.zeros(shape, bool), housing & live, *(np.zeros(shape) for _ in range(3))
     idx = cand.reshape(-1).nonzero()[0]
     s = counts.reshape(-1)[idx]
-    o = np.stack([ox.reshape(-1)[idx], oy.reshape(-1)[idx]], axis=1)       # (A, 2)
-    u = np.stack([np.cos(h.reshape(-1)[idx]), np.sin(h.reshape(-1)[idx])], axis=1)
+    h_idx = h.reshape(-1)[idx]
     own = found.label.reshape(-1)[idx] if found is not None else np.full(idx.size, -1)
     n_sensors = shape[1]
     sensor = idx % n_sensors
     # the lines with the extent of their valid members along them
     use = (np.zeros(0, dtype=int) if found is None else found.usable.nonzero()[0])
-    lab = found.label.reshape(-1) if found is not None else np.zeros(0, int)
-    member = (lab >= 0) & p.valid.reshape(-1)
     if use.size:
         c, e, nrm = found.centroid[use], found.direction[use], found.normal[use]
-        col = np.full(found.usable.size, -1)
-        col[use] = np.arange(use.size)
-        mcol = col[lab[member]]
-        keep = mcol >= 0
-        mx, my = p.x.reshape(-1)[member][keep], p.y.reshape(-1)[member][keep]
-        mcol = mcol[keep]
-        along = (mx - c[mcol, 0]) * e[mcol, 0] + (my - c[mcol, 1]) * e[mcol, 1]
-        lo = np.full(use.size, np.inf)
-        hi = np.full(use.size, -np.inf)
-        np.minimum.at(lo, mcol, along)
-        np.maximum.at(hi, mcol, along)
+        col, at, mcol, lo, hi = member_spans(p, found, use)
         # a line one sensor alone saw may be a wrong-branch curve cut into pieces (or a few
         # readings at the peak, where both branches meet, with a poor direction): only lines
         # two sensors agree on judge other readings
-        msensor = member.nonzero()[0][keep] % n_sensors
-        pairs = np.unique(mcol * n_sensors + msensor)
+        pairs = np.unique(mcol * n_sensors + at % n_sensors)
         trusted = np.bincount(pairs // n_sensors, minlength=use.size) >= 2
         line_sensor = found.start[use] % n_sensors
         # certainly far members: their near end point would lie inside the housing
-        anchored = np.bincount(mcol[housing.reshape(-1)[member.nonzero()[0][keep]]],
+        anchored = np.bincount(mcol[housing.reshape(-1)[at]],
                                minlength=use.size) >= _FOLD_ANCHOR
     else:
         anchored = np.zeros(0, bool)
@@ -704,18 +709,10 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         line_sensor = np.zeros(0, int)
     # a wall ends at a corner: a line's extension stops where it meets another trusted line
     # (past a box's corner its extension would cut the beams that graze the next face)
-    lo_b, hi_b = _clip_at_corners(c, e, lo, hi)
+    lo_b, hi_b = clip_at_corners(c, e, lo, hi)
     # every candidate's beam against every line: crossing distance t, incidence there
-    un = u @ nrm.T                                                          # (A, L)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((c[None, :, 0] - o[:, None, 0]) * nrm[None, :, 0]
-             + (c[None, :, 1] - o[:, None, 1]) * nrm[None, :, 1]) / un
-    t = np.where(np.abs(un) > 1e-9, t, np.inf)
-    ahead = np.isfinite(t) & (t > 0)
-    t = np.where(ahead, t, 0.0)
-    qx = o[:, None, 0] + t * u[:, None, 0] - c[None, :, 0]
-    qy = o[:, None, 1] + t * u[:, None, 1] - c[None, :, 1]
-    along = qx * e[None, :, 0] + qy * e[None, :, 1]
+    un, t, ahead, along = beam_crossings(ox.reshape(-1)[idx], oy.reshape(-1)[idx],
+                                         np.cos(h_idx), np.sin(h_idx), c, e, nrm)   # (A, L)
     # each reading's own line is where its far end point lies: it blocks nothing
     other = (use[None, :] != own[:, None]) & trusted[None, :]
     block_span = ahead & other & (along >= lo_b) & (along <= hi_b)
@@ -774,7 +771,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     return near, far, out[0], out[1], out[2]
 
 
-def _clip_at_corners(c, e, lo, hi):
+def clip_at_corners(c, e, lo, hi):
     """Each line's span extended by ``_FOLD_BLOCK_M`` either way, but not past the point where
     it meets another line's extended span (a corner, 10 mm beyond it)."""
     lo_b, hi_b = lo - _FOLD_BLOCK_M, hi + _FOLD_BLOCK_M
@@ -784,7 +781,7 @@ def _clip_at_corners(c, e, lo, hi):
     den = e[:, None, 0] * e[None, :, 1] - e[:, None, 1] * e[None, :, 0]       # e_i × e_j
     dx = c[None, :, 0] - c[:, None, 0]
     dy = c[None, :, 1] - c[:, None, 1]
-    ok = np.abs(den) > 0.1                    # lines meeting at < ~6° make no corner
+    ok = np.abs(den) > _CORNER_MIN_SIN        # lines meeting at < ~6° make no corner
     den = np.where(ok, den, 1.0)
     a = (dx * e[None, :, 1] - dy * e[None, :, 0]) / den
     b = (dx * e[:, None, 1] - dy * e[:, None, 0]) / den
@@ -792,8 +789,8 @@ def _clip_at_corners(c, e, lo, hi):
               & ~np.eye(c.shape[0], dtype=bool))
     high = corner & (a > hi[:, None]) & (a < hi_b[:, None])
     low = corner & (a < lo[:, None]) & (a > lo_b[:, None])
-    hi_b = np.minimum(hi_b, np.where(high, a + 0.01, np.inf).min(axis=1))
-    lo_b = np.maximum(lo_b, np.where(low, a - 0.01, -np.inf).max(axis=1))
+    hi_b = np.minimum(hi_b, np.where(high, a + _CORNER_PAST_M, np.inf).min(axis=1))
+    lo_b = np.maximum(lo_b, np.where(low, a - _CORNER_PAST_M, -np.inf).max(axis=1))
     return lo_b, hi_b
 
 
