@@ -135,11 +135,12 @@ class MapRun:
 
     def _repr_png_(self) -> bytes:
         """The map picture (as map.png, smaller), so a notebook shows a MapRun inline."""
-        from .maps import render   # deferred: matplotlib, only for a picture
+        from .maps import render   # deferred: Pillow, only for a picture
 
         reach, ring_r = _reach(self) if self.sweeps else (None, 0.15)
-        return render.MapFigure(self.grid, self.scenario, self.poses, reach, ring_r,
-                                _title(self)).png_bytes()
+        title = _title(self)
+        return render.MapPicture(self.grid, self.scenario, self.poses, reach, ring_r, dpi=80,
+                                 title=title).png_bytes(self.grid.classify(), title)
 
     def recording_meta(self) -> dict:
         """What ``irring replay`` needs to rebuild this exact map."""
@@ -418,7 +419,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     interrupted or failed write leaves the folder as it was); time it as the "render"
     stage. ``mcap``: also write the run there as MCAP (``mcap_export``; the "mcap" stage),
     which needs the ``mcap`` extra."""
-    from .maps import render  # noqa: F401  # deferred: matplotlib, loaded before the clock
+    from .maps import render  # noqa: F401  # deferred: Pillow, loaded before the clock
 
     t0 = time.perf_counter()
     target = OutputSet(out_dir)
@@ -438,7 +439,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
 
 def _write_into(result: MapRun, out: Path, *, animation: bool, recording: bool,
                 title: str | None) -> dict[str, Path]:
-    from .maps import render   # deferred: matplotlib, only for the pictures
+    from .maps import render   # deferred: Pillow, only for the pictures
 
     sc = result.scenario
     reach, ring_r = _reach(result)

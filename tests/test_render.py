@@ -1,8 +1,12 @@
-"""Map pictures: animation frames composed with numpy look like matplotlib's drawing of the
-same figure, are streamed (counted, thinned for long runs), leave the caller's matplotlib
-alone, and pose numbers never sit on each other."""
+"""Map pictures: cells, walls and poses where they belong; frames streamed (counted,
+thinned for long runs) that end as the PNG; the caller's matplotlib left alone (and not
+even loaded); pose numbers never sit on each other."""
 
 from __future__ import annotations
+
+import io
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -40,76 +44,149 @@ def test_a_long_run_is_thinned_to_a_watchable_animation():
     assert pipeline.frame_plan(1, 6) == (6, 1, 7)
 
 
-def _matplotlib_drawing(run, classes, shown, dpi):
-    """The figure as matplotlib alone draws it: the reference the composed frames match."""
-    mf = render.MapFigure(run.grid, run.scenario, run.poses, *pipeline._reach(run), "",
-                          dpi=dpi)
-    mf.image.set_data(render.map_rgb(classes))
-    for k, arts in enumerate(mf.pose_artists):
-        for a in arts:
-            a.set_visible(k < shown)
-    mf.fig.canvas.draw()
-    return np.asarray(mf.fig.canvas.buffer_rgba())[..., :3].astype(int)
+def _hue(img, color, min_chroma=60):
+    """Mask of pixels of that hue (inks blend with what lies under them)."""
+    rgb = np.array([int(color[i:i + 2], 16) for i in (1, 3, 5)], float)
+    img = np.asarray(img, float)
+    chroma = img - img.min(axis=-1, keepdims=True)
+    want = (rgb - rgb.min()) / np.ptp(rgb)
+    close = np.abs(chroma / np.maximum(chroma.max(axis=-1, keepdims=True), 1) - want)
+    return (chroma.max(axis=-1) > min_chroma) & np.all(close < 0.2, axis=-1)
 
 
-@pytest.mark.parametrize("frame_no", [3, 12, 24])
-def test_composed_frames_look_like_matplotlibs_drawing(t_room_run, frame_no):
-    frames = list(pipeline.building_frames(t_room_run))
-    anim = render.MapAnimator(t_room_run.grid, t_room_run.scenario, t_room_run.poses,
-                              *pipeline._reach(t_room_run))
-    for f in frames[:frame_no]:
-        anim.frame(*f)
-    classes, shown, _ = frames[frame_no]
-    got = np.asarray(anim.palette_image(anim.frame(classes, shown, "")).convert("RGB"), int)
-    want = _matplotlib_drawing(t_room_run, classes, shown, render.PNG_DPI)
-    assert got.shape == want.shape
-    diff = np.abs(got - want).max(axis=2)
-    # the same picture: a GIF palette's rounding everywhere, a handful of edge pixels more
-    assert np.mean(diff) < 3.0
-    assert np.mean(diff > 40) < 0.002
-    # and it is the map: as many pixels of each cell colour as matplotlib puts there (±1 %)
-    for rgb in ((191, 191, 191), (255, 255, 255), (0, 0, 0)):
-        n_got = np.count_nonzero(np.all(np.abs(got - rgb) <= 4, axis=2))
-        n_want = np.count_nonzero(np.all(np.abs(want - rgb) <= 4, axis=2))
-        assert n_got == pytest.approx(n_want, rel=0.01, abs=50), rgb
+def _near(mask, col, row, r=2):
+    c, w = int(col), int(row)
+    return bool(mask[max(0, w - r):w + r + 1, max(0, c - r):c + r + 1].any())
 
 
-def test_gif_and_png_written_and_the_users_matplotlib_left_alone(t_room_run, tmp_path):
-    import matplotlib
+def _picture(run, **kw):
+    return render.MapPicture(run.grid, run.scenario, run.poses, *pipeline._reach(run), **kw)
+
+
+def test_the_picture_puts_cells_walls_and_poses_where_they_are(t_room_run):
+    pic = _picture(t_room_run, title="t_room")
+    classes = t_room_run.grid.classify()
+    img = pic.rgb(classes, "t_room").astype(int)
+    assert img.shape == (pic.height, pic.width, 3) and 700 < pic.width < 1000
+    # each cell's centre pixel has its class's colour wherever nothing is drawn over it
+    ny, nx = classes.shape
+    x0, _, y0, _ = t_room_run.grid.extent_m
+    res = t_room_run.grid.resolution_m
+    rr, cc = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+    px = pic.to_px(x0 + (cc.ravel() + 0.5) * res, y0 + (rr.ravel() + 0.5) * res)
+    cols, rows = px[:, 0].astype(int), px[:, 1].astype(int)
+    drawn = pic._alpha.copy()
+    for layers in pic._poses:
+        for layer in layers:
+            drawn[layer.index] = 1
+    bare = drawn.reshape(pic.height, pic.width)[rows, cols] == 0
+    bare &= pic._bg.reshape(pic.height, pic.width)[rows, cols] < 0
+    assert bare.mean() > 0.7
+    got = img[rows[bare], cols[bare]]
+    want = np.round(render.map_rgb(classes.ravel()[bare]) * 255)
+    np.testing.assert_array_equal(got, want)
+    for cls in (-1, 0, 1):                    # all three classes were checked
+        assert np.count_nonzero(classes.ravel()[bare] == cls) > 100
+    # the true walls: blue along the room outline (away from the black mapped wall cells,
+    # the outline is drawn over them), at each corner of the T
+    blue = _hue(img, render.TRUTH_COLOR)
+    outline = np.asarray(t_room_run.scenario.room.outline_m)
+    for x, y in outline:
+        assert _near(blue, *pic.to_px(x, y)), (x, y)
+    # the poses: a red ring of the ring's radius round each, the dashed orange reach
+    red, orange = _hue(img, render.POSE_COLOR), _hue(img, render.RANGE_COLOR)
+    reach, ring_r = pipeline._reach(t_room_run)
+    theta = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    L, T, R, B = pic._box
+    for x, y, *_ in t_room_run.poses:
+        ring = [_near(red, *pic.to_px(x + ring_r * np.cos(t), y + ring_r * np.sin(t)), r=1)
+                for t in theta]
+        assert np.mean(ring) > 0.95
+        fine = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+        far = pic.to_px(x + reach * np.cos(fine), y + reach * np.sin(fine))
+        inside = ((far[:, 0] > L + 3) & (far[:, 0] < R - 3) &
+                  (far[:, 1] > T + 3) & (far[:, 1] < B - 3))
+        on = [_near(orange, c, r, r=0) for c, r in far[inside]]
+        assert inside.sum() > 100 and 0.5 < np.mean(on) < 0.9    # dashed: not all the way
+        assert not _near(red, *pic.to_px(x + 0.5 * ring_r, y - 0.5 * ring_r), r=1)
+    # the title above the axes: dark text, and nothing but white beside it
+    band = img[:int(T) - 2, int(L):int(R)].min(axis=2)
+    assert np.count_nonzero(band < 100) > 100
+
+
+def test_frames_show_the_poses_scanned_so_far_and_end_as_the_png(t_room_run, tmp_path):
     from PIL import Image
+
+    paths = pipeline.write_outputs(t_room_run, tmp_path)
+    gif = Image.open(paths["animation"])
+    png = np.asarray(Image.open(paths["map_png"]).convert("RGB"), int)
+    assert gif.n_frames == 25 and gif.size == png.shape[1::-1]
+    pic = _picture(t_room_run)
+    centres = [pic.to_px(x, y + 0.15) for x, y, *_ in t_room_run.poses]   # on each ring
+    frames = []
+    for k in (0, 1, 6, 24):
+        gif.seek(k)
+        frames.append(np.asarray(gif.convert("RGB"), int))
+    shown = [[_near(_hue(f, render.POSE_COLOR), *c, r=1) for c in centres] for f in frames]
+    assert shown == [[False] * 4, [True, False, False, False],
+                     [True, False, False, False], [True] * 4]
+    # the first frame is all unknown inside the walls; the last is the PNG, in the palette
+    mid = pic.to_px(1.2, 1.5)
+    assert tuple(frames[0][int(mid[1]), int(mid[0])]) == (191, 191, 191)
+    L, T, R, B = pic._box
+    diff = np.abs(frames[-1] - png)[int(T):].max(axis=2)    # (the caption is not the title)
+    assert np.mean(diff) < 2.0 and np.mean(diff > 40) < 0.002
+    # each frame's caption where the title goes
+    band = lambda f: f[:int(T) - 2, int(L):int(R)].min(axis=2) < 100  # noqa: E731
+    assert band(frames[0]).sum() > 50 and np.any(band(frames[0]) != band(frames[1]))
+
+
+def test_rendering_leaves_the_users_matplotlib_alone(t_room_run, tmp_path):
+    import matplotlib
 
     before = matplotlib.get_backend()
     matplotlib.use("svg")           # as a notebook would have its own backend
     try:
-        paths = pipeline.write_outputs(t_room_run, tmp_path)
+        pipeline.write_outputs(t_room_run, tmp_path)
+        t_room_run._repr_png_()
         assert matplotlib.get_backend() == "svg"
         import matplotlib.pyplot as plt
 
         assert plt.get_fignums() == []
     finally:
         matplotlib.use(before)
-    gif = Image.open(paths["animation"])
-    assert gif.n_frames == 25 and gif.size[0] > 800
-    first = np.asarray(gif.convert("RGB"), int)
-    png = np.asarray(Image.open(paths["map_png"]).convert("RGB"), int)
 
-    def pixels(img, color):   # pixels of that hue (outlines blend with what lies under)
-        rgb = np.array(matplotlib.colors.to_rgb(color))
-        chroma = img - img.min(axis=2, keepdims=True)
-        want = (rgb - rgb.min()) / np.ptp(rgb)
-        close = np.abs(chroma / np.maximum(chroma.max(axis=2, keepdims=True), 1) - want)
-        return np.count_nonzero((chroma.max(axis=2) > 60) & np.all(close < 0.2, axis=2))
 
-    # the true outline before anything is mapped (later the walls' cells cover it); the
-    # poses and their reach on the final picture
-    assert pixels(first, render.TRUTH_COLOR) > 1000
-    assert pixels(png, render.POSE_COLOR) > 1000 and pixels(png, render.RANGE_COLOR) > 1000
-    assert pixels(first, render.POSE_COLOR) < 200     # no pose scanned yet (legend only)
+def test_irring_run_pictures_do_not_load_matplotlib(tmp_path):
+    # matplotlib's start-up costs a fresh `irring run` more than making the map
+    code = ("import sys; from irring import pipeline; from irring.scenario import load_scenario; "
+            "r = pipeline.run(load_scenario('t_room_cylinder'), progress=False, "
+            "frames_per_sweep=2); pipeline.write_outputs(r, sys.argv[1]); r._repr_png_(); "
+            "print('matplotlib' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], check=True,
+                         capture_output=True, text=True)
+    assert out.stdout.strip() == "False"
+    assert (tmp_path / "map_building.gif").stat().st_size > 10_000
 
 
 def test_a_maprun_shows_its_map_inline(t_room_run):
+    from PIL import Image
+
     data = t_room_run._repr_png_()
-    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    img = np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
+    assert 500 < img.shape[1] < 700            # as map.png, at 80 dpi instead of 110
+    assert _hue(img, render.POSE_COLOR).sum() > 300 and _hue(img, render.TRUTH_COLOR).sum() > 300
+
+
+def test_ticks_fall_on_round_metres():
+    # the T-room's x axis at 287 px/m, ticks ≥ 110 px apart: every 0.5 m from 0
+    ticks, step = render._ticks(-0.1, 2.55, 287.0, 110.0)
+    assert step == 0.5 and ticks == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5]
+    ticks, step = render._ticks(-0.35, 0.9, 287.0, 66.0)
+    assert step == 0.25 and ticks == [-0.25, 0.0, 0.25, 0.5, 0.75]
+    assert [render._tick_label(v, 0.25) for v in (-0.25, 0.5)] == ["-0.25", "0.50"]
+    assert render._tick_label(1.0, 0.5) == "1.0" and render._tick_label(20.0, 10) == "20"
 
 
 def test_pose_numbers_clear_each_other_when_poses_crowd():

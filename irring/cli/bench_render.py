@@ -13,7 +13,7 @@ Runs the scenario end to end (simulate, estimate, map, score) and writes its out
 (map.png, the GIF, map.pgm, sweeps.npz) to a temporary folder, in --repeats fresh
 processes as `irring run` does; prints medians of CPU seconds (each process's own work:
 compare these on a shared machine) and wall seconds, their ratio (target: render ≤ 2×
-making the map), loading matplotlib, the peak memory (target ≤ 1 GB) and, timed as
+making the map), loading the picture code, the peak memory (target ≤ 1 GB) and, timed as
 often, the whole `irring run SCENARIO` command as a user starts it: interpreter, imports
 and parser included (target ≤ 1.5 s wall).
 

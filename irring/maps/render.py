@@ -1,26 +1,19 @@
-"""Pictures of maps: a PNG of the final map and a GIF of it being built, drawn on
-matplotlib's own Agg canvas (never pyplot: the caller's backend and figures are left alone).
-What the pictures show and how the GIF is streamed: docs/mapping.md.
+"""Pictures of maps: a PNG of the final map and a GIF of it being built, drawn with Pillow
+and numpy (matplotlib, which costs a fresh ``irring run`` more than making the map, is only
+for charts: :func:`figure`). What the pictures show and how the GIF is streamed:
+docs/mapping.md.
 """
 
 from __future__ import annotations
 
 import functools
+import importlib.util
 import io
 import math
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
-# loaded with the module, not per picture: pipeline.write_outputs imports this module before
-# it starts the render stage's clock, as the other stages' modules load with irring
-from matplotlib import font_manager
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import to_rgb
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from matplotlib.patches import Circle, Patch, Polygon
-from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 from PIL import Image, ImageDraw, ImageFont
 
 from ..core import Cylinder, box_corners
@@ -36,11 +29,16 @@ RANGE_COLOR = "#ff8c00"
 _CLASS0 = min(UNKNOWN, FREE, OCCUPIED)
 _CLASS_RGB = np.array([{UNKNOWN: UNKNOWN_RGB, FREE: FREE_RGB, OCCUPIED: OCCUPIED_RGB}[c]
                        for c in range(_CLASS0, _CLASS0 + 3)])
+PNG_DPI = 110
 
 
 def figure(width_in: float, height_in: float, dpi: float = 100):
-    """A matplotlib Figure on its own Agg canvas: no pyplot, so drawing it neither switches
-    the caller's backend (a notebook's inline one) nor adds to pyplot's open figures."""
+    """A matplotlib Figure on its own Agg canvas, for charts: no pyplot, so drawing it
+    neither switches the caller's backend (a notebook's inline one) nor adds to pyplot's
+    open figures."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # deferred: charts only
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(width_in, height_in), dpi=dpi)
     FigureCanvasAgg(fig)
     return fig
@@ -96,234 +94,433 @@ def label_offsets(poses: Sequence, ring_radius_m: float, extent: Sequence[float]
     return out
 
 
-class MapFigure:
-    """The map picture: the map image, the static overlays, and each pose's marks."""
+# --------------------------------------------------------------------------- drawing
 
-    def __init__(self, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
-                 reach_m: float | None = None, ring_radius_m: float = 0.15, title: str = "",
-                 width_in: float = 8.0, dpi: float = 100):
-
-        x0, x1, y0, y1 = grid.extent_m
-        aspect = (y1 - y0) / (x1 - x0)
-        self.fig = figure(width_in, width_in * aspect * 0.9 + 1.5, dpi)
-        self.grid_shape = grid.shape
-        ax = self.ax = self.fig.add_subplot()
-        self.image = ax.imshow(map_rgb(grid.classify()), origin="lower",
-                               extent=grid.extent_m, interpolation="nearest", zorder=0)
-        handles = [Patch(facecolor=UNKNOWN_RGB, edgecolor="k", lw=0.5, label="unknown"),
-                   Patch(facecolor=FREE_RGB, edgecolor="k", lw=0.5, label="free"),
-                   Patch(facecolor=OCCUPIED_RGB, edgecolor="k", lw=0.5, label="occupied")]
-        if scenario is not None:
-            ax.add_patch(Polygon(np.asarray(scenario.room.outline_m), closed=True, fill=False,
-                                 ec=TRUTH_COLOR, lw=1.0, alpha=0.8, zorder=3))
-            for ob in scenario.obstacles:
-                if isinstance(ob, Cylinder):
-                    ax.add_patch(Circle(ob.center_m, ob.radius_m, fill=False, ec=TRUTH_COLOR,
-                                        lw=1.0, zorder=3))
-                else:
-                    ax.add_patch(Polygon(box_corners(ob), closed=True, fill=False,
-                                         ec=TRUTH_COLOR, lw=1.0, zorder=3))
-            handles.append(Line2D([], [], color=TRUTH_COLOR, lw=1.2,
-                                  label="true walls / obstacles"))
-        # a label's box: 8 pt bold digits (crowded poses), as metres on this figure
-        m_per_in = (x1 - x0) / (width_in * 0.8)
-        label_m = 8 / 72 * 2.0 * m_per_in
-        offsets = label_offsets(poses, ring_radius_m, grid.extent_m, label_m)
-        self.pose_artists = []
-        self.crowded = crowded(poses, ring_radius_m)
-        for k, pose in enumerate(poses):
-            x, y = float(pose[0]), float(pose[1])
-            if self.crowded:       # a numbered path: a dot per pose, a line from the last
-                arts = [ax.plot([x], [y], "o", color=POSE_COLOR, ms=3, zorder=4)[0]]
-                if k:
-                    px, py = float(poses[k - 1][0]), float(poses[k - 1][1])
-                    arts.append(ax.plot([px, x], [py, y], "-", color=POSE_COLOR, lw=0.8,
-                                        alpha=0.7, zorder=4)[0])
-            else:
-                arts = [ax.add_patch(Circle((x, y), ring_radius_m, fill=False, ec=POSE_COLOR,
-                                            lw=1.5, zorder=4)),
-                        ax.plot([x], [y], "+", color=POSE_COLOR, ms=8, mew=1.5, zorder=4)[0]]
-                if reach_m:
-                    arts.append(ax.add_patch(Circle((x, y), reach_m, fill=False,
-                                                    ec=RANGE_COLOR, lw=1.0, ls="--",
-                                                    zorder=4)))
-            if offsets[k] is not None:
-                dx, dy = offsets[k]
-                arts.append(ax.text(x + dx, y + dy, str(k + 1), color=POSE_COLOR,
-                                    ha="center", va="center", weight="bold", zorder=5,
-                                    fontsize=8 if self.crowded else 10, clip_on=True))
-            self.pose_artists.append(arts)
-        if len(poses) and self.crowded:
-            handles.append(Line2D([], [], color=POSE_COLOR, marker="o", ms=3, lw=0.8,
-                                  label="scan poses in order (numbered where room)"))
-        elif len(poses):
-            handles.append(Line2D([], [], color=POSE_COLOR, marker="o", ls="", mfc="none",
-                                  ms=9, mew=1.5, label="ring at scan pose (number = order)"))
-        if reach_m and len(poses) and not self.crowded:
-            handles.append(Line2D([], [], color=RANGE_COLOR, ls="--", lw=1.0,
-                                  label=f"sensor reach ({reach_m * 1000:.0f} mm)"))
-        ax.set_xlim(x0, x1)
-        ax.set_ylim(y0, y1)
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        self._scale_bar(x0, x1, y0, y1)
-        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
-                  fontsize=8, frameon=False)
-        self.title = ax.set_title(title, fontsize=10)
-        # fixed margins (inches) where tight_layout would measure every label (a third of
-        # the drawing's cost): tick labels and y label left, title top, x label and legend
-        h_in = self.fig.get_figheight()
-        self.fig.subplots_adjust(left=0.8 / width_in, right=1 - 0.15 / width_in,
-                                 top=1 - 0.4 / h_in, bottom=1.3 / h_in)
-
-    def _scale_bar(self, x0, x1, y0, y1) -> None:
-
-        bar = 0.5 if x1 - x0 > 1.5 else 0.1
-        self.ax.add_artist(AnchoredSizeBar(self.ax.transData, bar, f"{bar * 1000:.0f} mm",
-                                           loc="upper left", pad=0.4, borderpad=0.6, sep=3,
-                                           size_vertical=(y1 - y0) * 0.008, frameon=True,
-                                           fontproperties={"size": 8}))
-
-    def save(self, path, dpi: float | None = None) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.fig.savefig(path, dpi=dpi or PNG_DPI, bbox_inches="tight")
-        return path
-
-    def png_bytes(self, dpi: float = 80) -> bytes:
-        buf = io.BytesIO()
-        self.fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
-        return buf.getvalue()
+def _rgb255(color: str) -> tuple[int, int, int]:
+    return tuple(int(color[i:i + 2], 16) for i in (1, 3, 5))
 
 
-def save_map_png(path, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
-                 reach_m: float | None = None, ring_radius_m: float = 0.15,
-                 title: str = "") -> Path:
-    """Write the map picture (see the module doc) to ``path``."""
-    return MapFigure(grid, scenario, poses, reach_m, ring_radius_m, title).save(path)
+# The inks drawn over the map; a picture's pixel is a base colour (a cell class's, or the
+# figure's white = the free cells' white) under at most one ink at some coverage.
+BLACK, TRUTH, POSE, RANGE = range(4)
+_INK_RGB = np.array([(0, 0, 0), _rgb255(TRUTH_COLOR), _rgb255(POSE_COLOR),
+                     _rgb255(RANGE_COLOR)], np.float32)
+_WHITE = FREE - _CLASS0            # the figure's white, as a base: the free cells' colour
+_BASE_RGB8 = np.round(_CLASS_RGB * 255).astype(np.uint8)
+_LEVELS = 16                       # ink coverages a GIF frame tells apart
 
 
-# --------------------------------------------------------------------------- animation
+@functools.lru_cache(maxsize=1)
+def _palette() -> tuple[bytes, np.ndarray]:
+    """The one palette of every frame (3 bases × 4 inks × 17 coverages ≤ 256 colours) and
+    the index of each (base, ink, coverage level): (3, 4, 17) uint8."""
+    a = (np.arange(_LEVELS + 1) / _LEVELS)[None, None, :, None]
+    blends = a * _INK_RGB[None, :, None, :] + (1 - a) * (_CLASS_RGB * 255)[:, None, None, :]
+    pal, index = np.unique(np.round(blends).astype(np.uint8).reshape(-1, 3), axis=0,
+                           return_inverse=True)
+    return pal.tobytes().ljust(256 * 3, b"\0"), index.reshape(blends.shape[:3]).astype(np.uint8)
 
-PNG_DPI = 110
+
+@functools.lru_cache(maxsize=None)
+def _font(size_px: float, bold: bool = False):
+    """DejaVu Sans (matplotlib's font, from its package data; found without importing
+    matplotlib) at ``size_px``; Pillow's own font if that is missing."""
+    name = "DejaVuSans-Bold.ttf" if bold else "DejaVuSans.ttf"
+    spec = importlib.util.find_spec("matplotlib")
+    for folder in (spec.submodule_search_locations or []) if spec else []:
+        path = Path(folder) / "mpl-data" / "fonts" / "ttf" / name
+        if path.exists():
+            return ImageFont.truetype(str(path), size_px)
+    return ImageFont.load_default(size_px)
+
+
+class _Ink:
+    """One ink's coverage (0 … 1) over a box of the picture, anti-aliased: shapes by each
+    pixel centre's distance to them, text by FreeType. Coordinates: picture pixels."""
+
+    def __init__(self, box: tuple[int, int, int, int]):
+        self.c0, self.r0, c1, r1 = box
+        self.cover = np.zeros((r1 - self.r0, c1 - self.c0), np.float32)
+        self._text = None
+
+    def _window(self, lo_x, lo_y, hi_x, hi_y):
+        """(the array's slice, pixel centres' x, y) over a bounding box, or None if outside."""
+        h, w = self.cover.shape
+        c0, c1 = max(0, int(lo_x) - self.c0), min(w, math.ceil(hi_x) + 1 - self.c0)
+        r0, r1 = max(0, int(lo_y) - self.r0), min(h, math.ceil(hi_y) + 1 - self.r0)
+        if c1 <= c0 or r1 <= r0:
+            return None
+        x = np.arange(c0, c1, dtype=np.float32)[None, :] + (self.c0 + 0.5)
+        y = np.arange(r0, r1, dtype=np.float32)[:, None] + (self.r0 + 0.5)
+        return (slice(r0, r1), slice(c0, c1)), x, y
+
+    def _put(self, win, cover) -> None:
+        s = win[0]
+        np.maximum(self.cover[s], np.clip(cover, 0, 1), out=self.cover[s])
+
+    def line(self, xy, width_px: float, dash: tuple[float, float] | None = None) -> None:
+        """A polyline ``width_px`` wide (round ends); ``dash``: (on, off) lengths in pixels."""
+        pts = np.asarray(xy, float)
+        for a, b in zip(pts[:-1], pts[1:]):
+            length = float(np.hypot(*(b - a)))
+            if dash is None or length == 0:
+                self._segment(a, b, width_px)
+                continue
+            for t0 in np.arange(0, length, sum(dash)):
+                t1 = min(t0 + dash[0], length)
+                self._segment(a + (b - a) * t0 / length, a + (b - a) * t1 / length, width_px)
+
+    def _segment(self, a, b, width_px: float) -> None:
+        half = width_px / 2 + 1
+        win = self._window(min(a[0], b[0]) - half, min(a[1], b[1]) - half,
+                           max(a[0], b[0]) + half, max(a[1], b[1]) + half)
+        if win is None:
+            return
+        _, x, y = win
+        d = np.asarray(b - a, np.float32)
+        den = float(d @ d) or 1.0
+        t = np.clip(((x - a[0]) * d[0] + (y - a[1]) * d[1]) / den, 0, 1)
+        dist = np.hypot(x - (a[0] + t * d[0]), y - (a[1] + t * d[1]))
+        self._put(win, width_px / 2 + 0.5 - dist)
+
+    def polygon(self, xy, width_px: float) -> None:
+        pts = [tuple(p) for p in np.asarray(xy, float)]
+        self.line(pts + pts[:1], width_px)
+
+    def circle(self, centre, r_px: float, width_px: float,
+               dash: tuple[float, float] | None = None) -> None:
+        """A ring of radius ``r_px``; ``dash``: (on, off) arc lengths in pixels, rounded to
+        whole dashes round the circle."""
+        cx, cy = centre
+        out = r_px + width_px / 2 + 1
+        win = self._window(cx - out, cy - out, cx + out, cy + out)
+        if win is None:
+            return
+        _, x, y = win
+        cover = width_px / 2 + 0.5 - np.abs(np.hypot(x - cx, y - cy) - r_px)
+        if dash is not None:
+            period = 2 * math.pi * r_px / max(1, round(2 * math.pi * r_px / sum(dash)))
+            on = np.nonzero(cover > 0)           # the angle only where the ring is
+            dy, dx = y[on[0], 0] - cy, x[0, on[1]] - cx
+            s = np.mod(np.arctan2(dy, dx) * r_px, period)     # along the arc
+            cover[on] = np.minimum(cover[on], np.minimum(s, dash[0] - s) + 0.5)
+        self._put(win, cover)
+
+    def dot(self, centre, r_px: float) -> None:
+        cx, cy = centre
+        win = self._window(cx - r_px - 1, cy - r_px - 1, cx + r_px + 1, cy + r_px + 1)
+        if win is not None:
+            _, x, y = win
+            self._put(win, r_px + 0.5 - np.hypot(x - cx, y - cy))
+
+    def text(self, xy, text: str, font, anchor: str, vertical: bool = False) -> None:
+        if self._text is None:
+            self._text = Image.new("L", self.cover.shape[::-1], 0)
+        x, y = xy[0] - self.c0, xy[1] - self.r0
+        if not vertical:
+            ImageDraw.Draw(self._text).text((x, y), text, fill=255, font=font, anchor=anchor)
+            return
+        l, t, r, b = font.getbbox(text, anchor="mm")
+        img = Image.new("L", (r - l + 2, b - t + 2), 0)
+        ImageDraw.Draw(img).text((1 - l, 1 - t), text, fill=255, font=font, anchor="mm")
+        img = img.rotate(90, expand=True)        # reads bottom to top, as a y label does
+        self._text.paste(img, (round(x - img.width / 2), round(y - img.height / 2)), img)
+
+    def coverage(self) -> np.ndarray:
+        """(rows, cols) float32 coverage 0 … 1."""
+        if self._text is not None:
+            np.maximum(self.cover, np.asarray(self._text, np.float32) / 255, out=self.cover)
+        return self.cover
 
 
 class _Layer:
-    """Straight-alpha RGBA pixels of one drawn artist group, kept sparse: flat pixel
-    indices into the frame and their (n, 4) float32 colours (0 … 1)."""
+    """One ink's pixels, kept sparse: flat pixel indices into the picture, coverage 0 … 1."""
 
-    __slots__ = ("index", "rgba")
+    __slots__ = ("ink", "index", "alpha")
 
-    def __init__(self, buf: np.ndarray, box: tuple[int, int, int, int]):
-        r0, r1, c0, c1 = box
-        patch = buf[r0:r1, c0:c1]
-        rr, cc = np.nonzero(patch[..., 3])
-        self.index = (rr + r0) * buf.shape[1] + (cc + c0)
-        self.rgba = patch[rr, cc].astype(np.float32) / 255.0
+    def __init__(self, ink: int, index: np.ndarray, alpha: np.ndarray):
+        self.ink, self.index, self.alpha = ink, index, alpha
 
 
-class MapAnimator:
-    """Frames of a map being built, and the final map picture, composed with numpy from
-    one matplotlib drawing.
+class MapPicture:
+    """The map picture, and frames of the map being built, composed with numpy.
 
-    The figure is drawn once without the map, on a transparent canvas: that is the overlay
-    (axes, outlines, legend, scale bar) with each pixel's opacity; the map goes under it
-    inside the axes, the figure's white outside. Each pose's marks are drawn once, alone,
-    on the cleared canvas. A frame is the map's cells, upsampled by index, under the overlay
-    and the poses shown so far, with a caption; colours go through one palette, so a frame
-    is an index image (one byte a pixel).
+    Laid out once: the axes box (the map at equal scale), ticks and labels in metres, the
+    true outlines, a scale bar, the legend, a title line; each pose's marks as a layer of
+    their own. A picture is the map's cells, upsampled by index, under those inks. A GIF
+    frame goes through one palette (an index image, one byte a pixel); the PNG is full
+    colour. Both are cut to what is drawn, with 0.1 in around it.
     """
 
     def __init__(self, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
                  reach_m: float | None = None, ring_radius_m: float = 0.15,
-                 dpi: float = PNG_DPI):
-        mf = MapFigure(grid, scenario, poses, reach_m, ring_radius_m, "", dpi=dpi)
-        self._mf = mf
-        canvas = mf.fig.canvas
-        hidden = [mf.fig.patch, mf.ax.patch, mf.image] + [a for arts in mf.pose_artists
-                                                          for a in arts]
-        for a in hidden:
-            a.set_visible(False)
-        canvas.draw()
-        layer = np.asarray(canvas.buffer_rgba()).astype(np.float32)
-        self.height, self.width = layer.shape[:2]
-        n = self.height * self.width
-        alpha = layer[..., 3].reshape(n) / 255.0
-        over = layer[..., :3].reshape(n, 3) * alpha[:, None]
-        # the map lies under the overlay inside the image's box, the figure's white outside
-        ny, nx = grid.shape
-        x0, x1, y0, y1 = grid.extent_m
-        (dx0, dy0), (dx1, dy1) = mf.ax.transData.transform([(x0, y0), (x1, y1)])
-        cx = (np.arange(self.width) + 0.5 - dx0) / (dx1 - dx0) * nx
-        cy = (self.height - np.arange(self.height) - 0.5 - dy0) / (dy1 - dy0) * ny
-        inside = (((cy >= 0) & (cy < ny))[:, None] & ((cx >= 0) & (cx < nx))[None, :]).ravel()
-        over[~inside] += (1 - alpha[~inside])[:, None] * 255
-        alpha[~inside] = 1.0
-        self._over, self._alpha = over, alpha
-        # which cell each pixel shows (nearest, as imshow draws it), as a flat cell index
-        rows = np.clip(np.floor(cy), 0, ny - 1).astype(np.intp)
-        cols = np.clip(np.floor(cx), 0, nx - 1).astype(np.intp)
-        self._cell = (rows[:, None] * nx + cols[None, :]).ravel()
+                 dpi: float = PNG_DPI, title: str = "", width_in: float = 8.0):
+        self.dpi = dpi
+        pt = dpi / 72                                    # pixels per point
+        x0, x1, y0, y1 = self.extent_m = grid.extent_m
+        width = round(width_in * dpi)
+        height = round((width_in * (y1 - y0) / (x1 - x0) * 0.9 + 1.5) * dpi)
+        # the axes: the box left by fixed margins (inches), shrunk to the map's aspect
+        bl, br, bt, bb = 0.8 * dpi, width - 0.15 * dpi, 0.4 * dpi, height - 1.3 * dpi
+        scale = min((br - bl) / (x1 - x0), (bb - bt) / (y1 - y0))     # pixels per metre
+        left = (bl + br) / 2 - scale * (x1 - x0) / 2
+        top = (bt + bb) / 2 - scale * (y1 - y0) / 2
+        self._box = [left, top, left + scale * (x1 - x0), top + scale * (y1 - y0)]
+        self.scale = scale
 
-        self._renderer = canvas.get_renderer()
-        self._poses = []
-        for arts in mf.pose_artists:
-            self._renderer.clear()
-            for a in arts:
-                a.set_visible(True)
-                mf.ax.draw_artist(a)
-            box = self._box(arts)      # (a hidden text has no extent)
-            for a in arts:
-                a.set_visible(False)
-            self._poses.append(_Layer(np.asarray(self._renderer.buffer_rgba()), box))
-        self._font = None
-        self._caption_box = None
-        self._palette, self._lut = _palette()
-        self._t0, self._d1, self._d2 = (np.zeros(n, np.uint8) for _ in range(3))
+        full = (0, 0, width, height)
+        inks = {k: _Ink(full) for k in (BLACK, TRUTH, POSE, RANGE)}
+        fills: list[tuple[tuple[int, int, int, int], int]] = []   # opaque boxes over all
+        drawn = [tuple(round(v) for v in self._box)]              # boxes the crop keeps
+        black = inks[BLACK]
+        lw_axes = 0.8 * pt
+        black.polygon(self._box_corners(), lw_axes)
+        small, normal = _font(8 * pt), _font(10 * pt)
+
+        # ticks (outward) and their labels; the axis labels beyond them
+        tick, pad = 3.5 * pt, 3.5 * pt
+        L, T, R, B = self._box
+        xt, dx = _ticks(x0, x1, scale, 1.0 * dpi)
+        yt, dy = _ticks(y0, y1, scale, 0.6 * dpi)
+        for v in xt:
+            x, _ = self.to_px(v, y0)
+            black.line([(x, B), (x, B + tick)], lw_axes)
+            black.text((x, B + tick + pad), _tick_label(v, dx), normal, "mt")
+        label_w = 0
+        for v in yt:
+            _, y = self.to_px(x0, v)
+            black.line([(L, y), (L - tick, y)], lw_axes)
+            black.text((L - tick - pad, y), _tick_label(v, dy), normal, "rm")
+            label_w = max(label_w, normal.getlength(_tick_label(v, dy)))
+        x_label_top = B + tick + pad + normal.size * 1.2 + 4 * pt
+        black.text(((L + R) / 2, x_label_top), "x (m)", normal, "mt")
+        ylx = L - tick - pad - label_w - 4 * pt - normal.size * 0.6
+        black.text((ylx, (T + B) / 2), "y (m)", normal, "mm", vertical=True)
+        drawn.append((round(ylx - normal.size), round(T), round(L), round(B)))
+
+        # the ground truth (under the poses' marks, like the walls they outline)
+        truth = inks[TRUTH]
+        if scenario is not None:
+            truth.polygon(self.to_px(*np.asarray(scenario.room.outline_m).T), 1.0 * pt)
+            for ob in scenario.obstacles:
+                if isinstance(ob, Cylinder):
+                    truth.circle(self.to_px(*ob.center_m), ob.radius_m * scale, 1.0 * pt)
+                else:
+                    truth.polygon(self.to_px(*np.asarray(box_corners(ob)).T), 1.0 * pt)
+
+        # the scale bar: a framed white box in the upper left corner of the axes
+        bar_m = 0.5 if x1 - x0 > 1.5 else 0.1
+        bar_h = max(2.0, (y1 - y0) * 0.008 * scale)
+        text = f"{bar_m * 1000:.0f} mm"
+        bx0, by0 = L + 0.6 * 8 * pt, T + 0.6 * 8 * pt
+        inner = 0.4 * 8 * pt
+        sb = (round(bx0), round(by0),
+              round(bx0 + 2 * inner + max(bar_m * scale, small.getlength(text))),
+              round(by0 + 2 * inner + bar_h + 3 * pt + small.size))
+        fills.append((sb, _WHITE))
+        black.polygon([(sb[0], sb[1]), (sb[2], sb[1]), (sb[2], sb[3]), (sb[0], sb[3])], lw_axes)
+        bar_y = sb[1] + inner + bar_h / 2
+        bar_x = (sb[0] + sb[2]) / 2 - bar_m * scale / 2
+        black.line([(bar_x, bar_y), (bar_x + bar_m * scale, bar_y)], bar_h)
+        black.text(((sb[0] + sb[2]) / 2, bar_y + bar_h / 2 + 3 * pt), text, small, "mt")
+
+        # the legend, three columns filled top to bottom, below the x label
+        self.crowded = crowded(poses, ring_radius_m)
+        entries = [("patch", UNKNOWN - _CLASS0, "unknown"), ("patch", FREE - _CLASS0, "free"),
+                   ("patch", OCCUPIED - _CLASS0, "occupied")]
+        if scenario is not None:
+            entries.append(("line", TRUTH, "true walls / obstacles"))
+        if len(poses) and self.crowded:
+            entries.append(("path", POSE, "scan poses in order (numbered where room)"))
+        elif len(poses):
+            entries.append(("ring", POSE, "ring at scan pose (number = order)"))
+        if reach_m and len(poses) and not self.crowded:
+            entries.append(("dash", RANGE, f"sensor reach ({reach_m * 1000:.0f} mm)"))
+        fs = small.size
+        rows = math.ceil(len(entries) / 3)
+        columns = [entries[i:i + rows] for i in range(0, len(entries), rows)]
+        widths = [2.8 * fs + max(small.getlength(e[2]) for e in col) for col in columns]
+        total = sum(widths) + 2.0 * fs * (len(columns) - 1)
+        lx = (L + R) / 2 - total / 2
+        ly = x_label_top + normal.size * 1.2 + 0.8 * fs
+        for col, w in zip(columns, widths):
+            for i, (kind, what, label) in enumerate(col):
+                cy = ly + (i + 0.5) * 1.5 * fs
+                h0, h1 = lx, lx + 2.0 * fs
+                if kind == "patch":
+                    box = (round(h0), round(cy - 0.35 * fs), round(h1), round(cy + 0.35 * fs))
+                    fills.append((box, what))
+                    black.polygon([(box[0], box[1]), (box[2], box[1]), (box[2], box[3]),
+                                   (box[0], box[3])], 0.5 * pt)
+                elif kind == "ring":
+                    inks[what].circle(((h0 + h1) / 2, cy), 4.5 * pt - 0.75 * pt, 1.5 * pt)
+                else:
+                    inks[what].line([(h0, cy), (h1, cy)], (1.2 if kind == "line" else 0.8
+                                                           if kind == "path" else 1.0) * pt,
+                                    dash=(3.7 * pt, 1.6 * pt) if kind == "dash" else None)
+                    if kind == "path":
+                        inks[what].dot(((h0 + h1) / 2, cy), 1.5 * pt)
+                black.text((h1 + 0.8 * fs, cy), label, small, "lm")
+            lx += w + 2.0 * fs
+        drawn.append((round((L + R) / 2 - total / 2), round(ly),
+                      round((L + R) / 2 + total / 2), round(ly + rows * 1.5 * fs)))
+
+        # the title line: its baseline 6 pt above the axes, centred on them
+        self._title_xy = ((L + R) / 2, T - 6 * pt)
+        self._title_font = normal
+        tl, tt, tr, tb = normal.getbbox(title or "pose 0 of 0", anchor="ms")
+        drawn.append((round(self._title_xy[0] + tl), round(self._title_xy[1] + tt),
+                      round(self._title_xy[0] + tr), round(self._title_xy[1] + tb)))
+
+        # the static picture: truth, the legend's coloured marks, then the opaque boxes,
+        # then black (the scale bar's frame and text over its box)
+        n = width * height
+        self._alpha = np.zeros(n, np.float32)
+        self._ink = np.zeros(n, np.uint8)
+        self._over = np.zeros((n, 3), np.float32)     # premultiplied RGB 0 … 255
+        self._bg = np.full((height, width), _WHITE, np.int8)   # -1: the map shows
+        ri, ci = np.arange(height)[:, None] + 0.5, np.arange(width)[None, :] + 0.5
+        self._bg[(ci >= L) & (ci < R) & (ri >= T) & (ri < B)] = -1
+        covered = np.zeros((height, width), bool)
+        for (c0, r0, c1, r1), base in fills:
+            self._bg[r0:r1, c0:c1] = base
+            covered[r0:r1, c0:c1] = True
+        for k in (TRUTH, POSE, RANGE):
+            a = inks[k].coverage()
+            a[covered] = 0
+            self._composite(_layer(k, a))
+        self._composite(_layer(BLACK, black.coverage()))
+
+        # cut to what is drawn, 0.1 in around it
+        margin = round(0.1 * dpi)
+        box = np.array(drawn)
+        c0, r0 = max(0, box[:, 0].min() - margin), max(0, box[:, 1].min() - margin)
+        c1, r1 = min(width, box[:, 2].max() + margin), min(height, box[:, 3].max() + margin)
+        keep = (slice(r0, r1), slice(c0, c1))
+        self.height, self.width = r1 - r0, c1 - c0
+        self._alpha = self._alpha.reshape(height, width)[keep].ravel()
+        self._ink = self._ink.reshape(height, width)[keep].ravel()
+        self._over = self._over.reshape(height, width, 3)[keep].reshape(-1, 3)
+        self._bg = self._bg[keep].ravel()
+        self._covered = covered[keep]
+        self._box = [L - c0, T - r0, R - c0, B - r0]
+        self._title_xy = (self._title_xy[0] - c0, self._title_xy[1] - r0)
+
+        # which cell each pixel shows (nearest), as a flat cell index
+        ny, nx = grid.shape
+        L, T, R, B = self._box
+        cx = (np.arange(self.width) + 0.5 - L) / (R - L) * nx
+        cy = (B - np.arange(self.height) - 0.5) / (B - T) * ny
+        rows_ = np.clip(np.floor(cy), 0, ny - 1).astype(np.intp)
+        cols_ = np.clip(np.floor(cx), 0, nx - 1).astype(np.intp)
+        self._cell = (rows_[:, None] * nx + cols_[None, :]).ravel()
+
+        self._poses = self._pose_layers(poses, ring_radius_m, reach_m, pt)
+        self._palette, self._pal_index = _palette()
+        self._tables = np.zeros((3, self.height * self.width), np.uint8)
         self._set_tables()
+        self._caption_box = None
         self._shown = 0
 
-    def _box(self, artists) -> tuple[int, int, int, int]:
-        """(row0, row1, col0, col1) of the pixels the artists can touch, with a margin."""
-        boxes = [a.get_window_extent(self._renderer) for a in artists]
-        x0 = min(b.x0 for b in boxes) - 3
-        x1 = max(b.x1 for b in boxes) + 3
-        y0 = min(b.y0 for b in boxes) - 3
-        y1 = max(b.y1 for b in boxes) + 3
-        h, w = self.height, self.width
-        return (max(0, int(h - y1)), min(h, int(math.ceil(h - y0))),
-                max(0, int(x0)), min(w, int(math.ceil(x1))))
+    # ---- geometry
 
-    # ---- colours
+    def to_px(self, x, y):
+        """Picture pixel coordinates (column, row; floats) of map coordinates (m)."""
+        x0, _, y0, _ = self.extent_m
+        L, _, _, B = self._box
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        cols, rows = L + (x - x0) * self.scale, B - (y - y0) * self.scale
+        return (float(cols), float(rows)) if cols.ndim == 0 else np.stack([cols, rows], -1)
 
-    def _index(self, rgb: np.ndarray) -> np.ndarray:
-        """Palette indices of RGB colours (…, 3), 0 … 255."""
-        q = (np.asarray(rgb, np.float32) * np.float32(31 / 255) + np.float32(0.5)).astype(np.int32)
-        np.clip(q, 0, 31, out=q)   # (premultiplied colours may round a hair past 255)
-        return self._lut[(q[..., 0] * 32 + q[..., 1]) * 32 + q[..., 2]]
+    def _box_corners(self):
+        L, T, R, B = self._box
+        return [(L, T), (R, T), (R, B), (L, B)]
 
-    def _set_tables(self, i=slice(None)) -> None:
-        """Palette index of pixels ``i`` (default: all) for each cell class under the overlay,
-        kept as the unknown colour plus modular (uint8) steps to the free and occupied ones.
-        Only the pixels the overlay blends need a look-up per class."""
-        over, alpha = self._over[i], self._alpha[i]
-        t = np.empty((3, alpha.size), np.uint8)
-        bare, opaque = alpha == 0, alpha == 1
-        mixed = ~(bare | opaque)
-        t[:, opaque] = self._index(over[opaque])
-        for k, c in enumerate(_CLASS_RGB):
-            t[k, bare] = self._index(np.array(c) * 255)
-            t[k, mixed] = self._index(over[mixed] + (1 - alpha[mixed])[:, None] * (c * 255))
-        self._t0[i], self._d1[i], self._d2[i] = t[0], t[1] - t[0], t[2] - t[0]
+    def _pose_layers(self, poses, ring_radius_m, reach_m, pt) -> list[list[_Layer]]:
+        """Each pose's marks as layers of the cut picture, clipped to the axes box and
+        kept off the scale bar: a ring, a cross, the reach circle, the number; crowded, a
+        dot and a line from the pose before."""
+        label_m = 8 * pt * 2.0 / self.scale
+        offsets = label_offsets(poses, ring_radius_m, self.extent_m, label_m)
+        L, T, R, B = self._box
+        ri = np.arange(self.height)[:, None] + 0.5
+        ci = np.arange(self.width)[None, :] + 0.5
+        inside = (ci >= L) & (ci < R) & (ri >= T) & (ri < B) & ~self._covered
+        out = []
+        for k, pose in enumerate(poses):
+            c = self.to_px(float(pose[0]), float(pose[1]))
+            reach = (reach_m or 0) * self.scale if not self.crowded else 0
+            half = max(ring_radius_m * self.scale, reach, 16 * pt) + 4 * pt
+            prev = self.to_px(float(poses[k - 1][0]), float(poses[k - 1][1])) if k else c
+            box = (max(0, int(min(c[0], prev[0]) - half)), max(0, int(min(c[1], prev[1]) - half)),
+                   min(self.width, math.ceil(max(c[0], prev[0]) + half)),
+                   min(self.height, math.ceil(max(c[1], prev[1]) + half)))
+            if box[2] <= box[0] or box[3] <= box[1]:
+                out.append([])
+                continue
+            marks, under = _Ink(box), _Ink(box)     # red marks over what goes under them
+            under_ink, under_weight = RANGE, 1.0
+            if self.crowded:       # a numbered path: a dot per pose, a line from the last
+                marks.dot(c, 1.5 * pt)
+                if k:
+                    under.line([prev, c], 0.8 * pt)
+                    under_ink, under_weight = POSE, 0.7          # red, a little see-through
+            else:
+                marks.circle(c, ring_radius_m * self.scale, 1.5 * pt)
+                arm = 4 * pt
+                marks.line([(c[0] - arm, c[1]), (c[0] + arm, c[1])], 1.5 * pt)
+                marks.line([(c[0], c[1] - arm), (c[0], c[1] + arm)], 1.5 * pt)
+                if reach_m:
+                    under.circle(c, reach, 1.0 * pt, dash=(3.7 * pt, 1.6 * pt))
+            if offsets[k] is not None:
+                dx, dy = offsets[k]
+                marks.text((c[0] + dx * self.scale, c[1] - dy * self.scale), str(k + 1),
+                           _font((8 if self.crowded else 10) * pt, bold=True), "mm")
+            c0, r0, c1, r1 = box
+            clip = inside[r0:r1, c0:c1]
+            flat = (np.arange(r0, r1)[:, None] * self.width + np.arange(c0, c1)[None, :])
+            layers = []
+            for ink, draw, weight in ((under_ink, under, under_weight), (POSE, marks, 1.0)):
+                a = draw.coverage() * weight
+                a[~clip] = 0
+                nz = np.nonzero(a)
+                layers.append(_Layer(ink, flat[nz], a[nz]))
+            out.append(layers)
+        return out
 
-    # ---- frames
+    # ---- composing
+
+    def _composite(self, layer: _Layer, over=None, alpha=None, ink=None) -> None:
+        """Put a layer over the picture (or the given arrays), in place; where inks meet,
+        a pixel keeps the ink that contributes most (a GIF pixel shows one ink)."""
+        over = self._over if over is None else over
+        alpha = self._alpha if alpha is None else alpha
+        ink = self._ink if ink is None else ink
+        i, a = layer.index, layer.alpha
+        below = alpha[i] * (1 - a)
+        over[i] = _INK_RGB[layer.ink] * a[:, None] + over[i] * (1 - a)[:, None]
+        alpha[i] = a + below
+        ink[i] = np.where(a >= below, layer.ink, ink[i])
+
+    def _set_tables(self, i=None) -> None:
+        """Palette index of pixels ``i`` (default: all) for each cell class under them,
+        kept as the unknown colour's and modular (uint8) steps to the free and occupied
+        ones. Only pixels with ink or a box over them need a look-up."""
+        if i is None:
+            bare = self._pal_index[:, 0, 0]
+            self._tables[0], self._tables[1], self._tables[2] = bare[0], *(bare[1:] - bare[0])
+            i = np.flatnonzero((self._alpha > 0) | (self._bg >= 0))
+        level = np.rint(self._alpha[i] * _LEVELS).astype(np.intp)
+        bg, ink = self._bg[i], self._ink[i]
+        t = [self._pal_index[np.where(bg < 0, k, bg), ink, level] for k in range(3)]
+        self._tables[0, i] = t[0]
+        self._tables[1, i], self._tables[2, i] = t[1] - t[0], t[2] - t[0]
 
     def _show_poses(self, n: int) -> None:
-        while self._shown < n:
-            layer = self._poses[self._shown]
-            _composite(self._over, self._alpha, layer)
-            self._set_tables(layer.index)
+        while self._shown < min(n, len(self._poses)):
+            for layer in self._poses[self._shown]:
+                self._composite(layer)
+                self._set_tables(layer.index)
             self._shown += 1
 
     def frame(self, classes: np.ndarray, poses_shown: int, caption: str) -> np.ndarray:
@@ -331,52 +528,31 @@ class MapAnimator:
         ``poses_shown`` poses (never fewer than an earlier frame showed), the caption."""
         self._show_poses(poses_shown)
         c = np.take((np.asarray(classes) - _CLASS0).astype(np.uint8).ravel(), self._cell)
-        out = self._t0 + self._d1 * (c == 1) + self._d2 * (c == 2)
-        out = out.reshape(self.height, self.width)
+        t = self._tables      # the unknown colour plus modular (uint8) steps to the others
+        out = (t[0] + t[1] * (c == 1) + t[2] * (c == 2)).reshape(self.height, self.width)
         if caption:
-            self._caption(out, classes, caption)
+            self._caption(out, caption)
         return out
 
-    def _under(self, classes, r0, r1, c0, c1) -> tuple[np.ndarray, np.ndarray]:
-        """RGB (0 … 255) of a box of the picture as composed so far, and its flat indices."""
-        flat = np.arange(r0, r1)[:, None] * self.width + np.arange(c0, c1)[None, :]
-        cls = np.take((np.asarray(classes) - _CLASS0).astype(np.intp).ravel(), self._cell[flat])
-        return self._over[flat] + (1 - self._alpha[flat])[..., None] * (_CLASS_RGB[cls] * 255), flat
-
-    def _caption(self, out: np.ndarray, classes, caption: str) -> None:
-        """Write the caption where the title goes, drawn by FreeType through Pillow in
-        matplotlib's own title font and size (matplotlib's text layout would cost more
-        than the rest of the frame)."""
-        font, (x, y), ink = self._title_font()
-        left, top, right, bottom = font.getbbox(caption, anchor="ms")
-        box = (max(0, int(y + top) - 2), min(self.height, int(math.ceil(y + bottom)) + 2),
-               max(0, int(x + left) - 2), min(self.width, int(math.ceil(x + right)) + 2))
-        if self._caption_box is not None:   # the union, so a shorter caption clears a longer
-            b = self._caption_box
-            box = (min(box[0], b[0]), max(box[1], b[1]), min(box[2], b[2]), max(box[3], b[3]))
-        self._caption_box = r0, r1, c0, c1 = box
+    def _caption_mask(self, text: str, box=None):
+        """(box, coverage 0 … 1) of ``text`` on the title line; ``box`` at least."""
+        font, (x, y) = self._title_font, self._title_xy
+        left, top, right, bottom = font.getbbox(text, anchor="ms")
+        r0, r1 = max(0, int(y + top) - 2), min(self.height, math.ceil(y + bottom) + 2)
+        c0, c1 = max(0, int(x + left) - 2), min(self.width, math.ceil(x + right) + 2)
+        if box is not None:        # the union, so a shorter caption clears a longer
+            r0, r1, c0, c1 = min(r0, box[0]), max(r1, box[1]), min(c0, box[2]), max(c1, box[3])
         mask = Image.new("L", (c1 - c0, r1 - r0), 0)
-        ImageDraw.Draw(mask).text((x - c0, y - r0), caption, fill=255, font=font, anchor="ms")
-        a = np.asarray(mask, np.float32)[..., None] / 255.0
-        under, _ = self._under(classes, r0, r1, c0, c1)
-        out[r0:r1, c0:c1] = self._index(ink * a + under * (1 - a))
+        ImageDraw.Draw(mask).text((x - c0, y - r0), text, fill=255, font=font, anchor="ms")
+        return (r0, r1, c0, c1), np.asarray(mask, np.float32) / 255
 
-    def _title_font(self):
-        """(Pillow font, the title's centre and baseline in pixels, its RGB 0 … 255): the
-        title's own font file and size; its place found by laying out one title."""
-        if self._font is None:
-
-            title = self._mf.title
-            title.set_text("pose 0")
-            ext = title.get_window_extent(self._renderer)
-            _, _, descent = self._renderer.get_text_width_height_descent(
-                "pose 0", title.get_fontproperties(), ismath=False)
-            title.set_text("")
-            px = title.get_fontsize() * self._mf.fig.dpi / 72
-            font = ImageFont.truetype(font_manager.findfont(title.get_fontproperties()), px)
-            xy = ((ext.x0 + ext.x1) / 2, self.height - (ext.y0 + descent))
-            self._font = font, xy, np.array(to_rgb(title.get_color()), np.float32) * 255
-        return self._font
+    def _caption(self, out: np.ndarray, caption: str) -> None:
+        """The caption drawn over the title line (outside the map: on white)."""
+        self._caption_box, a = self._caption_mask(caption, self._caption_box)
+        r0, r1, c0, c1 = self._caption_box
+        level = np.rint(a * _LEVELS).astype(np.intp)
+        under = out[r0:r1, c0:c1]
+        out[r0:r1, c0:c1] = np.where(level > 0, self._pal_index[_WHITE, BLACK, level], under)
 
     def palette_image(self, indices: np.ndarray):
         """A frame as a Pillow palette image."""
@@ -384,72 +560,70 @@ class MapAnimator:
         img.putpalette(self._palette)
         return img
 
-    def save_png(self, path, classes: np.ndarray, title: str = "") -> Path:
-        """The map picture (:func:`save_map_png`'s) of ``classes`` with every pose and
-        ``title``, composed like a frame in full colour (the title drawn by matplotlib)
-        and cut to what is drawn, as ``savefig(bbox_inches="tight")`` would."""
-        mf = self._mf
-        over, alpha = self._over.copy(), self._alpha.copy()
-        for layer in self._poses[self._shown:]:
-            _composite(over, alpha, layer)
-        c = np.take((np.asarray(classes) - _CLASS0).astype(np.intp).ravel(), self._cell)
-        rgb = over + (1 - alpha)[:, None] * (_CLASS_RGB[c] * 255)
-        for arts in mf.pose_artists:
-            for a in arts:
-                a.set_visible(True)
+    def rgb(self, classes: np.ndarray, title: str = "") -> np.ndarray:
+        """(height, width, 3) uint8: the map picture of ``classes`` with every pose and
+        ``title``, in full colour."""
+        over, alpha, ink = self._over.copy(), self._alpha.copy(), self._ink.copy()
+        for layers in self._poses[self._shown:]:
+            for layer in layers:
+                self._composite(layer, over, alpha, ink)
+        c = np.take((np.asarray(classes) - _CLASS0).astype(np.int8).ravel(), self._cell)
+        img = _BASE_RGB8[np.where(self._bg < 0, c, self._bg)]
+        i = np.flatnonzero(alpha)                 # blend only where something is drawn
+        base = img[i].astype(np.float32)
+        img[i] = (over[i] + (1 - alpha[i])[:, None] * base + 0.5).astype(np.uint8)
+        img = img.reshape(self.height, self.width, 3)
         if title:
-            mf.title.set_text(title)
-            self._renderer.clear()
-            mf.ax.draw_artist(mf.title)
-            t = _Layer(np.asarray(self._renderer.buffer_rgba()), self._box([mf.title]))
-            a = t.rgba[:, 3:]
-            rgb[t.index] = t.rgba[:, :3] * 255 * a + rgb[t.index] * (1 - a)
-        # the tight box: everything not the figure's white, and 0.1 in around it (as
-        # savefig's bbox_inches="tight" pads, measured on the pixels instead of re-laid out)
-        img = (rgb.reshape(self.height, self.width, 3) + 0.5).astype(np.uint8)
-        ink = np.any(img < 250, axis=2)
-        rows, cols = np.flatnonzero(ink.any(axis=1)), np.flatnonzero(ink.any(axis=0))
-        dpi = mf.fig.dpi
-        pad = int(round(0.1 * dpi))
-        r0, r1 = max(0, rows[0] - pad), min(self.height, rows[-1] + 1 + pad)
-        c0, c1 = max(0, cols[0] - pad), min(self.width, cols[-1] + 1 + pad)
-        img = img[r0:r1, c0:c1]
+            (r0, r1, c0, c1), a = self._caption_mask(title)
+            img[r0:r1, c0:c1] = (img[r0:r1, c0:c1] * (1 - a)[..., None] + 0.5).astype(np.uint8)
+        return img
+
+    def save_png(self, path, classes: np.ndarray, title: str = "") -> Path:
+        """Write :meth:`rgb` as a PNG."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        # zlib level 3: a third of the default level's time for a file ~10 % larger
-        Image.fromarray(img).save(path, format="PNG", dpi=(dpi, dpi), compress_level=3)
+        path.write_bytes(self.png_bytes(classes, title))
         return path
 
-
-@functools.lru_cache(maxsize=1)
-def _palette() -> tuple[bytes, np.ndarray]:
-    """The one 256-colour palette of every frame, and its 32³ RGB → index lookup table.
-
-    Every colour a frame can show is a cell colour (unknown, free, occupied, or the figure's
-    white) under at most one ink (black text and axes, the truth, pose and reach colours)
-    at some coverage: those blends, 17 coverages each, are the palette; a pixel where two
-    inks cross takes the nearest. Worked out once, whatever the scene.
-    """
-    bases = np.vstack([_CLASS_RGB, [1.0, 1.0, 1.0]]) * 255
-    inks = np.array([(0.0, 0.0, 0.0)] + [to_rgb(c) for c in
-                                          (TRUTH_COLOR, POSE_COLOR, RANGE_COLOR)]) * 255
-    cover = np.linspace(0, 1, 17)[:, None, None, None]
-    blends = cover * inks[None, :, None] + (1 - cover) * bases[None, None, :]
-    pal = np.unique(np.round(blends.reshape(-1, 3)).astype(np.uint8), axis=0)[:256]
-    levels = np.round(np.arange(32) * 255 / 31).astype(np.float32)
-    cube = np.stack(np.meshgrid(levels, levels, levels, indexing="ij"), -1).reshape(-1, 3)
-    p = pal.astype(np.float32)
-    # nearest by |c - p|² = |p|² - 2 c·p (+ |c|², the same for every p): one product
-    lut = ((p * p).sum(1)[None, :] - 2 * cube @ p.T).argmin(1).astype(np.uint8)
-    return pal.tobytes().ljust(256 * 3, b"\0"), lut
+    def png_bytes(self, classes: np.ndarray, title: str = "") -> bytes:
+        buf = io.BytesIO()
+        # zlib level 3: a third of the default level's time for a file ~10 % larger
+        Image.fromarray(self.rgb(classes, title)).save(buf, format="PNG",
+                                                       dpi=(self.dpi, self.dpi),
+                                                       compress_level=3)
+        return buf.getvalue()
 
 
-def _composite(over: np.ndarray, alpha: np.ndarray, layer: _Layer) -> None:
-    """Put a straight-alpha layer over a premultiplied (over 0 … 255, alpha) image, in place."""
-    i, c = layer.index, layer.rgba
-    a = c[:, 3]
-    over[i] = c[:, :3] * 255 * a[:, None] + over[i] * (1 - a)[:, None]
-    alpha[i] = a + alpha[i] * (1 - a)
+def _layer(ink: int, coverage: np.ndarray) -> _Layer:
+    flat = coverage.ravel()
+    i = np.flatnonzero(flat)
+    return _Layer(ink, i, flat[i])
+
+
+def _ticks(lo: float, hi: float, px_per_m: float, min_gap_px: float) -> tuple[list, float]:
+    """Tick values in [lo, hi] on a 1-2-2.5-5 step at least ``min_gap_px`` apart, and
+    the step."""
+    want = min_gap_px / px_per_m
+    exp = math.floor(math.log10(want))
+    step = next(m * 10 ** e for e in (exp, exp + 1) for m in (1, 2, 2.5, 5)
+                if m * 10 ** e >= want * (1 - 1e-9))
+    first = math.ceil(lo / step - 1e-9)
+    return [round(k * step, 10) for k in range(first, math.floor(hi / step + 1e-9) + 1)], step
+
+
+def _tick_label(value: float, step: float) -> str:
+    decimals = max(0, -math.floor(math.log10(step) + 1e-9))
+    if round(step * 10 ** decimals, 6) % 1:
+        decimals += 1                      # 0.25 needs two
+    return f"{value:.{decimals}f}"
+
+
+def save_map_png(path, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
+                 reach_m: float | None = None, ring_radius_m: float = 0.15,
+                 title: str = "") -> Path:
+    """Write the map picture (see the module doc) to ``path``."""
+    return MapPicture(grid, scenario, poses, reach_m, ring_radius_m,
+                      title=title).save_png(path, grid.classify(), title)
 
 
 def save_animation(path, grid: OccupancyGrid,
@@ -462,19 +636,19 @@ def save_animation(path, grid: OccupancyGrid,
     ``frames``: an iterable (e.g. a generator) of (cell classes (ny, nx) int8, poses scanned
     so far, caption), ``n_frames`` of them; the last is held ``hold_s`` seconds. With
     ``png_path``, also the map picture of ``grid`` with ``title`` (as :func:`save_map_png`
-    draws it), from the same drawing.
+    draws it), from the same layout.
     """
     if n_frames < 1:
         raise ValueError(f"an animation needs at least one frame, got n_frames={n_frames}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    anim = MapAnimator(grid, scenario, poses, reach_m, ring_radius_m)
-    images = (anim.palette_image(anim.frame(*f)) for f in frames)
+    pic = MapPicture(grid, scenario, poses, reach_m, ring_radius_m, title=title)
+    images = (pic.palette_image(pic.frame(*f)) for f in frames)
     first = next(images)
     durations = [round(frame_s * 1000)] * n_frames
     durations[-1] = round(hold_s * 1000)
     first.save(path, format="GIF", save_all=True, append_images=images, duration=durations,
                loop=0, optimize=False)
     if png_path is not None:
-        anim.save_png(png_path, grid.classify(), title)
+        pic.save_png(png_path, grid.classify(), title)
     return path

@@ -100,7 +100,7 @@ def report(r: dict) -> str:
         f"wall {r['wall_render_s']:.2f} s",
         f"  render / making the map: cpu {r['render_vs_make_map_cpu']:.2f}×, wall "
         f"{r['render_vs_make_map_wall']:.2f}× (target ≤ 2×)",
-        f"  loading matplotlib and Pillow (before the render clock): cpu "
+        f"  loading the picture code (Pillow; before the render clock): cpu "
         f"{r['cpu_load_render_s']:.2f} s",
         f"  the same work in one process: cpu {r['cpu_command_s']:.2f} s; wall "
         f"{r['wall_process_s']:.2f} s with the interpreter's start (each: {walls})",
