@@ -179,6 +179,24 @@ def test_a_maprun_shows_its_map_inline(t_room_run):
     assert _hue(img, render.POSE_COLOR).sum() > 300 and _hue(img, render.TRUTH_COLOR).sum() > 300
 
 
+def test_a_tall_map_is_drawn_narrower_not_taller_and_cells_stay_square():
+    from irring.maps.mapping import OccupancyGrid
+
+    grid = OccupancyGrid((-0.15, 0.2), (310, 70), 0.01)     # 0.7 m × 3.1 m, off the origin
+    classes = np.full(grid.shape, -1, np.int8)
+    classes[:, :35] = 1                                      # the left half occupied
+    pic = render.MapPicture(grid, poses=[(0.1, 1.3)], reach_m=0.4)
+    img = pic.rgb(classes)
+    assert img.shape[0] <= (render.MAX_MAP_HEIGHT_IN + 1.5) * render.PNG_DPI
+    (c0, r0), (c1, r1) = pic.to_px(-0.15, 0.2), pic.to_px(0.55, 3.3)
+    assert (c1 - c0) / (r0 - r1) == pytest.approx(0.7 / 3.1)   # equal scale on x and y
+    # the boundary between the halves at x = 0.2 m, at any height
+    for y in (0.5, 1.9, 3.0):
+        (cl, row), (cr, _) = pic.to_px(0.18, y), pic.to_px(0.22, y)
+        assert tuple(img[int(row), int(cl)]) == (0, 0, 0)
+        assert tuple(img[int(row), int(cr)]) == (191, 191, 191)
+
+
 def test_ticks_fall_on_round_metres():
     # the T-room's x axis at 287 px/m, ticks ≥ 110 px apart: every 0.5 m from 0
     ticks, step = render._ticks(-0.1, 2.55, 287.0, 110.0)

@@ -30,6 +30,7 @@ _CLASS0 = min(UNKNOWN, FREE, OCCUPIED)
 _CLASS_RGB = np.array([{UNKNOWN: UNKNOWN_RGB, FREE: FREE_RGB, OCCUPIED: OCCUPIED_RGB}[c]
                        for c in range(_CLASS0, _CLASS0 + 3)])
 PNG_DPI = 110
+MAX_MAP_HEIGHT_IN = 8.0        # the axes' height at most (the figure adds 1.5 in)
 
 
 def figure(width_in: float, height_in: float, dpi: float = 100):
@@ -259,7 +260,9 @@ class MapPicture:
         pt = dpi / 72                                    # pixels per point
         x0, x1, y0, y1 = self.extent_m = grid.extent_m
         width = round(width_in * dpi)
-        height = round((width_in * (y1 - y0) / (x1 - x0) * 0.9 + 1.5) * dpi)
+        # a tall map is drawn narrower, not taller than a screen (a 3 m shaft: 3000 pixels)
+        height = round((min(width_in * (y1 - y0) / (x1 - x0) * 0.9, MAX_MAP_HEIGHT_IN)
+                        + 1.5) * dpi)
         # the axes: the box left by fixed margins (inches), shrunk to the map's aspect
         bl, br, bt, bb = 0.8 * dpi, width - 0.15 * dpi, 0.4 * dpi, height - 1.3 * dpi
         scale = min((br - bl) / (x1 - x0), (bb - bt) / (y1 - y0))     # pixels per metre
