@@ -285,6 +285,55 @@ def test_wall_too_close_to_range_is_not_counted_as_visible():
     assert run.scores["occupied_precision"] == 1.0
 
 
+# Walls 5 mm off the 10 mm grid (so along cell edges), one pose in a corner: the south wall
+# 101–106 mm from the nearest sensors, the east and north walls at the 624 mm reach.
+EDGE_CORNER = """\
+name: edge_corner
+seed: 7
+room:
+  outline_mm: [[5, 15], [1055, 15], [1055, 1035], [5, 1035]]
+robot:
+  poses:
+    - {x_mm: 279, y_mm: 266, yaw_deg: -128}
+"""
+
+
+def test_in_range_is_judged_at_the_wall_in_the_cell_not_at_its_centre():
+    # a wall along a cell edge lies half a cell from the cell's centre: judged at the centre,
+    # 17 cells of east and north wall 625-629 mm from every sensor counted as in the 624 mm
+    # reach (no sensor, the ideal one too, can map them: ideal recall 0.928), and 5 cells of
+    # south wall 100-105 mm from a sensor as too near to measure
+    from irring import pipeline
+    from irring.core import distance_to_outline
+    from irring.scenario import loads
+
+    sc = loads(EDGE_CORNER, "edge_corner.yaml")
+    grid = OccupancyGrid.for_scenario(sc)
+    truth = ground_truth(sc, grid)
+    sy, sx = np.nonzero(truth.surface)
+    sp = truth.surface_point[sy, sx]
+    assert np.isnan(truth.surface_point[~truth.surface]).all()
+    assert distance_to_outline(sp[:, 0], sp[:, 1], sc.room.outline_m).max() < 1e-12
+    ix, iy = grid.cell_of(sp[:, 0], sp[:, 1])
+    np.testing.assert_array_equal(ix, sx)
+    np.testing.assert_array_equal(iy, sy)
+
+    xs, ys = grid.cell_centers()
+    pose, ranging = sc.robot.poses[0], metrics._ranging(sc)
+    at_centre = metrics._measurable(xs[sx], ys[sy], pose, *ranging)
+    at_wall = metrics._measurable(sp[:, 0], sp[:, 1], pose, *ranging)
+    dist = np.hypot(sp[:, 0] - pose.x_m, sp[:, 1] - pose.y_m)
+    assert (at_centre & ~at_wall).sum() == 17 and dist[at_centre & ~at_wall].min() > 0.76
+    near = ~at_centre & at_wall    # the south wall beside the pose
+    assert near.sum() == 5 and np.allclose(sp[near, 1], 0.015) and dist[near].max() < 0.26
+    assert int(truth.visible.sum()) == 210
+    np.testing.assert_array_equal(truth.visible[sy, sx], at_wall)
+
+    run = pipeline.run(sc, progress=False)
+    assert run.scores["occupied_recall"] >= 0.99
+    assert run.scores["occupied_precision"] == 1.0
+
+
 def test_shadow_credits_only_wall_a_sensor_could_range():
     # hidden wall no sensor can range along a clear line (behind box_room's crate: 7 cells,
     # none) is missed by every map, however its cells are painted; behind the three

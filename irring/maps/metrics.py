@@ -36,6 +36,8 @@ class GroundTruth:
     label: np.ndarray          # int16: EXTERIOR, FREE_SPACE, WALL or OBSTACLE0 + j (cell centre)
     surface: np.ndarray        # bool: a sensed surface crosses the cell
     surface_owner: np.ndarray  # int16: WALL or OBSTACLE0 + j for surface cells, else 0
+    surface_point: np.ndarray  # (ny, nx, 2) m: the surface point nearest each surface
+    #                            cell's centre (what "in range" measures to), else NaN
     occupied: np.ndarray       # bool: surface or material
     free: np.ndarray           # bool: free space and not surface
     in_range: np.ndarray       # bool: within max range + ring radius of some pose
@@ -68,6 +70,22 @@ def _surface_samples(ob, step_m: float) -> np.ndarray:
         return np.stack([ob.center_m[0] + ob.radius_m * np.cos(a),
                          ob.center_m[1] + ob.radius_m * np.sin(a)], axis=1)
     return _outline_samples(box_corners(ob), step_m)
+
+
+def _nearest_to_centres(samples: np.ndarray, cell: np.ndarray, cx: np.ndarray,
+                        cy: np.ndarray) -> np.ndarray:
+    """(ny, nx, 2) on the grid of cell centres ``cx``, ``cy`` (ny, nx; m): for each cell
+    holding surface ``samples`` (m; ``cell`` their flat cell index), the sample nearest its
+    centre; NaN in cells without one. A wall along a cell's edge lies half a cell from the
+    centre: judged at the centre, wall 629 mm from a sensor counted as in its 624 mm reach."""
+    out = np.full((cx.size, 2), np.nan)
+    if cell.size:
+        dist = np.hypot(samples[:, 0] - cx.take(cell), samples[:, 1] - cy.take(cell))
+        order = np.lexsort((dist, cell))
+        first = np.unique(cell[order], return_index=True)[1]
+        pick = order[first]
+        out[cell[pick]] = samples[pick]
+    return out.reshape(cx.shape + (2,))
 
 
 def _dilate(mask: np.ndarray) -> np.ndarray:
@@ -179,12 +197,12 @@ def _measurable(px, py, pose, *ranging) -> np.ndarray:
 
 
 def _ranged_in_sight(scenario: Scenario, grid: OccupancyGrid, material: np.ndarray,
-                     cells: np.ndarray, ranging) -> np.ndarray:
-    """The ``cells`` (bool, on the grid) some sensor of some pose could range along a clear
-    line from its emitter (no material on the way but within 1 cell of the cell)."""
+                     cells: np.ndarray, surface_point: np.ndarray, ranging) -> np.ndarray:
+    """The surface ``cells`` (bool, on the grid) some sensor of some pose could range (at
+    their ``surface_point``) along a clear line from its emitter (no material on the way but
+    within 1 cell of the cell)."""
     ty, tx = np.nonzero(cells)
-    xs, ys = grid.cell_centers()
-    px, py = xs[tx], ys[ty]
+    px, py = surface_point[ty, tx, 0], surface_point[ty, tx, 1]
     ok = np.zeros(len(tx), bool)
     for pose in scenario.robot.poses:
         for can, ex, ey in _sensor_views(px, py, pose, *ranging):
@@ -220,16 +238,21 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     # surfaces: sample the outline and obstacle perimeters finely, mark the cells they fall in
     surface_owner = np.zeros(px.shape, np.int16)
     step = res / 4
+    marked = []
 
     def mark(samples, owner):
         ix, iy = grid.cell_of(samples[:, 0], samples[:, 1])
         ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
         surface_owner[iy[ok], ix[ok]] = owner
+        marked.append((samples[ok], iy[ok] * nx + ix[ok]))
 
     mark(_outline_samples(np.asarray(outline, float), step), WALL)
     for j, ob in enumerate(scenario.obstacles):
         mark(_surface_samples(ob, step), OBSTACLE0 + j)
     surface = surface_owner > 0
+    surface_point = _nearest_to_centres(np.concatenate([m[0] for m in marked]),
+                                        np.concatenate([m[1] for m in marked]),
+                                        px, py)
     occupied = surface | (label > 0)
     free = (label == FREE_SPACE) & ~surface
 
@@ -243,9 +266,10 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     seen = np.zeros(px.shape, bool)       # … and in its line of sight
     hidden_by_obstacle = np.zeros(px.shape, np.int16)
     sy, sx = np.nonzero(surface)
+    sp = surface_point[sy, sx]
     for pose in scenario.robot.poses:  # a handful of poses; each is vectorised over cells
         near = free & (np.hypot(px - pose.x_m, py - pose.y_m) <= reach)
-        near[sy, sx] = _measurable(px[sy, sx], py[sy, sx], pose, *ranging)
+        near[sy, sx] = _measurable(sp[:, 0], sp[:, 1], pose, *ranging)
         in_range |= near
         ty, tx = np.nonzero(near)
         first = _sight((ny, nx), origin, res, material, (pose.x_m, pose.y_m), tx, ty)
@@ -257,8 +281,9 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
         hidden_by_obstacle[ty[pick], tx[pick]] = first[pick]
     visible = seen & surface
     shadow = (surface_owner == WALL) & in_range & ~visible & (hidden_by_obstacle > 0)
-    shadow_ranged = _ranged_in_sight(scenario, grid, material, shadow, ranging)
+    shadow_ranged = _ranged_in_sight(scenario, grid, material, shadow, surface_point, ranging)
     return GroundTruth(label=label, surface=surface, surface_owner=surface_owner,
+                       surface_point=surface_point,
                        occupied=occupied, free=free, in_range=in_range,
                        visible=visible, reachable_free=seen & free, shadow=shadow,
                        shadow_ranged=shadow_ranged,
@@ -303,7 +328,8 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
             and (_ranging(mapped_by), mapped_by.robot.poses)
             != (_ranging(scenario), scenario.robot.poses)):   # another ring or other poses
         material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
-        ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow, _ranging(mapped_by))
+        ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow, truth.surface_point,
+                                  _ranging(mapped_by))
     cls = grid.classify()
     occ = cls == OCCUPIED
     free = cls == FREE
