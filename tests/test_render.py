@@ -197,6 +197,26 @@ def test_a_tall_map_is_drawn_narrower_not_taller_and_cells_stay_square():
         assert tuple(img[int(row), int(cr)]) == (191, 191, 191)
 
 
+def test_a_tiny_map_gets_a_scale_bar_that_fits_and_its_end_labels_whole():
+    from irring.maps.mapping import OccupancyGrid
+
+    grid = OccupancyGrid((0.3, -0.2), (4, 6), 0.01)        # 6 × 4 cm
+    pic = render.MapPicture(grid, title="tiny")
+    img = pic.rgb(grid.classify(), "tiny").min(axis=2)
+    L, T, R, B = pic._box
+    # the bar: 10 mm (a fifth of the map at most), its black inside the axes' upper left
+    assert render._round_below(0.06 / 5) == 0.01
+    bar_row = img[int(T) + 5:int(T) + 25, :]
+    dark_cols = np.flatnonzero((bar_row < 50).sum(axis=0) >= 2)
+    inside = dark_cols[(dark_cols > L + 3) & (dark_cols < R - 3)]
+    assert 0.01 * pic.scale * 0.9 < inside.max() - inside.min() < 0.01 * pic.scale * 1.3
+    # the end tick's label (0.36) sticks out past the axes and is kept whole, with white
+    # margin beyond it
+    below = img[int(B) + 8:int(B) + 30]
+    assert np.any(below[:, int(R) + 4:] < 100) and np.all(img[:, -3:] == 255)
+    assert [render._round_below(v) for v in (2.65 / 5, 0.16, 7.3)] == [0.5, 0.1, 5.0]
+
+
 def test_ticks_fall_on_round_metres():
     # the T-room's x axis at 287 px/m, ticks ≥ 110 px apart: every 0.5 m from 0
     ticks, step = render._ticks(-0.1, 2.55, 287.0, 110.0)

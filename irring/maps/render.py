@@ -259,12 +259,16 @@ class MapPicture:
         self.dpi = dpi
         pt = dpi / 72                                    # pixels per point
         x0, x1, y0, y1 = self.extent_m = grid.extent_m
-        width = round(width_in * dpi)
+        # laid out on width_in, drawn on a canvas wider by `spare` each side (an end tick's
+        # label or a long y label may stick out), then cut to what is drawn
+        spare = round(0.5 * dpi)
+        width = round(width_in * dpi) + 2 * spare
         # a tall map is drawn narrower, not taller than a screen (a 3 m shaft: 3000 pixels)
         height = round((min(width_in * (y1 - y0) / (x1 - x0) * 0.9, MAX_MAP_HEIGHT_IN)
                         + 1.5) * dpi)
         # the axes: the box left by fixed margins (inches), shrunk to the map's aspect
-        bl, br, bt, bb = 0.8 * dpi, width - 0.15 * dpi, 0.4 * dpi, height - 1.3 * dpi
+        bl, br = spare + 0.8 * dpi, width - spare - 0.15 * dpi
+        bt, bb = 0.4 * dpi, height - 1.3 * dpi
         scale = min((br - bl) / (x1 - x0), (bb - bt) / (y1 - y0))     # pixels per metre
         left = (bl + br) / 2 - scale * (x1 - x0) / 2
         top = (bt + bb) / 2 - scale * (y1 - y0) / 2
@@ -289,6 +293,8 @@ class MapPicture:
             x, _ = self.to_px(v, y0)
             black.line([(x, B), (x, B + tick)], lw_axes)
             black.text((x, B + tick + pad), _tick_label(v, dx), normal, "mt")
+            half = normal.getlength(_tick_label(v, dx)) / 2
+            drawn.append((round(x - half), round(B), round(x + half), round(B + tick + pad)))
         label_w = 0
         for v in yt:
             _, y = self.to_px(x0, v)
@@ -312,9 +318,9 @@ class MapPicture:
                     truth.polygon(self.to_px(*np.asarray(box_corners(ob)).T), 1.0 * pt)
 
         # the scale bar: a framed white box in the upper left corner of the axes
-        bar_m = 0.5 if x1 - x0 > 1.5 else 0.1
+        bar_m = _round_below((x1 - x0) / 5)               # 0.5 m on the T-room
         bar_h = max(2.0, (y1 - y0) * 0.008 * scale)
-        text = f"{bar_m * 1000:.0f} mm"
+        text = f"{bar_m * 1000:.0f} mm" if bar_m < 1 else f"{bar_m:g} m"
         bx0, by0 = L + 0.6 * 8 * pt, T + 0.6 * 8 * pt
         inner = 0.4 * 8 * pt
         sb = (round(bx0), round(by0),
@@ -612,6 +618,13 @@ def _ticks(lo: float, hi: float, px_per_m: float, min_gap_px: float) -> tuple[li
                 if m * 10 ** e >= want * (1 - 1e-9))
     first = math.ceil(lo / step - 1e-9)
     return [round(k * step, 10) for k in range(first, math.floor(hi / step + 1e-9) + 1)], step
+
+
+def _round_below(length: float) -> float:
+    """The largest 1, 2 or 5 × 10ᵏ not above ``length`` (> 0)."""
+    exp = math.floor(math.log10(length))
+    return max(m * 10.0 ** e for e in (exp - 1, exp) for m in (1, 2, 5)
+               if m * 10.0 ** e <= length * (1 + 1e-9))
 
 
 def _tick_label(value: float, step: float) -> str:
