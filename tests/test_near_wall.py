@@ -65,6 +65,28 @@ def test_ideal_readings_below_100mm_are_refused_and_from_100mm_exact():
     assert run.scores["occupied_recall"] == 1.0
 
 
+def test_recall_measures_range_as_the_simulated_beam_does():
+    # the scores' "could range" (metrics._sensor_views: from the hinge, emitter d_o beside the
+    # beam) and the simulated rangefinder (its site on the hinge axis, d_o aside) measure
+    # the same length: not from the ring's housing (20 mm further out) or the centre
+    import math
+
+    sc, run, points, truth_d, err = _run("", None)
+    sweep, ring, pose = run.sweeps[0], sc.ring, sc.robot.poses[0]
+    rho = pose.yaw_rad + 2 * math.pi * np.arange(ring.sensors) / ring.sensors
+    hx, hy = pose.x_m + ring.radius_m * np.cos(rho), pose.y_m + ring.radius_m * np.sin(rho)
+    hit = sweep.truth.hit_point
+    along = np.sqrt((hit[..., 0] - hx) ** 2 + (hit[..., 1] - hy) ** 2 - ring.emitter_offset_m ** 2)
+    seen = np.isfinite(truth_d)
+    assert seen.sum() > 500
+    np.testing.assert_allclose(along[seen], truth_d[seen], atol=1e-9)
+    ranging = metrics._ranging(sc)
+    can = np.zeros(seen.sum(), bool)
+    for c, _, _ in metrics._sensor_views(hit[seen][:, 0], hit[seen][:, 1], pose, *ranging):
+        can |= c
+    assert (can == (truth_d[seen] >= 0.100)).all()   # every hit from 100 mm is rangeable
+
+
 @pytest.mark.parametrize("seed", [13, 14, 15])
 def test_near_walls_are_mapped_whole_and_in_place_with_the_default_effects(seed):
     sc, run, points, truth_d, err = _run("effects: [incidence, noise, quantization]\n", seed)
