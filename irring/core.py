@@ -311,6 +311,8 @@ class Reason(enum.IntEnum):
     SATURATED = 4          # ADC at full scale
     NOT_CONVERGED = 5      # iterative estimation did not settle
     MISSING = 6            # the reading never arrived (hardware)
+    INCIDENCE_UNKNOWN = 7  # on no line, too few neighbours to tell θ: the θ = 0 distance
+    #                        could be > 100 mm long (estimate.local_incidence)
 
 
 @dataclass(frozen=True)

@@ -405,21 +405,25 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         heading=np.array(heading), sigma_m=sigma.reshape(shape),
         iterations=it_out.reshape(shape), valid=valid.reshape(shape), reason=reason,
         max_range_m=max_range)
-    return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, detail, history)
+    return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, detail, history,
+                          counts, steps)
 
 
 def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration,
                    options: LineOptions, snap: bool, detail: bool, history: list,
+                   counts: np.ndarray, steps: np.ndarray,
                    reach: Callable | None = None) -> Estimate:
-    """The estimate from the final points and grouping (either estimator's): line members
-    onto their lines (:func:`snap_to_lines`), each silent beam's reach (``reach``: the
-    compiled :func:`no_return_reach` or the oracle's) and, with ``detail``, the
-    :class:`Lines`."""
+    """The estimate from the final points and grouping (either estimator's): readings on no
+    line at the incidence their own sensor's neighbours give (:func:`local_incidence`;
+    ``counts`` (S, N), ``steps`` (S,): the sweep's), line members onto their lines
+    (:func:`snap_to_lines`), each silent beam's reach (``reach``: the compiled
+    :func:`no_return_reach` or the oracle's) and, with ``detail``, the :class:`Lines`."""
     if grouping is None:
         return Estimate(points=points, lines=None, theta_history=tuple(history))
     shape = points.valid.shape
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
+    points = local_incidence(points, label, index, counts, steps, cal)
     if snap:
         points = snap_to_lines(points, label, cal.min_range_m)
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
@@ -433,6 +437,145 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = replace(points, reach_m=(reach or no_return_reach)(points, found, cal, options))
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+# --------------------------------------------------------------------------- readings on no line
+
+_LOCAL_STEPS = 5        # a reading on no line looks this many steps either way …
+_LOCAL_MIN = 3          # … and needs this many readings of one surface (itself included) …
+_LOCAL_SPREAD_M = 0.001  # … spread across its beam by at least this RMS …
+_LOCAL_SLOPE_SE = 2.0   # … a range slope this many standard errors from flat …
+_CHI2_95 = np.array([3.84, 5.99, 7.81, 9.49, 11.07])  # … and a straight profile: χ² within
+#                                                    its 95 % point (1 … 5 degrees of freedom)
+_UNKNOWN_M = 0.10       # fewer readings, and θ = 0 may read this much long: INCIDENCE_UNKNOWN
+
+
+def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
+                    counts: np.ndarray, steps: np.ndarray, cal: Calibration) -> Points:
+    """Readings on no line (``label`` −1, θ = 0) re-read at the incidence their own sensor's
+    neighbouring steps give; numpy, shared by both estimators.
+
+    ``index``: flat (S, N) indices of the live readings in scan order (each sensor's by
+    step); ``steps`` (S,): each row's motor step. A wall seen at 60–70° often gives only a few readings before the drop-out, too
+    few or too short for a line, and read at θ = 0 they lie 100–190 mm beyond it. Its range
+    still grows steadily as the beam turns: in the frame of a reading's beam (u along, v
+    across) the neighbours' end points lie on u = u0 + v·tan θ. So the valid readings of the
+    same surface (the same polyline: no range jump, ``polyline_ids``) within
+    ``_LOCAL_STEPS`` steps, read at a common θ, are fitted by least squares (u on v: the
+    noise is along the beam; each neighbour read at θ plus the angle its beam turned, as
+    on a flat surface), θ = atan|slope| (at most the drop-out angle), three times.
+    The slope is used only where it is clearly not flat (``_LOCAL_SLOPE_SE`` standard
+    errors) and the profile is straight (χ² within its 95 % point, ``_CHI2_95``, and no
+    curvature term ``_LOCAL_SLOPE_SE`` standard errors off zero): a post's readings bend
+    away from the beam (its centre is read at θ ≈ 0 rightly) and keep θ = 0. σ: the reading's noise at θ plus the spread of d over θ ± the slope's
+    standard error. A reading with fewer than ``_LOCAL_MIN`` such readings, or a straight
+    profile whose slope is not clearly steep or flat, has no incidence to go by: where its
+    θ = 0 distance exceeds the one at the steepest θ it allows (the drop-out angle, or
+    slope + 2 standard errors) by more than ``_UNKNOWN_M`` it is INCIDENCE_UNKNOWN (not
+    valid: a wall's last readings before the drop-out were read up to 190 mm long)."""
+    flat_valid = points.valid.reshape(-1)
+    vi = index[flat_valid[index]]               # valid readings in scan order
+    if vi.size == 0:
+        return points
+    lab = label.reshape(-1)
+    off = ((lab[vi] < 0) & (points.theta.reshape(-1)[vi] == 0.0)).nonzero()[0]
+    if off.size == 0:
+        return points
+    n_sensors = points.valid.shape[1]
+    s = np.asarray(counts, dtype=float).reshape(-1)[vi]
+    h = points.heading.reshape(-1)[vi]
+    ox, oy = points.origin_x.reshape(-1)[vi], points.origin_y.reshape(-1)[vi]
+    log_s = np.log(s)
+    sig_s = cal._levels[3] / s                  # σ_d = |b|·d·σ_S/S
+    la0, b0 = cal._log_ab(0.0)
+    d0 = np.exp(la0 + b0 * log_s)
+    chain = polyline_ids(d0, np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M), h,
+                         vi % n_sensors, cal.max_incidence_rad, LineOptions.jump_sigmas)
+    # the window: same polyline, within _LOCAL_STEPS steps
+    step = np.asarray(steps).reshape(-1)[vi // n_sensors]
+    j = off[:, None] + np.arange(-_LOCAL_STEPS, _LOCAL_STEPS + 1)[None, :]
+    jc = np.clip(j, 0, vi.size - 1)
+    w = ((j == jc) & (chain[jc] == chain[off][:, None])
+         & (np.abs(step[jc] - step[off][:, None]) <= _LOCAL_STEPS)).astype(float)
+    n = w.sum(axis=1)
+    ux, uy = np.cos(h[off])[:, None], np.sin(h[off])[:, None]
+    rx, ry = ox[jc] - ox[off][:, None], oy[jc] - oy[off][:, None]
+    cj, sj = np.cos(h[jc]), np.sin(h[jc])
+    lsj = log_s[jc]
+    turn = h[jc] - h[off][:, None]
+    turn -= 2.0 * math.pi * np.round(turn / (2.0 * math.pi))
+    signed = np.zeros(off.size)          # θ with the sign of the slope
+    for _ in range(3):
+        # on a flat surface a neighbour meets it at θ plus the angle the beam turned
+        theta_j = np.minimum(np.abs(signed[:, None] + turn), cal.max_incidence_rad)
+        la, b = cal._log_ab(theta_j)
+        d = np.exp(la + b * lsj)
+        x, y = rx + d * cj, ry + d * sj
+        u, v = x * ux + y * uy, y * ux - x * uy
+        nn = np.maximum(n, 1.0)
+        mu, mv = (w * u).sum(axis=1) / nn, (w * v).sum(axis=1) / nn
+        du, dv = (u - mu[:, None]) * w, (v - mv[:, None]) * w
+        svv = np.maximum((dv * dv).sum(axis=1), 1e-12)
+        slope = (du * dv).sum(axis=1) / svv
+        signed = np.clip(np.arctan(slope), -cal.max_incidence_rad, cal.max_incidence_rad)
+    theta = np.abs(signed)
+    sig = np.maximum(np.abs(b) * d * sig_s[jc], SIGMA_FLOOR_M)
+    se = np.sqrt(((sig * dv) ** 2).sum(axis=1)) / svv
+    res = (du - slope[:, None] * dv) / sig
+    chi2 = (res * res).sum(axis=1)
+    # readings of one step repeated lie on one spot: they give no slope
+    n = np.where(svv >= n * _LOCAL_SPREAD_M ** 2, n, 0.0)
+    dof = np.clip(n - 2.0, 1.0, _CHI2_95.size).astype(np.intp)
+    # bent: a curvature term (v², orthogonal to 1 and v) clearly off zero; a post's side
+    # bends away from the beam (θ changes ~10× faster than the beam turns), a flat wall
+    # is straight whatever its θ
+    q = dv * dv
+    q = (q - (q.sum(axis=1) / nn)[:, None] * w
+         - ((q * dv).sum(axis=1) / svv)[:, None] * dv) * w
+    sqq = np.maximum((q * q).sum(axis=1), 1e-30)
+    bend = (du * q).sum(axis=1) / sqq
+    bend_se = np.sqrt(((sig * q) ** 2).sum(axis=1)) / sqq
+    straight = ((n >= _LOCAL_MIN) & (chi2 <= _CHI2_95[dof - 1])
+                & (np.abs(bend) <= _LOCAL_SLOPE_SE * bend_se))
+    ok = straight & (np.abs(slope) > _LOCAL_SLOPE_SE * se)
+    # undecided: too few readings (θ anywhere up to the drop-out), a bent profile or one
+    # whose slope may be anything from flat to steep; kept at θ = 0 they may read long
+    # (a post's centre has a flat slope: it stays)
+    steep = np.where(n < _LOCAL_MIN, cal.max_incidence_rad, np.minimum(
+        np.arctan(np.abs(slope) + _LOCAL_SLOPE_SE * se), cal.max_incidence_rad))
+    few = ~ok
+    if few.any():
+        alone = off[few]
+        few[few] = d0[alone] - cal.distance(s[alone], steep[few]) > _UNKNOWN_M
+    if not (ok.any() or few.any()):
+        return points
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    if few.any():
+        gone = vi[off[few]]
+        for f in out.values():
+            f.reshape(-1)[gone] = np.nan
+        valid, reason = points.valid.copy(), points.reason.copy()
+        valid.reshape(-1)[gone] = False
+        reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
+        points = replace(points, valid=valid, reason=reason)
+    at = vi[off[ok]]
+    th, t, e = theta[ok], np.abs(slope[ok]), se[ok]
+    d_new = cal.distance(s[off[ok]], th)
+    # θ ± the slope's standard error: the range of d it leaves
+    lo = np.arctan(np.maximum(t - e, 0.0))
+    hi = np.minimum(np.arctan(t + e), cal.max_incidence_rad)
+    spread = 0.5 * np.abs(cal.distance(s[off[ok]], lo) - cal.distance(s[off[ok]], hi))
+    _, b_new = cal._log_ab(th)
+    sigma = np.hypot(np.maximum(np.abs(b_new) * d_new * sig_s[off[ok]], SIGMA_FLOOR_M), spread)
+    keep = np.isfinite(d_new) & (d_new >= cal.min_range_m) & np.isfinite(sigma)
+    at, th, d_new, sigma = at[keep], th[keep], d_new[keep], sigma[keep]
+    hh = points.heading.reshape(-1)[at]
+    out["d"].reshape(-1)[at] = d_new
+    out["theta"].reshape(-1)[at] = th
+    out["sigma_m"].reshape(-1)[at] = sigma
+    out["x"].reshape(-1)[at] = points.origin_x.reshape(-1)[at] + d_new * np.cos(hh)
+    out["y"].reshape(-1)[at] = points.origin_y.reshape(-1)[at] + d_new * np.sin(hh)
+    return replace(points, **out)
 
 
 # --------------------------------------------------------------------------- silent beams

@@ -968,7 +968,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         heading=np.array(heading), sigma_m=_scatter(sigma, sw.index, shape, nan, mask=valid),
         iterations=it_out, valid=valid, reason=reason, max_range_m=max_range)
     return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, True, history,
-                          reach=no_return_reach)
+                          counts, np.asarray(sweep.steps), reach=no_return_reach)
 
 
 def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
