@@ -763,8 +763,9 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     second = run(near | ambiguous, True, True)
     p = second.points
     # near readings, and far ones the second pass found on no line (its neighbours held
-    # out): the distance at the incidence of the line that decided their branch
-    lost = p.valid & (second.lines.label < 0)
+    # out) nor gave a θ from their own sensor's slope (local_incidence): the distance at
+    # the incidence of the line that decided their branch
+    lost = p.valid & (second.lines.label < 0) & (p.theta == 0.0)
     put = near | (far & lost & (d_fold > 0))
     q = first.points
     on_first = q.valid & (first.lines.label >= 0)
