@@ -540,8 +540,10 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     ok = straight & (np.abs(slope) > _LOCAL_SLOPE_SE * se)
     # undecided: too few readings (θ anywhere up to the drop-out), a bent profile or one
     # whose slope may be anything from flat to steep; kept at θ = 0 they may read long
-    # (a post's centre has a flat slope: it stays)
-    steep = np.where(n < _LOCAL_MIN, cal.max_incidence_rad, np.minimum(
+    # (a post's centre has a flat slope: it stays); a profile bent towards the beam is a
+    # concave corner, the reading on either wall: θ anywhere up to the drop-out
+    concave = bend < -_LOCAL_SLOPE_SE * bend_se
+    steep = np.where((n < _LOCAL_MIN) | concave, cal.max_incidence_rad, np.minimum(
         np.arctan(np.abs(slope) + _LOCAL_SLOPE_SE * se), cal.max_incidence_rad))
     few = ~ok
     if few.any():
