@@ -217,6 +217,18 @@ def test_a_tiny_map_gets_a_scale_bar_that_fits_and_its_end_labels_whole():
     assert [render._round_below(v) for v in (2.65 / 5, 0.16, 7.3)] == [0.5, 0.1, 5.0]
 
 
+def test_a_pose_with_no_place_gets_no_marks_and_the_others_theirs():
+    from irring.maps.mapping import OccupancyGrid
+
+    grid = OccupancyGrid((0, 0), (100, 200), 0.01)
+    poses = [(0.5, 0.5), (float("nan"), 0.5), (1.4, 0.3)]
+    pic = render.MapPicture(grid, poses=poses, reach_m=0.3)
+    img = pic.rgb(grid.classify()).astype(int)
+    red = _hue(img, render.POSE_COLOR)
+    assert _near(red, *pic.to_px(0.5 + 0.15, 0.5)) and _near(red, *pic.to_px(1.4, 0.3 - 0.15))
+    assert [len(layers) for layers in pic._poses] == [2, 0, 2]
+
+
 def test_ticks_fall_on_round_metres():
     # the T-room's x axis at 287 px/m, ticks ≥ 110 px apart: every 0.5 m from 0
     ticks, step = render._ticks(-0.1, 2.55, 287.0, 110.0)

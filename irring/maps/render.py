@@ -54,6 +54,7 @@ def crowded(poses: Sequence, ring_radius_m: float) -> bool:
     """True when two poses' rings overlap (a moving scan's sweeps, a dense survey): the
     picture then draws the poses as a numbered path instead of rings and reach circles."""
     xy = np.array([[float(p[0]), float(p[1])] for p in poses]).reshape(-1, 2)
+    xy = xy[np.isfinite(xy).all(axis=1)]
     if len(xy) < 2:
         return False
     d = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1)) + np.eye(len(xy)) * 1e9
@@ -458,9 +459,14 @@ class MapPicture:
         out = []
         for k, pose in enumerate(poses):
             c = self.to_px(float(pose[0]), float(pose[1]))
+            if not np.all(np.isfinite(c)):
+                out.append([])           # (a pose with no place has no marks to draw)
+                continue
             reach = (reach_m or 0) * self.scale if not self.crowded else 0
             half = max(ring_radius_m * self.scale, reach, 16 * pt) + 4 * pt
             prev = self.to_px(float(poses[k - 1][0]), float(poses[k - 1][1])) if k else c
+            if not np.all(np.isfinite(prev)):
+                prev = c
             box = (max(0, int(min(c[0], prev[0]) - half)), max(0, int(min(c[1], prev[1]) - half)),
                    min(self.width, math.ceil(max(c[0], prev[0]) + half)),
                    min(self.height, math.ceil(max(c[1], prev[1]) + half)))
