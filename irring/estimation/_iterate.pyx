@@ -540,7 +540,8 @@ cdef class Sweep:
 
     def finish(self, const double[::1] theta, const unsigned char[::1] on,
                const Py_ssize_t[::1] last_moving, Py_ssize_t n_its, bint iterate, cal,
-               double max_range_m, unsigned char[::1] reason, bint keep_moving=False):
+               double max_range_m, unsigned char[::1] reason, bint keep_moving=False,
+               double range_sigmas=0.0):
         """Final points with the exact curve (Calibration's log a(θ), b(θ): see
         :meth:`curve`; ``cal._log_ab`` where the fine table check failed) and reasons.
         Returns flat (S·N,) arrays x, y, d, θ, σ (NaN where not valid), iterations (int32)
@@ -552,7 +553,10 @@ cdef class Sweep:
         (``cal._spread``: log a, b at the quadrature nodes, see
         ``estimate._fallback_nodes``). A reading still moving in the last iteration is
         NOT_CONVERGED (with ``keep_moving``: valid, at its last θ); a distance outside
-        [min, max] range or a non-finite point is OUT_OF_RANGE."""
+        [min, max] range or a non-finite point is OUT_OF_RANGE, except that a reading on a
+        line stays valid up to ``range_sigmas`` of its σ past the max range (a surface at
+        the limit read long by noise: ``estimate.final_estimate`` keeps it only on its
+        line, within range)."""
         cdef Py_ssize_t i, j, f, k = self.k, size = self.size
         cdef Py_ssize_t nodes, n_off = 0, o
         cdef double dv, s, px, py
@@ -609,7 +613,9 @@ cdef class Sweep:
             px = self.ox[i] + dv * self.ux[i]
             py = self.oy[i] + dv * self.uy[i]
             io[f] = <int>min(last_moving[i] + 2, n_its)
-            if dv > max_range_m or dv < min_range_m or not isfinite(dv):
+            # (a line member's σ is its noise alone: only fallbacks were widened)
+            if (dv - (range_sigmas * sg[i] if iterate and on[i] else 0.0) > max_range_m
+                    or dv < min_range_m or not isfinite(dv)):
                 why = R_OUT_OF_RANGE
             elif n_its and last_moving[i] == n_its - 1 and not keep_moving:
                 why = R_NOT_CONVERGED

@@ -38,6 +38,12 @@ CALIBRATION_FORMAT = 1  # version written into calibration files
 # from a far, steep surface: OUT_OF_RANGE, neither mapped nor freed.
 NO_RETURN_SIGMAS = 2.0
 RETURN_SIGMAS = 3.72
+# A return read past the max range by at most RANGE_SIGMAS of its range σ may be a surface
+# at the range limit that noise pushed out: it is fitted with its line, and kept if that
+# line meets its beam within range (docs/estimator.md, "At the range limit"). Dropping it
+# instead biased the lines of walls near the limit inward (the readings noise moved out
+# were lost, those it moved in kept).
+RANGE_SIGMAS = 2.0
 _FINE_CELLS = 1 << 16  # cells of the fine (log a, b) table over 0 … 90°
 FALLBACK_NODES = 8   # quadrature nodes for the fallback σ (see _fallback_nodes)
 # the paper's sensor curve (models/sensors/gp2d12.yaml): a calibration's default range

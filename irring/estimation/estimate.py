@@ -18,7 +18,7 @@ from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files name it here
 # (irring.estimation.estimate.Calibration.load), so this module exports it too
-from .calibration import Calibration
+from .calibration import RANGE_SIGMAS, Calibration
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -397,7 +397,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     # θ's unknown (see _fallback_nodes)
     x, y, d, theta_out, sigma, it_out, valid = sw.finish(
         theta, on_line, last_moving, n_its, iterate, cal, max_range, reason.reshape(-1),
-        keep_unconverged)
+        keep_unconverged, RANGE_SIGMAS)
     points = Points(
         x=x.reshape(shape), y=y.reshape(shape), d=d.reshape(shape),
         theta=theta_out.reshape(shape),
@@ -416,16 +416,20 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     """The estimate from the final points and grouping (either estimator's): readings on no
     line at the incidence their own sensor's neighbours give (:func:`local_incidence`;
     ``counts`` (S, N), ``steps`` (S,): the sweep's), line members onto their lines
-    (:func:`snap_to_lines`), each silent beam's reach (``reach``: the compiled
-    :func:`no_return_reach` or the oracle's) and, with ``detail``, the :class:`Lines`."""
+    (:func:`snap_to_lines`), members read just past the max range kept only where their
+    line put them within it (:func:`drop_beyond_range`), each silent beam's reach
+    (``reach``: the compiled :func:`no_return_reach` or the oracle's) and, with ``detail``,
+    the :class:`Lines`."""
     if grouping is None:
-        return Estimate(points=points, lines=None, theta_history=tuple(history))
+        return Estimate(points=drop_beyond_range(points), lines=None,
+                        theta_history=tuple(history))
     shape = points.valid.shape
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points = local_incidence(points, label, index, counts, steps, cal)
     if snap:
         points = snap_to_lines(points, label, cal.min_range_m)
+    points = drop_beyond_range(points)
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                          alpha=grouping.alpha, usable=grouping.usable)
     used = index if grouping.uidx is None else index.take(grouping.uidx)
@@ -437,6 +441,25 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = replace(points, reach_m=(reach or no_return_reach)(points, found, cal, options))
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+def drop_beyond_range(points: Points) -> Points:
+    """``points`` with every valid reading still past ``max_range_m`` made OUT_OF_RANGE.
+
+    The estimator keeps a line member read up to :data:`RANGE_SIGMAS` of its σ past the
+    max range valid for its line's fit (a surface at the range limit that noise read
+    long: dropping those biased the lines of such walls inward); once
+    :func:`snap_to_lines` has put the members on their lines, one its line did not bring
+    within range is not trusted as a point (docs/estimator.md, "At the range limit")."""
+    beyond = points.valid & (points.d > points.max_range_m)
+    if not beyond.any():
+        return points
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    for v in out.values():
+        v[beyond] = np.nan
+    reason = np.array(points.reason)
+    reason[beyond] = Reason.OUT_OF_RANGE
+    return replace(points, valid=points.valid & ~beyond, reason=reason, **out)
 
 
 # --------------------------------------------------------------------------- readings on no line
@@ -670,7 +693,8 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
     """End points of the readings on a line put where their beams meet it.
 
     ``member`` (S, N): the line each reading took θ from (−1: none). Each line is fitted
-    (total least squares) to its valid members' final end points; a member's end point
+    (total least squares) to its valid members' final end points (members read a little
+    past the max range included: see :func:`drop_beyond_range`); a member's end point
     moves along its beam to the line if that is within 3σ of its distance. The line
     averages the noise of all its members, so a wall seen at 13 mm RMS per reading comes
     out a few mm thick; a reading the line does not explain keeps its own distance, and

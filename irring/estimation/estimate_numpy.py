@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
-from .calibration import FALLBACK_NODES, Calibration
+from .calibration import FALLBACK_NODES, RANGE_SIGMAS, Calibration
 from .estimate import (MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
                        SIGMA_FLOOR_M, Estimate, LineOptions, Lines, Pieces, beam_crossings,
                        clip_at_corners, final_estimate, member_spans, nominal_calibration,
@@ -940,6 +940,9 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     d = np.exp(log_a + b * sw.log_s)
     sigma = np.maximum(np.abs(b) * d * sw.sig_s, SIGMA_FLOOR_M)
     px, py = sw.ox + d * sw.ux, sw.oy + d * sw.uy
+    # a line member stays valid up to RANGE_SIGMAS of its (noise) σ past the max range: a
+    # surface at the limit read long; final_estimate keeps it only on its line, in range
+    limit = max_range + np.where(on_line, RANGE_SIGMAS * sigma, 0.0) if iterate else max_range
     if iterate:  # fallback readings (no line): θ = 0, σ widened by θ's unknown
         off = (~on_line).nonzero()[0]
         if off.size:
@@ -949,7 +952,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     iterations = np.minimum(last_moving + 2, n_its)
     moving_at_end = last_moving == n_its - 1 if n_its and not keep_unconverged \
         else np.zeros(k, dtype=bool)
-    bad_range = (d > max_range) | (d < cal.min_range_m) | ~np.isfinite(d)
+    bad_range = (d > limit) | (d < cal.min_range_m) | ~np.isfinite(d)
     why = np.where(bad_range, np.uint8(Reason.OUT_OF_RANGE),
                    np.where(moving_at_end, np.uint8(Reason.NOT_CONVERGED), np.uint8(Reason.OK)))
     why = np.where(np.isfinite(px) & np.isfinite(py) & np.isfinite(sigma) | (why != Reason.OK),
