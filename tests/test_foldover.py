@@ -5,6 +5,7 @@ flags FOLDOVER_AMBIGUOUS, and never leaves a valid reading on the wrong branch."
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -206,3 +207,43 @@ def test_neighbours_close_to_one_surface_do_not_vouch_for_the_far_branch(room, s
     # the scene is a hard one: dozens of readings closer than the peak, which read on the
     # far branch alone land on the wrong branch, and what cannot be decided is flagged
     assert close > 60 and far_only_wrong > 30 and flagged > 200
+
+
+# Noise this heavy (100 mV, ~1/20 of the curve's span) leaves sweeps where no reading goes on
+# any line: the second pass had no lines record and the run ended in exit 70.
+HEAVY_NOISE = """
+name: fold_heavy_noise
+seed: 0
+room: {outline_mm: [[0, 0], [2000, 0], [2000, 1500], [0, 1500]]}
+robot: {poses: [{x_mm: 1000, y_mm: 750}, {x_mm: 400, y_mm: 1100, yaw_deg: 11}]}
+effects: {noise: {sigma_v: 0.1}, foldover: {}}
+"""
+
+
+def test_a_sweep_with_no_line_is_resolved_by_both_estimators():
+    from irring.estimation import estimate_numpy
+
+    sc = loads(HEAVY_NOISE, source="<test>")
+    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
+    cal = scene_calibration(sc)[0]
+    for sw in sweeps:
+        fast, slow = estimate(sw, cal), estimate_numpy.estimate_detail(sw, cal).points
+        np.testing.assert_array_equal(fast.reason, slow.reason)
+        np.testing.assert_allclose(fast.d, slow.d, atol=1e-9, rtol=0)
+        assert np.isfinite(fast.d[fast.valid]).all()
+    # the run that crashed maps and scores
+    result = pipeline.run(sc, seed=0, progress=False)
+    assert 0.0 <= result.scores["free_accuracy"] <= 1.0
+
+
+def test_an_estimate_with_no_readings_to_group_still_has_its_lines_record():
+    from irring.estimation import estimate_numpy
+
+    sc = loads(ROOM + "effects: [foldover]\n", source="<test>")
+    sweep = pipeline.simulated(sc, progress=False)[0].sweeps[0]
+    silent = replace(sweep, counts=np.zeros_like(sweep.counts))   # no return anywhere
+    cal = scene_calibration(sc)[0]
+    for found in (estimate_numpy.estimate_detail(silent, cal).lines,
+                  estimate_numpy.estimate_detail(sweep, cal).lines):
+        assert found is not None and found.label.shape == np.shape(sweep.counts)
+    assert (estimate_numpy.estimate_detail(silent, cal).lines.label == -1).all()

@@ -420,10 +420,11 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     line put them within it (:func:`drop_beyond_range`), each silent beam's reach
     (``reach``: the compiled :func:`no_return_reach` or the oracle's) and, with ``detail``,
     the :class:`Lines`."""
-    if grouping is None:
-        return Estimate(points=drop_beyond_range(points), lines=None,
-                        theta_history=tuple(history))
     shape = points.valid.shape
+    if grouping is None:       # nothing to group (e.g. every reading invalid): no lines
+        empty = _lines_record(None, np.full(shape, -1, dtype=np.intp), np.zeros(0, np.intp))
+        return Estimate(points=drop_beyond_range(points), lines=empty if detail else None,
+                        theta_history=tuple(history))
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points = local_incidence(points, label, index, counts, steps, cal)
