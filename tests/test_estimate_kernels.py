@@ -69,7 +69,9 @@ def test_sweep_without_live_readings():
     p = est.points
     assert not p.valid.any()
     assert set(np.unique(p.reason)) == {Reason.MISSING, Reason.NO_RETURN}
-    assert np.all(p.iterations == 1) and est.lines is None and len(est.theta_history) == 1
+    assert np.all(p.iterations == 1) and len(est.theta_history) == 1
+    # detail asked for: an empty lines record, every reading on no line
+    assert est.lines.n_points.size == 0 and (est.lines.label == -1).all()
 
 
 def test_single_live_reading_keeps_theta_zero():
