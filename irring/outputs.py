@@ -11,6 +11,7 @@ folder leave one run's set, never a mix; :func:`atomic_file` does the same for o
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import secrets
@@ -169,20 +170,51 @@ def _hidden_sibling(path: Path, *, folder: bool) -> Path:
     raise FileExistsError(f"no free temporary name beside {path}")
 
 
+# an OSError of these while writing the temporary is the output's fault, not the writer's
+_WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG, errno.EACCES,
+                           errno.EPERM})
+
+
 @contextlib.contextmanager
-def atomic_file(path: str | Path) -> Iterator[Path]:
+def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
     """A hidden temporary file beside ``path`` to write, renamed over ``path`` when the
     block ends without an exception and removed when it ends with one: a reader (or the
     user after Ctrl-C, a full disk, a crash of the writer) sees the old file or the whole
-    new one, never part of one."""
+    new one, never part of one. A missing parent folder is made. Raises
+    :class:`OutputError` naming ``path`` (after ``option``, e.g. ``--mcap``, if given) when
+    the folder cannot be made or written, ``path`` is a folder, or the disk fills."""
     path = Path(path)
-    tmp = _hidden_sibling(path.absolute(), folder=False)
+    shown = printable(f"{option} {path}" if option else str(path))
+    if path.is_dir():
+        raise OutputError(f"{shown}: is a folder; expected a file")
     try:
-        yield tmp
-        os.replace(tmp, path)
+        path.absolute().parent.mkdir(parents=True, exist_ok=True)
+        tmp = _hidden_sibling(path.absolute(), folder=False)
+    except OSError as exc:
+        blocker = next((p for p in path.absolute().parents if p.exists()), None)
+        if blocker is not None and not blocker.is_dir():
+            raise OutputError(f"{shown}: {printable(str(blocker))} is a file, so the folder "
+                              "cannot be made") from None
+        raise OutputError(f"{shown}: cannot write there: {_why(exc)}") from None
+    try:
+        try:
+            yield tmp
+        except OSError as exc:
+            if isinstance(exc, OutputError) or not (
+                    exc.errno in _WRITE_ERRNOS or exc.filename == str(tmp)):
+                raise
+            raise OutputError(f"{shown}: {_why(exc)}") from exc
+        try:
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise OutputError(f"{shown}: cannot move the file in: {_why(exc)}") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _why(exc: OSError) -> str:
+    return exc.strerror or str(exc) or type(exc).__name__
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:

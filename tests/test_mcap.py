@@ -17,6 +17,7 @@ from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
 from irring import pipeline  # noqa: E402
 from irring.cli import main  # noqa: E402
+from irring.errors import OutputError  # noqa: E402
 from irring.recording import load_recording  # noqa: E402
 from irring.scenario import load_scenario  # noqa: E402
 
@@ -104,7 +105,7 @@ def test_a_failed_mcap_write_leaves_no_partial_file(tmp_path, monkeypatch):
         return real(points, t)
 
     monkeypatch.setattr(mcap_export, "point_cloud", failing)
-    with pytest.raises(OSError, match="No space left"):
+    with pytest.raises(OutputError, match=f"^{target}: No space left on device$"):
         mcap_export.write_mcap(run, target)
     assert target.read_bytes() == b"an earlier run's file"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.mcap"]
@@ -114,6 +115,21 @@ def test_a_failed_mcap_write_leaves_no_partial_file(tmp_path, monkeypatch):
     summary, msgs = _messages(tmp_path / "new.mcap")
     assert len(msgs["/irring/points"]) == 4 and len(msgs["/map"]) == 1
     assert (tmp_path / "new.mcap").stat().st_mode & 0o777 == 0o666 & ~_umask()
+
+
+def test_an_mcap_that_cannot_be_written_is_an_output_error_naming_it(tmp_path, capsys):
+    """--mcap below a file: exit 4 (an output), one line naming the path and the file in the
+    way; it was exit 1 with mkdir's bare 'File exists'. A missing folder is made."""
+    (tmp_path / "taken").write_text("keep")
+    bad = tmp_path / "taken" / "run.mcap"
+    assert main(["run", "t_room_three_cylinders", "--out", str(tmp_path / "room"),
+                 "--no-animation", "--mcap", str(bad)]) == 4
+    err = capsys.readouterr().err
+    assert err == (f"irring run: error: {bad}: {tmp_path / 'taken'} is a file, so the folder "
+                   "cannot be made\n")
+    run = pipeline.replay(tmp_path / "room" / "sweeps.npz", progress=False)
+    made = tmp_path / "new" / "deeper" / "run.mcap"
+    assert pipeline.write_mcap(run, made) == made and made.stat().st_size > 0
 
 
 def _umask() -> int:

@@ -184,3 +184,35 @@ def test_outputs_get_the_modes_the_users_files_get(tmp_path):
         os.umask(mask)
     assert (tmp_path / "new").stat().st_mode & 0o777 == 0o750
     assert (tmp_path / "cal.yaml").stat().st_mode & 0o777 == 0o640
+
+
+def test_atomic_file_makes_its_folder_and_names_the_path_it_cannot_write(tmp_path):
+    """One home for a single file's write failures: a file where a folder should be, a
+    folder where the file should be, a full disk are OutputError (exit 4) naming the path
+    (after the option, when given); nothing is left behind; other errors pass unchanged."""
+    from irring.errors import OUTPUT, OutputError
+    from irring.outputs import atomic_file, write_text_atomic
+
+    made = write_text_atomic(tmp_path / "a" / "b" / "cal.yaml", "a: 1\n")
+    assert made.read_text() == "a: 1\n"
+    (tmp_path / "taken").write_text("keep")
+    with pytest.raises(OutputError) as e:
+        write_text_atomic(tmp_path / "taken" / "sub" / "cal.yaml", "a: 1\n")
+    assert e.value.status == OUTPUT
+    assert str(e.value) == (f"{tmp_path}/taken/sub/cal.yaml: {tmp_path}/taken is a file, so "
+                            "the folder cannot be made")
+    with pytest.raises(OutputError, match=f"^--mcap {tmp_path}/a: is a folder; expected a file$"):
+        with atomic_file(tmp_path / "a", "--mcap"):
+            raise AssertionError("the block ran for a folder")
+    with pytest.raises(OutputError, match=f"^{tmp_path}/x.bin: No space left on device$"):
+        with atomic_file(tmp_path / "x.bin") as tmp:
+            tmp.write_bytes(b"half")
+            _full_disk()
+    with pytest.raises(FileNotFoundError):     # reading an input is not the output's fault
+        with atomic_file(tmp_path / "y.bin"):
+            open(tmp_path / "no-such-input")
+    with pytest.raises(ValueError, match="^bad$"):
+        with atomic_file(tmp_path / "z.bin"):
+            raise ValueError("bad")
+    assert sorted(os.listdir(tmp_path)) == ["a", "taken"]
+    assert (tmp_path / "taken").read_text() == "keep"

@@ -103,10 +103,6 @@ def write_png(image, path: Path) -> Path:
     """``image`` (H×W×3 uint8) to ``path`` as PNG, whole or not at all. Raises OutputError."""
     from PIL import Image   # deferred: Pillow, only to save a picture
 
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_file(path) as tmp:
-            Image.fromarray(image).save(tmp, format="PNG")
-    except OSError as exc:
-        raise OutputError(f"--out {path}: {exc.strerror or exc}") from exc
+    with atomic_file(path, "--out") as tmp:
+        Image.fromarray(image).save(tmp, format="PNG")
     return path

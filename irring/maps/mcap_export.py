@@ -137,10 +137,10 @@ def _obstacle_outline(ob) -> np.ndarray:
 
 def write_mcap(result, path) -> Path:
     """Write ``result`` (a :class:`pipeline.MapRun`) to ``path`` as MCAP (see the module doc).
-    Raises ImportError naming the extra when the mcap packages are missing."""
+    Raises ImportError naming the extra when the mcap packages are missing, OutputError
+    (outputs.atomic_file) when ``path`` cannot be written."""
     Writer = _import()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     t_ns, ends = 0, []
     for s in result.sweeps:
         t_ns += int(round(s.duration_s * 1e9))
