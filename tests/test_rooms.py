@@ -186,3 +186,33 @@ def test_the_ideal_sensor_loses_only_on_scores_both_define():
     assert rooms._ideal_worse({**dict.fromkeys(S_KEYS, 0.5), "point_rms_m": None},
                               {**dict.fromkeys(S_KEYS, 0.6), "shadow": 0.4,
                                "point_rms_m": None}) == ["shadow"]
+
+
+def test_debug_prints_a_failed_rooms_traceback_and_goes_on(tmp_path, monkeypatch, capsys):
+    """--debug reaches the room whose run failed (a parameter, not the environment): its
+    traceback on stderr, the room an error row, the other rooms scored; without it, the
+    one line only."""
+    (tmp_path / "a_post.yaml").write_text(SMALL_ROOM.replace("name: tiny_post", "name: a_post"))
+    (tmp_path / "b_post.yaml").write_text(SMALL_ROOM)
+    real = rooms.score_room
+
+    def failing(scene, seed):
+        if scene.name == "a_post":
+            raise ZeroDivisionError("a_post's run")
+        return real(scene, seed)
+
+    monkeypatch.setattr(rooms, "score_room", failing)
+    monkeypatch.delenv("IRRING_DEBUG", raising=False)
+    argv = ["bench", "rooms", str(tmp_path), "--out", str(tmp_path / "out"), "--json"]
+    assert main(["--debug", *argv]) == 70
+    err = capsys.readouterr().err
+    assert err.count("Traceback (most recent call last):") == 1
+    assert "ZeroDivisionError: a_post's run\n" in err
+    assert err.endswith("irring bench rooms: error: 1 of 2 room(s) not scored; internal error "
+                        "(ZeroDivisionError: a_post's run); rerun with --debug (or "
+                        "IRRING_DEBUG=1) for the traceback and please report it\n")
+    assert main(argv) == 70
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("\n") == 1
+    assert [r["name"] for r in json.loads((tmp_path / "out" / "rooms.json").read_text())
+            if "error" not in r] == ["tiny_post"]

@@ -95,6 +95,7 @@ def main(argv: list[str] | None = None) -> int:
                 parser.print_help()
                 return errors.USAGE
             command = f"irring {args.command}"
+            args.debug = debug   # for commands that report an error and go on (bench rooms)
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         if debug:

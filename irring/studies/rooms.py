@@ -116,14 +116,15 @@ def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
 
 
 def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
-            progress: bool | None = None) -> list[dict]:
+            progress: bool | None = None, debug: bool = False) -> list[dict]:
     """Per room: ``name``, ``source``, and for each of :data:`VARIANTS` the mean over
     ``n_seeds`` seeds (the scenario's own seed, +1, …) of every figure of :func:`score_room`, plus
     ``misses``: the targets (:data:`TARGETS`) the room's scene misses (an undefined score,
     nothing to score, is none), and the scores on which the ideal sensor is worse than the
     scene's (``ideal_worse``). A room that cannot be
     loaded or run (an :class:`Unusable`, or an error in its run) is a row with ``error`` (the
-    one-line message) and ``status`` (the exit status ``irring run`` would give) instead."""
+    one-line message) and ``status`` (the exit status ``irring run`` would give) instead;
+    ``debug``: also print that error's traceback to stderr."""
     rows = []
     with progress_bar(len(scenarios) * n_seeds * 2, "rooms", progress, unit="run") as bar:
         for sc in scenarios:
@@ -135,7 +136,7 @@ def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
             try:
                 rows.append(_measure_room(sc, n_seeds, bar))
             except Exception as exc:  # noqa: BLE001 - one room's failure is that room's row
-                if errors.debug_requested():
+                if debug:
                     traceback.print_exc()
                 status, line = errors.describe(exc)
                 rows.append({"name": sc.name, "source": sc.source, "error": line,
