@@ -206,6 +206,20 @@ def test_speed_reports_every_stage_and_the_ratios():
     json.dumps(r)                                             # plain figures only
 
 
+def test_the_benchmarks_print_the_load_average_in_one_way():
+    """bench speed, render and study: one line, the three load averages before and after."""
+    from irring.studies import scaling
+    from irring.studies.report import load_line
+
+    before, after = [6.35, 3.42, 1.861], [0.6, 0.5, 0.47]
+    line = load_line(before, after, 2)
+    assert line == ("load average (1, 5, 15 min) before 6.35 3.42 1.86 and after 0.60 0.50 "
+                    "0.47; with more than 2 busy the figures are slower than the machine")
+    r = {"grid": "3 designs × 3 rooms × seeds", "cpus": 2, "load_before": before,
+         "load_after": after, "speed": [], "memory": []}
+    assert scaling.report(r).splitlines() == ["3 designs × 3 rooms × seeds; 2 CPUs", line]
+
+
 def test_timed_pipeline_gives_the_same_counts_as_the_plain_one():
     import numpy as np
 

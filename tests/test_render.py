@@ -262,7 +262,7 @@ def test_pose_numbers_clear_each_other_when_poses_crowd():
 
 
 def test_render_bench_times_fresh_processes_and_counts_the_frames():
-    from irring.studies import render_bench
+    from irring.studies import render_bench, report
 
     with pytest.raises(ValueError, match="repeats must be ≥ 1, got 0"):
         render_bench.measure("t_room_cylinder", repeats=0)
@@ -276,3 +276,7 @@ def test_render_bench_times_fresh_processes_and_counts_the_frames():
     assert len(r["wall_irring_run_all_s"]) == 1 and r["wall_irring_run_s"] > 0
     assert r["cpu_irring_run_s"] > r["cpu_make_map_s"] + r["cpu_render_s"]
     assert "whole command `irring run t_room_cylinder`: wall" in render_bench.report(r)
+    # how busy the machine was, before and after, in the words every benchmark uses
+    assert len(r["load_before"]) == len(r["load_after"]) == 3
+    assert render_bench.report(r).splitlines()[-1] == report.load_line(
+        r["load_before"], r["load_after"], r["cpus"])

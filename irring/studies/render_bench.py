@@ -21,6 +21,7 @@ import time
 
 from .. import pipeline
 from ..scenario import load_scenario
+from .report import load_average, load_line
 
 KEYS = ("cpu_make_map_s", "wall_make_map_s", "cpu_render_s", "wall_render_s",
         "cpu_load_render_s", "wall_command_s", "cpu_command_s", "peak_memory_mb")
@@ -53,6 +54,7 @@ def measure(scenario_name: str, repeats: int = 5) -> dict:
     (peak memory: the largest). Raises ValueError for repeats < 1."""
     if repeats < 1:
         raise ValueError(f"repeats must be ≥ 1, got {repeats}")
+    load_before = load_average()
     runs, commands = [], []
     for _ in range(repeats):   # the parts and the command in turn, so both see the same load
         t = time.perf_counter()
@@ -72,7 +74,7 @@ def measure(scenario_name: str, repeats: int = 5) -> dict:
             "wall_irring_run_s": statistics.median(w for w, _ in commands),
             "cpu_irring_run_s": statistics.median(c for _, c in commands),
             "wall_irring_run_all_s": [w for w, _ in commands],
-            "load_average": list(os.getloadavg())}
+            "load_before": load_before, "load_after": load_average(), "cpus": os.cpu_count()}
 
 
 def _irring_run(scenario_name: str) -> tuple[float, float]:
@@ -106,8 +108,8 @@ def report(r: dict) -> str:
         f"{r['wall_process_s']:.2f} s with the interpreter's start (each: {walls})",
         f"  whole command `irring run {r['scenario']}`: wall {r['wall_irring_run_s']:.2f} s "
         f"(each: {commands}; target ≤ 1.5 s), cpu {r['cpu_irring_run_s']:.2f} s",
-        f"  peak memory: {r['peak_memory_mb']:.0f} MB (target ≤ 1024 MB); load average "
-        + " ".join(f"{v:.2f}" for v in r["load_average"]),
+        f"  peak memory: {r['peak_memory_mb']:.0f} MB (target ≤ 1024 MB)",
+        load_line(r["load_before"], r["load_after"], r["cpus"]),
     ])
 
 

@@ -1,10 +1,11 @@
-"""The files a study writes (JSON, CSV tables, a chart, all together) and the mean its
-tables show."""
+"""The files a study writes (JSON, CSV tables, a chart, all together), the mean its
+tables show, and the load-average line every benchmark prints."""
 
 from __future__ import annotations
 
 import csv
 import json
+import os
 
 import numpy as np
 
@@ -15,6 +16,21 @@ def mean_of(values) -> float | None:
     """Mean of the values that are not None (None when there are none)."""
     vals = [v for v in values if v is not None]
     return float(np.mean(vals)) if vals else None
+
+
+def load_average() -> list[float]:
+    """The machine's load average over 1, 5 and 15 minutes (``os.getloadavg``): a
+    benchmark records it before and after, since a busy machine slows every timing."""
+    return list(os.getloadavg())
+
+
+def load_line(before, after, cpus: int | None = None) -> str:
+    """The line a benchmark prints about how busy the machine was (``load_average()``
+    before and after its work)."""
+    cpus = os.cpu_count() if cpus is None else cpus
+    return ("load average (1, 5, 15 min) before {} and after {}; with more than {} busy the "
+            "figures are slower than the machine".format(
+                " ".join(f"{v:.2f}" for v in before), " ".join(f"{v:.2f}" for v in after), cpus))
 
 
 def write_csv(path, rows: list[dict], keys) -> None:

@@ -15,6 +15,7 @@ from typing import Sequence
 
 from .. import designs
 from .executor import executor
+from .report import load_average, load_line
 from .study import DesignSpec, Study, read_results, run_study
 
 SCENARIOS = ("t_room", "t_room_cylinder", "t_room_three_cylinders")
@@ -67,7 +68,7 @@ def measure(seeds: int = 20, workers: Sequence[int] = (1, 2),
             memory_seeds: Sequence[int] = (4, 40), memory_workers: int = 2) -> dict:
     """Time the ``seeds`` grid on each worker count, then peak memory on each grid of
     ``memory_seeds``. Returns plain figures (see :func:`report`)."""
-    load_before = os.getloadavg()
+    load_before = load_average()
     speed, memory = [], []
     with tempfile.TemporaryDirectory(prefix="irring-scaling-") as tmp:
         for i, w in enumerate(workers):
@@ -80,12 +81,12 @@ def measure(seeds: int = 20, workers: Sequence[int] = (1, 2),
         r["speedup"] = base / r["wall_s"]
     return {"grid": f"{len(study_for(1).designs)} designs × {len(SCENARIOS)} rooms × seeds",
             "speed": speed, "memory": memory, "cpus": os.cpu_count(),
-            "load_before": list(load_before), "load_after": list(os.getloadavg())}
+            "load_before": load_before, "load_after": load_average()}
 
 
 def report(r: dict) -> str:
-    lines = [f"{r['grid']}; {r['cpus']} CPUs, load average before "
-             f"{r['load_before'][0]:.1f}, after {r['load_after'][0]:.1f}"]
+    lines = [f"{r['grid']}; {r['cpus']} CPUs",
+             load_line(r["load_before"], r["load_after"], r["cpus"])]
     for s in r["speed"]:
         lines.append(f"  {s['runs']} runs, {s['workers']} worker(s): {s['wall_s']:.1f} s, "
                      f"{s['runs_per_s']:.1f} runs/s, speed-up {s['speedup']:.2f}× over the "

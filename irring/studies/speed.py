@@ -21,6 +21,7 @@ from ..maps.mapping import OccupancyGrid
 from ..scenario import load_scenario
 from ..simulation.effects import PHASES, Pipeline
 from ..simulation.rangers import pipeline_for
+from .report import load_average, load_line
 
 TARGETS = {"sweep_ms": 2.0, "ray_vs_raw_ratio": 1.5, "realtime_factor": 1000.0}
 RAY_PAIRS = 3   # per round: our ray stage and the raw call, alternating
@@ -66,7 +67,7 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
 
     if rounds < 1:
         raise ValueError(f"rounds must be ≥ 1, got {rounds}")
-    load_before = os.getloadavg()    # a busy machine slows every figure: say how busy
+    load_before = load_average()
     sim = SimRing(scenario, seed=seed)
     steps = sim.default_steps()
     motor = steps * sim.ring.motor_step_rad
@@ -189,7 +190,7 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                     "python": platform.python_version(), "mujoco": mujoco.__version__,
                     "numpy": np.__version__,
-                    "load_before": list(load_before), "load_after": list(os.getloadavg())},
+                    "load_before": load_before, "load_after": load_average()},
     }
     out["targets"] = {
         "sweep_ms": {"target": f"≤ {TARGETS['sweep_ms']:g} ms", "value": sweep_ms,
@@ -223,10 +224,7 @@ def report(r: dict) -> str:
         f"→ {r['ray_vs_raw_ratio']:.2f}×",
         f"sweeps per second {r['sweeps_per_s']:.0f}; hardware time {r['hardware_time_s']:.2f} s "
         f"per sweep → real-time factor {r['realtime_factor']:.0f}×",
-        "load average (1, 5, 15 min) before {} and after {}; with more than {} busy the "
-        "figures are slower than the machine".format(
-            " ".join(f"{v:.2f}" for v in r["machine"]["load_before"]),
-            " ".join(f"{v:.2f}" for v in r["machine"]["load_after"]), r["machine"]["cpus"]),
+        load_line(r["machine"]["load_before"], r["machine"]["load_after"], r["machine"]["cpus"]),
         "targets:"]
     for key, t in r["targets"].items():
         v = t["value"]
