@@ -41,3 +41,62 @@ def test_no_docstring_quotes_a_measured_time():
     assert TIMING.search("takes ~0.1–0.5 s") and TIMING.search("0.044 ms per sweep")
     assert not TIMING.search("areas in m², 8 m/s")
     assert found == []
+
+
+ROOT = PACKAGE.parent
+# where a user reads a dotted irring.* name: the docs, the bundled files, the firmware
+DOC_PLACES = ("README.md", "docs", "scenarios", "models", "firmware")
+DOC_SUFFIXES = {".md", ".yaml", ".xml", ".txt", ".h", ".c", ".cpp", ".ino", ".py", ""}
+DOTTED = re.compile(r"\birring(?:\.[A-Za-z_]\w*)+")
+FILE_NAMES = re.compile(r"\.(xml|yaml|py|md|csv|json|png)$")   # irring.xml is a file
+
+
+def _home_of(name: str) -> str | None:
+    """Where ``name`` (irring.a.b.C.m) is defined, or None when it does not resolve."""
+    import importlib
+    import inspect
+
+    parts = name.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+            break
+        except ImportError:
+            continue
+    module = obj.__name__
+    for attr in parts[i:]:
+        if not hasattr(obj, attr):
+            return None
+        obj = getattr(obj, attr)
+        if inspect.isclass(obj) or inspect.isfunction(obj):
+            module = obj.__module__ if attr == parts[i] else module
+    return module
+
+
+def _names_in(text: str) -> set[str]:
+    return {m for m in DOTTED.findall(text) if not FILE_NAMES.search(m)}
+
+
+def test_the_irring_names_users_read_are_where_the_code_is():
+    """A dotted irring.* name in the docs, the bundled files, the firmware's notes or a
+    calibration file's header resolves, through the module that defines it (not a
+    re-export kept for old files): moved code leaves no stale path."""
+    from irring.estimation.calibration import Calibration
+    from irring.scenario import load_scenario
+
+    places = {"calibration file header":
+              Calibration.for_scene(load_scenario("t_room")).to_yaml()}
+    for place in DOC_PLACES:
+        path = ROOT / place
+        for f in [path] if path.is_file() else sorted(path.rglob("*")):
+            if f.is_file() and f.suffix in DOC_SUFFIXES:
+                places[str(f.relative_to(ROOT))] = f.read_text(encoding="utf-8", errors="replace")
+    stale = {}
+    for place, text in places.items():
+        for name in _names_in(text):
+            home = _home_of(name)
+            if home is None or not name.startswith(home):
+                stale.setdefault(place, []).append(f"{name} (defined in {home})")
+    assert "irring.estimation.calibration.Calibration.load" in _names_in(
+        places["calibration file header"])
+    assert stale == {}

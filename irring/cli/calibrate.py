@@ -28,7 +28,7 @@ what it does:
                   at the end. Enter: read; s: skip the placement; q: quit.
 
   The file is YAML (distances in mm, angles in degrees); pass it to the estimator with
-  `irring run --calibration FILE` or irring.estimation.estimate.Calibration.load(FILE).
+  `irring run --calibration FILE` or irring.estimation.calibration.Calibration.load(FILE).
   Without a calibration file `irring run` reads a simulated scene with the calibration of
   what the scene simulates, `irring drive` the real ring with the sensor's datasheet curve.
 

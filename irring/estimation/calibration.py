@@ -330,7 +330,7 @@ class Calibration:
         """The calibration file's text (mm and degrees for people, d = a·S^b, S in counts)."""
         header = ("# irring calibration: d[m] = a(θ)·S^b(θ), S in ADC counts (paper Eq. 10);\n"
                   "# emitter offset d_o (paper Eq. 9) in mm; load with "
-                  "irring.estimation.estimate.Calibration.load\n")
+                  "irring.estimation.calibration.Calibration.load\n")
         return header + yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True)
 
     def save(self, path: str | Path) -> Path:

@@ -16,8 +16,8 @@ import numpy as np
 
 from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
 from ..resources import kernel
-# Calibration is the estimator's input; calibration files name it here
-# (irring.estimation.estimate.Calibration.load), so this module exports it too
+# Calibration is the estimator's input; calibration files written before 2026-11-26 name
+# it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, Calibration
 
 _iterate = kernel("estimation._iterate")
