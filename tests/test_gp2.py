@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -48,10 +49,13 @@ def test_table_row_zero_is_the_log_log_fit_of_the_files_points(name):
 def test_the_curve_files_are_what_refit_writes_with_the_calibration_fit():
     """models/sensors/refit.py fits each part's points with the calibration's Eq. 10 fit
     (irring.estimation.calibration.fit_curve) and renders every bundled file byte for byte:
-    no file was edited by hand past its generator."""
+    no file was edited by hand past its generator. Loading it changes nothing of this
+    process (it imported irring from a sys.path entry of its own)."""
+    path_before = list(sys.path)
     spec = importlib.util.spec_from_file_location("refit", gp2.sensors_dir() / "refit.py")
     refit = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(refit)
+    assert sys.path == path_before
     assert set(refit.SPECS) == set(ALL)
     for name, part in refit.SPECS.items():
         assert refit.render(name, part) == (gp2.sensors_dir() / f"{name}.yaml").read_text(), name

@@ -1,6 +1,7 @@
 """Regenerate the sensor curve files in this folder from their source points.
 
-Run from the repository root:  python models/sensors/refit.py
+Run from the repository root, with irring installed (pip install -e .):
+    python models/sensors/refit.py
 It fits d = a·V^b (paper Eq. 10) to each part's datasheet points by least squares on
 log d = log a + b·log V (``irring.estimation.calibration.fit_curve``, the fit
 ``irring calibrate`` makes), then tabulates a(θ), b(θ) with the incidence model stated in
@@ -10,14 +11,13 @@ tests/test_gp2.py checks that they still match their points.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
+from irring.estimation.calibration import fit_curve
+
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))   # this checkout's irring, installed or not
-from irring.estimation.calibration import fit_curve  # noqa: E402
 THETA_DEG = list(range(0, 90, 5))  # 0 … 85°; beyond the last entry a, b are held constant
 
 # Incidence model (README.md): a(θ) = a0·cos(θ)^A_EXP, b(θ) = b0·(1 + B_SLOPE·(1 − cos θ)).
@@ -154,7 +154,11 @@ def render(name: str, spec: dict) -> str:
     return "\n".join(lines)
 
 
-if __name__ == "__main__":
+def main() -> None:
     for name, spec in SPECS.items():
         (HERE / f"{name}.yaml").write_text(render(name, spec))
         print(f"wrote {name}.yaml")
+
+
+if __name__ == "__main__":
+    main()
