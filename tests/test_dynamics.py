@@ -143,6 +143,31 @@ def test_belt_stretch_is_bounded_and_steady_from_the_second_sweep():
     assert r["read_error_max_rad"] < 0.02  # the sensors lag a 4-ms step by < 1.2°
 
 
+def test_belt_physics_follows_one_run_through_chunks_of_targets():
+    """BeltPhysics.follow, the public way to run the belt on (studies.dynamics.endurance
+    uses it): chunks continue one run, so two chunks are the same physics as their
+    concatenation, each chunk's first sample the last of the one before; run() is follow's
+    single chunk from rest at the sweep's first step."""
+    ring = load_scenario("t_room").ring
+    physics = D.BeltPhysics(ring, BeltDynamicsEffect())
+    sched = D.schedule(np.arange(ring.min_step, ring.max_step + 1), ring,
+                       step_time_s=physics.params.step_time_s, timing=True)
+    ctrl = physics.controls(sched)
+    cut = 37                                            # not a step boundary
+    stretch = np.linspace(-0.002, 0.001, ring.sensors)  # asymmetric start
+    a, b = physics.follow([ctrl[:cut], ctrl[cut:]], sched.motor_rad[0], stretch)
+    (whole,) = physics.follow([ctrl], sched.motor_rad[0], stretch)
+    assert len(a.sensor_rad) == cut + 1 and len(b.sensor_rad) == len(ctrl) - cut + 1
+    assert np.array_equal(a.sensor_rad[-1], b.sensor_rad[0])
+    np.testing.assert_allclose(np.concatenate([a.sensor_rad, b.sensor_rad[1:]]),
+                               whole.sensor_rad, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(whole.stretch_rad[0], stretch, rtol=0, atol=1e-15)
+    assert not np.allclose(whole.stretch_rad[-1], stretch)      # the belt moved
+    run = physics.run(sched)
+    (rest,) = physics.follow([ctrl], sched.motor_rad[0], physics.rest_offset(sched.steps))
+    assert np.array_equal(run.sensor_rad, rest.sensor_rad)
+
+
 def test_belt_lag_decays_with_settle_time():
     rows = bench.settling({"belt_dynamics": {}}, (0.0, 0.020, 0.1))
     assert 0.005 < rows[0]["angle_error_rms_rad"] < 0.02     # read on arrival: ~0.7° behind

@@ -6,6 +6,7 @@ How it works, its assumptions and measured figures: docs/dynamics.md.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 import mujoco
@@ -285,18 +286,27 @@ class BeltPhysics:
 
     def run(self, sched: Schedule, *, duration_s: float | None = None) -> Trajectory:
         """One sweep from rest at its first step, through ``duration_s`` (default its end)."""
-        ctrl = self.controls(sched, duration_s)[None]
+        return next(self.follow([self.controls(sched, duration_s)], sched.motor_rad[0],
+                                self.rest_offset(sched.steps)))
+
+    def follow(self, targets: Iterable[np.ndarray], motor_rad: float,
+               stretch_rad: np.ndarray) -> Iterator[Trajectory]:
+        """One continuous run from rest at ``motor_rad`` with belt stretch ``stretch_rad``
+        (N,), through successive chunks of actuator targets (each (T,), one per physics
+        step): yields each chunk's :class:`Trajectory`, T + 1 samples from the chunk's start
+        (the first is the last of the chunk before). Raises as :meth:`roll`."""
         batch = self.batch(1)
-        offset = self.rest_offset(sched.steps)
-        self.start(batch, sched.motor_rad[:1], offset)
-        q0 = batch.bind("qpos")[0].copy()
-        out = self.roll(batch, ctrl)
-        qpos = np.concatenate([q0[None], out["qpos"][0]])
-        qvel = np.concatenate([np.zeros((1, self.model.nv)), out["qvel"][0]])
-        return Trajectory(dt_s=self.dt_s, motor_rad=qpos[:, self.motor_qpos],
-                          motor_vel=qvel[:, self.motor_dof],
-                          sensor_rad=qpos[:, self.sensor_qpos],
-                          sensor_vel=qvel[:, self.sensor_dof], gear=self.gear)
+        self.start(batch, np.array([motor_rad], dtype=float), stretch_rad)
+        q, v = batch.bind("qpos")[0].copy(), np.zeros(self.model.nv)
+        for ctrl in targets:
+            out = self.roll(batch, np.asarray(ctrl, dtype=float)[None])
+            qpos = np.concatenate([q[None], out["qpos"][0]])
+            qvel = np.concatenate([v[None], out["qvel"][0]])
+            q, v = qpos[-1].copy(), qvel[-1].copy()
+            yield Trajectory(dt_s=self.dt_s, motor_rad=qpos[:, self.motor_qpos],
+                             motor_vel=qvel[:, self.motor_dof],
+                             sensor_rad=qpos[:, self.sensor_qpos],
+                             sensor_vel=qvel[:, self.sensor_dof], gear=self.gear)
 
 
 # --------------------------------------------------------------------------- GP2 clocks
