@@ -326,6 +326,34 @@ def test_irring_emulate_serves_a_link_and_cleans_up_on_sigterm(tmp_path, t_room,
     assert not link.exists()
 
 
+def test_a_second_emulator_refuses_a_link_in_use_and_replaces_a_stale_one(tmp_path, t_room,
+                                                                         pty_device):
+    """A running emulator's link is refused (usage, exit 2, one line naming it and --link),
+    and left pointing at its pty; a link whose pty closed (an emulator killed) is replaced,
+    as is nothing else: a file of the user's is kept."""
+    live = pty_device(Device(SimRing(t_room)))
+    target = os.readlink(live)
+    second = subprocess.run([sys.executable, "-m", "irring", "emulate", "t_room", "--link",
+                             live], capture_output=True, text=True, timeout=60)  # not serve on
+    assert second.returncode == 2
+    assert second.stderr == (f"irring emulate: error: --link {live}: {live} is in use: it points at "
+                   f"{target}, which is open (another irring emulate?); stop that one, or "
+                   "pick another link with --link PATH\n")
+    assert os.readlink(live) == target
+    stale = tmp_path / "stale.pty"
+    os.symlink("/dev/pts/no-such-pty", stale)
+    emu = PtyEmulator(Device(SimRing(t_room)), link=stale)
+    path = emu.open()
+    assert os.readlink(stale) == path != target
+    emu.stop()
+    assert not stale.is_symlink()
+    mine = tmp_path / "mine"
+    mine.write_text("keep")
+    with pytest.raises(FileExistsError, match="exists and is not a symlink"):
+        PtyEmulator(Device(SimRing(t_room)), link=mine).open()
+    assert mine.read_text() == "keep"
+
+
 # --------------------------------------------------------------------------- irring drive
 
 

@@ -43,8 +43,9 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="bundled scenario name or YAML path (default: t_room)")
     p.add_argument("--link", metavar="PATH", default=DEFAULT_LINK,
                    help=f"symlink to the pty slave for the host to open (default: {DEFAULT_LINK} "
-                        "in the current folder; an existing symlink is replaced, any other "
-                        "file refused; removed when the emulator stops)")
+                        "in the current folder; removed when the emulator stops; a link "
+                        "left by an emulator that was killed is replaced, one in use by a "
+                        "running emulator or any other file refused)")
     p.add_argument("--tcp", metavar="[HOST:]PORT", default=None, type=host_port,
                    help="serve on TCP instead of a pty; the host opens socket://HOST:PORT "
                         "(HOST defaults to 127.0.0.1; PORT 0 picks a free one)")

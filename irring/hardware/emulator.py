@@ -328,7 +328,7 @@ class PtyEmulator(_Server):
     """Runs a :class:`Device` on a pseudo-terminal.
 
     ``path`` is the slave device (``/dev/pts/N``) a host opens like a serial port; ``link``,
-    if given, is a symlink to it (replaced if it exists). ``baud`` > 0 paces output like a
+    if given, is a symlink to it (a stale one replaced, one in use refused). ``baud`` > 0 paces output like a
     UART at that rate (10 bits per byte); 0 sends as fast as the pty takes it.
     """
 
@@ -359,9 +359,16 @@ class PtyEmulator(_Server):
         return self.path
 
     def _make_link(self) -> None:
-        """Point ``link`` at the pty: a new symlink, or one that replaces an old symlink in a
-        single rename; anything else at that path (a file, a folder) is left alone."""
+        """Point ``link`` at the pty: a new symlink, or one that replaces a stale symlink (to
+        a pty that closed: its emulator stopped) in a single rename. Anything else at that
+        path is left alone: a file, a folder, or a link in use (its pty open: another
+        emulator's) raise FileExistsError saying what to do."""
         link = self.link
+        if link.is_symlink() and link.exists():
+            raise FileExistsError(errno.EEXIST, f"{link} is in use: it points at "
+                                  f"{os.readlink(link)}, which is open (another irring "
+                                  "emulate?); stop that one, or pick another link with "
+                                  "--link PATH")
         if link.exists() and not link.is_symlink():
             raise FileExistsError(errno.EEXIST, f"{link} exists and is not a symlink; not "
                                                 "replacing it (remove it or pick another --link)")
