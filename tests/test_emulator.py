@@ -421,6 +421,25 @@ def test_irring_drive_survives_a_bad_link_and_says_what_was_lost(tmp_path, t_roo
     assert "steps missing" in out
 
 
+@pytest.mark.parametrize("fault", ["stall_after", "disconnect_after"])
+def test_irring_drive_on_a_device_dead_after_its_handshake_says_so_in_one_line(
+        tmp_path, t_room, pty_device, capsys, fault):
+    """The ring answers IRHLO and then nothing: one error line (why, and that nothing was
+    written), exit 3; it was two lines, the second a bare 'no readings arrived'."""
+    from irring.cli import main
+
+    link = pty_device(Device(SimRing(t_room), faults=Faults(**{fault: 1})))
+    assert main(["drive", "--port", link, "--out", str(tmp_path / "d"), "--no-animation",
+                 "--timeout", "0.3", "--json"]) == 3
+    out, err = capsys.readouterr()
+    lost = ("stopped answering (no sentence for 0.3 s during IRSWP,-35,35 after 0 of 71 steps"
+            if fault == "stall_after" else "disconnected (")
+    assert err.count("irring drive: error:") == 1 and err.endswith(
+        "; no reading arrived, so nothing was mapped or written\n")
+    assert f"\nirring drive: error: ring on {link} {lost}" in err
+    assert out == "" and not (tmp_path / "d").exists()
+
+
 def test_irring_drive_without_a_device_is_a_clear_error(capsys):
     from irring.cli import main
 

@@ -186,12 +186,13 @@ def run(args: argparse.Namespace) -> int:
     finally:
         ring.close()
     sweeps, failure = acq.sweeps, acq.error
-    if failure is not None:
-        print(f"irring drive: error: {errors.printable(str(failure), 2000)}", file=sys.stderr)
-    if not sweeps:
-        print("irring drive: error: no readings arrived; nothing to map (nothing written)",
-              file=sys.stderr)
+    if not sweeps:   # one line: why, and that there is nothing to map
+        why = f"{errors.printable(str(failure), 2000)}; " if failure is not None else ""
+        print(f"irring drive: error: {why}no reading arrived, so "
+              "nothing was mapped or written", file=sys.stderr)
         return errors.DEVICE
+    if failure is not None:   # what arrived is mapped below
+        print(f"irring drive: error: {errors.printable(str(failure), 2000)}", file=sys.stderr)
 
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.map_sweeps(sweeps, scenario=truth, calibration=calibration,
