@@ -270,3 +270,41 @@ def test_a_reader_that_stops_early_ends_the_command_quietly():
     err = proc.stderr.read()
     assert proc.wait(timeout=120) == 4
     assert err == b""
+
+
+@pytest.mark.parametrize("argv, module, target", [
+    (["emulate", "l_room", "--link", "x.pty"], "irring.cli.emulate", "Device"),
+    (["bench", "speed", "--scenario", "l_room"], "irring.cli.bench_speed", "measure"),
+    (["view", "l_room", "--out", "x.png"], "irring.simulation.view", "SceneView"),
+])
+def test_a_pose_is_typed_as_the_map_numbers_it_from_1(argv, module, target, monkeypatch,
+                                                      capsys):
+    """--pose K is scan pose K of 1 … N in every command (map.png and the progress lines
+    count from 1): pose 2 of l_room's 3 is index 1; 0, 4 and -1 are refused naming
+    what is allowed (bench speed and emulate took 0-based indices, and -1 silently meant
+    the last pose)."""
+    import importlib
+
+    mod = importlib.import_module(module)
+    seen = {}
+
+    class Stop(SystemExit):   # main lets a SystemExit through
+        pass
+
+    def record(*a, **k):
+        seen.update(k)
+        raise Stop
+
+    monkeypatch.setattr(mod, target, record)
+    with pytest.raises(Stop):
+        main(argv + ["--pose", "2"])
+    assert seen[{"Device": "fixed_pose", "measure": "pose_index", "SceneView": "pose"}[target]] == 1
+    assert main(argv + ["--pose", "4"]) == 2
+    assert capsys.readouterr().err.endswith(
+        "error: --pose 4 is out of range: scenario 'l_room' has 3 scan pose(s), "
+        "1 … 3\n")
+    for bad in ("0", "-1"):
+        with pytest.raises(SystemExit) as e:
+            main(argv + ["--pose", bad])
+        assert e.value.code == 2
+        assert f"argument --pose: must be ≥ 1, got {bad}" in capsys.readouterr().err

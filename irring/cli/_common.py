@@ -15,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..core import SEED_MAX
+from ..errors import UsageError
 
 
 class LazyParser(argparse.ArgumentParser):
@@ -92,6 +93,25 @@ def distances_mm(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(
             f"must be one or more positive distances in mm, like 250,500,1000; got {text!r}")
     return values
+
+
+def add_pose_option(parser: argparse.ArgumentParser, default: int | None, what: str) -> None:
+    """``--pose K``: a scan pose by number, 1 … N, as map.png and the progress lines number
+    poses (everything a user types or reads counts poses from 1); :func:`pose_index` checks
+    it against the scenario."""
+    parser.add_argument("--pose", type=at_least(1), default=default, metavar="K",
+                        help=f"{what}: scan pose K of the scenario, numbered 1 … N as on "
+                             "map.png" + (f" (default: {default})" if default else ""))
+
+
+def pose_index(number: int, scenario, option: str = "--pose") -> int:
+    """The 0-based index of scan pose ``number`` (1 … N) of ``scenario``. Raises
+    UsageError naming the option and the poses there are."""
+    n = len(scenario.robot.poses)
+    if not 1 <= number <= n:
+        raise UsageError(f"{option} {number} is out of range: scenario {scenario.name!r} has "
+                         f"{n} scan pose(s), 1 … {n}")
+    return number - 1
 
 
 def add_mcap_option(parser: argparse.ArgumentParser) -> None:

@@ -7,7 +7,7 @@ import json
 
 from ..scenario import load_scenario
 from ..studies.speed import measure, report
-from ._common import at_least, describe, seed
+from ._common import add_pose_option, at_least, describe, pose_index, seed
 
 EPILOG = """\
 stages (ms per sweep, median over rounds, each round times every stage once in turn):
@@ -29,7 +29,7 @@ JSON keys: sweep_ms, ray_ms, raw_mujoco_ms, ray_vs_raw_ratio, realtime_factor,
 sweeps_per_s, hardware_time_s, stages [{stage, ms}], targets, machine, …
 
 examples:
-  irring bench speed                        t_room, pose 0, 200 rounds
+  irring bench speed                        t_room, pose 1, 200 rounds
   irring bench speed --json
   irring bench speed --scenario t_room_three_cylinders --rounds 50
 """
@@ -42,7 +42,7 @@ def register(p: argparse.ArgumentParser) -> None:
              EPILOG)
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="bundled scenario name or YAML path (default: t_room)")
-    p.add_argument("--pose", type=int, default=0, help="scan pose index (default: 0)")
+    add_pose_option(p, 1, "where the sweep is timed")
     p.add_argument("--rounds", type=at_least(1), default=200, metavar="N",
                    help="timing rounds; medians over rounds are reported (≥ 1; default: 200)")
     p.add_argument("--seed", type=seed, default=None, help="noise seed ≥ 0 (default: the scenario's)")
@@ -52,7 +52,8 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    r = measure(load_scenario(args.scenario), rounds=args.rounds, pose_index=args.pose,
+    scenario = load_scenario(args.scenario)
+    r = measure(scenario, rounds=args.rounds, pose_index=pose_index(args.pose, scenario),
                 seed=args.seed)
     print(json.dumps(r, indent=2) if args.json else report(r))
     missed = [k for k, t in r["targets"].items() if not t["met"]]

@@ -11,7 +11,7 @@ import time
 
 from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
 from ..scenario import load_scenario
-from ._common import between, describe, host_port, seed
+from ._common import add_pose_option, between, describe, host_port, pose_index, seed
 
 DEFAULT_LINK = "ring.pty"
 
@@ -29,8 +29,8 @@ The device speaks IRR protocol v1 (docs/protocol.md) on /dev/pts/N; any serial p
 the --link path (e.g. `python -m serial.tools.miniterm ring.pty`, then type $IRHLO*50).
 Readings come from the scenario's simulated ring and effects with the scenario's seed, so a
 fault-free full sweep equals `SimRing(scenario).sweep(pose)`. The robot starts at the
-scenario's first pose; each further full-range sweep moves it to the next pose. Faults act
-on what the device sends."""
+scenario's first pose (pose 1, as map.png numbers them); each further full-range sweep
+moves it to the next pose. Faults act on what the device sends."""
 
 
 def register(p: argparse.ArgumentParser) -> None:
@@ -71,9 +71,7 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="noise seed ≥ 0 of the readings (default: the scenario's seed)")
     p.add_argument("--fault-seed", type=seed, default=0,
                    help="seed ≥ 0 of the fault injection (default 0)")
-    p.add_argument("--pose", type=int, default=None, metavar="INDEX",
-                   help="stay at scenario pose INDEX instead of moving on after each full "
-                        "sweep")
+    add_pose_option(p, None, "stay at one pose instead of moving on after each full sweep")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=run)
 
@@ -89,14 +87,10 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"irring emulate: error: {exc}", file=sys.stderr)
         return 2
-    n_poses = len(scenario.robot.poses)
-    if args.pose is not None and not 0 <= args.pose < n_poses:
-        print(f"irring emulate: error: --pose {args.pose} is out of range; {scenario.name} has "
-              f"poses 0 … {n_poses - 1}", file=sys.stderr)
-        return 2
+    fixed = None if args.pose is None else pose_index(args.pose, scenario)
     baud = args.baud if args.baud is not None else (115200 if args.realtime else 0)
     source = SimRing(scenario, seed=args.seed)
-    device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=args.pose)
+    device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=fixed)
     if args.tcp is not None:
         host, port = args.tcp
         if not _loopback(host):

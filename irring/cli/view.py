@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import OutputError
 from ..outputs import atomic_file, check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import at_least, describe
+from ._common import add_pose_option, describe, pose_index
 
 HELP = """\
 Show the scenario's MuJoCo scene: the room, the obstacles, the ring at one scan pose and
@@ -31,8 +31,7 @@ def register(p: argparse.ArgumentParser) -> None:
     describe(p, HELP)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
                    help="bundled scenario name or YAML path (default: t_room)")
-    p.add_argument("--pose", type=at_least(1), default=1, metavar="K",
-                   help="scan pose, numbered from 1 as on map.png (default: 1)")
+    add_pose_option(p, 1, "where the robot stands")
     p.add_argument("--step", type=int, default=0, metavar="S",
                    help="motor step, within the ring's limits (the paper's ring: -35 … 35; "
                         "default: 0, the sensors facing outwards)")
@@ -56,13 +55,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"irring view: error: --size must be WIDTHxHEIGHT in pixels, 16 … 8192 each, "
               f"like 1280x960; got {args.size!r}", file=sys.stderr)
         return 2
-    n = len(scenario.robot.poses)
-    if args.pose > n:
-        print(f"irring view: error: --pose {args.pose} is out of range: scenario "
-              f"{scenario.name!r} has {n} scan pose(s), 1 … {n}", file=sys.stderr)
-        return 2
+    pose = pose_index(args.pose, scenario)
     try:
-        scene = view.SceneView(scenario, pose=args.pose - 1, step=args.step)
+        scene = view.SceneView(scenario, pose=pose, step=args.step)
     except ValueError as exc:
         print(f"irring view: error: --step: {exc}", file=sys.stderr)
         return 2
