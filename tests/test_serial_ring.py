@@ -38,6 +38,34 @@ class StandInSource(FakeSource):
         return base + rng.integers(0, 50, size=base.shape)
 
 
+class VirtualTime:
+    """``time`` for the driver, the in-process ports and these tests: ``sleep`` moves the
+    clock on at once, so a poll that waits for nothing costs no real time and a deadline
+    falls after exactly the polls the driver's arithmetic says, however loaded the machine
+    (real-time bounds flaked under load; the device is in-process, so nothing else moves)."""
+
+    def __init__(self, start_s: float = 1000.0):
+        self.now = start_s
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += max(0.0, seconds)
+
+
+@pytest.fixture
+def virtual_time(monkeypatch) -> VirtualTime:
+    import sys
+
+    from irring.hardware import emulator, serial_ring
+
+    clock = VirtualTime()
+    for module in (serial_ring, emulator, sys.modules[__name__]):
+        monkeypatch.setattr(module, "time", clock)
+    return clock
+
+
 def ring_on(device: Device, **kw) -> SerialRing:
     kw.setdefault("timeout_s", TIMEOUT_S)
     return SerialRing(DevicePort(device), **kw).open()
@@ -190,7 +218,7 @@ def test_resweep_fetches_only_the_missing_steps():
     assert ring.last_report.link["resweeps"] >= 1
 
 
-def test_a_stalled_device_is_a_timeout_with_the_partial_sweep_not_a_hang():
+def test_a_stalled_device_is_a_timeout_with_the_partial_sweep_not_a_hang(virtual_time):
     ring = ring_on(Device(StandInSource(), faults=Faults(stall_after=1 + 30)), retries=1)
     started = time.monotonic()
     with pytest.raises(DeviceTimeout) as err:
@@ -213,7 +241,7 @@ def test_a_disconnect_mid_sweep_raises_with_the_readings_received():
     assert len(err.value.partial.steps) == 20 and ring.stats.disconnects == 1
 
 
-def test_a_silent_device_fails_the_handshake_quickly_with_advice():
+def test_a_silent_device_fails_the_handshake_quickly_with_advice(virtual_time):
     port = ScriptPort(lambda msg: [])
     started = time.monotonic()
     with pytest.raises(HandshakeError, match=r"3 IRHLO of 0.1 s each.*baud rate \(115200\)"):
@@ -388,8 +416,9 @@ def test_layering_protocol_imports_no_serial_and_the_driver_no_simulator():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
-@pytest.mark.parametrize("retries", [0, 3])
-def test_a_silent_device_gets_exactly_retries_plus_one_irstp_before_the_timeout(retries):
+@pytest.mark.parametrize("retries", [0, 3, 6])
+def test_a_silent_device_gets_exactly_retries_plus_one_irstp_before_the_timeout(retries,
+                                                                             virtual_time):
     # three readings, then nothing more, not even to IRSTP: the first IRSTP and then
     # `retries` repeats of it, each after its own timeout, and then DeviceTimeout
     def script(msg):

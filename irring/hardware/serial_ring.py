@@ -40,8 +40,8 @@ MOVE_ALLOWANCE_S = 0.005  # per motor step the ring may travel before a sweep's 
 MAX_SENSORS = 72
 MAX_ADC_BITS = 24
 MAX_STEP_SPAN = 100_000
-# a sweep pass that makes no progress (no new step) for this many timeouts is given up,
-# whatever else the device keeps sending
+# a sweep pass that makes no progress (no new step) for this many timeouts beyond its
+# IRSTP retries is given up, whatever else the device keeps sending
 NO_PROGRESS_TIMEOUTS = 3
 
 
@@ -555,7 +555,10 @@ class SerialRing:
         # Deadlines move on progress only (a new step, IRDON): a device that keeps talking
         # without progress (repeated IRSCN, endless IRPOS) is treated like a silent one.
         stalled_since = time.monotonic()
-        stall_limit = first_wait + NO_PROGRESS_TIMEOUTS * (self.timeout_s + per_step_s)
+        # past the retries + 1 IRSTP a silent device gets (each a timeout), so this net
+        # catches only a device that talks on without progress, never cuts the retries short
+        stall_limit = first_wait + (self.retries + NO_PROGRESS_TIMEOUTS) * (self.timeout_s
+                                                                            + per_step_s)
         while True:
             had = len(ps.got)
             msgs = self._receive()
