@@ -308,3 +308,16 @@ def test_a_pose_is_typed_as_the_map_numbers_it_from_1(argv, module, target, monk
             main(argv + ["--pose", bad])
         assert e.value.code == 2
         assert f"argument --pose: must be ≥ 1, got {bad}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, command", [(["run", "t_room", "--bogus"], "irring run"),
+                                           (["bench", "speed", "--json", "x"], "irring bench speed")])
+def test_an_unknown_option_is_reported_by_its_command_with_its_usage(argv, command, capsys):
+    """argparse's own output (usage, then one error line, exit 2), but the command's: it
+    printed `irring`'s usage (COMMAND ...) and 'irring: error:' for a subcommand's option."""
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"usage: {command} [-h]")
+    assert err.endswith(f"\n{command}: error: unrecognized arguments: {argv[-1]}\n")

@@ -33,7 +33,10 @@ class LazyParser(argparse.ArgumentParser):
 
     def parse_known_args(self, args=None, namespace=None):
         self._load()
-        return super().parse_known_args(args, namespace)
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras:   # else argparse reports them with `irring`'s usage, not this command's
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
 
     def format_usage(self) -> str:
         self._load()
