@@ -440,11 +440,21 @@ def test_irring_drive_on_a_device_dead_after_its_handshake_says_so_in_one_line(
     assert out == "" and not (tmp_path / "d").exists()
 
 
-def test_irring_drive_without_a_device_is_a_clear_error(capsys):
+def test_irring_drive_without_a_device_is_a_clear_error(tmp_path, capsys):
+    """The operating system's reason, once (pyserial's own wrapping said it twice, with
+    errno numbers); a file that is no terminal is 'not a serial port'."""
     from irring.cli import main
 
+    advice = ("Check the device path (ls /dev/ttyUSB* /dev/ttyACM*), that you may use it "
+              "(group dialout), or start the emulator: irring emulate t_room (then --port "
+              "ring.pty)\n")
     assert main(["drive", "--port", "/dev/irring-none", "--no-animation"]) == 3
-    assert "cannot open /dev/irring-none" in capsys.readouterr().err
+    assert capsys.readouterr().err == ("irring drive: error: cannot open /dev/irring-none: "
+                                       "No such file or directory. " + advice)
+    (tmp_path / "notes.txt").write_text("not a tty")
+    assert main(["drive", "--port", str(tmp_path / "notes.txt"), "--no-animation"]) == 3
+    assert capsys.readouterr().err == (f"irring drive: error: cannot open {tmp_path}/notes.txt: "
+                                       "not a serial port. " + advice)
 
 
 def test_a_moving_scene_is_emulated_sweep_by_sweep_but_not_driven(capsys):

@@ -11,6 +11,7 @@ holding ``.partial``. Ports, link checks and counters: docs/protocol.md.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import logging
 import time
 from dataclasses import dataclass, field
@@ -135,6 +136,20 @@ def _describe_link(link: dict[str, int]) -> str:
 # --------------------------------------------------------------------------- driver
 
 
+def _open_failure(exc: BaseException) -> str:
+    """Why a port did not open: the operating system's reason (pyserial wraps it as
+    "[Errno 2] could not open port X: [Errno 2] No such file or directory: 'X'"), else
+    the error's own text."""
+    reason, seen = None, exc
+    while seen is not None:
+        code, text = (tuple(seen.args) + (None, None))[:2]
+        if not isinstance(seen, serial.SerialException) and isinstance(code, int) \
+                and isinstance(text, str):   # an OSError, or termios.error (errno, text)
+            reason = "not a serial port" if code == errno.ENOTTY else text
+        seen = seen.__cause__ or seen.__context__
+    return reason or str(exc)
+
+
 def _check_settings(samples: int, settle_s: float, resweep: int) -> None:
     if not 1 <= samples <= p.MAX_SAMPLES:
         raise ValueError(f"samples must be 1 … {p.MAX_SAMPLES}, got {samples}")
@@ -246,7 +261,8 @@ class SerialRing:
                                              timeout=self.poll_s, write_timeout=self.timeout_s)
                 except (serial.SerialException, OSError, ValueError) as exc:
                     raise DeviceError(
-                        f"cannot open {self._port_arg}: {exc}. Check the device path (ls "
+                        f"cannot open {self._port_arg}: {_open_failure(exc)}. Check the "
+                        f"device path (ls "
                         f"/dev/ttyUSB* /dev/ttyACM*), that you may use it (group dialout), "
                         f"or start the emulator: irring emulate t_room (then --port ring.pty)"
                     ) from exc
