@@ -2,7 +2,8 @@
 short for a line; read at θ = 0 they lay 100–190 mm behind it. They take the slope of their
 own sensor's neighbouring steps (estimate.local_incidence), or are INCIDENCE_UNKNOWN when
 nothing decides θ and θ = 0 could read more than 100 mm long. Rooms of our own, asymmetric;
-before this change each had 2–5 valid readings per seed more than 100 mm off (up to 187 mm)."""
+before this change they had 10, 5 and 6 valid readings more than 100 mm off over the three
+seeds (worst 171, 187, 139 mm)."""
 
 from __future__ import annotations
 
