@@ -27,6 +27,16 @@ SENSOR_MODEL = "gp2d12"  # the paper's sensor, Sharp GP2D12 (models/sensors/gp2d
 SEED_MAX = 2**63 - 1  # the largest seed a scenario or an option takes (numpy takes any int ≥ 0)
 GP2_PERIOD_S = 0.0383   # GP2 measurement period (datasheet 38.3 ms ± 9.6 ms); one sample, one period
 
+# --------------------------------------------------------------------------- work limits
+# What one simulated run may ask for, checked before the work starts (irring.simulation.sim
+# raises TooBig above them); a recording holds no more sweeps or steps than this either.
+MAX_SWEEPS = 10_000
+MAX_STEPS = 100_000                 # readings per sensor in one sweep
+WORK_MEMORY_BYTES = 2 * 10**9       # readings and belt physics of one run together
+BYTES_PER_READING = 600             # a reading through simulation, estimate and map (measured:
+                                    # 72 sensors × 20 001 steps peaked 0.94 GB, 10 001 steps 0.51 GB)
+BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
+
 # --------------------------------------------------------------------------- field bounds
 # A field's metadata holds its inclusive SI bounds or allowed choices; the scenario loader
 # checks YAML against them and designs check rings made in code.

@@ -15,7 +15,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import gp2
-from .core import ADC_BITS, MAX_RANGE_M, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth
+from .core import ADC_BITS, MAX_RANGE_M, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth
 from .errors import InputError, IrringError, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
 from .scenario import ScenarioError, load_dataclass
@@ -71,8 +71,6 @@ def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> P
 MAX_FILE_BYTES = 2 * 2**30        # the .npz on disk
 MAX_ARRAY_BYTES = 512 * 2**20     # one array, uncompressed
 MAX_TEXT_CHARS = 8 * 2**20        # meta / scalars JSON, the embedded scenario
-MAX_SWEEPS = 10_000
-MAX_STEPS = 100_000               # readings per sensor in one sweep
 
 _SWEEP_ARRAYS = {  # name: (dimensions, kinds allowed, finite required)
     "steps": ("S", "iu", True), "sensor_angles": ("SN", "f", True), "counts": ("SN", "iuf", True),

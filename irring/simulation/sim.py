@@ -6,6 +6,7 @@ How it works, its assumptions and measured figures: docs/simulation.md.
 from __future__ import annotations
 
 import copy
+import math
 import functools
 from dataclasses import dataclass
 
@@ -13,7 +14,9 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from ..core import Sweep, Truth, as_pose, hardware_duration_s
+from ..core import (BYTES_PER_PHYSICS_VALUE, BYTES_PER_READING, MAX_STEPS, MAX_SWEEPS,
+                    WORK_MEMORY_BYTES, Sweep, Truth, as_pose, hardware_duration_s)
+from ..errors import TooBig
 from ..scenario import Scenario
 from . import dynamics as dynamics_lib
 from . import model as model_lib
@@ -51,6 +54,38 @@ def pose_quat(yaw_rad: np.ndarray) -> np.ndarray:
     out[..., 0] = np.cos(yaw / 2.0)
     out[..., 3] = np.sin(yaw / 2.0)
     return out
+
+
+def check_work(sim: SimRing) -> None:
+    """Raise :class:`irring.errors.TooBig` when the scene's run (every sweep's readings and
+    the belt physics) exceeds the limits in :mod:`irring.core`, naming what it would take and
+    the keys that set it."""
+    where = sim.scenario.source or sim.scenario.name
+    steps, sensors, sweeps = len(sim.default_steps()), sim.built.n_sensors, sim.n_sweeps
+    readings = sweeps * steps * sensors
+    physics_steps = 0
+    if sim.dynamics is not None and sim.dynamics.belt is not None:
+        sched = sim.dynamics.schedule(sim.default_steps())
+        physics_steps = int(math.ceil(sched.duration_s / sim.dynamics.belt.timestep_s)) + 1
+    physics_bytes = physics_steps * (sim.model.nq + sim.model.nv) * BYTES_PER_PHYSICS_VALUE
+    need = readings * BYTES_PER_READING + physics_bytes
+    work = (f"{sweeps:,} sweeps × {steps:,} steps × {sensors} sensors = {readings:,} readings"
+            + (f" and {physics_steps:,} belt physics steps" if physics_steps else "")
+            + f" (about {need / 1e9:.1f} GB)")
+    sweep_keys = "narrow robot.ring min_step … max_step or raise scan.step_stride"
+    if steps > MAX_STEPS:
+        raise TooBig(f"{where}: {work}: a sweep takes at most {MAX_STEPS:,} steps; {sweep_keys}")
+    if sweeps > MAX_SWEEPS:
+        raise TooBig(f"{where}: {work}: a run takes at most {MAX_SWEEPS:,} sweeps; raise "
+                     f"effects.motion.speed_mm_s or shorten effects.motion.path")
+    if need > WORK_MEMORY_BYTES:
+        keys = (f"{sweep_keys}, or use fewer robot.ring.sensors, robot.poses or a shorter or "
+                f"faster effects.motion")
+        if physics_bytes > readings * BYTES_PER_READING:
+            keys = ("raise effects.belt_dynamics.timestep_ms or lower step_time_ms, lower "
+                    f"scan.settle_ms or scan.samples, or {sweep_keys}")
+        raise TooBig(f"{where}: {work}, more than the {WORK_MEMORY_BYTES / 1e9:g} GB a run "
+                     f"may use: {keys}")
 
 
 class SimRing:
@@ -102,6 +137,7 @@ class SimRing:
         self.dynamics = None  # irring.simulation.dynamics.Dynamics, only for scenes that need it
         if dynamics_lib.uses_dynamics(scenario):
             self.dynamics = dynamics_lib.Dynamics(scenario, self.built, self.seed)
+        check_work(self)   # refuse a run too big for memory before any sweep
 
     # ------------------------------------------------------------------ set-up and state
 
