@@ -486,6 +486,11 @@ def parse(raw: Any, source: str = "") -> Scenario:
     return sc
 
 
+# RK4 on the critically damped belt spring: stable up to timestep ≈ 2.6 τ (measured: 2.5 τ runs,
+# 2.7 τ goes unstable, for τ = 0.2 and 1 ms); the loader allows 2.5 τ.
+BELT_STABLE_STEP_RATIO = 2.5
+
+
 def _validate_effects(sc: Scenario, fail) -> None:
     """What the schema's per-field bounds cannot say: knobs that only act with an effect,
     and a motion path that goes somewhere."""
@@ -494,6 +499,24 @@ def _validate_effects(sc: Scenario, fail) -> None:
                                    "with the `averaging` effect (and would be charged in "
                                    "hardware time for nothing); add `averaging` to effects or "
                                    "leave scan.samples out")
+    outliers = sc.effects.get("outliers")
+    if outliers is not None:
+        total = outliers.short_rate + outliers.random_rate + outliers.max_rate
+        if total > 1.0:
+            raise fail("effects.outliers", f"short_rate + random_rate + max_rate = {total:g}; "
+                                           "they are shares of exclusive cases, so their sum "
+                                           "must be ≤ 1")
+    incidence = sc.effects.get("incidence")
+    if incidence is not None and incidence.max_incidence_rad is not None \
+            and incidence.max_incidence_rad <= 0:
+        raise fail("effects.incidence.max_incidence_deg", "must be > 0° (at 0° every return "
+                                                          "would drop out)")
+    belt = sc.effects.get("belt_dynamics")
+    if belt is not None and belt.timestep_s > BELT_STABLE_STEP_RATIO * belt.belt_timeconst_s:
+        raise fail("effects.belt_dynamics.timestep_ms",
+                   f"{belt.timestep_s * 1e3:g} ms is more than {BELT_STABLE_STEP_RATIO:g} × "
+                   f"belt_timeconst_ms ({belt.belt_timeconst_s * 1e3:g} ms), where the belt "
+                   f"physics goes unstable; lower timestep_ms or raise belt_timeconst_ms")
     motion = sc.effects.get("motion")
     if motion is not None:
         if len(motion.path) < 2:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
 import pytest
 
 from irring import errors
@@ -76,3 +77,49 @@ def test_belt_physics_too_long_for_memory_is_refused_naming_the_belt_keys(tmp_pa
     assert code == errors.TOO_BIG
     assert "belt physics steps" in err and "effects.belt_dynamics.timestep_ms" in err
     assert seconds < 30
+
+
+@pytest.mark.parametrize("effects, key, message", [
+    ("outliers: {short_rate: 0.6, random_rate: 0.3, max_rate: 0.2}", "effects.outliers",
+     "short_rate + random_rate + max_rate = 1.1; they are shares of exclusive cases"),
+    ("belt_dynamics: {timestep_ms: 3, belt_timeconst_ms: 1.1, step_time_ms: 0.2}",
+     "effects.belt_dynamics.timestep_ms", "3 ms is more than 2.5 × belt_timeconst_ms (1.1 ms)"),
+    ("incidence: {max_incidence_deg: 0}", "effects.incidence.max_incidence_deg", "must be > 0°"),
+])
+def test_bad_effect_combinations_are_input_errors_at_load(tmp_path, capsys, effects, key,
+                                                          message):
+    path = scene(tmp_path, "bad", effects=f"effects:\n  {effects}\n")
+    code, err, _ = run_status(path, tmp_path, capsys)
+    assert code == errors.INPUT
+    assert f"{path}: {key}: {message}" in err
+    assert "internal error" not in err and "WARNING" not in err
+
+
+def test_belt_at_the_stability_limit_runs_and_just_past_it_is_refused(tmp_path):
+    from irring.scenario import ScenarioError, loads
+    from irring.simulation.sim import SimRing
+    text = BOX.format(name="belt", robot=POSE, effects="effects:\n  belt_dynamics: "
+                      "{timestep_ms: 2.5, belt_timeconst_ms: 1, step_time_ms: 4}\n")
+    sweep = SimRing(loads(text, "belt.yaml")).sweep(0)
+    assert np.isfinite(sweep.sensor_angles).all()
+    with pytest.raises(ScenarioError, match="belt.yaml: effects.belt_dynamics.timestep_ms"):
+        loads(text.replace("timestep_ms: 2.5", "timestep_ms: 2.51"), "belt.yaml")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["geometry", "--range-mm", "0"], "argument --range-mm: must be a number > 0"),
+    (["geometry", "--range-mm", "nan"], "got 'nan'"),
+    (["geometry", "--range-mm", "inf"], "got 'inf'"),
+    (["geometry", "--range-mm", "3", "--samples", "1000"],
+     "--range-mm 3: R·sin(Φ/2) = 0.03882 m exceeds the range D = 0.003 m"),
+    (["bench", "estimator", "--min-theta", "nan"], "argument --min-theta: must be a number ≥ 0"),
+    (["bench", "estimator", "--min-theta", "90.5"], "≤ 90, got '90.5'"),
+])
+def test_out_of_range_options_are_usage_errors(capsys, argv, message):
+    with pytest.raises(SystemExit) as exit_:
+        code = main(argv)
+        raise SystemExit(code)
+    assert exit_.value.code == errors.USAGE
+    err = capsys.readouterr().err
+    assert message in err and "internal error" not in err
+

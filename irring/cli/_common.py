@@ -154,6 +154,26 @@ def between(low: int, high: int) -> Callable[[str], int]:
 seed = between(0, SEED_MAX)
 
 
+def number_in(low: float, high: float, *, low_open: bool = False) -> Callable[[str], float]:
+    """A ``type=`` for a finite number in ``low`` … ``high`` (``low`` excluded when
+    ``low_open``); NaN and infinities are refused."""
+    lo_text = f"> {low:g}" if low_open else f"≥ {low:g}"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and (value > low if low_open else value >= low)
+                and value <= high):
+            raise argparse.ArgumentTypeError(f"must be a number {lo_text} and ≤ {high:g}, "
+                                             f"got {text!r}")
+        return value
+
+    parse.__name__ = f"number {lo_text} … {high:g}"
+    return parse
+
+
 def positive_seconds(text: str) -> float:
     """A ``type=`` for a finite time in seconds > 0 (``--timeout``)."""
     try:

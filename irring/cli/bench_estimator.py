@@ -8,7 +8,7 @@ import json
 from ..estimation.calibration import Calibration, SimulatedRig
 from ..scenario import load_scenario
 from ..studies.estimator import measure
-from ._common import at_least, describe, seed
+from ._common import at_least, describe, number_in, seed
 
 EPILOG = """\
 what it prints (range errors against the simulator's true distance from the emitter):
@@ -39,9 +39,9 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="bundled scenario name or YAML path (default: t_room, noise on)")
     p.add_argument("--sweeps", type=at_least(1), default=5, metavar="N",
                    help="sweeps per pose, fresh noise each (≥ 1; default: 5)")
-    p.add_argument("--min-theta", type=float, default=40.0, metavar="DEG",
-                   help="true incidence (degrees) from which a reading counts as steep "
-                        "(default: 40)")
+    p.add_argument("--min-theta", type=number_in(0, 90), default=40.0, metavar="DEG",
+                   help="true incidence (degrees, 0 … 90) from which a reading counts as "
+                        "steep (default: 40)")
     p.add_argument("--max-iterations", type=at_least(1), default=20, metavar="N",
                    help="iteration cap of the estimator (≥ 1; default: 20)")
     group = p.add_mutually_exclusive_group()

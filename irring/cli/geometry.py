@@ -8,8 +8,9 @@ import math
 
 from .. import designs
 from ..designs import DESIGN_BY_NAME
+from ..errors import UsageError
 from ..studies import geometry
-from ._common import at_least, describe, distances_mm, seed
+from ._common import at_least, describe, distances_mm, number_in, seed
 
 EPILOG = """\
 what it prints:
@@ -42,9 +43,10 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--design", default="rotating12", metavar="NAME",
                    choices=[*DESIGN_BY_NAME, "all"],
                    help=f"one of {', '.join(DESIGN_BY_NAME)}, or all (default: rotating12)")
-    p.add_argument("--range-mm", type=float, default=None, metavar="D",
-                   help="max range D in mm for Eqs. 2–3 (default: the sensor's design range, "
-                        "686 mm for the GP2D12 as in Table I)")
+    p.add_argument("--range-mm", type=number_in(0, 100_000, low_open=True), default=None,
+                   metavar="D",
+                   help="max range D in mm for Eqs. 2–3, > 0 and ≤ 100000 (default: the "
+                        "sensor's design range, 686 mm for the GP2D12 as in Table I)")
     p.add_argument("--distances-mm", type=distances_mm, default="250,500,750,1000",
                    metavar="LIST",
                    help="comma-separated positive distances in mm for the blind spot "
@@ -61,9 +63,14 @@ def register(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
     range_m = None if args.range_mm is None else args.range_mm * 1e-3
-    reports = [geometry.design_report(designs.get(n), args.distances_mm, range_m=range_m,
-                                      samples=args.samples, seed=args.seed)
-               for n in names]
+    try:
+        reports = [geometry.design_report(designs.get(n), args.distances_mm, range_m=range_m,
+                                          samples=args.samples, seed=args.seed)
+                   for n in names]
+    except ValueError as exc:   # a range too short for the ring's geometry (Eq. 2)
+        if args.range_mm is None:
+            raise
+        raise UsageError(f"--range-mm {args.range_mm:g}: {exc}") from None
     if args.json:
         print(json.dumps(reports if args.design == "all" else reports[0], indent=2))
         return 0

@@ -533,7 +533,12 @@ class Dynamics:
         cached = self._timelines.get(key)
         if cached is None:
             sched = self.schedule(steps)
-            cached = (sched, self.physics.run(sched) if self.belt is not None else None)
+            try:
+                traj = self.physics.run(sched) if self.belt is not None else None
+            except RuntimeError as exc:  # a combination the loader's stability rule let through
+                raise ScenarioError(f"{self.scenario.source or self.scenario.name}: "
+                                 f"effects.belt_dynamics: {exc}") from None
+            cached = (sched, traj)
             self._timelines[key] = cached
         return cached
 
