@@ -143,3 +143,20 @@ def test_table_prints_the_shadow_of_one_scan_and_of_four_scans():
     assert "1.00" in ring.split() and "0.53" in ring.split()
     assert "0.15" in laser.split() and "0.88" in laser.split()
     assert legend == "shadow 1 scan: t_room_cylinder, shadow 4 scans: t_room_three_cylinders"
+
+
+@pytest.mark.parametrize("design", ["rotating12", "laser"])
+def test_chart_with_nothing_to_label_draws_no_empty_legend(tmp_path, design):
+    """t_room hides no wall behind a post (an empty shadow panel) and a laser has no
+    detection curve: neither may warn, so `python -W error` runs compare."""
+    import warnings
+
+    from irring.cli import main
+
+    out = tmp_path / "cmp"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["compare", "--scenario", "t_room", "--design", design, "--seeds", "1",
+                     "--workers", "1", "--bearings", "16", "--distances-mm", "90000",
+                     "--out", str(out)]) == 0
+    assert (out / "compare.png").stat().st_size > 10_000

@@ -123,3 +123,10 @@ def test_out_of_range_options_are_usage_errors(capsys, argv, message):
     err = capsys.readouterr().err
     assert message in err and "internal error" not in err
 
+
+
+def test_a_detection_distance_past_float_range_is_a_usage_error(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["compare", "--design", "laser", "--distances-mm", "400,1e300"])
+    assert exit_.value.code == errors.USAGE
+    assert "up to 100000, like 250,500,1000; got '400,1e300'" in capsys.readouterr().err

@@ -83,18 +83,22 @@ def at_least(low: int) -> Callable[[str], int]:
     return parse
 
 
+MAX_DISTANCE_M = 100.0   # --distances-mm: far beyond any ring's reach, short of float overflow
+
+
 def distances_mm(text: str) -> list[float]:
     """A ``type=`` for ``--distances-mm`` "250,500,1000" (mm) → metres: at least one
-    number, all positive and finite."""
+    number, all positive and at most :data:`MAX_DISTANCE_M`."""
     try:
         values = [float(v) * 1e-3 for v in text.split(",") if v.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"must be positive distances in mm separated by commas, like 250,500,1000; "
             f"got {text!r}") from None
-    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+    if not values or not all(math.isfinite(v) and 0 < v <= MAX_DISTANCE_M for v in values):
         raise argparse.ArgumentTypeError(
-            f"must be one or more positive distances in mm, like 250,500,1000; got {text!r}")
+            f"must be one or more positive distances in mm up to {MAX_DISTANCE_M * 1e3:g}, "
+            f"like 250,500,1000; got {text!r}")
     return values
 
 

@@ -481,7 +481,7 @@ def chart(result: dict, path) -> None:
             ax.set_xlabel(clabel)
             ax.set_ylabel(mlabel)
             ax.grid(alpha=0.3, which="both")
-            if i == 0 and j == 0:
+            if i == 0 and j == 0 and ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=8, loc="lower right")
     meta = result["meta"]
     fig.suptitle(f"What accuracy costs in time — one knob at a time around the default; "

@@ -188,7 +188,11 @@ def chart(result: dict, path) -> None:
         ax.set_ylim(0, 1.0)
         ax.set_ylabel("score (1 = perfect)")
         ax.set_title(title, fontsize=9)
-        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncols=4)
+        if series:
+            ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncols=4)
+        else:   # nothing to label (matplotlib warns on an empty legend): say why it is empty
+            ax.text(0.5, 0.5, "no scenario here hides a wall behind a thin post",
+                    ha="center", va="center", fontsize=9, transform=ax.transAxes)
         ax.grid(axis="y", alpha=0.3)
 
     runs = recs[0]["runs"] if recs else 0
@@ -225,7 +229,8 @@ def chart(result: dict, path) -> None:
     a_det.set_ylabel("radius (mm)")
     a_det.set_title("Smallest cylinder seen at every bearing (no point: none up to 200 mm)",
                     fontsize=9)
-    a_det.legend(fontsize=8)
+    if a_det.get_legend_handles_labels()[0]:   # a laser-only compare draws no curve
+        a_det.legend(fontsize=8)
     a_det.grid(alpha=0.3, which="both")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
