@@ -471,6 +471,7 @@ _LOCAL_SPREAD_M = 0.001  # … spread across its beam by at least this RMS …
 _LOCAL_SLOPE_SE = 2.0   # … a range slope this many standard errors from flat …
 _CHI2_95 = np.array([3.84, 5.99, 7.81, 9.49, 11.07])  # … and a straight profile: χ² within
 #                                                    its 95 % point (1 … 5 degrees of freedom)
+_CONVEX_BELOW_DROP_RAD = math.radians(5)  # a bend with θ this near the drop-out is the model's clamp
 _UNKNOWN_M = 0.10       # fewer readings, and θ = 0 may read this much long: INCIDENCE_UNKNOWN
 
 
@@ -492,8 +493,8 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     errors) and the profile is straight (χ² within its 95 % point, ``_CHI2_95``, and no
     curvature term ``_LOCAL_SLOPE_SE`` standard errors off zero): a post's readings bend
     away from the beam (its centre is read at θ ≈ 0 rightly) and keep θ = 0. σ: the reading's noise at θ plus the spread of d over θ ± the slope's
-    standard error. A reading with fewer than ``_LOCAL_MIN`` such readings, or a straight
-    profile whose slope is not clearly steep or flat, has no incidence to go by: where its
+    standard error. A reading with fewer than ``_LOCAL_MIN`` such readings, a concave bend,
+    or a straight profile whose slope is not clearly steep or flat, has no incidence to go by: where its
     θ = 0 distance exceeds the one at the steepest θ it allows (the drop-out angle, or
     slope + 2 standard errors) by more than ``_UNKNOWN_M`` it is INCIDENCE_UNKNOWN (not
     valid: a wall's last readings before the drop-out were read up to 190 mm long)."""
@@ -569,13 +570,23 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     concave = bend < -_LOCAL_SLOPE_SE * bend_se
     steep = np.where((n < _LOCAL_MIN) | concave, cal.max_incidence_rad, np.minimum(
         np.arctan(np.abs(slope) + _LOCAL_SLOPE_SE * se), cal.max_incidence_rad))
-    few = ~ok
+    # a profile bent away from the beam is a convex thing (a post, a leg): kept at θ = 0,
+    # as a post's readings are; flagging them lost thin legs' recall (0.96 -> 0.89)
+    convex = ((n >= _LOCAL_MIN) & (bend > _LOCAL_SLOPE_SE * bend_se)
+              & (theta < cal.max_incidence_rad - _CONVEX_BELOW_DROP_RAD))
+    few = ~ok & ~convex
     if few.any():
         alone = off[few]
         few[few] = d0[alone] - cal.distance(s[alone], steep[few]) > _UNKNOWN_M
-    if not (ok.any() or few.any()):
+    # a convex thing's reading may have met its side steeply: θ = 0 with the σ of that doubt
+    wide = convex & ~ok
+    if not (ok.any() or few.any() or wide.any()):
         return points
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    if wide.any():
+        at = vi[off[wide]]
+        doubt = 0.5 * (d0[off[wide]] - cal.distance(s[off[wide]], steep[wide]))
+        out["sigma_m"].reshape(-1)[at] = np.hypot(out["sigma_m"].reshape(-1)[at], doubt)
     if few.any():
         gone = vi[off[few]]
         for f in out.values():
