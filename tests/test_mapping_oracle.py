@@ -78,3 +78,37 @@ def test_insert_agrees_with_the_numpy_oracle(seed, ny, nx, n, cone, stop, lone, 
     np.testing.assert_allclose(g.log_odds, want, rtol=0, atol=TOL)
     # the same cells change (a stop decided differently would change a run of cells)
     assert np.array_equal(np.abs(g.log_odds - before) > 1e-3, np.abs(want - before) > 1e-3)
+
+
+def test_silent_beams_past_one_occupied_cell_stop_where_the_oracle_stops():
+    """No-return beams fanned 0.1° apart past a single occupied cell (and a 2 × 3 block) of
+    a 41 × 63 grid: the kernel counts the columns before any chunk that could stop a beam as
+    runs and walks the rest; the cells changed are the oracle's, beam by beam (those that
+    graze the cell's corner included), and 54 of the 900 stop there."""
+    params = MapperParams()
+    g = OccupancyGrid((-0.013, -0.021), (41, 63), 0.01, params)
+    g.log_odds[23, 40] = params.l_max
+    g.log_odds[8:10, 44:47] = params.l_max
+    n = 900
+    heading = np.radians(np.linspace(-45.0, 45.0, n)) + 0.013
+    ox, oy = np.full(n, 0.031), np.full(n, 0.183)
+    nan = np.full(n, np.nan)
+    pts = Points(x=nan, y=nan, d=nan, theta=np.zeros(n), origin_x=ox, origin_y=oy,
+                 heading=heading, sigma_m=nan, iterations=np.ones(n, int),
+                 valid=np.zeros(n, bool), reason=np.full(n, Reason.NO_RETURN, np.uint8),
+                 max_range_m=0.55)
+    stopped = 0
+    for i in range(n):
+        one = Points(**{f: (v[i:i + 1] if isinstance(v, np.ndarray) else v)
+                        for f, v in vars(pts).items()})
+        want = mapping_numpy.add(g.log_odds, one, g.origin_xy_m, g.resolution_m, params,
+                                 params.l_min, params.l_max)
+        got = g.empty_like()
+        got.log_odds = g.log_odds.copy()
+        got.insert(one)
+        np.testing.assert_array_equal(got.log_odds != g.log_odds, want != g.log_odds)
+        np.testing.assert_allclose(got.log_odds, want, rtol=0, atol=1e-12)
+        free = mapping_numpy.add(np.zeros(g.shape), one, g.origin_xy_m, g.resolution_m,
+                                 params, params.l_min, params.l_max)
+        stopped += int((want != g.log_odds).sum() < (free != 0).sum())
+    assert stopped == 54

@@ -18,6 +18,7 @@ along a segment are u = t·scale − shift (t: 0…1 over the segment).
 """
 
 from libc.math cimport INFINITY, cos, exp, fabs, isfinite, sin, sqrt
+from libc.string cimport memset
 
 import numpy as np
 
@@ -35,6 +36,9 @@ cdef double NEAR_SIGMAS = 4.5
 cdef double FAR_CELLS = 1e9
 cdef double SQRT1_2 = 0.70710678118654752440
 cdef double INTEGRAL = 4503599627370496.0         # 2^52: doubles this large are integers
+# A no-return beam looks for cells where it could stop this many columns at a time (in a
+# summed-area table); the columns before the first such chunk go in as runs.
+cdef long SAT_COLUMNS = 8
 
 
 cdef struct Seg:
@@ -351,11 +355,13 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     tail_sigmas·σ behind the end point: the columns up to NEAR_SIGMAS·σ before the point
     where the free evidence stops (constant weight l_free) are counted as row runs, exactly
     (integers), the rest walked cell by cell and weighed with the model; all of it goes into
-    the grid unclamped. Then no-return readings (finite emitter and heading) are walked cell
-    by cell along the heading to the max range, or to ``reach_m`` where that is finite and
-    shorter (a surface explains the silence; ≤ 0: not at all), or to the first cell whose
-    log-odds (the grid's plus this batch's valid readings') exceed ``no_return_stop`` (+inf:
-    never), and add l_no_return to the cells before it. Every other reading changes nothing.
+    the grid unclamped. Then no-return readings (finite emitter and heading) go along the
+    heading to the max range, or to ``reach_m`` where that is finite and shorter (a surface
+    explains the silence; ≤ 0: not at all), or to the first cell whose log-odds (the grid's
+    plus this batch's valid readings') exceed ``no_return_stop`` (+inf: never), and add
+    l_no_return to the cells before it: counted as runs up to the first chunk of SAT_COLUMNS
+    columns whose box holds such a cell (a summed-area table of them), walked cell by cell
+    from there. Every other reading changes nothing.
     The clamp comes last: the batch's updates are summed before clamping.
     """
     cdef double l_occ = params.l_occ, l_free = params.l_free, l_nr = params.l_no_return
@@ -374,6 +380,9 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef double a, z, u_in, u_mid, u_out, mu, far, t_end
     cdef long long run
     cdef int* passes
+    cdef int* sat
+    cdef long sw, qx0, qx1, qy0, qy1
+    cdef bint silent_runs = False, stops = isfinite(stop_at) or stop_at < 0
     cdef double v
     cdef double* e
     cdef long long* rx
@@ -468,6 +477,12 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     passes_a = np.zeros(bh * bw, np.intc)
     cdef int[::1] passes_v = passes_a
     passes = &passes_v[0]
+    # where no-return beams can stop: a summed-area table of the box's cells above
+    # no_return_stop, so a beam whose cells hold none goes in as runs instead of a cell walk
+    sw = bw + 1
+    sat_a = np.zeros((bh + 1) * sw if nb > nv and stops else 1, np.intc)
+    cdef int[::1] sat_v = sat_a
+    sat = &sat_v[0]
     with nogil:
         for j in range(nv):
             e = &beams[j, 0]
@@ -528,15 +543,48 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                     run += row[ix]
                     if not held[iy * bw + ix]:
                         out[ix] += <double>(run + col[ix]) * l_free
+            if nb > nv:                                # the runs again, for no-return beams
+                memset(rx, 0, (bh * (bw + 1) + (bh + 1) * bw) * sizeof(long long))
+        if nb > nv and stops:
+            for iy in range(bh):
+                out = &log_odds[by0 + iy, bx0]
+                run = 0
+                for ix in range(bw):
+                    run += out[ix] > stop_at
+                    sat[(iy + 1) * sw + ix + 1] = sat[iy * sw + ix + 1] + <int>run
         for j in range(nv, nb):                        # no-return beams
             e = &beams[j, 0]
             if not clip(e[0], e[1], e[2], e[3], nx, ny, &s):
                 continue
             kept += 1
+            # the columns before the first chunk of SAT_COLUMNS whose box (± one cell) holds
+            # a cell above no_return_stop cannot stop the beam: runs, as a valid beam's far part
+            n_far = 0
+            if not s.short:
+                n_far = s.count
+                k = 0
+                while stops and k < s.count:
+                    u_in = dmax(s.t_col0 + k * s.t_col, s.t0)
+                    u_out = dmin(s.t_col0 + (k + SAT_COLUMNS) * s.t_col, s.t1)
+                    qx0 = clampl(lfloor(e[0] + dmin(u_in * e[2], u_out * e[2])) - 1 - bx0, bw - 1)
+                    qx1 = clampl(lfloor(e[0] + dmax(u_in * e[2], u_out * e[2])) + 1 - bx0, bw - 1)
+                    qy0 = clampl(lfloor(e[1] + dmin(u_in * e[3], u_out * e[3])) - 1 - by0, bh - 1)
+                    qy1 = clampl(lfloor(e[1] + dmax(u_in * e[3], u_out * e[3])) + 1 - by0, bh - 1)
+                    if (sat[(qy1 + 1) * sw + qx1 + 1] - sat[qy0 * sw + qx1 + 1]
+                            - sat[(qy1 + 1) * sw + qx0] + sat[qy0 * sw + qx0]):
+                        n_far = k
+                        break
+                    k += SAT_COLUMNS
+                t_end = dmin(s.t_col0 + n_far * s.t_col, s.t1)
+                if n_far > 0 and (t_end - s.t0) * s.length >= SHORT_CELLS:
+                    add_runs(&s, t_end, 1, bx0, by0, bw, bh, rx, ry)
+                    silent_runs = True
+                else:
+                    n_far = 0
             # l_no_return on every cell up to the first one the map, with this batch's valid
             # readings, holds occupied (a surface at grazing incidence returns nothing)
             columns(&s, 1.0, 0.0, &c)
-            for k in range(s.count):
+            for k in range(n_far, s.count):
                 two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
                 if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
                     if log_odds[iy, ix] > stop_at:
@@ -546,6 +594,17 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                     if log_odds[iy, ix] > stop_at:
                         break
                     passes[(iy - by0) * bw + ix - bx0] += 1
+        if silent_runs:   # the runs' counts join the walked passes
+            for iy in range(1, bh + 1):
+                for ix in range(bw):
+                    ry[iy * bw + ix] += ry[(iy - 1) * bw + ix]
+            for iy in range(bh):
+                row = rx + iy * (bw + 1)
+                col = ry + iy * bw
+                run = 0
+                for ix in range(bw):
+                    run += row[ix]
+                    passes[iy * bw + ix] += <int>(run + col[ix])
         if kept:
             # the no-return passes' log-odds (none in held cells), then the clamp
             for iy in range(bh):
