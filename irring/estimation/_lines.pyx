@@ -909,3 +909,125 @@ def no_return_reach(const double[::1] heading, const double[::1] ox, const doubl
             reach[i] = stop if stop > 0.0 else 0.0
             found = True
     return reach_arr if found else None
+
+
+# --------------------------------------------------------------------------- end points on lines
+
+def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
+                  const double[::1] x, const double[::1] y, const double[::1] d,
+                  const double[::1] sigma_m, const double[::1] heading, const double[::1] ox,
+                  const double[::1] oy, idx_t min_members, double snap_sigmas, double own_share,
+                  double sigma_floor, double min_range, double max_range):
+    """Line members' end points moved onto their lines:
+    ``irring.estimation.estimate_numpy.snap_to_lines`` (the statement and the why) in two
+    passes over the readings, the same operations in the same order (the per-line sums
+    accumulate in reading order, as numpy's bincount does; the line angles from numpy's
+    own arctan2, the cos and sin libm's, see the top of this file).
+
+    Per reading (K,) flat: line index ``member`` (−1: none), valid (uint8), end point x, y,
+    distance d, sigma_m, heading, emitter ox, oy. Returns new (x, y, d, sigma_m) arrays, or
+    None when no end point moves."""
+    cdef idx_t K = member.shape[0], L = 0, i, g, moved = 0
+    cdef double u, v, ca, sa, ngx, ngy, ch, sh, un, rel, t, al, perp2, sl, own
+    if not (valid.shape[0] == x.shape[0] == y.shape[0] == d.shape[0] == sigma_m.shape[0]
+            == heading.shape[0] == ox.shape[0] == oy.shape[0] == K):
+        raise ValueError("per-reading arrays differ in length")
+    for i in range(K):
+        if valid[i] and member[i] >= L:
+            L = member[i] + 1
+    if L == 0:
+        return None
+    # per line: n, Σx, Σy, then Σuv, Σuu, Σvv, Σrel², Σalong² (numpy's bincount order)
+    sums = np.zeros((10, L))
+    cdef double[:, ::1] S = sums
+    cdef double[::1] n = S[0], mx = S[1], my = S[2], suv = S[3], suu = S[4], svv = S[5]
+    cdef double[::1] sr = S[6], sal = S[7], cos_a = S[8], sin_a = S[9]
+    cdef bint any_kept = False
+    for i in range(K):
+        if valid[i] and member[i] >= 0:
+            g = member[i]
+            n[g] += 1.0
+            mx[g] += x[i]
+            my[g] += y[i]
+    for g in range(L):
+        if n[g] >= min_members:
+            any_kept = True
+        if n[g] < 1.0:
+            n[g] = 1.0                         # nn = max(n, 1)
+        mx[g] = mx[g] / n[g]
+        my[g] = my[g] / n[g]
+    if not any_kept:
+        return None
+    for i in range(K):
+        if valid[i] and member[i] >= 0:
+            g = member[i]
+            u = x[i] - mx[g]
+            v = y[i] - my[g]
+            suv[g] += u * v
+            suu[g] += u * u
+            svv[g] += v * v
+    for g in range(L):
+        suv[g] = 2.0 * suv[g]
+        suu[g] = suu[g] - svv[g]
+    alpha = _arctan2(sums[3], sums[4])
+    alpha *= 0.5
+    cdef double[::1] a = alpha
+    for g in range(L):
+        cos_a[g] = cos(a[g])
+        sin_a[g] = sin(a[g])
+    # the moves, and the sums the moved points' σ needs
+    step = np.full((3, K), NAN)       # t of each reading that moves, its beam's cos and sin
+    cdef double[:, ::1] tcs = step
+    cdef double[::1] tt = tcs[0], cos_h = tcs[1], sin_h = tcs[2]
+    for i in range(K):
+        if not (valid[i] and member[i] >= 0):
+            continue
+        g = member[i]
+        u = x[i] - mx[g]
+        v = y[i] - my[g]
+        ngx = -sin_a[g]
+        ngy = cos_a[g]
+        al = u * cos_a[g] + v * sin_a[g]
+        rel = u * ngx + v * ngy
+        sr[g] += rel * rel
+        sal[g] += al * al
+        cos_h[i] = cos(heading[i])
+        sin_h[i] = sin(heading[i])
+        un = cos_h[i] * ngx + sin_h[i] * ngy
+        t = d[i] - rel / un
+        if (n[g] >= min_members and isfinite(t) and fabs(t - d[i]) <= snap_sigmas * sigma_m[i]
+                and t >= min_range and t <= max_range):
+            tt[i] = t
+            moved += 1
+    if moved == 0:
+        return None
+    out = np.empty((4, K))
+    cdef double[:, ::1] o = out
+    o[0, :] = x
+    o[1, :] = y
+    o[2, :] = d
+    o[3, :] = sigma_m
+    for i in range(K):
+        t = tt[i]
+        if t != t:
+            continue
+        g = member[i]
+        u = x[i] - mx[g]
+        v = y[i] - my[g]
+        ngx = -sin_a[g]
+        ngy = cos_a[g]
+        al = u * cos_a[g] + v * sin_a[g]
+        ch = cos_h[i]
+        sh = sin_h[i]
+        un = ch * ngx + sh * ngy
+        sl = sal[g] / n[g]
+        if not sl >= 1e-12:
+            sl = 1e-12 if sl == sl else sl
+        perp2 = (sr[g] / n[g]) / n[g] * (1.0 + al * al / sl)
+        sl = sqrt(perp2) / fabs(un)
+        own = hypot(sl, own_share * sigma_m[i])
+        o[3, i] = sigma_floor if own < sigma_floor else own    # (NaN stays, as numpy's)
+        o[2, i] = t
+        o[0, i] = ox[i] + t * ch
+        o[1, i] = oy[i] + t * sh
+    return out[0], out[1], out[2], out[3]

@@ -411,15 +411,15 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
 
 def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration,
                    options: LineOptions, snap: bool, detail: bool, history: list,
-                   counts: np.ndarray, steps: np.ndarray,
-                   reach: Callable | None = None) -> Estimate:
+                   counts: np.ndarray, steps: np.ndarray, reach: Callable | None = None,
+                   snapper: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's): readings on no
     line at the incidence their own sensor's neighbours give (:func:`local_incidence`;
     ``counts`` (S, N), ``steps`` (S,): the sweep's), line members onto their lines
-    (:func:`snap_to_lines`), members read just past the max range kept only where their
-    line put them within it (:func:`drop_beyond_range`), each silent beam's reach
-    (``reach``: the compiled :func:`no_return_reach` or the oracle's) and, with ``detail``,
-    the :class:`Lines`."""
+    (``snapper``, the compiled :func:`snap_to_lines` by default), members read just past
+    the max range kept only where their line put them within it (:func:`drop_beyond_range`),
+    each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
+    oracle passes its numpy statements of both) and, with ``detail``, the :class:`Lines`."""
     shape = points.valid.shape
     if grouping is None:       # nothing to group (e.g. every reading invalid): no lines
         empty = _lines_record(None, np.full(shape, -1, dtype=np.intp), np.zeros(0, np.intp))
@@ -429,7 +429,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points = local_incidence(points, label, index, counts, steps, cal)
     if snap:
-        points = snap_to_lines(points, label, cal.min_range_m)
+        points = (snapper or snap_to_lines)(points, label, cal.min_range_m)
     points = drop_beyond_range(points)
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                          alpha=grouping.alpha, usable=grouping.usable)
@@ -696,72 +696,34 @@ def beam_crossings(ox, oy, ux, uy, c, e, nrm):
 
 # --------------------------------------------------------------------------- end points on lines
 
-_SNAP_SIGMAS = 3.0   # a member moves onto its line if that is within 3σ of its distance …
-_SNAP_MIN = 10       # … and the line has at least 10 members (short lines are less sure)
-_SNAP_OWN = 0.5      # share of a member's own σ kept in its σ on the line
+SNAP_SIGMAS = 3.0   # a member moves onto its line if that is within 3σ of its distance …
+SNAP_MIN = 10       # … and the line has at least 10 members (short lines are less sure)
+SNAP_OWN = 0.5      # share of a member's own σ kept in its σ on the line
 
 
 def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Points:
     """End points of the readings on a line put where their beams meet it.
 
-    ``member`` (S, N): the line each reading took θ from (−1: none). Each line is fitted
-    (total least squares) to its valid members' final end points (members read a little
-    past the max range included: see :func:`drop_beyond_range`); a member's end point
-    moves along its beam to the line if that is within 3σ of its distance. The line
-    averages the noise of all its members, so a wall seen at 13 mm RMS per reading comes
-    out a few mm thick; a reading the line does not explain keeps its own distance, and
-    none leaves [``min_range_m``, ``points.max_range_m``]. A moved reading's σ is the
-    line's uncertainty where its beam meets it, with half its own σ added in quadrature."""
-    on = (points.valid & (member >= 0)).reshape(-1).nonzero()[0]
-    if on.size == 0:
+    ``member`` (S, N): the line each reading took θ from (−1: none). A valid member of a
+    line with ≥ 10 members moves along its beam onto the line refitted to their end points
+    (members read a little past the max range included: see :func:`drop_beyond_range`)
+    when that is within 3σ of its distance and within [``min_range_m``,
+    ``points.max_range_m``]; its σ becomes the line's uncertainty there (half its own σ
+    added). One compiled call (``irring.estimation._lines.snap_to_lines``); the readable
+    statement and the why: :func:`irring.estimation.estimate_numpy.snap_to_lines`."""
+    f = np.ascontiguousarray
+    moved = _lines.snap_to_lines(
+        f(member, dtype=np.intp).reshape(-1),
+        f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
+        *(f(getattr(points, k), dtype=float).reshape(-1)
+          for k in ("x", "y", "d", "sigma_m", "heading", "origin_x", "origin_y")),
+        SNAP_MIN, SNAP_SIGMAS, SNAP_OWN, SIGMA_FLOOR_M, float(min_range_m),
+        float(points.max_range_m))
+    if moved is None:
         return points
-    g = member.reshape(-1).take(on)              # line indices: small, so bincount directly
-    x, y = points.x.reshape(-1).take(on), points.y.reshape(-1).take(on)
-    n = np.bincount(g)
-    keep = n >= _SNAP_MIN
-    if not keep.any():
-        return points
-    nn = np.maximum(n, 1)
-    mx, my = np.bincount(g, x) / nn, np.bincount(g, y) / nn
-    u, v = x - mx.take(g), y - my.take(g)
-    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v), np.bincount(g, u * u)
-                             - np.bincount(g, v * v))
-    nx, ny = -np.sin(alpha), np.cos(alpha)
-    along = u * np.cos(alpha).take(g) + v * np.sin(alpha).take(g)
-    h = points.heading.reshape(-1).take(on)
-    ch, sh = np.cos(h), np.sin(h)
-    ngx, ngy = nx.take(g), ny.take(g)
-    un = ch * ngx + sh * ngy
-    ox, oy = points.origin_x.reshape(-1).take(on), points.origin_y.reshape(-1).take(on)
-    # the line through the members' centroid: t along the beam to it (members offset by u, v)
-    rel = u * ngx + v * ngy                      # each member's signed offset from its line
-    d = points.d.reshape(-1).take(on)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = d - rel / un
-    ok = (keep.take(g) & np.isfinite(t)
-          & (np.abs(t - d) <= _SNAP_SIGMAS * points.sigma_m.reshape(-1).take(on))
-          & (t >= min_range_m) & (t <= points.max_range_m))
-    if not ok.any():
-        return points
-    # σ of a point on the line: the fitted line's own uncertainty where the beam meets it
-    # (its offset, rms²/n, and its angle, growing with the distance s from the centroid:
-    # rms²·s²/(n·var_along)), along the beam
-    var_perp = np.bincount(g, rel * rel) / nn
-    var_along = np.maximum(np.bincount(g, along * along) / nn, 1e-12)
-    perp2 = var_perp.take(g) / nn.take(g) * (1.0 + along * along / var_along.take(g))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sigma_line = np.sqrt(perp2) / np.abs(un)
-    at, t = on[ok], t[ok]
-    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "sigma_m")}
-    # plus half the reading's own σ: the line is a model, a wall's end or a slightly
-    # wrong θ moves a member off it (with none, 4 % of T-room members lie beyond 3σ)
-    own = points.sigma_m.reshape(-1)[at]
-    out["sigma_m"].reshape(-1)[at] = np.maximum(np.hypot(sigma_line[ok], _SNAP_OWN * own),
-                                                SIGMA_FLOOR_M)
-    out["d"].reshape(-1)[at] = t
-    out["x"].reshape(-1)[at] = ox[ok] + t * ch[ok]
-    out["y"].reshape(-1)[at] = oy[ok] + t * sh[ok]
-    return replace(points, **out)
+    shape = points.valid.shape
+    x, y, d, sigma = (v.reshape(shape) for v in moved)
+    return replace(points, x=x, y=y, d=d, sigma_m=sigma)
 
 
 # --------------------------------------------------------------------------- fold-over
