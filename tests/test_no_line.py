@@ -190,3 +190,26 @@ def test_a_leg_seen_bent_away_from_the_beam_stays_valid(monkeypatch):
         assert np.all(err[more] <= 2.0 * new.sigma_m[more]), (err[more], new.sigma_m[more])
         added += int(more.sum())
     assert added >= 3
+
+
+def test_a_ring_held_still_keeps_its_readings_with_the_sigma_of_its_doubt():
+    """A radial ring reads each bearing once: no neighbouring step can give a slope, so a
+    reading is kept at θ = 0 (not INCIDENCE_UNKNOWN, which took nearly every reading of
+    radial12) with a σ that covers the error θ = 0 makes on a steep wall."""
+    from _synthetic import rectangle
+
+    cal = dataclasses.replace(NOMINAL, noise_counts=2.0)
+    walls = rectangle(-0.37, -0.29, 0.43, 0.52)
+    still, d, inc = make_sweep(cal, walls=walls, pose=(0.0, 0.0, math.radians(31)),
+                               noise_counts=2.0, seed=4, quantize=True, steps=np.array([0]))
+    p = estimate(still, cal)
+    seen = np.isfinite(d)
+    assert seen.sum() >= 8 and np.degrees(inc[seen]).max() > 30
+    assert np.all(p.valid[seen]) and not np.any(p.reason == Reason.INCIDENCE_UNKNOWN)
+    assert np.all(p.theta[seen] == 0.0)
+    assert np.all(np.abs(p.d - d)[seen] <= 2.0 * p.sigma_m[seen])
+    # the same sensors turning: the steep readings get their θ or are flagged, never kept long
+    turning, d2, _ = make_sweep(cal, walls=walls, pose=(0.0, 0.0, math.radians(31)),
+                                noise_counts=2.0, seed=4, quantize=True)
+    q = estimate(turning, cal)
+    assert np.all(np.abs(q.d - d2)[q.valid] < 0.1)

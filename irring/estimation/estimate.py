@@ -574,12 +574,16 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     # as a post's readings are; flagging them lost thin legs' recall (0.96 -> 0.89)
     convex = ((n >= _LOCAL_MIN) & (bend > _LOCAL_SLOPE_SE * bend_se)
               & (theta < cal.max_incidence_rad - _CONVEX_BELOW_DROP_RAD))
-    few = ~ok & ~convex
+    # a ring held still (fewer motor steps than a slope needs) has no neighbours to ask: its
+    # readings are what it has (flagging them lost a radial ring nearly every reading)
+    still = np.full(ok.shape, np.unique(np.asarray(steps)).size < _LOCAL_MIN)
+    few = ~ok & ~convex & ~still
     if few.any():
         alone = off[few]
         few[few] = d0[alone] - cal.distance(s[alone], steep[few]) > _UNKNOWN_M
-    # a convex thing's reading may have met its side steeply: θ = 0 with the σ of that doubt
-    wide = convex & ~ok
+    # a convex thing's reading may have met its side steeply, a still ring's any surface:
+    # θ = 0 with the σ of that doubt
+    wide = (convex | still) & ~ok
     if not (ok.any() or few.any() or wide.any()):
         return points
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
