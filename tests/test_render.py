@@ -280,3 +280,17 @@ def test_render_bench_times_fresh_processes_and_counts_the_frames():
     assert len(r["load_before"]) == len(r["load_after"]) == 3
     assert render_bench.report(r).splitlines()[-1] == report.load_line(
         r["load_before"], r["load_after"], r["cpus"])
+
+
+def test_the_memory_survey_is_the_t_room_seen_from_300_poses():
+    """docs/survey300.yaml, the README's 300-pose memory figure: it loads, it is the T-room's
+    outline, and its 300 poses are distinct and inside the bar of the T."""
+    from pathlib import Path
+
+    survey = load_scenario(str(Path(__file__).parents[1] / "docs" / "survey300.yaml"))
+    t_room = load_scenario("t_room")
+    assert survey.room.outline_m == t_room.room.outline_m
+    xy = np.array([(p.x_m, p.y_m) for p in survey.robot.poses])
+    assert xy.shape == (300, 2) and len(np.unique(xy, axis=0)) == 300
+    assert xy[:, 0].min() > 0.15 and xy[:, 0].max() < 2.42 - 0.15
+    assert xy[:, 1].min() > 0.15 and xy[:, 1].max() < 0.90 - 0.15
