@@ -369,3 +369,19 @@ def test_bundled_moving_scenario_maps_and_replays_exactly(tmp_path):
     paths = pipeline.write_outputs(run, tmp_path, animation=False)
     again = pipeline.replay(paths["recording"], progress=False)
     assert np.array_equal(again.grid.log_odds, run.grid.log_odds)
+
+
+def test_a_belt_rollout_in_chunks_equals_one_rollout(monkeypatch):
+    """The belt is rolled out ROLLOUT_CHUNK_STEPS at a time so Ctrl-C lands between MuJoCo
+    calls; the chunks continue one run exactly."""
+    sc = bench.variant("t_room", effects={"belt_dynamics": {"timestep_ms": 0.4,
+                                                            "backlash_deg": 0.3}})
+    dyn = D.Dynamics(sc, SimRing(sc).built, 0)
+    sched = dyn.schedule(np.arange(-35, 36))
+    monkeypatch.setattr(D, "ROLLOUT_CHUNK_STEPS", 10**9)
+    whole = dyn.physics.run(sched)
+    assert len(whole.motor_rad) > 3 * 997
+    monkeypatch.setattr(D, "ROLLOUT_CHUNK_STEPS", 997)
+    chunked = dyn.physics.run(sched)
+    for name in ("motor_rad", "motor_vel", "sensor_rad", "sensor_vel"):
+        assert np.array_equal(getattr(chunked, name), getattr(whole, name)), name

@@ -433,3 +433,51 @@ def test_a_silent_device_gets_exactly_retries_plus_one_irstp_before_the_timeout(
     with pytest.raises(DeviceTimeout, match=rf"; {retries + 1} IRSTP unanswered"):
         ring.sweep()
     assert [m.TYPE for m in port.sent].count("IRSTP") == retries + 1
+
+
+def _garbled(msg: p.Message) -> bytes:
+    line = bytearray(p.encode(msg))
+    line[4] ^= 0x20   # "$IRdON…": the checksum no longer matches
+    return bytes(line)
+
+
+def _irdon_lost_then_irstp_answered(garbled_answers: int | None):
+    """Every IRSCN of a sweep arrives, its IRDON does not; the first ``garbled_answers``
+    IRSTP (None: every one) are answered by a garbled IRDON, the next intact."""
+    answered = []
+
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            return [p.Scan(i, s, i, (10, 11)) for i, s in enumerate(range(-3, 4))]
+        if isinstance(msg, p.Stop):
+            answered.append(msg)
+            if garbled_answers is None or len(answered) <= garbled_answers:
+                return [_garbled(p.Done(6))]
+            return [p.Done(6)]
+        return []
+    return ScriptPort(script)
+
+
+def test_an_irstp_answered_garbled_is_sent_again_not_counted_as_unanswered(virtual_time):
+    # the emulator's own fault example (corrupt 0.01, drop 0.05, fault seed 2) lost an
+    # IRDON and garbled the next two answers: 3 IRSTP "unanswered" ended the drive
+    port = _irdon_lost_then_irstp_answered(3)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S, retries=2).open()
+    t0 = virtual_time.now
+    sweep = ring.sweep()
+    assert len(sweep.steps) == 7 and ring.last_report.complete
+    assert [m.TYPE for m in port.sent].count("IRSTP") == 4
+    link = ring.last_report.link
+    assert link["checksum_failures"] == 3 and link["timeouts"] == 1
+    assert virtual_time.now - t0 < TIMEOUT_S + 3 * 0.1 + 0.5   # asked again at once, not after timeouts
+
+
+def test_a_device_that_only_ever_garbles_its_answer_still_ends_in_a_timeout(virtual_time):
+    port = _irdon_lost_then_irstp_answered(None)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S, retries=2).open()
+    with pytest.raises(DeviceTimeout, match=r"no progress for .* 7 of 7 steps arrived"):
+        ring.sweep()
+    stops = [m.TYPE for m in port.sent].count("IRSTP")
+    assert 3 < stops < 200

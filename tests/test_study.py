@@ -417,3 +417,39 @@ def test_ctrl_c_says_how_many_runs_are_kept_and_how_to_resume(small, tmp_path, m
     err = capsys.readouterr().err
     assert err == (f"irring: study interrupted; 2 finished run(s) kept in {out / study.RESULTS}: "
                    "run the same command with --resume to run the rest\n")
+
+
+def test_ctrl_c_stops_a_pool_at_once_and_terminates_its_running_workers():
+    """SIGINT to `irring study --workers 2` left the workers running their jobs."""
+    import time
+
+    from irring.studies.executor import executor, run_jobs
+
+    workers = []
+
+    def interrupt(_):
+        workers.extend(ex._processes.values())
+        raise KeyboardInterrupt
+
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with executor(2) as ex:
+            run_jobs(time.sleep, [0.0, 120.0, 120.0, 120.0], ex, progress=interrupt)
+    assert time.monotonic() - t0 < 60   # not the 120 s a running job would take
+    assert len(workers) == 2 and not any(w.is_alive() for w in workers)
+
+
+def test_sigterm_to_a_pool_parent_ends_like_ctrl_c_and_restores_the_default():
+    import os
+    import signal
+    import time
+
+    from irring.studies.executor import executor
+
+    with pytest.raises(KeyboardInterrupt):
+        with executor(2):
+            # never send SIGTERM to the test process unless the handler is in place
+            assert signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(10)
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL

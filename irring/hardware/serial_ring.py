@@ -44,6 +44,9 @@ MAX_STEP_SPAN = 100_000
 # a sweep pass that makes no progress (no new step) for this many timeouts beyond its
 # IRSTP retries is given up, whatever else the device keeps sending
 NO_PROGRESS_TIMEOUTS = 3
+# an IRSTP answered by a garbled sentence was heard: it is sent again this soon, and not
+# counted among the unanswered (the no-progress limit above still bounds the whole pass)
+GARBLED_ANSWER_RETRY_S = 0.1
 
 
 class HandshakeError(DeviceError):
@@ -575,10 +578,15 @@ class SerialRing:
         # catches only a device that talks on without progress, never cuts the retries short
         stall_limit = first_wait + (self.retries + NO_PROGRESS_TIMEOUTS) * (self.timeout_s
                                                                             + per_step_s)
+        heard = False   # a garbled sentence arrived since the last IRSTP: the device answers
         while True:
             had = len(ps.got)
+            garbled = self.stats.checksum_failures + self.stats.malformed
             msgs = self._receive()
             now = time.monotonic()
+            if stops and self.stats.checksum_failures + self.stats.malformed > garbled:
+                heard = True
+                deadline = min(deadline, now + min(self.timeout_s, GARBLED_ANSWER_RETRY_S))
             if now - stalled_since > stall_limit:
                 raise self._lost(
                     DeviceTimeout,
@@ -658,15 +666,18 @@ class SerialRing:
                     # case IRSTP fetches it sooner than a full timeout would
                     deadline = now + min(self.timeout_s, max(0.1, 2 * per_step_s))
             if now >= deadline:
-                # silence: ask the device to end the sweep; IRDON tells what it sent
-                self.stats.timeouts += 1
-                if stops > self.retries:
-                    received = len(ps.got)
-                    raise self._lost(
-                        DeviceTimeout,
-                        f"no sentence for {self.timeout_s:g} s during IRSWP,{lo},{hi} after "
-                        f"{received} of {len(ps.expected)} steps; {stops} IRSTP unanswered")
-                stops += 1
+                # silence (or a garbled answer): ask the device to end the sweep; IRDON
+                # tells what it sent
+                if not heard:
+                    self.stats.timeouts += 1
+                    if stops > self.retries:
+                        received = len(ps.got)
+                        raise self._lost(
+                            DeviceTimeout,
+                            f"no sentence for {self.timeout_s:g} s during IRSWP,{lo},{hi} after "
+                            f"{received} of {len(ps.expected)} steps; {stops} IRSTP unanswered")
+                    stops += 1
+                heard = False
                 self.stats.resent_commands += 1
                 self._send(p.Stop())
                 deadline = now + self.timeout_s

@@ -22,6 +22,9 @@ TIMING_STREAM = 0x7469   # "ti": seeds the GP2 clocks
 ODOMETRY_STREAM = 0x6F64  # "od": seeds the odometry drift
 DYNAMIC_EFFECTS = ("belt_dynamics", "timing", "motion")
 _PATH_SAMPLE_M = 0.005     # odometry / clearance resolution along the path
+# physics steps per MuJoCo rollout call: Python (Ctrl-C) runs only between calls, and this
+# many take well under a second (~0.3 s for the 12-sensor ring at load 3)
+ROLLOUT_CHUNK_STEPS = 10_000
 
 # Physics of the ring alone: no contacts, no rangefinders (beams are cast by sim.SimRing).
 _PHYSICS_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR | mujoco.mjtDisableBit.mjDSBL_CONTACT)
@@ -285,9 +288,21 @@ class BeltPhysics:
         return out
 
     def run(self, sched: Schedule, *, duration_s: float | None = None) -> Trajectory:
-        """One sweep from rest at its first step, through ``duration_s`` (default its end)."""
-        return next(self.follow([self.controls(sched, duration_s)], sched.motor_rad[0],
-                                self.rest_offset(sched.steps)))
+        """One sweep from rest at its first step, through ``duration_s`` (default its end),
+        rolled out :data:`ROLLOUT_CHUNK_STEPS` physics steps at a time (Ctrl-C lands between)."""
+        ctrl = self.controls(sched, duration_s)
+        chunks = [ctrl[i:i + ROLLOUT_CHUNK_STEPS] for i in range(0, len(ctrl), ROLLOUT_CHUNK_STEPS)]
+        parts = list(self.follow(chunks, sched.motor_rad[0], self.rest_offset(sched.steps)))
+        if len(parts) == 1:
+            return parts[0]
+
+        def joined(name: str) -> np.ndarray:  # each chunk after the first repeats its start
+            return np.concatenate([getattr(parts[0], name)]
+                                  + [getattr(t, name)[1:] for t in parts[1:]])
+
+        return Trajectory(dt_s=self.dt_s, motor_rad=joined("motor_rad"),
+                          motor_vel=joined("motor_vel"), sensor_rad=joined("sensor_rad"),
+                          sensor_vel=joined("sensor_vel"), gear=self.gear)
 
     def follow(self, targets: Iterable[np.ndarray], motor_rad: float,
                stretch_rad: np.ndarray) -> Iterator[Trajectory]:

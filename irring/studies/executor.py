@@ -11,6 +11,7 @@ import contextlib
 import itertools
 import multiprocessing
 import os
+import signal
 import threading
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterator, Sequence
@@ -120,12 +121,51 @@ def executor(workers: int | None = 1, dask: str | Any | None = None) -> Iterator
     if n <= 1:
         yield SerialExecutor()
         return
-    pool = ProcessPoolExecutor(max_workers=n,
+    pool = ProcessPoolExecutor(max_workers=n, initializer=_ignore_sigint,
                                mp_context=multiprocessing.get_context(_start_method()))
     try:
-        yield pool
+        with _sigterm_as_interrupt():
+            yield pool
+    except (KeyboardInterrupt, SystemExit):   # Ctrl-C: stop the runs in flight, do not wait
+        _stop_workers(pool)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _ignore_sigint() -> None:
+    """A pool worker leaves Ctrl-C (SIGINT to the whole process group) to the parent, which
+    stops the pool; otherwise each worker prints its own KeyboardInterrupt traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Cancel the queued jobs and terminate the running ones (the pool has no public way)."""
+    workers = list((getattr(pool, "_processes", None) or {}).values())  # shutdown forgets them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in workers:
+        proc.terminate()
+    for proc in workers:
+        proc.join(5)
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM ends a pool's parent as Ctrl-C does (workers stopped, queues closed), instead
+    of killing it with the pool's semaphores leaked; only where nobody else handles it."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
+        yield
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def capacity(ex: Executor | None) -> int:
