@@ -294,3 +294,31 @@ def test_the_memory_survey_is_the_t_room_seen_from_300_poses():
     assert xy.shape == (300, 2) and len(np.unique(xy, axis=0)) == 300
     assert xy[:, 0].min() > 0.15 and xy[:, 0].max() < 2.42 - 0.15
     assert xy[:, 1].min() > 0.15 and xy[:, 1].max() < 0.90 - 0.15
+
+
+def test_a_long_thin_room_is_drawn_as_a_strip_with_its_walls_and_pose():
+    """A 30 m × 0.4 m corridor (a hostile tester's file) left the axes a negative height
+    and the render a math domain error after all the work; it is drawn as a thin strip."""
+    from PIL import Image
+
+    from irring.maps.mapping import OccupancyGrid
+    from irring.scenario import loads
+
+    sc = loads("""
+name: corridor
+room: {outline_mm: [[0, 0], [30000, 0], [30000, 400], [0, 400]]}
+robot: {poses: [{x_mm: 300, y_mm: 170}]}
+""", source="corridor.yaml")
+    grid = OccupancyGrid.for_scenario(sc)
+    pic = render.MapPicture(grid, sc, [np.array([0.3, 0.17, 0.0])], 0.62, 0.15)
+    img = pic.rgb(grid.classify(), "corridor").astype(int)
+    height, width = img.shape[:2]
+    assert height < width / 3
+    png = Image.open(io.BytesIO(pic.png_bytes(grid.classify())))
+    assert png.height < png.width / 3
+    L, T, R, B = pic._box
+    assert B - T > 2 and R - L > 0.8 * width
+    blue, red = _hue(img, render.TRUTH_COLOR), _hue(img, render.POSE_COLOR)
+    for x in (9.0, 15.0, 29.0):          # the long walls, past the scale bar's box
+        assert _near(blue, *pic.to_px(x, 0.0)) and _near(blue, *pic.to_px(x, 0.4)), x
+    assert _near(red, *pic.to_px(0.3, 0.17), r=4)

@@ -130,21 +130,3 @@ def test_a_detection_distance_past_float_range_is_a_usage_error(capsys):
         main(["compare", "--design", "laser", "--distances-mm", "400,1e300"])
     assert exit_.value.code == errors.USAGE
     assert "up to 100000, like 250,500,1000; got '400,1e300'" in capsys.readouterr().err
-
-
-@pytest.mark.xfail(strict=True, raises=ValueError,
-                   reason="hostile finding S3, still open: irring/maps/render.py _ticks takes "
-                          "log10 of a non-positive tick spacing for a 30 m × 0.4 m room (20 m "
-                          "renders); irring/maps is another helper's")
-def test_a_long_thin_room_renders(tmp_path):
-    from irring.maps import render
-    from irring.maps.mapping import OccupancyGrid
-    from irring.scenario import loads
-
-    sc = loads(BOX.format(name="corridor", robot="  poses: [{x_mm: 300, y_mm: 170}]",
-                          effects="").replace("[[0, 0], [2100, 0], [2100, 1400], [0, 1400]]",
-                                              "[[0, 0], [30000, 0], [30000, 400], [0, 400]]"),
-               "corridor.yaml")
-    path = render.save_map_png(tmp_path / "map.png", OccupancyGrid.for_scenario(sc), sc,
-                               [np.array([0.3, 0.17, 0.0])], 0.62, 0.15, "corridor")
-    assert path.stat().st_size > 1000

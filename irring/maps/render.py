@@ -31,6 +31,7 @@ _CLASS_RGB = np.array([{UNKNOWN: UNKNOWN_RGB, FREE: FREE_RGB, OCCUPIED: OCCUPIED
                        for c in range(_CLASS0, _CLASS0 + 3)])
 PNG_DPI = 110
 MAX_MAP_HEIGHT_IN = 8.0        # the axes' height at most (the figure adds 1.5 in)
+MIN_MAP_HEIGHT_IN = 0.6   # … and at least this, so the axes keep a height past the margins
 
 
 def figure(width_in: float, height_in: float, dpi: float = 100):
@@ -265,8 +266,10 @@ class MapPicture:
         spare = round(0.5 * dpi)
         width = round(width_in * dpi) + 2 * spare
         # a tall map is drawn narrower, not taller than a screen (a 3 m shaft: 3000 pixels)
-        height = round((min(width_in * (y1 - y0) / (x1 - x0) * 0.9, MAX_MAP_HEIGHT_IN)
-                        + 1.5) * dpi)
+        # … and a long thin one no flatter than the margins need (a 30 m × 0.4 m corridor
+        # left the axes a negative height)
+        height = round((min(max(width_in * (y1 - y0) / (x1 - x0) * 0.9, MIN_MAP_HEIGHT_IN),
+                            MAX_MAP_HEIGHT_IN) + 1.5) * dpi)
         # the axes: the box left by fixed margins (inches), shrunk to the map's aspect
         bl, br = spare + 0.8 * dpi, width - spare - 0.15 * dpi
         bt, bb = 0.4 * dpi, height - 1.3 * dpi
