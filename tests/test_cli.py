@@ -321,3 +321,23 @@ def test_an_unknown_option_is_reported_by_its_command_with_its_usage(argv, comma
     err = capsys.readouterr().err
     assert err.startswith(f"usage: {command} [-h]")
     assert err.endswith(f"\n{command}: error: unrecognized arguments: {argv[-1]}\n")
+
+
+@pytest.mark.parametrize("command", [["run", "t_room"], ["replay", "sweeps.npz"],
+                                     ["drive", "--port", "ring.pty"]])
+def test_mcap_without_its_extra_is_refused_before_any_work(command, tmp_path, monkeypatch,
+                                                            capsys):
+    """Without the mcap extra, --mcap ended a whole run in exit 70 after every other file
+    was written; it is a usage error at the command line."""
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "mcap_ros2" else real(name, *a))
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_:
+        main(command + ["--mcap", "run.mcap"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "writing run.mcap needs the mcap extra: pip install 'irring[mcap]'" in err
+    assert list(tmp_path.iterdir()) == []        # nothing simulated, nothing written

@@ -9,6 +9,7 @@ exits 2, like any other bad argument (exit 1 is left for runs that fail).
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import importlib
 import math
 from collections.abc import Callable
@@ -121,9 +122,17 @@ def pose_index(number: int, scenario, option: str = "--pose") -> int:
     return number - 1
 
 
+def mcap_file(text: str) -> Path:
+    """``--mcap``'s value, refused before any work when the mcap extra is not installed."""
+    if importlib.util.find_spec("mcap_ros2") is None:
+        raise argparse.ArgumentTypeError(
+            f"writing {text} needs the mcap extra: pip install 'irring[mcap]'")
+    return Path(text)
+
+
 def add_mcap_option(parser: argparse.ArgumentParser) -> None:
     """``--mcap FILE``: the run as MCAP for Foxglove / rosbag2 (irring/maps/mcap_export.py)."""
-    parser.add_argument("--mcap", type=Path, default=None, metavar="FILE",
+    parser.add_argument("--mcap", type=mcap_file, default=None, metavar="FILE",
                         help="also write the run as MCAP with ROS 2 messages (each sweep's "
                              "end points, the ring pose on /tf, the map, the true outline), "
                              "for Foxglove or rosbag2; needs pip install 'irring[mcap]'")
