@@ -976,9 +976,11 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
         cos_a[g] = cos(a[g])
         sin_a[g] = sin(a[g])
     # the moves, and the sums the moved points' σ needs
-    step = np.full((3, K), NAN)       # t of each reading that moves, its beam's cos and sin
+    # t of each reading that moves, its beam's cos and sin, its place along its line and the
+    # beam's cosine to the line's normal (the σ pass reads them back)
+    step = np.full((5, K), NAN)
     cdef double[:, ::1] tcs = step
-    cdef double[::1] tt = tcs[0], cos_h = tcs[1], sin_h = tcs[2]
+    cdef double[::1] tt = tcs[0], cos_h = tcs[1], sin_h = tcs[2], along = tcs[3], to_n = tcs[4]
     for i in range(K):
         if not (valid[i] and member[i] >= 0):
             continue
@@ -998,6 +1000,8 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
         if (n[g] >= min_members and isfinite(t) and fabs(t - d[i]) <= snap_sigmas * sigma_m[i]
                 and t >= min_range and t <= max_range):
             tt[i] = t
+            along[i] = al
+            to_n[i] = un
             moved += 1
     if moved == 0:
         return None
@@ -1012,14 +1016,10 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
         if t != t:
             continue
         g = member[i]
-        u = x[i] - mx[g]
-        v = y[i] - my[g]
-        ngx = -sin_a[g]
-        ngy = cos_a[g]
-        al = u * cos_a[g] + v * sin_a[g]
+        al = along[i]
+        un = to_n[i]
         ch = cos_h[i]
         sh = sin_h[i]
-        un = ch * ngx + sh * ngy
         sl = sal[g] / n[g]
         if not sl >= 1e-12:
             sl = 1e-12 if sl == sl else sl
