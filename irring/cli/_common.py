@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import importlib
 import math
 from collections.abc import Callable
 from pathlib import Path

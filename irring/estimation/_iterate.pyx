@@ -453,7 +453,7 @@ cdef class Sweep:
 
     cdef void curve(self, double theta, double* la, double* b) noexcept nogil:
         """log a(θ), b(θ) of the calibration (linear in |θ| between its nodes, held at the
-        ends): Calibration._log_ab's np.interp, the same computation as :meth:`look` (only
+        ends): Calibration.log_ab's np.interp, the same computation as :meth:`look` (only
         with ``exact``)."""
         cdef Py_ssize_t j, n = self.n_nodes
         cdef double x = fabs(theta)
@@ -543,7 +543,7 @@ cdef class Sweep:
                double max_range_m, unsigned char[::1] reason, bint keep_moving=False,
                double range_sigmas=0.0):
         """Final points with the exact curve (Calibration's log a(θ), b(θ): see
-        :meth:`curve`; ``cal._log_ab`` where the fine table check failed) and reasons.
+        :meth:`curve`; ``cal.log_ab`` where the fine table check failed) and reasons.
         Returns flat (S·N,) arrays x, y, d, θ, σ (NaN where not valid), iterations (int32)
         and valid, and writes each live reading's reason into ``reason`` (flat, S·N; the
         others keep theirs). ``theta``, ``on`` (on a line), ``last_moving``: per live reading.
@@ -574,7 +574,7 @@ cdef class Sweep:
             for i in range(k):
                 self.curve(theta[i], &la[i], &b[i])
         else:
-            la, b = cal._log_ab(np.asarray(theta))
+            la, b = cal.log_ab(np.asarray(theta))
         for i in range(k):
             d[i] = la[i] + b[i] * self.ls[i]
         _exp(d_arr, d_arr)

@@ -181,27 +181,27 @@ class Calibration:
     def max_theta_rad(self) -> float:
         return float(self.theta_rad[-1])
 
-    def _log_ab(self, theta_rad: Any) -> tuple[np.ndarray, np.ndarray]:
+    def log_ab(self, theta_rad: Any) -> tuple[np.ndarray, np.ndarray]:
         """log a(θ), b(θ) at |θ|: linear in (log a, b), held beyond the table."""
         t = np.abs(np.asarray(theta_rad, dtype=float))
         return np.interp(t, self.theta_rad, self._log_a), np.interp(t, self.theta_rad, self.b)
 
     def ab(self, theta_rad: Any) -> tuple[np.ndarray, np.ndarray]:
         """a(θ), b(θ) at |θ|: linear in (log a, b), held beyond the table."""
-        log_a, b = self._log_ab(theta_rad)
+        log_a, b = self.log_ab(theta_rad)
         return np.exp(log_a), b
 
     def distance(self, counts: Any, theta_rad: Any = 0.0) -> np.ndarray:
         """Eq. 10: metres from counts (> 0) at incidence θ; vectorised."""
         s = np.asarray(counts, dtype=float)
-        log_a, b = self._log_ab(theta_rad)
+        log_a, b = self.log_ab(theta_rad)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.exp(log_a + b * np.log(s))
 
     def counts(self, distance_m: Any, theta_rad: Any = 0.0) -> np.ndarray:
         """The inverse of Eq. 10: the counts a return at ``distance_m`` and θ gives."""
         d = np.asarray(distance_m, dtype=float)
-        log_a, b = self._log_ab(theta_rad)
+        log_a, b = self.log_ab(theta_rad)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.exp((np.log(d) - log_a) / b)
 
@@ -429,7 +429,7 @@ def _fallback_nodes(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
     distance is the longest the reading can mean, so the error is one-sided and grows
     steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
     u = (np.arange(FALLBACK_NODES) + 0.5) / FALLBACK_NODES * math.sin(cal.max_incidence_rad)
-    return cal._log_ab(np.arcsin(u))
+    return cal.log_ab(np.arcsin(u))
 
 
 def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False

@@ -511,8 +511,8 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     h = points.heading.reshape(-1)[vi]
     ox, oy = points.origin_x.reshape(-1)[vi], points.origin_y.reshape(-1)[vi]
     log_s = np.log(s)
-    sig_s = cal._levels[3] / s                  # σ_d = |b|·d·σ_S/S
-    la0, b0 = cal._log_ab(0.0)
+    sig_s = cal.sigma_counts() / s              # σ_d = |b|·d·σ_S/S
+    la0, b0 = cal.log_ab(0.0)
     d0 = np.exp(la0 + b0 * log_s)
     chain = polyline_ids(d0, np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M), h,
                          vi % n_sensors, cal.max_incidence_rad, LineOptions.jump_sigmas)
@@ -533,7 +533,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     for _ in range(3):
         # on a flat surface a neighbour meets it at θ plus the angle the beam turned
         theta_j = np.minimum(np.abs(signed[:, None] + turn), cal.max_incidence_rad)
-        la, b = cal._log_ab(theta_j)
+        la, b = cal.log_ab(theta_j)
         d = np.exp(la + b * lsj)
         x, y = rx + d * cj, ry + d * sj
         u, v = x * ux + y * uy, y * ux - x * uy
@@ -576,8 +576,8 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
               & (theta < cal.max_incidence_rad - _CONVEX_BELOW_DROP_RAD))
     # a ring held still (fewer motor steps than a slope needs) has no neighbours to ask: its
     # readings are what it has (flagging them lost a radial ring nearly every reading)
-    still = np.full(ok.shape, np.unique(np.asarray(steps)).size < _LOCAL_MIN)
-    few = ~ok & ~convex & ~still
+    still = bool(np.unique(np.asarray(steps)).size < _LOCAL_MIN)
+    few = ~ok & ~convex & (not still)
     if few.any():
         alone = off[few]
         few[few] = d0[alone] - cal.distance(s[alone], steep[few]) > _UNKNOWN_M
@@ -606,7 +606,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     lo = np.arctan(np.maximum(t - e, 0.0))
     hi = np.minimum(np.arctan(t + e), cal.max_incidence_rad)
     spread = 0.5 * np.abs(cal.distance(s[off[ok]], lo) - cal.distance(s[off[ok]], hi))
-    _, b_new = cal._log_ab(th)
+    _, b_new = cal.log_ab(th)
     sigma = np.hypot(np.maximum(np.abs(b_new) * d_new * sig_s[off[ok]], SIGMA_FLOOR_M), spread)
     keep = np.isfinite(d_new) & (d_new >= cal.min_range_m) & np.isfinite(sigma)
     at, th, d_new, sigma = at[keep], th[keep], d_new[keep], sigma[keep]

@@ -400,7 +400,7 @@ class _Sweep:
                        else (0.0, 0.0))
         self.at = np.arange(self.k)
         self.cal = cal
-        self.sig_s = cal._levels[3] / self.counts             # σ_d = |b|·d·σ_S/S
+        self.sig_s = cal.sigma_counts() / self.counts          # σ_d = |b|·d·σ_S/S
         self.inv_h, table, _ = cal._fine
         self.la_t, self.b_t = table[:, 0].copy(), table[:, 1].copy()
         self.opts = opts
@@ -938,7 +938,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
 
     # final points with the exact curve
     s = sw.counts
-    log_a, b = cal._log_ab(theta)
+    log_a, b = cal.log_ab(theta)
     d = np.exp(log_a + b * sw.log_s)
     sigma = np.maximum(np.abs(b) * d * sw.sig_s, SIGMA_FLOOR_M)
     px, py = sw.ox + d * sw.ux, sw.oy + d * sw.uy
