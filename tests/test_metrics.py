@@ -391,3 +391,96 @@ def test_a_design_judged_on_the_scenes_truth_gets_shadow_credit_for_what_it_rang
     assert run_scene(one, "laser")["shadow"] == 0.0
     assert run_scene(one, "rotating12")["shadow"] == 1.0
     assert run_scene(four, "laser")["shadow"] > run_scene(four, "rotating12")["shadow"] + 0.3
+
+
+def _facing(pose, ring, k, sensor_angle_rad, incidence_rad):
+    """A unit surface normal that sensor k's beam (turned by the angle) meets at the
+    incidence (turned counter-clockwise from facing the beam square on)."""
+    psi = pose.yaw_rad + 2 * math.pi * k / ring.sensors + sensor_angle_rad + math.pi
+    return math.cos(psi + incidence_rad), math.sin(psi + incidence_rad)
+
+
+def _sensor_can(k, *args, **kwargs) -> bool:
+    """Whether sensor k alone (:func:`metrics._sensor_views`) ranges the one point."""
+    return bool(list(metrics._sensor_views(*args, **kwargs))[k][0][0])
+
+
+def test_a_return_needs_an_incidence_and_a_signal_the_sensor_can_tell_from_nothing():
+    # GP2D12 with the incidence effect: a(θ), b(θ) dim a slanted return, and one no brighter
+    # than a surface at the 624 mm max range square on reads as nothing (a wall 600 mm off
+    # at 30° reads 633 mm); past the 70° drop-out angle nothing comes back at all
+    from irring.core import Pose
+    from irring.designs import PAPER_RING
+
+    pose, k, angle = Pose(0.43, 0.31, 0.3), 7, math.radians(-12.0)
+    geometric = (PAPER_RING, 0.10, 0.624, -math.radians(37.8), math.radians(37.8))
+    slanted = geometric + (metrics.Returns("gp2d12", max_incidence_rad=math.radians(70.0)),)
+    cases = {  # (distance along the beam m, incidence °) → a return
+        (0.30, 65.0): True, (0.30, -69.0): True,   # reads 395 / 418 mm
+        (0.30, 71.0): False,                        # past the drop-out angle
+        (0.50, 50.0): True, (0.50, -60.0): False,   # reads 585 / 640 mm
+        (0.60, 0.0): True, (0.60, 30.0): False,     # reads 600 / 633 mm
+    }
+    for (t, inc), want in cases.items():
+        x, y = _on_beam(pose, PAPER_RING, k, angle, t)
+        nx, ny = _facing(pose, PAPER_RING, k, angle, math.radians(inc))
+        surface = (np.array([nx]), np.array([ny]), np.array([1.0]))
+        at = (np.array([x]), np.array([y]), pose)
+        assert _sensor_can(k, *at, *slanted, surface=surface) == want, (t, inc)
+        assert _sensor_can(k, *at, *geometric)                  # range and sweep: all in
+        assert _sensor_can(k, *at, *geometric, metrics.Returns("gp2d12"),
+                           surface=surface)                     # no effect: no condition
+    # reflectance 0.1 with min_signal 0.2: seen to 0.8 m · √(0.1 / 0.2) = 566 mm
+    dark = geometric + (metrics.Returns("gp2d12", min_signal=0.2),)
+    for t, want in ((0.55, True), (0.58, False)):
+        x, y = _on_beam(pose, PAPER_RING, k, angle, t)
+        surface = (np.array([0.0]), np.array([1.0]), np.array([0.1]))
+        assert _sensor_can(k, np.array([x]), np.array([y]), pose, *dark,
+                           surface=surface) == want, t
+    with pytest.raises(ValueError, match="surface=.normal x, normal y, reflectance"):
+        metrics._measurable(np.array([x]), np.array([y]), pose, *slanted)
+
+
+# One pose near the south-west corner of a room whose far walls lie near the reach.
+FAR_CORNER = """\
+name: far_corner
+seed: 5
+room:
+  outline_mm: [[0, 0], [1030, 0], [1030, 990], [0, 990]]
+robot:
+  poses:
+    - {x_mm: 262, y_mm: 243, yaw_deg: 17}
+"""
+
+
+def test_visible_wall_is_wall_the_scenes_sensor_returns_from():
+    # the same room with and without the incidence effect: the wall only seen obliquely
+    # near the reach leaves the visible wall (no sensor could tell it from nothing), the
+    # rest stays; the geometry (in range, shadow) does not change
+    from irring.scenario import loads
+
+    ideal = loads(FAR_CORNER, "far_corner.yaml")
+    slanted = loads(FAR_CORNER + "effects: [incidence, noise, quantization]\n",
+                    "far_corner.yaml")
+    grid = OccupancyGrid.for_scenario(ideal)
+    a, b = ground_truth(ideal, grid), ground_truth(slanted, grid)
+    np.testing.assert_array_equal(a.in_range, b.in_range)
+    np.testing.assert_array_equal(a.shadow, b.shadow)
+    assert not (b.visible & ~a.visible).any()
+    gone = a.visible & ~b.visible
+    sy, sx = np.nonzero(gone)
+    sp = b.surface_point[sy, sx]
+    pose = ideal.robot.poses[0]
+    dist = np.hypot(sp[:, 0] - pose.x_m, sp[:, 1] - pose.y_m)
+    assert gone.sum() == 41 and dist.min() > 0.6           # only far, oblique wall leaves
+    ky, kx = np.nonzero(a.visible)
+    near = np.hypot(b.surface_point[ky, kx, 0] - pose.x_m,
+                    b.surface_point[ky, kx, 1] - pose.y_m) < 0.45
+    assert b.visible[ky[near], kx[near]].all()
+    # each surface cell knows the side it lies on: south and north walls ±y, west ±x
+    n = b.surface_normal[b.surface]
+    assert np.allclose(np.hypot(n[:, 0], n[:, 1]), 1.0)
+    assert np.isnan(b.surface_normal[~b.surface]).all()
+    west = b.surface & (np.abs(b.surface_point[..., 0]) < 1e-9) \
+        & (b.surface_point[..., 1] > 0.01) & (b.surface_point[..., 1] < 0.98)
+    assert np.allclose(np.abs(b.surface_normal[west][:, 0]), 1.0)

@@ -216,3 +216,38 @@ def test_debug_prints_a_failed_rooms_traceback_and_goes_on(tmp_path, monkeypatch
     assert "Traceback" not in err and err.count("\n") == 1
     assert [r["name"] for r in json.loads((tmp_path / "out" / "rooms.json").read_text())
             if "error" not in r] == ["tiny_post"]
+
+
+# One pose near a corner, the far walls near the reach: wall seen there only obliquely gives
+# the GP2 no return (incidence dims it below nothing-in-range), so the scene's visible wall is
+# smaller than an ideal sensor's.
+FAR_CORNER = """\
+name: far_corner
+seed: 5
+room:
+  outline_mm: [[0, 0], [1030, 0], [1030, 990], [0, 990]]
+robot:
+  poses:
+    - {x_mm: 262, y_mm: 243, yaw_deg: 17}
+effects: [incidence, noise, quantization]
+"""
+
+
+def test_the_ideal_sensor_is_judged_on_the_scenes_visible_wall():
+    # both rows of a room score their maps against the same cells, the scene's truth
+    from irring import pipeline
+    from irring.maps import metrics
+
+    sc = S.loads(FAR_CORNER, "far_corner.yaml")
+    ideal = rooms.ideal(sc)
+    row = rooms.measure([sc], 1, progress=False)[0]
+    run = pipeline.run(ideal, seed=5, progress=False)
+    truth = metrics.ground_truth(sc, run.grid)
+    assert {k: row["ideal"][k] for k in S_KEYS} == metrics.score(run.grid, sc, truth)
+    # the ideal sensor's own truth has 41 more cells: far wall seen only obliquely
+    assert int(run.truth.visible.sum()) - int(truth.visible.sum()) == 41
+    # judged on those too, the scene's map misses them
+    own = rooms.score_room(sc, 5)
+    on_ideal = rooms.score_room(sc, 5, judged_on=ideal)
+    assert on_ideal["occupied_recall"] < own["occupied_recall"] - 0.1
+    assert {k: own[k] for k in S_KEYS} == {k: row["effects"][k] for k in S_KEYS}

@@ -24,6 +24,7 @@ without any sensor-signal effect; belt, timing and motion are kept):
   θ=0 mm          the same readings read as if square on (Eq. 10 with a(0), b(0))
   misses          targets missed by the scene's run: F1 ≥ 0.93, precision ≥ 0.90, free
                   accuracy ≥ 0.99; "ideal<" lists scores where the ideal sensor is worse
+                  (both maps judged on the scene's truth: the wall its sensor returns from)
   n/a             nothing to score: no wall within reach (F1, precision, recall), no cell
                   mapped free (free); never counted as a miss or a loss
 

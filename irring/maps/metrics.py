@@ -38,10 +38,13 @@ class GroundTruth:
     surface_owner: np.ndarray  # int16: WALL or OBSTACLE0 + j for surface cells, else 0
     surface_point: np.ndarray  # (ny, nx, 2) m: the surface point nearest each surface
     #                            cell's centre (what "in range" measures to), else NaN
+    surface_normal: np.ndarray  # (ny, nx, 2): unit normal of the surface there, else NaN
+    surface_reflectance: np.ndarray  # (ny, nx): reflectance of the surface there, else NaN
     occupied: np.ndarray       # bool: surface or material
     free: np.ndarray           # bool: free space and not surface
     in_range: np.ndarray       # bool: within max range + ring radius of some pose
-    visible: np.ndarray        # bool: surface cells seen (in range, line of sight) from a pose
+    visible: np.ndarray        # bool: surface cells seen from a pose (in range, line of
+    #                            sight, giving the scene's sensor a return: Returns)
     reachable_free: np.ndarray  # bool: free cells in range and line of sight of some pose
     shadow: np.ndarray         # bool: wall surface cells hidden behind an obstacle (see module doc)
     shadow_ranged: np.ndarray  # bool: shadow cells a sensor could range along a clear line
@@ -52,40 +55,47 @@ class GroundTruth:
 # --------------------------------------------------------------------------- geometry on cells
 
 
-def _outline_samples(points: np.ndarray, step_m: float) -> np.ndarray:
-    """Points every ``step_m`` along a closed polygon (including every corner)."""
+def _outline_samples(points: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ``step_m`` along a closed polygon (including every corner) and the unit
+    normal of the side each lies on (a corner takes its first side's)."""
     pts = np.asarray(points, float)
-    out = []
+    out, normals = [], []
     for a, b in zip(pts, np.roll(pts, -1, axis=0)):
-        n = max(int(math.ceil(np.hypot(*(b - a)) / step_m)), 1)
+        side = b - a
+        length = float(np.hypot(*side))
+        n = max(int(math.ceil(length / step_m)), 1)
         t = np.arange(n + 1)[:, None] / n
-        out.append(a + t * (b - a))
-    return np.concatenate(out)
+        out.append(a + t * side)
+        normal = np.array([-side[1], side[0]]) / length if length > 0 else np.zeros(2)
+        normals.append(np.broadcast_to(normal, (n + 1, 2)))
+    return np.concatenate(out), np.concatenate(normals)
 
 
-def _surface_samples(ob, step_m: float) -> np.ndarray:
+def _surface_samples(ob, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_outline_samples` of an obstacle's perimeter (a cylinder's normals radial)."""
     if isinstance(ob, Cylinder):
         n = max(int(math.ceil(2 * math.pi * ob.radius_m / step_m)), 8)
         a = np.arange(n) * (2 * math.pi / n)
-        return np.stack([ob.center_m[0] + ob.radius_m * np.cos(a),
-                         ob.center_m[1] + ob.radius_m * np.sin(a)], axis=1)
+        radial = np.stack([np.cos(a), np.sin(a)], axis=1)
+        return np.asarray(ob.center_m, float) + ob.radius_m * radial, radial
     return _outline_samples(box_corners(ob), step_m)
 
 
 def _nearest_to_centres(samples: np.ndarray, cell: np.ndarray, cx: np.ndarray,
                         cy: np.ndarray) -> np.ndarray:
-    """(ny, nx, 2) on the grid of cell centres ``cx``, ``cy`` (ny, nx; m): for each cell
-    holding surface ``samples`` (m; ``cell`` their flat cell index), the sample nearest its
-    centre; NaN in cells without one. A wall along a cell's edge lies half a cell from the
-    centre: judged at the centre, wall 629 mm from a sensor counted as in its 624 mm reach."""
-    out = np.full((cx.size, 2), np.nan)
+    """(ny, nx) on the grid of cell centres ``cx``, ``cy`` (ny, nx; m): for each cell
+    holding surface ``samples`` (m; ``cell`` their flat cell index), the index of the sample
+    nearest its centre; −1 in cells without one. A wall along a cell's edge lies half a cell
+    from the centre: judged at the centre, wall 629 mm from a sensor counted as in its
+    624 mm reach."""
+    out = np.full(cx.size, -1, np.intp)
     if cell.size:
         dist = np.hypot(samples[:, 0] - cx.take(cell), samples[:, 1] - cy.take(cell))
         order = np.lexsort((dist, cell))
         first = np.unique(cell[order], return_index=True)[1]
         pick = order[first]
-        out[cell[pick]] = samples[pick]
-    return out.reshape(cx.shape + (2,))
+        out[cell[pick]] = pick
+    return out.reshape(cx.shape)
 
 
 def _dilate(mask: np.ndarray) -> np.ndarray:
@@ -153,10 +163,36 @@ def _reach_m(scenario: Scenario) -> float:
     return scenario.sensor.max_range_m + radius
 
 
-def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float]:
-    """(ring, min and max range m, sensor angles lo and hi rad) of what a sensor can range:
-    the sensor model's measuring interval and the ring's sweep, widened to at least ± half
-    the sensor spacing (see :func:`_measurable`)."""
+@dataclass(frozen=True)
+class Returns:
+    """What, beyond range and line of sight, the scene's sensor needs to return a reading
+    from a surface point: its curve ``model`` (gp2 name); with the ``incidence`` effect, an
+    incidence ≤ ``max_incidence_rad`` and a voltage no weaker than nothing in range gives
+    (a(θ), b(θ) dim a slanted return: a wall 600 mm off at 65° reads as 825 mm); with the
+    ``reflectance`` effect, a signal ≥ ``min_signal`` (None: the effect is off)."""
+
+    model: str
+    max_incidence_rad: float | None = None
+    min_signal: float | None = None
+
+
+def _returns(scenario: Scenario) -> Returns:
+    effects = scenario.effects
+    model = gp2.sensor(scenario.sensor.model)
+    incidence, reflectance = effects.get("incidence"), effects.get("reflectance")
+    limit = None
+    if incidence is not None:
+        limit = (incidence.max_incidence_rad if incidence.max_incidence_rad is not None
+                 else model.max_incidence_rad)
+    return Returns(model=scenario.sensor.model, max_incidence_rad=limit,
+                   min_signal=None if reflectance is None else reflectance.min_signal)
+
+
+def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float, Returns]:
+    """(ring, min and max range m, sensor angles lo and hi rad, :class:`Returns`) of what a
+    sensor can range: the sensor model's measuring interval and the ring's sweep, widened to
+    at least ± half the sensor spacing (see :func:`_measurable`), and what the scene's
+    effects need of a surface for a return."""
     try:
         ring = scenario.ring
     except ValueError:  # a design without a ring preset: one sensor at the centre, any way
@@ -165,15 +201,38 @@ def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float]:
     lo, hi = ring.min_step * turn, ring.max_step * turn
     half = math.pi / ring.sensors
     return (ring, gp2.sensor(scenario.sensor.model).min_range_m, scenario.sensor.max_range_m,
-            min(lo, -half), max(hi, half))
+            min(lo, -half), max(hi, half), _returns(scenario))
+
+
+def _gives_return(t, psi, d_max: float, returns: Returns, surface) -> np.ndarray:
+    """Whether beams of heading ``psi`` (rad) meeting ``surface`` = (normal x, normal y,
+    reflectance) at ``t`` m along them return a reading (:class:`Returns`), noise aside."""
+    model = gp2.sensor(returns.model)
+    nx, ny, rho = surface
+    ok = np.ones(np.shape(t), bool)
+    t = np.maximum(t, 1e-9)
+    if returns.max_incidence_rad is not None:
+        theta = np.arccos(np.minimum(np.abs(np.cos(psi) * nx + np.sin(psi) * ny), 1.0))
+        read_square_on = model.distance(model.voltage(t, theta))   # what its voltage means
+        ok &= (theta <= returns.max_incidence_rad) & (read_square_on <= d_max)
+    if returns.min_signal is not None:
+        ok &= rho * (model.max_range_m / t) ** 2 >= returns.min_signal
+    return ok
 
 
 def _sensor_views(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: float,
-                  a_hi: float):
+                  a_hi: float, returns: Returns | None = None, *, surface=None):
     """Per sensor k of ``ring`` at ``pose``: (can, ex, ey) for points (m): whether sensor k,
     its hinge at the ring radius, turned to the angle that puts the point on its beam (the
     emitter d_o to the beam's right) within [a_lo, a_hi] of radial, finds it at a distance
-    within [d_min, d_max] of the emitter; and where that emitter then is."""
+    within [d_min, d_max] of the emitter and, by ``returns``, gets a return from it; and
+    where that emitter then is. ``surface``: (normal x, normal y, reflectance) of each
+    point, needed when ``returns`` asks for incidence or reflectance (else ValueError)."""
+    check = returns is not None and (returns.max_incidence_rad is not None
+                                     or returns.min_signal is not None)
+    if check and surface is None:
+        raise ValueError("the scene's effects make returns depend on the surface: pass "
+                         "surface=(normal x, normal y, reflectance)")
     d_o = ring.emitter_offset_m
     for k in range(ring.sensors):
         rho = pose.yaw_rad + 2.0 * math.pi * k / ring.sensors
@@ -184,23 +243,33 @@ def _sensor_views(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: fl
         psi = np.arctan2(vy, vx) + np.arctan2(d_o, t)                 # the beam's heading
         can = ((t >= d_min) & (t <= d_max)
                & (np.mod(psi - rho - a_lo, 2.0 * math.pi) <= a_hi - a_lo))
+        if check:
+            can &= _gives_return(t, psi, d_max, returns, surface)
         yield can, hx + d_o * np.sin(psi), hy - d_o * np.cos(psi)
 
 
-def _measurable(px, py, pose, *ranging) -> np.ndarray:
+def _measurable(px, py, pose, *ranging, surface=None) -> np.ndarray:
     """Points (m) some sensor of the ring at ``pose`` could range (:func:`_sensor_views`;
     ``ranging`` from :func:`_ranging`)."""
     ok = np.zeros(np.shape(px), bool)
-    for can, _, _ in _sensor_views(px, py, pose, *ranging):
+    for can, _, _ in _sensor_views(px, py, pose, *ranging, surface=surface):
         ok |= can
     return ok
+
+
+def _surface_at(cells, surface_point, surface_normal, surface_reflectance):
+    """(ty, tx, x, y, (normal x, normal y, reflectance)) of the ``cells`` (bool grid)."""
+    ty, tx = np.nonzero(cells)
+    n = surface_normal[ty, tx]
+    return (ty, tx, surface_point[ty, tx, 0], surface_point[ty, tx, 1],
+            (n[:, 0], n[:, 1], surface_reflectance[ty, tx]))
 
 
 def _ranged_in_sight(scenario: Scenario, grid: OccupancyGrid, material: np.ndarray,
                      cells: np.ndarray, surface_point: np.ndarray, ranging) -> np.ndarray:
     """The surface ``cells`` (bool, on the grid) some sensor of some pose could range (at
-    their ``surface_point``) along a clear line from its emitter (no material on the way but
-    within 1 cell of the cell)."""
+    their ``surface_point``; ``ranging`` without :class:`Returns`) along a clear line from
+    its emitter (no material on the way but within 1 cell of the cell)."""
     ty, tx = np.nonzero(cells)
     px, py = surface_point[ty, tx, 0], surface_point[ty, tx, 1]
     ok = np.zeros(len(tx), bool)
@@ -240,19 +309,27 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     step = res / 4
     marked = []
 
-    def mark(samples, owner):
+    def mark(sampled, reflectance, owner):
+        samples, normals = sampled
         ix, iy = grid.cell_of(samples[:, 0], samples[:, 1])
         ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
         surface_owner[iy[ok], ix[ok]] = owner
-        marked.append((samples[ok], iy[ok] * nx + ix[ok]))
+        marked.append((samples[ok], normals[ok], np.full(int(ok.sum()), float(reflectance)),
+                       iy[ok] * nx + ix[ok]))
 
-    mark(_outline_samples(np.asarray(outline, float), step), WALL)
+    mark(_outline_samples(np.asarray(outline, float), step), scenario.room.reflectance, WALL)
     for j, ob in enumerate(scenario.obstacles):
-        mark(_surface_samples(ob, step), OBSTACLE0 + j)
+        mark(_surface_samples(ob, step), ob.reflectance, OBSTACLE0 + j)
     surface = surface_owner > 0
-    surface_point = _nearest_to_centres(np.concatenate([m[0] for m in marked]),
-                                        np.concatenate([m[1] for m in marked]),
-                                        px, py)
+    samples, normals, rho, cells = (np.concatenate(m) for m in zip(*marked))
+    pick = _nearest_to_centres(samples, cells, px, py)
+    has = pick >= 0
+    surface_point = np.full(px.shape + (2,), np.nan)
+    surface_point[has] = samples[pick[has]]
+    surface_normal = np.full(px.shape + (2,), np.nan)
+    surface_normal[has] = normals[pick[has]]
+    surface_reflectance = np.full(px.shape, np.nan)
+    surface_reflectance[has] = rho[pick[has]]
     occupied = surface | (label > 0)
     free = (label == FREE_SPACE) & ~surface
 
@@ -264,26 +341,33 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     ranging = _ranging(scenario)
     in_range = np.zeros(px.shape, bool)   # surface and free cells in range of some pose …
     seen = np.zeros(px.shape, bool)       # … and in its line of sight
+    visible = np.zeros(px.shape, bool)    # … and giving a return (Returns) from that pose
     hidden_by_obstacle = np.zeros(px.shape, np.int16)
-    sy, sx = np.nonzero(surface)
-    sp = surface_point[sy, sx]
+    sy, sx, spx, spy, sdir = _surface_at(surface, surface_point, surface_normal,
+                                         surface_reflectance)
+    geometric = ranging[:5]               # range and sweep only: what the shadow is judged by
     for pose in scenario.robot.poses:  # a handful of poses; each is vectorised over cells
         near = free & (np.hypot(px - pose.x_m, py - pose.y_m) <= reach)
-        near[sy, sx] = _measurable(sp[:, 0], sp[:, 1], pose, *ranging)
+        near[sy, sx] = _measurable(spx, spy, pose, *geometric)
         in_range |= near
         ty, tx = np.nonzero(near)
         first = _sight((ny, nx), origin, res, material, (pose.x_m, pose.y_m), tx, ty)
         clear = first == 0
         seen[ty[clear], tx[clear]] = True
+        returns = np.zeros(px.shape, bool)
+        returns[sy, sx] = _measurable(spx, spy, pose, *ranging, surface=sdir)
+        visible[ty[clear], tx[clear]] |= returns[ty[clear], tx[clear]]
         by_obstacle = (first >= OBSTACLE0) & (surface_owner[ty, tx] == WALL)
         unset = hidden_by_obstacle[ty, tx] == 0
         pick = by_obstacle & unset
         hidden_by_obstacle[ty[pick], tx[pick]] = first[pick]
-    visible = seen & surface
-    shadow = (surface_owner == WALL) & in_range & ~visible & (hidden_by_obstacle > 0)
-    shadow_ranged = _ranged_in_sight(scenario, grid, material, shadow, surface_point, ranging)
+    # the paper's shadow is geometry (wall a centre sensor cannot see); a cell the sensor
+    # sees too obliquely to return from is not hidden, and not visible either
+    shadow = (surface_owner == WALL) & in_range & ~(seen & surface) & (hidden_by_obstacle > 0)
+    shadow_ranged = _ranged_in_sight(scenario, grid, material, shadow, surface_point, geometric)
     return GroundTruth(label=label, surface=surface, surface_owner=surface_owner,
-                       surface_point=surface_point,
+                       surface_point=surface_point, surface_normal=surface_normal,
+                       surface_reflectance=surface_reflectance,
                        occupied=occupied, free=free, in_range=in_range,
                        visible=visible, reachable_free=seen & free, shadow=shadow,
                        shadow_ranged=shadow_ranged,
@@ -325,11 +409,11 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
                          "build it with ground_truth(scenario, grid) for this grid")
     ranged = truth.shadow_ranged
     if (mapped_by is not None and mapped_by is not scenario
-            and (_ranging(mapped_by), mapped_by.robot.poses)
-            != (_ranging(scenario), scenario.robot.poses)):   # another ring or other poses
+            and (_ranging(mapped_by)[:5], mapped_by.robot.poses)
+            != (_ranging(scenario)[:5], scenario.robot.poses)):   # another ring or other poses
         material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
-        ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow, truth.surface_point,
-                                  _ranging(mapped_by))
+        ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow,
+                                  truth.surface_point, _ranging(mapped_by)[:5])
     cls = grid.classify()
     occ = cls == OCCUPIED
     free = cls == FREE

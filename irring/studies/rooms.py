@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import errors, pipeline
 from ..estimation.estimate import estimate
+from ..maps import metrics
 from ..maps.metrics import SCORE_KEYS
 from ..pipeline import progress_bar
 from ..scenario import Scenario, ScenarioError, load_scenario, resolve
@@ -56,9 +57,12 @@ def point_errors(sweep, points, points_theta0) -> tuple[np.ndarray, np.ndarray]:
             np.hypot(points_theta0.x[m] - hx[m], points_theta0.y[m] - hy[m]))
 
 
-def score_room(scenario: Scenario, seed: int | None = None) -> dict:
+def score_room(scenario: Scenario, seed: int | None = None, *,
+               judged_on: Scenario | None = None) -> dict:
     """One room, one seed, as written: the six map scores, ``point_rms_m``,
-    ``point_rms_theta0_m`` (None when no reading qualifies), ``readings``, ``valid``."""
+    ``point_rms_theta0_m`` (None when no reading qualifies), ``readings``, ``valid``.
+    ``judged_on``: the scene whose ground truth scores the map (default ``scenario``): the
+    same room with other effects, so two sensors are judged on the same visible wall."""
     theta0 = []
 
     def both(sweep, calibration):  # θ = 0 with the very calibration the run estimates with
@@ -72,7 +76,9 @@ def score_room(scenario: Scenario, seed: int | None = None) -> dict:
         errs.append(e)
         errs0.append(e0)
     readings = run.readings()
-    return {**{k: run.scores[k] for k in SCORE_KEYS},
+    scores = run.scores if judged_on is None else metrics.score(
+        run.grid, judged_on, metrics.ground_truth(judged_on, run.grid), mapped_by=scenario)
+    return {**{k: scores[k] for k in SCORE_KEYS},
             "point_rms_m": _rms(np.concatenate(errs)),
             "point_rms_theta0_m": _rms(np.concatenate(errs0)),
             "readings": readings["total"], "valid": readings["valid"]}
@@ -149,8 +155,8 @@ def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
     row = {"name": sc.name, "source": sc.source}
     for variant, scene in (("effects", sc), ("ideal", ideal(sc))):
         runs = []
-        for seed in seeds:
-            runs.append(score_room(scene, seed))
+        for seed in seeds:   # both judged on the scene's truth: the wall its sensor returns from
+            runs.append(score_room(scene, seed, judged_on=sc if scene is not sc else None))
             bar.update()
         row[variant] = {k: mean_of([r[k] for r in runs]) for k in runs[0]}
     row["misses"] = {k: row["effects"][k] for k, lim in TARGETS.items()
