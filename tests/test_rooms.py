@@ -196,10 +196,10 @@ def test_debug_prints_a_failed_rooms_traceback_and_goes_on(tmp_path, monkeypatch
     (tmp_path / "b_post.yaml").write_text(SMALL_ROOM)
     real = rooms.score_room
 
-    def failing(scene, seed):
+    def failing(scene, seed, **judged):
         if scene.name == "a_post":
             raise ZeroDivisionError("a_post's run")
-        return real(scene, seed)
+        return real(scene, seed, **judged)
 
     monkeypatch.setattr(rooms, "score_room", failing)
     monkeypatch.delenv("IRRING_DEBUG", raising=False)
