@@ -8,10 +8,14 @@ can raise these.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import reprlib
+import signal
 import sys
+import threading
+from typing import Iterator
 
 OK = 0             # done
 INPUT = 1          # bad input: a scenario, recording, calibration or sensor-curve file
@@ -109,3 +113,23 @@ def describe(exc: BaseException) -> tuple[int, str]:
         return INPUT, printable(f"{where}{why}")
     return INTERNAL, printable(f"internal error ({type(exc).__name__}: {exc}); rerun with "
                                f"--debug (or {DEBUG_ENV}=1) for the traceback and please report it")
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM (`kill`) ends the block as Ctrl-C does (KeyboardInterrupt), so what the
+    command does on Ctrl-C (stop a worker pool, write what a drive swept) happens too,
+    instead of the process dying; only where nobody else handles SIGTERM."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
+        yield
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)

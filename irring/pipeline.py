@@ -173,14 +173,15 @@ class Acquisition:
 
     ``reports[i]`` is the source's account of sweep i when it keeps one (``SerialRing``:
     its :class:`~irring.hardware.SweepReport`), else None. ``error`` is the
-    :class:`~irring.core.SourceLost` that ended the acquisition early (its partial sweep,
-    if any readings arrived, is the last of ``sweeps``), None when every pose was swept.
+    :class:`~irring.core.SourceLost` (or, when interruptible, the KeyboardInterrupt or
+    EOFError) that ended the acquisition early (its partial sweep, if any readings arrived,
+    is the last of ``sweeps``), None when every pose was swept.
     ``seconds``: wall-clock time spent sweeping.
     """
 
     sweeps: list[Sweep] = field(default_factory=list)
     reports: list[Any] = field(default_factory=list)
-    error: Exception | None = None
+    error: BaseException | None = None
     seconds: float = 0.0
 
     @property
@@ -191,7 +192,8 @@ class Acquisition:
 
 def acquire(source: RingSource, poses: Iterable, *, steps: np.ndarray | None = None,
             progress: bool | None = None, before: Callable[[int, Any], None] | None = None,
-            after: Callable[[int, Sweep, Any], None] | None = None) -> Acquisition:
+            after: Callable[[int, Sweep, Any], None] | None = None,
+            interruptible: bool = False) -> Acquisition:
     """One sweep of ``source`` (a :class:`~irring.core.RingSource`: ``SimRing``,
     ``SerialRing``, …) at each of ``poses``, in order → :class:`Acquisition`.
 
@@ -201,21 +203,25 @@ def acquire(source: RingSource, poses: Iterable, *, steps: np.ndarray | None = N
     wait while a person moves the robot), ``after(k, sweep, report)`` after it.
     A source lost mid-sweep (:class:`~irring.core.SourceLost`) ends the acquisition
     without raising: what arrived is kept and the error is in ``Acquisition.error``.
+    ``interruptible``: Ctrl-C (KeyboardInterrupt) or the end of input (EOFError, from
+    ``before``) ends it the same way, for a caller that writes what arrived before stopping.
     """
     poses = list(poses)
     out = Acquisition()
+    stops = (SourceLost, KeyboardInterrupt, EOFError) if interruptible else SourceLost
     t0 = time.perf_counter()
     with progress_bar(len(poses), "sweep", progress) as bar:
         for k, pose in enumerate(poses):
-            if before is not None:
-                before(k, pose)
             try:
+                if before is not None:
+                    before(k, pose)
                 sweep = source.sweep(pose, steps=steps)
-            except SourceLost as exc:
+            except stops as exc:
                 out.error = exc
-                if exc.partial is not None and len(exc.partial.steps):
-                    out.sweeps.append(exc.partial)
-                    out.reports.append(exc.report)
+                partial = getattr(exc, "partial", None)   # a source's SourceLost carries it
+                if partial is not None and len(partial.steps):
+                    out.sweeps.append(partial)
+                    out.reports.append(getattr(exc, "report", None))
                 break
             report = getattr(source, "last_report", None)
             out.sweeps.append(sweep)

@@ -254,3 +254,49 @@ def announces(**kw):
             dev.send(info(**kw))
     behaviour.__name__ = "announces_" + "_".join(f"{k}{v}" for k, v in kw.items())
     return behaviour
+
+
+def good_then(behaviour, sweeps: int = 1):
+    """A correct device for the first ``sweeps`` IRSWP, then ``behaviour`` (a board that
+    breaks down at the second pose)."""
+    def switch(dev, cmd):
+        if isinstance(cmd, p.SweepCommand):
+            dev.sweeps_seen = getattr(dev, "sweeps_seen", 0) + 1
+        late = getattr(dev, "sweeps_seen", 0) > sweeps
+        (behaviour if late else good)(dev, cmd)
+    switch.__name__ = f"good_then_{behaviour.__name__}"
+    return switch
+
+
+def clock_jump(dev, cmd):
+    """Two steps whose device clocks lie 2³¹ ms (25 days) apart, the rest lost, then IRDON;
+    later passes deliver nothing."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand):
+        dev.passes = getattr(dev, "passes", 0) + 1
+        if dev.passes == 1:
+            for step, t_ms in ((cmd.from_step, 0), (cmd.from_step + 1, 2**31 - 1000)):
+                counts = ",".join(map(str, counts_for(step)))
+                dev.send(line(f"IRSCN,{dev.seq},{step},{t_ms},{counts}"))
+                dev.seq += 1
+            dev.seq += abs(cmd.to_step - cmd.from_step) - 1   # sent, but lost on the way
+        dev.send(line(f"IRDON,{dev.seq - 1}"))
+    elif isinstance(cmd, p.Stop):
+        dev.send(line(f"IRDON,{dev.seq - 1}"))
+
+
+def interrupt_after(n_scans: int):
+    """Sends ``n_scans`` IRSCN of the second sweep, then Ctrl-C reaches the host (its main
+    thread gets KeyboardInterrupt) and the device goes quiet."""
+    import _thread
+
+    def second(dev, cmd):
+        if isinstance(cmd, p.SweepCommand):
+            for step in range(cmd.from_step, cmd.from_step + n_scans):
+                dev.send(scan(dev.seq, step))
+                dev.seq += 1
+            time.sleep(0.05)
+            _thread.interrupt_main()
+    second.__name__ = f"interrupt_after_{n_scans}"
+    return second

@@ -344,6 +344,79 @@ def test_drive_on_a_hostile_device_exits_3_with_one_line_and_writes_nothing(
     assert not out.exists() and list(tmp_path.iterdir()) == []   # no partial output
 
 
+def _drive(tmp_path, behaviour, *extra, poses=3):
+    """irring drive on a hostile device at ``poses`` poses 100 mm apart → (status, out)."""
+    dev = hd.HostileDevice(behaviour)
+    out = tmp_path / "out"
+    argv = ["drive", "--port", dev.link, "--timeout", str(TIMEOUT_S), "--no-wait",
+            "--no-animation", "--out", str(out), "--resweep", "0", *extra]
+    for k in range(poses):
+        argv += ["--pose", f"{100 * k},{30 + 7 * k},{5 * k}"]
+    try:
+        return main(argv), out
+    finally:
+        dev.close()
+
+
+def _recorded(out) -> list:
+    sweeps, _ = load_recording(out / "sweeps.npz")
+    for sweep in sweeps:   # what was recorded is what the device sent, nothing invented
+        for step, row in zip(sweep.steps, sweep.counts):
+            assert list(row) == hd.counts_for(int(step))
+    return sweeps
+
+
+@pytest.mark.parametrize("later, said", [
+    (hd.error_reply(3), "the ring rejected $IRSWP,-2,2,1,0*63: IRERR 3 (bad argument)"),
+    (hd.error_reply(5), "the ring kept refusing $IRSWP,-2,2,1,0*63: IRERR 5 (busy)"),
+])
+def test_a_device_refusing_the_second_pose_keeps_the_first(tmp_path, capsys, later, said):
+    """A refusal ended the drive as exit 3 with nothing written: the complete first sweep
+    was thrown away."""
+    code, out = _drive(tmp_path, hd.good_then(later))
+    err = capsys.readouterr().err
+    assert code == 3, err
+    assert said in err and "Traceback" not in err
+    sweeps = _recorded(out)
+    assert len(sweeps) == 1 and list(sweeps[0].steps) == [-2, -1, 0, 1, 2]
+    assert np.allclose(sweeps[0].pose, [0.0, 0.030, 0.0])
+    link = json.loads((out / "link.json").read_text())
+    assert len(link["sweeps"]) == 1 and said in link["error"]
+
+
+def test_input_ending_at_the_pose_prompt_keeps_what_was_swept(tmp_path, capsys, monkeypatch):
+    """Ctrl-D at "press Enter" was an internal error (exit 70) that lost the first sweep."""
+    class Terminal(io.StringIO):   # a terminal whose input has ended
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr("sys.stdin", Terminal(""))
+    dev = hd.HostileDevice(hd.good)
+    out = tmp_path / "out"
+    try:
+        code = main(["drive", "--port", dev.link, "--timeout", str(TIMEOUT_S), "--out",
+                     str(out), "--no-animation", "--pose", "0,30", "--pose", "100,37"])
+    finally:
+        dev.close()
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert "irring drive: input ended before pose 2 of 2; the 1 pose swept is mapped" in err
+    assert "internal error" not in err
+    assert len(_recorded(out)) == 1
+
+
+def test_ctrl_c_in_a_sweep_keeps_the_finished_poses_and_the_steps_that_arrived(tmp_path,
+                                                                               capsys):
+    code, out = _drive(tmp_path, hd.good_then(hd.interrupt_after(3)))
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert "irring drive: interrupted during pose 2 of 3; the 2 poses swept are mapped" in err
+    first, second = _recorded(out)
+    assert list(first.steps) == [-2, -1, 0, 1, 2]
+    assert list(second.steps) == [-2, -1, 0] and second.missing_steps == (1, 2)
+    assert json.loads((out / "link.json").read_text())["error"] == "interrupted"
+
+
 # --------------------------------------------------------------------------- command line
 
 

@@ -38,9 +38,10 @@ otherwise give each pose with --pose X_MM,Y_MM,YAW_DEG (default: one pose at the
 Between poses drive waits for Enter when run at a terminal (--no-wait to skip); the emulator
 moves its robot by itself at every full sweep.
 
-Exit status: 0 all poses swept; 3 no device, or it stopped answering, disconnected or made
-no progress (what arrived is still mapped and written); 2 bad arguments; 1 a bad --truth or
---calibration file.
+Exit status: 0 all poses swept; 3 no device, or it stopped answering, disconnected, refused
+a sweep or made no progress (what arrived is still mapped and written); 130 Ctrl-C, SIGTERM
+or the input ended at the prompt (the poses swept so far are mapped and written); 2 bad
+arguments; 1 a bad --truth or --calibration file.
 
 examples:
   irring emulate t_room &                               # try it without hardware (ring.pty)
@@ -180,18 +181,38 @@ def run(args: argparse.Namespace) -> int:
             input(f"move the robot to pose {k + 1} of {n} ({pose[0] * 1e3:.0f} mm, "
                   f"{pose[1] * 1e3:.0f} mm, {math.degrees(pose[2]):.0f}°) and press Enter ")
 
+    finished = []   # poses whose sweep came back whole or with steps missing
+
+    def swept(k: int, sweep, report) -> None:
+        finished.append(k)
+        say(f"pose {k + 1}/{n}: {report.message}")
+
     try:
-        acq = pipeline.acquire(ring, poses[:n], steps=steps, progress=False, before=move,
-                               after=lambda k, _, r: say(f"pose {k + 1}/{n}: {r.message}"))
+        # Ctrl-C, `kill` or the end of input (Ctrl-D at the prompt) stops the drive, but
+        # what the ring already delivered is mapped and written, as after a lost link
+        with errors.sigterm_as_interrupt():
+            acq = pipeline.acquire(ring, poses[:n], steps=steps, progress=False, before=move,
+                                   after=swept, interruptible=True)
     finally:
         ring.close()
     sweeps, failure = acq.sweeps, acq.error
-    if not sweeps:   # one line: why, and that there is nothing to map
+    stopped = isinstance(failure, (KeyboardInterrupt, EOFError))
+    if stopped:
+        at = len(finished)
+        what = (f"input ended before pose {at + 1} of {n}" if isinstance(failure, EOFError)
+                else f"interrupted during pose {at + 1} of {n}")
+        kept = (f"the {len(sweeps)} pose{'s' if len(sweeps) != 1 else ''} swept "
+                f"{'are' if len(sweeps) != 1 else 'is'} mapped and written" if sweeps
+                else "no reading arrived, so nothing was mapped or written")
+        print(f"irring drive: {what}; {kept}", file=sys.stderr)
+        if not sweeps:
+            return errors.INTERRUPTED
+    elif not sweeps:   # one line: why, and that there is nothing to map
         why = f"{errors.printable(str(failure), 2000)}; " if failure is not None else ""
         print(f"irring drive: error: {why}no reading arrived, so "
               "nothing was mapped or written", file=sys.stderr)
         return errors.DEVICE
-    if failure is not None:   # what arrived is mapped below
+    elif failure is not None:   # what arrived is mapped below
         print(f"irring drive: error: {errors.printable(str(failure), 2000)}", file=sys.stderr)
 
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
@@ -201,7 +222,7 @@ def run(args: argparse.Namespace) -> int:
     result.calibration_text = cal_text
     link = {"port": args.port, "firmware": info.firmware, "totals": ring.stats.as_dict(),
             "sweeps": [r.as_dict() for r in acq.reports],
-            "error": None if failure is None else str(failure)}
+            "error": None if failure is None else "interrupted" if stopped else str(failure)}
     paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation,
                                    mcap=args.mcap,
                                    extra_files={"link": ("link.json", json.dumps(link, indent=2))})
@@ -215,4 +236,4 @@ def run(args: argparse.Namespace) -> int:
         print(f"  link      {t.scans} steps read, {missing} steps missing; "
               f"{t.checksum_failures} checksum failures, {t.malformed} malformed, "
               f"{t.seq_gaps} seq gaps, {t.timeouts} timeouts, {t.resweeps} re-sweeps")
-    return 0 if failure is None else errors.DEVICE
+    return 0 if failure is None else errors.INTERRUPTED if stopped else errors.DEVICE

@@ -53,8 +53,9 @@ class HandshakeError(DeviceError):
     """No usable IRINF answer to IRHLO."""
 
 
-class DeviceRejected(DeviceError):
-    """The device answered a command with IRERR (bad argument, step out of range, …)."""
+class DeviceRejected(DeviceError, core.SourceLost):
+    """The device answered a command with IRERR (bad argument, step out of range, …); in a
+    sweep, ``partial`` and ``report`` hold what arrived before it (as :class:`LinkLost`)."""
 
     def __init__(self, message: str, code: int, text: str):
         super().__init__(message)
@@ -533,13 +534,18 @@ class SerialRing:
                 for run in _runs(missing):
                     passes.append(_Pass(run))
                     self._pass(passes[-1], samples, settle_ms)
-        except LinkLost as exc:
+        except (LinkLost, DeviceRejected, KeyboardInterrupt) as exc:
+            # what arrived before the failure (or Ctrl-C) goes with the exception: a caller
+            # keeps it (pipeline.acquire) instead of losing the readings
             self._last_seq = None  # the device may still be numbering IRSCN we never saw
             self._position = None
-            sweep, report = build(False, "device stopped answering"
-                                  if isinstance(exc, DeviceTimeout) else "device disconnected")
+            reason = ("device stopped answering" if isinstance(exc, DeviceTimeout) else
+                      "device disconnected" if isinstance(exc, DeviceDisconnected) else
+                      "device refused" if isinstance(exc, DeviceRejected) else "interrupted")
+            sweep, report = build(False, reason)
             exc.partial, exc.report = sweep, report
-            exc.args = (f"{exc} {report.message}",)
+            if not isinstance(exc, KeyboardInterrupt):
+                exc.args = (f"{exc} {report.message}",)
             raise
         sweep, report = build(all(ps.done for ps in passes), "")
         if not len(sweep.steps):
@@ -645,7 +651,8 @@ class SerialRing:
                     if msg.code == p.ERR_BUSY or (msg.code == p.ERR_BAD_SENTENCE and not ps.got
                                                   and not stops):
                         if resends >= self.retries:
-                            raise DeviceRejected(f"the ring kept refusing {p.encode(cmd)!r}: "
+                            raise DeviceRejected(f"the ring kept refusing "
+                                                 f"{p.encode(cmd).decode().strip()}: "
                                                  f"IRERR {msg.code} ({msg.text})", msg.code,
                                                  msg.text)
                         resends += 1

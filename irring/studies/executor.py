@@ -16,7 +16,7 @@ import threading
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterator, Sequence
 
-from ..errors import UsageError
+from ..errors import UsageError, sigterm_as_interrupt
 
 
 class SerialExecutor(Executor):
@@ -124,7 +124,7 @@ def executor(workers: int | None = 1, dask: str | Any | None = None) -> Iterator
     pool = ProcessPoolExecutor(max_workers=n, initializer=_ignore_sigint,
                                mp_context=multiprocessing.get_context(_start_method()))
     try:
-        with _sigterm_as_interrupt():
+        with sigterm_as_interrupt():
             yield pool
     except (KeyboardInterrupt, SystemExit):   # Ctrl-C: stop the runs in flight, do not wait
         _stop_workers(pool)
@@ -147,25 +147,6 @@ def _stop_workers(pool: ProcessPoolExecutor) -> None:
         proc.terminate()
     for proc in workers:
         proc.join(5)
-
-
-@contextlib.contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
-    """SIGTERM ends a pool's parent as Ctrl-C does (workers stopped, queues closed), instead
-    of killing it with the pool's semaphores leaked; only where nobody else handles it."""
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
-        yield
-        return
-
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def capacity(ex: Executor | None) -> int:
