@@ -322,3 +322,33 @@ robot: {poses: [{x_mm: 300, y_mm: 170}]}
     for x in (9.0, 15.0, 29.0):          # the long walls, past the scale bar's box
         assert _near(blue, *pic.to_px(x, 0.0)) and _near(blue, *pic.to_px(x, 0.4)), x
     assert _near(red, *pic.to_px(0.3, 0.17), r=4)
+
+
+def test_a_flat_map_keeps_its_scale_bar_below_the_axes_off_the_poses():
+    # in a 6 m × 0.42 m corridor the bar's box in the axes' corner hid the first pose's
+    # ring and number and a third of the strip's height; it goes right of the x label
+    from irring.maps.mapping import OccupancyGrid
+    from irring.scenario import loads
+
+    sc = loads("""
+name: corridor6
+room: {outline_mm: [[0, 0], [6000, 0], [6000, 420], [0, 420]]}
+robot: {poses: [{x_mm: 800, y_mm: 210}, {x_mm: 3100, y_mm: 215}]}
+""", source="corridor6.yaml")
+    grid = OccupancyGrid.for_scenario(sc)
+    poses = [np.array([0.8, 0.21, 0.0]), np.array([3.1, 0.215, 0.0])]
+    pic = render.MapPicture(grid, sc, poses, 0.624, 0.15)
+    img = pic.rgb(grid.classify(), "corridor6").astype(int)
+    L, T, R, B = pic._box
+    red = _hue(img, render.POSE_COLOR)
+    c, r = pic.to_px(0.8, 0.21)
+    for dx, dy in ((0.15, 0.0), (-0.15, 0.0), (0.0, 0.15)):     # pose 1's ring all round
+        assert _near(red, *pic.to_px(0.8 + dx, 0.21 + dy), r=3), (dx, dy)
+    # the 1 m bar: a black line 1 m long below the axes, ending at their right edge
+    half = int((L + R) / 2 + 0.5 * pic.scale)                   # right of the x label
+    below = img[int(B) + 20:, half:int(R) + 1].min(axis=2) < 50
+    spans = [np.ptp(np.flatnonzero(row)) if row.any() else 0 for row in below]
+    bar = [k for k, w in enumerate(spans)                  # the bar, not its wider frame
+           if 0.97 * pic.scale < w < 1.04 * pic.scale and below[k].sum() > 0.95 * w]
+    assert len(bar) >= 2
+    assert abs(half + np.flatnonzero(below[bar[0]]).max() - R) < 0.15 * pic.scale

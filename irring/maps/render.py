@@ -321,16 +321,21 @@ class MapPicture:
                 else:
                     truth.polygon(self.to_px(*np.asarray(box_corners(ob)).T), 1.0 * pt)
 
-        # the scale bar: a framed white box in the upper left corner of the axes
+        # the scale bar: a framed white box in the upper left corner of the axes, or, where
+        # it would hide a third of a flat map (a corridor), right of the x label below them
         bar_m = _round_below((x1 - x0) / 5)               # 0.5 m on the T-room
         bar_h = max(2.0, (y1 - y0) * 0.008 * scale)
         text = f"{bar_m * 1000:.0f} mm" if bar_m < 1 else f"{bar_m:g} m"
-        bx0, by0 = L + 0.6 * 8 * pt, T + 0.6 * 8 * pt
         inner = 0.4 * 8 * pt
-        sb = (round(bx0), round(by0),
-              round(bx0 + 2 * inner + max(bar_m * scale, small.getlength(text))),
-              round(by0 + 2 * inner + bar_h + 3 * pt + small.size))
+        sb_w = 2 * inner + max(bar_m * scale, small.getlength(text))
+        sb_h = 2 * inner + bar_h + 3 * pt + small.size
+        if sb_h + 1.2 * 8 * pt <= (B - T) / 3:
+            bx0, by0 = L + 0.6 * 8 * pt, T + 0.6 * 8 * pt
+        else:
+            bx0, by0 = R - sb_w, x_label_top
+        sb = (round(bx0), round(by0), round(bx0 + sb_w), round(by0 + sb_h))
         fills.append((sb, _WHITE))
+        drawn.append(sb)
         black.polygon([(sb[0], sb[1]), (sb[2], sb[1]), (sb[2], sb[3]), (sb[0], sb[3])], lw_axes)
         bar_y = sb[1] + inner + bar_h / 2
         bar_x = (sb[0] + sb[2]) / 2 - bar_m * scale / 2
