@@ -75,7 +75,9 @@ BAD_VALUES = [
      "must be one or more positive distances in mm up to 100000, like 250,500,1000; got ','"),
     (["geometry", "--distances-mm", "250,abc"], "--distances-mm",
      "must be positive distances in mm separated by commas, like 250,500,1000; got '250,abc'"),
-    (["geometry", "--samples", "999"], "--samples", "must be ≥ 1000, got 999"),
+    (["geometry", "--samples", "999"], "--samples", "must be in 1000 … 10000000, got 999"),
+    (["geometry", "--samples", "100000000000"], "--samples",
+     "must be in 1000 … 10000000, got 100000000000"),       # was exit 5, out of memory
     # every seed option takes what a scenario's seed: takes, 0 … 2**63 - 1
     (["run", "--seed", "-3"], "--seed", "must be ≥ 0, got -3"),
     (["geometry", "--seed", "-1"], "--seed", "must be ≥ 0, got -1"),
@@ -117,6 +119,7 @@ def test_the_boundary_values_are_accepted():
     assert (args.seeds, args.bearings) == (1, 8)
     assert args.distances_mm == pytest.approx([0.0005, 0.3])
     assert parse(["geometry", "--samples", "1000"]).samples == 1000
+    assert parse(["geometry", "--samples", "10000000"]).samples == 10_000_000
     assert parse(["run", "t_room", "--seed", "0"]).seed == 0
     assert parse(["emulate", "--fault-seed", str(2**63 - 1)]).fault_seed == 2**63 - 1
 
@@ -140,6 +143,8 @@ def test_help_states_the_allowed_range(argv, option, message, capsys):
         allowed = "≥ 0"                                   # a seed: 0 … 2**63 - 1
     elif "≥" in message:
         allowed = "≥ " + message.split("≥ ")[1].split(",")[0]
+    elif "must be in " in message:                        # a range: "1000 … 10000000"
+        allowed = message.split("must be in ")[1].split(",")[0]
     else:
         allowed = "positive"
     assert allowed in block

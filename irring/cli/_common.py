@@ -66,20 +66,21 @@ def describe(p: argparse.ArgumentParser, description: str, epilog: str | None = 
         p.formatter_class = argparse.RawDescriptionHelpFormatter
 
 
-def at_least(low: int) -> Callable[[str], int]:
-    """A ``type=`` for an integer option that must be ≥ ``low``."""
+def at_least(low: int, high: int | None = None) -> Callable[[str], int]:
+    """A ``type=`` for an integer option that must be ≥ ``low`` (and ≤ ``high`` if given)."""
+    allowed = f"≥ {low}" if high is None else f"in {low} … {high}"
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(
-                f"must be an integer ≥ {low}, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be ≥ {low}, got {value}")
+                f"must be an integer {allowed}, got {text!r}") from None
+        if value < low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {value}")
         return value
 
-    parse.__name__ = f"int ≥ {low}"
+    parse.__name__ = f"int {allowed}"
     return parse
 
 
