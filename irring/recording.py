@@ -15,7 +15,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import gp2
-from .core import ADC_BITS, MAX_RANGE_M, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth
+from .core import ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth
 from .errors import InputError, IrringError, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
 from .scenario import ScenarioError, load_dataclass
@@ -282,8 +282,8 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
                                    "0.001 … 100 m", MAX_RANGE_M)
     kwargs["samples"] = scalar("samples", whole(1, 64), "a whole number 1 … 64", 1)
     kwargs["settle_s"] = scalar("settle_s", lambda v: _finite(v, 0.0, 60.0), "0 … 60 s", 0.0)
-    kwargs["duration_s"] = scalar("duration_s", lambda v: _finite(v, 0.0, 1e7),
-                                  "a finite number of seconds ≥ 0")
+    kwargs["duration_s"] = scalar("duration_s", lambda v: _finite(v, 0.0, MAX_DURATION_S),
+                                  f"0 … {MAX_DURATION_S:,.0f} s")
     kwargs["source"] = scalar("source", lambda v: isinstance(v, str) and len(v) <= 200,
                               "a short text", "sim")
     missing = scalar("missing_steps", lambda v: isinstance(v, list) and len(v) <= MAX_STEPS

@@ -417,6 +417,21 @@ def test_ctrl_c_in_a_sweep_keeps_the_finished_poses_and_the_steps_that_arrived(t
     assert json.loads((out / "link.json").read_text())["error"] == "interrupted"
 
 
+def test_a_device_clock_that_jumps_days_is_not_the_sweeps_hardware_time(tmp_path, capsys):
+    """Two steps 2³¹ ms apart on the device clock made a 5-step sweep "take" 10.7 million s:
+    drive printed it and wrote a sweeps.npz that replay refused (duration_s > 10⁷ s)."""
+    code, out = _drive(tmp_path, hd.clock_jump, poses=1)
+    assert code == 0, capsys.readouterr().err
+    (sweep,) = _recorded(out)                          # replay can read what drive wrote
+    assert list(sweep.steps) == [-2, -1] and sweep.missing_steps == (0, 1, 2)
+    assert sweep.duration_s == pytest.approx(5 * 0.0383)   # the nominal 5 steps × 38.3 ms
+    link = json.loads((out / "link.json").read_text())
+    assert link["totals"]["clock_faults"] == 1
+    assert "1 device clock faults" in link["sweeps"][0]["message"]
+    assert main(["replay", str(out / "sweeps.npz"), "--out", str(tmp_path / "re"),
+                 "--no-animation"]) == 0
+
+
 # --------------------------------------------------------------------------- command line
 
 

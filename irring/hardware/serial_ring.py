@@ -102,6 +102,8 @@ class LinkStats:
     device_errors: int = 0      # IRERR answers received
     resent_commands: int = 0    # commands sent again after IRERR 1 / busy / timeout
     resweeps: int = 0           # IRSWP re-issued for missing steps only
+    clock_faults: int = 0       # passes whose device clock ran impossibly fast or backwards
+    #                             (the pass's hardware time is then the nominal one)
 
     def as_dict(self) -> dict[str, int]:
         return dataclasses.asdict(self)
@@ -132,7 +134,7 @@ def _describe_link(link: dict[str, int]) -> str:
              "inconsistent": "inconsistent IRSCN dropped", "stale": "stale IRSCN dropped",
              "duplicates": "duplicates", "device_errors": "IRERR answers",
              "resent_commands": "commands resent", "resweeps": "re-sweeps",
-             "disconnects": "disconnects"}
+             "disconnects": "disconnects", "clock_faults": "device clock faults"}
     parts = [f"{link[k]} {v}" for k, v in names.items() if link.get(k)]
     return ", ".join(parts) if parts else "clean link"
 
@@ -185,6 +187,9 @@ class _Pass:
     run: tuple[int, int]                 # (from, to) inclusive, either direction
     got: dict[int, p.Scan] = field(default_factory=dict)
     done: bool = False
+    # host time a step may take at most before the pass is given up (its no-progress
+    # limit): a device clock claiming more per step than this is wrong
+    max_step_s: float = float("inf")
 
     @property
     def expected(self) -> list[int]:
@@ -584,6 +589,7 @@ class SerialRing:
         # catches only a device that talks on without progress, never cuts the retries short
         stall_limit = first_wait + (self.retries + NO_PROGRESS_TIMEOUTS) * (self.timeout_s
                                                                             + per_step_s)
+        ps.max_step_s = stall_limit
         heard = False   # a garbled sentence arrived since the last IRSTP: the device answers
         while True:
             had = len(ps.got)
@@ -710,6 +716,9 @@ class SerialRing:
         else:
             timestamps = np.zeros(0)
         duration = sum(self._pass_duration(ps, samples, settle_ms) for ps in passes)
+        if duration > core.MAX_DURATION_S:   # more than a recording may hold
+            self.stats.clock_faults += 1
+            duration = core.hardware_duration_s(len(req), settle_ms / 1000, samples)
         return core.Sweep(
             steps=steps, sensor_angles=core.sensor_angles_for_steps(self.ring, steps),
             counts=counts, timestamps_s=timestamps, duration_s=duration, pose=pose,
@@ -717,18 +726,26 @@ class SerialRing:
             vref_v=self.vref_v, max_range_m=self.max_range_m, samples=samples,
             settle_s=settle_ms / 1000, missing_steps=missing, source=f"serial:{self.port_name}")
 
-    @staticmethod
-    def _pass_duration(ps: _Pass, samples: int, settle_ms: int) -> float:
+    def _pass_duration(self, ps: _Pass, samples: int, settle_ms: int) -> float:
         """Device-clock time of one pass: the span between its first and last readings,
         extended by one mean step interval (the first step's own time, which no timestamp
-        brackets). With fewer than two readings, the nominal hardware time."""
+        brackets). With fewer than two readings, or a clock that claims more time a step
+        than the pass's no-progress limit allows (it jumped, or ran backwards), the nominal
+        hardware time (counted in ``stats.clock_faults``)."""
+        nominal = core.hardware_duration_s(len(ps.expected), settle_ms / 1000, samples)
         if len(ps.got) < 2:
-            return core.hardware_duration_s(len(ps.expected), settle_ms / 1000, samples)
+            return nominal
         pos = ps.index
         first = min(ps.got.values(), key=lambda sc: pos[sc.step])
         last = max(ps.got.values(), key=lambda sc: pos[sc.step])
         span_s = ((last.t_ms - first.t_ms) % p.CLOCK_MODULO) / 1000.0
         per_step = span_s / (pos[last.step] - pos[first.step])
+        if per_step > ps.max_step_s:
+            self.stats.clock_faults += 1
+            log.info("device clock: %.0f s a step between steps %d and %d; using the "
+                     "nominal %.3f s a step", per_step, first.step, last.step,
+                     nominal / len(ps.expected))
+            return nominal
         return per_step * len(ps.expected)
 
     def _report(self, req: list[int], sweep: core.Sweep, before: dict[str, int],
