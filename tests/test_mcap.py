@@ -136,3 +136,24 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def test_sweep_times_past_ros_time_are_an_output_error_not_an_internal_one(tmp_path, capsys):
+    """A recording of 216 sweeps of 9.99e6 s each (every one within the loader's 10⁷ s) adds
+    up past ROS 2's int32 seconds: replay --mcap ended in exit 70 (struct.error)."""
+    from irring import core
+    from irring.recording import save_recording
+
+    ring = core.Ring(sensors=3, min_step=0, max_step=1)
+    sweep = core.Sweep(steps=np.array([0, 1]), sensor_angles=np.zeros((2, 3)),
+                       counts=np.full((2, 3), 1500), timestamps_s=np.array([0.0, 0.04]),
+                       duration_s=9.99e6, pose=np.array([0.4, 0.3, 0.2]), ring=ring)
+    rec = save_recording(tmp_path / "long.npz", [sweep] * 216)
+    mcap = tmp_path / "long.mcap"
+    code = main(["replay", str(rec), "--out", str(tmp_path / "o"), "--no-animation",
+                 "--mcap", str(mcap)])
+    err = capsys.readouterr().err
+    assert code == 4, err
+    assert (f"{mcap}: the sweeps' hardware time adds up to 2157840000 s, past the ROS 2 time "
+            "stamp's 2147483647 s (68 years); MCAP not written") in err
+    assert not mcap.exists() and (tmp_path / "o" / "sweeps.npz").exists()

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import Cylinder, box_corners
+from ..errors import OutputError
 from ..outputs import atomic_file
 
 FRAME = "map"
@@ -66,6 +67,7 @@ MSGDEFS = {
 }
 
 _FLOAT32 = 7
+ROS_TIME_MAX_S = 2**31 - 1
 CYLINDER_SIDES = 32
 
 
@@ -138,13 +140,17 @@ def _obstacle_outline(ob) -> np.ndarray:
 def write_mcap(result, path) -> Path:
     """Write ``result`` (a :class:`pipeline.MapRun`) to ``path`` as MCAP (see the module doc).
     Raises ImportError naming the extra when the mcap packages are missing, OutputError
-    (outputs.atomic_file) when ``path`` cannot be written."""
+    (outputs.atomic_file) when ``path`` cannot be written or the sweeps' times overflow ROS time."""
     Writer = _import()
     path = Path(path)
     t_ns, ends = 0, []
     for s in result.sweeps:
         t_ns += int(round(s.duration_s * 1e9))
         ends.append(t_ns)
+    if t_ns // 1_000_000_000 > ROS_TIME_MAX_S:   # builtin_interfaces/Time's sec is an int32
+        raise OutputError(f"{path}: the sweeps' hardware time adds up to "
+                          f"{t_ns // 1_000_000_000} s, past the ROS 2 time stamp's "
+                          f"{ROS_TIME_MAX_S} s (68 years); MCAP not written")
     with atomic_file(path) as tmp, open(tmp, "wb") as f:
         writer = Writer(f)
         schemas = {name: writer.register_msgdef(name, text) for name, text in MSGDEFS.items()}
