@@ -77,6 +77,10 @@ _SWEEP_ARRAYS = {  # name: (dimensions, kinds allowed, finite required)
     "timestamps_s": ("S", "iuf", True), "pose": ("3", "iuf", True),
     "reading_poses": ("SN3", "f", True),
 }
+# |value| bounds of positions (m) and angles (rad): a pose 1e300 m away is finite, but
+# no map can place it (drawing its ring failed inside Pillow)
+MAX_ABS_COORDINATE = 1e6
+_BOUNDED = ("pose", "reading_poses", "sensor_angles")
 _TRUTH_ARRAYS = {"distance_m": "SN", "incidence_rad": "SN", "hit_point": "SN3", "origin": "SN3",
                  "direction": "SN3", "geom_id": "SN", "reflectance": "SN"}
 
@@ -235,6 +239,11 @@ def _array(npz, headers: dict, name: str, dims: str, kinds: str, sizes: dict, fa
     arr = npz[name]
     if finite and arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
         raise fail(f"{name}: holds NaN or infinite values")
+    if name.rsplit("/", 1)[-1] in _BOUNDED and arr.size:
+        far = float(np.max(np.abs(arr)))
+        if far > MAX_ABS_COORDINATE:
+            raise fail(f"{name}: holds {far:g}; positions and angles lie within "
+                       f"±{MAX_ABS_COORDINATE:g} (m, rad)")
     return arr
 
 

@@ -15,6 +15,7 @@ import io
 import json
 import math
 import os
+import re
 import time
 import zipfile
 
@@ -200,6 +201,10 @@ def _scalars(data: bytes, **changes) -> bytes:
     (lambda d: _rewrite(d, "sweep000/counts", np.ones((5, 4), complex)), "holds complex"),
     (lambda d: _rewrite(d, "sweep000/counts", np.ones((5, 3), int)), "does not match"),
     (lambda d: _rewrite(d, "sweep000/sensor_angles", np.full((5, 4), np.nan)), "NaN or infinite"),
+    (lambda d: _rewrite(d, "sweep000/pose", np.array([1e300, -2e6, 0.1])),
+     "sweep000/pose: holds 1e+300; positions and angles lie within ±1e+06 (m, rad)"),
+    (lambda d: _rewrite(d, "sweep000/sensor_angles", np.full((5, 4), -3e7)),
+     "sweep000/sensor_angles: holds 3e+07; positions and angles lie within"),
     (lambda d: _scalars(d, adc_bits=0), "adc_bits: 0 is not allowed"),
     (lambda d: _scalars(d, adc_bits=64), "adc_bits: 64 is not allowed"),
     (lambda d: _scalars(d, max_range_m=float("nan")), "max_range_m: nan is not allowed"),
@@ -214,8 +219,7 @@ def _scalars(data: bytes, **changes) -> bytes:
 def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, message):
     path = tmp_path / "bad.npz"
     path.write_bytes(make(good_recording))
-    with pytest.raises((RecordingError, TooBig),
-                       match=message.replace("(", r"\(").replace(".", r"\.")):
+    with pytest.raises((RecordingError, TooBig), match=re.escape(message)):
         load_recording(path)
 
 
