@@ -24,7 +24,7 @@ import numpy as np
 
 from . import recording as rec
 from .core import Points, Reason, RingSource, SourceLost, Sweep
-from .estimation.calibration import load_calibration, scene_calibration
+from .estimation.calibration import CalibrationError, load_calibration, scene_calibration
 from .estimation.estimate import estimate
 from .gp2 import SENSORS
 from .maps import metrics
@@ -354,6 +354,28 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
             yield grid.classify(), k + 1, f"pose {k + 1} of {n}: done"
 
 
+def _sensor(model: str, adc_bits: int, vref_v: float) -> str:
+    return f"a {model} with a {adc_bits}-bit ADC at {vref_v:g} V"
+
+
+def check_calibration(calibration, model: str, adc_bits: int, vref_v: float, where: str,
+                      what: str) -> None:
+    """Raise CalibrationError (naming ``where``, the calibration's file) unless
+    ``calibration`` (None: nothing to check) is for this sensor model, ADC bits and reference
+    voltage: its a(θ), b(θ) are in that converter's counts, so counts of another converter
+    or sensor read as silently wrong distances. ``what`` names the readings."""
+    if calibration is None:
+        return
+    if (calibration.sensor_model, calibration.adc_bits) == (model, adc_bits) and math.isclose(
+            calibration.vref_v, vref_v, rel_tol=1e-9):
+        return
+    raise CalibrationError(
+        f"{where}: the calibration is for "
+        f"{_sensor(calibration.sensor_model, calibration.adc_bits, calibration.vref_v)}, but "
+        f"{what} {_sensor(model, adc_bits, vref_v)}; use a calibration of that sensor (irring "
+        f"calibrate) or leave --calibration out")
+
+
 def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | Path | None = None,
         frames_per_sweep: int = 0, score: bool = True, progress: bool | None = None,
         params: MapperParams | None = None, estimator: Callable | None = None) -> MapRun:
@@ -363,6 +385,9 @@ def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | 
     check_scenario_grid(scenario)   # refuse a grid too big for memory before the work
     calibration, cal_text = (load_calibration(calibration_file) if calibration_file is not None
                              else scene_calibration(scenario))
+    sensor = scenario.sensor
+    check_calibration(calibration, sensor.model, sensor.adc_bits, sensor.vref_v,
+                      str(calibration_file), f"{scenario.name} reads")
     acq, build_s = simulated(scenario, seed=seed, progress=progress)
     result = map_sweeps(acq.sweeps, scenario=scenario, params=params, calibration=calibration,
                         frames_per_sweep=frames_per_sweep, score=score, progress=progress,
@@ -393,6 +418,10 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
         calibration, cal_text = load_calibration(meta.get("calibration_yaml"), is_text=True)
     else:  # a simulated recording from before runs recorded the scene's calibration
         calibration, cal_text = scene_calibration(scenario)
+    for k, sweep in enumerate(sweeps):
+        check_calibration(calibration, sweep.sensor_model, sweep.adc_bits, sweep.vref_v,
+                          str(calibration_file or f"{recording} (recorded calibration)"),
+                          f"sweep {k + 1} was read by")
     grid = None
     params = MapperParams(**meta["mapper"]) if meta.get("mapper") else None
     if meta.get("grid"):

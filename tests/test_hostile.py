@@ -269,6 +269,34 @@ def test_any_edit_of_a_calibration_loads_or_is_a_calibration_error(key, value):
 _CAL = Calibration.for_scene(loads(yaml.safe_dump(T_ROOM), "t_room.yaml"))
 
 
+@pytest.mark.parametrize("model, bits, vref, read_as", [
+    ("gp2d12", 10, 5.0, "a 10-bit ADC"), ("gp2y0a21", 12, 5.0, "a gp2y0a21"),
+    ("gp2d12", 12, 3.3, "at 3.3 V"),
+])
+def test_a_calibration_for_another_sensor_or_adc_is_refused(tmp_path, capsys, model, bits,
+                                                             vref, read_as):
+    """`run --calibration` with a 10-bit file read t_room's 12-bit counts as 10-bit ones: exit
+    0 with 1536 'valid' readings and F1 0.000 (gp2y0a21: F1 0.723), a silently wrong map."""
+    cal = tmp_path / "other.yaml"
+    Calibration.nominal(model, None, bits, vref).save(cal)
+    out = tmp_path / "o"
+    t0 = time.monotonic()
+    assert main(["run", "t_room", "--calibration", str(cal), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert time.monotonic() - t0 < 5
+    assert f"{cal}: the calibration is for a {model} with a {bits}-bit ADC at {vref:g} V" in err
+    assert "but t_room reads a gp2d12 with a 12-bit ADC at 5 V" in err and read_as in err
+    assert not out.exists()
+    # replay: the recorded sweeps against the same file
+    assert main(["run", "t_room_cylinder", "--out", str(out), "--no-animation"]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(out / "sweeps.npz"), "--calibration", str(cal),
+                 "--out", str(tmp_path / "re")]) == 1
+    assert ("but sweep 1 was read by a gp2d12 with a 12-bit ADC at 5 V"
+            in capsys.readouterr().err)
+    assert not (tmp_path / "re").exists()
+
+
 # --------------------------------------------------------------------------- devices
 
 TIMEOUT_S = 0.15
