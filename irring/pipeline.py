@@ -28,7 +28,8 @@ from .estimation.calibration import CalibrationError, load_calibration, scene_ca
 from .estimation.estimate import estimate
 from .gp2 import SENSORS
 from .maps import metrics
-from .maps.mapping import MapperParams, OccupancyGrid, check_scenario_grid, classify, slice_steps
+from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_scenario_grid,
+                           classify, slice_steps)
 from .maps.mcap_export import write_mcap
 from .outputs import OutputSet
 from .scenario import Scenario, loads
@@ -246,6 +247,19 @@ def simulated(scenario: Scenario, *, seed: int | None = None, progress: bool | N
         return acquire(sim, range(sim.n_sweeps), progress=progress), build_s
 
 
+def check_pose_spread(poses_xy, reach_m: float, where: str, resolution_m: float = 0.010,
+                      margin_m: float = 0.10) -> None:
+    """Refuse (TooBig, before any sweep) poses so far apart that :func:`grid_for_points`
+    around them and ``reach_m`` beyond each (ring radius + what a sensor may read) could
+    not be mapped together."""
+    xy = np.asarray(poses_xy, dtype=float).reshape(-1, 2)
+    lo, hi = xy.min(axis=0) - reach_m - margin_m, xy.max(axis=0) + reach_m + margin_m
+    w, h = xy.max(axis=0) - xy.min(axis=0)
+    check_covering(lo, hi, resolution_m, where,
+                   f"poses {w:.0f} m × {h:.0f} m apart are too far apart to map together; "
+                   f"map each part on its own")
+
+
 def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
                     margin_m: float = 0.10, params: MapperParams | None = None) -> OccupancyGrid:
     """A grid around every emitter and end point, ``margin_m`` beyond them (for sweeps
@@ -259,9 +273,13 @@ def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
             ys.append(np.asarray(y, float).ravel())
     x = np.concatenate(xs)
     y = np.concatenate(ys)
-    return OccupancyGrid.covering(np.array([np.nanmin(x), np.nanmin(y)]) - margin_m,
-                                  np.array([np.nanmax(x), np.nanmax(y)]) + margin_m,
-                                  resolution_m, params)
+    lo = np.array([np.nanmin(x), np.nanmin(y)]) - margin_m
+    hi = np.array([np.nanmax(x), np.nanmax(y)]) + margin_m
+    w, h = hi - lo
+    check_covering(lo, hi, resolution_m, "the sweeps' poses and readings",
+                   f"they span {w:.0f} m × {h:.0f} m, too far to map together; map each "
+                   f"part on its own")
+    return OccupancyGrid.covering(lo, hi, resolution_m, params)
 
 
 def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,

@@ -32,6 +32,7 @@ from irring.core import Sweep
 from irring.errors import TooBig
 from irring.estimation.calibration import Calibration, CalibrationError, load_calibration
 from irring.hardware import DeviceError, NoReadings, SerialRing
+from irring.hardware import protocol as p_
 from irring.recording import RecordingError, load_recording, save_recording
 from irring.core import Ring
 from irring.scenario import ScenarioError, loads, resolve
@@ -462,6 +463,32 @@ def test_a_device_clock_that_jumps_days_is_not_the_sweeps_hardware_time(tmp_path
     assert "1 device clock faults" in link["sweeps"][0]["message"]
     assert main(["replay", str(out / "sweeps.npz"), "--out", str(tmp_path / "re"),
                  "--no-animation"]) == 0
+
+
+def test_drive_poses_too_far_apart_to_map_are_refused_before_any_sweep(tmp_path, capsys):
+    """--pose 0,0 --pose 1000000,-700000: both poses were swept, then the map's grid was
+    refused (exit 5) and every reading was lost; the message advised map.resolution_mm,
+    which drive does not have."""
+    swept = []
+
+    def counting(dev, cmd):
+        swept.append(isinstance(cmd, p_.SweepCommand))
+        hd.good(dev, cmd)
+
+    dev = hd.HostileDevice(counting)
+    out = tmp_path / "out"
+    try:
+        code = main(["drive", "--port", dev.link, "--timeout", str(TIMEOUT_S), "--no-wait",
+                     "--out", str(out), "--pose", "0,0", "--pose", "1000000,-700000,90"])
+    finally:
+        dev.close()
+    err = capsys.readouterr().err
+    assert code == 5, err
+    # 700 m + 2 × (150 mm ring + 2 × 624 mm reach + 100 mm margin) = 702.996 m: 70,302 rows
+    assert "--pose: a grid of 70,302 × 100,302 cells of 10 mm would need about 423.1 GB" in err
+    assert ("are mapped: poses 1000 m × 700 m apart are too far apart to map together; map "
+            "each part on its own") in err and "resolution_mm" not in err
+    assert not any(swept) and not out.exists()
 
 
 # --------------------------------------------------------------------------- command line

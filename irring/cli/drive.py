@@ -151,6 +151,10 @@ def run(args: argparse.Namespace) -> int:
                           samples=samples, settle_s=settle_s, resweep=args.resweep, **known)
     except ValueError as exc:
         return _error(str(exc))
+    if truth is None:   # the map is laid out around the poses: refuse one too big unswept
+        radius = ring.radius_m if ring.radius_m is not None else ring.template.radius_m
+        pipeline.check_pose_spread([p[:2] for p in poses[:n]],
+                                   radius + 2 * ring.max_range_m, "--pose")
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
     try:
         ring.open()

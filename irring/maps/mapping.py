@@ -144,17 +144,20 @@ MAX_GRID_CELLS = 25_000_000
 BYTES_PER_CELL = 60
 
 
-def check_grid_size(ny: int, nx: int, resolution_m: float, where: str = "the map") -> None:
+def check_grid_size(ny: int, nx: int, resolution_m: float, where: str = "the map",
+                    advice: str | None = None) -> None:
     """Raise :class:`irring.errors.TooBig` (before anything is allocated) for a grid of more
-    than :data:`MAX_GRID_CELLS` cells, naming the memory it would need."""
+    than :data:`MAX_GRID_CELLS` cells, naming the memory it would need; ``advice`` says
+    what to change (default: a scenario's cells or room)."""
     cells = int(ny) * int(nx)
     if cells > MAX_GRID_CELLS:
         scale = math.sqrt(cells / MAX_GRID_CELLS)
+        fix = advice or (f"use coarser cells (map.resolution_mm ≥ "
+                         f"{math.ceil(resolution_m * 1e3 * scale)}) or a smaller room")
         raise TooBig(f"{where}: a grid of {ny:,} × {nx:,} cells of {resolution_m * 1e3:g} mm "
                      f"would need about {cells * BYTES_PER_CELL / 1e9:.1f} GB; at most "
                      f"{MAX_GRID_CELLS:,} cells (~{MAX_GRID_CELLS * BYTES_PER_CELL / 1e9:.1f} GB) "
-                     f"are mapped: use coarser cells (map.resolution_mm ≥ "
-                     f"{math.ceil(resolution_m * 1e3 * scale)}) or a smaller room")
+                     f"are mapped: {fix}")
 
 
 def _layout(lo_xy_m, hi_xy_m, resolution_m: float) -> tuple[np.ndarray, tuple[int, int]]:
@@ -169,6 +172,13 @@ def _scenario_box(scenario) -> tuple[np.ndarray, np.ndarray]:
     outline = np.asarray(scenario.room.outline_m, dtype=float)
     return (outline.min(axis=0) - scenario.map.margin_m,
             outline.max(axis=0) + scenario.map.margin_m)
+
+
+def check_covering(lo_xy_m, hi_xy_m, resolution_m: float, where: str,
+                   advice: str | None = None) -> None:
+    """:func:`check_grid_size` for the grid :meth:`OccupancyGrid.covering` would build."""
+    _, (ny, nx) = _layout(lo_xy_m, hi_xy_m, resolution_m)
+    check_grid_size(ny, nx, resolution_m, where, advice)
 
 
 def check_scenario_grid(scenario) -> None:
