@@ -491,6 +491,27 @@ def test_drive_poses_too_far_apart_to_map_are_refused_before_any_sweep(tmp_path,
     assert not any(swept) and not out.exists()
 
 
+def test_calibrate_on_a_sensor_the_ring_does_not_have_says_so_before_a_placement(
+        tmp_path, capsys, monkeypatch):
+    """--sensor 20 on a 12-sensor ring asked for the first wall, then ended in exit 70
+    (IndexError) once it was placed; on the simulated rig the same was exit 1."""
+    monkeypatch.setattr("builtins.input", lambda prompt="": pytest.fail("asked: " + prompt))
+    dev = hd.HostileDevice(hd.good)
+    try:
+        code = main(["calibrate", "--port", dev.link, "--sensor", "12",
+                     "--out", str(tmp_path / "c.yaml")])
+    finally:
+        dev.close()
+    assert code == 2
+    assert ("irring calibrate: error: --sensor 12: the ring on "
+            f"{dev.link} has sensors 0 … 11") in capsys.readouterr().err
+    assert main(["calibrate", "--scenario", "t_room", "--sensor", "12",
+                 "--out", str(tmp_path / "c.yaml")]) == 2
+    assert ("irring calibrate: error: --sensor 12: t_room's ring has sensors 0 … 11"
+            in capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
 # --------------------------------------------------------------------------- command line
 
 
@@ -499,6 +520,8 @@ def test_drive_poses_too_far_apart_to_map_are_refused_before_any_sweep(tmp_path,
     (["drive", "--port", "x", "--samples", "65"], 2, "--samples: must be 1 … 64"),
     (["drive", "--port", "x", "--pose", "nan,nan"], 2, "--pose: 'nan,nan': expected"),
     (["emulate", "--baud", "-100"], 2, "--baud: must be ≥ 0"),
+    (["calibrate", "--port", "loop://", "--baud", "0"], 2, "--baud: must be ≥ 1, got 0"),
+    (["calibrate", "--sensor", "-1"], 2, "--sensor: must be ≥ 0, got -1"),
     (["emulate", "--tcp", "127.0.0.1:99999"], 2, "PORT 0 … 65535"),
 ])
 def test_bad_options_are_usage_errors(capsys, argv, status, message):

@@ -12,7 +12,7 @@ from ..estimation.calibration import (CalibrationAborted, CalibrationError, Guid
                                       SimulatedRig)
 from ..outputs import check_out
 from ..scenario import load_scenario
-from ._common import at_least, describe, seed
+from ._common import at_least, between, describe, seed
 
 EPILOG = """\
 what it does:
@@ -55,9 +55,9 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", metavar="PORT",
                    help="serial port or pyserial URL of the real ring; runs the guided "
                         "procedure instead of the simulated rig")
-    p.add_argument("--baud", type=int, default=115200,
+    p.add_argument("--baud", type=between(1, 10_000_000), default=115200,
                    help="serial speed with --port (default: 115200)")
-    p.add_argument("--sensor", type=int, default=0,
+    p.add_argument("--sensor", type=at_least(0), default=0,
                    help="which sensor faces the wall (default: 0)")
     p.add_argument("--sweeps", type=at_least(1), default=None, metavar="N",
                    help="sweeps per placement, averaged (≥ 1; default: 8 simulated, 4 real)")
@@ -78,8 +78,16 @@ def run(args: argparse.Namespace) -> int:
         out = out / "calibration.yaml"
     check_out(out.parent)
     scenario = load_scenario(args.scenario)
+
+    def no_such_sensor(ring: str, sensors: int) -> int:
+        print(f"irring calibrate: error: --sensor {args.sensor}: {ring} has sensors 0 … "
+              f"{sensors - 1}", file=sys.stderr)
+        return errors.USAGE
+
     try:
         if args.port is None:
+            if args.sensor >= scenario.ring.sensors:
+                return no_such_sensor(f"{scenario.name}'s ring", scenario.ring.sensors)
             rig = SimulatedRig(scenario, sensor=args.sensor, sweeps=args.sweeps or 8,
                                seed=args.seed)
             print(f"simulated rig: {scenario.name}'s ring and {scenario.sensor.model}, effects: "
@@ -95,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
                               max_range_m=scenario.sensor.max_range_m)
             try:
                 with ring:  # the handshake sets ring.info (or raises)
+                    if args.sensor >= ring.info.nsensors:   # before the first placement
+                        return no_such_sensor(f"the ring on {args.port}", ring.info.nsensors)
                     guided = GuidedCalibration(
                         read_sweep=lambda: ring.sweep(resweep=1), prompt=input, show=print,
                         sensor_model=scenario.sensor.model, adc_bits=ring.info.adc_bits,
