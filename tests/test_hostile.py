@@ -512,6 +512,48 @@ def test_calibrate_on_a_sensor_the_ring_does_not_have_says_so_before_a_placement
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.fixture(scope="module")
+def one_run_study(tmp_path_factory):
+    """A finished one-run study (t_room_cylinder, rotating12, seed 1): (study file, out)."""
+    d = tmp_path_factory.mktemp("study")
+    (d / "s.yaml").write_text("designs: [rotating12]\nscenarios: [t_room_cylinder]\n"
+                              "seeds: [1]\n")
+    assert main(["study", str(d / "s.yaml"), "--out", str(d / "o"), "--workers", "1"]) == 0
+    return d / "s.yaml", (d / "o" / "results.csv").read_text()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda row: row.update(occupied_recall="inf"),
+     "line 2, occupied_recall: 'inf' is not allowed; a finite number"),
+    (lambda row: row.update(occupied_f1="nan"), "line 2, occupied_f1: 'nan' is not allowed"),
+    (lambda row: row.update(hardware_time_s="hello"),
+     "line 2, hardware_time_s: 'hello' is not allowed; a finite number"),
+    (lambda row: row.update(seed="2.5"), "line 2, seed: '2.5' is not allowed; a whole number"),
+    (lambda row: row.update(compute_ms=""), "line 2, compute_ms: '' is not allowed"),
+    (None, "line 3 repeats the run of line 2 (rotating12, t_room_cylinder, seed 1)"),
+])
+def test_a_damaged_results_csv_is_refused_on_resume_naming_line_and_column(
+        tmp_path, capsys, one_run_study, edit, message):
+    """--resume read 'inf' or text in a score as exit 70 (RuntimeWarning / ValueError), a
+    'nan' score as NaN in summary.json, and a repeated row as a third run of a 2-seed
+    configuration (runs: 3)."""
+    study, text = one_run_study
+    header, line = text.splitlines()[:2]
+    row = dict(zip(header.split(","), line.split(",")))
+    if edit is None:
+        lines = [header, line, line]
+    else:
+        edit(row)
+        lines = [header, ",".join(row.values())]
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "results.csv").write_text("\n".join(lines) + "\n")
+    assert main(["study", str(study), "--out", str(out), "--workers", "1", "--resume"]) == 1
+    err = capsys.readouterr().err
+    assert f"{out / 'results.csv'}: {message}" in err and "internal error" not in err
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv"]   # nothing run or summarised
+
+
 # --------------------------------------------------------------------------- command line
 
 

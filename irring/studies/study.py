@@ -13,6 +13,7 @@ import itertools
 import json
 import math
 import os
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +28,7 @@ import numpy as np
 
 from .. import designs, gp2, safe_yaml
 from ..core import SEED_MAX, SENSOR_MODEL
+from ..errors import brief
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
 from ..resources import installed_version
@@ -393,13 +395,47 @@ def read_results(path: str | Path, *, repair: bool = False) -> list[dict[str, st
         raise StudyError(f"{p}: its columns are not the ones this irring writes ({len(header)} "
                          f"columns, expected {len(COLUMNS)}: {', '.join(COLUMNS[:6])}, …); "
                          "choose another --out, or move the file away to start afresh")
-    rows = []
+    rows, lines_of = [], {}
     for i, cells in enumerate(reader, start=2):
         if len(cells) != len(COLUMNS):
             raise StudyError(f"{p}: line {i} has {len(cells)} cells, expected {len(COLUMNS)}; "
                              "the file was edited or damaged")
-        rows.append(dict(zip(COLUMNS, cells)))
+        row = dict(zip(COLUMNS, cells))
+        for col, cell in row.items():
+            want = _cell_problem(col, cell)
+            if want:
+                raise StudyError(f"{p}: line {i}, {col}: {brief(cell)} is not allowed; {want}; "
+                                 "the file was edited or damaged")
+        first = lines_of.setdefault(row_key(row), i)
+        if first != i:   # summarised, it would count as one more run
+            raise StudyError(f"{p}: line {i} repeats the run of line {first} ({row['design']}, "
+                             f"{row['scenario']}, seed {row['seed']}); the file was edited or "
+                             "damaged")
+        rows.append(row)
     return rows
+
+
+_TEXT_COLUMNS = ("design", "scenario", "sensor", "irring_version")
+_WHOLE_COLUMNS = ("step_stride", "samples", "seed", "sensors", "poses", "readings")
+_NAN_COLUMNS = ("worker_peak_mb",)   # NaN where the platform cannot measure it
+
+
+def _cell_problem(col: str, cell: str) -> str | None:
+    """What a results.csv cell of ``col`` must be, if ``cell`` is not that (else None): the
+    summary takes means of these, so a NaN, inf or text would end in it or in a crash."""
+    if col in _TEXT_COLUMNS:
+        return None
+    if col in _WHOLE_COLUMNS:
+        return None if re.fullmatch(r"-?[0-9]+", cell) else "a whole number"
+    if cell == "" and col in SCORE_COLUMNS:
+        return None   # n/a
+    try:
+        value = float(cell)
+    except ValueError:
+        value = None
+    if value is not None and (math.isfinite(value) or (col in _NAN_COLUMNS and value != value)):
+        return None
+    return "a finite number" + (" or empty (n/a)" if col in SCORE_COLUMNS else "")
 
 
 def row_key(row: Mapping[str, Any]) -> tuple[str, ...]:
