@@ -298,6 +298,41 @@ def test_a_calibration_for_another_sensor_or_adc_is_refused(tmp_path, capsys, mo
     assert not (tmp_path / "re").exists()
 
 
+@pytest.mark.parametrize("row0, reads", [
+    ({"a": 1e300}, "5.65e+295 … 1e+300 m"),
+    ({"b": -1e-300}, "774 … 774 m"),
+    ({"b": -1e300}, "0 … 774 m"),   # 774 m at count 1, nothing from 2 on
+])
+def test_a_calibration_that_reads_no_count_in_range_is_refused(tmp_path, capsys, row0, reads):
+    """a = 1e300 or b = -1e300 passed the loader (a > 0, b < 0) and mapped nothing (exit 0,
+    F1 0.000, every reading 'no return'); b = -1e-300 ended in exit 70 under -W error
+    (overflow in exp)."""
+    raw = Calibration.nominal("gp2d12", None, 12, 5.0).to_dict()
+    raw["curve"][0].update(row0)
+    cal = tmp_path / "impossible.yaml"
+    cal.write_text(yaml.safe_dump(raw))
+    out = tmp_path / "o"
+    assert main(["run", "t_room", "--calibration", str(cal), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert (f"{cal}: its θ = 0 curve reads the counts 1 … 4095 as {reads}, never within "
+            f"its 0.1 … 0.8 m range") in err
+    assert not out.exists()
+    # drive: before the port is opened
+    assert main(["drive", "--port", str(tmp_path / "no-such-port"), "--calibration", str(cal),
+                 "--out", str(out)]) == 1
+    assert f"irring drive: error: {cal}: its θ = 0 curve reads" in capsys.readouterr().err
+
+
+def test_drive_with_a_bad_calibration_file_exits_1_as_its_help_says(tmp_path, capsys):
+    """It exited 2 (a usage error) and named the file twice."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("irring_calibration: 1\nsensor_model: gp2d12\n")
+    assert main(["drive", "--port", str(tmp_path / "no-such-port"), "--calibration",
+                 str(bad)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"irring drive: error: {bad}: ") and err.count(str(bad)) == 1
+
+
 # --------------------------------------------------------------------------- devices
 
 TIMEOUT_S = 0.15
