@@ -209,6 +209,164 @@ def test_unstable_physics_says_what_to_change(monkeypatch, tmp_path):
         sim.sweep(0)
 
 
+# --------------------------------------------------------------------------- time step check
+
+BOX_ROOM = """name: box
+seed: 2
+room:
+  outline_mm: [[0, 0], [1300, 0], [1300, 900], [0, 900]]
+robot:
+  poses: [{{x_mm: 500, y_mm: 400}}]
+effects:
+  belt_dynamics: {{timestep_ms: {dt}, belt_timeconst_ms: {tau}, step_time_ms: 4}}
+{more}"""
+
+
+def box_file(tmp_path, dt, tau, more=""):
+    path = tmp_path / "box.yaml"
+    path.write_text(BOX_ROOM.format(dt=dt, tau=tau, more=more))
+    return path
+
+
+def test_an_unconverged_belt_time_step_is_refused_by_irring_run(tmp_path, capsys):
+    """τ = 0.25 ms at 0.5 ms passes the loader's RK4 rule (2 τ ≤ 2.5 τ) and MuJoCo never
+    warns, but the map fell apart (F1 0.37): halving the step moves the sensors by ~900°."""
+    from irring import errors
+    from irring.cli import main
+    D._checked.clear()
+    out = tmp_path / "out"
+    code = main(["run", str(box_file(tmp_path, 0.5, 0.25)), "--no-animation", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == errors.INPUT == 1
+    assert (f"{tmp_path / 'box.yaml'}: effects.belt_dynamics.timestep_ms: 0.5 ms is not "
+            "converged: halving it moves a sensor's true angle at a reading by ") in err
+    degrees = float(err.split("at a reading by ")[1].split("°")[0])
+    assert 100 < degrees < 2000, err
+    assert "more than the 0.1° allowed; timestep_ms: 0.25 passes" in err
+    assert "internal error" not in err and not (out / "map.png").exists()
+
+
+def test_a_converged_time_step_runs_and_its_change_is_below_the_tolerance(tmp_path):
+    """τ = 0.5 ms at 0.45 ms (0.9 τ) is converged (measured 0.003°); the default 0.5 ms at
+    τ = 2 ms by three orders of magnitude."""
+    D._checked.clear()
+    sc = load_scenario(box_file(tmp_path, 0.45, 0.5))
+    result = pipeline.run(sc, progress=False)
+    assert result.scores["occupied_f1"] > 0.95
+    sim = SimRing(sc)
+    sched = sim.dynamics.schedule(sim.default_steps())
+    change, advice = D.check_timestep(sim.dynamics.physics, sched)
+    assert 1e-3 * D.CONVERGED_ANGLE_RAD < change < D.CONVERGED_ANGLE_RAD and advice == ""
+    default = SimRing(bench.variant("t_room", effects={"belt_dynamics": {}}))
+    sched = default.dynamics.schedule(default.default_steps())
+    change, _ = D.check_timestep(default.dynamics.physics, sched)
+    assert change < 1e-3 * D.CONVERGED_ANGLE_RAD
+
+
+def test_the_time_step_is_checked_once_per_schedule_and_scene(monkeypatch, tmp_path):
+    """The check rolls the sweep out again at dt/2: once per ring, belt and schedule in a
+    process, so further sweeps, SimRings and seeds of the same scene reuse its verdict."""
+    D._checked.clear()
+    calls = []
+    change = D.timestep_change
+    monkeypatch.setattr(D, "timestep_change",
+                        lambda *a, **k: calls.append(a[1].steps.copy()) or change(*a, **k))
+    sc = bench.variant("t_room", effects={"belt_dynamics": {"belt_timeconst_ms": 1.3}},
+                       scan={"settle_s": 0.003})
+    sim = SimRing(sc)
+    for pose in (0, 1, 2, 0):
+        sim.sweep(pose)
+    assert len(calls) == 1
+    SimRing(sc, seed=5).sweep(3)
+    sim.reset(seed=7)
+    sim.sweep(1)
+    assert len(calls) == 1
+    sim.sweep(0, steps=np.arange(-3, 12))       # another schedule: its own check
+    sim.sweep(2, steps=np.arange(-3, 12))
+    assert len(calls) == 2 and np.array_equal(calls[1], np.arange(-3, 12))
+    slower = bench.variant("t_room", effects={"belt_dynamics": {"belt_timeconst_ms": 1.7}},
+                           scan={"settle_s": 0.003})
+    SimRing(slower).sweep(0)                     # another belt: its own check
+    assert len(calls) == 3
+
+
+def test_a_refusal_is_remembered_with_its_advice(monkeypatch, tmp_path):
+    D._checked.clear()
+    sc = load_scenario(box_file(tmp_path, 1.5, 2))
+    with pytest.raises(ScenarioError, match=r"1\.5 ms is not converged: .* by 0\.2\d+°.*; "
+                                            r"timestep_ms: 0\.75 passes") as first:
+        SimRing(sc).sweep(0)
+    monkeypatch.setattr(D, "timestep_change", lambda *a, **k: pytest.fail("checked again"))
+    with pytest.raises(ScenarioError) as again:
+        SimRing(sc, seed=9).sweep(0)
+    assert str(again.value) == str(first.value)
+
+
+def test_timed_reads_are_checked_wherever_a_measurement_may_fall():
+    """With timing a read returns a measurement from latency + up to the longest period
+    before it; the check compares every physics step in those windows (and nothing else),
+    for every sensor."""
+    ring = Ring()
+    timing = TimingEffect(period_s=0.0173, jitter_s=0.0041, latency_s=0.0029)
+    sched = D.schedule(np.array([4, 5, 7, 6]), ring, settle_s=0.031, step_time_s=0.0037,
+                       timing=True, period_s=timing.period_s)
+    dt = 0.0005
+    t, k = D.check_instants(sched, 12, dt, timing)
+    grid = np.arange(int(sched.duration_s / dt) + 1) * dt
+    ends = sched.read_s[:, 0] - timing.latency_s
+    inside = [g for g in grid
+              if any(0 <= e - g <= timing.period_s + timing.jitter_s for e in ends)]
+    np.testing.assert_array_equal(t[::12], inside)
+    assert len(t) == 12 * len(inside) and 0 < len(inside) < len(grid)
+    np.testing.assert_array_equal(k[:24], np.tile(np.arange(12), 2))
+    t, k = D.check_instants(sched, 12, dt, None)   # untimed: each step's first read
+    np.testing.assert_array_equal(t, np.repeat(sched.read_s[:, 0], 12))
+
+
+def test_a_timed_sweep_is_checked_where_it_measures_not_only_at_its_reads(tmp_path):
+    """Settle 20 ms with timing, 1.3 ms at τ = 2 ms: at the reads the belt has settled and
+    halving the step moves it by 0.01°, but a GP2 may have measured up to 48 ms earlier,
+    during the move, where it moves by 0.23°: refused."""
+    D._checked.clear()
+    sc = load_scenario(box_file(tmp_path, 1.3, 2, "  timing: {}\nscan: {settle_ms: 20}\n"))
+    sim = SimRing(sc)
+    sched = sim.dynamics.schedule(sim.default_steps())
+    at_reads = D.timestep_change(sim.dynamics.physics, sched, None)
+    measured = D.timestep_change(sim.dynamics.physics, sched, sim.dynamics.timing)
+    assert at_reads < D.CONVERGED_ANGLE_RAD / 5 and measured > 2 * D.CONVERGED_ANGLE_RAD
+    with pytest.raises(ScenarioError, match=r"effects\.belt_dynamics\.timestep_ms: 1\.3 ms is "
+                                            r"not converged: .* by 0\.2\d+°"):
+        sim.sweep(0)
+
+
+def test_the_timestep_table_shows_what_an_unconverged_step_costs_the_map():
+    """docs/dynamics.md's table (irring bench dynamics --timesteps), two of its rows: the
+    default step passes and maps the box perfectly; 2 ms at τ = 2 ms is refused, and the map
+    made there anyway loses walls."""
+    fine, coarse = bench.timestep_table(((2.0, 4.0, 0.0, (0.5, 2.0)),))
+    assert fine["passes"] and fine["angle_change_rad"] < 1e-5
+    assert fine["occupied_f1"] == pytest.approx(1.0)
+    assert not coarse["passes"] and math.radians(2) < coarse["angle_change_rad"] < math.radians(5)
+    assert 0.7 < coarse["occupied_f1"] < 0.95
+
+
+def test_streamed_angles_equal_the_stored_run_across_chunks(monkeypatch):
+    """angles_at keeps only the chunk it reads: the same angles as the whole run's."""
+    sc = bench.variant("t_room", effects={"belt_dynamics": {"timestep_ms": 0.4,
+                                                            "backlash_deg": 0.3}})
+    physics = D.BeltPhysics(sc.ring, sc.effects["belt_dynamics"])
+    sched = D.schedule(np.arange(-35, 36), sc.ring)
+    whole = physics.run(sched)
+    rng = np.random.default_rng(4)
+    t = np.concatenate([rng.uniform(0, sched.duration_s, 500), [0.0, sched.duration_s,
+                                                                 997 * 0.0004]])
+    k = rng.integers(0, 12, len(t))
+    monkeypatch.setattr(D, "ROLLOUT_CHUNK_STEPS", 997)
+    streamed = D.angles_at(physics, sched, t, k)
+    np.testing.assert_allclose(streamed, whole.sensors_at(np.tile(t[:, None], 12))[
+        np.arange(len(t)), k], rtol=0, atol=1e-12)
+
+
 # --------------------------------------------------------------------------- GP2 timing
 
 

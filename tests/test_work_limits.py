@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -95,13 +96,23 @@ def test_bad_effect_combinations_are_input_errors_at_load(tmp_path, capsys, effe
     assert "internal error" not in err and "WARNING" not in err
 
 
-def test_belt_at_the_stability_limit_runs_and_just_past_it_is_refused(tmp_path):
+def test_belt_at_the_stability_limit_loads_but_its_unconverged_sweep_is_refused(tmp_path):
+    """The loader's RK4 rule (timestep ≤ 2.5 τ) lets 2.5 ms at τ = 1 ms through and the
+    rollout stays finite without a MuJoCo warning, but halving the step moves the sensors by
+    hundreds of degrees: the first sweep is refused, naming a halved step that passes."""
     from irring.scenario import ScenarioError, loads
+    from irring.simulation import dynamics
     from irring.simulation.sim import SimRing
     text = BOX.format(name="belt", robot=POSE, effects="effects:\n  belt_dynamics: "
                       "{timestep_ms: 2.5, belt_timeconst_ms: 1, step_time_ms: 4}\n")
-    sweep = SimRing(loads(text, "belt.yaml")).sweep(0)
-    assert np.isfinite(sweep.sensor_angles).all()
+    sim = SimRing(loads(text, "belt.yaml"))
+    run = sim.dynamics.physics.run(sim.dynamics.schedule(sim.default_steps()))
+    assert np.isfinite(run.sensor_rad).all()
+    with pytest.raises(ScenarioError, match=r"belt\.yaml: effects\.belt_dynamics\.timestep_ms: "
+                                            r"2\.5 ms is not converged: .* by \d+°, more than "
+                                            r"the 0\.1° allowed; timestep_ms: 0\.625 passes"):
+        sim.sweep(0)
+    assert dynamics.CONVERGED_ANGLE_RAD == pytest.approx(math.radians(0.1))
     with pytest.raises(ScenarioError, match="belt.yaml: effects.belt_dynamics.timestep_ms"):
         loads(text.replace("timestep_ms: 2.5", "timestep_ms: 2.51"), "belt.yaml")
 

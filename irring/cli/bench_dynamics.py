@@ -15,6 +15,10 @@ what it prints (the paper's ring in the T-room, pose 0 unless said; angles at th
               first and last sweep, largest read error, MuJoCo warnings
   convergence one sweep at the default time step and at half of it: largest change of a
               true sensor angle, true distance, ADC count
+  check       what the first sweep's time-step check (the sweep again at half the step)
+              costs on t_room_moving's sweep, against the belt physics itself
+  timesteps   (--timesteps) a 1.3 × 0.9 m box at several belt time constants and time
+              steps: the check's angle change, its verdict, and the map's F1 made anyway
   settling    hardware time per sweep and angle error (true − commanded sensor angle where
               the reading was measured, rms / max) for settle times: belt + GP2 timing,
               belt alone, timing alone. Settle ≥ 52.9 ms (slowest GP2 period 47.9 ms +
@@ -29,6 +33,7 @@ examples:
   irring bench dynamics                    everything (≈ 30 s)
   irring bench dynamics --sweeps 100       a shorter belt run
   irring bench dynamics --no-motion --json figures as JSON, without the mapping runs
+  irring bench dynamics --no-motion --sweeps 10 --timesteps   docs/dynamics.md's table
 """
 
 
@@ -43,6 +48,9 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=seed, nargs="+", default=[1], metavar="SEED",
                    help="seeds ≥ 0 for the motion figures, averaged (default: 1)")
     p.add_argument("--no-motion", action="store_true", help="skip the mapping runs")
+    p.add_argument("--timesteps", action="store_true",
+                   help="also the time-step table: which belt time steps are converged and "
+                        "what the map loses at those that are not (≈ 15 s)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=run)
 
@@ -54,7 +62,8 @@ def _deg(x: float) -> str:
 def run(args: argparse.Namespace) -> int:
     from ..studies.dynamics import measure   # deferred: loads MuJoCo, which --help does not need
 
-    r = measure(sweeps=args.sweeps, seeds=tuple(args.seeds), with_motion=not args.no_motion)
+    r = measure(sweeps=args.sweeps, seeds=tuple(args.seeds), with_motion=not args.no_motion,
+                timesteps=args.timesteps)
     if args.json:
         print(json.dumps(r, indent=2))
         return 0
@@ -70,6 +79,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {v['scene']:<26} dt {v['timestep_s'] * 1e3:g} ms: angle {v['angle_rad']:.1e} rad,"
               f" distance {v['distance_m'] * 1e3:.4f} mm, counts {v['counts']:g}, hits changed "
               f"{v['hit_changed']}")
+    k = r["check_cost"]
+    print(f"timestep check on {k['scene']}'s sweep ({k['physics_steps']:,} physics steps): "
+          f"physics {k['physics_s']:.2f} s, check {k['check_s']:.2f} s ({k['ratio']:.1f}×), "
+          f"once per scene and schedule; halving the step moves "
+          f"{math.degrees(k['angle_change_rad']):.1e}°")
     for key, title in (("settling_belt_timing", "belt + timing"), ("settling_belt", "belt only"),
                        ("settling_timing", "timing only")):
         print(f"settling, {title}:   settle    hardware/sweep   angle error rms        max")
@@ -90,4 +104,13 @@ def run(args: argparse.Namespace) -> int:
                            ("moving_bundled", "moving, bundled odometry")):
             print(f"  {label:<32} {mo[key]:.3f}  ({mo['sweeps'][key]} sweeps, "
                   f"{mo[key + '_hardware_s']:.1f} s hardware)")
+    if "timesteps" in r:
+        print("timesteps: 1.3 × 0.9 m box, one sweep from (500, 400) mm, seed 2; change of a "
+              "true angle at a read when the step is halved (check: ≤ 0.1°)")
+        print("  τ ms  step ms  backlash   dt ms   change        check    occupied F1 (made anyway)")
+        for t in r["timesteps"]:
+            print(f"  {t['belt_timeconst_s'] * 1e3:4g}  {t['step_time_s'] * 1e3:7g}  "
+                  f"{math.degrees(t['backlash_rad']):7g}°  {t['timestep_s'] * 1e3:6g}  "
+                  f"{_deg(t['angle_change_rad'])}  {'passes ' if t['passes'] else 'refused'}  "
+                  f"{t['occupied_f1']:.3f}")
     return 0

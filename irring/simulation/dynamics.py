@@ -5,6 +5,8 @@ How it works, its assumptions and measured figures: docs/dynamics.md.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -25,6 +27,12 @@ _PATH_SAMPLE_M = 0.005     # odometry / clearance resolution along the path
 # physics steps per MuJoCo rollout call: Python (Ctrl-C) runs only between calls, and this
 # many take well under a second (~0.3 s for the 12-sensor ring at load 3)
 ROLLOUT_CHUNK_STEPS = 10_000
+# A belt time step is converged when halving it moves no sensor's true angle at a reading by
+# more than this. 0.1° is 1.1 mm across at the GP2D12's 624 mm (2.6 mm at 1.5 m): a tenth of
+# a 10-mm cell, under a tenth of the sensor's 1.08° step, and 7× below the smallest change
+# measured to cost map F1 (docs/dynamics.md, "Is the time step converged?").
+CONVERGED_ANGLE_RAD = math.radians(0.1)
+_CHECKED_MAX = 256   # timestep verdicts kept per process (one per ring, belt and schedule)
 
 # Physics of the ring alone: no contacts, no rangefinders (beams are cast by sim.SimRing).
 _PHYSICS_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR | mujoco.mjtDisableBit.mjDSBL_CONTACT)
@@ -98,14 +106,16 @@ def schedule(steps: np.ndarray, ring: Ring, *, settle_s: float = 0.0, samples: i
 # --------------------------------------------------------------------------- ring motion
 
 
-def _hermite(t_grid_dt: float, q: np.ndarray, v: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+def _hermite(t_grid_dt: float, q: np.ndarray, v: np.ndarray, t_s: np.ndarray,
+             col: np.ndarray | None = None) -> np.ndarray:
     """Cubic Hermite interpolation of columns q, v (T, N) sampled every dt from t = 0, at
-    times ``t_s`` (..., N) (column k at t_s[..., k]); clamped to the samples' span."""
+    times ``t_s`` (..., N) (column k at t_s[..., k]), or of columns ``col`` (same shape as
+    ``t_s``) when given; clamped to the samples' span."""
     n = q.shape[0]
     x = np.clip(np.asarray(t_s, dtype=float) / t_grid_dt, 0.0, n - 1.0)
     i = np.minimum(np.floor(x).astype(np.int64), n - 2)
     u = x - i
-    col = np.arange(q.shape[1])
+    col = np.arange(q.shape[1]) if col is None else col
     q0, q1 = q[i, col], q[i + 1, col]
     v0, v1 = v[i, col] * t_grid_dt, v[i + 1, col] * t_grid_dt
     u2, u3 = u * u, u * u * u
@@ -181,6 +191,16 @@ def physics_spec(ring: Ring, params: BeltDynamicsEffect,
     return spec
 
 
+def _without_shapes(spec: mujoco.MjSpec) -> mujoco.MjSpec:
+    """The spec without geoms, sites and sensors: with contacts and sensors off they only
+    cost kinematics (the bodies' inertias are explicit, so the physics is bit for bit the same,
+    ~15 % faster)."""
+    for kind in ("sensors", "geoms", "sites"):
+        for element in list(getattr(spec, kind)):
+            spec.delete(element)
+    return spec
+
+
 def tune_belt(model: mujoco.MjModel, params: BeltDynamicsEffect) -> np.ndarray:
     """Set each belt tendon's stiffness I/τ² and critical damping 2√(K·I); return K (N·m/rad).
 
@@ -219,7 +239,7 @@ class BeltPhysics:
     def __init__(self, ring: Ring, params: BeltDynamicsEffect, *, nthread: int = 1):
         self.ring = ring
         self.params = params
-        self.model = physics_spec(ring, params).compile()
+        self.model = _without_shapes(physics_spec(ring, params)).compile()
         self.model.opt.disableflags |= _PHYSICS_OFF
         self.stiffness = tune_belt(self.model, params)
         m = self.model
@@ -322,6 +342,112 @@ class BeltPhysics:
                              motor_vel=qvel[:, self.motor_dof],
                              sensor_rad=qpos[:, self.sensor_qpos],
                              sensor_vel=qvel[:, self.sensor_dof], gear=self.gear)
+
+
+def angles_at(physics: BeltPhysics, sched: Schedule, t_s: np.ndarray,
+              sensor: np.ndarray) -> np.ndarray:
+    """(M,) true angles (rad) of sensors ``sensor`` (M,) at times ``t_s`` (M,) of the sweep
+    ``sched`` rolled out from rest, chunk by chunk (only the chunk being read is kept).
+    Raises as :meth:`BeltPhysics.roll`."""
+    t_s = np.asarray(t_s, dtype=float)
+    out = np.zeros(len(t_s))
+    done = np.zeros(len(t_s), dtype=bool)
+    dt = physics.dt_s
+    ctrl = physics.controls(sched)
+    starts = range(0, len(ctrl), ROLLOUT_CHUNK_STEPS)
+    chunks = (ctrl[i:i + ROLLOUT_CHUNK_STEPS] for i in starts)
+    last = (len(ctrl) - 1) // ROLLOUT_CHUNK_STEPS * ROLLOUT_CHUNK_STEPS  # its start
+    for i, run in zip(starts, physics.follow(chunks, sched.motor_rad[0],
+                                             physics.rest_offset(sched.steps))):
+        end = (i + len(run.motor_rad) - 1) * dt
+        pick = ~done & ((t_s <= end) | (i == last))
+        out[pick] = _hermite(dt, run.sensor_rad, run.sensor_vel, t_s[pick] - i * dt,
+                             np.asarray(sensor)[pick])
+        done |= pick
+    return out
+
+
+def check_instants(sched: Schedule, n_sensors: int, dt_s: float,
+                   timing: TimingEffect | None) -> tuple[np.ndarray, np.ndarray]:
+    """Where the timestep check compares angles: times (M,) and sensors (M,). Without
+    ``timing`` every sensor at each step's first read; with it every physics step (``dt_s``)
+    at which some read's measurement may have been taken: from latency + the longest period
+    (period_s + jitter_s, whatever the seed drew) before the read to latency before it."""
+    first = sched.read_s[:, 0]
+    if timing is None:
+        t = first
+    else:
+        grid = np.arange(int(math.floor(sched.duration_s / dt_s)) + 1) * dt_s
+        ends = first - timing.latency_s
+        nxt = np.minimum(np.searchsorted(ends, grid), len(ends) - 1)
+        t = grid[(grid <= ends[nxt]) & (ends[nxt] - grid <= timing.period_s + timing.jitter_s)]
+    return np.repeat(t, n_sensors), np.tile(np.arange(n_sensors), len(t))
+
+
+def timestep_change(physics: BeltPhysics, sched: Schedule, timing: TimingEffect | None = None,
+                    run: Trajectory | None = None) -> float:
+    """How far (rad) halving ``physics``'s time step moves a sensor's true angle, at most,
+    at the instants the sweep ``sched`` reads (:func:`check_instants`). ``run``: the sweep at
+    the full step if already rolled out. Raises as :meth:`BeltPhysics.roll`."""
+    t, k = check_instants(sched, physics.ring.sensors, physics.dt_s, timing)
+    if len(t) == 0:
+        return 0.0
+    coarse = (_hermite(run.dt_s, run.sensor_rad, run.sensor_vel, t, k) if run is not None
+              else angles_at(physics, sched, t, k))
+    half = BeltPhysics(physics.ring, dataclasses.replace(physics.params,
+                                                         timestep_s=physics.dt_s / 2))
+    return float(np.abs(coarse - angles_at(half, sched, t, k)).max())
+
+
+_checked: dict[tuple, tuple[float, str]] = {}   # (ring, belt, timing, schedule) → verdict
+
+
+def _schedule_key(sched: Schedule) -> str:
+    digest = hashlib.sha256()
+    for a in (sched.motor_rad, sched.command_s, sched.move_s, sched.read_s[:, 0]):
+        digest.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    return digest.hexdigest()
+
+
+def check_timestep(physics: BeltPhysics, sched: Schedule, timing: TimingEffect | None = None,
+                   run: Trajectory | None = None) -> tuple[float, str]:
+    """(change rad, advice): :func:`timestep_change`, and when it exceeds
+    :data:`CONVERGED_ANGLE_RAD` what to do (a halved time step that passes, checked, or how
+    far it still is). Remembered per ring, belt, timing and schedule for the process: a study
+    or bench over the same scene checks once. Raises as :meth:`BeltPhysics.roll`."""
+    key = (physics.ring, physics.params, timing, _schedule_key(sched))
+    verdict = _checked.get(key)
+    if verdict is None:
+        change = timestep_change(physics, sched, timing, run)
+        advice = ""
+        if change > CONVERGED_ANGLE_RAD:
+            advice = _halving_advice(physics, sched, timing)
+        if len(_checked) >= _CHECKED_MAX:
+            _checked.clear()
+        verdict = _checked[key] = (change, advice)
+    return verdict
+
+
+def _halving_advice(physics: BeltPhysics, sched: Schedule, timing: TimingEffect | None,
+                    ) -> str:
+    """A halved time step that passes, checked: dt/2, else dt/4 (the check of dt/2^j rolls
+    the sweep at 2^j and 2^(j+1) times the steps, so it stops there), else how far it is."""
+    params = physics.params
+    measured = None
+    for halvings in (1, 2):
+        finer = BeltPhysics(physics.ring, dataclasses.replace(
+            params, timestep_s=params.timestep_s / 2 ** halvings))
+        try:
+            measured = timestep_change(finer, sched, timing)
+        except RuntimeError:
+            continue
+        if measured <= CONVERGED_ANGLE_RAD:
+            return (f"timestep_ms: {finer.dt_s * 1e3:.4g} passes (halving it moves "
+                    f"{math.degrees(measured):.2g}°)")
+    if measured is None:
+        return "lower timestep_ms"
+    return (f"{finer.dt_s * 1e3:.4g} ms still moves {math.degrees(measured):.2g}° when halved: "
+            f"lower timestep_ms further")
 
 
 # --------------------------------------------------------------------------- GP2 clocks
@@ -510,6 +636,9 @@ class Dynamics:
         self.motion: MotionEffect | None = scenario.effects.get("motion")
         self.step_time_s = (self.belt or BeltDynamicsEffect()).step_time_s
         self._physics: BeltPhysics | None = None
+        # refuse a belt time step whose physics is not converged (check_timestep); off only
+        # for a study that measures convergence itself (studies.dynamics.convergence)
+        self.verify_timestep = True
         self._timelines: dict[bytes, tuple[Schedule, Trajectory | None]] = {}
         self.periods_s = (SensorClocks.periods(self.timing, built.n_sensors, self.seed)
                           if self.timing else None)
@@ -548,11 +677,21 @@ class Dynamics:
         cached = self._timelines.get(key)
         if cached is None:
             sched = self.schedule(steps)
+            where = self.scenario.source or self.scenario.name
+            traj = None
             try:
-                traj = self.physics.run(sched) if self.belt is not None else None
+                if self.belt is not None:
+                    traj = self.physics.run(sched)
+                    if self.verify_timestep:
+                        change, advice = check_timestep(self.physics, sched, self.timing, traj)
             except RuntimeError as exc:  # a combination the loader's stability rule let through
-                raise ScenarioError(f"{self.scenario.source or self.scenario.name}: "
-                                 f"effects.belt_dynamics: {exc}") from None
+                raise ScenarioError(f"{where}: effects.belt_dynamics: {exc}") from None
+            if traj is not None and self.verify_timestep and change > CONVERGED_ANGLE_RAD:
+                raise ScenarioError(
+                    f"{where}: effects.belt_dynamics.timestep_ms: {self.belt.timestep_s * 1e3:g} "
+                    f"ms is not converged: halving it moves a sensor's true angle at a reading "
+                    f"by {math.degrees(change):.3g}°, more than the "
+                    f"{math.degrees(CONVERGED_ANGLE_RAD):g}° allowed; {advice}")
             cached = (sched, traj)
             self._timelines[key] = cached
         return cached

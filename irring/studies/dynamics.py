@@ -1,6 +1,6 @@
 """What the belt, the GP2's clock and a moving robot do to the readings, in numbers:
-:func:`coupling`, :func:`convergence`, :func:`settling`, :func:`mujoco_clocks` and
-:func:`motion` return plain figures (``irring bench dynamics`` prints them,
+:func:`coupling`, :func:`convergence`, :func:`timestep_table`, :func:`check_cost`,
+:func:`settling`, :func:`mujoco_clocks` and :func:`motion` return plain figures (``irring bench dynamics`` prints them,
 tests/test_dynamics.py asserts on them). What each measures: docs/dynamics.md.
 """
 
@@ -15,11 +15,28 @@ import numpy as np
 
 from .. import pipeline, safe_yaml
 from ..core import Ring
-from ..scenario import BeltDynamicsEffect, Scenario, load_scenario, parse, resolve
+from ..estimation.calibration import scene_calibration
+from ..scenario import BeltDynamicsEffect, Scenario, load_scenario, loads, parse, resolve
 from ..simulation import dynamics as dyn, model as model_lib
 from ..simulation.sim import SimRing
 
 SETTLE_S = (0.0, 0.010, 0.020, 0.0383, 0.0529, 0.075)
+# docs/dynamics.md's time-step table: (belt τ ms, step time ms, backlash °, time steps ms)
+TIMESTEP_CASES = ((2.0, 4.0, 0.0, (0.5, 1.0, 1.5, 1.75, 2.0, 3.0, 4.0)),
+                  (10.0, 4.0, 0.0, (2.0, 3.0, 4.0, 5.0)),
+                  (0.5, 4.0, 0.0, (0.45,)),
+                  (0.25, 4.0, 0.0, (0.5,)),
+                  (0.2, 4.0, 5.0, (0.5,)))
+BOX_ROOM = """name: box
+seed: 2
+room:
+  outline_mm: [[0, 0], [1300, 0], [1300, 900], [0, 900]]
+robot:
+  poses: [{{x_mm: 500, y_mm: 400}}]
+effects:
+  belt_dynamics: {{timestep_ms: {dt}, belt_timeconst_ms: {tau}, step_time_ms: {step},
+                  backlash_deg: {backlash}}}
+"""
 
 
 def variant(name: str, *, effects: dict | None = None, drop: tuple = (), scan: dict | None = None,
@@ -100,6 +117,7 @@ def _sweep_at(scenario: Scenario, timestep_s: float, seed: int):
     effects["belt_dynamics"] = dataclasses.replace(effects["belt_dynamics"], timestep_s=timestep_s)
     sc = dataclasses.replace(scenario, effects=types.MappingProxyType(effects))
     sim = SimRing(sc, seed=seed)
+    sim.dynamics.verify_timestep = False   # this measures convergence, at any time step
     plan = sim.dynamics.plan(0, sim.default_steps(), 0, sim.pose(0))
     return plan, sim.sweep(0)
 
@@ -118,6 +136,51 @@ def convergence(scenario: Scenario, timestep_s: float | None = None, seed: int =
             "counts": float(np.abs(np.asarray(sa.counts, float)
                                    - np.asarray(sb.counts, float)).max()),
             "angle_error_rms_rad": float(np.sqrt(np.mean(pa.angle_error_rad ** 2)))}
+
+
+def timestep_table(cases=TIMESTEP_CASES, seed: int = 2) -> list[dict]:
+    """Per case and time step, one sweep of a 1.3 × 0.9 m box from (500, 400) mm: how far
+    halving the step moves a true sensor angle at a read (what the first sweep's check
+    measures, ``passes`` if ≤ :data:`~irring.simulation.dynamics.CONVERGED_ANGLE_RAD`) and the
+    occupied F1 of the map made at that step anyway (the check off)."""
+    rows = []
+    for tau_ms, step_ms, backlash_deg, dts_ms in cases:
+        for dt_ms in dts_ms:
+            sc = loads(BOX_ROOM.format(dt=dt_ms, tau=tau_ms, step=step_ms, backlash=backlash_deg),
+                       "timestep table")
+            sim = SimRing(sc, seed=seed)
+            sim.dynamics.verify_timestep = False
+            acq = pipeline.acquire(sim, range(sim.n_sweeps), progress=False)
+            sched, run = sim.dynamics.timeline(sim.default_steps())
+            change = dyn.timestep_change(sim.dynamics.physics, sched, sim.dynamics.timing, run)
+            result = pipeline.map_sweeps(acq.sweeps, scenario=sc,
+                                         calibration=scene_calibration(sc)[0])
+            rows.append({"belt_timeconst_s": tau_ms / 1e3, "step_time_s": step_ms / 1e3,
+                         "backlash_rad": float(np.radians(backlash_deg)),
+                         "timestep_s": dt_ms / 1e3, "angle_change_rad": change,
+                         "passes": change <= dyn.CONVERGED_ANGLE_RAD,
+                         "occupied_f1": float(result.scores["occupied_f1"])})
+    return rows
+
+
+def check_cost(name: str = "t_room_moving", repeats: int = 3) -> dict:
+    """What the first sweep's time-step check costs on ``name``'s sweep: the belt physics
+    rolled out at the scene's step and the check (the same sweep at half the step, compared),
+    best of ``repeats``; the ratio is the check's extra work per scene and schedule."""
+    sim = SimRing(load_scenario(name))
+    dynamics = sim.dynamics
+    sched = dynamics.schedule(sim.default_steps())
+    physics_s, check_s = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run = dynamics.physics.run(sched)
+        t1 = time.perf_counter()
+        change = dyn.timestep_change(dynamics.physics, sched, dynamics.timing, run)
+        check_s.append(time.perf_counter() - t1)
+        physics_s.append(t1 - t0)
+    return {"scene": name, "physics_steps": len(run.motor_rad), "physics_s": min(physics_s),
+            "check_s": min(check_s), "ratio": min(check_s) / min(physics_s),
+            "angle_change_rad": change}
 
 
 def settling(effects: dict, settles_s=SETTLE_S, seed: int = 1, name: str = "t_room") -> list[dict]:
@@ -252,8 +315,10 @@ def motion(seeds=(1,)) -> dict:
     return out
 
 
-def measure(*, sweeps: int = 1000, seeds=(1,), with_motion: bool = True) -> dict:
-    """Everything above with the defaults (what ``irring bench dynamics`` prints)."""
+def measure(*, sweeps: int = 1000, seeds=(1,), with_motion: bool = True,
+            timesteps: bool = False) -> dict:
+    """Everything above with the defaults (what ``irring bench dynamics`` prints); the
+    time-step table only with ``timesteps``."""
     belt_timing = {"belt_dynamics": {}, "timing": {}}
     fast = variant("t_room", effects=belt_timing, scan={"settle_s": 0.0})
     belt_only = variant("t_room", effects={"belt_dynamics": {}}, scan={"settle_s": 0.0})
@@ -265,8 +330,11 @@ def measure(*, sweeps: int = 1000, seeds=(1,), with_motion: bool = True) -> dict
         "settling_belt": settling({"belt_dynamics": {}}, (0.0, 0.005, 0.010, 0.020)),
         "settling_timing": settling({"timing": {}}),
         "mujoco_clocks": mujoco_clocks(fast),
+        "check_cost": check_cost(),
     }
     out["coupling"].pop("stretch_per_sweep_rad")
     if with_motion:
         out["motion"] = motion(seeds)
+    if timesteps:
+        out["timesteps"] = timestep_table()
     return out
