@@ -164,3 +164,16 @@ def single_ray(ox, oy, heading, d, *, valid=True, reason=Reason.OK, sigma_m=0.00
                   heading=a(heading), sigma_m=a(sigma_m), iterations=np.ones((1, 1), int),
                   valid=np.array([[valid]]), reason=np.array([[reason]], np.uint8),
                   max_range_m=max_range_m)
+
+
+# One pose near the south-west corner of a room whose far walls lie near the reach
+# (metrics and bench-rooms tests of what counts as visible wall).
+FAR_CORNER = """\
+name: far_corner
+seed: 5
+room:
+  outline_mm: [[0, 0], [1030, 0], [1030, 990], [0, 990]]
+robot:
+  poses:
+    - {x_mm: 262, y_mm: 243, yaw_deg: 17}
+"""

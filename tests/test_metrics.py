@@ -17,7 +17,7 @@ from irring.maps.metrics import (OBSTACLE0, SCORE_KEYS, WALL, ground_truth, scor
                             shadow_by_obstacle)
 from irring.scenario import load_scenario
 
-from _synthetic import points_for_pose, ray_distances
+from _synthetic import FAR_CORNER, points_for_pose, ray_distances
 
 
 @pytest.fixture(scope="module")
@@ -439,18 +439,6 @@ def test_a_return_needs_an_incidence_and_a_signal_the_sensor_can_tell_from_nothi
                            surface=surface) == want, t
     with pytest.raises(ValueError, match="surface=.normal x, normal y, reflectance"):
         metrics._measurable(np.array([x]), np.array([y]), pose, *slanted)
-
-
-# One pose near the south-west corner of a room whose far walls lie near the reach.
-FAR_CORNER = """\
-name: far_corner
-seed: 5
-room:
-  outline_mm: [[0, 0], [1030, 0], [1030, 990], [0, 990]]
-robot:
-  poses:
-    - {x_mm: 262, y_mm: 243, yaw_deg: 17}
-"""
 
 
 def test_visible_wall_is_wall_the_scenes_sensor_returns_from():

@@ -14,6 +14,8 @@ from irring.cli import main
 from irring.simulation.sim import SimRing
 from irring.maps.metrics import SCORE_KEYS as S_KEYS
 
+from _synthetic import FAR_CORNER
+
 # A room of our own, not in scenarios/: a 1.03 × 0.81 m room with one post.
 SMALL_ROOM = """\
 name: tiny_post
@@ -218,19 +220,10 @@ def test_debug_prints_a_failed_rooms_traceback_and_goes_on(tmp_path, monkeypatch
             if "error" not in r] == ["tiny_post"]
 
 
-# One pose near a corner, the far walls near the reach: wall seen there only obliquely gives
-# the GP2 no return (incidence dims it below nothing-in-range), so the scene's visible wall is
-# smaller than an ideal sensor's.
-FAR_CORNER = """\
-name: far_corner
-seed: 5
-room:
-  outline_mm: [[0, 0], [1030, 0], [1030, 990], [0, 990]]
-robot:
-  poses:
-    - {x_mm: 262, y_mm: 243, yaw_deg: 17}
-effects: [incidence, noise, quantization]
-"""
+# FAR_CORNER with the default effects: wall seen there only obliquely gives the GP2 no
+# return (incidence dims it below nothing-in-range), so the scene's visible wall is smaller
+# than an ideal sensor's.
+FAR_CORNER_EFFECTS = FAR_CORNER + "effects: [incidence, noise, quantization]\n"
 
 
 def test_the_ideal_sensor_is_judged_on_the_scenes_visible_wall():
@@ -238,7 +231,7 @@ def test_the_ideal_sensor_is_judged_on_the_scenes_visible_wall():
     from irring import pipeline
     from irring.maps import metrics
 
-    sc = S.loads(FAR_CORNER, "far_corner.yaml")
+    sc = S.loads(FAR_CORNER_EFFECTS, "far_corner.yaml")
     ideal = rooms.ideal(sc)
     row = rooms.measure([sc], 1, progress=False)[0]
     run = pipeline.run(ideal, seed=5, progress=False)
