@@ -302,6 +302,24 @@ def test_a_refusal_is_remembered_with_its_advice(monkeypatch, tmp_path):
     assert str(again.value) == str(first.value)
 
 
+def test_a_long_sweep_is_refused_with_an_estimate_instead_of_a_checked_step(monkeypatch,
+                                                                            tmp_path):
+    """Checking dt/2 would roll 6× the sweep's physics steps; past ADVICE_MAX_STEPS the
+    advice is RK4's fourth-order estimate, half of dt·(0.1° / change)^¼, and says it is one."""
+    D._checked.clear()
+    sim = SimRing(load_scenario(box_file(tmp_path, 0.5, 0.25)))
+    steps = len(sim.dynamics.physics.controls(sim.dynamics.schedule(sim.default_steps())))
+    assert steps == 6000
+    monkeypatch.setattr(D, "ADVICE_MAX_STEPS", 6 * steps - 1)
+    with pytest.raises(ScenarioError) as refused:
+        sim.sweep(0)
+    message = str(refused.value)
+    change = float(message.split("at a reading by ")[1].split("°")[0])
+    guess = 0.5 * (0.1 / change) ** 0.25 / 2
+    assert message.endswith(f"lower timestep_ms, to about {guess:.2g} ms (estimated, not checked)")
+    assert 0.01 < guess < 0.05
+
+
 def test_timed_reads_are_checked_wherever_a_measurement_may_fall():
     """With timing a read returns a measurement from latency + up to the longest period
     before it; the check compares every physics step in those windows (and nothing else),

@@ -33,6 +33,9 @@ ROLLOUT_CHUNK_STEPS = 10_000
 # measured to cost map F1 (docs/dynamics.md, "Is the time step converged?").
 CONVERGED_ANGLE_RAD = math.radians(0.1)
 _CHECKED_MAX = 256   # timestep verdicts kept per process (one per ring, belt and schedule)
+# a refusal's advice checks halved steps only while that rolls out at most this many physics
+# steps (~15 s at 15 µs a step): the sweep at dt/2 and dt/4 is 6× its steps at dt
+ADVICE_MAX_STEPS = 1_000_000
 
 # Physics of the ring alone: no contacts, no rangefinders (beams are cast by sim.SimRing).
 _PHYSICS_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR | mujoco.mjtDisableBit.mjDSBL_CONTACT)
@@ -421,7 +424,7 @@ def check_timestep(physics: BeltPhysics, sched: Schedule, timing: TimingEffect |
         change = timestep_change(physics, sched, timing, run)
         advice = ""
         if change > CONVERGED_ANGLE_RAD:
-            advice = _halving_advice(physics, sched, timing)
+            advice = _halving_advice(physics, sched, timing, change)
         if len(_checked) >= _CHECKED_MAX:
             _checked.clear()
         verdict = _checked[key] = (change, advice)
@@ -429,12 +432,17 @@ def check_timestep(physics: BeltPhysics, sched: Schedule, timing: TimingEffect |
 
 
 def _halving_advice(physics: BeltPhysics, sched: Schedule, timing: TimingEffect | None,
-                    ) -> str:
-    """A halved time step that passes, checked: dt/2, else dt/4 (the check of dt/2^j rolls
-    the sweep at 2^j and 2^(j+1) times the steps, so it stops there), else how far it is."""
+                    change: float) -> str:
+    """A halved time step that passes, checked: dt/2, else dt/4. Checking dt/2^j rolls the
+    sweep at 2^j and 2^(j+1) times its physics steps, so it stops there, and tries none
+    that would take more than :data:`ADVICE_MAX_STEPS`; then RK4's fourth order estimates
+    one (said so: not checked)."""
     params = physics.params
+    steps = len(physics.controls(sched))
     measured = None
     for halvings in (1, 2):
+        if 3 * 2 ** halvings * steps > ADVICE_MAX_STEPS:
+            break
         finer = BeltPhysics(physics.ring, dataclasses.replace(
             params, timestep_s=params.timestep_s / 2 ** halvings))
         try:
@@ -444,10 +452,11 @@ def _halving_advice(physics: BeltPhysics, sched: Schedule, timing: TimingEffect 
         if measured <= CONVERGED_ANGLE_RAD:
             return (f"timestep_ms: {finer.dt_s * 1e3:.4g} passes (halving it moves "
                     f"{math.degrees(measured):.2g}°)")
-    if measured is None:
-        return "lower timestep_ms"
-    return (f"{finer.dt_s * 1e3:.4g} ms still moves {math.degrees(measured):.2g}° when halved: "
-            f"lower timestep_ms further")
+    if measured is not None:
+        return (f"{finer.dt_s * 1e3:.4g} ms still moves {math.degrees(measured):.2g}° when "
+                f"halved: lower timestep_ms further")
+    guess = physics.dt_s * (CONVERGED_ANGLE_RAD / change) ** 0.25 / 2
+    return f"lower timestep_ms, to about {guess * 1e3:.2g} ms (estimated, not checked)"
 
 
 # --------------------------------------------------------------------------- GP2 clocks
