@@ -233,7 +233,7 @@ def test_an_unconverged_belt_time_step_is_refused_by_irring_run(tmp_path, capsys
     warns, but the map fell apart (F1 0.37): halving the step moves the sensors by ~900°."""
     from irring import errors
     from irring.cli import main
-    D._checked.clear()
+    D.forget_timestep_checks()
     out = tmp_path / "out"
     code = main(["run", str(box_file(tmp_path, 0.5, 0.25)), "--no-animation", "--out", str(out)])
     err = capsys.readouterr().err
@@ -249,7 +249,7 @@ def test_an_unconverged_belt_time_step_is_refused_by_irring_run(tmp_path, capsys
 def test_a_converged_time_step_runs_and_its_change_is_below_the_tolerance(tmp_path):
     """τ = 0.5 ms at 0.45 ms (0.9 τ) is converged (measured 0.003°); the default 0.5 ms at
     τ = 2 ms by three orders of magnitude."""
-    D._checked.clear()
+    D.forget_timestep_checks()
     sc = load_scenario(box_file(tmp_path, 0.45, 0.5))
     result = pipeline.run(sc, progress=False)
     assert result.scores["occupied_f1"] > 0.95
@@ -259,17 +259,45 @@ def test_a_converged_time_step_runs_and_its_change_is_below_the_tolerance(tmp_pa
     assert 1e-3 * D.CONVERGED_ANGLE_RAD < change < D.CONVERGED_ANGLE_RAD and advice == ""
     default = SimRing(bench.variant("t_room", effects={"belt_dynamics": {}}))
     sched = default.dynamics.schedule(default.default_steps())
-    change, _ = D.check_timestep(default.dynamics.physics, sched)
-    assert change < 1e-3 * D.CONVERGED_ANGLE_RAD
+    assert D.timestep_change(default.dynamics.physics, sched) < 1e-3 * D.CONVERGED_ANGLE_RAD
+
+
+def test_a_step_whose_doubling_already_passes_is_not_rolled_at_half(monkeypatch, tmp_path,
+                                                                    capfd):
+    """The default 0.5 ms: the sweep at 1 ms moves the angles 0.012°, within 0.1°, so it
+    passes on a quarter of the work. 0.45 ms at τ = 0.5 ms: 0.9 ms is past RK4's limit
+    (0.58 ms), so the sweep at half the step decides. 0.5 ms at τ = 0.25 ms: 1 ms blows up,
+    without a word (no MuJoCo warning printed or logged)."""
+    monkeypatch.chdir(tmp_path)
+    D.forget_timestep_checks()
+    default = SimRing(bench.variant("t_room", effects={"belt_dynamics": {}}))
+    sched = default.dynamics.schedule(default.default_steps())
+    halving = D.timestep_change
+    monkeypatch.setattr(D, "timestep_change", lambda *a, **k: pytest.fail("rolled at dt/2"))
+    change, advice = D.check_timestep(default.dynamics.physics, sched)
+    assert math.radians(0.005) < change < math.radians(0.05) and advice == ""
+    monkeypatch.setattr(D, "timestep_change", halving)
+    sc = load_scenario(box_file(tmp_path, 0.45, 0.5))
+    sim = SimRing(sc)
+    sched = sim.dynamics.schedule(sim.default_steps())
+    assert D._doubling_change(sim.dynamics.physics, sched, None, None) > 1.0
+    change, advice = D.check_timestep(sim.dynamics.physics, sched)
+    assert change == D.timestep_change(sim.dynamics.physics, sched) and advice == ""
+    sim.sweep(0)
+    unstable = SimRing(load_scenario(box_file(tmp_path, 0.5, 0.25)))
+    sched = unstable.dynamics.schedule(unstable.default_steps())
+    assert D._doubling_change(unstable.dynamics.physics, sched, None, None) is None
+    out, err = capfd.readouterr()
+    assert "WARNING" not in out + err and not (tmp_path / "MUJOCO_LOG.TXT").exists()
 
 
 def test_the_time_step_is_checked_once_per_schedule_and_scene(monkeypatch, tmp_path):
     """The check rolls the sweep out again at dt/2: once per ring, belt and schedule in a
     process, so further sweeps, SimRings and seeds of the same scene reuse its verdict."""
-    D._checked.clear()
+    D.forget_timestep_checks()
     calls = []
-    change = D.timestep_change
-    monkeypatch.setattr(D, "timestep_change",
+    change = D._doubling_change   # the check's first roll-out, whatever follows
+    monkeypatch.setattr(D, "_doubling_change",
                         lambda *a, **k: calls.append(a[1].steps.copy()) or change(*a, **k))
     sc = bench.variant("t_room", effects={"belt_dynamics": {"belt_timeconst_ms": 1.3}},
                        scan={"settle_s": 0.003})
@@ -291,7 +319,7 @@ def test_the_time_step_is_checked_once_per_schedule_and_scene(monkeypatch, tmp_p
 
 
 def test_a_refusal_is_remembered_with_its_advice(monkeypatch, tmp_path):
-    D._checked.clear()
+    D.forget_timestep_checks()
     sc = load_scenario(box_file(tmp_path, 1.5, 2))
     with pytest.raises(ScenarioError, match=r"1\.5 ms is not converged: .* by 0\.2\d+°.*; "
                                             r"timestep_ms: 0\.75 passes") as first:
@@ -306,7 +334,7 @@ def test_a_long_sweep_is_refused_with_an_estimate_instead_of_a_checked_step(monk
                                                                             tmp_path):
     """Checking dt/2 would roll 6× the sweep's physics steps; past ADVICE_MAX_STEPS the
     advice is RK4's fourth-order estimate, half of dt·(0.1° / change)^¼, and says it is one."""
-    D._checked.clear()
+    D.forget_timestep_checks()
     sim = SimRing(load_scenario(box_file(tmp_path, 0.5, 0.25)))
     steps = len(sim.dynamics.physics.controls(sim.dynamics.schedule(sim.default_steps())))
     assert steps == 6000
@@ -345,7 +373,7 @@ def test_a_timed_sweep_is_checked_where_it_measures_not_only_at_its_reads(tmp_pa
     """Settle 20 ms with timing, 1.3 ms at τ = 2 ms: at the reads the belt has settled and
     halving the step moves it by 0.01°, but a GP2 may have measured up to 48 ms earlier,
     during the move, where it moves by 0.23°: refused."""
-    D._checked.clear()
+    D.forget_timestep_checks()
     sc = load_scenario(box_file(tmp_path, 1.3, 2, "  timing: {}\nscan: {settle_ms: 20}\n"))
     sim = SimRing(sc)
     sched = sim.dynamics.schedule(sim.default_steps())
