@@ -182,11 +182,15 @@ def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
     user after Ctrl-C, a full disk, a crash of the writer) sees the old file or the whole
     new one, never part of one. A missing parent folder is made. Raises
     :class:`OutputError` naming ``path`` (after ``option``, e.g. ``--mcap``, if given) when
-    the folder cannot be made or written, ``path`` is a folder, or the disk fills."""
+    the folder cannot be made or written, ``path`` is a folder or a device (never replaced),
+    or the disk fills."""
     path = Path(path)
     shown = printable(f"{option} {path}" if option else str(path))
     if path.is_dir():
         raise OutputError(f"{shown}: is a folder; expected a file")
+    if path.exists() and not path.is_file():   # the rename would replace the device node
+        raise OutputError(f"{shown}: is not a regular file (a device, pipe or socket); irring "
+                          "writes a new file there, so name one")
     try:
         path.absolute().parent.mkdir(parents=True, exist_ok=True)
         tmp = _hidden_sibling(path.absolute(), folder=False)

@@ -216,3 +216,24 @@ def test_atomic_file_makes_its_folder_and_names_the_path_it_cannot_write(tmp_pat
             raise ValueError("bad")
     assert sorted(os.listdir(tmp_path)) == ["a", "taken"]
     assert (tmp_path / "taken").read_text() == "keep"
+
+
+def test_a_device_or_pipe_at_an_output_path_is_refused_never_replaced(tmp_path, capsys):
+    """As root, `--mcap /dev/full` and `irring calibrate --out /dev/full` printed 'wrote
+    /dev/full' and had renamed a regular file over the device node (so /dev/null could be
+    replaced too); a named pipe stands in for the device here."""
+    from irring.errors import OutputError
+    from irring.outputs import write_text_atomic
+
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    link = tmp_path / "to-pipe.yaml"
+    link.symlink_to(pipe)
+    for target in (pipe, link):
+        with pytest.raises(OutputError, match=f"^{target}: is not a regular file"):
+            write_text_atomic(target, "a: 1\n")
+    assert main(["calibrate", "--out", str(pipe)]) == 4
+    assert (f"irring calibrate: error: {pipe}: is not a regular file (a device, pipe or "
+            "socket); irring writes a new file there, so name one") in capsys.readouterr().err
+    assert pipe.is_fifo() and link.is_symlink() and sorted(os.listdir(tmp_path)) == [
+        "pipe", "to-pipe.yaml"]
