@@ -235,5 +235,9 @@ def test_a_device_or_pipe_at_an_output_path_is_refused_never_replaced(tmp_path, 
     assert main(["calibrate", "--out", str(pipe)]) == 4
     assert (f"irring calibrate: error: {pipe}: is not a regular file (a device, pipe or "
             "socket); irring writes a new file there, so name one") in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:   # --mcap: refused before the run
+        main(["run", "t_room", "--mcap", str(link), "--out", str(tmp_path / "o")])
+    assert usage.value.code == 2
+    assert f"--mcap: {link}: is a folder or a device; name a file" in capsys.readouterr().err
     assert pipe.is_fifo() and link.is_symlink() and sorted(os.listdir(tmp_path)) == [
         "pipe", "to-pipe.yaml"]

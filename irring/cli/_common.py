@@ -123,11 +123,15 @@ def pose_index(number: int, scenario, option: str = "--pose") -> int:
 
 
 def mcap_file(text: str) -> Path:
-    """``--mcap``'s value, refused before any work when the mcap extra is not installed."""
+    """``--mcap``'s value, refused before any work when the mcap extra is not installed or
+    it names a folder or a device (outputs.atomic_file would refuse it after the work)."""
     if importlib.util.find_spec("mcap_ros2") is None:
         raise argparse.ArgumentTypeError(
             f"writing {text} needs the mcap extra: pip install 'irring[mcap]'")
-    return Path(text)
+    path = Path(text)
+    if path.exists() and not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text}: is a folder or a device; name a file")
+    return path
 
 
 def add_mcap_option(parser: argparse.ArgumentParser) -> None:
