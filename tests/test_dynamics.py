@@ -286,7 +286,16 @@ def test_a_step_whose_doubling_already_passes_is_not_rolled_at_half(monkeypatch,
     sim.sweep(0)
     unstable = SimRing(load_scenario(box_file(tmp_path, 0.5, 0.25)))
     sched = unstable.dynamics.schedule(unstable.default_steps())
+    heard = []
+    mine = heard.append
+    mujoco.set_mju_user_warning(mine)
+    try:
+        assert D._doubling_change(unstable.dynamics.physics, sched, None, None) is None
+        assert mujoco.get_mju_user_warning() is mine and heard == []   # put back, unused
+    finally:
+        mujoco.set_mju_user_warning(None)
     assert D._doubling_change(unstable.dynamics.physics, sched, None, None) is None
+    assert mujoco.get_mju_user_warning() is None
     out, err = capfd.readouterr()
     assert "WARNING" not in out + err and not (tmp_path / "MUJOCO_LOG.TXT").exists()
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import threading
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
@@ -402,6 +403,9 @@ def timestep_change(physics: BeltPhysics, sched: Schedule, timing: TimingEffect 
     return float(np.abs(coarse - angles_at(half, sched, t, k)).max())
 
 
+_WARNING_HANDLER = threading.Lock()   # MuJoCo's warning handler is process-wide
+
+
 def _doubling_change(physics: BeltPhysics, sched: Schedule, timing: TimingEffect | None,
                      run: Trajectory | None) -> float | None:
     """How far (rad) the sweep at twice ``physics``'s step moves from it at the check's
@@ -414,14 +418,15 @@ def _doubling_change(physics: BeltPhysics, sched: Schedule, timing: TimingEffect
                else angles_at(physics, sched, t, k))
     doubled = BeltPhysics(physics.ring, dataclasses.replace(physics.params,
                                                             timestep_s=physics.dt_s * 2))
-    handler = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(lambda message: None)
-    try:
-        coarse = angles_at(doubled, sched, t, k)
-    except RuntimeError:
-        return None
-    finally:
-        mujoco.set_mju_user_warning(handler)
+    with _WARNING_HANDLER:   # one swap at a time, so threads restore what was there
+        handler = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(lambda message: None)
+        try:
+            coarse = angles_at(doubled, sched, t, k)
+        except RuntimeError:
+            return None
+        finally:
+            mujoco.set_mju_user_warning(handler)
     return float(np.abs(coarse - at_step).max())
 
 
@@ -713,7 +718,9 @@ class Dynamics:
 
         Every sweep over the same steps starts at rest at its first step, so both are the
         same each time: they are computed once (the physics is nearly all of a belt sweep's
-        cost) and shared, read-only, by every plan over these steps.
+        cost) and shared, read-only, by every plan over these steps. The first time, the
+        time step is checked (:func:`check_timestep`, unless ``verify_timestep`` is off).
+        Raises ScenarioError when the physics goes unstable or is not converged.
         """
         steps = np.asarray(steps, dtype=np.int64)
         key = steps.tobytes()
