@@ -1,7 +1,8 @@
 """The compiled grid update (irring/maps/_traverse.pyx ``add_beams``) against its numpy oracle
 (irring/maps/mapping_numpy.py), on grids and readings hypothesis draws: prior maps with
-occupied blocks (where no-return beams stop), sharp and uncertain readings, no-returns, other
-invalid readings, cones, and any of the knobs this update has.
+occupied blocks (where no-return beams stop), sharp and uncertain readings (the sharp ones
+beside a farther or silent neighbour with the surface's depth), no-returns, other invalid
+readings, cones, and any of the knobs this update has.
 
 Tolerance: 2e-4 log-odds per cell. The kernel counts the cells well in front of a valid end
 point as whole passes (the formula there differs from l_free by < 4e-5 and a hit's tail
@@ -62,12 +63,13 @@ def prior_map(rng, shape, params):
        stop=st.sampled_from([1.7, 0.0, -2.0, math.inf]),
        lone=st.sampled_from([0.03, 0.008, math.inf]),
        free_sigmas=st.sampled_from([0.0, 1.5]),
-       hold=st.sampled_from([0.005, 0.02, 0.0]))
+       hold=st.sampled_from([0.005, 0.02, 0.0]),
+       depth=st.sampled_from([1.25, 0.0, 3.0]), jump=st.sampled_from([5.0, 0.0, 20.0]))
 def test_insert_agrees_with_the_numpy_oracle(seed, ny, nx, n, cone, stop, lone, free_sigmas,
-                                             hold):
+                                             hold, depth, jump):
     rng = np.random.default_rng(seed)
     params = MapperParams(no_return_stop=stop, lone_sigma_m=lone, free_sigmas=free_sigmas,
-                          hold_sigma_m=hold)
+                          hold_sigma_m=hold, hit_depth_cells=depth, edge_jump_cells=jump)
     g = OccupancyGrid((0.013, -0.021), (ny, nx), 0.01, params)
     g.log_odds = prior_map(rng, (ny, nx), params)
     pts = drawn_readings(rng, n, (nx * 0.01, ny * 0.01), max_range_m=0.3, cone=cone and n <= 30)

@@ -17,7 +17,7 @@ from its number, not from the previous one, so nothing accumulates along a ray. 
 along a segment are u = t·scale − shift (t: 0…1 over the segment).
 """
 
-from libc.math cimport INFINITY, cos, exp, fabs, isfinite, sin, sqrt
+from libc.math cimport INFINITY, NAN, cos, exp, fabs, isfinite, sin, sqrt
 from libc.string cimport memset
 
 import numpy as np
@@ -338,10 +338,21 @@ cdef inline double weight(double z_a, double z_b, double mu, double l_occ,
     return w
 
 
+cdef inline double depth(double z_a, double dz, double tail, double l_occ,
+                         double l_depth) noexcept nogil:
+    """What the surface's depth adds to a cell entered z_a > 0 σ behind an end point, over
+    its hit (l_occ·exp(−z_a²/2) before the tail's end, nothing beyond): up to l_depth,
+    Gaussian in the gap to dz σ deep."""
+    cdef double gap = dmax(z_a - dz, 0.0)
+    cdef double w = l_depth * exp(-0.5 * gap * gap)
+    return w - l_occ * exp(-0.5 * z_a * z_a) if z_a < tail else w
+
+
 def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[::1] origin_y,
               const double[::1] heading, const double[::1] x, const double[::1] y,
               const double[::1] sigma_m, const unsigned char[::1] valid,
               const unsigned char[::1] no_return, const double[::1] reach_m,
+              Py_ssize_t step_stride,
               double max_range_m, double grid_x, double grid_y, double res, params,
               double lo, double hi):
     """Add the log-odds of one batch of readings (flat arrays, metres; ``valid`` and
@@ -355,9 +366,12 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     tail_sigmas·σ behind the end point: the columns up to NEAR_SIGMAS·σ before the point
     where the free evidence stops (constant weight l_free) are counted as row runs, exactly
     (integers), the rest walked cell by cell and weighed with the model; all of it goes into
-    the grid unclamped. Then no-return readings (finite emitter and heading) go along the
-    heading to the max range, or to ``reach_m`` where that is finite and shorter (a surface
-    explains the silence; ≤ 0: not at all), or to the first cell whose log-odds (the grid's
+    the grid unclamped. A sharp one on an occluding edge (reading i's neighbours in its
+    sensor's sweep are i ± ``step_stride``, the readings per step) is walked on to its
+    surface's depth, whose weights wait until the no-return readings are in. Then no-return
+    readings (finite emitter and heading) go along the heading to the max range, or to
+    ``reach_m`` where that is finite and shorter (a surface explains the silence; ≤ 0: not
+    at all), or to the first cell whose log-odds (the grid's
     plus this batch's valid readings') exceed ``no_return_stop`` (+inf: never), and add
     l_no_return to the cells before it: counted as runs up to the first chunk of SAT_COLUMNS
     columns whose box holds such a cell (a summed-area table of them), walked cell by cell
@@ -372,6 +386,10 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef double free_sigmas = params.free_sigmas, stop_m
     cdef double stop_at = params.no_return_stop, lone_sigma = params.lone_sigma_m
     cdef double hold_sigma = params.hold_sigma_m, l_pass, trust
+    cdef double l_depth = min(params.l_occ_min, params.l_occ)
+    cdef double depth_m = params.hit_depth_cells * res, jump_m = params.edge_jump_cells * res
+    cdef double dz, extra, l_deep
+    cdef Py_ssize_t deep_cap = 0, n_deep = 0
     cdef long ny = log_odds.shape[0], nx = log_odds.shape[1]
     cdef Py_ssize_t n = origin_x.shape[0], i, j, nb = 0, nv = 0, kept = 0
     cdef long k, ix, iy, n_far, bx0, by0, bx1, by1, bw, bh
@@ -385,6 +403,9 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef bint silent_runs = False, stops = isfinite(stop_at) or stop_at < 0
     cdef double v
     cdef double* e
+    cdef double* deep_w
+    cdef Py_ssize_t* deep_at
+    cdef double* grid
     cdef long long* rx
     cdef long long* ry
     cdef long long* row
@@ -401,11 +422,25 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
         raise ValueError("every array of the readings needs the same length")
     if n >= 1 << 31:
         raise ValueError("at most 2^31 − 1 readings per insert (the cell counts are 32-bit)")
-    beams_a = np.empty((max(n, 1), 9))
+    if step_stride < 1:
+        raise ValueError(f"step_stride must be ≥ 1, got {step_stride}")
+    beams_a = np.empty((max(n, 1), 10))
     cdef double[:, ::1] beams = beams_a
+    # each reading's range for its neighbours' edge test: inf if silent, NaN if neither
+    ranged_a = np.empty(max(n, 1))
+    cdef double[::1] ranged = ranged_a
     with nogil:
+        for i in range(n):
+            if no_return[i]:
+                ranged[i] = INFINITY
+            elif valid[i] and isfinite(x[i] + y[i]) and isfinite(origin_x[i] + origin_y[i]):
+                vx, vy = x[i] - origin_x[i], y[i] - origin_y[i]
+                ranged[i] = sqrt(vx * vx + vy * vy)
+            else:
+                ranged[i] = NAN
         # the mapped beams in cells, valid ones first: x0, y0, Δx, Δy, d (m), σ (m), length (m),
         # and for valid ones the end point's cell coordinates (as mapping.cell_of: (x − x_g)/res)
+        # and the depth of its surface (m)
         for pass_ in range(2):
             is_valid = pass_ == 0
             for i in range(n):
@@ -416,12 +451,22 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                 if is_valid:
                     if not (valid[i] and isfinite(x[i] + y[i])):
                         continue
-                    # emitter → end point, continued tail_sigmas·σ into the surface
+                    # emitter → end point, continued into the surface: by its hit's depth
+                    # (a sharp end point on an occluding edge: the step before or after it,
+                    # i ∓ step_stride, reads ≥ jump_m farther or nothing; mapping_numpy's
+                    # hit_depths) and tail_sigmas·σ
                     sigma = sigma_m[i] if isfinite(sigma_m[i]) else default_sigma
                     sigma = dmax(sigma, min_sigma)
                     vx, vy = x[i] - ox, y[i] - oy
                     d = sqrt(vx * vx + vy * vy)
-                    length = d + tail * sigma
+                    e[9] = 0.0
+                    if depth_m > 0 and sigma <= hold_sigma and (
+                            (i >= step_stride and ranged[i - step_stride] - d >= jump_m)
+                            or (i + step_stride < n and ranged[i + step_stride] - d >= jump_m)):
+                        e[9] = depth_m
+                        # cells it can enter behind the end point: 2 per column crossed
+                        deep_cap += 2 * (<Py_ssize_t>((depth_m + tail * sigma) * inv) + 3)
+                    length = d + e[9] + tail * sigma
                     stretch = length / d
                     if d == 0:                         # an end point on its emitter: along the heading
                         hx, hy = cos(heading[i]), sin(heading[i])
@@ -473,6 +518,17 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     held_a = np.zeros(bh * bw, np.uint8)
     cdef unsigned char[::1] held_v = held_a
     held = &held_v[0]
+    # what the surface's depth adds (flat grid cell, log-odds), added after the silent beams
+    # (it does not stop them)
+    cdef Py_ssize_t[::1] deep_at_v
+    cdef double[::1] deep_w_v
+    deep_at, deep_w = NULL, NULL
+    if deep_cap:
+        deep_at_v = np.empty(deep_cap, np.intp)
+        deep_w_v = np.empty(deep_cap)
+        deep_at = &deep_at_v[0]
+        deep_w = &deep_w_v[0]
+    grid = &log_odds[0, 0]
     # no-return passes per cell of the box
     passes_a = np.zeros(bh * bw, np.intc)
     cdef int[::1] passes_v = passes_a
@@ -520,14 +576,39 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
             # a reading k times as uncertain as occ_sigma spreads 1/k of a hit over k times
             # the length, but adds at least l_occ_min (or l_occ, if that is less)
             l_hit = dmax(dmin(l_occ_min, l_occ) * trust, l_occ * dmin(1.0, occ_sigma / sigma))
+            if e[9] == 0:
+                for k in range(n_far, s.count):
+                    two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
+                    if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
+                        l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
+                        log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_pass)
+                    if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
+                        l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
+                        log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_pass)
+                continue
+            # a beam with a depth: the hit and pass up to the tail's end (tail σ behind the end
+            # point) as any; a cell entered behind the end point gets at least l_deep
+            # (l_occ_min, at most the hit's), Gaussian in its gap to the depth dz (in σ)
+            dz = e[9] / sigma
+            l_deep = dmin(l_depth, l_hit)
             for k in range(n_far, s.count):
                 two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
                 if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
-                    l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
-                    log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_pass)
+                    if u_in < tail:
+                        l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
+                        log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_pass)
+                    extra = depth(u_in, dz, tail, l_hit, l_deep) if u_in > 0 else 0.0
+                    if extra > 0 and n_deep < deep_cap:
+                        deep_at[n_deep], deep_w[n_deep] = iy * nx + ix, extra
+                        n_deep += 1
                 if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
-                    l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
-                    log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_pass)
+                    if u_mid < tail:
+                        l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
+                        log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_pass)
+                    extra = depth(u_mid, dz, tail, l_hit, l_deep) if u_mid > 0 else 0.0
+                    if extra > 0 and n_deep < deep_cap:
+                        deep_at[n_deep], deep_w[n_deep] = iy * nx + ix, extra
+                        n_deep += 1
         if kept:
             # the runs' cumulative sums (down the columns, then along each row) count the
             # valid beams' clean passes: add their l_free (none in held cells), unclamped
@@ -605,6 +686,8 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                 for ix in range(bw):
                     run += row[ix]
                     passes[iy * bw + ix] += <int>(run + col[ix])
+        for j in range(n_deep):                        # the surface's depth
+            grid[deep_at[j]] += deep_w[j]
         if kept:
             # the no-return passes' log-odds (none in held cells), then the clamp
             for iy in range(bh):

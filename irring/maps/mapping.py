@@ -51,7 +51,7 @@ class MapperParams:
     no_return_stop: float = 1.7   # … or to the first cell above this (> a lone l_occ_min hit)
     l_min: float = -4.0           # clamp: the most certain "free"
     l_max: float = 4.0            # clamp: the most certain "occupied"
-    tail_sigmas: float = 0.25     # the beam is followed to d + tail_sigmas·σ
+    tail_sigmas: float = 0.25     # the beam is followed to d (+ depth) + tail_sigmas·σ
     min_sigma_m: float = 0.005    # floor on a reading's σ: half a 10 mm cell (finer is not resolved)
     default_sigma_m: float = 0.01  # used where a valid reading's sigma_m is NaN
     free_margin_cells: float = 0.5  # no free evidence within this many cells before the end point
@@ -60,6 +60,10 @@ class MapperParams:
     l_occ_min: float = 1.6        # … but at least this (a lone far hit still marks its cell) …
     lone_sigma_m: float = 0.03    # a reading of σ above this weighs lone_sigma_m/σ (hit and pass)
     hold_sigma_m: float = 0.005   # a cell holding an end point of σ ≤ this is not freed by its batch
+    # … and where the next or previous step of its sensor reads ≥ edge_jump_cells farther (or
+    # nothing: an occluding edge), the surface behind it weighs l_occ_min this deep (cells)
+    hit_depth_cells: float = 1.25
+    edge_jump_cells: float = 5.0
     # readings from a wide cone (Points.cone_half_angle_rad > 0: sonar), mapped as arcs
     cone_step_rad: float = math.radians(1.0)  # spacing of the fan of rays across the cone
     cone_l_occ: float = 1.25      # a hit on the arc
@@ -86,6 +90,10 @@ class MapperParams:
                              "got nan")
         if not self.hold_sigma_m >= 0:
             raise ValueError(f"need hold_sigma_m ≥ 0, got {self.hold_sigma_m}")
+        for name in ("hit_depth_cells", "edge_jump_cells"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"need a finite {name} ≥ 0, got {value}")
         if not (self.occ_sigma_m > 0 and self.l_occ_min >= 0):
             raise ValueError(f"need occ_sigma_m > 0 and l_occ_min ≥ 0, got "
                              f"{self.occ_sigma_m}, {self.l_occ_min}")
@@ -273,6 +281,7 @@ class OccupancyGrid:
             (np.asarray(points.reason).ravel() == _NO_RETURN).view(np.uint8),
             _flat(np.full(np.shape(points.valid), np.nan) if points.reach_m is None
                   else points.reach_m),
+            math.prod(np.shape(points.valid)[1:]),       # a step's readings (its sensors)
             float(points.max_range_m), float(self.origin_xy_m[0]), float(self.origin_xy_m[1]),
             self.resolution_m, params, lo, hi)
 

@@ -16,6 +16,28 @@ from ..core import Points, Reason
 from .mapping import MapperParams, mapped_beams, traverse
 
 
+def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.ndarray:
+    """(S, N) m: how deep behind each reading's end point its hit's surface goes.
+    ``hit_depth_cells`` for a sharp valid end point (σ ≤ ``hold_sigma_m``) on an occluding
+    edge: the step before or after it, same sensor, reads nothing (``NO_RETURN``) or
+    ≥ ``edge_jump_cells`` farther (a post's flank, turned away from the beams that pass it);
+    0 elsewhere."""
+    ox, oy = np.asarray(points.origin_x, float), np.asarray(points.origin_y, float)
+    px, py = np.asarray(points.x, float), np.asarray(points.y, float)
+    with np.errstate(invalid="ignore"):
+        valid = np.asarray(points.valid, bool) & np.isfinite(px + py) & np.isfinite(ox + oy)
+        d = np.where(valid, np.hypot(px - ox, py - oy), np.nan)
+        sigma = np.maximum(np.nan_to_num(np.asarray(points.sigma_m, float),
+                                         nan=params.default_sigma_m), params.min_sigma_m)
+        ranged = np.where(np.asarray(points.reason) == int(Reason.NO_RETURN), np.inf, d)
+        jump = params.edge_jump_cells * resolution_m
+        edge = np.zeros(d.shape, bool)
+        edge[1:] |= ranged[:-1] - d[1:] >= jump            # the step before
+        edge[:-1] |= ranged[1:] - d[:-1] >= jump           # the step after
+    sharp = valid & (sigma <= params.hold_sigma_m) & edge
+    return np.where(sharp, params.hit_depth_cells * resolution_m, 0.0)
+
+
 def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
         params: MapperParams, lo: float = -np.inf, hi: float = np.inf) -> np.ndarray:
     """``log_odds`` (ny, nx) after one batch of readings, clamped to [lo, hi] (a new array).
@@ -46,11 +68,13 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     inside = sharp & (hx >= 0) & (hx < shape[1]) & (hy >= 0) & (hy < shape[0])
     held[hy[inside].astype(int), hx[inside].astype(int)] = True
 
-    # valid beams: emitter → end point, continued tail_sigmas·σ into the surface
+    # valid beams: emitter → end point, continued into the surface: by the hit's depth (a
+    # sharp end point on an occluding edge) and tail_sigmas·σ
     vi = np.flatnonzero(valid)
     d = np.hypot(px[vi] - ox[vi], py[vi] - oy[vi])
     s = sigma[vi]
-    length = d + p.tail_sigmas * s
+    depth = hit_depths(points, p, res).ravel()[vi]
+    length = d + depth + p.tail_sigmas * s
     with np.errstate(invalid="ignore", divide="ignore"):
         ux = np.where(d > 0, (px[vi] - ox[vi]) / d, np.cos(hd[vi]))
         uy = np.where(d > 0, (py[vi] - oy[vi]) / d, np.sin(hd[vi]))
@@ -60,12 +84,21 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     r = v.ray
     s_a, s_b = v.t_enter * length[r], v.t_exit * length[r]
     # the hit: σ-weighted (l_occ up to occ_sigma_m, l_occ·occ_sigma_m/σ beyond, at least
-    # l_occ_min), Gaussian in the gap between the cell and the end point
+    # l_occ_min), Gaussian in the gap between the cell and the end point, up to tail_sigmas·σ
+    # behind it
     trust = np.minimum(1.0, p.lone_sigma_m / s)
     l_hit = np.maximum(min(p.l_occ_min, p.l_occ) * trust,
                        p.l_occ * np.minimum(1.0, p.occ_sigma_m / s))
     gap = np.maximum(np.maximum(s_a - d[r], d[r] - s_b), 0.0)
-    w_hit = l_hit[r] * np.exp(-0.5 * (gap / s[r]) ** 2)
+    w_hit = np.where(s_a < d[r] + p.tail_sigmas * s[r],
+                     l_hit[r] * np.exp(-0.5 * (gap / s[r]) ** 2), 0.0)
+    # the surface's depth: a cell entered behind an end point with one gets at least l_occ_min
+    # (no more than the hit), Gaussian in its gap to [d, d + depth]; kept apart until the
+    # silent beams are in (an inferred surface does not stop them)
+    l_depth = np.minimum(min(p.l_occ_min, p.l_occ), l_hit[r])
+    gap_depth = np.maximum(s_a - d[r] - depth[r], 0.0)
+    w_depth = np.where((s_a > d[r]) & (depth[r] > 0), np.maximum(
+        l_depth * np.exp(-0.5 * (gap_depth / s[r]) ** 2) - w_hit, 0.0), 0.0)
     # the pass: l_free·Φ((stop − s_b)/σ) where the cell ends before the free evidence stops,
     # the free margin plus free_sigmas × the σ beyond the floor in front of the end point
     stop = d - p.free_margin_cells * res - p.free_sigmas * (s - p.min_sigma_m)
@@ -74,6 +107,8 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     w_free = p.l_free * trust[r] * np.where((s_b < stop[r]) & ~held[v.iy, v.ix], phi, 0.0)
     out = np.array(log_odds, dtype=float)
     np.add.at(out, (v.iy, v.ix), w_hit + w_free)
+    deep = np.zeros(shape)
+    np.add.at(deep, (v.iy, v.ix), w_depth)
 
     # no-return beams: along the heading to the max range, or to the first cell whose
     # log-odds (the grid's with this batch's valid readings) exceed no_return_stop; none in
@@ -94,4 +129,4 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
         before[first:np.searchsorted(v.ray, ray, side="right")] = False
     keep = before & ~held[v.iy, v.ix]
     np.add.at(out, (v.iy[keep], v.ix[keep]), p.l_no_return)
-    return np.clip(out, lo, hi)
+    return np.clip(out + deep, lo, hi)
