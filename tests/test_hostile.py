@@ -608,6 +608,19 @@ def test_bad_options_are_usage_errors(capsys, argv, status, message):
     assert message in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, message", [
+    (["--stall-seconds", "5"], "--stall-seconds 5 recovers from a stall, so it needs "
+                               "--stall-after N"),
+    (["--tcp", "0", "--link", "x.pty"], "--link and --tcp: the device is on a pty"),
+])
+def test_emulate_refuses_an_option_it_would_ignore(tmp_path, monkeypatch, capsys, argv, message):
+    """Both ran an emulator that silently ignored the option (no stall; no link)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["emulate", "t_room", "--quiet", *argv]) == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_emulate_link_never_replaces_a_regular_file(tmp_path, capsys):
     target = tmp_path / "precious.txt"
     target.write_text("keep me")

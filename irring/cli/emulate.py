@@ -41,7 +41,7 @@ def register(p: argparse.ArgumentParser) -> None:
              EPILOG)
     p.add_argument("scenario", nargs="?", default="t_room",
                    help="bundled scenario name or YAML path (default: t_room)")
-    p.add_argument("--link", metavar="PATH", default=DEFAULT_LINK,
+    p.add_argument("--link", metavar="PATH", default=None,
                    help=f"symlink to the pty slave for the host to open (default: {DEFAULT_LINK} "
                         "in the current folder; removed when the emulator stops; a link "
                         "left by an emulator that was killed is replaced, one in use by a "
@@ -79,6 +79,16 @@ def register(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..simulation.sim import SimRing   # deferred: loads MuJoCo, which --help does not need
 
+    # an option that would do nothing is refused rather than ignored
+    if args.tcp is not None and args.link is not None:
+        print("irring emulate: error: --link and --tcp: the device is on a pty (--link PATH) "
+              "or on TCP (--tcp PORT), not both", file=sys.stderr)
+        return 2
+    if args.stall_seconds != math.inf and args.stall_after is None:
+        print(f"irring emulate: error: --stall-seconds {args.stall_seconds:g} recovers from a "
+              "stall, so it needs --stall-after N (when to stall)", file=sys.stderr)
+        return 2
+    args.link = DEFAULT_LINK if args.link is None else args.link
     scenario = load_scenario(args.scenario)
     try:
         faults = Faults(corrupt_rate=args.corrupt_rate, drop_rate=args.drop_rate,
