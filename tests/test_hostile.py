@@ -29,7 +29,7 @@ import hostile_devices as hd
 from irring import safe_yaml
 from irring.cli import main
 from irring.core import Sweep
-from irring.errors import TooBig
+from irring.errors import OutputError, TooBig
 from irring.estimation.calibration import Calibration, CalibrationError, load_calibration
 from irring.hardware import DeviceError, NoReadings, SerialRing
 from irring.hardware import protocol as p_
@@ -587,6 +587,35 @@ def test_a_damaged_results_csv_is_refused_on_resume_naming_line_and_column(
     err = capsys.readouterr().err
     assert f"{out / 'results.csv'}: {message}" in err and "internal error" not in err
     assert sorted(p.name for p in out.iterdir()) == ["results.csv"]   # nothing run or summarised
+
+
+@pytest.mark.parametrize("failure, status", [
+    (OutputError("out/map.png: No space left on device"), 4),
+    (KeyboardInterrupt(), 130),
+])
+def test_drive_saves_the_sweeps_elsewhere_when_its_outputs_cannot_be_written(
+        tmp_path, capsys, monkeypatch, failure, status):
+    """A full disk (or a second Ctrl-C) while writing --out lost every sweep of the drive:
+    exit 4 with nothing kept, after the robot had been walked through every pose."""
+    from irring import pipeline
+
+    def fail(*a, **k):
+        raise failure
+
+    monkeypatch.setattr(pipeline, "write_outputs", fail)
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path / "spare"))
+    (tmp_path / "spare").mkdir()
+    code, out = _drive(tmp_path, hd.good, poses=2)
+    err = capsys.readouterr().err
+    assert code == status, err
+    (saved,) = (tmp_path / "spare").iterdir()
+    assert saved.name.startswith("irring-drive-") and saved.suffix == ".npz"
+    assert f"the 2 sweeps are kept in {saved}: irring replay {saved}" in err
+    sweeps, _ = load_recording(saved)
+    assert [list(s.steps) for s in sweeps] == [[-2, -1, 0, 1, 2]] * 2
+    assert all(list(row) == hd.counts_for(int(step))
+               for s in sweeps for step, row in zip(s.steps, s.counts))
+    assert not out.exists()
 
 
 # --------------------------------------------------------------------------- command line

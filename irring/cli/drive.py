@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -219,19 +220,12 @@ def run(args: argparse.Namespace) -> int:
     elif failure is not None:   # what arrived is mapped below
         print(f"irring drive: error: {errors.printable(str(failure), 2000)}", file=sys.stderr)
 
-    frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
-    result = pipeline.map_sweeps(sweeps, scenario=truth, calibration=calibration,
-                                 frames_per_sweep=frames, score=truth is not None)
-    result.scenario_text = pipeline.scenario_text(truth) if truth is not None else None
-    result.calibration_text = cal_text
-    link = {"port": args.port, "firmware": info.firmware, "totals": ring.stats.as_dict(),
-            "sweeps": [r.as_dict() for r in acq.reports],
-            "error": None if failure is None else "interrupted" if stopped else str(failure)}
-    paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation,
-                                   mcap=args.mcap,
-                                   extra_files={"link": ("link.json", json.dumps(link, indent=2))})
-
-
+    try:
+        paths, result, link = _map_and_write(args, sweeps, acq, ring, truth, calibration,
+                                             cal_text, failure, stopped)
+    except BaseException:   # a full disk, a second Ctrl-C, a bug: the readings survive
+        _keep_elsewhere(sweeps, truth, cal_text)
+        raise
     report(result, paths, as_json=args.json,
            extra={"source": f"serial:{args.port}", "link": link})
     if not args.json:
@@ -241,3 +235,41 @@ def run(args: argparse.Namespace) -> int:
               f"{t.checksum_failures} checksum failures, {t.malformed} malformed, "
               f"{t.seq_gaps} seq gaps, {t.timeouts} timeouts, {t.resweeps} re-sweeps")
     return 0 if failure is None else errors.INTERRUPTED if stopped else errors.DEVICE
+
+
+def _map_and_write(args, sweeps, acq, ring, truth, calibration, cal_text, failure, stopped):
+    """Estimate, map and score what arrived and write --out: (paths, result, link)."""
+    frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
+    result = pipeline.map_sweeps(sweeps, scenario=truth, calibration=calibration,
+                                 frames_per_sweep=frames, score=truth is not None)
+    result.scenario_text = pipeline.scenario_text(truth) if truth is not None else None
+    result.calibration_text = cal_text
+    link = {"port": args.port, "firmware": ring.info.firmware, "totals": ring.stats.as_dict(),
+            "sweeps": [r.as_dict() for r in acq.reports],
+            "error": None if failure is None else "interrupted" if stopped else str(failure)}
+    paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation,
+                                   mcap=args.mcap,
+                                   extra_files={"link": ("link.json", json.dumps(link, indent=2))})
+    return paths, result, link
+
+
+def _keep_elsewhere(sweeps, truth, cal_text) -> None:
+    """Save the sweeps to a new file in the temporary folder and say where: --out could not
+    take them, and a drive's readings cannot be taken again for free."""
+    import tempfile
+
+    from ..recording import save_recording
+
+    try:
+        fd, name = tempfile.mkstemp(prefix="irring-drive-", suffix=".npz")
+        os.close(fd)
+        meta = {"scenario_yaml": pipeline.scenario_text(truth) if truth is not None else None,
+                "calibration_yaml": cal_text}
+        path = save_recording(name, sweeps, meta)
+    except Exception as exc:   # noqa: BLE001 - the error being reported matters more
+        print(f"irring drive: the sweeps could not be kept either ({errors.printable(str(exc))})",
+              file=sys.stderr)
+        return
+    n = len(sweeps)
+    print(f"irring drive: the {n} sweep{'s' if n != 1 else ''} {'are' if n != 1 else 'is'} "
+          f"kept in {path}: irring replay {path}", file=sys.stderr)
