@@ -64,15 +64,19 @@ def prior_map(rng, shape, params):
        lone=st.sampled_from([0.03, 0.008, math.inf]),
        free_sigmas=st.sampled_from([0.0, 1.5]),
        hold=st.sampled_from([0.005, 0.02, 0.0]),
-       depth=st.sampled_from([1.25, 0.0, 3.0]), jump=st.sampled_from([5.0, 0.0, 20.0]))
+       depth=st.sampled_from([1.25, 0.0, 3.0]), jump=st.sampled_from([5.0, 0.0, 20.0]),
+       sensors=st.sampled_from([1, 3, 12]))
 def test_insert_agrees_with_the_numpy_oracle(seed, ny, nx, n, cone, stop, lone, free_sigmas,
-                                             hold, depth, jump):
+                                             hold, depth, jump, sensors):
     rng = np.random.default_rng(seed)
     params = MapperParams(no_return_stop=stop, lone_sigma_m=lone, free_sigmas=free_sigmas,
                           hold_sigma_m=hold, hit_depth_cells=depth, edge_jump_cells=jump)
     g = OccupancyGrid((0.013, -0.021), (ny, nx), 0.01, params)
     g.log_odds = prior_map(rng, (ny, nx), params)
     pts = drawn_readings(rng, n, (nx * 0.01, ny * 0.01), max_range_m=0.3, cone=cone and n <= 30)
+    if n % sensors == 0 and not cone:       # as a sweep: (steps, sensors), neighbours by step
+        pts = Points(**{k: (v.reshape(-1, sensors) if isinstance(v, np.ndarray) else v)
+                        for k, v in vars(pts).items()})
     want = mapping_numpy.add(g.log_odds, pts, g.origin_xy_m, g.resolution_m, params,
                              params.l_min, params.l_max)
     before = g.log_odds.copy()
