@@ -348,6 +348,21 @@ cdef inline double depth(double z_a, double dz, double tail, double l_occ,
     return w - l_occ * exp(-0.5 * z_a * z_a) if z_a < tail else w
 
 
+cdef inline double ranged(Py_ssize_t i, const double[::1] origin_x,
+                         const double[::1] origin_y, const double[::1] x, const double[::1] y,
+                         const unsigned char[::1] valid,
+                         const unsigned char[::1] no_return) noexcept nogil:
+    """Reading i's range for its neighbours' edge test: inf if silent, its end point's
+    distance from its emitter if valid, else NaN (no edge)."""
+    cdef double vx, vy
+    if no_return[i]:
+        return INFINITY
+    if valid[i] and isfinite(x[i] + y[i]) and isfinite(origin_x[i] + origin_y[i]):
+        vx, vy = x[i] - origin_x[i], y[i] - origin_y[i]
+        return sqrt(vx * vx + vy * vy)
+    return NAN
+
+
 def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[::1] origin_y,
               const double[::1] heading, const double[::1] x, const double[::1] y,
               const double[::1] sigma_m, const unsigned char[::1] valid,
@@ -426,18 +441,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
         raise ValueError(f"step_stride must be ≥ 1, got {step_stride}")
     beams_a = np.empty((max(n, 1), 10))
     cdef double[:, ::1] beams = beams_a
-    # each reading's range for its neighbours' edge test: inf if silent, NaN if neither
-    ranged_a = np.empty(max(n, 1))
-    cdef double[::1] ranged = ranged_a
     with nogil:
-        for i in range(n):
-            if no_return[i]:
-                ranged[i] = INFINITY
-            elif valid[i] and isfinite(x[i] + y[i]) and isfinite(origin_x[i] + origin_y[i]):
-                vx, vy = x[i] - origin_x[i], y[i] - origin_y[i]
-                ranged[i] = sqrt(vx * vx + vy * vy)
-            else:
-                ranged[i] = NAN
         # the mapped beams in cells, valid ones first: x0, y0, Δx, Δy, d (m), σ (m), length (m),
         # and for valid ones the end point's cell coordinates (as mapping.cell_of: (x − x_g)/res)
         # and the depth of its surface (m)
@@ -461,8 +465,11 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                     d = sqrt(vx * vx + vy * vy)
                     e[9] = 0.0
                     if depth_m > 0 and sigma <= hold_sigma and (
-                            (i >= step_stride and ranged[i - step_stride] - d >= jump_m)
-                            or (i + step_stride < n and ranged[i + step_stride] - d >= jump_m)):
+                            (i >= step_stride and ranged(i - step_stride, origin_x, origin_y,
+                                                         x, y, valid, no_return) - d >= jump_m)
+                            or (i + step_stride < n and ranged(i + step_stride, origin_x,
+                                                               origin_y, x, y, valid,
+                                                               no_return) - d >= jump_m)):
                         e[9] = depth_m
                         # cells it can enter behind the end point: 2 per column crossed
                         deep_cap += 2 * (<Py_ssize_t>((depth_m + tail * sigma) * inv) + 3)
