@@ -7,6 +7,7 @@ import json
 import math
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ from .. import errors, pipeline
 from ..estimation.calibration import load_calibration
 from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
+from ..recording import save_recording
 from ..scenario import load_scenario
 from ._common import add_mcap_option, between, describe, positive_seconds
 from .run import report
@@ -256,10 +258,6 @@ def _map_and_write(args, sweeps, acq, ring, truth, calibration, cal_text, failur
 def _keep_elsewhere(sweeps, truth, cal_text) -> None:
     """Save the sweeps to a new file in the temporary folder and say where: --out could not
     take them, and a drive's readings cannot be taken again for free."""
-    import tempfile
-
-    from ..recording import save_recording
-
     try:
         fd, name = tempfile.mkstemp(prefix="irring-drive-", suffix=".npz")
         os.close(fd)
