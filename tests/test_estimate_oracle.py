@@ -51,7 +51,7 @@ def assert_agree(sweep, cal, **kw):
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2 ** 20),
-       room=st.sampled_from(["box", "wedge", "posts", "crate"]),
+       room=st.sampled_from(["box", "wedge", "obtuse", "posts", "crate"]),
        strength=st.sampled_from([0.0, 0.25, 1.0]),
        noise=st.sampled_from([0.0, 0.5, 3.0]),
        keep=st.floats(0.3, 1.0),
@@ -66,6 +66,10 @@ def test_kernels_agree_with_the_numpy_oracle(seed, room, strength, noise, keep, 
     walls, circles = rectangle(x0, y0, x1, y1), []
     if room == "wedge":   # a slanted wall cutting a corner off: a 3-wall corner at odd angles
         walls = polygon([(x0, y0), (x1, y0), (x1, 0.5 * y1), (0.3 * x1, y1), (x0, y1)])
+    elif room == "obtuse":  # 125–150° corners met at grazing incidence (corner_sides' moves)
+        y0 = -rng.uniform(0.12, 0.3)
+        walls = polygon([(x0, y0), (x1, y0), (x1 + rng.uniform(0.15, 0.4), 0.3 * y1),
+                         (x1, y1), (x0 - rng.uniform(0.1, 0.3), 0.6 * y0)])
     elif room == "crate":  # a turned box in the room: range jumps at its corners
         cx, cy, turn = 0.7 * x1, 0.6 * y0, rng.uniform(0, math.pi)
         c, s_ = math.cos(turn), math.sin(turn)

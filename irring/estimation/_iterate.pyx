@@ -40,6 +40,7 @@ from libc.math cimport cos, fabs, floor, hypot, isfinite, rint, sin, sqrt
 from ..core import Reason
 
 cdef object _exp = np.exp
+cdef object _tan = np.tan
 cdef object _log = np.log
 cdef object _arctan2 = np.arctan2
 cdef object _empty = np.empty
@@ -157,6 +158,11 @@ cdef inline double _tls(const double* m, Py_ssize_t row, Py_ssize_t c, double cn
     p[0] = sxy + sxy
     q[0] = (t2 - t0 * mx[0]) - (t3 - t1 * my[0])
     return (t2 - t0 * mx[0]) + (t3 - t1 * my[0])
+
+
+cdef inline double _sign(double v) noexcept nogil:
+    """np.sign: −1, 0 or 1 (NaN stays NaN)."""
+    return (1.0 if v > 0 else -1.0 if v < 0 else 0.0) if v == v else v
 
 
 cdef inline Py_ssize_t _argmin(const double* r, Py_ssize_t n) noexcept nogil:
@@ -313,6 +319,7 @@ cdef class Sweep:
     cdef unsigned char[::1] usable
     cdef bint all_usable
     cdef double inv_h, cx0, cy0, min_split, split_sigmas, adopt_margin, corner_sigmas
+    cdef double corner_reach, corner_past, jump_sigmas
     cdef double pinned, floor_m
     cdef Py_ssize_t corner_window, top
     # scratch for the kernels (each uses it within one call): index rows of k + 1, value
@@ -401,6 +408,9 @@ cdef class Sweep:
         self.adopt_margin = opts.adopt_margin_m
         self.corner_window = opts.corner_window
         self.corner_sigmas = opts.corner_sigmas
+        self.corner_reach = opts.corner_reach_m
+        self.corner_past = opts.corner_past_m
+        self.jump_sigmas = opts.jump_sigmas
         self.floor_m = floor_m
         self.pinned = pinned_rad
         self.all_usable = True
@@ -872,96 +882,241 @@ cdef class Grouping:
                 lab[i] = self.t_use[best]
 
     cdef void corner_sides(self):
-        """A wall ends at its corner: a reading on a line beyond the corner it shares with
-        the next piece of the same sweep (past the two lines' intersection) is not on it.
+        """A wall ends at its corner: readings on a line past a corner it makes with another
+        line (past the intersection, away from the line's bulk) are not on it.
 
-        Next to a corner a reading read with the wrong wall's θ lands on that wall's
-        extension, self-consistently, and fits both lines about as well; where it lands
-        tells them apart. Such a reading moves to the line across the corner if, read with
-        that line's θ, it lies on it (within the split threshold, see :meth:`_residuals`) and on
-        its side. Only corners where the lines meet at > 30° count.
+        Corners: two usable lines meeting at > 30°, adjacent pieces of a polyline or
+        meeting within ``corner_reach_m`` of both lines' members. Such a reading goes to the
+        line across if, read with that line's θ, it lies on it (split threshold, within
+        ``adopt_margin_m`` of its members' extent) on its side of the corner; past a corner
+        of adjacent pieces by itself, else with its run, if the run's range stays
+        continuous with the readings beside it and one of them is on that line (see
+        ``estimate_numpy._Grouping.corner_sides``, the statement this compiles).
         """
         cdef Sweep sw = self.sw
-        cdef Py_ssize_t n = self.n_lines, l, m = 0, q, p, i, c, c2, u, U = 0, M = 0
-        cdef double s0, side, cxa, cya, cxb, cyb, v
+        cdef Py_ssize_t n, i, j, o, c, l, q, p, P = 0, k = sw.k, first, best
+        cdef double den, ex, ey, s, t, v, X, Y, m = sw.adopt_margin, reach = sw.corner_reach
+        cdef double qx, qy, r, side, la, b, th
+        cdef bint adjacent
+        cdef Py_ssize_t[:, ::1] pv
+        cdef double[:, ::1] vv
+        if self.n_lines < 2:
+            return
+        self._table()
+        n = self.n_use
         if n < 2:
             return
-        cdef Py_ssize_t[::1] corner = sw.iscr[0]
-        for l in range(n - 1):
-            if (self.starts[l + 1] == self.ends[l] and self._usable[l] and self._usable[l + 1]
-                    and fabs(sin(self._alpha[l + 1] - self._alpha[l])) > 0.5):
-                corner[m] = l
-                m += 1
-        if m == 0:
-            return
-        # both sides of every corner (entry p < m: the left line, p ≥ m: the right line):
-        # the line, the other line, direction, the lines' intersection, the side its
-        # readings are on
-        ints = _empty((3, 2 * m), dtype=_intp)
-        vals = _empty((5, 2 * m))
-        cdef Py_ssize_t[:, ::1] iv = ints
-        cdef double[:, ::1] vv = vals
-        cdef Py_ssize_t[::1] line = iv[0], other = iv[1]
-        cdef double[::1] dx = vv[0], dy = vv[1], X = vv[2], Y = vv[3], bulk = vv[4]
-        for q in range(m):
-            line[q], line[m + q] = corner[q], corner[q] + 1
-            other[q], other[m + q] = corner[q] + 1, corner[q]
-        for p in range(2 * m):
-            dx[p], dy[p] = cos(self._alpha[line[p]]), sin(self._alpha[line[p]])
-        for q in range(m):
-            # intersection X = c0 + s·d0 with (X − c1) × d1 = 0
-            cxa, cya = self._cx[line[q]], self._cy[line[q]]
-            cxb, cyb = self._cx[line[m + q]], self._cy[line[m + q]]
-            s0 = (((cxb - cxa) * dy[m + q] - (cyb - cya) * dx[m + q])
-                  / (dx[q] * dy[m + q] - dy[q] * dx[m + q]))
-            X[q] = cxa + s0 * dx[q]
-            Y[q] = cya + s0 * dy[q]
-            X[m + q], Y[m + q] = X[q], Y[q]
-        for p in range(2 * m):
-            v = ((self._cx[line[p]] - X[p]) * dx[p] + (self._cy[line[p]] - Y[p]) * dy[p])
-            bulk[p] = (1.0 if v > 0 else -1.0 if v < 0 else 0.0) if v == v else v   # np.sign
-        cdef Py_ssize_t[::1] pos = sw.iscr[1]    # a line with corners at both ends: the last
-        for l in range(n):
-            pos[l] = -1
-        for p in range(2 * m):
-            pos[line[p]] = p
-        cdef Py_ssize_t[::1] lab = self._label, mem = sw.iscr[2], ent = sw.iscr[3]
-        for i in range(sw.k):
-            if lab[i] < 0:
+        cdef Py_ssize_t[::1] lab = self._label
+        # the extent of each usable line's members along it
+        ext = _empty((2, n))
+        cdef double[:, ::1] ev = ext
+        cdef double[::1] lo = ev[0], hi = ev[1]
+        for c in range(n):
+            lo[c] = INF
+            hi[c] = -INF
+        for i in range(k):
+            l = lab[i]
+            if l < 0:
                 continue
-            c = pos[lab[i]]
+            c = self.t_col[l]
             if c < 0:
                 continue
-            if ((sw._px[i] - X[c]) * dx[c] + (sw._py[i] - Y[c]) * dy[c]) * bulk[c] < 0:
-                mem[U] = i
-                ent[U] = c
-                U += 1
-        if U == 0:
+            v = (sw._px[i] - self.t_cx[c]) * self.t_dx[c] + (sw._py[i] - self.t_cy[c]) * self.t_dy[c]
+            lo[c] = _min(lo[c], v)
+            hi[c] = _max(hi[c], v)
+        # the corners: intersection (X, Y) and the side of it each line's bulk is on
+        cmat = _empty((3, n, n))
+        cdef double[:, :, ::1] cm = cmat
+        kmat = np.zeros((n, n), dtype=_uint8)
+        cdef unsigned char[:, ::1] K = kmat
+        cdef bint any_corner = False
+        cdef double[::1] dx = self.t_dx, dy = self.t_dy, cx = self.t_cx, cy = self.t_cy
+        for i in range(n):
+            for j in range(i + 1, n):
+                den = dx[i] * dy[j] - dy[i] * dx[j]
+                if not fabs(den) > 0.5:
+                    continue
+                ex = cx[j] - cx[i]
+                ey = cy[j] - cy[i]
+                s = (ex * dy[j] - ey * dx[j]) / den
+                t = (ex * dy[i] - ey * dx[i]) / den
+                adjacent = (self.t_use[j] == self.t_use[i] + 1
+                            and self.starts[self.t_use[j]] == self.ends[self.t_use[i]])
+                if not (adjacent or (s >= lo[i] - reach and s <= hi[i] + reach
+                                     and t >= lo[j] - reach and t <= hi[j] + reach)):
+                    continue
+                K[i, j] = K[j, i] = 2 if adjacent else 1
+                any_corner = True
+                X = cx[i] + s * dx[i]
+                Y = cy[i] + s * dy[i]
+                cm[0, i, j] = cm[0, j, i] = X
+                cm[1, i, j] = cm[1, j, i] = Y
+                cm[2, i, j] = _sign(-s)
+                cm[2, j, i] = _sign(-t)
+        if not any_corner:
             return
+        # (member, line across) pairs, the member beyond the corner: counted, then listed
+        for q in range(2):
+            if q == 1:
+                if P == 0:
+                    return
+                pairs = _empty((3, P), dtype=_intp)
+                vals = _empty((4, P))
+                pv = pairs
+                vv = vals
+                P = 0
+            for i in range(k):
+                l = lab[i]
+                if l < 0:
+                    continue
+                c = self.t_col[l]
+                if c < 0:
+                    continue
+                for o in range(n):
+                    if not K[c, o]:
+                        continue
+                    v = ((sw._px[i] - cm[0, c, o]) * dx[c] + (sw._py[i] - cm[1, c, o]) * dy[c]
+                         ) * cm[2, c, o]
+                    if not v < 0:
+                        continue
+                    if q == 1:
+                        pv[0, P], pv[1, P], pv[2, P] = i, o, c
+                        vv[3, P] = v
+                    P += 1
+        cdef Py_ssize_t[::1] pm = pv[0], po = pv[1], pc = pv[2]
+        cdef double[::1] dd = vv[0], rr = vv[1]
         # read with the target's θ the reading must lie on the target line ...
-        self._table()
-        # (rows 0 and 1 are free again: corner and pos are done with)
-        cdef Py_ssize_t[::1] cols = sw.iscr[4], sel = sw.iscr[0], cent = sw.iscr[1]
-        for u in range(U):
-            c = self.t_col[other[ent[u]]]
-            if c >= 0:
-                sel[M], cols[M], cent[M] = mem[u], c, ent[u]
-                M += 1
-        if M == 0:
-            return
-        cdef double[::1] d = self._reread(sel[:M], cols[:M]), th = sw.rr_th
-        cdef double r
-        for u in range(M):
-            i = sel[u]
-            self._residuals(i, cols[u], 1, &d[u], &th[u], -1, &r)
-            if not r <= sw._thr[i]:
+        for p in range(P):
+            i, o = pm[p], po[p]
+            th = _incidence(sw.hm[i], self.t_a[o])
+            vv[2, p] = th
+            if th > sw.reject:
+                dd[p] = 0.0
+                continue
+            sw.look(_min(th, sw.cap), &la, &b)
+            dd[p] = la + b * sw.ls[i]
+        _exp(vals[0], vals[0])
+        cdef unsigned char[::1] left = np.zeros(P, dtype=_uint8)
+        for p in range(P):
+            i, o, c = pm[p], po[p], pc[p]
+            if vv[2, p] > sw.reject:
+                continue
+            qx = dd[p] * sw.ux[i] + (sw.ox[i] - cx[o])
+            qy = dd[p] * sw.uy[i] + (sw.oy[i] - cy[o])
+            r = fabs(qy * dx[o] - qx * dy[o])
+            t = qx * dx[o] + qy * dy[o]
+            rr[p] = r
+            if not (r <= sw._thr[i] and t >= lo[o] - m and t <= hi[o] + m):
                 continue
             # ... and on the target's side of the corner
-            c2 = (cent[u] + m) % (2 * m)
-            side = ((sw.ox[i] + d[u] * sw.ux[i] - X[c2]) * dx[c2]
-                    + (sw.oy[i] + d[u] * sw.uy[i] - Y[c2]) * dy[c2])
-            if side * bulk[c2] >= 0:
-                lab[i] = other[cent[u]]
+            side = ((sw.ox[i] + dd[p] * sw.ux[i] - cm[0, c, o]) * dx[o]
+                    + (sw.oy[i] + dd[p] * sw.uy[i] - cm[1, c, o]) * dy[o])
+            left[p] = side * cm[2, o, c] >= 0
+        # one target per reading (its pairs are consecutive): of those a neighbouring
+        # reading of its sensor is on, the one it fits best (the first of equals); else
+        # the one it fits best
+        cdef unsigned char[::1] cand = sw.flag
+        cdef Py_ssize_t[::1] tgt = sw.iscr[0], win = sw.iscr[1]
+        cdef double[::1] d_new = sw.dscr[0], slope = sw.dscr[1]
+        cdef Py_ssize_t W = 0, nb
+        cdef bint seen, best_seen = False
+        for i in range(k):
+            cand[i] = 0
+            d_new[i] = sw._d[i]      # the distances once every candidate moved
+        first = 0
+        while first < P:
+            i = pm[first]
+            q = first
+            best = -1
+            while q < P and pm[q] == i:
+                if left[q]:
+                    o = self.t_use[po[q]]
+                    seen = ((not sw.run_brk[i] and lab[i - 1] == o)
+                            or (i + 1 < k and not sw.run_brk[i + 1] and lab[i + 1] == o))
+                    if best < 0 or (seen and not best_seen) or (
+                            seen == best_seen and rr[q] < rr[best]):
+                        best, best_seen = q, seen
+                q += 1
+            if best >= 0:
+                cand[i] = 1
+                tgt[i] = self.t_use[po[best]]
+                d_new[i] = dd[best]
+                win[W] = best
+                W += 1
+            first = q
+        if W == 0:
+            return
+        tan_arr = _empty(W)
+        cdef double[::1] tv = tan_arr
+        for q in range(W):
+            tv[q] = _min(vv[2, win[q]], sw.cap)
+        _tan(tan_arr, tan_arr)
+        for q in range(W):
+            slope[pm[win[q]]] = tv[q]
+        # next to the corner (within corner_past_m) and not clearly closer to the target
+        # line than to its own (by corner_sigmas·σ): such a run moves only between readings
+        # on the target line; past the corner of two pieces of one polyline (the trace is
+        # continuous there, the target the piece beside it) a reading moves by itself
+        cdef unsigned char[::1] near = np.zeros(k, dtype=_uint8)
+        cdef Py_ssize_t[::1] moved = sw.iscr[2]    # the labels change once all are decided
+        cdef Py_ssize_t oc
+        cdef double r_own
+        for i in range(k):
+            moved[i] = -1
+        for q in range(W):
+            p = win[q]
+            i, o, c = pm[p], po[p], pc[p]
+            oc = self.t_col[lab[i]]
+            r_own = fabs((sw._py[i] - cy[oc]) * dx[oc] - (sw._px[i] - cx[oc]) * dy[oc])
+            near[i] = vv[3, p] >= -sw.corner_past and not (
+                rr[p] < r_own - sw.corner_sigmas * sw._sigma[i])
+            if K[c, o] == 2:
+                moved[i] = tgt[i]
+                cand[i] = 0
+        # runs (consecutive readings of a sensor on one line with one target) move if their
+        # range, once moved, is continuous with the readings either side of them and one of
+        # those is on the target line
+        cdef Py_ssize_t s0, e0
+        cdef bint ok_run, on_prev, on_next, any_near
+        i = 0
+        while i < k:
+            if not cand[i]:
+                i += 1
+                continue
+            s0 = e0 = i
+            while (e0 + 1 < k and cand[e0 + 1] and not sw.run_brk[e0 + 1]
+                   and lab[e0 + 1] == lab[e0] and tgt[e0 + 1] == tgt[e0]):
+                e0 += 1
+            o = tgt[s0]
+            ok_run = True
+            on_prev = on_next = any_near = False
+            if not sw.run_brk[s0]:
+                ok_run = self._same_surface(d_new, s0, s0 - 1, slope[s0])
+                on_prev = lab[s0 - 1] == o
+            if e0 + 1 < k and not sw.run_brk[e0 + 1]:
+                ok_run = ok_run and self._same_surface(d_new, e0, e0 + 1, slope[e0])
+                on_next = lab[e0 + 1] == o
+            for nb in range(s0, e0 + 1):
+                any_near = any_near or near[nb]
+            if ok_run and (on_prev or on_next) and (not any_near or (on_prev and on_next)):
+                for nb in range(s0, e0 + 1):
+                    moved[nb] = o
+            i = e0 + 1
+        for i in range(k):
+            if moved[i] >= 0:
+                lab[i] = moved[i]
+
+    cdef bint _same_surface(self, const double[::1] d, Py_ssize_t i, Py_ssize_t j,
+                            double slope) noexcept:
+        """Whether readings i and j (neighbours of one sensor) at distances ``d`` lie on one
+        surface: ranges apart by at most max(d)·sin(turn)·``slope`` (d·tanθ per radian the
+        beam turns) + jump_sigmas·(σ_i ⊕ σ_j)."""
+        cdef Sweep sw = self.sw
+        cdef double di = d[i], dj = d[j], turn, allowed
+        turn = fabs(sw.ux[i] * sw.uy[j] - sw.uy[i] * sw.ux[j])
+        allowed = _max(di, dj) * turn * slope
+        allowed = allowed + sw.jump_sigmas * hypot(sw._sigma[i], sw._sigma[j])
+        return fabs(di - dj) <= allowed
 
     cdef void drop_steep(self):
         """A line the beam would meet past the drop-out angle cannot be what it saw.
@@ -1109,18 +1264,19 @@ cdef class Grouping:
         self.refit()
         return changed
 
-    def check(self):
+    def check(self, bint corners=True):
         """The membership check at the readings' new places: the lines refitted where their
-        members now are (:meth:`refit`), then :meth:`corner_sides`, :meth:`drop_steep`,
-        :meth:`adopt`; if that changed who belongs where, the lines are refitted to their new
-        members. Returns whether it changed."""
+        members now are (:meth:`refit`), then :meth:`corner_sides` (if ``corners``),
+        :meth:`drop_steep`, :meth:`adopt`; if that changed who belongs where, the lines are
+        refitted to their new members. Returns whether it changed."""
         cdef Py_ssize_t i
         cdef Py_ssize_t[::1] snap = self.sw.snap
         cdef bint changed = False
         for i in range(self.sw.k):
             snap[i] = self._label[i]
         self.refit()
-        self.corner_sides()
+        if corners:
+            self.corner_sides()
         self.drop_steep()
         self.adopt()
         for i in range(self.sw.k):

@@ -25,6 +25,8 @@ _lines = kernel("estimation._lines")
 
 SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
 REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
+CORNER_WINDOW = 14  # corners re-decided at a grouping's first check, later ones only before
+#                     this iteration (a late move left its lines too few iterations to settle)
 MAX_GAIN = 8.0      # the held iteration's secant step at most 8× the plain one
 PINNED_RAD = math.radians(2.0)  # a line most readings meet within this of the drop-out angle
 #                                  is a runaway, not a wall (see _drop_steep)
@@ -49,6 +51,8 @@ class LineOptions:
     adopt_margin_m: float = 0.05   # a reading on no line may join one this far past its ends
     corner_window: int = 4         # readings this close to a corner may change line …
     corner_sigmas: float = 0.5     # … if another line fits them this many σ better
+    corner_reach_m: float = 0.25   # lines meeting within this of both's readings: a corner;
+    corner_past_m: float = 0.02    # readings closer to it need more evidence to move across
     incidence_margin_rad: float = math.radians(5.0)  # a line meeting a beam this far past
     #                                                  the drop-out angle is not its surface
 
@@ -344,6 +348,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                                   None if grouping is None else grouping.pieces)
                 grouping = _iterate.Grouping(sw, pieces, uidx)
                 changed = grouping.regroup(before)
+                corners_checked = False    # the grouping's first check re-decides corners
                 regroups += 1
                 # regroup again only while that changes who belongs where, and not back to
                 # the grouping before (readings at a corner flipping between two lines)
@@ -351,7 +356,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                     older is not None and _iterate.same(older, grouping.label))
                 older = before
             else:  # the same members, refitted where they now are, checked again
-                changed = grouping.check()
+                changed = grouping.check(not corners_checked or it < CORNER_WINDOW)
+                corners_checked = True
                 if not changed and settled:
                     break      # the members stand and their lines did not move: done
             mode = "inner"

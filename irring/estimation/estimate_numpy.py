@@ -12,11 +12,11 @@ import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
 from .calibration import FALLBACK_NODES, RANGE_SIGMAS, Calibration
-from .estimate import (MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
-                       SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate, LineOptions,
-                       Lines, Pieces, beam_crossings, clip_at_corners, final_estimate,
-                       member_spans, nominal_calibration, polyline_ids, reach_cos_limit,
-                       resolve_foldover, scan_order)
+from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH_MIN_MEMBERS,
+                       REGROUP_WINDOW, SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
+                       LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
+                       final_estimate, member_spans, nominal_calibration, polyline_ids,
+                       reach_cos_limit, resolve_foldover, scan_order)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -114,6 +114,8 @@ def _owner(starts: np.ndarray, k: int) -> np.ndarray:
 def _lengths(first: np.ndarray, total: int) -> np.ndarray:
     """Lengths of the runs starting at ``first`` (ascending) in a sequence of ``total``."""
     n = np.empty(first.size)
+    if first.size == 0:
+        return n
     np.subtract(first[1:], first[:-1], out=n[:-1])
     n[-1] = total - first[-1]
     return n
@@ -538,73 +540,195 @@ class _Grouping:
             seq[idx[ok]] = use.take(best[ok])
             self.label = seq
 
-    def corner_sides(self, px, py, thr) -> None:
-        """A wall ends at its corner: a reading on a line beyond the corner it shares with
-        the next piece of the same sweep (past the two lines' intersection) is not on it.
+    def corners(self, px, py):
+        """Every corner of two usable lines meeting at > 30°: pieces adjacent in a polyline,
+        or lines whose intersection X lies within ``corner_reach_m`` of both lines' members.
+
+        Returns None (no corner) or, per line and corner (ordered by line; entry e's mirror,
+        the line across, is ``mirror[e]``): the line, the line across, X, Y, the line's
+        direction, the side of X its bulk (centroid) is on (±1), the extent of the members
+        of each usable column along its line (lo, hi; ±inf without members), and whether
+        the corner is of adjacent pieces."""
+        use, a, cx, cy, dx, dy, _, _, col = self.table(px, py)
+        n = use.size
+        if n < 2:
+            return None
+        lab = self.label
+        mem = (lab >= 0).nonzero()[0]
+        c = col.take(lab.take(mem))
+        keep = c >= 0
+        mem, c = mem[keep], c[keep]
+        along = (px.take(mem) - cx.take(c)) * dx.take(c) + (py.take(mem) - cy.take(c)) * dy.take(c)
+        lo = np.full(n, np.inf)
+        hi = np.full(n, -np.inf)
+        np.minimum.at(lo, c, along)
+        np.maximum.at(hi, c, along)
+        reach = self.sw.opts.corner_reach_m
+        pc = self.pieces
+        i, j = np.triu_indices(n, 1)
+        den = dx[i] * dy[j] - dy[i] * dx[j]                 # sin of the angle between them
+        ok = np.abs(den) > 0.5
+        i, j, den = i[ok], j[ok], den[ok]
+        ex, ey = cx[j] - cx[i], cy[j] - cy[i]
+        s = (ex * dy[j] - ey * dx[j]) / den                   # X along line i from its centroid
+        t = (ex * dy[i] - ey * dx[i]) / den                   # … and along line j
+        li, lj = use.take(i), use.take(j)
+        adjacent = (lj == li + 1) & (pc.starts.take(np.minimum(lj, pc.starts.size - 1))
+                                     == pc.ends.take(li))
+        near = ((s >= lo.take(i) - reach) & (s <= hi.take(i) + reach)
+                & (t >= lo.take(j) - reach) & (t <= hi.take(j) + reach))
+        keep = adjacent | near
+        if not keep.any():
+            return None
+        i, j, s, t, adjacent = i[keep], j[keep], s[keep], t[keep], adjacent[keep]
+        X = cx.take(i) + s * dx.take(i)
+        Y = cy.take(i) + s * dy.take(i)
+        m = i.size
+        # entries 2q (line i) and 2q + 1 (line j) of corner q, then ordered by line
+        side = np.stack([i, j], axis=1).reshape(-1)
+        order = np.argsort(use.take(side), kind="stable")
+        rank = np.empty(2 * m, dtype=np.intp)
+        rank[order] = np.arange(2 * m)
+        mirror = rank.take(np.arange(2 * m) ^ 1).take(order)
+        side = side.take(order)
+        other = np.stack([j, i], axis=1).reshape(-1).take(order)
+        bulk = np.sign(-np.stack([s, t], axis=1).reshape(-1)).take(order)
+        return (use.take(side), use.take(other), np.repeat(X, 2).take(order),
+                np.repeat(Y, 2).take(order), dx.take(side), dy.take(side), bulk, mirror, lo, hi,
+                np.repeat(adjacent, 2).take(order))
+
+    def corner_sides(self, d_now, px, py, sigma, thr) -> None:
+        """A wall ends at its corner: readings on a line past a corner it makes with another
+        line (past the intersection, away from the line's bulk) are not on it.
 
         Next to a corner a reading read with the wrong wall's θ lands on that wall's
         extension, self-consistently, and fits both lines about as well; where it lands
-        tells them apart. Such a reading moves to the line across the corner if, read with
-        that line's θ, it lies on it (within the split threshold) and on its side.
+        tells them apart. Such a reading goes to the line across the corner if, read with
+        that line's θ, it lies on it (within the split threshold and ``adopt_margin_m`` of
+        its members' extent) and on its side of the corner; of several, one a neighbouring
+        reading of its sensor is on, else the one it fits best. Past a corner of adjacent
+        pieces it moves by itself. Past any other it moves with its run (the readings of
+        its sensor next to it on its line going to the same line), only if the run's range,
+        once moved, is continuous with the readings either side of it (a corner keeps the
+        range continuous; a wall's readings behind an occlusion edge moved onto the near
+        face would jump at the far end) and one of them is on the target line; a run within
+        ``corner_past_m`` of the corner needs both, or each of its readings clearly
+        (``corner_sigmas``·σ) closer to the target line than to its own. Corners:
+        :meth:`corners`; ``d_now`` the readings' current distances (docs/estimator.md).
         """
-        pc = self.pieces
-        j = ((pc.starts[1:] == pc.ends[:-1]) & self.usable[:-1] & self.usable[1:]).nonzero()[0]
-        if j.size == 0:
+        ent = self.corners(px, py)
+        if ent is None:
             return
-        a0, a1 = self.alpha.take(j), self.alpha.take(j + 1)
-        ok = np.abs(np.sin(a1 - a0)) > 0.5      # lines meeting at > 30°: a real corner
-        if not ok.any():
-            return
-        j, a0, a1 = j[ok], a0[ok], a1[ok]
-        m = j.size
-        # both sides of every corner: the line, the other line, directions
-        line = np.concatenate([j, j + 1])
-        other = np.concatenate([j + 1, j])
-        aa = np.concatenate([a0, a1])
-        dx, dy = np.cos(aa), np.sin(aa)
-        cx, cy = self.cx.take(line), self.cy.take(line)
-        # intersection X = c0 + s·d0 with (X − c1) × d1 = 0
-        s0 = (((cx[m:] - cx[:m]) * dy[m:] - (cy[m:] - cy[:m]) * dx[m:])
-              / (dx[:m] * dy[m:] - dy[:m] * dx[m:]))
-        X = cx[:m] + s0 * dx[:m]
-        Y = cy[:m] + s0 * dy[:m]
-        X = np.concatenate([X, X])
-        Y = np.concatenate([Y, Y])
-        bulk = np.sign((cx - X) * dx + (cy - Y) * dy)   # the side each line's readings are on
-        pos = np.full(self.n_lines, -1)
-        pos[line] = np.arange(line.size)   # a line with corners at both ends: one of them
-        lab = self.label
-        c = pos.take(lab)                  # lab −1 → pos[−1]: the last line's entry or −1
-        c[lab < 0] = -1
-        mem = (c >= 0).nonzero()[0]
-        if mem.size == 0:
-            return
-        c = c.take(mem)
-        beyond = ((px.take(mem) - X.take(c)) * dx.take(c)
-                  + (py.take(mem) - Y.take(c)) * dy.take(c)) * bulk.take(c) < 0
-        if not beyond.any():
-            return
-        mem, c = mem[beyond], c[beyond]
-        tgt = other.take(c)
-        _, r = self.fit_to(mem, px, py)
-        col = self._tab[8].take(tgt)
-        move = (col >= 0) & (r[np.arange(mem.size), col] <= thr.take(mem))
-        if not move.any():
-            return
-        # read with the target's θ the reading must land on the target's side of the corner
-        mem, c, tgt = mem[move], c[move], tgt[move]
+        line, other, X, Y, dx, dy, bulk, mirror, lo, hi, adjacent = ent
         sw = self.sw
-        c2 = (c + m) % (2 * m)                       # the target's entry (the other side)
-        th = _incidence(sw.hm.take(mem), aa.take(c2))
+        lab = self.label
+        mem = (lab >= 0).nonzero()[0]
+        # (member, entry) pairs of the member's line, the member past the corner
+        pm, pe = (lab.take(mem)[:, None] == line[None, :]).nonzero()
+        pm = mem.take(pm)
+        beyond = ((px.take(pm) - X.take(pe)) * dx.take(pe)
+                  + (py.take(pm) - Y.take(pe)) * dy.take(pe)) * bulk.take(pe)
+        keep = beyond < 0
+        pm, pe, beyond = pm[keep], pe[keep], beyond[keep]
+        if pm.size == 0:
+            return
+        # read with the target's θ the reading must lie on the target line ...
+        use, a, cx, cy, tdx, tdy, _, _, col = self._tab
+        tc = col.take(other.take(pe))
+        th = _incidence(sw.hm.take(pm), a.take(tc))
         la, b = sw.ab(np.minimum(th, sw.cap))
-        d = np.exp(la + b * sw.log_s.take(mem))
-        side = ((sw.ox.take(mem) + d * sw.ux.take(mem) - X.take(c2)) * dx.take(c2)
-                + (sw.oy.take(mem) + d * sw.uy.take(mem) - Y.take(c2)) * dy.take(c2))
-        ok = side * bulk.take(c2) >= 0
-        if ok.any():
-            lab = lab.copy()
-            lab[mem[ok]] = tgt[ok]
-            self.label = lab
+        d = np.exp(la + b * sw.log_s.take(pm))
+        qx = d * sw.ux.take(pm)
+        qx += sw.ox.take(pm) - cx.take(tc)
+        qy = d * sw.uy.take(pm)
+        qy += sw.oy.take(pm) - cy.take(tc)
+        r = np.abs(qy * tdx.take(tc) - qx * tdy.take(tc))
+        t = qx * tdx.take(tc) + qy * tdy.take(tc)
+        m = sw.opts.adopt_margin_m
+        ok = ((th <= sw.reject) & (r <= thr.take(pm)) & (t >= lo.take(tc) - m)
+              & (t <= hi.take(tc) + m))
+        # ... on the target's side of the corner
+        pt = mirror.take(pe)
+        side = ((sw.ox.take(pm) + d * sw.ux.take(pm) - X.take(pt)) * dx.take(pt)
+                + (sw.oy.take(pm) + d * sw.uy.take(pm) - Y.take(pt)) * dy.take(pt))
+        ok &= side * bulk.take(pt) >= 0
+        pm, pe, r, d, th, beyond = pm[ok], pe[ok], r[ok], d[ok], th[ok], beyond[ok]
+        if pm.size == 0:
+            return
+        # one target per reading: of those a neighbouring reading of its sensor is on, the
+        # one it fits best (the first of equals); else the one it fits best
+        k = sw.k
+        brk = sw.run_brk
+        tg = other.take(pe)
+        seen = ~brk.take(pm) & (lab.take(np.maximum(pm - 1, 0)) == tg)
+        nx = pm + 1 < k
+        nx[nx] = ~brk.take(pm[nx] + 1)
+        seen |= nx & (lab.take(np.minimum(pm + 1, k - 1)) == tg)
+        order = np.lexsort((np.arange(pm.size), r, ~seen, pm))
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = pm.take(order[1:]) != pm.take(order[:-1])
+        win = order[first]
+        at = pm.take(win)
+        cand = np.zeros(k, dtype=bool)
+        cand[at] = True
+        tgt = np.full(k, -1)
+        tgt[at] = tg.take(win)
+        d_new = d_now.copy()                  # the distances once every candidate moved
+        d_new[at] = d.take(win)
+        slope = np.zeros(k)
+        slope[at] = np.tan(np.minimum(th.take(win), sw.cap))
+        # within corner_past_m of the corner, and not clearly closer to the target line
+        # than to its own (by corner_sigmas·σ, as settle_corners)
+        oc = col.take(lab.take(at))
+        r_own = np.abs((py.take(at) - cy.take(oc)) * tdx.take(oc)
+                       - (px.take(at) - cx.take(oc)) * tdy.take(oc))
+        near = np.zeros(k, dtype=bool)
+        near[at] = ((beyond.take(win) >= -sw.opts.corner_past_m)
+                    & ~(r.take(win) < r_own - sw.opts.corner_sigmas * sigma.take(at)))
+        # past the corner of two pieces of one polyline: the trace is continuous there and
+        # the target the piece beside it, so the reading moves by itself
+        new = lab.copy()
+        by_piece = adjacent.take(pe.take(win))
+        new[at[by_piece]] = tgt.take(at[by_piece])
+        cand[at[by_piece]] = False
+        # runs: consecutive readings of a sensor on one line with one target
+        same = np.zeros(k, dtype=bool)
+        same[1:] = (cand[1:] & cand[:-1] & ~brk[1:] & (lab[1:] == lab[:-1])
+                    & (tgt[1:] == tgt[:-1]))
+        start = cand & ~same
+        a = start.nonzero()[0]                                # first reading of each run
+        if a.size == 0:
+            self.label = new
+            return
+        last = cand.copy()
+        last[:-1] &= ~same[1:]
+        b = last.nonzero()[0]                                 # last reading of each run
+        t = tgt.take(a)
+        has_prev = ~brk.take(a)
+        has_next = b + 1 < k
+        has_next[has_next] = ~brk.take(b[has_next] + 1)
+        prev, nxt = np.maximum(a - 1, 0), np.minimum(b + 1, k - 1)
+        ok_prev = ~has_prev | self._same_surface(d_new, a, prev, slope.take(a), sigma)
+        ok_next = ~has_next | self._same_surface(d_new, b, nxt, slope.take(b), sigma)
+        on_prev, on_next = has_prev & (lab.take(prev) == t), has_next & (lab.take(nxt) == t)
+        run = np.cumsum(start) - 1                            # run of each candidate
+        n_near = np.bincount(run[cand & near], minlength=a.size)
+        # a run next to the corner moves only between readings on the target line
+        move = ok_prev & ok_next & (on_prev | on_next) & ((n_near == 0) | (on_prev & on_next))
+        at = (cand & move.take(np.maximum(run, 0))).nonzero()[0]
+        new[at] = tgt.take(at)
+        self.label = new
+
+    def _same_surface(self, d, i, j, slope, sigma):
+        """Whether readings i and j (neighbours of one sensor) at distances ``d`` lie on one
+        surface: ranges apart by at most max(d)·sin(turn)·``slope`` (d·tanθ per radian the
+        beam turns) + jump_sigmas·(σ_i ⊕ σ_j)."""
+        sw = self.sw
+        di, dj = d.take(i), d.take(j)
+        turn = np.abs(sw.ux.take(i) * sw.uy.take(j) - sw.uy.take(i) * sw.ux.take(j))
+        allowed = np.maximum(di, dj) * turn * slope
+        allowed += sw.opts.jump_sigmas * np.hypot(sigma.take(i), sigma.take(j))
+        return np.abs(di - dj) <= allowed
 
     def drop_steep(self, usable) -> None:
         """A line the beam would meet past the drop-out angle cannot be what it saw.
@@ -875,10 +999,13 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                 grouping = _Grouping(sw, pieces, uidx)
                 grouping.members(px, py, thr)
                 grouping.settle_corners(px, py, sigma, thr)
+                corners_checked = False    # the grouping's first check re-decides corners
                 regroups += 1
             else:  # the same members, refitted where they now are
                 grouping.refit(use_mask, px, py)
-                grouping.corner_sides(px, py, thr)
+                if not corners_checked or it < CORNER_WINDOW:
+                    grouping.corner_sides(d, px, py, sigma, thr)
+                corners_checked = True
             grouping.drop_steep(use_mask)
             grouping.adopt(use_mask, px, py, thr)
             changed = before is None or not np.array_equal(before, grouping.label)
