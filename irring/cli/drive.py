@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import errors, pipeline
+from ..core import MAX_SWEEPS
 from ..estimation.calibration import load_calibration
 from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
@@ -83,7 +84,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", default=None, metavar="SCENARIO",
                    help="scenario the ring is standing in (name or YAML): its poses, sensor "
                         "settings and room are used, and the map is scored against it")
-    p.add_argument("--poses", type=between(1, 100_000), default=None, metavar="N",
+    p.add_argument("--poses", type=between(1, MAX_SWEEPS), default=None, metavar="N",
                    help="number of poses to sweep (default: all of --truth's, or of --pose)")
     p.add_argument("--pose", type=_pose, action="append", default=None,
                    metavar="X_MM,Y_MM[,YAW_DEG]",
@@ -138,6 +139,9 @@ def run(args: argparse.Namespace) -> int:
     n = args.poses if args.poses is not None else len(poses)
     if n < 1:
         return _error("--poses must be at least 1")
+    if n > MAX_SWEEPS:   # a recording holds at most this many: replay could not read it
+        return _error(f"{n} poses: a drive sweeps at most {MAX_SWEEPS:,} (a recording's "
+                      f"limit); map them in parts")
     if n > len(poses):
         if args.pose or truth:
             return _error(f"--poses {n} but only {len(poses)} pose(s) known; add --pose "
