@@ -475,8 +475,17 @@ def test_input_ending_at_the_pose_prompt_keeps_what_was_swept(tmp_path, capsys, 
 
 def test_ctrl_c_in_a_sweep_keeps_the_finished_poses_and_the_steps_that_arrived(tmp_path,
                                                                                capsys):
-    code, out = _drive(tmp_path, hd.good_then(hd.interrupt_after(3)))
+    heard = []
+    device = hd.good_then(hd.interrupt_after(3))
+
+    def listening(dev, cmd):
+        heard.append(cmd.TYPE)
+        device(dev, cmd)
+
+    code, out = _drive(tmp_path, listening)
     err = capsys.readouterr().err
+    # the ring is told to stop turning (heard while the host maps, before the pty closes)
+    assert heard == ["IRHLO", "IRSWP", "IRSWP", "IRSTP"]
     assert code == 130, err
     assert "irring drive: interrupted during pose 2 of 3; the 2 poses swept are mapped" in err
     first, second = _recorded(out)

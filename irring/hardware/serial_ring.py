@@ -549,7 +549,13 @@ class SerialRing:
                       "device refused" if isinstance(exc, DeviceRejected) else "interrupted")
             sweep, report = build(False, reason)
             exc.partial, exc.report = sweep, report
-            if not isinstance(exc, KeyboardInterrupt):
+            if isinstance(exc, KeyboardInterrupt):
+                # the ring would turn on to the sweep's end: one IRSTP, not waited for
+                try:
+                    self._send(p.Stop())
+                except DeviceError:
+                    pass
+            else:
                 exc.args = (f"{exc} {report.message}",)
             raise
         sweep, report = build(all(ps.done for ps in passes), "")
