@@ -317,7 +317,10 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
                  frames_per_sweep=int(frames_per_sweep), timings_s=timings)
     if score and scenario is not None:
         t0 = time.perf_counter()
-        run.truth = truth if truth is not None else metrics.ground_truth(scenario, grid)
+        if truth is None:
+            with progress_bar(0, "score", progress, unit="cell") as bar:
+                truth = metrics.ground_truth(scenario, grid, bar)
+        run.truth = truth
         run.scores = metrics.score(grid, scenario, run.truth)
         run.timings_s["score"] = time.perf_counter() - t0
     return run

@@ -472,3 +472,33 @@ def test_visible_wall_is_wall_the_scenes_sensor_returns_from():
     west = b.surface & (np.abs(b.surface_point[..., 0]) < 1e-9) \
         & (b.surface_point[..., 1] > 0.01) & (b.surface_point[..., 1] < 0.98)
     assert np.allclose(np.abs(b.surface_normal[west][:, 0]), 1.0)
+
+
+def test_scoring_moves_a_progress_bar_and_chunks_change_nothing(monkeypatch):
+    # a 1 mm grid of a few m² walks ~10⁹ cells of lines of sight a pose (half a minute):
+    # the walk goes in chunks with a bar over the cells; the truth is the same
+    from irring.scenario import loads
+
+    sc = loads(FAR_CORNER.replace("    - {x_mm: 262", "    - {x_mm: 700, y_mm: 610}\n"
+                                  "    - {x_mm: 262"), "two_poses.yaml")
+    grid = OccupancyGrid.for_scenario(sc)
+    whole = ground_truth(sc, grid)
+
+    class Bar:
+        total, done, calls = None, 0, 0
+
+        def reset(self, total):
+            self.total = total
+
+        def update(self, n):
+            self.done += n
+            self.calls += 1
+
+    bar = Bar()
+    monkeypatch.setattr(metrics, "SIGHT_CHUNK_CELLS", 3001)
+    chunked = ground_truth(sc, grid, bar)
+    for field in ("visible", "reachable_free", "in_range", "shadow", "shadow_ranged"):
+        np.testing.assert_array_equal(getattr(chunked, field), getattr(whole, field))
+    assert bar.done == bar.total
+    # both poses' cells in range, each pose's walk cut into pieces of at most 3001
+    assert bar.calls >= bar.total // 3001 + 2 and bar.total > int(whole.in_range.sum())

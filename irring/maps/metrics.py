@@ -285,8 +285,15 @@ def _ranged_in_sight(scenario: Scenario, grid: OccupancyGrid, material: np.ndarr
     return out
 
 
-def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
-    """Rasterise the scenario onto ``grid``'s cells and work out what each pose can see."""
+# lines of sight walked per call while scoring: a progress bar moves between them (a 1 mm
+# grid of a few m² walks ~10⁹ cells a pose: half a minute)
+SIGHT_CHUNK_CELLS = 200_000
+
+
+def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTruth:
+    """Rasterise the scenario onto ``grid``'s cells and work out what each pose can see.
+    ``bar``: a progress bar (``reset(total)``, ``update(n)``) counting the cells whose line
+    of sight is walked."""
     res = grid.resolution_m
     origin = grid.origin_xy_m
     ny, nx = grid.shape
@@ -346,12 +353,23 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid) -> GroundTruth:
     sy, sx, spx, spy, sdir = _surface_at(surface, surface_point, surface_normal,
                                          surface_reflectance)
     geometric = ranging[:5]               # range and sweep only: what the shadow is judged by
+    nears = []
     for pose in scenario.robot.poses:  # a handful of poses; each is vectorised over cells
         near = free & (np.hypot(px - pose.x_m, py - pose.y_m) <= reach)
         near[sy, sx] = _measurable(spx, spy, pose, *geometric)
+        nears.append(near)
+    if bar is not None:
+        bar.reset(total=int(sum(int(n.sum()) for n in nears)))
+    for pose, near in zip(scenario.robot.poses, nears):
         in_range |= near
         ty, tx = np.nonzero(near)
-        first = _sight((ny, nx), origin, res, material, (pose.x_m, pose.y_m), tx, ty)
+        first = np.empty(len(tx), np.int16)
+        for at in range(0, len(tx), SIGHT_CHUNK_CELLS):
+            part = slice(at, at + SIGHT_CHUNK_CELLS)
+            first[part] = _sight((ny, nx), origin, res, material, (pose.x_m, pose.y_m),
+                                 tx[part], ty[part])
+            if bar is not None:
+                bar.update(len(tx[part]))
         clear = first == 0
         seen[ty[clear], tx[clear]] = True
         returns = np.zeros(px.shape, bool)
