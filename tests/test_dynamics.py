@@ -211,20 +211,10 @@ def test_unstable_physics_says_what_to_change(monkeypatch, tmp_path):
 
 # --------------------------------------------------------------------------- time step check
 
-BOX_ROOM = """name: box
-seed: 2
-room:
-  outline_mm: [[0, 0], [1300, 0], [1300, 900], [0, 900]]
-robot:
-  poses: [{{x_mm: 500, y_mm: 400}}]
-effects:
-  belt_dynamics: {{timestep_ms: {dt}, belt_timeconst_ms: {tau}, step_time_ms: 4}}
-{more}"""
-
-
 def box_file(tmp_path, dt, tau, more=""):
     path = tmp_path / "box.yaml"
-    path.write_text(BOX_ROOM.format(dt=dt, tau=tau, more=more))
+    # the timestep table's room (studies.dynamics), 4 ms steps, no backlash
+    path.write_text(bench.BOX_ROOM.format(dt=dt, tau=tau, step=4, backlash=0) + more)
     return path
 
 

@@ -388,18 +388,29 @@ def check_instants(sched: Schedule, n_sensors: int, dt_s: float,
     return np.repeat(t, n_sensors), np.tile(np.arange(n_sensors), len(t))
 
 
+def _at_step_and(physics: BeltPhysics, sched: Schedule, timing: TimingEffect | None,
+                 run: Trajectory | None, factor: float):
+    """The check's instants (t, k), the sensors' angles there at ``physics``'s step (from
+    ``run`` if rolled out), and the same belt at ``factor`` × the step (None: no instants)."""
+    t, k = check_instants(sched, physics.ring.sensors, physics.dt_s, timing)
+    if len(t) == 0:
+        return None
+    at_step = (_hermite(run.dt_s, run.sensor_rad, run.sensor_vel, t, k) if run is not None
+               else angles_at(physics, sched, t, k))
+    other = BeltPhysics(physics.ring, dataclasses.replace(physics.params,
+                                                          timestep_s=physics.dt_s * factor))
+    return t, k, at_step, other
+
+
 def timestep_change(physics: BeltPhysics, sched: Schedule, timing: TimingEffect | None = None,
                     run: Trajectory | None = None) -> float:
     """How far (rad) halving ``physics``'s time step moves a sensor's true angle, at most,
     at the instants the sweep ``sched`` reads (:func:`check_instants`). ``run``: the sweep at
     the full step if already rolled out. Raises as :meth:`BeltPhysics.roll`."""
-    t, k = check_instants(sched, physics.ring.sensors, physics.dt_s, timing)
-    if len(t) == 0:
+    both = _at_step_and(physics, sched, timing, run, 0.5)
+    if both is None:
         return 0.0
-    coarse = (_hermite(run.dt_s, run.sensor_rad, run.sensor_vel, t, k) if run is not None
-              else angles_at(physics, sched, t, k))
-    half = BeltPhysics(physics.ring, dataclasses.replace(physics.params,
-                                                         timestep_s=physics.dt_s / 2))
+    t, k, coarse, half = both
     return float(np.abs(coarse - angles_at(half, sched, t, k)).max())
 
 
@@ -411,13 +422,10 @@ def _doubling_change(physics: BeltPhysics, sched: Schedule, timing: TimingEffect
     """How far (rad) the sweep at twice ``physics``'s step moves from it at the check's
     instants, or None when that run goes unstable (its MuJoCo warnings are silenced: the
     scene's own step is not at fault)."""
-    t, k = check_instants(sched, physics.ring.sensors, physics.dt_s, timing)
-    if len(t) == 0:
+    both = _at_step_and(physics, sched, timing, run, 2.0)
+    if both is None:
         return 0.0
-    at_step = (_hermite(run.dt_s, run.sensor_rad, run.sensor_vel, t, k) if run is not None
-               else angles_at(physics, sched, t, k))
-    doubled = BeltPhysics(physics.ring, dataclasses.replace(physics.params,
-                                                            timestep_s=physics.dt_s * 2))
+    t, k, at_step, doubled = both
     with _WARNING_HANDLER:   # one swap at a time, so threads restore what was there
         handler = mujoco.get_mju_user_warning()
         mujoco.set_mju_user_warning(lambda message: None)
