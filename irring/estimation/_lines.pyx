@@ -997,7 +997,8 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
         sin_h[i] = sin(heading[i])
         un = cos_h[i] * ngx + sin_h[i] * ngy
         t = d[i] - rel / un
-        if (n[g] >= min_members and isfinite(t) and fabs(t - d[i]) <= snap_sigmas * sigma_m[i]
+        # behind its line: always onto it; short of it: within snap_sigmas σ (the oracle's why)
+        if (n[g] >= min_members and isfinite(t) and t - d[i] <= snap_sigmas * sigma_m[i]
                 and t >= min_range and t <= max_range):
             tt[i] = t
             along[i] = al

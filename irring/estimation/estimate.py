@@ -706,7 +706,7 @@ def beam_crossings(ox, oy, ux, uy, c, e, nrm):
 
 # --------------------------------------------------------------------------- end points on lines
 
-SNAP_SIGMAS = 3.0   # a member moves onto its line if that is within 3σ of its distance …
+SNAP_SIGMAS = 3.0   # a member moves out onto its line if that is within 3σ (in from behind: always) …
 SNAP_MIN = 10       # … and the line has at least 10 members (short lines are less sure)
 SNAP_OWN = 0.5      # share of a member's own σ kept in its σ on the line
 
@@ -717,7 +717,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
     ``member`` (S, N): the line each reading took θ from (−1: none). A valid member of a
     line with ≥ 10 members moves along its beam onto the line refitted to their end points
     (members read a little past the max range included: see :func:`drop_beyond_range`)
-    when that is within 3σ of its distance and within [``min_range_m``,
+    when the member lies behind it or short of it by no more than 3σ, within [``min_range_m``,
     ``points.max_range_m``]; its σ becomes the line's uncertainty there (half its own σ
     added). One compiled call (``irring.estimation._lines.snap_to_lines``); the readable
     statement and the why: :func:`irring.estimation.estimate_numpy.snap_to_lines`."""
