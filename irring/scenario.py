@@ -75,6 +75,12 @@ class IncidenceEffect:
                                           doc="returns at steeper incidence drop out "
                                               "(default: the sensor model's, GP2: 70°, sonar: 20°)")
 
+    def drop_out_rad(self, model) -> float:
+        """The incidence (rad) past which returns drop out: this effect's, else ``model``'s
+        (a ``gp2.SensorModel``)."""
+        return self.max_incidence_rad if self.max_incidence_rad is not None \
+            else model.max_incidence_rad
+
 
 @dataclass(frozen=True)
 class NoiseEffect:
@@ -99,6 +105,12 @@ class ReflectanceEffect:
                             doc="returns weaker than this (reflectance / d² relative to max range)"
                                 " drop out; 0.2 lets 18 % grey card (0.2 of white) reach the "
                                 "sensor's full range, as the GP2 datasheets specify")
+
+    @staticmethod
+    def signal(reflectance, distance_m, max_range_m: float):
+        """Signal of a return: reflectance · (max_range / d)², 1 for white at the sensor
+        model's ``max_range_m``; it drops out below ``min_signal``."""
+        return reflectance * (max_range_m / distance_m) ** 2
 
 
 @dataclass(frozen=True)

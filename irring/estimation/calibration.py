@@ -296,9 +296,8 @@ class Calibration:
                            max_incidence_rad=None,
                            source=f"{model.name} curve as scene {scenario.name!r} simulates it "
                                   f"(effects: {effects}; no incidence: a, b independent of θ)")
-        limit = incidence.max_incidence_rad
-        return replace(cal, max_incidence_rad=min(
-            model.max_incidence_rad if limit is None else limit, _table_end(cal.theta_rad)),
+        return replace(cal, max_incidence_rad=min(incidence.drop_out_rad(model),
+                                                  _table_end(cal.theta_rad)),
             source=f"{model.name} curve as scene {scenario.name!r} simulates it "
                    f"(effects: {effects})")
 

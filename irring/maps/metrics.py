@@ -16,7 +16,7 @@ from .. import gp2
 from ..core import (Cylinder, Ring, box_corners, distance_to_outline, inside_obstacle,
                     inside_outline)
 from ..resources import kernel
-from ..scenario import Scenario
+from ..scenario import ReflectanceEffect, Scenario
 
 _traverse = kernel("maps._traverse")
 
@@ -180,11 +180,8 @@ def _returns(scenario: Scenario) -> Returns:
     effects = scenario.effects
     model = gp2.sensor(scenario.sensor.model)
     incidence, reflectance = effects.get("incidence"), effects.get("reflectance")
-    limit = None
-    if incidence is not None:
-        limit = (incidence.max_incidence_rad if incidence.max_incidence_rad is not None
-                 else model.max_incidence_rad)
-    return Returns(model=scenario.sensor.model, max_incidence_rad=limit,
+    return Returns(model=scenario.sensor.model,
+                   max_incidence_rad=None if incidence is None else incidence.drop_out_rad(model),
                    min_signal=None if reflectance is None else reflectance.min_signal)
 
 
@@ -216,23 +213,16 @@ def _gives_return(t, psi, d_max: float, returns: Returns, surface) -> np.ndarray
         read_square_on = model.distance(model.voltage(t, theta))   # what its voltage means
         ok &= (theta <= returns.max_incidence_rad) & (read_square_on <= d_max)
     if returns.min_signal is not None:
-        ok &= rho * (model.max_range_m / t) ** 2 >= returns.min_signal
+        ok &= ReflectanceEffect.signal(rho, t, model.max_range_m) >= returns.min_signal
     return ok
 
 
-def _sensor_views(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: float,
-                  a_hi: float, returns: Returns | None = None, *, surface=None):
-    """Per sensor k of ``ring`` at ``pose``: (can, ex, ey) for points (m): whether sensor k,
-    its hinge at the ring radius, turned to the angle that puts the point on its beam (the
-    emitter d_o to the beam's right) within [a_lo, a_hi] of radial, finds it at a distance
-    within [d_min, d_max] of the emitter and, by ``returns``, gets a return from it; and
-    where that emitter then is. ``surface``: (normal x, normal y, reflectance) of each
-    point, needed when ``returns`` asks for incidence or reflectance (else ValueError)."""
-    check = returns is not None and (returns.max_incidence_rad is not None
-                                     or returns.min_signal is not None)
-    if check and surface is None:
-        raise ValueError("the scene's effects make returns depend on the surface: pass "
-                         "surface=(normal x, normal y, reflectance)")
+def _geometry(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: float, a_hi: float):
+    """Per sensor k of ``ring`` at ``pose``: (can, t, psi, ex, ey) for points (m): whether
+    sensor k, its hinge at the ring radius, turned to the angle that puts the point on its
+    beam (the emitter d_o to the beam's right) within [a_lo, a_hi] of radial, finds it at a
+    distance t within [d_min, d_max] of the emitter; the beam's heading psi; where that
+    emitter then is."""
     d_o = ring.emitter_offset_m
     for k in range(ring.sensors):
         rho = pose.yaw_rad + 2.0 * math.pi * k / ring.sensors
@@ -243,9 +233,30 @@ def _sensor_views(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: fl
         psi = np.arctan2(vy, vx) + np.arctan2(d_o, t)                 # the beam's heading
         can = ((t >= d_min) & (t <= d_max)
                & (np.mod(psi - rho - a_lo, 2.0 * math.pi) <= a_hi - a_lo))
+        yield can, t, psi, hx + d_o * np.sin(psi), hy - d_o * np.cos(psi)
+
+
+def _checks(returns: Returns | None, surface) -> bool:
+    """Whether ``returns`` asks anything of the surface (ValueError if ``surface`` is None)."""
+    check = returns is not None and (returns.max_incidence_rad is not None
+                                     or returns.min_signal is not None)
+    if check and surface is None:
+        raise ValueError("the scene's effects make returns depend on the surface: pass "
+                         "surface=(normal x, normal y, reflectance)")
+    return check
+
+
+def _sensor_views(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: float,
+                  a_hi: float, returns: Returns | None = None, *, surface=None):
+    """Per sensor k of ``ring`` at ``pose``: (can, ex, ey) for points (m): :func:`_geometry`'s
+    ``can`` and, by ``returns``, a return from the point; where the emitter then is.
+    ``surface``: (normal x, normal y, reflectance) of each point, needed when ``returns``
+    asks for incidence or reflectance (else ValueError)."""
+    check = _checks(returns, surface)
+    for can, t, psi, ex, ey in _geometry(px, py, pose, ring, d_min, d_max, a_lo, a_hi):
         if check:
             can &= _gives_return(t, psi, d_max, returns, surface)
-        yield can, hx + d_o * np.sin(psi), hy - d_o * np.cos(psi)
+        yield can, ex, ey
 
 
 def _measurable(px, py, pose, *ranging, surface=None) -> np.ndarray:
@@ -255,6 +266,19 @@ def _measurable(px, py, pose, *ranging, surface=None) -> np.ndarray:
     for can, _, _ in _sensor_views(px, py, pose, *ranging, surface=surface):
         ok |= can
     return ok
+
+
+def _measurable_returning(px, py, pose, ranging, surface) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_measurable` of surface points without and with ``ranging``'s :class:`Returns`,
+    in one pass over the sensors."""
+    ring, d_min, d_max, a_lo, a_hi, returns = ranging
+    check = _checks(returns, surface)
+    reach = np.zeros(np.shape(px), bool)
+    ret = np.zeros(np.shape(px), bool)
+    for can, t, psi, _, _ in _geometry(px, py, pose, ring, d_min, d_max, a_lo, a_hi):
+        reach |= can
+        ret |= (can & _gives_return(t, psi, d_max, returns, surface)) if check else can
+    return reach, ret
 
 
 def _surface_at(cells, surface_point, surface_normal, surface_reflectance):
@@ -354,13 +378,15 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
                                          surface_reflectance)
     geometric = ranging[:5]               # range and sweep only: what the shadow is judged by
     nears = []
+    returning = []                        # per pose: which surface cells give a return
     for pose in scenario.robot.poses:  # a handful of poses; each is vectorised over cells
         near = free & (np.hypot(px - pose.x_m, py - pose.y_m) <= reach)
-        near[sy, sx] = _measurable(spx, spy, pose, *geometric)
+        near[sy, sx], ret = _measurable_returning(spx, spy, pose, ranging, sdir)
         nears.append(near)
+        returning.append(ret)
     if bar is not None:
         bar.reset(total=int(sum(int(n.sum()) for n in nears)))
-    for pose, near in zip(scenario.robot.poses, nears):
+    for pose, near, ret in zip(scenario.robot.poses, nears, returning):
         in_range |= near
         ty, tx = np.nonzero(near)
         first = np.empty(len(tx), np.int16)
@@ -371,10 +397,10 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
             if bar is not None:
                 bar.update(len(tx[part]))
         clear = first == 0
-        seen[ty[clear], tx[clear]] = True
-        returns = np.zeros(px.shape, bool)
-        returns[sy, sx] = _measurable(spx, spy, pose, *ranging, surface=sdir)
-        visible[ty[clear], tx[clear]] |= returns[ty[clear], tx[clear]]
+        seen_now = np.zeros(px.shape, bool)
+        seen_now[ty[clear], tx[clear]] = True
+        seen |= seen_now
+        visible[sy, sx] |= seen_now[sy, sx] & ret
         by_obstacle = (first >= OBSTACLE0) & (surface_owner[ty, tx] == WALL)
         unset = hidden_by_obstacle[ty, tx] == 0
         pick = by_obstacle & unset

@@ -168,8 +168,7 @@ class IncidenceStage(Stage):
 
     def __init__(self, params: IncidenceEffect, setup: Setup):
         super().__init__(params, setup)
-        self.max_incidence_rad = (params.max_incidence_rad if params.max_incidence_rad is not None
-                                  else setup.model.max_incidence_rad)
+        self.max_incidence_rad = params.drop_out_rad(setup.model)
 
     def returns(self, f: Frame) -> None:
         f.theta = f.incidence
@@ -192,7 +191,7 @@ class ReflectanceStage(Stage):
 
     def returns(self, f: Frame) -> None:
         rho = np.where(np.isnan(f.reflectance), 1.0, f.reflectance)
-        s = rho * (self.setup.model.max_range_m / f.d) ** 2
+        s = ReflectanceEffect.signal(rho, f.d, self.setup.model.max_range_m)
         weak = s < self.params.min_signal
         f.d = np.where(weak, np.nan, f.d)
         ok = ~weak & ~np.isnan(s)

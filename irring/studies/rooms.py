@@ -58,26 +58,29 @@ def point_errors(sweep, points, points_theta0) -> tuple[np.ndarray, np.ndarray]:
 
 
 def score_room(scenario: Scenario, seed: int | None = None, *,
-               judged_on: Scenario | None = None) -> dict:
+               judged_on: Scenario | None = None, truth_cache: dict | None = None) -> dict:
     """One room, one seed, as written: the six map scores, ``point_rms_m``,
     ``point_rms_theta0_m`` (None when no reading qualifies), ``readings``, ``valid``.
     ``judged_on``: the scene whose ground truth scores the map (default ``scenario``): the
-    same room with other effects, so two sensors are judged on the same visible wall."""
+    same room with other effects, so two sensors are judged on the same visible wall.
+    ``truth_cache``: a dict the caller keeps, so runs of one room rasterise its truth once."""
     theta0 = []
 
     def both(sweep, calibration):  # θ = 0 with the very calibration the run estimates with
         theta0.append(estimate(sweep, calibration, iterate=False))
         return estimate(sweep, calibration)
 
-    run = pipeline.run(scenario, seed=seed, progress=False, estimator=both)
+    run = pipeline.run(scenario, seed=seed, progress=False, estimator=both, score=False)
     errs, errs0 = [], []
     for sweep, pts, p0 in zip(run.sweeps, run.points, theta0):
         e, e0 = point_errors(sweep, pts, p0)
         errs.append(e)
         errs0.append(e0)
     readings = run.readings()
-    scores = run.scores if judged_on is None else metrics.score(
-        run.grid, judged_on, metrics.ground_truth(judged_on, run.grid), mapped_by=scenario)
+    judge = scenario if judged_on is None else judged_on
+    truth = (metrics.ground_truth(judge, run.grid) if truth_cache is None else
+             metrics.cached_ground_truth(judge, run.grid, truth_cache, judge.source or judge.name))
+    scores = metrics.score(run.grid, judge, truth, mapped_by=scenario)
     return {**{k: scores[k] for k in SCORE_KEYS},
             "point_rms_m": _rms(np.concatenate(errs)),
             "point_rms_theta0_m": _rms(np.concatenate(errs0)),
@@ -153,10 +156,11 @@ def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
 def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
     seeds = [sc.seed + k for k in range(n_seeds)]
     row = {"name": sc.name, "source": sc.source}
+    truths: dict = {}
     for variant, scene in (("effects", sc), ("ideal", ideal(sc))):
         runs = []
         for seed in seeds:   # both judged on the scene's truth: the wall its sensor returns from
-            runs.append(score_room(scene, seed, judged_on=sc if scene is not sc else None))
+            runs.append(score_room(scene, seed, judged_on=sc, truth_cache=truths))
             bar.update()
         row[variant] = {k: mean_of([r[k] for r in runs]) for k in runs[0]}
     row["misses"] = {k: row["effects"][k] for k, lim in TARGETS.items()
