@@ -394,27 +394,6 @@ def check_calibration(calibration, model: str, adc_bits: int, vref_v: float, whe
             f"{_sensor(calibration.sensor_model, calibration.adc_bits, calibration.vref_v)}, "
             f"but {what} {_sensor(model, adc_bits, vref_v)}; use a calibration of that sensor "
             f"(irring calibrate) or leave --calibration out")
-    # a > 0 and b of one sign pass the loader, but a = 1e300 or b = -1e-300 reads every
-    # count as a distance outside the range: nothing would be mapped, without a word
-    top = 2 ** adc_bits - 1
-    a, b = float(calibration.a[0]), float(calibration.b[0])
-    lo, hi = calibration.min_range_m, calibration.max_range_m
-    with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
-        def reads(counts):   # d = a·S^b
-            return a * np.power(np.asarray(counts, dtype=float), b)
-        # the counts that read lo and hi, and the whole counts next to them: one of those
-        # must read within the range (the ends alone miss a curve that jumps past it)
-        edges = np.exp((np.log([lo, hi]) - math.log(a)) / b)
-        edges = np.clip(np.nan_to_num(edges, nan=1.0), 1, top)
-        whole = np.unique(np.r_[np.floor(edges), np.ceil(edges)])
-        fits = np.any((reads(whole) >= lo * (1 - 1e-9)) & (reads(whole) <= hi * (1 + 1e-9)))
-        ends = reads([1, top])
-    near, far = float(ends.min()), float(ends.max())
-    if not fits:
-        raise CalibrationError(
-            f"{where}: its θ = 0 curve reads the counts 1 … {top} as {near:.3g} … {far:.3g} m, "
-            f"never within its {lo:g} … {hi:g} m range (a = {calibration.a[0]:.6g}, b = "
-            f"{calibration.b[0]:.6g}); no sensor reads so: calibrate it again")
 
 
 def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | Path | None = None,

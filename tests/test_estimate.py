@@ -110,11 +110,9 @@ def test_calibration_yaml_round_trip(tmp_path):
 @pytest.mark.parametrize("model, range_m", [("gp2d12", (0.10, 0.80)), ("gp2y0a02", (0.20, 1.50)),
                                             ("sonar", (0.1524, 6.45))])
 def test_a_calibration_file_without_its_range_trusts_its_sensor_curves(tmp_path, model, range_m):
-    raw = STAND_IN.to_dict()
+    # a rising curve (b > 0) for the sonar: a GP2's flipped would read nothing in range
+    raw = (Calibration.nominal("sonar") if model == "sonar" else STAND_IN).to_dict()
     raw.update(sensor_model=model, source=model)
-    if model == "sonar":   # a rising curve (b > 0)
-        for row in raw["curve"]:
-            row["b"] = -row["b"]
     del raw["min_range_mm"], raw["max_range_mm"]
     path = tmp_path / "cal.yaml"
     path.write_text(yaml.safe_dump(raw))
@@ -197,8 +195,9 @@ def test_eq9_refuses_readings_straight_at_the_wall(phi):
 def test_log_log_fit_recovers_a_theta_b_theta(a0, b0, k, n, seed):
     rng = np.random.default_rng(seed)
     grid = np.radians(np.arange(0.0, 81.0, 10.0))
+    # a = 100, b = -0.6 reads 0.1 m at 10^5 counts: a 24-bit converter's curve
     truth = Calibration("t", 0.0, grid, a0 * (1 + k * (1 - np.cos(grid))),
-                        b0 * (1 + 0.1 * k * (1 - np.cos(grid))))
+                        b0 * (1 + 0.1 * k * (1 - np.cos(grid))), adc_bits=24)
     theta = rng.uniform(0, math.radians(80), n)
     theta[: grid.size] = grid                       # every row gets support …
     theta[grid.size: 2 * grid.size] = grid
@@ -206,7 +205,7 @@ def test_log_log_fit_recovers_a_theta_b_theta(a0, b0, k, n, seed):
     d[: grid.size], d[grid.size: 2 * grid.size] = 0.12, 0.7   # … at two distances
     counts = truth.counts(d, theta)
     t, a, b = fit_curve(counts, d, theta, grid, min_readings=2)
-    fitted = Calibration("t", 0.0, t, a, b)
+    fitted = Calibration("t", 0.0, t, a, b, adc_bits=24)
     assume(t.size == grid.size)
     dd = np.linspace(0.1, 0.8, 9)[:, None]
     s = truth.counts(dd, grid[None, :])

@@ -298,29 +298,46 @@ def test_a_calibration_for_another_sensor_or_adc_is_refused(tmp_path, capsys, mo
     assert not (tmp_path / "re").exists()
 
 
-@pytest.mark.parametrize("row0, reads", [
-    ({"a": 1e300}, "5.65e+295 … 1e+300 m"),
-    ({"b": -1e-300}, "774 … 774 m"),
-    ({"b": -1e300}, "0 … 774 m"),   # 774 m at count 1, nothing from 2 on
+@pytest.mark.parametrize("row, edit, reads", [
+    (0, {"a": 1e300}, "5.65e+295 … 1e+300 m"),
+    (0, {"b": -1e-300}, "774 … 774 m"),
+    (0, {"b": -1e300}, "0 … 774 m"),   # 774 m at count 1, nothing from 2 on
+    (4, {"a": 1e-9}, "5.99e-14 … 1e-09 m"),   # a row within the drop-out angle
 ])
-def test_a_calibration_that_reads_no_count_in_range_is_refused(tmp_path, capsys, row0, reads):
+def test_a_calibration_that_reads_no_count_in_range_is_refused(tmp_path, capsys, row, edit,
+                                                               reads):
     """a = 1e300 or b = -1e300 passed the loader (a > 0, b < 0) and mapped nothing (exit 0,
     F1 0.000, every reading 'no return'); b = -1e-300 ended in exit 70 under -W error
-    (overflow in exp)."""
+    (overflow in exp). Refused at load, naming the row and what is allowed."""
     raw = Calibration.nominal("gp2d12", None, 12, 5.0).to_dict()
-    raw["curve"][0].update(row0)
+    raw["curve"][row].update(edit)
     cal = tmp_path / "impossible.yaml"
     cal.write_text(yaml.safe_dump(raw))
+    theta = raw["curve"][row]["theta_deg"]
+    message = (f"{cal}: curve[{row}] (θ = {theta:g}°): a = {raw['curve'][row]['a']:.6g}, b = "
+               f"{raw['curve'][row]['b']:.6g} read the counts 1 … 4095 of a 12-bit ADC as "
+               f"{reads}, never within the 0.1 … 0.8 m range (min_range_mm … max_range_mm); "
+               f"allowed: a, b under which some count reads within it")
+    with pytest.raises(CalibrationError) as caught:
+        Calibration.load(cal)
+    assert message in str(caught.value)
     out = tmp_path / "o"
     assert main(["run", "t_room", "--calibration", str(cal), "--out", str(out)]) == 1
-    err = capsys.readouterr().err
-    assert (f"{cal}: its θ = 0 curve reads the counts 1 … 4095 as {reads}, never within "
-            f"its 0.1 … 0.8 m range") in err
+    assert message in capsys.readouterr().err
     assert not out.exists()
     # drive: before the port is opened
     assert main(["drive", "--port", str(tmp_path / "no-such-port"), "--calibration", str(cal),
                  "--out", str(out)]) == 1
-    assert f"irring drive: error: {cal}: its θ = 0 curve reads" in capsys.readouterr().err
+    assert f"irring drive: error: {message}" in capsys.readouterr().err
+
+
+def test_a_curve_row_past_the_drop_out_angle_is_not_judged(tmp_path):
+    """Rows past max_incidence are never read with (the return drops out there)."""
+    raw = Calibration.nominal("gp2d12", None, 12, 5.0).to_dict()
+    raw["max_incidence_deg"] = 60.0
+    raw["curve"][-1]["a"] = 1e-9
+    cal = Calibration.from_dict(raw)
+    assert cal.a[-1] == 1e-9 and math.degrees(cal.max_incidence_rad) == pytest.approx(60.0)
 
 
 def test_drive_with_a_bad_calibration_file_exits_1_as_its_help_says(tmp_path, capsys):

@@ -120,9 +120,6 @@ def run(args: argparse.Namespace) -> int:
                       "IRR v1 reports no robot pose, so a moving scan cannot be mapped from the "
                       "link; map it with `irring run` instead")
     calibration, cal_text = load_calibration(args.calibration)   # a bad file: exit 1
-    if calibration is not None:   # a curve that reads no count in range: before any sweep
-        pipeline.check_calibration(calibration, calibration.sensor_model, calibration.adc_bits,
-                                   calibration.vref_v, str(args.calibration), "it reads")
 
     # what the device does not report: the calibration's numbers over the truth scenario's
     # over SerialRing's defaults (the paper's ring and GP2D12)

@@ -71,6 +71,31 @@ def _table_end(theta: np.ndarray) -> float:
     return float(theta[-1]) or math.pi / 2 - 1e-3
 
 
+def _reads_in_range(a: float, b: float, lo: float, hi: float, top: int) -> bool:
+    """Whether some whole count n in 1 … ``top`` reads a·n^b within [lo, hi] (m), to 1e-9."""
+    with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
+        # log n at the two ends of the range; n lies between them (either order)
+        ends = (np.log([lo * (1 - 1e-9), hi * (1 + 1e-9)]) - math.log(a)) / b
+        first, last = float(np.min(ends)), float(np.max(ends))
+        if np.isnan(ends).any():
+            return False
+        n_lo = max(1.0, math.ceil(math.exp(min(first, 60.0))))
+        n_hi = min(float(top), math.floor(math.exp(min(last, 60.0))))
+        if n_hi - n_lo >= 2:
+            return True
+        # an end count of a narrow interval may be rounding (b = -1e300): read it directly
+        near = np.clip([n_lo - 1, n_lo, n_hi, n_hi + 1], 1, top)
+        d = a * np.power(near, b)
+        return bool(np.any((d >= lo * (1 - 1e-9)) & (d <= hi * (1 + 1e-9))))
+
+
+def _count_span_m(a: float, b: float, top: int) -> tuple[float, float]:
+    """The distances (m, nearest first) the counts 1 and ``top`` read under a·n^b."""
+    with np.errstate(over="ignore", under="ignore"):
+        ends = a * np.power(np.array([1.0, float(top)]), b)
+    return float(ends.min()), float(ends.max())
+
+
 def _source_text(value: Any, fail) -> str:
     if not isinstance(value, str) or len(value) > 4096:
         raise fail("source", "expected a line of text (at most 4096 characters)")
@@ -143,6 +168,22 @@ class Calibration:
         object.__setattr__(self, "a", a)
         object.__setattr__(self, "b", b)
         object.__setattr__(self, "_log_a", np.log(a))
+        # a > 0 and b of one sign are not enough: a = 1e300 or b = -1e-300 reads every count
+        # as a distance outside the range, and nothing would be mapped, without a word
+        top = 2 ** int(self.adc_bits) - 1
+        for i, (t, a_i, b_i) in enumerate(zip(theta, a, b)):
+            if t > self.max_incidence_rad + 1e-12:
+                break   # past the drop-out angle no return is read with this row
+            if not _reads_in_range(float(a_i), float(b_i), self.min_range_m,
+                                   self.max_range_m, top):
+                near, far = _count_span_m(float(a_i), float(b_i), top)
+                raise CalibrationError(
+                    f"curve[{i}] (θ = {math.degrees(t):g}°): a = {a_i:.6g}, b = {b_i:.6g} read "
+                    f"the counts 1 … {top} of a {self.adc_bits}-bit ADC as {near:.3g} … "
+                    f"{far:.3g} m, never within the {self.min_range_m:g} … "
+                    f"{self.max_range_m:g} m range (min_range_mm … max_range_mm); allowed: a, "
+                    f"b under which some count reads within it. No sensor reads so: "
+                    f"calibrate it again")
 
     # ---- what the estimator reads per sweep, built on its first sweep (a calibration that
     # is only fitted, saved or shown never needs them: the fine table takes ~3 ms)
