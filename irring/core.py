@@ -75,6 +75,12 @@ def si_name(yaml_name: str) -> str:
     return yaml_name
 
 
+def bounds(cls: type, name: str) -> tuple[Any, Any]:
+    """The inclusive (lo, hi) SI bounds of field ``name`` of dataclass ``cls`` (None: open)."""
+    meta = next(f for f in dataclasses.fields(cls) if f.name == name).metadata
+    return meta.get("lo"), meta.get("hi")
+
+
 def _fmt_range(name: str, lo: float | None, hi: float | None) -> str:
     suf = unit_suffix(name)
     scale, unit = 1.0, ""

@@ -23,8 +23,9 @@ def line(body: str) -> bytes:
     return f"${body}*{p.checksum(body.encode()):02X}\r\n".encode()
 
 
-def info(sensors=SENSORS, bits=BITS, lo=MIN_STEP, hi=MAX_STEP, step_mdeg=1800) -> bytes:
-    return line(f"IRINF,1,{sensors},{bits},{step_mdeg},3,5,{lo},{hi},hostile")
+def info(sensors=SENSORS, bits=BITS, lo=MIN_STEP, hi=MAX_STEP, step_mdeg=1800, num=3,
+         den=5) -> bytes:
+    return line(f"IRINF,1,{sensors},{bits},{step_mdeg},{num},{den},{lo},{hi},hostile")
 
 
 def counts_for(step: int, n: int = SENSORS) -> list[int]:

@@ -378,9 +378,10 @@ def _sweep_on(behaviour, **ring_kw):
     (hd.error_reply(3), "IRERR 3"),
     (hd.error_reply(4), "IRERR 4"),
     (hd.error_reply(5), "kept refusing|IRERR 5"),
-    (hd.announces(sensors=4096), "announces 4096 sensors"),
-    (hd.announces(bits=32), "announces a 32-bit ADC"),
-    (hd.announces(lo=-2**31 + 1, hi=2**31 - 1), "announces steps"),
+    (hd.announces(sensors=4096), re.escape("announces 4096 sensors (nsensors; allowed 1 … 72)")),
+    (hd.announces(bits=32), re.escape("announces a 32-bit ADC (adc_bits; allowed 1 … 24)")),
+    (hd.announces(lo=-2**31 + 1, hi=2**31 - 1), re.escape(
+        "announces steps -2147483647 … 2147483647 (min_step, max_step; allowed -100000 … 100000")),
 ])
 def test_a_hostile_device_is_a_clear_error_within_a_bounded_time(behaviour, error):
     t0 = time.monotonic()
@@ -392,6 +393,25 @@ def test_a_hostile_device_is_a_clear_error_within_a_bounded_time(behaviour, erro
     if partial is not None:                            # no invented reading
         for step, row in zip(partial.steps, partial.counts):
             assert list(row) == hd.counts_for(int(step))
+
+
+@pytest.mark.parametrize("announced, message", [
+    # 20 steps of 45° through a belt of 10: the sensors turned ±9000°, accepted and mapped
+    (dict(lo=-20, hi=20, step_mdeg=45_000, num=10, den=1),
+     "a sweep turning the sensors to ±9000° (steps -20 … 20 × 45° × belt 10; allowed at most "
+     "±360°, a sensor turned once round)"),
+    (dict(step_mdeg=50_000), "a motor step of 50° (step_mdeg; allowed 10 … 45000 m°)"),
+    (dict(num=100, den=1), "a belt ratio of 100 (gear_num/gear_den; allowed 0.01 … 10)"),
+    (dict(lo=-60_000, hi=60_000), "steps -60000 … 60000 (min_step, max_step; allowed -100000 "
+                                  "… 100000, at most 100,000 steps)"),
+])
+def test_a_device_announcing_a_ring_no_scenario_allows_is_refused_naming_the_field(
+        announced, message):
+    """The handshake bounded sizes but not angles: a device could announce a sweep of
+    ±9000° (the scenario schema caps joint_limit at ±360°) and be mapped."""
+    with pytest.raises(DeviceError) as caught:
+        _sweep_on(hd.announces(**announced))
+    assert f"announces {message}; no ring has that" in str(caught.value)
 
 
 @pytest.mark.parametrize("behaviour", [hd.trickle, hd.out_of_order, hd.good])

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import errno
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
@@ -36,11 +37,10 @@ MOVE_ALLOWANCE_S = 0.005  # per motor step the ring may travel before a sweep's 
 # --------------------------------------------------------------------------- errors
 
 
-# Bounds on what a device may announce in IRINF (the scenario schema's ring bounds; an
-# IRSCN of 72 counts no longer fits a 128-byte sentence anyway)
-MAX_SENSORS = 72
+# What a device may announce in IRINF is what a Ring may be (core.Ring's field bounds, the
+# scenario schema's; an IRSCN of 72 counts no longer fits a 128-byte sentence anyway), and an
+# ADC of at most this many bits (a recording's and a calibration file's bound)
 MAX_ADC_BITS = 24
-MAX_STEP_SPAN = 100_000
 # a sweep pass that makes no progress (no new step) for this many timeouts beyond its
 # IRSTP retries is given up, whatever else the device keeps sending
 NO_PROGRESS_TIMEOUTS = 3
@@ -51,6 +51,40 @@ GARBLED_ANSWER_RETRY_S = 0.1
 
 class HandshakeError(DeviceError):
     """No usable IRINF answer to IRHLO."""
+
+
+def _info_faults(info: p.Info) -> list[str]:
+    """What in an IRINF no ring has: each fault names the field and the allowed range."""
+    def allowed(name: str, scale: float = 1.0, unit: str = "") -> str:
+        lo, hi = core.bounds(Ring, name)
+        return f"allowed {lo * scale:g} … {hi * scale:g}{unit}"
+
+    gear = info.gear_num / info.gear_den
+    step_lo, step_hi = core.bounds(Ring, "max_step")
+    turn = max(abs(info.min_step), abs(info.max_step)) * info.step_mdeg / 1000.0 * gear
+    limit_deg = math.degrees(core.bounds(Ring, "joint_limit_rad")[1])
+    faults = []
+    if not core.bounds(Ring, "sensors")[0] <= info.nsensors <= core.bounds(Ring, "sensors")[1]:
+        faults.append(f"{info.nsensors} sensors (nsensors; {allowed('sensors')})")
+    if not 1 <= info.adc_bits <= MAX_ADC_BITS:
+        faults.append(f"a {info.adc_bits}-bit ADC (adc_bits; allowed 1 … {MAX_ADC_BITS})")
+    if not (step_lo <= info.min_step and info.max_step <= step_hi
+            and info.max_step - info.min_step < core.MAX_STEPS):
+        faults.append(f"steps {info.min_step} … {info.max_step} (min_step, max_step; allowed "
+                      f"{step_lo} … {step_hi}, at most {core.MAX_STEPS:,} steps)")
+    step_rad = math.radians(info.step_mdeg / 1000.0)
+    lo, hi = core.bounds(Ring, "motor_step_rad")
+    if not lo - 1e-12 <= step_rad <= hi + 1e-12:
+        faults.append(f"a motor step of {info.step_mdeg / 1000:g}° (step_mdeg; allowed "
+                      f"{math.degrees(lo) * 1000:g} … {math.degrees(hi) * 1000:g} m°)")
+    lo, hi = core.bounds(Ring, "gear")
+    if not lo <= gear <= hi:
+        faults.append(f"a belt ratio of {gear:g} (gear_num/gear_den; {allowed('gear')})")
+    if not faults and turn > limit_deg + 1e-9:
+        faults.append(f"a sweep turning the sensors to ±{turn:g}° (steps {info.min_step} … "
+                      f"{info.max_step} × {info.step_mdeg / 1000:g}° × belt {gear:g}; allowed "
+                      f"at most ±{limit_deg:g}°, a sensor turned once round)")
+    return faults
 
 
 class DeviceRejected(DeviceError, core.SourceLost):
@@ -396,24 +430,11 @@ class SerialRing:
         if info.proto != p.PROTOCOL_VERSION:
             raise HandshakeError(f"the device on {self.port_name} speaks IRR protocol "
                                  f"v{info.proto}; this driver speaks v{p.PROTOCOL_VERSION}")
-        # sizes the host allocates by: refuse what no ring has before trusting them
-        span = info.max_step - info.min_step + 1
-        gear = info.gear_num / info.gear_den
-        for ok, what in ((1 <= info.nsensors <= MAX_SENSORS, f"{info.nsensors} sensors "
-                                                              f"(1 … {MAX_SENSORS})"),
-                         (1 <= info.adc_bits <= MAX_ADC_BITS, f"a {info.adc_bits}-bit ADC "
-                                                               f"(1 … {MAX_ADC_BITS})"),
-                         (span <= MAX_STEP_SPAN and max(abs(info.min_step), abs(info.max_step))
-                          <= MAX_STEP_SPAN, f"steps {info.min_step} … {info.max_step} (at "
-                                            f"most {MAX_STEP_SPAN} steps, |step| ≤ "
-                                            f"{MAX_STEP_SPAN})"),
-                         (10 <= info.step_mdeg <= 45_000, f"a motor step of "
-                                                          f"{info.step_mdeg / 1000:g}° "
-                                                          f"(0.01 … 45°)"),
-                         (0.01 <= gear <= 10, f"a belt ratio of {gear:g} (0.01 … 10)")):
-            if not ok:
-                raise HandshakeError(f"the device on {self.port_name} announces {what}; "
-                                     f"no ring has that, so its IRINF is not trusted")
+        # sizes the host allocates by, and angles it maps by: refuse what no ring has
+        # before trusting them (Ring's bounds, one home with the scenario schema)
+        for fault in _info_faults(info):
+            raise HandshakeError(f"the device on {self.port_name} announces {fault}; no ring "
+                                 f"has that, so its IRINF is not trusted")
         self.info = info
         self.ring = p.ring_from_info(info, self.template, radius_m=self.radius_m,
                                      emitter_offset_m=self.emitter_offset_m)
