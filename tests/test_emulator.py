@@ -237,6 +237,21 @@ def test_full_range_sweeps_move_the_robot_to_the_next_pose_partial_ones_do_not()
     assert src.calls[2][1] == tuple(range(35, -36, -1))
 
 
+def test_a_hello_starts_a_new_session_at_the_first_pose():
+    """The pose counter outlived the host: a second `drive --truth t_room` against one
+    emulator started at its pose 2+ and mapped it as pose 1 (F1 0.145)."""
+    src = TinySource()
+    dev = Device(src)
+    for cmd in [p.Hello(), p.SweepCommand(-35, 35), p.SweepCommand(-35, 35), p.Hello(),
+                p.SweepCommand(-35, 35), p.SweepCommand(35, -35), p.SweepCommand(0, 3)]:
+        talk(dev, p.encode(cmd))
+    assert [c[0] for c in src.calls] == [0, 1, 0, 1, 1]
+    held = Device(src := TinySource(), fixed_pose=2)   # --pose K stays at K in every session
+    for cmd in [p.SweepCommand(-35, 35), p.Hello(), p.SweepCommand(-35, 35)]:
+        talk(held, p.encode(cmd))
+    assert [c[0] for c in src.calls] == [2, 2]
+
+
 def test_fault_rates_are_what_was_asked():
     dev = Device(TinySource(), faults=Faults(drop_rate=0.05, corrupt_rate=0.01, seed=3))
     for _ in range(40):
@@ -382,6 +397,14 @@ def test_irring_drive_on_the_emulator_makes_the_same_map_as_irring_run(tmp_path,
     capsys.readouterr()
     assert (tmp_path / "replay" / "map.pgm").read_bytes() == \
         (tmp_path / "run" / "map.pgm").read_bytes()
+    # drives of 3 poses against the same emulator each start at its pose 1 (the second
+    # began at the emulator's pose 4 and scored F1 0.145)
+    scores = []
+    for out in ("d3", "again"):
+        assert main(["drive", "--port", link, "--truth", "t_room", "--poses", "3", "--out",
+                     str(tmp_path / out), "--no-animation", "--json", "--timeout", "0.5"]) == 0
+        scores.append(json.loads(capsys.readouterr().out)["scores"]["occupied_f1"])
+    assert scores[0] > 0.75 and abs(scores[1] - scores[0]) < 0.02, scores
 
 
 def test_irring_drive_without_truth_says_which_ring_it_mapped_with(tmp_path, t_room,

@@ -30,7 +30,9 @@ the --link path (e.g. `python -m serial.tools.miniterm ring.pty`, then type $IRH
 Readings come from the scenario's simulated ring and effects with the scenario's seed, so a
 fault-free full sweep equals `SimRing(scenario).sweep(pose)`. The robot starts at the
 scenario's first pose (pose 1, as map.png numbers them); each further full-range sweep
-moves it to the next pose. Faults act on what the device sends."""
+moves it to the next pose, and each new session (a host's $IRHLO, sent when `irring drive`
+or `calibrate` opens the port) starts it again at pose 1. Faults act on what the device
+sends."""
 
 
 def register(p: argparse.ArgumentParser) -> None:

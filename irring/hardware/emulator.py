@@ -143,6 +143,10 @@ class Device:
             self.stats.commands_rejected += 1
             self._say(p.ErrorReply(p.ERR_UNKNOWN_TYPE, f"{msg.TYPE} is not a command"))
         elif isinstance(msg, p.Hello):
+            # a host says hello when it opens the link: a new session starts the robot again
+            # at its first pose, as a person would put the real robot back (a second drive
+            # against one emulator began at pose 2+ and scored against the wrong poses)
+            self._pose, self._full_sweeps = 0, 0
             self._say(self.info)
         elif isinstance(msg, p.Stop):
             self._job = None  # stop after the step in progress: IRDON with the last seq sent
