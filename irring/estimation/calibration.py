@@ -270,6 +270,18 @@ class Calibration:
         (``RETURN_SIGMAS`` count σ); between the two margins it is OUT_OF_RANGE."""
         return RETURN_SIGMAS * self.sigma_counts()
 
+    @functools.cached_property
+    def silent_range_m(self) -> float:
+        """How far a NO_RETURN reading rules out a surface (m): where a surface square on
+        gives counts ``NO_RETURN_SIGMAS + RETURN_SIGMAS`` count σ above the no-return level,
+        so it reads as no return with the 1e-4 tail ``RETURN_SIGMAS`` allows the other way;
+        at most ``max_range_m``. A curve ending at the noise floor (a GP2Y0A21 read to its
+        0.8 m) reaches it short of the max range; linear hooks (laser, sonar): the max range."""
+        if not self.falling:
+            return self.max_range_m
+        told = self.no_return_counts + (NO_RETURN_SIGMAS + RETURN_SIGMAS) * self.sigma_counts()
+        return float(min(self.max_range_m, self.distance(told, 0.0)))
+
     @property
     def near_counts(self) -> float:
         """The near end of the calibrated curve (any θ): a GP2 reading brighter than this

@@ -425,12 +425,13 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     (``snapper``, the compiled :func:`snap_to_lines` by default), members read just past
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
-    oracle passes its numpy statements of both) and, with ``detail``, the :class:`Lines`."""
+    oracle passes its numpy statements of both; never past ``cal.silent_range_m``:
+    :func:`silent_reach`) and, with ``detail``, the :class:`Lines`."""
     shape = points.valid.shape
     if grouping is None:       # nothing to group (e.g. every reading invalid): no lines
         empty = _lines_record(None, np.full(shape, -1, dtype=np.intp), np.zeros(0, np.intp))
-        return Estimate(points=drop_beyond_range(points), lines=empty if detail else None,
-                        theta_history=tuple(history))
+        return Estimate(points=silent_reach(drop_beyond_range(points), cal),
+                        lines=empty if detail else None, theta_history=tuple(history))
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points = local_incidence(points, label, index, counts, steps, cal)
@@ -446,8 +447,23 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     found = _lines_record(pieces_out, label, used)
     if silent:
         points = replace(points, reach_m=(reach or no_return_reach)(points, found, cal, options))
+        points = silent_reach(points, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+def silent_reach(points: Points, cal: Calibration) -> Points:
+    """``points`` with every NO_RETURN beam's ``reach_m`` at most ``cal.silent_range_m``,
+    where that is shorter than ``points.max_range_m``: past it a surface square on reads as
+    silence too often for silence to rule it out (docs/estimator.md, "Silent beams")."""
+    limit = cal.silent_range_m
+    silent = points.reason == Reason.NO_RETURN
+    if not (limit < points.max_range_m and silent.any()):
+        return points
+    reach = (np.full(silent.shape, np.nan) if points.reach_m is None
+             else np.array(points.reach_m, dtype=float))
+    reach[silent] = np.fmin(reach[silent], limit)
+    return replace(points, reach_m=reach)
 
 
 def drop_beyond_range(points: Points) -> Points:
