@@ -30,7 +30,8 @@ from irring import safe_yaml
 from irring.cli import main
 from irring.core import Sweep
 from irring.errors import OutputError, TooBig
-from irring.estimation.calibration import Calibration, CalibrationError, load_calibration
+from irring.estimation.calibration import (Calibration, CalibrationError, load_calibration,
+                                           load_progress)
 from irring.hardware import DeviceError, NoReadings, SerialRing
 from irring.hardware import protocol as p_
 from irring.recording import RecordingError, load_recording, save_recording
@@ -778,3 +779,141 @@ def test_dataclass_fields_of_sweep_are_all_checked():
                                               "vref_v", "max_range_m", "samples", "settle_s",
                                               "duration_s", "source", "missing_steps"}
     assert {f.name for f in dataclasses.fields(Sweep)} <= checked
+
+
+# --------------------------------------------------------------------------- calibrate --port
+
+
+def _calibrate(tmp_path, monkeypatch, behaviour, stop_at=None, stop=KeyboardInterrupt, *extra):
+    """irring calibrate --port on a hostile device, the person pressing Enter at every
+    prompt and ``stop`` (an exception to raise, or an answer) at placement ``stop_at``'s
+    → (status, link, prompts asked to place the wall, out)."""
+    placed = []
+
+    def person(text):
+        if "Place a flat, white wall" in text:
+            k = int(re.match(r"\[(\d+)/", text).group(1))
+            if k == stop_at:
+                if isinstance(stop, str):
+                    return stop
+                raise stop()
+            placed.append(k)
+        return ""
+
+    monkeypatch.setattr("builtins.input", person)
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path / "spare"))
+    (tmp_path / "spare").mkdir(exist_ok=True)
+    dev = hd.HostileDevice(behaviour)
+    out = tmp_path / "ring.yaml"
+    try:
+        return (main(["calibrate", "--port", dev.link, "--sweeps", "1", "--out", str(out),
+                      *extra]), dev.link, placed, out)
+    finally:
+        dev.close()
+
+
+def _kept(tmp_path):
+    (saved,) = (tmp_path / "spare").iterdir()
+    assert saved.name.startswith("irring-calibrate-") and saved.suffix == ".yaml"
+    return saved
+
+
+@pytest.mark.parametrize("behaviour, stop, status, said", [
+    (hd.good, KeyboardInterrupt, 130, "interrupted at placement 4 of 28"),
+    (hd.good, EOFError, 1, "input ended at placement 4 of 28"),
+    (hd.good, "q", 1, "calibration stopped by the user at placement 4"),
+    (hd.good_then(hd.disconnect_on_sweep, sweeps=3), None, 3, "error: ring on"),
+])
+def test_calibrate_keeps_the_placements_read_when_it_stops_early(
+        tmp_path, capsys, monkeypatch, behaviour, stop, status, said):
+    """Ctrl-C, Ctrl-D, q or a device failing at placement 4 lost the three placements the
+    person had already set the wall up for ('nothing written')."""
+    code, link, placed, out = _calibrate(tmp_path, monkeypatch, behaviour,
+                                         None if stop is None else 4, stop)
+    err = capsys.readouterr().err
+    assert code == status, err
+    assert placed == [1, 2, 3] + ([4] if stop is None else [])
+    saved = _kept(tmp_path)
+    assert f"irring calibrate: {said}" in err
+    assert (f"the 3 placements read (of 28) are kept in {saved}; resume with: irring calibrate "
+            f"--port {link} --resume {saved} --out {out} --sweeps 1") in err
+    progress = load_progress(saved)
+    assert sorted(progress.done) == [0, 1, 2] and progress.sensor == 0
+    for place, readings in progress.done.values():   # what the device sent, sensor 0's
+        assert list(readings.counts) == [hd.counts_for(s)[0] for s in range(-2, 3)]
+        assert place.purpose == "offset" and list(readings.repeats) == [1] * 5
+    assert not out.exists()
+
+
+def test_calibrate_resumes_asking_only_for_the_placements_not_read(tmp_path, capsys,
+                                                                   monkeypatch):
+    code, link, _, out = _calibrate(tmp_path, monkeypatch, hd.good, 4)
+    assert code == 130
+    saved = _kept(tmp_path)
+    saved = saved.rename(tmp_path / "progress.yaml")
+    capsys.readouterr()
+    code, _, placed, out = _calibrate(tmp_path, monkeypatch, hd.good, None, None,
+                                      "--resume", str(saved))
+    captured = capsys.readouterr()
+    assert placed == list(range(4, 29))   # placements 1-3 were not measured again
+    assert f"resuming from {saved}: 3 of 28 placements read before" in captured.out
+    assert "[1/28] read before (resumed)" in captured.out
+    # the device's counts are no wall, so no curve fits: all 28 are kept for another try
+    assert code == 1, captured.err
+    assert "the 28 placements read (of 28) are kept in" in captured.err
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--sensor", "1"], "sensor 1, a gp2d12 with a 12-bit ADC at 5 V"),
+    (["--scenario", "SCENE"], "sensor 0, a gp2y0a21 with a 12-bit ADC at 5 V"),
+])
+def test_calibrate_refuses_to_resume_another_procedure(tmp_path, capsys, monkeypatch, extra,
+                                                       message):
+    scene = copy.deepcopy(T_ROOM)
+    scene["sensor"]["model"] = "gp2y0a21"
+    (tmp_path / "y0a21.yaml").write_text(yaml.safe_dump(scene))
+    extra = [str(tmp_path / "y0a21.yaml") if a == "SCENE" else a for a in extra]
+    code, _, _, _ = _calibrate(tmp_path, monkeypatch, hd.good, 2)
+    saved = _kept(tmp_path).rename(tmp_path / "progress.yaml")
+    capsys.readouterr()
+    code, _, placed, _ = _calibrate(tmp_path, monkeypatch, hd.good, None, None,
+                                    "--resume", str(saved), *extra)
+    err = capsys.readouterr().err
+    assert code == 1 and placed == []
+    assert (f"irring calibrate: error: {saved}: cannot resume: it was read from sensor 0, a "
+            f"gp2d12 with a 12-bit ADC at 5 V; this run calibrates {message}") in err
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d["read"][0]["counts"].__setitem__(0, 1e9),
+     "read[0].counts: 1000000000.0 is not allowed; expected numbers 0 … 4095 or null"),
+    (lambda d: d["read"][0]["repeats"].pop(), "read[0]: its lists differ in length"),
+    (lambda d: d["read"][0].update(placement=99), "read[0].placement: expected a whole number "
+                                                  "1 … 28, got 99"),
+    (lambda d: d["read"].append(copy.deepcopy(d["read"][0])),
+     "read[1].placement: placement 1 is read twice"),
+    (lambda d: d.update(irring_calibration_progress=2), "irring_calibration_progress: "
+                                                        "expected format 1"),
+    (lambda d: d["read"][0].update(wall_distance_mm=float("nan")),
+     "read[0].wall_distance_mm: expected a number"),
+    (lambda d: d["read"][0].update(wall_distance_mm=400.0), "cannot resume: its placement 1 "
+                                                           "(a flat, white wall 400 mm"),
+])
+def test_a_damaged_progress_file_is_refused_naming_the_key(tmp_path, capsys, monkeypatch,
+                                                           edit, message):
+    _calibrate(tmp_path, monkeypatch, hd.good, 2)
+    saved = _kept(tmp_path).rename(tmp_path / "progress.yaml")
+    doc = yaml.safe_load(saved.read_text())
+    edit(doc)
+    saved.write_text(yaml.safe_dump(doc))
+    capsys.readouterr()
+    code, _, placed, _ = _calibrate(tmp_path, monkeypatch, hd.good, None, None,
+                                    "--resume", str(saved))
+    err = capsys.readouterr().err
+    assert code == 1 and placed == [] and "internal error" not in err
+    assert f"{saved}: {message}" in err
+
+
+def test_calibrate_resume_needs_a_port(tmp_path, capsys):
+    assert main(["calibrate", "--resume", str(tmp_path / "p.yaml")]) == 2
+    assert "--resume continues a guided calibration of the real ring" in capsys.readouterr().err

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import shlex
 import sys
+import tempfile
 from pathlib import Path
 
 from .. import errors
 from ..estimation.calibration import (CalibrationAborted, CalibrationError, GuidedCalibration,
-                                      SimulatedRig)
+                                      SimulatedRig, load_progress, save_progress)
 from ..outputs import check_out
 from ..scenario import load_scenario
 from ._common import at_least, between, describe, seed
@@ -27,6 +30,13 @@ what it does:
                   axis in mm, angles in degrees), the ring sweeps, and the file is written
                   at the end. Enter: read; s: skip the placement; q: quit.
 
+  stopping early  When the procedure stops before the file is written (q, Ctrl-C, the input
+                  ending, the device failing, a fit that fails, --out not writable), the
+                  placements already read are kept in a file in the temporary folder
+                  ($TMPDIR, else /tmp), named on stderr with the command that resumes:
+                  irring calibrate --port PORT --resume FILE asks only for the placements
+                  the file does not hold (same --sensor and --scenario sensor as before).
+
   The file is YAML (distances in mm, angles in degrees); pass it to the estimator with
   `irring run --calibration FILE` or irring.estimation.calibration.Calibration.load(FILE).
   Without a calibration file `irring run` reads a simulated scene with the calibration of
@@ -36,6 +46,7 @@ examples:
   irring calibrate                                  simulated rig, t_room's sensor and effects
   irring calibrate --scenario my_room.yaml --out my_cal.yaml
   irring calibrate --port /dev/ttyUSB0 --out ring.yaml
+  irring calibrate --port /dev/ttyUSB0 --out ring.yaml --resume /tmp/irring-calibrate-x.yaml
   irring emulate t_room &                           then
   irring calibrate --port ring.pty                 (checks the I/O only: the emulator shows
                                                     its scene, not your wall)
@@ -57,6 +68,9 @@ def register(p: argparse.ArgumentParser) -> None:
                         "procedure instead of the simulated rig")
     p.add_argument("--baud", type=between(1, 10_000_000), default=115200,
                    help="serial speed with --port (default: 115200)")
+    p.add_argument("--resume", type=Path, default=None, metavar="FILE",
+                   help="with --port: the placements an earlier run read before it stopped "
+                        "(the file it named); they are not measured again")
     p.add_argument("--sensor", type=at_least(0), default=0,
                    help="which sensor faces the wall (default: 0)")
     p.add_argument("--sweeps", type=at_least(1), default=None, metavar="N",
@@ -76,55 +90,131 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.is_dir():  # `--out DIR`: the file goes inside, not over the folder
         out = out / "calibration.yaml"
+    if args.resume is not None and args.port is None:
+        print("irring calibrate: error: --resume continues a guided calibration of the real "
+              "ring; give its --port too", file=sys.stderr)
+        return errors.USAGE
     check_out(out.parent)
     scenario = load_scenario(args.scenario)
-
-    def no_such_sensor(ring: str, sensors: int) -> int:
-        print(f"irring calibrate: error: --sensor {args.sensor}: {ring} has sensors 0 … "
-              f"{sensors - 1}", file=sys.stderr)
-        return errors.USAGE
-
+    if args.port is not None:
+        return _guided(args, scenario, out)
+    if args.sensor >= scenario.ring.sensors:
+        return _no_such_sensor(args, f"{scenario.name}'s ring", scenario.ring.sensors)
     try:
-        if args.port is None:
-            if args.sensor >= scenario.ring.sensors:
-                return no_such_sensor(f"{scenario.name}'s ring", scenario.ring.sensors)
-            rig = SimulatedRig(scenario, sensor=args.sensor, sweeps=args.sweeps or 8,
-                               seed=args.seed)
-            print(f"simulated rig: {scenario.name}'s ring and {scenario.sensor.model}, effects: "
-                  f"{', '.join(k for k in scenario.effects if k != 'motion') or 'none'}; "
-                  f"{len(rig.placements)} placements × {rig.sweeps} sweeps")
-            cal = rig.calibrate()
-        else:
-            from ..hardware.serial_ring import SerialRing   # deferred: loads pyserial
-
-            ring = SerialRing(args.port, baudrate=args.baud,
-                              emitter_offset_m=scenario.ring.emitter_offset_m,
-                              sensor_model=scenario.sensor.model, vref_v=scenario.sensor.vref_v,
-                              max_range_m=scenario.sensor.max_range_m)
-            try:
-                with ring:  # the handshake sets ring.info (or raises)
-                    if args.sensor >= ring.info.nsensors:   # before the first placement
-                        return no_such_sensor(f"the ring on {args.port}", ring.info.nsensors)
-                    guided = GuidedCalibration(
-                        read_sweep=lambda: ring.sweep(resweep=1), prompt=input, show=print,
-                        sensor_model=scenario.sensor.model, adc_bits=ring.info.adc_bits,
-                        vref_v=scenario.sensor.vref_v, sensor=args.sensor,
-                        sweeps=args.sweeps or 4,
-                        emitter_offset_guess_m=scenario.ring.emitter_offset_m)
-                    cal = guided.run()
-            except errors.DeviceError as exc:
-                print(f"irring calibrate: error: {exc}", file=sys.stderr)
-                return errors.DEVICE
-    except CalibrationAborted as exc:
-        print(f"irring calibrate: {exc}; nothing written", file=sys.stderr)
-        return 1
+        rig = SimulatedRig(scenario, sensor=args.sensor, sweeps=args.sweeps or 8,
+                           seed=args.seed)
+        print(f"simulated rig: {scenario.name}'s ring and {scenario.sensor.model}, effects: "
+              f"{', '.join(k for k in scenario.effects if k != 'motion') or 'none'}; "
+              f"{len(rig.placements)} placements × {rig.sweeps} sweeps")
+        cal = rig.calibrate()
     except (CalibrationError, ValueError) as exc:
         print(f"irring calibrate: error: {errors.printable(str(exc))}", file=sys.stderr)
         return errors.INPUT
-    except EOFError:
-        print("irring calibrate: input ended; nothing written", file=sys.stderr)
-        return 1
     path = cal.save(out)
     print(_summary(cal))
     print(f"wrote {path}")
     return 0
+
+
+def _no_such_sensor(args, ring: str, sensors: int) -> int:
+    print(f"irring calibrate: error: --sensor {args.sensor}: {ring} has sensors 0 … "
+          f"{sensors - 1}", file=sys.stderr)
+    return errors.USAGE
+
+
+def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
+    """The guided procedure on the real ring; what was read survives any way it stops."""
+    from ..hardware.serial_ring import SerialRing   # deferred: loads pyserial
+
+    progress = load_progress(args.resume) if args.resume is not None else None   # exit 1
+    try:
+        ring = SerialRing(args.port, baudrate=args.baud,
+                          emitter_offset_m=scenario.ring.emitter_offset_m,
+                          sensor_model=scenario.sensor.model, vref_v=scenario.sensor.vref_v,
+                          max_range_m=scenario.sensor.max_range_m)
+    except ValueError as exc:
+        print(f"irring calibrate: error: {errors.printable(str(exc))}", file=sys.stderr)
+        return errors.USAGE
+    guided = None
+    try:
+        # Ctrl-C or `kill` stops the procedure, but the placements read are kept
+        with errors.sigterm_as_interrupt(), ring:   # the handshake sets ring.info (or raises)
+            if args.sensor >= ring.info.nsensors:   # before the first placement
+                return _no_such_sensor(args, f"the ring on {args.port}", ring.info.nsensors)
+            guided = GuidedCalibration(
+                read_sweep=lambda: ring.sweep(resweep=1), prompt=input, show=print,
+                sensor_model=scenario.sensor.model, adc_bits=ring.info.adc_bits,
+                vref_v=scenario.sensor.vref_v, sensor=args.sensor, sweeps=args.sweeps or 4,
+                emitter_offset_guess_m=scenario.ring.emitter_offset_m)
+            if progress is not None:
+                why = progress.mismatch(guided)
+                if why:
+                    print(f"irring calibrate: error: {args.resume}: cannot resume: {why}",
+                          file=sys.stderr)
+                    return errors.INPUT
+                guided.done.update((i, r) for i, (_, r) in progress.done.items())
+                guided.resumed = len(guided.done)
+                print(f"resuming from {args.resume}: {len(guided.done)} of "
+                      f"{len(guided.placements)} placements read before")
+            cal = guided.run()
+        path = cal.save(out)
+    except BaseException as exc:   # noqa: BLE001 - say why, keep what was read, then stop
+        status = _say_why(exc, guided)
+        if guided is not None:
+            _keep(args, guided)
+        if status is None:   # anything else (a full disk, a bug): main's one line
+            raise
+        return status
+    print(_summary(cal))
+    print(f"wrote {path}")
+    return 0
+
+
+def _say_why(exc: BaseException, guided) -> int | None:
+    """Print why the procedure stopped and return the exit status (None: let main say)."""
+    where = (f" at placement {guided.at} of {len(guided.placements)}"
+             if guided is not None and guided.at else "")
+    if isinstance(exc, CalibrationAborted):
+        line, status = str(exc), errors.INPUT
+    elif isinstance(exc, EOFError):
+        line, status = f"input ended{where}", errors.INPUT
+    elif isinstance(exc, KeyboardInterrupt):
+        line, status = f"interrupted{where}", errors.INTERRUPTED
+    elif isinstance(exc, (errors.DeviceError, CalibrationError)):
+        line, status = f"error: {errors.printable(str(exc), 2000)}", exc.status
+    else:
+        return None
+    print(f"irring calibrate: {line}", file=sys.stderr)
+    return status
+
+
+def _keep(args: argparse.Namespace, guided) -> None:
+    """Save the placements read to a new file in the temporary folder and say how to
+    resume: a person placed the wall for each of them."""
+    n, total = len(guided.done), len(guided.placements)
+    if not guided.done:
+        print("irring calibrate: no placement was read, so nothing was kept", file=sys.stderr)
+        return
+    if n == guided.resumed:
+        print(f"irring calibrate: nothing new was read; {args.resume} still holds the {n} "
+              f"placements read before", file=sys.stderr)
+        return
+    try:
+        fd, name = tempfile.mkstemp(prefix="irring-calibrate-", suffix=".yaml")
+        os.close(fd)
+        path = save_progress(name, guided)
+    except Exception as exc:   # noqa: BLE001 - the error being reported matters more
+        print(f"irring calibrate: the placements read could not be kept either "
+              f"({errors.printable(str(exc))})", file=sys.stderr)
+        return
+    again = ["irring", "calibrate", "--port", args.port, "--resume", str(path)]
+    for option, value, default in (("--scenario", args.scenario, "t_room"),
+                                   ("--sensor", args.sensor, 0), ("--out", args.out,
+                                                                  "calibration.yaml"),
+                                   ("--sweeps", args.sweeps, None),
+                                   ("--baud", args.baud, 115200)):
+        if value != default and str(value) != default:
+            again += [option, str(value)]
+    print(f"irring calibrate: the {n} placement{'s' if n != 1 else ''} read (of {total}) "
+          f"{'are' if n != 1 else 'is'} kept in {path}; resume with: "
+          f"{shlex.join(again)}", file=sys.stderr)

@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 
 from .. import gp2, safe_yaml
-from ..core import ADC_BITS, SENSOR_MODEL, VREF_V, Pose, Ring, Sweep
+from ..core import ADC_BITS, MAX_STEPS, SENSOR_MODEL, VREF_V, Pose, Ring, Sweep
 from ..errors import InputError, brief
 from ..outputs import write_text_atomic
 from ..resources import kernel
@@ -862,14 +862,18 @@ class GuidedCalibration:
     For each placement the user sets up the wall and presses Enter (``s`` skips it, ``q``
     quits); the ring sweeps ``sweeps`` times; a placement whose central reading is far from
     what the nominal curve expects is offered for a retake (a wall in the wrong place is
-    the usual mistake).
+    the usual mistake). ``done`` (placement index → :class:`RigReadings`, from
+    :func:`load_progress`) holds placements read before, which are not measured again;
+    :attr:`done` grows as placements are read, so a caller can keep them when the
+    procedure stops early (:func:`save_progress`).
     """
 
     def __init__(self, *, read_sweep: Callable[[], Sweep], prompt: Callable[[str], str] = input,
                  show: Callable[[str], None] = print, sensor_model: str = SENSOR_MODEL,
                  adc_bits: int = ADC_BITS, vref_v: float = VREF_V, sensor: int = 0,
                  sweeps: int = 4, placements: Sequence[Placement] | None = None,
-                 emitter_offset_guess_m: float = Ring().emitter_offset_m):
+                 emitter_offset_guess_m: float = Ring().emitter_offset_m,
+                 done: Mapping[int, RigReadings] | None = None):
         self.read_sweep = read_sweep
         self.prompt = prompt
         self.show = show
@@ -884,6 +888,11 @@ class GuidedCalibration:
         self.emitter_offset_guess_m = emitter_offset_guess_m
         self._nominal = Calibration.nominal(sensor_model, None, adc_bits, vref_v,
                                             emitter_offset_m=emitter_offset_guess_m)
+        # placement index (0-based) → its readings: what a resumed run read before, then
+        # each placement as it is read (kept when the procedure stops: save_progress)
+        self.done: dict[int, RigReadings] = dict(done or {})
+        self.resumed = len(self.done)
+        self.at = 0   # the placement (1-based) the procedure is at
 
     def _expected_counts(self, placement: Placement, sweep: Sweep) -> tuple[float, float]:
         angles = np.asarray(sweep.sensor_angles, dtype=float)[:, self.sensor]
@@ -899,9 +908,12 @@ class GuidedCalibration:
              f"{self.sweeps} sweeps each. Distances are from the sensor's rotation axis to the "
              "wall; angles are the turn of the robot (or the wall) so the sensor's radial "
              "direction meets the wall's normal at that angle.")
-        parts = []
         doubtful: list[int] = []   # placements kept although their reading looked wrong
         for k, placement in enumerate(self.placements, start=1):
+            self.at = k
+            if k - 1 in self.done:
+                show(f"[{k}/{n}] read before (resumed)")
+                continue
             while True:
                 answer = self.prompt(f"[{k}/{n}] Place {placement.describe(self.sensor)}. "
                                      "Enter when ready, s to skip, q to quit: ").strip().lower()
@@ -920,9 +932,10 @@ class GuidedCalibration:
                     if again == "r":
                         continue
                     doubtful.append(k)
-                parts.append(collect(sweeps, placement, self.sensor))
+                self.done[k - 1] = collect(sweeps, placement, self.sensor)
                 show(f"[{k}/{n}] read {len(sweeps)} sweeps")
                 break
+        parts = [self.done[i] for i in sorted(self.done)]
         if not any(p.offset.any() for p in parts):
             raise CalibrationError("no offset placement (wall square to the sensor) was read; "
                                    "d_o needs at least one")
@@ -940,3 +953,159 @@ class GuidedCalibration:
              f"b(0) = {cal.b[0]:.4f}; θ table up to {math.degrees(cal.max_theta_rad):.0f}°; "
              f"noise {cal.noise_counts:.1f} counts")
         return cal
+
+
+# --------------------------------------------------------------------------- progress
+
+PROGRESS_FORMAT = 1   # version written into a guided calibration's progress file
+
+
+def save_progress(path: str | Path, guided: GuidedCalibration) -> Path:
+    """Write the placements ``guided`` has read (:attr:`GuidedCalibration.done`) to a YAML
+    file that :func:`load_progress` reads back to resume the procedure without measuring
+    them again (``irring calibrate --port … --resume FILE``)."""
+    def values(arr, digits=6):   # NaN (a step no sweep read) as null
+        return [None if not math.isfinite(v) else round(float(v), digits) for v in arr]
+
+    read = []
+    for i in sorted(guided.done):
+        r, place = guided.done[i], guided.placements[i]
+        read.append({"placement": i + 1,
+                     "wall_distance_mm": round(place.wall_distance_m * 1e3, 9),
+                     "yaw_deg": round(math.degrees(place.yaw_rad), 9),
+                     "purpose": place.purpose,
+                     "beam_angle_deg": values(np.degrees(r.beam_angle_rad), 9),
+                     "counts": values(r.counts), "spread_counts": values(r.spread_counts),
+                     "repeats": [int(v) for v in r.repeats]})
+    doc = {"irring_calibration_progress": PROGRESS_FORMAT, "sensor": guided.sensor,
+           "sensor_model": guided.sensor_model, "adc_bits": guided.adc_bits,
+           "vref_v": guided.vref_v, "sweeps": guided.sweeps,
+           "placements": len(guided.placements), "read": read}
+    header = ("# irring calibrate: the placements read so far; resume with\n"
+              "# irring calibrate --port PORT --resume THIS_FILE\n")
+    return write_text_atomic(path, header + yaml.safe_dump(doc, sort_keys=False,
+                                                           default_flow_style=None, width=100))
+
+
+@dataclass(frozen=True)
+class Progress:
+    """A progress file's contents: the procedure it belongs to and what was read."""
+
+    sensor: int
+    sensor_model: str
+    adc_bits: int
+    vref_v: float
+    placements: int
+    done: dict   # placement index (0-based) → (Placement, RigReadings)
+
+    def mismatch(self, guided: GuidedCalibration) -> str | None:
+        """Why this progress cannot resume ``guided`` (None: it can)."""
+        mine = (self.sensor, self.sensor_model, self.adc_bits)
+        theirs = (guided.sensor, guided.sensor_model, guided.adc_bits)
+        if mine != theirs or not math.isclose(self.vref_v, guided.vref_v, rel_tol=1e-9):
+            return (f"it was read from sensor {self.sensor}, a {self.sensor_model} with a "
+                    f"{self.adc_bits}-bit ADC at {self.vref_v:g} V; this run calibrates sensor "
+                    f"{guided.sensor}, a {guided.sensor_model} with a {guided.adc_bits}-bit ADC "
+                    f"at {guided.vref_v:g} V")
+        if self.placements != len(guided.placements):
+            return (f"it belongs to a procedure of {self.placements} placements; this run has "
+                    f"{len(guided.placements)}")
+        for i, (place, _) in self.done.items():
+            want = guided.placements[i]
+            if not (math.isclose(place.wall_distance_m, want.wall_distance_m, abs_tol=1e-9)
+                    and math.isclose(place.yaw_rad, want.yaw_rad, abs_tol=1e-9)
+                    and place.purpose == want.purpose):
+                return (f"its placement {i + 1} ({place.describe(self.sensor)}) is not this "
+                        f"run's ({want.describe(guided.sensor)})")
+        return None
+
+
+def load_progress(path: str | Path) -> Progress:
+    """A progress file :func:`save_progress` wrote; :class:`CalibrationError` naming the file
+    and the key for anything else."""
+    source = str(path)
+    try:
+        raw = safe_yaml.load(safe_yaml.read_text(path, "calibration progress file"), source)
+    except safe_yaml.InputError as exc:
+        raise CalibrationError(str(exc)) from None
+
+    def fail(key: str, msg: str) -> CalibrationError:
+        return CalibrationError(f"{source}: {key}: {msg}")
+
+    if not isinstance(raw, Mapping) or raw.get("irring_calibration_progress") != PROGRESS_FORMAT:
+        raise fail("irring_calibration_progress",
+                   f"expected format {PROGRESS_FORMAT} (a file `irring calibrate --port` names "
+                   f"when it stops early)")
+    known = {"irring_calibration_progress", "sensor", "sensor_model", "adc_bits", "vref_v",
+             "sweeps", "placements", "read"}
+    for key in raw:
+        if key not in known:
+            raise fail(str(key), f"unknown key; allowed: {', '.join(sorted(known))}")
+
+    def whole(node, key, lo, hi, where=""):
+        value = node.get(key) if isinstance(node, Mapping) else None
+        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+            raise fail(where + key, f"expected a whole number {lo} … {hi}, got {brief(value)}")
+        return value
+
+    def real(node, key, lo, hi, where=""):
+        value = node.get(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not (math.isfinite(value) and lo <= value <= hi):
+            raise fail(where + key, f"expected a number {lo:g} … {hi:g}, got {brief(value)}")
+        return float(value)
+
+    model = raw.get("sensor_model")
+    if model not in gp2.SENSORS:
+        raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
+                                   f"{', '.join(gp2.SENSORS)}")
+    whole(raw, "sweeps", 1, 10**6)
+    bits = whole(raw, "adc_bits", 1, 24)
+    top = 2 ** bits - 1
+    n = whole(raw, "placements", 1, 10_000)
+    read = raw.get("read")
+    if not isinstance(read, list) or len(read) > n:
+        raise fail("read", f"expected a list of at most {n} placements read")
+    done: dict = {}
+    for j, entry in enumerate(read):
+        at = f"read[{j}]."
+        if not isinstance(entry, Mapping):
+            raise fail(f"read[{j}]", "expected a mapping")
+        k = whole(entry, "placement", 1, n, at)
+        if k - 1 in done:
+            raise fail(at + "placement", f"placement {k} is read twice")
+        purpose = entry.get("purpose")
+        if purpose not in ("offset", "curve"):
+            raise fail(at + "purpose", f"expected offset or curve, got {brief(purpose)}")
+        place = Placement(real(entry, "wall_distance_mm", 1e-3, 1e5, at) * 1e-3,
+                          math.radians(real(entry, "yaw_deg", -90, 90, at)), purpose)
+        cols = {}
+        for key, lo, hi, nullable in (("beam_angle_deg", -360.0, 360.0, False),
+                                      ("counts", 0.0, float(top), True),
+                                      ("spread_counts", 0.0, float(top), True),
+                                      ("repeats", 0, 10_000, False)):
+            col = entry.get(key)
+            if not isinstance(col, list) or not 1 <= len(col) <= MAX_STEPS:
+                raise fail(at + key, f"expected a list of 1 … {MAX_STEPS} values")
+            for v in col:
+                if v is None and nullable:
+                    continue
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or \
+                        not (math.isfinite(v) and lo <= v <= hi) or \
+                        (key == "repeats" and not isinstance(v, int)):
+                    raise fail(at + key, f"{brief(v)} is not allowed; expected "
+                                         f"{'whole numbers' if key == 'repeats' else 'numbers'} "
+                                         f"{lo:g} … {hi:g}{' or null' if nullable else ''}")
+            cols[key] = np.array([math.nan if v is None else v for v in col], dtype=float)
+        sizes = {key: c.size for key, c in cols.items()}
+        if len(set(sizes.values())) != 1:
+            raise fail(f"read[{j}]", f"its lists differ in length ({sizes}); one value a step")
+        size = cols["counts"].size
+        done[k - 1] = (place, RigReadings(
+            counts=cols["counts"], beam_angle_rad=np.radians(cols["beam_angle_deg"]),
+            wall_distance_m=np.full(size, place.wall_distance_m),
+            spread_counts=cols["spread_counts"], repeats=cols["repeats"].astype(int),
+            offset=np.full(size, purpose == "offset")))
+    return Progress(sensor=whole(raw, "sensor", 0, 71), sensor_model=str(model),
+                    adc_bits=bits, vref_v=real(raw, "vref_v", 0.1, 50.0), placements=n,
+                    done=done)
