@@ -502,3 +502,47 @@ def test_scoring_moves_a_progress_bar_and_chunks_change_nothing(monkeypatch):
     assert bar.done == bar.total
     # both poses' cells in range, each pose's walk cut into pieces of at most 3001
     assert bar.calls >= bar.total // 3001 + 2 and bar.total > int(whole.in_range.sum())
+
+
+SLAB = """
+name: slab_one_side
+seed: 41
+room: {outline_mm: [[0, 0], [1600, 0], [1600, 1200], [0, 1200]]}
+obstacles:
+  - {type: box, center_mm: [830, 720], size_mm: [620, 14], yaw_deg: 17}
+robot: {poses: [{x_mm: 760, y_mm: 390, yaw_deg: 8}]}
+sensor: {model: gp2d12, max_range_mm: 624}
+effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}}
+map: {resolution_mm: 10}
+"""
+
+
+def test_a_beam_meets_a_face_from_its_front_only():
+    # a 14 mm slab seen from one side: the line of sight to its far face is clear (no cell
+    # centre lies inside the slab), yet no beam can meet that face, so it is not visible wall;
+    # an ideal sensor maps every visible cell (its recall was 0.9962, 58 back-face cells in
+    # the truth), and listing the room's corners the other way round changes nothing
+    from irring import pipeline
+    from irring.scenario import loads
+    from irring.studies.rooms import ideal
+
+    sc = loads(SLAB, "slab.yaml")
+    grid = pipeline.run(ideal(sc), seed=sc.seed, progress=False, score=False).grid
+    truth = ground_truth(sc, grid)
+    ob = sc.obstacles[0]
+    c, s = math.cos(ob.yaw_rad), math.sin(ob.yaw_rad)
+    slab = truth.visible & (truth.surface_owner == OBSTACLE0)
+    sy, sx = np.nonzero(slab)
+    sp = truth.surface_point[sy, sx]
+    across = -s * (sp[:, 0] - ob.center_m[0]) + c * (sp[:, 1] - ob.center_m[1])
+    assert np.all(across < -0.0069) and slab.sum() == 73    # the near face, 7 mm below
+    assert score(grid, sc, truth)["occupied_recall"] == 1.0
+    # the outline listed clockwise: the walls still face into the room
+    flipped = SLAB.replace("[[0, 0], [1600, 0], [1600, 1200], [0, 1200]]",
+                           "[[0, 1200], [1600, 1200], [1600, 0], [0, 0]]")
+    other = ground_truth(loads(flipped, "slab.yaml"), grid)
+    np.testing.assert_array_equal(other.visible, truth.visible)
+    walls = truth.surface_owner == WALL
+    inward = (truth.surface_normal[walls] * np.sign(
+        np.array([0.8, 0.6]) - truth.surface_point[walls])).max(axis=1)
+    assert (inward > 0.99).all()                             # each wall's normal points in

@@ -38,13 +38,15 @@ class GroundTruth:
     surface_owner: np.ndarray  # int16: WALL or OBSTACLE0 + j for surface cells, else 0
     surface_point: np.ndarray  # (ny, nx, 2) m: the surface point nearest each surface
     #                            cell's centre (what "in range" measures to), else NaN
-    surface_normal: np.ndarray  # (ny, nx, 2): unit normal of the surface there, else NaN
+    surface_normal: np.ndarray  # (ny, nx, 2): unit normal of the surface there, pointing to
+    #                              the side it faces (into the room, out of an obstacle); else NaN
     surface_reflectance: np.ndarray  # (ny, nx): reflectance of the surface there, else NaN
     occupied: np.ndarray       # bool: surface or material
     free: np.ndarray           # bool: free space and not surface
     in_range: np.ndarray       # bool: within max range + ring radius of some pose
     visible: np.ndarray        # bool: surface cells seen from a pose (in range, line of
-    #                            sight, giving the scene's sensor a return: Returns)
+    #                            sight, met from the side they face, giving the scene's
+    #                            sensor a return: Returns)
     reachable_free: np.ndarray  # bool: free cells in range and line of sight of some pose
     shadow: np.ndarray         # bool: wall surface cells hidden behind an obstacle (see module doc)
     shadow_ranged: np.ndarray  # bool: shadow cells a sensor could range along a clear line
@@ -55,10 +57,16 @@ class GroundTruth:
 # --------------------------------------------------------------------------- geometry on cells
 
 
-def _outline_samples(points: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+def _outline_samples(points: np.ndarray, step_m: float, *, inward: bool
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """Points every ``step_m`` along a closed polygon (including every corner) and the unit
-    normal of the side each lies on (a corner takes its first side's)."""
+    normal of the side each lies on (a corner takes its first side's), pointing into the
+    polygon (``inward``: a room's walls face in) or out of it (an obstacle's faces out),
+    whichever way round its corners are listed."""
     pts = np.asarray(points, float)
+    x, y = pts[:, 0], pts[:, 1]
+    counter_clockwise = float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)) > 0
+    sign = 1.0 if counter_clockwise == inward else -1.0   # the left normal points in on a CCW turn
     out, normals = [], []
     for a, b in zip(pts, np.roll(pts, -1, axis=0)):
         side = b - a
@@ -66,7 +74,7 @@ def _outline_samples(points: np.ndarray, step_m: float) -> tuple[np.ndarray, np.
         n = max(int(math.ceil(length / step_m)), 1)
         t = np.arange(n + 1)[:, None] / n
         out.append(a + t * side)
-        normal = np.array([-side[1], side[0]]) / length if length > 0 else np.zeros(2)
+        normal = sign * np.array([-side[1], side[0]]) / length if length > 0 else np.zeros(2)
         normals.append(np.broadcast_to(normal, (n + 1, 2)))
     return np.concatenate(out), np.concatenate(normals)
 
@@ -78,7 +86,7 @@ def _surface_samples(ob, step_m: float) -> tuple[np.ndarray, np.ndarray]:
         a = np.arange(n) * (2 * math.pi / n)
         radial = np.stack([np.cos(a), np.sin(a)], axis=1)
         return np.asarray(ob.center_m, float) + ob.radius_m * radial, radial
-    return _outline_samples(box_corners(ob), step_m)
+    return _outline_samples(box_corners(ob), step_m, inward=False)
 
 
 def _nearest_to_centres(samples: np.ndarray, cell: np.ndarray, cx: np.ndarray,
@@ -275,8 +283,12 @@ def _measurable_returning(px, py, pose, ranging, surface) -> tuple[np.ndarray, n
     check = _checks(returns, surface)
     reach = np.zeros(np.shape(px), bool)
     ret = np.zeros(np.shape(px), bool)
+    nx, ny = surface[0], surface[1]
     for can, t, psi, _, _ in _geometry(px, py, pose, ring, d_min, d_max, a_lo, a_hi):
         reach |= can
+        # a beam meets a face from the side it faces: through a slab thinner than two cells
+        # the line of sight is clear, yet the far face stays out of the beam's reach
+        can = can & (np.cos(psi) * nx + np.sin(psi) * ny < 0.0)
         ret |= (can & _gives_return(t, psi, d_max, returns, surface)) if check else can
     return reach, ret
 
@@ -348,7 +360,8 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
         marked.append((samples[ok], normals[ok], np.full(int(ok.sum()), float(reflectance)),
                        iy[ok] * nx + ix[ok]))
 
-    mark(_outline_samples(np.asarray(outline, float), step), scenario.room.reflectance, WALL)
+    mark(_outline_samples(np.asarray(outline, float), step, inward=True),
+         scenario.room.reflectance, WALL)
     for j, ob in enumerate(scenario.obstacles):
         mark(_surface_samples(ob, step), ob.reflectance, OBSTACLE0 + j)
     surface = surface_owner > 0
