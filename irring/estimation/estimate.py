@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import math
 import operator
+from statistics import NormalDist
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -18,7 +19,7 @@ from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
-from .calibration import RANGE_SIGMAS, Calibration
+from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -426,7 +427,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
     oracle passes its numpy statements of both; never past ``cal.silent_range_m``:
-    :func:`silent_reach`) and, with ``detail``, the :class:`Lines`."""
+    :func:`silent_reach`) and, with ``detail``, the :class:`Lines`. Line members are first
+    moved out by what the return level cut off their lines (:func:`censored_lines`)."""
     shape = points.valid.shape
     if grouping is None:       # nothing to group (e.g. every reading invalid): no lines
         empty = _lines_record(None, np.full(shape, -1, dtype=np.intp), np.zeros(0, np.intp))
@@ -435,6 +437,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points = local_incidence(points, label, index, counts, steps, cal)
+    points = censored_lines(points, label, counts, steps, cal)
     if snap:
         points = (snapper or snap_to_lines)(points, label, cal.min_range_m)
     points = drop_beyond_range(points)
@@ -450,6 +453,56 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = silent_reach(points, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
+                   cal: Calibration) -> Points:
+    """Each valid member of a line moved out along its beam by the mean noise of the returns
+    its line kept: σ·λ(f), λ(f) = φ(Φ⁻¹(f))/(1 − f), where f is the share of the line's beams
+    whose counts fell below the return level (``no_return_counts + RETURN_SIGMAS`` count σ;
+    NO_RETURN or OUT_OF_RANGE) and σ the member's range noise |b|·d·σ_S/S.
+
+    A line's beams: each sensor's readings from its first to its last member step. Only
+    where that level cuts into the range (``cal.silent_range_m`` short of
+    ``points.max_range_m``: a part read to its own range); elsewhere ``points`` as given.
+    ``label`` (S, N): each reading's line (−1: none); ``counts`` (S, N); ``steps`` (S,).
+    Why and what it measured: docs/estimator.md, "Censored lines"."""
+    if not (cal.falling and cal.silent_range_m < points.max_range_m):
+        return points
+    shape = points.valid.shape
+    s = np.asarray(counts, dtype=float).reshape(shape)
+    label = np.asarray(label).reshape(shape)
+    member = points.valid & (label >= 0)
+    if not member.any():
+        return points
+    n_lines, n_sensors = int(label[member].max()) + 1, shape[1]
+    rank = np.empty(shape[0], dtype=np.intp)            # each row's place in step order
+    rank[np.argsort(np.asarray(steps), kind="stable")] = np.arange(shape[0])
+    row, sensor = member.nonzero()
+    pair = label[row, sensor] * n_sensors + sensor       # (line, sensor)
+    lo = np.full(n_lines * n_sensors, shape[0], dtype=np.intp)
+    hi = np.full(n_lines * n_sensors, -1, dtype=np.intp)
+    np.minimum.at(lo, pair, rank[row])
+    np.maximum.at(hi, pair, rank[row])
+    silent = (points.reason == Reason.NO_RETURN) | (points.reason == Reason.OUT_OF_RANGE)
+    cut = silent & (s < cal.no_return_counts + RETURN_SIGMAS * cal.sigma_counts())
+    c_row, c_sensor = cut.nonzero()
+    lo, hi = lo.reshape(n_lines, n_sensors), hi.reshape(n_lines, n_sensors)
+    on = (lo[:, c_sensor] <= rank[c_row]) & (rank[c_row] <= hi[:, c_sensor])   # (L, C)
+    lost = on.sum(axis=1)
+    if not lost.any():
+        return points
+    kept = np.bincount(label[member], minlength=n_lines)
+    share = lost / np.maximum(lost + kept, 1)
+    normal = NormalDist()
+    mills = np.array([normal.pdf(normal.inv_cdf(f)) / (1.0 - f) if f > 0 else 0.0
+                      for f in share])
+    _, b = cal.log_ab(points.theta[member])
+    sigma = np.abs(b) * points.d[member] * cal.sigma_counts() / s[member]
+    d = np.array(points.d)
+    d[member] += mills[label[member]] * sigma
+    return replace(points, d=d, x=points.origin_x + d * np.cos(points.heading),
+                   y=points.origin_y + d * np.sin(points.heading))
 
 
 def silent_reach(points: Points, cal: Calibration) -> Points:
