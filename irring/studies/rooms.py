@@ -25,7 +25,8 @@ from .report import mean_of
 # The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
 # these unless given others.
 ROOMS = ("l_room", "corridor_table", "angled_walls", "posts", "box_room", "big_room",
-         "narrow_room", "far_walls", "t_room", "t_room_cylinder", "t_room_three_cylinders")
+         "narrow_room", "far_walls", "far_hexagon", "t_room", "t_room_cylinder",
+         "t_room_three_cylinders")
 
 # Effects that change the signal a sensor reports; the ideal sensor has none of them.
 SIGNAL_EFFECTS = ("incidence", "noise", "quantization", "foldover", "reflectance", "outliers",
