@@ -45,8 +45,8 @@ class GroundTruth:
     free: np.ndarray           # bool: free space and not surface
     in_range: np.ndarray       # bool: within max range + ring radius of some pose
     visible: np.ndarray        # bool: surface cells seen from a pose (in range, line of
-    #                            sight, met from the side they face, giving the scene's
-    #                            sensor a return: Returns)
+    #                            sight, giving the scene's sensor a return: Returns) and met
+    #                            there by a sensor's beam from the front (_met)
     reachable_free: np.ndarray  # bool: free cells in range and line of sight of some pose
     shadow: np.ndarray         # bool: wall surface cells hidden behind an obstacle (see module doc)
     shadow_ranged: np.ndarray  # bool: shadow cells a sensor could range along a clear line
@@ -283,14 +283,83 @@ def _measurable_returning(px, py, pose, ranging, surface) -> tuple[np.ndarray, n
     check = _checks(returns, surface)
     reach = np.zeros(np.shape(px), bool)
     ret = np.zeros(np.shape(px), bool)
-    nx, ny = surface[0], surface[1]
     for can, t, psi, _, _ in _geometry(px, py, pose, ring, d_min, d_max, a_lo, a_hi):
         reach |= can
-        # a beam meets a face from the side it faces: through a slab thinner than two cells
-        # the line of sight is clear, yet the far face stays out of the beam's reach
-        can = can & (np.cos(psi) * nx + np.sin(psi) * ny < 0.0)
         ret |= (can & _gives_return(t, psi, d_max, returns, surface)) if check else can
     return reach, ret
+
+
+# A beam meets a surface point when its way to this far (in cells) before the point is clear
+# (:func:`_clear_way`).
+ARRIVAL_CELLS = 0.05
+# Points per cell along a surface where the truth asks whether a beam meets it: a post's
+# flank cell may be met only on a sliver at its edge (a 10 mm cell on a post of radius 11 mm:
+# 6° of its 36° of arc, 1 mm)
+MET_SAMPLES_PER_CELL = 16
+
+
+def _clear_way(scenario: Scenario, x0, y0, x1, y1) -> np.ndarray:
+    """Whether the segments (x0, y0) → (x1, y1) (m) run through free space: they start in the
+    room, cross no wall of its outline and enter no obstacle (exact geometry, not cells)."""
+    dx, dy = x1 - x0, y1 - y0
+    outline = np.asarray(scenario.room.outline_m, float)
+    clear = inside_outline(x0, y0, outline)
+    for (ax, ay), (bx, by) in zip(outline, np.roll(outline, -1, axis=0)):
+        ex, ey = bx - ax, by - ay
+        s0 = dx * (ay - y0) - dy * (ax - x0)          # which side of the segment a and b lie
+        s1 = dx * (by - y0) - dy * (bx - x0)
+        t0 = ex * (y0 - ay) - ey * (x0 - ax)          # … and the segment's ends of the wall
+        t1 = ex * (y1 - ay) - ey * (x1 - ax)
+        clear &= ~((s0 * s1 <= 0) & (t0 * t1 <= 0) & ((s0 != s1) | (t0 != t1)))
+    for ob in scenario.obstacles:
+        if isinstance(ob, Cylinder):
+            cx, cy = ob.center_m
+            with np.errstate(invalid="ignore", divide="ignore"):
+                t = np.clip(((cx - x0) * dx + (cy - y0) * dy) / (dx * dx + dy * dy), 0.0, 1.0)
+            t = np.nan_to_num(t)
+            clear &= np.hypot(x0 + t * dx - cx, y0 + t * dy - cy) > ob.radius_m
+        else:   # a box: the segment in its frame, clipped to its extent (Liang–Barsky)
+            c, s = math.cos(ob.yaw_rad), math.sin(ob.yaw_rad)
+            px, py = x0 - ob.center_m[0], y0 - ob.center_m[1]
+            lo, hi = np.zeros(np.shape(x0)), np.ones(np.shape(x0))
+            for p0, dp, half in ((c * px + s * py, c * dx + s * dy, ob.size_m[0] / 2),
+                                 (-s * px + c * py, -s * dx + c * dy, ob.size_m[1] / 2)):
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    ta, tb = (-half - p0) / dp, (half - p0) / dp
+                flat = dp == 0
+                lo = np.where(flat, np.where(np.abs(p0) <= half, lo, 2.0),
+                              np.maximum(lo, np.minimum(ta, tb)))
+                hi = np.where(flat, hi, np.minimum(hi, np.maximum(ta, tb)))
+            clear &= ~(lo <= hi)
+    return clear
+
+
+def _met(scenario: Scenario, grid: OccupancyGrid, px, py, tx, ty, surface, pose,
+         ranging) -> np.ndarray:
+    """Per surface point (m; in cells ``tx``, ``ty``; ``surface``: its normal towards the free
+    side and reflectance), whether some sensor of the ring at ``pose`` meets a point of its
+    cell: within its sweep and measuring interval, with a return (``ranging``'s
+    :class:`Returns`), from the front (the beam heads against the normal; a corner's point
+    is judged once per side) and through free space from its emitter to just before the
+    point (:func:`_clear_way`)."""
+    ring, d_min, d_max, a_lo, a_hi, returns = ranging
+    check = _checks(returns, surface)
+    eps = ARRIVAL_CELLS * grid.resolution_m
+    cell = np.unique(ty * grid.shape[1] + tx, return_inverse=True)[1].ravel()
+    met = np.zeros(int(cell.max()) + 1 if cell.size else 0, bool)
+    ways = []                                     # (point, emitter x, y, beam x, y) to check
+    for can, t, psi, ex, ey in _geometry(px, py, pose, ring, d_min, d_max, a_lo, a_hi):
+        ask = np.flatnonzero(can)
+        if check:
+            ask = ask[_gives_return(t[ask], psi[ask], d_max, returns,
+                                    tuple(a[ask] for a in surface))]
+        ux, uy = np.cos(psi[ask]), np.sin(psi[ask])
+        front = ux * surface[0][ask] + uy * surface[1][ask] < 0
+        ways.append((ask[front], ex[ask][front], ey[ask][front], ux[front], uy[front]))
+    at, ex, ey, ux, uy = (np.concatenate(w) for w in zip(*ways))
+    clear = _clear_way(scenario, ex, ey, px[at] - eps * ux, py[at] - eps * uy)
+    met[cell[at[clear]]] = True
+    return met[cell]
 
 
 def _surface_at(cells, surface_point, surface_normal, surface_reflectance):
@@ -349,23 +418,26 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
 
     # surfaces: sample the outline and obstacle perimeters finely, mark the cells they fall in
     surface_owner = np.zeros(px.shape, np.int16)
-    step = res / 4
-    marked = []
 
-    def mark(sampled, reflectance, owner):
-        samples, normals = sampled
-        ix, iy = grid.cell_of(samples[:, 0], samples[:, 1])
-        ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
-        surface_owner[iy[ok], ix[ok]] = owner
-        marked.append((samples[ok], normals[ok], np.full(int(ok.sum()), float(reflectance)),
-                       iy[ok] * nx + ix[ok]))
+    def sampled(step, mark=False):
+        """(points, normals towards the free side, reflectance, flat cell) every ``step`` m
+        along every surface inside the grid; ``mark``: their cells in surface_owner."""
+        parts = [(_outline_samples(np.asarray(outline, float), step, inward=True),
+                  scenario.room.reflectance, WALL)]
+        parts += [(_surface_samples(ob, step), ob.reflectance, OBSTACLE0 + j)
+                  for j, ob in enumerate(scenario.obstacles)]
+        out = []
+        for (points, normals), reflectance, owner in parts:
+            ix, iy = grid.cell_of(points[:, 0], points[:, 1])
+            ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+            if mark:
+                surface_owner[iy[ok], ix[ok]] = owner
+            out.append((points[ok], normals[ok], np.full(int(ok.sum()), float(reflectance)),
+                        iy[ok] * nx + ix[ok]))
+        return tuple(np.concatenate(m) for m in zip(*out))
 
-    mark(_outline_samples(np.asarray(outline, float), step, inward=True),
-         scenario.room.reflectance, WALL)
-    for j, ob in enumerate(scenario.obstacles):
-        mark(_surface_samples(ob, step), ob.reflectance, OBSTACLE0 + j)
+    samples, normals, rho, cells = sampled(res / 4, mark=True)
     surface = surface_owner > 0
-    samples, normals, rho, cells = (np.concatenate(m) for m in zip(*marked))
     pick = _nearest_to_centres(samples, cells, px, py)
     has = pick >= 0
     surface_point = np.full(px.shape + (2,), np.nan)
@@ -399,6 +471,12 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
         returning.append(ret)
     if bar is not None:
         bar.reset(total=int(sum(int(n.sum()) for n in nears)))
+    could = np.zeros(px.shape, bool)      # surface cells some pose's ring returns from …
+    for ret in returning:
+        could[sy, sx] |= ret
+    met = np.zeros(px.shape, bool)        # … and whose surface some sensor meets
+    coarse = (samples, normals, rho, cells)
+    fine = sampled(res / MET_SAMPLES_PER_CELL)
     for pose, near, ret in zip(scenario.robot.poses, nears, returning):
         in_range |= near
         ty, tx = np.nonzero(near)
@@ -414,12 +492,22 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
         seen_now[ty[clear], tx[clear]] = True
         seen |= seen_now
         visible[sy, sx] |= seen_now[sy, sx] & ret
+        # met: some of the cell's surface a sensor of a pose that sees the cell meets from the
+        # front, through free space from its emitter (the coarse points first, then the fine)
+        for at in (coarse, fine):
+            on = (seen_now & near & could & ~met).ravel()[at[3]]
+            if on.any():
+                hit = _met(scenario, grid, at[0][on, 0], at[0][on, 1],
+                           at[3][on] % nx, at[3][on] // nx,
+                           (at[1][on, 0], at[1][on, 1], at[2][on]), pose, ranging)
+                met.ravel()[at[3][on][hit]] = True
         by_obstacle = (first >= OBSTACLE0) & (surface_owner[ty, tx] == WALL)
         unset = hidden_by_obstacle[ty, tx] == 0
         pick = by_obstacle & unset
         hidden_by_obstacle[ty[pick], tx[pick]] = first[pick]
     # the paper's shadow is geometry (wall a centre sensor cannot see); a cell the sensor
     # sees too obliquely to return from is not hidden, and not visible either
+    visible &= met
     shadow = (surface_owner == WALL) & in_range & ~(seen & surface) & (hidden_by_obstacle > 0)
     shadow_ranged = _ranged_in_sight(scenario, grid, material, shadow, surface_point, geometric)
     return GroundTruth(label=label, surface=surface, surface_owner=surface_owner,
