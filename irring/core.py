@@ -37,6 +37,8 @@ WORK_MEMORY_BYTES = 2 * 10**9       # readings and belt physics of one run toget
 BYTES_PER_READING = 600             # a reading through simulation, estimate and map (measured:
                                     # 72 sensors × 20 001 steps peaked 0.94 GB, 10 001 steps 0.51 GB)
 BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
+MAX_OUTLINE_CORNERS = 10_000        # corners of a room outline (checking that its walls never
+                                    # cross takes ~1 s at this many; 100 000 took hours)
 
 # --------------------------------------------------------------------------- field bounds
 # A field's metadata holds its inclusive SI bounds or allowed choices; the scenario loader
@@ -229,8 +231,41 @@ def inside_outline(px, py, outline) -> np.ndarray:
 def distance_to_outline(px, py, outline) -> np.ndarray:
     """Distance (m) from points to the nearest wall of a closed outline."""
     n = len(outline)
-    return np.min([segment_distance(px, py, *outline[i], *outline[(i + 1) % n])
-                   for i in range(n)], axis=0)
+    nearest = segment_distance(px, py, *outline[-1], *outline[0])
+    for i in range(n - 1):   # a running minimum: memory of one wall's distances, not n
+        nearest = np.minimum(nearest, segment_distance(px, py, *outline[i], *outline[i + 1]))
+    return nearest
+
+
+_CROSS_PAIRS = 4_000_000   # wall pairs :func:`first_crossing` holds at once (~100 MB)
+
+
+def first_crossing(outline) -> tuple[int, int] | None:
+    """The first pair of walls (i, j), i < j in row order, of a closed outline that cross
+    properly (touching does not count), or None. Only pairs whose bounding boxes meet are
+    judged, a block of walls against all at a time (numpy)."""
+    a = np.asarray(outline, dtype=float).reshape(-1, 2)
+    n = len(a)
+    b = np.roll(a, -1, axis=0)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+
+    def orient(u, v, w):   # > 0: w left of u→v
+        return (v[:, 0] - u[:, 0]) * (w[:, 1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (w[:, 0] - u[:, 0])
+
+    rows = max(1, _CROSS_PAIRS // max(n, 1))
+    for i0 in range(0, n, rows):
+        i = np.arange(i0, min(n, i0 + rows))[:, None]
+        j = np.arange(n)[None, :]
+        meet = ((lo[i, 0] <= hi[j, 0]) & (lo[j, 0] <= hi[i, 0]) & (lo[i, 1] <= hi[j, 1])
+                & (lo[j, 1] <= hi[i, 1]) & (j >= i + 2) & ~((i == 0) & (j == n - 1)))
+        ii, jj = np.nonzero(meet)   # row-major: the first crossing found is the first pair
+        ii += i0
+        p, q, r, t = a[ii], b[ii], a[jj], b[jj]
+        cross = (orient(r, t, p) * orient(r, t, q) < 0) & (orient(p, q, r) * orient(p, q, t) < 0)
+        if cross.any():
+            k = int(np.argmax(cross))
+            return int(ii[k]), int(jj[k])
+    return None
 
 
 def box_corners(box: Box) -> np.ndarray:

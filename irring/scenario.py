@@ -18,10 +18,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
 from . import designs, gp2, resources, safe_yaml
-from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_RANGE_M, SEED_MAX,
+from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_OUTLINE_CORNERS,
+                   MAX_RANGE_M, SEED_MAX,
                    SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
-                   distance_to_outline, inside_outline, num, obstacle_distance, unit_suffix)
+                   distance_to_outline, first_crossing, inside_outline, num,
+                   obstacle_distance, unit_suffix)
 from .designs import Design
 from .errors import InputError
 
@@ -387,56 +391,58 @@ def _close(word: str, options: Mapping | list) -> str:
 # --------------------------------------------------------------------------- geometry checks
 
 
-def _segments_cross(p1, p2, q1, q2) -> bool:
-    def orient(a, b, c):
-        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-
-    d1, d2 = orient(q1, q2, p1), orient(q1, q2, p2)
-    d3, d4 = orient(p1, p2, q1), orient(p1, p2, q2)
-    return (d1 * d2 < 0) and (d3 * d4 < 0)
-
-
 def _validate_geometry(sc: Scenario, fail) -> None:
     outline = sc.room.outline_m
     n = len(outline)
     if n < 3:
         raise fail("room.outline_mm", f"needs at least 3 corners, got {n}")
+    if n > MAX_OUTLINE_CORNERS:
+        raise fail("room.outline_mm", f"{n:,} corners; at most {MAX_OUTLINE_CORNERS:,} are "
+                                      f"allowed (a wall a corner)")
     for i in range(n):
         a, b = outline[i], outline[(i + 1) % n]
         if math.hypot(b[0] - a[0], b[1] - a[1]) < 1e-6:
             raise fail(f"room.outline_mm[{i}]", "repeats the next corner (zero-length wall)")
-    for i in range(n):
-        for j in range(i + 2, n):
-            if i == 0 and j == n - 1:
-                continue  # neighbours through the closing wall
-            if _segments_cross(outline[i], outline[(i + 1) % n], outline[j], outline[(j + 1) % n]):
-                raise fail("room.outline_mm",
-                           f"walls {i} and {j} cross: the outline must not intersect itself")
+    crossing = first_crossing(outline)
+    if crossing is not None:
+        raise fail("room.outline_mm", f"walls {crossing[0]} and {crossing[1]} cross: the "
+                                      f"outline must not intersect itself")
     if not sc.robot.poses:
         raise fail("robot.poses", "at least one scan pose is required")
     ring = sc.ring
     clearance = ring.radius_m + HOUSING_M  # sensors plus their housing
-    for k, pose in enumerate(sc.robot.poses):
-        path = f"robot.poses[{k}]"
-        if not inside_outline(pose.x_m, pose.y_m, outline):
+    # every pose at once (a scenario may hold 10 000 poses and 10 000 corners)
+    px = np.array([pose.x_m for pose in sc.robot.poses])
+    py = np.array([pose.y_m for pose in sc.robot.poses])
+    outside = ~inside_outline(px, py, outline)
+    near_wall = distance_to_outline(px, py, outline) < clearance - GEOMETRY_TOL_M
+    overlaps = np.zeros((len(sc.obstacles), px.size), bool)
+    for j, ob in enumerate(sc.obstacles):
+        overlaps[j] = obstacle_distance(ob, px, py) < clearance - GEOMETRY_TOL_M
+    bad = np.flatnonzero(outside | near_wall | overlaps.any(axis=0))
+    if bad.size:   # the first pose that fails, as the file lists them
+        k = int(bad[0])
+        pose, path = sc.robot.poses[k], f"robot.poses[{k}]"
+        if outside[k]:
             raise fail(path, f"pose ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm is outside the room")
-        if distance_to_outline(pose.x_m, pose.y_m, outline) < clearance - GEOMETRY_TOL_M:
+        if near_wall[k]:
             raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) would be "
                              f"inside a wall at ({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm; "
                              f"keep the pose ≥ {clearance * 1e3:g} mm from every wall")
-        for j, ob in enumerate(sc.obstacles):
-            gap = obstacle_distance(ob, pose.x_m, pose.y_m)
-            if gap < clearance - GEOMETRY_TOL_M:
-                raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) at "
-                                 f"({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm would overlap "
-                                 f"obstacles[{j}] ({type(ob).__name__.lower()} at "
-                                 f"({ob.center_m[0] * 1e3:g}, {ob.center_m[1] * 1e3:g}) mm); "
-                                 f"keep the pose ≥ {clearance * 1e3:g} mm from it")
+        j = int(np.argmax(overlaps[:, k]))
+        ob = sc.obstacles[j]
+        raise fail(path, f"the ring (radius {clearance * 1e3:g} mm with housing) at "
+                         f"({pose.x_m * 1e3:g}, {pose.y_m * 1e3:g}) mm would overlap "
+                         f"obstacles[{j}] ({type(ob).__name__.lower()} at "
+                         f"({ob.center_m[0] * 1e3:g}, {ob.center_m[1] * 1e3:g}) mm); "
+                         f"keep the pose ≥ {clearance * 1e3:g} mm from it")
+    centres = np.array([ob.center_m for ob in sc.obstacles], dtype=float).reshape(-1, 2)
+    in_room = inside_outline(centres[:, 0], centres[:, 1], outline)
     for j, ob in enumerate(sc.obstacles):
         if isinstance(ob, Box) and min(ob.size_m) < 0.002:
             raise fail(f"obstacles[{j}].size_mm", f"box sides ({ob.size_m[0] * 1e3:g}, "
                                                   f"{ob.size_m[1] * 1e3:g}) mm must each be ≥ 2 mm")
-        if not inside_outline(ob.center_m[0], ob.center_m[1], outline):
+        if not in_room[j]:
             raise fail(f"obstacles[{j}].center_mm", "obstacle centre is outside the room")
     if ring.min_step > ring.max_step:
         raise fail("robot.ring.min_step", f"min_step {ring.min_step} > max_step {ring.max_step}")

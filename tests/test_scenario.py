@@ -312,3 +312,65 @@ def test_a_surface_exactly_at_the_housing_is_allowed(name):
 def test_a_surface_just_inside_the_housing_is_refused(name, raw, pattern):
     with pytest.raises(ScenarioError, match=pattern):
         parse(raw, "edge.yaml")
+
+
+# --------------------------------------------------------------------------- big outlines
+
+
+def _ellipse_mm(n: int, cx=1210.0, cy=450.0, rx=800.0, ry=400.0) -> list:
+    return [[cx + rx * math.cos(2 * math.pi * k / n), cy + ry * math.sin(2 * math.pi * k / n)]
+            for k in range(n)]
+
+
+def test_an_outline_of_more_corners_than_allowed_is_refused_naming_the_key(t_room_raw):
+    """100 000 corners (4.8 MB of YAML) kept the loader checking wall pairs for hours."""
+    _set(t_room_raw, "room.outline_mm", _ellipse_mm(10_001))
+    _set(t_room_raw, "robot.poses", [{"x_mm": 1210, "y_mm": 450}])
+    with pytest.raises(ScenarioError, match=r"bad\.yaml: room\.outline_mm: 10,001 corners; at "
+                                            r"most 10,000 are allowed"):
+        parse(t_room_raw, "bad.yaml")
+
+
+def test_a_crossing_in_the_largest_outline_allowed_is_found_and_named(t_room_raw):
+    outline = _ellipse_mm(10_000)
+    outline[7000], outline[7001] = outline[7001], outline[7000]   # a twist near the end
+    _set(t_room_raw, "room.outline_mm", outline)
+    _set(t_room_raw, "robot.poses", [{"x_mm": 1210, "y_mm": 450}] * 3 + [{"x_mm": 1211,
+                                                                          "y_mm": 451}])
+    with pytest.raises(ScenarioError, match=r"room\.outline_mm: walls 6999 and 7001 cross"):
+        parse(t_room_raw, "bad.yaml")
+    outline[7000], outline[7001] = outline[7001], outline[7000]
+    sc = parse(t_room_raw, "ok.yaml")
+    assert len(sc.room.outline_m) == 10_000 and len(sc.robot.poses) == 4
+
+
+def _crossing_oracle(outline):
+    """The loader's former pairwise check, pair by pair in Python."""
+    def orient(a, b, c):
+        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+
+    n = len(outline)
+    for i in range(n):
+        for j in range(i + 2, n):
+            if i == 0 and j == n - 1:
+                continue
+            p1, p2, q1, q2 = outline[i], outline[(i + 1) % n], outline[j], outline[(j + 1) % n]
+            if orient(q1, q2, p1) * orient(q1, q2, p2) < 0 and \
+                    orient(p1, p2, q1) * orient(p1, p2, q2) < 0:
+                return i, j
+    return None
+
+
+def test_first_crossing_finds_the_pair_the_pairwise_oracle_finds():
+    from irring.core import first_crossing
+
+    rng = np.random.default_rng(7)
+    found = 0
+    for trial in range(600):
+        n = int(rng.integers(3, 14))
+        pts = (rng.integers(0, 5, (n, 2)).astype(float) if trial % 2   # touching, collinear
+               else rng.uniform(-1.0, 2.0, (n, 2)))
+        outline = [tuple(p) for p in pts]
+        assert first_crossing(outline) == _crossing_oracle(outline), outline
+        found += _crossing_oracle(outline) is not None
+    assert 100 < found < 550   # both outcomes are exercised
