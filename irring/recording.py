@@ -14,13 +14,14 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import gp2
+from . import core, gp2
 from .core import ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth
 from .errors import InputError, IrringError, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
-from .scenario import ScenarioError, load_dataclass
+from .scenario import MapSpec, ScenarioError, load_dataclass
 
 FORMAT = "irring-recording/1"
+_RESOLUTION_M = core.bounds(MapSpec, "resolution_m")   # a recorded grid's cells: a scenario's
 
 
 class RecordingError(InputError):
@@ -180,7 +181,25 @@ def _read(npz, headers: dict, fail) -> tuple[list[Sweep], dict]:
         raise fail(f"holds {len(keys)} sweeps; a recording holds 1 … {MAX_SWEEPS}")
     # by number: from sweep1000 on, names no longer sort as text (sweep1000 < sweep101)
     order = sorted(keys, key=lambda k: int(k[len("sweep"):]))
-    return [_load_sweep(npz, headers, key, fail) for key in order], meta
+    sweeps = [_load_sweep(npz, headers, key, fail) for key in order]
+    _check_grid_holds_poses(meta.get("grid"), sweeps, fail)
+    return sweeps, meta
+
+
+def _check_grid_holds_poses(grid: dict | None, sweeps: Sequence[Sweep], fail) -> None:
+    """A recorded grid that leaves out a sweep's pose belongs to other sweeps: mapped on it,
+    every reading would land outside and the map come out empty without a word."""
+    if grid is None:
+        return
+    res = grid["resolution_m"]
+    lo = np.asarray(grid["origin_xy_m"], dtype=float)
+    hi = lo + res * np.asarray(grid["shape"][::-1], dtype=float)   # shape is rows, columns
+    for k, sweep in enumerate(sweeps):
+        xy = np.asarray(sweep.pose, dtype=float)[:2]
+        if not np.all((lo <= xy) & (xy <= hi)):
+            raise fail(f"meta.grid: sweep {k + 1}'s pose ({xy[0]:g}, {xy[1]:g}) m lies outside "
+                       f"the recorded grid (x {lo[0]:g} … {hi[0]:g} m, y {lo[1]:g} … "
+                       f"{hi[1]:g} m); the grid and the sweeps do not belong together")
 
 
 def _finite(value: Any, lo: float, hi: float) -> bool:
@@ -203,10 +222,11 @@ def _check_meta(meta: dict, fail) -> None:
                       for v in grid["shape"])
               and isinstance(grid["origin_xy_m"], list) and len(grid["origin_xy_m"]) == 2
               and all(_finite(v, -1e6, 1e6) for v in grid["origin_xy_m"])
-              and _finite(grid["resolution_m"], 1e-4, 10.0))
+              and _finite(grid["resolution_m"], *_RESOLUTION_M))
         if not ok:
             raise fail("meta.grid: expected origin_xy_m [x, y] (finite m), shape [rows, "
-                       "columns] (whole numbers ≥ 1), resolution_m 0.0001 … 10")
+                       "columns] (whole numbers ≥ 1), resolution_m "
+                       f"{_RESOLUTION_M[0]:g} … {_RESOLUTION_M[1]:g} (a scenario's map cells)")
         check_grid_size(*grid["shape"], grid["resolution_m"], f"{fail('').args[0]}meta.grid")
     mapper = meta.get("mapper")
     if mapper is not None:

@@ -217,6 +217,14 @@ def _scalars(data: bytes, **changes) -> bytes:
         {"grid": {"origin_xy_m": [0, 0], "shape": [200000, 200000], "resolution_m": 0.01}}))),
      "200,000 × 200,000 cells of 10 mm would need about 2400.0 GB"),
     (lambda d: _rewrite(d, "meta", np.array("[" * 100_000)), "meta: not valid JSON"),
+    # a grid that is not the sweeps': replay mapped 617 valid readings onto nothing, exit 0
+    (lambda d: _rewrite(d, "meta", np.array(json.dumps(
+        {"grid": {"origin_xy_m": [1000, -3], "shape": [30, 20], "resolution_m": 0.01}}))),
+     "meta.grid: sweep 1's pose (0.5, 0.4) m lies outside the recorded grid (x 1000 … 1000.2 m, "
+     "y -3 … -2.7 m); the grid and the sweeps do not belong together"),
+    (lambda d: _rewrite(d, "meta", np.array(json.dumps(
+        {"grid": {"origin_xy_m": [0, 0], "shape": [3, 3], "resolution_m": 10.0}}))),
+     "resolution_m 0.001 … 0.5 (a scenario's map cells)"),
 ])
 def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, message):
     path = tmp_path / "bad.npz"

@@ -55,8 +55,9 @@ def test_round_trip_is_lossless(tmp_path):
                                           missing_steps=(2, 3), counts_dtype=np.uint16,
                                           sensor_model="gp2y0a02", adc_bits=10, samples=4,
                                           settle_s=0.0123456789)]
-    meta = {"scenario": "x", "seed": 5, "grid": {"origin_xy_m": [-0.105, 1 / 3], "shape": [3, 5],
-                                             "resolution_m": 0.01}}
+    # a grid holding the poses (a normal draw each: within ±5 m)
+    meta = {"scenario": "x", "seed": 5, "grid": {"origin_xy_m": [-5.105, -5 - 1 / 3],
+                                             "shape": [1000, 1100], "resolution_m": 0.01}}
     path = save_recording(tmp_path / "rec", sweeps, meta)
     assert path.suffix == ".npz"
     back, meta_back = load_recording(path)
