@@ -307,6 +307,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     if hold is not None:
         reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
+    counts, reason = pooled_counts(counts, reason, steps, cal, max_range)
     sw = _iterate.Sweep(cal, lines, counts.reshape(-1), np.ascontiguousarray(origin).reshape(-1),
                         np.ascontiguousarray(heading).reshape(-1), reason.reshape(-1),
                         scan_order(steps, shape[1]), shape[1],
@@ -503,6 +504,53 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
     d[member] += mills[label[member]] * sigma
     return replace(points, d=d, x=points.origin_x + d * np.cos(points.heading),
                    y=points.origin_y + d * np.sin(points.heading))
+
+
+POOL_STEPS = 6   # a reading near the no-return level is pooled with 6 steps either way
+
+
+def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal: Calibration,
+                  max_range_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(counts, reason), both (S, N), with each reading near the no-return level read as the
+    mean of its sensor's 2·``POOL_STEPS`` + 1 readings around it (by step), where that mean
+    stands ``RETURN_SIGMAS`` standard errors (count σ/√13) above the no-return level: such a
+    reading becomes OK with the mean's counts; all others are returned as given.
+
+    Near the level: below it plus ``RETURN_SIGMAS + RANGE_SIGMAS`` count σ, NO_RETURN,
+    OUT_OF_RANGE or OK, and so is every reading of the window (it ends at none: a sweep's
+    first and last steps are not pooled). Only where a part is read to its own range
+    (``max_range_m`` ≥ ``cal.max_range_m``: its counts fall steadily to the no-return level,
+    no surface in range is cut off above it) and that level cuts into it
+    (``cal.silent_range_m`` short of ``max_range_m``); no change elsewhere. Why and what it
+    measured: docs/estimator.md, "Pooled readings"."""
+    if not (cal.falling and cal.silent_range_m < max_range_m
+            and max_range_m >= cal.max_range_m):
+        return counts, reason
+    shape = counts.shape
+    order = np.argsort(np.asarray(steps), kind="stable")      # rows in step order
+    s, why = counts[order], reason[order]
+    sigma = cal.sigma_counts()
+    near = ((s < cal.no_return_counts + (RETURN_SIGMAS + RANGE_SIGMAS) * sigma)
+            & ((why == Reason.NO_RETURN) | (why == Reason.OUT_OF_RANGE) | (why == Reason.OK)))
+    n = 2 * POOL_STEPS + 1
+    if shape[0] < n or not near.any():
+        return counts, reason
+    zero = np.zeros((1, shape[1]))
+    total = np.vstack([zero, np.cumsum(np.where(near, s, 0.0), axis=0)])
+    count = np.vstack([zero, np.cumsum(near, axis=0)])
+    mean = (total[n:] - total[:-n]) / n                        # windows' means, centred rows
+    whole = (count[n:] - count[:-n]) == n
+    seen = (mean - cal.no_return_counts) * math.sqrt(n) >= RETURN_SIGMAS * sigma
+    centre = slice(POOL_STEPS, shape[0] - POOL_STEPS)
+    pick = near[centre] & whole & seen
+    if not pick.any():
+        return counts, reason
+    s, why = s.copy(), why.copy()
+    s[centre][pick] = mean[pick]
+    why[centre][pick] = Reason.OK
+    out_s, out_why = np.empty_like(counts), np.empty_like(reason)
+    out_s[order], out_why[order] = s, why
+    return out_s, out_why
 
 
 def silent_reach(points: Points, cal: Calibration) -> Points:

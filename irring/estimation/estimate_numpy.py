@@ -15,7 +15,7 @@ from .calibration import FALLBACK_NODES, RANGE_SIGMAS, Calibration
 from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH_MIN_MEMBERS,
                        REGROUP_WINDOW, SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
                        LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
-                       final_estimate, member_spans, nominal_calibration, polyline_ids,
+                       final_estimate, member_spans, nominal_calibration, polyline_ids, pooled_counts,
                        reach_cos_limit, resolve_foldover, scan_order)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
@@ -959,8 +959,9 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     reason = classify(counts, sweep, cal)
     if hold is not None:
         reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
-    live = reason == Reason.OK
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
+    counts, reason = pooled_counts(counts, reason, np.asarray(sweep.steps), cal, max_range)
+    live = reason == Reason.OK
     sw = _Sweep(cal, counts, origin, heading, live, np.asarray(sweep.steps), lines)
     k = sw.k
     theta = np.zeros(k)
