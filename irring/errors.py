@@ -102,6 +102,12 @@ def describe(exc: BaseException) -> tuple[int, str]:
                          "(make the room, grid or number of poses smaller)")
     if isinstance(exc, RecursionError):
         return INPUT, "the input is nested too deeply to read"
+    if isinstance(exc, RuntimeError) and "environment variable MUJOCO_GL" in str(exc):
+        # raised by `import mujoco` (mujoco/gl_context.py) for a value it does not take
+        value = os.environ.get("MUJOCO_GL", "")
+        return USAGE, printable(f"MUJOCO_GL={value!r} is not a value MuJoCo takes; set "
+                                f"MUJOCO_GL=egl or osmesa (pictures without a display), glfw "
+                                f"(with a display), or unset it")
     serial = sys.modules.get("serial")  # not imported: then no pyserial error can be raised
     if serial is not None and isinstance(exc, serial.SerialException):
         return DEVICE, printable(str(exc) or type(exc).__name__)

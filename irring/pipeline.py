@@ -161,11 +161,8 @@ class MapRun:
 
 
 def scenario_text(scenario: Scenario) -> str | None:
-    """The YAML a scenario was loaded from, if it came from a file."""
-    try:
-        return Path(scenario.source).read_text() if scenario.source else None
-    except OSError:
-        return None
+    """The YAML a scenario was loaded from (None for one made in code)."""
+    return scenario.text or None
 
 
 @dataclass

@@ -108,7 +108,13 @@ def read_text(path: str | Path, what: str = "file", max_bytes: int = MAX_BYTES) 
         if size > max_bytes:
             raise InputError(f"{path}: {size / 2**20:.1f} MB is too big for a {what} "
                              f"(at most {max_bytes / 2**20:g} MB)")
-        data = path.read_bytes()[:max_bytes + 1]
+        # a device or pipe reports size 0 and may never end (/dev/zero): read no more
+        # than the limit allows
+        with open(path, "rb") as f:
+            data = f.read(max_bytes + 1)
+        if len(data) > max_bytes:
+            raise InputError(f"{path}: more than {max_bytes / 2**20:g} MB; too big for a {what} "
+                             f"(is it a device or a stream that never ends?)")
     except OSError as exc:
         raise InputError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
     try:

@@ -190,6 +190,9 @@ EFFECTS: dict[str, type] = {
 }
 
 
+NOT_IN_FILE = ("source", "text")   # Scenario fields that say where it came from
+
+
 @dataclass(frozen=True)
 class Scenario:
     name: str
@@ -203,6 +206,8 @@ class Scenario:
     effects: Mapping[str, Any] = field(default_factory=dict)
     seed: int = num(0, lo=0, hi=SEED_MAX)
     source: str = ""  # file it was loaded from, for messages
+    # the YAML it was loaded from, recorded with its sweeps (a pipe cannot be read again)
+    text: str = field(default="", repr=False, compare=False)
 
     def has(self, effect: str) -> bool:
         return effect in self.effects
@@ -254,7 +259,7 @@ class _Loader:
         hints = typing.get_type_hints(cls)
         allowed: dict[str, tuple[dataclasses.Field, float]] = {}
         for f in dataclasses.fields(cls):
-            if f.name == "source":
+            if f.name in NOT_IN_FILE:
                 continue
             for key, factor in _yaml_keys(f.name):
                 allowed[key] = (f, factor)
@@ -567,18 +572,19 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load and validate a scenario file (or a bundled scenario by name)."""
     path = resolve(name_or_path)
     try:
-        raw = safe_yaml.load_file(path, "scenario file")
+        text = safe_yaml.read_text(path, "scenario file")
     except safe_yaml.InputError as exc:
         raise ScenarioError(str(exc)) from None
-    return parse(raw, str(path))
+    return loads(text, str(path))
 
 
 def loads(text: str, source: str = "<string>") -> Scenario:
+    """Load and validate a scenario from its YAML ``text``; ``source`` names it in errors."""
     try:
         raw = safe_yaml.load(text, source)
     except safe_yaml.InputError as exc:
         raise ScenarioError(str(exc)) from None
-    return parse(raw, source)
+    return dataclasses.replace(parse(raw, source), text=text)
 
 
 # --------------------------------------------------------------------------- designs in scenes

@@ -925,3 +925,70 @@ def test_a_damaged_progress_file_is_refused_naming_the_key(tmp_path, capsys, mon
 def test_calibrate_resume_needs_a_port(tmp_path, capsys):
     assert main(["calibrate", "--resume", str(tmp_path / "p.yaml")]) == 2
     assert "--resume continues a guided calibration of the real ring" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- files and environment
+
+
+@pytest.mark.parametrize("argv, what", [
+    (["run", "/dev/zero"], "scenario file"),
+    (["run", "t_room", "--calibration", "/dev/zero"], "calibration file"),
+])
+def test_a_device_named_as_an_input_file_is_read_only_up_to_the_limit(tmp_path, capsys, argv,
+                                                                      what):
+    """/dev/zero (size 0 to stat) was read until memory ran out: the process was killed by
+    the kernel (exit 137), or under a memory limit exit 5 'ran out of memory'."""
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert f"/dev/zero: more than 8 MB; too big for a {what}" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_scenario_read_from_a_pipe_is_recorded_with_its_sweeps(tmp_path, capsys):
+    """`irring run <(cat room.yaml)`: the scenario was read again from the spent pipe when
+    the recording was written, so sweeps.npz held an empty scenario_yaml and replay could
+    neither score nor name the room."""
+    text = resolve("t_room_cylinder").read_text()
+    r, w = os.pipe()
+    os.write(w, text.encode())
+    os.close(w)
+    try:
+        out = tmp_path / "o"
+        assert main(["run", f"/dev/fd/{r}", "--out", str(out), "--no-animation", "--json"]) == 0
+    finally:
+        os.close(r)
+    ran = json.loads(capsys.readouterr().out)
+    _, meta = load_recording(out / "sweeps.npz")
+    assert meta["scenario_yaml"] == text
+    assert main(["replay", str(out / "sweeps.npz"), "--out", str(tmp_path / "re"),
+                 "--no-animation", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["scores"] == ran["scores"]
+
+
+def _irring(tmp_path, *argv, **env):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "irring", *argv], cwd=tmp_path, text=True,
+                          capture_output=True, timeout=120, stdin=subprocess.DEVNULL,
+                          env={**os.environ, "CI": "true", **env})
+
+
+def test_a_mujoco_gl_value_mujoco_does_not_take_is_a_usage_error(tmp_path):
+    """MUJOCO_GL=nonsense made every command that simulates exit 70 'internal error
+    (RuntimeError: invalid value for environment variable MUJOCO_GL: nonsense)'."""
+    done = _irring(tmp_path, "run", "t_room_cylinder", "--out", "o", MUJOCO_GL="nonsense")
+    assert done.returncode == 2, done.stderr
+    assert ("irring run: error: MUJOCO_GL='nonsense' is not a value MuJoCo takes; set "
+            "MUJOCO_GL=egl or osmesa") in done.stderr
+    assert "internal error" not in done.stderr
+
+
+def test_view_with_a_display_that_cannot_be_opened_writes_the_picture(tmp_path):
+    """DISPLAY naming no X server (a forwarded display gone): `irring view` ended with
+    MuJoCo's 'ERROR: could not initialize GLFW' and exit 1, nothing written."""
+    done = _irring(tmp_path, "view", "t_room_cylinder", DISPLAY=":97", WAYLAND_DISPLAY="")
+    assert done.returncode == 0, done.stderr
+    assert ("irring view: the display ':97' cannot be opened (GLFW could not connect to it); "
+            "writing the picture instead") in done.stderr
+    assert (tmp_path / "out" / "t_room_cylinder" / "view.png").stat().st_size > 1000

@@ -231,7 +231,7 @@ def _schema_keys() -> set[str]:
     keys = set(S.EFFECTS)
     for cls in classes:
         for f in dataclasses.fields(cls):
-            if f.name != "source":
+            if f.name not in S.NOT_IN_FILE:
                 keys.update(k for k, _ in S._yaml_keys(f.name))
     return keys
 

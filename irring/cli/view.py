@@ -19,7 +19,8 @@ where nothing is within the sensor's range).
 With --out, or without a display, the picture is rendered offscreen (EGL or OSMesa, no
 display needed; MUJOCO_GL=egl|osmesa picks one) and written as a PNG (default without a
 display: ./out/<scenario>/view.png). With a display and no --out, MuJoCo's interactive
-viewer opens and plays the sweep, beams drawn, until you close it.
+viewer opens and plays the sweep, beams drawn, until you close it; a DISPLAY that cannot
+be opened (a forwarded X display gone) is said on stderr and the picture written instead.
 
 examples:
   irring view t_room_cylinder --out cyl.png        # the picture, headless
@@ -61,9 +62,13 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"irring view: error: --step: {exc}", file=sys.stderr)
         return 2
-    if args.out is None and view.has_display():
-        view.play(scene)
-        return 0
+    if args.out is None:
+        problem = view.display_problem()
+        if problem is None:
+            view.play(scene)
+            return 0
+        if problem != "no display":   # a display was named: say why no window opens
+            print(f"irring view: {problem}; writing the picture instead", file=sys.stderr)
     out = picture_path(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
     try:
         image = view.render(scene, width, height)

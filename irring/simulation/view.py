@@ -238,8 +238,27 @@ class _Projection:
 # --------------------------------------------------------------------------- interactive
 
 
+def display_problem() -> str | None:
+    """Why the interactive viewer cannot open a window here (None: it can): no display
+    named, or one named that GLFW cannot open (a forwarded X display gone, a wrong
+    DISPLAY); the viewer itself would end the process with 'could not initialize GLFW'."""
+    named = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    if not named:
+        return "no display"
+    try:
+        import glfw   # deferred: the viewer's window library, only to probe the display
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # GLFWError warnings: said below in one line
+            if glfw.init():
+                return None
+    except Exception as exc:   # noqa: BLE001 - any failure means no window
+        return f"GLFW cannot be loaded ({type(exc).__name__}: {exc})"
+    return f"the display {named!r} cannot be opened (GLFW could not connect to it)"
+
+
 def has_display() -> bool:
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return display_problem() is None
 
 
 def play(view: SceneView, step_s: float = 0.05) -> None:
