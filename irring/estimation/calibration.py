@@ -271,6 +271,18 @@ class Calibration:
         return RETURN_SIGMAS * self.sigma_counts()
 
     @functools.cached_property
+    def return_range_m(self) -> float:
+        """The farthest a surface square on gives a return at least as often as not (m):
+        where its counts stand :attr:`return_margin_counts` above the no-return level, the
+        level from which a reading is a return; at most ``max_range_m``. A curve ending at
+        the noise floor (a GP2Y0A21 read to its 0.8 m with 15 mV: 0.687 m) reaches it short
+        of the max range; linear hooks (laser, sonar): the max range."""
+        if not self.falling:
+            return self.max_range_m
+        level = self.no_return_counts + self.return_margin_counts
+        return float(min(self.max_range_m, self.distance(level, 0.0)))
+
+    @functools.cached_property
     def silent_range_m(self) -> float:
         """How far a NO_RETURN reading rules out a surface (m): where a surface square on
         gives counts ``NO_RETURN_SIGMAS + RETURN_SIGMAS`` count σ above the no-return level,

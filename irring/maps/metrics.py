@@ -16,6 +16,7 @@ from .. import gp2
 from ..core import (Cylinder, Ring, box_corners, distance_to_outline, inside_obstacle,
                     inside_outline)
 from ..resources import kernel
+from ..estimation.calibration import Calibration
 from ..scenario import ReflectanceEffect, Scenario
 
 _traverse = kernel("maps._traverse")
@@ -182,15 +183,24 @@ class Returns:
     model: str
     max_incidence_rad: float | None = None
     min_signal: float | None = None
+    # with the scene's noise, the farthest a surface square on returns a reading at least as
+    # often as not (Calibration.return_range_m), where that is short of the max range
+    # (a GP2Y0A21 read to 800 mm: 687 mm with 15 mV); None: the max range
+    return_range_m: float | None = None
 
 
 def _returns(scenario: Scenario) -> Returns:
     effects = scenario.effects
     model = gp2.sensor(scenario.sensor.model)
     incidence, reflectance = effects.get("incidence"), effects.get("reflectance")
+    try:
+        reach = Calibration.for_scene(scenario).return_range_m
+    except ValueError:   # a design without a ring preset: its sensor's own max range
+        reach = math.inf
     return Returns(model=scenario.sensor.model,
                    max_incidence_rad=None if incidence is None else incidence.drop_out_rad(model),
-                   min_signal=None if reflectance is None else reflectance.min_signal)
+                   min_signal=None if reflectance is None else reflectance.min_signal,
+                   return_range_m=reach if reach < scenario.sensor.max_range_m else None)
 
 
 def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float, Returns]:
@@ -216,10 +226,13 @@ def _gives_return(t, psi, d_max: float, returns: Returns, surface) -> np.ndarray
     nx, ny, rho = surface
     ok = np.ones(np.shape(t), bool)
     t = np.maximum(t, 1e-9)
+    reach = d_max if returns.return_range_m is None else min(d_max, returns.return_range_m)
     if returns.max_incidence_rad is not None:
         theta = np.arccos(np.minimum(np.abs(np.cos(psi) * nx + np.sin(psi) * ny), 1.0))
         read_square_on = model.distance(model.voltage(t, theta))   # what its voltage means
-        ok &= (theta <= returns.max_incidence_rad) & (read_square_on <= d_max)
+        ok &= (theta <= returns.max_incidence_rad) & (read_square_on <= reach)
+    elif returns.return_range_m is not None:
+        ok &= t <= reach
     if returns.min_signal is not None:
         ok &= ReflectanceEffect.signal(rho, t, model.max_range_m) >= returns.min_signal
     return ok
@@ -247,7 +260,8 @@ def _geometry(px, py, pose, ring: Ring, d_min: float, d_max: float, a_lo: float,
 def _checks(returns: Returns | None, surface) -> bool:
     """Whether ``returns`` asks anything of the surface (ValueError if ``surface`` is None)."""
     check = returns is not None and (returns.max_incidence_rad is not None
-                                     or returns.min_signal is not None)
+                                     or returns.min_signal is not None
+                                     or returns.return_range_m is not None)
     if check and surface is None:
         raise ValueError("the scene's effects make returns depend on the surface: pass "
                          "surface=(normal x, normal y, reflectance)")
