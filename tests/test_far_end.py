@@ -370,3 +370,16 @@ def test_visible_wall_ends_where_a_single_reading_stops_telling_it_from_nothing(
     assert (nearest[gone] > reach - half_cell).all()
     assert (nearest[~gone] < reach + half_cell).all()
     assert gone.sum() >= int((nearest > reach + half_cell).sum())
+
+
+def test_irring_run_says_where_the_noise_ends_the_visible_wall():
+    from irring.cli.run import summary_lines
+    from irring.scenario import load_scenario
+
+    far = pipeline.run(loads(FAR_A21), progress=False, score=True)
+    said = [ln for ln in summary_lines(far, {}) if "recall counts wall within" in ln]
+    assert said == ["            recall counts wall within 687 mm (past it one GP2Y0A21 "
+                    "reading tells wall from nothing less than half the time)"]
+    paper = pipeline.run(load_scenario("t_room"), progress=False)
+    assert not any("recall counts wall within" in ln for ln in summary_lines(paper, {}))
+    assert metrics.visible_range_m(load_scenario("t_room")) is None

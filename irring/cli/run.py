@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 from .. import pipeline
+from ..maps import metrics
 from ..outputs import check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ._common import add_mcap_option, describe, seed
@@ -119,6 +120,11 @@ def summary_lines(result, paths: dict) -> list[str]:
     if sc_:
         lines.append(f"  occupied  F1 {_f(sc_['occupied_f1'])}  (precision "
                      f"{_f(sc_['occupied_precision'])}, recall {_f(sc_['occupied_recall'])})")
+        reach = None if sc is None else metrics.visible_range_m(sc)
+        if reach is not None:   # what the noise costs at the far end, said where it applies
+            lines.append(f"            recall counts wall within {reach * 1000:.0f} mm (past it "
+                         f"one {sc.sensor.model.upper()} reading tells wall from nothing less "
+                         f"than half the time)")
         lines.append(f"  free      accuracy {_f(sc_['free_accuracy'])}, coverage "
                      f"{_f(sc_['coverage'])} of the reachable free area")
         shadow = sc_["shadow"]

@@ -203,6 +203,12 @@ def _returns(scenario: Scenario) -> Returns:
                    return_range_m=reach if reach < scenario.sensor.max_range_m else None)
 
 
+def visible_range_m(scenario: Scenario) -> float | None:
+    """How far a surface square on counts as visible wall (m), where the scene's noise makes
+    that shorter than its max range (:class:`Returns`); None where it does not."""
+    return _returns(scenario).return_range_m
+
+
 def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float, Returns]:
     """(ring, min and max range m, sensor angles lo and hi rad, :class:`Returns`) of what a
     sensor can range: the sensor model's measuring interval and the ring's sweep, widened to
