@@ -14,7 +14,8 @@ from ._common import at_least, describe
 EPILOG = """\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have
 incidence, 15 mV noise and quantization) and for an ideal sensor ("ideal": the same scene
-without any sensor-signal effect; belt, timing and motion are kept):
+without any sensor-signal effect and with exact odometry; belt, timing and the drive are
+kept):
   F1, prec, rec   occupied F1, precision, recall (1-cell tolerance, see `irring run --help`)
   free            free accuracy: share of the cells mapped free that are really free
   cov             coverage: share of the reachable free floor mapped free
@@ -23,7 +24,9 @@ without any sensor-signal effect; belt, timing and motion are kept):
                   both estimators call valid
   θ=0 mm          the same readings read as if square on (Eq. 10 with a(0), b(0))
   misses          targets missed by the scene's run: F1 ≥ 0.93, precision ≥ 0.90, free
-                  accuracy ≥ 0.99; "ideal<" lists scores where the ideal sensor is worse
+                  accuracy ≥ 0.99, set for the default effects (a scene with more, e.g. a
+                  moving robot's odometry drift, names them: "(with motion, …)");
+                  "ideal<" lists scores where the ideal sensor is worse
                   (both maps judged on the scene's truth: the wall its sensor returns from)
   n/a             nothing to score: no wall within reach (F1, precision, recall), no cell
                   mapped free (free); never counted as a miss or a loss
@@ -111,6 +114,8 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
             note = ""
             if variant == "effects":
                 note = ", ".join(f"{k} {v:.3f}" for k, v in r["misses"].items())
+                if note and r["beyond_target_effects"]:   # the targets assume the defaults
+                    note += " (with " + ", ".join(r["beyond_target_effects"]) + ")"
                 if r["ideal_worse"]:
                     note += ("; " if note else "") + "ideal< " + ", ".join(r["ideal_worse"])
             name = r["name"] if variant == "effects" else ""
