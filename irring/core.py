@@ -37,6 +37,7 @@ WORK_MEMORY_BYTES = 2 * 10**9       # readings and belt physics of one run toget
 BYTES_PER_READING = 600             # a reading through simulation, estimate and map (measured:
                                     # 72 sensors × 20 001 steps peaked 0.94 GB, 10 001 steps 0.51 GB)
 BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
+MAX_SEEDS = 100_000                 # seeds of one configuration a study, compare or bench runs
 MAX_OUTLINE_CORNERS = 10_000        # corners of a room outline (checking that its walls never
                                     # cross takes ~1 s at this many; 100 000 took hours)
 

@@ -686,6 +686,15 @@ def test_drive_saves_the_sweeps_elsewhere_when_its_outputs_cannot_be_written(
     (["calibrate", "--port", "loop://", "--baud", "0"], 2, "--baud: must be ≥ 1, got 0"),
     (["calibrate", "--sensor", "-1"], 2, "--sensor: must be ≥ 0, got -1"),
     (["emulate", "--tcp", "127.0.0.1:99999"], 2, "PORT 0 … 65535"),
+    # counts that grew memory without bound: 10^12 ran out of it (exit 5, wrong advice)
+    (["bench", "effects", "--samples", "65"], 2, "--samples: must be in 1 … 64, got 65"),
+    (["bench", "dynamics", "--sweeps", "10001"], 2, "--sweeps: must be in 1 … 10000, got 10001"),
+    (["bench", "study", "--seeds", "100001"], 2, "--seeds: must be in 1 … 100000, got 100001"),
+    (["bench", "study", "--memory-seeds", "10**12"], 2, "--memory-seeds: must be an integer in 1"),
+    (["compare", "--bearings", "3601"], 2, "--bearings: must be in 8 … 3600, got 3601"),
+    (["compare", "--seeds", "1000000000000"], 2, "--seeds: must be in 1 … 100000"),
+    (["bench", "accuracy", "--seeds", "100001"], 2, "--seeds: must be in 1 … 100000"),
+    (["bench", "rooms", "--seeds", "100001"], 2, "--seeds: must be in 1 … 100000"),
 ])
 def test_bad_options_are_usage_errors(capsys, argv, status, message):
     with pytest.raises(SystemExit) as stop:

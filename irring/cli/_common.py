@@ -14,7 +14,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
-from ..core import SEED_MAX
+from ..core import MAX_SEEDS, SEED_MAX
 from ..errors import UsageError
 
 
@@ -169,6 +169,9 @@ def between(low: int, high: int) -> Callable[[str], int]:
 
 # a seed option takes what a scenario's seed: takes
 seed = between(0, SEED_MAX)
+# how many seeds an option may ask for: what a study file may (its runs' memory and time
+# grow with them; 10^12 ran out of memory)
+seed_count = at_least(1, MAX_SEEDS)
 
 
 def number_in(low: float, high: float, *, low_open: bool = False) -> Callable[[str], float]:

@@ -11,7 +11,8 @@ from ..pipeline import progress_bar
 from ..studies import accuracy
 from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
 from ..studies.executor import executor
-from ._common import add_executor_options, at_least, describe
+from ..core import MAX_SEEDS
+from ._common import add_executor_options, describe, seed_count
 
 EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):
@@ -72,9 +73,9 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--knob", action="append", choices=KNOBS, metavar="K",
                    help="knob to vary; repeat for several (default: all: " + ", ".join(KNOBS)
                         + ")")
-    p.add_argument("--seeds", type=at_least(1), default=3, metavar="N",
+    p.add_argument("--seeds", type=seed_count, default=3, metavar="N",
                    help="runs per configuration and scenario, seeds scenario.seed, +1, … "
-                        "(≥ 1; default: 3)")
+                        f"(1 … {MAX_SEEDS}; default: 3)")
     add_executor_options(p)
     p.add_argument("--out", default="out/bench_accuracy", metavar="DIR",
                    help="output folder (default: out/bench_accuracy)")

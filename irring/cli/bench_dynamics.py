@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 
+from ..core import MAX_SWEEPS
 from ._common import at_least, describe, seed
 
 EPILOG = """\
@@ -43,8 +44,9 @@ def register(p: argparse.ArgumentParser) -> None:
              "readings, how settle time trades hardware time for angle error, "
              "MuJoCo's own sensor timing against irring's, and maps made on the move.",
              EPILOG)
-    p.add_argument("--sweeps", type=at_least(1), default=1000, metavar="N",
-                   help="back-and-forth sweeps for the belt figures (≥ 1; default: 1000)")
+    p.add_argument("--sweeps", type=at_least(1, MAX_SWEEPS), default=1000, metavar="N",
+                   help=f"back-and-forth sweeps for the belt figures (1 … {MAX_SWEEPS}, "
+                        f"a run's limit; default: 1000)")
     p.add_argument("--seeds", type=seed, nargs="+", default=[1], metavar="SEED",
                    help="seeds ≥ 0 for the motion figures, averaged (default: 1)")
     p.add_argument("--no-motion", action="store_true", help="skip the mapping runs")

@@ -9,7 +9,8 @@ import sys
 
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, measure, resolve_rooms
-from ._common import at_least, describe
+from ..core import MAX_SEEDS
+from ._common import describe, seed_count
 
 EPILOG = """\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have
@@ -51,8 +52,9 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("rooms", nargs="*", metavar="ROOM",
                    help="bundled scenario names, YAML files or folders of them "
                         "(default: the room set and the T-rooms)")
-    p.add_argument("--seeds", type=at_least(1), default=1, metavar="N",
-                   help="seeds per room: the scenario's seed, +1, … (≥ 1; default: 1)")
+    p.add_argument("--seeds", type=seed_count, default=1, metavar="N",
+                   help=f"seeds per room: the scenario's seed, +1, … (1 … {MAX_SEEDS}; "
+                        f"default: 1)")
     p.add_argument("--out", default="out/bench_rooms", metavar="DIR",
                    help="where rooms.json and rooms.csv go (default: out/bench_rooms)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")

@@ -6,7 +6,8 @@ import argparse
 import json
 
 from ..studies.scaling import measure, report
-from ._common import at_least, describe
+from ..core import MAX_SEEDS
+from ._common import at_least, describe, seed_count
 
 EPILOG = """\
 grid: every named design × t_room, t_room_cylinder, t_room_three_cylinders × seeds 1 … S,
@@ -28,11 +29,12 @@ def register(p: argparse.ArgumentParser) -> None:
     describe(p, "Time a grid of designs × rooms × seeds on 1 and on N local workers, "
              "and measure peak memory on a small and a larger grid.",
              EPILOG)
-    p.add_argument("--seeds", type=at_least(1), default=20, metavar="S",
-                   help="seeds per design and room for the timing (default: 20, 300 runs)")
+    p.add_argument("--seeds", type=seed_count, default=20, metavar="S",
+                   help=f"seeds per design and room for the timing (1 … {MAX_SEEDS}; default: "
+                        f"20, 300 runs)")
     p.add_argument("--workers", type=at_least(1), action="append", metavar="N",
                    help="worker counts to time, repeatable (default: 1 and 2)")
-    p.add_argument("--memory-seeds", type=at_least(1), action="append", metavar="S",
+    p.add_argument("--memory-seeds", type=seed_count, action="append", metavar="S",
                    help="seeds of the memory grids, repeatable (default: 4 and 40: 60 and "
                         "600 runs)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")

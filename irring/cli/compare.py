@@ -11,7 +11,12 @@ from ..outputs import check_out
 from ..pipeline import progress_enabled
 from ..studies import compare
 from ..studies.executor import executor
-from ._common import add_executor_options, at_least, describe, distances_mm
+from ..core import MAX_SEEDS
+from ._common import add_executor_options, at_least, describe, distances_mm, seed_count
+
+# cylinder bearings a detection curve tries per distance: 3,600 took 20-50 s (0.008° apart
+# over the paper ring's 30° period); 10^8 ran out of memory
+MAX_BEARINGS = 3_600
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room_three_cylinders", "t_room")
 
@@ -55,18 +60,18 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--design", action="append", metavar="D", choices=list(DESIGN_BY_NAME),
                    help="design name; repeat for several (default: all: "
                         + ", ".join(DESIGN_BY_NAME) + ")")
-    p.add_argument("--seeds", type=at_least(1), default=3, metavar="N",
+    p.add_argument("--seeds", type=seed_count, default=3, metavar="N",
                    help="runs per scenario and design, seeds scenario.seed, +1, … "
-                        "(≥ 1; default: 3)")
+                        f"(1 … {MAX_SEEDS}; default: 3)")
     p.add_argument("--out", default="out/compare", metavar="DIR",
                    help="output folder (default: out/compare)")
     p.add_argument("--distances-mm", type=distances_mm, default="250,350,450,550,650,750",
                    metavar="LIST",
                    help="comma-separated positive distances (mm, robot centre to cylinder) "
                         "for the detection curve (default: 250,350,450,550,650,750)")
-    p.add_argument("--bearings", type=at_least(8), default=180, metavar="N",
+    p.add_argument("--bearings", type=at_least(8, MAX_BEARINGS), default=180, metavar="N",
                    help="cylinder bearings tried per distance, over one symmetry period of "
-                        "the design (≥ 8; default: 180)")
+                        f"the design (8 … {MAX_BEARINGS}; default: 180)")
     add_executor_options(p)
     p.add_argument("--json", action="store_true",
                    help="print one JSON record per design instead of the table")

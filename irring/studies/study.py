@@ -27,7 +27,7 @@ except ImportError:  # pragma: no cover - not on POSIX
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
-from ..core import SEED_MAX, SENSOR_MODEL
+from ..core import MAX_SEEDS, SEED_MAX, SENSOR_MODEL
 from ..errors import brief
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
@@ -213,7 +213,7 @@ def parse_study(raw: Any, source: str = "") -> Study:
     seeds, count = None, 1
     raw_seeds = raw.get("seeds", 1)
     if isinstance(raw_seeds, int) and not isinstance(raw_seeds, bool):
-        count = _number(source, "seeds", raw_seeds, int, 1, 100000)
+        count = _number(source, "seeds", raw_seeds, int, 1, MAX_SEEDS)
     else:
         seeds = tuple(_number(source, f"seeds[{i}]", s, int, 0, SEED_MAX)
                       for i, s in enumerate(_list(source, "seeds", raw_seeds, "seeds")))
