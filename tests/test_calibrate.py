@@ -287,3 +287,30 @@ def test_guided_calibration_blames_the_placement_when_nothing_fits(t_room):
                           sensor_model="gp2d12", sweeps=1)
     with pytest.raises(CalibrationError, match="was the wall where it was asked to be"):
         g.run()
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_one_sweep_a_placement_ends_the_table_before_steep_rows_it_cannot_fit(t_room, seed):
+    """`irring calibrate --sweeps 1` (allowed: ≥ 1) failed for 2 seeds in 6 with 'fitted b(θ)
+    changes sign … are the readings and distances paired correctly?': the 85° row rests on
+    a few noisy readings. The table now ends before the first row of the wrong sign."""
+    cal = SimulatedRig(t_room, sweeps=1, seed=seed).calibrate()
+    assert np.all(cal.b < 0) and 60.0 <= math.degrees(cal.max_theta_rad) < 85.0
+    model = gp2.sensor(t_room.sensor.model)
+    d = np.linspace(model.min_range_m, model.max_range_m, 15)[:, None]
+    theta = np.radians(np.arange(0.0, 46.0, 5.0))[None, :]
+    counts = gp2.counts_from_voltage(model.voltage(d, theta), t_room.sensor.adc_bits,
+                                     t_room.sensor.vref_v)
+    assert np.max(np.abs(cal.distance(counts, theta) / d - 1.0)) < 0.03
+
+
+def test_a_fit_whose_second_row_flips_sign_is_still_refused():
+    """Only steep rows are trimmed: readings that flip b at 5° are not of a wall."""
+    from irring.estimation.calibration import fit_curve
+
+    rng = np.random.default_rng(2)
+    d = rng.uniform(0.1, 0.8, 200)
+    theta = np.where(np.arange(200) % 2, math.radians(5.0), 0.0)
+    counts = np.where(theta > 0, 40.0 * d, 0.5 / d)    # rising at 5°, falling at 0°
+    with pytest.raises(CalibrationError, match="changes sign"):
+        fit_curve(counts, d, theta, np.radians([0.0, 5.0, 10.0]), min_readings=2)

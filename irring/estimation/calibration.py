@@ -560,6 +560,8 @@ def fit_curve(counts: Any, distance_m: Any, theta_rad: Any, theta_grid_rad: Any,
     any incidence count, and readings exactly at the grid angles reduce to one straight-line
     fit per angle. Grid angles with fewer than ``min_readings`` readings' worth of support are
     dropped (θ = 0 must stay). A tiny curvature penalty keeps sparse tables well posed.
+    A row past 60° whose b comes out of the other sign than θ = 0's (few, noisy readings)
+    ends the table before it; a flip nearer square on raises :class:`CalibrationError`.
     Returns (theta_rad, a, b) of the kept grid angles.
     """
     s, d, t = (np.asarray(v, dtype=float).reshape(-1) for v in (counts, distance_m, theta_rad))
@@ -575,6 +577,25 @@ def fit_curve(counts: Any, distance_m: Any, theta_rad: Any, theta_grid_rad: Any,
     if s.size < 2 or np.ptp(np.log(s)) < 1e-6:
         raise CalibrationError(f"need readings at ≥ 2 different distances to fit a and b; got "
                                f"{s.size} usable readings")
+    while True:
+        log_a, b = _fit_rows(s, d, t, grid, smoothing)
+        flipped = np.flatnonzero(np.sign(b) != np.sign(b[0]))
+        if flipped.size == 0:
+            return grid, np.exp(log_a), b
+        if grid[flipped[0]] < _TRIMMABLE_RAD:
+            raise CalibrationError(f"fitted b(θ) changes sign ({b.round(4)}); are the readings "
+                                   "and distances paired correctly?")
+        # rows past 60° rest on few, noisy readings (one sweep a placement): a b of the
+        # other sign reads no surface at all there, so the table ends before them (held
+        # beyond); a flip nearer square on means readings that are not of the wall
+        grid = grid[:flipped[0]]
+        inside = t <= grid[-1] + 1e-9
+        s, d, t = s[inside], d[inside], t[inside]
+
+
+def _fit_rows(s: np.ndarray, d: np.ndarray, t: np.ndarray, grid: np.ndarray,
+              smoothing: float) -> tuple[np.ndarray, np.ndarray]:
+    """log a and b at each grid angle: :func:`fit_curve`'s least squares."""
     w = _hat_weights(t, grid)                       # (M, J)
     ls = np.log(s)
     design = np.hstack([w, w * ls[:, None]])         # unknowns: log a_j, b_j
@@ -591,11 +612,10 @@ def fit_curve(counts: Any, distance_m: Any, theta_rad: Any, theta_grid_rad: Any,
         design = np.vstack([design, reg])
         rhs = np.concatenate([rhs, np.zeros(2 * (j - 2))])
     sol, *_ = np.linalg.lstsq(design, rhs, rcond=None)
-    log_a, b = sol[:j], sol[j:]
-    if not np.all(np.isfinite(sol)) or not (np.all(b < 0) or np.all(b > 0)):
-        raise CalibrationError(f"fitted b(θ) changes sign ({b.round(4)}); are the readings "
-                               "and distances paired correctly?")
-    return grid, np.exp(log_a), b
+    if not np.all(np.isfinite(sol)):
+        raise CalibrationError("the fit of a(θ), b(θ) did not converge; are the readings and "
+                               "distances paired correctly?")
+    return sol[:j], sol[j:]
 
 
 def _hat_weights(t: np.ndarray, grid: np.ndarray) -> np.ndarray:
@@ -632,6 +652,7 @@ def _supported_grid(grid: np.ndarray, t: np.ndarray, min_readings: int
 # --------------------------------------------------------------------------- the procedure
 
 DEFAULT_THETA_GRID_RAD = np.radians(np.arange(0.0, 86.0, 5.0))
+_TRIMMABLE_RAD = math.radians(60.0)   # fit_curve may end the table before a steeper row
 _ROUNDS = 3
 
 
