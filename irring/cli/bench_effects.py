@@ -38,8 +38,9 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
                    help="scenario whose sensor block (model, ADC bits) is used; its effects "
                         "are replaced (default: t_room)")
-    p.add_argument("--samples", type=at_least(*bounds(Scan, "samples")), default=4, metavar="N",
-                   help="scan.samples for the averaging effect (1 … 64 as in a scenario; "
+    lo, hi = bounds(Scan, "samples")
+    p.add_argument("--samples", type=at_least(lo, hi), default=4, metavar="N",
+                   help=f"scan.samples for the averaging effect ({lo} … {hi} as in a scenario; "
                         "default: 4)")
     p.add_argument("--rounds", type=at_least(1), default=25, metavar="N",
                    help="timing rounds; the median over rounds is reported (≥ 1; default: 25)")
