@@ -32,6 +32,9 @@ GP2_PERIOD_S = 0.0383   # GP2 measurement period (datasheet 38.3 ms ± 9.6 ms); 
 # raises TooBig above them); a recording holds no more sweeps or steps than this either.
 MAX_SWEEPS = 10_000
 MAX_STEPS = 100_000                 # readings per sensor in one sweep
+MAX_ADC_BITS = 24                   # a converter's bits a device, recording or calibration
+                                    # file may state (a scenario's are fewer: Sensor.adc_bits)
+VREF_RANGE_V = (0.1, 50.0)          # its reference voltage there (V; a scenario's: Sensor.vref_v)
 MAX_DURATION_S = 1e7                # hardware time of one sweep (115 days; a recording's bound)
 WORK_MEMORY_BYTES = 2 * 10**9       # readings and belt physics of one run together
 BYTES_PER_READING = 600             # a reading through simulation, estimate and map (measured:

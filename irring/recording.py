@@ -305,8 +305,11 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
 
     kwargs["sensor_model"] = scalar("sensor_model", lambda v: v in gp2.SENSORS,
                                     f"one of {', '.join(gp2.SENSORS)}", SENSOR_MODEL)
-    bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, 24), "a whole number 1 … 24", ADC_BITS)
-    kwargs["vref_v"] = scalar("vref_v", lambda v: _finite(v, 0.1, 50.0), "0.1 … 50 V", VREF_V)
+    bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, core.MAX_ADC_BITS),
+                                       f"a whole number 1 … {core.MAX_ADC_BITS}", ADC_BITS)
+    v_lo, v_hi = core.VREF_RANGE_V
+    kwargs["vref_v"] = scalar("vref_v", lambda v: _finite(v, v_lo, v_hi), f"{v_lo:g} … {v_hi:g} V",
+                              VREF_V)
     kwargs["max_range_m"] = scalar("max_range_m", lambda v: _finite(v, 0.001, 100.0),
                                    "0.001 … 100 m", MAX_RANGE_M)
     kwargs["samples"] = scalar("samples", whole(1, 64), "a whole number 1 … 64", 1)

@@ -22,7 +22,8 @@ import numpy as np
 import yaml
 
 from .. import gp2, safe_yaml
-from ..core import ADC_BITS, MAX_STEPS, SENSOR_MODEL, VREF_V, Pose, Ring, Sweep
+from ..core import (ADC_BITS, MAX_ADC_BITS, MAX_STEPS, SENSOR_MODEL, VREF_RANGE_V, VREF_V,
+                    Pose, Ring, Sweep, bounds)
 from ..errors import InputError, brief
 from ..outputs import write_text_atomic
 from ..resources import kernel
@@ -458,13 +459,14 @@ class Calibration:
         bits = raw.get("adc_bits", ADC_BITS)
         curve = gp2.sensor(str(model))   # a file without its range trusts its curve's
         curve_mm = (curve.min_range_m * 1e3, curve.max_range_m * 1e3)
-        if isinstance(bits, bool) or not isinstance(bits, int) or not 1 <= bits <= 24:
-            raise fail("adc_bits", f"expected a whole number 1 … 24, got {bits!r}")
+        if isinstance(bits, bool) or not isinstance(bits, int) or \
+                not 1 <= bits <= MAX_ADC_BITS:
+            raise fail("adc_bits", f"expected a whole number 1 … {MAX_ADC_BITS}, got {bits!r}")
         try:
             return cls(sensor_model=str(model),
                        emitter_offset_m=number("emitter_offset_mm", hi=100.0, lo=-100.0) * 1e-3,
                        theta_rad=np.radians(table[:, 0]), a=table[:, 1], b=table[:, 2],
-                       adc_bits=bits, vref_v=number("vref_v", VREF_V, 0.1, 50.0),
+                       adc_bits=bits, vref_v=number("vref_v", VREF_V, *VREF_RANGE_V),
                        min_range_m=number("min_range_mm", curve_mm[0], 0.0, 1e5) * 1e-3,
                        max_range_m=number("max_range_mm", curve_mm[1], 0.0, 1e5) * 1e-3,
                        noise_counts=number("noise_counts", 0.0, 0.0, 1e7),
@@ -1093,7 +1095,7 @@ def load_progress(path: str | Path) -> Progress:
         raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
                                    f"{', '.join(gp2.SENSORS)}")
     whole(raw, "sweeps", 1, 10**6)
-    bits = whole(raw, "adc_bits", 1, 24)
+    bits = whole(raw, "adc_bits", 1, MAX_ADC_BITS)
     top = 2 ** bits - 1
     n = whole(raw, "placements", 1, 10_000)
     read = raw.get("read")
@@ -1139,6 +1141,7 @@ def load_progress(path: str | Path) -> Progress:
             wall_distance_m=np.full(size, place.wall_distance_m),
             spread_counts=cols["spread_counts"], repeats=cols["repeats"].astype(int),
             offset=np.full(size, purpose == "offset")))
-    return Progress(sensor=whole(raw, "sensor", 0, 71), sensor_model=str(model),
-                    adc_bits=bits, vref_v=real(raw, "vref_v", 0.1, 50.0), placements=n,
+    return Progress(sensor=whole(raw, "sensor", 0, bounds(Ring, "sensors")[1] - 1),
+                    sensor_model=str(model), adc_bits=bits,
+                    vref_v=real(raw, "vref_v", *VREF_RANGE_V), placements=n,
                     done=done)

@@ -39,8 +39,7 @@ MOVE_ALLOWANCE_S = 0.005  # per motor step the ring may travel before a sweep's 
 
 # What a device may announce in IRINF is what a Ring may be (core.Ring's field bounds, the
 # scenario schema's; an IRSCN of 72 counts no longer fits a 128-byte sentence anyway), and an
-# ADC of at most this many bits (a recording's and a calibration file's bound)
-MAX_ADC_BITS = 24
+# ADC of at most core.MAX_ADC_BITS bits (a recording's and a calibration file's bound)
 # a sweep pass that makes no progress (no new step) for this many timeouts beyond its
 # IRSTP retries is given up, whatever else the device keeps sending
 NO_PROGRESS_TIMEOUTS = 3
@@ -66,8 +65,8 @@ def _info_faults(info: p.Info) -> list[str]:
     faults = []
     if not core.bounds(Ring, "sensors")[0] <= info.nsensors <= core.bounds(Ring, "sensors")[1]:
         faults.append(f"{info.nsensors} sensors (nsensors; {allowed('sensors')})")
-    if not 1 <= info.adc_bits <= MAX_ADC_BITS:
-        faults.append(f"a {info.adc_bits}-bit ADC (adc_bits; allowed 1 … {MAX_ADC_BITS})")
+    if not 1 <= info.adc_bits <= core.MAX_ADC_BITS:
+        faults.append(f"a {info.adc_bits}-bit ADC (adc_bits; allowed 1 … {core.MAX_ADC_BITS})")
     if not (step_lo <= info.min_step and info.max_step <= step_hi
             and info.max_step - info.min_step < core.MAX_STEPS):
         faults.append(f"steps {info.min_step} … {info.max_step} (min_step, max_step; allowed "
