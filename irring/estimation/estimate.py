@@ -513,8 +513,9 @@ def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal
                   max_range_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(counts, reason), both (S, N), with each reading near the no-return level read as the
     mean of its sensor's 2·``POOL_STEPS`` + 1 readings around it (by step), where that mean
-    stands ``RETURN_SIGMAS`` standard errors (count σ/√13) above the no-return level: such a
-    reading becomes OK with the mean's counts; all others are returned as given.
+    stands ``RETURN_SIGMAS`` standard errors (count σ/√(2·POOL_STEPS + 1)) above the
+    no-return level: such a reading becomes OK with the mean's counts; all others are
+    returned as given.
 
     Near the level: below it plus ``RETURN_SIGMAS + RANGE_SIGMAS`` count σ, NO_RETURN,
     OUT_OF_RANGE or OK, and so is every reading of the window (it ends at none: a sweep's

@@ -257,10 +257,6 @@ def display_problem() -> str | None:
     return f"the display {named!r} cannot be opened (GLFW could not connect to it)"
 
 
-def has_display() -> bool:
-    return display_problem() is None
-
-
 def play(view: SceneView, step_s: float = 0.05) -> None:
     """The interactive MuJoCo viewer (passive) playing the sweep back and forth, beams
     drawn, until its window is closed."""
