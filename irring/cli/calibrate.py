@@ -14,7 +14,7 @@ from .. import errors
 from ..estimation.calibration import (CalibrationAborted, CalibrationError, GuidedCalibration,
                                       SimulatedRig, load_progress, save_progress)
 from ..outputs import check_out
-from ..scenario import load_scenario
+from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ._common import at_least, between, describe, seed
 
 EPILOG = """\
@@ -53,27 +53,33 @@ examples:
 """
 
 
+# the options' defaults, stated once: the parser's, and the ones the command that resumes
+# leaves out (_keep)
+DEFAULTS = {"scenario": DEFAULT_SCENARIO, "out": "calibration.yaml", "baud": 115200,
+            "sensor": 0, "sweeps": None}
+
+
 def register(p: argparse.ArgumentParser) -> None:
     describe(p, "Calibrate the ring for the estimator: the emitter offset d_o (paper "
              "Eq. 9) and the curve d = a(θ)·S^b(θ) (Eq. 10) from readings against a "
              "flat wall, on the simulated rig (default) or on the real ring (--port).",
              EPILOG)
-    p.add_argument("--scenario", default="t_room", metavar="NAME_OR_PATH",
+    p.add_argument("--scenario", default=DEFAULTS["scenario"], metavar="NAME_OR_PATH",
                    help="scenario whose ring, sensor model, ADC and effects are used "
-                        "(default: t_room)")
-    p.add_argument("--out", default="calibration.yaml", metavar="FILE",
-                   help="calibration file to write (default: calibration.yaml)")
+                        f"(default: {DEFAULTS['scenario']})")
+    p.add_argument("--out", default=DEFAULTS["out"], metavar="FILE",
+                   help=f"calibration file to write (default: {DEFAULTS['out']})")
     p.add_argument("--port", metavar="PORT",
                    help="serial port or pyserial URL of the real ring; runs the guided "
                         "procedure instead of the simulated rig")
-    p.add_argument("--baud", type=between(1, 10_000_000), default=115200,
-                   help="serial speed with --port (default: 115200)")
+    p.add_argument("--baud", type=between(1, 10_000_000), default=DEFAULTS["baud"],
+                   help=f"serial speed with --port (default: {DEFAULTS['baud']})")
     p.add_argument("--resume", type=Path, default=None, metavar="FILE",
                    help="with --port: the placements an earlier run read before it stopped "
                         "(the file it named); they are not measured again")
-    p.add_argument("--sensor", type=at_least(0), default=0,
-                   help="which sensor faces the wall (default: 0)")
-    p.add_argument("--sweeps", type=at_least(1), default=None, metavar="N",
+    p.add_argument("--sensor", type=at_least(0), default=DEFAULTS["sensor"],
+                   help=f"which sensor faces the wall (default: {DEFAULTS['sensor']})")
+    p.add_argument("--sweeps", type=at_least(1), default=DEFAULTS["sweeps"], metavar="N",
                    help="sweeps per placement, averaged (≥ 1; default: 8 simulated, 4 real)")
     p.add_argument("--seed", type=seed, default=None,
                    help="noise seed ≥ 0 of the simulated rig (default: the scenario's)")
@@ -208,13 +214,10 @@ def _keep(args: argparse.Namespace, guided) -> None:
               f"({errors.printable(str(exc))})", file=sys.stderr)
         return
     again = ["irring", "calibrate", "--port", args.port, "--resume", str(path)]
-    for option, value, default in (("--scenario", args.scenario, "t_room"),
-                                   ("--sensor", args.sensor, 0), ("--out", args.out,
-                                                                  "calibration.yaml"),
-                                   ("--sweeps", args.sweeps, None),
-                                   ("--baud", args.baud, 115200)):
+    for name in ("scenario", "sensor", "out", "sweeps", "baud"):
+        value, default = getattr(args, name), DEFAULTS[name]
         if value != default and str(value) != default:
-            again += [option, str(value)]
+            again += [f"--{name}", str(value)]
     print(f"irring calibrate: the {n} placement{'s' if n != 1 else ''} read (of {total}) "
           f"{'are' if n != 1 else 'is'} kept in {path}; resume with: "
           f"{shlex.join(again)}", file=sys.stderr)
