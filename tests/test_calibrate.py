@@ -60,7 +60,7 @@ def test_simulated_rig_curve_reproduces_distances_within_1_percent(t_room, rig_c
 
 def test_rig_without_effects_is_exact_and_flat(t_room):
     """No effects: the sim reads the θ = 0 curve whatever the incidence; the rig says so."""
-    cal = SimulatedRig(_no_effects(t_room), sweeps=1).calibrate()
+    cal = SimulatedRig(_no_effects(t_room), sweeps=2).calibrate()   # 2: a spread, of 0
     assert cal.emitter_offset_m == pytest.approx(t_room.ring.emitter_offset_m, abs=1e-7)
     nominal = Calibration.nominal(t_room.sensor.model, t_room.ring)
     assert cal.a[0] == pytest.approx(nominal.a[0], rel=1e-6)
@@ -296,6 +296,12 @@ def test_one_sweep_a_placement_ends_the_table_before_steep_rows_it_cannot_fit(t_
     a few noisy readings. The table now ends before the first row of the wrong sign."""
     cal = SimulatedRig(t_room, sweeps=1, seed=seed).calibrate()
     assert np.all(cal.b < 0) and 60.0 <= math.degrees(cal.max_theta_rad) < 85.0
+    # one sweep measures no spread: the noise is the datasheet's and says so (it was 0.0,
+    # so the estimator judged returns by quantisation alone)
+    nominal = Calibration.nominal(t_room.sensor.model, None, t_room.sensor.adc_bits,
+                                  t_room.sensor.vref_v)
+    assert cal.noise_counts == nominal.noise_counts > 10.0
+    assert cal.source.endswith("; noise: the datasheet's (no repeated readings to measure it)")
     model = gp2.sensor(t_room.sensor.model)
     d = np.linspace(model.min_range_m, model.max_range_m, 15)[:, None]
     theta = np.radians(np.arange(0.0, 46.0, 5.0))[None, :]

@@ -773,11 +773,15 @@ def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = ADC_BITS,
     """
     r = readings
     spread = r.spread_counts[np.isfinite(r.spread_counts) & (r.repeats > 1)]
-    noise = float(np.sqrt(np.mean(spread ** 2))) if spread.size else 0.0
     # the datasheet curve says what "nothing there" reads until our own curve can say it,
     # and its range is the default
-    cal = dataclasses.replace(Calibration.nominal(sensor_model, None, adc_bits, vref_v),
-                              noise_counts=noise)
+    cal = Calibration.nominal(sensor_model, None, adc_bits, vref_v)
+    if spread.size:
+        noise = float(np.sqrt(np.mean(spread ** 2)))
+    else:   # one sweep a placement measures no spread: the datasheet's, said, not 0
+        noise = cal.noise_counts
+        source = f"{source}; noise: the datasheet's (no repeated readings to measure it)"
+    cal = dataclasses.replace(cal, noise_counts=noise)
     min_range_m = cal.min_range_m if min_range_m is None else min_range_m
     max_range_m = cal.max_range_m if max_range_m is None else max_range_m
     full = cal.full_scale_counts
