@@ -35,7 +35,8 @@ what it does:
                   placements already read are kept in a file in the temporary folder
                   ($TMPDIR, else /tmp), named on stderr with the command that resumes:
                   irring calibrate --port PORT --resume FILE asks only for the placements
-                  the file does not hold (same --sensor and --scenario sensor as before).
+                  the file does not hold (the printed command repeats --sensor, --scenario
+                  and --out; a file of another sensor, model or ADC is refused).
 
   The file is YAML (distances in mm, angles in degrees); pass it to the estimator with
   `irring run --calibration FILE` or irring.estimation.calibration.Calibration.load(FILE).
