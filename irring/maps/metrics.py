@@ -227,7 +227,9 @@ def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float, Retu
 
 def _gives_return(t, psi, d_max: float, returns: Returns, surface) -> np.ndarray:
     """Whether beams of heading ``psi`` (rad) meeting ``surface`` = (normal x, normal y,
-    reflectance) at ``t`` m along them return a reading (:class:`Returns`), noise aside."""
+    reflectance) at ``t`` m along them return a reading (:class:`Returns`), judged on the
+    noise-free reading, which must also lie within ``return_range_m`` where the scene's
+    noise sets a return level short of the max range."""
     model = gp2.sensor(returns.model)
     nx, ny, rho = surface
     ok = np.ones(np.shape(t), bool)
