@@ -66,7 +66,7 @@ BAD_VALUES = [
     (["bench", "estimator", "--max-iterations", "0"], "--max-iterations", "must be ≥ 1, got 0"),
     (["bench", "speed", "--rounds", "0"], "--rounds", "must be ≥ 1, got 0"),
     (["bench", "speed", "--rounds", "many"], "--rounds", "must be an integer ≥ 1, got 'many'"),
-    (["calibrate", "--sweeps", "0"], "--sweeps", "must be ≥ 1, got 0"),
+    (["calibrate", "--sweeps", "0"], "--sweeps", "must be in 1 … 10000, got 0"),
     (["compare", "--seeds", "0"], "--seeds", "must be in 1 … 100000, got 0"),
     (["compare", "--bearings", "7"], "--bearings", "must be in 8 … 3600, got 7"),
     (["compare", "--distances-mm", "250,0"], "--distances-mm",

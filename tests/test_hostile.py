@@ -915,6 +915,10 @@ def test_calibrate_refuses_to_resume_another_procedure(tmp_path, capsys, monkeyp
      "read[0].wall_distance_mm: expected a number"),
     (lambda d: d["read"][0].update(wall_distance_mm=400.0), "cannot resume: its placement 1 "
                                                            "(a flat, white wall 400 mm"),
+    # sweeps and the repeats they give share one bound (sweeps 10^6 passed, repeats > 10^4 not)
+    (lambda d: d.update(sweeps=10_001), "sweeps: expected a whole number 1 … 10000, got 10001"),
+    (lambda d: d["read"][0]["repeats"].__setitem__(0, 10_001),
+     "read[0].repeats: 10001 is not allowed; expected whole numbers 0 … 10000"),
 ])
 def test_a_damaged_progress_file_is_refused_naming_the_key(tmp_path, capsys, monkeypatch,
                                                            edit, message):
@@ -929,6 +933,15 @@ def test_a_damaged_progress_file_is_refused_naming_the_key(tmp_path, capsys, mon
     err = capsys.readouterr().err
     assert code == 1 and placed == [] and "internal error" not in err
     assert f"{saved}: {message}" in err
+
+
+def test_calibrate_sweeps_are_bounded_by_what_a_progress_file_holds(tmp_path, capsys):
+    # --sweeps 20000 read placements whose repeats (up to 20000 a step) no --resume could load
+    with pytest.raises(SystemExit) as stop:
+        main(["calibrate", "--sweeps", "10001", "--out", str(tmp_path / "c.yaml")])
+    assert stop.value.code == 2
+    assert "--sweeps: must be in 1 … 10000, got 10001" in capsys.readouterr().err
+    assert not (tmp_path / "c.yaml").exists()
 
 
 def test_calibrate_resume_needs_a_port(tmp_path, capsys):

@@ -14,6 +14,7 @@ from .. import errors
 from ..estimation.calibration import (CalibrationAborted, CalibrationError, GuidedCalibration,
                                       SimulatedRig, load_progress, save_progress)
 from ..outputs import check_out
+from ..core import MAX_SWEEPS
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ._common import at_least, between, describe, seed
 
@@ -80,8 +81,9 @@ def register(p: argparse.ArgumentParser) -> None:
                         "(the file it named); they are not measured again")
     p.add_argument("--sensor", type=at_least(0), default=DEFAULTS["sensor"],
                    help=f"which sensor faces the wall (default: {DEFAULTS['sensor']})")
-    p.add_argument("--sweeps", type=at_least(1), default=DEFAULTS["sweeps"], metavar="N",
-                   help="sweeps per placement, averaged (≥ 1; default: 8 simulated, 4 real)")
+    p.add_argument("--sweeps", type=at_least(1, MAX_SWEEPS), default=DEFAULTS["sweeps"],
+                   metavar="N", help=f"sweeps per placement, averaged (1 … {MAX_SWEEPS}, what a "
+                                     f"progress file holds; default: 8 simulated, 4 real)")
     p.add_argument("--seed", type=seed, default=None,
                    help="noise seed ≥ 0 of the simulated rig (default: the scenario's)")
     p.set_defaults(func=run)

@@ -22,8 +22,8 @@ import numpy as np
 import yaml
 
 from .. import gp2, safe_yaml
-from ..core import (ADC_BITS, MAX_ADC_BITS, MAX_STEPS, SENSOR_MODEL, VREF_RANGE_V, VREF_V,
-                    Pose, Ring, Sweep, bounds)
+from ..core import (ADC_BITS, MAX_ADC_BITS, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL, VREF_RANGE_V,
+                    VREF_V, Pose, Ring, Sweep, bounds)
 from ..errors import InputError, brief
 from ..outputs import write_text_atomic
 from ..resources import kernel
@@ -1098,7 +1098,7 @@ def load_progress(path: str | Path) -> Progress:
     if model not in gp2.SENSORS:
         raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
                                    f"{', '.join(gp2.SENSORS)}")
-    whole(raw, "sweeps", 1, 10**6)
+    whole(raw, "sweeps", 1, MAX_SWEEPS)   # a placement's repeats are at most its sweeps
     bits = whole(raw, "adc_bits", 1, MAX_ADC_BITS)
     top = 2 ** bits - 1
     n = whole(raw, "placements", 1, 10_000)
@@ -1122,7 +1122,7 @@ def load_progress(path: str | Path) -> Progress:
         for key, lo, hi, nullable in (("beam_angle_deg", -360.0, 360.0, False),
                                       ("counts", 0.0, float(top), True),
                                       ("spread_counts", 0.0, float(top), True),
-                                      ("repeats", 0, 10_000, False)):
+                                      ("repeats", 0, MAX_SWEEPS, False)):
             col = entry.get(key)
             if not isinstance(col, list) or not 1 <= len(col) <= MAX_STEPS:
                 raise fail(at + key, f"expected a list of 1 … {MAX_STEPS} values")
