@@ -32,7 +32,7 @@ from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_sc
                            classify, slice_steps)
 from .maps.mcap_export import write_mcap
 from .outputs import OutputSet
-from .scenario import Scenario, loads
+from .scenario import Scenario, ScenarioError, loads
 
 FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
 
@@ -161,8 +161,17 @@ class MapRun:
 
 
 def scenario_text(scenario: Scenario) -> str | None:
-    """The YAML a scenario was loaded from (None for one made in code)."""
-    return scenario.text or None
+    """The YAML a scenario was loaded from, while it still describes it: None for one made
+    in code or changed since (``dataclasses.replace`` keeps the text it was loaded with, so
+    ``rooms.ideal(sc)`` or another seed would be rebuilt, recorded or shipped as the
+    original)."""
+    if not scenario.text:
+        return None
+    try:
+        same = loads(scenario.text, scenario.source) == scenario
+    except ScenarioError:
+        same = False
+    return scenario.text if same else None
 
 
 @dataclass

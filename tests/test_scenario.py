@@ -374,3 +374,23 @@ def test_first_crossing_finds_the_pair_the_pairwise_oracle_finds():
         assert first_crossing(outline) == _crossing_oracle(outline), outline
         found += _crossing_oracle(outline) is not None
     assert 100 < found < 550   # both outcomes are exercised
+
+
+def test_a_changed_scenario_no_longer_claims_the_text_it_was_loaded_from():
+    # dataclasses.replace keeps `text`: a scenario changed in code was recorded and shipped
+    # to study workers as the file it came from (another seed rebuilt as seed 1, the ideal
+    # sensor's scene rebuilt with incidence, noise and quantization)
+    import dataclasses
+
+    from irring.pipeline import scenario_text
+    from irring.studies import rooms, study
+
+    sc = load_scenario("t_room")
+    assert scenario_text(sc) == sc.text and "incidence" in sc.text
+    for changed in (dataclasses.replace(sc, seed=777), rooms.ideal(sc)):
+        assert changed.text == sc.text
+        assert scenario_text(changed) is None
+    # a study of the changed scene carries it as itself, not as the file's text
+    point = study.point(study.DesignSpec("rotating12"), sc, 3)
+    task, = study.tasks_for([point], {point.scenario: rooms.ideal(sc)})
+    assert task.scenario_yaml is None and not task.scenario.effects

@@ -194,9 +194,11 @@ def _returns(scenario: Scenario) -> Returns:
     model = gp2.sensor(scenario.sensor.model)
     incidence, reflectance = effects.get("incidence"), effects.get("reflectance")
     try:
-        reach = Calibration.for_scene(scenario).return_range_m
+        scenario.ring
     except ValueError:   # a design without a ring preset: its sensor's own max range
         reach = math.inf
+    else:
+        reach = Calibration.for_scene(scenario).return_range_m
     return Returns(model=scenario.sensor.model,
                    max_incidence_rad=None if incidence is None else incidence.drop_out_rad(model),
                    min_signal=None if reflectance is None else reflectance.min_signal,
