@@ -8,11 +8,11 @@ import json
 import sys
 
 from ..outputs import OutputSet, check_out
-from ..studies.rooms import ROOMS, measure, resolve_rooms
+from ..studies.rooms import ROOMS, TARGETS, measure, resolve_rooms
 from ..core import MAX_SEEDS
 from ._common import describe, seed_count
 
-EPILOG = """\
+EPILOG = f"""\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have
 incidence, 15 mV noise and quantization) and for an ideal sensor ("ideal": the same scene
 without any sensor-signal effect and with exact odometry; belt, timing and the drive are
@@ -24,8 +24,8 @@ kept):
   pt mm           end-point RMS: estimated end point to the true hit point, over readings
                   both estimators call valid
   θ=0 mm          the same readings read as if square on (Eq. 10 with a(0), b(0))
-  misses          targets missed by the scene's run: F1 ≥ 0.93, precision ≥ 0.90, free
-                  accuracy ≥ 0.99, set for the default effects (a scene with more, e.g. a
+  misses          targets missed by the scene's run: F1 ≥ {TARGETS['occupied_f1']:.2f}, precision ≥ {TARGETS['occupied_precision']:.2f}, free
+                  accuracy ≥ {TARGETS['free_accuracy']:.2f}, set for the default effects (a scene with more, e.g. a
                   moving robot's odometry drift, names them: "(with motion, …)");
                   "ideal<" lists scores where the ideal sensor is worse
                   (both maps judged on the scene's truth: the wall its sensor returns from)
