@@ -49,7 +49,8 @@ class GroundTruth:
     #                            sight, giving the scene's sensor a return: Returns) and met
     #                            there by a sensor's beam from the front (_met)
     reachable_free: np.ndarray  # bool: free cells in range and line of sight of some pose
-    shadow: np.ndarray         # bool: wall surface cells hidden behind an obstacle (see module doc)
+    shadow: np.ndarray         # bool: wall surface cells hidden behind an obstacle from
+    #                            a radial ring at the pose centre (docs/mapping.md)
     shadow_ranged: np.ndarray  # bool: shadow cells a sensor could range along a clear line
     shadow_owner: np.ndarray   # int16: OBSTACLE0 + j casting the shadow (first pose that has it)
     reach_m: float             # max range + ring radius used for "in range"
