@@ -917,8 +917,11 @@ def test_calibrate_refuses_to_resume_another_procedure(tmp_path, capsys, monkeyp
                                                            "(a flat, white wall 400 mm"),
     # sweeps and the repeats they give share one bound (sweeps 10^6 passed, repeats > 10^4 not)
     (lambda d: d.update(sweeps=10_001), "sweeps: expected a whole number 1 … 10000, got 10001"),
-    (lambda d: d["read"][0]["repeats"].__setitem__(0, 10_001),
-     "read[0].repeats: 10001 is not allowed; expected whole numbers 0 … 10000"),
+    # a placement's repeats are at most the file's sweeps, and its keys those written
+    (lambda d: (d.update(sweeps=2), d["read"][0]["repeats"].__setitem__(0, 3)),
+     "read[0].repeats: 3 is not allowed; expected whole numbers 0 … 2"),
+    (lambda d: d["read"][0].update(colour="red"),
+     "read[0].colour: unknown key; allowed: placement, wall_distance_mm, yaw_deg, purpose"),
 ])
 def test_a_damaged_progress_file_is_refused_naming_the_key(tmp_path, capsys, monkeypatch,
                                                            edit, message):

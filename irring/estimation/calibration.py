@@ -997,6 +997,9 @@ class GuidedCalibration:
 # --------------------------------------------------------------------------- progress
 
 PROGRESS_FORMAT = 1   # version written into a guided calibration's progress file
+# what save_progress writes for each placement read
+PROGRESS_READ_KEYS = ("placement", "wall_distance_mm", "yaw_deg", "purpose", "beam_angle_deg",
+                      "counts", "spread_counts", "repeats")
 
 
 def save_progress(path: str | Path, guided: GuidedCalibration) -> Path:
@@ -1098,7 +1101,7 @@ def load_progress(path: str | Path) -> Progress:
     if model not in gp2.SENSORS:
         raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
                                    f"{', '.join(gp2.SENSORS)}")
-    whole(raw, "sweeps", 1, MAX_SWEEPS)   # a placement's repeats are at most its sweeps
+    sweeps = whole(raw, "sweeps", 1, MAX_SWEEPS)   # a placement's repeats are at most its sweeps
     bits = whole(raw, "adc_bits", 1, MAX_ADC_BITS)
     top = 2 ** bits - 1
     n = whole(raw, "placements", 1, 10_000)
@@ -1110,6 +1113,10 @@ def load_progress(path: str | Path) -> Progress:
         at = f"read[{j}]."
         if not isinstance(entry, Mapping):
             raise fail(f"read[{j}]", "expected a mapping")
+        for key in entry:
+            if key not in PROGRESS_READ_KEYS:
+                raise fail(at + str(key), "unknown key; allowed: "
+                                          + ", ".join(PROGRESS_READ_KEYS))
         k = whole(entry, "placement", 1, n, at)
         if k - 1 in done:
             raise fail(at + "placement", f"placement {k} is read twice")
@@ -1122,7 +1129,7 @@ def load_progress(path: str | Path) -> Progress:
         for key, lo, hi, nullable in (("beam_angle_deg", -360.0, 360.0, False),
                                       ("counts", 0.0, float(top), True),
                                       ("spread_counts", 0.0, float(top), True),
-                                      ("repeats", 0, MAX_SWEEPS, False)):
+                                      ("repeats", 0, sweeps, False)):
             col = entry.get(key)
             if not isinstance(col, list) or not 1 <= len(col) <= MAX_STEPS:
                 raise fail(at + key, f"expected a list of 1 … {MAX_STEPS} values")
