@@ -213,10 +213,15 @@ def visible_range_m(scenario: Scenario) -> float | None:
 
 
 def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float, Returns]:
-    """(ring, min and max range m, sensor angles lo and hi rad, :class:`Returns`) of what a
-    sensor can range: the sensor model's measuring interval and the ring's sweep, widened to
-    at least ± half the sensor spacing (see :func:`_measurable`), and what the scene's
-    effects need of a surface for a return."""
+    """:func:`_geometric_ranging` and what the scene's effects need of a surface for a
+    return (:class:`Returns`)."""
+    return _geometric_ranging(scenario) + (_returns(scenario),)
+
+
+def _geometric_ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float]:
+    """(ring, min and max range m, sensor angles lo and hi rad) of what a sensor can range:
+    the sensor model's measuring interval and the ring's sweep, widened to at least ± half
+    the sensor spacing (see :func:`_measurable`)."""
     try:
         ring = scenario.ring
     except ValueError:  # a design without a ring preset: one sensor at the centre, any way
@@ -225,7 +230,7 @@ def _ranging(scenario: Scenario) -> tuple[Ring, float, float, float, float, Retu
     lo, hi = ring.min_step * turn, ring.max_step * turn
     half = math.pi / ring.sensors
     return (ring, gp2.sensor(scenario.sensor.model).min_range_m, scenario.sensor.max_range_m,
-            min(lo, -half), max(hi, half), _returns(scenario))
+            min(lo, -half), max(hi, half))
 
 
 def _gives_return(t, psi, d_max: float, returns: Returns, surface) -> np.ndarray:
@@ -578,12 +583,13 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
         raise ValueError(f"ground truth is {truth.label.shape} cells but the grid is {grid.shape}; "
                          "build it with ground_truth(scenario, grid) for this grid")
     ranged = truth.shadow_ranged
-    if (mapped_by is not None and mapped_by is not scenario
-            and (_ranging(mapped_by)[:5], mapped_by.robot.poses)
-            != (_ranging(scenario)[:5], scenario.robot.poses)):   # another ring or other poses
+    theirs = None if mapped_by is None or mapped_by is scenario else \
+        _geometric_ranging(mapped_by)
+    if theirs is not None and (theirs, mapped_by.robot.poses) != (
+            _geometric_ranging(scenario), scenario.robot.poses):   # another ring or other poses
         material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
         ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow,
-                                  truth.surface_point, _ranging(mapped_by)[:5])
+                                  truth.surface_point, theirs)
     cls = grid.classify()
     occ = cls == OCCUPIED
     free = cls == FREE
