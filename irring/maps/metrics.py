@@ -487,7 +487,7 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
     ranging = _ranging(scenario)
     in_range = np.zeros(px.shape, bool)   # surface and free cells in range of some pose …
     seen = np.zeros(px.shape, bool)       # … and in its line of sight
-    visible = np.zeros(px.shape, bool)    # … and giving a return (Returns) from that pose
+    visible = np.zeros(px.shape, bool)    # … giving a return (Returns) and met (_met) there
     hidden_by_obstacle = np.zeros(px.shape, np.int16)
     sy, sx, spx, spy, sdir = _surface_at(surface, surface_point, surface_normal,
                                          surface_reflectance)
@@ -501,10 +501,6 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
         returning.append(ret)
     if bar is not None:
         bar.reset(total=int(sum(int(n.sum()) for n in nears)))
-    could = np.zeros(px.shape, bool)      # surface cells some pose's ring returns from …
-    for ret in returning:
-        could[sy, sx] |= ret
-    met = np.zeros(px.shape, bool)        # … and whose surface some sensor meets
     coarse = (samples, normals, rho, cells)
     fine = sampled(res / MET_SAMPLES_PER_CELL)
     for pose, near, ret in zip(scenario.robot.poses, nears, returning):
@@ -521,23 +517,23 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
         seen_now = np.zeros(px.shape, bool)
         seen_now[ty[clear], tx[clear]] = True
         seen |= seen_now
-        visible[sy, sx] |= seen_now[sy, sx] & ret
-        # met: some of the cell's surface a sensor of a pose that sees the cell meets from the
-        # front, through free space from its emitter (the coarse points first, then the fine)
+        returns_now = np.zeros(px.shape, bool)
+        returns_now[sy, sx] = ret
+        # visible: some of the cell's surface a sensor of this pose meets from the front,
+        # through free space from its emitter (the coarse points first, then the fine)
         for at in (coarse, fine):
-            on = (seen_now & near & could & ~met).ravel()[at[3]]
+            on = (seen_now & near & returns_now & ~visible).ravel()[at[3]]
             if on.any():
                 hit = _met(scenario, grid, at[0][on, 0], at[0][on, 1],
                            at[3][on] % nx, at[3][on] // nx,
                            (at[1][on, 0], at[1][on, 1], at[2][on]), pose, ranging)
-                met.ravel()[at[3][on][hit]] = True
+                visible.ravel()[at[3][on][hit]] = True
         by_obstacle = (first >= OBSTACLE0) & (surface_owner[ty, tx] == WALL)
         unset = hidden_by_obstacle[ty, tx] == 0
         pick = by_obstacle & unset
         hidden_by_obstacle[ty[pick], tx[pick]] = first[pick]
     # the paper's shadow is geometry (wall a centre sensor cannot see); a cell the sensor
     # sees too obliquely to return from is not hidden, and not visible either
-    visible &= met
     shadow = (surface_owner == WALL) & in_range & ~(seen & surface) & (hidden_by_obstacle > 0)
     shadow_ranged = _ranged_in_sight(scenario, grid, material, shadow, surface_point, geometric)
     return GroundTruth(label=label, surface=surface, surface_owner=surface_owner,
