@@ -28,13 +28,16 @@ def test_no_command_prints_help_and_fails(capsys):
 
 @pytest.mark.parametrize("argv", [[name, "--help"] for name in COMMANDS] +
                          [["bench", name, "--help"] for name in BENCHES])
-def test_every_command_explains_itself(argv, capsys):
+def test_every_command_explains_itself(argv, capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "80")
     with pytest.raises(SystemExit) as stop:
         main(argv)
     assert stop.value.code == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: irring " + " ".join(argv[:-1]))
     assert len(out.splitlines()) >= 4  # more than a bare usage line
+    # prose (a line at the margin) fits the terminal; indented examples keep their lines
+    assert [line for line in out.splitlines() if len(line) > 80 and line[:1].strip()] == []
 
 
 def test_scenarios_lists_every_bundled_scenario_and_marks_the_default(capsys):

@@ -17,7 +17,7 @@ import traceback
 
 from .. import errors
 from ..resources import installed_version
-from ._common import add_subcommands
+from ._common import HelpFormatter, add_subcommands
 
 # Subcommand modules → one-line help, in the order `irring --help` lists them.
 COMMANDS = {
@@ -56,7 +56,7 @@ adds the traceback. Scan poses are numbered 1 … N everywhere (--pose K, map.pn
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="irring", description=DESCRIPTION, epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+        formatter_class=HelpFormatter)
     parser.add_argument("--version", action=_Version,
                         help="show program's version number and exit")
     parser.add_argument("--debug", action="store_true",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import math
+import textwrap
 from collections.abc import Callable
 from pathlib import Path
 
@@ -57,13 +58,32 @@ def add_subcommands(parser: argparse.ArgumentParser, dest: str, metavar: str,
     return sub
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the line breaks of a description and epilog (their indented tables and
+    examples) but refills a paragraph of prose (lines that start at the margin) when one
+    of its lines is wider than the terminal, as a description given on one line is."""
+
+    def _fill_text(self, text, width, indent):
+        lines, prose = [], []
+        for line in [*text.splitlines(), ""]:
+            if line[:1].strip():
+                prose.append(line)
+                continue
+            if any(len(p) > width for p in prose):
+                prose = textwrap.wrap(" ".join(prose), width, break_on_hyphens=False)
+            lines += [*prose, line]
+            prose = []
+        return "\n".join(indent + line for line in lines[:-1])
+
+
 def describe(p: argparse.ArgumentParser, description: str, epilog: str | None = None, *,
              raw: bool = True) -> None:
     """Set a subcommand's long help (its one-line help is where it is listed);
-    ``raw``: print the texts with their own line breaks."""
+    ``raw``: print the texts with their own line breaks (a line of prose wider than the
+    terminal is still wrapped, :class:`HelpFormatter`)."""
     p.description, p.epilog = description, epilog
     if raw:
-        p.formatter_class = argparse.RawDescriptionHelpFormatter
+        p.formatter_class = HelpFormatter
 
 
 def at_least(low: int, high: int | None = None) -> Callable[[str], int]:
