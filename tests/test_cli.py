@@ -182,6 +182,26 @@ def test_the_docs_a_user_is_sent_to_exist(capsys):
     assert missing == []
 
 
+def test_markdown_links_stay_inside_the_repository():
+    """Every [text](target) of the repository's Markdown names a file of the repository
+    that exists (or an #anchor): a checkout read offline has everything it links to."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    pages = [p for p in root.rglob("*.md")   # not .pytest_cache/, out/, build/, *.egg-info/
+             if not any(part.startswith(".") or part in ("out", "build")
+                        or part.endswith("egg-info") for part in p.relative_to(root).parts)]
+    assert root / "README.md" in pages and root / "firmware" / "README.md" in pages
+    bad = sorted((str(page.relative_to(root)), target)
+                 for page in pages
+                 for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text())
+                 if not target.startswith("#")
+                 and (":" in target
+                      or not (page.parent / target.split("#")[0]).resolve().is_relative_to(root)
+                      or not (page.parent / target.split("#")[0]).exists()))
+    assert bad == []
+
+
 def test_a_command_loads_only_its_own_module():
     """Building the parser imports no subcommand; `irring run` parses without loading
     what other commands need (the studies, the serial link, Dask, matplotlib charts)."""
