@@ -518,3 +518,18 @@ def test_the_avr_image_itself_in_simavr_answers_serial_ring(tmp_path):
         proc.terminate()
         proc.wait(timeout=10)
     assert proc.returncode == 0, proc.stderr.read().decode()
+
+
+@pytest.mark.parametrize("target, tool, advice", [
+    ("avr", "AVRCC=irring-no-such-avr-gcc", "gcc-avr, avr-libc, binutils-avr"),
+    ("flash", "AVRDUDE=irring-no-such-avrdude", "apt install avrdude"),
+])
+def test_a_missing_build_tool_is_named_with_where_to_get_it(target, tool, advice, tmp_path):
+    if shutil.which("make") is None:
+        pytest.skip("make is needed (bash .ci/system-deps installs it)")
+    if target == "flash" and shutil.which("avr-gcc") is None:
+        pytest.skip("the AVR toolchain is needed to get as far as flashing")
+    done = subprocess.run(["make", "-s", "-C", str(FIRMWARE), target, tool,
+                           f"BUILD={tmp_path}"], capture_output=True, text=True)
+    assert done.returncode != 0
+    assert f"needs {tool.split('=')[1]}: " in done.stderr and advice in done.stderr
