@@ -588,3 +588,14 @@ def test_a_belt_rollout_in_chunks_equals_one_rollout(monkeypatch):
     chunked = dyn.physics.run(sched)
     for name in ("motor_rad", "motor_vel", "sensor_rad", "sensor_vel"):
         assert np.array_equal(getattr(chunked, name), getattr(whole, name)), name
+
+
+def test_the_belt_run_reports_its_progress_without_changing_a_figure():
+    """``on_sweeps`` (irring bench dynamics' progress bar) hears of every sweep, chunk by
+    chunk, and the figures are those of a run nobody watches."""
+    heard = []
+    watched = bench.coupling(53, on_sweeps=heard.append)
+    assert heard == [50, 3]
+    alone = bench.coupling(53)
+    np.testing.assert_array_equal(watched["stretch_per_sweep_rad"], alone["stretch_per_sweep_rad"])
+    assert watched["read_error_max_rad"] == alone["read_error_max_rad"]

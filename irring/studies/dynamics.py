@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import time
 import types
+from collections.abc import Callable
 
 import mujoco
 import numpy as np
@@ -58,12 +59,14 @@ def variant(name: str, *, effects: dict | None = None, drop: tuple = (), scan: d
 
 
 def coupling(n_sweeps: int = 1000, params: BeltDynamicsEffect | None = None,
-             ring: Ring | None = None) -> dict:
-    """The belt over ``n_sweeps`` continuous back-and-forth sweeps (see the module doc)."""
+             ring: Ring | None = None, on_sweeps: Callable[[int], object] | None = None) -> dict:
+    """The belt over ``n_sweeps`` continuous back-and-forth sweeps (see the module doc);
+    ``on_sweeps(k)`` is told each time k more are done (a progress bar's ``update``)."""
     ring = ring or Ring()
     physics = dyn.BeltPhysics(ring, params or BeltDynamicsEffect())
     t0 = time.perf_counter()
-    r = endurance(physics, np.arange(ring.min_step, ring.max_step + 1), n_sweeps)
+    r = endurance(physics, np.arange(ring.min_step, ring.max_step + 1), n_sweeps,
+                  on_sweeps=on_sweeps)
     return {"sweeps": n_sweeps, "physics_steps": r["physics_steps"],
             "timestep_s": physics.dt_s, "stretch_max_rad": float(r["stretch_rad"].max()),
             "stretch_first_rad": float(r["stretch_rad"][0]),
@@ -74,7 +77,7 @@ def coupling(n_sweeps: int = 1000, params: BeltDynamicsEffect | None = None,
 
 
 def endurance(physics: dyn.BeltPhysics, steps: np.ndarray, n_sweeps: int, *,
-              chunk: int = 50) -> dict:
+              chunk: int = 50, on_sweeps: Callable[[int], object] | None = None) -> dict:
     """Sweep back and forth ``n_sweeps`` times in one continuous run, never resting: each
     sweep moves step to step every ``step_time_s`` and reads at each arrival (a timed sweep
     with no settle, the belt's hardest duty), the next starting where the last ended.
@@ -107,6 +110,8 @@ def endurance(physics: dyn.BeltPhysics, steps: np.ndarray, n_sweeps: int, *,
             stretch[done + j] = belt[a:a + per + 1].max()
             at = run.sensor_rad[a + reads[leg]]
             read_err[done + j] = np.abs(at - commanded[leg]).max()
+        if on_sweeps is not None:
+            on_sweeps(min(chunk, n_sweeps - done))
     # follow raises on any MuJoCo warning: a run that ends had none
     return {"stretch_rad": stretch, "read_error_rad": read_err,
             "physics_steps": n_sweeps * per, "warnings": 0}
@@ -323,25 +328,32 @@ def motion(seeds=(1,)) -> dict:
 
 
 def measure(*, sweeps: int = 1000, seeds=(1,), with_motion: bool = True,
-            timesteps: bool = False) -> dict:
+            timesteps: bool = False, progress: bool | None = None) -> dict:
     """Everything above with the defaults (what ``irring bench dynamics`` prints); the
-    time-step table only with ``timesteps``."""
+    time-step table only with ``timesteps``. ``progress``: bars over the belt's sweeps,
+    then the other parts (None: at a terminal, ``pipeline.progress_enabled``)."""
     belt_timing = {"belt_dynamics": {}, "timing": {}}
     fast = variant("t_room", effects=belt_timing, scan={"settle_s": 0.0})
     belt_only = variant("t_room", effects={"belt_dynamics": {}}, scan={"settle_s": 0.0})
-    out = {
-        "coupling": coupling(sweeps),
-        "convergence": [dict(convergence(sc), scene=label) for label, sc in
-                        (("belt, settle 0", belt_only), ("belt + timing, settle 0", fast))],
-        "settling_belt_timing": settling(belt_timing),
-        "settling_belt": settling({"belt_dynamics": {}}, (0.0, 0.005, 0.010, 0.020)),
-        "settling_timing": settling({"timing": {}}),
-        "mujoco_clocks": mujoco_clocks(fast),
-        "check_cost": check_cost(),
+    parts = {
+        "convergence": lambda: [dict(convergence(sc), scene=label) for label, sc in
+                                (("belt, settle 0", belt_only),
+                                 ("belt + timing, settle 0", fast))],
+        "settling_belt_timing": lambda: settling(belt_timing),
+        "settling_belt": lambda: settling({"belt_dynamics": {}}, (0.0, 0.005, 0.010, 0.020)),
+        "settling_timing": lambda: settling({"timing": {}}),
+        "mujoco_clocks": lambda: mujoco_clocks(fast),
+        "check_cost": check_cost,
     }
-    out["coupling"].pop("stretch_per_sweep_rad")
     if with_motion:
-        out["motion"] = motion(seeds)
+        parts["motion"] = lambda: motion(seeds)
     if timesteps:
-        out["timesteps"] = timestep_table()
+        parts["timesteps"] = timestep_table
+    with pipeline.progress_bar(sweeps, "belt", progress, unit="sweep") as bar:
+        out = {"coupling": coupling(sweeps, on_sweeps=bar.update)}
+    out["coupling"].pop("stretch_per_sweep_rad")
+    with pipeline.progress_bar(len(parts), "bench dynamics", progress, unit="part") as bar:
+        for key, part in parts.items():
+            out[key] = part()
+            bar.update()
     return out
