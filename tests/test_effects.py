@@ -397,3 +397,13 @@ def test_bench_effects_reports_every_effect(capsys):
 def test_the_stage_registry_runs_in_the_documented_order():
     # the order readings pass the stages; a new stage must take its place in STAGE_ORDER
     assert tuple(effects.STAGES) == effects.STAGE_ORDER
+
+
+def test_bench_effects_shows_its_rounds_only_when_a_bar_is_wanted(capsys):
+    from irring.scenario import load_scenario
+    from irring.studies.effects import measure
+
+    r = measure(load_scenario("t_room"), rounds=2, batch=1, progress=True)
+    assert r["rounds"] == 2 and "bench effects:   0%" in capsys.readouterr().err
+    measure(load_scenario("t_room"), rounds=2, batch=1, progress=False)
+    assert capsys.readouterr().err == ""

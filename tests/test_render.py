@@ -261,12 +261,13 @@ def test_pose_numbers_clear_each_other_when_poses_crowd():
     assert dx == 0 and 0 < dy < 0.15
 
 
-def test_render_bench_times_fresh_processes_and_counts_the_frames():
+def test_render_bench_times_fresh_processes_and_counts_the_frames(capsys):
     from irring.studies import render_bench, report
 
     with pytest.raises(ValueError, match="repeats must be ≥ 1, got 0"):
         render_bench.measure("t_room_cylinder", repeats=0)
-    r = render_bench.measure("t_room_cylinder", repeats=1)
+    r = render_bench.measure("t_room_cylinder", repeats=1, progress=True)
+    assert "bench render:   0%" in capsys.readouterr().err   # the bar asked for, over 1 repeat
     assert (r["poses"], r["frames"]) == (1, 1 + pipeline.FRAMES_PER_SWEEP)
     assert r["cpu_render_s"] > 0 and r["cpu_make_map_s"] > 0
     assert r["render_vs_make_map_cpu"] == r["cpu_render_s"] / r["cpu_make_map_s"]

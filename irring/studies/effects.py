@@ -17,6 +17,7 @@ import numpy as np
 from .. import gp2
 from ..core import MAX_RANGE_M, Truth, beam_geometry, sensor_angles_for_steps
 from ..designs import PAPER_RING
+from ..pipeline import progress_bar
 from ..simulation.effects import STAGE_ORDER, Pipeline
 from ..scenario import (EFFECTS, IncidenceEffect, NoiseEffect, OutliersEffect,
                         ReflectanceEffect, Scenario)
@@ -115,23 +116,28 @@ def _with_effects(base: Scenario, effects: dict, samples: int) -> Scenario:
                                scan=dataclasses.replace(base.scan, samples=samples))
 
 
-def _time(configs: dict[str, Callable[[], object]], rounds: int, batch: int) -> dict[str, float]:
-    """Median over rounds of µs per call, configurations interleaved."""
+def _time(configs: dict[str, Callable[[], object]], rounds: int, batch: int,
+          progress: bool | None = None) -> dict[str, float]:
+    """Median over rounds of µs per call, configurations interleaved; a bar over the
+    rounds (``progress``, as :func:`irring.pipeline.progress_bar` takes it)."""
     samples: dict[str, list[float]] = {k: [] for k in configs}
     for fn in configs.values():  # warm up caches and lazy imports
         fn()
-    for _ in range(rounds):
-        for name, fn in configs.items():
-            t0 = time.perf_counter_ns()
-            for _ in range(batch):
-                fn()
-            samples[name].append((time.perf_counter_ns() - t0) / batch / 1e3)
+    with progress_bar(rounds, "bench effects", progress, unit="round") as bar:
+        for _ in range(rounds):
+            for name, fn in configs.items():
+                t0 = time.perf_counter_ns()
+                for _ in range(batch):
+                    fn()
+                samples[name].append((time.perf_counter_ns() - t0) / batch / 1e3)
+            bar.update()
     return {k: float(np.median(v)) for k, v in samples.items()}
 
 
 def measure(base: Scenario, *, samples: int = 4, rounds: int = 25, batch: int = 40,
-            seed: int = 0) -> dict:
-    """Per-sweep cost of each effect and of the effects that are off (see module doc)."""
+            seed: int = 0, progress: bool | None = None) -> dict:
+    """Per-sweep cost of each effect and of the effects that are off (see module doc);
+    ``progress``: a bar over the rounds (None: at a terminal)."""
     room = RoundRoom(max_range_m=base.sensor.max_range_m)
     truth = synthetic_truth(room)
     rng = np.random.default_rng(seed)
@@ -161,7 +167,7 @@ def measure(base: Scenario, *, samples: int = 4, rounds: int = 25, batch: int = 
         configs[f"without:{name}"] = pipe({k: v for k, v in all_on.items() if k != name})
         if name in NEUTRAL:
             configs[f"neutral:{name}"] = pipe({name: NEUTRAL[name]})
-    t = _time(configs, rounds, batch)
+    t = _time(configs, rounds, batch, progress)
 
     full, ideal = t["full"], t["ideal"]
     off = ideal - t["bare"]  # signed: timing noise can make it slightly negative

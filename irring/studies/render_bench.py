@@ -49,21 +49,24 @@ def one_run(scenario_name: str) -> dict:
             "peak_memory_mb": peak_kb / 1024, "stages_wall_s": result.timings_s}
 
 
-def measure(scenario_name: str, repeats: int = 5) -> dict:
+def measure(scenario_name: str, repeats: int = 5, progress: bool | None = None) -> dict:
     """``repeats`` fresh processes each running :func:`one_run`; medians of every figure
-    (peak memory: the largest). Raises ValueError for repeats < 1."""
+    (peak memory: the largest). ``progress``: a bar over the repeats (None: at a
+    terminal). Raises ValueError for repeats < 1."""
     if repeats < 1:
         raise ValueError(f"repeats must be ≥ 1, got {repeats}")
     load_before = load_average()
     runs, commands = [], []
-    for _ in range(repeats):   # the parts and the command in turn, so both see the same load
-        t = time.perf_counter()
-        out = subprocess.run([sys.executable, "-m", __name__, scenario_name], check=True,
-                             capture_output=True, text=True)
-        run = json.loads(out.stdout)
-        run["wall_process_s"] = time.perf_counter() - t   # interpreter start included
-        runs.append(run)
-        commands.append(_irring_run(scenario_name))
+    with pipeline.progress_bar(repeats, "bench render", progress, unit="repeat") as bar:
+        for _ in range(repeats):   # the parts and the command in turn: both see the same load
+            t = time.perf_counter()
+            out = subprocess.run([sys.executable, "-m", __name__, scenario_name], check=True,
+                                 capture_output=True, text=True)
+            run = json.loads(out.stdout)
+            run["wall_process_s"] = time.perf_counter() - t   # interpreter start included
+            runs.append(run)
+            commands.append(_irring_run(scenario_name))
+            bar.update()
     med = {k: statistics.median(r[k] for r in runs) for k in KEYS + ("wall_process_s",)}
     med["peak_memory_mb"] = max(r["peak_memory_mb"] for r in runs)
     return {"scenario": runs[0]["scenario"], "poses": runs[0]["poses"],

@@ -14,9 +14,10 @@ from pathlib import Path
 from typing import Sequence
 
 from .. import designs
+from ..pipeline import progress_bar
 from .executor import executor
 from .report import load_average, load_line
-from .study import DesignSpec, Study, read_results, run_study
+from .study import DesignSpec, Study, grid, read_results, run_study
 
 SCENARIOS = ("t_room", "t_room_cylinder", "t_room_three_cylinders")
 
@@ -27,10 +28,10 @@ def study_for(seeds: int):
                  seeds=tuple(range(1, seeds + 1)))
 
 
-def _timed(seeds: int, workers: int, out: Path) -> dict:
+def _timed(seeds: int, workers: int, out: Path, bar) -> dict:
     t0 = time.perf_counter()
     with executor(workers) as ex:
-        rows = run_study(study_for(seeds), out, ex)["rows"]
+        rows = run_study(study_for(seeds), out, ex, progress=lambda row: bar.update())["rows"]
     wall = time.perf_counter() - t0
     run_s = sorted(float(r["run_s"]) for r in rows)
     return {"runs": len(rows), "workers": workers, "wall_s": wall, "runs_per_s": len(rows) / wall,
@@ -65,17 +66,23 @@ def _memory(seeds: int, workers: int, tmp: Path) -> dict:
 
 
 def measure(seeds: int = 20, workers: Sequence[int] = (1, 2),
-            memory_seeds: Sequence[int] = (4, 40), memory_workers: int = 2) -> dict:
+            memory_seeds: Sequence[int] = (4, 40), memory_workers: int = 2,
+            progress: bool | None = None) -> dict:
     """Time the ``seeds`` grid on each worker count, then peak memory on each grid of
-    ``memory_seeds``. Returns plain figures (see :func:`report`)."""
+    ``memory_seeds``; ``progress``: a bar over every run (None: at a terminal). Returns
+    plain figures (see :func:`report`)."""
     load_before = load_average()
     speed, memory = [], []
-    with tempfile.TemporaryDirectory(prefix="irring-scaling-") as tmp:
+    per_seed = len(grid(study_for(1)))   # runs a seed adds to a grid
+    total = per_seed * (seeds * len(workers) + sum(memory_seeds))
+    with tempfile.TemporaryDirectory(prefix="irring-scaling-") as tmp, \
+            progress_bar(total, "bench study", progress, unit="run") as bar:
         for i, w in enumerate(workers):
-            speed.append(_timed(seeds, w, Path(tmp) / f"speed{i}"))
+            speed.append(_timed(seeds, w, Path(tmp) / f"speed{i}", bar))
         for i, s in enumerate(memory_seeds):
             (Path(tmp) / f"memory{i}").mkdir()
             memory.append(_memory(s, memory_workers, Path(tmp) / f"memory{i}"))
+            bar.update(per_seed * s)   # a fresh process: its runs are counted when it ends
     base = speed[0]["wall_s"] if speed else None
     for r in speed:
         r["speedup"] = base / r["wall_s"]
