@@ -254,8 +254,6 @@ class _Loader:
     def dataclass_(self, cls: type, raw: Any, path: str, scale: float = 1.0) -> Any:
         if raw is None:
             raw = {}
-        if not isinstance(raw, Mapping):
-            raise self.fail(path, f"expected a mapping of {cls.__name__} fields, got {raw!r}")
         hints = typing.get_type_hints(cls)
         allowed: dict[str, tuple[dataclasses.Field, float]] = {}
         for f in dataclasses.fields(cls):
@@ -263,6 +261,9 @@ class _Loader:
                 continue
             for key, factor in _yaml_keys(f.name):
                 allowed[key] = (f, factor)
+        if not isinstance(raw, Mapping):   # named by its keys: the class is not in the file
+            keys = ", ".join(sorted(allowed)) or "none, write {} for the defaults"
+            raise self.fail(path, f"expected a mapping of keys, got {raw!r}; allowed here: {keys}")
         kwargs: dict[str, Any] = {}
         for key, value in raw.items():
             if key not in allowed:

@@ -112,6 +112,15 @@ BAD = [
      [r"room\.wall_height_mm: expected a finite number, got nan"]),
     ("a mapping where a list belongs", lambda r: _set(r, "robot.poses", {"x_mm": 1}),
      [r"robot\.poses: expected a list"]),
+    ("an effect's parameter without its key", lambda r: _set(r, "effects.noise", 0.02),
+     [r"effects\.noise: expected a mapping of keys, got 0\.02; allowed here: sigma_v$"]),
+    ("a number for an effect that has no keys", lambda r: _set(r, "effects.quantization", 12),
+     [r"effects\.quantization: expected a mapping of keys, got 12; allowed here: none, write "
+      r"\{\} for the defaults$"]),
+    ("corners where the room's mapping belongs",
+     lambda r: _set(r, "room", [[0, 0], [2000, 0], [2000, 900]]),
+     [r"room: expected a mapping of keys, got \[\[0, 0\], .*; allowed here: outline_m, "
+      r"outline_mm, reflectance"]),
 ]
 
 
