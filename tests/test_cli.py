@@ -202,6 +202,15 @@ def test_markdown_links_stay_inside_the_repository():
     assert bad == []
 
 
+def test_the_docs_index_lists_every_page():
+    """docs/README.md is where a newcomer looks for a part: every page of docs/ is linked."""
+    from pathlib import Path
+
+    docs = Path(__file__).resolve().parents[1] / "docs"
+    linked = set(re.findall(r"\]\(([\w-]+\.md)\)", (docs / "README.md").read_text()))
+    assert linked == {p.name for p in docs.glob("*.md")} - {"README.md"}
+
+
 def test_a_command_loads_only_its_own_module():
     """Building the parser imports no subcommand; `irring run` parses without loading
     what other commands need (the studies, the serial link, Dask, matplotlib charts)."""
