@@ -93,6 +93,15 @@ BAD_VALUES = [
     (["bench", "dynamics", "--seeds", "-4"], "--seeds", "must be ≥ 0, got -4"),
     (["emulate", "--fault-seed", "x"], "--fault-seed",
      "must be an integer ≥ 0, got 'x'"),
+    # these were `type=int`/`float`: -5 named a field (stall_after) with no usage line, and a
+    # negative --stall-seconds was taken
+    (["emulate", "--stall-after", "-5"], "--stall-after", "must be ≥ 0, got -5"),
+    (["emulate", "--disconnect-after", "-1"], "--disconnect-after", "must be ≥ 0, got -1"),
+    (["emulate", "--stall-seconds", "-2"], "--stall-seconds",
+     "must be a number ≥ 0 and ≤ 86400, got '-2'"),
+    (["drive", "--settle-ms", "70000"], "--settle-ms", "must be in 0 … 60000, got 70000"),
+    (["drive", "--samples", "65"], "--samples", "must be in 1 … 64, got 65"),
+    (["calibrate", "--sensor", "-1"], "--sensor", "must be ≥ 0, got -1"),
 ]
 
 

@@ -678,7 +678,7 @@ def test_drive_saves_the_sweeps_elsewhere_when_its_outputs_cannot_be_written(
 
 @pytest.mark.parametrize("argv, status, message", [
     (["drive", "--port", "x", "--timeout", "0"], 2, "--timeout: must be a number of seconds > 0"),
-    (["drive", "--port", "x", "--samples", "65"], 2, "--samples: must be 1 … 64"),
+    (["drive", "--port", "x", "--samples", "65"], 2, "--samples: must be in 1 … 64"),
     # more sweeps than a recording holds: drive wrote a sweeps.npz replay refused
     (["drive", "--port", "x", "--poses", "10001"], 2, "--poses: must be 1 … 10000, got 10001"),
     (["drive", "--port", "x", "--pose", "nan,nan"], 2, "--pose: 'nan,nan': expected"),

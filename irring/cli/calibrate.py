@@ -79,8 +79,9 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", type=Path, default=None, metavar="FILE",
                    help="with --port: the placements an earlier run read before it stopped "
                         "(the file it named); they are not measured again")
-    p.add_argument("--sensor", type=at_least(0), default=DEFAULTS["sensor"],
-                   help=f"which sensor faces the wall (default: {DEFAULTS['sensor']})")
+    p.add_argument("--sensor", type=at_least(0), default=DEFAULTS["sensor"], metavar="K",
+                   help=f"which sensor faces the wall, ≥ 0: 0 … N−1 of the scenario's ring "
+                        f"(default: {DEFAULTS['sensor']})")
     p.add_argument("--sweeps", type=at_least(1, MAX_SWEEPS), default=DEFAULTS["sweeps"],
                    metavar="N", help=f"sweeps per placement, averaged (1 … {MAX_SWEEPS}, what a "
                                      f"progress file holds; default: 8 simulated, 4 real)")

@@ -19,7 +19,7 @@ from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..recording import save_recording
 from ..scenario import load_scenario
-from ._common import add_mcap_option, between, describe, positive_seconds
+from ._common import add_mcap_option, at_least, between, describe, positive_seconds
 from .run import report
 
 HELP = """\
@@ -89,11 +89,12 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pose", type=_pose, action="append", default=None,
                    metavar="X_MM,Y_MM[,YAW_DEG]",
                    help="robot pose of the next sweep, repeatable (overrides --truth's)")
-    p.add_argument("--samples", type=between(1, 64), default=None,
-                   help="readings averaged per step by the device, 1–64 (default: --truth's "
+    p.add_argument("--samples", type=at_least(1, 64), default=None, metavar="N",
+                   help="readings averaged per step by the device, 1 … 64 (default: --truth's "
                         "scan.samples with averaging, else 1)")
-    p.add_argument("--settle-ms", type=between(0, 60_000), default=None, metavar="MS",
-                   help="wait at each step before reading (default: --truth's, else 0)")
+    p.add_argument("--settle-ms", type=at_least(0, 60_000), default=None, metavar="MS",
+                   help="wait at each step before reading, 0 … 60000 ms (default: --truth's, "
+                        "else 0)")
     p.add_argument("--resweep", type=between(0, 100), default=2, metavar="K",
                    help="rounds of re-sweeping only the missing steps (default 2; 0 = never)")
     p.add_argument("--out", type=Path, default=Path("out") / "drive", metavar="DIR",

@@ -11,7 +11,10 @@ import time
 
 from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
 from ..scenario import load_scenario
-from ._common import add_pose_option, between, describe, host_port, pose_index, seed
+from ._common import (add_pose_option, at_least, between, describe, host_port, number_in,
+                      pose_index, seed)
+
+STALL_S_MAX = 86_400   # a day: longer is a firmware that never recovers, the default
 
 DEFAULT_LINK = "ring.pty"
 
@@ -63,15 +66,16 @@ def register(p: argparse.ArgumentParser) -> None:
                         "garbles about half of all 80-byte IRSCN sentences)")
     p.add_argument("--drop-rate", type=float, default=0.0, metavar="P",
                    help="probability that a sentence is never sent, 0…1 (default 0)")
-    p.add_argument("--stall-after", type=int, default=None, metavar="N",
-                   help="stop answering after N sentences (a hung firmware)")
-    p.add_argument("--stall-seconds", type=float, default=math.inf, metavar="S",
-                   help="with --stall-after: recover after S seconds (default: never)")
-    p.add_argument("--disconnect-after", type=int, default=None, metavar="N",
-                   help="close the port after N sentences (a pulled cable)")
+    p.add_argument("--stall-after", type=at_least(0), default=None, metavar="N",
+                   help="stop answering after N ≥ 0 sentences, a hung firmware (default: never)")
+    p.add_argument("--stall-seconds", type=number_in(0, STALL_S_MAX), default=math.inf,
+                   metavar="S", help=f"with --stall-after: recover after S seconds, ≥ 0 and "
+                                     f"≤ {STALL_S_MAX:g} (default: never)")
+    p.add_argument("--disconnect-after", type=at_least(0), default=None, metavar="N",
+                   help="close the port after N ≥ 0 sentences, a pulled cable (default: never)")
     p.add_argument("--seed", type=seed, default=None,
                    help="noise seed ≥ 0 of the readings (default: the scenario's seed)")
-    p.add_argument("--fault-seed", type=seed, default=0,
+    p.add_argument("--fault-seed", type=seed, default=0, metavar="SEED",
                    help="seed ≥ 0 of the fault injection (default 0)")
     add_pose_option(p, None, "stay at one pose instead of moving on after each full sweep")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
