@@ -209,6 +209,12 @@ def test_markdown_links_stay_inside_the_repository():
                       or not (page.parent / target.split("#")[0]).resolve().is_relative_to(root)
                       or not (page.parent / target.split("#")[0]).exists()))
     assert bad == []
+    # a link to a section names a heading of the page, as GitHub makes its anchor
+    for page in pages:
+        text = page.read_text()
+        anchors = {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-")
+                   for h in re.findall(r"^#+ (.+)$", text, flags=re.M)}
+        assert set(re.findall(r"\]\(#([^)]+)\)", text)) <= anchors, page
 
 
 def test_the_docs_index_lists_every_page():
