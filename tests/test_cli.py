@@ -217,6 +217,19 @@ def test_markdown_links_stay_inside_the_repository():
         assert set(re.findall(r"\]\(#([^)]+)\)", text)) <= anchors, page
 
 
+def test_markdown_pages_hold_no_restructuredtext():
+    """docs/ is read as Markdown (on GitHub, in an editor): a Sphinx role (:class:`X`)
+    shows as literal text, and a reST table's ===== line turns the paragraph above it into
+    a heading."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    pages = [root / "README.md", *sorted((root / "docs").glob("*.md"))]
+    found = sorted((p.name, m) for p in pages for m in re.findall(
+        r":(?:class|func|meth|data|attr|mod|exc|obj):`|^=+ +=+ *$", p.read_text(), flags=re.M))
+    assert found == []
+
+
 def test_the_docs_index_lists_every_page():
     """docs/README.md is where a newcomer looks for a part: every page of docs/ is linked."""
     from pathlib import Path
