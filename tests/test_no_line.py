@@ -84,6 +84,50 @@ def test_no_valid_reading_more_than_100_mm_off_and_none_outside_the_room(text, m
     assert valid >= min_valid       # the readings are kept, not flagged away
 
 
+# turned rooms, fold-over on, poses at the housing limit: a sensor meets a far wall near a
+# corner at 60-66° in a few readings (3 at the sweep's edge; 6 among ambiguous ones) whose
+# profile noise bent 2.2 SE away from the beam; kept as a post at θ = 0 they lay 106-166 mm
+# long (3 readings in each room before the convex rule asked for a surer bend)
+TURNED_31 = """
+name: turned_31
+seed: 9108
+room: {outline_mm: [[0, 0], [1371.47, 824.06], [495.9, 2281.25], [-875.56, 1457.18]]}
+robot:
+  poses:
+    - {x_mm: -70.43, y_mm: 447.67, yaw_deg: 77}
+    - {x_mm: 1071.07, y_mm: 993.55, yaw_deg: 150}
+    - {x_mm: -102.17, y_mm: 1723.32, yaw_deg: 12}
+sensor: {model: gp2d12, max_range_mm: 624}
+effects: [incidence, noise, quantization, foldover]
+"""
+TURNED_M8 = """
+name: turned_m8
+seed: 9109
+room: {outline_mm: [[0, 0], [2277.62, -320.1], [2451.58, 917.74], [173.97, 1237.84]]}
+robot:
+  poses:
+    - {x_mm: 204.73, y_mm: 233.78, yaw_deg: 10}
+    - {x_mm: 2241.29, y_mm: 644.34, yaw_deg: 200}
+    - {x_mm: 1338.6, y_mm: 902.28, yaw_deg: -30}
+sensor: {model: gp2d12, max_range_mm: 624}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 680), (TURNED_M8, 500)])
+def test_a_far_steep_wall_bent_by_noise_is_not_kept_as_a_post(text, min_valid):
+    sc = loads(text, source="<test>")
+    valid = 0
+    for seed in range(sc.seed, sc.seed + 3):
+        run = pipeline.run(sc, seed=seed, progress=False)
+        for sw, p in zip(run.sweeps, run.points):
+            hit = sw.truth.hit_point
+            v = p.valid
+            valid += int(v.sum())
+            err = np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[v]
+            assert np.all(np.isfinite(err)) and err.max() <= 0.100, (seed, err.max())
+    assert valid >= min_valid
+
 def _short_wall(length_m, distance_m, tilt_deg):
     """A wall segment centred ``distance_m`` ahead (3 cm to the left), its normal turned
     ``tilt_deg`` from the beam's axis."""

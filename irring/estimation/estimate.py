@@ -597,6 +597,7 @@ _CHI2_95 = np.array([3.84, 5.99, 7.81, 9.49, 11.07])  # … and a straight profi
 #                                                    its 95 % point (1 … 5 degrees of freedom)
 _CONVEX_BELOW_DROP_RAD = math.radians(5)  # a bend with θ this near the drop-out is the model's clamp
 _UNKNOWN_M = 0.10       # fewer readings, and θ = 0 may read this much long: INCIDENCE_UNKNOWN
+_CONVEX_SURE_SE = 3.0   # … unless its profile bends away this many standard errors: a post
 
 
 def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
@@ -698,6 +699,10 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     # as a post's readings are; flagging them lost thin legs' recall (0.96 -> 0.89)
     convex = ((n >= _LOCAL_MIN) & (bend > _LOCAL_SLOPE_SE * bend_se)
               & (theta < cal.max_incidence_rad - _CONVEX_BELOW_DROP_RAD))
+    # where θ = 0 may read more than _UNKNOWN_M long, a bend noise could make (a steep far
+    # wall's few readings bent 2.2 SE by noise were kept 106-166 mm long) is not enough
+    doubtful = d0[off] - cal.distance(s[off], steep) > _UNKNOWN_M
+    convex &= ~doubtful | (bend > _CONVEX_SURE_SE * bend_se)
     # a ring held still (fewer motor steps than a slope needs) has no neighbours to ask: its
     # readings are what it has (flagging them lost a radial ring nearly every reading)
     still = bool(np.unique(np.asarray(steps)).size < _LOCAL_MIN)
