@@ -90,3 +90,19 @@ def test_out_without_png_is_a_folder_and_an_unwritable_out_exits_4(tmp_path, mon
         assert err.count("\n") == 1 and why in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "d.png", "pics"]
     assert (tmp_path / "afile").read_text() == "mine" and not any((tmp_path / "d.png").iterdir())
+
+
+def test_the_camera_frames_the_room_when_the_reach_is_larger():
+    """The IR ring's 0.77 m reach is what the picture frames in the T-room; a laser's 8 m
+    would leave the room a speck in the middle (it did), so the room's farthest corner
+    bounds the framing."""
+    from irring.scenario import apply_design
+
+    t_room = load_scenario("t_room")
+    ir = view.SceneView(t_room).camera()
+    assert ir.distance == pytest.approx(2.4 * (0.624 + 0.150))
+    laser = view.SceneView(apply_design(t_room, "laser")).camera()
+    x, y = t_room.robot.poses[0].x_m, t_room.robot.poses[0].y_m
+    corners = np.asarray(t_room.room.outline_m)
+    farthest = np.hypot(corners[:, 0] - x, corners[:, 1] - y).max()
+    assert 1.5 < farthest < 2.5 and laser.distance == pytest.approx(2.4 * farthest)

@@ -86,12 +86,14 @@ class SceneView:
 
     def camera(self) -> mujoco.MjvCamera:
         """A free camera looking down at the pose from behind and above, the sensors'
-        reach in view."""
+        reach in view, or the room where it is smaller (a laser's 8 m would shrink it)."""
         cam = mujoco.MjvCamera()
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
         x, y, yaw = self.sim.pose(self.pose_index)
         cam.lookat[:] = (x, y, 0.0)
-        cam.distance = 2.4 * (self.sim.max_range_m + self.sim.ring.radius_m)
+        corners = np.asarray(self.sim.scenario.room.outline_m)
+        farthest_wall = float(np.hypot(corners[:, 0] - x, corners[:, 1] - y).max())
+        cam.distance = 2.4 * min(self.sim.max_range_m + self.sim.ring.radius_m, farthest_wall)
         cam.elevation = -65.0
         cam.azimuth = 90.0 - 25.0
         return cam
