@@ -64,6 +64,13 @@ class MapperParams:
     # nothing: an occluding edge), the surface behind it weighs l_occ_min this deep (cells)
     hit_depth_cells: float = 1.25
     edge_jump_cells: float = 5.0
+    # a valid reading (σ from explain_sharper·min_sigma_m to lone_sigma_m) whose beam
+    # crosses, within explain_sigmas·σ and at least a cell before its end point, a cell
+    # where the batch's end points explain_sharper times sharper hold explain_log_odds is
+    # mapped as ending there, with their σ (explain_sigmas 0: off)
+    explain_sigmas: float = 3.0
+    explain_log_odds: float = 3.0
+    explain_sharper: float = 2.0
     # readings from a wide cone (Points.cone_half_angle_rad > 0: sonar), mapped as arcs
     cone_step_rad: float = math.radians(1.0)  # spacing of the fan of rays across the cone
     cone_l_occ: float = 1.25      # a hit on the arc
@@ -94,6 +101,13 @@ class MapperParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"need a finite {name} ≥ 0, got {value}")
+        if not (math.isfinite(self.explain_sigmas) and self.explain_sigmas >= 0):
+            raise ValueError(f"need a finite explain_sigmas ≥ 0 (0: off), got "
+                             f"{self.explain_sigmas}")
+        if not (math.isfinite(self.explain_log_odds) and self.explain_log_odds > 0):
+            raise ValueError(f"need a finite explain_log_odds > 0, got {self.explain_log_odds}")
+        if not (math.isfinite(self.explain_sharper) and self.explain_sharper >= 1):
+            raise ValueError(f"need a finite explain_sharper ≥ 1, got {self.explain_sharper}")
         if not (self.occ_sigma_m > 0 and self.l_occ_min >= 0):
             raise ValueError(f"need occ_sigma_m > 0 and l_occ_min ≥ 0, got "
                              f"{self.occ_sigma_m}, {self.l_occ_min}")
@@ -272,8 +286,17 @@ class OccupancyGrid:
         """Add the log-odds of ``points`` to ``log_odds`` (this grid's shape, float64,
         C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
         ``add_beams``). Work and memory scale with the beams, not the grid. Readings from a
-        cone go in as :func:`cone_fan` with the ``cone_*`` weights."""
+        cone go in as :func:`cone_fan` with the ``cone_*`` weights; pencil beams a surface
+        explains (:func:`explained_ranges`) are moved onto it first."""
+        if self.params.explain_sigmas > 0 and points.cone_half_angle_rad == 0:
+            points = at_ranges(points, explained_ranges(
+                points, self.shape, self.origin_xy_m, self.resolution_m, self.params),
+                self.params)
         points, params = mapped_beams(points, self.params)
+        self._add_beams(log_odds, points, params, lo, hi)
+
+    def _add_beams(self, log_odds: np.ndarray, points: Points, params: MapperParams,
+                   lo: float, hi: float) -> None:
         _traverse.add_beams(
             log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
             _flat(points.x), _flat(points.y), _flat(points.sigma_m),
@@ -429,6 +452,93 @@ def mapped_beams(points: Points, params: MapperParams) -> tuple[Points, MapperPa
             params, l_occ=params.cone_l_occ, l_free=params.cone_l_free,
             l_no_return=params.cone_l_no_return, hold_sigma_m=0.0)
     return points, params
+
+
+def hit_weight(sigma: np.ndarray, params: MapperParams) -> np.ndarray:
+    """The log-odds of a valid reading's hit at its end point, from its σ (m, floored):
+    l_occ up to ``occ_sigma_m``, l_occ·occ_sigma_m/σ beyond, at least l_occ_min, and that
+    floor scaled by lone_sigma_m/σ beyond ``lone_sigma_m`` (docs/mapping.md)."""
+    trust = np.minimum(1.0, params.lone_sigma_m / sigma)
+    return np.maximum(min(params.l_occ_min, params.l_occ) * trust,
+                      params.l_occ * np.minimum(1.0, params.occ_sigma_m / sigma))
+
+
+def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
+                     params: MapperParams) -> np.ndarray:
+    """(S, N) m: the range each valid reading a surface explains is mapped at instead of
+    its own (NaN for the others), on a grid of ``shape`` (ny, nx) cells.
+
+    A reading is explained when its σ lies in [``explain_sharper``·``min_sigma_m``, ``lone_sigma_m``]
+    and its beam crosses, within ``explain_sigmas``·σ before its end point and leaving it
+    at least a cell before, a cell that sharper end points of the batch confirm: the hits
+    (:func:`hit_weight`) of those in it whose σ is at most σ/``explain_sharper`` reach
+    ``explain_log_odds``. That surface, within the reading's noise in front of it, explains
+    the reading, which is mapped at the middle of its beam's passage through the first such
+    cell. docs/mapping.md says why and what it changed.
+    """
+    p, res = params, float(resolution_m)
+    ny, nx = (int(n) for n in shape)
+    out = np.full(np.shape(points.valid), np.nan)
+    vi = np.flatnonzero(np.asarray(points.valid, bool).ravel())
+    if p.explain_sigmas <= 0 or vi.size == 0:
+        return out
+    sigma = np.asarray(points.sigma_m, float).ravel()[vi]
+    sigma = np.maximum(np.where(np.isnan(sigma), p.default_sigma_m, sigma), p.min_sigma_m)
+    cand = (sigma >= p.explain_sharper * p.min_sigma_m) & (sigma <= p.lone_sigma_m)
+    if not cand.any():                 # (most sweeps of near walls: nothing to explain)
+        return out
+    ox, oy = (np.asarray(a, float).ravel()[vi] for a in (points.origin_x, points.origin_y))
+    px, py = (np.asarray(a, float).ravel()[vi] for a in (points.x, points.y))
+    with np.errstate(invalid="ignore"):
+        d = np.hypot(px - ox, py - oy)
+        near = np.maximum(d - p.explain_sigmas * sigma, 0.0)
+        cand = np.flatnonzero(cand & np.isfinite(d) & (d - res > near))
+    if cand.size == 0:
+        return out
+    # the batch's end points by cell, then σ: a cell's hits of σ up to s are a prefix sum
+    with np.errstate(invalid="ignore"):
+        ix = np.floor((px - origin_xy_m[0]) / res)
+        iy = np.floor((py - origin_xy_m[1]) / res)
+        inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+    key = (iy * nx + ix)[inside] + np.minimum(sigma[inside], 0.5)   # σ < 1 m
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    cum = np.concatenate(([0.0], np.cumsum(hit_weight(sigma[inside][order], p))))
+    # each candidate's beam from d − kσ to its end point
+    dc, a, sc, x0, y0 = d[cand], near[cand], sigma[cand], ox[cand], oy[cand]
+    ux, uy = (px[cand] - x0) / dc, (py[cand] - y0) / dc
+    v = traverse(x0 + ux * a, y0 + uy * a, px[cand], py[cand], origin_xy_m, (ny, nx), res)
+    r = v.ray
+    s_a, s_b = a[r] + v.t_enter * (dc - a)[r], a[r] + v.t_exit * (dc - a)[r]
+    at = (v.iy * nx + v.ix).astype(float)
+    sharper = (cum[np.searchsorted(key, at + np.minimum(sc[r] / p.explain_sharper, 0.5),
+                                   side="right")]
+               - cum[np.searchsorted(key, at, side="left")])
+    confirmed = np.flatnonzero((s_b <= dc[r] - res) & (sharper >= p.explain_log_odds))
+    if confirmed.size:
+        rays, first = np.unique(r[confirmed], return_index=True)   # visits run along the ray
+        hit = confirmed[first]
+        out.reshape(-1)[vi[cand[rays]]] = 0.5 * (s_a[hit] + s_b[hit])
+    return out
+
+
+def at_ranges(points: Points, ranges: np.ndarray, params: MapperParams) -> Points:
+    """``points`` with each valid reading whose ``ranges`` (m) entry is finite moved along
+    its beam to that range, with σ/``explain_sharper`` (the σ of the readings that confirm
+    the surface it was moved to); the others as they are."""
+    moved = np.asarray(points.valid, bool) & np.isfinite(ranges)
+    if not moved.any():
+        return points
+    ox, oy = np.asarray(points.origin_x, float), np.asarray(points.origin_y, float)
+    px, py = np.asarray(points.x, float), np.asarray(points.y, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(moved, ranges / np.hypot(px - ox, py - oy), 1.0)
+    sigma = np.asarray(points.sigma_m, float)
+    return dataclasses.replace(
+        points, x=np.where(moved, ox + (px - ox) * scale, points.x),
+        y=np.where(moved, oy + (py - oy) * scale, points.y),
+        d=np.where(moved, ranges, points.d),
+        sigma_m=np.where(moved, sigma / params.explain_sharper, points.sigma_m))
 
 
 def slice_steps(points: Points, rows: slice) -> Points:

@@ -13,7 +13,8 @@ import math
 import numpy as np
 
 from ..core import Points, Reason
-from .mapping import MapperParams, mapped_beams, traverse
+from .mapping import (MapperParams, at_ranges, explained_ranges, hit_weight, mapped_beams,
+                      traverse)
 
 
 def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.ndarray:
@@ -44,11 +45,15 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
 
     As :meth:`OccupancyGrid.insert` (with ``lo, hi`` its clamps) and :meth:`~OccupancyGrid.delta`
     (the grid as it is, no clamp: silent beams stop at its cells); readings from a wide cone
-    go in as their fan of rays. The kernel clamps only the box of cells its beams reach; on a
-    grid already inside [lo, hi] that is the same.
+    go in as their fan of rays, and pencil beams a sharper surface explains at its range
+    (:func:`~irring.maps.mapping.explained_ranges`). The kernel clamps only the box of cells
+    its beams reach; on a grid already inside [lo, hi] that is the same.
     """
-    points, p = mapped_beams(points, params)
     shape = np.shape(log_odds)
+    if params.explain_sigmas > 0 and points.cone_half_angle_rad == 0:
+        points = at_ranges(points, explained_ranges(points, shape, origin_xy_m, resolution_m,
+                                                    params), params)
+    points, p = mapped_beams(points, params)
     res = float(resolution_m)
     ox, oy = points.origin_x.ravel().astype(float), points.origin_y.ravel().astype(float)
     px, py = points.x.ravel().astype(float), points.y.ravel().astype(float)
@@ -87,8 +92,7 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     # l_occ_min), Gaussian in the gap between the cell and the end point, up to tail_sigmas·σ
     # behind it
     trust = np.minimum(1.0, p.lone_sigma_m / s)
-    l_hit = np.maximum(min(p.l_occ_min, p.l_occ) * trust,
-                       p.l_occ * np.minimum(1.0, p.occ_sigma_m / s))
+    l_hit = hit_weight(s, p)
     gap = np.maximum(np.maximum(s_a - d[r], d[r] - s_b), 0.0)
     w_hit = np.where(s_a < d[r] + p.tail_sigmas * s[r],
                      l_hit[r] * np.exp(-0.5 * (gap / s[r]) ** 2), 0.0)

@@ -1,0 +1,143 @@
+"""A far reading that sharper readings of its sweep explain is mapped on their surface
+(MapperParams.explain_*, mapping.explained_ranges; docs/mapping.md, "Readings a sharper
+surface explains")."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from irring.core import Points, Reason
+from irring.maps import mapping_numpy
+from irring.maps.mapping import (OCCUPIED, MapperParams, OccupancyGrid, at_ranges,
+                                 explained_ranges)
+
+WALL_Y = 0.605            # a wall's surface in the middle of cell row 60 (10 mm cells)
+EMITTER = (0.503, 0.05)   # the emitter every beam starts from
+
+
+def grid(**params) -> OccupancyGrid:
+    return OccupancyGrid((0.0, 0.0), (80, 100), 0.01, MapperParams(**params))
+
+
+def sweep(*beams, steps: int = 2) -> Points:
+    """One batch: each beam (heading in degrees, range m, σ m) from EMITTER, ``steps`` times
+    (steps of a sweep that read alike), as a (steps, n) Points."""
+    heading = np.radians([b[0] for b in beams])
+    d = np.array([b[1] for b in beams], float)
+    sigma = np.array([b[2] for b in beams], float)
+    rows = lambda a: np.tile(a, (steps, 1))  # noqa: E731
+    ox, oy = np.full(d.size, EMITTER[0]), np.full(d.size, EMITTER[1])
+    return Points(x=rows(ox + d * np.cos(heading)), y=rows(oy + d * np.sin(heading)),
+                  d=rows(d), theta=rows(np.zeros(d.size)), origin_x=rows(ox),
+                  origin_y=rows(oy), heading=rows(heading), sigma_m=rows(sigma),
+                  iterations=np.ones((steps, d.size), int),
+                  valid=np.ones((steps, d.size), bool),
+                  reason=np.full((steps, d.size), int(Reason.OK), np.uint8), max_range_m=0.624)
+
+
+def wall_beams(sigma_m: float):
+    """Beams from 80° to 100° every 0.5° that end on the wall, but for the one at 90° (the
+    long reading's; of the others only 89.5° ends in the wall cell its beam crosses)."""
+    return [(h, (WALL_Y - EMITTER[1]) / math.sin(math.radians(h)), sigma_m)
+            for h in np.arange(80.0, 100.01, 0.5) if abs(h - 90.0) > 1e-9]
+
+
+def occupied_at(g: OccupancyGrid, x: float, y: float) -> bool:
+    ix, iy = g.cell_of(x, y)
+    return bool(g.classify()[iy, ix] == OCCUPIED)
+
+
+LONG = (90.0, WALL_Y - EMITTER[1] + 0.045, 0.020)   # straight up, 45 mm (2.25 σ) long
+
+
+def test_a_long_reading_behind_a_wall_sharper_readings_confirm_draws_no_wall_behind_it():
+    """The wall seen by sharp readings (σ 8 mm) and one reading of σ 20 mm that noise put
+    45 mm behind it: the map has no occupied cell more than a cell behind the wall; without
+    the rule the long reading marks its cell 45 mm outside."""
+    batch = sweep(*wall_beams(0.008), LONG)
+    g = grid()
+    g.insert(batch)
+    rows = np.flatnonzero((g.classify() == OCCUPIED).any(axis=1))
+    assert rows.max() == 60 and 60 in rows                  # the wall's row, nothing behind
+    assert not occupied_at(g, EMITTER[0], WALL_Y + 0.045)
+    off = grid(explain_sigmas=0.0)
+    off.insert(batch)
+    assert occupied_at(off, EMITTER[0], WALL_Y + 0.045)
+
+
+def test_the_explained_reading_is_mapped_on_the_confirmed_cell_with_the_sharper_sigma():
+    """explained_ranges gives the middle of the beam's passage through the wall's cell
+    (0.55 … 0.56 m up the beam) for the long reading and NaN for every other; at_ranges
+    moves it there with σ / explain_sharper."""
+    batch = sweep(*wall_beams(0.008), LONG)
+    g = grid()
+    ranges = explained_ranges(batch, g.shape, g.origin_xy_m, g.resolution_m, g.params)
+    assert ranges.shape == (2, 41)
+    assert np.isfinite(ranges).sum() == 2                    # the long reading, both steps
+    np.testing.assert_allclose(ranges[:, -1], 0.555, atol=1e-9)
+    moved = at_ranges(batch, ranges, g.params)
+    np.testing.assert_allclose(moved.y[:, -1], WALL_Y, atol=1e-9)
+    np.testing.assert_allclose(moved.x[:, -1], EMITTER[0], atol=1e-9)
+    np.testing.assert_allclose(moved.sigma_m[:, -1], 0.010)
+    np.testing.assert_array_equal(moved.x[:, :-1], batch.x[:, :-1])
+    np.testing.assert_array_equal(moved.sigma_m[:, :-1], batch.sigma_m[:, :-1])
+
+
+def test_a_lone_uncertain_reading_with_nothing_in_front_still_marks_its_cell():
+    """A thin post seen by one reading of σ 20 mm (nothing confirmed along its beam) and a
+    surface 80 mm (4 σ) behind a confirmed wall (seen through a gap): both stay marked."""
+    post = (135.0, 0.42, 0.020)
+    deep = (90.0, WALL_Y - EMITTER[1] + 0.080, 0.020)
+    g = grid()
+    g.insert(sweep(*wall_beams(0.008), post, deep))
+    h = math.radians(135.0)
+    assert occupied_at(g, EMITTER[0] + 0.42 * math.cos(h), EMITTER[1] + 0.42 * math.sin(h))
+    assert occupied_at(g, EMITTER[0], WALL_Y + 0.080)
+
+
+def test_readings_no_sharper_than_the_long_one_do_not_explain_it():
+    """The same wall read with σ 12 mm (more than 20 mm / explain_sharper): the long
+    reading keeps its end point; and a wall of σ 8 mm read by one step of the sweep (one end
+    point, 1.6, in the cell the long beam crosses: below explain_log_odds 3) does not explain
+    it either, while two steps (3.2) do."""
+    g = grid()
+    g.insert(sweep(*wall_beams(0.012), LONG))
+    assert occupied_at(g, EMITTER[0], WALL_Y + 0.045)
+    once = sweep(*wall_beams(0.008), LONG, steps=1)
+    r = explained_ranges(once, g.shape, g.origin_xy_m, g.resolution_m, g.params)
+    assert not np.isfinite(r).any()
+    twice = sweep(*wall_beams(0.008), LONG, steps=2)
+    r = explained_ranges(twice, g.shape, g.origin_xy_m, g.resolution_m, g.params)
+    assert np.isfinite(r[:, -1]).all() and not np.isfinite(r[:, :-1]).any()
+
+
+def test_kernel_and_oracle_map_explained_readings_alike():
+    """grid.delta (compiled kernel) and mapping_numpy.add (the oracle) on the batch with an
+    explained reading: the same cells within the oracle tests' 2e-4."""
+    batch = sweep(*wall_beams(0.008), LONG, (135.0, 0.42, 0.020))
+    g = grid()
+    g.log_odds[40:45, 10:20] = 1.25
+    want = mapping_numpy.add(g.log_odds, batch, g.origin_xy_m, g.resolution_m, g.params)
+    np.testing.assert_allclose(g.log_odds + g.delta(batch), want, atol=2e-4)
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"explain_sigmas": -1.0}, "explain_sigmas ≥ 0"),
+    ({"explain_sigmas": math.inf}, "explain_sigmas ≥ 0"),
+    ({"explain_log_odds": 0.0}, "explain_log_odds > 0"),
+    ({"explain_log_odds": math.nan}, "explain_log_odds > 0"),
+    ({"explain_sharper": 0.5}, "explain_sharper ≥ 1"),
+])
+def test_bad_explain_knobs_are_refused_by_name(bad, message):
+    with pytest.raises(ValueError, match=message):
+        MapperParams(**bad)
+
+
+def test_explain_sigmas_zero_turns_the_rule_off():
+    batch = sweep(*wall_beams(0.008), LONG)
+    g = grid(explain_sigmas=0.0)
+    r = explained_ranges(batch, g.shape, g.origin_xy_m, g.resolution_m, g.params)
+    assert not np.isfinite(r).any()
