@@ -747,3 +747,143 @@ def first_material(const double[::1] x0, const double[::1] y0, const double[::1]
                         out[j] = lab
                         break
     return out_a
+
+
+cdef inline double hit_log_odds(double sigma, double l_occ, double l_occ_min, double occ_sigma,
+                                double lone_sigma) noexcept nogil:
+    # mapping.hit_weight: the hit at a valid reading's end point, from its (floored) σ
+    return dmax(dmin(l_occ_min, l_occ) * dmin(1.0, lone_sigma / sigma),
+                l_occ * dmin(1.0, occ_sigma / sigma))
+
+
+cdef inline Py_ssize_t lower_bound(const double* keys, Py_ssize_t n, double v) noexcept nogil:
+    # the first index whose key is ≥ v (keys ascending)
+    cdef Py_ssize_t lo = 0, hi = n, mid
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if keys[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+cdef inline Py_ssize_t upper_bound(const double* keys, Py_ssize_t n, double v) noexcept nogil:
+    # the first index whose key is > v (keys ascending)
+    cdef Py_ssize_t lo = 0, hi = n, mid
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if keys[mid] <= v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+def explained_ranges(const double[::1] origin_x, const double[::1] origin_y,
+                     const double[::1] x, const double[::1] y, const double[::1] sigma_m,
+                     const unsigned char[::1] valid, double grid_x, double grid_y, double res,
+                     long nx, long ny, params):
+    """The range (m) each reading is mapped at where a sharper surface explains it, NaN
+    elsewhere (flat arrays, metres; ``valid`` as uint8): ``mapping.explained_ranges``, whose
+    numpy oracle is ``mapping_numpy.explained_ranges``. The batch's end points inside the
+    grid are sorted by cell, then σ (numpy's argsort), so a cell's hits of σ up to s are a
+    prefix sum found by binary search; each candidate's beam is walked cell by cell
+    (Amanatides–Woo, no visit for a cell it stays in less than TOUCH_CELLS) from
+    explain_sigmas·σ before its end point until a cell confirms it or none can."""
+    cdef Py_ssize_t n = origin_x.shape[0], i, j, m = 0, nc = 0, lo_i, hi_i
+    if not (origin_y.shape[0] == x.shape[0] == y.shape[0] == sigma_m.shape[0]
+            == valid.shape[0] == n):
+        raise ValueError("every array of the readings needs the same length")
+    out_a = np.full(n, np.nan)
+    cdef double[::1] out = out_a
+    cdef double k_sig = params.explain_sigmas, ratio = params.explain_sharper
+    cdef double need = params.explain_log_odds, lone = params.lone_sigma_m
+    cdef double min_sigma = params.min_sigma_m, default_sigma = params.default_sigma_m
+    cdef double l_occ = params.l_occ, l_occ_min = params.l_occ_min, occ_sigma = params.occ_sigma_m
+    if not k_sig > 0 or n == 0:
+        return out_a
+    keys_a = np.empty(n)
+    w_a = np.empty(n)
+    cand_a = np.empty(n, np.intp)
+    cdef double[::1] keys = keys_a
+    cdef double[::1] w = w_a
+    cdef Py_ssize_t[::1] cand = cand_a
+    cdef double inv = 1.0 / res, s, d, vx, vy, cx, cy
+    with nogil:
+        for i in range(n):
+            if not (valid[i] and isfinite(x[i] + y[i]) and isfinite(origin_x[i] + origin_y[i])):
+                continue
+            s = sigma_m[i] if isfinite(sigma_m[i]) else default_sigma
+            s = dmax(s, min_sigma)
+            cx, cy = ffloor((x[i] - grid_x) * inv), ffloor((y[i] - grid_y) * inv)
+            if 0 <= cx < nx and 0 <= cy < ny:
+                keys[m] = cy * nx + cx + dmin(s, 0.5)
+                w[m] = hit_log_odds(s, l_occ, l_occ_min, occ_sigma, lone)
+                m += 1
+            vx, vy = x[i] - origin_x[i], y[i] - origin_y[i]
+            d = sqrt(vx * vx + vy * vy)
+            if s >= ratio * min_sigma and s <= lone and d - res > dmax(d - k_sig * s, 0.0):
+                cand[nc] = i
+                nc += 1
+    if nc == 0 or m == 0:
+        return out_a
+    order = np.argsort(keys_a[:m], kind="stable")
+    sorted_a = keys_a[:m][order]
+    cum_a = np.zeros(m + 1)
+    cum_a[1:] = np.cumsum(w_a[:m][order])
+    cdef double[::1] sk = sorted_a
+    cdef double[::1] cum = cum_a
+    cdef double a, ux, uy, px0, py0, length, t, t_exit, tmx, tmy, tdx, tdy, s_a, s_b, cell
+    cdef long ix, iy, stx, sty
+    with nogil:
+        for j in range(nc):
+            i = cand[j]
+            s = sigma_m[i] if isfinite(sigma_m[i]) else default_sigma
+            s = dmax(s, min_sigma)
+            vx, vy = x[i] - origin_x[i], y[i] - origin_y[i]
+            d = sqrt(vx * vx + vy * vy)
+            ux, uy = vx / d, vy / d
+            a = dmax(d - k_sig * s, 0.0)
+            # the window's start in cells, and its length in cells
+            px0 = (origin_x[i] + ux * a - grid_x) * inv
+            py0 = (origin_y[i] + uy * a - grid_y) * inv
+            length = (d - a) * inv
+            ix, iy = lfloor(px0), lfloor(py0)
+            stx = 1 if ux > 0 else -1
+            sty = 1 if uy > 0 else -1
+            tdx = 1.0 / fabs(ux) if ux != 0 else INFINITY
+            tdy = 1.0 / fabs(uy) if uy != 0 else INFINITY
+            tmx = ((ix + (ux > 0)) - px0) / ux if ux != 0 else INFINITY
+            tmy = ((iy + (uy > 0)) - py0) / uy if uy != 0 else INFINITY
+            t = 0.0
+            while True:
+                t_exit = dmin(dmin(tmx, tmy), length)
+                s_a, s_b = a + t * res, a + t_exit * res
+                if s_a >= d - res:
+                    break
+                if t_exit - t >= TOUCH_CELLS and s_b <= d - res and 0 <= ix < nx \
+                        and 0 <= iy < ny:
+                    cell = <double>(iy * nx + ix)
+                    lo_i = lower_bound(&sk[0], m, cell)
+                    hi_i = upper_bound(&sk[0], m, cell + dmin(s / ratio, 0.5))
+                    if cum[hi_i] - cum[lo_i] >= need:
+                        out[i] = 0.5 * (s_a + s_b)
+                        break
+                if t_exit >= length:
+                    break
+                if tmx < tmy:
+                    ix += stx
+                    t = tmx
+                    tmx += tdx
+                elif tmy < tmx:
+                    iy += sty
+                    t = tmy
+                    tmy += tdy
+                else:                                  # through a corner: the diagonal cell
+                    ix += stx
+                    iy += sty
+                    t = tmx
+                    tmx += tdx
+                    tmy += tdy
+    return out_a

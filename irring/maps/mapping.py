@@ -468,58 +468,22 @@ def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
     """(S, N) m: the range each valid reading a surface explains is mapped at instead of
     its own (NaN for the others), on a grid of ``shape`` (ny, nx) cells.
 
-    A reading is explained when its σ lies in [``explain_sharper``·``min_sigma_m``, ``lone_sigma_m``]
-    and its beam crosses, within ``explain_sigmas``·σ before its end point and leaving it
-    at least a cell before, a cell that sharper end points of the batch confirm: the hits
-    (:func:`hit_weight`) of those in it whose σ is at most σ/``explain_sharper`` reach
-    ``explain_log_odds``. That surface, within the reading's noise in front of it, explains
-    the reading, which is mapped at the middle of its beam's passage through the first such
-    cell. docs/mapping.md says why and what it changed.
+    A reading is explained when its σ lies in [``explain_sharper``·``min_sigma_m``,
+    ``lone_sigma_m``] and its beam crosses, within ``explain_sigmas``·σ before its end point
+    and leaving it at least a cell before, a cell that sharper end points of the batch
+    confirm: the hits (:func:`hit_weight`) of those in it whose σ is at most
+    σ/``explain_sharper`` reach ``explain_log_odds``. That surface, within the reading's
+    noise in front of it, explains the reading, which is mapped at the middle of its beam's
+    passage through the first such cell. Compiled (irring/maps/_traverse.pyx); the numpy
+    oracle is :func:`irring.maps.mapping_numpy.explained_ranges`. docs/mapping.md says why
+    and what it changed.
     """
-    p, res = params, float(resolution_m)
     ny, nx = (int(n) for n in shape)
-    out = np.full(np.shape(points.valid), np.nan)
-    vi = np.flatnonzero(np.asarray(points.valid, bool).ravel())
-    if p.explain_sigmas <= 0 or vi.size == 0:
-        return out
-    sigma = np.asarray(points.sigma_m, float).ravel()[vi]
-    sigma = np.maximum(np.where(np.isnan(sigma), p.default_sigma_m, sigma), p.min_sigma_m)
-    cand = (sigma >= p.explain_sharper * p.min_sigma_m) & (sigma <= p.lone_sigma_m)
-    if not cand.any():                 # (most sweeps of near walls: nothing to explain)
-        return out
-    ox, oy = (np.asarray(a, float).ravel()[vi] for a in (points.origin_x, points.origin_y))
-    px, py = (np.asarray(a, float).ravel()[vi] for a in (points.x, points.y))
-    with np.errstate(invalid="ignore"):
-        d = np.hypot(px - ox, py - oy)
-        near = np.maximum(d - p.explain_sigmas * sigma, 0.0)
-        cand = np.flatnonzero(cand & np.isfinite(d) & (d - res > near))
-    if cand.size == 0:
-        return out
-    # the batch's end points by cell, then σ: a cell's hits of σ up to s are a prefix sum
-    with np.errstate(invalid="ignore"):
-        ix = np.floor((px - origin_xy_m[0]) / res)
-        iy = np.floor((py - origin_xy_m[1]) / res)
-        inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
-    key = (iy * nx + ix)[inside] + np.minimum(sigma[inside], 0.5)   # σ < 1 m
-    order = np.argsort(key, kind="stable")
-    key = key[order]
-    cum = np.concatenate(([0.0], np.cumsum(hit_weight(sigma[inside][order], p))))
-    # each candidate's beam from d − kσ to its end point
-    dc, a, sc, x0, y0 = d[cand], near[cand], sigma[cand], ox[cand], oy[cand]
-    ux, uy = (px[cand] - x0) / dc, (py[cand] - y0) / dc
-    v = traverse(x0 + ux * a, y0 + uy * a, px[cand], py[cand], origin_xy_m, (ny, nx), res)
-    r = v.ray
-    s_a, s_b = a[r] + v.t_enter * (dc - a)[r], a[r] + v.t_exit * (dc - a)[r]
-    at = (v.iy * nx + v.ix).astype(float)
-    sharper = (cum[np.searchsorted(key, at + np.minimum(sc[r] / p.explain_sharper, 0.5),
-                                   side="right")]
-               - cum[np.searchsorted(key, at, side="left")])
-    confirmed = np.flatnonzero((s_b <= dc[r] - res) & (sharper >= p.explain_log_odds))
-    if confirmed.size:
-        rays, first = np.unique(r[confirmed], return_index=True)   # visits run along the ray
-        hit = confirmed[first]
-        out.reshape(-1)[vi[cand[rays]]] = 0.5 * (s_a[hit] + s_b[hit])
-    return out
+    return _traverse.explained_ranges(
+        _flat(points.origin_x), _flat(points.origin_y), _flat(points.x), _flat(points.y),
+        _flat(points.sigma_m), np.asarray(points.valid, bool).ravel().view(np.uint8),
+        float(origin_xy_m[0]), float(origin_xy_m[1]), float(resolution_m), nx, ny,
+        params).reshape(np.shape(points.valid))
 
 
 def at_ranges(points: Points, ranges: np.ndarray, params: MapperParams) -> Points:

@@ -1,4 +1,5 @@
-"""The occupancy grid's update in plain numpy: the oracle of the compiled ``add_beams``.
+"""The occupancy grid's update in plain numpy: the oracle of the compiled ``add_beams`` and
+``explained_ranges``.
 
 Slow and readable: every cell a beam crosses (:func:`~irring.maps.mapping.traverse`) gets
 the inverse sensor model of docs/mapping.md, evaluated with ``math.erf``. The kernel
@@ -13,8 +14,7 @@ import math
 import numpy as np
 
 from ..core import Points, Reason
-from .mapping import (MapperParams, at_ranges, explained_ranges, hit_weight, mapped_beams,
-                      traverse)
+from .mapping import MapperParams, at_ranges, hit_weight, mapped_beams, traverse
 
 
 def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.ndarray:
@@ -39,6 +39,66 @@ def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.
     return np.where(sharp, params.hit_depth_cells * resolution_m, 0.0)
 
 
+def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
+                     params: MapperParams) -> np.ndarray:
+    """(S, N) m: the range each valid reading a surface explains is mapped at instead of
+    its own (NaN for the others), on a grid of ``shape`` (ny, nx) cells.
+
+    A reading is explained when its σ lies in [``explain_sharper``·``min_sigma_m``, ``lone_sigma_m``]
+    and its beam crosses, within ``explain_sigmas``·σ before its end point and leaving it
+    at least a cell before, a cell that sharper end points of the batch confirm: the hits
+    (:func:`hit_weight`) of those in it whose σ is at most σ/``explain_sharper`` reach
+    ``explain_log_odds``. That surface, within the reading's noise in front of it, explains
+    the reading, which is mapped at the middle of its beam's passage through the first such
+    cell. The oracle of the compiled :func:`irring.maps.mapping.explained_ranges` (every
+    cell from :func:`~irring.maps.mapping.traverse`).
+    """
+    p, res = params, float(resolution_m)
+    ny, nx = (int(n) for n in shape)
+    out = np.full(np.shape(points.valid), np.nan)
+    vi = np.flatnonzero(np.asarray(points.valid, bool).ravel())
+    if p.explain_sigmas <= 0 or vi.size == 0:
+        return out
+    sigma = np.asarray(points.sigma_m, float).ravel()[vi]
+    sigma = np.maximum(np.where(np.isnan(sigma), p.default_sigma_m, sigma), p.min_sigma_m)
+    cand = (sigma >= p.explain_sharper * p.min_sigma_m) & (sigma <= p.lone_sigma_m)
+    if not cand.any():                 # (most sweeps of near walls: nothing to explain)
+        return out
+    ox, oy = (np.asarray(a, float).ravel()[vi] for a in (points.origin_x, points.origin_y))
+    px, py = (np.asarray(a, float).ravel()[vi] for a in (points.x, points.y))
+    with np.errstate(invalid="ignore"):
+        d = np.hypot(px - ox, py - oy)
+        near = np.maximum(d - p.explain_sigmas * sigma, 0.0)
+        cand = np.flatnonzero(cand & np.isfinite(d) & (d - res > near))
+    if cand.size == 0:
+        return out
+    # the batch's end points by cell, then σ: a cell's hits of σ up to s are a prefix sum
+    with np.errstate(invalid="ignore"):
+        ix = np.floor((px - origin_xy_m[0]) / res)
+        iy = np.floor((py - origin_xy_m[1]) / res)
+        inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+    key = (iy * nx + ix)[inside] + np.minimum(sigma[inside], 0.5)   # σ < 1 m
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    cum = np.concatenate(([0.0], np.cumsum(hit_weight(sigma[inside][order], p))))
+    # each candidate's beam from d − kσ to its end point
+    dc, a, sc, x0, y0 = d[cand], near[cand], sigma[cand], ox[cand], oy[cand]
+    ux, uy = (px[cand] - x0) / dc, (py[cand] - y0) / dc
+    v = traverse(x0 + ux * a, y0 + uy * a, px[cand], py[cand], origin_xy_m, (ny, nx), res)
+    r = v.ray
+    s_a, s_b = a[r] + v.t_enter * (dc - a)[r], a[r] + v.t_exit * (dc - a)[r]
+    at = (v.iy * nx + v.ix).astype(float)
+    sharper = (cum[np.searchsorted(key, at + np.minimum(sc[r] / p.explain_sharper, 0.5),
+                                   side="right")]
+               - cum[np.searchsorted(key, at, side="left")])
+    confirmed = np.flatnonzero((s_b <= dc[r] - res) & (sharper >= p.explain_log_odds))
+    if confirmed.size:
+        rays, first = np.unique(r[confirmed], return_index=True)   # visits run along the ray
+        hit = confirmed[first]
+        out.reshape(-1)[vi[cand[rays]]] = 0.5 * (s_a[hit] + s_b[hit])
+    return out
+
+
 def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
         params: MapperParams, lo: float = -np.inf, hi: float = np.inf) -> np.ndarray:
     """``log_odds`` (ny, nx) after one batch of readings, clamped to [lo, hi] (a new array).
@@ -46,7 +106,7 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     As :meth:`OccupancyGrid.insert` (with ``lo, hi`` its clamps) and :meth:`~OccupancyGrid.delta`
     (the grid as it is, no clamp: silent beams stop at its cells); readings from a wide cone
     go in as their fan of rays, and pencil beams a sharper surface explains at its range
-    (:func:`~irring.maps.mapping.explained_ranges`). The kernel clamps only the box of cells
+    (:func:`explained_ranges`). The kernel clamps only the box of cells
     its beams reach; on a grid already inside [lo, hi] that is the same.
     """
     shape = np.shape(log_odds)
