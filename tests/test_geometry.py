@@ -200,3 +200,18 @@ def test_a_negative_overlap_angle_is_printed_as_the_gap_it_is(capsys):
     text = capsys.readouterr().out
     assert "none: neighbouring sweeps 18.24° apart (Eq. 2 gives -18.24°)" in text
     assert "rays:" not in text                          # a pencil beam: Eq. 1 is the answer
+
+
+def test_the_monte_carlo_reports_each_pair_without_changing_the_area():
+    """``on_pair`` (irring geometry's progress bar) hears of the 12 pairs of the paper's
+    ring, none of a lone sensor's, and the area is that of a run nobody watches."""
+    from irring import designs
+    from irring.simulation import model as ring_model
+
+    heard = []
+    sectors = g.swept_sectors(ring_model.compile_ring(designs.get("rotating12").ring))
+    watched = g.overlap_area_mc_m2(sectors, 0.686, samples=2000, seed=3,
+                                   on_pair=lambda: heard.append(1))
+    assert len(heard) == 12 == len(g.neighbour_pairs(12))
+    assert watched == g.overlap_area_mc_m2(sectors, 0.686, samples=2000, seed=3)
+    assert g.neighbour_pairs(1) == [] and g.neighbour_pairs(2) == [(0, 1)]

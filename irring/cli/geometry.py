@@ -9,6 +9,7 @@ import math
 from .. import designs
 from ..designs import DESIGN_BY_NAME
 from ..errors import UsageError
+from ..pipeline import progress_bar
 from ..studies import geometry
 from ._common import at_least, describe, distances_mm, number_in, seed
 
@@ -67,10 +68,13 @@ def register(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
     range_m = None if args.range_mm is None else args.range_mm * 1e-3
-    try:
-        reports = [geometry.design_report(designs.get(n), args.distances_mm, range_m=range_m,
-                                          samples=args.samples, seed=args.seed)
-                   for n in names]
+    pairs = sum(len(geometry.neighbour_pairs(designs.get(n).ring.sensors)) for n in names)
+    try:   # the Monte Carlo is the slow part (~40 s at --samples 10^7): a bar over its pairs
+        with progress_bar(pairs, "overlap (Monte Carlo)", unit="pair") as bar:
+            reports = [geometry.design_report(designs.get(n), args.distances_mm,
+                                              range_m=range_m, samples=args.samples,
+                                              seed=args.seed, on_pair=bar.update)
+                       for n in names]
     except ValueError as exc:   # a range too short for the ring's geometry (Eq. 2)
         if args.range_mm is None:
             raise

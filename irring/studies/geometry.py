@@ -6,6 +6,7 @@ The equations and what the measurements check: docs/designs.md."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -107,13 +108,23 @@ def in_sector(points_xy: np.ndarray, apex_xy: np.ndarray, heading_min_rad: float
     return inside & (rel <= width_rad + 1e-12)
 
 
+def neighbour_pairs(sensors: int) -> list[tuple[int, int]]:
+    """The neighbouring sensor pairs (k, k+1) around a ring of ``sensors``: none for one,
+    one for two, else ``sensors`` (the ring closes)."""
+    if sensors < 2:
+        return []
+    return [(k, (k + 1) % sensors) for k in range(sensors if sensors > 2 else 1)]
+
+
 def overlap_area_mc_m2(sectors: SweptSectors, range_m: float, *, samples: int = 400_000,
-                       seed: int = 0) -> tuple[float, float]:
+                       seed: int = 0, on_pair: Callable[[], object] | None = None
+                       ) -> tuple[float, float]:
     """Monte-Carlo area (m²) seen by both sensors of each neighbouring pair, averaged.
 
     Returns ``(mean_area_m2, standard_error_m2)``. For each pair (k, k+1) random points
     are drawn uniformly in the box around both sweeps; the share inside both sectors,
     times the box area, estimates the overlap. Fewer than two sensors: (0, 0).
+    ``on_pair()`` is called after each pair (a progress bar's ``update``).
     """
     n = sectors.sensors
     if n < 2:
@@ -121,8 +132,7 @@ def overlap_area_mc_m2(sectors: SweptSectors, range_m: float, *, samples: int = 
     rng = np.random.default_rng(seed)
     widths = sectors.width_rad
     areas, variances = [], []
-    pairs = [(k, (k + 1) % n) for k in range(n if n > 2 else 1)]
-    for k, j in pairs:  # one loop per pair (≤ 72); the points are vectorised
+    for k, j in neighbour_pairs(n):  # one loop per pair (≤ 72); the points are vectorised
         apexes = sectors.apex_xy[[k, j]]
         lo = apexes.min(axis=0) - range_m
         hi = apexes.max(axis=0) + range_m
@@ -133,6 +143,8 @@ def overlap_area_mc_m2(sectors: SweptSectors, range_m: float, *, samples: int = 
         p = both.mean()
         areas.append(p * box)
         variances.append(p * (1 - p) / samples * box ** 2)
+        if on_pair is not None:
+            on_pair()
     m = len(areas)
     return float(np.mean(areas)), float(math.sqrt(sum(variances)) / m)
 
@@ -199,12 +211,14 @@ def swept_sectors(ring_model, beam_half_angle_rad: float = 0.0) -> SweptSectors:
 
 
 def design_report(design, distances_m=(0.25, 0.5, 0.75, 1.0), *, range_m: float | None = None,
-                  samples: int = 400_000, seed: int = 0) -> dict:
+                  samples: int = 400_000, seed: int = 0,
+                  on_pair: Callable[[], object] | None = None) -> dict:
     """Everything ``irring geometry`` prints for a design (``designs.Design``).
 
     Analytic β and S from the design's numbers (R, Φ = 2π/N, α, D), the Monte-Carlo S from
     its built MuJoCo model, and Eq. 1's blind spot at ``distances_m`` with the design's
-    ray step. ``range_m`` is D (default: the sensor's design range, Table I's 0.686 m).
+    ray step. ``range_m`` is D (default: the sensor's design range, Table I's 0.686 m);
+    ``on_pair`` as :func:`overlap_area_mc_m2` takes it.
     """
     from ..simulation import model as ring_model_mod   # deferred: loads MuJoCo
 
@@ -218,7 +232,7 @@ def design_report(design, distances_m=(0.25, 0.5, 0.75, 1.0), *, range_m: float 
         beta, area = float("nan"), 0.0  # one sensor has no neighbour to overlap with
     rm = ring_model_mod.compile_ring(ring)
     sectors = swept_sectors(rm, design.sensor.beam_half_angle_rad)
-    mc, se = overlap_area_mc_m2(sectors, D, samples=samples, seed=seed)
+    mc, se = overlap_area_mc_m2(sectors, D, samples=samples, seed=seed, on_pair=on_pair)
     dist = np.asarray(distances_m, dtype=float)
     step = design.ray_step_rad()
     return {
