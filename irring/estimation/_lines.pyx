@@ -917,7 +917,7 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
                   const double[::1] x, const double[::1] y, const double[::1] d,
                   const double[::1] sigma_m, const double[::1] heading, const double[::1] ox,
                   const double[::1] oy, idx_t min_members, double snap_sigmas, double own_share,
-                  double sigma_floor, double min_range, double max_range):
+                  double own_cap, double sigma_floor, double min_range, double max_range):
     """Line members' end points moved onto their lines:
     ``irring.estimation.estimate_numpy.snap_to_lines`` (the statement and the why) in two
     passes over the readings, the same operations in the same order (the per-line sums
@@ -925,8 +925,9 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
     own arctan2, the cos and sin libm's, see the top of this file).
 
     Per reading (K,) flat: line index ``member`` (−1: none), valid (uint8), end point x, y,
-    distance d, sigma_m, heading, emitter ox, oy. Returns new (x, y, d, sigma_m) arrays, or
-    None when no end point moves."""
+    distance d, sigma_m, heading, emitter ox, oy; ``own_cap``: the most ``own_share`` of a
+    member's σ adds (+inf: no cap). Returns new (x, y, d, sigma_m) arrays, or None when no
+    end point moves."""
     cdef idx_t K = member.shape[0], L = 0, i, g, moved = 0
     cdef double u, v, ca, sa, ngx, ngy, ch, sh, un, rel, t, al, perp2, sl, own
     if not (valid.shape[0] == x.shape[0] == y.shape[0] == d.shape[0] == sigma_m.shape[0]
@@ -1026,7 +1027,8 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
             sl = 1e-12 if sl == sl else sl
         perp2 = (sr[g] / n[g]) / n[g] * (1.0 + al * al / sl)
         sl = sqrt(perp2) / fabs(un)
-        own = hypot(sl, own_share * sigma_m[i])
+        own = own_share * sigma_m[i]
+        own = hypot(sl, own_cap if own > own_cap else own)
         o[3, i] = sigma_floor if own < sigma_floor else own    # (NaN stays, as numpy's)
         o[2, i] = t
         o[0, i] = ox[i] + t * ch

@@ -440,7 +440,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     points = local_incidence(points, label, index, counts, steps, cal)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
-        points = (snapper or snap_to_lines)(points, label, cal.min_range_m)
+        points = (snapper or snap_to_lines)(points, label, cal.min_range_m,
+                                            far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                          alpha=grouping.alpha, usable=grouping.usable)
@@ -454,6 +455,15 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = silent_reach(points, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+def far_sigma_cap(cal: Calibration, max_range_m: float) -> float:
+    """The most a line member's own σ may add to its σ on its line (m):
+    :data:`SNAP_OWN_CAP_M` where a part is read to its own range (``cal.silent_range_m``
+    short of ``max_range_m``: its far end's noise reaches 30–55 mm, which the line averages
+    away), else +inf (half the member's own σ, as ever). Why and what it measured:
+    docs/estimator.md, "A far line's σ"."""
+    return SNAP_OWN_CAP_M if cal.falling and cal.silent_range_m < max_range_m else math.inf
 
 
 def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
@@ -831,10 +841,12 @@ def beam_crossings(ox, oy, ux, uy, c, e, nrm):
 
 SNAP_SIGMAS = 3.0   # a member moves out onto its line if that is within 3σ (in from behind: always) …
 SNAP_MIN = 10       # … and the line has at least 10 members (short lines are less sure)
-SNAP_OWN = 0.5      # share of a member's own σ kept in its σ on the line
+SNAP_OWN = 0.5      # share of a member's own σ kept in its σ on the line …
+SNAP_OWN_CAP_M = 0.010  # … at most this where a part is read to its own range (far_sigma_cap)
 
 
-def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Points:
+def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
+                  own_cap_m: float = math.inf) -> Points:
     """End points of the readings on a line put where their beams meet it.
 
     ``member`` (S, N): the line each reading took θ from (−1: none). A valid member of a
@@ -842,15 +854,15 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
     (members read a little past the max range included: see :func:`drop_beyond_range`)
     when the member lies behind it or short of it by no more than 3σ, within [``min_range_m``,
     ``points.max_range_m``]; its σ becomes the line's uncertainty there (half its own σ
-    added). One compiled call (``irring.estimation._lines.snap_to_lines``); the readable
-    statement and the why: :func:`irring.estimation.estimate_numpy.snap_to_lines`."""
+    added, at most ``own_cap_m``). One compiled call (``irring.estimation._lines.snap_to_lines``);
+    the readable statement and the why: :func:`irring.estimation.estimate_numpy.snap_to_lines`."""
     f = np.ascontiguousarray
     moved = _lines.snap_to_lines(
         f(member, dtype=np.intp).reshape(-1),
         f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
         *(f(getattr(points, k), dtype=float).reshape(-1)
           for k in ("x", "y", "d", "sigma_m", "heading", "origin_x", "origin_y")),
-        SNAP_MIN, SNAP_SIGMAS, SNAP_OWN, SIGMA_FLOOR_M, float(min_range_m),
+        SNAP_MIN, SNAP_SIGMAS, SNAP_OWN, float(own_cap_m), SIGMA_FLOOR_M, float(min_range_m),
         float(points.max_range_m))
     if moved is None:
         return points

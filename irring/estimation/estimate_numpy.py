@@ -1105,7 +1105,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           snapper=snap_to_lines)
 
 
-def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Points:
+def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
+                  own_cap_m: float = math.inf) -> Points:
     """End points of the readings on a line put where their beams meet it.
 
     ``member`` (S, N): the line each reading took θ from (−1: none). Each line is fitted
@@ -1118,8 +1119,11 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
     averages the noise of all its members, so a wall seen at 13 mm RMS per reading comes
     out a few mm thick; a reading the line does not explain keeps its own distance, and
     none leaves [``min_range_m``, ``points.max_range_m``]. A moved reading's σ is the
-    line's uncertainty where its beam meets it, with half its own σ added in quadrature.
-    The statement :func:`irring.estimation.estimate.snap_to_lines` compiles."""
+    line's uncertainty where its beam meets it, with half its own σ added in quadrature (at
+    most ``own_cap_m``: where a part is read to its own range, its far end's noise is 30–55
+    mm a reading and that half alone made a snapped point's σ twice its error; final_estimate
+    passes :func:`irring.estimation.estimate.far_sigma_cap`). The statement
+    :func:`irring.estimation.estimate.snap_to_lines` compiles."""
     on = (points.valid & (member >= 0)).reshape(-1).nonzero()[0]
     if on.size == 0:
         return points
@@ -1164,8 +1168,8 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float) -> Poi
     # plus half the reading's own σ: the line is a model, a wall's end or a slightly
     # wrong θ moves a member off it (with none, 4 % of T-room members lie beyond 3σ)
     own = points.sigma_m.reshape(-1)[at]
-    out["sigma_m"].reshape(-1)[at] = np.maximum(np.hypot(sigma_line[ok], SNAP_OWN * own),
-                                                SIGMA_FLOOR_M)
+    out["sigma_m"].reshape(-1)[at] = np.maximum(
+        np.hypot(sigma_line[ok], np.minimum(SNAP_OWN * own, own_cap_m)), SIGMA_FLOOR_M)
     out["d"].reshape(-1)[at] = t
     out["x"].reshape(-1)[at] = ox[ok] + t * ch[ok]
     out["y"].reshape(-1)[at] = oy[ok] + t * sh[ok]
