@@ -324,7 +324,10 @@ def test_noisy_corners_stay_finite_and_mostly_right(kind, dist, yaw_deg, seed):
     p = est.points
     check_points(p, sweep)
     on = p.valid & (est.lines.label >= 0)
-    assert np.all(p.theta[p.valid & ~on] == 0.0)          # the documented fallback
+    # the documented fallback: θ = 0, or the slope of the reading's own sensor's profile
+    # (estimate.local_incidence; a convex corner's faces may be read as a round thing's)
+    off = p.theta[p.valid & ~on]
+    assert np.all((off >= 0.0) & (off <= cal.max_incidence_rad))
     if on.sum() >= 10:  # short noisy lines: a few degrees (σ_normal ≈ σ_d·√(12/n)/length)
         assert np.median(np.degrees(np.abs(p.theta - inc))[on]) < 8.0
 

@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
 from irring.estimation import estimate_numpy as oracle
 from irring.core import Reason
-from irring.estimation.estimate import LineOptions, estimate_detail
+from irring.estimation.estimate import (LineOptions, range_profiles, estimate_detail,
+                                        profiles_compiled, scan_order)
 from irring.estimation.estimate import no_return_reach as fast_reach
 from irring.estimation.estimate import snap_to_lines as fast_snap
 
@@ -200,3 +201,41 @@ def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge,
         np.testing.assert_allclose(getattr(fast, f), getattr(slow, f), rtol=0, atol=TOL,
                                    err_msg=f)
     assert moved.sum() > 0 or label.max() < 0 or np.bincount(label[label >= 0]).max() < 10
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2 ** 20),
+       room=st.sampled_from(["box", "wedge", "posts", "crate", "columns"]),
+       strength=st.sampled_from([0.0, 0.25, 1.0]),
+       noise=st.sampled_from([0.0, 0.5, 3.0]),
+       keep=st.floats(0.5, 1.0),
+       ask_share=st.floats(0.05, 1.0))
+def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, noise, keep,
+                                                        ask_share):
+    """``_lines.profiles`` (compiled) against ``estimate.range_profiles`` (numpy) on a sweep's
+    valid readings, steps dropped at random (windows cut short, polylines broken), any
+    subset asked, on curves whose a(θ) grows: the same flags (ok, convex, sure, concave;
+    exact),
+    and the same counts, slopes, standard errors and angles within 1e-9."""
+    walls, circles, rng = _scene(seed, room)
+    if room == "columns":    # round things 50–200 mm across, the round-line rule's case
+        circles = [((0.6 * walls[1][0][0], 0.2), rng.uniform(0.025, 0.1)),
+                   ((-0.3, -0.35), rng.uniform(0.025, 0.1))]
+    cal = stand_in_calibration(strength=strength, noise_counts=noise)
+    sweep, _, _ = make_sweep(cal, walls=walls, circles=circles, noise_counts=noise, seed=seed,
+                             pose=(0.0, 0.0, rng.uniform(-3, 3)), quantize=noise > 0)
+    counts = np.array(sweep.counts)
+    counts[rng.random(counts.shape) > keep] = 0.0
+    sweep = dataclasses.replace(sweep, counts=counts)
+    p = estimate_detail(sweep, cal).points
+    index = scan_order(np.asarray(sweep.steps), p.valid.shape[1])
+    vi = index[p.valid.reshape(-1)[index]]
+    ask = np.sort(rng.permutation(vi.size)[:max(1, int(ask_share * vi.size))])
+    fast = profiles_compiled(p, vi, ask, sweep.counts, np.asarray(sweep.steps), cal)
+    slow = range_profiles(p, vi, ask, sweep.counts, np.asarray(sweep.steps), cal)
+    for f in ("ok", "convex", "sure", "concave"):
+        np.testing.assert_array_equal(getattr(fast, f), getattr(slow, f), err_msg=f)
+    for f in ("n", "slope", "se", "theta", "steep"):
+        np.testing.assert_allclose(getattr(fast, f), getattr(slow, f), rtol=TOL, atol=TOL,
+                                   err_msg=f)
+    assert vi.size >= 20

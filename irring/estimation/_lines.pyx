@@ -24,7 +24,8 @@ plus ~5–10 µs of work on ~630 points.
 
 from cpython.buffer cimport (PyObject_GetBuffer, PyBuffer_Release, PyBUF_C_CONTIGUOUS,
                             PyBUF_FORMAT, PyBUF_WRITABLE)
-from libc.math cimport sin, cos, sqrt, fabs, hypot, isfinite, M_PI, INFINITY, NAN
+from libc.math cimport (sin, cos, sqrt, fabs, hypot, isfinite, exp, atan, nearbyint, M_PI,
+                        INFINITY, NAN)
 from libc.stdlib cimport malloc, free
 
 import numpy as np
@@ -1034,3 +1035,186 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
         o[0, i] = ox[i] + t * ch
         o[1, i] = oy[i] + t * sh
     return out[0], out[1], out[2], out[3]
+
+
+# --------------------------------------------------------------------------- range profiles
+
+cdef inline void _interp_ab(double t, const double[::1] xp, const double[::1] la,
+                            const double[::1] bb, double* out_la, double* out_b) noexcept nogil:
+    """log a(θ), b(θ) at θ = t ≥ 0 linear between the calibration's nodes, held beyond
+    them (np.interp's rule)."""
+    cdef idx_t m = xp.shape[0], lo = 0, hi = m - 1, mid
+    cdef double f
+    if t <= xp[0]:
+        out_la[0] = la[0]
+        out_b[0] = bb[0]
+        return
+    if t >= xp[m - 1]:
+        out_la[0] = la[m - 1]
+        out_b[0] = bb[m - 1]
+        return
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if xp[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    f = (t - xp[lo]) / (xp[hi] - xp[lo])
+    out_la[0] = la[lo] + f * (la[hi] - la[lo])
+    out_b[0] = bb[lo] + f * (bb[hi] - bb[lo])
+
+
+def profiles(const double[::1] ox, const double[::1] oy, const double[::1] heading,
+             const double[::1] log_s, const double[::1] sig_s, const idx_t[::1] chain,
+             const idx_t[::1] step, const idx_t[::1] ask, const double[::1] xp,
+             const double[::1] node_log_a, const double[::1] node_b, double max_inc,
+             double convex_below, idx_t half, idx_t min_n, double spread_m, double n_se,
+             const double[::1] chi2_95, double sigma_floor, double sure_se):
+    """Each asked reading's range profile: ``irring.estimation.estimate.range_profiles`` (the
+    statement and the why) reading by reading, to within rounding (the sums accumulate in
+    window order, θ's curve between nodes as np.interp draws it).
+
+    Per valid reading in scan order (K,): emitter ox, oy, heading, log counts, σ_S/S,
+    polyline id and motor step; ``ask`` (M,) positions into them. Returns (n, slope, se,
+    theta, steep) float arrays and (ok, convex, sure, concave) uint8 arrays, each (M,);
+    sure: bent away by ``sure_se`` standard errors."""
+    cdef idx_t K = ox.shape[0], M = ask.shape[0], i, p, c, w, r, nw, dof, n_ok
+    cdef idx_t W = 2 * half + 1
+    cdef double ux, uy, signed, th, la, b, d, x, y, nn, mu, mv, svv, sl, t, se, chi2, res
+    cdef double sqq, qm, qdv, bend, bend_se, sig, e2
+    if not (oy.shape[0] == heading.shape[0] == log_s.shape[0] == sig_s.shape[0]
+            == chain.shape[0] == step.shape[0] == K):
+        raise ValueError("per-reading arrays differ in length")
+    out_f = np.zeros((5, M))
+    out_b = np.zeros((4, M), dtype=np.uint8)
+    cdef double[:, ::1] F = out_f
+    cdef unsigned char[:, ::1] B = out_b
+    cdef idx_t* win = <idx_t*> malloc(W * sizeof(idx_t))
+    cdef double* turn = <double*> malloc(W * sizeof(double))
+    cdef double* u = <double*> malloc(W * sizeof(double))
+    cdef double* v = <double*> malloc(W * sizeof(double))
+    cdef double* sg = <double*> malloc(W * sizeof(double))
+    cdef double* q = <double*> malloc(W * sizeof(double))
+    cdef double* rx = <double*> malloc(4 * W * sizeof(double))
+    cdef double* ry = rx + W
+    cdef double* ch = rx + 2 * W
+    cdef double* sh = rx + 3 * W
+    if (win == NULL or turn == NULL or u == NULL or v == NULL or sg == NULL or q == NULL
+            or rx == NULL):
+        free(win); free(turn); free(u); free(v); free(sg); free(q); free(rx)
+        raise MemoryError()
+    try:
+        for i in range(M):
+            p = ask[i]
+            if p < 0 or p >= K:
+                raise IndexError(f"ask[{i}] = {p} is outside 0 … {K - 1}")
+            nw = 0
+            for c in range(p - half, p + half + 1):
+                if c < 0 or c >= K or chain[c] != chain[p]:
+                    continue
+                if step[c] - step[p] > half or step[p] - step[c] > half:
+                    continue
+                win[nw] = c
+                t = heading[c] - heading[p]
+                turn[nw] = t - 2.0 * M_PI * nearbyint(t / (2.0 * M_PI))
+                rx[nw] = ox[c] - ox[p]
+                ry[nw] = oy[c] - oy[p]
+                ch[nw] = cos(heading[c])
+                sh[nw] = sin(heading[c])
+                nw += 1
+            ux = cos(heading[p])
+            uy = sin(heading[p])
+            nn = nw if nw > 1 else 1.0
+            signed = 0.0
+            sl = 0.0
+            svv = 1e-12
+            for r in range(3):
+                # on a flat surface a neighbour meets it at θ plus the angle the beam turned
+                mu = 0.0
+                mv = 0.0
+                for w in range(nw):
+                    c = win[w]
+                    th = fabs(signed + turn[w])
+                    if th > max_inc:
+                        th = max_inc
+                    _interp_ab(th, xp, node_log_a, node_b, &la, &b)
+                    d = exp(la + b * log_s[c])
+                    x = rx[w] + d * ch[w]
+                    y = ry[w] + d * sh[w]
+                    u[w] = x * ux + y * uy
+                    v[w] = y * ux - x * uy
+                    sig = fabs(b) * d * sig_s[c]
+                    sg[w] = sig if sig > sigma_floor else sigma_floor
+                    mu += u[w]
+                    mv += v[w]
+                mu /= nn
+                mv /= nn
+                svv = 0.0
+                sl = 0.0
+                for w in range(nw):
+                    u[w] -= mu
+                    v[w] -= mv
+                    svv += v[w] * v[w]
+                    sl += u[w] * v[w]
+                if svv < 1e-12:
+                    svv = 1e-12
+                sl /= svv
+                signed = atan(sl)
+                if signed > max_inc:
+                    signed = max_inc
+                elif signed < -max_inc:
+                    signed = -max_inc
+            e2 = 0.0
+            chi2 = 0.0
+            qm = 0.0
+            qdv = 0.0
+            for w in range(nw):
+                e2 += (sg[w] * v[w]) * (sg[w] * v[w])
+                res = (u[w] - sl * v[w]) / sg[w]
+                chi2 += res * res
+                q[w] = v[w] * v[w]
+                qm += q[w]
+                qdv += q[w] * v[w]
+            se = sqrt(e2) / svv
+            qm /= nn
+            qdv /= svv
+            sqq = 0.0
+            bend = 0.0
+            bend_se = 0.0
+            for w in range(nw):
+                # the curvature term, orthogonal to 1 and v
+                q[w] = q[w] - qm - qdv * v[w]
+                sqq += q[w] * q[w]
+            if sqq < 1e-30:
+                sqq = 1e-30
+            for w in range(nw):
+                bend += u[w] * q[w]
+                bend_se += (sg[w] * q[w]) * (sg[w] * q[w])
+            bend /= sqq
+            bend_se = sqrt(bend_se) / sqq
+            # readings of one step repeated lie on one spot: they give no slope
+            n_ok = nw if svv >= nw * spread_m * spread_m else 0
+            dof = n_ok - 2
+            if dof < 1:
+                dof = 1
+            elif dof > chi2_95.shape[0]:
+                dof = chi2_95.shape[0]
+            th = fabs(signed)
+            F[0, i] = n_ok
+            F[1, i] = sl
+            F[2, i] = se
+            F[3, i] = th
+            B[0, i] = (n_ok >= min_n and chi2 <= chi2_95[dof - 1]
+                       and fabs(bend) <= n_se * bend_se and fabs(sl) > n_se * se)
+            B[1, i] = n_ok >= min_n and bend > n_se * bend_se and th < max_inc - convex_below
+            B[2, i] = bend > sure_se * bend_se
+            B[3, i] = bend < -n_se * bend_se
+            if n_ok < min_n or B[3, i]:
+                F[4, i] = max_inc
+            else:
+                t = atan(fabs(sl) + n_se * se)
+                F[4, i] = t if t < max_inc else max_inc
+    finally:
+        free(win); free(turn); free(u); free(v); free(sg); free(q); free(rx)
+    return (out_f[0], out_f[1], out_f[2], out_f[3], out_f[4], out_b[0], out_b[1], out_b[2],
+            out_b[3])

@@ -19,7 +19,7 @@ from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
-from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration
+from .calibration import FALLBACK_NODES, RANGE_SIGMAS, RETURN_SIGMAS, Calibration
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -420,7 +420,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
 def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration,
                    options: LineOptions, snap: bool, detail: bool, history: list,
                    counts: np.ndarray, steps: np.ndarray, reach: Callable | None = None,
-                   snapper: Callable | None = None) -> Estimate:
+                   snapper: Callable | None = None, profiler: Callable | None = None
+                   ) -> Estimate:
     """The estimate from the final points and grouping (either estimator's): readings on no
     line at the incidence their own sensor's neighbours give (:func:`local_incidence`;
     ``counts`` (S, N), ``steps`` (S,): the sweep's), line members onto their lines
@@ -429,7 +430,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
     oracle passes its numpy statements of both; never past ``cal.silent_range_m``:
     :func:`silent_reach`) and, with ``detail``, the :class:`Lines`. Line members are first
-    moved out by what the return level cut off their lines (:func:`censored_lines`)."""
+    moved out by what the return level cut off their lines (:func:`censored_lines`).
+    ``profiler``: the readings' range profiles (the compiled :func:`profiles_compiled` by
+    default; the oracle passes its numpy statement :func:`range_profiles`)."""
     shape = points.valid.shape
     if grouping is None:       # nothing to group (e.g. every reading invalid): no lines
         empty = _lines_record(None, np.full(shape, -1, dtype=np.intp), np.zeros(0, np.intp))
@@ -437,7 +440,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                         lines=empty if detail else None, theta_history=tuple(history))
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
-    points = local_incidence(points, label, index, counts, steps, cal)
+    points, label = local_incidence(points, label, index, counts, steps, cal, profiler)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         points = (snapper or snap_to_lines)(points, label, cal.min_range_m,
@@ -610,37 +613,29 @@ _UNKNOWN_M = 0.10       # fewer readings, and θ = 0 may read this much long: IN
 _CONVEX_SURE_SE = 3.0   # … unless its profile bends away this many standard errors: a post
 
 
-def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
-                    counts: np.ndarray, steps: np.ndarray, cal: Calibration) -> Points:
-    """Readings on no line (``label`` −1, θ = 0) re-read at the incidence their own sensor's
-    neighbouring steps give; numpy, shared by both estimators.
+@dataclass(frozen=True)
+class _Profile:
+    """What a reading's own sensor's neighbouring steps say of the surface it met
+    (:func:`range_profiles`); arrays over the asked readings, ``s``, ``d0`` and ``sig_s``
+    over every valid reading."""
+    s: np.ndarray         # counts of every valid reading in scan order
+    d0: np.ndarray        # their θ = 0 distances
+    sig_s: np.ndarray     # their relative count noise σ_S/S
+    n: np.ndarray         # readings of the same surface in the window
+    slope: np.ndarray     # range slope across the beam (tan θ, signed)
+    se: np.ndarray        # its standard error
+    theta: np.ndarray     # θ = atan|slope|, at most the drop-out angle
+    ok: np.ndarray        # a straight profile clearly not flat: θ is its slope
+    convex: np.ndarray    # bent away from the beam: a post, a leg, a column
+    sure: np.ndarray      # bent away by _CONVEX_SURE_SE standard errors (not noise)
+    concave: np.ndarray   # bent towards the beam: a concave corner
+    steep: np.ndarray     # the steepest θ the readings allow
 
-    ``index``: flat (S, N) indices of the live readings in scan order (each sensor's by
-    step); ``steps`` (S,): each row's motor step. A wall seen at 60–70° often gives only a few readings before the drop-out, too
-    few or too short for a line, and read at θ = 0 they lie 100–190 mm beyond it. Its range
-    still grows steadily as the beam turns: in the frame of a reading's beam (u along, v
-    across) the neighbours' end points lie on u = u0 + v·tan θ. So the valid readings of the
-    same surface (the same polyline: no range jump, ``polyline_ids``) within
-    ``_LOCAL_STEPS`` steps, read at a common θ, are fitted by least squares (u on v: the
-    noise is along the beam; each neighbour read at θ plus the angle its beam turned, as
-    on a flat surface), θ = atan|slope| (at most the drop-out angle), three times.
-    The slope is used only where it is clearly not flat (``_LOCAL_SLOPE_SE`` standard
-    errors) and the profile is straight (χ² within its 95 % point, ``_CHI2_95``, and no
-    curvature term ``_LOCAL_SLOPE_SE`` standard errors off zero): a post's readings bend
-    away from the beam (its centre is read at θ ≈ 0 rightly) and keep θ = 0. σ: the reading's noise at θ plus the spread of d over θ ± the slope's
-    standard error. A reading with fewer than ``_LOCAL_MIN`` such readings, a concave bend,
-    or a straight profile whose slope is not clearly steep or flat, has no incidence to go by: where its
-    θ = 0 distance exceeds the one at the steepest θ it allows (the drop-out angle, or
-    slope + 2 standard errors) by more than ``_UNKNOWN_M`` it is INCIDENCE_UNKNOWN (not
-    valid: a wall's last readings before the drop-out were read up to 190 mm long)."""
-    flat_valid = points.valid.reshape(-1)
-    vi = index[flat_valid[index]]               # valid readings in scan order
-    if vi.size == 0:
-        return points
-    lab = label.reshape(-1)
-    off = ((lab[vi] < 0) & (points.theta.reshape(-1)[vi] == 0.0)).nonzero()[0]
-    if off.size == 0:
-        return points
+
+def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: np.ndarray,
+                    cal: Calibration):
+    """Per valid reading in scan order (``vi``): counts, heading, emitter, log counts,
+    σ_S/S, θ = 0 distance, polyline id (at θ = 0) and motor step."""
     n_sensors = points.valid.shape[1]
     s = np.asarray(counts, dtype=float).reshape(-1)[vi]
     h = points.heading.reshape(-1)[vi]
@@ -651,8 +646,36 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     d0 = np.exp(la0 + b0 * log_s)
     chain = polyline_ids(d0, np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M), h,
                          vi % n_sensors, cal.max_incidence_rad, LineOptions.jump_sigmas)
-    # the window: same polyline, within _LOCAL_STEPS steps
     step = np.asarray(steps).reshape(-1)[vi // n_sensors]
+    return s, h, ox, oy, log_s, sig_s, d0, chain, step
+
+
+def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.ndarray,
+                      steps: np.ndarray, cal: Calibration) -> _Profile:
+    """:func:`range_profiles` in one compiled call (``irring.estimation._lines.profiles``, held
+    to it by tests/test_estimate_oracle.py)."""
+    s, h, ox, oy, log_s, sig_s, d0, chain, step = _profile_inputs(points, vi, counts, steps,
+                                                                 cal)
+    n, slope, se, theta, steep, ok, convex, sure, concave = _lines.profiles(
+        ox, oy, h, log_s, sig_s, chain.astype(np.intp), step.astype(np.intp),
+        np.ascontiguousarray(off, dtype=np.intp), cal.theta_rad,
+        cal.log_ab(cal.theta_rad)[0], cal.b, cal.max_incidence_rad,
+        _CONVEX_BELOW_DROP_RAD, _LOCAL_STEPS, _LOCAL_MIN, _LOCAL_SPREAD_M, _LOCAL_SLOPE_SE,
+        _CHI2_95, SIGMA_FLOOR_M, _CONVEX_SURE_SE)
+    return _Profile(s=s, d0=d0, sig_s=sig_s, n=n, slope=slope, se=se, theta=theta,
+                    ok=ok.view(bool), convex=convex.view(bool), sure=sure.view(bool),
+                    concave=concave.view(bool), steep=steep)
+
+
+def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.ndarray,
+                   steps: np.ndarray, cal: Calibration) -> _Profile:
+    """The range profile of each reading ``vi[off]`` (``vi``: the valid readings' flat
+    indices in scan order) from its sensor's valid readings of the same polyline within
+    ``_LOCAL_STEPS`` steps, read as a flat surface would be (:func:`local_incidence`);
+    numpy, the statement :func:`profiles_compiled` is held to."""
+    s, h, ox, oy, log_s, sig_s, d0, chain, step = _profile_inputs(points, vi, counts, steps,
+                                                                 cal)
+    # the window: same polyline, within _LOCAL_STEPS steps
     j = off[:, None] + np.arange(-_LOCAL_STEPS, _LOCAL_STEPS + 1)[None, :]
     jc = np.clip(j, 0, vi.size - 1)
     w = ((j == jc) & (chain[jc] == chain[off][:, None])
@@ -709,10 +732,113 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     # as a post's readings are; flagging them lost thin legs' recall (0.96 -> 0.89)
     convex = ((n >= _LOCAL_MIN) & (bend > _LOCAL_SLOPE_SE * bend_se)
               & (theta < cal.max_incidence_rad - _CONVEX_BELOW_DROP_RAD))
+    return _Profile(s=s, d0=d0, sig_s=sig_s, n=n, slope=slope, se=se, theta=theta, ok=ok,
+                    convex=convex, sure=bend > _CONVEX_SURE_SE * bend_se, concave=concave,
+                    steep=steep)
+
+
+ROUND_SHARE = 0.4        # a line is a round thing's when this share of its members' profiles
+#                          bend away from the beam, …
+ROUND_OVER_OK = 1.5      # … this many times as many as are straight and steep (a convex
+#                          corner's faces are), …
+ROUND_MIN_THETA = math.radians(30)  # … and its members' mean θ is at least this
+
+
+def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.ndarray:
+    """RMS range error of reading ``counts`` with θ = 0 (giving ``d0``) when the true θ is
+    unknown: θ as a beam meets a round surface at a uniformly random offset (sin θ uniform
+    up to the drop-out angle; most such readings are thin obstacles), by 8-point quadrature.
+    The θ = 0 distance is the longest the reading can mean, so the error is one-sided and
+    grows steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
+    u = (np.arange(FALLBACK_NODES) + 0.5) / FALLBACK_NODES * math.sin(cal.max_incidence_rad)
+    err = cal.distance(counts[:, None], np.arcsin(u)) - d0[:, None]
+    return np.sqrt(np.mean(err * err, axis=1))
+
+
+def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
+                    steps: np.ndarray, cal: Calibration, profiler: Callable | None = None
+                    ) -> tuple[Points, np.ndarray]:
+    """Readings on no line (``label`` −1, θ = 0), and the members of lines that are a round
+    thing's, re-read at the incidence their own sensor's neighbouring steps give; numpy,
+    shared by both estimators.
+
+    ``index``: flat (S, N) indices of the live readings in scan order (each sensor's by
+    step); ``steps`` (S,): each row's motor step. A wall seen at 60–70° often gives only a few readings before the drop-out, too
+    few or too short for a line, and read at θ = 0 they lie 100–190 mm beyond it. Its range
+    still grows steadily as the beam turns: in the frame of a reading's beam (u along, v
+    across) the neighbours' end points lie on u = u0 + v·tan θ. So the valid readings of the
+    same surface (the same polyline: no range jump, ``polyline_ids``) within
+    ``_LOCAL_STEPS`` steps, read at a common θ, are fitted by least squares (u on v: the
+    noise is along the beam; each neighbour read at θ plus the angle its beam turned, as
+    on a flat surface), θ = atan|slope| (at most the drop-out angle), three times.
+    The slope is used only where it is clearly not flat (``_LOCAL_SLOPE_SE`` standard
+    errors) and the profile is straight (χ² within its 95 % point, ``_CHI2_95``, and no
+    curvature term ``_LOCAL_SLOPE_SE`` standard errors off zero): a post's readings bend
+    away from the beam (its centre is read at θ ≈ 0 rightly) and keep θ = 0. σ: the reading's noise at θ plus the spread of d over θ ± the slope's
+    standard error. A reading with fewer than ``_LOCAL_MIN`` such readings, a concave bend,
+    or a straight profile whose slope is not clearly steep or flat, has no incidence to go by: where its
+    θ = 0 distance exceeds the one at the steepest θ it allows (the drop-out angle, or
+    slope + 2 standard errors) by more than ``_UNKNOWN_M`` it is INCIDENCE_UNKNOWN (not
+    valid: a wall's last readings before the drop-out were read up to 190 mm long).
+
+    Round things: the members of a line read steeply (mean θ ≥ ``ROUND_MIN_THETA``) whose
+    own profiles bend away from the beam (at least ``ROUND_SHARE`` of them, and
+    ``ROUND_OVER_OK`` times as many as are straight and steep) leave it first and are read
+    as readings on no line: a column's arc, cut into short lines, settles on a θ 20–30° too
+    steep and puts its readings 30–140 mm in front of it (docs/estimator.md, "Round
+    things"). Returns the points and ``label`` without those members."""
+    flat_valid = points.valid.reshape(-1)
+    vi = index[flat_valid[index]]               # valid readings in scan order
+    if vi.size == 0:
+        return points, label
+    lab = label.reshape(-1)[vi]
+    theta_now = points.theta.reshape(-1)[vi]
+    off = (lab < 0) & (theta_now == 0.0)
+    # only a line read steeply can be read too steeply: its members are asked too
+    member = (lab >= 0).nonzero()[0]
+    line = lab[member]
+    total = np.bincount(line)
+    steep = np.bincount(line, weights=theta_now[member], minlength=total.size)
+    maybe = np.zeros(vi.size, dtype=bool)
+    maybe[member] = (steep >= ROUND_MIN_THETA * total)[line]
+    ask = (off | maybe).nonzero()[0]
+    if ask.size == 0:
+        return points, label
+    pr = (profiler or profiles_compiled)(points, vi, ask, counts, steps, cal)
+    # round lines: their members bend away more often than not straight and steep
+    asked = maybe[ask]
+    line = lab[ask[asked]]
+    bent = np.bincount(line, weights=pr.convex[asked], minlength=total.size)
+    straight = np.bincount(line, weights=pr.ok[asked], minlength=total.size)
+    round_line = (bent >= ROUND_SHARE * total) & (bent >= ROUND_OVER_OK * straight)
+    taken = np.zeros(ask.size, dtype=bool)
+    taken[asked] = round_line[line]
+    if taken.any():    # back to θ = 0 with the σ of a reading on no line
+        at = vi[ask[taken]]
+        s0, d0 = pr.s[ask[taken]], pr.d0[ask[taken]]
+        _, b0 = cal.log_ab(0.0)
+        sigma0 = np.hypot(np.maximum(np.abs(b0) * d0 * pr.sig_s[ask[taken]], SIGMA_FLOOR_M),
+                          fallback_spread(cal, s0, d0))
+        hh = points.heading.reshape(-1)[at]
+        moved = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+        for f, v in (("d", d0), ("theta", 0.0), ("sigma_m", sigma0),
+                     ("x", points.origin_x.reshape(-1)[at] + d0 * np.cos(hh)),
+                     ("y", points.origin_y.reshape(-1)[at] + d0 * np.sin(hh))):
+            moved[f].reshape(-1)[at] = v
+        points = replace(points, **moved)
+        label = label.copy()
+        label.reshape(-1)[at] = -1
+    mine = off[ask] | taken                     # the readings on no line now
+    if not mine.any():
+        return points, label
+    off = ask[mine]
+    s, d0, sig_s = pr.s, pr.d0, pr.sig_s
+    ok, convex, sure, steep, theta, slope, se = (v[mine] for v in (
+        pr.ok, pr.convex, pr.sure, pr.steep, pr.theta, pr.slope, pr.se))
     # where θ = 0 may read more than _UNKNOWN_M long, a bend noise could make (a steep far
     # wall's few readings bent 2.2 SE by noise were kept 106-166 mm long) is not enough
     doubtful = d0[off] - cal.distance(s[off], steep) > _UNKNOWN_M
-    convex &= ~doubtful | (bend > _CONVEX_SURE_SE * bend_se)
+    convex = convex & (~doubtful | sure)
     # a ring held still (fewer motor steps than a slope needs) has no neighbours to ask: its
     # readings are what it has (flagging them lost a radial ring nearly every reading)
     still = bool(np.unique(np.asarray(steps)).size < _LOCAL_MIN)
@@ -724,7 +850,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     # θ = 0 with the σ of that doubt
     wide = (convex | still) & ~ok
     if not (ok.any() or few.any() or wide.any()):
-        return points
+        return points, label
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     if wide.any():
         at = vi[off[wide]]
@@ -755,7 +881,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray,
     out["sigma_m"].reshape(-1)[at] = sigma
     out["x"].reshape(-1)[at] = points.origin_x.reshape(-1)[at] + d_new * np.cos(hh)
     out["y"].reshape(-1)[at] = points.origin_y.reshape(-1)[at] + d_new * np.sin(hh)
-    return replace(points, **out)
+    return replace(points, **out), label
 
 
 # --------------------------------------------------------------------------- silent beams

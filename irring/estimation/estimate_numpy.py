@@ -11,12 +11,13 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
-from .calibration import FALLBACK_NODES, RANGE_SIGMAS, Calibration
+from .calibration import RANGE_SIGMAS, Calibration
 from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH_MIN_MEMBERS,
                        REGROUP_WINDOW, SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
                        LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
-                       final_estimate, member_spans, nominal_calibration, polyline_ids, pooled_counts,
-                       reach_cos_limit, resolve_foldover, scan_order)
+                       fallback_spread, final_estimate, member_spans, nominal_calibration,
+                       polyline_ids, pooled_counts, range_profiles, reach_cos_limit,
+                       resolve_foldover, scan_order)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -1076,7 +1077,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     if iterate:  # fallback readings (no line): θ = 0, σ widened by θ's unknown
         off = (~on_line).nonzero()[0]
         if off.size:
-            sigma[off] = np.hypot(sigma.take(off), _fallback_spread(cal, s.take(off),
+            sigma[off] = np.hypot(sigma.take(off), fallback_spread(cal, s.take(off),
                                                                      d.take(off)))
 
     iterations = np.minimum(last_moving + 2, n_its)
@@ -1102,7 +1103,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         iterations=it_out, valid=valid, reason=reason, max_range_m=max_range)
     return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, True, history,
                           counts, np.asarray(sweep.steps), reach=no_return_reach,
-                          snapper=snap_to_lines)
+                          snapper=snap_to_lines, profiler=range_profiles)
 
 
 def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
@@ -1218,17 +1219,6 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
     reach[nr] = np.where(np.isfinite(stop), np.maximum(stop, 0.0), np.nan)
     return reach.reshape(points.valid.shape)
 
-
-
-def _fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.ndarray:
-    """RMS range error of reading ``counts`` with θ = 0 (giving ``d0``) when the true θ is
-    unknown: θ as a beam meets a round surface at a uniformly random offset (sin θ uniform
-    up to the drop-out angle; most such readings are thin obstacles), by 8-point quadrature.
-    The θ = 0 distance is the longest the reading can mean, so the error is one-sided and
-    grows steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
-    u = (np.arange(FALLBACK_NODES) + 0.5) / FALLBACK_NODES * math.sin(cal.max_incidence_rad)
-    err = cal.distance(counts[:, None], np.arcsin(u)) - d0[:, None]
-    return np.sqrt(np.mean(err * err, axis=1))
 
 
 def _needs_drop(held: _Held, hot, theta_line, sw: _Sweep) -> bool:
