@@ -48,7 +48,8 @@ class Robot:
 class Sensor:
     model: str = choice(SENSOR_MODEL, tuple(gp2.SENSORS))
     max_range_m: float = num(MAX_RANGE_M, lo=0.02, hi=30.0,
-                             doc="readings beyond are treated as no return (paper: 624 mm)")
+                             doc="readings beyond are treated as no return (default: the "
+                                 "model's, gp2.SENSORS; the paper's GP2D12: 624 mm)")
     adc_bits: int = choice(ADC_BITS, (8, 10, 12, 16))
     vref_v: float = num(VREF_V, lo=1.0, hi=10.0)
 
@@ -504,6 +505,7 @@ def parse(raw: Any, source: str = "") -> Scenario:
         if any(not (ch.isprintable() or ch in "\n\t") for ch in text):
             raise loader.fail(key, "control characters (terminal escapes) are not allowed")
     sc = dataclasses.replace(sc, source=source)
+    sc = _part_range(sc, raw)
     sc = _sensor_for_design(sc, raw, loader.fail)
     _validate_geometry(sc, loader.fail)
     _validate_effects(sc, loader.fail)
@@ -548,6 +550,19 @@ def _validate_effects(sc: Scenario, fail) -> None:
                                               f"{len(motion.path)}")
         if motion.speed_m_s <= 0:
             raise fail("effects.motion.speed_mm_s", "must be > 0 to drive the path")
+
+
+def _part_range(sc: Scenario, raw: Mapping) -> Scenario:
+    """A ``sensor:`` block that names no max range reads to its model's range
+    (``gp2.SENSORS``: the GP2D12 to the paper's 624 mm, the other parts to their curve's
+    end), not to the GP2D12's: a GP2Y0A02 read to 624 mm sees 40 % of its range."""
+    block = raw.get("sensor")
+    if isinstance(block, Mapping) and any(k in block for k, _ in _yaml_keys("max_range_m")):
+        return sc
+    part = gp2.sensor_spec(sc.sensor.model).max_range_m
+    if part == sc.sensor.max_range_m:
+        return sc
+    return dataclasses.replace(sc, sensor=dataclasses.replace(sc.sensor, max_range_m=part))
 
 
 def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:

@@ -443,3 +443,15 @@ def test_the_papers_range_keeps_half_a_members_own_sigma():
     cal = Calibration.nominal("gp2d12", noise_sigma_v=0.015)
     assert fast.far_sigma_cap(cal, 0.624) == math.inf
     assert fast.far_sigma_cap(Calibration.nominal("gp2y0a21", noise_sigma_v=0.015), 0.8) == 0.010
+
+
+def test_a_gp2y0a02_scene_without_a_range_reads_to_1500_mm():
+    """FAR_A02 with no max_range_mm: read to the part's 1500 mm, not the GP2D12's 624 mm
+    (which sees 25 of the hall's 564 cells of wall): its far walls are mapped (seed 5021:
+    F1 0.943, precision 0.922)."""
+    scene = loads(FAR_A02.replace("{model: gp2y0a02, max_range_mm: 1500}", "{model: gp2y0a02}"))
+    assert scene.sensor.max_range_m == 1.5
+    run = pipeline.run(scene, progress=False)
+    far = sum(int((p.valid & (p.d > 1.2)).sum()) for p in run.points)
+    assert far > 200          # (read to 624 mm: none)
+    assert run.scores["occupied_f1"] > 0.93 and run.scores["occupied_precision"] > 0.90

@@ -14,7 +14,7 @@ import typing
 import numpy as np
 import pytest
 
-from irring import designs, resources
+from irring import designs, gp2, resources
 from irring import scenario as S
 from irring.scenario import ScenarioError, load_scenario, loads, parse
 
@@ -218,6 +218,28 @@ def test_a_non_ir_design_brings_its_own_sensor(t_room_raw, design, kind):
         parse(t_room_raw)
 
 
+@pytest.mark.parametrize("model, expected_m", [("gp2d12", 0.624), ("gp2y0a21", 0.8),
+                                               ("gp2y0a02", 1.5), ("laser", 8.0),
+                                               ("sonar", 6.45)])
+def test_a_sensor_block_without_a_range_reads_to_its_models_range(t_room_raw, model,
+                                                                  expected_m):
+    """The GP2D12 to the paper's 624 mm, every other part to its curve's end (a GP2Y0A02
+    read to 624 mm saw 40 % of its range); a range the file names is kept, in either unit."""
+    t_room_raw["sensor"] = {"model": model, "adc_bits": 10}
+    sc = parse(t_room_raw)
+    assert sc.sensor.max_range_m == gp2.sensor_spec(model).max_range_m == expected_m
+    assert sc.sensor.adc_bits == 10
+    t_room_raw["sensor"] = {"model": model, "max_range_mm": 431}
+    assert parse(t_room_raw).sensor.max_range_m == pytest.approx(0.431)
+    t_room_raw["sensor"] = {"model": model, "max_range_m": 0.624}
+    assert parse(t_room_raw).sensor.max_range_m == 0.624
+
+
+def test_no_sensor_block_is_the_papers_gp2d12_to_624_mm(t_room_raw):
+    t_room_raw.pop("sensor", None)
+    assert parse(t_room_raw).sensor == S.Sensor(model="gp2d12", max_range_m=0.624)
+
+
 # --------------------------------------------------------------------------- the user docs
 
 README = resources.scenarios_dir() / "README.md"
@@ -257,7 +279,7 @@ def test_readme_defaults_match_the_schema():
     text = README.read_text()
     for row in ("| `sensors` | whole number | 1 … 72 | 12 |",
                 "| 150 mm |", "| 1.8° |", "| 0.6 |", "| −35, 35 |", "| 7 mm |", "| 37.8° |",
-                "| 624 mm |", "| 10 mm |"):
+                "| the model's: 624 mm for `gp2d12` (the paper's)", "| 10 mm |"):
         assert row in text, row
     ring = S.Ring()
     assert (ring.sensors, ring.radius_m, ring.gear, ring.min_step, ring.max_step) == \
