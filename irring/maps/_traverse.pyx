@@ -363,6 +363,13 @@ cdef inline double ranged(Py_ssize_t i, const double[::1] origin_x,
     return NAN
 
 
+cdef inline double hit_log_odds(double sigma, double l_occ, double l_occ_min, double occ_sigma,
+                                double lone_sigma) noexcept nogil:
+    # mapping.hit_weight: the hit at a valid reading's end point, from its (floored) σ
+    return dmax(dmin(l_occ_min, l_occ) * dmin(1.0, lone_sigma / sigma),
+                l_occ * dmin(1.0, occ_sigma / sigma))
+
+
 def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[::1] origin_y,
               const double[::1] heading, const double[::1] x, const double[::1] y,
               const double[::1] sigma_m, const unsigned char[::1] valid,
@@ -582,7 +589,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
             mu = stop_m / sigma
             # a reading k times as uncertain as occ_sigma spreads 1/k of a hit over k times
             # the length, but adds at least l_occ_min (or l_occ, if that is less)
-            l_hit = dmax(dmin(l_occ_min, l_occ) * trust, l_occ * dmin(1.0, occ_sigma / sigma))
+            l_hit = hit_log_odds(sigma, l_occ, l_occ_min, occ_sigma, lone_sigma)
             if e[9] == 0:
                 for k in range(n_far, s.count):
                     two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
@@ -747,13 +754,6 @@ def first_material(const double[::1] x0, const double[::1] y0, const double[::1]
                         out[j] = lab
                         break
     return out_a
-
-
-cdef inline double hit_log_odds(double sigma, double l_occ, double l_occ_min, double occ_sigma,
-                                double lone_sigma) noexcept nogil:
-    # mapping.hit_weight: the hit at a valid reading's end point, from its (floored) σ
-    return dmax(dmin(l_occ_min, l_occ) * dmin(1.0, lone_sigma / sigma),
-                l_occ * dmin(1.0, occ_sigma / sigma))
 
 
 cdef inline Py_ssize_t lower_bound(const double* keys, Py_ssize_t n, double v) noexcept nogil:

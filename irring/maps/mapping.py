@@ -293,10 +293,6 @@ class OccupancyGrid:
                 points, self.shape, self.origin_xy_m, self.resolution_m, self.params),
                 self.params)
         points, params = mapped_beams(points, self.params)
-        self._add_beams(log_odds, points, params, lo, hi)
-
-    def _add_beams(self, log_odds: np.ndarray, points: Points, params: MapperParams,
-                   lo: float, hi: float) -> None:
         _traverse.add_beams(
             log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
             _flat(points.x), _flat(points.y), _flat(points.sigma_m),

@@ -41,18 +41,10 @@ def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.
 
 def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
                      params: MapperParams) -> np.ndarray:
-    """(S, N) m: the range each valid reading a surface explains is mapped at instead of
-    its own (NaN for the others), on a grid of ``shape`` (ny, nx) cells.
-
-    A reading is explained when its σ lies in [``explain_sharper``·``min_sigma_m``, ``lone_sigma_m``]
-    and its beam crosses, within ``explain_sigmas``·σ before its end point and leaving it
-    at least a cell before, a cell that sharper end points of the batch confirm: the hits
-    (:func:`hit_weight`) of those in it whose σ is at most σ/``explain_sharper`` reach
-    ``explain_log_odds``. That surface, within the reading's noise in front of it, explains
-    the reading, which is mapped at the middle of its beam's passage through the first such
-    cell. The oracle of the compiled :func:`irring.maps.mapping.explained_ranges` (every
-    cell from :func:`~irring.maps.mapping.traverse`).
-    """
+    """The numpy statement of the compiled :func:`irring.maps.mapping.explained_ranges`
+    (its contract, stated there): every cell of each candidate's window from
+    :func:`~irring.maps.mapping.traverse`, a cell's sharper hits a prefix sum of the batch's
+    end points sorted by cell, then σ."""
     p, res = params, float(resolution_m)
     ny, nx = (int(n) for n in shape)
     out = np.full(np.shape(points.valid), np.nan)
