@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
     range_m = None if args.range_mm is None else args.range_mm * 1e-3
     pairs = sum(len(geometry.neighbour_pairs(designs.get(n).ring.sensors)) for n in names)
-    try:   # the Monte Carlo is the slow part (~40 s at --samples 10^7): a bar over its pairs
+    try:   # the Monte Carlo is the slow part (--samples says how slow): a bar over its pairs
         with progress_bar(pairs, "overlap (Monte Carlo)", unit="pair") as bar:
             reports = [geometry.design_report(designs.get(n), args.distances_mm,
                                               range_m=range_m, samples=args.samples,
