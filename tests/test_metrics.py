@@ -715,3 +715,30 @@ def test_a_beam_meets_a_face_from_its_front_only():
     inward = (truth.surface_normal[walls] * np.sign(
         np.array([0.8, 0.6]) - truth.surface_point[walls])).max(axis=1)
     assert (inward > 0.99).all()                             # each wall's normal points in
+
+
+def test_a_cell_is_visible_only_where_one_pose_both_returns_from_and_meets_it(monkeypatch):
+    """Visible wall needs a return and a meeting beam from the same pose (docs/mapping.md):
+    with returns granted only to the T-room's first pose and meeting beams only to its
+    last, no cell is visible (before 0c7705c a return from any pose counted: this failed);
+    both granted to either pose, part of the wall is."""
+    sc = load_scenario("t_room")
+    grid = OccupancyGrid.for_scenario(sc)
+    first, last = sc.robot.poses[0], sc.robot.poses[-1]
+    measurable, met = metrics._measurable_returning, metrics._met
+
+    def truth(returns_from, meets_from):
+        def returning(px, py, pose, ranging, surface):
+            near, ret = measurable(px, py, pose, ranging, surface)
+            return near, ret & (pose is returns_from)
+
+        def meets(*args):      # (scenario, grid, px, py, tx, ty, surface, pose, ranging)
+            return met(*args) & (args[7] is meets_from)
+
+        monkeypatch.setattr(metrics, "_measurable_returning", returning)
+        monkeypatch.setattr(metrics, "_met", meets)
+        return ground_truth(sc, grid)
+
+    assert truth(first, last).visible.sum() == 0
+    for pose in (first, last):      # each alone sees part of the T-room's 844 wall cells
+        assert 0 < truth(pose, pose).visible.sum() < 844
