@@ -37,12 +37,22 @@ MAX_ADC_BITS = 24                   # a converter's bits a device, recording or 
 VREF_RANGE_V = (0.1, 50.0)          # its reference voltage there (V; a scenario's: Sensor.vref_v)
 MAX_DURATION_S = 1e7                # hardware time of one sweep (115 days; a recording's bound)
 WORK_MEMORY_BYTES = 2 * 10**9       # readings and belt physics of one run together
-BYTES_PER_READING = 600             # a reading through simulation, estimate and map (measured:
-                                    # 72 sensors × 20 001 steps peaked 0.94 GB, 10 001 steps 0.51 GB)
+BYTES_PER_READING = 600             # a reading through simulation, estimate and map (measured,
+                                    # few beams returning: 72 sensors × 20 001 steps peaked 0.94 GB)
+ESTIMATE_BYTES_PER_READING = 2_700  # more for each reading of the sweep being estimated when
+                                    # every reading returns (72 × 20 001 did: 3.8 GB, 4.0 GB a run)
 BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
 MAX_SEEDS = 100_000                 # seeds of one configuration a study, compare or bench runs
 MAX_OUTLINE_CORNERS = 10_000        # corners of a room outline (checking that its walls never
                                     # cross takes ~1 s at this many; 100 000 took hours)
+
+
+
+def work_bytes(readings: int, largest_sweep: int) -> int:
+    """Memory (bytes) estimating and mapping ``readings`` takes at most, ``largest_sweep`` of
+    them in one sweep (estimated one sweep at a time); held within :data:`WORK_MEMORY_BYTES`."""
+    return int(readings) * BYTES_PER_READING + int(largest_sweep) * ESTIMATE_BYTES_PER_READING
+
 
 # --------------------------------------------------------------------------- field bounds
 # A field's metadata holds its inclusive SI bounds or allowed choices; the scenario loader

@@ -15,8 +15,9 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import core, gp2
-from .core import ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth
-from .errors import InputError, IrringError, brief
+from .core import (ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL,
+                   VREF_V, WORK_MEMORY_BYTES, Ring, Sweep, Truth, work_bytes)
+from .errors import InputError, IrringError, TooBig, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
 from .scenario import MapSpec, ScenarioError, load_dataclass
 
@@ -134,6 +135,7 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
                 if not name.endswith(".npy"):
                     raise fail(f"{brief(name)}: unknown entry; a recording holds .npy arrays")
             headers = {name[:-4]: _npy_header(zf, info, fail) for name, info in infos.items()}
+        _check_work(headers, path)
         with np.load(path, allow_pickle=False) as npz:
             return _read(npz, headers, fail)
     except IrringError:   # RecordingError, TooBig
@@ -143,6 +145,24 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
         # flag, RuntimeError "encrypted", IndexError, EOFError, …): all mean a damaged file
         why = getattr(exc, "strerror", None) or f"{type(exc).__name__}: {exc}"
         raise fail(f"not an irring recording (.npz), or a damaged one: {brief(why)[1:-1]}") from None
+
+
+def _check_work(headers: dict, path: Path) -> None:
+    """:class:`TooBig` for sweeps too many readings to estimate and map within the work
+    budget, told from the counts' headers before any array is read (a 1.2 MB file of one
+    100,000 × 72 sweep filled 5.5 GB)."""
+    shapes = [shape for name, (shape, _) in headers.items()
+              if name.count("/") == 1 and name.endswith("/counts") and len(shape) == 2]
+    if not shapes:
+        return   # _read names what is missing
+    readings = sum(s * n for s, n in shapes)
+    steps, sensors = max(shapes, key=lambda sn: sn[0] * sn[1])
+    need = work_bytes(readings, steps * sensors)
+    if need > WORK_MEMORY_BYTES:
+        raise TooBig(f"{path}: {len(shapes)} sweeps, {readings:,} readings (the largest sweep "
+                     f"{steps:,} steps × {sensors} sensors) need about {need / 1e9:.1f} GB to "
+                     f"estimate and map, more than the {WORK_MEMORY_BYTES / 1e9:g} GB a replay "
+                     "may use; map fewer or shorter sweeps at a time")
 
 
 def _text(npz, headers: dict, name: str, fail) -> str:

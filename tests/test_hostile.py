@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import hostile_devices as hd
-from irring import safe_yaml
+from irring import errors, safe_yaml
 from irring.cli import main
 from irring.core import Sweep
 from irring.errors import OutputError, TooBig
@@ -1017,3 +1017,30 @@ def test_view_with_a_display_that_cannot_be_opened_writes_the_picture(tmp_path):
     assert ("irring view: the display ':97' cannot be opened (GLFW could not connect to it); "
             "writing the picture instead") in done.stderr
     assert (tmp_path / "out" / "t_room_cylinder" / "view.png").stat().st_size > 1000
+
+
+def test_drive_refuses_a_ring_too_big_to_map_before_any_sweep(tmp_path, capsys):
+    """A device announcing 72 sensors × 40 001 steps (allowed by the handshake): one sweep
+    is 2.9 M readings, about 9.5 GB to estimate; drive would sweep it for 25 min, then run
+    out of memory and lose it."""
+    asked = []
+
+    def big_ring(dev, cmd):
+        if isinstance(cmd, p_.Hello):
+            dev.send(hd.info(sensors=72, lo=-20000, hi=20000, step_mdeg=10, num=1, den=100))
+        elif isinstance(cmd, p_.SweepCommand):
+            asked.append(cmd)
+
+    dev = hd.HostileDevice(big_ring)
+    out = tmp_path / "out"
+    try:
+        code = main(["drive", "--port", dev.link, "--timeout", str(TIMEOUT_S), "--no-wait",
+                     "--no-animation", "--out", str(out), "--poses", "2"])
+    finally:
+        dev.close()
+    err = capsys.readouterr().err
+    assert code == errors.TOO_BIG, err
+    assert ("2 sweeps × 40,001 steps × 72 sensors (the ring's IRINF) = 5,760,144 readings "
+            "(about 11.2 GB)") in err
+    assert "more than the 2 GB" in err and "--poses" in err
+    assert asked == [] and not out.exists()

@@ -10,7 +10,9 @@ import zipfile
 import numpy as np
 import pytest
 
+from irring import core
 from irring.core import Sweep, Truth
+from irring.errors import TooBig
 from irring.recording import FORMAT, RecordingError, load_recording, save_recording
 from irring.core import Ring
 
@@ -109,3 +111,23 @@ def test_simulated_sweep_round_trips(tmp_path):
     sweep = SimRing(load_scenario("t_room_cylinder")).sweep(0)
     back, _ = load_recording(save_recording(tmp_path / "s.npz", [sweep]))
     assert_same(sweep, back[0])
+
+
+def test_a_recording_too_big_to_replay_is_refused_before_its_arrays_are_read(tmp_path):
+    # 1.2 MB on disk: one sweep of 100 000 steps × 72 sensors, all the same count; replaying
+    # it filled 5.5 GB before running out under an 8 GB limit
+    ring = core.Ring(sensors=72, radius_m=0.15, motor_step_rad=math.radians(0.01), gear=0.01,
+                     min_step=-50000, max_step=49999, emitter_offset_m=0.007,
+                     sensor_height_m=0.1, joint_limit_rad=0.6)
+    steps = np.arange(-50000, 50000)
+    sweep = core.Sweep(steps=steps, sensor_angles=core.sensor_angles_for_steps(ring, steps),
+                       counts=np.full((len(steps), 72), 2000, dtype=np.int16),
+                       timestamps_s=np.arange(len(steps)) * 0.04, duration_s=4000.0,
+                       pose=np.array([0.5, 0.4, 0.0]), ring=ring)
+    path = save_recording(tmp_path / "big.npz", [sweep])
+    with pytest.raises(TooBig) as caught:
+        load_recording(path)
+    message = str(caught.value)
+    assert str(path) in message
+    assert "1 sweeps, 7,200,000 readings (the largest sweep 100,000 steps × 72 sensors)" in message
+    assert "about 23.8 GB" in message and "more than the 2 GB" in message

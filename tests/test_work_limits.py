@@ -60,13 +60,14 @@ def test_a_sweep_of_more_steps_than_a_run_takes_is_refused(tmp_path, capsys):
 
 
 def test_too_many_readings_in_total_are_refused_with_the_memory(tmp_path, capsys):
-    # 72 sensors × 40 001 steps × 2 poses = 5.76 M readings, each sweep allowed alone
+    # 72 sensors × 4 001 steps × 8 poses = 2.3 M readings, each sweep allowed alone
+    poses = ", ".join(f"{{x_mm: {400 + 150 * k}, y_mm: {610 + 20 * k}}}" for k in range(8))
     robot = ("  design: custom\n  ring: {sensors: 72, radius_mm: 150, motor_step_deg: 0.01, "
-             "gear: 0.01, min_step: -20000, max_step: 20000, joint_limit_deg: 360}\n"
-             "  poses: [{x_mm: 1040, y_mm: 730}, {x_mm: 900, y_mm: 610}]")
+             "gear: 0.01, min_step: -2000, max_step: 2000, joint_limit_deg: 360}\n"
+             f"  poses: [{poses}]")
     code, err, _ = run_status(scene(tmp_path, "many", robot=robot), tmp_path, capsys)
     assert code == errors.TOO_BIG
-    assert "2 sweeps × 40,001 steps × 72 sensors = 5,760,144 readings (about 3.5 GB)" in err
+    assert "8 sweeps × 4,001 steps × 72 sensors = 2,304,576 readings (about 2.2 GB)" in err
     assert "more than the 2 GB" in err and "robot.poses" in err
 
 
@@ -141,3 +142,21 @@ def test_a_detection_distance_past_float_range_is_a_usage_error(capsys):
         main(["compare", "--design", "laser", "--distances-mm", "400,1e300"])
     assert exit_.value.code == errors.USAGE
     assert "up to 100000, like 250,500,1000; got '400,1e300'" in capsys.readouterr().err
+
+
+DENSE_ROBOT = ("  design: custom\n  ring: {sensors: 72, radius_mm: 150, motor_step_deg: 0.01, "
+               "gear: 0.01, min_step: -10000, max_step: 10000, joint_limit_deg: 3}\n"
+               "  poses: [{x_mm: 410, y_mm: 370}]")
+
+
+def test_one_sweep_too_big_to_estimate_is_refused_up_front(tmp_path, capsys):
+    # 72 × 20 001 readings in an 800 × 760 mm room, every one a return: the budget called it
+    # 0.9 GB and let it run; estimating it peaked at 4.0 GB
+    path = tmp_path / "dense.yaml"
+    path.write_text("name: dense\nroom:\n  outline_mm: [[0, 0], [800, 0], [800, 760], "
+                    "[0, 760]]\nrobot:\n" + DENSE_ROBOT + "\n")
+    code, err, seconds = run_status(path, tmp_path, capsys)
+    assert code == errors.TOO_BIG, err
+    assert "1 sweeps × 20,001 steps × 72 sensors = 1,440,072 readings (about 4.8 GB)" in err
+    assert "more than the 2 GB" in err and "robot.ring.sensors" in err
+    assert seconds < 30

@@ -14,8 +14,8 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from ..core import (BYTES_PER_PHYSICS_VALUE, BYTES_PER_READING, MAX_STEPS, MAX_SWEEPS,
-                    WORK_MEMORY_BYTES, Sweep, Truth, as_pose, hardware_duration_s)
+from ..core import (BYTES_PER_PHYSICS_VALUE, MAX_STEPS, MAX_SWEEPS, WORK_MEMORY_BYTES, Sweep,
+                    Truth, as_pose, hardware_duration_s, work_bytes)
 from ..errors import TooBig
 from ..scenario import Scenario
 from . import dynamics as dynamics_lib
@@ -68,7 +68,8 @@ def check_work(sim: SimRing) -> None:
         sched = sim.dynamics.schedule(sim.default_steps())
         physics_steps = int(math.ceil(sched.duration_s / sim.dynamics.belt.timestep_s)) + 1
     physics_bytes = physics_steps * (sim.model.nq + sim.model.nv) * BYTES_PER_PHYSICS_VALUE
-    need = readings * BYTES_PER_READING + physics_bytes
+    reading_bytes = work_bytes(readings, steps * sensors)
+    need = reading_bytes + physics_bytes
     work = (f"{sweeps:,} sweeps × {steps:,} steps × {sensors} sensors = {readings:,} readings"
             + (f" and {physics_steps:,} belt physics steps" if physics_steps else "")
             + f" (about {need / 1e9:.1f} GB)")
@@ -81,7 +82,7 @@ def check_work(sim: SimRing) -> None:
     if need > WORK_MEMORY_BYTES:
         keys = (f"{sweep_keys}, or use fewer robot.ring.sensors, robot.poses or a shorter or "
                 f"faster effects.motion")
-        if physics_bytes > readings * BYTES_PER_READING:
+        if physics_bytes > reading_bytes:
             keys = ("raise effects.belt_dynamics.timestep_ms or lower step_time_ms, lower "
                     f"scan.settle_ms or scan.samples, or {sweep_keys}")
         raise TooBig(f"{where}: {work}, more than the {WORK_MEMORY_BYTES / 1e9:g} GB a run "
