@@ -155,6 +155,22 @@ def test_an_existing_results_file_is_kept_unless_resumed(tmp_path):
 
 
 
+def test_resuming_with_a_design_changed_under_its_name_is_refused(tmp_path, capsys):
+    # the 16-sensor run was summarised with the 8-sensor one as two runs of "ring"
+    ring8 = "{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45, step_deg: 1.08, name: ring}"
+    p = write(tmp_path, f"designs: [{ring8}]\nscenarios: [l_room_post.yaml]\nseeds: [3]\n")
+    out = tmp_path / "out"
+    study.run_study(study.load_study(p), out)
+    before = (out / study.RESULTS).read_text()
+    p.write_text(p.read_text().replace("sensors: 8,", "sensors: 16,").replace("[3]", "[3, 4]"))
+    assert main(["study", str(p), "--out", str(out), "--resume", "--workers", "1"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"{out / study.RESULTS}: line 2: ring (" in err
+    assert "l_room_post.yaml, seed 3) was run with sensors 8; the study file's ring has 16" in err
+    assert (out / study.RESULTS).read_text() == before
+
+
 def test_an_out_folder_that_cannot_be_one_is_one_line(tmp_path, capsys):
     p = write(tmp_path, "designs: [radial12]\nscenarios: [l_room_post.yaml]\n")
     (tmp_path / "a file").write_text("mine")

@@ -329,6 +329,15 @@ def _peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # KiB on Linux
 
 
+def design_columns(design) -> dict[str, Any]:
+    """The :data:`DESIGN_COLUMNS` of a :class:`irring.designs.Design`."""
+    ring = design.ring
+    return dict(sensor=design.sensor.kind, sensors=ring.sensors, radius_mm=ring.radius_m * 1e3,
+                sweep_half_angle_deg=math.degrees(max(abs(ring.min_step), abs(ring.max_step))
+                                                  * ring.motor_step_rad * ring.gear),
+                step_deg=math.degrees(ring.motor_step_rad * ring.gear))
+
+
 def run_point(task: Task) -> dict:
     """One run of the grid (module level, so any executor can ship it): the row for
     results.csv, every column of :data:`COLUMNS`."""
@@ -347,14 +356,9 @@ def run_point(task: Task) -> dict:
                           design=design)
     r = accuracy.run_job(accuracy.Job(task.scenario_yaml, task.scenario_source, cfg, p.seed,
                                       base if task.scenario_yaml is None else None))
-    ring = design.ring
     row = dict(zip(KEY_COLUMNS, (p.design.label, p.scenario, p.step_stride, p.samples,
                                  float(p.settle_ms), p.seed)))
-    row.update(sensor=design.sensor.kind, sensors=ring.sensors,
-               radius_mm=ring.radius_m * 1e3,
-               sweep_half_angle_deg=math.degrees(max(abs(ring.min_step), abs(ring.max_step))
-                                                 * ring.motor_step_rad * ring.gear),
-               step_deg=math.degrees(ring.motor_step_rad * ring.gear))
+    row.update(design_columns(design))
     row.update({k: r.get(k) for k in SCORE_COLUMNS + COST_COLUMNS})
     row.update({k: r[k] for k in ("compute_ms", "estimate_ms", "map_ms", "sim_ms",
                                   "poses", "readings", "iterations_mean")})
@@ -438,6 +442,29 @@ def _cell_problem(col: str, cell: str) -> str | None:
     return "a finite number" + (" or empty (n/a)" if col in SCORE_COLUMNS else "")
 
 
+def _check_same_designs(path: Path, rows: Sequence[Mapping[str, str]],
+                        points: Sequence[Point]) -> None:
+    """:class:`StudyError` for a kept row whose design columns are not its point's: a design
+    changed under its name would be summarised together with the runs of the old one."""
+    by_key = {p.key: p for p in points}
+    columns: dict[str, dict[str, Any]] = {}
+    for line, row in enumerate(rows, start=2):
+        p = by_key.get(row_key(row))
+        if p is None:
+            continue
+        label = p.design.label
+        if label not in columns:
+            columns[label] = design_columns(p.design.build())
+        for col, now in columns[label].items():
+            same = (row[col] == now if isinstance(now, str)
+                    else math.isclose(float(row[col]), now, rel_tol=1e-9, abs_tol=1e-12))
+            if not same:
+                raise StudyError(f"{path}: line {line}: {label} ({row['scenario']}, seed "
+                                 f"{row['seed']}) was run with {col} {row[col]}; the study "
+                                 f"file's {label} has {_cell(now)}: give the changed design "
+                                 "another name, or choose another --out")
+
+
 def row_key(row: Mapping[str, Any]) -> tuple[str, ...]:
     """A row's grid point as text (the same as :attr:`Point.key`)."""
     return (str(row["design"]), str(row["scenario"]), str(row["step_stride"]),
@@ -495,6 +522,7 @@ def run_study(study: Study | Sequence[Point], out_dir: str | Path, ex=None, *,
     if existing and not resume:
         raise StudyError(f"{path}: already holds {len(existing)} run(s); pass --resume to run "
                          "only the missing ones, or choose another --out")
+    _check_same_designs(path, existing, points)
     done = {row_key(r) for r in existing}
     todo = [p for p in points if p.key not in done]
     if on_start is not None:
