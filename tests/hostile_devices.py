@@ -301,3 +301,20 @@ def interrupt_after(n_scans: int):
             _thread.interrupt_main()
     second.__name__ = f"interrupt_after_{n_scans}"
     return second
+
+
+def reboots_in_sweep(k: int):
+    """A correct device until its ``k``-th IRSWP, where it sends two steps and reboots: it
+    forgets the sweep and numbers IRSCN from 0 again (IRDON -1: none sent since boot)."""
+    def behaviour(dev, cmd):
+        if isinstance(cmd, p.SweepCommand):
+            dev.sweeps_seen = getattr(dev, "sweeps_seen", 0) + 1
+            if dev.sweeps_seen == k:
+                for step in (cmd.from_step, cmd.from_step + 1):
+                    dev.send(scan(dev.seq, step))
+                    dev.seq += 1
+                dev.seq = 0   # the reboot
+                return
+        good(dev, cmd)
+    behaviour.__name__ = f"reboots_in_sweep_{k}"
+    return behaviour

@@ -1044,3 +1044,21 @@ def test_drive_refuses_a_ring_too_big_to_map_before_any_sweep(tmp_path, capsys):
             "(about 11.2 GB)") in err
     assert "more than the 2 GB" in err and "--poses" in err
     assert asked == [] and not out.exists()
+
+
+def test_a_device_that_reboots_mid_sweep_is_swept_again_in_one_round():
+    """After a reboot the device numbers IRSCN from 0 and answers IRSTP with IRDON -1; the
+    driver took the new numbers for ones sent before its sweep and dropped every reading of
+    the re-sweep as stale."""
+    dev = hd.HostileDevice(hd.reboots_in_sweep(21))   # seq ~100 ahead of the new numbering
+    try:
+        with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:
+            for _ in range(20):
+                ring.sweep()
+            sweep = ring.sweep(resweep=1)
+    finally:
+        dev.close()
+    assert list(sweep.steps) == list(range(hd.MIN_STEP, hd.MAX_STEP + 1))
+    assert sweep.missing_steps == ()
+    for step, row in zip(sweep.steps, sweep.counts):
+        assert list(row) == hd.counts_for(int(step))

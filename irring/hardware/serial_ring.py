@@ -472,7 +472,7 @@ class SerialRing:
             self._send(p.Stop())
             msg = self._await((p.Done,), self.timeout_s)
             if isinstance(msg, p.Done):
-                self._last_seq = msg.seq if msg.seq >= 0 else self._last_seq
+                self._last_seq = msg.seq if msg.seq >= 0 else None   # -1: (re)booted
                 return msg.seq
         return None
 
@@ -675,7 +675,9 @@ class SerialRing:
                         if 0 < ahead < p.SEQ_MODULO // 2:  # IRSCN after the last one we got
                             self.stats.seq_gaps += 1
                             self.stats.lost_scans += ahead
-                    self._last_seq = msg.seq if msg.seq >= 0 else self._last_seq
+                    # IRDON -1: no IRSCN sent since the device (re)booted; its numbering
+                    # starts again at 0, which must not read as stale in the next pass
+                    self._last_seq = msg.seq if msg.seq >= 0 else None
                     ps.done = True
                     return
                 elif isinstance(msg, p.ErrorReply):
