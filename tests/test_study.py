@@ -127,6 +127,11 @@ BAD = [
     ("- rotating12\n", r"<top>: a study file must be a mapping"),
     ("designs: [radial12\n", r"s\.yaml: line 2: not valid YAML"),
     ("designs: [radial12]\ndesigns: [laser]\n", r"s\.yaml: line 2: key .designs. given twice"),
+    # 1.6 billion runs: the grid alone filled memory before the first run
+    ("designs: [radial12, rotating12]\nscenarios: [t_room, l_room_post.yaml]\nseeds: 100000\n"
+     "knobs: {samples: [1, 2, 3, 4], step_stride: [1, 2, 3, 4]}\n",
+     r"s\.yaml: 2 designs × 2 scenarios × 16 knob settings × 100000 seeds = 6,400,000 runs; a "
+     r"study runs at most 200,000"),
 ]
 
 
@@ -139,6 +144,20 @@ def test_a_bad_study_file_is_one_line_naming_the_key(tmp_path, capsys, text, mes
     err = capsys.readouterr().err
     assert err.startswith("irring study: error: ") and err.count("\n") == 1, err
     assert not (tmp_path / "out").exists()
+
+
+def test_the_grid_loads_each_scenario_once(tmp_path, monkeypatch):
+    # 2 000 seeds took 60 s to lay out (a scenario read and checked again for every point)
+    p = write(tmp_path, "designs: [radial12, rotating12]\nscenarios: [t_room, l_room_post.yaml]\n"
+                        "seeds: 2000\nknobs: {samples: [1, 3]}\n")
+    spec = study.load_study(p)
+    loads = []
+    real = study.load_scenario
+    monkeypatch.setattr(study, "load_scenario", lambda s: loads.append(s) or real(s))
+    points = study.grid(spec)
+    assert len(points) == 2 * 2 * 2 * 2000 and sorted(loads) == sorted(spec.scenarios)
+    assert points[0].key == ("radial12", "t_room", "1", "1", "0.0", "1")
+    assert points[-1].key[1:] == (str(tmp_path / "l_room_post.yaml"), "1", "3", "0.0", "2006")
 
 
 def test_an_existing_results_file_is_kept_unless_resumed(tmp_path):

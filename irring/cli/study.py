@@ -14,20 +14,22 @@ from ..studies import study
 from ..studies.executor import executor
 from ._common import add_executor_options, describe
 
-EPILOG = """\
+EPILOG = f"""\
 the study file (YAML):
-  designs:   [rotating12, radial12, {sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45,
-              step_deg: 1.08}]     named designs (rotating12 radial12 rotating1 laser sonar12)
+  designs:   [rotating12, radial12, {{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45,
+              step_deg: 1.08}}]     named designs (rotating12 radial12 rotating1 laser sonar12)
                                    or parametric rings (optional: sensor, name)
   scenarios: [t_room, t_room_cylinder, my_room.yaml]   bundled names or paths
   seeds:     [1, 2, 3]             explicit seeds, or a count N: each scenario's seed, +1, …
-  knobs:     {step_stride: [1, 2], samples: [1, 4], settle_ms: [0, 40]}      optional; a
+  knobs:     {{step_stride: [1, 2], samples: [1, 4], settle_ms: [0, 40]}}      optional; a
              knob left out keeps the scenario's value. settle_ms only changes the map when
              the scenario simulates belt_dynamics and timing (e.g. t_room_moving); otherwise
              it only adds hardware time
 
-one run per design × scenario × knob values × seed: every pose swept, estimated, mapped and
-scored as `irring run` does, every design judged on the scenario's own ground truth.
+one run per design × scenario × knob values × seed (at most {study.MAX_RUNS:,} runs a
+study): every pose swept, estimated, mapped and scored as `irring run` does, every design judged on the
+scenario's own ground truth. --resume refuses kept runs of a design since changed under
+its name.
 
 writes to DIR:
   results.csv     one row per run, appended as each finishes (a killed study loses only the

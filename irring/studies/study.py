@@ -59,6 +59,8 @@ META_COLUMNS = ("poses", "readings", "iterations_mean", "irring_version")
 COLUMNS = (KEY_COLUMNS + DESIGN_COLUMNS + SCORE_COLUMNS + COST_COLUMNS + TIMING_COLUMNS
            + META_COLUMNS)
 RESULTS = "results.csv"
+MAX_RUNS = 200_000           # runs of one study (read back to summarise: ~0.75 GB of rows)
+RESULT_ROW_BYTES = 3_800     # a results.csv row read back (measured: 100 000 rows, 377 MB)
 
 
 
@@ -233,6 +235,15 @@ def parse_study(raw: Any, source: str = "") -> Study:
         if len(set(vals)) != len(vals):
             raise _fail(source, f"knobs.{key}", f"a value is listed twice: {list(vals)}")
         knobs.append((key, vals))
+    settings = math.prod(len(v) for _, v in knobs)
+    n_seeds = len(seeds) if seeds is not None else count
+    runs = len(designs) * len(scenarios) * settings * n_seeds
+    if runs > MAX_RUNS:
+        raise StudyError(f"{source}: {len(designs)} designs × {len(scenarios)} scenarios × "
+                         f"{settings} knob settings × {n_seeds} seeds = {runs:,} runs; a study "
+                         f"runs at most {MAX_RUNS:,} (its results alone would hold ~"
+                         f"{runs * RESULT_ROW_BYTES / 1e9:.0f} GB): use fewer seeds, knob values, "
+                         "designs or scenarios, or split it into several studies")
     return Study(designs, tuple(scenarios), seeds, count, tuple(knobs), source)
 
 
@@ -271,10 +282,12 @@ def own_knobs(scenario) -> dict[str, float]:
             "settle_ms": scenario.scan.settle_s * 1e3}
 
 
-def point(design: DesignSpec, scenario, seed: int, **knobs) -> Point:
+def point(design: DesignSpec, scenario, seed: int, *, loaded=None, **knobs) -> Point:
     """One grid point of ``scenario`` (a name, a path, or a Scenario: its file, or its name
-    when it has none); knobs not given take the scenario's values."""
-    sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
+    when it has none); knobs not given take the scenario's values. ``loaded``: the Scenario
+    a name or path names, already loaded (else it is loaded here)."""
+    sc = (loaded if loaded is not None else load_scenario(scenario)
+          if isinstance(scenario, (str, Path)) else scenario)
     label = str(scenario) if isinstance(scenario, (str, Path)) else (sc.source or sc.name)
     k = {**own_knobs(sc), **knobs}
     return Point(design, label, int(k["step_stride"]), int(k["samples"]),
@@ -287,11 +300,12 @@ def grid(study: Study) -> list[Point]:
     names = [k for k, _ in study.knobs]
     combos = list(itertools.product(*[v for _, v in study.knobs]))
     out = []
+    loaded = {s: load_scenario(s) for s in study.scenarios}   # once each, not once a point
     for d in study.designs:
         for s in study.scenarios:
-            sc = load_scenario(s)
+            sc = loaded[s]
             seeds = study.seeds or tuple(sc.seed + k for k in range(study.seed_count))
-            out += [point(d, s, seed, **dict(zip(names, combo)))
+            out += [point(d, s, seed, loaded=sc, **dict(zip(names, combo)))
                     for combo in combos for seed in seeds]
     return out
 
