@@ -287,6 +287,21 @@ def _array(npz, headers: dict, name: str, dims: str, kinds: str, sizes: dict, fa
     return arr
 
 
+def _check_steps(steps: np.ndarray, missing: list[int], ring: Ring, key: str, fail) -> None:
+    """Steps listed once each and within the ring's range (a row also listed missing is one a
+    source kept but marked missing): a step read twice was mapped twice, and no driver or
+    simulator writes a step its ring does not have."""
+    values, counts = np.unique(steps, return_counts=True)
+    if np.any(counts > 1):
+        raise fail(f"{key}/steps: step {values[counts > 1][0]} is listed twice; a sweep reads "
+                   "each step once")
+    for name, seq in ((f"{key}/steps", values), (f"{key}/scalars.missing_steps", missing)):
+        outside = [int(s) for s in seq if not ring.min_step <= s <= ring.max_step]
+        if outside:
+            raise fail(f"{name}: step {outside[0]} lies outside the ring's steps "
+                       f"{ring.min_step} … {ring.max_step}")
+
+
 def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
     scalars = _json(npz, headers, f"{key}/scalars", fail)
     known = {f.name for f in dataclasses.fields(Sweep)} | {"has_truth"}
@@ -342,6 +357,7 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
                      and all(whole(-2**31, 2**31)(s) for s in v),
                      "a list of whole-number steps", [])
     kwargs["missing_steps"] = tuple(missing)
+    _check_steps(kwargs["steps"], missing, ring, key, fail)
     counts = kwargs["counts"]
     if counts.size and (counts.min() < 0 or counts.max() > 2 ** bits - 1):
         raise fail(f"{key}/counts: readings {counts.min():g} … {counts.max():g} lie outside a "

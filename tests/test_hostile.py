@@ -225,6 +225,14 @@ def _scalars(data: bytes, **changes) -> bytes:
     (lambda d: _rewrite(d, "meta", np.array(json.dumps(
         {"grid": {"origin_xy_m": [0, 0], "shape": [3, 3], "resolution_m": 10.0}}))),
      "resolution_m 0.001 … 0.5 (a scenario's map cells)"),
+    # a step read twice was mapped twice; one outside the ring contradicts the sweep (a
+    # driver or simulator never writes it)
+    (lambda d: _rewrite(d, "sweep000/steps", np.array([-2, -1, -1, 0, 1])),
+     "sweep000/steps: step -1 is listed twice; a sweep reads each step once"),
+    (lambda d: _rewrite(d, "sweep000/steps", np.array([-2, -1, 0, 1, 7])),
+     "sweep000/steps: step 7 lies outside the ring's steps -2 … 2"),
+    (lambda d: _scalars(d, missing_steps=[3, 0]),
+     "sweep000/scalars.missing_steps: step 3 lies outside the ring's steps -2 … 2"),
 ])
 def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, message):
     path = tmp_path / "bad.npz"
