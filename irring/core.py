@@ -26,6 +26,7 @@ VREF_V = 5.0
 SENSOR_MODEL = "gp2d12"  # the paper's sensor, Sharp GP2D12 (models/sensors/gp2d12.yaml)
 SEED_MAX = 2**63 - 1  # the largest seed a scenario or an option takes (numpy takes any int ≥ 0)
 GP2_PERIOD_S = 0.0383   # GP2 measurement period (datasheet 38.3 ms ± 9.6 ms); one sample, one period
+MIN_READING_PERIOD_S = 0.001  # no sensor a scenario or device may have reads faster
 
 # --------------------------------------------------------------------------- work limits
 # What one simulated run may ask for, checked before the work starts (irring.simulation.sim

@@ -22,7 +22,7 @@ import numpy as np
 
 from . import designs, gp2, resources, safe_yaml
 from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_OUTLINE_CORNERS,
-                   MAX_RANGE_M, SEED_MAX,
+                   MAX_RANGE_M, MIN_READING_PERIOD_S, SEED_MAX,
                    SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
                    distance_to_outline, first_crossing, inside_outline, num,
                    obstacle_distance, unit_suffix)
@@ -156,7 +156,7 @@ class BeltDynamicsEffect:
 
 @dataclass(frozen=True)
 class TimingEffect:
-    period_s: float = num(GP2_PERIOD_S, lo=0.001, hi=1.0)
+    period_s: float = num(GP2_PERIOD_S, lo=MIN_READING_PERIOD_S, hi=1.0)
     jitter_s: float = num(0.0096, lo=0.0, hi=1.0)
     latency_s: float = num(0.005, lo=0.0, hi=1.0)
 

@@ -318,3 +318,17 @@ def reboots_in_sweep(k: int):
         good(dev, cmd)
     behaviour.__name__ = f"reboots_in_sweep_{k}"
     return behaviour
+
+
+def stuck_clock(dev, cmd):
+    """A correct device whose clock never moves: every IRSCN carries t_ms 5000."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.SweepCommand):
+        d = 1 if cmd.to_step >= cmd.from_step else -1
+        for step in range(cmd.from_step, cmd.to_step + d, d):
+            dev.send(line(f"IRSCN,{dev.seq},{step},5000,{','.join(map(str, counts_for(step)))}"))
+            dev.seq += 1
+        dev.send(line(f"IRDON,{dev.seq - 1}"))
+    elif isinstance(cmd, p.Stop):
+        dev.send(line(f"IRDON,{dev.seq - 1}"))

@@ -563,6 +563,17 @@ def test_a_device_clock_that_jumps_days_is_not_the_sweeps_hardware_time(tmp_path
                  "--no-animation"]) == 0
 
 
+def test_a_device_clock_that_stands_still_is_not_the_sweeps_hardware_time(tmp_path, capsys):
+    """Every step at the same device time: drive reported "hardware 0.0 s" for the sweep and
+    recorded it, though no sensor reads faster than a reading in 1 ms."""
+    code, out = _drive(tmp_path, hd.stuck_clock, poses=1)
+    assert code == 0, capsys.readouterr().err
+    (sweep,) = _recorded(out)
+    assert list(sweep.steps) == [-2, -1, 0, 1, 2]
+    assert sweep.duration_s == pytest.approx(5 * 0.0383)   # the nominal 5 steps × 38.3 ms
+    assert json.loads((out / "link.json").read_text())["totals"]["clock_faults"] == 1
+
+
 def test_drive_poses_too_far_apart_to_map_are_refused_before_any_sweep(tmp_path, capsys):
     """--pose 0,0 --pose 1000000,-700000: both poses were swept, then the map's grid was
     refused (exit 5) and every reading was lost; the message advised map.resolution_mm,

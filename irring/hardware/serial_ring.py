@@ -135,8 +135,8 @@ class LinkStats:
     device_errors: int = 0      # IRERR answers received
     resent_commands: int = 0    # commands sent again after IRERR 1 / busy / timeout
     resweeps: int = 0           # IRSWP re-issued for missing steps only
-    clock_faults: int = 0       # passes whose device clock ran impossibly fast or backwards
-    #                             (the pass's hardware time is then the nominal one)
+    clock_faults: int = 0       # passes whose device clock ran impossibly fast, backwards or
+    #                             stood still (the pass's hardware time is then the nominal one)
 
     def as_dict(self) -> dict[str, int]:
         return dataclasses.asdict(self)
@@ -758,8 +758,9 @@ class SerialRing:
         """Device-clock time of one pass: the span between its first and last readings,
         extended by one mean step interval (the first step's own time, which no timestamp
         brackets). With fewer than two readings, or a clock that claims more time a step
-        than the pass's no-progress limit allows (it jumped, or ran backwards), the nominal
-        hardware time (counted in ``stats.clock_faults``)."""
+        than the pass's no-progress limit allows (it jumped, or ran backwards) or less than
+        ``samples`` readings of the fastest sensor (it stood still), the nominal hardware
+        time (counted in ``stats.clock_faults``)."""
         nominal = core.hardware_duration_s(len(ps.expected), settle_ms / 1000, samples)
         if len(ps.got) < 2:
             return nominal
@@ -768,7 +769,9 @@ class SerialRing:
         last = max(ps.got.values(), key=lambda sc: pos[sc.step])
         span_s = ((last.t_ms - first.t_ms) % p.CLOCK_MODULO) / 1000.0
         per_step = span_s / (pos[last.step] - pos[first.step])
-        if per_step > ps.max_step_s:
+        # faster than any sensor reads (a clock standing still), or slower than the pass's
+        # no-progress limit allowed
+        if not core.MIN_READING_PERIOD_S * samples <= per_step <= ps.max_step_s:
             self.stats.clock_faults += 1
             log.info("device clock: %.0f s a step between steps %d and %d; using the "
                      "nominal %.3f s a step", per_step, first.step, last.step,
