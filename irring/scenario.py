@@ -345,7 +345,7 @@ class _Loader:
         if not isinstance(raw, Mapping) or "type" not in raw:
             raise self.fail(path, f"expected a mapping with `type:` one of {', '.join(by_tag)}")
         tag = raw["type"]
-        if tag not in by_tag:
+        if not isinstance(tag, str) or tag not in by_tag:   # a list: unhashable
             raise self.fail(_join(path, "type"),
                             f"{tag!r} is not allowed; choose one of: {', '.join(by_tag)}")
         rest = {k: v for k, v in raw.items() if k != "type"}

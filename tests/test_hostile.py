@@ -140,6 +140,11 @@ def test_any_text_is_a_scenario_or_a_scenario_error(text):
     (lambda r: r.update(effects={"motion": {"path": []}}), "effects.motion.path: needs at least 2"),
     (lambda r: r.update(name="\x1b[31mred"), "name: control characters"),
     (lambda r: r.update(name=""), "name: expected a name of 1"),
+    # a list or mapping where a name belongs ended in exit 70 (TypeError: unhashable type)
+    (lambda r: r.update(obstacles=[{"type": ["box"], "center_mm": [1, 2]}]),
+     "'box'] is not allowed; choose one of: cylinder, box"),
+    (lambda r: r.update(obstacles=[{"type": {"box": 1}, "center_mm": [1, 2]}]),
+     "type: {'box': 1} is not allowed; choose one of: cylinder, box"),
 ])
 def test_silently_accepted_scenarios_are_now_errors(change, message):
     raw = copy.deepcopy(T_ROOM)
@@ -346,6 +351,19 @@ def test_a_calibration_that_reads_no_count_in_range_is_refused(tmp_path, capsys,
     assert main(["drive", "--port", str(tmp_path / "no-such-port"), "--calibration", str(cal),
                  "--out", str(out)]) == 1
     assert f"irring drive: error: {message}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("model", [["gp2d12"], {"name": "gp2d12"}])
+def test_a_calibration_naming_its_sensor_by_a_list_or_mapping_is_one_clear_error(tmp_path, capsys,
+                                                                                model):
+    # `sensor_model: [gp2d12]` ended in exit 70 (TypeError: unhashable type: 'list')
+    raw = _CAL.to_dict()
+    raw["sensor_model"] = model
+    path = tmp_path / "cal.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    assert main(["run", "t_room", "--calibration", str(path), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert f"{path}: sensor_model: {model!r} is not a sensor model; choose one of: gp2d12" in err
 
 
 def test_a_curve_row_past_the_drop_out_angle_is_not_judged(tmp_path):
@@ -941,6 +959,9 @@ def test_calibrate_refuses_to_resume_another_procedure(tmp_path, capsys, monkeyp
      "read[0].repeats: 3 is not allowed; expected whole numbers 0 … 2"),
     (lambda d: d["read"][0].update(colour="red"),
      "read[0].colour: unknown key; allowed: placement, wall_distance_mm, yaw_deg, purpose"),
+    # a list where a name belongs ended in exit 70 (TypeError: unhashable type)
+    (lambda d: d.update(sensor_model=["gp2d12"]), "sensor_model: ['gp2d12'] is not a sensor "
+                                                  "model; choose one of: gp2d12"),
 ])
 def test_a_damaged_progress_file_is_refused_naming_the_key(tmp_path, capsys, monkeypatch,
                                                            edit, message):

@@ -127,6 +127,9 @@ BAD = [
     ("- rotating12\n", r"<top>: a study file must be a mapping"),
     ("designs: [radial12\n", r"s\.yaml: line 2: not valid YAML"),
     ("designs: [radial12]\ndesigns: [laser]\n", r"s\.yaml: line 2: key .designs. given twice"),
+    ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, "
+     "sensor: [gp2d12]}]\nscenarios: [t_room]\n",
+     r"designs\[0\]\.sensor: \['gp2d12'\] is not allowed; choose one of: gp2d12"),
     # 1.6 billion runs: the grid alone filled memory before the first run
     ("designs: [radial12, rotating12]\nscenarios: [t_room, l_room_post.yaml]\nseeds: 100000\n"
      "knobs: {samples: [1, 2, 3, 4], step_stride: [1, 2, 3, 4]}\n",

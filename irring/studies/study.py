@@ -163,7 +163,7 @@ def _design(source: str, path: str, raw: Any) -> DesignSpec:
     params = tuple((k, _number(source, f"{path}.{k}", raw[k], *limits[k]))
                    for k in PARAMETRIC_KEYS)
     sensor = raw.get("sensor", SENSOR_MODEL)
-    if sensor not in gp2.SENSORS:
+    if not isinstance(sensor, str) or sensor not in gp2.SENSORS:   # a list: unhashable
         raise _fail(source, f"{path}.sensor", f"{sensor!r} is not allowed; choose one of: "
                     f"{', '.join(gp2.SENSORS)}")
     p = dict(params)
