@@ -23,7 +23,8 @@ USAGE = 2          # bad usage: an option or argument (argparse's own status)
 DEVICE = 3         # the device: no answer, disconnected, error replies, no progress
 OUTPUT = 4         # an output could not be written (--out not a writable folder, disk full)
 TOO_BIG = 5        # refused up front as too big for memory (the message says what it needs)
-INTERNAL = 70      # an internal error (a bug: please report it with --debug's traceback)
+INTERNAL = 70      # an internal error (a bug: please report it with --debug's traceback),
+                   # or a compiled kernel not built or built from another .pyx (KernelError)
 INTERRUPTED = 130  # interrupted (Ctrl-C)
 
 DEBUG_ENV = "IRRING_DEBUG"   # set to 1 for a traceback with every error
@@ -52,6 +53,13 @@ class DeviceError(IrringError, RuntimeError):
 
 class OutputError(IrringError, OSError):
     status = OUTPUT
+
+
+class KernelError(IrringError, ImportError):
+    """A compiled kernel that cannot be used (not built, or built from another version of
+    its source); the message names it and the command that rebuilds it."""
+
+    status = INTERNAL
 
 
 class TooBig(IrringError, ValueError):

@@ -1,9 +1,11 @@
 """What the installation provides: the bundled models and scenarios, the compiled kernels.
 
 A wheel carries models and scenarios inside the package (``irring/_data``, see
-pyproject.toml); a source checkout keeps them at the repository's top level. A source tree
-never installed lacks the compiled kernels: :class:`MissingKernel` stands in for one and
-raises the ImportError that says how to build it when it is used.
+pyproject.toml); a source checkout keeps them at the repository's top level. A kernel that
+cannot be used — not built (a source tree never installed), or built from another version of
+its .pyx than the one beside it (a checkout pulled or edited since `pip install -e .`) — is
+replaced by an :class:`UnusableKernel` whose first use raises the KernelError that names it
+and the rebuild (the build records each .pyx's SHA-256 in its kernel: irring/kernel_build.py).
 """
 
 from __future__ import annotations
@@ -11,6 +13,9 @@ from __future__ import annotations
 import functools
 import importlib
 from pathlib import Path
+
+from .errors import KernelError
+from .kernel_build import DIGEST_ATTRIBUTE, source_digest
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -43,23 +48,50 @@ def scenarios_dir() -> Path:
     return _find("scenarios")
 
 
-class MissingKernel:
-    """Stands in for a compiled kernel (irring/*/_*.pyx) that is not built; using it raises."""
+class UnusableKernel:
+    """Stands in for a compiled kernel (irring/*/_*.pyx) that cannot be used; any use raises
+    KernelError with ``message`` (what is wrong and the command that fixes it)."""
 
-    def __init__(self, name: str):
-        self._name = name
+    def __init__(self, name: str, message: str):
+        self._name, self._message = name, message
 
     def __getattr__(self, attr: str):
-        raise ImportError(
-            f"irring's compiled kernel {self._name} is not built: install irring with "
-            f"`pip install .` (or `pip install -e .` in a checkout); pip compiles it with the "
-            f"machine's C compiler (Debian: apt install build-essential python3-dev)")
+        raise KernelError(self._message)
 
 
+@functools.lru_cache(maxsize=None)   # imported by several modules: compared once
 def kernel(name: str):
-    """The compiled module ``irring.<name>`` (e.g. "maps._traverse"), or a MissingKernel
-    that raises when used: a source tree never installed still imports."""
+    """The compiled module ``irring.<name>`` (e.g. "maps._traverse"), or an UnusableKernel
+    that raises when used: a kernel not built, or one whose .pyx beside it (a checkout)
+    changed since it was built. An installed wheel has no .pyx, so nothing is compared."""
     try:
-        return importlib.import_module(f"irring.{name}")
+        module = importlib.import_module(f"irring.{name}")
     except ImportError:
-        return MissingKernel(name)
+        return UnusableKernel(name, (
+            f"irring's compiled kernel {name} is not built: install irring with "
+            f"`pip install .` (or `pip install -e .` in a checkout); pip compiles it with the "
+            f"machine's C compiler (Debian: apt install build-essential python3-dev)"))
+    stale = stale_reason(name, module)
+    return UnusableKernel(name, stale) if stale else module
+
+
+def stale_reason(name: str, module) -> str | None:
+    """Why ``module`` was not built from the .pyx now beside it (the message for the user),
+    or None: the same source, or no .pyx there (an installed wheel: one failed stat)."""
+    built = Path(module.__file__)
+    source = built.parent / (name.rsplit(".", 1)[-1] + ".pyx")
+    if not source.is_file():
+        return None
+    recorded = getattr(module, DIGEST_ATTRIBUTE, "")
+    if recorded:
+        if source_digest(source) == recorded:
+            return None
+    elif source.stat().st_mtime <= built.stat().st_mtime:
+        # built without a digest (plain `cythonize -i`, or before digests were recorded):
+        # a .pyx no newer than the kernel is taken as its source
+        return None
+    root = built.parents[name.count(".") + 1]
+    return (f"irring's compiled kernel {name} was built from another version of "
+            f"{source.relative_to(root).as_posix()} (it changed since: a pull, a rebase, "
+            f"a checkout or an edit); rebuild the kernels in {root}: `pip install -e .`, "
+            f"or quicker `python -m irring.kernel_build`")

@@ -194,7 +194,8 @@ def test_without_kernels_the_estimator_fails_only_when_used_and_names_the_fix():
 # display or hardware library, or is optional (by dotted-name prefix), and an irring module
 # only when it loads one of them. Anything else belongs at the top of the file.
 DEFERRABLE = ("mujoco", "matplotlib", "PIL", "imageio", "dask", "distributed", "mcap",
-              "mcap_ros2", "tqdm", "serial", "pyarrow", "importlib.metadata", "glfw")
+              "mcap_ros2", "tqdm", "serial", "pyarrow", "importlib.metadata", "glfw",
+              "hashlib", "setuptools")
 
 
 def _external(node: ast.Import | ast.ImportFrom) -> set[str]:

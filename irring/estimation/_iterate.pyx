@@ -35,6 +35,18 @@ taking per-reading arrays their length. A label of −1 (no line) is never used 
 cimport cython
 import numpy as np
 
+# The SHA-256 of this file as built (irring/kernel_build.py defines IRRING_PYX_SHA256; "" when
+# built without it): irring.resources.kernel compares it with the file in a checkout.
+cdef extern from *:
+    """
+    #ifndef IRRING_PYX_SHA256
+    #define IRRING_PYX_SHA256 ""
+    #endif
+    """
+    const char *IRRING_PYX_SHA256
+
+PYX_SHA256 = IRRING_PYX_SHA256.decode("ascii")
+
 from libc.math cimport cos, fabs, floor, hypot, isfinite, rint, sin, sqrt
 
 from ..core import Reason

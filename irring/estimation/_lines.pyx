@@ -30,6 +30,18 @@ from libc.stdlib cimport malloc, free
 
 import numpy as np
 
+# The SHA-256 of this file as built (irring/kernel_build.py defines IRRING_PYX_SHA256; "" when
+# built without it): irring.resources.kernel compares it with the file in a checkout.
+cdef extern from *:
+    """
+    #ifndef IRRING_PYX_SHA256
+    #define IRRING_PYX_SHA256 ""
+    #endif
+    """
+    const char *IRRING_PYX_SHA256
+
+PYX_SHA256 = IRRING_PYX_SHA256.decode("ascii")
+
 _arctan2 = np.arctan2      # numpy's, for the same angles to the last bit (see above)
 
 cdef extern from *:

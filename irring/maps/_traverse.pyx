@@ -22,6 +22,18 @@ from libc.string cimport memset
 
 import numpy as np
 
+# The SHA-256 of this file as built (irring/kernel_build.py defines IRRING_PYX_SHA256; "" when
+# built without it): irring.resources.kernel compares it with the file in a checkout.
+cdef extern from *:
+    """
+    #ifndef IRRING_PYX_SHA256
+    #define IRRING_PYX_SHA256 ""
+    #endif
+    """
+    const char *IRRING_PYX_SHA256
+
+PYX_SHA256 = IRRING_PYX_SHA256.decode("ascii")
+
 # Crossings closer than this (in cells) are the same point: a ray through a cell corner does
 # not visit the two side cells it only touches (nor any cell it stays in for less).
 cdef double TOUCH_CELLS = 1e-9

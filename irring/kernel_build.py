@@ -1,0 +1,75 @@
+"""How the compiled kernels (irring/*/_*.pyx) are built: with their source's SHA-256 in them.
+
+pyproject.toml names :class:`BuildKernels` as its build_ext, so `pip install .` and
+`pip install -e .` compile into every kernel the digest of the .pyx it was made from (the
+kernel's ``PYX_SHA256``); ``irring.resources.kernel`` compares it with the .pyx beside the
+kernel. `python -m irring.kernel_build` is a checkout's quick rebuild: in place, only the
+kernels whose .pyx changed. setuptools loads this file on its own during a build (without
+irring's dependencies): it imports nothing of irring, and setuptools only when asked.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+from pathlib import Path
+
+DIGEST_ATTRIBUTE = "PYX_SHA256"   # a kernel's digest of its .pyx as built; "" if not recorded
+DIGEST_MACRO = "IRRING_PYX_SHA256"   # the C macro the build defines it by
+
+
+def source_digest(path: Path) -> str:
+    """SHA-256 (hex) of a kernel's source file, as the build compiles it in."""
+    # deferred: hashlib loads OpenSSL (~2 ms); only a kernel with its .pyx beside it needs it
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def __getattr__(name: str):
+    # only a build asks for BuildKernels, so importing irring loads no setuptools
+    if name == "BuildKernels":
+        return _build_kernels_command()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+@functools.lru_cache(maxsize=1)
+def _build_kernels_command():
+    # deferred: setuptools is there when irring is built, not always where it runs
+    from setuptools.command.build_ext import build_ext
+
+    class BuildKernels(build_ext):
+        """setuptools' build_ext (Cython's, which the build requires) that compiles the
+        SHA-256 of each kernel's .pyx into it as the C macro IRRING_PYX_SHA256."""
+
+        def build_extension(self, ext):
+            sources = [Path(s) for s in ext.sources if s.endswith(".pyx")]
+            if sources:   # a second pass sees the generated .c and keeps the first digest
+                ext.define_macros = [
+                    *(m for m in ext.define_macros if m[0] != DIGEST_MACRO),
+                    (DIGEST_MACRO, f'"{source_digest(sources[0])}"')]
+            super().build_extension(ext)
+
+    return BuildKernels
+
+
+def main() -> int:
+    """`python -m irring.kernel_build`: rebuild in place the kernels whose .pyx changed (the
+    quick rebuild of a checkout; pip's does the same with the rest of the install)."""
+    # deferred: setuptools is there when irring is built, not always where it runs
+    from setuptools import setup
+
+    root = Path(__file__).resolve().parent.parent
+    if not (root / "pyproject.toml").is_file():
+        print(f"python -m irring.kernel_build: error: {root} is not a checkout of irring (no "
+              f"pyproject.toml); an installed irring is rebuilt by `pip install` itself",
+              file=sys.stderr)
+        return 2
+    os.chdir(root)   # setup() reads pyproject.toml (the kernels, BuildKernels) from here
+    setup(script_args=["build_ext", "--inplace"])
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
