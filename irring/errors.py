@@ -23,6 +23,7 @@ USAGE = 2          # bad usage: an option or argument (argparse's own status)
 DEVICE = 3         # the device: no answer, disconnected, error replies, no progress
 OUTPUT = 4         # an output could not be written (--out not a writable folder, disk full)
 TOO_BIG = 5        # refused up front as too big for memory (the message says what it needs)
+TARGET_MISSED = 6  # a benchmark's target missed (its figures printed as usual)
 INTERNAL = 70      # an internal error (a bug: please report it with --debug's traceback),
                    # or a compiled kernel not built or built from another .pyx (KernelError)
 INTERRUPTED = 130  # interrupted (Ctrl-C)

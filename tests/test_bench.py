@@ -237,6 +237,22 @@ def test_timed_pipeline_gives_the_same_counts_as_the_plain_one():
     assert all(math.isfinite(v) and v >= 0 for v in tally.values())
 
 
+def test_cli_speed_check_exits_6_only_when_a_target_is_missed(monkeypatch, capsys):
+    """6, not 1 (a bad scenario file): the figures are printed, a target was not met."""
+    from irring.cli import main
+
+    easy = {"sweep_ms": 1e9, "ray_vs_raw_ratio": 1e9, "realtime_factor": 0.0}
+    for key, value in easy.items():
+        monkeypatch.setitem(speed.TARGETS, key, value)
+    assert main(["bench", "speed", "--rounds", "1", "--check"]) == 0
+    monkeypatch.setitem(speed.TARGETS, "realtime_factor", 1e12)   # no machine is that fast
+    assert main(["bench", "speed", "--rounds", "1"]) == 0          # reported, not checked
+    assert main(["bench", "speed", "--rounds", "1", "--check"]) == 6
+    out = capsys.readouterr().out.splitlines()
+    assert [ln.split()[-1] for ln in out[-3:]] == ["met", "met", "MISSED"]
+    assert main(["bench", "speed", "--scenario", "no_such_room", "--check"]) == 1
+
+
 def test_cli_speed_json(capsys):
     from irring.cli import main
 
