@@ -13,7 +13,7 @@ import dataclasses
 import math
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
@@ -238,4 +238,6 @@ def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, no
     for f in ("n", "slope", "se", "theta", "steep"):
         np.testing.assert_allclose(getattr(fast, f), getattr(slow, f), rtol=TOL, atol=TOL,
                                    err_msg=f)
-    assert vi.size >= 20
+    # a scene left with few readings proves little (seed 25752, columns, keep 0.81: 11 left);
+    # hypothesis draws another instead of failing on the scene, after comparing this one
+    assume(vi.size >= 20)
