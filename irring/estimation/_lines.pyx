@@ -1052,10 +1052,12 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
 # --------------------------------------------------------------------------- range profiles
 
 cdef inline void _interp_ab(double t, const double[::1] xp, const double[::1] la,
-                            const double[::1] bb, double* out_la, double* out_b) noexcept nogil:
+                            const double[::1] bb, double inv_dx, double* out_la,
+                            double* out_b) noexcept nogil:
     """log a(θ), b(θ) at θ = t ≥ 0 linear between the calibration's nodes, held beyond
-    them (np.interp's rule)."""
-    cdef idx_t m = xp.shape[0], lo = 0, hi = m - 1, mid
+    them (np.interp's rule). The cell is guessed as if the nodes were evenly spaced
+    (``inv_dx``: cells per radian over their span) and walked to from there."""
+    cdef idx_t m = xp.shape[0], lo
     cdef double f
     if t <= xp[0]:
         out_la[0] = la[0]
@@ -1065,15 +1067,16 @@ cdef inline void _interp_ab(double t, const double[::1] xp, const double[::1] la
         out_la[0] = la[m - 1]
         out_b[0] = bb[m - 1]
         return
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if xp[mid] <= t:
-            lo = mid
-        else:
-            hi = mid
-    f = (t - xp[lo]) / (xp[hi] - xp[lo])
-    out_la[0] = la[lo] + f * (la[hi] - la[lo])
-    out_b[0] = bb[lo] + f * (bb[hi] - bb[lo])
+    lo = <idx_t> ((t - xp[0]) * inv_dx)
+    if lo > m - 2:
+        lo = m - 2
+    while lo > 0 and xp[lo] > t:
+        lo -= 1
+    while lo < m - 2 and xp[lo + 1] <= t:
+        lo += 1
+    f = (t - xp[lo]) / (xp[lo + 1] - xp[lo])
+    out_la[0] = la[lo] + f * (la[lo + 1] - la[lo])
+    out_b[0] = bb[lo] + f * (bb[lo + 1] - bb[lo])
 
 
 def profiles(const double[::1] ox, const double[::1] oy, const double[::1] heading,
@@ -1092,11 +1095,14 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
     sure: bent away by ``sure_se`` standard errors."""
     cdef idx_t K = ox.shape[0], M = ask.shape[0], i, p, c, w, r, nw, dof, n_ok
     cdef idx_t W = 2 * half + 1
+    cdef double inv_dx = 0.0
     cdef double ux, uy, signed, th, la, b, d, x, y, nn, mu, mv, svv, sl, t, se, chi2, res
     cdef double sqq, qm, qdv, bend, bend_se, sig, e2
     if not (oy.shape[0] == heading.shape[0] == log_s.shape[0] == sig_s.shape[0]
             == chain.shape[0] == step.shape[0] == K):
         raise ValueError("per-reading arrays differ in length")
+    if xp.shape[0] > 1 and xp[xp.shape[0] - 1] > xp[0]:
+        inv_dx = (xp.shape[0] - 1) / (xp[xp.shape[0] - 1] - xp[0])
     out_f = np.zeros((5, M))
     out_b = np.zeros((4, M), dtype=np.uint8)
     cdef double[:, ::1] F = out_f
@@ -1149,14 +1155,15 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
                     th = fabs(signed + turn[w])
                     if th > max_inc:
                         th = max_inc
-                    _interp_ab(th, xp, node_log_a, node_b, &la, &b)
+                    _interp_ab(th, xp, node_log_a, node_b, inv_dx, &la, &b)
                     d = exp(la + b * log_s[c])
                     x = rx[w] + d * ch[w]
                     y = ry[w] + d * sh[w]
                     u[w] = x * ux + y * uy
                     v[w] = y * ux - x * uy
-                    sig = fabs(b) * d * sig_s[c]
-                    sg[w] = sig if sig > sigma_floor else sigma_floor
+                    if r == 2:    # the noise of the last round's distances
+                        sig = fabs(b) * d * sig_s[c]
+                        sg[w] = sig if sig > sigma_floor else sigma_floor
                     mu += u[w]
                     mv += v[w]
                 mu /= nn
