@@ -223,6 +223,12 @@ SENSORS: dict[str, SensorSpec] = {
 }
 
 
+def is_sensor_model(value) -> bool:
+    """Whether ``value`` names a model of :data:`SENSORS`; False for anything but a string (a
+    file may hold a list there, which is not hashable)."""
+    return isinstance(value, str) and value in SENSORS
+
+
 def sensor_spec(kind: str) -> SensorSpec:
     try:
         return SENSORS[kind]

@@ -338,8 +338,7 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
     def whole(lo: int, hi: int) -> Callable[[Any], bool]:
         return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
 
-    kwargs["sensor_model"] = scalar("sensor_model",
-                                    lambda v: isinstance(v, str) and v in gp2.SENSORS,
+    kwargs["sensor_model"] = scalar("sensor_model", gp2.is_sensor_model,
                                     f"one of {', '.join(gp2.SENSORS)}", SENSOR_MODEL)
     bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, core.MAX_ADC_BITS),
                                        f"a whole number 1 … {core.MAX_ADC_BITS}", ADC_BITS)

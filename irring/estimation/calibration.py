@@ -433,7 +433,7 @@ class Calibration:
             return float(value)
 
         model = raw["sensor_model"]
-        if not isinstance(model, str) or model not in gp2.SENSORS:   # a list: unhashable
+        if not gp2.is_sensor_model(model):
             raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
                                        f"{', '.join(gp2.SENSORS)}")
 
@@ -1098,7 +1098,7 @@ def load_progress(path: str | Path) -> Progress:
         return float(value)
 
     model = raw.get("sensor_model")
-    if not isinstance(model, str) or model not in gp2.SENSORS:   # a list: unhashable
+    if not gp2.is_sensor_model(model):
         raise fail("sensor_model", f"{brief(model)} is not a sensor model; choose one of: "
                                    f"{', '.join(gp2.SENSORS)}")
     sweeps = whole(raw, "sweeps", 1, MAX_SWEEPS)   # a placement's repeats are at most its sweeps

@@ -163,7 +163,7 @@ def _design(source: str, path: str, raw: Any) -> DesignSpec:
     params = tuple((k, _number(source, f"{path}.{k}", raw[k], *limits[k]))
                    for k in PARAMETRIC_KEYS)
     sensor = raw.get("sensor", SENSOR_MODEL)
-    if not isinstance(sensor, str) or sensor not in gp2.SENSORS:   # a list: unhashable
+    if not gp2.is_sensor_model(sensor):
         raise _fail(source, f"{path}.sensor", f"{sensor!r} is not allowed; choose one of: "
                     f"{', '.join(gp2.SENSORS)}")
     p = dict(params)
