@@ -484,18 +484,24 @@ class Calibration:
         return load_calibration(Path(path))[0]
 
 
-def _fallback_nodes(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
-    """log a(θ), b(θ) at the nodes of the fallback σ's quadrature.
+def fallback_thetas(cal: Calibration) -> np.ndarray:
+    """θ (rad) at the ``FALLBACK_NODES`` nodes of the fallback σ's quadrature.
 
     A reading on no line keeps θ = 0 (the paper's starting assumption, giving d0). Its θ is
     unknown, so its σ includes the RMS error of reading its counts S with θ = 0 when the true
     θ is that of a beam meeting a round surface at a uniformly random offset (sin θ uniform
-    up to the drop-out angle; most such readings are thin obstacles), by 8-point quadrature:
-    sqrt(mean_j (a(θ_j)·S^b(θ_j) − d0)²), summed by ``_iterate.Sweep.finish``. The θ = 0
-    distance is the longest the reading can mean, so the error is one-sided and grows
-    steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
+    up to the drop-out angle; most such readings are thin obstacles): sqrt(mean_j
+    (a(θ_j)·S^b(θ_j) − d0)²) over these nodes. The θ = 0 distance is the longest the reading
+    can mean, so the error is one-sided and grows steeply with θ: at 0.4 m on the GP2D12
+    curve ≈ 37 mm."""
     u = (np.arange(FALLBACK_NODES) + 0.5) / FALLBACK_NODES * math.sin(cal.max_incidence_rad)
-    return cal.log_ab(np.arcsin(u))
+    return np.arcsin(u)
+
+
+def _fallback_nodes(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
+    """log a(θ), b(θ) at :func:`fallback_thetas` (the quadrature ``_iterate.Sweep.finish``
+    sums)."""
+    return cal.log_ab(fallback_thetas(cal))
 
 
 def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False

@@ -19,7 +19,7 @@ from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
-from .calibration import FALLBACK_NODES, RANGE_SIGMAS, RETURN_SIGMAS, Calibration
+from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, fallback_thetas
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -745,13 +745,9 @@ ROUND_MIN_THETA = math.radians(30)  # … and its members' mean θ is at least t
 
 
 def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.ndarray:
-    """RMS range error of reading ``counts`` with θ = 0 (giving ``d0``) when the true θ is
-    unknown: θ as a beam meets a round surface at a uniformly random offset (sin θ uniform
-    up to the drop-out angle; most such readings are thin obstacles), by 8-point quadrature.
-    The θ = 0 distance is the longest the reading can mean, so the error is one-sided and
-    grows steeply with θ: at 0.4 m on the GP2D12 curve ≈ 37 mm."""
-    u = (np.arange(FALLBACK_NODES) + 0.5) / FALLBACK_NODES * math.sin(cal.max_incidence_rad)
-    err = cal.distance(counts[:, None], np.arcsin(u)) - d0[:, None]
+    """RMS range error (m) of reading ``counts`` with θ = 0 (giving ``d0``) when the true θ
+    is unknown, over the quadrature of :func:`calibration.fallback_thetas`."""
+    err = cal.distance(counts[:, None], fallback_thetas(cal)) - d0[:, None]
     return np.sqrt(np.mean(err * err, axis=1))
 
 
@@ -763,30 +759,15 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     shared by both estimators.
 
     ``index``: flat (S, N) indices of the live readings in scan order (each sensor's by
-    step); ``steps`` (S,): each row's motor step. A wall seen at 60–70° often gives only a few readings before the drop-out, too
-    few or too short for a line, and read at θ = 0 they lie 100–190 mm beyond it. Its range
-    still grows steadily as the beam turns: in the frame of a reading's beam (u along, v
-    across) the neighbours' end points lie on u = u0 + v·tan θ. So the valid readings of the
-    same surface (the same polyline: no range jump, ``polyline_ids``) within
-    ``_LOCAL_STEPS`` steps, read at a common θ, are fitted by least squares (u on v: the
-    noise is along the beam; each neighbour read at θ plus the angle its beam turned, as
-    on a flat surface), θ = atan|slope| (at most the drop-out angle), three times.
-    The slope is used only where it is clearly not flat (``_LOCAL_SLOPE_SE`` standard
-    errors) and the profile is straight (χ² within its 95 % point, ``_CHI2_95``, and no
-    curvature term ``_LOCAL_SLOPE_SE`` standard errors off zero): a post's readings bend
-    away from the beam (its centre is read at θ ≈ 0 rightly) and keep θ = 0. σ: the reading's noise at θ plus the spread of d over θ ± the slope's
-    standard error. A reading with fewer than ``_LOCAL_MIN`` such readings, a concave bend,
-    or a straight profile whose slope is not clearly steep or flat, has no incidence to go by: where its
-    θ = 0 distance exceeds the one at the steepest θ it allows (the drop-out angle, or
-    slope + 2 standard errors) by more than ``_UNKNOWN_M`` it is INCIDENCE_UNKNOWN (not
-    valid: a wall's last readings before the drop-out were read up to 190 mm long).
-
-    Round things: the members of a line read steeply (mean θ ≥ ``ROUND_MIN_THETA``) whose
-    own profiles bend away from the beam (at least ``ROUND_SHARE`` of them, and
-    ``ROUND_OVER_OK`` times as many as are straight and steep) leave it first and are read
-    as readings on no line: a column's arc, cut into short lines, settles on a θ 20–30° too
-    steep and puts its readings 30–140 mm in front of it (docs/estimator.md, "Round
-    things"). Returns the points and ``label`` without those members."""
+    step); ``steps`` (S,): each row's motor step. The valid readings of the same surface
+    (polyline) within ``_LOCAL_STEPS`` steps are fitted as u = u0 + v·tan θ in the reading's
+    beam frame. A straight profile clearly not flat gives θ and a σ that includes the slope's
+    standard error; a profile bent away from the beam (a post) keeps θ = 0 with the σ of its
+    doubt; one that decides nothing, where θ = 0 may read more than ``_UNKNOWN_M`` long, is
+    INCIDENCE_UNKNOWN. The members of a steep line whose own profiles mostly bend away (a
+    column's arc cut into short lines; ``ROUND_*``) leave it first and are read the same way.
+    Returns the points and ``label`` without those members. The why and the measured
+    effects: docs/estimator.md ("Readings on no line", "Round things")."""
     flat_valid = points.valid.reshape(-1)
     vi = index[flat_valid[index]]               # valid readings in scan order
     if vi.size == 0:
