@@ -816,17 +816,15 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     s, d0, sig_s = pr.s, pr.d0, pr.sig_s
     ok, convex, sure, steep, theta, slope, se = (v[mine] for v in (
         pr.ok, pr.convex, pr.sure, pr.steep, pr.theta, pr.slope, pr.se))
+    # how much longer θ = 0 reads than the steepest θ the readings allow
+    span = d0[off] - cal.distance(s[off], steep)
     # where θ = 0 may read more than _UNKNOWN_M long, a bend noise could make (a steep far
     # wall's few readings bent 2.2 SE by noise were kept 106-166 mm long) is not enough
-    doubtful = d0[off] - cal.distance(s[off], steep) > _UNKNOWN_M
-    convex = convex & (~doubtful | sure)
+    convex = convex & (~(span > _UNKNOWN_M) | sure)
     # a ring held still (fewer motor steps than a slope needs) has no neighbours to ask: its
     # readings are what it has (flagging them lost a radial ring nearly every reading)
     still = bool(np.unique(np.asarray(steps)).size < _LOCAL_MIN)
-    few = ~ok & ~convex & (not still)
-    if few.any():
-        alone = off[few]
-        few[few] = d0[alone] - cal.distance(s[alone], steep[few]) > _UNKNOWN_M
+    few = ~ok & ~convex & (not still) & (span > _UNKNOWN_M)
     # a convex thing's reading may have met its side steeply, a still ring's any surface:
     # θ = 0 with the σ of that doubt
     wide = (convex | still) & ~ok
@@ -835,7 +833,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     if wide.any():
         at = vi[off[wide]]
-        doubt = 0.5 * (d0[off[wide]] - cal.distance(s[off[wide]], steep[wide]))
+        doubt = 0.5 * span[wide]
         out["sigma_m"].reshape(-1)[at] = np.hypot(out["sigma_m"].reshape(-1)[at], doubt)
     if few.any():
         gone = vi[off[few]]
