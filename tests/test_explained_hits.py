@@ -145,9 +145,15 @@ def test_explain_sigmas_zero_turns_the_rule_off():
     assert not np.isfinite(r).any()
 
 
+def _some_unknown(pick, sigma):
+    """σ with 5 % NaN (not given) and 3 % +inf (unknown: mapped as no reading)."""
+    return np.where(pick < 0.05, np.nan, np.where(pick > 0.97, np.inf, sigma))
+
+
 def noisy_walls(seed: int) -> Points:
-    """Readings of two slanted walls from three emitters: σ from 4 to 30 mm, each end point
-    moved along its beam by Gaussian noise of its σ (two steps of 60 beams)."""
+    """Readings of two slanted walls from three emitters: σ from 4 to 30 mm (some NaN or
+    +inf), each end point moved along its beam by Gaussian noise of its σ (two steps of 60
+    beams)."""
     rng = np.random.default_rng(seed)
     ox = np.repeat(rng.uniform(0.2, 0.8, 3), 40)
     oy = np.repeat(rng.uniform(0.05, 0.2, 3), 40)
@@ -163,7 +169,7 @@ def noisy_walls(seed: int) -> Points:
     return Points(x=(ox + nd * ux).reshape(shape), y=(oy + nd * uy).reshape(shape),
                   d=nd.reshape(shape), theta=np.zeros(shape), origin_x=ox.reshape(shape),
                   origin_y=oy.reshape(shape), heading=heading.reshape(shape),
-                  sigma_m=np.where(rng.random(120) < 0.05, np.nan, sigma).reshape(shape),
+                  sigma_m=_some_unknown(rng.random(120), sigma).reshape(shape),
                   iterations=np.ones(shape, int), valid=valid.reshape(shape),
                   reason=np.where(valid, int(Reason.OK), int(Reason.OUT_OF_RANGE)).astype(
                       np.uint8).reshape(shape), max_range_m=0.8)

@@ -533,7 +533,10 @@ def random_points(rng, n, *, box=(0.6, 0.4), max_range_m=0.3):
     kind = rng.choice([Reason.OK, Reason.NO_RETURN, Reason.OUT_OF_RANGE], n, p=[0.7, 0.2, 0.1])
     valid = kind == Reason.OK
     dd = np.where(valid, d, np.nan)
-    sigma = np.where(rng.random(n) < 0.1, np.nan, rng.uniform(0.001, 0.03, n))
+    # σ: mostly drawn, some NaN (not given), +inf (unknown: no evidence) and −inf (floored)
+    pick = rng.random(n)
+    sigma = np.where(pick < 0.1, np.nan, rng.uniform(0.001, 0.03, n))
+    sigma = np.where(pick > 0.96, np.inf, np.where(pick > 0.94, -np.inf, sigma))
     # some silent beams explained by a surface: known free only to their reach
     reach = np.where(rng.random(n) < 0.5, rng.uniform(-0.02, 1.2 * max_range_m, n), np.nan)
     return Points(x=ox + dd * np.cos(heading), y=oy + dd * np.sin(heading), d=dd,
@@ -610,6 +613,45 @@ def test_grid_much_smaller_than_the_beams_reach_follows_the_reference():
         want = np.clip(reference_delta(g, pts), g.params.l_min, g.params.l_max)
         np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
         assert np.array_equal(g.log_odds != 0, want != 0) and (want != 0).any()
+
+
+def test_a_reading_of_unknown_sigma_adds_nothing_in_kernel_and_oracle():
+    """σ = +inf (accuracy unknown) maps as no reading: the kernel turned it into the 10 mm
+    default σ (a hit of 2.5 and a freed beam) where the numpy oracle kept it near 0; NaN
+    takes default_sigma_m and −inf the min_sigma_m floor, in both."""
+    ox, oy = np.array([0.055, 0.105, 0.205]), np.array([0.205, 0.115, 0.305])
+    heading = np.radians([0.0, 30.0, -20.0])
+    d = np.array([0.397, 0.253, 0.171])      # (no end − margin on a cell border)
+
+    def batch(sigma):
+        n = len(ox)
+        return Points(x=ox + d * np.cos(heading), y=oy + d * np.sin(heading), d=d,
+                      theta=np.zeros(n), origin_x=ox, origin_y=oy, heading=heading,
+                      sigma_m=np.array(sigma, float), iterations=np.ones(n, int),
+                      valid=np.ones(n, bool), reason=np.zeros(n, np.uint8), max_range_m=0.5)
+
+    def both(pts):
+        g = small_grid()
+        return g.delta(pts), reference_delta(g, pts)
+
+    fast, slow = both(batch([np.inf, 0.012, 0.007]))
+    lone = batch([0.012, 0.007])
+    lone = dataclasses.replace(lone, **{k: getattr(lone, k)[1:] for k in
+                                        ("x", "y", "d", "theta", "origin_x", "origin_y",
+                                         "heading", "iterations", "valid", "reason")})
+    want, _ = both(lone)
+    np.testing.assert_array_equal(fast, want)
+    np.testing.assert_allclose(slow, want, atol=2e-4)
+    assert np.count_nonzero(fast) == np.count_nonzero(want) > 0
+    for given_, meant in (([np.nan, 0.012, 0.007], [0.01, 0.012, 0.007]),
+                          ([-np.inf, 0.012, 0.007], [0.005, 0.012, 0.007])):
+        fast, slow = both(batch(given_))
+        want, _ = both(batch(meant))
+        np.testing.assert_array_equal(fast, want)
+        np.testing.assert_allclose(slow, want, atol=2e-4)
+    only_unknown = batch([np.inf, np.inf, np.inf])
+    fast, slow = both(only_unknown)
+    assert not fast.any() and not slow.any()
 
 
 def test_batches_with_nothing_to_map_change_nothing():

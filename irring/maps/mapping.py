@@ -53,7 +53,7 @@ class MapperParams:
     l_max: float = 4.0            # clamp: the most certain "occupied"
     tail_sigmas: float = 0.25     # the beam is followed to d (+ depth) + tail_sigmas·σ
     min_sigma_m: float = 0.005    # floor on a reading's σ: half a 10 mm cell (finer is not resolved)
-    default_sigma_m: float = 0.01  # used where a valid reading's sigma_m is NaN
+    default_sigma_m: float = 0.01  # used where a valid reading's sigma_m is NaN (not given)
     free_margin_cells: float = 0.5  # no free evidence within this many cells before the end point
     free_sigmas: float = 0.0      # … nor within this many σ before that (an uncertain reading clears less)
     occ_sigma_m: float = 0.005    # a hit with σ above this weighs l_occ·occ_sigma_m/σ …
@@ -287,7 +287,8 @@ class OccupancyGrid:
         C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
         ``add_beams``). Work and memory scale with the beams, not the grid. Readings from a
         cone go in as :func:`cone_fan` with the ``cone_*`` weights; pencil beams a surface
-        explains (:func:`explained_ranges`) are moved onto it first."""
+        explains (:func:`explained_ranges`) are moved onto it first; σ as :func:`known_sigma`."""
+        points = known_sigma(points)
         if self.params.explain_sigmas > 0 and points.cone_half_angle_rad == 0:
             points = at_ranges(points, explained_ranges(
                 points, self.shape, self.origin_xy_m, self.resolution_m, self.params),
@@ -439,6 +440,21 @@ def cone_fan(points: Points, step_rad: float) -> Points:
         reach_m=None if points.reach_m is None else fan(points.reach_m))
 
 
+def known_sigma(points: Points) -> Points:
+    """``points`` as the mapper takes them: a valid reading whose σ is +inf (its accuracy
+    unknown, its end point anywhere on its beam) is mapped as no reading at all, neither a
+    hit nor free space (the limit of the lone_sigma_m/σ weight); a σ of −inf is floored like
+    any σ below ``min_sigma_m``. NaN (no σ given) takes ``default_sigma_m`` later. The one
+    home of that rule for the kernel and the numpy oracle (docs/mapping.md)."""
+    sigma = np.asarray(points.sigma_m, float)
+    unknown = np.asarray(points.valid, bool) & (sigma == np.inf)
+    below = sigma == -np.inf
+    if not (unknown.any() or below.any()):
+        return points
+    return dataclasses.replace(points, valid=np.asarray(points.valid, bool) & ~unknown,
+                               sigma_m=np.where(below, 0.0, sigma))
+
+
 def mapped_beams(points: Points, params: MapperParams) -> tuple[Points, MapperParams]:
     """The pencil beams a batch of readings is mapped as, and the weights they take:
     readings from a wide cone (``cone_half_angle_rad`` > 0) as :func:`cone_fan` with the
@@ -475,6 +491,7 @@ def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
     and what it changed.
     """
     ny, nx = (int(n) for n in shape)
+    points = known_sigma(points)
     return _traverse.explained_ranges(
         _flat(points.origin_x), _flat(points.origin_y), _flat(points.x), _flat(points.y),
         _flat(points.sigma_m), np.asarray(points.valid, bool).ravel().view(np.uint8),

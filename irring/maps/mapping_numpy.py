@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from ..core import Points, Reason
-from .mapping import MapperParams, at_ranges, hit_weight, mapped_beams, traverse
+from .mapping import MapperParams, at_ranges, hit_weight, known_sigma, mapped_beams, traverse
 
 
 def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.ndarray:
@@ -47,6 +47,7 @@ def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
     end points sorted by cell, then σ."""
     p, res = params, float(resolution_m)
     ny, nx = (int(n) for n in shape)
+    points = known_sigma(points)      # σ = +inf: no reading (its rule's one home)
     out = np.full(np.shape(points.valid), np.nan)
     vi = np.flatnonzero(np.asarray(points.valid, bool).ravel())
     if p.explain_sigmas <= 0 or vi.size == 0:
@@ -102,6 +103,7 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     its beams reach; on a grid already inside [lo, hi] that is the same.
     """
     shape = np.shape(log_odds)
+    points = known_sigma(points)      # σ = +inf: no reading (its rule's one home)
     if params.explain_sigmas > 0 and points.cone_half_angle_rad == 0:
         points = at_ranges(points, explained_ranges(points, shape, origin_xy_m, resolution_m,
                                                     params), params)
