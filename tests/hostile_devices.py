@@ -332,3 +332,47 @@ def stuck_clock(dev, cmd):
         dev.send(line(f"IRDON,{dev.seq - 1}"))
     elif isinstance(cmd, p.Stop):
         dev.send(line(f"IRDON,{dev.seq - 1}"))
+
+
+def garbled_stretch(garbled: int, every_s: float):
+    """A correct device behind a noisy link: the first step arrives, then ``garbled``
+    sentences with a wrong checksum, one every ``every_s`` s (the link talks all along,
+    never silent for longer), then the other steps and IRDON. Each IRSTP it receives is
+    counted in ``dev.stops`` and answered with IRDON, as a board ends its sweep."""
+    def behaviour(dev, cmd):
+        if _hello(dev, cmd):
+            return
+        if isinstance(cmd, p.Stop):
+            dev.stops = getattr(dev, "stops", 0) + 1
+            dev.send(line(f"IRDON,{dev.seq - 1}"))
+        elif isinstance(cmd, p.SweepCommand):
+            steps = list(range(cmd.from_step, cmd.to_step + 1))
+            first = scan(dev.seq, steps[0])
+            noise = first.replace(first[-4:-2], b"00" if first[-4:-2] != b"00" else b"11")
+
+            def run():
+                dev.send(first)
+                dev.seq += 1
+                for _ in range(garbled):
+                    if dev.closed.wait(every_s):
+                        return
+                    dev.send(noise)
+                for step in steps[1:]:
+                    dev.send(scan(dev.seq, step))
+                    dev.seq += 1
+                dev.send(line(f"IRDON,{dev.seq - 1}"))
+            threading.Thread(target=run, daemon=True).start()
+    behaviour.__name__ = f"garbled_stretch_{garbled}"
+    return behaviour
+
+
+def talks_without_steps(dev, cmd):
+    """After IRSWP, a valid IRPOS every 2 ms forever and never a reading; IRSTP is counted
+    in ``dev.stops`` and otherwise ignored."""
+    if _hello(dev, cmd):
+        return
+    if isinstance(cmd, p.Stop):
+        dev.stops = getattr(dev, "stops", 0) + 1
+    elif isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
+        dev.flooding = True
+        dev.chatter(lambda: line("IRPOS,0"), 0.002)

@@ -33,6 +33,7 @@ from irring.errors import OutputError, TooBig
 from irring.estimation.calibration import (Calibration, CalibrationError, load_calibration,
                                            load_progress)
 from irring.hardware import DeviceError, NoReadings, SerialRing
+from irring.hardware.serial_ring import CHATTER_LIMIT_BYTES, DeviceTimeout
 from irring.hardware import protocol as p_
 from irring.recording import RecordingError, load_recording, save_recording
 from irring.core import Ring
@@ -428,6 +429,43 @@ def test_a_hostile_device_is_a_clear_error_within_a_bounded_time(behaviour, erro
     if partial is not None:                            # no invented reading
         for step, row in zip(partial.steps, partial.counts):
             assert list(row) == hd.counts_for(int(step))
+
+
+def test_a_noisy_link_that_never_falls_silent_is_not_stopped():
+    """timeout_s is the longest silence: 10 garbled sentences, one every 0.2 s, is 2 s
+    without an intact step but never 0.8 s without a byte. The driver sent IRSTP after
+    0.8 s without a new step, and the board, stopping, lost the four steps still to come."""
+    dev = hd.HostileDevice(hd.garbled_stretch(10, 0.2))
+    try:
+        with SerialRing(dev.link, timeout_s=0.8) as ring:
+            sweep = ring.sweep()
+            assert list(sweep.steps) == list(range(hd.MIN_STEP, hd.MAX_STEP + 1))
+            assert sweep.missing_steps == ()
+            assert getattr(dev, "stops", 0) == 0
+            assert ring.stats.timeouts == 0 and ring.stats.checksum_failures == 10
+    finally:
+        dev.close()
+
+
+def test_a_device_that_talks_but_never_sends_a_step_is_stopped_by_a_byte_budget():
+    """Never silent, so no timeout ever fires (timeout_s 30 s): after CHATTER_LIMIT_BYTES
+    without a new step the driver sends IRSTP, as for silence, and after its retries + 1
+    IRSTP gives up. Counts, not clocks: exactly 3 IRSTP reach the device (it waited for
+    the 30 s no-progress limit before)."""
+    dev = hd.HostileDevice(hd.talks_without_steps)
+    try:
+        with SerialRing(dev.link, timeout_s=30.0, retries=2) as ring:
+            with pytest.raises(DeviceTimeout) as caught:
+                ring.sweep()
+        waited = time.monotonic()      # the last IRSTP may still be on its way
+        while getattr(dev, "stops", 0) < 3 and time.monotonic() - waited < 10.0:
+            time.sleep(0.01)
+        assert getattr(dev, "stops", 0) == 3
+        assert (f"no progress during IRSWP,{hd.MIN_STEP},{hd.MAX_STEP}: "
+                f"{CHATTER_LIMIT_BYTES} bytes arrived without a new step 4 times, 3 IRSTP did "
+                f"not end it; 0 of 5 steps arrived") in str(caught.value)
+    finally:
+        dev.close()
 
 
 @pytest.mark.parametrize("announced, message", [

@@ -43,6 +43,11 @@ MOVE_ALLOWANCE_S = 0.005  # per motor step the ring may travel before a sweep's 
 # a sweep pass that makes no progress (no new step) for this many timeouts beyond its
 # IRSTP retries is given up, whatever else the device keeps sending
 NO_PROGRESS_TIMEOUTS = 3
+# a sweep pass in which this many bytes arrive without a new step (32 of the longest
+# sentences: dozens of steps' worth) is treated like a silent one (IRSTP, counted): a link
+# that talks (noise, useless or garbled sentences) but never delivers an intact step is
+# bounded by what it sends, not by a clock
+CHATTER_LIMIT_BYTES = 32 * p.MAX_SENTENCE_BYTES
 # an IRSTP answered by a garbled sentence was heard: it is sent again this soon, and not
 # counted among the unanswered (the no-progress limit above still bounds the whole pass)
 GARBLED_ANSWER_RETRY_S = 0.1
@@ -243,10 +248,13 @@ class SerialRing:
     ----------
     port: a pyserial URL or device path, or an open/openable pyserial port object.
     baudrate: UART speed (both ends must agree; 115200 by default).
-    timeout_s: longest silence tolerated while an answer is due, on top of the time the
-        device needs per step (settle + samples × 38.3 ms). After it the driver sends
-        IRSTP and repeats it up to ``retries`` times (``retries + 1`` in all, each with its
-        own ``timeout_s``) before giving up with :class:`DeviceTimeout`.
+    timeout_s: longest silence (not a byte arriving) tolerated while an answer is due, on
+        top of the time the device needs per step (settle + samples × 38.3 ms). After it
+        the driver sends IRSTP and repeats it up to ``retries`` times (``retries + 1`` in
+        all, each with its own ``timeout_s``) before giving up with :class:`DeviceTimeout`.
+        During a sweep, CHATTER_LIMIT_BYTES arriving without a new step count as one such
+        silence (a link that talks but delivers nothing); IRHLO and IRGTO wait ``timeout_s``
+        for their answer.
     retries: how often a command is repeated after IRERR 1, busy or a timeout.
     template: the ring design whose numbers the device does not report (radius, emitter
         offset, sensor height, joint limit); IRINF overrides sensors, step, gear, limits.
@@ -285,6 +293,7 @@ class SerialRing:
         self.opener = opener
         self.poll_s = min(0.02, self.timeout_s / 4)
         self.decoder = p.Decoder()
+        self._rx_bytes = 0     # bytes read from the port, all told (silence is none arriving)
         self.stats = LinkStats()
         self.info: p.Info | None = None
         self.ring: Ring | None = None
@@ -368,6 +377,7 @@ class SerialRing:
             raise self._lost(DeviceDisconnected, str(exc)) from exc
         if not chunk:
             return []
+        self._rx_bytes += len(chunk)
         before = self.decoder.ignored_bytes
         out = []
         for item in self.decoder.feed(chunk):
@@ -606,10 +616,13 @@ class SerialRing:
         cmd = p.SweepCommand(lo, hi, samples, settle_ms)
         self._flush()
         self._send(cmd)
-        deadline = time.monotonic() + first_wait
+        wait_s = first_wait        # the silence allowed now (no byte arriving)
+        deadline = time.monotonic() + wait_s
         stops = resends = 0
-        # Deadlines move on progress only (a new step, IRDON): a device that keeps talking
-        # without progress (repeated IRSCN, endless IRPOS) is treated like a silent one.
+        # Silence is no byte for wait_s: bytes move the deadline, so a noisy link that talks
+        # is not stopped. A device that talks without progress (garbage, repeated IRSCN,
+        # endless IRPOS) is stopped like a silent one after CHATTER_LIMIT_BYTES.
+        chatter = 0                # bytes since the last new step or IRSTP
         stalled_since = time.monotonic()
         # past the retries + 1 IRSTP a silent device gets (each a timeout), so this net
         # catches only a device that talks on without progress, never cuts the retries short
@@ -620,8 +633,12 @@ class SerialRing:
         while True:
             had = len(ps.got)
             garbled = self.stats.checksum_failures + self.stats.malformed
+            rx = self._rx_bytes
             msgs = self._receive()
             now = time.monotonic()
+            if self._rx_bytes > rx:
+                chatter += self._rx_bytes - rx
+                deadline = max(deadline, now + wait_s)
             if stops and self.stats.checksum_failures + self.stats.malformed > garbled:
                 heard = True
                 deadline = min(deadline, now + min(self.timeout_s, GARBLED_ANSWER_RETRY_S))
@@ -701,27 +718,35 @@ class SerialRing:
                 # IRPOS / IRINF here are late answers to earlier commands: ignore
             if len(ps.got) > had:
                 stalled_since = now
-                deadline = now + self.timeout_s + per_step_s
+                chatter = 0
+                wait_s = self.timeout_s + per_step_s
                 if len(ps.got) == len(pos_of) and not stops:
                     # every IRSCN is in: IRDON follows at once unless it was lost, in which
                     # case IRSTP fetches it sooner than a full timeout would
-                    deadline = now + min(self.timeout_s, max(0.1, 2 * per_step_s))
-            if now >= deadline:
-                # silence (or a garbled answer): ask the device to end the sweep; IRDON
-                # tells what it sent
-                if not heard:
-                    self.stats.timeouts += 1
+                    wait_s = min(self.timeout_s, max(0.1, 2 * per_step_s))
+                deadline = now + wait_s
+            flooded = chatter >= CHATTER_LIMIT_BYTES
+            if flooded or now >= deadline:
+                # silence, talk without progress, or a garbled answer: ask the device to end
+                # the sweep; IRDON tells what it sent
+                if flooded or not heard:
+                    if not flooded:
+                        self.stats.timeouts += 1
                     if stops > self.retries:
-                        received = len(ps.got)
-                        raise self._lost(
-                            DeviceTimeout,
+                        got = f"{len(ps.got)} of {len(ps.expected)} steps"
+                        raise self._lost(DeviceTimeout, (
+                            f"no progress during IRSWP,{lo},{hi}: {CHATTER_LIMIT_BYTES} bytes "
+                            f"arrived without a new step {stops + 1} times, {stops} IRSTP did "
+                            f"not end it; {got} arrived") if flooded else (
                             f"no sentence for {self.timeout_s:g} s during IRSWP,{lo},{hi} after "
-                            f"{received} of {len(ps.expected)} steps; {stops} IRSTP unanswered")
+                            f"{got}; {stops} IRSTP unanswered"))
                     stops += 1
                 heard = False
+                chatter = 0
                 self.stats.resent_commands += 1
                 self._send(p.Stop())
-                deadline = now + self.timeout_s
+                wait_s = self.timeout_s
+                deadline = now + wait_s
 
     def _assemble(self, req: list[int], passes: list[_Pass], samples: int, settle_ms: int,
                   pose: np.ndarray) -> core.Sweep:
