@@ -15,7 +15,7 @@ import pytest
 
 from irring.hardware import DeviceDisconnected, DeviceTimeout, SerialRing
 from irring.hardware import protocol as p
-from irring.hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
+from irring.hardware.emulator import OUT_LIMIT_BYTES, Device, Faults, PtyEmulator, TcpEmulator
 from irring.scenario import load_scenario
 from irring.simulation.sim import SimRing
 
@@ -229,6 +229,25 @@ def test_firmware_hello_goto_busy_and_stop():
     assert [m.code for m in busy] == [5, 5]
     assert talk(dev, p.encode(p.Stop())) == [p.Done(-1)]
     assert talk(Device(TinySource()), p.encode(p.GoTo(-7))) == [p.Position(-7)]
+
+
+def test_a_flooding_host_gets_a_bounded_queue_and_loses_no_reading():
+    """10 000 IRHLO in one burst queued 10 000 IRINF (530 kB) for a host that sent them
+    faster than they could go out. Now a command that finds OUT_LIMIT_BYTES waiting is
+    dropped unanswered and counted, as the board's RX buffer overruns: the first
+    ceil(256 / len(IRINF)) are answered; a sweep asked for first still sends every IRSCN,
+    and the device answers again once its output has gone."""
+    dev = Device(TinySource())
+    hello = p.encode(p.Hello())
+    answer = len(p.encode(p.info_for_ring(TinySource.ring, 12, "irring-emulator-1")))
+    answered = -(-OUT_LIMIT_BYTES // answer)
+    out = talk(dev, p.encode(p.SweepCommand(-35, 31)), hello * 10_000)
+    assert dev.stats.commands == 10_001
+    assert dev.stats.commands_dropped == 10_000 - answered
+    assert sum(isinstance(m, p.Info) for m in out) == answered
+    assert [m.step for m in out if isinstance(m, p.Scan)] == list(range(-35, 32))
+    assert isinstance(out[-1], p.Done) and len(out) == answered + 67 + 1
+    assert isinstance(talk(dev, hello)[0], p.Info) and dev.stats.commands_dropped == 10_000 - answered
 
 
 def test_full_range_sweeps_move_the_robot_to_the_next_pose_partial_ones_do_not():

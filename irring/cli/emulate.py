@@ -147,7 +147,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         why = "disconnected as injected" if device.disconnected else "stopped"
         print(f"irring emulate: {why} after {time.monotonic() - started:.1f} s: {s.commands} "
-              f"commands ({s.commands_rejected} rejected), {s.sweeps} sweeps, "
+              f"commands ({s.commands_rejected} rejected, {s.commands_dropped} dropped unanswered), "
+              f"{s.sweeps} sweeps, "
               f"{s.sentences_produced} sentences ({s.sentences_dropped} dropped, "
               f"{s.bytes_corrupted} bytes corrupted)", flush=True)
     return 0

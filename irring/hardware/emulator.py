@@ -27,6 +27,11 @@ from . import protocol as p
 
 FIRMWARE = "irring-emulator-1"
 MOVE_S_PER_STEP = 0.002  # stepper time per motor step (500 steps/s) for IRGTO / reaching `from`
+# Output not yet handed to the link, at most: a command that finds this much waiting is
+# dropped unanswered (DeviceStats.commands_dropped), as the board's 32-byte RX buffer
+# overruns while it blocks on a full 64-byte TX buffer (firmware/avr/hal_avr.c). It holds
+# a sweep's IRSCN + IRDON (≤ 2 × 128 bytes), so only a host flooding it meets the bound.
+OUT_LIMIT_BYTES = 2 * p.MAX_SENTENCE_BYTES
 
 
 @dataclass(frozen=True)
@@ -68,6 +73,7 @@ class DeviceStats:
     bytes_corrupted: int = 0
     commands: int = 0
     commands_rejected: int = 0
+    commands_dropped: int = 0    # arrived while OUT_LIMIT_BYTES of output waited: no answer
     sweeps: int = 0
 
 
@@ -131,6 +137,9 @@ class Device:
             return  # a hung device hears nothing
         for item in self.decoder.feed(chunk):
             self.stats.commands += 1
+            if sum(map(len, self._out)) >= OUT_LIMIT_BYTES:
+                self.stats.commands_dropped += 1    # a flooding host: the board's RX overran
+                continue
             if isinstance(item, p.ProtocolError):
                 self.stats.commands_rejected += 1
                 code = item.fault.device_error_code
