@@ -44,6 +44,9 @@ ESTIMATE_BYTES_PER_READING = 2_700  # more for each reading of the sweep being e
                                     # every reading returns (72 × 20 001 did: 3.8 GB, 4.0 GB a run)
 BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
 MAX_SEEDS = 100_000                 # seeds of one configuration a study, compare or bench runs
+# |value| of a position or size (m) in a scene or recording: 1e300 m is finite, but squaring
+# it overflows and no map can place it
+MAX_ABS_COORDINATE_M = 1e6
 MAX_OUTLINE_CORNERS = 10_000        # corners of a room outline (checking that its walls never
                                     # cross takes ~1 s at this many; 100 000 took hours)
 
@@ -116,7 +119,8 @@ def _show(value: Any, si: str) -> str:
     if suf in ("_m", "_rad", "_s") and isinstance(value, float):
         _, scale, unit = _DISPLAY[suf]
         return f"{value * scale:g} {unit}"
-    return repr(value)
+    text = repr(value)   # bounded: the message must still say what is allowed
+    return text if len(text) <= 60 else text[:59] + "…"
 
 
 def bounds_error(value: Any, meta: Any, path: str) -> str | None:

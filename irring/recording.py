@@ -81,7 +81,7 @@ _SWEEP_ARRAYS = {  # name: (dimensions, kinds allowed, finite required)
 }
 # |value| bounds of positions (m) and angles (rad): a pose 1e300 m away is finite, but
 # no map can place it (drawing its ring failed inside Pillow)
-MAX_ABS_COORDINATE = 1e6
+MAX_ABS_COORDINATE = core.MAX_ABS_COORDINATE_M
 _BOUNDED = ("pose", "reading_poses", "sensor_angles")
 _TRUTH_ARRAYS = {"distance_m": "SN", "incidence_rad": "SN", "hit_point": "SN3", "origin": "SN3",
                  "direction": "SN3", "geom_id": "SN", "reflectance": "SN"}

@@ -5,10 +5,12 @@ PyYAML's ``safe_load`` builds no objects, but it still lets the last of two equa
 silently, expands aliases (a 562-byte "billion laughs" file grows to gigabytes) and recurses
 once per nesting level. :func:`load` refuses all three, and :func:`read_text` refuses what
 is not a readable UTF-8 file of sane size, each with one line naming the file and the line.
+Numbers read as written (``1e-3``); YAML 1.1's octal ``0750`` and base-60 ``1:30`` are refused.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +20,13 @@ from .errors import InputError, brief
 
 MAX_DEPTH = 64             # nesting levels; irring's deepest schema uses 5
 MAX_BYTES = 8 * 2**20      # a scenario with 100k outline corners is ~3 MB
+MAX_DIGITS = 100           # of a whole number: more than any file's field takes (a float
+#                            overflows at 309 digits; Python refuses to parse 4,300)
+
+# YAML 1.2's exponent floats without a dot or without the exponent's sign (1e-3, 1.0e300),
+# which YAML 1.1 reads as text
+_EXPONENT_FLOAT = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9_]+$")
+_FLOAT_TAG = "tag:yaml.org,2002:float"
 
 
 class YamlError(InputError):
@@ -31,6 +40,43 @@ class _StrictLoader(yaml.SafeLoader):
         super().__init__(stream)
         self.source = source
         self.depth = 0
+
+    def construct_object(self, node, deep=False):
+        # a value PyYAML cannot build (a date 2026-13-45, `!!int x`) fails with a bare
+        # ValueError: name the line and the value
+        try:
+            return super().construct_object(node, deep=deep)
+        except YamlError:
+            raise
+        except (ValueError, OverflowError) as exc:
+            raise self.fail(node.start_mark, f"{brief(node.value)} cannot be read as "
+                                             f"{node.tag.rsplit(':', 1)[-1]}: {exc}") from None
+
+    def construct_yaml_int(self, node):
+        text = str(self.construct_scalar(node))
+        digits = text.replace("_", "").lstrip("+-")
+        if ":" in digits:
+            raise self.fail(node.start_mark, f"{text} is a base-60 number in YAML 1.1 "
+                                             f"({super().construct_yaml_int(node)}); write the "
+                                             "number you mean, or quote it for text")
+        if len(digits) > MAX_DIGITS:
+            raise self.fail(node.start_mark, f"a whole number of {len(digits):,} digits; no "
+                                             f"field takes one of more than {MAX_DIGITS}")
+        value = super().construct_yaml_int(node)
+        if (len(digits) > 1 and digits[0] == "0" and digits[1].isdigit()
+                and value != int(text.replace("_", ""), 10)):
+            raise self.fail(node.start_mark, f"{text} is an octal number in YAML 1.1 ({value}); "
+                                             f"write it without the leading 0, or quote it for "
+                                             "text")
+        return value
+
+    def construct_yaml_float(self, node):
+        text = str(self.construct_scalar(node))
+        if ":" in text:
+            raise self.fail(node.start_mark, f"{text} is a base-60 number in YAML 1.1 "
+                                             f"({super().construct_yaml_float(node)}); write the "
+                                             "number you mean, or quote it for text")
+        return super().construct_yaml_float(node)
 
     def fail(self, mark: Any, msg: str) -> YamlError:
         line = f"line {mark.line + 1}: " if mark is not None else ""
@@ -65,6 +111,12 @@ class _StrictLoader(yaml.SafeLoader):
                                     f"key {brief(key)} given twice (first on line {first + 1})")
                 seen[key] = key_node.start_mark.line
         return super().construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_constructor("tag:yaml.org,2002:int", _StrictLoader.construct_yaml_int)
+_StrictLoader.add_constructor(_FLOAT_TAG, _StrictLoader.construct_yaml_float)
+for _first in "-+.0123456789":
+    _StrictLoader.add_implicit_resolver(_FLOAT_TAG, _EXPONENT_FLOAT, [_first])
 
 
 def load(text: str, source: str = "<string>") -> Any:

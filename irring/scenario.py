@@ -21,13 +21,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from . import designs, gp2, resources, safe_yaml
-from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_OUTLINE_CORNERS,
-                   MAX_RANGE_M, MIN_READING_PERIOD_S, SEED_MAX,
+from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_COORDINATE_M,
+                   MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S, SEED_MAX,
                    SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
                    distance_to_outline, first_crossing, inside_outline, num,
                    obstacle_distance, unit_suffix)
 from .designs import Design
-from .errors import InputError
+from .errors import InputError, brief
 
 # --------------------------------------------------------------------------- errors
 
@@ -264,7 +264,7 @@ class _Loader:
                 allowed[key] = (f, factor)
         if not isinstance(raw, Mapping):   # named by its keys: the class is not in the file
             keys = ", ".join(sorted(allowed)) or "none, write {} for the defaults"
-            raise self.fail(path, f"expected a mapping of keys, got {raw!r}; allowed here: {keys}")
+            raise self.fail(path, f"expected a mapping of keys, got {brief(raw)}; allowed here: {keys}")
         kwargs: dict[str, Any] = {}
         for key, value in raw.items():
             if key not in allowed:
@@ -301,7 +301,7 @@ class _Loader:
             return self.dataclass_(tp, raw, path)
         if origin is tuple:
             if not isinstance(raw, (list, tuple)):
-                raise self.fail(path, f"expected a list, got {raw!r}")
+                raise self.fail(path, f"expected a list, got {brief(raw)}")
             if len(args) == 2 and args[1] is Ellipsis:
                 return tuple(self.value(args[0], r, f"{path}[{i}]", factor)
                              for i, r in enumerate(raw))
@@ -313,24 +313,29 @@ class _Loader:
             return self.effects(raw, path)
         if tp is bool:
             if not isinstance(raw, bool):
-                raise self.fail(path, f"expected true or false, got {raw!r}")
+                raise self.fail(path, f"expected true or false, got {brief(raw)}")
             return raw
         if tp is int:
             if isinstance(raw, bool) or not isinstance(raw, int):
-                raise self.fail(path, f"expected a whole number, got {raw!r}")
+                raise self.fail(path, f"expected a whole number, got {brief(raw)}")
             self.check(raw, meta, path)
             return raw
         if tp is float:
             if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-                raise self.fail(path, f"expected a number, got {raw!r}")
-            value = float(raw) * factor
+                raise self.fail(path, f"expected a number, got {brief(raw)}")
+            try:
+                value = float(raw) * factor
+            except OverflowError:   # a whole number past float's range
+                value = math.inf
             if not math.isfinite(value):
-                raise self.fail(path, f"expected a finite number, got {raw!r}")
+                raise self.fail(path, f"expected a finite number, got {brief(raw)}")
+            if "lo" not in meta and "hi" not in meta:   # positions and sizes (m)
+                meta = {"lo": -MAX_ABS_COORDINATE_M, "hi": MAX_ABS_COORDINATE_M}
             self.check(value, meta, path)
             return value
         if tp is str:
             if not isinstance(raw, str):
-                raise self.fail(path, f"expected text, got {raw!r}")
+                raise self.fail(path, f"expected text, got {brief(raw)}")
             self.check(raw, meta, path)
             return raw
         raise self.fail(path, f"unsupported type {_type_name(tp)}")  # pragma: no cover
@@ -370,7 +375,7 @@ class _Loader:
                 listed[name] = params
             raw = listed
         if not isinstance(raw, Mapping):
-            raise self.fail(path, f"expected a mapping of effect names, got {raw!r}")
+            raise self.fail(path, f"expected a mapping of effect names, got {brief(raw)}")
         out = {}
         for name, params in raw.items():
             if name not in EFFECTS:

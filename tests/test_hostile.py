@@ -53,11 +53,32 @@ T_ROOM = yaml.safe_load(resolve("t_room").read_text())
     ("[" * 10_000 + "]" * 10_000, "nested more than 64 levels deep"),
     ("? [1, 2]\n: 3\n", "a mapping key must be a plain value"),
     ("a: [1, 2\n", "line 2: not valid YAML"),
+    # YAML 1.1 reads these as numbers no one meant: refused, not 488 or 90
+    ("a: 1\nb: 0750\n", "line 2: 0750 is an octal number in YAML 1.1 (488)"),
+    ("a: 1\nb: 1:30\n", "line 2: 1:30 is a base-60 number in YAML 1.1 (90)"),
+    ("a: 1:30.5\n", "line 1: 1:30.5 is a base-60 number in YAML 1.1 (90.5)"),
+    # values PyYAML cannot build ended in exit 70 (ValueError, OverflowError)
+    ("a: 1\nb: 2026-13-45\n", "line 2: '2026-13-45' cannot be read as timestamp: month"),
+    ("a: !!int abc\n", "line 1: 'abc' cannot be read as int"),
+    ("a: 1\nb: " + "7" * 5000 + "\n", "line 2: a whole number of 5,000 digits; no field takes "
+                                      "one of more than 100"),
 ])
 def test_strict_yaml_refuses_what_safe_load_lets_through(text, message):
     with pytest.raises(safe_yaml.YamlError, match=message.replace("*", r"\*").replace(
             "(", r"\(").replace(")", r"\)").replace("[", r"\[")):
         safe_yaml.load(text, "f.yaml")
+
+
+def test_numbers_are_read_as_written():
+    # YAML 1.1 reads 1e-3 and 1.0e300 as text ("expected a number, got '1e-3'"); 07 and 00
+    # are the same in octal and decimal, 1_000 is digit grouping
+    assert safe_yaml.load("a: 1e-3\nb: 1.0e300\nc: -2.5E2\nd: .5e1\ne: 07\nf: 1_000\n"
+                          "g: '0750'\n") == {"a": 0.001, "b": 1e300, "c": -250.0, "d": 5.0,
+                                              "e": 7, "f": 1000, "g": "0750"}
+    raw = copy.deepcopy(T_ROOM)
+    raw["effects"]["noise"]["sigma_v"] = "SIGMA"
+    text = yaml.safe_dump(raw).replace("SIGMA", "2.5e-2")
+    assert loads(text, "x.yaml").effects["noise"].sigma_v == 0.025
 
 
 def test_billion_laughs_is_refused_at_once():
@@ -146,6 +167,15 @@ def test_any_text_is_a_scenario_or_a_scenario_error(text):
      "'box'] is not allowed; choose one of: cylinder, box"),
     (lambda r: r.update(obstacles=[{"type": {"box": 1}, "center_mm": [1, 2]}]),
      "type: {'box': 1} is not allowed; choose one of: cylinder, box"),
+    # a position past ±1e9 mm overflowed the outline checks (exit 70, RuntimeWarning)
+    (lambda r: r["room"]["outline_mm"][1].__setitem__(0, 1e200),
+     "room.outline_mm[1][0]: 1e+200 mm is out of range; allowed -1e+09 … 1e+09 mm"),
+    (lambda r: r["robot"]["poses"][2].__setitem__("y_mm", -3e9),
+     "robot.poses[2].y_mm: -3e+09 mm is out of range; allowed -1e+09 … 1e+09 mm"),
+    # a long bad value no longer crowds out what is allowed (a message is cut at 400 characters)
+    (lambda r: r.update(map=list(range(10_000))),
+     "map: expected a mapping of keys, got [0, 1, 2, 3, 4, 5, ...]; allowed here: margin_m"),
+    (lambda r: r.update(seed=int("7" * 90)), "seed: " + "7" * 59 + "… is out of range; allowed 0 …"),
 ])
 def test_silently_accepted_scenarios_are_now_errors(change, message):
     raw = copy.deepcopy(T_ROOM)
@@ -154,8 +184,15 @@ def test_silently_accepted_scenarios_are_now_errors(change, message):
     if message is None:
         assert loads(text, "x.yaml").has("noise")
         return
-    with pytest.raises(ScenarioError, match=message.replace("(", r"\(").replace(".", r"\.")):
+    with pytest.raises(ScenarioError, match=re.escape(message)):
         loads(text, "x.yaml")
+
+
+def test_a_whole_number_past_floats_range_is_not_a_crash():
+    # JSON (a recording's ring) takes integers of hundreds of digits; float() overflowed
+    from irring.scenario import load_dataclass
+    with pytest.raises(ScenarioError, match=r"ring\.radius_m: expected a finite number, got 1000"):
+        load_dataclass(Ring, {"radius_m": 10**400}, "ring", "rec.npz")
 
 
 # --------------------------------------------------------------------------- recordings
