@@ -123,7 +123,7 @@ def describe(exc: BaseException) -> tuple[int, str]:
     if isinstance(exc, OSError):
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         why = exc.strerror or str(exc)
-        if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG):
             return OUTPUT, printable(f"{where}{why}")
         return INPUT, printable(f"{where}{why}")
     return INTERNAL, printable(f"internal error ({type(exc).__name__}: {exc}); rerun with "

@@ -94,6 +94,11 @@ class OutputSet:
                 self.discard()
         else:
             self.discard()
+            if (isinstance(exc, OSError) and not isinstance(exc, OutputError)
+                    and exc.errno in _WRITE_ERRNOS):
+                # a full disk or a file-size limit says neither folder nor file: name --out
+                raise OutputError(f"{self.option} {printable(str(self.out))}: cannot write the "
+                                  f"outputs there: {_why(exc)}; nothing was changed") from exc
 
     def discard(self) -> None:
         if self.tmp is not None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import errno
 import io
 import json
 import math
@@ -754,6 +755,84 @@ def test_a_damaged_results_csv_is_refused_on_resume_naming_line_and_column(
     err = capsys.readouterr().err
     assert f"{out / 'results.csv'}: {message}" in err and "internal error" not in err
     assert sorted(p.name for p in out.iterdir()) == ["results.csv"]   # nothing run or summarised
+
+
+@pytest.mark.parametrize("edit, status, message", [
+    # Excel's "CSV UTF-8" starts with a BOM: read as "columns are not the ones this irring
+    # writes (33 columns, expected 33 …)"; now resumed
+    (lambda data: b"\xef\xbb\xbf" + data, 0, None),
+    # saved in Latin-1 / cp1252: exit 70 (UnicodeDecodeError)
+    (lambda data: data.replace(b"t_room_cylinder", b"t_r\xe9om", 2), 1,
+     "line 2: not UTF-8 text (byte "),
+    (lambda data: data.replace(b",seed,", b",Seed,", 1), 1,
+     "its columns are not the ones this irring writes (column 6 is 'Seed', expected 'seed')"),
+])
+def test_a_results_csv_saved_by_a_spreadsheet_is_resumed_or_named(tmp_path, capsys,
+                                                                  one_run_study, edit, status,
+                                                                  message):
+    study, text = one_run_study
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "results.csv").write_bytes(edit(text.encode()))
+    assert main(["study", str(study), "--out", str(out), "--workers", "1", "--resume"]) == status
+    err = capsys.readouterr().err
+    if message is None:   # nothing run again: the kept row, rewritten without the BOM
+        assert (out / "results.csv").read_text() == text
+        assert json.loads((out / "summary.json").read_text())["configurations"][0]["runs"] == 1
+    else:
+        assert f"{out / 'results.csv'}: {message}" in err and "internal error" not in err
+
+
+def test_a_results_csv_that_cannot_be_written_names_it_and_keeps_the_runs(tmp_path, capsys,
+                                                                          monkeypatch):
+    """A full disk or a file-size limit (ulimit -f) while streaming results.csv ended in
+    exit 1 'File too large' (or exit 4 'No space left on device'), naming no file."""
+    from irring.studies import study as study_mod
+    (tmp_path / "s.yaml").write_text("designs: [rotating12]\nscenarios: [t_room_cylinder]\n"
+                                     "seeds: 3\n")
+    real_writer = study_mod.csv.writer
+
+    class Filling:   # the header and two rows fit; the third does not
+        def __init__(self, fh):
+            self.fh, self.rows, self.w = fh, 0, real_writer(fh)
+
+        def writerow(self, cells):
+            self.rows += 1
+            if self.rows > 3:
+                raise OSError(errno.EFBIG, "File too large")
+            return self.w.writerow(cells)
+
+    monkeypatch.setattr(study_mod.csv, "writer", Filling)
+    out = tmp_path / "o"
+    argv = ["study", str(tmp_path / "s.yaml"), "--out", str(out), "--workers", "1"]
+    assert main(argv) == 4
+    err = capsys.readouterr().err
+    assert (f"{out / 'results.csv'}: cannot write the study's results: File too large; the 2 "
+            "run(s) written before are kept (free space, then rerun with --resume)") in err
+    assert len((out / "results.csv").read_text().splitlines()) == 3
+    monkeypatch.undo()
+    assert main(argv + ["--resume"]) == 0   # the third run only
+    assert len((out / "results.csv").read_text().splitlines()) == 4
+
+
+def test_a_run_on_a_full_disk_names_its_out_folder(tmp_path):
+    """ENOSPC / EFBIG while writing the outputs said only 'No space left on device' or
+    'File too large' (EFBIG as exit 1, 'bad input')."""
+    import resource
+    import subprocess
+    import sys
+
+    def limit():   # about 30 KB a file: the map PNG fits, the GIF does not
+        resource.setrlimit(resource.RLIMIT_FSIZE, (30_000, 30_000))
+
+    out = tmp_path / "o"
+    done = subprocess.run([sys.executable, "-m", "irring", "run", "t_room_cylinder", "--out",
+                           str(out)], preexec_fn=limit, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 4, done.stderr
+    assert (f"irring run: error: --out {out}: cannot write the outputs there: File too large; "
+            "nothing was changed") in done.stderr
+    assert os.listdir(tmp_path) == []   # no output folder, no temporaries left
 
 
 @pytest.mark.parametrize("failure, status", [

@@ -120,7 +120,8 @@ def test_a_failed_write_leaves_the_earlier_outputs_byte_identical(command, input
     else:
         monkeypatch.setattr(Figure, "savefig", _full_disk)
     assert main(argv_again + ["--out", str(out)]) == 4
-    assert "No space left on device" in capsys.readouterr().err
+    assert (f"--out {out}: cannot write the outputs there: No space left on device; nothing "
+            "was changed") in capsys.readouterr().err
     after = _snapshot(out)
     if command == "study":   # the checkpoint streams on (and keeps both rows)
         assert after.pop("results.csv").count(b"\n") == before.pop("results.csv").count(b"\n") + 1

@@ -7,6 +7,8 @@ then a summary per configuration and a chart. A bad study file raises :class:`St
 
 from __future__ import annotations
 
+import codecs
+import contextlib
 import csv
 import difflib
 import itertools
@@ -28,7 +30,7 @@ import numpy as np
 
 from .. import designs, gp2, safe_yaml
 from ..core import MAX_SEEDS, SEED_MAX, SENSOR_MODEL
-from ..errors import brief
+from ..errors import OutputError, brief
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
 from ..resources import installed_version
@@ -404,14 +406,24 @@ def read_results(path: str | Path, *, repair: bool = False) -> list[dict[str, st
         if repair:
             with open(p, "r+b") as fh:
                 fh.truncate(len(data))
-    lines = data.decode().splitlines()
+    data = data.removeprefix(codecs.BOM_UTF8)   # a spreadsheet's "CSV UTF-8" starts with one
+    try:
+        lines = data.decode("utf-8").splitlines()
+    except UnicodeDecodeError as exc:   # saved by a spreadsheet in Latin-1 / cp1252
+        line = data[:exc.start].count(b"\n") + 1
+        raise StudyError(f"{p}: line {line}: not UTF-8 text (byte {exc.start}); the file was "
+                         "edited or damaged; save it as UTF-8 CSV") from None
     if not lines:
         return []
     reader = csv.reader(lines)
     header = tuple(next(reader))
     if header != COLUMNS:
-        raise StudyError(f"{p}: its columns are not the ones this irring writes ({len(header)} "
-                         f"columns, expected {len(COLUMNS)}: {', '.join(COLUMNS[:6])}, …); "
+        first = next((i for i, (h, c) in enumerate(zip(header, COLUMNS)) if h != c),
+                     min(len(header), len(COLUMNS)))
+        what = (f"column {first + 1} is {brief(header[first])}, expected {COLUMNS[first]!r}"
+                if first < min(len(header), len(COLUMNS)) else
+                f"{len(header)} columns, expected {len(COLUMNS)}")
+        raise StudyError(f"{p}: its columns are not the ones this irring writes ({what}); "
                          "choose another --out, or move the file away to start afresh")
     rows, lines_of = [], {}
     for i, cells in enumerate(reader, start=2):
@@ -487,14 +499,31 @@ def row_key(row: Mapping[str, Any]) -> tuple[str, ...]:
 
 def _write_sorted(path: Path, rows: list[dict[str, str]]) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(COLUMNS)
-        for r in rows:
-            w.writerow([r[k] for k in COLUMNS])
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(COLUMNS)
+            for r in rows:
+                w.writerow([r[k] for k in COLUMNS])
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)   # a full disk: the rows in path stay as streamed
+
+
+@contextlib.contextmanager
+def _results_writes(path: Path, kept: Callable[[], int]):
+    """Writes to results.csv: an OSError there (a full disk, a file-size limit) is an
+    :class:`OutputError` naming the file and the runs it keeps for ``--resume``."""
+    try:
+        yield
+    except OSError as exc:
+        if isinstance(exc, OutputError):
+            raise
+        raise OutputError(f"{path}: cannot write the study's results: "
+                          f"{exc.strerror or exc}; the {kept()} run(s) written before are kept "
+                          "(free space, then rerun with --resume)") from exc
 
 
 def _write_parquet(csv_path: Path) -> Path | None:
@@ -542,21 +571,33 @@ def run_study(study: Study | Sequence[Point], out_dir: str | Path, ex=None, *,
     if on_start is not None:
         on_start(len(points) - len(todo), len(todo))
     new_file = not existing
-    with open(path, "w" if new_file else "a", newline="") as fh:
+    kept = len(existing)
+    with _results_writes(path, lambda: kept):
+        fh = open(path, "w" if new_file else "a", newline="")
+    try:
         w = csv.writer(fh)
         if new_file:
-            w.writerow(COLUMNS)
-            fh.flush()
+            with _results_writes(path, lambda: kept):
+                w.writerow(COLUMNS)
+                fh.flush()
         for _, row in stream(run_point, tasks_for(todo), ex):
-            w.writerow([_cell(row[k]) for k in COLUMNS])
-            fh.flush()   # a killed study keeps every finished row
+            with _results_writes(path, lambda: kept):   # not the runs' own OSErrors
+                w.writerow([_cell(row[k]) for k in COLUMNS])
+                fh.flush()   # a killed study keeps every finished row
+            kept += 1
             if progress is not None:
                 progress(row)
+    finally:
+        # every row was flushed; what close() could still fail on is a row whose flush
+        # already failed (--resume drops its cut-off line)
+        with contextlib.suppress(OSError):
+            fh.close()
     rows = read_results(path)
     order = {p.key: i for i, p in enumerate(points)}
     # grid order; rows of points no longer in the study are kept, after the grid's
     rows.sort(key=lambda r: order.get(row_key(r), len(order)))
-    _write_sorted(path, rows)
+    with _results_writes(path, lambda: len(rows)):
+        _write_sorted(path, rows)
     paths = {"results": str(path)}
     pq = _write_parquet(path)
     if pq is not None:
