@@ -36,7 +36,14 @@ ROOT = Path(__file__).resolve().parents[1]
 # Keys whose value is this machine's time or memory (JSON and CSV), never a result.
 TIMING_KEY = re.compile(r"^(compute.*|ms|.*_ms(_.*)?|run_s|wall_s|worker_peak_mb|front_cpu_.*"
                         r"|machine|irring_version|sweeps_per_s|realtime_factor"
-                        r"|ray_vs_raw_ratio|targets)$")
+                        r"|ray_vs_raw_ratio|targets"
+                        r"|physics_s|check_s|halving_s|check_ratio|halving_ratio)$")
+#                         (the last five: bench dynamics' check_cost, seconds and their ratios)
+# Paths a run makes up: its temporary work folder and the calibration progress file kept in
+# $TMPDIR (calibrate's resume hint names both).
+MADE_UP_PATHS = ((re.compile(r"\S*/sameness-[^/\s]+/"), "<work>/"),
+                 (re.compile(r"\S*/irring-calibrate-[^/\s]*\.yaml"),
+                  "<tmp>/irring-calibrate-<x>.yaml"))
 KEEP_KEY = re.compile(r"^(settle_ms)$")   # a knob spelt like a timing
 # Charts whose axes include compute time; their bytes differ from run to run.
 TIMED_CHARTS = {"accuracy.png", "compare.png"}
@@ -272,6 +279,8 @@ def normalise_record(runs: list[dict]) -> str:
                 normalise_stdout(r["stdout"])]
         if r["stderr"].strip():   # a warning names the file and line it came from: code moves
             err = re.sub(r"\S*/irring/(\S+\.py):\d+:", r"irring/\1:<line>:", r["stderr"])
+            for made_up, mask in MADE_UP_PATHS:
+                err = made_up.sub(mask, err)
             body.append("stderr: " + normalise_text(_strip_progress(err)))
         body.extend(describe_files(r["files"]))
         sections.append("\n".join(body))
