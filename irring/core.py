@@ -37,12 +37,16 @@ MAX_ADC_BITS = 24                   # a converter's bits a device, recording or 
                                     # file may state (a scenario's are fewer: Sensor.adc_bits)
 VREF_RANGE_V = (0.1, 50.0)          # its reference voltage there (V; a scenario's: Sensor.vref_v)
 MAX_DURATION_S = 1e7                # hardware time of one sweep (115 days; a recording's bound)
-WORK_MEMORY_BYTES = 2 * 10**9       # readings and belt physics of one run together
+WORK_MEMORY_BYTES = 2 * 10**9       # what one command's work may hold: a run's readings and
+                                    # belt physics together, a study's results read back
 BYTES_PER_READING = 600             # a reading through simulation, estimate and map (measured,
                                     # few beams returning: 72 sensors × 20 001 steps peaked 0.94 GB)
 ESTIMATE_BYTES_PER_READING = 2_700  # more for each reading of the sweep being estimated when
                                     # every reading returns (72 × 20 001 did: 3.8 GB, 4.0 GB a run)
 BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
+RESULT_ROW_BYTES = 3_800            # a study's results.csv row read back to summarise
+                                    # (measured: 100 000 rows, 377 MB)
+MAX_RUNS = WORK_MEMORY_BYTES // RESULT_ROW_BYTES   # runs of one study (526,315)
 MAX_SEEDS = 100_000                 # seeds of one configuration a study, compare or bench runs
 # |value| of a position or size (m) in a scene or recording: 1e300 m is finite, but squaring
 # it overflows and no map can place it
@@ -56,6 +60,16 @@ def work_bytes(readings: int, largest_sweep: int) -> int:
     """Memory (bytes) estimating and mapping ``readings`` takes at most, ``largest_sweep`` of
     them in one sweep (estimated one sweep at a time); held within :data:`WORK_MEMORY_BYTES`."""
     return int(readings) * BYTES_PER_READING + int(largest_sweep) * ESTIMATE_BYTES_PER_READING
+
+
+def work_refusal(work: str, need: int, who: str, advice: str) -> str | None:
+    """None when ``need`` bytes fit :data:`WORK_MEMORY_BYTES`, else the one wording every
+    refusal of too much work uses (raised as :class:`irring.errors.TooBig`, exit 5):
+    '{work} (about N GB), more than the 2 GB {who} may use: {advice}'."""
+    if need <= WORK_MEMORY_BYTES:
+        return None
+    return (f"{work} (about {need / 1e9:.1f} GB), more than the {WORK_MEMORY_BYTES / 1e9:g} GB "
+            f"{who} may use: {advice}")
 
 
 # --------------------------------------------------------------------------- field bounds

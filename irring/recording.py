@@ -16,7 +16,7 @@ import numpy as np
 
 from . import core, gp2
 from .core import (ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL,
-                   VREF_V, WORK_MEMORY_BYTES, Ring, Sweep, Truth, work_bytes)
+                   VREF_V, Ring, Sweep, Truth, work_bytes, work_refusal)
 from .errors import InputError, IrringError, TooBig, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
 from .scenario import MapSpec, ScenarioError, load_dataclass
@@ -157,12 +157,12 @@ def _check_work(headers: dict, path: Path) -> None:
         return   # _read names what is missing
     readings = sum(s * n for s, n in shapes)
     steps, sensors = max(shapes, key=lambda sn: sn[0] * sn[1])
-    need = work_bytes(readings, steps * sensors)
-    if need > WORK_MEMORY_BYTES:
-        raise TooBig(f"{path}: {len(shapes)} sweeps, {readings:,} readings (the largest sweep "
-                     f"{steps:,} steps × {sensors} sensors) need about {need / 1e9:.1f} GB to "
-                     f"estimate and map, more than the {WORK_MEMORY_BYTES / 1e9:g} GB a replay "
-                     "may use; map fewer or shorter sweeps at a time")
+    refusal = work_refusal(f"{len(shapes)} sweeps, {readings:,} readings (the largest sweep "
+                           f"{steps:,} steps × {sensors} sensors) to estimate and map",
+                           work_bytes(readings, steps * sensors), "a replay",
+                           "map fewer or shorter sweeps at a time")
+    if refusal:
+        raise TooBig(f"{path}: {refusal}")
 
 
 def _text(npz, headers: dict, name: str, fail) -> str:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from irring import errors
 from irring.studies import executor, study
 from irring.cli import main
 
@@ -130,12 +131,35 @@ BAD = [
     ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, "
      "sensor: [gp2d12]}]\nscenarios: [t_room]\n",
      r"designs\[0\]\.sensor: \['gp2d12'\] is not allowed; choose one of: gp2d12"),
-    # 1.6 billion runs: the grid alone filled memory before the first run
-    ("designs: [radial12, rotating12]\nscenarios: [t_room, l_room_post.yaml]\nseeds: 100000\n"
-     "knobs: {samples: [1, 2, 3, 4], step_stride: [1, 2, 3, 4]}\n",
-     r"s\.yaml: 2 designs × 2 scenarios × 16 knob settings × 100000 seeds = 6,400,000 runs; a "
-     r"study runs at most 200,000"),
 ]
+
+
+@pytest.mark.parametrize("designs, refused", [(5, False), (6, True)])
+def test_a_study_too_big_for_the_work_budget_is_refused_as_too_big(tmp_path, capsys, designs,
+                                                                   refused):
+    """One budget for every command (core.WORK_MEMORY_BYTES, core.check_work): a study's
+    results read back take 3,800 bytes a run, so 500,000 runs (1.9 GB) fit and 600,000
+    (2.3 GB) do not. It was a limit of its own (200,000 runs, exit 1, its own wording):
+    6,400,000 runs, whose grid alone filled memory before the first run, were refused as a
+    bad file."""
+    names = ", ".join(["radial12", "rotating12", "rotating1", "laser", "sonar12",
+                       "{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, "
+                       "name: ring8}"][:designs])
+    p = write(tmp_path, f"designs: [{names}]\nscenarios: [t_room]\nseeds: 100000\n")
+    if not refused:
+        spec = study.load_study(p)
+        assert len(spec.designs) * len(spec.scenarios) * spec.seed_count == 500_000
+        return
+    with pytest.raises(errors.TooBig) as caught:
+        study.load_study(p)
+    assert str(caught.value) == (
+        f"{p}: 6 designs × 1 scenarios × 1 knob settings × 100000 seeds = 600,000 runs, their "
+        "results read back to summarise (about 2.3 GB), more than the 2 GB a study may use: "
+        "use fewer seeds, knob values, designs or scenarios, or split it into several studies")
+    assert main(["study", str(p), "--out", str(tmp_path / "out")]) == errors.TOO_BIG
+    err = capsys.readouterr().err
+    assert err.startswith("irring study: error: ") and err.count("\n") == 1, err
+    assert "more than the 2 GB a study may use" in err and not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("text, message", BAD)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import errors, pipeline
-from ..core import MAX_SWEEPS, WORK_MEMORY_BYTES, work_bytes
+from ..core import MAX_SWEEPS, work_bytes, work_refusal
 from ..estimation.calibration import load_calibration
 from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
@@ -180,13 +180,13 @@ def run(args: argparse.Namespace) -> int:
     stride = truth.scan.step_stride if truth else 1
     steps = np.arange(info.min_step, info.max_step + 1, stride)
     readings = n * len(steps) * info.nsensors
-    need = work_bytes(readings, len(steps) * info.nsensors)
-    if need > WORK_MEMORY_BYTES:   # refused before the ring turns: mapped at the end, it
-        ring.close()               # would run out of memory after every sweep was read
-        print(f"irring drive: error: {n:,} sweeps × {len(steps):,} steps × {info.nsensors} "
-              f"sensors (the ring's IRINF) = {readings:,} readings (about {need / 1e9:.1f} GB), "
-              f"more than the {WORK_MEMORY_BYTES / 1e9:g} GB a drive may use: give fewer "
-              f"--poses, or a firmware sweeping fewer steps", file=sys.stderr)
+    refusal = work_refusal(f"{n:,} sweeps × {len(steps):,} steps × {info.nsensors} sensors "
+                           f"(the ring's IRINF) = {readings:,} readings",
+                           work_bytes(readings, len(steps) * info.nsensors), "a drive",
+                           "give fewer --poses, or a firmware sweeping fewer steps")
+    if refusal:   # refused before the ring turns: mapped at the end, it would run out of
+        ring.close()   # memory after every sweep was read
+        print(f"irring drive: error: {refusal}", file=sys.stderr)
         return errors.TOO_BIG
     if stride > 1:
         # IRSWP reads every step it passes, so every Nth step costs one IRSWP each; an

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..core import MAX_RUNS
 from ..outputs import check_out, safe_name
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
@@ -26,7 +27,7 @@ the study file (YAML):
              the scenario simulates belt_dynamics and timing (e.g. t_room_moving); otherwise
              it only adds hardware time
 
-one run per design × scenario × knob values × seed (at most {study.MAX_RUNS:,} runs a
+one run per design × scenario × knob values × seed (at most {MAX_RUNS:,} runs a
 study): every pose swept, estimated, mapped and scored as `irring run` does, every design judged on the
 scenario's own ground truth. --resume refuses kept runs of a design since changed under
 its name.

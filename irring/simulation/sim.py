@@ -14,8 +14,8 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from ..core import (BYTES_PER_PHYSICS_VALUE, MAX_STEPS, MAX_SWEEPS, WORK_MEMORY_BYTES, Sweep,
-                    Truth, as_pose, hardware_duration_s, work_bytes)
+from ..core import (BYTES_PER_PHYSICS_VALUE, MAX_STEPS, MAX_SWEEPS, Sweep, Truth, as_pose,
+                    hardware_duration_s, work_bytes, work_refusal)
 from ..errors import TooBig
 from ..scenario import Scenario
 from . import dynamics as dynamics_lib
@@ -71,22 +71,23 @@ def check_work(sim: SimRing) -> None:
     reading_bytes = work_bytes(readings, steps * sensors)
     need = reading_bytes + physics_bytes
     work = (f"{sweeps:,} sweeps × {steps:,} steps × {sensors} sensors = {readings:,} readings"
-            + (f" and {physics_steps:,} belt physics steps" if physics_steps else "")
-            + f" (about {need / 1e9:.1f} GB)")
+            + (f" and {physics_steps:,} belt physics steps" if physics_steps else ""))
     sweep_keys = "narrow robot.ring min_step … max_step or raise scan.step_stride"
     if steps > MAX_STEPS:
-        raise TooBig(f"{where}: {work}: a sweep takes at most {MAX_STEPS:,} steps; {sweep_keys}")
+        raise TooBig(f"{where}: {work} (about {need / 1e9:.1f} GB): a sweep takes at most "
+                     f"{MAX_STEPS:,} steps; {sweep_keys}")
     if sweeps > MAX_SWEEPS:
-        raise TooBig(f"{where}: {work}: a run takes at most {MAX_SWEEPS:,} sweeps; raise "
-                     f"effects.motion.speed_mm_s or shorten effects.motion.path")
-    if need > WORK_MEMORY_BYTES:
-        keys = (f"{sweep_keys}, or use fewer robot.ring.sensors, robot.poses or a shorter or "
-                f"faster effects.motion")
-        if physics_bytes > reading_bytes:
-            keys = ("raise effects.belt_dynamics.timestep_ms or lower step_time_ms, lower "
-                    f"scan.settle_ms or scan.samples, or {sweep_keys}")
-        raise TooBig(f"{where}: {work}, more than the {WORK_MEMORY_BYTES / 1e9:g} GB a run "
-                     f"may use: {keys}")
+        raise TooBig(f"{where}: {work} (about {need / 1e9:.1f} GB): a run takes at most "
+                     f"{MAX_SWEEPS:,} sweeps; raise effects.motion.speed_mm_s or shorten "
+                     f"effects.motion.path")
+    keys = (f"{sweep_keys}, or use fewer robot.ring.sensors, robot.poses or a shorter or "
+            f"faster effects.motion")
+    if physics_bytes > reading_bytes:
+        keys = ("raise effects.belt_dynamics.timestep_ms or lower step_time_ms, lower "
+                f"scan.settle_ms or scan.samples, or {sweep_keys}")
+    refusal = work_refusal(work, need, "a run", keys)
+    if refusal:
+        raise TooBig(f"{where}: {refusal}")
 
 
 class SimRing:

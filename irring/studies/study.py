@@ -29,8 +29,8 @@ except ImportError:  # pragma: no cover - not on POSIX
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
-from ..core import MAX_SEEDS, SEED_MAX, SENSOR_MODEL
-from ..errors import OutputError, brief
+from ..core import MAX_SEEDS, RESULT_ROW_BYTES, SEED_MAX, SENSOR_MODEL, work_refusal
+from ..errors import OutputError, TooBig, brief
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
 from ..resources import installed_version
@@ -61,8 +61,6 @@ META_COLUMNS = ("poses", "readings", "iterations_mean", "irring_version")
 COLUMNS = (KEY_COLUMNS + DESIGN_COLUMNS + SCORE_COLUMNS + COST_COLUMNS + TIMING_COLUMNS
            + META_COLUMNS)
 RESULTS = "results.csv"
-MAX_RUNS = 200_000           # runs of one study (read back to summarise: ~0.75 GB of rows)
-RESULT_ROW_BYTES = 3_800     # a results.csv row read back (measured: 100 000 rows, 377 MB)
 
 
 
@@ -183,7 +181,8 @@ def _design(source: str, path: str, raw: Any) -> DesignSpec:
 
 
 def parse_study(raw: Any, source: str = "") -> Study:
-    """Validate a parsed study document (see the module doc); raises :class:`StudyError`."""
+    """Validate a parsed study document (see the module doc); raises :class:`StudyError`, or
+    :class:`irring.errors.TooBig` for more runs than the work budget holds."""
     if not isinstance(raw, Mapping):
         raise _fail(source, "", "a study file must be a mapping with keys "
                     + ", ".join(TOP_KEYS))
@@ -240,12 +239,13 @@ def parse_study(raw: Any, source: str = "") -> Study:
     settings = math.prod(len(v) for _, v in knobs)
     n_seeds = len(seeds) if seeds is not None else count
     runs = len(designs) * len(scenarios) * settings * n_seeds
-    if runs > MAX_RUNS:
-        raise StudyError(f"{source}: {len(designs)} designs × {len(scenarios)} scenarios × "
-                         f"{settings} knob settings × {n_seeds} seeds = {runs:,} runs; a study "
-                         f"runs at most {MAX_RUNS:,} (its results alone would hold ~"
-                         f"{runs * RESULT_ROW_BYTES / 1e9:.0f} GB): use fewer seeds, knob values, "
-                         "designs or scenarios, or split it into several studies")
+    refusal = work_refusal(
+        f"{len(designs)} designs × {len(scenarios)} scenarios × {settings} knob settings × "
+        f"{n_seeds} seeds = {runs:,} runs, their results read back to summarise",
+        runs * RESULT_ROW_BYTES, "a study", "use fewer seeds, knob values, designs or scenarios, "
+        "or split it into several studies")
+    if refusal:
+        raise TooBig(f"{source}: {refusal}" if source else refusal)
     return Study(designs, tuple(scenarios), seeds, count, tuple(knobs), source)
 
 
