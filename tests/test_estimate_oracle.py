@@ -171,14 +171,17 @@ def test_reach_kernel_agrees_with_its_numpy_statement(seed, room, silent, margin
        jitter_m=st.sampled_from([0.0, 0.002, 0.02]),
        sigma_scale=st.floats(0.2, 5.0),
        min_range_m=st.floats(0.0, 0.3),
-       own_cap_m=st.sampled_from([math.inf, 0.010, 0.003, 0.0]))
+       own_cap_m=st.sampled_from([math.inf, 0.010, 0.003, 0.0]),
+       unknown=st.sampled_from([0.0, 0.1]))
 def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge, jitter_m,
-                                                     sigma_scale, min_range_m, own_cap_m):
+                                                     sigma_scale, min_range_m, own_cap_m,
+                                                     unknown):
     """``_lines.snap_to_lines`` (compiled) against ``estimate_numpy.snap_to_lines`` on a
     sweep's end points with drawn line labels (some dropped, pairs of lines merged into one
     that fits neither), end points jittered along and across their beams, σ scaled, any
-    minimum range and cap on a member's own σ: the same end points move (exact) and x, y,
-    d, σ agree within 1e-9 m."""
+    minimum range and cap on a member's own σ, a share of σ NaN or +inf (a caller's Points
+    may hold them): the same end points move (exact) and x, y, d, σ agree within 1e-9 m
+    (NaN and inf where the other has them)."""
     walls, circles, rng = _scene(seed, room)
     cal = stand_in_calibration()
     sweep, _, _ = make_sweep(cal, walls=walls, circles=circles, noise_counts=0.5, seed=seed,
@@ -192,6 +195,10 @@ def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge,
     p = dataclasses.replace(p, x=p.x + jx, y=p.y + jy, d=np.hypot(p.x + jx - p.origin_x,
                                                                   p.y + jy - p.origin_y),
                             sigma_m=p.sigma_m * sigma_scale)
+    if unknown:
+        pick = rng.random(label.shape)
+        p = dataclasses.replace(p, sigma_m=np.where(pick < unknown / 2, np.inf, np.where(
+            pick > 1 - unknown / 2, np.nan, p.sigma_m)))
     fast = fast_snap(p, label, min_range_m, own_cap_m)
     slow = oracle.snap_to_lines(p, label, min_range_m, own_cap_m)
     moved = np.nan_to_num(fast.d, nan=-1.0) != np.nan_to_num(p.d, nan=-1.0)
