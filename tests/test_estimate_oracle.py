@@ -19,8 +19,9 @@ from hypothesis import strategies as st
 from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
 from irring.estimation import estimate_numpy as oracle
 from irring.core import Reason
+from irring.estimation import _lines
 from irring.estimation.estimate import (LineOptions, range_profiles, estimate_detail,
-                                        profiles_compiled, scan_order)
+                                        polyline_ids, profiles_compiled, scan_order)
 from irring.estimation.estimate import no_return_reach as fast_reach
 from irring.estimation.estimate import snap_to_lines as fast_snap
 
@@ -248,3 +249,29 @@ def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, no
     # a scene left with few readings proves little (seed 25752, columns, keep 0.81: 11 left);
     # hypothesis draws another instead of failing on the scene, after comparing this one
     assume(vi.size >= 20)
+
+
+_RANGE = st.floats(0.0, 1.2) | st.sampled_from([math.nan, math.inf, 0.3])
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=st.data(), k=st.integers(0, 40), reject=st.floats(0.3, 2.0),
+       sigmas=st.floats(0.0, 6.0))
+def test_polyline_kernel_agrees_with_its_numpy_statement(data, k, reject, sigmas):
+    """``_lines.polyline_ids`` (compiled) against ``estimate.polyline_ids`` (numpy): the
+    same ids, exactly, on ranges with ties, NaN and inf, headings that wrap past ±π and
+    sensors that repeat or change."""
+    d = np.array(data.draw(st.lists(_RANGE, min_size=k, max_size=k)), dtype=float)
+    sigma = np.array(data.draw(st.lists(st.floats(0.0, 0.05) | st.just(math.nan), min_size=k,
+                                        max_size=k)), dtype=float)
+    heading = np.array(data.draw(st.lists(st.floats(-7.0, 7.0), min_size=k, max_size=k)),
+                       dtype=float)
+    sensor = np.array(data.draw(st.lists(st.integers(0, 2), min_size=k, max_size=k)),
+                      dtype=np.intp)
+    with np.errstate(invalid="ignore"):    # inf − inf, 0 · inf: NaN, as the kernel takes it
+        slow = polyline_ids(d, sigma, heading, sensor, reject, sigmas)
+    fast = _lines.polyline_ids(d, sigma, heading, sensor, math.tan(min(reject, 1.5)), sigmas)
+    assert fast.dtype == np.intp
+    np.testing.assert_array_equal(fast, slow)
+    if k > 1:    # not vacuous: a sensor change always cuts
+        assert fast[-1] >= 1 + np.count_nonzero(sensor[1:] != sensor[:-1])

@@ -1079,6 +1079,37 @@ cdef inline void _interp_ab(double t, const double[::1] xp, const double[::1] la
     out_b[0] = bb[lo] + f * (bb[lo + 1] - bb[lo])
 
 
+def polyline_ids(const double[::1] d, const double[::1] sigma, const double[::1] heading,
+                 const idx_t[::1] sensor, double tan_reject, double sigmas):
+    """``irring.estimation.estimate.polyline_ids`` (the statement and the why) bit for bit:
+    readings (k,) in scan order; ``tan_reject`` = tan(min(reject, 1.5)). Returns the
+    polyline id of each reading (intp, from 1), as np.cumsum of the cuts."""
+    cdef idx_t k = d.shape[0], i, run = 1
+    cdef double turn, wrap, far, allowed
+    if not (sigma.shape[0] == heading.shape[0] == sensor.shape[0] == k):
+        raise ValueError("per-reading arrays differ in length")
+    out = np.empty(k, dtype=np.intp)
+    if k == 0:
+        return out
+    cdef idx_t[::1] ids = out
+    ids[0] = 1
+    for i in range(1, k):
+        # np.minimum / np.maximum: a NaN wins; a NaN allowance cuts nothing
+        turn = fabs(heading[i] - heading[i - 1])
+        wrap = 2.0 * M_PI - turn
+        if not (turn != turn or turn <= wrap):
+            turn = wrap
+        far = d[i]
+        if not (far != far or far >= d[i - 1]):
+            far = d[i - 1]
+        allowed = far * turn * tan_reject
+        allowed = allowed + sigmas * hypot(sigma[i], sigma[i - 1])
+        if fabs(d[i] - d[i - 1]) > allowed or sensor[i] != sensor[i - 1]:
+            run += 1
+        ids[i] = run
+    return out
+
+
 def profiles(const double[::1] ox, const double[::1] oy, const double[::1] heading,
              const double[::1] log_s, const double[::1] sig_s, const idx_t[::1] chain,
              const idx_t[::1] step, const idx_t[::1] ask, const double[::1] xp,

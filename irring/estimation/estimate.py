@@ -145,7 +145,10 @@ def polyline_ids(d: np.ndarray, sigma: np.ndarray, heading: np.ndarray, sensor: 
     a convex corner seen across at the current θ (the faces' θ differ). Joined into one
     polyline (consecutive end points were within the 0.15 m gap), the wall's readings past
     a counter's corner were fitted with the counter's face: θ ~20° off, end points up to
-    110 mm off with σ 7–16 mm (tests/test_estimate.py has that galley)."""
+    110 mm off with σ 7–16 mm (tests/test_estimate.py has that galley).
+
+    numpy, the statement the kernel ``_lines.polyline_ids`` (which the estimator calls) is
+    held to bit for bit (tests/test_estimate_oracle.py)."""
     k = d.size
     cut = np.ones(k, dtype=bool)
     if k > 1:
@@ -314,6 +317,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                         SIGMA_FLOOR_M, PINNED_RAD)
     k = sw.k
     scan_heading = np.ascontiguousarray(heading).reshape(-1).take(sw.index)
+    tan_reject = math.tan(min(sw.reject, 1.5))   # polyline_ids' bound on a surface's slope
     theta = np.zeros(k)
     last_moving = np.full(k, -1, dtype=np.intp)  # last iteration in which each θ moved
     on_line = np.zeros(k, dtype=np.uint8)        # took θ from a line in the last plain step
@@ -337,8 +341,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
             # readings far outside the range cannot help a line (but stay for the final check)
             uidx = sw.place(theta, 1.5 * max_range)
             if mode == "regroup":
-                chains = polyline_ids(sw.d, sw.sigma, scan_heading, sw.sensor, sw.reject,
-                                      lines.jump_sigmas)
+                chains = _lines.polyline_ids(sw.d, sw.sigma, scan_heading, sw.sensor,
+                                             tan_reject, lines.jump_sigmas)
                 parts = (sw.px, sw.py, sw.thr, chains)
                 if uidx is not None:
                     parts = tuple(v.take(uidx) for v in parts)
@@ -633,9 +637,10 @@ class _Profile:
 
 
 def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: np.ndarray,
-                    cal: Calibration):
+                    cal: Calibration, compiled: bool = False):
     """Per valid reading in scan order (``vi``): counts, heading, emitter, log counts,
-    σ_S/S, θ = 0 distance, polyline id (at θ = 0) and motor step."""
+    σ_S/S, θ = 0 distance, polyline id (at θ = 0; ``compiled``: by the kernel
+    ``_lines.polyline_ids``, else :func:`polyline_ids`) and motor step."""
     n_sensors = points.valid.shape[1]
     s = np.asarray(counts, dtype=float).reshape(-1)[vi]
     h = points.heading.reshape(-1)[vi]
@@ -644,8 +649,14 @@ def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: n
     sig_s = cal.sigma_counts() / s              # σ_d = |b|·d·σ_S/S
     la0, b0 = cal.log_ab(0.0)
     d0 = np.exp(la0 + b0 * log_s)
-    chain = polyline_ids(d0, np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M), h,
-                         vi % n_sensors, cal.max_incidence_rad, LineOptions.jump_sigmas)
+    sigma0 = np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M)
+    if compiled:
+        chain = _lines.polyline_ids(d0, sigma0, h, vi % n_sensors,
+                                    math.tan(min(cal.max_incidence_rad, 1.5)),
+                                    LineOptions.jump_sigmas)
+    else:
+        chain = polyline_ids(d0, sigma0, h, vi % n_sensors, cal.max_incidence_rad,
+                             LineOptions.jump_sigmas)
     step = np.asarray(steps).reshape(-1)[vi // n_sensors]
     return s, h, ox, oy, log_s, sig_s, d0, chain, step
 
@@ -655,7 +666,7 @@ def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: n
     """:func:`range_profiles` in one compiled call (``irring.estimation._lines.profiles``, held
     to it by tests/test_estimate_oracle.py)."""
     s, h, ox, oy, log_s, sig_s, d0, chain, step = _profile_inputs(points, vi, counts, steps,
-                                                                 cal)
+                                                                 cal, compiled=True)
     n, slope, se, theta, steep, ok, convex, sure, concave = _lines.profiles(
         ox, oy, h, log_s, sig_s, chain.astype(np.intp), step.astype(np.intp),
         np.ascontiguousarray(off, dtype=np.intp), cal.theta_rad,
