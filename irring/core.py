@@ -460,9 +460,10 @@ def beam_geometry(ring: Ring, pose: np.ndarray, sensor_angles: np.ndarray,
     heading = rho + sensor_angles
     hx = x + ring.radius_m * np.cos(rho)
     hy = y + ring.radius_m * np.sin(rho)
-    ox = hx + emitter_offset_m * np.sin(heading)
-    oy = hy - emitter_offset_m * np.cos(heading)
-    return np.stack(np.broadcast_arrays(ox, oy), axis=-1), heading
+    origin = np.empty(np.broadcast_shapes(np.shape(hx), np.shape(heading)) + (2,))
+    np.add(hx, emitter_offset_m * np.sin(heading), out=origin[..., 0])
+    np.subtract(hy, emitter_offset_m * np.cos(heading), out=origin[..., 1])
+    return origin, heading
 
 
 def as_pose(pose: Any) -> np.ndarray:

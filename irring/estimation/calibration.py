@@ -209,6 +209,16 @@ class Calibration:
                 _iterate.fine_table_is_interp(self.theta_rad, self._log_a, self.b, table))
 
     @functools.cached_property
+    def _ab0(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`log_ab` at θ = 0, which the estimator asks every sweep."""
+        return self.log_ab(0.0)
+
+    @functools.cached_property
+    def _node_log_a(self) -> np.ndarray:
+        """:meth:`log_ab`'s log a at the curve's own nodes (``_lines.profiles`` reads it)."""
+        return self.log_ab(self.theta_rad)[0]
+
+    @functools.cached_property
     def _spread(self) -> tuple[np.ndarray, np.ndarray]:
         """log a, b at the fallback σ's quadrature nodes (see :func:`_fallback_nodes`)."""
         return _fallback_nodes(self)

@@ -23,6 +23,8 @@ from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, fallback_thet
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
+# plain ints: an array compared with an IntEnum member takes numpy's slow path (~7 µs)
+_NO_RETURN, _OUT_OF_RANGE = int(Reason.NO_RETURN), int(Reason.OUT_OF_RANGE)
 
 SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
 REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
@@ -453,7 +455,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                          alpha=grouping.alpha, usable=grouping.usable)
     used = index if grouping.uidx is None else index.take(grouping.uidx)
-    silent = bool((points.reason == Reason.NO_RETURN).any())
+    silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
     if not (detail or silent):     # no silent beam to explain, no lines asked for
         return Estimate(points=points, lines=None, theta_history=tuple(history))
     found = _lines_record(pieces_out, label, used)
@@ -502,7 +504,7 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
     hi = np.full(n_lines * n_sensors, -1, dtype=np.intp)
     np.minimum.at(lo, pair, rank[row])
     np.maximum.at(hi, pair, rank[row])
-    silent = (points.reason == Reason.NO_RETURN) | (points.reason == Reason.OUT_OF_RANGE)
+    silent = (points.reason == _NO_RETURN) | (points.reason == _OUT_OF_RANGE)
     cut = silent & (s < cal.no_return_counts + RETURN_SIGMAS * cal.sigma_counts())
     c_row, c_sensor = cut.nonzero()
     lo, hi = lo.reshape(n_lines, n_sensors), hi.reshape(n_lines, n_sensors)
@@ -576,8 +578,10 @@ def silent_reach(points: Points, cal: Calibration) -> Points:
     where that is shorter than ``points.max_range_m``: past it a surface square on reads as
     silence too often for silence to rule it out (docs/estimator.md, "Silent beams")."""
     limit = cal.silent_range_m
-    silent = points.reason == Reason.NO_RETURN
-    if not (limit < points.max_range_m and silent.any()):
+    if not limit < points.max_range_m:
+        return points
+    silent = points.reason == _NO_RETURN
+    if not np.count_nonzero(silent):
         return points
     reach = (np.full(silent.shape, np.nan) if points.reach_m is None
              else np.array(points.reach_m, dtype=float))
@@ -594,7 +598,7 @@ def drop_beyond_range(points: Points) -> Points:
     :func:`snap_to_lines` has put the members on their lines, one its line did not bring
     within range is not trusted as a point (docs/estimator.md, "At the range limit")."""
     beyond = points.valid & (points.d > points.max_range_m)
-    if not beyond.any():
+    if not np.count_nonzero(beyond):
         return points
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     for v in out.values():
@@ -647,7 +651,7 @@ def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: n
     ox, oy = points.origin_x.reshape(-1)[vi], points.origin_y.reshape(-1)[vi]
     log_s = np.log(s)
     sig_s = cal.sigma_counts() / s              # σ_d = |b|·d·σ_S/S
-    la0, b0 = cal.log_ab(0.0)
+    la0, b0 = cal._ab0
     d0 = np.exp(la0 + b0 * log_s)
     sigma0 = np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M)
     if compiled:
@@ -670,7 +674,7 @@ def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: n
     n, slope, se, theta, steep, ok, convex, sure, concave = _lines.profiles(
         ox, oy, h, log_s, sig_s, chain.astype(np.intp), step.astype(np.intp),
         np.ascontiguousarray(off, dtype=np.intp), cal.theta_rad,
-        cal.log_ab(cal.theta_rad)[0], cal.b, cal.max_incidence_rad,
+        cal._node_log_a, cal.b, cal.max_incidence_rad,
         _CONVEX_BELOW_DROP_RAD, _LOCAL_STEPS, _LOCAL_MIN, _LOCAL_SPREAD_M, _LOCAL_SLOPE_SE,
         _CHI2_95, SIGMA_FLOOR_M, _CONVEX_SURE_SE)
     return _Profile(s=s, d0=d0, sig_s=sig_s, n=n, slope=slope, se=se, theta=theta,
@@ -808,7 +812,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     if taken.any():    # back to θ = 0 with the σ of a reading on no line
         at = vi[ask[taken]]
         s0, d0 = pr.s[ask[taken]], pr.d0[ask[taken]]
-        _, b0 = cal.log_ab(0.0)
+        _, b0 = cal._ab0
         sigma0 = np.hypot(np.maximum(np.abs(b0) * d0 * pr.sig_s[ask[taken]], SIGMA_FLOOR_M),
                           fallback_spread(cal, s0, d0))
         hh = points.heading.reshape(-1)[at]
