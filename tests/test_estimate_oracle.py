@@ -20,8 +20,9 @@ from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
 from irring.estimation import estimate_numpy as oracle
 from irring.core import Reason
 from irring.estimation import _lines
-from irring.estimation.estimate import (LineOptions, range_profiles, estimate_detail,
-                                        polyline_ids, profiles_compiled, scan_order)
+from irring.estimation.estimate import (SIGMA_FLOOR_M, LineOptions, _profile_inputs,
+                                        estimate_detail, polyline_ids, profiles_compiled,
+                                        range_profiles, scan_order)
 from irring.estimation.estimate import no_return_reach as fast_reach
 from irring.estimation.estimate import snap_to_lines as fast_snap
 
@@ -241,8 +242,19 @@ def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, no
     ask = np.sort(rng.permutation(vi.size)[:max(1, int(ask_share * vi.size))])
     fast = profiles_compiled(p, vi, ask, sweep.counts, np.asarray(sweep.steps), cal)
     slow = range_profiles(p, vi, ask, sweep.counts, np.asarray(sweep.steps), cal)
-    for f in ("ok", "convex", "sure", "concave"):
+    for f in ("ok", "convex", "sure", "concave", "s", "d0", "sig_s"):
         np.testing.assert_array_equal(getattr(fast, f), getattr(slow, f), err_msg=f)
+    # the inputs (counts, θ = 0 distances, polylines, steps) bit for bit
+    la0, b0 = cal._ab0
+    compiled = _lines.profile_inputs(
+        np.ravel(p_counts := np.asarray(sweep.counts, float)), p.heading.ravel(),
+        p.origin_x.ravel(), p.origin_y.ravel(), np.asarray(sweep.steps).astype(np.intp), vi,
+        p.valid.shape[1], cal.sigma_counts(), la0, b0, SIGMA_FLOOR_M,
+        math.tan(min(cal.max_incidence_rad, 1.5)), LineOptions.jump_sigmas)
+    numpy_inputs = _profile_inputs(p, vi, p_counts, np.asarray(sweep.steps), cal)
+    for name, a, b in zip(("s", "h", "ox", "oy", "log_s", "sig_s", "d0", "chain", "step"),
+                          compiled, numpy_inputs):
+        np.testing.assert_array_equal(a, b, err_msg=name)
     for f in ("n", "slope", "se", "theta", "steep"):
         np.testing.assert_allclose(getattr(fast, f), getattr(slow, f), rtol=TOL, atol=TOL,
                                    err_msg=f)

@@ -1110,6 +1110,67 @@ def polyline_ids(const double[::1] d, const double[::1] sigma, const double[::1]
     return out
 
 
+def profile_inputs(const double[::1] counts, const double[::1] heading,
+                   const double[::1] origin_x, const double[::1] origin_y,
+                   const idx_t[::1] steps, const idx_t[::1] vi, idx_t n_sensors,
+                   double sigma_counts, double la0, double b0, double sigma_floor,
+                   double tan_reject, double jump_sigmas):
+    """``irring.estimation.estimate._profile_inputs`` bit for bit in one call (log and exp
+    are numpy's, on this call's rows): per valid reading ``vi`` (flat (S·N) indices in scan
+    order) of the flat (S·N) ``counts``, ``heading``, ``origin_x``, ``origin_y`` and the
+    (S,) ``steps``. Returns (K,) rows s, h, ox, oy, log s, σ_S/S, d0 (one float block) and
+    the polyline ids at θ = 0 (as :func:`polyline_ids`) and motor steps (intp)."""
+    cdef idx_t K = vi.shape[0], size = counts.shape[0], i, f, run = 1
+    cdef double turn, wrap, far, allowed, sg, sg_prev = 0.0, c
+    if not (heading.shape[0] == origin_x.shape[0] == origin_y.shape[0] == size
+            and n_sensors >= 1 and steps.shape[0] * n_sensors == size):
+        raise ValueError("counts, heading, origin_x, origin_y need one entry per reading "
+                         "and steps one per row")
+    rows = np.empty((7, K))
+    ints = np.empty((2, K), dtype=np.intp)
+    if K == 0:
+        return rows[0], rows[1], rows[2], rows[3], rows[4], rows[5], rows[6], ints[0], ints[1]
+    cdef double[:, ::1] R = rows
+    cdef idx_t[:, ::1] I = ints
+    for i in range(K):
+        f = vi[i]
+        if f < 0 or f >= size:
+            raise IndexError(f"vi[{i}] = {f} is not a reading (0 … {size - 1})")
+        c = counts[f]
+        R[0, i] = c
+        R[1, i] = heading[f]
+        R[2, i] = origin_x[f]
+        R[3, i] = origin_y[f]
+        R[5, i] = sigma_counts / c              # σ_d = |b|·d·σ_S/S
+        I[1, i] = steps[f // n_sensors]
+    np.log(rows[0], out=rows[4])
+    for i in range(K):
+        R[6, i] = la0 + b0 * R[4, i]
+    np.exp(rows[6], out=rows[6])
+    for i in range(K):
+        sg = fabs(b0) * R[6, i] * R[5, i]
+        if not (sg != sg or sg >= sigma_floor):     # np.maximum: a NaN wins
+            sg = sigma_floor
+        if i == 0:
+            I[0, i] = run
+            sg_prev = sg
+            continue
+        turn = fabs(R[1, i] - R[1, i - 1])
+        wrap = 2.0 * M_PI - turn
+        if not (turn != turn or turn <= wrap):
+            turn = wrap
+        far = R[6, i]
+        if not (far != far or far >= R[6, i - 1]):
+            far = R[6, i - 1]
+        allowed = far * turn * tan_reject
+        allowed = allowed + jump_sigmas * hypot(sg, sg_prev)
+        if fabs(R[6, i] - R[6, i - 1]) > allowed or vi[i] % n_sensors != vi[i - 1] % n_sensors:
+            run += 1
+        I[0, i] = run
+        sg_prev = sg
+    return rows[0], rows[1], rows[2], rows[3], rows[4], rows[5], rows[6], ints[0], ints[1]
+
+
 def profiles(const double[::1] ox, const double[::1] oy, const double[::1] heading,
              const double[::1] log_s, const double[::1] sig_s, const idx_t[::1] chain,
              const idx_t[::1] step, const idx_t[::1] ask, const double[::1] xp,

@@ -641,10 +641,10 @@ class _Profile:
 
 
 def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: np.ndarray,
-                    cal: Calibration, compiled: bool = False):
+                    cal: Calibration):
     """Per valid reading in scan order (``vi``): counts, heading, emitter, log counts,
-    σ_S/S, θ = 0 distance, polyline id (at θ = 0; ``compiled``: by the kernel
-    ``_lines.polyline_ids``, else :func:`polyline_ids`) and motor step."""
+    σ_S/S, θ = 0 distance, polyline id (at θ = 0) and motor step. numpy, the statement
+    the kernel ``_lines.profile_inputs`` (which :func:`profiles_compiled` calls) is held to."""
     n_sensors = points.valid.shape[1]
     s = np.asarray(counts, dtype=float).reshape(-1)[vi]
     h = points.heading.reshape(-1)[vi]
@@ -653,26 +653,26 @@ def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: n
     sig_s = cal.sigma_counts() / s              # σ_d = |b|·d·σ_S/S
     la0, b0 = cal._ab0
     d0 = np.exp(la0 + b0 * log_s)
-    sigma0 = np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M)
-    if compiled:
-        chain = _lines.polyline_ids(d0, sigma0, h, vi % n_sensors,
-                                    math.tan(min(cal.max_incidence_rad, 1.5)),
-                                    LineOptions.jump_sigmas)
-    else:
-        chain = polyline_ids(d0, sigma0, h, vi % n_sensors, cal.max_incidence_rad,
-                             LineOptions.jump_sigmas)
+    chain = polyline_ids(d0, np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M), h,
+                         vi % n_sensors, cal.max_incidence_rad, LineOptions.jump_sigmas)
     step = np.asarray(steps).reshape(-1)[vi // n_sensors]
     return s, h, ox, oy, log_s, sig_s, d0, chain, step
 
 
 def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.ndarray,
                       steps: np.ndarray, cal: Calibration) -> _Profile:
-    """:func:`range_profiles` in one compiled call (``irring.estimation._lines.profiles``, held
-    to it by tests/test_estimate_oracle.py)."""
-    s, h, ox, oy, log_s, sig_s, d0, chain, step = _profile_inputs(points, vi, counts, steps,
-                                                                 cal, compiled=True)
+    """:func:`range_profiles` in two compiled calls (``irring.estimation._lines.profile_inputs``
+    and ``profiles``, held to it by tests/test_estimate_oracle.py)."""
+    f = np.ascontiguousarray
+    la0, b0 = cal._ab0
+    s, h, ox, oy, log_s, sig_s, d0, chain, step = _lines.profile_inputs(
+        f(counts, dtype=float).reshape(-1), f(points.heading, dtype=float).reshape(-1),
+        f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
+        np.asarray(steps).reshape(-1).astype(np.intp), f(vi, dtype=np.intp),
+        points.valid.shape[1], cal.sigma_counts(), la0, b0, SIGMA_FLOOR_M,
+        math.tan(min(cal.max_incidence_rad, 1.5)), LineOptions.jump_sigmas)
     n, slope, se, theta, steep, ok, convex, sure, concave = _lines.profiles(
-        ox, oy, h, log_s, sig_s, chain.astype(np.intp), step.astype(np.intp),
+        ox, oy, h, log_s, sig_s, chain, step,
         np.ascontiguousarray(off, dtype=np.intp), cal.theta_rad,
         cal._node_log_a, cal.b, cal.max_incidence_rad,
         _CONVEX_BELOW_DROP_RAD, _LOCAL_STEPS, _LOCAL_MIN, _LOCAL_SPREAD_M, _LOCAL_SLOPE_SE,
