@@ -444,7 +444,7 @@ def sensor_angles_for_steps(ring: Ring, steps: np.ndarray) -> np.ndarray:
 
 
 def beam_geometry(ring: Ring, pose: np.ndarray, sensor_angles: np.ndarray,
-                  emitter_offset_m: float) -> tuple[np.ndarray, np.ndarray]:
+                  emitter_offset_m: float, *, trig: bool = False) -> tuple[np.ndarray, ...]:
     """Emitter positions (S, N, 2) and world beam headings (S, N) for a sweep.
 
     Frames (the one convention, shared by the MJCF model and the estimator): sensor k's
@@ -452,7 +452,8 @@ def beam_geometry(ring: Ring, pose: np.ndarray, sensor_angles: np.ndarray,
     h = yaw + ρ_k + φ (φ = sensor angle, CCW positive); the emitter sits d_o to the right of
     the hinge, at hinge + d_o·(sin h, −cos h). Against a wall at perpendicular distance y
     from the hinge this gives the paper's Eq. 5, d = −d_o·tan φ + y / cos φ.
-    ``pose`` is (3,) or, for a moving robot, (S, N, 3).
+    ``pose`` is (3,) or, for a moving robot, (S, N, 3). ``trig``: also cos h and sin h
+    (the estimator's beam directions).
     """
     pose = np.asarray(pose, dtype=float)
     x, y, yaw = pose[..., 0], pose[..., 1], pose[..., 2]
@@ -460,10 +461,11 @@ def beam_geometry(ring: Ring, pose: np.ndarray, sensor_angles: np.ndarray,
     heading = rho + sensor_angles
     hx = x + ring.radius_m * np.cos(rho)
     hy = y + ring.radius_m * np.sin(rho)
+    cos_h, sin_h = np.cos(heading), np.sin(heading)
     origin = np.empty(np.broadcast_shapes(np.shape(hx), np.shape(heading)) + (2,))
-    np.add(hx, emitter_offset_m * np.sin(heading), out=origin[..., 0])
-    np.subtract(hy, emitter_offset_m * np.cos(heading), out=origin[..., 1])
-    return origin, heading
+    np.add(hx, emitter_offset_m * sin_h, out=origin[..., 0])
+    np.subtract(hy, emitter_offset_m * cos_h, out=origin[..., 1])
+    return (origin, heading, cos_h, sin_h) if trig else (origin, heading)
 
 
 def as_pose(pose: Any) -> np.ndarray:

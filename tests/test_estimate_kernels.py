@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from _synthetic import PAPER_RING, make_sweep, rectangle, stand_in_calibration
 from irring.estimation import _iterate
-from irring.core import Reason
+from irring.core import Reason, beam_geometry
 from irring.estimation.calibration import Calibration
 from irring.estimation.estimate import LineOptions, estimate, estimate_detail
 
@@ -125,6 +125,32 @@ def test_scan_order_outside_the_readings_is_refused():
     with pytest.raises(ValueError, match="scan"):
         _iterate.Sweep(NOMINAL, LineOptions(), counts, np.zeros(2 * n), np.zeros(n), reason,
                        scan, 12, 0.001, 0.03)
+
+
+def test_sweep_takes_the_callers_beam_directions_or_computes_them():
+    """The estimator hands the kernel numpy's cos and sin of the headings (computed anyway
+    for the emitters); without them the kernel computes libm's. Both place every reading
+    at the same end point, bit for bit, and wrong lengths are refused."""
+    sweep, _, _ = make_sweep(NOMINAL, walls=rectangle(-0.45, -0.35, 0.5, 0.4),
+                             pose=(0.03, -0.02, 2.9), noise_counts=1.0, seed=5)
+    counts = np.ascontiguousarray(sweep.counts, dtype=float).reshape(-1)
+    n = counts.size
+    origin, heading, cos_h, sin_h = beam_geometry(
+        PAPER_RING, np.asarray(sweep.pose), np.asarray(sweep.sensor_angles),
+        NOMINAL.emitter_offset_m, trig=True)
+    reason = np.where(counts > 0, 0, int(Reason.NO_RETURN)).astype(np.uint8)
+    args = (NOMINAL, LineOptions(), counts, origin.reshape(-1), heading.reshape(-1), reason,
+            np.arange(n, dtype=np.intp), 12, 0.001, 0.03)
+    given = _iterate.Sweep(*args, cos_h.reshape(-1), sin_h.reshape(-1))
+    own = _iterate.Sweep(*args)
+    theta = np.full(given.k, 0.3)
+    given.place(theta, 2.0)
+    own.place(theta, 2.0)
+    assert given.k == own.k > 400
+    for f in ("px", "py", "d"):
+        np.testing.assert_array_equal(getattr(given, f), getattr(own, f), err_msg=f)
+    with pytest.raises(ValueError, match="cos_h, sin_h"):
+        _iterate.Sweep(*args, cos_h.reshape(-1)[:-1], sin_h.reshape(-1))
 
 
 def test_readings_leaving_the_usable_range_between_groupings():

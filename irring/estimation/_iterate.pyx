@@ -348,20 +348,26 @@ cdef class Sweep:
     def __init__(self, cal, opts, const double[::1] counts, const double[::1] origin,
                  const double[::1] heading, const unsigned char[::1] reason,
                  const Py_ssize_t[::1] scan, Py_ssize_t n_sensors, double floor_m,
-                 double pinned_rad):
+                 double pinned_rad, const double[::1] cos_h=None,
+                 const double[::1] sin_h=None):
         """``counts``, ``heading`` (S·N,), ``origin`` (S·N·2,) flat in (S, N) order,
         ``reason`` the counts' verdicts (live: OK), ``scan`` the flat scan order;
-        ``floor_m`` the smallest σ, ``pinned_rad`` (see Grouping.drop_steep). Raises
-        ValueError unless the sizes agree and ``scan`` indexes within them (every kernel
-        indexes unchecked through ``index``)."""
+        ``floor_m`` the smallest σ, ``pinned_rad`` (see Grouping.drop_steep); ``cos_h``,
+        ``sin_h`` (S·N,): the headings' cos and sin where the caller has them (numpy's,
+        which are libm's; else computed here). Raises ValueError unless the sizes agree and
+        ``scan`` indexes within them (every kernel indexes unchecked through ``index``)."""
         cdef Py_ssize_t total = scan.shape[0], size = reason.shape[0], p, f, j, k = 0
         cdef Py_ssize_t prev = -2
         cdef double c, h, sigma_counts = cal._levels[3]
+        cdef bint trig = cos_h is not None and sin_h is not None
         if not (counts.shape[0] == heading.shape[0] == size == total
                 and origin.shape[0] == 2 * size):
             raise ValueError(f"counts, heading, reason, scan ({counts.shape[0]}, "
                              f"{heading.shape[0]}, {size}, {total}) need one entry per "
                              f"reading, origin ({origin.shape[0]}) two")
+        if trig and not (cos_h.shape[0] == sin_h.shape[0] == size):
+            raise ValueError(f"cos_h, sin_h ({cos_h.shape[0]}, {sin_h.shape[0]}) need one "
+                             f"entry per reading ({size})")
         for p in range(total):
             f = scan[p]
             if f < 0 or f >= size:
@@ -396,8 +402,12 @@ cdef class Sweep:
             self.ox[j] = origin[2 * f]
             self.oy[j] = origin[2 * f + 1]
             h = heading[f]
-            self.ux[j] = cos(h)
-            self.uy[j] = sin(h)
+            if trig:
+                self.ux[j] = cos_h[f]
+                self.uy[j] = sin_h[f]
+            else:
+                self.ux[j] = cos(h)
+                self.uy[j] = sin(h)
             self.hm[j] = h - PI * floor(h / PI)     # heading mod π
             j += 1
         self.log_s = _log(rows[0])

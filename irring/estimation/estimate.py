@@ -300,12 +300,13 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                          f"{counts.shape}, got shape {steps.shape}")
     angles = np.asarray(sweep.sensor_angles, dtype=float)
     pose = sweep.reading_poses if sweep.reading_poses is not None else sweep.pose
-    origin, heading = beam_geometry(sweep.ring, np.asarray(pose, dtype=float), angles,
-                                    cal.emitter_offset_m)
+    origin, heading, cos_h, sin_h = beam_geometry(
+        sweep.ring, np.asarray(pose, dtype=float), angles, cal.emitter_offset_m, trig=True)
     if origin.shape != counts.shape + (2,):
         origin = np.broadcast_to(origin, counts.shape + (2,))
     if heading.shape != counts.shape:
-        heading = np.broadcast_to(heading, counts.shape)
+        heading, cos_h, sin_h = (np.broadcast_to(v, counts.shape)
+                                 for v in (heading, cos_h, sin_h))
     shape = counts.shape
 
     reason = _classify(counts, sweep, cal)
@@ -316,7 +317,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     sw = _iterate.Sweep(cal, lines, counts.reshape(-1), np.ascontiguousarray(origin).reshape(-1),
                         np.ascontiguousarray(heading).reshape(-1), reason.reshape(-1),
                         scan_order(steps, shape[1]), shape[1],
-                        SIGMA_FLOOR_M, PINNED_RAD)
+                        SIGMA_FLOOR_M, PINNED_RAD, np.ascontiguousarray(cos_h).reshape(-1),
+                        np.ascontiguousarray(sin_h).reshape(-1))
     k = sw.k
     scan_heading = np.ascontiguousarray(heading).reshape(-1).take(sw.index)
     tan_reject = math.tan(min(sw.reject, 1.5))   # polyline_ids' bound on a surface's slope
