@@ -20,9 +20,9 @@ from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
 from irring.estimation import estimate_numpy as oracle
 from irring.core import Reason
 from irring.estimation import _lines
-from irring.estimation.estimate import (SIGMA_FLOOR_M, LineOptions, _profile_inputs,
-                                        estimate_detail, polyline_ids, profiles_compiled,
-                                        range_profiles, scan_order)
+from irring.estimation.estimate import (SIGMA_FLOOR_M, LineOptions, _fewer_distinct,
+                                        _profile_inputs, estimate_detail, polyline_ids,
+                                        profiles_compiled, range_profiles, scan_order)
 from irring.estimation.estimate import no_return_reach as fast_reach
 from irring.estimation.estimate import snap_to_lines as fast_snap
 
@@ -287,3 +287,13 @@ def test_polyline_kernel_agrees_with_its_numpy_statement(data, k, reject, sigmas
     np.testing.assert_array_equal(fast, slow)
     if k > 1:    # not vacuous: a sensor change always cuts
         assert fast[-1] >= 1 + np.count_nonzero(sensor[1:] != sensor[:-1])
+
+
+@settings(max_examples=200, deadline=None)
+@given(values=st.lists(st.integers(-3, 3), max_size=12) | st.lists(
+    st.floats(-2.0, 2.0) | st.just(math.nan), max_size=6), n=st.integers(1, 4))
+def test_distinct_count_agrees_with_unique(values, n):
+    """local_incidence's "a ring held still" test counts distinct steps without np.unique:
+    the same verdict, exactly, for integers (by sorting) and anything else (np.unique)."""
+    arr = np.array(values, dtype=float if any(isinstance(v, float) for v in values) else int)
+    assert _fewer_distinct(arr, n) == (np.unique(arr).size < n)
