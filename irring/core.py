@@ -432,6 +432,23 @@ class Points:
         return {Reason(int(v)).name.lower(): int(c) for v, c in zip(values, counts)}
 
 
+_POINTS_FIELDS = frozenset(f.name for f in dataclasses.fields(Points))
+
+
+def points_with(points: Points, **changes) -> Points:
+    """``dataclasses.replace(points, **changes)`` in ~1 µs instead of ~5 (the estimator makes
+    a handful a sweep): the same fields and values, without running ``__init__`` again
+    (Points has no ``__post_init__`` to skip; tests/test_estimate.py holds it to replace).
+    Raises TypeError naming a field Points does not have."""
+    unknown = changes.keys() - _POINTS_FIELDS
+    if unknown:
+        raise TypeError(f"Points has no field {', '.join(sorted(unknown))}")
+    out = object.__new__(Points)
+    out.__dict__.update(points.__dict__)
+    out.__dict__.update(changes)
+    return out
+
+
 def ring_angles(ring: Ring) -> np.ndarray:
     """(N,) radial direction of each sensor in the robot frame: sensor k at k·2π/N."""
     return np.arange(ring.sensors) * (2.0 * np.pi / ring.sensors)

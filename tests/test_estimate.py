@@ -756,3 +756,20 @@ def test_shadow_behind_the_cylinder_is_mapped_on_every_seed(cylinder_room):
         run = pipeline.map_sweeps(sweeps, scenario=cylinder_room, progress=False, truth=truth)
         truth = run.truth
         assert run.scores["shadow"] >= 0.5, (seed, run.scores)
+
+
+def test_points_with_is_dataclasses_replace():
+    """points_with, the estimator's quick replace, makes what dataclasses.replace makes (so
+    Points must keep no __post_init__ it would skip) and refuses a field Points lacks."""
+    from irring.core import Points, points_with
+    assert not hasattr(Points, "__post_init__")
+    z = np.arange(6.0).reshape(3, 2)
+    p = Points(*(z + k for k in range(9)), valid=z > 2, reason=np.zeros((3, 2), np.uint8),
+               max_range_m=0.7)
+    new_x, reach = z - 5.0, z * 2
+    q, r = points_with(p, x=new_x, reach_m=reach), dataclasses.replace(p, x=new_x, reach_m=reach)
+    for f in dataclasses.fields(Points):     # the very objects, as replace hands them on
+        assert getattr(q, f.name) is getattr(r, f.name), f.name
+    assert q.x is new_x and p.x[0, 0] == 0.0 and q.max_range_m == 0.7
+    with pytest.raises(TypeError, match="no field xx"):
+        points_with(p, xx=z)

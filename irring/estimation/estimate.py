@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry
+from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry, points_with
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
@@ -462,7 +462,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         return Estimate(points=points, lines=None, theta_history=tuple(history))
     found = _lines_record(pieces_out, label, used)
     if silent:
-        points = replace(points, reach_m=(reach or no_return_reach)(points, found, cal, options))
+        points = points_with(points, reach_m=(reach or no_return_reach)(points, found, cal,
+                                                                          options))
         points = silent_reach(points, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
@@ -523,8 +524,8 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
     sigma = np.abs(b) * points.d[member] * cal.sigma_counts() / s[member]
     d = np.array(points.d)
     d[member] += mills[label[member]] * sigma
-    return replace(points, d=d, x=points.origin_x + d * np.cos(points.heading),
-                   y=points.origin_y + d * np.sin(points.heading))
+    return points_with(points, d=d, x=points.origin_x + d * np.cos(points.heading),
+                       y=points.origin_y + d * np.sin(points.heading))
 
 
 POOL_STEPS = 6   # a reading near the no-return level is pooled with 6 steps either way
@@ -588,7 +589,7 @@ def silent_reach(points: Points, cal: Calibration) -> Points:
     reach = (np.full(silent.shape, np.nan) if points.reach_m is None
              else np.array(points.reach_m, dtype=float))
     reach[silent] = np.fmin(reach[silent], limit)
-    return replace(points, reach_m=reach)
+    return points_with(points, reach_m=reach)
 
 
 def drop_beyond_range(points: Points) -> Points:
@@ -607,7 +608,7 @@ def drop_beyond_range(points: Points) -> Points:
         v[beyond] = np.nan
     reason = np.array(points.reason)
     reason[beyond] = Reason.OUT_OF_RANGE
-    return replace(points, valid=points.valid & ~beyond, reason=reason, **out)
+    return points_with(points, valid=points.valid & ~beyond, reason=reason, **out)
 
 
 # --------------------------------------------------------------------------- readings on no line
@@ -835,7 +836,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
                      ("x", points.origin_x.reshape(-1)[at] + d0 * np.cos(hh)),
                      ("y", points.origin_y.reshape(-1)[at] + d0 * np.sin(hh))):
             moved[f].reshape(-1)[at] = v
-        points = replace(points, **moved)
+        points = points_with(points, **moved)
         label = label.copy()
         label.reshape(-1)[at] = -1
     mine = off[ask] | taken                     # the readings on no line now
@@ -883,7 +884,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
         valid, reason = points.valid.copy(), points.reason.copy()
         valid.reshape(-1)[gone] = False
         reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
-        points = replace(points, valid=valid, reason=reason)
+        points = points_with(points, valid=valid, reason=reason)
     at = vi[off[ok]]
     spread = 0.5 * np.abs(d_lo - d_hi)
     _, b_new = cal.log_ab(th)
@@ -896,7 +897,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     out["sigma_m"].reshape(-1)[at] = sigma
     out["x"].reshape(-1)[at] = points.origin_x.reshape(-1)[at] + d_new * np.cos(hh)
     out["y"].reshape(-1)[at] = points.origin_y.reshape(-1)[at] + d_new * np.sin(hh)
-    return replace(points, **out), label
+    return points_with(points, **out), label
 
 
 # --------------------------------------------------------------------------- silent beams
@@ -1009,7 +1010,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
         return points
     shape = points.valid.shape
     x, y, d, sigma = (v.reshape(shape) for v in moved)
-    return replace(points, x=x, y=y, d=d, sigma_m=sigma)
+    return points_with(points, x=x, y=y, d=d, sigma_m=sigma)
 
 
 # --------------------------------------------------------------------------- fold-over
