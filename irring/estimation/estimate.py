@@ -171,9 +171,11 @@ def _lines_record(pieces: Pieces | None, label: np.ndarray, index: np.ndarray) -
                      n_points=np.zeros(0, int), length_m=z1, rms_m=z1,
                      usable=np.zeros(0, bool), start=np.zeros(0, int), end=np.zeros(0, int))
     a = pieces.alpha
-    direction = np.stack([np.cos(a), np.sin(a)], axis=-1)
-    return Lines(label=label, centroid=np.stack([pieces.cx, pieces.cy], axis=-1),
-                 normal=np.stack([-direction[:, 1], direction[:, 0]], axis=-1),
+    centroid, direction, normal = np.empty((3, a.size, 2))   # (one block: np.stack thrice
+    centroid[:, 0], centroid[:, 1] = pieces.cx, pieces.cy    # cost more than the lines)
+    direction[:, 0], direction[:, 1] = np.cos(a), np.sin(a)
+    normal[:, 0], normal[:, 1] = -direction[:, 1], direction[:, 0]
+    return Lines(label=label, centroid=centroid, normal=normal,
                  direction=direction, n_points=pieces.n_points, length_m=pieces.length_m,
                  rms_m=np.sqrt(pieces.lmin), usable=pieces.usable.copy(),
                  start=index[pieces.starts], end=index[pieces.ends])
@@ -454,12 +456,12 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = (snapper or snap_to_lines)(points, label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
-    pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
-                         alpha=grouping.alpha, usable=grouping.usable)
-    used = index if grouping.uidx is None else index.take(grouping.uidx)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
     if not (detail or silent):     # no silent beam to explain, no lines asked for
         return Estimate(points=points, lines=None, theta_history=tuple(history))
+    pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
+                         alpha=grouping.alpha, usable=grouping.usable)
+    used = index if grouping.uidx is None else index.take(grouping.uidx)
     found = _lines_record(pieces_out, label, used)
     if silent:
         points = points_with(points, reach_m=(reach or no_return_reach)(points, found, cal,
