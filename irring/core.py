@@ -436,10 +436,10 @@ _POINTS_FIELDS = frozenset(f.name for f in dataclasses.fields(Points))
 
 
 def points_with(points: Points, **changes) -> Points:
-    """``dataclasses.replace(points, **changes)`` in ~1 µs instead of ~5 (the estimator makes
-    a handful a sweep): the same fields and values, without running ``__init__`` again
-    (Points has no ``__post_init__`` to skip; tests/test_estimate.py holds it to replace).
-    Raises TypeError naming a field Points does not have."""
+    """``dataclasses.replace(points, **changes)`` without running ``__init__`` again (the
+    estimator makes a handful a sweep; replace costs several times more): the same fields
+    and values (Points has no ``__post_init__`` to skip; tests/test_estimate.py holds it to
+    replace). Raises TypeError naming a field Points does not have."""
     unknown = changes.keys() - _POINTS_FIELDS
     if unknown:
         raise TypeError(f"Points has no field {', '.join(sorted(unknown))}")
