@@ -29,7 +29,7 @@ from .estimation.estimate import estimate
 from .gp2 import SENSORS
 from .maps import metrics
 from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_scenario_grid,
-                           classify, slice_steps)
+                           classify, returns_of, silences_of, slice_steps)
 from .maps.mcap_export import write_mcap
 from .outputs import OutputSet
 from .scenario import Scenario, ScenarioError, loads
@@ -316,8 +316,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     t0 = time.perf_counter()
     if grid is None:
         grid = grid_for_points(points, params=params)
-    for p in points:
-        grid.insert(p)
+    grid.insert_run(points)
     timings["map"] = time.perf_counter() - t0
     run = MapRun(sweeps=list(sweeps), points=points, grid=grid, scenario=scenario,
                  frames_per_sweep=int(frames_per_sweep), timings_s=timings)
@@ -364,7 +363,8 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
     n = len(result.points)
     parts, stride, _ = frame_plan(n, result.frames_per_sweep if frames_per_sweep is None
                                   else frames_per_sweep)
-    grid = result.grid.empty_like()
+    returns = result.grid.empty_like()     # every return so far (OccupancyGrid.insert_run)
+    grid = returns.empty_like()
     yield grid.classify(), 0, "before the first sweep"
     for k, p in enumerate(result.points):
         shown = (k + 1) % stride == 0 or k == n - 1
@@ -376,8 +376,13 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
                 acc += grid.delta(slice_steps(p, slice(edges[j - 1], edges[j])))
                 lo = np.clip(grid.log_odds + acc, grid.params.l_min, grid.params.l_max)
                 yield classify(lo), k + 1, f"pose {k + 1} of {n}: sweeping ({j}/{parts})"
-        grid.insert(p)
-        if shown:
+        returns.insert(returns_of(p))
+        if shown:    # the map of the run so far: its silent beams against all its returns
+            grid = OccupancyGrid(returns.origin_xy_m, returns.shape, returns.resolution_m,
+                                 returns.params)
+            grid.log_odds = returns.log_odds.copy()
+            for q in result.points[:k + 1]:
+                grid.insert(silences_of(q))
             yield grid.classify(), k + 1, f"pose {k + 1} of {n}: done"
 
 

@@ -9,6 +9,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -289,7 +290,8 @@ class OccupancyGrid:
         cone go in as :func:`cone_fan` with the ``cone_*`` weights; pencil beams a surface
         explains (:func:`explained_ranges`) are moved onto it first; σ as :func:`known_sigma`."""
         points = known_sigma(points)
-        if self.params.explain_sigmas > 0 and points.cone_half_angle_rad == 0:
+        if (self.params.explain_sigmas > 0 and points.cone_half_angle_rad == 0
+                and np.any(points.valid)):        # (a run's silent beams: nothing to explain)
             points = at_ranges(points, explained_ranges(
                 points, self.shape, self.origin_xy_m, self.resolution_m, self.params),
                 self.params)
@@ -317,6 +319,18 @@ class OccupancyGrid:
         can reach are touched."""
         self.log_odds = np.ascontiguousarray(self.log_odds, dtype=float)   # (as the kernel wants)
         self._add(self.log_odds, points, self.params.l_min, self.params.l_max)
+
+    def insert_run(self, batches: Sequence[Points]) -> None:
+        """Add a run's batches (sweeps) so that its silent beams stop at every surface the
+        run's returns establish, whichever batch saw it: every batch's returns
+        (:func:`returns_of`) in order, then every batch's silent beams (:func:`silences_of`).
+        A silent beam never lowers a cell above ``no_return_stop``, so the second part does
+        not depend on the order of the batches (docs/mapping.md, "Silent beams and the
+        run's returns")."""
+        for points in batches:
+            self.insert(returns_of(points))
+        for points in batches:
+            self.insert(silences_of(points))
 
     # ---- reading the map
 
@@ -516,6 +530,23 @@ def at_ranges(points: Points, ranges: np.ndarray, params: MapperParams) -> Point
         y=np.where(moved, oy + (py - oy) * scale, points.y),
         d=np.where(moved, ranges, points.d),
         sigma_m=np.where(moved, sigma / params.explain_sharper, points.sigma_m))
+
+
+def returns_of(points: Points) -> Points:
+    """``points`` with its silent beams (NO_RETURN) mapping nothing (a reach of 0) but still
+    marking its occluding edges (the surface's depth): the valid readings' part of a batch."""
+    silent = np.asarray(points.reason) == _NO_RETURN
+    if not silent.any():
+        return points
+    reach = (np.full(silent.shape, np.nan) if points.reach_m is None
+             else np.asarray(points.reach_m, float))
+    return dataclasses.replace(points, reach_m=np.where(silent, 0.0, reach))
+
+
+def silences_of(points: Points) -> Points:
+    """``points`` with no valid reading: only its silent beams map (to their reach, or to
+    the first cell the grid holds above ``no_return_stop``)."""
+    return dataclasses.replace(points, valid=np.zeros(np.shape(points.valid), bool))
 
 
 def slice_steps(points: Points, rows: slice) -> Points:

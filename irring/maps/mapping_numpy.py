@@ -14,7 +14,8 @@ import math
 import numpy as np
 
 from ..core import Points, Reason
-from .mapping import MapperParams, at_ranges, hit_weight, known_sigma, mapped_beams, traverse
+from .mapping import (MapperParams, at_ranges, hit_weight, known_sigma, mapped_beams,
+                      returns_of, silences_of, traverse)
 
 
 def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.ndarray:
@@ -188,3 +189,15 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     keep = before & ~held[v.iy, v.ix]
     np.add.at(out, (v.iy[keep], v.ix[keep]), p.l_no_return)
     return np.clip(out + deep, lo, hi)
+
+
+def add_run(log_odds: np.ndarray, batches, origin_xy_m, resolution_m: float,
+            params: MapperParams, lo: float = -np.inf, hi: float = np.inf) -> np.ndarray:
+    """``log_odds`` after a run's batches, as :meth:`OccupancyGrid.insert_run`: every batch's
+    returns, in order, then every batch's silent beams, each :func:`add` clamped to [lo, hi]."""
+    out = np.array(log_odds, dtype=float)
+    for points in batches:
+        out = add(out, returns_of(points), origin_xy_m, resolution_m, params, lo, hi)
+    for points in batches:
+        out = add(out, silences_of(points), origin_xy_m, resolution_m, params, lo, hi)
+    return out
