@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from .. import safe_yaml
-from ..core import Points, Reason
+from ..core import Points, Reason, points_with
 from ..errors import TooBig
 from ..resources import kernel
 
@@ -540,13 +540,13 @@ def returns_of(points: Points) -> Points:
         return points
     reach = (np.full(silent.shape, np.nan) if points.reach_m is None
              else np.asarray(points.reach_m, float))
-    return dataclasses.replace(points, reach_m=np.where(silent, 0.0, reach))
+    return points_with(points, reach_m=np.where(silent, 0.0, reach))
 
 
 def silences_of(points: Points) -> Points:
     """``points`` with no valid reading: only its silent beams map (to their reach, or to
     the first cell the grid holds above ``no_return_stop``)."""
-    return dataclasses.replace(points, valid=np.zeros(np.shape(points.valid), bool))
+    return points_with(points, valid=np.zeros(np.shape(points.valid), bool))
 
 
 def slice_steps(points: Points, rows: slice) -> Points:
