@@ -643,6 +643,11 @@ class _Profile:
     sure: np.ndarray      # bent away by _CONVEX_SURE_SE standard errors (not noise)
     concave: np.ndarray   # bent towards the beam: a concave corner
     steep: np.ndarray     # the steepest θ the readings allow
+    chain: np.ndarray     # polyline id (at θ = 0) of every valid reading in scan order …
+    heading: np.ndarray   # … its beam's heading …
+    ox: np.ndarray        # … its emitter …
+    oy: np.ndarray
+    step: np.ndarray      # … and motor step
 
 
 def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: np.ndarray,
@@ -684,7 +689,8 @@ def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: n
         _CHI2_95, SIGMA_FLOOR_M, _CONVEX_SURE_SE)
     return _Profile(s=s, d0=d0, sig_s=sig_s, n=n, slope=slope, se=se, theta=theta,
                     ok=ok.view(bool), convex=convex.view(bool), sure=sure.view(bool),
-                    concave=concave.view(bool), steep=steep)
+                    concave=concave.view(bool), steep=steep, chain=chain, heading=h,
+                    ox=ox, oy=oy, step=step)
 
 
 def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.ndarray,
@@ -754,7 +760,7 @@ def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.n
               & (theta < cal.max_incidence_rad - _CONVEX_BELOW_DROP_RAD))
     return _Profile(s=s, d0=d0, sig_s=sig_s, n=n, slope=slope, se=se, theta=theta, ok=ok,
                     convex=convex, sure=bend > _CONVEX_SURE_SE * bend_se, concave=concave,
-                    steep=steep)
+                    steep=steep, chain=chain, heading=h, ox=ox, oy=oy, step=step)
 
 
 ROUND_SHARE = 0.4        # a line is a round thing's when this share of its members' profiles
@@ -774,6 +780,135 @@ def _fewer_distinct(values: np.ndarray, n: int) -> bool:
         return True
     v = np.sort(v)
     return bool(np.count_nonzero(v[1:] != v[:-1]) + 1 < n)
+
+
+ARC_RADII_M = np.geomspace(0.008, 0.6, 12)  # the radii a round thing's arc is tried at, …
+ARC_REFINE = np.array([-0.5, -0.25, 0.0, 0.25, 0.5])  # … then these grid steps about the best
+ARC_MIN = 5             # a sensor's arc needs this many readings on no line …
+ARC_SIDE = 2            # … this many either side of its apex (a whole arc seen) …
+ARC_GAP_STEPS = 4       # … no more than this many motor steps apart …
+ARC_APEX_STEPS = 4      # … whose apex lies within this many readings of its nearest one …
+ARC_MISFIT = 4.0        # … and reads them at the arc's θ within this mean squared misfit (σ²),
+ARC_MISS = 16.0         # each at most this (a beam that misses the arc: this); a reading
+ARC_ON = 9.0            # takes the arc's θ where its own misfit is at most this
+ARC_DOUBT_RAD = math.radians(5)  # a reading on an arc: σ includes d over θ ± this
+
+
+def _arc_misfit(geo, apex: np.ndarray, radius: np.ndarray, cal: Calibration):
+    """Candidate circles (C, K): apex reading index and radius (m) of each polyline's
+    circle; ``geo`` its readings' padded arrays (C, J). Returns the summed misfit (C, K) and
+    each reading's θ, d and misfit at that circle (C, K, J)."""
+    ox, oy, ex, ey, d0, log_s, noise, mask = geo
+    ax, ay = np.take_along_axis(ex, apex, axis=1), np.take_along_axis(ey, apex, axis=1)
+    cx = np.take_along_axis(ox + d0 * ex, apex, axis=1) + radius * ax
+    cy = np.take_along_axis(oy + d0 * ey, apex, axis=1) + radius * ay
+    rx = cx[..., None] - ox[:, None, :]
+    ry = cy[..., None] - oy[:, None, :]
+    ejx, ejy = ex[:, None, :], ey[:, None, :]
+    along = rx * ejx + ry * ejy
+    r = radius[..., None]
+    disc = along * along - (rx * rx + ry * ry - r * r)
+    t = along - np.sqrt(np.maximum(disc, 0.0))           # where the beam meets the circle
+    cos = np.clip(-((t * ejx - rx) * ejx + (t * ejy - ry) * ejy) / r, 0.0, 1.0)
+    th = np.arccos(cos)
+    meets = (disc > 0.0) & (along > 0.0) & (th <= cal.max_incidence_rad)
+    la, b = cal.log_ab(th)
+    d = np.exp(la + b * log_s[:, None, :])
+    z = (d - t) / noise[:, None, :]
+    each = np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
+    return np.where(mask[:, None, :], each, 0.0).sum(axis=-1), th, d, each
+
+
+def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration):
+    """θ of readings on no line from one circle per arc (a sensor's readings of a round
+    thing), numpy; shared by both estimators.
+
+    ``pos``: positions into the valid readings in scan order (ascending). An arc is a run of
+    at least ``ARC_MIN`` of them on one polyline, steps at most ``ARC_GAP_STEPS`` apart. It
+    is tried as part of a circle whose nearest point lies on one of its readings' beams at
+    that reading's θ = 0 distance (the apex, met square on; within ``ARC_APEX_STEPS`` of its
+    nearest reading) with a radius of ``ARC_RADII_M`` (refined by ``ARC_REFINE``): every
+    reading is read at the θ at which its beam meets that circle and scored by how far that
+    distance lies from the circle (in its noise σ, squared, at most ``ARC_MISS``). The best
+    circle is kept where its apex has ``ARC_SIDE`` readings either side (a whole arc seen)
+    and its mean misfit is below ``ARC_MISFIT``; a reading takes it where its own misfit is
+    at most ``ARC_ON``. Returns θ (rad), d (m), σ (m: noise at θ plus the spread of d over
+    θ ± ``ARC_DOUBT_RAD``) and ``good``, each (len(pos),). Why: docs/estimator.md, "Round
+    things seen far away"."""
+    m = pos.size
+    theta, dist, sigma = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
+    good = np.zeros(m, dtype=bool)
+    if m < ARC_MIN:
+        return theta, dist, sigma, good
+    # an arc: consecutive readings of one polyline (its ids grow along the scan order, so
+    # they are consecutive in ``pos``, ordered by step), broken where steps are missing (a
+    # polyline runs on over silent beams: two posts 39° apart made one)
+    chain, step = pr.chain[pos], pr.step[pos]
+    cut = np.ones(m, dtype=bool)
+    cut[1:] = (chain[1:] != chain[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
+    ids, first, size = np.unique(np.cumsum(cut), return_index=True, return_counts=True)
+    group = np.repeat(np.arange(ids.size), size)
+    rank = np.arange(m) - np.repeat(first, size)
+    keep = size[group] >= ARC_MIN
+    if not keep.any():
+        return theta, dist, sigma, good
+    big = (size >= ARC_MIN).nonzero()[0]
+    row = np.full(ids.size, -1)
+    row[big] = np.arange(big.size)
+    c, j = row[group[keep]], rank[keep]
+    n_c, n_j = big.size, int(size[big].max())
+    mask = np.zeros((n_c, n_j), dtype=bool)
+    mask[c, j] = True
+
+    def pad(v, fill):
+        out = np.full((n_c, n_j), fill)
+        out[c, j] = v[pos[keep]]
+        return out
+    s, d0, sig_s = pad(pr.s, 1.0), pad(pr.d0, np.inf), pad(pr.sig_s, 0.0)
+    h = pad(pr.heading, 0.0)
+    ex, ey = np.cos(h), np.sin(h)
+    _, b0 = cal.log_ab(0.0)
+    noise = np.maximum(np.abs(b0) * np.where(mask, d0, 1.0) * sig_s, SIGMA_FLOOR_M)
+    geo = (pad(pr.ox, 0.0), pad(pr.oy, 0.0), ex, ey, np.where(mask, d0, 1.0), np.log(s),
+           noise, mask)
+    n_in = mask.sum(axis=1)
+    # the apex: near the nearest reading, by three-reading means (noise moves a single one)
+    left = np.concatenate([d0[:, :1], d0[:, :-1]], axis=1)
+    right = np.concatenate([d0[:, 1:], d0[:, -1:]], axis=1)
+    right = np.where(np.isfinite(right), right, d0)
+    near = np.argmin(d0 + left + right, axis=1)
+    span = np.arange(-ARC_APEX_STEPS, ARC_APEX_STEPS + 1)
+    apex = np.clip(near[:, None] + span[None, :], 0, (n_in - 1)[:, None])
+    k_r = ARC_RADII_M.size
+    apex1 = np.repeat(apex, k_r, axis=1)
+    radius1 = np.tile(ARC_RADII_M, (n_c, span.size))
+    cost1 = _arc_misfit(geo, apex1, radius1, cal)[0]
+    best1 = np.argmin(cost1, axis=1)
+    # refine: the best apex and its neighbours, radii between the grid's
+    a1 = apex1[np.arange(n_c), best1]
+    grid_step = math.log(ARC_RADII_M[1] / ARC_RADII_M[0])
+    apex2 = np.clip(a1[:, None] + np.repeat([-1, 0, 1], ARC_REFINE.size)[None, :], 0,
+                    (n_in - 1)[:, None])
+    radius2 = radius1[np.arange(n_c), best1][:, None] * np.exp(
+        grid_step * np.tile(ARC_REFINE, 3))[None, :]
+    cost2, th2, d2, mis2 = _arc_misfit(geo, apex2, radius2, cal)
+    best = np.argmin(cost2, axis=1)
+    a = apex2[np.arange(n_c), best]
+    fits = ((a >= ARC_SIDE) & (a < n_in - ARC_SIDE)
+            & (cost2[np.arange(n_c), best] < ARC_MISFIT * n_in))
+    th_best = th2[np.arange(n_c), best]                       # (C, J)
+    d_best = d2[np.arange(n_c), best]
+    on = mis2[np.arange(n_c), best] <= ARC_ON
+    lo = cal.distance(s, np.maximum(th_best - ARC_DOUBT_RAD, 0.0))
+    hi = cal.distance(s, np.minimum(th_best + ARC_DOUBT_RAD, cal.max_incidence_rad))
+    _, b_th = cal.log_ab(th_best)
+    sig = np.hypot(np.maximum(np.abs(b_th) * d_best * sig_s, SIGMA_FLOOR_M),
+                   0.5 * np.abs(lo - hi))
+    at = keep.nonzero()[0]
+    theta[at], dist[at], sigma[at] = th_best[c, j], d_best[c, j], sig[c, j]
+    good[at] = (fits[c] & on[c, j] & np.isfinite(dist[at]) & (dist[at] >= cal.min_range_m)
+                & np.isfinite(sigma[at]))
+    return theta, dist, sigma, good
 
 
 def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.ndarray:
@@ -872,7 +1007,20 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     # a convex thing's reading may have met its side steeply, a still ring's any surface:
     # θ = 0 with the σ of that doubt
     wide = (convex | still) & ~ok
-    if not (ok.any() or few.any() or wide.any()):
+    # a polyline holding a bent profile is a round thing's arc: its readings on no line
+    # take θ from one circle through them where one fits (arc_incidence)
+    arc = np.zeros(0, dtype=np.intp)
+    if convex.any() and not still:
+        on_arc = np.isin(pr.chain[off], np.unique(pr.chain[off[convex]]))
+        th_a, d_a, sig_a, fit = arc_incidence(pr, off[on_arc], cal)
+        arc = on_arc.nonzero()[0][fit]
+        th_a, d_a, sig_a = th_a[fit], d_a[fit], sig_a[fit]
+        on = np.zeros(off.size, dtype=bool)
+        on[arc] = True
+        rest = ~on[ok]          # the slopes' readings not on an arc
+        th, d_new, d_lo, d_hi = th[rest], d_new[rest], d_lo[rest], d_hi[rest]
+        ok, few, wide = ok & ~on, few & ~on, wide & ~on
+    if not (ok.any() or few.any() or wide.any() or arc.size):
         return points, label
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     if wide.any():
@@ -893,6 +1041,9 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     sigma = np.hypot(np.maximum(np.abs(b_new) * d_new * sig_s[off[ok]], SIGMA_FLOOR_M), spread)
     keep = np.isfinite(d_new) & (d_new >= cal.min_range_m) & np.isfinite(sigma)
     at, th, d_new, sigma = at[keep], th[keep], d_new[keep], sigma[keep]
+    if arc.size:
+        at = np.concatenate([at, vi[off[arc]]])
+        th, d_new, sigma = (np.concatenate(v) for v in ((th, th_a), (d_new, d_a), (sigma, sig_a)))
     hh = points.heading.reshape(-1)[at]
     out["d"].reshape(-1)[at] = d_new
     out["theta"].reshape(-1)[at] = th
