@@ -768,6 +768,9 @@ ROUND_SHARE = 0.4        # a line is a round thing's when this share of its memb
 ROUND_OVER_OK = 1.5      # … this many times as many as are straight and steep (a convex
 #                          corner's faces are), …
 ROUND_MIN_THETA = math.radians(30)  # … and its members' mean θ is at least this
+FAR_LINE_MAX_MEMBERS = 16  # a line of at most this many members is short: its direction
+#                            rests on a few noisy readings
+REGAIN_RATIO = 2.0  # a fold-over's first-pass line this many times as long gives back θ
 
 
 def _fewer_distinct(values: np.ndarray, n: int) -> bool:
@@ -1222,6 +1225,9 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     # a reading both passes read, differently: which lines it belongs to depended on how
     # its neighbours were read; it cannot be decided
     differ = torn | (p.valid & q.valid & ~put & ~keep & apart(p.d, p.sigma_m, q.d, q.sigma_m))
+    # a far reading on a fragment of a line the first pass saw whole: on that line
+    p = _onto_first_lines(p, q, first.lines, second.lines.label,
+                          p.valid & q.valid & ~put & ~keep & ~differ)
     if put.any() or keep.any() or differ.any():
         x, y, d, theta, sigma = (np.array(v) for v in (p.x, p.y, p.d, p.theta, p.sigma_m))
         d[put], theta[put], sigma[put] = d_fold[put], theta_fold[put], sigma_fold[put]
@@ -1242,6 +1248,43 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
         reach = q.reach_m if p.reach_m is None else np.fmin(p.reach_m, q.reach_m)
         p = replace(p, reach_m=reach)
     return replace(second, points=p, lines=second.lines if detail else None)
+
+
+def _onto_first_lines(p: Points, q: Points, first: Lines, label_second: np.ndarray,
+                      both: np.ndarray) -> Points:
+    """``p`` (the fold-over's second pass) with the readings ``both`` passes read valid that
+    sit on a short line of the second pass (at most ``FAR_LINE_MAX_MEMBERS`` members) but
+    on a line of the first pass (``q``, ``first``) with at least ``REGAIN_RATIO`` times the
+    members put where their beam meets that line, when it lies within 3σ of their reading at
+    its θ: the second pass held out the ambiguous readings, and the fragment left takes its
+    direction from a few noisy ones (15° off on a 7-member piece of a 27-member line).
+    docs/foldover.md, "Short far lines"."""
+    def size(label):
+        on = label >= 0
+        return np.where(on, np.bincount(label[on], minlength=1).take(np.maximum(label, 0)), 0)
+
+    lab1, n2 = first.label, size(label_second)
+    regain = (both & (label_second >= 0) & (n2 <= FAR_LINE_MAX_MEMBERS)
+              & (size(lab1) >= REGAIN_RATIO * np.maximum(n2, 1)))
+    if not regain.any():
+        return p
+    line = lab1[regain]
+    ux, uy = np.cos(p.heading[regain]), np.sin(p.heading[regain])
+    nx, ny = first.normal[line, 0], first.normal[line, 1]
+    across = nx * ux + ny * uy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((first.centroid[line, 0] - p.origin_x[regain]) * nx
+             + (first.centroid[line, 1] - p.origin_y[regain]) * ny) / across
+    fits = ((np.abs(across) > 1e-9) & (np.abs(t - q.d[regain]) <= 3.0 * q.sigma_m[regain])
+            & (t > 0.0) & (t <= p.max_range_m))   # never a point past the range
+    at = tuple(a[fits] for a in np.nonzero(regain))
+    if not at[0].size:
+        return p
+    x, y, d, theta = (np.array(v) for v in (p.x, p.y, p.d, p.theta))
+    d[at], theta[at] = t[fits], q.theta[at]
+    x[at] = p.origin_x[at] + t[fits] * ux[fits]
+    y[at] = p.origin_y[at] + t[fits] * uy[fits]
+    return replace(p, x=x, y=y, d=d, theta=theta)
 
 
 def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
