@@ -1,20 +1,29 @@
-"""Far walls drawn outside the room by a fold-over's fragments of lines (issue 13, fold-over
-must-show). The fold-over's second pass holds out the readings whose branch it cannot decide;
-what is left of a far wall's line can be a fragment of 6-16 members whose direction, from a
-few noisy readings, sets θ 5-15° off: its members read 20-50 mm long and the mapper drew
-cells 30-50 mm outside the room. The first pass held the same readings on a line of at least
-twice the members; they are put where their beams meet it (estimate._onto_first_lines,
-docs/foldover.md, "Short far lines"). A room of our own, every pose 172-176 mm from a wall."""
+"""Far walls drawn outside the room, and far readings > 100 mm off, from short far lines
+in a fold-over's second pass (issue 13, fold-over must-show).
+
+- Fragments: the second pass holds out the readings whose branch it cannot decide; what is
+  left of a far wall's line can be a fragment of 6-16 members whose direction, from a few
+  noisy readings, sets θ 5-15° off: its members read 20-50 mm long, cells 30-50 mm outside
+  the room. The first pass held the same readings on a line of at least twice the members;
+  they are put where their beams meet it (estimate._onto_first_lines).
+- Lines the members disown: a short far line of two sensors can settle 20-45° off the wall
+  (its members 100-115 mm long); each member's own range profile (its sensor's neighbouring
+  steps) lies on average more than a standard error from the line's θ, and the members
+  leave the line (estimate.local_incidence).
+
+docs/foldover.md, "Short far lines". Rooms of our own, every pose 171-179 mm from a wall."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
 from irring import pipeline
 from irring.core import distance_to_outline, inside_outline
 from irring.estimation import estimate as est
+from irring.estimation.calibration import scene_calibration
 from irring.maps import mapping
 from irring.scenario import loads
 
@@ -31,6 +40,23 @@ sensor: {model: gp2d12, max_range_mm: 624, adc_bits: 12}
 map: {resolution_mm: 10}
 effects: [incidence, noise, quantization, foldover]
 """
+
+
+PENTAGON = """
+name: far_line_pentagon
+seed: 9733
+room: {outline_mm: [[0, 0], [1900, -250], [2500, 900], [1300, 1950], [-200, 1300]]}
+obstacles:
+  - {type: box, center_mm: [1500, 900], size_mm: [240, 410], yaw_deg: -14}
+robot:
+  poses:
+    - {x_mm: 1910.39, y_mm: 139.6, yaw_deg: 17}
+    - {x_mm: 456.17, y_mm: 1389.26, yaw_deg: -33}
+    - {x_mm: 1466.83, y_mm: -16.5, yaw_deg: 4}
+sensor: {model: gp2d12, max_range_mm: 624, adc_bits: 12}
+map: {resolution_mm: 10}
+"""
+FOLDING = PENTAGON + "effects: [incidence, noise, quantization, foldover]\n"
 
 
 def _worst_reading_and_cells_outside(text: str):
@@ -64,3 +90,30 @@ def test_without_the_first_passs_line_the_fragment_draws_wall_outside(monkeypatc
     monkeypatch.setattr(est, "REGAIN_RATIO", math.inf)
     worst, outside = _worst_reading_and_cells_outside(QUAD)
     assert worst > 0.040 and outside >= 1
+
+
+def test_a_short_far_line_its_members_disown_puts_no_reading_100_mm_off():
+    worst, outside = _worst_reading_and_cells_outside(FOLDING)
+    assert worst <= 0.100 and outside == 0, (worst, outside)
+
+
+def test_without_the_rule_the_far_line_kept_a_reading_100_mm_off(monkeypatch):
+    # the same run with no line ever doubted: a reading of the line 1-13° off a wall met at
+    # 50-54° lay 114 mm long (what main did before the rule)
+    monkeypatch.setattr(est, "FAR_LINE_Z", math.inf)
+    worst, _ = _worst_reading_and_cells_outside(FOLDING)
+    assert worst > 0.110
+
+
+@pytest.mark.parametrize("effects", ["[foldover]", "[noise, quantization, foldover]"])
+def test_a_sensor_with_no_incidence_effect_has_no_line_doubted(effects, monkeypatch):
+    # where θ does not change the distance, no θ can read a member long: nothing moves
+    sc = loads(PENTAGON + f"effects: {effects}\n", source="<test>")
+    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
+    cal = scene_calibration(sc)[0]
+    with_rule = [est.estimate(sw, cal) for sw in sweeps]
+    monkeypatch.setattr(est, "FAR_LINE_Z", math.inf)
+    for sw, p in zip(sweeps, with_rule):
+        q = est.estimate(sw, cal)
+        assert np.array_equal(p.valid, q.valid)
+        assert np.array_equal(p.d[p.valid], q.d[q.valid])

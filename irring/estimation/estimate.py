@@ -450,7 +450,13 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                         lines=empty if detail else None, theta_history=tuple(history))
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
-    points, label = local_incidence(points, label, index, counts, steps, cal, profiler)
+    # short far lines are doubted in a fold-over's second pass only: the judging pass keeps
+    # its lines whole (they decide the branches), and elsewhere the rule's numpy would cost
+    # 0.1 ms on a t_room sweep (docs/foldover.md, "Short far lines"); a part read to its
+    # own range pools its far readings, which its profiles cannot judge
+    points, label = local_incidence(
+        points, label, index, counts, steps, cal, profiler,
+        doubt_far=snap and cal.folds and not read_to_own_range(cal, points.max_range_m))
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         points = (snapper or snap_to_lines)(points, label, cal.min_range_m,
@@ -471,13 +477,19 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                     theta_history=tuple(history))
 
 
+def read_to_own_range(cal: Calibration, max_range_m: float) -> bool:
+    """Whether a part is read to its own range: silence ends short of ``max_range_m``
+    (``cal.silent_range_m``), so its far readings are pooled and its far lines censored."""
+    return bool(cal.falling and cal.silent_range_m < max_range_m)
+
+
 def far_sigma_cap(cal: Calibration, max_range_m: float) -> float:
     """The most a line member's own σ may add to its σ on its line (m):
     :data:`SNAP_OWN_CAP_M` where a part is read to its own range (``cal.silent_range_m``
     short of ``max_range_m``: its far end's noise reaches 30–55 mm, which the line averages
     away), else +inf (half the member's own σ, as ever). Why and what it measured:
     docs/estimator.md, "A far line's σ"."""
-    return SNAP_OWN_CAP_M if cal.falling and cal.silent_range_m < max_range_m else math.inf
+    return SNAP_OWN_CAP_M if read_to_own_range(cal, max_range_m) else math.inf
 
 
 def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
@@ -492,7 +504,7 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
     ``points.max_range_m``: a part read to its own range); elsewhere ``points`` as given.
     ``label`` (S, N): each reading's line (−1: none); ``counts`` (S, N); ``steps`` (S,).
     Why and what it measured: docs/estimator.md, "Censored lines"."""
-    if not (cal.falling and cal.silent_range_m < points.max_range_m):
+    if not read_to_own_range(cal, points.max_range_m):
         return points
     shape = points.valid.shape
     s = np.asarray(counts, dtype=float).reshape(shape)
@@ -769,7 +781,12 @@ ROUND_OVER_OK = 1.5      # … this many times as many as are straight and steep
 #                          corner's faces are), …
 ROUND_MIN_THETA = math.radians(30)  # … and its members' mean θ is at least this
 FAR_LINE_MAX_MEMBERS = 16  # a line of at most this many members is short: its direction
-#                            rests on a few noisy readings
+#                            rests on a few noisy readings; a short line …
+FAR_LINE_MIN_SHARE = 0.72  # … whose members lie this share of the max range away on average
+#                            (the GP2D12's 0.45 of 0.624 m), …
+FAR_LINE_Z = 1.0           # … whose members' own slopes differ from its θ by this many of
+#                            their standard errors on average (either way) …
+FAR_LINE_SHIFT_M = 0.01    # … and would move them by a map cell on average is doubted
 REGAIN_RATIO = 2.0  # a fold-over's first-pass line this many times as long gives back θ
 
 
@@ -922,8 +939,8 @@ def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.
 
 
 def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
-                    steps: np.ndarray, cal: Calibration, profiler: Callable | None = None
-                    ) -> tuple[Points, np.ndarray]:
+                    steps: np.ndarray, cal: Calibration, profiler: Callable | None = None,
+                    doubt_far: bool = False) -> tuple[Points, np.ndarray]:
     """Readings on no line (``label`` −1, θ = 0), and the members of lines that are a round
     thing's, re-read at the incidence their own sensor's neighbouring steps give; numpy,
     shared by both estimators.
@@ -935,9 +952,12 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     standard error; a profile bent away from the beam (a post) keeps θ = 0 with the σ of its
     doubt; one that decides nothing, where θ = 0 may read more than ``_UNKNOWN_M`` long, is
     INCIDENCE_UNKNOWN. The members of a steep line whose own profiles mostly bend away (a
-    column's arc cut into short lines; ``ROUND_*``) leave it first and are read the same way.
-    Returns the points and ``label`` without those members. The why and the measured
-    effects: docs/estimator.md ("Readings on no line", "Round things")."""
+    column's arc cut into short lines; ``ROUND_*``) leave it first and are read the same way;
+    so do, with ``doubt_far``, the members of a short far line whose own slopes disown its θ
+    (``FAR_LINE_*``), those their slope does not place INCIDENCE_UNKNOWN. Returns the points
+    and ``label`` without those members. The why and the measured effects:
+    docs/estimator.md ("Readings on no line", "Round things"), docs/foldover.md ("Short far
+    lines")."""
     flat_valid = points.valid.reshape(-1)
     vi = index[flat_valid[index]]               # valid readings in scan order
     if vi.size == 0:
@@ -952,7 +972,13 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     steep = np.bincount(line, weights=theta_now[member], minlength=total.size)
     maybe = np.zeros(vi.size, dtype=bool)
     maybe[member] = (steep >= ROUND_MIN_THETA * total)[line]
-    ask = (off | maybe).nonzero()[0]
+    # a short far line's direction rests on few noisy readings: its members are asked too
+    doubt = np.zeros(vi.size, dtype=bool)
+    if doubt_far:
+        far = np.bincount(line, weights=points.d.reshape(-1)[vi[member]], minlength=total.size)
+        doubt[member] = ((total <= FAR_LINE_MAX_MEMBERS)
+                         & (far >= FAR_LINE_MIN_SHARE * points.max_range_m * total))[line]
+    ask = (off | maybe | doubt).nonzero()[0]
     if ask.size == 0:
         return points, label
     pr = (profiler or profiles_compiled)(points, vi, ask, counts, steps, cal)
@@ -964,6 +990,28 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     round_line = (bent >= ROUND_SHARE * total) & (bent >= ROUND_OVER_OK * straight)
     taken = np.zeros(ask.size, dtype=bool)
     taken[asked] = round_line[line]
+    # short far lines: the members' own slopes, on average, against the line's θ
+    doubted = np.zeros(ask.size, dtype=bool)
+    asked = doubt[ask]
+    if asked.any():
+        line = lab[ask[asked]]
+        use = (pr.n[asked] >= _LOCAL_MIN) & (pr.se[asked] > 0)
+        z = np.where(use, (np.tan(theta_now[ask[asked]]) - np.abs(pr.slope[asked]))
+                     / np.where(use, pr.se[asked], 1.0), 0.0)
+        n_use = np.bincount(line, weights=use, minlength=total.size)
+        z_sum = np.bincount(line, weights=z, minlength=total.size)
+        off_line = (n_use >= _LOCAL_MIN) & (np.abs(z_sum) > FAR_LINE_Z * np.maximum(n_use, 1))
+        if off_line.any():   # … and whether their own θ would move them at all
+            use &= off_line[line]
+            at = ask[asked][use]
+            shift = np.zeros(line.size)
+            shift[use] = np.abs(points.d.reshape(-1)[vi[at]]
+                                - cal.distance(pr.s[at], pr.theta[asked][use]))
+            off_line &= (np.bincount(line, weights=shift, minlength=total.size)
+                         >= FAR_LINE_SHIFT_M * n_use)
+            doubted[asked] = off_line[line] & ~taken[asked]
+    if doubted.any():
+        points, label = _leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal)
     if taken.any():    # back to θ = 0 with the σ of a reading on no line
         at = vi[ask[taken]]
         s0, d0 = pr.s[ask[taken]], pr.d0[ask[taken]]
@@ -1039,10 +1087,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
         reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
         points = points_with(points, valid=valid, reason=reason)
     at = vi[off[ok]]
-    spread = 0.5 * np.abs(d_lo - d_hi)
-    _, b_new = cal.log_ab(th)
-    sigma = np.hypot(np.maximum(np.abs(b_new) * d_new * sig_s[off[ok]], SIGMA_FLOOR_M), spread)
-    keep = np.isfinite(d_new) & (d_new >= cal.min_range_m) & np.isfinite(sigma)
+    sigma, keep = _own_slope_sigma(cal, th, d_new, d_lo, d_hi, sig_s[off[ok]])
     at, th, d_new, sigma = at[keep], th[keep], d_new[keep], sigma[keep]
     if arc.size:
         at = np.concatenate([at, vi[off[arc]]])
@@ -1054,6 +1099,51 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     out["x"].reshape(-1)[at] = points.origin_x.reshape(-1)[at] + d_new * np.cos(hh)
     out["y"].reshape(-1)[at] = points.origin_y.reshape(-1)[at] + d_new * np.sin(hh)
     return points_with(points, **out), label
+
+
+def _own_slope_sigma(cal: Calibration, theta: np.ndarray, d: np.ndarray, d_lo: np.ndarray,
+                     d_hi: np.ndarray, sig_s: np.ndarray):
+    """(σ, placed) of readings read at their own profile's θ (distance ``d``; ``d_lo``,
+    ``d_hi`` at θ ± the slope's standard error; ``sig_s``: σ_S/S): the noise at θ plus half
+    the spread of d over θ ± that error; placed: d and σ finite, d within the curve."""
+    spread = 0.5 * np.abs(d_lo - d_hi)
+    _, b_new = cal.log_ab(theta)
+    sigma = np.hypot(np.maximum(np.abs(b_new) * d * sig_s, SIGMA_FLOOR_M), spread)
+    return sigma, np.isfinite(d) & (d >= cal.min_range_m) & np.isfinite(sigma)
+
+
+def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: np.ndarray,
+                        pr: _Profile, doubted: np.ndarray, cal: Calibration
+                        ) -> tuple[Points, np.ndarray]:
+    """The members of doubted short far lines off their lines (``pos``: their places among
+    the valid readings ``vi``; ``doubted``: which of the readings ``pr`` profiled they are):
+    each at its own profile's θ where that is straight and clearly steep, else
+    INCIDENCE_UNKNOWN (far, and nothing places it)."""
+    at = vi[pos]
+    label = label.copy()
+    label.reshape(-1)[at] = -1
+    s, theta, t, e = pr.s[pos], pr.theta[doubted], np.abs(pr.slope[doubted]), pr.se[doubted]
+    lo = np.arctan(np.maximum(t - e, 0.0))
+    hi = np.minimum(np.arctan(t + e), cal.max_incidence_rad)
+    d_new, d_lo, d_hi = cal.distance(np.concatenate([s, s, s]),
+                                     np.concatenate([theta, lo, hi])).reshape(3, -1)
+    sigma, placed = _own_slope_sigma(cal, theta, d_new, d_lo, d_hi, pr.sig_s[pos])
+    placed &= pr.ok[doubted]
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    put, gone = at[placed], at[~placed]
+    hh = points.heading.reshape(-1)[put]
+    for f, v in (("d", d_new[placed]), ("theta", theta[placed]), ("sigma_m", sigma[placed]),
+                 ("x", points.origin_x.reshape(-1)[put] + d_new[placed] * np.cos(hh)),
+                 ("y", points.origin_y.reshape(-1)[put] + d_new[placed] * np.sin(hh))):
+        out[f].reshape(-1)[put] = v
+    valid, reason = points.valid, points.reason
+    if gone.size:
+        for f in out.values():
+            f.reshape(-1)[gone] = np.nan
+        valid, reason = valid.copy(), reason.copy()
+        valid.reshape(-1)[gone] = False
+        reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
+    return points_with(points, valid=valid, reason=reason, **out), label
 
 
 # --------------------------------------------------------------------------- silent beams
