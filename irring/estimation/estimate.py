@@ -788,6 +788,22 @@ FAR_LINE_Z = 1.0           # … whose members' own slopes differ from its θ by
 #                            their standard errors on average (either way) …
 FAR_LINE_SHIFT_M = 0.01    # … and would move them by a map cell on average is doubted
 REGAIN_RATIO = 2.0  # a fold-over's first-pass line this many times as long gives back θ
+DIRECTION_SE_MAX = math.radians(6)  # a far line whose direction is known no better gives no θ
+
+
+def direction_se(x: np.ndarray, y: np.ndarray, sigma_perp: np.ndarray, line: np.ndarray,
+                 n_lines: int) -> np.ndarray:
+    """Each line's direction standard error (rad) from its members' own noise: the RMS of
+    their σ across the line (``sigma_perp``, m) over the root of the members' summed squared
+    spread along it (total least squares); ``x``, ``y`` (m) and ``line`` over the members."""
+    n = np.maximum(np.bincount(line, minlength=n_lines), 1)
+    u = x - (np.bincount(line, x, n_lines) / n).take(line)
+    v = y - (np.bincount(line, y, n_lines) / n).take(line)
+    alpha = 0.5 * np.arctan2(2.0 * np.bincount(line, u * v, n_lines),
+                             np.bincount(line, u * u - v * v, n_lines))
+    along = u * np.cos(alpha).take(line) + v * np.sin(alpha).take(line)
+    spread = np.maximum(np.bincount(line, along * along, n_lines), 1e-12)
+    return np.sqrt(np.bincount(line, sigma_perp * sigma_perp, n_lines) / n / spread)
 
 
 def _fewer_distinct(values: np.ndarray, n: int) -> bool:
@@ -972,12 +988,24 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     steep = np.bincount(line, weights=theta_now[member], minlength=total.size)
     maybe = np.zeros(vi.size, dtype=bool)
     maybe[member] = (steep >= ROUND_MIN_THETA * total)[line]
+    # where a part is read to its own range, a far line of few noisy readings may know its
+    # direction only to 10-20°, and its members read at that θ lie 20-150 mm off: a line
+    # whose direction is that unsure gives its members no θ (docs/estimator.md, "A far
+    # line's direction")
+    unsure = np.zeros(vi.size, dtype=bool)
+    if cal.falling and cal.silent_range_m < points.max_range_m and member.size:
+        at = vi[member]
+        sigma_perp = points.sigma_m.reshape(-1)[at] * np.cos(theta_now[member])
+        se_dir = direction_se(points.x.reshape(-1)[at], points.y.reshape(-1)[at], sigma_perp,
+                              line, total.size)
+        unsure[member] = (se_dir > DIRECTION_SE_MAX)[line]
     # a short far line's direction rests on few noisy readings: its members are asked too
     doubt = np.zeros(vi.size, dtype=bool)
     if doubt_far:
         far = np.bincount(line, weights=points.d.reshape(-1)[vi[member]], minlength=total.size)
         doubt[member] = ((total <= FAR_LINE_MAX_MEMBERS)
                          & (far >= FAR_LINE_MIN_SHARE * points.max_range_m * total))[line]
+    maybe |= unsure
     ask = (off | maybe | doubt).nonzero()[0]
     if ask.size == 0:
         return points, label
@@ -988,8 +1016,8 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     bent = np.bincount(line, weights=pr.convex[asked], minlength=total.size)
     straight = np.bincount(line, weights=pr.ok[asked], minlength=total.size)
     round_line = (bent >= ROUND_SHARE * total) & (bent >= ROUND_OVER_OK * straight)
-    taken = np.zeros(ask.size, dtype=bool)
-    taken[asked] = round_line[line]
+    taken = unsure[ask]
+    taken[asked] |= round_line[line]
     # short far lines: the members' own slopes, on average, against the line's θ
     doubted = np.zeros(ask.size, dtype=bool)
     asked = doubt[ask]
