@@ -376,3 +376,22 @@ def talks_without_steps(dev, cmd):
     elif isinstance(cmd, p.SweepCommand) and not getattr(dev, "flooding", False):
         dev.flooding = True
         dev.chatter(lambda: line("IRPOS,0"), 0.002)
+
+
+def reboots_between_sweeps(lose_first: bool = False):
+    """A correct device that reboots after its first sweep: the second sweep's IRSCN are
+    numbered from 0 again (its IRDON too); with ``lose_first`` that sweep's first IRSCN is
+    lost on the way."""
+    def behaviour(dev, cmd):
+        if isinstance(cmd, p.SweepCommand):
+            dev.sweeps_seen = getattr(dev, "sweeps_seen", 0) + 1
+            if dev.sweeps_seen == 2:
+                dev.seq = 0   # the reboot
+                if lose_first:
+                    dev.seq = 1
+                    cmd = p.SweepCommand(cmd.from_step + 1, cmd.to_step, cmd.samples,
+                                         cmd.settle_ms)
+        good(dev, cmd)
+    behaviour.__name__ = "reboots_between_sweeps" + ("_losing_the_first_scan" if lose_first
+                                                     else "")
+    return behaviour

@@ -1256,3 +1256,51 @@ def test_a_device_that_reboots_mid_sweep_is_swept_again_in_one_round():
     assert sweep.missing_steps == ()
     for step, row in zip(sweep.steps, sweep.counts):
         assert list(row) == hd.counts_for(int(step))
+
+
+@pytest.mark.parametrize("lose_first", [False, True])
+def test_a_device_that_reboots_between_sweeps_keeps_the_next_sweep(lose_first):
+    """After a reboot between sweeps the device numbers IRSCN (and IRDON) from 0: the driver
+    dropped the whole next sweep as stale (--resweep 0: NoReadings, the pose lost; else a
+    timeout and a full re-sweep). Their numbering and the IRDON that ends it confirm them."""
+    dev = hd.HostileDevice(hd.reboots_between_sweeps(lose_first))
+    try:
+        with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:
+            ring.sweep(resweep=0)
+            t0 = time.monotonic()
+            sweep = ring.sweep(resweep=0)
+            took = time.monotonic() - t0
+            link = ring.last_report.link
+    finally:
+        dev.close()
+    kept = list(range(hd.MIN_STEP + lose_first, hd.MAX_STEP + 1))
+    assert list(sweep.steps) == kept
+    assert sweep.missing_steps == ((hd.MIN_STEP,) if lose_first else ())
+    for step, row in zip(sweep.steps, sweep.counts):
+        assert list(row) == hd.counts_for(int(step))
+    assert (link["stale"], link["lost_scans"], link["timeouts"]) == (0, int(lose_first), 0)
+    assert took < TIMEOUT_S, took   # no timeout waited for an IRDON already received
+
+
+def test_stale_scans_the_irdon_does_not_confirm_are_still_dropped():
+    """The renumbering is taken only when the IRDON ends the stale-looking IRSCN: ones from
+    an earlier exchange, followed by this sweep's own IRDON, stay dropped."""
+    def leftovers(dev, cmd):
+        if isinstance(cmd, p_.SweepCommand):
+            dev.sweeps_seen = getattr(dev, "sweeps_seen", 0) + 1
+            if dev.sweeps_seen == 2:   # two old IRSCN, then this sweep's IRDON, nothing sent
+                dev.send(hd.scan(dev.seq - 5, cmd.from_step)
+                         + hd.scan(dev.seq - 4, cmd.from_step + 1))
+                dev.seq += 5
+                dev.send(hd.line(f"IRDON,{dev.seq - 1}"))
+                return
+        hd.good(dev, cmd)
+    dev = hd.HostileDevice(leftovers)
+    try:
+        with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:
+            ring.sweep(resweep=0)
+            with pytest.raises(NoReadings):
+                ring.sweep(resweep=0)
+            assert ring.last_report.link["stale"] == 2
+    finally:
+        dev.close()

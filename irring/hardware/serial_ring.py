@@ -218,6 +218,19 @@ def _runs(steps: list[int]) -> list[tuple[int, int]]:
     return runs
 
 
+def _renumbered(scans: list[p.Scan], pos_of: dict[int, int], done_seq: int) -> bool:
+    """True when ``scans`` (IRSCN numbered before the pass began) are one numbering of the
+    pass's steps — each seq minus its step's place the same — that the IRDON ``done_seq``
+    ends: its seq is theirs at the place of the last step received or a later one."""
+    if not scans or done_seq < 0 or any(sc.step not in pos_of for sc in scans):
+        return False
+    bases = {(sc.seq - pos_of[sc.step]) % p.SEQ_MODULO for sc in scans}
+    if len(bases) != 1:
+        return False
+    last = (done_seq - bases.pop()) % p.SEQ_MODULO
+    return max(pos_of[sc.step] for sc in scans) <= last < len(pos_of)
+
+
 @dataclass
 class _Pass:
     """Bookkeeping of one IRSWP: which steps it asked for and what arrived."""
@@ -630,6 +643,32 @@ class SerialRing:
                                                                             + per_step_s)
         ps.max_step_s = stall_limit
         heard = False   # a garbled sentence arrived since the last IRSTP: the device answers
+        suspects: list[p.Scan] = []   # IRSCN numbered before `hint`: stale, or a renumbering
+
+        def take(msg: p.Scan) -> None:
+            """Keep one IRSCN of this pass, counting gaps, duplicates and contradictions."""
+            nonlocal base, last_seq
+            pos = pos_of.get(msg.step)
+            if pos is None or (base is not None and (msg.seq - base) % p.SEQ_MODULO != pos):
+                self.stats.inconsistent += 1  # its step contradicts its seq
+                return
+            if base is None:
+                base = (msg.seq - pos) % p.SEQ_MODULO
+            if msg.step in ps.got:
+                self.stats.duplicates += 1
+                return
+            gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) % p.SEQ_MODULO
+            if gap >= p.SEQ_MODULO // 2:
+                self.stats.out_of_order += 1   # an earlier IRSCN, late: no loss
+            else:
+                if gap:
+                    self.stats.seq_gaps += 1
+                    self.stats.lost_scans += gap
+                last_seq = msg.seq
+            self._position = msg.step
+            ps.got[msg.step] = msg
+            self.stats.scans += 1
+
         while True:
             had = len(ps.got)
             garbled = self.stats.checksum_failures + self.stats.malformed
@@ -653,31 +692,23 @@ class SerialRing:
                     if len(msg.counts) != info.nsensors or max(msg.counts) > max_count:
                         self.stats.inconsistent += 1
                         continue
-                    pos = pos_of.get(msg.step)
                     if hint is not None and (msg.seq - hint) % p.SEQ_MODULO >= p.SEQ_MODULO // 2:
                         self.stats.stale += 1  # numbered before this pass began
+                        suspects.append(msg)
                         continue
-                    if pos is None or (base is not None and (msg.seq - base) % p.SEQ_MODULO != pos):
-                        self.stats.inconsistent += 1  # its step contradicts its seq
-                        continue
-                    if base is None:
-                        base = (msg.seq - pos) % p.SEQ_MODULO
-                    if msg.step in ps.got:
-                        self.stats.duplicates += 1
-                        continue
-                    gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) \
-                        % p.SEQ_MODULO
-                    if gap >= p.SEQ_MODULO // 2:
-                        self.stats.out_of_order += 1   # an earlier IRSCN, late: no loss
-                    else:
-                        if gap:
-                            self.stats.seq_gaps += 1
-                            self.stats.lost_scans += gap
-                        last_seq = msg.seq
-                    self._position = msg.step
-                    ps.got[msg.step] = msg
-                    self.stats.scans += 1
+                    take(msg)
                 elif isinstance(msg, p.Done):
+                    if not ps.got and _renumbered(suspects, pos_of, msg.seq):
+                        # every IRSCN looked stale, but they and this IRDON number this very
+                        # pass: the device numbers from elsewhere (it rebooted between sweeps,
+                        # or its last IRDON was wrong), so they are this pass's readings
+                        log.info("the device renumbered its IRSCN (rebooted?); %d of this "
+                                 "pass's readings kept", len(suspects))
+                        self.stats.stale -= len(suspects)
+                        hint = None
+                        for scan in suspects:
+                            take(scan)
+                        suspects.clear()
                     if (not stops and not ps.got and hint is not None
                             and msg.seq == (hint - 1) % p.SEQ_MODULO):
                         # reports nothing new and we did not ask to stop: the late answer
