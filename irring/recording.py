@@ -131,6 +131,11 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
             infos = {i.filename: i for i in zf.infolist()}
             if "format.npy" not in infos:
                 raise fail("not an irring recording (no 'format' entry)")
+            # zipfile reads the last zip of a file: `cat a.npz b.npz` replayed b alone
+            ahead = min(i.header_offset for i in infos.values())
+            if ahead:
+                raise fail(f"{ahead:,} bytes before the recording (two recordings joined into "
+                           "one file?); replay each .npz on its own")
             for name in infos:
                 if not name.endswith(".npy"):
                     raise fail(f"{brief(name)}: unknown entry; a recording holds .npy arrays")
