@@ -142,6 +142,15 @@ def pose_index(number: int, scenario, option: str = "--pose") -> int:
     return number - 1
 
 
+def out_path(text: str) -> Path:
+    """``--out``'s value: an empty one (``--out "$DIR"`` with DIR unset) wrote into the
+    current folder, or the default, without a word."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path; name a folder or file (. is the "
+                                         "current folder)")
+    return Path(text)
+
+
 def mcap_file(text: str) -> Path:
     """``--mcap``'s value, refused before any work when the mcap extra is not installed or
     it names a folder or a device (outputs.atomic_file would refuse it after the work)."""

@@ -12,7 +12,7 @@ from ..studies import accuracy
 from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
 from ..studies.executor import executor
 from ..core import MAX_SEEDS
-from ._common import add_executor_options, describe, seed_count
+from ._common import out_path, add_executor_options, describe, seed_count
 
 EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):
@@ -77,7 +77,7 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="runs per configuration and scenario, seeds scenario.seed, +1, … "
                         f"(1 … {MAX_SEEDS}; default: 3)")
     add_executor_options(p)
-    p.add_argument("--out", default="out/bench_accuracy", metavar="DIR",
+    p.add_argument("--out", type=out_path, default="out/bench_accuracy", metavar="DIR",
                    help="output folder (default: out/bench_accuracy)")
     p.add_argument("--json", action="store_true",
                    help="print the result (configurations, per scenario, every run) as JSON")

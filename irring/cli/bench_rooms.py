@@ -10,7 +10,7 @@ import sys
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, TARGETS, measure, resolve_rooms
 from ..core import MAX_SEEDS
-from ._common import describe, seed_count
+from ._common import out_path, describe, seed_count
 
 EPILOG = f"""\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have
@@ -55,7 +55,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=seed_count, default=1, metavar="N",
                    help=f"seeds per room: the scenario's seed, +1, … (1 … {MAX_SEEDS}; "
                         f"default: 1)")
-    p.add_argument("--out", default="out/bench_rooms", metavar="DIR",
+    p.add_argument("--out", type=out_path, default="out/bench_rooms", metavar="DIR",
                    help="where rooms.json and rooms.csv go (default: out/bench_rooms)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=run)

@@ -16,7 +16,7 @@ from ..estimation.calibration import (CalibrationAborted, CalibrationError, Guid
 from ..outputs import check_out
 from ..core import MAX_SWEEPS
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import at_least, between, describe, seed
+from ._common import out_path, at_least, between, describe, seed
 
 EPILOG = """\
 what it does:
@@ -69,7 +69,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default=DEFAULTS["scenario"], metavar="NAME_OR_PATH",
                    help="scenario whose ring, sensor model, ADC and effects are used "
                         f"(default: {DEFAULTS['scenario']})")
-    p.add_argument("--out", default=DEFAULTS["out"], metavar="FILE",
+    p.add_argument("--out", type=out_path, default=DEFAULTS["out"], metavar="FILE",
                    help=f"calibration file to write (default: {DEFAULTS['out']})")
     p.add_argument("--port", metavar="PORT",
                    help="serial port or pyserial URL of the real ring; runs the guided "

@@ -12,7 +12,7 @@ from ..pipeline import progress_enabled
 from ..studies import compare
 from ..studies.executor import executor
 from ..core import MAX_SEEDS
-from ._common import add_executor_options, at_least, describe, distances_mm, seed_count
+from ._common import out_path, add_executor_options, at_least, describe, distances_mm, seed_count
 
 # cylinder bearings a detection curve tries per distance: 3,600 took 20-50 s (0.008° apart
 # over the paper ring's 30° period); 10^8 ran out of memory
@@ -63,7 +63,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=seed_count, default=3, metavar="N",
                    help="runs per scenario and design, seeds scenario.seed, +1, … "
                         f"(1 … {MAX_SEEDS}; default: 3)")
-    p.add_argument("--out", default="out/compare", metavar="DIR",
+    p.add_argument("--out", type=out_path, default="out/compare", metavar="DIR",
                    help="output folder (default: out/compare)")
     p.add_argument("--distances-mm", type=distances_mm, default="250,350,450,550,650,750",
                    metavar="LIST",

@@ -19,7 +19,7 @@ from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..recording import save_recording
 from ..scenario import load_scenario
-from ._common import add_mcap_option, at_least, between, describe, positive_seconds
+from ._common import out_path, add_mcap_option, at_least, between, describe, positive_seconds
 from .run import report
 
 HELP = """\
@@ -97,7 +97,7 @@ def register(p: argparse.ArgumentParser) -> None:
                         "else 0)")
     p.add_argument("--resweep", type=between(0, 100), default=2, metavar="K",
                    help="rounds of re-sweeping only the missing steps (default 2; 0 = never)")
-    p.add_argument("--out", type=Path, default=Path("out") / "drive", metavar="DIR",
+    p.add_argument("--out", type=out_path, default=Path("out") / "drive", metavar="DIR",
                    help="output folder (default: ./out/drive)")
     p.add_argument("--json", action="store_true",
                    help="print a JSON summary on stdout instead of the readable one")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .. import pipeline
 from ..outputs import check_out, safe_name
-from ._common import add_mcap_option, describe
+from ._common import out_path, add_mcap_option, describe
 from .run import report
 
 HELP = """\
@@ -33,7 +33,7 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="a sweeps .npz written by `irring run` or `irring drive`")
     p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
                    help="calibration YAML to use instead of the recorded one")
-    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+    p.add_argument("--out", type=out_path, default=None, metavar="DIR",
                    help="output folder (default: ./out/<recording folder>-replay)")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--no-animation", action="store_true", help="skip the GIF")

@@ -11,7 +11,7 @@ from .. import pipeline
 from ..maps import metrics
 from ..outputs import check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import add_mcap_option, describe, seed
+from ._common import out_path, add_mcap_option, describe, seed
 
 HELP = """\
 Simulate one sweep of the ring at each of the scenario's scan poses, turn the ADC counts
@@ -43,7 +43,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
                    help="bundled scenario name or YAML path (default: t_room; "
                         "`irring scenarios` lists them)")
-    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+    p.add_argument("--out", type=out_path, default=None, metavar="DIR",
                    help="output folder (default: ./out/<scenario>)")
     p.add_argument("--json", action="store_true",
                    help="print a JSON summary on stdout instead of the readable one")

@@ -13,7 +13,7 @@ from ..outputs import check_out, safe_name
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
 from ..studies.executor import executor
-from ._common import add_executor_options, describe
+from ._common import out_path, add_executor_options, describe
 
 EPILOG = f"""\
 the study file (YAML):
@@ -58,7 +58,7 @@ def register(p: argparse.ArgumentParser) -> None:
              "time with the Pareto front.",
              EPILOG)
     p.add_argument("file", metavar="FILE.yaml", help="the study file (see below)")
-    p.add_argument("--out", default=None, metavar="DIR",
+    p.add_argument("--out", type=out_path, default=None, metavar="DIR",
                    help="output folder (default: out/<file name without .yaml>)")
     add_executor_options(p)
     p.add_argument("--resume", action="store_true",

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import OutputError
 from ..outputs import atomic_file, check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import add_pose_option, describe, pose_index
+from ._common import out_path, add_pose_option, describe, pose_index
 
 HELP = """\
 Show the scenario's MuJoCo scene: the room, the obstacles, the ring at one scan pose and
@@ -36,7 +36,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--step", type=int, default=0, metavar="S",
                    help="motor step, within the ring's limits (the paper's ring: -35 … 35; "
                         "default: 0, the sensors facing outwards)")
-    p.add_argument("--out", type=Path, default=None, metavar="FILE.png",
+    p.add_argument("--out", type=out_path, default=None, metavar="FILE.png",
                    help="write the picture here instead of opening the viewer (a name "
                         "without .png is a folder: view.png inside it)")
     p.add_argument("--size", default="1280x960", metavar="WxH",
