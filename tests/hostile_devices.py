@@ -248,6 +248,15 @@ def error_reply(code: int):
     return behaviour
 
 
+def refuses_hello(code: int):
+    """Answers every IRHLO with IRERR ``code`` (an older firmware, a garbling receiver)."""
+    def behaviour(dev, cmd):
+        if isinstance(cmd, p.Hello):
+            dev.send(line(f"IRERR,{code},{p.ERROR_TEXT[code]}"))
+    behaviour.__name__ = f"refuses_hello_{code}"
+    return behaviour
+
+
 def announces(**kw):
     """IRINF with out-of-bounds sizes."""
     def behaviour(dev, cmd):

@@ -423,6 +423,8 @@ class SerialRing:
     def hello(self) -> p.Info:
         """IRHLO → IRINF: learn the ring's geometry; sets :attr:`info` and :attr:`ring`."""
         tries = self.retries + 1
+        refusals: list[p.ErrorReply] = []
+        every_refused = True
         for attempt in range(tries):
             if attempt:
                 self.stats.resent_commands += 1
@@ -436,11 +438,22 @@ class SerialRing:
                     if isinstance(msg, p.ErrorReply):
                         # IRERR 1/2: our IRHLO was garbled; 5: a sweep still runs, stop it
                         self.stats.device_errors += 1
+                        refusals.append(msg)
                         if msg.code == p.ERR_BUSY:
                             self._send(p.Stop())
                         refused = True
             if not refused:
                 self.stats.timeouts += 1
+                every_refused = False
+        if every_refused:   # a working link to a device that will not say hello
+            last = refusals[-1]
+            raise HandshakeError(
+                f"the device on {self.port_name} answered each of {tries} IRHLO with IRERR "
+                f"{last.code} ({last.text or p.ERROR_TEXT.get(last.code, '?')}), never IRINF: "
+                + ("its firmware does not know IRHLO; it needs IRR protocol "
+                   f"v{p.PROTOCOL_VERSION} firmware" if last.code == p.ERR_UNKNOWN_TYPE else
+                   f"it cannot read what this host sends; check the baud rate ({self.baudrate}) "
+                   "and the cable" if last.code == p.ERR_BAD_SENTENCE else "reset the board"))
         raise HandshakeError(
             f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
             f"each. Check the port, the baud rate ({self.baudrate}), that the ring is powered "
