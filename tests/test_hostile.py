@@ -277,6 +277,10 @@ def _scalars(data: bytes, **changes) -> bytes:
      "sweep000/steps: step 7 lies outside the ring's steps -2 … 2"),
     (lambda d: _scalars(d, missing_steps=[3, 0]),
      "sweep000/scalars.missing_steps: step 3 lies outside the ring's steps -2 … 2"),
+    # `cat a.npz b.npz > c.npz` replayed b alone (zipfile reads the last zip of a file)
+    (lambda d: _scalars(d, adc_bits=10) + d,
+     "bytes before the recording (two recordings joined into one file?); replay each .npz "
+     "on its own"),
 ])
 def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, message):
     path = tmp_path / "bad.npz"
@@ -452,6 +456,11 @@ def _sweep_on(behaviour, **ring_kw):
     (hd.error_reply(3), "IRERR 3"),
     (hd.error_reply(4), "IRERR 4"),
     (hd.error_reply(5), "kept refusing|IRERR 5"),
+    # a device refusing every IRHLO was 'no IRINF answer … Check the port, the baud rate'
+    (hd.refuses_hello(2), re.escape("answered each of 3 IRHLO with IRERR 2 (unknown type), "
+                                    "never IRINF: its firmware does not know IRHLO")),
+    (hd.refuses_hello(1), re.escape("answered each of 3 IRHLO with IRERR 1 (bad sentence), "
+                                    "never IRINF: it cannot read what this host sends")),
     (hd.announces(sensors=4096), re.escape("announces 4096 sensors (nsensors; allowed 1 … 72)")),
     (hd.announces(bits=32), re.escape("announces a 32-bit ADC (adc_bits; allowed 1 … 24)")),
     (hd.announces(lo=-2**31 + 1, hi=2**31 - 1), re.escape(
@@ -886,6 +895,12 @@ def test_drive_saves_the_sweeps_elsewhere_when_its_outputs_cannot_be_written(
     (["compare", "--seeds", "1000000000000"], 2, "--seeds: must be in 1 … 100000"),
     (["bench", "accuracy", "--seeds", "100001"], 2, "--seeds: must be in 1 … 100000"),
     (["bench", "rooms", "--seeds", "100001"], 2, "--seeds: must be in 1 … 100000"),
+    # `--out "$DIR"` with DIR unset wrote into the current folder (run, replay, view,
+    # compare) or the default (calibrate, study) without a word
+    (["run", "t_room", "--out", ""], 2, "argument --out: an empty path; name a folder or file"),
+    (["replay", "x.npz", "--out", " "], 2, "argument --out: an empty path"),
+    (["calibrate", "--out", ""], 2, "argument --out: an empty path"),
+    (["study", "s.yaml", "--out", ""], 2, "argument --out: an empty path"),
 ])
 def test_bad_options_are_usage_errors(capsys, argv, status, message):
     with pytest.raises(SystemExit) as stop:
