@@ -29,7 +29,7 @@ from irring.studies import dynamics as bench
 from irring.core import Sweep, beam_geometry
 from irring.estimation.estimate import estimate
 from irring.core import Ring
-from irring.scenario import BeltDynamicsEffect, ScenarioError, TimingEffect, load_scenario
+from irring.scenario import BeltDynamicsEffect, ScenarioError, TimingEffect, load_scenario, loads
 from irring.simulation.sim import SimRing
 
 STRETCH_BOUND_RAD = 0.007
@@ -599,3 +599,58 @@ def test_the_belt_run_reports_its_progress_without_changing_a_figure():
     alone = bench.coupling(53)
     np.testing.assert_array_equal(watched["stretch_per_sweep_rad"], alone["stretch_per_sweep_rad"])
     assert watched["read_error_max_rad"] == alone["read_error_max_rad"]
+
+
+# A room of our own for the path clearance check: 1.53 × 0.97 m, a post and a box off-centre.
+_CLEAR_ROOM = """\
+name: path_clearance
+room:
+  outline_mm: [[0, 0], [1530, 0], [1530, 970], [0, 970]]
+obstacles:
+  - {type: cylinder, center_mm: [1110, 380], radius_mm: 41}
+  - {type: box, center_mm: [430, 690], size_mm: [120, 70], yaw_deg: 17}
+robot:
+  poses:
+    - {x_mm: 260, y_mm: 240}
+effects:
+  motion:
+    path: PATH
+"""
+
+
+def _clearance_oracle(path, scenario):
+    """The first failing sample, one at a time (the check before it was vectorised)."""
+    from irring.core import HOUSING_M, distance_to_outline, inside_outline, obstacle_distance
+    clearance = scenario.ring.radius_m + HOUSING_M
+    n = max(2, int(math.ceil(path.length_m / D._PATH_SAMPLE_M)) + 1)
+    for x, y, _ in path.pose_at_arc(np.linspace(0.0, path.length_m, n)):
+        gaps = [distance_to_outline(x, y, scenario.room.outline_m)] + [
+            obstacle_distance(ob, x, y) for ob in scenario.obstacles]
+        if not inside_outline(x, y, scenario.room.outline_m) or min(gaps) < clearance:
+            return f"at ({x * 1e3:.0f}, {y * 1e3:.0f}) mm"
+    return None
+
+
+@pytest.mark.parametrize("waypoints, segment", [
+    ([(260, 240), (700, 240), (700, 600)], None),                         # clear all the way
+    ([(260, 240), (700, 240), (700, 600), (1110, 560)], "[2] → [3]"),     # into the post
+    ([(260, 240), (430, 500)], "[0] → [1]"),                              # into the box
+    ([(260, 240), (700, 240), (700, 600), (1400, 800)], "[2] → [3]"),     # into the far corner
+])
+def test_path_clearance_finds_the_sample_the_one_at_a_time_check_finds(monkeypatch, waypoints,
+                                                                       segment):
+    """check_clearance took a sample at a time (2,000 waypoints: 6 min before the run was
+    refused as too big); in blocks it must stop at the same first sample, also across a
+    block's edge (blocks of 7 samples here)."""
+    monkeypatch.setattr(D, "_CLEARANCE_BLOCK", 7)
+    path_yaml = "[" + ", ".join(f"{{x_mm: {x}, y_mm: {y}}}" for x, y in waypoints) + "]"
+    sc = loads(_CLEAR_ROOM.replace("PATH", path_yaml), "path_clearance.yaml")
+    path = D.Path.from_effect(sc.effects["motion"])
+    expected = _clearance_oracle(path, sc)
+    if segment is None:
+        assert expected is None
+        path.check_clearance(sc)
+        return
+    with pytest.raises(ScenarioError) as caught:
+        path.check_clearance(sc)
+    assert f"effects.motion.path{segment}: {expected} the ring" in str(caught.value)
