@@ -1319,3 +1319,23 @@ def test_stale_scans_the_irdon_does_not_confirm_are_still_dropped():
             assert ring.last_report.link["stale"] == 2
     finally:
         dev.close()
+
+
+@pytest.mark.parametrize("calibration", [False, True])
+def test_replay_into_the_recordings_own_folder_is_refused(tmp_path, capsys, monkeypatch,
+                                                         good_recording, calibration):
+    """irring replay out/drive/sweeps.npz --out out/drive removed the drive's link.json (the
+    only record of its link) and, with --calibration, replaced the recorded calibration."""
+    folder = tmp_path / "drive"
+    folder.mkdir()
+    (folder / "sweeps.npz").write_bytes(good_recording)
+    (folder / "link.json").write_text('{"lost_scans": 3, "checksum_failures": 7}\n')
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    monkeypatch.chdir(tmp_path)
+    argv = ["replay", "drive/sweeps.npz", "--out", str(folder)]
+    if calibration:
+        argv += ["--calibration", "other.yaml"]
+    assert main(argv) == 2
+    assert (f"--out {folder}: holds the recording being replayed (drive/sweeps.npz); its "
+            "outputs would replace it") in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before

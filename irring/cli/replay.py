@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from .. import pipeline
+from ..errors import UsageError
 from ..outputs import check_out, safe_name
 from ._common import out_path, add_mcap_option, describe
 from .run import report
@@ -48,6 +49,12 @@ def run(args: argparse.Namespace) -> int:
         stem = args.recording.resolve().parent.name if args.recording.stem == "sweeps" \
             else args.recording.stem
         out = Path("out") / f"{safe_name(stem, 'recording')}-replay"
+    if Path(out).resolve() == args.recording.resolve().parent:
+        # the new set would replace the recording (and its calibration, with --calibration)
+        # and remove the files of a run this one does not write: a drive's link.json
+        raise UsageError(f"--out {out}: holds the recording being replayed ({args.recording}); "
+                         "its outputs would replace it, so choose another folder (default: "
+                         "out/<recording folder>-replay)")
     check_out(out)
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.replay(args.recording, calibration_file=args.calibration,
