@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import math
+import os
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
@@ -149,6 +150,19 @@ def out_path(text: str) -> Path:
         raise argparse.ArgumentTypeError("an empty path; name a folder or file (. is the "
                                          "current folder)")
     return Path(text)
+
+
+def spare_inputs(outputs: dict, inputs: dict) -> None:
+    """:class:`UsageError` when a file the command writes (``{option: path}``) is one it
+    reads: ``irring run my.yaml --mcap my.yaml`` replaced the scenario with MCAP bytes."""
+    for out_option, out in outputs.items():
+        if out is None or not Path(out).is_file():
+            continue
+        for in_option, path in inputs.items():
+            if path is not None and Path(path).is_file() and os.path.samefile(out, path):
+                raise UsageError(f"{out_option} {out}: is the file {in_option} {path}, which "
+                                 "this command reads; writing there would replace it, so name "
+                                 "another file")
 
 
 def mcap_file(text: str) -> Path:

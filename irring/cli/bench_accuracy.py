@@ -12,7 +12,7 @@ from ..studies import accuracy
 from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
 from ..studies.executor import executor
 from ..core import MAX_SEEDS
-from ._common import out_path, add_executor_options, describe, seed_count
+from ._common import add_executor_options, describe, out_path, seed_count
 
 EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):

@@ -10,7 +10,7 @@ import sys
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, TARGETS, measure, resolve_rooms
 from ..core import MAX_SEEDS
-from ._common import out_path, describe, seed_count
+from ._common import describe, out_path, seed_count
 
 EPILOG = f"""\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have

@@ -16,7 +16,7 @@ from ..estimation.calibration import (CalibrationAborted, CalibrationError, Guid
 from ..outputs import check_out
 from ..core import MAX_SWEEPS
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import out_path, at_least, between, describe, seed
+from ._common import at_least, between, describe, out_path, seed, spare_inputs
 
 EPILOG = """\
 what it does:
@@ -105,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
               "ring; give its --port too", file=sys.stderr)
         return errors.USAGE
     check_out(out.parent)
+    spare_inputs({"--out": out}, {"--scenario": args.scenario, "--resume": args.resume})
     scenario = load_scenario(args.scenario)
     if args.port is not None:
         return _guided(args, scenario, out)

@@ -12,7 +12,7 @@ from ..pipeline import progress_enabled
 from ..studies import compare
 from ..studies.executor import executor
 from ..core import MAX_SEEDS
-from ._common import out_path, add_executor_options, at_least, describe, distances_mm, seed_count
+from ._common import add_executor_options, at_least, describe, distances_mm, out_path, seed_count
 
 # cylinder bearings a detection curve tries per distance: 3,600 took 20-50 s (0.008° apart
 # over the paper ring's 30° period); 10^8 ran out of memory

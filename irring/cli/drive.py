@@ -19,7 +19,8 @@ from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..recording import save_recording
 from ..scenario import load_scenario
-from ._common import out_path, add_mcap_option, at_least, between, describe, positive_seconds
+from ._common import (add_mcap_option, at_least, between, describe, out_path, positive_seconds,
+                      spare_inputs)
 from .run import report
 
 HELP = """\
@@ -114,6 +115,8 @@ def _error(msg: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    spare_inputs({"--mcap": args.mcap}, {"--truth": args.truth,
+                                         "--calibration": args.calibration})
     check_out(args.out)
     truth = load_scenario(args.truth) if args.truth else None
     if truth is not None and truth.has("motion"):

@@ -8,7 +8,7 @@ from pathlib import Path
 from .. import pipeline
 from ..errors import UsageError
 from ..outputs import check_out, safe_name
-from ._common import out_path, add_mcap_option, describe
+from ._common import add_mcap_option, describe, out_path, spare_inputs
 from .run import report
 
 HELP = """\
@@ -49,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
         stem = args.recording.resolve().parent.name if args.recording.stem == "sweeps" \
             else args.recording.stem
         out = Path("out") / f"{safe_name(stem, 'recording')}-replay"
+    spare_inputs({"--mcap": args.mcap}, {"RECORDING": args.recording,
+                                         "--calibration": args.calibration})
     if Path(out).resolve() == args.recording.resolve().parent:
         # the new set would replace the recording (and its calibration, with --calibration)
         # and remove the files of a run this one does not write: a drive's link.json

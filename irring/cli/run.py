@@ -11,7 +11,7 @@ from .. import pipeline
 from ..maps import metrics
 from ..outputs import check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import out_path, add_mcap_option, describe, seed
+from ._common import add_mcap_option, describe, out_path, seed, spare_inputs
 
 HELP = """\
 Simulate one sweep of the ring at each of the scenario's scan poses, turn the ADC counts
@@ -60,6 +60,8 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    spare_inputs({"--mcap": args.mcap}, {"SCENARIO": args.scenario,
+                                         "--calibration": args.calibration})
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
     out = check_out(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP

@@ -13,7 +13,7 @@ from ..outputs import check_out, safe_name
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
 from ..studies.executor import executor
-from ._common import out_path, add_executor_options, describe
+from ._common import add_executor_options, describe, out_path
 
 EPILOG = f"""\
 the study file (YAML):

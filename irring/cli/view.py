@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import OutputError
 from ..outputs import atomic_file, check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import out_path, add_pose_option, describe, pose_index
+from ._common import add_pose_option, describe, out_path, pose_index
 
 HELP = """\
 Show the scenario's MuJoCo scene: the room, the obstacles, the ring at one scan pose and
