@@ -472,18 +472,21 @@ class Calibration:
         if isinstance(bits, bool) or not isinstance(bits, int) or \
                 not 1 <= bits <= MAX_ADC_BITS:
             raise fail("adc_bits", f"expected a whole number 1 … {MAX_ADC_BITS}, got {bits!r}")
+        # each key checked (its error names the file) before the cross-key checks of
+        # __post_init__, whose errors do not: named once, not twice
+        values = dict(sensor_model=str(model),
+                      emitter_offset_m=number("emitter_offset_mm", hi=100.0, lo=-100.0) * 1e-3,
+                      theta_rad=np.radians(table[:, 0]), a=table[:, 1], b=table[:, 2],
+                      adc_bits=bits, vref_v=number("vref_v", VREF_V, *VREF_RANGE_V),
+                      min_range_m=number("min_range_mm", curve_mm[0], 0.0, 1e5) * 1e-3,
+                      max_range_m=number("max_range_mm", curve_mm[1], 0.0, 1e5) * 1e-3,
+                      noise_counts=number("noise_counts", 0.0, 0.0, 1e7),
+                      peak_distance_m=number("peak_distance_mm", 0.0, 0.0, 1e5) * 1e-3,
+                      max_incidence_rad=(math.radians(number("max_incidence_deg"))
+                                         if "max_incidence_deg" in raw else None),
+                      source=_source_text(raw.get("source", ""), fail))
         try:
-            return cls(sensor_model=str(model),
-                       emitter_offset_m=number("emitter_offset_mm", hi=100.0, lo=-100.0) * 1e-3,
-                       theta_rad=np.radians(table[:, 0]), a=table[:, 1], b=table[:, 2],
-                       adc_bits=bits, vref_v=number("vref_v", VREF_V, *VREF_RANGE_V),
-                       min_range_m=number("min_range_mm", curve_mm[0], 0.0, 1e5) * 1e-3,
-                       max_range_m=number("max_range_mm", curve_mm[1], 0.0, 1e5) * 1e-3,
-                       noise_counts=number("noise_counts", 0.0, 0.0, 1e7),
-                       peak_distance_m=number("peak_distance_mm", 0.0, 0.0, 1e5) * 1e-3,
-                       max_incidence_rad=(math.radians(number("max_incidence_deg"))
-                                          if "max_incidence_deg" in raw else None),
-                       source=_source_text(raw.get("source", ""), fail))
+            return cls(**values)
         except CalibrationError as exc:
             raise CalibrationError(f"{source}: {exc}") from None
 
