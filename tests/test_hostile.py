@@ -1339,3 +1339,45 @@ def test_replay_into_the_recordings_own_folder_is_refused(tmp_path, capsys, monk
     assert (f"--out {folder}: holds the recording being replayed (drive/sweeps.npz); its "
             "outputs would replace it") in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+@pytest.mark.parametrize("argv, option, named", [
+    (["run", "IN/room.yaml", "--mcap", "IN/room.yaml", "--out", "OUT"], "--mcap", "SCENARIO"),
+    (["run", "t_room", "--calibration", "IN/cal.yaml", "--mcap", "IN/cal.yaml", "--out", "OUT"],
+     "--mcap", "--calibration"),
+    (["replay", "IN/rec.npz", "--mcap", "IN/rec.npz", "--out", "OUT"], "--mcap", "RECORDING"),
+    (["calibrate", "--scenario", "IN/room.yaml", "--out", "IN/room.yaml"], "--out",
+     "--scenario"),
+])
+def test_an_output_naming_an_input_of_the_same_command_is_refused(tmp_path, capsys,
+                                                                   good_recording, argv,
+                                                                   option, named):
+    """irring run my.yaml --mcap my.yaml: exit 0, and my.yaml held MCAP bytes afterwards; the
+    same for a replayed recording, a calibration, calibrate's scenario."""
+    d = tmp_path / "in"
+    d.mkdir()
+    (d / "room.yaml").write_text(resolve("t_room_cylinder").read_text())
+    (d / "cal.yaml").write_text("not read: refused before\n")
+    (d / "rec.npz").write_bytes(good_recording)
+    before = {p.name: p.read_bytes() for p in d.iterdir()}
+    argv = [a.replace("IN", str(d)).replace("OUT", str(tmp_path / "o")) for a in argv]
+    assert main(argv) == 2
+    target = argv[argv.index(option) + 1]
+    assert (f"{option} {target}: is the file {named} {target}, which this command reads; "
+            "writing there would replace it") in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in d.iterdir()} == before
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_calibration_value_out_of_range_names_its_file_once(tmp_path, capsys):
+    """'cal.yaml: cal.yaml: noise_counts: inf is out of range': the key's own error, already
+    naming the file, was wrapped again with it."""
+    from irring.estimation.calibration import scene_calibration
+    from irring.scenario import load_scenario
+    _, text = scene_calibration(load_scenario("t_room"))
+    cal = tmp_path / "cal.yaml"
+    cal.write_text(re.sub(r"(?m)^noise_counts: .*$", "noise_counts: 1e400", text))
+    assert main(["run", "t_room", "--calibration", str(cal), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert f"error: {cal}: noise_counts: inf is out of range; allowed 0 … 1e+07" in err
+    assert err.count(str(cal)) == 1
