@@ -29,7 +29,7 @@ from .estimation.estimate import estimate
 from .gp2 import SENSORS
 from .maps import metrics
 from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_scenario_grid,
-                           classify, returns_of, silences_of, slice_steps)
+                           classify, returns_of, silences_of_run, slice_steps)
 from .maps.mcap_export import write_mcap
 from .outputs import OutputSet
 from .scenario import Scenario, ScenarioError, loads
@@ -381,8 +381,8 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
             grid = OccupancyGrid(returns.origin_xy_m, returns.shape, returns.resolution_m,
                                  returns.params)
             grid.log_odds = returns.log_odds.copy()
-            for q in result.points[:k + 1]:
-                grid.insert(silences_of(q))
+            for q in silences_of_run(result.points[:k + 1]):
+                grid.insert(q)
             yield grid.classify(), k + 1, f"pose {k + 1} of {n}: done"
 
 

@@ -323,14 +323,15 @@ class OccupancyGrid:
     def insert_run(self, batches: Sequence[Points]) -> None:
         """Add a run's batches (sweeps) so that its silent beams stop at every surface the
         run's returns establish, whichever batch saw it: every batch's returns
-        (:func:`returns_of`) in order, then every batch's silent beams (:func:`silences_of`).
+        (:func:`returns_of`) in order, then every batch's silent beams
+        (:func:`silences_of_run`: in one insert).
         A silent beam never lowers a cell above ``no_return_stop``, so the second part does
         not depend on the order of the batches (docs/mapping.md, "Silent beams and the
         run's returns")."""
         for points in batches:
             self.insert(returns_of(points))
-        for points in batches:
-            self.insert(silences_of(points))
+        for points in silences_of_run(batches):
+            self.insert(points)
 
     # ---- reading the map
 
@@ -547,6 +548,36 @@ def silences_of(points: Points) -> Points:
     """``points`` with no valid reading: only its silent beams map (to their reach, or to
     the first cell the grid holds above ``no_return_stop``)."""
     return points_with(points, valid=np.zeros(np.shape(points.valid), bool))
+
+
+def silences_of_run(batches: Sequence[Points]) -> list[Points]:
+    """:func:`silences_of` each batch, joined into one batch (one row) where they share the
+    max range and cone: the order of silent beams does not matter (they never lower a cell
+    that stops them), so one insert maps them as the batches' own would, with one call."""
+    batches = list(batches)
+    if not batches:
+        return []
+    kinds = {(float(p.max_range_m), float(p.cone_half_angle_rad)) for p in batches}
+    if len(kinds) > 1:
+        return [silences_of(p) for p in batches]
+    silent = [np.asarray(p.reason).ravel() == _NO_RETURN for p in batches]
+
+    def joined(values):
+        return np.concatenate([np.asarray(v, float).ravel()[k]
+                               for v, k in zip(values, silent)])[None, :]
+
+    reach = joined([np.full(k.shape, np.nan) if p.reach_m is None else p.reach_m
+                    for p, k in zip(batches, silent)])
+    if reach.size == 0:
+        return []
+    nan = np.full(reach.shape, np.nan)     # a silent beam has no end point, d, θ or σ
+    return [points_with(
+        batches[0], x=nan, y=nan, d=nan, theta=nan, sigma_m=nan,
+        origin_x=joined([p.origin_x for p in batches]),
+        origin_y=joined([p.origin_y for p in batches]),
+        heading=joined([p.heading for p in batches]), iterations=np.zeros(reach.shape, int),
+        valid=np.zeros(reach.shape, bool), reason=np.full(reach.shape, _NO_RETURN, np.uint8),
+        reach_m=reach)]
 
 
 def slice_steps(points: Points, rows: slice) -> Points:
