@@ -524,3 +524,21 @@ def test_a_far_line_whose_members_do_not_tell_its_direction_gives_them_no_theta(
     err0, scores0 = far_errors()
     assert (err0 > 0.10).sum() >= 4 and np.sqrt(np.mean(err0 ** 2)) > 0.015
     assert scores0["occupied_precision"] < scores["occupied_precision"] - 0.008
+
+
+def test_a_held_reading_stays_held_through_pooling():
+    """The fold-over's second pass holds out undecided readings: pooling must not make one of
+    them OK again (a GP2Y0A02 far wall's readings, pooled, came back valid on the far branch
+    the first pass could not decide)."""
+    cal = Calibration.nominal("gp2y0a21", noise_sigma_v=0.015)
+    counts, reason = _quiet_counts(cal)
+    hold = np.zeros(reason.shape, bool)
+    hold[7, 1] = True                      # pooled to OK when not held
+    free_c, free_r = fast.pooled_counts(counts, reason, np.arange(20), cal, 0.8)
+    assert free_r[7, 1] == Reason.OK
+    held_c, held_r = fast.held_and_pooled(counts, reason, hold, np.arange(20), cal, 0.8)
+    assert held_r[7, 1] == Reason.FOLDOVER_AMBIGUOUS
+    # the others pool as before (step 16 was OK already)
+    assert np.array_equal(np.nonzero(held_r[:, 1] == Reason.OK)[0], [6, 8, 9, 16])
+    np.testing.assert_array_equal(held_c[~hold], free_c[~hold])
+    assert reason[7, 1] != Reason.FOLDOVER_AMBIGUOUS          # the input is left alone

@@ -247,3 +247,42 @@ def test_an_estimate_with_no_readings_to_group_still_has_its_lines_record():
                   estimate_numpy.estimate_detail(sweep, cal).lines):
         assert found is not None and found.label.shape == np.shape(sweep.counts)
     assert (estimate_numpy.estimate_detail(silent, cal).lines.label == -1).all()
+
+
+# The longer-range parts at the housing limit. A reading the far branch read out of range
+# (or at an unknown θ) in the judging pass was left out of judging and read again in the
+# second pass, valid on the far branch: the GP2Y0A21's 56 mm pilaster reading at 100 mm, the
+# GP2Y0A02's readings of a wall 129-198 mm away (near its 150 mm peak) at 200-257 mm.
+PILASTER_A21 = """
+name: fold_pilaster_a21
+seed: 6101
+room: {outline_mm: [[0, 0], [900, 0], [900, 55], [975, 55], [975, 0], [1700, 0], [1700, 1150],
+                    [0, 1150]]}
+robot: {poses: [{x_mm: 937, y_mm: 230, yaw_deg: 7}, {x_mm: 176, y_mm: 976, yaw_deg: 13}]}
+sensor: {model: gp2y0a21}
+effects: [incidence, noise, quantization, foldover]
+"""
+CORNER_A02 = """
+name: fold_corner_a02
+seed: 6507
+room: {outline_mm: [[0, 0], [2800, 0], [2800, 2400], [-420, 2380]]}
+robot: {poses: [{x_mm: 152, y_mm: 176, yaw_deg: 31}, {x_mm: 1400, y_mm: 178, yaw_deg: -6}]}
+sensor: {model: gp2y0a02, max_range_mm: 1300}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+@pytest.mark.parametrize("room", [PILASTER_A21, CORNER_A02], ids=["a21-pilaster", "a02-corner"])
+def test_a_reading_the_judging_pass_left_out_is_never_valid_on_the_far_branch(room):
+    sc = loads(room, source="<test>")
+    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
+    cal = scene_calibration(sc)[0]
+    judged_out = wrong = 0
+    for sw in sweeps:
+        p = estimate(sw, cal)
+        d_true = sw.truth.distance_m
+        # the far branch for a reading truly at most 50 mm past the peak, 30 mm long or more
+        wrong += int(np.sum(p.valid & (d_true < cal.peak_distance_m + 0.05)
+                            & (p.d > d_true + 0.03)))
+        judged_out += int(np.sum(p.reason == Reason.FOLDOVER_AMBIGUOUS))
+    assert wrong == 0 and judged_out > 500

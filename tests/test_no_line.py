@@ -77,7 +77,9 @@ def runs_within_100_mm(sc):
             yield seed, p
 
 
-@pytest.mark.parametrize("text, min_valid", [(CLOSE_CORNER, 300), (CLOSE_PASSAGE, 1000),
+# (328 and 1015 valid before the readings the judging pass read out of range were judged
+# too: 58 and 110 of them, truly 82-101 mm away at the GP2D12's 90 mm peak, are undecided)
+@pytest.mark.parametrize("text, min_valid", [(CLOSE_CORNER, 260), (CLOSE_PASSAGE, 880),
                                              (GRAZING_BOXES, 4300)])
 def test_no_valid_reading_more_than_100_mm_off_and_none_outside_the_room(text, min_valid):
     sc = loads(text, source="<test>")
@@ -121,7 +123,9 @@ effects: [incidence, noise, quantization, foldover]
 """
 
 
-@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 680), (TURNED_M8, 500)])
+# (692 and 510 valid before readings the judging pass read out of range were judged: 83 and 69
+# of them, truly 82-100 mm away at the peak, 1-30 mm off on the far branch, are undecided)
+@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 590), (TURNED_M8, 430)])
 def test_a_far_steep_wall_bent_by_noise_is_not_kept_as_a_post(text, min_valid):
     sc = loads(text, source="<test>")
     valid = sum(int(p.valid.sum()) for _, p in runs_within_100_mm(sc))

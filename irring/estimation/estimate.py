@@ -311,11 +311,9 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                                  for v in (heading, cos_h, sin_h))
     shape = counts.shape
 
-    reason = _classify(counts, sweep, cal)
-    if hold is not None:
-        reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
-    counts, reason = pooled_counts(counts, reason, steps, cal, max_range)
+    counts, reason = held_and_pooled(counts, _classify(counts, sweep, cal), hold, steps, cal,
+                                     max_range)
     sw = _iterate.Sweep(cal, lines, counts.reshape(-1), np.ascontiguousarray(origin).reshape(-1),
                         np.ascontiguousarray(heading).reshape(-1), reason.reshape(-1),
                         scan_order(steps, shape[1]), shape[1],
@@ -588,6 +586,22 @@ def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal
     out_s, out_why = np.empty_like(counts), np.empty_like(reason)
     out_s[order], out_why[order] = s, why
     return out_s, out_why
+
+
+def held_and_pooled(counts: np.ndarray, reason: np.ndarray, hold: np.ndarray | None,
+                    steps: np.ndarray, cal: Calibration, max_range_m: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pooled_counts` of the classified readings with those ``hold`` marks (S, N; or
+    None) FOLDOVER_AMBIGUOUS: before pooling, so they join no pool, and after it, so that
+    pooling (which makes a reading near the no-return level OK) revives none of them."""
+    if hold is None:
+        return pooled_counts(counts, reason, steps, cal, max_range_m)
+    reason = reason.copy()
+    reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
+    counts, reason = pooled_counts(counts, reason, steps, cal, max_range_m)
+    reason = reason.copy()
+    reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
+    return counts, reason
 
 
 def silent_reach(points: Points, cal: Calibration) -> Points:
@@ -1292,6 +1306,10 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
 _FOLD_BLOCK_M = 0.25   # a known wall blocks a beam this far past its readings' ends …
 _FOLD_ON_M = 0.10      # … and a reading lies on it this far past them
 _FOLD_ANCHOR = 2       # a line decides "far" once this many of its members are certainly far
+# the readings whose branch is judged: every one that returned something. A reading the far
+# branch puts out of range or at an unknown θ may be on the near branch all the same, and the
+# second pass (its neighbours held out) could otherwise read it valid on the far one
+_FOLD_JUDGED = (Reason.OK, Reason.NOT_CONVERGED, Reason.OUT_OF_RANGE, Reason.INCIDENCE_UNKNOWN)
 _CORNER_MIN_SIN = 0.1  # lines crossing at under ~6° (sine of the angle) make no corner …
 _CORNER_PAST_M = 0.01  # … a line's span ends this far past the corner it meets
 
@@ -1319,8 +1337,7 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     # the judging pass reads each end point on its own (not snapped onto its line)
     first = run(np.zeros(np.shape(sweep.counts), dtype=bool), True, False)
     near, far, d_fold, theta_fold, sigma_fold = _fold_branches(first, sweep, cal)
-    ambiguous = (d_fold == 0) & ~far
-    ambiguous &= (first.points.reason == Reason.OK) | (first.points.reason == Reason.NOT_CONVERGED)
+    ambiguous = (d_fold == 0) & ~far & np.isin(first.points.reason, _FOLD_JUDGED)
     second = run(near | ambiguous, True, True)
     p = second.points
     # near readings, and far ones the second pass found on no line (its neighbours held
@@ -1413,7 +1430,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     p, found = first.points, first.lines
     shape = p.valid.shape
     counts = np.asarray(sweep.counts, dtype=float)
-    live = (p.reason == Reason.OK) | (p.reason == Reason.NOT_CONVERGED)
+    live = np.isin(p.reason, _FOLD_JUDGED)
     ox, oy, h = p.origin_x, p.origin_y, p.heading
     pose = np.asarray(sweep.reading_poses if sweep.reading_poses is not None else sweep.pose,
                       dtype=float)

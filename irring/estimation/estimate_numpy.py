@@ -15,8 +15,8 @@ from .calibration import RANGE_SIGMAS, Calibration
 from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH_MIN_MEMBERS,
                        REGROUP_WINDOW, SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
                        LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
-                       fallback_spread, final_estimate, member_spans, nominal_calibration,
-                       polyline_ids, pooled_counts, range_profiles, reach_cos_limit,
+                       fallback_spread, final_estimate, held_and_pooled, member_spans,
+                       nominal_calibration, polyline_ids, range_profiles, reach_cos_limit,
                        resolve_foldover, scan_order)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
@@ -957,11 +957,9 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     heading = np.broadcast_to(heading, counts.shape)
     shape = counts.shape
 
-    reason = classify(counts, sweep, cal)
-    if hold is not None:
-        reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
     max_range = min(float(sweep.max_range_m), cal.max_range_m)
-    counts, reason = pooled_counts(counts, reason, np.asarray(sweep.steps), cal, max_range)
+    counts, reason = held_and_pooled(counts, classify(counts, sweep, cal), hold,
+                                     np.asarray(sweep.steps), cal, max_range)
     live = reason == Reason.OK
     sw = _Sweep(cal, counts, origin, heading, live, np.asarray(sweep.steps), lines)
     k = sw.k
