@@ -286,3 +286,33 @@ def test_a_reading_the_judging_pass_left_out_is_never_valid_on_the_far_branch(ro
                             & (p.d > d_true + 0.03)))
         judged_out += int(np.sum(p.reason == Reason.FOLDOVER_AMBIGUOUS))
     assert wrong == 0 and judged_out > 500
+
+
+# A pilaster 315 mm wide and 63 mm deep, the ring 178 mm from its face: the face read far
+# (35-51 mm away, read 103-189 mm) lands on the line of the wall beside the pilaster, run on
+# behind it where no reading sees it; that line decided "far" for the face's readings.
+WIDE_PILASTER_A21 = """
+name: fold_wide_pilaster_a21
+seed: 6611
+room: {outline_mm: [[0, 0], [640, 0], [640, 63], [955, 63], [955, 0], [1750, 0], [1750, 1230],
+                    [0, 1230]]}
+robot: {poses: [{x_mm: 790, y_mm: 241, yaw_deg: 4}, {x_mm: 1560, y_mm: 180, yaw_deg: -14}]}
+sensor: {model: gp2y0a21}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_line_decides_the_far_branch_only_where_it_is_seen():
+    sc = loads(WIDE_PILASTER_A21, source="<test>")
+    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
+    cal = scene_calibration(sc)[0]
+    wrong = valid = 0
+    for sw in sweeps:
+        p = estimate(sw, cal)
+        d_true, hit = sw.truth.distance_m, sw.truth.hit_point
+        wrong += int(np.sum(p.valid & (d_true < cal.peak_distance_m + 0.05)
+                            & (p.d > d_true + 0.03)))
+        err = np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[p.valid]
+        assert err.size and err.max() < 0.100
+        valid += int(p.valid.sum())
+    assert wrong == 0 and valid > 150      # the walls seen far are still read

@@ -124,8 +124,9 @@ effects: [incidence, noise, quantization, foldover]
 
 
 # (692 and 510 valid before readings the judging pass read out of range were judged: 83 and 69
-# of them, truly 82-100 mm away at the peak, 1-30 mm off on the far branch, are undecided)
-@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 590), (TURNED_M8, 430)])
+# of them, truly 82-100 mm away at the peak, 1-30 mm off on the far branch, are undecided;
+# 52 and 27 more, 0-6 mm off, were decided far by a line 50-100 mm past where it is seen)
+@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 530), (TURNED_M8, 390)])
 def test_a_far_steep_wall_bent_by_noise_is_not_kept_as_a_post(text, min_valid):
     sc = loads(text, source="<test>")
     valid = sum(int(p.valid.sum()) for _, p in runs_within_100_mm(sc))

@@ -1306,6 +1306,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
 _FOLD_BLOCK_M = 0.25   # a known wall blocks a beam this far past its readings' ends …
 _FOLD_ON_M = 0.10      # … and a reading lies on it this far past them
 _FOLD_ANCHOR = 2       # a line decides "far" once this many of its members are certainly far
+_FOLD_SEEN_M = 0.05    # … where a member of it lies this near the far end point along it
 # the readings whose branch is judged: every one that returned something. A reading the far
 # branch puts out of range or at an unknown θ may be on the near branch all the same, and the
 # second pass (its neighbours held out) could otherwise read it valid on the far one
@@ -1465,6 +1466,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
                                minlength=use.size) >= _FOLD_ANCHOR
     else:
         anchored = np.zeros(0, bool)
+        at = mcol = np.zeros(0, int)
         c = e = nrm = np.zeros((0, 2))
         lo = hi = np.zeros(0)
         trusted = np.zeros(0, bool)
@@ -1502,6 +1504,9 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     can_far = ~blocked_far & ~near_on & ~near_any
     fit_far = np.where(on_span & seen & (line_sensor[None, :] != sensor[:, None]),
                        np.abs(t - d_far) / tol_far, np.inf)
+    # … and only where the line is seen: behind a pilaster or a box the wall's line runs on
+    # unseen, and a near reading of the face in front, read far, lands on it there
+    fit_far[~_seen_there(fit_far <= 1.0, along, mcol, at, p, found, use)] = np.inf
     # Two sensors agreeing on a line is no proof it is seen far: two neighbours close to one
     # surface both read it far, and their far end points (curves) can fit one line behind it.
     # A line decides "far" only once it is anchored: _FOLD_ANCHOR members certainly far (near
@@ -1531,6 +1536,28 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         out[2].reshape(-1)[idx] = np.where(dist > 0, np.maximum(slope * dist * sig_s,
                                                                  SIGMA_FLOOR_M), 0.0)
     return near, far, out[0], out[1], out[2]
+
+
+def _seen_there(pairs: np.ndarray, along: np.ndarray, mcol: np.ndarray, at: np.ndarray,
+                p: Points, found: Lines, use: np.ndarray) -> np.ndarray:
+    """(A, L): for the (reading, line) ``pairs``, whether the line has a valid member within
+    ``_FOLD_SEEN_M`` of the crossing ``along`` it (True elsewhere)."""
+    out = np.ones(pairs.shape, bool)
+    a_idx, l_idx = pairs.nonzero()
+    if not a_idx.size:
+        return out
+    c, e = found.centroid[use], found.direction[use]
+    m_along = ((p.x.reshape(-1)[at] - c[mcol, 0]) * e[mcol, 0]
+               + (p.y.reshape(-1)[at] - c[mcol, 1]) * e[mcol, 1])
+    # members sorted by line, then along it: a query's neighbours are found by bisection
+    span = 2.0 * (float(np.max(np.abs(m_along))) + 1.0)
+    keys = np.sort(mcol * span + m_along)
+    q = l_idx * span + along[a_idx, l_idx]
+    i = np.searchsorted(keys, q)
+    left = keys[np.clip(i - 1, 0, keys.size - 1)]
+    right = keys[np.clip(i, 0, keys.size - 1)]
+    out[a_idx, l_idx] = np.minimum(np.abs(q - left), np.abs(q - right)) <= _FOLD_SEEN_M
+    return out
 
 
 def clip_at_corners(c, e, lo, hi):
