@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -54,18 +55,53 @@ def _build_kernels_command():
     return BuildKernels
 
 
+def missing_build_requirements(pyproject: Path) -> list[str]:
+    """The requirements of pyproject.toml's ``[build-system] requires`` (``name>=version``)
+    this interpreter lacks or has too old: pip builds in an environment of its own, an
+    in-place build uses this one (a fresh venv has setuptools 65 and no Cython)."""
+    from importlib import metadata
+
+    block = re.search(r"^\[build-system\](.*?)^\[", pyproject.read_text() + "\n[", re.S | re.M)
+    listed = re.search(r"^requires\s*=\s*\[(.*?)\]", block[1] if block else "", re.S | re.M)
+    missing = []
+    for name, least in re.findall(r'"([A-Za-z0-9_.-]+)\s*>=\s*([0-9.]+)"',
+                                  listed[1] if listed else ""):
+        try:
+            have = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            missing.append(f"{name}>={least}")
+            continue
+        if _release(have) < _release(least):
+            missing.append(f"{name}>={least} (this environment has {have})")
+    return missing
+
+
+def _release(version: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in re.findall(r"\d+", version.split("+")[0])[:3])
+
+
 def main() -> int:
     """`python -m irring.kernel_build`: rebuild in place the kernels whose .pyx changed (the
-    quick rebuild of a checkout; pip's does the same with the rest of the install)."""
-    # deferred: setuptools is there when irring is built, not always where it runs
-    from setuptools import setup
-
+    quick rebuild of a checkout; pip's does the same with the rest of the install).
+    Exit 2 (with one line saying what to do) outside a checkout or without the build's
+    requirements in this environment."""
     root = Path(__file__).resolve().parent.parent
     if not (root / "pyproject.toml").is_file():
         print(f"python -m irring.kernel_build: error: {root} is not a checkout of irring (no "
               f"pyproject.toml); an installed irring is rebuilt by `pip install` itself",
               file=sys.stderr)
         return 2
+    missing = missing_build_requirements(root / "pyproject.toml")
+    if missing:
+        print(f"python -m irring.kernel_build: error: an in-place build needs "
+              f"{', '.join(missing)} in this environment; `pip install -e .` rebuilds the "
+              f"kernels without them (pip builds in an environment of its own), or install "
+              f"them first: pip install {' '.join(repr(m.split(' ')[0]) for m in missing)}",
+              file=sys.stderr)
+        return 2
+    # deferred: setuptools is there when irring is built, not always where it runs
+    from setuptools import setup
+
     os.chdir(root)   # setup() reads pyproject.toml (the kernels, BuildKernels) from here
     setup(script_args=["build_ext", "--inplace"])
     return 0

@@ -136,3 +136,39 @@ except ImportError as exc:
     assert run.returncode == INTERNAL
     assert run.stderr.splitlines() == [
         "irring run: error: " + done.stdout.splitlines()[1].removeprefix("KernelError ")]
+
+
+def test_an_in_place_rebuild_names_the_build_requirements_this_environment_lacks(
+        tmp_path, monkeypatch, capsys):
+    """`python -m irring.kernel_build` uses this interpreter's setuptools and Cython, where
+    pip builds in an environment of its own: a fresh venv (setuptools 65, no Cython) got a
+    60-line setuptools traceback about pyproject's licence field. Now one line says what to
+    do, read from pyproject.toml's [build-system] requires."""
+    from importlib import metadata
+
+    from irring import kernel_build
+
+    pyproject = tmp_path / "pyproject.toml"
+    pyproject.write_text('[build-system]\nrequires = ["setuptools>=77.2", "cython>=3.0",\n'
+                         '            "numpy>=1.9"]\n\n[project]\nrequires = ["x>=9"]\n')
+    installed = {"setuptools": "65.5.0", "numpy": "1.26.4"}
+
+    def version(name):
+        if name not in installed:
+            raise metadata.PackageNotFoundError(name)
+        return installed[name]
+
+    monkeypatch.setattr(metadata, "version", version)
+    assert kernel_build.missing_build_requirements(pyproject) == [
+        "setuptools>=77.2 (this environment has 65.5.0)", "cython>=3.0"]
+    installed.update(setuptools="77.10.1", cython="3.0.0")
+    assert kernel_build.missing_build_requirements(pyproject) == []
+    # the checkout's own pyproject names both, and main() stops before setuptools runs
+    del installed["cython"]
+    assert kernel_build.missing_build_requirements(PACKAGE.parent / "pyproject.toml") == [
+        "cython>=3.0"]
+    assert kernel_build.main() == 2
+    assert capsys.readouterr().err == (
+        "python -m irring.kernel_build: error: an in-place build needs cython>=3.0 in this "
+        "environment; `pip install -e .` rebuilds the kernels without them (pip builds in an "
+        "environment of its own), or install them first: pip install 'cython>=3.0'\n")
