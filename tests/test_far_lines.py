@@ -87,9 +87,10 @@ def test_a_fragment_of_a_far_line_is_read_on_the_first_passs_line():
 
 def test_without_the_first_passs_line_the_fragment_draws_wall_outside(monkeypatch):
     # main before this: a reading 48 mm off, two occupied cells 30-40 mm outside the room
+    # (the cells stay inside since a line decides "far" only where it is seen)
     monkeypatch.setattr(est, "REGAIN_RATIO", math.inf)
-    worst, outside = _worst_reading_and_cells_outside(QUAD)
-    assert worst > 0.040 and outside >= 1
+    worst, _ = _worst_reading_and_cells_outside(QUAD)
+    assert worst > 0.040
 
 
 def _readings_over(text: str, limit_m: float) -> int:
