@@ -59,6 +59,7 @@ def missing_build_requirements(pyproject: Path) -> list[str]:
     """The requirements of pyproject.toml's ``[build-system] requires`` (``name>=version``)
     this interpreter lacks or has too old: pip builds in an environment of its own, an
     in-place build uses this one (a fresh venv has setuptools 65 and no Cython)."""
+    # deferred: only a rebuild reads installed versions (importlib.metadata scans site-packages)
     from importlib import metadata
 
     block = re.search(r"^\[build-system\](.*?)^\[", pyproject.read_text() + "\n[", re.S | re.M)
