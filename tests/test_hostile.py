@@ -479,17 +479,18 @@ def test_a_hostile_device_is_a_clear_error_within_a_bounded_time(behaviour, erro
 
 
 def test_a_noisy_link_that_never_falls_silent_is_not_stopped():
-    """timeout_s is the longest silence: 10 garbled sentences, one every 0.2 s, is 2 s
-    without an intact step but never 0.8 s without a byte. The driver sent IRSTP after
-    0.8 s without a new step, and the board, stopping, lost the four steps still to come."""
-    dev = hd.HostileDevice(hd.garbled_stretch(10, 0.2))
+    """timeout_s is the longest silence: 14 garbled sentences, one every 0.2 s, is 2.8 s
+    without an intact step but never 1.2 s without a byte (a 1 s margin for a starved
+    device thread). The driver sent IRSTP after 1.2 s without a new step, and the board,
+    stopping, lost the four steps still to come."""
+    dev = hd.HostileDevice(hd.garbled_stretch(14, 0.2))
     try:
-        with SerialRing(dev.link, timeout_s=0.8) as ring:
+        with SerialRing(dev.link, timeout_s=1.2) as ring:
             sweep = ring.sweep()
             assert list(sweep.steps) == list(range(hd.MIN_STEP, hd.MAX_STEP + 1))
             assert sweep.missing_steps == ()
             assert getattr(dev, "stops", 0) == 0
-            assert ring.stats.timeouts == 0 and ring.stats.checksum_failures == 10
+            assert ring.stats.timeouts == 0 and ring.stats.checksum_failures == 14
     finally:
         dev.close()
 
