@@ -466,8 +466,8 @@ def known_sigma(points: Points) -> Points:
     below = sigma == -np.inf
     if not (unknown.any() or below.any()):
         return points
-    return dataclasses.replace(points, valid=np.asarray(points.valid, bool) & ~unknown,
-                               sigma_m=np.where(below, 0.0, sigma))
+    return points_with(points, valid=np.asarray(points.valid, bool) & ~unknown,
+                       sigma_m=np.where(below, 0.0, sigma))
 
 
 def mapped_beams(points: Points, params: MapperParams) -> tuple[Points, MapperParams]:
