@@ -331,6 +331,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     regroups = 0
     regroup_changed = True
     older = None          # the labels two groupings ago
+    passes = []           # (iteration, θ, last_moving) at each membership pass
     mode = "regroup"
     it = 0
     settled = False
@@ -342,6 +343,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
             checked = True
             if held is not None:
                 held.put_theta(theta)
+                passes.append((it, theta.copy(), last_moving.copy()))
             # readings far outside the range cannot help a line (but stay for the final check)
             uidx = sw.place(theta, 1.5 * max_range)
             if mode == "regroup":
@@ -408,6 +410,8 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     n_its = it
     if held is not None:
         held.put_theta(theta)
+    if not keep_unconverged:
+        settled_within_noise(passes, theta, last_moving, n_its, cal, sw.log_s)
 
     # final points with the exact curve; fallback readings (no line): θ = 0, σ widened by
     # θ's unknown (see _fallback_nodes)
@@ -423,6 +427,35 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         max_range_m=max_range)
     return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, detail, history,
                           counts, steps)
+
+
+SETTLED_SIGMAS = 1.0  # a reading caught moving reads within this many σ of its converged d
+
+
+def settled_within_noise(passes: list, theta: np.ndarray, last_moving: np.ndarray, n_its: int,
+                         cal: Calibration, log_s: np.ndarray) -> None:
+    """Readings still moving at the cap (``last_moving`` = ``n_its`` − 1) that met Table II's
+    test (no move in the iteration before) at a membership pass and whose distance at the cap
+    lies within ``SETTLED_SIGMAS`` of their noise σ of the distance they had there are
+    marked converged in ``last_moving`` (in place): a regroup or check set them moving again,
+    and what they report has not moved beyond their noise. ``passes``: (iteration, θ,
+    last_moving) at each pass; θ, ``log_s`` (log counts): per live reading. Why:
+    docs/estimator.md, "Caught by the cap"."""
+    late = last_moving == n_its - 1 if n_its else None
+    if late is None or not late.any():
+        return
+    for it, theta_then, moving_then in reversed(passes):   # the latest still state judges
+        i = (late & (moving_then < it - 1)).nonzero()[0]
+        if not i.size:
+            continue
+        late[i] = False
+        log_a, b = cal.log_ab(theta.take(i))
+        d = np.exp(log_a + b * log_s.take(i))
+        log_a, b_then = cal.log_ab(theta_then.take(i))
+        d_then = np.exp(log_a + b_then * log_s.take(i))
+        sigma = np.maximum(np.abs(b) * d * cal.sigma_counts() * np.exp(-log_s.take(i)),
+                           SIGMA_FLOOR_M)
+        last_moving[i[np.abs(d - d_then) <= SETTLED_SIGMAS * sigma]] = n_its - 2
 
 
 def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration,

@@ -17,7 +17,7 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH
                        LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
                        fallback_spread, final_estimate, held_and_pooled, member_spans,
                        nominal_calibration, polyline_ids, range_profiles, reach_cos_limit,
-                       resolve_foldover, scan_order)
+                       resolve_foldover, scan_order, settled_within_noise)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -973,6 +973,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     regroups = 0
     regroup_changed = True
     older = None          # the labels two groupings ago
+    passes = []           # (iteration, θ, last_moving) at each membership pass
     mode = "regroup"
     it = 0
     settled = False
@@ -983,6 +984,9 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
             checked = True
             if held is not None:
                 theta[held.perm] = held.theta
+                # who stood still here met Table II's test; should this pass set them
+                # moving again and the cap catch them, settled_within_noise judges them
+                passes.append((it, theta.copy(), last_moving.copy()))
             d, px, py, sigma = sw.points(theta)
             thr = sw.thresholds(sigma)
             # readings far outside the range cannot help a line (but stay for the final check)
@@ -1062,6 +1066,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     n_its = it
     if held is not None:
         theta[held.perm] = held.theta
+    if not keep_unconverged:
+        settled_within_noise(passes, theta, last_moving, n_its, cal, sw.log_s)
 
     # final points with the exact curve
     s = sw.counts
