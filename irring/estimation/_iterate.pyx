@@ -977,6 +977,18 @@ cdef class Grouping:
                 cm[2, j, i] = _sign(-t)
         if not any_corner:
             return
+        # each line's corner partners in column order (the pair loops visit only them)
+        nbr_arr = _empty(n * n + n + 1, dtype=_intp)
+        cdef Py_ssize_t[::1] nbr = nbr_arr
+        cdef Py_ssize_t[::1] nbr_at = nbr[n * n:]
+        cdef Py_ssize_t n_nbr = 0, t_o
+        for c in range(n):
+            nbr_at[c] = n_nbr
+            for o in range(n):
+                if K[c, o]:
+                    nbr[n_nbr] = o
+                    n_nbr += 1
+        nbr_at[n] = n_nbr
         # (member, line across) pairs, the member beyond the corner: counted, then listed
         for q in range(2):
             if q == 1:
@@ -994,9 +1006,8 @@ cdef class Grouping:
                 c = self.t_col[l]
                 if c < 0:
                     continue
-                for o in range(n):
-                    if not K[c, o]:
-                        continue
+                for t_o in range(nbr_at[c], nbr_at[c + 1]):
+                    o = nbr[t_o]
                     v = ((sw._px[i] - cm[0, c, o]) * dx[c] + (sw._py[i] - cm[1, c, o]) * dy[c]
                          ) * cm[2, c, o]
                     if not v < 0:
