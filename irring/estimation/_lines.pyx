@@ -26,7 +26,7 @@ from cpython.buffer cimport (PyObject_GetBuffer, PyBuffer_Release, PyBUF_C_CONTI
                             PyBUF_FORMAT, PyBUF_WRITABLE)
 from libc.math cimport (sin, cos, sqrt, fabs, hypot, isfinite, exp, atan, nearbyint, M_PI,
                         INFINITY, NAN)
-from libc.stdlib cimport malloc, free
+from libc.stdlib cimport calloc, free, malloc
 
 import numpy as np
 
@@ -1209,9 +1209,15 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
     cdef double* ry = rx + W
     cdef double* ch = rx + 2 * W
     cdef double* sh = rx + 3 * W
+    # each valid reading's beam direction, computed the first time a window needs it
+    # (windows overlap: most readings are in several)
+    cdef double* cos_k = <double*> malloc(2 * K * sizeof(double) + 1)
+    cdef double* sin_k = cos_k + K
+    cdef unsigned char* have = <unsigned char*> calloc(K + 1, 1)
     if (win == NULL or turn == NULL or u == NULL or v == NULL or sg == NULL or q == NULL
-            or rx == NULL):
+            or rx == NULL or cos_k == NULL or have == NULL):
         free(win); free(turn); free(u); free(v); free(sg); free(q); free(rx)
+        free(cos_k); free(have)
         raise MemoryError()
     try:
         for i in range(M):
@@ -1229,11 +1235,19 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
                 turn[nw] = t - 2.0 * M_PI * nearbyint(t / (2.0 * M_PI))
                 rx[nw] = ox[c] - ox[p]
                 ry[nw] = oy[c] - oy[p]
-                ch[nw] = cos(heading[c])
-                sh[nw] = sin(heading[c])
+                if not have[c]:
+                    cos_k[c] = cos(heading[c])
+                    sin_k[c] = sin(heading[c])
+                    have[c] = 1
+                ch[nw] = cos_k[c]
+                sh[nw] = sin_k[c]
                 nw += 1
-            ux = cos(heading[p])
-            uy = sin(heading[p])
+            if not have[p]:
+                cos_k[p] = cos(heading[p])
+                sin_k[p] = sin(heading[p])
+                have[p] = 1
+            ux = cos_k[p]
+            uy = sin_k[p]
             nn = nw if nw > 1 else 1.0
             signed = 0.0
             sl = 0.0
@@ -1327,5 +1341,6 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
                 F[4, i] = t if t < max_inc else max_inc
     finally:
         free(win); free(turn); free(u); free(v); free(sg); free(q); free(rx)
+        free(cos_k); free(have)
     return (out_f[0], out_f[1], out_f[2], out_f[3], out_f[4], out_b[0], out_b[1], out_b[2],
             out_b[3])
