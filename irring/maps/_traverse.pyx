@@ -448,8 +448,8 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef unsigned char* held
     cdef Seg s
     cdef Cols c
-    cdef bint two, is_valid
-    cdef int pass_
+    cdef bint two, is_valid, again
+    cdef int pass_, n_pass
     if not (origin_y.shape[0] == heading.shape[0] == x.shape[0] == y.shape[0]
             == sigma_m.shape[0] == valid.shape[0] == no_return.shape[0]
             == reach_m.shape[0] == n):
@@ -637,21 +637,29 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                         n_deep += 1
         if kept:
             # the runs' cumulative sums (down the columns, then along each row) count the
-            # valid beams' clean passes: add their l_free (none in held cells), unclamped
-            for iy in range(1, bh + 1):
-                for ix in range(bw):
-                    ry[iy * bw + ix] += ry[(iy - 1) * bw + ix]
+            # valid beams' clean passes: add their l_free (none in held cells), unclamped.
+            # One pass, row by row: a row's column sums need only the row above; with
+            # no-return beams to come it leaves the runs zeroed behind it for them
+            again = nb > nv
             for iy in range(bh):
                 row = rx + iy * (bw + 1)
                 col = ry + iy * bw
                 out = &log_odds[by0 + iy, bx0]
                 run = 0
                 for ix in range(bw):
+                    if iy > 0:
+                        col[ix] += col[ix - bw]
+                        if again:
+                            col[ix - bw] = 0
                     run += row[ix]
+                    if again:
+                        row[ix] = 0
                     if not held[iy * bw + ix]:
                         out[ix] += <double>(run + col[ix]) * l_free
-            if nb > nv:                                # the runs again, for no-return beams
-                memset(rx, 0, (bh * (bw + 1) + (bh + 1) * bw) * sizeof(long long))
+                if again:
+                    row[bw] = 0                        # (the spare column past the box)
+            if again:                                  # the last row and the spare one
+                memset(ry + (bh - 1) * bw, 0, 2 * bw * sizeof(long long))
         if nb > nv and stops:
             for iy in range(bh):
                 out = &log_odds[by0 + iy, bx0]
@@ -701,27 +709,26 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                     if log_odds[iy, ix] > stop_at:
                         break
                     passes[(iy - by0) * bw + ix - bx0] += 1
-        if silent_runs:   # the runs' counts join the walked passes
-            for iy in range(1, bh + 1):
-                for ix in range(bw):
-                    ry[iy * bw + ix] += ry[(iy - 1) * bw + ix]
+        for j in range(n_deep):                        # the surface's depth
+            grid[deep_at[j]] += deep_w[j]
+        if kept:
+            # the no-return passes' log-odds (none in held cells), then the clamp; the
+            # silent runs' counts (cumulative sums as above) join the walked passes first
             for iy in range(bh):
+                out = &log_odds[by0 + iy, bx0]
                 row = rx + iy * (bw + 1)
                 col = ry + iy * bw
                 run = 0
                 for ix in range(bw):
-                    run += row[ix]
-                    passes[iy * bw + ix] += <int>(run + col[ix])
-        for j in range(n_deep):                        # the surface's depth
-            grid[deep_at[j]] += deep_w[j]
-        if kept:
-            # the no-return passes' log-odds (none in held cells), then the clamp
-            for iy in range(bh):
-                out = &log_odds[by0 + iy, bx0]
-                for ix in range(bw):
+                    n_pass = passes[iy * bw + ix]
+                    if silent_runs:
+                        if iy > 0:
+                            col[ix] += col[ix - bw]
+                        run += row[ix]
+                        n_pass += <int>(run + col[ix])
                     v = out[ix]
                     if not held[iy * bw + ix]:
-                        v += passes[iy * bw + ix] * l_nr
+                        v += n_pass * l_nr
                     out[ix] = lo if v < lo else (hi if v > hi else v)
     return kept > 0
 
