@@ -272,6 +272,13 @@ effects: [incidence, noise, quantization, foldover]
 """
 
 
+def wrong_branch(p, sweep, cal) -> int:
+    """Valid readings truly at most 50 mm past the peak read 30 mm long or more: the far
+    branch where the near one was meant."""
+    d_true = sweep.truth.distance_m
+    return int(np.sum(p.valid & (d_true < cal.peak_distance_m + 0.05) & (p.d > d_true + 0.03)))
+
+
 @pytest.mark.parametrize("room", [PILASTER_A21, CORNER_A02], ids=["a21-pilaster", "a02-corner"])
 def test_a_reading_the_judging_pass_left_out_is_never_valid_on_the_far_branch(room):
     sc = loads(room, source="<test>")
@@ -280,10 +287,7 @@ def test_a_reading_the_judging_pass_left_out_is_never_valid_on_the_far_branch(ro
     judged_out = wrong = 0
     for sw in sweeps:
         p = estimate(sw, cal)
-        d_true = sw.truth.distance_m
-        # the far branch for a reading truly at most 50 mm past the peak, 30 mm long or more
-        wrong += int(np.sum(p.valid & (d_true < cal.peak_distance_m + 0.05)
-                            & (p.d > d_true + 0.03)))
+        wrong += wrong_branch(p, sw, cal)
         judged_out += int(np.sum(p.reason == Reason.FOLDOVER_AMBIGUOUS))
     assert wrong == 0 and judged_out > 500
 
@@ -309,9 +313,8 @@ def test_a_line_decides_the_far_branch_only_where_it_is_seen():
     wrong = valid = 0
     for sw in sweeps:
         p = estimate(sw, cal)
-        d_true, hit = sw.truth.distance_m, sw.truth.hit_point
-        wrong += int(np.sum(p.valid & (d_true < cal.peak_distance_m + 0.05)
-                            & (p.d > d_true + 0.03)))
+        hit = sw.truth.hit_point
+        wrong += wrong_branch(p, sw, cal)
         err = np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[p.valid]
         assert err.size and err.max() < 0.100
         valid += int(p.valid.sum())
