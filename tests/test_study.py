@@ -137,7 +137,7 @@ BAD = [
 @pytest.mark.parametrize("designs, refused", [(5, False), (6, True)])
 def test_a_study_too_big_for_the_work_budget_is_refused_as_too_big(tmp_path, capsys, designs,
                                                                    refused):
-    """One budget for every command (core.WORK_MEMORY_BYTES, core.check_work): a study's
+    """One budget for every command (core.WORK_MEMORY_BYTES, core.work_refusal): a study's
     results read back take 3,800 bytes a run, so 500,000 runs (1.9 GB) fit and 600,000
     (2.3 GB) do not. It was a limit of its own (200,000 runs, exit 1, its own wording):
     6,400,000 runs, whose grid alone filled memory before the first run, were refused as a
