@@ -598,8 +598,7 @@ def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal
     no surface in range is cut off above it) and that level cuts into it
     (``cal.silent_range_m`` short of ``max_range_m``); no change elsewhere. Why and what it
     measured: docs/estimator.md, "Pooled readings"."""
-    if not (cal.falling and cal.silent_range_m < max_range_m
-            and max_range_m >= cal.max_range_m):
+    if not (read_to_own_range(cal, max_range_m) and max_range_m >= cal.max_range_m):
         return counts, reason
     shape = counts.shape
     order = np.argsort(np.asarray(steps), kind="stable")      # rows in step order
@@ -1047,7 +1046,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     # whose direction is that unsure gives its members no θ (docs/estimator.md, "A far
     # line's direction")
     unsure = np.zeros(vi.size, dtype=bool)
-    if cal.falling and cal.silent_range_m < points.max_range_m and member.size:
+    if read_to_own_range(cal, points.max_range_m) and member.size:
         at = vi[member]
         sigma_perp = points.sigma_m.reshape(-1)[at] * np.cos(theta_now[member])
         se_dir = direction_se(points.x.reshape(-1)[at], points.y.reshape(-1)[at], sigma_perp,
