@@ -1261,8 +1261,9 @@ def reach_cos_limit(cal: Calibration, options: LineOptions) -> float:
 def member_spans(points: Points, found: Lines, use: np.ndarray):
     """The valid members of the lines ``use`` (indices into ``found``) and their extent.
 
-    Returns (col, at, mcol, lo, hi): ``col`` (L,) each line's position in ``use`` (−1: not
-    used); ``at`` the members' flat (S·N) indices and ``mcol`` their line's position; ``lo``,
+    Returns (col, at, mcol, along, lo, hi): ``col`` (L,) each line's position in ``use`` (−1:
+    not used); ``at`` the members' flat (S·N) indices, ``mcol`` their line's position and
+    ``along`` their coordinate along it from its centroid (m); ``lo``,
     ``hi`` (len(use),) the least and greatest member coordinate along each line from its
     centroid (m; ±inf for a line without valid members)."""
     lab = found.label.reshape(-1)
@@ -1279,7 +1280,7 @@ def member_spans(points: Points, found: Lines, use: np.ndarray):
     hi = np.full(use.size, -np.inf)
     np.minimum.at(lo, mcol, along)
     np.maximum.at(hi, mcol, along)
-    return col, at, mcol, lo, hi
+    return col, at, mcol, along, lo, hi
 
 
 def beam_crossings(ox, oy, ux, uy, c, e, nrm):
@@ -1486,7 +1487,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     use = (np.zeros(0, dtype=int) if found is None else found.usable.nonzero()[0])
     if use.size:
         c, e, nrm = found.centroid[use], found.direction[use], found.normal[use]
-        col, at, mcol, lo, hi = member_spans(p, found, use)
+        col, at, mcol, m_along, lo, hi = member_spans(p, found, use)
         # a line one sensor alone saw may be a wrong-branch curve cut into pieces (or a few
         # readings at the peak, where both branches meet, with a poor direction): only lines
         # two sensors agree on judge other readings
@@ -1499,6 +1500,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     else:
         anchored = np.zeros(0, bool)
         at = mcol = np.zeros(0, int)
+        m_along = np.zeros(0)
         c = e = nrm = np.zeros((0, 2))
         lo = hi = np.zeros(0)
         trusted = np.zeros(0, bool)
@@ -1538,7 +1540,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
                        np.abs(t - d_far) / tol_far, np.inf)
     # … and only where the line is seen: behind a pilaster or a box the wall's line runs on
     # unseen, and a near reading of the face in front, read far, lands on it there
-    fit_far[~_seen_there(fit_far <= 1.0, along, mcol, at, p, found, use)] = np.inf
+    fit_far[~_seen_there(fit_far <= 1.0, along, mcol, m_along)] = np.inf
     # Two sensors agreeing on a line is no proof it is seen far: two neighbours close to one
     # surface both read it far, and their far end points (curves) can fit one line behind it.
     # A line decides "far" only once it is anchored: _FOLD_ANCHOR members certainly far (near
@@ -1570,17 +1572,15 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     return near, far, out[0], out[1], out[2]
 
 
-def _seen_there(pairs: np.ndarray, along: np.ndarray, mcol: np.ndarray, at: np.ndarray,
-                p: Points, found: Lines, use: np.ndarray) -> np.ndarray:
-    """(A, L): for the (reading, line) ``pairs``, whether the line has a valid member within
-    ``_FOLD_SEEN_M`` of the crossing ``along`` it (True elsewhere)."""
+def _seen_there(pairs: np.ndarray, along: np.ndarray, mcol: np.ndarray,
+                m_along: np.ndarray) -> np.ndarray:
+    """(A, L): for the (reading, line) ``pairs``, whether the line has a valid member (line
+    ``mcol``, at ``m_along`` along it: :func:`member_spans`) within ``_FOLD_SEEN_M`` of the
+    crossing ``along`` it (True elsewhere)."""
     out = np.ones(pairs.shape, bool)
     a_idx, l_idx = pairs.nonzero()
     if not a_idx.size:
         return out
-    c, e = found.centroid[use], found.direction[use]
-    m_along = ((p.x.reshape(-1)[at] - c[mcol, 0]) * e[mcol, 0]
-               + (p.y.reshape(-1)[at] - c[mcol, 1]) * e[mcol, 1])
     # members sorted by line, then along it: a query's neighbours are found by bisection
     span = 2.0 * (float(np.max(np.abs(m_along))) + 1.0)
     keys = np.sort(mcol * span + m_along)

@@ -1206,7 +1206,7 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
     if use.size == 0:
         return None
     c, e, nrm = found.centroid[use], found.direction[use], found.normal[use]
-    _, _, _, lo, hi = member_spans(points, found, use)
+    *_, lo, hi = member_spans(points, found, use)
     lo_b, hi_b = clip_at_corners(c, e, lo, hi)
     h = points.heading.reshape(-1)[nr]
     un, t, ahead, along = beam_crossings(points.origin_x.reshape(-1)[nr],
