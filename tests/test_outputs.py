@@ -236,9 +236,22 @@ def test_a_device_or_pipe_at_an_output_path_is_refused_never_replaced(tmp_path, 
     assert main(["calibrate", "--out", str(pipe)]) == 4
     assert (f"irring calibrate: error: {pipe}: is not a regular file (a device, pipe or "
             "socket); irring writes a new file there, so name one") in capsys.readouterr().err
-    with pytest.raises(SystemExit) as usage:   # --mcap: refused before the run
+    assert pipe.is_fifo() and link.is_symlink() and sorted(os.listdir(tmp_path)) == [
+        "pipe", "to-pipe.yaml"]
+
+
+def test_mcap_at_a_device_is_refused_before_the_run(tmp_path, capsys):
+    """`--mcap` naming a pipe (through a symlink) is a usage error before any work; without
+    the mcap extra the option is refused for that reason instead (test_cli tests that)."""
+    pytest.importorskip("mcap_ros2")
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    link = tmp_path / "to-pipe.yaml"
+    link.symlink_to(pipe)
+    with pytest.raises(SystemExit) as usage:
         main(["run", "t_room", "--mcap", str(link), "--out", str(tmp_path / "o")])
     assert usage.value.code == 2
     assert f"--mcap: {link}: is a folder or a device; name a file" in capsys.readouterr().err
     assert pipe.is_fifo() and link.is_symlink() and sorted(os.listdir(tmp_path)) == [
         "pipe", "to-pipe.yaml"]
+
