@@ -490,7 +490,10 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         doubt_far=snap and cal.folds and not read_to_own_range(cal, points.max_range_m))
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
-        points = (snapper or snap_to_lines)(points, label, cal.min_range_m,
+        # a part read to its own range: the overlapping lines of one wall fitted as one
+        snap_label = (fused_lines(points, label) if read_to_own_range(cal, points.max_range_m)
+                      else label)
+        points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
@@ -506,6 +509,90 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = silent_reach(points, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+FUSE_MIN = 5            # lines of at least this many valid members are tried together …
+FUSE_Z = 2.5            # … where direction and offset agree within this many standard errors …
+FUSE_OVERLAP_M = 0.05   # … over at least this much of both lines' extents …
+FUSE_TURN_MAX = math.radians(5)  # … and whose directions differ by at most this
+
+
+def fused_lines(points: Points, label: np.ndarray) -> np.ndarray:
+    """``label`` (S, N: each reading's line, −1 none) with lines that are one surface joined:
+    lines of ≥ ``FUSE_MIN`` valid members whose extents overlap by ≥ ``FUSE_OVERLAP_M`` and
+    whose directions, and offsets at the middle of the overlap, differ by at most ``FUSE_Z``
+    of their combined standard errors (total least squares; the members' scatter about
+    their line or, where more, their own noise across it) take the smallest label of their
+    group. Overlapping lines are of different sensors that saw one wall; the snap then fits
+    them as one, which averages their independent offsets. Why: docs/estimator.md, "Far
+    lines fused across sensors"."""
+    label = np.asarray(label)
+    member = points.valid & (label >= 0)
+    if not member.any():
+        return label
+    g = label[member]
+    n_lines = int(label.max()) + 1     # invalid readings may hold the highest labels
+    n = np.bincount(g, minlength=n_lines)
+    cand = (n >= FUSE_MIN).nonzero()[0]
+    if cand.size < 2:
+        return label
+    x, y = points.x[member], points.y[member]
+    nn = np.maximum(n, 1)
+    mx, my = np.bincount(g, x, n_lines) / nn, np.bincount(g, y, n_lines) / nn
+    u, v = x - mx.take(g), y - my.take(g)
+    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_lines),
+                             np.bincount(g, u * u - v * v, n_lines))
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    along = u * ca.take(g) + v * sa.take(g)
+    rel = v * ca.take(g) - u * sa.take(g)
+    # the members' scatter about their line, or their own noise across it where that is
+    # more: pooled readings (13 steps' mean counts) share their noise and scatter less
+    own = points.sigma_m[member] * np.cos(points.theta[member])
+    var_perp = np.maximum(np.bincount(g, rel * rel, n_lines),
+                          np.bincount(g, own * own, n_lines)) / nn
+    spread = np.maximum(np.bincount(g, along * along, n_lines), 1e-12)
+    lo = np.full(n_lines, np.inf)
+    hi = np.full(n_lines, -np.inf)
+    np.minimum.at(lo, g, along)
+    np.maximum.at(hi, g, along)
+    i, j = (a.ravel() for a in np.meshgrid(cand, cand, indexing="ij"))
+    keep = i < j
+    i, j = i[keep], j[keep]
+    # j's extent in i's frame (along i's direction, from i's centroid)
+    dxc, dyc = mx[j] - mx[i], my[j] - my[i]
+    cj = dxc * ca[i] + dyc * sa[i]
+    dot = ca[i] * ca[j] + sa[i] * sa[j]
+    ends = cj + dot * lo[j], cj + dot * hi[j]
+    a = np.maximum(lo[i], np.minimum(*ends))
+    b = np.minimum(hi[i], np.maximum(*ends))
+    s = 0.5 * (a + b)                                   # the overlap's middle, on i
+    px, py = mx[i] + s * ca[i], my[i] + s * sa[i]
+    off = (py - my[j]) * ca[j] - (px - mx[j]) * sa[j]   # j's line from there, across j
+    sj = (px - mx[j]) * ca[j] + (py - my[j]) * sa[j]
+    var_a = var_perp[i] / spread[i] + var_perp[j] / spread[j]
+    var_off = (var_perp[i] / nn[i] + var_perp[i] / spread[i] * s * s
+               + var_perp[j] / nn[j] + var_perp[j] / spread[j] * sj * sj)
+    turn = np.arcsin(np.clip(np.abs(ca[i] * sa[j] - sa[i] * ca[j]), 0.0, 1.0))
+    join = ((b - a >= FUSE_OVERLAP_M) & (turn <= np.minimum(FUSE_Z * np.sqrt(var_a),
+                                                             FUSE_TURN_MAX))
+            & (np.abs(off) <= FUSE_Z * np.sqrt(var_off)))
+    if not join.any():
+        return label
+    root = np.arange(n_lines)
+
+    def find(k):
+        while root[k] != k:
+            root[k] = root[root[k]]
+            k = root[k]
+        return k
+    for p, q in zip(i[join], j[join]):
+        rp, rq = find(p), find(q)
+        if rp != rq:
+            root[max(rp, rq)] = min(rp, rq)
+    top = np.array([find(k) for k in range(n_lines)])
+    out = label.copy()
+    out[label >= 0] = top.take(label[label >= 0])
+    return out
 
 
 def read_to_own_range(cal: Calibration, max_range_m: float) -> bool:
