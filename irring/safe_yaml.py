@@ -3,9 +3,10 @@ curves, the scenario inside a recording, study files).
 
 PyYAML's ``safe_load`` builds no objects, but it still lets the last of two equal keys win
 silently, expands aliases (a 562-byte "billion laughs" file grows to gigabytes) and recurses
-once per nesting level. :func:`load` refuses all three, and :func:`read_text` refuses what
-is not a readable UTF-8 file of sane size, each with one line naming the file and the line.
-Numbers read as written (``1e-3``); YAML 1.1's octal ``0750`` and base-60 ``1:30`` are refused.
+once per nesting level. :func:`load` refuses these and a file past its kind's
+:data:`LIMITS`, :func:`read_text` what is not a readable UTF-8 file, each with one line
+naming the file and the line. Numbers read as written (``1e-3``); YAML 1.1's octal ``0750``
+and base-60 ``1:30`` are refused.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from .errors import InputError, brief
 
 MAX_DEPTH = 64             # nesting levels; irring's deepest schema uses 5
 MAX_BYTES = 8 * 2**20      # a scenario with 100k outline corners is ~3 MB
+MAX_VALUES = 1_000_000     # scalars, lists and mappings of one file (a scenario of 10,000
+#                            corners, 10,000 poses and 10,000 obstacles has ~190,000)
 MAX_DIGITS = 100           # of a whole number: more than any file's field takes (a float
 #                            overflows at 309 digits; Python refuses to parse 4,300)
 
@@ -29,16 +32,54 @@ _EXPONENT_FLOAT = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE
 _FLOAT_TAG = "tag:yaml.org,2002:float"
 
 
+# (bytes, values) a kind of file may have, checked before a value is built (building one
+# costs far more than parsing it); the smaller kinds are far from their limits in use (a
+# calibration `irring calibrate` writes is 2 kB, 130 values) and refuse a wrong or runaway
+# file at once instead of after minutes
+LIMITS = {
+    "scenario file": (MAX_BYTES, MAX_VALUES),
+    "calibration file": (2**20, 100_000),           # 10,000 curve rows
+    "calibration progress file": (MAX_BYTES, MAX_VALUES),
+    "study file": (2**20, 100_000),
+    "sensor curve file": (2**20, 100_000),
+    "map_server YAML": (2**16, 1_000),
+}
+
+
+def limits(what: str) -> tuple[int, int]:
+    """(bytes, values) a ``what`` (a key of :data:`LIMITS`) may have; any other kind gets
+    the largest."""
+    return LIMITS.get(what, (MAX_BYTES, MAX_VALUES))
+
+
 class YamlError(InputError):
     """A YAML text irring refuses to read; the message names the source and line."""
 
 
-class _StrictLoader(yaml.SafeLoader):
-    """SafeLoader without aliases, duplicate keys or unbounded nesting."""
+# libyaml's parser (C, ~30× PyYAML's) feeds the Python composer, which does the checks;
+# PyYAML's own reader, scanner and parser where PyYAML was built without libyaml
+_PARSING = ((yaml.cyaml.CParser,) if yaml.__with_libyaml__ else
+            (yaml.reader.Reader, yaml.scanner.Scanner, yaml.parser.Parser))
 
-    def __init__(self, stream: str, source: str):
-        super().__init__(stream)
+
+class _StrictLoader(yaml.composer.Composer, *_PARSING, yaml.constructor.SafeConstructor,
+                    yaml.resolver.Resolver):
+    """SafeLoader without aliases, duplicate keys, unbounded nesting or too many values."""
+
+    def __init__(self, stream: str, source: str, what: str, max_values: int):
+        if yaml.__with_libyaml__:
+            yaml.cyaml.CParser.__init__(self, stream)
+        else:
+            yaml.reader.Reader.__init__(self, stream)
+            yaml.scanner.Scanner.__init__(self)
+            yaml.parser.Parser.__init__(self)
+        yaml.composer.Composer.__init__(self)
+        yaml.constructor.SafeConstructor.__init__(self)
+        yaml.resolver.Resolver.__init__(self)
         self.source = source
+        self.what = what
+        self.max_values = max_values
+        self.values = 0
         self.depth = 0
 
     def construct_object(self, node, deep=False):
@@ -87,6 +128,11 @@ class _StrictLoader(yaml.SafeLoader):
             event = self.peek_event()
             raise self.fail(event.start_mark, f"YAML aliases (*{brief(event.anchor)[1:-1]}) are "
                                               "not allowed; write the value out")
+        self.values += 1
+        if self.values > self.max_values:
+            raise self.fail(self.peek_event().start_mark,
+                            f"more than {self.max_values:,} values (numbers, keys, lists); "
+                            f"too big for a {self.what}")
         self.depth += 1
         if self.depth > MAX_DEPTH:
             raise self.fail(self.peek_event().start_mark,
@@ -119,23 +165,40 @@ for _first in "-+.0123456789":
     _StrictLoader.add_implicit_resolver(_FLOAT_TAG, _EXPONENT_FLOAT, [_first])
 
 
-def load(text: str, source: str = "<string>") -> Any:
+def load(text: str, source: str = "<string>", what: str = "YAML file") -> Any:
     """Parse one YAML document strictly: no aliases, no duplicate keys, at most
-    :data:`MAX_DEPTH` levels. Raises :class:`YamlError` naming ``source`` and the line."""
+    :data:`MAX_DEPTH` levels and the :func:`limits` of a ``what``. Raises
+    :class:`YamlError` naming ``source`` and the line."""
     if not isinstance(text, str):
         raise YamlError(f"{source}: expected YAML text, got {type(text).__name__}")
+    max_bytes, max_values = limits(what)
+    if len(text) > max_bytes:      # text from a recording, not read by read_text
+        raise YamlError(f"{source}: {len(text):,} characters is too big for a {what} (at "
+                        f"most {max_bytes:,})")
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:   # a lone surrogate, from a JSON escape in a recording
+        raise YamlError(f"{source}: line {text.count(chr(10), 0, exc.start) + 1}: character "
+                        f"U+{ord(text[exc.start]):04X} is not allowed in YAML (it is half of "
+                        "a UTF-16 pair)") from None
     loader = None
     try:
-        loader = _StrictLoader(text, source)   # (its reader refuses control characters)
+        # (its reader refuses control characters)
+        loader = _StrictLoader(text, source, what, max_values)
         return loader.get_single_data()
     except YamlError:
         raise
     except yaml.reader.ReaderError as exc:
-        raise YamlError(f"{source}: character {brief(exc.character)} at position "
-                        f"{exc.position} is not allowed in YAML (control characters are "
-                        "not)") from None
+        # libyaml counts the position in UTF-8 bytes, PyYAML in characters
+        before = text.encode("utf-8")[:exc.position].decode(
+            "utf-8", "replace") if yaml.__with_libyaml__ else text[:exc.position]
+        code = exc.character if isinstance(exc.character, int) else ord(exc.character)
+        raise YamlError(f"{source}: line {before.count(chr(10)) + 1}: character U+{code:04X} "
+                        "is not allowed in YAML (control characters are not)") from None
     except yaml.MarkedYAMLError as exc:
         where = f"line {exc.problem_mark.line + 1}: " if exc.problem_mark else ""
+        if "maximum nesting depth" in str(exc.problem):   # libyaml stops at 1,000 levels
+            raise YamlError(f"{source}: {where}nested more than {MAX_DEPTH} levels deep") from None
         raise YamlError(f"{source}: {where}not valid YAML: {brief(exc.problem or str(exc))[1:-1]}") from None
     except yaml.YAMLError as exc:
         raise YamlError(f"{source}: not valid YAML: {brief(str(exc))}") from None
@@ -146,11 +209,12 @@ def load(text: str, source: str = "<string>") -> Any:
             loader.dispose()
 
 
-def read_text(path: str | Path, what: str = "file", max_bytes: int = MAX_BYTES) -> str:
+def read_text(path: str | Path, what: str = "file") -> str:
     """The UTF-8 text of a file a user named; :class:`InputError` (one line naming the path)
-    for a missing file, a folder, an unreadable or oversized file or bytes that are not
-    UTF-8."""
+    for a missing file, a folder, an unreadable file, one over the :func:`limits` of a
+    ``what``, or bytes that are not UTF-8."""
     path = Path(path)
+    max_bytes = limits(what)[0]
     try:
         if path.is_dir():
             raise InputError(f"{path}: is a folder; expected a {what}")
@@ -158,8 +222,8 @@ def read_text(path: str | Path, what: str = "file", max_bytes: int = MAX_BYTES) 
             raise InputError(f"{path}: no such {what}")
         size = path.stat().st_size
         if size > max_bytes:
-            raise InputError(f"{path}: {size / 2**20:.1f} MB is too big for a {what} "
-                             f"(at most {max_bytes / 2**20:g} MB)")
+            raise InputError(f"{path}: {size:,} bytes is too big for a {what} (at most "
+                             f"{max_bytes / 2**20:g} MB, {max_bytes:,} bytes)")
         # a device or pipe reports size 0 and may never end (/dev/zero): read no more
         # than the limit allows
         with open(path, "rb") as f:
@@ -179,4 +243,4 @@ def read_text(path: str | Path, what: str = "file", max_bytes: int = MAX_BYTES) 
 
 def load_file(path: str | Path, what: str = "file") -> Any:
     """:func:`read_text` then :func:`load`."""
-    return load(read_text(path, what), str(path))
+    return load(read_text(path, what), str(path), what)

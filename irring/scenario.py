@@ -602,7 +602,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
 def loads(text: str, source: str = "<string>") -> Scenario:
     """Load and validate a scenario from its YAML ``text``; ``source`` names it in errors."""
     try:
-        raw = safe_yaml.load(text, source)
+        raw = safe_yaml.load(text, source, "scenario file")
     except safe_yaml.InputError as exc:
         raise ScenarioError(str(exc)) from None
     return dataclasses.replace(parse(raw, source), text=text)

@@ -102,6 +102,59 @@ def test_non_utf8_and_folders_name_the_file(tmp_path):
         safe_yaml.load_file(tmp_path, "scenario file")
 
 
+def _calibration_of(rows: int, extra: str = "") -> str:
+    head = Calibration.nominal("gp2d12").to_yaml().split("curve:")[0]
+    return head + extra + "curve:\n" + "".join(
+        f"- {{theta_deg: {i * 60 / rows:.7f}, a: {700 - i * 300 / rows:.5f}, b: -1.17}}\n"
+        for i in range(rows))
+
+
+@pytest.mark.parametrize("text, message", [
+    # 22,000 valid rows (1.1 MB): PyYAML took ~60 s under load to read 5 MB of them
+    (lambda: _calibration_of(22_000), "cal.yaml: 1,096,753 bytes is too big for a calibration "
+                                      "file (at most 1 MB, 1,048,576 bytes)"),
+    # 440 kB, 150,000 numbers in one flow list: read whole (11 s at load 6), then "unknown key"
+    (lambda: _calibration_of(10, "extra: [" + "0, " * 150_000 + "0]\n"),
+     "cal.yaml: line 14: more than 100,000 values (numbers, keys, lists); too big for a "
+     "calibration file"),
+])
+def test_a_file_past_the_size_of_its_kind_is_refused_before_it_is_parsed(tmp_path, capsys, text,
+                                                                         message):
+    cal = tmp_path / "cal.yaml"
+    cal.write_text(text())
+    assert main(["run", "t_room", "--calibration", str(cal), "--out", str(tmp_path / "o")]) == 1
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_calibration_file_of_the_rows_its_limits_promise_loads():
+    cal, _ = load_calibration(_calibration_of(10_000), is_text=True)   # safe_yaml.LIMITS
+    assert cal.theta_rad.size == 10_000 and cal.theta_rad[-1] == pytest.approx(
+        math.radians(60 * 9_999 / 10_000))
+
+
+def test_the_values_limit_counts_every_value():
+    at_limit = "a: [" + "1, " * 996 + "2]"     # the mapping, its key and the list are values
+    assert safe_yaml.load(at_limit, "f.yaml", "map_server YAML")["a"][-2:] == [1, 2]
+    with pytest.raises(safe_yaml.YamlError, match="f.yaml: line 1: more than 1,000 values "
+                                                  r"\(numbers, keys, lists\); too big for a "
+                                                  "map_server YAML"):
+        safe_yaml.load(at_limit.replace("[", "[0, "), "f.yaml", "map_server YAML")
+
+
+def test_yaml_text_from_a_recording_is_bounded_like_a_file():
+    """A recording's embedded calibration and scenario are read with load(), not read_text:
+    they were parsed whatever their length (a recording's text may be 8 M characters)."""
+    text = _calibration_of(10) + "#" * 2**20
+    with pytest.raises(CalibrationError, match=r"<recording's calibration>: 1,049,\d+ characters "
+                                               r"is too big for a calibration file \(at most "
+                                               r"1,048,576\)"):
+        load_calibration(text, is_text=True)
+    with pytest.raises(ScenarioError, match="x: line 2: character U\\+D800 is not allowed in YAML "
+                                            r"\(it is half of a UTF-16 pair\)"):
+        loads("name: a\ndescription: \ud800\n", "x")
+
+
 # --------------------------------------------------------------------------- scenarios
 
 _VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**12, 10**12),
@@ -1168,17 +1221,17 @@ def test_calibrate_resume_needs_a_port(tmp_path, capsys):
 # --------------------------------------------------------------------------- files and environment
 
 
-@pytest.mark.parametrize("argv, what", [
-    (["run", "/dev/zero"], "scenario file"),
-    (["run", "t_room", "--calibration", "/dev/zero"], "calibration file"),
+@pytest.mark.parametrize("argv, limit", [
+    (["run", "/dev/zero"], "8 MB; too big for a scenario file"),
+    (["run", "t_room", "--calibration", "/dev/zero"], "1 MB; too big for a calibration file"),
 ])
 def test_a_device_named_as_an_input_file_is_read_only_up_to_the_limit(tmp_path, capsys, argv,
-                                                                      what):
+                                                                      limit):
     """/dev/zero (size 0 to stat) was read until memory ran out: the process was killed by
     the kernel (exit 137), or under a memory limit exit 5 'ran out of memory'."""
     assert main([*argv, "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err
-    assert f"/dev/zero: more than 8 MB; too big for a {what}" in err
+    assert f"/dev/zero: more than {limit}" in err
     assert not (tmp_path / "o").exists()
 
 

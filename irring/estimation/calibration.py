@@ -531,7 +531,7 @@ def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False
         except safe_yaml.InputError as exc:
             raise CalibrationError(str(exc)) from None
     try:
-        raw = safe_yaml.load(text, source)
+        raw = safe_yaml.load(text, source, "calibration file")
     except safe_yaml.InputError as exc:
         raise CalibrationError(str(exc)) from None
     return Calibration.from_dict(raw, source), text
@@ -1086,7 +1086,7 @@ def load_progress(path: str | Path) -> Progress:
     and the key for anything else."""
     source = str(path)
     try:
-        raw = safe_yaml.load(safe_yaml.read_text(path, "calibration progress file"), source)
+        raw = safe_yaml.load_file(path, "calibration progress file")
     except safe_yaml.InputError as exc:
         raise CalibrationError(str(exc)) from None
 
