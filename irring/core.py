@@ -46,6 +46,8 @@ ESTIMATE_BYTES_PER_READING = 2_700  # more for each reading of the sweep being e
 BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
 RESULT_ROW_BYTES = 3_800            # a study's results.csv row read back to summarise
                                     # (measured: 100 000 rows, 377 MB)
+RESULT_ROW_TEXT_BYTES = 500         # the line of such a row (a study writes 340-480 bytes); a
+                                    # longer line's excess is held as well
 MAX_RUNS = WORK_MEMORY_BYTES // RESULT_ROW_BYTES   # runs of one study (526,315)
 MAX_SEEDS = 100_000                 # seeds of one configuration a study, compare or bench runs
 # |value| of a position or size (m) in a scene or recording: 1e300 m is finite, but squaring

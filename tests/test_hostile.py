@@ -800,6 +800,9 @@ def one_run_study(tmp_path_factory):
     (lambda row: row.update(seed="2.5"), "line 2, seed: '2.5' is not allowed; a whole number"),
     (lambda row: row.update(compute_ms=""), "line 2, compute_ms: '' is not allowed"),
     (None, "line 3 repeats the run of line 2 (rotating12, t_room_cylinder, seed 1)"),
+    # past csv's field limit (128 kB): exit 70 "Error: field larger than field limit"
+    (lambda row: row.update(sensor="x" * 200_000), "line 2 is longer than 65,536 bytes (a study "
+                                                   "writes ~500); the file was edited or damaged"),
 ])
 def test_a_damaged_results_csv_is_refused_on_resume_naming_line_and_column(
         tmp_path, capsys, one_run_study, edit, message):
@@ -847,6 +850,88 @@ def test_a_results_csv_saved_by_a_spreadsheet_is_resumed_or_named(tmp_path, caps
         assert json.loads((out / "summary.json").read_text())["configurations"][0]["runs"] == 1
     else:
         assert f"{out / 'results.csv'}: {message}" in err and "internal error" not in err
+
+
+def test_a_results_csv_that_is_a_device_is_refused_not_read_whole(tmp_path, one_run_study):
+    """results.csv was read whole (read_bytes): a link to /dev/zero filled memory (here: exit
+    5 'ran out of memory' under a 1.5 GB address-space limit; without one the kernel kills)."""
+    import resource
+    import subprocess
+    import sys
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (1_500_000_000, 1_500_000_000))
+
+    study, _ = one_run_study
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "results.csv").symlink_to("/dev/zero")
+    done = subprocess.run([sys.executable, "-m", "irring", "study", str(study), "--out",
+                           str(out), "--workers", "1", "--resume"], preexec_fn=limit,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1, done.stderr
+    assert (f"irring study: error: {out / 'results.csv'}: not a regular file; a study's "
+            "results.csv is the file it wrote: choose another --out") in done.stderr
+
+
+def test_a_results_csv_with_a_line_break_in_a_cell_is_resumed(tmp_path, capsys):
+    """A scenario path with a line break is written quoted over two lines; --resume split
+    the file at every line break and refused the study's own file ('line 2 has 2 cells')."""
+    scene = tmp_path / "t\nroom.yaml"
+    scene.write_text(resolve("t_room_cylinder").read_text())
+    (tmp_path / "s.yaml").write_text(f'designs: [rotating12]\nscenarios: ["{tmp_path}/t\\nroom.yaml"]'
+                                     "\nseeds: 2\n")
+    argv = ["study", str(tmp_path / "s.yaml"), "--out", str(tmp_path / "o"), "--workers", "1"]
+    assert main(argv) == 0
+    text = (tmp_path / "o" / "results.csv").read_text()
+    assert text.count("\n") == 5          # the header and two rows of two lines each
+    capsys.readouterr()
+    assert main(argv + ["--resume"]) == 0
+    assert ": ran 0 in " in capsys.readouterr().out
+    assert (tmp_path / "o" / "results.csv").read_text() == text
+
+
+@pytest.mark.parametrize("seeds, long, by", [((1, 2, 3), False, "3 by line 4"),
+                                             ((1, 2), True, "2 by line 3")])
+def test_a_results_csv_of_more_runs_than_a_study_may_read_back_is_refused(
+        tmp_path, capsys, one_run_study, monkeypatch, seeds, long, by):
+    """It was read whole, whatever its size; now row by row, each costing what a row read
+    back holds (RESULT_ROW_BYTES), a long line its excess as well."""
+    from irring.studies import study as study_mod
+    monkeypatch.setattr(study_mod, "RESULT_ROW_BYTES", 10**9)   # a study may read back 2 rows
+    study, text = one_run_study
+    header, line = text.splitlines()[:2]
+    out = tmp_path / "o"
+    out.mkdir()
+    rows = [line.replace("t_room_cylinder,1,1,0.0,1,", f"t_room_cylinder,1,1,0.0,{seed},")
+            for seed in seeds]
+    if long:   # 60 kB: within a line's limit, so two rows cost more than 2 GB
+        rows[0] = rows[0].replace("rotating12", "r" * 60_000)
+    (out / "results.csv").write_text("\n".join([header, *rows]) + "\n")
+    assert main(["study", str(study), "--out", str(out), "--workers", "1", "--resume"]) == 5
+    assert (f"{out / 'results.csv'}: its runs read back to summarise ({by}) (about "
+            f"{len(seeds):.1f} GB), more than the 2 GB a study may use: choose another --out, "
+            "or split the file" in capsys.readouterr().err)
+
+
+def test_a_resume_whose_kept_and_new_runs_are_too_many_to_read_back_is_refused(
+        tmp_path, capsys, one_run_study, monkeypatch):
+    """Rows of points no longer in the study are kept and read back with the new ones: a
+    file of many old runs resumed with another study of many runs passed each bound alone."""
+    from irring.studies import study as study_mod
+    monkeypatch.setattr(study_mod, "RESULT_ROW_BYTES", 10**9)   # a study may read back 2 rows
+    _, text = one_run_study
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "results.csv").write_text(text)                     # seed 1
+    (tmp_path / "s.yaml").write_text("designs: [rotating12]\nscenarios: [t_room_cylinder]\n"
+                                     "seeds: [2, 3]\n")
+    assert main(["study", str(tmp_path / "s.yaml"), "--out", str(out), "--workers", "1",
+                 "--resume"]) == 5
+    assert (f"1 runs kept in {out / 'results.csv'} and 2 to run, read back to summarise (about "
+            "3.0 GB), more than the 2 GB a study may use: choose another --out"
+            in capsys.readouterr().err)
+    assert (out / "results.csv").read_text() == text
 
 
 def test_a_results_csv_that_cannot_be_written_names_it_and_keeps_the_runs(tmp_path, capsys,

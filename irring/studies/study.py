@@ -16,6 +16,7 @@ import json
 import math
 import os
 import re
+import stat
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +30,8 @@ except ImportError:  # pragma: no cover - not on POSIX
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
-from ..core import MAX_SEEDS, RESULT_ROW_BYTES, SEED_MAX, SENSOR_MODEL, work_refusal
+from ..core import (MAX_SEEDS, RESULT_ROW_BYTES, RESULT_ROW_TEXT_BYTES, SEED_MAX,
+                    SENSOR_MODEL, work_refusal)
 from ..errors import OutputError, TooBig, brief
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
@@ -395,53 +397,106 @@ def _cell(v: Any) -> str:
     return str(v)
 
 
+MAX_LINE_BYTES = 2**16   # of a results.csv line (a study writes ~500 bytes; csv's own field
+#                          limit, 128 kB, ends in csv.Error)
+
+
 def read_results(path: str | Path, *, repair: bool = False) -> list[dict[str, str]]:
-    """The rows of a results.csv as text. A last line cut short by a kill is dropped (and,
-    with ``repair``, cut from the file). Raises :class:`StudyError` if the columns are not
-    this version's."""
+    """The rows of a results.csv as text, read line by line. A last line cut short by a kill
+    is dropped (and, with ``repair``, cut from the file). Raises :class:`StudyError` if the
+    columns are not this version's or a line is damaged, :class:`TooBig` if the rows would
+    take more memory than a study may use."""
     p = Path(path)
-    data = p.read_bytes()
-    if data and not data.endswith(b"\n"):
-        data = data[: data.rfind(b"\n") + 1]
-        if repair:
-            with open(p, "r+b") as fh:
-                fh.truncate(len(data))
-    data = data.removeprefix(codecs.BOM_UTF8)   # a spreadsheet's "CSV UTF-8" starts with one
+    lines = _Lines(p)
     try:
-        lines = data.decode("utf-8").splitlines()
-    except UnicodeDecodeError as exc:   # saved by a spreadsheet in Latin-1 / cp1252
-        line = data[:exc.start].count(b"\n") + 1
-        raise StudyError(f"{p}: line {line}: not UTF-8 text (byte {exc.start}); the file was "
-                         "edited or damaged; save it as UTF-8 CSV") from None
-    if not lines:
-        return []
-    reader = csv.reader(lines)
-    header = tuple(next(reader))
-    if header != COLUMNS:
-        first = next((i for i, (h, c) in enumerate(zip(header, COLUMNS)) if h != c),
-                     min(len(header), len(COLUMNS)))
-        what = (f"column {first + 1} is {brief(header[first])}, expected {COLUMNS[first]!r}"
-                if first < min(len(header), len(COLUMNS)) else
-                f"{len(header)} columns, expected {len(COLUMNS)}")
-        raise StudyError(f"{p}: its columns are not the ones this irring writes ({what}); "
-                         "choose another --out, or move the file away to start afresh")
-    rows, lines_of = [], {}
-    for i, cells in enumerate(reader, start=2):
-        if len(cells) != len(COLUMNS):
-            raise StudyError(f"{p}: line {i} has {len(cells)} cells, expected {len(COLUMNS)}; "
-                             "the file was edited or damaged")
-        row = dict(zip(COLUMNS, cells))
-        for col, cell in row.items():
-            want = _cell_problem(col, cell)
-            if want:
-                raise StudyError(f"{p}: line {i}, {col}: {brief(cell)} is not allowed; {want}; "
+        with open(p, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):   # /dev/zero never ends
+                raise StudyError(f"{p}: not a regular file; a study's {RESULTS} is the file it "
+                                 "wrote: choose another --out")
+            rows = _read_rows(p, lines, lines.read(fh))
+    except OSError as exc:
+        raise StudyError(f"{p}: cannot read the study's results: "
+                         f"{exc.strerror or exc}") from None
+    if lines.cut is not None and repair:
+        with open(p, "r+b") as fh:
+            fh.truncate(lines.cut)
+    return rows
+
+
+class _Lines:
+    """A results.csv's complete lines, decoded; counts the bytes read and where a last line
+    without its newline (cut short by a kill) begins."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.bytes = 0
+        self.cut: int | None = None
+
+    def read(self, fh) -> Iterable[str]:
+        """Each line with its newline (csv joins the lines of a quoted field)."""
+        for number in itertools.count(1):
+            raw = fh.readline(MAX_LINE_BYTES + 1)
+            if not raw.endswith(b"\n"):
+                if len(raw) > MAX_LINE_BYTES:
+                    raise StudyError(f"{self.path}: line {number} is longer than "
+                                     f"{MAX_LINE_BYTES:,} bytes (a study writes ~500); the file "
+                                     "was edited or damaged")
+                self.cut = self.bytes if raw else None
+                return
+            start, self.bytes = self.bytes, self.bytes + len(raw)
+            if number == 1:
+                raw = raw.removeprefix(codecs.BOM_UTF8)   # a spreadsheet's "CSV UTF-8"
+            try:
+                yield raw.decode("utf-8")
+            except UnicodeDecodeError as exc:   # saved by a spreadsheet in Latin-1 / cp1252
+                raise StudyError(f"{self.path}: line {number}: not UTF-8 text (byte "
+                                 f"{start + exc.start}); the file was edited or damaged; save "
+                                 "it as UTF-8 CSV") from None
+
+
+def _read_rows(p: Path, lines: _Lines, text: Iterable[str]) -> list[dict[str, str]]:
+    reader = csv.reader(text)
+    try:
+        header = tuple(next(reader, ()))
+        if not header:
+            return []
+        if header != COLUMNS:
+            first = next((i for i, (h, c) in enumerate(zip(header, COLUMNS)) if h != c),
+                         min(len(header), len(COLUMNS)))
+            what = (f"column {first + 1} is {brief(header[first])}, expected "
+                    f"{COLUMNS[first]!r}" if first < min(len(header), len(COLUMNS)) else
+                    f"{len(header)} columns, expected {len(COLUMNS)}")
+            raise StudyError(f"{p}: its columns are not the ones this irring writes ({what}); "
+                             "choose another --out, or move the file away to start afresh")
+        rows, lines_of = [], {}
+        need, before = 0, lines.bytes
+        for cells in reader:
+            i = reader.line_num
+            need += RESULT_ROW_BYTES + max(0, lines.bytes - before - RESULT_ROW_TEXT_BYTES)
+            before = lines.bytes
+            refusal = work_refusal(f"its runs read back to summarise ({len(rows) + 1:,} by "
+                                   f"line {i})", need, "a study",
+                                   "choose another --out, or split the file")
+            if refusal:
+                raise TooBig(f"{p}: {refusal}")
+            if len(cells) != len(COLUMNS):
+                raise StudyError(f"{p}: line {i} has {len(cells)} cells, expected "
+                                 f"{len(COLUMNS)}; the file was edited or damaged")
+            row = dict(zip(COLUMNS, cells))
+            for col, cell in row.items():
+                want = _cell_problem(col, cell)
+                if want:
+                    raise StudyError(f"{p}: line {i}, {col}: {brief(cell)} is not allowed; "
+                                     f"{want}; the file was edited or damaged")
+            first = lines_of.setdefault(row_key(row), i)
+            if first != i:   # summarised, it would count as one more run
+                raise StudyError(f"{p}: line {i} repeats the run of line {first} "
+                                 f"({row['design']}, {row['scenario']}, seed {row['seed']}); "
                                  "the file was edited or damaged")
-        first = lines_of.setdefault(row_key(row), i)
-        if first != i:   # summarised, it would count as one more run
-            raise StudyError(f"{p}: line {i} repeats the run of line {first} ({row['design']}, "
-                             f"{row['scenario']}, seed {row['seed']}); the file was edited or "
-                             "damaged")
-        rows.append(row)
+            rows.append(row)
+    except csv.Error as exc:
+        raise StudyError(f"{p}: line {reader.line_num}: {exc}; the file was edited or "
+                         "damaged") from None
     return rows
 
 
@@ -568,6 +623,12 @@ def run_study(study: Study | Sequence[Point], out_dir: str | Path, ex=None, *,
     _check_same_designs(path, existing, points)
     done = {row_key(r) for r in existing}
     todo = [p for p in points if p.key not in done]
+    refusal = work_refusal(    # the kept rows of points no longer in the study are read back too
+        f"{len(existing):,} runs kept in {path} and {len(todo):,} to run, read back to "
+        "summarise", (len(existing) + len(todo)) * RESULT_ROW_BYTES, "a study",
+        "choose another --out")
+    if refusal:
+        raise TooBig(refusal)
     if on_start is not None:
         on_start(len(points) - len(todo), len(todo))
     new_file = not existing
