@@ -131,6 +131,16 @@ BAD = [
     ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, "
      "sensor: [gp2d12]}]\nscenarios: [t_room]\n",
      r"designs\[0\]\.sensor: \['gp2d12'\] is not allowed; choose one of: gp2d12"),
+    # printed raw in the summary table (a terminal escape; a line break split the row)
+    ('designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, '
+     'name: "\\e[31mred"}]\nscenarios: [t_room]\n',
+     r"designs\[0\]\.name: '\\x1b\[31mred': control characters \(terminal escapes, line "
+     r"breaks\) are not allowed"),
+    ('designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, '
+     'name: "ring\\n8"}]\nscenarios: [t_room]\n', r"designs\[0\]\.name: 'ring\\n8': control"),
+    ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, "
+     f"name: {'r' * 201}}}]\nscenarios: [t_room]\n",
+     r"designs\[0\]\.name: expected a text of 1 … 200 characters, got 'rrrr"),
 ]
 
 

@@ -172,8 +172,12 @@ def _design(source: str, path: str, raw: Any) -> DesignSpec:
     label = raw.get("name") or (f"ring{p['sensors']}_r{p['radius_mm']:g}_"
                                 f"a{p['sweep_half_angle_deg']:g}_s{p['step_deg']:g}"
                                 + ("" if sensor == SENSOR_MODEL else f"_{sensor}"))
-    if not isinstance(label, str) or not label.strip():
-        raise _fail(source, f"{path}.name", f"expected a non-empty text, got {label!r}")
+    if not isinstance(label, str) or not label.strip() or len(label) > 200:
+        raise _fail(source, f"{path}.name", f"expected a text of 1 … 200 characters, got "
+                                            f"{brief(label)}")
+    if not label.isprintable():   # printed in the summary table, drawn in study.png
+        raise _fail(source, f"{path}.name", f"{brief(label)}: control characters (terminal "
+                                            "escapes, line breaks) are not allowed")
     spec = DesignSpec(str(label), params=params, sensor=sensor)
     try:
         spec.build()
