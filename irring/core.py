@@ -502,6 +502,24 @@ def as_pose(pose: Any) -> np.ndarray:
     return np.append(arr, 0.0) if arr.size == 2 else arr
 
 
+def check_steps(steps: Any, lo: int, hi: int) -> np.ndarray:
+    """``steps`` as int64 motor steps for one sweep: a non-empty 1-D sequence of whole
+    numbers within ``lo`` … ``hi``, each once (a step read twice would be estimated and mapped
+    twice, and a recording of it is refused). Raises ValueError naming what is wrong."""
+    arr = np.asarray(steps)
+    if arr.ndim != 1 or arr.size == 0 or not np.issubdtype(arr.dtype, np.integer):
+        raise ValueError(f"steps must be a non-empty 1-D array of whole motor steps, got "
+                         f"{_show(arr, '')}")
+    if arr.min() < lo or arr.max() > hi:
+        raise ValueError(f"steps must lie in the ring's range {lo} … {hi}; got "
+                         f"{arr.min()} … {arr.max()}")
+    values, counts = np.unique(arr, return_counts=True)
+    if counts.max() > 1:
+        raise ValueError(f"step {values[counts > 1][0]} is listed twice; a sweep reads each "
+                         "step once")
+    return arr.astype(np.int64)
+
+
 @runtime_checkable
 class RingSource(Protocol):
     """Anything that sweeps a ring: the simulator (``SimRing``), the real ring over a serial

@@ -156,8 +156,14 @@ def test_descending_and_non_contiguous_steps_are_read_in_the_order_asked():
 
 def test_steps_outside_the_ring_are_refused_before_anything_is_sent():
     ring = ring_on(Device(StandInSource()))
-    with pytest.raises(ValueError, match=r"outside the ring's -35 … 35"):
+    with pytest.raises(ValueError, match=r"steps must lie in the ring's range -35 … 35; got 0 … 36"):
         ring.sweep(steps=[0, 36])
+    # the rule SimRing applies (core.check_steps): 1.5 was read as step 1
+    with pytest.raises(ValueError, match=r"a non-empty 1-D array of whole motor steps, got "
+                                         r"array\(\[1.5, 2. \]\)"):
+        ring.sweep(steps=[1.5, 2])
+    with pytest.raises(ValueError, match="step 2 is listed twice; a sweep reads each step once"):
+        ring.sweep(steps=[3, 2, 2])
     with pytest.raises(ValueError, match="samples must be 1 … 64"):
         ring.sweep(samples=0)
     # the first argument is the pose (RingSource), not the steps of the old signature

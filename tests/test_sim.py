@@ -274,6 +274,10 @@ def test_sweep_steps_are_checked(t_room):
         sim.truth(0, steps=np.array([0, 36]))
     with pytest.raises(IndexError, match="has 4 pose"):
         sim.sweep(4)
+    # a step listed twice was read twice, estimated and mapped twice, and written into a
+    # sweeps.npz that irring replay refuses ("step 1 is listed twice")
+    with pytest.raises(ValueError, match="step 30 is listed twice; a sweep reads each step once"):
+        sim.sweep(0, steps=[1, 30, 2, 30])
 
 
 def test_same_seed_same_sweeps_and_noise_differs_between_sweeps(t_room):

@@ -556,15 +556,9 @@ class SerialRing:
         :class:`DeviceDisconnected` (with ``.partial``) if the device goes away.
         """
         info = self._require_info()
-        req = [int(s) for s in (self.full_range() if steps is None else np.asarray(steps).ravel())]
-        if not req:
-            raise ValueError("no steps to sweep")
-        bad = [s for s in req if not info.min_step <= s <= info.max_step]
-        if bad:
-            raise ValueError(f"steps {bad[:5]} are outside the ring's {info.min_step} … "
-                             f"{info.max_step} (from IRINF)")
-        if len(set(req)) != len(req):
-            raise ValueError("each step may be requested once per sweep")
+        # (1.5 was read as step 1)
+        req = [int(s) for s in (self.full_range() if steps is None else
+                                core.check_steps(steps, info.min_step, info.max_step))]
         samples = self.samples if samples is None else samples
         settle_s = self.settle_s if settle_s is None else settle_s
         resweep = self.resweep if resweep is None else resweep

@@ -15,7 +15,7 @@ import mujoco.batch
 import numpy as np
 
 from ..core import (BYTES_PER_PHYSICS_VALUE, MAX_STEPS, MAX_SWEEPS, Sweep, Truth, as_pose,
-                    hardware_duration_s, work_bytes, work_refusal)
+                    check_steps, hardware_duration_s, work_bytes, work_refusal)
 from ..errors import TooBig
 from ..scenario import Scenario
 from . import dynamics as dynamics_lib
@@ -191,15 +191,7 @@ class SimRing:
                          self.scenario.scan.step_stride)
 
     def _check_steps(self, steps) -> np.ndarray:
-        steps = np.asarray(steps)
-        if steps.ndim != 1 or steps.size == 0 or not np.issubdtype(steps.dtype, np.integer):
-            raise ValueError(f"steps must be a non-empty 1-D array of whole motor steps, got "
-                             f"{steps!r}")
-        lo, hi = self.ring.min_step, self.ring.max_step
-        if steps.min() < lo or steps.max() > hi:
-            raise ValueError(f"steps must lie in the ring's range {lo} … {hi}; got "
-                             f"{steps.min()} … {steps.max()}")
-        return steps.astype(np.int64)
+        return check_steps(steps, self.ring.min_step, self.ring.max_step)
 
     # ------------------------------------------------------------------ kinematics
 
