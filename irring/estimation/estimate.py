@@ -496,6 +496,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
+    if snap and read_to_own_range(cal, points.max_range_m):
+        # a thin post far away: its few readings, several sensors', fitted as one circle
+        points = far_posts(points, label, counts, steps, cal)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
     if not (detail or silent):     # no silent beam to explain, no lines asked for
         return Estimate(points=points, lines=None, theta_history=tuple(history))
@@ -1078,6 +1081,143 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration):
     good[at] = (fits[c] & on[c, j] & np.isfinite(dist[at]) & (dist[at] >= cal.min_range_m)
                 & np.isfinite(sigma[at]))
     return theta, dist, sigma, good
+
+
+POST_RADII_M = np.geomspace(0.01, 0.07, 14)  # a far post is tried as a circle of these radii
+#                                              (the largest fitting best: not a post) …
+POST_LINK_M = 0.12       # … through readings on no line whose θ = 0 end points chain this near …
+POST_RUN_MAX = 5         # … at most this many of one sensor (more: a surface, not a post) …
+POST_SENSORS = 2         # … from at least this many sensors …
+POST_JUMP_M = 0.10       # … each sensor's run flanked by silence or readings this much farther;
+POST_BEARING_RAD = 0.0025  # its centre searched on this bearing grid …
+POST_RANGE_M = 0.005     # … and this range grid; a silent flanking beam it meets this far
+POST_SILENT_RAD = math.radians(15)  # inside the drop-out angle (within the return range) misfits
+
+
+def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
+              cal: Calibration) -> Points:
+    """Readings on no line (valid, or INCIDENCE_UNKNOWN; clear returns only) that are one
+    thin post seen by several sensors, read at the θ at which their beams meet one circle
+    fitted to them all; numpy, shared by both estimators.
+
+    A group: ≥ 3 readings whose θ = 0 end points chain within ``POST_LINK_M``, from
+    ≥ ``POST_SENSORS`` sensors, ≤ ``POST_RUN_MAX`` of each, each sensor's run flanked by a
+    silent beam or a reading ``POST_JUMP_M`` farther. Its circle (radius in
+    ``POST_RADII_M``, not the largest) is scored as an arc (:func:`arc_incidence`) plus
+    ``ARC_MISS`` for each flanking silent beam it would have returned; kept at a mean misfit
+    below ``ARC_MISFIT`` with ≥ 3 readings on it (misfit ≤ ``ARC_ON``), which become valid at
+    its θ, at their own distance there, σ as on an arc. ``label`` (S, N): each reading's
+    line (−1 none); ``counts`` (S, N); ``steps`` (S,). Why: docs/estimator.md, "Far
+    posts"."""
+    shape = points.valid.shape
+    s = np.asarray(counts, dtype=float).reshape(shape)
+    # clear returns only: near the no-return level noise alone makes some (as pooling says)
+    clear = s >= cal.no_return_counts + (RETURN_SIGMAS + RANGE_SIGMAS) * cal.sigma_counts()
+    cand = clear & ((points.reason == Reason.INCIDENCE_UNKNOWN)
+                    | (points.valid & (np.asarray(label).reshape(shape) < 0)))
+    if np.count_nonzero(cand) < 3:
+        return points
+    silent = (points.reason == _NO_RETURN) | (points.reason == _OUT_OF_RANGE)
+    has = s > 0
+    d0 = np.full(shape, np.nan)
+    d0[has] = cal.distance(s[has], 0.0)
+    heading = np.asarray(points.heading, dtype=float)
+    ox, oy = np.asarray(points.origin_x, float), np.asarray(points.origin_y, float)
+    ex, ey = np.cos(heading), np.sin(heading)
+    row, col = cand.nonzero()
+    px = ox[row, col] + d0[row, col] * ex[row, col]
+    py = oy[row, col] + d0[row, col] * ey[row, col]
+    near = np.hypot(px[:, None] - px[None, :], py[:, None] - py[None, :]) < POST_LINK_M
+    comp = np.arange(row.size)
+    while True:                    # connected groups: each takes its smallest member's index
+        low = np.where(near, comp[None, :], row.size).min(axis=1)
+        if np.array_equal(low, comp):
+            break
+        comp = low
+    rank = np.empty(shape[0], dtype=np.intp)            # each row's place in step order
+    order = np.argsort(np.asarray(steps), kind="stable")
+    rank[order] = np.arange(shape[0])
+    cx0, cy0 = float(np.mean(ox)), float(np.mean(oy))
+    log_s = np.log(np.where(has, s, 1.0))
+    out = None
+    for c in np.unique(comp):
+        ii, kk = row[comp == c], col[comp == c]
+        if (ii.size < 3 or np.unique(kk).size < POST_SENSORS
+                or np.bincount(kk).max() > POST_RUN_MAX):
+            continue
+        flank, standing = [], True
+        for k in np.unique(kk):
+            r_k = np.sort(rank[ii[kk == k]])
+            far = np.nanmax(d0[ii[kk == k], k]) + POST_JUMP_M
+            for q in (r_k[0] - 1, r_k[-1] + 1):
+                if not 0 <= q < shape[0]:
+                    continue            # the sweep's end: nothing says either way
+                j = order[q]
+                if silent[j, k]:
+                    flank.append((j, k))
+                elif not (d0[j, k] > far and not cand[j, k]):
+                    standing = False
+        if not standing:
+            continue
+        fi = np.array([f[0] for f in flank], dtype=np.intp)
+        fk = np.array([f[1] for f in flank], dtype=np.intp)
+        bearing = np.arctan2(py[comp == c] - cy0, px[comp == c] - cx0)
+        grid_a = np.arange(bearing.min() - 8 * POST_BEARING_RAD,
+                           bearing.max() + 8 * POST_BEARING_RAD, POST_BEARING_RAD)
+        best = None
+        for radius in POST_RADII_M:
+            grid_t = np.arange(np.nanmin(d0[ii, kk]) - 0.15 + radius,
+                               np.nanmax(d0[ii, kk]) + radius + 0.05, POST_RANGE_M)
+            a, t = (v.reshape(-1, 1) for v in np.meshgrid(grid_a, grid_t))
+            centre = (cx0 + t * np.cos(a), cy0 + t * np.sin(a))
+            t_i, th_i, meets = _meet_circle(centre, radius, ox[ii, kk], oy[ii, kk],
+                                            ex[ii, kk], ey[ii, kk])
+            la, b = cal.log_ab(th_i)
+            d_i = np.exp(la + b * log_s[ii, kk])
+            noise = np.abs(b) * d_i * cal.sigma_counts() / s[ii, kk]
+            z = (d_i - t_i) / noise
+            each = np.where(meets & (th_i <= cal.max_incidence_rad),
+                            np.minimum(z * z, ARC_MISS), ARC_MISS)
+            cost = each.sum(axis=1)
+            if fi.size:
+                t_f, th_f, meets_f = _meet_circle(centre, radius, ox[fi, fk], oy[fi, fk],
+                                                  ex[fi, fk], ey[fi, fk])
+                cost = cost + ARC_MISS * np.count_nonzero(
+                    meets_f & (th_f < cal.max_incidence_rad - POST_SILENT_RAD)
+                    & (t_f < cal.return_range_m), axis=1)
+            q = int(np.argmin(cost))
+            if best is None or cost[q] < best[0]:
+                best = (cost[q], radius, th_i[q], d_i[q], each[q], noise[q])
+        cost, radius, th, d, each, noise = best
+        if cost > ARC_MISFIT * (ii.size + fi.size) or radius >= POST_RADII_M[-1]:
+            continue
+        on = (each <= ARC_ON) & (d >= cal.min_range_m) & (d <= points.max_range_m)
+        if np.count_nonzero(on) < 3:     # a circle is three numbers: three readings on it
+            continue
+        lo = cal.distance(s[ii, kk], np.maximum(th - ARC_DOUBT_RAD, 0.0))
+        hi = cal.distance(s[ii, kk], np.minimum(th + ARC_DOUBT_RAD, cal.max_incidence_rad))
+        sigma = np.hypot(np.maximum(noise, SIGMA_FLOOR_M), 0.5 * np.abs(lo - hi))
+        if out is None:
+            out = {f: np.array(getattr(points, f))
+                   for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason")}
+        i, k = ii[on], kk[on]
+        out["d"][i, k], out["theta"][i, k], out["sigma_m"][i, k] = d[on], th[on], sigma[on]
+        out["x"][i, k] = ox[i, k] + d[on] * ex[i, k]
+        out["y"][i, k] = oy[i, k] + d[on] * ey[i, k]
+        out["valid"][i, k], out["reason"][i, k] = True, Reason.OK
+    return points if out is None else points_with(points, **out)
+
+
+def _meet_circle(centre, radius: float, ox, oy, ex, ey):
+    """Where beams (origins ``ox, oy``, unit directions ``ex, ey``: (J,)) meet circles
+    (``centre``: x, y of shape (C, 1)): the distance t (C, J), the incidence there and
+    whether they meet at all (ahead of the origin)."""
+    rx, ry = centre[0] - ox, centre[1] - oy
+    along = rx * ex + ry * ey
+    disc = along * along - (rx * rx + ry * ry - radius * radius)
+    t = along - np.sqrt(np.maximum(disc, 0.0))
+    cos = np.clip(-((t * ex - rx) * ex + (t * ey - ry) * ey) / radius, 0.0, 1.0)
+    return t, np.arccos(cos), (disc > 0.0) & (along > 0.0)
 
 
 def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.ndarray:
