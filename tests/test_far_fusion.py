@@ -84,7 +84,8 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
     """FAR_HALL, seed 3117: each sensor's far line (1.1-1.5 m, 16-49 members of 30-50 mm
     noise) lies off its wall by its own 5-25 mm, and the mapper drew each at its own offset:
     walls two cells thick. Snapped as one, the far end points' error across their wall is
-    RMS 9.5 mm (11.9 before), 20 lie more than 20 mm off (39), precision 0.981 (0.952)."""
+    RMS 9.5 mm (11.9 before), 20 lie more than 20 mm off (39), precision 0.981 (0.956; 0.952
+    before the mapper's median of neighbouring steps, docs/mapping.md)."""
     scene = loads(FAR_HALL)
     monkeypatch.setattr(fast, "far_posts", lambda points, *args: points)   # lines alone
 
@@ -103,7 +104,7 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
     monkeypatch.setattr(fast, "FUSE_MIN", 10 ** 9)
     err0, precision0 = far_errors()
     assert err0.size == 582 and np.sqrt(np.mean(err0 ** 2)) > 0.0115
-    assert (np.abs(err0) > 0.02).sum() >= 35 and precision0 < 0.955
+    assert (np.abs(err0) > 0.02).sum() >= 35 and precision0 < 0.96
 
 
 def _on_posts(scene, sweep):

@@ -17,7 +17,8 @@ from its number, not from the previous one, so nothing accumulates along a ray. 
 along a segment are u = t·scale − shift (t: 0…1 over the segment).
 """
 
-from libc.math cimport INFINITY, NAN, cos, exp, fabs, isfinite, sin, sqrt
+from libc.float cimport DBL_MAX
+from libc.math cimport INFINITY, NAN, cos, exp, fabs, hypot, isfinite, isnan, sin, sqrt
 from libc.string cimport memset
 
 import numpy as np
@@ -905,4 +906,68 @@ def explained_ranges(const double[::1] origin_x, const double[::1] origin_y,
                     t = tmx
                     tmx += tdx
                     tmy += tdy
+    return out_a
+
+
+def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
+                     const double[::1] x, const double[::1] y, const double[::1] sigma_m,
+                     const unsigned char[::1] valid, long rows, long cols, params):
+    """The range (m) each reading its sensor's neighbouring steps bracket is mapped at, NaN
+    elsewhere: ``mapping.neighbour_ranges`` on flat (rows, cols) arrays (row-major; a
+    column is a sensor, a row a step), whose numpy oracle is
+    ``mapping_numpy.neighbour_ranges``. Each column's valid readings are visited in row
+    order, each compared with the valid ones before and after it in that order."""
+    cdef Py_ssize_t n = rows * cols, c, r, i, k, m, prev, nxt
+    if not (origin_x.shape[0] == origin_y.shape[0] == x.shape[0] == y.shape[0]
+            == sigma_m.shape[0] == valid.shape[0] == n):
+        raise ValueError("every array of the readings needs rows × cols entries")
+    out_a = np.full(n, np.nan)
+    cdef double[::1] out = out_a
+    cdef long steps = <long>params.neighbour_steps
+    cdef double k_sig = params.explain_sigmas, lone = params.lone_sigma_m
+    cdef double min_sigma = params.min_sigma_m, default_sigma = params.default_sigma_m
+    cdef double low = params.explain_sharper * params.min_sigma_m
+    if steps == 0 or rows < 3 or n == 0:
+        return out_a
+    d_a, s_a = np.empty(n), np.empty(n)
+    at_a = np.empty(rows, np.intp)
+    cdef double[::1] d = d_a
+    cdef double[::1] s = s_a
+    cdef Py_ssize_t[::1] at = at_a
+    cdef double dp, dn, si
+    cdef bint near_p, near_n
+    with nogil:
+        for c in range(cols):
+            m = 0                                   # the column's valid readings, in row order
+            for r in range(rows):
+                i = r * cols + c
+                if not (valid[i] and isfinite(x[i] + y[i])
+                        and isfinite(origin_x[i] + origin_y[i])):
+                    continue
+                si = sigma_m[i]
+                if isnan(si):
+                    si = default_sigma
+                elif si == INFINITY:
+                    si = DBL_MAX                    # (as numpy's nan_to_num)
+                s[i] = si if si > min_sigma else min_sigma
+                d[i] = hypot(x[i] - origin_x[i], y[i] - origin_y[i])
+                at[m] = r
+                m += 1
+            for k in range(1, m - 1):
+                r = at[k]
+                i = r * cols + c
+                if not (s[i] >= low and s[i] <= lone):
+                    continue
+                if r - at[k - 1] > steps or at[k + 1] - r > steps:
+                    continue
+                prev, nxt = at[k - 1] * cols + c, at[k + 1] * cols + c
+                near_p = hypot(x[prev] - x[i], y[prev] - y[i]) <= k_sig * hypot(s[prev], s[i])
+                near_n = hypot(x[nxt] - x[i], y[nxt] - y[i]) <= k_sig * hypot(s[nxt], s[i])
+                if not (near_p and near_n):
+                    continue
+                dp, dn = d[prev], d[nxt]
+                if dp < d[i] and dn < d[i]:
+                    out[i] = dp if dp > dn else dn
+                elif dp > d[i] and dn > d[i]:
+                    out[i] = dp if dp < dn else dn
     return out_a

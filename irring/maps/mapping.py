@@ -72,6 +72,11 @@ class MapperParams:
     explain_sigmas: float = 3.0
     explain_log_odds: float = 3.0
     explain_sharper: float = 2.0
+    # a valid reading (σ as above) its sensor's nearest valid readings before and after it
+    # (at most neighbour_steps rows of the sweep away, end points within explain_sigmas
+    # combined σ of its own) both read shorter (longer) is mapped at the farther (nearer)
+    # of their ranges: the median of the three (0: off)
+    neighbour_steps: float = 2.0
     # readings from a wide cone (Points.cone_half_angle_rad > 0: sonar), mapped as arcs
     cone_step_rad: float = math.radians(1.0)  # spacing of the fan of rays across the cone
     cone_l_occ: float = 1.25      # a hit on the arc
@@ -109,6 +114,9 @@ class MapperParams:
             raise ValueError(f"need a finite explain_log_odds > 0, got {self.explain_log_odds}")
         if not (math.isfinite(self.explain_sharper) and self.explain_sharper >= 1):
             raise ValueError(f"need a finite explain_sharper ≥ 1, got {self.explain_sharper}")
+        if not (self.neighbour_steps in range(0, 1001)):
+            raise ValueError(f"need a whole number 0 … 1000 of neighbour_steps (0: off), got "
+                             f"{self.neighbour_steps}")
         if not (self.occ_sigma_m > 0 and self.l_occ_min >= 0):
             raise ValueError(f"need occ_sigma_m > 0 and l_occ_min ≥ 0, got "
                              f"{self.occ_sigma_m}, {self.l_occ_min}")
@@ -287,14 +295,16 @@ class OccupancyGrid:
         """Add the log-odds of ``points`` to ``log_odds`` (this grid's shape, float64,
         C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
         ``add_beams``). Work and memory scale with the beams, not the grid. Readings from a
-        cone go in as :func:`cone_fan` with the ``cone_*`` weights; pencil beams a surface
-        explains (:func:`explained_ranges`) are moved onto it first; σ as :func:`known_sigma`."""
+        cone go in as :func:`cone_fan` with the ``cone_*`` weights; pencil beams their
+        neighbouring steps bracket (:func:`neighbour_ranges`), then those a surface explains
+        (:func:`explained_ranges`), are moved first; σ as :func:`known_sigma`."""
         points = known_sigma(points)
-        if (self.params.explain_sigmas > 0 and points.cone_half_angle_rad == 0
-                and np.any(points.valid)):        # (a run's silent beams: nothing to explain)
-            points = at_ranges(points, explained_ranges(
-                points, self.shape, self.origin_xy_m, self.resolution_m, self.params),
-                self.params)
+        if points.cone_half_angle_rad == 0 and np.any(points.valid):   # (silent beams: none)
+            points = along_beams(points, neighbour_ranges(points, self.params))
+            if self.params.explain_sigmas > 0:
+                points = at_ranges(points, explained_ranges(
+                    points, self.shape, self.origin_xy_m, self.resolution_m, self.params),
+                    self.params)
         points, params = mapped_beams(points, self.params)
         _traverse.add_beams(
             log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
@@ -514,10 +524,31 @@ def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
         params).reshape(np.shape(points.valid))
 
 
-def at_ranges(points: Points, ranges: np.ndarray, params: MapperParams) -> Points:
+def neighbour_ranges(points: Points, params: MapperParams) -> np.ndarray:
+    """(S, N) m: the range each valid reading its sensor's neighbouring steps bracket is
+    mapped at, NaN for the others.
+
+    A reading of σ from ``explain_sharper``·``min_sigma_m`` to ``lone_sigma_m`` (one that
+    cannot place its surface in one cell) whose sensor's nearest valid readings before and
+    after it in the sweep (rows, at most ``neighbour_steps`` away) both end within
+    ``explain_sigmas`` combined σ of its end point, and both read shorter (longer) than it,
+    is mapped at the farther (nearer) of their ranges: the median of the three. Compiled
+    (irring/maps/_traverse.pyx); the numpy oracle is
+    :func:`irring.maps.mapping_numpy.neighbour_ranges`. docs/mapping.md says why ("A
+    sensor's neighbouring steps")."""
+    shape = np.shape(points.valid)
+    if (params.neighbour_steps == 0 or points.cone_half_angle_rad > 0 or len(shape) != 2
+            or shape[0] < 3):
+        return np.full(shape, np.nan)
+    return _traverse.neighbour_ranges(
+        _flat(points.origin_x), _flat(points.origin_y), _flat(points.x), _flat(points.y),
+        _flat(points.sigma_m), np.asarray(points.valid, bool).ravel().view(np.uint8),
+        shape[0], shape[1], params).reshape(shape)
+
+
+def along_beams(points: Points, ranges: np.ndarray, sigma_m=None) -> Points:
     """``points`` with each valid reading whose ``ranges`` (m) entry is finite moved along
-    its beam to that range, with σ/``explain_sharper`` (the σ of the readings that confirm
-    the surface it was moved to); the others as they are."""
+    its beam to that range (with σ ``sigma_m`` where given); the others as they are."""
     moved = np.asarray(points.valid, bool) & np.isfinite(ranges)
     if not moved.any():
         return points
@@ -525,12 +556,18 @@ def at_ranges(points: Points, ranges: np.ndarray, params: MapperParams) -> Point
     px, py = np.asarray(points.x, float), np.asarray(points.y, float)
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = np.where(moved, ranges / np.hypot(px - ox, py - oy), 1.0)
-    sigma = np.asarray(points.sigma_m, float)
     return dataclasses.replace(
         points, x=np.where(moved, ox + (px - ox) * scale, points.x),
         y=np.where(moved, oy + (py - oy) * scale, points.y),
         d=np.where(moved, ranges, points.d),
-        sigma_m=np.where(moved, sigma / params.explain_sharper, points.sigma_m))
+        sigma_m=points.sigma_m if sigma_m is None else np.where(moved, sigma_m, points.sigma_m))
+
+
+def at_ranges(points: Points, ranges: np.ndarray, params: MapperParams) -> Points:
+    """``points`` with each valid reading whose ``ranges`` (m) entry is finite moved along
+    its beam to that range, with σ/``explain_sharper`` (the σ of the readings that confirm
+    the surface it was moved to); the others as they are."""
+    return along_beams(points, ranges, np.asarray(points.sigma_m, float) / params.explain_sharper)
 
 
 def returns_of(points: Points) -> Points:

@@ -1,5 +1,5 @@
-"""The occupancy grid's update in plain numpy: the oracle of the compiled ``add_beams`` and
-``explained_ranges``.
+"""The occupancy grid's update in plain numpy: the oracle of the compiled ``add_beams``,
+``neighbour_ranges`` and ``explained_ranges``.
 
 Slow and readable: every cell a beam crosses (:func:`~irring.maps.mapping.traverse`) gets
 the inverse sensor model of docs/mapping.md, evaluated with ``math.erf``. The kernel
@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from ..core import Points, Reason
-from .mapping import (MapperParams, at_ranges, hit_weight, known_sigma, mapped_beams,
-                      returns_of, silences_of, traverse)
+from .mapping import (MapperParams, along_beams, at_ranges, hit_weight, known_sigma,
+                      mapped_beams, returns_of, silences_of, traverse)
 
 
 def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.ndarray:
@@ -38,6 +38,64 @@ def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.
         edge[:-1] |= ranged[1:] - d[:-1] >= jump           # the step after
     sharp = valid & (sigma <= params.hold_sigma_m) & edge
     return np.where(sharp, params.hit_depth_cells * resolution_m, 0.0)
+
+
+def _nearest_valid(valid: np.ndarray, steps: int, later: bool) -> np.ndarray:
+    """(S, N) row of each reading's nearest valid reading of the same sensor (column) at
+    most ``steps`` rows before it (``later``: after it); −1 where there is none."""
+    rows = np.arange(valid.shape[0])[:, None]
+    marks = np.where(valid, rows, -1 if not later else valid.shape[0])
+    if later:
+        nearest = np.minimum.accumulate(marks[::-1], axis=0)[::-1]
+        nearest = np.vstack([nearest[1:], np.full((1, valid.shape[1]), valid.shape[0])])
+        return np.where((nearest < valid.shape[0]) & (nearest - rows <= steps), nearest, -1)
+    nearest = np.maximum.accumulate(marks, axis=0)
+    nearest = np.vstack([np.full((1, valid.shape[1]), -1), nearest[:-1]])
+    return np.where((nearest >= 0) & (rows - nearest <= steps), nearest, -1)
+
+
+def neighbour_ranges(points: Points, params: MapperParams) -> np.ndarray:
+    """(S, N) m: the range each valid reading its sensor's neighbouring steps bracket is
+    mapped at, NaN for the others.
+
+    A reading of σ from ``explain_sharper``·``min_sigma_m`` to ``lone_sigma_m`` (one that
+    cannot place its surface in one cell) whose sensor's nearest valid readings before and
+    after it in the sweep (rows, at most ``neighbour_steps`` away) both end within
+    ``explain_sigmas`` combined σ of its end point, and both read shorter (longer) than it,
+    is mapped at the farther (nearer) of their ranges: the median of the three. The numpy
+    statement of the compiled :func:`irring.maps.mapping.neighbour_ranges` (its contract
+    and why, stated there)."""
+    shape = np.shape(points.valid)
+    out = np.full(shape, np.nan)
+    steps = int(params.neighbour_steps)
+    if steps == 0 or points.cone_half_angle_rad > 0 or len(shape) != 2 or shape[0] < 3:
+        return out
+    ox, oy = np.asarray(points.origin_x, float), np.asarray(points.origin_y, float)
+    px, py = np.asarray(points.x, float), np.asarray(points.y, float)
+    with np.errstate(invalid="ignore"):
+        valid = np.asarray(points.valid, bool) & np.isfinite(px + py) & np.isfinite(ox + oy)
+        sigma = np.maximum(np.nan_to_num(np.asarray(points.sigma_m, float),
+                                         nan=params.default_sigma_m), params.min_sigma_m)
+        cand = valid & (sigma >= params.explain_sharper * params.min_sigma_m) & (
+            sigma <= params.lone_sigma_m)
+        if not cand.any():
+            return out
+        d = np.where(valid, np.hypot(px - ox, py - oy), np.nan)
+        cols = np.arange(shape[1])[None, :]
+        behind, before = cand.copy(), cand.copy()      # behind both neighbours / before both
+        farther, nearer = np.zeros(shape), np.full(shape, np.inf)
+        for later in (False, True):
+            row = _nearest_valid(valid, steps, later)
+            r = np.maximum(row, 0)
+            near = (row >= 0) & (np.hypot(px[r, cols] - px, py[r, cols] - py)
+                                 <= params.explain_sigmas * np.hypot(sigma[r, cols], sigma))
+            other = np.where(near, d[r, cols], np.nan)
+            behind &= near & (other < d)
+            before &= near & (other > d)
+            farther, nearer = np.fmax(farther, other), np.fmin(nearer, other)
+        out[behind] = farther[behind]
+        out[before] = nearer[before]
+    return out
 
 
 def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
@@ -105,6 +163,8 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     """
     shape = np.shape(log_odds)
     points = known_sigma(points)      # σ = +inf: no reading (its rule's one home)
+    if points.cone_half_angle_rad == 0:
+        points = along_beams(points, neighbour_ranges(points, params))
     if params.explain_sigmas > 0 and points.cone_half_angle_rad == 0:
         points = at_ranges(points, explained_ranges(points, shape, origin_xy_m, resolution_m,
                                                     params), params)
