@@ -874,6 +874,27 @@ def test_a_results_csv_that_is_a_device_is_refused_not_read_whole(tmp_path, one_
             "results.csv is the file it wrote: choose another --out") in done.stderr
 
 
+@pytest.mark.parametrize("resume", [False, True])
+def test_a_results_csv_that_is_a_link_is_refused_not_written_through(tmp_path, capsys,
+                                                                     one_run_study, resume):
+    """A dangling link made the study create its target (anywhere: we run as root) and write
+    its rows there, then replace the link; a link to another study's results.csv had this
+    study's rows appended to it with --resume."""
+    study, text = one_run_study
+    out, elsewhere = tmp_path / "o", tmp_path / "elsewhere.csv"
+    out.mkdir()
+    if resume:
+        elsewhere.write_text(text)
+    (out / "results.csv").symlink_to(elsewhere)
+    argv = ["study", str(study), "--out", str(out), "--workers", "1"]
+    assert main(argv + ["--resume"] * resume) == 4
+    assert (f"{out / 'results.csv'}: a symbolic link (to {elsewhere}); a study appends to its "
+            "own results.csv in --out: remove the link or choose another --out"
+            in capsys.readouterr().err)
+    assert (elsewhere.read_text() == text) if resume else not elsewhere.exists()
+    assert (out / "results.csv").is_symlink() and os.listdir(out) == ["results.csv"]
+
+
 def test_a_results_csv_with_a_line_break_in_a_cell_is_resumed(tmp_path, capsys):
     """A scenario path with a line break is written quoted over two lines; --resume split
     the file at every line break and refused the study's own file ('line 2 has 2 cells')."""

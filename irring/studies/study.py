@@ -32,7 +32,7 @@ import numpy as np
 from .. import designs, gp2, safe_yaml
 from ..core import (MAX_SEEDS, RESULT_ROW_BYTES, RESULT_ROW_TEXT_BYTES, SEED_MAX,
                     SENSOR_MODEL, work_refusal)
-from ..errors import OutputError, TooBig, brief
+from ..errors import OutputError, TooBig, brief, printable
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
 from ..resources import installed_version
@@ -620,6 +620,10 @@ def run_study(study: Study | Sequence[Point], out_dir: str | Path, ex=None, *,
         raise StudyError(f"{out}: cannot write the study's results there: "
                          f"{exc.strerror or exc}") from None
     path = out / RESULTS
+    if path.is_symlink():   # rows appended through it would land outside --out
+        raise OutputError(f"{path}: a symbolic link (to {printable(os.readlink(path))}); a study "
+                          f"appends to its own {RESULTS} in --out: remove the link or choose "
+                          "another --out")
     existing = read_results(path, repair=resume) if path.exists() else []
     if existing and not resume:
         raise StudyError(f"{path}: already holds {len(existing)} run(s); pass --resume to run "
