@@ -413,10 +413,11 @@ def read_results(path: str | Path, *, repair: bool = False) -> list[dict[str, st
     p = Path(path)
     lines = _Lines(p)
     try:
+        # a device never ends (/dev/zero), a pipe blocks open() until a writer comes
+        if not stat.S_ISREG(p.stat().st_mode):
+            raise StudyError(f"{p}: not a regular file; a study's {RESULTS} is the file it "
+                             "wrote: choose another --out")
         with open(p, "rb") as fh:
-            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):   # /dev/zero never ends
-                raise StudyError(f"{p}: not a regular file; a study's {RESULTS} is the file it "
-                                 "wrote: choose another --out")
             rows = _read_rows(p, lines, lines.read(fh))
     except OSError as exc:
         raise StudyError(f"{p}: cannot read the study's results: "
