@@ -294,6 +294,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
                progress: bool | None = None, estimator: Callable | None = None,
                truth=None) -> MapRun:
     """Estimate and map recorded or live sweeps, in order; score against the scenario if any.
+    A sweep :func:`irring.recording.check_sweep` refuses raises ValueError naming it.
 
     ``grid`` defaults to the scenario's (or, without one, a grid around the points), with
     the mapper ``params`` (a given grid has its own).
@@ -302,11 +303,19 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     ``truth``: a ``metrics.GroundTruth`` of this scenario on this grid's cells, to reuse
     across many runs (rasterising it costs more than mapping).
     """
+    for i, sweep in enumerate(sweeps):   # before any work: what a replay would refuse
+        rec.check_sweep(sweep, f"sweeps[{i}]")
     estimator = estimate if estimator is None else estimator
     timings = {"estimate": 0.0, "map": 0.0}
     points: list[Points] = []
     if grid is None and scenario is not None:
         grid = OccupancyGrid.for_scenario(scenario, params)
+    if grid is not None:   # every reading of a sweep from outside would miss it, silently
+        lo = grid.origin_xy_m
+        outside = rec.poses_outside(lo, lo + grid.resolution_m * np.asarray(grid.shape[::-1]),
+                                    sweeps, "the map's grid")
+        if outside:
+            raise ValueError(f"{outside}; map the sweeps on a grid that holds them")
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:
         for sweep in sweeps:
             t0 = time.perf_counter()

@@ -37,8 +37,74 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"cannot store {type(obj).__name__} in a recording's JSON")
 
 
+def check_sweep(sweep: Sweep, name: str = "sweep") -> None:
+    """ValueError naming ``name`` and the field for a :class:`Sweep` (from any source: a
+    ``RingSource`` of your own, a sweep edited in code) that :func:`load_recording` would
+    refuse: arrays of the wrong shape, NaN or inf, positions past ±1e6 m, a step twice or
+    outside the ring, counts outside its ADC, scalars out of range. Mapped, such a sweep
+    made NaN end points or invented readings, and its recording could not be replayed."""
+    def fail(field_: str, msg: str) -> ValueError:
+        return ValueError(f"{name}.{field_}: {msg}")
+
+    counts = np.asarray(sweep.counts)
+    if counts.ndim != 2 or counts.shape[1] != sweep.ring.sensors or counts.dtype.kind not in "iuf":
+        raise fail("counts", f"expected numbers of shape (steps, {sweep.ring.sensors} sensors), "
+                             f"got {counts.dtype} {counts.shape}")
+    n_steps = counts.shape[0]
+    shapes = {"steps": (n_steps,), "sensor_angles": counts.shape, "timestamps_s": (n_steps,),
+              "pose": (3,), "reading_poses": counts.shape + (3,)}
+    for field_, shape in shapes.items():
+        value = getattr(sweep, field_)
+        if value is None and field_ == "reading_poses":
+            continue
+        arr = np.asarray(value)
+        if arr.shape != shape or arr.dtype.kind not in "iuf":
+            raise fail(field_, f"expected numbers of shape {shape}, got {arr.dtype} {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise fail(field_, "holds NaN or infinite values")
+        if field_.removeprefix("reading_") in ("pose", "sensor_angles") and arr.size and \
+                np.max(np.abs(arr)) > MAX_ABS_COORDINATE:
+            raise fail(field_, f"holds {np.max(np.abs(arr)):g}; positions and angles lie "
+                               f"within ±{MAX_ABS_COORDINATE:g} (m, rad)")
+    if not np.all(np.isfinite(counts)):
+        raise fail("counts", "holds NaN or infinite values")
+    try:
+        core.check_steps(sweep.steps, sweep.ring.min_step, sweep.ring.max_step)
+        if sweep.missing_steps:
+            core.check_steps(list(sweep.missing_steps), sweep.ring.min_step,
+                             sweep.ring.max_step)
+    except ValueError as exc:
+        raise fail("steps", str(exc)) from None
+    scalars = (("sensor_model", gp2.is_sensor_model(sweep.sensor_model),
+                f"one of {', '.join(gp2.SENSORS)}"),
+               ("adc_bits", _whole(sweep.adc_bits, 1, core.MAX_ADC_BITS),
+                f"a whole number 1 … {core.MAX_ADC_BITS}"),
+               ("vref_v", _finite(sweep.vref_v, *core.VREF_RANGE_V),
+                "{:g} … {:g} V".format(*core.VREF_RANGE_V)),
+               ("max_range_m", _finite(sweep.max_range_m, 0.001, 100.0), "0.001 … 100 m"),
+               ("samples", _whole(sweep.samples, 1, 64), "a whole number 1 … 64"),
+               ("settle_s", _finite(sweep.settle_s, 0.0, 60.0), "0 … 60 s"),
+               ("duration_s", _finite(sweep.duration_s, 0.0, MAX_DURATION_S),
+                f"0 … {MAX_DURATION_S:,.0f} s"))
+    for field_, ok, allowed in scalars:
+        if not ok:
+            raise fail(field_, f"{brief(getattr(sweep, field_))} is not allowed; {allowed}")
+    top = 2 ** sweep.adc_bits - 1
+    if counts.size and (counts.min() < 0 or counts.max() > top):
+        raise fail("counts", f"readings {counts.min():g} … {counts.max():g} lie outside a "
+                             f"{sweep.adc_bits}-bit ADC's 0 … {top}")
+
+
+def _whole(value: Any, lo: int, hi: int) -> bool:
+    return (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+            and lo <= value <= hi)
+
+
 def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> Path:
-    """Write ``sweeps`` (and a JSON-serialisable ``meta``) to a compressed ``.npz``."""
+    """Write ``sweeps`` (and a JSON-serialisable ``meta``) to a compressed ``.npz``; a sweep
+    :func:`check_sweep` refuses raises ValueError before anything is written."""
+    for i, sweep in enumerate(sweeps):
+        check_sweep(sweep, f"sweeps[{i}]")
     path = Path(path)
     if path.suffix != ".npz":
         path = path.with_suffix(".npz")
@@ -216,15 +282,24 @@ def _check_grid_holds_poses(grid: dict | None, sweeps: Sequence[Sweep], fail) ->
     every reading would land outside and the map come out empty without a word."""
     if grid is None:
         return
-    res = grid["resolution_m"]
     lo = np.asarray(grid["origin_xy_m"], dtype=float)
-    hi = lo + res * np.asarray(grid["shape"][::-1], dtype=float)   # shape is rows, columns
+    outside = poses_outside(lo, lo + grid["resolution_m"] * np.asarray(grid["shape"][::-1],
+                                                                      dtype=float), sweeps,
+                            "the recorded grid")
+    if outside:
+        raise fail(f"meta.grid: {outside}; the grid and the sweeps do not belong together")
+
+
+def poses_outside(lo_xy_m: Any, hi_xy_m: Any, sweeps: Sequence[Sweep], what: str) -> str | None:
+    """'sweep K's pose (x, y) m lies outside {what} (x … m, y … m)' for the first sweep whose
+    pose lies outside the box ``lo_xy_m`` … ``hi_xy_m`` (m), else None."""
+    lo, hi = np.asarray(lo_xy_m, dtype=float), np.asarray(hi_xy_m, dtype=float)
     for k, sweep in enumerate(sweeps):
         xy = np.asarray(sweep.pose, dtype=float)[:2]
         if not np.all((lo <= xy) & (xy <= hi)):
-            raise fail(f"meta.grid: sweep {k + 1}'s pose ({xy[0]:g}, {xy[1]:g}) m lies outside "
-                       f"the recorded grid (x {lo[0]:g} … {hi[0]:g} m, y {lo[1]:g} … "
-                       f"{hi[1]:g} m); the grid and the sweeps do not belong together")
+            return (f"sweep {k + 1}'s pose ({xy[0]:g}, {xy[1]:g}) m lies outside {what} (x "
+                    f"{lo[0]:g} … {hi[0]:g} m, y {lo[1]:g} … {hi[1]:g} m)")
+    return None
 
 
 def _finite(value: Any, lo: float, hi: float) -> bool:

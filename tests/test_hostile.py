@@ -27,7 +27,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import hostile_devices as hd
-from irring import errors, safe_yaml
+from irring import errors, pipeline, safe_yaml
 from irring.cli import main
 from irring.core import Sweep
 from irring.errors import OutputError, TooBig
@@ -38,7 +38,7 @@ from irring.hardware.serial_ring import CHATTER_LIMIT_BYTES, DeviceTimeout
 from irring.hardware import protocol as p_
 from irring.recording import RecordingError, load_recording, save_recording
 from irring.core import Ring
-from irring.scenario import ScenarioError, loads, resolve
+from irring.scenario import ScenarioError, load_scenario, loads, resolve
 
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
@@ -340,6 +340,46 @@ def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, m
     path.write_bytes(make(good_recording))
     with pytest.raises((RecordingError, TooBig), match=re.escape(message)):
         load_recording(path)
+
+
+@pytest.fixture(scope="module")
+def t_room_sweep():
+    from irring import SimRing
+    room = load_scenario("t_room")
+    return room, SimRing(room).sweep(0)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda s: {"counts": np.where(np.arange(s.counts.size).reshape(s.counts.shape) % 7, s.counts,
+                                   np.nan)}, "sweeps[0].counts: holds NaN or infinite values"),
+    (lambda s: {"counts": s.counts - 5000.0}, "sweeps[0].counts: readings -4"),
+    (lambda s: {"sensor_angles": s.sensor_angles + np.inf},
+     "sweeps[0].sensor_angles: holds NaN or infinite values"),
+    (lambda s: {"pose": np.array([np.nan, 0.45, 0.0])}, "sweeps[0].pose: holds NaN or infinite"),
+    (lambda s: {"steps": np.where(s.steps == 3, 2, s.steps)},
+     "sweeps[0].steps: step 2 is listed twice; a sweep reads each step once"),
+    (lambda s: {"duration_s": -1.0}, "sweeps[0].duration_s: -1.0 is not allowed; 0 … 10,000,000 s"),
+    (lambda s: {"adc_bits": 0}, "sweeps[0].adc_bits: 0 is not allowed; a whole number 1 … 24"),
+    (lambda s: {"timestamps_s": s.timestamps_s[:-1]},
+     "sweeps[0].timestamps_s: expected numbers of shape (71,), got float64 (70,)"),
+    (lambda s: {"pose": np.array([100.0, 0.45, 0.0])},
+     "sweep 1's pose (100, 0.45) m lies outside the map's grid (x -0.105 … 2.535 m, y -0.105 "
+     "… 1.915 m); map the sweeps on a grid that holds them"),
+])
+def test_a_sweep_a_replay_would_refuse_is_refused_by_map_sweeps(tmp_path, t_room_sweep, edit,
+                                                                 message):
+    """pipeline.map_sweeps (the README's API for any RingSource) mapped such sweeps: NaN end
+    points dropped without a word, a repeated step mapped twice, a pose off the grid mapped
+    nothing (exit 0, an empty map), adc_bits 0 a RuntimeWarning; write_outputs then wrote a
+    sweeps.npz that irring replay refused."""
+    room, sweep = t_room_sweep
+    bad = dataclasses.replace(sweep, **edit(sweep))
+    with pytest.raises(ValueError, match=re.escape(message)):
+        pipeline.map_sweeps([bad, sweep], scenario=room)
+    if "map's grid" not in message:
+        with pytest.raises(ValueError, match=re.escape(message.replace("[0]", "[1]"))):
+            save_recording(tmp_path / "x.npz", [sweep, bad])
+    assert not (tmp_path / "x.npz").exists()
 
 
 @FUZZ
