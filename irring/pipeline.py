@@ -310,12 +310,6 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     points: list[Points] = []
     if grid is None and scenario is not None:
         grid = OccupancyGrid.for_scenario(scenario, params)
-    if grid is not None:   # every reading of a sweep from outside would miss it, silently
-        lo = grid.origin_xy_m
-        outside = rec.poses_outside(lo, lo + grid.resolution_m * np.asarray(grid.shape[::-1]),
-                                    sweeps, "the map's grid")
-        if outside:
-            raise ValueError(f"{outside}; map the sweeps on a grid that holds them")
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:
         for sweep in sweeps:
             t0 = time.perf_counter()

@@ -536,6 +536,26 @@ def test_odometry_noise_degrades_the_map_gracefully():
     assert f1[2] < f1[1] and f1[3] < f1[1]        # bad odometry: a bad map, still a map
 
 
+def test_a_run_whose_odometry_drifts_off_its_grid_replays_to_the_same_map(tmp_path):
+    """odometry_sigma 1 m a metre (allowed) carries sweep 3's believed pose to (2.69, 1.57) m,
+    off the T-room's grid: the run mapped what landed on it, but irring replay refused its
+    sweeps.npz ('meta.grid: sweep 3's pose … lies outside the recorded grid')."""
+    from irring.cli import main
+    sc = bench.variant("t_room_moving", drop=("belt_dynamics",),
+                       motion={"odometry_sigma_mm": 1000, "odometry_sigma_deg": 57})
+    run = pipeline.run(sc, progress=False)
+    lo, res = run.grid.origin_xy_m, run.grid.resolution_m
+    hi = lo + res * np.array(run.grid.shape[::-1])
+    off = [k for k, s in enumerate(run.sweeps)
+           if not np.all((lo <= s.pose[:2]) & (s.pose[:2] <= hi))]
+    assert off == [2, 4, 6, 8] and len(run.sweeps) == 11
+    pipeline.write_outputs(run, tmp_path / "run")
+    assert main(["replay", str(tmp_path / "run" / "sweeps.npz"), "--out", str(tmp_path / "rep"),
+                 "--no-animation"]) == 0
+    assert ((tmp_path / "rep" / "map.pgm").read_bytes()
+            == (tmp_path / "run" / "map.pgm").read_bytes())
+
+
 def test_odometry_drift_has_the_stated_sigma_per_metre():
     path = D.Path(xy_m=np.array([[0.0, 0.0], [1.0, 0.0]]), yaw_rad=np.zeros(2),
                   arc_m=np.array([0.0, 1.0]), speed_m_s=0.1)
