@@ -122,7 +122,7 @@ def test_a_far_posts_few_readings_from_several_sensors_are_read_on_one_circle(mo
     readings between silent beams, too few for a slope or an arc; they were INCIDENCE_UNKNOWN
     or θ = 0 fallbacks up to 213 mm off (RMS 59 mm), and 13 of the posts' 33 visible cells
     were mapped. Fitted as one circle across the sensors: 15 readings change, all on the
-    posts, now 1-37 mm off (RMS 20 mm); 31 cells are mapped, recall 0.952 → 0.983,
+    posts, now 2-40 mm off (RMS 19 mm); 31 cells are mapped, recall 0.952 → 0.983,
     precision 0.981 → 0.975."""
     scene = loads(FAR_HALL)
     changed = []
@@ -149,7 +149,7 @@ def test_a_far_posts_few_readings_from_several_sensors_are_read_on_one_circle(mo
     assert sum(int(c.sum()) for c in changed) == 15
     assert all(not (c & ~_on_posts(scene, sw)).any() for c, sw in zip(changed, run.sweeps))
     moved = np.concatenate([e[c] for e, c in zip(err, changed)])
-    assert moved.max() < 0.04 and np.sqrt(np.mean(moved ** 2)) < 0.022
+    assert moved.max() < 0.045 and np.sqrt(np.mean(moved ** 2)) < 0.021
     assert on_post.size == 29 and cells == (33, 31)
     monkeypatch.setattr(fast, "far_posts", lambda points, *args: points)
     run0, _, on_post0, cells0 = measure()

@@ -1083,7 +1083,7 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration):
     return theta, dist, sigma, good
 
 
-POST_RADII_M = np.geomspace(0.01, 0.07, 14)  # a far post is tried as a circle of these radii
+POST_RADII_M = np.geomspace(0.01, 0.07, 13)  # a far post is tried as a circle of these radii
 #                                              (the largest fitting best: not a post) …
 POST_LINK_M = 0.12       # … through readings on no line whose θ = 0 end points chain this near …
 POST_RUN_MAX = 5         # … at most this many of one sensor (more: a surface, not a post) …
@@ -1092,6 +1092,7 @@ POST_JUMP_M = 0.10       # … each sensor's run flanked by silence or readings 
 POST_BEARING_RAD = 0.0025  # its centre searched on this bearing grid …
 POST_RANGE_M = 0.005     # … and this range grid; a silent flanking beam it meets this far
 POST_SILENT_RAD = math.radians(15)  # inside the drop-out angle (within the return range) misfits
+POST_COARSE = 4          # the search: every 4th radius on a grid 4× as coarse, then fine about it
 
 
 def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
@@ -1162,13 +1163,11 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
         fi = np.array([f[0] for f in flank], dtype=np.intp)
         fk = np.array([f[1] for f in flank], dtype=np.intp)
         bearing = np.arctan2(py[comp == c] - cy0, px[comp == c] - cx0)
-        grid_a = np.arange(bearing.min() - 8 * POST_BEARING_RAD,
-                           bearing.max() + 8 * POST_BEARING_RAD, POST_BEARING_RAD)
-        best = None
-        for radius in POST_RADII_M:
-            grid_t = np.arange(np.nanmin(d0[ii, kk]) - 0.15 + radius,
-                               np.nanmax(d0[ii, kk]) + radius + 0.05, POST_RANGE_M)
-            a, t = (v.reshape(-1, 1) for v in np.meshgrid(grid_a, grid_t))
+        near_m, far_m = np.nanmin(d0[ii, kk]) - 0.15, np.nanmax(d0[ii, kk]) + 0.05
+
+        def score(radius, a, t):
+            """Each candidate circle's summed misfit and its readings' θ, d, misfit, noise
+            (radius, bearing a and centre range t: (C, 1))."""
             centre = (cx0 + t * np.cos(a), cy0 + t * np.sin(a))
             t_i, th_i, meets = _meet_circle(centre, radius, ox[ii, kk], oy[ii, kk],
                                             ex[ii, kk], ey[ii, kk])
@@ -1185,10 +1184,32 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
                 cost = cost + ARC_MISS * np.count_nonzero(
                     meets_f & (th_f < cal.max_incidence_rad - POST_SILENT_RAD)
                     & (t_f < cal.return_range_m), axis=1)
-            q = int(np.argmin(cost))
-            if best is None or cost[q] < best[0]:
-                best = (cost[q], radius, th_i[q], d_i[q], each[q], noise[q])
-        cost, radius, th, d, each, noise = best
+            return cost, th_i, d_i, each, noise
+
+        # coarse (every POST_COARSE-th radius, POST_COARSE-times the grid steps), then fine
+        # about the best: 30× fewer circles than the fine grid (docs/estimator.md, cost)
+        step_a, step_t = POST_COARSE * POST_BEARING_RAD, POST_COARSE * POST_RANGE_M
+        grid_a = np.arange(bearing.min() - 8 * POST_BEARING_RAD,
+                           bearing.max() + 8 * POST_BEARING_RAD + step_a, step_a)
+        cand_r, cand_a, cand_t = [], [], []
+        for radius in POST_RADII_M[::POST_COARSE]:
+            a_g, t_g = np.meshgrid(grid_a, np.arange(near_m + radius, far_m + radius + step_t,
+                                                     step_t))
+            cand_r.append(np.full(a_g.size, radius))
+            cand_a.append(a_g.ravel())
+            cand_t.append(t_g.ravel())
+        r_c, a_c, t_c = (np.concatenate(v).reshape(-1, 1) for v in (cand_r, cand_a, cand_t))
+        q = int(np.argmin(score(r_c, a_c, t_c)[0]))
+        at = int(np.argmin(np.abs(POST_RADII_M - r_c[q, 0])))
+        fine = np.arange(-POST_COARSE, POST_COARSE + 1)
+        r_f, a_f, t_f = np.meshgrid(POST_RADII_M[max(at - POST_COARSE + 1, 0):at + POST_COARSE],
+                                    a_c[q, 0] + fine * POST_BEARING_RAD,
+                                    fine * POST_RANGE_M, indexing="ij")
+        t_f = t_f + t_c[q, 0] - r_c[q, 0] + r_f      # the same surface, each radius behind it
+        r_f, a_f, t_f = (v.reshape(-1, 1) for v in (r_f, a_f, t_f))
+        cost, th, d, each, noise = score(r_f, a_f, t_f)
+        q = int(np.argmin(cost))
+        cost, radius, th, d, each, noise = cost[q], r_f[q, 0], th[q], d[q], each[q], noise[q]
         if cost > ARC_MISFIT * (ii.size + fi.size) or radius >= POST_RADII_M[-1]:
             continue
         on = (each <= ARC_ON) & (d >= cal.min_range_m) & (d <= points.max_range_m)
