@@ -516,6 +516,22 @@ def test_drive_with_a_bad_calibration_file_exits_1_as_its_help_says(tmp_path, ca
     assert err.startswith(f"irring drive: error: {bad}: ") and err.count(str(bad)) == 1
 
 
+def test_drive_with_a_calibration_for_another_adc_exits_1_naming_the_file(tmp_path, capsys):
+    """It exited 2 (a usage error), naming neither the file nor the port."""
+    cal = tmp_path / "cal10.yaml"
+    cal.write_text(Calibration.nominal("gp2d12", adc_bits=10).to_yaml())
+    dev = hd.HostileDevice(hd.good)   # announces 12 bits
+    try:
+        assert main(["drive", "--port", dev.link, "--calibration", str(cal), "--no-wait",
+                     "--out", str(tmp_path / "o")]) == 1
+    finally:
+        dev.close()
+    assert (f"irring drive: error: {cal}: a calibration for a 10-bit ADC; the ring on "
+            f"{dev.link} reports 12 bits: calibrate this ring (irring calibrate)"
+            in capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()
+
+
 # --------------------------------------------------------------------------- devices
 
 TIMEOUT_S = 0.15

@@ -174,9 +174,11 @@ def run(args: argparse.Namespace) -> int:
         f"ADC, step {info.step_mdeg / 1000:g}° × {info.gear_num}/{info.gear_den}, steps "
         f"{info.min_step} … {info.max_step}")
     if calibration is not None and calibration.adc_bits != info.adc_bits:
-        ring.close()
-        return _error(f"the calibration is for a {calibration.adc_bits}-bit ADC but the ring "
-                      f"reports {info.adc_bits} bits; calibrate this ring (irring calibrate)")
+        ring.close()   # a bad --calibration file for this ring: exit 1, as --help says
+        _error(f"{args.calibration}: a calibration for a {calibration.adc_bits}-bit ADC; the "
+               f"ring on {args.port} reports {info.adc_bits} bits: calibrate this ring "
+               "(irring calibrate)")
+        return errors.INPUT
     if truth is not None and ring.ring != truth.ring:
         say(f"warning: the device's geometry differs from {truth.name}'s ring; using the "
             f"device's")
