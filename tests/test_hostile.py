@@ -516,6 +516,19 @@ def test_drive_with_a_bad_calibration_file_exits_1_as_its_help_says(tmp_path, ca
     assert err.startswith(f"irring drive: error: {bad}: ") and err.count(str(bad)) == 1
 
 
+def test_a_network_port_that_cannot_be_opened_gets_network_advice(tmp_path, capsys):
+    """It was told to check /dev/ttyUSB* and the dialout group."""
+    import socket
+    with socket.socket() as s:   # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    assert main(["drive", "--port", f"socket://127.0.0.1:{port}", "--no-wait", "--out",
+                 str(tmp_path / "o")]) == 3
+    assert (f"cannot open socket://127.0.0.1:{port}: Connection refused. Check that the ring's "
+            "server listens at that host and port, or start the emulator: irring emulate "
+            "t_room --tcp PORT" in capsys.readouterr().err)
+
+
 def test_drive_with_a_calibration_for_another_adc_exits_1_naming_the_file(tmp_path, capsys):
     """It exited 2 (a usage error), naming neither the file nor the port."""
     cal = tmp_path / "cal10.yaml"
@@ -1088,6 +1101,16 @@ def test_drive_saves_the_sweeps_elsewhere_when_its_outputs_cannot_be_written(
 
 @pytest.mark.parametrize("argv, status, message", [
     (["drive", "--port", "x", "--timeout", "0"], 2, "--timeout: must be a number of seconds > 0"),
+    # exit 3 "Could not open port socket://: '<=' not supported between instances of 'int'
+    # and 'NoneType'. Check the device path (ls /dev/ttyUSB* …)"; socket://:99999 said
+    # "'debug|info|warning|error'"
+    (["drive", "--port", "socket://"], 2,
+     "argument --port: expected socket://HOST:PORT with PORT 1 … 65535, got 'socket://'"),
+    (["drive", "--port", "socket://:99999"], 2, "expected socket://HOST:PORT with PORT 1 … "
+                                                "65535, got 'socket://:99999'"),
+    (["calibrate", "--port", "rfc2217://ring.local"], 2,
+     "argument --port: expected rfc2217://HOST:PORT with PORT 1 … 65535"),
+    (["drive", "--port", ""], 2, "argument --port: an empty port; name a device"),
     (["drive", "--port", "x", "--samples", "65"], 2, "--samples: must be in 1 … 64"),
     # more sweeps than a recording holds: drive wrote a sweeps.npz replay refused
     (["drive", "--port", "x", "--poses", "10001"], 2, "--poses: must be 1 … 10000, got 10001"),

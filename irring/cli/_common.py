@@ -13,6 +13,7 @@ import importlib.util
 import math
 import os
 import textwrap
+import urllib.parse
 from collections.abc import Callable
 from pathlib import Path
 
@@ -247,6 +248,26 @@ def positive_seconds(text: str) -> float:
         raise argparse.ArgumentTypeError(f"must be a number of seconds > 0 and ≤ 3600, "
                                          f"got {text!r}")
     return value
+
+
+def serial_port(text: str) -> str:
+    """A ``type=`` for ``--port``: a device path, or a pyserial URL; a network URL must name
+    its host and port (``socket://`` alone failed inside pyserial with "'<=' not supported
+    between instances of 'int' and 'NoneType'" and advice to check /dev/ttyUSB*)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty port; name a device (/dev/ttyUSB0, a pty) "
+                                         "or a URL (socket://HOST:PORT)")
+    scheme = text.partition("://")[0].lower() if "://" in text else ""
+    if scheme in ("socket", "rfc2217"):
+        parts = urllib.parse.urlsplit(text)
+        try:
+            port = parts.port
+        except ValueError:
+            port = None
+        if not parts.hostname or port is None or not 1 <= port <= 65535:
+            raise argparse.ArgumentTypeError(f"expected {scheme}://HOST:PORT with PORT 1 … "
+                                             f"65535, got {text!r}")
+    return text
 
 
 def host_port(text: str) -> tuple[str, int]:

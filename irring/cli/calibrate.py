@@ -16,7 +16,7 @@ from ..estimation.calibration import (CalibrationAborted, CalibrationError, Guid
 from ..outputs import check_out
 from ..core import MAX_SWEEPS
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import at_least, between, describe, out_path, seed, spare_inputs
+from ._common import at_least, between, describe, out_path, seed, serial_port, spare_inputs
 
 EPILOG = """\
 what it does:
@@ -71,7 +71,7 @@ def register(p: argparse.ArgumentParser) -> None:
                         f"(default: {DEFAULTS['scenario']})")
     p.add_argument("--out", type=out_path, default=DEFAULTS["out"], metavar="FILE",
                    help=f"calibration file to write (default: {DEFAULTS['out']})")
-    p.add_argument("--port", metavar="PORT",
+    p.add_argument("--port", type=serial_port, metavar="PORT",
                    help="serial port or pyserial URL of the real ring; runs the guided "
                         "procedure instead of the simulated rig")
     p.add_argument("--baud", type=between(1, 10_000_000), default=DEFAULTS["baud"],

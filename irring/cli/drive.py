@@ -20,7 +20,7 @@ from ..outputs import check_out
 from ..recording import save_recording
 from ..scenario import load_scenario
 from ._common import (add_mcap_option, at_least, between, describe, out_path, positive_seconds,
-                      spare_inputs)
+                      serial_port, spare_inputs)
 from .run import report
 
 HELP = """\
@@ -70,7 +70,7 @@ def _pose(text: str) -> tuple[float, float, float]:
 
 def register(p: argparse.ArgumentParser) -> None:
     describe(p, HELP)
-    p.add_argument("--port", required=True, metavar="PORT",
+    p.add_argument("--port", required=True, type=serial_port, metavar="PORT",
                    help="serial device or pyserial URL: /dev/ttyUSB0, COM3, a pty path, "
                         "socket://host:port, loop://")
     p.add_argument("--baud", type=between(1, 10_000_000), default=115200,

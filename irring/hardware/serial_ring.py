@@ -324,12 +324,14 @@ class SerialRing:
                     self._port = self.opener(self._port_arg, baudrate=self.baudrate,
                                              timeout=self.poll_s, write_timeout=self.timeout_s)
                 except (serial.SerialException, OSError, ValueError) as exc:
-                    raise DeviceError(
-                        f"cannot open {self._port_arg}: {_open_failure(exc)}. Check the "
-                        f"device path (ls "
-                        f"/dev/ttyUSB* /dev/ttyACM*), that you may use it (group dialout), "
-                        f"or start the emulator: irring emulate t_room (then --port ring.pty)"
-                    ) from exc
+                    network = self._port_arg.lower().startswith(("socket://", "rfc2217://"))
+                    advice = ("that the ring's server listens at that host and port, or start "
+                              "the emulator: irring emulate t_room --tcp PORT" if network else
+                              "the device path (ls /dev/ttyUSB* /dev/ttyACM*), that you may "
+                              "use it (group dialout), or start the emulator: irring emulate "
+                              "t_room (then --port ring.pty)")
+                    raise DeviceError(f"cannot open {self._port_arg}: {_open_failure(exc)}. "
+                                      f"Check {advice}") from exc
             else:
                 self._port = self._port_arg
                 if not self._port.is_open:
