@@ -449,7 +449,8 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
     if calibration_file is not None:
         calibration, cal_text = load_calibration(calibration_file)
     elif meta.get("calibration_yaml") or scenario is None:
-        calibration, cal_text = load_calibration(meta.get("calibration_yaml"), is_text=True)
+        calibration, cal_text = load_calibration(meta.get("calibration_yaml"), is_text=True,
+                                                 source=f"{recording} (recorded calibration)")
     else:  # a simulated recording from before runs recorded the scene's calibration
         calibration, cal_text = scene_calibration(scenario)
     for k, sweep in enumerate(sweeps):

@@ -342,6 +342,19 @@ def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, m
         load_recording(path)
 
 
+def test_a_damaged_recorded_calibration_names_the_recording(tmp_path, capsys, good_recording):
+    """It named '<recording's calibration>' only: which of the files replayed?"""
+    cal = Calibration.nominal("gp2d12").to_yaml().replace("adc_bits: 12",
+                                                          "adc_bits: 12\nadc_bits: 12")
+    path = tmp_path / "rec.npz"
+    path.write_bytes(_rewrite(good_recording, "meta", np.array(json.dumps(
+        {"seed": 3, "calibration_yaml": cal}))))
+    line = cal.splitlines().index("adc_bits: 12") + 2
+    assert main(["replay", str(path), "--out", str(tmp_path / "o")]) == 1
+    assert (f"irring replay: error: {path} (recorded calibration): line {line}: key 'adc_bits' "
+            f"given twice (first on line {line - 1})" in capsys.readouterr().err)
+
+
 @pytest.fixture(scope="module")
 def t_room_sweep():
     from irring import SimRing

@@ -517,13 +517,15 @@ def _fallback_nodes(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
     return cal.log_ab(fallback_thetas(cal))
 
 
-def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False
+def load_calibration(path_or_text: str | Path | None, *, is_text: bool = False,
+                     source: str = "<recording's calibration>"
                      ) -> tuple[Calibration | None, str | None]:
-    """(Calibration or None, YAML text or None) from a file path or from stored YAML text."""
+    """(Calibration or None, YAML text or None) from a file path or from stored YAML text
+    (``source`` names it in errors)."""
     if path_or_text is None:
         return None, None
     if is_text:
-        text, source = str(path_or_text), "<recording's calibration>"
+        text = str(path_or_text)
     else:
         source = str(path_or_text)
         try:
