@@ -320,3 +320,26 @@ def test_a_fit_whose_second_row_flips_sign_is_still_refused():
     counts = np.where(theta > 0, 40.0 * d, 0.5 / d)    # rising at 5°, falling at 0°
     with pytest.raises(CalibrationError, match="changes sign"):
         fit_curve(counts, d, theta, np.radians([0.0, 5.0, 10.0]), min_readings=2)
+
+
+@pytest.mark.parametrize("design, message", [
+    # "cannot determine the emitter offset d_o: Σ tan²φ = 0 over 4 readings … sweep the sensor
+    # across angles on both sides of the wall normal": a radial ring cannot
+    ("radial12", "its design, radial12, does not turn its sensors (motor steps 0 … 0); the "
+                 "procedure reads d_o from a sensor turned across a wall (paper Eq. 9): use a "
+                 "turning design (rotating12, rotating1)"),
+    # "emitter_offset_m -0.161 is not a plausible d_o (|d_o| < 0.1 m)"
+    ("laser", "its sensor, laser, reads distance linearly; irring calibrate fits a GP2's curve "
+              "d = a(θ)·S^b(θ) (paper Eq. 10): use a scenario with a GP2 sensor"),
+    ("sonar12", "its sensor, sonar, reads distance linearly"),
+])
+def test_calibrate_refuses_a_scene_the_wall_procedure_cannot_calibrate(tmp_path, capsys, design,
+                                                                       message):
+    from irring.cli import main
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("name: s\nroom: {outline_mm: [[0, 0], [1000, 0], [1000, 800], [0, 800]]}\n"
+                     f"robot: {{design: {design}, poses: [{{x_mm: 500, y_mm: 400}}]}}\n")
+    assert main(["calibrate", "--scenario", str(scene), "--out", str(tmp_path / "c.yaml"),
+                 "--sweeps", "1"]) == 1
+    assert f"irring calibrate: error: {scene}: {message}" in capsys.readouterr().err
+    assert not (tmp_path / "c.yaml").exists()

@@ -10,7 +10,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from .. import errors
+from .. import errors, gp2
 from ..estimation.calibration import (CalibrationAborted, CalibrationError, GuidedCalibration,
                                       SimulatedRig, load_progress, save_progress)
 from ..outputs import check_out
@@ -107,6 +107,11 @@ def run(args: argparse.Namespace) -> int:
     check_out(out.parent)
     spare_inputs({"--out": out}, {"--scenario": args.scenario, "--resume": args.resume})
     scenario = load_scenario(args.scenario)
+    why = _cannot_calibrate(scenario, simulated=args.port is None)
+    if why:
+        print(f"irring calibrate: error: {scenario.source or scenario.name}: {why}",
+              file=sys.stderr)
+        return errors.INPUT
     if args.port is not None:
         return _guided(args, scenario, out)
     if args.sensor >= scenario.ring.sensors:
@@ -125,6 +130,24 @@ def run(args: argparse.Namespace) -> int:
     print(_summary(cal))
     print(f"wrote {path}")
     return 0
+
+
+def _cannot_calibrate(scenario, simulated: bool) -> str | None:
+    """Why the wall procedure cannot calibrate ``scenario``'s sensor (None: it can). It fits
+    a GP2's falling curve and reads d_o from one sensor turned across a wall: a radial
+    design ended in 'Σ tan²φ = 0 … sweep the sensor across angles', a laser in 'not a
+    plausible d_o'."""
+    if gp2.sensor(scenario.sensor.model).b[0] > 0:
+        return (f"its sensor, {scenario.sensor.model}, reads distance linearly; irring "
+                "calibrate fits a GP2's curve d = a(θ)·S^b(θ) (paper Eq. 10): use a scenario "
+                "with a GP2 sensor (gp2d12, gp2y0a21, gp2y0a02)")
+    ring = scenario.ring
+    if simulated and ring.min_step == ring.max_step:
+        return (f"its design, {scenario.robot.design}, does not turn its sensors (motor steps "
+                f"{ring.min_step} … {ring.max_step}); the procedure reads d_o from a sensor "
+                "turned across a wall (paper Eq. 9): use a turning design (rotating12, "
+                "rotating1)")
+    return None
 
 
 def _no_such_sensor(args, ring: str, sensors: int) -> int:
