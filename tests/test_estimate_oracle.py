@@ -13,7 +13,7 @@ import dataclasses
 import math
 
 import numpy as np
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
@@ -223,13 +223,16 @@ def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge,
        noise=st.sampled_from([0.0, 0.5, 3.0]),
        keep=st.floats(0.5, 1.0),
        ask_share=st.floats(0.05, 1.0))
+# a window of two readings, whose curvature term is rounding: 'sure' differed at index 83
+@example(seed=1414, room="columns", strength=1.0, noise=3.0, keep=0.9609375, ask_share=1.0)
 def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, noise, keep,
                                                         ask_share):
     """``_lines.profiles`` (compiled) against ``estimate.range_profiles`` (numpy) on a sweep's
     valid readings, steps dropped at random (windows cut short, polylines broken), any
     subset asked, on curves whose a(θ) grows: the same flags (ok, convex, sure, concave;
-    exact),
-    and the same counts, slopes, standard errors and angles within 1e-9."""
+    exact: numpy's sums of 8 or more terms round apart from the kernel's, so a flag must not
+    rest on rounding alone), and the same counts, slopes, standard errors and angles within
+    1e-9."""
     walls, circles, rng = _scene(seed, room)
     if room == "columns":    # round things 50–200 mm across, the round-line rule's case
         circles = [((0.6 * walls[1][0][0], 0.2), rng.uniform(0.025, 0.1)),

@@ -1176,7 +1176,8 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
              const idx_t[::1] step, const idx_t[::1] ask, const double[::1] xp,
              const double[::1] node_log_a, const double[::1] node_b, double max_inc,
              double convex_below, idx_t half, idx_t min_n, double spread_m, double n_se,
-             const double[::1] chi2_95, double sigma_floor, double sure_se):
+             const double[::1] chi2_95, double sigma_floor, double sure_se,
+             double bend_min_share):
     """Each asked reading's range profile: ``irring.estimation.estimate.range_profiles`` (the
     statement and the why) reading by reading, to within rounding (the sums accumulate in
     window order, θ's curve between nodes as np.interp draws it).
@@ -1184,12 +1185,13 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
     Per valid reading in scan order (K,): emitter ox, oy, heading, log counts, σ_S/S,
     polyline id and motor step; ``ask`` (M,) positions into them. Returns (n, slope, se,
     theta, steep) float arrays and (ok, convex, sure, concave) uint8 arrays, each (M,);
-    sure: bent away by ``sure_se`` standard errors."""
+    sure: bent away by ``sure_se`` standard errors; no bend where fewer than ``min_n``
+    readings or the curvature term keeps at most ``bend_min_share`` of Σ(v²)²."""
     cdef idx_t K = ox.shape[0], M = ask.shape[0], i, p, c, w, r, nw, dof, n_ok
     cdef idx_t W = 2 * half + 1
     cdef double inv_dx = 0.0
     cdef double ux, uy, signed, th, la, b, d, x, y, nn, mu, mv, svv, sl, t, se, chi2, res
-    cdef double sqq, qm, qdv, bend, bend_se, sig, e2
+    cdef double sqq, qm, qdv, bend, bend_se, sig, e2, q_norm
     if not (oy.shape[0] == heading.shape[0] == log_s.shape[0] == sig_s.shape[0]
             == chain.shape[0] == step.shape[0] == K):
         raise ValueError("per-reading arrays differ in length")
@@ -1293,11 +1295,13 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
             chi2 = 0.0
             qm = 0.0
             qdv = 0.0
+            q_norm = 0.0
             for w in range(nw):
                 e2 += (sg[w] * v[w]) * (sg[w] * v[w])
                 res = (u[w] - sl * v[w]) / sg[w]
                 chi2 += res * res
                 q[w] = v[w] * v[w]
+                q_norm += q[w] * q[w]
                 qm += q[w]
                 qdv += q[w] * v[w]
             se = sqrt(e2) / svv
@@ -1310,15 +1314,17 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
                 # the curvature term, orthogonal to 1 and v
                 q[w] = q[w] - qm - qdv * v[w]
                 sqq += q[w] * q[w]
-            if sqq < 1e-30:
-                sqq = 1e-30
-            for w in range(nw):
-                bend += u[w] * q[w]
-                bend_se += (sg[w] * q[w]) * (sg[w] * q[w])
-            bend /= sqq
-            bend_se = sqrt(bend_se) / sqq
             # readings of one step repeated lie on one spot: they give no slope
             n_ok = nw if svv >= nw * spread_m * spread_m else 0
+            # at two spots the curvature term is rounding: no bend (as range_profiles says)
+            if n_ok >= min_n and sqq > bend_min_share * q_norm:
+                if sqq < 1e-30:
+                    sqq = 1e-30
+                for w in range(nw):
+                    bend += u[w] * q[w]
+                    bend_se += (sg[w] * q[w]) * (sg[w] * q[w])
+                bend /= sqq
+                bend_se = sqrt(bend_se) / sqq
             dof = n_ok - 2
             if dof < 1:
                 dof = 1

@@ -772,6 +772,8 @@ _CHI2_95 = np.array([3.84, 5.99, 7.81, 9.49, 11.07])  # … and a straight profi
 _CONVEX_BELOW_DROP_RAD = math.radians(5)  # a bend with θ this near the drop-out is the model's clamp
 _UNKNOWN_M = 0.10       # fewer readings, and θ = 0 may read this much long: INCIDENCE_UNKNOWN
 _CONVEX_SURE_SE = 3.0   # … unless its profile bends away this many standard errors: a post
+_BEND_MIN_SHARE = 1e-12  # a bend is read only where the curvature term keeps this share of
+#                          Σ(v²)²: readings at three spots across the beam or more
 
 
 @dataclass(frozen=True)
@@ -834,7 +836,7 @@ def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: n
         np.ascontiguousarray(off, dtype=np.intp), cal.theta_rad,
         cal._node_log_a, cal.b, cal.max_incidence_rad,
         _CONVEX_BELOW_DROP_RAD, _LOCAL_STEPS, _LOCAL_MIN, _LOCAL_SPREAD_M, _LOCAL_SLOPE_SE,
-        _CHI2_95, SIGMA_FLOOR_M, _CONVEX_SURE_SE)
+        _CHI2_95, SIGMA_FLOOR_M, _CONVEX_SURE_SE, _BEND_MIN_SHARE)
     return _Profile(s=s, d0=d0, sig_s=sig_s, n=n, slope=slope, se=se, theta=theta,
                     ok=ok.view(bool), convex=convex.view(bool), sure=sure.view(bool),
                     concave=concave.view(bool), steep=steep, chain=chain, heading=h,
@@ -887,11 +889,16 @@ def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.n
     # bends away from the beam (θ changes ~10× faster than the beam turns), a flat wall
     # is straight whatever its θ
     q = dv * dv
+    q_norm = (q * q).sum(axis=1)
     q = (q - (q.sum(axis=1) / nn)[:, None] * w
          - ((q * dv).sum(axis=1) / svv)[:, None] * dv) * w
-    sqq = np.maximum((q * q).sum(axis=1), 1e-30)
-    bend = (du * q).sum(axis=1) / sqq
-    bend_se = np.sqrt(((sig * q) ** 2).sum(axis=1)) / sqq
+    sqq = (q * q).sum(axis=1)
+    # at two spots (two readings, or a step repeated) the term is zero but for rounding and
+    # its bend noise over noise, which numpy and the kernel round apart: no bend there
+    curved = (n >= _LOCAL_MIN) & (sqq > _BEND_MIN_SHARE * q_norm)
+    sqq = np.maximum(sqq, 1e-30)
+    bend = np.where(curved, (du * q).sum(axis=1) / sqq, 0.0)
+    bend_se = np.where(curved, np.sqrt(((sig * q) ** 2).sum(axis=1)) / sqq, 0.0)
     straight = ((n >= _LOCAL_MIN) & (chi2 <= _CHI2_95[dof - 1])
                 & (np.abs(bend) <= _LOCAL_SLOPE_SE * bend_se))
     ok = straight & (np.abs(slope) > _LOCAL_SLOPE_SE * se)
