@@ -21,8 +21,9 @@ from irring.estimation import estimate_numpy as oracle
 from irring.core import Reason
 from irring.estimation import _lines
 from irring.estimation.estimate import (SIGMA_FLOOR_M, LineOptions, _fewer_distinct,
-                                        _profile_inputs, estimate_detail, polyline_ids,
-                                        profiles_compiled, range_profiles, scan_order)
+                                        _profile_inputs, estimate_detail, jump_slope,
+                                        polyline_ids, profiles_compiled, range_profiles,
+                                        scan_order)
 from irring.estimation.estimate import no_return_reach as fast_reach
 from irring.estimation.estimate import snap_to_lines as fast_snap
 
@@ -257,7 +258,7 @@ def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, no
         np.ravel(p_counts := np.asarray(sweep.counts, float)), p.heading.ravel(),
         p.origin_x.ravel(), p.origin_y.ravel(), np.asarray(sweep.steps).astype(np.intp), vi,
         p.valid.shape[1], cal.sigma_counts(), la0, b0, SIGMA_FLOOR_M,
-        math.tan(min(cal.max_incidence_rad, 1.5)), LineOptions.jump_sigmas)
+        jump_slope(cal.max_incidence_rad), LineOptions.jump_sigmas)
     numpy_inputs = _profile_inputs(p, vi, p_counts, np.asarray(sweep.steps), cal)
     for name, a, b in zip(("s", "h", "ox", "oy", "log_s", "sig_s", "d0", "chain", "step"),
                           compiled, numpy_inputs):
@@ -289,7 +290,7 @@ def test_polyline_kernel_agrees_with_its_numpy_statement(data, k, reject, sigmas
                       dtype=np.intp)
     with np.errstate(invalid="ignore"):    # inf − inf, 0 · inf: NaN, as the kernel takes it
         slow = polyline_ids(d, sigma, heading, sensor, reject, sigmas)
-    fast = _lines.polyline_ids(d, sigma, heading, sensor, math.tan(min(reject, 1.5)), sigmas)
+    fast = _lines.polyline_ids(d, sigma, heading, sensor, jump_slope(reject), sigmas)
     assert fast.dtype == np.intp
     np.testing.assert_array_equal(fast, slow)
     if k > 1:    # not vacuous: a sensor change always cuts

@@ -1082,7 +1082,7 @@ cdef inline void _interp_ab(double t, const double[::1] xp, const double[::1] la
 def polyline_ids(const double[::1] d, const double[::1] sigma, const double[::1] heading,
                  const idx_t[::1] sensor, double tan_reject, double sigmas):
     """``irring.estimation.estimate.polyline_ids`` (the statement and the why) bit for bit:
-    readings (k,) in scan order; ``tan_reject`` = tan(min(reject, 1.5)). Returns the
+    readings (k,) in scan order; ``tan_reject`` = ``estimate.jump_slope(reject)``. Returns the
     polyline id of each reading (intp, from 1), as np.cumsum of the cuts."""
     cdef idx_t k = d.shape[0], i, run = 1
     cdef double turn, wrap, far, allowed

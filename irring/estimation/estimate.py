@@ -136,6 +136,13 @@ def _segment(px, py, thr, sensor, opts: LineOptions, centre, prev: Pieces | None
         opts.split_sigmas, opts.min_points, opts.min_length_m, opts.max_rms_sigmas))
 
 
+def jump_slope(reject_rad: float) -> float:
+    """tan of the steepest incidence :func:`polyline_ids` lets a surface have: ``reject_rad``,
+    at most 1.5 rad (tan 14; towards 90° it grows without bound and no jump would cut).
+    The compiled ``_lines.polyline_ids`` and ``profile_inputs`` take it (``tan_reject``)."""
+    return math.tan(min(reject_rad, 1.5))
+
+
 def polyline_ids(d: np.ndarray, sigma: np.ndarray, heading: np.ndarray, sensor: np.ndarray,
                  reject_rad: float, sigmas: float) -> np.ndarray:
     """Polyline ids of readings in scan order: a new one at a sensor change or at a *range
@@ -156,7 +163,7 @@ def polyline_ids(d: np.ndarray, sigma: np.ndarray, heading: np.ndarray, sensor: 
     if k > 1:
         turn = np.abs(heading[1:] - heading[:-1])
         turn = np.minimum(turn, 2.0 * math.pi - turn)
-        allowed = np.maximum(d[1:], d[:-1]) * turn * math.tan(min(reject_rad, 1.5))
+        allowed = np.maximum(d[1:], d[:-1]) * turn * jump_slope(reject_rad)
         allowed += sigmas * np.hypot(sigma[1:], sigma[:-1])
         np.greater(np.abs(d[1:] - d[:-1]), allowed, out=cut[1:])
         cut[1:] |= sensor[1:] != sensor[:-1]
@@ -321,7 +328,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                         np.ascontiguousarray(sin_h).reshape(-1))
     k = sw.k
     scan_heading = np.ascontiguousarray(heading).reshape(-1).take(sw.index)
-    tan_reject = math.tan(min(sw.reject, 1.5))   # polyline_ids' bound on a surface's slope
+    tan_reject = jump_slope(sw.reject)
     theta = np.zeros(k)
     last_moving = np.full(k, -1, dtype=np.intp)  # last iteration in which each θ moved
     on_line = np.zeros(k, dtype=np.uint8)        # took θ from a line in the last plain step
@@ -830,7 +837,7 @@ def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: n
         f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
         np.asarray(steps).reshape(-1).astype(np.intp), f(vi, dtype=np.intp),
         points.valid.shape[1], cal.sigma_counts(), la0, b0, SIGMA_FLOOR_M,
-        math.tan(min(cal.max_incidence_rad, 1.5)), LineOptions.jump_sigmas)
+        jump_slope(cal.max_incidence_rad), LineOptions.jump_sigmas)
     n, slope, se, theta, steep, ok, convex, sure, concave = _lines.profiles(
         ox, oy, h, log_s, sig_s, chain, step,
         np.ascontiguousarray(off, dtype=np.intp), cal.theta_rad,
