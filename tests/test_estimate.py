@@ -268,6 +268,23 @@ def test_two_points_fit_a_line_but_default_options_want_three():
     assert not fit_lines(x, y, ok, sig).usable.any()
 
 
+def test_a_reading_of_unknown_accuracy_is_no_reading_to_the_line_fit():
+    """σ = +inf (the end point anywhere on its beam, as the mapper reads it) is no reading:
+    it joins no line and moves none. It was fitted with σ taken as 1 m, so a point 60 mm off
+    a wall of 0.001 m readings could not split it and tilted and shifted its line."""
+    x = np.linspace(-0.27, 0.33, 21)
+    y = 0.25 + 0.02 * x
+    y[12] += 0.06
+    sigma = np.full(21, 0.001)
+    sigma[12] = np.inf
+    x, y = _line(np.stack([x, y], axis=1))
+    lines = fit_lines(x, y, np.ones_like(x, bool), sigma[:, None])
+    assert lines.label[12, 0] == -1
+    assert lines.usable.sum() == 1 and np.all(np.delete(lines.label[:, 0], 12) == 0)
+    assert lines.rms_m[0] < 1e-9
+    assert abs(lines.normal[0] @ [1.0, 0.02]) < 1e-9     # the wall's own direction
+
+
 @pytest.mark.parametrize("turn_deg", [90.0, 45.0, 135.0])
 def test_corners_split_into_two_lines(turn_deg):
     """A polyline that turns at a corner is split there, at any turning angle."""

@@ -192,7 +192,9 @@ def fit_lines(x: np.ndarray, y: np.ndarray, ok: np.ndarray, sigma_m: np.ndarray,
               steps: np.ndarray | None = None, options: LineOptions = LineOptions()) -> Lines:
     """Group the end points of a sweep into lines (split-and-merge, see :func:`_segment`).
 
-    ``x``, ``y``, ``ok``, ``sigma_m`` are (S, N); readings with ``ok`` False are skipped.
+    ``x``, ``y``, ``ok``, ``sigma_m`` are (S, N); readings with ``ok`` False, a non-finite
+    end point or σ = +inf (accuracy unknown: anywhere on its beam) are skipped; a NaN σ (none
+    given) splits at ``min_split_m``.
     Each sensor's readings, ordered by ``steps``, form polylines (broken where consecutive
     readings are more than ``gap_m`` apart); each polyline is split at the reading farthest
     from its chord while that exceeds max(min_split_m, split_sigmas·σ) (all polylines at
@@ -207,15 +209,17 @@ def fit_lines(x: np.ndarray, y: np.ndarray, ok: np.ndarray, sigma_m: np.ndarray,
     if steps is None:
         steps = np.arange(n_steps)
     flat = scan_order(steps, n_sensors)
+    sigma = np.broadcast_to(np.asarray(sigma_m, float), shape).reshape(-1)
     okf = np.asarray(ok, dtype=bool).reshape(-1)[flat]
-    okf &= np.isfinite(x.reshape(-1)[flat]) & np.isfinite(y.reshape(-1)[flat])
+    okf &= (np.isfinite(x.reshape(-1)[flat]) & np.isfinite(y.reshape(-1)[flat])
+            & (sigma[flat] != np.inf))
     idx = flat[okf]
     label = np.full(n_steps * n_sensors, -1, dtype=int)
     if idx.size == 0:
         return _lines_record(None, label.reshape(shape), idx)
     px, py = x.reshape(-1)[idx], y.reshape(-1)[idx]
-    thr = np.maximum(options.min_split_m, options.split_sigmas * np.nan_to_num(
-        np.asarray(sigma_m, float).reshape(-1)[idx], nan=0.0, posinf=1.0))
+    thr = np.maximum(options.min_split_m,
+                     options.split_sigmas * np.nan_to_num(sigma[idx], nan=0.0))
     pieces = _segment(px, py, thr, idx % n_sensors, options, (float(px.mean()), float(py.mean())))
     label[idx] = pieces.owner
     return _lines_record(pieces, label.reshape(shape), idx)
