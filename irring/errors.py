@@ -69,6 +69,13 @@ class TooBig(IrringError, ValueError):
     status = TOO_BIG
 
 
+def lengths_differ(what: str, **lengths: int) -> ValueError:
+    """The error a compiled kernel raises for arrays that must share a length, naming each
+    length: ``lengths_differ("readings", x=5, y=4)`` says "readings differ in length: x 5, y 4"."""
+    return ValueError(f"{what} differ in length: "
+                      + ", ".join(f"{name} {n}" for name, n in lengths.items()))
+
+
 _repr = reprlib.Repr()
 _repr.maxstring = _repr.maxother = 60
 _repr.maxlist = _repr.maxtuple = _repr.maxdict = _repr.maxset = 6

@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from _synthetic import PAPER_RING, make_sweep, rectangle, stand_in_calibration
-from irring.estimation import _iterate
+from irring.estimation import _iterate, _lines
 from irring.core import Reason, beam_geometry
 from irring.estimation.calibration import Calibration
 from irring.estimation.estimate import LineOptions, estimate, estimate_detail
@@ -217,3 +217,20 @@ def test_sparse_sweeps_keep_the_contract(seed, keep, max_iterations, max_range_m
     same = estimate(sweep, cal, max_iterations=max_iterations, lines=opts)
     for f in FIELDS:
         np.testing.assert_array_equal(getattr(p, f), getattr(same, f), err_msg=f)
+
+
+def test_a_kernel_given_arrays_of_different_lengths_names_each_length():
+    """The kernels index unchecked, so arrays that must share a length are checked first;
+    the refusal names every array's length, so a caller sees which one is off."""
+    f = np.zeros
+    with pytest.raises(ValueError, match=r"^per-reading arrays differ in length: d 5, "
+                                         r"sigma 4, heading 5, sensor 5$"):
+        _lines.polyline_ids(f(5), f(4), f(5), f(5, np.intp), 1.0, 2.0)
+    with pytest.raises(ValueError, match=r"^counts and reason differ in length: counts 7, "
+                                         r"reason 6$"):
+        _iterate.classify(f(7), f(6, np.uint8), 900.0, 600.0, 30.0, 5.0, 10.0, True)
+    with pytest.raises(ValueError, match=r"differ in length: ox 3, oy 3, heading 3, "
+                                         r"log_s 3, sig_s 3, chain 2, step 3$"):
+        _lines.profiles(f(3), f(3), f(3), f(3), f(3), f(2, np.intp), f(3, np.intp),
+                        f(1, np.intp), f(2), f(2), f(2), 1.2, 0.1, 5, 3, 0.001, 2.0, f(5),
+                        0.001, 3.0, 1e-12)

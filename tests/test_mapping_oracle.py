@@ -16,11 +16,12 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from irring.core import Points, Reason
-from irring.maps import mapping_numpy
+from irring.maps import _traverse, mapping_numpy
 from irring.maps.mapping import MapperParams, OccupancyGrid
 
 TOL = 2e-4
@@ -156,3 +157,21 @@ def test_silent_beams_past_one_occupied_cell_stop_where_the_oracle_stops():
                                  params, params.l_min, params.l_max)
         stopped += int((want != g.log_odds).sum() < (free != 0).sum())
     assert stopped == 54
+
+
+def test_the_grid_kernels_name_each_length_when_arrays_differ():
+    """The segment walk indexes its arrays unchecked: different lengths are refused with
+    every array's length named."""
+    f = np.zeros
+    with pytest.raises(ValueError, match=r"^segment arrays differ in length: x0 4, y0 4, "
+                                         r"dx 3, dy 4$"):
+        _traverse.walk(f(4), f(4), f(3), f(4), 10, 12)
+    with pytest.raises(ValueError, match=r"segment arrays differ in length: x0 2, y0 2, "
+                                         r"dx 2, dy 2, tx 2, ty 1$"):
+        _traverse.first_material(f(2), f(2), f(2), f(2), f((12, 10), np.int16),
+                                 f(2, np.intp), f(1, np.intp))
+    with pytest.raises(ValueError, match=r"^the readings' arrays \(rows × cols = 6\) differ in "
+                                         r"length: origin_x 6, origin_y 6, x 6, y 5, sigma_m 6, "
+                                         r"valid 6$"):
+        _traverse.neighbour_ranges(f(6), f(6), f(6), f(5), f(6), f(6, np.uint8), 3, 2,
+                                   MapperParams())

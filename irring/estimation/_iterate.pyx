@@ -50,6 +50,7 @@ PYX_SHA256 = IRRING_PYX_SHA256.decode("ascii")
 from libc.math cimport cos, fabs, floor, hypot, isfinite, rint, sin, sqrt
 
 from ..core import Reason
+from ..errors import lengths_differ
 
 cdef object _exp = np.exp
 cdef object _tan = np.tan
@@ -268,7 +269,8 @@ def classify(const double[::1] counts, unsigned char[::1] reason, double full, d
     cdef double s
     cdef unsigned char r
     if reason.shape[0] != counts.shape[0]:
-        raise ValueError("classify needs one reason per count")
+        raise lengths_differ("counts and reason", counts=counts.shape[0],
+                             reason=reason.shape[0])
     for i in range(counts.shape[0]):
         s = counts[i]
         r = R_OK
@@ -596,8 +598,10 @@ cdef class Sweep:
         cdef double[::1] d = self.dscr[0], sg = self.dscr[1], e, la, b
         cdef const double[::1] spread_la, spread_b
         if reason.shape[0] != size or min(theta.shape[0], on.shape[0], last_moving.shape[0]) < k:
-            raise ValueError("finish needs reason per reading (S·N) and theta, on, "
-                             "last_moving per live reading")
+            raise ValueError(f"finish needs reason per reading ({size}, has "
+                             f"{reason.shape[0]}) and theta, on, last_moving per live reading "
+                             f"({k}; have {theta.shape[0]}, {on.shape[0]}, "
+                             f"{last_moving.shape[0]})")
         spread_la, spread_b = cal._spread
         cdef double min_range_m = cal.min_range_m
         d_arr = self.dscr_obj[0]

@@ -29,6 +29,7 @@ from libc.math cimport (sin, cos, sqrt, fabs, hypot, isfinite, exp, atan, nearby
 from libc.stdlib cimport calloc, free, malloc
 
 import numpy as np
+from ..errors import lengths_differ
 
 # The SHA-256 of this file as built (irring/kernel_build.py defines IRRING_PYX_SHA256; "" when
 # built without it): irring.resources.kernel compares it with the file in a checkout.
@@ -822,7 +823,9 @@ def no_return_reach(const double[::1] heading, const double[::1] ox, const doubl
     cdef bint found = False
     if not (ox.shape[0] == oy.shape[0] == x.shape[0] == y.shape[0] == label.shape[0]
             == valid.shape[0] == reason.shape[0] == K):
-        raise ValueError("per-reading arrays differ in length")
+        raise lengths_differ("per-reading arrays", heading=K, ox=ox.shape[0], oy=oy.shape[0],
+                             x=x.shape[0], y=y.shape[0], label=label.shape[0],
+                             valid=valid.shape[0], reason=reason.shape[0])
     if not (centroid.shape[0] == direction.shape[0] == normal.shape[0] == L
             and centroid.shape[1] == direction.shape[1] == normal.shape[1] == 2):
         raise ValueError("line arrays must be (L, 2) for the L usable flags")
@@ -945,7 +948,10 @@ def snap_to_lines(const idx_t[::1] member, const unsigned char[::1] valid,
     cdef double u, v, ca, sa, ngx, ngy, ch, sh, un, rel, t, al, perp2, sl, own
     if not (valid.shape[0] == x.shape[0] == y.shape[0] == d.shape[0] == sigma_m.shape[0]
             == heading.shape[0] == ox.shape[0] == oy.shape[0] == K):
-        raise ValueError("per-reading arrays differ in length")
+        raise lengths_differ("per-reading arrays", member=K, valid=valid.shape[0],
+                             x=x.shape[0], y=y.shape[0], d=d.shape[0],
+                             sigma_m=sigma_m.shape[0], heading=heading.shape[0],
+                             ox=ox.shape[0], oy=oy.shape[0])
     for i in range(K):
         if valid[i] and member[i] >= L:
             L = member[i] + 1
@@ -1087,7 +1093,8 @@ def polyline_ids(const double[::1] d, const double[::1] sigma, const double[::1]
     cdef idx_t k = d.shape[0], i, run = 1
     cdef double turn, wrap, far, allowed
     if not (sigma.shape[0] == heading.shape[0] == sensor.shape[0] == k):
-        raise ValueError("per-reading arrays differ in length")
+        raise lengths_differ("per-reading arrays", d=k, sigma=sigma.shape[0],
+                             heading=heading.shape[0], sensor=sensor.shape[0])
     out = np.empty(k, dtype=np.intp)
     if k == 0:
         return out
@@ -1194,7 +1201,9 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
     cdef double sqq, qm, qdv, bend, bend_se, sig, e2, q_norm
     if not (oy.shape[0] == heading.shape[0] == log_s.shape[0] == sig_s.shape[0]
             == chain.shape[0] == step.shape[0] == K):
-        raise ValueError("per-reading arrays differ in length")
+        raise lengths_differ("per-reading arrays", ox=K, oy=oy.shape[0],
+                             heading=heading.shape[0], log_s=log_s.shape[0],
+                             sig_s=sig_s.shape[0], chain=chain.shape[0], step=step.shape[0])
     if xp.shape[0] > 1 and xp[xp.shape[0] - 1] > xp[0]:
         inv_dx = (xp.shape[0] - 1) / (xp[xp.shape[0] - 1] - xp[0])
     out_f = np.zeros((5, M))

@@ -22,6 +22,7 @@ from libc.math cimport INFINITY, NAN, cos, exp, fabs, hypot, isfinite, isnan, si
 from libc.string cimport memset
 
 import numpy as np
+from ..errors import lengths_differ
 
 # The SHA-256 of this file as built (irring/kernel_build.py defines IRRING_PYX_SHA256; "" when
 # built without it): irring.resources.kernel compares it with the file in a checkout.
@@ -253,7 +254,8 @@ def walk(const double[::1] x0, const double[::1] y0, const double[::1] dx,
     [0, nx) × [0, ny): (ray, ix, iy, t_enter, t_exit), ordered by segment, then along it."""
     cdef Py_ssize_t n = x0.shape[0], m
     if y0.shape[0] != n or dx.shape[0] != n or dy.shape[0] != n:
-        raise ValueError("x0, y0, dx, dy must have the same length")
+        raise lengths_differ("segment arrays", x0=n, y0=y0.shape[0], dx=dx.shape[0],
+                             dy=dy.shape[0])
     with nogil:
         m = _visits(x0, y0, dx, dy, nx, ny, NULL, NULL, NULL, NULL, NULL)
     ray_a = np.empty(m, np.intp)
@@ -454,7 +456,10 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     if not (origin_y.shape[0] == heading.shape[0] == x.shape[0] == y.shape[0]
             == sigma_m.shape[0] == valid.shape[0] == no_return.shape[0]
             == reach_m.shape[0] == n):
-        raise ValueError("every array of the readings needs the same length")
+        raise lengths_differ("the readings' arrays", origin_x=n, origin_y=origin_y.shape[0],
+                             heading=heading.shape[0], x=x.shape[0], y=y.shape[0],
+                             sigma_m=sigma_m.shape[0], valid=valid.shape[0],
+                             no_return=no_return.shape[0], reach_m=reach_m.shape[0])
     if n >= 1 << 31:
         raise ValueError("at most 2^31 − 1 readings per insert (the cell counts are 32-bit)")
     if step_stride < 1:
@@ -751,7 +756,8 @@ def first_material(const double[::1] x0, const double[::1] y0, const double[::1]
     cdef short lab
     if (y0.shape[0] != n or dx.shape[0] != n or dy.shape[0] != n or tx.shape[0] != n
             or ty.shape[0] != n):
-        raise ValueError("x0, y0, dx, dy, tx, ty must have the same length")
+        raise lengths_differ("segment arrays", x0=n, y0=y0.shape[0], dx=dx.shape[0],
+                             dy=dy.shape[0], tx=tx.shape[0], ty=ty.shape[0])
     out_a = np.zeros(n, np.int16)
     cdef short[::1] out = out_a
     with nogil:
@@ -814,7 +820,9 @@ def explained_ranges(const double[::1] origin_x, const double[::1] origin_y,
     cdef Py_ssize_t n = origin_x.shape[0], i, j, m = 0, nc = 0, lo_i, hi_i
     if not (origin_y.shape[0] == x.shape[0] == y.shape[0] == sigma_m.shape[0]
             == valid.shape[0] == n):
-        raise ValueError("every array of the readings needs the same length")
+        raise lengths_differ("the readings' arrays", origin_x=n, origin_y=origin_y.shape[0],
+                             x=x.shape[0], y=y.shape[0], sigma_m=sigma_m.shape[0],
+                             valid=valid.shape[0])
     out_a = np.full(n, np.nan)
     cdef double[::1] out = out_a
     cdef double k_sig = params.explain_sigmas, ratio = params.explain_sharper
@@ -920,7 +928,10 @@ def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
     cdef Py_ssize_t n = rows * cols, c, r, i, k, m, prev, nxt
     if not (origin_x.shape[0] == origin_y.shape[0] == x.shape[0] == y.shape[0]
             == sigma_m.shape[0] == valid.shape[0] == n):
-        raise ValueError("every array of the readings needs rows × cols entries")
+        raise lengths_differ(f"the readings' arrays (rows × cols = {n})",
+                             origin_x=origin_x.shape[0], origin_y=origin_y.shape[0],
+                             x=x.shape[0], y=y.shape[0], sigma_m=sigma_m.shape[0],
+                             valid=valid.shape[0])
     out_a = np.full(n, np.nan)
     cdef double[::1] out = out_a
     cdef long steps = <long>params.neighbour_steps
