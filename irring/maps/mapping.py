@@ -302,7 +302,7 @@ class OccupancyGrid:
         if points.cone_half_angle_rad == 0 and np.any(points.valid):   # (silent beams: none)
             points = along_beams(points, neighbour_ranges(points, self.params))
             if self.params.explain_sigmas > 0:
-                points = at_ranges(points, explained_ranges(
+                points = at_ranges(points, _explained(
                     points, self.shape, self.origin_xy_m, self.resolution_m, self.params),
                     self.params)
         points, params = mapped_beams(points, self.params)
@@ -472,10 +472,10 @@ def known_sigma(points: Points) -> Points:
     any σ below ``min_sigma_m``. NaN (no σ given) takes ``default_sigma_m`` later. The one
     home of that rule for the kernel and the numpy oracle (docs/mapping.md)."""
     sigma = np.asarray(points.sigma_m, float)
+    if not np.isinf(sigma).any():     # one pass for the usual batch, which has neither
+        return points
     unknown = np.asarray(points.valid, bool) & (sigma == np.inf)
     below = sigma == -np.inf
-    if not (unknown.any() or below.any()):
-        return points
     return points_with(points, valid=np.asarray(points.valid, bool) & ~unknown,
                        sigma_m=np.where(below, 0.0, sigma))
 
@@ -515,8 +515,13 @@ def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
     oracle is :func:`irring.maps.mapping_numpy.explained_ranges`. docs/mapping.md says why
     and what it changed.
     """
+    return _explained(known_sigma(points), shape, origin_xy_m, resolution_m, params)
+
+
+def _explained(points: Points, shape, origin_xy_m, resolution_m: float,
+               params: MapperParams) -> np.ndarray:
+    """:func:`explained_ranges` of points already through :func:`known_sigma`."""
     ny, nx = (int(n) for n in shape)
-    points = known_sigma(points)
     return _traverse.explained_ranges(
         _flat(points.origin_x), _flat(points.origin_y), _flat(points.x), _flat(points.y),
         _flat(points.sigma_m), np.asarray(points.valid, bool).ravel().view(np.uint8),
