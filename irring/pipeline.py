@@ -313,7 +313,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:
         for sweep in sweeps:
             t0 = time.perf_counter()
-            points.append(_with_cone(estimator(sweep, calibration), sweep))
+            points.append(with_cone(estimator(sweep, calibration), sweep))
             timings["estimate"] += time.perf_counter() - t0
             bar.update()
     t0 = time.perf_counter()
@@ -334,7 +334,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     return run
 
 
-def _with_cone(points: Points, sweep: Sweep) -> Points:
+def with_cone(points: Points, sweep: Sweep) -> Points:
     """The points of a sweep whose sensor hears an echo anywhere in a cone (the sonar's)
     marked with that cone, so the mapper draws arcs (mapping.cone_fan)."""
     spec = SENSORS.get(sweep.sensor_model)

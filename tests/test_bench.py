@@ -6,8 +6,14 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
+from irring import pipeline
+from irring.core import Reason
+from irring.estimation.calibration import Calibration
+from irring.estimation.estimate import estimate
+from irring.maps.mapping import OccupancyGrid
 from irring.studies import accuracy, executor, speed
 from irring.scenario import load_scenario
 
@@ -106,6 +112,41 @@ def test_every_run_is_recorded_with_costs_and_scores(small_grid):
         assert 0 < r["valid_share"] <= 1 and r["range_rmse_m"] > 0
     keys = {accuracy.front_key(c, m) for c in accuracy.COSTS for m in accuracy.FRONT_METRICS}
     assert all(keys <= set(row) for row in small_grid["configs"])
+
+
+def test_the_timed_mapping_is_the_maps_own_work(monkeypatch):
+    """The accuracy-vs-time chart charges the map what it costs: the timed mapper makes the
+    inserts map_sweeps makes (each sweep's returns, then the run's silent beams in one) and
+    ends on the same grid, bit for bit. It timed one insert of each whole sweep: not the
+    map the run drew, and one insert fewer."""
+    sc = load_scenario("t_room")
+    sweeps = pipeline.simulated(sc, seed=3, progress=False)[0].sweeps
+    cal = Calibration.for_scene(sc)
+    calls, grids = [], []
+    insert, insert_run = OccupancyGrid.insert, OccupancyGrid.insert_run
+
+    def spy(grid, points):
+        calls.append((int(np.count_nonzero(points.valid)),
+                      int(np.count_nonzero(np.asarray(points.reason) == Reason.NO_RETURN)),
+                      np.shape(points.valid)))
+        insert(grid, points)
+
+    def spy_run(grid, batches):
+        insert_run(grid, batches)
+        grids.append(grid)
+
+    monkeypatch.setattr(OccupancyGrid, "insert", spy)
+    monkeypatch.setattr(OccupancyGrid, "insert_run", spy_run)
+    mapped = pipeline.map_sweeps(sweeps, grid=OccupancyGrid.for_scenario(sc), calibration=cal,
+                                 score=False, progress=False).grid
+    made = calls[:]
+    assert len(made) == len(sweeps) + 1 and made[-1][0] == 0 and made[-1][1] > 100
+    del calls[:], grids[:]
+    accuracy._compute_time(sweeps, cal, estimate, OccupancyGrid.for_scenario(sc))
+    assert calls == made * accuracy.TIMING_REPEATS
+    assert len(grids) == accuracy.TIMING_REPEATS
+    for g in grids:
+        np.testing.assert_array_equal(g.log_odds, mapped.log_odds)
 
 
 def test_pareto_front_keeps_only_undominated_configurations():
