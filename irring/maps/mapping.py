@@ -557,15 +557,19 @@ def along_beams(points: Points, ranges: np.ndarray, sigma_m=None) -> Points:
     moved = np.asarray(points.valid, bool) & np.isfinite(ranges)
     if not moved.any():
         return points
-    ox, oy = np.asarray(points.origin_x, float), np.asarray(points.origin_y, float)
-    px, py = np.asarray(points.x, float), np.asarray(points.y, float)
+    at = moved.nonzero()           # a few readings of a batch: computed there alone
+    ox, oy = np.asarray(points.origin_x, float)[at], np.asarray(points.origin_y, float)[at]
+    px, py = np.asarray(points.x, float)[at], np.asarray(points.y, float)[at]
+    r = np.asarray(ranges, float)[at]
     with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(moved, ranges / np.hypot(px - ox, py - oy), 1.0)
-    return dataclasses.replace(
-        points, x=np.where(moved, ox + (px - ox) * scale, points.x),
-        y=np.where(moved, oy + (py - oy) * scale, points.y),
-        d=np.where(moved, ranges, points.d),
-        sigma_m=points.sigma_m if sigma_m is None else np.where(moved, sigma_m, points.sigma_m))
+        scale = r / np.hypot(px - ox, py - oy)
+    x, y, d = (np.array(v, float) for v in (points.x, points.y, points.d))
+    x[at], y[at], d[at] = ox + (px - ox) * scale, oy + (py - oy) * scale, r
+    sigma = points.sigma_m
+    if sigma_m is not None:
+        sigma = np.array(points.sigma_m, float)
+        sigma[at] = np.broadcast_to(sigma_m, sigma.shape)[at]
+    return points_with(points, x=x, y=y, d=d, sigma_m=sigma)
 
 
 def at_ranges(points: Points, ranges: np.ndarray, params: MapperParams) -> Points:
