@@ -14,7 +14,7 @@ import pytest
 
 from irring import core
 from irring.designs import PAPER_RING
-from irring.hardware import (DeviceDisconnected, DeviceError, DeviceRejected, DeviceTimeout,
+from irring.hardware import (DeviceChanged, DeviceDisconnected, DeviceError, DeviceRejected, DeviceTimeout,
                              HandshakeError, SerialRing)
 from irring.hardware import protocol as p
 from irring.hardware.emulator import Device, DevicePort, Faults
@@ -340,6 +340,39 @@ def test_irscn_contradicting_the_sweep_is_dropped_not_trusted():
     link = ring.last_report.link
     assert (link["inconsistent"], link["duplicates"]) == (3, 1)
     assert link["lost_scans"] == 5  # seq 1, 2, 3 dropped or lost, 5 and 6 never arrived
+
+
+def test_an_irinf_announcing_another_ring_mid_sweep_ends_it_keeping_the_old_rings_readings():
+    """A board that reboots into other firmware mid-session announces itself; its IRINF
+    was ignored as a late answer, so the driver went on reading the old ring's geometry.
+    An IRINF equal to the handshake's (a late answer to a repeated IRHLO) is still ignored."""
+    other = p.Info(1, 3, 10, 900, 1, 1, -5, 5, "other")
+
+    def on_sweep(cmd):
+        if on_sweep.calls == 0:
+            on_sweep.calls += 1
+            return [p.Scan(0, -3, 0, (10, 11)), INFO, p.Scan(1, -2, 1, (12, 13)),
+                    *(p.Scan(2 + i, s, 2 + i, (14 + i, 15)) for i, s in enumerate(range(-1, 4))),
+                    p.Done(6)]
+        return [p.Scan(7, -3, 7, (30, 31)), p.Scan(8, -2, 8, (32, 33)), other,
+                p.Scan(9, -1, 9, (34, 35, 36))]
+    on_sweep.calls = 0
+
+    ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
+    first = ring.sweep()
+    assert list(first.steps) == [-3, -2, -1, 0, 1, 2, 3] and first.missing_steps == ()
+    with pytest.raises(DeviceChanged) as err:
+        ring.sweep()
+    assert str(err.value) == (   # one IRSCN of the new ring (3 sensors) is not taken
+        "the device on script:// now announces another ring: 3 sensors, 10-bit ADC, steps -5 "
+        "… 5 of 0.9° × 1/1, firmware 'other', where the handshake said 2 sensors, 12-bit ADC, "
+        "steps -3 … 3 of 1.8° × 3/5, firmware 'script'; it was reflashed or swapped. Readings "
+        "of the old ring are kept; connect again to read the new one. device changed: 2 of 7 steps "
+        "received; missing steps -1, 0, 1, 2, 3 (not invented, left out of the sweep); clean "
+        "link")
+    partial = err.value.partial
+    assert list(partial.steps) == [-3, -2] and partial.counts.tolist() == [[30, 31], [32, 33]]
+    assert not err.value.report.complete and err.value.report.received_steps == 2
 
 
 def test_stale_irscn_from_an_earlier_sweep_is_dropped():

@@ -10,7 +10,8 @@ backed by the simulator (import it explicitly). The driver's names load on first
 from __future__ import annotations
 
 __all__ = ["SerialRing", "SweepReport", "LinkStats", "DeviceError", "DeviceTimeout",
-           "DeviceDisconnected", "DeviceRejected", "HandshakeError", "LinkLost", "NoReadings"]
+           "DeviceChanged", "DeviceDisconnected", "DeviceRejected", "HandshakeError", "LinkLost",
+           "NoReadings"]
 
 
 def __getattr__(name: str):

@@ -91,6 +91,12 @@ def _info_faults(info: p.Info) -> list[str]:
     return faults
 
 
+def _ring_text(info: p.Info) -> str:
+    return (f"{info.nsensors} sensors, {info.adc_bits}-bit ADC, steps {info.min_step} … "
+            f"{info.max_step} of {info.step_mdeg / 1000:g}° × {info.gear_num}/{info.gear_den}, "
+            f"firmware {info.firmware!r}")
+
+
 class DeviceRejected(DeviceError, core.SourceLost):
     """The device answered a command with IRERR (bad argument, step out of range, …); in a
     sweep, ``partial`` and ``report`` hold what arrived before it (as :class:`LinkLost`)."""
@@ -107,6 +113,11 @@ class LinkLost(DeviceError, core.SourceLost):
 
 class NoReadings(LinkLost):
     """A sweep ended without a single step arriving (``partial`` holds the empty sweep)."""
+
+
+class DeviceChanged(LinkLost):
+    """Mid-session the device announced (IRINF) another ring than the handshake's: it was
+    reflashed or swapped; the readings of the ring it was are in ``partial``."""
 
 
 class DeviceTimeout(LinkLost):
@@ -598,6 +609,7 @@ class SerialRing:
             self._position = None
             reason = ("device stopped answering" if isinstance(exc, DeviceTimeout) else
                       "device disconnected" if isinstance(exc, DeviceDisconnected) else
+                      "device changed" if isinstance(exc, DeviceChanged) else
                       "device refused" if isinstance(exc, DeviceRejected) else "interrupted")
             sweep, report = build(False, reason)
             exc.partial, exc.report = sweep, report
@@ -755,7 +767,13 @@ class SerialRing:
                         self._send(p.Stop())  # our IRSTP was garbled
                     elif msg.code != p.ERR_BAD_SENTENCE:
                         self._raise_rejected(msg, p.encode(cmd).decode().strip())
-                # IRPOS / IRINF here are late answers to earlier commands: ignore
+                elif isinstance(msg, p.Info) and msg != info:
+                    raise DeviceChanged(
+                        f"the device on {self.port_name} now announces another ring: "
+                        f"{_ring_text(msg)}, where the handshake said {_ring_text(info)}; "
+                        f"it was reflashed or swapped. Readings of the old ring are kept; "
+                        f"connect again to read the new one.")
+                # IRPOS, and IRINF equal to the handshake's, are late answers: ignore
             if len(ps.got) > had:
                 stalled_since = now
                 chatter = 0
