@@ -121,6 +121,23 @@ def test_cli_names_a_folder_without_rooms(tmp_path, capsys):
     assert f"{tmp_path}: the folder holds no *.yaml scenario" in capsys.readouterr().err
 
 
+def test_cli_refuses_a_room_given_twice_before_any_run(tmp_path, capsys):
+    """A file named itself and again through its folder (or a symlink to it) was scored and
+    listed twice; the second mention is named with the argument that made it."""
+    rooms_dir = tmp_path / "rooms"
+    rooms_dir.mkdir()
+    room = rooms_dir / "b_room.yaml"
+    room.write_text(SMALL_ROOM)
+    (rooms_dir / "a_link.yaml").symlink_to(room)
+    assert main(["bench", "rooms", str(room), str(rooms_dir)]) == 1
+    assert (f"{rooms_dir}/a_link.yaml: given twice (by {room} and {rooms_dir}); it would be "
+            "scored and listed twice, so name each room once") in capsys.readouterr().err
+    (rooms_dir / "a_link.yaml").unlink()
+    assert main(["bench", "rooms", str(rooms_dir), str(room), "--out", str(tmp_path / "o")]) == 1
+    assert (f"{room}: given twice (by {rooms_dir} and {room})" in capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()
+
+
 def test_cli_scores_the_other_rooms_when_one_file_is_bad_or_too_big(tmp_path, capsys):
     rooms_dir = tmp_path / "rooms"
     rooms_dir.mkdir()

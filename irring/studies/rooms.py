@@ -109,19 +109,27 @@ class Unusable:
 def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
     """Scenarios from bundled names, YAML paths, or folders (every ``*.yaml`` in them).
 
-    A name that is no file and no bundled scenario, or a folder without ``*.yaml``, raises
-    ScenarioError before any work; a file that does not load is an :class:`Unusable` entry,
-    so one bad room in a folder does not stop the others."""
-    paths = []
+    A name that is no file and no bundled scenario, a folder without ``*.yaml``, or a file
+    given twice (itself, or in a folder) raises ScenarioError before any work; a file that
+    does not load is an :class:`Unusable` entry, so one bad room in a folder does not stop
+    the others."""
+    paths: list[Path] = []
+    given: dict[Path, str] = {}     # each file's real path → the argument that named it
     for item in names_or_paths:
         path = Path(item)
         if path.is_dir():
             files = sorted(path.glob("*.yaml"))
             if not files:
                 raise ScenarioError(f"{item}: the folder holds no *.yaml scenario")
-            paths.extend(files)
         else:
-            paths.append(resolve(item))
+            files = [resolve(item)]
+        for file in files:
+            real = file.resolve()
+            if real in given:
+                raise ScenarioError(f"{file}: given twice (by {given[real]} and {item}); it "
+                                    "would be scored and listed twice, so name each room once")
+            given[real] = str(item)
+        paths.extend(files)
     out: list[Scenario | Unusable] = []
     for path in paths:
         try:
