@@ -319,3 +319,58 @@ def test_a_line_decides_the_far_branch_only_where_it_is_seen():
         assert err.size and err.max() < 0.100
         valid += int(p.valid.sum())
     assert wrong == 0 and valid > 150      # the walls seen far are still read
+
+
+# A wall met at 60-70° beside a corner, the wall past the corner 0.55-0.75 m away: the near
+# wall's last readings before its drop-out, read at the θ of the far wall's line that took
+# them in, landed behind the corner on that line's extension, 100-220 mm long. Their counts
+# read at the near wall's incidence put them on its line (seen by other sensors elsewhere),
+# and the far line had 1-6 members past it: they are INCIDENCE_UNKNOWN now.
+STEEP_CORNER = """
+room: {outline_mm: [[0, 0], [1730, 0], [1730, 1260], [420, 1260], [0, 880]]}
+effects: [incidence, noise, quantization, foldover]
+"""
+STEEP_CORNER_D12 = STEEP_CORNER + """
+name: steep_corner_d12
+robot: {poses: [{x_mm: 1170, y_mm: 176, yaw_deg: -23}, {x_mm: 1110, y_mm: 176, yaw_deg: 6}]}
+sensor: {model: gp2d12}
+"""
+STEEP_CORNER_A21 = STEEP_CORNER + """
+name: steep_corner_a21
+robot: {poses: [{x_mm: 1040, y_mm: 176, yaw_deg: 6}, {x_mm: 970, y_mm: 176, yaw_deg: 6}]}
+sensor: {model: gp2y0a21}
+"""
+
+
+@pytest.mark.parametrize("room, seed, long_before, taken", [
+    (STEEP_CORNER_D12, 3, 1, 4), (STEEP_CORNER_A21, 4, 4, 4)], ids=["gp2d12", "gp2y0a21"])
+def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
+        room, seed, long_before, taken, monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc = loads(room, source="<test>")
+    sweeps = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps
+    cal = scene_calibration(sc)[0]
+
+    def errors(p, sw):
+        hit = sw.truth.hit_point
+        return np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])
+
+    now = [estimate(sw, cal) for sw in sweeps]
+    with monkeypatch.context() as m:
+        m.setattr(est, "_behind_a_wall", lambda p, *args: p)
+        before = [estimate(sw, cal) for sw in sweeps]
+    long_now = gone = 0
+    for sw, p, q in zip(sweeps, now, before):
+        long_now += int(np.sum(errors(p, sw)[p.valid] > 0.100))
+        assert int(np.sum(errors(q, sw)[q.valid] > 0.100)) <= long_before
+        took = q.valid & ~p.valid
+        assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
+        assert np.all(errors(q, sw)[took] > 0.05)      # only readings far off were taken
+        assert np.array_equal(p.valid | took, q.valid)  # and nothing else changed
+        gone += int(took.sum())
+        slow = estimate_numpy.estimate_detail(sw, cal).points
+        np.testing.assert_array_equal(slow.reason, p.reason)
+    assert sum(int(np.sum(errors(q, sw)[q.valid] > 0.100)) for sw, q in zip(sweeps, before)) \
+        == long_before
+    assert long_now == 0 and gone == taken

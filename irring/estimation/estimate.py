@@ -1612,6 +1612,10 @@ _FOLD_SEEN_M = 0.05    # … where a member of it lies this near the far end poi
 _FOLD_JUDGED = (Reason.OK, Reason.NOT_CONVERGED, Reason.OUT_OF_RANGE, Reason.INCIDENCE_UNKNOWN)
 _CORNER_MIN_SIN = 0.1  # lines crossing at under ~6° (sine of the angle) make no corner …
 _CORNER_PAST_M = 0.01  # … a line's span ends this far past the corner it meets
+_FOLD_PAST_MAX = 6     # a line with at most this many members past a wall its last members'
+#                        counts fit ahead of them did not run on past that wall: the few
+#                        last readings of the steep wall before its drop-out (1-6 seen; a
+#                        wall seen past such a line had 8 or more)
 
 
 def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: Sweep,
@@ -1636,7 +1640,7 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     """
     # the judging pass reads each end point on its own (not snapped onto its line)
     first = run(np.zeros(np.shape(sweep.counts), dtype=bool), True, False)
-    near, far, d_fold, theta_fold, sigma_fold = _fold_branches(first, sweep, cal)
+    near, far, d_fold, theta_fold, sigma_fold, walls = _fold_branches(first, sweep, cal)
     ambiguous = (d_fold == 0) & ~far & np.isin(first.points.reason, _FOLD_JUDGED)
     second = run(near | ambiguous, True, True)
     p = second.points
@@ -1677,12 +1681,72 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
             v[differ] = np.nan
         p = replace(p, x=x, y=y, d=d, theta=theta, sigma_m=sigma, valid=valid, reason=reason,
                     iterations=iterations)
+    # a far line member behind a wall its counts fit, where its line does not run on past it
+    p = _behind_a_wall(p, second.lines.label, first.lines, walls, sweep, cal)
     # a silent beam is known free only to the nearest line either pass explains it by: the
     # second pass lacks the lines of the readings it held out
     if q.reach_m is not None:
         reach = q.reach_m if p.reach_m is None else np.fmin(p.reach_m, q.reach_m)
         p = replace(p, reach_m=reach)
     return replace(second, points=p, lines=second.lines if detail else None)
+
+
+def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray,
+                   sweep: Sweep, cal: Calibration) -> Points:
+    """``p`` (the fold-over's result) with INCIDENCE_UNKNOWN for each valid member of a line
+    (``label``: the second pass's, −1 none) whose beam crosses a line ``walls`` of the
+    judging pass (indices into ``first``; anywhere along it, not the reading's own) where its
+    counts read at that line's incidence put it within 3σ, and ahead of its end point by more
+    than both placements' 3σ together, while at most ``_FOLD_PAST_MAX`` members of its own
+    line lie past that line: a wall's last readings before its drop-out, adopted at the θ of
+    the wall past the corner, land behind the corner on that wall's extension, 100-220 mm
+    long; nothing tells which wall they met. docs/foldover.md, "Past a wall its counts fit"."""
+    mem = p.valid & (label >= 0)
+    if not walls.size or not mem.any():
+        return p
+    idx = mem.reshape(-1).nonzero()[0]
+    s = np.asarray(sweep.counts, dtype=float).reshape(-1)[idx]
+    h = p.heading.reshape(-1)[idx]
+    ox, oy = p.origin_x.reshape(-1)[idx], p.origin_y.reshape(-1)[idx]
+    c, nrm = first.centroid[walls], first.normal[walls]
+    un, t, ahead, _ = beam_crossings(ox, oy, np.cos(h), np.sin(h), c, first.direction[walls],
+                                     nrm)
+    theta_l = np.arccos(np.clip(np.abs(un), 0.0, 1.0))
+    d_l = cal.distance(s[:, None], theta_l)
+    tol = np.maximum(0.02, 3.0 * np.abs(cal.ab(theta_l)[1]) * d_l
+                     * (cal.sigma_counts() / s)[:, None])
+    d, sigma = p.d.reshape(-1)[idx][:, None], p.sigma_m.reshape(-1)[idx][:, None]
+    fits = (ahead & (theta_l <= cal.max_incidence_rad) & (np.abs(t - d_l) <= tol)
+            & (t + tol < d - 3.0 * sigma)
+            & (walls[None, :] != first.label.reshape(-1)[idx][:, None]))
+    pa, pw = fits.nonzero()
+    if not pa.size:
+        return p
+    # the members of each pair's own line, on the far side of the crossed line from the
+    # reading's emitter: a wall seen well past that line is not bounded by it there
+    lab = label.reshape(-1)
+    at = mem.reshape(-1).nonzero()[0]
+    at = at[np.argsort(lab[at], kind="stable")]
+    n_lines = int(lab[at[-1]]) + 1
+    start = np.searchsorted(lab[at], np.arange(n_lines))
+    line = lab[idx[pa]]
+    n = np.bincount(lab[at], minlength=n_lines)[line]
+    pair = np.repeat(np.arange(pa.size), n)
+    m = at[np.repeat(start[line] - (np.cumsum(n) - n), n) + np.arange(n.sum())]
+    cx, cy, nx, ny = c[pw[pair], 0], c[pw[pair], 1], nrm[pw[pair], 0], nrm[pw[pair], 1]
+    side = ((p.x.reshape(-1)[m] - cx) * nx + (p.y.reshape(-1)[m] - cy) * ny
+            ) * ((ox[pa[pair]] - cx) * nx + (oy[pa[pair]] - cy) * ny)
+    past = np.bincount(pair, weights=side < 0.0, minlength=pa.size)
+    gone = np.unique(idx[pa[past <= _FOLD_PAST_MAX]])
+    if not gone.size:
+        return p
+    out = {f: np.array(getattr(p, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    for v in out.values():
+        v.reshape(-1)[gone] = np.nan
+    valid, reason = p.valid.copy(), p.reason.copy()
+    valid.reshape(-1)[gone] = False
+    reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
+    return replace(p, valid=valid, reason=reason, **out)
 
 
 def _onto_first_lines(p: Points, q: Points, first: Lines, label_second: np.ndarray,
@@ -1723,10 +1787,11 @@ def _onto_first_lines(p: Points, q: Points, first: Lines, label_second: np.ndarr
 
 
 def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
-    """(near, far, d, θ, σ), all (S, N), from the far-branch estimate ``first`` (see
-    :func:`resolve_foldover`); vectorised over (readings, lines). ``far`` includes the
-    readings whose near end point would lie inside the housing; d > 0 where a line decided
-    the branch: the distance on that branch at that line's incidence (0 elsewhere)."""
+    """(near, far, d, θ, σ), all (S, N), and the lines two sensors agree on (indices into
+    ``first.lines``), from the far-branch estimate ``first`` (see :func:`resolve_foldover`);
+    vectorised over (readings, lines). ``far`` includes the readings whose near end point
+    would lie inside the housing; d > 0 where a line decided the branch: the distance on
+    that branch at that line's incidence (0 elsewhere)."""
     p, found = first.points, first.lines
     shape = p.valid.shape
     counts = np.asarray(sweep.counts, dtype=float)
@@ -1742,7 +1807,8 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     housing = np.hypot(hx - pose[..., 0], hy - pose[..., 1]) < sweep.ring.radius_m + HOUSING_M
     cand = live & ~housing
     if not cand.any():
-        return np.zeros(shape, bool), housing & live, *(np.zeros(shape) for _ in range(3))
+        return (np.zeros(shape, bool), housing & live, *(np.zeros(shape) for _ in range(3)),
+                np.zeros(0, np.intp))
     idx = cand.reshape(-1).nonzero()[0]
     s = counts.reshape(-1)[idx]
     h_idx = h.reshape(-1)[idx]
@@ -1835,7 +1901,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         out[1].reshape(-1)[idx] = theta
         out[2].reshape(-1)[idx] = np.where(dist > 0, np.maximum(slope * dist * sig_s,
                                                                  SIGMA_FLOOR_M), 0.0)
-    return near, far, out[0], out[1], out[2]
+    return near, far, out[0], out[1], out[2], use[trusted]
 
 
 def _seen_there(pairs: np.ndarray, along: np.ndarray, mcol: np.ndarray,
