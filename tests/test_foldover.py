@@ -343,7 +343,7 @@ sensor: {model: gp2y0a21}
 
 
 @pytest.mark.parametrize("room, seed, long_before, taken", [
-    (STEEP_CORNER_D12, 3, 1, 4), (STEEP_CORNER_A21, 4, 4, 4)], ids=["gp2d12", "gp2y0a21"])
+    (STEEP_CORNER_D12, 3, 1, 4), (STEEP_CORNER_A21, 2, 3, 3)], ids=["gp2d12", "gp2y0a21"])
 def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
         room, seed, long_before, taken, monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
@@ -374,3 +374,39 @@ def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
     assert sum(int(np.sum(errors(q, sw)[q.valid] > 0.100)) for sw, q in zip(sweeps, before)) \
         == long_before
     assert long_now == 0 and gone == taken
+
+
+# The reverse at the same corner: the far wall's first reading past the corner, taken in by
+# the steep wall's line and read at its 67° (its own profile, straight: 25°), 135 mm short.
+STEEP_CORNER_A21_TURNED = STEEP_CORNER + """
+name: steep_corner_a21_turned
+robot: {poses: [{x_mm: 1040, y_mm: 176, yaw_deg: -23}, {x_mm: 1110, y_mm: 176, yaw_deg: -9}]}
+sensor: {model: gp2y0a21}
+"""
+
+
+def test_a_line_member_its_own_profile_reads_100_mm_elsewhere_is_not_placed(monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc = loads(STEEP_CORNER_A21_TURNED, source="<test>")
+    sweeps = pipeline.simulated(sc, seed=2, progress=False)[0].sweeps
+    cal = scene_calibration(sc)[0]
+    now = [estimate(sw, cal) for sw in sweeps]
+    with monkeypatch.context() as m:
+        m.setattr(est, "_disowned_by_own_profile", lambda p, *args: p)
+        before = [estimate(sw, cal) for sw in sweeps]
+    long_before = long_now = taken = 0
+    for sw, p, q in zip(sweeps, now, before):
+        hit = sw.truth.hit_point
+        err_p = np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])
+        err_q = np.hypot(q.x - hit[..., 0], q.y - hit[..., 1])
+        long_before += int(np.sum(err_q[q.valid] > 0.100))
+        long_now += int(np.sum(err_p[p.valid] > 0.100))
+        took = q.valid & ~p.valid
+        assert np.array_equal(p.valid | took, q.valid)
+        assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
+        assert np.all(err_q[took] > 0.100)
+        taken += int(took.sum())
+        np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
+                                      p.reason)
+    assert (long_before, long_now, taken) == (1, 0, 1)

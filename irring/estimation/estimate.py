@@ -1616,16 +1616,19 @@ _FOLD_PAST_MAX = 6     # a line with at most this many members past a wall its l
 #                        counts fit ahead of them did not run on past that wall: the few
 #                        last readings of the steep wall before its drop-out (1-6 seen; a
 #                        wall seen past such a line had 8 or more)
+_FOLD_OWN_Z = 3.0      # a member whose own straight slope is this many standard errors off
+#                        its line's θ, reading it > _UNKNOWN_M elsewhere, is not placed
 
 
 def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: Sweep,
-                     cal: Calibration, detail: bool) -> Estimate:
+                     cal: Calibration, detail: bool, profiler: Callable | None = None
+                     ) -> Estimate:
     """Estimate a sweep of a folding sensor: every reading has a far-branch distance (Eq. 10)
     and a near one (:meth:`Calibration.near_distance`, below the peak); pick the branch
     from what the rest of the sweep says, or flag FOLDOVER_AMBIGUOUS.
 
-    ``run(hold, detail, snap)`` is the estimator with the readings ``hold`` kept out. Three
-    steps (docs/foldover.md has the geometry and the measured outcome):
+    ``run(hold, detail, snap)`` is the estimator with the readings ``hold`` kept out;
+    ``profiler`` as for :func:`final_estimate`. Three steps (docs/foldover.md has the geometry and the measured outcome):
 
     1. the whole sweep estimated on the far branch: walls give lines (a near wall's readings
        read far give a curve, which the lines of the neighbouring sensors contradict);
@@ -1683,6 +1686,8 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
                     iterations=iterations)
     # a far line member behind a wall its counts fit, where its line does not run on past it
     p = _behind_a_wall(p, second.lines.label, first.lines, walls, sweep, cal)
+    # … and one whose own profile reads it more than 100 mm from where its line puts it
+    p = _disowned_by_own_profile(p, second.lines.label, sweep, cal, profiler)
     # a silent beam is known free only to the nearest line either pass explains it by: the
     # second pass lacks the lines of the readings it held out
     if q.reach_m is not None:
@@ -1738,6 +1743,38 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
             ) * ((ox[pa[pair]] - cx) * nx + (oy[pa[pair]] - cy) * ny)
     past = np.bincount(pair, weights=side < 0.0, minlength=pa.size)
     gone = np.unique(idx[pa[past <= _FOLD_PAST_MAX]])
+    if not gone.size:
+        return p
+    out = {f: np.array(getattr(p, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    for v in out.values():
+        v.reshape(-1)[gone] = np.nan
+    valid, reason = p.valid.copy(), p.reason.copy()
+    valid.reshape(-1)[gone] = False
+    reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
+    return replace(p, valid=valid, reason=reason, **out)
+
+
+def _disowned_by_own_profile(p: Points, label: np.ndarray, sweep: Sweep, cal: Calibration,
+                             profiler: Callable | None) -> Points:
+    """``p`` (the fold-over's result) with INCIDENCE_UNKNOWN for each valid member of a line
+    (``label``: the second pass's, −1 none) whose own range profile (:func:`range_profiles`;
+    ``profiler``, the compiled :func:`profiles_compiled` by default) is straight and clearly
+    steep at a θ more than ``_FOLD_OWN_Z`` standard errors from its line's, where the two
+    θ read it more than ``_UNKNOWN_M`` apart: the first reading past a corner, taken in by
+    the steep wall's line at 67° (its own slope: 25°), read 135 mm short.
+    docs/foldover.md, "Past a wall its counts fit"."""
+    if not (p.valid & (label >= 0)).any():
+        return p
+    steps = np.asarray(sweep.steps)
+    index = scan_order(steps, p.valid.shape[1])
+    vi = index[p.valid.reshape(-1)[index]]
+    ask = (label.reshape(-1)[vi] >= 0).nonzero()[0]
+    pr = (profiler or profiles_compiled)(p, vi, ask, sweep.counts, steps, cal)
+    at = vi[ask]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (np.tan(p.theta.reshape(-1)[at]) - np.abs(pr.slope)) / pr.se
+    apart = np.abs(p.d.reshape(-1)[at] - cal.distance(pr.s[ask], pr.theta)) > _UNKNOWN_M
+    gone = at[pr.ok & (pr.se > 0) & (np.abs(z) > _FOLD_OWN_Z) & apart]
     if not gone.size:
         return p
     out = {f: np.array(getattr(p, f)) for f in ("x", "y", "d", "theta", "sigma_m")}

@@ -943,7 +943,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         return resolve_foldover(lambda held, _detail, snap_: estimate_detail(
             sweep, cal, max_iterations=max_iterations, tolerance_rad=tolerance_rad,
             iterate=iterate, lines=lines, keep_history=keep_history, damping=damping,
-            hold=held, snap=snap_, keep_unconverged=keep_unconverged), sweep, cal, True)
+            hold=held, snap=snap_, keep_unconverged=keep_unconverged), sweep, cal, True,
+            range_profiles)
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
     counts = np.asarray(sweep.counts, dtype=float)
