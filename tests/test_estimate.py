@@ -17,12 +17,13 @@ import yaml
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from _synthetic import (PAPER_RING, T_POSES, T_ROOM, make_sweep, rectangle,
+from _synthetic import (PAPER_RING, T_POSES, T_ROOM, make_sweep, polygon, rectangle,
                         stand_in_calibration)
 from irring import gp2
 from irring.core import Reason, beam_geometry, sensor_angles_for_steps
 from irring.estimation.calibration import (Calibration, CalibrationError,
                                       emitter_offset_from_wall, fit_curve)
+from irring.estimation import estimate as estimate_module
 from irring.estimation.estimate import (LineOptions, estimate, estimate_detail, fit_lines,
                                         no_return_reach)
 from irring.core import Ring
@@ -713,11 +714,45 @@ def test_silent_beams_grazing_a_cabinet_do_not_free_its_inside(noise):
         assert inside_free[0] == 0 and inside_free[1] >= 10, (seed, inside_free)
 
 
-def test_silent_beams_take_the_callers_incidence_margin():
+@pytest.mark.parametrize("noise", [0.0, 12.3])
+def test_silent_beams_past_a_faces_end_do_not_free_the_box_behind_it(noise, monkeypatch):
+    """A 330 × 410 mm box turned 7°, 0.6 m from the pose (turned −23°): the sweep sees its
+    near face as a line, and its side face from that line's end onwards only at 64–76°
+    (a few returns, then silence: no line). The silent beams past the line's end stop where
+    a face turned away there could hide from them (``no_return_reach``): no cell inside the
+    box is mapped free (at most 2 with noise) where, with that rule off, 37–61 were."""
+    from irring.maps.mapping import FREE, MapperParams, OccupancyGrid
+
+    cal = dataclasses.replace(NOMINAL, noise_counts=max(noise, 0.3))
+    centre, half, yaw = np.array([-0.33, 0.50]), np.array([0.165, 0.205]), math.radians(7.0)
+    turn = np.array([[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]])
+    corners = [tuple(centre + turn @ (half * s)) for s in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    walls = rectangle(-1.15, -0.62, 0.75, 1.08) + polygon(corners)
+    g = OccupancyGrid.covering((-1.2, -0.7), (0.8, 1.1), 0.01, MapperParams())
+    xs, ys = g.cell_centers()
+    local = np.einsum("ji,yxj->yxi", turn, np.stack(np.meshgrid(xs, ys), axis=-1) - centre)
+    inside = (np.abs(local) < half - 0.01).all(axis=-1)
+    inside_free = {True: [], False: []}
+    for rule in (True, False):
+        if not rule:
+            monkeypatch.setattr(estimate_module, "end_hide_angle", lambda c, o: math.pi / 2)
+        for seed in range(4):
+            sweep, _, _ = make_sweep(cal, walls=walls, pose=(0.0, 0.0, math.radians(-23.0)),
+                                     noise_counts=noise, seed=seed, quantize=noise > 0)
+            g = OccupancyGrid.covering((-1.2, -0.7), (0.8, 1.1), 0.01, MapperParams())
+            g.insert(estimate(sweep, cal))
+            inside_free[rule].append(int((g.classify()[inside] == FREE).sum()))
+    assert max(inside_free[True]) <= (0 if noise == 0 else 2), inside_free
+    assert min(inside_free[False]) >= 37, inside_free
+
+
+def test_silent_beams_take_the_callers_incidence_margin(monkeypatch):
     """``LineOptions.incidence_margin_rad`` decides which lines explain a silent beam: in the
     cabinet scene above, a 20° margin (lines met ≥ 50° count, the drop-out angle being 70°)
     explains 23 silent beams where the default 5° explains 14 of the same sweep's, and the
-    estimator's ``reach_m`` is that of the margin it was given (it used the default's)."""
+    estimator's ``reach_m`` is that of the margin it was given (it used the default's).
+    With the faces that could hide past the lines' ends (turned ≥ 50° or 65° from the
+    beams): 69 and 55."""
     cal = dataclasses.replace(NOMINAL, noise_counts=0.3)
     walls = rectangle(-0.55, -0.45, 0.95, 0.62) + rectangle(0.25, 0.10, 0.75, 0.18)
     sweep, _, _ = make_sweep(cal, walls=walls, pose=(0.0, -0.12, 0.3))
@@ -727,8 +762,13 @@ def test_silent_beams_take_the_callers_incidence_margin():
     mine = no_return_reach(p, est.lines, cal, wide)
     default = no_return_reach(p, est.lines, cal, LineOptions())
     np.testing.assert_array_equal(p.reach_m, mine)
-    assert np.isfinite(mine).sum() == 23 and np.isfinite(default).sum() == 14
+    assert np.isfinite(mine).sum() == 69 and np.isfinite(default).sum() == 55
     # the wider margin only adds beams; where both explain one, the nearest line may differ
+    assert not (np.isfinite(default) & ~np.isfinite(mine)).any()
+    monkeypatch.setattr(estimate_module, "end_hide_angle", lambda cal, options: math.pi / 2)
+    mine = no_return_reach(p, est.lines, cal, wide)
+    default = no_return_reach(p, est.lines, cal, LineOptions())
+    assert np.isfinite(mine).sum() == 23 and np.isfinite(default).sum() == 14
     assert not (np.isfinite(default) & ~np.isfinite(mine)).any()
 
 

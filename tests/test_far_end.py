@@ -85,13 +85,16 @@ def test_silent_beams_no_longer_free_cells_behind_walls_they_could_not_return_fr
     np.testing.assert_array_less(p.reach_m[silent], cal.silent_range_m + 1e-12)
     assert false_free == 0 and run.scores["free_accuracy"] == 1.0
     monkeypatch.setattr(fast, "silent_reach", lambda points, cal: points)
+    monkeypatch.setattr(fast, "end_hide_angle", lambda cal, options: math.pi / 2)
     before, _ = _false_free(scene)
     assert before == 241
 
 
-def test_the_papers_range_is_left_as_it_was():
+def test_the_papers_range_is_left_as_it_was(monkeypatch):
     """GP2D12 read to 624 mm with 15 mV of noise: silence rules a surface out to 644 mm,
-    past the range, so silent beams keep their reach (None: to the max range)."""
+    past the range, so silent beams keep their reach (None: to the max range; beams past a
+    line's end, which a face turned away could hide from, aside)."""
+    monkeypatch.setattr(fast, "end_hide_angle", lambda cal, options: math.pi / 2)
     scene = loads(FAR_A21.replace("{model: gp2y0a21, max_range_mm: 800}", "{model: gp2d12}"))
     points = pipeline.run(scene, progress=False).points[0]
     assert int((points.reason == Reason.NO_RETURN).sum()) > 100
@@ -225,6 +228,7 @@ def test_the_bundled_far_hexagon_is_read_to_800_mm_and_frees_nothing_outside(mon
     monkeypatch.setattr(fast, "pooled_counts", lambda counts, reason, *args: (counts, reason))
     monkeypatch.setattr(fast, "DIRECTION_SE_MAX", math.inf)   # (which came after: 0.931)
     monkeypatch.setattr(fast, "FUSE_MIN", 10 ** 9)   # nor the fused lines (after: 0.913)
+    monkeypatch.setattr(fast, "end_hide_angle", lambda cal, options: math.pi / 2)
     before = pipeline.run(scene, progress=False).scores
     assert before["free_accuracy"] < 0.991 and before["occupied_precision"] < 0.89
 

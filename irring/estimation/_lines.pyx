@@ -25,7 +25,7 @@ plus ~5–10 µs of work on ~630 points.
 from cpython.buffer cimport (PyObject_GetBuffer, PyBuffer_Release, PyBUF_C_CONTIGUOUS,
                             PyBUF_FORMAT, PyBUF_WRITABLE)
 from libc.math cimport (sin, cos, sqrt, fabs, hypot, isfinite, exp, atan, nearbyint, M_PI,
-                        INFINITY, NAN)
+                        INFINITY, NAN, asin, tan, fmin, fmax)
 from libc.stdlib cimport calloc, free, malloc
 
 import numpy as np
@@ -807,7 +807,7 @@ def no_return_reach(const double[::1] heading, const double[::1] ox, const doubl
                     const double[:, ::1] direction, const double[:, ::1] normal,
                     const unsigned char[::1] usable, idx_t min_members, double clear_m,
                     double block_m, double corner_min_sin, double corner_past_m,
-                    double cos_limit, double max_range):
+                    double cos_limit, double max_range, double end_theta, idx_t width):
     """How far each silent beam is known free: ``irring.estimation.estimate_numpy.no_return_reach``
     (the statement and the why) in one pass: the same operations in the same order, the
     beam's cos and sin libm's (numpy's agree with them, see the top of this file).
@@ -816,10 +816,15 @@ def no_return_reach(const double[::1] heading, const double[::1] ox, const doubl
     label (−1: none), valid, reason (``no_return``: a silent beam). Per line (L,): centroid,
     direction, normal (L, 2) and usable. Lines with ≥ ``min_members`` valid members explain
     beams; their span is the members' extent plus ``block_m``, clipped ``corner_past_m`` past
-    a corner (``irring.estimation.estimate.clip_at_corners``). Returns reach (K,) (NaN: to
-    the max range) or None when no beam is explained; a label ≥ L is a ValueError."""
-    cdef idx_t K = heading.shape[0], L = usable.shape[0], U = 0, i, j, l, u, v
+    a corner (``irring.estimation.estimate.clip_at_corners``). Past a line's members' end a
+    beam stops where a face turned ``end_theta`` + γ from it could hide (γ at most the
+    heading gap to the nearest reading ``width`` apart, a step before or after in the same
+    sensor's column, that was not silent: ``estimate_numpy.return_gaps``). Returns reach (K,)
+    (NaN: to the max range) or None when no beam is explained; a label ≥ L is a ValueError."""
+    cdef idx_t K = heading.shape[0], L = usable.shape[0], U = 0, i, j, l, u, v, side
     cdef double along, den, dx, dy, a, b, ux, uy, un, gap, cos_inc, t, s, stop
+    cdef double end, ex, ey, t_end, off, angle, hide, cross, gamma, heard, up, down, dh
+    cdef idx_t other
     cdef bint found = False
     if not (ox.shape[0] == oy.shape[0] == x.shape[0] == y.shape[0] == label.shape[0]
             == valid.shape[0] == reason.shape[0] == K):
@@ -904,12 +909,29 @@ def no_return_reach(const double[::1] heading, const double[::1] ox, const doubl
             continue
         ux = cos(heading[i])
         uy = sin(heading[i])
+        # the heading gaps to the nearest readings of the same column that were not silent
+        up = NAN
+        down = NAN
+        for side in range(2):
+            if width <= 0:
+                break
+            other = i - width if side == 0 else i + width
+            while 0 <= other < K and reason[other] == no_return:
+                other = other - width if side == 0 else other + width
+            if not 0 <= other < K:
+                continue
+            dh = heading[other] - heading[i]
+            dh = dh - 2.0 * M_PI * nearbyint(dh / (2.0 * M_PI))
+            if dh > 0 and not up <= dh:
+                up = dh
+            elif dh < 0 and not down <= -dh:
+                down = -dh
         stop = INFINITY
         for u in range(U):
             l = use[u]
             un = ux * normal[l, 0] + uy * normal[l, 1]
             cos_inc = fabs(un)
-            if not (cos_inc > 1e-9 and cos_inc <= cos_limit):
+            if not cos_inc > 1e-9:
                 continue
             gap = (centroid[l, 0] - ox[i]) * normal[l, 0] + (centroid[l, 1] - oy[i]) * normal[l, 1]
             t = gap / un
@@ -917,12 +939,42 @@ def no_return_reach(const double[::1] heading, const double[::1] ox, const doubl
                 continue
             along = ((ox[i] + t * ux - centroid[l, 0]) * direction[l, 0]
                      + (oy[i] + t * uy - centroid[l, 1]) * direction[l, 1])
-            if along >= lo_b[u] and along <= hi_b[u]:
+            if cos_inc <= cos_limit and along >= lo_b[u] and along <= hi_b[u]:
                 s = t - clear_m / cos_inc
+                if s < 0.0:
+                    s = 0.0
+                if s < stop:
+                    stop = s
+            # past an end of the members: where a face turned away there could hide
+            for side in range(2):
+                if side == 0:
+                    if not along > hi[u]:
+                        continue
+                    end = hi[u]
+                else:
+                    if not along < lo[u]:
+                        continue
+                    end = lo[u]
+                ex = centroid[l, 0] + end * direction[l, 0] - ox[i]
+                ey = centroid[l, 1] + end * direction[l, 1] - oy[i]
+                t_end = ex * ux + ey * uy
+                if not t_end > 0:
+                    continue
+                cross = ux * ey - uy * ex
+                off = fabs(cross)
+                gamma = asin(fmin(off / fmax(hypot(ex, ey), 1e-12), 1.0))
+                heard = up if cross > 0 else down
+                if heard < gamma:
+                    gamma = heard
+                angle = end_theta + gamma
+                if not angle < 0.5 * M_PI - 1e-6:
+                    continue
+                hide = t_end + off * tan(angle)
+                s = t if t > hide else hide
                 if s < stop:
                     stop = s
         if stop < INFINITY:
-            reach[i] = stop if stop > 0.0 else 0.0
+            reach[i] = stop
             found = True
     return reach_arr if found else None
 

@@ -1499,7 +1499,8 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
 
     A silent beam is stopped 10 mm before the first usable line of ≥ 5 valid members it
     meets within range, inside that line's span (members' extent plus 0.25 m, not past a
-    corner), at an incidence ≥ the drop-out angle less ``options.incidence_margin_rad``.
+    corner), at an incidence ≥ the drop-out angle less ``options.incidence_margin_rad``;
+    past the members' end, where a face turned away there could hide from it.
     One compiled call (``irring.estimation._lines.no_return_reach``); the readable statement
     and the why: :func:`irring.estimation.estimate_numpy.no_return_reach`."""
     if found is None or found.usable.size == 0:
@@ -1514,7 +1515,8 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
         f(found.centroid, dtype=float), f(found.direction, dtype=float),
         f(found.normal, dtype=float), f(found.usable, dtype=bool).view(np.uint8),
         REACH_MIN_MEMBERS, REACH_CLEAR_M, _FOLD_BLOCK_M, _CORNER_MIN_SIN, _CORNER_PAST_M,
-        reach_cos_limit(cal, options), float(points.max_range_m))
+        reach_cos_limit(cal, options), float(points.max_range_m), end_hide_angle(cal, options),
+        math.prod(np.shape(points.valid)[1:]))
     return None if reach is None else reach.reshape(points.valid.shape)
 
 
@@ -1522,6 +1524,13 @@ def reach_cos_limit(cal: Calibration, options: LineOptions) -> float:
     """A silent beam meeting a line with |cos incidence| at most this would have dropped out
     there: the drop-out angle less ``options.incidence_margin_rad``."""
     return math.cos(cal.max_incidence_rad - options.incidence_margin_rad)
+
+
+def end_hide_angle(cal: Calibration, options: LineOptions) -> float:
+    """The least angle (rad, from its normal) at which a face past a line's end meets a
+    silent beam it hides from: the drop-out angle less ``options.incidence_margin_rad``
+    (π/2 or more: no face hides there, the beams past a line's end keep their reach)."""
+    return max(cal.max_incidence_rad - options.incidence_margin_rad, 0.0)
 
 
 def member_spans(points: Points, found: Lines, use: np.ndarray):

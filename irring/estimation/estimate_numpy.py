@@ -15,9 +15,9 @@ from .calibration import RANGE_SIGMAS, Calibration
 from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH_MIN_MEMBERS,
                        REGROUP_WINDOW, SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
                        LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
-                       fallback_spread, final_estimate, held_and_pooled, member_spans,
-                       nominal_calibration, polyline_ids, range_profiles, reach_cos_limit,
-                       resolve_foldover, scan_order, settled_within_noise)
+                       end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
+                       member_spans, nominal_calibration, polyline_ids, range_profiles,
+                       reach_cos_limit, resolve_foldover, scan_order, settled_within_noise)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -1182,6 +1182,31 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
     return replace(points, **out)
 
 
+def return_gaps(points: Points) -> tuple[np.ndarray, np.ndarray]:
+    """(up, down) (S·N,) rad: how far each reading's heading lies from the nearest reading of
+    the same sensor column, earlier or later in the sweep, that was not silent (any reason
+    but NO_RETURN), toward greater (``up``) and lesser (``down``) headings; NaN: none there.
+    (Why: :func:`no_return_reach`, "Past a line's end".)"""
+    reason = np.asarray(points.reason)
+    steps = reason.shape[0]
+    heard = (reason != Reason.NO_RETURN).reshape(steps, -1)
+    h = np.asarray(points.heading, dtype=float).reshape(steps, -1)
+    row = np.arange(steps)[:, None]
+    cols = np.arange(heard.shape[1])[None, :]
+    before = np.maximum.accumulate(np.where(heard, row, -1), axis=0)
+    after = np.minimum.accumulate(np.where(heard, row, steps)[::-1], axis=0)[::-1]
+    up = np.full(h.shape, np.nan)
+    down = np.full(h.shape, np.nan)
+    for other in (before, after):
+        has = (other >= 0) & (other < steps)
+        diff = h[np.where(has, other, row), cols] - h
+        diff = diff - 2.0 * math.pi * np.rint(diff / (2.0 * math.pi))      # to [−π, π]
+        diff = np.where(has & (diff != 0.0), diff, np.nan)
+        up = np.fmin(up, np.where(diff > 0, diff, np.nan))
+        down = np.fmin(down, np.where(diff < 0, -diff, np.nan))
+    return up.reshape(-1), down.reshape(-1)
+
+
 def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
                     options: LineOptions) -> np.ndarray | None:
     """How far each NO_RETURN beam is known free (S, N, m; NaN: to the max range; None: no
@@ -1196,7 +1221,19 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
     at an incidence the sensor would drop out at (≥ the drop-out angle less
     ``options.incidence_margin_rad``) is explained by it: it is known free only to where
     it comes within 10 mm of that line. A line met at a smaller incidence is not what the
-    beam saw (it would have returned), so it explains nothing."""
+    beam saw (it would have returned), so it explains nothing.
+
+    Past a line's end the surface may turn away past the drop-out (a reflex corner of the
+    room, a box's face met end-on) and hide from every beam: a silent beam from O that
+    crosses a usable line's supporting line beyond its members' end E, within range, is
+    known free at most to t_E + δ·tan(θ + γ) and not before it crosses that line (t_E:
+    along the beam to E's foot, δ: E's distance from the beam, γ: the angle at O between
+    the beam and E, θ: the drop-out angle less the margin; no limit where θ + γ ≥ 90°).
+    A straight face from E meets the beam at the angle ψ with tan ψ = (stop − t_E)/δ, and
+    the sensor's beams between O→E and this one cross it up to γ less steeply: a face
+    meeting the beam sooner would have returned one of them. Those that did return
+    something may have seen it, so γ is at most the heading gap to the nearest of them
+    (:func:`return_gaps`; docs/estimator.md, "Silent beams past a line's end")."""
     nr = (points.reason == Reason.NO_RETURN).reshape(-1).nonzero()[0]
     if nr.size == 0 or found is None or found.usable.size == 0:
         return None
@@ -1217,11 +1254,33 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
     ok = (ahead & (cos_inc <= reach_cos_limit(cal, options)) & (t <= points.max_range_m)
           & (along >= lo_b[None, :]) & (along <= hi_b[None, :]))
     # the beam stops where it comes within REACH_CLEAR_M of the line
-    stop = np.where(ok, t - REACH_CLEAR_M / np.where(ok, cos_inc, 1.0), np.inf).min(axis=1)
+    stop = np.maximum(np.where(ok, t - REACH_CLEAR_M / np.where(ok, cos_inc, 1.0),
+                               np.inf).min(axis=1), 0.0)
+    # … or where a face turned away at a line's end could have hidden from it
+    theta = end_hide_angle(cal, options)
+    ox, oy = points.origin_x.reshape(-1)[nr], points.origin_y.reshape(-1)[nr]
+    ux, uy = np.cos(h), np.sin(h)
+    up, down = (g[nr] for g in return_gaps(points))
+    for end, beyond in ((hi, along > hi[None, :]), (lo, along < lo[None, :])):
+        ex = c[None, :, 0] + end[None, :] * e[None, :, 0] - ox[:, None]         # O → E
+        ey = c[None, :, 1] + end[None, :] * e[None, :, 1] - oy[:, None]
+        t_end = ex * ux[:, None] + ey * uy[:, None]
+        cross = ux[:, None] * ey - uy[:, None] * ex          # > 0: E at greater headings
+        off = np.abs(cross)
+        # γ: the angle to E, or to the nearest beam of the same sensor toward E that heard
+        # something (the face may have returned it: only the silent ones in between count)
+        gamma = np.arcsin(np.minimum(off / np.maximum(np.hypot(ex, ey), 1e-12), 1.0))
+        heard = np.where(cross > 0, up[:, None], down[:, None])
+        gamma = np.where(heard < gamma, heard, gamma)
+        angle = theta + gamma
+        hides = (ahead & beyond & (t <= points.max_range_m) & (t_end > 0)
+                 & (angle < 0.5 * math.pi - 1e-6))
+        hide = t_end + off * np.tan(np.where(hides, angle, 0.0))
+        stop = np.minimum(stop, np.where(hides, np.maximum(t, hide), np.inf).min(axis=1))
     if not np.isfinite(stop).any():
         return None
     reach = np.full(points.valid.size, np.nan)
-    reach[nr] = np.where(np.isfinite(stop), np.maximum(stop, 0.0), np.nan)
+    reach[nr] = np.where(np.isfinite(stop), stop, np.nan)
     return reach.reshape(points.valid.shape)
 
 
