@@ -39,6 +39,7 @@ from irring.hardware import protocol as p_
 from irring.recording import RecordingError, load_recording, save_recording
 from irring.core import Ring
 from irring.scenario import ScenarioError, load_scenario, loads, resolve
+from irring.studies.study import COLUMNS
 
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
@@ -927,6 +928,22 @@ def test_a_results_csv_saved_by_a_spreadsheet_is_resumed_or_named(tmp_path, caps
         assert json.loads((out / "summary.json").read_text())["configurations"][0]["runs"] == 1
     else:
         assert f"{out / 'results.csv'}: {message}" in err and "internal error" not in err
+
+
+def test_a_results_csv_with_a_blank_first_line_is_refused_not_overwritten(tmp_path, capsys,
+                                                                         one_run_study):
+    """Read line by line, a blank first line was taken for an empty file: the study then
+    opened results.csv afresh ('w') and its kept run was lost, without --resume."""
+    study, text = one_run_study
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "results.csv").write_text("\n" + text)
+    assert main(["study", str(study), "--out", str(out), "--workers", "1"]) == 1
+    err = capsys.readouterr().err
+    assert (f"{out / 'results.csv'}: its columns are not the ones this irring writes "
+            f"(0 columns, expected {len(COLUMNS)})") in err
+    assert (out / "results.csv").read_text() == "\n" + text
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv"]
 
 
 def test_a_results_csv_that_is_not_a_file_is_refused_not_read(tmp_path, one_run_study):

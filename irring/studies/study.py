@@ -462,9 +462,10 @@ class _Lines:
 def _read_rows(p: Path, lines: _Lines, text: Iterable[str]) -> list[dict[str, str]]:
     reader = csv.reader(text)
     try:
-        header = tuple(next(reader, ()))
-        if not header:
+        header = next(reader, None)   # None: no line at all; a blank first line is []
+        if header is None:
             return []
+        header = tuple(header)
         if header != COLUMNS:
             first = next((i for i, (h, c) in enumerate(zip(header, COLUMNS)) if h != c),
                          min(len(header), len(COLUMNS)))
