@@ -4,6 +4,7 @@ mapping.neighbour_ranges; docs/mapping.md, "A sensor's neighbouring steps")."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -130,16 +131,41 @@ def test_kernel_and_oracle_map_bracketed_readings_alike():
     assert np.abs(off.delta(batch) - g.delta(batch)).max() > 1.0
 
 
+def in_rows(points: Points, order) -> Points:
+    """``points`` with its rows (steps) in ``order``: a sweep read in the order asked."""
+    return dataclasses.replace(points, **{
+        f: np.asarray(getattr(points, f))[order] for f in (
+            "x", "y", "d", "theta", "origin_x", "origin_y", "heading", "sigma_m",
+            "iterations", "valid", "reason")})
+
+
+def test_only_readings_whose_neighbouring_rows_bracket_their_beam_move():
+    """Rows in the order a sweep asked for its steps: reversed (a descending sweep), the
+    same steps move to the same ranges. Asked 0, 1, 2, 4, 3, 5, …: step 4's neighbouring
+    rows are steps 2 and 3, both on one side of its beam, and it stays (it was mapped at
+    step 2's range, a beam 2.1° away); step 2, between steps 1 and 4, moves out."""
+    batch = one_sensor(LONG, 0.020)
+    p = MapperParams()
+    back = list(range(8, -1, -1))
+    assert moved(in_rows(batch, back), p) == pytest.approx(
+        {back.index(3): batch.d[2, 0], back.index(4): batch.d[3, 0]}, abs=1e-12)
+    swapped = in_rows(batch, [0, 1, 2, 4, 3, 5, 6, 7, 8])
+    assert moved(swapped, p) == pytest.approx({2: batch.d[1, 0]}, abs=1e-12)
+    np.testing.assert_array_equal(mapping_numpy.neighbour_ranges(swapped, p),
+                                  neighbour_ranges(swapped, p))
+
+
 @pytest.mark.parametrize("bad", [1.5, -1.0, math.nan, math.inf, 1001.0])
 def test_bad_neighbour_steps_are_refused_by_name(bad):
     with pytest.raises(ValueError, match="neighbour_steps"):
         MapperParams(neighbour_steps=bad)
 
 
-def drawn_sweep(rng, steps, sensors, steps_knob):
+def drawn_sweep(rng, steps, sensors, steps_knob, shuffled=False):
     """A sweep of ``sensors`` emitters on a ring each turning through ``steps`` steps
     past a wall, posts and gaps: ranges with noise of their σ (5–40 mm, some NaN), some
-    readings invalid, some out of the wall's reach (a post in front, a gap behind)."""
+    readings invalid, some out of the wall's reach (a post in front, a gap behind);
+    ``shuffled``: its rows (steps) in a random order."""
     base = rng.uniform(0.0, 2 * np.pi, sensors)
     heading = base[None, :] + np.radians(1.07) * np.arange(steps)[:, None]
     ox = 0.15 * np.cos(base)[None, :] + np.zeros((steps, 1))
@@ -151,20 +177,24 @@ def drawn_sweep(rng, steps, sensors, steps_knob):
     sigma[rng.random((steps, sensors)) < 0.05] = np.nan
     valid = rng.random((steps, sensors)) < 0.8
     d = np.where(valid, d, np.nan)
-    return Points(x=ox + d * np.cos(heading), y=oy + d * np.sin(heading), d=d,
-                  theta=np.zeros(d.shape), origin_x=ox, origin_y=oy, heading=heading,
-                  sigma_m=sigma, iterations=np.ones(d.shape, int), valid=valid,
-                  reason=np.where(valid, int(Reason.OK), int(Reason.NOT_CONVERGED)).astype(
-                      np.uint8), max_range_m=0.624), MapperParams(neighbour_steps=steps_knob)
+    points = Points(x=ox + d * np.cos(heading), y=oy + d * np.sin(heading), d=d,
+                    theta=np.zeros(d.shape), origin_x=ox, origin_y=oy, heading=heading,
+                    sigma_m=sigma, iterations=np.ones(d.shape, int), valid=valid,
+                    reason=np.where(valid, int(Reason.OK), int(Reason.NOT_CONVERGED)).astype(
+                        np.uint8), max_range_m=0.624)
+    if shuffled:
+        points = in_rows(points, rng.permutation(steps))
+    return points, MapperParams(neighbour_steps=steps_knob)
 
 
 @settings(max_examples=200, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 2 ** 20), steps=st.integers(1, 40), sensors=st.integers(1, 12),
-       knob=st.sampled_from([2, 1, 3, 0]))
-def test_the_kernel_agrees_with_its_numpy_statement(seed, steps, sensors, knob):
+       knob=st.sampled_from([2, 1, 3, 0]), shuffled=st.booleans())
+def test_the_kernel_agrees_with_its_numpy_statement(seed, steps, sensors, knob, shuffled):
     """mapping.neighbour_ranges (compiled) and mapping_numpy.neighbour_ranges: the same
-    readings moved (NaN pattern exact) to the same range (bit for bit)."""
-    points, params = drawn_sweep(np.random.default_rng(seed), steps, sensors, knob)
+    readings moved (NaN pattern exact) to the same range (bit for bit), rows in step order
+    or not."""
+    points, params = drawn_sweep(np.random.default_rng(seed), steps, sensors, knob, shuffled)
     got = neighbour_ranges(points, params)
     want = mapping_numpy.neighbour_ranges(points, params)
     np.testing.assert_array_equal(np.isnan(got), np.isnan(want))

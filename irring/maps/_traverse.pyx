@@ -924,7 +924,9 @@ def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
     elsewhere: ``mapping.neighbour_ranges`` on flat (rows, cols) arrays (row-major; a
     column is a sensor, a row a step), whose numpy oracle is
     ``mapping_numpy.neighbour_ranges``. Each column's valid readings are visited in row
-    order, each compared with the valid ones before and after it in that order."""
+    order, each compared with the valid ones before and after it in that order whose beams
+    bracket its own (the beam turns one way from the one before to it and on to the one
+    after)."""
     cdef Py_ssize_t n = rows * cols, c, r, i, k, m, prev, nxt
     if not (origin_x.shape[0] == origin_y.shape[0] == x.shape[0] == y.shape[0]
             == sigma_m.shape[0] == valid.shape[0] == n):
@@ -945,7 +947,7 @@ def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
     cdef double[::1] d = d_a
     cdef double[::1] s = s_a
     cdef Py_ssize_t[::1] at = at_a
-    cdef double dp, dn, si
+    cdef double dp, dn, si, turn_p, turn_n
     cdef bint near_p, near_n
     with nogil:
         for c in range(cols):
@@ -972,6 +974,13 @@ def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
                 if r - at[k - 1] > steps or at[k + 1] - r > steps:
                     continue
                 prev, nxt = at[k - 1] * cols + c, at[k + 1] * cols + c
+                # rows in any order (a sweep asked for steps 5, -10, 30): beams on one side
+                turn_p = ((x[prev] - origin_x[prev]) * (y[i] - origin_y[i])
+                          - (y[prev] - origin_y[prev]) * (x[i] - origin_x[i]))
+                turn_n = ((x[i] - origin_x[i]) * (y[nxt] - origin_y[nxt])
+                          - (y[i] - origin_y[i]) * (x[nxt] - origin_x[nxt]))
+                if not ((turn_p > 0 and turn_n > 0) or (turn_p < 0 and turn_n < 0)):
+                    continue
                 near_p = hypot(x[prev] - x[i], y[prev] - y[i]) <= k_sig * hypot(s[prev], s[i])
                 near_n = hypot(x[nxt] - x[i], y[nxt] - y[i]) <= k_sig * hypot(s[nxt], s[i])
                 if not (near_p and near_n):

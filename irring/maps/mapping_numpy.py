@@ -55,16 +55,8 @@ def _nearest_valid(valid: np.ndarray, steps: int, later: bool) -> np.ndarray:
 
 
 def neighbour_ranges(points: Points, params: MapperParams) -> np.ndarray:
-    """(S, N) m: the range each valid reading its sensor's neighbouring steps bracket is
-    mapped at, NaN for the others.
-
-    A reading of σ from ``explain_sharper``·``min_sigma_m`` to ``lone_sigma_m`` (one that
-    cannot place its surface in one cell) whose sensor's nearest valid readings before and
-    after it in the sweep (rows, at most ``neighbour_steps`` away) both end within
-    ``explain_sigmas`` combined σ of its end point, and both read shorter (longer) than it,
-    is mapped at the farther (nearer) of their ranges: the median of the three. The numpy
-    statement of the compiled :func:`irring.maps.mapping.neighbour_ranges` (its contract
-    and why, stated there)."""
+    """The numpy statement of the compiled :func:`irring.maps.mapping.neighbour_ranges`
+    (its contract and why, stated there): (S, N) m, NaN where a reading stays."""
     shape = np.shape(points.valid)
     out = np.full(shape, np.nan)
     steps = int(params.neighbour_steps)
@@ -84,15 +76,23 @@ def neighbour_ranges(points: Points, params: MapperParams) -> np.ndarray:
         cols = np.arange(shape[1])[None, :]
         behind, before = cand.copy(), cand.copy()      # behind both neighbours / before both
         farther, nearer = np.zeros(shape), np.full(shape, np.inf)
+        turns = []
         for later in (False, True):
             row = _nearest_valid(valid, steps, later)
             r = np.maximum(row, 0)
             near = (row >= 0) & (np.hypot(px[r, cols] - px, py[r, cols] - py)
                                  <= params.explain_sigmas * np.hypot(sigma[r, cols], sigma))
+            # the turn from the earlier beam to the later one (z of their cross product)
+            bx, by = px[r, cols] - ox[r, cols], py[r, cols] - oy[r, cols]
+            turns.append(np.sign(bx * (py - oy) - by * (px - ox)) if not later else
+                         np.sign((px - ox) * by - (py - oy) * bx))
             other = np.where(near, d[r, cols], np.nan)
             behind &= near & (other < d)
             before &= near & (other > d)
             farther, nearer = np.fmax(farther, other), np.fmin(nearer, other)
+        bracketed = (turns[0] * turns[1] > 0)   # its beam between theirs: rows in any order
+        behind &= bracketed
+        before &= bracketed
         out[behind] = farther[behind]
         out[before] = nearer[before]
     return out
