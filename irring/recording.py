@@ -15,8 +15,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import core, gp2
-from .core import (ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL,
-                   VREF_V, Ring, Sweep, Truth, work_bytes, work_refusal)
+from .core import (ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_SAMPLES, MAX_STEPS, MAX_SWEEPS,
+                   SENSOR_MODEL, VREF_V, Ring, Sweep, Truth, work_bytes, work_refusal)
 from .errors import InputError, IrringError, TooBig, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
 from .scenario import MapSpec, ScenarioError, load_dataclass
@@ -75,19 +75,8 @@ def check_sweep(sweep: Sweep, name: str = "sweep") -> None:
                              sweep.ring.max_step)
     except ValueError as exc:
         raise fail("steps", str(exc)) from None
-    scalars = (("sensor_model", gp2.is_sensor_model(sweep.sensor_model),
-                f"one of {', '.join(gp2.SENSORS)}"),
-               ("adc_bits", _whole(sweep.adc_bits, 1, core.MAX_ADC_BITS),
-                f"a whole number 1 … {core.MAX_ADC_BITS}"),
-               ("vref_v", _finite(sweep.vref_v, *core.VREF_RANGE_V),
-                "{:g} … {:g} V".format(*core.VREF_RANGE_V)),
-               ("max_range_m", _finite(sweep.max_range_m, 0.001, 100.0), "0.001 … 100 m"),
-               ("samples", _whole(sweep.samples, 1, 64), "a whole number 1 … 64"),
-               ("settle_s", _finite(sweep.settle_s, 0.0, 60.0), "0 … 60 s"),
-               ("duration_s", _finite(sweep.duration_s, 0.0, MAX_DURATION_S),
-                f"0 … {MAX_DURATION_S:,.0f} s"))
-    for field_, ok, allowed in scalars:
-        if not ok:
+    for field_, (ok, allowed, _) in _SCALARS.items():
+        if not ok(getattr(sweep, field_)):
             raise fail(field_, f"{brief(getattr(sweep, field_))} is not allowed; {allowed}")
     top = 2 ** sweep.adc_bits - 1
     if counts.size and (counts.min() < 0 or counts.max() > top):
@@ -98,6 +87,22 @@ def check_sweep(sweep: Sweep, name: str = "sweep") -> None:
 def _whole(value: Any, lo: int, hi: int) -> bool:
     return (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
             and lo <= value <= hi)
+
+
+# a sweep's scalars: (allowed?, what is allowed, default in a recording that leaves it out);
+# one table for check_sweep and load_recording
+_SCALARS: dict[str, tuple[Callable[[Any], bool], str, Any]] = {
+    "sensor_model": (gp2.is_sensor_model, f"one of {', '.join(gp2.SENSORS)}", SENSOR_MODEL),
+    "adc_bits": (lambda v: _whole(v, 1, core.MAX_ADC_BITS),
+                 f"a whole number 1 … {core.MAX_ADC_BITS}", ADC_BITS),
+    "vref_v": (lambda v: _finite(v, *core.VREF_RANGE_V),
+               "{:g} … {:g} V".format(*core.VREF_RANGE_V), VREF_V),
+    "max_range_m": (lambda v: _finite(v, 0.001, 100.0), "0.001 … 100 m", MAX_RANGE_M),
+    "samples": (lambda v: _whole(v, 1, MAX_SAMPLES), f"a whole number 1 … {MAX_SAMPLES}", 1),
+    "settle_s": (lambda v: _finite(v, 0.0, 60.0), "0 … 60 s", 0.0),
+    "duration_s": (lambda v: _finite(v, 0.0, MAX_DURATION_S), f"0 … {MAX_DURATION_S:,.0f} s",
+                   None),
+}
 
 
 def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> Path:
@@ -411,19 +416,9 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
     def whole(lo: int, hi: int) -> Callable[[Any], bool]:
         return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
 
-    kwargs["sensor_model"] = scalar("sensor_model", gp2.is_sensor_model,
-                                    f"one of {', '.join(gp2.SENSORS)}", SENSOR_MODEL)
-    bits = kwargs["adc_bits"] = scalar("adc_bits", whole(1, core.MAX_ADC_BITS),
-                                       f"a whole number 1 … {core.MAX_ADC_BITS}", ADC_BITS)
-    v_lo, v_hi = core.VREF_RANGE_V
-    kwargs["vref_v"] = scalar("vref_v", lambda v: _finite(v, v_lo, v_hi), f"{v_lo:g} … {v_hi:g} V",
-                              VREF_V)
-    kwargs["max_range_m"] = scalar("max_range_m", lambda v: _finite(v, 0.001, 100.0),
-                                   "0.001 … 100 m", MAX_RANGE_M)
-    kwargs["samples"] = scalar("samples", whole(1, 64), "a whole number 1 … 64", 1)
-    kwargs["settle_s"] = scalar("settle_s", lambda v: _finite(v, 0.0, 60.0), "0 … 60 s", 0.0)
-    kwargs["duration_s"] = scalar("duration_s", lambda v: _finite(v, 0.0, MAX_DURATION_S),
-                                  f"0 … {MAX_DURATION_S:,.0f} s")
+    for name, (ok, allowed, default) in _SCALARS.items():
+        kwargs[name] = scalar(name, ok, allowed, default)
+    bits = kwargs["adc_bits"]
     kwargs["source"] = scalar("source", lambda v: isinstance(v, str) and len(v) <= 200,
                               "a short text", "sim")
     missing = scalar("missing_steps", lambda v: isinstance(v, list) and len(v) <= MAX_STEPS

@@ -16,13 +16,12 @@ from dataclasses import dataclass, fields
 from fractions import Fraction
 from typing import ClassVar, Union
 
-from ..core import Ring
+from ..core import MAX_SAMPLES, Ring
 
 PROTOCOL_VERSION = 1
 MAX_SENTENCE_BYTES = 128  # from `$` to `\n` inclusive
 SEQ_MODULO = 1 << 16      # IRSCN sequence numbers wrap at 65536
 CLOCK_MODULO = 1 << 32    # the device clock (ms) wraps at 2³²
-MAX_SAMPLES = 64
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
 
 # Error codes a device answers with (docs/protocol.md, IRERR).
