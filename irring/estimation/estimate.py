@@ -1181,6 +1181,8 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
         fi = np.array([f[0] for f in flank], dtype=np.intp)
         fk = np.array([f[1] for f in flank], dtype=np.intp)
         bearing = np.arctan2(py[comp == c] - cy0, px[comp == c] - cx0)
+        if bearing.max() - bearing.min() > math.pi:   # across ±π: the grid not round the ring
+            bearing = np.where(bearing < 0.0, bearing + 2.0 * math.pi, bearing)
         near_m, far_m = np.nanmin(d0[ii, kk]) - 0.15, np.nanmax(d0[ii, kk]) + 0.05
 
         def score(radius, a, t):
