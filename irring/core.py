@@ -36,6 +36,7 @@ MAX_STEPS = 100_000                 # readings per sensor in one sweep
 MAX_ADC_BITS = 24                   # a converter's bits a device, recording or calibration
                                     # file may state (a scenario's are fewer: Sensor.adc_bits)
 MAX_SAMPLES = 64                    # readings a device averages per step (IRSCN, a recording)
+NETWORK_URL_SCHEMES = ("socket", "rfc2217")  # pyserial URLs of a ring reached at HOST:PORT
 VREF_RANGE_V = (0.1, 50.0)          # its reference voltage there (V; a scenario's: Sensor.vref_v)
 MAX_DURATION_S = 1e7                # hardware time of one sweep (115 days; a recording's bound)
 WORK_MEMORY_BYTES = 2 * 10**9       # what one command's work may hold: a run's readings and

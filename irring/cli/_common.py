@@ -17,7 +17,7 @@ import urllib.parse
 from collections.abc import Callable
 from pathlib import Path
 
-from ..core import MAX_SEEDS, SEED_MAX
+from ..core import MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
 from ..errors import UsageError
 
 
@@ -258,7 +258,7 @@ def serial_port(text: str) -> str:
         raise argparse.ArgumentTypeError("an empty port; name a device (/dev/ttyUSB0, a pty) "
                                          "or a URL (socket://HOST:PORT)")
     scheme = text.partition("://")[0].lower() if "://" in text else ""
-    if scheme in ("socket", "rfc2217"):
+    if scheme in NETWORK_URL_SCHEMES:
         parts = urllib.parse.urlsplit(text)
         try:
             port = parts.port

@@ -335,7 +335,8 @@ class SerialRing:
                     self._port = self.opener(self._port_arg, baudrate=self.baudrate,
                                              timeout=self.poll_s, write_timeout=self.timeout_s)
                 except (serial.SerialException, OSError, ValueError) as exc:
-                    network = self._port_arg.lower().startswith(("socket://", "rfc2217://"))
+                    network = self._port_arg.lower().startswith(
+                        tuple(f"{s}://" for s in core.NETWORK_URL_SCHEMES))
                     advice = ("that the ring's server listens at that host and port, or start "
                               "the emulator: irring emulate t_room --tcp PORT" if network else
                               "the device path (ls /dev/ttyUSB* /dev/ttyACM*), that you may "
