@@ -1756,6 +1756,12 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
     gone = np.unique(idx[pa[past <= _FOLD_PAST_MAX]])
     if not gone.size:
         return p
+    return _unplaced(p, gone)
+
+
+def _unplaced(p: Points, gone: np.ndarray) -> Points:
+    """``p`` with the readings at flat indices ``gone`` made INCIDENCE_UNKNOWN: not valid,
+    no end point, distance, θ or σ."""
     out = {f: np.array(getattr(p, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     for v in out.values():
         v.reshape(-1)[gone] = np.nan
@@ -1788,13 +1794,7 @@ def _disowned_by_own_profile(p: Points, label: np.ndarray, sweep: Sweep, cal: Ca
     gone = at[pr.ok & (pr.se > 0) & (np.abs(z) > _FOLD_OWN_Z) & apart]
     if not gone.size:
         return p
-    out = {f: np.array(getattr(p, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-    for v in out.values():
-        v.reshape(-1)[gone] = np.nan
-    valid, reason = p.valid.copy(), p.reason.copy()
-    valid.reshape(-1)[gone] = False
-    reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
-    return replace(p, valid=valid, reason=reason, **out)
+    return _unplaced(p, gone)
 
 
 def _onto_first_lines(p: Points, q: Points, first: Lines, label_second: np.ndarray,
