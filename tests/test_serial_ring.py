@@ -366,13 +366,27 @@ def test_an_irinf_announcing_another_ring_mid_sweep_ends_it_keeping_the_old_ring
     assert str(err.value) == (   # one IRSCN of the new ring (3 sensors) is not taken
         "the device on script:// now announces another ring: 3 sensors, 10-bit ADC, steps -5 "
         "… 5 of 0.9° × 1/1, firmware 'other', where the handshake said 2 sensors, 12-bit ADC, "
-        "steps -3 … 3 of 1.8° × 3/5, firmware 'script'; it was reflashed or swapped. Readings "
-        "of the old ring are kept; connect again to read the new one. device changed: 2 of 7 steps "
-        "received; missing steps -1, 0, 1, 2, 3 (not invented, left out of the sweep); clean "
-        "link")
+        "steps -3 … 3 of 1.8° × 3/5, firmware 'script'; it was reflashed or swapped; connect "
+        "again to read the new one. device changed: 2 of 7 steps received; missing steps -1, 0, "
+        "1, 2, 3 (not invented, left out of the sweep); clean link")
     partial = err.value.partial
     assert list(partial.steps) == [-3, -2] and partial.counts.tolist() == [[30, 31], [32, 33]]
     assert not err.value.report.complete and err.value.report.received_steps == 2
+
+
+def test_an_irinf_announcing_another_ring_during_goto_or_stop_is_device_changed():
+    other = p.Info(1, 3, 10, 900, 1, 1, -5, 5, "other")
+    answers = {p.GoTo: [INFO, p.Position(2)], p.Stop: [other, p.Done(-1)]}
+
+    def script(msg):
+        return [INFO] if isinstance(msg, p.Hello) else answers.get(type(msg), [])
+
+    ring = SerialRing(ScriptPort(script), timeout_s=TIMEOUT_S).open()
+    assert ring.goto(2) == 2    # the handshake's IRINF again: a late answer, ignored
+    with pytest.raises(DeviceChanged, match=r"^the device on script:// now announces another "
+                       r"ring: 3 sensors, 10-bit ADC, steps -5 … 5 .*; it was reflashed or "
+                       r"swapped; connect again to read the new one\.$"):
+        ring.stop()
 
 
 def test_stale_irscn_from_an_earlier_sweep_is_dropped():

@@ -117,7 +117,7 @@ class NoReadings(LinkLost):
 
 class DeviceChanged(LinkLost):
     """Mid-session the device announced (IRINF) another ring than the handshake's: it was
-    reflashed or swapped; the readings of the ring it was are in ``partial``."""
+    reflashed or swapped; in a sweep, the readings of the ring it was are in ``partial``."""
 
 
 class DeviceTimeout(LinkLost):
@@ -526,10 +526,21 @@ class SerialRing:
                 return msg.seq
         return None
 
+    def _same_ring(self, info: p.Info) -> None:
+        """An IRINF after the handshake: a late answer if it equals the handshake's, else
+        :class:`DeviceChanged` (the board was reflashed or swapped)."""
+        if info != self.info:
+            raise DeviceChanged(
+                f"the device on {self.port_name} now announces another ring: "
+                f"{_ring_text(info)}, where the handshake said {_ring_text(self.info)}; "
+                f"it was reflashed or swapped; connect again to read the new one.")
+
     def _await(self, kinds: tuple[type, ...], wait_s: float) -> p.AnyMessage | None:
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
             for msg in self._receive():
+                if isinstance(msg, p.Info) and self.info is not None:
+                    self._same_ring(msg)
                 if isinstance(msg, p.ErrorReply):
                     self.stats.device_errors += 1
                     if msg.code in (p.ERR_BAD_SENTENCE, p.ERR_BUSY) and p.ErrorReply not in kinds:
@@ -768,12 +779,8 @@ class SerialRing:
                         self._send(p.Stop())  # our IRSTP was garbled
                     elif msg.code != p.ERR_BAD_SENTENCE:
                         self._raise_rejected(msg, p.encode(cmd).decode().strip())
-                elif isinstance(msg, p.Info) and msg != info:
-                    raise DeviceChanged(
-                        f"the device on {self.port_name} now announces another ring: "
-                        f"{_ring_text(msg)}, where the handshake said {_ring_text(info)}; "
-                        f"it was reflashed or swapped. Readings of the old ring are kept; "
-                        f"connect again to read the new one.")
+                elif isinstance(msg, p.Info):
+                    self._same_ring(msg)
                 # IRPOS, and IRINF equal to the handshake's, are late answers: ignore
             if len(ps.got) > had:
                 stalled_since = now
