@@ -40,10 +40,15 @@ sensor: {model: gp2d12, max_range_mm: 624}
 OUTLINE = [(0, 0), (1.4, 0), (1.4, 0.6), (0.9, 1.1), (0, 1.1)]
 
 
+def simulated(room: str, seed: int | None = None):
+    """The scene of YAML text ``room``, its simulated sweeps and its calibration."""
+    sc = loads(room, source="<test>")
+    sweeps = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps
+    return sc, sweeps, scene_calibration(sc)[0]
+
+
 def run(effects: str):
-    sc = loads(ROOM + f"effects: {effects}\n", source="<test>")
-    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
-    cal = scene_calibration(sc)[0]
+    sc, sweeps, cal = simulated(ROOM + f"effects: {effects}\n")
     return sc, sweeps, cal, [estimate(sw, cal) for sw in sweeps]
 
 
@@ -182,9 +187,7 @@ robot: {poses: [{x_mm: 706, y_mm: 330, yaw_deg: 0}, {x_mm: 1003, y_mm: 700, yaw_
                                         (BOX_FACE, 304), (BOX_FACE, 310)],
                          ids=["corner-301", "corner-304", "corner-317", "box-304", "box-310"])
 def test_neighbours_close_to_one_surface_do_not_vouch_for_the_far_branch(room, seed):
-    sc = loads(room + CLOSE_EFFECTS, source="<test>")
-    sweeps = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps
-    cal = pipeline.scene_calibration(sc)[0]
+    sc, sweeps, cal = simulated(room + CLOSE_EFFECTS, seed=seed)
     import dataclasses
     trusting = dataclasses.replace(cal, peak_distance_m=0.0)
     close = far_only_wrong = flagged = 0
@@ -223,9 +226,7 @@ effects: {noise: {sigma_v: 0.1}, foldover: {}}
 def test_a_sweep_with_no_line_is_resolved_by_both_estimators():
     from irring.estimation import estimate_numpy
 
-    sc = loads(HEAVY_NOISE, source="<test>")
-    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
-    cal = scene_calibration(sc)[0]
+    sc, sweeps, cal = simulated(HEAVY_NOISE)
     for sw in sweeps:
         fast, slow = estimate(sw, cal), estimate_numpy.estimate_detail(sw, cal).points
         np.testing.assert_array_equal(fast.reason, slow.reason)
@@ -281,9 +282,7 @@ def wrong_branch(p, sweep, cal) -> int:
 
 @pytest.mark.parametrize("room", [PILASTER_A21, CORNER_A02], ids=["a21-pilaster", "a02-corner"])
 def test_a_reading_the_judging_pass_left_out_is_never_valid_on_the_far_branch(room):
-    sc = loads(room, source="<test>")
-    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
-    cal = scene_calibration(sc)[0]
+    sc, sweeps, cal = simulated(room)
     judged_out = wrong = 0
     for sw in sweeps:
         p = estimate(sw, cal)
@@ -307,9 +306,7 @@ effects: [incidence, noise, quantization, foldover]
 
 
 def test_a_line_decides_the_far_branch_only_where_it_is_seen():
-    sc = loads(WIDE_PILASTER_A21, source="<test>")
-    sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
-    cal = scene_calibration(sc)[0]
+    sc, sweeps, cal = simulated(WIDE_PILASTER_A21)
     wrong = valid = 0
     for sw in sweeps:
         p = estimate(sw, cal)
@@ -348,9 +345,7 @@ def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
         room, seed, long_before, taken, monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
 
-    sc = loads(room, source="<test>")
-    sweeps = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps
-    cal = scene_calibration(sc)[0]
+    sc, sweeps, cal = simulated(room, seed=seed)
 
     def errors(p, sw):
         hit = sw.truth.hit_point
@@ -388,9 +383,7 @@ sensor: {model: gp2y0a21}
 def test_a_line_member_its_own_profile_reads_100_mm_elsewhere_is_not_placed(monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
 
-    sc = loads(STEEP_CORNER_A21_TURNED, source="<test>")
-    sweeps = pipeline.simulated(sc, seed=2, progress=False)[0].sweeps
-    cal = scene_calibration(sc)[0]
+    sc, sweeps, cal = simulated(STEEP_CORNER_A21_TURNED, seed=2)
     now = [estimate(sw, cal) for sw in sweeps]
     with monkeypatch.context() as m:
         m.setattr(est, "_disowned_by_own_profile", lambda p, *args: p)
