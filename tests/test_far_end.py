@@ -555,3 +555,53 @@ def test_a_held_reading_stays_held_through_pooling():
     assert np.array_equal(np.nonzero(held_r[:, 1] == Reason.OK)[0], [6, 8, 9, 16])
     np.testing.assert_array_equal(held_c[~hold], free_c[~hold])
     assert reason[7, 1] != Reason.FOLDOVER_AMBIGUOUS          # the input is left alone
+
+
+# A room of our own: the GP2Y0A21 ring as close to the long wall as the housing allows
+# (171 mm), turned 7°. Sensor 0 sweeps that wall out past the 70° drop-out toward the far
+# corner; the room's end wall, 720-780 mm away, reads at the no-return level as the
+# dropped-out beams do, and pooling mixed the two.
+GRAZE_A21 = """\
+name: graze_a21
+seed: 520
+room: {outline_mm: [[0, 0], [1500, 0], [1500, 1100], [0, 1100]]}
+robot: {poses: [{x_mm: 600, y_mm: 171, yaw_deg: 7}]}
+sensor: {model: gp2y0a21}
+"""
+
+
+def _past_the_drop_out(run, cal):
+    """(valid readings met past the drop-out angle > 100 mm from their true hit, the most
+    any silent beam met past it is known free beyond its true hit, m)."""
+    sw, p = run.sweeps[0], run.points[0]
+    t = sw.truth
+    steep = t.incidence_rad > cal.max_incidence_rad
+    err = np.hypot(p.x - t.hit_point[..., 0], p.y - t.hit_point[..., 1])
+    silent = steep & (p.reason == Reason.NO_RETURN) & (p.reach_m is not None)
+    reach = np.asarray(p.reach_m) if p.reach_m is not None else np.full(steep.shape, np.nan)
+    over = np.where(silent, np.fmin(reach, p.max_range_m) - t.distance_m, -np.inf)
+    return int((p.valid & steep & (err > 0.1)).sum()), float(np.nanmax(over))
+
+
+@pytest.mark.parametrize("effects", ["[incidence, noise, quantization]",
+                                     "[incidence, noise, quantization, foldover]"])
+def test_a_beam_that_dropped_out_on_a_wall_is_not_pooled_onto_the_wall_behind_it(
+        effects, monkeypatch):
+    """GRAZE_A21, seeds 520, 523, 529: the simulation and the calibration agree on the
+    GP2Y0A21's 70° drop-out (models/sensors/gp2y0a21.yaml), yet 1, 2 and 2 beams met at
+    72-74° read valid 104-187 mm long: pooled with the end wall's readings, placed on it.
+    They are silent, and known free only to the wall they met."""
+    scene = loads(GRAZE_A21 + f"effects: {effects}\n")
+    cal = scene_calibration(scene)[0]
+    # one drop-out angle: the sensor model's, which the simulated effect reads too
+    assert cal.max_incidence_rad == scene.effects["incidence"].drop_out_rad(
+        gp2.sensor("gp2y0a21")) == pytest.approx(math.radians(70.0))
+    seeds = (520, 523, 529)
+    after = [_past_the_drop_out(pipeline.run(scene, seed=s, progress=False), cal)
+             for s in seeds]
+    assert [n for n, _ in after] == [0, 0, 0]
+    assert max(over for _, over in after) < 0.0    # no silent beam freed past its wall
+    monkeypatch.setattr(fast, "silent_behind_a_wall", lambda points, *a, **k: points)
+    before = [_past_the_drop_out(pipeline.run(scene, seed=s, progress=False), cal)[0]
+              for s in seeds]
+    assert before == [1, 2, 2]

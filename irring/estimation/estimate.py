@@ -295,7 +295,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         return resolve_foldover(lambda held, full, snap: _estimate(
             sweep, cal, max_iterations, tolerance_rad, iterate, lines, keep_history=keep_history,
             damping=damping, detail=full, hold=held, snap=snap,
-            keep_unconverged=keep_unconverged), sweep, cal, detail)
+            keep_unconverged=keep_unconverged), sweep, cal, detail, options=lines)
     # the kernels take a C integer: a float would fail only once an iteration needs it
     max_iterations = operator.index(max_iterations)
     if max_iterations < 1:
@@ -510,13 +510,18 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     if snap and read_to_own_range(cal, points.max_range_m):
         # a thin post far away: its few readings, several sensors', fitted as one circle
         points = far_posts(points, label, counts, steps, cal)
+    pooled = (points.valid & (counts < cal.no_return_counts + cal.return_margin_counts)
+              if read_to_own_range(cal, points.max_range_m) else None)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
-    if not (detail or silent):     # no silent beam to explain, no lines asked for
+    if not (detail or silent or (pooled is not None and pooled.any())):
         return Estimate(points=points, lines=None, theta_history=tuple(history))
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                          alpha=grouping.alpha, usable=grouping.usable)
     used = index if grouping.uidx is None else index.take(grouping.uidx)
     found = _lines_record(pieces_out, label, used)
+    if pooled is not None and pooled.any():
+        points = silent_behind_a_wall(points, pooled, found, cal, options)
+        silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
     if silent:
         points = points_with(points, reach_m=(reach or no_return_reach)(points, found, cal,
                                                                           options))
@@ -675,6 +680,7 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
 
 
 POOL_STEPS = 6   # a reading near the no-return level is pooled with 6 steps either way
+POOL_BLOCK_M = 0.5  # a wall silences a pooled beam this far past its readings (to a corner)
 
 
 def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal: Calibration,
@@ -1522,6 +1528,61 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
     return None if reach is None else reach.reshape(points.valid.shape)
 
 
+def silent_behind_a_wall(points: Points, pooled: np.ndarray, found: Lines, cal: Calibration,
+                         options: LineOptions, among: np.ndarray | None = None,
+                         members: Points | None = None) -> Points:
+    """``points`` with each reading of ``pooled`` (S, N: valid only by pooling, its counts
+    below the return level) made NO_RETURN where its beam meets a line of ``found`` (those
+    ``among``, default all; its members those of ``members``, default ``points``) that
+    explains a silent beam (:func:`no_return_reach`'s:
+    ≥ ``REACH_MIN_MEMBERS`` valid members, within its span, at an incidence past the
+    drop-out angle less ``options.incidence_margin_rad``) more than 3σ (at least
+    ``REACH_CLEAR_M``) before its end point; its beam is known free to ``REACH_CLEAR_M``
+    before that line. Near the no-return level a beam that dropped out on a wall and one
+    that reached a far wall read alike, and a pool's mean of both put the dropped one on
+    the far wall, 100-290 mm behind the steep one (GP2Y0A21, a wall met at 71-81°).
+    docs/estimator.md, "Pooled readings"."""
+    members = points if members is None else members
+    lab = found.label.reshape(-1)
+    n_mem = np.bincount(lab[(lab >= 0) & members.valid.reshape(-1)],
+                        minlength=found.usable.size)
+    ok = found.usable & (n_mem >= REACH_MIN_MEMBERS)
+    if among is not None:
+        ok &= np.isin(np.arange(ok.size), among)
+    use = ok.nonzero()[0]
+    if use.size == 0:
+        return points
+    at = pooled.reshape(-1).nonzero()[0]
+    c, e, nrm = found.centroid[use], found.direction[use], found.normal[use]
+    *_, lo, hi = member_spans(members, found, use)
+    lo_b, hi_b = clip_at_corners(c, e, lo, hi, POOL_BLOCK_M)
+    h = points.heading.reshape(-1)[at]
+    un, t, ahead, along = beam_crossings(points.origin_x.reshape(-1)[at],
+                                         points.origin_y.reshape(-1)[at], np.cos(h), np.sin(h),
+                                         c, e, nrm)                          # (B, L)
+    d, sigma = points.d.reshape(-1)[at], points.sigma_m.reshape(-1)[at]
+    clear = np.maximum(3.0 * sigma, REACH_CLEAR_M)
+    cos_inc = np.abs(un)
+    before = (ahead & (cos_inc <= reach_cos_limit(cal, options))
+              & (t < (d - clear)[:, None]) & (along >= lo_b[None, :]) & (along <= hi_b[None, :])
+              & (lab[at][:, None] != use[None, :]))
+    hit = before.any(axis=1)
+    if not hit.any():
+        return points
+    gone = at[hit]
+    stop = np.where(before, t - REACH_CLEAR_M / np.where(before, cos_inc, 1.0), np.inf)
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    for v in out.values():
+        v.reshape(-1)[gone] = np.nan
+    valid, reason = points.valid.copy(), np.array(points.reason)
+    valid.reshape(-1)[gone] = False
+    reason.reshape(-1)[gone] = Reason.NO_RETURN
+    reach = (np.full(valid.shape, np.nan) if points.reach_m is None
+             else np.array(points.reach_m, dtype=float))
+    reach.reshape(-1)[gone] = np.maximum(stop[hit].min(axis=1), 0.0)
+    return points_with(points, valid=valid, reason=reason, reach_m=reach, **out)
+
+
 def reach_cos_limit(cal: Calibration, options: LineOptions) -> float:
     """A silent beam meeting a line with |cos incidence| at most this would have dropped out
     there: the drop-out angle less ``options.incidence_margin_rad``."""
@@ -1632,14 +1693,14 @@ _FOLD_OWN_Z = 3.0      # a member whose own straight slope is this many standard
 
 
 def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: Sweep,
-                     cal: Calibration, detail: bool, profiler: Callable | None = None
-                     ) -> Estimate:
+                     cal: Calibration, detail: bool, profiler: Callable | None = None,
+                     options: LineOptions = LineOptions()) -> Estimate:
     """Estimate a sweep of a folding sensor: every reading has a far-branch distance (Eq. 10)
     and a near one (:meth:`Calibration.near_distance`, below the peak); pick the branch
     from what the rest of the sweep says, or flag FOLDOVER_AMBIGUOUS.
 
     ``run(hold, detail, snap)`` is the estimator with the readings ``hold`` kept out;
-    ``profiler`` as for :func:`final_estimate`. Three steps (docs/foldover.md has the geometry and the measured outcome):
+    ``profiler`` as for :func:`final_estimate`; ``options`` the estimator's. Three steps (docs/foldover.md has the geometry and the measured outcome):
 
     1. the whole sweep estimated on the far branch: walls give lines (a near wall's readings
        read far give a curve, which the lines of the neighbouring sensors contradict);
@@ -1704,6 +1765,13 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     if q.reach_m is not None:
         reach = q.reach_m if p.reach_m is None else np.fmin(p.reach_m, q.reach_m)
         p = replace(p, reach_m=reach)
+    # a reading valid only by pooling, behind a wall the second pass held out (a near one)
+    if read_to_own_range(cal, p.max_range_m):
+        pooled = p.valid & (np.asarray(sweep.counts, dtype=float)
+                            < cal.no_return_counts + cal.return_margin_counts)
+        if pooled.any():
+            p = silent_behind_a_wall(p, pooled, first.lines, cal, options, among=walls,
+                                     members=q)
     return replace(second, points=p, lines=second.lines if detail else None)
 
 
@@ -1972,10 +2040,10 @@ def _seen_there(pairs: np.ndarray, along: np.ndarray, mcol: np.ndarray,
     return out
 
 
-def clip_at_corners(c, e, lo, hi):
-    """Each line's span extended by ``_FOLD_BLOCK_M`` either way, but not past the point where
+def clip_at_corners(c, e, lo, hi, block_m: float = _FOLD_BLOCK_M):
+    """Each line's span extended by ``block_m`` either way, but not past the point where
     it meets another line's extended span (a corner, 10 mm beyond it)."""
-    lo_b, hi_b = lo - _FOLD_BLOCK_M, hi + _FOLD_BLOCK_M
+    lo_b, hi_b = lo - block_m, hi + block_m
     if c.shape[0] < 2:
         return lo_b, hi_b
     # intersection of line i with line j, as a coordinate along i (a) and along j (b)

@@ -944,7 +944,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
             sweep, cal, max_iterations=max_iterations, tolerance_rad=tolerance_rad,
             iterate=iterate, lines=lines, keep_history=keep_history, damping=damping,
             hold=held, snap=snap_, keep_unconverged=keep_unconverged), sweep, cal, True,
-            range_profiles)
+            range_profiles, options=lines)
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be ≥ 1, got {max_iterations}")
     counts = np.asarray(sweep.counts, dtype=float)
