@@ -223,14 +223,17 @@ def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge,
        strength=st.sampled_from([0.0, 0.25, 1.0]),
        noise=st.sampled_from([0.0, 0.5, 3.0]),
        keep=st.floats(0.5, 1.0),
-       ask_share=st.floats(0.05, 1.0))
+       ask_share=st.floats(0.05, 1.0),
+       apart_share=st.sampled_from([0.0, 0.0, 0.3]))
 # a window of two readings, whose curvature term is rounding: 'sure' differed at index 83
-@example(seed=1414, room="columns", strength=1.0, noise=3.0, keep=0.9609375, ask_share=1.0)
+@example(seed=1414, room="columns", strength=1.0, noise=3.0, keep=0.9609375, ask_share=1.0,
+         apart_share=0.0)
 def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, noise, keep,
-                                                        ask_share):
+                                                        ask_share, apart_share):
     """``_lines.profiles`` (compiled) against ``estimate.range_profiles`` (numpy) on a sweep's
     valid readings, steps dropped at random (windows cut short, polylines broken), any
-    subset asked, on curves whose a(θ) grows: the same flags (ok, convex, sure, concave;
+    subset asked, some readings set apart (a polyline each, as line members are when a
+    reading on no line is asked again), on curves whose a(θ) grows: the same flags (ok, convex, sure, concave;
     exact: numpy's sums of 8 or more terms round apart from the kernel's, so a flag must not
     rest on rounding alone), and the same counts, slopes, standard errors and angles within
     1e-9."""
@@ -248,8 +251,9 @@ def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, no
     index = scan_order(np.asarray(sweep.steps), p.valid.shape[1])
     vi = index[p.valid.reshape(-1)[index]]
     ask = np.sort(rng.permutation(vi.size)[:max(1, int(ask_share * vi.size))])
-    fast = profiles_compiled(p, vi, ask, sweep.counts, np.asarray(sweep.steps), cal)
-    slow = range_profiles(p, vi, ask, sweep.counts, np.asarray(sweep.steps), cal)
+    apart = rng.random(vi.size) < apart_share
+    fast = profiles_compiled(p, vi, ask, sweep.counts, np.asarray(sweep.steps), cal, apart)
+    slow = range_profiles(p, vi, ask, sweep.counts, np.asarray(sweep.steps), cal, apart)
     for f in ("ok", "convex", "sure", "concave", "s", "d0", "sig_s"):
         np.testing.assert_array_equal(getattr(fast, f), getattr(slow, f), err_msg=f)
     # the inputs (counts, θ = 0 distances, polylines, steps) bit for bit

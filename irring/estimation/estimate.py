@@ -837,7 +837,8 @@ def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: n
 
 
 def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.ndarray,
-                      steps: np.ndarray, cal: Calibration) -> _Profile:
+                      steps: np.ndarray, cal: Calibration, apart: np.ndarray | None = None
+                      ) -> _Profile:
     """:func:`range_profiles` in two compiled calls (``irring.estimation._lines.profile_inputs``
     and ``profiles``, held to it by tests/test_estimate_oracle.py)."""
     f = np.ascontiguousarray
@@ -848,6 +849,7 @@ def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: n
         np.asarray(steps).reshape(-1).astype(np.intp), f(vi, dtype=np.intp),
         points.valid.shape[1], cal.sigma_counts(), la0, b0, SIGMA_FLOOR_M,
         jump_slope(cal.max_incidence_rad), LineOptions.jump_sigmas)
+    chain = _set_apart(chain, apart)
     n, slope, se, theta, steep, ok, convex, sure, concave = _lines.profiles(
         ox, oy, h, log_s, sig_s, chain, step,
         np.ascontiguousarray(off, dtype=np.intp), cal.theta_rad,
@@ -860,14 +862,27 @@ def profiles_compiled(points: Points, vi: np.ndarray, off: np.ndarray, counts: n
                     ox=ox, oy=oy, step=step)
 
 
+def _set_apart(chain: np.ndarray, apart: np.ndarray | None) -> np.ndarray:
+    """Polyline ids ``chain`` (scan order) with each reading where ``apart`` holds a polyline
+    of its own, its neighbours either side cut from each other too."""
+    if apart is None or not apart.any():
+        return chain
+    cut = np.ones(chain.size, dtype=bool)
+    cut[1:] = (chain[1:] != chain[:-1]) | apart[1:] | apart[:-1]
+    return np.cumsum(cut).astype(chain.dtype)
+
+
 def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.ndarray,
-                   steps: np.ndarray, cal: Calibration) -> _Profile:
+                   steps: np.ndarray, cal: Calibration, apart: np.ndarray | None = None
+                   ) -> _Profile:
     """The range profile of each reading ``vi[off]`` (``vi``: the valid readings' flat
     indices in scan order) from its sensor's valid readings of the same polyline within
     ``_LOCAL_STEPS`` steps, read as a flat surface would be (:func:`local_incidence`);
+    ``apart`` (over ``vi``, optional): readings that are a polyline of their own.
     numpy, the statement :func:`profiles_compiled` is held to."""
     s, h, ox, oy, log_s, sig_s, d0, chain, step = _profile_inputs(points, vi, counts, steps,
                                                                  cal)
+    chain = _set_apart(chain, apart)
     # the window: same polyline, within _LOCAL_STEPS steps
     j = off[:, None] + np.arange(-_LOCAL_STEPS, _LOCAL_STEPS + 1)[None, :]
     jc = np.clip(j, 0, vi.size - 1)
@@ -1287,8 +1302,10 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     beam frame. A straight profile clearly not flat gives θ and a σ that includes the slope's
     standard error; a profile bent away from the beam (a post) keeps θ = 0 with the σ of its
     doubt; one that decides nothing, where θ = 0 may read more than ``_UNKNOWN_M`` long, is
-    INCIDENCE_UNKNOWN. The members of a steep line whose own profiles mostly bend away (a
-    column's arc cut into short lines; ``ROUND_*``) leave it first and are read the same way;
+    INCIDENCE_UNKNOWN, unless the readings on no line alone give it a straight profile that
+    places it surely (:func:`_off_line_profiles`). The members of a steep line whose own
+    profiles mostly bend away (a column's arc cut into short lines; ``ROUND_*``) leave it
+    first and are read the same way;
     so do, with ``doubt_far``, the members of a short far line whose own slopes disown its θ
     (``FAR_LINE_*``), those their slope does not place INCIDENCE_UNKNOWN. Returns the points
     and ``label`` without those members. The why and the measured effects:
@@ -1403,6 +1420,26 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     # readings are what it has (flagging them lost a radial ring nearly every reading)
     still = _fewer_distinct(steps, _LOCAL_MIN)
     few = ~ok & ~convex & (not still) & (span > _UNKNOWN_M)
+    if few.any() and member.size:
+        # a short face beside a line's face (a box's end past its corner) bends the profile
+        # of its readings where their window takes in the line's members: asked again of
+        # the readings on no line alone, a straight profile gives θ
+        again = _off_line_profiles(points, label, off[few], vi, counts, steps, cal, profiler)
+        if again is not None:
+            fix = few.nonzero()[0][again[0]]
+            sure = _placed_surely(cal, s_off[fix], *again[1:], sig_s[off[fix]])
+            if sure.any():
+                fix = fix[sure]
+                ok, few = ok.copy(), few.copy()
+                ok[fix], few[fix] = True, False
+                theta, slope, se = theta.copy(), slope.copy(), se.copy()
+                theta[fix], slope[fix], se[fix] = (v[sure] for v in again[1:])
+                th, t, e = theta[ok], np.abs(slope[ok]), se[ok]
+                lo = np.arctan(np.maximum(t - e, 0.0))
+                hi = np.minimum(np.arctan(t + e), cal.max_incidence_rad)
+                s_ok = s_off[ok]
+                d_new, d_lo, d_hi = cal.distance(np.concatenate([s_ok, s_ok, s_ok]),
+                                                 np.concatenate([th, lo, hi])).reshape(3, -1)
     # a convex thing's reading may have met its side steeply, a still ring's any surface:
     # θ = 0 with the σ of that doubt
     wide = (convex | still) & ~ok
@@ -1447,6 +1484,38 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     out["x"].reshape(-1)[at] = points.origin_x.reshape(-1)[at] + d_new * np.cos(hh)
     out["y"].reshape(-1)[at] = points.origin_y.reshape(-1)[at] + d_new * np.sin(hh)
     return points_with(points, **out), label
+
+
+def _off_line_profiles(points: Points, label: np.ndarray, pos: np.ndarray, vi: np.ndarray,
+                       counts: np.ndarray, steps: np.ndarray, cal: Calibration,
+                       profiler: Callable | None):
+    """The range profiles of the valid readings ``vi[pos]`` (on no line) from their sensor's
+    valid readings on no line alone (``label`` −1; a line's member cuts the polyline):
+    (which are straight and clearly sloped, their θ, slope, standard error) or None where
+    none is."""
+    pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal,
+                                         apart=label.reshape(-1)[vi] >= 0)
+    if not pr.ok.any():
+        return None
+    return pr.ok, pr.theta[pr.ok], pr.slope[pr.ok], pr.se[pr.ok]
+
+
+_AGAIN_SIGMA_M = _UNKNOWN_M / 3  # a profile asked again places a reading only this surely …
+
+
+def _placed_surely(cal: Calibration, s: np.ndarray, theta: np.ndarray, slope: np.ndarray,
+                   se: np.ndarray, sig_s: np.ndarray) -> np.ndarray:
+    """Which readings (counts ``s``) a profile asked again may place at its ``theta``
+    (``slope`` and its standard error ``se``; ``sig_s``: σ_S/S): σ at most
+    ``_AGAIN_SIGMA_M`` (θ = 0 would be off by 3σ or more), θ not pinned at the drop-out
+    angle (a slope that steep is two surfaces', not one face's)."""
+    t = np.abs(slope)
+    lo = np.arctan(np.maximum(t - se, 0.0))
+    hi = np.minimum(np.arctan(t + se), cal.max_incidence_rad)
+    d, d_lo, d_hi = cal.distance(np.concatenate([s, s, s]),
+                                 np.concatenate([theta, lo, hi])).reshape(3, -1)
+    sigma, placed = _own_slope_sigma(cal, theta, d, d_lo, d_hi, sig_s)
+    return placed & (sigma <= _AGAIN_SIGMA_M) & (theta < cal.max_incidence_rad - PINNED_RAD)
 
 
 def _own_slope_sigma(cal: Calibration, theta: np.ndarray, d: np.ndarray, d_lo: np.ndarray,
