@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 
 from irring import Sweep, designs, scenario
 from irring.core import beam_geometry, sensor_angles_for_steps
-from irring.core import Cylinder
+from irring.core import Box, Cylinder
+from irring.simulation import model as model_lib
 from irring.simulation.sim import RayHits, SimRing
 
 TOL_M = 1e-6
@@ -301,3 +302,38 @@ def test_truth_needs_no_effects_and_is_deterministic(t_room):
     _, _, two = SimRing(t_room).truth(1)
     for field in dataclasses.fields(one):
         np.testing.assert_array_equal(getattr(one, field.name), getattr(two, field.name))
+
+
+def test_rays_into_the_room_alone_hit_what_the_whole_scene_hits(t_room):
+    """SimRing casts into the room without the robot (model.room_model); every ray's
+    distance, normal and geom (the scene's id) are bit for bit those of the same call on the
+    whole scene model, in a room with a box, a cylinder and a turned wall, from inside and
+    outside the room, past the robot's own geoms too."""
+    sc = dataclasses.replace(
+        t_room, obstacles=(Box(center_m=(0.61, 0.37), size_m=(0.13, 0.05),
+                                        yaw_rad=0.4, reflectance=0.35),
+                           Cylinder(center_m=(1.83, 0.52), radius_m=0.04, reflectance=0.8)),
+        room=dataclasses.replace(t_room.room, outline_m=(
+            (0.0, 0.0), (2.42, 0.0), (2.42, 0.9), (1.66, 0.9), (1.51, 1.8), (0.76, 1.8),
+            (0.76, 0.9), (0.0, 0.9))))
+    sim = SimRing(sc)
+    assert sim.ray_model.ngeom < sim.model.ngeom
+    rng = np.random.default_rng(7)
+    origin = np.column_stack([rng.uniform(-0.3, 2.7, 4000), rng.uniform(-0.2, 2.0, 4000),
+                              rng.uniform(0.0, 0.35, 4000)])
+    direction = rng.normal(size=(4000, 3)) * [1.0, 1.0, 0.05]
+    unit = direction / np.sqrt(np.einsum("ij,ij->i", direction, direction))[:, None]  # as cast
+    whole = mujoco.batch.Batch(sim.model, 1, nthread=1)
+    dist, gid, normal = (a[0] for a in whole.ray(origin[None], unit[None],
+                                                 geomgroup=model_lib.RAY_GEOMGROUP,
+                                                 normal=True))
+    hits = sim.cast(origin, direction, max_range_m=10.0)
+    hit = gid >= 0
+    assert 2000 < hit.sum() < 4000 and set(sim.built.ray_geoms) == set(gid[hit])
+    np.testing.assert_array_equal(hits.geom_id, gid)
+    np.testing.assert_array_equal(hits.distance_m[hit], dist[hit])
+    assert np.isnan(hits.distance_m[~hit]).all()
+    cos = np.abs(np.einsum("ij,ij->i", unit, normal))[hit]
+    np.testing.assert_array_equal(
+        hits.incidence_rad[hit], np.arctan2(np.sqrt(np.maximum(1.0 - cos * cos, 0.0)), cos))
+    np.testing.assert_array_equal(hits.reflectance[hit], sim.built.reflectance[gid[hit]])

@@ -245,6 +245,23 @@ def build(scenario: Scenario) -> RingModel:
     return _resolve(spec.compile(), scenario.ring, reflectance)
 
 
+def room_model(scenario: Scenario, scene: mujoco.MjModel) -> tuple[mujoco.MjModel, np.ndarray]:
+    """The scenario's room alone (floor, walls, obstacles: no robot) for ray casts, and the
+    ``scene`` model's geom id of each of its geoms. A ray call tests every geom of its model
+    against every ray, group filter or not: without the robot's geoms it takes less time for
+    the same hits (both models place the world's geoms from the same numbers;
+    docs/simulation.md has the figures)."""
+    spec = mujoco.MjSpec()
+    spec.modelname = f"irring_{scenario.name}_room"
+    add_room(spec, scenario)
+    room = spec.compile()
+    ids = np.array([mujoco.mj_name2id(scene, mujoco.mjtObj.mjOBJ_GEOM, room.geom(g).name)
+                    for g in range(room.ngeom)], dtype=np.int32)
+    if ids.min(initial=0) < 0:
+        raise RuntimeError("the room model has a geom the scene model lacks")
+    return room, ids
+
+
 def _resolve(model: mujoco.MjModel, ring: Ring, reflectance: dict[str, float]) -> RingModel:
     def jid(name: str) -> int:
         return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)

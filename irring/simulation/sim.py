@@ -103,7 +103,9 @@ class SimRing:
     with the object).
 
     Attributes: ``model`` (``mujoco.MjModel``), ``data`` (an ``MjData`` for callers who step
-    physics), ``built`` (:class:`irring.simulation.model.RingModel`: ids and addresses), ``scenario``,
+    physics), ``ray_model`` (the room alone, which the rays are cast into:
+    :func:`irring.simulation.model.room_model`), ``built``
+    (:class:`irring.simulation.model.RingModel`: ids and addresses), ``scenario``,
     ``ring``, ``pipeline`` (the scene's effects pipeline, built on first use unless given),
     ``dynamics`` (:class:`irring.simulation.dynamics.Dynamics` when the scene lists ``belt_dynamics``,
     ``timing`` or ``motion``, else None), ``n_sweeps`` (sweeps the scene takes: one per
@@ -125,7 +127,10 @@ class SimRing:
         self._kin_model.opt.disableflags |= _KINEMATICS_ONLY
         self._kin: dict[int, tuple] = {}  # number of steps → (batch, bound arrays)
         self._frame_cache: dict[bytes, tuple] = {}  # angles → robot-frame emitter frames
-        self._rays = mujoco.batch.Batch(self.model, 1, nthread=1)
+        # rays go to the room alone (model.room_model); hits name the scene model's geoms
+        self.ray_model, room_geoms = model_lib.room_model(scenario, self.model)
+        self._rays = mujoco.batch.Batch(self.ray_model, 1, nthread=1)
+        self._scene_geom = np.append(room_geoms, -1)   # a miss's id −1 reads the last
         self._pipeline = pipeline
         self._sweeps: dict[int, int] = {}
         # what every full static sweep needs and only the scenario decides, worked out once:
@@ -134,8 +139,8 @@ class SimRing:
         steps = self.default_steps()
         self._full_sweep = (steps, self.built.sensor_qpos_for(steps * self.ring.motor_step_rad))
         self._step_s = hardware_duration_s(1, scenario.scan.settle_s, scenario.samples_per_step)
-        # reflectance by geom id with a NaN at the end, where a miss's id −1 reads
-        self._reflectance = np.append(self.built.reflectance, np.nan)
+        # reflectance by room-model geom id with a NaN at the end, where a miss's id −1 reads
+        self._reflectance = np.append(self.built.reflectance[room_geoms], np.nan)
         self.dynamics = None  # irring.simulation.dynamics.Dynamics, only for scenes that need it
         if dynamics_lib.uses_dynamics(scenario):
             self.dynamics = dynamics_lib.Dynamics(scenario, self.built, self.seed)
@@ -303,6 +308,7 @@ class SimRing:
         point = o + u * distance[:, None]
         geom = np.where(miss, -1, gid)
         refl = self._reflectance[geom]  # a miss (−1) reads the appended NaN
+        geom = self._scene_geom[geom]   # the scene model's ids
         return RayHits(distance_m=distance.reshape(lead), incidence_rad=incidence.reshape(lead),
                        hit_point=point.reshape(lead + (3,)), geom_id=geom.reshape(lead),
                        reflectance=refl.reshape(lead))

@@ -76,7 +76,7 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
     origin, direction = sim.frames(angles, pose)
     o = np.ascontiguousarray(origin.reshape(-1, 3))
     u = np.ascontiguousarray(direction.reshape(-1, 3))
-    raw = mujoco.batch.Batch(sim.model, 1, nthread=1)
+    raw = mujoco.batch.Batch(sim.ray_model, 1, nthread=1)   # the model SimRing.cast casts into
     group = model_lib.RAY_GEOMGROUP
 
     tally: dict[str, float] = {}
@@ -306,7 +306,7 @@ def ray_paths(scenario_name: str = "t_room", repeats: int = 200) -> dict[str, fl
             mujoco.mj_multiRay(m, d, o[i], u[i], model_lib.RAY_GEOMGROUP, 1, -1, geomid, dist1,
                                normal, 1, 1e9)
 
-    raw = mujoco.batch.Batch(m, 1, nthread=1)   # the same batched ray call SimRing.cast makes
+    raw = mujoco.batch.Batch(sim.ray_model, 1, nthread=1)   # the batched ray call SimRing.cast makes
     mujoco.mj_kinematics(m, d)
     return {
         "rays": float(len(o)),
