@@ -29,7 +29,7 @@ from .estimation.estimate import estimate
 from .gp2 import SENSORS
 from .maps import metrics
 from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_scenario_grid,
-                           classify, returns_of, silences_of_run, slice_steps)
+                           RunSilences, classify, returns_of, slice_steps)
 from .maps.mcap_export import write_mcap
 from .outputs import OutputSet
 from .scenario import Scenario, ScenarioError, loads
@@ -367,6 +367,7 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
     parts, stride, _ = frame_plan(n, result.frames_per_sweep if frames_per_sweep is None
                                   else frames_per_sweep)
     returns = result.grid.empty_like()     # every return so far (OccupancyGrid.insert_run)
+    silences = RunSilences(returns, result.points)   # and the silent beams over them
     grid = returns.empty_like()
     yield grid.classify(), 0, "before the first sweep"
     for k, p in enumerate(result.points):
@@ -383,9 +384,7 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
         if shown:    # the map of the run so far: its silent beams against all its returns
             grid = OccupancyGrid(returns.origin_xy_m, returns.shape, returns.resolution_m,
                                  returns.params)
-            grid.log_odds = returns.log_odds.copy()
-            for q in silences_of_run(result.points[:k + 1]):
-                grid.insert(q)
+            grid.log_odds = silences.log_odds(returns, k + 1)
             yield grid.classify(), k + 1, f"pose {k + 1} of {n}: done"
 
 
