@@ -8,7 +8,7 @@ import numpy as np
 
 from irring import pipeline
 from irring.estimation.calibration import scene_calibration
-from irring.estimation.estimate import estimate
+from irring.estimation.estimate import LineOptions, estimate
 from irring.scenario import loads
 
 CORRIDOR = """
@@ -119,6 +119,43 @@ def test_a_walls_last_readings_before_the_drop_out_stay_off_the_wall_past_the_co
     assert err.size > 2000 and steep.sum() > 100
     assert err.max() < 0.100
     assert float(np.sqrt(np.mean(err[steep] ** 2))) <= 0.010
+
+
+FAR_CORNER = """
+name: far_corner
+seed: 7
+room:
+  outline_mm: [[-600, -1130], [1240, -900], [1310, 760], [-600, 990]]
+robot:
+  poses:
+    - {x_mm: 0, y_mm: 0, yaw_deg: 16}
+sensor: {model: gp2y0a02, max_range_mm: 1500}
+effects: [incidence, noise, quantization]
+"""
+
+
+def test_a_far_walls_last_readings_hidden_by_the_drop_out_gap_go_back_to_it():
+    """corner_sides at a far corner (GP2Y0A02, 1.28 m away): a wall 0.6 m off the ring,
+    seen at 55–62° at 0.95–1.1 m, ends in a drop-out gap wider than ``corner_reach_m``, so
+    its last readings, read with the far wall's θ, landed 150–230 mm past the corner (seed
+    2, four of them, with ``corner_reach_share`` = 0). The corner's reach grows with its
+    distance and the wall's extent runs on to it: each such reading within 100 mm."""
+    sc = loads(FAR_CORNER, source="<test>")
+    cal = scene_calibration(sc)[0]
+    off = {}
+    for share in (0.0, LineOptions().corner_reach_share):
+        errs = []
+        for seed in (0, 1, 2):
+            sw = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps[0]
+            p = estimate(sw, cal, lines=LineOptions(corner_reach_share=share))
+            hit = sw.truth.hit_point[..., :2]
+            near_corner = p.valid & (np.abs(hit[..., 0] + 0.6) < 0.001) & (hit[..., 1] < -0.88)
+            errs.append(np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[near_corner])
+        off[share] = np.concatenate(errs)
+    before, after = off[0.0], off[LineOptions().corner_reach_share]
+    assert before.size == after.size >= 15
+    assert np.count_nonzero(before > 0.15) == 4
+    assert after.max() < 0.100
 
 
 def _wall_members(sigma_m: float = 0.01):

@@ -333,7 +333,7 @@ cdef class Sweep:
     cdef unsigned char[::1] usable
     cdef bint all_usable
     cdef double inv_h, cx0, cy0, min_split, split_sigmas, adopt_margin, corner_sigmas
-    cdef double corner_reach, corner_past, jump_sigmas
+    cdef double corner_reach, corner_share, corner_past, jump_sigmas
     cdef double pinned, floor_m
     cdef Py_ssize_t corner_window, top
     # scratch for the kernels (each uses it within one call): index rows of k + 1, value
@@ -433,6 +433,7 @@ cdef class Sweep:
         self.corner_window = opts.corner_window
         self.corner_sigmas = opts.corner_sigmas
         self.corner_reach = opts.corner_reach_m
+        self.corner_share = opts.corner_reach_share
         self.corner_past = opts.corner_past_m
         self.jump_sigmas = opts.jump_sigmas
         self.floor_m = floor_m
@@ -912,17 +913,19 @@ cdef class Grouping:
         line (past the intersection, away from the line's bulk) are not on it.
 
         Corners: two usable lines meeting at > 30°, adjacent pieces of a polyline or
-        meeting within ``corner_reach_m`` of both lines' members. Such a reading goes to the
-        line across if, read with that line's θ, it lies on it (split threshold, within
-        ``adopt_margin_m`` of its members' extent) on its side of the corner; past a corner
-        of adjacent pieces by itself, else with its run, if the run's range stays
+        meeting within ``corner_reach_m`` (or ``corner_reach_share`` of the corner's distance
+        from the ring) of both lines' members. Such a reading goes to the line across if,
+        read with that line's θ, it lies on it (split threshold, within ``adopt_margin_m`` of
+        its members' extent; at a far corner of the corner too, if that brings it closer by
+        more than the split threshold) on its side of the corner; past a corner of adjacent
+        pieces by itself, else with its run, if the run's range stays
         continuous with the readings beside it and one of them is on that line (see
         ``estimate_numpy._Grouping.corner_sides``, the statement this compiles).
         """
         cdef Sweep sw = self.sw
         cdef Py_ssize_t n, i, j, o, c, l, q, p, P = 0, k = sw.k, first, best
-        cdef double den, ex, ey, s, t, v, X, Y, m = sw.adopt_margin, reach = sw.corner_reach
-        cdef double qx, qy, r, side, la, b, th
+        cdef double den, ex, ey, s, t, v, X, Y, m = sw.adopt_margin, reach
+        cdef double qx, qy, r, side, la, b, th, tx
         cdef bint adjacent
         cdef Py_ssize_t[:, ::1] pv
         cdef double[:, ::1] vv
@@ -968,13 +971,15 @@ cdef class Grouping:
                 t = (ex * dy[i] - ey * dx[i]) / den
                 adjacent = (self.t_use[j] == self.t_use[i] + 1
                             and self.starts[self.t_use[j]] == self.ends[self.t_use[i]])
+                X = cx[i] + s * dx[i]
+                Y = cy[i] + s * dy[i]
+                # a far corner's drop-out gap is wider: the reach grows with its distance
+                reach = _max(sw.corner_reach, sw.corner_share * hypot(X - sw.cx0, Y - sw.cy0))
                 if not (adjacent or (s >= lo[i] - reach and s <= hi[i] + reach
                                      and t >= lo[j] - reach and t <= hi[j] + reach)):
                     continue
                 K[i, j] = K[j, i] = 2 if adjacent else 1
                 any_corner = True
-                X = cx[i] + s * dx[i]
-                Y = cy[i] + s * dy[i]
                 cm[0, i, j] = cm[0, j, i] = X
                 cm[1, i, j] = cm[1, j, i] = Y
                 cm[2, i, j] = _sign(-s)
@@ -1043,7 +1048,13 @@ cdef class Grouping:
             r = fabs(qy * dx[o] - qx * dy[o])
             t = qx * dx[o] + qy * dy[o]
             rr[p] = r
-            if not (r <= sw._thr[i] and t >= lo[o] - m and t <= hi[o] + m):
+            # a far corner hides the wall's end in the drop-out gap: a reading its target
+            # brings closer by more than the split threshold may lie on it up to the corner
+            tx = lo[o]
+            if (sw.corner_share * hypot(cm[0, c, o] - sw.cx0, cm[1, c, o] - sw.cy0)
+                    > sw.corner_reach and dd[p] < sw._d[i] - sw._thr[i]):
+                tx = (cm[0, c, o] - cx[o]) * dx[o] + (cm[1, c, o] - cy[o]) * dy[o]
+            if not (r <= sw._thr[i] and t >= _min(lo[o], tx) - m and t <= _max(hi[o], tx) + m):
                 continue
             # ... and on the target's side of the corner
             side = ((sw.ox[i] + dd[p] * sw.ux[i] - cm[0, c, o]) * dx[o]

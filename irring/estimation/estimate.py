@@ -54,7 +54,9 @@ class LineOptions:
     adopt_margin_m: float = 0.05   # a reading on no line may join one this far past its ends
     corner_window: int = 4         # readings this close to a corner may change line …
     corner_sigmas: float = 0.5     # … if another line fits them this many σ better
-    corner_reach_m: float = 0.25   # lines meeting within this of both's readings: a corner;
+    corner_reach_m: float = 0.25   # lines meeting within this of both's readings: a corner …
+    corner_reach_share: float = 0.3  # … or this share of its distance from the ring if more
+    #                                  (a far corner's drop-out gap is wider);
     corner_past_m: float = 0.02    # readings closer to it need more evidence to move across
     incidence_margin_rad: float = math.radians(5.0)  # a line meeting a beam this far past
     #                                                  the drop-out angle is not its surface

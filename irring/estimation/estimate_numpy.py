@@ -543,7 +543,8 @@ class _Grouping:
 
     def corners(self, px, py):
         """Every corner of two usable lines meeting at > 30°: pieces adjacent in a polyline,
-        or lines whose intersection X lies within ``corner_reach_m`` of both lines' members.
+        or lines whose intersection X lies within ``corner_reach_m`` of both lines' members
+        (or ``corner_reach_share`` of X's distance from the ring's centre, if more).
 
         Returns None (no corner) or, per line and corner (ordered by line; entry e's mirror,
         the line across, is ``mirror[e]``): the line, the line across, X, Y, the line's
@@ -564,7 +565,7 @@ class _Grouping:
         hi = np.full(n, -np.inf)
         np.minimum.at(lo, c, along)
         np.maximum.at(hi, c, along)
-        reach = self.sw.opts.corner_reach_m
+        opts = self.sw.opts
         pc = self.pieces
         i, j = np.triu_indices(n, 1)
         den = dx[i] * dy[j] - dy[i] * dx[j]                 # sin of the angle between them
@@ -573,6 +574,11 @@ class _Grouping:
         ex, ey = cx[j] - cx[i], cy[j] - cy[i]
         s = (ex * dy[j] - ey * dx[j]) / den                   # X along line i from its centroid
         t = (ex * dy[i] - ey * dx[i]) / den                   # … and along line j
+        X = cx.take(i) + s * dx.take(i)
+        Y = cy.take(i) + s * dy.take(i)
+        # a far corner's drop-out gap is wider: the reach grows with its distance
+        reach = np.maximum(opts.corner_reach_m, opts.corner_reach_share
+                           * np.hypot(X - self.sw.centre[0], Y - self.sw.centre[1]))
         li, lj = use.take(i), use.take(j)
         adjacent = (lj == li + 1) & (pc.starts.take(np.minimum(lj, pc.starts.size - 1))
                                      == pc.ends.take(li))
@@ -582,8 +588,7 @@ class _Grouping:
         if not keep.any():
             return None
         i, j, s, t, adjacent = i[keep], j[keep], s[keep], t[keep], adjacent[keep]
-        X = cx.take(i) + s * dx.take(i)
-        Y = cy.take(i) + s * dy.take(i)
+        X, Y = X[keep], Y[keep]
         m = i.size
         # entries 2q (line i) and 2q + 1 (line j) of corner q, then ordered by line
         side = np.stack([i, j], axis=1).reshape(-1)
@@ -606,13 +611,15 @@ class _Grouping:
         extension, self-consistently, and fits both lines about as well; where it lands
         tells them apart. Such a reading goes to the line across the corner if, read with
         that line's θ, it lies on it (within the split threshold and ``adopt_margin_m`` of
-        its members' extent) and on its side of the corner; of several, one a neighbouring
-        reading of its sensor is on, else the one it fits best. Past a corner of adjacent
-        pieces it moves by itself. Past any other it moves with its run (the readings of
-        its sensor next to it on its line going to the same line), only if the run's range,
-        once moved, is continuous with the readings either side of it (a corner keeps the
-        range continuous; a wall's readings behind an occlusion edge moved onto the near
-        face would jump at the far end) and one of them is on the target line; a run within
+        its members' extent; at a far corner, of the corner too, if that brings it closer
+        by more than the split threshold) and on its side of the corner; of several, one a
+        neighbouring reading of its sensor is on, else the one it fits best. Past a corner
+        of adjacent pieces it moves by itself. Past any other it moves with its run (the
+        readings of its sensor next to it on its line going to the same line), only if the
+        run's range, once moved, is continuous with the readings either side of it (a
+        corner keeps the range continuous; a wall's readings behind an occlusion edge moved
+        onto the near face would jump at the far end) and one of them is on the target
+        line; a run within
         ``corner_past_m`` of the corner needs both, or each of its readings clearly
         (``corner_sigmas``·σ) closer to the target line than to its own. Corners:
         :meth:`corners`; ``d_now`` the readings' current distances (docs/estimator.md).
@@ -645,9 +652,19 @@ class _Grouping:
         qy += sw.oy.take(pm) - cy.take(tc)
         r = np.abs(qy * tdx.take(tc) - qx * tdy.take(tc))
         t = qx * tdx.take(tc) + qy * tdy.take(tc)
+        # a far corner (its reach grown with its distance) hides the wall's end in the
+        # drop-out gap: a reading that, read with the target's θ, comes closer by more than
+        # the split threshold (its beam would have met that wall first) may lie on the
+        # target up to the corner, not only up to its members
         m = sw.opts.adopt_margin_m
-        ok = ((th <= sw.reject) & (r <= thr.take(pm)) & (t >= lo.take(tc) - m)
-              & (t <= hi.take(tc) + m))
+        tx = ((X.take(pe) - cx.take(tc)) * tdx.take(tc)
+              + (Y.take(pe) - cy.take(tc)) * tdy.take(tc))
+        far = (sw.opts.corner_reach_share * np.hypot(X.take(pe) - sw.centre[0],
+                                                     Y.take(pe) - sw.centre[1])
+               > sw.opts.corner_reach_m)
+        tx = np.where(far & (d < d_now.take(pm) - thr.take(pm)), tx, lo.take(tc))
+        ok = ((th <= sw.reject) & (r <= thr.take(pm))
+              & (t >= np.minimum(lo.take(tc), tx) - m) & (t <= np.maximum(hi.take(tc), tx) + m))
         # ... on the target's side of the corner
         pt = mirror.take(pe)
         side = ((sw.ox.take(pm) + d * sw.ux.take(pm) - X.take(pt)) * dx.take(pt)
