@@ -558,18 +558,21 @@ def along_beams(points: Points, ranges: np.ndarray, sigma_m=None) -> Points:
     moved = np.asarray(points.valid, bool) & np.isfinite(ranges)
     if not moved.any():
         return points
-    at = moved.nonzero()           # a few readings of a batch: computed there alone
-    ox, oy = np.asarray(points.origin_x, float)[at], np.asarray(points.origin_y, float)[at]
-    px, py = np.asarray(points.x, float)[at], np.asarray(points.y, float)[at]
-    r = np.asarray(ranges, float)[at]
+    at = np.flatnonzero(moved)     # a few readings of a batch: computed there alone
+
+    def picked(v):
+        return np.asarray(v, float).ravel()[at]
+
+    ox, oy, px, py = (picked(v) for v in (points.origin_x, points.origin_y, points.x, points.y))
+    r = picked(ranges)
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = r / np.hypot(px - ox, py - oy)
     x, y, d = (np.array(v, float) for v in (points.x, points.y, points.d))
-    x[at], y[at], d[at] = ox + (px - ox) * scale, oy + (py - oy) * scale, r
+    x.ravel()[at], y.ravel()[at], d.ravel()[at] = ox + (px - ox) * scale, oy + (py - oy) * scale, r
     sigma = points.sigma_m
     if sigma_m is not None:
         sigma = np.array(points.sigma_m, float)
-        sigma[at] = np.broadcast_to(sigma_m, sigma.shape)[at]
+        sigma.ravel()[at] = np.broadcast_to(sigma_m, sigma.shape).ravel()[at]
     return points_with(points, x=x, y=y, d=d, sigma_m=sigma)
 
 
