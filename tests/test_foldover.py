@@ -403,3 +403,37 @@ def test_a_line_member_its_own_profile_reads_100_mm_elsewhere_is_not_placed(monk
         np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
                                       p.reason)
     assert (long_before, long_now, taken) == (1, 0, 1)
+
+
+def test_a_reading_the_first_pass_put_past_the_range_on_a_line_is_not_read_elsewhere():
+    """The first reading past a 60° corner: the judging pass put it on the far wall's line,
+    604 mm away at 7°, read past the 624 mm range; the second pass, its neighbours held out,
+    read it on the next wall at 65°: 494 mm, 110 mm off. Where its beam meets the first
+    line apart from the second reading (or not ahead of it), it cannot be decided."""
+    from irring.core import Points
+    from irring.estimation.estimate import Lines, _past_range_elsewhere
+    shape = (2, 3)
+    heading = np.array([[0.5, 0.5, -0.5], [0.5, 0.5, 0.5]]) * math.pi
+    d = np.array([[0.45, 0.494, 0.52], [0.47, 0.61, 0.50]])
+
+    def pts(valid, reason):
+        z = np.zeros(shape)
+        return Points(x=z, y=d, d=d, theta=z, origin_x=z, origin_y=z, heading=heading,
+                      sigma_m=z + 0.017, iterations=z.astype(int), valid=np.array(valid),
+                      reason=np.array(reason, dtype=np.uint8))
+    out, ok = int(Reason.OUT_OF_RANGE), int(Reason.OK)
+    p = pts(np.ones(shape, bool), np.zeros(shape))
+    q = pts([[False, False, False], [False, False, True]],
+            [[out, out, out], [out, out, ok]])
+    first = Lines(label=np.array([[0, 0, 0], [-1, 0, 0]]), centroid=np.array([[0.3, 0.604]]),
+                  normal=np.array([[0.0, 1.0]]), direction=np.array([[1.0, 0.0]]),
+                  n_points=np.array([9]), length_m=np.array([0.3]), rms_m=np.array([0.01]),
+                  usable=np.array([True]), start=np.array([0]), end=np.array([8]))
+
+    def apart(d1, s1, d2, s2):
+        return np.abs(d1 - d2) > np.maximum(0.03, 3.0 * np.fmax(s1, s2))
+    judged = np.array([[False, True, True], [True, True, True]])
+    got = _past_range_elsewhere(p, q, first, judged, apart)
+    # (0, 0) not judged; (0, 1) 110 mm short of its line; (0, 2) turned away from it;
+    # (1, 0) on no line; (1, 1) on it (6 mm); (1, 2) valid in the first pass
+    assert got.tolist() == [[False, True, True], [False, False, False]]

@@ -1848,6 +1848,8 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     # a reading both passes read, differently: which lines it belongs to depended on how
     # its neighbours were read; it cannot be decided
     differ = torn | (p.valid & q.valid & ~put & ~keep & apart(p.d, p.sigma_m, q.d, q.sigma_m))
+    # … or one the first pass put on a line past the range, where its beam meets that line
+    differ |= _past_range_elsewhere(p, q, first.lines, ~put & ~keep, apart)
     # a far reading on a fragment of a line the first pass saw whole: on that line
     p = _onto_first_lines(p, q, first.lines, second.lines.label,
                           p.valid & q.valid & ~put & ~keep & ~differ)
@@ -1882,6 +1884,30 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
             p = silent_behind_a_wall(p, pooled, first.lines, cal, options, among=walls,
                                      members=q)
     return replace(second, points=p, lines=second.lines if detail else None)
+
+
+def _past_range_elsewhere(p: Points, q: Points, first: Lines, judged: np.ndarray,
+                          apart: Callable) -> np.ndarray:
+    """(S, N): the readings ``judged`` the second pass (``p``) reads valid that the first
+    (``q``, lines ``first``) put on a line but past the max range (OUT_OF_RANGE), where
+    their beam meets that line ``apart`` from the second pass's distance (or not ahead):
+    the second pass, its neighbours held out, took them into another line. The first
+    reading past a 60° corner, 604 mm away at 7° on its line, read at the next wall's 65°:
+    494 mm, 110 mm off. docs/foldover.md, "Readings past the range"."""
+    lab = first.label
+    ask = judged & p.valid & ~q.valid & (q.reason == Reason.OUT_OF_RANGE) & (lab >= 0)
+    out = np.zeros(ask.shape, dtype=bool)
+    if not ask.any():
+        return out
+    line = lab[ask]
+    h = p.heading[ask]
+    un, t, ahead, _ = beam_crossings(p.origin_x[ask], p.origin_y[ask], np.cos(h), np.sin(h),
+                                     first.centroid[line], first.direction[line],
+                                     first.normal[line])
+    k = np.arange(line.size)
+    t, ahead = t[k, k], ahead[k, k]
+    out[ask] = ~ahead | apart(t, p.sigma_m[ask], p.d[ask], p.sigma_m[ask])
+    return out
 
 
 def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray,
