@@ -437,3 +437,38 @@ def test_a_reading_the_first_pass_put_past_the_range_on_a_line_is_not_read_elsew
     # (0, 0) not judged; (0, 1) 110 mm short of its line; (0, 2) turned away from it;
     # (1, 0) on no line; (1, 1) on it (6 mm); (1, 2) valid in the first pass
     assert got.tolist() == [[False, True, True], [False, False, False]]
+
+
+# A room of our own: a GP2Y0A21 ring at the housing limit from the long wall, and turned 31°
+# in the far corner with a 70 mm post between.
+NEAR_A21 = """
+name: near_a21
+seed: 8110
+room: {outline_mm: [[0, 0], [1700, 0], [1700, 980], [0, 980]]}
+obstacles: [{type: cylinder, center_mm: [1010, 560], radius_mm: 35}]
+robot: {poses: [{x_mm: 610, y_mm: 171.5, yaw_deg: -5}, {x_mm: 1528.5, y_mm: 808.5, yaw_deg: 31}]}
+sensor: {model: gp2y0a21}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
+    """NEAR_A21, seed 8112: a beam met a wall at 74° past the drop-out; the judging pass,
+    pooling its counts (330, below the no-return level) with its neighbours', found it
+    behind that wall and silent. The second pass, a neighbour held out, read it valid on
+    another line at 69°: 505 mm for 632 mm. It stays NO_RETURN."""
+    import irring.estimation.estimate as fast
+    scene = loads(NEAR_A21, source="<test>")
+
+    def off():
+        run = pipeline.run(scene, seed=8112, progress=False)
+        n = 0
+        for sw, p in zip(run.sweeps, run.points):
+            e = np.hypot(p.x - sw.truth.hit_point[..., 0], p.y - sw.truth.hit_point[..., 1])
+            n += int((p.valid & (e > 0.1)).sum())
+        return n, sum(int(p.valid.sum()) for p in run.points)
+    assert off() == (0, 471)
+    keep = fast._unplaced
+    monkeypatch.setattr(fast, "_unplaced", lambda p, gone, why=Reason.INCIDENCE_UNKNOWN:
+                        p if why == Reason.NO_RETURN else keep(p, gone, why))
+    assert off() == (1, 472)

@@ -1871,6 +1871,12 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     p = _behind_a_wall(p, second.lines.label, first.lines, walls, sweep, cal)
     # … and one whose own profile reads it more than 100 mm from where its line puts it
     p = _disowned_by_own_profile(p, second.lines.label, sweep, cal, profiler)
+    # a beam the judging pass, which saw every reading, found silent stays silent: the
+    # second pass, its neighbours held out, put one the first silenced behind a wall it
+    # met at 74° (silent_behind_a_wall) on a line at 69°, 127 mm short
+    revived = p.valid & (q.reason == Reason.NO_RETURN)
+    if revived.any():
+        p = _unplaced(p, revived.reshape(-1).nonzero()[0], Reason.NO_RETURN)
     # a silent beam is known free only to the nearest line either pass explains it by: the
     # second pass lacks the lines of the readings it held out
     if q.reach_m is not None:
@@ -1962,15 +1968,16 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
     return _unplaced(p, gone)
 
 
-def _unplaced(p: Points, gone: np.ndarray) -> Points:
-    """``p`` with the readings at flat indices ``gone`` made INCIDENCE_UNKNOWN: not valid,
-    no end point, distance, θ or σ."""
+def _unplaced(p: Points, gone: np.ndarray, why: Reason = Reason.INCIDENCE_UNKNOWN
+              ) -> Points:
+    """``p`` with the readings at flat indices ``gone`` made ``why`` (INCIDENCE_UNKNOWN by
+    default): not valid, no end point, distance, θ or σ."""
     out = {f: np.array(getattr(p, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     for v in out.values():
         v.reshape(-1)[gone] = np.nan
     valid, reason = p.valid.copy(), p.reason.copy()
     valid.reshape(-1)[gone] = False
-    reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
+    reason.reshape(-1)[gone] = why
     return replace(p, valid=valid, reason=reason, **out)
 
 
@@ -2137,6 +2144,9 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         if np.array_equal(more, anchored):
             break
         anchored = more
+    # a reading whose far end point also lies on an anchored line, seen there, has both
+    # branches on a line: the line that blocked its far one may run on across a gap
+    is_near &= ~(np.where(anchored[None, :], fit_far, np.inf) <= 1.0).any(axis=1)
     near, far = np.zeros(shape, bool), housing & live
     near.reshape(-1)[idx] = is_near
     far.reshape(-1)[idx] = is_far
