@@ -89,11 +89,21 @@ def test_a_sweep_is_walked_again_only_where_new_returns_stop_its_beams(walk, mon
     assert len(walked) > 9                       # (the path comes back: some are)
 
 
-def test_crowded_sweeps_are_walked_together_as_insert_run_does(walk, monkeypatch):
-    monkeypatch.setattr(RunSilences, "RECOUNT_COST", 1e9)
-    monkeypatch.setattr(RunSilences, "HEAD_START", 0)
+@pytest.mark.parametrize("limit", ["crowded", "memory"])
+def test_crowded_or_long_runs_are_walked_together_as_insert_run_does(walk, monkeypatch, limit):
+    if limit == "crowded":
+        monkeypatch.setattr(RunSilences, "RECOUNT_COST", 1e9)
+        monkeypatch.setattr(RunSilences, "HEAD_START", 0)
+    else:        # three sweeps' kept passes (~0.13 MB each here) fill the budget
+        monkeypatch.setattr(RunSilences, "RECOUNT_COST", 0.0)
+        monkeypatch.setattr(RunSilences, "MAX_KEPT_BYTES", 300_000)
+    switched = []
+    recount = RunSilences._recount
+    monkeypatch.setattr(RunSilences, "_recount", lambda self, j, counting: switched.append(
+        len(switched)) or recount(self, j, counting))
     ours, theirs, silences = _frames(walk)
-    assert not silences._incremental
+    assert not silences._incremental        # from the first frame, or the third
+    assert len(switched) == (0 if limit == "crowded" else 4)
     for a, b in zip(ours, theirs):
         np.testing.assert_array_equal(_bits(a), _bits(b))
 

@@ -637,8 +637,9 @@ class RunSilences:
     run's length): a batch's silent beams are walked again only when the returns changed,
     on a cell where one of them passes or stops, whether it stops a silent beam (holds more
     than ``no_return_stop``). Where most batches' beams keep crossing each other (sweeps
-    crowded into one room) that would cost more than walking them all: from then on every
-    k walks them all at once, as insert_run does.
+    crowded into one room) that would cost more than walking them all, and where the passes
+    kept would take more than ``MAX_KEPT_BYTES`` (a long run), every k from then on walks
+    them all at once, as insert_run does.
 
     Bit for bit insert_run's numbers: a batch's passes are counted by the same kernel walk
     (on a grid that holds +inf where the returns stop a silent beam, a whole number below
@@ -652,6 +653,9 @@ class RunSilences:
     # joined insert of all of them (2.2× in a T-room of 100 sweeps, 3× in a 6 m room)
     RECOUNT_COST = 3.0
     HEAD_START = 50        # walks any run may spend before its crowding is judged
+    # what the kept passes may take (a box of int32 passes and bool cells a sweep: 0.13 MB
+    # in the T-room); a longer run is walked joined from there on
+    MAX_KEPT_BYTES = 200_000_000
 
     def __init__(self, grid: OccupancyGrid, batches: Sequence[Points]):
         self._grid, self._batches = grid, list(batches)
@@ -676,6 +680,7 @@ class RunSilences:
         # one of them stops (those passed, their neighbours and the emitters' cells)
         self._kept: list[tuple[int, int, int, int, np.ndarray, np.ndarray]] = []
         self._recounts = self._walks = 0   # batches walked alone; as many walked joined
+        self._kept_bytes = 0
 
     def log_odds(self, returns: OccupancyGrid, k: int) -> np.ndarray:
         """(ny, nx): ``returns`` (every return of the first ``k`` batches, as insert_run's
@@ -691,9 +696,10 @@ class RunSilences:
             stale += range(len(self._kept), k)
             self._recounts += len(stale)
             self._walks += k
-            if self._recounts * self.RECOUNT_COST <= max(self._walks, self.HEAD_START):
+            if (self._recounts * self.RECOUNT_COST <= max(self._walks, self.HEAD_START)
+                    and self._kept_bytes <= self.MAX_KEPT_BYTES):
                 return self._recounted(returns, above, stale)
-            self._incremental = False     # crowded: walk them all from now on
+            self._incremental = False     # crowded or long: walk them all from now on
             del self._kept, self._passes, self._above
         grid = OccupancyGrid(returns.origin_xy_m, returns.shape, returns.resolution_m,
                              returns.params)
@@ -716,8 +722,9 @@ class RunSilences:
         and the cells where a change could move one of its beams' stops."""
         g, points = self._grid, self._batches[j]
         if j < len(self._kept):
-            r0, r1, c0, c1, passes, _ = self._kept[j]
+            r0, r1, c0, c1, passes, near = self._kept[j]
             self._passes[r0:r1, c0:c1] -= passes
+            self._kept_bytes -= passes.nbytes + near.nbytes
         else:
             r0, r1, c0, c1 = self._box(points)
         before = counting[r0:r1, c0:c1].copy()
@@ -745,6 +752,7 @@ class RunSilences:
         else:
             near[iy, ix] = True
         self._kept[j:j + 1] = [(r0, r1, c0, c1, passes, near)]
+        self._kept_bytes += passes.nbytes + near.nbytes
 
     def _box(self, points: Points) -> tuple[int, int, int, int]:
         """Rows and columns (start, stop) holding every cell the batch's silent beams can
