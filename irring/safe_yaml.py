@@ -38,7 +38,7 @@ _FLOAT_TAG = "tag:yaml.org,2002:float"
 # file at once instead of after minutes
 LIMITS = {
     "scenario file": (MAX_BYTES, MAX_VALUES),
-    "calibration file": (2**20, 100_000),           # 10,000 curve rows
+    "calibration file": (2**20, 100_000),   # calibration.MAX_CURVE_ROWS rows as saved
     "calibration progress file": (MAX_BYTES, MAX_VALUES),
     "study file": (2**20, 100_000),
     "sensor curve file": (2**20, 100_000),

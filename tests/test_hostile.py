@@ -31,8 +31,8 @@ from irring import errors, pipeline, safe_yaml
 from irring.cli import main
 from irring.core import Sweep
 from irring.errors import OutputError, TooBig
-from irring.estimation.calibration import (Calibration, CalibrationError, load_calibration,
-                                           load_progress)
+from irring.estimation.calibration import (MAX_CURVE_ROWS, Calibration, CalibrationError,
+                                           load_calibration, load_progress)
 from irring.hardware import DeviceError, NoReadings, SerialRing
 from irring.hardware.serial_ring import CHATTER_LIMIT_BYTES, DeviceTimeout
 from irring.hardware import protocol as p_
@@ -132,6 +132,31 @@ def test_a_calibration_file_of_the_rows_its_limits_promise_loads():
     cal, _ = load_calibration(_calibration_of(10_000), is_text=True)   # safe_yaml.LIMITS
     assert cal.theta_rad.size == 10_000 and cal.theta_rad[-1] == pytest.approx(
         math.radians(60 * 9_999 / 10_000))
+
+
+def test_a_calibration_save_writes_only_what_load_reads(tmp_path):
+    """The largest curve a Calibration holds, in the longest form save writes it (17-digit
+    a and b, θ to 9 decimals, a long non-ASCII source), loads back; one row more is refused
+    where the Calibration is made (it used to save a file load refused)."""
+    nominal = Calibration.nominal("gp2d12")
+    rows = MAX_CURVE_ROWS
+    theta = np.radians(np.linspace(0.0, 89.987654321, rows))
+    wiggle = 1.0 + np.sqrt(2.0) * 1e-9 * np.arange(rows) / rows   # long reprs
+    log_a, b = nominal.log_ab(np.minimum(theta, nominal.theta_rad[-1]))
+    cal = dataclasses.replace(nominal, theta_rad=theta, a=np.exp(log_a) * wiggle, b=b * wiggle,
+                              max_incidence_rad=None, source="€𝄞" * 2048)
+    back = Calibration.load(cal.save(tmp_path / "cal.yaml"))
+    assert back.theta_rad.size == rows and back.source == cal.source
+    np.testing.assert_array_equal(back.a, cal.a)
+    theta_more = np.radians(np.linspace(0.0, 80.0, rows + 1))
+    with pytest.raises(CalibrationError, match=r"^curve: 10,001 rows; a calibration holds at "
+                                               r"most 10,000"):
+        dataclasses.replace(nominal, theta_rad=theta_more, a=np.full(rows + 1, nominal.a[0]),
+                            b=np.full(rows + 1, nominal.b[0]), max_incidence_rad=None)
+    text = _calibration_of(rows + 1)     # a file of as many rows, compact enough to parse
+    with pytest.raises(CalibrationError, match=r"^cal.yaml: curve: 10,001 rows; a calibration "
+                                               r"holds at most 10,000"):
+        load_calibration(text, is_text=True, source="cal.yaml")
 
 
 def test_the_values_limit_counts_every_value():

@@ -31,6 +31,9 @@ from ..resources import kernel
 _iterate = kernel("estimation._iterate")
 
 CALIBRATION_FORMAT = 1  # version written into calibration files
+# rows of a curve table (`irring calibrate` fits ~19): one home for save and load, whose
+# file of this many rows (≤ 90 bytes, 7 values each) fits safe_yaml's calibration limits
+MAX_CURVE_ROWS = 10_000
 # Count σ above the no-return level: at or below NO_RETURN_SIGMAS a reading saw nothing (its
 # beam frees the cells up to the max range); above RETURN_SIGMAS it is a return, with a
 # one-sided Gaussian tail of 1e-4, so one reading in 10 000 that saw nothing passes for one
@@ -141,6 +144,9 @@ class Calibration:
         if not (theta.size == a.size == b.size) or theta.size == 0:
             raise CalibrationError(f"theta, a and b need the same non-zero length, got "
                                    f"{theta.size}, {a.size}, {b.size}")
+        if theta.size > MAX_CURVE_ROWS:
+            raise CalibrationError(f"curve: {theta.size:,} rows; a calibration holds at most "
+                                   f"{MAX_CURVE_ROWS:,} (θ every 0.01° to 90° is 9,000)")
         if abs(theta[0]) > 1e-12 or np.any(np.diff(theta) <= 0) or theta[-1] >= math.pi / 2:
             raise CalibrationError("theta must start at 0 and increase strictly below 90°, got "
                                    f"{np.degrees(theta).round(3).tolist()} deg")
