@@ -31,8 +31,9 @@ from irring import errors, pipeline, safe_yaml
 from irring.cli import main
 from irring.core import Sweep
 from irring.errors import OutputError, TooBig
-from irring.estimation.calibration import (MAX_CURVE_ROWS, Calibration, CalibrationError,
-                                           load_calibration, load_progress)
+from irring.estimation.calibration import (MAX_CURVE_ROWS, PROGRESS_MAX_READINGS, Calibration,
+                                           CalibrationError, GuidedCalibration, RigReadings,
+                                           load_calibration, load_progress, save_progress)
 from irring.hardware import DeviceError, NoReadings, SerialRing
 from irring.hardware.serial_ring import CHATTER_LIMIT_BYTES, DeviceTimeout
 from irring.hardware import protocol as p_
@@ -1442,6 +1443,41 @@ def test_calibrate_sweeps_are_bounded_by_what_a_progress_file_holds(tmp_path, ca
     assert stop.value.code == 2
     assert "--sweeps: must be in 1 … 10000, got 10001" in capsys.readouterr().err
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_calibrate_refuses_a_ring_whose_readings_a_progress_file_cannot_keep(tmp_path, capsys,
+                                                                            monkeypatch):
+    """A ring of 9,000 steps a sweep (IRINF allows 100,000) read 28 placements whose progress
+    file (10 MB) --resume refused as too big: such a ring is refused before the first wall."""
+    code, _, placed, out = _calibrate(tmp_path, monkeypatch,
+                                      hd.announces(lo=-893, hi=893, step_mdeg=10))
+    err = capsys.readouterr().err
+    assert code == 5 and placed == [] and not out.exists()
+    assert ("irring calibrate: error: a sweep of 1,787 steps × 28 placements is 50,036 "
+            "readings; a calibration keeps at most 50,000 (sweeps of at most 1,785 steps)") in err
+
+
+def test_the_largest_progress_a_calibration_keeps_is_resumed(tmp_path):
+    """save_progress of PROGRESS_MAX_READINGS step readings, each in the longest form it
+    writes, is read back by load_progress whole."""
+    guided = GuidedCalibration(read_sweep=None, adc_bits=24, sweeps=10_000)
+    n = len(guided.placements)
+    steps = PROGRESS_MAX_READINGS // n
+    guided.check_steps(steps)
+    with pytest.raises(TooBig):
+        guided.check_steps(steps + 1)
+    top = 2.0 ** 24 - 1
+    for i, place in enumerate(guided.placements):
+        k = np.arange(steps)
+        guided.done[i] = RigReadings(
+            counts=top - 1 - (k + i) * 1.23456789e-3, beam_angle_rad=np.radians(
+                -359.987654321 + k * 1e-7 * math.pi), wall_distance_m=np.full(steps,
+                place.wall_distance_m), spread_counts=top / 3 + k * math.pi * 1e-6,
+            repeats=np.full(steps, 10_000), offset=np.full(steps, place.purpose == "offset"))
+    progress = load_progress(save_progress(tmp_path / "p.yaml", guided))
+    assert sorted(progress.done) == list(range(n))
+    np.testing.assert_allclose(progress.done[n - 1][1].counts, guided.done[n - 1].counts,
+                               rtol=0, atol=1e-6)
 
 
 def test_calibrate_resume_needs_a_port(tmp_path, capsys):

@@ -180,6 +180,7 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
                 sensor_model=scenario.sensor.model, adc_bits=ring.info.adc_bits,
                 vref_v=scenario.sensor.vref_v, sensor=args.sensor, sweeps=args.sweeps or 4,
                 emitter_offset_guess_m=scenario.ring.emitter_offset_m)
+            guided.check_steps(ring.info.max_step - ring.info.min_step + 1)   # before a wall
             if progress is not None:
                 why = progress.mismatch(guided)
                 if why:
@@ -214,7 +215,7 @@ def _say_why(exc: BaseException, guided) -> int | None:
         line, status = f"input ended{where}", errors.INPUT
     elif isinstance(exc, KeyboardInterrupt):
         line, status = f"interrupted{where}", errors.INTERRUPTED
-    elif isinstance(exc, (errors.DeviceError, CalibrationError)):
+    elif isinstance(exc, (errors.DeviceError, CalibrationError, errors.TooBig)):
         line, status = f"error: {errors.printable(str(exc), 2000)}", exc.status
     else:
         return None
