@@ -17,6 +17,8 @@ import json
 import math
 import os
 import re
+import subprocess
+import sys
 import time
 import zipfile
 
@@ -50,7 +52,7 @@ T_ROOM = yaml.safe_load(resolve("t_room").read_text())
 # --------------------------------------------------------------------------- YAML reader
 
 
-@pytest.mark.parametrize("text, message", [
+STRICT_REFUSALS = [
     ("a: 1\nb: 2\na: 3\n", "line 3: key 'a' given twice (first on line 1)"),
     ("a: &x [1, 2]\nb: *x\n", "line 2: YAML aliases (*x) are not allowed"),
     ("[" * 10_000 + "]" * 10_000, "nested more than 64 levels deep"),
@@ -65,7 +67,10 @@ T_ROOM = yaml.safe_load(resolve("t_room").read_text())
     ("a: !!int abc\n", "line 1: 'abc' cannot be read as int"),
     ("a: 1\nb: " + "7" * 5000 + "\n", "line 2: a whole number of 5,000 digits; no field takes "
                                       "one of more than 100"),
-])
+]
+
+
+@pytest.mark.parametrize("text, message", STRICT_REFUSALS)
 def test_strict_yaml_refuses_what_safe_load_lets_through(text, message):
     with pytest.raises(safe_yaml.YamlError, match=message.replace("*", r"\*").replace(
             "(", r"\(").replace(")", r"\)").replace("[", r"\[")):
@@ -82,6 +87,48 @@ def test_numbers_are_read_as_written():
     raw["effects"]["noise"]["sigma_v"] = "SIGMA"
     text = yaml.safe_dump(raw).replace("SIGMA", "2.5e-2")
     assert loads(text, "x.yaml").effects["noise"].sigma_v == 0.025
+
+
+def test_the_pure_python_yaml_reader_reads_and_refuses_alike(tmp_path):
+    """Where PyYAML was built without libyaml, safe_yaml parses with PyYAML's own reader,
+    scanner and parser (a subprocess told so before it imports irring): the same values and
+    the same messages, line numbers included, as with libyaml here."""
+    texts = [text for text, _ in STRICT_REFUSALS] + [
+        resolve("t_room").read_text(), _calibration_of(40),
+        "a: 1e-3\nb: 1.0e300\nc: -2.5E2\nd: .5e1\ne: 07\nf: 1_000\ng: '0750'\n",
+        "a: 'Küche €'\nb: 'x\x07'\n",        # a control character after multi-byte ones
+        "a: [" + "1, " * 996 + "2]", "a: [" + "1, " * 997 + "2]",   # map_server's 1,000 values
+        "a: 1\n  b: 2\n", "\ufeffa: 1\n", "a:\n- 1\n- {b: [2, 3], c: null}\n"]
+    script = (
+        "import json, sys, yaml\n"
+        "yaml.__with_libyaml__ = False   # as a PyYAML built without libyaml\n"
+        "from irring import safe_yaml\n"
+        "out = [[c.__name__ for c in safe_yaml._PARSING]]\n"
+        "for text in json.load(sys.stdin):\n"
+        "    try:\n"
+        "        out.append(['ok', safe_yaml.load(text, 'f.yaml', 'map_server YAML' if "
+        "text.startswith('a: [1') else 'YAML file')])\n"
+        "    except safe_yaml.YamlError as exc:\n"
+        "        out.append(['error', str(exc)])\n"
+        "print(json.dumps(out))\n")
+    done = subprocess.run([sys.executable, "-c", script], input=json.dumps(texts), text=True,
+                          capture_output=True, timeout=300, check=True)
+    parsing, *pure = json.loads(done.stdout)
+    assert parsing == ["Reader", "Scanner", "Parser"] and safe_yaml._PARSING[0].__name__ == \
+        "CParser"
+    here = []
+    for text in texts:
+        try:
+            here.append(["ok", safe_yaml.load(text, "f.yaml", "map_server YAML" if
+                                              text.startswith("a: [1") else "YAML file")])
+        except safe_yaml.YamlError as exc:
+            here.append(["error", str(exc)])
+    here = json.loads(json.dumps(here))   # tuples → lists, as the subprocess's
+    assert [kind for kind, _ in here].count("ok") == 6
+    for text, mine, theirs in zip(texts, here, pure):
+        if "not valid YAML: " in mine[1]:   # the parsers word a syntax error their own way
+            mine, theirs = mine[1].split(": not valid YAML")[0], theirs[1].split(": not valid")[0]
+        assert theirs == mine, text[:80]
 
 
 def test_billion_laughs_is_refused_at_once():
