@@ -599,6 +599,20 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return loads(text, str(path))
 
 
+def counted_seeds(sc: Scenario, count: int) -> list[int]:
+    """The seeds of ``count`` runs of ``sc`` (its seed, +1, …), as study, compare and bench
+    count them; :class:`ScenarioError` naming the scenario when the last passes
+    ``SEED_MAX``, a seed ``irring run --seed`` and the scenario file refuse (its run could not
+    be run again)."""
+    last = sc.seed + count - 1
+    if last > SEED_MAX:
+        raise ScenarioError(f"{sc.source or sc.name}: seed: {sc.seed} and {count:,} seeds counted "
+                            f"up from it reach {last}; allowed up to {SEED_MAX} (the largest "
+                            f"seed a scenario or --seed takes): give the scenario a seed of at "
+                            f"most {SEED_MAX - count + 1}")
+    return [sc.seed + k for k in range(count)]
+
+
 def loads(text: str, source: str = "<string>") -> Scenario:
     """Load and validate a scenario from its YAML ``text``; ``source`` names it in errors."""
     try:

@@ -42,7 +42,8 @@ from irring.hardware import protocol as p_
 from irring.recording import RecordingError, load_recording, save_recording
 from irring.core import Ring
 from irring.scenario import ScenarioError, load_scenario, loads, resolve
-from irring.studies.study import COLUMNS
+from irring.studies.accuracy import Config, jobs_for
+from irring.studies.study import COLUMNS, StudyError, grid, load_study
 
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
@@ -930,6 +931,34 @@ def test_calibrate_on_a_sensor_the_ring_does_not_have_says_so_before_a_placement
     assert ("irring calibrate: error: --sensor 12: t_room's ring has sensors 0 … 11"
             in capsys.readouterr().err)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_seeds_counted_past_the_largest_seed_are_refused_naming_the_scenario(tmp_path, capsys):
+    """A scenario of seed 2^63 - 1 and 2 seeds ran seed 2^63 in study, compare and bench rooms
+    (results.csv held it); `irring run --seed` refuses that seed, so the run could not be run
+    again by hand."""
+    text = resolve("t_room").read_text().replace("\nseed: 1\n", "\nseed: 9223372036854775807\n")
+    (tmp_path / "top.yaml").write_text(text)
+    (tmp_path / "s.yaml").write_text("designs: [rotating12]\nscenarios: [top.yaml]\nseeds: 2\n")
+    said = (f"{tmp_path / 'top.yaml'}: seed: 9223372036854775807 and 2 seeds counted up from it "
+            "reach 9223372036854775808; allowed up to 9223372036854775807 (the largest seed a "
+            "scenario or --seed takes): give the scenario a seed of at most 9223372036854775806")
+    for argv, status in (
+            (["study", str(tmp_path / "s.yaml"), "--out", str(tmp_path / "st")], 1),
+            (["compare", "--scenario", str(tmp_path / "top.yaml"), "--design", "rotating12",
+              "--seeds", "2", "--out", str(tmp_path / "cmp")], 1),
+            (["bench", "rooms", str(tmp_path / "top.yaml"), "--seeds", "2", "--out",
+              str(tmp_path / "br")], 1)):
+        assert main(argv) == status, argv
+        err = capsys.readouterr().err
+        assert said in err and "internal error" not in err, argv
+    with pytest.raises(StudyError, match=re.escape(f"s.yaml: seeds: scenarios[0]: {said}")):
+        load_study(tmp_path / "s.yaml")
+    assert not (tmp_path / "st").exists() and not (tmp_path / "cmp").exists()
+    with pytest.raises(ScenarioError, match=re.escape(said)):
+        jobs_for([str(tmp_path / "top.yaml")], [Config()], 2)
+    (tmp_path / "s.yaml").write_text("designs: [rotating12]\nscenarios: [top.yaml]\nseeds: 1\n")
+    assert [p.seed for p in grid(load_study(tmp_path / "s.yaml"))] == [2**63 - 1]
 
 
 @pytest.fixture(scope="module")

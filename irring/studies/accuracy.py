@@ -21,7 +21,8 @@ from ..estimation.estimate import LineOptions, estimate
 from ..maps import metrics
 from ..maps.mapping import OccupancyGrid
 from ..pipeline import scenario_text
-from ..scenario import AveragingEffect, BeltDynamicsEffect, TimingEffect, load_scenario, loads
+from ..scenario import (AveragingEffect, BeltDynamicsEffect, TimingEffect, counted_seeds,
+                        load_scenario, loads)
 from .report import mean_of, write_study
 from .executor import run_jobs
 
@@ -259,7 +260,8 @@ def jobs_for(scenarios: Sequence, configs: Sequence[Config], seeds: int) -> list
         if text is None:
             raise ValueError(f"scenario {sc.name!r} has no YAML source file; jobs carry the "
                              "scenario as YAML text so any worker can rebuild it")
-        out += [Job(text, sc.source, cfg, sc.seed + k) for cfg in configs for k in range(seeds)]
+        out += [Job(text, sc.source, cfg, seed) for cfg in configs
+                for seed in counted_seeds(sc, seeds)]
     return out
 
 

@@ -19,7 +19,7 @@ from ..estimation.estimate import estimate
 from ..maps import metrics
 from ..maps.metrics import SCORE_KEYS
 from ..pipeline import progress_bar
-from ..scenario import Scenario, ScenarioError, load_scenario, resolve
+from ..scenario import Scenario, ScenarioError, counted_seeds, load_scenario, resolve
 from .report import mean_of
 
 # The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
@@ -171,7 +171,7 @@ def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
 
 
 def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
-    seeds = [sc.seed + k for k in range(n_seeds)]
+    seeds = counted_seeds(sc, n_seeds)
     row = {"name": sc.name, "source": sc.source}
     truths: dict = {}
     for variant, scene in (("effects", sc), ("ideal", ideal(sc))):

@@ -36,7 +36,7 @@ from ..errors import OutputError, TooBig, brief, printable
 from ..outputs import OutputSet, atomic_file
 from ..pipeline import scenario_text
 from ..resources import installed_version
-from ..scenario import Scenario, ScenarioError, load_scenario
+from ..scenario import Scenario, ScenarioError, counted_seeds, load_scenario
 from . import accuracy
 from .accuracy import mark_pareto
 from .report import write_csv
@@ -204,7 +204,7 @@ def parse_study(raw: Any, source: str = "") -> Study:
     for i, label in enumerate(labels):
         if label in labels[:i]:
             raise _fail(source, f"designs[{i}]", f"design {label!r} is listed twice")
-    scenarios = []
+    scenarios, seed_of = [], {}
     for i, s in enumerate(_list(source, "scenarios", raw["scenarios"], "scenario names or paths")):
         path = f"scenarios[{i}]"
         if not isinstance(s, str):
@@ -213,16 +213,22 @@ def parse_study(raw: Any, source: str = "") -> Study:
                 and (Path(source).parent / s).exists():
             s = str(Path(source).parent / s)   # a path relative to the study file
         try:
-            load_scenario(s)
+            loaded = load_scenario(s)
         except ScenarioError as exc:
             raise _fail(source, path, str(exc)) from None
         if s in scenarios:
             raise _fail(source, path, f"scenario {s!r} is listed twice")
         scenarios.append(s)
+        seed_of[s] = loaded
     seeds, count = None, 1
     raw_seeds = raw.get("seeds", 1)
     if isinstance(raw_seeds, int) and not isinstance(raw_seeds, bool):
         count = _number(source, "seeds", raw_seeds, int, 1, MAX_SEEDS)
+        for i, s in enumerate(scenarios):
+            try:
+                counted_seeds(seed_of[s], count)
+            except ScenarioError as exc:
+                raise _fail(source, "seeds", f"scenarios[{i}]: {exc}") from None
     else:
         seeds = tuple(_number(source, f"seeds[{i}]", s, int, 0, SEED_MAX)
                       for i, s in enumerate(_list(source, "seeds", raw_seeds, "seeds")))
@@ -312,7 +318,7 @@ def grid(study: Study) -> list[Point]:
     for d in study.designs:
         for s in study.scenarios:
             sc = loaded[s]
-            seeds = study.seeds or tuple(sc.seed + k for k in range(study.seed_count))
+            seeds = study.seeds or counted_seeds(sc, study.seed_count)
             out += [point(d, s, seed, loaded=sc, **dict(zip(names, combo)))
                     for combo in combos for seed in seeds]
     return out
