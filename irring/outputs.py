@@ -22,6 +22,11 @@ from pathlib import Path
 
 from .errors import OutputError, printable
 
+try:
+    import fcntl
+except ImportError:   # pragma: no cover - Windows: no advisory locks (sole_writer)
+    fcntl = None
+
 # every file `irring run/replay/drive` may write: a folder holding only these is ours to swap
 RUN_FILES = frozenset({"map.png", "map_building.gif", "map.pgm", "map.yaml", "sweeps.npz",
                        "link.json", "map.mcap"})
@@ -220,6 +225,33 @@ def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+@contextlib.contextmanager
+def sole_writer(folder: str | Path, what: str) -> Iterator[None]:
+    """Hold ``folder`` (an existing folder) while this process writes ``what`` there;
+    :class:`OutputError` at once when another process holds it. Two studies appending to
+    one results.csv each rewrote the file the other appended to: one's runs were lost. An
+    advisory lock (flock) on the folder itself, so nothing is left behind by a kill; where
+    the system has none (Windows), nothing is held."""
+    if fcntl is None:   # pragma: no cover - not POSIX
+        yield
+        return
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:   # a folder one may write but not read (mode -wx): held by no one
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise OutputError(f"{printable(str(folder))}: another irring process is writing "
+                              f"{what} there; wait for it to finish, or choose another --out"
+                              ) from None
+        yield
+    finally:
+        os.close(fd)   # releases the lock
 
 
 def _why(exc: OSError) -> str:

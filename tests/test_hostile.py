@@ -1087,6 +1087,31 @@ def test_a_results_csv_that_is_a_link_is_refused_not_written_through(tmp_path, c
     assert (out / "results.csv").is_symlink() and os.listdir(out) == ["results.csv"]
 
 
+def test_a_study_into_the_folder_another_study_is_writing_is_refused(tmp_path, capsys,
+                                                                     one_run_study):
+    """Two studies into one --out (the second with --resume while the first ran): each
+    rewrote the results.csv the other was appending to; exit 0 twice, the second's 40 runs
+    lost and a cut row ("ing12,…") left in the file. A running study holds its --out (an
+    flock on the folder, as taken here); a second is refused before it reads or runs."""
+    fcntl = pytest.importorskip("fcntl")
+    study, text = one_run_study
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "results.csv").write_text(text)
+    argv = ["study", str(study), "--out", str(out), "--workers", "1", "--resume"]
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # what the running study holds
+        assert main(argv) == 4
+        assert (f"irring study: error: {out}: another irring process is writing a study's "
+                "results.csv there; wait for it to finish, or choose another --out"
+                in capsys.readouterr().err)
+        assert (out / "results.csv").read_text() == text and os.listdir(out) == ["results.csv"]
+    finally:
+        os.close(fd)
+    assert main(argv) == 0 and (out / "results.csv").read_text() == text   # held no more
+
+
 def test_a_results_csv_with_a_line_break_in_a_cell_is_resumed(tmp_path, capsys):
     """A scenario path with a line break is written quoted over two lines; --resume split
     the file at every line break and refused the study's own file ('line 2 has 2 cells')."""

@@ -33,7 +33,7 @@ from .. import designs, gp2, safe_yaml
 from ..core import (MAX_SEEDS, RESULT_ROW_BYTES, RESULT_ROW_TEXT_BYTES, SEED_MAX,
                     SENSOR_MODEL, work_refusal)
 from ..errors import OutputError, TooBig, brief, printable
-from ..outputs import OutputSet, atomic_file
+from ..outputs import OutputSet, atomic_file, sole_writer
 from ..pipeline import scenario_text
 from ..resources import installed_version
 from ..scenario import Scenario, ScenarioError, counted_seeds, load_scenario
@@ -627,6 +627,11 @@ def run_study(study: Study | Sequence[Point], out_dir: str | Path, ex=None, *,
     except OSError as exc:
         raise StudyError(f"{out}: cannot write the study's results there: "
                          f"{exc.strerror or exc}") from None
+    with sole_writer(out, f"a study's {RESULTS}"):   # exit 4 while another study runs there
+        return _run_study(study, points, out, ex, resume, progress, on_start)
+
+
+def _run_study(study, points: list, out: Path, ex, resume: bool, progress, on_start) -> dict:
     path = out / RESULTS
     if path.is_symlink():   # rows appended through it would land outside --out
         raise OutputError(f"{path}: a symbolic link (to {printable(os.readlink(path))}); a study "
