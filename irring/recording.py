@@ -329,11 +329,18 @@ def _check_meta(meta: dict, fail) -> None:
     mapper = meta.get("mapper")
     if mapper is not None:
         names = {f.name for f in dataclasses.fields(MapperParams)}
-        if (not isinstance(mapper, dict) or not set(mapper) <= names
-                or not all(_finite(v, -1e3, 1e3) or (k in OFF_AT_INFINITY and v == math.inf)
-                           for k, v in mapper.items())):
-            raise fail(f"meta.mapper: expected finite numbers for {', '.join(sorted(names))} "
-                       f"({', '.join(OFF_AT_INFINITY)} may also be inf: off)")
+        if not isinstance(mapper, dict):
+            raise fail(f"meta.mapper: expected a JSON object of mapper parameters, got "
+                       f"{brief(mapper)}")
+        for k, v in mapper.items():   # a parameter missing takes this irring's default
+            if k not in names:
+                raise fail(f"meta.mapper.{brief(k)[1:-1]}: a mapper parameter this irring does "
+                           "not have (a recording from another irring version?); it maps with "
+                           f"{', '.join(sorted(names))}")
+            if not (_finite(v, -1e3, 1e3) or (k in OFF_AT_INFINITY and v == math.inf)):
+                raise fail(f"meta.mapper.{k}: expected a finite number -1000 … 1000, got "
+                           f"{brief(v)} (only {', '.join(OFF_AT_INFINITY)} may also be inf: "
+                           "off)")
         try:
             MapperParams(**mapper)
         except ValueError as exc:
