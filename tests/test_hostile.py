@@ -1233,6 +1233,35 @@ def test_a_run_on_a_full_disk_names_its_out_folder(tmp_path):
     assert os.listdir(tmp_path) == []   # no output folder, no temporaries left
 
 
+@pytest.mark.parametrize("command, writer", [
+    (["run", "t_room_cylinder", "--out", "{out}"], "irring.recording.save_recording"),
+    (["run", "t_room_cylinder", "--out", "{out}", "--mcap", "{tmp}/m.mcap"],
+     "irring.maps.mcap_export._polygon"),
+])
+def test_a_command_killed_while_writing_leaves_no_half_written_outputs(tmp_path, command,
+                                                                       writer):
+    """`kill` (SIGTERM, what timeout(1), a job scheduler or systemd send) while a run wrote
+    its outputs ended the process at once: a hidden .irring-o-…/ folder of half the files or
+    a half .irring-m.mcap-… file stayed beside --out, one more each time. It now stops as
+    Ctrl-C does (exit 130) and removes them. The signal is sent from inside the writer."""
+    module, name = writer.rsplit(".", 1)
+    script = (f"import os, signal, sys, {module} as m\n"
+              f"real = m.{name}\n"
+              "def killed(*a, **k):\n"
+              "    os.kill(os.getpid(), signal.SIGTERM)\n"
+              "    return real(*a, **k)\n"
+              f"m.{name} = killed\n"
+              "from irring.cli import main\n"
+              "sys.exit(main(sys.argv[1:]))\n")
+    argv = [a.format(out=tmp_path / "o", tmp=tmp_path) for a in command]
+    done = subprocess.run([sys.executable, "-c", script, *argv], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 130, done.stderr
+    assert "irring run: interrupted" in done.stderr
+    left = sorted(os.listdir(tmp_path))
+    assert left == ([] if "--mcap" not in command else ["o"]), left
+
+
 @pytest.mark.parametrize("failure, status", [
     (OutputError("out/map.png: No space left on device"), 4),
     (KeyboardInterrupt(), 130),

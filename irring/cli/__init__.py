@@ -90,7 +90,9 @@ def main(argv: list[str] | None = None) -> int:
     # subcommand's module may load MuJoCo when it is imported)
     word = next((a for a in argv if not a.startswith("-")), "")
     try:
-        with _no_opengl(word != "view"):
+        # `kill` (SIGTERM) stops a command as Ctrl-C does: killed outright, it left its
+        # half-written output folder or file (.irring-*) beside --out
+        with _no_opengl(word != "view"), errors.sigterm_as_interrupt():
             parser = build_parser()
             args = parser.parse_args(argv)
             if not getattr(args, "func", None):
