@@ -589,6 +589,15 @@ def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
     return sc
 
 
+def scenario_file(name_or_path: str | Path) -> Path | str:
+    """The file a bundled name or a path means (links and ``..`` resolved), or
+    ``name_or_path`` itself where it means none: two names of one room compare equal."""
+    try:
+        return resolve(name_or_path).resolve()
+    except (ScenarioError, OSError):
+        return name_or_path
+
+
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load and validate a scenario file (or a bundled scenario by name)."""
     path = resolve(name_or_path)

@@ -1338,6 +1338,27 @@ def test_bad_options_are_usage_errors(capsys, argv, status, message):
 
 
 @pytest.mark.parametrize("argv, message", [
+    (["compare", "--scenario", "t_room_cylinder", "--scenario", "{cyl}", "--design", "rotating12"],
+     "--scenario {cyl}: given twice (as t_room_cylinder and {cyl}); it would be run and counted "
+     "in the means twice, so name each once"),
+    (["compare", "--scenario", "t_room_cylinder", "--design", "radial12", "--design", "radial12"],
+     "--design radial12: given twice; it would be run and counted in the means twice"),
+    (["bench", "accuracy", "--scenario", "t_room", "--scenario", "t_room"],
+     "--scenario t_room: given twice; it would be run and counted in the means twice"),
+    (["bench", "accuracy", "--knob", "samples", "--knob", "samples"], "--knob samples: given twice"),
+])
+def test_a_scenario_or_design_given_twice_is_refused_not_counted_twice(tmp_path, capsys, argv,
+                                                                        message):
+    """compare ran a room or design given twice twice: 'runs 2' for one run, and the repeated
+    room weighed double in a design's mean over rooms (bench rooms already refused it)."""
+    cyl = str(resolve("t_room_cylinder"))
+    argv = [a.format(cyl=cyl) for a in argv] + ["--seeds", "1", "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
+    assert f"error: {message.format(cyl=cyl)}" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
     (["--stall-seconds", "5"], "--stall-seconds 5 recovers from a stall, so it needs "
                                "--stall-after N"),
     (["--tcp", "0", "--link", "x.pty"], "--link and --tcp: the device is on a pty"),

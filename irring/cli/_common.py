@@ -144,6 +144,20 @@ def pose_index(number: int, scenario, option: str = "--pose") -> int:
     return number - 1
 
 
+def named_once(values, option: str, same: Callable = lambda value: value) -> None:
+    """:class:`UsageError` when two of ``values`` of a repeatable ``option`` are the same
+    (``same(value)`` equal: e.g. a scenario's file): run twice, it would weigh twice in the
+    means and the summary count it as another one."""
+    seen: dict = {}
+    for value in values:
+        key = same(value)
+        if key in seen:
+            given = "" if seen[key] == value else f" (as {seen[key]} and {value})"
+            raise UsageError(f"{option} {value}: given twice{given}; it would be run and "
+                             "counted in the means twice, so name each once")
+        seen[key] = value
+
+
 def out_path(text: str) -> Path:
     """``--out``'s value: an empty one (``--out "$DIR"`` with DIR unset) wrote into the
     current folder, or the default, without a word."""

@@ -12,7 +12,8 @@ from ..studies import accuracy
 from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
 from ..studies.executor import executor
 from ..core import MAX_SEEDS
-from ._common import add_executor_options, describe, out_path, seed_count
+from ..scenario import scenario_file
+from ._common import add_executor_options, describe, named_once, out_path, seed_count
 
 EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):
@@ -86,6 +87,8 @@ def register(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     scenarios = args.scenario or list(accuracy.DEFAULT_SCENARIOS)
+    named_once(scenarios, "--scenario", scenario_file)
+    named_once(args.knob or (), "--knob")
     configs = accuracy.configurations(args.knob)
     check_out(args.out)
     total = len(configs) * len(scenarios) * args.seeds

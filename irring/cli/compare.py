@@ -12,7 +12,9 @@ from ..pipeline import progress_enabled
 from ..studies import compare
 from ..studies.executor import executor
 from ..core import MAX_SEEDS
-from ._common import add_executor_options, at_least, describe, distances_mm, out_path, seed_count
+from ..scenario import scenario_file
+from ._common import (add_executor_options, at_least, describe, distances_mm, named_once,
+                      out_path, seed_count)
 
 # cylinder bearings a detection curve tries per distance: 3,600 took 20-50 s (0.008° apart
 # over the paper ring's 30° period); 10^8 ran out of memory
@@ -81,6 +83,8 @@ def register(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     scenarios = args.scenario or list(DEFAULT_SCENARIOS)
     names = args.design or list(designs.DESIGN_BY_NAME)
+    named_once(scenarios, "--scenario", scenario_file)
+    named_once(names, "--design")
     check_out(args.out)
     with executor(args.workers, args.dask) as ex:
         result = compare.compare(scenarios, names, args.seeds,
