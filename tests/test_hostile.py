@@ -613,6 +613,17 @@ def test_drive_with_a_bad_calibration_file_exits_1_as_its_help_says(tmp_path, ca
     assert err.startswith(f"irring drive: error: {bad}: ") and err.count(str(bad)) == 1
 
 
+def test_a_port_that_cannot_be_opened_is_named_on_one_line(tmp_path, capsys):
+    """A --port holding a line break (or a terminal escape) was printed raw: the error
+    broke over two lines, the second starting mid-path."""
+    port = str(tmp_path / "ring\n\x1b[31mred")
+    assert main(["drive", "--port", port, "--pose", "0,0", "--no-wait", "--out",
+                 str(tmp_path / "o")]) == 3
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "\x1b" not in err
+    assert f"irring drive: error: cannot open {tmp_path}/ring \\x1b[31mred: No such file" in err
+
+
 def test_a_network_port_that_cannot_be_opened_gets_network_advice(tmp_path, capsys):
     """It was told to check /dev/ttyUSB* and the dialout group."""
     import socket

@@ -110,7 +110,7 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def _error(msg: str) -> int:
-    print(f"irring drive: error: {msg}", file=sys.stderr)
+    print(f"irring drive: error: {errors.printable(msg, 2000)}", file=sys.stderr)
     return 2
 
 
