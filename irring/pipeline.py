@@ -96,6 +96,7 @@ class MapRun:
     truth: Any = None                    # metrics.GroundTruth when scored
     scores: dict | None = None
     timings_s: dict[str, float] = field(default_factory=dict)
+    unscored: str | None = None          # why a replay's recorded scenario could not score it
 
     @property
     def hardware_time_s(self) -> float:
@@ -132,6 +133,7 @@ class MapRun:
             "hardware_time_s": self.hardware_time_s,
             "compute_time_s": {**{k: float(v) for k, v in self.timings_s.items()},
                                "total": self.compute_time_s},
+            **({"unscored": self.unscored} if self.unscored else {}),
         }
 
     def _repr_png_(self) -> bytes:
@@ -442,9 +444,16 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
     t_load = time.perf_counter() - t0
     if not sweeps:
         raise rec.RecordingError(f"{recording}: holds no sweeps")
-    scenario = None
+    scenario, unscored = None, None
     if meta.get("scenario_yaml"):
-        scenario = loads(meta["scenario_yaml"], source=f"{recording} (recorded scenario)")
+        try:
+            scenario = loads(meta["scenario_yaml"], source=f"{recording} (recorded scenario)")
+        except ScenarioError as exc:
+            # (from another irring version, say): it only scores the map, unless the
+            # recording left the calibration to its scene
+            if calibration_file is None and not meta.get("calibration_yaml"):
+                raise
+            unscored = str(exc)
     if calibration_file is not None:
         calibration, cal_text = load_calibration(calibration_file)
     elif meta.get("calibration_yaml") or scenario is None:
@@ -465,6 +474,7 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
                         calibration=calibration, frames_per_sweep=frames_per_sweep,
                         score=score, progress=progress)
     result.timings_s = {"load": t_load, **result.timings_s}
+    result.unscored = unscored
     result.scenario_text = meta.get("scenario_yaml")
     result.calibration_text = cal_text
     result.seed = meta.get("seed")

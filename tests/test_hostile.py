@@ -439,6 +439,34 @@ def test_a_damaged_recorded_calibration_names_the_recording(tmp_path, capsys, go
             f"given twice (first on line {line - 1})" in capsys.readouterr().err)
 
 
+def test_a_recording_whose_scenario_this_irring_cannot_read_is_mapped_unscored(tmp_path,
+                                                                             capsys):
+    """A recording from an irring whose scenarios have an effect this one lacks was refused
+    whole ('effects.multipath: unknown key'): its sweeps could not be mapped again, though
+    the scenario only scores them. With a recorded calibration it is mapped, not scored, and
+    says why; without one (its scene's calibration needs the scene) it is still refused."""
+    assert main(["run", "t_room_cylinder", "--out", str(tmp_path / "o"), "--no-animation"]) == 0
+    first = (tmp_path / "o" / "map.pgm").read_bytes()
+    data = (tmp_path / "o" / "sweeps.npz").read_bytes()
+    meta = json.loads(str(np.lib.format.read_array(io.BytesIO(
+        zipfile.ZipFile(io.BytesIO(data)).read("meta.npy")))))
+    meta["scenario_yaml"] = meta["scenario_yaml"].replace("effects:\n", "effects:\n  multipath: {}\n")
+    newer = tmp_path / "newer.npz"
+    newer.write_bytes(_rewrite(data, "meta", np.array(json.dumps(meta))))
+    capsys.readouterr()
+    assert main(["replay", str(newer), "--out", str(tmp_path / "r"), "--no-animation"]) == 0
+    out = capsys.readouterr().out
+    assert (f"(not scored: {newer} (recorded scenario): effects.multipath: unknown effect; "
+            "allowed: incidence, noise") in out, out
+    assert "F1" not in out and (tmp_path / "r" / "map.pgm").read_bytes() == first
+    del meta["calibration_yaml"]
+    older = tmp_path / "older.npz"
+    older.write_bytes(_rewrite(data, "meta", np.array(json.dumps(meta))))
+    assert main(["replay", str(older), "--out", str(tmp_path / "r2")]) == 1
+    assert f"{older} (recorded scenario): effects.multipath:" in capsys.readouterr().err
+    assert not (tmp_path / "r2").exists()
+
+
 @pytest.fixture(scope="module")
 def t_room_sweep():
     from irring import SimRing

@@ -17,7 +17,8 @@ real ring) through the estimator and mapper again, on the grid they were first m
 With the recorded calibration (`irring run` records the scene's; none: the datasheet curve,
 or for an older simulated recording the recorded scene's) the map is identical to the
 original run's; pass --calibration to see what another calibration makes of the same counts.
-Scores are computed when the recording carries its scenario (simulated runs do).
+Scores are computed when the recording carries its scenario (simulated runs do);
+one this irring cannot read (from another version) is named, and the map not scored.
 
 Writes into --out (default: ./out/<recording name>-replay) the same files as `irring run`:
 map.png, map_building.gif, map.pgm + map.yaml (ROS map_server), and sweeps.npz.

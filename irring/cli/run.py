@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from .. import pipeline
+from .. import errors, pipeline
 from ..maps import metrics
 from ..outputs import check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
@@ -132,6 +132,8 @@ def summary_lines(result, paths: dict) -> list[str]:
         shadow = sc_["shadow"]
         lines.append("  shadow    " + ("n/a (nothing hidden behind an obstacle)" if shadow is None
                                        else f"{_f(shadow)} of the wall behind obstacles mapped"))
+    elif s.get("unscored"):
+        lines.append(f"  (not scored: {errors.printable(s['unscored'], 2000)})")
     else:
         lines.append("  (no ground truth: not scored)")
     t = s["compute_time_s"]
