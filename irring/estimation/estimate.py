@@ -609,10 +609,12 @@ def fused_lines(points: Points, label: np.ndarray, steps: np.ndarray | None = No
                                                              FUSE_TURN_MAX))
             & (np.abs(off) <= FUSE_Z * np.sqrt(var_off)))
     own2 = np.bincount(g, own * own, n_lines) / nn
-    split = ((_switches(label, member, steps, n_lines)[i, j] >= FUSE_SWITCHES)
-             & (turn <= FUSE_TURN_MAX)
+    split = (~join & (turn <= FUSE_TURN_MAX)
              & (np.abs(off) <= FUSE_SPLIT_SIGMAS * np.sqrt(0.5 * (own2[i] + own2[j]))))
-    join |= split
+    if split.any():     # the switches counted only where they could decide (most sweeps: none)
+        split[split] = (_switches(label, member, steps, i[split], j[split])
+                        >= FUSE_SWITCHES)
+        join |= split
     if not join.any():
         return label
     root = np.arange(n_lines)
@@ -633,25 +635,25 @@ def fused_lines(points: Points, label: np.ndarray, steps: np.ndarray | None = No
 
 
 def _switches(label: np.ndarray, member: np.ndarray, steps: np.ndarray | None,
-              n_lines: int) -> np.ndarray:
-    """(L, L), symmetric: the most times one sensor's successive members (``member``, S × N,
-    by ``steps``, default row order) switch between lines i and j (``label``)."""
-    rows = (np.arange(label.shape[0]) if steps is None
-            else np.argsort(np.asarray(steps), kind="stable"))
-    seq_lab = np.where(member, label, -1)[rows].T           # (N, S): each sensor by step
-    col, at = (seq_lab >= 0).nonzero()
-    seq = seq_lab[col, at]
+              i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """For each pair of lines (``i``, ``j``): the most times one sensor's successive members
+    (``member``, S × N, by ``steps``, default row order) switch between them (``label``)."""
+    lab = np.where(member, label, -1)
+    if steps is not None:
+        lab = lab[np.argsort(np.asarray(steps), kind="stable")]
+    seq_lab = np.ascontiguousarray(lab.T).reshape(-1)        # each sensor's, by step
+    at = np.flatnonzero(seq_lab >= 0)
+    col, seq = at // lab.shape[0], seq_lab[at]
     flip = (col[1:] == col[:-1]) & (seq[1:] != seq[:-1])
     lo = np.minimum(seq[1:], seq[:-1])[flip]
     hi = np.maximum(seq[1:], seq[:-1])[flip]
-    out = np.zeros((n_lines, n_lines), dtype=np.intp)
-    if lo.size:
-        n_cols = seq_lab.shape[0]
-        key, count = np.unique((lo * n_lines + hi) * n_cols + col[1:][flip],
-                               return_counts=True)
-        pair = key // n_cols
-        np.maximum.at(out.reshape(-1), pair, count)
-    return np.maximum(out, out.T)
+    if not lo.size:
+        return np.zeros(i.size, dtype=np.intp)
+    n_lines, n_cols = int(label.max()) + 1, lab.shape[1]
+    key, count = np.unique((lo * n_lines + hi) * n_cols + col[1:][flip], return_counts=True)
+    most = np.zeros(n_lines * n_lines, dtype=np.intp)
+    np.maximum.at(most, key // n_cols, count)
+    return most[np.minimum(i, j) * n_lines + np.maximum(i, j)]
 
 
 def read_to_own_range(cal: Calibration, max_range_m: float) -> bool:
