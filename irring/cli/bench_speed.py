@@ -13,7 +13,8 @@ from ._common import add_pose_option, at_least, describe, pose_index, seed
 EPILOG = """\
 stages (ms per sweep, median over rounds, each round times every stage once in turn):
   kinematics      emitter frames of every step from one batched MuJoCo forward
-  rays            SimRing.cast: one batched MuJoCo ray call + range/incidence/reflectance
+  rays            a sweep's rays (SimRing.truth_at): one batched MuJoCo ray call + range,
+                  incidence, hit point, reflectance
   effect: NAME    each effect the scenario lists, timed inside the effects pipeline
   effects core    the pipeline's always-on work (voltage curve, counts, no-return fill)
   estimator       the iterative estimator (paper Table II), calibrated once

@@ -300,22 +300,19 @@ class SimRing:
             dist, gid, normal = np.zeros(0), np.zeros(0, np.int32), np.zeros((0, 3))
         miss = gid < 0
         miss |= dist > limit
-        # θ from the unit hit normal. sin from cos loses precision only near θ = 0, where the
-        # error stays below √ε ≈ 1.5e-8 rad (a cross product costs twice as much).
-        # misses become NaN in the distance (the hit point inherits it) and the incidence;
-        # the arrays are ours, so the steps between work in place
-        distance = np.where(miss, np.nan, dist)
-        cos = np.einsum("ij,ij->i", u, normal)
-        np.abs(cos, out=cos)
-        sin = cos * cos
-        np.subtract(1.0, sin, out=sin)
-        np.maximum(sin, 0.0, out=sin)
-        np.sqrt(sin, out=sin)
-        incidence = np.arctan2(sin, cos, out=sin)
+        # θ = arccos|u·n|: near θ = 0 it is off by at most √ε ≈ 1.5e-8 rad, as any form from
+        # the cosine alone; misses become NaN in the distance (the hit point inherits it) and
+        # the incidence, and -1 in the geom. The arrays are ours, so the steps work in place
+        dist[miss] = np.nan
+        incidence = np.einsum("ij,ij->i", u, normal)
+        np.abs(incidence, out=incidence)
+        np.minimum(incidence, 1.0, out=incidence)
+        np.arccos(incidence, out=incidence)
         incidence[miss] = np.nan
-        point = u * distance[:, None]
+        point = u * dist[:, None]
         point += o
-        geom = np.where(miss, -1, gid)
+        distance, geom = dist, gid
+        geom[miss] = -1
         refl = self._reflectance.take(geom)  # a miss (−1) reads the appended NaN
         geom = self._scene_geom.take(geom)   # the scene model's ids
         return RayHits(distance_m=distance.reshape(lead), incidence_rad=incidence.reshape(lead),
@@ -336,11 +333,12 @@ class SimRing:
             steps = self._check_steps(steps)
             angles = self.built.sensor_qpos_for(steps * self.ring.motor_step_rad)
         pose = self.pose(pose_index) if pose is None else np.asarray(pose, dtype=float)
-        return steps, angles, self._truth_at(*self.frames(angles, pose))
+        return steps, angles, self.truth_at(*self.frames(angles, pose))
 
-    def _truth_at(self, origin: np.ndarray, direction: np.ndarray) -> Truth:
-        """The :class:`Truth` of beams from emitter frames (S, N, 3) each."""
-        # site z axes are unit already: skip cast()'s normalisation
+    def truth_at(self, origin: np.ndarray, direction: np.ndarray) -> Truth:
+        """The :class:`Truth` of beams from emitter frames (S, N, 3) each, as :meth:`frames`
+        gives them: the directions must be unit vectors (they are not normalised again).
+        """
         hits = self._cast_unit(origin.reshape(-1, 3), direction.reshape(-1, 3), self.max_range_m,
                                origin.shape[:-1])
         return Truth(distance_m=hits.distance_m, incidence_rad=hits.incidence_rad,
@@ -415,7 +413,7 @@ class SimRing:
             index %= len(self.scenario.robot.poses)
         k = self._count(index)
         plan = dyn.plan(index, steps, k, pose)
-        truth = self._truth_at(*self.frames(plan.sensor_rad, plan.pose))
+        truth = self.truth_at(*self.frames(plan.sensor_rad, plan.pose))
         return self._finish(index, k, steps, plan.commanded_rad, truth,
                             timestamps_s=plan.schedule.done_s.copy(),
                             duration_s=plan.schedule.duration_s, pose=plan.sweep_pose,

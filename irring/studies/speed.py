@@ -76,7 +76,7 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
     origin, direction = sim.frames(angles, pose)
     o = np.ascontiguousarray(origin.reshape(-1, 3))
     u = np.ascontiguousarray(direction.reshape(-1, 3))
-    raw = mujoco.batch.Batch(sim.ray_model, 1, nthread=1)   # the model SimRing.cast casts into
+    raw = mujoco.batch.Batch(sim.ray_model, 1, nthread=1)   # the model a sweep casts into
     group = model_lib.RAY_GEOMGROUP
 
     tally: dict[str, float] = {}
@@ -101,7 +101,7 @@ def measure(scenario, *, rounds: int = 200, pose_index: int = 0, seed: int | Non
         "estimator": lambda: estimate(sweep, cal),
         "mapper": lambda: grid.insert(points),
     }
-    ours = lambda: sim.cast(origin, direction)  # noqa: E731
+    ours = lambda: sim.truth_at(origin, direction)  # noqa: E731  (the rays of a sweep)
     bare = lambda: raw.ray(o[None], u[None], geomgroup=group, normal=True)  # noqa: E731
     samples: dict[str, list[float]] = {k: [] for k in
                                        (*plain_stages, "rays", "raw_mujoco", "effects", "sweep")}
