@@ -1251,6 +1251,7 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
     cdef double inv_dx = 0.0
     cdef double ux, uy, signed, th, la, b, d, x, y, nn, mu, mv, svv, sl, t, se, chi2, res
     cdef double sqq, qm, qdv, bend, bend_se, sig, e2, q_norm
+    cdef bint straight
     if not (oy.shape[0] == heading.shape[0] == log_s.shape[0] == sig_s.shape[0]
             == chain.shape[0] == step.shape[0] == K):
         raise lengths_differ("per-reading arrays", ox=K, oy=oy.shape[0],
@@ -1396,12 +1397,14 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
             F[1, i] = sl
             F[2, i] = se
             F[3, i] = th
-            B[0, i] = (n_ok >= min_n and chi2 <= chi2_95[dof - 1]
-                       and fabs(bend) <= n_se * bend_se and fabs(sl) > n_se * se)
+            straight = (n_ok >= min_n and chi2 <= chi2_95[dof - 1]
+                        and fabs(bend) <= n_se * bend_se)
+            B[0, i] = straight and fabs(sl) > n_se * se
             B[1, i] = n_ok >= min_n and bend > n_se * bend_se and th < max_inc - convex_below
             B[2, i] = bend > sure_se * bend_se
             B[3, i] = bend < -n_se * bend_se
-            if n_ok < min_n or B[3, i]:
+            # the slope bounds θ only where the profile is straight or bent away
+            if n_ok < min_n or B[3, i] or not (straight or bend > n_se * bend_se):
                 F[4, i] = max_inc
             else:
                 t = atan(fabs(sl) + n_se * se)

@@ -84,6 +84,46 @@ def scan_order(steps: np.ndarray, n_sensors: int) -> np.ndarray:
     return (order[None, :] * n_sensors + np.arange(n_sensors)[:, None]).reshape(-1)
 
 
+SILENT_DIP_SIGMAS = 3.0  # a sensor's readings either side of steps read this many count σ
+#                          below both (silent, out of range) are not of one flat surface
+
+
+def silent_gaps(index: np.ndarray, counts: np.ndarray, steps: np.ndarray,
+                reason: np.ndarray, sigma_counts: float) -> np.ndarray:
+    """Which readings ``index`` (flat (S, N) indices in scan order: each sensor's by step)
+    follow their sensor's previous one across steps whose lowest count (``counts`` (S, N))
+    lies ``SILENT_DIP_SIGMAS`` × ``sigma_counts`` below both of theirs: (k,) bool.
+
+    Along one flat surface neither the range nor the incidence of the beams between two
+    readings exceeds both ends', so no reading between them returns much less light: a
+    silent step between two returns is an edge (a wall ending, another starting behind a
+    gap). Before, a line's θ, a wall's read at 3°, was carried across six NO_RETURN steps
+    onto a wall at 69° (:func:`across_silence`; docs/estimator.md, "Silent gaps"). MISSING
+    steps (never read) say nothing."""
+    k = index.size
+    cut = np.zeros(k, dtype=bool)
+    if k < 2:
+        return cut
+    n_sensors = counts.shape[1]
+    scan = scan_order(steps, n_sensors)
+    pos = np.empty(scan.size, dtype=np.intp)
+    pos[scan] = np.arange(scan.size)
+    p = pos[index]
+    gap = (p[1:] - p[:-1] > 1) & (index[1:] % n_sensors == index[:-1] % n_sensors)
+    if not gap.any():
+        return cut
+    flat = np.asarray(counts, dtype=float).reshape(-1)
+    column = np.where(np.asarray(reason).reshape(-1) == int(Reason.MISSING), np.inf, flat)
+    column = column[scan]
+    at = gap.nonzero()[0]
+    # the lowest count strictly between the two readings: minimum.reduceat over each gap
+    bounds = np.stack([p[at] + 1, p[at + 1]], axis=1).reshape(-1)
+    low = np.minimum.reduceat(np.append(column, np.inf), bounds)[::2]
+    ends = np.minimum(flat[index[at]], flat[index[at + 1]])
+    cut[at + 1] = low < ends - SILENT_DIP_SIGMAS * sigma_counts
+    return cut
+
+
 @dataclass
 class Pieces:
     """The split-and-merge result over the usable points (indices into their compact order)
@@ -498,6 +538,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     # its lines whole (they decide the branches), and elsewhere the rule's numpy would cost
     # 0.1 ms on a t_room sweep (docs/foldover.md, "Short far lines"); a part read to its
     # own range pools its far readings, which its profiles cannot judge
+    points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
+                                   grouping.cx, grouping.cy)
     points, label = local_incidence(
         points, label, index, counts, steps, cal, profiler,
         doubt_far=snap and cal.folds and not read_to_own_range(cal, points.max_range_m))
@@ -531,6 +573,142 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = silent_reach(points, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+def _line_contradicted(points: Points, counts: np.ndarray, steps: np.ndarray,
+                       cal: Calibration, vi: np.ndarray, at: np.ndarray, before: np.ndarray,
+                       line: np.ndarray, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray
+                       ) -> np.ndarray:
+    """Whether line ``line`` (per reading ``vi[at]``) would have returned
+    ``CONTRADICT_SIGMAS`` count σ more than one of the steps of the gap beside that reading
+    read (the gap before it where ``before``, else after; same sensor; up to the sensor's
+    next valid reading, at most ``ACROSS_MAX`` + 3 steps): the beam meets the line in front
+    of the emitter within the drop-out angle."""
+    n_steps, n_sensors = np.shape(counts)
+    order = np.argsort(np.asarray(steps), kind="stable")
+    rank = np.empty(n_steps, dtype=np.intp)
+    rank[order] = np.arange(n_steps)
+    flat = vi[at]
+    row, k = flat // n_sensors, flat % n_sensors
+    step = np.where(before, -1, 1)
+    # the sensor's valid reading across the gap bounds it
+    other = np.clip(at + step, 0, vi.size - 1)
+    same = (vi[other] % n_sensors == k) & (other != at)
+    bound = np.where(same, rank[vi[other] // n_sensors], np.where(before, -1, n_steps))
+    flat_counts = np.asarray(counts, dtype=float).reshape(-1)
+    nx, ny = -np.sin(alpha[line]), np.cos(alpha[line])
+    found = np.zeros(at.size, dtype=bool)
+    for j in range(1, ACROSS_MAX + 4):
+        r = rank[row] + j * step
+        inside = (r >= 0) & (r < n_steps) & ((r - bound) * step < 0)
+        if not inside.any():
+            break
+        g = order[np.clip(r, 0, n_steps - 1)] * n_sensors + k
+        h = points.heading.reshape(-1)[g]
+        ox, oy = points.origin_x.reshape(-1)[g], points.origin_y.reshape(-1)[g]
+        along = np.cos(h) * nx + np.sin(h) * ny
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((cx[line] - ox) * nx + (cy[line] - oy) * ny) / along
+            expect = cal.counts(t, np.arccos(np.minimum(np.abs(along), 1.0)))
+        met = (inside & (t > 0) & (np.abs(along) > math.cos(cal.max_incidence_rad))
+               & np.isfinite(expect))
+        found |= met & (expect > flat_counts[g] + CONTRADICT_SIGMAS * cal.sigma_counts())
+    return found
+
+
+CONTRADICT_SIGMAS = 5.0  # a line that would have read a silent step this many count σ
+#                          brighter (of up to ACROSS_MAX + 3 steps: 5σ, not 3σ) is not there
+ACROSS_MAX = 5  # at most this many readings a line took across a silent gap are moved
+
+
+def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
+                   steps: np.ndarray, cal: Calibration, alpha: np.ndarray, cx: np.ndarray,
+                   cy: np.ndarray) -> tuple[Points, np.ndarray]:
+    """Line members whose membership a silent gap contradicts, moved to the line of their
+    side of it; numpy, shared by both estimators.
+
+    A sensor's valid readings are split into runs at its silent gaps (:func:`silent_gaps`).
+    A run that begins (or ends) with at most ``ACROSS_MAX`` members of a line whose other
+    members of this sensor lie across the gap only, followed (preceded) by at least as many
+    members of another line, where the line would have returned clearly more light than a
+    silent step beside them read (:func:`_line_contradicted`; ``alpha``, ``cx``, ``cy``
+    (L,): each line's direction and centroid), took those few across the gap: they move to
+    the other line, read at the incidence their beam meets it with the noise σ at that θ;
+    where it meets it past the drop-out angle they leave their line, read at θ = 0 with the
+    fallback σ (:func:`local_incidence` asks them). ``label`` (S, N): each reading's line
+    or −1; ``index``: the live readings' flat indices in scan order.
+    Why: docs/estimator.md ("Silent gaps")."""
+    n_sensors = label.shape[1]
+    vi = index[points.valid.reshape(-1)[index]]
+    lab = label.reshape(-1)[vi]
+    if vi.size < 3 or not (lab >= 0).any():
+        return points, label
+    cut = silent_gaps(vi, counts, steps, points.reason, cal.sigma_counts())
+    if not cut.any():
+        return points, label
+    sensor = vi % n_sensors
+    new_run = cut | np.r_[True, sensor[1:] != sensor[:-1]]
+    run = np.cumsum(new_run) - 1
+    # stretches: consecutive readings of one run and one label
+    new_stretch = new_run | np.r_[True, lab[1:] != lab[:-1]]
+    first = new_stretch.nonzero()[0]
+    last = np.r_[first[1:] - 1, vi.size - 1]
+    s_lab, s_run, s_len = lab[first], run[first], last - first + 1
+    s_sens = sensor[first]
+    n_lines, n_runs = alpha.size, int(run[-1]) + 1
+    mem = lab >= 0
+    # members per (run, line) and the runs each (line, sensor) holds members in
+    in_run = np.zeros((n_runs, n_lines), dtype=np.intp)
+    np.add.at(in_run, (run[mem], lab[mem]), 1)
+    runs_of = np.zeros((n_lines, n_sensors), dtype=np.intp)
+    held = in_run > 0
+    r_idx, l_idx = held.nonzero()
+    np.add.at(runs_of, (l_idx, sensor[first[np.searchsorted(s_run, r_idx)]]), 1)
+    n_s = first.size
+    to = np.full(n_s, -1, dtype=np.intp)
+    for side, nb in ((new_run[first], np.arange(1, n_s + 1)),          # a run's first
+                     (np.r_[new_run[1:], True][last], np.arange(-1, n_s - 1))):  # … last
+        nb = np.clip(nb, 0, n_s - 1)
+        m_lab = s_lab[nb]
+        ok = (side & (s_lab >= 0) & (s_run[nb] == s_run) & (nb != np.arange(n_s))
+              & (m_lab >= 0) & (m_lab != s_lab))
+        lab_c, m_c = np.maximum(s_lab, 0), np.maximum(m_lab, 0)
+        ok &= (in_run[s_run, lab_c] == s_len) & (runs_of[lab_c, s_sens] >= 2)
+        ok &= (in_run[s_run, m_c] >= s_len) & (s_len <= ACROSS_MAX)
+        ok &= _line_contradicted(points, counts, steps, cal, vi,
+                                 np.where(nb > np.arange(n_s), first, last),
+                                 nb > np.arange(n_s), lab_c, alpha, cx, cy)
+        to = np.where(ok & (to < 0), m_lab, to)
+    if not (to >= 0).any():
+        return points, label
+    # (readings their line put past the range are dropped as read: none is made valid)
+    move = np.repeat(to >= 0, s_len) & (points.d.reshape(-1)[vi] <= points.max_range_m)
+    if not move.any():
+        return points, label
+    at, to = vi[move], np.repeat(to, s_len)[move]
+    h = points.heading.reshape(-1)[at]
+    theta = np.arccos(np.minimum(np.abs(np.sin(h - alpha[to])), 1.0))
+    s = np.asarray(counts, dtype=float).reshape(-1)[at]
+    d = cal.distance(s, theta)
+    _, b = cal.log_ab(theta)
+    sig_s = cal.sigma_counts() / s
+    sigma = np.maximum(np.abs(b) * d * sig_s, SIGMA_FLOOR_M)
+    met = (theta <= cal.max_incidence_rad) & np.isfinite(d) & (d >= cal.min_range_m)
+    # a reading the line of its run meets past the drop-out leaves its line for θ = 0 and
+    # the fallback σ: local_incidence then asks its own profile
+    la0, b0 = cal._ab0
+    d0 = np.exp(la0 + b0 * np.log(s[~met]))
+    theta[~met], d[~met], to[~met] = 0.0, d0, -1
+    sigma[~met] = np.hypot(np.maximum(np.abs(b0) * d0 * sig_s[~met], SIGMA_FLOOR_M),
+                           fallback_spread(cal, s[~met], d0))
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    for f, v in (("d", d), ("theta", theta), ("sigma_m", sigma),
+                 ("x", points.origin_x.reshape(-1)[at] + d * np.cos(h)),
+                 ("y", points.origin_y.reshape(-1)[at] + d * np.sin(h))):
+        out[f].reshape(-1)[at] = v
+    label = label.copy()
+    label.reshape(-1)[at] = to
+    return points_with(points, **out), label
 
 
 FUSE_MIN = 5            # lines of at least this many valid members are tried together …
@@ -981,7 +1159,11 @@ def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.n
     # (a post's centre has a flat slope: it stays); a profile bent towards the beam is a
     # concave corner, the reading on either wall: θ anywhere up to the drop-out
     concave = bend < -_LOCAL_SLOPE_SE * bend_se
-    steep = np.where((n < _LOCAL_MIN) | concave, cal.max_incidence_rad, np.minimum(
+    # the slope bounds θ only where the profile is straight (or a post's, bent away): a
+    # window across a corner fails χ², and its slope's noise-only error bounded a reading
+    # 39° steep at 47°, keeping it at θ = 0 105 mm long
+    bounded = straight | (bend > _LOCAL_SLOPE_SE * bend_se)
+    steep = np.where((n < _LOCAL_MIN) | concave | ~bounded, cal.max_incidence_rad, np.minimum(
         np.arctan(np.abs(slope) + _LOCAL_SLOPE_SE * se), cal.max_incidence_rad))
     # a profile bent away from the beam is a convex thing (a post, a leg): kept at θ = 0,
     # as a post's readings are; flagging them lost thin legs' recall (0.96 -> 0.89)
