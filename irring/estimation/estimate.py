@@ -568,9 +568,12 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = silent_behind_a_wall(points, pooled, found, cal, options)
         silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
     if silent:
-        points = points_with(points, reach_m=(reach or no_return_reach)(points, found, cal,
-                                                                          options))
-        points = silent_reach(points, cal)
+        reach_m = (reach or no_return_reach)(points, found, cal, options)
+        if points.reach_m is not None:
+            # the lines' reach past a line's members runs up to the line itself: a beam
+            # silent_behind_a_wall silenced keeps its clearance before the wall it met
+            reach_m = points.reach_m if reach_m is None else np.fmin(points.reach_m, reach_m)
+        points = silent_reach(points_with(points, reach_m=reach_m), cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 
