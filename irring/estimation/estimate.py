@@ -736,9 +736,8 @@ def fused_lines(points: Points, label: np.ndarray, steps: np.ndarray | None = No
     overlap's middle, ``FUSE_SPLIT_SIGMAS`` of their members' own RMS σ of one offset, between
     which one sensor's successive members (by ``steps`` (S,), default row order) switch
     ``FUSE_SWITCHES`` times or more: a beam sweeping on cannot go back and forth between two
-    surfaces; noise split one wall's readings into a near and a far line, each off by most
-    of a reading's σ (a GP2Y0A21 wall at 620 mm: 40 mm apart, the far one 25-37 mm behind
-    the wall). Why: docs/estimator.md, "Far lines fused across sensors"."""
+    surfaces: noise split one wall's readings into a near and a far line. Why:
+    docs/estimator.md, "Far lines fused across sensors"."""
     label = np.asarray(label)
     member = points.valid & (label >= 0)
     if not member.any():
@@ -1833,11 +1832,9 @@ def silent_behind_a_wall(points: Points, pooled: np.ndarray, found: Lines, cal: 
     explains a silent beam (:func:`no_return_reach`'s:
     ≥ ``REACH_MIN_MEMBERS`` valid members, within its span, at an incidence past the
     drop-out angle less ``options.incidence_margin_rad``) more than 3σ (at least
-    ``REACH_CLEAR_M``) before its end point; its beam is known free to ``REACH_CLEAR_M``
-    before that line. Near the no-return level a beam that dropped out on a wall and one
-    that reached a far wall read alike, and a pool's mean of both put the dropped one on
-    the far wall, 100-290 mm behind the steep one (GP2Y0A21, a wall met at 71-81°).
-    docs/estimator.md, "Pooled readings"."""
+    ``REACH_CLEAR_M``) before its end point; its beam is known free (``reach_m``) to
+    ``REACH_CLEAR_M`` before that line. Why (a pool near the no-return level mixes a beam
+    that dropped out with the wall behind): docs/estimator.md, "Pooled readings"."""
     members = points if members is None else members
     lab = found.label.reshape(-1)
     n_mem = np.bincount(lab[(lab >= 0) & members.valid.reshape(-1)],
@@ -2083,10 +2080,9 @@ def _past_range_elsewhere(p: Points, q: Points, first: Lines, judged: np.ndarray
                           apart: Callable) -> np.ndarray:
     """(S, N): the readings ``judged`` the second pass (``p``) reads valid that the first
     (``q``, lines ``first``) put on a line but past the max range (OUT_OF_RANGE), where
-    their beam meets that line ``apart`` from the second pass's distance (or not ahead):
-    the second pass, its neighbours held out, took them into another line. The first
-    reading past a 60° corner, 604 mm away at 7° on its line, read at the next wall's 65°:
-    494 mm, 110 mm off. docs/foldover.md, "Readings past the range"."""
+    their beam meets that line ``apart`` (``apart(d1, σ1, d2, σ2)``, bool) from the second
+    pass's distance, or not ahead: the second pass, its neighbours held out, took them into
+    another line. docs/foldover.md, "Readings the judging pass read out of range"."""
     lab = first.label
     ask = judged & p.valid & ~q.valid & (q.reason == Reason.OUT_OF_RANGE) & (lab >= 0)
     out = np.zeros(ask.shape, dtype=bool)

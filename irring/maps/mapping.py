@@ -631,22 +631,14 @@ def silences_of_run(batches: Sequence[Points]) -> list[Points]:
 
 
 class RunSilences:
-    """The log-odds :meth:`OccupancyGrid.insert_run` makes of a run's first k batches, for
-    k = 1, 2, … in turn (an animation's frames), without walking every earlier batch's
-    silent beams again for each k where it can (that work grows with the square of the
-    run's length): a batch's silent beams are walked again only when the returns changed,
-    on a cell where one of them passes or stops, whether it stops a silent beam (holds more
-    than ``no_return_stop``). Where most batches' beams keep crossing each other (sweeps
-    crowded into one room) that would cost more than walking them all, and where the passes
-    kept would take more than ``MAX_KEPT_BYTES`` (a long run), every k from then on walks
-    them all at once, as insert_run does.
-
-    Bit for bit insert_run's numbers: a batch's passes are counted by the same kernel walk
-    (on a grid that holds +inf where the returns stop a silent beam, a whole number below
-    the stop elsewhere, and −1 for ``l_no_return``), summed as integers, then added as the
-    joined insert adds them, ``returns + passes · l_no_return``, clamped. Batches with
-    different max ranges or cones (which insert_run maps one after another) are mapped as
-    insert_run maps them.
+    """The log-odds :meth:`OccupancyGrid.insert_run` makes of a run's first k batches, bit for
+    bit, for k = 1, 2, … in turn (an animation's frames), without walking every earlier
+    batch's silent beams again for each k where it can: a batch is walked again only when
+    the returns changed whether a cell one of its beams passes or stops on holds more than
+    ``no_return_stop``. Batches of different max ranges or cones, runs whose batches keep
+    crossing each other (``RECOUNT_COST``, after ``HEAD_START`` walks) and runs whose kept
+    passes would pass ``MAX_KEPT_BYTES`` are walked joined, as insert_run walks them. How
+    and why: docs/mapping.md, "Pictures".
     """
 
     # walking one batch's silent beams alone costs about this many times its share of a
