@@ -310,3 +310,50 @@ def test_a_face_past_a_corner_takes_the_slope_of_its_own_readings(monkeypatch):
             assert np.all(err[face] <= 2.0 * p.sigma_m[face])
         else:
             assert np.all(p.reason[face] == Reason.INCIDENCE_UNKNOWN)
+
+
+# our own room (GP2D12 read to 624 mm): a 203 x 381 mm box at 36.5° and a 496 x 263 mm box at
+# 4.6°; the first's face 470-560 mm away at 48-56° makes sensor 7 a line of few members
+TWO_FAR_BOXES = """
+name: two_far_boxes
+seed: 1072
+room: {outline_mm: [[0, 0], [2876, 0], [2876, 2236], [0, 2236]]}
+obstacles:
+  - {type: box, center_mm: [1342, 763], size_mm: [203, 381], yaw_deg: 36.5}
+  - {type: box, center_mm: [1958, 1901], size_mm: [496, 263], yaw_deg: 4.6}
+robot:
+  design: rotating12
+  poses:
+    - {x_mm: 1511, y_mm: 1408, yaw_deg: 159.9}
+sensor: {model: gp2d12, adc_bits: 12}
+effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}}
+"""
+
+
+def test_a_short_far_line_of_unsure_direction_leaves_its_members_their_own_slope(monkeypatch):
+    """Lines of at most 9 readings 0.72 of the range or more away whose direction standard
+    error exceeds 4°: a member whose own profile is straight, its slope more than half its
+    standard error off the line's, reads at its own θ. Sensor 7's five such readings of the
+    first box (48-55°, read 5-14° too steep): before, 3 lay 4.2-5.0σ off their true hits
+    (56-58 mm); after, none lies 2σ off, and their RMS error falls by a third or more
+    (50 -> 28 mm)."""
+    from irring.estimation import estimate as estimate_module
+
+    sc = loads(TWO_FAR_BOXES, source="<test>")
+    runs = {}
+    for rule in (True, False):
+        if not rule:
+            monkeypatch.setattr(estimate_module, "SHORT_LINE_SE_MAX", math.inf)
+        run = pipeline.run(sc, seed=sc.seed, progress=False)
+        runs[rule] = [(p.valid, p.d, p.sigma_m, np.hypot(p.x - sw.truth.hit_point[..., 0],
+                                                         p.y - sw.truth.hit_point[..., 1]))
+                      for sw, p in zip(run.sweeps, run.points)]
+    (v1, d1, s1, e1), (v0, d0, s0, e0) = (
+        [np.concatenate([r[i].ravel() for r in runs[rule]]) for i in range(4)]
+        for rule in (True, False))
+    moved = v0 & v1 & (np.abs(d1 - d0) > 1e-4)
+    assert moved.sum() == 5
+    assert np.all(v1 == v0)
+    assert np.count_nonzero(e0[moved] > 3.0 * s0[moved]) == 3
+    assert np.all(e1[moved] <= 2.0 * s1[moved])
+    assert np.sqrt(np.mean(e1[moved] ** 2)) <= 0.67 * np.sqrt(np.mean(e0[moved] ** 2))

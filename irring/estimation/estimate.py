@@ -542,7 +542,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                                    grouping.cx, grouping.cy)
     points, label = local_incidence(
         points, label, index, counts, steps, cal, profiler,
-        doubt_far=snap and cal.folds and not read_to_own_range(cal, points.max_range_m))
+        doubt_far=snap and cal.folds and not read_to_own_range(cal, points.max_range_m),
+        short_far=snap)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -1190,6 +1191,10 @@ FAR_LINE_Z = 1.0           # … whose members' own slopes differ from its θ by
 FAR_LINE_SHIFT_M = 0.01    # … and would move them by a map cell on average is doubted
 REGAIN_RATIO = 2.0  # a fold-over's first-pass line this many times as long gives back θ
 DIRECTION_SE_MAX = math.radians(6)  # a far line whose direction is known no better gives no θ
+SHORT_LINE_MAX_MEMBERS = 9  # elsewhere a far line of at most this many members (unsnapped) …
+SHORT_LINE_SE_MAX = math.radians(4)  # … whose direction is known no better leaves each member
+#                                      its own θ where its own profile is straight …
+SHORT_LINE_OWN_SE = 0.5      # … and its slope this many of its standard errors off the line's
 
 
 def direction_se(x: np.ndarray, y: np.ndarray, sigma_perp: np.ndarray, line: np.ndarray,
@@ -1517,7 +1522,8 @@ def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.
 
 def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                     steps: np.ndarray, cal: Calibration, profiler: Callable | None = None,
-                    doubt_far: bool = False) -> tuple[Points, np.ndarray]:
+                    doubt_far: bool = False, short_far: bool = False
+                    ) -> tuple[Points, np.ndarray]:
     """Readings on no line (``label`` −1, θ = 0), and the members of lines that are a round
     thing's, re-read at the incidence their own sensor's neighbouring steps give; numpy,
     shared by both estimators.
@@ -1531,12 +1537,13 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     INCIDENCE_UNKNOWN, unless the readings on no line alone give it a straight profile that
     places it surely (:func:`_off_line_profiles`). The members of a steep line whose own
     profiles mostly bend away (a column's arc cut into short lines; ``ROUND_*``) leave it
-    first and are read the same way;
-    so do, with ``doubt_far``, the members of a short far line whose own slopes disown its θ
-    (``FAR_LINE_*``), those their slope does not place INCIDENCE_UNKNOWN. Returns the points
-    and ``label`` without those members. The why and the measured effects:
-    docs/estimator.md ("Readings on no line", "Round things"), docs/foldover.md ("Short far
-    lines")."""
+    first and are read the same way; so do, with ``doubt_far``, the members of a short far
+    line whose own slopes disown its θ (``FAR_LINE_*``), those their slope does not place
+    INCIDENCE_UNKNOWN; a short far line whose direction is unsure (``SHORT_LINE_*``) loses
+    the members whose own profile is straight and clearly sloped, at their own θ. Returns the
+    points and ``label`` without those members. The why and the measured effects:
+    docs/estimator.md ("Readings on no line", "Round things", "A short far line's
+    direction"), docs/foldover.md ("Short far lines")."""
     flat_valid = points.valid.reshape(-1)
     vi = index[flat_valid[index]]               # valid readings in scan order
     if vi.size == 0:
@@ -1554,22 +1561,35 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     # where a part is read to its own range, a far line of few noisy readings may know its
     # direction only to 10-20°, and its members read at that θ lie 20-150 mm off: a line
     # whose direction is that unsure gives its members no θ (docs/estimator.md, "A far
-    # line's direction")
+    # line's direction"); elsewhere a short far line that unsure lets each member whose own
+    # profile is straight and clearly sloped take its own θ ("A short far line's direction")
     unsure = np.zeros(vi.size, dtype=bool)
-    if read_to_own_range(cal, points.max_range_m) and member.size:
-        at = vi[member]
-        sigma_perp = points.sigma_m.reshape(-1)[at] * np.cos(theta_now[member])
-        se_dir = direction_se(points.x.reshape(-1)[at], points.y.reshape(-1)[at], sigma_perp,
-                              line, total.size)
-        unsure[member] = (se_dir > DIRECTION_SE_MAX)[line]
-    # a short far line's direction rests on few noisy readings: its members are asked too
+    loose = np.zeros(vi.size, dtype=bool)
     doubt = np.zeros(vi.size, dtype=bool)
-    if doubt_far:
-        far = np.bincount(line, weights=points.d.reshape(-1)[vi[member]], minlength=total.size)
-        doubt[member] = ((total <= FAR_LINE_MAX_MEMBERS)
-                         & (far >= FAR_LINE_MIN_SHARE * points.max_range_m * total))[line]
+    if member.size:
+        at = vi[member]
+        far = (np.bincount(line, weights=points.d.reshape(-1)[at], minlength=total.size)
+               >= FAR_LINE_MIN_SHARE * points.max_range_m * total)
+        own_range = read_to_own_range(cal, points.max_range_m)
+        if own_range:
+            sigma_perp = points.sigma_m.reshape(-1)[at] * np.cos(theta_now[member])
+            se_dir = direction_se(points.x.reshape(-1)[at], points.y.reshape(-1)[at],
+                                  sigma_perp, line, total.size)
+            unsure[member] = (se_dir > DIRECTION_SE_MAX)[line]
+        else:
+            few_far = far & (total <= SHORT_LINE_MAX_MEMBERS) & short_far
+            if few_far.any():        # (the directions of those lines' members alone)
+                sel = few_far[line].nonzero()[0]
+                at_s = at[sel]
+                sigma_perp = points.sigma_m.reshape(-1)[at_s] * np.cos(theta_now[member[sel]])
+                se_dir = direction_se(points.x.reshape(-1)[at_s], points.y.reshape(-1)[at_s],
+                                      sigma_perp, line[sel], total.size)
+                loose[member[sel]] = (se_dir > SHORT_LINE_SE_MAX)[line[sel]]
+        # a short far line's direction rests on few noisy readings: its members are asked too
+        if doubt_far:
+            doubt[member] = (far & (total <= FAR_LINE_MAX_MEMBERS))[line]
     maybe |= unsure
-    ask = (off | maybe | doubt).nonzero()[0]
+    ask = (off | maybe | doubt | loose).nonzero()[0]
     if ask.size == 0:
         return points, label
     pr = (profiler or profiles_compiled)(points, vi, ask, counts, steps, cal)
@@ -1601,8 +1621,13 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
             off_line &= (np.bincount(line, weights=shift, minlength=total.size)
                          >= FAR_LINE_SHIFT_M * n_use)
             doubted[asked] = off_line[line] & ~taken[asked]
+    if loose.any():   # … each member whose own straight slope is clearly not the line's
+        own = loose[ask] & pr.ok & ~taken
+        doubted |= own & (np.abs(np.tan(theta_now[ask]) - np.abs(pr.slope))
+                          > SHORT_LINE_OWN_SE * pr.se)
     if doubted.any():
-        points, label = _leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal)
+        points, label = _leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal,
+                                            stay=loose[ask[doubted]])
     if taken.any():    # back to θ = 0 with the σ of a reading on no line
         at = vi[ask[taken]]
         s0, d0 = pr.s[ask[taken]], pr.d0[ask[taken]]
@@ -1756,15 +1781,14 @@ def _own_slope_sigma(cal: Calibration, theta: np.ndarray, d: np.ndarray, d_lo: n
 
 
 def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: np.ndarray,
-                        pr: _Profile, doubted: np.ndarray, cal: Calibration
-                        ) -> tuple[Points, np.ndarray]:
+                        pr: _Profile, doubted: np.ndarray, cal: Calibration,
+                        stay: np.ndarray | None = None) -> tuple[Points, np.ndarray]:
     """The members of doubted short far lines off their lines (``pos``: their places among
     the valid readings ``vi``; ``doubted``: which of the readings ``pr`` profiled they are):
     each at its own profile's θ where that is straight and clearly steep, else
-    INCIDENCE_UNKNOWN (far, and nothing places it)."""
-    at = vi[pos]
-    label = label.copy()
-    label.reshape(-1)[at] = -1
+    INCIDENCE_UNKNOWN (far, and nothing places it). ``stay`` (over ``pos``): members
+    left on their line, as they were, where their own θ does not place them within the
+    range."""
     s, theta, t, e = pr.s[pos], pr.theta[doubted], np.abs(pr.slope[doubted]), pr.se[doubted]
     lo = np.arctan(np.maximum(t - e, 0.0))
     hi = np.minimum(np.arctan(t + e), cal.max_incidence_rad)
@@ -1772,6 +1796,14 @@ def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: 
                                      np.concatenate([theta, lo, hi])).reshape(3, -1)
     sigma, placed = _own_slope_sigma(cal, theta, d_new, d_lo, d_hi, pr.sig_s[pos])
     placed &= pr.ok[doubted]
+    if stay is not None:     # (a stayer is placed only within the range)
+        placed &= ~stay | (d_new <= points.max_range_m)
+    if stay is not None and np.any(stay & ~placed):
+        keep = ~(stay & ~placed)
+        pos, placed, theta, d_new, sigma = (v[keep] for v in (pos, placed, theta, d_new, sigma))
+    at = vi[pos]
+    label = label.copy()
+    label.reshape(-1)[at] = -1
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     put, gone = at[placed], at[~placed]
     hh = points.heading.reshape(-1)[put]
