@@ -1359,6 +1359,7 @@ POST_LINK_M = 0.12       # … through readings on no line whose θ = 0 end poin
 POST_RUN_MAX = 5         # … at most this many of one sensor (more: a surface, not a post) …
 POST_SENSORS = 2         # … from at least this many sensors …
 POST_JUMP_M = 0.10       # … each sensor's run flanked by silence or readings this much farther;
+POST_ON_TESTED = 4       # readings on the circle where a flank is itself on no line (not 3)
 POST_BEARING_RAD = 0.0025  # its centre searched on this bearing grid …
 POST_RANGE_M = 0.005     # … and this range grid; a silent flanking beam it meets this far
 POST_SILENT_RAD = math.radians(15)  # inside the drop-out angle (within the return range) misfits
@@ -1373,7 +1374,8 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
 
     A group: ≥ 3 readings whose θ = 0 end points chain within ``POST_LINK_M``, from
     ≥ ``POST_SENSORS`` sensors, ≤ ``POST_RUN_MAX`` of each, each sensor's run flanked by a
-    silent beam or a reading ``POST_JUMP_M`` farther. Its circle (radius in
+    silent beam or a reading ``POST_JUMP_M`` farther (one on no line itself: then
+    ``POST_ON_TESTED`` readings on the circle). Its circle (radius in
     ``POST_RADII_M``, not the largest) is scored as an arc (:func:`arc_incidence`) plus
     ``ARC_MISS`` for each flanking silent beam it would have returned; kept at a mean misfit
     below ``ARC_MISFIT`` with ≥ 3 readings on it (misfit ≤ ``ARC_ON``), which become valid at
@@ -1416,7 +1418,7 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
         if (ii.size < 3 or np.unique(kk).size < POST_SENSORS
                 or np.bincount(kk).max() > POST_RUN_MAX):
             continue
-        flank, standing = [], True
+        flank, standing, tested = [], True, False
         for k in np.unique(kk):
             r_k = np.sort(rank[ii[kk == k]])
             far = np.nanmax(d0[ii[kk == k], k]) + POST_JUMP_M
@@ -1426,8 +1428,10 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
                 j = order[q]
                 if silent[j, k]:
                     flank.append((j, k))
-                elif not (d0[j, k] > far and not cand[j, k]):
+                elif not d0[j, k] > far:
                     standing = False
+                elif cand[j, k]:      # on no line itself: the post's grazed edge, or more
+                    tested = True     # of a steep surface; a circle fitted must be tested
         if not standing:
             continue
         fi = np.array([f[0] for f in flank], dtype=np.intp)
@@ -1485,7 +1489,8 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
         if cost > ARC_MISFIT * (ii.size + fi.size) or radius >= POST_RADII_M[-1]:
             continue
         on = (each <= ARC_ON) & (d >= cal.min_range_m) & (d <= points.max_range_m)
-        if np.count_nonzero(on) < 3:     # a circle is three numbers: three readings on it
+        # a circle is three numbers: three readings on it (one more where it must be tested)
+        if np.count_nonzero(on) < (POST_ON_TESTED if tested else 3):
             continue
         lo = cal.distance(s[ii, kk], np.maximum(th - ARC_DOUBT_RAD, 0.0))
         hi = cal.distance(s[ii, kk], np.minimum(th + ARC_DOUBT_RAD, cal.max_incidence_rad))
