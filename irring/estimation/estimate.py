@@ -2364,9 +2364,6 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         if np.array_equal(more, anchored):
             break
         anchored = more
-    # a reading whose far end point also lies on an anchored line, seen there, has both
-    # branches on a line: the line that blocked its far one may run on across a gap
-    is_near &= ~(np.where(anchored[None, :], fit_far, np.inf) <= 1.0).any(axis=1)
     near, far = np.zeros(shape, bool), housing & live
     near.reshape(-1)[idx] = is_near
     far.reshape(-1)[idx] = is_far
