@@ -19,6 +19,9 @@ BENCHES = {
     "dynamics": "belt stretch, physics convergence, settle time vs angle error, mapping on "
                 "the move",
     "rooms": "map scores on a set of rooms, scene effects vs an ideal sensor",
+    "foldover": "fold-over from as close as the housing allows: wrong-branch readings, "
+                "walls outside the room",
+    "grazing": "end-point RMS per 10° of incidence vs θ = 0, walls up to ~70°",
     "study": "how `irring study` scales: runs/s on 1 and N workers, memory",
     "render": "cost of the map pictures vs making the map; peak memory",
 }

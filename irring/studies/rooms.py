@@ -55,12 +55,31 @@ def _rms(x: np.ndarray) -> float | None:
     return float(math.sqrt(np.mean(x * x))) if x.size else None
 
 
+def run_with_theta0(scenario: Scenario, seed: int | None = None) -> tuple:
+    """``pipeline.run`` of the scenario (not scored) and, per sweep, the same readings read
+    at θ = 0 with the very calibration the run estimates with: (run, [Points, …])."""
+    theta0 = []
+
+    def both(sweep, calibration):
+        theta0.append(estimate(sweep, calibration, iterate=False))
+        return estimate(sweep, calibration)
+
+    run = pipeline.run(scenario, seed=seed, progress=False, estimator=both, score=False)
+    return run, theta0
+
+
+def compared(sweep, points, points_theta0) -> np.ndarray:
+    """(S, N) bool: the readings both estimates call valid and that hit a surface."""
+    hx, hy = sweep.truth.hit_point[..., 0], sweep.truth.hit_point[..., 1]
+    return points.valid & points_theta0.valid & np.isfinite(hx) & np.isfinite(hy)
+
+
 def point_errors(sweep, points, points_theta0) -> tuple[np.ndarray, np.ndarray]:
-    """End-point errors (m) of the readings both estimates call valid and that hit a
-    surface: (iterative, θ = 0), each against the simulator's true hit point."""
+    """End-point errors (m) of the :func:`compared` readings: (iterative, θ = 0), each
+    against the simulator's true hit point."""
     truth = sweep.truth
     hx, hy = truth.hit_point[..., 0], truth.hit_point[..., 1]
-    m = points.valid & points_theta0.valid & np.isfinite(hx) & np.isfinite(hy)
+    m = compared(sweep, points, points_theta0)
     return (np.hypot(points.x[m] - hx[m], points.y[m] - hy[m]),
             np.hypot(points_theta0.x[m] - hx[m], points_theta0.y[m] - hy[m]))
 
@@ -72,13 +91,7 @@ def score_room(scenario: Scenario, seed: int | None = None, *,
     ``judged_on``: the scene whose ground truth scores the map (default ``scenario``): the
     same room with other effects, so two sensors are judged on the same visible wall.
     ``truth_cache``: a dict the caller keeps, so runs of one room rasterise its truth once."""
-    theta0 = []
-
-    def both(sweep, calibration):  # θ = 0 with the very calibration the run estimates with
-        theta0.append(estimate(sweep, calibration, iterate=False))
-        return estimate(sweep, calibration)
-
-    run = pipeline.run(scenario, seed=seed, progress=False, estimator=both, score=False)
+    run, theta0 = run_with_theta0(scenario, seed)
     errs, errs0 = [], []
     for sweep, pts, p0 in zip(run.sweeps, run.points, theta0):
         e, e0 = point_errors(sweep, pts, p0)
@@ -148,19 +161,30 @@ def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
     nothing to score, is none), the scene's effects beyond those the targets are set for
     (``beyond_target_effects``, :data:`TARGET_EFFECTS`), and the scores on which the ideal
     sensor is worse than the scene's (``ideal_worse``). A room that cannot be
-    loaded or run (an :class:`Unusable`, or an error in its run) is a row with ``error`` (the
-    one-line message) and ``status`` (the exit status ``irring run`` would give) instead;
-    ``debug``: also print that error's traceback to stderr."""
+    loaded or run is an error row (:func:`each_room`)."""
+    return each_room(scenarios, n_seeds, _measure_room, runs_per_seed=len(VARIANTS),
+                     progress=progress, debug=debug)
+
+
+def each_room(scenarios: list[Scenario | Unusable], n_seeds: int, measure_room, *,
+              runs_per_seed: int = 1, label: str = "rooms", progress: bool | None = None,
+              debug: bool = False) -> list[dict]:
+    """``measure_room(scenario, n_seeds, bar)`` (a dict starting with ``name`` and
+    ``source``; ``bar.update()`` once per run) for each room, under one progress bar. A room
+    that cannot be loaded or run (an :class:`Unusable`, or an error in its run) is a row with
+    ``name``, ``source``, ``error`` (the one-line message) and ``status`` (the exit status
+    ``irring run`` would give) instead; ``debug``: also print that error's traceback."""
     rows = []
-    with progress_bar(len(scenarios) * n_seeds * 2, "rooms", progress, unit="run") as bar:
+    with progress_bar(len(scenarios) * n_seeds * runs_per_seed, label, progress,
+                      unit="run") as bar:
         for sc in scenarios:
             if isinstance(sc, Unusable):
                 rows.append({"name": sc.name, "source": sc.source, "error": sc.message,
                              "status": sc.status})
-                bar.update(2 * n_seeds)
+                bar.update(runs_per_seed * n_seeds)
                 continue
             try:
-                rows.append(_measure_room(sc, n_seeds, bar))
+                rows.append(measure_room(sc, n_seeds, bar))
             except Exception as exc:  # noqa: BLE001 - one room's failure is that room's row
                 if debug:
                     traceback.print_exc()

@@ -1,0 +1,100 @@
+"""`irring bench foldover`: fold-over seen from as close as the housing allows."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from .. import errors
+from ..core import MAX_SEEDS
+from ..outputs import OutputSet, check_out
+from ..studies.foldover import (MAX_ERROR_M, OUTSIDE_CELLS, OUTSIDE_MARGIN_M, measure,
+                                outside_tolerance_m)
+from ..studies.rooms import resolve_rooms
+from ._common import describe, out_path, seed_count
+
+DEFAULT_ROOMS = ("foldover_corner",)
+
+EPILOG = f"""\
+what it prints, per room and seed (each run as `irring run` runs it, with the scene's own
+effects; a fold-over room lists `foldover` and puts the ring as close to a wall as its
+housing allows):
+  valid        readings the estimator calls valid
+  ambiguous    readings flagged foldover_ambiguous: which side of the GP2's peak undecided
+  >{MAX_ERROR_M * 1e3:.0f}mm       valid readings more than {MAX_ERROR_M * 1e3:.0f} mm from their true hit (target 0: none
+               on the wrong branch); a valid reading whose beam hit nothing counts here
+  max mm       the largest of those errors (n/a: no valid reading)
+  outside      occupied cells whose centre lies outside the room by more than
+               {OUTSIDE_CELLS:g} cells + {OUTSIDE_MARGIN_M * 1e3:.0f} mm ({outside_tolerance_m(0.010) * 1e3:.0f} mm on 10 mm cells; target 0:
+               walls never outside)
+  nonfinite    valid readings with a NaN or inf x, y or σ (target 0)
+  verdict      pass when all three targets hold
+
+Figures are per seed (the first is the scenario's own seed + 0). A room file that cannot be
+loaded or run is listed with its error and the others are checked.
+exit status: 0 when every run passes; {errors.TARGET_MISSED} when a run misses a target (the table says
+which); that of the first room's error (1 for a bad file) when a room could not be run.
+
+examples:
+  irring bench foldover                        the bundled fold-over room ({', '.join(DEFAULT_ROOMS)})
+  irring bench foldover my_rooms/ --seeds 3    rooms of your own: folders of *.yaml or files
+  irring bench foldover --json > foldover.json
+"""
+
+OUTPUT_FILES = ("foldover.json",)
+
+
+def register(p: argparse.ArgumentParser) -> None:
+    describe(p, "Run rooms seen from as close as the ring's housing allows (with the "
+             "`foldover` effect) and check issue 13's fold-over targets: no valid reading "
+             f"more than {MAX_ERROR_M * 1e3:.0f} mm from its true hit, no wall drawn outside "
+             "the room, nothing non-finite.", EPILOG)
+    p.add_argument("rooms", nargs="*", metavar="ROOM",
+                   help="bundled scenario names, YAML files or folders of them "
+                        f"(default: {', '.join(DEFAULT_ROOMS)})")
+    p.add_argument("--seeds", type=seed_count, default=3, metavar="N",
+                   help=f"seeds per room: the scenario's seed, +1, … (1 … {MAX_SEEDS}; "
+                        "default: 3)")
+    p.add_argument("--out", type=out_path, default="out/bench_foldover", metavar="DIR",
+                   help="where foldover.json goes (default: out/bench_foldover)")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    scenarios = resolve_rooms(args.rooms or DEFAULT_ROOMS)
+    out = check_out(args.out)
+    rows = measure(scenarios, args.seeds, debug=args.debug)
+    with OutputSet(out, files=OUTPUT_FILES) as tmp:
+        (tmp / "foldover.json").write_text(json.dumps(rows, indent=2))
+    failed = [r for r in rows if "error" in r]
+    runs = [run for r in rows if "error" not in r for run in r["runs"]]
+    n_fail = sum(not run["passed"] for run in runs)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    else:
+        _print_table(rows, n_fail, len(runs), out)
+    if failed:   # the table has the rest; the status says that not every room was run
+        print(f"irring bench foldover: error: {len(failed)} of {len(rows)} room(s) not run; "
+              f"{failed[0]['error']}", file=sys.stderr)
+        return failed[0]["status"]
+    return errors.TARGET_MISSED if n_fail else errors.OK
+
+
+def _print_table(rows: list[dict], n_fail: int, n_runs: int, out) -> None:
+    width = max([len(r["name"]) for r in rows] + [4])
+    far = f">{MAX_ERROR_M * 1e3:.0f}mm"
+    print(f"{'room':<{width}}  {'seed':>6}{'valid':>7}{'ambiguous':>10}{far:>8}{'max mm':>8}"
+          f"{'outside':>8}{'nonfinite':>10}  verdict")
+    for r in rows:
+        if "error" in r:
+            print(f"{r['name']:<{width}}  error: {r['error']}")
+            continue
+        for i, x in enumerate(r["runs"]):
+            name = r["name"] if i == 0 else ""
+            worst = "n/a" if x["max_error_m"] is None else f"{x['max_error_m'] * 1e3:.0f}"
+            print(f"{name:<{width}}  {x['seed']:>6}{x['valid']:>7}{x['ambiguous']:>10}"
+                  f"{x['far']:>8}{worst:>8}{x['cells_outside']:>8}{x['nonfinite']:>10}  "
+                  f"{'pass' if x['passed'] else 'FAIL'}")
+    print(f"{n_runs} run(s): {n_fail} miss a target; wrote {out}/foldover.json")

@@ -1,0 +1,87 @@
+"""Fold-over seen from as close as the housing allows (issue 13's must-show, ``irring bench
+foldover``): per room and seed, no valid reading more than :data:`MAX_ERROR_M` from its true
+hit, no occupied cell outside the room, no non-finite valid output. The story:
+docs/foldover.md.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import pipeline
+from ..core import Reason, distance_to_outline, inside_outline
+from ..maps.mapping import OCCUPIED, OccupancyGrid
+from ..scenario import Scenario, counted_seeds
+from .rooms import Unusable, each_room
+
+MAX_ERROR_M = 0.100   # a valid reading farther than this from its true hit is on the wrong branch
+# An occupied cell lies "outside the room" when its centre is farther beyond the outline than
+# the scores' 1-cell tolerance plus half a cell (a wall's cell centre), plus this margin.
+OUTSIDE_CELLS = 1.5
+OUTSIDE_MARGIN_M = 0.010
+
+
+def outside_tolerance_m(resolution_m: float) -> float:
+    """How far (m) beyond the outline an occupied cell's centre may lie on cells of this size."""
+    return OUTSIDE_CELLS * resolution_m + OUTSIDE_MARGIN_M
+
+
+def reading_errors(points, truth) -> np.ndarray:
+    """End-point error (m) of each valid reading of a sweep against its true hit, flat; inf
+    for a valid reading whose beam hit nothing or whose end point is not finite."""
+    e = np.hypot(points.x - truth.hit_point[..., 0], points.y - truth.hit_point[..., 1])
+    e = e[points.valid]
+    return np.where(np.isfinite(e), e, np.inf)
+
+
+def nonfinite_outputs(points) -> int:
+    """Valid readings of a sweep with a NaN or inf x, y or σ."""
+    v = points.valid
+    return int((~(np.isfinite(points.x[v]) & np.isfinite(points.y[v])
+                  & np.isfinite(points.sigma_m[v]))).sum())
+
+
+def cells_outside(grid: OccupancyGrid, outline) -> int:
+    """Occupied cells whose centre lies outside ``outline`` (m) by more than
+    :func:`outside_tolerance_m`: walls drawn outside the room."""
+    iy, ix = np.nonzero(grid.classify() == OCCUPIED)
+    cx, cy = grid.cell_centers()
+    x, y = cx[ix], cy[iy]
+    out = ~inside_outline(x, y, outline)
+    out &= distance_to_outline(x, y, outline) > outside_tolerance_m(grid.resolution_m)
+    return int(out.sum())
+
+
+def check_run(scenario: Scenario, seed: int | None = None) -> dict:
+    """One room, one seed, as written: ``seed``, ``valid`` readings, ``ambiguous``
+    (FOLDOVER_AMBIGUOUS), ``far`` (valid readings > :data:`MAX_ERROR_M` off),
+    ``max_error_m`` (None without a valid reading), ``cells_outside``, ``nonfinite`` and
+    ``passed`` (no far reading, no cell outside, nothing non-finite)."""
+    run = pipeline.run(scenario, seed=seed, progress=False, score=False)
+    errs = np.concatenate([reading_errors(p, sw.truth) for sw, p in zip(run.sweeps, run.points)])
+    row = {"seed": run.seed, "valid": int(errs.size),
+           "ambiguous": int(sum((p.reason == Reason.FOLDOVER_AMBIGUOUS).sum()
+                                for p in run.points)),
+           "far": int((errs > MAX_ERROR_M).sum()),
+           "max_error_m": float(errs.max()) if errs.size else None,
+           "cells_outside": cells_outside(run.grid, scenario.room.outline_m),
+           "nonfinite": sum(nonfinite_outputs(p) for p in run.points)}
+    row["passed"] = row["far"] == 0 and row["cells_outside"] == 0 and row["nonfinite"] == 0
+    return row
+
+
+def _check_room(sc: Scenario, n_seeds: int, bar) -> dict:
+    runs = []
+    for seed in counted_seeds(sc, n_seeds):
+        runs.append(check_run(sc, seed))
+        bar.update()
+    return {"name": sc.name, "source": sc.source, "effects": list(sc.effects), "runs": runs}
+
+
+def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
+            progress: bool | None = None, debug: bool = False) -> list[dict]:
+    """Per room: ``name``, ``source``, ``effects`` and ``runs``: :func:`check_run` for each
+    seed (the scenario's own, +1, …); a room that cannot be loaded or run is an error row
+    (:func:`rooms.each_room`)."""
+    return each_room(scenarios, n_seeds, _check_room, label="fold-over", progress=progress,
+                     debug=debug)
