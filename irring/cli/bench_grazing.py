@@ -51,9 +51,9 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("rooms", nargs="*", metavar="ROOM",
                    help="bundled scenario names, YAML files or folders of them "
                         f"(default: {', '.join(DEFAULT_ROOMS)})")
-    p.add_argument("--seeds", type=seed_count, default=1, metavar="N",
+    p.add_argument("--seeds", type=seed_count, default=2, metavar="N",
                    help=f"seeds per room: the scenario's seed, +1, … (1 … {MAX_SEEDS}; "
-                        "default: 1)")
+                        "default: 2)")
     p.add_argument("--out", type=out_path, default="out/bench_grazing", metavar="DIR",
                    help="where grazing.json goes (default: out/bench_grazing)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
