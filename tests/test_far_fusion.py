@@ -206,49 +206,6 @@ def test_a_post_due_west_is_searched_about_its_own_bearing(monkeypatch):
     assert runs["post due west"][0] == runs["as written"][0] == 880
 
 
-def test_one_walls_readings_split_by_noise_into_two_lines_are_joined():
-    """Sensor 0 reads one wall 620 mm away with 23 mm of noise a reading; the grouping put
-    its near readings on line 0 and its far ones on line 1 (36 mm apart), switching 6 times
-    along its sweep: joined, though their offsets differ by 4 standard errors. Sensors 1
-    and 2 see two parallel faces 36 mm apart over the same stretch with 5 mm of noise, each
-    its own (no switch): kept apart. Sensor 3 sees line 4 then line 5, 36 mm behind it, once
-    switching at an edge: kept apart."""
-    rng = np.random.default_rng(5)
-    steps = np.arange(20) * 3 - 31                    # motor steps, rows in step order
-    u = np.linspace(-0.17, 0.21, 20)
-    noise = rng.normal(0.0, 0.023, 20)
-    split = np.where(noise < 0, 0, 1)
-    v = np.where(split == 0, -0.018, 0.018) + rng.normal(0.0, 0.004, 20)
-    cols = [(u, 0.62 + v, np.full(20, 0.023), split),
-            (u, 0.50 + rng.normal(0.0, 0.005, 20), np.full(20, 0.005), np.full(20, 2)),
-            (u, 0.536 + rng.normal(0.0, 0.005, 20), np.full(20, 0.005), np.full(20, 3)),
-            (u, np.where(u < 0.02, 0.30, 0.336) + rng.normal(0.0, 0.003, 20), np.full(20, 0.004),
-             np.where(u < 0.02, 4, 5))]
-    x = np.stack([c[0] for c in cols], axis=1)
-    y = np.stack([c[1] for c in cols], axis=1)
-    sig = np.stack([c[2] for c in cols], axis=1)
-    label = np.stack([c[3] for c in cols], axis=1).astype(np.intp)
-    zeros = np.zeros(x.shape)
-    points = Points(x=x, y=y, d=zeros + 0.62, theta=zeros, origin_x=zeros, origin_y=zeros,
-                    heading=zeros, sigma_m=sig, iterations=zeros.astype(int),
-                    valid=np.ones(x.shape, bool), reason=np.zeros(x.shape, np.uint8))
-    assert int(np.sum(split[1:] != split[:-1])) == 6
-    # the rows shuffled with their steps: the switches are counted in step order
-    perm = rng.permutation(20)
-    shuffled = Points(**{f: (getattr(points, f)[perm] if np.ndim(getattr(points, f)) == 2
-                             else getattr(points, f))
-                         for f in ("x", "y", "d", "theta", "origin_x", "origin_y", "heading",
-                                   "sigma_m", "iterations", "valid", "reason")})
-    for pts, lab, st in ((points, label, steps), (shuffled, label[perm], steps[perm])):
-        fused = fast.fused_lines(pts, lab, st)
-        tops = {int(k): sorted(set(fused[lab == k].tolist())) for k in range(6)}
-        assert tops == {0: [0], 1: [0], 2: [2], 3: [3], 4: [4], 5: [5]}
-    # without the switches (rows in a wrong order: the near and far readings each together)
-    order = np.argsort(split, kind="stable")
-    fused = fast.fused_lines(points, label, steps[np.argsort(order)])
-    assert sorted(set(fused[label == 1].tolist())) == [1]
-
-
 # A canteen corner of our own read to 1300 mm: a 300 mm pillar 0.9 m away and a 50 mm table
 # leg 0.6 m away, which the GP2Y0A02 sees at 0.6 m only between beams that graze its sides.
 CANTEEN_LEG = """\

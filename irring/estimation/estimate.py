@@ -547,8 +547,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
-        snap_label = (fused_lines(points, label, steps)
-                      if read_to_own_range(cal, points.max_range_m)
+        snap_label = (fused_lines(points, label) if read_to_own_range(cal, points.max_range_m)
                       else label)
         points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
@@ -719,26 +718,17 @@ FUSE_MIN = 5            # lines of at least this many valid members are tried to
 FUSE_Z = 2.5            # … where direction and offset agree within this many standard errors …
 FUSE_OVERLAP_M = 0.05   # … over at least this much of both lines' extents …
 FUSE_TURN_MAX = math.radians(5)  # … and whose directions differ by at most this
-FUSE_SWITCHES = 3       # lines one sensor's successive members switch between this often …
-FUSE_SPLIT_SIGMAS = 2.5  # … lying within this many of their members' own σ of each other
 
 
-def fused_lines(points: Points, label: np.ndarray, steps: np.ndarray | None = None
-                ) -> np.ndarray:
+def fused_lines(points: Points, label: np.ndarray) -> np.ndarray:
     """``label`` (S, N: each reading's line, −1 none) with lines that are one surface joined:
     lines of ≥ ``FUSE_MIN`` valid members whose extents overlap by ≥ ``FUSE_OVERLAP_M`` and
     whose directions, and offsets at the middle of the overlap, differ by at most ``FUSE_Z``
     of their combined standard errors (total least squares; the members' scatter about
     their line or, where more, their own noise across it) take the smallest label of their
     group. Overlapping lines are of different sensors that saw one wall; the snap then fits
-    them as one, which averages their independent offsets.
-
-    Also joined: two such lines within ``FUSE_TURN_MAX`` of one direction and, at the
-    overlap's middle, ``FUSE_SPLIT_SIGMAS`` of their members' own RMS σ of one offset, between
-    which one sensor's successive members (by ``steps`` (S,), default row order) switch
-    ``FUSE_SWITCHES`` times or more: a beam sweeping on cannot go back and forth between two
-    surfaces: noise split one wall's readings into a near and a far line. Why:
-    docs/estimator.md, "Far lines fused across sensors"."""
+    them as one, which averages their independent offsets. Why: docs/estimator.md, "Far
+    lines fused across sensors"."""
     label = np.asarray(label)
     member = points.valid & (label >= 0)
     if not member.any():
@@ -789,13 +779,6 @@ def fused_lines(points: Points, label: np.ndarray, steps: np.ndarray | None = No
     join = ((b - a >= FUSE_OVERLAP_M) & (turn <= np.minimum(FUSE_Z * np.sqrt(var_a),
                                                              FUSE_TURN_MAX))
             & (np.abs(off) <= FUSE_Z * np.sqrt(var_off)))
-    own2 = np.bincount(g, own * own, n_lines) / nn
-    split = (~join & (turn <= FUSE_TURN_MAX)
-             & (np.abs(off) <= FUSE_SPLIT_SIGMAS * np.sqrt(0.5 * (own2[i] + own2[j]))))
-    if split.any():     # the switches counted only where they could decide (most sweeps: none)
-        split[split] = (_switches(label, member, steps, i[split], j[split])
-                        >= FUSE_SWITCHES)
-        join |= split
     if not join.any():
         return label
     root = np.arange(n_lines)
@@ -813,28 +796,6 @@ def fused_lines(points: Points, label: np.ndarray, steps: np.ndarray | None = No
     out = label.copy()
     out[label >= 0] = top.take(label[label >= 0])
     return out
-
-
-def _switches(label: np.ndarray, member: np.ndarray, steps: np.ndarray | None,
-              i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """For each pair of lines (``i``, ``j``): the most times one sensor's successive members
-    (``member``, S × N, by ``steps``, default row order) switch between them (``label``)."""
-    lab = np.where(member, label, -1)
-    if steps is not None:
-        lab = lab[np.argsort(np.asarray(steps), kind="stable")]
-    seq_lab = np.ascontiguousarray(lab.T).reshape(-1)        # each sensor's, by step
-    at = np.flatnonzero(seq_lab >= 0)
-    col, seq = at // lab.shape[0], seq_lab[at]
-    flip = (col[1:] == col[:-1]) & (seq[1:] != seq[:-1])
-    lo = np.minimum(seq[1:], seq[:-1])[flip]
-    hi = np.maximum(seq[1:], seq[:-1])[flip]
-    if not lo.size:
-        return np.zeros(i.size, dtype=np.intp)
-    n_lines, n_cols = int(label.max()) + 1, lab.shape[1]
-    key, count = np.unique((lo * n_lines + hi) * n_cols + col[1:][flip], return_counts=True)
-    most = np.zeros(n_lines * n_lines, dtype=np.intp)
-    np.maximum.at(most, key // n_cols, count)
-    return most[np.minimum(i, j) * n_lines + np.maximum(i, j)]
 
 
 def read_to_own_range(cal: Calibration, max_range_m: float) -> bool:
