@@ -41,6 +41,8 @@ def test_a_planted_wrong_branch_reading_is_counted_beyond_100_mm_and_nothing_els
     assert e[:4] == pytest.approx([0.030, 0.101, 0.099, 0.0])
     assert e[4] == math.inf
     assert int((e > foldover.MAX_ERROR_M).sum()) == 2
+    assert foldover.worst_error(e) == (pytest.approx(0.101), 1)   # JSON gets no Infinity
+    assert foldover.worst_error(e[4:]) == (None, 1)
     assert foldover.nonfinite_outputs(p) == 0
     p.y[0, 2] = np.nan           # a valid output gone NaN …
     p.sigma_m[1, 1] = np.inf     # … and an infinite σ
@@ -121,7 +123,7 @@ def test_foldover_cli_runs_the_other_rooms_and_ends_with_a_bad_files_status(tmp_
     # the fold-over targets: none on the wrong branch, nothing outside, nothing non-finite
     assert run["passed"] and run["far"] == 0 and run["cells_outside"] == 0
     assert run["nonfinite"] == 0 and run["valid"] > 100 and run["ambiguous"] > 0
-    assert run["max_error_m"] < foldover.MAX_ERROR_M
+    assert run["max_error_m"] < foldover.MAX_ERROR_M and run["no_hit"] == 0
     assert lines[2].split()[-1] == "pass"
     # the good room alone passes: status 0
     assert main(["bench", "foldover", str(good), "--seeds", "1", "--json",

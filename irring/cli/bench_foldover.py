@@ -24,7 +24,8 @@ housing allows):
   ambiguous    readings flagged foldover_ambiguous: which side of the GP2's peak undecided
   >{MAX_ERROR_M * 1e3:.0f}mm       valid readings more than {MAX_ERROR_M * 1e3:.0f} mm from their true hit (target 0: none
                on the wrong branch); a valid reading whose beam hit nothing counts here
-  max mm       the largest of those errors (n/a: no valid reading)
+  max mm       the largest error of a valid reading with a true hit (n/a: none); "inf" when a
+               valid reading's beam hit nothing (JSON: no_hit counts them)
   outside      occupied cells whose centre lies outside the room by more than
                {OUTSIDE_CELLS:g} cells + {OUTSIDE_MARGIN_M * 1e3:.0f} mm ({outside_tolerance_m(0.010) * 1e3:.0f} mm on 10 mm cells; target 0:
                walls never outside)
@@ -67,12 +68,12 @@ def run(args: argparse.Namespace) -> int:
     out = check_out(args.out)
     rows = measure(scenarios, args.seeds, debug=args.debug)
     with OutputSet(out, files=OUTPUT_FILES) as tmp:
-        (tmp / "foldover.json").write_text(json.dumps(rows, indent=2))
+        (tmp / "foldover.json").write_text(json.dumps(rows, indent=2, allow_nan=False))
     failed = [r for r in rows if "error" in r]
     runs = [run for r in rows if "error" not in r for run in r["runs"]]
     n_fail = sum(not run["passed"] for run in runs)
     if args.json:
-        print(json.dumps(rows, indent=2))
+        print(json.dumps(rows, indent=2, allow_nan=False))
     else:
         _print_table(rows, n_fail, len(runs), out)
     if failed:   # the table has the rest; the status says that not every room was run
@@ -93,7 +94,8 @@ def _print_table(rows: list[dict], n_fail: int, n_runs: int, out) -> None:
             continue
         for i, x in enumerate(r["runs"]):
             name = r["name"] if i == 0 else ""
-            worst = "n/a" if x["max_error_m"] is None else f"{x['max_error_m'] * 1e3:.0f}"
+            worst = ("inf" if x["no_hit"] else "n/a" if x["max_error_m"] is None
+                     else f"{x['max_error_m'] * 1e3:.0f}")
             print(f"{name:<{width}}  {x['seed']:>6}{x['valid']:>7}{x['ambiguous']:>10}"
                   f"{x['far']:>8}{worst:>8}{x['cells_outside']:>8}{x['nonfinite']:>10}  "
                   f"{'pass' if x['passed'] else 'FAIL'}")

@@ -34,6 +34,13 @@ def reading_errors(points, truth) -> np.ndarray:
     return np.where(np.isfinite(e), e, np.inf)
 
 
+def worst_error(errors: np.ndarray) -> tuple[float | None, int]:
+    """(the largest finite error in m, None without one; how many are inf: valid readings
+    whose beam hit nothing). Kept apart so the JSON holds numbers only."""
+    finite = np.isfinite(errors)
+    return (float(errors[finite].max()) if finite.any() else None), int((~finite).sum())
+
+
 def nonfinite_outputs(points) -> int:
     """Valid readings of a sweep with a NaN or inf x, y or σ."""
     v = points.valid
@@ -55,7 +62,8 @@ def cells_outside(grid: OccupancyGrid, outline) -> int:
 def check_run(scenario: Scenario, seed: int | None = None) -> dict:
     """One room, one seed, as written: ``seed``, ``valid`` readings, ``ambiguous``
     (FOLDOVER_AMBIGUOUS), ``far`` (valid readings > :data:`MAX_ERROR_M` off),
-    ``max_error_m`` (None without a valid reading), ``cells_outside``, ``nonfinite`` and
+    ``max_error_m`` (the largest finite error; None without one), ``no_hit`` (valid readings
+    whose beam hit nothing, counted in ``far``), ``cells_outside``, ``nonfinite`` and
     ``passed`` (no far reading, no cell outside, nothing non-finite)."""
     run = pipeline.run(scenario, seed=seed, progress=False, score=False)
     errs = np.concatenate([reading_errors(p, sw.truth) for sw, p in zip(run.sweeps, run.points)])
@@ -63,7 +71,7 @@ def check_run(scenario: Scenario, seed: int | None = None) -> dict:
            "ambiguous": int(sum((p.reason == Reason.FOLDOVER_AMBIGUOUS).sum()
                                 for p in run.points)),
            "far": int((errs > MAX_ERROR_M).sum()),
-           "max_error_m": float(errs.max()) if errs.size else None,
+           **dict(zip(("max_error_m", "no_hit"), worst_error(errs))),
            "cells_outside": cells_outside(run.grid, scenario.room.outline_m),
            "nonfinite": sum(nonfinite_outputs(p) for p in run.points)}
     row["passed"] = row["far"] == 0 and row["cells_outside"] == 0 and row["nonfinite"] == 0
