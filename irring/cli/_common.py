@@ -295,3 +295,18 @@ def host_port(text: str) -> tuple[str, int]:
         raise argparse.ArgumentTypeError(f"expected [HOST:]PORT with PORT 0 … 65535, "
                                          f"got {text!r}")
     return host.strip("[]") or "127.0.0.1", number
+
+
+def add_room_set_options(p: argparse.ArgumentParser, default_rooms: str, seeds: int,
+                         out: str, written: str) -> None:
+    """The options of a bench over a set of rooms: ROOM…, --seeds, --out, --json.
+    ``default_rooms`` names what runs without ROOM; ``written`` the files --out receives."""
+    p.add_argument("rooms", nargs="*", metavar="ROOM",
+                   help="bundled scenario names, YAML files or folders of them "
+                        f"(default: {default_rooms})")
+    p.add_argument("--seeds", type=seed_count, default=seeds, metavar="N",
+                   help=f"seeds per room: the scenario's seed, +1, … (1 … {MAX_SEEDS}; "
+                        f"default: {seeds})")
+    p.add_argument("--out", type=out_path, default=out, metavar="DIR",
+                   help=f"where {written} (default: {out})")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")

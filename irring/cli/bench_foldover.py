@@ -7,12 +7,11 @@ import json
 import sys
 
 from .. import errors
-from ..core import MAX_SEEDS
 from ..outputs import OutputSet, check_out
 from ..studies.foldover import (MAX_ERROR_M, OUTSIDE_CELLS, OUTSIDE_MARGIN_M, measure,
                                 outside_tolerance_m)
 from ..studies.rooms import resolve_rooms
-from ._common import describe, out_path, seed_count
+from ._common import add_room_set_options, describe
 
 DEFAULT_ROOMS = ("foldover_corner",)
 
@@ -51,15 +50,7 @@ def register(p: argparse.ArgumentParser) -> None:
              "`foldover` effect) and check issue 13's fold-over targets: no valid reading "
              f"more than {MAX_ERROR_M * 1e3:.0f} mm from its true hit, no wall drawn outside "
              "the room, nothing non-finite.", EPILOG)
-    p.add_argument("rooms", nargs="*", metavar="ROOM",
-                   help="bundled scenario names, YAML files or folders of them "
-                        f"(default: {', '.join(DEFAULT_ROOMS)})")
-    p.add_argument("--seeds", type=seed_count, default=3, metavar="N",
-                   help=f"seeds per room: the scenario's seed, +1, … (1 … {MAX_SEEDS}; "
-                        "default: 3)")
-    p.add_argument("--out", type=out_path, default="out/bench_foldover", metavar="DIR",
-                   help="where foldover.json goes (default: out/bench_foldover)")
-    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    add_room_set_options(p, ", ".join(DEFAULT_ROOMS), 3, "out/bench_foldover", "foldover.json goes")
     p.set_defaults(func=run)
 
 

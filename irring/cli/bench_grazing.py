@@ -7,12 +7,11 @@ import json
 import sys
 
 from .. import errors
-from ..core import MAX_SEEDS
 from ..outputs import OutputSet, check_out
 from ..studies.grazing import (BIN_DEG, GAIN_BAND_DEG, GAIN_TARGET, MAX_INCIDENCE_DEG,
                                RMS_TARGET_M, measure)
 from ..studies.rooms import resolve_rooms
-from ._common import describe, out_path, seed_count
+from ._common import add_room_set_options, describe
 
 DEFAULT_ROOMS = ("grazing_corridor",)
 _LO, _HI = GAIN_BAND_DEG
@@ -48,15 +47,7 @@ def register(p: argparse.ArgumentParser) -> None:
              f"points' RMS error per {BIN_DEG}° of true incidence beside θ = 0's, against "
              f"issue 13's targets: ≤ {RMS_TARGET_M * 1e3:.0f} mm up to {MAX_INCIDENCE_DEG}°, "
              f"≥ {GAIN_TARGET:g}× better than θ = 0 over {_LO}–{_HI}°.", EPILOG)
-    p.add_argument("rooms", nargs="*", metavar="ROOM",
-                   help="bundled scenario names, YAML files or folders of them "
-                        f"(default: {', '.join(DEFAULT_ROOMS)})")
-    p.add_argument("--seeds", type=seed_count, default=2, metavar="N",
-                   help=f"seeds per room: the scenario's seed, +1, … (1 … {MAX_SEEDS}; "
-                        "default: 2)")
-    p.add_argument("--out", type=out_path, default="out/bench_grazing", metavar="DIR",
-                   help="where grazing.json goes (default: out/bench_grazing)")
-    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    add_room_set_options(p, ", ".join(DEFAULT_ROOMS), 2, "out/bench_grazing", "grazing.json goes")
     p.set_defaults(func=run)
 
 

@@ -9,8 +9,7 @@ import sys
 
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, TARGETS, measure, resolve_rooms
-from ..core import MAX_SEEDS
-from ._common import describe, out_path, seed_count
+from ._common import add_room_set_options, describe
 
 EPILOG = f"""\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have
@@ -49,15 +48,7 @@ def register(p: argparse.ArgumentParser) -> None:
              "and print per room occupied F1, precision, recall, free accuracy, "
              "coverage, shadow and the end points' RMS error beside θ = 0's.",
              EPILOG)
-    p.add_argument("rooms", nargs="*", metavar="ROOM",
-                   help="bundled scenario names, YAML files or folders of them "
-                        "(default: the room set and the T-rooms)")
-    p.add_argument("--seeds", type=seed_count, default=1, metavar="N",
-                   help=f"seeds per room: the scenario's seed, +1, … (1 … {MAX_SEEDS}; "
-                        f"default: 1)")
-    p.add_argument("--out", type=out_path, default="out/bench_rooms", metavar="DIR",
-                   help="where rooms.json and rooms.csv go (default: out/bench_rooms)")
-    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    add_room_set_options(p, "the room set and the T-rooms", 1, "out/bench_rooms", "rooms.json and rooms.csv go")
     p.set_defaults(func=run)
 
 
