@@ -571,6 +571,28 @@ def test_odometry_drift_has_the_stated_sigma_per_metre():
                                [[0, 0, 0], [0.5, 0, 0], [1, 0, 0]], atol=1e-12)
 
 
+def test_exact_odometry_turns_in_place_where_the_true_pose_does():
+    """A turn in place takes no time: the true pose jumps at its waypoint. Odometry sampled
+    every 5 mm ramped the 69° turn over the last sample gap before it, so readings there
+    were drawn up to 69° off with exact odometry (an ideal run mapped worse than a noisy one)."""
+    path = D.Path(xy_m=np.array([[0.2, 0.1], [1.3, 0.4], [1.3, 0.4], [1.9, -0.35]]),
+                  yaw_rad=np.array([0.3, 0.3, -0.9, -0.9]),
+                  arc_m=np.concatenate([[0.0], np.cumsum([np.hypot(1.1, 0.3), 0.0,
+                                                          np.hypot(0.6, 0.75)])]),
+                  speed_m_s=0.06)
+    t_turn = path.arc_m[1] / path.speed_m_s
+    t = np.concatenate([np.linspace(0.0, path.duration_s, 2001),
+                        t_turn + np.array([-0.2, -0.05, -1e-6, 0.0, 1e-6, 0.05])])
+    exact = D.Odometry.along(path, 0.0, 0.0, np.random.default_rng(0))
+    np.testing.assert_allclose(exact.pose_at(t), path.pose_at(t), atol=1e-9)
+    before, after = exact.pose_at(np.array([t_turn - 1e-6, t_turn]))
+    assert before[2] == pytest.approx(0.3) and after[2] == pytest.approx(-0.9)
+    # with noise the turn is still a jump: the yaw 1 µs before it is the pre-turn heading
+    noisy = D.Odometry.along(path, 0.01, 0.01, np.random.default_rng(3))
+    yaw = noisy.pose_at(np.array([t_turn - 1e-6, t_turn]))[:, 2]
+    assert yaw[0] - yaw[1] == pytest.approx(1.2, abs=0.02)
+
+
 def test_a_path_through_a_wall_is_an_error_naming_the_segment(t_room_raw):
     from irring.scenario import parse
 

@@ -574,13 +574,20 @@ class Path:
         return self.length_m / self.speed_m_s if self.speed_m_s > 0 and self.length_m > 0 else 0.0
 
     def pose_at_arc(self, s_m: np.ndarray) -> np.ndarray:
-        """(..., 3) poses at arc lengths ``s_m`` (...,)."""
+        """(..., 3) poses at arc lengths ``s_m`` (...,); a turn in place at s is done."""
+        return self._pose_on_segments(s_m, side="right")
+
+    def pose_before_arc(self, s_m: np.ndarray) -> np.ndarray:
+        """(..., 3) poses at arc lengths ``s_m`` (...,) before any turn in place there."""
+        return self._pose_on_segments(s_m, side="left")
+
+    def _pose_on_segments(self, s_m: np.ndarray, side: str) -> np.ndarray:
         s = np.clip(np.asarray(s_m, dtype=float), 0.0, self.length_m)
         if len(self.arc_m) == 1 or self.length_m == 0:
             last = np.array([*self.xy_m[-1], self.yaw_rad[-1]])
             return np.broadcast_to(last, s.shape + (3,)).copy()
-        # the last waypoint at a given arc (a turn in place jumps to its end yaw)
-        i = np.clip(np.searchsorted(self.arc_m, s, side="right") - 1, 0, len(self.arc_m) - 2)
+        # side "right": the last waypoint at a given arc (a turn in place jumps to its end yaw)
+        i = np.clip(np.searchsorted(self.arc_m, s, side=side) - 1, 0, len(self.arc_m) - 2)
         seg = self.arc_m[i + 1] - self.arc_m[i]
         u = np.where(seg > 0, (s - self.arc_m[i]) / np.where(seg > 0, seg, 1.0), 1.0)
         xy = self.xy_m[i] + (self.xy_m[i + 1] - self.xy_m[i]) * u[..., None]
@@ -635,6 +642,13 @@ class Odometry:
         n = max(2, int(math.ceil(path.length_m / _PATH_SAMPLE_M)) + 1)
         arc = np.unique(np.concatenate([np.linspace(0.0, path.length_m, n), path.arc_m]))
         true = path.pose_at_arc(arc)
+        # a turn in place jumps at its arc: a second sample there holds the pose before it,
+        # so odometry jumps where the true pose does instead of ramping over the last 5 mm
+        turns = np.unique(path.arc_m[1:][(np.diff(path.arc_m) == 0) & (path.arc_m[1:] > 0)])
+        if turns.size:
+            at = np.searchsorted(arc, turns)
+            arc = np.insert(arc, at, turns)
+            true = np.insert(true, at, path.pose_before_arc(turns), axis=0)
         if sigma_m == 0 and sigma_rad == 0:
             return cls(path=path, arc_m=arc, pose=true)
         d = np.diff(true, axis=0)
@@ -654,7 +668,11 @@ class Odometry:
     def pose_at(self, t_s: np.ndarray) -> np.ndarray:
         """(..., 3) odometry pose at times ``t_s``."""
         s = np.clip(np.asarray(t_s, dtype=float) * self.path.speed_m_s, 0.0, self.path.length_m)
-        return np.stack([np.interp(s, self.arc_m, self.pose[:, j]) for j in range(3)], axis=-1)
+        # the last sample at or before s (after a turn in place at s, as Path.pose_at_arc)
+        i = np.clip(np.searchsorted(self.arc_m, s, side="right") - 1, 0, len(self.arc_m) - 2)
+        gap = self.arc_m[i + 1] - self.arc_m[i]
+        u = np.where(gap > 0, (s - self.arc_m[i]) / np.where(gap > 0, gap, 1.0), 1.0)
+        return self.pose[i] + (self.pose[i + 1] - self.pose[i]) * u[..., None]
 
 
 # --------------------------------------------------------------------------- per sweep
