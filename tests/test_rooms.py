@@ -288,3 +288,28 @@ def test_a_miss_of_a_scene_with_more_than_the_default_effects_names_them(tmp_pat
     rows = {r["name"]: r for r in json.loads((tmp_path / "rooms.json").read_text())}
     assert rows["t_room_moving"]["beyond_target_effects"] == ["belt_dynamics", "timing", "motion"]
     assert rows["t_room"]["beyond_target_effects"] == [] and rows["t_room"]["misses"] == {}
+
+
+def test_bench_rooms_exits_6_when_a_room_misses_a_target_or_the_ideal_is_worse(
+        tmp_path, monkeypatch, capsys):
+    from irring import errors
+    from irring.cli import bench_rooms
+
+    (tmp_path / "tiny_post.yaml").write_text(SMALL_ROOM)
+    argv = ["bench", "rooms", str(tmp_path / "tiny_post.yaml"), "--out", str(tmp_path / "o")]
+    monkeypatch.setitem(rooms.TARGETS, "occupied_f1", 1.01)     # no map reaches it
+    assert main(argv) == errors.TARGET_MISSED == 6
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("tiny_post"))
+    assert "occupied_f1 0." in line
+    monkeypatch.setitem(rooms.TARGETS, "occupied_f1", 0.0)
+    assert main(argv) == 0
+    real = bench_rooms.measure
+
+    def ideal_worse(*a, **k):
+        rows = real(*a, **k)
+        rows[0]["ideal_worse"] = ["occupied_recall"]
+        return rows
+
+    monkeypatch.setattr(bench_rooms, "measure", ideal_worse)
+    assert main(argv) == 6
+    assert "ideal< occupied_recall" in capsys.readouterr().out

@@ -7,6 +7,7 @@ import csv
 import json
 import sys
 
+from .. import errors
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, TARGETS, measure, resolve_rooms
 from ._common import add_room_set_options, describe
@@ -34,6 +35,10 @@ kept):
 Figures are means over --seeds seeds (the first is the scenario's own seed + 0).
 A room file that cannot be loaded or run is listed with its error and the others are scored;
 the command then ends with that error's exit status (1 for a bad file).
+
+exit status: 0 when every room was scored and holds its targets; {errors.TARGET_MISSED} when a room
+misses a target set for its effects or the ideal sensor is worse somewhere (the table's
+misses column says which); a misses entry marked "(with …)" is shown, not counted.
 
 examples:
   irring bench rooms                          the room set (scenarios/) and the T-rooms
@@ -91,7 +96,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"irring bench rooms: error: {len(failed)} of {len(rows)} room(s) not scored; "
               f"{first['error']}", file=sys.stderr)
         return first["status"]
-    return 0
+    return errors.TARGET_MISSED if any(_misses_target(r) for r in rows) else errors.OK
+
+
+def _misses_target(row: dict) -> bool:
+    """A scored room below a target its effects were set for, or with the ideal sensor worse."""
+    return bool(row["ideal_worse"]) or bool(row["misses"] and not row["beyond_target_effects"])
 
 
 def _print_table(rows: list[dict], seeds: int, out) -> None:
