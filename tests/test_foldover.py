@@ -372,7 +372,7 @@ def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
 
 
 # The reverse at the same corner: the far wall's first reading past the corner, taken in by
-# the steep wall's line and read at its 67° (its own profile, straight: 25°), 135 mm short.
+# the steep wall's line and read at its 67° (true incidence 19-25°), 135-142 mm short.
 STEEP_CORNER_A21_TURNED = STEEP_CORNER + """
 name: steep_corner_a21_turned
 robot: {poses: [{x_mm: 1040, y_mm: 176, yaw_deg: -23}, {x_mm: 1110, y_mm: 176, yaw_deg: -9}]}
@@ -383,7 +383,9 @@ sensor: {model: gp2y0a21}
 def test_a_line_member_its_own_profile_reads_100_mm_elsewhere_is_not_placed(monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
 
-    sc, sweeps, cal = simulated(STEEP_CORNER_A21_TURNED, seed=2)
+    # seed 8 (seed 2 showed it until the own-trace rule made the reading's neighbours
+    # ambiguous: test_a_far_end_point_needs_the_reading_s_own_far_trace)
+    sc, sweeps, cal = simulated(STEEP_CORNER_A21_TURNED, seed=8)
     now = [estimate(sw, cal) for sw in sweeps]
     with monkeypatch.context() as m:
         m.setattr(est, "_disowned_by_own_profile", lambda p, *args: p)
@@ -453,22 +455,102 @@ effects: [incidence, noise, quantization, foldover]
 
 
 def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
-    """NEAR_A21, seed 8112: a beam met a wall at 74° past the drop-out; the judging pass,
-    pooling its counts (330, below the no-return level) with its neighbours', found it
+    """NEAR_A21, seed 8104: a beam met a wall at 74° past the drop-out; the judging pass,
+    pooling its counts (335, below the no-return level) with its neighbours', found it
     behind that wall and silent. The second pass, a neighbour held out, read it valid on
-    another line at 69°: 505 mm for 632 mm. It stays NO_RETURN."""
+    another line at 68°: 528 mm for 632 mm. It stays NO_RETURN. (Seed 8112 showed it until
+    the own-trace rule held out other neighbours: test_a_far_end_point_needs_…)"""
     import irring.estimation.estimate as fast
     scene = loads(NEAR_A21, source="<test>")
 
     def off():
-        run = pipeline.run(scene, seed=8112, progress=False)
+        run = pipeline.run(scene, seed=8104, progress=False)
         n = 0
         for sw, p in zip(run.sweeps, run.points):
             e = np.hypot(p.x - sw.truth.hit_point[..., 0], p.y - sw.truth.hit_point[..., 1])
             n += int((p.valid & (e > 0.1)).sum())
         return n, sum(int(p.valid.sum()) for p in run.points)
-    assert off() == (0, 471)
+    assert off() == (0, 469)
     keep = fast._unplaced
     monkeypatch.setattr(fast, "_unplaced", lambda p, gone, why=Reason.INCIDENCE_UNKNOWN:
                         p if why == Reason.NO_RETURN else keep(p, gone, why))
-    assert off() == (1, 472)
+    assert off() == (1, 470)
+
+
+# A box as deep as its face's far-branch distance fills a corner (a stepped corner): the ring
+# 176 mm from its face, its face 28-36 mm from the sensors facing it. Read far (266-360 mm)
+# those readings land on the right wall's line, which the box hides up to 220 mm: where the
+# wall comes into view above the box (past its last seen member) and across its seen stretch.
+STEPPED_CORNER = """
+name: fold_stepped_corner
+room: {outline_mm: [[0, 0], [1500, 0], [1500, 1200], [0, 1200]]}
+obstacles:
+  - {type: box, center_mm: [1350, 110], size_mm: [300, 220]}
+robot: {poses: [{x_mm: 1025, y_mm: 171, yaw_deg: -17}]}
+sensor: {model: gp2d12}
+effects: [incidence, noise, quantization, foldover]
+"""
+# A GP2Y0A21 above a pilaster's top face (280 x 80 mm), 174 mm from it
+PILASTER_TOP_A21 = """
+name: fold_pilaster_top_a21
+room: {outline_mm: [[0, 0], [1500, 0], [1500, 1200], [0, 1200]]}
+obstacles:
+  - {type: box, center_mm: [800, 40], size_mm: [280, 80]}
+robot: {poses: [{x_mm: 800, y_mm: 254, yaw_deg: 7}]}
+sensor: {model: gp2y0a21}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def _long_and_valid(points, sweeps):
+    n = 0
+    for sw, p in zip(sweeps, points):
+        hit = sw.truth.hit_point
+        n += int(np.sum(np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[p.valid] > 0.100))
+    return n, sum(int(p.valid.sum()) for p in points)
+
+
+@pytest.mark.parametrize("room, seed, before, now", [
+    (STEPPED_CORNER, 7021, (42, 74), (0, 23)), (PILASTER_TOP_A21, 7108, (9, 249), (0, 236))],
+    ids=["stepped-corner", "a21-pilaster-top"])
+def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, now,
+                                                          monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc, sweeps, cal = simulated(room, seed=seed)
+    points = [estimate(sw, cal) for sw in sweeps]
+    assert _long_and_valid(points, sweeps) == now
+    for sw, p in zip(sweeps, points):
+        slow = estimate_numpy.estimate_detail(sw, cal).points
+        np.testing.assert_array_equal(slow.reason, p.reason)
+        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    with monkeypatch.context() as m:
+        m.setattr(est, "_own_trace_agrees", lambda between, *a: np.ones(between.shape, bool))
+        assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == before
+    if room is STEPPED_CORNER:
+        # past the last seen member alone: the readings landing on the wall's seen stretch,
+        # their own line across it at 25-47°, stay valid
+        monkeypatch.setattr(est, "_FOLD_OWN_COS", -1.0)
+        assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (12, 35)
+
+
+def test_seen_there_tells_between_members_from_past_the_last_one():
+    from irring.estimation.estimate import _own_trace_agrees, _seen_there
+
+    # line 0: members at -0.30, -0.12, -0.08 m along it; line 1: one member at 0.21 m
+    mcol = np.array([0, 0, 0, 1])
+    m_along = np.array([-0.30, -0.12, -0.08, 0.21])
+    along = np.array([[-0.10, 0.0], [-0.05, 0.0], [-0.19, 0.0], [0.0, 0.17]])
+    pairs = np.array([[True, False], [True, False], [True, False], [False, True]])
+    seen, between = _seen_there(pairs, along, mcol, m_along)
+    assert seen.tolist() == [[True, True], [True, True], [False, True], [True, True]]
+    assert between.tolist() == [[True, True], [False, True], [False, True], [True, False]]
+    # lines 0 and 1 meet at 35°; line 1 has 3 certainly far members, line 0 none
+    e = np.array([[1.0, 0.0], [math.cos(math.radians(35)), math.sin(math.radians(35))]])
+    certain = np.array([0, 3])
+    between = np.array([[True, False], [True, True], [False, True], [True, True]])
+    agrees = _own_trace_agrees(between, np.array([1, 0, 0, -1]), certain, e)
+    # own line 1 is anchored: anywhere, past the last member too; own line 0 is not: only
+    # between the members of a line it runs along (itself, not line 1 35° off) and no
+    # further; a reading on no line of its own: nowhere
+    assert agrees.tolist() == [[True, True], [True, False], [False, False], [False, False]]

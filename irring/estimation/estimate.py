@@ -1969,6 +1969,9 @@ _FOLD_BLOCK_M = 0.25   # a known wall blocks a beam this far past its readings' 
 _FOLD_ON_M = 0.10      # … and a reading lies on it this far past them
 _FOLD_ANCHOR = 2       # a line decides "far" once this many of its members are certainly far
 _FOLD_SEEN_M = 0.05    # … where a member of it lies this near the far end point along it
+_FOLD_OWN_COS = math.cos(math.radians(20.0))  # … and, unless its own line is anchored,
+#                        its own line runs this near its direction, the end point between
+#                        the line's members (a near face's far curve crossed it at 25-47°)
 # the readings whose branch is judged: every one that returned something. A reading the far
 # branch puts out of range or at an unknown θ may be on the near branch all the same, and the
 # second pass (its neighbours held out) could otherwise read it valid on the far one
@@ -2266,9 +2269,10 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         trusted = np.bincount(pairs // n_sensors, minlength=use.size) >= 2
         line_sensor = found.start[use] % n_sensors
         # certainly far members: their near end point would lie inside the housing
-        anchored = np.bincount(mcol[housing.reshape(-1)[at]],
-                               minlength=use.size) >= _FOLD_ANCHOR
+        certain = np.bincount(mcol[housing.reshape(-1)[at]], minlength=use.size)
+        anchored = certain >= _FOLD_ANCHOR
     else:
+        certain = np.zeros(1, int)
         anchored = np.zeros(0, bool)
         at = mcol = np.zeros(0, int)
         m_along = np.zeros(0)
@@ -2311,12 +2315,16 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
                        np.abs(t - d_far) / tol_far, np.inf)
     # … and only where the line is seen: behind a pilaster or a box the wall's line runs on
     # unseen, and a near reading of the face in front, read far, lands on it there
-    fit_far[~_seen_there(fit_far <= 1.0, along, mcol, m_along)] = np.inf
+    seen_there, between = _seen_there(fit_far <= 1.0, along, mcol, m_along)
+    # … and only where the reading's own far trace agrees (a near face read far can land
+    # on the wall behind it)
+    ocol = (np.where(own >= 0, col[np.maximum(own, 0)], -1) if use.size
+            else np.full(idx.size, -1))
+    fit_far[~seen_there | ~_own_trace_agrees(between, ocol, certain, e)] = np.inf
     # Two sensors agreeing on a line is no proof it is seen far: two neighbours close to one
     # surface both read it far, and their far end points (curves) can fit one line behind it.
     # A line decides "far" only once it is anchored: _FOLD_ANCHOR members certainly far (near
     # end point inside the housing, or decided far on an anchored line), spread line to line.
-    ocol = np.where(own >= 0, col[np.maximum(own, 0)], -1) if use.size else own
     while True:
         far_fit = np.where(anchored[None, :], fit_far, np.inf)
         is_far = can_far & (far_fit <= 1.0).any(axis=1)
@@ -2343,15 +2351,36 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     return near, far, out[0], out[1], out[2], use[trusted]
 
 
+def _own_trace_agrees(between: np.ndarray, ocol: np.ndarray, certain: np.ndarray,
+                      e: np.ndarray) -> np.ndarray:
+    """(A, L): whether a reading's far end point on a line may decide "far" as far as its
+    own first-pass line is concerned: that line (``ocol``, position among the lines of
+    direction ``e``; −1 none) has ``_FOLD_ANCHOR`` members ``certain``ly far, or the end
+    point lies ``between`` the line's members (:func:`_seen_there`) and its own line runs
+    within 20° of it (``_FOLD_OWN_COS``). A face 30 mm in front read far lands on the wall
+    behind a box as deep as its far-branch distance, where the wall comes into view past
+    the box (0-50 mm past its last member) or across its seen stretch, while the face's own
+    far curve runs across the wall and holds no certainly far member.
+    docs/foldover.md, "A near face read far onto the wall behind a box"."""
+    has = ocol >= 0
+    own_certain = has & (certain[np.maximum(ocol, 0)] >= _FOLD_ANCHOR)
+    along = np.zeros(between.shape, bool)
+    if e.shape[0]:
+        along = has[:, None] & (np.abs(e[np.maximum(ocol, 0)] @ e.T) >= _FOLD_OWN_COS)
+    return own_certain[:, None] | (between & along)
+
+
 def _seen_there(pairs: np.ndarray, along: np.ndarray, mcol: np.ndarray,
-                m_along: np.ndarray) -> np.ndarray:
-    """(A, L): for the (reading, line) ``pairs``, whether the line has a valid member (line
-    ``mcol``, at ``m_along`` along it: :func:`member_spans`) within ``_FOLD_SEEN_M`` of the
-    crossing ``along`` it (True elsewhere)."""
+                m_along: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(seen, between), each (A, L): for the (reading, line) ``pairs``, whether the line has
+    a valid member (line ``mcol``, at ``m_along`` along it: :func:`member_spans`) within
+    ``_FOLD_SEEN_M`` of the crossing ``along`` it, and whether it has one that near on
+    either side of it (both True elsewhere)."""
     out = np.ones(pairs.shape, bool)
+    both = np.ones(pairs.shape, bool)
     a_idx, l_idx = pairs.nonzero()
     if not a_idx.size:
-        return out
+        return out, both
     # members sorted by line, then along it: a query's neighbours are found by bisection
     span = 2.0 * (float(np.max(np.abs(m_along))) + 1.0)
     keys = np.sort(mcol * span + m_along)
@@ -2359,8 +2388,13 @@ def _seen_there(pairs: np.ndarray, along: np.ndarray, mcol: np.ndarray,
     i = np.searchsorted(keys, q)
     left = keys[np.clip(i - 1, 0, keys.size - 1)]
     right = keys[np.clip(i, 0, keys.size - 1)]
+    # keys of other lines lie more than ``span`` away; at the ends searchsorted clips
+    below, above = np.abs(q - left) <= _FOLD_SEEN_M, np.abs(q - right) <= _FOLD_SEEN_M
+    below &= left <= q
+    above &= right >= q
     out[a_idx, l_idx] = np.minimum(np.abs(q - left), np.abs(q - right)) <= _FOLD_SEEN_M
-    return out
+    both[a_idx, l_idx] = below & above
+    return out, both
 
 
 def clip_at_corners(c, e, lo, hi, block_m: float = _FOLD_BLOCK_M):
