@@ -55,7 +55,7 @@ def assert_agree(sweep, cal, **kw):
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2 ** 20),
-       room=st.sampled_from(["box", "wedge", "obtuse", "posts", "crate"]),
+       room=st.sampled_from(["box", "wedge", "obtuse", "posts", "crate", "table"]),
        strength=st.sampled_from([0.0, 0.25, 1.0]),
        noise=st.sampled_from([0.0, 0.5, 3.0]),
        keep=st.floats(0.3, 1.0),
@@ -84,6 +84,10 @@ def test_kernels_agree_with_the_numpy_oracle(seed, room, strength, noise, keep, 
     elif room == "posts":
         circles = [((0.5 * x1, 0.6 * y1), rng.uniform(0.005, 0.04)),
                    ((0.6 * x0, 0.4 * y0), rng.uniform(0.005, 0.04))]
+    elif room == "table":  # a round table 240–600 mm across: arcs cut into lines (round_runs)
+        x1 = rng.uniform(0.8, 1.1)
+        walls = rectangle(x0, y0, x1, y1)
+        circles = [((0.6 * x1, 0.15 * y1), rng.uniform(0.12, 0.3))]
     cal = stand_in_calibration(strength=strength, noise_counts=noise)
     sweep, _, _ = make_sweep(cal, walls=walls, circles=circles, noise_counts=noise, seed=seed,
                              pose=(0.0, 0.0, rng.uniform(-3, 3)), quantize=noise > 0)

@@ -544,6 +544,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label, index, counts, steps, cal, profiler,
         doubt_far=snap and cal.folds and not read_to_own_range(cal, points.max_range_m),
         short_far=snap)
+    points, label = round_runs(points, label, index, counts, steps, cal, grouping.alpha,
+                               grouping.cx, grouping.cy, profiler)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -1222,7 +1224,8 @@ def _arc_misfit(geo, apex: np.ndarray, radius: np.ndarray, cal: Calibration):
     return np.where(mask[:, None, :], each, 0.0).sum(axis=-1), th, d, each
 
 
-def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration):
+def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration,
+                  radii: np.ndarray = ARC_RADII_M):
     """θ of readings on no line from one circle per arc (a sensor's readings of a round
     thing), numpy; shared by both estimators.
 
@@ -1230,19 +1233,23 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration):
     at least ``ARC_MIN`` of them on one polyline, steps at most ``ARC_GAP_STEPS`` apart. It
     is tried as part of a circle whose nearest point lies on one of its readings' beams at
     that reading's θ = 0 distance (the apex, met square on; within ``ARC_APEX_STEPS`` of its
-    nearest reading) with a radius of ``ARC_RADII_M`` (refined by ``ARC_REFINE``): every
+    nearest reading) with a radius of ``radii`` (refined by ``ARC_REFINE``): every
     reading is read at the θ at which its beam meets that circle and scored by how far that
     distance lies from the circle (in its noise σ, squared, at most ``ARC_MISS``). The best
     circle is kept where its apex has ``ARC_SIDE`` readings either side (a whole arc seen)
     and its mean misfit is below ``ARC_MISFIT``; a reading takes it where its own misfit is
     at most ``ARC_ON``. Returns θ (rad), d (m), σ (m: noise at θ plus the spread of d over
-    θ ± ``ARC_DOUBT_RAD``) and ``good``, each (len(pos),). Why: docs/estimator.md, "Round
+    θ ± ``ARC_DOUBT_RAD``), ``good`` and each reading's misfit at its arc's best circle
+    (``ARC_MISS`` where it is on none), each (len(pos),), and that circle's centre x, y and
+    radius (3, len(pos)). Why: docs/estimator.md, "Round
     things seen far away"."""
     m = pos.size
     theta, dist, sigma = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
     good = np.zeros(m, dtype=bool)
+    misfit = np.full(m, ARC_MISS)
+    circle = np.full((3, m), np.nan)
     if m < ARC_MIN:
-        return theta, dist, sigma, good
+        return theta, dist, sigma, good, misfit, circle
     # an arc: consecutive readings of one polyline (its ids grow along the scan order, so
     # they are consecutive in ``pos``, ordered by step), broken where steps are missing (a
     # polyline runs on over silent beams: two posts 39° apart made one)
@@ -1254,7 +1261,7 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration):
     rank = np.arange(m) - np.repeat(first, size)
     keep = size[group] >= ARC_MIN
     if not keep.any():
-        return theta, dist, sigma, good
+        return theta, dist, sigma, good, misfit, circle
     big = (size >= ARC_MIN).nonzero()[0]
     row = np.full(ids.size, -1)
     row[big] = np.arange(big.size)
@@ -1282,14 +1289,14 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration):
     near = np.argmin(d0 + left + right, axis=1)
     span = np.arange(-ARC_APEX_STEPS, ARC_APEX_STEPS + 1)
     apex = np.clip(near[:, None] + span[None, :], 0, (n_in - 1)[:, None])
-    k_r = ARC_RADII_M.size
+    k_r = radii.size
     apex1 = np.repeat(apex, k_r, axis=1)
-    radius1 = np.tile(ARC_RADII_M, (n_c, span.size))
+    radius1 = np.tile(radii, (n_c, span.size))
     cost1 = _arc_misfit(geo, apex1, radius1, cal)[0]
     best1 = np.argmin(cost1, axis=1)
     # refine: the best apex and its neighbours, radii between the grid's
     a1 = apex1[np.arange(n_c), best1]
-    grid_step = math.log(ARC_RADII_M[1] / ARC_RADII_M[0])
+    grid_step = math.log(radii[1] / radii[0])
     apex2 = np.clip(a1[:, None] + np.repeat([-1, 0, 1], ARC_REFINE.size)[None, :], 0,
                     (n_in - 1)[:, None])
     radius2 = radius1[np.arange(n_c), best1][:, None] * np.exp(
@@ -1311,7 +1318,262 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration):
     theta[at], dist[at], sigma[at] = th_best[c, j], d_best[c, j], sig[c, j]
     good[at] = (fits[c] & on[c, j] & np.isfinite(dist[at]) & (dist[at] >= cal.min_range_m)
                 & np.isfinite(sigma[at]))
-    return theta, dist, sigma, good
+    misfit[at] = mis2[np.arange(n_c), best][c, j]
+    # the circle: its apex on the apex reading's beam at that reading's θ = 0 distance
+    ox, oy, ex, ey, d_apex = (v[np.arange(n_c), a] for v in geo[:5])
+    rad = radius2[np.arange(n_c), best]
+    circle[:, at] = np.stack([ox + (d_apex + rad) * ex, oy + (d_apex + rad) * ey, rad])[:, c]
+    return theta, dist, sigma, good, misfit, circle
+
+
+ROUND_RADII_M = np.geomspace(0.1, 1.2, 12)  # a sensor's run cut into lines is tried as an arc
+ROUND_RUN_MIN = 8        # … where it holds this many valid readings, steps ARC_GAP_STEPS apart
+ROUND_JUMP_M = 0.10      # … θ = 0 ranges this near (a jump: another surface) …
+ROUND_BULGE_M = 0.01     # … whose end points bulge this far towards it on average …
+ROUND_BEHIND = 0.2       # … at most this share of them as far behind the chord of its ends
+ROUND_BETTER = 0.5       # an arc replaces the lines where it misfits at most this share of one
+ROUND_LINE_ITERATIONS = 4  # line through the run's readings (read as Table II would, this often)
+
+
+def _kasa_radii(x: np.ndarray, y: np.ndarray, group: np.ndarray, n: int) -> np.ndarray:
+    """Radius (m) of the least-squares (Kåsa) circle through each group's points (n,);
+    infinite for collinear points."""
+    cnt = np.bincount(group, minlength=n).astype(float)
+    u = x - (np.bincount(group, x, n) / cnt)[group]
+    v = y - (np.bincount(group, y, n) / cnt)[group]
+    z = u * u + v * v
+    suu, suv, svv, suz, svz, sz = (np.bincount(group, w, n)
+                                   for w in (u * u, u * v, v * v, u * z, v * z, z))
+    # centred: Σu = Σv = 0, so the centre solves a 2×2 system
+    det = suu * svv - suv * suv
+    ok = det > 1e-12 * (suu + svv) ** 2
+    det = np.where(ok, det, 1.0)
+    a = 0.5 * (svv * suz - suv * svz) / det
+    b = 0.5 * (suu * svz - suv * suz) / det
+    return np.where(ok, np.sqrt(a * a + b * b + sz / cnt), np.inf)
+
+
+def _one_line_misfit(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
+                     cal: Calibration) -> np.ndarray:
+    """Each reading's misfit (as :func:`_arc_misfit` scores it) when its group's readings
+    (``pr`` positions ``pos``, groups ``group`` < ``n``) are read as one straight line: Table
+    II's iteration on one total-least-squares line per group, ``ROUND_LINE_ITERATIONS``
+    times from θ = 0."""
+    ox, oy, h = pr.ox[pos], pr.oy[pos], pr.heading[pos]
+    ex, ey = np.cos(h), np.sin(h)
+    log_s, d = np.log(pr.s[pos]), pr.d0[pos]
+    _, b0 = cal.log_ab(0.0)
+    noise = np.maximum(np.abs(b0) * d * pr.sig_s[pos], SIGMA_FLOOR_M)
+    cnt = np.bincount(group, minlength=n).astype(float)
+    for _ in range(ROUND_LINE_ITERATIONS):
+        x, y = ox + d * ex, oy + d * ey
+        mx, my = np.bincount(group, x, n) / cnt, np.bincount(group, y, n) / cnt
+        u, v = x - mx[group], y - my[group]
+        alpha = 0.5 * np.arctan2(2.0 * np.bincount(group, u * v, n),
+                                 np.bincount(group, u * u - v * v, n))
+        nx, ny = -np.sin(alpha)[group], np.cos(alpha)[group]
+        across = nx * ex + ny * ey
+        t = (nx * (mx[group] - ox) + ny * (my[group] - oy)) / np.where(across == 0, 1.0, across)
+        th = np.arccos(np.minimum(np.abs(across), 1.0))
+        meets = (across != 0) & (t > 0) & (th <= cal.max_incidence_rad)
+        la, b = cal.log_ab(np.minimum(th, cal.max_incidence_rad))
+        d = np.exp(la + b * log_s)
+    z = (d - t) / noise
+    return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
+
+
+def _pieces_misfit(pr: _Profile, pos: np.ndarray, lab: np.ndarray, alpha: np.ndarray,
+                   cx: np.ndarray, cy: np.ndarray, cal: Calibration) -> np.ndarray:
+    """Each reading's misfit (as :func:`_arc_misfit` scores it) on the line it is a member
+    of (``lab`` ≥ 0; lines by direction ``alpha`` and centroid ``cx``, ``cy``), read at the
+    θ its beam meets that line with; ``ARC_MISS`` for a reading on no line."""
+    on = lab >= 0
+    li = np.maximum(lab, 0)
+    h = pr.heading[pos]
+    ex, ey = np.cos(h), np.sin(h)
+    nx, ny = -np.sin(alpha[li]), np.cos(alpha[li])
+    across = nx * ex + ny * ey
+    t = ((nx * (cx[li] - pr.ox[pos]) + ny * (cy[li] - pr.oy[pos]))
+         / np.where(across == 0, 1.0, across))
+    th = np.arccos(np.minimum(np.abs(across), 1.0))
+    meets = on & (across != 0) & (t > 0) & (th <= cal.max_incidence_rad)
+    la, b = cal.log_ab(np.minimum(th, cal.max_incidence_rad))
+    d = np.exp(la + b * np.log(pr.s[pos]))
+    _, b0 = cal.log_ab(0.0)
+    z = (d - t) / np.maximum(np.abs(b0) * pr.d0[pos] * pr.sig_s[pos], SIGMA_FLOOR_M)
+    return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
+
+
+def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
+               steps: np.ndarray, cal: Calibration, line_alpha: np.ndarray,
+               line_cx: np.ndarray, line_cy: np.ndarray, profiler: Callable | None = None
+               ) -> tuple[Points, np.ndarray]:
+    """A sensor's run of readings that the line model cut into pieces (several lines, or
+    lines and readings on no line) re-read as one circle's arc where one fits, and the
+    sweep's other runs on such a circle with it; numpy, shared by both estimators.
+
+    A run: valid readings of one sensor, steps at most ``ARC_GAP_STEPS`` apart and θ = 0
+    ranges within ``ROUND_JUMP_M``. One of at least ``ROUND_RUN_MIN`` readings holding two
+    labels or more, whose end points bulge towards the sensor (``ROUND_BULGE_M``,
+    ``ROUND_BEHIND``: not a wall, not a concave corner) and whose θ = 0 end points' circle
+    is no smaller than the smallest of ``ROUND_RADII_M`` (not a post, not a box's corner), is
+    tried by :func:`arc_incidence` (radii ``ROUND_RADII_M``); its arc is kept where it
+    misfits at most ``ROUND_BETTER`` of one line through the run and, by BIC, no more than
+    the pieces do (:func:`_round_wins`). Any other run of ``ARC_MIN`` readings or more then tries the kept
+    circles (a sensor that saw one flank only: no apex of its own) and keeps the one it fits
+    best where it fits within ``ARC_MISFIT`` (the circle's evidence is another sensor's: its
+    own pieces, each a chord read at its θ, fit themselves as well). Each reading taken
+    (its own misfit at most ``ARC_ON``) leaves its line (label −1) at the arc's θ, d and σ
+    (noise at θ plus d over θ ± ``ARC_DOUBT_RAD``). ``line_alpha``, ``line_cx``,
+    ``line_cy``: the lines' directions and centroids. Returns the points and ``label``. Why: docs/estimator.md,
+    "Large round things"."""
+    flat_valid = points.valid.reshape(-1)
+    vi = index[flat_valid[index]]
+    if vi.size < ROUND_RUN_MIN:
+        return points, label
+    n_sensors = points.valid.shape[1]
+    lab = label.reshape(-1)[vi]
+    sensor = vi % n_sensors
+    step = np.asarray(steps).reshape(-1)[vi // n_sensors]
+    # ranges at θ = 0: a line's θ, wrong where it cuts an arc, makes jumps of its own
+    la0, b0 = cal._ab0
+    d0 = np.exp(la0 + b0 * np.log(np.asarray(counts, dtype=float).reshape(-1)[vi]))
+    cut = np.ones(vi.size, dtype=bool)
+    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
+               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
+    run = np.cumsum(cut) - 1
+    n_run = int(run[-1]) + 1
+    size = np.bincount(run, minlength=n_run)
+    change = np.zeros(vi.size)
+    change[1:] = ~cut[1:] & (lab[1:] != lab[:-1])
+    cand = (size >= ROUND_RUN_MIN) & (np.bincount(run, change, n_run) > 0)
+    if not cand.any():
+        return points, label
+    sel = cand[run].nonzero()[0]
+    gi = (np.cumsum(cand) - 1)[run[sel]]
+    n_c = int(np.count_nonzero(cand))
+    # the run's end points bulge towards the sensor off the chord between its ends, nowhere
+    # fall behind it (a concave corner), and not by noise alone (a wall cut in two)
+    at = vi[sel]
+    px, py = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
+    first = np.searchsorted(gi, np.arange(n_c))
+    last = np.append(first[1:], gi.size) - 1
+    ux, uy = px[last] - px[first], py[last] - py[first]
+    norm = np.hypot(ux, uy)
+    ux, uy = ux / np.maximum(norm, 1e-12), uy / np.maximum(norm, 1e-12)
+    o_first = vi[sel[first]]
+    side = np.sign((points.origin_x.reshape(-1)[o_first] - px[first]) * uy
+                   - (points.origin_y.reshape(-1)[o_first] - py[first]) * ux)
+    toward = ((px - px[first][gi]) * uy[gi] - (py - py[first][gi]) * ux[gi]) * side[gi]
+    n_in = np.bincount(gi, minlength=n_c)
+    keep = ((np.bincount(gi, toward, n_c) >= ROUND_BULGE_M * n_in)
+            & (np.bincount(gi, toward < -ROUND_BULGE_M, n_c) <= ROUND_BEHIND * n_in))
+    if not keep.any():
+        return points, label
+    # … and their circle at θ = 0 is a round thing's, not a post's or a box's corner (θ = 0
+    # reads an arc's flanks long: that circle is smooth, if smaller than the arc's)
+    hh = points.heading.reshape(-1)[at]
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
+    keep &= _kasa_radii(ox + d0[sel] * np.cos(hh), oy + d0[sel] * np.sin(hh), gi,
+                        n_c) >= ROUND_RADII_M[0]
+    if not keep.any():
+        return points, label
+    pos = sel[keep[gi]]
+    pr = (profiler or profiles_compiled)(points, vi, np.zeros(0, dtype=np.intp), counts,
+                                         steps, cal)
+    th, dist, sig, good, arc_mis, circle = arc_incidence(pr, pos, cal, ROUND_RADII_M)
+    if not good.any():
+        return points, label
+    gk = (np.cumsum(keep) - 1)[gi[keep[gi]]]
+    n_k = int(np.count_nonzero(keep))
+    # the simpler model wins where it explains the run as well: one line through it
+    line_cost = np.bincount(gk, _one_line_misfit(pr, pos, gk, n_k, cal), n_k)
+    wins = ((np.bincount(gk, arc_mis, n_k) <= ROUND_BETTER * line_cost)
+            & _round_wins(pr, pos, lab[pos], gk, n_k, arc_mis, 3, line_alpha, line_cx,
+                          line_cy, cal))
+    good &= wins[gk]
+    if not good.any():
+        return points, label
+    # the other runs on a kept circle: one per run kept, the readings on it taken
+    taken = np.zeros(vi.size, dtype=bool)
+    taken[pos[good]] = True
+    kept = good.nonzero()[0]
+    circ = circle[:, kept[np.unique(gk[kept], return_index=True)[1]]]
+    left = np.bincount(run, ~taken, n_run)
+    other = left >= ARC_MIN
+    if other.any():
+        o_pos = (other[run] & ~taken).nonzero()[0]
+        o_run = (np.cumsum(other) - 1)[run[o_pos]]
+        n_o = int(np.count_nonzero(other))
+        th_o, d_o, sig_o, mis_o = _on_circles(pr, o_pos, o_run, n_o, circ, cal)
+        n_in = np.bincount(o_run, minlength=n_o)
+        fits = np.bincount(o_run, mis_o, n_o) <= ARC_MISFIT * n_in
+        on = fits[o_run] & (mis_o <= ARC_ON) & np.isfinite(d_o) & (d_o >= cal.min_range_m)
+        pos = np.concatenate([pos[good], o_pos[on]])
+        th, dist, sig = (np.concatenate([v[good], w[on]])
+                         for v, w in ((th, th_o), (dist, d_o), (sig, sig_o)))
+    else:
+        pos, th, dist, sig = pos[good], th[good], dist[good], sig[good]
+    at = vi[pos]
+    hh = points.heading.reshape(-1)[at]
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    for f, v in (("d", dist), ("theta", th), ("sigma_m", sig),
+                 ("x", points.origin_x.reshape(-1)[at] + dist * np.cos(hh)),
+                 ("y", points.origin_y.reshape(-1)[at] + dist * np.sin(hh))):
+        out[f].reshape(-1)[at] = v
+    label = label.copy()
+    label.reshape(-1)[at] = -1
+    return points_with(points, **out), label
+
+
+def _round_wins(pr: _Profile, pos: np.ndarray, lab: np.ndarray, group: np.ndarray, n: int,
+                arc_mis: np.ndarray, arc_params: int, line_alpha: np.ndarray,
+                line_cx: np.ndarray, line_cy: np.ndarray, cal: Calibration) -> np.ndarray:
+    """Per group (n,): whether its line members (``lab`` ≥ 0) misfit their arc (``arc_mis``,
+    ``arc_params`` parameters of its own) no more than their lines by BIC, a line worth 3
+    (direction, offset and where it ends; the last piece 2): a box's convex corner seen by
+    one sensor is two lines within noise and a circle well outside it."""
+    mem = lab >= 0
+    lm, gm = lab[mem], group[mem]
+    piece_cost = np.bincount(gm, _pieces_misfit(pr, pos[mem], lm, line_alpha, line_cx,
+                                                line_cy, cal), n)
+    new_piece = np.ones(lm.size)
+    new_piece[1:] = (lm[1:] != lm[:-1]) | (gm[1:] != gm[:-1])
+    n_pieces = np.bincount(gm, new_piece, n)
+    log_n = np.log(np.maximum(np.bincount(gm, minlength=n), 2))
+    arc_cost = np.bincount(gm, arc_mis[mem], n)
+    return ((arc_cost + arc_params * log_n <= piece_cost + (3.0 * n_pieces - 1.0) * log_n)
+            | (n_pieces == 0))
+
+
+def _on_circles(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
+                circles: np.ndarray, cal: Calibration):
+    """Readings ``pr`` positions ``pos`` (groups ``group`` < ``n``) read on each of
+    ``circles`` (3, C: centre x, y, radius); each group takes the circle it misfits least.
+    Returns θ, d, σ (as :func:`arc_incidence` gives them) and misfit, each per reading."""
+    h = pr.heading[pos]
+    ex, ey = np.cos(h), np.sin(h)
+    t, th, meets = _meet_circle(circles[:2, :, None], circles[2][:, None], pr.ox[pos],
+                                pr.oy[pos], ex, ey)
+    meets &= th <= cal.max_incidence_rad                      # (C, J)
+    s = pr.s[pos]
+    log_s = np.log(s)
+    la, b = cal.log_ab(th)
+    d = np.exp(la + b * log_s)
+    _, b0 = cal.log_ab(0.0)
+    noise = np.maximum(np.abs(b0) * pr.d0[pos] * pr.sig_s[pos], SIGMA_FLOOR_M)
+    z = (d - t) / noise
+    mis = np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
+    cost = np.stack([np.bincount(group, m, n) for m in mis])  # (C, n)
+    best = np.argmin(cost, axis=0)[group]
+    j = np.arange(pos.size)
+    th_b, d_b, mis_b = th[best, j], d[best, j], mis[best, j]
+    lo = cal.distance(s, np.maximum(th_b - ARC_DOUBT_RAD, 0.0))
+    hi = cal.distance(s, np.minimum(th_b + ARC_DOUBT_RAD, cal.max_incidence_rad))
+    _, b_th = cal.log_ab(th_b)
+    sig = np.hypot(np.maximum(np.abs(b_th) * d_b * pr.sig_s[pos], SIGMA_FLOOR_M),
+                   0.5 * np.abs(lo - hi))
+    return th_b, d_b, sig, mis_b
 
 
 POST_RADII_M = np.geomspace(0.01, 0.07, 13)  # a far post is tried as a circle of these radii
@@ -1665,7 +1927,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     arc = np.zeros(0, dtype=np.intp)
     if convex.any() and not still:
         on_arc = np.isin(pr.chain[off], np.unique(pr.chain[off[convex]]))
-        th_a, d_a, sig_a, fit = arc_incidence(pr, off[on_arc], cal)
+        th_a, d_a, sig_a, fit, _, _ = arc_incidence(pr, off[on_arc], cal)
         arc = on_arc.nonzero()[0][fit]
         th_a, d_a, sig_a = th_a[fit], d_a[fit], sig_a[fit]
         on = np.zeros(off.size, dtype=bool)
