@@ -1530,16 +1530,16 @@ def _round_wins(pr: _Profile, pos: np.ndarray, lab: np.ndarray, group: np.ndarra
                 arc_mis: np.ndarray, arc_params: int, line_alpha: np.ndarray,
                 line_cx: np.ndarray, line_cy: np.ndarray, cal: Calibration) -> np.ndarray:
     """Per group (n,): whether its line members (``lab`` ≥ 0) misfit their arc (``arc_mis``,
-    ``arc_params`` parameters of its own) no more than their lines by BIC, a line worth 3
-    (direction, offset and where it ends; the last piece 2): a box's convex corner seen by
-    one sensor is two lines within noise and a circle well outside it."""
+    ``arc_params`` parameters of its own) no more than their lines by BIC, each distinct line
+    worth 3 (direction, offset and where it ends; the last 2): a box's convex corner seen
+    by one sensor is two lines within noise and a circle well outside it."""
     mem = lab >= 0
     lm, gm = lab[mem], group[mem]
     piece_cost = np.bincount(gm, _pieces_misfit(pr, pos[mem], lm, line_alpha, line_cx,
                                                 line_cy, cal), n)
-    new_piece = np.ones(lm.size)
-    new_piece[1:] = (lm[1:] != lm[:-1]) | (gm[1:] != gm[:-1])
-    n_pieces = np.bincount(gm, new_piece, n)
+    # distinct lines (a run's readings may alternate between two of them)
+    width = int(lm.max(initial=0)) + 1
+    n_pieces = np.bincount(np.unique(gm * width + lm) // width, minlength=n)
     log_n = np.log(np.maximum(np.bincount(gm, minlength=n), 2))
     arc_cost = np.bincount(gm, arc_mis[mem], n)
     return ((arc_cost + arc_params * log_n <= piece_cost + (3.0 * n_pieces - 1.0) * log_n)
