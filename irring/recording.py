@@ -16,7 +16,7 @@ import numpy as np
 
 from . import core, gp2
 from .core import (ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_SAMPLES, MAX_STEPS, MAX_SWEEPS,
-                   SENSOR_MODEL, VREF_V, Ring, Sweep, Truth, work_bytes, work_refusal)
+                   SEED_MAX, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth, work_bytes, work_refusal)
 from .errors import InputError, IrringError, TooBig, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
 from .scenario import MapSpec, ScenarioError, load_dataclass
@@ -110,12 +110,14 @@ def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> P
     :func:`check_sweep` refuses raises ValueError before anything is written."""
     for i, sweep in enumerate(sweeps):
         check_sweep(sweep, f"sweeps[{i}]")
+    meta_json = json.dumps(meta or {}, default=_json_default)
+    _check_meta(json.loads(meta_json), ValueError)   # what load_recording would refuse
     path = Path(path)
     if path.suffix != ".npz":
         path = path.with_suffix(".npz")
     arrays: dict[str, np.ndarray] = {
         "format": np.array(FORMAT),
-        "meta": np.array(json.dumps(meta or {}, default=_json_default)),
+        "meta": np.array(meta_json),
     }
     for i, sweep in enumerate(sweeps):
         key = f"sweep{i:03d}"
@@ -310,8 +312,9 @@ def _check_meta(meta: dict, fail) -> None:
         if meta.get(key) is not None and not isinstance(meta[key], str):
             raise fail(f"meta.{key}: expected text, got {brief(meta[key])}")
     seed = meta.get("seed")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
-        raise fail(f"meta.seed: expected a whole number ≥ 0, got {brief(seed)}")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)
+                             or not 0 <= seed <= SEED_MAX):   # irring run --seed's bounds
+        raise fail(f"meta.seed: expected a whole number 0 … {SEED_MAX}, got {brief(seed)}")
     grid = meta.get("grid")
     if grid is not None:
         ok = (isinstance(grid, dict) and set(grid) == {"origin_xy_m", "shape", "resolution_m"}

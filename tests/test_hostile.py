@@ -414,6 +414,9 @@ def _scalars(data: bytes, **changes) -> bytes:
     (lambda d: _rewrite(d, "meta", np.array(json.dumps({"mapper": {"l_occ": 2.0,
                                                                    "l_free": "-1.5"}}))),
      "meta.mapper.l_free: expected a finite number -1000 … 1000, got '-1.5'"),
+    # a seed irring run --seed refuses replayed and was written back into outputs
+    (lambda d: _rewrite(d, "meta", np.array(json.dumps({"seed": 2**63}))),
+     "meta.seed: expected a whole number 0 … 9223372036854775807, got 9223372036854775808"),
     # `cat a.npz b.npz > c.npz` replayed b alone (zipfile reads the last zip of a file)
     (lambda d: _scalars(d, adc_bits=10) + d,
      "bytes before the recording (two recordings joined into one file?); replay each .npz "
@@ -424,6 +427,18 @@ def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, m
     path.write_bytes(make(good_recording))
     with pytest.raises((RecordingError, TooBig), match=re.escape(message)):
         load_recording(path)
+
+
+def test_save_recording_refuses_a_meta_its_loader_refuses(tmp_path):
+    """A seed past SEED_MAX was written and replayed (and written back); now the writer
+    refuses what the reader would, before anything is written."""
+    path = tmp_path / "big_seed.npz"
+    with pytest.raises(ValueError, match=re.escape(
+            "meta.seed: expected a whole number 0 … 9223372036854775807, got 10000000000")):
+        save_recording(path, [_sweep(np.random.default_rng(5))], {"seed": 10 ** 40})
+    assert not path.exists()
+    save_recording(path, [_sweep(np.random.default_rng(5))], {"seed": 2 ** 63 - 1})
+    assert load_recording(path)[1]["seed"] == 2 ** 63 - 1
 
 
 def test_a_damaged_recorded_calibration_names_the_recording(tmp_path, capsys, good_recording):
