@@ -405,6 +405,13 @@ def _load_sweep(npz, headers: dict, key: str, fail) -> Sweep:
         ring = load_dataclass(Ring, scalars.get("ring"), "ring", f"{fail('').args[0]}{key}")
     except ScenarioError as exc:
         raise RecordingError(str(exc)) from None
+    # every recording lists them all; a default would invent geometry (a laser's radius 0
+    # read as the paper's 0.15 m)
+    ring_fields = [f.name for f in dataclasses.fields(Ring)]
+    for name in ring_fields:
+        if name not in (scalars.get("ring") or {}):
+            raise fail(f"{key}/scalars.ring.{name}: missing; a recording lists every ring "
+                       f"field ({', '.join(ring_fields)})")
     sizes = {"N": ring.sensors}
     kwargs: dict[str, Any] = {"ring": ring}
     for name, (dims, kinds, finite) in _SWEEP_ARRAYS.items():

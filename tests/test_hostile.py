@@ -417,6 +417,12 @@ def _scalars(data: bytes, **changes) -> bytes:
     # a seed irring run --seed refuses replayed and was written back into outputs
     (lambda d: _rewrite(d, "meta", np.array(json.dumps({"seed": 2**63}))),
      "meta.seed: expected a whole number 0 … 9223372036854775807, got 9223372036854775808"),
+    # a ring field left out took the paper's value: a laser's radius 0 became 0.15 m
+    (lambda d: _scalars(d, ring={k: v for k, v in dataclasses.asdict(
+        Ring(sensors=4, min_step=-2, max_step=2, radius_m=0.0)).items() if k != "radius_m"}),
+     "sweep000/scalars.ring.radius_m: missing; a recording lists every ring field (sensors, "
+     "radius_m, motor_step_rad, gear, "),
+    (lambda d: _scalars(d, ring=None), "sweep000/scalars.ring.sensors: missing"),
     # `cat a.npz b.npz > c.npz` replayed b alone (zipfile reads the last zip of a file)
     (lambda d: _scalars(d, adc_bits=10) + d,
      "bytes before the recording (two recordings joined into one file?); replay each .npz "
