@@ -42,6 +42,9 @@ class Robot:
     design: str = choice("rotating12", (*designs.DESIGN_BY_NAME, "custom"))
     ring: Ring | None = None
     poses: tuple[Pose, ...] = ()
+    # the robot.ring fields a file gave: a named design takes each of them, even one that
+    # equals the paper's value (made in code: the fields that differ from the paper's)
+    ring_keys: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -191,7 +194,8 @@ EFFECTS: dict[str, type] = {
 }
 
 
-NOT_IN_FILE = ("source", "text")   # Scenario fields that say where it came from
+# fields that say where a scenario came from, and what the loader notes of the file
+NOT_IN_FILE = ("source", "text", "ring_keys")
 
 
 @dataclass(frozen=True)
@@ -510,6 +514,11 @@ def parse(raw: Any, source: str = "") -> Scenario:
         if any(not (ch.isprintable() or ch in "\n\t") for ch in text):
             raise loader.fail(key, "control characters (terminal escapes) are not allowed")
     sc = dataclasses.replace(sc, source=source)
+    ring_raw = raw["robot"].get("ring") if isinstance(raw.get("robot"), Mapping) else None
+    if isinstance(ring_raw, Mapping):
+        given = tuple(f.name for f in dataclasses.fields(Ring)
+                      if any(k in ring_raw for k, _ in _yaml_keys(f.name)))
+        sc = dataclasses.replace(sc, robot=dataclasses.replace(sc.robot, ring_keys=given))
     sc = _part_range(sc, raw)
     sc = _sensor_for_design(sc, raw, loader.fail)
     _validate_geometry(sc, loader.fail)
@@ -580,8 +589,8 @@ def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
     if design.sensor.is_ir:
         return sc
     sensor_raw = raw.get("sensor") or {}
-    if "model" not in sensor_raw:
-        return apply_design(sc, design)
+    if "model" not in sensor_raw:   # the robot as written: its ring keeps what it gives
+        return dataclasses.replace(apply_design(sc, design), robot=sc.robot)
     if sc.sensor.model != design.sensor.kind:
         raise fail("sensor.model", f"{sc.sensor.model!r} does not fit design "
                                    f"{sc.robot.design!r}, which carries a {design.sensor.kind!r} "
@@ -655,9 +664,9 @@ def ring_for(robot: Robot) -> Ring:
     """The ring a robot uses.
 
     ``design: custom`` takes ``robot.ring`` as written (fields left out keep the paper's
-    values). A named design takes that design's ring, and any ``robot.ring`` field that
-    differs from the paper's value replaces the design's (so ``design: radial12`` with
-    ``ring: {sensors: 8}`` is a still ring of 8).
+    values). A named design takes that design's ring, and each ``robot.ring`` field the file
+    gave (``ring_keys``) or that differs from the paper's value replaces the design's (so
+    ``design: radial12`` with ``ring: {sensors: 8}`` is a still ring of 8).
     """
     if robot.design == "custom":
         if robot.ring is None:
@@ -666,7 +675,8 @@ def ring_for(robot: Robot) -> Ring:
         return robot.ring
     ring = designs.get(robot.design).ring
     if robot.ring is not None:
-        ring = dataclasses.replace(ring, **_overrides(robot.ring))
+        given = {k: getattr(robot.ring, k) for k in robot.ring_keys}
+        ring = dataclasses.replace(ring, **{**_overrides(robot.ring), **given})
     return ring
 
 

@@ -116,6 +116,24 @@ def test_scenario_ring_numbers_override_the_named_design():
     assert sc.ring.min_step == sc.ring.max_step == 0     # still radial12's
 
 
+def test_a_ring_number_the_file_gives_overrides_the_design_even_at_the_papers_value():
+    """Only fields that differed from the paper's ring replaced a named design's: radial12
+    with `ring: {min_step: -35, max_step: 35}` stayed still (steps 0 … 0), rotating1 with
+    `ring: {sensors: 12, radius_mm: 150}` stayed one sensor at the centre, and laser with
+    `gear: 0.6` kept its 1.0, all without a word."""
+    sc = loads(T_ROOM % ("radial12", "ring: {min_step: -35, max_step: 35}"))
+    assert (sc.ring.min_step, sc.ring.max_step) == (-35, 35)
+    assert sc.ring.radius_m == designs.get("radial12").ring.radius_m
+    sc = loads(T_ROOM % ("rotating1", "ring: {sensors: 12, radius_mm: 150, joint_limit_deg: 360}"))
+    assert (sc.ring.sensors, sc.ring.radius_m, sc.ring.max_step) == (12, 0.15, 333)
+    laser = designs.get("laser").ring
+    sc = loads(T_ROOM % ("laser", "ring: {gear: 0.6, max_step: 700}"))
+    assert (sc.ring.gear, sc.ring.max_step, sc.ring.motor_step_rad) == (0.6, 700,
+                                                                       laser.motor_step_rad)
+    # the same scenario text read again is the same scene (what recordings and workers get)
+    assert loads(sc.text) == sc
+
+
 def test_custom_design_takes_the_ring_as_written_and_needs_one():
     sc = loads(T_ROOM % ("custom", "ring: {sensors: 6, min_step: -10, max_step: 10}"))
     assert (sc.ring.sensors, sc.ring.min_step, sc.ring.max_step) == (6, -10, 10)
