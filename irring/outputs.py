@@ -80,13 +80,15 @@ class OutputSet:
         self.option = option
         self.files = frozenset(files)
         self.tmp: Path | None = None
+        self.made: list[Path] = []   # folders __enter__ made for ``out``, innermost first
 
     def __enter__(self) -> Path:
-        parent = self.out.absolute().parent
+        self.made = []
         try:
-            parent.mkdir(parents=True, exist_ok=True)
+            self.made = _make_folders(self.out.absolute().parent)
             self.tmp = _hidden_sibling(self.out.absolute(), folder=True)
         except OSError as exc:
+            _remove_empty(self.made)
             raise OutputError(f"{self.option} {printable(str(self.out))}: cannot write "
                               f"there: {exc.strerror or exc}") from None
         return self.tmp
@@ -99,6 +101,7 @@ class OutputSet:
                 self.discard()
         else:
             self.discard()
+            _remove_empty(self.made)   # nothing written: no folders made for it either
             if (isinstance(exc, OSError) and not isinstance(exc, OutputError)
                     and exc.errno in _WRITE_ERRNOS):
                 # a full disk or a file-size limit says neither folder nor file: name --out
@@ -163,6 +166,29 @@ class OutputSet:
             shutil.rmtree(old, ignore_errors=True)
 
 
+def _make_folders(folder: Path) -> list[Path]:
+    """Make ``folder`` and its missing parents; the ones made, innermost first (a write
+    that fails removes them again: a failed command leaves no empty folders behind)."""
+    missing = [p for p in (folder, *folder.parents) if not p.exists()]
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        _remove_empty(missing)
+        raise
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove ``folders`` (innermost first) while they are empty."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except FileNotFoundError:
+            continue
+        except OSError:   # not empty (another writer's files), or not ours to remove
+            return
+
+
 def _hidden_sibling(path: Path, *, folder: bool) -> Path:
     """A new, empty hidden file or folder beside ``path``, made with the modes any file the
     user makes gets (umask applied: tempfile's are private, and would stay so once renamed
@@ -201,10 +227,12 @@ def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
     if path.exists() and not path.is_file():   # the rename would replace the device node
         raise OutputError(f"{shown}: is not a regular file (a device, pipe or socket); irring "
                           "writes a new file there, so name one")
+    made: list[Path] = []
     try:
-        path.absolute().parent.mkdir(parents=True, exist_ok=True)
+        made = _make_folders(path.absolute().parent)
         tmp = _hidden_sibling(path.absolute(), folder=False)
     except OSError as exc:
+        _remove_empty(made)
         blocker = next((p for p in path.absolute().parents if p.exists()), None)
         if blocker is not None and not blocker.is_dir():
             raise OutputError(f"{shown}: {printable(str(blocker))} is a file, so the folder "
@@ -224,6 +252,7 @@ def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
             raise OutputError(f"{shown}: cannot move the file in: {_why(exc)}") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
+        _remove_empty(made)
         raise
 
 

@@ -12,7 +12,8 @@ import pytest
 from matplotlib.figure import Figure
 
 from irring.cli import main
-from irring.outputs import OutputSet
+from irring.errors import OutputError
+from irring.outputs import OutputSet, atomic_file
 from irring.studies import report
 
 # A room of our own: 0.93 × 0.71 m, one post off-centre, one pose (x ≠ y everywhere).
@@ -255,3 +256,27 @@ def test_mcap_at_a_device_is_refused_before_the_run(tmp_path, capsys):
     assert pipe.is_fifo() and link.is_symlink() and sorted(os.listdir(tmp_path)) == [
         "pipe", "to-pipe.yaml"]
 
+
+
+def test_a_write_that_fails_removes_the_folders_it_made_and_only_those(tmp_path):
+    """atomic_file and OutputSet make missing parents; a write that failed left them behind
+    empty (irring view --out v1 on a full disk: the folder v1)."""
+    (tmp_path / "kept").mkdir()
+    (tmp_path / "busy").mkdir()
+    for target in (tmp_path / "a" / "b" / "view.png", tmp_path / "kept" / "c" / "x.mcap",
+                   tmp_path / "busy" / "y.mcap"):
+        with pytest.raises(OutputError, match="No space left on device"):
+            with atomic_file(target, "--out") as tmp:
+                (tmp_path / "busy" / "theirs").write_text("another writer's")
+                raise OSError(errno.ENOSPC, "No space left on device", str(tmp))
+    for out in (tmp_path / "d" / "e" / "run", tmp_path / "kept" / "run"):
+        with pytest.raises(OutputError, match="nothing was changed"):
+            with OutputSet(out) as tmp:
+                (tmp / "map.png").write_bytes(b"half")
+                raise OSError(errno.EFBIG, "File too large")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["busy", "kept"]
+    assert not any((tmp_path / "kept").iterdir())
+    assert [p.name for p in (tmp_path / "busy").iterdir()] == ["theirs"]
+    with atomic_file(tmp_path / "f" / "g" / "ok.txt") as tmp:   # a write that succeeds keeps them
+        tmp.write_text("whole")
+    assert (tmp_path / "f" / "g" / "ok.txt").read_text() == "whole"

@@ -106,3 +106,25 @@ def test_the_camera_frames_the_room_when_the_reach_is_larger():
     corners = np.asarray(t_room.room.outline_m)
     farthest = np.hypot(corners[:, 0] - x, corners[:, 1] - y).max()
     assert 1.5 < farthest < 2.5 and laser.distance == pytest.approx(2.4 * farthest)
+
+
+def test_a_picture_that_cannot_be_written_leaves_no_folder_behind(tmp_path, monkeypatch, capsys):
+    """A full disk while writing view.png left the empty --out folder (and its parents)
+    that the command had made for it."""
+    import errno
+
+    from PIL import Image
+
+    _offscreen_or_skip()
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine").mkdir()
+
+    def full_disk(self, fp, *a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device", str(fp))
+
+    monkeypatch.setattr(Image.Image, "save", full_disk)
+    for out in ("v1", "a/b/v2", "mine/v3", "c/shot.png"):
+        assert main(["view", "t_room", "--out", out, "--size", "48x32"]) == 4, out
+        assert "No space left on device" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine"]
+    assert not any((tmp_path / "mine").iterdir())
