@@ -17,6 +17,7 @@ import re
 import secrets
 import shutil
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -128,19 +129,32 @@ class OutputSet:
                 except OSError:
                     if not out.is_dir():
                         raise
-            if all(p.name in self.files for p in out.iterdir()) and self._swap():
-                return
-            written = {p.name for p in self.tmp.iterdir()}
-            for name in sorted(self.files - written):
-                stale = out / name
-                if stale.is_file():
-                    stale.unlink()
-            for name in sorted(written):
-                os.replace(self.tmp / name, out / name)
+            # one commit at a time: two runs renaming their files in one by one left a mix
+            # (a map.pgm of one, sweeps.npz of the other)
+            with _holding(out, COMMIT_WAIT_S) as held:
+                if not held:
+                    raise OutputError(
+                        f"{self.option} {printable(str(out))}: another irring process held the "
+                        f"folder for {COMMIT_WAIT_S:g} s (a study writing there?); nothing was "
+                        "changed: choose another --out, or run again when it is done")
+                self._move_in(out)
+        except OutputError:
+            raise
         except OSError as exc:
             raise OutputError(f"{self.option} {printable(str(out))}: cannot move the outputs "
                               f"in: {exc.strerror or exc}") from None
 
+
+    def _move_in(self, out: Path) -> None:
+        if all(p.name in self.files for p in out.iterdir()) and self._swap():
+            return
+        written = {p.name for p in self.tmp.iterdir()}
+        for name in sorted(self.files - written):
+            stale = out / name
+            if stale.is_file():
+                stale.unlink()
+        for name in sorted(written):
+            os.replace(self.tmp / name, out / name)
 
     def _swap(self) -> bool:
         """Replace the folder ``out`` by the written one; False when that cannot be done
@@ -256,31 +270,73 @@ def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
         raise
 
 
+# folders this process holds (sole_writer, a commit), by (device, inode): a study moving its
+# summary into the --out it holds does not wait for itself
+_HELD: set[tuple[int, int]] = set()
+# how long a commit waits for another process's commit (renames: milliseconds) or study
+COMMIT_WAIT_S = 30.0
+
+
+@contextlib.contextmanager
+def _holding(folder: Path, wait_s: float) -> Iterator[bool]:
+    """Hold the advisory lock (flock) on the folder ``folder`` names, waiting up to
+    ``wait_s`` for another process to release it; yields False when it stayed held. Where
+    the system has no locks, the folder cannot be opened (mode -wx) or this process already
+    holds it, yields True at once."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        if fcntl is None:   # pragma: no cover - not POSIX
+            yield True
+            return
+        try:
+            fd = os.open(folder, os.O_RDONLY)
+        except OSError:   # a folder one may write but not read: held by no one
+            yield True
+            return
+        try:
+            st = os.fstat(fd)
+            ident = (st.st_dev, st.st_ino)
+            if ident in _HELD:
+                yield True
+                return
+            while True:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if time.monotonic() >= deadline:
+                        yield False
+                        return
+                    time.sleep(0.02)
+            try:
+                same = os.stat(folder)
+            except OSError:
+                same = None
+            if same is not None and (same.st_dev, same.st_ino) == ident:
+                _HELD.add(ident)
+                try:
+                    yield True
+                finally:
+                    _HELD.discard(ident)
+                return
+        finally:
+            os.close(fd)   # releases the lock
+        # another commit swapped the folder while we waited: hold the one there now
+
+
 @contextlib.contextmanager
 def sole_writer(folder: str | Path, what: str) -> Iterator[None]:
     """Hold ``folder`` (an existing folder) while this process writes ``what`` there;
     :class:`OutputError` at once when another process holds it. Two studies appending to
     one results.csv each rewrote the file the other appended to: one's runs were lost. An
     advisory lock (flock) on the folder itself, so nothing is left behind by a kill; where
-    the system has none (Windows), nothing is held."""
-    if fcntl is None:   # pragma: no cover - not POSIX
-        yield
-        return
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:   # a folder one may write but not read (mode -wx): held by no one
-        yield
-        return
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+    the system has none (Windows), nothing is held. :meth:`OutputSet.commit` takes the same
+    lock."""
+    with _holding(Path(folder), 0.0) as held:
+        if not held:
             raise OutputError(f"{printable(str(folder))}: another irring process is writing "
-                              f"{what} there; wait for it to finish, or choose another --out"
-                              ) from None
+                              f"{what} there; wait for it to finish, or choose another --out")
         yield
-    finally:
-        os.close(fd)   # releases the lock
 
 
 def _why(exc: OSError) -> str:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import errno
 import importlib
 import os
+import re
 
 import pytest
 from matplotlib.figure import Figure
@@ -280,3 +281,57 @@ def test_a_write_that_fails_removes_the_folders_it_made_and_only_those(tmp_path)
     with atomic_file(tmp_path / "f" / "g" / "ok.txt") as tmp:   # a write that succeeds keeps them
         tmp.write_text("whole")
     assert (tmp_path / "f" / "g" / "ok.txt").read_text() == "whole"
+
+
+def test_two_commits_into_one_folder_leave_one_set_never_a_mix(tmp_path, monkeypatch):
+    """Into a folder holding a file of the user's, a set is renamed in file by file; two
+    runs committing at once left a map.pgm of one beside the sweeps.npz of the other (seen
+    with a commit slowed by 3 s a file: irring run t_room and t_room_cylinder into one
+    --out, both exit 0). A commit now holds the folder's lock, as another process's commit
+    (played here by a thread holding it) does."""
+    import fcntl
+    import threading
+    import time
+
+    from irring import outputs
+
+    out = tmp_path / "shared"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    held, done = threading.Event(), threading.Event()
+
+    def other_commit():   # renames its set in one by one, holding the lock
+        fd = os.open(out, os.O_RDONLY)
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        held.set()
+        for name in ("map.pgm", "sweeps.npz"):
+            (tmp_path / name).write_text("A")
+            os.replace(tmp_path / name, out / name)
+            time.sleep(0.4)
+        os.close(fd)
+        done.set()
+
+    thread = threading.Thread(target=other_commit)
+    thread.start()
+    held.wait()
+    with OutputSet(out) as tmp:
+        for name in ("map.pgm", "sweeps.npz"):
+            (tmp / name).write_text("B")
+    thread.join()
+    assert done.is_set()
+    assert {p.name: p.read_text() for p in out.iterdir()} == {
+        "notes.txt": "mine", "map.pgm": "B", "sweeps.npz": "B"}
+    # a folder held past the wait (a study writing there) is left as it was, named
+    monkeypatch.setattr(outputs, "COMMIT_WAIT_S", 0.2)
+    fd = os.open(out, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    try:
+        with pytest.raises(OutputError, match=re.escape(
+                f"--out {out}: another irring process held the folder for 0.2 s (a study "
+                "writing there?); nothing was changed")):
+            with OutputSet(out) as tmp:
+                (tmp / "map.pgm").write_text("C")
+    finally:
+        os.close(fd)
+    assert (out / "map.pgm").read_text() == "B"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["shared"]
