@@ -50,6 +50,19 @@ def test_a_crawling_drive_is_refused_before_any_sweep(tmp_path, capsys):
     assert seconds < 30   # refused at model build, not after sweeping
 
 
+def test_more_poses_than_a_run_takes_are_refused_naming_the_poses(tmp_path, capsys):
+    """10,001 scan poses and no motion: the refusal said to raise effects.motion.speed_mm_s
+    or shorten effects.motion.path, keys the scene does not have."""
+    poses = ", ".join(f"{{x_mm: {300 + k % 1500}, y_mm: {700 + k % 7}}}" for k in range(10_001))
+    code, err, _ = run_status(scene(tmp_path, "poses", robot=f"  poses: [{poses}]"), tmp_path,
+                              capsys)
+    assert code == errors.TOO_BIG
+    assert ("10,001 sweeps × 71 steps × 12 sensors = 8,520,852 readings" in err
+            and "a run takes at most 10,000 sweeps; list at most 10,000 robot.poses (a sweep "
+            "each), or split them into several scenarios" in err), err
+    assert "motion" not in err and not (tmp_path / "out").exists()
+
+
 def test_a_sweep_of_more_steps_than_a_run_takes_is_refused(tmp_path, capsys):
     robot = ("  design: custom\n  ring: {sensors: 72, radius_mm: 150, motor_step_deg: 0.01, "
              "gear: 0.01, min_step: -100000, max_step: 60000, joint_limit_deg: 360}\n" + POSE)

@@ -77,9 +77,12 @@ def check_work(sim: SimRing) -> None:
         raise TooBig(f"{where}: {work} (about {need / 1e9:.1f} GB): a sweep takes at most "
                      f"{MAX_STEPS:,} steps; {sweep_keys}")
     if sweeps > MAX_SWEEPS:
+        fix = ("raise effects.motion.speed_mm_s or shorten effects.motion.path"
+               if sim.scenario.has("motion") else
+               f"list at most {MAX_SWEEPS:,} robot.poses (a sweep each), or split them "
+               "into several scenarios")
         raise TooBig(f"{where}: {work} (about {need / 1e9:.1f} GB): a run takes at most "
-                     f"{MAX_SWEEPS:,} sweeps; raise effects.motion.speed_mm_s or shorten "
-                     f"effects.motion.path")
+                     f"{MAX_SWEEPS:,} sweeps; {fix}")
     keys = (f"{sweep_keys}, or use fewer robot.ring.sensors, robot.poses or a shorter or "
             f"faster effects.motion")
     if physics_bytes > reading_bytes:
