@@ -1913,6 +1913,32 @@ def test_an_output_naming_an_input_of_the_same_command_is_refused(tmp_path, caps
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("argv", [
+    ["run", "t_room_cylinder", "--no-animation"],
+    ["replay", "IN/rec.npz", "--no-animation"],
+])
+@pytest.mark.parametrize("name", ["sweeps.npz", "map.png", "map.yaml"])
+def test_an_mcap_naming_a_file_of_the_output_set_is_refused(tmp_path, capsys, good_recording,
+                                                            argv, name, monkeypatch):
+    """irring run t_room --out o --mcap o/sweeps.npz: exit 0, and o/sweeps.npz held the
+    MCAP, the recording gone (written after the set, the MCAP replaced it)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "rec.npz").write_bytes(good_recording)
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / name).write_bytes(b"an earlier run's")
+    argv = [a.replace("IN", "in") for a in argv]
+    assert main(argv + ["--out", "o", "--mcap", f"o/../o/{name}"]) == 2
+    assert (f"--mcap o/../o/{name}: is the {name} this command writes into --out o; the MCAP "
+            "would replace it, so name another file (such as o/map.mcap)"
+            in capsys.readouterr().err)
+    assert [(p.name, p.read_bytes()) for p in (tmp_path / "o").iterdir()] == [
+        (name, b"an earlier run's")]
+    assert main(argv + ["--out", "o", "--mcap", "o/map.mcap"]) == 0
+    assert sorted(p.name for p in (tmp_path / "o").iterdir())[:2] == ["map.mcap", "map.pgm"]
+    assert (tmp_path / "o" / "map.mcap").read_bytes().startswith(b"\x89MCAP")
+
+
 def test_a_calibration_value_out_of_range_names_its_file_once(tmp_path, capsys):
     """'cal.yaml: cal.yaml: noise_counts: inf is out of range': the key's own error, already
     naming the file, was wrapped again with it."""

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ..core import MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
 from ..errors import UsageError
+from ..outputs import RUN_FILES
 
 
 class LazyParser(argparse.ArgumentParser):
@@ -178,6 +179,18 @@ def spare_inputs(outputs: dict, inputs: dict) -> None:
                 raise UsageError(f"{out_option} {out}: is the file {in_option} {path}, which "
                                  "this command reads; writing there would replace it, so name "
                                  "another file")
+
+
+def mcap_beside_outputs(mcap: Path | None, out: Path) -> None:
+    """:class:`UsageError` when ``--mcap`` names one of the files a run writes into ``out``:
+    ``irring run t_room --out o --mcap o/sweeps.npz`` left MCAP bytes where the recording
+    was (the MCAP is written after the set; map.mcap is the one name kept for it)."""
+    if mcap is None or mcap.name not in RUN_FILES - {"map.mcap"}:
+        return
+    if mcap.absolute().parent.resolve() == Path(out).absolute().resolve():
+        raise UsageError(f"--mcap {mcap}: is the {mcap.name} this command writes into --out "
+                         f"{out}; the MCAP would replace it, so name another file (such as "
+                         f"{Path(out) / 'map.mcap'})")
 
 
 def mcap_file(text: str) -> Path:

@@ -19,8 +19,8 @@ from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..recording import save_recording
 from ..scenario import load_scenario
-from ._common import (add_mcap_option, at_least, between, describe, out_path, positive_seconds,
-                      serial_port, spare_inputs)
+from ._common import (add_mcap_option, at_least, between, describe, mcap_beside_outputs,
+                      out_path, positive_seconds, serial_port, spare_inputs)
 from .run import report
 
 HELP = """\
@@ -118,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
     spare_inputs({"--mcap": args.mcap}, {"--truth": args.truth,
                                          "--calibration": args.calibration})
     check_out(args.out)
+    mcap_beside_outputs(args.mcap, args.out)
     truth = load_scenario(args.truth) if args.truth else None
     if truth is not None and truth.has("motion"):
         return _error(f"--truth {args.truth}: the scenario drives while scanning (`motion`), but "

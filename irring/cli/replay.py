@@ -8,7 +8,8 @@ from pathlib import Path
 from .. import pipeline
 from ..errors import UsageError
 from ..outputs import check_out, safe_name
-from ._common import add_mcap_option, describe, out_path, spare_inputs
+from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path,
+                      spare_inputs)
 from .run import report
 
 HELP = """\
@@ -59,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
                          "its outputs would replace it, so choose another folder (default: "
                          "out/<recording folder>-replay)")
     check_out(out)
+    mcap_beside_outputs(args.mcap, out)
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.replay(args.recording, calibration_file=args.calibration,
                              frames_per_sweep=frames)

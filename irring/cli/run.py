@@ -11,7 +11,8 @@ from .. import errors, pipeline
 from ..maps import metrics
 from ..outputs import check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import add_mcap_option, describe, out_path, seed, spare_inputs
+from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path, seed,
+                      spare_inputs)
 
 HELP = """\
 Simulate one sweep of the ring at each of the scenario's scan poses, turn the ADC counts
@@ -64,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
                                          "--calibration": args.calibration})
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
     out = check_out(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
+    mcap_beside_outputs(args.mcap, out)
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.run(scenario, seed=args.seed, calibration_file=args.calibration,
                           frames_per_sweep=frames)
