@@ -82,6 +82,15 @@ def check_sweep(sweep: Sweep, name: str = "sweep") -> None:
     if counts.size and (counts.min() < 0 or counts.max() > top):
         raise fail("counts", f"readings {counts.min():g} … {counts.max():g} lie outside a "
                              f"{sweep.adc_bits}-bit ADC's 0 … {top}")
+    if sweep.truth is not None:   # as the loader reads them (_TRUTH_ARRAYS)
+        for key, dims in _TRUTH_ARRAYS.items():
+            arr = np.asarray(getattr(sweep.truth, key))
+            shape = counts.shape + ((3,) if dims == "SN3" else ())
+            if arr.shape != shape or arr.dtype.kind not in ("iuf" if key == "geom_id" else "f"):
+                raise fail(f"truth.{key}", f"expected numbers of shape {shape}, got "
+                                            f"{arr.dtype} {arr.shape}")
+            if key in ("origin", "direction") and not np.all(np.isfinite(arr)):
+                raise fail(f"truth.{key}", "holds NaN or infinite values")
 
 
 def _whole(value: Any, lo: int, hi: int) -> bool:

@@ -447,6 +447,32 @@ def test_save_recording_refuses_a_meta_its_loader_refuses(tmp_path):
     assert load_recording(path)[1]["seed"] == 2 ** 63 - 1
 
 
+def test_save_recording_refuses_a_truth_its_loader_refuses(tmp_path):
+    """A sweep cut to 8 of 12 sensors in code kept its 12-sensor truth: save_recording wrote
+    it, and replay refused the file ('sweep001/truth/distance_m: shape (71, 12) does not
+    match the sweep's 71 steps × 8 sensors')."""
+    from irring.core import Truth
+
+    sweep = _sweep(np.random.default_rng(7))
+    shape = sweep.counts.shape
+    truth = Truth(distance_m=np.ones(shape), incidence_rad=np.zeros(shape),
+                  hit_point=np.zeros(shape + (3,)), origin=np.zeros(shape + (3,)),
+                  direction=np.ones(shape + (3,)), geom_id=np.zeros(shape, int),
+                  reflectance=np.ones(shape))
+    path = tmp_path / "t.npz"
+    save_recording(path, [dataclasses.replace(sweep, truth=truth)])
+    assert load_recording(path)[0][0].truth.hit_point.shape == (5, 4, 3)
+    for field, value, message in [
+            ("distance_m", np.ones((5, 12)), "expected numbers of shape (5, 4), got float64 "
+                                             "(5, 12)"),
+            ("hit_point", np.zeros((5, 4)), "expected numbers of shape (5, 4, 3)"),
+            ("direction", np.full(shape + (3,), np.nan), "holds NaN or infinite values")]:
+        bad = dataclasses.replace(sweep, truth=dataclasses.replace(truth, **{field: value}))
+        with pytest.raises(ValueError, match=re.escape(f"sweeps[1].truth.{field}: {message}")):
+            save_recording(tmp_path / "bad.npz", [sweep, bad])
+        assert not (tmp_path / "bad.npz").exists()
+
+
 def test_a_damaged_recorded_calibration_names_the_recording(tmp_path, capsys, good_recording):
     """It named '<recording's calibration>' only: which of the files replayed?"""
     cal = Calibration.nominal("gp2d12").to_yaml().replace("adc_bits: 12",
