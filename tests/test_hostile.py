@@ -1977,3 +1977,30 @@ def test_a_calibration_value_out_of_range_names_its_file_once(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"error: {cal}: noise_counts: inf is out of range; allowed 0 … 1e+07" in err
     assert err.count(str(cal)) == 1
+
+
+def test_a_full_standard_output_is_named(tmp_path, capsys, monkeypatch):
+    """irring run --json > /dev/full: exit 4 'No space left on device' — though the outputs
+    in --out were written whole, the message named no file. Now it names standard output;
+    a broken pipe is still told apart (BrokenPipeError)."""
+    class Full(io.StringIO):
+        def write(self, text):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    class Closed(io.StringIO):
+        def write(self, text):
+            raise OSError(errno.EPIPE, "Broken pipe")
+
+    monkeypatch.setattr(sys, "stdout", Full())
+    assert main(["run", "t_room_cylinder", "--out", str(tmp_path / "o"), "--no-animation",
+                 "--json"]) == errors.OUTPUT
+    assert capsys.readouterr().err == ("irring run: error: standard output: No space left on "
+                                       "device\n")
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == [
+        "map.pgm", "map.png", "map.yaml", "sweeps.npz"]
+    assert isinstance(sys.stdout, Full)   # given back as it was
+    seen = []
+    monkeypatch.setattr(errors, "describe", lambda exc: (seen.append(exc), (4, "x"))[1])
+    monkeypatch.setattr(sys, "stdout", Closed())
+    assert main(["scenarios"]) == errors.OUTPUT
+    assert isinstance(seen[0], BrokenPipeError) and seen[0].filename == "standard output"

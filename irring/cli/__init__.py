@@ -89,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     # the first word that is not an option names the subcommand (before parsing: a
     # subcommand's module may load MuJoCo when it is imported)
     word = next((a for a in argv if not a.startswith("-")), "")
+    stdout, sys.stdout = sys.stdout, _NamedStream(sys.stdout, "standard output")
     try:
         # `kill` (SIGTERM) stops a command as Ctrl-C does: killed outright, it left its
         # half-written output folder or file (.irring-*) beside --out
@@ -123,6 +124,33 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, ValueError):  # stderr itself is gone
             pass
         return status
+    finally:
+        sys.stdout = stdout
+
+
+class _NamedStream:
+    """A text stream whose write errors name it: ``irring run --json > /dev/full`` said
+    only 'No space left on device', after the outputs in --out were written whole."""
+
+    def __init__(self, stream, name: str):
+        self._stream, self._name = stream, name
+
+    def _named(self, call, *args):
+        try:
+            return call(*args)
+        except OSError as exc:
+            if exc.filename is not None or exc.errno is None:
+                raise
+            raise OSError(exc.errno, exc.strerror, self._name) from exc   # EPIPE: BrokenPipeError
+
+    def write(self, text: str) -> int:
+        return self._named(self._stream.write, text)
+
+    def flush(self) -> None:
+        return self._named(self._stream.flush)
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
 
 
 def _stdout_gone() -> bool:
