@@ -137,21 +137,45 @@ def describe(exc: BaseException) -> tuple[int, str]:
                                f"--debug (or {DEBUG_ENV}=1) for the traceback and please report it")
 
 
+# SIGTERM: `kill`, timeout(1), a scheduler; SIGHUP: the terminal or SSH session closed,
+# which killed a drive or a guided calibration outright and lost every pose swept
+_STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP")
+                      if hasattr(signal, name))
+
+
 @contextlib.contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
-    """SIGTERM (`kill`) ends the block as Ctrl-C does (KeyboardInterrupt), so what the
-    command does on Ctrl-C (stop a worker pool, write what a drive swept) happens too,
-    instead of the process dying; only where nobody else handles SIGTERM."""
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
+    """SIGTERM (`kill`) and SIGHUP (the terminal closed) end the block as Ctrl-C does
+    (KeyboardInterrupt), so what the command does on Ctrl-C (stop a worker pool, write what
+    a drive swept, keep a calibration's placements) happens too, instead of the process
+    dying; only for a signal nobody else handles (not under nohup)."""
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
+    mine = [s for s in _STOP_SIGNALS if signal.getsignal(s) is signal.SIG_DFL]
 
     def interrupt(signum, frame):
+        if signum != signal.SIGTERM:
+            _leave_terminal()
         raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, interrupt)
+    for s in mine:
+        signal.signal(s, interrupt)
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        for s in mine:
+            signal.signal(s, signal.SIG_DFL)
+
+
+def _leave_terminal() -> None:
+    """Point the standard streams that are a (hung-up) terminal at /dev/null: writing a
+    message there fails (EIO) before the outputs are written, and input ends."""
+    for fd in (0, 1, 2):
+        try:
+            if os.isatty(fd):
+                null = os.open(os.devnull, os.O_RDWR)
+                os.dup2(null, fd)
+                os.close(null)
+        except OSError:
+            pass

@@ -1319,22 +1319,24 @@ def test_a_run_on_a_full_disk_names_its_out_folder(tmp_path):
     assert os.listdir(tmp_path) == []   # no output folder, no temporaries left
 
 
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGHUP"])
 @pytest.mark.parametrize("command, writer", [
     (["run", "t_room_cylinder", "--out", "{out}"], "irring.recording.save_recording"),
     (["run", "t_room_cylinder", "--out", "{out}", "--mcap", "{tmp}/m.mcap"],
      "irring.maps.mcap_export._polygon"),
 ])
 def test_a_command_killed_while_writing_leaves_no_half_written_outputs(tmp_path, command,
-                                                                       writer):
+                                                                       writer, sig):
     """`kill` (SIGTERM, what timeout(1), a job scheduler or systemd send) while a run wrote
     its outputs ended the process at once: a hidden .irring-o-…/ folder of half the files or
     a half .irring-m.mcap-… file stayed beside --out, one more each time. It now stops as
-    Ctrl-C does (exit 130) and removes them. The signal is sent from inside the writer."""
+    Ctrl-C does (exit 130) and removes them; so does SIGHUP (the terminal or SSH session
+    closed: exit 129 and the temporaries, before). The signal is sent from inside the writer."""
     module, name = writer.rsplit(".", 1)
     script = (f"import os, signal, sys, {module} as m\n"
               f"real = m.{name}\n"
               "def killed(*a, **k):\n"
-              "    os.kill(os.getpid(), signal.SIGTERM)\n"
+              f"    os.kill(os.getpid(), signal.{sig})\n"
               "    return real(*a, **k)\n"
               f"m.{name} = killed\n"
               "from irring.cli import main\n"
@@ -1346,6 +1348,37 @@ def test_a_command_killed_while_writing_leaves_no_half_written_outputs(tmp_path,
     assert "irring run: interrupted" in done.stderr
     left = sorted(os.listdir(tmp_path))
     assert left == ([] if "--mcap" not in command else ["o"]), left
+
+
+def test_a_drive_whose_terminal_hangs_up_keeps_the_poses_swept(tmp_path):
+    """SIGHUP (the SSH session or terminal closed) mid-drive killed it outright: exit 129,
+    nothing written, every pose swept lost (SIGTERM and Ctrl-C map and write them). The
+    hang-up is sent as the second pose's sweep begins, from a subprocess on a pty device."""
+    script = (
+        "import os, signal, sys\n"
+        f"sys.path.insert(0, {os.path.dirname(os.path.abspath(__file__))!r})\n"
+        "import hostile_devices as hd\n"
+        "from irring.hardware import SerialRing\n"
+        "real, calls = SerialRing.sweep, []\n"
+        "def sweep(self, *a, **k):\n"
+        "    calls.append(1)\n"
+        "    if len(calls) == 2:\n"
+        "        os.kill(os.getpid(), signal.SIGHUP)\n"
+        "    return real(self, *a, **k)\n"
+        "SerialRing.sweep = sweep\n"
+        "dev = hd.HostileDevice(hd.good)\n"
+        "from irring.cli import main\n"
+        "code = main(['drive', '--port', dev.link, '--pose', '500,450', '--pose', '800,450',\n"
+        "             '--pose', '900,450', '--no-wait', '--no-animation', '--out', sys.argv[1]])\n"
+        "dev.close()\n"
+        "sys.exit(code)\n")
+    out = tmp_path / "o"
+    done = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 130, done.stderr
+    assert ("irring drive: interrupted during pose 2 of 3; the 1 pose swept is mapped"
+            in done.stderr), done.stderr
+    assert len(_recorded(out)) == 1
 
 
 @pytest.mark.parametrize("failure, status", [
@@ -2004,3 +2037,4 @@ def test_a_full_standard_output_is_named(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(sys, "stdout", Closed())
     assert main(["scenarios"]) == errors.OUTPUT
     assert isinstance(seen[0], BrokenPipeError) and seen[0].filename == "standard output"
+
