@@ -1433,6 +1433,14 @@ def test_drive_saves_the_sweeps_elsewhere_when_its_outputs_cannot_be_written(
     (["calibrate", "--port", "loop://", "--baud", "0"], 2, "--baud: must be ≥ 1, got 0"),
     (["calibrate", "--sensor", "-1"], 2, "--sensor: must be ≥ 0, got -1"),
     (["emulate", "--tcp", "127.0.0.1:99999"], 2, "PORT 0 … 65535"),
+    # said 'corrupt_rate must be 0 … 1, got nan' (no option named); an empty --link was
+    # the current folder ('--link : . exists and is not a symlink')
+    (["emulate", "--corrupt-rate", "nan"], 2,
+     "argument --corrupt-rate: must be a number ≥ 0 and ≤ 1, got 'nan'"),
+    (["emulate", "--drop-rate", "1.5"], 2,
+     "argument --drop-rate: must be a number ≥ 0 and ≤ 1, got '1.5'"),
+    (["emulate", "--link", ""], 2, "argument --link: an empty path; name the link to make "
+                                   "(default ring.pty)"),
     # counts that grew memory without bound: 10^12 ran out of it (exit 5, wrong advice)
     (["bench", "effects", "--samples", "65"], 2, "--samples: must be in 1 … 64, got 65"),
     (["bench", "dynamics", "--sweeps", "10001"], 2, "--sweeps: must be in 1 … 10000, got 10001"),

@@ -46,7 +46,7 @@ def register(p: argparse.ArgumentParser) -> None:
              EPILOG)
     p.add_argument("scenario", nargs="?", default="t_room",
                    help="bundled scenario name or YAML path (default: t_room)")
-    p.add_argument("--link", metavar="PATH", default=None,
+    p.add_argument("--link", metavar="PATH", default=None, type=_link_path,
                    help=f"symlink to the pty slave for the host to open (default: {DEFAULT_LINK} "
                         "in the current folder; removed when the emulator stops; a link "
                         "left by an emulator that was killed is replaced, one in use by a "
@@ -61,10 +61,10 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--baud", type=between(0, 10_000_000), default=None, metavar="BAUD",
                    help="pace output like a UART at BAUD bit/s, 10 bits per byte "
                         "(default: 115200 with --realtime, else unthrottled; 0 = unthrottled)")
-    p.add_argument("--corrupt-rate", type=float, default=0.0, metavar="P",
+    p.add_argument("--corrupt-rate", type=number_in(0, 1), default=0.0, metavar="P",
                    help="probability that each byte sent is corrupted, 0…1 (default 0; 0.01 "
                         "garbles about half of all 80-byte IRSCN sentences)")
-    p.add_argument("--drop-rate", type=float, default=0.0, metavar="P",
+    p.add_argument("--drop-rate", type=number_in(0, 1), default=0.0, metavar="P",
                    help="probability that a sentence is never sent, 0…1 (default 0)")
     p.add_argument("--stall-after", type=at_least(0), default=None, metavar="N",
                    help="stop answering after N ≥ 0 sentences, a hung firmware (default: never)")
@@ -80,6 +80,15 @@ def register(p: argparse.ArgumentParser) -> None:
     add_pose_option(p, None, "stay at one pose instead of moving on after each full sweep")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=run)
+
+
+def _link_path(text: str) -> str:
+    """``--link``'s value: an empty one (``--link "$L"`` with L unset) was taken as the
+    current folder ('--link : . exists and is not a symlink')."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"an empty path; name the link to make (default "
+                                         f"{DEFAULT_LINK})")
+    return text
 
 
 def run(args: argparse.Namespace) -> int:
