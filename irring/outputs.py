@@ -49,13 +49,18 @@ def check_out(out: str | Path, option: str = "--out") -> Path:
     the option."""
     out = Path(out)
     shown = printable(str(out))
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"{option} {shown}: is a file; expected a folder for the outputs")
-    probe = out
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
+    try:
+        if out.exists() and not out.is_dir():
+            raise OutputError(f"{option} {shown}: is a file; expected a folder for the outputs")
+        probe = out
+        while not probe.exists():
+            if probe.parent == probe:
+                break
+            probe = probe.parent
+    except OutputError:
+        raise
+    except OSError as exc:   # a name longer than the file system takes: exit 1 (bad input)
+        raise OutputError(f"{option} {shown}: cannot be a folder: {_why(exc)}") from None
     if not probe.is_dir():
         raise OutputError(f"{option} {shown}: {printable(str(probe))} is a file, so the folder "
                           "cannot be made")
@@ -236,9 +241,14 @@ def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
     or the disk fills."""
     path = Path(path)
     shown = printable(f"{option} {path}" if option else str(path))
-    if path.is_dir():
+    try:
+        kind = "folder" if path.is_dir() else "other" if path.exists() and not path.is_file() \
+            else None
+    except OSError as exc:   # a name longer than the file system takes
+        raise OutputError(f"{shown}: cannot be written: {_why(exc)}") from None
+    if kind == "folder":
         raise OutputError(f"{shown}: is a folder; expected a file")
-    if path.exists() and not path.is_file():   # the rename would replace the device node
+    if kind == "other":   # the rename would replace the device node
         raise OutputError(f"{shown}: is not a regular file (a device, pipe or socket); irring "
                           "writes a new file there, so name one")
     made: list[Path] = []

@@ -2046,3 +2046,28 @@ def test_a_full_standard_output_is_named(tmp_path, capsys, monkeypatch):
     assert main(["scenarios"]) == errors.OUTPUT
     assert isinstance(seen[0], BrokenPipeError) and seen[0].filename == "standard output"
 
+
+def test_a_name_too_long_for_the_file_system_is_named_with_its_option(tmp_path, capsys,
+                                                                      monkeypatch):
+    """A 300-character --out or --mcap (most file systems take 255 bytes a name): exit 1,
+    'bad input file', as 'irring run: error: xxx…: File name too long'; --mcap's check ran
+    inside argparse and said 'irring: error:' (no command, no option)."""
+    monkeypatch.chdir(tmp_path)
+    long = "x" * 300
+    assert main(["run", "t_room_cylinder", "--out", long, "--no-animation"]) == 4
+    assert capsys.readouterr().err == (f"irring run: error: --out {long}: cannot be a folder: "
+                                       "File name too long\n")
+    assert main(["view", "t_room", "--out", long + ".png"]) == 4
+    assert (f"irring view: error: --out {long}.png: cannot be written: File name too long"
+            in capsys.readouterr().err)
+    with pytest.raises(SystemExit) as stop:
+        main(["run", "t_room_cylinder", "--mcap", long + ".mcap"])
+    assert stop.value.code == 2
+    assert (f"irring run: error: argument --mcap: {long}.mcap: File name too long"
+            in capsys.readouterr().err)
+    from irring.outputs import atomic_file
+    with pytest.raises(OutputError, match=re.escape(
+            f"--out {long}.yaml: cannot be written: File name too long")):
+        with atomic_file(long + ".yaml", "--out"):
+            pass
+    assert os.listdir(tmp_path) == []

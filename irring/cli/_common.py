@@ -200,8 +200,11 @@ def mcap_file(text: str) -> Path:
         raise argparse.ArgumentTypeError(
             f"writing {text} needs the mcap extra: pip install 'irring[mcap]'")
     path = Path(text)
-    if path.exists() and not path.is_file():
-        raise argparse.ArgumentTypeError(f"{text}: is a folder or a device; name a file")
+    try:
+        if path.exists() and not path.is_file():
+            raise argparse.ArgumentTypeError(f"{text}: is a folder or a device; name a file")
+    except OSError as exc:   # a name too long: argparse would let it escape as exit 1
+        raise argparse.ArgumentTypeError(f"{text}: {exc.strerror or exc}") from None
     return path
 
 

@@ -87,13 +87,17 @@ def picture_path(out: Path) -> Path:
     """The PNG ``--out`` names: the file itself when it ends in .png, else view.png in that
     folder. Checked before any rendering. Raises OutputError (a suffix other than .png, a
     folder that cannot be made or written)."""
+    try:
+        is_dir = out.is_dir()
+    except OSError as exc:   # a name longer than the file system takes
+        raise OutputError(f"--out {out}: cannot be written: {exc.strerror or exc}") from None
     if out.suffix.lower() == ".png":
-        if out.is_dir():
+        if is_dir:
             raise OutputError(f"--out {out}: is a folder; name a .png file or the folder "
                               "without .png")
         check_out(out.parent)
         return out
-    if out.suffix and not out.is_dir():
+    if out.suffix and not is_dir:
         raise OutputError(f"--out {out}: a picture is written as PNG; name a .png file or a "
                           "folder (view.png inside it)")
     return check_out(out) / "view.png"
