@@ -207,6 +207,9 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
             raise fail("is a folder; expected a sweeps .npz recording")
         if not path.exists():
             raise fail("no such recording")
+        if not path.is_file():   # a FIFO with no writer blocked here for good
+            raise fail("is not a regular file (a pipe or a device); a recording is read from "
+                       "a saved .npz file, in which it must seek: save it to a file first")
         if path.stat().st_size > MAX_FILE_BYTES:
             raise fail(f"{path.stat().st_size / 2**30:.1f} GB is larger than any recording")
         with zipfile.ZipFile(path) as zf:

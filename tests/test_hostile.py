@@ -2071,3 +2071,21 @@ def test_a_name_too_long_for_the_file_system_is_named_with_its_option(tmp_path, 
         with atomic_file(long + ".yaml", "--out"):
             pass
     assert os.listdir(tmp_path) == []
+
+
+def test_a_recording_that_is_a_pipe_is_refused_not_waited_for(tmp_path, good_recording):
+    """irring replay FIFO waited for a writer for good; `cat rec.npz | irring replay
+    /dev/stdin` said the recording was 'not an irring recording (.npz), or a damaged one:
+    File is not a zip file' (a zip is read by seeking). Run in a subprocess with a limit."""
+    fifo = tmp_path / "rec.npz"
+    os.mkfifo(fifo)
+    done = subprocess.run([sys.executable, "-m", "irring", "replay", str(fifo), "--out",
+                           str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1, done.stderr
+    assert (f"irring replay: error: {fifo}: is not a regular file (a pipe or a device); a "
+            "recording is read from a saved .npz file" in done.stderr)
+    piped = subprocess.run([sys.executable, "-m", "irring", "replay", "/dev/stdin", "--out",
+                            str(tmp_path / "o")], input=good_recording, capture_output=True,
+                           timeout=120)
+    assert piped.returncode == 1 and b"is not a regular file" in piped.stderr, piped.stderr
+    assert sorted(os.listdir(tmp_path)) == ["rec.npz"]
