@@ -318,6 +318,9 @@ def _holding(folder: Path, wait_s: float) -> Iterator[bool]:
                         yield False
                         return
                     time.sleep(0.02)
+                except OSError:   # a file system without locks (NFS without lockd: ENOLCK)
+                    yield True
+                    return
             try:
                 same = os.stat(folder)
             except OSError:

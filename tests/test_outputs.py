@@ -335,3 +335,24 @@ def test_two_commits_into_one_folder_leave_one_set_never_a_mix(tmp_path, monkeyp
         os.close(fd)
     assert (out / "map.pgm").read_text() == "B"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["shared"]
+
+
+def test_a_folder_on_a_file_system_without_locks_is_written_unlocked(tmp_path, monkeypatch):
+    """flock fails with ENOLCK on an NFS mount without a lock daemon: a study there ended
+    'No locks available' (exit 1) before its first run, and so would every run's commit.
+    Where no lock can be had, nothing is held (as on Windows)."""
+    import fcntl
+
+    from irring.outputs import sole_writer
+
+    def no_locks(fd, operation):
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    with sole_writer(out, "a study's results.csv"):
+        with OutputSet(out) as tmp:
+            (tmp / "map.png").write_text("B")
+    assert {p.name: p.read_text() for p in out.iterdir()} == {"notes.txt": "mine", "map.png": "B"}
