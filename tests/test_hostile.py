@@ -2089,3 +2089,21 @@ def test_a_recording_that_is_a_pipe_is_refused_not_waited_for(tmp_path, good_rec
                            timeout=120)
     assert piped.returncode == 1 and b"is not a regular file" in piped.stderr, piped.stderr
     assert sorted(os.listdir(tmp_path)) == ["rec.npz"]
+
+
+def test_an_mcap_folder_that_cannot_be_written_is_refused_before_the_run(tmp_path, capsys,
+                                                                         monkeypatch):
+    """irring run --out o --mcap ro/x.mcap on a read-only ro/: the whole run was computed and
+    o/ written before 'ro/x.mcap: cannot write there: Read-only file system' (exit 4, the
+    option unnamed). Now refused first, as an unwritable --out is (os.access, as
+    check_out asks it, says no for ro/: the tests run as root)."""
+    from irring import outputs
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "ro").mkdir()
+    real = os.access
+    monkeypatch.setattr(outputs.os, "access",
+                        lambda p, mode: real(p, mode) and os.path.basename(p) != "ro")
+    assert main(["run", "t_room_cylinder", "--out", "o", "--mcap", "ro/x.mcap"]) == 4
+    assert capsys.readouterr().err == "irring run: error: --mcap ro: ro is not writable\n"
+    assert sorted(os.listdir(tmp_path)) == ["ro"] and not any((tmp_path / "ro").iterdir())

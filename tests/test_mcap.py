@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import numpy as np
 import pytest
@@ -118,16 +119,22 @@ def test_a_failed_mcap_write_leaves_no_partial_file(tmp_path, monkeypatch):
 
 
 def test_an_mcap_that_cannot_be_written_is_an_output_error_naming_it(tmp_path, capsys):
-    """--mcap below a file: exit 4 (an output), one line naming the path and the file in the
-    way; it was exit 1 with mkdir's bare 'File exists'. A missing folder is made."""
+    """--mcap below a file: exit 4 (an output), one line naming the option and the file in
+    the way, before the run (it was exit 1 with mkdir's bare 'File exists', then after the
+    run); written from code, the path and the file in the way. A missing folder is made."""
     (tmp_path / "taken").write_text("keep")
     bad = tmp_path / "taken" / "run.mcap"
-    assert main(["run", "t_room_three_cylinders", "--out", str(tmp_path / "room"),
-                 "--no-animation", "--mcap", str(bad)]) == 4
+    argv = ["run", "t_room_three_cylinders", "--out", str(tmp_path / "room"), "--no-animation"]
+    assert main(argv + ["--mcap", str(bad)]) == 4
     err = capsys.readouterr().err
-    assert err == (f"irring run: error: {bad}: {tmp_path / 'taken'} is a file, so the folder "
-                   "cannot be made\n")
+    assert err == (f"irring run: error: --mcap {tmp_path / 'taken'}: is a file; expected a "
+                   "folder for the outputs\n")
+    assert not (tmp_path / "room").exists()   # refused before the run
+    assert main(argv) == 0
     run = pipeline.replay(tmp_path / "room" / "sweeps.npz", progress=False)
+    with pytest.raises(OutputError, match=re.escape(
+            f"{bad}: {tmp_path / 'taken'} is a file, so the folder cannot be made")):
+        pipeline.write_mcap(run, bad)
     made = tmp_path / "new" / "deeper" / "run.mcap"
     assert pipeline.write_mcap(run, made) == made and made.stat().st_size > 0
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..core import MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
 from ..errors import UsageError
-from ..outputs import RUN_FILES
+from ..outputs import RUN_FILES, check_out
 
 
 class LazyParser(argparse.ArgumentParser):
@@ -184,8 +184,13 @@ def spare_inputs(outputs: dict, inputs: dict) -> None:
 def mcap_beside_outputs(mcap: Path | None, out: Path) -> None:
     """:class:`UsageError` when ``--mcap`` names one of the files a run writes into ``out``:
     ``irring run t_room --out o --mcap o/sweeps.npz`` left MCAP bytes where the recording
-    was (the MCAP is written after the set; map.mcap is the one name kept for it)."""
-    if mcap is None or mcap.name not in RUN_FILES - {"map.mcap"}:
+    was (the MCAP is written after the set; map.mcap is the one name kept for it);
+    :class:`OutputError` when its folder cannot be written (checked before the work)."""
+    if mcap is None:
+        return
+    # before the work, as --out is: a read-only folder failed after the whole run
+    check_out(mcap.parent, "--mcap")
+    if mcap.name not in RUN_FILES - {"map.mcap"}:
         return
     if mcap.absolute().parent.resolve() == Path(out).absolute().resolve():
         raise UsageError(f"--mcap {mcap}: is the {mcap.name} this command writes into --out "
