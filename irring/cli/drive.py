@@ -44,9 +44,9 @@ Between poses drive waits for Enter when run at a terminal (--no-wait to skip); 
 moves its robot by itself at every full sweep.
 
 Exit status: 0 all poses swept; 3 no device, or it stopped answering, disconnected, refused
-a sweep or made no progress (what arrived is still mapped and written); 130 Ctrl-C, SIGTERM
-or the input ended at the prompt (the poses swept so far are mapped and written); 2 bad
-arguments; 1 a bad --truth or --calibration file.
+a sweep or made no progress (what arrived is still mapped and written); 130 Ctrl-C, SIGTERM,
+SIGHUP (the terminal closed) or the input ended at the prompt (the poses swept so far are
+mapped and written); 2 bad arguments; 1 a bad --truth or --calibration file.
 
 examples:
   irring emulate t_room &                               # try it without hardware (ring.pty)
