@@ -867,6 +867,10 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
 
 POOL_STEPS = 6   # a reading near the no-return level is pooled with 6 steps either way
 POOL_BLOCK_M = 0.5  # a wall silences a pooled beam this far past its readings (to a corner)
+# ... but not where either half of its window (itself and its 6 steps one way) stands less than
+# this many standard errors above the level: that side saw nothing, the window straddles a
+# surface's end, and its mean would carry the face past it (docs/estimator.md, "Pooled readings")
+POOL_SIDE_SIGMAS = 2.0
 
 
 def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal: Calibration,
@@ -874,8 +878,9 @@ def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal
     """(counts, reason), both (S, N), with each reading near the no-return level read as the
     mean of its sensor's 2·``POOL_STEPS`` + 1 readings around it (by step), where that mean
     stands ``RETURN_SIGMAS`` standard errors (count σ/√(2·POOL_STEPS + 1)) above the
-    no-return level: such a reading becomes OK with the mean's counts; all others are
-    returned as given.
+    no-return level, and so does each half of it (the reading and its ``POOL_STEPS`` steps one
+    way; ``POOL_SIDE_SIGMAS`` standard errors, count σ/√(``POOL_STEPS`` + 1)): such a
+    reading becomes OK with the mean's counts; all others are returned as given.
 
     Near the level: below it plus ``RETURN_SIGMAS + RANGE_SIGMAS`` count σ, NO_RETURN,
     OUT_OF_RANGE or OK, and so is every reading of the window (it ends at none: a sweep's
@@ -901,6 +906,11 @@ def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal
     mean = (total[n:] - total[:-n]) / n                        # windows' means, centred rows
     whole = (count[n:] - count[:-n]) == n
     seen = (mean - cal.no_return_counts) * math.sqrt(n) >= RETURN_SIGMAS * sigma
+    # each half (the centre and POOL_STEPS rows one way) must show the surface too
+    half, rows = POOL_STEPS + 1, shape[0] - 2 * POOL_STEPS
+    side = np.minimum(total[half:half + rows] - total[:rows],            # rows i-6 … i
+                      total[n:] - total[POOL_STEPS:POOL_STEPS + rows])   # rows i … i+6
+    seen &= (side / half - cal.no_return_counts) * math.sqrt(half) >= POOL_SIDE_SIGMAS * sigma
     centre = slice(POOL_STEPS, shape[0] - POOL_STEPS)
     pick = near[centre] & whole & seen
     if not pick.any():
