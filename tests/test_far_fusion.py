@@ -85,7 +85,10 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
     noise) lies off its wall by its own 5-25 mm, and the mapper drew each at its own offset:
     walls two cells thick. Snapped as one, the far end points' error across their wall is
     RMS 9.5 mm (11.9 before), 20 lie more than 20 mm off (39), precision 0.981 (0.956; 0.952
-    before the mapper's median of neighbouring steps, docs/mapping.md)."""
+    before the mapper's median of neighbouring steps, docs/mapping.md). Since a pool one half
+    of which saw nothing is left as it was (POOL_SIDE_SIGMAS: a wall fading out of range at
+    30° reads like a face's end), 550 far readings (582): RMS 10.7 mm (12.6 unfused), 26 more
+    than 20 mm off (44), precision 0.972 (0.945)."""
     scene = loads(FAR_HALL)
     monkeypatch.setattr(fast, "far_posts", lambda points, *args: points)   # lines alone
 
@@ -99,12 +102,12 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
         return np.concatenate(err), run.scores["occupied_precision"]
 
     err, precision = far_errors()
-    assert err.size == 582 and np.sqrt(np.mean(err ** 2)) < 0.0100
-    assert (np.abs(err) > 0.02).sum() <= 22 and precision > 0.975
+    assert err.size == 550 and np.sqrt(np.mean(err ** 2)) < 0.0110
+    assert (np.abs(err) > 0.02).sum() <= 26 and precision > 0.97
     monkeypatch.setattr(fast, "FUSE_MIN", 10 ** 9)
     err0, precision0 = far_errors()
-    assert err0.size == 582 and np.sqrt(np.mean(err0 ** 2)) > 0.0115
-    assert (np.abs(err0) > 0.02).sum() >= 35 and precision0 < 0.96
+    assert err0.size == 550 and np.sqrt(np.mean(err0 ** 2)) > 0.0120
+    assert (np.abs(err0) > 0.02).sum() >= 40 and precision0 < 0.955
 
 
 def _on_posts(scene, sweep):
