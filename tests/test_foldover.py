@@ -459,7 +459,9 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
     pooling its counts (335, below the no-return level) with its neighbours', found it
     behind that wall and silent. The second pass, a neighbour held out, read it valid on
     another line at 68°: 528 mm for 632 mm. It stays NO_RETURN. (Seed 8112 showed it until
-    the own-trace rule held out other neighbours: test_a_far_end_point_needs_…)"""
+    the own-trace rule held out other neighbours: test_a_far_end_point_needs_…; since a pool
+    one half of which saw nothing is left as it was, POOL_SIDE_SIGMAS, that pool does not
+    form: 455 valid readings, none off; the guard is checked with the halves' rule off.)"""
     import irring.estimation.estimate as fast
     scene = loads(NEAR_A21, source="<test>")
 
@@ -470,6 +472,8 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
             e = np.hypot(p.x - sw.truth.hit_point[..., 0], p.y - sw.truth.hit_point[..., 1])
             n += int((p.valid & (e > 0.1)).sum())
         return n, sum(int(p.valid.sum()) for p in run.points)
+    assert off() == (0, 455)
+    monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)
     assert off() == (0, 469)
     keep = fast._unplaced
     monkeypatch.setattr(fast, "_unplaced", lambda p, gone, why=Reason.INCIDENCE_UNKNOWN:

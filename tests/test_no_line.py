@@ -291,10 +291,17 @@ def test_a_face_past_a_corner_takes_the_slope_of_its_own_readings(monkeypatch):
     """Three readings of a box face at 66-68°, on no line: their profile window took in the
     other face's line members and bent, so they were INCIDENCE_UNKNOWN. Asked again of the
     readings on no line alone, they are placed within 20 mm (θ within 4° of the truth) with
-    a σ that covers the error."""
+    a σ that covers the error. (Their profile held sensor 9's readings past the 70° drop-out,
+    pooled with the face's; since a pool one half of which saw nothing is left as it was,
+    POOL_SIDE_SIGMAS, those stay silent, the profile is too short and the three stay
+    INCIDENCE_UNKNOWN: the asking again is checked with the halves' rule off.)"""
     from irring.estimation import estimate as estimate_module
 
     sc = loads(BOX_PAST_CORNER, source="<test>")
+    run = pipeline.run(sc, seed=sc.seed, progress=False)
+    assert np.all(run.points[0].reason[np.isin(run.sweeps[0].steps, [-3, -2, -1]), 9]
+                  == Reason.INCIDENCE_UNKNOWN)
+    monkeypatch.setattr(estimate_module, "POOL_SIDE_SIGMAS", -math.inf)
     face = None
     for asked_again in (True, False):
         if not asked_again:
