@@ -514,8 +514,10 @@ def _long_and_valid(points, sweeps):
     return n, sum(int(p.valid.sum()) for p in points)
 
 
+# (the pilaster: (9, 249) and (0, 236) before a pool one half of which saw nothing was left
+# as it was, POOL_SIDE_SIGMAS)
 @pytest.mark.parametrize("room, seed, before, now", [
-    (STEPPED_CORNER, 7021, (42, 74), (0, 23)), (PILASTER_TOP_A21, 7108, (9, 249), (0, 236))],
+    (STEPPED_CORNER, 7021, (42, 74), (0, 23)), (PILASTER_TOP_A21, 7108, (9, 239), (0, 226))],
     ids=["stepped-corner", "a21-pilaster-top"])
 def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, now,
                                                           monkeypatch):
