@@ -22,6 +22,7 @@ BENCHES = {
     "foldover": "fold-over from as close as the housing allows: wrong-branch readings, "
                 "walls outside the room",
     "grazing": "end-point RMS per 10° of incidence vs θ = 0, walls up to ~70°",
+    "sigma": "each reading's σ against its range error, per distance band and sensor model",
     "study": "how `irring study` scales: runs/s on 1 and N workers, memory",
     "render": "cost of the map pictures vs making the map; peak memory",
 }
