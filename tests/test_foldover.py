@@ -506,6 +506,10 @@ effects: [incidence, noise, quantization, foldover]
 """
 
 
+def _no_straight_trace(counts, *args):
+    return np.zeros(np.shape(counts), bool)
+
+
 def _long_and_valid(points, sweeps):
     n = 0
     for sw, p in zip(sweeps, points):
@@ -517,7 +521,7 @@ def _long_and_valid(points, sweeps):
 # (the pilaster: (9, 249) and (0, 236) before a pool one half of which saw nothing was left
 # as it was, POOL_SIDE_SIGMAS)
 @pytest.mark.parametrize("room, seed, before, now", [
-    (STEPPED_CORNER, 7021, (42, 74), (0, 23)), (PILASTER_TOP_A21, 7108, (9, 239), (0, 226))],
+    (STEPPED_CORNER, 7021, (42, 74), (0, 21)), (PILASTER_TOP_A21, 7108, (9, 239), (0, 226))],
     ids=["stepped-corner", "a21-pilaster-top"])
 def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, now,
                                                           monkeypatch):
@@ -530,6 +534,8 @@ def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, n
         slow = estimate_numpy.estimate_detail(sw, cal).points
         np.testing.assert_array_equal(slow.reason, p.reason)
         np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    # the straight-trace test (below) alone leaves none of these valid either: without both
+    monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
     with monkeypatch.context() as m:
         m.setattr(est, "_own_trace_agrees", lambda between, *a: np.ones(between.shape, bool))
         assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == before
@@ -560,3 +566,54 @@ def test_seen_there_tells_between_members_from_past_the_last_one():
     # between the members of a line it runs along (itself, not line 1 35° off) and no
     # further; a reading on no line of its own: nowhere
     assert agrees.tolist() == [[True, True], [True, False], [False, False], [False, False]]
+
+
+# A 240 x 180 mm box in the room's corner, the ring 175 mm from its face and 171 mm from the
+# floor: the face's far curve runs along the floor wall behind it, 2.8° off
+BOX_IN_CORNER = """
+name: fold_box_in_corner
+room: {outline_mm: [[0, 0], [1500, 0], [1500, 1200], [0, 1200]]}
+obstacles:
+  - {type: box, center_mm: [1380, 90], size_mm: [240, 180]}
+robot: {poses: [{x_mm: 1085, y_mm: 171}, {x_mm: 1082, y_mm: 174, yaw_deg: 13}]}
+sensor: {model: gp2d12, adc_bits: 12}
+effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}, foldover: {}}
+"""
+
+
+def test_a_far_decision_its_own_line_does_not_anchor_needs_the_straighter_far_trace(
+        monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc, sweeps, cal = simulated(BOX_IN_CORNER, seed=7003)
+    points = [estimate(sw, cal) for sw in sweeps]
+    assert _long_and_valid(points, sweeps) == (0, 136)
+    for sw, p in zip(sweeps, points):
+        slow = estimate_numpy.estimate_detail(sw, cal).points
+        np.testing.assert_array_equal(slow.reason, p.reason)
+        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    # without the test: 7 readings of the face read far onto the floor wall, ~250 mm off
+    monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
+    assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (7, 151)
+
+
+def test_near_trace_straight_tells_a_close_face_from_a_far_wall():
+    from types import SimpleNamespace
+
+    from irring.estimation.estimate import _near_trace_straight
+
+    cal = scene_calibration(loads(STEPPED_CORNER, source="<test>"))[0]
+    steps = 23
+    heading = np.linspace(-0.31, 0.27, steps)[:, None] + np.array([0.0, 1.9])[None, :]
+    p = SimpleNamespace(origin_x=np.tile([0.021, -0.013], (steps, 1)),
+                        origin_y=np.tile([-0.008, 0.017], (steps, 1)), heading=heading)
+    # sensor 0: a flat face 33 mm in front (near branch); sensor 1: a wall 305 mm away (far)
+    face = 0.033 / np.cos(heading[:, 0] - 0.05)
+    wall = 0.305 / np.cos(heading[:, 1] - 1.82)
+    counts = np.stack([face / cal.peak_distance_m * cal.counts(cal.peak_distance_m, 0.0),
+                       cal.counts(wall, 0.0)], axis=1)
+    use = np.ones((steps, 2), bool)
+    use[4, 0] = False
+    straight = _near_trace_straight(counts, p, np.arange(steps)[::-1].copy(), use, cal)
+    assert straight[:, 0].tolist() == [i != 4 for i in range(steps)]
+    assert not straight[:, 1].any()

@@ -2244,6 +2244,8 @@ _FOLD_SEEN_M = 0.05    # … where a member of it lies this near the far end poi
 _FOLD_OWN_COS = math.cos(math.radians(20.0))  # … and, unless its own line is anchored,
 #                        its own line runs this near its direction, the end point between
 #                        the line's members (a near face's far curve crossed it at 25-47°)
+_FOLD_TRACE_STEPS = 10  # a reading's own traces: its sensor's readings this many steps either
+_FOLD_TRACE_RATIO = 2.0  # side; the near one "as straight" within this ratio of reduced χ²
 # the readings whose branch is judged: every one that returned something. A reading the far
 # branch puts out of range or at an unknown θ may be on the near branch all the same, and the
 # second pass (its neighbours held out) could otherwise read it valid on the far one
@@ -2281,7 +2283,8 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     """
     # the judging pass reads each end point on its own (not snapped onto its line)
     first = run(np.zeros(np.shape(sweep.counts), dtype=bool), True, False)
-    near, far, d_fold, theta_fold, sigma_fold, walls = _fold_branches(first, sweep, cal)
+    near, far, d_fold, theta_fold, sigma_fold, walls, doubted = _fold_branches(first, sweep,
+                                                                                 cal)
     ambiguous = (d_fold == 0) & ~far & np.isin(first.points.reason, _FOLD_JUDGED)
     second = run(near | ambiguous, True, True)
     p = second.points
@@ -2328,6 +2331,10 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     p = _behind_a_wall(p, second.lines.label, first.lines, walls, sweep, cal)
     # … and one whose own profile reads it more than 100 mm from where its line puts it
     p = _disowned_by_own_profile(p, second.lines.label, sweep, cal, profiler)
+    # a far reading whose own near trace is as straight as its far one: undecided (it took
+    # part in the second pass as a far one, so the other readings are read as before)
+    if doubted.any():
+        p = _unplaced(p, (doubted & p.valid).reshape(-1).nonzero()[0], Reason.FOLDOVER_AMBIGUOUS)
     # a beam the judging pass, which saw every reading, found silent stays silent: the
     # second pass, its neighbours held out, put one the first silenced behind a wall it
     # met at 74° (silent_behind_a_wall) on a line at 69°, 127 mm short
@@ -2501,11 +2508,13 @@ def _onto_first_lines(p: Points, q: Points, first: Lines, label_second: np.ndarr
 
 
 def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
-    """(near, far, d, θ, σ), all (S, N), and the lines two sensors agree on (indices into
-    ``first.lines``), from the far-branch estimate ``first`` (see :func:`resolve_foldover`);
-    vectorised over (readings, lines). ``far`` includes the readings whose near end point
-    would lie inside the housing; d > 0 where a line decided the branch: the distance on
-    that branch at that line's incidence (0 elsewhere)."""
+    """(near, far, d, θ, σ), all (S, N), the lines two sensors agree on (indices into
+    ``first.lines``) and ``doubted`` (S, N), from the far-branch estimate ``first`` (see
+    :func:`resolve_foldover`); vectorised over (readings, lines). ``far`` includes the
+    readings whose near end point would lie inside the housing; d > 0 where a line decided
+    the branch: the distance on that branch at that line's incidence (0 elsewhere);
+    ``doubted``: far ones whose own near trace is as straight as their far one while their
+    own line is not anchored (:func:`_near_trace_straight`), undecided in the end."""
     p, found = first.points, first.lines
     shape = p.valid.shape
     counts = np.asarray(sweep.counts, dtype=float)
@@ -2522,7 +2531,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     cand = live & ~housing
     if not cand.any():
         return (np.zeros(shape, bool), housing & live, *(np.zeros(shape) for _ in range(3)),
-                np.zeros(0, np.intp))
+                np.zeros(0, np.intp), np.zeros(shape, bool))
     idx = cand.reshape(-1).nonzero()[0]
     s = counts.reshape(-1)[idx]
     h_idx = h.reshape(-1)[idx]
@@ -2605,6 +2614,15 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         if np.array_equal(more, anchored):
             break
         anchored = more
+    # … and not where its sensor's near trace is as straight as its far one, unless its own
+    # line is anchored: a near face's far curve can run along the wall behind it while its
+    # near trace fits the face, and then which branch it is on cannot be told. Flagged after
+    # the second pass only: held out of either pass, such readings un-anchored right lines
+    # and left other readings valid > 100 mm off (docs/foldover.md)
+    own_certain = (ocol >= 0) & (certain[np.maximum(ocol, 0)] >= _FOLD_ANCHOR)
+    straight = _near_trace_straight(counts, p, np.asarray(sweep.steps), cand, cal)
+    doubted = np.zeros(shape, bool)
+    doubted.reshape(-1)[idx] = is_far & straight.reshape(-1)[idx] & ~own_certain
     near, far = np.zeros(shape, bool), housing & live
     near.reshape(-1)[idx] = is_near
     far.reshape(-1)[idx] = is_far
@@ -2620,7 +2638,56 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         out[1].reshape(-1)[idx] = theta
         out[2].reshape(-1)[idx] = np.where(dist > 0, np.maximum(slope * dist * sig_s,
                                                                  SIGMA_FLOOR_M), 0.0)
-    return near, far, out[0], out[1], out[2], use[trusted]
+    return near, far, out[0], out[1], out[2], use[trusted], doubted
+
+
+def _trace_chi2(x: np.ndarray, y: np.ndarray, sigma: np.ndarray, use: np.ndarray,
+                order: np.ndarray, steps_either_side: int) -> np.ndarray:
+    """(S, N): the reduced χ² of one straight line through each reading's end point (x, y,
+    σ, all (S, N)) and those of its sensor's readings ``use`` within ``steps_either_side``
+    steps either side (rows in step ``order``); NaN where fewer than 5 such points."""
+    shape = use.shape
+    x, y, sigma, ok = (np.where(use, v, 0.0)[order] for v in (x, y, sigma, use.astype(float)))
+    w = steps_either_side
+    x, y, sigma, ok = (np.pad(v, ((w, w), (0, 0))) for v in (x, y, sigma, ok))
+    rows = shape[0]
+    # sums relative to each reading's own point (no cancellation)
+    x0, y0 = x[w:w + rows], y[w:w + rows]
+    n = sx = sy = sxx = syy = sxy = ss = np.zeros(shape)
+    for o in range(2 * w + 1):
+        m = ok[o:o + rows]
+        dx, dy = (x[o:o + rows] - x0) * m, (y[o:o + rows] - y0) * m
+        n, sx, sy, ss = n + m, sx + dx, sy + dy, ss + sigma[o:o + rows] ** 2 * m
+        sxx, syy, sxy = sxx + dx * dx, syy + dy * dy, sxy + dx * dy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a, c = sxx / n - (sx / n) ** 2, syy / n - (sy / n) ** 2
+        b = sxy / n - (sx / n) * (sy / n)
+        smallest = 0.5 * (a + c) - np.sqrt(0.25 * (a - c) ** 2 + b * b)
+        chi2 = n * n * np.maximum(smallest, 0.0) / ((n - 2.0) * ss)
+    chi2[(n < 5) | (ok[w:w + rows] == 0)] = np.nan
+    out = np.empty(shape)
+    out[order] = chi2
+    return out
+
+
+def _near_trace_straight(counts: np.ndarray, p: Points, steps: np.ndarray,
+                         use: np.ndarray, cal: Calibration) -> np.ndarray:
+    """(S, N) bool: whether a reading's own near trace is as straight as its far one: the
+    end points (θ = 0) of its sensor's readings ``use`` within ``_FOLD_TRACE_STEPS`` steps
+    either side fit one line on the near branch with a reduced χ² at most
+    ``_FOLD_TRACE_RATIO`` times the far branch's (NaN, fewer than 5 points: False). A flat
+    face 30 mm in front gives a straight near trace; a wall read far a straight far one.
+    docs/foldover.md, "Both branches straight"."""
+    order = np.argsort(np.asarray(steps), kind="stable")
+    rel = cal.sigma_counts() / np.maximum(counts, 1.0)
+    chi2 = []
+    for d, slope in ((cal.near_distance(counts, 0.0), 1.0),
+                     (cal.distance(np.maximum(counts, 1.0), 0.0), abs(float(cal.ab(0.0)[1])))):
+        x, y = p.origin_x + d * np.cos(p.heading), p.origin_y + d * np.sin(p.heading)
+        chi2.append(_trace_chi2(x, y, np.maximum(slope * d * rel, 1e-6), use, order,
+                                _FOLD_TRACE_STEPS))
+    near, far = chi2
+    return near <= _FOLD_TRACE_RATIO * far
 
 
 def _own_trace_agrees(between: np.ndarray, ocol: np.ndarray, certain: np.ndarray,
