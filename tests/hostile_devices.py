@@ -19,13 +19,13 @@ SENSORS, MIN_STEP, MAX_STEP, BITS = 12, -2, 2, 12
 
 
 def line(body: str) -> bytes:
-    """One sentence with a correct checksum, whatever its fields say."""
-    return f"${body}*{p.checksum(body.encode()):02X}\r\n".encode()
+    """One sentence with a correct CRC, whatever its fields say."""
+    return p.frame(body.encode())
 
 
 def info(sensors=SENSORS, bits=BITS, lo=MIN_STEP, hi=MAX_STEP, step_mdeg=1800, num=3,
          den=5) -> bytes:
-    return line(f"IRINF,1,{sensors},{bits},{step_mdeg},{num},{den},{lo},{hi},hostile")
+    return line(f"IRINF,{p.PROTOCOL_VERSION},{sensors},{bits},{step_mdeg},{num},{den},{lo},{hi},hostile")
 
 
 def counts_for(step: int, n: int = SENSORS) -> list[int]:

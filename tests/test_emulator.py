@@ -126,7 +126,7 @@ def test_faults_gauntlet_corruption_drops_a_stall_and_a_disconnect(t_room, pty_d
     stall_s = 4 * TIMEOUT_S
     source = RecordingSource(t_room)
     faults = Faults(corrupt_rate=0.01, drop_rate=0.05, stall_after=1 + 71 + 30, stall_s=stall_s,
-                    disconnect_after=1 + 71 + 1 + 30 + 1 + 40, seed=11)
+                    disconnect_after=1 + 71 + 1 + 30 + 1 + 40, seed=12)
     link = pty_device(Device(source, faults=faults))
     ring = SerialRing(link, timeout_s=TIMEOUT_S, retries=1).open()
     bound_s = TIMEOUT_S + 0.04 + 70 * 0.005 + (ring.retries + 1) * TIMEOUT_S + 0.5
@@ -206,11 +206,11 @@ class TinySource(FakeSource):
 
 
 @pytest.mark.parametrize("line,code", [
-    (b"$IRHLO*51\r\n", 1),                       # bad checksum
+    (b"$IRHLO*26D1\r\n", 1),                     # bad CRC
     (b"$IRSWP,1,2\r\n", 1),                      # no checksum
     (p.encode(p.Done(3)), 2),                    # a device sentence is not a command
-    (b"$IRXYZ*" + b"%02X" % (0x49 ^ 0x52 ^ 0x58 ^ 0x59 ^ 0x5A) + b"\r\n", 2),
-    (b"$IRSWP,-35,35,0,40*" + b"%02X" % p.checksum(b"IRSWP,-35,35,0,40") + b"\r\n", 3),
+    (p.frame(b"IRXYZ"), 2),
+    (p.frame(b"IRSWP,-35,35,0,40"), 3),
     (p.encode(p.SweepCommand(-36, 35)), 4),
     (p.encode(p.GoTo(99)), 4),
 ])
@@ -515,3 +515,80 @@ def test_a_moving_scene_is_emulated_sweep_by_sweep_but_not_driven(capsys):
     err = capsys.readouterr().err
     assert "--truth t_room_moving: the scenario drives while scanning (`motion`)" in err
     assert "irring run" in err
+
+
+# --------------------------------------------------------------------------- protocol versions
+
+
+def test_a_v2_device_answers_an_old_hosts_v1_sentences_in_v1_framing():
+    """An irring that speaks only v1 sends `$IRHLO*50`: it gets an IRINF it can read whose
+    version field says 2 (so it refuses with its own clear error), and every other v1
+    sentence an IRERR it can read; none is obeyed."""
+    dev = Device(TinySource())
+    out = b""
+    now = time.monotonic()
+    for line in (b"$IRHLO*50\r\n", p.encode(p.GoTo(3), version=1),
+                 p.encode(p.Done(1), version=1), b"$IRHLO*51\r\n"):
+        dev.receive(line, now)
+        out += dev.poll(now)[0]
+    old_host = p.Decoder(version=1).feed(out)
+    assert old_host == [p.info_for_ring(TinySource.ring, 12, "irring-emulator-1", version=2),
+                        p.ErrorReply(1, "bad sentence"), p.ErrorReply(2, "unknown type"),
+                        p.ErrorReply(1, "bad sentence")]
+    assert old_host[0].proto == 2 and dev.stats.sweeps == 0 and dev._pending_pos is None
+
+
+def test_a_v1_device_answers_a_v2_hello_with_a_v1_irerr_and_a_v1_hello_with_its_irinf():
+    dev = Device(TinySource(), protocol=1)
+    now = time.monotonic()
+    dev.receive(p.encode(p.Hello()) + p.encode(p.Hello(), version=1), now)
+    out = dev.poll(now)[0]
+    assert out.startswith(b"$IRERR,1,bad sentence*29\r\n$IRINF,1,12,")
+    assert p.Decoder(version=1).feed(out)[1].proto == 1
+
+
+def test_irring_drive_refuses_an_old_ring_and_uses_it_when_told(tmp_path, t_room, pty_device,
+                                                               capsys):
+    import json
+
+    from irring.cli import main
+
+    link = pty_device(Device(SimRing(t_room), protocol=1))
+    args = ["drive", "--port", link, "--truth", "t_room", "--no-animation", "--timeout", "0.5"]
+    assert main(args + ["--out", str(tmp_path / "refused")]) == 3
+    err = capsys.readouterr().err
+    assert "runs IRR protocol v1 firmware (irring-emulator-1)" in err
+    assert "this irring speaks v2 (a CRC-16). Reflash the ring" in err
+    assert "--accept-protocol-v1" in err and not (tmp_path / "refused").exists()
+    assert main(args + ["--out", str(tmp_path / "v1"), "--accept-protocol-v1", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert "IRR protocol v1" in err and "warning: the device on" in err
+    assert "speaking v1 as asked (--accept-protocol-v1)" in err
+    drove = json.loads(out)
+    link_json = json.loads((tmp_path / "v1" / "link.json").read_text())
+    assert link_json["protocol"] == drove["link"]["protocol"] == 1
+    assert drove["link"]["totals"]["lost_scans"] == 0
+
+
+def test_emulate_protocol_option_is_checked():
+    from irring.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["emulate", "t_room", "--protocol", "3"])
+    assert exc.value.code == 2
+
+
+def test_irring_calibrate_refuses_an_old_ring_and_needs_a_port_for_the_option(tmp_path,
+                                                                             t_room,
+                                                                             pty_device,
+                                                                             capsys):
+    from irring.cli import main
+
+    link = pty_device(Device(SimRing(t_room), protocol=1))
+    assert main(["calibrate", "--port", link, "--out", str(tmp_path / "cal.yaml")]) == 3
+    err = capsys.readouterr().err
+    assert "runs IRR protocol v1 firmware" in err and "make -C firmware avr flash" in err
+    assert not (tmp_path / "cal.yaml").exists()
+    assert main(["calibrate", "--accept-protocol-v1", "--out", str(tmp_path / "c.yaml")]) == 2
+    assert "--accept-protocol-v1 is for a real ring's old firmware; give its --port too" in \
+        capsys.readouterr().err

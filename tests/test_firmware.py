@@ -61,7 +61,7 @@ def device(host_binary, tmp_path):
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         procs.append(proc)
         line = proc.stdout.readline().decode()
-        assert "serving IRR v1 on /dev/pts/" in line and link.is_symlink(), line
+        assert "serving IRR v2 on /dev/pts/" in line and link.is_symlink(), line
         return str(link)
 
     yield start
@@ -228,13 +228,23 @@ def test_stop_when_idle_reports_none_sent_and_serial_ring_stop_works(device):
 # --------------------------------------------------------------------------- every IRERR
 
 
-def line(body: str) -> bytes:
-    return b"$" + body.encode() + b"*%02X\r\n" % p.checksum(body.encode())
+def line(body: str, version: int = 2) -> bytes:
+    return p.frame(body.encode(), version)
+
+
+def answers(stream: bytes) -> list[tuple[int, p.AnyMessage]]:
+    """Each sentence a device sent, with the protocol version it was framed in."""
+    out = []
+    for raw in re.findall(rb"\$[^$]*?\r\n", stream):
+        version = 1 if re.search(rb"\*[0-9A-F]{2}\r\n$", raw) else 2
+        out.append((version, p.decode(raw, version=version)))
+    return out
 
 
 BAD = {
-    1: [b"$IRHLO*51\r\n",                      # wrong checksum
-        b"$IRGTO,7*5c\r\n",                     # lower-case checksum (5C is right)
+    1: [b"$IRHLO*26D1\r\n",                    # wrong CRC
+        b"$IRGTO,7*d85b\r\n",                   # lower-case CRC (D85B is right)
+        b"$IRGTO,7*D85\r\n", b"$IRGTO,7*D85B0\r\n",   # 3 and 5 digits
         line("IRHLO")[:-2] + b"\n",            # no \r
         line("IRGTO,5").replace(b"*", b""),     # no `*`
         line("IRGTO,x"), line("IRGTO,1.5"), line("IRGTO,+3"), line("IRGTO,-"),
@@ -256,19 +266,28 @@ BAD = {
 }
 
 
-def reference_codes(data: bytes) -> list[int]:
-    """The IRERR codes the Python reference device would answer a byte stream with."""
+def reference_codes(data: bytes, framing: bool = False) -> list:
+    """The IRERR codes the Python reference device (irring/hardware/emulator.py) would
+    answer a byte stream with; with ``framing``, (version, code) pairs."""
     codes = []
     for item in p.Decoder().feed(data):
-        if isinstance(item, p.ProtocolError):
-            codes.append(item.fault.device_error_code)
+        if isinstance(item, p.ProtocolError) and item.fault is p.Fault.OTHER_VERSION:
+            try:   # answered in v1 framing: IRHLO with IRINF, the rest with IRERR
+                msg = p.decode(item.raw, version=1)
+            except p.ProtocolError as exc:
+                codes.append((1, exc.fault.device_error_code))
+            else:
+                if not isinstance(msg, p.Hello):
+                    codes.append((1, 2 if msg.TYPE not in p.HOST_TYPES else 1))
+        elif isinstance(item, p.ProtocolError):
+            codes.append((2, item.fault.device_error_code))
         elif item.TYPE not in p.HOST_TYPES:
-            codes.append(p.ERR_UNKNOWN_TYPE)
+            codes.append((2, p.ERR_UNKNOWN_TYPE))
         elif isinstance(item, (p.GoTo, p.SweepCommand)):
             steps = [item.step] if isinstance(item, p.GoTo) else [item.from_step, item.to_step]
             if any(not -35 <= s <= 35 for s in steps):
-                codes.append(p.ERR_STEP_RANGE)
-    return codes
+                codes.append((2, p.ERR_STEP_RANGE))
+    return codes if framing else [c for _, c in codes]
 
 
 @pytest.mark.parametrize("code", sorted(BAD))
@@ -293,8 +312,8 @@ def _sentence(draw) -> bytes:
     body = ",".join([draw(_TYPES)] + draw(st.lists(_TOKENS, max_size=10))).encode()
     if draw(st.booleans()):
         body = body.replace(b",", draw(st.sampled_from([b",", b", ", b"\t", b"*", b"$"])), 1)
-    cs = b"%02X" % p.checksum(body)
-    cs = draw(st.sampled_from([cs, cs.lower(), b"00", cs[:1], b""]))
+    cs, v1 = p.checksum(body), p.checksum(body, version=1)   # v1: an old host's sentences
+    cs = draw(st.sampled_from([cs, cs, cs.lower(), b"0000", cs[:3], b"", v1, v1.lower(), b"00"]))
     end = draw(st.sampled_from([b"\r\n", b"\r\n", b"\n", b""]))
     noise = draw(st.binary(max_size=3).filter(lambda b: b"$" not in b))
     return noise + b"$" + body + b"*" + cs + end
@@ -311,8 +330,8 @@ def test_c_parser_rejects_exactly_what_the_python_reference_rejects(host_binary,
                    for m in p.Decoder().feed(stream)))
     run = subprocess.run([str(host_binary), "--stdio"], input=stream, capture_output=True,
                          timeout=10)
-    got = [m.code for m in p.Decoder().feed(run.stdout) if isinstance(m, p.ErrorReply)]
-    assert got == reference_codes(stream)
+    got = [(v, m.code) for v, m in answers(run.stdout) if isinstance(m, p.ErrorReply)]
+    assert got == reference_codes(stream, framing=True)
 
 
 def test_busy_while_sweeping_then_accepted_after(raw):
@@ -354,7 +373,7 @@ def test_garbage_and_over_long_lines(raw):
 def test_checksum_vectors_of_the_protocol_document(raw):
     doc = (ROOT / "docs" / "protocol.md").read_text()
     example = doc.split("## Example", 1)[1]
-    vectors = {who: [m.encode() for m in re.findall(rf"^{who}:\s+(\$.*?\*[0-9A-F]{{2}})", example, re.M)]
+    vectors = {who: [m.encode() for m in re.findall(rf"^{who}:\s+(\$.*?\*[0-9A-F]{{4}})", example, re.M)]
                for who in ("host", "device")}
     assert len(vectors["host"]) == 3 and len(vectors["device"]) == 5
     for v in vectors["device"]:
@@ -367,10 +386,38 @@ def test_checksum_vectors_of_the_protocol_document(raw):
     assert raw.ask(hello + b"\r\n")[0].TYPE == "IRINF"
     got = raw.ask(sweep + b"\r\n", n=72, wait_s=5.0)  # $IRSWP,-35,35,1,40
     assert [m.step for m in got[:-1]] == list(range(-35, 36)) and got[-1] == p.Done(70)
-    # the device's own answer to `$IRGTO,99*6B` is the document's line, byte for byte
+    # the device's own answer to `$IRGTO,99*86A9` is the document's line, byte for byte
     raw.lines.clear()
     assert raw.ask(goto + b"\r\n") == [p.ErrorReply(4, "step out of range")]
     assert raw.lines == [vectors["device"][-1] + b"\r\n"]
+
+
+def test_the_c_crc_is_the_documents_and_pythons(host_binary):
+    """firmware/core/irr_proto.c's CRC (the host build's C; the AVR's avr-libc
+    _crc_ccitt_update is checked through every sentence of the simavr test below)."""
+    def c_crc(text: str) -> str:
+        return subprocess.run([str(host_binary), "--crc", text], capture_output=True,
+                              text=True, check=True).stdout.strip()
+
+    assert c_crc("123456789") == "906E" == f"{p.CRC16_CHECK:04X}"
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 30, 120):
+        text = "".join(chr(c) for c in rng.integers(0x21, 0x7F, n))
+        assert c_crc(text) == f"{p.crc16(text.encode()):04X}", text
+
+
+def test_an_old_hosts_v1_sentences_are_answered_in_v1_and_never_obeyed(raw):
+    """A host that speaks only v1 learns from the IRINF it can read that this is a v2 device
+    (proto 2); its commands are refused in a framing it reads."""
+    raw.send(line("IRHLO", 1) + line("IRGTO,3", 1) + line("IRDON,1", 1) + b"$IRHLO*51\r\n")
+    deadline = time.monotonic() + 2
+    while time.monotonic() < deadline and len(raw.lines) < 4:
+        raw.read_until(lambda got: False, 0.1)
+    got = answers(b"".join(raw.lines))
+    assert got == [(1, p.info_for_ring(PAPER_RING, 12, "irring-fw-2.0", version=2)),
+                   (1, p.ErrorReply(1, "bad sentence")), (1, p.ErrorReply(2, "unknown type")),
+                   (1, p.ErrorReply(1, "bad sentence"))]
+    assert raw.ask(p.encode(p.GoTo(-1))) == [p.Position(-1)]   # the motor never went to 3
 
 
 def test_device_sentences_decode_with_the_python_protocol(raw):

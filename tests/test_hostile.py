@@ -893,8 +893,8 @@ def _recorded(out) -> list:
 
 
 @pytest.mark.parametrize("later, said", [
-    (hd.error_reply(3), "the ring rejected $IRSWP,-2,2,1,0*63: IRERR 3 (bad argument)"),
-    (hd.error_reply(5), "the ring kept refusing $IRSWP,-2,2,1,0*63: IRERR 5 (busy)"),
+    (hd.error_reply(3), "the ring rejected $IRSWP,-2,2,1,0*408C: IRERR 3 (bad argument)"),
+    (hd.error_reply(5), "the ring kept refusing $IRSWP,-2,2,1,0*408C: IRERR 5 (busy)"),
 ])
 def test_a_device_refusing_the_second_pose_keeps_the_first(tmp_path, capsys, later, said):
     """A refusal ended the drive as exit 3 with nothing written: the complete first sweep

@@ -1,39 +1,87 @@
-"""IRR protocol v1: docs/protocol.md's test vectors, every malformed kind, stream resync."""
+"""IRR protocol v2: docs/protocol.md's test vectors and CRC, every malformed kind, stream
+resync, and v1 framing (an old device's) kept apart from v2."""
 
 from __future__ import annotations
 
-import functools
+import binascii
+import re
+from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import numpy as np
+
 from irring.designs import PAPER_RING
 from irring.hardware import protocol as p
 
+DOC = (Path(__file__).resolve().parents[1] / "docs" / "protocol.md").read_text()
 # docs/protocol.md, section "Example", copied verbatim (host and device lines).
 EXAMPLE = [
-    b"$IRHLO*50",
-    b"$IRINF,1,12,12,1800,3,5,-35,35,atmega8535-1.0*77",
-    b"$IRSWP,-35,35,1,40*57",
-    b"$IRSCN,0,-35,1000,812,790,1203,1510,655,700,702,1498,2210,980,640,633*77",
-    b"$IRSCN,1,-34,1041,815,788,1190,1532,660,698,705,1488,2251,979,641,630*74",
-    b"$IRDON,70*75",
-    b"$IRERR,4,step out of range*40",
+    b"$IRHLO*26D0",
+    b"$IRINF,2,12,12,1800,3,5,-35,35,atmega8535-2.0*2FB3",
+    b"$IRSWP,-35,35,1,40*45E7",
+    b"$IRSCN,0,-35,1000,812,790,1203,1510,655,700,702,1498,2210,980,640,633*9565",
+    b"$IRSCN,1,-34,1041,815,788,1190,1532,660,698,705,1488,2251,979,641,630*9B26",
+    b"$IRDON,70*6212",
+    b"$IRERR,4,step out of range*64CF",
 ]
-# The first specification showed `$IRGTO,99*73`, but XOR("IRGTO,99") is 0x6B; docs/protocol.md
-# prints the corrected line. A correct receiver drops the old one; the corrected one round-trips.
-EXAMPLE_BAD_GTO = b"$IRGTO,99*73"
-EXAMPLE_GTO_FIXED = b"$IRGTO,99*6B"
+EXAMPLE_GTO = b"$IRGTO,99*86A9"
+# v1's XOR of `IRGTO,99` is 0x6B; the first specification printed 0x73. Both are dropped by v2.
+V1_GTO, V1_BAD_GTO = b"$IRGTO,99*6B", b"$IRGTO,99*73"
 
 
-def sentence(body: str | bytes) -> bytes:
-    """A sentence with the right checksum, so a test isolates one other fault."""
+def sentence(body: str | bytes, version: int = 2) -> bytes:
+    """A sentence with the right check field, so a test isolates one other fault."""
     body = body.encode("latin-1") if isinstance(body, str) else body
-    return b"$" + body + b"*%02X" % functools.reduce(lambda a, b: a ^ b, body, 0) + b"\r\n"
+    return p.frame(body, version)
 
 
-@pytest.mark.parametrize("line", EXAMPLE + [EXAMPLE_GTO_FIXED])
+def test_the_examples_here_are_the_documents():
+    example = DOC.split("## Example", 1)[1].split("##", 1)[0]
+    lines = re.findall(r"^(?:host|device):\s+(\$.*?\*[0-9A-F]{4})", example, re.M)
+    assert [ln.encode() for ln in lines] == EXAMPLE[:5] + EXAMPLE[5:6] + [EXAMPLE_GTO] + EXAMPLE[6:]
+
+
+def test_the_readmes_protocol_lines_are_v2_sentences():
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = readme.split("### The protocol in one screen", 1)[1].split("```\n", 2)[1]
+    lines = [ln.encode() + b"\r\n" for ln in block.splitlines() if ln.startswith("$")]
+    assert len(lines) == 9
+    for line in lines:
+        assert p.encode(p.decode(line)) == line
+
+
+def test_crc_check_value_parameters_and_fast_path_agree_with_the_oracle():
+    # the catalogue's check value for CRC-16/IBM-SDLC, and the document's
+    assert p.crc16(b"123456789") == p.crc16_oracle(b"123456789") == p.CRC16_CHECK == 0x906E
+    assert "is 0x906E" in DOC
+    # the document's bit-by-bit loop (its code block), run as written
+    code = DOC.split("```python\n", 1)[1].split("```", 1)[0]
+    scope: dict = {}
+    exec(code, scope)
+    # unreflected CCITT from 0xFFFF (CRC-16/CCITT-FALSE, binascii.crc_hqx) is another CRC
+    assert binascii.crc_hqx(b"123456789", 0xFFFF) == 0x29B1
+    rng = np.random.default_rng(11)
+    for n in (0, 1, 2, 7, 64, 125):
+        body = bytes(rng.integers(0, 256, n, dtype=np.uint8))
+        assert p.crc16(body) == p.crc16_oracle(body) == scope["crc16"](body)
+
+
+def test_worked_example_frame_bytes_and_register_trace():
+    line = p.encode(p.GoTo(5))
+    assert line == b"$IRGTO,5*B470\r\n"
+    assert line.hex(" ").upper() in DOC
+    crc, trace = p.CRC16_INIT, []
+    for byte in b"IRGTO,5":
+        crc = (crc >> 8) ^ p._CRC16_TABLE[(crc ^ byte) & 0xFF]
+        trace.append(f"{crc:04X}")
+    assert "| register | " + " | ".join(trace) + " |" in DOC
+    assert trace[-1] == "4B8F" and 0x4B8F ^ 0xFFFF == 0xB470
+
+
+@pytest.mark.parametrize("line", EXAMPLE + [EXAMPLE_GTO])
 def test_protocol_md_examples_decode_and_reencode_byte_for_byte(line):
     msg = p.decode(line + b"\r\n")
     assert p.encode(msg) == line + b"\r\n"
@@ -43,7 +91,7 @@ def test_protocol_md_example_values():
     info = p.decode(EXAMPLE[1] + b"\r\n")
     assert (info.nsensors, info.adc_bits, info.step_mdeg, info.gear_num, info.gear_den,
             info.min_step, info.max_step, info.firmware) == (12, 12, 1800, 3, 5, -35, 35,
-                                                               "atmega8535-1.0")
+                                                               "atmega8535-2.0")
     scan = p.decode(EXAMPLE[3] + b"\r\n")
     assert (scan.seq, scan.step, scan.t_ms, len(scan.counts), scan.counts[0]) == (0, -35, 1000,
                                                                                   12, 812)
@@ -51,16 +99,35 @@ def test_protocol_md_example_values():
     assert p.decode(EXAMPLE[-1] + b"\r\n") == p.ErrorReply(4, "step out of range")
 
 
-def test_protocol_md_irgto_example_has_a_wrong_checksum_and_is_dropped():
+def test_v1_lines_decode_only_as_v1_and_v2_lines_only_as_v2():
+    assert p.decode(V1_GTO + b"\r\n", version=1) == p.GoTo(99)
     with pytest.raises(p.ProtocolError) as err:
-        p.decode(EXAMPLE_BAD_GTO + b"\r\n")
-    assert err.value.fault is p.Fault.CHECKSUM_MISMATCH
-    assert "computed 6B" in str(err.value)
+        p.decode(V1_BAD_GTO + b"\r\n", version=1)
+    assert err.value.fault is p.Fault.CHECKSUM_MISMATCH and "computed 6B" in str(err.value)
+    with pytest.raises(p.ProtocolError) as err:
+        p.decode(V1_GTO + b"\r\n")
+    assert err.value.fault is p.Fault.OTHER_VERSION
+    assert "2 hex digits: a protocol v1 check; this link speaks v2 (4)" in str(err.value)
+    with pytest.raises(p.ProtocolError) as err:
+        p.decode(EXAMPLE_GTO + b"\r\n", version=1)
+    assert err.value.fault is p.Fault.OTHER_VERSION
+    assert "4 hex digits: a protocol v2 check; this link speaks v1 (2)" in str(err.value)
+    with pytest.raises(ValueError, match="version 3: this irring frames versions 1, 2"):
+        p.Decoder(3)
+
+
+def test_v1_xor_cannot_tell_two_changes_in_one_bit_column_apart_and_v2_can():
+    # the document's example: IRINF's `1` → `2` in two places keeps the XOR
+    v1 = p.encode(p.Info(1, 12, 12, 1800, 3, 5, -35, 35, "atmega8535-1.0"), version=1)
+    v2_text = p.encode(p.Info(2, 12, 12, 1800, 3, 5, -35, 35, "atmega8535-2.0"), version=1)
+    assert v1[-4:] == v2_text[-4:] == b"77\r\n"
+    assert p.checksum(v1[1:-5]) != p.checksum(v2_text[1:-5])
+    assert v2_text[1:-5] + b"*77" in DOC.encode() and b"*2FB3" in DOC.encode()
 
 
 def test_paper_ring_and_example_irinf_map_to_each_other_exactly():
     info = p.decode(EXAMPLE[1] + b"\r\n")
-    assert p.info_for_ring(PAPER_RING, 12, "atmega8535-1.0") == info
+    assert p.info_for_ring(PAPER_RING, 12, "atmega8535-2.0") == info
     assert p.ring_from_info(info, PAPER_RING) == PAPER_RING
     other = p.Info(1, 8, 10, 900, 1, 2, -10, 20, "x")
     ring = p.ring_from_info(other, PAPER_RING, radius_m=0.2, emitter_offset_m=0.01)
@@ -73,17 +140,19 @@ def test_paper_ring_and_example_irinf_map_to_each_other_exactly():
 
 MALFORMED = [
     # (why, bytes, fault)
-    ("no $", b"IRHLO*50\r\n", p.Fault.NO_START),
-    ("129 bytes", sentence(f"IRSCN,0,1,2,{'1' * 116}"), p.Fault.TOO_LONG),
-    ("bare \\n", b"$IRHLO*50\n", p.Fault.NO_TERMINATOR),
-    ("bare \\r", b"$IRHLO*50\r", p.Fault.NO_TERMINATOR),
-    ("no terminator", b"$IRHLO*50", p.Fault.NO_TERMINATOR),
+    ("no $", b"IRHLO*26D0\r\n", p.Fault.NO_START),
+    ("129 bytes", sentence(f"IRSCN,0,1,2,{'1' * 114}"), p.Fault.TOO_LONG),
+    ("bare \\n", b"$IRHLO*26D0\n", p.Fault.NO_TERMINATOR),
+    ("bare \\r", b"$IRHLO*26D0\r", p.Fault.NO_TERMINATOR),
+    ("no terminator", b"$IRHLO*26D0", p.Fault.NO_TERMINATOR),
     ("no *", b"$IRHLO\r\n", p.Fault.NO_CHECKSUM),
-    ("one hex digit", b"$IRHLO*5\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
-    ("three hex digits", b"$IRHLO*500\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
-    ("lower-case hex", b"$IRGTO,99*6b\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
-    ("not hex", b"$IRHLO*G0\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
-    ("wrong checksum", b"$IRHLO*51\r\n", p.Fault.CHECKSUM_MISMATCH),
+    ("one hex digit", b"$IRHLO*2\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
+    ("three hex digits", b"$IRHLO*26D\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
+    ("five hex digits", b"$IRHLO*26D00\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
+    ("lower-case hex", b"$IRGTO,99*86a9\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
+    ("not hex", b"$IRHLO*G6D0\r\n", p.Fault.BAD_CHECKSUM_FORMAT),
+    ("v1 check", b"$IRHLO*50\r\n", p.Fault.OTHER_VERSION),
+    ("wrong checksum", b"$IRHLO*26D1\r\n", p.Fault.CHECKSUM_MISMATCH),
     ("control byte", sentence(b"IRERR,1,bad\x01text"), p.Fault.BAD_CHARACTER),
     ("8-bit byte", sentence(b"IRERR,1,caf\xe9"), p.Fault.BAD_CHARACTER),
     ("tab", sentence(b"IRGTO,\t5"), p.Fault.BAD_CHARACTER),
@@ -138,12 +207,12 @@ def test_every_fault_kind_has_a_malformed_example():
 
 
 def test_128_bytes_is_allowed_129_is_not():
-    body = "IRSCN,10,1,2," + ",".join(["4095"] * 22)  # 122 bytes between `$` and `*`
+    body = "IRSCN,1,1,2," + ",".join(["4095"] * 21 + ["409"])  # 120 bytes between `$` and `*`
     line = sentence(body)
     assert len(line) == 128
     assert len(p.decode(line).counts) == 22
     assert p.Decoder().feed(line)[0] == p.decode(line)
-    longer = sentence(body.replace("IRSCN,10", "IRSCN,100"))
+    longer = sentence(body.replace("IRSCN,1", "IRSCN,10"))
     assert len(longer) == 129
     (err,) = p.Decoder().feed(longer)
     assert err.fault is p.Fault.TOO_LONG
@@ -181,7 +250,7 @@ def test_garbage_stream_resyncs_at_the_next_dollar():
     stream = (b"\x00\xffnoise\r\n" + p.encode(wanted[0])
               + b"$IRSC" + p.encode(wanted[1])             # cut short by the next `$`
               + b"$" + b"x" * 300 + b"\r\n"                # far too long, then a newline
-              + b"*12\r\n$IRHLO*00\r\n"                    # stray tail, bad checksum
+              + b"*12\r\n$IRHLO*0000\r\n"                  # stray tail, bad checksum
               + p.encode(wanted[2]))
     out = p.Decoder().feed(stream)
     messages = [m for m in out if not isinstance(m, p.ProtocolError)]

@@ -7,6 +7,7 @@ The real-pty tests against SimRing are in test_emulator.py.
 
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
@@ -118,10 +119,108 @@ def test_handshake_sets_the_geometry_from_irinf_and_the_user_numbers():
     assert ring.info.firmware == "irring-emulator-1"
 
 
-def test_wrong_protocol_version_is_refused():
-    port = ScriptPort(lambda msg: [p.Info(2, 12, 12, 1800, 3, 5, -35, 35, "future")])
-    with pytest.raises(HandshakeError, match="speaks IRR protocol v2"):
+def test_a_future_protocol_version_is_refused_naming_both():
+    port = ScriptPort(lambda msg: [p.Info(3, 12, 12, 1800, 3, 5, -35, 35, "future")])
+    with pytest.raises(HandshakeError) as err:
         SerialRing(port, timeout_s=TIMEOUT_S).open()
+    assert str(err.value) == ("the device on script:// speaks IRR protocol v3; this irring "
+                              "speaks v2 (and v1 to an old board): update irring")
+
+
+def test_an_irinf_contradicting_its_own_framing_is_refused():
+    port = ScriptPort(lambda msg: [p.Info(1, 12, 12, 1800, 3, 5, -35, 35, "liar")])
+    with pytest.raises(HandshakeError, match="speaks IRR protocol v1; .*its IRINF "
+                                             "contradicts its own framing"):
+        SerialRing(port, timeout_s=TIMEOUT_S).open()
+
+
+def test_an_old_v1_device_is_refused_with_both_versions_and_how_to_reflash(virtual_time):
+    device = Device(StandInSource(), protocol=1)
+    ring = SerialRing(DevicePort(device, name="/dev/ttyUSB7"), timeout_s=TIMEOUT_S)
+    with pytest.raises(HandshakeError) as err:
+        ring.open()
+    assert str(err.value) == (
+        "the device on /dev/ttyUSB7 runs IRR protocol v1 firmware (irring-emulator-1), whose "
+        "8-bit XOR checksum lets two bit errors in one bit column through as changed "
+        "readings; this irring speaks v2 (a CRC-16). Reflash the ring with this irring's "
+        "firmware (firmware/README.md: make -C firmware avr flash PORT=/dev/ttyUSB7), or "
+        "accept v1 for now (irring drive/calibrate --accept-protocol-v1, "
+        "SerialRing(accept_v1=True))")
+    assert ring.info is None and device.stats.sweeps == 0
+    # the old board heard a v2 IRHLO (it answered IRERR 1) and then a v1 one
+    assert device.stats.commands == 2 and device.stats.commands_rejected == 1
+
+
+def test_a_v2_device_whose_hello_answer_looked_like_v1_is_asked_again_in_v2():
+    """A v1-framed answer to the v2 IRHLO (here a garbled one) makes the driver ask in v1;
+    a v2 device answers that with a v1-framed IRINF naming version 2, and the driver says
+    hello in v2 again rather than taking the device for an old one."""
+    info = p.Info(2, 2, 12, 1800, 3, 5, -3, 3, "v2")
+    sent: list[bytes] = []
+    answers = [p.encode(p.ErrorReply(1, "bad sentence"), version=1),
+               p.encode(info, version=1), p.encode(info)]
+
+    class Port(ScriptPort):
+        def write(self, line):
+            sent.append(line)
+            self._buf += answers.pop(0)
+            return len(line)
+
+    ring = SerialRing(Port(None), timeout_s=TIMEOUT_S).open()
+    assert sent == [b"$IRHLO*26D0\r\n", b"$IRHLO*50\r\n", b"$IRHLO*26D0\r\n"]
+    assert ring.info == info and ring.protocol == 2 and ring.protocol_warning is None
+    assert ring.stats.malformed == 1 and ring.stats.sentences == 2 and ring.stats.timeouts == 0
+
+
+def test_an_old_v1_device_accepted_on_request_sweeps_alike_with_a_warning(virtual_time,
+                                                                           caplog):
+    src = StandInSource()
+    steps = np.arange(-35, 36)
+    with caplog.at_level(logging.WARNING, logger="irring.hardware"):
+        old = ring_on(Device(src, protocol=1), accept_v1=True)
+    new = ring_on(Device(StandInSource()))
+    assert (old.protocol, new.protocol) == (1, 2)
+    assert new.protocol_warning is None
+    assert old.protocol_warning.startswith("the device on device://emulator runs IRR protocol "
+                                           "v1 firmware (irring-emulator-1)")
+    assert old.protocol_warning.endswith("speaking v1 as asked (--accept-protocol-v1): "
+                                         "reflash it (firmware/README.md) to have every "
+                                         "sentence CRC-checked")
+    assert caplog.records[-1].getMessage() == old.protocol_warning
+    a, b = old.sweep((0.1, 0.2, 0.3)), new.sweep((0.1, 0.2, 0.3))
+    assert np.array_equal(a.counts, b.counts) and np.array_equal(a.counts, src.truth(0, steps))
+    assert old.stats.lost_scans == new.stats.lost_scans == 0
+    # v2 sentences no longer pass on the v1 link, nor v1 ones on the v2 link
+    assert old.decoder.feed(p.encode(p.Done(3)))[0].fault is p.Fault.OTHER_VERSION
+    assert new.decoder.feed(p.encode(p.Done(3), version=1))[0].fault is p.Fault.OTHER_VERSION
+
+
+def test_a_v1_sentence_amid_a_v2_sweep_is_dropped_and_counted_never_used(virtual_time):
+    """After the handshake only v2 framing is read: a v1-framed IRSCN (as a corrupted v2
+    one could turn out) is a malformed sentence, its step re-swept from the device."""
+    steps = np.arange(-3, 4)
+    forged = p.encode(p.Scan(0, -3, 5, (9, 9)), version=1)
+
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            d = 1 if msg.to_step >= msg.from_step else -1
+            run = np.arange(msg.from_step, msg.to_step + d, d)
+            out = []
+            for k, step in enumerate(run):
+                seq = script.seq = script.seq + 1
+                scan = p.Scan(seq, int(step), 10 * seq, (100 + int(step), 200 + int(step)))
+                out.append(forged if (k == 0 and seq == 0) else scan)
+            return out + [p.Done(script.seq)]
+        return [p.Done(script.seq)]
+
+    script.seq = -1
+    ring = SerialRing(ScriptPort(script), timeout_s=TIMEOUT_S, resweep=1).open()
+    sweep = ring.sweep(steps=steps)
+    assert ring.stats.malformed == 1 and ring.stats.checksum_failures == 0
+    assert list(sweep.steps) == list(steps) and sweep.missing_steps == ()
+    assert sweep.counts[0].tolist() == [97, 197]   # the re-swept step, not the forged 9, 9
 
 
 # --------------------------------------------------------------------------- sweeps
@@ -309,7 +408,7 @@ class ScriptPort:
         self.is_open = False
 
 
-INFO = p.Info(1, 2, 12, 1800, 3, 5, -3, 3, "script")
+INFO = p.Info(2, 2, 12, 1800, 3, 5, -3, 3, "script")
 
 
 def scripted(on_sweep):

@@ -4,7 +4,7 @@
 #ifndef IRR_CONFIG_H
 #define IRR_CONFIG_H
 
-#define IRR_PROTO          1
+#define IRR_PROTO          2       /* protocol version: IRINF reports it */
 #define IRR_SENSORS        12      /* ir_00 … ir_11, two per MCP3202 */
 #define IRR_ADC_BITS       12      /* MCP3202 */
 #define IRR_STEP_MDEG      1800    /* motor full step, millidegrees */
@@ -15,7 +15,7 @@
 #define IRR_MAX_SAMPLES    64
 
 #ifndef IRR_FIRMWARE
-#define IRR_FIRMWARE       "irring-fw-1.0"
+#define IRR_FIRMWARE       "irring-fw-2.0"
 #endif
 
 /* A GP2D12 updates its output every 38.3 ms (datasheet, ±9.6 ms): each sample waits one

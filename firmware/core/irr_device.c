@@ -70,12 +70,21 @@ static void send_position(void)
     irr_out_end();
 }
 
+static void answer(const irr_cmd_t *c);
+
 static uint8_t in_range(int32_t step)
 {
     return step >= IRR_MIN_STEP && step <= IRR_MAX_STEP;
 }
 
 static void handle(const irr_cmd_t *c)
+{
+    irr_out_framing(c->framing);   /* this answer only; a sweep's sentences are v2 */
+    answer(c);
+    irr_out_framing(IRR_PROTO);
+}
+
+static void answer(const irr_cmd_t *c)
 {
     if (c->error) {
         irr_send_error(c->error);

@@ -1,4 +1,4 @@
-/* The ring's firmware proper: answers IRR v1 commands and runs sweeps as a non-blocking
+/* The ring's firmware proper: answers IRR v2 commands and runs sweeps as a non-blocking
  * state machine (so IRSTP and IRHLO are heard mid-sweep). Board I/O goes through irr_hal.h.
  *
  *   irr_init();

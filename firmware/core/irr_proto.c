@@ -1,7 +1,10 @@
-/* IRR v1 parser and encoder; the checks and their order follow irring/hardware/protocol.py
+/* IRR v2 parser and encoder; the checks and their order follow irring/hardware/protocol.py
  * (decode and Decoder), so the C device rejects exactly what the Python reference rejects. */
 #include "irr_proto.h"
 #include "irr_hal.h"
+#ifdef __AVR__
+#include <util/crc16.h>
+#endif
 
 static const IRR_FLASH char e0[] = "", e1[] = "bad sentence", e2[] = "unknown type",
     e3[] = "bad argument", e4[] = "step out of range", e5[] = "busy";
@@ -34,6 +37,7 @@ uint8_t irr_parse_byte(irr_parser_t *p, uint8_t c, irr_cmd_t *cmd)
         if (cut) {
             cmd->error = IRR_ERR_SENTENCE;
             cmd->type = IRR_NONE;
+            cmd->framing = IRR_PROTO;
             return 1;
         }
         return 0;
@@ -55,6 +59,7 @@ uint8_t irr_parse_byte(irr_parser_t *p, uint8_t c, irr_cmd_t *cmd)
         p->overflow = 1;
         cmd->error = IRR_ERR_SENTENCE;
         cmd->type = IRR_NONE;
+        cmd->framing = IRR_PROTO;
         return 1;
     }
     return 0;
@@ -66,6 +71,28 @@ uint8_t irr_checksum(const uint8_t *body, uint8_t n)
     while (n--)
         cs ^= *body++;
     return cs;
+}
+
+/* avr-libc's _crc_ccitt_update is the reflected CCITT polynomial (0x8408), the bit order a
+ * UART sends (its name is not CRC-16/CCITT-FALSE's, which is _crc_xmodem_update from
+ * 0xFFFF). Elsewhere the C that avr-libc documents as its equivalent. */
+uint16_t irr_crc16_update(uint16_t crc, uint8_t c)
+{
+#ifdef __AVR__
+    return _crc_ccitt_update(crc, c);
+#else
+    c ^= (uint8_t)(crc & 0xFF);
+    c ^= (uint8_t)(c << 4);
+    return (uint16_t)((((uint16_t)c << 8) | (crc >> 8)) ^ (uint8_t)(c >> 4) ^ ((uint16_t)c << 3));
+#endif
+}
+
+uint16_t irr_crc16(const uint8_t *body, uint8_t n)
+{
+    uint16_t crc = IRR_CRC_INIT;
+    while (n--)
+        crc = irr_crc16_update(crc, *body++);
+    return (uint16_t)(crc ^ IRR_CRC_XOROUT);
 }
 
 static int8_t hex_digit(uint8_t c)
@@ -164,10 +191,25 @@ static uint8_t parse_field(const uint8_t *s, uint8_t n, uint8_t kind, int32_t *o
     return *out >= lo && *out <= hi ? IRR_OK : IRR_ERR_ARGUMENT;
 }
 
+/* Decode one sentence; a v1-framed one (two check digits, all hex) is answered in v1
+ * framing: IRHLO with this device's IRINF (its version field tells an old host what it
+ * met), anything else with IRERR — this device takes no v1 command. */
+static void decode_framed(const uint8_t *line, uint8_t len, irr_cmd_t *cmd);
+
 void irr_decode(const uint8_t *line, uint8_t len, irr_cmd_t *cmd)
 {
-    uint8_t star, i, nf, start, n_specs = sizeof specs / sizeof specs[0];
-    int8_t hi, lo;
+    cmd->framing = IRR_PROTO;
+    decode_framed(line, len, cmd);
+    if (cmd->framing == 1 && cmd->error == IRR_OK && cmd->type != IRR_HLO) {
+        cmd->type = IRR_NONE;
+        cmd->error = IRR_ERR_SENTENCE;
+    }
+}
+
+static void decode_framed(const uint8_t *line, uint8_t len, irr_cmd_t *cmd)
+{
+    uint8_t star, i, nf, start, digits, n_specs = sizeof specs / sizeof specs[0];
+    uint16_t sent = 0;
     int32_t value = 0, inf_min = 0;
     const IRR_FLASH irr_spec_t *spec = 0;
     cmd->type = IRR_NONE;
@@ -176,14 +218,22 @@ void irr_decode(const uint8_t *line, uint8_t len, irr_cmd_t *cmd)
         return;
     for (star = len - 2; star > 0 && line[star] != '*'; star--)
         ;                               /* the last `*` */
-    if (star == 0 || len - 2 - star != 3)
-        return;                         /* no `*`, or not two checksum digits */
-    hi = hex_digit(line[star + 1]);
-    lo = hex_digit(line[star + 2]);
-    if (hi < 0 || lo < 0)
+    if (star == 0)
+        return;                         /* no `*` */
+    digits = (uint8_t)(len - 3 - star);
+    for (i = 0; i < digits; i++) {
+        int8_t d = hex_digit(line[star + 1 + i]);
+        if (d < 0 || digits > 4)
+            return;                     /* not upper-case hex digits */
+        sent = (uint16_t)((sent << 4) | (uint8_t)d);
+    }
+    if (digits == 2) {
+        cmd->framing = 1;               /* an old host's sentence: answered in its framing */
+        if (sent != irr_checksum(line + 1, (uint8_t)(star - 1)))
+            return;
+    } else if (digits != 4 || sent != irr_crc16(line + 1, (uint8_t)(star - 1))) {
         return;
-    if ((uint8_t)((hi << 4) | lo) != irr_checksum(line + 1, (uint8_t)(star - 1)))
-        return;
+    }
     for (i = 1; i < star; i++)
         if (line[i] < 0x20 || line[i] > 0x7E || line[i] == '$' || line[i] == '*')
             return;
@@ -241,12 +291,19 @@ void irr_decode(const uint8_t *line, uint8_t len, irr_cmd_t *cmd)
 
 /* ------------------------------------------------------------------ encoder */
 
-static uint8_t out_cs;
+static uint8_t out_cs, out_framing = IRR_PROTO;
+static uint16_t out_crc;
 
 static void out_byte(uint8_t c)
 {
     out_cs ^= c;
+    out_crc = irr_crc16_update(out_crc, c);
     hal_putc(c);
+}
+
+void irr_out_framing(uint8_t version)
+{
+    out_framing = version;
 }
 
 void irr_out_begin(uint8_t type)
@@ -254,6 +311,7 @@ void irr_out_begin(uint8_t type)
     uint8_t i;
     hal_putc('$');
     out_cs = 0;
+    out_crc = IRR_CRC_INIT;
     out_byte('I');
     out_byte('R');
     for (i = 0; i < 3; i++)
@@ -310,10 +368,15 @@ void irr_out_text(const IRR_FLASH char *s)
 void irr_out_end(void)
 {
     static const IRR_FLASH char hex[] = "0123456789ABCDEF";
-    uint8_t cs = out_cs;
+    uint16_t crc = (uint16_t)(out_crc ^ IRR_CRC_XOROUT);
+    int8_t shift = 12;
     hal_putc('*');
-    hal_putc((uint8_t)hex[cs >> 4]);
-    hal_putc((uint8_t)hex[cs & 15]);
+    if (out_framing == 1) {
+        crc = out_cs;
+        shift = 4;
+    }
+    for (; shift >= 0; shift -= 4)
+        hal_putc((uint8_t)hex[(crc >> shift) & 15]);
     hal_putc('\r');
     hal_putc('\n');
 }

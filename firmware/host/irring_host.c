@@ -4,6 +4,7 @@
  *   irring-host --link ring.pty [--speed 20]   serve on a pty, symlinked at ./ring.pty
  *   irring-host --stdio                           commands on stdin, answers on stdout
  *   irring-host --baud F_CPU BAUD                 print the UART divisor and its rate error
+ *   irring-host --crc TEXT                        print the v2 CRC of TEXT (4 hex digits)
  *
  * Host HAL: the clock is the monotonic clock × --speed (the device's t_ms, settle and
  * sample waits run that much faster than wall time); the motor is a counter; sensor k at
@@ -24,6 +25,7 @@
 
 #include "irr_baud.h"
 #include "irr_device.h"
+#include "irr_proto.h"
 #include "irr_hal.h"
 #include "irr_synthetic.h"
 
@@ -176,7 +178,7 @@ static int serve_pty(void)
             return 2;
         }
     }
-    printf("irring-host: serving IRR v1 on %s%s%s (speed %g)\n", slave_name,
+    printf("irring-host: serving IRR v%d on %s%s%s (speed %g)\n", IRR_PROTO, slave_name,
            link_path ? " linked at " : "", link_path ? link_path : "", speed);
     fflush(stdout);
     int rc = serve(master, master, 0);
@@ -206,6 +208,7 @@ static int usage(FILE *to, int rc)
             "usage: irring-host --link PATH [--speed X]   serve the firmware on a pty at PATH\n"
             "       irring-host --stdio [--speed X]       commands on stdin, answers on stdout\n"
             "       irring-host --baud F_CPU BAUD          UART divisor and rate error\n"
+            "       irring-host --crc TEXT                 the protocol's CRC-16 of TEXT\n"
             "--speed X runs the device clock X times faster than wall time (default 1).\n"
             "Sensor k at motor step s reads 400 + 97 k + 7 (s + 35) counts.\n");
     return rc;
@@ -228,6 +231,14 @@ int main(int argc, char **argv)
             stdio_mode = 1;
         } else if (!strcmp(argv[i], "--baud") && i + 2 < argc) {
             return baud_report(argv[i + 1], argv[i + 2]);
+        } else if (!strcmp(argv[i], "--crc") && i + 1 < argc) {
+            size_t n = strlen(argv[i + 1]);
+            if (n > 255) {
+                fprintf(stderr, "irring-host: --crc takes at most 255 bytes\n");
+                return 2;
+            }
+            printf("%04X\n", irr_crc16((const uint8_t *)argv[i + 1], (uint8_t)n));
+            return 0;
         } else if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
             return usage(stdout, 0);
         } else {

@@ -213,6 +213,21 @@ def mcap_file(text: str) -> Path:
     return path
 
 
+def add_protocol_v1_option(parser: argparse.ArgumentParser, when: str = "") -> None:
+    """``--accept-protocol-v1``: speak v1 to an old ring (SerialRing's ``accept_v1``)."""
+    parser.add_argument("--accept-protocol-v1", action="store_true", dest="accept_v1",
+                        help=f"{when}use a ring whose firmware speaks IRR protocol v1 (an 8-bit XOR "
+                             "checksum: two bit errors in one bit column pass as changed "
+                             "readings) with a warning, instead of refusing it; better, "
+                             "reflash it (firmware/README.md)")
+
+
+def warn_protocol(ring, say) -> None:
+    """Print the link's protocol warning (a v1 ring accepted), if any, through ``say``."""
+    if ring.protocol_warning:
+        say(f"warning: {ring.protocol_warning}")
+
+
 def add_mcap_option(parser: argparse.ArgumentParser) -> None:
     """``--mcap FILE``: the run as MCAP for Foxglove / rosbag2 (irring/maps/mcap_export.py)."""
     parser.add_argument("--mcap", type=mcap_file, default=None, metavar="FILE",

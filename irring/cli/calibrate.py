@@ -16,7 +16,8 @@ from ..estimation.calibration import (CalibrationAborted, CalibrationError, Guid
 from ..outputs import check_out
 from ..core import MAX_SWEEPS
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import at_least, between, describe, out_path, seed, serial_port, spare_inputs
+from ._common import (add_protocol_v1_option, at_least, between, describe, out_path, seed,
+                      serial_port, spare_inputs, warn_protocol)
 
 EPILOG = """\
 what it does:
@@ -76,6 +77,7 @@ def register(p: argparse.ArgumentParser) -> None:
                         "procedure instead of the simulated rig")
     p.add_argument("--baud", type=between(1, 10_000_000), default=DEFAULTS["baud"],
                    help=f"serial speed with --port (default: {DEFAULTS['baud']})")
+    add_protocol_v1_option(p, "with --port: ")
     p.add_argument("--resume", type=Path, default=None, metavar="FILE",
                    help="with --port: the placements an earlier run read before it stopped "
                         "(the file it named); they are not measured again")
@@ -103,6 +105,10 @@ def run(args: argparse.Namespace) -> int:
     if args.resume is not None and args.port is None:
         print("irring calibrate: error: --resume continues a guided calibration of the real "
               "ring; give its --port too", file=sys.stderr)
+        return errors.USAGE
+    if args.accept_v1 and args.port is None:
+        print("irring calibrate: error: --accept-protocol-v1 is for a real ring's old "
+              "firmware; give its --port too", file=sys.stderr)
         return errors.USAGE
     check_out(out.parent)
     spare_inputs({"--out": out}, {"--scenario": args.scenario, "--resume": args.resume})
@@ -165,7 +171,7 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
         ring = SerialRing(args.port, baudrate=args.baud,
                           emitter_offset_m=scenario.ring.emitter_offset_m,
                           sensor_model=scenario.sensor.model, vref_v=scenario.sensor.vref_v,
-                          max_range_m=scenario.sensor.max_range_m)
+                          max_range_m=scenario.sensor.max_range_m, accept_v1=args.accept_v1)
     except ValueError as exc:
         print(f"irring calibrate: error: {errors.printable(str(exc))}", file=sys.stderr)
         return errors.USAGE
@@ -173,6 +179,7 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
     try:
         # Ctrl-C or `kill` stops the procedure, but the placements read are kept
         with errors.sigterm_as_interrupt(), ring:   # the handshake sets ring.info (or raises)
+            warn_protocol(ring, print)
             if args.sensor >= ring.info.nsensors:   # before the first placement
                 return _no_such_sensor(args, f"the ring on {args.port}", ring.info.nsensors)
             guided = GuidedCalibration(

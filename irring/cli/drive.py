@@ -19,15 +19,18 @@ from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..recording import save_recording
 from ..scenario import load_scenario
-from ._common import (add_mcap_option, at_least, between, describe, mcap_beside_outputs,
-                      out_path, positive_seconds, serial_port, spare_inputs)
+from ._common import (add_mcap_option, add_protocol_v1_option, at_least, between, describe,
+                      mcap_beside_outputs, out_path, positive_seconds, serial_port,
+                      spare_inputs, warn_protocol)
 from .run import report
 
 HELP = """\
 Sweep the real ring (or `irring emulate`) over a serial port at one or more poses, then run
 the readings through the same estimator and occupancy-grid mapper as `irring run`.
 
-The ring must speak IRR protocol v1 (docs/protocol.md). The handshake reads the sensor count,
+The ring must speak IRR protocol v2 (docs/protocol.md; a ring on v1 firmware is refused
+with how to reflash it, or used with a warning under --accept-protocol-v1). The handshake
+reads the protocol version, the sensor count,
 ADC bits, motor step, belt ratio and step limits from the device; the ring radius and
 emitter offset, which the device does not report, come from the paper (0.15 m, 7 mm), from
 --calibration (its emitter offset d_o) or from --truth. Steps whose readings were lost on
@@ -36,7 +39,8 @@ is ever invented.
 
 Writes into --out (default ./out/drive) the same files as `irring run` — map.png,
 map_building.gif, map.pgm + map.yaml (ROS map_server), sweeps.npz (for `irring replay`) —
-plus link.json (per-sweep link report: missing steps, checksum failures, seq gaps, timeouts).
+plus link.json (the protocol version and a per-sweep link report: missing steps, checksum
+failures, seq gaps, timeouts).
 
 Poses: with --truth the scenario's scan poses are used (and the map is scored against it);
 otherwise give each pose with --pose X_MM,Y_MM,YAW_DEG (default: one pose at the origin).
@@ -75,6 +79,7 @@ def register(p: argparse.ArgumentParser) -> None:
                         "socket://host:port, loop://")
     p.add_argument("--baud", type=between(1, 10_000_000), default=115200,
                    help="baud rate (default 115200)")
+    add_protocol_v1_option(p)
     p.add_argument("--timeout", type=positive_seconds, default=1.0, metavar="S",
                    help="longest silence tolerated while an answer is due, on top of the "
                         "per-step time, in seconds (default 1.0); a silent device is given up "
@@ -122,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     truth = load_scenario(args.truth) if args.truth else None
     if truth is not None and truth.has("motion"):
         return _error(f"--truth {args.truth}: the scenario drives while scanning (`motion`), but "
-                      "IRR v1 reports no robot pose, so a moving scan cannot be mapped from the "
+                      "the IRR protocol reports no robot pose, so a moving scan cannot be mapped from the "
                       "link; map it with `irring run` instead")
     calibration, cal_text = load_calibration(args.calibration)   # a bad file: exit 1
 
@@ -157,7 +162,8 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         ring = SerialRing(args.port, baudrate=args.baud, timeout_s=args.timeout,
-                          samples=samples, settle_s=settle_s, resweep=args.resweep, **known)
+                          samples=samples, settle_s=settle_s, resweep=args.resweep,
+                          accept_v1=args.accept_v1, **known)
     except ValueError as exc:
         return _error(str(exc))
     if truth is None:   # the map is laid out around the poses: refuse one too big unswept
@@ -173,7 +179,8 @@ def run(args: argparse.Namespace) -> int:
     info = ring.info
     say(f"ring on {args.port}: {info.firmware}, {info.nsensors} sensors, {info.adc_bits}-bit "
         f"ADC, step {info.step_mdeg / 1000:g}° × {info.gear_num}/{info.gear_den}, steps "
-        f"{info.min_step} … {info.max_step}")
+        f"{info.min_step} … {info.max_step}; IRR protocol v{ring.protocol}")
+    warn_protocol(ring, say)
     if calibration is not None and calibration.adc_bits != info.adc_bits:
         ring.close()   # a bad --calibration file for this ring: exit 1, as --help says
         _error(f"{args.calibration}: a calibration for a {calibration.adc_bits}-bit ADC; the "
@@ -263,7 +270,8 @@ def _map_and_write(args, sweeps, acq, ring, truth, calibration, cal_text, failur
                                  frames_per_sweep=frames, score=truth is not None)
     result.scenario_text = pipeline.scenario_text(truth) if truth is not None else None
     result.calibration_text = cal_text
-    link = {"port": args.port, "firmware": ring.info.firmware, "totals": ring.stats.as_dict(),
+    link = {"port": args.port, "firmware": ring.info.firmware, "protocol": ring.protocol,
+            "totals": ring.stats.as_dict(),
             "sweeps": [r.as_dict() for r in acq.reports],
             "error": None if failure is None else "interrupted" if stopped else str(failure)}
     paths = pipeline.write_outputs(result, args.out, animation=not args.no_animation,

@@ -9,6 +9,7 @@ import signal
 import sys
 import time
 
+from ..hardware import protocol
 from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
 from ..scenario import load_scenario
 from ._common import (add_pose_option, at_least, between, describe, host_port, number_in,
@@ -27,9 +28,10 @@ examples:
   irring emulate t_room_cylinder --link ring2.pty # a second device beside the first
   irring emulate t_room --tcp 0                   # a free TCP port; it prints which, then:
                                                   #   irring drive --port socket://127.0.0.1:PORT
+  irring emulate t_room --protocol 1              # an old board not yet reflashed
 
-The device speaks IRR protocol v1 (docs/protocol.md) on /dev/pts/N; any serial program can open
-the --link path (e.g. `python -m serial.tools.miniterm ring.pty`, then type $IRHLO*50).
+The device speaks IRR protocol v2 (docs/protocol.md) on /dev/pts/N; any serial program can open
+the --link path (e.g. `python -m serial.tools.miniterm ring.pty`, then type $IRHLO*26D0).
 Readings come from the scenario's simulated ring and effects with the scenario's seed, so a
 fault-free full sweep equals `SimRing(scenario).sweep(pose)`. The robot starts at the
 scenario's first pose (pose 1, as map.png numbers them); each further full-range sweep
@@ -77,6 +79,11 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="noise seed ≥ 0 of the readings (default: the scenario's seed)")
     p.add_argument("--fault-seed", type=seed, default=0, metavar="SEED",
                    help="seed ≥ 0 of the fault injection (default 0)")
+    p.add_argument("--protocol", type=int, choices=protocol.PROTOCOL_VERSIONS,
+                   default=protocol.PROTOCOL_VERSION, metavar="N",
+                   help=f"IRR protocol version to speak: {protocol.PROTOCOL_VERSION} (default, "
+                        "CRC-16) or 1 (an old board's 8-bit XOR checksum: irring drive "
+                        "refuses it unless given --accept-protocol-v1)")
     add_pose_option(p, None, "stay at one pose instead of moving on after each full sweep")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=run)
@@ -115,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
     fixed = None if args.pose is None else pose_index(args.pose, scenario)
     baud = args.baud if args.baud is not None else (115200 if args.realtime else 0)
     source = SimRing(scenario, seed=args.seed)
-    device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=fixed)
+    device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=fixed,
+                    protocol=args.protocol)
     if args.tcp is not None:
         host, port = args.tcp
         if not _loopback(host):

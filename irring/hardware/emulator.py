@@ -96,14 +96,16 @@ class Device:
 
     def __init__(self, source: core.RingSource, *, faults: Faults = Faults(),
                  realtime: bool = False, firmware: str = FIRMWARE,
-                 clock_start_ms: int = 1000, fixed_pose: int | None = None):
+                 clock_start_ms: int = 1000, fixed_pose: int | None = None,
+                 protocol: int = p.PROTOCOL_VERSION):
         self.source = source
-        self.info = p.info_for_ring(source.ring, source.adc_bits, firmware)
+        self.protocol = p.check_version(protocol)   # 1: an old, unreflashed board
+        self.info = p.info_for_ring(source.ring, source.adc_bits, firmware, protocol)
         self.poses = max(1, int(source.n_sweeps))  # the robot visits source poses 0 … poses-1
         self.faults = faults
         self.realtime = realtime
         self.fixed_pose = fixed_pose
-        self.decoder = p.Decoder()
+        self.decoder = p.Decoder(protocol)
         self.stats = DeviceStats()
         self._rng = np.random.default_rng([faults.seed, 0x1F])
         self._out: deque[bytes] = deque()
@@ -140,12 +142,31 @@ class Device:
             if sum(map(len, self._out)) >= OUT_LIMIT_BYTES:
                 self.stats.commands_dropped += 1    # a flooding host: the board's RX overran
                 continue
-            if isinstance(item, p.ProtocolError):
+            if isinstance(item, p.ProtocolError) and item.fault is p.Fault.OTHER_VERSION \
+                    and self.protocol == 2:
+                self._answer_old_host(item.raw)
+            elif isinstance(item, p.ProtocolError):
                 self.stats.commands_rejected += 1
                 code = item.fault.device_error_code
                 self._say(p.ErrorReply(code, p.ERROR_TEXT[code]))
             else:
                 self._handle(item, now)
+
+    def _answer_old_host(self, line: bytes) -> None:
+        """A v1-framed sentence to a v2 device is answered in v1 framing: IRHLO with the
+        IRINF whose version field tells an old host what it met, anything else IRERR
+        (firmware/core/irr_proto.c does the same)."""
+        try:
+            msg = p.decode(line, version=1)
+        except p.ProtocolError as exc:
+            code = exc.fault.device_error_code
+        else:
+            if isinstance(msg, p.Hello):
+                self._say(self.info, version=1)
+                return
+            code = p.ERR_UNKNOWN_TYPE if msg.TYPE not in p.HOST_TYPES else p.ERR_BAD_SENTENCE
+        self.stats.commands_rejected += 1
+        self._say(p.ErrorReply(code, p.ERROR_TEXT[code]), version=1)
 
     def _handle(self, msg: p.AnyMessage, now: float) -> None:
         if msg.TYPE not in p.HOST_TYPES:
@@ -247,8 +268,8 @@ class Device:
             nxt = self._pending_pos[0] if nxt is None else min(nxt, self._pending_pos[0])
         return bytes(out), nxt
 
-    def _say(self, msg: p.Message) -> None:
-        self._out.append(p.encode(msg))
+    def _say(self, msg: p.Message, version: int | None = None) -> None:
+        self._out.append(p.encode(msg, version=version or self.protocol))
 
     def _transmit(self, line: bytes, now: float) -> bytes:
         """Apply the faults to one sentence on its way out."""

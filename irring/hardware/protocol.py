@@ -1,13 +1,15 @@
-"""IRR serial protocol version 1 (docs/protocol.md): pure encode/decode of sentences, no I/O.
+"""IRR serial protocol version 2 (docs/protocol.md): pure encode/decode of sentences, no I/O.
 
 :func:`encode` makes one sentence's bytes from a typed message (a frozen dataclass per
 sentence type); :func:`decode` parses one or raises :class:`ProtocolError` naming its
 :class:`Fault`; :class:`Decoder` cuts a byte stream into messages and rejections, never
-raising on what the wire delivers.
+raising on what the wire delivers. Each takes ``version``: 2 (a CRC-16, the default) or 1
+(the old 8-bit XOR, spoken only to an old device the host was told to accept).
 """
 
 from __future__ import annotations
 
+import binascii
 import dataclasses
 import enum
 import math
@@ -18,7 +20,8 @@ from typing import ClassVar, Union
 
 from ..core import MAX_SAMPLES, Ring
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2      # what this irring speaks
+PROTOCOL_VERSIONS = (1, 2)  # what it can frame: v1 only to identify (or, told to, use) an old device
 MAX_SENTENCE_BYTES = 128  # from `$` to `\n` inclusive
 SEQ_MODULO = 1 << 16      # IRSCN sequence numbers wrap at 65536
 CLOCK_MODULO = 1 << 32    # the device clock (ms) wraps at 2³²
@@ -46,7 +49,8 @@ class Fault(enum.Enum):
     INTERRUPTED = "cut short by a new `$` before its end"
     NO_TERMINATOR = "does not end with \\r\\n"
     NO_CHECKSUM = "has no `*` before the checksum"
-    BAD_CHECKSUM_FORMAT = "checksum is not two upper-case hex digits"
+    BAD_CHECKSUM_FORMAT = "checksum is not upper-case hex digits of the protocol's length"
+    OTHER_VERSION = "is framed for another protocol version"
     CHECKSUM_MISMATCH = "checksum does not match"
     BAD_CHARACTER = "contains a byte that is not printable ASCII or a reserved `$`/`*`"
     BAD_TYPE = "type is not 5 upper-case letters starting with IR"
@@ -211,13 +215,81 @@ _TYPE_RE = re.compile(rb"IR[A-Z]{3}")
 _INT_RE = re.compile(rb"-?[0-9]+")
 _HEX = b"0123456789ABCDEF"
 
+# The check value's hex digits per protocol version: v1 an 8-bit XOR, v2 a CRC-16.
+CHECK_DIGITS = {1: 2, 2: 4}
 
-def checksum(body: bytes) -> int:
-    """XOR of every byte of ``body`` (the bytes between `$` and `*`)."""
+# v2's CRC: CRC-16/IBM-SDLC (also called CRC-16/X-25; HDLC's and PPP's frame check):
+# width 16, poly 0x1021, init 0xFFFF, refin and refout true, xorout 0xFFFF;
+# check value (the CRC of b"123456789") 0x906E. Reflected, so its bits run in the UART's
+# order (least significant bit first): a burst of up to 16 bits on the wire is a burst of
+# up to 16 in the polynomial, which a CRC-16 always detects.
+CRC16_POLY_REFLECTED = 0x8408
+CRC16_INIT = 0xFFFF
+CRC16_XOROUT = 0xFFFF
+CRC16_CHECK = 0x906E
+
+
+def _crc16_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ CRC16_POLY_REFLECTED if crc & 1 else crc >> 1
+        table.append(crc)
+    return tuple(table)
+
+
+_CRC16_TABLE = _crc16_table()
+
+
+def crc16_oracle(body: bytes) -> int:
+    """CRC-16/IBM-SDLC of ``body``, byte by byte from its table: the readable statement
+    that :func:`crc16` (the fast one) is tested against."""
+    crc = CRC16_INIT
+    for byte in body:
+        crc = (crc >> 8) ^ _CRC16_TABLE[(crc ^ byte) & 0xFF]
+    return crc ^ CRC16_XOROUT
+
+
+# binascii.crc_hqx is the same polynomial unreflected, in C: fed each byte bit-reversed
+# and its result bit-reversed, it computes the reflected CRC, several times faster than
+# the table loop (docs/protocol.md).
+_REVERSED = bytes(int(f"{b:08b}"[::-1], 2) for b in range(256))
+
+
+def crc16(body: bytes) -> int:
+    """CRC-16/IBM-SDLC of ``body`` (protocol v2's check of the bytes between `$` and `*`)."""
+    crc = binascii.crc_hqx(bytes(body).translate(_REVERSED), CRC16_INIT)
+    return ((_REVERSED[crc & 0xFF] << 8) | _REVERSED[crc >> 8]) ^ CRC16_XOROUT
+
+
+def xor8(body: bytes) -> int:
+    """XOR of every byte of ``body``: protocol v1's checksum."""
     cs = 0
     for byte in body:
         cs ^= byte
     return cs
+
+
+def check_version(version: int) -> int:
+    """``version`` if this irring can frame it, else ValueError naming the allowed ones."""
+    if version not in PROTOCOL_VERSIONS:
+        raise ValueError(f"IRR protocol version {version!r}: this irring frames versions "
+                         f"{', '.join(map(str, PROTOCOL_VERSIONS))}")
+    return version
+
+
+def checksum(body: bytes, version: int = PROTOCOL_VERSION) -> bytes:
+    """The check field of a sentence whose bytes between `$` and `*` are ``body``: four
+    upper-case hex digits of :func:`crc16` (v2), two of :func:`xor8` (v1)."""
+    if check_version(version) == 1:
+        return b"%02X" % xor8(body)
+    return b"%04X" % crc16(body)
+
+
+def frame(body: bytes, version: int = PROTOCOL_VERSION) -> bytes:
+    """``$body*CHECK\\r\\n``: one sentence around ``body``, whatever its fields say."""
+    return b"$" + bytes(body) + b"*" + checksum(body, version) + b"\r\n"
 
 
 def _text_ok(text: str) -> bool:
@@ -233,8 +305,8 @@ def _field_values(msg: Message) -> list:
     return values
 
 
-def encode(msg: Message, *, check: bool = True) -> bytes:
-    """The bytes of one sentence for ``msg``, ``$`` to ``\\r\\n``.
+def encode(msg: Message, *, check: bool = True, version: int = PROTOCOL_VERSION) -> bytes:
+    """The bytes of one sentence for ``msg``, ``$`` to ``\\r\\n``, framed for ``version``.
 
     Raises ValueError if a field is out of its range, a text field holds a reserved or
     unprintable character, or the sentence would exceed 128 bytes.
@@ -254,7 +326,7 @@ def encode(msg: Message, *, check: bool = True) -> bytes:
                     raise ValueError(f"{msg.TYPE} field {i + 1} = {value} is outside {lo} … {hi}")
             parts.append(str(value).encode("ascii"))
     body = b",".join(parts)
-    line = b"$" + body + b"*" + b"%02X" % checksum(body) + b"\r\n"
+    line = frame(body, version)
     if check and len(line) > MAX_SENTENCE_BYTES:
         raise ValueError(f"{msg.TYPE} sentence is {len(line)} bytes; the protocol allows "
                          f"{MAX_SENTENCE_BYTES}")
@@ -272,8 +344,9 @@ def _bounds(msg: Message | type[Message], i: int) -> tuple[int, int] | str:
 # --------------------------------------------------------------------------- decode
 
 
-def decode(line: bytes) -> AnyMessage:
-    """Decode one whole sentence (``$`` … ``\\r\\n``) or raise :class:`ProtocolError`."""
+def decode(line: bytes, *, version: int = PROTOCOL_VERSION) -> AnyMessage:
+    """Decode one whole sentence (``$`` … ``\\r\\n``) framed for ``version`` or raise
+    :class:`ProtocolError` (OTHER_VERSION: a check field of the other version's length)."""
     line = bytes(line)
     if len(line) > MAX_SENTENCE_BYTES:
         raise ProtocolError(Fault.TOO_LONG, line, f"{len(line)} bytes")
@@ -285,12 +358,19 @@ def decode(line: bytes) -> AnyMessage:
     if star < 0:
         raise ProtocolError(Fault.NO_CHECKSUM, line)
     body, cs = line[1:star], line[star + 1:-2]
-    if len(cs) != 2 or any(c not in _HEX for c in cs):
+    digits = CHECK_DIGITS[version]
+    if any(c not in _HEX for c in cs):
         raise ProtocolError(Fault.BAD_CHECKSUM_FORMAT, line, f"got {cs!r}")
-    expected = checksum(body)
-    if int(cs, 16) != expected:
+    if len(cs) != digits:
+        other = [v for v, n in CHECK_DIGITS.items() if n == len(cs)]
+        if other:
+            raise ProtocolError(Fault.OTHER_VERSION, line, f"{len(cs)} hex digits: a protocol "
+                                f"v{other[0]} check; this link speaks v{version} ({digits})")
+        raise ProtocolError(Fault.BAD_CHECKSUM_FORMAT, line, f"got {cs!r}")
+    expected = checksum(body, version)
+    if cs != expected:
         raise ProtocolError(Fault.CHECKSUM_MISMATCH, line,
-                            f"sent {cs.decode()}, computed {expected:02X}")
+                            f"sent {cs.decode()}, computed {expected.decode()}")
     if any(b < 0x20 or b > 0x7E or b in b"$*" for b in body):
         raise ProtocolError(Fault.BAD_CHARACTER, line)
     tag, *raw_fields = body.split(b",")
@@ -349,10 +429,12 @@ class Decoder:
     :class:`ProtocolError` for a rejected sentence. Bytes outside a sentence are ignored
     (counted in ``ignored_bytes``); a ``$`` inside a sentence ends it as INTERRUPTED and
     starts a new one; a sentence that grows past 128 bytes without ``\\n`` is TOO_LONG and
-    the decoder hunts for the next ``$``.
+    the decoder hunts for the next ``$``. ``version`` frames the sentences it accepts
+    (settable between feeds: a host learns the device's in the handshake).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, version: int = PROTOCOL_VERSION) -> None:
+        self.version = check_version(version)
         self._buf = bytearray()
         self._in_sentence = False
         self._overflow = False  # discarding the rest of a too-long sentence
@@ -402,7 +484,7 @@ class Decoder:
             if not self._overflow:
                 self._buf += b"\n"
                 try:
-                    out.append(decode(bytes(self._buf)))
+                    out.append(decode(bytes(self._buf), version=self.version))
                 except ProtocolError as exc:
                     out.append(exc)
             else:
@@ -441,11 +523,12 @@ def ring_from_info(info: Info, template: Ring, *, radius_m: float | None = None,
     return dataclasses.replace(template, **changes)
 
 
-def info_for_ring(ring: Ring, adc_bits: int, firmware: str) -> Info:
-    """The IRINF a device with this ring sends (step rounded to 0.001°, belt ratio to a
-    fraction with denominator ≤ 10 000)."""
+def info_for_ring(ring: Ring, adc_bits: int, firmware: str,
+                  version: int = PROTOCOL_VERSION) -> Info:
+    """The IRINF a device with this ring speaking ``version`` sends (step rounded to
+    0.001°, belt ratio to a fraction with denominator ≤ 10 000)."""
     gear = _gear_fraction(ring.gear)
-    return Info(PROTOCOL_VERSION, ring.sensors, adc_bits, _step_mdeg(ring.motor_step_rad),
+    return Info(check_version(version), ring.sensors, adc_bits, _step_mdeg(ring.motor_step_rad),
                 gear.numerator, gear.denominator, ring.min_step, ring.max_step, firmware)
 
 

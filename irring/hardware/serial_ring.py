@@ -288,6 +288,10 @@ class SerialRing:
     samples, settle_s, resweep: how :meth:`sweep` sweeps unless told otherwise: readings
         averaged per step by the device (1–64), wait at each step before reading (s), rounds
         of re-sweeping only the steps still missing.
+    accept_v1: speak IRR protocol v1 (an 8-bit XOR checksum: two bit errors in one bit
+        column pass as changed readings) to a device not yet reflashed for v2, with a
+        warning (:attr:`protocol_warning`, logged); by default such a device is refused
+        with :class:`HandshakeError` saying how to reflash it.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
 
     A :class:`irring.core.RingSource`: ``pipeline.acquire`` drives it as it drives SimRing.
@@ -298,7 +302,7 @@ class SerialRing:
                  template: Ring = PAPER_RING, radius_m: float | None = None,
                  emitter_offset_m: float | None = None, sensor_model: str = core.SENSOR_MODEL,
                  vref_v: float = core.VREF_V, max_range_m: float = core.MAX_RANGE_M, samples: int = 1,
-                 settle_s: float = 0.0, resweep: int = 0,
+                 settle_s: float = 0.0, resweep: int = 0, accept_v1: bool = False,
                  opener: Callable[..., serial.SerialBase] = serial.serial_for_url):
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
@@ -316,7 +320,10 @@ class SerialRing:
         self.sensor_model, self.vref_v, self.max_range_m = sensor_model, vref_v, max_range_m
         self.opener = opener
         self.poll_s = min(0.02, self.timeout_s / 4)
-        self.decoder = p.Decoder()
+        self.accept_v1 = bool(accept_v1)
+        self.decoder = p.Decoder()   # v2; v1 only after a handshake found an old device
+        self.protocol_warning: str | None = None
+        self._other_framing = 0  # sentences framed for another protocol version, heard
         self._rx_bytes = 0     # bytes read from the port, all told (silence is none arriving)
         self.stats = LinkStats()
         self.info: p.Info | None = None
@@ -383,8 +390,13 @@ class SerialRing:
             raise self._lost(DeviceDisconnected, f"flushing failed: {exc}") from exc
         self.decoder.reset()
 
+    @property
+    def protocol(self) -> int:
+        """The IRR protocol version this link speaks (2, or 1 with ``accept_v1``)."""
+        return self.decoder.version
+
     def _send(self, msg: p.Message) -> None:
-        line = p.encode(msg)
+        line = p.encode(msg, version=self.decoder.version)
         log.debug("host → %r", line)
         try:
             self.port.write(line)
@@ -412,6 +424,7 @@ class SerialRing:
                 if item.fault is p.Fault.CHECKSUM_MISMATCH:
                     self.stats.checksum_failures += 1
                 else:
+                    self._other_framing += item.fault is p.Fault.OTHER_VERSION
                     self.stats.malformed += 1
                 log.debug("dropped: %s", item)
             else:
@@ -435,7 +448,9 @@ class SerialRing:
     # ---------------------------------------------------------------- handshake
 
     def hello(self) -> p.Info:
-        """IRHLO → IRINF: learn the ring's geometry; sets :attr:`info` and :attr:`ring`."""
+        """IRHLO → IRINF: learn the ring's geometry and protocol version; sets :attr:`info`
+        and :attr:`ring`. A device answering in v1 framing is asked again in v1 (an old
+        board answers a v2 IRHLO with a v1 IRERR 1) and refused unless ``accept_v1``."""
         tries = self.retries + 1
         refusals: list[p.ErrorReply] = []
         every_refused = True
@@ -444,8 +459,14 @@ class SerialRing:
                 self.stats.resent_commands += 1
             self._send(p.Hello())
             deadline = time.monotonic() + self.timeout_s
-            refused = False
+            refused = probed = False
+            framed_before = self._other_framing
             while not refused and time.monotonic() < deadline:
+                if self._other_framing > framed_before and self.decoder.version != 1:
+                    info, probed = self._hello_v1(), True
+                    if info is not None:
+                        return self._accept_info(info)
+                    break   # garbled, or a v2 device after all: no answer, say hello again
                 for msg in self._receive():
                     if isinstance(msg, p.Info):
                         return self._accept_info(msg)
@@ -457,7 +478,7 @@ class SerialRing:
                             self._send(p.Stop())
                         refused = True
             if not refused:
-                self.stats.timeouts += 1
+                self.stats.timeouts += not probed   # a probe that timed out counted itself
                 every_refused = False
         if every_refused:   # a working link to a device that will not say hello
             last = refusals[-1]
@@ -471,14 +492,42 @@ class SerialRing:
         raise HandshakeError(
             f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
             f"each. Check the port, the baud rate ({self.baudrate}), that the ring is powered "
-            f"and runs IRR protocol v{p.PROTOCOL_VERSION} firmware "
+            f"and runs IRR protocol v{p.PROTOCOL_VERSION} firmware (firmware/README.md) "
             f"({self.stats.checksum_failures} checksum failures, "
             f"{self.stats.ignored_bytes} stray bytes seen).")
 
+    def _hello_v1(self) -> p.Info | None:
+        """IRHLO in v1 framing, after v1-framed sentences answered a v2 one: the IRINF of
+        an old (v1) device, or None (no v1 answer, or a v2 device: the link goes on in v2)."""
+        self.decoder.version = 1
+        self._send(p.Hello())
+        msg = self._await((p.Info,), self.timeout_s)
+        if isinstance(msg, p.Info) and msg.proto == 1:
+            return msg   # the decoder stays at v1 if it is accepted
+        self.decoder.version = p.PROTOCOL_VERSION
+        return None
+
     def _accept_info(self, info: p.Info) -> p.Info:
-        if info.proto != p.PROTOCOL_VERSION:
+        if info.proto == 1 and self.decoder.version == 1:
+            what = (f"the device on {self.port_name} runs IRR protocol v1 firmware "
+                    f"({info.firmware}), whose 8-bit XOR checksum lets two bit errors in one "
+                    f"bit column through as changed readings; this irring speaks "
+                    f"v{p.PROTOCOL_VERSION} (a CRC-16)")
+            if not self.accept_v1:
+                raise HandshakeError(
+                    f"{what}. Reflash the ring with this irring's firmware (firmware/README.md:"
+                    f" make -C firmware avr flash PORT={self.port_name}), or accept v1 for now "
+                    f"(irring drive/calibrate --accept-protocol-v1, SerialRing(accept_v1=True))")
+            self.protocol_warning = (f"{what}; speaking v1 as asked (--accept-protocol-v1): "
+                                     f"reflash it (firmware/README.md) to have every sentence "
+                                     f"CRC-checked")
+            log.warning("%s", self.protocol_warning)
+        elif info.proto != self.decoder.version:
             raise HandshakeError(f"the device on {self.port_name} speaks IRR protocol "
-                                 f"v{info.proto}; this driver speaks v{p.PROTOCOL_VERSION}")
+                                 f"v{info.proto}; this irring speaks v{p.PROTOCOL_VERSION} "
+                                 f"(and v1 to an old board): "
+                                 + ("update irring" if info.proto > p.PROTOCOL_VERSION else
+                                    "its IRINF contradicts its own framing"))
         # sizes the host allocates by, and angles it maps by: refuse what no ring has
         # before trusting them (Ring's bounds, one home with the scenario schema)
         for fault in _info_faults(info):
