@@ -25,6 +25,7 @@ BENCHES = {
     "sigma": "each reading's σ against its range error, per distance band and sensor model",
     "study": "how `irring study` scales: runs/s on 1 and N workers, memory",
     "render": "cost of the map pictures vs making the map; peak memory",
+    "link": "corrupted IRSCN accepted under protocol v1's XOR vs v2's CRC-16; decode time",
 }
 
 
