@@ -131,3 +131,33 @@ def test_a_recording_too_big_to_replay_is_refused_before_its_arrays_are_read(tmp
     assert str(path) in message
     assert "1 sweeps, 7,200,000 readings (the largest sweep 100,000 steps × 72 sensors)" in message
     assert "about 23.8 GB" in message and "more than the 2 GB" in message
+
+
+def test_a_recording_driven_over_protocol_v1_by_the_previous_irring_still_loads(tmp_path,
+                                                                               capsys):
+    """tests/data/drive_protocol_v1.npz: the sweep `irring drive` kept from a v1 emulator
+    (t_room, pose 1) before protocol v2. A recording holds decoded sweeps, never wire
+    frames, so the protocol change leaves its format alone: it loads, replays, and what
+    this irring writes from it has the same members, dtypes and values."""
+    from pathlib import Path
+
+    from irring.cli import main
+
+    old = Path(__file__).parent / "data" / "drive_protocol_v1.npz"
+    sweeps, meta = load_recording(old)
+    (sweep,) = sweeps
+    assert sweep.steps.tolist() == list(range(-35, 36)) and sweep.missing_steps == ()
+    assert sweep.counts.shape == (71, 12) and sweep.counts.dtype.kind == "i"
+    assert 0 < sweep.counts.min() and sweep.counts.max() < 4096
+    assert sorted(meta) == ["calibration_yaml", "scenario_yaml"]
+    again = save_recording(tmp_path / "again.npz", sweeps, meta)
+    with zipfile.ZipFile(old) as a, zipfile.ZipFile(again) as b:
+        assert a.namelist() == b.namelist()
+    with np.load(old) as a, np.load(again) as b:
+        for name in a.files:
+            assert a[name].dtype == b[name].dtype and np.array_equal(a[name], b[name]), name
+    assert main(["replay", str(old), "--out", str(tmp_path / "replay"), "--no-animation",
+                 "--json"]) == 0
+    replayed = json.loads(capsys.readouterr().out)
+    assert replayed["readings"]["total"] == 71 * 12 and replayed["readings"]["valid"] > 500
+    assert (tmp_path / "replay" / "map.pgm").exists()
