@@ -486,7 +486,9 @@ class Decoder:
                 try:
                     out.append(decode(bytes(self._buf), version=self.version))
                 except ProtocolError as exc:
-                    out.append(exc)
+                    # returned, not raised: without its traceback it holds no frames (whose
+                    # locals a caller's big arrays may be) in a cycle only the GC breaks
+                    out.append(exc.with_traceback(None))
             else:
                 self.ignored_bytes += 1
             self._in_sentence, self._overflow = False, False
