@@ -720,7 +720,7 @@ def test_silent_beams_past_a_faces_end_do_not_free_the_box_behind_it(noise, monk
     near face as a line, and its side face from that line's end onwards only at 64–76°
     (a few returns, then silence: no line). The silent beams past the line's end stop where
     a face turned away there could hide from them (``no_return_reach``): no cell inside the
-    box is mapped free (at most 2 with noise) where, with that rule off, 37–61 were."""
+    box is mapped free (at most 2 with noise) where, with that rule off, 36–61 were."""
     from irring.maps.mapping import FREE, MapperParams, OccupancyGrid
 
     cal = dataclasses.replace(NOMINAL, noise_counts=max(noise, 0.3))
@@ -743,7 +743,7 @@ def test_silent_beams_past_a_faces_end_do_not_free_the_box_behind_it(noise, monk
             g.insert(estimate(sweep, cal))
             inside_free[rule].append(int((g.classify()[inside] == FREE).sum()))
     assert max(inside_free[True]) <= (0 if noise == 0 else 2), inside_free
-    assert min(inside_free[False]) >= 37, inside_free
+    assert min(inside_free[False]) >= 36, inside_free
 
 
 def test_silent_beams_take_the_callers_incidence_margin(monkeypatch):

@@ -106,6 +106,73 @@ def test_only_uncertain_readings_bracketed_within_their_noise_move():
     assert not np.isfinite(neighbour_ranges(one_sensor(leg, 0.020), p)).any()
 
 
+# seven steps on the wall, σ 10 mm; the fourth a θ = 0 fallback of σ 45 mm read 90 mm long
+FALLBACK = [0.0, 0.0, 0.0, 0.090, 0.0, 0.0, 0.0]
+FALLBACK_SIGMA = [0.010, 0.010, 0.010, 0.045, 0.010, 0.010, 0.010]
+
+
+def test_an_uncertain_reading_behind_both_neighbours_draws_no_wall_outside():
+    """A reading of σ 45 mm (above lone_sigma_m) read 90 mm long between two of σ 10 mm:
+    its hit alone marked 3 cells 80–100 mm behind the wall; mapped at the farther of its
+    neighbours' ranges, none (the rule held only readings of σ ≤ 30 mm before). Step 2,
+    of σ 10 mm, moves out to step 1's range as it did."""
+    batch = one_sensor(FALLBACK, FALLBACK_SIGMA)
+    off = grid(neighbour_steps=0)
+    off.insert(batch)
+    assert cells_behind(off, 0.025) == 3
+    g = grid()
+    g.insert(batch)
+    assert cells_behind(g, 0.025) == 0
+    assert moved(batch, g.params) == pytest.approx({2: batch.d[1, 0], 3: batch.d[2, 0]},
+                                                 abs=1e-12)
+    np.testing.assert_array_equal(mapping_numpy.neighbour_ranges(batch, g.params),
+                                  neighbour_ranges(batch, g.params))
+
+
+def test_an_uncertain_reading_before_both_neighbours_stays():
+    """Read 40 mm short (a thin thing in front of the wall its neighbours see may be what
+    it met): a reading of σ 45 mm is not moved out onto the wall; one of σ 20 mm is, to
+    the nearer of its neighbours' ranges, as before."""
+    short = [0.0, 0.0, 0.0, -0.040, 0.0, 0.0, 0.0]
+    for rule in (neighbour_ranges, mapping_numpy.neighbour_ranges):
+        assert np.isnan(rule(one_sensor(short, FALLBACK_SIGMA), MapperParams())[3, 0])
+    sharper = one_sensor(short, [0.010, 0.010, 0.010, 0.020, 0.010, 0.010, 0.010])
+    assert moved(sharper, MapperParams())[3] == pytest.approx(sharper.d[4, 0], abs=1e-12)
+
+
+def test_an_uncertain_last_reading_is_not_read_behind_its_one_sharper_neighbour():
+    """The fallback reading as the last valid step before two the estimator could not place
+    (INCIDENCE_UNKNOWN: invalid here): mapped at its one neighbour's range (σ 10 mm,
+    within 3 combined σ, shorter), no cell behind the wall; not when that neighbour is
+    no sharper (σ 45 mm too) or lies beyond 3 combined σ (a reading 200 mm long); nor a
+    reading of σ ≤ 30 mm (it needs a neighbour on each side)."""
+    valid = [1, 1, 1, 1, 0, 0, 1]
+    batch = one_sensor(FALLBACK, FALLBACK_SIGMA, valid=valid)
+    off = grid(neighbour_steps=0)
+    off.insert(batch)
+    assert cells_behind(off, 0.025) == 3
+    g = grid()
+    g.insert(batch)
+    assert cells_behind(g, 0.025) == 0
+    assert moved(batch, g.params) == pytest.approx({2: batch.d[1, 0], 3: batch.d[2, 0]},
+                                                 abs=1e-12)
+    # the same from the other side (rows reversed: its one neighbour after it)
+    back = in_rows(batch, list(range(6, -1, -1)))
+    assert moved(back, g.params) == pytest.approx({4: batch.d[1, 0], 3: batch.d[2, 0]},
+                                                abs=1e-12)
+    blunt = one_sensor(FALLBACK, [0.010, 0.010, 0.045, 0.045, 0.010, 0.010, 0.010],
+                       valid=valid)
+    assert 3 not in moved(blunt, g.params)
+    far = one_sensor([0.0, 0.0, 0.0, 0.200, 0.0, 0.0, 0.0], FALLBACK_SIGMA, valid=valid)
+    assert 3 not in moved(far, g.params)
+    sharp = one_sensor([0.0, 0.0, 0.0, 0.040, 0.0, 0.0, 0.0],
+                       [0.010, 0.010, 0.010, 0.020, 0.010, 0.010, 0.010], valid=valid)
+    assert 3 not in moved(sharp, g.params)
+    for p in (batch, back, blunt, far, sharp):
+        np.testing.assert_array_equal(mapping_numpy.neighbour_ranges(p, g.params),
+                                      neighbour_ranges(p, g.params))
+
+
 def test_the_nearest_valid_neighbour_within_neighbour_steps_counts():
     """Step 3 not converged: step 2 is the long reading's neighbour before it (2 steps away)
     and it moves; with steps 2 and 3 both out, the nearest before is 3 steps away and it
@@ -163,14 +230,14 @@ def test_bad_neighbour_steps_are_refused_by_name(bad):
 
 def drawn_sweep(rng, steps, sensors, steps_knob, shuffled=False):
     """A sweep of ``sensors`` emitters on a ring each turning through ``steps`` steps
-    past a wall, posts and gaps: ranges with noise of their σ (5–40 mm, some NaN), some
+    past a wall, posts and gaps: ranges with noise of their σ (5–120 mm, some NaN), some
     readings invalid, some out of the wall's reach (a post in front, a gap behind);
     ``shuffled``: its rows (steps) in a random order."""
     base = rng.uniform(0.0, 2 * np.pi, sensors)
     heading = base[None, :] + np.radians(1.07) * np.arange(steps)[:, None]
     ox = 0.15 * np.cos(base)[None, :] + np.zeros((steps, 1))
     oy = 0.15 * np.sin(base)[None, :] + np.zeros((steps, 1))
-    sigma = np.exp(rng.uniform(math.log(0.005), math.log(0.04), (steps, sensors)))
+    sigma = np.exp(rng.uniform(math.log(0.005), math.log(0.12), (steps, sensors)))
     d = rng.uniform(0.3, 0.6, sensors)[None, :] + rng.normal(0.0, 1.0, (steps, sensors)) * sigma
     d += np.where(rng.random((steps, sensors)) < 0.1, rng.choice([-0.2, 0.15], (steps, sensors)),
                   0.0)

@@ -926,7 +926,7 @@ def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
     ``mapping_numpy.neighbour_ranges``. Each column's valid readings are visited in row
     order, each compared with the valid ones before and after it in that order whose beams
     bracket its own (the beam turns one way from the one before to it and on to the one
-    after)."""
+    after); one of σ > lone_sigma_m with a neighbour on one side only, with that one."""
     cdef Py_ssize_t n = rows * cols, c, r, i, k, m, prev, nxt
     if not (origin_x.shape[0] == origin_y.shape[0] == x.shape[0] == y.shape[0]
             == sigma_m.shape[0] == valid.shape[0] == n):
@@ -948,7 +948,7 @@ def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
     cdef double[::1] s = s_a
     cdef Py_ssize_t[::1] at = at_a
     cdef double dp, dn, si, turn_p, turn_n
-    cdef bint near_p, near_n
+    cdef bint near_p, near_n, has_p, has_n
     with nogil:
         for c in range(cols):
             m = 0                                   # the column's valid readings, in row order
@@ -966,12 +966,24 @@ def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
                 d[i] = hypot(x[i] - origin_x[i], y[i] - origin_y[i])
                 at[m] = r
                 m += 1
-            for k in range(1, m - 1):
+            for k in range(m):
                 r = at[k]
                 i = r * cols + c
-                if not (s[i] >= low and s[i] <= lone):
+                if not s[i] >= low:
                     continue
-                if r - at[k - 1] > steps or at[k + 1] - r > steps:
+                has_p = k > 0 and r - at[k - 1] <= steps
+                has_n = k < m - 1 and at[k + 1] - r <= steps
+                if has_p != has_n:
+                    # one neighbour only: an uncertain end point is not read behind it
+                    # when it is sharper, shorter and within their noise
+                    if s[i] <= lone:
+                        continue
+                    prev = at[k - 1] * cols + c if has_p else at[k + 1] * cols + c
+                    if (s[prev] < s[i] and d[prev] < d[i] and hypot(
+                            x[prev] - x[i], y[prev] - y[i]) <= k_sig * hypot(s[prev], s[i])):
+                        out[i] = d[prev]
+                    continue
+                if not has_p:
                     continue
                 prev, nxt = at[k - 1] * cols + c, at[k + 1] * cols + c
                 # rows in any order (a sweep asked for steps 5, -10, 30): beams on one side
@@ -988,6 +1000,6 @@ def neighbour_ranges(const double[::1] origin_x, const double[::1] origin_y,
                 dp, dn = d[prev], d[nxt]
                 if dp < d[i] and dn < d[i]:
                     out[i] = dp if dp > dn else dn
-                elif dp > d[i] and dn > d[i]:
+                elif dp > d[i] and dn > d[i] and s[i] <= lone:
                     out[i] = dp if dp < dn else dn
     return out_a

@@ -72,10 +72,12 @@ class MapperParams:
     explain_sigmas: float = 3.0
     explain_log_odds: float = 3.0
     explain_sharper: float = 2.0
-    # a valid reading (σ as above) its sensor's nearest valid readings before and after it
-    # (at most neighbour_steps rows of the sweep away, beams on either side of its own, end
-    # points within explain_sigmas combined σ of its own) both read shorter (longer) is
-    # mapped at the farther (nearer) of their ranges: the median of the three (0: off)
+    # a valid reading (σ ≥ explain_sharper·min_sigma_m) its sensor's nearest valid readings
+    # before and after it (at most neighbour_steps rows of the sweep away, beams on either
+    # side of its own, end points within explain_sigmas combined σ of its own) both read
+    # shorter (longer: σ ≤ lone_sigma_m only) is mapped at the farther (nearer) of their
+    # ranges, the median of the three; one of σ > lone_sigma_m with such a neighbour on one
+    # side only, sharper and shorter, at its range (0: off)
     neighbour_steps: float = 2.0
     # readings from a wide cone (Points.cone_half_angle_rad > 0: sonar), mapped as arcs
     cone_step_rad: float = math.radians(1.0)  # spacing of the fan of rays across the cone
@@ -533,12 +535,15 @@ def neighbour_ranges(points: Points, params: MapperParams) -> np.ndarray:
     """(S, N) m: the range each valid reading its sensor's neighbouring steps bracket is
     mapped at, NaN for the others.
 
-    A reading of σ from ``explain_sharper``·``min_sigma_m`` to ``lone_sigma_m`` (one that
-    cannot place its surface in one cell) whose sensor's nearest valid readings before and
-    after it in the sweep (rows, at most ``neighbour_steps`` away, their beams on either
-    side of its own) both end within ``explain_sigmas`` combined σ of its end point, and
-    both read shorter (longer) than it, is mapped at the farther (nearer) of their ranges:
-    the median of the three. Compiled
+    A reading of σ from ``explain_sharper``·``min_sigma_m`` (one that cannot place its
+    surface in one cell) whose sensor's nearest valid readings before and after it in the
+    sweep (rows, at most ``neighbour_steps`` away, their beams on either side of its own)
+    both end within ``explain_sigmas`` combined σ of its end point, and both read shorter
+    than it (or, for σ up to ``lone_sigma_m``, both longer), is mapped at the farther
+    (nearer) of their ranges: the median of the three. A reading of σ above
+    ``lone_sigma_m`` with a valid reading within ``neighbour_steps`` on one side only,
+    sharper, shorter and within ``explain_sigmas`` combined σ, is mapped at its range.
+    Compiled
     (irring/maps/_traverse.pyx); the numpy oracle is
     :func:`irring.maps.mapping_numpy.neighbour_ranges`. docs/mapping.md says why ("A
     sensor's neighbouring steps")."""

@@ -28,7 +28,9 @@ def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.
     px, py = np.asarray(points.x, float), np.asarray(points.y, float)
     with np.errstate(invalid="ignore"):
         valid = np.asarray(points.valid, bool) & np.isfinite(px + py) & np.isfinite(ox + oy)
-        d = np.where(valid, np.hypot(px - ox, py - oy), np.nan)
+        # (as the kernel's sqrt(Δx² + Δy²): a reading moved to its neighbour's range ties
+        # with it, and one rounding of hypot's would decide a jump of 0 the other way)
+        d = np.where(valid, np.sqrt((px - ox) * (px - ox) + (py - oy) * (py - oy)), np.nan)
         sigma = np.maximum(np.nan_to_num(np.asarray(points.sigma_m, float),
                                          nan=params.default_sigma_m), params.min_sigma_m)
         ranged = np.where(np.asarray(points.reason) == int(Reason.NO_RETURN), np.inf, d)
@@ -68,20 +70,23 @@ def neighbour_ranges(points: Points, params: MapperParams) -> np.ndarray:
         valid = np.asarray(points.valid, bool) & np.isfinite(px + py) & np.isfinite(ox + oy)
         sigma = np.maximum(np.nan_to_num(np.asarray(points.sigma_m, float),
                                          nan=params.default_sigma_m), params.min_sigma_m)
-        cand = valid & (sigma >= params.explain_sharper * params.min_sigma_m) & (
-            sigma <= params.lone_sigma_m)
+        cand = valid & (sigma >= params.explain_sharper * params.min_sigma_m)
         if not cand.any():
             return out
         d = np.where(valid, np.hypot(px - ox, py - oy), np.nan)
         cols = np.arange(shape[1])[None, :]
         behind, before = cand.copy(), cand.copy()      # behind both neighbours / before both
         farther, nearer = np.zeros(shape), np.full(shape, np.inf)
-        turns = []
+        turns, present, behind_one = [], [], []
         for later in (False, True):
             row = _nearest_valid(valid, steps, later)
             r = np.maximum(row, 0)
             near = (row >= 0) & (np.hypot(px[r, cols] - px, py[r, cols] - py)
                                  <= params.explain_sigmas * np.hypot(sigma[r, cols], sigma))
+            present.append(row >= 0)
+            # (a one-sided neighbour: sharper, shorter, within the noise)
+            behind_one.append(np.where(near & (sigma[r, cols] < sigma) & (d[r, cols] < d),
+                                       d[r, cols], np.nan))
             # the turn from the earlier beam to the later one (z of their cross product)
             bx, by = px[r, cols] - ox[r, cols], py[r, cols] - oy[r, cols]
             turns.append(np.sign(bx * (py - oy) - by * (px - ox)) if not later else
@@ -92,9 +97,17 @@ def neighbour_ranges(points: Points, params: MapperParams) -> np.ndarray:
             farther, nearer = np.fmax(farther, other), np.fmin(nearer, other)
         bracketed = (turns[0] * turns[1] > 0)   # its beam between theirs: rows in any order
         behind &= bracketed
-        before &= bracketed
+        # (an uncertain end point is never moved out: a thin thing in front of the
+        # surface its neighbours see may be what it met)
+        before &= bracketed & (sigma <= params.lone_sigma_m)
         out[behind] = farther[behind]
         out[before] = nearer[before]
+        # an uncertain end point with a neighbour on one side only (silence, an unplaced
+        # step or the sweep's end on the other) is not read behind that sharper neighbour
+        broad = cand & (sigma > params.lone_sigma_m)
+        for side in (0, 1):
+            one = broad & present[side] & ~present[1 - side] & np.isfinite(behind_one[side])
+            out[one] = behind_one[side][one]
     return out
 
 
