@@ -2006,6 +2006,19 @@ def test_an_mcap_naming_a_file_of_the_output_set_is_refused(tmp_path, capsys, go
     assert (tmp_path / "o" / "map.mcap").read_bytes().startswith(b"\x89MCAP")
 
 
+@pytest.mark.parametrize("out, mcap", [("o", "o"), ("o/sub", "o"), ("o/sub", "o/sub/..")])
+def test_an_mcap_naming_the_out_folder_is_refused_before_the_run(tmp_path, capsys,
+                                                                  monkeypatch, out, mcap):
+    """irring run --out o --mcap o: the whole run, the set written into o, then exit 4 with
+    'o: is a folder; expected a file' (not naming --mcap)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "t_room", "--no-animation", "--out", out, "--mcap", mcap]) == 2
+    assert capsys.readouterr().err == (
+        f"irring run: error: --mcap {mcap}: is the folder --out {out} or holds it, and this "
+        f"command writes its outputs there; name a file (such as {out}/map.mcap)\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_calibration_value_out_of_range_names_its_file_once(tmp_path, capsys):
     """'cal.yaml: cal.yaml: noise_counts: inf is out of range': the key's own error, already
     naming the file, was wrapped again with it."""

@@ -185,9 +185,16 @@ def mcap_beside_outputs(mcap: Path | None, out: Path) -> None:
     """:class:`UsageError` when ``--mcap`` names one of the files a run writes into ``out``:
     ``irring run t_room --out o --mcap o/sweeps.npz`` left MCAP bytes where the recording
     was (the MCAP is written after the set; map.mcap is the one name kept for it);
-    :class:`OutputError` when its folder cannot be written (checked before the work)."""
+    :class:`OutputError` when its folder cannot be written (checked before the work).
+    :class:`UsageError` too when it names ``out`` or a folder holding it: ``--out o --mcap
+    o`` wrote the whole set, then failed (exit 4) on the folder it had made."""
     if mcap is None:
         return
+    mcap_at, out_at = mcap.absolute().resolve(), Path(out).absolute().resolve()
+    if mcap_at == out_at or mcap_at in out_at.parents:
+        raise UsageError(f"--mcap {mcap}: is the folder --out {out} or holds it, and this "
+                         f"command writes its outputs there; name a file (such as "
+                         f"{Path(out) / 'map.mcap'})")
     # before the work, as --out is: a read-only folder failed after the whole run
     check_out(mcap.parent, "--mcap")
     if mcap.name not in RUN_FILES - {"map.mcap"}:
