@@ -704,16 +704,22 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     la0, b0 = cal._ab0
     d0 = np.exp(la0 + b0 * np.log(s[~met]))
     theta[~met], d[~met], to[~met] = 0.0, d0, -1
-    sigma[~met] = np.hypot(np.maximum(np.abs(b0) * d0 * sig_s[~met], SIGMA_FLOOR_M),
-                           fallback_spread(cal, s[~met], d0))
+    sigma[~met] = theta0_sigma(cal, s[~met], d0, sig_s[~met])
+    label = label.copy()
+    label.reshape(-1)[at] = to
+    return placed_at(points, at, d, theta, sigma), label
+
+
+def placed_at(points: Points, at: np.ndarray, d, theta, sigma) -> Points:
+    """``points`` with the flat readings ``at`` read at range ``d`` (m), incidence ``theta``
+    (rad) and ``sigma`` (m), their end points along their own headings."""
+    h = points.heading.reshape(-1)[at]
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     for f, v in (("d", d), ("theta", theta), ("sigma_m", sigma),
                  ("x", points.origin_x.reshape(-1)[at] + d * np.cos(h)),
                  ("y", points.origin_y.reshape(-1)[at] + d * np.sin(h))):
         out[f].reshape(-1)[at] = v
-    label = label.copy()
-    label.reshape(-1)[at] = to
-    return points_with(points, **out), label
+    return points_with(points, **out)
 
 
 FUSE_MIN = 5            # lines of at least this many valid members are tried together …
@@ -1525,15 +1531,9 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     else:
         pos, th, dist, sig = pos[good], th[good], dist[good], sig[good]
     at = vi[pos]
-    hh = points.heading.reshape(-1)[at]
-    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-    for f, v in (("d", dist), ("theta", th), ("sigma_m", sig),
-                 ("x", points.origin_x.reshape(-1)[at] + dist * np.cos(hh)),
-                 ("y", points.origin_y.reshape(-1)[at] + dist * np.sin(hh))):
-        out[f].reshape(-1)[at] = v
     label = label.copy()
     label.reshape(-1)[at] = -1
-    return points_with(points, **out), label
+    return placed_at(points, at, dist, th, sig), label
 
 
 def _round_wins(pr: _Profile, pos: np.ndarray, lab: np.ndarray, group: np.ndarray, n: int,
@@ -1751,6 +1751,15 @@ def _meet_circle(centre, radius: float, ox, oy, ex, ey):
     return t, np.arccos(cos), (disc > 0.0) & (along > 0.0)
 
 
+def theta0_sigma(cal: Calibration, counts: np.ndarray, d0: np.ndarray,
+                 sig_s: np.ndarray) -> np.ndarray:
+    """σ (m) of readings ``counts`` read at θ = 0 (``d0``) on no line: their noise
+    (``sig_s``, relative) through θ = 0's slope, floored, with :func:`fallback_spread`."""
+    _, b0 = cal._ab0
+    return np.hypot(np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M),
+                    fallback_spread(cal, counts, d0))
+
+
 def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.ndarray:
     """RMS range error (m) of reading ``counts`` with θ = 0 (giving ``d0``) when the true θ
     is unknown, over the quadrature of :func:`calibration.fallback_thetas`."""
@@ -1869,16 +1878,8 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     if taken.any():    # back to θ = 0 with the σ of a reading on no line
         at = vi[ask[taken]]
         s0, d0 = pr.s[ask[taken]], pr.d0[ask[taken]]
-        _, b0 = cal._ab0
-        sigma0 = np.hypot(np.maximum(np.abs(b0) * d0 * pr.sig_s[ask[taken]], SIGMA_FLOOR_M),
-                          fallback_spread(cal, s0, d0))
-        hh = points.heading.reshape(-1)[at]
-        moved = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-        for f, v in (("d", d0), ("theta", 0.0), ("sigma_m", sigma0),
-                     ("x", points.origin_x.reshape(-1)[at] + d0 * np.cos(hh)),
-                     ("y", points.origin_y.reshape(-1)[at] + d0 * np.sin(hh))):
-            moved[f].reshape(-1)[at] = v
-        points = points_with(points, **moved)
+        points = placed_at(points, at, d0, 0.0,
+                           theta0_sigma(cal, s0, d0, pr.sig_s[ask[taken]]))
         label = label.copy()
         label.reshape(-1)[at] = -1
     mine = off[ask] | taken                     # the readings on no line now
