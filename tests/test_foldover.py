@@ -617,3 +617,38 @@ def test_near_trace_straight_tells_a_close_face_from_a_far_wall():
     straight = _near_trace_straight(counts, p, np.arange(steps)[::-1].copy(), use, cal)
     assert straight[:, 0].tolist() == [i != 4 for i in range(steps)]
     assert not straight[:, 1].any()
+
+
+# A wall yawed 12°, the ring 172 mm off it (GP2Y0A21): sensor 7's far readings of the floor
+# wall find no line (its neighbours' readings are held out): 22 take θ = 0 (σ 63-83 mm) and
+# read 37 mm short to 44 mm long; the long ones drew 3 cells more than 25 mm outside the room.
+WALL_YAW12_A21 = """
+name: wall_yaw12_a21
+room: {outline_mm: [[0, 0], [2400, 0], [2400, 1500], [318.8, 1500]]}
+robot: {poses: [{x_mm: 325, y_mm: 700, yaw_deg: 17}]}
+sensor: {model: gp2y0a21}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_far_reading_nothing_places_within_30_mm_is_left_unplaced(monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+    from irring.studies.foldover import cells_outside
+
+    sc = loads(WALL_YAW12_A21, source="<test>")
+    now = pipeline.run(sc, seed=7104, progress=False, score=False)
+    with monkeypatch.context() as m:
+        m.setattr(est, "FOLD_PLACED_SIGMA_M", math.inf)
+        before = pipeline.run(sc, seed=7104, progress=False, score=False)
+    cal = scene_calibration(sc)[0]
+    (sw,), (p,), (q,) = now.sweeps, now.points, before.points
+    took = q.valid & ~p.valid
+    assert np.array_equal(p.valid | took, q.valid)          # nothing else left or came back
+    assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
+    assert np.all(q.sigma_m[took] > 0.03) and np.all(p.sigma_m[p.valid] <= 0.03)
+    assert int(took.sum()) == 23 and int(q.valid.sum()) == 223
+    assert int(np.sum((q.theta[took] == 0.0) & (q.sigma_m[took] > 0.06))) == 22
+    outline = sc.room.outline_m
+    assert (cells_outside(before.grid, outline), cells_outside(now.grid, outline)) == (3, 0)
+    np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
+                                  p.reason)

@@ -2261,6 +2261,13 @@ _FOLD_OWN_Z = 3.0      # a member whose own straight slope is this many standard
 #                        its line's θ, reading it > _UNKNOWN_M elsewhere, is not placed
 
 
+# a fold-over's reading whose σ says it is placed no better than this (θ = 0 for want of a
+# line: σ 65-75 mm; a profile's uncertain θ: 30-60 mm) is INCIDENCE_UNKNOWN: around a ring at
+# the housing limit the walls that would pin its θ are held out as near or ambiguous
+# (docs/foldover.md, "Far readings nothing places")
+FOLD_PLACED_SIGMA_M = 0.03
+
+
 def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: Sweep,
                      cal: Calibration, detail: bool, profiler: Callable | None = None,
                      options: LineOptions = LineOptions()) -> Estimate:
@@ -2354,6 +2361,11 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
         if pooled.any():
             p = silent_behind_a_wall(p, pooled, first.lines, cal, options, among=walls,
                                      members=q)
+    # a reading placed no better than FOLD_PLACED_SIGMA_M: its θ is 0 for want of a line, or
+    # an uncertain profile's; such end points read 20-90 mm long drew walls outside the room
+    vague = p.valid & (p.sigma_m > FOLD_PLACED_SIGMA_M)
+    if vague.any():
+        p = _unplaced(p, vague.reshape(-1).nonzero()[0])
     return replace(second, points=p, lines=second.lines if detail else None)
 
 
