@@ -80,8 +80,9 @@ def runs_within_100_mm(sc):
 # (328 and 1015 valid before the readings the judging pass read out of range were judged
 # too: 58 and 110 of them, truly 82-101 mm away at the GP2D12's 90 mm peak, are undecided;
 # the passage 884 -> 870 since a line decides "far" only where the reading's own far trace
-# agrees: right readings past a line's last member whose own line is not anchored)
-@pytest.mark.parametrize("text, min_valid", [(CLOSE_CORNER, 260), (CLOSE_PASSAGE, 860),
+# agrees: right readings past a line's last member whose own line is not anchored; 857 since
+# a reading placed no better than 30 mm is left unplaced: estimate.FOLD_PLACED_SIGMA_M)
+@pytest.mark.parametrize("text, min_valid", [(CLOSE_CORNER, 260), (CLOSE_PASSAGE, 850),
                                              (GRAZING_BOXES, 4300)])
 def test_no_valid_reading_more_than_100_mm_off_and_none_outside_the_room(text, min_valid):
     sc = loads(text, source="<test>")
@@ -129,8 +130,10 @@ effects: [incidence, noise, quantization, foldover]
 # of them, truly 82-100 mm away at the peak, 1-30 mm off on the far branch, are undecided;
 # 52 and 27 more, 0-6 mm off, were decided far by a line 50-100 mm past where it is seen;
 # 557 and 414 -> 521 and 395 since the own-trace rule: right readings past a line's last
-# member whose own line is not anchored, or whose own line runs > 20° off, are undecided)
-@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 510), (TURNED_M8, 385)])
+# member whose own line is not anchored, or whose own line runs > 20° off, are undecided;
+# 521 -> 507 since readings placed no better than 30 mm are left unplaced:
+# estimate.FOLD_PLACED_SIGMA_M)
+@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 500), (TURNED_M8, 385)])
 def test_a_far_steep_wall_bent_by_noise_is_not_kept_as_a_post(text, min_valid):
     sc = loads(text, source="<test>")
     valid = sum(int(p.valid.sum()) for _, p in runs_within_100_mm(sc))
