@@ -275,33 +275,65 @@ def distance_to_outline(px, py, outline) -> np.ndarray:
 
 
 _CROSS_PAIRS = 4_000_000   # wall pairs :func:`first_crossing` holds at once (~100 MB)
+OVERLAP_MIN_M = 1e-6   # walls sharing a stretch longer than this retrace each other (1 µm)
+
+
+def _orient(u, v, w):   # > 0: w left of u→v (rows of points)
+    return (v[:, 0] - u[:, 0]) * (w[:, 1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (w[:, 0] - u[:, 0])
+
+
+def _meeting_walls(outline, *, neighbours: bool):
+    """Blocks (starts, ends, i, j) of the wall pairs i < j, row-major, of a closed outline
+    whose bounding boxes meet; ``neighbours``: also the walls that share a corner."""
+    a = np.asarray(outline, dtype=float).reshape(-1, 2)
+    n = len(a)
+    b = np.roll(a, -1, axis=0)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    rows = max(1, _CROSS_PAIRS // max(n, 1))
+    gap = 1 if neighbours else 2
+    for i0 in range(0, n, rows):
+        i = np.arange(i0, min(n, i0 + rows))[:, None]
+        j = np.arange(n)[None, :]
+        meet = ((lo[i, 0] <= hi[j, 0]) & (lo[j, 0] <= hi[i, 0]) & (lo[i, 1] <= hi[j, 1])
+                & (lo[j, 1] <= hi[i, 1]) & (j >= i + gap))
+        if not neighbours:
+            meet &= ~((i == 0) & (j == n - 1))
+        ii, jj = np.nonzero(meet)
+        yield a, b, ii + i0, jj
 
 
 def first_crossing(outline) -> tuple[int, int] | None:
     """The first pair of walls (i, j), i < j in row order, of a closed outline that cross
     properly (touching does not count), or None. Only pairs whose bounding boxes meet are
     judged, a block of walls against all at a time (numpy)."""
-    a = np.asarray(outline, dtype=float).reshape(-1, 2)
-    n = len(a)
-    b = np.roll(a, -1, axis=0)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-
-    def orient(u, v, w):   # > 0: w left of u→v
-        return (v[:, 0] - u[:, 0]) * (w[:, 1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (w[:, 0] - u[:, 0])
-
-    rows = max(1, _CROSS_PAIRS // max(n, 1))
-    for i0 in range(0, n, rows):
-        i = np.arange(i0, min(n, i0 + rows))[:, None]
-        j = np.arange(n)[None, :]
-        meet = ((lo[i, 0] <= hi[j, 0]) & (lo[j, 0] <= hi[i, 0]) & (lo[i, 1] <= hi[j, 1])
-                & (lo[j, 1] <= hi[i, 1]) & (j >= i + 2) & ~((i == 0) & (j == n - 1)))
-        ii, jj = np.nonzero(meet)   # row-major: the first crossing found is the first pair
-        ii += i0
+    for a, b, ii, jj in _meeting_walls(outline, neighbours=False):
         p, q, r, t = a[ii], b[ii], a[jj], b[jj]
-        cross = (orient(r, t, p) * orient(r, t, q) < 0) & (orient(p, q, r) * orient(p, q, t) < 0)
+        cross = ((_orient(r, t, p) * _orient(r, t, q) < 0)
+                 & (_orient(p, q, r) * _orient(p, q, t) < 0))
         if cross.any():
             k = int(np.argmax(cross))
             return int(ii[k]), int(jj[k])
+    return None
+
+
+def first_overlap(outline) -> tuple[int, int, float] | None:
+    """The first pair of walls (i, j), i < j in row order, of a closed outline that run along
+    one line over a common stretch longer than :data:`OVERLAP_MIN_M` (a wall doubling back
+    over its neighbour, or over any other wall), and that stretch's length (m); or None.
+    Walls that only touch, or meet end to end along one line, do not overlap."""
+    for a, b, ii, jj in _meeting_walls(outline, neighbours=True):
+        p, q, r, t = a[ii], b[ii], a[jj], b[jj]
+        length = np.hypot(*(q - p).T)
+        on_line = ((np.abs(_orient(p, q, r)) <= GEOMETRY_TOL_M * length)
+                   & (np.abs(_orient(p, q, t)) <= GEOMETRY_TOL_M * length))
+        along_r = np.einsum("ij,ij->i", r - p, q - p) / length   # r, t measured along p→q
+        along_t = np.einsum("ij,ij->i", t - p, q - p) / length
+        shared = (np.minimum(length, np.maximum(along_r, along_t))
+                  - np.maximum(0.0, np.minimum(along_r, along_t)))
+        overlap = on_line & (shared > OVERLAP_MIN_M)
+        if overlap.any():
+            k = int(np.argmax(overlap))
+            return int(ii[k]), int(jj[k]), float(shared[k])
     return None
 
 

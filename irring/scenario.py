@@ -24,7 +24,7 @@ from . import designs, gp2, resources, safe_yaml
 from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_COORDINATE_M,
                    MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S, SEED_MAX,
                    SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
-                   distance_to_outline, first_crossing, inside_outline, num,
+                   distance_to_outline, first_crossing, first_overlap, inside_outline, num,
                    obstacle_distance, unit_suffix)
 from .designs import Design
 from .errors import InputError, brief
@@ -407,6 +407,11 @@ def _close(word: str, options: Mapping | list) -> str:
 # --------------------------------------------------------------------------- geometry checks
 
 
+def _wall_mm(outline, k: int) -> str:
+    (x1, y1), (x2, y2) = outline[k], outline[(k + 1) % len(outline)]
+    return f"wall {k} (({x1 * 1e3:g}, {y1 * 1e3:g}) → ({x2 * 1e3:g}, {y2 * 1e3:g}) mm)"
+
+
 def _validate_geometry(sc: Scenario, fail) -> None:
     outline = sc.room.outline_m
     n = len(outline)
@@ -423,6 +428,12 @@ def _validate_geometry(sc: Scenario, fail) -> None:
     if crossing is not None:
         raise fail("room.outline_mm", f"walls {crossing[0]} and {crossing[1]} cross: the "
                                       f"outline must not intersect itself")
+    overlap = first_overlap(outline)
+    if overlap is not None:
+        i, j, shared = overlap
+        raise fail("room.outline_mm", f"{_wall_mm(outline, i)} and {_wall_mm(outline, j)} "
+                                      f"overlap along {shared * 1e3:g} mm: a wall must not run "
+                                      f"back over another")
     if not sc.robot.poses:
         raise fail("robot.poses", "at least one scan pose is required")
     ring = sc.ring

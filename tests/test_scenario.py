@@ -57,6 +57,18 @@ BAD = [
     ("self-intersecting outline",
      lambda r: _set(r, "room.outline_mm", [[0, 0], [2000, 2000], [2000, 0], [0, 2000]]),
      [r"room\.outline_mm: walls 0 and 2 cross: the outline must not intersect itself"]),
+    ("a wall doubling back over the last",   # no proper crossing: it used to run
+     lambda r: _set(r, "room.outline_mm", [[0, 0], [2420, 0], [2420, 900], [1800, 900],
+                                           [2200, 900], [0, 900]]),
+     [r"room\.outline_mm: wall 2 \(\(2420, 900\) → \(1800, 900\) mm\) and wall 3 "
+      r"\(\(1800, 900\) → \(2200, 900\) mm\) overlap along 400 mm: a wall must not run back "
+      r"over another$"]),
+    ("a wall running back over one far from it",
+     lambda r: _set(r, "room.outline_mm", [[0, 0], [2420, 0], [2420, 900], [1200, 900],
+                                           [1200, 1500], [600, 1500], [600, 900], [1400, 900],
+                                           [1400, 600], [0, 600]]),
+     [r"room\.outline_mm: wall 2 \(.*\) and wall 6 \(\(600, 900\) → \(1400, 900\) mm\) "
+      r"overlap along 200 mm"]),
     ("outline of two corners", lambda r: _set(r, "room.outline_mm", [[0, 0], [2000, 2000]]),
      [r"room\.outline_mm: needs at least 3 corners, got 2"]),
     ("a corner with three numbers",
@@ -405,6 +417,55 @@ def test_first_crossing_finds_the_pair_the_pairwise_oracle_finds():
         assert first_crossing(outline) == _crossing_oracle(outline), outline
         found += _crossing_oracle(outline) is not None
     assert 100 < found < 550   # both outcomes are exercised
+
+
+def _overlap_oracle(outline):
+    """Walls (i, j) on one line sharing a stretch > 1 µm, pair by pair in Python (exact
+    fractions: integer corners)."""
+    from fractions import Fraction
+
+    n = len(outline)
+    for i in range(n):
+        for j in range(i + 1, n):
+            p, q = outline[i], outline[(i + 1) % n]
+            r, t = outline[j], outline[(j + 1) % n]
+            d = (q[0] - p[0], q[1] - p[1])
+            if any(d[0] * (w[1] - p[1]) - d[1] * (w[0] - p[0]) for w in (r, t)):
+                continue
+            dd = d[0] ** 2 + d[1] ** 2
+            s_r = Fraction(int((r[0] - p[0]) * d[0] + (r[1] - p[1]) * d[1]), int(dd))
+            s_t = Fraction(int((t[0] - p[0]) * d[0] + (t[1] - p[1]) * d[1]), int(dd))
+            if min(1, max(s_r, s_t)) - max(0, min(s_r, s_t)) > 0:
+                return i, j
+    return None
+
+
+def test_first_overlap_finds_the_pair_the_pairwise_oracle_finds():
+    from irring.core import first_overlap
+
+    rng = np.random.default_rng(11)
+    found = 0
+    for trial in range(600):
+        n = int(rng.integers(3, 12))
+        pts = rng.integers(0, 4, (n, 2)).astype(float)   # small grid: many collinear walls
+        keep = np.any(pts != np.roll(pts, -1, axis=0), axis=1)
+        outline = [tuple(p) for p in pts[keep]]
+        if len(outline) < 3:
+            continue
+        got = first_overlap(outline)
+        assert (got and got[:2]) == _overlap_oracle(outline), outline
+        found += got is not None
+    assert 100 < found < 500   # both outcomes are exercised
+    # walls that meet end to end along one line, or touch at a corner, do not overlap
+    assert first_overlap([(0, 0), (1, 0), (2, 0), (2, 1), (1, 1), (1, 0.5), (0, 1)]) is None
+    assert first_overlap([(0, 0), (2, 0), (2, 2), (1, 0), (0, 2)]) is None
+
+
+def test_an_outline_with_a_corner_midway_along_a_wall_still_loads(t_room_raw):
+    _set(t_room_raw, "room.outline_mm", [[0, 0], [1000, 0], [2420, 0], [2420, 900],
+                                         [1660, 900], [1660, 1800], [760, 1800], [760, 900],
+                                         [0, 900]])
+    assert len(parse(t_room_raw, "ok.yaml").room.outline_m) == 9
 
 
 def test_a_changed_scenario_no_longer_claims_the_text_it_was_loaded_from():
