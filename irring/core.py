@@ -337,6 +337,19 @@ def first_overlap(outline) -> tuple[int, int, float] | None:
     return None
 
 
+def on_one_line(outline) -> bool:
+    """Every corner of an outline within :data:`OVERLAP_MIN_M` of one line (it encloses no
+    area)."""
+    a = np.asarray(outline, dtype=float).reshape(-1, 2)
+    far = a[int(np.argmax(np.hypot(*(a - a[0]).T)))]
+    span = math.hypot(*(far - a[0]))
+    if span == 0.0:
+        return True
+    off = np.abs((far[0] - a[0, 0]) * (a[:, 1] - a[0, 1])
+                 - (far[1] - a[0, 1]) * (a[:, 0] - a[0, 0]))
+    return bool(np.all(off <= OVERLAP_MIN_M * span))
+
+
 def box_corners(box: Box) -> np.ndarray:
     """(4, 2) corners of a box, counter-clockwise."""
     c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)

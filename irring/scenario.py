@@ -25,7 +25,7 @@ from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_CO
                    MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S, SEED_MAX,
                    SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
                    distance_to_outline, first_crossing, first_overlap, inside_outline, num,
-                   obstacle_distance, unit_suffix)
+                   obstacle_distance, on_one_line, unit_suffix)
 from .designs import Design
 from .errors import InputError, brief
 
@@ -424,6 +424,9 @@ def _validate_geometry(sc: Scenario, fail) -> None:
         a, b = outline[i], outline[(i + 1) % n]
         if math.hypot(b[0] - a[0], b[1] - a[1]) < 1e-6:
             raise fail(f"room.outline_mm[{i}]", "repeats the next corner (zero-length wall)")
+    if on_one_line(outline):   # else named as its poses being outside it
+        raise fail("room.outline_mm", f"all {n} corners lie on one line, so the outline "
+                                      f"encloses no room; list the corners of an area")
     crossing = first_crossing(outline)
     if crossing is not None:
         raise fail("room.outline_mm", f"walls {crossing[0]} and {crossing[1]} cross: the "

@@ -69,6 +69,13 @@ BAD = [
                                            [1400, 600], [0, 600]]),
      [r"room\.outline_mm: wall 2 \(.*\) and wall 6 \(\(600, 900\) → \(1400, 900\) mm\) "
       r"overlap along 200 mm"]),
+    ("three corners on one line (no area)",   # was: "pose (1210, 450) mm is outside"
+     lambda r: _set(r, "room.outline_mm", [[0, 0], [1000, 0], [2400, 0]]),
+     [r"room\.outline_mm: all 3 corners lie on one line, so the outline encloses no room; "
+      r"list the corners of an area$"]),
+    ("a sloped outline of no area",
+     lambda r: _set(r, "room.outline_mm", [[10, 20], [1210, 920], [410, 320], [2410, 1820]]),
+     [r"room\.outline_mm: all 4 corners lie on one line"]),
     ("outline of two corners", lambda r: _set(r, "room.outline_mm", [[0, 0], [2000, 2000]]),
      [r"room\.outline_mm: needs at least 3 corners, got 2"]),
     ("a corner with three numbers",
