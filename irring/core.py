@@ -381,6 +381,33 @@ def obstacle_distance(ob: Cylinder | Box, px, py) -> np.ndarray:
     return np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)) + np.minimum(np.maximum(qx, qy), 0.0)
 
 
+def first_wall_into(ob: Cylinder | Box, outline) -> int | None:
+    """The first wall of a closed outline that comes into an obstacle (deeper than
+    :data:`GEOMETRY_TOL_M`: a wall touching it does not), or None. With the obstacle's
+    centre inside the room, None means the whole obstacle is inside."""
+    a = np.asarray(outline, dtype=float).reshape(-1, 2)
+    b = np.roll(a, -1, axis=0)
+    if isinstance(ob, Cylinder):
+        near = segment_distance(ob.center_m[0], ob.center_m[1], a[:, 0], a[:, 1], b[:, 0],
+                                b[:, 1]) < ob.radius_m - GEOMETRY_TOL_M
+    else:   # each wall clipped to the box shrunk by the tolerance, in the box's own frame
+        (u0, v0), (u1, v1) = _box_local(ob, a[:, 0], a[:, 1]), _box_local(ob, b[:, 0], b[:, 1])
+        enter, leave = np.zeros(len(a)), np.ones(len(a))
+        near = np.ones(len(a), bool)
+        for start, end, half in ((u0, u1, ob.size_m[0] / 2), (v0, v1, ob.size_m[1] / 2)):
+            half -= GEOMETRY_TOL_M
+            step = end - start
+            still = step == 0.0
+            near &= ~still | (np.abs(start) < half)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t1, t2 = (-half - start) / step, (half - start) / step
+            enter = np.where(still, enter, np.maximum(enter, np.minimum(t1, t2)))
+            leave = np.where(still, leave, np.minimum(leave, np.maximum(t1, t2)))
+        near &= leave > enter
+    hit = np.flatnonzero(near)
+    return int(hit[0]) if hit.size else None
+
+
 # --------------------------------------------------------------------------- sweeps and points
 
 

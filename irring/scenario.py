@@ -24,7 +24,7 @@ from . import designs, gp2, resources, safe_yaml
 from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_COORDINATE_M,
                    MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S, SEED_MAX,
                    SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
-                   distance_to_outline, first_crossing, first_overlap, inside_outline, num,
+                   distance_to_outline, first_crossing, first_overlap, first_wall_into, inside_outline, num,
                    obstacle_distance, on_one_line, unit_suffix)
 from .designs import Design
 from .errors import InputError, brief
@@ -468,12 +468,24 @@ def _validate_geometry(sc: Scenario, fail) -> None:
                          f"keep the pose ≥ {clearance * 1e3:g} mm from it")
     centres = np.array([ob.center_m for ob in sc.obstacles], dtype=float).reshape(-1, 2)
     in_room = inside_outline(centres[:, 0], centres[:, 1], outline)
+    off_wall = distance_to_outline(centres[:, 0], centres[:, 1], outline)
+    # how far each obstacle reaches from its centre: only those near a wall are clipped
+    ob_reach = np.array([ob.radius_m if isinstance(ob, Cylinder) else
+                         math.hypot(*ob.size_m) / 2 for ob in sc.obstacles], dtype=float)
     for j, ob in enumerate(sc.obstacles):
         if isinstance(ob, Box) and min(ob.size_m) < 0.002:
             raise fail(f"obstacles[{j}].size_mm", f"box sides ({ob.size_m[0] * 1e3:g}, "
                                                   f"{ob.size_m[1] * 1e3:g}) mm must each be ≥ 2 mm")
-        if not in_room[j]:
-            raise fail(f"obstacles[{j}].center_mm", "obstacle centre is outside the room")
+        # one reaching through a wall is clipped there (a partition built into it); one
+        # wholly outside is a mistake (nothing of it could be seen)
+        if not in_room[j] and (ob_reach[j] <= off_wall[j] + GEOMETRY_TOL_M
+                               or first_wall_into(ob, outline) is None):
+            what = (f"cylinder (radius {ob.radius_m * 1e3:g} mm)" if isinstance(ob, Cylinder)
+                    else f"box ({ob.size_m[0] * 1e3:g} × {ob.size_m[1] * 1e3:g} mm)")
+            raise fail(f"obstacles[{j}].center_mm",
+                       f"the {what} at ({ob.center_m[0] * 1e3:g}, {ob.center_m[1] * 1e3:g}) mm "
+                       f"lies wholly outside the room; an obstacle must stand at least partly "
+                       f"inside it (what reaches beyond a wall is ignored)")
     if ring.min_step > ring.max_step:
         raise fail("robot.ring.min_step", f"min_step {ring.min_step} > max_step {ring.max_step}")
     reach = max(abs(ring.min_step), abs(ring.max_step)) * ring.motor_step_rad * ring.gear

@@ -93,7 +93,19 @@ BAD = [
     ("obstacle outside the room",
      lambda r: _set(r, "obstacles", [{"type": "cylinder", "center_mm": [5000, 450],
                                       "radius_mm": 30}]),
-     [r"obstacles\[0\]\.center_mm: obstacle centre is outside the room"]),
+     [r"obstacles\[0\]\.center_mm: the cylinder \(radius 30 mm\) at \(5000, 450\) mm lies "
+      r"wholly outside the room"]),
+    ("a box wholly outside the room, past a wall",
+     lambda r: _set(r, "obstacles", [{"type": "box", "center_mm": [2600, 300],
+                                      "size_mm": [300, 200]}]),
+     [r"obstacles\[0\]\.center_mm: the box \(300 × 200 mm\) at \(2600, 300\) mm lies wholly "
+      r"outside the room; an obstacle must stand at least partly inside it \(what reaches "
+      r"beyond a wall is ignored\)$"]),
+    ("a cylinder outside touching a wall",
+     lambda r: _set(r, "obstacles", [{"type": "cylinder", "center_mm": [500, 960],
+                                      "radius_mm": 60}]),
+     [r"obstacles\[0\]\.center_mm: the cylinder \(radius 60 mm\) at \(500, 960\) mm lies "
+      r"wholly outside the room"]),
     ("unknown obstacle type",
      lambda r: _set(r, "obstacles", [{"type": "sphere", "center_mm": [500, 450],
                                       "radius_mm": 30}]),
@@ -473,6 +485,69 @@ def test_an_outline_with_a_corner_midway_along_a_wall_still_loads(t_room_raw):
                                          [1660, 900], [1660, 1800], [760, 1800], [760, 900],
                                          [0, 900]])
     assert len(parse(t_room_raw, "ok.yaml").room.outline_m) == 9
+
+
+def test_an_obstacle_reaching_through_a_wall_loads_and_is_clipped_at_the_wall(t_room_raw):
+    """A partition built into a wall, a pillar centred on one, a box flush in a corner (rooms
+    people write): they load; the ground truth holds no obstacle beyond the walls (before:
+    the pillar's outer half was occupied truth up to the map's edge, 100 mm outside) and no
+    wall face inside one."""
+    from irring.maps import metrics
+    from irring.maps.mapping import OccupancyGrid
+
+    _set(t_room_raw, "obstacles", [
+        {"type": "box", "center_mm": [1180, 1350], "size_mm": [860, 30]},    # into x = 760
+        {"type": "box", "center_mm": [2420, 300], "size_mm": [300, 200]},    # on wall 1
+        {"type": "cylinder", "center_mm": [2420, 700], "radius_mm": 40},     # on wall 1
+        {"type": "box", "center_mm": [100, 60], "size_mm": [200, 120]}])     # flush, corner
+    _set(t_room_raw, "robot.poses", [{"x_mm": 1210, "y_mm": 450}])
+    sc = parse(t_room_raw, "ok.yaml")
+    assert len(sc.obstacles) == 4
+    grid = OccupancyGrid.for_scenario(sc)   # 100 mm beyond the walls' inner face
+    truth = metrics.ground_truth(sc, grid)
+    xs, ys = grid.cell_centers()
+    px, py = np.meshgrid(xs, ys)
+    beyond = S.distance_to_outline(px, py, sc.room.outline_m) > sc.room.wall_thickness_m + 0.01
+    beyond &= ~S.inside_outline(px, py, sc.room.outline_m)
+    assert not (truth.occupied & beyond).any()
+    assert not (truth.label >= metrics.OBSTACLE0)[beyond].any()
+    pillar_in_room = (np.abs(px - 2.345) < 0.06) & (np.abs(py - 0.3) < 0.09)
+    assert (truth.label[pillar_in_room] == metrics.OBSTACLE0 + 1).all()
+    assert beyond[(np.abs(px - 2.5) < 0.015) & (np.abs(py - 0.3) < 0.09)].all()   # judged there
+    # the wall the pillar is built into is no face to see (before: it was shadow to map)
+    buried = (np.abs(px - 2.42) < 0.006) & (np.abs(py - 0.3) < 0.09)
+    assert buried.sum() == 17   # y 0.22 … 0.38, one column
+    assert not (truth.surface_owner == metrics.WALL)[buried].any()
+    assert not truth.shadow[buried].any()
+
+
+def test_first_wall_into_agrees_with_points_sampled_in_the_obstacle():
+    """Random boxes and cylinders in the T-room: a wall comes into one exactly when some of
+    its points (a fine grid over it) lie outside the room, away from the borderline."""
+    from irring.core import (Box, Cylinder, distance_to_outline, first_wall_into,
+                             inside_obstacle, inside_outline, obstacle_distance)
+
+    outline = load_scenario("t_room").room.outline_m
+    rng = np.random.default_rng(5)
+    gx, gy = np.meshgrid(np.linspace(-0.2, 2.62, 1129), np.linspace(-0.2, 2.0, 881))
+    counts = [0, 0]
+    for trial in range(300):
+        centre = (float(rng.uniform(0, 2.42)), float(rng.uniform(0, 1.8)))
+        if not inside_outline(*centre, outline):
+            continue
+        ob = (Cylinder(centre, float(rng.uniform(0.01, 0.3))) if trial % 2 else
+              Box(centre, (float(rng.uniform(0.01, 0.6)), float(rng.uniform(0.01, 0.3))),
+                  float(rng.uniform(-3, 3))))
+        cells = inside_obstacle(ob, gx, gy)
+        out = cells & ~inside_outline(gx, gy, outline)
+        if (out.any() and np.max(-obstacle_distance(ob, gx[out], gy[out])) < 0.01) or \
+                (not out.any() and np.min(distance_to_outline(gx[cells], gy[cells],
+                                                              outline)) < 0.005):
+            continue   # within a few grid cells of touching: the grid cannot judge it
+        wall = first_wall_into(ob, outline)
+        assert (wall is not None) == bool(out.any()), (ob, wall)
+        counts[wall is not None] += 1
+    assert min(counts) > 30   # both outcomes exercised
 
 
 def test_a_changed_scenario_no_longer_claims_the_text_it_was_loaded_from():

@@ -13,8 +13,8 @@ import numpy as np
 
 from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
 from .. import gp2
-from ..core import (Cylinder, Ring, box_corners, distance_to_outline, inside_obstacle,
-                    inside_outline)
+from ..core import (Cylinder, Ring, box_corners, distance_to_outline, first_wall_into,
+                    inside_obstacle, inside_outline, obstacle_distance)
 from ..resources import kernel
 from ..estimation.calibration import Calibration
 from ..scenario import ReflectanceEffect, Scenario
@@ -89,6 +89,25 @@ def _surface_samples(ob, step_m: float) -> tuple[np.ndarray, np.ndarray]:
         radial = np.stack([np.cos(a), np.sin(a)], axis=1)
         return np.asarray(ob.center_m, float) + ob.radius_m * radial, radial
     return _outline_samples(box_corners(ob), step_m, inward=False)
+
+
+def _in_room(samples: tuple[np.ndarray, np.ndarray], outline) -> tuple[np.ndarray, np.ndarray]:
+    """The surface samples (points, normals) inside the room or on its outline."""
+    points, normals = samples
+    keep = (inside_outline(points[:, 0], points[:, 1], outline)
+            | (distance_to_outline(points[:, 0], points[:, 1], outline) <= 1e-9))
+    return points[keep], normals[keep]
+
+
+def _outside_obstacles(samples: tuple[np.ndarray, np.ndarray], obstacles
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The wall surface samples (points, normals) not covered by an obstacle: where a box
+    stands flush against a wall or is built into it, that stretch of wall is no face."""
+    points, normals = samples
+    keep = np.ones(len(points), bool)
+    for ob in obstacles:
+        keep &= obstacle_distance(ob, points[:, 0], points[:, 1]) > 1e-9
+    return points[keep], normals[keep]
 
 
 def _nearest_to_centres(samples: np.ndarray, cell: np.ndarray, cx: np.ndarray,
@@ -443,8 +462,11 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
     label = np.full(px.shape, EXTERIOR, np.int16)
     label[inside] = FREE_SPACE
     label[~inside & (dist > eps) & (dist <= scenario.room.wall_thickness_m)] = WALL
+    # an obstacle reaching through a wall is clipped there: nothing of it beyond the walls
+    # (the scene's walls hide that part, so it is no truth to map)
+    through = [first_wall_into(ob, outline) is not None for ob in scenario.obstacles]
     for j, ob in enumerate(scenario.obstacles):
-        label[inside_obstacle(ob, px, py)] = OBSTACLE0 + j
+        label[inside_obstacle(ob, px, py) & (label != EXTERIOR)] = OBSTACLE0 + j
 
     # surfaces: sample the outline and obstacle perimeters finely, mark the cells they fall in
     surface_owner = np.zeros(px.shape, np.int16)
@@ -452,9 +474,11 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
     def sampled(step, mark=False):
         """(points, normals towards the free side, reflectance, flat cell) every ``step`` m
         along every surface inside the grid; ``mark``: their cells in surface_owner."""
-        parts = [(_outline_samples(np.asarray(outline, float), step, inward=True),
+        parts = [(_outside_obstacles(_outline_samples(np.asarray(outline, float), step,
+                                                      inward=True), scenario.obstacles),
                   scenario.room.reflectance, WALL)]
-        parts += [(_surface_samples(ob, step), ob.reflectance, OBSTACLE0 + j)
+        parts += [(_in_room(_surface_samples(ob, step), outline) if through[j] else
+                   _surface_samples(ob, step), ob.reflectance, OBSTACLE0 + j)
                   for j, ob in enumerate(scenario.obstacles)]
         out = []
         for (points, normals), reflectance, owner in parts:
