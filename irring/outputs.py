@@ -43,9 +43,11 @@ def safe_name(name: str, default: str = "scenario") -> str:
     return text[:80].strip("._") or default
 
 
-def check_out(out: str | Path, option: str = "--out") -> Path:
+def check_out(out: str | Path, option: str = "--out", *, held: bool = True) -> Path:
     """``out`` if it can become a folder of outputs: an existing writable folder, or a path
-    whose nearest existing parent is a writable folder. Raises :class:`OutputError` naming
+    whose nearest existing parent is a writable folder. ``held=False``: also refuse a folder
+    another irring process holds (a study writing there) for :data:`PROBE_WAIT_S`, as an
+    :class:`OutputSet` commit would after the work. Raises :class:`OutputError` naming
     the option."""
     out = Path(out)
     shown = printable(str(out))
@@ -66,6 +68,12 @@ def check_out(out: str | Path, option: str = "--out") -> Path:
                           "cannot be made")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise OutputError(f"{option} {shown}: {printable(str(probe))} is not writable")
+    if not held and probe == out:
+        with _holding(out, PROBE_WAIT_S) as free:
+            if not free:
+                raise OutputError(f"{option} {shown}: another irring process holds the folder "
+                                  f"(a study writing its results there?); nothing was run: "
+                                  f"choose another --out, or run again when it is done")
     return out
 
 
@@ -285,6 +293,9 @@ def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
 _HELD: set[tuple[int, int]] = set()
 # how long a commit waits for another process's commit (renames: milliseconds) or study
 COMMIT_WAIT_S = 30.0
+# how long check_out(held=False) waits, before the work, for a holder to let go: a commit
+# is over by then, a study is not
+PROBE_WAIT_S = 3.0
 
 
 @contextlib.contextmanager

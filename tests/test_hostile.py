@@ -1207,6 +1207,58 @@ def test_a_study_into_the_folder_another_study_is_writing_is_refused(tmp_path, c
     assert main(argv) == 0 and (out / "results.csv").read_text() == text   # held no more
 
 
+@pytest.mark.parametrize("command", ["run", "replay", "bench rooms"])
+def test_a_run_into_a_folder_another_process_holds_is_refused_before_the_work(
+        tmp_path, capsys, monkeypatch, good_recording, command):
+    """A run into the --out a study holds waited 30 s for the commit lock after the whole
+    run, then exit 4 with the run's work lost. The folder is probed before the work: held
+    past PROBE_WAIT_S (a commit is over by then, a study is not), exit 4, nothing run."""
+    fcntl = pytest.importorskip("fcntl")
+    from irring import outputs
+
+    monkeypatch.setattr(outputs, "PROBE_WAIT_S", 0.3)
+    monkeypatch.setattr(pipeline, "run", lambda *a, **k: pytest.fail("ran"))
+    monkeypatch.setattr(pipeline, "replay", lambda *a, **k: pytest.fail("ran"))
+    out = tmp_path / "held out"
+    out.mkdir()
+    (out / "results.csv").write_text("design\n")
+    recording = tmp_path / "rec.npz"
+    recording.write_bytes(good_recording)
+    argv = {"run": ["run", "t_room_cylinder"], "replay": ["replay", str(recording)],
+            "bench rooms": ["bench", "rooms", "t_room_cylinder"]}[command]
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # what a running study holds
+        started = time.monotonic()
+        assert main([*argv, "--out", str(out)]) == 4
+        assert time.monotonic() - started < 20
+    finally:
+        os.close(fd)
+    assert capsys.readouterr().err.endswith(
+        f"error: --out {out}: another irring process holds the folder (a study writing its "
+        "results there?); nothing was run: choose another --out, or run again when it is "
+        "done\n")
+    assert os.listdir(out) == ["results.csv"]
+    assert sorted(os.listdir(tmp_path)) == ["held out", "rec.npz"]
+
+
+def test_a_folder_held_for_a_moment_is_waited_for(tmp_path, monkeypatch):
+    """A commit holds the folder for milliseconds: the probe waits it out, not refuses."""
+    fcntl = pytest.importorskip("fcntl")
+    import threading
+
+    from irring import outputs
+
+    out = tmp_path / "o"
+    out.mkdir()
+    fd = os.open(out, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    threading.Timer(0.3, os.close, (fd,)).start()   # the other commit ends
+    started = time.monotonic()
+    assert outputs.check_out(out, held=False) == out
+    assert 0.25 < time.monotonic() - started < outputs.PROBE_WAIT_S
+
+
 def test_a_results_csv_with_a_line_break_in_a_cell_is_resumed(tmp_path, capsys):
     """A scenario path with a line break is written quoted over two lines; --resume split
     the file at every line break and refused the study's own file ('line 2 has 2 cells')."""

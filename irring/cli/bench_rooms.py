@@ -72,7 +72,7 @@ OUTPUT_FILES = ("rooms.json", "rooms.csv")
 
 def run(args: argparse.Namespace) -> int:
     scenarios = resolve_rooms(args.rooms or ROOMS)
-    out = check_out(args.out)
+    out = check_out(args.out, held=False)
     rows = measure(scenarios, args.seeds, debug=args.debug)
     failed = [r for r in rows if "error" in r]
     with OutputSet(out, files=OUTPUT_FILES) as tmp:

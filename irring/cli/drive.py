@@ -122,7 +122,7 @@ def _error(msg: str) -> int:
 def run(args: argparse.Namespace) -> int:
     spare_inputs({"--mcap": args.mcap}, {"--truth": args.truth,
                                          "--calibration": args.calibration})
-    check_out(args.out)
+    check_out(args.out, held=False)
     mcap_beside_outputs(args.mcap, args.out)
     truth = load_scenario(args.truth) if args.truth else None
     if truth is not None and truth.has("motion"):

@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: holds the recording being replayed ({args.recording}); "
                          "its outputs would replace it, so choose another folder (default: "
                          "out/<recording folder>-replay)")
-    check_out(out)
+    check_out(out, held=False)
     mcap_beside_outputs(args.mcap, out)
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.replay(args.recording, calibration_file=args.calibration,

@@ -64,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
     spare_inputs({"--mcap": args.mcap}, {"SCENARIO": args.scenario,
                                          "--calibration": args.calibration})
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
-    out = check_out(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
+    out = check_out(args.out if args.out is not None else Path("out") / safe_name(scenario.name),
+                    held=False)   # a study holding the folder: refused before the run
     mcap_beside_outputs(args.mcap, out)
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.run(scenario, seed=args.seed, calibration_file=args.calibration,
