@@ -1489,6 +1489,8 @@ def test_drive_saves_the_sweeps_elsewhere_when_its_outputs_cannot_be_written(
     # the current folder ('--link : . exists and is not a symlink')
     (["emulate", "--corrupt-rate", "nan"], 2,
      "argument --corrupt-rate: must be a number ≥ 0 and ≤ 1, got 'nan'"),
+    (["emulate", "--bitflip-rate", "-0.001"], 2,
+     "argument --bitflip-rate: must be a number ≥ 0 and ≤ 1, got '-0.001'"),
     (["emulate", "--drop-rate", "1.5"], 2,
      "argument --drop-rate: must be a number ≥ 0 and ≤ 1, got '1.5'"),
     (["emulate", "--link", ""], 2, "argument --link: an empty path; name the link to make "

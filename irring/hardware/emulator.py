@@ -39,6 +39,8 @@ class Faults:
     """What goes wrong on the emulated device's output (its input is delivered intact).
 
     corrupt_rate: probability that each byte sent is replaced by a different random byte.
+    bitflip_rate: probability that each bit sent is flipped (line noise, a UART's bit
+        errors: most garbled sentences differ from the sent one in a single bit).
     drop_rate: probability that a whole sentence is never sent.
     stall_after: after this many sentences the device stops answering (reads and ignores
         input) for ``stall_s`` seconds (default: for good), then aborts its sweep and
@@ -48,6 +50,7 @@ class Faults:
     """
 
     corrupt_rate: float = 0.0
+    bitflip_rate: float = 0.0
     drop_rate: float = 0.0
     stall_after: int | None = None
     stall_s: float = math.inf
@@ -55,7 +58,7 @@ class Faults:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("corrupt_rate", "drop_rate"):
+        for name in ("corrupt_rate", "bitflip_rate", "drop_rate"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"{name} must be 0 … 1, got {value}")
@@ -71,6 +74,8 @@ class DeviceStats:
     sentences_dropped: int = 0
     bytes_sent: int = 0
     bytes_corrupted: int = 0
+    bits_flipped: int = 0
+    sentences_corrupted: int = 0  # sent with a byte replaced or a bit flipped
     commands: int = 0
     commands_rejected: int = 0
     commands_dropped: int = 0    # arrived while OUT_LIMIT_BYTES of output waited: no answer
@@ -288,6 +293,7 @@ class Device:
         if f.drop_rate and self._rng.random() < f.drop_rate:
             self.stats.sentences_dropped += 1
             return b""
+        sent = line
         if f.corrupt_rate:
             buf = np.frombuffer(line, dtype=np.uint8).copy()
             hit = self._rng.random(buf.size) < f.corrupt_rate
@@ -295,6 +301,12 @@ class Device:
                 buf[hit] ^= self._rng.integers(1, 256, hit.sum(), dtype=np.uint8)
                 self.stats.bytes_corrupted += int(hit.sum())
                 line = buf.tobytes()
+        if f.bitflip_rate:
+            flip = self._rng.random(len(line) * 8) < f.bitflip_rate
+            if flip.any():
+                line = (np.frombuffer(line, dtype=np.uint8) ^ np.packbits(flip)).tobytes()
+                self.stats.bits_flipped += int(flip.sum())
+        self.stats.sentences_corrupted += line != sent
         self.stats.bytes_sent += len(line)
         return line
 
