@@ -462,6 +462,27 @@ class Sweep:
         return self.counts.shape
 
 
+def in_turn_order(sweep: Sweep) -> Sweep:
+    """``sweep`` with its rows in the order the ring turns through its steps: unchanged when
+    its steps rise or fall, else a copy with every per-step row sorted by rising step (a
+    source or a hand-made recording may list them in any order; the mapper takes a
+    reading's neighbours from the rows beside it)."""
+    steps = np.asarray(sweep.steps)
+    gaps = np.diff(steps)
+    if np.all(gaps > 0) or np.all(gaps < 0):
+        return sweep
+    order = np.argsort(steps, kind="stable")
+    truth = None if sweep.truth is None else Truth(
+        **{f.name: np.asarray(getattr(sweep.truth, f.name))[order]
+           for f in dataclasses.fields(Truth)})
+    return dataclasses.replace(
+        sweep, steps=steps[order], sensor_angles=np.asarray(sweep.sensor_angles)[order],
+        counts=np.asarray(sweep.counts)[order],
+        timestamps_s=np.asarray(sweep.timestamps_s)[order], truth=truth,
+        reading_poses=None if sweep.reading_poses is None else
+        np.asarray(sweep.reading_poses)[order])
+
+
 class Reason(enum.IntEnum):
     """Why a reading is invalid (OK when it is valid)."""
 

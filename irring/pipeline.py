@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from . import recording as rec
-from .core import Points, Reason, RingSource, SourceLost, Sweep
+from .core import Points, Reason, RingSource, SourceLost, Sweep, in_turn_order
 from .estimation.calibration import CalibrationError, load_calibration, scene_calibration
 from .estimation.estimate import estimate
 from .gp2 import SENSORS
@@ -307,6 +307,8 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     """
     for i, sweep in enumerate(sweeps):   # before any work: what a replay would refuse
         rec.check_sweep(sweep, f"sweeps[{i}]")
+    # rows listed out of step order mapped differently (a reading's neighbours are rows)
+    sweeps = [in_turn_order(sweep) for sweep in sweeps]
     estimator = estimate if estimator is None else estimator
     timings = {"estimate": 0.0, "map": 0.0}
     points: list[Points] = []
