@@ -1259,6 +1259,13 @@ def test_a_folder_held_for_a_moment_is_waited_for(tmp_path, monkeypatch):
     assert 0.25 < time.monotonic() - started < outputs.PROBE_WAIT_S
 
 
+def test_an_error_of_a_bench_names_the_bench(tmp_path, capsys):
+    # said "irring bench: error: …", where the bench's own errors say "irring bench rooms"
+    assert main(["bench", "rooms", str(tmp_path)]) == 1
+    assert capsys.readouterr().err == (f"irring bench rooms: error: {tmp_path}: the folder "
+                                       "holds no *.yaml scenario\n")
+
+
 def test_a_results_csv_with_a_line_break_in_a_cell_is_resumed(tmp_path, capsys):
     """A scenario path with a line break is written quoted over two lines; --resume split
     the file at every line break and refused the study's own file ('line 2 has 2 cells')."""

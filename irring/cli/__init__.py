@@ -99,7 +99,9 @@ def main(argv: list[str] | None = None) -> int:
             if not getattr(args, "func", None):
                 parser.print_help()
                 return errors.USAGE
-            command = f"irring {args.command}"
+            # `irring bench rooms: error: …`, as the bench's own errors name it
+            command = " ".join(["irring", args.command, *([args.bench] if getattr(
+                args, "bench", None) else [])])
             args.debug = debug   # for commands that report an error and go on (bench rooms)
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
