@@ -655,3 +655,46 @@ def test_a_far_reading_nothing_places_within_30_mm_is_left_unplaced(monkeypatch)
     assert (cells_outside(before.grid, outline), cells_outside(now.grid, outline)) == (3, 0)
     np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
                                   p.reason)
+
+
+# A 36 mm post 77 mm before the floor wall near a corner, the ring 178 mm from another post
+# (GP2D12): the post's readings met square on are held out (FOLDOVER_AMBIGUOUS); its edges,
+# met at 62-65°, read like the wall behind it and joined the wall's line, 100-132 mm long.
+POST_BY_CORNER = """
+name: post_by_corner
+room: {outline_mm: [[0, 0], [2100, 0], [2100, 1450], [0, 1450]]}
+obstacles:
+  - {type: cylinder, center_mm: [330, 95], radius_mm: 18}
+  - {type: cylinder, center_mm: [95, 470], radius_mm: 12}
+robot: {poses: [{x_mm: 180, y_mm: 640, yaw_deg: -23}]}
+sensor: {model: gp2d12}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+@pytest.mark.parametrize("seed, far_before, far_now, taken, taken_near", [
+    (7102, 2, 0, 2, 0), (7107, 3, 1, 3, 1)])
+def test_a_line_member_beside_a_nearer_surface_held_out_is_not_placed(
+        seed, far_before, far_now, taken, taken_near, monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc = loads(POST_BY_CORNER, source="<test>")
+    cal = scene_calibration(sc)[0]
+
+    def errors(run):
+        (sw,), (p,) = run.sweeps, run.points
+        return sw, p, np.hypot(p.x - sw.truth.hit_point[..., 0], p.y - sw.truth.hit_point[..., 1])
+
+    sw, p, err_p = errors(pipeline.run(sc, seed=seed, progress=False, score=False))
+    with monkeypatch.context() as m:
+        m.setattr(est, "_beside_a_hidden_edge", lambda p, *args: p)
+        _, q, err_q = errors(pipeline.run(sc, seed=seed, progress=False, score=False))
+    took = q.valid & ~p.valid
+    assert np.array_equal(p.valid | took, q.valid)
+    assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
+    assert int(np.sum(err_q[q.valid] > 0.100)) == far_before
+    assert int(np.sum(err_p[p.valid] > 0.100)) == far_now
+    # what it took: the edge's readings, and (the cost) a wall reading beside the edge
+    assert int(took.sum()) == taken and int(np.sum(err_q[took] < 0.010)) == taken_near
+    np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
+                                  p.reason)

@@ -2361,12 +2361,52 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
         if pooled.any():
             p = silent_behind_a_wall(p, pooled, first.lines, cal, options, among=walls,
                                      members=q)
+    # a far line member beside a nearer surface its own sensor's next step saw, undecided
+    p = _beside_a_hidden_edge(p, second.lines.label, sweep, cal, options)
     # a reading placed no better than FOLD_PLACED_SIGMA_M: its θ is 0 for want of a line, or
     # an uncertain profile's; such end points read 20-90 mm long drew walls outside the room
     vague = p.valid & (p.sigma_m > FOLD_PLACED_SIGMA_M)
     if vague.any():
         p = _unplaced(p, vague.reshape(-1).nonzero()[0])
     return replace(second, points=p, lines=second.lines if detail else None)
+
+
+def _beside_a_hidden_edge(p: Points, label: np.ndarray, sweep: Sweep, cal: Calibration,
+                          options: LineOptions) -> Points:
+    """``p`` (the fold-over's result) with INCIDENCE_UNKNOWN for each valid line member
+    (``label``: the second pass's, −1 none) whose own sensor's previous or next motor step
+    is FOLDOVER_AMBIGUOUS and reads, far at θ = 0, nearer than the member by more than one
+    surface could make them (:func:`polyline_ids`' jump, ``options.jump_sigmas`` times the
+    member's σ for each), where the member's counts read at the drop-out angle reach that
+    nearer range: a thin post before a wall, its readings held out, its edge met at 62-65°
+    read like the wall behind it and joined that wall's line, 100-128 mm long.
+    docs/foldover.md, "Beside a nearer surface held out"."""
+    mem = p.valid & (label >= 0)
+    amb = p.reason == Reason.FOLDOVER_AMBIGUOUS
+    if not (mem.any() and amb.any()) or p.valid.shape[0] < 2:
+        return p
+    counts = np.asarray(sweep.counts, dtype=float)
+    far0 = cal.distance(counts, 0.0)
+    nearer = np.full(counts.shape, np.inf)     # the nearer undecided neighbour's θ = 0 range
+    turn = np.zeros(counts.shape)              # … and how far the beam turned to it
+    steps = np.asarray(sweep.steps)
+    next_to = (np.diff(steps) == 1)[:, None]
+    dh = np.abs(np.diff(p.heading, axis=0))
+    dh = np.minimum(dh, 2.0 * math.pi - dh)
+    for mine, theirs in ((np.s_[:-1], np.s_[1:]), (np.s_[1:], np.s_[:-1])):
+        d_nb = np.where(next_to & amb[theirs], far0[theirs], np.inf)
+        closer = d_nb < nearer[mine]
+        nearer[mine] = np.where(closer, d_nb, nearer[mine])
+        turn[mine] = np.where(closer, dh, turn[mine])
+    with np.errstate(invalid="ignore"):
+        allowed = (p.d * turn * jump_slope(cal.max_incidence_rad)
+                   + options.jump_sigmas * math.sqrt(2.0) * p.sigma_m)
+        # the curve falls with θ: at the drop-out angle the counts read nearest
+        gone = (mem & (nearer < p.d - allowed)
+                & (cal.distance(counts, cal.max_incidence_rad) <= nearer))
+    if not gone.any():
+        return p
+    return _unplaced(p, gone.reshape(-1).nonzero()[0])
 
 
 def _past_range_elsewhere(p: Points, q: Points, first: Lines, judged: np.ndarray,
