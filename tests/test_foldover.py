@@ -622,9 +622,10 @@ def test_near_trace_straight_tells_a_close_face_from_a_far_wall():
     assert not straight[:, 1].any()
 
 
-# A wall yawed 12°, the ring 172 mm off it (GP2Y0A21): sensor 7's far readings of the floor
-# wall find no line (its neighbours' readings are held out): 22 take θ = 0 (σ 63-83 mm) and
-# read 37 mm short to 44 mm long; the long ones drew 3 cells more than 25 mm outside the room.
+# A wall yawed 12°, the ring 172 mm off it (GP2Y0A21): far readings of the floor and top
+# walls near their corners with it (sensors 1-3, 7 and 8) find no line, their neighbours'
+# readings held out: 22 take θ = 0 (σ 63-83 mm) and read 37 mm short to 44 mm long; sensor
+# 7's long ones on the floor drew 3 cells more than 25 mm outside the room.
 WALL_YAW12_A21 = """
 name: wall_yaw12_a21
 room: {outline_mm: [[0, 0], [2400, 0], [2400, 1500], [318.8, 1500]]}
