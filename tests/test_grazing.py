@@ -68,7 +68,8 @@ def test_line_members_sit_on_their_line_with_the_sigma_the_line_gives():
         own = _estimate(*args, keep_history=False, damping=True, detail=True, snap=False)
         snapped = _estimate(*args, keep_history=False, damping=True, detail=True, snap=True)
         p, q = own.points, snapped.points
-        # members in both runs (a short far line's member may leave it in the final pass)
+        # members of a line in both (a short far line's members may leave it in the final
+        # pass: local_incidence's doubt)
         on = p.valid & q.valid & (own.lines.label >= 0) & (snapped.lines.label >= 0)
         moved = on & (p.d != q.d)
         assert moved.sum() > 100

@@ -25,6 +25,7 @@ _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
 # plain ints: an array compared with an IntEnum member takes numpy's slow path (~7 µs)
 _NO_RETURN, _OUT_OF_RANGE = int(Reason.NO_RETURN), int(Reason.OUT_OF_RANGE)
+_INCIDENCE_UNKNOWN = int(Reason.INCIDENCE_UNKNOWN)
 
 SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
 REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
@@ -534,16 +535,12 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                         lines=empty if detail else None, theta_history=tuple(history))
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
-    # short far lines are doubted in a fold-over's second pass only: the judging pass keeps
-    # its lines whole (they decide the branches), and elsewhere the rule's numpy would cost
-    # 0.1 ms on a t_room sweep (docs/foldover.md, "Short far lines"); a part read to its
-    # own range pools its far readings, which its profiles cannot judge
+    # short far lines are doubted in the final pass: a fold-over's judging pass keeps its
+    # lines whole (they decide the branches; docs/foldover.md, "Short far lines")
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
                                    grouping.cx, grouping.cy)
-    points, label = local_incidence(
-        points, label, index, counts, steps, cal, profiler,
-        doubt_far=snap and cal.folds and not read_to_own_range(cal, points.max_range_m),
-        short_far=snap)
+    points, label = local_incidence(points, label, index, counts, steps, cal, profiler,
+                                    doubt_far=snap, short_far=snap)
     points, label = round_runs(points, label, index, counts, steps, cal, grouping.alpha,
                                grouping.cx, grouping.cy, profiler)
     points = censored_lines(points, label, counts, steps, cal)
@@ -554,7 +551,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
-    if snap and read_to_own_range(cal, points.max_range_m):
+    if snap:
         # a thin post far away: its few readings, several sensors', fitted as one circle
         points = far_posts(points, label, counts, steps, cal)
     pooled = (points.valid & (counts < cal.no_return_counts + cal.return_margin_counts)
@@ -1161,7 +1158,7 @@ ROUND_SHARE = 0.4        # a line is a round thing's when this share of its memb
 ROUND_OVER_OK = 1.5      # … this many times as many as are straight and steep (a convex
 #                          corner's faces are), …
 ROUND_MIN_THETA = math.radians(30)  # … and its members' mean θ is at least this
-FAR_LINE_MAX_MEMBERS = 16  # a line of at most this many members is short: its direction
+FAR_LINE_MAX_MEMBERS = 25  # a line of at most this many members is short: its direction
 #                            rests on a few noisy readings; a short line …
 FAR_LINE_MIN_SHARE = 0.72  # … whose members lie this share of the max range away on average
 #                            (the GP2D12's 0.45 of 0.624 m), …
@@ -1616,23 +1613,27 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     line (−1 none); ``counts`` (S, N); ``steps`` (S,). Why: docs/estimator.md, "Far
     posts"."""
     shape = points.valid.shape
+    row, col = ((points.reason == _INCIDENCE_UNKNOWN)
+                | (points.valid & (np.asarray(label).reshape(shape) < 0))).nonzero()
+    # most sweeps hold no group that could be a post: done before any geometry
+    if row.size < 3 or _fewer_distinct(col, POST_SENSORS):
+        return points
     s = np.asarray(counts, dtype=float).reshape(shape)
     # clear returns only: near the no-return level noise alone makes some (as pooling says)
-    clear = s >= cal.no_return_counts + (RETURN_SIGMAS + RANGE_SIGMAS) * cal.sigma_counts()
-    cand = clear & ((points.reason == Reason.INCIDENCE_UNKNOWN)
-                    | (points.valid & (np.asarray(label).reshape(shape) < 0)))
-    if np.count_nonzero(cand) < 3:
-        return points
-    silent = (points.reason == _NO_RETURN) | (points.reason == _OUT_OF_RANGE)
-    has = s > 0
-    d0 = np.full(shape, np.nan)
-    d0[has] = cal.distance(s[has], 0.0)
+    _, _, no_return, sigma_counts, _ = cal._levels
+    s_c = s[row, col]
+    clear = s_c >= no_return + (RETURN_SIGMAS + RANGE_SIGMAS) * sigma_counts
+    if not clear.all():
+        row, col, s_c = row[clear], col[clear], s_c[clear]
+        if row.size < 3 or _fewer_distinct(col, POST_SENSORS):
+            return points
     heading = np.asarray(points.heading, dtype=float)
     ox, oy = np.asarray(points.origin_x, float), np.asarray(points.origin_y, float)
-    ex, ey = np.cos(heading), np.sin(heading)
-    row, col = cand.nonzero()
-    px = ox[row, col] + d0[row, col] * ex[row, col]
-    py = oy[row, col] + d0[row, col] * ey[row, col]
+    at_c = heading[row, col]
+    la0, b0 = cal._ab0
+    d0_c = np.exp(la0 + b0 * np.log(s_c))             # cal.distance(s_c, 0.0)
+    px = ox[row, col] + d0_c * np.cos(at_c)
+    py = oy[row, col] + d0_c * np.sin(at_c)
     near = np.hypot(px[:, None] - px[None, :], py[:, None] - py[None, :]) < POST_LINK_M
     comp = np.arange(row.size)
     while True:                    # connected groups: each takes its smallest member's index
@@ -1640,17 +1641,28 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
         if np.array_equal(low, comp):
             break
         comp = low
+    # a group: ≥ 3 readings of ≥ POST_SENSORS sensors, ≤ POST_RUN_MAX of each
+    each = np.bincount(comp * shape[1] + col, minlength=row.size * shape[1]).reshape(
+        row.size, shape[1])
+    groups = ((each.sum(axis=1) >= 3) & (np.count_nonzero(each, axis=1) >= POST_SENSORS)
+              & (each.max(axis=1) <= POST_RUN_MAX)).nonzero()[0]
+    if not groups.size:
+        return points
+    cand = np.zeros(shape, dtype=bool)
+    cand[row, col] = True
+    silent = (points.reason == _NO_RETURN) | (points.reason == _OUT_OF_RANGE)
+    has = s > 0
+    d0 = np.full(shape, np.nan)
+    d0[has] = cal.distance(s[has], 0.0)
+    ex, ey = np.cos(heading), np.sin(heading)
     rank = np.empty(shape[0], dtype=np.intp)            # each row's place in step order
     order = np.argsort(np.asarray(steps), kind="stable")
     rank[order] = np.arange(shape[0])
     cx0, cy0 = float(np.mean(ox)), float(np.mean(oy))
     log_s = np.log(np.where(has, s, 1.0))
     out = None
-    for c in np.unique(comp):
+    for c in groups:
         ii, kk = row[comp == c], col[comp == c]
-        if (ii.size < 3 or np.unique(kk).size < POST_SENSORS
-                or np.bincount(kk).max() > POST_RUN_MAX):
-            continue
         flank, standing, tested = [], True, False
         for k in np.unique(kk):
             r_k = np.sort(rank[ii[kk == k]])
@@ -1832,9 +1844,12 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
                 se_dir = direction_se(points.x.reshape(-1)[at_s], points.y.reshape(-1)[at_s],
                                       sigma_perp, line[sel], total.size)
                 loose[member[sel]] = (se_dir > SHORT_LINE_SE_MAX)[line[sel]]
-        # a short far line's direction rests on few noisy readings: its members are asked too
+        # a short far line's direction rests on few noisy readings: its members are asked
+        # too; fewer than _LOCAL_MIN members never outvote their line (below): not asked
         if doubt_far:
-            doubt[member] = (far & (total <= FAR_LINE_MAX_MEMBERS))[line]
+            short = far & (total >= _LOCAL_MIN) & (total <= FAR_LINE_MAX_MEMBERS)
+            if short.any():
+                doubt[member] = short[line]
     maybe |= unsure
     ask = (off | maybe | doubt | loose).nonzero()[0]
     if ask.size == 0:
@@ -1852,29 +1867,38 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     doubted = np.zeros(ask.size, dtype=bool)
     asked = doubt[ask]
     if asked.any():
-        line = lab[ask[asked]]
+        at = ask[asked]
+        line = lab[at]
         use = (pr.n[asked] >= _LOCAL_MIN) & (pr.se[asked] > 0)
-        z = np.where(use, (np.tan(theta_now[ask[asked]]) - np.abs(pr.slope[asked]))
+        # a profile whose window holds another line's reading spans a corner and measures
+        # neither wall: a line with enough members whose profiles see it alone is judged by them
+        j = at[:, None] + np.arange(-_LOCAL_STEPS, _LOCAL_STEPS + 1)
+        jc = np.minimum(np.maximum(j, 0), vi.size - 1)
+        window = ((j == jc) & (pr.chain.take(jc) == pr.chain.take(at)[:, None])
+                  & (np.abs(pr.step.take(jc) - pr.step.take(at)[:, None]) <= _LOCAL_STEPS))
+        pure = use & ~(window & (lab.take(jc) != line[:, None])).any(axis=1)
+        use &= pure | (np.bincount(line, weights=pure, minlength=total.size) < _LOCAL_MIN)[line]
+        z = np.where(use, (np.tan(theta_now[at]) - np.abs(pr.slope[asked]))
                      / np.where(use, pr.se[asked], 1.0), 0.0)
         n_use = np.bincount(line, weights=use, minlength=total.size)
         z_sum = np.bincount(line, weights=z, minlength=total.size)
         off_line = (n_use >= _LOCAL_MIN) & (np.abs(z_sum) > FAR_LINE_Z * np.maximum(n_use, 1))
         if off_line.any():   # … and whether their own θ would move them at all
             use &= off_line[line]
-            at = ask[asked][use]
             shift = np.zeros(line.size)
-            shift[use] = np.abs(points.d.reshape(-1)[vi[at]]
-                                - cal.distance(pr.s[at], pr.theta[asked][use]))
+            shift[use] = np.abs(points.d.reshape(-1)[vi[at[use]]]
+                                - cal.distance(pr.s[at[use]], pr.theta[asked][use]))
             off_line &= (np.bincount(line, weights=shift, minlength=total.size)
                          >= FAR_LINE_SHIFT_M * n_use)
             doubted[asked] = off_line[line] & ~taken[asked]
+    voted = doubted.copy()   # (a line its members voted off: every member leaves it)
     if loose.any():   # … each member whose own straight slope is clearly not the line's
         own = loose[ask] & pr.ok & ~taken
         doubted |= own & (np.abs(np.tan(theta_now[ask]) - np.abs(pr.slope))
                           > SHORT_LINE_OWN_SE * pr.se)
     if doubted.any():
         points, label = _leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal,
-                                            stay=loose[ask[doubted]])
+                                            stay=loose[ask[doubted]] & ~voted[doubted])
     if taken.any():    # back to θ = 0 with the σ of a reading on no line
         at = vi[ask[taken]]
         s0, d0 = pr.s[ask[taken]], pr.d0[ask[taken]]
@@ -2028,28 +2052,29 @@ def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: 
     INCIDENCE_UNKNOWN (far, and nothing places it). ``stay`` (over ``pos``): members
     left on their line, as they were, where their own θ does not place them within the
     range."""
-    s, theta, t, e = pr.s[pos], pr.theta[doubted], np.abs(pr.slope[doubted]), pr.se[doubted]
-    lo = np.arctan(np.maximum(t - e, 0.0))
-    hi = np.minimum(np.arctan(t + e), cal.max_incidence_rad)
-    d_new, d_lo, d_hi = cal.distance(np.concatenate([s, s, s]),
-                                     np.concatenate([theta, lo, hi])).reshape(3, -1)
-    sigma, placed = _own_slope_sigma(cal, theta, d_new, d_lo, d_hi, pr.sig_s[pos])
-    placed &= pr.ok[doubted]
-    if stay is not None:     # (a stayer is placed only within the range)
-        placed &= ~stay | (d_new <= points.max_range_m)
-    if stay is not None and np.any(stay & ~placed):
-        keep = ~(stay & ~placed)
-        pos, placed, theta, d_new, sigma = (v[keep] for v in (pos, placed, theta, d_new, sigma))
-    at = vi[pos]
-    label = label.copy()
-    label.reshape(-1)[at] = -1
+    placed = pr.ok[doubted].copy()  # only a straight, clearly steep profile places one
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-    put, gone = at[placed], at[~placed]
-    hh = points.heading.reshape(-1)[put]
-    for f, v in (("d", d_new[placed]), ("theta", theta[placed]), ("sigma_m", sigma[placed]),
-                 ("x", points.origin_x.reshape(-1)[put] + d_new[placed] * np.cos(hh)),
-                 ("y", points.origin_y.reshape(-1)[put] + d_new[placed] * np.sin(hh))):
-        out[f].reshape(-1)[put] = v
+    if placed.any():
+        s, theta = pr.s[pos[placed]], pr.theta[doubted][placed]
+        t, e = np.abs(pr.slope[doubted][placed]), pr.se[doubted][placed]
+        lo = np.arctan(np.maximum(t - e, 0.0))
+        hi = np.minimum(np.arctan(t + e), cal.max_incidence_rad)
+        d_new, d_lo, d_hi = cal.distance(np.concatenate([s, s, s]),
+                                         np.concatenate([theta, lo, hi])).reshape(3, -1)
+        sigma, fits = _own_slope_sigma(cal, theta, d_new, d_lo, d_hi, pr.sig_s[pos[placed]])
+        if stay is not None:     # (a stayer is placed only within the range)
+            fits &= ~stay[placed] | (d_new <= points.max_range_m)
+        placed[placed] = fits
+        put = vi[pos[placed]]
+        hh = points.heading.reshape(-1)[put]
+        for f, v in (("d", d_new[fits]), ("theta", theta[fits]), ("sigma_m", sigma[fits]),
+                     ("x", points.origin_x.reshape(-1)[put] + d_new[fits] * np.cos(hh)),
+                     ("y", points.origin_y.reshape(-1)[put] + d_new[fits] * np.sin(hh))):
+            out[f].reshape(-1)[put] = v
+    leave = np.ones(pos.size, dtype=bool) if stay is None else placed | ~stay
+    label = label.copy()
+    label.reshape(-1)[vi[pos[leave]]] = -1
+    gone = vi[pos[leave & ~placed]]
     valid, reason = points.valid, points.reason
     if gone.size:
         for f in out.values():
