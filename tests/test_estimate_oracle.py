@@ -338,3 +338,112 @@ def test_distinct_count_agrees_with_unique(values, n):
     the same verdict, exactly, for integers (by sorting) and anything else (np.unique)."""
     arr = np.array(values, dtype=float if any(isinstance(v, float) for v in values) else int)
     assert _fewer_distinct(arr, n) == (np.unique(arr).size < n)
+
+
+def _vote_inputs(seed: int):
+    """A random short-far-line vote: K valid readings on up to 4 lines (some on none), on
+    polylines and steps with repeats, the members asked among other readings, profiles
+    with too few readings or no slope error, slopes near and far from their line's."""
+    rng = np.random.default_rng(seed)
+    k, n_lines = int(rng.integers(3, 70)), int(rng.integers(1, 5))
+    lab = rng.integers(-1, n_lines, k).astype(np.intp)
+    members = (lab >= 0).nonzero()[0]
+    others = rng.permutation(k)[:int(rng.integers(0, k))]
+    ask = np.union1d(members, others).astype(np.intp)
+    sel = np.searchsorted(ask, members).astype(np.intp)
+    m = ask.size
+    theta_now = rng.uniform(0.0, 1.3, k)
+    theta = rng.uniform(0.0, 1.3, m)
+    # most slopes near tan of their line's θ (a vote within z), the rest anywhere
+    near = np.tan(theta_now[ask]) * np.where(rng.random(m) < 0.5, 1.0, -1.0)
+    slope = np.where(rng.random(m) < 0.6, near + rng.normal(0.0, 0.02, m),
+                     rng.normal(0.0, 1.5, m))
+    pr = oracle_profile(
+        n=rng.integers(0, 9, m).astype(float), se=rng.choice([0.0, 0.01, 0.1, 0.5], m),
+        slope=slope, theta=theta, s=rng.uniform(60.0, 1500.0, k),
+        chain=np.cumsum(rng.random(k) < 0.15).astype(np.intp),
+        step=np.sort(rng.integers(0, k, k)).astype(np.intp))
+    vi = np.sort(rng.permutation(2 * k)[:k]).astype(np.intp)
+    d = rng.uniform(0.05, 0.9, 2 * k)
+    args = (members, sel, lab, theta_now, pr, d, vi, n_lines, stand_in_calibration(),
+            int(rng.integers(0, 5)), int(rng.integers(1, 5)),
+            float(rng.choice([0.0, 0.5, 1.0, math.inf])), float(rng.choice([0.0, 0.01, 0.3])))
+    return args
+
+
+def oracle_profile(**fields):
+    """A stand-in ``_Profile`` with the fields the vote reads."""
+    return dataclasses.make_dataclass("Profile", list(fields))(**fields)
+
+
+def test_far_line_vote_kernel_agrees_with_its_numpy_statement():
+    """``_lines.far_line_vote`` (compiled, via local_incidence's wrapper) against
+    ``estimate_numpy.far_line_vote`` on 400 random votes: the same lines voted off, exactly
+    (tan, log, exp and the curve's interpolation differ from numpy's by an ulp at most, no
+    vote here sits on its threshold), and not vacuously: some lines go off, most stay."""
+    from irring.estimation.estimate import _far_line_vote_compiled
+    off = stay = 0
+    for seed in range(400):
+        args = _vote_inputs(seed)
+        fast = _far_line_vote_compiled(*args)
+        slow = oracle.far_line_vote(*args)
+        assert fast.dtype == bool and fast.shape == (args[7],)
+        np.testing.assert_array_equal(fast, slow, err_msg=f"seed {seed}")
+        off += int(fast.sum())
+        stay += int((~fast).sum())
+    assert 40 < off < stay
+
+
+def test_far_line_vote_kernel_names_a_line_out_of_range():
+    members = np.array([0, 1], dtype=np.intp)
+    args = list(_vote_inputs(0))
+    args[2] = np.full(args[2].size, 7, dtype=np.intp)        # every reading on line 7
+    args[0], args[1], args[7] = members, members, 3
+    with np.testing.assert_raises_regex(IndexError, "reading 0 is on line 7, not one of 0 … 2"):
+        from irring.estimation.estimate import _far_line_vote_compiled
+        _far_line_vote_compiled(*args)
+
+
+def _post_scene(seed: int):
+    """Readings of S steps × N sensors round a ring: some aimed at one spot (a post) from a
+    few sensors, the rest anywhere; reasons OK, INCIDENCE_UNKNOWN or NO_RETURN, some valid
+    ones on a line, counts from just above the no-return level to near."""
+    rng = np.random.default_rng(seed)
+    cal = stand_in_calibration()
+    s, n = int(rng.integers(2, 12)), int(rng.integers(2, 12))
+    ring = rng.uniform(-math.pi, math.pi, (s, n))
+    ox, oy = 0.15 * np.cos(ring), 0.15 * np.sin(ring)
+    post = rng.uniform(-0.6, 0.6, 2)
+    aimed = rng.random((s, n)) < rng.uniform(0.0, 1.0)
+    heading = np.where(aimed, np.arctan2(post[1] - oy, post[0] - ox) + rng.normal(0, 0.02, (s, n)),
+                       rng.uniform(-math.pi, math.pi, (s, n)))
+    dist = np.where(aimed, np.hypot(post[0] - ox, post[1] - oy) + rng.normal(0, 0.03, (s, n)),
+                    rng.uniform(0.1, 0.8, (s, n)))
+    counts = cal.counts(np.clip(dist, 0.09, 0.85), 0.0) * rng.uniform(0.97, 1.03, (s, n))
+    reason = rng.choice(np.array([Reason.OK, Reason.INCIDENCE_UNKNOWN, Reason.NO_RETURN],
+                                 dtype=np.uint8), (s, n), p=[0.5, 0.3, 0.2])
+    points = dataclasses.make_dataclass("P", ["reason", "valid", "heading", "origin_x",
+                                              "origin_y"])(
+        reason, reason == Reason.OK, heading, ox, oy)
+    label = np.where(rng.random((s, n)) < 0.3, 2, -1).astype(np.intp)
+    return points, label, counts, cal
+
+
+def test_post_group_kernel_agrees_with_its_numpy_statement():
+    """``_lines.post_groups`` (compiled, via far_posts' wrapper) against
+    ``estimate_numpy.post_groups`` on 400 random scenes: both find no group, or the same
+    candidates, groups (labelled by their smallest member), qualifying groups and end
+    points, bit for bit; not vacuously: groups qualify in some scenes and not in others."""
+    from irring.estimation.estimate import post_groups_compiled
+    found = none = 0
+    for seed in range(400):
+        args = _post_scene(seed)
+        fast, slow = post_groups_compiled(*args), oracle.post_groups(*args)
+        assert (fast is None) == (slow is None), f"seed {seed}"
+        if fast is None:
+            none += 1
+            continue
+        found += 1
+        for name, a, b in zip(("row", "col", "comp", "groups", "px", "py"), fast, slow):
+            np.testing.assert_array_equal(a, b, err_msg=f"seed {seed}: {name}")
+    assert found > 40 and none > 40

@@ -131,8 +131,8 @@ def test_a_far_posts_few_readings_from_several_sensors_are_read_on_one_circle(mo
     changed = []
     far_posts = fast.far_posts
 
-    def recording(points, label, counts, steps, cal):
-        out = far_posts(points, label, counts, steps, cal)
+    def recording(points, *args):
+        out = far_posts(points, *args)
         changed.append((out.valid != points.valid) | (out.valid & (out.theta != points.theta)))
         return out
 

@@ -24,7 +24,7 @@ plus ~5–10 µs of work on ~630 points.
 
 from cpython.buffer cimport (PyObject_GetBuffer, PyBuffer_Release, PyBUF_C_CONTIGUOUS,
                             PyBUF_FORMAT, PyBUF_WRITABLE)
-from libc.math cimport (sin, cos, sqrt, fabs, hypot, isfinite, exp, atan, nearbyint, M_PI,
+from libc.math cimport (sin, cos, sqrt, fabs, hypot, isfinite, exp, log, atan, nearbyint, M_PI,
                         INFINITY, NAN, asin, tan, fmin, fmax)
 from libc.stdlib cimport calloc, free, malloc
 
@@ -1414,3 +1414,234 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
         free(cos_k); free(have)
     return (out_f[0], out_f[1], out_f[2], out_f[3], out_f[4], out_b[0], out_b[1], out_b[2],
             out_b[3])
+
+
+def far_line_vote(const idx_t[::1] at, const idx_t[::1] sel, const idx_t[::1] lab,
+                  const double[::1] theta_now, const idx_t[::1] chain, const idx_t[::1] step,
+                  const double[::1] n, const double[::1] se, const double[::1] slope,
+                  const double[::1] theta_own, const double[::1] s, const double[::1] d,
+                  const idx_t[::1] vi, const double[::1] xp, const double[::1] node_log_a,
+                  const double[::1] node_b, idx_t n_lines, idx_t half, idx_t min_n,
+                  double z_max, double shift_m):
+    """``irring.estimation.estimate_numpy.far_line_vote`` (the statement and the why) in one
+    pass, the sums in its order, to within rounding (tan, log, exp and log a, b between the
+    calibration's nodes ``xp``, ``node_log_a``, ``node_b`` are libm's and this file's, not
+    numpy's). ``at`` (A,) the asked members' places among the K valid readings ``vi`` (flat
+    indices into ``d``), ``sel`` (A,) their places among the profiled readings; per valid
+    reading (K,): ``lab`` line (−1 none), ``theta_now``, ``chain``, ``step``, ``s``
+    (counts); per profiled reading: ``n``, ``se``, ``slope``, ``theta_own``. Returns
+    ``off_line`` (n_lines,) uint8."""
+    cdef idx_t A = at.shape[0], K = lab.shape[0], M = n.shape[0], i, q, p, c, L, lo, hi
+    cdef idx_t n_nodes = xp.shape[0]
+    cdef bint u, pure, any_off = False
+    cdef double inv_dx = 0.0, la, b
+    if not (sel.shape[0] == A and theta_now.shape[0] == chain.shape[0] == step.shape[0]
+            == s.shape[0] == vi.shape[0] == K and se.shape[0] == slope.shape[0]
+            == theta_own.shape[0] == M):
+        raise lengths_differ("far_line_vote's arrays", at=A, sel=sel.shape[0], lab=K,
+                             theta_now=theta_now.shape[0], chain=chain.shape[0],
+                             step=step.shape[0], s=s.shape[0], vi=vi.shape[0], n=M,
+                             se=se.shape[0], slope=slope.shape[0],
+                             theta_own=theta_own.shape[0])
+    if n_nodes > 1 and xp[n_nodes - 1] > xp[0]:
+        inv_dx = (n_nodes - 1) / (xp[n_nodes - 1] - xp[0])
+    off_arr = np.zeros(n_lines, dtype=np.uint8)
+    flags = np.zeros((2, A), dtype=np.uint8)      # use, pure
+    sums = np.zeros((4, n_lines))     # pure members, members used, their summed z, shift
+    cdef unsigned char[::1] off = off_arr
+    cdef unsigned char[:, ::1] F = flags
+    cdef double[:, ::1] S = sums
+    for i in range(A):
+        p = at[i]
+        q = sel[i]
+        if p < 0 or p >= K or q < 0 or q >= M:
+            raise IndexError(f"at[{i}] = {p} or sel[{i}] = {q} is outside 0 … {K - 1} "
+                             f"or 0 … {M - 1}")
+        L = lab[p]
+        if L < 0 or L >= n_lines:
+            raise IndexError(f"reading {p} is on line {L}, not one of 0 … {n_lines - 1}")
+        u = n[q] >= min_n and se[q] > 0
+        pure = u
+        if u:         # another line's reading (or one on none) in the profile's window
+            lo = p - half if p >= half else 0
+            hi = p + half if p + half < K else K - 1
+            for c in range(lo, hi + 1):
+                if (chain[c] == chain[p] and step[c] - step[p] <= half
+                        and step[p] - step[c] <= half and lab[c] != L):
+                    pure = False
+                    break
+        F[0, i] = u
+        F[1, i] = pure
+        S[0, L] += pure
+    for i in range(A):
+        L = lab[at[i]]
+        q = sel[i]
+        if F[0, i] and not (F[1, i] or S[0, L] < min_n):
+            F[0, i] = 0
+        S[1, L] += F[0, i]
+        S[2, L] += (tan(theta_now[at[i]]) - fabs(slope[q])) / se[q] if F[0, i] else 0.0
+    for L in range(n_lines):
+        off[L] = S[1, L] >= min_n and fabs(S[2, L]) > z_max * (S[1, L] if S[1, L] > 1 else 1.0)
+        any_off = any_off or off[L]
+    if not any_off:
+        return off_arr.view(bool)
+    for i in range(A):        # … and whether their own θ would move them at all
+        L = lab[at[i]]
+        if F[0, i] and off[L]:
+            _interp_ab(fabs(theta_own[sel[i]]), xp, node_log_a, node_b, inv_dx, &la, &b)
+            S[3, L] += fabs(d[vi[at[i]]] - exp(la + b * log(s[at[i]])))
+    for L in range(n_lines):
+        off[L] = off[L] and S[3, L] >= shift_m * S[1, L]
+    return off_arr.view(bool)
+
+
+def post_groups(const unsigned char[::1] reason, const unsigned char[::1] valid,
+                const idx_t[::1] label, unsigned char unknown, const double[::1] counts,
+                const double[::1] heading, const double[::1] ox, const double[::1] oy,
+                idx_t n_sensors, double clear_counts, double la0, double b0, double link_m,
+                idx_t min_sensors, idx_t run_max):
+    """``irring.estimation.estimate_numpy.post_groups`` (the statement and the why): of the
+    flat (S·N) readings, those on no line (``reason`` ``unknown``, or ``valid`` with
+    ``label`` < 0) whose ``counts`` are at least
+    ``clear_counts``, their θ = 0 end points (log and exp, cos and sin are numpy's, on this
+    call's candidates), the groups chained within ``link_m`` (each labelled by its smallest
+    member) and which groups hold ≥ 3 readings of ≥ ``min_sensors`` sensors, ≤ ``run_max``
+    of each. Returns None where no group qualifies, else (row, col, comp, groups) intp and
+    (px, py) float, the candidates in flat order."""
+    cdef idx_t size = counts.shape[0], m = 0, i, j, f, a, b, r, g, k, nk, top
+    if not (reason.shape[0] == valid.shape[0] == label.shape[0] == heading.shape[0]
+            == ox.shape[0] == oy.shape[0] == size and n_sensors >= 1 and size % n_sensors == 0):
+        raise lengths_differ("per-reading arrays", reason=reason.shape[0],
+                             valid=valid.shape[0], label=label.shape[0], counts=size,
+                             heading=heading.shape[0], ox=ox.shape[0], oy=oy.shape[0])
+    for f in range(size):
+        if ((reason[f] == unknown or (valid[f] and label[f] < 0))
+                and counts[f] >= clear_counts):
+            m += 1
+    if m < 3:
+        return None
+    flat_arr = np.empty(m, dtype=np.intp)
+    cdef idx_t[::1] flat = flat_arr
+    seen_arr = np.zeros(n_sensors, dtype=np.intp)
+    cdef idx_t[::1] seen = seen_arr
+    j = 0
+    nk = 0
+    for f in range(size):
+        if ((reason[f] == unknown or (valid[f] and label[f] < 0))
+                and counts[f] >= clear_counts):
+            flat[j] = f
+            j += 1
+            if not seen[f % n_sensors]:
+                seen[f % n_sensors] = 1
+                nk += 1
+    if nk < min_sensors:
+        return None
+    rows = np.empty((4, m))        # counts → their log → d0, heading → its cos, sin
+    cdef double[:, ::1] R = rows
+    for j in range(m):
+        R[0, j] = counts[flat[j]]
+        R[1, j] = heading[flat[j]]
+    np.log(rows[0], out=rows[2])
+    for j in range(m):
+        R[2, j] = la0 + b0 * R[2, j]
+    np.exp(rows[2], out=rows[2])
+    cs = np.cos(rows[1])
+    sn = np.sin(rows[1])
+    cdef double[::1] C = cs, SN = sn
+    pxy = np.empty((2, m))
+    cdef double[:, ::1] P = pxy
+    for j in range(m):
+        P[0, j] = ox[flat[j]] + R[2, j] * C[j]
+        P[1, j] = oy[flat[j]] + R[2, j] * SN[j]
+    # connected groups (union-find, each group's root its smallest member)
+    comp_arr = np.arange(m, dtype=np.intp)
+    cdef idx_t[::1] comp = comp_arr
+    for i in range(m):
+        for j in range(i + 1, m):
+            if hypot(P[0, i] - P[0, j], P[1, i] - P[1, j]) < link_m:
+                a = i
+                while comp[a] != a:
+                    a = comp[a]
+                b = j
+                while comp[b] != b:
+                    b = comp[b]
+                if a < b:
+                    comp[b] = a
+                elif b < a:
+                    comp[a] = b
+    for i in range(m):        # members precede in index order: their root is final already
+        comp[i] = comp[comp[i]]
+    each_arr = np.zeros((m, n_sensors), dtype=np.intp)
+    cdef idx_t[:, ::1] each = each_arr
+    for i in range(m):
+        each[comp[i], flat[i] % n_sensors] += 1
+    ok_arr = np.zeros(m, dtype=np.intp)
+    cdef idx_t[::1] ok = ok_arr
+    g = 0
+    for r in range(m):
+        if comp[r] != r:
+            continue
+        a = 0
+        nk = 0
+        top = 0
+        for k in range(n_sensors):
+            a += each[r, k]
+            nk += each[r, k] > 0
+            if each[r, k] > top:
+                top = each[r, k]
+        if a >= 3 and nk >= min_sensors and top <= run_max:
+            ok[g] = r
+            g += 1
+    if g == 0:
+        return None
+    return (flat_arr // n_sensors, flat_arr % n_sensors, comp_arr, ok_arr[:g].copy(),
+            pxy[0], pxy[1])
+
+
+def silent_gaps(const idx_t[::1] index, const double[::1] counts, const idx_t[::1] order,
+                const unsigned char[::1] reason, idx_t n_sensors, unsigned char missing,
+                double dip):
+    """``irring.estimation.estimate.silent_gaps`` (the statement and the why), exactly:
+    ``index`` (k,) flat (S·N) readings in scan order, ``counts`` and ``reason`` flat (S·N),
+    ``order`` (S,) the rows in step order; ``dip`` = SILENT_DIP_SIGMAS × σ of a count.
+    Returns (k,) uint8: 1 where a reading follows its sensor's previous one across steps
+    whose lowest count (``missing`` ones: none) lies ``dip`` below both of theirs."""
+    cdef idx_t k = index.shape[0], size = counts.shape[0], S = order.shape[0], i, a, b, q, r
+    cdef idx_t col
+    cdef double low, v, ends
+    if not (reason.shape[0] == size and n_sensors >= 1 and S * n_sensors == size):
+        raise lengths_differ("silent_gaps' arrays", counts=size, reason=reason.shape[0],
+                             steps_times_sensors=S * n_sensors)
+    cut_arr = np.zeros(k, dtype=np.uint8)
+    if k < 2:
+        return cut_arr
+    rank_arr = np.empty(S, dtype=np.intp)
+    cdef unsigned char[::1] cut = cut_arr
+    cdef idx_t[::1] rank = rank_arr
+    for q in range(S):
+        r = order[q]
+        if r < 0 or r >= S:
+            raise IndexError(f"order[{q}] = {r} is not a row (0 … {S - 1})")
+        rank[r] = q
+    for i in range(k):
+        if index[i] < 0 or index[i] >= size:
+            raise IndexError(f"index[{i}] = {index[i]} is not a reading (0 … {size - 1})")
+    for i in range(1, k):
+        a = index[i - 1]
+        b = index[i]
+        col = b % n_sensors
+        if a % n_sensors != col or rank[b // n_sensors] - rank[a // n_sensors] <= 1:
+            continue
+        low = INFINITY
+        for q in range(rank[a // n_sensors] + 1, rank[b // n_sensors]):
+            r = order[q] * n_sensors + col
+            v = INFINITY if reason[r] == missing else counts[r]
+            if v != v or low != low:        # np.minimum: a NaN wins
+                low = NAN
+            elif v < low:
+                low = v
+        ends = counts[a]
+        if counts[b] < ends or counts[b] != counts[b]:
+            ends = counts[b]
+        cut[i] = low < ends - dip
+    return cut_arr

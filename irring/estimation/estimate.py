@@ -25,7 +25,7 @@ _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
 # plain ints: an array compared with an IntEnum member takes numpy's slow path (~7 µs)
 _NO_RETURN, _OUT_OF_RANGE = int(Reason.NO_RETURN), int(Reason.OUT_OF_RANGE)
-_INCIDENCE_UNKNOWN = int(Reason.INCIDENCE_UNKNOWN)
+_INCIDENCE_UNKNOWN, _MISSING = int(Reason.INCIDENCE_UNKNOWN), int(Reason.MISSING)
 
 SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
 REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
@@ -123,6 +123,18 @@ def silent_gaps(index: np.ndarray, counts: np.ndarray, steps: np.ndarray,
     ends = np.minimum(flat[index[at]], flat[index[at + 1]])
     cut[at + 1] = low < ends - SILENT_DIP_SIGMAS * sigma_counts
     return cut
+
+
+def silent_gaps_compiled(index: np.ndarray, counts: np.ndarray, steps: np.ndarray,
+                         reason: np.ndarray, sigma_counts: float) -> np.ndarray:
+    """:func:`silent_gaps` in one compiled call (``irring.estimation._lines.silent_gaps``,
+    held to it by tests/test_silent_gaps.py)."""
+    f = np.ascontiguousarray
+    counts = f(counts, dtype=float)
+    return _lines.silent_gaps(
+        f(index, dtype=np.intp), counts.reshape(-1),
+        np.argsort(np.asarray(steps), kind="stable"), f(reason, dtype=np.uint8).reshape(-1),
+        counts.shape[1], _MISSING, SILENT_DIP_SIGMAS * sigma_counts).view(bool)
 
 
 @dataclass
@@ -515,8 +527,9 @@ def settled_within_noise(passes: list, theta: np.ndarray, last_moving: np.ndarra
 def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Calibration,
                    options: LineOptions, snap: bool, detail: bool, history: list,
                    counts: np.ndarray, steps: np.ndarray, reach: Callable | None = None,
-                   snapper: Callable | None = None, profiler: Callable | None = None
-                   ) -> Estimate:
+                   snapper: Callable | None = None, profiler: Callable | None = None,
+                   voter: Callable | None = None, post_grouper: Callable | None = None,
+                   gapper: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's): readings on no
     line at the incidence their own sensor's neighbours give (:func:`local_incidence`;
     ``counts`` (S, N), ``steps`` (S,): the sweep's), line members onto their lines
@@ -527,7 +540,10 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     :func:`silent_reach`) and, with ``detail``, the :class:`Lines`. Line members are first
     moved out by what the return level cut off their lines (:func:`censored_lines`).
     ``profiler``: the readings' range profiles (the compiled :func:`profiles_compiled` by
-    default; the oracle passes its numpy statement :func:`range_profiles`)."""
+    default; the oracle passes its numpy statement :func:`range_profiles`); ``voter`` and
+    ``post_grouper``: the short far lines' vote and the far posts' groups (compiled by
+    default; the oracle passes its numpy ``far_line_vote`` and ``post_groups``);
+    ``gapper``: the silent gaps (:func:`silent_gaps_compiled`; the oracle: :func:`silent_gaps`)."""
     shape = points.valid.shape
     if grouping is None:       # nothing to group (e.g. every reading invalid): no lines
         empty = _lines_record(None, np.full(shape, -1, dtype=np.intp), np.zeros(0, np.intp))
@@ -538,9 +554,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     # short far lines are doubted in the final pass: a fold-over's judging pass keeps its
     # lines whole (they decide the branches; docs/foldover.md, "Short far lines")
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
-                                   grouping.cx, grouping.cy)
+                                   grouping.cx, grouping.cy, gapper)
     points, label = local_incidence(points, label, index, counts, steps, cal, profiler,
-                                    doubt_far=snap, short_far=snap)
+                                    doubt_far=snap, short_far=snap, voter=voter)
     points, label = round_runs(points, label, index, counts, steps, cal, grouping.alpha,
                                grouping.cx, grouping.cy, profiler)
     points = censored_lines(points, label, counts, steps, cal)
@@ -553,7 +569,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     points = drop_beyond_range(points)
     if snap:
         # a thin post far away: its few readings, several sensors', fitted as one circle
-        points = far_posts(points, label, counts, steps, cal)
+        points = far_posts(points, label, counts, steps, cal, post_grouper)
     pooled = (points.valid & (counts < cal.no_return_counts + cal.return_margin_counts)
               if read_to_own_range(cal, points.max_range_m) else None)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
@@ -625,7 +641,8 @@ ACROSS_MAX = 5  # at most this many readings a line took across a silent gap are
 
 def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                    steps: np.ndarray, cal: Calibration, alpha: np.ndarray, cx: np.ndarray,
-                   cy: np.ndarray) -> tuple[Points, np.ndarray]:
+                   cy: np.ndarray, gapper: Callable | None = None
+                   ) -> tuple[Points, np.ndarray]:
     """Line members whose membership a silent gap contradicts, moved to the line of their
     side of it; numpy, shared by both estimators.
 
@@ -638,14 +655,15 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     the other line, read at the incidence their beam meets it with the noise σ at that θ;
     where it meets it past the drop-out angle they leave their line, read at θ = 0 with the
     fallback σ (:func:`local_incidence` asks them). ``label`` (S, N): each reading's line
-    or −1; ``index``: the live readings' flat indices in scan order.
+    or −1; ``index``: the live readings' flat indices in scan order; ``gapper``: the gaps
+    (:func:`silent_gaps_compiled` by default; the oracle passes :func:`silent_gaps`).
     Why: docs/estimator.md ("Silent gaps")."""
     n_sensors = label.shape[1]
     vi = index[points.valid.reshape(-1)[index]]
     lab = label.reshape(-1)[vi]
     if vi.size < 3 or not (lab >= 0).any():
         return points, label
-    cut = silent_gaps(vi, counts, steps, points.reason, cal.sigma_counts())
+    cut = (gapper or silent_gaps_compiled)(vi, counts, steps, points.reason, cal._levels[3])
     if not cut.any():
         return points, label
     sensor = vi % n_sensors
@@ -1597,7 +1615,7 @@ POST_COARSE = 4          # the search: every 4th radius on a grid 4× as coarse,
 
 
 def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
-              cal: Calibration) -> Points:
+              cal: Calibration, grouper: Callable | None = None) -> Points:
     """Readings on no line (valid, or INCIDENCE_UNKNOWN; clear returns only) that are one
     thin post seen by several sensors, read at the θ at which their beams meet one circle
     fitted to them all; numpy, shared by both estimators.
@@ -1610,44 +1628,17 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     ``ARC_MISS`` for each flanking silent beam it would have returned; kept at a mean misfit
     below ``ARC_MISFIT`` with ≥ 3 readings on it (misfit ≤ ``ARC_ON``), which become valid at
     its θ, at their own distance there, σ as on an arc. ``label`` (S, N): each reading's
-    line (−1 none); ``counts`` (S, N); ``steps`` (S,). Why: docs/estimator.md, "Far
-    posts"."""
-    shape = points.valid.shape
-    row, col = ((points.reason == _INCIDENCE_UNKNOWN)
-                | (points.valid & (np.asarray(label).reshape(shape) < 0))).nonzero()
-    # most sweeps hold no group that could be a post: done before any geometry
-    if row.size < 3 or _fewer_distinct(col, POST_SENSORS):
+    line (−1 none); ``counts`` (S, N); ``steps`` (S,); ``grouper``: the groups (the compiled
+    :func:`post_groups_compiled` by default; its statement: ``estimate_numpy.post_groups``).
+    Why: docs/estimator.md, "Far posts"."""
+    found = (grouper or post_groups_compiled)(points, label, counts, cal)
+    if found is None:        # most sweeps: no group that could be a post, nothing to fit
         return points
+    row, col, comp, groups, px, py = found
+    shape = points.valid.shape
     s = np.asarray(counts, dtype=float).reshape(shape)
-    # clear returns only: near the no-return level noise alone makes some (as pooling says)
-    _, _, no_return, sigma_counts, _ = cal._levels
-    s_c = s[row, col]
-    clear = s_c >= no_return + (RETURN_SIGMAS + RANGE_SIGMAS) * sigma_counts
-    if not clear.all():
-        row, col, s_c = row[clear], col[clear], s_c[clear]
-        if row.size < 3 or _fewer_distinct(col, POST_SENSORS):
-            return points
     heading = np.asarray(points.heading, dtype=float)
     ox, oy = np.asarray(points.origin_x, float), np.asarray(points.origin_y, float)
-    at_c = heading[row, col]
-    la0, b0 = cal._ab0
-    d0_c = np.exp(la0 + b0 * np.log(s_c))             # cal.distance(s_c, 0.0)
-    px = ox[row, col] + d0_c * np.cos(at_c)
-    py = oy[row, col] + d0_c * np.sin(at_c)
-    near = np.hypot(px[:, None] - px[None, :], py[:, None] - py[None, :]) < POST_LINK_M
-    comp = np.arange(row.size)
-    while True:                    # connected groups: each takes its smallest member's index
-        low = np.where(near, comp[None, :], row.size).min(axis=1)
-        if np.array_equal(low, comp):
-            break
-        comp = low
-    # a group: ≥ 3 readings of ≥ POST_SENSORS sensors, ≤ POST_RUN_MAX of each
-    each = np.bincount(comp * shape[1] + col, minlength=row.size * shape[1]).reshape(
-        row.size, shape[1])
-    groups = ((each.sum(axis=1) >= 3) & (np.count_nonzero(each, axis=1) >= POST_SENSORS)
-              & (each.max(axis=1) <= POST_RUN_MAX)).nonzero()[0]
-    if not groups.size:
-        return points
     cand = np.zeros(shape, dtype=bool)
     cand[row, col] = True
     silent = (points.reason == _NO_RETURN) | (points.reason == _OUT_OF_RANGE)
@@ -1751,6 +1742,23 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     return points if out is None else points_with(points, **out)
 
 
+def post_groups_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
+                         cal: Calibration):
+    """``estimate_numpy.post_groups`` (the statement) in one compiled call
+    (``irring.estimation._lines.post_groups``, held to it by tests/test_estimate_oracle.py)."""
+    f = np.ascontiguousarray
+    la0, b0 = cal._ab0
+    _, _, no_return, sigma_counts, _ = cal._levels      # (cached: the properties cost µs)
+    return _lines.post_groups(
+        f(points.reason, dtype=np.uint8).reshape(-1),
+        f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
+        f(label, dtype=np.intp).reshape(-1), _INCIDENCE_UNKNOWN,
+        f(counts, dtype=float).reshape(-1), f(points.heading, dtype=float).reshape(-1),
+        f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
+        points.valid.shape[1], no_return + (RETURN_SIGMAS + RANGE_SIGMAS) * sigma_counts,
+        la0, b0, POST_LINK_M, POST_SENSORS, POST_RUN_MAX)
+
+
 def _meet_circle(centre, radius: float, ox, oy, ex, ey):
     """Where beams (origins ``ox, oy``, unit directions ``ex, ey``: (J,)) meet circles
     (``centre``: x, y of shape (C, 1)): the distance t (C, J), the incidence there and
@@ -1781,8 +1789,8 @@ def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.
 
 def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                     steps: np.ndarray, cal: Calibration, profiler: Callable | None = None,
-                    doubt_far: bool = False, short_far: bool = False
-                    ) -> tuple[Points, np.ndarray]:
+                    doubt_far: bool = False, short_far: bool = False,
+                    voter: Callable | None = None) -> tuple[Points, np.ndarray]:
     """Readings on no line (``label`` −1, θ = 0), and the members of lines that are a round
     thing's, re-read at the incidence their own sensor's neighbouring steps give; numpy,
     shared by both estimators.
@@ -1868,29 +1876,11 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     asked = doubt[ask]
     if asked.any():
         at = ask[asked]
-        line = lab[at]
-        use = (pr.n[asked] >= _LOCAL_MIN) & (pr.se[asked] > 0)
-        # a profile whose window holds another line's reading spans a corner and measures
-        # neither wall: a line with enough members whose profiles see it alone is judged by them
-        j = at[:, None] + np.arange(-_LOCAL_STEPS, _LOCAL_STEPS + 1)
-        jc = np.minimum(np.maximum(j, 0), vi.size - 1)
-        window = ((j == jc) & (pr.chain.take(jc) == pr.chain.take(at)[:, None])
-                  & (np.abs(pr.step.take(jc) - pr.step.take(at)[:, None]) <= _LOCAL_STEPS))
-        pure = use & ~(window & (lab.take(jc) != line[:, None])).any(axis=1)
-        use &= pure | (np.bincount(line, weights=pure, minlength=total.size) < _LOCAL_MIN)[line]
-        z = np.where(use, (np.tan(theta_now[at]) - np.abs(pr.slope[asked]))
-                     / np.where(use, pr.se[asked], 1.0), 0.0)
-        n_use = np.bincount(line, weights=use, minlength=total.size)
-        z_sum = np.bincount(line, weights=z, minlength=total.size)
-        off_line = (n_use >= _LOCAL_MIN) & (np.abs(z_sum) > FAR_LINE_Z * np.maximum(n_use, 1))
-        if off_line.any():   # … and whether their own θ would move them at all
-            use &= off_line[line]
-            shift = np.zeros(line.size)
-            shift[use] = np.abs(points.d.reshape(-1)[vi[at[use]]]
-                                - cal.distance(pr.s[at[use]], pr.theta[asked][use]))
-            off_line &= (np.bincount(line, weights=shift, minlength=total.size)
-                         >= FAR_LINE_SHIFT_M * n_use)
-            doubted[asked] = off_line[line] & ~taken[asked]
+        off_line = (voter or _far_line_vote_compiled)(
+            at, asked.nonzero()[0], lab, theta_now, pr, points.d.reshape(-1), vi, total.size,
+            cal, _LOCAL_STEPS, _LOCAL_MIN, FAR_LINE_Z, FAR_LINE_SHIFT_M)
+        if off_line.any():
+            doubted[asked] = off_line[lab[at]] & ~taken[asked]
     voted = doubted.copy()   # (a line its members voted off: every member leaves it)
     if loose.any():   # … each member whose own straight slope is clearly not the line's
         own = loose[ask] & pr.ok & ~taken
@@ -2041,6 +2031,19 @@ def _own_slope_sigma(cal: Calibration, theta: np.ndarray, d: np.ndarray, d_lo: n
     _, b_new = cal.log_ab(theta)
     sigma = np.hypot(np.maximum(np.abs(b_new) * d * sig_s, SIGMA_FLOOR_M), spread)
     return sigma, np.isfinite(d) & (d >= cal.min_range_m) & np.isfinite(sigma)
+
+
+def _far_line_vote_compiled(at, sel, lab, theta_now, pr: _Profile, d, vi, n_lines: int,
+                            cal: Calibration, half: int, min_n: int, z_max: float,
+                            shift_m: float) -> np.ndarray:
+    """``estimate_numpy.far_line_vote`` (the statement and the why) in one compiled call
+    (``irring.estimation._lines.far_line_vote``, held to it by tests/test_estimate_oracle.py):
+    the lines voted off, (n_lines,) bool."""
+    f = np.ascontiguousarray
+    return _lines.far_line_vote(
+        at, sel, lab, f(theta_now, dtype=float), pr.chain, pr.step, pr.n, pr.se, pr.slope,
+        pr.theta, pr.s, f(d, dtype=float), vi, cal.theta_rad, cal._node_log_a, cal.b,
+        n_lines, half, min_n, z_max, shift_m)
 
 
 def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: np.ndarray,

@@ -11,13 +11,15 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
-from .calibration import RANGE_SIGMAS, Calibration
-from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, REACH_CLEAR_M, REACH_MIN_MEMBERS,
-                       REGROUP_WINDOW, SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
+from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration
+from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RUN_MAX,
+                       POST_SENSORS, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
+                       SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
                        LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
                        member_spans, nominal_calibration, polyline_ids, range_profiles,
-                       reach_cos_limit, resolve_foldover, scan_order, settled_within_noise)
+                       reach_cos_limit, resolve_foldover, scan_order, settled_within_noise,
+                       silent_gaps)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -1125,7 +1127,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
         iterations=it_out, valid=valid, reason=reason, max_range_m=max_range)
     return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, True, history,
                           counts, np.asarray(sweep.steps), reach=no_return_reach,
-                          snapper=snap_to_lines, profiler=range_profiles)
+                          snapper=snap_to_lines, profiler=range_profiles,
+                          voter=far_line_vote, post_grouper=post_groups, gapper=silent_gaps)
 
 
 def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
@@ -1321,3 +1324,81 @@ def _scatter(values, index, shape, fill, held: _Held | None = None, mask=None):
     if mask is not None:
         out[~mask] = fill
     return out
+
+
+def far_line_vote(at: np.ndarray, sel: np.ndarray, lab: np.ndarray, theta_now: np.ndarray,
+                  pr, d: np.ndarray, vi: np.ndarray, n_lines: int, cal: Calibration,
+                  half: int, min_n: int, z_max: float, shift_m: float) -> np.ndarray:
+    """Which short far lines their members vote off (``estimate.local_incidence``; docs/
+    foldover.md, "Short far lines"): (n_lines,) bool. ``at`` (A,): the asked members'
+    places among the valid readings ``vi`` (flat indices into ``d``, the distances),
+    ``sel`` (A,) their places among the readings profiled (``pr``, a ``_Profile``); ``lab``,
+    ``theta_now`` (K,): each valid reading's line (−1 none) and θ.
+
+    A member votes where its profile has ≥ ``min_n`` readings and a slope error, and its
+    window (``half`` steps) holds its line's readings only, unless fewer than ``min_n`` of
+    the line's members have such a window. A line with ≥ ``min_n`` votes is off where their
+    summed z = (tan θ − |own slope|)/se exceeds ``z_max`` per vote and reading the voters at
+    their own θ would move them ``shift_m`` on average. The compiled
+    ``_lines.far_line_vote`` is held to this."""
+    line = lab[at]
+    n, se, slope = pr.n[sel], pr.se[sel], pr.slope[sel]
+    use = (n >= min_n) & (se > 0)
+    # a profile whose window holds another line's reading spans a corner and measures
+    # neither wall: a line with enough members whose profiles see it alone is judged by them
+    j = at[:, None] + np.arange(-half, half + 1)
+    jc = np.clip(j, 0, lab.size - 1)
+    window = ((j == jc) & (pr.chain[jc] == pr.chain[at][:, None])
+              & (np.abs(pr.step[jc] - pr.step[at][:, None]) <= half))
+    pure = use & ~(window & (lab[jc] != line[:, None])).any(axis=1)
+    use &= pure | (np.bincount(line, weights=pure, minlength=n_lines) < min_n)[line]
+    z = np.where(use, (np.tan(theta_now[at]) - np.abs(slope)) / np.where(use, se, 1.0), 0.0)
+    n_use = np.bincount(line, weights=use, minlength=n_lines)
+    z_sum = np.bincount(line, weights=z, minlength=n_lines)
+    off_line = (n_use >= min_n) & (np.abs(z_sum) > z_max * np.maximum(n_use, 1))
+    if off_line.any():   # … and whether their own θ would move them at all
+        use &= off_line[line]
+        shift = np.zeros(line.size)
+        shift[use] = np.abs(d[vi[at[use]]] - cal.distance(pr.s[at[use]], pr.theta[sel][use]))
+        off_line &= np.bincount(line, weights=shift, minlength=n_lines) >= shift_m * n_use
+    return off_line
+
+
+def post_groups(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration):
+    """The groups of readings that could be one far post (``estimate.far_posts``; docs/
+    estimator.md, "Far posts"): readings on no line (INCIDENCE_UNKNOWN, or valid with
+    ``label`` (S, N) −1) with clear returns (``counts`` (S, N) at least RETURN_SIGMAS +
+    RANGE_SIGMAS count σ above the no-return level), whose θ = 0 end points chain within
+    ``POST_LINK_M``; a group holds ≥ 3 readings of ≥ ``POST_SENSORS`` sensors, ≤
+    ``POST_RUN_MAX`` of each. Returns None where none does, else (row, col, comp, groups,
+    px, py): the candidates (row-major), each one's group (its smallest member's index),
+    the groups that qualify and the end points. The compiled ``_lines.post_groups`` is held
+    to this."""
+    shape = points.valid.shape
+    row, col = ((points.reason == Reason.INCIDENCE_UNKNOWN)
+                | (points.valid & (np.asarray(label).reshape(shape) < 0))).nonzero()
+    s_c = np.asarray(counts, dtype=float).reshape(shape)[row, col]
+    # clear returns only: near the no-return level noise alone makes some (as pooling says)
+    clear = s_c >= cal.no_return_counts + (RETURN_SIGMAS + RANGE_SIGMAS) * cal.sigma_counts()
+    row, col, s_c = row[clear], col[clear], s_c[clear]
+    if row.size < 3 or np.unique(col).size < POST_SENSORS:
+        return None
+    la0, b0 = cal._ab0
+    d0 = np.exp(la0 + b0 * np.log(s_c))                 # cal.distance(s_c, 0.0)
+    heading = np.asarray(points.heading, dtype=float)[row, col]
+    px = np.asarray(points.origin_x, dtype=float)[row, col] + d0 * np.cos(heading)
+    py = np.asarray(points.origin_y, dtype=float)[row, col] + d0 * np.sin(heading)
+    near = np.hypot(px[:, None] - px[None, :], py[:, None] - py[None, :]) < POST_LINK_M
+    comp = np.arange(row.size)
+    while True:                    # connected groups: each takes its smallest member's index
+        low = np.where(near, comp[None, :], row.size).min(axis=1)
+        if np.array_equal(low, comp):
+            break
+        comp = low
+    each = np.bincount(comp * shape[1] + col, minlength=row.size * shape[1]).reshape(
+        row.size, shape[1])
+    groups = ((each.sum(axis=1) >= 3) & (np.count_nonzero(each, axis=1) >= POST_SENSORS)
+              & (each.max(axis=1) <= POST_RUN_MAX)).nonzero()[0]
+    if not groups.size:
+        return None
+    return row, col, comp, groups, px, py
