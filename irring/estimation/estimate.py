@@ -695,10 +695,13 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
         lab_c, m_c = np.maximum(s_lab, 0), np.maximum(m_lab, 0)
         ok &= (in_run[s_run, lab_c] == s_len) & (runs_of[lab_c, s_sens] >= 2)
         ok &= (in_run[s_run, m_c] >= s_len) & (s_len <= ACROSS_MAX)
-        ok &= _line_contradicted(points, counts, steps, cal, vi,
-                                 np.where(nb > np.arange(n_s), first, last),
-                                 nb > np.arange(n_s), lab_c, alpha, cx, cy)
-        to = np.where(ok & (to < 0), m_lab, to)
+        ask = ok.nonzero()[0]
+        if ask.size:     # the light test (the costly part) only where the rest holds
+            before = nb[ask] > ask
+            ok[ask] = _line_contradicted(points, counts, steps, cal, vi,
+                                         np.where(before, first[ask], last[ask]), before,
+                                         lab_c[ask], alpha, cx, cy)
+            to = np.where(ok & (to < 0), m_lab, to)
     if not (to >= 0).any():
         return points, label
     # (readings their line put past the range are dropped as read: none is made valid)
