@@ -551,14 +551,19 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                         lines=empty if detail else None, theta_history=tuple(history))
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
-    # short far lines are doubted in the final pass: a fold-over's judging pass keeps its
-    # lines whole (they decide the branches; docs/foldover.md, "Short far lines")
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
                                    grouping.cx, grouping.cy, gapper)
-    points, label = local_incidence(points, label, index, counts, steps, cal, profiler,
-                                    doubt_far=snap, short_far=snap, voter=voter)
+    # short far lines are doubted in the final pass (a fold-over's judging pass keeps its
+    # lines whole: they decide the branches; docs/foldover.md, "Short far lines"), judged as
+    # fitted, but after round_runs: a column's arc cut into short far lines is a circle's
+    # first (doubted first, its members made INCIDENCE_UNKNOWN cut the column's runs)
+    short = short_far_lines(points, label, index, cal) if snap else None
+    points, label = local_incidence(points, label, index, counts, steps, cal, profiler)
     points, label = round_runs(points, label, index, counts, steps, cal, grouping.alpha,
                                grouping.cx, grouping.cy, profiler)
+    if short is not None:
+        points, label = doubt_far_lines(points, label, index, counts, steps, cal, *short,
+                                        profiler, voter)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -1791,9 +1796,8 @@ def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.
 
 
 def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
-                    steps: np.ndarray, cal: Calibration, profiler: Callable | None = None,
-                    doubt_far: bool = False, short_far: bool = False,
-                    voter: Callable | None = None) -> tuple[Points, np.ndarray]:
+                    steps: np.ndarray, cal: Calibration, profiler: Callable | None = None
+                    ) -> tuple[Points, np.ndarray]:
     """Readings on no line (``label`` −1, θ = 0), and the members of lines that are a round
     thing's, re-read at the incidence their own sensor's neighbouring steps give; numpy,
     shared by both estimators.
@@ -1807,10 +1811,7 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     INCIDENCE_UNKNOWN, unless the readings on no line alone give it a straight profile that
     places it surely (:func:`_off_line_profiles`). The members of a steep line whose own
     profiles mostly bend away (a column's arc cut into short lines; ``ROUND_*``) leave it
-    first and are read the same way; so do, with ``doubt_far``, the members of a short far
-    line whose own slopes disown its θ (``FAR_LINE_*``), those their slope does not place
-    INCIDENCE_UNKNOWN; a short far line whose direction is unsure (``SHORT_LINE_*``) loses
-    the members whose own profile is straight and clearly sloped, at their own θ. Returns the
+    first and are read the same way (short far lines: :func:`doubt_far_lines`). Returns the
     points and ``label`` without those members. The why and the measured effects:
     docs/estimator.md ("Readings on no line", "Round things", "A short far line's
     direction"), docs/foldover.md ("Short far lines")."""
@@ -1831,38 +1832,16 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     # where a part is read to its own range, a far line of few noisy readings may know its
     # direction only to 10-20°, and its members read at that θ lie 20-150 mm off: a line
     # whose direction is that unsure gives its members no θ (docs/estimator.md, "A far
-    # line's direction"); elsewhere a short far line that unsure lets each member whose own
-    # profile is straight and clearly sloped take its own θ ("A short far line's direction")
+    # line's direction"; elsewhere: doubt_far_lines)
     unsure = np.zeros(vi.size, dtype=bool)
-    loose = np.zeros(vi.size, dtype=bool)
-    doubt = np.zeros(vi.size, dtype=bool)
-    if member.size:
+    if member.size and read_to_own_range(cal, points.max_range_m):
         at = vi[member]
-        far = (np.bincount(line, weights=points.d.reshape(-1)[at], minlength=total.size)
-               >= FAR_LINE_MIN_SHARE * points.max_range_m * total)
-        own_range = read_to_own_range(cal, points.max_range_m)
-        if own_range:
-            sigma_perp = points.sigma_m.reshape(-1)[at] * np.cos(theta_now[member])
-            se_dir = direction_se(points.x.reshape(-1)[at], points.y.reshape(-1)[at],
-                                  sigma_perp, line, total.size)
-            unsure[member] = (se_dir > DIRECTION_SE_MAX)[line]
-        else:
-            few_far = far & (total <= SHORT_LINE_MAX_MEMBERS) & short_far
-            if few_far.any():        # (the directions of those lines' members alone)
-                sel = few_far[line].nonzero()[0]
-                at_s = at[sel]
-                sigma_perp = points.sigma_m.reshape(-1)[at_s] * np.cos(theta_now[member[sel]])
-                se_dir = direction_se(points.x.reshape(-1)[at_s], points.y.reshape(-1)[at_s],
-                                      sigma_perp, line[sel], total.size)
-                loose[member[sel]] = (se_dir > SHORT_LINE_SE_MAX)[line[sel]]
-        # a short far line's direction rests on few noisy readings: its members are asked
-        # too; fewer than _LOCAL_MIN members never outvote their line (below): not asked
-        if doubt_far:
-            short = far & (total >= _LOCAL_MIN) & (total <= FAR_LINE_MAX_MEMBERS)
-            if short.any():
-                doubt[member] = short[line]
+        sigma_perp = points.sigma_m.reshape(-1)[at] * np.cos(theta_now[member])
+        se_dir = direction_se(points.x.reshape(-1)[at], points.y.reshape(-1)[at],
+                              sigma_perp, line, total.size)
+        unsure[member] = (se_dir > DIRECTION_SE_MAX)[line]
     maybe |= unsure
-    ask = (off | maybe | doubt | loose).nonzero()[0]
+    ask = (off | maybe).nonzero()[0]
     if ask.size == 0:
         return points, label
     pr = (profiler or profiles_compiled)(points, vi, ask, counts, steps, cal)
@@ -1874,24 +1853,6 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     round_line = (bent >= ROUND_SHARE * total) & (bent >= ROUND_OVER_OK * straight)
     taken = unsure[ask]
     taken[asked] |= round_line[line]
-    # short far lines: the members' own slopes, on average, against the line's θ
-    doubted = np.zeros(ask.size, dtype=bool)
-    asked = doubt[ask]
-    if asked.any():
-        at = ask[asked]
-        off_line = (voter or _far_line_vote_compiled)(
-            at, asked.nonzero()[0], lab, theta_now, pr, points.d.reshape(-1), vi, total.size,
-            cal, _LOCAL_STEPS, _LOCAL_MIN, FAR_LINE_Z, FAR_LINE_SHIFT_M)
-        if off_line.any():
-            doubted[asked] = off_line[lab[at]] & ~taken[asked]
-    voted = doubted.copy()   # (a line its members voted off: every member leaves it)
-    if loose.any():   # … each member whose own straight slope is clearly not the line's
-        own = loose[ask] & pr.ok & ~taken
-        doubted |= own & (np.abs(np.tan(theta_now[ask]) - np.abs(pr.slope))
-                          > SHORT_LINE_OWN_SE * pr.se)
-    if doubted.any():
-        points, label = _leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal,
-                                            stay=loose[ask[doubted]] & ~voted[doubted])
     if taken.any():    # back to θ = 0 with the σ of a reading on no line
         at = vi[ask[taken]]
         s0, d0 = pr.s[ask[taken]], pr.d0[ask[taken]]
@@ -1993,6 +1954,84 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     return points_with(points, **out), label
 
 
+def short_far_lines(points: Points, label: np.ndarray, index: np.ndarray, cal: Calibration
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The members of short far lines, as fitted (flat (S·N,) masks; None where there are
+    none): those of lines of ``_LOCAL_MIN`` to ``FAR_LINE_MAX_MEMBERS`` members lying on
+    average ``FAR_LINE_MIN_SHARE`` of the range away, which their members' profiles vote
+    on, and, unless a part is read to its own range, those of such lines of at most
+    ``SHORT_LINE_MAX_MEMBERS`` whose direction standard error exceeds ``SHORT_LINE_SE_MAX``
+    (:func:`doubt_far_lines` asks both)."""
+    vi = index[points.valid.reshape(-1)[index]]
+    lab = label.reshape(-1)[vi]
+    member = (lab >= 0).nonzero()[0]
+    if member.size == 0:
+        return None
+    line = lab[member]
+    total = np.bincount(line)
+    at = vi[member]
+    far = (np.bincount(line, weights=points.d.reshape(-1)[at], minlength=total.size)
+           >= FAR_LINE_MIN_SHARE * points.max_range_m * total)
+    # fewer than _LOCAL_MIN members never outvote their line: not asked
+    doubt = np.zeros(label.size, dtype=bool)
+    doubt[at] = (far & (total >= _LOCAL_MIN) & (total <= FAR_LINE_MAX_MEMBERS))[line]
+    loose = np.zeros(label.size, dtype=bool)
+    few_far = far & (total <= SHORT_LINE_MAX_MEMBERS)
+    if few_far.any() and not read_to_own_range(cal, points.max_range_m):
+        sel = few_far[line].nonzero()[0]   # (the directions of those lines' members alone)
+        at_s = at[sel]
+        sigma_perp = (points.sigma_m.reshape(-1)[at_s]
+                      * np.cos(points.theta.reshape(-1)[at_s]))
+        se_dir = direction_se(points.x.reshape(-1)[at_s], points.y.reshape(-1)[at_s],
+                              sigma_perp, line[sel], total.size)
+        loose[at_s] = (se_dir > SHORT_LINE_SE_MAX)[line[sel]]
+    return (doubt, loose) if doubt.any() or loose.any() else None
+
+
+def doubt_far_lines(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
+                    steps: np.ndarray, cal: Calibration, doubt: np.ndarray, loose: np.ndarray,
+                    profiler: Callable | None = None, voter: Callable | None = None
+                    ) -> tuple[Points, np.ndarray]:
+    """The members of short far lines (:func:`short_far_lines`: ``doubt``, ``loose``) their
+    own profiles (:func:`local_incidence`'s) disown, off their lines; numpy, shared by both
+    estimators.
+
+    Where the members of a ``doubt`` line differ from its θ by more than ``FAR_LINE_Z``
+    standard errors on average and would move ``FAR_LINE_SHIFT_M`` on average, every member
+    leaves it, at its own θ where its profile is straight and clearly steep, else
+    INCIDENCE_UNKNOWN; a ``loose`` line loses the members whose own profile is straight and
+    whose slope lies ``SHORT_LINE_OWN_SE`` of its standard error off the line's, at their
+    own θ where that lies within the range. Only members still on their line are asked (not
+    those a circle took: :func:`round_runs`). ``voter``: the vote (compiled by default; the
+    oracle passes ``estimate_numpy.far_line_vote``). Returns the points and ``label``.
+    Why: docs/foldover.md ("Short far lines", "On every sweep"), docs/estimator.md ("A short
+    far line's direction")."""
+    vi = index[points.valid.reshape(-1)[index]]
+    lab = label.reshape(-1)[vi]
+    on = lab >= 0
+    doubt, loose = doubt[vi] & on, loose[vi] & on
+    ask = (doubt | loose).nonzero()[0]
+    if ask.size == 0:
+        return points, label
+    pr = (profiler or profiles_compiled)(points, vi, ask, counts, steps, cal)
+    theta_now = points.theta.reshape(-1)[vi]
+    doubted = np.zeros(ask.size, dtype=bool)
+    asked = doubt[ask]
+    if asked.any():      # the members' own slopes, on average, against the line's θ
+        off_line = (voter or _far_line_vote_compiled)(
+            ask[asked], asked.nonzero()[0], lab, theta_now, pr, points.d.reshape(-1), vi,
+            int(lab.max()) + 1, cal, _LOCAL_STEPS, _LOCAL_MIN, FAR_LINE_Z, FAR_LINE_SHIFT_M)
+        doubted[asked] = off_line[lab[ask[asked]]]
+    voted = doubted.copy()   # (a line its members voted off: every member leaves it)
+    if loose.any():   # … each member whose own straight slope is clearly not the line's
+        doubted |= loose[ask] & pr.ok & (np.abs(np.tan(theta_now[ask]) - np.abs(pr.slope))
+                                         > SHORT_LINE_OWN_SE * pr.se)
+    if not doubted.any():
+        return points, label
+    return _leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal,
+                               stay=loose[ask[doubted]] & ~voted[doubted])
+
+
 def _off_line_profiles(points: Points, label: np.ndarray, pos: np.ndarray, vi: np.ndarray,
                        counts: np.ndarray, steps: np.ndarray, cal: Calibration,
                        profiler: Callable | None):
@@ -2059,7 +2098,6 @@ def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: 
     left on their line, as they were, where their own θ does not place them within the
     range."""
     placed = pr.ok[doubted].copy()  # only a straight, clearly steep profile places one
-    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     if placed.any():
         s, theta = pr.s[pos[placed]], pr.theta[doubted][placed]
         t, e = np.abs(pr.slope[doubted][placed]), pr.se[doubted][placed]
@@ -2071,24 +2109,21 @@ def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: 
         if stay is not None:     # (a stayer is placed only within the range)
             fits &= ~stay[placed] | (d_new <= points.max_range_m)
         placed[placed] = fits
-        put = vi[pos[placed]]
-        hh = points.heading.reshape(-1)[put]
-        for f, v in (("d", d_new[fits]), ("theta", theta[fits]), ("sigma_m", sigma[fits]),
-                     ("x", points.origin_x.reshape(-1)[put] + d_new[fits] * np.cos(hh)),
-                     ("y", points.origin_y.reshape(-1)[put] + d_new[fits] * np.sin(hh))):
-            out[f].reshape(-1)[put] = v
+        if fits.any():
+            points = placed_at(points, vi[pos[placed]], d_new[fits], theta[fits], sigma[fits])
     leave = np.ones(pos.size, dtype=bool) if stay is None else placed | ~stay
     label = label.copy()
     label.reshape(-1)[vi[pos[leave]]] = -1
     gone = vi[pos[leave & ~placed]]
-    valid, reason = points.valid, points.reason
     if gone.size:
+        out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
         for f in out.values():
             f.reshape(-1)[gone] = np.nan
-        valid, reason = valid.copy(), reason.copy()
+        valid, reason = points.valid.copy(), points.reason.copy()
         valid.reshape(-1)[gone] = False
         reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
-    return points_with(points, valid=valid, reason=reason, **out), label
+        points = points_with(points, valid=valid, reason=reason, **out)
+    return points, label
 
 
 # --------------------------------------------------------------------------- silent beams

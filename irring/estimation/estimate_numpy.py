@@ -1329,7 +1329,7 @@ def _scatter(values, index, shape, fill, held: _Held | None = None, mask=None):
 def far_line_vote(at: np.ndarray, sel: np.ndarray, lab: np.ndarray, theta_now: np.ndarray,
                   pr, d: np.ndarray, vi: np.ndarray, n_lines: int, cal: Calibration,
                   half: int, min_n: int, z_max: float, shift_m: float) -> np.ndarray:
-    """Which short far lines their members vote off (``estimate.local_incidence``; docs/
+    """Which short far lines their members vote off (``estimate.doubt_far_lines``; docs/
     foldover.md, "Short far lines"): (n_lines,) bool. ``at`` (A,): the asked members'
     places among the valid readings ``vi`` (flat indices into ``d``, the distances),
     ``sel`` (A,) their places among the readings profiled (``pr``, a ``_Profile``); ``lab``,
