@@ -45,9 +45,10 @@ def test_on_simulated_walls_no_band_understates_its_error():
 
 def test_faces_ending_at_the_far_end_understate_less_without_straddling_pools(monkeypatch):
     """CRATES_A02, seeds 4307-4309, true distance 1.20-1.35 m (the GP2Y0A02's 80-90 % of its
-    1500 mm): err/σ RMS 2.16 and 22 % beyond 2σ while pools straddled a face's end; 1.68 and
-    16 % since POOL_SIDE_SIGMAS. Still above 1: those faces' lines hold a selection of their
-    readings (docs/estimator.md)."""
+    1500 mm): err/σ RMS 2.00 and 17.9 % beyond 2σ while pools straddled a face's end (2.16
+    and 21.6 % before the short far lines' doubt ran on every part); 1.68 and 15.7 % since
+    POOL_SIDE_SIGMAS. Still above 1: those faces' lines hold a selection of their readings
+    (docs/estimator.md)."""
     scene = loads(CRATES_A02)
 
     def band():
@@ -59,5 +60,5 @@ def test_faces_ending_at_the_far_end_understate_less_without_straddling_pools(mo
     after = band()
     monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)
     before = band()
-    assert before["z_rms"] > 2.0 and before["beyond_2sigma"] > 0.2
+    assert before["z_rms"] > 1.98 and before["beyond_2sigma"] > 0.175
     assert 1.25 < after["z_rms"] < before["z_rms"] - 0.3 and after["beyond_2sigma"] < 0.17
