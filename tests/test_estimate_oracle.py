@@ -377,7 +377,7 @@ def oracle_profile(**fields):
 
 
 def test_far_line_vote_kernel_agrees_with_its_numpy_statement():
-    """``_lines.far_line_vote`` (compiled, via local_incidence's wrapper) against
+    """``_lines.far_line_vote`` (compiled, via doubt_far_lines' wrapper) against
     ``estimate_numpy.far_line_vote`` on 400 random votes: the same lines voted off, exactly
     (tan, log, exp and the curve's interpolation differ from numpy's by an ulp at most, no
     vote here sits on its threshold), and not vacuously: some lines go off, most stay."""

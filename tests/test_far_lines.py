@@ -10,7 +10,7 @@ lines on every sweep (a GP2D12 that does not fold, below).
 - Lines the members disown: a short far line of two sensors can settle 20-45° off the wall
   (its members 100-115 mm long); each member's own range profile (its sensor's neighbouring
   steps) lies on average more than a standard error from the line's θ, and the members
-  leave the line (estimate.local_incidence).
+  leave the line (estimate.doubt_far_lines).
 
 docs/foldover.md, "Short far lines". Rooms of our own, every pose 171-179 mm from a wall
 but those of the GP2D12 that does not fold (at the end)."""

@@ -69,7 +69,7 @@ def test_line_members_sit_on_their_line_with_the_sigma_the_line_gives():
         snapped = _estimate(*args, keep_history=False, damping=True, detail=True, snap=True)
         p, q = own.points, snapped.points
         # members of a line in both (a short far line's members may leave it in the final
-        # pass: local_incidence's doubt)
+        # pass: doubt_far_lines)
         on = p.valid & q.valid & (own.lines.label >= 0) & (snapped.lines.label >= 0)
         moved = on & (p.d != q.d)
         assert moved.sum() > 100
