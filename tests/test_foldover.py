@@ -699,3 +699,27 @@ def test_a_line_member_beside_a_nearer_surface_held_out_is_not_placed(
     assert int(took.sum()) == taken and int(np.sum(err_q[took] < 0.010)) == taken_near
     np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
                                   p.reason)
+
+
+def test_a_line_member_beside_a_nearer_surface_is_found_whatever_the_row_order():
+    """The held-out neighbour is the sensor's previous or next motor step, not the row
+    beside it: the ring turning back (steps falling) kept the post's 2 edge readings."""
+    from irring.estimation import estimate_numpy
+
+    sc = loads(POST_BY_CORNER, source="<test>")
+    cal = scene_calibration(sc)[0]
+    (sw,) = pipeline.run(sc, seed=7102, progress=False, score=False).sweeps
+    rising = estimate(sw, cal)
+
+    def reordered(order):
+        return replace(sw, steps=sw.steps[order], sensor_angles=sw.sensor_angles[order],
+                       counts=sw.counts[order], timestamps_s=sw.timestamps_s[order],
+                       truth=None)
+
+    falling = np.arange(len(sw.steps))[::-1]
+    shuffled = np.random.default_rng(5).permutation(len(sw.steps))
+    assert int(rising.valid.sum()) == 67
+    for order in (falling, shuffled):
+        for p in (estimate(reordered(order), cal),
+                  estimate_numpy.estimate_detail(reordered(order), cal).points):
+            np.testing.assert_array_equal(p.reason, rising.reason[order])

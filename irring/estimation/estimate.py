@@ -2453,17 +2453,21 @@ def _beside_a_hidden_edge(p: Points, label: np.ndarray, sweep: Sweep, cal: Calib
         return p
     counts = np.asarray(sweep.counts, dtype=float)
     far0 = cal.distance(counts, 0.0)
-    nearer = np.full(counts.shape, np.inf)     # the nearer undecided neighbour's θ = 0 range
-    turn = np.zeros(counts.shape)              # … and how far the beam turned to it
-    steps = np.asarray(sweep.steps)
-    next_to = (np.diff(steps) == 1)[:, None]
-    dh = np.abs(np.diff(p.heading, axis=0))
+    # neighbours in step order: a falling or shuffled sweep's rows are not
+    order = np.argsort(np.asarray(sweep.steps), kind="stable")
+    far0_s, amb_s = far0[order], amb[order]
+    nearer_s = np.full(counts.shape, np.inf)   # the nearer undecided neighbour's θ = 0 range
+    turn_s = np.zeros(counts.shape)            # … and how far the beam turned to it
+    next_to = (np.diff(np.asarray(sweep.steps)[order]) == 1)[:, None]
+    dh = np.abs(np.diff(p.heading[order], axis=0))
     dh = np.minimum(dh, 2.0 * math.pi - dh)
     for mine, theirs in ((np.s_[:-1], np.s_[1:]), (np.s_[1:], np.s_[:-1])):
-        d_nb = np.where(next_to & amb[theirs], far0[theirs], np.inf)
-        closer = d_nb < nearer[mine]
-        nearer[mine] = np.where(closer, d_nb, nearer[mine])
-        turn[mine] = np.where(closer, dh, turn[mine])
+        d_nb = np.where(next_to & amb_s[theirs], far0_s[theirs], np.inf)
+        closer = d_nb < nearer_s[mine]
+        nearer_s[mine] = np.where(closer, d_nb, nearer_s[mine])
+        turn_s[mine] = np.where(closer, dh, turn_s[mine])
+    nearer, turn = np.empty_like(nearer_s), np.empty_like(turn_s)
+    nearer[order], turn[order] = nearer_s, turn_s
     with np.errstate(invalid="ignore"):
         allowed = (p.d * turn * jump_slope(cal.max_incidence_rad)
                    + options.jump_sigmas * math.sqrt(2.0) * p.sigma_m)
