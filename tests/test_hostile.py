@@ -1207,7 +1207,8 @@ def test_a_study_into_the_folder_another_study_is_writing_is_refused(tmp_path, c
     assert main(argv) == 0 and (out / "results.csv").read_text() == text   # held no more
 
 
-@pytest.mark.parametrize("command", ["run", "replay", "bench rooms"])
+@pytest.mark.parametrize("command", ["run", "replay", "bench rooms", "compare",
+                                     "bench accuracy"])
 def test_a_run_into_a_folder_another_process_holds_is_refused_before_the_work(
         tmp_path, capsys, monkeypatch, good_recording, command):
     """A run into the --out a study holds waited 30 s for the commit lock after the whole
@@ -1219,13 +1220,18 @@ def test_a_run_into_a_folder_another_process_holds_is_refused_before_the_work(
     monkeypatch.setattr(outputs, "PROBE_WAIT_S", 0.3)
     monkeypatch.setattr(pipeline, "run", lambda *a, **k: pytest.fail("ran"))
     monkeypatch.setattr(pipeline, "replay", lambda *a, **k: pytest.fail("ran"))
+    from irring.studies import accuracy, compare
+    monkeypatch.setattr(compare, "compare", lambda *a, **k: pytest.fail("ran"))
+    monkeypatch.setattr(accuracy, "measure", lambda *a, **k: pytest.fail("ran"))
     out = tmp_path / "held out"
     out.mkdir()
     (out / "results.csv").write_text("design\n")
     recording = tmp_path / "rec.npz"
     recording.write_bytes(good_recording)
     argv = {"run": ["run", "t_room_cylinder"], "replay": ["replay", str(recording)],
-            "bench rooms": ["bench", "rooms", "t_room_cylinder"]}[command]
+            "bench rooms": ["bench", "rooms", "t_room_cylinder"],
+            "compare": ["compare", "--scenario", "t_room_cylinder"],
+            "bench accuracy": ["bench", "accuracy", "--scenario", "t_room_cylinder"]}[command]
     fd = os.open(out, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # what a running study holds

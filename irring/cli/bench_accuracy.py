@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     named_once(scenarios, "--scenario", scenario_file)
     named_once(args.knob or (), "--knob")
     configs = accuracy.configurations(args.knob)
-    check_out(args.out)
+    check_out(args.out, held=False)   # a study holding the folder: refused before the work
     total = len(configs) * len(scenarios) * args.seeds
     with progress_bar(total, "bench accuracy", unit="run") as bar, \
             executor(args.workers, args.dask) as ex:

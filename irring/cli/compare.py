@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     names = args.design or list(designs.DESIGN_BY_NAME)
     named_once(scenarios, "--scenario", scenario_file)
     named_once(names, "--design")
-    check_out(args.out)
+    check_out(args.out, held=False)   # a study holding the folder: refused before the work
     with executor(args.workers, args.dask) as ex:
         result = compare.compare(scenarios, names, args.seeds,
                                  detection_distances_m=args.distances_mm, bearings=args.bearings,
