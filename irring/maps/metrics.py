@@ -13,8 +13,8 @@ import numpy as np
 
 from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
 from .. import gp2
-from ..core import (Cylinder, Ring, box_corners, distance_to_outline, first_wall_into,
-                    inside_obstacle, inside_outline, obstacle_distance)
+from ..core import (GEOMETRY_TOL_M, Cylinder, Ring, box_corners, distance_to_outline,
+                    first_wall_into, inside_obstacle, inside_outline, obstacle_distance)
 from ..resources import kernel
 from ..estimation.calibration import Calibration
 from ..scenario import ReflectanceEffect, Scenario
@@ -95,7 +95,7 @@ def _in_room(samples: tuple[np.ndarray, np.ndarray], outline) -> tuple[np.ndarra
     """The surface samples (points, normals) inside the room or on its outline."""
     points, normals = samples
     keep = (inside_outline(points[:, 0], points[:, 1], outline)
-            | (distance_to_outline(points[:, 0], points[:, 1], outline) <= 1e-9))
+            | (distance_to_outline(points[:, 0], points[:, 1], outline) <= GEOMETRY_TOL_M))
     return points[keep], normals[keep]
 
 
@@ -106,7 +106,7 @@ def _outside_obstacles(samples: tuple[np.ndarray, np.ndarray], obstacles
     points, normals = samples
     keep = np.ones(len(points), bool)
     for ob in obstacles:
-        keep &= obstacle_distance(ob, points[:, 0], points[:, 1]) > 1e-9
+        keep &= obstacle_distance(ob, points[:, 0], points[:, 1]) > GEOMETRY_TOL_M
     return points[keep], normals[keep]
 
 
