@@ -558,6 +558,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     # fitted, but after round_runs: a column's arc cut into short far lines is a circle's
     # first (doubted first, its members made INCIDENCE_UNKNOWN cut the column's runs)
     short = short_far_lines(points, label, index, cal) if snap else None
+    # one profile call for local_incidence, round_runs and the doubt while no reading leaves
+    profiler = _SharedProfiles(profiler or profiles_compiled,
+                               None if short is None else short[0] | short[1])
     points, label = local_incidence(points, label, index, counts, steps, cal, profiler)
     points, label = round_runs(points, label, index, counts, steps, cal, grouping.alpha,
                                grouping.cx, grouping.cy, profiler)
@@ -1177,6 +1180,41 @@ def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.n
     return _Profile(s=s, d0=d0, sig_s=sig_s, n=n, slope=slope, se=se, theta=theta, ok=ok,
                     convex=convex, sure=bend > _CONVEX_SURE_SE * bend_se, concave=concave,
                     steep=steep, chain=chain, heading=h, ox=ox, oy=oy, step=step)
+
+
+class _SharedProfiles:
+    """A profiler (``profiler``'s signature) that also profiles the readings of ``extra``
+    (flat (S·N,) mask) in its first call and answers later calls from that one while the
+    valid readings ``vi`` are the same: a reading's profile depends on ``vi`` and on no
+    other asked reading (the shared profile_inputs and one kernel call saved a sweep)."""
+
+    def __init__(self, profiler: Callable, extra: np.ndarray | None):
+        self.profiler, self.extra, self.vi, self.asked, self.pr = profiler, extra, None, None, None
+
+    def __call__(self, points: Points, vi: np.ndarray, off: np.ndarray, counts: np.ndarray,
+                 steps: np.ndarray, cal: Calibration, apart: np.ndarray | None = None
+                 ) -> _Profile:
+        if apart is not None:
+            return self.profiler(points, vi, off, counts, steps, cal, apart=apart)
+        if self.pr is None:
+            if self.extra is None:
+                return self.profiler(points, vi, off, counts, steps, cal)
+            asked = self.extra[vi]
+            asked[off] = True
+            self.vi, self.asked = vi, asked.nonzero()[0]
+            self.pr = self.profiler(points, vi, self.asked, counts, steps, cal)
+        elif not np.array_equal(vi, self.vi):
+            return self.profiler(points, vi, off, counts, steps, cal)
+        row = np.searchsorted(self.asked, off)
+        if not np.array_equal(self.asked.take(row, mode="clip"), off):
+            return self.profiler(points, vi, off, counts, steps, cal)
+        out = object.__new__(_Profile)    # (dataclasses.replace costs several times more)
+        out.__dict__.update(self.pr.__dict__)
+        out.__dict__.update({f: getattr(self.pr, f).take(row) for f in _PROFILE_ROWS})
+        return out
+
+
+_PROFILE_ROWS = ("n", "slope", "se", "theta", "ok", "convex", "sure", "concave", "steep")
 
 
 ROUND_SHARE = 0.4        # a line is a round thing's when this share of its members' profiles
