@@ -26,8 +26,8 @@ def _same(a, b):
 def test_shared_profiles_are_a_call_of_their_own_while_the_valid_readings_stay(profiler):
     """Asked first for some readings with others extra, then for the extra ones: the
     profiler runs once and both answers are bit for bit a call of their own; once a
-    reading is gone (another ``vi``), or a reading never asked is wanted, or readings are
-    set apart, it asks the profiler afresh."""
+    reading is gone (another ``vi``) it asks the profiler afresh, the extra ones with it;
+    a reading never asked, or readings set apart, are a call of their own."""
     cal = stand_in_calibration(strength=0.6, noise_counts=2.0)
     room = polygon([(-0.41, -0.37), (0.52, -0.29), (0.47, 0.44), (-0.33, 0.51)])
     sweep, _, _ = make_sweep(cal, walls=room, circles=[((0.21, -0.08), 0.06)],
@@ -60,10 +60,14 @@ def test_shared_profiles_are_a_call_of_their_own_while_the_valid_readings_stay(p
     unasked = np.setdiff1d(np.arange(vi.size), shared.asked)[:4]
     _same(shared(p, vi, unasked, sweep.counts, steps, cal),
           profiler(p, vi, unasked, sweep.counts, steps, cal))
-    # a reading gone: other polylines and windows, a call of its own
+    # a reading gone: other polylines and windows, a call of its own, the extra ones with it
     fewer = np.delete(vi, 11)
     _same(shared(p, fewer, later - 1, sweep.counts, steps, cal),
           profiler(p, fewer, later - 1, sweep.counts, steps, cal))
+    assert calls[-1] == np.union1d(later - 1, extra[fewer].nonzero()[0]).size
+    on_fewer = extra[fewer].nonzero()[0]
+    _same(shared(p, fewer.copy(), on_fewer, sweep.counts, steps, cal),
+          profiler(p, fewer, on_fewer, sweep.counts, steps, cal))
     apart = np.zeros(vi.size, dtype=bool)
     apart[::5] = True
     _same(shared(p, vi, first, sweep.counts, steps, cal, apart=apart),

@@ -1184,9 +1184,10 @@ def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.n
 
 class _SharedProfiles:
     """A profiler (``profiler``'s signature) that also profiles the readings of ``extra``
-    (flat (S·N,) mask) in its first call and answers later calls from that one while the
-    valid readings ``vi`` are the same: a reading's profile depends on ``vi`` and on no
-    other asked reading (the shared profile_inputs and one kernel call saved a sweep)."""
+    (flat (S·N,) mask) whenever it calls ``profiler`` and answers later calls from that call
+    while the valid readings ``vi`` are the same: a reading's profile depends on ``vi`` and
+    on no other asked reading (the shared profile_inputs and one kernel call saved a sweep).
+    Readings set apart, or never asked, are asked of ``profiler`` alone."""
 
     def __init__(self, profiler: Callable, extra: np.ndarray | None):
         self.profiler, self.extra, self.vi, self.asked, self.pr = profiler, extra, None, None, None
@@ -1194,24 +1195,22 @@ class _SharedProfiles:
     def __call__(self, points: Points, vi: np.ndarray, off: np.ndarray, counts: np.ndarray,
                  steps: np.ndarray, cal: Calibration, apart: np.ndarray | None = None
                  ) -> _Profile:
-        if apart is not None:
+        if apart is not None or self.extra is None:
             return self.profiler(points, vi, off, counts, steps, cal, apart=apart)
-        if self.pr is None:
-            if self.extra is None:
+        if self.pr is not None and np.array_equal(vi, self.vi):
+            row = np.searchsorted(self.asked, off)
+            if not np.array_equal(self.asked.take(row, mode="clip"), off):
                 return self.profiler(points, vi, off, counts, steps, cal)
-            asked = self.extra[vi]
-            asked[off] = True
-            self.vi, self.asked = vi, asked.nonzero()[0]
-            self.pr = self.profiler(points, vi, self.asked, counts, steps, cal)
-        elif not np.array_equal(vi, self.vi):
-            return self.profiler(points, vi, off, counts, steps, cal)
-        row = np.searchsorted(self.asked, off)
-        if not np.array_equal(self.asked.take(row, mode="clip"), off):
-            return self.profiler(points, vi, off, counts, steps, cal)
-        out = object.__new__(_Profile)    # (dataclasses.replace costs several times more)
-        out.__dict__.update(self.pr.__dict__)
-        out.__dict__.update({f: getattr(self.pr, f).take(row) for f in _PROFILE_ROWS})
-        return out
+            out = object.__new__(_Profile)    # (dataclasses.replace costs several times more)
+            out.__dict__.update(self.pr.__dict__)
+            out.__dict__.update({f: getattr(self.pr, f).take(row) for f in _PROFILE_ROWS})
+            return out
+        # the first call, or a reading left since: the doubt's members asked with it
+        asked = self.extra[vi]
+        asked[off] = True
+        self.vi, self.asked = vi, asked.nonzero()[0]
+        self.pr = self.profiler(points, vi, self.asked, counts, steps, cal)
+        return self(points, vi, off, counts, steps, cal)
 
 
 _PROFILE_ROWS = ("n", "slope", "se", "theta", "ok", "convex", "sure", "concave", "steep")
