@@ -10,10 +10,10 @@ import types
 import numpy as np
 import pytest
 
-from irring import errors
+from irring import errors, pipeline
 from irring.cli import main
 from irring.maps.mapping import OccupancyGrid
-from irring.scenario import resolve
+from irring.scenario import load_scenario, resolve
 from irring.studies import foldover, grazing
 
 # An asymmetric room: a wall rising at 48.6° from the origin (m).
@@ -125,6 +125,15 @@ def test_foldover_cli_runs_the_other_rooms_and_ends_with_a_bad_files_status(tmp_
     assert run["nonfinite"] == 0 and run["valid"] > 100 and run["ambiguous"] > 0
     assert run["max_error_m"] < foldover.MAX_ERROR_M and run["no_hit"] == 0
     assert lines[2].split()[-1] == "pass"
+    # the map's scores, as `irring run` scores that room and seed
+    scores = pipeline.run(load_scenario(good), progress=False).scores
+    assert {k: run[k] for k in foldover.MAP_SCORES} == {k: scores[k] for k in (
+        "occupied_f1", "occupied_precision", "occupied_recall", "free_accuracy")}
+    assert 0.3 < run["occupied_f1"] < 0.99 and run["free_accuracy"] > 0.9
+    assert rows[1]["sensor"] == "gp2d12"
+    assert lines[2].split()[-5] == f"{run['occupied_f1']:.3f}"
+    mean = lines[3].split()   # one room of that model, one seed: its own scores
+    assert mean[:2] == ["mean", "gp2d12"] and mean[-4] == f"{run['occupied_f1']:.3f}"
     # the good room alone passes: status 0
     assert main(["bench", "foldover", str(good), "--seeds", "1", "--json",
                  "--out", str(out)]) == errors.OK

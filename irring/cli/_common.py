@@ -353,3 +353,13 @@ def add_room_set_options(p: argparse.ArgumentParser, default_rooms: str, seeds: 
     p.add_argument("--out", type=out_path, default=out, metavar="DIR",
                    help=f"where {written} (default: {out})")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+
+
+# A map's scores as the bench tables print them: (score key, column label, scale, digits).
+MAP_COLUMNS = (("occupied_f1", "F1", 1, 3), ("occupied_precision", "prec", 1, 3),
+               ("occupied_recall", "rec", 1, 3), ("free_accuracy", "free", 1, 3))
+
+
+def score_text(v, scale: float = 1.0, digits: int = 3) -> str:
+    """A score (or other figure) for a table: n/a where it is undefined (None)."""
+    return "n/a" if v is None else f"{v * scale:.{digits}f}"

@@ -8,10 +8,12 @@ import sys
 
 from .. import errors
 from ..outputs import OutputSet, check_out
-from ..studies.foldover import (MAX_ERROR_M, OUTSIDE_CELLS, OUTSIDE_MARGIN_M, measure,
-                                outside_tolerance_m)
+from ..studies.foldover import (MAP_SCORES, MAX_ERROR_M, OUTSIDE_CELLS, OUTSIDE_MARGIN_M,
+                                measure, outside_tolerance_m)
 from ..studies.rooms import resolve_rooms
-from ._common import add_room_set_options, describe
+from ._common import MAP_COLUMNS, add_room_set_options, describe, score_text
+
+SCORE_COLUMNS = tuple(c for c in MAP_COLUMNS if c[0] in MAP_SCORES)
 
 DEFAULT_ROOMS = ("foldover_corner",)
 
@@ -29,6 +31,9 @@ housing allows):
                {OUTSIDE_CELLS:g} cells + {OUTSIDE_MARGIN_M * 1e3:.0f} mm ({outside_tolerance_m(0.010) * 1e3:.0f} mm on 10 mm cells; target 0:
                walls never outside)
   nonfinite    valid readings with a NaN or inf x, y or σ (target 0)
+  F1 prec rec free  the map's occupied F1, precision, recall and free accuracy, scored as
+               `irring bench rooms` scores them (no target here: readings left ambiguous
+               are walls the map lacks); the last lines give their mean per sensor model
   verdict      pass when all three targets hold
 
 Figures are per seed (the first is the scenario's own seed + 0). A room file that cannot be
@@ -77,8 +82,9 @@ def run(args: argparse.Namespace) -> int:
 def _print_table(rows: list[dict], n_fail: int, n_runs: int, out) -> None:
     width = max([len(r["name"]) for r in rows] + [4])
     far = f">{MAX_ERROR_M * 1e3:.0f}mm"
+    head = "".join(f"{label:>7}" for _, label, _, _ in SCORE_COLUMNS)
     print(f"{'room':<{width}}  {'seed':>6}{'valid':>7}{'ambiguous':>10}{far:>8}{'max mm':>8}"
-          f"{'outside':>8}{'nonfinite':>10}  verdict")
+          f"{'outside':>8}{'nonfinite':>10}{head}  verdict")
     for r in rows:
         if "error" in r:
             print(f"{r['name']:<{width}}  error: {r['error']}")
@@ -88,6 +94,26 @@ def _print_table(rows: list[dict], n_fail: int, n_runs: int, out) -> None:
             worst = ("inf" if x["no_hit"] else "n/a" if x["max_error_m"] is None
                      else f"{x['max_error_m'] * 1e3:.0f}")
             print(f"{name:<{width}}  {x['seed']:>6}{x['valid']:>7}{x['ambiguous']:>10}"
-                  f"{x['far']:>8}{worst:>8}{x['cells_outside']:>8}{x['nonfinite']:>10}  "
-                  f"{'pass' if x['passed'] else 'FAIL'}")
+                  f"{x['far']:>8}{worst:>8}{x['cells_outside']:>8}{x['nonfinite']:>10}"
+                  f"{_scores(x)}  {'pass' if x['passed'] else 'FAIL'}")
+    by_sensor: dict[str, list[dict]] = {}
+    for r in rows:
+        if "error" not in r:
+            by_sensor.setdefault(r["sensor"], []).extend(r["runs"])
+    for sensor, runs in sorted(by_sensor.items()):
+        mean = {k: _mean([x[k] for x in runs]) for k, _, _, _ in SCORE_COLUMNS}
+        print(f"{'mean ' + sensor:<{width}}  {len(runs):>6}{sum(x['valid'] for x in runs):>7}"
+              f"{sum(x['ambiguous'] for x in runs):>10}{sum(x['far'] for x in runs):>8}"
+              f"{'':>8}{sum(x['cells_outside'] for x in runs):>8}"
+              f"{sum(x['nonfinite'] for x in runs):>10}{_scores(mean)}")
     print(f"{n_runs} run(s): {n_fail} miss a target; wrote {out}/foldover.json")
+
+
+def _scores(x: dict) -> str:
+    return "".join(f"{score_text(x[k], s, d):>7}" for k, _, s, d in SCORE_COLUMNS)
+
+
+def _mean(values: list) -> float | None:
+    """The mean of the defined scores (None: none defined)."""
+    defined = [v for v in values if v is not None]
+    return sum(defined) / len(defined) if defined else None

@@ -10,7 +10,7 @@ import sys
 from .. import errors
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, TARGETS, measure, resolve_rooms
-from ._common import add_room_set_options, describe
+from ._common import MAP_COLUMNS, add_room_set_options, describe, score_text
 
 EPILOG = f"""\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have
@@ -57,14 +57,9 @@ def register(p: argparse.ArgumentParser) -> None:
     p.set_defaults(func=run)
 
 
-def _f(v, scale: float = 1.0, digits: int = 3) -> str:
-    return "n/a" if v is None else f"{v * scale:.{digits}f}"
-
-
-COLUMNS = (("occupied_f1", "F1", 1, 3), ("occupied_precision", "prec", 1, 3),
-           ("occupied_recall", "rec", 1, 3), ("free_accuracy", "free", 1, 3),
-           ("coverage", "cov", 1, 3), ("shadow", "shadow", 1, 2),
-           ("point_rms_m", "pt mm", 1e3, 1), ("point_rms_theta0_m", "θ=0 mm", 1e3, 1))
+COLUMNS = MAP_COLUMNS + (("coverage", "cov", 1, 3), ("shadow", "shadow", 1, 2),
+                         ("point_rms_m", "pt mm", 1e3, 1),
+                         ("point_rms_theta0_m", "θ=0 mm", 1e3, 1))
 
 
 OUTPUT_FILES = ("rooms.json", "rooms.csv")
@@ -113,7 +108,7 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
             print(f"{r['name']:<{width}}  error: {r['error']}")
             continue
         for variant in ("effects", "ideal"):
-            vals = "".join(f"{_f(r[variant][k], s, d):>8}" for k, _, s, d in COLUMNS)
+            vals = "".join(f"{score_text(r[variant][k], s, d):>8}" for k, _, s, d in COLUMNS)
             note = ""
             if variant == "effects":
                 note = ", ".join(f"{k} {v:.3f}" for k, v in r["misses"].items())

@@ -11,6 +11,7 @@ import numpy as np
 from .. import pipeline
 from ..core import Reason, distance_to_outline, inside_outline
 from ..maps.mapping import OCCUPIED, OccupancyGrid
+from ..maps.metrics import SCORE_KEYS
 from ..scenario import Scenario, counted_seeds
 from .rooms import Unusable, each_room
 
@@ -19,6 +20,9 @@ MAX_ERROR_M = 0.100   # a valid reading farther than this from its true hit is o
 # the scores' 1-cell tolerance plus half a cell (a wall's cell centre), plus this margin.
 OUTSIDE_CELLS = 1.5
 OUTSIDE_MARGIN_M = 0.010
+# What a room's map is worth once fold-over has been resolved (readings left ambiguous are
+# cells lost): shown beside the targets, not judged.
+MAP_SCORES = tuple(k for k in SCORE_KEYS if k not in ("coverage", "shadow"))
 
 
 def outside_tolerance_m(resolution_m: float) -> float:
@@ -63,9 +67,11 @@ def check_run(scenario: Scenario, seed: int | None = None) -> dict:
     """One room, one seed, as written: ``seed``, ``valid`` readings, ``ambiguous``
     (FOLDOVER_AMBIGUOUS), ``far`` (valid readings > :data:`MAX_ERROR_M` off),
     ``max_error_m`` (the largest finite error; None without one), ``no_hit`` (valid readings
-    whose beam hit nothing, counted in ``far``), ``cells_outside``, ``nonfinite`` and
-    ``passed`` (no far reading, no cell outside, nothing non-finite)."""
-    run = pipeline.run(scenario, seed=seed, progress=False, score=False)
+    whose beam hit nothing, counted in ``far``), ``cells_outside``, ``nonfinite``, the map
+    scores of :data:`MAP_SCORES` (as ``irring run`` and ``irring bench rooms`` score a map;
+    None where undefined; not targets here) and ``passed`` (no far reading, no cell outside,
+    nothing non-finite)."""
+    run = pipeline.run(scenario, seed=seed, progress=False)
     errs = np.concatenate([reading_errors(p, sw.truth) for sw, p in zip(run.sweeps, run.points)])
     row = {"seed": run.seed, "valid": int(errs.size),
            "ambiguous": int(sum((p.reason == Reason.FOLDOVER_AMBIGUOUS).sum()
@@ -73,7 +79,8 @@ def check_run(scenario: Scenario, seed: int | None = None) -> dict:
            "far": int((errs > MAX_ERROR_M).sum()),
            **dict(zip(("max_error_m", "no_hit"), worst_error(errs))),
            "cells_outside": cells_outside(run.grid, scenario.room.outline_m),
-           "nonfinite": sum(nonfinite_outputs(p) for p in run.points)}
+           "nonfinite": sum(nonfinite_outputs(p) for p in run.points),
+           **{k: run.scores[k] for k in MAP_SCORES}}
     row["passed"] = row["far"] == 0 and row["cells_outside"] == 0 and row["nonfinite"] == 0
     return row
 
@@ -83,12 +90,13 @@ def _check_room(sc: Scenario, n_seeds: int, bar) -> dict:
     for seed in counted_seeds(sc, n_seeds):
         runs.append(check_run(sc, seed))
         bar.update()
-    return {"name": sc.name, "source": sc.source, "effects": list(sc.effects), "runs": runs}
+    return {"name": sc.name, "source": sc.source, "sensor": sc.sensor.model,
+            "effects": list(sc.effects), "runs": runs}
 
 
 def measure(scenarios: list[Scenario | Unusable], n_seeds: int = 1, *,
             progress: bool | None = None, debug: bool = False) -> list[dict]:
-    """Per room: ``name``, ``source``, ``effects`` and ``runs``: :func:`check_run` for each
+    """Per room: ``name``, ``source``, ``sensor`` (its model), ``effects`` and ``runs``: :func:`check_run` for each
     seed (the scenario's own, +1, …); a room that cannot be loaded or run is an error row
     (:func:`rooms.each_room`)."""
     return each_room(scenarios, n_seeds, _check_room, label="fold-over", progress=progress,
