@@ -1265,6 +1265,35 @@ def test_a_folder_held_for_a_moment_is_waited_for(tmp_path, monkeypatch):
     assert 0.25 < time.monotonic() - started < outputs.PROBE_WAIT_S
 
 
+def test_a_pipe_or_folder_among_a_folders_rooms_is_named_not_waited_for(tmp_path):
+    """`irring bench rooms DIR` with a FIFO named c.yaml in DIR waited for a writer for good
+    (killed after 60 s: 'interrupted'); a folder b.yaml too would be read as a room. Each is
+    a row naming it, and the other rooms are scored."""
+    import threading
+
+    from irring.studies.rooms import Unusable, resolve_rooms
+
+    (tmp_path / "a.yaml").write_text(resolve("t_room_cylinder").read_text())
+    (tmp_path / "b.yaml").mkdir()
+    os.mkfifo(tmp_path / "c.yaml")
+    (tmp_path / "d.yaml").symlink_to(tmp_path / "gone.yaml")
+    got = []
+    worker = threading.Thread(target=lambda: got.extend(resolve_rooms([tmp_path])), daemon=True)
+    worker.start()
+    worker.join(60)
+    if worker.is_alive():   # free the thread before failing: open the pipe's far end
+        os.close(os.open(tmp_path / "c.yaml", os.O_WRONLY | os.O_NONBLOCK))
+        pytest.fail("resolve_rooms waited on the pipe")
+    assert got[0].name == "t_room_cylinder"
+    assert got[1:] == [
+        Unusable("b", str(tmp_path / "b.yaml"), 1, f"{tmp_path}/b.yaml: is a folder, not a "
+                 "scenario file; a folder's rooms are its regular *.yaml files"),
+        Unusable("c", str(tmp_path / "c.yaml"), 1, f"{tmp_path}/c.yaml: is a pipe, socket or "
+                 "device, not a scenario file; a folder's rooms are its regular *.yaml files"),
+        Unusable("d", str(tmp_path / "d.yaml"), 1, f"{tmp_path}/d.yaml: is a broken link, not "
+                 "a scenario file; a folder's rooms are its regular *.yaml files")]
+
+
 def test_an_error_of_a_bench_names_the_bench(tmp_path, capsys):
     # said "irring bench: error: …", where the bench's own errors say "irring bench rooms"
     assert main(["bench", "rooms", str(tmp_path)]) == 1

@@ -124,9 +124,10 @@ def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
 
     A name that is no file and no bundled scenario, a folder without ``*.yaml``, or a file
     given twice (itself, or in a folder) raises ScenarioError before any work; a file that
-    does not load is an :class:`Unusable` entry, so one bad room in a folder does not stop
-    the others."""
-    paths: list[Path] = []
+    does not load, or a ``*.yaml`` in a folder that is no regular file (a pipe would be
+    waited on for good), is an :class:`Unusable` entry, so one bad room in a folder does
+    not stop the others."""
+    paths: list[tuple[Path, bool]] = []   # (file, found in a folder rather than named)
     given: dict[Path, str] = {}     # each file's real path → the argument that named it
     for item in names_or_paths:
         path = Path(item)
@@ -142,9 +143,16 @@ def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
                 raise ScenarioError(f"{file}: given twice (by {given[real]} and {item}); it "
                                     "would be scored and listed twice, so name each room once")
             given[real] = str(item)
-        paths.extend(files)
+        paths.extend((file, path.is_dir()) for file in files)
     out: list[Scenario | Unusable] = []
-    for path in paths:
+    for path, in_folder in paths:
+        if in_folder and not path.is_file():   # a pipe among the rooms waited for good
+            kind = "a folder" if path.is_dir() else (
+                "a pipe, socket or device" if path.exists() else "a broken link")
+            out.append(Unusable(path.stem, str(path), errors.INPUT,
+                                f"{errors.printable(str(path))}: is {kind}, not a scenario "
+                                "file; a folder's rooms are its regular *.yaml files"))
+            continue
         try:
             out.append(load_scenario(path))
         except ScenarioError as exc:
