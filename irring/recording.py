@@ -151,6 +151,8 @@ def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> P
     return path
 
 
+MCAP_MAGIC = b"\x89MCAP0\r\n"   # the first bytes of every MCAP file (mcap.dev/spec)
+
 # Bounds checked before anything sized by the file is allocated.
 MAX_FILE_BYTES = 2 * 2**30        # the .npz on disk
 MAX_ARRAY_BYTES = 512 * 2**20     # one array, uncompressed
@@ -212,6 +214,10 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
                        "a saved .npz file, in which it must seek: save it to a file first")
         if path.stat().st_size > MAX_FILE_BYTES:
             raise fail(f"{path.stat().st_size / 2**30:.1f} GB is larger than any recording")
+        with open(path, "rb") as f:
+            if f.read(len(MCAP_MAGIC)) == MCAP_MAGIC:   # was "… damaged one: not a zip file"
+                raise fail("an MCAP file (what --mcap writes for viewers such as Foxglove), "
+                           "not a recording; replay the sweeps.npz written beside it")
         with zipfile.ZipFile(path) as zf:
             infos = {i.filename: i for i in zf.infolist()}
             if "format.npy" not in infos:

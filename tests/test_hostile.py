@@ -1294,6 +1294,18 @@ def test_a_pipe_or_folder_among_a_folders_rooms_is_named_not_waited_for(tmp_path
                  "a scenario file; a folder's rooms are its regular *.yaml files")]
 
 
+def test_an_mcap_given_to_replay_is_named_as_one(tmp_path, capsys):
+    # was "not an irring recording (.npz), or a damaged one: BadZipFile: File is not a zip
+    # file", of the file `run --mcap` wrote beside the recording
+    mcap = tmp_path / "map.mcap"
+    mcap.write_bytes(b"\x89MCAP0\r\n" + bytes(64))
+    assert main(["replay", str(mcap), "--out", str(tmp_path / "o")]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {mcap}: an MCAP file (what --mcap writes for viewers such as "
+        "Foxglove), not a recording; replay the sweeps.npz written beside it\n")
+    assert os.listdir(tmp_path) == ["map.mcap"]
+
+
 def test_an_error_of_a_bench_names_the_bench(tmp_path, capsys):
     # said "irring bench: error: …", where the bench's own errors say "irring bench rooms"
     assert main(["bench", "rooms", str(tmp_path)]) == 1
