@@ -1306,6 +1306,17 @@ def test_an_mcap_given_to_replay_is_named_as_one(tmp_path, capsys):
     assert os.listdir(tmp_path) == ["map.mcap"]
 
 
+def test_an_output_path_with_a_line_break_or_an_escape_is_printed_on_one_line(tmp_path,
+                                                                              capsys):
+    # "wrote" printed --out raw: a line break split the summary, an escape reached the
+    # terminal (error lines were already made printable, round 7's D14)
+    out = tmp_path / "a\nb \x1b[31mred"
+    assert main(["run", "t_room_cylinder", "--out", str(out), "--no-animation"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        f"  wrote     {tmp_path}/a b \\x1b[31mred/: map.png, map.pgm, map.yaml, sweeps.npz")
+    assert sorted(os.listdir(out)) == ["map.pgm", "map.png", "map.yaml", "sweeps.npz"]
+
+
 def test_an_error_of_a_bench_names_the_bench(tmp_path, capsys):
     # said "irring bench: error: …", where the bench's own errors say "irring bench rooms"
     assert main(["bench", "rooms", str(tmp_path)]) == 1

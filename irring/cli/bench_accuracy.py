@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from .. import errors
 from ..outputs import check_out
 from ..pipeline import progress_bar
 from ..studies import accuracy
@@ -105,5 +106,6 @@ def run(args: argparse.Namespace) -> int:
           f"seed(s), {meta['jobs']} runs in {meta['wall_s']:.1f} s; one knob at a time "
           "around the default")
     print(accuracy.table(result["configs"]))
-    print(f"wrote {args.out}/: " + ", ".join(sorted(Path(p).name for p in paths.values())))
+    print(f"wrote {errors.printable(str(args.out))}/: "
+          + ", ".join(sorted(Path(p).name for p in paths.values())))
     return 0

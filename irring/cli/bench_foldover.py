@@ -106,7 +106,7 @@ def _print_table(rows: list[dict], n_fail: int, n_runs: int, out) -> None:
               f"{sum(x['ambiguous'] for x in runs):>10}{sum(x['far'] for x in runs):>8}"
               f"{'':>8}{sum(x['cells_outside'] for x in runs):>8}"
               f"{sum(x['nonfinite'] for x in runs):>10}{_scores(mean)}")
-    print(f"{n_runs} run(s): {n_fail} miss a target; wrote {out}/foldover.json")
+    print(f"{n_runs} run(s): {n_fail} miss a target; wrote {errors.printable(str(out))}/foldover.json")
 
 
 def _scores(x: dict) -> str:

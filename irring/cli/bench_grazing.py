@@ -104,4 +104,4 @@ def _print(r: dict, seeds: int, out) -> None:
         print(f"{b['lo_deg']:>4}–{b['hi_deg']:>2}°{b['n']:>8}{_mm(b['rms_m']):>8}"
               f"{_mm(b['rms_theta0_m']):>8}{_x(b['gain']):>7}{_mm(b['max_m'], 0):>8}  {target}".rstrip())
     verdict = "; ".join(r["misses"]) if r["misses"] else "every target met"
-    print(f"{'MISSED: ' if r['misses'] else ''}{verdict}; wrote {out}/grazing.json")
+    print(f"{'MISSED: ' if r['misses'] else ''}{verdict}; wrote {errors.printable(str(out))}/grazing.json")

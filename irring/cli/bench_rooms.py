@@ -124,4 +124,4 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
     n_failed = len(rows) - len(scored)
     failed = f"{n_failed} not scored (error), " if n_failed else ""
     print(f"{len(rows)} rooms, {seeds} seed(s) each: {failed}{n_miss} miss a target, "
-          f"{n_worse} where the ideal sensor is worse somewhere; wrote {out}/rooms.json, rooms.csv")
+          f"{n_worse} where the ideal sensor is worse somewhere; wrote {errors.printable(str(out))}/rooms.json, rooms.csv")

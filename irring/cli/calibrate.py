@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         return errors.INPUT
     path = cal.save(out)
     print(_summary(cal))
-    print(f"wrote {path}")
+    print(f"wrote {errors.printable(str(path))}")
     return 0
 
 
@@ -208,7 +208,7 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
             raise
         return status
     print(_summary(cal))
-    print(f"wrote {path}")
+    print(f"wrote {errors.printable(str(path))}")
     return 0
 
 

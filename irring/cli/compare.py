@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .. import designs
+from .. import designs, errors
 from ..designs import DESIGN_BY_NAME
 from ..outputs import check_out
 from ..pipeline import progress_enabled
@@ -101,5 +101,5 @@ def run(args: argparse.Namespace) -> int:
     print("r@d: smallest cylinder radius seen at every bearing at distance d (miss: none ≤ "
           "200 mm); times: one 360° view")
     for kind, path in paths.items():
-        print(f"  {kind:<9}{path}")
+        print(f"  {kind:<9}{errors.printable(str(path))}")
     return 0

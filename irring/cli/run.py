@@ -145,6 +145,7 @@ def summary_lines(result, paths: dict) -> list[str]:
                  f"compute {t['total']:.2f} s ({stages})")
     if paths:
         folder = Path(next(iter(paths.values()))).parent
-        lines.append(f"  wrote     {folder}/: " + ", ".join(
-            Path(p).name if Path(p).parent == folder else str(p) for p in paths.values()))
+        lines.append(f"  wrote     {errors.printable(str(folder))}/: " + ", ".join(
+            Path(p).name if Path(p).parent == folder else errors.printable(str(p))
+            for p in paths.values()))
     return lines

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from .. import errors
 from ..core import MAX_RUNS
 from ..outputs import check_out, safe_name
 from ..pipeline import progress_bar, progress_enabled
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         path = out / study.RESULTS
         kept = len(study.read_results(path)) if path.exists() else 0
-        print(f"irring: study interrupted; {kept} finished run(s) kept in {path}: run the same "
+        print(f"irring: study interrupted; {kept} finished run(s) kept in {errors.printable(str(path))}: run the same "
               "command with --resume to run the rest", file=sys.stderr)
         return 130
     wall = time.perf_counter() - t0
@@ -97,12 +98,12 @@ def run(args: argparse.Namespace) -> int:
     ran = result["ran"]
     kept = f" ({result['done_before']} already in the file)" if result["done_before"] else ""
     rate = f", {ran / wall:.1f} runs/s" if ran else ""
-    print(f"{len(result['rows'])} run(s) in {out / study.RESULTS}: ran {ran} in {wall:.1f} s"
+    print(f"{len(result['rows'])} run(s) in {errors.printable(str(out / study.RESULTS))}: ran {ran} in {wall:.1f} s"
           f"{rate}{kept}")
     print(study.table(records, by))
     print("mean ± sd over scenarios × seeds; shadow only over the runs in rooms that hide "
           "wall behind an obstacle (in k/n: k of the n runs; —: none); front: on the Pareto "
           "front of hardware time against occupied F1 (f1), coverage (cov), range RMSE (rmse)")
     for kind, path in result["paths"].items():
-        print(f"  {kind:<13}{path}")
+        print(f"  {kind:<13}{errors.printable(str(path))}")
     return 0

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from .. import errors
 from ..errors import OutputError
 from ..outputs import atomic_file, check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     path = write_png(image, out)
     b = scene.beams
-    print(f"wrote {path}: {scenario.name}, pose {args.pose}, motor step {scene.step}; "
+    print(f"wrote {errors.printable(str(path))}: {scenario.name}, pose {args.pose}, motor step {scene.step}; "
           f"{int(b.hits.shape[0])} of {b.distance_m.size} beams hit within "
           f"{b.max_range_m * 1000:.0f} mm")
     return 0
