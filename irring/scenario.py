@@ -514,6 +514,7 @@ def bundled() -> dict[str, Path]:
 
 
 DEFAULT_SCENARIO = "t_room"
+MAX_DESCRIPTION = 1000   # characters
 
 
 def resolve(name_or_path: str | Path) -> Path:
@@ -536,6 +537,10 @@ def parse(raw: Any, source: str = "") -> Scenario:
     sc = loader.dataclass_(Scenario, raw, "")
     if not sc.name.strip() or len(sc.name) > 200:
         raise loader.fail("name", "expected a name of 1 … 200 characters")
+    if len(sc.description) > MAX_DESCRIPTION:   # a 7 MB one was printed by every run
+        raise loader.fail("description", f"{len(sc.description):,} characters; a description "
+                                         f"is a line of at most {MAX_DESCRIPTION:,} (irring run "
+                                         f"and irring scenarios print it)")
     for key, text in (("name", sc.name), ("description", sc.description)):
         if any(not (ch.isprintable() or ch in "\n\t") for ch in text):
             raise loader.fail(key, "control characters (terminal escapes) are not allowed")

@@ -76,6 +76,10 @@ BAD = [
     ("a sloped outline of no area",
      lambda r: _set(r, "room.outline_mm", [[10, 20], [1210, 920], [410, 320], [2410, 1820]]),
      [r"room\.outline_mm: all 4 corners lie on one line"]),
+    ("a description of a megabyte",   # printed whole by every run
+     lambda r: _set(r, "description", "d" * 1_000_001),
+     [r"description: 1,000,001 characters; a description is a line of at most 1,000 "
+      r"\(irring run and irring scenarios print it\)$"]),
     ("outline of two corners", lambda r: _set(r, "room.outline_mm", [[0, 0], [2000, 2000]]),
      [r"room\.outline_mm: needs at least 3 corners, got 2"]),
     ("a corner with three numbers",
