@@ -57,6 +57,9 @@ MAX_SEEDS = 100_000                 # seeds of one configuration a study, compar
 MAX_ABS_COORDINATE_M = 1e6
 MAX_OUTLINE_CORNERS = 10_000        # corners of a room outline (checking that its walls never
                                     # cross takes ~1 s at this many; 100 000 took hours)
+MAX_OBSTACLES = 10_000              # obstacles of a scene: each is checked against every pose
+                                    # (a bool each) and rasterised for the score (20 000 took
+                                    # 3 min to score; a file may list 245 000: 2.4 GB of checks)
 
 
 

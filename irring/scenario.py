@@ -22,10 +22,10 @@ import numpy as np
 
 from . import designs, gp2, resources, safe_yaml
 from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_COORDINATE_M,
-                   MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S, SEED_MAX,
-                   SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error, choice,
-                   distance_to_outline, first_crossing, first_overlap, first_wall_into, inside_outline, num,
-                   obstacle_distance, on_one_line, unit_suffix)
+                   MAX_OBSTACLES, MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S,
+                   SEED_MAX, SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error,
+                   choice, distance_to_outline, first_crossing, first_overlap, first_wall_into,
+                   inside_outline, num, obstacle_distance, on_one_line, unit_suffix)
 from .designs import Design
 from .errors import InputError, brief
 
@@ -439,6 +439,9 @@ def _validate_geometry(sc: Scenario, fail) -> None:
                                       f"back over another")
     if not sc.robot.poses:
         raise fail("robot.poses", "at least one scan pose is required")
+    if len(sc.obstacles) > MAX_OBSTACLES:
+        raise fail("obstacles", f"{len(sc.obstacles):,} obstacles; at most {MAX_OBSTACLES:,} "
+                                f"are allowed")
     ring = sc.ring
     clearance = ring.radius_m + HOUSING_M  # sensors plus their housing
     # every pose at once (a scenario may hold 10 000 poses and 10 000 corners)

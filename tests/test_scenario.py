@@ -80,6 +80,11 @@ BAD = [
      lambda r: _set(r, "description", "d" * 1_000_001),
      [r"description: 1,000,001 characters; a description is a line of at most 1,000 "
       r"\(irring run and irring scenarios print it\)$"]),
+    ("more obstacles than a scene takes",   # 20,000 took 3 min to score
+     lambda r: _set(r, "obstacles", [{"type": "cylinder", "center_mm": [1000 + i % 40,
+                                                                       700 + i // 40],
+                                      "radius_mm": 2} for i in range(10_001)]),
+     [r"obstacles: 10,001 obstacles; at most 10,000 are allowed$"]),
     ("outline of two corners", lambda r: _set(r, "room.outline_mm", [[0, 0], [2000, 2000]]),
      [r"room\.outline_mm: needs at least 3 corners, got 2"]),
     ("a corner with three numbers",
