@@ -50,6 +50,22 @@ def test_a_crawling_drive_is_refused_before_any_sweep(tmp_path, capsys):
     assert seconds < 30   # refused at model build, not after sweeping
 
 
+def test_a_drive_too_long_is_refused_before_its_odometry_is_made(tmp_path, capsys,
+                                                                  monkeypatch):
+    """A path of 20,000 waypoints took 1 GB (a dead-reckoning sample every 5 mm of its 28 km)
+    before it was refused as more sweeps than a run takes; 200,000 fit in a scenario file.
+    The odometry is made when a sweep needs it, after the run's size is checked."""
+    from irring.simulation import dynamics
+
+    monkeypatch.setattr(dynamics.Odometry, "along",
+                        classmethod(lambda *a, **k: pytest.fail("odometry made")))
+    waypoints = ", ".join(f"{{x_mm: {480 + 1000 * (k % 2)}, y_mm: 730}}" for k in range(2_001))
+    path = scene(tmp_path, "long", effects=f"effects:\n  motion:\n    path: [{waypoints}]\n")
+    code, err, _ = run_status(path, tmp_path, capsys)
+    assert code == errors.TOO_BIG
+    assert "a run takes at most 10,000 sweeps; raise effects.motion.speed_mm_s" in err, err
+
+
 def test_more_poses_than_a_run_takes_are_refused_naming_the_poses(tmp_path, capsys):
     """10,001 scan poses and no motion: the refusal said to raise effects.motion.speed_mm_s
     or shorten effects.motion.path, keys the scene does not have."""

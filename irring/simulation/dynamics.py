@@ -724,17 +724,25 @@ class Dynamics:
         self._timelines: dict[bytes, tuple[Schedule, Trajectory | None]] = {}
         self.periods_s = (SensorClocks.periods(self.timing, built.n_sensors, self.seed)
                           if self.timing else None)
-        self.path = self.odometry = None
+        self.path = self._odometry = None
         self.clocks = None
         if self.motion is not None:
             self.path = Path.from_effect(self.motion)
             self.path.check_clearance(scenario)
-            self.odometry = Odometry.along(self.path, self.motion.odometry_sigma_m,
-                                           self.motion.odometry_sigma_rad,
-                                           np.random.default_rng([self.seed, ODOMETRY_STREAM]))
             if self.timing:  # one continuous clock for the whole drive
                 rng = np.random.default_rng([self.seed, TIMING_STREAM, 1])
                 self.clocks = SensorClocks.draw(self.timing, self.periods_s, rng)
+
+    @property
+    def odometry(self) -> Odometry | None:
+        """Dead reckoning along the path (None without motion), made on first use: a sample
+        every 5 mm of the drive, so not before the run's size is checked (a path of 20,000
+        waypoints took 1 GB here before it was refused as more sweeps than a run takes)."""
+        if self._odometry is None and self.path is not None:
+            self._odometry = Odometry.along(self.path, self.motion.odometry_sigma_m,
+                                            self.motion.odometry_sigma_rad,
+                                            np.random.default_rng([self.seed, ODOMETRY_STREAM]))
+        return self._odometry
 
     @property
     def physics(self) -> BeltPhysics:
