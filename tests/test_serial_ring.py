@@ -8,6 +8,7 @@ The real-pty tests against SimRing are in test_emulator.py.
 from __future__ import annotations
 
 import logging
+import re
 import time
 
 import numpy as np
@@ -351,6 +352,21 @@ def test_bit_flips_on_the_line_are_every_one_rejected_and_counted_and_no_good_sc
     stats = device.stats
     assert stats.sentences_corrupted >= corrupted_scans > 90
     assert stats.bytes_corrupted == 0 and stats.bits_flipped >= stats.sentences_corrupted
+
+
+def test_a_handshake_lost_to_line_noise_says_its_answers_arrived_garbled():
+    """At 1 % of bits flipped nearly every IRINF arrives garbled; the refusal counted only
+    the checksum failures among them ('1 checksum failures, 0 stray bytes seen' after three
+    garbled answers: the other two malformed)."""
+    device = Device(StandInSource(), faults=Faults(bitflip_rate=0.01, seed=3))
+    with pytest.raises(HandshakeError) as err:
+        ring_on(device, retries=2)
+    msg = str(err.value)
+    counted = re.search(r"\((\d+) checksum failures, (\d+) malformed sentences, \d+ stray "
+                        r"bytes seen\)\. Sentences that arrive garbled point at line noise or a "
+                        r"loose cable\.$", msg)
+    assert counted, msg
+    assert int(counted[1]) + int(counted[2]) >= 3 and int(counted[2]) > 0
 
 
 def test_bit_flips_that_protocol_v1_lets_through_v2_does_not():

@@ -493,8 +493,10 @@ class SerialRing:
             f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
             f"each. Check the port, the baud rate ({self.baudrate}), that the ring is powered "
             f"and runs IRR protocol v{p.PROTOCOL_VERSION} firmware (firmware/README.md) "
-            f"({self.stats.checksum_failures} checksum failures, "
-            f"{self.stats.ignored_bytes} stray bytes seen).")
+            f"({self.stats.checksum_failures} checksum failures, {self.stats.malformed} "
+            f"malformed sentences, {self.stats.ignored_bytes} stray bytes seen)."
+            + (" Sentences that arrive garbled point at line noise or a loose cable."
+               if self.stats.checksum_failures + self.stats.malformed else ""))
 
     def _hello_v1(self) -> p.Info | None:
         """IRHLO in v1 framing, after v1-framed sentences answered a v2 one: the IRINF of
