@@ -180,6 +180,9 @@ class Ring:
 
 
 HOUSING_M = 0.02  # the sensors' housing reaches this far beyond the ring radius
+# a point whose σ exceeds this is placed no better than uncertain: the mapper weighs it
+# down by default (MapperParams.lone_sigma_m) and a fold-over sweep leaves it unplaced
+UNCERTAIN_SIGMA_M = 0.03
 # Geometry given in mm becomes metres by a float product (0.89 − 0.7 − 0.02 ≠ 0.17): checks
 # of "at least this far" allow this much so a surface exactly at the limit passes.
 GEOMETRY_TOL_M = 1e-9

@@ -15,7 +15,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..core import HOUSING_M, Points, Reason, Ring, Sweep, beam_geometry, points_with
+from ..core import (HOUSING_M, UNCERTAIN_SIGMA_M, Points, Reason, Ring, Sweep, beam_geometry,
+                    points_with)
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
@@ -2420,7 +2421,7 @@ _FOLD_OWN_Z = 3.0      # a member whose own straight slope is this many standard
 # line: σ 65-75 mm; a profile's uncertain θ: 30-60 mm) is INCIDENCE_UNKNOWN: around a ring at
 # the housing limit the walls that would pin its θ are held out as near or ambiguous
 # (docs/foldover.md, "Far readings nothing places")
-FOLD_PLACED_SIGMA_M = 0.03
+FOLD_PLACED_SIGMA_M = UNCERTAIN_SIGMA_M
 
 
 def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: Sweep,

@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from .. import safe_yaml
-from ..core import Points, Reason, points_with
+from ..core import UNCERTAIN_SIGMA_M, Points, Reason, points_with
 from ..errors import TooBig
 from ..resources import kernel
 
@@ -59,7 +59,7 @@ class MapperParams:
     free_sigmas: float = 0.0      # … nor within this many σ before that (an uncertain reading clears less)
     occ_sigma_m: float = 0.005    # a hit with σ above this weighs l_occ·occ_sigma_m/σ …
     l_occ_min: float = 1.6        # … but at least this (a lone far hit still marks its cell) …
-    lone_sigma_m: float = 0.03    # a reading of σ above this weighs lone_sigma_m/σ (hit and pass)
+    lone_sigma_m: float = UNCERTAIN_SIGMA_M  # σ above this weighs lone_sigma_m/σ (hit and pass)
     hold_sigma_m: float = 0.005   # a cell holding an end point of σ ≤ this is not freed by its batch
     # … and where the next or previous step of its sensor reads ≥ edge_jump_cells farther (or
     # nothing: an occluding edge), the surface behind it weighs l_occ_min this deep (cells)
