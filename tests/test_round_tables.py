@@ -215,8 +215,8 @@ def test_a_far_columns_arc_is_a_circle_before_its_short_lines_are_doubted(doubt_
     > 50 mm off (3 of the column's readings INCIDENCE_UNKNOWN). Doubted first (as the doubt
     once ran, in local_incidence), the arc's short lines lose 13 more readings
     (INCIDENCE_UNKNOWN) and no run is left to try as an arc: 8 of
-    the column's 27 left > 50 mm off, F1 0.912, precision 0.893 (0.908, 0.885 before the
-    steep-run rule at θ = 0; held-out q5_column_gap30: F1 0.994 -> 0.955)."""
+    the column's 27 left > 50 mm off, F1 0.908, precision 0.885 (held-out q5_column_gap30:
+    F1 0.994 -> 0.955)."""
     round_runs, doubt = est.round_runs, est.doubt_far_lines
     circled = []
 
@@ -250,4 +250,4 @@ def test_a_far_columns_arc_is_a_circle_before_its_short_lines_are_doubted(doubt_
         assert unknown == 3 + 13
         assert int((column & p.valid).sum()) == 27
         assert int((err[column & p.valid] > 0.05).sum()) == 8
-        assert run.scores["occupied_f1"] < 0.915 and run.scores["occupied_precision"] < 0.895
+        assert run.scores["occupied_f1"] < 0.91 and run.scores["occupied_precision"] < 0.89
