@@ -214,32 +214,18 @@ def test_a_gp2d12_line_across_a_corner_its_members_disown_is_left(monkeypatch):
 
 
 def test_lines_of_up_to_25_members_are_asked(monkeypatch):
-    # a 21-member line of sensors 2 and 4 (seed 6767): asked (up to FAR_LINE_MAX_MEMBERS =
-    # 25), its members' profiles disown it: 5 are read at their own slope, 16 are
-    # INCIDENCE_UNKNOWN. (Room 5025 below once had such a line, bridging a corner's drop-out
-    # gap; since the steep-run rule at θ = 0 no line is drawn across that corner.)
-    text = _corner_room(6767, "{x_mm: 76, y_mm: 838, yaw_deg: 69.8}")
+    # a 21-member line of sensors 0 and 1 bridges a corner's drop-out gap: at θ 4-25° on
+    # walls met at 15-32° and, before the gap, 60-61° (two members 61-77 mm short). Asked
+    # (up to FAR_LINE_MAX_MEMBERS = 25), its members' profiles disown it: 10 are read at
+    # their own slope, 11 are INCIDENCE_UNKNOWN
+    text = _corner_room(5025, "{x_mm: 538, y_mm: 915, yaw_deg: 120.8}")
     run, before, left = _left_and_before(text, monkeypatch)
-    assert len(left) == 21 and {k for k, _ in left} == {2, 4}
-    assert sum(placed for _, placed in left) == 5
+    assert len(left) == 21 and {k for k, _ in left} == {0, 1}
+    assert sum(placed for _, placed in left) == 10
+    assert _readings_over_run(before, 0.050) == 4 and _readings_over_run(run, 0.050) == 2
     # with the cap at 16 the line is not asked: the run is the one with no line doubted
     monkeypatch.setattr(est, "FAR_LINE_MAX_MEMBERS", 16)
     left.clear()
     capped = pipeline.run(loads(text, source="<test>"), progress=False)
     assert not left
     assert np.array_equal(capped.points[0].d, before.points[0].d, equal_nan=True)
-
-
-def test_a_corner_once_bridged_by_a_far_line_is_read_without_one(monkeypatch):
-    # room 5025: before the steep-run rule at θ = 0 a 21-member line of sensors 0 and 1
-    # bridged a corner's drop-out gap at θ 4-25° (walls met at 15-32° and 60-61°): asked,
-    # 11 of its members became INCIDENCE_UNKNOWN and 2 stayed over 50 mm off (10 over 30 mm;
-    # F1 0.949). Now the walls' lines stop at the corner: no line is doubted, every one of
-    # the 400 valid readings lies within 30 mm of its hit, and the map is exact
-    run, before, left = _left_and_before(
-        _corner_room(5025, "{x_mm: 538, y_mm: 915, yaw_deg: 120.8}"), monkeypatch)
-    assert not left
-    assert np.array_equal(run.points[0].d, before.points[0].d, equal_nan=True)
-    assert np.count_nonzero(run.points[0].valid) == 400
-    assert _readings_over_run(run, 0.030) == 0
-    assert run.scores["occupied_f1"] == 1.0
