@@ -121,12 +121,11 @@ def test_the_oracle_is_the_paper_iteration_on_a_grazing_wall():
 
 def test_the_far_corner_rule_agrees_with_the_oracle_where_it_moves_readings():
     """corner_sides at a far corner (``corner_reach_share``: reach and extent grown with the
-    corner's distance) on tests/test_grazing.py's FAR_CORNER_24 (GP2Y0A02, a corner 1.2 m
+    corner's distance) on tests/test_grazing.py's FAR_CORNER (GP2Y0A02, a corner 1.28 m
     away), which the drawn rooms above (walls within 1 m) rarely reach: the kernel agrees
-    with the oracle with the rule and without it. Not vacuous: at seed 1 the rule moves the
-    oracle's end point of one reading by more than 100 mm (FAR_CORNER itself, seed 2,
-    needs the rule no longer since the steep-run rule at θ = 0: 2 readings before)."""
-    from test_grazing import FAR_CORNER_24 as FAR_CORNER
+    with the oracle with the rule and without it. Not vacuous: at seed 2 the rule moves the
+    oracle's end points of some readings (2 since b47b38f, 4 before) by more than 100 mm."""
+    from test_grazing import FAR_CORNER
 
     from irring import pipeline
     from irring.estimation.calibration import scene_calibration
@@ -134,7 +133,7 @@ def test_the_far_corner_rule_agrees_with_the_oracle_where_it_moves_readings():
 
     sc = loads(FAR_CORNER, source="<test>")
     cal = scene_calibration(sc)[0]
-    sweep = pipeline.simulated(sc, seed=1, progress=False)[0].sweeps[0]
+    sweep = pipeline.simulated(sc, seed=2, progress=False)[0].sweeps[0]
     off, on = LineOptions(corner_reach_share=0.0), LineOptions()
     assert on.corner_reach_share > 0
     for opts in (off, on):
@@ -142,7 +141,7 @@ def test_the_far_corner_rule_agrees_with_the_oracle_where_it_moves_readings():
     a = oracle.estimate_detail(sweep, cal, lines=off).points
     b = oracle.estimate_detail(sweep, cal, lines=on).points
     np.testing.assert_array_equal(a.valid, b.valid)
-    assert np.count_nonzero(np.hypot(a.x - b.x, a.y - b.y)[a.valid] > 0.1) == 1
+    assert np.count_nonzero(np.hypot(a.x - b.x, a.y - b.y)[a.valid] > 0.1) >= 1
 
 def _scene(seed, room):
     """A room hypothesis draws (as in the agreement test above): its walls and circles."""

@@ -330,7 +330,6 @@ cdef class Sweep:
     cdef double[::1] ls, ox, oy, ux, uy, hm, sig_s
     cdef Py_ssize_t[::1] ix, sn
     cdef unsigned char[::1] run_brk
-    cdef unsigned char[::1] convex  # in a run that bulges towards its sensor (mark_convex)
     cdef double[::1] _d, _px, _py, _sigma, _thr
     cdef unsigned char[::1] usable
     cdef bint all_usable
@@ -447,7 +446,6 @@ cdef class Sweep:
         self.dscr_obj = _empty((7, k))
         self.dscr = self.dscr_obj
         self.flag = _empty(k, dtype=_uint8)
-        self.convex = np.zeros(k, dtype=_uint8)
         self.rr_obj = _empty(0)
         self.rr_th = _empty(0)
         # Grouping.check's labels from before: it calls kernels that use rows 0-4 in
@@ -524,15 +522,6 @@ cdef class Sweep:
             self.rr_obj = _empty(2 * n)
             self.rr_th = _empty(2 * n)
         return self.rr_obj[:n]
-
-    def mark_convex(self, const unsigned char[::1] mask):
-        """Marks the live readings (scan order, ``mask`` (k,)) in runs that bulge towards
-        their sensor (``estimate.bulging_runs``): the grouping's wall-only rules leave them
-        alone. Raises ValueError unless ``mask`` has one entry per live reading."""
-        cdef Py_ssize_t i
-        _per_reading(mask.shape[0], self.k, "mask")
-        for i in range(self.k):
-            self.convex[i] = mask[i]
 
     def place(self, const double[::1] theta, double max_use_m):
         """Every live reading at incidence θ: d, end point, σ and split threshold (new arrays
@@ -926,8 +915,7 @@ cdef class Grouping:
             self._residuals(i, 0, L, &d[u * L], &th[u * L], own, &row[0])
             best = _argmin(&row[0], L)
             r_own = row[own]
-            if (at_zero and not sw.folds and long_run[u] and not sw.convex[i]
-                    and th[u * L + own] > steep_rad):
+            if at_zero and not sw.folds and long_run[u] and th[u * L + own] > steep_rad:
                 # a steep wall's line lies where θ = 0 put its readings: judged there
                 r_own = fabs((sw._py[i] - self.t_cy[own]) * self.t_dx[own]
                              - (sw._px[i] - self.t_cx[own]) * self.t_dy[own])
@@ -1148,8 +1136,7 @@ cdef class Grouping:
             near[i] = vv[3, p] >= -sw.corner_past and not (
                 rr[p] < r_own - sw.corner_sigmas * sw._sigma[i])
             # past a corner of adjacent pieces: the polyline's own sensor's readings (below)
-            by_piece[i] = K[c, o] == 2 and (sw.folds or sw.convex[i]
-                                            or sw.sn[i] == sw.sn[self.first[lab[i]]])
+            by_piece[i] = K[c, o] == 2 and (sw.folds or sw.sn[i] == sw.sn[self.first[lab[i]]])
         cdef Py_ssize_t s0, e0
         cdef bint ok_run, on_prev, on_next, any_near
         # past the corner of two pieces of one polyline the trace is continuous and the
@@ -1167,7 +1154,7 @@ cdef class Grouping:
                    and tgt[e0 + 1] == tgt[e0]):
                 e0 += 1
             o = tgt[s0]
-            if (sw.folds or sw.convex[s0] or (o < lab[s0] and not sw.run_brk[s0])
+            if (sw.folds or (o < lab[s0] and not sw.run_brk[s0])
                     or (o > lab[s0] and e0 + 1 < k and not sw.run_brk[e0 + 1])):
                 for nb in range(s0, e0 + 1):
                     moved[nb] = o
@@ -1177,7 +1164,7 @@ cdef class Grouping:
         # range, once moved, is continuous with the readings either side of them and one of
         # those is on the target line; in rounds until none moves, a run next to one that
         # moved to the target in the round before being next to the target
-        cdef bint more = True, later = False   # later rounds: walls only
+        cdef bint more = True
         cdef Py_ssize_t[::1] now = np.empty(k, dtype=_intp)   # the labels a round starts from
         for i in range(k):
             now[i] = lab[i]
@@ -1193,7 +1180,7 @@ cdef class Grouping:
                        and lab[e0 + 1] == lab[e0] and tgt[e0 + 1] == tgt[e0]):
                     e0 += 1
                 o = tgt[s0]
-                if moved[s0] == o or (later and sw.convex[s0]):   # moved in an earlier round
+                if moved[s0] == o:      # moved in an earlier round
                     i = e0 + 1
                     continue
                 ok_run = True
@@ -1214,7 +1201,6 @@ cdef class Grouping:
             for i in range(k):
                 if moved[i] >= 0:
                     now[i] = moved[i]
-            later = True
         for i in range(k):
             if moved[i] >= 0:
                 lab[i] = moved[i]

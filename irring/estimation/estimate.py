@@ -427,11 +427,6 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                 # other points, and the segmentation splits afresh by itself
                 pieces = _segment(*parts, lines, sw.centre,
                                   None if grouping is None else grouping.pieces)
-                if before is None and not cal.folds:   # at θ = 0: convex things' runs
-                    sw.mark_convex(bulging_runs(
-                        sw.px, sw.py, origin[..., 0].reshape(-1).take(sw.index),
-                        origin[..., 1].reshape(-1).take(sw.index), sw.sensor,
-                        steps.take(sw.index // shape[1]), sw.d).view(np.uint8))
                 grouping = _iterate.Grouping(sw, pieces, uidx)
                 changed = grouping.regroup(before, STEEP_AT_ZERO_RAD)
                 corners_checked = False    # the grouping's first check re-decides corners
@@ -1488,57 +1483,6 @@ def _pieces_misfit(pr: _Profile, pos: np.ndarray, lab: np.ndarray, alpha: np.nda
     return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
 
 
-def _round_cuts(sensor: np.ndarray, step: np.ndarray, d0: np.ndarray) -> np.ndarray:
-    """Where a run of readings (in scan order) starts: a sensor change, steps more than
-    ``ARC_GAP_STEPS`` apart or θ = 0 ranges ``d0`` more than ``ROUND_JUMP_M`` apart (m)."""
-    cut = np.ones(sensor.size, dtype=bool)
-    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
-               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
-    return cut
-
-
-def _bulging(px: np.ndarray, py: np.ndarray, ox: np.ndarray, oy: np.ndarray,
-             group: np.ndarray, n: int) -> np.ndarray:
-    """Per run (``group`` < ``n``, sorted, each in scan order): whether its points ``px``,
-    ``py`` bulge towards the sensor (origins ``ox``, ``oy``) off the chord between its ends
-    by ``ROUND_BULGE_M`` on average, at most ``ROUND_BEHIND`` of them as far behind it (a
-    concave corner), not by noise alone (a wall cut in two). All in m."""
-    first = np.searchsorted(group, np.arange(n))
-    last = np.append(first[1:], group.size) - 1
-    ux, uy = px[last] - px[first], py[last] - py[first]
-    norm = np.hypot(ux, uy)
-    ux, uy = ux / np.maximum(norm, 1e-12), uy / np.maximum(norm, 1e-12)
-    side = np.sign((ox[first] - px[first]) * uy - (oy[first] - py[first]) * ux)
-    toward = ((px - px[first][group]) * uy[group]
-              - (py - py[first][group]) * ux[group]) * side[group]
-    n_in = np.bincount(group, minlength=n)
-    return ((np.bincount(group, toward, n) >= ROUND_BULGE_M * n_in)
-            & (np.bincount(group, toward < -ROUND_BULGE_M, n) <= ROUND_BEHIND * n_in))
-
-
-def bulging_runs(x0: np.ndarray, y0: np.ndarray, ox: np.ndarray, oy: np.ndarray,
-                 sensor: np.ndarray, step: np.ndarray, d0: np.ndarray) -> np.ndarray:
-    """Per reading (scan order, all at θ = 0: points ``x0``, ``y0``, origins ``ox``, ``oy``,
-    ranges ``d0``, m): whether it is in a run of at least ``ROUND_RUN_MIN`` readings (runs as
-    :func:`round_runs` cuts them) that bulges towards its sensor (:func:`_bulging`): a
-    convex thing (a round table, a column, a post, a box's corner), for the grouping's rules
-    that hold for walls and concave corners only (docs/estimator.md, "Steep runs at
-    θ = 0")."""
-    if sensor.size < ROUND_RUN_MIN:
-        return np.zeros(sensor.size, dtype=bool)
-    run = np.cumsum(_round_cuts(sensor, step, d0)) - 1
-    n_run = int(run[-1]) + 1
-    cand = np.bincount(run, minlength=n_run) >= ROUND_RUN_MIN
-    out = np.zeros(sensor.size, dtype=bool)
-    if not cand.any():
-        return out
-    sel = cand[run].nonzero()[0]
-    gi = (np.cumsum(cand) - 1)[run[sel]]
-    out[sel] = _bulging(x0[sel], y0[sel], ox[sel], oy[sel], gi,
-                        int(np.count_nonzero(cand)))[gi]
-    return out
-
-
 def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                steps: np.ndarray, cal: Calibration, line_alpha: np.ndarray,
                line_cx: np.ndarray, line_cy: np.ndarray, profiler: Callable | None = None
@@ -1573,7 +1517,9 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     # ranges at θ = 0: a line's θ, wrong where it cuts an arc, makes jumps of its own
     la0, b0 = cal._ab0
     d0 = np.exp(la0 + b0 * np.log(np.asarray(counts, dtype=float).reshape(-1)[vi]))
-    cut = _round_cuts(sensor, step, d0)
+    cut = np.ones(vi.size, dtype=bool)
+    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
+               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
     run = np.cumsum(cut) - 1
     n_run = int(run[-1]) + 1
     size = np.bincount(run, minlength=n_run)
@@ -1585,15 +1531,28 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     sel = cand[run].nonzero()[0]
     gi = (np.cumsum(cand) - 1)[run[sel]]
     n_c = int(np.count_nonzero(cand))
+    # the run's end points bulge towards the sensor off the chord between its ends, nowhere
+    # fall behind it (a concave corner), and not by noise alone (a wall cut in two)
     at = vi[sel]
-    hh = points.heading.reshape(-1)[at]
-    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
-    # the run's end points bulge towards the sensor off the chord between its ends …
-    keep = _bulging(points.x.reshape(-1)[at], points.y.reshape(-1)[at], ox, oy, gi, n_c)
+    px, py = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
+    first = np.searchsorted(gi, np.arange(n_c))
+    last = np.append(first[1:], gi.size) - 1
+    ux, uy = px[last] - px[first], py[last] - py[first]
+    norm = np.hypot(ux, uy)
+    ux, uy = ux / np.maximum(norm, 1e-12), uy / np.maximum(norm, 1e-12)
+    o_first = vi[sel[first]]
+    side = np.sign((points.origin_x.reshape(-1)[o_first] - px[first]) * uy
+                   - (points.origin_y.reshape(-1)[o_first] - py[first]) * ux)
+    toward = ((px - px[first][gi]) * uy[gi] - (py - py[first][gi]) * ux[gi]) * side[gi]
+    n_in = np.bincount(gi, minlength=n_c)
+    keep = ((np.bincount(gi, toward, n_c) >= ROUND_BULGE_M * n_in)
+            & (np.bincount(gi, toward < -ROUND_BULGE_M, n_c) <= ROUND_BEHIND * n_in))
     if not keep.any():
         return points, label
     # … and their circle at θ = 0 is a round thing's, not a post's or a box's corner (θ = 0
     # reads an arc's flanks long: that circle is smooth, if smaller than the arc's)
+    hh = points.heading.reshape(-1)[at]
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
     keep &= _kasa_radii(ox + d0[sel] * np.cos(hh), oy + d0[sel] * np.sin(hh), gi,
                         n_c) >= ROUND_RADII_M[0]
     if not keep.any():

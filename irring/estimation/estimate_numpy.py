@@ -18,8 +18,8 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RU
                        Estimate, LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
                        member_spans, nominal_calibration, polyline_ids, range_profiles,
-                       bulging_runs, reach_cos_limit, resolve_foldover, scan_order,
-                       settled_within_noise, silent_gaps)
+                       reach_cos_limit, resolve_foldover, scan_order, settled_within_noise,
+                       silent_gaps)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -411,13 +411,6 @@ class _Sweep:
         self.opts = opts
         self.cap = cal.max_incidence_rad
         self.reject = self.cap + opts.incidence_margin_rad
-        # readings of a convex thing's runs: the grouping's wall-only rules leave them alone
-        # (a calibration that folds has none of those rules)
-        self.convex = np.zeros(self.k, dtype=bool)
-        if not cal.folds:
-            d0, x0, y0, _ = self.points(np.zeros(self.k))
-            self.convex = bulging_runs(x0, y0, self.ox, self.oy, self.sensor,
-                                      np.asarray(steps).reshape(-1).take(sel // n_sensors), d0)
 
     def ab(self, theta: np.ndarray):
         """log a(θ), b(θ) from the fine table (θ in [0, π/2])."""
@@ -555,7 +548,6 @@ class _Grouping:
             _, a, cx, cy, dx, dy, _, _, col = self._tab
             oc = col.take(own)
             steep = ((_incidence(sw.hm.take(idx), a.take(oc)) > STEEP_AT_ZERO_RAD)
-                     & ~sw.convex.take(idx)
                      & (run_end.take(idx) - run_start.take(idx) + 1
                         >= 2 * sw.opts.corner_window)).nonzero()[0]
             if steep.size:
@@ -744,7 +736,7 @@ class _Grouping:
         by_piece = np.zeros(k, dtype=bool)
         by_piece[at] = (adjacent.take(pe.take(win))
                         & ((sw.sensor.take(at) == sw.sensor.take(self.first.take(lab.take(at))))
-                           | sw.cal.folds | sw.convex.take(at)))
+                           | sw.cal.folds))
         if by_piece.any():
             together = np.zeros(k, dtype=bool)
             together[1:] = by_piece[1:] & by_piece[:-1] & ~brk[1:] & (tgt[1:] == tgt[:-1])
@@ -757,7 +749,6 @@ class _Grouping:
             # the target piece lies before the run in the scan when its index is lower
             go = np.where(tgt.take(first_of) < lab.take(first_of), ~brk.take(first_of), nxt)
             group = np.cumsum(by_piece & ~together) - 1
-            go |= sw.convex.take(first_of)    # a convex thing's: as before the rule
             by_piece &= go.take(np.maximum(group, 0)) | sw.cal.folds
             new[by_piece] = tgt.take(by_piece.nonzero()[0])
             cand[by_piece] = False
@@ -789,8 +780,6 @@ class _Grouping:
             on_prev, on_next = has_prev & (src.take(prev) == t), has_next & (src.take(nxt) == t)
             # a run next to the corner moves only between readings on the target line
             move = ok_prev & ok_next & (on_prev | on_next) & ((n_near == 0) | (on_prev & on_next))
-            if src is new:      # later rounds: walls only (a convex thing's runs move once)
-                move &= ~sw.convex.take(a)
             at = (cand & move.take(np.maximum(run, 0))).nonzero()[0]
             if src is new and np.array_equal(new.take(at), tgt.take(at)):
                 break
