@@ -319,7 +319,6 @@ cdef class Sweep:
     cdef readonly object index, sensor, centre, log_s
     cdef readonly object d, px, py, sigma, thr
     cdef readonly double cap, reject
-    cdef readonly bint folds       # readings may lie on the near branch (cal.folds)
     cdef const double[:, ::1] ab_t
     # the calibration's nodes, for computing the fine table's rows (see look)
     cdef bint exact
@@ -328,7 +327,7 @@ cdef class Sweep:
     cdef double[::1] xp, fa, fb, sa, sb
     cdef Py_ssize_t[::1] bucket
     cdef double[::1] ls, ox, oy, ux, uy, hm, sig_s
-    cdef Py_ssize_t[::1] ix, sn
+    cdef Py_ssize_t[::1] ix
     cdef unsigned char[::1] run_brk
     cdef double[::1] _d, _px, _py, _sigma, _thr
     cdef unsigned char[::1] usable
@@ -384,7 +383,6 @@ cdef class Sweep:
         cdef Py_ssize_t[:, ::1] iv = ints
         self.ix = iv[0]
         cdef Py_ssize_t[::1] sn = iv[1]
-        self.sn = sn
         self.run_brk = _empty(k, dtype=_uint8)
         rows = _empty((7, k))
         cdef double[:, ::1] rv = rows
@@ -428,7 +426,6 @@ cdef class Sweep:
         if self.exact:
             self._nodes(cal)
         self.cap = cal.max_incidence_rad
-        self.folds = cal.folds
         self.reject = self.cap + opts.incidence_margin_rad
         self.min_split = opts.min_split_m
         self.split_sigmas = opts.split_sigmas
@@ -869,7 +866,7 @@ cdef class Grouping:
             if r <= sw._thr[i] and self._usable[o]:
                 self._label[i] = o
 
-    cdef void settle_corners(self, bint at_zero, double steep_rad):
+    cdef void settle_corners(self):
         """Readings at the ends of their run go to whichever line explains them best.
 
         Near a corner both walls' lines pass close to the first readings past it, and a
@@ -879,13 +876,9 @@ cdef class Grouping:
         with every usable line's θ and put on the line it then lies closest to (within the
         split threshold; see :meth:`_resid`), if that is clearly better than its own
         (by ``corner_sigmas``·σ: noise alone must not shuffle readings between lines).
-        ``at_zero`` (the first grouping): where the own line meets the reading steeper than
-        ``steep_rad`` and the run is at least 2·``corner_window`` long, the own line is
-        judged where the reading lies (``estimate_numpy._Grouping.settle_corners``).
         """
         cdef Sweep sw = self.sw
         cdef Py_ssize_t k = sw.k, i, u, j, U = 0, start = 0, end, own, best, L
-        cdef double r_own
         if k == 0 or not self._any_usable():
             return
         cdef Py_ssize_t[::1] idx = sw.iscr[0], run_end = sw.iscr[1]
@@ -896,13 +889,11 @@ cdef class Grouping:
             if i < k - 1 and (sw.run_brk[i + 1] or lab[i + 1] != lab[i]):
                 end = i
             run_end[i] = end
-        cdef Py_ssize_t[::1] long_run = sw.iscr[2]
         for i in range(k):
             if sw.run_brk[i] or (i > 0 and lab[i] != lab[i - 1]):
                 start = i
             if lab[i] >= 0 and min(i - start, run_end[i] - i) < sw.corner_window:
                 idx[U] = i
-                long_run[U] = run_end[i] - start + 1 >= 2 * sw.corner_window
                 U += 1
         if U == 0:
             return
@@ -914,12 +905,7 @@ cdef class Grouping:
             own = self.t_col[lab[i]]
             self._residuals(i, 0, L, &d[u * L], &th[u * L], own, &row[0])
             best = _argmin(&row[0], L)
-            r_own = row[own]
-            if at_zero and not sw.folds and long_run[u] and th[u * L + own] > steep_rad:
-                # a steep wall's line lies where θ = 0 put its readings: judged there
-                r_own = fabs((sw._py[i] - self.t_cy[own]) * self.t_dx[own]
-                             - (sw._px[i] - self.t_cx[own]) * self.t_dy[own])
-            if row[best] <= sw._thr[i] and row[best] < r_own - sw.corner_sigmas * sw._sigma[i]:
+            if row[best] <= sw._thr[i] and row[best] < row[own] - sw.corner_sigmas * sw._sigma[i]:
                 lab[i] = self.t_use[best]
 
     cdef void corner_sides(self):
@@ -932,10 +918,8 @@ cdef class Grouping:
         read with that line's θ, it lies on it (split threshold, within ``adopt_margin_m`` of
         its members' extent; at a far corner of the corner too, if that brings it closer by
         more than the split threshold) on its side of the corner; past a corner of adjacent
-        pieces (a reading of that polyline's sensor) with the readings next to it that go
-        there too, if the trace goes on towards the target piece; else with its run, if the
-        run's range stays continuous with the readings beside it and one of them is on that
-        line, in rounds until none moves (see
+        pieces by itself, else with its run, if the run's range stays
+        continuous with the readings beside it and one of them is on that line (see
         ``estimate_numpy._Grouping.corner_sides``, the statement this compiles).
         """
         cdef Sweep sw = self.sw
@@ -1120,9 +1104,8 @@ cdef class Grouping:
         # next to the corner (within corner_past_m) and not clearly closer to the target
         # line than to its own (by corner_sigmas·σ): such a run moves only between readings
         # on the target line; past the corner of two pieces of one polyline (the trace is
-        # continuous there, the target the piece beside it) without the range test
+        # continuous there, the target the piece beside it) a reading moves by itself
         cdef unsigned char[::1] near = np.zeros(k, dtype=_uint8)
-        cdef unsigned char[::1] by_piece = np.zeros(k, dtype=_uint8)
         cdef Py_ssize_t[::1] moved = sw.iscr[2]    # the labels change once all are decided
         cdef Py_ssize_t oc
         cdef double r_own
@@ -1135,72 +1118,38 @@ cdef class Grouping:
             r_own = fabs((sw._py[i] - cy[oc]) * dx[oc] - (sw._px[i] - cx[oc]) * dy[oc])
             near[i] = vv[3, p] >= -sw.corner_past and not (
                 rr[p] < r_own - sw.corner_sigmas * sw._sigma[i])
-            # past a corner of adjacent pieces: the polyline's own sensor's readings (below)
-            by_piece[i] = K[c, o] == 2 and (sw.folds or sw.sn[i] == sw.sn[self.first[lab[i]]])
+            if K[c, o] == 2:
+                moved[i] = tgt[i]
+                cand[i] = 0
+        # runs (consecutive readings of a sensor on one line with one target) move if their
+        # range, once moved, is continuous with the readings either side of them and one of
+        # those is on the target line
         cdef Py_ssize_t s0, e0
         cdef bint ok_run, on_prev, on_next, any_near
-        # past the corner of two pieces of one polyline the trace is continuous and the
-        # target the piece beside it: the polyline's own sensor's readings there move
-        # without the range test, those next to each other together, if their sensor's
-        # trace goes on (a live reading) towards the target piece (before them in the scan
-        # if its index is lower)
         i = 0
         while i < k:
-            if not by_piece[i]:
+            if not cand[i]:
                 i += 1
                 continue
             s0 = e0 = i
-            while (e0 + 1 < k and by_piece[e0 + 1] and not sw.run_brk[e0 + 1]
-                   and tgt[e0 + 1] == tgt[e0]):
+            while (e0 + 1 < k and cand[e0 + 1] and not sw.run_brk[e0 + 1]
+                   and lab[e0 + 1] == lab[e0] and tgt[e0 + 1] == tgt[e0]):
                 e0 += 1
             o = tgt[s0]
-            if (sw.folds or (o < lab[s0] and not sw.run_brk[s0])
-                    or (o > lab[s0] and e0 + 1 < k and not sw.run_brk[e0 + 1])):
+            ok_run = True
+            on_prev = on_next = any_near = False
+            if not sw.run_brk[s0]:
+                ok_run = self._same_surface(d_new, s0, s0 - 1, slope[s0])
+                on_prev = lab[s0 - 1] == o
+            if e0 + 1 < k and not sw.run_brk[e0 + 1]:
+                ok_run = ok_run and self._same_surface(d_new, e0, e0 + 1, slope[e0])
+                on_next = lab[e0 + 1] == o
+            for nb in range(s0, e0 + 1):
+                any_near = any_near or near[nb]
+            if ok_run and (on_prev or on_next) and (not any_near or (on_prev and on_next)):
                 for nb in range(s0, e0 + 1):
                     moved[nb] = o
-                    cand[nb] = 0
             i = e0 + 1
-        # runs (consecutive readings of a sensor on one line with one target) move if their
-        # range, once moved, is continuous with the readings either side of them and one of
-        # those is on the target line; in rounds until none moves, a run next to one that
-        # moved to the target in the round before being next to the target
-        cdef bint more = True
-        cdef Py_ssize_t[::1] now = np.empty(k, dtype=_intp)   # the labels a round starts from
-        for i in range(k):
-            now[i] = lab[i]
-        while more:
-            more = False
-            i = 0
-            while i < k:
-                if not cand[i]:
-                    i += 1
-                    continue
-                s0 = e0 = i
-                while (e0 + 1 < k and cand[e0 + 1] and not sw.run_brk[e0 + 1]
-                       and lab[e0 + 1] == lab[e0] and tgt[e0 + 1] == tgt[e0]):
-                    e0 += 1
-                o = tgt[s0]
-                if moved[s0] == o:      # moved in an earlier round
-                    i = e0 + 1
-                    continue
-                ok_run = True
-                on_prev = on_next = any_near = False
-                if not sw.run_brk[s0]:
-                    ok_run = self._same_surface(d_new, s0, s0 - 1, slope[s0])
-                    on_prev = now[s0 - 1] == o
-                if e0 + 1 < k and not sw.run_brk[e0 + 1]:
-                    ok_run = ok_run and self._same_surface(d_new, e0, e0 + 1, slope[e0])
-                    on_next = now[e0 + 1] == o
-                for nb in range(s0, e0 + 1):
-                    any_near = any_near or near[nb]
-                if ok_run and (on_prev or on_next) and (not any_near or (on_prev and on_next)):
-                    for nb in range(s0, e0 + 1):
-                        moved[nb] = o
-                    more = not sw.folds
-                i = e0 + 1
-            for i in range(k):
-                if moved[i] >= 0:
-                    now[i] = moved[i]
         for i in range(k):
             if moved[i] >= 0:
                 lab[i] = moved[i]
@@ -1350,14 +1299,13 @@ cdef class Grouping:
             else:
                 self._usable[l] = 0
 
-    def regroup(self, before, double steep_rad):
-        """The membership pass of a new grouping: :meth:`members`, :meth:`settle_corners`
-        (at θ = 0 where there was no grouping before; ``steep_rad``: its steep-run angle),
+    def regroup(self, before):
+        """The membership pass of a new grouping: :meth:`members`, :meth:`settle_corners`,
         :meth:`drop_steep`, :meth:`adopt`, then every line refitted to its members
         (:meth:`refit`), so θ comes from the members' own lines. Returns whether the labels
         differ from ``before`` (the previous grouping's; None: there was none)."""
         self.members()
-        self.settle_corners(before is None, steep_rad)
+        self.settle_corners()
         self.drop_steep()
         self.adopt()
         changed = before is None or not same(before, self.label)

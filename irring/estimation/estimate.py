@@ -35,8 +35,6 @@ CORNER_WINDOW = 14  # corners re-decided at a grouping's first check, later ones
 MAX_GAIN = 8.0      # the held iteration's secant step at most 8× the plain one
 PINNED_RAD = math.radians(2.0)  # a line most readings meet within this of the drop-out angle
 #                                  is a runaway, not a wall (see _drop_steep)
-STEEP_AT_ZERO_RAD = math.radians(55.0)  # at θ = 0 a long run's own line met steeper than
-#                     this is judged where the run lies (settle_corners; docs/estimator.md)
 
 
 # --------------------------------------------------------------------------- line grouping
@@ -428,7 +426,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
                 pieces = _segment(*parts, lines, sw.centre,
                                   None if grouping is None else grouping.pieces)
                 grouping = _iterate.Grouping(sw, pieces, uidx)
-                changed = grouping.regroup(before, STEEP_AT_ZERO_RAD)
+                changed = grouping.regroup(before)
                 corners_checked = False    # the grouping's first check re-decides corners
                 regroups += 1
                 # regroup again only while that changes who belongs where, and not back to

@@ -14,8 +14,8 @@ from ..core import Points, Reason, Sweep, beam_geometry
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration
 from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RUN_MAX,
                        POST_SENSORS, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
-                       SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, STEEP_AT_ZERO_RAD,
-                       Estimate, LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
+                       SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
+                       LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
                        member_spans, nominal_calibration, polyline_ids, range_profiles,
                        reach_cos_limit, resolve_foldover, scan_order, settled_within_noise,
@@ -504,7 +504,7 @@ class _Grouping:
         r[far] = np.inf
         return use, r
 
-    def settle_corners(self, px, py, sigma, thr, at_zero: bool) -> None:
+    def settle_corners(self, px, py, sigma, thr) -> None:
         """Readings at the ends of their run go to whichever line explains them best.
 
         Near a corner both walls' lines pass close to the first readings past it, and a
@@ -512,10 +512,7 @@ class _Grouping:
         self-consistent but wrong answer). Each reading within ``corner_window`` readings of
         either end of its run (same line, same sensor, consecutive in the scan) is re-read
         with every usable line's θ (see :meth:`fit_to`) and put on the line it then lies
-        closest to, if that is clearly better than its own. ``at_zero`` (the first
-        grouping, at θ = 0): where the own line meets the reading steeper than
-        ``STEEP_AT_ZERO_RAD`` and the run is at least 2·``corner_window`` long, the own
-        line is judged where the reading lies, not re-read (see below).
+        closest to, if that is clearly better than its own.
         """
         sw = self.sw
         k = sw.k
@@ -539,21 +536,6 @@ class _Grouping:
         best = r.argmin(axis=1)
         r_best = r[rows, best]
         r_own = r[rows, self._tab[8].take(own)]
-        if at_zero and not sw.cal.folds:
-            # θ = 0 reads a wall met at 55–70° 60–100 mm long and fits its line where they lie;
-            # re-read with that line's θ its readings leave it by as much, and the first ones
-            # past a corner went to the other wall's line (docs/estimator.md, "Steep runs at
-            # θ = 0"). Where its sensor's trace goes on along the line (a long run), the line
-            # is judged where the reading lies, as it was fitted.
-            _, a, cx, cy, dx, dy, _, _, col = self._tab
-            oc = col.take(own)
-            steep = ((_incidence(sw.hm.take(idx), a.take(oc)) > STEEP_AT_ZERO_RAD)
-                     & (run_end.take(idx) - run_start.take(idx) + 1
-                        >= 2 * sw.opts.corner_window)).nonzero()[0]
-            if steep.size:
-                i, c = idx.take(steep), oc.take(steep)
-                r_own[steep] = np.abs((py.take(i) - cy.take(c)) * dx.take(c)
-                                      - (px.take(i) - cx.take(c)) * dy.take(c))
         # switch only for a clear gain (noise alone must not shuffle readings between lines)
         ok = (r_best <= thr.take(idx)) & (r_best < r_own - sw.opts.corner_sigmas * sigma.take(idx))
         if ok.any():
@@ -634,10 +616,7 @@ class _Grouping:
         its members' extent; at a far corner, of the corner too, if that brings it closer
         by more than the split threshold) and on its side of the corner; of several, one a
         neighbouring reading of its sensor is on, else the one it fits best. Past a corner
-        of adjacent pieces a reading of that polyline's sensor moves with those next to it
-        that go there too, if its sensor's trace goes on towards the target piece (not
-        across a drop-out gap; another sensor's reading has no trace there). Past any
-        other it moves with its run (the
+        of adjacent pieces it moves by itself. Past any other it moves with its run (the
         readings of its sensor next to it on its line going to the same line), only if the
         run's range, once moved, is continuous with the readings either side of it (a
         corner keeps the range continuous; a wall's readings behind an occlusion edge moved
@@ -726,32 +705,12 @@ class _Grouping:
         near = np.zeros(k, dtype=bool)
         near[at] = ((beyond.take(win) >= -sw.opts.corner_past_m)
                     & ~(r.take(win) < r_own - sw.opts.corner_sigmas * sigma.take(at)))
-        # past the corner of two pieces of one polyline the trace is continuous and the
-        # target the piece beside it: the polyline's own sensor's readings there move
-        # without the range test, those next to each other together, if their sensor's
-        # trace goes on (a live reading) towards the target piece (another sensor's
-        # reading, or one across a drop-out gap, has no trace there: it moves with its
-        # run, below)
+        # past the corner of two pieces of one polyline: the trace is continuous there and
+        # the target the piece beside it, so the reading moves by itself
         new = lab.copy()
-        by_piece = np.zeros(k, dtype=bool)
-        by_piece[at] = (adjacent.take(pe.take(win))
-                        & ((sw.sensor.take(at) == sw.sensor.take(self.first.take(lab.take(at))))
-                           | sw.cal.folds))
-        if by_piece.any():
-            together = np.zeros(k, dtype=bool)
-            together[1:] = by_piece[1:] & by_piece[:-1] & ~brk[1:] & (tgt[1:] == tgt[:-1])
-            first_of = (by_piece & ~together).nonzero()[0]
-            last_of = by_piece.copy()
-            last_of[:-1] &= ~together[1:]
-            last_of = last_of.nonzero()[0]
-            nxt = last_of + 1 < k
-            nxt[nxt] = ~brk.take(last_of[nxt] + 1)
-            # the target piece lies before the run in the scan when its index is lower
-            go = np.where(tgt.take(first_of) < lab.take(first_of), ~brk.take(first_of), nxt)
-            group = np.cumsum(by_piece & ~together) - 1
-            by_piece &= go.take(np.maximum(group, 0)) | sw.cal.folds
-            new[by_piece] = tgt.take(by_piece.nonzero()[0])
-            cand[by_piece] = False
+        by_piece = adjacent.take(pe.take(win))
+        new[at[by_piece]] = tgt.take(at[by_piece])
+        cand[at[by_piece]] = False
         # runs: consecutive readings of a sensor on one line with one target
         same = np.zeros(k, dtype=bool)
         same[1:] = (cand[1:] & cand[:-1] & ~brk[1:] & (lab[1:] == lab[:-1])
@@ -771,22 +730,13 @@ class _Grouping:
         prev, nxt = np.maximum(a - 1, 0), np.minimum(b + 1, k - 1)
         ok_prev = ~has_prev | self._same_surface(d_new, a, prev, slope.take(a), sigma)
         ok_next = ~has_next | self._same_surface(d_new, b, nxt, slope.take(b), sigma)
+        on_prev, on_next = has_prev & (lab.take(prev) == t), has_next & (lab.take(nxt) == t)
         run = np.cumsum(start) - 1                            # run of each candidate
         n_near = np.bincount(run[cand & near], minlength=a.size)
-        # rounds until none moves: a run next to one that moved to the target in the round
-        # before is next to the target (a wall's readings past a corner split over lines)
-        src = lab
-        while True:
-            on_prev, on_next = has_prev & (src.take(prev) == t), has_next & (src.take(nxt) == t)
-            # a run next to the corner moves only between readings on the target line
-            move = ok_prev & ok_next & (on_prev | on_next) & ((n_near == 0) | (on_prev & on_next))
-            at = (cand & move.take(np.maximum(run, 0))).nonzero()[0]
-            if src is new and np.array_equal(new.take(at), tgt.take(at)):
-                break
-            new[at] = tgt.take(at)
-            if sw.cal.folds:
-                break
-            src = new
+        # a run next to the corner moves only between readings on the target line
+        move = ok_prev & ok_next & (on_prev | on_next) & ((n_near == 0) | (on_prev & on_next))
+        at = (cand & move.take(np.maximum(run, 0))).nonzero()[0]
+        new[at] = tgt.take(at)
         self.label = new
 
     def _same_surface(self, d, i, j, slope, sigma):
@@ -1072,7 +1022,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                 pieces = _segment(*parts, lines, sw.centre, pieces)
                 grouping = _Grouping(sw, pieces, uidx)
                 grouping.members(px, py, thr)
-                grouping.settle_corners(px, py, sigma, thr, at_zero=before is None)
+                grouping.settle_corners(px, py, sigma, thr)
                 corners_checked = False    # the grouping's first check re-decides corners
                 regroups += 1
             else:  # the same members, refitted where they now are
