@@ -83,10 +83,8 @@ def _worst_reading_and_cells_outside(text: str):
 
 
 def test_a_fragment_of_a_far_line_is_read_on_the_first_passs_line():
-    # the worst: a reading decided far by its own trace (test_foldover.py), 37 mm short at
-    # its true θ (σ 12 mm: noise); the fragment's members are within 30 mm
     worst, outside = _worst_reading_and_cells_outside(QUAD)
-    assert worst <= 0.038 and outside == 0, (worst, outside)
+    assert worst <= 0.030 and outside == 0, (worst, outside)
 
 
 def test_without_the_first_passs_line_the_fragment_draws_wall_outside(monkeypatch):

@@ -316,8 +316,8 @@ def test_a_line_decides_the_far_branch_only_where_it_is_seen():
         assert err.size and err.max() < 0.100
         valid += int(p.valid.sum())
     # the walls seen far are still read (152 until the 9 at θ = 0, σ 72-79 mm, were left
-    # unplaced: FOLD_PLACED_SIGMA_M; 227 since the far-trace rule: test_a_straight_far_…)
-    assert wrong == 0 and valid == 227
+    # unplaced: FOLD_PLACED_SIGMA_M)
+    assert wrong == 0 and valid == 143
 
 
 # A wall met at 60-70° beside a corner, the wall past the corner 0.55-0.75 m away: the near
@@ -463,9 +463,8 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
     another line at 68°: 528 mm for 632 mm. It stays NO_RETURN. (Seed 8112 showed it until
     the own-trace rule held out other neighbours: test_a_far_end_point_needs_…; since a pool
     one half of which saw nothing is left as it was, POOL_SIDE_SIGMAS, that pool does not
-    form: 455 valid readings, none off, 443 since FOLD_PLACED_SIGMA_M, 514 since
-    the far-trace rule: test_a_straight_far_…; the guard is checked with the halves' rule
-    off, and without the far-trace rule.)"""
+    form: 455 valid readings, none off, 443 since FOLD_PLACED_SIGMA_M; the guard is checked
+    with the halves' rule off.)"""
     import irring.estimation.estimate as fast
     scene = loads(NEAR_A21, source="<test>")
 
@@ -476,8 +475,6 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
             e = np.hypot(p.x - sw.truth.hit_point[..., 0], p.y - sw.truth.hit_point[..., 1])
             n += int((p.valid & (e > 0.1)).sum())
         return n, sum(int(p.valid.sum()) for p in run.points)
-    assert off() == (0, 514)
-    monkeypatch.setattr(fast, "_far_trace_certain", _no_reading)
     assert off() == (0, 443)
     monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)
     assert off() == (0, 456)
@@ -512,8 +509,7 @@ effects: [incidence, noise, quantization, foldover]
 """
 
 
-def _no_reading(counts, *args):
-    """A per-reading rule (S, N) that holds for none: the estimator without it."""
+def _no_straight_trace(counts, *args):
     return np.zeros(np.shape(counts), bool)
 
 
@@ -528,7 +524,7 @@ def _long_and_valid(points, sweeps):
 # (the pilaster: (9, 249) and (0, 236) before a pool one half of which saw nothing was left
 # as it was, POOL_SIDE_SIGMAS)
 @pytest.mark.parametrize("room, seed, before, now", [
-    (STEPPED_CORNER, 7021, (42, 74), (0, 67)), (PILASTER_TOP_A21, 7108, (9, 239), (0, 271))],
+    (STEPPED_CORNER, 7021, (42, 74), (0, 21)), (PILASTER_TOP_A21, 7108, (9, 239), (0, 226))],
     ids=["stepped-corner", "a21-pilaster-top"])
 def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, now,
                                                           monkeypatch):
@@ -542,9 +538,7 @@ def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, n
         np.testing.assert_array_equal(slow.reason, p.reason)
         np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
     # the straight-trace test (below) alone leaves none of these valid either: without both
-    # (and without the far-trace rule, which came later: test_a_straight_far_trace_…)
-    monkeypatch.setattr(est, "_far_trace_certain", _no_reading)
-    monkeypatch.setattr(est, "_near_trace_straight", _no_reading)
+    monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
     with monkeypatch.context() as m:
         m.setattr(est, "_own_trace_agrees", lambda between, *a: np.ones(between.shape, bool))
         assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == before
@@ -596,17 +590,13 @@ def test_a_far_decision_its_own_line_does_not_anchor_needs_the_straighter_far_tr
 
     sc, sweeps, cal = simulated(BOX_IN_CORNER, seed=7003)
     points = [estimate(sw, cal) for sw in sweeps]
-    assert _long_and_valid(points, sweeps) == (0, 227)
+    assert _long_and_valid(points, sweeps) == (0, 136)
     for sw, p in zip(sweeps, points):
         slow = estimate_numpy.estimate_detail(sw, cal).points
         np.testing.assert_array_equal(slow.reason, p.reason)
         np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
     # without the test: 7 readings of the face read far onto the floor wall, ~250 mm off
-    # (without the far-trace rule too: it took the floor wall's readings out of the judging,
-    # and the face's far curve no longer lands on the wall's seen stretch)
-    monkeypatch.setattr(est, "_far_trace_certain", _no_reading)
-    assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (0, 136)
-    monkeypatch.setattr(est, "_near_trace_straight", _no_reading)
+    monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
     assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (7, 151)
 
 
@@ -660,7 +650,7 @@ def test_a_far_reading_nothing_places_within_30_mm_is_left_unplaced(monkeypatch)
     assert np.array_equal(p.valid | took, q.valid)          # nothing else left or came back
     assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
     assert np.all(q.sigma_m[took] > 0.03) and np.all(p.sigma_m[p.valid] <= 0.03)
-    assert int(took.sum()) == 23 and int(q.valid.sum()) == 237   # 223 without the far-trace rule
+    assert int(took.sum()) == 23 and int(q.valid.sum()) == 223
     assert int(np.sum((q.theta[took] == 0.0) & (q.sigma_m[took] > 0.06))) == 22
     outline = sc.room.outline_m
     assert (cells_outside(before.grid, outline), cells_outside(now.grid, outline)) == (3, 0)
@@ -728,88 +718,8 @@ def test_a_line_member_beside_a_nearer_surface_is_found_whatever_the_row_order()
 
     falling = np.arange(len(sw.steps))[::-1]
     shuffled = np.random.default_rng(5).permutation(len(sw.steps))
-    assert int(rising.valid.sum()) == 86   # 67 without the far-trace rule
+    assert int(rising.valid.sum()) == 67
     for order in (falling, shuffled):
         for p in (estimate(reordered(order), cal),
                   estimate_numpy.estimate_detail(reordered(order), cal).points):
             np.testing.assert_array_equal(p.reason, rising.reason[order])
-
-
-# Rooms of our own where the housing test proves next to nothing far: a GP2Y0A02 (peak
-# 150 mm) 181 mm from both walls of a 75° corner, then 450 mm from a wall square-on; a GP2D12
-# 177 mm from a box's face (box turned 28°), then 174 mm from the floor wall, turned -17°.
-CORNER75_A02 = """
-name: fold_corner75_a02
-room: {outline_mm: [[0, 0], [2000, 0], [2000, 1500], [401.9, 1500]]}
-robot: {poses: [{x_mm: 235.9, y_mm: 181.0, yaw_deg: 21}, {x_mm: 1550, y_mm: 690}]}
-sensor: {model: gp2y0a02}
-effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}, foldover: {}}
-map: {resolution_mm: 10}
-"""
-BOX28_D12 = """
-name: fold_box28_d12
-room: {outline_mm: [[0, 0], [1700, 0], [1700, 1300], [0, 1300]]}
-obstacles: [{type: box, center_mm: [800, 640], size_mm: [300, 200], yaw_deg: 28}]
-robot: {poses: [{x_mm: 670, y_mm: 885, yaw_deg: 6}, {x_mm: 1100, y_mm: 174, yaw_deg: -17}]}
-sensor: {model: gp2d12}
-effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}, foldover: {}}
-map: {resolution_mm: 10}
-"""
-
-
-@pytest.mark.parametrize("room, seed, before, now", [
-    (CORNER75_A02, 5303, 6, 353), (BOX28_D12, 5505, 220, 456)], ids=["a02-corner", "d12-box"])
-def test_a_straight_far_trace_over_the_turn_decides_far(room, seed, before, now, monkeypatch):
-    from irring.estimation import estimate as est, estimate_numpy
-    from irring.studies.foldover import check_run
-
-    sc = loads(room, source="<test>")
-    got = check_run(sc, seed)
-    # far readings the ring can now use, none > 100 mm off, no wall outside the room
-    assert (got["valid"], got["far"], got["cells_outside"]) == (now, 0, 0)
-    sc_, sweeps, cal = simulated(room, seed=seed)
-    for sw in sweeps:   # the compiled estimator and the numpy oracle agree
-        fast, slow = estimate(sw, cal), estimate_numpy.estimate_detail(sw, cal).points
-        np.testing.assert_array_equal(slow.reason, fast.reason)
-        np.testing.assert_allclose(slow.d, fast.d, atol=1e-9, rtol=0)
-    monkeypatch.setattr(est, "_far_trace_certain", _no_reading)
-    got = check_run(sc, seed)
-    assert (got["valid"], got["far"], got["cells_outside"]) == (before, 0, 0)
-
-
-@pytest.mark.parametrize("model", ["gp2y0a02", "gp2d12"])
-def test_far_trace_certain_tells_a_far_wall_from_a_close_face_over_the_turn(model):
-    from types import SimpleNamespace
-
-    from irring.estimation.estimate import _far_trace_certain
-
-    cal = scene_calibration(loads(CORNER75_A02.replace("gp2y0a02", model), source="<t>"))[0]
-    steps = 71   # the motor's turn, ±37.8°
-    turn = np.linspace(-0.66, 0.66, steps)[:, None]
-    heading = turn + np.array([0.0, 2.1, 4.3])[None, :]
-    p = SimpleNamespace(origin_x=0.15 * np.cos(heading) + 0.31,
-                        origin_y=0.15 * np.sin(heading) - 0.17, heading=heading)
-    # sensor 0: a flat face 41 mm in front (near branch); sensor 1: a wall 337 mm away
-    # (far); sensor 2: a wall 12 mm past the peak, where both branches lie close together
-
-    def plane(sensor, normal_rad, gap_m):   # range to a flat surface gap_m past the housing
-        n = np.array([math.cos(normal_rad), math.sin(normal_rad)])
-        c = n @ [0.31, -0.17] + 0.15 + gap_m
-        h = heading[:, sensor]
-        ox, oy = p.origin_x[:, sensor], p.origin_y[:, sensor]
-        return (c - n[0] * ox - n[1] * oy) / (n[0] * np.cos(h) + n[1] * np.sin(h))
-    face = plane(0, 0.07, 0.041)
-    wall = plane(1, 2.1 - 0.11, 0.337)
-    at_peak = plane(2, 4.3 + 0.02, cal.peak_distance_m + 0.012)
-    rng = np.random.default_rng(5303)
-    counts = np.stack([face / cal.peak_distance_m * cal.counts(cal.peak_distance_m, 0.0),
-                       cal.counts(wall, 0.0), cal.counts(at_peak, 0.0)], axis=1)
-    counts = counts + rng.normal(0.0, cal.sigma_counts(), counts.shape)
-    use = np.ones(counts.shape, bool)
-    use[30, 1] = False
-    sure = _far_trace_certain(counts, p, np.arange(steps)[::-1].copy(), use, cal)
-    assert not sure[:, 0].any()
-    # within 30 mm of the peak nothing (the surface's far ends, turned, lie farther)
-    assert not sure[at_peak < cal.peak_distance_m + 0.03, 2].any()
-    assert (at_peak < cal.peak_distance_m + 0.03).sum() >= 35
-    assert sure[:, 1].tolist() == [i != 30 for i in range(steps)]

@@ -2351,15 +2351,6 @@ _FOLD_OWN_COS = math.cos(math.radians(20.0))  # … and, unless its own line is 
 #                        the line's members (a near face's far curve crossed it at 25-47°)
 _FOLD_TRACE_STEPS = 10  # a reading's own traces: its sensor's readings this many steps either
 _FOLD_TRACE_RATIO = 2.0  # side; the near one "as straight" within this ratio of reduced χ²
-# A reading is far, as if its near end point lay inside the housing, where its sensor's
-# readings over most of the motor's turn (this many steps either side) fit one straight
-# line on the far branch (reduced χ² at most _FOLD_SURE_CHI2) and the near branch's χ² is
-# _FOLD_SURE_RATIO times that or more: the surface is straight on one branch only. Not
-# within _FOLD_SURE_PEAK_M of the peak, where both branches lie close together
-_FOLD_SURE_STEPS = 35
-_FOLD_SURE_CHI2 = 2.0
-_FOLD_SURE_RATIO = 10.0
-_FOLD_SURE_PEAK_M = 0.03
 # the readings whose branch is judged: every one that returned something. A reading the far
 # branch puts out of range or at an unknown θ may be on the near branch all the same, and the
 # second pass (its neighbours held out) could otherwise read it valid on the far one
@@ -2398,8 +2389,7 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
        blocks its beam before it, while its near end point lies on no line nor any line's
        extension; near if a line blocks the beam before the far end point and its near end
        point lies on a line; certainly far if its near end point would lie inside the
-       ring's housing, far if its sensor's trace over the turn is straight on the far
-       branch only (:func:`_far_trace_certain`); else ambiguous;
+       ring's housing; else ambiguous;
     3. the sweep estimated again without the near and ambiguous readings; the near readings
        get their near distance at the incidence of the line they lie on.
     """
@@ -2682,8 +2672,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     """(near, far, d, θ, σ), all (S, N), the lines two sensors agree on (indices into
     ``first.lines``) and ``doubted`` (S, N), from the far-branch estimate ``first`` (see
     :func:`resolve_foldover`); vectorised over (readings, lines). ``far`` includes the
-    readings whose near end point would lie inside the housing and those whose own trace
-    is straight on the far branch only (:func:`_far_trace_certain`); d > 0 where a line decided
+    readings whose near end point would lie inside the housing; d > 0 where a line decided
     the branch: the distance on that branch at that line's incidence (0 elsewhere);
     ``doubted``: far ones whose own near trace is as straight as their far one while their
     own line is not anchored (:func:`_near_trace_straight`), undecided in the end."""
@@ -2700,13 +2689,9 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     far_near = cal.peak_distance_m * counts / float(np.min(cal.counts(cal.peak_distance_m, rows)))
     hx, hy = ox + far_near * np.cos(h), oy + far_near * np.sin(h)
     housing = np.hypot(hx - pose[..., 0], hy - pose[..., 1]) < sweep.ring.radius_m + HOUSING_M
-    # … and so is one whose sensor's trace over the turn is straight on the far branch only;
-    # it anchors no line (lines anchored by these too made more valid far readings, and
-    # more of them long: cells outside the room in 8 of 44 runs of our rooms, 4 without)
-    sure = housing | _far_trace_certain(counts, p, np.asarray(sweep.steps), live, cal)
-    cand = live & ~sure
+    cand = live & ~housing
     if not cand.any():
-        return (np.zeros(shape, bool), sure & live, *(np.zeros(shape) for _ in range(3)),
+        return (np.zeros(shape, bool), housing & live, *(np.zeros(shape) for _ in range(3)),
                 np.zeros(0, np.intp), np.zeros(shape, bool))
     idx = cand.reshape(-1).nonzero()[0]
     s = counts.reshape(-1)[idx]
@@ -2799,7 +2784,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     straight = _near_trace_straight(counts, p, np.asarray(sweep.steps), cand, cal)
     doubted = np.zeros(shape, bool)
     doubted.reshape(-1)[idx] = is_far & straight.reshape(-1)[idx] & ~own_certain
-    near, far = np.zeros(shape, bool), sure & live
+    near, far = np.zeros(shape, bool), housing & live
     near.reshape(-1)[idx] = is_near
     far.reshape(-1)[idx] = is_far
     out = [np.zeros(shape) for _ in range(3)]
@@ -2846,22 +2831,6 @@ def _trace_chi2(x: np.ndarray, y: np.ndarray, sigma: np.ndarray, use: np.ndarray
     return out
 
 
-def _branch_traces(counts: np.ndarray, p: Points, steps: np.ndarray, use: np.ndarray,
-                   cal: Calibration, steps_either_side: int) -> tuple[np.ndarray, np.ndarray]:
-    """(near, far), each (S, N): the reduced χ² of each reading's own trace on either branch
-    (:func:`_trace_chi2` of the end points at θ = 0 of its sensor's readings ``use`` within
-    ``steps_either_side`` steps, σ from the counts' noise on that branch)."""
-    order = np.argsort(np.asarray(steps), kind="stable")
-    rel = cal.sigma_counts() / np.maximum(counts, 1.0)
-    chi2 = []
-    for d, slope in ((cal.near_distance(counts, 0.0), 1.0),
-                     (cal.distance(np.maximum(counts, 1.0), 0.0), abs(float(cal.ab(0.0)[1])))):
-        x, y = p.origin_x + d * np.cos(p.heading), p.origin_y + d * np.sin(p.heading)
-        chi2.append(_trace_chi2(x, y, np.maximum(slope * d * rel, 1e-6), use, order,
-                                steps_either_side))
-    return chi2[0], chi2[1]
-
-
 def _near_trace_straight(counts: np.ndarray, p: Points, steps: np.ndarray,
                          use: np.ndarray, cal: Calibration) -> np.ndarray:
     """(S, N) bool: whether a reading's own near trace is as straight as its far one: the
@@ -2870,26 +2839,16 @@ def _near_trace_straight(counts: np.ndarray, p: Points, steps: np.ndarray,
     ``_FOLD_TRACE_RATIO`` times the far branch's (NaN, fewer than 5 points: False). A flat
     face 30 mm in front gives a straight near trace; a wall read far a straight far one.
     docs/foldover.md, "Both branches straight"."""
-    near, far = _branch_traces(counts, p, steps, use, cal, _FOLD_TRACE_STEPS)
+    order = np.argsort(np.asarray(steps), kind="stable")
+    rel = cal.sigma_counts() / np.maximum(counts, 1.0)
+    chi2 = []
+    for d, slope in ((cal.near_distance(counts, 0.0), 1.0),
+                     (cal.distance(np.maximum(counts, 1.0), 0.0), abs(float(cal.ab(0.0)[1])))):
+        x, y = p.origin_x + d * np.cos(p.heading), p.origin_y + d * np.sin(p.heading)
+        chi2.append(_trace_chi2(x, y, np.maximum(slope * d * rel, 1e-6), use, order,
+                                _FOLD_TRACE_STEPS))
+    near, far = chi2
     return near <= _FOLD_TRACE_RATIO * far
-
-
-def _far_trace_certain(counts: np.ndarray, p: Points, steps: np.ndarray, use: np.ndarray,
-                       cal: Calibration) -> np.ndarray:
-    """(S, N) bool: the readings ``use`` whose own trace over ``_FOLD_SURE_STEPS`` steps
-    either side is straight on the far branch (reduced χ² ≤ ``_FOLD_SURE_CHI2``) and
-    ``_FOLD_SURE_RATIO`` times less straight on the near one, their shortest far distance
-    ``_FOLD_SURE_PEAK_M`` or more past the peak. As the ring turns, a wall read on its own
-    branch traces a line, on the other a curve (r ∝ cos^m φ, or its inverse); over a few
-    steps both are straight, over the turn they are not. What the housing test does for
-    parts whose peak lies close to the ring (the GP2Y0A02's, at 150 mm, never does).
-    docs/foldover.md, "Straight on one branch over the turn"."""
-    near, far = _branch_traces(counts, p, steps, use, cal, _FOLD_SURE_STEPS)
-    s = np.maximum(counts, 1.0)
-    far_min = np.minimum(cal.distance(s, 0.0), cal.distance(s, cal.max_incidence_rad))
-    with np.errstate(invalid="ignore"):
-        return (use & (far <= _FOLD_SURE_CHI2) & (near >= _FOLD_SURE_RATIO * far)
-                & (far_min >= cal.peak_distance_m + _FOLD_SURE_PEAK_M))
 
 
 def _own_trace_agrees(between: np.ndarray, ocol: np.ndarray, certain: np.ndarray,
