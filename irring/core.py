@@ -391,6 +391,13 @@ def first_wall_into(ob: Cylinder | Box, outline) -> int | None:
     """The first wall of a closed outline that comes into an obstacle (deeper than
     :data:`GEOMETRY_TOL_M`: a wall touching it does not), or None. With the obstacle's
     centre inside the room, None means the whole obstacle is inside."""
+    hit = np.flatnonzero(walls_into(ob, outline))
+    return int(hit[0]) if hit.size else None
+
+
+def walls_into(ob: Cylinder | Box, outline) -> np.ndarray:
+    """(n,) bool: which walls of a closed outline come into an obstacle (as
+    :func:`first_wall_into`)."""
     a = np.asarray(outline, dtype=float).reshape(-1, 2)
     b = np.roll(a, -1, axis=0)
     if isinstance(ob, Cylinder):
@@ -410,8 +417,61 @@ def first_wall_into(ob: Cylinder | Box, outline) -> int | None:
             enter = np.where(still, enter, np.maximum(enter, np.minimum(t1, t2)))
             leave = np.where(still, leave, np.minimum(leave, np.maximum(t1, t2)))
         near &= leave > enter
-    hit = np.flatnonzero(near)
-    return int(hit[0]) if hit.size else None
+    return near
+
+
+FOOTPRINT_SIDES = 360   # a cylinder's footprint as a polygon: its area within 0.01 %
+
+
+def footprint(ob: Cylinder | Box) -> np.ndarray:
+    """(K, 2) an obstacle's outline seen from above, counter-clockwise: a box's corners, a
+    cylinder's as a regular polygon of FOOTPRINT_SIDES corners on its circle."""
+    if isinstance(ob, Box):
+        return box_corners(ob)
+    a = np.linspace(0.0, 2.0 * math.pi, FOOTPRINT_SIDES, endpoint=False)
+    return np.asarray(ob.center_m) + ob.radius_m * np.column_stack([np.cos(a), np.sin(a)])
+
+
+def polygon_area(poly) -> float:
+    """Area (m²) a closed polygon encloses, either orientation (shoelace)."""
+    x, y = np.asarray(poly, dtype=float).reshape(-1, 2).T
+    return abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))) / 2.0
+
+
+def clip_to_convex(poly, window) -> np.ndarray:
+    """The part of a closed polygon (any simple one, either orientation) inside a convex
+    counter-clockwise ``window`` (Sutherland–Hodgman: a concave ``poly`` may come out with
+    edges running back over one another, which enclose no area)."""
+    out = np.asarray(poly, dtype=float).reshape(-1, 2)
+    w = np.asarray(window, dtype=float).reshape(-1, 2)
+    for p, q in zip(w, np.roll(w, -1, axis=0)):
+        if not len(out):
+            break
+        side = (q[0] - p[0]) * (out[:, 1] - p[1]) - (q[1] - p[1]) * (out[:, 0] - p[0])
+        nxt, side_nxt = np.roll(out, -1, axis=0), np.roll(side, -1)
+        keep, cross = side >= 0, (side >= 0) != (side_nxt >= 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(cross, side / (side - side_nxt), 0.0)
+        both = np.empty((2 * len(out), 2))
+        both[0::2], both[1::2] = out, out + t[:, None] * (nxt - out)
+        out = both[np.column_stack([keep, cross]).reshape(-1)]
+    return out
+
+
+def reach_outside(ob: Cylinder | Box, outline, spacing_m: float = 0.001) -> float:
+    """How far (m) an obstacle reaches past a closed outline: the largest distance from the
+    outline of a point of its footprint outside it (0 when none is), from points along the
+    footprint's edges at most ``spacing_m`` apart (the farthest point outside is on them)."""
+    a = footprint(ob)
+    b = np.roll(a, -1, axis=0)
+    n = np.maximum(1, np.ceil(np.hypot(*(b - a).T) / spacing_m).astype(int))
+    t = np.concatenate([np.arange(k) / k for k in n])
+    start = np.repeat(a, n, axis=0)
+    pts = start + t[:, None] * (np.repeat(b, n, axis=0) - start)
+    out = ~inside_outline(pts[:, 0], pts[:, 1], outline)
+    if not out.any():
+        return 0.0
+    return float(np.max(distance_to_outline(pts[out, 0], pts[out, 1], outline)))
 
 
 # --------------------------------------------------------------------------- sweeps and points

@@ -32,7 +32,7 @@ from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_sc
                            RunSilences, classify, returns_of, slice_steps)
 from .maps.mcap_export import write_mcap
 from .outputs import OutputSet
-from .scenario import Scenario, ScenarioError, loads
+from .scenario import Scenario, ScenarioError, clipped_obstacles, loads
 
 FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
 
@@ -124,6 +124,7 @@ class MapRun:
     def summary(self) -> dict:
         """The JSON document ``irring run --json`` prints."""
         sc = self.scenario
+        clipped = [c.as_json() for c in clipped_obstacles(sc)] if sc else []
         return {
             "scenario": sc.name if sc else None,
             "design": sc.robot.design if sc else None,
@@ -134,6 +135,7 @@ class MapRun:
             "compute_time_s": {**{k: float(v) for k, v in self.timings_s.items()},
                                "total": self.compute_time_s},
             **({"unscored": self.unscored} if self.unscored else {}),
+            **({"clipped_obstacles": clipped} if clipped else {}),
         }
 
     def _repr_png_(self) -> bytes:

@@ -24,8 +24,9 @@ from . import designs, gp2, resources, safe_yaml
 from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_COORDINATE_M,
                    MAX_OBSTACLES, MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S,
                    SEED_MAX, SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error,
-                   choice, distance_to_outline, first_crossing, first_overlap, first_wall_into,
-                   inside_outline, num, obstacle_distance, on_one_line, unit_suffix)
+                   choice, clip_to_convex, distance_to_outline, first_crossing, first_overlap,
+                   first_wall_into, footprint, inside_outline, num, obstacle_distance,
+                   on_one_line, polygon_area, reach_outside, unit_suffix, walls_into)
 from .designs import Design
 from .errors import InputError, brief
 
@@ -506,6 +507,57 @@ def _validate_geometry(sc: Scenario, fail) -> None:
 
 
 # --------------------------------------------------------------------------- public API
+
+# an obstacle reaching less than this past a wall is one written flush with it (a rounded
+# centre or size): clipped all the same, but not worth a note
+CLIP_NOTE_MIN_M = 0.001
+
+
+@dataclass(frozen=True)
+class Clipped:
+    """An obstacle reaching through the walls (:func:`clipped_obstacles`)."""
+
+    index: int                # in ``scenario.obstacles`` (the file's obstacles[index])
+    walls: tuple[int, ...]    # the walls that come into it (outline indices)
+    reach_m: float            # how far it reaches past the walls' inner face
+    share: float              # the part of its footprint's area beyond the walls (0 … 1)
+    note: str                 # the one line saying so (run summaries, `irring scenarios`)
+
+    def as_json(self) -> dict:
+        return {"obstacle": self.index, "walls": list(self.walls),
+                "reach_mm": round(self.reach_m * 1e3, 1), "share_clipped": round(self.share, 4),
+                "note": self.note}
+
+
+def clipped_obstacles(sc: Scenario) -> list[Clipped]:
+    """The obstacles the walls clip by more than CLIP_NOTE_MIN_M, in file order: a box put
+    against a wall on purpose is normal, a mistyped centre putting one half through a wall
+    is not, and only the user can tell them apart (a note, never an error)."""
+    outline = sc.room.outline_m
+    centres = np.array([ob.center_m for ob in sc.obstacles], dtype=float).reshape(-1, 2)
+    reach_max = np.array([ob.radius_m if isinstance(ob, Cylinder) else
+                          math.hypot(*ob.size_m) / 2 for ob in sc.obstacles], dtype=float)
+    near = reach_max > distance_to_outline(centres[:, 0], centres[:, 1], outline)
+    out = []
+    for j in np.flatnonzero(near).tolist():
+        ob = sc.obstacles[j]
+        into = np.flatnonzero(walls_into(ob, outline))
+        if not into.size:
+            continue
+        reach = reach_outside(ob, outline)
+        if reach <= CLIP_NOTE_MIN_M:
+            continue
+        shape = footprint(ob)
+        share = 1.0 - polygon_area(clip_to_convex(outline, shape)) / polygon_area(shape)
+        what = (f"a cylinder of radius {ob.radius_m * 1e3:g} mm" if isinstance(ob, Cylinder)
+                else f"a {ob.size_m[0] * 1e3:g} × {ob.size_m[1] * 1e3:g} mm box")
+        walls = " and ".join(_wall_mm(outline, int(k)) for k in into)
+        note = (f"obstacles[{j}], {what} at ({ob.center_m[0] * 1e3:g}, "
+                f"{ob.center_m[1] * 1e3:g}) mm, reaches {reach * 1e3:.0f} mm through {walls}: "
+                f"{share:.1%} of it lies beyond the walls, clipped (never seen, not scored)")
+        out.append(Clipped(j, tuple(int(k) for k in into), reach, share, note))
+    return out
+
 
 def bundled_dir() -> Path:
     """Folder of the bundled scenarios (works for editable and plain installs)."""

@@ -49,6 +49,51 @@ def test_scenarios_lists_every_bundled_scenario_and_marks_the_default(capsys):
     assert default and default[0].endswith("(default)")
 
 
+HALF_THROUGH = """
+name: half_through
+room: {outline_mm: [[0, 0], [2420, 0], [2420, 900], [0, 900]]}
+obstacles:
+  - {type: cylinder, center_mm: [600, 450], radius_mm: 30}
+  - {type: box, center_mm: [2500, 300], size_mm: [300, 200]}
+robot: {poses: [{x_mm: 1200, y_mm: 450}]}
+"""
+HALF_NOTE = ("obstacles[1], a 300 × 200 mm box at (2500, 300) mm, reaches 230 mm through wall 1 "
+             "((2420, 0) → (2420, 900) mm): 76.7% of it lies beyond the walls, clipped (never "
+             "seen, not scored)")
+
+
+def test_an_obstacle_half_through_a_wall_is_noted_where_the_user_looks(tmp_path, capsys):
+    """A mistyped centre (2500 for 2300) put a box 230 mm through a wall: it loaded and ran
+    without a word. `irring scenarios FILE`, `irring run`'s summary and its JSON name it (a
+    note on stdout, no warning: `python -W error` runs and parsers of the JSON are unharmed;
+    the box flush with the wall prints no note and no JSON key)."""
+    import json
+    import warnings
+
+    room = tmp_path / "half.yaml"
+    room.write_text(HALF_THROUGH)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["scenarios", str(room), "t_room"]) == 0
+        listed = capsys.readouterr().out.splitlines()
+        assert main(["run", str(room), "--no-animation", "--out", str(tmp_path / "o")]) == 0
+        readable = capsys.readouterr().out.splitlines()
+        assert main(["run", str(room), "--json", "--no-animation", "--out",
+                     str(tmp_path / "o")]) == 0
+        summary = json.loads(capsys.readouterr().out)
+    assert listed[0].split() == [str(room), "1", "pose(s)", "2", "obstacle(s)"]
+    assert listed[1:] == [f"  note: {HALF_NOTE}", listed[2]] and listed[2].startswith("t_room ")
+    assert readable[2] == f"  note      {HALF_NOTE}"
+    assert summary["clipped_obstacles"] == [{"obstacle": 1, "walls": [1], "reach_mm": 230.0,
+                                             "share_clipped": 0.7667, "note": HALF_NOTE}]
+    room.write_text(HALF_THROUGH.replace("[2500, 300]", "[2270, 300]"))   # flush: no note
+    assert main(["run", str(room), "--json", "--no-animation", "--out",
+                 str(tmp_path / "o")]) == 0
+    assert "clipped_obstacles" not in json.loads(capsys.readouterr().out)
+    assert main(["scenarios", str(room)]) == 0
+    assert "note" not in capsys.readouterr().out
+
+
 def test_an_unknown_scenario_names_the_bundled_ones(capsys):
     assert main(["run", "t_rooom", "--out", "/nonexistent/never-written"]) == 1
     err = capsys.readouterr().err

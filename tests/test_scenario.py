@@ -530,6 +530,43 @@ def test_an_obstacle_reaching_through_a_wall_loads_and_is_clipped_at_the_wall(t_
     assert not truth.shadow[buried].any()
 
 
+def test_an_obstacle_the_walls_clip_is_named_with_how_far_and_how_much(t_room_raw):
+    """A mistyped centre put a box half through a wall and the scene loaded without a word.
+    Each obstacle clipped by more than 1 mm is named: the walls it goes through, how far it
+    reaches past them and the share of its footprint beyond; one written flush with a wall
+    (exactly, or 0.5 mm past: rounding) is not."""
+    _set(t_room_raw, "obstacles", [
+        {"type": "box", "center_mm": [1100, 300], "size_mm": [200, 120]},    # inside
+        {"type": "box", "center_mm": [1700, 950], "size_mm": [200, 120]},    # T's inner corner
+        {"type": "box", "center_mm": [2270, 700], "size_mm": [300, 200]},    # flush, wall 1
+        {"type": "box", "center_mm": [2320.5, 300], "size_mm": [200, 90]},   # 0.5 mm past
+        {"type": "box", "center_mm": [400, 899.4], "size_mm": [120, 3]},     # 0.9 mm past
+        {"type": "box", "center_mm": [300, 58], "size_mm": [50, 120]},       # 2 mm past wall 0
+        {"type": "cylinder", "center_mm": [2435, 450], "radius_mm": 40}])    # centre outside
+    _set(t_room_raw, "robot.poses", [{"x_mm": 1210, "y_mm": 1300}])
+    sc = parse(t_room_raw, "ok.yaml")
+    clipped = S.clipped_obstacles(sc)
+    assert [c.index for c in clipped] == [1, 5, 6]
+    corner, low, pillar = clipped
+    assert corner.note == (
+        "obstacles[1], a 200 × 120 mm box at (1700, 950) mm, reaches 110 mm through wall 2 "
+        "((2420, 900) → (1660, 900) mm) and wall 3 ((1660, 900) → (1660, 1800) mm): 64.2% of "
+        "it lies beyond the walls, clipped (never seen, not scored)")
+    assert corner.walls == (2, 3) and corner.share == pytest.approx(140 * 110 / (200 * 120))
+    assert low.walls == (0,) and low.reach_m == pytest.approx(0.002)
+    assert low.share == pytest.approx(2 / 120)
+    # all but the circle's segment 25 mm deep left in the room (the footprint a 360-gon)
+    r, h = 0.040, 0.025
+    segment = r * r * math.acos((r - h) / r) - (r - h) * math.sqrt(2 * r * h - h * h)
+    assert pillar.share == pytest.approx(1 - segment / (math.pi * r * r), rel=1e-4)
+    assert pillar.reach_m == pytest.approx(0.055, abs=1e-6) and pillar.walls == (1,)
+    assert pillar.as_json() == {"obstacle": 6, "walls": [1], "reach_mm": 55.0,
+                                "share_clipped": round(pillar.share, 4), "note": pillar.note}
+    assert pillar.note.startswith("obstacles[6], a cylinder of radius 40 mm at (2435, 450) mm, "
+                                  "reaches 55 mm through wall 1 ((2420, 0) → (2420, 900) mm): "
+                                  "73.3% of it")
+
+
 def test_first_wall_into_agrees_with_points_sampled_in_the_obstacle():
     """Random boxes and cylinders in the T-room: a wall comes into one exactly when some of
     its points (a fine grid over it) lie outside the room, away from the borderline."""

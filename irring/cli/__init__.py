@@ -24,7 +24,7 @@ COMMANDS = {
     "run": "map a scenario: simulate, estimate, map, score, draw",
     "replay": "estimate and map a recording (.npz) again",
     "view": "picture (or live viewer) of the MuJoCo scene with beams",
-    "scenarios": "list the bundled scenarios, one line each",
+    "scenarios": "list the bundled scenarios, or check scenario files",
     "calibrate": "measure d_o and the sensor curve a(θ), b(θ); write a YAML file",
     "emulate": "a simulated ring device on a pseudo-terminal (try `drive` without hardware)",
     "drive": "sweep the real ring over a serial port, estimate and map",

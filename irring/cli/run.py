@@ -121,6 +121,8 @@ def summary_lines(result, paths: dict) -> list[str]:
     lines.append(f"  design {s['design'] or _unnamed_ring(result)}, {s['poses']} pose(s), "
                  f"{r['total']} readings: {r['valid']} valid"
                  + (f" ({invalid})" if invalid else ""))
+    for clip in s.get("clipped_obstacles", ()):   # a note, not an error: it may be on purpose
+        lines.append(f"  note      {clip['note']}")
     sc_ = s["scores"]
     if sc_:
         lines.append(f"  occupied  F1 {_f(sc_['occupied_f1'])}  (precision "

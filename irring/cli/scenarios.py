@@ -1,27 +1,39 @@
-"""`irring scenarios`: list the bundled scenarios."""
+"""`irring scenarios [SCENARIO ...]`: list the bundled scenarios, or check the ones named."""
 
 from __future__ import annotations
 
 import argparse
 
 from .. import scenario
+from ..errors import printable
 from ._common import describe
 
 
 def register(p: argparse.ArgumentParser) -> None:
     describe(p, "List the bundled scenarios (name, poses, obstacles, "
-             "description). Pass a name or a YAML path to other commands.", raw=False)
+             "description). Pass a name or a YAML path to other commands. With names or "
+             "paths, list those instead: each is loaded and checked as `irring run` would "
+             "(a bad file is an error naming it), and a note names any obstacle the walls "
+             "clip (one reaching through a wall: what lies beyond it is never seen).",
+             raw=False)
+    p.add_argument("scenario", nargs="*", metavar="SCENARIO",
+                   help="bundled scenario names or YAML paths to check (default: the bundled "
+                        "scenarios)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    named = args.scenario
     rows = []
-    for name, path in scenario.bundled().items():
-        sc = scenario.load_scenario(path)
-        rows.append((name, f"{len(sc.robot.poses)} pose(s)", f"{len(sc.obstacles)} obstacle(s)",
-                     sc.description))
+    for name in named or scenario.bundled():
+        sc = scenario.load_scenario(name if named else scenario.bundled()[name])
+        default = "" if named or name != scenario.DEFAULT_SCENARIO else " (default)"
+        rows.append((printable(name) if named else name, f"{len(sc.robot.poses)} pose(s)",
+                     f"{len(sc.obstacles)} obstacle(s)", printable(sc.description) + default,
+                     [c.note for c in scenario.clipped_obstacles(sc)]))
     width = max(len(r[0]) for r in rows)
-    for name, poses, obstacles, desc in rows:
-        default = " (default)" if name == scenario.DEFAULT_SCENARIO else ""
-        print(f"{name:<{width}}  {poses:<9} {obstacles:<13} {desc}{default}")
+    for name, poses, obstacles, desc, notes in rows:
+        print(f"{name:<{width}}  {poses:<9} {obstacles:<13} {desc}".rstrip())
+        for note in notes:
+            print(f"  note: {note}")
     return 0
