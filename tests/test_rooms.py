@@ -288,6 +288,9 @@ def test_a_miss_of_a_scene_with_more_than_the_default_effects_names_them(tmp_pat
     rows = {r["name"]: r for r in json.loads((tmp_path / "rooms.json").read_text())}
     assert rows["t_room_moving"]["beyond_target_effects"] == ["belt_dynamics", "timing", "motion"]
     assert rows["t_room"]["beyond_target_effects"] == [] and rows["t_room"]["misses"] == {}
+    # the closing count agrees with the exit status: t_room_moving is shown, not counted
+    assert ("2 rooms, 1 seed(s) each: 0 miss a target, 1 below one with effects beyond the "
+            "defaults (shown, not counted), 0 where") in out
 
 
 def test_bench_rooms_exits_6_when_a_room_misses_a_target_or_the_ideal_is_worse(

@@ -119,9 +119,13 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
             name = r["name"] if variant == "effects" else ""
             print(f"{name:<{width}}  {variant:<8}{vals}  {note}")
     scored = [r for r in rows if "error" not in r]
-    n_miss = sum(bool(r["misses"]) for r in scored)
+    n_miss = sum(bool(r["misses"]) and not r["beyond_target_effects"] for r in scored)
+    n_beyond = sum(bool(r["misses"]) and bool(r["beyond_target_effects"]) for r in scored)
     n_worse = sum(bool(r["ideal_worse"]) for r in scored)
     n_failed = len(rows) - len(scored)
     failed = f"{n_failed} not scored (error), " if n_failed else ""
-    print(f"{len(rows)} rooms, {seeds} seed(s) each: {failed}{n_miss} miss a target, "
+    # as the exit status counts: a room with more than the default effects is shown, not counted
+    beyond = (f", {n_beyond} below one with effects beyond the defaults (shown, not counted)"
+              if n_beyond else "")
+    print(f"{len(rows)} rooms, {seeds} seed(s) each: {failed}{n_miss} miss a target{beyond}, "
           f"{n_worse} where the ideal sensor is worse somewhere; wrote {errors.printable(str(out))}/rooms.json, rooms.csv")
