@@ -1249,20 +1249,42 @@ def test_a_run_into_a_folder_another_process_holds_is_refused_before_the_work(
 
 
 def test_a_folder_held_for_a_moment_is_waited_for(tmp_path, monkeypatch):
-    """A commit holds the folder for milliseconds: the probe waits it out, not refuses."""
+    """A commit holds the folder for milliseconds: the probe waits it out, not refuses.
+    Counted, not timed (a timer releasing the lock after 0.3 s, the probe bound to finish
+    within 3 s of wall clock, failed under load): the probe's clock and sleeps are this
+    test's, and the holder lets go during the probe's 15th poll, 0.3 s into its wait."""
     fcntl = pytest.importorskip("fcntl")
-    import threading
-
     from irring import outputs
 
     out = tmp_path / "o"
     out.mkdir()
     fd = os.open(out, os.O_RDONLY)
     fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    threading.Timer(0.3, os.close, (fd,)).start()   # the other commit ends
-    started = time.monotonic()
+    polls = []
+
+    class Clock:   # the probe's time: advanced only by its own polls
+        now = 0.0
+
+        @classmethod
+        def monotonic(cls):
+            return cls.now
+
+        @classmethod
+        def sleep(cls, seconds):
+            polls.append(seconds)
+            cls.now += seconds
+            if len(polls) == 15:
+                os.close(fd)   # the other commit ends
+
+    monkeypatch.setattr(outputs, "time", Clock)
     assert outputs.check_out(out, held=False) == out
-    assert 0.25 < time.monotonic() - started < outputs.PROBE_WAIT_S
+    assert polls == [0.02] * 15                     # held at each try before, taken after
+    assert Clock.now == pytest.approx(0.3) and Clock.now < outputs.PROBE_WAIT_S
+    probe = os.open(out, os.O_RDONLY)               # and let go again
+    try:
+        fcntl.flock(probe, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    finally:
+        os.close(probe)
 
 
 def test_a_pipe_or_folder_among_a_folders_rooms_is_named_not_waited_for(tmp_path):
