@@ -549,6 +549,15 @@ def in_turn_order(sweep: Sweep) -> Sweep:
         np.asarray(sweep.reading_poses)[order])
 
 
+def reading_stride(sweep: Sweep) -> int:
+    """Motor steps from one of a sweep's readings to the ring's next (``scan.step_stride``):
+    the greatest common divisor of the gaps between its steps, those listed missing with
+    them (so a lost step leaves a wider gap, not a coarser stride); 1 when it has one step."""
+    steps = np.unique(np.concatenate([np.asarray(sweep.steps, dtype=np.int64).reshape(-1),
+                                      np.asarray(sweep.missing_steps, dtype=np.int64)]))
+    return int(np.gcd.reduce(np.diff(steps))) if steps.size > 1 else 1
+
+
 class Reason(enum.IntEnum):
     """Why a reading is invalid (OK when it is valid)."""
 

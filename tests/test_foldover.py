@@ -701,6 +701,73 @@ def test_a_line_member_beside_a_nearer_surface_held_out_is_not_placed(
                                   p.reason)
 
 
+# POST_BY_CORNER read every other motor step, on the even steps the stride-1 scan meets the
+# post's edge at (sensor 11, steps -28 and -24)
+POST_BY_CORNER_STRIDE_2 = POST_BY_CORNER.replace(
+    "robot: {poses", "robot: {ring: {min_step: -34, max_step: 34}, poses") + \
+    "scan: {step_stride: 2}\n"
+
+
+def test_a_line_member_beside_a_nearer_surface_is_found_at_any_step_stride(monkeypatch):
+    """The held-out neighbour is the sensor's next reading, a stride of motor steps away:
+    taken as the next motor step, the rule never fired with step_stride 2 (no two readings
+    1 step apart). Over seeds 7101-7110 it now takes 8 readings there, 7 of them the post's
+    edge on sensor 11 at steps -28 and -24, 105-147 mm off (at stride 1 it takes 14 there,
+    102-132 mm off), and the 8th, 23 mm off, is the cost it has at stride 1 too."""
+    from irring.core import reading_stride
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc = loads(POST_BY_CORNER_STRIDE_2, source="<test>")
+    cal = scene_calibration(sc)[0]
+
+    def run(seed):
+        r = pipeline.run(sc, seed=seed, progress=False, score=False)
+        return r.sweeps[0], r.points[0]
+
+    taken, before = [], 0
+    for seed in range(7101, 7111):
+        sw, p = run(seed)
+        assert reading_stride(sw) == 2 and sw.steps[0] == -34
+        with monkeypatch.context() as m:
+            m.setattr(est, "_beside_a_hidden_edge", lambda p, *args: p)
+            _, off = run(seed)
+        with monkeypatch.context() as m:   # the neighbour one motor step on, as before
+            m.setattr(est, "reading_stride", lambda sweep: 1)
+            _, old = run(seed)
+        before += int(np.sum(off.valid & ~old.valid))
+        took = off.valid & ~p.valid
+        assert np.array_equal(p.valid | took, off.valid)
+        assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
+        err = np.hypot(off.x - sw.truth.hit_point[..., 0], off.y - sw.truth.hit_point[..., 1])
+        rows, cols = np.nonzero(took)
+        taken += [(int(sw.steps[i]), int(k), round(float(err[i, k]) * 1e3))
+                  for i, k in zip(rows, cols)]
+        if seed == 7110:
+            np.testing.assert_array_equal(
+                estimate_numpy.estimate_detail(sw, cal).points.reason, p.reason)
+    assert before == 0
+    edge = [e for s, k, e in taken if k == 11 and s in (-28, -24)]
+    assert len(taken) == 8 and len(edge) == 7
+    assert min(edge) == 105 and max(edge) == 147
+    assert [e for s, k, e in taken if (s, k) not in ((-28, 11), (-24, 11))] == [23]
+
+
+def test_a_sweeps_reading_stride_is_the_steps_between_its_readings():
+    from irring.core import reading_stride
+
+    sw = pipeline.run(loads(POST_BY_CORNER, source="<test>"), seed=7101, progress=False,
+                      score=False).sweeps[0]
+    assert reading_stride(sw) == 1
+    odd = sw.steps % 2 == 1
+    thinned = replace(sw, steps=sw.steps[odd], counts=sw.counts[odd], truth=None)
+    assert reading_stride(thinned) == 2
+    # a step lost on the way widens a gap, the stride stays
+    assert reading_stride(replace(thinned, steps=np.delete(thinned.steps, 5))) == 2
+    # … and one listed missing keeps a stride-1 sweep's stride at 1
+    assert reading_stride(replace(thinned, missing_steps=(-34,))) == 1
+    assert reading_stride(replace(sw, steps=sw.steps[:1])) == 1
+
+
 def test_a_line_member_beside_a_nearer_surface_is_found_whatever_the_row_order():
     """The held-out neighbour is the sensor's previous or next motor step, not the row
     beside it: the ring turning back (steps falling) kept the post's 2 edge readings."""

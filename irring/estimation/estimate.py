@@ -16,7 +16,7 @@ from typing import Callable
 import numpy as np
 
 from ..core import (HOUSING_M, UNCERTAIN_SIGMA_M, Points, Reason, Ring, Sweep, beam_geometry,
-                    points_with)
+                    points_with, reading_stride)
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
@@ -2478,12 +2478,13 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
 def _beside_a_hidden_edge(p: Points, label: np.ndarray, sweep: Sweep, cal: Calibration,
                           options: LineOptions) -> Points:
     """``p`` (the fold-over's result) with INCIDENCE_UNKNOWN for each valid line member
-    (``label``: the second pass's, −1 none) whose own sensor's previous or next motor step
-    is FOLDOVER_AMBIGUOUS and reads, far at θ = 0, nearer than the member by more than one
-    surface could make them (:func:`polyline_ids`' jump, ``options.jump_sigmas`` times the
-    member's σ for each), where the member's counts read at the drop-out angle reach that
-    nearer range: a thin post before a wall, its readings held out, its edge met at 62-65°
-    read like the wall behind it and joined that wall's line, 100-128 mm long.
+    (``label``: the second pass's, −1 none) whose own sensor's previous or next reading
+    (:func:`~irring.core.reading_stride` motor steps away) is FOLDOVER_AMBIGUOUS and reads,
+    far at θ = 0, nearer than the member by more than one surface could make them
+    (:func:`polyline_ids`' jump, ``options.jump_sigmas`` times the member's σ for each),
+    where the member's counts read at the drop-out angle reach that nearer range: a thin
+    post before a wall, its readings held out, its edge met at 62-65° read like the wall
+    behind it and joined that wall's line, 100-128 mm long.
     docs/foldover.md, "Beside a nearer surface held out"."""
     mem = p.valid & (label >= 0)
     amb = p.reason == Reason.FOLDOVER_AMBIGUOUS
@@ -2491,12 +2492,13 @@ def _beside_a_hidden_edge(p: Points, label: np.ndarray, sweep: Sweep, cal: Calib
         return p
     counts = np.asarray(sweep.counts, dtype=float)
     far0 = cal.distance(counts, 0.0)
-    # neighbours in step order: a falling or shuffled sweep's rows are not
+    # neighbours in step order (a falling or shuffled sweep's rows are not), one stride
+    # apart (with step_stride 2 no two readings were 1 step apart: it never fired)
     order = np.argsort(np.asarray(sweep.steps), kind="stable")
     far0_s, amb_s = far0[order], amb[order]
     nearer_s = np.full(counts.shape, np.inf)   # the nearer undecided neighbour's θ = 0 range
     turn_s = np.zeros(counts.shape)            # … and how far the beam turned to it
-    next_to = (np.diff(np.asarray(sweep.steps)[order]) == 1)[:, None]
+    next_to = (np.diff(np.asarray(sweep.steps)[order]) == reading_stride(sweep))[:, None]
     dh = np.abs(np.diff(p.heading[order], axis=0))
     dh = np.minimum(dh, 2.0 * math.pi - dh)
     for mine, theirs in ((np.s_[:-1], np.s_[1:]), (np.s_[1:], np.s_[:-1])):
