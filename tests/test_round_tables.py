@@ -46,19 +46,26 @@ def test_a_table_cut_into_lines_is_read_as_one_arc(model, centre, radius, yaw, m
     11.6/10.1/12.2 mm, θ error p90 17.0/15.8/16.9° → 1.2/1.6/4.0°, readings > 25 mm short
     31/20/18 → 3/2/3 of 118–124, z RMS 3.75/2.99/3.05 → 0.90/0.84/0.86; GP2D12 RMS
     21.0/27.0/24.4 → 9.7/9.5/12.0 mm, θ p90 19.4/19.0/17.4° → 2.8/1.2/3.7°, short
-    25/37/28 → 2/2/2 of 113–115, z RMS 3.26/4.21/3.91 → 0.89/0.83/1.13."""
+    25/37/28 → 2/2/2 of 113–115, z RMS 3.26/4.21/3.91 → 0.89/0.83/1.13. Then each reading
+    kept its own distance at the arc's θ; now they are put on their circle's radius
+    refitted to all of them (estimate.onto_circles): GP2Y0A21 RMS 11.6/10.1/12.2 →
+    2.1/3.6/3.2 mm, none > 25 mm short, σ median 10.2–11.0 → 5.3–5.6 mm, z RMS
+    0.90/0.84/0.86 → 0.36/0.67/0.54; GP2D12 RMS 9.7/9.5/12.0 → 5.9/4.9/6.8 mm, short 1 a
+    seed, σ median 4.9–5.2 mm, z RMS 0.68/0.42/1.10 (σ keeps half the reading's own, as a
+    line member's does: it overstates a circle's error as it does a wall's)."""
     for seed in (3, 4, 5):
         cal, sweep, d, inc = _table(model, centre, radius, yaw, max_range, seed)
         p = estimate(sweep, cal)
         seen = p.valid & np.isfinite(d)
         assert seen.sum() >= 110, (seed, seen.sum())
         err = (p.d - d)[seen]
-        assert np.sqrt(np.mean(err ** 2)) < 0.0135, (seed, np.sqrt(np.mean(err ** 2)))
-        assert np.count_nonzero(err < -0.025) <= 4, (seed, np.count_nonzero(err < -0.025))
+        assert np.sqrt(np.mean(err ** 2)) < 0.0075, (seed, np.sqrt(np.mean(err ** 2)))
+        assert np.count_nonzero(err < -0.025) <= 1, (seed, np.count_nonzero(err < -0.025))
         theta_err = np.degrees(np.abs(p.theta - inc))[seen]
         assert np.percentile(theta_err, 90) < 5.0, (seed, np.percentile(theta_err, 90))
         z = err / p.sigma_m[seen]
-        assert 0.6 < np.sqrt(np.mean(z * z)) < 1.3, (seed, np.sqrt(np.mean(z * z)))
+        assert 0.3 < np.sqrt(np.mean(z * z)) < 1.2, (seed, np.sqrt(np.mean(z * z)))
+        assert np.median(p.sigma_m[seen]) < 0.006, (seed, np.median(p.sigma_m[seen]))
 
 
 def test_a_flank_seen_alone_takes_the_circle_another_sensor_found():
@@ -251,3 +258,61 @@ def test_a_far_columns_arc_is_a_circle_before_its_short_lines_are_doubted(doubt_
         assert int((column & p.valid).sum()) == 27
         assert int((err[column & p.valid] > 0.05).sum()) == 8
         assert run.scores["occupied_f1"] < 0.91 and run.scores["occupied_precision"] < 0.89
+
+
+# A canteen of our own: six round tables of 360-600 mm seen by the GP2Y0A02 from 0.6-1.3 m
+CANTEEN_A02 = """
+name: canteen_a02
+seed: 9201
+room: {outline_mm: [[0, 0], [5400, 0], [5400, 4200], [0, 4200]]}
+obstacles:
+  - {type: cylinder, center_mm: [1300, 1100], radius_mm: 300}
+  - {type: cylinder, center_mm: [3000, 1000], radius_mm: 250}
+  - {type: cylinder, center_mm: [4300, 1300], radius_mm: 300}
+  - {type: cylinder, center_mm: [1500, 3100], radius_mm: 220}
+  - {type: cylinder, center_mm: [3300, 3000], radius_mm: 300}
+  - {type: cylinder, center_mm: [4500, 3200], radius_mm: 180}
+robot:
+  design: rotating12
+  poses:
+    - {x_mm: 2200, y_mm: 2050, yaw_deg: 4}
+    - {x_mm: 3900, y_mm: 2200, yaw_deg: -19}
+    - {x_mm: 800, y_mm: 2100, yaw_deg: 27}
+sensor: {model: gp2y0a02, max_range_mm: 1500, adc_bits: 12}
+effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}}
+map: {resolution_mm: 10}
+"""
+
+
+@pytest.mark.parametrize("snapped", [True, False])
+def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
+    """CANTEEN_A02, seeds 9201-9202: the readings round_runs takes onto a table's circle
+    each kept its own distance at the arc's θ, 45-50 mm of noise a reading at 1.3 m: 275
+    and 164 of them, RMS 20.9 and 22.0 mm off their true hit, 36 and 24 more than 30 mm
+    off, drawn as a ragged band about each table (precision 0.922, 0.896). Put on their
+    circle's radius refitted to all of them (estimate.onto_circles): RMS 5.5 and 13.4 mm,
+    0 and 1 more than 30 mm off, precision 0.951 and 0.912, F1 0.891 → 0.908 and 0.885 →
+    0.891."""
+    sc = loads(CANTEEN_A02, source="<test>")
+    taken = []
+    onto = est.onto_circles
+
+    def recording(points, at, circle, circles, *args):
+        mask = np.zeros(points.valid.size, dtype=bool)
+        mask[at] = True
+        taken.append(mask.reshape(points.valid.shape))
+        return onto(points, at, circle, circles, *args) if snapped else points
+    monkeypatch.setattr(est, "onto_circles", recording)
+    expect = {True: [(275, 0.0060, 0, 0.950), (164, 0.0140, 1, 0.911)],
+              False: [(275, 0.0215, 36, 0.922), (164, 0.0225, 24, 0.896)]}[snapped]
+    for seed, (n, rms, off, precision) in zip((9201, 9202), expect):
+        taken.clear()
+        run = pipeline.run(sc, seed=seed, progress=False)
+        err = np.concatenate([(p.d - sw.truth.distance_m)[t & p.valid]
+                              for sw, p, t in zip(run.sweeps, run.points, taken)])
+        assert err.size == n and np.isfinite(err).all(), (seed, err.size)
+        got = np.sqrt(np.mean(err ** 2))
+        assert (got < rms) if snapped else (got > rms - 0.002), (seed, got)
+        assert int((np.abs(err) > 0.03).sum()) == off, (seed, (np.abs(err) > 0.03).sum())
+        p = run.scores["occupied_precision"]
+        assert (p > precision) if snapped else (p < precision + 0.001), (seed, p)

@@ -564,7 +564,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                                None if short is None else short[0] | short[1])
     points, label = local_incidence(points, label, index, counts, steps, cal, profiler)
     points, label = round_runs(points, label, index, counts, steps, cal, grouping.alpha,
-                               grouping.cx, grouping.cy, profiler)
+                               grouping.cx, grouping.cy, profiler, snap,
+                               far_sigma_cap(cal, points.max_range_m))
     if short is not None:
         points, label = doubt_far_lines(points, label, index, counts, steps, cal, *short,
                                         profiler, voter)
@@ -1483,8 +1484,8 @@ def _pieces_misfit(pr: _Profile, pos: np.ndarray, lab: np.ndarray, alpha: np.nda
 
 def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                steps: np.ndarray, cal: Calibration, line_alpha: np.ndarray,
-               line_cx: np.ndarray, line_cy: np.ndarray, profiler: Callable | None = None
-               ) -> tuple[Points, np.ndarray]:
+               line_cx: np.ndarray, line_cy: np.ndarray, profiler: Callable | None = None,
+               snap: bool = False, own_cap_m: float = math.inf) -> tuple[Points, np.ndarray]:
     """A sensor's run of readings that the line model cut into pieces (several lines, or
     lines and readings on no line) re-read as one circle's arc where one fits, and the
     sweep's other runs on such a circle with it; numpy, shared by both estimators.
@@ -1502,7 +1503,9 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     own pieces, each a chord read at its θ, fit themselves as well). Each reading taken
     (its own misfit at most ``ARC_ON``) leaves its line (label −1) at the arc's θ, d and σ
     (noise at θ plus d over θ ± ``ARC_DOUBT_RAD``). ``line_alpha``, ``line_cx``,
-    ``line_cy``: the lines' directions and centroids. Returns the points and ``label``. Why: docs/estimator.md,
+    ``line_cy``: the lines' directions and centroids. With ``snap`` the readings taken are
+    then put on their circle (:func:`onto_circles`; ``own_cap_m`` as for
+    :func:`snap_to_lines`). Returns the points and ``label``. Why: docs/estimator.md,
     "Large round things"."""
     flat_valid = points.valid.reshape(-1)
     vi = index[flat_valid[index]]
@@ -1575,26 +1578,76 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     taken = np.zeros(vi.size, dtype=bool)
     taken[pos[good]] = True
     kept = good.nonzero()[0]
-    circ = circle[:, kept[np.unique(gk[kept], return_index=True)[1]]]
+    kept_groups, first_of = np.unique(gk[kept], return_index=True)
+    circ = circle[:, kept[first_of]]
+    cid = np.searchsorted(kept_groups, gk)      # each good reading's circle in circ
     left = np.bincount(run, ~taken, n_run)
     other = left >= ARC_MIN
     if other.any():
         o_pos = (other[run] & ~taken).nonzero()[0]
         o_run = (np.cumsum(other) - 1)[run[o_pos]]
         n_o = int(np.count_nonzero(other))
-        th_o, d_o, sig_o, mis_o = _on_circles(pr, o_pos, o_run, n_o, circ, cal)
+        th_o, d_o, sig_o, mis_o, c_o = _on_circles(pr, o_pos, o_run, n_o, circ, cal)
         n_in = np.bincount(o_run, minlength=n_o)
         fits = np.bincount(o_run, mis_o, n_o) <= ARC_MISFIT * n_in
         on = fits[o_run] & (mis_o <= ARC_ON) & np.isfinite(d_o) & (d_o >= cal.min_range_m)
         pos = np.concatenate([pos[good], o_pos[on]])
-        th, dist, sig = (np.concatenate([v[good], w[on]])
-                         for v, w in ((th, th_o), (dist, d_o), (sig, sig_o)))
+        th, dist, sig, cid = (np.concatenate([v[good], w[on]])
+                              for v, w in ((th, th_o), (dist, d_o), (sig, sig_o),
+                                           (cid, c_o)))
     else:
-        pos, th, dist, sig = pos[good], th[good], dist[good], sig[good]
+        pos, th, dist, sig, cid = pos[good], th[good], dist[good], sig[good], cid[good]
     at = vi[pos]
     label = label.copy()
     label.reshape(-1)[at] = -1
-    return placed_at(points, at, dist, th, sig), label
+    points = placed_at(points, at, dist, th, sig)
+    if snap:
+        points = onto_circles(points, at, cid, circ, cal.min_range_m, own_cap_m)
+    return points, label
+
+
+def onto_circles(points: Points, at: np.ndarray, circle: np.ndarray, circles: np.ndarray,
+                 min_range_m: float, own_cap_m: float = math.inf) -> Points:
+    """The flat readings ``at`` of round things (``circle``: which of ``circles`` (3, C:
+    centre x, y, radius; :func:`round_runs`' kept circles) each was read on) put where their
+    beams meet that circle's radius refitted to the end points of all its readings, as
+    :func:`snap_to_lines` puts a line's members on their line: a circle of at least
+    ``SNAP_MIN`` readings, each moved in from behind it or out by at most ``SNAP_SIGMAS`` σ,
+    within [``min_range_m``, ``points.max_range_m``]; its σ becomes the circle's uncertainty
+    there (its members' radial RMS over √n, along the beam) with half its own σ added (at
+    most ``own_cap_m``). Why: docs/estimator.md, "Onto a round thing's circle"."""
+    if at.size == 0:
+        return points
+    n_c = circles.shape[1]
+    n = np.bincount(circle, minlength=n_c)
+    x, y = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
+    cxm, cym = circles[0], circles[1]
+    radial = np.hypot(x - cxm[circle], y - cym[circle])
+    rm = np.bincount(circle, radial, n_c) / np.maximum(n, 1)
+    use = n >= SNAP_MIN
+    if not use[circle].any():
+        return points
+    resid = radial - rm[circle]
+    rms = np.sqrt(np.bincount(circle, resid * resid, n_c) / np.maximum(n, 1))
+    h = points.heading.reshape(-1)[at]
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
+    rx, ry = cxm[circle] - ox, cym[circle] - oy
+    ex, ey = np.cos(h), np.sin(h)
+    along = rx * ex + ry * ey
+    disc = along * along - (rx * rx + ry * ry - rm[circle] ** 2)
+    t = along - np.sqrt(np.maximum(disc, 0.0))
+    d = points.d.reshape(-1)[at]
+    own = points.sigma_m.reshape(-1)[at]
+    ok = (use[circle] & (disc > 0.0) & (along > 0.0) & (t - d <= SNAP_SIGMAS * own)
+          & (t >= min_range_m) & (t <= points.max_range_m))
+    if not ok.any():
+        return points
+    # the beam's cosine on the circle where it meets it: the fit's normal error along it
+    cos = np.clip(((ox + t * ex - cxm[circle]) * -ex + (oy + t * ey - cym[circle]) * -ey)
+                  / np.maximum(rm[circle], 1e-12), 1e-3, 1.0)
+    fit = rms[circle] / np.sqrt(np.maximum(n[circle], 1)) / cos
+    sigma = np.maximum(np.hypot(fit, np.minimum(SNAP_OWN * own, own_cap_m)), SIGMA_FLOOR_M)
+    return placed_at(points, at[ok], t[ok], points.theta.reshape(-1)[at[ok]], sigma[ok])
 
 
 def _round_wins(pr: _Profile, pos: np.ndarray, lab: np.ndarray, group: np.ndarray, n: int,
@@ -1621,7 +1674,8 @@ def _on_circles(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
                 circles: np.ndarray, cal: Calibration):
     """Readings ``pr`` positions ``pos`` (groups ``group`` < ``n``) read on each of
     ``circles`` (3, C: centre x, y, radius); each group takes the circle it misfits least.
-    Returns θ, d, σ (as :func:`arc_incidence` gives them) and misfit, each per reading."""
+    Returns θ, d, σ (as :func:`arc_incidence` gives them), misfit and the circle taken, each
+    per reading."""
     h = pr.heading[pos]
     ex, ey = np.cos(h), np.sin(h)
     t, th, meets = _meet_circle(circles[:2, :, None], circles[2][:, None], pr.ox[pos],
@@ -1644,7 +1698,7 @@ def _on_circles(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
     _, b_th = cal.log_ab(th_b)
     sig = np.hypot(np.maximum(np.abs(b_th) * d_b * pr.sig_s[pos], SIGMA_FLOOR_M),
                    0.5 * np.abs(lo - hi))
-    return th_b, d_b, sig, mis_b
+    return th_b, d_b, sig, mis_b, best
 
 
 POST_RADII_M = np.geomspace(0.01, 0.07, 13)  # a far post is tried as a circle of these radii
