@@ -790,3 +790,57 @@ def test_a_line_member_beside_a_nearer_surface_is_found_whatever_the_row_order()
         for p in (estimate(reordered(order), cal),
                   estimate_numpy.estimate_detail(reordered(order), cal).points):
             np.testing.assert_array_equal(p.reason, rising.reason[order])
+
+
+# Two posts 300 mm apart, the ring 172 mm from the floor wall, then between the posts and the
+# top wall (GP2D12). Seed 8232, second pose: sensor 6 sees the top-left wall at 0.56-0.62 m,
+# its neighbours' readings held out; what is left is a 7-member line of that one sensor,
+# 13° shallower than the wall (θ 21-27° for 34-41°), and its far readings 25-57 mm long at
+# σ 18-22 mm (up to 2.7σ) drew 7 cells 30-40 mm outside the room.
+POSTS_300_APART = """
+name: posts_300_apart
+room: {outline_mm: [[0, 0], [1500, 0], [1500, 1150], [0, 1150]]}
+obstacles:
+  - {type: cylinder, center_mm: [560, 470], radius_mm: 20}
+  - {type: cylinder, center_mm: [860, 490], radius_mm: 28}
+robot: {poses: [{x_mm: 710.0, y_mm: 172.1, yaw_deg: 3}, {x_mm: 724.9, y_mm: 643.1, yaw_deg: -18}]}
+sensor: {model: gp2d12}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_short_line_s_direction_error_is_in_its_members_sigma(monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+    from irring.studies.foldover import cells_outside
+
+    sc = loads(POSTS_300_APART, source="<test>")
+    now = pipeline.run(sc, seed=8232, progress=False, score=False)
+    with monkeypatch.context() as m:     # the σ as widened, none left unplaced for it
+        m.setattr(est, "FOLD_PLACED_SIGMA_M", math.inf)
+        wide = pipeline.run(sc, seed=8232, progress=False, score=False)
+        m.setattr(est, "_short_line_sigma", lambda p, *args: p)
+        before = pipeline.run(sc, seed=8232, progress=False, score=False)
+    outline = sc.room.outline_m
+    assert (cells_outside(before.grid, outline), cells_outside(now.grid, outline)) == (7, 0)
+    assert np.array_equal(now.points[0].valid, before.points[0].valid)
+    sw, p, w, q = now.sweeps[1], now.points[1], wide.points[1], before.points[1]
+    took = q.valid & ~p.valid
+    assert np.array_equal(p.valid | took, q.valid)          # nothing else left or came back
+    assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
+    kept = p.valid
+    for f in ("x", "y", "d", "sigma_m"):                    # the rest read as before
+        np.testing.assert_array_equal(getattr(p, f)[kept], getattr(q, f)[kept])
+    # the six: sensor 6's far readings, read at their short line's θ (13° shallow)
+    assert int(took.sum()) == 6 and np.unique(np.nonzero(took)[1]).tolist() == [6]
+    assert np.all(sw.truth.incidence_rad[took] - q.theta[took] > math.radians(12.5))
+    err = np.abs(q.d - sw.truth.distance_m)[took]
+    assert round(float(err.max()) * 1e3) == 57
+    assert np.all(q.sigma_m[took] < 0.022) and float((err / q.sigma_m[took]).max()) > 2.6
+    # the line's direction error in their σ: all of them now within 1.6σ, σ 31-41 mm
+    assert np.all(w.valid[took]) and np.all(w.sigma_m[took] > est.FOLD_PLACED_SIGMA_M)
+    assert float((err / w.sigma_m[took]).max()) < 1.6
+    np.testing.assert_array_equal(w.sigma_m[w.valid & ~took], q.sigma_m[w.valid & ~took])
+    cal = scene_calibration(sc)[0]
+    oracle = estimate_numpy.estimate_detail(sw, cal).points
+    np.testing.assert_array_equal(oracle.reason, p.reason)
+    np.testing.assert_allclose(oracle.sigma_m[p.valid], p.sigma_m[p.valid], rtol=1e-9)

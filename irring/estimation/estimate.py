@@ -2477,8 +2477,11 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     # … or one the first pass put on a line past the range, where its beam meets that line
     differ |= _past_range_elsewhere(p, q, first.lines, ~put & ~keep, apart)
     # a far reading on a fragment of a line the first pass saw whole: on that line
+    placed = p.theta
     p = _onto_first_lines(p, q, first.lines, second.lines.label,
                           p.valid & q.valid & ~put & ~keep & ~differ)
+    # the far readings still read at a short line's θ: θ is as sure as that line's direction
+    from_line = ~put & ~keep & ~differ & (p.theta == placed)
     if put.any() or keep.any() or differ.any():
         x, y, d, theta, sigma = (np.array(v) for v in (p.x, p.y, p.d, p.theta, p.sigma_m))
         d[put], theta[put], sigma[put] = d_fold[put], theta_fold[put], sigma_fold[put]
@@ -2521,12 +2524,50 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
                                      members=q)
     # a far line member beside a nearer surface its own sensor's next step saw, undecided
     p = _beside_a_hidden_edge(p, second.lines.label, sweep, cal, options)
-    # a reading placed no better than FOLD_PLACED_SIGMA_M: its θ is 0 for want of a line, or
-    # an uncertain profile's; such end points read 20-90 mm long drew walls outside the room
+    # a far member of a short line: its σ covers the line's direction error
+    p = _short_line_sigma(p, second, from_line, cal)
+    # a reading placed no better than FOLD_PLACED_SIGMA_M: its θ is 0 for want of a line, an
+    # uncertain profile's or a short line's; such end points read 20-90 mm long drew walls
+    # outside the room
     vague = p.valid & (p.sigma_m > FOLD_PLACED_SIGMA_M)
     if vague.any():
         p = _unplaced(p, vague.reshape(-1).nonzero()[0])
     return replace(second, points=p, lines=second.lines if detail else None)
+
+
+def _short_line_sigma(p: Points, second: Estimate, from_line: np.ndarray,
+                      cal: Calibration) -> Points:
+    """``p`` (the fold-over's result) with the σ of each valid far-branch reading that is read
+    at the θ of a line of the second pass too short to be snapped onto (fewer than
+    ``SNAP_MIN`` members; ``from_line``: it still has that line's θ) widened by that line's
+    direction standard error (:func:`direction_se`), as a reading placed by its own
+    profile's slope is (:func:`_own_slope_sigma`): half the spread of its distance over
+    θ ± the error. Unsnapped, such a member keeps its own distance at the line's θ, so the
+    direction error enters only through a(θ), b(θ). docs/foldover.md, "A short line's
+    direction in its members' σ"."""
+    q, label = second.points, second.lines.label
+    on = q.valid & (label >= 0)
+    if not on.any():
+        return p
+    line = label[on]
+    n = np.bincount(line)
+    se = direction_se(q.x[on], q.y[on], q.sigma_m[on] * np.cos(q.theta[on]), line, n.size)
+    short = n < SNAP_MIN
+    lab = np.where(on, label, 0)
+    ask = (p.valid & from_line & on & short.take(lab)
+           & (p.d > cal.peak_distance_m) & np.isfinite(p.theta))
+    if not ask.any():
+        return p
+    theta, d, e = p.theta[ask], p.d[ask], se.take(lab[ask])
+    counts = cal.counts(d, theta)     # the counts the far branch read at θ (its inverse)
+    d_lo, d_hi = cal.distance(np.concatenate([counts, counts]), np.concatenate(
+        [np.maximum(theta - e, 0.0), np.minimum(theta + e, cal.max_incidence_rad)])
+    ).reshape(2, -1)
+    spread = 0.5 * np.abs(d_lo - d_hi)
+    sigma = np.array(p.sigma_m)
+    # a line so short its direction is not defined leaves its members' σ infinite
+    sigma[ask] = np.where(np.isfinite(spread), np.hypot(sigma[ask], spread), np.inf)
+    return points_with(p, sigma_m=sigma)
 
 
 def _beside_a_hidden_edge(p: Points, label: np.ndarray, sweep: Sweep, cal: Calibration,
