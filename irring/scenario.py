@@ -599,6 +599,9 @@ def parse(raw: Any, source: str = "") -> Scenario:
     for key, text in (("name", sc.name), ("description", sc.description)):
         if any(not (ch.isprintable() or ch in "\n\t") for ch in text):
             raise loader.fail(key, "control characters (terminal escapes) are not allowed")
+    if "\n" in sc.name:   # map.png's title: Pillow's text layout failed on it (exit 70)
+        raise loader.fail("name", "a line break is not allowed; a name is one line (the title "
+                                  "of map.png, the output folder)")
     sc = dataclasses.replace(sc, source=source)
     ring_raw = raw["robot"].get("ring") if isinstance(raw.get("robot"), Mapping) else None
     if isinstance(ring_raw, Mapping):

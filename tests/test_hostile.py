@@ -291,6 +291,8 @@ def test_any_text_is_a_scenario_or_a_scenario_error(text):
     (lambda r: r.update(effects={"motion": {"path": []}}), "effects.motion.path: needs at least 2"),
     (lambda r: r.update(name="\x1b[31mred"), "name: control characters"),
     (lambda r: r.update(name=""), "name: expected a name of 1"),
+    # map.png's title: Pillow's layout raised RuntimeError on two lines (exit 70 after the run)
+    (lambda r: r.update(name="a\nb"), "name: a line break is not allowed; a name is one line"),
     # a list or mapping where a name belongs ended in exit 70 (TypeError: unhashable type)
     (lambda r: r.update(obstacles=[{"type": ["box"], "center_mm": [1, 2]}]),
      "'box'] is not allowed; choose one of: cylinder, box"),
