@@ -5,7 +5,8 @@ command's files into a hidden sibling folder of ``--out`` and moves them in toge
 Ctrl-C, a full disk or a crash leaves the previous files untouched and two runs into one
 folder leave one run's set, never a mix; :func:`atomic_file` does the same for one file
 (--mcap, a study's results.parquet, a calibration). Every command's outputs go through them;
-:func:`safe_name` makes a scenario name one folder name inside its parent.
+:func:`safe_name` makes a scenario name one folder name inside its parent; :func:`real_path`
+resolves a path that may be a loop of links.
 """
 
 from __future__ import annotations
@@ -32,6 +33,13 @@ except ImportError:   # pragma: no cover - Windows: no advisory locks (sole_writ
 RUN_FILES = frozenset({"map.png", "map_building.gif", "map.pgm", "map.yaml", "sweeps.npz",
                        "link.json", "map.mcap"})
 _TEMP_PREFIX = ".irring-"
+
+
+def real_path(path: str | Path) -> Path:
+    """``path`` absolute, with links and ``..`` resolved as far as they go: a loop of links
+    is left as it is (``Path.resolve`` raises RuntimeError on one before Python 3.13), so
+    the check that follows names it as a path that does not exist."""
+    return Path(os.path.realpath(path))
 
 
 def safe_name(name: str, default: str = "scenario") -> str:

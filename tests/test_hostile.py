@@ -1301,6 +1301,7 @@ def test_a_pipe_or_folder_among_a_folders_rooms_is_named_not_waited_for(tmp_path
     (tmp_path / "b.yaml").mkdir()
     os.mkfifo(tmp_path / "c.yaml")
     (tmp_path / "d.yaml").symlink_to(tmp_path / "gone.yaml")
+    (tmp_path / "e.yaml").symlink_to("e.yaml")   # a loop: Path.resolve raised RuntimeError
     got = []
     worker = threading.Thread(target=lambda: got.extend(resolve_rooms([tmp_path])), daemon=True)
     worker.start()
@@ -1314,8 +1315,26 @@ def test_a_pipe_or_folder_among_a_folders_rooms_is_named_not_waited_for(tmp_path
                  "scenario file; a folder's rooms are its regular *.yaml files"),
         Unusable("c", str(tmp_path / "c.yaml"), 1, f"{tmp_path}/c.yaml: is a pipe, socket or "
                  "device, not a scenario file; a folder's rooms are its regular *.yaml files"),
-        Unusable("d", str(tmp_path / "d.yaml"), 1, f"{tmp_path}/d.yaml: is a broken link, not "
-                 "a scenario file; a folder's rooms are its regular *.yaml files")]
+        Unusable("d", str(tmp_path / "d.yaml"), 1, f"{tmp_path}/d.yaml: is a broken link (or a "
+                 "loop of links), not a scenario file; a folder's rooms are its regular *.yaml "
+                 "files"),
+        Unusable("e", str(tmp_path / "e.yaml"), 1, f"{tmp_path}/e.yaml: is a broken link (or a "
+                 "loop of links), not a scenario file; a folder's rooms are its regular *.yaml "
+                 "files")]
+
+
+def test_a_loop_of_links_named_as_a_path_is_an_error_not_a_crash(tmp_path, capsys):
+    """A link to itself as the recording, or as --mcap, ended in exit 70 (RuntimeError:
+    Symlink loop, from Path.resolve)."""
+    from irring.cli._common import mcap_beside_outputs
+
+    loop = tmp_path / "loop"
+    loop.symlink_to("loop")
+    assert main(["replay", str(loop), "--out", str(tmp_path / "o")]) == 1
+    assert capsys.readouterr().err == f"irring replay: error: {loop}: no such recording\n"
+    # --mcap at the loop is a file name like any other: the MCAP replaces the link
+    assert mcap_beside_outputs(loop, tmp_path / "o") is None
+    assert sorted(os.listdir(tmp_path)) == ["loop"]
 
 
 def test_an_mcap_given_to_replay_is_named_as_one(tmp_path, capsys):

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..core import MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
 from ..errors import UsageError
-from ..outputs import RUN_FILES, check_out
+from ..outputs import RUN_FILES, check_out, real_path
 
 
 class LazyParser(argparse.ArgumentParser):
@@ -190,7 +190,7 @@ def mcap_beside_outputs(mcap: Path | None, out: Path) -> None:
     o`` wrote the whole set, then failed (exit 4) on the folder it had made."""
     if mcap is None:
         return
-    mcap_at, out_at = mcap.absolute().resolve(), Path(out).absolute().resolve()
+    mcap_at, out_at = real_path(mcap), real_path(out)
     if mcap_at == out_at or mcap_at in out_at.parents:
         raise UsageError(f"--mcap {mcap}: is the folder --out {out} or holds it, and this "
                          f"command writes its outputs there; name a file (such as "
@@ -199,7 +199,7 @@ def mcap_beside_outputs(mcap: Path | None, out: Path) -> None:
     check_out(mcap.parent, "--mcap")
     if mcap.name not in RUN_FILES - {"map.mcap"}:
         return
-    if mcap.absolute().parent.resolve() == Path(out).absolute().resolve():
+    if real_path(mcap.absolute().parent) == out_at:
         raise UsageError(f"--mcap {mcap}: is the {mcap.name} this command writes into --out "
                          f"{out}; the MCAP would replace it, so name another file (such as "
                          f"{Path(out) / 'map.mcap'})")

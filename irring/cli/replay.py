@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .. import pipeline
 from ..errors import UsageError
-from ..outputs import check_out, safe_name
+from ..outputs import check_out, real_path, safe_name
 from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path,
                       spare_inputs)
 from .run import report
@@ -48,12 +48,12 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         out = args.out
     else:
-        stem = args.recording.resolve().parent.name if args.recording.stem == "sweeps" \
+        stem = real_path(args.recording).parent.name if args.recording.stem == "sweeps" \
             else args.recording.stem
         out = Path("out") / f"{safe_name(stem, 'recording')}-replay"
     spare_inputs({"--mcap": args.mcap}, {"RECORDING": args.recording,
                                          "--calibration": args.calibration})
-    if Path(out).resolve() == args.recording.resolve().parent:
+    if real_path(out) == real_path(args.recording).parent:
         # the new set would replace the recording (and its calibration, with --calibration)
         # and remove the files of a run this one does not write: a drive's link.json
         raise UsageError(f"--out {out}: holds the recording being replayed ({args.recording}); "

@@ -18,6 +18,7 @@ from .. import errors, pipeline
 from ..estimation.estimate import estimate
 from ..maps import metrics
 from ..maps.metrics import SCORE_KEYS
+from ..outputs import real_path
 from ..pipeline import progress_bar
 from ..scenario import Scenario, ScenarioError, counted_seeds, load_scenario, resolve
 from .report import mean_of
@@ -138,7 +139,7 @@ def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
         else:
             files = [resolve(item)]
         for file in files:
-            real = file.resolve()
+            real = real_path(file)
             if real in given:
                 raise ScenarioError(f"{file}: given twice (by {given[real]} and {item}); it "
                                     "would be scored and listed twice, so name each room once")
@@ -148,7 +149,8 @@ def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
     for path, in_folder in paths:
         if in_folder and not path.is_file():   # a pipe among the rooms waited for good
             kind = "a folder" if path.is_dir() else (
-                "a pipe, socket or device" if path.exists() else "a broken link")
+                "a pipe, socket or device" if path.exists() else
+                "a broken link (or a loop of links)")
             out.append(Unusable(path.stem, str(path), errors.INPUT,
                                 f"{errors.printable(str(path))}: is {kind}, not a scenario "
                                 "file; a folder's rooms are its regular *.yaml files"))
