@@ -62,6 +62,10 @@ def check_out(out: str | Path, option: str = "--out", *, held: bool = True) -> P
     try:
         if out.exists() and not out.is_dir():
             raise OutputError(f"{option} {shown}: is a file; expected a folder for the outputs")
+        if out.is_symlink() and not out.exists():   # the move into it failed after the work
+            raise OutputError(f"{option} {shown}: is a link to "
+                              f"{printable(os.readlink(out))}, which does not exist (or a loop "
+                              "of links); make that folder or name another")
         probe = out
         while not probe.exists():
             if probe.parent == probe:

@@ -85,6 +85,22 @@ def test_out_naming_a_file_is_refused_before_any_run(command, inputs, tmp_path, 
     assert sorted(os.listdir(tmp_path)) == ["in", "taken.txt"]
 
 
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_out_naming_a_broken_link_is_refused_before_any_run(command, inputs, tmp_path,
+                                                            monkeypatch, capsys):
+    # the whole work was done, then 'cannot move the outputs in: Not a directory' (exit 4)
+    argv, name, runner = COMMANDS[command]
+    monkeypatch.setattr(importlib.import_module(name), runner, _never)
+    (tmp_path / "gone").symlink_to(tmp_path / "scratch" / "out")
+    (tmp_path / "loop").symlink_to("loop")
+    for link, to in (("gone", tmp_path / "scratch" / "out"), ("loop", "loop")):
+        assert main(argv(inputs) + ["--out", str(tmp_path / link)]) == 4
+        assert capsys.readouterr().err.endswith(
+            f": error: --out {tmp_path / link}: is a link to {to}, which does not exist (or a "
+            "loop of links); make that folder or name another\n")
+    assert sorted(os.listdir(tmp_path)) == ["gone", "in", "loop"]
+
+
 def _full_disk(*a, **k):
     raise OSError(errno.ENOSPC, "No space left on device")
 
