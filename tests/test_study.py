@@ -4,6 +4,7 @@ after a kill, and the summary."""
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import signal
@@ -489,6 +490,40 @@ def test_ctrl_c_says_how_many_runs_are_kept_and_how_to_resume(small, tmp_path, m
     err = capsys.readouterr().err
     assert err == (f"irring: study interrupted; 2 finished run(s) kept in {out / study.RESULTS}: "
                    "run the same command with --resume to run the rest\n")
+
+
+def test_an_interrupted_study_leaves_no_summary_of_an_earlier_smaller_one(small, tmp_path,
+                                                                         monkeypatch):
+    """A finished study grown (more seeds) and resumed, then stopped by Ctrl-C, kept the
+    first study's summary.csv/.json, study.png and results.parquet (2 runs) beside a
+    results.csv of more: the folder looked finished."""
+    p, rows = small
+    out = tmp_path / "out"
+    out.mkdir()
+    lines = (p.parent / "serial" / study.RESULTS).read_text().splitlines(keepends=True)
+    (out / study.RESULTS).write_text("".join(lines[:3]))           # an earlier study: 2 runs
+    study.write_summary(study.read_results(out / study.RESULTS), out)
+    (out / "results.parquet").write_bytes(b"PAR1 the 2 runs")
+    real, ran = study.run_point, []
+
+    def the_second_is_interrupted(task):
+        if ran:
+            raise KeyboardInterrupt
+        ran.append(task)
+        return real(task)
+
+    monkeypatch.setattr(study, "run_point", the_second_is_interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        study.run_study(study.load_study(p), out, resume=True)
+    assert len(study.read_results(out / study.RESULTS)) == 3
+    assert sorted(f.name for f in out.iterdir()) == [study.RESULTS]
+    monkeypatch.setattr(study, "run_point", real)
+    done = study.run_study(study.load_study(p), out, resume=True)
+    assert done["ran"] == len(rows) - 3
+    assert sorted(f.name for f in out.iterdir()) >= sorted(
+        [study.RESULTS, *study.SUMMARY_FILES.values()])
+    summary = json.loads((out / "summary.json").read_text())["configurations"]
+    assert sum(c["runs"] for c in summary) == len(rows)
 
 
 def test_ctrl_c_stops_a_pool_at_once_and_terminates_its_running_workers():

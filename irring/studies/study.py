@@ -652,6 +652,8 @@ def _run_study(study, points: list, out: Path, ex, resume: bool, progress, on_st
         raise TooBig(refusal)
     if on_start is not None:
         on_start(len(points) - len(todo), len(todo))
+    if todo:   # an earlier run's summary beside rows it does not count looks finished
+        _drop_summary(out)
     new_file = not existing
     kept = len(existing)
     with _results_writes(path, lambda: kept):
@@ -828,6 +830,20 @@ SUMMARY_CSV_KEYS = ("runs", "hardware_time_s", "compute_ms") + tuple(
 
 SUMMARY_FILES = {"summary_csv": "summary.csv", "summary_json": "summary.json",
                  "chart": "study.png"}
+
+
+def _drop_summary(out: Path) -> None:
+    """Remove the summary files and results.parquet of an earlier run before rows are
+    appended: made from results.csv again at the end, they would otherwise stay beside a
+    half-run study (Ctrl-C, a kill) as if it had finished."""
+    for name in (*SUMMARY_FILES.values(), Path(RESULTS).with_suffix(".parquet").name):
+        path = out / name
+        try:
+            if path.is_file() or path.is_symlink():
+                path.unlink()
+        except OSError as exc:
+            raise OutputError(f"{path}: the summary of an earlier run cannot be removed "
+                              f"before new runs are added: {exc.strerror or exc}") from None
 
 
 def write_summary(rows: Sequence[Mapping[str, str]], out_dir: str | Path,
