@@ -137,7 +137,7 @@ BAD_VALUES = [
     (["emulate", "--seed", "-2"], "--seed", "must be ≥ 0, got -2"),
     (["bench", "dynamics", "--seeds", "-4"], "--seeds", "must be ≥ 0, got -4"),
     (["emulate", "--fault-seed", "x"], "--fault-seed",
-     "must be an integer ≥ 0, got 'x'"),
+     "must be an integer 0 … 9223372036854775807, got 'x'"),
     # these were `type=int`/`float`: -5 named a field (stall_after) with no usage line, and a
     # negative --stall-seconds was taken
     (["emulate", "--stall-after", "-5"], "--stall-after", "must be ≥ 0, got -5"),
@@ -147,11 +147,18 @@ BAD_VALUES = [
     (["drive", "--settle-ms", "70000"], "--settle-ms", "must be in 0 … 60000, got 70000"),
     (["drive", "--samples", "65"], "--samples", "must be in 1 … 64, got 65"),
     (["calibrate", "--sensor", "-1"], "--sensor", "must be ≥ 0, got -1"),
+    # int() refuses over 4,300 digits: 'must be an integer ≥ 0' and all 5,000 of them (5 kB)
+    (["run", "--seed", "9" * 5000], "--seed",
+     "must be 0 … 9223372036854775807, got a number of 5,000 digits"),
+    (["compare", "--seeds", "7" * 4400], "--seeds", "must be in 1 … 100000, got a number of "
+                                                    "4,400 digits"),
+    (["bench", "effects", "--seed", "8" * 300], "--seed",
+     "must be 0 … 9223372036854775807, got 888888888888888888...8888888888888888888"),
 ]
 
 
 @pytest.mark.parametrize("argv, option, message", BAD_VALUES,
-                         ids=[" ".join(argv) for argv, _, _ in BAD_VALUES])
+                         ids=[" ".join(argv)[:60] for argv, _, _ in BAD_VALUES])
 def test_an_out_of_range_value_is_a_usage_error(argv, option, message, capsys):
     command = " ".join(argv[:-2])
     with pytest.raises(SystemExit) as stop:
@@ -190,13 +197,13 @@ def test_the_default_distances_are_parsed_to_metres():
 
 
 @pytest.mark.parametrize("argv, option, message", BAD_VALUES,
-                         ids=[" ".join(argv) for argv, _, _ in BAD_VALUES])
+                         ids=[" ".join(argv)[:60] for argv, _, _ in BAD_VALUES])
 def test_help_states_the_allowed_range(argv, option, message, capsys):
     with pytest.raises(SystemExit):
         main([*argv[:-2], "--help"])
     blocks = capsys.readouterr().out.split("\n  --")
     block = " ".join(next(b for b in blocks if b.startswith(option[2:] + " ")).split())
-    if "must be 0 … " in message:
+    if "0 … 9223372036854775807" in message:
         allowed = "≥ 0"                                   # a seed: 0 … 2**63 - 1
     elif "≥" in message:
         allowed = "≥ " + message.split("≥ ")[1].split(",")[0]

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..core import MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
-from ..errors import UsageError
+from ..errors import UsageError, brief
 from ..outputs import RUN_FILES, check_out, real_path
 
 
@@ -89,18 +89,27 @@ def describe(p: argparse.ArgumentParser, description: str, epilog: str | None = 
         p.formatter_class = HelpFormatter
 
 
+def _integer(text: str, allowed: str) -> int:
+    """``int(text)``, or the usage error saying what is ``allowed``."""
+    try:
+        return int(text)
+    except ValueError:
+        digits = text.strip().lstrip("+-").replace("_", "")
+        if digits.isdigit():   # int() refuses more than 4,300 digits: still a number
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got a number of "
+                                             f"{len(digits):,} digits") from None
+        raise argparse.ArgumentTypeError(f"must be an integer {allowed}, got "
+                                         f"{brief(text)}") from None
+
+
 def at_least(low: int, high: int | None = None) -> Callable[[str], int]:
     """A ``type=`` for an integer option that must be ≥ ``low`` (and ≤ ``high`` if given)."""
     allowed = f"≥ {low}" if high is None else f"in {low} … {high}"
 
     def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"must be an integer {allowed}, got {text!r}") from None
+        value = _integer(text, allowed)
         if value < low or (high is not None and value > high):
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {value}")
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {brief(value)}")
         return value
 
     parse.__name__ = f"int {allowed}"
@@ -259,9 +268,11 @@ def between(low: int, high: int) -> Callable[[str], int]:
     """A ``type=`` for an integer option that must lie in ``low`` … ``high``."""
 
     def parse(text: str) -> int:
-        value = at_least(low)(text)
+        value = _integer(text, f"{low} … {high}")
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be ≥ {low}, got {brief(value)}")
         if value > high:
-            raise argparse.ArgumentTypeError(f"must be {low} … {high}, got {value}")
+            raise argparse.ArgumentTypeError(f"must be {low} … {high}, got {brief(value)}")
         return value
 
     parse.__name__ = f"int {low} … {high}"
