@@ -220,6 +220,12 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
                            "not a recording; replay the sweeps.npz written beside it")
         with zipfile.ZipFile(path) as zf:
             infos = {i.filename: i for i in zf.infolist()}
+            if len(infos) < len(zf.infolist()):   # zipfile reads the last of the same name
+                seen: set[str] = set()
+                twice = next(i.filename for i in zf.infolist()
+                             if i.filename in seen or seen.add(i.filename))
+                raise fail(f"{brief(twice[:-4])[1:-1]}: given twice in the zip; a recording "
+                           "holds each entry once, and which one to read is not known")
             if "format.npy" not in infos:
                 raise fail("not an irring recording (no 'format' entry)")
             # zipfile reads the last zip of a file: `cat a.npz b.npz` replayed b alone
@@ -269,8 +275,17 @@ def _text(npz, headers: dict, name: str, fail) -> str:
 
 
 def _json(npz, headers: dict, name: str, fail) -> dict:
+    def once(pairs: list) -> dict:   # json keeps the last of a key given twice
+        keys = [k for k, _ in pairs]
+        for k in keys:
+            if keys.count(k) > 1:
+                raise fail(f"{name}: key {brief(k)} given twice")
+        return dict(pairs)
+
     try:
-        value = json.loads(_text(npz, headers, name, fail))
+        value = json.loads(_text(npz, headers, name, fail), object_pairs_hook=once)
+    except RecordingError:
+        raise
     except (ValueError, RecursionError):
         raise fail(f"{name}: not valid JSON") from None
     if not isinstance(value, dict):
@@ -293,6 +308,12 @@ def _read(npz, headers: dict, fail) -> tuple[list[Sweep], dict]:
             raise fail(f"{brief(name)}: unknown entry; a recording holds format, meta and "
                        f"sweepNNN/…")
         keys.add(head)
+    numbers: dict[int, str] = {}
+    for k in sorted(keys):
+        other = numbers.setdefault(int(k[len("sweep"):]), k)
+        if other != k:   # sweep1 and sweep001: one sweep number, two sweeps
+            raise fail(f"{brief(other)[1:-1]} and {brief(k)[1:-1]} both number sweep "
+                       f"{int(k[len('sweep'):])}; a recording numbers each sweep once")
     if not 1 <= len(keys) <= MAX_SWEEPS:
         raise fail(f"holds {len(keys)} sweeps; a recording holds 1 … {MAX_SWEEPS}")
     # by number: from sweep1000 on, names no longer sort as text (sweep1000 < sweep101)

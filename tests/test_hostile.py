@@ -20,6 +20,7 @@ import re
 import subprocess
 import sys
 import time
+import warnings
 import zipfile
 
 import numpy as np
@@ -360,6 +361,18 @@ def _rewrite(data: bytes, member: str, array) -> bytes:
     return out.getvalue()
 
 
+def _appended(data: bytes, member: str, array) -> bytes:
+    """The recording with one more zip entry ``member`` (a name it may already hold)."""
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.asarray(array))
+    out = io.BytesIO(data)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # zipfile warns of a name written twice
+        with zipfile.ZipFile(out, "a") as z:
+            z.writestr(member + ".npy", buf.getvalue())
+    return out.getvalue()
+
+
 def _scalars(data: bytes, **changes) -> bytes:
     src = zipfile.ZipFile(io.BytesIO(data))
     buf = io.BytesIO(src.read("sweep000/scalars.npy"))
@@ -425,6 +438,13 @@ def _scalars(data: bytes, **changes) -> bytes:
      "sweep000/scalars.ring.radius_m: missing; a recording lists every ring field (sensors, "
      "radius_m, motor_step_rad, gear, "),
     (lambda d: _scalars(d, ring=None), "sweep000/scalars.ring.sensors: missing"),
+    # an entry given twice: replay read the last silently, a map of other readings (exit 0)
+    (lambda d: _appended(d, "sweep000/counts", np.zeros((5, 4), np.int64)),
+     "sweep000/counts: given twice in the zip; a recording holds each entry once"),
+    (lambda d: _appended(d, "sweep0/counts", np.zeros((5, 4), np.int64)),
+     "sweep0 and sweep000 both number sweep 0; a recording numbers each sweep once"),
+    (lambda d: _rewrite(d, "meta", np.array('{"seed": 3, "seed": 4}')),
+     "meta: key 'seed' given twice"),
     # `cat a.npz b.npz > c.npz` replayed b alone (zipfile reads the last zip of a file)
     (lambda d: _scalars(d, adc_bits=10) + d,
      "bytes before the recording (two recordings joined into one file?); replay each .npz "
