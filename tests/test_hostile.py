@@ -783,6 +783,13 @@ def _sweep_on(behaviour, **ring_kw):
                                     "never IRINF: its firmware does not know IRHLO")),
     (hd.refuses_hello(1), re.escape("answered each of 3 IRHLO with IRERR 1 (bad sentence), "
                                     "never IRINF: it cannot read what this host sends")),
+    # an IRINF outside the protocol's own ranges, intact (its CRC matched), was told as 'no
+    # IRINF answer … Sentences that arrive garbled point at line noise or a loose cable'
+    (hd.announces(sensors=0), re.escape(
+        "answers IRHLO with an IRINF that IRR protocol v2 does not allow (IRINF field 2 "
+        "(nsensors) = 0 is outside 1 … 4096): $IRINF,2,0,12,")),
+    (hd.announces(den=0), re.escape("(IRINF field 6 (gear_den) = 0 is outside 1 … 2147483647)")),
+    (hd.announces(lo=5, hi=-5), re.escape("does not allow (min_step 5 > max_step -5)")),
     (hd.announces(sensors=4096), re.escape("announces 4096 sensors (nsensors; allowed 1 … 72)")),
     (hd.announces(bits=32), re.escape("announces a 32-bit ADC (adc_bits; allowed 1 … 24)")),
     (hd.announces(lo=-2**31 + 1, hi=2**31 - 1), re.escape(

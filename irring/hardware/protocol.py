@@ -402,19 +402,21 @@ def _parse_fields(cls: type[Message], raw: list[bytes], line: bytes) -> list:
     if not ok:
         raise ProtocolError(Fault.FIELD_COUNT, line, f"{cls.TYPE} takes {want}, got {len(raw)}")
     values: list = []
+    names = [f.name for f in fields(cls)]
     for i, text in enumerate(raw):
         kind = _bounds(cls, i)
+        what = f"{cls.TYPE} field {i + 1} ({names[min(i, len(names) - 1)]})"
         if kind == TEXT:
             values.append(text.decode("ascii"))  # characters were checked above
             continue
         if not _INT_RE.fullmatch(text):
             raise ProtocolError(Fault.BAD_FIELD, line,
-                                f"{cls.TYPE} field {i + 1} {text!r} is not a decimal integer")
+                                f"{what} {text!r} is not a decimal integer")
         value = int(text)
         lo, hi = kind
         if not lo <= value <= hi:
             raise ProtocolError(Fault.OUT_OF_RANGE, line,
-                                f"{cls.TYPE} field {i + 1} = {value} is outside {lo} … {hi}")
+                                f"{what} = {value} is outside {lo} … {hi}")
         values.append(value)
     return values
 

@@ -23,7 +23,7 @@ import serial
 
 from .. import core
 from ..designs import PAPER_RING
-from ..errors import DeviceError
+from ..errors import DeviceError, printable
 from ..core import Ring
 from . import protocol as p
 
@@ -55,6 +55,10 @@ GARBLED_ANSWER_RETRY_S = 0.1
 
 class HandshakeError(DeviceError):
     """No usable IRINF answer to IRHLO."""
+
+
+# a sentence whose check field matched but whose fields break the protocol's rules
+_FIELD_FAULTS = (p.Fault.FIELD_COUNT, p.Fault.BAD_FIELD, p.Fault.OUT_OF_RANGE)
 
 
 def _info_faults(info: p.Info) -> list[str]:
@@ -324,6 +328,7 @@ class SerialRing:
         self.decoder = p.Decoder()   # v2; v1 only after a handshake found an old device
         self.protocol_warning: str | None = None
         self._other_framing = 0  # sentences framed for another protocol version, heard
+        self._refused_info: p.ProtocolError | None = None  # an intact IRINF out of range
         self._rx_bytes = 0     # bytes read from the port, all told (silence is none arriving)
         self.stats = LinkStats()
         self.info: p.Info | None = None
@@ -426,6 +431,8 @@ class SerialRing:
                 else:
                     self._other_framing += item.fault is p.Fault.OTHER_VERSION
                     self.stats.malformed += 1
+                    if item.raw.startswith(b"$IRINF") and item.fault in _FIELD_FAULTS:
+                        self._refused_info = item   # its check field matched: not noise
                 log.debug("dropped: %s", item)
             else:
                 self.stats.sentences += 1
@@ -453,6 +460,7 @@ class SerialRing:
         board answers a v2 IRHLO with a v1 IRERR 1) and refused unless ``accept_v1``."""
         tries = self.retries + 1
         refusals: list[p.ErrorReply] = []
+        self._refused_info = None
         every_refused = True
         for attempt in range(tries):
             if attempt:
@@ -489,6 +497,13 @@ class SerialRing:
                    f"v{p.PROTOCOL_VERSION} firmware" if last.code == p.ERR_UNKNOWN_TYPE else
                    f"it cannot read what this host sends; check the baud rate ({self.baudrate}) "
                    "and the cable" if last.code == p.ERR_BAD_SENTENCE else "reset the board"))
+        if self._refused_info is not None:   # was 'no IRINF answer … a loose cable'
+            bad = self._refused_info
+            raise HandshakeError(
+                f"the device on {self.port_name} answers IRHLO with an IRINF that IRR protocol "
+                f"v{self.decoder.version} does not allow ({bad.detail}): "
+                f"{printable(bad.raw.decode('ascii', 'replace').strip())}; no ring has that, so "
+                f"its IRINF is not trusted")
         raise HandshakeError(
             f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
             f"each. Check the port, the baud rate ({self.baudrate}), that the ring is powered "
