@@ -807,6 +807,27 @@ def test_a_hostile_device_is_a_clear_error_within_a_bounded_time(behaviour, erro
             assert list(row) == hd.counts_for(int(step))
 
 
+def test_a_second_irring_on_a_port_in_use_is_refused_before_it_reads(tmp_path):
+    """Two `irring drive` on one emulator each read some of the other's IRSCN as their own
+    (the device answers whoever reads first): one scored F1 0.784 against the other's 0.979,
+    exit 0 for both. The port is opened exclusively; the second is told it is in use."""
+    dev = hd.HostileDevice(hd.good)
+    try:
+        with SerialRing(dev.link, timeout_s=TIMEOUT_S) as first:
+            second = SerialRing(dev.link, timeout_s=TIMEOUT_S)
+            with pytest.raises(DeviceError, match=re.escape(
+                    f"cannot open {dev.link}: another program has it open and locked (an irring "
+                    "drive or calibrate still running on it?). Check which program has it "
+                    "(fuser, lsof) and run this when it is done")):
+                second.open()
+            sweep = first.sweep()
+            assert [list(r) for r in sweep.counts] == [hd.counts_for(s) for s in sweep.steps]
+        with SerialRing(dev.link, timeout_s=TIMEOUT_S) as again:   # free once closed
+            assert again.info.nsensors == hd.SENSORS
+    finally:
+        dev.close()
+
+
 def test_a_noisy_link_that_never_falls_silent_is_not_stopped():
     """timeout_s is the longest silence: 14 garbled sentences, one every 0.2 s, is 2.8 s
     without an intact step but never 1.2 s without a byte (a 1 s margin for a starved

@@ -195,6 +195,10 @@ def _describe_link(link: dict[str, int]) -> str:
 # --------------------------------------------------------------------------- driver
 
 
+PORT_LOCKED = ("another program has it open and locked (an irring drive or calibrate still "
+               "running on it?)")
+
+
 def _open_failure(exc: BaseException) -> str:
     """Why a port did not open: the operating system's reason (pyserial wraps it as
     "[Errno 2] could not open port X: [Errno 2] No such file or directory: 'X'"), else
@@ -204,7 +208,9 @@ def _open_failure(exc: BaseException) -> str:
         code, text = (tuple(seen.args) + (None, None))[:2]
         if not isinstance(seen, serial.SerialException) and isinstance(code, int) \
                 and isinstance(text, str):   # an OSError, or termios.error (errno, text)
-            reason = "not a serial port" if code == errno.ENOTTY else text
+            reason = ("not a serial port" if code == errno.ENOTTY else PORT_LOCKED
+                      if code in (errno.EAGAIN, errno.EWOULDBLOCK) and "lock" in str(exc).lower()
+                      else text)
         seen = seen.__cause__ or seen.__context__
     return reason or str(exc)
 
@@ -344,8 +350,11 @@ class SerialRing:
         if self._port is None:
             if isinstance(self._port_arg, str):
                 try:
+                    # exclusive: a second irring on the port read the other's IRSCN as its
+                    # own (the device's replies go to whoever reads first), mapped unwarned
                     self._port = self.opener(self._port_arg, baudrate=self.baudrate,
-                                             timeout=self.poll_s, write_timeout=self.timeout_s)
+                                             timeout=self.poll_s, write_timeout=self.timeout_s,
+                                             exclusive=True)
                 except (serial.SerialException, OSError, ValueError) as exc:
                     network = self._port_arg.lower().startswith(
                         tuple(f"{s}://" for s in core.NETWORK_URL_SCHEMES))
@@ -354,7 +363,10 @@ class SerialRing:
                               "the device path (ls /dev/ttyUSB* /dev/ttyACM*), that you may "
                               "use it (group dialout), or start the emulator: irring emulate "
                               "t_room (then --port ring.pty)")
-                    raise DeviceError(f"cannot open {self._port_arg}: {_open_failure(exc)}. "
+                    why = _open_failure(exc)
+                    if why == PORT_LOCKED:
+                        advice = "which program has it (fuser, lsof) and run this when it is done"
+                    raise DeviceError(f"cannot open {self._port_arg}: {why}. "
                                       f"Check {advice}") from exc
             else:
                 self._port = self._port_arg
