@@ -37,6 +37,12 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"cannot store {type(obj).__name__} in a recording's JSON")
 
 
+def _farthest(arr: np.ndarray) -> float:
+    """max |x| of ``arr`` (0 if empty), taken in float64: in int64 |−2⁶³| is −2⁶³, and a
+    float16 array cast the bound to inf with a RuntimeWarning."""
+    return float(np.max(np.abs(arr.astype(np.float64)))) if arr.size else 0.0
+
+
 def check_sweep(sweep: Sweep, name: str = "sweep") -> None:
     """ValueError naming ``name`` and the field for a :class:`Sweep` (from any source: a
     ``RingSource`` of your own, a sweep edited in code) that :func:`load_recording` would
@@ -62,9 +68,10 @@ def check_sweep(sweep: Sweep, name: str = "sweep") -> None:
             raise fail(field_, f"expected numbers of shape {shape}, got {arr.dtype} {arr.shape}")
         if not np.all(np.isfinite(arr)):
             raise fail(field_, "holds NaN or infinite values")
-        if field_.removeprefix("reading_") in ("pose", "sensor_angles") and arr.size and \
-                np.max(np.abs(arr)) > MAX_ABS_COORDINATE:
-            raise fail(field_, f"holds {np.max(np.abs(arr)):g}; positions and angles lie "
+        far = _farthest(arr) if field_.removeprefix("reading_") in ("pose", "sensor_angles") \
+            else 0.0
+        if far > MAX_ABS_COORDINATE:
+            raise fail(field_, f"holds {far:g}; positions and angles lie "
                                f"within ±{MAX_ABS_COORDINATE:g} (m, rad)")
     if not np.all(np.isfinite(counts)):
         raise fail("counts", "holds NaN or infinite values")
@@ -406,8 +413,8 @@ def _array(npz, headers: dict, name: str, dims: str, kinds: str, sizes: dict, fa
     arr = npz[name]
     if finite and arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
         raise fail(f"{name}: holds NaN or infinite values")
-    if name.rsplit("/", 1)[-1] in _BOUNDED and arr.size:
-        far = float(np.max(np.abs(arr)))
+    if name.rsplit("/", 1)[-1] in _BOUNDED:
+        far = _farthest(arr)
         if far > MAX_ABS_COORDINATE:
             raise fail(f"{name}: holds {far:g}; positions and angles lie within "
                        f"±{MAX_ABS_COORDINATE:g} (m, rad)")

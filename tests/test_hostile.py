@@ -394,6 +394,9 @@ def _scalars(data: bytes, **changes) -> bytes:
      "sweep000/pose: holds 1e+300; positions and angles lie within ±1e+06 (m, rad)"),
     (lambda d: _rewrite(d, "sweep000/sensor_angles", np.full((5, 4), -3e7)),
      "sweep000/sensor_angles: holds 3e+07; positions and angles lie within"),
+    # |−2⁶³| overflows to −2⁶³ in int64: the pose passed the bound and was replayed (exit 0)
+    (lambda d: _rewrite(d, "sweep000/pose", np.array([-2**63, 4, 0], np.int64)),
+     "sweep000/pose: holds 9.22337e+18; positions and angles lie within ±1e+06 (m, rad)"),
     (lambda d: _scalars(d, adc_bits=0), "adc_bits: 0 is not allowed"),
     (lambda d: _scalars(d, adc_bits=64), "adc_bits: 64 is not allowed"),
     (lambda d: _scalars(d, max_range_m=float("nan")), "max_range_m: nan is not allowed"),
@@ -455,6 +458,23 @@ def test_broken_recordings_are_one_clear_error(tmp_path, good_recording, make, m
     path.write_bytes(make(good_recording))
     with pytest.raises((RecordingError, TooBig), match=re.escape(message)):
         load_recording(path)
+
+
+def test_the_bound_on_poses_and_angles_holds_in_any_dtype(tmp_path):
+    """check_sweep took |x| in the array's own dtype: an int64 pose of −2⁶³ passed as −2⁶³,
+    and float16 angles printed 'RuntimeWarning: overflow encountered in cast' (1e6 cast to
+    float16) on stderr of a replay that succeeded."""
+    from irring.recording import check_sweep
+
+    sweep = _sweep(np.random.default_rng(9))
+    with pytest.raises(ValueError, match=re.escape("holds 9.22337e+18; positions and angles")):
+        check_sweep(dataclasses.replace(sweep, pose=np.array([-2**63, 1, 0], np.int64)))
+    half = dataclasses.replace(sweep, sensor_angles=sweep.sensor_angles.astype(np.float16))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_sweep(half)
+        save_recording(tmp_path / "half.npz", [half])
+        assert load_recording(tmp_path / "half.npz")[0][0].sensor_angles.dtype == np.float16
 
 
 def test_save_recording_refuses_a_meta_its_loader_refuses(tmp_path):
