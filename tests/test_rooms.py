@@ -116,6 +116,31 @@ def test_cli_scores_bundled_and_own_rooms_with_and_without_effects(tmp_path, cap
     assert rows[0]["effects"]["point_rms_theta0_m"] > 2 * rows[0]["effects"]["point_rms_m"]
 
 
+def test_cli_notes_an_obstacle_of_ones_own_room_the_walls_clip(tmp_path, capsys):
+    """bench rooms scores rooms people write: a box a mistyped centre put 47 mm through a
+    wall is named under its room's rows and in rooms.json (a note: the exit status is the
+    scores'); the room beside it, nothing clipped, has neither."""
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "a_tiny_post.yaml").write_text(SMALL_ROOM)
+    (own / "b_clipped.yaml").write_text(SMALL_ROOM.replace("tiny_post", "clipped").replace(
+        "{type: cylinder, center_mm: [810, 230], radius_mm: 24}",
+        "{type: box, center_mm: [997, 600], size_mm: [160, 80], yaw_deg: 0}"))
+    out = tmp_path / "bench"
+    assert main(["bench", "rooms", str(own), "--out", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    note = ("obstacles[0], a 160 × 80 mm box at (997, 600) mm, reaches 47 mm through wall 1 "
+            "((1030, 0) → (1030, 810) mm): 29.4% of it lies beyond the walls, clipped (never "
+            "seen, not scored)")
+    at = [i for i, line in enumerate(lines) if line.startswith("clipped ")]
+    assert at and lines[at[0] + 1].split()[0] == "ideal" and lines[at[0] + 2] == f"  note: {note}"
+    assert sum("note:" in line for line in lines) == 1
+    rows = json.loads((out / "rooms.json").read_text())
+    assert "clipped_obstacles" not in rows[0]
+    assert rows[1]["clipped_obstacles"] == [{"obstacle": 0, "walls": [1], "reach_mm": 47.0,
+                                             "share_clipped": 0.2938, "note": note}]
+
+
 def test_cli_names_a_folder_without_rooms(tmp_path, capsys):
     assert main(["bench", "rooms", str(tmp_path)]) == 1
     assert f"{tmp_path}: the folder holds no *.yaml scenario" in capsys.readouterr().err

@@ -118,6 +118,8 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
                     note += ("; " if note else "") + "ideal< " + ", ".join(r["ideal_worse"])
             name = r["name"] if variant == "effects" else ""
             print(f"{name:<{width}}  {variant:<8}{vals}  {note}")
+        for clip in r.get("clipped_obstacles", ()):
+            print(f"  note: {clip['note']}")
     scored = [r for r in rows if "error" not in r]
     n_miss = sum(bool(r["misses"]) and not r["beyond_target_effects"] for r in scored)
     n_beyond = sum(bool(r["misses"]) and bool(r["beyond_target_effects"]) for r in scored)

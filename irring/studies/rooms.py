@@ -20,7 +20,8 @@ from ..maps import metrics
 from ..maps.metrics import SCORE_KEYS
 from ..outputs import real_path
 from ..pipeline import progress_bar
-from ..scenario import Scenario, ScenarioError, counted_seeds, load_scenario, resolve
+from ..scenario import (Scenario, ScenarioError, clipped_obstacles, counted_seeds, load_scenario,
+                        resolve)
 from .report import mean_of
 
 # The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
@@ -218,6 +219,9 @@ def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
                      if row["effects"][k] is not None and row["effects"][k] < lim}
     row["beyond_target_effects"] = [k for k in sc.effects if k not in TARGET_EFFECTS]
     row["ideal_worse"] = _ideal_worse(row["effects"], row["ideal"])
+    clipped = clipped_obstacles(sc)   # a room of the user's: a mistyped centre is said
+    if clipped:
+        row["clipped_obstacles"] = [c.as_json() for c in clipped]
     return row
 
 
