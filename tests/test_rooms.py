@@ -117,9 +117,9 @@ def test_cli_scores_bundled_and_own_rooms_with_and_without_effects(tmp_path, cap
 
 
 def test_cli_notes_an_obstacle_of_ones_own_room_the_walls_clip(tmp_path, capsys):
-    """bench rooms scores rooms people write: a box a mistyped centre put 47 mm through a
-    wall is named under its room's rows and in rooms.json (a note: the exit status is the
-    scores'); the room beside it, nothing clipped, has neither."""
+    """bench rooms (and foldover, grazing) run rooms people write: a box a mistyped centre put
+    47 mm through a wall is named under its room's rows and in the JSON (a note: the exit
+    status is the scores'); the room beside it, nothing clipped, has neither."""
     own = tmp_path / "own"
     own.mkdir()
     (own / "a_tiny_post.yaml").write_text(SMALL_ROOM)
@@ -139,6 +139,15 @@ def test_cli_notes_an_obstacle_of_ones_own_room_the_walls_clip(tmp_path, capsys)
     assert "clipped_obstacles" not in rows[0]
     assert rows[1]["clipped_obstacles"] == [{"obstacle": 0, "walls": [1], "reach_mm": 47.0,
                                              "share_clipped": 0.2938, "note": note}]
+    for bench, json_file in (("foldover", "foldover.json"), ("grazing", "grazing.json")):
+        main(["bench", bench, str(own), "--seeds", "1", "--out", str(tmp_path / bench)])
+        lines = capsys.readouterr().out.splitlines()
+        at = [i for i, line in enumerate(lines) if line.startswith("clipped ")]
+        assert at and lines[at[0] + 1] == f"  note: {note}", bench
+        assert sum("note:" in line for line in lines) == 1
+        data = json.loads((tmp_path / bench / json_file).read_text())
+        got = data["rooms"] if bench == "grazing" else data
+        assert [r.get("clipped_obstacles") for r in got] == [None, rows[1]["clipped_obstacles"]]
 
 
 def test_cli_names_a_folder_without_rooms(tmp_path, capsys):

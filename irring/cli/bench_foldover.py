@@ -10,7 +10,7 @@ from .. import errors
 from ..outputs import OutputSet, check_out
 from ..studies.foldover import (MAP_SCORES, MAX_ERROR_M, OUTSIDE_CELLS, OUTSIDE_MARGIN_M,
                                 measure, outside_tolerance_m)
-from ..studies.rooms import resolve_rooms
+from ..studies.rooms import print_clip_notes, resolve_rooms
 from ._common import MAP_COLUMNS, add_room_set_options, describe, score_text
 
 SCORE_COLUMNS = tuple(c for c in MAP_COLUMNS if c[0] in MAP_SCORES)
@@ -96,6 +96,7 @@ def _print_table(rows: list[dict], n_fail: int, n_runs: int, out) -> None:
             print(f"{name:<{width}}  {x['seed']:>6}{x['valid']:>7}{x['ambiguous']:>10}"
                   f"{x['far']:>8}{worst:>8}{x['cells_outside']:>8}{x['nonfinite']:>10}"
                   f"{_scores(x)}  {'pass' if x['passed'] else 'FAIL'}")
+        print_clip_notes(r)
     by_sensor: dict[str, list[dict]] = {}
     for r in rows:
         if "error" not in r:

@@ -10,7 +10,7 @@ from .. import errors
 from ..outputs import OutputSet, check_out
 from ..studies.grazing import (BIN_DEG, GAIN_BAND_DEG, GAIN_TARGET, MAX_INCIDENCE_DEG,
                                RMS_TARGET_M, measure)
-from ..studies.rooms import resolve_rooms
+from ..studies.rooms import print_clip_notes, resolve_rooms
 from ._common import add_room_set_options, describe
 
 DEFAULT_ROOMS = ("grazing_corridor",)
@@ -90,6 +90,7 @@ def _print(r: dict, seeds: int, out) -> None:
         print(f"{row['name']:<{width}}  {row['n']:>6}{_mm(row['rms_m']):>8}"
               f"{_mm(row['rms_theta0_m']):>8}   {'':>{len(band) + 1}} {g['n']:>5}"
               f"{_mm(g['rms_m']):>8}{_mm(g['rms_theta0_m']):>8}{_x(g['gain']):>7}")
+        print_clip_notes(row)
     print(f"pooled over {len(r['rooms'])} room(s), {seeds} seed(s) each: n {r['n']}, RMS "
           f"{_mm(r['rms_m'])} mm, θ = 0 {_mm(r['rms_theta0_m'])} mm")
     print(f"{'incidence':>10}{'n':>7}{'RMS mm':>8}{'θ=0 mm':>8}{'gain':>7}{'max mm':>8}  target")

@@ -9,7 +9,7 @@ import sys
 
 from .. import errors
 from ..outputs import OutputSet, check_out
-from ..studies.rooms import ROOMS, TARGETS, measure, resolve_rooms
+from ..studies.rooms import ROOMS, TARGETS, measure, print_clip_notes, resolve_rooms
 from ._common import MAP_COLUMNS, add_room_set_options, describe, score_text
 
 EPILOG = f"""\
@@ -118,8 +118,7 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
                     note += ("; " if note else "") + "ideal< " + ", ".join(r["ideal_worse"])
             name = r["name"] if variant == "effects" else ""
             print(f"{name:<{width}}  {variant:<8}{vals}  {note}")
-        for clip in r.get("clipped_obstacles", ()):
-            print(f"  note: {clip['note']}")
+        print_clip_notes(r)
     scored = [r for r in rows if "error" not in r]
     n_miss = sum(bool(r["misses"]) and not r["beyond_target_effects"] for r in scored)
     n_beyond = sum(bool(r["misses"]) and bool(r["beyond_target_effects"]) for r in scored)

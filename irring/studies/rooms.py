@@ -184,7 +184,8 @@ def each_room(scenarios: list[Scenario | Unusable], n_seeds: int, measure_room, 
     ``source``; ``bar.update()`` once per run) for each room, under one progress bar. A room
     that cannot be loaded or run (an :class:`Unusable`, or an error in its run) is a row with
     ``name``, ``source``, ``error`` (the one-line message) and ``status`` (the exit status
-    ``irring run`` would give) instead; ``debug``: also print that error's traceback."""
+    ``irring run`` would give) instead; ``debug``: also print that error's traceback. A room
+    whose walls clip an obstacle has ``clipped_obstacles`` (:func:`clipped_obstacles`)."""
     rows = []
     with progress_bar(len(scenarios) * n_seeds * runs_per_seed, label, progress,
                       unit="run") as bar:
@@ -195,14 +196,25 @@ def each_room(scenarios: list[Scenario | Unusable], n_seeds: int, measure_room, 
                 bar.update(runs_per_seed * n_seeds)
                 continue
             try:
-                rows.append(measure_room(sc, n_seeds, bar))
+                row = measure_room(sc, n_seeds, bar)
             except Exception as exc:  # noqa: BLE001 - one room's failure is that room's row
                 if debug:
                     traceback.print_exc()
                 status, line = errors.describe(exc)
                 rows.append({"name": sc.name, "source": sc.source, "error": line,
                              "status": status})
+                continue
+            clipped = clipped_obstacles(sc)   # rooms of the user's: a mistyped centre is said
+            if clipped:
+                row["clipped_obstacles"] = [c.as_json() for c in clipped]
+            rows.append(row)
     return rows
+
+
+def print_clip_notes(row: dict) -> None:
+    """The note lines for a room's obstacles its walls clip (``each_room``'s rows)."""
+    for clip in row.get("clipped_obstacles", ()):
+        print(f"  note: {clip['note']}")
 
 
 def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
@@ -219,9 +231,6 @@ def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
                      if row["effects"][k] is not None and row["effects"][k] < lim}
     row["beyond_target_effects"] = [k for k in sc.effects if k not in TARGET_EFFECTS]
     row["ideal_worse"] = _ideal_worse(row["effects"], row["ideal"])
-    clipped = clipped_obstacles(sc)   # a room of the user's: a mistyped centre is said
-    if clipped:
-        row["clipped_obstacles"] = [c.as_json() for c in clipped]
     return row
 
 
