@@ -7,6 +7,7 @@ import csv
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -18,6 +19,7 @@ import pytest
 from irring import errors
 from irring.studies import executor, study
 from irring.cli import main
+from irring.scenario import resolve
 
 # A room of our own: an L-shaped room (x ≠ y everywhere), one post, one pose off-centre.
 ROOM = """\
@@ -114,6 +116,10 @@ BAD = [
      r"designs\[0\]\.sensor: 'lidar' is not allowed; choose one of: gp2d12"),
     ("designs: [radial12, radial12]\nscenarios: [t_room]\n",
      r"designs\[1\]: design 'radial12' is listed twice"),
+    # one room by two names ran twice and counted twice in the summary's means
+    (f"designs: [radial12]\nscenarios: [t_room, {resolve('t_room')}]\n",
+     rf"scenarios\[1\]: scenario '{re.escape(str(resolve('t_room')))}' is listed twice \(as "
+     r"'t_room', the same file\); it would be run and counted in the means twice"),
     ("designs: [radial12]\nscenarios: [no_such_room]\n",
      r"scenarios\[0\]: no_such_room: no such file and no bundled scenario"),
     ("designs: [radial12]\nscenarios: [t_room]\nseeds: [1, -2]\n",

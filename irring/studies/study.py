@@ -36,7 +36,7 @@ from ..errors import OutputError, TooBig, brief, printable
 from ..outputs import OutputSet, atomic_file, sole_writer
 from ..pipeline import scenario_text
 from ..resources import installed_version
-from ..scenario import Scenario, ScenarioError, counted_seeds, load_scenario
+from ..scenario import Scenario, ScenarioError, counted_seeds, load_scenario, scenario_file
 from . import accuracy
 from .accuracy import mark_pareto
 from .report import write_csv
@@ -204,7 +204,7 @@ def parse_study(raw: Any, source: str = "") -> Study:
     for i, label in enumerate(labels):
         if label in labels[:i]:
             raise _fail(source, f"designs[{i}]", f"design {label!r} is listed twice")
-    scenarios, seed_of = [], {}
+    scenarios, seed_of, seen = [], {}, {}
     for i, s in enumerate(_list(source, "scenarios", raw["scenarios"], "scenario names or paths")):
         path = f"scenarios[{i}]"
         if not isinstance(s, str):
@@ -216,8 +216,11 @@ def parse_study(raw: Any, source: str = "") -> Study:
             loaded = load_scenario(s)
         except ScenarioError as exc:
             raise _fail(source, path, str(exc)) from None
-        if s in scenarios:
-            raise _fail(source, path, f"scenario {s!r} is listed twice")
+        first = seen.setdefault(scenario_file(s), s)
+        if s in scenarios or first != s:   # t_room and scenarios/t_room.yaml: one room
+            raise _fail(source, path, f"scenario {s!r} is listed twice" + (
+                f" (as {first!r}, the same file); it would be run and counted in the means "
+                f"twice" if first != s else ""))
         scenarios.append(s)
         seed_of[s] = loaded
     seeds, count = None, 1
