@@ -399,11 +399,12 @@ def _sensor(model: str, adc_bits: int, vref_v: float) -> str:
 
 
 def check_calibration(calibration, model: str, adc_bits: int, vref_v: float, where: str,
-                      what: str) -> None:
+                      what: str, recorded: bool = False) -> None:
     """Raise CalibrationError (naming ``where``, the calibration's file) unless
     ``calibration`` (None: nothing to check) is for this sensor model, ADC bits and reference
     voltage: its a(θ), b(θ) are in that converter's counts, so counts of another converter
-    or sensor read as silently wrong distances. ``what`` names the readings."""
+    or sensor read as silently wrong distances. ``what`` names the readings; ``recorded``:
+    the calibration is a recording's own, which only --calibration replaces."""
     if calibration is None:
         return
     if (calibration.sensor_model, calibration.adc_bits) != (model, adc_bits) or not \
@@ -411,8 +412,10 @@ def check_calibration(calibration, model: str, adc_bits: int, vref_v: float, whe
         raise CalibrationError(
             f"{where}: the calibration is for "
             f"{_sensor(calibration.sensor_model, calibration.adc_bits, calibration.vref_v)}, "
-            f"but {what} {_sensor(model, adc_bits, vref_v)}; use a calibration of that sensor "
-            f"(irring calibrate) or leave --calibration out")
+            f"but {what} {_sensor(model, adc_bits, vref_v)}; "
+            + ("replay it with --calibration FILE, a calibration of that sensor (irring "
+               "calibrate)" if recorded else "use a calibration of that sensor (irring "
+               "calibrate) or leave --calibration out"))
 
 
 def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | Path | None = None,
@@ -468,7 +471,7 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
     for k, sweep in enumerate(sweeps):
         check_calibration(calibration, sweep.sensor_model, sweep.adc_bits, sweep.vref_v,
                           str(calibration_file or f"{recording} (recorded calibration)"),
-                          f"sweep {k + 1} was read by")
+                          f"sweep {k + 1} was read by", recorded=calibration_file is None)
     grid = None
     params = MapperParams(**meta["mapper"]) if meta.get("mapper") else None
     if meta.get("grid"):

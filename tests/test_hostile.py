@@ -528,6 +528,25 @@ def test_a_damaged_recorded_calibration_names_the_recording(tmp_path, capsys, go
             f"given twice (first on line {line - 1})" in capsys.readouterr().err)
 
 
+def test_a_recorded_calibration_of_another_sensor_says_how_to_replay(tmp_path, capsys,
+                                                                    good_recording):
+    """Its advice was 'or leave --calibration out', given to a replay without --calibration:
+    leaving it out is what reads the recorded calibration that does not fit."""
+    cal = Calibration.nominal("gp2d12").to_yaml().replace("adc_bits: 12", "adc_bits: 10")
+    path = tmp_path / "rec.npz"
+    path.write_bytes(_rewrite(good_recording, "meta", np.array(json.dumps(
+        {"seed": 3, "calibration_yaml": cal}))))
+    assert main(["replay", str(path), "--out", str(tmp_path / "o")]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {path} (recorded calibration): the calibration is for a gp2d12 "
+        "with a 10-bit ADC at 5 V, but sweep 1 was read by a gp2d12 with a 12-bit ADC at 5 V; "
+        "replay it with --calibration FILE, a calibration of that sensor (irring calibrate)\n")
+    fits = tmp_path / "fits.yaml"
+    fits.write_text(Calibration.nominal("gp2d12").to_yaml())
+    assert main(["replay", str(path), "--calibration", str(fits), "--out",
+                 str(tmp_path / "o"), "--no-animation"]) == 0
+
+
 def test_a_recording_whose_scenario_this_irring_cannot_read_is_mapped_unscored(tmp_path,
                                                                              capsys):
     """A recording from an irring whose scenarios have an effect this one lacks was refused
