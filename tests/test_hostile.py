@@ -846,6 +846,42 @@ def test_a_hostile_device_is_a_clear_error_within_a_bounded_time(behaviour, erro
             assert list(row) == hd.counts_for(int(step))
 
 
+def _contradicts_once(dev, cmd):
+    """Its first IRSWP sends every IRSCN twice under one seq, the copy with other counts
+    (each with a valid CRC); after that a correct device."""
+    if isinstance(cmd, p_.SweepCommand) and not getattr(dev, "lied", False):
+        dev.lied = True
+        for step in range(cmd.from_step, cmd.to_step + 1):
+            dev.send(hd.scan(dev.seq, step))
+            other = ",".join(str(c + 7) for c in hd.counts_for(step))
+            dev.send(hd.line(f"IRSCN,{dev.seq},{step},{1000 + dev.seq},{other}"))
+            dev.seq += 1
+        dev.send(hd.line(f"IRDON,{dev.seq - 1}"))
+        return
+    hd.good(dev, cmd)
+
+
+def test_an_irscn_sent_again_with_other_readings_is_dropped_and_swept_again():
+    """Both copies pass the CRC, so which is right is not known: the first was kept and the
+    sweep reported '5 duplicates', as for a harmless resend. Now the step is dropped as
+    inconsistent and re-swept."""
+    dev = hd.HostileDevice(_contradicts_once)
+    try:
+        with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:
+            sweep = ring.sweep(resweep=1)
+            assert list(sweep.steps) == list(range(hd.MIN_STEP, hd.MAX_STEP + 1))
+            assert [list(r) for r in sweep.counts] == [hd.counts_for(s) for s in sweep.steps]
+            assert (ring.stats.inconsistent, ring.stats.duplicates, ring.stats.resweeps) == \
+                (10, 0, 1)
+            assert "10 inconsistent IRSCN dropped" in ring.last_report.message
+        dev.lied = False   # and without a re-sweep the steps are missing, never invented
+        with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:
+            with pytest.raises(NoReadings):
+                ring.sweep(resweep=0)
+    finally:
+        dev.close()
+
+
 def test_a_second_irring_on_a_port_in_use_is_refused_before_it_reads(tmp_path):
     """Two `irring drive` on one emulator each read some of the other's IRSCN as their own
     (the device answers whoever reads first): one scored F1 0.784 against the other's 0.979,

@@ -146,7 +146,8 @@ class LinkStats:
     ignored_bytes: int = 0      # bytes outside any sentence (line noise)
     seq_gaps: int = 0           # places where the IRSCN sequence jumped
     lost_scans: int = 0         # IRSCN the device sent that never arrived intact
-    inconsistent: int = 0       # valid-checksum IRSCN contradicting the sweep, dropped
+    inconsistent: int = 0       # valid-checksum IRSCN contradicting the sweep (or each
+    #                             other: one step twice with other counts), dropped
     stale: int = 0              # IRSCN/IRDON left over from an earlier exchange, dropped
     duplicates: int = 0         # a second IRSCN for a step already read, dropped
     out_of_order: int = 0       # IRSCN that arrived after a later one (kept; not a loss)
@@ -755,6 +756,7 @@ class SerialRing:
         ps.max_step_s = stall_limit
         heard = False   # a garbled sentence arrived since the last IRSTP: the device answers
         suspects: list[p.Scan] = []   # IRSCN numbered before `hint`: stale, or a renumbering
+        contradicted: set[int] = set()   # steps read twice with other counts in this pass
 
         def take(msg: p.Scan) -> None:
             """Keep one IRSCN of this pass, counting gaps, duplicates and contradictions."""
@@ -765,8 +767,19 @@ class SerialRing:
                 return
             if base is None:
                 base = (msg.seq - pos) % p.SEQ_MODULO
+            if msg.step in contradicted:
+                self.stats.inconsistent += 1
+                return
             if msg.step in ps.got:
-                self.stats.duplicates += 1
+                if ps.got[msg.step].counts == msg.counts:
+                    self.stats.duplicates += 1   # a resend: the same reading
+                    return
+                # the same IRSCN with other readings, both intact: which is right is not
+                # known, so neither is kept (the step is missing, re-swept)
+                del ps.got[msg.step]
+                contradicted.add(msg.step)
+                self.stats.scans -= 1
+                self.stats.inconsistent += 2
                 return
             gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) % p.SEQ_MODULO
             if gap >= p.SEQ_MODULO // 2:
