@@ -554,6 +554,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
                                    grouping.cx, grouping.cy, gapper)
+    points, label = rejoin_traces(points, label, index, counts, cal, grouping.alpha,
+                                  grouping.cx, grouping.cy, grouping.usable, options)
     # short far lines are doubted in the final pass (a fold-over's judging pass keeps its
     # lines whole: they decide the branches; docs/foldover.md, "Short far lines"), judged as
     # fitted, but after round_runs: a column's arc cut into short far lines is a circle's
@@ -736,6 +738,187 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     label = label.copy()
     label.reshape(-1)[at] = to
     return placed_at(points, at, d, theta, sigma), label
+
+
+TRACE_ROUNDS = 64   # at most this many readings a trace carries its line across, each way
+
+
+TRACE_CORNER_RAD = math.radians(30)  # lines meeting at more than this make a corner
+TRACE_LOOSE = 2.0   # a line whose members scatter this many times more than another's is looser
+
+
+def _past_a_corner(qx: np.ndarray, qy: np.ndarray, line: np.ndarray, alpha: np.ndarray,
+                   cx: np.ndarray, cy: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                   n_mem: np.ndarray, good: np.ndarray, px: np.ndarray, py: np.ndarray,
+                   lab: np.ndarray, options: LineOptions) -> np.ndarray:
+    """(k, L) bool: whether points (qx, qy) put on lines ``line`` lie past the corner their
+    line makes with each line: across another usable line of ≥ ``min_points`` members, met at more than
+    ``TRACE_CORNER_RAD`` within ``corner_reach_m`` of both lines' extents (``lo``, ``hi``
+    along each line from its centroid), on the side away from their line's members. A
+    wall ends at its corner; read past it, a reading would sit behind the other wall."""
+    out = np.zeros((qx.size, alpha.size), dtype=bool)
+    other = (good & (n_mem >= options.min_points)).nonzero()[0]
+    if not (qx.size and other.size):
+        return out
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    b = line[:, None]
+    c = other[None, :]
+    turn = np.abs(np.sin(alpha[b] - alpha[c]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # where line c meets line b, along each from its centroid
+        wx, wy = cx[c] - cx[b], cy[c] - cy[b]
+        cross = ca[b] * sa[c] - sa[b] * ca[c]
+        tb = (wx * sa[c] - wy * ca[c]) / cross
+        tc = (wx * sa[b] - wy * ca[b]) / cross
+    reach = options.corner_reach_m
+    corner = ((c != b) & (turn > math.sin(TRACE_CORNER_RAD))
+              & (tb >= lo[b] - reach) & (tb <= hi[b] + reach)
+              & (tc >= lo[c] - reach) & (tc <= hi[c] + reach))
+    if not corner.any():
+        return out
+    # line b's members' mean side of line c, and the point's
+    mem = lab >= 0
+    n = np.maximum(np.bincount(lab[mem], minlength=alpha.size), 1)
+    mx = np.bincount(lab[mem], px[mem], alpha.size) / n
+    my = np.bincount(lab[mem], py[mem], alpha.size) / n
+    side_b = (my[b] - cy[c]) * ca[c] - (mx[b] - cx[c]) * sa[c]
+    side_q = (qy[:, None] - cy[c]) * ca[c] - (qx[:, None] - cx[c]) * sa[c]
+    out[:, other] = corner & (side_b * side_q < 0) & (np.abs(side_q) > options.min_split_m)
+    return out
+
+
+def _trace_moves(kind: str, lab, moved, joined, past, n_mem, rms, good, gone, alpha, cx, cy,
+                 lo, hi, s, h, ox, oy, px, py, sig_s, cal: Calibration, max_range_m: float,
+                 options: LineOptions):
+    """One round of :func:`rejoin_traces`' moves of one ``kind``: "absorb" (a member of a
+    line of fewer members within ``TRACE_CORNER_RAD`` of its neighbour's, or of a line
+    ``gone`` (L,): one that lost more members than it kept) or "cross" (a member past its
+    line's corner with its neighbour's line). A gone line takes none. Per reading in scan order:
+    the target line (−1: none), and its range, θ and σ read at the target's incidence."""
+    k = lab.size
+    best = np.full(k, -1, dtype=np.intp)
+    best_miss = np.full(k, np.inf)
+    best_d, best_t, best_sig = (np.full(k, np.nan) for _ in range(3))
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    own = np.maximum(lab, 0)
+    for nb_off, link in ((-1, np.r_[False, joined]), (1, np.r_[joined, False])):
+        b = lab[np.clip(np.arange(k) + nb_off, 0, k - 1)]
+        b0 = np.maximum(b, 0)
+        ask = (link & (lab >= 0) & (b >= 0) & (b != lab) & ~moved  # a reading moves once
+               & good[b0] & ~gone[b0])
+        if kind == "absorb":
+            ask &= gone[own] | ((n_mem[own] < n_mem[b0]) & (rms[own] > TRACE_LOOSE * rms[b0])
+                                & (np.abs(np.sin(alpha[own] - alpha[b0]))
+                                   <= math.sin(TRACE_CORNER_RAD)))
+        else:
+            ask &= past[np.arange(k), b0]
+        at = ask.nonzero()[0]
+        if not at.size:
+            continue
+        bb = b[at]
+        theta = np.arccos(np.minimum(np.abs(np.sin(h[at] - alpha[bb])), 1.0))
+        d = cal.distance(s[at], theta)
+        _, bexp = cal.log_ab(theta)
+        sigma = np.maximum(np.abs(bexp) * d * sig_s[at], SIGMA_FLOOR_M)
+        qx, qy = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
+        perp = np.abs((qy - cy[bb]) * ca[bb] - (qx - cx[bb]) * sa[bb])
+        u = (qx - cx[bb]) * ca[bb] + (qy - cy[bb]) * sa[bb]
+        thr = np.maximum(options.split_sigmas * sigma, options.min_split_m)
+        ok = ((theta <= cal.max_incidence_rad) & np.isfinite(d) & (d >= cal.min_range_m)
+              & (d <= max_range_m) & (perp <= thr)
+              & (u >= lo[bb] - options.adopt_margin_m) & (u <= hi[bb] + options.adopt_margin_m))
+        ok[ok] = ~_past_a_corner(qx[ok], qy[ok], bb[ok], alpha, cx, cy, lo, hi, n_mem, good,
+                                 px, py, lab, options).any(axis=1)
+        miss = np.where(ok, perp / thr, np.inf)
+        take = miss < best_miss[at]
+        w = at[take]
+        best[w], best_miss[w] = bb[take], miss[take]
+        best_d[w], best_t[w], best_sig[w] = d[take], theta[take], sigma[take]
+    return best, best_d, best_t, best_sig
+
+
+def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
+                  cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+                  usable: np.ndarray, options: LineOptions) -> tuple[Points, np.ndarray]:
+    """Line members a better-held line their sensor's trace continues on explains, moved to
+    it; numpy, shared by both estimators.
+
+    A reading whose neighbouring step of the same sensor (both valid, consecutive in the
+    scan) is on a usable line B, and which, read at the incidence its beam meets B with,
+    lies on B (within the split threshold, inside B's members' extent plus
+    ``adopt_margin_m``), moves to B where its own line holds it weakly: no line, a line of
+    fewer members than B, or a stretch of at most ``TRACE_SHORT`` of its sensor's
+    consecutive readings. Repeated a reading at a time along the trace (at most
+    ``TRACE_ROUNDS`` rounds). At grazing incidence one sensor's readings beside a corner
+    fit a line of their own self-consistently at a wrong direction (a 12-member line 7–25°
+    off the wall, readings 40–125 mm off), which no corner test sees (its lines meet at
+    < 30°); the wall's line, fitted by other sensors, places them within noise.
+    ``label`` (S, N): each reading's line or −1; ``alpha``, ``cx``, ``cy``, ``usable``
+    (L,): the lines. Why and what it measured: docs/estimator.md ("Traces")."""
+    n_sensors = label.shape[1]
+    vi = index[points.valid.reshape(-1)[index]]
+    if vi.size < 2 or alpha.size == 0:
+        return points, label
+    pos = np.empty(label.size, dtype=np.intp)
+    pos[index] = np.arange(index.size)
+    sensor = vi % n_sensors
+    # consecutive valid readings of one sensor at consecutive scan positions
+    joined = (sensor[1:] == sensor[:-1]) & (pos[vi[1:]] - pos[vi[:-1]] == 1)
+    lab = label.reshape(-1)[vi].copy()
+    n_lines = alpha.size
+    good = np.asarray(usable, dtype=bool)
+    s = np.asarray(counts, dtype=float).reshape(-1)[vi]
+    h = points.heading.reshape(-1)[vi]
+    ox, oy = points.origin_x.reshape(-1)[vi], points.origin_y.reshape(-1)[vi]
+    px, py = points.x.reshape(-1)[vi], points.y.reshape(-1)[vi]
+    sig_s = cal.sigma_counts() / s
+    moved = np.zeros(vi.size, dtype=bool)
+    new_d = np.full(vi.size, np.nan)
+    new_t = np.full(vi.size, np.nan)
+    new_sig = np.full(vi.size, np.nan)
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    lost = np.zeros(n_lines, dtype=np.intp)     # members each line gave up
+    for _ in range(TRACE_ROUNDS):
+        mem = lab >= 0
+        n_mem = np.bincount(lab[mem], minlength=n_lines)
+        # each line's members' extent along it
+        along = (px - cx[np.maximum(lab, 0)]) * ca[np.maximum(lab, 0)] + \
+            (py - cy[np.maximum(lab, 0)]) * sa[np.maximum(lab, 0)]
+        lo = np.full(n_lines, np.inf)
+        hi = np.full(n_lines, -np.inf)
+        np.minimum.at(lo, lab[mem], along[mem])
+        np.maximum.at(hi, lab[mem], along[mem])
+        perp = (py - cy[np.maximum(lab, 0)]) * ca[np.maximum(lab, 0)] - \
+            (px - cx[np.maximum(lab, 0)]) * sa[np.maximum(lab, 0)]
+        rms = np.sqrt(np.bincount(lab[mem], perp[mem] ** 2, n_lines) / np.maximum(n_mem, 1))
+        # a member past its line's corner with another line may cross to that line
+        edge = mem & ~moved & ((np.r_[False, joined] & (np.r_[-1, lab[:-1]] != lab))
+                               | (np.r_[joined, False] & (np.r_[lab[1:], -1] != lab)))
+        past = np.zeros((vi.size, n_lines), dtype=bool)
+        if edge.any():
+            past[edge] = _past_a_corner(px[edge], py[edge], lab[edge], alpha, cx, cy, lo, hi,
+                                        n_mem, good, px, py, lab, options)
+        for kind in ("absorb", "cross"):    # a weaker line's members first, then corners
+            best, best_d, best_t, best_sig = _trace_moves(
+                kind, lab, moved, joined, past, n_mem, rms, good, lost > n_mem, alpha, cx, cy,
+                lo, hi, s, h, ox, oy, px, py, sig_s, cal, points.max_range_m, options)
+            if (best >= 0).any():
+                break
+        go = best >= 0
+        if not go.any():
+            break
+        np.add.at(lost, lab[go], 1)
+        lab[go] = best[go]
+        moved |= go
+        new_d[go], new_t[go], new_sig[go] = best_d[go], best_t[go], best_sig[go]
+        px[go] = ox[go] + best_d[go] * np.cos(h[go])
+        py[go] = oy[go] + best_d[go] * np.sin(h[go])
+    if not moved.any():
+        return points, label
+    at = vi[moved]
+    label = label.copy()
+    label.reshape(-1)[at] = lab[moved]
+    return placed_at(points, at, new_d[moved], new_t[moved], new_sig[moved]), label
 
 
 def placed_at(points: Points, at: np.ndarray, d, theta, sigma) -> Points:
