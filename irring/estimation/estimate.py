@@ -744,17 +744,22 @@ TRACE_ROUNDS = 64   # at most this many readings a trace carries its line across
 
 
 TRACE_CORNER_RAD = math.radians(30)  # lines meeting at more than this make a corner
-TRACE_LOOSE = 2.0   # a line whose members scatter this many times more than another's is looser
+TRACE_LOOSE = 2.0   # a line whose members scatter this many times more than another's …
+TRACE_LOOSE_MIN_M = 0.005  # … and by more than this (half a map cell) is looser
+TRACE_ON_SIGMAS = 2.5  # a reading re-read at a line's θ lies on it within this many σ (≥ 10 mm)
+TRACE_SKIP = 2      # a trace links readings across at most this many of its readings on no line
 
 
-def _past_a_corner(qx: np.ndarray, qy: np.ndarray, line: np.ndarray, alpha: np.ndarray,
+def _past_a_corner(qx: np.ndarray, qy: np.ndarray, ox: np.ndarray, oy: np.ndarray,
+                   line: np.ndarray, alpha: np.ndarray,
                    cx: np.ndarray, cy: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                    n_mem: np.ndarray, good: np.ndarray, px: np.ndarray, py: np.ndarray,
                    lab: np.ndarray, options: LineOptions) -> np.ndarray:
     """(k, L) bool: whether points (qx, qy) put on lines ``line`` lie past the corner their
     line makes with each line: across another usable line of ≥ ``min_points`` members, met at more than
-    ``TRACE_CORNER_RAD`` within ``corner_reach_m`` of both lines' extents (``lo``, ``hi``
-    along each line from its centroid), on the side away from their line's members. A
+    ``TRACE_CORNER_RAD`` within ``corner_reach_m`` (or ``corner_reach_share`` of the corner's
+    distance from their emitters ``ox``, ``oy``, where more) of both lines' extents (``lo``,
+    ``hi`` along each line from its centroid), on the side away from their line's members. A
     wall ends at its corner; read past it, a reading would sit behind the other wall."""
     out = np.zeros((qx.size, alpha.size), dtype=bool)
     other = (good & (n_mem >= options.min_points)).nonzero()[0]
@@ -770,7 +775,11 @@ def _past_a_corner(qx: np.ndarray, qy: np.ndarray, line: np.ndarray, alpha: np.n
         cross = ca[b] * sa[c] - sa[b] * ca[c]
         tb = (wx * sa[c] - wy * ca[c]) / cross
         tc = (wx * sa[b] - wy * ca[b]) / cross
-    reach = options.corner_reach_m
+    # the reach grows with the corner's distance from the emitter (a far corner's drop-out
+    # gap is wider: docs/estimator.md, "A far corner")
+    kx, ky = cx[b] + tb * ca[b], cy[b] + tb * sa[b]
+    reach = np.maximum(options.corner_reach_m, options.corner_reach_share
+                       * np.hypot(kx - ox[:, None], ky - oy[:, None]))
     corner = ((c != b) & (turn > math.sin(TRACE_CORNER_RAD))
               & (tb >= lo[b] - reach) & (tb <= hi[b] + reach)
               & (tc >= lo[c] - reach) & (tc <= hi[c] + reach))
@@ -787,7 +796,7 @@ def _past_a_corner(qx: np.ndarray, qy: np.ndarray, line: np.ndarray, alpha: np.n
     return out
 
 
-def _trace_moves(kind: str, lab, moved, joined, past, n_mem, rms, good, gone, alpha, cx, cy,
+def _trace_moves(kind: str, lab, moved, nbrs, past, n_mem, rms, good, gone, alpha, cx, cy,
                  lo, hi, s, h, ox, oy, px, py, sig_s, cal: Calibration, max_range_m: float,
                  options: LineOptions):
     """One round of :func:`rejoin_traces`' moves of one ``kind``: "absorb" (a member of a
@@ -801,13 +810,13 @@ def _trace_moves(kind: str, lab, moved, joined, past, n_mem, rms, good, gone, al
     best_d, best_t, best_sig = (np.full(k, np.nan) for _ in range(3))
     ca, sa = np.cos(alpha), np.sin(alpha)
     own = np.maximum(lab, 0)
-    for nb_off, link in ((-1, np.r_[False, joined]), (1, np.r_[joined, False])):
-        b = lab[np.clip(np.arange(k) + nb_off, 0, k - 1)]
+    for nb in nbrs:
+        b = np.where(nb >= 0, lab[nb], -1)
         b0 = np.maximum(b, 0)
-        ask = (link & (lab >= 0) & (b >= 0) & (b != lab) & ~moved  # a reading moves once
+        ask = ((lab >= 0) & (b >= 0) & (b != lab) & ~moved  # a reading moves once
                & good[b0] & ~gone[b0])
         if kind == "absorb":
-            ask &= gone[own] | ((n_mem[own] < n_mem[b0]) & (rms[own] > TRACE_LOOSE * rms[b0])
+            ask &= gone[own] | ((n_mem[own] < n_mem[b0]) & (rms[own] > np.maximum(TRACE_LOOSE * rms[b0], TRACE_LOOSE_MIN_M))
                                 & (np.abs(np.sin(alpha[own] - alpha[b0]))
                                    <= math.sin(TRACE_CORNER_RAD)))
         else:
@@ -823,12 +832,19 @@ def _trace_moves(kind: str, lab, moved, joined, past, n_mem, rms, good, gone, al
         qx, qy = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
         perp = np.abs((qy - cy[bb]) * ca[bb] - (qx - cx[bb]) * sa[bb])
         u = (qx - cx[bb]) * ca[bb] + (qy - cy[bb]) * sa[bb]
-        thr = np.maximum(options.split_sigmas * sigma, options.min_split_m)
+        thr = np.maximum(TRACE_ON_SIGMAS * sigma, options.min_split_m)
+        first, last = lo[bb], hi[bb]
+        if kind == "cross":   # across a corner the target runs on to it
+            aa = lab[at]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                tx = (((cx[aa] - cx[bb]) * sa[aa] - (cy[aa] - cy[bb]) * ca[aa])
+                      / (ca[bb] * sa[aa] - sa[bb] * ca[aa]))
+            first, last = np.fmin(first, tx), np.fmax(last, tx)
         ok = ((theta <= cal.max_incidence_rad) & np.isfinite(d) & (d >= cal.min_range_m)
               & (d <= max_range_m) & (perp <= thr)
-              & (u >= lo[bb] - options.adopt_margin_m) & (u <= hi[bb] + options.adopt_margin_m))
-        ok[ok] = ~_past_a_corner(qx[ok], qy[ok], bb[ok], alpha, cx, cy, lo, hi, n_mem, good,
-                                 px, py, lab, options).any(axis=1)
+              & (u >= first - options.adopt_margin_m) & (u <= last + options.adopt_margin_m))
+        ok[ok] = ~_past_a_corner(qx[ok], qy[ok], ox[at][ok], oy[at][ok], bb[ok], alpha, cx,
+                                 cy, lo, hi, n_mem, good, px, py, lab, options).any(axis=1)
         miss = np.where(ok, perp / thr, np.inf)
         take = miss < best_miss[at]
         w = at[take]
@@ -865,6 +881,15 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     # consecutive valid readings of one sensor at consecutive scan positions
     joined = (sensor[1:] == sensor[:-1]) & (pos[vi[1:]] - pos[vi[:-1]] == 1)
     lab = label.reshape(-1)[vi].copy()
+    # each reading's neighbouring line member of its sensor: the next valid reading either
+    # way, past at most TRACE_SKIP on no line (those never move)
+    nbrs = []
+    for step, link in ((-1, np.r_[False, joined]), (1, np.r_[joined, False])):
+        nb = np.where(link, np.arange(vi.size) + step, -1)
+        for _ in range(TRACE_SKIP):
+            on_none = (nb >= 0) & (lab[np.maximum(nb, 0)] < 0)
+            nb = np.where(on_none, np.where(link[np.maximum(nb, 0)], nb + step, -1), nb)
+        nbrs.append(nb)
     n_lines = alpha.size
     good = np.asarray(usable, dtype=bool)
     s = np.asarray(counts, dtype=float).reshape(-1)[vi]
@@ -892,15 +917,16 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
             (px - cx[np.maximum(lab, 0)]) * sa[np.maximum(lab, 0)]
         rms = np.sqrt(np.bincount(lab[mem], perp[mem] ** 2, n_lines) / np.maximum(n_mem, 1))
         # a member past its line's corner with another line may cross to that line
-        edge = mem & ~moved & ((np.r_[False, joined] & (np.r_[-1, lab[:-1]] != lab))
-                               | (np.r_[joined, False] & (np.r_[lab[1:], -1] != lab)))
+        edge = mem & ~moved
+        edge &= functools.reduce(operator.or_, ((nb >= 0) & (lab[nb] != lab) for nb in nbrs))
         past = np.zeros((vi.size, n_lines), dtype=bool)
         if edge.any():
-            past[edge] = _past_a_corner(px[edge], py[edge], lab[edge], alpha, cx, cy, lo, hi,
-                                        n_mem, good, px, py, lab, options)
+            past[edge] = _past_a_corner(px[edge], py[edge], ox[edge], oy[edge], lab[edge],
+                                        alpha, cx, cy, lo, hi, n_mem, good, px, py, lab,
+                                        options)
         for kind in ("absorb", "cross"):    # a weaker line's members first, then corners
             best, best_d, best_t, best_sig = _trace_moves(
-                kind, lab, moved, joined, past, n_mem, rms, good, lost > n_mem, alpha, cx, cy,
+                kind, lab, moved, nbrs, past, n_mem, rms, good, lost > n_mem, alpha, cx, cy,
                 lo, hi, s, h, ox, oy, px, py, sig_s, cal, points.max_range_m, options)
             if (best >= 0).any():
                 break
