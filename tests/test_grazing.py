@@ -137,16 +137,17 @@ effects: [incidence, noise, quantization]
 """
 
 
-def test_a_far_walls_last_readings_hidden_by_the_drop_out_gap_go_back_to_it():
+def test_a_far_walls_last_readings_hidden_by_the_drop_out_gap_go_back_to_it(monkeypatch):
     """corner_sides at a far corner (GP2Y0A02, 1.28 m away): a wall 0.6 m off the ring,
     seen at 55–62° at 0.95–1.1 m, ends in a drop-out gap wider than ``corner_reach_m``, so
     its last readings, read with the far wall's θ, landed 150–230 mm past the corner (seed
     2, four of them, with ``corner_reach_share`` = 0). The corner's reach grows with its
-    distance and the wall's extent runs on to it: each such reading within 100 mm."""
+    distance and the wall's extent runs on to it: each such reading within 100 mm.
+    rejoin_traces alone (``corner_reach_share`` = 0) carries the wall's line to it too."""
     sc = loads(FAR_CORNER, source="<test>")
     cal = scene_calibration(sc)[0]
-    off = {}
-    for share in (0.0, LineOptions().corner_reach_share):
+
+    def off_by(share):
         errs = []
         for seed in (0, 1, 2):
             sw = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps[0]
@@ -154,13 +155,18 @@ def test_a_far_walls_last_readings_hidden_by_the_drop_out_gap_go_back_to_it():
             hit = sw.truth.hit_point[..., :2]
             near_corner = p.valid & (np.abs(hit[..., 0] + 0.6) < 0.001) & (hit[..., 1] < -0.88)
             errs.append(np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[near_corner])
-        off[share] = np.concatenate(errs)
-    before, after = off[0.0], off[LineOptions().corner_reach_share]
-    assert before.size == after.size >= 15
+        return np.concatenate(errs)
+    share = LineOptions().corner_reach_share
+    after, by_traces = off_by(share), off_by(0.0)
+    with monkeypatch.context() as m:
+        _without_rejoin(m)
+        before, by_share = off_by(0.0), off_by(share)
+    assert before.size == after.size == by_traces.size == by_share.size >= 15
     # (4 before across_silence: three of them, first after the drop-out gap's silent
     # steps, now take the near wall's line without the reach)
     assert np.count_nonzero(before > 0.15) == 1
-    assert after.max() < 0.100
+    for rest in (after, by_traces, by_share):
+        assert rest.max() < 0.100
 
 
 def _wall_members(sigma_m: float = 0.01):
@@ -202,3 +208,74 @@ def test_a_member_read_behind_its_line_goes_onto_it_one_read_short_stays():
         others = np.ones(12, bool)
         others[[4, 8]] = False
         assert np.all(np.abs(out.d[others, 0] - d_true[others, 0]) < 0.010)   # the fit tilts
+
+
+def _off_by(sweep, points, rows, sensor):
+    hit = sweep.truth.hit_point[..., :2]
+    return np.hypot(points.x - hit[..., 0], points.y - hit[..., 1])[rows, sensor]
+
+
+def _without_rejoin(monkeypatch):
+    from irring.estimation import estimate as module
+    monkeypatch.setattr(module, "rejoin_traces", lambda points, label, *args: (points, label))
+
+
+def test_a_sensors_run_on_a_line_of_its_own_beside_a_corner_goes_to_the_walls_line(monkeypatch):
+    """rejoin_traces (issue 13; docs/estimator.md, "Traces"): the bundled grazing_corridor,
+    first pose, sensor 6 sweeping from the end wall (steps 18–23, 23–29° incidence) round the
+    square corner onto the steep side wall (24–35, 48–60°). Its readings beside the corner
+    formed a 12-member line of their own 7–25° off the wall, and a few end-wall lines ran on
+    past the corner: 18 of these 36 readings (seeds 427, 428) lay 38–125 mm off their true
+    hits. Moved to the side wall's line (two sensors' readings, 2 mm scatter) and back to the
+    end wall's, none is more than 5 mm off; the numpy oracle places them the same."""
+    from irring.estimation import estimate_numpy as oracle
+    from irring.studies.rooms import resolve_rooms
+
+    sc = resolve_rooms(["grazing_corridor"])[0]
+    cal = scene_calibration(sc)[0]
+    sweeps = [pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps[0]
+              for seed in (427, 428)]
+    rows = [np.nonzero((np.asarray(sw.steps) >= 18) & (np.asarray(sw.steps) <= 35))[0]
+            for sw in sweeps]
+    after = np.concatenate([_off_by(sw, estimate(sw, cal), r, 6) for sw, r in zip(sweeps, rows)])
+    slow = np.concatenate([_off_by(sw, oracle.estimate_detail(sw, cal).points, r, 6)
+                           for sw, r in zip(sweeps, rows)])
+    with monkeypatch.context() as m:
+        _without_rejoin(m)
+        before = np.concatenate([_off_by(sw, estimate(sw, cal), r, 6)
+                                 for sw, r in zip(sweeps, rows)])
+    assert after.size == before.size == 36
+    assert np.count_nonzero(before > 0.035) == 18 and before.max() > 0.120
+    assert after.max() < 0.005
+    np.testing.assert_allclose(slow, after, atol=0.001)
+
+
+RHOMBUS_A02 = """
+name: rhombus_63
+seed: 814
+room:
+  outline_mm: [[0, 0], [2600, 0], [3463, 1693], [863, 1693]]
+robot:
+  poses:
+    - {x_mm: 765, y_mm: 836, yaw_deg: -76.1}
+sensor: {model: gp2y0a02}
+effects: [incidence, noise, quantization]
+"""
+
+
+def test_readings_past_a_far_acute_corner_cross_to_the_wall_they_hit():
+    """rejoin_traces at a far acute corner (ours: a 63° rhombus, GP2Y0A02 1.0–1.1 m from the
+    corner): sensor 11's last three returns of the 63° wall before it drops out (66–69°),
+    read with the bottom wall's θ, sat on that wall's extension 151–235 mm past the corner.
+    The next reading on the 63° wall's line is two steps back across one on no line, and
+    the corner lies 0.35 m beyond that line's members (0.3 of its distance from the ring):
+    they cross, within 5 mm of their true hits."""
+    sc = loads(RHOMBUS_A02, source="<test>")
+    cal = scene_calibration(sc)[0]
+    sw = pipeline.simulated(sc, seed=814, progress=False)[0].sweeps[0]
+    rows = np.nonzero((np.asarray(sw.steps) >= -32) & (np.asarray(sw.steps) <= -30))[0]
+    inc = np.degrees(sw.truth.incidence_rad)[rows, 11]
+    assert rows.size == 3 and np.all((inc > 66) & (inc < 69))
+    p = estimate(sw, cal)
+    assert p.valid[rows, 11].all()
+    assert _off_by(sw, p, rows, 11).max() < 0.005

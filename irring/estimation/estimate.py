@@ -741,8 +741,6 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
 
 
 TRACE_ROUNDS = 64   # at most this many readings a trace carries its line across, each way
-
-
 TRACE_CORNER_RAD = math.radians(30)  # lines meeting at more than this make a corner
 TRACE_LOOSE = 2.0   # a line whose members scatter this many times more than another's …
 TRACE_LOOSE_MIN_M = 0.005  # … and by more than this (half a map cell) is looser
@@ -751,194 +749,186 @@ TRACE_SKIP = 2      # a trace links readings across at most this many of its rea
 
 
 def _past_a_corner(qx: np.ndarray, qy: np.ndarray, ox: np.ndarray, oy: np.ndarray,
-                   line: np.ndarray, alpha: np.ndarray,
-                   cx: np.ndarray, cy: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                   n_mem: np.ndarray, good: np.ndarray, px: np.ndarray, py: np.ndarray,
-                   lab: np.ndarray, options: LineOptions) -> np.ndarray:
-    """(k, L) bool: whether points (qx, qy) put on lines ``line`` lie past the corner their
-    line makes with each line: across another usable line of ≥ ``min_points`` members, met at more than
-    ``TRACE_CORNER_RAD`` within ``corner_reach_m`` (or ``corner_reach_share`` of the corner's
-    distance from their emitters ``ox``, ``oy``, where more) of both lines' extents (``lo``,
-    ``hi`` along each line from its centroid), on the side away from their line's members. A
-    wall ends at its corner; read past it, a reading would sit behind the other wall."""
-    out = np.zeros((qx.size, alpha.size), dtype=bool)
-    other = (good & (n_mem >= options.min_points)).nonzero()[0]
-    if not (qx.size and other.size):
-        return out
+                   line: np.ndarray, other: np.ndarray, alpha: np.ndarray, cx: np.ndarray,
+                   cy: np.ndarray, lo: np.ndarray, hi: np.ndarray, mx: np.ndarray,
+                   my: np.ndarray, options: LineOptions) -> np.ndarray:
+    """(k, m) bool: whether points (qx, qy) (k,) put on lines ``line`` lie past the corner
+    their line makes with lines ``other`` ((k, m) or (1, m)): the two met at more than
+    ``TRACE_CORNER_RAD`` within ``corner_reach_m`` (or ``corner_reach_share`` of the
+    corner's distance from the points' emitters ``ox``, ``oy``, where more) of both lines'
+    member extents (``lo``, ``hi`` along each line from its point ``cx``, ``cy``), the point
+    on the other line's far side from its own line's members (their mean ``mx``, ``my``).
+    A wall ends at its corner: read past it, a reading would sit behind the other wall."""
     ca, sa = np.cos(alpha), np.sin(alpha)
     b = line[:, None]
-    c = other[None, :]
-    turn = np.abs(np.sin(alpha[b] - alpha[c]))
+    c = other
     with np.errstate(divide="ignore", invalid="ignore"):
-        # where line c meets line b, along each from its centroid
+        # where line c meets line b, along each from its point
         wx, wy = cx[c] - cx[b], cy[c] - cy[b]
         cross = ca[b] * sa[c] - sa[b] * ca[c]
         tb = (wx * sa[c] - wy * ca[c]) / cross
         tc = (wx * sa[b] - wy * ca[b]) / cross
     # the reach grows with the corner's distance from the emitter (a far corner's drop-out
     # gap is wider: docs/estimator.md, "A far corner")
-    kx, ky = cx[b] + tb * ca[b], cy[b] + tb * sa[b]
-    reach = np.maximum(options.corner_reach_m, options.corner_reach_share
-                       * np.hypot(kx - ox[:, None], ky - oy[:, None]))
-    corner = ((c != b) & (turn > math.sin(TRACE_CORNER_RAD))
-              & (tb >= lo[b] - reach) & (tb <= hi[b] + reach)
-              & (tc >= lo[c] - reach) & (tc <= hi[c] + reach))
-    if not corner.any():
-        return out
-    # line b's members' mean side of line c, and the point's
-    mem = lab >= 0
-    n = np.maximum(np.bincount(lab[mem], minlength=alpha.size), 1)
-    mx = np.bincount(lab[mem], px[mem], alpha.size) / n
-    my = np.bincount(lab[mem], py[mem], alpha.size) / n
+    reach = np.maximum(options.corner_reach_m, options.corner_reach_share * np.hypot(
+        cx[b] + tb * ca[b] - ox[:, None], cy[b] + tb * sa[b] - oy[:, None]))
     side_b = (my[b] - cy[c]) * ca[c] - (mx[b] - cx[c]) * sa[c]
     side_q = (qy[:, None] - cy[c]) * ca[c] - (qx[:, None] - cx[c]) * sa[c]
-    out[:, other] = corner & (side_b * side_q < 0) & (np.abs(side_q) > options.min_split_m)
-    return out
+    return ((np.abs(cross) > math.sin(TRACE_CORNER_RAD))
+            & (tb >= lo[b] - reach) & (tb <= hi[b] + reach)
+            & (tc >= lo[c] - reach) & (tc <= hi[c] + reach)
+            & (side_b * side_q < 0) & (np.abs(side_q) > options.min_split_m))
 
 
-def _trace_moves(kind: str, lab, moved, nbrs, past, n_mem, rms, good, gone, alpha, cx, cy,
-                 lo, hi, s, h, ox, oy, px, py, sig_s, cal: Calibration, max_range_m: float,
-                 options: LineOptions):
-    """One round of :func:`rejoin_traces`' moves of one ``kind``: "absorb" (a member of a
-    line of fewer members within ``TRACE_CORNER_RAD`` of its neighbour's, or of a line
-    ``gone`` (L,): one that lost more members than it kept) or "cross" (a member past its
-    line's corner with its neighbour's line). A gone line takes none. Per reading in scan order:
-    the target line (−1: none), and its range, θ and σ read at the target's incidence."""
-    k = lab.size
-    best = np.full(k, -1, dtype=np.intp)
-    best_miss = np.full(k, np.inf)
-    best_d, best_t, best_sig = (np.full(k, np.nan) for _ in range(3))
+def _trace_moves(ask: np.ndarray, i: np.ndarray, a: np.ndarray, b: np.ndarray,
+                 counts: np.ndarray, h: np.ndarray, ox: np.ndarray, oy: np.ndarray,
+                 alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray, lo: np.ndarray,
+                 hi: np.ndarray, mx: np.ndarray, my: np.ndarray, n_mem: np.ndarray,
+                 good: np.ndarray, cal: Calibration, max_range_m: float, options: LineOptions,
+                 to_corner: bool):
+    """One round of :func:`rejoin_traces`: of the frontier pairs ``ask`` (reading ``i`` on
+    line ``a``, its neighbour on line ``b``), the readings that, read at the incidence their
+    beam meets ``b`` with, lie on it (within ``TRACE_ON_SIGMAS`` σ; within its members'
+    extent ``lo``..``hi`` along it from its point ``cx``, ``cy``, plus ``adopt_margin_m``, or
+    up to its corner with ``a`` where ``to_corner``) and not past a corner ``b`` makes
+    (:func:`_past_a_corner`; ``mx``, ``my``: the members' mean); of two targets the one it
+    lies closer to. (readings, targets, d, θ, σ), or None."""
+    if not ask.any():
+        return None
+    i, a, b = i[ask], a[ask], b[ask]
     ca, sa = np.cos(alpha), np.sin(alpha)
-    own = np.maximum(lab, 0)
-    for nb in nbrs:
-        b = np.where(nb >= 0, lab[nb], -1)
-        b0 = np.maximum(b, 0)
-        ask = ((lab >= 0) & (b >= 0) & (b != lab) & ~moved  # a reading moves once
-               & good[b0] & ~gone[b0])
-        if kind == "absorb":
-            ask &= gone[own] | ((n_mem[own] < n_mem[b0]) & (rms[own] > np.maximum(TRACE_LOOSE * rms[b0], TRACE_LOOSE_MIN_M))
-                                & (np.abs(np.sin(alpha[own] - alpha[b0]))
-                                   <= math.sin(TRACE_CORNER_RAD)))
-        else:
-            ask &= past[np.arange(k), b0]
-        at = ask.nonzero()[0]
-        if not at.size:
-            continue
-        bb = b[at]
-        theta = np.arccos(np.minimum(np.abs(np.sin(h[at] - alpha[bb])), 1.0))
-        d = cal.distance(s[at], theta)
-        _, bexp = cal.log_ab(theta)
-        sigma = np.maximum(np.abs(bexp) * d * sig_s[at], SIGMA_FLOOR_M)
-        qx, qy = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
-        perp = np.abs((qy - cy[bb]) * ca[bb] - (qx - cx[bb]) * sa[bb])
-        u = (qx - cx[bb]) * ca[bb] + (qy - cy[bb]) * sa[bb]
-        thr = np.maximum(TRACE_ON_SIGMAS * sigma, options.min_split_m)
-        first, last = lo[bb], hi[bb]
-        if kind == "cross":   # across a corner the target runs on to it
-            aa = lab[at]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                tx = (((cx[aa] - cx[bb]) * sa[aa] - (cy[aa] - cy[bb]) * ca[aa])
-                      / (ca[bb] * sa[aa] - sa[bb] * ca[aa]))
-            first, last = np.fmin(first, tx), np.fmax(last, tx)
-        ok = ((theta <= cal.max_incidence_rad) & np.isfinite(d) & (d >= cal.min_range_m)
-              & (d <= max_range_m) & (perp <= thr)
-              & (u >= first - options.adopt_margin_m) & (u <= last + options.adopt_margin_m))
-        ok[ok] = ~_past_a_corner(qx[ok], qy[ok], ox[at][ok], oy[at][ok], bb[ok], alpha, cx,
-                                 cy, lo, hi, n_mem, good, px, py, lab, options).any(axis=1)
-        miss = np.where(ok, perp / thr, np.inf)
-        take = miss < best_miss[at]
-        w = at[take]
-        best[w], best_miss[w] = bb[take], miss[take]
-        best_d[w], best_t[w], best_sig[w] = d[take], theta[take], sigma[take]
-    return best, best_d, best_t, best_sig
+    theta = np.arccos(np.minimum(np.abs(np.sin(h[i] - alpha[b])), 1.0))
+    d = cal.distance(counts[i], theta)
+    _, bexp = cal.log_ab(theta)
+    sigma = np.maximum(np.abs(bexp) * d * cal.sigma_counts() / counts[i], SIGMA_FLOOR_M)
+    qx, qy = ox[i] + d * np.cos(h[i]), oy[i] + d * np.sin(h[i])
+    perp = np.abs((qy - cy[b]) * ca[b] - (qx - cx[b]) * sa[b])
+    u = (qx - cx[b]) * ca[b] + (qy - cy[b]) * sa[b]
+    thr = np.maximum(TRACE_ON_SIGMAS * sigma, options.min_split_m)
+    first, last = lo[b], hi[b]
+    if to_corner:   # across a corner the target runs on to it
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tx = (((cx[a] - cx[b]) * sa[a] - (cy[a] - cy[b]) * ca[a])
+                  / (ca[b] * sa[a] - sa[b] * ca[a]))
+        first, last = np.fmin(first, tx), np.fmax(last, tx)
+    ok = ((theta <= cal.max_incidence_rad) & np.isfinite(d) & (d >= cal.min_range_m)
+          & (d <= max_range_m) & (perp <= thr)
+          & (u >= first - options.adopt_margin_m) & (u <= last + options.adopt_margin_m))
+    if ok.any():
+        corners = (good & (n_mem >= options.min_points)).nonzero()[0][None, :]
+        ok[ok] = ~_past_a_corner(qx[ok], qy[ok], ox[i[ok]], oy[i[ok]], b[ok], corners, alpha,
+                                 cx, cy, lo, hi, mx, my, options).any(axis=1)
+    if not ok.any():
+        return None
+    # a reading asked both ways: the target it lies closer to
+    miss = (perp / thr)[ok]
+    i, b, d, theta, sigma = i[ok], b[ok], d[ok], theta[ok], sigma[ok]
+    order = np.lexsort((miss, i))
+    pick = order[np.r_[True, i[order][1:] != i[order][:-1]]]
+    return i[pick], b[pick], d[pick], theta[pick], sigma[pick]
 
 
 def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                   cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
                   usable: np.ndarray, options: LineOptions) -> tuple[Points, np.ndarray]:
-    """Line members a better-held line their sensor's trace continues on explains, moved to
-    it; numpy, shared by both estimators.
+    """Line members that a better-held line their own sensor's trace continues on places,
+    moved to it; numpy, shared by both estimators.
 
-    A reading whose neighbouring step of the same sensor (both valid, consecutive in the
-    scan) is on a usable line B, and which, read at the incidence its beam meets B with,
-    lies on B (within the split threshold, inside B's members' extent plus
-    ``adopt_margin_m``), moves to B where its own line holds it weakly: no line, a line of
-    fewer members than B, or a stretch of at most ``TRACE_SHORT`` of its sensor's
-    consecutive readings. Repeated a reading at a time along the trace (at most
-    ``TRACE_ROUNDS`` rounds). At grazing incidence one sensor's readings beside a corner
-    fit a line of their own self-consistently at a wrong direction (a 12-member line 7–25°
-    off the wall, readings 40–125 mm off), which no corner test sees (its lines meet at
-    < 30°); the wall's line, fitted by other sensors, places them within noise.
-    ``label`` (S, N): each reading's line or −1; ``alpha``, ``cx``, ``cy``, ``usable``
+    A member whose sensor's neighbouring reading (the next valid one either way, across at
+    most ``TRACE_SKIP`` on no line) is on another usable line B moves to B if, read at the
+    incidence its beam meets B with, it lies on B (within ``TRACE_ON_SIGMAS`` σ, at least
+    ``min_split_m``; within B's members' extent plus ``adopt_margin_m``) and not past a
+    corner B makes (:func:`_past_a_corner`), where its own line holds it weakly: first
+    ("absorb") a line within ``TRACE_CORNER_RAD`` of B with fewer members whose members
+    scatter ``TRACE_LOOSE`` times as much (and over ``TRACE_LOOSE_MIN_M``), or one that
+    gave up more members than it kept; only where no such move is left ("cross") a member
+    lying past its line's corner with B (B's extent then runs on to that corner). A reading
+    moves once; rounds of one reading along each trace, at most ``TRACE_ROUNDS``. Readings
+    on no line never move (local_incidence reads them). At grazing incidence one sensor's
+    readings beside a corner fit a line of their own at a wrong direction (a 12-member
+    line 7–25° off the wall, 38–125 mm off), which no corner test sees (it meets the
+    wall's line at < 30°); the wall's line, fitted by other sensors, places them. ``label``
+    (S, N): each reading's line or −1; ``alpha``, ``cx``, ``cy``, ``usable``
     (L,): the lines. Why and what it measured: docs/estimator.md ("Traces")."""
     n_sensors = label.shape[1]
     vi = index[points.valid.reshape(-1)[index]]
-    if vi.size < 2 or alpha.size == 0:
+    lab = label.reshape(-1)[vi]
+    if vi.size < 2 or not (lab >= 0).any():
         return points, label
+    lab = lab.copy()
     pos = np.empty(label.size, dtype=np.intp)
     pos[index] = np.arange(index.size)
     sensor = vi % n_sensors
     # consecutive valid readings of one sensor at consecutive scan positions
     joined = (sensor[1:] == sensor[:-1]) & (pos[vi[1:]] - pos[vi[:-1]] == 1)
-    lab = label.reshape(-1)[vi].copy()
-    # each reading's neighbouring line member of its sensor: the next valid reading either
-    # way, past at most TRACE_SKIP on no line (those never move)
-    nbrs = []
+    # each member's neighbouring line member of its sensor, both ways, as pairs: the next
+    # valid reading, past at most TRACE_SKIP on no line (those never move)
+    k = vi.size
+    ar = np.arange(k)
+    reading, nbr = [], []
     for step, link in ((-1, np.r_[False, joined]), (1, np.r_[joined, False])):
-        nb = np.where(link, np.arange(vi.size) + step, -1)
+        nb = np.where(link, ar + step, -1)
         for _ in range(TRACE_SKIP):
             on_none = (nb >= 0) & (lab[np.maximum(nb, 0)] < 0)
             nb = np.where(on_none, np.where(link[np.maximum(nb, 0)], nb + step, -1), nb)
-        nbrs.append(nb)
+        keep = (nb >= 0) & (lab >= 0)
+        reading.append(ar[keep])
+        nbr.append(nb[keep])
+    reading, nbr = np.concatenate(reading), np.concatenate(nbr)
     n_lines = alpha.size
     good = np.asarray(usable, dtype=bool)
-    s = np.asarray(counts, dtype=float).reshape(-1)[vi]
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    counts_at = np.asarray(counts, dtype=float).reshape(-1)[vi]
     h = points.heading.reshape(-1)[vi]
     ox, oy = points.origin_x.reshape(-1)[vi], points.origin_y.reshape(-1)[vi]
     px, py = points.x.reshape(-1)[vi], points.y.reshape(-1)[vi]
-    sig_s = cal.sigma_counts() / s
-    moved = np.zeros(vi.size, dtype=bool)
-    new_d = np.full(vi.size, np.nan)
-    new_t = np.full(vi.size, np.nan)
-    new_sig = np.full(vi.size, np.nan)
-    ca, sa = np.cos(alpha), np.sin(alpha)
+    moved = np.zeros(k, dtype=bool)
+    new_d, new_t, new_sig = np.full(k, np.nan), np.full(k, np.nan), np.full(k, np.nan)
     lost = np.zeros(n_lines, dtype=np.intp)     # members each line gave up
+    along_rad = math.sin(TRACE_CORNER_RAD)
     for _ in range(TRACE_ROUNDS):
-        mem = lab >= 0
-        n_mem = np.bincount(lab[mem], minlength=n_lines)
-        # each line's members' extent along it
-        along = (px - cx[np.maximum(lab, 0)]) * ca[np.maximum(lab, 0)] + \
-            (py - cy[np.maximum(lab, 0)]) * sa[np.maximum(lab, 0)]
-        lo = np.full(n_lines, np.inf)
-        hi = np.full(n_lines, -np.inf)
-        np.minimum.at(lo, lab[mem], along[mem])
-        np.maximum.at(hi, lab[mem], along[mem])
-        perp = (py - cy[np.maximum(lab, 0)]) * ca[np.maximum(lab, 0)] - \
-            (px - cx[np.maximum(lab, 0)]) * sa[np.maximum(lab, 0)]
-        rms = np.sqrt(np.bincount(lab[mem], perp[mem] ** 2, n_lines) / np.maximum(n_mem, 1))
-        # a member past its line's corner with another line may cross to that line
-        edge = mem & ~moved
-        edge &= functools.reduce(operator.or_, ((nb >= 0) & (lab[nb] != lab) for nb in nbrs))
-        past = np.zeros((vi.size, n_lines), dtype=bool)
-        if edge.any():
-            past[edge] = _past_a_corner(px[edge], py[edge], ox[edge], oy[edge], lab[edge],
-                                        alpha, cx, cy, lo, hi, n_mem, good, px, py, lab,
-                                        options)
-        for kind in ("absorb", "cross"):    # a weaker line's members first, then corners
-            best, best_d, best_t, best_sig = _trace_moves(
-                kind, lab, moved, nbrs, past, n_mem, rms, good, lost > n_mem, alpha, cx, cy,
-                lo, hi, s, h, ox, oy, px, py, sig_s, cal, points.max_range_m, options)
-            if (best >= 0).any():
-                break
-        go = best >= 0
-        if not go.any():
+        # the trace's frontier: a member not moved yet whose neighbour is on another usable line
+        a, b = lab[reading], lab[nbr]
+        f = ~moved[reading] & (b >= 0) & (b != a)
+        f[f] = good[b[f]]
+        if not f.any():
             break
-        np.add.at(lost, lab[go], 1)
-        lab[go] = best[go]
-        moved |= go
-        new_d[go], new_t[go], new_sig[go] = best_d[go], best_t[go], best_sig[go]
-        px[go] = ox[go] + best_d[go] * np.cos(h[go])
-        py[go] = oy[go] + best_d[go] * np.sin(h[go])
+        i, a, b = reading[f], a[f], b[f]
+        mem = lab >= 0
+        g = lab[mem]
+        n_mem = np.bincount(g, minlength=n_lines)
+        nm = np.maximum(n_mem, 1)
+        mx, my = np.bincount(g, px[mem], n_lines) / nm, np.bincount(g, py[mem], n_lines) / nm
+        # each line's members' extent along it and their scatter across it
+        along = (px[mem] - cx[g]) * ca[g] + (py[mem] - cy[g]) * sa[g]
+        across = (py[mem] - cy[g]) * ca[g] - (px[mem] - cx[g]) * sa[g]
+        lo, hi = np.full(n_lines, np.inf), np.full(n_lines, -np.inf)
+        np.minimum.at(lo, g, along)
+        np.maximum.at(hi, g, along)
+        rms = np.sqrt(np.bincount(g, across * across, n_lines) / nm)
+        gone = lost > n_mem
+        f = ~gone[b]               # a line that gave up more than it kept takes none
+        # first a weaker line's members (or a gone line's), then members past a corner
+        absorb = f & (gone[a] | ((n_mem[a] < n_mem[b])
+                                 & (rms[a] > np.maximum(TRACE_LOOSE * rms[b], TRACE_LOOSE_MIN_M))
+                                 & (np.abs(np.sin(alpha[a] - alpha[b])) <= along_rad)))
+        args = (i, a, b, counts_at, h, ox, oy, alpha, cx, cy, lo, hi, mx, my, n_mem, good,
+                cal, points.max_range_m, options)
+        go = _trace_moves(absorb, *args, False)
+        if go is None and f.any():
+            cross = f.copy()
+            at = i[f]
+            cross[f] = _past_a_corner(px[at], py[at], ox[at], oy[at], a[f], b[f][:, None],
+                                      alpha, cx, cy, lo, hi, mx, my, options)[:, 0]
+            go = _trace_moves(cross, *args, True)
+        if go is None:
+            break
+        at, to, d, theta, sigma = go
+        np.add.at(lost, lab[at], 1)
+        lab[at] = to
+        moved[at] = True
+        new_d[at], new_t[at], new_sig[at] = d, theta, sigma
+        px[at], py[at] = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
     if not moved.any():
         return points, label
     at = vi[moved]
