@@ -780,30 +780,41 @@ def _past_a_corner(qx: np.ndarray, qy: np.ndarray, ox: np.ndarray, oy: np.ndarra
             & (side_b * side_q < 0) & (np.abs(side_q) > options.min_split_m))
 
 
-def _trace_moves(ask: np.ndarray, i: np.ndarray, a: np.ndarray, b: np.ndarray,
-                 counts: np.ndarray, h: np.ndarray, ox: np.ndarray, oy: np.ndarray,
-                 alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray, lo: np.ndarray,
-                 hi: np.ndarray, mx: np.ndarray, my: np.ndarray, n_mem: np.ndarray,
-                 good: np.ndarray, cal: Calibration, max_range_m: float, options: LineOptions,
-                 to_corner: bool):
-    """One round of :func:`rejoin_traces`: of the frontier pairs ``ask`` (reading ``i`` on
-    line ``a``, its neighbour on line ``b``), the readings that, read at the incidence their
-    beam meets ``b`` with, lie on it (within ``TRACE_ON_SIGMAS`` σ; within its members'
-    extent ``lo``..``hi`` along it from its point ``cx``, ``cy``, plus ``adopt_margin_m``, or
-    up to its corner with ``a`` where ``to_corner``) and not past a corner ``b`` makes
-    (:func:`_past_a_corner`; ``mx``, ``my``: the members' mean); of two targets the one it
-    lies closer to. (readings, targets, d, θ, σ), or None."""
+def _trace_moves(ask: np.ndarray, i: np.ndarray, j: np.ndarray, a: np.ndarray,
+                 b: np.ndarray, run_lo: np.ndarray, run_hi: np.ndarray, kx: np.ndarray,
+                 ky: np.ndarray, counts: np.ndarray, h: np.ndarray, ox: np.ndarray,
+                 oy: np.ndarray, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+                 lo: np.ndarray, hi: np.ndarray, mx: np.ndarray, my: np.ndarray,
+                 n_mem: np.ndarray, good: np.ndarray, cal: Calibration, max_range_m: float,
+                 options: LineOptions, to_corner: bool):
+    """One round of :func:`rejoin_traces`: for the frontier pairs ``ask`` (reading ``i`` on
+    line ``a``, its neighbour ``j`` on line ``b``), the run of ``a``'s readings from ``i``
+    away from ``j`` (its run's bounds ``run_lo``, ``run_hi``, in scan order) as far as each,
+    read at the incidence its beam meets ``b`` with, lies on ``b`` (within
+    ``TRACE_ON_SIGMAS`` σ; within ``adopt_margin_m`` of ``b``'s members' extent ``lo``..``hi``
+    along it from its point ``cx``, ``cy``, grown by the run's readings before it, or up to
+    its corner with ``a`` where ``to_corner``, each then past that corner: their end points
+    ``kx``, ``ky``), not past a corner ``b`` makes (:func:`_past_a_corner`; ``mx``, ``my``:
+    the members' mean); a reading two runs take goes where it lies closer. (readings,
+    targets, d, θ, σ), or None."""
     if not ask.any():
         return None
-    i, a, b = i[ask], a[ask], b[ask]
+    i, j, a, b = i[ask], j[ask], a[ask], b[ask]
+    step = np.where(i > j, 1, -1)
+    span = np.where(step > 0, run_hi[i] - i, i - run_lo[i]) + 1
+    t = np.arange(min(int(span.max()), TRACE_ROUNDS))
+    e = i[:, None] + step[:, None] * t          # (P, T) the run, outward from i
+    inside = t < span[:, None]
+    e = np.where(inside, e, i[:, None])
+    bb = np.broadcast_to(b[:, None], e.shape)
     ca, sa = np.cos(alpha), np.sin(alpha)
-    theta = np.arccos(np.minimum(np.abs(np.sin(h[i] - alpha[b])), 1.0))
-    d = cal.distance(counts[i], theta)
+    theta = np.arccos(np.minimum(np.abs(np.sin(h[e] - alpha[bb])), 1.0))
+    d = cal.distance(counts[e], theta)
     _, bexp = cal.log_ab(theta)
-    sigma = np.maximum(np.abs(bexp) * d * cal.sigma_counts() / counts[i], SIGMA_FLOOR_M)
-    qx, qy = ox[i] + d * np.cos(h[i]), oy[i] + d * np.sin(h[i])
-    perp = np.abs((qy - cy[b]) * ca[b] - (qx - cx[b]) * sa[b])
-    u = (qx - cx[b]) * ca[b] + (qy - cy[b]) * sa[b]
+    sigma = np.maximum(np.abs(bexp) * d * cal.sigma_counts() / counts[e], SIGMA_FLOOR_M)
+    qx, qy = ox[e] + d * np.cos(h[e]), oy[e] + d * np.sin(h[e])
+    perp = np.abs((qy - cy[bb]) * ca[bb] - (qx - cx[bb]) * sa[bb])
+    u = (qx - cx[bb]) * ca[bb] + (qy - cy[bb]) * sa[bb]
     thr = np.maximum(TRACE_ON_SIGMAS * sigma, options.min_split_m)
     first, last = lo[b], hi[b]
     if to_corner:   # across a corner the target runs on to it
@@ -811,21 +822,31 @@ def _trace_moves(ask: np.ndarray, i: np.ndarray, a: np.ndarray, b: np.ndarray,
             tx = (((cx[a] - cx[b]) * sa[a] - (cy[a] - cy[b]) * ca[a])
                   / (ca[b] * sa[a] - sa[b] * ca[a]))
         first, last = np.fmin(first, tx), np.fmax(last, tx)
-    ok = ((theta <= cal.max_incidence_rad) & np.isfinite(d) & (d >= cal.min_range_m)
-          & (d <= max_range_m) & (perp <= thr)
-          & (u >= first - options.adopt_margin_m) & (u <= last + options.adopt_margin_m))
+    # the extent grows by the run's readings before each
+    grow_lo = np.minimum(first[:, None], np.minimum.accumulate(
+        np.c_[np.full(len(i), np.inf), u[:, :-1]], axis=1))
+    grow_hi = np.maximum(last[:, None], np.maximum.accumulate(
+        np.c_[np.full(len(i), -np.inf), u[:, :-1]], axis=1))
+    ok = (inside & (theta <= cal.max_incidence_rad) & np.isfinite(d)
+          & (d >= cal.min_range_m) & (d <= max_range_m) & (perp <= thr)
+          & (u >= grow_lo - options.adopt_margin_m) & (u <= grow_hi + options.adopt_margin_m))
+    if to_corner:   # each of the run past its own line's corner with b
+        w = ok.nonzero()
+        ok[w] = _past_a_corner(kx[e[w]], ky[e[w]], ox[e[w]], oy[e[w]], a[w[0]],
+                               b[w[0]][:, None], alpha, cx, cy, lo, hi, mx, my, options)[:, 0]
     if ok.any():
+        w = ok.nonzero()
         corners = (good & (n_mem >= options.min_points)).nonzero()[0][None, :]
-        ok[ok] = ~_past_a_corner(qx[ok], qy[ok], ox[i[ok]], oy[i[ok]], b[ok], corners, alpha,
-                                 cx, cy, lo, hi, mx, my, options).any(axis=1)
+        ok[w] = ~_past_a_corner(qx[w], qy[w], ox[e[w]], oy[e[w]], b[w[0]], corners, alpha,
+                                cx, cy, lo, hi, mx, my, options).any(axis=1)
+    ok = np.logical_and.accumulate(ok, axis=1)  # as far as each of the run lies on b
     if not ok.any():
         return None
-    # a reading asked both ways: the target it lies closer to
-    miss = (perp / thr)[ok]
-    i, b, d, theta, sigma = i[ok], b[ok], d[ok], theta[ok], sigma[ok]
-    order = np.lexsort((miss, i))
-    pick = order[np.r_[True, i[order][1:] != i[order][:-1]]]
-    return i[pick], b[pick], d[pick], theta[pick], sigma[pick]
+    # a reading two runs take: the target it lies closer to
+    r, miss = e[ok], (perp / thr)[ok]
+    order = np.lexsort((miss, r))
+    pick = order[np.r_[True, r[order][1:] != r[order][:-1]]]
+    return (r[pick], bb[ok][pick], d[ok][pick], theta[ok][pick], sigma[ok][pick])
 
 
 def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
@@ -893,7 +914,12 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
         f[f] = good[b[f]]
         if not f.any():
             break
-        i, a, b = reading[f], a[f], b[f]
+        i, j, a, b = reading[f], nbr[f], a[f], b[f]
+        # runs: consecutive readings of one sensor on one line (none moved, or all)
+        new_run = np.r_[True, ~joined | (lab[1:] != lab[:-1]) | (moved[1:] != moved[:-1])]
+        start = new_run.nonzero()[0]
+        run = np.cumsum(new_run) - 1
+        run_lo, run_hi = start[run], np.r_[start[1:] - 1, k - 1][run]
         mem = lab >= 0
         g = lab[mem]
         n_mem = np.bincount(g, minlength=n_lines)
@@ -912,8 +938,8 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
         absorb = f & (gone[a] | ((n_mem[a] < n_mem[b])
                                  & (rms[a] > np.maximum(TRACE_LOOSE * rms[b], TRACE_LOOSE_MIN_M))
                                  & (np.abs(np.sin(alpha[a] - alpha[b])) <= along_rad)))
-        args = (i, a, b, counts_at, h, ox, oy, alpha, cx, cy, lo, hi, mx, my, n_mem, good,
-                cal, points.max_range_m, options)
+        args = (i, j, a, b, run_lo, run_hi, px, py, counts_at, h, ox, oy, alpha, cx, cy, lo,
+                hi, mx, my, n_mem, good, cal, points.max_range_m, options)
         go = _trace_moves(absorb, *args, False)
         if go is None and f.any():
             cross = f.copy()
