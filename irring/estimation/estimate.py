@@ -554,7 +554,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
                                    grouping.cx, grouping.cy, gapper)
-    points, label = rejoin_traces(points, label, index, counts, cal, grouping.alpha,
+    points, label = rejoin_traces(points, label, index, counts, steps, cal, grouping.alpha,
                                   grouping.cx, grouping.cy, grouping.usable, options)
     # short far lines are doubted in the final pass (a fold-over's judging pass keeps its
     # lines whole: they decide the branches; docs/foldover.md, "Short far lines"), judged as
@@ -850,26 +850,27 @@ def _trace_moves(ask: np.ndarray, i: np.ndarray, j: np.ndarray, a: np.ndarray,
 
 
 def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
-                  cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
-                  usable: np.ndarray, options: LineOptions) -> tuple[Points, np.ndarray]:
+                  steps: np.ndarray, cal: Calibration, alpha: np.ndarray, cx: np.ndarray,
+                  cy: np.ndarray, usable: np.ndarray, options: LineOptions
+                  ) -> tuple[Points, np.ndarray]:
     """Line members that a better-held line their own sensor's trace continues on places,
     moved to it; numpy, shared by both estimators.
 
-    A member whose sensor's neighbouring reading (the next valid one either way, across at
-    most ``TRACE_SKIP`` on no line) is on another usable line B moves to B if, read at the
-    incidence its beam meets B with, it lies on B (within ``TRACE_ON_SIGMAS`` σ, at least
-    ``min_split_m``; within B's members' extent plus ``adopt_margin_m``) and not past a
-    corner B makes (:func:`_past_a_corner`), where its own line holds it weakly: first
-    ("absorb") a line within ``TRACE_CORNER_RAD`` of B with fewer members whose members
-    scatter ``TRACE_LOOSE`` times as much (and over ``TRACE_LOOSE_MIN_M``), or one that
-    gave up more members than it kept; only where no such move is left ("cross") a member
-    lying past its line's corner with B (B's extent then runs on to that corner). A reading
-    moves once; rounds of one reading along each trace, at most ``TRACE_ROUNDS``. Readings
-    on no line never move (local_incidence reads them). At grazing incidence one sensor's
-    readings beside a corner fit a line of their own at a wrong direction (a 12-member
-    line 7–25° off the wall, 38–125 mm off), which no corner test sees (it meets the
-    wall's line at < 30°); the wall's line, fitted by other sensors, places them. ``label``
-    (S, N): each reading's line or −1; ``alpha``, ``cx``, ``cy``, ``usable``
+    A member whose sensor's neighbouring reading (at the next step, or across at most
+    ``TRACE_SKIP`` valid readings on no line) is on another usable line B moves to B where
+    its own line holds it weakly and, read at the incidence its beam meets B with, it lies
+    on B (``TRACE_ON_SIGMAS`` σ, ≥ ``min_split_m``; within ``adopt_margin_m`` of B's
+    members' extent), not past a corner B makes (:func:`_past_a_corner`). Weakly: first
+    ("absorb") a line within ``TRACE_CORNER_RAD`` of B with fewer members scattering
+    ``TRACE_LOOSE`` times as much (and over ``TRACE_LOOSE_MIN_M``), or one that gave up more
+    members than it kept; where none such is left ("cross"), a member lying past its line's
+    corner with B (B's extent then runs on to the corner). A round moves each such run of
+    a line's readings outward as far as each lies on B; a reading moves once; readings on
+    no line never move. At grazing incidence one sensor's readings beside a corner fit a
+    line of their own at a wrong direction (7–25° off the wall, 38–125 mm off), which no
+    corner test sees (< 30° from the wall's line); the wall's line, fitted by other
+    sensors' readings, places them. ``label`` (S, N): each reading's line or −1;
+    ``steps`` (S,): each row's motor step; ``alpha``, ``cx``, ``cy``, ``usable``
     (L,): the lines. Why and what it measured: docs/estimator.md ("Traces")."""
     n_sensors = label.shape[1]
     vi = index[points.valid.reshape(-1)[index]]
@@ -877,10 +878,11 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     if vi.size < 2 or not (lab >= 0).any():
         return points, label
     lab = lab.copy()
+    scan = scan_order(steps, n_sensors)
     pos = np.empty(label.size, dtype=np.intp)
-    pos[index] = np.arange(index.size)
+    pos[scan] = np.arange(scan.size)
     sensor = vi % n_sensors
-    # consecutive valid readings of one sensor at consecutive scan positions
+    # valid readings of one sensor at consecutive steps (no invalid reading between)
     joined = (sensor[1:] == sensor[:-1]) & (pos[vi[1:]] - pos[vi[:-1]] == 1)
     # each member's neighbouring line member of its sensor, both ways, as pairs: the next
     # valid reading, past at most TRACE_SKIP on no line (those never move)
