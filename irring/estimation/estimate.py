@@ -959,10 +959,22 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
         px[at], py[at] = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
     if not moved.any():
         return points, label
-    at = vi[moved]
+    # a line that gave up more members than it kept gives the rest no θ: they are read at
+    # θ = 0 with the fallback σ, on no line (local_incidence asks their own profile)
+    mem = lab >= 0
+    left = mem & (lost > np.bincount(lab[mem], minlength=n_lines))[np.maximum(lab, 0)]
+    if left.any():
+        la0, b0 = cal._ab0
+        s_left = counts_at[left]
+        new_d[left] = np.exp(la0 + b0 * np.log(s_left))
+        new_t[left] = 0.0
+        new_sig[left] = theta0_sigma(cal, s_left, new_d[left], cal.sigma_counts() / s_left)
+        lab[left] = -1
+    change = moved | left
+    at = vi[change]
     label = label.copy()
-    label.reshape(-1)[at] = lab[moved]
-    return placed_at(points, at, new_d[moved], new_t[moved], new_sig[moved]), label
+    label.reshape(-1)[at] = lab[change]
+    return placed_at(points, at, new_d[change], new_t[change], new_sig[change]), label
 
 
 def placed_at(points: Points, at: np.ndarray, d, theta, sigma) -> Points:
