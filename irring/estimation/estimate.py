@@ -531,7 +531,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    snapper: Callable | None = None, profiler: Callable | None = None,
                    voter: Callable | None = None, post_grouper: Callable | None = None,
                    gapper: Callable | None = None) -> Estimate:
-    """The estimate from the final points and grouping (either estimator's): readings on no
+    """The estimate from the final points and grouping (either estimator's): members that a
+    better-held line their sensor's trace continues on places moved to it
+    (:func:`rejoin_traces`), readings on no
     line at the incidence their own sensor's neighbours give (:func:`local_incidence`;
     ``counts`` (S, N), ``steps`` (S,): the sweep's), line members onto their lines
     (``snapper``, the compiled :func:`snap_to_lines` by default), members read just past
