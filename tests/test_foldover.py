@@ -341,8 +341,9 @@ sensor: {model: gp2y0a21}
 """
 
 
+# (gp2y0a21: 3 and 3 before rejoin_traces; with it one of the three is not 100 mm off)
 @pytest.mark.parametrize("room, seed, long_before, taken", [
-    (STEEP_CORNER_D12, 3, 1, 4), (STEEP_CORNER_A21, 2, 3, 3)], ids=["gp2d12", "gp2y0a21"])
+    (STEEP_CORNER_D12, 3, 1, 4), (STEEP_CORNER_A21, 2, 2, 2)], ids=["gp2d12", "gp2y0a21"])
 def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
         room, seed, long_before, taken, monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
@@ -477,10 +478,14 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
         return n, sum(int(p.valid.sum()) for p in run.points)
     assert off() == (0, 443)
     monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)
-    assert off() == (0, 456)
+    assert off() == (0, 454)
     keep = fast._unplaced
     monkeypatch.setattr(fast, "_unplaced", lambda p, gone, why=Reason.INCIDENCE_UNKNOWN:
                         p if why == Reason.NO_RETURN else keep(p, gone, why))
+    # with rejoin_traces no reading is 100 mm off even so (455 valid): the guard is shown
+    # without it
+    assert off() == (0, 455)
+    monkeypatch.setattr(fast, "rejoin_traces", lambda points, label, *args: (points, label))
     assert off() == (1, 457)
 
 

@@ -556,8 +556,10 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
                                    grouping.cx, grouping.cy, gapper)
-    points, label = rejoin_traces(points, label, index, counts, steps, cal, grouping.alpha,
-                                  grouping.cx, grouping.cy, grouping.usable, options)
+    if snap:   # (a fold-over's judging pass keeps its lines as fitted: they decide branches)
+        points, label = rejoin_traces(points, label, index, counts, steps, cal,
+                                      grouping.alpha, grouping.cx, grouping.cy,
+                                      grouping.usable, options)
     # short far lines are doubted in the final pass (a fold-over's judging pass keeps its
     # lines whole: they decide the branches; docs/foldover.md, "Short far lines"), judged as
     # fitted, but after round_runs: a column's arc cut into short far lines is a circle's
@@ -764,16 +766,17 @@ def _past_a_corner(qx: np.ndarray, qy: np.ndarray, ox: np.ndarray, oy: np.ndarra
     ca, sa = np.cos(alpha), np.sin(alpha)
     b = line[:, None]
     c = other
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # (parallel lines meet nowhere: inf and nan compare False below)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # where line c meets line b, along each from its point
         wx, wy = cx[c] - cx[b], cy[c] - cy[b]
         cross = ca[b] * sa[c] - sa[b] * ca[c]
         tb = (wx * sa[c] - wy * ca[c]) / cross
         tc = (wx * sa[b] - wy * ca[b]) / cross
-    # the reach grows with the corner's distance from the emitter (a far corner's drop-out
-    # gap is wider: docs/estimator.md, "A far corner")
-    reach = np.maximum(options.corner_reach_m, options.corner_reach_share * np.hypot(
-        cx[b] + tb * ca[b] - ox[:, None], cy[b] + tb * sa[b] - oy[:, None]))
+        # the reach grows with the corner's distance from the emitter (a far corner's
+        # drop-out gap is wider: docs/estimator.md, "A far corner")
+        reach = np.maximum(options.corner_reach_m, options.corner_reach_share * np.hypot(
+            cx[b] + tb * ca[b] - ox[:, None], cy[b] + tb * sa[b] - oy[:, None]))
     side_b = (my[b] - cy[c]) * ca[c] - (mx[b] - cx[c]) * sa[c]
     side_q = (qy[:, None] - cy[c]) * ca[c] - (qx[:, None] - cx[c]) * sa[c]
     return ((np.abs(cross) > math.sin(TRACE_CORNER_RAD))
