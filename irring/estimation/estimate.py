@@ -556,10 +556,6 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
                                    grouping.cx, grouping.cy, gapper)
-    if snap:   # (a fold-over's judging pass keeps its lines as fitted: they decide branches)
-        points, label = rejoin_traces(points, label, index, counts, steps, cal,
-                                      grouping.alpha, grouping.cx, grouping.cy,
-                                      grouping.usable, options)
     # short far lines are doubted in the final pass (a fold-over's judging pass keeps its
     # lines whole: they decide the branches; docs/foldover.md, "Short far lines"), judged as
     # fitted, but after round_runs: a column's arc cut into short far lines is a circle's
@@ -575,6 +571,11 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     if short is not None:
         points, label = doubt_far_lines(points, label, index, counts, steps, cal, *short,
                                         profiler, voter)
+    if snap:   # (a fold-over's judging pass keeps its lines as fitted: they decide branches;
+        # after round_runs: a round thing's arc cut into lines is its circle's first)
+        points, label = rejoin_traces(points, label, index, counts, steps, cal,
+                                      grouping.alpha, grouping.cx, grouping.cy,
+                                      grouping.usable, options)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -964,22 +965,15 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
         px[at], py[at] = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
     if not moved.any():
         return points, label
-    # a line that gave up more members than it kept gives the rest no θ: they are read at
-    # θ = 0 with the fallback σ, on no line (local_incidence asks their own profile)
+    # a line that gave up more members than it kept gives the rest no θ: INCIDENCE_UNKNOWN
     mem = lab >= 0
     left = mem & (lost > np.bincount(lab[mem], minlength=n_lines))[np.maximum(lab, 0)]
-    if left.any():
-        la0, b0 = cal._ab0
-        s_left = counts_at[left]
-        new_d[left] = np.exp(la0 + b0 * np.log(s_left))
-        new_t[left] = 0.0
-        new_sig[left] = theta0_sigma(cal, s_left, new_d[left], cal.sigma_counts() / s_left)
-        lab[left] = -1
-    change = moved | left
-    at = vi[change]
+    lab[left] = -1
+    at = vi[moved]
     label = label.copy()
-    label.reshape(-1)[at] = lab[change]
-    return placed_at(points, at, new_d[change], new_t[change], new_sig[change]), label
+    label.reshape(-1)[vi[moved | left]] = lab[moved | left]
+    points = placed_at(points, at, new_d[moved], new_t[moved], new_sig[moved])
+    return (_unplaced(points, vi[left]) if left.any() else points), label
 
 
 def placed_at(points: Points, at: np.ndarray, d, theta, sigma) -> Points:
