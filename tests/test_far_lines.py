@@ -215,9 +215,8 @@ def test_lines_of_up_to_25_members_are_asked(monkeypatch):
     # a 21-member line of sensors 0 and 1 bridges a corner's drop-out gap: at θ 4-25° on
     # walls met at 15-32° and, before the gap, 60-61° (two members 61-77 mm short). Asked
     # (up to FAR_LINE_MAX_MEMBERS = 25), its members' profiles disown it: 10 are read at
-    # their own slope, 11 are INCIDENCE_UNKNOWN. Since rejoin_traces its two members before
-    # the gap go to their own wall's line first (no reading over 50 mm off, asked or not)
-    # and 19 are asked; without it, as before:
+    # their own slope, 11 are INCIDENCE_UNKNOWN. rejoin_traces, after the doubt, leaves no
+    # reading over 50 mm off, asked or not; without it, as before:
     text = _corner_room(5025, "{x_mm: 538, y_mm: 915, yaw_deg: 120.8}")
     with monkeypatch.context() as m:
         m.setattr(est, "rejoin_traces", lambda points, label, *args: (points, label))
@@ -226,7 +225,7 @@ def test_lines_of_up_to_25_members_are_asked(monkeypatch):
         assert sum(placed for _, placed in left) == 10
         assert _readings_over_run(before, 0.050) == 4 and _readings_over_run(run, 0.050) == 2
     run, before, left = _left_and_before(text, monkeypatch)
-    assert len(left) == 19 and {k for k, _ in left} == {0, 1}
+    assert len(left) == 21 and {k for k, _ in left} == {0, 1}
     assert sum(placed for _, placed in left) == 10
     assert _readings_over_run(before, 0.050) == 0 and _readings_over_run(run, 0.050) == 0
     # with the cap at 16 the line is not asked: the run is the one with no line doubted
