@@ -493,7 +493,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         iterations=it_out.reshape(shape), valid=valid.reshape(shape), reason=reason,
         max_range_m=max_range)
     return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, detail, history,
-                          counts, steps)
+                          counts, steps, raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
 SETTLED_SIGMAS = 1.0  # a reading caught moving reads within this many σ of its converged d
@@ -530,7 +530,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    counts: np.ndarray, steps: np.ndarray, reach: Callable | None = None,
                    snapper: Callable | None = None, profiler: Callable | None = None,
                    voter: Callable | None = None, post_grouper: Callable | None = None,
-                   gapper: Callable | None = None) -> Estimate:
+                   gapper: Callable | None = None, raw_counts: np.ndarray | None = None
+                   ) -> Estimate:
     """The estimate from the final points and grouping (either estimator's): members that a
     better-held line their sensor's trace continues on places moved to it
     (:func:`rejoin_traces`), readings on no
@@ -546,11 +547,14 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     default; the oracle passes its numpy statement :func:`range_profiles`); ``voter`` and
     ``post_grouper``: the short far lines' vote and the far posts' groups (compiled by
     default; the oracle passes its numpy ``far_line_vote`` and ``post_groups``);
-    ``gapper``: the silent gaps (:func:`silent_gaps_compiled`; the oracle: :func:`silent_gaps`)."""
+    ``gapper``: the silent gaps (:func:`silent_gaps_compiled`; the oracle: :func:`silent_gaps`).
+    ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
+    pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
     if grouping is None:       # nothing to group (e.g. every reading invalid): no lines
         empty = _lines_record(None, np.full(shape, -1, dtype=np.intp), np.zeros(0, np.intp))
-        return Estimate(points=silent_reach(drop_beyond_range(points), cal),
+        return Estimate(points=silent_reach(beside_a_return(drop_beyond_range(points), counts,
+                                                            cal, options), cal),
                         lines=empty if detail else None, theta_history=tuple(history))
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
@@ -597,7 +601,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     used = index if grouping.uidx is None else index.take(grouping.uidx)
     found = _lines_record(pieces_out, label, used)
     if pooled is not None and pooled.any():
-        points = silent_behind_a_wall(points, pooled, found, cal, options)
+        points = noise_past_line_end(points, found,
+                                     counts if raw_counts is None else raw_counts, cal)
+        points = silent_behind_a_wall(points, pooled & points.valid, found, cal, options)
         silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
     if silent:
         reach_m = (reach or no_return_reach)(points, found, cal, options)
@@ -605,7 +611,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
             # the lines' reach past a line's members runs up to the line itself: a beam
             # silent_behind_a_wall silenced keeps its clearance before the wall it met
             reach_m = points.reach_m if reach_m is None else np.fmin(points.reach_m, reach_m)
-        points = silent_reach(points_with(points, reach_m=reach_m), cal)
+        points = silent_reach(beside_a_return(points_with(points, reach_m=reach_m), counts,
+                                              cal, options, found.label), cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 
@@ -1209,6 +1216,57 @@ def held_and_pooled(counts: np.ndarray, reason: np.ndarray, hold: np.ndarray | N
     reason = reason.copy()
     reason[hold & (reason == Reason.OK)] = Reason.FOLDOVER_AMBIGUOUS
     return counts, reason
+
+
+def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
+                    options: LineOptions, label: np.ndarray | None = None) -> Points:
+    """``points`` with each NO_RETURN beam's ``reach_m`` at most r·cos θ / cos(θ + γ), from
+    the nearest reading of its sensor (by step, either way) that heard a surface (valid, or
+    unplaced with ``counts`` at least the return level; not MISSING): r the nearest its
+    surface can be (a member of a line of ``label`` (S, N; −1 none): its d; any other reading,
+    too near to place, past the range or on no line: the far-branch distance of its counts
+    at the drop-out angle, the steepest it could have returned at), θ =
+    :func:`end_hide_angle`, γ the heading gap to it; no limit where θ + γ ≥ 90°. A face
+    through that reading's hit, turned past the drop-out angle, may cross this beam unheard
+    from there on (docs/estimator.md, "Silent beams beside a return")."""
+    silent = points.reason == _NO_RETURN
+    if not np.count_nonzero(silent):
+        return points
+    theta = end_hide_angle(cal, options)
+    c = np.minimum(np.asarray(counts, dtype=float), cal.full_scale_counts)
+    heard = points.valid | ((c >= cal.no_return_counts + cal.return_margin_counts) & ~silent
+                            & (np.asarray(points.reason) != Reason.MISSING))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = cal.distance(np.where(heard, c, cal.full_scale_counts), cal.max_incidence_rad)
+    if label is not None:       # a line member's θ is its line's: its d stands
+        r = np.where(points.valid & (label >= 0), points.d, r)
+    use = heard & np.isfinite(r)
+    steps = silent.shape[0]
+    heard2 = heard.reshape(steps, -1)
+    use2 = use.reshape(steps, -1)
+    r2 = np.where(use2, r.reshape(steps, -1), 0.0)
+    h = np.asarray(points.heading, dtype=float).reshape(steps, -1)
+    row = np.arange(steps)[:, None]
+    cols = np.arange(heard2.shape[1])[None, :]
+    before = np.maximum.accumulate(np.where(heard2, row, -1), axis=0)
+    after = np.minimum.accumulate(np.where(heard2, row, steps)[::-1], axis=0)[::-1]
+    bound = np.full(h.shape, np.inf)
+    for other in (before, after):
+        has = (other >= 0) & (other < steps)
+        at = np.where(has, other, row)
+        gap = h[at, cols] - h
+        gamma = np.abs(gap - 2.0 * math.pi * np.rint(gap / (2.0 * math.pi)))
+        hides = has & use2[at, cols] & (theta + gamma < 0.5 * math.pi - 1e-6)
+        stop = r2[at, cols] * math.cos(theta) / np.cos(np.where(hides, theta + gamma, 0.0))
+        bound = np.minimum(bound, np.where(hides, stop, np.inf))
+    bound = bound.reshape(silent.shape)
+    cut = silent & np.isfinite(bound)
+    if not cut.any():
+        return points
+    reach = (np.full(silent.shape, np.nan) if points.reach_m is None
+             else np.array(points.reach_m, dtype=float))
+    reach[cut] = np.fmin(reach[cut], bound[cut])
+    return points_with(points, reach_m=reach)
 
 
 def silent_reach(points: Points, cal: Calibration) -> Points:
@@ -2488,6 +2546,42 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
         reach_cos_limit(cal, options), float(points.max_range_m), end_hide_angle(cal, options),
         math.prod(np.shape(points.valid)[1:]))
     return None if reach is None else reach.reshape(points.valid.shape)
+
+
+def noise_past_line_end(points: Points, found: Lines, raw_counts: np.ndarray,
+                        cal: Calibration) -> Points:
+    """``points`` with each valid line member whose own counts (``raw_counts``, before
+    pooling) are at the noise level (at most ``cal.no_return_counts`` +
+    ``cal.no_return_margin_counts``: valid only by pooling) made NO_RETURN where it lies
+    past the extent, along its line (``found``), of the line's members that are not: its
+    counts say nothing of where the surface ends, and its pool's mean, from its
+    neighbours, placed it on their line beyond what they saw (docs/estimator.md, "Pooled
+    readings"). Its beam is then a silent one (reach by :func:`no_return_reach`)."""
+    lab = found.label
+    member = points.valid & (lab >= 0)
+    noise = member & (np.asarray(raw_counts, dtype=float)
+                      <= cal.no_return_counts + cal.no_return_margin_counts)
+    if not noise.any():
+        return points
+    n_lines = found.centroid.shape[0]
+    li = np.where(member, lab, 0)
+    c, e = found.centroid[li], found.direction[li]
+    along = (points.x - c[..., 0]) * e[..., 0] + (points.y - c[..., 1]) * e[..., 1]
+    clear = member & ~noise
+    lo = np.full(n_lines, np.inf)
+    hi = np.full(n_lines, -np.inf)
+    np.minimum.at(lo, lab[clear], along[clear])
+    np.maximum.at(hi, lab[clear], along[clear])
+    gone = noise & np.isfinite(lo[li]) & ((along < lo[li]) | (along > hi[li]))
+    if not gone.any():
+        return points
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    for v in out.values():
+        v[gone] = np.nan
+    valid, reason = points.valid.copy(), np.array(points.reason)
+    valid[gone] = False
+    reason[gone] = Reason.NO_RETURN
+    return points_with(points, valid=valid, reason=reason, **out)
 
 
 def silent_behind_a_wall(points: Points, pooled: np.ndarray, found: Lines, cal: Calibration,

@@ -1128,7 +1128,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, True, history,
                           counts, np.asarray(sweep.steps), reach=no_return_reach,
                           snapper=snap_to_lines, profiler=range_profiles,
-                          voter=far_line_vote, post_grouper=post_groups, gapper=silent_gaps)
+                          voter=far_line_vote, post_grouper=post_groups, gapper=silent_gaps,
+                          raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
 def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
