@@ -1223,12 +1223,12 @@ def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
     """``points`` with each NO_RETURN beam's ``reach_m`` at most r·cos θ / cos(θ + γ), from
     the nearest reading of its sensor (by step, either way) that heard a surface (valid, or
     unplaced with ``counts`` at least the return level; not MISSING): r the nearest its
-    surface can be (a member of a line of ``label`` (S, N; −1 none): its d; any other reading,
-    too near to place, past the range or on no line: the far-branch distance of its counts
-    at the drop-out angle, the steepest it could have returned at), θ =
-    :func:`end_hide_angle`, γ the heading gap to it; no limit where θ + γ ≥ 90°. A face
-    through that reading's hit, turned past the drop-out angle, may cross this beam unheard
-    from there on (docs/estimator.md, "Silent beams beside a return")."""
+    surface can be (where its θ is known, a member of a line of ``label`` (S, N; −1 none) or
+    θ > 0: its d; any other reading, too near to place, past the range or read at θ = 0: the
+    far-branch distance of its counts at the drop-out angle, the steepest it could have
+    returned at), θ = :func:`end_hide_angle`, γ the heading gap to it; no limit where
+    θ + γ ≥ 90°. A face through that reading's hit, turned past the drop-out angle, may
+    cross this beam unheard from there on (docs/estimator.md, "Silent beams beside a return")."""
     silent = points.reason == _NO_RETURN
     if not np.count_nonzero(silent):
         return points
@@ -1238,8 +1238,11 @@ def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
                             & (np.asarray(points.reason) != Reason.MISSING))
     with np.errstate(invalid="ignore", divide="ignore"):
         r = cal.distance(np.where(heard, c, cal.full_scale_counts), cal.max_incidence_rad)
-    if label is not None:       # a line member's θ is its line's: its d stands
-        r = np.where(points.valid & (label >= 0), points.d, r)
+    # where its θ is known (on a line, or estimated: θ > 0) its d stands
+    known = points.valid & (np.nan_to_num(np.asarray(points.theta, dtype=float)) > 0)
+    if label is not None:
+        known |= points.valid & (label >= 0)
+    r = np.where(known, points.d, r)
     use = heard & np.isfinite(r)
     steps = silent.shape[0]
     heard2 = heard.reshape(steps, -1)
