@@ -1237,7 +1237,8 @@ def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
     heard = points.valid | ((c >= cal.no_return_counts + cal.return_margin_counts) & ~silent
                             & (np.asarray(points.reason) != Reason.MISSING))
     with np.errstate(invalid="ignore", divide="ignore"):
-        r = cal.distance(np.where(heard, c, cal.full_scale_counts), cal.max_incidence_rad)
+        r = (cal.distance(np.where(heard, c, cal.full_scale_counts), cal.max_incidence_rad)
+             if cal.falling else np.where(points.valid, points.d, np.nan))   # (linear hooks)
     # where its θ is known (on a line, or estimated: θ > 0) its d stands
     known = points.valid & (np.nan_to_num(np.asarray(points.theta, dtype=float)) > 0)
     if label is not None:
