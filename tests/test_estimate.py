@@ -750,8 +750,9 @@ def test_silent_beams_take_the_callers_incidence_margin(monkeypatch):
     """``LineOptions.incidence_margin_rad`` decides which lines explain a silent beam: in the
     cabinet scene above, a 20° margin (lines met ≥ 50° count, the drop-out angle being 70°)
     explains 23 silent beams where the default 5° explains 14 of the same sweep's, and the
-    estimator's ``reach_m`` is that of the margin it was given (it used the default's).
-    With the faces that could hide past the lines' ends (turned ≥ 50° or 65° from the
+    estimator's ``reach_m`` is that of the margin it was given (it used the default's), and
+    bounded beside each beam's nearest return with it (70 beams shorter). With the faces
+    that could hide past the lines' ends (turned ≥ 50° or 65° from the
     beams): 69 and 55."""
     cal = dataclasses.replace(NOMINAL, noise_counts=0.3)
     walls = rectangle(-0.55, -0.45, 0.95, 0.62) + rectangle(0.25, 0.10, 0.75, 0.18)
@@ -761,7 +762,12 @@ def test_silent_beams_take_the_callers_incidence_margin(monkeypatch):
     p = est.points
     mine = no_return_reach(p, est.lines, cal, wide)
     default = no_return_reach(p, est.lines, cal, LineOptions())
-    np.testing.assert_array_equal(p.reach_m, mine)
+    # … then bounded beside each beam's nearest return, with the same margin
+    counts = np.asarray(sweep.counts, dtype=float)
+    beside = estimate_module.beside_a_return(estimate_module.points_with(p, reach_m=mine),
+                                             counts, cal, wide, est.lines.label).reach_m
+    np.testing.assert_array_equal(p.reach_m, beside)
+    assert int((beside < np.where(np.isnan(mine), np.inf, mine)).sum()) == 70
     assert np.isfinite(mine).sum() == 69 and np.isfinite(default).sum() == 55
     # the wider margin only adds beams; where both explain one, the nearest line may differ
     assert not (np.isfinite(default) & ~np.isfinite(mine)).any()
