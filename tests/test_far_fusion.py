@@ -88,7 +88,9 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
     before the mapper's median of neighbouring steps, docs/mapping.md). Since a pool one half
     of which saw nothing is left as it was (POOL_SIDE_SIGMAS: a wall fading out of range at
     30° reads like a face's end), 550 far readings (582): RMS 10.7 mm (12.6 unfused), 26 more
-    than 20 mm off (44), precision 0.972 (0.945)."""
+    than 20 mm off (44), precision 0.972 (0.945). Since a noise-level reading past its line's
+    other members is silenced (noise_past_line_end; here some were a wall fading out of
+    range), 543 far readings, 26 more than 20 mm off, precision 0.967."""
     scene = loads(FAR_HALL)
     monkeypatch.setattr(fast, "far_posts", lambda points, *args: points)   # lines alone
 
@@ -102,11 +104,11 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
         return np.concatenate(err), run.scores["occupied_precision"]
 
     err, precision = far_errors()
-    assert err.size == 550 and np.sqrt(np.mean(err ** 2)) < 0.0110
-    assert (np.abs(err) > 0.02).sum() <= 26 and precision > 0.97
+    assert err.size == 543 and np.sqrt(np.mean(err ** 2)) < 0.0110
+    assert (np.abs(err) > 0.02).sum() <= 26 and precision > 0.965
     monkeypatch.setattr(fast, "FUSE_MIN", 10 ** 9)
     err0, precision0 = far_errors()
-    assert err0.size == 550 and np.sqrt(np.mean(err0 ** 2)) > 0.0120
+    assert err0.size == 543 and np.sqrt(np.mean(err0 ** 2)) > 0.0120
     assert (np.abs(err0) > 0.02).sum() >= 40 and precision0 < 0.955
 
 
@@ -139,7 +141,9 @@ def test_a_far_posts_few_readings_from_several_sensors_are_read_on_one_circle(mo
     or θ = 0 fallbacks up to 213 mm off (RMS 59 mm), and 13 of the posts' 33 visible cells
     were mapped. Fitted as one circle across the sensors: 15 readings change, all on the
     posts, now 2-40 mm off (RMS 19 mm); 31 cells are mapped, recall 0.952 → 0.983,
-    precision 0.981 → 0.975."""
+    precision 0.981 → 0.975 (with the far lines' later rules: recall 0.945 → 0.976,
+    precision 0.972 → 0.962; with silent beams bounded beside their nearest return and
+    noise-level readings past a line's other members silenced, 0.967 → 0.957)."""
     scene = loads(FAR_HALL)
     def measure():
         run = pipeline.run(scene, progress=False)
@@ -164,7 +168,7 @@ def test_a_far_posts_few_readings_from_several_sensors_are_read_on_one_circle(mo
     assert on_post0.size == 21 and np.sqrt(np.mean(on_post0 ** 2)) > 0.05
     assert cells0 == (33, 13)
     assert run.scores["occupied_recall"] > run0.scores["occupied_recall"] + 0.025
-    assert run.scores["occupied_precision"] > run0.scores["occupied_precision"] - 0.01
+    assert run.scores["occupied_precision"] > run0.scores["occupied_precision"] - 0.011
 
 
 # A room of our own for the GP2D12 at its default range: three posts 25-39 mm across,
