@@ -292,7 +292,9 @@ def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
     off, drawn as a ragged band about each table (precision 0.922, 0.896). Put on their
     circle's radius refitted to all of them (estimate.onto_circles): RMS 5.5 and 13.4 mm,
     0 and 1 more than 30 mm off, precision 0.951 and 0.912, F1 0.891 → 0.908 and 0.885 →
-    0.891."""
+    0.891. (Precision 0.940 and 0.903 since silent beams are bounded beside their sensor's
+    nearest return: those beside the tables' returns no longer clear the cells about them;
+    free accuracy 0.9994 → 0.9998.)"""
     sc = loads(CANTEEN_A02, source="<test>")
     taken = []
     onto = est.onto_circles
@@ -303,7 +305,7 @@ def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
         taken.append(mask.reshape(points.valid.shape))
         return onto(points, at, circle, circles, *args) if snapped else points
     monkeypatch.setattr(est, "onto_circles", recording)
-    expect = {True: [(275, 0.0060, 0, 0.950), (164, 0.0140, 1, 0.911)],
+    expect = {True: [(275, 0.0060, 0, 0.940), (164, 0.0140, 1, 0.902)],
               False: [(275, 0.0215, 36, 0.922), (164, 0.0225, 24, 0.896)]}[snapped]
     for seed, (n, rms, off, precision) in zip((9201, 9202), expect):
         taken.clear()
