@@ -3144,10 +3144,17 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         trusted = np.bincount(pairs // n_sensors, minlength=use.size) >= 2
         line_sensor = found.start[use] % n_sensors
         # certainly far members: their near end point would lie inside the housing
-        certain = np.bincount(mcol[housing.reshape(-1)[at]], minlength=use.size)
+        sure = housing.reshape(-1)[at]
+        certain = np.bincount(mcol[sure], minlength=use.size)
         anchored = certain >= _FOLD_ANCHOR
+        # … and those of each (line, sensor): a line two sensors share may be one sensor's
+        # wall and the other's near face read far, lying along it (docs/foldover.md,
+        # "A near column read far onto a wall's line")
+        mine = np.bincount(mcol[sure] * n_sensors + at[sure] % n_sensors,
+                           minlength=use.size * n_sensors)
     else:
         certain = np.zeros(1, int)
+        mine = np.zeros(n_sensors, int)
         anchored = np.zeros(0, bool)
         at = mcol = np.zeros(0, int)
         m_along = np.zeros(0)
@@ -3195,7 +3202,9 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     # on the wall behind it)
     ocol = (np.where(own >= 0, col[np.maximum(own, 0)], -1) if use.size
             else np.full(idx.size, -1))
-    fit_far[~seen_there | ~_own_trace_agrees(between, ocol, certain, e)] = np.inf
+    # its own line anchored by certainly far members of its own sensor
+    own_certain = (ocol >= 0) & (mine[np.maximum(ocol, 0) * n_sensors + sensor] >= _FOLD_ANCHOR)
+    fit_far[~seen_there | ~_own_trace_agrees(between, ocol, own_certain, e)] = np.inf
     # Two sensors agreeing on a line is no proof it is seen far: two neighbours close to one
     # surface both read it far, and their far end points (curves) can fit one line behind it.
     # A line decides "far" only once it is anchored: _FOLD_ANCHOR members certainly far (near
@@ -3213,7 +3222,6 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     # near trace fits the face, and then which branch it is on cannot be told. Flagged after
     # the second pass only: held out of either pass, such readings un-anchored right lines
     # and left other readings valid > 100 mm off (docs/foldover.md)
-    own_certain = (ocol >= 0) & (certain[np.maximum(ocol, 0)] >= _FOLD_ANCHOR)
     straight = _near_trace_straight(counts, p, np.asarray(sweep.steps), cand, cal)
     doubted = np.zeros(shape, bool)
     doubted.reshape(-1)[idx] = is_far & straight.reshape(-1)[idx] & ~own_certain
@@ -3284,23 +3292,24 @@ def _near_trace_straight(counts: np.ndarray, p: Points, steps: np.ndarray,
     return near <= _FOLD_TRACE_RATIO * far
 
 
-def _own_trace_agrees(between: np.ndarray, ocol: np.ndarray, certain: np.ndarray,
+def _own_trace_agrees(between: np.ndarray, ocol: np.ndarray, own_certain: np.ndarray,
                       e: np.ndarray) -> np.ndarray:
     """(A, L): whether a reading's far end point on a line may decide "far" as far as its
     own first-pass line is concerned: that line (``ocol``, position among the lines of
-    direction ``e``; −1 none) has ``_FOLD_ANCHOR`` members ``certain``ly far, or the end
-    point lies ``between`` the line's members (:func:`_seen_there`) and its own line runs
-    within 20° of it (``_FOLD_OWN_COS``). A face 30 mm in front read far lands on the wall
-    behind a box as deep as its far-branch distance, where the wall comes into view past
-    the box (0-50 mm past its last member) or across its seen stretch, while the face's own
-    far curve runs across the wall and holds no certainly far member.
+    direction ``e``; −1 none) has ``_FOLD_ANCHOR`` members of the reading's own sensor
+    certainly far (``own_certain``, (A,)), or the end point lies ``between`` the line's
+    members (:func:`_seen_there`) and its own line runs within 20° of it
+    (``_FOLD_OWN_COS``). A face 30 mm in front read far lands on the wall behind a box as
+    deep as its far-branch distance, where the wall comes into view past the box (0-50 mm
+    past its last member) or across its seen stretch, while the face's own far curve runs
+    across the wall and holds no certainly far member; a column 22 mm away read far joins
+    the line of the wall behind it, whose other sensor's members anchor it.
     docs/foldover.md, "A near face read far onto the wall behind a box"."""
     has = ocol >= 0
-    own_certain = has & (certain[np.maximum(ocol, 0)] >= _FOLD_ANCHOR)
     along = np.zeros(between.shape, bool)
     if e.shape[0]:
         along = has[:, None] & (np.abs(e[np.maximum(ocol, 0)] @ e.T) >= _FOLD_OWN_COS)
-    return own_certain[:, None] | (between & along)
+    return (has & own_certain)[:, None] | (between & along)
 
 
 def _seen_there(pairs: np.ndarray, along: np.ndarray, mcol: np.ndarray,
