@@ -855,3 +855,109 @@ def test_a_short_line_s_direction_error_is_in_its_members_sigma(monkeypatch):
     oracle = estimate_numpy.estimate_detail(sw, cal).points
     np.testing.assert_array_equal(oracle.reason, p.reason)
     np.testing.assert_allclose(oracle.sigma_m[p.valid], p.sigma_m[p.valid], rtol=1e-9)
+
+
+# A 286 mm column 22 mm from the nearest emitter, a wall 180 mm behind it (GP2D12). Read far,
+# the column's readings (true 22-23 mm) land 463-502 mm out on the line of the room's far
+# wall; the first pass's line through them is shared with the sensor that sees that wall,
+# whose certainly far members anchored it: 7 readings 441-480 mm off before (seed 6090).
+COLUMN_BY_WALL = """
+name: column_286_by_wall
+room: {outline_mm: [[0, 0], [1625, 0], [1625, 1266], [0, 1266]]}
+obstacles:
+  - {type: cylinder, center_mm: [872, 323], radius_mm: 143}
+robot:
+  poses:
+    - {x_mm: 1044.6, y_mm: 587.2, yaw_deg: -4}
+    - {x_mm: 872.7, y_mm: 661.6, yaw_deg: 38}
+sensor: {model: gp2d12, adc_bits: 12}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_line_another_sensor_anchors_does_not_vouch_for_a_reading_s_far_branch():
+    from irring.estimation import estimate_numpy
+
+    sc = loads(COLUMN_BY_WALL, source="<test>")
+    cal = scene_calibration(sc)[0]
+    run_ = pipeline.run(sc, seed=6090, progress=False, score=False)
+    got = []
+    for sw, p in zip(run_.sweeps, run_.points):
+        d = sw.truth.distance_m
+        wrong = p.valid & (d < cal.peak_distance_m) & (p.d > d + 0.05)
+        got.append((int(p.valid.sum()), int(wrong.sum()),
+                    int((p.reason == Reason.FOLDOVER_AMBIGUOUS).sum())))
+        np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
+                                      p.reason)
+    # main before this rule (cab4ff6): (214, 7, 335) in the first sweep
+    assert got == [(207, 0, 342), (22, 0, 330)]
+
+
+# A GP2Y0A21 176-182 mm from a wall, the far walls 600-700 mm away met at 21-36°: the judging
+# pass read them on no line (θ = 0, or INCIDENCE_UNKNOWN); the second pass, the near walls
+# held out, put them on a line of two sensors at 45-70°, 51-128 mm short.
+A21_FAR_WALLS = """
+name: a21_far_walls
+room: {outline_mm: [[0, 0], [1576, 0], [1576, 1268], [497, 1268], [0, 794]]}
+obstacles:
+  - {type: cylinder, center_mm: [349, 110], radius_mm: 30}
+robot: {poses: [{x_mm: 691, y_mm: 1086, yaw_deg: -25}]}
+sensor: {model: gp2y0a21}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+@pytest.mark.parametrize("seed, far_before, taken", [(9179, 2, 6), (9184, 4, 9)])
+def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, taken,
+                                                           monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc = loads(A21_FAR_WALLS, source="<test>")
+    cal = scene_calibration(sc)[0]
+
+    def errors():
+        (sw,), (p,) = (lambda r: (r.sweeps, r.points))(
+            pipeline.run(sc, seed=seed, progress=False, score=False))
+        return sw, p, np.hypot(p.x - sw.truth.hit_point[..., 0], p.y - sw.truth.hit_point[..., 1])
+
+    sw, p, err_p = errors()
+    with monkeypatch.context() as m:
+        m.setattr(est, "_theta_unsupported", lambda p, *args: p)
+        _, q, err_q = errors()
+    took = q.valid & ~p.valid
+    assert np.array_equal(p.valid | took, q.valid)
+    assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
+    assert int(np.sum(err_q[q.valid] > 0.100)) == far_before
+    assert int(np.sum(err_p[p.valid] > 0.100)) == 0
+    # every reading it took was read 50 mm or more short, at a θ 20-35° too steep
+    assert int(took.sum()) == taken and np.all(err_q[took] > 0.05)
+    assert np.all(q.theta[took] > sw.truth.incidence_rad[took] + math.radians(20))
+    np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
+                                  p.reason)
+
+
+def test_theta_unsupported_takes_only_readings_no_judging_line_placed():
+    """A reading pinned at the drop-out angle, or on a second-pass line, 100 mm or more
+    from its θ = 0 distance goes; on a first-pass line, or within 100 mm, it stays."""
+    from irring.estimation.estimate import _theta_unsupported
+
+    sc, sweeps, cal = simulated(ROOM + "effects: [foldover]\n", seed=7)
+    sw = sweeps[0]
+    p = estimate(sw, cal)
+    counts = np.asarray(sw.counts, dtype=float)
+    d0 = cal.distance(np.maximum(counts, 1.0), 0.0)
+    (i, j), (k, l), (m, n) = list(zip(*np.nonzero(p.valid)))[:3]
+    d, theta = np.array(p.d), np.array(p.theta)
+    d[i, j], theta[i, j] = d0[i, j] - 0.13, cal.max_incidence_rad       # pinned, 130 mm: goes
+    d[k, l], theta[k, l] = d0[k, l] - 0.07, cal.max_incidence_rad       # pinned, 70 mm: stays
+    d[m, n], theta[m, n] = d0[m, n] - 0.13, math.radians(40)            # second-pass line
+    p = replace(p, d=d, theta=theta)
+    label = np.full(p.valid.shape, -1)
+    label[m, n] = 0
+    no_first = np.ones(p.valid.shape, bool)
+    out = _theta_unsupported(p, no_first, label, sw, cal)
+    gone = p.valid & ~out.valid
+    assert {tuple(x) for x in np.argwhere(gone)} == {(i, j), (m, n)}
+    assert np.all(out.reason[gone] == Reason.INCIDENCE_UNKNOWN)
+    # on a line of the judging pass: nothing goes
+    assert np.array_equal(_theta_unsupported(p, ~no_first, label, sw, cal).valid, p.valid)

@@ -2860,6 +2860,9 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
                                      members=q)
     # a far line member beside a nearer surface its own sensor's next step saw, undecided
     p = _beside_a_hidden_edge(p, second.lines.label, sweep, cal, options)
+    # a far reading the judging pass put on no line, placed > 100 mm from θ = 0 by a θ that
+    # only the second pass's lines give, or pinned at the drop-out angle: θ undecided
+    p = _theta_unsupported(p, ~near & (first.lines.label < 0), second.lines.label, sweep, cal)
     # a far member of a short line: its σ covers the line's direction error
     p = _short_line_sigma(p, second, from_line, cal)
     # a reading placed no better than FOLD_PLACED_SIGMA_M: its θ is 0 for want of a line, an
@@ -2945,6 +2948,28 @@ def _beside_a_hidden_edge(p: Points, label: np.ndarray, sweep: Sweep, cal: Calib
         # the curve falls with θ: at the drop-out angle the counts read nearest
         gone = (mem & (nearer < p.d - allowed)
                 & (cal.distance(counts, cal.max_incidence_rad) <= nearer))
+    if not gone.any():
+        return p
+    return _unplaced(p, gone.reshape(-1).nonzero()[0])
+
+
+def _theta_unsupported(p: Points, no_first_line: np.ndarray, label: np.ndarray, sweep: Sweep,
+                       cal: Calibration) -> Points:
+    """``p`` (the fold-over's result) with INCIDENCE_UNKNOWN for each valid reading of
+    ``no_first_line`` (far ones the judging pass, which saw every reading, put on no line)
+    whose θ reads it more than ``_UNKNOWN_M`` from its θ = 0 distance, where that θ is a
+    line's of the second pass (``label`` ≥ 0: built without the readings held out) or lies
+    within ``PINNED_RAD`` of the drop-out angle (the model's clamp, not a measured slope):
+    a GP2Y0A21's walls 600-670 mm away met at 21-33° joined a second-pass line at 58-68°
+    and read 120-170 mm short; a flank read at the 70° clamp, 211 mm short.
+    docs/foldover.md, "θ from the second pass alone"."""
+    ask = p.valid & no_first_line & ((label >= 0)
+                                     | (p.theta >= cal.max_incidence_rad - PINNED_RAD))
+    if not ask.any():
+        return p
+    d0 = cal.distance(np.maximum(np.asarray(sweep.counts, dtype=float)[ask], 1.0), 0.0)
+    gone = np.zeros(ask.shape, bool)
+    gone[ask] = np.abs(p.d[ask] - d0) > _UNKNOWN_M
     if not gone.any():
         return p
     return _unplaced(p, gone.reshape(-1).nonzero()[0])
