@@ -465,8 +465,9 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
     another line at 68°: 528 mm for 632 mm. It stays NO_RETURN. (Seed 8112 showed it until
     the own-trace rule held out other neighbours: test_a_far_end_point_needs_…; since a pool
     one half of which saw nothing is left as it was, POOL_SIDE_SIGMAS, that pool does not
-    form: 455 valid readings, none off, 443 since FOLD_PLACED_SIGMA_M; the guard is checked
-    with the halves' rule off.)"""
+    form: 455 valid readings, none off, 443 since FOLD_PLACED_SIGMA_M, 436 since
+    _theta_unsupported (7 readings 1-5 mm off on second-pass lines at 59-70°); the guard is
+    checked with the halves' rule off.)"""
     import irring.estimation.estimate as fast
     scene = loads(NEAR_A21, source="<test>")
 
@@ -477,19 +478,20 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
             e = np.hypot(p.x - sw.truth.hit_point[..., 0], p.y - sw.truth.hit_point[..., 1])
             n += int((p.valid & (e > 0.1)).sum())
         return n, sum(int(p.valid.sum()) for p in run.points)
-    assert off() == (0, 438)      # (0, 443) before noise_past_line_end
+    # (0, 443) before noise_past_line_end, (0, 438) before own-sensor anchoring
+    assert off() == (0, 431)
     monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)
-    assert off() == (0, 444)      # (0, 456) before rejoin_traces and noise_past_line_end
+    assert off() == (0, 437)      # (0, 456) before rejoin_traces and noise_past_line_end
     keep = fast._unplaced
     monkeypatch.setattr(fast, "_unplaced", lambda p, gone, why=Reason.INCIDENCE_UNKNOWN:
                         p if why == Reason.NO_RETURN else keep(p, gone, why))
     # with rejoin_traces and noise_past_line_end no reading is 100 mm off even so: the guard
     # is shown without them (its counts are at the noise level, past its new line's members)
-    assert off() == (0, 444)
+    assert off() == (0, 437)
     monkeypatch.setattr(fast, "rejoin_traces", lambda points, label, *args: (points, label))
-    assert off() == (0, 446)
+    assert off() == (0, 439)
     monkeypatch.setattr(fast, "noise_past_line_end", lambda points, *a, **k: points)
-    assert off() == (1, 457)
+    assert off() == (1, 450)
 
 
 # A box as deep as its face's far-branch distance fills a corner (a stepped corner): the ring
@@ -533,7 +535,7 @@ def _long_and_valid(points, sweeps):
 # as it was, POOL_SIDE_SIGMAS; (9, 239) and (0, 226) before noise-level readings past their line's other
 # members were silenced, noise_past_line_end)
 @pytest.mark.parametrize("room, seed, before, now", [
-    (STEPPED_CORNER, 7021, (42, 74), (0, 21)), (PILASTER_TOP_A21, 7108, (9, 237), (0, 224))],
+    (STEPPED_CORNER, 7021, (42, 74), (0, 19)), (PILASTER_TOP_A21, 7108, (9, 237), (0, 224))],
     ids=["stepped-corner", "a21-pilaster-top"])
 def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, now,
                                                           monkeypatch):
@@ -569,11 +571,12 @@ def test_seen_there_tells_between_members_from_past_the_last_one():
     seen, between = _seen_there(pairs, along, mcol, m_along)
     assert seen.tolist() == [[True, True], [True, True], [False, True], [True, True]]
     assert between.tolist() == [[True, True], [False, True], [False, True], [True, False]]
-    # lines 0 and 1 meet at 35°; line 1 has 3 certainly far members, line 0 none
+    # lines 0 and 1 meet at 35°; line 1 has certainly far members of the first reading's
+    # sensor, line 0 none (the fourth reading's "anchored" flag is ignored: it has no line)
     e = np.array([[1.0, 0.0], [math.cos(math.radians(35)), math.sin(math.radians(35))]])
-    certain = np.array([0, 3])
+    own_certain = np.array([True, False, False, True])
     between = np.array([[True, False], [True, True], [False, True], [True, True]])
-    agrees = _own_trace_agrees(between, np.array([1, 0, 0, -1]), certain, e)
+    agrees = _own_trace_agrees(between, np.array([1, 0, 0, -1]), own_certain, e)
     # own line 1 is anchored: anywhere, past the last member too; own line 0 is not: only
     # between the members of a line it runs along (itself, not line 1 35° off) and no
     # further; a reading on no line of its own: nowhere
@@ -599,14 +602,14 @@ def test_a_far_decision_its_own_line_does_not_anchor_needs_the_straighter_far_tr
 
     sc, sweeps, cal = simulated(BOX_IN_CORNER, seed=7003)
     points = [estimate(sw, cal) for sw in sweeps]
-    assert _long_and_valid(points, sweeps) == (0, 136)
+    assert _long_and_valid(points, sweeps) == (0, 122)
     for sw, p in zip(sweeps, points):
         slow = estimate_numpy.estimate_detail(sw, cal).points
         np.testing.assert_array_equal(slow.reason, p.reason)
         np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
     # without the test: 7 readings of the face read far onto the floor wall, ~250 mm off
     monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
-    assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (7, 151)
+    assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (7, 147)
 
 
 def test_near_trace_straight_tells_a_close_face_from_a_far_wall():
@@ -724,7 +727,7 @@ def test_a_line_member_beside_a_nearer_surface_is_found_at_any_step_stride(monke
     1 step apart). Over seeds 7101-7110 it now takes 8 readings there, 7 of them the post's
     edge on sensor 11 at steps -28 and -24, 105-147 mm off (at stride 1 it takes 14 there,
     102-132 mm off), and the 8th, 23 mm off, is the cost it has at stride 1 too; since
-    rejoin_traces it takes only the 7."""
+    rejoin_traces and own-sensor anchoring (either alone) it takes only the 7."""
     from irring.core import reading_stride
     from irring.estimation import estimate as est, estimate_numpy
 
@@ -781,7 +784,9 @@ def test_a_sweeps_reading_stride_is_the_steps_between_its_readings():
 
 def test_a_line_member_beside_a_nearer_surface_is_found_whatever_the_row_order():
     """The held-out neighbour is the sensor's previous or next motor step, not the row
-    beside it: the ring turning back (steps falling) kept the post's 2 edge readings."""
+    beside it: the ring turning back (steps falling) kept the post's 2 edge readings.
+    (67 valid readings until a line's certainly far members vouched only for their own
+    sensor's readings: the rest of the walls' readings here are FOLDOVER_AMBIGUOUS now.)"""
     from irring.estimation import estimate_numpy
 
     sc = loads(POST_BY_CORNER, source="<test>")
@@ -796,7 +801,7 @@ def test_a_line_member_beside_a_nearer_surface_is_found_whatever_the_row_order()
 
     falling = np.arange(len(sw.steps))[::-1]
     shuffled = np.random.default_rng(5).permutation(len(sw.steps))
-    assert int(rising.valid.sum()) == 67
+    assert int(rising.valid.sum()) == 11
     for order in (falling, shuffled):
         for p in (estimate(reordered(order), cal),
                   estimate_numpy.estimate_detail(reordered(order), cal).points):
@@ -907,7 +912,9 @@ effects: [incidence, noise, quantization, foldover]
 """
 
 
-@pytest.mark.parametrize("seed, far_before, taken", [(9179, 2, 6), (9184, 4, 9)])
+# seed 9184: (4, 9) before rejoin_traces, which moves 3 of those readings onto the line their
+# sensor's trace continues on
+@pytest.mark.parametrize("seed, far_before, taken", [(9179, 2, 6), (9184, 1, 1)])
 def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, taken,
                                                            monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
