@@ -580,6 +580,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label = rejoin_traces(points, label, index, counts, steps, cal,
                                       grouping.alpha, grouping.cx, grouping.cy,
                                       grouping.usable, options)
+    points, label = counts_disown_lines(points, label, index, counts, steps, cal,
+                                        grouping.alpha, grouping.cx, grouping.cy, profiler)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -2422,6 +2424,86 @@ def doubt_far_lines(points: Points, label: np.ndarray, index: np.ndarray, counts
         return points, label
     return _leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal,
                                stay=loose[ask[doubted]] & ~voted[doubted])
+
+
+COUNTS_MIN_MEMBERS = 8  # a line of at least this many valid members is asked …
+COUNTS_Z = 4.0  # … whether its members' counts misfit it this many normal σ (χ², p ≈ 3e-5)
+COUNTS_SINGLE = 4.0  # … leaving out members each misfit by this many count σ
+
+
+def counts_misfit_z(chi2: np.ndarray, dof: np.ndarray) -> np.ndarray:
+    """The normal deviate of χ² with ``dof`` degrees of freedom (Wilson–Hilferty cube
+    root; within 0.11 of the exact deviate up to z = 4.5 for 6 or more degrees of freedom)."""
+    k = np.asarray(dof, dtype=float)
+    v = 2.0 / (9.0 * k)
+    return (np.cbrt(np.asarray(chi2, dtype=float) / k) - (1.0 - v)) / np.sqrt(v)
+
+
+def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, counts: np.ndarray,
+                        cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray
+                        ) -> np.ndarray:
+    """The lines (L,) bool whose valid members' counts (``vi``: the valid readings; ``label``
+    their lines as fitted: direction ``alpha``, through (``cx``, ``cy``)) the line, read
+    back through the sensor model (each beam's range and incidence at the line,
+    ``cal.counts``), misfits: χ² over ``cal.sigma_counts()`` at least ``COUNTS_Z`` normal σ
+    above its n − 2 degrees of freedom, over the members each misfit by less than
+    ``COUNTS_SINGLE`` count σ, for lines of ``COUNTS_MIN_MEMBERS`` or more such members
+    whose beams all meet it within the drop-out angle."""
+    n_lines = alpha.size
+    lab = label.reshape(-1)[vi]
+    member = (lab >= 0).nonzero()[0]
+    out = np.zeros(n_lines, dtype=bool)
+    if member.size == 0:
+        return out
+    line = lab[member]
+    total = np.bincount(line, minlength=n_lines)
+    ask = (total >= COUNTS_MIN_MEMBERS)[line]
+    if not ask.any():
+        return out
+    at, line = vi[member[ask]], line[ask]
+    h = points.heading.reshape(-1)[at]
+    nx, ny = -np.sin(alpha[line]), np.cos(alpha[line])
+    along = np.cos(h) * nx + np.sin(h) * ny
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((cx[line] - ox) * nx + (cy[line] - oy) * ny) / along
+        expect = cal.counts(t, np.arccos(np.minimum(np.abs(along), 1.0)))
+    met = ((t > 0) & (np.abs(along) > math.cos(cal.max_incidence_rad)) & np.isfinite(expect))
+    # a line some member's beam cannot meet is judged elsewhere (corners, silence)
+    unmet = np.bincount(line, weights=~met, minlength=n_lines) > 0
+    r = np.where(met, (np.asarray(counts, dtype=float).reshape(-1)[at] - expect)
+                 / cal.sigma_counts(), 0.0)
+    # a member the line misfits on its own is another surface's (a neighbouring face):
+    # the question is whether the line explains the rest
+    kept = np.abs(r) < COUNTS_SINGLE
+    n_kept = np.bincount(line, weights=kept, minlength=n_lines)
+    chi2 = np.bincount(line, weights=np.where(kept, r * r, 0.0), minlength=n_lines)
+    asked = (n_kept >= COUNTS_MIN_MEMBERS) & ~unmet
+    z = counts_misfit_z(chi2[asked], n_kept[asked] - 2)
+    out[asked] = z >= COUNTS_Z
+    return out
+
+
+def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
+                        counts: np.ndarray, steps: np.ndarray, cal: Calibration,
+                        alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+                        profiler: Callable | None = None) -> tuple[Points, np.ndarray]:
+    """Every member of a line its members' counts contradict (:func:`counts_contradicted`)
+    off it: at its own profile's θ where that is straight and clearly steep, else
+    INCIDENCE_UNKNOWN (:func:`_leave_doubted_line`); numpy, shared by both estimators.
+    Returns the points and ``label``. Why: docs/estimator.md ("A line its counts
+    contradict"): a convex corner seen along its bisector near the range limit reads, at
+    θ = 0, like a flat wall square on, and the iteration settles there."""
+    vi = index[points.valid.reshape(-1)[index]]
+    if vi.size == 0 or alpha.size == 0:
+        return points, label
+    bad = counts_contradicted(points, label, vi, counts, cal, alpha, cx, cy)
+    if not bad.any():
+        return points, label
+    lab = label.reshape(-1)[vi]
+    pos = ((lab >= 0) & bad[np.maximum(lab, 0)]).nonzero()[0]
+    pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal)
+    return _leave_doubted_line(points, label, vi, pos, pr, np.ones(pos.size, dtype=bool), cal)
 
 
 def _off_line_profiles(points: Points, label: np.ndarray, pos: np.ndarray, vi: np.ndarray,
