@@ -116,3 +116,31 @@ def test_t_room_convex_corner_along_its_bisector_is_not_read_as_a_wall():
         # but the tip's, left off the line at θ = 0 with its σ widened
         steep = p.theta[steps, sensor][ok] > math.radians(30)
         assert np.all(steep | (p.sigma_m[steps, sensor][ok] > 0.05))
+
+
+def test_a_sweep_noisier_than_its_calibration_scales_the_test():
+    # four walls at 0.42-0.61 m square on, 40 readings each, their counts 1.8× as noisy as
+    # the calibration says (40 seeds): one such line alone is contradicted 32 times in 40;
+    # in a sweep of four the lines' own median reduced χ² scales the noise and none is
+    n, alone, together = 40, 0, 0
+    phi = np.radians(np.linspace(-8.0, 13.0, n))
+    alpha = np.full(4, math.pi / 2)
+    label = np.repeat(np.arange(4), n)[:, None]
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        parts, counts = [], []
+        for dist in (0.61, 0.42, 0.55, 0.48):
+            counts.append(CAL.counts(dist / np.cos(phi), phi)
+                          + rng.normal(0.0, 1.8 * CAL.sigma_counts(), n))
+            parts.append(_fan(np.full(n, dist), dist * np.tan(phi), counts[-1])[0])
+        pts = Points(**{f: np.concatenate([getattr(q, f) for q in parts]) for f in
+                        ("x", "y", "d", "theta", "origin_x", "origin_y", "heading", "sigma_m",
+                         "iterations", "valid", "reason")}, max_range_m=0.8)
+        cx = np.array([float(np.mean(q.x)) for q in parts])
+        together += est.counts_contradicted(pts, label, np.arange(4 * n), np.concatenate(counts),
+                                            CAL, alpha, cx, np.zeros(4)).any()
+        alone += est.counts_contradicted(parts[0], np.zeros((n, 1), dtype=np.intp),
+                                         np.arange(n), counts[0][:, None], CAL, alpha[:1],
+                                         cx[:1], np.zeros(1))[0]
+    assert together == 0
+    assert alone >= 25

@@ -580,8 +580,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label = rejoin_traces(points, label, index, counts, steps, cal,
                                       grouping.alpha, grouping.cx, grouping.cy,
                                       grouping.usable, options)
-    points, label = counts_disown_lines(points, label, index, counts, steps, cal,
-                                        grouping.alpha, grouping.cx, grouping.cy, profiler)
+        points, label = counts_disown_lines(points, label, index, counts, steps, cal,
+                                            grouping.alpha, grouping.cx, grouping.cy, profiler)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -2439,16 +2439,36 @@ def counts_misfit_z(chi2: np.ndarray, dof: np.ndarray) -> np.ndarray:
     return (np.cbrt(np.asarray(chi2, dtype=float) / k) - (1.0 - v)) / np.sqrt(v)
 
 
+def _counts_at(cal: Calibration, alpha, c, ox, oy, cos_h, sin_h):
+    """The counts a line (direction ``alpha``, offset ``c`` along its normal) returns to
+    each beam, and whether the beam meets it ahead within the drop-out angle."""
+    nx, ny = -np.sin(alpha), np.cos(alpha)
+    along = cos_h * nx + sin_h * ny
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t = (c - ox * nx - oy * ny) / along
+        expect = cal.counts(t, np.arccos(np.minimum(np.abs(along), 1.0)))
+    met = (t > 0) & (np.abs(along) > math.cos(cal.max_incidence_rad)) & np.isfinite(expect)
+    return np.where(met, expect, 0.0), met
+
+
+COUNTS_FIT_STEPS = 8  # Gauss–Newton steps of the line fitted to its members' counts
+COUNTS_SCALE_LINES = 3  # a sweep of this many asked lines scales the count noise by theirs
+_COUNTS_DA, _COUNTS_DC = 1e-5, 1e-6  # central-difference steps (rad, m) of its Jacobian
+
+
 def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, counts: np.ndarray,
                         cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray
                         ) -> np.ndarray:
     """The lines (L,) bool whose valid members' counts (``vi``: the valid readings; ``label``
-    their lines as fitted: direction ``alpha``, through (``cx``, ``cy``)) the line, read
-    back through the sensor model (each beam's range and incidence at the line,
-    ``cal.counts``), misfits: χ² over ``cal.sigma_counts()`` at least ``COUNTS_Z`` normal σ
-    above its n − 2 degrees of freedom, over the members each misfit by less than
-    ``COUNTS_SINGLE`` count σ, for lines of ``COUNTS_MIN_MEMBERS`` or more such members
-    whose beams all meet it within the drop-out angle."""
+    their lines as fitted: direction ``alpha``, through (``cx``, ``cy``)) no line near it
+    explains through the sensor model (each beam's range and incidence at the line,
+    ``cal.counts``): the line refitted to the counts (Gauss–Newton in direction and offset
+    from the fitted one) still leaves χ² over ``cal.sigma_counts()`` at least ``COUNTS_Z``
+    normal σ above n − 2 degrees of freedom (σ scaled up by the square root of the median
+    reduced χ² of the sweep's asked lines where there are ``COUNTS_SCALE_LINES`` or more and
+    it exceeds 1). Members the fitted line misfits by
+    ``COUNTS_SINGLE`` count σ or more each are left out; lines of ``COUNTS_MIN_MEMBERS`` or
+    more such members whose beams all meet the fitted line within the drop-out angle."""
     n_lines = alpha.size
     lab = label.reshape(-1)[vi]
     member = (lab >= 0).nonzero()[0]
@@ -2462,24 +2482,65 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
         return out
     at, line = vi[member[ask]], line[ask]
     h = points.heading.reshape(-1)[at]
-    nx, ny = -np.sin(alpha[line]), np.cos(alpha[line])
-    along = np.cos(h) * nx + np.sin(h) * ny
-    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((cx[line] - ox) * nx + (cy[line] - oy) * ny) / along
-        expect = cal.counts(t, np.arccos(np.minimum(np.abs(along), 1.0)))
-    met = ((t > 0) & (np.abs(along) > math.cos(cal.max_incidence_rad)) & np.isfinite(expect))
+    beam = (points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at], np.cos(h),
+            np.sin(h))
+    s = np.asarray(counts, dtype=float).reshape(-1)[at]
+    sig = cal.sigma_counts()
+    a = np.asarray(alpha, dtype=float).copy()
+    c = -np.sin(a) * cx + np.cos(a) * cy
+    expect, met = _counts_at(cal, a[line], c[line], *beam)
     # a line some member's beam cannot meet is judged elsewhere (corners, silence)
     unmet = np.bincount(line, weights=~met, minlength=n_lines) > 0
-    r = np.where(met, (np.asarray(counts, dtype=float).reshape(-1)[at] - expect)
-                 / cal.sigma_counts(), 0.0)
+    r = (s - expect) / sig
     # a member the line misfits on its own is another surface's (a neighbouring face):
-    # the question is whether the line explains the rest
-    kept = np.abs(r) < COUNTS_SINGLE
+    # the question is whether a line explains the rest
+    kept = met & (np.abs(r) < COUNTS_SINGLE)
     n_kept = np.bincount(line, weights=kept, minlength=n_lines)
-    chi2 = np.bincount(line, weights=np.where(kept, r * r, 0.0), minlength=n_lines)
     asked = (n_kept >= COUNTS_MIN_MEMBERS) & ~unmet
-    z = counts_misfit_z(chi2[asked], n_kept[asked] - 2)
+    if not asked.any():
+        return out
+    sel = kept & asked[line]
+    line, s = line[sel], s[sel]
+    beam = tuple(v[sel] for v in beam)
+
+    def chi2_of(a_, c_):
+        e, m = _counts_at(cal, a_[line], c_[line], *beam)
+        q = np.bincount(line, weights=((s - e) / sig) ** 2, minlength=n_lines)
+        return np.where(np.bincount(line, weights=~m, minlength=n_lines) > 0, np.inf, q), e
+
+    best, e0 = chi2_of(a, c)
+    for _ in range(COUNTS_FIT_STEPS):
+        # the counts' Jacobian in (direction, offset) by central differences
+        ja = (_counts_at(cal, a[line] + _COUNTS_DA, c[line], *beam)[0]
+              - _counts_at(cal, a[line] - _COUNTS_DA, c[line], *beam)[0]) / (2 * _COUNTS_DA)
+        jc = (_counts_at(cal, a[line], c[line] + _COUNTS_DC, *beam)[0]
+              - _counts_at(cal, a[line], c[line] - _COUNTS_DC, *beam)[0]) / (2 * _COUNTS_DC)
+        res = s - e0
+        saa, sac, scc = (np.bincount(line, weights=w, minlength=n_lines)
+                         for w in (ja * ja, ja * jc, jc * jc))
+        ga, gc = (np.bincount(line, weights=w * res, minlength=n_lines) for w in (ja, jc))
+        det = saa * scc - sac * sac
+        ok = asked & np.isfinite(det) & (det > 1e-12 * np.maximum(saa * scc, 1e-300))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            da = np.where(ok, (scc * ga - sac * gc) / det, 0.0)
+            dc = np.where(ok, (saa * gc - sac * ga) / det, 0.0)
+        # a step that does not lower χ² is halved (up to four times), else not taken
+        for _half in range(5):
+            trial, e_t = chi2_of(a + da, c + dc)
+            better = ok & (trial < best)
+            a, c = np.where(better, a + da, a), np.where(better, c + dc, c)
+            best = np.where(better, trial, best)
+            ok &= ~better
+            if not ok.any():
+                break
+            da, dc = 0.5 * da, 0.5 * dc
+        best, e0 = chi2_of(a, c)
+    dof = n_kept[asked] - 2
+    # the noise the sweep's own lines show, where it exceeds the calibration's (a curve
+    # fitted less well than its repeat noise says, a noisier part): their median reduced χ²
+    scale = (max(1.0, float(np.median(best[asked] / dof))) if asked.sum() >= COUNTS_SCALE_LINES
+             else 1.0)
+    z = counts_misfit_z(best[asked] / scale, dof)
     out[asked] = z >= COUNTS_Z
     return out
 
