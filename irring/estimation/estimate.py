@@ -2465,8 +2465,8 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     ``cal.counts``): the line refitted to the counts (Gauss–Newton in direction and offset
     from the fitted one) still leaves χ² over ``cal.sigma_counts()`` at least ``COUNTS_Z``
     normal σ above n − 2 degrees of freedom (σ scaled up by the square root of the median
-    reduced χ² of the sweep's asked lines where there are ``COUNTS_SCALE_LINES`` or more and
-    it exceeds 1). Members the fitted line misfits by
+    reduced χ² of the sweep's asked lines as fitted, where there are ``COUNTS_SCALE_LINES``
+    or more and it exceeds 1; only lines that misfit as fitted are refitted). Members the fitted line misfits by
     ``COUNTS_SINGLE`` count σ or more each are left out; lines of ``COUNTS_MIN_MEMBERS`` or
     more such members whose beams all meet the fitted line within the drop-out angle."""
     n_lines = alpha.size
@@ -2499,6 +2499,17 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     asked = (n_kept >= COUNTS_MIN_MEMBERS) & ~unmet
     if not asked.any():
         return out
+    # the noise the sweep's own lines show, where it exceeds the calibration's (a curve
+    # fitted less well than its repeat noise says, a noisier part): their median reduced χ²
+    # about their lines as fitted
+    chi2 = np.bincount(line, weights=np.where(kept, r * r, 0.0), minlength=n_lines)
+    dof = np.maximum(n_kept - 2, 1)
+    scale = (max(1.0, float(np.median(chi2[asked] / dof[asked])))
+             if asked.sum() >= COUNTS_SCALE_LINES else 1.0)
+    # a refit only lowers χ²: only the lines that misfit as fitted are refitted
+    asked &= counts_misfit_z(chi2 / scale, dof) >= COUNTS_Z
+    if not asked.any():
+        return out
     sel = kept & asked[line]
     line, s = line[sel], s[sel]
     beam = tuple(v[sel] for v in beam)
@@ -2525,22 +2536,21 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
             da = np.where(ok, (scc * ga - sac * gc) / det, 0.0)
             dc = np.where(ok, (saa * gc - sac * ga) / det, 0.0)
         # a step that does not lower χ² is halved (up to four times), else not taken
+        moved = np.zeros(n_lines, dtype=bool)
         for _half in range(5):
-            trial, e_t = chi2_of(a + da, c + dc)
+            trial, _ = chi2_of(a + da, c + dc)
             better = ok & (trial < best)
             a, c = np.where(better, a + da, a), np.where(better, c + dc, c)
             best = np.where(better, trial, best)
+            moved |= better
             ok &= ~better
             if not ok.any():
                 break
             da, dc = 0.5 * da, 0.5 * dc
+        if not moved.any():
+            break
         best, e0 = chi2_of(a, c)
-    dof = n_kept[asked] - 2
-    # the noise the sweep's own lines show, where it exceeds the calibration's (a curve
-    # fitted less well than its repeat noise says, a noisier part): their median reduced χ²
-    scale = (max(1.0, float(np.median(best[asked] / dof))) if asked.sum() >= COUNTS_SCALE_LINES
-             else 1.0)
-    z = counts_misfit_z(best[asked] / scale, dof)
+    z = counts_misfit_z(best[asked] / scale, dof[asked])
     out[asked] = z >= COUNTS_Z
     return out
 
