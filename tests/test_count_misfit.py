@@ -91,7 +91,8 @@ def test_members_the_line_misfits_singly_are_left_out_of_the_test():
 def test_too_few_members_are_not_asked():
     phi = np.radians(np.linspace(-5.0, 8.0, est.COUNTS_MIN_MEMBERS - 1))
     x = np.full(phi.size, 0.5)
-    bad = CAL.counts(0.5 / np.cos(phi), phi) + np.where(np.arange(phi.size) % 2 == 0, 3.0, -3.0) * CAL.sigma_counts()
+    bad = (CAL.counts(0.5 / np.cos(phi), phi)
+           + np.where(np.arange(phi.size) % 2 == 0, 3.0, -3.0) * CAL.sigma_counts())
     pts, counts = _fan(x, x * np.tan(phi), bad)
     label = np.zeros((phi.size, 1), dtype=np.intp)
     assert not est.counts_contradicted(pts, label, np.arange(phi.size), counts, CAL,

@@ -2466,9 +2466,10 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     from the fitted one) still leaves χ² over ``cal.sigma_counts()`` at least ``COUNTS_Z``
     normal σ above n − 2 degrees of freedom (σ scaled up by the square root of the median
     reduced χ² of the sweep's asked lines as fitted, where there are ``COUNTS_SCALE_LINES``
-    or more and it exceeds 1; only lines that misfit as fitted are refitted). Members the fitted line misfits by
-    ``COUNTS_SINGLE`` count σ or more each are left out; lines of ``COUNTS_MIN_MEMBERS`` or
-    more such members whose beams all meet the fitted line within the drop-out angle."""
+    or more and it exceeds 1; only lines that misfit as fitted are refitted). Members the
+    fitted line misfits by ``COUNTS_SINGLE`` count σ or more each are left out; lines of
+    ``COUNTS_MIN_MEMBERS`` or more such members whose beams all meet the fitted line within
+    the drop-out angle."""
     n_lines = alpha.size
     lab = label.reshape(-1)[vi]
     member = (lab >= 0).nonzero()[0]
