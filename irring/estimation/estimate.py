@@ -2429,6 +2429,7 @@ def doubt_far_lines(points: Points, label: np.ndarray, index: np.ndarray, counts
 COUNTS_MIN_MEMBERS = 8  # a line of at least this many valid members is asked …
 COUNTS_Z = 4.0  # … whether its members' counts misfit it this many normal σ (χ², p ≈ 3e-5)
 COUNTS_SINGLE = 4.0  # … leaving out members each misfit by this many count σ
+COUNTS_FLOOR_M = SIGMA_FLOOR_M  # a count σ no smaller than this range's change
 
 
 def counts_misfit_z(chi2: np.ndarray, dof: np.ndarray) -> np.ndarray:
@@ -2486,7 +2487,13 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     beam = (points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at], np.cos(h),
             np.sin(h))
     s = np.asarray(counts, dtype=float).reshape(-1)[at]
-    sig = cal.sigma_counts()
+    # no reading is trusted better than SIGMA_FLOOR_M in range (the pose, the beam's
+    # direction): its counts no better than the change that range makes
+    _, b0 = cal.log_ab(0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d0 = cal.distance(s, 0.0)
+        sig = np.maximum(cal.sigma_counts(),
+                         np.nan_to_num(s / (np.abs(b0) * d0)) * COUNTS_FLOOR_M)
     a = np.asarray(alpha, dtype=float).copy()
     c = -np.sin(a) * cx + np.cos(a) * cy
     expect, met = _counts_at(cal, a[line], c[line], *beam)
@@ -2512,7 +2519,7 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     if not asked.any():
         return out
     sel = kept & asked[line]
-    line, s = line[sel], s[sel]
+    line, s, sig = line[sel], s[sel], sig[sel]
     beam = tuple(v[sel] for v in beam)
 
     def chi2_of(a_, c_):
