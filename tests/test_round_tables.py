@@ -294,7 +294,9 @@ def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
     0 and 1 more than 30 mm off, precision 0.951 and 0.912, F1 0.891 → 0.908 and 0.885 →
     0.891. (Precision 0.940 and 0.903 since silent beams are bounded beside their sensor's
     nearest return: those beside the tables' returns no longer clear the cells about them;
-    free accuracy 0.9994 → 0.9998.)"""
+    free accuracy 0.9994 → 0.9998; 0.932 and 0.903 since a line its counts contradict gives no
+    θ: a wall line 45 mm off, θ 28° against 23°, is disowned and its members' own profiles
+    place them no better.)"""
     sc = loads(CANTEEN_A02, source="<test>")
     taken = []
     onto = est.onto_circles
@@ -305,7 +307,7 @@ def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
         taken.append(mask.reshape(points.valid.shape))
         return onto(points, at, circle, circles, *args) if snapped else points
     monkeypatch.setattr(est, "onto_circles", recording)
-    expect = {True: [(275, 0.0060, 0, 0.940), (164, 0.0140, 1, 0.902)],
+    expect = {True: [(275, 0.0060, 0, 0.930), (164, 0.0140, 1, 0.902)],
               False: [(275, 0.0215, 36, 0.922), (164, 0.0225, 24, 0.896)]}[snapped]
     for seed, (n, rms, off, precision) in zip((9201, 9202), expect):
         taken.clear()
