@@ -921,6 +921,10 @@ def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, tak
 
     sc = loads(A21_FAR_WALLS, source="<test>")
     cal = scene_calibration(sc)[0]
+    # the rule on its own: since a line its counts contradict gives no θ
+    # (counts_disown_lines), seed 9179's six readings leave their line before it sees them
+    # (0 > 100 mm off, 0 taken), so that rule is off here
+    monkeypatch.setattr(est, "counts_disown_lines", lambda points, label, *a, **k: (points, label))
 
     def errors():
         (sw,), (p,) = (lambda r: (r.sweeps, r.points))(
