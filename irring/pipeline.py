@@ -375,6 +375,8 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
     returns = result.grid.empty_like()     # every return so far (OccupancyGrid.insert_run)
     silences = RunSilences(returns, result.points)   # and the silent beams over them
     grid = returns.empty_like()
+    # each sweep's readings where the whole run's map places them (its last frame is the map)
+    placed = returns.placed_readings(result.points)
     yield grid.classify(), 0, "before the first sweep"
     for k, p in enumerate(result.points):
         shown = (k + 1) % stride == 0 or k == n - 1
@@ -386,7 +388,7 @@ def building_frames(result: MapRun, frames_per_sweep: int | None = None
                 acc += grid.delta(slice_steps(p, slice(edges[j - 1], edges[j])))
                 lo = np.clip(grid.log_odds + acc, grid.params.l_min, grid.params.l_max)
                 yield classify(lo), k + 1, f"pose {k + 1} of {n}: sweeping ({j}/{parts})"
-        returns.insert(returns_of(p))
+        returns.insert(returns_of(placed[k]), placed=True)
         if shown:    # the map of the run so far: its silent beams against all its returns
             grid = OccupancyGrid(returns.origin_xy_m, returns.shape, returns.resolution_m,
                                  returns.params)

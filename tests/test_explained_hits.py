@@ -206,3 +206,55 @@ def test_noisy_walls_have_readings_to_explain():
         assert np.all(fast[m] < pts.d[m]) and np.all(pts.d[m] - fast[m] < 3 * pts.sigma_m[m])
         moved += int(m.sum())
     assert moved == 8
+
+
+# --------------------------------------------------------------------------- across a run
+
+def test_a_long_reading_of_one_sweep_ends_on_the_wall_another_sweep_confirms():
+    """The wall seen sharp (σ 8 mm) by one sweep, the long reading (σ 20 mm, 45 mm behind
+    it) by another: insert_run places it on the wall (nothing occupied behind the wall's
+    row), in either order of the sweeps; inserted one sweep at a time, with nothing of its
+    own batch in front of it, it marks its cell 45 mm outside."""
+    wall, long = sweep(*wall_beams(0.008)), sweep(LONG)
+    for order in ([wall, long], [long, wall]):
+        g = grid()
+        g.insert_run(order)
+        rows = np.flatnonzero((g.classify() == OCCUPIED).any(axis=1))
+        assert rows.max() == 60 and 60 in rows
+    alone = grid()
+    for batch in (wall, long):
+        alone.insert(batch)
+    assert occupied_at(alone, EMITTER[0], WALL_Y + 0.045)
+    placed = grid().placed_readings([long, wall])
+    np.testing.assert_allclose(placed[0].y, WALL_Y, atol=1e-9)        # moved onto the wall
+    np.testing.assert_allclose(placed[0].sigma_m, 0.010)              # with σ / 2
+    np.testing.assert_array_equal(placed[1].y, wall.y)                # the wall's stay
+
+
+def test_a_run_confirms_a_wall_no_single_sweep_does():
+    """Two sweeps each read the wall cell the long beam crosses once (σ 8 mm, 1.6 each:
+    below explain_log_odds 3 alone, 3.2 together): the run explains the long reading, each
+    sweep with it alone does not; readings no sharper than σ/2 (12 mm) never do."""
+    one = sweep(*wall_beams(0.008), steps=1)
+    g = grid()
+    alone = g.placed_readings([one, sweep(LONG, steps=1)])[1]
+    both = g.placed_readings([one, one, sweep(LONG, steps=1)])[2]
+    assert alone.y[0, 0] == pytest.approx(WALL_Y + 0.045)
+    assert both.y[0, 0] == pytest.approx(WALL_Y)
+    blunt = sweep(*wall_beams(0.012), steps=1)
+    kept = g.placed_readings([blunt, blunt, blunt, sweep(LONG, steps=1)])[3]
+    assert kept.y[0, 0] == pytest.approx(WALL_Y + 0.045)
+
+
+def test_kernel_and_oracle_map_a_run_explained_across_sweeps_alike():
+    """insert_run (compiled) and mapping_numpy.add_run (the oracle) on sweeps whose
+    readings other sweeps explain: the same cells within the oracle tests' 2e-4, and the
+    cell behind the wall not occupied in either."""
+    batches = [sweep(*wall_beams(0.008), steps=1), sweep(LONG, (135.0, 0.42, 0.020)),
+               sweep(*wall_beams(0.008), steps=1)]
+    g = grid()
+    want = mapping_numpy.add_run(g.log_odds, batches, g.origin_xy_m, g.resolution_m,
+                                 g.params, g.params.l_min, g.params.l_max)
+    g.insert_run(batches)
+    np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
+    assert not occupied_at(g, EMITTER[0], WALL_Y + 0.045)

@@ -45,18 +45,27 @@ def walk():
 
 
 def _frames(run, params=None, batches=None):
-    """(RunSilences' frames, insert_run's) after each batch."""
+    """(RunSilences' frames, insert_run's) after each batch: insert_run's second part (every
+    silent beam so far, in one insert) over the returns of the sweeps so far, each placed as
+    the whole run places it (pipeline.building_frames; the last frame is insert_run's map)."""
     batches = run.points if batches is None else batches
     returns = OccupancyGrid(run.grid.origin_xy_m, run.grid.shape, run.grid.resolution_m,
                             params or run.grid.params)
     silences = RunSilences(returns, batches)
+    placed = returns.placed_readings(batches)
     ours, theirs = [], []
-    for k, p in enumerate(batches):
-        returns.insert(returns_of(p))
+    for k, p in enumerate(placed):
+        returns.insert(returns_of(p), placed=True)
         ours.append(silences.log_odds(returns, k + 1).copy())
         whole = returns.empty_like()
-        whole.insert_run(batches[:k + 1])
+        for q in placed[:k + 1]:
+            whole.insert(returns_of(q), placed=True)
+        for q in mapping.silences_of_run(batches[:k + 1]):
+            whole.insert(q)
         theirs.append(whole.log_odds)
+    whole = returns.empty_like()
+    whole.insert_run(batches)
+    np.testing.assert_array_equal(_bits(theirs[-1]), _bits(whole.log_odds))
     return ours, theirs, silences
 
 
@@ -67,7 +76,7 @@ def _bits(a):
 @pytest.mark.parametrize("params", [None, MapperParams(no_return_stop=-0.3),
                                     MapperParams(no_return_stop=float("inf")),
                                     MapperParams(no_return_stop=0.4, l_no_return=-0.3)])
-def test_every_frame_is_insert_run_of_the_sweeps_so_far(walk, params, monkeypatch):
+def test_every_frame_is_insert_run_of_the_sweeps_so_far_as_the_run_places_them(walk, params, monkeypatch):
     monkeypatch.setattr(RunSilences, "RECOUNT_COST", 0.0)     # never walk them all together
     ours, theirs, silences = _frames(walk, params)
     assert silences._incremental

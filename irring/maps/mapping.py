@@ -293,20 +293,16 @@ class OccupancyGrid:
 
     # ---- updates
 
-    def _add(self, log_odds: np.ndarray, points: Points, lo: float, hi: float) -> None:
+    def _add(self, log_odds: np.ndarray, points: Points, lo: float, hi: float,
+             placed: bool = False) -> None:
         """Add the log-odds of ``points`` to ``log_odds`` (this grid's shape, float64,
         C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
         ``add_beams``). Work and memory scale with the beams, not the grid. Readings from a
-        cone go in as :func:`cone_fan` with the ``cone_*`` weights; pencil beams their
-        neighbouring steps bracket (:func:`neighbour_ranges`), then those a surface explains
-        (:func:`explained_ranges`), are moved first; σ as :func:`known_sigma`."""
-        points = known_sigma(points)
-        if points.cone_half_angle_rad == 0 and np.any(points.valid):   # (silent beams: none)
-            points = along_beams(points, neighbour_ranges(points, self.params))
-            if self.params.explain_sigmas > 0:
-                points = at_ranges(points, _explained(
-                    points, self.shape, self.origin_xy_m, self.resolution_m, self.params),
-                    self.params)
+        cone go in as :func:`cone_fan` with the ``cone_*`` weights; pencil beams are first
+        placed as :func:`placed_readings` places a batch of its own (``placed``: they are
+        already); σ as :func:`known_sigma`."""
+        if not placed:
+            points = self.placed_readings([points])[0]
         points, params = mapped_beams(points, self.params)
         _traverse.add_beams(
             log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
@@ -326,22 +322,30 @@ class OccupancyGrid:
         self._add(out, points, -np.inf, np.inf)
         return out - self.log_odds
 
-    def insert(self, points: Points) -> None:
+    def insert(self, points: Points, placed: bool = False) -> None:
         """Add one batch of readings (typically a sweep) to the map; only the cells its beams
-        can reach are touched."""
+        can reach are touched. Its readings are first placed as :meth:`placed_readings`
+        places a batch alone, unless ``placed`` says that they already are (a batch of a
+        run, placed against the whole run)."""
         self.log_odds = np.ascontiguousarray(self.log_odds, dtype=float)   # (as the kernel wants)
-        self._add(self.log_odds, points, self.params.l_min, self.params.l_max)
+        self._add(self.log_odds, points, self.params.l_min, self.params.l_max, placed)
+
+    def placed_readings(self, batches: Sequence[Points]) -> list[Points]:
+        """:func:`placed_readings` on this grid's cells and with its mapper numbers."""
+        return placed_readings(batches, self.shape, self.origin_xy_m, self.resolution_m,
+                               self.params)
 
     def insert_run(self, batches: Sequence[Points]) -> None:
         """Add a run's batches (sweeps) so that its silent beams stop at every surface the
-        run's returns establish, whichever batch saw it: every batch's returns
-        (:func:`returns_of`) in order, then every batch's silent beams
-        (:func:`silences_of_run`: in one insert).
+        run's returns establish, whichever batch saw it, and a reading that surface explains
+        ends on it: the batches' readings placed against the whole run
+        (:meth:`placed_readings`), every batch's returns (:func:`returns_of`) in order, then
+        every batch's silent beams (:func:`silences_of_run`: in one insert).
         A silent beam never lowers a cell above ``no_return_stop``, so the second part does
         not depend on the order of the batches (docs/mapping.md, "Silent beams and the
-        run's returns")."""
-        for points in batches:
-            self.insert(returns_of(points))
+        run's returns"); nor does the first, but for the clamps."""
+        for points in self.placed_readings(batches):
+            self.insert(returns_of(points), placed=True)
         for points in silences_of_run(batches):
             self.insert(points)
 
@@ -518,6 +522,42 @@ def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
     and what it changed.
     """
     return _explained(known_sigma(points), shape, origin_xy_m, resolution_m, params)
+
+
+def placed_readings(batches: Sequence[Points], shape, origin_xy_m, resolution_m: float,
+                    params: MapperParams, neighbours=None, explained=None) -> list[Points]:
+    """Each batch (sweep) as the map takes its readings (:func:`known_sigma`): pencil beams
+    its sensors' neighbouring steps bracket moved first (:func:`neighbour_ranges`, within
+    the batch: a sweep's rows), then those a sharper surface explains
+    (:func:`explained_ranges`) moved onto it, where that surface is confirmed by the end
+    points of **every batch given**, not only the reading's own: a wall other sweeps or
+    poses saw sharper ends the beam that meets it. ``neighbours(points, params)`` and
+    ``explained(points, shape, origin_xy_m, resolution_m, params)`` default to the compiled
+    rules (the numpy oracle passes its own). docs/mapping.md, "Explained against the run"."""
+    neighbours = neighbour_ranges if neighbours is None else neighbours
+    explained = _explained if explained is None else explained
+    out = [known_sigma(p) for p in batches]
+    pencil = [i for i, p in enumerate(out)
+              if p.cone_half_angle_rad == 0 and np.any(p.valid)]    # (silent beams: none)
+    for i in pencil:
+        out[i] = along_beams(out[i], neighbours(out[i], params))
+    if params.explain_sigmas <= 0 or not pencil:
+        return out
+    # every batch's end points as one row: each reading against the run's surfaces
+    joined = {name: np.concatenate([np.asarray(getattr(out[i], name), dtype).ravel()
+                                    for i in pencil])[None, :]
+              for name, dtype in (("origin_x", float), ("origin_y", float), ("x", float),
+                                  ("y", float), ("d", float), ("sigma_m", float),
+                                  ("valid", bool))}
+    ranges = np.asarray(explained(points_with(out[pencil[0]], **joined), shape, origin_xy_m,
+                                  resolution_m, params), float).ravel()
+    start = 0
+    for i in pencil:
+        n = math.prod(np.shape(out[i].valid))
+        out[i] = at_ranges(out[i], ranges[start:start + n].reshape(np.shape(out[i].valid)),
+                           params)
+        start += n
+    return out
 
 
 def _explained(points: Points, shape, origin_xy_m, resolution_m: float,

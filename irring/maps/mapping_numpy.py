@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from ..core import Points, Reason
-from .mapping import (MapperParams, along_beams, at_ranges, hit_weight, known_sigma,
-                      mapped_beams, returns_of, silences_of, traverse)
+from .mapping import (MapperParams, hit_weight, known_sigma, mapped_beams, placed_readings,
+                      returns_of, silences_of, traverse)
 
 
 def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.ndarray:
@@ -164,23 +164,28 @@ def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,
     return out
 
 
+def placed(batches, shape, origin_xy_m, resolution_m: float, params: MapperParams) -> list:
+    """:func:`irring.maps.mapping.placed_readings` with this module's rules: each batch's
+    readings moved by its neighbouring steps, then explained against every batch's."""
+    return placed_readings(batches, shape, origin_xy_m, resolution_m, params,
+                           neighbours=neighbour_ranges, explained=explained_ranges)
+
+
 def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
-        params: MapperParams, lo: float = -np.inf, hi: float = np.inf) -> np.ndarray:
+        params: MapperParams, lo: float = -np.inf, hi: float = np.inf,
+        already_placed: bool = False) -> np.ndarray:
     """``log_odds`` (ny, nx) after one batch of readings, clamped to [lo, hi] (a new array).
 
     As :meth:`OccupancyGrid.insert` (with ``lo, hi`` its clamps) and :meth:`~OccupancyGrid.delta`
     (the grid as it is, no clamp: silent beams stop at its cells); readings from a wide cone
     go in as their fan of rays, and pencil beams a sharper surface explains at its range
-    (:func:`explained_ranges`). The kernel clamps only the box of cells
+    (:func:`explained_ranges`), as :func:`placed` places a batch alone (``already_placed``:
+    they are). The kernel clamps only the box of cells
     its beams reach; on a grid already inside [lo, hi] that is the same.
     """
     shape = np.shape(log_odds)
-    points = known_sigma(points)      # σ = +inf: no reading (its rule's one home)
-    if points.cone_half_angle_rad == 0:
-        points = along_beams(points, neighbour_ranges(points, params))
-    if params.explain_sigmas > 0 and points.cone_half_angle_rad == 0:
-        points = at_ranges(points, explained_ranges(points, shape, origin_xy_m, resolution_m,
-                                                    params), params)
+    if not already_placed:
+        points = placed([points], shape, origin_xy_m, resolution_m, params)[0]
     points, p = mapped_beams(points, params)
     res = float(resolution_m)
     ox, oy = points.origin_x.ravel().astype(float), points.origin_y.ravel().astype(float)
@@ -266,11 +271,13 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
 
 def add_run(log_odds: np.ndarray, batches, origin_xy_m, resolution_m: float,
             params: MapperParams, lo: float = -np.inf, hi: float = np.inf) -> np.ndarray:
-    """``log_odds`` after a run's batches, as :meth:`OccupancyGrid.insert_run`: every batch's
-    returns, in order, then every batch's silent beams, each :func:`add` clamped to [lo, hi]."""
+    """``log_odds`` after a run's batches, as :meth:`OccupancyGrid.insert_run`: the readings
+    placed against the whole run (:func:`placed`), every batch's returns, in order, then
+    every batch's silent beams, each :func:`add` clamped to [lo, hi]."""
     out = np.array(log_odds, dtype=float)
-    for points in batches:
-        out = add(out, returns_of(points), origin_xy_m, resolution_m, params, lo, hi)
+    for points in placed(batches, np.shape(out), origin_xy_m, resolution_m, params):
+        out = add(out, returns_of(points), origin_xy_m, resolution_m, params, lo, hi,
+                  already_placed=True)
     for points in batches:
         out = add(out, silences_of(points), origin_xy_m, resolution_m, params, lo, hi)
     return out
