@@ -125,11 +125,11 @@ def test_the_timed_mapping_is_the_maps_own_work(monkeypatch):
     calls, grids = [], []
     insert, insert_run = OccupancyGrid.insert, OccupancyGrid.insert_run
 
-    def spy(grid, points):
+    def spy(grid, points, placed=False):
         calls.append((int(np.count_nonzero(points.valid)),
                       int(np.count_nonzero(np.asarray(points.reason) == Reason.NO_RETURN)),
-                      np.shape(points.valid)))
-        insert(grid, points)
+                      np.shape(points.valid), placed))
+        insert(grid, points, placed)
 
     def spy_run(grid, batches):
         insert_run(grid, batches)
