@@ -543,6 +543,11 @@ def placed_readings(batches: Sequence[Points], shape, origin_xy_m, resolution_m:
         out[i] = along_beams(out[i], neighbours(out[i], params))
     if params.explain_sigmas <= 0 or not pencil:
         return out
+    if len(pencil) == 1:     # (one insert: its batch as it is, no copies)
+        only = pencil[0]
+        out[only] = at_ranges(out[only], explained(out[only], shape, origin_xy_m,
+                                                   resolution_m, params), params)
+        return out
     # every batch's end points as one row: each reading against the run's surfaces
     joined = {name: np.concatenate([np.asarray(getattr(out[i], name), dtype).ravel()
                                     for i in pencil])[None, :]
