@@ -532,11 +532,16 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    voter: Callable | None = None, post_grouper: Callable | None = None,
                    gapper: Callable | None = None, raw_counts: np.ndarray | None = None
                    ) -> Estimate:
-    """The estimate from the final points and grouping (either estimator's): members that a
-    better-held line their sensor's trace continues on places moved to it
-    (:func:`rejoin_traces`), readings on no
-    line at the incidence their own sensor's neighbours give (:func:`local_incidence`;
-    ``counts`` (S, N), ``steps`` (S,): the sweep's), line members onto their lines
+    """The estimate from the final points and grouping (either estimator's), in this order:
+    a line's few members a silent gap contradicts moved to the line of their side of it
+    (:func:`across_silence`),
+    readings on no line at the incidence their own sensor's neighbours give
+    (:func:`local_incidence`; ``counts`` (S, N), ``steps`` (S,): the sweep's), round things'
+    arcs (:func:`round_runs`); with ``snap`` only (not a fold-over's judging pass): short far
+    lines doubted (:func:`doubt_far_lines`), members that a better-held line their sensor's
+    trace continues on places moved to it (:func:`rejoin_traces`), then the members of a
+    line their counts contradict (as rejoined) off it (:func:`counts_disown_lines`); line
+    members onto their lines
     (``snapper``, the compiled :func:`snap_to_lines` by default), members read just past
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
@@ -1252,12 +1257,9 @@ def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
     use2 = use.reshape(steps, -1)
     r2 = np.where(use2, r.reshape(steps, -1), 0.0)
     h = np.asarray(points.heading, dtype=float).reshape(steps, -1)
-    row = np.arange(steps)[:, None]
-    cols = np.arange(heard2.shape[1])[None, :]
-    before = np.maximum.accumulate(np.where(heard2, row, -1), axis=0)
-    after = np.minimum.accumulate(np.where(heard2, row, steps)[::-1], axis=0)[::-1]
+    row, cols, nearest = nearest_heard_rows(heard2)
     bound = np.full(h.shape, np.inf)
-    for other in (before, after):
+    for other in nearest:
         has = (other >= 0) & (other < steps)
         at = np.where(has, other, row)
         gap = h[at, cols] - h
@@ -1273,6 +1275,18 @@ def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
              else np.array(points.reach_m, dtype=float))
     reach[cut] = np.fmin(reach[cut], bound[cut])
     return points_with(points, reach_m=reach)
+
+
+def nearest_heard_rows(heard: np.ndarray):
+    """(row (S, 1), cols (1, N), (before, after) (S, N)): for each (step row, sensor column)
+    of ``heard`` (S, N bool), the nearest row at or before it, and at or after it, in the same
+    column that is ``heard``; −1 (before) or S (after) where there is none."""
+    steps = heard.shape[0]
+    row = np.arange(steps)[:, None]
+    cols = np.arange(heard.shape[1])[None, :]
+    before = np.maximum.accumulate(np.where(heard, row, -1), axis=0)
+    after = np.minimum.accumulate(np.where(heard, row, steps)[::-1], axis=0)[::-1]
+    return row, cols, (before, after)
 
 
 def silent_reach(points: Points, cal: Calibration) -> Points:
@@ -3123,7 +3137,8 @@ def _theta_unsupported(p: Points, no_first_line: np.ndarray, label: np.ndarray, 
     within ``PINNED_RAD`` of the drop-out angle (the model's clamp, not a measured slope):
     a GP2Y0A21's walls 600-670 mm away met at 21-33° joined a second-pass line at 58-68°
     and read 120-170 mm short; a flank read at the 70° clamp, 211 mm short.
-    docs/foldover.md, "θ from the second pass alone"."""
+    docs/foldover.md, "A column read far onto a wall's line; θ that only the second pass
+    gives"."""
     ask = p.valid & no_first_line & ((label >= 0)
                                      | (p.theta >= cal.max_incidence_rad - PINNED_RAD))
     if not ask.any():
@@ -3335,7 +3350,7 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         anchored = certain >= _FOLD_ANCHOR
         # … and those of each (line, sensor): a line two sensors share may be one sensor's
         # wall and the other's near face read far, lying along it (docs/foldover.md,
-        # "A near column read far onto a wall's line")
+        # "A column read far onto a wall's line; θ that only the second pass gives")
         mine = np.bincount(mcol[sure] * n_sensors + at[sure] % n_sensors,
                            minlength=use.size * n_sensors)
     else:

@@ -17,9 +17,9 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RU
                        SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
                        LineOptions, Lines, Pieces, beam_crossings, clip_at_corners,
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
-                       member_spans, nominal_calibration, polyline_ids, range_profiles,
-                       reach_cos_limit, resolve_foldover, scan_order, settled_within_noise,
-                       silent_gaps)
+                       member_spans, nearest_heard_rows, nominal_calibration, polyline_ids,
+                       range_profiles, reach_cos_limit, resolve_foldover, scan_order,
+                       settled_within_noise, silent_gaps)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -1212,13 +1212,10 @@ def return_gaps(points: Points) -> tuple[np.ndarray, np.ndarray]:
     steps = reason.shape[0]
     heard = (reason != Reason.NO_RETURN).reshape(steps, -1)
     h = np.asarray(points.heading, dtype=float).reshape(steps, -1)
-    row = np.arange(steps)[:, None]
-    cols = np.arange(heard.shape[1])[None, :]
-    before = np.maximum.accumulate(np.where(heard, row, -1), axis=0)
-    after = np.minimum.accumulate(np.where(heard, row, steps)[::-1], axis=0)[::-1]
+    row, cols, nearest = nearest_heard_rows(heard)
     up = np.full(h.shape, np.nan)
     down = np.full(h.shape, np.nan)
-    for other in (before, after):
+    for other in nearest:
         has = (other >= 0) & (other < steps)
         diff = h[np.where(has, other, row), cols] - h
         diff = diff - 2.0 * math.pi * np.rint(diff / (2.0 * math.pi))      # to [−π, π]

@@ -36,7 +36,7 @@ from ..errors import OutputError, TooBig, brief, printable
 from ..outputs import OutputSet, atomic_file, sole_writer
 from ..pipeline import scenario_text
 from ..resources import installed_version
-from ..scenario import Scenario, ScenarioError, counted_seeds, load_scenario, scenario_file
+from ..scenario import ScenarioError, counted_seeds, load_scenario, scenario_file
 from . import accuracy
 from .accuracy import mark_pareto
 from .report import write_csv
