@@ -826,7 +826,7 @@ def _trace_moves(ask: np.ndarray, i: np.ndarray, j: np.ndarray, a: np.ndarray,
     e = i[:, None] + step[:, None] * t          # (P, T) the run, outward from i
     inside = t < span[:, None]
     e = np.where(inside, e, i[:, None])
-    bb = np.broadcast_to(b[:, None], e.shape)
+    bb = b[:, None].repeat(e.shape[1], axis=1)   # (np.broadcast_to costs more)
     ca, sa = np.cos(alpha), np.sin(alpha)
     theta = np.arccos(np.minimum(np.abs(np.sin(h[e] - alpha[bb])), 1.0))
     d = cal.distance(counts[e], theta)
@@ -843,13 +843,18 @@ def _trace_moves(ask: np.ndarray, i: np.ndarray, j: np.ndarray, a: np.ndarray,
                   / (ca[b] * sa[a] - sa[b] * ca[a]))
         first, last = np.fmin(first, tx), np.fmax(last, tx)
     # the extent grows by the run's readings before each
+    # (np.concatenate, not np.r_ / np.c_: those cost more than the arithmetic here)
     grow_lo = np.minimum(first[:, None], np.minimum.accumulate(
-        np.c_[np.full(len(i), np.inf), u[:, :-1]], axis=1))
+        np.concatenate((np.full((len(i), 1), np.inf), u[:, :-1]), axis=1), axis=1))
     grow_hi = np.maximum(last[:, None], np.maximum.accumulate(
-        np.c_[np.full(len(i), -np.inf), u[:, :-1]], axis=1))
+        np.concatenate((np.full((len(i), 1), -np.inf), u[:, :-1]), axis=1), axis=1))
     ok = (inside & (theta <= cal.max_incidence_rad) & np.isfinite(d)
           & (d >= cal.min_range_m) & (d <= max_range_m) & (perp <= thr)
           & (u >= grow_lo - options.adopt_margin_m) & (u <= grow_hi + options.adopt_margin_m))
+    # a run moves only as far as each of it lies on b: the corner tests ask nothing past
+    ok = np.logical_and.accumulate(ok, axis=1)
+    if not ok.any():
+        return None
     if to_corner:   # each of the run past its own line's corner with b
         w = ok.nonzero()
         ok[w] = _past_a_corner(kx[e[w]], ky[e[w]], ox[e[w]], oy[e[w]], a[w[0]],
@@ -865,7 +870,7 @@ def _trace_moves(ask: np.ndarray, i: np.ndarray, j: np.ndarray, a: np.ndarray,
     # a reading two runs take: the target it lies closer to
     r, miss = e[ok], (perp / thr)[ok]
     order = np.lexsort((miss, r))
-    pick = order[np.r_[True, r[order][1:] != r[order][:-1]]]
+    pick = order[np.concatenate(([True], r[order][1:] != r[order][:-1]))]
     return (r[pick], bb[ok][pick], d[ok][pick], theta[ok][pick], sigma[ok][pick])
 
 
@@ -909,7 +914,8 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     k = vi.size
     ar = np.arange(k)
     reading, nbr = [], []
-    for step, link in ((-1, np.r_[False, joined]), (1, np.r_[joined, False])):
+    for step, link in ((-1, np.concatenate(([False], joined))),
+                       (1, np.concatenate((joined, [False])))):
         nb = np.where(link, ar + step, -1)
         for _ in range(TRACE_SKIP):
             on_none = (nb >= 0) & (lab[np.maximum(nb, 0)] < 0)
@@ -938,10 +944,11 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
             break
         i, j, a, b = reading[f], nbr[f], a[f], b[f]
         # runs: consecutive readings of one sensor on one line (none moved, or all)
-        new_run = np.r_[True, ~joined | (lab[1:] != lab[:-1]) | (moved[1:] != moved[:-1])]
+        new_run = np.concatenate(
+            ([True], ~joined | (lab[1:] != lab[:-1]) | (moved[1:] != moved[:-1])))
         start = new_run.nonzero()[0]
         run = np.cumsum(new_run) - 1
-        run_lo, run_hi = start[run], np.r_[start[1:] - 1, k - 1][run]
+        run_lo, run_hi = start[run], np.concatenate((start[1:] - 1, [k - 1]))[run]
         mem = lab >= 0
         g = lab[mem]
         n_mem = np.bincount(g, minlength=n_lines)
@@ -1242,38 +1249,47 @@ def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
     theta = end_hide_angle(cal, options)
     c = np.minimum(np.asarray(counts, dtype=float), cal.full_scale_counts)
     heard = points.valid | ((c >= cal.no_return_counts + cal.return_margin_counts) & ~silent
-                            & (np.asarray(points.reason) != Reason.MISSING))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = (cal.distance(np.where(heard, c, cal.full_scale_counts), cal.max_incidence_rad)
-             if cal.falling else np.where(points.valid, points.d, np.nan))   # (linear hooks)
-    # where its θ is known (on a line, or estimated: θ > 0) its d stands
-    known = points.valid & (np.nan_to_num(np.asarray(points.theta, dtype=float)) > 0)
-    if label is not None:
-        known |= points.valid & (label >= 0)
-    r = np.where(known, points.d, r)
-    use = heard & np.isfinite(r)
+                            & (np.asarray(points.reason) != _MISSING))
     steps = silent.shape[0]
     heard2 = heard.reshape(steps, -1)
-    use2 = use.reshape(steps, -1)
-    r2 = np.where(use2, r.reshape(steps, -1), 0.0)
+    _, _, (before, after) = nearest_heard_rows(heard2)
+    # only the silent beams' bounds are asked for: each beam (row, cols) twice, with the
+    # nearest heard reading before it, then after it, (at, cols)
+    srow, scol = silent.reshape(steps, -1).nonzero()
+    other = np.concatenate((before[srow, scol], after[srow, scol]))
+    row, cols = np.concatenate((srow, srow)), np.concatenate((scol, scol))
+    has = (other >= 0) & (other < steps)
+    at = np.where(has, other, row)
+
+    def there(v):
+        return np.asarray(v).reshape(steps, -1)[at, cols]
+
+    valid, d = there(points.valid), there(points.d)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = (cal.distance(np.where(there(heard), there(c), cal.full_scale_counts),
+                          cal.max_incidence_rad)
+             if cal.falling else np.where(valid, d, np.nan))   # (linear hooks)
+    # where its θ is known (on a line, or estimated: θ > 0; NaN compares False) its d stands
+    known = valid & (there(np.asarray(points.theta, dtype=float)) > 0)
+    if label is not None:
+        known |= valid & (there(label) >= 0)
+    r = np.where(known, d, r)
+    use = there(heard) & np.isfinite(r)
     h = np.asarray(points.heading, dtype=float).reshape(steps, -1)
-    row, cols, nearest = nearest_heard_rows(heard2)
-    bound = np.full(h.shape, np.inf)
-    for other in nearest:
-        has = (other >= 0) & (other < steps)
-        at = np.where(has, other, row)
-        gap = h[at, cols] - h
-        gamma = np.abs(gap - 2.0 * math.pi * np.rint(gap / (2.0 * math.pi)))
-        hides = has & use2[at, cols] & (theta + gamma < 0.5 * math.pi - 1e-6)
-        stop = r2[at, cols] * math.cos(theta) / np.cos(np.where(hides, theta + gamma, 0.0))
-        bound = np.minimum(bound, np.where(hides, stop, np.inf))
-    bound = bound.reshape(silent.shape)
-    cut = silent & np.isfinite(bound)
+    gap = h[at, cols] - h[row, cols]
+    gamma = np.abs(gap - 2.0 * math.pi * np.rint(gap / (2.0 * math.pi)))
+    hides = has & use & (theta + gamma < 0.5 * math.pi - 1e-6)
+    stop = np.where(use, r, 0.0) * math.cos(theta) / np.cos(np.where(hides, theta + gamma, 0.0))
+    bound = np.where(hides, stop, np.inf)
+    bound = np.minimum(bound[:srow.size], bound[srow.size:])
+    cut = np.isfinite(bound)
     if not cut.any():
         return points
     reach = (np.full(silent.shape, np.nan) if points.reach_m is None
              else np.array(points.reach_m, dtype=float))
-    reach[cut] = np.fmin(reach[cut], bound[cut])
+    flat = reach.reshape(-1)
+    at = (srow * h.shape[1] + scol)[cut]
+    flat[at] = np.fmin(flat[at], bound[cut])
     return points_with(points, reach_m=reach)
 
 
@@ -2526,6 +2542,9 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     # about their lines as fitted
     chi2 = np.bincount(line, weights=np.where(kept, r * r, 0.0), minlength=n_lines)
     dof = np.maximum(n_kept - 2, 1)
+    # the scale is at least 1: where no line misfits unscaled, none misfits scaled
+    if not (asked & (counts_misfit_z(chi2, dof) >= COUNTS_Z)).any():
+        return out
     scale = (max(1.0, float(np.median(chi2[asked] / dof[asked])))
              if asked.sum() >= COUNTS_SCALE_LINES else 1.0)
     # a refit only lowers χ²: only the lines that misfit as fitted are refitted
