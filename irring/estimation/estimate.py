@@ -997,6 +997,19 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     return (_unplaced(points, vi[left]) if left.any() else points), label
 
 
+def invalidated(points: Points, gone: np.ndarray, why: Reason) -> Points:
+    """``points`` with the readings ``gone`` (flat (S·N,) indices, or a bool mask of any
+    shape) made ``why``: not valid, no end point, distance, θ or σ."""
+    gone = np.flatnonzero(gone) if gone.dtype == bool else gone
+    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
+    for v in out.values():
+        v.reshape(-1)[gone] = np.nan
+    valid, reason = points.valid.copy(), np.array(points.reason)
+    valid.reshape(-1)[gone] = False
+    reason.reshape(-1)[gone] = why
+    return points_with(points, valid=valid, reason=reason, **out)
+
+
 def placed_at(points: Points, at: np.ndarray, d, theta, sigma) -> Points:
     """``points`` with the flat readings ``at`` read at range ``d`` (m), incidence ``theta``
     (rad) and ``sigma`` (m), their end points along their own headings."""
@@ -1332,12 +1345,7 @@ def drop_beyond_range(points: Points) -> Points:
     beyond = points.valid & (points.d > points.max_range_m)
     if not np.count_nonzero(beyond):
         return points
-    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-    for v in out.values():
-        v[beyond] = np.nan
-    reason = np.array(points.reason)
-    reason[beyond] = Reason.OUT_OF_RANGE
-    return points_with(points, valid=points.valid & ~beyond, reason=reason, **out)
+    return invalidated(points, beyond, Reason.OUT_OF_RANGE)
 
 
 # --------------------------------------------------------------------------- readings on no line
@@ -2702,13 +2710,7 @@ def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: 
     label.reshape(-1)[vi[pos[leave]]] = -1
     gone = vi[pos[leave & ~placed]]
     if gone.size:
-        out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-        for f in out.values():
-            f.reshape(-1)[gone] = np.nan
-        valid, reason = points.valid.copy(), points.reason.copy()
-        valid.reshape(-1)[gone] = False
-        reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
-        points = points_with(points, valid=valid, reason=reason, **out)
+        points = invalidated(points, gone, Reason.INCIDENCE_UNKNOWN)
     return points, label
 
 
@@ -2771,15 +2773,7 @@ def noise_past_line_end(points: Points, found: Lines, raw_counts: np.ndarray,
     np.minimum.at(lo, lab[clear], along[clear])
     np.maximum.at(hi, lab[clear], along[clear])
     gone = noise & np.isfinite(lo[li]) & ((along < lo[li]) | (along > hi[li]))
-    if not gone.any():
-        return points
-    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-    for v in out.values():
-        v[gone] = np.nan
-    valid, reason = points.valid.copy(), np.array(points.reason)
-    valid[gone] = False
-    reason[gone] = Reason.NO_RETURN
-    return points_with(points, valid=valid, reason=reason, **out)
+    return invalidated(points, gone, Reason.NO_RETURN) if gone.any() else points
 
 
 def silent_behind_a_wall(points: Points, pooled: np.ndarray, found: Lines, cal: Calibration,
@@ -2823,16 +2817,10 @@ def silent_behind_a_wall(points: Points, pooled: np.ndarray, found: Lines, cal: 
         return points
     gone = at[hit]
     stop = np.where(before, t - REACH_CLEAR_M / np.where(before, cos_inc, 1.0), np.inf)
-    out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-    for v in out.values():
-        v.reshape(-1)[gone] = np.nan
-    valid, reason = points.valid.copy(), np.array(points.reason)
-    valid.reshape(-1)[gone] = False
-    reason.reshape(-1)[gone] = Reason.NO_RETURN
-    reach = (np.full(valid.shape, np.nan) if points.reach_m is None
+    reach = (np.full(points.valid.shape, np.nan) if points.reach_m is None
              else np.array(points.reach_m, dtype=float))
     reach.reshape(-1)[gone] = np.maximum(stop[hit].min(axis=1), 0.0)
-    return points_with(points, valid=valid, reason=reason, reach_m=reach, **out)
+    return points_with(invalidated(points, gone, Reason.NO_RETURN), reach_m=reach)
 
 
 def reach_cos_limit(cal: Calibration, options: LineOptions) -> float:
@@ -3248,14 +3236,9 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
 def _unplaced(p: Points, gone: np.ndarray, why: Reason = Reason.INCIDENCE_UNKNOWN
               ) -> Points:
     """``p`` with the readings at flat indices ``gone`` made ``why`` (INCIDENCE_UNKNOWN by
-    default): not valid, no end point, distance, θ or σ."""
-    out = {f: np.array(getattr(p, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
-    for v in out.values():
-        v.reshape(-1)[gone] = np.nan
-    valid, reason = p.valid.copy(), p.reason.copy()
-    valid.reshape(-1)[gone] = False
-    reason.reshape(-1)[gone] = why
-    return replace(p, valid=valid, reason=reason, **out)
+    default): not valid, no end point, distance, θ or σ (:func:`invalidated`; its own name
+    so that the fold-over's guards can be switched off in tests one by one)."""
+    return invalidated(p, gone, why)
 
 
 def _disowned_by_own_profile(p: Points, label: np.ndarray, sweep: Sweep, cal: Calibration,
