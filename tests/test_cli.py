@@ -389,6 +389,36 @@ def test_a_reader_that_stops_early_ends_the_command_quietly():
     assert err == b""
 
 
+def _with_closed(fd: int, argv: list[str], cwd) -> "subprocess.CompletedProcess":
+    """`irring ARGV` started with standard stream ``fd`` closed (`>&-`, `2>&-`, `<&-`), the
+    others captured (stdin: /dev/null)."""
+    import os
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "irring", *argv], cwd=cwd,
+                          stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                          preexec_fn=lambda: os.close(fd), timeout=300)
+
+
+def test_a_closed_standard_output_is_an_output_error(tmp_path):
+    """`irring scenarios >&-`: exit 70, 'internal error (AttributeError: 'NoneType' object has
+    no attribute 'write')' (Python leaves a stream closed at start None), and the next file
+    the command opened took descriptor 1, so whatever wrote to it would land in that file.
+    Now exit 4 naming standard output, with /dev/null holding the descriptor."""
+    done = _with_closed(1, ["scenarios"], tmp_path)
+    assert done.returncode == errors.OUTPUT
+    assert done.stderr == ("irring scenarios: error: standard output is closed (as by >&-), "
+                           "so nothing can be written to it\n")
+    probe = ("import os, sys\nfrom irring import cli\ncli._hold_closed_streams()\n"
+             "print(os.readlink('/proc/self/fd/1'), file=sys.stderr)")
+    import subprocess
+    import sys
+    held = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                          preexec_fn=lambda: __import__("os").close(1), timeout=60)
+    assert held.stderr == "/dev/null\n"
+
+
 @pytest.mark.parametrize("argv, module, target", [
     (["emulate", "l_room", "--link", "x.pty"], "irring.cli.emulate", "Device"),
     (["bench", "speed", "--scenario", "l_room"], "irring.cli.bench_speed", "measure"),

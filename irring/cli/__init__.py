@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import io
 import os
 import select
 import sys
@@ -89,6 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     # the first word that is not an option names the subcommand (before parsing: a
     # subcommand's module may load MuJoCo when it is imported)
     word = next((a for a in argv if not a.startswith("-")), "")
+    _hold_closed_streams()
     stdout, sys.stdout = sys.stdout, _NamedStream(sys.stdout, "standard output")
     try:
         # `kill` (SIGTERM) stops a command as Ctrl-C does: killed outright, it left its
@@ -128,6 +130,38 @@ def main(argv: list[str] | None = None) -> int:
         return status
     finally:
         sys.stdout = stdout
+
+
+def _hold_closed_streams() -> None:
+    """A standard stream closed when irring started (`irring … >&-`, a daemon's) is None in
+    Python, and its descriptor is free: the next file opened takes it, and whatever writes
+    to that descriptor lands in the file. /dev/null holds it instead; writing to a closed
+    standard output is an output error (exit 4)."""
+    for fd, name in ((1, "stdout"),):
+        if getattr(sys, name) is not None:
+            continue
+        try:
+            os.fstat(fd)
+        except OSError:   # still free (if a file took it meanwhile, it stays that file's)
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+        setattr(sys, name, _Closed("standard output"))
+
+
+class _Closed(io.TextIOBase):
+    """A standard stream that was closed: every write fails naming it."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        raise errors.OutputError(f"{self.name} is closed (as by >&-), so nothing can be "
+                                 f"written to it")
 
 
 class _NamedStream:
