@@ -419,6 +419,18 @@ def test_a_closed_standard_output_is_an_output_error(tmp_path):
     assert held.stderr == "/dev/null\n"
 
 
+def test_a_closed_standard_error_costs_only_the_messages(tmp_path):
+    """`irring geometry 2>&-` (a cron job, a daemon): exit 70 before any work (progress bars
+    asked the missing stream isatty()), and an error line went to standard output instead
+    (print(file=None) writes there). Now the work is done, messages go to /dev/null, and an
+    error still ends in its status with nothing on standard output."""
+    done = _with_closed(2, ["geometry", "--samples", "1000", "--range-mm", "300"], tmp_path)
+    assert done.returncode == 0
+    assert "overlap" in done.stdout and done.stdout.count("\n") > 3
+    failed = _with_closed(2, ["replay", "missing.npz"], tmp_path)
+    assert (failed.returncode, failed.stdout) == (errors.INPUT, "")
+
+
 @pytest.mark.parametrize("argv, module, target", [
     (["emulate", "l_room", "--link", "x.pty"], "irring.cli.emulate", "Device"),
     (["bench", "speed", "--scenario", "l_room"], "irring.cli.bench_speed", "measure"),

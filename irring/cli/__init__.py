@@ -136,8 +136,9 @@ def _hold_closed_streams() -> None:
     """A standard stream closed when irring started (`irring … >&-`, a daemon's) is None in
     Python, and its descriptor is free: the next file opened takes it, and whatever writes
     to that descriptor lands in the file. /dev/null holds it instead; writing to a closed
-    standard output is an output error (exit 4)."""
-    for fd, name in ((1, "stdout"),):
+    standard output is an output error (exit 4), messages to a closed standard error go
+    nowhere (the exit status still tells)."""
+    for fd, name in ((1, "stdout"), (2, "stderr")):
         if getattr(sys, name) is not None:
             continue
         try:
@@ -147,7 +148,7 @@ def _hold_closed_streams() -> None:
             if null != fd:
                 os.dup2(null, fd)
                 os.close(null)
-        setattr(sys, name, _Closed("standard output"))
+        setattr(sys, name, _Closed("standard output") if fd == 1 else open(os.devnull, "w"))
 
 
 class _Closed(io.TextIOBase):
