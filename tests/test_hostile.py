@@ -1664,6 +1664,28 @@ def test_a_drive_whose_terminal_hangs_up_keeps_the_poses_swept(tmp_path):
     assert len(_recorded(out)) == 1
 
 
+def test_a_drive_with_its_standard_input_closed_sweeps_every_pose(tmp_path):
+    """`irring drive … <&-` (started from a service or a script that closed stdin): pose 1
+    was swept, then asking the missing stdin isatty() before pose 2 ended the drive in exit
+    70 with nothing written. A closed stdin is now read as /dev/null: no terminal, no wait."""
+    script = (
+        "import sys\n"
+        f"sys.path.insert(0, {os.path.dirname(os.path.abspath(__file__))!r})\n"
+        "import hostile_devices as hd\n"
+        "dev = hd.HostileDevice(hd.good)\n"
+        "from irring.cli import main\n"
+        "code = main(['drive', '--port', dev.link, '--pose', '500,450', '--pose', '800,450',\n"
+        "             '--no-animation', '--out', sys.argv[1]])\n"
+        "dev.close()\n"
+        "sys.exit(code)\n")
+    out = tmp_path / "o"
+    done = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True,
+                          text=True, timeout=300, preexec_fn=lambda: os.close(0))
+    assert done.returncode == 0, done.stderr
+    assert "pose 2/2: all 5 steps received" in done.stdout
+    assert len(_recorded(out)) == 2
+
+
 @pytest.mark.parametrize("failure, status", [
     (OutputError("out/map.png: No space left on device"), 4),
     (KeyboardInterrupt(), 130),

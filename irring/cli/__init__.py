@@ -135,12 +135,13 @@ def main(argv: list[str] | None = None) -> int:
 def _hold_closed_streams() -> None:
     """A standard stream closed when irring started (`irring … >&-`, a daemon's) is None in
     Python, and its descriptor is free: the next file opened takes it, and whatever writes
-    to that descriptor lands in the file. /dev/null holds it instead; writing to a closed
-    standard output is an output error (exit 4), messages to a closed standard error go
-    nowhere (the exit status still tells)."""
-    for fd, name in ((1, "stdout"), (2, "stderr")):
-        if getattr(sys, name) is not None:
-            continue
+    to that descriptor lands in the file. /dev/null holds it instead: a closed standard
+    input reads as ended (no terminal to wait at), writing to a closed standard output is an
+    output error (exit 4), messages to a closed standard error go nowhere (the exit status
+    still tells)."""
+    closed = [(fd, name) for fd, name in ((0, "stdin"), (1, "stdout"), (2, "stderr"))
+              if getattr(sys, name) is None]
+    for fd, _ in closed:   # every descriptor first, before a stream below opens a file
         try:
             os.fstat(fd)
         except OSError:   # still free (if a file took it meanwhile, it stays that file's)
@@ -148,7 +149,9 @@ def _hold_closed_streams() -> None:
             if null != fd:
                 os.dup2(null, fd)
                 os.close(null)
-        setattr(sys, name, _Closed("standard output") if fd == 1 else open(os.devnull, "w"))
+    for fd, name in closed:
+        setattr(sys, name, open(os.devnull) if fd == 0 else _Closed("standard output")
+                if fd == 1 else open(os.devnull, "w"))
 
 
 class _Closed(io.TextIOBase):
