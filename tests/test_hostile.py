@@ -1686,6 +1686,29 @@ def test_a_drive_with_its_standard_input_closed_sweeps_every_pose(tmp_path):
     assert len(_recorded(out)) == 2
 
 
+def test_drive_asks_for_the_next_pose_on_standard_error(tmp_path, capsys, monkeypatch):
+    """`irring drive … --json > summary.json` at a terminal: input() wrote each 'move the robot
+    to pose K' prompt to standard output, into summary.json (no longer JSON) and unseen by the
+    person the drive waited for. The prompt is for the person: it goes to standard error."""
+    class Terminal(io.StringIO):   # Enter pressed at each prompt
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr(sys, "stdin", Terminal("\n\n"))
+    dev = hd.HostileDevice(hd.good)
+    try:
+        code = main(["drive", "--port", dev.link, "--timeout", str(TIMEOUT_S), "--json",
+                     "--no-animation", "--out", str(tmp_path / "o"), "--pose", "500,450",
+                     "--pose", "800,450,90", "--pose", "900,450"])
+    finally:
+        dev.close()
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert json.loads(out)["poses"] == 3
+    assert err.count("and press Enter") == 2
+    assert "move the robot to pose 2 of 3 (800 mm, 450 mm, 90°) and press Enter" in err
+
+
 @pytest.mark.parametrize("failure, status", [
     (OutputError("out/map.png: No space left on device"), 4),
     (KeyboardInterrupt(), 130),

@@ -209,8 +209,12 @@ def run(args: argparse.Namespace) -> int:
 
     def move(k: int, pose) -> None:
         if k and sys.stdin.isatty() and not args.no_wait:
-            input(f"move the robot to pose {k + 1} of {n} ({pose[0] * 1e3:.0f} mm, "
-                  f"{pose[1] * 1e3:.0f} mm, {math.degrees(pose[2]):.0f}°) and press Enter ")
+            # for the person, as errors are: on stdout it went into a redirected --json
+            # summary, unseen
+            print(f"move the robot to pose {k + 1} of {n} ({pose[0] * 1e3:.0f} mm, "
+                  f"{pose[1] * 1e3:.0f} mm, {math.degrees(pose[2]):.0f}°) and press Enter ",
+                  end="", file=sys.stderr, flush=True)
+            input()
 
     finished = []   # poses whose sweep came back whole or with steps missing
 
