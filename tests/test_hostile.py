@@ -1709,6 +1709,38 @@ def test_drive_asks_for_the_next_pose_on_standard_error(tmp_path, capsys, monkey
     assert "move the robot to pose 2 of 3 (800 mm, 450 mm, 90°) and press Enter" in err
 
 
+def test_a_drive_whose_reader_leaves_keeps_sweeping_and_writes_every_pose(tmp_path):
+    """`irring drive … | head -1`: the reader took the first line and left, the next progress
+    line ('pose 1/3: …') raised BrokenPipeError inside the acquisition, and the drive ended
+    exit 4 with nothing written: the swept poses were lost. A progress line is not worth
+    the readings: the drive goes on, writes --out, and ends exit 4 when the report cannot
+    be printed. The device takes 0.3 s a sweep, so the reader is gone by pose 1's line."""
+    script = (
+        "import sys, time\n"
+        f"sys.path.insert(0, {os.path.dirname(os.path.abspath(__file__))!r})\n"
+        "import hostile_devices as hd\n"
+        "def slow(dev, cmd):\n"
+        "    if isinstance(cmd, hd.p.SweepCommand):\n"
+        "        time.sleep(0.3)\n"
+        "    hd.good(dev, cmd)\n"
+        "dev = hd.HostileDevice(slow)\n"
+        "from irring.cli import main\n"
+        "code = main(['drive', '--port', dev.link, '--pose', '500,450', '--pose', '800,450',\n"
+        "             '--pose', '900,450', '--no-animation', '--out', sys.argv[1]])\n"
+        "dev.close()\n"
+        "sys.exit(code)\n")
+    out = tmp_path / "o"
+    proc = subprocess.Popen([sys.executable, "-c", script, str(out)], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    first = proc.stdout.readline()
+    proc.stdout.close()   # `| head -1`
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == errors.OUTPUT, err
+    assert first.startswith(b"ring on ")
+    assert err == ""
+    assert len(_recorded(out)) == 3
+
+
 @pytest.mark.parametrize("failure, status", [
     (OutputError("out/map.png: No space left on device"), 4),
     (KeyboardInterrupt(), 130),

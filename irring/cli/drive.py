@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -170,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
         radius = ring.radius_m if ring.radius_m is not None else ring.template.radius_m
         pipeline.check_pose_spread([p[:2] for p in poses[:n]],
                                    radius + 2 * ring.max_range_m, "--pose")
-    say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
+    say = functools.partial(_tell, file=sys.stderr if args.json else sys.stdout)
     try:
         ring.open()
     except DeviceError as exc:
@@ -211,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
         if k and sys.stdin.isatty() and not args.no_wait:
             # for the person, as errors are: on stdout it went into a redirected --json
             # summary, unseen
-            print(f"move the robot to pose {k + 1} of {n} ({pose[0] * 1e3:.0f} mm, "
+            _tell(f"move the robot to pose {k + 1} of {n} ({pose[0] * 1e3:.0f} mm, "
                   f"{pose[1] * 1e3:.0f} mm, {math.degrees(pose[2]):.0f}°) and press Enter ",
                   end="", file=sys.stderr, flush=True)
             input()
@@ -239,7 +240,7 @@ def run(args: argparse.Namespace) -> int:
         kept = (f"the {len(sweeps)} pose{'s' if len(sweeps) != 1 else ''} swept "
                 f"{'are' if len(sweeps) != 1 else 'is'} mapped and written" if sweeps
                 else "no reading arrived, so nothing was mapped or written")
-        print(f"irring drive: {what}; {kept}", file=sys.stderr)
+        _tell(f"irring drive: {what}; {kept}", file=sys.stderr)
         if not sweeps:
             return errors.INTERRUPTED
     elif not sweeps:   # one line: why, and that there is nothing to map
@@ -248,7 +249,7 @@ def run(args: argparse.Namespace) -> int:
               "nothing was mapped or written", file=sys.stderr)
         return errors.DEVICE
     elif failure is not None:   # what arrived is mapped below
-        print(f"irring drive: error: {errors.printable(str(failure), 2000)}", file=sys.stderr)
+        _tell(f"irring drive: error: {errors.printable(str(failure), 2000)}", file=sys.stderr)
 
     try:
         paths, result, link = _map_and_write(args, sweeps, acq, ring, truth, calibration,
@@ -265,6 +266,16 @@ def run(args: argparse.Namespace) -> int:
               f"{t.checksum_failures} checksum failures, {t.malformed} malformed, "
               f"{t.seq_gaps} seq gaps, {t.timeouts} timeouts, {t.resweeps} re-sweeps")
     return 0 if failure is None else errors.INTERRUPTED if stopped else errors.DEVICE
+
+
+def _tell(*lines, file, **kw) -> None:
+    """print(), but a line its reader did not take (`irring drive | head -1`) must not end
+    the drive and lose what the ring delivered: the report after --out is written meets the
+    same closed stream and ends the command (exit 4)."""
+    try:
+        print(*lines, file=file, **kw)
+    except OSError:
+        pass
 
 
 def _map_and_write(args, sweeps, acq, ring, truth, calibration, cal_text, failure, stopped):
