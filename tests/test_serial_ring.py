@@ -549,6 +549,34 @@ def test_an_irinf_announcing_another_ring_mid_sweep_ends_it_keeping_the_old_ring
     assert not err.value.report.complete and err.value.report.received_steps == 2
 
 
+def test_a_device_that_turns_to_the_other_protocols_framing_mid_sweep_is_named():
+    """A board reflashed with v1 firmware (or swapped for an old one) mid-session answered
+    every IRSCN, IRDON and IRSTP in v1 framing, each dropped as malformed; the drive ended
+    'stopped answering … Check power, cable and baud rate', of a device that answered all
+    along. It ends as DeviceChanged naming the framing, the readings before it kept."""
+    def v1(msg):
+        return p.encode(msg, version=1)
+
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            return [p.Scan(0, -3, 0, (10, 11)), p.Scan(1, -2, 1, (12, 13)),
+                    *(v1(p.Scan(2 + i, s, 2 + i, (14, 15))) for i, s in enumerate(range(-1, 4))),
+                    v1(p.Done(6))]
+        return [v1(p.Done(6))] if isinstance(msg, p.Stop) else []
+
+    ring = SerialRing(ScriptPort(script), timeout_s=TIMEOUT_S).open()
+    with pytest.raises(DeviceChanged) as err:
+        ring.sweep()
+    assert str(err.value).startswith(
+        "the device on script:// now frames its sentences for IRR protocol v1 (")
+    assert ("where the handshake spoke v2: it was reflashed or swapped; connect again to read "
+            "it. device changed: 2 of 7 steps received; missing steps -1, 0, 1, 2, 3") in str(
+        err.value)
+    assert err.value.partial.counts.tolist() == [[10, 11], [12, 13]]
+
+
 def test_an_irinf_announcing_another_ring_during_goto_or_stop_is_device_changed():
     other = p.Info(1, 3, 10, 900, 1, 1, -5, 5, "other")
     answers = {p.GoTo: [INFO, p.Position(2)], p.Stop: [other, p.Done(-1)]}

@@ -755,6 +755,7 @@ class SerialRing:
                                                                             + per_step_s)
         ps.max_step_s = stall_limit
         heard = False   # a garbled sentence arrived since the last IRSTP: the device answers
+        framed, accepted = self._other_framing, self.stats.sentences
         suspects: list[p.Scan] = []   # IRSCN numbered before `hint`: stale, or a renumbering
         contradicted: set[int] = set()   # steps read twice with other counts in this pass
 
@@ -806,8 +807,8 @@ class SerialRing:
                 heard = True
                 deadline = min(deadline, now + min(self.timeout_s, GARBLED_ANSWER_RETRY_S))
             if now - stalled_since > stall_limit:
-                raise self._lost(
-                    DeviceTimeout,
+                raise self._given_up(
+                    framed, accepted,
                     f"no progress for {now - stalled_since:.1f} s during IRSWP,{lo},{hi}: "
                     f"{len(ps.got)} of {len(ps.expected)} steps arrived, "
                     f"{self.stats.sentences} sentences in all")
@@ -891,7 +892,7 @@ class SerialRing:
                         self.stats.timeouts += 1
                     if stops > self.retries:
                         got = f"{len(ps.got)} of {len(ps.expected)} steps"
-                        raise self._lost(DeviceTimeout, (
+                        raise self._given_up(framed, accepted, (
                             f"no progress during IRSWP,{lo},{hi}: {CHATTER_LIMIT_BYTES} bytes "
                             f"arrived without a new step {stops + 1} times, {stops} IRSTP did "
                             f"not end it; {got} arrived") if flooded else (
@@ -904,6 +905,22 @@ class SerialRing:
                 self._send(p.Stop())
                 wait_s = self.timeout_s
                 deadline = now + wait_s
+
+    def _given_up(self, framed: int, accepted: int, what: str) -> LinkLost:
+        """The error of a pass given up (DeviceTimeout, ``what`` saying why), unless since it
+        began (``framed``, ``accepted``: the counters then) more sentences came framed for
+        the other protocol version than intact, a few at least: then the device answers in
+        the other framing (reflashed or swapped mid-session), which no IRSTP changes."""
+        other = self._other_framing - framed
+        if other < 3 or other <= self.stats.sentences - accepted:
+            return self._lost(DeviceTimeout, what)
+        spoken = self.decoder.version
+        them = 3 - spoken   # the other of p.PROTOCOL_VERSIONS
+        return DeviceChanged(
+            f"the device on {self.port_name} now frames its sentences for IRR protocol "
+            f"v{them} ({other} sentences with a {p.CHECK_DIGITS[them]}-digit check field "
+            f"since this pass began, dropped), where the handshake spoke v{spoken}: it was "
+            f"reflashed or swapped; connect again to read it.")
 
     def _assemble(self, req: list[int], passes: list[_Pass], samples: int, settle_ms: int,
                   pose: np.ndarray) -> core.Sweep:
