@@ -343,11 +343,14 @@ def test_fault_settings_are_checked(kw):
 # --------------------------------------------------------------------------- CLI
 
 
-@pytest.mark.parametrize("given", [True, False], ids=["--link", "default ./ring.pty"])
-def test_irring_emulate_serves_a_link_and_cleans_up_on_sigterm(tmp_path, t_room, given):
+@pytest.mark.parametrize("given, reverse", [(True, False), (False, False), (True, True)],
+                         ids=["--link", "default ./ring.pty", "--reverse-sweeps"])
+def test_irring_emulate_serves_a_link_and_cleans_up_on_sigterm(tmp_path, t_room, given,
+                                                               reverse):
     link = tmp_path / ("irr" if given else "ring.pty")
     proc = subprocess.Popen([sys.executable, "-m", "irring", "emulate", "t_room"]
-                            + (["--link", str(link)] if given else []), cwd=tmp_path,
+                            + (["--link", str(link)] if given else [])
+                            + (["--reverse-sweeps"] if reverse else []), cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 20
@@ -356,7 +359,11 @@ def test_irring_emulate_serves_a_link_and_cleans_up_on_sigterm(tmp_path, t_room,
         assert link.exists(), proc.stderr.read() if proc.poll() is not None else "no link"
         with SerialRing(str(link), timeout_s=1.0) as ring:
             sweep = ring.sweep()
-        assert np.array_equal(sweep.counts, SimRing(t_room).sweep(0).counts)
+            report = ring.last_report
+        # reversed, the device reads the steps from 35 down: the same steps, another order
+        truth = SimRing(t_room).sweep(0, steps=FULL[::-1] if reverse else FULL).counts
+        assert np.array_equal(sweep.steps, FULL) and report.link["reversed_passes"] == reverse
+        assert np.array_equal(sweep.counts, truth[::-1] if reverse else truth)
     finally:
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=10)

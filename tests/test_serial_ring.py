@@ -517,6 +517,81 @@ def test_irscn_contradicting_the_sweep_is_dropped_not_trusted():
     assert link["lost_scans"] == 5  # seq 1, 2, 3 dropped or lost, 5 and 6 never arrived
 
 
+def test_a_device_sweeping_against_the_asked_direction_is_read_at_the_steps_it_names():
+    """A firmware that sweeps IRSWP,-35,35 from 35 down, each IRSCN naming its step: its seq
+    runs against the steps, and the driver dropped all but the first as inconsistent (1 of
+    71 steps, "140 IRSCN lost"). Each reading is placed at the step it names; the report
+    says the pass ran the other way."""
+    src = StandInSource()
+    ring = ring_on(Device(src, faults=Faults(reverse_sweeps=True)))
+    sweep = ring.sweep(samples=2, settle_s=0.010)
+    steps = np.arange(-35, 36)
+    assert src.calls[-1][1] == tuple(range(35, -36, -1))     # the device swept downwards
+    assert np.array_equal(sweep.steps, steps) and sweep.missing_steps == ()
+    assert np.array_equal(sweep.counts, src.truth(0, steps[::-1])[::-1])
+    # read from step 35 down: the device clock falls along the rising steps
+    assert np.allclose(np.diff(sweep.timestamps_s), -(0.010 + 2 * core.GP2_PERIOD_S),
+                       atol=1.1e-3)
+    assert sweep.duration_s == pytest.approx(core.hardware_duration_s(71, 0.010, 2), abs=2e-3)
+    link = ring.last_report.link
+    assert {k: v for k, v in link.items() if v and k not in ("sentences", "scans")} \
+        == {"reversed_passes": 1}
+    assert ring.last_report.message == \
+        "all 71 steps received; 1 passes swept against the asked direction"
+
+
+def test_a_reversed_device_on_a_lossy_link_keeps_only_what_it_sent_and_resweeps_the_rest():
+    src = StandInSource()
+    ring = ring_on(Device(src, faults=Faults(reverse_sweeps=True, drop_rate=0.2, seed=1)))
+    first = ring.sweep(resweep=0)
+    truth = src.truth(0, np.arange(35, -36, -1))[::-1]
+    assert rows_equal(first, truth, np.arange(-35, 36))
+    assert 5 < len(first.missing_steps) < 30
+    assert ring.last_report.link["lost_scans"] == len(first.missing_steps)
+    assert ring.last_report.link["inconsistent"] == 0
+    again = ring.sweep(resweep=4)
+    assert len(again.missing_steps) < 3 and ring.last_report.link["inconsistent"] == 0
+    # the full pass ran reversed; the re-swept steps went out one IRSWP each (no direction)
+    assert ring.last_report.link["reversed_passes"] == 1
+
+
+@pytest.mark.parametrize("reverse, arrive", [
+    (True, [1, 2]),             # the first IRSCN (step 3) lost: step 2 alone looks forward
+    (True, [6]),                # only the last sent (step -3) arrives: the IRDON tells
+    (False, [6]),               # forward, only step 3 arrives: it alone looks reversed
+    (False, [0, 1, 2, 3, 4, 5, 6]),
+    (True, [0, 1, 2, 3, 4, 5, 6]),
+])
+def test_which_way_a_pass_ran_is_settled_by_a_second_irscn_or_the_irdon(reverse, arrive):
+    """Losses are counted in the order the device sent, whichever way it swept."""
+    order = list(range(3, -4, -1)) if reverse else list(range(-3, 4))
+
+    def on_sweep(cmd):
+        return [p.Scan(10 + i, order[i], i, (order[i] + 50, 7)) for i in arrive] + [p.Done(16)]
+    ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
+    sweep = ring.sweep(resweep=0)
+    assert sorted(sweep.steps.tolist()) == sorted(order[i] for i in arrive)
+    assert sweep.counts[:, 0].tolist() == [s + 50 for s in sweep.steps]
+    link = ring.last_report.link
+    assert (link["lost_scans"], link["reversed_passes"], link["inconsistent"]) == \
+        (7 - len(arrive), int(reverse), 0)
+    assert link["seq_gaps"] == (arrive[0] > 0) + (arrive[-1] < 6)
+
+
+def test_a_reversed_device_that_rebooted_between_sweeps_keeps_the_next_sweep():
+    """Numbered from 0 again after a reboot, the second sweep's IRSCN look stale; the IRDON
+    that ends them confirms them as this sweep's, read 3 → -3."""
+    def on_sweep(cmd):
+        return [p.Scan(i, 3 - i, i, (53 - i, 7)) for i in range(7)] + [p.Done(6)]
+    ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
+    ring.sweep(resweep=0)
+    sweep = ring.sweep(resweep=0)
+    assert sweep.steps.tolist() == list(range(-3, 4)) and sweep.missing_steps == ()
+    assert sweep.counts[:, 0].tolist() == list(range(47, 54))
+    link = ring.last_report.link
+    assert (link["stale"], link["lost_scans"], link["reversed_passes"]) == (0, 0, 1)
+
+
 def test_an_irinf_announcing_another_ring_mid_sweep_ends_it_keeping_the_old_rings_readings():
     """A board that reboots into other firmware mid-session announces itself; its IRINF
     was ignored as a late answer, so the driver went on reading the old ring's geometry.

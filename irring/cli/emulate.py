@@ -26,6 +26,7 @@ examples:
   irring emulate t_room --corrupt-rate 0.01 --drop-rate 0.05
   irring emulate t_room --bitflip-rate 0.001      # line noise: single bits flipped
   irring emulate t_room --stall-after 100 --disconnect-after 400
+  irring emulate t_room --reverse-sweeps          # sweeps each IRSWP from its end back
   irring emulate t_room_cylinder --link ring2.pty # a second device beside the first
   irring emulate t_room --tcp 0                   # a free TCP port; it prints which, then:
                                                   #   irring drive --port socket://127.0.0.1:PORT
@@ -80,6 +81,9 @@ def register(p: argparse.ArgumentParser) -> None:
                                      f"≤ {STALL_S_MAX:g} (default: never)")
     p.add_argument("--disconnect-after", type=at_least(0), default=None, metavar="N",
                    help="close the port after N ≥ 0 sentences, a pulled cable (default: never)")
+    p.add_argument("--reverse-sweeps", action="store_true",
+                   help="sweep every IRSWP from its last step back to its first, each IRSCN "
+                        "naming its step: a firmware that ignores the asked direction")
     p.add_argument("--seed", type=seed, default=None,
                    help="noise seed ≥ 0 of the readings (default: the scenario's seed)")
     p.add_argument("--fault-seed", type=seed, default=0, metavar="SEED",
@@ -121,7 +125,8 @@ def run(args: argparse.Namespace) -> int:
         faults = Faults(corrupt_rate=args.corrupt_rate, bitflip_rate=args.bitflip_rate,
                         drop_rate=args.drop_rate,
                         stall_after=args.stall_after, stall_s=args.stall_seconds,
-                        disconnect_after=args.disconnect_after, seed=args.fault_seed)
+                        disconnect_after=args.disconnect_after,
+                        reverse_sweeps=args.reverse_sweeps, seed=args.fault_seed)
     except ValueError as exc:
         print(f"irring emulate: error: {exc}", file=sys.stderr)
         return 2

@@ -46,6 +46,9 @@ class Faults:
         input) for ``stall_s`` seconds (default: for good), then aborts its sweep and
         recovers.
     disconnect_after: after this many sentences the device closes the port.
+    reverse_sweeps: the device sweeps every IRSWP from ``to`` to ``from``, against the asked
+        direction, each IRSCN naming the step it was read at (a firmware that ignores the
+        direction it is given).
     seed: of the fault generator (independent of the readings' noise).
     """
 
@@ -55,6 +58,7 @@ class Faults:
     stall_after: int | None = None
     stall_s: float = math.inf
     disconnect_after: int | None = None
+    reverse_sweeps: bool = False
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -210,6 +214,8 @@ class Device:
     def _start_sweep(self, cmd: p.SweepCommand, now: float) -> None:
         d = 1 if cmd.to_step >= cmd.from_step else -1
         steps = np.arange(cmd.from_step, cmd.to_step + d, d)
+        if self.faults.reverse_sweeps:
+            steps = steps[::-1]
         full = {cmd.from_step, cmd.to_step} == {self.info.min_step, self.info.max_step}
         if full:
             if self._full_sweeps and self.fixed_pose is None:
@@ -223,7 +229,7 @@ class Device:
         counts = np.clip(np.rint(np.nan_to_num(raw, nan=0.0)), 0, top).astype(np.int64)
         # Moving to `from_step` costs motor time; the one-step moves inside the sweep happen
         # within each step's settle time, so a sweep lasts core.hardware_duration_s.
-        move_s = abs(cmd.from_step - self._position) * MOVE_S_PER_STEP
+        move_s = abs(int(steps[0]) - self._position) * MOVE_S_PER_STEP
         step_s = core.hardware_duration_s(1, settle_s, cmd.samples)
         self._advance(move_s)
         first_due = now + (move_s + step_s if self.realtime else 0.0)

@@ -158,6 +158,8 @@ class LinkStats:
     resweeps: int = 0           # IRSWP re-issued for missing steps only
     clock_faults: int = 0       # passes whose device clock ran impossibly fast, backwards or
     #                             stood still (the pass's hardware time is then the nominal one)
+    reversed_passes: int = 0    # passes the device swept to → from, against the asked order
+    #                             (read: each IRSCN names its step; its seq runs the other way)
 
     def as_dict(self) -> dict[str, int]:
         return dataclasses.asdict(self)
@@ -188,7 +190,8 @@ def _describe_link(link: dict[str, int]) -> str:
              "inconsistent": "inconsistent IRSCN dropped", "stale": "stale IRSCN dropped",
              "duplicates": "duplicates", "device_errors": "IRERR answers",
              "resent_commands": "commands resent", "resweeps": "re-sweeps",
-             "disconnects": "disconnects", "clock_faults": "device clock faults"}
+             "disconnects": "disconnects", "clock_faults": "device clock faults",
+             "reversed_passes": "passes swept against the asked direction"}
     parts = [f"{link[k]} {v}" for k, v in names.items() if link.get(k)]
     return ", ".join(parts) if parts else "clean link"
 
@@ -240,17 +243,20 @@ def _runs(steps: list[int]) -> list[tuple[int, int]]:
     return runs
 
 
-def _renumbered(scans: list[p.Scan], pos_of: dict[int, int], done_seq: int) -> bool:
-    """True when ``scans`` (IRSCN numbered before the pass began) are one numbering of the
+def _renumbered(scans: list[p.Scan], pos_of: dict[int, int], done_seq: int) -> bool | None:
+    """Whether ``scans`` (IRSCN numbered before the pass began) are one numbering of the
     pass's steps — each seq minus its step's place the same — that the IRDON ``done_seq``
-    ends: its seq is theirs at the place of the last step received or a later one."""
+    ends (its seq is theirs at the place of the last step received or a later one): None if
+    not, else whether they number the steps from the pass's last one (swept reversed)."""
     if not scans or done_seq < 0 or any(sc.step not in pos_of for sc in scans):
-        return False
-    bases = {(sc.seq - pos_of[sc.step]) % p.SEQ_MODULO for sc in scans}
-    if len(bases) != 1:
-        return False
-    last = (done_seq - bases.pop()) % p.SEQ_MODULO
-    return max(pos_of[sc.step] for sc in scans) <= last < len(pos_of)
+        return None
+    n = len(pos_of)
+    for reverse in (False, True):
+        places = [n - 1 - pos_of[sc.step] if reverse else pos_of[sc.step] for sc in scans]
+        bases = {(sc.seq - at) % p.SEQ_MODULO for sc, at in zip(scans, places)}
+        if len(bases) == 1 and max(places) <= (done_seq - bases.pop()) % p.SEQ_MODULO < n:
+            return reverse
+    return None
 
 
 @dataclass
@@ -260,6 +266,8 @@ class _Pass:
     run: tuple[int, int]                 # (from, to) inclusive, either direction
     got: dict[int, p.Scan] = field(default_factory=dict)
     done: bool = False
+    # the device swept to → from (its IRSCN name their steps; their seq runs against them)
+    reversed: bool = False
     # host time a step may take at most before the pass is given up (its no-progress
     # limit): a device clock claiming more per step than this is wrong
     max_step_s: float = float("inf")
@@ -274,6 +282,12 @@ class _Pass:
     def index(self) -> dict[int, int]:
         """step → its place in the pass."""
         return {s: i for i, s in enumerate(self.expected)}
+
+    def sent_at(self, pos: int, reverse: bool | None = None) -> int:
+        """The place in the device's sending order of the step at place ``pos`` (swept as
+        ``reverse`` says, else as the pass is believed swept)."""
+        reverse = self.reversed if reverse is None else reverse
+        return abs(self.run[1] - self.run[0]) - pos if reverse else pos
 
 
 class SerialRing:
@@ -758,16 +772,51 @@ class SerialRing:
         framed, accepted = self._other_framing, self.stats.sentences
         suspects: list[p.Scan] = []   # IRSCN numbered before `hint`: stale, or a renumbering
         contradicted: set[int] = set()   # steps read twice with other counts in this pass
+        # A device sweeps from → to. One whose IRSCN come to → from, each naming its step,
+        # is read as it swept: the step places the reading, the seq only runs the other way.
+        # The first IRSCN kept guesses the direction; a second one (or the IRDON) settles it.
+        first: p.Scan | None = None
+        settled = len(pos_of) == 1
+
+        def settle(reverse: bool) -> None:
+            nonlocal base, settled
+            settled = True
+            if reverse != ps.reversed:   # `first` alone was misread: place it anew
+                pos = pos_of[first.step]
+                old, new = ps.sent_at(pos), ps.sent_at(pos, reverse)
+                base = (first.seq - new) % p.SEQ_MODULO
+                self.stats.lost_scans += new - old
+                self.stats.seq_gaps += (new > 0) - (old > 0)
+                ps.reversed = reverse
+            self.stats.reversed_passes += reverse
+
+        def alone() -> bool:
+            """Only `first` is kept and the direction is not settled yet."""
+            return not settled and len(ps.got) == 1 and first is not None \
+                and first.step in ps.got
 
         def take(msg: p.Scan) -> None:
             """Keep one IRSCN of this pass, counting gaps, duplicates and contradictions."""
-            nonlocal base, last_seq
+            nonlocal base, last_seq, first
             pos = pos_of.get(msg.step)
-            if pos is None or (base is not None and (msg.seq - base) % p.SEQ_MODULO != pos):
-                self.stats.inconsistent += 1  # its step contradicts its seq
+            if pos is None:
+                self.stats.inconsistent += 1  # a step this pass did not ask for
                 return
             if base is None:
-                base = (msg.seq - pos) % p.SEQ_MODULO
+                if not settled:   # its first IRSCN: the pass's last step if swept reversed
+                    ps.reversed = pos == len(pos_of) - 1
+                base = (msg.seq - ps.sent_at(pos)) % p.SEQ_MODULO
+            elif (msg.seq - base) % p.SEQ_MODULO != ps.sent_at(pos):
+                flip = not ps.reversed
+                if not (alone() and msg.step != first.step
+                        and (msg.seq - first.seq) % p.SEQ_MODULO
+                        == (ps.sent_at(pos, flip) - ps.sent_at(pos_of[first.step], flip))
+                        % p.SEQ_MODULO):
+                    self.stats.inconsistent += 1  # its step contradicts its seq
+                    return
+                settle(flip)
+            elif alone() and msg.step != first.step:
+                settle(ps.reversed)
             if msg.step in contradicted:
                 self.stats.inconsistent += 1
                 return
@@ -792,6 +841,8 @@ class SerialRing:
                 last_seq = msg.seq
             self._position = msg.step
             ps.got[msg.step] = msg
+            if first is None:
+                first = msg
             self.stats.scans += 1
 
         while True:
@@ -823,7 +874,8 @@ class SerialRing:
                         continue
                     take(msg)
                 elif isinstance(msg, p.Done):
-                    if not ps.got and _renumbered(suspects, pos_of, msg.seq):
+                    reverse = None if ps.got else _renumbered(suspects, pos_of, msg.seq)
+                    if reverse is not None:
                         # every IRSCN looked stale, but they and this IRDON number this very
                         # pass: the device numbers from elsewhere (it rebooted between sweeps,
                         # or its last IRDON was wrong), so they are this pass's readings
@@ -831,6 +883,9 @@ class SerialRing:
                                  "pass's readings kept", len(suspects))
                         self.stats.stale -= len(suspects)
                         hint = None
+                        ps.reversed = reverse
+                        if len(suspects) > 1:
+                            settle(reverse)
                         for scan in suspects:
                             take(scan)
                         suspects.clear()
@@ -842,6 +897,12 @@ class SerialRing:
                         continue
                     if base is None:
                         base = hint
+                    if alone() and not stops and msg.seq >= 0:
+                        # one IRSCN kept: how many the device sent after it tells the way
+                        after = (msg.seq - first.seq) % p.SEQ_MODULO
+                        pos = pos_of[first.step]
+                        if after in (pos, len(pos_of) - 1 - pos) and 2 * pos != len(pos_of) - 1:
+                            settle(after == pos)
                     if msg.seq >= 0 and base is not None:
                         ahead = (msg.seq - (base - 1 if last_seq is None else last_seq)) \
                             % p.SEQ_MODULO
@@ -963,11 +1024,12 @@ class SerialRing:
         nominal = core.hardware_duration_s(len(ps.expected), settle_ms / 1000, samples)
         if len(ps.got) < 2:
             return nominal
-        pos = ps.index
-        first = min(ps.got.values(), key=lambda sc: pos[sc.step])
-        last = max(ps.got.values(), key=lambda sc: pos[sc.step])
+        index = ps.index
+        sent = {step: ps.sent_at(index[step]) for step in ps.got}
+        first = min(ps.got.values(), key=lambda sc: sent[sc.step])
+        last = max(ps.got.values(), key=lambda sc: sent[sc.step])
         span_s = ((last.t_ms - first.t_ms) % p.CLOCK_MODULO) / 1000.0
-        per_step = span_s / (pos[last.step] - pos[first.step])
+        per_step = span_s / (sent[last.step] - sent[first.step])
         # faster than any sensor reads (a clock standing still), or slower than the pass's
         # no-progress limit allowed
         if not core.MIN_READING_PERIOD_S * samples <= per_step <= ps.max_step_s:
