@@ -30,8 +30,8 @@ from .gp2 import SENSORS
 from .maps import metrics
 from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_scenario_grid,
                            RunSilences, classify, returns_of, slice_steps)
-from .maps.mcap_export import write_mcap
-from .outputs import OutputSet
+from .maps.mcap_export import write_mcap, write_mcap_to  # noqa: F401  (write_mcap: API)
+from .outputs import OutputError, OutputSet, atomic_file
 from .scenario import Scenario, ScenarioError, clipped_obstacles, loads
 
 FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
@@ -506,23 +506,40 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     text)}) into ``out_dir``, all together (:class:`irring.outputs.OutputSet`: an
     interrupted or failed write leaves the folder as it was); time it as the "render"
     stage. ``mcap``: also write the run there as MCAP (``mcap_export``; the "mcap" stage),
-    which needs the ``mcap`` extra."""
+    which needs the ``mcap`` extra: written first beside its place and renamed in just
+    after the set, so an interruption leaves both as they were; an MCAP that fails (an
+    OutputError) still leaves the set written, then raises."""
     from .maps import render  # noqa: F401  # deferred: Pillow, loaded before the clock
 
-    t0 = time.perf_counter()
-    target = OutputSet(out_dir)
-    with target as tmp:
-        paths = _write_into(result, tmp, animation=animation, recording=recording, title=title)
-        for key, (name, text) in (extra_files or {}).items():
-            paths[key] = tmp / name
-            paths[key].write_text(text, encoding="utf-8")
-    result.timings_s["render"] = time.perf_counter() - t0
-    paths = {key: target.out / Path(p).name for key, p in paths.items()}
-    if mcap is not None:
+    def write_set() -> dict[str, Path]:
         t0 = time.perf_counter()
-        paths["mcap"] = write_mcap(result, mcap)
-        result.timings_s["mcap"] = time.perf_counter() - t0
-    return paths
+        target = OutputSet(out_dir)
+        with target as tmp:
+            paths = _write_into(result, tmp, animation=animation, recording=recording,
+                                title=title)
+            for key, (name, text) in (extra_files or {}).items():
+                paths[key] = tmp / name
+                paths[key].write_text(text, encoding="utf-8")
+        result.timings_s["render"] = time.perf_counter() - t0
+        return {key: target.out / Path(p).name for key, p in paths.items()}
+
+    if mcap is None:
+        return write_set()
+    mcap, written = Path(mcap), False
+    try:
+        # Ctrl-C in the 0.16 s the MCAP took after the set (t_room_moving) left the new set
+        # beside an earlier run's MCAP
+        with atomic_file(mcap) as tmp:
+            t0 = time.perf_counter()
+            write_mcap_to(result, tmp, mcap)
+            result.timings_s["mcap"] = time.perf_counter() - t0
+            written = True
+            paths = write_set()
+    except OutputError:
+        if not written:
+            write_set()   # the run's own files are not lost for the MCAP
+        raise
+    return {**paths, "mcap": mcap}
 
 
 def _write_into(result: MapRun, out: Path, *, animation: bool, recording: bool,

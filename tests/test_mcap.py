@@ -118,6 +118,46 @@ def test_a_failed_mcap_write_leaves_no_partial_file(tmp_path, monkeypatch):
     assert (tmp_path / "new.mcap").stat().st_mode & 0o777 == 0o666 & ~_umask()
 
 
+def _files(folder) -> dict[str, bytes]:
+    """Every file below ``folder`` (hidden temporaries too) and its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize("inside", [False, True], ids=["beside --out", "--out/map.mcap"])
+def test_ctrl_c_while_the_mcap_is_written_leaves_the_set_and_the_mcap_as_they_were(
+        tmp_path, monkeypatch, inside):
+    """The MCAP was written after the set was committed: Ctrl-C in its 0.16 s left the new
+    set beside an earlier run's MCAP (with --mcap in --out, the new set without any)."""
+    from irring.maps import mcap_export
+
+    scenario = load_scenario("t_room")
+    out = tmp_path / "o"
+    mcap = out / "map.mcap" if inside else tmp_path / "run.mcap"
+    pipeline.write_outputs(pipeline.run(scenario, seed=1, progress=False), out,
+                           animation=False, mcap=mcap)
+    before = _files(tmp_path)
+    assert {"o/map.pgm", "o/sweeps.npz"} <= set(before) and mcap.exists()
+    real, calls = mcap_export.point_cloud, []
+
+    def interrupted(points, t):
+        calls.append(t)
+        if len(calls) == 2:       # Ctrl-C with half the messages written
+            raise KeyboardInterrupt
+        return real(points, t)
+
+    other = pipeline.run(scenario, seed=2, progress=False)
+    monkeypatch.setattr(mcap_export, "point_cloud", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        pipeline.write_outputs(other, out, animation=False, mcap=mcap)
+    assert _files(tmp_path) == before     # no file changed, no temporary left
+    monkeypatch.setattr(mcap_export, "point_cloud", real)
+    pipeline.write_outputs(other, out, animation=False, mcap=mcap)
+    after = _files(tmp_path)
+    assert set(after) == set(before)
+    assert all(after[name] != before[name] for name in ("o/sweeps.npz", "o/map.pgm"))
+    assert after[str(mcap.relative_to(tmp_path))] != before[str(mcap.relative_to(tmp_path))]
+
+
 def test_an_mcap_that_cannot_be_written_is_an_output_error_naming_it(tmp_path, capsys):
     """--mcap below a file: exit 4 (an output), one line naming the option and the file in
     the way, before the run (it was exit 1 with mkdir's bare 'File exists', then after the

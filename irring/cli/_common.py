@@ -193,7 +193,7 @@ def spare_inputs(outputs: dict, inputs: dict) -> None:
 def mcap_beside_outputs(mcap: Path | None, out: Path) -> None:
     """:class:`UsageError` when ``--mcap`` names one of the files a run writes into ``out``:
     ``irring run t_room --out o --mcap o/sweeps.npz`` left MCAP bytes where the recording
-    was (the MCAP is written after the set; map.mcap is the one name kept for it);
+    was (the MCAP is renamed in after the set; map.mcap is the one name kept for it);
     :class:`OutputError` when its folder cannot be written (checked before the work).
     :class:`UsageError` too when it names ``out`` or a folder holding it: ``--out o --mcap
     o`` wrote the whole set, then failed (exit 4) on the folder it had made."""

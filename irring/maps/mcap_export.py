@@ -141,6 +141,15 @@ def write_mcap(result, path) -> Path:
     """Write ``result`` (a :class:`pipeline.MapRun`) to ``path`` as MCAP (see the module doc).
     Raises ImportError naming the extra when the mcap packages are missing, OutputError
     (outputs.atomic_file) when ``path`` cannot be written or the sweeps' times overflow ROS time."""
+    path = Path(path)
+    with atomic_file(path) as tmp:
+        write_mcap_to(result, tmp, path)
+    return path
+
+
+def write_mcap_to(result, tmp, path) -> None:
+    """:func:`write_mcap`'s work without the rename: the MCAP written at ``tmp`` (a
+    temporary the caller renames to ``path``, the name its errors give)."""
     Writer = _import()
     path = Path(path)
     t_ns, ends = 0, []
@@ -151,7 +160,7 @@ def write_mcap(result, path) -> Path:
         raise OutputError(f"{path}: the sweeps' hardware time adds up to "
                           f"{t_ns // 1_000_000_000} s, past the ROS 2 time stamp's "
                           f"{ROS_TIME_MAX_S} s (68 years); MCAP not written")
-    with atomic_file(path) as tmp, open(tmp, "wb") as f:
+    with open(tmp, "wb") as f:
         writer = Writer(f)
         schemas = {name: writer.register_msgdef(name, text) for name, text in MSGDEFS.items()}
         sc = result.scenario
@@ -177,4 +186,3 @@ def write_mcap(result, path) -> Path:
                              occupancy_grid(result.grid, t_ns), log_time=t_ns,
                              publish_time=t_ns)
         writer.finish()
-    return path
