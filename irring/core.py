@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -144,16 +145,36 @@ def _show(value: Any, si: str) -> str:
     return text if len(text) <= 60 else text[:59] + "…"
 
 
-def bounds_error(value: Any, meta: Any, path: str) -> str | None:
+# the unit a file's key names (longest suffix first), for a number shown as it was written
+_KEY_UNITS = (("_mm_s", "mm/s"), ("_m_s", "m/s"), ("_per_m", "per m"), ("_mm", "mm"),
+              ("_deg", "°"), ("_ms", "ms"), ("_rad", "rad"), ("_m", "m"), ("_s", "s"))
+
+
+def _number(x: float) -> str:
+    """``x`` as %g, a subnormal as its shortest repr (%g shows 5e-324 as 4.94066e-324)."""
+    return repr(float(x)) if 0 < abs(x) < sys.float_info.min else f"{x:g}"
+
+
+def bounds_error(value: Any, meta: Any, path: str, written: float | None = None,
+                 factor: float = 1.0) -> str | None:
     """Why ``value`` breaks the field metadata ``meta`` (None if it does not); ``path`` names
-    the field (its last part, in YAML or SI spelling, sets the display unit)."""
+    the field (its last part, in YAML or SI spelling, sets the display unit). ``written``:
+    the number as the file gave it, ``factor`` times it being ``value``; shown with the
+    range in the unit its key names (5e-324 mm became 0 m and read "0 mm")."""
     choices = meta.get("choices")
     if choices is not None and value not in choices:
         allowed = ", ".join(str(c) for c in choices)
         return f"{value!r} is not allowed; choose one of: {allowed}"
     lo, hi = meta.get("lo"), meta.get("hi")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
-        si = si_name(path.rsplit(".", 1)[-1].split("[", 1)[0])
+        key = path.rsplit(".", 1)[-1].split("[", 1)[0]
+        unit = next((u for suf, u in _KEY_UNITS if key.endswith(suf)), None)
+        if written is not None and unit is not None:
+            lo_hi = [None if v is None else _number(v / factor) for v in (lo, hi)]
+            span = (f"{lo_hi[0]} … {lo_hi[1]}" if None not in lo_hi else
+                    f"≥ {lo_hi[0]}" if lo_hi[0] is not None else f"≤ {lo_hi[1]}")
+            return f"{_number(written)} {unit} is out of range; allowed {span} {unit}"
+        si = si_name(key)
         return f"{_show(value, si)} is out of range; allowed {_fmt_range(si, lo, hi)}"
     return None
 

@@ -336,7 +336,7 @@ class _Loader:
                 raise self.fail(path, f"expected a finite number, got {brief(raw)}")
             if "lo" not in meta and "hi" not in meta:   # positions and sizes (m)
                 meta = {"lo": -MAX_ABS_COORDINATE_M, "hi": MAX_ABS_COORDINATE_M}
-            self.check(value, meta, path)
+            self.check(value, meta, path, raw, factor)
             return value
         if tp is str:
             if not isinstance(raw, str):
@@ -345,8 +345,9 @@ class _Loader:
             return raw
         raise self.fail(path, f"unsupported type {_type_name(tp)}")  # pragma: no cover
 
-    def check(self, value: Any, meta: Mapping, path: str) -> None:
-        why = bounds_error(value, meta, path)
+    def check(self, value: Any, meta: Mapping, path: str, written: float | None = None,
+              factor: float = 1.0) -> None:
+        why = bounds_error(value, meta, path, written, factor)
         if why is not None:
             raise self.fail(path, why)
 

@@ -48,6 +48,21 @@ BAD = [
                                                         "center_mm": [500, 300],
                                                         "radius_mm": -5}]),
      [r"obstacles\[0\]\.radius_mm: -5 mm is out of range; allowed 2 … 2000 mm"]),
+    # shown as written: in metres 5e-324 mm is 0, and the message read "0 mm"
+    ("a subnormal radius", lambda r: _set(r, "obstacles", [{"type": "cylinder",
+                                                           "center_mm": [500, 300],
+                                                           "radius_mm": 5e-324}]),
+     [r"obstacles\[0\]\.radius_mm: 5e-324 mm is out of range; allowed 2 … 2000 mm$"]),
+    ("a subnormal resolution", lambda r: _set(r, "map.resolution_mm", 1e-320),
+     [r"map\.resolution_mm: 1e-320 mm is out of range; allowed 1 … 500 mm$"]),
+    # in the unit its key names: 1e307 m read "inf mm", 9000 mm/s "9.0 … allowed 0 … 5"
+    ("a size in metres past float's mm",
+     lambda r: _set(r, "sensor", {"model": "gp2d12", "max_range_m": 1e307}),
+     [r"sensor\.max_range_m: 1e\+307 m is out of range; allowed 0\.02 … 30 m$"]),
+    ("a speed in mm/s", lambda r: _set(r, "effects", {"motion": {
+        "path": [{"x_mm": 500, "y_mm": 450}, {"x_mm": 600, "y_mm": 450}],
+        "speed_mm_s": 9000}}),
+     [r"effects\.motion\.speed_mm_s: 9000 mm/s is out of range; allowed 0 … 5000 mm/s$"]),
     ("not a known sensor", lambda r: _set(r, "sensor.model", "gp2d13"),
      [r"sensor\.model: 'gp2d13' is not allowed; choose one of: gp2d12, .*laser"]),
     ("not a known design", lambda r: _set(r, "robot.design", "rotating13"),
