@@ -305,6 +305,8 @@ class _Loader:
         if dataclasses.is_dataclass(tp):
             return self.dataclass_(tp, raw, path)
         if origin is tuple:
+            if raw is None and len(args) == 2 and args[1] is Ellipsis:
+                raw = []   # a list left empty is empty, as a section left empty (`effects:`) is
             if not isinstance(raw, (list, tuple)):
                 raise self.fail(path, f"expected a list, got {brief(raw)}")
             if len(args) == 2 and args[1] is Ellipsis:

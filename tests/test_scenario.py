@@ -6,6 +6,7 @@ is allowed — a typo never becomes a silent default.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import re
@@ -258,6 +259,26 @@ def test_effects_as_a_list_are_the_defaults(t_room_raw):
     assert dict(sc.effects) == {"incidence": S.IncidenceEffect(), "noise": S.NoiseEffect()}
     with pytest.raises(TypeError):
         sc.effects["foldover"] = S.FoldoverEffect()  # read-only
+
+
+def test_a_list_left_empty_is_empty_as_a_section_left_empty_is(t_room_raw):
+    """`effects:` with nothing after it meant no effects, `obstacles:` was refused ("expected
+    a list, got None"): a key left empty is now its empty value, list or mapping alike."""
+    t_room_raw["obstacles"] = None
+    t_room_raw["effects"] = None
+    sc = parse(t_room_raw)
+    assert sc.obstacles == () and dict(sc.effects) == {}
+    t_room_raw["obstacles"] = [{"type": "cylinder", "center_mm": [2170, 220], "radius_mm": 22}]
+    assert len(parse(t_room_raw).obstacles) == 1
+    for path, value, message in [
+            ("robot.poses", None, "robot.poses: at least one scan pose is required"),
+            ("room.outline_mm", None, "room.outline_mm: needs at least 3 corners, got 0"),
+            ("obstacles.0.center_mm", None, "obstacles[0].center_mm: expected a list, got None"),
+            ("obstacles", {}, "obstacles: expected a list, got {}"),
+            ("seed", None, "seed: expected a whole number, got None")]:
+        raw = _set(copy.deepcopy(t_room_raw), path, value)
+        with pytest.raises(ScenarioError, match=f"^{re.escape(message)}$"):
+            parse(raw)
 
 
 @pytest.mark.parametrize("design, kind", [("laser", "laser"), ("sonar12", "sonar")])
