@@ -258,3 +258,38 @@ def test_kernel_and_oracle_map_a_run_explained_across_sweeps_alike():
     g.insert_run(batches)
     np.testing.assert_allclose(g.log_odds, want, atol=2e-4)
     assert not occupied_at(g, EMITTER[0], WALL_Y + 0.045)
+
+
+def test_the_run_joined_for_the_explain_rule_is_one_consistent_points():
+    """Sweeps of different shapes are explained against each other as one row: every
+    per-reading field is joined in the same order (the rule was given x, y, d, σ, origins
+    and valid joined, (1, K), but heading, θ, reason and the rest of the first sweep, (S, N):
+    right only while the rule read no other field)."""
+    from irring.core import points_with
+    from irring.maps import mapping
+
+    wall = sweep(*wall_beams(0.008))                               # (2, 40)
+    long = points_with(sweep(LONG, steps=3), reach_m=np.full((3, 1), 0.3),
+                       reason=np.full((3, 1), int(Reason.NO_RETURN), np.uint8))
+    given = []
+
+    def explained(points, *args):
+        given.append(points)
+        return mapping._explained(points, *args)
+
+    g = grid()
+    placed = mapping.placed_readings([wall, long], g.shape, g.origin_xy_m, g.resolution_m,
+                                     g.params, explained=explained)
+    (row,) = given
+    for field in ("x", "y", "d", "theta", "origin_x", "origin_y", "heading", "sigma_m",
+                  "iterations", "valid", "reason", "reach_m"):
+        value = getattr(row, field)
+        assert value.shape == (1, 83), field
+        if field in ("x", "y", "d", "sigma_m", "valid"):
+            continue   # (as the map takes them: known_sigma and along_beams may move them)
+        parts = [np.ravel(getattr(b, field)) if getattr(b, field) is not None
+                 else np.full(b.valid.size, np.nan) for b in (wall, long)]
+        np.testing.assert_array_equal(value[0], np.concatenate(parts), err_msg=field)
+    assert row.reason.dtype == np.uint8 and row.valid.dtype == bool
+    assert np.isnan(row.reach_m[0, :80]).all() and (row.reach_m[0, 80:] == 0.3).all()
+    assert placed[0].valid.shape == (2, 40) and placed[1].valid.shape == (3, 1)

@@ -549,12 +549,7 @@ def placed_readings(batches: Sequence[Points], shape, origin_xy_m, resolution_m:
                                                    resolution_m, params), params)
         return out
     # every batch's end points as one row: each reading against the run's surfaces
-    joined = {name: np.concatenate([np.asarray(getattr(out[i], name), dtype).ravel()
-                                    for i in pencil])[None, :]
-              for name, dtype in (("origin_x", float), ("origin_y", float), ("x", float),
-                                  ("y", float), ("d", float), ("sigma_m", float),
-                                  ("valid", bool))}
-    ranges = np.asarray(explained(points_with(out[pencil[0]], **joined), shape, origin_xy_m,
+    ranges = np.asarray(explained(joined_row([out[i] for i in pencil]), shape, origin_xy_m,
                                   resolution_m, params), float).ravel()
     start = 0
     for i in pencil:
@@ -563,6 +558,29 @@ def placed_readings(batches: Sequence[Points], shape, origin_xy_m, resolution_m:
                            params)
         start += n
     return out
+
+
+# Points' per-reading fields and the dtype a joined row holds them in
+_READING_FIELDS = (("x", float), ("y", float), ("d", float), ("theta", float),
+                   ("origin_x", float), ("origin_y", float), ("heading", float),
+                   ("sigma_m", float), ("iterations", np.int64), ("valid", bool),
+                   ("reason", np.uint8))
+
+
+def joined_row(batches: Sequence[Points]) -> Points:
+    """``batches`` (sweeps, each (S_i, N_i)) as one Points of shape (1, ΣS_i·N_i): every
+    per-reading field joined in the same order (``reach_m`` NaN for a batch without one),
+    ``max_range_m`` and ``cone_half_angle_rad`` the first batch's."""
+    joined = {name: np.concatenate([np.asarray(getattr(p, name), dtype).ravel()
+                                    for p in batches])[None, :]
+              for name, dtype in _READING_FIELDS}
+    if any(p.reach_m is not None for p in batches):
+        joined["reach_m"] = np.concatenate([
+            np.full(math.prod(np.shape(p.valid)), np.nan) if p.reach_m is None
+            else np.asarray(p.reach_m, float).ravel() for p in batches])[None, :]
+    else:
+        joined["reach_m"] = None
+    return points_with(batches[0], **joined)
 
 
 def _explained(points: Points, shape, origin_xy_m, resolution_m: float,
