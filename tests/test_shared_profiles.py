@@ -75,6 +75,34 @@ def test_shared_profiles_are_a_call_of_their_own_while_the_valid_readings_stay(p
     assert len(calls) == 4
 
 
+@pytest.mark.parametrize("profiler", [profiles_compiled, range_profiles])
+def test_a_first_call_that_asked_nothing_answers_a_later_one_by_a_call_of_its_own(profiler):
+    """First asked for no reading with no extra ones (nothing shared), then for three: a
+    call of its own (a corridor room crashed here, IndexError taking from nothing)."""
+    cal = stand_in_calibration(strength=0.6, noise_counts=2.0)
+    room = polygon([(-0.43, -0.36), (0.55, -0.31), (0.49, 0.42), (-0.35, 0.53)])
+    sweep, _, _ = make_sweep(cal, walls=room, noise_counts=2.0, seed=5,
+                             pose=(0.02, -0.04, 0.3), quantize=True)
+    p = estimate_detail(sweep, cal).points
+    steps = np.asarray(sweep.steps)
+    index = scan_order(steps, p.valid.shape[1])
+    vi = index[p.valid.reshape(-1)[index]]
+    calls = []
+
+    def counting(*a, **k):
+        calls.append(a[2].size)
+        return profiler(*a, **k)
+
+    shared = _SharedProfiles(counting, np.zeros(p.valid.size, dtype=bool))
+    none = np.zeros(0, dtype=np.intp)
+    _same(shared(p, vi, none, sweep.counts, steps, cal),
+          profiler(p, vi, none, sweep.counts, steps, cal))
+    some = np.array([1, 4, 9], dtype=np.intp)
+    _same(shared(p, vi, some, sweep.counts, steps, cal),
+          profiler(p, vi, some, sweep.counts, steps, cal))
+    assert calls == [0, 3]
+
+
 def test_the_t_rooms_final_pass_profiles_once_with_the_same_estimate(monkeypatch):
     """On the bundled T-room the short far lines' doubt takes its members' profiles from
     local_incidence's call: one kernel call fewer, and the estimate bit for bit the one

@@ -1541,7 +1541,9 @@ class _SharedProfiles:
             return self.profiler(points, vi, off, counts, steps, cal, apart=apart)
         if self.pr is not None and np.array_equal(vi, self.vi):
             row = np.searchsorted(self.asked, off)
-            if not np.array_equal(self.asked.take(row, mode="clip"), off):
+            # (a first call that asked nothing leaves nothing to take from)
+            have = self.asked.take(row, mode="clip") if self.asked.size else self.asked
+            if not np.array_equal(have, off):
                 return self.profiler(points, vi, off, counts, steps, cal)
             out = object.__new__(_Profile)    # (dataclasses.replace costs several times more)
             out.__dict__.update(self.pr.__dict__)
