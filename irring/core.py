@@ -70,13 +70,20 @@ def work_bytes(readings: int, largest_sweep: int) -> int:
     return int(readings) * BYTES_PER_READING + int(largest_sweep) * ESTIMATE_BYTES_PER_READING
 
 
+def gigabytes(n_bytes: float) -> str:
+    """``n_bytes`` in GB as a refusal shows it: one decimal, three significant figures past
+    a million GB (a 10³⁰-cell grid read "about 600000000000000016777216.0 GB")."""
+    gb = n_bytes / 1e9
+    return f"{gb:.1f} GB" if gb < 1e6 else f"{gb:.3g} GB"
+
+
 def work_refusal(work: str, need: int, who: str, advice: str) -> str | None:
     """None when ``need`` bytes fit :data:`WORK_MEMORY_BYTES`, else the one wording every
     refusal of too much work uses (raised as :class:`irring.errors.TooBig`, exit 5):
     '{work} (about N GB), more than the 2 GB {who} may use: {advice}'."""
     if need <= WORK_MEMORY_BYTES:
         return None
-    return (f"{work} (about {need / 1e9:.1f} GB), more than the {WORK_MEMORY_BYTES / 1e9:g} GB "
+    return (f"{work} (about {gigabytes(need)}), more than the {WORK_MEMORY_BYTES / 1e9:g} GB "
             f"{who} may use: {advice}")
 
 

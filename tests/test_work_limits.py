@@ -189,3 +189,18 @@ def test_one_sweep_too_big_to_estimate_is_refused_up_front(tmp_path, capsys):
     assert "1 sweeps × 20,001 steps × 72 sensors = 1,440,072 readings (about 4.8 GB)" in err
     assert "more than the 2 GB" in err and "robot.ring.sensors" in err
     assert seconds < 30
+
+
+def test_a_grid_far_past_memory_says_its_gigabytes_in_a_few_digits():
+    """A 10¹⁵ × 10¹⁵-cell grid (a recording's metadata may say so) read "about
+    600000000000000016777216.0 GB" (FINDINGS10); one decimal stays below a million GB."""
+    from irring.errors import TooBig
+    from irring.maps.mapping import BYTES_PER_CELL, check_grid_size
+
+    assert BYTES_PER_CELL == 60
+    with pytest.raises(TooBig) as huge:
+        check_grid_size(10**15, 2 * 10**15, 0.01)
+    assert "would need about 1.2e+23 GB; at most" in str(huge.value)
+    with pytest.raises(TooBig) as big:
+        check_grid_size(200_000, 300_000, 0.01)
+    assert "would need about 3600.0 GB; at most" in str(big.value)

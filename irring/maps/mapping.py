@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from .. import safe_yaml
-from ..core import UNCERTAIN_SIGMA_M, Points, Reason, points_with
+from ..core import UNCERTAIN_SIGMA_M, Points, Reason, gigabytes, points_with
 from ..errors import TooBig
 from ..resources import kernel
 
@@ -188,7 +188,7 @@ def check_grid_size(ny: int, nx: int, resolution_m: float, where: str = "the map
         fix = advice or (f"use coarser cells (map.resolution_mm ≥ "
                          f"{math.ceil(resolution_m * 1e3 * scale)}) or a smaller room")
         raise TooBig(f"{where}: a grid of {ny:,} × {nx:,} cells of {resolution_m * 1e3:g} mm "
-                     f"would need about {cells * BYTES_PER_CELL / 1e9:.1f} GB; at most "
+                     f"would need about {gigabytes(cells * BYTES_PER_CELL)}; at most "
                      f"{MAX_GRID_CELLS:,} cells (~{MAX_GRID_CELLS * BYTES_PER_CELL / 1e9:.1f} GB) "
                      f"are mapped: {fix}")
 

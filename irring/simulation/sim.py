@@ -15,7 +15,7 @@ import mujoco.batch
 import numpy as np
 
 from ..core import (BYTES_PER_PHYSICS_VALUE, MAX_STEPS, MAX_SWEEPS, Sweep, Truth, as_pose,
-                    check_steps, hardware_duration_s, work_bytes, work_refusal)
+                    check_steps, gigabytes, hardware_duration_s, work_bytes, work_refusal)
 from ..errors import TooBig
 from ..scenario import Scenario
 from . import dynamics as dynamics_lib
@@ -74,14 +74,14 @@ def check_work(sim: SimRing) -> None:
             + (f" and {physics_steps:,} belt physics steps" if physics_steps else ""))
     sweep_keys = "narrow robot.ring min_step … max_step or raise scan.step_stride"
     if steps > MAX_STEPS:
-        raise TooBig(f"{where}: {work} (about {need / 1e9:.1f} GB): a sweep takes at most "
+        raise TooBig(f"{where}: {work} (about {gigabytes(need)}): a sweep takes at most "
                      f"{MAX_STEPS:,} steps; {sweep_keys}")
     if sweeps > MAX_SWEEPS:
         fix = ("raise effects.motion.speed_mm_s or shorten effects.motion.path"
                if sim.scenario.has("motion") else
                f"list at most {MAX_SWEEPS:,} robot.poses (a sweep each), or split them "
                "into several scenarios")
-        raise TooBig(f"{where}: {work} (about {need / 1e9:.1f} GB): a run takes at most "
+        raise TooBig(f"{where}: {work} (about {gigabytes(need)}): a run takes at most "
                      f"{MAX_SWEEPS:,} sweeps; {fix}")
     keys = (f"{sweep_keys}, or use fewer robot.ring.sensors, robot.poses or a shorter or "
             f"faster effects.motion")
