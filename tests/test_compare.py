@@ -160,3 +160,17 @@ def test_chart_with_nothing_to_label_draws_no_empty_legend(tmp_path, design):
                      "--workers", "1", "--bearings", "16", "--distances-mm", "90000",
                      "--out", str(out)]) == 0
     assert (out / "compare.png").stat().st_size > 10_000
+
+
+def test_table_heads_each_detection_distance_with_its_own_value():
+    """--distances-mm 0.0001 headed its column "r@0mm" (FINDINGS10); 250.5 read "r@250mm"."""
+    from irring.studies import compare as compare_mod
+
+    scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": None}
+    rec = {"design": "rotating12", **scores, "hardware_time_s": 2.72, "compute_time_s": 0.004,
+           "scenarios": ["t_room"], "poses": {"t_room": 4}, "by_scenario": {"t_room": scores},
+           "detection_distances_m": [1e-7, 0.2505, 0.75],
+           "min_detectable_radius_m": [None, 0.0121, 0.02]}
+    head, _, row = compare_mod.table([rec]).splitlines()[:3]
+    assert head.split()[-3:] == ["r@0.0001mm", "r@250.5mm", "r@750mm"]
+    assert row.split()[-3:] == ["miss", "12.1mm", "20.0mm"]

@@ -134,7 +134,7 @@ def table(records: list[dict]) -> str:
     shadow_head = [f"shadow {n} scan{'s' if n > 1 else ''}" if by_count else f"shadow {sc}"
                    for sc, n in scans.items()]
     head = (["design", "F1 occ", "free acc", "coverage", "shadow"] + shadow_head
-            + ["360° view", "compute"] + [f"r@{d * 1e3:.0f}mm" for d in dists])
+            + ["360° view", "compute"] + [f"r@{d * 1e3:g}mm" for d in dists])
     rows = [head]
     for r in records:
         row = [r["design"]] + [("—" if r[k] is None else f"{r[k]:.3f}") for k in TABLE_SCORES]
