@@ -540,6 +540,17 @@ def test_a_device_sweeping_against_the_asked_direction_is_read_at_the_steps_it_n
         "all 71 steps received; 1 passes swept against the asked direction"
 
 
+def test_a_reversed_device_is_given_the_time_to_travel_to_the_end_it_starts_from(
+        virtual_time):
+    """After a sweep it ends at -35; asked for -35 … 35 it first travels 70 steps to 35.
+    The first reading was awaited as if the ring stood at its start: with a short timeout
+    the IRSTP went out during the move and the next sweep came back empty (NoReadings)."""
+    ring = ring_on(Device(StandInSource(), faults=Faults(reverse_sweeps=True), realtime=True))
+    for _ in range(3):
+        sweep = ring.sweep(resweep=0, samples=1, settle_s=0.0)
+        assert len(sweep.steps) == 71 and ring.last_report.link["timeouts"] == 0
+
+
 def test_a_reversed_device_on_a_lossy_link_keeps_only_what_it_sent_and_resweeps_the_rest():
     src = StandInSource()
     ring = ring_on(Device(src, faults=Faults(reverse_sweeps=True, drop_rate=0.2, seed=1)))

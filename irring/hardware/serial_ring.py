@@ -748,9 +748,10 @@ class SerialRing:
         last_seq: int | None = None
         max_count = (1 << info.adc_bits) - 1
         per_step_s = core.hardware_duration_s(1, settle_ms / 1000, samples)
-        # the first IRSCN may need a move to `lo` first (allow 5 ms per motor step)
+        # the first IRSCN may need a move to `lo` first (allow 5 ms per motor step), or to
+        # `hi` on a device that sweeps the other way
         travel = (info.max_step - info.min_step if self._position is None
-                  else abs(lo - self._position))
+                  else max(abs(lo - self._position), abs(hi - self._position)))
         first_wait = self.timeout_s + per_step_s + travel * MOVE_ALLOWANCE_S
         cmd = p.SweepCommand(lo, hi, samples, settle_ms)
         self._flush()
