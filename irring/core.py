@@ -157,6 +157,12 @@ _KEY_UNITS = (("_mm_s", "mm/s"), ("_m_s", "m/s"), ("_per_m", "per m"), ("_mm", "
               ("_deg", "°"), ("_ms", "ms"), ("_rad", "rad"), ("_m", "m"), ("_s", "s"))
 
 
+def key_unit(path: str) -> str | None:
+    """The unit the last key of ``path`` names (``obstacles[0].radius_mm`` → "mm"), if any."""
+    key = path.rsplit(".", 1)[-1].split("[", 1)[0]
+    return next((u for suf, u in _KEY_UNITS if key.endswith(suf)), None)
+
+
 def _number(x: float) -> str:
     """``x`` as %g, a subnormal as its shortest repr (%g shows 5e-324 as 4.94066e-324)."""
     return repr(float(x)) if 0 < abs(x) < sys.float_info.min else f"{x:g}"
@@ -174,14 +180,13 @@ def bounds_error(value: Any, meta: Any, path: str, written: float | None = None,
         return f"{value!r} is not allowed; choose one of: {allowed}"
     lo, hi = meta.get("lo"), meta.get("hi")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
-        key = path.rsplit(".", 1)[-1].split("[", 1)[0]
-        unit = next((u for suf, u in _KEY_UNITS if key.endswith(suf)), None)
+        unit = key_unit(path)
         if written is not None and unit is not None:
             lo_hi = [None if v is None else _number(v / factor) for v in (lo, hi)]
             span = (f"{lo_hi[0]} … {lo_hi[1]}" if None not in lo_hi else
                     f"≥ {lo_hi[0]}" if lo_hi[0] is not None else f"≤ {lo_hi[1]}")
             return f"{_number(written)} {unit} is out of range; allowed {span} {unit}"
-        si = si_name(key)
+        si = si_name(path.rsplit(".", 1)[-1].split("[", 1)[0])
         return f"{_show(value, si)} is out of range; allowed {_fmt_range(si, lo, hi)}"
     return None
 

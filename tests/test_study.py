@@ -108,7 +108,11 @@ BAD = [
     ("designs: [{sensors: 8, radius_mm: 120, step_deg: 1}]\nscenarios: [t_room]\n",
      r"designs\[0\]\.sweep_half_angle_deg: required key is missing"),
     ("designs: [{sensors: 8, radius_mm: 1200, sweep_half_angle_deg: 40, step_deg: 1}]\n"
-     "scenarios: [t_room]\n", r"designs\[0\]\.radius_mm: 1200 is out of range; allowed 0 … 1000"),
+     "scenarios: [t_room]\n", r"designs\[0\]\.radius_mm: 1200 mm is out of range; allowed 0 … 1000 mm$"),
+    # a number with the unit its key names (a subnormal as written)
+    ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 5e-324}]\n"
+     "scenarios: [t_room]\n",
+     r"designs\[0\]\.step_deg: 5e-324 ° is out of range; allowed 0\.01 … 90 °$"),
     ("designs: [{sensors: 8.5, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1}]\n"
      "scenarios: [t_room]\n", r"designs\[0\]\.sensors: expected an integer in 1 … 64, got 8\.5"),
     ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, "
@@ -130,7 +134,7 @@ BAD = [
     ("designs: [radial12]\nscenarios: [t_room]\nknobs: {samples: [1, 65]}\n",
      r"knobs\.samples\[1\]: 65 is out of range; allowed 1 … 64"),
     ("designs: [radial12]\nscenarios: [t_room]\nknobs: {settle_ms: [0, fast]}\n",
-     r"knobs\.settle_ms\[1\]: expected a number in 0 … 5000, got 'fast'"),
+     r"knobs\.settle_ms\[1\]: expected a number in 0 … 5000 ms, got 'fast'"),
     ("designs: []\nscenarios: [t_room]\n", r"designs: expected a non-empty list of designs"),
     ("- rotating12\n", r"<top>: a study file must be a mapping"),
     ("designs: [radial12\n", r"s\.yaml: line 2: not valid YAML"),

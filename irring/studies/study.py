@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import designs, gp2, safe_yaml
 from ..core import (MAX_SEEDS, RESULT_ROW_BYTES, RESULT_ROW_TEXT_BYTES, SEED_MAX,
-                    SENSOR_MODEL, work_refusal)
+                    SENSOR_MODEL, key_unit, work_refusal)
 from ..errors import OutputError, TooBig, brief, printable
 from ..outputs import OutputSet, atomic_file, sole_writer
 from ..pipeline import scenario_text
@@ -134,12 +134,14 @@ def _number(source: str, path: str, raw: Any, tp: type, lo: float, hi: float) ->
     ok = isinstance(raw, (int, float)) and not isinstance(raw, bool)
     if ok and tp is int and isinstance(raw, float):
         ok = raw.is_integer()
-    span = f"{lo:g} … {hi:g}" if tp is float else f"{int(lo)} … {int(hi)}"
+    unit = key_unit(path)
+    unit = f" {unit}" if unit else ""
+    span = (f"{lo:g} … {hi:g}" if tp is float else f"{int(lo)} … {int(hi)}") + unit
     if not ok or not math.isfinite(raw):
         kind = "an integer" if tp is int else "a number"
-        raise _fail(source, path, f"expected {kind} in {span}, got {raw!r}")
+        raise _fail(source, path, f"expected {kind} in {span}, got {brief(raw)}")
     if not lo <= raw <= hi:
-        raise _fail(source, path, f"{raw!r} is out of range; allowed {span}")
+        raise _fail(source, path, f"{brief(raw)}{unit} is out of range; allowed {span}")
     return tp(raw)
 
 
