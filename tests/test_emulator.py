@@ -599,3 +599,19 @@ def test_irring_calibrate_refuses_an_old_ring_and_needs_a_port_for_the_option(tm
     assert main(["calibrate", "--accept-protocol-v1", "--out", str(tmp_path / "c.yaml")]) == 2
     assert "--accept-protocol-v1 is for a real ring's old firmware; give its --port too" in \
         capsys.readouterr().err
+
+
+def test_emulate_motor_reversed_is_refused_for_a_ring_not_symmetric_about_step_0(tmp_path,
+                                                                                 capsys):
+    from irring.cli import main
+
+    room = tmp_path / "lopsided.yaml"
+    room.write_text((Path(__file__).parents[1] / "scenarios" / "t_room.yaml").read_text()
+                    .replace("  design: rotating12\n",
+                             "  design: rotating12\n  ring: {min_step: -10, max_step: 20}\n"))
+    link = tmp_path / "ring.pty"
+    assert main(["emulate", str(room), "--motor-reversed", "--link", str(link)]) == 2
+    assert capsys.readouterr().err == (
+        "irring emulate: error: motor_reversed needs steps symmetric about 0, got -10 … 20: "
+        "turned the other way the ring would pass its end\n")
+    assert not link.exists()

@@ -7,6 +7,7 @@ The real-pty tests against SimRing are in test_emulator.py.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import re
 import time
@@ -549,6 +550,24 @@ def test_a_reversed_device_is_given_the_time_to_travel_to_the_end_it_starts_from
     for _ in range(3):
         sweep = ring.sweep(resweep=0, samples=1, settle_s=0.0)
         assert len(sweep.steps) == 71 and ring.last_report.link["timeouts"] == 0
+
+
+def test_a_ring_whose_motor_turns_the_wrong_way_is_emulated_reading_step_s_at_minus_s():
+    """What the link cannot show: every step arrives in order on a clean link, each read
+    where the ring really pointed (−s). A ring not symmetric about step 0 is refused: turned
+    the other way it would pass its end."""
+    src = StandInSource()
+    ring = ring_on(Device(src, faults=Faults(motor_reversed=True)))
+    sweep = ring.sweep()
+    steps = np.arange(-35, 36)
+    assert np.array_equal(sweep.steps, steps) and src.calls[-1][1] == tuple(-steps)
+    assert np.array_equal(sweep.counts, src.truth(0, -steps))
+    assert ring.last_report.message == "all 71 steps received; clean link"
+    lopsided = dataclasses.replace(PAPER_RING, min_step=-10, max_step=20)
+    with pytest.raises(ValueError, match=r"^motor_reversed needs steps symmetric about 0, got "
+                                         r"-10 … 20: turned the other way the ring would pass "
+                                         r"its end$"):
+        Device(StandInSource(ring=lopsided), faults=Faults(motor_reversed=True))
 
 
 def test_a_reversed_device_on_a_lossy_link_keeps_only_what_it_sent_and_resweeps_the_rest():

@@ -27,6 +27,7 @@ examples:
   irring emulate t_room --bitflip-rate 0.001      # line noise: single bits flipped
   irring emulate t_room --stall-after 100 --disconnect-after 400
   irring emulate t_room --reverse-sweeps          # sweeps each IRSWP from its end back
+  irring emulate t_room --motor-reversed          # a ring wired to turn the wrong way
   irring emulate t_room_cylinder --link ring2.pty # a second device beside the first
   irring emulate t_room --tcp 0                   # a free TCP port; it prints which, then:
                                                   #   irring drive --port socket://127.0.0.1:PORT
@@ -84,6 +85,10 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reverse-sweeps", action="store_true",
                    help="sweep every IRSWP from its last step back to its first, each IRSCN "
                         "naming its step: a firmware that ignores the asked direction")
+    p.add_argument("--motor-reversed", action="store_true",
+                   help="turn the motor the other way than the firmware counts (DIR wired "
+                        "reversed): step s is read at step -s, which the link cannot show "
+                        "(irring drive --truth scores the mirrored map)")
     p.add_argument("--seed", type=seed, default=None,
                    help="noise seed ≥ 0 of the readings (default: the scenario's seed)")
     p.add_argument("--fault-seed", type=seed, default=0, metavar="SEED",
@@ -126,15 +131,20 @@ def run(args: argparse.Namespace) -> int:
                         drop_rate=args.drop_rate,
                         stall_after=args.stall_after, stall_s=args.stall_seconds,
                         disconnect_after=args.disconnect_after,
-                        reverse_sweeps=args.reverse_sweeps, seed=args.fault_seed)
+                        reverse_sweeps=args.reverse_sweeps,
+                        motor_reversed=args.motor_reversed, seed=args.fault_seed)
     except ValueError as exc:
         print(f"irring emulate: error: {exc}", file=sys.stderr)
         return 2
     fixed = None if args.pose is None else pose_index(args.pose, scenario)
     baud = args.baud if args.baud is not None else (115200 if args.realtime else 0)
     source = SimRing(scenario, seed=args.seed)
-    device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=fixed,
-                    protocol=args.protocol)
+    try:
+        device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=fixed,
+                        protocol=args.protocol)
+    except ValueError as exc:   # --motor-reversed on a ring not symmetric about step 0
+        print(f"irring emulate: error: {exc}", file=sys.stderr)
+        return 2
     if args.tcp is not None:
         host, port = args.tcp
         if not _loopback(host):

@@ -49,6 +49,9 @@ class Faults:
     reverse_sweeps: the device sweeps every IRSWP from ``to`` to ``from``, against the asked
         direction, each IRSCN naming the step it was read at (a firmware that ignores the
         direction it is given).
+    motor_reversed: the motor turns the other way than the firmware counts (its DIR wired
+        reversed, firmware built without IRR_DIR_INVERT): an IRSCN naming step s was read at
+        step −s. The link cannot show it; the readings land mirrored.
     seed: of the fault generator (independent of the readings' noise).
     """
 
@@ -59,6 +62,7 @@ class Faults:
     stall_s: float = math.inf
     disconnect_after: int | None = None
     reverse_sweeps: bool = False
+    motor_reversed: bool = False
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -110,6 +114,10 @@ class Device:
         self.source = source
         self.protocol = p.check_version(protocol)   # 1: an old, unreflashed board
         self.info = p.info_for_ring(source.ring, source.adc_bits, firmware, protocol)
+        if faults.motor_reversed and self.info.min_step != -self.info.max_step:
+            raise ValueError(f"motor_reversed needs steps symmetric about 0, got "
+                             f"{self.info.min_step} … {self.info.max_step}: turned the other "
+                             f"way the ring would pass its end")
         self.poses = max(1, int(source.n_sweeps))  # the robot visits source poses 0 … poses-1
         self.faults = faults
         self.realtime = realtime
@@ -223,7 +231,8 @@ class Device:
             self._full_sweeps += 1
         pose = self._pose if self.fixed_pose is None else self.fixed_pose
         settle_s = cmd.settle_ms / 1000.0
-        raw = np.asarray(self.source.sweep(pose, steps=steps).counts, dtype=float)
+        turned = -steps if self.faults.motor_reversed else steps   # where the ring really is
+        raw = np.asarray(self.source.sweep(pose, steps=turned).counts, dtype=float)
         top = (1 << self.info.adc_bits) - 1
         # a real ADC reports whole counts in range; NaN (no reading) reads as 0
         counts = np.clip(np.rint(np.nan_to_num(raw, nan=0.0)), 0, top).astype(np.int64)
