@@ -99,6 +99,23 @@ def test_cli_run_writes_every_output_and_replay_reproduces_the_map(tmp_path, cap
     assert not (rep / "map_building.gif").exists()
 
 
+def test_replay_without_out_writes_beside_the_run_it_names(tmp_path, capsys, monkeypatch):
+    """The default folder its help promises: a sweeps.npz is named by its run's folder,
+    any other recording by its own file name."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "t_room_cylinder", "--out", "runs/cyl", "--no-animation"]) == 0
+    (tmp_path / "lab.npz").write_bytes((tmp_path / "runs/cyl/sweeps.npz").read_bytes())
+    capsys.readouterr()
+    assert main(["replay", "runs/cyl/sweeps.npz", "--no-animation"]) == 0
+    assert main(["replay", "lab.npz", "--no-animation"]) == 0
+    out = capsys.readouterr().out
+    assert "wrote     out/cyl-replay/: map.png" in out and "wrote     out/lab-replay/: " in out
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["cyl-replay", "lab-replay"]
+    for name in ("cyl-replay", "lab-replay"):
+        assert (tmp_path / "out" / name / "map.pgm").read_bytes() == \
+            (tmp_path / "runs/cyl/map.pgm").read_bytes()
+
+
 def test_replay_with_another_calibration_changes_the_map(tmp_path):
     from irring.estimation.calibration import Calibration
 

@@ -21,8 +21,10 @@ original run's; pass --calibration to see what another calibration makes of the 
 Scores are computed when the recording carries its scenario (simulated runs do);
 one this irring cannot read (from another version) is named, and the map not scored.
 
-Writes into --out (default: ./out/<recording name>-replay) the same files as `irring run`:
-map.png, map_building.gif, map.pgm + map.yaml (ROS map_server), and sweeps.npz.
+Writes into --out the same files as `irring run`: map.png, map_building.gif, map.pgm +
+map.yaml (ROS map_server), and sweeps.npz. Default: ./out/<run>-replay, where <run> is the
+folder of a sweeps.npz (out/t_room/sweeps.npz → out/t_room-replay), else the file's own
+name (lab.npz → out/lab-replay).
 
 examples:
   irring replay out/t_room/sweeps.npz
@@ -37,7 +39,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
                    help="calibration YAML to use instead of the recorded one")
     p.add_argument("--out", type=out_path, default=None, metavar="DIR",
-                   help="output folder (default: ./out/<recording folder>-replay)")
+                   help="output folder (default: ./out/<run>-replay, <run> as above)")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--no-animation", action="store_true", help="skip the GIF")
     add_mcap_option(p)
