@@ -300,6 +300,14 @@ def cases(tmp: Path) -> list[tuple[str, str, callable]]:
 
 
 def main(argv: list[str]) -> int:
+    if any(a in ("-h", "--help") for a in argv):
+        print(__doc__)
+        return 0
+    unknown = [a for a in argv if a != "--list" and not a.startswith("--kind=")]
+    if unknown:     # before the ~2 min census, not after it
+        print(f"hostile_corpus.py: unknown argument {unknown[0]!r}; allowed: --list, "
+              "--kind=NAME, --help", file=sys.stderr)
+        return 2
     results = []
     lock = threading.Lock()
     with tempfile.TemporaryDirectory() as top:

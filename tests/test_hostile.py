@@ -2484,3 +2484,21 @@ def test_an_mcap_folder_that_cannot_be_written_is_refused_before_the_run(tmp_pat
     assert main(["run", "t_room_cylinder", "--out", "o", "--mcap", "ro/x.mcap"]) == 4
     assert capsys.readouterr().err == "irring run: error: --mcap ro: ro is not writable\n"
     assert sorted(os.listdir(tmp_path)) == ["ro"] and not any((tmp_path / "ro").iterdir())
+
+
+@pytest.mark.parametrize("argv, status", [(["--help"], 0), (["--kind", "serial"], 2),
+                                          (["--lsit"], 2)])
+def test_the_corpus_script_answers_help_and_typos_before_its_census(argv, status, capsys,
+                                                                    monkeypatch):
+    """`python tests/hostile_corpus.py --help` (or a mistyped option) started the ~2 min
+    census of 105 fresh processes; now it prints the usage or names the argument."""
+    import hostile_corpus
+
+    monkeypatch.setattr(hostile_corpus, "cases", lambda top: pytest.fail("census started"))
+    assert hostile_corpus.main(argv) == status
+    out, err = capsys.readouterr()
+    if status == 0:
+        assert "python tests/hostile_corpus.py --list" in out and err == ""
+    else:
+        assert err == (f"hostile_corpus.py: unknown argument {argv[0]!r}; allowed: --list, "
+                       "--kind=NAME, --help\n")
