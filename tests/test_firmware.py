@@ -569,7 +569,8 @@ def test_the_avr_image_itself_in_simavr_answers_serial_ring(tmp_path):
 
 @pytest.mark.parametrize("target, tool, advice", [
     ("avr", "AVRCC=irring-no-such-avr-gcc", "gcc-avr, avr-libc, binutils-avr"),
-    ("flash", "AVRDUDE=irring-no-such-avrdude", "apt install avrdude"),
+    ("flash", "AVRDUDE=irring-no-such-avrdude",
+     "apt install avrdude or bash .ci/system-deps flash"),
 ])
 def test_a_missing_build_tool_is_named_with_where_to_get_it(target, tool, advice, tmp_path):
     if shutil.which("make") is None:
@@ -580,3 +581,12 @@ def test_a_missing_build_tool_is_named_with_where_to_get_it(target, tool, advice
                            f"BUILD={tmp_path}"], capture_output=True, text=True)
     assert done.returncode != 0
     assert f"needs {tool.split('=')[1]}: " in done.stderr and advice in done.stderr
+
+
+def test_system_deps_takes_flash_and_names_anything_else():
+    """`bash .ci/system-deps flash` adds avrdude for a builder; a mistyped argument stops
+    before apt is asked for anything."""
+    done = subprocess.run(["bash", str(ROOT / ".ci" / "system-deps"), "flahs"],
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr == "system-deps: unknown argument 'flahs'; allowed: flash (adds avrdude)\n"
