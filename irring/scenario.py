@@ -583,8 +583,9 @@ def resolve(name_or_path: str | Path) -> Path:
         return p
     if str(name_or_path) in found:
         return found[str(name_or_path)]
-    raise ScenarioError(f"{name_or_path}: no such file and no bundled scenario of that name; "
-                        f"bundled: {', '.join(found)}")
+    near = _close(p.name, found) if p.parent == Path(".") else ""   # a name, not a path
+    raise ScenarioError(f"{name_or_path}: no such file and no bundled scenario of that name"
+                        f"{near}; bundled: {', '.join(found)}")
 
 
 def parse(raw: Any, source: str = "") -> Scenario:

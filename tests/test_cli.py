@@ -97,8 +97,22 @@ def test_an_obstacle_half_through_a_wall_is_noted_where_the_user_looks(tmp_path,
 def test_an_unknown_scenario_names_the_bundled_ones(capsys):
     assert main(["run", "t_rooom", "--out", "/nonexistent/never-written"]) == 1
     err = capsys.readouterr().err
-    assert "t_rooom: no such file and no bundled scenario of that name" in err
+    assert "t_rooom: no such file and no bundled scenario of that name (did you mean `t_room`?)" \
+        "; bundled: angled_walls, big_room, " in err
     assert "t_room_cylinder" in err
+
+
+@pytest.mark.parametrize("given, near", [
+    ("t_room_cylinder.yaml", " (did you mean `t_room_cylinder`?)"),
+    ("corridor", " (did you mean `corridor_table`?)"),
+    ("nothing_like_it", ""),
+    ("rooms/big_rooom.yaml", ""),     # a path: the user's own file, not a bundled one
+])
+def test_a_mistyped_scenario_name_gets_the_nearest_bundled_one(given, near, capsys):
+    assert main(["scenarios", given]) == 1
+    assert capsys.readouterr().err.startswith(
+        f"irring scenarios: error: {given}: no such file and no bundled scenario of that "
+        f"name{near}; bundled: angled_walls, ")
 
 
 # Every range-checked option: a bad value is a usage error (argparse's exit 2, usage line,
