@@ -514,3 +514,17 @@ def test_mcap_without_its_extra_is_refused_before_any_work(command, tmp_path, mo
     err = capsys.readouterr().err
     assert "writing run.mcap needs the mcap extra: pip install 'irring[mcap]'" in err
     assert list(tmp_path.iterdir()) == []        # nothing simulated, nothing written
+
+
+def test_run_help_explains_every_reason_the_readings_line_can_give(capsys, monkeypatch):
+    """`irring run` prints '2153 valid (no return 1181, out of range 56, incidence unknown
+    18)'; a newcomer finds each word explained in its help, and a new Reason must be too."""
+    from irring.core import Reason
+
+    monkeypatch.setenv("COLUMNS", "200")
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    readings = capsys.readouterr().out.split("Readings:", 1)[1].split("examples:")[0]
+    said = re.findall(r"(?:^|\), |: )([a-z][a-z ]+?) \(", " ".join(readings.split()))
+    assert sorted(said) == sorted(r.name.lower().replace("_", " ") for r in Reason
+                                  if r != Reason.OK)

@@ -31,6 +31,13 @@ free accuracy, coverage of the free area the poses can reach, and shadow (share 
 behind obstacles that is mapped). Hardware time is what the real ring would spend (71 steps
 × 38.3 ms per sweep by default); compute time is this machine's, per stage.
 
+Readings: "N valid (…)" says why the others are not (irring.core.Reason): no return (nothing
+within range), out of range (outside the sensor's calibrated range), incidence unknown (on
+no wall line and too few neighbours to tell the angle of incidence: read square on, it could
+be over 100 mm long), not converged (the iteration did not settle), foldover ambiguous (with
+the foldover effect: which side of the GP2's peak is undecided), saturated (ADC at full
+scale), missing (lost on the serial link, `irring drive`).
+
 examples:
   irring run                                  # the default scenario, t_room
   irring run t_room_cylinder --out out/cyl    # a bundled scenario by name
