@@ -496,6 +496,26 @@ def test_an_unknown_option_is_reported_by_its_command_with_its_usage(argv, comma
     assert err.endswith(f"\n{command}: error: unrecognized arguments: {argv[-1]}\n")
 
 
+@pytest.mark.parametrize("argv, extra, meant", [
+    (["run", "t_room", "--seeds", "3"], "--seeds 3", "--seed"),
+    (["run", "--ouT", "x"], "--ouT", "--out"),          # x is taken as the SCENARIO
+    (["view", "--steps", "3"], "--steps", "--step"),
+    (["bench", "rooms", "--jsn"], "--jsn", "--json"),
+    (["drive", "--port", "p", "--calibraton", "c"], "--calibraton c", "--calibration"),
+])
+def test_a_mistyped_option_is_named_with_the_one_meant(argv, extra, meant, capsys, tmp_path,
+                                                       monkeypatch):
+    """Python 3.11's argparse says only 'unrecognized arguments'; a scenario key or name
+    typed wrong already gets a 'did you mean'. Nothing runs."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    assert capsys.readouterr().err.endswith(
+        f": error: unrecognized arguments: {extra} (did you mean {meant}?)\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("command", [["run", "t_room"], ["replay", "sweeps.npz"],
                                      ["drive", "--port", "ring.pty"]])
 def test_mcap_without_its_extra_is_refused_before_any_work(command, tmp_path, monkeypatch,

@@ -9,6 +9,7 @@ exits 2, like any other bad argument (exit 1 is left for runs that fail).
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib.util
 import math
 import os
@@ -39,8 +40,18 @@ class LazyParser(argparse.ArgumentParser):
         self._load()
         namespace, extras = super().parse_known_args(args, namespace)
         if extras:   # else argparse reports them with `irring`'s usage, not this command's
-            self.error(f"unrecognized arguments: {' '.join(extras)}")
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._near(extras)}")
         return namespace, extras
+
+    def _near(self, extras: list[str]) -> str:
+        """' (did you mean --seed?)' for the first mistyped option among ``extras``."""
+        names = [o[2:] for a in self._actions for o in a.option_strings if o.startswith("--")]
+        for word in extras:
+            if word.startswith("--"):   # compared without the "--" every option shares
+                near = difflib.get_close_matches(word[2:].split("=")[0].lower(), names, n=1)
+                if near:
+                    return f" (did you mean --{near[0]}?)"
+        return ""
 
     def format_usage(self) -> str:
         self._load()
