@@ -165,6 +165,15 @@ for _first in "-+.0123456789":
     _StrictLoader.add_implicit_resolver(_FLOAT_TAG, _EXPONENT_FLOAT, [_first])
 
 
+def _tab_hint(text: str, mark) -> str:
+    """A hint when a tab on the failing line, at or before the failing column, is the cause:
+    libyaml's message does not name the character."""
+    lines = text.splitlines()
+    if mark is None or mark.line >= len(lines) or "\t" not in lines[mark.line][:mark.column + 1]:
+        return ""
+    return " (a tab: YAML indents with spaces, never tabs)"
+
+
 def load(text: str, source: str = "<string>", what: str = "YAML file") -> Any:
     """Parse one YAML document strictly: no aliases, no duplicate keys, at most
     :data:`MAX_DEPTH` levels and the :func:`limits` of a ``what``. Raises
@@ -199,7 +208,8 @@ def load(text: str, source: str = "<string>", what: str = "YAML file") -> Any:
         where = f"line {exc.problem_mark.line + 1}: " if exc.problem_mark else ""
         if "maximum nesting depth" in str(exc.problem):   # libyaml stops at 1,000 levels
             raise YamlError(f"{source}: {where}nested more than {MAX_DEPTH} levels deep") from None
-        raise YamlError(f"{source}: {where}not valid YAML: {brief(exc.problem or str(exc))[1:-1]}") from None
+        raise YamlError(f"{source}: {where}not valid YAML: {brief(exc.problem or str(exc))[1:-1]}"
+                        f"{_tab_hint(text, exc.problem_mark)}") from None
     except yaml.YAMLError as exc:
         raise YamlError(f"{source}: not valid YAML: {brief(str(exc))}") from None
     except RecursionError:

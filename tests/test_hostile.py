@@ -79,6 +79,21 @@ def test_strict_yaml_refuses_what_safe_load_lets_through(text, message):
         safe_yaml.load(text, "f.yaml")
 
 
+@pytest.mark.parametrize("text, line, hint", [
+    ("name: t\nroom:\n\toutline_mm: [[0, 0]]\n", 3, True),     # a tab indenting a key
+    ("a:\n  b: 1\n\tc: 2\n", 3, True),                          # libyaml: "violates indentation"
+    ("a: 'x\ty'\nb: [1, 2\n", 3, False),                         # a tab, but not the fault
+])
+def test_a_tab_that_breaks_the_yaml_is_named(text, line, hint):
+    """libyaml's 'found character that cannot start any token' does not say which
+    character; a newcomer's editor put a tab where YAML wants spaces."""
+    with pytest.raises(safe_yaml.YamlError) as e:
+        safe_yaml.load(text, "f.yaml")
+    said = str(e.value)
+    assert said.startswith(f"f.yaml: line {line}: not valid YAML: ")
+    assert said.endswith(" (a tab: YAML indents with spaces, never tabs)") == hint
+
+
 def test_numbers_are_read_as_written():
     # YAML 1.1 reads 1e-3 and 1.0e300 as text ("expected a number, got '1e-3'"); 07 and 00
     # are the same in octal and decimal, 1_000 is digit grouping
@@ -100,7 +115,8 @@ def test_the_pure_python_yaml_reader_reads_and_refuses_alike(tmp_path):
         "a: 1e-3\nb: 1.0e300\nc: -2.5E2\nd: .5e1\ne: 07\nf: 1_000\ng: '0750'\n",
         "a: 'Küche €'\nb: 'x\x07'\n",        # a control character after multi-byte ones
         "a: [" + "1, " * 996 + "2]", "a: [" + "1, " * 997 + "2]",   # map_server's 1,000 values
-        "a: 1\n  b: 2\n", "\ufeffa: 1\n", "a:\n- 1\n- {b: [2, 3], c: null}\n"]
+        "a: 1\n  b: 2\n", "\ufeffa: 1\n", "a:\n- 1\n- {b: [2, 3], c: null}\n",
+        "name: t\nroom:\n\toutline_mm: [[0, 0]]\n"]
     script = (
         "import json, sys, yaml\n"
         "yaml.__with_libyaml__ = False   # as a PyYAML built without libyaml\n"
