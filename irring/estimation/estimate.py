@@ -1753,6 +1753,8 @@ ROUND_BULGE_M = 0.01     # … whose end points bulge this far towards it on ave
 ROUND_BEHIND = 0.2       # … at most this share of them as far behind the chord of its ends
 ROUND_BETTER = 0.5       # an arc replaces the lines where it misfits at most this share of one
 ROUND_LINE_ITERATIONS = 4  # line through the run's readings (read as Table II would, this often)
+ROUND_UNEXPLAINED = ARC_MISFIT  # a run's reading on no line costs its pieces this (σ²): no line
+#                                 explains it; a reading that just fits a circle costs as much
 
 
 def _kasa_radii(x: np.ndarray, y: np.ndarray, group: np.ndarray, n: int) -> np.ndarray:
@@ -1834,12 +1836,11 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
 
     A run: valid readings of one sensor, steps at most ``ARC_GAP_STEPS`` apart and θ = 0
     ranges within ``ROUND_JUMP_M``. One of at least ``ROUND_RUN_MIN`` readings holding two
-    labels or more, whose end points bulge towards the sensor (``ROUND_BULGE_M``,
-    ``ROUND_BEHIND``: not a wall, not a concave corner) and whose θ = 0 end points' circle
-    is no smaller than the smallest of ``ROUND_RADII_M`` (not a post, not a box's corner), is
+    labels or more, whose θ = 0 end points bulge towards the sensor (``ROUND_BULGE_M``,
+    ``ROUND_BEHIND``: not a wall, not a concave corner) and whose circle is no smaller than the smallest of ``ROUND_RADII_M`` (not a post, not a box's corner), is
     tried by :func:`arc_incidence` (radii ``ROUND_RADII_M``); its arc is kept where it
     misfits at most ``ROUND_BETTER`` of one line through the run and, by BIC, no more than
-    the pieces do (:func:`_round_wins`). Any other run of ``ARC_MIN`` readings or more then tries the kept
+    the pieces do, the run's readings on no line counted against them (:func:`_round_wins`). Any other run of ``ARC_MIN`` readings or more then tries the kept
     circles (a sensor that saw one flank only: no apex of its own) and keeps the one it fits
     best where it fits within ``ARC_MISFIT`` (the circle's evidence is another sensor's: its
     own pieces, each a chord read at its θ, fit themselves as well). Each reading taken
@@ -1874,18 +1875,21 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     sel = cand[run].nonzero()[0]
     gi = (np.cumsum(cand) - 1)[run[sel]]
     n_c = int(np.count_nonzero(cand))
-    # the run's end points bulge towards the sensor off the chord between its ends, nowhere
-    # fall behind it (a concave corner), and not by noise alone (a wall cut in two)
+    # the run's end points at θ = 0 bulge towards the sensor off the chord between its ends,
+    # nowhere fall behind it (a concave corner), and not by noise alone (a wall cut in two);
+    # at θ = 0, not as estimated: a line read too steep across an arc pulls its members in
+    # and makes the arc look hollow (docs/estimator.md, "A table's flank taken for a line")
     at = vi[sel]
-    px, py = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
+    hh = points.heading.reshape(-1)[at]
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
+    px, py = ox + d0[sel] * np.cos(hh), oy + d0[sel] * np.sin(hh)
     first = np.searchsorted(gi, np.arange(n_c))
     last = np.append(first[1:], gi.size) - 1
     ux, uy = px[last] - px[first], py[last] - py[first]
     norm = np.hypot(ux, uy)
     ux, uy = ux / np.maximum(norm, 1e-12), uy / np.maximum(norm, 1e-12)
     o_first = vi[sel[first]]
-    side = np.sign((points.origin_x.reshape(-1)[o_first] - px[first]) * uy
-                   - (points.origin_y.reshape(-1)[o_first] - py[first]) * ux)
+    side = np.sign((ox[first] - px[first]) * uy - (oy[first] - py[first]) * ux)
     toward = ((px - px[first][gi]) * uy[gi] - (py - py[first][gi]) * ux[gi]) * side[gi]
     n_in = np.bincount(gi, minlength=n_c)
     keep = ((np.bincount(gi, toward, n_c) >= ROUND_BULGE_M * n_in)
@@ -1894,10 +1898,7 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
         return points, label
     # … and their circle at θ = 0 is a round thing's, not a post's or a box's corner (θ = 0
     # reads an arc's flanks long: that circle is smooth, if smaller than the arc's)
-    hh = points.heading.reshape(-1)[at]
-    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
-    keep &= _kasa_radii(ox + d0[sel] * np.cos(hh), oy + d0[sel] * np.sin(hh), gi,
-                        n_c) >= ROUND_RADII_M[0]
+    keep &= _kasa_radii(px, py, gi, n_c) >= ROUND_RADII_M[0]
     if not keep.any():
         return points, label
     pos = sel[keep[gi]]
@@ -1995,19 +1996,22 @@ def onto_circles(points: Points, at: np.ndarray, circle: np.ndarray, circles: np
 def _round_wins(pr: _Profile, pos: np.ndarray, lab: np.ndarray, group: np.ndarray, n: int,
                 arc_mis: np.ndarray, arc_params: int, line_alpha: np.ndarray,
                 line_cx: np.ndarray, line_cy: np.ndarray, cal: Calibration) -> np.ndarray:
-    """Per group (n,): whether its line members (``lab`` ≥ 0) misfit their arc (``arc_mis``,
-    ``arc_params`` parameters of its own) no more than their lines by BIC, each distinct line
-    worth 3 (direction, offset and where it ends; the last 2): a box's convex corner seen
-    by one sensor is two lines within noise and a circle well outside it."""
+    """Per group (n,): whether its readings misfit their arc (``arc_mis``, ``arc_params``
+    parameters of its own) no more than its pieces by BIC: a line member on its line, each
+    distinct line worth 3 (direction, offset and where it ends; the last 2), a reading on no
+    line (``lab`` < 0) at ``ROUND_UNEXPLAINED`` (the lines leave it unexplained). A box's
+    convex corner seen by one sensor is two lines within noise and a circle well outside it;
+    an arc whose flank one line took too steep fits the readings that line left."""
     mem = lab >= 0
     lm, gm = lab[mem], group[mem]
-    piece_cost = np.bincount(gm, _pieces_misfit(pr, pos[mem], lm, line_alpha, line_cx,
-                                                line_cy, cal), n)
+    piece_cost = (np.bincount(gm, _pieces_misfit(pr, pos[mem], lm, line_alpha, line_cx,
+                                                 line_cy, cal), n)
+                  + ROUND_UNEXPLAINED * np.bincount(group[~mem], minlength=n))
     # distinct lines (a run's readings may alternate between two of them)
     width = int(lm.max(initial=0)) + 1
     n_pieces = np.bincount(np.unique(gm * width + lm) // width, minlength=n)
-    log_n = np.log(np.maximum(np.bincount(gm, minlength=n), 2))
-    arc_cost = np.bincount(gm, arc_mis[mem], n)
+    log_n = np.log(np.maximum(np.bincount(group, minlength=n), 2))
+    arc_cost = np.bincount(group, arc_mis, n)
     return ((arc_cost + arc_params * log_n <= piece_cost + (3.0 * n_pieces - 1.0) * log_n)
             | (n_pieces == 0))
 
