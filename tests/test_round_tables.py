@@ -93,9 +93,9 @@ def test_a_far_tables_flank_is_not_a_steep_line(centre, radius, yaw, seed):
     """Main d784d14 read the first table's readings 88.6 mm RMS off (25 of 46 more than
     50 mm short, 20 with θ more than 20° off: a flank taken as one line 30-40° too steep,
     which pulled its members in so the run looked hollow and fitted them better than the arc
-    fitted the run); the second 73.3 mm (17 of 41 short, 17 off in θ). Judged on the run's
-    θ = 0 end points and with the readings the lines left counted against them, the arc
-    wins: 8.7 and 34.8 mm RMS, 0 and 5 short, none off in θ by 20°."""
+    fitted the run); the second 73.3 mm (17 of 41 short, 17 off in θ). A run hollow as
+    estimated is asked again at θ = 0, and the readings its lines left count against them:
+    the arc wins, 8.7 and 34.8 mm RMS, 0 and 5 short, none off in θ by 20°."""
     cal = Calibration.nominal("gp2y0a02", PAPER_RING)
     sweep, d, inc = make_sweep(cal, circles=[(centre, radius)], pose=(0.0, 0.0, yaw),
                                noise_counts=cal.sigma_counts(), seed=seed, quantize=True,
@@ -341,10 +341,10 @@ def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
     nearest return: those beside the tables' returns no longer clear the cells about them;
     free accuracy 0.9994 → 0.9998; 0.932 and 0.903 since a line its counts contradict gives no
     θ: a wall line 45 mm off, θ 28° against 23°, is disowned and its members' own profiles
-    place them no better.) Since a run's bulge is judged at θ = 0 and its readings on no line
-    count against its lines (round_runs), 412 and 314 readings are taken: on their circle
-    RMS 8.5 and 11.3 mm, 0 and 2 more than 30 mm off, precision 0.981 and 0.933 (F1 0.954,
-    0.922); unsnapped 21.9 and 18.7 mm, precision 0.939 and 0.910."""
+    place them no better.) Since a run hollow as estimated is asked again at θ = 0 and its
+    readings on no line count against its lines (round_runs), 412 and 314 readings are
+    taken: on their circle RMS 8.5 and 11.3 mm, 0 and 2 more than 30 mm off, precision 0.981
+    and 0.933 (F1 0.954, 0.922); unsnapped 21.9 and 18.7 mm, precision 0.939 and 0.910."""
     sc = loads(CANTEEN_A02, source="<test>")
     taken = []
     onto = est.onto_circles

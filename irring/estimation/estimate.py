@@ -1753,8 +1753,29 @@ ROUND_BULGE_M = 0.01     # … whose end points bulge this far towards it on ave
 ROUND_BEHIND = 0.2       # … at most this share of them as far behind the chord of its ends
 ROUND_BETTER = 0.5       # an arc replaces the lines where it misfits at most this share of one
 ROUND_LINE_ITERATIONS = 4  # line through the run's readings (read as Table II would, this often)
+ROUND_RETRY_LINE = 1.0   # a run hollow as estimated that one line fits within this mean misfit
+#                          (σ², what noise alone gives) is a wall's: no circle is tried on it
 ROUND_UNEXPLAINED = ARC_MISFIT  # a run's reading on no line costs its pieces this (σ²): no line
 #                                 explains it; a reading that just fits a circle costs as much
+
+
+def _bulging(px: np.ndarray, py: np.ndarray, ox: np.ndarray, oy: np.ndarray,
+             group: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per group (n,) of end points ``px``, ``py`` seen from emitters ``ox``, ``oy`` (each
+    group's points in scan order): whether they bulge towards the sensor off the chord
+    between the group's ends by ``ROUND_BULGE_M`` on average with at most ``ROUND_BEHIND``
+    of them as far behind it; and each point's distance towards the sensor off it (m)."""
+    first = np.searchsorted(group, np.arange(n))
+    last = np.append(first[1:], group.size) - 1
+    ux, uy = px[last] - px[first], py[last] - py[first]
+    norm = np.hypot(ux, uy)
+    ux, uy = ux / np.maximum(norm, 1e-12), uy / np.maximum(norm, 1e-12)
+    side = np.sign((ox[first] - px[first]) * uy - (oy[first] - py[first]) * ux)
+    toward = ((px - px[first][group]) * uy[group] - (py - py[first][group]) * ux[group]) \
+        * side[group]
+    n_in = np.bincount(group, minlength=n)
+    return ((np.bincount(group, toward, n) >= ROUND_BULGE_M * n_in)
+            & (np.bincount(group, toward < -ROUND_BULGE_M, n) <= ROUND_BEHIND * n_in)), toward
 
 
 def _kasa_radii(x: np.ndarray, y: np.ndarray, group: np.ndarray, n: int) -> np.ndarray:
@@ -1836,13 +1857,16 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
 
     A run: valid readings of one sensor, steps at most ``ARC_GAP_STEPS`` apart and θ = 0
     ranges within ``ROUND_JUMP_M``. One of at least ``ROUND_RUN_MIN`` readings holding two
-    labels or more, whose θ = 0 end points bulge towards the sensor (``ROUND_BULGE_M``,
-    ``ROUND_BEHIND``: not a wall, not a concave corner) and whose circle is no smaller than the smallest of ``ROUND_RADII_M`` (not a post, not a box's corner), is
-    tried by :func:`arc_incidence` (radii ``ROUND_RADII_M``); its arc is kept where it
-    misfits at most ``ROUND_BETTER`` of one line through the run and, by BIC, no more than
-    the pieces do, the run's readings on no line counted against them (:func:`_round_wins`). Any other run of ``ARC_MIN`` readings or more then tries the kept
-    circles (a sensor that saw one flank only: no apex of its own) and keeps the one it fits
-    best where it fits within ``ARC_MISFIT`` (the circle's evidence is another sensor's: its
+    labels or more, whose end points bulge towards the sensor (``ROUND_BULGE_M``,
+    ``ROUND_BEHIND``: not a wall, not a concave corner; a run hollow as estimated is asked
+    again at θ = 0 and kept there unless one line fits it within ``ROUND_RETRY_LINE``) and
+    whose θ = 0 end points' circle is no smaller than the smallest of ``ROUND_RADII_M`` (not
+    a post, not a box's corner), is tried by :func:`arc_incidence` (radii
+    ``ROUND_RADII_M``); its arc is kept where it misfits at most ``ROUND_BETTER`` of one line
+    through the run and, by BIC, no more than the pieces do, the run's readings on no line
+    counted against them (:func:`_round_wins`). Any other run of ``ARC_MIN`` readings or
+    more then tries the kept circles (a sensor that saw one flank only: no apex of its own)
+    and keeps the one it fits best where it fits within ``ARC_MISFIT`` (the circle's evidence is another sensor's: its
     own pieces, each a chord read at its θ, fit themselves as well). Each reading taken
     (its own misfit at most ``ARC_ON``) leaves its line (label −1) at the arc's θ, d and σ
     (noise at θ plus d over θ ± ``ARC_DOUBT_RAD``). ``line_alpha``, ``line_cx``,
@@ -1875,25 +1899,22 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     sel = cand[run].nonzero()[0]
     gi = (np.cumsum(cand) - 1)[run[sel]]
     n_c = int(np.count_nonzero(cand))
-    # the run's end points at θ = 0 bulge towards the sensor off the chord between its ends,
-    # nowhere fall behind it (a concave corner), and not by noise alone (a wall cut in two);
-    # at θ = 0, not as estimated: a line read too steep across an arc pulls its members in
-    # and makes the arc look hollow (docs/estimator.md, "A table's flank taken for a line")
+    # the run's end points bulge towards the sensor off the chord between its ends, nowhere
+    # fall behind it (a concave corner), and not by noise alone (a wall cut in two); where
+    # they fall behind it as estimated, their θ = 0 end points are asked: a line read too
+    # steep across an arc pulls its members in and makes the arc look hollow
+    # (docs/estimator.md, "A table's flank taken for a line")
     at = vi[sel]
     hh = points.heading.reshape(-1)[at]
     ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
     px, py = ox + d0[sel] * np.cos(hh), oy + d0[sel] * np.sin(hh)
-    first = np.searchsorted(gi, np.arange(n_c))
-    last = np.append(first[1:], gi.size) - 1
-    ux, uy = px[last] - px[first], py[last] - py[first]
-    norm = np.hypot(ux, uy)
-    ux, uy = ux / np.maximum(norm, 1e-12), uy / np.maximum(norm, 1e-12)
-    o_first = vi[sel[first]]
-    side = np.sign((ox[first] - px[first]) * uy - (oy[first] - py[first]) * ux)
-    toward = ((px - px[first][gi]) * uy[gi] - (py - py[first][gi]) * ux[gi]) * side[gi]
-    n_in = np.bincount(gi, minlength=n_c)
-    keep = ((np.bincount(gi, toward, n_c) >= ROUND_BULGE_M * n_in)
-            & (np.bincount(gi, toward < -ROUND_BULGE_M, n_c) <= ROUND_BEHIND * n_in))
+    keep, toward = _bulging(points.x.reshape(-1)[at], points.y.reshape(-1)[at], ox, oy, gi,
+                            n_c)
+    retried = (np.bincount(gi, toward < -ROUND_BULGE_M, n_c)
+               > ROUND_BEHIND * np.bincount(gi, minlength=n_c))
+    if retried.any():
+        retried &= _bulging(px, py, ox, oy, gi, n_c)[0]
+        keep = keep | retried
     if not keep.any():
         return points, label
     # … and their circle at θ = 0 is a round thing's, not a post's or a box's corner (θ = 0
@@ -1904,13 +1925,27 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     pos = sel[keep[gi]]
     pr = (profiler or profiles_compiled)(points, vi, np.zeros(0, dtype=np.intp), counts,
                                          steps, cal)
-    th, dist, sig, good, arc_mis, circle = arc_incidence(pr, pos, cal, ROUND_RADII_M)
-    if not good.any():
-        return points, label
     gk = (np.cumsum(keep) - 1)[gi[keep[gi]]]
     n_k = int(np.count_nonzero(keep))
     # the simpler model wins where it explains the run as well: one line through it
-    line_cost = np.bincount(gk, _one_line_misfit(pr, pos, gk, n_k, cal), n_k)
+    line_cost = None
+    if retried[keep].any():
+        line_cost = np.bincount(gk, _one_line_misfit(pr, pos, gk, n_k, cal), n_k)
+        # a run hollow as estimated that one line explains within noise is a wall's (its
+        # noise fell behind the chord), not an arc: no circle is tried on it
+        wall = retried[keep] & (line_cost <= ROUND_RETRY_LINE * np.bincount(gk, minlength=n_k))
+        if wall.any():
+            keep[keep.nonzero()[0][wall]] = False
+            if not keep.any():
+                return points, label
+            pos, line_cost = sel[keep[gi]], line_cost[~wall]
+            gk = (np.cumsum(keep) - 1)[gi[keep[gi]]]
+            n_k = int(np.count_nonzero(keep))
+    th, dist, sig, good, arc_mis, circle = arc_incidence(pr, pos, cal, ROUND_RADII_M)
+    if not good.any():
+        return points, label
+    if line_cost is None:
+        line_cost = np.bincount(gk, _one_line_misfit(pr, pos, gk, n_k, cal), n_k)
     wins = ((np.bincount(gk, arc_mis, n_k) <= ROUND_BETTER * line_cost)
             & _round_wins(pr, pos, lab[pos], gk, n_k, arc_mis, 3, line_alpha, line_cx,
                           line_cy, cal))
