@@ -11,6 +11,7 @@ import math
 import operator
 from statistics import NormalDist
 from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
@@ -1753,8 +1754,8 @@ ROUND_BULGE_M = 0.01     # … whose end points bulge this far towards it on ave
 ROUND_BEHIND = 0.2       # … at most this share of them as far behind the chord of its ends
 ROUND_BETTER = 0.5       # an arc replaces the lines where it misfits at most this share of one
 ROUND_LINE_ITERATIONS = 4  # line through the run's readings (read as Table II would, this often)
-ROUND_RETRY_LINE = 1.0   # a run hollow as estimated that one line fits within this mean misfit
-#                          (σ², what noise alone gives) is a wall's: no circle is tried on it
+ROUND_RETRY_Z = 3.0      # a run hollow as estimated that one line fits as noise alone would
+#                          (χ² within this many of its σ above its n readings) is a wall's
 ROUND_UNEXPLAINED = ARC_MISFIT  # a run's reading on no line costs its pieces this (σ²): no line
 #                                 explains it; a reading that just fits a circle costs as much
 
@@ -1801,7 +1802,8 @@ def _one_line_misfit(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
     """Each reading's misfit (as :func:`_arc_misfit` scores it) when its group's readings
     (``pr`` positions ``pos``, groups ``group`` < ``n``) are read as one straight line: Table
     II's iteration on one total-least-squares line per group, ``ROUND_LINE_ITERATIONS``
-    times from θ = 0."""
+    times from θ = 0. (``pr``: a profile, or anything with its ox, oy, heading, s, d0 and
+    sig_s.)"""
     ox, oy, h = pr.ox[pos], pr.oy[pos], pr.heading[pos]
     ex, ey = np.cos(h), np.sin(h)
     log_s, d = np.log(pr.s[pos]), pr.d0[pos]
@@ -1823,6 +1825,27 @@ def _one_line_misfit(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
         d = np.exp(la + b * log_s)
     z = (d - t) / noise
     return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
+
+
+def _one_line_explains(points: Points, at: np.ndarray, counts: np.ndarray, cal: Calibration,
+                       d0: np.ndarray, group: np.ndarray, asked: np.ndarray) -> np.ndarray:
+    """Per group (``asked.size``,) of readings ``at`` (flat indices, θ = 0 distances ``d0``,
+    groups ``group``): whether one line fits the ``asked`` groups' readings as noise alone
+    would (:func:`_one_line_misfit`'s χ² within ``ROUND_RETRY_Z`` of its σ above its count);
+    read from the counts, without the range profiles."""
+    pick = asked[group]
+    s = np.asarray(counts, dtype=float).reshape(-1)[at[pick]]
+    lite = SimpleNamespace(ox=points.origin_x.reshape(-1)[at[pick]],
+                           oy=points.origin_y.reshape(-1)[at[pick]],
+                           heading=points.heading.reshape(-1)[at[pick]], s=s, d0=d0[pick],
+                           sig_s=cal.sigma_counts() / s)
+    n = int(np.count_nonzero(asked))
+    g = (np.cumsum(asked) - 1)[group[pick]]
+    cost = np.bincount(g, _one_line_misfit(lite, np.arange(s.size), g, n, cal), n)
+    n_in = np.bincount(g, minlength=n)
+    out = np.zeros(asked.size, dtype=bool)
+    out[asked] = cost <= n_in + ROUND_RETRY_Z * np.sqrt(2.0 * n_in)
+    return out
 
 
 def _pieces_misfit(pr: _Profile, pos: np.ndarray, lab: np.ndarray, alpha: np.ndarray,
@@ -1859,14 +1882,14 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     ranges within ``ROUND_JUMP_M``. One of at least ``ROUND_RUN_MIN`` readings holding two
     labels or more, whose end points bulge towards the sensor (``ROUND_BULGE_M``,
     ``ROUND_BEHIND``: not a wall, not a concave corner; a run hollow as estimated is asked
-    again at θ = 0 and kept there unless one line fits it within ``ROUND_RETRY_LINE``) and
-    whose θ = 0 end points' circle is no smaller than the smallest of ``ROUND_RADII_M`` (not
-    a post, not a box's corner), is tried by :func:`arc_incidence` (radii
-    ``ROUND_RADII_M``); its arc is kept where it misfits at most ``ROUND_BETTER`` of one line
-    through the run and, by BIC, no more than the pieces do, the run's readings on no line
-    counted against them (:func:`_round_wins`). Any other run of ``ARC_MIN`` readings or
-    more then tries the kept circles (a sensor that saw one flank only: no apex of its own)
-    and keeps the one it fits best where it fits within ``ARC_MISFIT`` (the circle's evidence is another sensor's: its
+    again at θ = 0 unless one line fits it within noise, ``ROUND_RETRY_Z``) and whose θ = 0
+    end points' circle is no smaller than the smallest of ``ROUND_RADII_M`` (not a post, not
+    a box's corner), is tried by :func:`arc_incidence` (radii ``ROUND_RADII_M``); its arc is
+    kept where it misfits at most ``ROUND_BETTER`` of one line through the run and, by BIC,
+    no more than the pieces do, the run's readings on no line counted against them
+    (:func:`_round_wins`). Any other run of ``ARC_MIN`` readings or more then tries the kept
+    circles (a sensor that saw one flank only: no apex of its own) and keeps the one it fits
+    best where it fits within ``ARC_MISFIT`` (the circle's evidence is another sensor's: its
     own pieces, each a chord read at its θ, fit themselves as well). Each reading taken
     (its own misfit at most ``ARC_ON``) leaves its line (label −1) at the arc's θ, d and σ
     (noise at θ plus d over θ ± ``ARC_DOUBT_RAD``). ``line_alpha``, ``line_cx``,
@@ -1922,30 +1945,23 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     keep &= _kasa_radii(px, py, gi, n_c) >= ROUND_RADII_M[0]
     if not keep.any():
         return points, label
+    retried &= keep
+    if retried.any():
+        # a run hollow as estimated that one line explains within noise is a wall's (its
+        # noise fell behind the chord), not an arc: no circle is tried on it
+        keep &= ~_one_line_explains(points, at, counts, cal, d0[sel], gi, retried)
+        if not keep.any():
+            return points, label
     pos = sel[keep[gi]]
     pr = (profiler or profiles_compiled)(points, vi, np.zeros(0, dtype=np.intp), counts,
                                          steps, cal)
-    gk = (np.cumsum(keep) - 1)[gi[keep[gi]]]
-    n_k = int(np.count_nonzero(keep))
-    # the simpler model wins where it explains the run as well: one line through it
-    line_cost = None
-    if retried[keep].any():
-        line_cost = np.bincount(gk, _one_line_misfit(pr, pos, gk, n_k, cal), n_k)
-        # a run hollow as estimated that one line explains within noise is a wall's (its
-        # noise fell behind the chord), not an arc: no circle is tried on it
-        wall = retried[keep] & (line_cost <= ROUND_RETRY_LINE * np.bincount(gk, minlength=n_k))
-        if wall.any():
-            keep[keep.nonzero()[0][wall]] = False
-            if not keep.any():
-                return points, label
-            pos, line_cost = sel[keep[gi]], line_cost[~wall]
-            gk = (np.cumsum(keep) - 1)[gi[keep[gi]]]
-            n_k = int(np.count_nonzero(keep))
     th, dist, sig, good, arc_mis, circle = arc_incidence(pr, pos, cal, ROUND_RADII_M)
     if not good.any():
         return points, label
-    if line_cost is None:
-        line_cost = np.bincount(gk, _one_line_misfit(pr, pos, gk, n_k, cal), n_k)
+    gk = (np.cumsum(keep) - 1)[gi[keep[gi]]]
+    n_k = int(np.count_nonzero(keep))
+    # the simpler model wins where it explains the run as well: one line through it
+    line_cost = np.bincount(gk, _one_line_misfit(pr, pos, gk, n_k, cal), n_k)
     wins = ((np.bincount(gk, arc_mis, n_k) <= ROUND_BETTER * line_cost)
             & _round_wins(pr, pos, lab[pos], gk, n_k, arc_mis, 3, line_alpha, line_cx,
                           line_cy, cal))
