@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import math
 
+import dataclasses
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from irring import pipeline
 from irring.core import Points, Reason
 from irring.estimation import estimate as fast
 from irring.estimation.calibration import scene_calibration
-from irring.estimation.estimate import (LineOptions, Lines, beside_a_return, end_hide_angle,
+from irring.estimation.estimate import (LineOptions, Lines, beside_a_return,
+                                        beside_a_return_compiled, end_hide_angle,
                                         noise_past_line_end, points_with)
 from irring.scenario import loads
 
@@ -97,6 +102,75 @@ def test_a_silent_beam_beside_a_return_is_free_only_to_where_a_face_turned_from_
     assert q.reach_m[5, 0] == pytest.approx(stop(0.5, 5))
 
 
+_REASONS = np.array([Reason.OK, Reason.NO_RETURN, Reason.MISSING, Reason.SATURATED,
+                     Reason.OUT_OF_RANGE, Reason.INCIDENCE_UNKNOWN], np.uint8)
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2 ** 31 - 1), steps=st.integers(0, 14), sensors=st.integers(1, 4),
+       silent=st.floats(0.0, 1.0), nan_share=st.sampled_from([0.0, 0.1, 0.5]),
+       labelled=st.booleans(), reached=st.booleans(), rising=st.booleans(),
+       margin_deg=st.sampled_from([0.0, 20.0, 90.0]), tie=st.booleans())
+def test_the_beside_kernel_agrees_with_its_numpy_statement(seed, steps, sensors, silent,
+                                                          nan_share, labelled, reached, rising,
+                                                          margin_deg, tie):
+    """``_lines.beside_a_return`` (compiled) against :func:`beside_a_return` on random
+    readings: any share silent (none, one reading, all), MISSING, saturated and unplaced
+    readings, valid flags that disagree with the reasons, NaN in d, θ, counts and the reach
+    already known, counts above full scale, headings wrapping past ±π (or all one heading:
+    ties of the gap), with and without line labels, a falling curve and a rising one (linear
+    hooks), the margin from none to past the drop-out angle: the same reach, bit for bit (NaN
+    where the other has NaN), and the points themselves back where nothing is bounded."""
+    rng = np.random.default_rng(seed)
+    cal = _a21_cal()
+    if rising:   # a linear hook's curve: d = a·S, more counts farther
+        top = 2 ** cal.adc_bits - 1
+        cal = dataclasses.replace(cal, a=np.full(cal.b.shape, cal.max_range_m / top),
+                                  b=np.ones(cal.b.shape))
+        assert not cal.falling
+    shape = (steps, sensors)
+    reason = np.where(rng.random(shape) < silent, np.uint8(Reason.NO_RETURN),
+                      rng.choice(_REASONS, shape)).astype(np.uint8)
+    valid = np.where(rng.random(shape) < 0.9, reason == Reason.OK, rng.random(shape) < 0.5)
+    d = rng.uniform(0.05, 1.0, shape)
+    theta = np.where(rng.random(shape) < 0.5, 0.0, rng.uniform(0.0, 1.4, shape))
+    heading = (np.full(shape, 3.1) if tie
+               else rng.uniform(-math.pi, math.pi, (steps, 1)) + rng.uniform(-0.3, 0.3, shape))
+    counts = rng.uniform(0.0, 1.2 * cal.full_scale_counts, shape)
+    reach = rng.uniform(0.0, 1.0, shape) if reached else None
+    for a in (d, theta, counts) + ((reach,) if reached else ()):
+        a[rng.random(shape) < nan_share * 0.3] = np.nan
+    z = np.zeros(shape)
+    p = Points(x=z, y=z, d=d, theta=theta, origin_x=z, origin_y=z, heading=heading,
+               sigma_m=z + 0.01, iterations=np.ones(shape, int), valid=valid, reason=reason,
+               max_range_m=0.8, reach_m=reach)
+    label = rng.integers(-1, 3, shape) if labelled else None
+    options = LineOptions(incidence_margin_rad=math.radians(margin_deg))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slow = beside_a_return(p, counts, cal, options, label)
+    fast = beside_a_return_compiled(p, counts, cal, options, label)
+    assert (fast is p) == (slow is p)
+    assert (fast.reach_m is None) == (slow.reach_m is None)
+    if fast.reach_m is not None:
+        assert fast.reach_m.tobytes() == slow.reach_m.tobytes()
+
+
+def test_the_beside_kernel_bounds_beams_it_should():
+    """Not vacuous: the kernel bounds the silent beams of the hand-made column above exactly
+    as the statement does (most of them), and a column with no return bounds none."""
+    cal = _a21_cal()
+    ok, nr, sat = Reason.OK, Reason.NO_RETURN, Reason.SATURATED
+    p = _column([ok, nr, nr, nr, sat] + [nr] * 42, [0.5] + [np.nan] * 46, range(47))
+    counts = np.full(p.valid.shape, 300.0)
+    counts[0], counts[4] = 450.0, cal.full_scale_counts
+    fast = beside_a_return_compiled(p, counts, cal, LineOptions())
+    slow = beside_a_return(p, counts, cal, LineOptions())
+    assert np.isfinite(fast.reach_m).sum() == 27
+    assert fast.reach_m.tobytes() == slow.reach_m.tobytes()
+    quiet = _column([nr] * 5, [np.nan] * 5, range(5))
+    assert beside_a_return_compiled(quiet, np.full((5, 1), 10.0), cal, LineOptions()) is quiet
+
+
 def test_a_noise_level_member_past_its_lines_other_members_is_silent():
     """A line along x at y = 0.7 m: clear members at x 0.10-0.30 m, noise-level members
     (own counts at most the no-return level plus its margin: valid only by pooling) at
@@ -156,7 +230,7 @@ def test_silent_beams_grazing_a_bench_beside_readings_too_near_to_place(monkeypa
     after = [_free_run_in_bench(pipeline.run(scene, seed=s, progress=False, score=False)
                                 .points[0]) for s in seeds]
     assert after == [(17, 0.53)] * 3
-    monkeypatch.setattr(fast, "beside_a_return", lambda points, *a, **k: points)
+    monkeypatch.setattr(fast, "beside_a_return_compiled", lambda points, *a, **k: points)
     before = [_free_run_in_bench(pipeline.run(scene, seed=s, progress=False, score=False)
                                  .points[0]) for s in seeds]
     assert before == [(47, 0.99), (48, 0.99), (48, 0.99)]

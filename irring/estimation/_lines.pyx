@@ -1645,3 +1645,123 @@ def silent_gaps(const idx_t[::1] index, const double[::1] counts, const idx_t[::
             ends = counts[b]
         cut[i] = low < ends - dip
     return cut_arr
+
+
+# --------------------------------------------------------------------------- silent beams beside a return
+
+def beside_a_return(const unsigned char[::1] reason, const unsigned char[::1] valid,
+                    const double[::1] counts, const double[::1] d, const double[::1] theta,
+                    const double[::1] heading, const idx_t[::1] label, bint has_label,
+                    idx_t n_sensors, unsigned char no_return, unsigned char missing,
+                    double full_scale, double level, bint falling, double la, double b,
+                    double hide, double cos_hide, double limit):
+    """``irring.estimation.estimate.beside_a_return`` (the statement and the why), exactly
+    (log and exp are numpy's, on this call's rows): flat (S·N) arrays; ``label`` read only
+    with ``has_label``; ``level`` = the return level; (``la``, ``b``) = log a, b at the
+    drop-out angle; ``hide`` = ``end_hide_angle``, ``cos_hide`` = math.cos of it,
+    ``limit`` = π/2 − 1e-6. Returns (flat indices, bounds) of the NO_RETURN beams whose
+    reach a reading beside them bounds, in row-major order."""
+    cdef idx_t size = reason.shape[0], S, i, r, col, m = 0, q, f, o, w, slot
+    cdef double c, gap, gamma, rr, stop, lo, hi, two_pi = 2.0 * M_PI
+    cdef bint has, use, hides, known
+    if not (valid.shape[0] == counts.shape[0] == d.shape[0] == theta.shape[0]
+            == heading.shape[0] == size and n_sensors >= 1 and size % n_sensors == 0
+            and (not has_label or label.shape[0] == size)):
+        raise lengths_differ("beside_a_return's arrays", reason=size, valid=valid.shape[0],
+                             counts=counts.shape[0], d=d.shape[0], theta=theta.shape[0],
+                             heading=heading.shape[0], label=label.shape[0])
+    S = size // n_sensors
+    for f in range(size):
+        if reason[f] == no_return:
+            m += 1
+    if m == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0)
+    heard_arr = np.zeros(size, dtype=np.uint8)
+    near_arr = np.empty(2 * size, dtype=np.intp)   # the nearest heard row at or before, after
+    cdef unsigned char[::1] heard = heard_arr
+    cdef idx_t[::1] near = near_arr
+    for f in range(size):
+        c = counts[f]
+        if c > full_scale:       # np.minimum: a NaN stays
+            c = full_scale
+        heard[f] = valid[f] or (c >= level and reason[f] != no_return and reason[f] != missing)
+    for col in range(n_sensors):
+        o = -1
+        for r in range(S):
+            if heard[r * n_sensors + col]:
+                o = r
+            near[r * n_sensors + col] = o
+        o = S
+        for r in range(S - 1, -1, -1):
+            if heard[r * n_sensors + col]:
+                o = r
+            near[size + r * n_sensors + col] = o
+    # each silent beam (row-major), with the nearest heard reading before it, then after it
+    beam_arr = np.empty(m, dtype=np.intp)
+    there_arr = np.empty(2 * m, dtype=np.intp)
+    has_arr = np.empty(2 * m, dtype=np.uint8)
+    cc_arr = np.empty(2 * m)
+    cdef idx_t[::1] beam = beam_arr, there = there_arr
+    cdef unsigned char[::1] have = has_arr
+    cdef double[::1] cc = cc_arr
+    q = 0
+    for f in range(size):
+        if reason[f] != no_return:
+            continue
+        beam[q] = f
+        r = f // n_sensors
+        col = f - r * n_sensors
+        for w in range(2):
+            o = near[w * size + f]
+            has = 0 <= o < S
+            slot = w * m + q
+            have[slot] = has
+            there[slot] = (o if has else r) * n_sensors + col
+            c = counts[there[slot]]
+            if c > full_scale:
+                c = full_scale
+            cc[slot] = c if heard[there[slot]] else full_scale
+        q += 1
+    dist_arr = None
+    cdef double[::1] dist
+    if falling:    # cal.distance(counts, drop-out angle): exp(log a + b·log s), numpy's
+        dist_arr = np.log(cc_arr)
+        dist = dist_arr
+        for q in range(2 * m):
+            dist[q] = la + b * dist[q]
+        np.exp(dist_arr, out=dist_arr)
+    at_arr = np.empty(m, dtype=np.intp)
+    bound_arr = np.empty(m)
+    cdef idx_t[::1] at = at_arr
+    cdef double[::1] bound = bound_arr
+    cdef idx_t n_cut = 0
+    for q in range(m):
+        lo = INFINITY
+        for w in range(2):
+            slot = w * m + q
+            o = there[slot]
+            if falling:
+                rr = dist[slot]
+            else:
+                rr = d[o] if valid[o] else NAN
+            # where its θ is known (on a line, or θ > 0; NaN compares False) its d stands
+            known = valid[o] and (theta[o] > 0 or (has_label and label[o] >= 0))
+            if known:
+                rr = d[o]
+            use = heard[o] and isfinite(rr)
+            gap = heading[o] - heading[beam[q]]
+            gamma = fabs(gap - two_pi * nearbyint(gap / two_pi))
+            hides = have[slot] and use and hide + gamma < limit
+            stop = (rr if use else 0.0) * cos_hide / cos(hide + gamma if hides else 0.0)
+            hi = stop if hides else INFINITY
+            if w == 0:
+                lo = hi
+            elif hi != hi or lo != lo:     # np.minimum: a NaN wins
+                lo = NAN
+            elif hi < lo:
+                lo = hi
+        if isfinite(lo):
+            at[n_cut] = beam[q]
+            bound[n_cut] = lo
+            n_cut += 1
+    return at_arr[:n_cut].copy(), bound_arr[:n_cut].copy()

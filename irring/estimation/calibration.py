@@ -220,6 +220,12 @@ class Calibration:
         return self.log_ab(0.0)
 
     @functools.cached_property
+    def _ab_drop(self) -> tuple[float, float]:
+        """:meth:`log_ab` at the drop-out angle (the silent beams beside a return ask it)."""
+        log_a, b = self.log_ab(self.max_incidence_rad)
+        return float(log_a), float(b)
+
+    @functools.cached_property
     def _node_log_a(self) -> np.ndarray:
         """:meth:`log_ab`'s log a at the curve's own nodes (``_lines.profiles`` reads it)."""
         return self.log_ab(self.theta_rad)[0]

@@ -531,8 +531,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    counts: np.ndarray, steps: np.ndarray, reach: Callable | None = None,
                    snapper: Callable | None = None, profiler: Callable | None = None,
                    voter: Callable | None = None, post_grouper: Callable | None = None,
-                   gapper: Callable | None = None, raw_counts: np.ndarray | None = None
-                   ) -> Estimate:
+                   gapper: Callable | None = None, raw_counts: np.ndarray | None = None,
+                   beside: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -553,14 +553,17 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     default; the oracle passes its numpy statement :func:`range_profiles`); ``voter`` and
     ``post_grouper``: the short far lines' vote and the far posts' groups (compiled by
     default; the oracle passes its numpy ``far_line_vote`` and ``post_groups``);
-    ``gapper``: the silent gaps (:func:`silent_gaps_compiled`; the oracle: :func:`silent_gaps`).
+    ``gapper``: the silent gaps (:func:`silent_gaps_compiled`; the oracle: :func:`silent_gaps`);
+    ``beside``: the silent beams beside a return (:func:`beside_a_return_compiled`; the
+    oracle: :func:`beside_a_return`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
+    beside = beside or beside_a_return_compiled
     if grouping is None:       # nothing to group (e.g. every reading invalid): no lines
         empty = _lines_record(None, np.full(shape, -1, dtype=np.intp), np.zeros(0, np.intp))
-        return Estimate(points=silent_reach(beside_a_return(drop_beyond_range(points), counts,
-                                                            cal, options), cal),
+        return Estimate(points=silent_reach(beside(drop_beyond_range(points), counts, cal,
+                                                   options), cal),
                         lines=empty if detail else None, theta_history=tuple(history))
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
@@ -619,8 +622,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
             # the lines' reach past a line's members runs up to the line itself: a beam
             # silent_behind_a_wall silenced keeps its clearance before the wall it met
             reach_m = points.reach_m if reach_m is None else np.fmin(points.reach_m, reach_m)
-        points = silent_reach(beside_a_return(points_with(points, reach_m=reach_m), counts,
-                                              cal, options, found.label), cal)
+        points = silent_reach(beside(points_with(points, reach_m=reach_m), counts, cal,
+                                     options, found.label), cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 
@@ -1246,17 +1249,23 @@ def held_and_pooled(counts: np.ndarray, reason: np.ndarray, hold: np.ndarray | N
     return counts, reason
 
 
+_HIDES_BELOW = 0.5 * math.pi - 1e-6   # θ + γ this near 90° or more: the face hides nothing
+
+
 def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
                     options: LineOptions, label: np.ndarray | None = None) -> Points:
     """``points`` with each NO_RETURN beam's ``reach_m`` at most r·cos θ / cos(θ + γ), from
-    the nearest reading of its sensor (by step, either way) that heard a surface (valid, or
+    the nearest reading of its sensor (by row, either way: the nearest step where the rows
+    rise or fall by step, as :func:`irring.core.in_turn_order` leaves a run's sweeps; rows
+    in any other order are taken as they lie) that heard a surface (valid, or
     unplaced with ``counts`` at least the return level; not MISSING): r the nearest its
     surface can be (where its θ is known, a member of a line of ``label`` (S, N; −1 none) or
     θ > 0: its d; any other reading, too near to place, past the range or read at θ = 0: the
     far-branch distance of its counts at the drop-out angle, the steepest it could have
     returned at), θ = :func:`end_hide_angle`, γ the heading gap to it; no limit where
     θ + γ ≥ 90°. A face through that reading's hit, turned past the drop-out angle, may
-    cross this beam unheard from there on (docs/estimator.md, "Silent beams beside a return")."""
+    cross this beam unheard from there on (docs/estimator.md, "Silent beams beside a return").
+    numpy, the statement :func:`beside_a_return_compiled` is held to."""
     silent = points.reason == _NO_RETURN
     if not np.count_nonzero(silent):
         return points
@@ -1292,7 +1301,7 @@ def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
     h = np.asarray(points.heading, dtype=float).reshape(steps, -1)
     gap = h[at, cols] - h[row, cols]
     gamma = np.abs(gap - 2.0 * math.pi * np.rint(gap / (2.0 * math.pi)))
-    hides = has & use & (theta + gamma < 0.5 * math.pi - 1e-6)
+    hides = has & use & (theta + gamma < _HIDES_BELOW)
     stop = np.where(use, r, 0.0) * math.cos(theta) / np.cos(np.where(hides, theta + gamma, 0.0))
     bound = np.where(hides, stop, np.inf)
     bound = np.minimum(bound[:srow.size], bound[srow.size:])
@@ -1305,6 +1314,34 @@ def beside_a_return(points: Points, counts: np.ndarray, cal: Calibration,
     at = (srow * h.shape[1] + scol)[cut]
     flat[at] = np.fmin(flat[at], bound[cut])
     return points_with(points, reach_m=reach)
+
+
+def beside_a_return_compiled(points: Points, counts: np.ndarray, cal: Calibration,
+                             options: LineOptions, label: np.ndarray | None = None) -> Points:
+    """:func:`beside_a_return` in one compiled call (``irring.estimation._lines.beside_a_return``,
+    held to it by tests/test_silence_beside.py)."""
+    if not np.count_nonzero(points.reason == _NO_RETURN):
+        return points
+    f = np.ascontiguousarray
+    theta = end_hide_angle(cal, options)
+    full, _, no_return, _, falling = cal._levels
+    at, bound = _lines.beside_a_return(
+        f(points.reason, dtype=np.uint8).reshape(-1), f(points.valid, dtype=np.uint8).reshape(-1),
+        f(counts, dtype=float).reshape(-1), f(points.d, dtype=float).reshape(-1),
+        f(points.theta, dtype=float).reshape(-1), f(points.heading, dtype=float).reshape(-1),
+        _NO_LABEL if label is None else f(label, dtype=np.intp).reshape(-1), label is not None,
+        points.valid.shape[1], _NO_RETURN, _MISSING, full, no_return + cal.return_margin_counts,
+        falling, *cal._ab_drop, theta, math.cos(theta), _HIDES_BELOW)
+    if not at.size:
+        return points
+    reach = (np.full(points.valid.shape, np.nan) if points.reach_m is None
+             else np.array(points.reach_m, dtype=float))
+    flat = reach.reshape(-1)
+    flat[at] = np.fmin(flat[at], bound)
+    return points_with(points, reach_m=reach)
+
+
+_NO_LABEL = np.zeros(0, dtype=np.intp)
 
 
 def nearest_heard_rows(heard: np.ndarray):
