@@ -4,11 +4,17 @@ the walls at 40–70° lie within 10 mm RMS of the true hit, at least 3× closer
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from irring import pipeline
 from irring.estimation.calibration import scene_calibration
-from irring.estimation.estimate import LineOptions, estimate
+from irring.estimation.estimate import (LineOptions, TraceKernels, TraceSteps, estimate,
+                                        scan_order)
 from irring.scenario import loads
 
 CORRIDOR = """
@@ -282,3 +288,107 @@ def test_readings_past_a_far_acute_corner_cross_to_the_wall_they_hit():
     p = estimate(sw, cal)
     assert p.valid[rows, 11].all()
     assert _off_by(sw, p, rows, 11).max() < 0.005
+
+
+def _same(fast, slow, what):
+    """Equal to the bit, NaN where the other has NaN, and of one dtype."""
+    fast, slow = np.asarray(fast), np.asarray(slow)
+    assert fast.dtype == slow.dtype and fast.shape == slow.shape, what
+    assert fast.tobytes() == slow.tobytes(), what
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2 ** 31 - 1), rows=st.integers(0, 12), sensors=st.integers(1, 4),
+       keep=st.floats(0.0, 1.0), on_none=st.floats(0.0, 0.8), scanned=st.booleans(),
+       stride=st.integers(0, 3))
+def test_the_trace_pair_kernel_agrees_with_its_numpy_statement(seed, rows, sensors, keep,
+                                                              on_none, scanned, stride):
+    """``_lines.trace_pairs`` against :meth:`TraceSteps.pairs`: rows out of step order, steps
+    repeated (stride 0: every row one step), any share of readings dropped (none, one) or
+    on no line, the readings in scan order or shuffled: joined, the pairs and their order
+    exact."""
+    rng = np.random.default_rng(seed)
+    steps = rng.permutation(rows) * stride
+    scan = scan_order(steps, sensors)
+    vi = scan[rng.random(scan.size) < keep]
+    if not scanned:
+        vi = rng.permutation(vi)
+    lab = np.where(rng.random(vi.size) < on_none, -1, rng.integers(0, 4, vi.size))
+    slow = TraceSteps.pairs(vi, lab, steps, sensors)
+    fast = TraceKernels.pairs(vi, lab, steps, sensors)
+    _same(fast[0].view(bool), slow[0], "joined")
+    _same(fast[1], slow[1], "reading")
+    _same(fast[2], slow[2], "nbr")
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2 ** 31 - 1), k=st.integers(0, 30), n_lines=st.integers(1, 5),
+       nan_share=st.sampled_from([0.0, 0.1]), parallel=st.booleans(),
+       reach=st.sampled_from([(0.0, 0.0), (0.05, 0.3), (1.0, 1.0)]))
+def test_the_trace_round_kernel_agrees_with_its_numpy_statement(seed, k, n_lines, nan_share,
+                                                                parallel, reach):
+    """``_lines.trace_round`` against :meth:`TraceSteps.round` on random readings, lines and
+    pairs (of members, as :meth:`TraceSteps.pairs` gives): members moved or not, lines
+    usable or not, lines that lost more than they kept, lines without members, parallel
+    lines (their corner at infinity), NaN end points, any corner reach: None together, else
+    every output exact; a pair whose reading is on no line is refused."""
+    rng = np.random.default_rng(seed)
+    lab = rng.integers(-1, n_lines, k)
+    moved = rng.random(k) < 0.2
+    joined = rng.random(max(k - 1, 0)) < 0.7
+    n_p = int(rng.integers(0, 2 * k + 1))
+    members = (lab >= 0).nonzero()[0]    # (a pair's reading is a member, as pairs gives)
+    reading = rng.choice(members, n_p) if members.size else np.zeros(0, np.intp)
+    nbr = rng.integers(0, k, reading.size) if k else np.zeros(0, np.intp)
+    good = rng.random(n_lines) < 0.8
+    lost = rng.integers(0, 4, n_lines)
+    px, py, ox, oy = rng.uniform(-1.0, 1.0, (4, k))
+    for a in (px, py):
+        a[rng.random(k) < nan_share] = np.nan
+    alpha = (np.full(n_lines, 0.3) if parallel else rng.uniform(-math.pi / 2, math.pi / 2,
+                                                                 n_lines))
+    cx, cy = rng.uniform(-1.0, 1.0, (2, n_lines))
+    options = LineOptions(corner_reach_m=reach[0], corner_reach_share=reach[1])
+    args = (lab, moved, joined, reading, nbr, good, lost, px, py, ox, oy, alpha, cx, cy,
+            options)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slow = TraceSteps.round(*args)
+    fast = TraceKernels.round(*args)
+    assert (fast is None) == (slow is None)
+    if slow is not None:
+        names = "i j a b run_lo run_hi n_mem mx my lo hi absorb cross".split()
+        for name, f, s_ in zip(names, fast, slow):
+            _same(f, s_, name)
+        off = lab.copy()
+        off[slow[0][0]] = -1
+        with pytest.raises(ValueError, match=f"reading {slow[0][0]} is on no line"):
+            TraceKernels.round(off, *args[1:])
+
+
+@pytest.mark.parametrize("name, seed", [("grazing_corridor", 1), ("narrow_room", 2)])
+def test_the_trace_kernels_move_what_the_statement_moves(monkeypatch, name, seed):
+    """Not vacuous: on bundled rooms whose readings rejoin_traces moves (16 and 82 in their
+    sweeps) the compiled steps move the same readings to the same lines as numpy's, to
+    the bit."""
+    from irring.estimation import estimate as module
+    from irring.scenario import load_scenario
+    sc = load_scenario(name)
+    cal = pipeline.scene_calibration(sc)[0]
+    run = pipeline.simulated(sc, seed=seed, progress=False)[0]
+    moves = []
+    original = module.rejoin_traces
+
+    def both(points, label, *args):
+        fast = original(points, label, *args[:-1], TraceKernels)
+        slow = original(points, label, *args[:-1], TraceSteps)
+        moves.append(int(np.count_nonzero(fast[1] != label)))
+        _same(fast[1], slow[1], "label")
+        for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason"):
+            _same(getattr(fast[0], f), getattr(slow[0], f), f)
+        return fast
+
+    monkeypatch.setattr(module, "rejoin_traces", both)
+    for sweep in run.sweeps:
+        estimate(sweep, cal)
+    assert len(moves) == len(run.sweeps) and sum(moves) == {"grazing_corridor": 16,
+                                                            "narrow_room": 82}[name]

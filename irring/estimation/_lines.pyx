@@ -1765,3 +1765,199 @@ def beside_a_return(const unsigned char[::1] reason, const unsigned char[::1] va
             bound[n_cut] = lo
             n_cut += 1
     return at_arr[:n_cut].copy(), bound_arr[:n_cut].copy()
+
+
+# --------------------------------------------------------------------------- traces (rejoin_traces)
+
+def trace_pairs(const idx_t[::1] vi, const idx_t[::1] lab, const idx_t[::1] order,
+                idx_t n_sensors, idx_t skip):
+    """``irring.estimation.estimate.TraceSteps.pairs`` (the statement), exactly: ``vi`` (k,)
+    flat (S·N) readings, ``lab`` their lines (−1: none), ``order`` (S,) the rows in step
+    order; ``skip`` = TRACE_SKIP. Returns (joined (k − 1,) uint8, reading, nbr)."""
+    cdef idx_t k = vi.shape[0], S = order.shape[0], i, q, r, nb, w, n_pairs = 0, step, t
+    if not (lab.shape[0] == k and n_sensors >= 1):
+        raise lengths_differ("trace_pairs' readings", vi=k, lab=lab.shape[0])
+    rank_arr = np.empty(S, dtype=np.intp)
+    cdef idx_t[::1] rank = rank_arr
+    for q in range(S):
+        r = order[q]
+        if r < 0 or r >= S:
+            raise IndexError(f"order[{q}] = {r} is not a row (0 … {S - 1})")
+        rank[r] = q
+    for i in range(k):
+        if vi[i] < 0 or vi[i] >= S * n_sensors:
+            raise IndexError(f"vi[{i}] = {vi[i]} is not a reading (0 … {S * n_sensors - 1})")
+    joined_arr = np.zeros(max(k - 1, 0), dtype=np.uint8)
+    cdef unsigned char[::1] joined = joined_arr
+    for i in range(k - 1):
+        joined[i] = (vi[i + 1] % n_sensors == vi[i] % n_sensors
+                     and rank[vi[i + 1] // n_sensors] - rank[vi[i] // n_sensors] == 1)
+    pairs_arr = np.empty((2, 2 * k), dtype=np.intp)
+    cdef idx_t[:, ::1] P = pairs_arr
+    for w in range(2):
+        step = -1 if w == 0 else 1
+        for i in range(k):
+            if lab[i] < 0:
+                continue
+            # the link from i one step on: joined between the two
+            nb = -1
+            if step < 0 and i >= 1 and joined[i - 1]:
+                nb = i - 1
+            elif step > 0 and i + 1 < k and joined[i]:
+                nb = i + 1
+            for t in range(skip):
+                if nb >= 0 and lab[nb] < 0:
+                    if step < 0:
+                        nb = nb - 1 if nb >= 1 and joined[nb - 1] else -1
+                    else:
+                        nb = nb + 1 if nb + 1 < k and joined[nb] else -1
+            if nb >= 0:
+                P[0, n_pairs] = i
+                P[1, n_pairs] = nb
+                n_pairs += 1
+    return joined_arr, pairs_arr[0, :n_pairs].copy(), pairs_arr[1, :n_pairs].copy()
+
+
+cdef inline bint _past_corner(double qx, double qy, double ox, double oy, idx_t b, idx_t c,
+                              const double[::1] alpha, const double[::1] cx,
+                              const double[::1] cy, const double* lo, const double* hi,
+                              const double* mx, const double* my, double reach_m,
+                              double reach_share, double min_split_m,
+                              double sin_corner) noexcept nogil:
+    """``estimate._past_a_corner`` for one point (qx, qy) put on line b, against line c."""
+    cdef double cab = cos(alpha[b]), sab = sin(alpha[b]), cac = cos(alpha[c]), sac = sin(alpha[c])
+    cdef double wx = cx[c] - cx[b], wy = cy[c] - cy[b]
+    cdef double crs = cab * sac - sab * cac
+    cdef double tb = (wx * sac - wy * cac) / crs
+    cdef double tc = (wx * sab - wy * cab) / crs
+    cdef double reach = reach_share * hypot(cx[b] + tb * cab - ox, cy[b] + tb * sab - oy)
+    cdef double side_b, side_q
+    if reach < reach_m:          # np.maximum: a NaN stays
+        reach = reach_m
+    side_b = (my[b] - cy[c]) * cac - (mx[b] - cx[c]) * sac
+    side_q = (qy - cy[c]) * cac - (qx - cx[c]) * sac
+    return (fabs(crs) > sin_corner and tb >= lo[b] - reach and tb <= hi[b] + reach
+            and tc >= lo[c] - reach and tc <= hi[c] + reach and side_b * side_q < 0
+            and fabs(side_q) > min_split_m)
+
+
+def trace_round(const idx_t[::1] lab, const unsigned char[::1] moved,
+                const unsigned char[::1] joined, const idx_t[::1] reading,
+                const idx_t[::1] nbr, const unsigned char[::1] good, const idx_t[::1] lost,
+                const double[::1] px, const double[::1] py, const double[::1] ox,
+                const double[::1] oy, const double[::1] alpha, const double[::1] cx,
+                const double[::1] cy, double reach_m, double reach_share, double min_split_m,
+                double loose, double loose_min, double sin_corner):
+    """``irring.estimation.estimate.TraceSteps.round`` (the statement and the why), exactly:
+    per valid reading (k,) ``lab``, ``moved``, end points, emitters; ``joined`` (k − 1,);
+    the pairs ``reading``, ``nbr``; per line (L,) ``good``, ``lost``, ``alpha``, ``cx``,
+    ``cy``; ``loose`` = TRACE_LOOSE, ``loose_min`` = TRACE_LOOSE_MIN_M, ``sin_corner`` = sin
+    TRACE_CORNER_RAD. Returns None (no frontier) or (i, j, a, b, run_lo, run_hi, n_mem,
+    mx, my, lo, hi, absorb, cross), absorb and cross bool."""
+    cdef idx_t k = lab.shape[0], L = alpha.shape[0], n_p = reading.shape[0], p, m = 0
+    cdef idx_t i, g, a, b, start
+    cdef double ca, sa, along, across, v, t
+    cdef bint f
+    if not (moved.shape[0] == px.shape[0] == py.shape[0] == ox.shape[0] == oy.shape[0] == k
+            and joined.shape[0] == max(k - 1, 0) and nbr.shape[0] == n_p):
+        raise lengths_differ("trace_round's readings", lab=k, moved=moved.shape[0],
+                             px=px.shape[0], py=py.shape[0], ox=ox.shape[0], oy=oy.shape[0],
+                             joined_plus_1=joined.shape[0] + 1, reading=n_p, nbr=nbr.shape[0])
+    if not (good.shape[0] == lost.shape[0] == cx.shape[0] == cy.shape[0] == L):
+        raise lengths_differ("trace_round's lines", alpha=L, good=good.shape[0],
+                             lost=lost.shape[0], cx=cx.shape[0], cy=cy.shape[0])
+    for i in range(k):
+        if lab[i] >= L:
+            raise IndexError(f"lab[{i}] = {lab[i]} is not a line (−1 … {L - 1})")
+    for p in range(n_p):
+        if not (0 <= reading[p] < k and 0 <= nbr[p] < k):
+            raise IndexError(f"pair {p} ({reading[p]}, {nbr[p]}) is not of readings 0 … {k - 1}")
+    front_arr = np.empty((4, n_p), dtype=np.intp)
+    cdef idx_t[:, ::1] F = front_arr
+    for p in range(n_p):
+        a = lab[reading[p]]
+        b = lab[nbr[p]]
+        if moved[reading[p]] or b < 0 or b == a or not good[b]:
+            continue
+        if a < 0:    # (pairs are of members, and a member moves only onto a line)
+            raise ValueError(f"pair {p}: reading {reading[p]} is on no line")
+        F[0, m] = reading[p]
+        F[1, m] = nbr[p]
+        F[2, m] = a
+        F[3, m] = b
+        m += 1
+    if m == 0:
+        return None
+    runs_arr = np.empty((2, k), dtype=np.intp)
+    cdef idx_t[:, ::1] R = runs_arr
+    start = 0
+    for i in range(k):
+        if i > 0 and (not joined[i - 1] or lab[i] != lab[i - 1] or moved[i] != moved[i - 1]):
+            start = i
+        R[0, i] = start
+    start = k - 1
+    for i in range(k - 1, -1, -1):
+        if i < k - 1 and R[0, i + 1] == i + 1:
+            start = i
+        R[1, i] = start
+    n_mem_arr = np.zeros(L, dtype=np.intp)
+    stats_arr = np.zeros((5, L))      # mx, my, lo, hi, rms
+    cdef idx_t[::1] n_mem = n_mem_arr
+    cdef double[:, ::1] T = stats_arr
+    cdef double* mx = &T[0, 0] if L else NULL
+    cdef double* my = mx + L
+    cdef double* lo = mx + 2 * L
+    cdef double* hi = mx + 3 * L
+    cdef double* rms = mx + 4 * L
+    for g in range(L):
+        lo[g] = INFINITY
+        hi[g] = -INFINITY
+    for i in range(k):
+        g = lab[i]
+        if g < 0:
+            continue
+        n_mem[g] += 1
+        mx[g] += px[i]
+        my[g] += py[i]
+    for i in range(k):
+        g = lab[i]
+        if g < 0:
+            continue
+        ca = cos(alpha[g])
+        sa = sin(alpha[g])
+        along = (px[i] - cx[g]) * ca + (py[i] - cy[g]) * sa
+        across = (py[i] - cy[g]) * ca - (px[i] - cx[g]) * sa
+        if along != along or lo[g] != lo[g]:     # np.minimum / np.maximum: a NaN wins
+            lo[g] = NAN
+        elif along < lo[g]:
+            lo[g] = along
+        if along != along or hi[g] != hi[g]:
+            hi[g] = NAN
+        elif along > hi[g]:
+            hi[g] = along
+        rms[g] += across * across
+    for g in range(L):
+        t = n_mem[g] if n_mem[g] > 1 else 1
+        mx[g] = mx[g] / t
+        my[g] = my[g] / t
+        rms[g] = sqrt(rms[g] / t)
+    flags_arr = np.zeros((2, m), dtype=np.uint8)
+    cdef unsigned char[:, ::1] B = flags_arr
+    for p in range(m):
+        i = F[0, p]
+        a = F[2, p]
+        b = F[3, p]
+        f = not (lost[b] > n_mem[b])
+        if not f:
+            continue
+        v = loose * rms[b]
+        if v < loose_min:        # np.maximum: a NaN stays
+            v = loose_min
+        B[0, p] = (lost[a] > n_mem[a]) or (n_mem[a] < n_mem[b] and rms[a] > v
+                                           and fabs(sin(alpha[a] - alpha[b])) <= sin_corner)
+        B[1, p] = _past_corner(px[i], py[i], ox[i], oy[i], a, b, alpha, cx, cy, lo, hi, mx,
+                               my, reach_m, reach_share, min_split_m, sin_corner)
+    return (front_arr[0, :m].copy(), front_arr[1, :m].copy(), front_arr[2, :m].copy(),
+            front_arr[3, :m].copy(), runs_arr[0], runs_arr[1], n_mem_arr, stats_arr[0],
+            stats_arr[1], stats_arr[2], stats_arr[3], flags_arr[0].view(bool),
+            flags_arr[1].view(bool))

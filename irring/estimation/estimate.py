@@ -532,7 +532,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    snapper: Callable | None = None, profiler: Callable | None = None,
                    voter: Callable | None = None, post_grouper: Callable | None = None,
                    gapper: Callable | None = None, raw_counts: np.ndarray | None = None,
-                   beside: Callable | None = None) -> Estimate:
+                   beside: Callable | None = None, tracer: type[TraceSteps] | None = None
+                   ) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -555,7 +556,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     default; the oracle passes its numpy ``far_line_vote`` and ``post_groups``);
     ``gapper``: the silent gaps (:func:`silent_gaps_compiled`; the oracle: :func:`silent_gaps`);
     ``beside``: the silent beams beside a return (:func:`beside_a_return_compiled`; the
-    oracle: :func:`beside_a_return`).
+    oracle: :func:`beside_a_return`); ``tracer``: :func:`rejoin_traces`' steps
+    (:class:`TraceKernels`; the oracle: :class:`TraceSteps`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -588,7 +590,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         # after round_runs: a round thing's arc cut into lines is its circle's first)
         points, label = rejoin_traces(points, label, index, counts, steps, cal,
                                       grouping.alpha, grouping.cx, grouping.cy,
-                                      grouping.usable, options)
+                                      grouping.usable, options, tracer or TraceKernels)
         points, label = counts_disown_lines(points, label, index, counts, steps, cal,
                                             grouping.alpha, grouping.cx, grouping.cy, profiler)
     points = censored_lines(points, label, counts, steps, cal)
@@ -878,12 +880,114 @@ def _trace_moves(ask: np.ndarray, i: np.ndarray, j: np.ndarray, a: np.ndarray,
     return (r[pick], bb[ok][pick], d[ok][pick], theta[ok][pick], sigma[ok][pick])
 
 
+class TraceSteps:
+    """:func:`rejoin_traces`' two steps over its arrays, in numpy: the statement the
+    compiled :class:`TraceKernels` is held to (tests/test_grazing.py)."""
+
+    @staticmethod
+    def pairs(vi: np.ndarray, lab: np.ndarray, steps: np.ndarray, n_sensors: int):
+        """(joined (k − 1,) bool, reading, nbr): of the valid readings ``vi`` (flat (S·N)
+        indices in scan order; ``lab`` their lines or −1), which follow their previous one
+        at their sensor's next step; and each member's neighbouring reading of its sensor,
+        both ways (all the previous ones first) as pairs (positions into ``vi``): the next
+        valid reading, past at most ``TRACE_SKIP`` on no line (those never move)."""
+        scan = scan_order(steps, n_sensors)
+        pos = np.empty(scan.size, dtype=np.intp)
+        pos[scan] = np.arange(scan.size)
+        sensor = vi % n_sensors
+        # valid readings of one sensor at consecutive steps (no invalid reading between)
+        joined = (sensor[1:] == sensor[:-1]) & (pos[vi[1:]] - pos[vi[:-1]] == 1)
+        k = vi.size
+        ar = np.arange(k)
+        reading, nbr = [], []
+        for step, link in ((-1, np.concatenate(([False], joined))),
+                           (1, np.concatenate((joined, [False])))):
+            nb = np.where(link, ar + step, -1)
+            for _ in range(TRACE_SKIP):
+                on_none = (nb >= 0) & (lab[np.maximum(nb, 0)] < 0)
+                nb = np.where(on_none, np.where(link[np.maximum(nb, 0)], nb + step, -1), nb)
+            keep = (nb >= 0) & (lab >= 0)
+            reading.append(ar[keep])
+            nbr.append(nb[keep])
+        return joined, np.concatenate(reading), np.concatenate(nbr)
+
+    @staticmethod
+    def round(lab, moved, joined, reading, nbr, good, lost, px, py, ox, oy, alpha, cx, cy,
+              options: LineOptions):
+        """One round's frontier and what it is judged by, or None where it is empty: the
+        pairs (``reading`` on line a, ``nbr`` on another usable line b; not moved yet) as
+        (i, j, a, b); each reading's run's bounds (run_lo, run_hi: consecutive readings of
+        one sensor on one line, none moved or all); each line's members' count, mean,
+        extent along it (lo, hi); and which pairs may move now: absorb (a's line weaker or
+        gone: a line that ``lost`` more members than it kept takes none) and cross (a's
+        reading past its line's corner with b)."""
+        a, b = lab[reading], lab[nbr]
+        f = ~moved[reading] & (b >= 0) & (b != a)
+        f[f] = good[b[f]]
+        if not f.any():
+            return None
+        i, j, a, b = reading[f], nbr[f], a[f], b[f]
+        k, n_lines = lab.size, alpha.size
+        new_run = np.concatenate(
+            ([True], ~joined | (lab[1:] != lab[:-1]) | (moved[1:] != moved[:-1])))
+        start = new_run.nonzero()[0]
+        run = np.cumsum(new_run) - 1
+        run_lo, run_hi = start[run], np.concatenate((start[1:] - 1, [k - 1]))[run]
+        ca, sa = np.cos(alpha), np.sin(alpha)
+        mem = lab >= 0
+        g = lab[mem]
+        n_mem = np.bincount(g, minlength=n_lines)
+        nm = np.maximum(n_mem, 1)
+        mx, my = np.bincount(g, px[mem], n_lines) / nm, np.bincount(g, py[mem], n_lines) / nm
+        # each line's members' extent along it and their scatter across it
+        along = (px[mem] - cx[g]) * ca[g] + (py[mem] - cy[g]) * sa[g]
+        across = (py[mem] - cy[g]) * ca[g] - (px[mem] - cx[g]) * sa[g]
+        lo, hi = np.full(n_lines, np.inf), np.full(n_lines, -np.inf)
+        np.minimum.at(lo, g, along)
+        np.maximum.at(hi, g, along)
+        rms = np.sqrt(np.bincount(g, across * across, n_lines) / nm)
+        gone = lost > n_mem
+        f = ~gone[b]               # a line that gave up more than it kept takes none
+        # first a weaker line's members (or a gone line's), then members past a corner
+        absorb = f & (gone[a] | ((n_mem[a] < n_mem[b])
+                                 & (rms[a] > np.maximum(TRACE_LOOSE * rms[b], TRACE_LOOSE_MIN_M))
+                                 & (np.abs(np.sin(alpha[a] - alpha[b]))
+                                    <= math.sin(TRACE_CORNER_RAD))))
+        cross = f.copy()
+        at = i[f]
+        cross[f] = _past_a_corner(px[at], py[at], ox[at], oy[at], a[f], b[f][:, None],
+                                  alpha, cx, cy, lo, hi, mx, my, options)[:, 0]
+        return i, j, a, b, run_lo, run_hi, n_mem, mx, my, lo, hi, absorb, cross
+
+
+class TraceKernels(TraceSteps):
+    """:class:`TraceSteps` in compiled calls (``irring.estimation._lines.trace_pairs`` and
+    ``trace_round``, held to it by tests/test_grazing.py)."""
+
+    @staticmethod
+    def pairs(vi: np.ndarray, lab: np.ndarray, steps: np.ndarray, n_sensors: int):
+        return _lines.trace_pairs(vi, lab, np.argsort(np.asarray(steps), kind="stable"),
+                                  n_sensors, TRACE_SKIP)
+
+    @staticmethod
+    def round(lab, moved, joined, reading, nbr, good, lost, px, py, ox, oy, alpha, cx, cy,
+              options: LineOptions):
+        f = np.ascontiguousarray
+        return _lines.trace_round(
+            lab, moved.view(np.uint8), f(joined).view(np.uint8), reading, nbr,
+            f(good).view(np.uint8), lost, px, py, ox, oy, f(alpha, dtype=float),
+            f(cx, dtype=float), f(cy, dtype=float), options.corner_reach_m,
+            options.corner_reach_share, options.min_split_m, TRACE_LOOSE, TRACE_LOOSE_MIN_M,
+            math.sin(TRACE_CORNER_RAD))
+
+
 def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                   steps: np.ndarray, cal: Calibration, alpha: np.ndarray, cx: np.ndarray,
-                  cy: np.ndarray, usable: np.ndarray, options: LineOptions
-                  ) -> tuple[Points, np.ndarray]:
+                  cy: np.ndarray, usable: np.ndarray, options: LineOptions,
+                  tracer: type[TraceSteps] = TraceSteps) -> tuple[Points, np.ndarray]:
     """Line members that a better-held line their own sensor's trace continues on places,
-    moved to it; numpy, shared by both estimators.
+    moved to it; shared by both estimators (``tracer``: its steps, numpy's
+    :class:`TraceSteps` or the compiled :class:`TraceKernels`).
 
     A member whose sensor's neighbouring reading (at the next step, or across at most
     ``TRACE_SKIP`` valid readings on no line) is on another usable line B moves to B where
@@ -907,30 +1011,10 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     if vi.size < 2 or not (lab >= 0).any():
         return points, label
     lab = lab.copy()
-    scan = scan_order(steps, n_sensors)
-    pos = np.empty(label.size, dtype=np.intp)
-    pos[scan] = np.arange(scan.size)
-    sensor = vi % n_sensors
-    # valid readings of one sensor at consecutive steps (no invalid reading between)
-    joined = (sensor[1:] == sensor[:-1]) & (pos[vi[1:]] - pos[vi[:-1]] == 1)
-    # each member's neighbouring line member of its sensor, both ways, as pairs: the next
-    # valid reading, past at most TRACE_SKIP on no line (those never move)
+    joined, reading, nbr = tracer.pairs(vi, lab, steps, n_sensors)
     k = vi.size
-    ar = np.arange(k)
-    reading, nbr = [], []
-    for step, link in ((-1, np.concatenate(([False], joined))),
-                       (1, np.concatenate((joined, [False])))):
-        nb = np.where(link, ar + step, -1)
-        for _ in range(TRACE_SKIP):
-            on_none = (nb >= 0) & (lab[np.maximum(nb, 0)] < 0)
-            nb = np.where(on_none, np.where(link[np.maximum(nb, 0)], nb + step, -1), nb)
-        keep = (nb >= 0) & (lab >= 0)
-        reading.append(ar[keep])
-        nbr.append(nb[keep])
-    reading, nbr = np.concatenate(reading), np.concatenate(nbr)
     n_lines = alpha.size
     good = np.asarray(usable, dtype=bool)
-    ca, sa = np.cos(alpha), np.sin(alpha)
     counts_at = np.asarray(counts, dtype=float).reshape(-1)[vi]
     h = points.heading.reshape(-1)[vi]
     ox, oy = points.origin_x.reshape(-1)[vi], points.origin_y.reshape(-1)[vi]
@@ -938,47 +1022,17 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     moved = np.zeros(k, dtype=bool)
     new_d, new_t, new_sig = np.full(k, np.nan), np.full(k, np.nan), np.full(k, np.nan)
     lost = np.zeros(n_lines, dtype=np.intp)     # members each line gave up
-    along_rad = math.sin(TRACE_CORNER_RAD)
     for _ in range(TRACE_ROUNDS):
         # the trace's frontier: a member not moved yet whose neighbour is on another usable line
-        a, b = lab[reading], lab[nbr]
-        f = ~moved[reading] & (b >= 0) & (b != a)
-        f[f] = good[b[f]]
-        if not f.any():
+        front = tracer.round(lab, moved, joined, reading, nbr, good, lost, px, py, ox, oy,
+                             alpha, cx, cy, options)
+        if front is None:
             break
-        i, j, a, b = reading[f], nbr[f], a[f], b[f]
-        # runs: consecutive readings of one sensor on one line (none moved, or all)
-        new_run = np.concatenate(
-            ([True], ~joined | (lab[1:] != lab[:-1]) | (moved[1:] != moved[:-1])))
-        start = new_run.nonzero()[0]
-        run = np.cumsum(new_run) - 1
-        run_lo, run_hi = start[run], np.concatenate((start[1:] - 1, [k - 1]))[run]
-        mem = lab >= 0
-        g = lab[mem]
-        n_mem = np.bincount(g, minlength=n_lines)
-        nm = np.maximum(n_mem, 1)
-        mx, my = np.bincount(g, px[mem], n_lines) / nm, np.bincount(g, py[mem], n_lines) / nm
-        # each line's members' extent along it and their scatter across it
-        along = (px[mem] - cx[g]) * ca[g] + (py[mem] - cy[g]) * sa[g]
-        across = (py[mem] - cy[g]) * ca[g] - (px[mem] - cx[g]) * sa[g]
-        lo, hi = np.full(n_lines, np.inf), np.full(n_lines, -np.inf)
-        np.minimum.at(lo, g, along)
-        np.maximum.at(hi, g, along)
-        rms = np.sqrt(np.bincount(g, across * across, n_lines) / nm)
-        gone = lost > n_mem
-        f = ~gone[b]               # a line that gave up more than it kept takes none
-        # first a weaker line's members (or a gone line's), then members past a corner
-        absorb = f & (gone[a] | ((n_mem[a] < n_mem[b])
-                                 & (rms[a] > np.maximum(TRACE_LOOSE * rms[b], TRACE_LOOSE_MIN_M))
-                                 & (np.abs(np.sin(alpha[a] - alpha[b])) <= along_rad)))
+        i, j, a, b, run_lo, run_hi, n_mem, mx, my, lo, hi, absorb, cross = front
         args = (i, j, a, b, run_lo, run_hi, px, py, counts_at, h, ox, oy, alpha, cx, cy, lo,
                 hi, mx, my, n_mem, good, cal, points.max_range_m, options)
         go = _trace_moves(absorb, *args, False)
-        if go is None and f.any():
-            cross = f.copy()
-            at = i[f]
-            cross[f] = _past_a_corner(px[at], py[at], ox[at], oy[at], a[f], b[f][:, None],
-                                      alpha, cx, cy, lo, hi, mx, my, options)[:, 0]
+        if go is None:
             go = _trace_moves(cross, *args, True)
         if go is None:
             break

@@ -15,7 +15,8 @@ from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration
 from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RUN_MAX,
                        POST_SENSORS, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
                        SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
-                       LineOptions, Lines, Pieces, beam_crossings, beside_a_return,
+                       LineOptions, Lines, Pieces, TraceSteps, beam_crossings,
+                       beside_a_return,
                        clip_at_corners,
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
                        member_spans, nearest_heard_rows, nominal_calibration, polyline_ids,
@@ -1130,7 +1131,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           counts, np.asarray(sweep.steps), reach=no_return_reach,
                           snapper=snap_to_lines, profiler=range_profiles,
                           voter=far_line_vote, post_grouper=post_groups, gapper=silent_gaps,
-                          beside=beside_a_return,
+                          beside=beside_a_return, tracer=TraceSteps,
                           raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
