@@ -258,7 +258,9 @@ class Calibration:
     def distance(self, counts: Any, theta_rad: Any = 0.0) -> np.ndarray:
         """Eq. 10: metres from counts (> 0) at incidence θ; vectorised."""
         s = np.asarray(counts, dtype=float)
-        log_a, b = self.log_ab(theta_rad)
+        # (θ = 0, the default and most callers' θ, from the cache: the same numbers)
+        log_a, b = (self._ab0 if type(theta_rad) is float and theta_rad == 0.0
+                    else self.log_ab(theta_rad))
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.exp(log_a + b * np.log(s))
 

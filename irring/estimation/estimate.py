@@ -1789,7 +1789,7 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration,
     s, d0, sig_s = pad(pr.s, 1.0), pad(pr.d0, np.inf), pad(pr.sig_s, 0.0)
     h = pad(pr.heading, 0.0)
     ex, ey = np.cos(h), np.sin(h)
-    _, b0 = cal.log_ab(0.0)
+    _, b0 = cal._ab0
     noise = np.maximum(np.abs(b0) * np.where(mask, d0, 1.0) * sig_s, SIGMA_FLOOR_M)
     geo = (pad(pr.ox, 0.0), pad(pr.oy, 0.0), ex, ey, np.where(mask, d0, 1.0), np.log(s),
            noise, mask)
@@ -1898,7 +1898,7 @@ def _one_line_misfit(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
     ox, oy, h = pr.ox[pos], pr.oy[pos], pr.heading[pos]
     ex, ey = np.cos(h), np.sin(h)
     log_s, d = np.log(pr.s[pos]), pr.d0[pos]
-    _, b0 = cal.log_ab(0.0)
+    _, b0 = cal._ab0
     noise = np.maximum(np.abs(b0) * d * pr.sig_s[pos], SIGMA_FLOOR_M)
     cnt = np.bincount(group, minlength=n).astype(float)
     for _ in range(ROUND_LINE_ITERATIONS):
@@ -1956,7 +1956,7 @@ def _pieces_misfit(pr: _Profile, pos: np.ndarray, lab: np.ndarray, alpha: np.nda
     meets = on & (across != 0) & (t > 0) & (th <= cal.max_incidence_rad)
     la, b = cal.log_ab(np.minimum(th, cal.max_incidence_rad))
     d = np.exp(la + b * np.log(pr.s[pos]))
-    _, b0 = cal.log_ab(0.0)
+    _, b0 = cal._ab0
     z = (d - t) / np.maximum(np.abs(b0) * pr.d0[pos] * pr.sig_s[pos], SIGMA_FLOOR_M)
     return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
 
@@ -2173,7 +2173,7 @@ def _on_circles(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
     log_s = np.log(s)
     la, b = cal.log_ab(th)
     d = np.exp(la + b * log_s)
-    _, b0 = cal.log_ab(0.0)
+    _, b0 = cal._ab0
     noise = np.maximum(np.abs(b0) * pr.d0[pos] * pr.sig_s[pos], SIGMA_FLOOR_M)
     z = (d - t) / noise
     mis = np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
@@ -2675,11 +2675,12 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     s = np.asarray(counts, dtype=float).reshape(-1)[at]
     # no reading is trusted better than SIGMA_FLOOR_M in range (the pose, the beam's
     # direction): its counts no better than the change that range makes
-    _, b0 = cal.log_ab(0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    _, b0 = cal._ab0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         d0 = cal.distance(s, 0.0)
-        sig = np.maximum(cal.sigma_counts(),
-                         np.nan_to_num(s / (np.abs(b0) * d0)) * COUNTS_FLOOR_M)
+        # (np.nan_to_num's NaN → 0 and ±inf → ±max float, in two cheaper calls)
+        sig = np.fmax(cal.sigma_counts(), np.minimum(s / (np.abs(b0) * d0),
+                                                     np.finfo(float).max) * COUNTS_FLOOR_M)
     a = np.asarray(alpha, dtype=float).copy()
     c = -np.sin(a) * cx + np.cos(a) * cy
     expect, met = _counts_at(cal, a[line], c[line], *beam)
