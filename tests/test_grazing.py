@@ -4,6 +4,8 @@ the walls at 40–70° lie within 10 mm RMS of the true hit, at least 3× closer
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -392,3 +394,79 @@ def test_the_trace_kernels_move_what_the_statement_moves(monkeypatch, name, seed
         estimate(sweep, cal)
     assert len(moves) == len(run.sweeps) and sum(moves) == {"grazing_corridor": 16,
                                                             "narrow_room": 82}[name]
+
+
+@functools.lru_cache(maxsize=1)
+def _move_states():
+    """The arguments of every ``TraceSteps.moves`` call the numpy estimator makes on
+    grazing_corridor seed 1 and narrow_room seed 2 (where readings move)."""
+    from irring.estimation import estimate_numpy
+    from irring.scenario import load_scenario
+    states, original = [], TraceSteps.moves
+
+    def record(*args):
+        states.append(args)
+        return original(*args)
+
+    TraceSteps.moves = staticmethod(record)
+    try:
+        for name, seed in (("grazing_corridor", 1), ("narrow_room", 2)):
+            sc = load_scenario(name)
+            cal = pipeline.scene_calibration(sc)[0]
+            for sweep in pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps:
+                estimate_numpy.estimate_detail(sweep, cal)
+    finally:
+        TraceSteps.moves = original
+    return tuple(states)
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=st.data(), ask_share=st.floats(0.0, 1.0), to_corner=st.booleans(),
+       spoil=st.sampled_from([None, "nan_counts", "zero_counts", "nan_points", "narrow"]),
+       adopt_m=st.sampled_from([0.0, 0.02, 0.2]), rounds_cap=st.booleans())
+def test_the_trace_move_kernel_agrees_with_its_numpy_statement(data, ask_share, to_corner,
+                                                              spoil, adopt_m, rounds_cap):
+    """``_lines.trace_moves`` against :func:`estimate._trace_moves` on the rounds the numpy
+    estimator met in two bundled rooms, with any pairs asked, either kind of move (across
+    a corner or not), NaN or zero counts, NaN end points, lines' extents narrowed to
+    nothing, any adopt margin: None together, else readings, targets, d, θ and σ exact.
+    Not vacuous: the unspoilt rounds move readings (counted below)."""
+    from irring.estimation.estimate import _trace_moves
+    states = _move_states()
+    args = list(states[data.draw(st.integers(0, len(states) - 1))])
+    rng = np.random.default_rng(data.draw(st.integers(0, 2 ** 31 - 1)))
+    n_pairs = args[1].size
+    args[0] = args[0] | (rng.random(n_pairs) < ask_share)
+    k = args[7].size
+    if spoil == "nan_counts":
+        args[9] = np.where(rng.random(k) < 0.2, np.nan, args[9])
+    elif spoil == "zero_counts":
+        args[9] = np.where(rng.random(k) < 0.2, 0.0, args[9])
+    elif spoil == "nan_points":
+        args[7] = np.where(rng.random(k) < 0.2, np.nan, args[7])
+    elif spoil == "narrow":
+        args[16], args[17] = args[17].copy(), args[16].copy()
+    args[24] = dataclasses.replace(args[24], adopt_margin_m=adopt_m)
+    args[25] = to_corner
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slow = _trace_moves(*args)
+    fast = TraceKernels.moves(*args)
+    assert (fast is None) == (slow is None)
+    if slow is not None:
+        for name, f, s_ in zip(("readings", "targets", "d", "theta", "sigma"), fast, slow):
+            _same(f, s_, name)
+
+
+def test_the_recorded_rounds_move_readings():
+    """The rounds the move test draws from are not all empty: some move readings, with the
+    compiled step as with numpy's."""
+    from irring.estimation.estimate import _trace_moves
+    moved = 0
+    for args in _move_states():
+        slow, fast = _trace_moves(*args), TraceKernels.moves(*args)
+        assert (fast is None) == (slow is None)
+        if slow is not None:
+            moved += slow[0].size
+            for f, s_ in zip(fast, slow):
+                _same(f, s_, "move")
+    assert moved > 50

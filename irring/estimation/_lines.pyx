@@ -1961,3 +1961,205 @@ def trace_round(const idx_t[::1] lab, const unsigned char[::1] moved,
             front_arr[3, :m].copy(), runs_arr[0], runs_arr[1], n_mem_arr, stats_arr[0],
             stats_arr[1], stats_arr[2], stats_arr[3], flags_arr[0].view(bool),
             flags_arr[1].view(bool))
+
+
+def trace_moves(const unsigned char[::1] ask, const idx_t[::1] i_in, const idx_t[::1] j_in,
+                const idx_t[::1] a_in, const idx_t[::1] b_in, const idx_t[::1] run_lo,
+                const idx_t[::1] run_hi, const double[::1] kx, const double[::1] ky,
+                const double[::1] counts, const double[::1] h, const double[::1] ox,
+                const double[::1] oy, const double[::1] alpha, const double[::1] cx,
+                const double[::1] cy, const double[::1] lo, const double[::1] hi,
+                const double[::1] mx, const double[::1] my, const idx_t[::1] n_mem,
+                const unsigned char[::1] good, xp, node_log_a, node_b, double sigma_counts,
+                double max_inc, double min_range, double max_range, double min_split,
+                double adopt, double reach_m, double reach_share, double sin_corner,
+                double on_sigmas, double sigma_floor, idx_t max_rounds, idx_t min_points,
+                bint to_corner):
+    """``irring.estimation.estimate._trace_moves`` (the statement and the why), exactly:
+    arccos, the curve's interpolation (np.interp over ``xp``, ``node_log_a``, ``node_b``:
+    the calibration's nodes, as ``log_ab``), log and exp are numpy's, on this call's rows;
+    the rest the same operations per element. Returns None or (readings, targets, d, θ, σ)."""
+    cdef idx_t n_in = ask.shape[0], k = kx.shape[0], L = alpha.shape[0]
+    cdef idx_t P = 0, T = 0, p, t, q, e, r, c, n_c = 0, w
+    cdef double x, dd, sg, qx, qy, ca, sa, first, last, tx, acc_lo, acc_hi, glo, ghi
+    cdef double u, perp, thr
+    cdef bint ok, any_ok = False
+    if not (i_in.shape[0] == j_in.shape[0] == a_in.shape[0] == b_in.shape[0] == n_in):
+        raise lengths_differ("trace_moves' pairs", ask=n_in, i=i_in.shape[0], j=j_in.shape[0],
+                             a=a_in.shape[0], b=b_in.shape[0])
+    if not (ky.shape[0] == counts.shape[0] == h.shape[0] == ox.shape[0] == oy.shape[0]
+            == run_lo.shape[0] == run_hi.shape[0] == k):
+        raise lengths_differ("trace_moves' readings", kx=k, ky=ky.shape[0],
+                             counts=counts.shape[0], h=h.shape[0], ox=ox.shape[0],
+                             oy=oy.shape[0], run_lo=run_lo.shape[0], run_hi=run_hi.shape[0])
+    if not (cx.shape[0] == cy.shape[0] == lo.shape[0] == hi.shape[0] == mx.shape[0]
+            == my.shape[0] == n_mem.shape[0] == good.shape[0] == L):
+        raise lengths_differ("trace_moves' lines", alpha=L, cx=cx.shape[0], cy=cy.shape[0],
+                             lo=lo.shape[0], hi=hi.shape[0], mx=mx.shape[0], my=my.shape[0],
+                             n_mem=n_mem.shape[0], good=good.shape[0])
+    for q in range(n_in):
+        if ask[q]:
+            if not (0 <= i_in[q] < k and 0 <= a_in[q] < L and 0 <= b_in[q] < L
+                    and 0 <= run_lo[i_in[q]] <= i_in[q] <= run_hi[i_in[q]] < k):
+                raise IndexError(f"pair {q}: reading {i_in[q]} (of {k}), lines {a_in[q]}, "
+                                 f"{b_in[q]} (of {L}) or its run is out of range")
+            P += 1
+    if P == 0:
+        return None
+    pairs_arr = np.empty((5, P), dtype=np.intp)    # i, a, b, step, span
+    cdef idx_t[:, ::1] A = pairs_arr
+    p = 0
+    for q in range(n_in):
+        if ask[q]:
+            A[0, p] = i_in[q]
+            A[1, p] = a_in[q]
+            A[2, p] = b_in[q]
+            A[3, p] = 1 if i_in[q] > j_in[q] else -1
+            A[4, p] = (run_hi[i_in[q]] - i_in[q] if A[3, p] > 0 else i_in[q] - run_lo[i_in[q]]) + 1
+            if A[4, p] > T:
+                T = A[4, p]
+            p += 1
+    if T > max_rounds:
+        T = max_rounds
+    # the runs, outward from each i (P, T): where past its run, i itself (as the statement)
+    grid_i = np.empty(P * T, dtype=np.intp)
+    grid_f = np.empty((3, P * T))     # min(|sin(h − α_b)|, 1); counts; then log a + b·log s
+    cdef idx_t[::1] E = grid_i
+    cdef double[:, ::1] G = grid_f
+    for p in range(P):
+        for t in range(T):
+            q = p * T + t
+            e = A[0, p] + A[3, p] * t if t < A[4, p] else A[0, p]
+            E[q] = e
+            x = fabs(sin(h[e] - alpha[A[2, p]]))
+            if x > 1.0:              # np.minimum: a NaN stays
+                x = 1.0
+            G[0, q] = x
+            G[1, q] = counts[e]
+    theta_arr = np.arccos(grid_f[0])
+    la_arr = np.interp(theta_arr, xp, node_log_a)
+    bexp_arr = np.interp(theta_arr, xp, node_b)
+    d_arr = np.log(grid_f[1])
+    cdef double[::1] TH = theta_arr, LA = la_arr, BE = bexp_arr, D = d_arr
+    for q in range(P * T):
+        D[q] = LA[q] + BE[q] * D[q]
+    np.exp(d_arr, out=d_arr)
+    out_f = np.empty((5, P * T))       # σ, x, y, perp / thr, ok
+    cdef double[:, ::1] O = out_f
+    ok_arr = np.zeros(P * T, dtype=np.uint8)
+    cdef unsigned char[::1] OK = ok_arr
+    for p in range(P):
+        b = A[2, p]
+        ca = cos(alpha[b])
+        sa = sin(alpha[b])
+        first = lo[b]
+        last = hi[b]
+        if to_corner:    # across a corner the target runs on to it
+            c = A[1, p]
+            tx = (((cx[c] - cx[b]) * sin(alpha[c]) - (cy[c] - cy[b]) * cos(alpha[c]))
+                  / (ca * sin(alpha[c]) - sa * cos(alpha[c])))
+            first = fmin(first, tx)
+            last = fmax(last, tx)
+        acc_lo = INFINITY
+        acc_hi = -INFINITY
+        for t in range(T):
+            q = p * T + t
+            e = E[q]
+            dd = D[q]
+            sg = fabs(BE[q]) * dd * sigma_counts / G[1, q]
+            if sg < sigma_floor:     # np.maximum: a NaN stays
+                sg = sigma_floor
+            qx = ox[e] + dd * cos(h[e])
+            qy = oy[e] + dd * sin(h[e])
+            perp = fabs((qy - cy[b]) * ca - (qx - cx[b]) * sa)
+            u = (qx - cx[b]) * ca + (qy - cy[b]) * sa
+            thr = on_sigmas * sg
+            if thr < min_split:
+                thr = min_split
+            # the extent grows by the run's readings before each (NaN wins, as np.minimum)
+            glo = NAN if first != first or acc_lo != acc_lo else (first if first < acc_lo
+                                                                  else acc_lo)
+            ghi = NAN if last != last or acc_hi != acc_hi else (last if last > acc_hi
+                                                               else acc_hi)
+            ok = (t < A[4, p] and TH[q] <= max_inc and isfinite(dd) and dd >= min_range
+                  and dd <= max_range and perp <= thr and u >= glo - adopt
+                  and u <= ghi + adopt)
+            # a run moves only as far as each of it lies on b
+            OK[q] = ok and (t == 0 or OK[q - 1])
+            if u != u or acc_lo != acc_lo:
+                acc_lo = NAN
+            elif u < acc_lo:
+                acc_lo = u
+            if u != u or acc_hi != acc_hi:
+                acc_hi = NAN
+            elif u > acc_hi:
+                acc_hi = u
+            O[0, q] = sg
+            O[1, q] = qx
+            O[2, q] = qy
+            O[3, q] = perp / thr
+            any_ok = any_ok or OK[q]
+    if not any_ok:
+        return None
+    corners_arr = np.empty(L, dtype=np.intp)
+    cdef idx_t[::1] corners = corners_arr
+    for c in range(L):
+        if good[c] and n_mem[c] >= min_points:
+            corners[n_c] = c
+            n_c += 1
+    cdef const double* plo = &lo[0]
+    cdef const double* phi = &hi[0]
+    cdef const double* pmx = &mx[0]
+    cdef const double* pmy = &my[0]
+    for p in range(P):
+        for t in range(T):
+            q = p * T + t
+            if not OK[q]:
+                break
+            e = E[q]
+            if to_corner and not _past_corner(kx[e], ky[e], ox[e], oy[e], A[1, p], A[2, p],
+                                              alpha, cx, cy, plo, phi, pmx, pmy, reach_m,
+                                              reach_share, min_split, sin_corner):
+                OK[q] = 0
+                break
+            for w in range(n_c):
+                if _past_corner(O[1, q], O[2, q], ox[e], oy[e], A[2, p], corners[w], alpha,
+                                cx, cy, plo, phi, pmx, pmy, reach_m, reach_share, min_split,
+                                sin_corner):
+                    OK[q] = 0
+                    break
+            if not OK[q]:
+                break
+        # (as far as each of the run lies on b: the rest of the run stays)
+        for t in range(t + 1, T):
+            OK[p * T + t] = 0
+    # a reading two runs take: the target it lies closer to (the first such, on a tie)
+    best_arr = np.full(k, -1, dtype=np.intp)
+    cdef idx_t[::1] best = best_arr
+    cdef idx_t n_out = 0
+    for q in range(P * T):
+        if OK[q]:
+            r = E[q]
+            if best[r] < 0:
+                best[r] = q
+                n_out += 1
+            elif O[3, q] < O[3, best[r]]:
+                best[r] = q
+    if n_out == 0:
+        return None
+    at_arr = np.empty((2, n_out), dtype=np.intp)
+    res_arr = np.empty((3, n_out))
+    cdef idx_t[:, ::1] AT = at_arr
+    cdef double[:, ::1] RES = res_arr
+    w = 0
+    for r in range(k):
+        q = best[r]
+        if q < 0:
+            continue
+        AT[0, w] = r
+        AT[1, w] = A[2, q // T]
+        RES[0, w] = D[q]
+        RES[1, w] = TH[q]
+        RES[2, w] = O[0, q]
+        w += 1
+    return at_arr[0], at_arr[1], res_arr[0], res_arr[1], res_arr[2]

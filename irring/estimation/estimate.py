@@ -881,8 +881,9 @@ def _trace_moves(ask: np.ndarray, i: np.ndarray, j: np.ndarray, a: np.ndarray,
 
 
 class TraceSteps:
-    """:func:`rejoin_traces`' two steps over its arrays, in numpy: the statement the
-    compiled :class:`TraceKernels` is held to (tests/test_grazing.py)."""
+    """:func:`rejoin_traces`' steps over its arrays, in numpy (``pairs`` once, then each
+    round's frontier, ``round``, and what it moves, ``moves`` = :func:`_trace_moves`): the
+    statement the compiled :class:`TraceKernels` is held to (tests/test_grazing.py)."""
 
     @staticmethod
     def pairs(vi: np.ndarray, lab: np.ndarray, steps: np.ndarray, n_sensors: int):
@@ -959,10 +960,12 @@ class TraceSteps:
                                   alpha, cx, cy, lo, hi, mx, my, options)[:, 0]
         return i, j, a, b, run_lo, run_hi, n_mem, mx, my, lo, hi, absorb, cross
 
+    moves = staticmethod(_trace_moves)
+
 
 class TraceKernels(TraceSteps):
-    """:class:`TraceSteps` in compiled calls (``irring.estimation._lines.trace_pairs`` and
-    ``trace_round``, held to it by tests/test_grazing.py)."""
+    """:class:`TraceSteps` in compiled calls (``irring.estimation._lines.trace_pairs``,
+    ``trace_round`` and ``trace_moves``, held to it by tests/test_grazing.py)."""
 
     @staticmethod
     def pairs(vi: np.ndarray, lab: np.ndarray, steps: np.ndarray, n_sensors: int):
@@ -979,6 +982,23 @@ class TraceKernels(TraceSteps):
             f(cx, dtype=float), f(cy, dtype=float), options.corner_reach_m,
             options.corner_reach_share, options.min_split_m, TRACE_LOOSE, TRACE_LOOSE_MIN_M,
             math.sin(TRACE_CORNER_RAD))
+
+    @staticmethod
+    def moves(ask, i, j, a, b, run_lo, run_hi, kx, ky, counts, h, ox, oy, alpha, cx, cy, lo,
+              hi, mx, my, n_mem, good, cal: Calibration, max_range_m: float,
+              options: LineOptions, to_corner: bool):
+        if not ask.any():
+            return None
+        f = np.ascontiguousarray
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return _lines.trace_moves(
+                ask.view(np.uint8), i, j, a, b, run_lo, run_hi, kx, ky, counts, h, ox, oy,
+                f(alpha, dtype=float), f(cx, dtype=float), f(cy, dtype=float), lo, hi, mx, my,
+                n_mem, f(good).view(np.uint8), cal.theta_rad, cal._log_a, cal.b,
+                cal.sigma_counts(), cal.max_incidence_rad, cal.min_range_m, max_range_m,
+                options.min_split_m, options.adopt_margin_m, options.corner_reach_m,
+                options.corner_reach_share, math.sin(TRACE_CORNER_RAD), TRACE_ON_SIGMAS,
+                SIGMA_FLOOR_M, TRACE_ROUNDS, options.min_points, to_corner)
 
 
 def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
@@ -1031,9 +1051,9 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
         i, j, a, b, run_lo, run_hi, n_mem, mx, my, lo, hi, absorb, cross = front
         args = (i, j, a, b, run_lo, run_hi, px, py, counts_at, h, ox, oy, alpha, cx, cy, lo,
                 hi, mx, my, n_mem, good, cal, points.max_range_m, options)
-        go = _trace_moves(absorb, *args, False)
+        go = tracer.moves(absorb, *args, False)
         if go is None:
-            go = _trace_moves(cross, *args, True)
+            go = tracer.moves(cross, *args, True)
         if go is None:
             break
         at, to, d, theta, sigma = go
