@@ -30,6 +30,12 @@ _NO_RETURN, _OUT_OF_RANGE = int(Reason.NO_RETURN), int(Reason.OUT_OF_RANGE)
 _INCIDENCE_UNKNOWN, _MISSING = int(Reason.INCIDENCE_UNKNOWN), int(Reason.MISSING)
 
 SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
+
+
+def range_sigma(b, d, rel):
+    """σ (m) of readings at range ``d`` on a curve of exponent ``b`` (Eq. 10: d ∝ S^b) whose
+    counts S have relative noise ``rel`` = σ_S/S: |b|·d·σ_S/S, at least ``SIGMA_FLOOR_M``."""
+    return np.maximum(np.abs(b) * d * rel, SIGMA_FLOOR_M)
 REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
 CORNER_WINDOW = 14  # corners re-decided at a grouping's first check, later ones only before
 #                     this iteration (a late move left its lines too few iterations to settle)
@@ -752,7 +758,7 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     d = cal.distance(s, theta)
     _, b = cal.log_ab(theta)
     sig_s = cal.sigma_counts() / s
-    sigma = np.maximum(np.abs(b) * d * sig_s, SIGMA_FLOOR_M)
+    sigma = range_sigma(b, d, sig_s)
     met = (theta <= cal.max_incidence_rad) & np.isfinite(d) & (d >= cal.min_range_m)
     # a reading the line of its run meets past the drop-out leaves its line for θ = 0 and
     # the fallback σ: local_incidence then asks its own profile
@@ -1512,7 +1518,7 @@ def _profile_inputs(points: Points, vi: np.ndarray, counts: np.ndarray, steps: n
     sig_s = cal.sigma_counts() / s              # σ_d = |b|·d·σ_S/S
     la0, b0 = cal._ab0
     d0 = np.exp(la0 + b0 * log_s)
-    chain = polyline_ids(d0, np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M), h,
+    chain = polyline_ids(d0, range_sigma(b0, d0, sig_s), h,
                          vi % n_sensors, cal.max_incidence_rad, LineOptions.jump_sigmas)
     step = np.asarray(steps).reshape(-1)[vi // n_sensors]
     return s, h, ox, oy, log_s, sig_s, d0, chain, step
@@ -1592,7 +1598,7 @@ def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.n
         slope = (du * dv).sum(axis=1) / svv
         signed = np.clip(np.arctan(slope), -cal.max_incidence_rad, cal.max_incidence_rad)
     theta = np.abs(signed)
-    sig = np.maximum(np.abs(b) * d * sig_s[jc], SIGMA_FLOOR_M)
+    sig = range_sigma(b, d, sig_s[jc])
     se = np.sqrt(((sig * dv) ** 2).sum(axis=1)) / svv
     res = (du - slope[:, None] * dv) / sig
     chi2 = (res * res).sum(axis=1)
@@ -1810,7 +1816,7 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration,
     h = pad(pr.heading, 0.0)
     ex, ey = np.cos(h), np.sin(h)
     _, b0 = cal._ab0
-    noise = np.maximum(np.abs(b0) * np.where(mask, d0, 1.0) * sig_s, SIGMA_FLOOR_M)
+    noise = range_sigma(b0, np.where(mask, d0, 1.0), sig_s)
     geo = (pad(pr.ox, 0.0), pad(pr.oy, 0.0), ex, ey, np.where(mask, d0, 1.0), np.log(s),
            noise, mask)
     n_in = mask.sum(axis=1)
@@ -1844,7 +1850,7 @@ def arc_incidence(pr: _Profile, pos: np.ndarray, cal: Calibration,
     lo = cal.distance(s, np.maximum(th_best - ARC_DOUBT_RAD, 0.0))
     hi = cal.distance(s, np.minimum(th_best + ARC_DOUBT_RAD, cal.max_incidence_rad))
     _, b_th = cal.log_ab(th_best)
-    sig = np.hypot(np.maximum(np.abs(b_th) * d_best * sig_s, SIGMA_FLOOR_M),
+    sig = np.hypot(range_sigma(b_th, d_best, sig_s),
                    0.5 * np.abs(lo - hi))
     at = keep.nonzero()[0]
     theta[at], dist[at], sigma[at] = th_best[c, j], d_best[c, j], sig[c, j]
@@ -1919,7 +1925,7 @@ def _one_line_misfit(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
     ex, ey = np.cos(h), np.sin(h)
     log_s, d = np.log(pr.s[pos]), pr.d0[pos]
     _, b0 = cal._ab0
-    noise = np.maximum(np.abs(b0) * d * pr.sig_s[pos], SIGMA_FLOOR_M)
+    noise = range_sigma(b0, d, pr.sig_s[pos])
     cnt = np.bincount(group, minlength=n).astype(float)
     for _ in range(ROUND_LINE_ITERATIONS):
         x, y = ox + d * ex, oy + d * ey
@@ -1977,7 +1983,7 @@ def _pieces_misfit(pr: _Profile, pos: np.ndarray, lab: np.ndarray, alpha: np.nda
     la, b = cal.log_ab(np.minimum(th, cal.max_incidence_rad))
     d = np.exp(la + b * np.log(pr.s[pos]))
     _, b0 = cal._ab0
-    z = (d - t) / np.maximum(np.abs(b0) * pr.d0[pos] * pr.sig_s[pos], SIGMA_FLOOR_M)
+    z = (d - t) / range_sigma(b0, pr.d0[pos], pr.sig_s[pos])
     return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
 
 
@@ -2194,7 +2200,7 @@ def _on_circles(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
     la, b = cal.log_ab(th)
     d = np.exp(la + b * log_s)
     _, b0 = cal._ab0
-    noise = np.maximum(np.abs(b0) * pr.d0[pos] * pr.sig_s[pos], SIGMA_FLOOR_M)
+    noise = range_sigma(b0, pr.d0[pos], pr.sig_s[pos])
     z = (d - t) / noise
     mis = np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
     cost = np.stack([np.bincount(group, m, n) for m in mis])  # (C, n)
@@ -2204,7 +2210,7 @@ def _on_circles(pr: _Profile, pos: np.ndarray, group: np.ndarray, n: int,
     lo = cal.distance(s, np.maximum(th_b - ARC_DOUBT_RAD, 0.0))
     hi = cal.distance(s, np.minimum(th_b + ARC_DOUBT_RAD, cal.max_incidence_rad))
     _, b_th = cal.log_ab(th_b)
-    sig = np.hypot(np.maximum(np.abs(b_th) * d_b * pr.sig_s[pos], SIGMA_FLOOR_M),
+    sig = np.hypot(range_sigma(b_th, d_b, pr.sig_s[pos]),
                    0.5 * np.abs(lo - hi))
     return th_b, d_b, sig, mis_b, best
 
@@ -2384,7 +2390,7 @@ def theta0_sigma(cal: Calibration, counts: np.ndarray, d0: np.ndarray,
     """σ (m) of readings ``counts`` read at θ = 0 (``d0``) on no line: their noise
     (``sig_s``, relative) through θ = 0's slope, floored, with :func:`fallback_spread`."""
     _, b0 = cal._ab0
-    return np.hypot(np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M),
+    return np.hypot(range_sigma(b0, d0, sig_s),
                     fallback_spread(cal, counts, d0))
 
 
@@ -2526,19 +2532,13 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
         ok, few, wide = ok & ~on, few & ~on, wide & ~on
     if not (ok.any() or few.any() or wide.any() or arc.size):
         return points, label
+    if few.any():    # (few, wide and ok are readings apart)
+        points = invalidated(points, vi[off[few]], Reason.INCIDENCE_UNKNOWN)
     out = {f: np.array(getattr(points, f)) for f in ("x", "y", "d", "theta", "sigma_m")}
     if wide.any():
         at = vi[off[wide]]
         doubt = 0.5 * span[wide]
         out["sigma_m"].reshape(-1)[at] = np.hypot(out["sigma_m"].reshape(-1)[at], doubt)
-    if few.any():
-        gone = vi[off[few]]
-        for f in out.values():
-            f.reshape(-1)[gone] = np.nan
-        valid, reason = points.valid.copy(), points.reason.copy()
-        valid.reshape(-1)[gone] = False
-        reason.reshape(-1)[gone] = Reason.INCIDENCE_UNKNOWN
-        points = points_with(points, valid=valid, reason=reason)
     at = vi[off[ok]]
     sigma, keep = _own_slope_sigma(cal, th, d_new, d_lo, d_hi, sig_s[off[ok]])
     at, th, d_new, sigma = at[keep], th[keep], d_new[keep], sigma[keep]
@@ -2834,7 +2834,7 @@ def _own_slope_sigma(cal: Calibration, theta: np.ndarray, d: np.ndarray, d_lo: n
     the spread of d over θ ± that error; placed: d and σ finite, d within the curve."""
     spread = 0.5 * np.abs(d_lo - d_hi)
     _, b_new = cal.log_ab(theta)
-    sigma = np.hypot(np.maximum(np.abs(b_new) * d * sig_s, SIGMA_FLOOR_M), spread)
+    sigma = np.hypot(range_sigma(b_new, d, sig_s), spread)
     return sigma, np.isfinite(d) & (d >= cal.min_range_m) & np.isfinite(sigma)
 
 

@@ -16,12 +16,11 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RU
                        POST_SENSORS, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
                        SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
                        LineOptions, Lines, Pieces, TraceSteps, beam_crossings,
-                       beside_a_return,
-                       clip_at_corners,
-                       end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
-                       member_spans, nearest_heard_rows, nominal_calibration, polyline_ids,
-                       range_profiles, reach_cos_limit, resolve_foldover, scan_order,
-                       settled_within_noise, silent_gaps)
+                       beside_a_return, clip_at_corners, end_hide_angle, fallback_spread,
+                       final_estimate, held_and_pooled, member_spans, nearest_heard_rows,
+                       nominal_calibration, polyline_ids, range_profiles, range_sigma,
+                       reach_cos_limit, resolve_foldover, scan_order, settled_within_noise,
+                       silent_gaps)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -423,7 +422,7 @@ class _Sweep:
         """d, x, y, σ of every live reading at incidence θ."""
         la, b = self.ab(theta)
         d = np.exp(la + b * self.log_s)
-        sigma = np.maximum(np.abs(b) * d * self.sig_s, SIGMA_FLOOR_M)
+        sigma = range_sigma(b, d, self.sig_s)
         return d, self.ox + d * self.ux, self.oy + d * self.uy, sigma
 
     def thresholds(self, sigma: np.ndarray) -> np.ndarray:
@@ -1095,7 +1094,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     s = sw.counts
     log_a, b = cal.log_ab(theta)
     d = np.exp(log_a + b * sw.log_s)
-    sigma = np.maximum(np.abs(b) * d * sw.sig_s, SIGMA_FLOOR_M)
+    sigma = range_sigma(b, d, sw.sig_s)
     px, py = sw.ox + d * sw.ux, sw.oy + d * sw.uy
     # a line member stays valid up to RANGE_SIGMAS of its (noise) σ past the max range: a
     # surface at the limit read long; final_estimate keeps it only on its line, in range
