@@ -2163,3 +2163,116 @@ def trace_moves(const unsigned char[::1] ask, const idx_t[::1] i_in, const idx_t
         RES[2, w] = O[0, q]
         w += 1
     return at_arr[0], at_arr[1], res_arr[0], res_arr[1], res_arr[2]
+
+
+# --------------------------------------------------------------------------- counts against lines
+
+def counts_misfit_any(const idx_t[::1] vi, const idx_t[::1] label, const double[::1] heading,
+                      const double[::1] origin_x, const double[::1] origin_y,
+                      const double[::1] counts, const double[::1] alpha,
+                      const double[::1] cx, const double[::1] cy, double la0, double b0,
+                      double sigma_counts, double floor_m, xp, node_log_a, node_b,
+                      double cos_max_inc, idx_t min_members, double single, double z_min):
+    """``irring.estimation.estimate._counts_asked(...) is not None`` (the statement; the why:
+    ``counts_contradicted``): some line asked misfits its members' counts by ``z_min``
+    normal σ before the sweep's noise scale and the refit, exactly (log, exp,
+    arccos, the curve's interpolation (np.interp over ``xp``, ``node_log_a``, ``node_b``)
+    and cbrt numpy's on this call's rows). ``vi`` (k,): the valid readings, flat (S·N)
+    indices; ``label``, ``heading``, ``origin_x``, ``origin_y``, ``counts`` flat (S·N);
+    (``la0``, ``b0``): log a, b at θ = 0. False: it answers no line."""
+    cdef idx_t K = vi.shape[0], size = label.shape[0], L = alpha.shape[0], i, f, g, m = 0, q
+    cdef double hh, a, nx, ny, along, x, e, r, s
+    cdef bint any_asked = False
+    if not (heading.shape[0] == origin_x.shape[0] == origin_y.shape[0] == counts.shape[0]
+            == size and cx.shape[0] == cy.shape[0] == L):
+        raise lengths_differ("counts_misfit_any's arrays", label=size, heading=heading.shape[0],
+                             origin_x=origin_x.shape[0], origin_y=origin_y.shape[0],
+                             counts=counts.shape[0], alpha=L, cx=cx.shape[0], cy=cy.shape[0])
+    for i in range(K):
+        f = vi[i]
+        if f < 0 or f >= size:
+            raise IndexError(f"vi[{i}] = {f} is not a reading (0 … {size - 1})")
+        if label[f] >= L:
+            raise IndexError(f"label[{f}] = {label[f]} is not a line (−1 … {L - 1})")
+    if L == 0:
+        return False
+    per_line = np.zeros((5, L))      # members, kept, unmet, χ², c
+    cdef double[:, ::1] PL = per_line
+    for i in range(K):
+        g = label[vi[i]]
+        if g >= 0:
+            PL[0, g] += 1.0
+    # the members of lines of min_members or more, in vi's order
+    at_arr = np.empty(K, dtype=np.intp)
+    cdef idx_t[::1] at = at_arr
+    for i in range(K):
+        g = label[vi[i]]
+        if g >= 0 and PL[0, g] >= min_members:
+            at[m] = vi[i]
+            m += 1
+    if m == 0:
+        return False
+    for g in range(L):
+        PL[4, g] = -sin(alpha[g]) * cx[g] + cos(alpha[g]) * cy[g]
+    rows = np.empty((6, m))           # s, log s → d0, along, t → log t, θ, expect
+    cdef double[:, ::1] W = rows
+    for q in range(m):
+        W[0, q] = counts[at[q]]
+    np.log(rows[0], out=rows[1])
+    for q in range(m):
+        W[1, q] = la0 + b0 * W[1, q]
+    np.exp(rows[1], out=rows[1])                   # d0 = cal.distance(s, 0)
+    for q in range(m):
+        f = at[q]
+        g = label[f]
+        hh = heading[f]
+        a = alpha[g]
+        nx = -sin(a)
+        ny = cos(a)
+        along = cos(hh) * nx + sin(hh) * ny
+        W[2, q] = along
+        W[3, q] = (PL[4, g] - origin_x[f] * nx - origin_y[f] * ny) / along
+        x = fabs(along)
+        if x > 1.0:              # np.minimum: a NaN stays
+            x = 1.0
+        W[4, q] = x
+    np.arccos(rows[4], out=rows[4])
+    la_arr = np.interp(rows[4], xp, node_log_a)
+    bb_arr = np.interp(rows[4], xp, node_b)
+    cdef double[::1] LA = la_arr, BB = bb_arr
+    np.log(rows[3], out=rows[5])
+    for q in range(m):
+        W[5, q] = (W[5, q] - LA[q]) / BB[q]
+    np.exp(rows[5], out=rows[5])                   # cal.counts(t, θ)
+    for q in range(m):
+        f = at[q]
+        g = label[f]
+        s = W[0, q]
+        met = W[3, q] > 0 and fabs(W[2, q]) > cos_max_inc and isfinite(W[5, q])
+        e = W[5, q] if met else 0.0
+        x = s / (fabs(b0) * W[1, q])
+        if x > 1.7976931348623157e308:     # np.minimum(x, max float): a NaN stays
+            x = 1.7976931348623157e308
+        x = fmax(sigma_counts, x * floor_m)
+        r = (s - e) / x
+        if not met:
+            PL[2, g] += 1.0
+        if met and fabs(r) < single:
+            PL[1, g] += 1.0
+            PL[3, g] += r * r
+        else:
+            PL[3, g] += 0.0
+    # asked: enough members kept, every beam meeting its line; the normal deviate of χ²
+    z_arr = np.empty(L)
+    dof_arr = np.empty(L)
+    cdef double[::1] Z = z_arr, DOF = dof_arr
+    for g in range(L):
+        DOF[g] = PL[1, g] - 2.0 if PL[1, g] - 2.0 > 1.0 else 1.0
+        Z[g] = PL[3, g] / DOF[g]
+    np.cbrt(z_arr, out=z_arr)
+    for g in range(L):
+        if PL[1, g] >= min_members and not PL[2, g] > 0:
+            x = 2.0 / (9.0 * DOF[g])
+            if (Z[g] - (1.0 - x)) / sqrt(x) >= z_min:
+                return True
+    return False

@@ -538,8 +538,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    snapper: Callable | None = None, profiler: Callable | None = None,
                    voter: Callable | None = None, post_grouper: Callable | None = None,
                    gapper: Callable | None = None, raw_counts: np.ndarray | None = None,
-                   beside: Callable | None = None, tracer: type[TraceSteps] | None = None
-                   ) -> Estimate:
+                   beside: Callable | None = None, tracer: type[TraceSteps] | None = None,
+                   judge: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -563,7 +563,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     ``gapper``: the silent gaps (:func:`silent_gaps_compiled`; the oracle: :func:`silent_gaps`);
     ``beside``: the silent beams beside a return (:func:`beside_a_return_compiled`; the
     oracle: :func:`beside_a_return`); ``tracer``: :func:`rejoin_traces`' steps
-    (:class:`TraceKernels`; the oracle: :class:`TraceSteps`).
+    (:class:`TraceKernels`; the oracle: :class:`TraceSteps`); ``judge``: the lines their
+    counts contradict (:func:`counts_contradicted_compiled`; the oracle:
+    :func:`counts_contradicted`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -598,7 +600,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                                       grouping.alpha, grouping.cx, grouping.cy,
                                       grouping.usable, options, tracer or TraceKernels)
         points, label = counts_disown_lines(points, label, index, counts, steps, cal,
-                                            grouping.alpha, grouping.cx, grouping.cy, profiler)
+                                            grouping.alpha, grouping.cx, grouping.cy, profiler,
+                                            judge)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -2663,31 +2666,22 @@ COUNTS_SCALE_LINES = 3  # a sweep of this many asked lines scales the count nois
 _COUNTS_DA, _COUNTS_DC = 1e-5, 1e-6  # central-difference steps (rad, m) of its Jacobian
 
 
-def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, counts: np.ndarray,
-                        cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray
-                        ) -> np.ndarray:
-    """The lines (L,) bool whose valid members' counts (``vi``: the valid readings; ``label``
-    their lines as fitted: direction ``alpha``, through (``cx``, ``cy``)) no line near it
-    explains through the sensor model (each beam's range and incidence at the line,
-    ``cal.counts``): the line refitted to the counts (Gauss–Newton in direction and offset
-    from the fitted one) still leaves χ² over ``cal.sigma_counts()`` at least ``COUNTS_Z``
-    normal σ above n − 2 degrees of freedom (σ scaled up by the square root of the median
-    reduced χ² of the sweep's asked lines as fitted, where there are ``COUNTS_SCALE_LINES``
-    or more and it exceeds 1; only lines that misfit as fitted are refitted). Members the
-    fitted line misfits by ``COUNTS_SINGLE`` count σ or more each are left out; lines of
-    ``COUNTS_MIN_MEMBERS`` or more such members whose beams all meet the fitted line within
-    the drop-out angle."""
+def _counts_asked(points: Points, label: np.ndarray, vi: np.ndarray, counts: np.ndarray,
+                  cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray):
+    """:func:`counts_contradicted`'s first question (its arguments): None where no line
+    asked misfits its members' counts as fitted, unscaled (then none is contradicted);
+    else what the rest of it reads (per member asked: line, counts, count σ, beam; per
+    line: direction, offset, the members kept, asked, χ², degrees of freedom)."""
     n_lines = alpha.size
     lab = label.reshape(-1)[vi]
     member = (lab >= 0).nonzero()[0]
-    out = np.zeros(n_lines, dtype=bool)
     if member.size == 0:
-        return out
+        return None
     line = lab[member]
     total = np.bincount(line, minlength=n_lines)
     ask = (total >= COUNTS_MIN_MEMBERS)[line]
     if not ask.any():
-        return out
+        return None
     at, line = vi[member[ask]], line[ask]
     h = points.heading.reshape(-1)[at]
     beam = (points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at], np.cos(h),
@@ -2713,7 +2707,7 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     n_kept = np.bincount(line, weights=kept, minlength=n_lines)
     asked = (n_kept >= COUNTS_MIN_MEMBERS) & ~unmet
     if not asked.any():
-        return out
+        return None
     # the noise the sweep's own lines show, where it exceeds the calibration's (a curve
     # fitted less well than its repeat noise says, a noisier part): their median reduced χ²
     # about their lines as fitted
@@ -2721,7 +2715,30 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     dof = np.maximum(n_kept - 2, 1)
     # the scale is at least 1: where no line misfits unscaled, none misfits scaled
     if not (asked & (counts_misfit_z(chi2, dof) >= COUNTS_Z)).any():
+        return None
+    return line, s, sig, beam, a, c, kept, asked, chi2, dof
+
+
+def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, counts: np.ndarray,
+                        cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray
+                        ) -> np.ndarray:
+    """The lines (L,) bool whose valid members' counts (``vi``: the valid readings; ``label``
+    their lines as fitted: direction ``alpha``, through (``cx``, ``cy``)) no line near it
+    explains through the sensor model (each beam's range and incidence at the line,
+    ``cal.counts``): the line refitted to the counts (Gauss–Newton in direction and offset
+    from the fitted one) still leaves χ² over ``cal.sigma_counts()`` at least ``COUNTS_Z``
+    normal σ above n − 2 degrees of freedom (σ scaled up by the square root of the median
+    reduced χ² of the sweep's asked lines as fitted, where there are ``COUNTS_SCALE_LINES``
+    or more and it exceeds 1; only lines that misfit as fitted are refitted). Members the
+    fitted line misfits by ``COUNTS_SINGLE`` count σ or more each are left out; lines of
+    ``COUNTS_MIN_MEMBERS`` or more such members whose beams all meet the fitted line within
+    the drop-out angle."""
+    n_lines = alpha.size
+    out = np.zeros(n_lines, dtype=bool)
+    first = _counts_asked(points, label, vi, counts, cal, alpha, cx, cy)
+    if first is None:
         return out
+    line, s, sig, beam, a, c, kept, asked, chi2, dof = first
     scale = (max(1.0, float(np.median(chi2[asked] / dof[asked])))
              if asked.sum() >= COUNTS_SCALE_LINES else 1.0)
     # a refit only lowers χ²: only the lines that misfit as fitted are refitted
@@ -2773,20 +2790,47 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     return out
 
 
+def counts_contradicted_compiled(points: Points, label: np.ndarray, vi: np.ndarray,
+                                 counts: np.ndarray, cal: Calibration, alpha: np.ndarray,
+                                 cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+    """:func:`counts_contradicted`, whose first question (:func:`_counts_asked`: does any
+    line asked misfit as fitted?) is one compiled call
+    (``irring.estimation._lines.counts_misfit_any``, held to it by
+    tests/test_count_misfit.py); the rare sweep it answers yes is judged by
+    :func:`counts_contradicted` itself."""
+    f = np.ascontiguousarray
+    la0, b0 = cal._ab0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        misfit = _lines.counts_misfit_any(
+            f(vi, dtype=np.intp), f(label, dtype=np.intp).reshape(-1),
+            f(points.heading, dtype=float).reshape(-1),
+            f(points.origin_x, dtype=float).reshape(-1),
+            f(points.origin_y, dtype=float).reshape(-1), f(counts, dtype=float).reshape(-1),
+            f(alpha, dtype=float), f(cx, dtype=float), f(cy, dtype=float), float(la0),
+            float(b0), cal.sigma_counts(), COUNTS_FLOOR_M, cal.theta_rad, cal._log_a, cal.b,
+            math.cos(cal.max_incidence_rad), COUNTS_MIN_MEMBERS, COUNTS_SINGLE, COUNTS_Z)
+    if not misfit:
+        return np.zeros(np.asarray(alpha).size, dtype=bool)
+    return counts_contradicted(points, label, vi, counts, cal, alpha, cx, cy)
+
+
 def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
                         counts: np.ndarray, steps: np.ndarray, cal: Calibration,
                         alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
-                        profiler: Callable | None = None) -> tuple[Points, np.ndarray]:
+                        profiler: Callable | None = None, judge: Callable | None = None
+                        ) -> tuple[Points, np.ndarray]:
     """Every member of a line its members' counts contradict (:func:`counts_contradicted`)
     off it: at its own profile's θ where that is straight and clearly steep, else
-    INCIDENCE_UNKNOWN (:func:`_leave_doubted_line`); numpy, shared by both estimators.
-    Returns the points and ``label``. Why: docs/estimator.md ("A line its counts
-    contradict"): a convex corner seen along its bisector near the range limit reads, at
-    θ = 0, like a flat wall square on, and the iteration settles there."""
+    INCIDENCE_UNKNOWN (:func:`_leave_doubted_line`); shared by both estimators (``judge``:
+    :func:`counts_contradicted_compiled` by default; the oracle passes
+    :func:`counts_contradicted`). Returns the points and ``label``. Why:
+    docs/estimator.md ("A line its counts contradict"): a convex corner seen along its
+    bisector near the range limit reads, at θ = 0, like a flat wall square on, and the
+    iteration settles there."""
     vi = index[points.valid.reshape(-1)[index]]
     if vi.size == 0 or alpha.size == 0:
         return points, label
-    bad = counts_contradicted(points, label, vi, counts, cal, alpha, cx, cy)
+    bad = (judge or counts_contradicted_compiled)(points, label, vi, counts, cal, alpha, cx, cy)
     if not bad.any():
         return points, label
     lab = label.reshape(-1)[vi]
