@@ -580,9 +580,6 @@ def _title(result: MapRun) -> str:
     s = result.scores
     if not s:
         return f"{name}: {len(result.sweeps)} sweep(s)"
-
-    def f(v):
-        return "n/a" if v is None else f"{v:.2f}"
-
+    f = metrics.score_text
     return (f"{name}: occupied F1 {f(s['occupied_f1'])}, free accuracy {f(s['free_accuracy'])}, "
             f"coverage {f(s['coverage'])}, shadow {f(s['shadow'])}")

@@ -109,8 +109,7 @@ def _unnamed_ring(result) -> str:
             f"R {ring.radius_m * 1000:g} mm, turning ±{turn:.1f}°)")
 
 
-def _f(v, digits: int = 3) -> str:
-    return "n/a" if v is None else f"{v:.{digits}f}"
+_f = metrics.score_text   # the map's title formats its scores the same way
 
 
 def summary_lines(result, paths: dict) -> list[str]:
