@@ -20,8 +20,13 @@ from irring.core import Ring
 
 
 @pytest.fixture(scope="module")
-def rig_cal(t_room):
-    return SimulatedRig(t_room).calibrate()
+def rig_fit(t_room):
+    return SimulatedRig(t_room).fit()
+
+
+@pytest.fixture(scope="module")
+def rig_cal(rig_fit):
+    return rig_fit.calibration
 
 
 def _with(scenario, **kwargs):
@@ -254,6 +259,17 @@ def test_irring_calibrate_writes_a_loadable_file(tmp_path, capsys):
     assert "wrote" in text and "d_o =" in text
     cal = Calibration.load(out)
     assert cal.sensor_model == "gp2d12" and abs(cal.emitter_offset_m - 0.007) < 1e-3
+    # and its picture beside it, named with .png: a PNG of the stated size
+    from PIL import Image
+
+    from irring.estimation import calibration_chart
+
+    png = tmp_path / "ring.png"
+    assert f"wrote {png} (the readings, the fitted curve and its errors)" in text
+    with Image.open(png) as image:
+        assert image.format == "PNG"
+        assert image.size == tuple(round(v * calibration_chart.DPI)
+                                   for v in calibration_chart.SIZE_IN) == (1100, 850)
 
 
 def test_irring_calibrate_help_explains_units_and_port(capsys):
@@ -264,6 +280,8 @@ def test_irring_calibrate_help_explains_units_and_port(capsys):
     text = capsys.readouterr().out
     for phrase in ("--port", "mm", "degrees", "Eq. 9", "Eq. 10", "examples"):
         assert phrase in text
+    assert "its picture is written beside it, named with .png\n" \
+           "                        (calibration.png)" in text
 
 
 def test_irring_calibrate_reports_a_bad_port(tmp_path, capsys):
@@ -343,3 +361,75 @@ def test_calibrate_refuses_a_scene_the_wall_procedure_cannot_calibrate(tmp_path,
                  "--sweeps", "1"]) == 1
     assert f"irring calibrate: error: {scene}: {message}" in capsys.readouterr().err
     assert not (tmp_path / "c.yaml").exists()
+
+
+# --------------------------------------------------------------------------- the picture
+
+
+def test_the_picture_plots_the_fitted_readings_and_the_calibrations_curve(t_room, rig_fit):
+    """What `irring calibrate` draws comes from the fit: the readings it fitted (and, apart,
+    those it did not), its curve at those distances, each reading's error under it, and
+    the sensor's fold-over peak."""
+    from irring.estimation.calibration_chart import CURVE_THETAS_DEG, chart_data
+
+    cal, r, used = rig_fit.calibration, rig_fit.readings, rig_fit.used
+    c = chart_data(rig_fit)
+    ok = np.isfinite(r.counts)
+    assert 0 < used.sum() < ok.sum()        # no-return readings past the drop-out were left
+    np.testing.assert_array_equal(c["counts"], r.counts[used])
+    assert c["counts"].size + c["unused_counts"].size == ok.sum()
+    true_mm = r.true_distance(cal.emitter_offset_m)[used] * 1e3
+    np.testing.assert_array_equal(c["distance_mm"], true_mm)
+    # fitted within the range (the last fit's d_o differs from the final one by < 1 mm)
+    assert cal.min_range_m * 1e3 - 1 < true_mm.min() and true_mm.max() < cal.max_range_m * 1e3 + 1
+    # the curves: the calibration's counts at the plotted distances, θ = 0 up to the drop-out
+    thetas = [t for t, _, _ in c["curves"]]
+    assert thetas == [t for t in CURVE_THETAS_DEG if t <= math.degrees(cal.max_incidence_rad)]
+    assert thetas[0] == 0.0 and len(thetas) >= 4
+    for t, d_mm, n in c["curves"]:
+        assert d_mm[0] == pytest.approx(cal.min_range_m * 1e3)
+        assert d_mm[-1] == pytest.approx(cal.max_range_m * 1e3)
+        np.testing.assert_allclose(n, cal.counts(d_mm / 1e3, math.radians(t)), rtol=1e-12)
+    # the errors: what the calibration reads from each reading minus the wall's distance;
+    # the scene's 15 mV noise, not a bias
+    theta = np.abs(r.beam_angle_rad[used])
+    np.testing.assert_allclose(c["error_mm"],
+                               cal.distance(r.counts[used], theta) * 1e3 - true_mm, atol=1e-9)
+    assert abs(np.median(c["error_mm"])) < 1.0 and 1.0 < np.sqrt(np.mean(c["error_mm"] ** 2)) < 10
+    # the fold-over peak: the GP2D12's, at its peak output in this ADC's counts
+    model = gp2.sensor("gp2d12")
+    lsb = gp2.lsb_v(t_room.sensor.adc_bits, t_room.sensor.vref_v)
+    assert c["peak"] == pytest.approx((model.peak_distance_m * 1e3, model.peak_v(0.0) / lsb))
+    assert c["volts_per_count"] == lsb
+
+
+def test_picture_named_beside_the_calibration_file(tmp_path):
+    from irring.cli.calibrate import picture_path
+
+    assert picture_path(tmp_path / "ring.yaml") == tmp_path / "ring.png"
+    assert picture_path(tmp_path / "ring") == tmp_path / "ring.png"
+    assert picture_path(tmp_path / "cal.PNG") == tmp_path / "cal.PNG.png"   # never itself
+
+
+def test_guided_calibration_keeps_what_it_fitted(t_room):
+    rig = SimulatedRig(t_room, seed=3)
+    guided = _guided(rig, FakeUser(rig), sweeps=1)
+    assert guided.fitted is None
+    cal = guided.run()
+    assert guided.fitted.calibration is cal
+    assert guided.fitted.readings.counts.size == guided.fitted.used.size > 0
+    again = solve(guided.fitted.readings, sensor_model="gp2d12",
+                  emitter_offset_guess_m=guided.emitter_offset_guess_m)
+    assert {**again.to_dict(), "source": ""} == {**cal.to_dict(), "source": ""}
+
+
+def test_the_picture_never_replaces_the_scenario_it_reads(tmp_path, capsys):
+    from irring.cli import main
+    from irring.scenario import resolve
+
+    scene = tmp_path / "room.png"   # a scenario under a picture's name
+    scene.write_text(resolve("t_room").read_text())
+    assert main(["calibrate", "--scenario", str(scene), "--out", str(tmp_path / "room.yaml")]) == 2
+    assert (f"its picture {scene}: is the file --scenario {scene}, which this command reads"
+            in capsys.readouterr().err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["room.png"]

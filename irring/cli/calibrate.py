@@ -11,6 +11,7 @@ import tempfile
 from pathlib import Path
 
 from .. import errors, gp2
+from ..estimation import calibration_chart
 from ..estimation.calibration import (CalibrationAborted, CalibrationError, GuidedCalibration,
                                       SimulatedRig, load_progress, save_progress)
 from ..outputs import check_out
@@ -39,6 +40,11 @@ what it does:
                   irring calibrate --port PORT --resume FILE asks only for the placements
                   the file does not hold (the printed command repeats --sensor, --scenario
                   and --out; a file of another sensor, model or ADC is refused).
+
+  the picture     Beside the file, the same name with .png (calibration.png): the readings
+                  (ADC counts and volts against the distance to the wall, coloured by the
+                  incidence angle) with the fitted curve through them, how far the curve
+                  reads each reading from the wall (mm), and the sensor's fold-over peak.
 
   The file is YAML (distances in mm, angles in degrees); pass it to the estimator with
   `irring run --calibration FILE` or irring.estimation.calibration.Calibration.load(FILE).
@@ -71,7 +77,8 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="scenario whose ring, sensor model, ADC and effects are used "
                         f"(default: {DEFAULTS['scenario']})")
     p.add_argument("--out", type=out_path, default=DEFAULTS["out"], metavar="FILE",
-                   help=f"calibration file to write (default: {DEFAULTS['out']})")
+                   help=f"calibration file to write (default: {DEFAULTS['out']}); its "
+                        "picture is written beside it, named with .png (calibration.png)")
     p.add_argument("--port", type=serial_port, metavar="PORT",
                    help="serial port or pyserial URL of the real ring; runs the guided "
                         "procedure instead of the simulated rig")
@@ -111,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
               "firmware; give its --port too", file=sys.stderr)
         return errors.USAGE
     check_out(out.parent)
-    spare_inputs({"--out": out}, {"--scenario": args.scenario, "--resume": args.resume})
+    spare_inputs({"--out": out, "its picture": picture_path(out)},
+                 {"--scenario": args.scenario, "--resume": args.resume})
     scenario = load_scenario(args.scenario)
     why = _cannot_calibrate(scenario, simulated=args.port is None)
     if why:
@@ -128,14 +136,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"simulated rig: {scenario.name}'s ring and {scenario.sensor.model}, effects: "
               f"{', '.join(k for k in scenario.effects if k != 'motion') or 'none'}; "
               f"{len(rig.placements)} placements × {rig.sweeps} sweeps")
-        cal = rig.calibrate()
+        fitted = rig.fit()
     except (CalibrationError, ValueError) as exc:
         print(f"irring calibrate: error: {errors.printable(str(exc))}", file=sys.stderr)
         return errors.INPUT
-    path = cal.save(out)
-    print(_summary(cal))
-    print(f"wrote {errors.printable(str(path))}")
-    return 0
+    path = fitted.calibration.save(out)
+    return _done(fitted, path, f"on the simulated rig ({scenario.name}'s ring)", args.sensor)
 
 
 def _cannot_calibrate(scenario, simulated: bool) -> str | None:
@@ -207,8 +213,25 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
         if status is None:   # anything else (a full disk, a bug): main's one line
             raise
         return status
+    return _done(guided.fitted, path, f"on the ring at {args.port}", args.sensor)
+
+
+def picture_path(out: Path) -> Path:
+    """The picture written beside the calibration file ``out``: its name with .png."""
+    return out.with_name(out.name + ".png") if out.suffix.lower() == ".png" else \
+        out.with_suffix(".png")
+
+
+def _done(fitted, path: Path, where: str, sensor: int) -> int:
+    """Say what was fitted; draw it beside the file (the file is written first: a picture
+    that fails loses no calibration)."""
+    cal = fitted.calibration
     print(_summary(cal))
     print(f"wrote {errors.printable(str(path))}")
+    title = (f"Calibration of sensor {sensor} ({cal.sensor_model}) {where}: d_o = "
+             f"{cal.emitter_offset_m * 1e3:.2f} mm, noise {cal.noise_counts:.1f} counts")
+    png = calibration_chart.save_png(picture_path(path), fitted, errors.printable(title))
+    print(f"wrote {errors.printable(str(png))} (the readings, the fitted curve and its errors)")
     return 0
 
 

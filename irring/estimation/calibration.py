@@ -794,12 +794,30 @@ def collect(sweeps: Sequence[Sweep], placement: Placement, sensor: int = 0) -> R
                        offset=np.full(size, placement.purpose == "offset"))
 
 
-def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = ADC_BITS,
-          vref_v: float = VREF_V, min_range_m: float | None = None,
-          max_range_m: float | None = None,
-          theta_grid_rad: np.ndarray = DEFAULT_THETA_GRID_RAD, emitter_offset_guess_m: float = 0.0,
-          source: str = "") -> Calibration:
-    """d_o (Eq. 9) and a(θ), b(θ) (Eq. 10) from a rig's readings, solved alternately.
+@dataclass(frozen=True)
+class Fitted:
+    """A calibration with the rig's readings it was fitted to (what `irring calibrate`
+    draws: ``calibration_chart``). ``used``: per reading, whether the curve's last fit used
+    it (the others were outside the range, at the ADC's ends or no return)."""
+
+    calibration: Calibration
+    readings: RigReadings
+    used: np.ndarray
+
+
+def solve(readings: RigReadings, **kwargs: Any) -> Calibration:
+    """d_o (Eq. 9) and a(θ), b(θ) (Eq. 10) from a rig's readings: :func:`fit`'s
+    calibration."""
+    return fit(readings, **kwargs).calibration
+
+
+def fit(readings: RigReadings, *, sensor_model: str, adc_bits: int = ADC_BITS,
+        vref_v: float = VREF_V, min_range_m: float | None = None,
+        max_range_m: float | None = None,
+        theta_grid_rad: np.ndarray = DEFAULT_THETA_GRID_RAD, emitter_offset_guess_m: float = 0.0,
+        source: str = "") -> Fitted:
+    """d_o (Eq. 9) and a(θ), b(θ) (Eq. 10) from a rig's readings, solved alternately; with
+    the readings and which of them the curve was fitted to.
 
     A reading is used for the curve if its counts are above the ADC floor and below full
     scale, its true distance lies in [min_range, max_range] (default: the sensor model's
@@ -845,7 +863,8 @@ def solve(readings: RigReadings, *, sensor_model: str, adc_bits: int = ADC_BITS,
                                    "d_o cannot be determined")
         d_meas = cal.distance(r.counts[off], r.beam_angle_rad[off])
         d_o = emitter_offset_from_wall(d_meas, r.beam_angle_rad[off], r.wall_distance_m[off])
-    return dataclasses.replace(cal, emitter_offset_m=d_o, max_incidence_rad=steepest)
+    return Fitted(dataclasses.replace(cal, emitter_offset_m=d_o, max_incidence_rad=steepest),
+                  r, use)
 
 
 # --------------------------------------------------------------------------- simulated rig
@@ -912,13 +931,17 @@ class SimulatedRig:
                                   for i, p in enumerate(self.placements))
 
     def calibrate(self, theta_grid_rad: np.ndarray = DEFAULT_THETA_GRID_RAD) -> Calibration:
+        return self.fit(theta_grid_rad).calibration
+
+    def fit(self, theta_grid_rad: np.ndarray = DEFAULT_THETA_GRID_RAD) -> Fitted:
+        """The calibration with the readings it was fitted to (:func:`fit`)."""
         sc = self.scenario
-        return solve(self.readings(), sensor_model=sc.sensor.model,
-                     adc_bits=sc.sensor.adc_bits, vref_v=sc.sensor.vref_v,
-                     theta_grid_rad=theta_grid_rad,
-                     source=f"simulated rig ({sc.name}: {', '.join(sc.effects) or 'no effects'}; "
-                            f"{len(self.placements)} placements × {self.sweeps} sweeps, "
-                            f"sensor {self.sensor})")
+        return fit(self.readings(), sensor_model=sc.sensor.model,
+                   adc_bits=sc.sensor.adc_bits, vref_v=sc.sensor.vref_v,
+                   theta_grid_rad=theta_grid_rad,
+                   source=f"simulated rig ({sc.name}: {', '.join(sc.effects) or 'no effects'}; "
+                          f"{len(self.placements)} placements × {self.sweeps} sweeps, "
+                          f"sensor {self.sensor})")
 
 
 # --------------------------------------------------------------------------- the real ring
@@ -939,7 +962,8 @@ class GuidedCalibration:
     the usual mistake). ``done`` (placement index → :class:`RigReadings`, from
     :func:`load_progress`) holds placements read before, which are not measured again;
     :attr:`done` grows as placements are read, so a caller can keep them when the
-    procedure stops early (:func:`save_progress`).
+    procedure stops early (:func:`save_progress`). After :meth:`run`, :attr:`fitted` holds
+    the calibration with the readings it was fitted to.
     """
 
     def __init__(self, *, read_sweep: Callable[[], Sweep], prompt: Callable[[str], str] = input,
@@ -967,6 +991,7 @@ class GuidedCalibration:
         self.done: dict[int, RigReadings] = dict(done or {})
         self.resumed = len(self.done)
         self.at = 0   # the placement (1-based) the procedure is at
+        self.fitted: Fitted | None = None   # what run() fitted, with its readings
 
     def check_steps(self, steps: int) -> None:
         """:class:`TooBig` when placements of ``steps`` steps a sweep are more readings than
@@ -1028,11 +1053,13 @@ class GuidedCalibration:
             raise CalibrationError("no offset placement (wall square to the sensor) was read; "
                                    "d_o needs at least one")
         try:
-            cal = solve(RigReadings.concat(parts), sensor_model=self.sensor_model,
-                        adc_bits=self.adc_bits, vref_v=self.vref_v,
-                        emitter_offset_guess_m=self.emitter_offset_guess_m,
-                        source=f"guided calibration of the real ring, sensor {self.sensor}, "
-                               f"{len(parts)} placements × {self.sweeps} sweeps")
+            self.fitted = fit(RigReadings.concat(parts), sensor_model=self.sensor_model,
+                              adc_bits=self.adc_bits, vref_v=self.vref_v,
+                              emitter_offset_guess_m=self.emitter_offset_guess_m,
+                              source=f"guided calibration of the real ring, sensor "
+                                     f"{self.sensor}, {len(parts)} placements × "
+                                     f"{self.sweeps} sweeps")
+            cal = self.fitted.calibration
         except CalibrationError as exc:
             hint = (f"; placements {', '.join(map(str, doubtful))} read far from the nominal "
                     "curve: was the wall where it was asked to be?" if doubtful else "")
