@@ -111,6 +111,14 @@ class MapRun:
     def poses(self) -> list[np.ndarray]:
         return [np.asarray(s.pose, float) for s in self.sweeps]
 
+    @property
+    def route(self) -> np.ndarray | None:
+        """(K, 2) m: where a moving ring read, step by step over its sweeps (the poses the
+        map placed its readings at), or None for sweeps taken standing."""
+        at = [np.asarray(s.reading_poses, float)[:, 0, :2] for s in self.sweeps
+              if s.reading_poses is not None]
+        return np.concatenate(at) if at else None
+
     def readings(self) -> dict[str, int]:
         """How many readings: total, valid, and per reason (lower-case Reason names)."""
         out = {"total": int(sum(p.valid.size for p in self.points)),
@@ -136,6 +144,7 @@ class MapRun:
                                "total": self.compute_time_s},
             **({"unscored": self.unscored} if self.unscored else {}),
             **({"clipped_obstacles": clipped} if clipped else {}),
+            **({"drive": drive_ending(sc)} if sc is not None and sc.has("motion") else {}),
         }
 
     def _repr_png_(self) -> bytes:
@@ -145,7 +154,8 @@ class MapRun:
         reach, ring_r = _reach(self) if self.sweeps else (None, 0.15)
         title = _title(self)
         return render.MapPicture(self.grid, self.scenario, self.poses, reach, ring_r, dpi=80,
-                                 title=title).png_bytes(self.grid.classify(), title)
+                                 title=title, route=self.route).png_bytes(self.grid.classify(),
+                                                                          title)
 
     def recording_meta(self) -> dict:
         """What ``irring replay`` needs to rebuild this exact map."""
@@ -557,15 +567,40 @@ def _write_into(result: MapRun, out: Path, *, animation: bool, recording: bool,
         n_frames = frame_plan(len(result.points), result.frames_per_sweep)[2]
         gif = render.save_animation(out / OUTPUT_NAMES["animation"], result.grid,
                                     building_frames(result), n_frames, sc, poses, reach,
-                                    ring_r, png_path=png, title=title)
+                                    ring_r, png_path=png, title=title, route=result.route)
         paths["map_png"], paths["animation"] = png, gif
     else:
-        paths["map_png"] = render.save_map_png(png, result.grid, sc, poses, reach, ring_r, title)
+        paths["map_png"] = render.save_map_png(png, result.grid, sc, poses, reach, ring_r, title,
+                                               route=result.route)
     paths["pgm"], paths["yaml"] = result.grid.to_pgm(out / OUTPUT_NAMES["pgm"])
     if recording:
         paths["recording"] = rec.save_recording(out / OUTPUT_NAMES["recording"], result.sweeps,
                                                 result.recording_meta())
     return paths
+
+
+def drive_ending(scenario: Scenario) -> dict:
+    """How a moving scene's drive went against its sweeps (``dynamics.Drive.ending``) and
+    ``note``: what became of the path's end, in a sentence, or None when the last sweep
+    ended as the robot arrived."""
+    from .simulation.dynamics import Drive   # deferred: MuJoCo
+
+    end = Drive.of(scenario).ending()
+    cut, note = end["cut"], None
+    if cut is not None:
+        n = cut["steps_standing"]
+        which = (f"last {n} of {cut['steps']} steps were" if n > 1
+                 else f"last step (of {cut['steps']}) was")
+        note = (f"the robot reached the path's end during sweep {cut['sweep']}: its {which} "
+                f"read standing there (kept)")
+    elif end["unswept_m"] >= UNSWEPT_NOTE_M:
+        note = (f"the path's last {end['unswept_m'] * 1000:.0f} mm were driven after the "
+                f"last sweep (during its rewind); no sweep starts once the robot has "
+                f"arrived, so nothing was read there")
+    return {**end, "note": note}
+
+
+UNSWEPT_NOTE_M = 0.0005   # a path's unswept end worth a note (shorter is rounding)
 
 
 def _reach(result: MapRun) -> tuple[float, float]:

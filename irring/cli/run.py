@@ -124,9 +124,14 @@ def summary_lines(result, paths: dict) -> list[str]:
     r = s["readings"]
     invalid = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in r.items()
                         if k not in ("total", "valid"))
-    lines.append(f"  design {s['design'] or _unnamed_ring(result)}, {s['poses']} pose(s), "
+    drive = s.get("drive")
+    where = (f"{s['poses']} sweep(s) along a {drive['path_m'] * 1000:.0f} mm path" if drive
+             else f"{s['poses']} pose(s)")
+    lines.append(f"  design {s['design'] or _unnamed_ring(result)}, {where}, "
                  f"{r['total']} readings: {r['valid']} valid"
                  + (f" ({invalid})" if invalid else ""))
+    if drive and drive["note"]:
+        lines.append(f"  note      {drive['note']}")
     for clip in s.get("clipped_obstacles", ()):   # a note, not an error: it may be on purpose
         lines.append(f"  note      {clip['note']}")
     sc_ = s["scores"]

@@ -50,11 +50,12 @@ class GroundTruth:
     surface_reflectance: np.ndarray  # (ny, nx): reflectance of the surface there, else NaN
     occupied: np.ndarray       # bool: surface or material
     free: np.ndarray           # bool: free space and not surface
-    in_range: np.ndarray       # bool: within max range + ring radius of some pose
-    visible: np.ndarray        # bool: surface cells seen from a pose (in range, line of
+    in_range: np.ndarray       # bool: within max range + ring radius of some view (a scan
+    #                            pose, or a moving ring's steps: views)
+    visible: np.ndarray        # bool: surface cells seen from a view (in range, line of
     #                            sight, giving the scene's sensor a return: Returns) and met
     #                            there by a sensor's beam from the front (_met)
-    reachable_free: np.ndarray  # bool: free cells in range and line of sight of some pose
+    reachable_free: np.ndarray  # bool: free cells in range and line of sight of some view
     shadow: np.ndarray         # bool: wall surface cells hidden behind an obstacle from
     #                            a radial ring at the pose centre (docs/mapping.md)
     shadow_ranged: np.ndarray  # bool: shadow cells a sensor could range along a clear line
@@ -340,7 +341,12 @@ def _measurable_returning(px, py, pose, ranging, surface) -> tuple[np.ndarray, n
     ret = np.zeros(np.shape(px), bool)
     for can, t, psi, _, _ in _geometry(px, py, pose, ring, d_min, d_max, a_lo, a_hi):
         reach |= can
-        ret |= (can & _gives_return(t, psi, d_max, returns, surface)) if check else can
+        if check:   # asked only of the points in reach (most of a moving view's are not)
+            at = np.flatnonzero(can & ~ret)
+            ret[at[_gives_return(t[at], psi[at], d_max, returns,
+                                 tuple(a[at] for a in surface))]] = True
+        else:
+            ret |= can
     return reach, ret
 
 
@@ -433,8 +439,8 @@ def _ranged_in_sight(scenario: Scenario, grid: OccupancyGrid, material: np.ndarr
     ty, tx = np.nonzero(cells)
     px, py = surface_point[ty, tx, 0], surface_point[ty, tx, 1]
     ok = np.zeros(len(tx), bool)
-    for pose in scenario.robot.poses:
-        for can, ex, ey in _sensor_views(px, py, pose, *ranging):
+    for view in views(scenario, grid) if len(tx) else ():
+        for can, ex, ey in _sensor_views(px, py, view, *_windowed(ranging, view)):
             ask = can & ~ok
             if ask.any():
                 first = _sight(grid.shape, grid.origin_xy_m, grid.resolution_m, material,
@@ -448,10 +454,116 @@ def _ranged_in_sight(scenario: Scenario, grid: OccupancyGrid, material: np.ndarr
 # lines of sight walked per call while scoring: a progress bar moves between them (a 1 mm
 # grid of a few m² walks ~10⁹ cells a pose: half a minute)
 SIGHT_CHUNK_CELLS = 200_000
+# A moving ring's steps are judged in groups whose hinges move at most this many cells
+# (travel + ring radius × turn): each step's pose within a cell of its group's, ~20 groups a
+# sweep at 50 mm/s with t_room_moving's 75 ms settle instead of 71 steps
+VIEW_SPAN_CELLS = 2.0
+
+
+@dataclass(frozen=True)
+class View:
+    """Where the ground truth judges the ring from: the robot's pose (x m, y m, yaw rad) and
+    the sensor angles from radial its sensors turned through there, [a_lo, a_hi] rad;
+    ``full``: the whole sweep (a standing ring; reach is then a disc around the pose)."""
+
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    a_lo: float
+    a_hi: float
+    full: bool
+
+
+def views(scenario: Scenario, grid: OccupancyGrid) -> list[View]:
+    """The ring's views of a scene: a full sweep at each scan pose; with ``motion``, the
+    steps of every sweep taken along the drive at the true pose of their reads
+    (``dynamics.Drive``), grouped so each group's hinges move at most
+    :data:`VIEW_SPAN_CELLS` of ``grid``'s cells, never a listed pose the drive did not
+    sweep at (docs/mapping.md, "A moving ring's truth")."""
+    ring, _, _, a_lo, a_hi = _geometric_ranging(scenario)
+    if not scenario.has("motion"):
+        return [View(p.x_m, p.y_m, p.yaw_rad, a_lo, a_hi, True) for p in scenario.robot.poses]
+    from ..simulation.dynamics import Drive   # deferred: MuJoCo, only for a moving scene
+
+    drive = Drive.of(scenario)
+    a = drive.sensor_rad
+    order = np.argsort(a, kind="stable")
+    edge = (a[order][1:] + a[order][:-1]) / 2      # each step's share of the sweep …
+    lo, hi = np.empty_like(a), np.empty_like(a)
+    lo[order] = np.concatenate([[min(a_lo, a[order][0])], edge])
+    hi[order] = np.concatenate([edge, [max(a_hi, a[order][-1])]])   # … ends as the static
+    out = []
+    tol = VIEW_SPAN_CELLS * grid.resolution_m
+    for poses in drive.poses:     # a sweep at a time, vectorised over its steps
+        move = np.concatenate([[0.0], np.hypot(*np.diff(poses[:, :2], axis=0).T)
+                               + ring.radius_m * np.abs(np.diff(poses[:, 2]))])
+        group = np.floor(np.cumsum(move) / tol).astype(np.intp)
+        starts = np.flatnonzero(np.diff(group, prepend=-1))
+        ends = np.append(starts[1:], len(poses))
+        mid = (starts + ends - 1) // 2
+        turn = poses[:, 2] - poses[np.repeat(mid, ends - starts), 2]   # yaw from the group's
+        g_lo = np.minimum.reduceat(lo + turn, starts)
+        g_hi = np.maximum.reduceat(hi + turn, starts)
+        for k, i in enumerate(mid):
+            full = bool(g_lo[k] <= a_lo and g_hi[k] >= a_hi)
+            out.append(View(*(float(v) for v in poses[i]), float(g_lo[k]), float(g_hi[k]),
+                            full))
+    return out
+
+
+def _windowed(ranging: tuple, view: View) -> tuple:
+    """``ranging`` (:func:`_ranging` or :func:`_geometric_ranging`) with ``view``'s sensor
+    angles."""
+    return ranging[:3] + (view.a_lo, view.a_hi) + ranging[5:]
+
+
+def _disc(free: np.ndarray, grid: OccupancyGrid, view: View, reach: float
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """(flat index, distance m) of the ``free`` cells whose centres lie within ``reach`` of
+    the view's centre (only the cells of the disc's bounding box are looked at)."""
+    (x0, x1), (y0, y1) = grid.cell_of(np.array([view.x_m - reach, view.x_m + reach]),
+                                      np.array([view.y_m - reach, view.y_m + reach]))
+    ny, nx = grid.shape
+    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1 + 1, nx), min(y1 + 1, ny)
+    if x1 <= x0 or y1 <= y0:
+        return np.zeros(0, np.intp), np.zeros(0)
+    ty, tx = np.nonzero(free[y0:y1, x0:x1])
+    ty, tx = ty + y0, tx + x0
+    xs, ys = grid.cell_centers()
+    d = np.hypot(xs[tx] - view.x_m, ys[ty] - view.y_m)
+    keep = d <= reach
+    return ty[keep] * nx + tx[keep], d[keep]
+
+
+def _in_window(cells: np.ndarray, dist: np.ndarray, grid: OccupancyGrid, view: View,
+               ranging: tuple) -> np.ndarray:
+    """Which free ``cells`` (flat; ``dist`` m from the view's centre, within its reach) a
+    partial view's beams cross: a beam from some sensor's hinge (radius R) at an angle in
+    [a_lo, a_hi] from radial, or inside the ring (a standing ring's disc holds those too).
+    A point D from the centre on a beam at angle a (its emitter d_o to the right of the
+    hinge) lies at bearing b(a) = φ − asin(R sin φ / D) from that hinge's radial, φ = a −
+    asin(d_o / |HP|) its direction from the hinge (increasing in a for D > R), so one
+    bearing per cell answers for all the sensors at once."""
+    ring, a_lo, a_hi = ranging[0], ranging[3], ranging[4]
+    xs, ys = grid.cell_centers()
+    ty, tx = np.divmod(cells, grid.shape[1])
+    r, d_o = ring.radius_m, ring.emitter_offset_m
+    d = np.maximum(dist, r * (1.0 + 1e-9))
+
+    def bearing_of(a):
+        from_hinge = np.sqrt(d * d - (r * math.sin(a)) ** 2) - r * math.cos(a)
+        phi = a - np.arcsin(np.clip(d_o / np.maximum(from_hinge, d_o), 0.0, 1.0))
+        return phi - np.arcsin(np.clip(r * np.sin(phi) / d, -1.0, 1.0))
+
+    lo, hi = bearing_of(a_lo), bearing_of(a_hi)
+    spacing = 2.0 * math.pi / ring.sensors
+    bearing = np.arctan2(ys[ty] - view.y_m, xs[tx] - view.x_m) - view.yaw_rad
+    return (dist <= r) | (np.mod(bearing - lo, spacing) <= hi - lo) | (hi - lo >= spacing)
 
 
 def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTruth:
-    """Rasterise the scenario onto ``grid``'s cells and work out what each pose can see.
+    """Rasterise the scenario onto ``grid``'s cells and work out what each view (:func:`views`)
+    can see.
     ``bar``: a progress bar (``reset(total)``, ``update(n)``) counting the cells whose line
     of sight is walked."""
     res = grid.resolution_m
@@ -515,49 +627,67 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
 
     reach = _reach_m(scenario)
     ranging = _ranging(scenario)
-    in_range = np.zeros(px.shape, bool)   # surface and free cells in range of some pose …
+    in_range = np.zeros(px.shape, bool)   # surface and free cells in range of some view …
     seen = np.zeros(px.shape, bool)       # … and in its line of sight
     visible = np.zeros(px.shape, bool)    # … giving a return (Returns) and met (_met) there
     hidden_by_obstacle = np.zeros(px.shape, np.int16)
     sy, sx, spx, spy, sdir = _surface_at(surface, surface_point, surface_normal,
                                          surface_reflectance)
+    surface_flat = sy * nx + sx
     geometric = ranging[:5]               # range and sweep only: what the shadow is judged by
-    nears = []
-    returning = []                        # per pose: which surface cells give a return
-    for pose in scenario.robot.poses:  # a handful of poses; each is vectorised over cells
-        near = free & (np.hypot(px - pose.x_m, py - pose.y_m) <= reach)
-        near[sy, sx], ret = _measurable_returning(spx, spy, pose, ranging, sdir)
-        nears.append(near)
-        returning.append(ret)
-    if bar is not None:
-        bar.reset(total=int(sum(int(n.sum()) for n in nears)))
+    the_views = views(scenario, grid)     # a handful of poses, or a drive's steps in groups
+    reaching = []                         # per view: surface cells it measures, which return
+    for view in the_views:
+        sub = np.flatnonzero(np.hypot(spx - view.x_m, spy - view.y_m) <= reach)
+        reach_s, ret = _measurable_returning(spx[sub], spy[sub], view, _windowed(ranging, view),
+                                             tuple(a[sub] for a in sdir))
+        reaching.append((surface_flat[sub[reach_s]], surface_flat[sub[ret]]))
+    if bar is not None:   # (a partial view's cells are counted by its whole disc)
+        bar.reset(total=int(sum(len(_disc(free, grid, v, reach)[0]) + len(s_)
+                                for v, (s_, _) in zip(the_views, reaching))))
     coarse = (samples, normals, rho, cells)
     fine = sampled(res / MET_SAMPLES_PER_CELL)
-    for pose, near, ret in zip(scenario.robot.poses, nears, returning):
-        in_range |= near
-        ty, tx = np.nonzero(near)
+    mark = np.zeros(ny * nx, bool)
+    for view, (near_surface, ret) in zip(the_views, reaching):
+        ranged = _windowed(ranging, view)
+        disc, dist = _disc(free, grid, view, reach)
+        # a free cell seen from an earlier view is done (in range and seen); walk only what
+        # this view can change: free cells not yet seen, surface cells not yet visible (a
+        # seen surface cell may become visible from another view)
+        unseen = ~seen.ravel()[disc]
+        near_free = disc[unseen]
+        if not view.full:
+            near_free = near_free[_in_window(near_free, dist[unseen], grid, view, ranged)]
+        in_range.ravel()[near_free] = True
+        in_range.ravel()[near_surface] = True
+        walk = np.concatenate([near_free, near_surface[~visible.ravel()[near_surface]]])
+        ty, tx = np.divmod(walk, nx)
         first = np.empty(len(tx), np.int16)
         for at in range(0, len(tx), SIGHT_CHUNK_CELLS):
             part = slice(at, at + SIGHT_CHUNK_CELLS)
-            first[part] = _sight((ny, nx), origin, res, material, (pose.x_m, pose.y_m),
+            first[part] = _sight((ny, nx), origin, res, material, (view.x_m, view.y_m),
                                  tx[part], ty[part])
             if bar is not None:
                 bar.update(len(tx[part]))
-        clear = first == 0
-        seen_now = np.zeros(px.shape, bool)
-        seen_now[ty[clear], tx[clear]] = True
-        seen |= seen_now
-        returns_now = np.zeros(px.shape, bool)
-        returns_now[sy, sx] = ret
-        # visible: some of the cell's surface a sensor of this pose meets from the front,
-        # through free space from its emitter (the coarse points first, then the fine)
+        if bar is not None:
+            bar.update(len(disc) + len(near_surface) - len(walk))
+        clear = walk[first == 0]
+        seen.ravel()[clear] = True
+        # visible: some of the cell's surface a sensor of this view meets from the front,
+        # through free space from its emitter (the coarse points first, then the fine); the
+        # cells asked are marked in a scratch grid, so a view costs its cells, not the grid's
+        mark[ret] = True
+        ask = clear[mark[clear]]
+        mark[ret] = False
+        mark[ask] = True
         for at in (coarse, fine):
-            on = (seen_now & near & returns_now & ~visible).ravel()[at[3]]
+            on = mark[at[3]] & ~visible.ravel()[at[3]]
             if on.any():
                 hit = _met(scenario, grid, at[0][on, 0], at[0][on, 1],
                            at[3][on] % nx, at[3][on] // nx,
-                           (at[1][on, 0], at[1][on, 1], at[2][on]), pose, ranging)
+                           (at[1][on, 0], at[1][on, 1], at[2][on]), view, ranged)
                 visible.ravel()[at[3][on][hit]] = True
+        mark[ask] = False
         by_obstacle = (first >= OBSTACLE0) & (surface_owner[ty, tx] == WALL)
         unset = hidden_by_obstacle[ty, tx] == 0
         pick = by_obstacle & unset
@@ -611,8 +741,8 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
     ranged = truth.shadow_ranged
     theirs = None if mapped_by is None or mapped_by is scenario else \
         _geometric_ranging(mapped_by)
-    if theirs is not None and (theirs, mapped_by.robot.poses) != (
-            _geometric_ranging(scenario), scenario.robot.poses):   # another ring or other poses
+    if theirs is not None and (theirs, views(mapped_by, grid)) != (
+            _geometric_ranging(scenario), views(scenario, grid)):   # another ring or other poses
         material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
         ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow,
                                   truth.surface_point, theirs)

@@ -257,7 +257,8 @@ class MapPicture:
 
     def __init__(self, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
                  reach_m: float | None = None, ring_radius_m: float = 0.15,
-                 dpi: float = PNG_DPI, title: str = "", width_in: float = 8.0):
+                 dpi: float = PNG_DPI, title: str = "", width_in: float = 8.0,
+                 route=None):
         self.dpi = dpi
         pt = dpi / 72                                    # pixels per point
         x0, x1, y0, y1 = self.extent_m = grid.extent_m
@@ -343,12 +344,17 @@ class MapPicture:
         black.text(((sb[0] + sb[2]) / 2, bar_y + bar_h / 2 + 3 * pt), text, small, "mt")
 
         # the legend, three columns filled top to bottom, below the x label
-        self.crowded = crowded(poses, ring_radius_m)
+        route = None if route is None else np.asarray(route, float).reshape(-1, 2)
+        driven = route is not None and len(route) > 1
+        # a moving ring's sweeps are no scan poses: its route and where each sweep began
+        self.crowded = driven or crowded(poses, ring_radius_m)
         entries = [("patch", UNKNOWN - _CLASS0, "unknown"), ("patch", FREE - _CLASS0, "free"),
                    ("patch", OCCUPIED - _CLASS0, "occupied")]
         if scenario is not None:
             entries.append(("line", TRUTH, "true walls / obstacles"))
-        if len(poses) and self.crowded:
+        if driven:
+            entries.append(("path", POSE, "path driven while sweeping (dots: sweep starts)"))
+        elif len(poses) and self.crowded:
             entries.append(("path", POSE, "scan poses in order (numbered where room)"))
         elif len(poses):
             entries.append(("ring", POSE, "ring at scan pose (number = order)"))
@@ -403,6 +409,13 @@ class MapPicture:
         for (c0, r0, c1, r1), base in fills:
             self._bg[r0:r1, c0:c1] = base
             covered[r0:r1, c0:c1] = True
+        if driven:   # the route, clipped to the axes box like the poses' marks
+            drawn_route = _Ink(full)
+            drawn_route.line(self.to_px(route[:, 0], route[:, 1]), 0.8 * pt)
+            a = drawn_route.coverage()
+            a[~(ci >= L) | ~(ci < R) | ~(ri >= T) | ~(ri < B)] = 0
+            a[covered] = 0
+            self._composite(_layer(POSE, a * 0.7))       # red, a little see-through
         for k in (TRUTH, POSE, RANGE):
             a = inks[k].coverage()
             a[covered] = 0
@@ -650,17 +663,18 @@ def _tick_label(value: float, step: float) -> str:
 
 def save_map_png(path, grid: OccupancyGrid, scenario=None, poses: Sequence = (),
                  reach_m: float | None = None, ring_radius_m: float = 0.15,
-                 title: str = "") -> Path:
-    """Write the map picture (see the module doc) to ``path``."""
+                 title: str = "", route=None) -> Path:
+    """Write the map picture (see the module doc) to ``path``; ``route``: (K, 2) m, the
+    path a moving ring read along (``poses`` are then where its sweeps began)."""
     return MapPicture(grid, scenario, poses, reach_m, ring_radius_m,
-                      title=title).save_png(path, grid.classify(), title)
+                      title=title, route=route).save_png(path, grid.classify(), title)
 
 
 def save_animation(path, grid: OccupancyGrid,
                    frames: Iterable[tuple[np.ndarray, int, str]], n_frames: int,
                    scenario=None, poses: Sequence = (), reach_m: float | None = None,
                    ring_radius_m: float = 0.15, frame_s: float = 0.25, hold_s: float = 2.0,
-                   png_path=None, title: str = "") -> Path:
+                   png_path=None, title: str = "", route=None) -> Path:
     """Write a GIF of the map being built, streaming the frames to the writer.
 
     ``frames``: an iterable (e.g. a generator) of (cell classes (ny, nx) int8, poses scanned
@@ -672,7 +686,7 @@ def save_animation(path, grid: OccupancyGrid,
         raise ValueError(f"an animation needs at least one frame, got n_frames={n_frames}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    pic = MapPicture(grid, scenario, poses, reach_m, ring_radius_m, title=title)
+    pic = MapPicture(grid, scenario, poses, reach_m, ring_radius_m, title=title, route=route)
     images = (pic.palette_image(pic.frame(*f)) for f in frames)
     first = next(images)
     durations = [round(frame_s * 1000)] * n_frames

@@ -675,6 +675,81 @@ class Odometry:
         return self.pose[i] + (self.pose[i + 1] - self.pose[i]) * u[..., None]
 
 
+def full_sweep_steps(scenario: Scenario) -> np.ndarray:
+    """Motor steps of a full sweep: min_step … max_step by ``scan.step_stride``."""
+    ring = scenario.ring
+    return np.arange(ring.min_step, ring.max_step + 1, scenario.scan.step_stride)
+
+
+def scene_schedule(scenario: Scenario, steps: np.ndarray) -> Schedule:
+    """The firmware's timeline of the scene's sweep over ``steps`` (its settle, samples,
+    step time and whether each GP2 keeps its own clock)."""
+    belt = scenario.effects.get("belt_dynamics") or BeltDynamicsEffect()
+    return schedule(steps, scenario.ring, settle_s=scenario.scan.settle_s,
+                    samples=scenario.samples_per_step, step_time_s=belt.step_time_s,
+                    timing=scenario.has("timing"))
+
+
+def sweeps_along(path: Path, sched: Schedule) -> int:
+    """Sweeps taken driving ``path``, one every sweep + rewind (``sched``) from the start:
+    each that starts before the robot arrives (at least one). A sweep the arrival cuts is
+    taken in full, its remaining steps read standing at the path's end; none starts after
+    (docs/dynamics.md, "Where the path ends")."""
+    cycle = sched.duration_s + sched.rewind_s
+    return max(1, int(math.ceil(path.duration_s / cycle - 1e-12)))
+
+
+@dataclass(frozen=True)
+class Drive:
+    """Where a moving scene's ring read along its path, from the scene alone (no physics,
+    no seed: what the ground truth judges a map by): ``poses`` (sweeps, S, 3) the true pose
+    at each step's first read, ``sensor_rad`` (S,) each step's commanded sensor angle
+    from radial."""
+
+    path: Path
+    schedule: Schedule
+    poses: np.ndarray
+    sensor_rad: np.ndarray
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> Drive:
+        """The scene's drive (ValueError for a scene without ``motion``)."""
+        motion = scenario.effects.get("motion")
+        if motion is None:
+            raise ValueError(f"scenario {scenario.name!r} does not drive (no effects.motion)")
+        steps = full_sweep_steps(scenario)
+        sched = scene_schedule(scenario, steps)
+        path = Path.from_effect(motion)
+        n = sweeps_along(path, sched)
+        starts = np.arange(n) * (sched.duration_s + sched.rewind_s)
+        ring = scenario.ring
+        return cls(path=path, schedule=sched,
+                   poses=path.pose_at(starts[:, None] + sched.read_s[None, :, 0]),
+                   sensor_rad=steps * ring.motor_step_rad * ring.gear)
+
+    @property
+    def n_sweeps(self) -> int:
+        return len(self.poses)
+
+    def ending(self) -> dict:
+        """How the path ended against the sweeps: ``sweeps``, ``path_m``, ``swept_m`` (driven
+        from the first read to the last), and ``cut``: None, or ``{"sweep": k (1-based),
+        "steps_standing": steps of sweep k read after the robot arrived, "steps": S}`` when
+        the robot arrived during the last sweep (those readings are kept, taken at the end),
+        and ``unswept_m``: the path driven after the last read (no sweep started there)."""
+        sched, path = self.schedule, self.path
+        first = (self.n_sweeps - 1) * (sched.duration_s + sched.rewind_s) + sched.read_s[:, 0]
+        arrive = path.duration_s
+        standing = int(np.count_nonzero(first > arrive))
+        speed = path.speed_m_s
+        last_read_m = min(path.length_m, float(first[-1]) * speed)
+        return {"sweeps": self.n_sweeps, "path_m": path.length_m,
+                "swept_m": last_read_m - min(path.length_m, float(sched.read_s[0, 0]) * speed),
+                "cut": ({"sweep": self.n_sweeps, "steps_standing": standing,
+                         "steps": len(first)} if standing else None),
+                "unswept_m": path.length_m - last_read_m}
+
+
 # --------------------------------------------------------------------------- per sweep
 
 
@@ -751,9 +826,7 @@ class Dynamics:
         return self._physics
 
     def schedule(self, steps: np.ndarray) -> Schedule:
-        return schedule(steps, self.scenario.ring, settle_s=self.scenario.scan.settle_s,
-                        samples=self.scenario.samples_per_step,
-                        step_time_s=self.step_time_s, timing=self.timing is not None)
+        return scene_schedule(self.scenario, steps)
 
     def timeline(self, steps: np.ndarray) -> tuple[Schedule, Trajectory | None]:
         """The schedule of a sweep over ``steps`` and, with ``belt_dynamics``, its physics.
@@ -790,12 +863,10 @@ class Dynamics:
 
     def n_sweeps(self, steps: np.ndarray) -> int:
         """Sweeps the scene takes: one per scan pose, or with motion, back to back until the
-        robot reaches the end of its path (at least one)."""
+        robot reaches the end of its path (:func:`sweeps_along`)."""
         if self.path is None:
             return len(self.scenario.robot.poses)
-        sched = self.schedule(steps)
-        cycle = sched.duration_s + sched.rewind_s
-        return max(1, int(math.ceil(self.path.duration_s / cycle - 1e-12)))
+        return sweeps_along(self.path, self.schedule(steps))
 
     def plan(self, index: int, steps: np.ndarray, count: int = 0,
              pose: np.ndarray | None = None) -> ReadingPlan:

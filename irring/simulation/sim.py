@@ -195,8 +195,7 @@ class SimRing:
 
     def default_steps(self) -> np.ndarray:
         """Motor steps of a full sweep: min_step … max_step by ``scan.step_stride``."""
-        return np.arange(self.ring.min_step, self.ring.max_step + 1,
-                         self.scenario.scan.step_stride)
+        return dynamics_lib.full_sweep_steps(self.scenario)
 
     def _check_steps(self, steps) -> np.ndarray:
         return check_steps(steps, self.ring.min_step, self.ring.max_step)
