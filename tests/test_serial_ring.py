@@ -682,6 +682,51 @@ def test_a_device_that_turns_to_the_other_protocols_framing_mid_sweep_is_named()
     assert err.value.partial.counts.tolist() == [[10, 11], [12, 13]]
 
 
+def _framed(body: bytes, mistake: str) -> bytes:
+    """``body`` as a sentence whose framing a firmware author got wrong in one way."""
+    import binascii
+    crc = p.crc16(body)
+    check = {"lower": b"%04x" % crc, "xmodem": b"%04X" % binascii.crc_hqx(body, 0),
+             "ccitt_false": b"%04X" % binascii.crc_hqx(body, 0xFFFF),
+             "no_xorout": b"%04X" % (crc ^ 0xFFFF),
+             "swapped": b"%04X" % (((crc & 0xFF) << 8) | (crc >> 8))}.get(mistake, b"%04X" % crc)
+    return b"$" + body + b"*" + check + (b"\n" if mistake == "lf" else b"\r\n")
+
+
+@pytest.mark.parametrize("mistake, said", [
+    ("lower", "its check field is in lower-case hex; the protocol's is upper-case"),
+    ("xmodem", "its check is CRC-16/XMODEM (the unreflected polynomial from 0: avr-libc's "
+               "_crc_xmodem_update), not CRC-16/IBM-SDLC"),
+    ("ccitt_false", "its check is CRC-16/CCITT-FALSE (the unreflected polynomial from 0xFFFF: "
+                    "avr-libc's _crc_xmodem_update), not CRC-16/IBM-SDLC"),
+    ("no_xorout", "its check is CRC-16/IBM-SDLC without the final XOR with 0xFFFF"),
+    ("swapped", "its check is CRC-16/IBM-SDLC with its two bytes swapped"),
+    ("lf", "it ends with \\n alone; a sentence ends with \\r\\n"),
+])
+def test_a_firmware_that_frames_every_sentence_wrongly_is_told_how(mistake, said):
+    """A board answering each IRHLO with the same IRINF, framed wrongly the same way each time
+    (avr-libc's _crc_xmodem_update, which docs/protocol.md warns of; printf's %04x; no \\r),
+    was told 'Sentences that arrive garbled point at line noise or a loose cable'. The
+    handshake names the mistake when two answers or more show the same one."""
+    raw = _framed(b"IRINF,2,2,12,1800,3,5,-3,3,fw", mistake)
+    with pytest.raises(p.ProtocolError):
+        p.decode(raw)
+    ring = SerialRing(ScriptPort(lambda msg: [raw] if isinstance(msg, p.Hello) else []),
+                      timeout_s=TIMEOUT_S)
+    with pytest.raises(HandshakeError) as err:
+        ring.open()
+    assert str(err.value).startswith(
+        "the device on script:// answers each IRHLO with an IRINF framed otherwise than IRR "
+        f"protocol v2 asks, the same way each time (not line noise): {said}: ")
+    assert "Fix the firmware's framing (docs/protocol.md, \"The CRC\"" in str(err.value)
+    # once, among noise, it is not taken for a firmware's habit
+    answers = iter([[raw], [b"$IRINF,2,2*0000\r\n"], []])
+    ring = SerialRing(ScriptPort(lambda msg: next(answers, []) if isinstance(msg, p.Hello)
+                                 else []), timeout_s=TIMEOUT_S)
+    with pytest.raises(HandshakeError, match="^no IRINF answer .* point at line noise"):
+        ring.open()
+
+
 def test_an_irinf_announcing_another_ring_during_goto_or_stop_is_device_changed():
     other = p.Info(1, 3, 10, 900, 1, 1, -5, 5, "other")
     answers = {p.GoTo: [INFO, p.Position(2)], p.Stop: [other, p.Done(-1)]}

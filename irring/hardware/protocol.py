@@ -271,6 +271,46 @@ def xor8(body: bytes) -> int:
     return cs
 
 
+_CHECK_FIELD = {1: re.compile(rb"[0-9A-Fa-f]{2}"), 2: re.compile(rb"[0-9A-Fa-f]{4}")}
+
+
+def misframing(line: bytes, version: int = PROTOCOL_VERSION) -> str | None:
+    """What a rejected sentence got wrong, when it is a mistake a firmware makes in every
+    sentence rather than line noise (the check field in lower case, another CRC-16 than
+    IBM-SDLC, \\n without \\r), said for a person; None if it is none of those."""
+    line = bytes(line)
+    star = line.rfind(b"*")
+    if not line.startswith(b"$") or star < 0 or not line.endswith(b"\n"):
+        return None
+    body, cs = line[1:star], line[star + 1:].rstrip(b"\r\n")
+    if not _CHECK_FIELD[check_version(version)].fullmatch(cs) or \
+            line[star + 1:] not in (cs + b"\r\n", cs + b"\n"):
+        return None
+    mistakes = []
+    if not line.endswith(b"\r\n"):
+        mistakes.append("it ends with \\n alone; a sentence ends with \\r\\n")
+    if cs != cs.upper():
+        mistakes.append("its check field is in lower-case hex; the protocol's is upper-case")
+    value = int(cs, 16)
+    right = crc16(body) if version == 2 else xor8(body)
+    if value != right:
+        if version != 2:
+            return None
+        unreflected = "the unreflected polynomial from {}: avr-libc's _crc_xmodem_update"
+        known = {binascii.crc_hqx(body, 0): f"CRC-16/XMODEM ({unreflected.format(0)})",
+                 binascii.crc_hqx(body, 0xFFFF): "CRC-16/CCITT-FALSE "
+                                                 f"({unreflected.format('0xFFFF')})",
+                 right ^ CRC16_XOROUT: "CRC-16/IBM-SDLC without the final XOR with 0xFFFF",
+                 ((right & 0xFF) << 8) | (right >> 8): "CRC-16/IBM-SDLC with its two bytes "
+                                                       "swapped"}
+        if value not in known:
+            return None
+        name = known[value]
+        mistakes.append(f"its check is {name}" + ("" if name.startswith("CRC-16/IBM-SDLC")
+                                                  else ", not CRC-16/IBM-SDLC"))
+    return "; ".join(mistakes) or None
+
+
 def check_version(version: int) -> int:
     """``version`` if this irring can frame it, else ValueError naming the allowed ones."""
     if version not in PROTOCOL_VERSIONS:

@@ -350,6 +350,7 @@ class SerialRing:
         self.protocol_warning: str | None = None
         self._other_framing = 0  # sentences framed for another protocol version, heard
         self._refused_info: p.ProtocolError | None = None  # an intact IRINF out of range
+        self._misframed_info: list[bytes] = []  # IRINF answers rejected for their framing
         self._rx_bytes = 0     # bytes read from the port, all told (silence is none arriving)
         self.stats = LinkStats()
         self.info: p.Info | None = None
@@ -460,6 +461,8 @@ class SerialRing:
                     self.stats.malformed += 1
                     if item.raw.startswith(b"$IRINF") and item.fault in _FIELD_FAULTS:
                         self._refused_info = item   # its check field matched: not noise
+                if item.raw.startswith(b"$IRINF") and len(self._misframed_info) < 16:
+                    self._misframed_info.append(item.raw)   # (cleared by each hello)
                 log.debug("dropped: %s", item)
             else:
                 self.stats.sentences += 1
@@ -488,6 +491,7 @@ class SerialRing:
         tries = self.retries + 1
         refusals: list[p.ErrorReply] = []
         self._refused_info = None
+        self._misframed_info = []
         every_refused = True
         for attempt in range(tries):
             if attempt:
@@ -531,6 +535,17 @@ class SerialRing:
                 f"v{self.decoder.version} does not allow ({bad.detail}): "
                 f"{printable(bad.raw.decode('ascii', 'replace').strip())}; no ring has that, so "
                 f"its IRINF is not trusted")
+        mistakes = [p.misframing(raw, self.decoder.version) for raw in self._misframed_info]
+        habit = next((m for m in mistakes if m is not None and mistakes.count(m) >= 2), None)
+        if habit is not None:   # the same mistake twice or more: the firmware's, not noise
+            raw = self._misframed_info[mistakes.index(habit)]
+            raise HandshakeError(
+                f"the device on {self.port_name} answers each IRHLO with an IRINF framed "
+                f"otherwise than IRR protocol v{self.decoder.version} asks, the same way each "
+                f"time (not line noise): {habit}: "
+                f"{printable(raw.decode('ascii', 'replace').strip())}. Fix the firmware's "
+                f"framing (docs/protocol.md, \"The CRC\": the CRC of the nine bytes "
+                f"123456789 is 0x{p.CRC16_CHECK:04X})")
         raise HandshakeError(
             f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
             f"each. Check the port, the baud rate ({self.baudrate}), that the ring is powered "
