@@ -622,6 +622,38 @@ def test_a_reversed_device_that_rebooted_between_sweeps_keeps_the_next_sweep():
     assert (link["stale"], link["lost_scans"], link["reversed_passes"]) == (0, 0, 1)
 
 
+@pytest.mark.parametrize("bad, named", [
+    (p.Scan(1, -2, 1, (12, 13, 14)), "IRSCN 1 of step -2 carries 3 counts; the IRINF announced "
+                                     "2 sensors"),
+    (p.Scan(1, -2, 1, (4096, 13)), "IRSCN 1 of step -2 has a count of 4096, beyond the 12-bit "
+                                   "ADC's 4095"),
+    (p.Scan(1, 9, 1, (12, 13)), "IRSCN 1 is of step 9, outside IRSWP,-3,3"),
+    (p.Scan(1, 0, 1, (12, 13)), "IRSCN 1 is of step 0, which this pass numbers 3"),
+])
+def test_an_irscn_dropped_as_inconsistent_is_named_in_the_report(bad, named):
+    """A firmware sending 11 counts on a ring it announced with 12 was told 'no step of it
+    arrived intact: … 15 inconsistent IRSCN dropped', which also stands for a count beyond
+    the ADC, a step not asked for and a seq that contradicts its step: the report names the
+    first one dropped."""
+    sweeps = []
+
+    def on_sweep(cmd):
+        sweeps.append(cmd)
+        if cmd.from_step != -3:   # the re-sweep of the dropped step -2
+            return [p.Done(-1)]
+        return [p.Scan(0, -3, 0, (10, 11)), bad if len(sweeps) == 1 else p.Scan(1, -2, 1, (1, 2)),
+                *(p.Scan(2 + i, s, 2 + i, (14, 15)) for i, s in enumerate(range(-1, 4))),
+                p.Done(6)]
+
+    ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
+    sweep = ring.sweep(resweep=1)
+    assert sweep.missing_steps == (-2,)
+    assert ring.last_report.message.endswith(
+        f"1 inconsistent IRSCN dropped (the first: {named}), 1 re-sweeps")
+    ring.sweep()   # the next sweep's report does not carry it over
+    assert ring.last_report.message.endswith("all 7 steps received; clean link")
+
+
 def test_an_irinf_announcing_another_ring_mid_sweep_ends_it_keeping_the_old_rings_readings():
     """A board that reboots into other firmware mid-session announces itself; its IRINF
     was ignored as a late answer, so the driver went on reading the old ring's geometry.

@@ -184,7 +184,9 @@ class SweepReport:
         return dataclasses.asdict(self)
 
 
-def _describe_link(link: dict[str, int]) -> str:
+def _describe_link(link: dict[str, int], dropped: str | None = None) -> str:
+    """The link counters that are not zero, for a person; ``dropped`` names the first IRSCN
+    dropped as inconsistent."""
     names = {"checksum_failures": "checksum failures", "malformed": "malformed sentences",
              "lost_scans": "IRSCN lost", "seq_gaps": "seq gaps", "timeouts": "timeouts",
              "inconsistent": "inconsistent IRSCN dropped", "stale": "stale IRSCN dropped",
@@ -192,7 +194,8 @@ def _describe_link(link: dict[str, int]) -> str:
              "resent_commands": "commands resent", "resweeps": "re-sweeps",
              "disconnects": "disconnects", "clock_faults": "device clock faults",
              "reversed_passes": "passes swept against the asked direction"}
-    parts = [f"{link[k]} {v}" for k, v in names.items() if link.get(k)]
+    parts = [f"{link[k]} {v}" + (f" (the first: {dropped})" if k == "inconsistent" and dropped
+                                 else "") for k, v in names.items() if link.get(k)]
     return ", ".join(parts) if parts else "clean link"
 
 
@@ -358,6 +361,7 @@ class SerialRing:
         self.last_report: SweepReport | None = None
         self._last_seq: int | None = None  # seq of the device's last IRSCN, from IRDON
         self._position: int | None = None  # motor step last reported (None: unknown)
+        self._dropped: str | None = None  # the sweep's first IRSCN dropped as inconsistent
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -700,6 +704,7 @@ class SerialRing:
         pose_arr = core.as_pose(pose)
         started = time.monotonic()
         before = self.stats.as_dict()
+        self._dropped = None
         passes: list[_Pass] = []
 
         def build(complete: bool, reason: str) -> tuple[core.Sweep, SweepReport]:
@@ -816,7 +821,8 @@ class SerialRing:
             nonlocal base, last_seq, first
             pos = pos_of.get(msg.step)
             if pos is None:
-                self.stats.inconsistent += 1  # a step this pass did not ask for
+                self._inconsistent(f"IRSCN {msg.seq} is of step {msg.step}, outside "
+                                   f"IRSWP,{lo},{hi}")
                 return
             if base is None:
                 if not settled:   # its first IRSCN: the pass's last step if swept reversed
@@ -828,13 +834,15 @@ class SerialRing:
                         and (msg.seq - first.seq) % p.SEQ_MODULO
                         == (ps.sent_at(pos, flip) - ps.sent_at(pos_of[first.step], flip))
                         % p.SEQ_MODULO):
-                    self.stats.inconsistent += 1  # its step contradicts its seq
+                    self._inconsistent(f"IRSCN {msg.seq} is of step {msg.step}, which this "
+                                       f"pass numbers {(base + ps.sent_at(pos)) % p.SEQ_MODULO}")
                     return
                 settle(flip)
             elif alone() and msg.step != first.step:
                 settle(ps.reversed)
             if msg.step in contradicted:
-                self.stats.inconsistent += 1
+                self._inconsistent(f"step {msg.step} came again after two IRSCN with other "
+                                   f"counts")
                 return
             if msg.step in ps.got:
                 if ps.got[msg.step].counts == msg.counts:
@@ -845,7 +853,8 @@ class SerialRing:
                 del ps.got[msg.step]
                 contradicted.add(msg.step)
                 self.stats.scans -= 1
-                self.stats.inconsistent += 2
+                self._inconsistent(f"IRSCN {msg.seq} of step {msg.step} came twice with other "
+                                   f"counts", 2)
                 return
             gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) % p.SEQ_MODULO
             if gap >= p.SEQ_MODULO // 2:
@@ -881,8 +890,15 @@ class SerialRing:
                     f"{self.stats.sentences} sentences in all")
             for msg in msgs:
                 if isinstance(msg, p.Scan):
-                    if len(msg.counts) != info.nsensors or max(msg.counts) > max_count:
-                        self.stats.inconsistent += 1
+                    if len(msg.counts) != info.nsensors:
+                        self._inconsistent(f"IRSCN {msg.seq} of step {msg.step} carries "
+                                           f"{len(msg.counts)} counts; the IRINF announced "
+                                           f"{info.nsensors} sensors")
+                        continue
+                    if max(msg.counts) > max_count:
+                        self._inconsistent(f"IRSCN {msg.seq} of step {msg.step} has a count of "
+                                           f"{max(msg.counts)}, beyond the {info.adc_bits}-bit "
+                                           f"ADC's {max_count}")
                         continue
                     if hint is not None and (msg.seq - hint) % p.SEQ_MODULO >= p.SEQ_MODULO // 2:
                         self.stats.stale += 1  # numbered before this pass began
@@ -983,6 +999,12 @@ class SerialRing:
                 wait_s = self.timeout_s
                 deadline = now + wait_s
 
+    def _inconsistent(self, why: str, n: int = 1) -> None:
+        """Count ``n`` IRSCN dropped as inconsistent; the sweep's report names the first."""
+        self.stats.inconsistent += n
+        if self._dropped is None:
+            self._dropped = why
+
     def _given_up(self, framed: int, accepted: int, what: str) -> LinkLost:
         """The error of a pass given up (DeviceTimeout, ``what`` saying why), unless since it
         began (``framed``, ``accepted``: the counters then) more sentences came framed for
@@ -1067,7 +1089,7 @@ class SerialRing:
                    f"(not invented, left out of the sweep)")
         else:
             msg = f"all {n_req} steps received"
-        msg += f"; {_describe_link(link)}"
+        msg += f"; {_describe_link(link, self._dropped)}"
         if reason:
             msg = f"{reason}: {msg}"
         return SweepReport(tuple(req), n_got, sweep.missing_steps, link, complete,
