@@ -104,11 +104,18 @@ def test_a_missing_port_is_a_clear_error_naming_the_emulator():
 
 
 def test_loop_url_is_opened_through_pyserial_and_an_echo_is_no_ring():
-    # loop:// hands our own IRHLO back: a decodable sentence, but not an IRINF answer
+    """loop:// hands our own IRHLO back: a decodable sentence, but not an IRINF answer. The
+    message told to check the baud rate, power and firmware, '0 checksum failures, 0
+    malformed sentences': it names the echo (a loopback plug, an adapter or terminal that
+    echoes what it is sent, or the wrong port)."""
     started = time.monotonic()
-    with pytest.raises(HandshakeError, match=r"no IRINF answer from loop:// to 2 IRHLO"):
+    with pytest.raises(HandshakeError, match=r"no IRINF answer from loop:// to 2 IRHLO") as err:
         SerialRing("loop://", timeout_s=TIMEOUT_S, retries=1).open()
     assert time.monotonic() - started < 2 * TIMEOUT_S + 0.5
+    assert str(err.value).endswith(
+        "s each, only this host's own IRHLO sent back (2 times): the port echoes what it is "
+        "sent (loop://, a loopback plug, an adapter or terminal that echoes). Check that it "
+        "is the ring's port and that the ring is powered")
 
 
 def test_handshake_sets_the_geometry_from_irinf_and_the_user_numbers():

@@ -497,6 +497,8 @@ class SerialRing:
         self._refused_info = None
         self._misframed_info = []
         every_refused = True
+        echoes = 0   # our own IRHLO heard back
+        heard = self.stats.sentences + self.stats.checksum_failures + self.stats.malformed
         for attempt in range(tries):
             if attempt:
                 self.stats.resent_commands += 1
@@ -513,6 +515,7 @@ class SerialRing:
                 for msg in self._receive():
                     if isinstance(msg, p.Info):
                         return self._accept_info(msg)
+                    echoes += isinstance(msg, p.Hello)
                     if isinstance(msg, p.ErrorReply):
                         # IRERR 1/2: our IRHLO was garbled; 5: a sweep still runs, stop it
                         self.stats.device_errors += 1
@@ -550,6 +553,13 @@ class SerialRing:
                 f"{printable(raw.decode('ascii', 'replace').strip())}. Fix the firmware's "
                 f"framing (docs/protocol.md, \"The CRC\": the CRC of the nine bytes "
                 f"123456789 is 0x{p.CRC16_CHECK:04X})")
+        if echoes and echoes == (self.stats.sentences + self.stats.checksum_failures
+                                 + self.stats.malformed - heard):   # nothing but our own
+            raise HandshakeError(
+                f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} "
+                f"s each, only this host's own IRHLO sent back ({echoes} times): the port "
+                f"echoes what it is sent (loop://, a loopback plug, an adapter or terminal that "
+                f"echoes). Check that it is the ring's port and that the ring is powered")
         raise HandshakeError(
             f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
             f"each. Check the port, the baud rate ({self.baudrate}), that the ring is powered "
