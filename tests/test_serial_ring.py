@@ -17,7 +17,7 @@ import pytest
 
 from irring import core
 from irring.designs import PAPER_RING
-from irring.hardware import (DeviceChanged, DeviceDisconnected, DeviceError, DeviceRejected, DeviceTimeout,
+from irring.hardware import (NoReadings, DeviceChanged, DeviceDisconnected, DeviceError, DeviceRejected, DeviceTimeout,
                              HandshakeError, SerialRing)
 from irring.hardware import protocol as p
 from irring.hardware.emulator import Device, DevicePort, Faults
@@ -659,6 +659,27 @@ def test_an_irscn_dropped_as_inconsistent_is_named_in_the_report(bad, named):
         f"1 inconsistent IRSCN dropped (the first: {named}), 1 re-sweeps")
     ring.sweep()   # the next sweep's report does not carry it over
     assert ring.last_report.message.endswith("all 7 steps received; clean link")
+
+
+def test_a_ring_whose_irscn_do_not_fit_a_sentence_is_told_why_none_arrived():
+    """A 24-sensor ring with a 12-bit ADC (the handshake allows up to 72 sensors): each
+    IRSCN is longer than the protocol's 128 bytes and was dropped as 'malformed', so the
+    sweep ended 'no step of it arrived intact: … 7 malformed sentences', the fault unnamed.
+    The report names the first malformed sentence and what was wrong with it."""
+    info = p.Info(2, 24, 12, 1800, 3, 5, -3, 3, "wide")
+    scan = p.frame(b"IRSCN,0,-3,0," + b",".join([b"4000"] * 24))
+
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [info]
+        return [scan, p.Done(6)] if isinstance(msg, p.SweepCommand) else [p.Done(-1)]
+
+    ring = SerialRing(ScriptPort(script), timeout_s=TIMEOUT_S).open()
+    with pytest.raises(NoReadings) as err:
+        ring.sweep()
+    assert str(err.value).endswith(
+        "1 malformed sentences (the first: sentence b'$IRSCN,0,-3,0,4000,4000,4000,4000,4000,"
+        "4...' longer than 128 bytes: no end within 128 bytes)")
 
 
 def test_an_irinf_announcing_another_ring_mid_sweep_ends_it_keeping_the_old_rings_readings():

@@ -184,9 +184,10 @@ class SweepReport:
         return dataclasses.asdict(self)
 
 
-def _describe_link(link: dict[str, int], dropped: str | None = None) -> str:
+def _describe_link(link: dict[str, int], dropped: str | None = None,
+                   garbled: str | None = None) -> str:
     """The link counters that are not zero, for a person; ``dropped`` names the first IRSCN
-    dropped as inconsistent."""
+    dropped as inconsistent, ``garbled`` the first malformed sentence."""
     names = {"checksum_failures": "checksum failures", "malformed": "malformed sentences",
              "lost_scans": "IRSCN lost", "seq_gaps": "seq gaps", "timeouts": "timeouts",
              "inconsistent": "inconsistent IRSCN dropped", "stale": "stale IRSCN dropped",
@@ -194,8 +195,9 @@ def _describe_link(link: dict[str, int], dropped: str | None = None) -> str:
              "resent_commands": "commands resent", "resweeps": "re-sweeps",
              "disconnects": "disconnects", "clock_faults": "device clock faults",
              "reversed_passes": "passes swept against the asked direction"}
-    parts = [f"{link[k]} {v}" + (f" (the first: {dropped})" if k == "inconsistent" and dropped
-                                 else "") for k, v in names.items() if link.get(k)]
+    first = {"inconsistent": dropped, "malformed": garbled}
+    parts = [f"{link[k]} {v}" + (f" (the first: {first[k]})" if first.get(k) else "")
+             for k, v in names.items() if link.get(k)]
     return ", ".join(parts) if parts else "clean link"
 
 
@@ -362,6 +364,7 @@ class SerialRing:
         self._last_seq: int | None = None  # seq of the device's last IRSCN, from IRDON
         self._position: int | None = None  # motor step last reported (None: unknown)
         self._dropped: str | None = None  # the sweep's first IRSCN dropped as inconsistent
+        self._garbled: str | None = None  # the sweep's first malformed sentence, and why
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -463,6 +466,8 @@ class SerialRing:
                 else:
                     self._other_framing += item.fault is p.Fault.OTHER_VERSION
                     self.stats.malformed += 1
+                    if self._garbled is None:   # named in the sweep's report
+                        self._garbled = str(item)
                     if item.raw.startswith(b"$IRINF") and item.fault in _FIELD_FAULTS:
                         self._refused_info = item   # its check field matched: not noise
                 if item.raw.startswith(b"$IRINF") and len(self._misframed_info) < 16:
@@ -714,7 +719,7 @@ class SerialRing:
         pose_arr = core.as_pose(pose)
         started = time.monotonic()
         before = self.stats.as_dict()
-        self._dropped = None
+        self._dropped = self._garbled = None
         passes: list[_Pass] = []
 
         def build(complete: bool, reason: str) -> tuple[core.Sweep, SweepReport]:
@@ -1099,7 +1104,7 @@ class SerialRing:
                    f"(not invented, left out of the sweep)")
         else:
             msg = f"all {n_req} steps received"
-        msg += f"; {_describe_link(link, self._dropped)}"
+        msg += f"; {_describe_link(link, self._dropped, self._garbled)}"
         if reason:
             msg = f"{reason}: {msg}"
         return SweepReport(tuple(req), n_got, sweep.missing_steps, link, complete,
