@@ -805,6 +805,34 @@ def test_drive_with_a_calibration_for_another_adc_exits_1_naming_the_file(tmp_pa
     assert not (tmp_path / "o").exists()
 
 
+def test_drive_refuses_a_ring_whose_adc_the_datasheet_curve_cannot_read_before_sweeping(
+        tmp_path, capsys):
+    """A ring announcing a 1-bit ADC (IRINF allows 1 … 24) was swept at every pose, then
+    refused with exit 1, a bad input file, though none was given ('curve[0] … No sensor reads
+    so: calibrate it again'). Refused after the handshake, before the ring turns (exit 3)."""
+    sweeps = []
+
+    def one_bit(dev, cmd):
+        if isinstance(cmd, hd.p.Hello):
+            dev.send(hd.info(bits=1))
+        elif isinstance(cmd, hd.p.SweepCommand):
+            sweeps.append(cmd)
+
+    dev = hd.HostileDevice(one_bit)
+    try:
+        assert main(["drive", "--port", dev.link, "--no-wait", "--out", str(tmp_path / "o"),
+                     "--pose", "0,0", "--pose", "300,0"]) == errors.DEVICE
+    finally:
+        dev.close()
+    err = capsys.readouterr().err
+    assert err.startswith(f"irring drive: error: the ring on {dev.link} reports a 1-bit ADC, "
+                          "whose counts the gp2d12 datasheet curve reads as no distance within "
+                          "its range (")
+    assert err.endswith("): calibrate this ring (irring calibrate) and drive it with "
+                        "--calibration FILE\n")
+    assert sweeps == [] and not (tmp_path / "o").exists()
+
+
 # --------------------------------------------------------------------------- devices
 
 TIMEOUT_S = 0.15

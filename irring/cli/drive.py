@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import errors, pipeline
 from ..core import MAX_SWEEPS, work_bytes, work_refusal
-from ..estimation.calibration import load_calibration
+from ..estimation.calibration import Calibration, CalibrationError, load_calibration
 from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..recording import save_recording
@@ -188,6 +188,16 @@ def run(args: argparse.Namespace) -> int:
                f"ring on {args.port} reports {info.adc_bits} bits: calibrate this ring "
                "(irring calibrate)")
         return errors.INPUT
+    if calibration is None:   # the datasheet curve for the ring's ADC, as map_sweeps takes it
+        try:
+            Calibration.nominal(ring.sensor_model, ring.ring, info.adc_bits, ring.vref_v)
+        except CalibrationError as exc:   # found after every pose was swept, as exit 1
+            ring.close()
+            _error(f"the ring on {args.port} reports a {info.adc_bits}-bit ADC, whose counts the "
+                   f"{ring.sensor_model} datasheet curve reads as no distance within its range "
+                   f"({exc}): calibrate this ring (irring calibrate) and drive it with "
+                   f"--calibration FILE")
+            return errors.DEVICE
     if truth is not None and ring.ring != truth.ring:
         say(f"warning: the device's geometry differs from {truth.name}'s ring; using the "
             f"device's")
