@@ -1061,6 +1061,36 @@ def _recorded(out) -> list:
     return sweeps
 
 
+def _irdon_counting(dev, cmd):
+    """A firmware whose IRDON gives how many IRSCN it has sent, not the seq of the last: one
+    more than the protocol's number."""
+    if isinstance(cmd, hd.p.SweepCommand):
+        for step in range(cmd.from_step, cmd.to_step + 1):
+            dev.send(hd.scan(dev.seq, step))
+            dev.seq += 1
+        dev.send(hd.line(f"IRDON,{dev.seq}"))
+    elif isinstance(cmd, hd.p.Stop):
+        dev.send(hd.line(f"IRDON,{dev.seq}"))
+    else:
+        hd.good(dev, cmd)
+
+
+def test_an_irdon_one_past_the_last_seq_loses_no_step_of_the_next_sweep(tmp_path, capsys):
+    """A firmware whose IRDON counts its IRSCN (one past the last seq): the next sweep's first
+    IRSCN, numbered before what that IRDON said, was dropped as stale at every pose after the
+    first (step -2 missing at 3 of 4 poses, and from each re-sweep too), though it arrived
+    intact and its seq fits the sweep's own numbering. It is taken; a leftover of an earlier
+    sweep, numbered before every step of this one by an honest IRDON, still is not."""
+    code, out = _drive(tmp_path, _irdon_counting, poses=4)
+    err = capsys.readouterr().err
+    assert code == 0, err
+    sweeps = _recorded(out)
+    assert [list(s.steps) for s in sweeps] == [[-2, -1, 0, 1, 2]] * 4
+    assert all(s.missing_steps == () for s in sweeps)
+    report = json.loads((out / "link.json").read_text())
+    assert [r["link"]["stale"] for r in report["sweeps"]] == [0, 0, 0, 0]
+
+
 @pytest.mark.parametrize("later, said", [
     (hd.error_reply(3), "the ring rejected $IRSWP,-2,2,1,0*408C: IRERR 3 (bad argument)"),
     (hd.error_reply(5), "the ring kept refusing $IRSWP,-2,2,1,0*408C: IRERR 5 (busy)"),

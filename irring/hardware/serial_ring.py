@@ -264,6 +264,19 @@ def _renumbered(scans: list[p.Scan], pos_of: dict[int, int], done_seq: int) -> b
     return None
 
 
+def _numbered_with(suspects: list[p.Scan], fresh: p.Scan, ps: _Pass) -> list[p.Scan]:
+    """The ``suspects`` (IRSCN that looked stale) whose seq is that of their step in the
+    numbering ``fresh`` gives ``ps`` (swept either way), earliest sent first."""
+    pos_of = ps.index
+    if fresh.step not in pos_of:
+        return []
+    at = pos_of[fresh.step]
+    fits = [sc for sc in suspects if sc.step in pos_of and any(
+        (fresh.seq - sc.seq) % p.SEQ_MODULO == ps.sent_at(at, r) - ps.sent_at(pos_of[sc.step], r)
+        for r in (False, True))]
+    return sorted(fits, key=lambda sc: (sc.seq - fresh.seq) % p.SEQ_MODULO)
+
+
 @dataclass
 class _Pass:
     """Bookkeeping of one IRSWP: which steps it asked for and what arrived."""
@@ -919,6 +932,15 @@ class SerialRing:
                         self.stats.stale += 1  # numbered before this pass began
                         suspects.append(msg)
                         continue
+                    if base is None and suspects:
+                        # held as stale, yet numbered as this first fresh IRSCN numbers the
+                        # pass: the last IRDON said more than the device had sent (a firmware
+                        # counting its IRSCN instead of naming the last), since an honest one
+                        # numbers every leftover before each step of this pass
+                        for scan in _numbered_with(suspects, msg, ps):
+                            suspects.remove(scan)
+                            self.stats.stale -= 1
+                            take(scan)
                     take(msg)
                 elif isinstance(msg, p.Done):
                     reverse = None if ps.got else _renumbered(suspects, pos_of, msg.seq)
