@@ -62,13 +62,16 @@ LONG = [0.0, 0.0, 0.0, 0.0, 0.040, 0.0, 0.0, 0.0, 0.0]
 
 
 def test_a_reading_behind_both_neighbours_draws_no_wall_outside():
-    """Without the rule the long reading's hit marks 2 cells 25–45 mm behind the wall (no
-    beam can clear them); with it, none: it is mapped at its farther neighbour's range,
-    on the wall."""
+    """Without the rule the long reading's hit marks its cell 35–45 mm behind the wall (no
+    beam can clear it; with the floor in front of its end point, ahead_floor 1, the cell in
+    front too); with it, none: it is mapped at its farther neighbour's range, on the wall."""
     batch = one_sensor(LONG, 0.020)
-    off = grid(neighbour_steps=0)
+    off = grid(neighbour_steps=0, between_steps=0)   # (the rule alone: no hits between steps)
     off.insert(batch)
-    assert cells_behind(off, 0.025) == 2
+    assert cells_behind(off, 0.025) == 1
+    floored = grid(neighbour_steps=0, between_steps=0, ahead_floor=1.0)
+    floored.insert(batch)
+    assert cells_behind(floored, 0.025) == 2
     g = grid()
     g.insert(batch)
     assert cells_behind(g, 0.025) == 0

@@ -51,7 +51,8 @@ def test_a_cone_reading_marks_its_arc_and_frees_its_sector():
     fan = cone_fan(p, c.cone_step_rad)
     assert fan.x.shape == (1, 31) and fan.cone_half_angle_rad == 0.0
     pencil = OccupancyGrid((0.0, 0.0), (100, 100), 0.01, dataclasses.replace(
-        c, l_occ=c.cone_l_occ, l_free=c.cone_l_free, l_no_return=c.cone_l_no_return))
+        c, l_occ=c.cone_l_occ, l_free=c.cone_l_free, l_no_return=c.cone_l_no_return,
+        ahead_floor=1.0))
     pencil.insert(fan)
     np.testing.assert_array_equal(g.log_odds, pencil.log_odds)
 

@@ -333,14 +333,15 @@ cdef inline void add_runs(const Seg* s, double t_end, long long unit, long bx0, 
             arr[clampl(p, p_hi) * p_stride + r * r_stride] += w
 
 
-cdef inline double weight(double z_a, double z_b, double mu, double l_occ,
+cdef inline double weight(double z_a, double z_b, double mu, double l_occ, double l_ahead,
                           double l_free) noexcept nogil:
     """Log-odds for a cell a valid beam crosses from z_a to z_b, in σ from its end point (the
-    model in docs/mapping.md); ``mu`` = the free margin in σ."""
+    model in docs/mapping.md); ``mu`` = the free margin in σ; ``l_ahead`` the hit's peak in
+    a cell wholly in front of the end point (z_b < 0)."""
     cdef double gap, w, y, t
     # occupied: l_occ·exp(−gap²/2), gap = how far the cell's [z_a, z_b] is from 0
     gap = dmax(dmax(z_a, -z_b), 0.0)
-    w = l_occ * exp(-0.5 * gap * gap)
+    w = (l_ahead if z_b < 0 else l_occ) * exp(-0.5 * gap * gap)
     # free: l_free·Φ(y√2) for y = −(z_b + mu)/√2 > 0 (the whole cell in front of the margin),
     # Φ(y√2) = 1 − erfc(y)/2, erfc(y) = t·(0.3480242 − 0.0958798·t + 0.7478556·t²)·exp(−y²)
     # with t = 1/(1 + 0.47047·y), to 2.5e-5 (Abramowitz & Stegun 7.1.25, as the numpy version
@@ -385,6 +386,15 @@ cdef inline double hit_log_odds(double sigma, double l_occ, double l_occ_min, do
                 l_occ * dmin(1.0, occ_sigma / sigma))
 
 
+cdef inline double ahead_log_odds(double sigma, double l_hit, double l_occ, double l_occ_min,
+                                  double occ_sigma, double lone_sigma,
+                                  double ahead_floor) noexcept nogil:
+    # mapping.ahead_weight: the hit's peak in the cells wholly in front of the end point
+    if sigma > lone_sigma:
+        return l_hit
+    return dmax(ahead_floor * dmin(l_occ_min, l_occ), l_occ * dmin(1.0, occ_sigma / sigma))
+
+
 def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[::1] origin_y,
               const double[::1] heading, const double[::1] x, const double[::1] y,
               const double[::1] sigma_m, const unsigned char[::1] valid,
@@ -419,6 +429,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef double tail = params.tail_sigmas, min_sigma = params.min_sigma_m
     cdef double default_sigma = params.default_sigma_m
     cdef double occ_sigma = params.occ_sigma_m, l_occ_min = params.l_occ_min, l_hit
+    cdef double ahead_floor = params.ahead_floor, l_ahead
     cdef double margin_m = params.free_margin_cells * res
     cdef double free_sigmas = params.free_sigmas, stop_m
     cdef double stop_at = params.no_return_stop, lone_sigma = params.lone_sigma_m
@@ -608,15 +619,17 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
             # a reading k times as uncertain as occ_sigma spreads 1/k of a hit over k times
             # the length, but adds at least l_occ_min (or l_occ, if that is less)
             l_hit = hit_log_odds(sigma, l_occ, l_occ_min, occ_sigma, lone_sigma)
+            l_ahead = ahead_log_odds(sigma, l_hit, l_occ, l_occ_min, occ_sigma, lone_sigma,
+                                     ahead_floor)
             if e[9] == 0:
                 for k in range(n_far, s.count):
                     two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
                     if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
                         l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
-                        log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_pass)
+                        log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_ahead, l_pass)
                     if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
                         l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
-                        log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_pass)
+                        log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_ahead, l_pass)
                 continue
             # a beam with a depth: the hit and pass up to the tail's end (tail σ behind the end
             # point) as any; a cell entered behind the end point gets at least l_deep
@@ -628,7 +641,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                 if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
                     if u_in < tail:
                         l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
-                        log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_pass)
+                        log_odds[iy, ix] += weight(u_in, u_mid, mu, l_hit, l_ahead, l_pass)
                     extra = depth(u_in, dz, tail, l_hit, l_deep) if u_in > 0 else 0.0
                     if extra > 0 and n_deep < deep_cap:
                         deep_at[n_deep], deep_w[n_deep] = iy * nx + ix, extra
@@ -636,7 +649,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                 if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
                     if u_mid < tail:
                         l_pass = 0.0 if held[(iy - by0) * bw + ix - bx0] else l_free * trust
-                        log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_pass)
+                        log_odds[iy, ix] += weight(u_mid, u_out, mu, l_hit, l_ahead, l_pass)
                     extra = depth(u_mid, dz, tail, l_hit, l_deep) if u_mid > 0 else 0.0
                     if extra > 0 and n_deep < deep_cap:
                         deep_at[n_deep], deep_w[n_deep] = iy * nx + ix, extra

@@ -60,6 +60,13 @@ class MapperParams:
     occ_sigma_m: float = 0.005    # a hit with σ above this weighs l_occ·occ_sigma_m/σ …
     l_occ_min: float = 1.6        # … but at least this (a lone far hit still marks its cell) …
     lone_sigma_m: float = UNCERTAIN_SIGMA_M  # σ above this weighs lone_sigma_m/σ (hit and pass)
+    # share of the l_occ_min floor a hit of σ ≤ lone_sigma_m keeps in the cells wholly in
+    # front of its end point (the σ-weighted hit does not change; 1: the floor as at the end
+    # point, as before 2026-11-27)
+    ahead_floor: float = 0.0
+    # hits along the segment between consecutive steps of a sensor whose ranges agree within
+    # explain_sigmas combined σ (σ ≤ lone_sigma_m): this share of the weaker one's (0: off)
+    between_steps: float = 0.5
     hold_sigma_m: float = 0.005   # a cell holding an end point of σ ≤ this is not freed by its batch
     # … and where the next or previous step of its sensor reads ≥ edge_jump_cells farther (or
     # nothing: an occluding edge), the surface behind it weighs l_occ_min this deep (cells)
@@ -103,6 +110,11 @@ class MapperParams:
         if math.isnan(self.no_return_stop):
             raise ValueError("no_return_stop must be a log-odds value or inf (never stop), "
                              "got nan")
+        if not (math.isfinite(self.ahead_floor) and 0 <= self.ahead_floor <= 1):
+            raise ValueError(f"need ahead_floor within 0 … 1, got {self.ahead_floor}")
+        if not (math.isfinite(self.between_steps) and 0 <= self.between_steps <= 1):
+            raise ValueError(f"need between_steps within 0 … 1 (0: off), got "
+                             f"{self.between_steps}")
         if not self.hold_sigma_m >= 0:
             raise ValueError(f"need hold_sigma_m ≥ 0, got {self.hold_sigma_m}")
         for name in ("hit_depth_cells", "edge_jump_cells"):
@@ -297,12 +309,15 @@ class OccupancyGrid:
              placed: bool = False) -> None:
         """Add the log-odds of ``points`` to ``log_odds`` (this grid's shape, float64,
         C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
-        ``add_beams``). Work and memory scale with the beams, not the grid. Readings from a
-        cone go in as :func:`cone_fan` with the ``cone_*`` weights; pencil beams are first
-        placed as :func:`placed_readings` places a batch of its own (``placed``: they are
-        already); σ as :func:`known_sigma`."""
+        ``add_beams``), with the hits between a sensor's steps (:func:`add_between`). Work
+        and memory scale with the beams, not the grid. Readings from a cone go in as
+        :func:`cone_fan` with the ``cone_*`` weights; pencil beams are first placed as
+        :func:`placed_readings` places a batch of its own (``placed``: they are already); σ
+        as :func:`known_sigma`."""
         if not placed:
             points = self.placed_readings([points])[0]
+        # (a sweep's pencil beams, before their clamp; a cone's fan has no steps to join)
+        add_between(log_odds, points, self.origin_xy_m, self.resolution_m, self.params)
         points, params = mapped_beams(points, self.params)
         _traverse.add_beams(
             log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
@@ -457,11 +472,12 @@ def cone_fan(points: Points, step_rad: float) -> Points:
     n = 2 * int(math.ceil(half / step_rad)) + 1
     offsets = np.linspace(-half, half, n)
     rows = np.shape(points.valid)[0]
+    cols = n * math.prod(np.shape(points.valid)[1:])   # (not −1: an empty batch has no rows)
 
     def fan(a):
-        return np.repeat(np.asarray(a)[..., None], n, axis=-1).reshape(rows, -1)
+        return np.repeat(np.asarray(a)[..., None], n, axis=-1).reshape(rows, cols)
 
-    heading = (np.asarray(points.heading, float)[..., None] + offsets).reshape(rows, -1)
+    heading = (np.asarray(points.heading, float)[..., None] + offsets).reshape(rows, cols)
     d, ox, oy = fan(points.d), fan(points.origin_x), fan(points.origin_y)
     return dataclasses.replace(
         points, x=ox + d * np.cos(heading), y=oy + d * np.sin(heading), d=d,
@@ -489,11 +505,12 @@ def known_sigma(points: Points) -> Points:
 def mapped_beams(points: Points, params: MapperParams) -> tuple[Points, MapperParams]:
     """The pencil beams a batch of readings is mapped as, and the weights they take:
     readings from a wide cone (``cone_half_angle_rad`` > 0) as :func:`cone_fan` with the
-    ``cone_*`` weights (an arc holds no cell: no sharp end point), others as they are."""
+    ``cone_*`` weights (an arc holds no cell: no sharp end point; its hit keeps its floor in
+    front of the arc), others as they are."""
     if points.cone_half_angle_rad > 0:
         return cone_fan(points, params.cone_step_rad), dataclasses.replace(
             params, l_occ=params.cone_l_occ, l_free=params.cone_l_free,
-            l_no_return=params.cone_l_no_return, hold_sigma_m=0.0)
+            l_no_return=params.cone_l_no_return, hold_sigma_m=0.0, ahead_floor=1.0)
     return points, params
 
 
@@ -504,6 +521,63 @@ def hit_weight(sigma: np.ndarray, params: MapperParams) -> np.ndarray:
     trust = np.minimum(1.0, params.lone_sigma_m / sigma)
     return np.maximum(min(params.l_occ_min, params.l_occ) * trust,
                       params.l_occ * np.minimum(1.0, params.occ_sigma_m / sigma))
+
+
+def ahead_weight(sigma: np.ndarray, params: MapperParams) -> np.ndarray:
+    """The log-odds peak of a valid reading's hit in the cells wholly in front of its end
+    point, from its σ (m, floored): the σ-weighted hit l_occ·min(1, occ_sigma_m/σ), the
+    l_occ_min floor only by ``ahead_floor``; a reading above ``lone_sigma_m`` its
+    :func:`hit_weight` there too (docs/mapping.md, "A hit's floor at its own cell")."""
+    sigma = np.asarray(sigma, float)
+    floored = params.l_occ * np.minimum(1.0, params.occ_sigma_m / sigma)
+    floor = params.ahead_floor * min(params.l_occ_min, params.l_occ)
+    return np.where(sigma <= params.lone_sigma_m, np.maximum(floor, floored),
+                    hit_weight(sigma, params))
+
+
+def between_steps(points: Points, shape, origin_xy_m, resolution_m: float,
+                  params: MapperParams) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(iy, ix, log-odds) the hits between a sensor's consecutive steps add: for valid
+    readings of σ ≤ ``lone_sigma_m`` in consecutive rows (steps) of one column (sensor)
+    whose ranges differ by at most ``explain_sigmas`` combined σ (one surface the beam swept
+    from one to the other), every cell the segment between their end points crosses but the
+    two end cells, ``between_steps`` × the weaker :func:`hit_weight` of the two once. None
+    when there is nothing to add (off, a cone, a batch that is not a sweep's rows). Numpy,
+    the same for the compiled insert and the oracle (docs/mapping.md, "Between a sensor's
+    steps")."""
+    shape_p = np.shape(points.valid)
+    if (params.between_steps <= 0 or points.cone_half_angle_rad > 0 or len(shape_p) != 2
+            or shape_p[0] < 2):
+        return None
+    x, y = np.asarray(points.x, float), np.asarray(points.y, float)
+    d = np.asarray(points.d, float)
+    sigma = np.maximum(np.nan_to_num(np.asarray(points.sigma_m, float),
+                                     nan=params.default_sigma_m), params.min_sigma_m)
+    with np.errstate(invalid="ignore"):
+        ok = (np.asarray(points.valid, bool) & np.isfinite(x + y + d)
+              & (sigma <= params.lone_sigma_m))
+        pair = (ok[:-1] & ok[1:] & (np.abs(d[1:] - d[:-1])
+                                    <= params.explain_sigmas * np.hypot(sigma[1:], sigma[:-1])))
+    r, k = np.nonzero(pair)
+    if r.size == 0:
+        return None
+    w = params.between_steps * np.minimum(hit_weight(sigma[r, k], params),
+                                          hit_weight(sigma[r + 1, k], params))
+    v = traverse(x[r, k], y[r, k], x[r + 1, k], y[r + 1, k], origin_xy_m, shape, resolution_m)
+    inner = (v.t_enter > 0) & (v.t_exit < 1)     # (the end points' own cells have their hits)
+    if not inner.any():
+        return None
+    return v.iy[inner], v.ix[inner], w[v.ray[inner]]
+
+
+def add_between(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
+                params: MapperParams) -> None:
+    """Add :func:`between_steps`' hits to ``log_odds`` in place, unclamped: part of the
+    batch's returns, summed with its beams' before the clamp and before its silent beams
+    look for a cell to stop at (the kernel's insert and the oracle alike)."""
+    hits = between_steps(points, np.shape(log_odds), origin_xy_m, resolution_m, params)
+    if hits is not None:
+        np.add.at(log_odds, hits[:2], hits[2])
 
 
 def explained_ranges(points: Points, shape, origin_xy_m, resolution_m: float,

@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from ..core import Points, Reason
-from .mapping import (MapperParams, hit_weight, known_sigma, mapped_beams, placed_readings,
-                      returns_of, silences_of, traverse)
+from .mapping import (MapperParams, add_between, ahead_weight, hit_weight, known_sigma,
+                      mapped_beams, placed_readings, returns_of, silences_of, traverse)
 
 
 def hit_depths(points: Points, params: MapperParams, resolution_m: float) -> np.ndarray:
@@ -186,6 +186,7 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     shape = np.shape(log_odds)
     if not already_placed:
         points = placed([points], shape, origin_xy_m, resolution_m, params)[0]
+    given = points
     points, p = mapped_beams(points, params)
     res = float(resolution_m)
     ox, oy = points.origin_x.ravel().astype(float), points.origin_y.ravel().astype(float)
@@ -222,13 +223,16 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     r = v.ray
     s_a, s_b = v.t_enter * length[r], v.t_exit * length[r]
     # the hit: σ-weighted (l_occ up to occ_sigma_m, l_occ·occ_sigma_m/σ beyond, at least
-    # l_occ_min), Gaussian in the gap between the cell and the end point, up to tail_sigmas·σ
-    # behind it
+    # l_occ_min; in the cells wholly in front of the end point the floor only by
+    # ahead_floor), Gaussian in the gap between the cell and the end point, up to
+    # tail_sigmas·σ behind it
     trust = np.minimum(1.0, p.lone_sigma_m / s)
     l_hit = hit_weight(s, p)
+    l_ahead = ahead_weight(s, p)
     gap = np.maximum(np.maximum(s_a - d[r], d[r] - s_b), 0.0)
     w_hit = np.where(s_a < d[r] + p.tail_sigmas * s[r],
-                     l_hit[r] * np.exp(-0.5 * (gap / s[r]) ** 2), 0.0)
+                     np.where(s_b < d[r], l_ahead[r], l_hit[r])
+                     * np.exp(-0.5 * (gap / s[r]) ** 2), 0.0)
     # the surface's depth: a cell entered behind an end point with one gets at least l_occ_min
     # (no more than the hit), Gaussian in its gap to [d, d + depth]; kept apart until the
     # silent beams are in (an inferred surface does not stop them)
@@ -244,6 +248,7 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     w_free = p.l_free * trust[r] * np.where((s_b < stop[r]) & ~held[v.iy, v.ix], phi, 0.0)
     out = np.array(log_odds, dtype=float)
     np.add.at(out, (v.iy, v.ix), w_hit + w_free)
+    add_between(out, given, origin_xy_m, resolution_m, params)   # (the sweep's pencil beams)
     deep = np.zeros(shape)
     np.add.at(deep, (v.iy, v.ix), w_depth)
 

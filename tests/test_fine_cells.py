@@ -1,0 +1,145 @@
+"""Fine cells and readings noisier than a cell (docs/mapping.md, "A hit's floor at its own
+cell" and "Between a sensor's steps"): the hit's floor stays in the end point's cell, and a
+sensor's consecutive steps on one surface mark the cells between their end points."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from irring.core import Points, Reason
+from irring.maps import mapping_numpy
+from irring.maps.mapping import OCCUPIED, MapperParams, OccupancyGrid, between_steps
+
+RES = 0.005                      # 5 mm cells, origin (0, 0): cell k spans [5k, 5k + 5) mm
+EMITTER = (0.0123, 0.0371)       # one beam along +x in cell row 7
+
+
+def one_beam(sigma_m: float, d: float = 0.3) -> Points:
+    a = lambda v: np.array([[v]], float)  # noqa: E731
+    return Points(x=a(EMITTER[0] + d), y=a(EMITTER[1]), d=a(d), theta=a(0.0),
+                  origin_x=a(EMITTER[0]), origin_y=a(EMITTER[1]), heading=a(0.0),
+                  sigma_m=a(sigma_m), iterations=np.ones((1, 1), int), valid=np.ones((1, 1), bool),
+                  reason=np.zeros((1, 1), np.uint8), max_range_m=0.8)
+
+
+def both(params: MapperParams, points: Points, shape=(20, 90)) -> tuple[np.ndarray, np.ndarray]:
+    """The compiled insert's change and the numpy oracle's, on an empty grid."""
+    g = OccupancyGrid((0.0, 0.0), shape, RES, params)
+    oracle = mapping_numpy.add(np.zeros(shape), points, g.origin_xy_m, RES, params)
+    return g.delta(points), oracle
+
+
+def phi(z: float) -> float:
+    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+def test_a_hit_keeps_its_floor_in_its_own_cell_and_its_sigma_weight_in_front():
+    """σ 20 mm, end point 300 mm out at x = 312.3 mm (cell 62). Cell 60 (300–305 mm, 7.3 mm
+    in front) gets l_occ·σ_occ/σ = 0.625 Gaussian in its gap plus the pass; with the floor
+    (ahead_floor 1) l_occ_min = 1.6 there. The end point's cell holds 1.6 either way."""
+    sigma, d = 0.020, 0.3
+    s_b = 0.305 - EMITTER[0]
+    gap = d - s_b
+    free = -1.5 * phi((d - 0.5 * RES - s_b) / sigma)
+    for floor, peak in ((0.0, 2.5 * 0.005 / sigma), (1.0, 1.6)):
+        kernel, oracle = both(MapperParams(ahead_floor=floor), one_beam(sigma, d))
+        want = peak * math.exp(-0.5 * (gap / sigma) ** 2) + free
+        assert abs(kernel[7, 60] - want) < 1e-4 and abs(oracle[7, 60] - want) < 1e-9
+        assert abs(kernel[7, 62] - 1.6) < 1e-4 and abs(oracle[7, 62] - 1.6) < 1e-9
+
+
+def test_uncertain_and_sharp_hits_are_as_before():
+    """A reading above lone_sigma_m (40 mm: a θ = 0 fallback) keeps its scaled floor in front
+    (a thin thing's near face); one of σ ≤ occ_sigma_m has no floor to lose."""
+    for sigma in (0.040, 0.004):
+        without, _ = both(MapperParams(ahead_floor=0.0), one_beam(sigma))
+        floored, _ = both(MapperParams(ahead_floor=1.0), one_beam(sigma))
+        np.testing.assert_array_equal(without, floored)
+
+
+EMITTERS = ((0.4317, 0.0529), (0.3102, 0.0611), (0.5521, 0.0477))   # three sensors' emitters
+WALL_Y = 0.6013                  # a wall in cell row 120 (600–605 mm)
+
+
+def wall_sweep(sigma_m: float) -> Points:
+    """Three sensors' 31 steps each, 1.07° apart, onto the wall y = 601.3 mm seen 16° off
+    square to 16° beyond, every end point on the wall: a snapped line's members, their σ on
+    their line ``sigma_m``."""
+    heading = np.radians(90.0 - 16.0 + 1.07 * np.arange(31))[:, None] + np.zeros(3)
+    ox = np.array([e[0] for e in EMITTERS]) + np.zeros((31, 1))
+    oy = np.array([e[1] for e in EMITTERS]) + np.zeros((31, 1))
+    d = (WALL_Y - oy) / np.sin(heading)
+    n = heading.shape
+    return Points(x=ox + d * np.cos(heading), y=oy + d * np.sin(heading), d=d,
+                  theta=np.zeros(n), origin_x=ox, origin_y=oy, heading=heading,
+                  sigma_m=np.full(n, sigma_m), iterations=np.ones(n, int),
+                  valid=np.ones(n, bool), reason=np.zeros(n, np.uint8), max_range_m=0.8)
+
+
+def test_a_wall_read_by_agreeing_readings_is_drawn_within_a_cell_of_it():
+    """Every end point on the wall, σ 10.5 mm (a GP2Y0A02 line member far out): with the
+    floor in front (ahead_floor 1) cells of row 118, 10–15 mm in front of the wall's row and
+    outside the map's 1-cell tolerance, are occupied where the hits of several sensors'
+    beams overlap; without it only the wall's row and the row in front of it. The wall's
+    row between the end points' cells is unbroken only with the hits between steps."""
+    pts = wall_sweep(0.0105)
+    cols = np.floor(pts.x / RES).astype(int)
+    span = np.arange(cols.min(), cols.max() + 1)
+    rows, unbroken = {}, {}
+    for floor, between in ((0.0, 0.5), (1.0, 0.5), (0.0, 0.0)):
+        g = OccupancyGrid((0.0, 0.0), (140, 200), RES,
+                          MapperParams(ahead_floor=floor, between_steps=between))
+        g.insert(pts)
+        occ = g.classify() == OCCUPIED
+        rows[floor, between] = set(np.nonzero(occ)[0].tolist())
+        unbroken[floor, between] = bool(occ[120, span].all())
+    assert rows[0.0, 0.5] == rows[0.0, 0.0] == {119, 120}
+    assert rows[1.0, 0.5] == {118, 119, 120}
+    assert unbroken[0.0, 0.5] and not unbroken[0.0, 0.0]
+
+
+def two_steps(ys=(0.6025, 0.6025), xs=(0.3113, 0.3371), sigma=(0.010, 0.012)) -> Points:
+    """Two consecutive steps of sensor 0 (rows 0, 1) from (330, 50) mm, and sensor 1 (column
+    1) beside them, valid only at step 0."""
+    ox, oy = 0.33, 0.05
+    x = np.array([[xs[0], 0.2100], [xs[1], np.nan]])
+    y = np.array([[ys[0], 0.6025], [ys[1], np.nan]])
+    d = np.hypot(x - ox, y - oy)
+    return Points(x=x, y=y, d=d, theta=np.zeros((2, 2)), origin_x=np.full((2, 2), ox),
+                  origin_y=np.full((2, 2), oy), heading=np.arctan2(y - oy, x - ox),
+                  sigma_m=np.array([[sigma[0], 0.01], [sigma[1], np.nan]]),
+                  iterations=np.ones((2, 2), int),
+                  valid=np.array([[True, True], [True, False]]),
+                  reason=np.array([[0, 0], [0, int(Reason.NO_RETURN)]], np.uint8), max_range_m=0.8)
+
+
+def test_consecutive_steps_on_one_surface_mark_the_cells_between():
+    """End points at x = 311.3 and 337.1 mm in cell row 120: the cells strictly between
+    their cells (63–66) get half the weaker hit (σ 12 mm: l_occ_min 1.6), 0.8 each, and
+    nothing else; sensor 1's lone reading joins nothing."""
+    params = MapperParams()
+    pts = two_steps()
+    iy, ix, w = between_steps(pts, (140, 140), (0.0, 0.0), RES, params)
+    assert iy.tolist() == [120] * 4 and ix.tolist() == [63, 64, 65, 66]
+    np.testing.assert_allclose(w, 0.8)
+    kernel, oracle = both(params, pts, (140, 140))
+    np.testing.assert_allclose(kernel[120, 63:67], 0.8, atol=1e-4)
+    np.testing.assert_allclose(oracle[120, 63:67], 0.8, atol=1e-12)
+    off, _ = both(MapperParams(between_steps=0.0), pts, (140, 140))
+    np.testing.assert_array_equal(off[120, 63:67], 0.0)
+
+
+def test_steps_that_disagree_or_fit_in_two_cells_join_nothing():
+    """Ranges 50 mm apart at σ 10 / 12 mm (more than 3 combined σ = 46.9 mm): two surfaces,
+    nothing between; the same steps on 20 mm cells lie in two neighbouring cells: nothing
+    between either (a coarse map is not changed by the rule)."""
+    params = MapperParams()
+    far = two_steps(ys=(0.6025, 0.6525))
+    assert abs(far.d[1, 0] - far.d[0, 0]) > 3 * math.hypot(0.010, 0.012)
+    assert between_steps(far, (140, 140), (0.0, 0.0), RES, params) is None
+    assert between_steps(two_steps(), (40, 40), (0.0, 0.0), 0.020, params) is None
+    # σ above lone_sigma_m (a θ = 0 fallback) joins nothing
+    assert between_steps(two_steps(sigma=(0.010, 0.040)), (140, 140), (0.0, 0.0), RES,
+                         params) is None
