@@ -1,6 +1,6 @@
-"""Fine cells and readings noisier than a cell (docs/mapping.md, "A hit's floor at its own
-cell" and "Between a sensor's steps"): the hit's floor stays in the end point's cell, and a
-sensor's consecutive steps on one surface mark the cells between their end points."""
+"""Fine cells and readings noisier than a cell (docs/mapping.md, "Fine cells"): the hit's
+floor stays in the end point's cell, and a sensor's consecutive steps on one surface mark
+the cells between their end points."""
 
 from __future__ import annotations
 

@@ -527,7 +527,7 @@ def ahead_weight(sigma: np.ndarray, params: MapperParams) -> np.ndarray:
     """The log-odds peak of a valid reading's hit in the cells wholly in front of its end
     point, from its σ (m, floored): the σ-weighted hit l_occ·min(1, occ_sigma_m/σ), the
     l_occ_min floor only by ``ahead_floor``; a reading above ``lone_sigma_m`` its
-    :func:`hit_weight` there too (docs/mapping.md, "A hit's floor at its own cell")."""
+    :func:`hit_weight` there too (docs/mapping.md, "Fine cells")."""
     sigma = np.asarray(sigma, float)
     floored = params.l_occ * np.minimum(1.0, params.occ_sigma_m / sigma)
     floor = params.ahead_floor * min(params.l_occ_min, params.l_occ)
@@ -543,8 +543,8 @@ def between_steps(points: Points, shape, origin_xy_m, resolution_m: float,
     from one to the other), every cell the segment between their end points crosses but the
     two end cells, ``between_steps`` × the weaker :func:`hit_weight` of the two once. None
     when there is nothing to add (off, a cone, a batch that is not a sweep's rows). Numpy,
-    the same for the compiled insert and the oracle (docs/mapping.md, "Between a sensor's
-    steps")."""
+    the same for the compiled insert and the oracle (docs/mapping.md, "Fine
+    cells")."""
     shape_p = np.shape(points.valid)
     if (params.between_steps <= 0 or points.cone_half_angle_rad > 0 or len(shape_p) != 2
             or shape_p[0] < 2):
@@ -559,6 +559,14 @@ def between_steps(points: Points, shape, origin_xy_m, resolution_m: float,
         pair = (ok[:-1] & ok[1:] & (np.abs(d[1:] - d[:-1])
                                     <= params.explain_sigmas * np.hypot(sigma[1:], sigma[:-1])))
     r, k = np.nonzero(pair)
+    if r.size:   # (end points in one cell or two sharing a side: no cell between them)
+        with np.errstate(invalid="ignore"):
+            cx = np.floor((x[r, k] - origin_xy_m[0]) / resolution_m)
+            cy = np.floor((y[r, k] - origin_xy_m[1]) / resolution_m)
+            dx = np.abs(np.floor((x[r + 1, k] - origin_xy_m[0]) / resolution_m) - cx)
+            dy = np.abs(np.floor((y[r + 1, k] - origin_xy_m[1]) / resolution_m) - cy)
+        apart = dx + dy > 1
+        r, k = r[apart], k[apart]
     if r.size == 0:
         return None
     w = params.between_steps * np.minimum(hit_weight(sigma[r, k], params),
