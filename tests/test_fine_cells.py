@@ -119,7 +119,7 @@ def test_consecutive_steps_on_one_surface_mark_the_cells_between():
     """End points at x = 311.3 and 337.1 mm in cell row 120: the cells strictly between
     their cells (63–66) get half the weaker hit (σ 12 mm: l_occ_min 1.6), 0.8 each, and
     nothing else; sensor 1's lone reading joins nothing."""
-    params = MapperParams()
+    params = MapperParams(between_steps=0.5)
     pts = two_steps()
     iy, ix, w = between_steps(pts, (140, 140), (0.0, 0.0), RES, params)
     assert iy.tolist() == [120] * 4 and ix.tolist() == [63, 64, 65, 66]
@@ -135,7 +135,7 @@ def test_steps_that_disagree_or_fit_in_two_cells_join_nothing():
     """Ranges 50 mm apart at σ 10 / 12 mm (more than 3 combined σ = 46.9 mm): two surfaces,
     nothing between; the same steps on 20 mm cells lie in two neighbouring cells: nothing
     between either (a coarse map is not changed by the rule)."""
-    params = MapperParams()
+    params = MapperParams(between_steps=0.5)
     far = two_steps(ys=(0.6025, 0.6525))
     assert abs(far.d[1, 0] - far.d[0, 0]) > 3 * math.hypot(0.010, 0.012)
     assert between_steps(far, (140, 140), (0.0, 0.0), RES, params) is None

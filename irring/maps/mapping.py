@@ -66,7 +66,7 @@ class MapperParams:
     ahead_floor: float = 0.0
     # hits along the segment between consecutive steps of a sensor whose ranges agree within
     # explain_sigmas combined σ (σ ≤ lone_sigma_m): this share of the weaker one's (0: off)
-    between_steps: float = 0.5
+    between_steps: float = 0.0
     hold_sigma_m: float = 0.005   # a cell holding an end point of σ ≤ this is not freed by its batch
     # … and where the next or previous step of its sensor reads ≥ edge_jump_cells farther (or
     # nothing: an occluding edge), the surface behind it weighs l_occ_min this deep (cells)
