@@ -146,6 +146,23 @@ def test_the_far_corner_rule_agrees_with_the_oracle_where_it_moves_readings(monk
     np.testing.assert_array_equal(a.valid, b.valid)
     assert np.count_nonzero(np.hypot(a.x - b.x, a.y - b.y)[a.valid] > 0.1) >= 1
 
+def test_the_edge_rule_agrees_with_the_oracle_where_it_fires():
+    """alone_at_an_edge on tests/test_edge_members.py's scene, where it makes a post's three
+    flank readings INCIDENCE_UNKNOWN: the kernels agree with the oracle."""
+    from test_edge_members import POST_BEFORE_FAR_WALL
+
+    from irring import pipeline
+    from irring.estimation.calibration import scene_calibration
+    from irring.scenario import loads
+
+    sc = loads(POST_BEFORE_FAR_WALL, source="<test>")
+    cal = scene_calibration(sc)[0]
+    sweep = pipeline.simulated(sc, seed=5241, progress=False)[0].sweeps[1]
+    fast = assert_agree(sweep, cal)
+    flanks = ([3, 39, 42], [5, 4, 4])
+    assert (fast.points.reason[flanks] == Reason.INCIDENCE_UNKNOWN).all()
+
+
 def _scene(seed, room):
     """A room hypothesis draws (as in the agreement test above): its walls and circles."""
     rng = np.random.default_rng(seed)

@@ -90,7 +90,9 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
     30° reads like a face's end), 550 far readings (582): RMS 10.7 mm (12.6 unfused), 26 more
     than 20 mm off (44), precision 0.972 (0.945). Since a noise-level reading past its line's
     other members is silenced (noise_past_line_end; here some were a wall fading out of
-    range), 543 far readings, 26 more than 20 mm off, precision 0.967."""
+    range), 543 far readings, 26 more than 20 mm off, precision 0.967. Since a line member
+    alone beside a nearer return is INCIDENCE_UNKNOWN (alone_at_an_edge; here one 6 mm off),
+    542."""
     scene = loads(FAR_HALL)
     monkeypatch.setattr(fast, "far_posts", lambda points, *args: points)   # lines alone
 
@@ -104,11 +106,11 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
         return np.concatenate(err), run.scores["occupied_precision"]
 
     err, precision = far_errors()
-    assert err.size == 543 and np.sqrt(np.mean(err ** 2)) < 0.0110
+    assert err.size == 542 and np.sqrt(np.mean(err ** 2)) < 0.0110
     assert (np.abs(err) > 0.02).sum() <= 26 and precision > 0.965
     monkeypatch.setattr(fast, "FUSE_MIN", 10 ** 9)
     err0, precision0 = far_errors()
-    assert err0.size == 543 and np.sqrt(np.mean(err0 ** 2)) > 0.0120
+    assert err0.size == 542 and np.sqrt(np.mean(err0 ** 2)) > 0.0120
     assert (np.abs(err0) > 0.02).sum() >= 40 and precision0 < 0.955
 
 

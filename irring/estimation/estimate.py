@@ -548,7 +548,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     arcs (:func:`round_runs`); with ``snap`` only (not a fold-over's judging pass): short far
     lines doubted (:func:`doubt_far_lines`), members that a better-held line their sensor's
     trace continues on places moved to it (:func:`rejoin_traces`), then the members of a
-    line their counts contradict (as rejoined) off it (:func:`counts_disown_lines`); line
+    line their counts contradict (as rejoined) off it (:func:`counts_disown_lines`) and
+    members alone at a nearer surface's edge (:func:`alone_at_an_edge`); line
     members onto their lines
     (``snapper``, the compiled :func:`snap_to_lines` by default), members read just past
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
@@ -602,6 +603,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label = counts_disown_lines(points, label, index, counts, steps, cal,
                                             grouping.alpha, grouping.cx, grouping.cy, profiler,
                                             judge)
+        points, label = alone_at_an_edge(points, label, counts, steps, cal)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -637,6 +639,59 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                                      options, found.label), cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+EDGE_JUMP_M = 0.10  # a sensor's adjacent reading this much nearer: a nearer surface's edge
+
+
+def alone_at_an_edge(points: Points, label: np.ndarray, counts: np.ndarray,
+                     steps: np.ndarray, cal: Calibration) -> tuple[Points, np.ndarray]:
+    """``points`` and ``label`` (S, N: each reading's line, −1: none) with every valid line
+    member made INCIDENCE_UNKNOWN and taken off its line where neither of its sensor's
+    adjacent steps (``steps`` (S,): the rows' motor steps) is a valid reading of its line
+    or of anything not ``EDGE_JUMP_M`` nearer, and one of them is nearer by that: valid
+    there, or a return (``counts`` (S, N), NOT_CONVERGED or INCIDENCE_UNKNOWN) that even
+    the drop-out angle reads nearer (a sweep's first and last steps are left: the beam beside
+    them is another sensor's). Numpy, shared by both estimators. Such a reading lies
+    at a nearer surface's edge: a beam past the edge onto the line's wall and a beam
+    grazing the edge's flank (dim, read far at the wall's θ) give the same counts, and
+    nothing of its own sensor vouches for the wall there. Why: docs/estimator.md, "Alone
+    at an edge"."""
+    valid = np.asarray(points.valid, dtype=bool)
+    steps = np.asarray(steps)
+    # rows in step order (a sweep's rows usually are: then no copies)
+    order = (slice(None) if steps.size < 2 or bool((steps[1:] > steps[:-1]).all())
+             else np.argsort(steps, kind="stable"))
+    v, lab_o, d = valid[order], np.where(valid, label, -1)[order], points.d[order]
+    # how far each reading can lie: its range where valid, past everything where not (a
+    # return: below, as far as the drop-out angle reads it)
+    r = np.where(v, d, np.inf)
+    reason = np.asarray(points.reason)[order]
+    returned = (reason == Reason.NOT_CONVERGED) | (reason == Reason.INCIDENCE_UNKNOWN)
+    if returned.any():
+        with np.errstate(divide="ignore", invalid="ignore"):
+            far_end = cal.distance(np.asarray(counts, dtype=float)[order][returned],
+                                   cal.max_incidence_rad)
+        r[returned] = np.where(np.isfinite(far_end), far_end, np.inf)
+    prev_v, prev_l, prev_r = v[:-1], lab_o[:-1], r[:-1]    # the step before rows 1…
+    next_v, next_l, next_r = v[1:], lab_o[1:], r[1:]       # the step after rows …S−2
+    # a sweep's first and last steps: their other neighbour is another sensor's beam, unread
+    alone = lab_o >= 0
+    alone[0] = alone[-1] = False
+    near_any = np.zeros_like(alone)
+    for sl, nv, nl, nr in ((slice(1, None), prev_v, prev_l, prev_r),
+                           (slice(None, -1), next_v, next_l, next_r)):
+        near = nr <= d[sl] - EDGE_JUMP_M
+        alone[sl] &= (nl != lab_o[sl]) & (near | ~nv)
+        near_any[sl] |= near
+    alone &= near_any
+    if not alone.any():
+        return points, label
+    gone = np.zeros_like(valid)
+    gone[order] = alone
+    label = label.copy()
+    label[gone] = -1
+    return invalidated(points, gone, Reason.INCIDENCE_UNKNOWN), label
 
 
 def _line_contradicted(points: Points, counts: np.ndarray, steps: np.ndarray,
