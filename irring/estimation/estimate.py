@@ -2956,7 +2956,8 @@ def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: 
     """The members of doubted short far lines off their lines (``pos``: their places among
     the valid readings ``vi``; ``doubted``: which of the readings ``pr`` profiled they are):
     each at its own profile's θ where that is straight and clearly steep, else
-    INCIDENCE_UNKNOWN (far, and nothing places it). ``stay`` (over ``pos``): members
+    INCIDENCE_UNKNOWN (far, and nothing places it), unless no θ reads it beyond its noise
+    (:func:`_theta_free`: then at θ = 0). ``stay`` (over ``pos``): members
     left on their line, as they were, where their own θ does not place them within the
     range."""
     placed = pr.ok[doubted].copy()  # only a straight, clearly steep profile places one
@@ -2974,12 +2975,37 @@ def _leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: 
         if fits.any():
             points = placed_at(points, vi[pos[placed]], d_new[fits], theta[fits], sigma[fits])
     leave = np.ones(pos.size, dtype=bool) if stay is None else placed | ~stay
+    # a reading no θ moves beyond its noise (an ideal sensor's) is placed by its counts alone
+    rest = (leave & ~placed).nonzero()[0]
+    if rest.size:
+        at, sigma = _theta_free(cal, pr.s[pos[rest]], pr.d0[pos[rest]], pr.sig_s[pos[rest]],
+                                points.max_range_m)
+        if at.any():
+            points = placed_at(points, vi[pos[rest[at]]], pr.d0[pos[rest[at]]], 0.0, sigma)
+            placed[rest[at]] = True
     label = label.copy()
     label.reshape(-1)[vi[pos[leave]]] = -1
     gone = vi[pos[leave & ~placed]]
     if gone.size:
         points = invalidated(points, gone, Reason.INCIDENCE_UNKNOWN)
     return points, label
+
+
+def _theta_free(cal: Calibration, s: np.ndarray, d0: np.ndarray, sig_s: np.ndarray,
+                max_range_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(which, σ) of readings (counts ``s``, θ = 0 distance ``d0``, ``sig_s``: σ_S/S) that
+    no incidence up to the drop-out angle reads more than their noise σ away from ``d0``
+    (a calibration without θ dependence: the ideal sensor's), within [min range, max
+    range]: what θ is does not matter to them, so nothing is unknown. σ: their θ = 0 σ."""
+    thetas = np.append(cal.theta_rad[cal.theta_rad <= cal.max_incidence_rad],
+                       cal.max_incidence_rad)
+    spread = np.max(np.abs(cal.distance(s[:, None], thetas[None, :]) - d0[:, None]), axis=1,
+                    initial=0.0)
+    sigma = theta0_sigma(cal, s, d0, sig_s)
+    _, b0 = cal._ab0
+    noise = np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M)
+    return (np.isfinite(d0) & (d0 >= cal.min_range_m) & (d0 <= max_range_m)
+            & (spread <= noise) & np.isfinite(sigma)), sigma
 
 
 # --------------------------------------------------------------------------- silent beams
