@@ -3002,10 +3002,8 @@ def _theta_free(cal: Calibration, s: np.ndarray, d0: np.ndarray, sig_s: np.ndarr
     spread = np.max(np.abs(cal.distance(s[:, None], thetas[None, :]) - d0[:, None]), axis=1,
                     initial=0.0)
     sigma = theta0_sigma(cal, s, d0, sig_s)
-    _, b0 = cal._ab0
-    noise = np.maximum(np.abs(b0) * d0 * sig_s, SIGMA_FLOOR_M)
     return (np.isfinite(d0) & (d0 >= cal.min_range_m) & (d0 <= max_range_m)
-            & (spread <= noise) & np.isfinite(sigma)), sigma
+            & (spread <= range_sigma(cal._ab0[1], d0, sig_s)) & np.isfinite(sigma)), sigma
 
 
 # --------------------------------------------------------------------------- silent beams
