@@ -22,6 +22,7 @@ from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, fallback_thetas
+from .bounds import clamped_slopes, kept_where_bounded, split_facets
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -609,6 +610,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         # a part read to its own range: the overlapping lines of one wall fitted as one
         snap_label = (fused_lines(points, label) if read_to_own_range(cal, points.max_range_m)
                       else label)
+        # a line across a corner of two facets: each piece snapped onto its own line
+        snap_label = split_facets(points, snap_label)
         points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
@@ -2545,6 +2548,13 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
         np.cumsum([s_off.size, s_ok.size, s_ok.size]))
     # how much longer θ = 0 reads than the steepest θ the readings allow
     span = d0[off] - d_steep
+    # a slope past the drop-out angle places a reading only where its lower bound does
+    clamp = clamped_slopes(cal, s_ok, slope[ok], se[ok], pr.n[mine][ok], _UNKNOWN_M)
+    if clamp.any():
+        ok = ok.copy()
+        ok[ok.nonzero()[0][clamp]] = False
+        th, t, e, lo, hi = (v[~clamp] for v in (th, t, e, lo, hi))
+        s_ok, d_new, d_lo, d_hi = (v[~clamp] for v in (s_ok, d_new, d_lo, d_hi))
     # where θ = 0 may read more than _UNKNOWN_M long, a bend noise could make (a steep far
     # wall's few readings bent 2.2 SE by noise were kept 106-166 mm long) is not enough
     convex = convex & (~(span > _UNKNOWN_M) | sure)
@@ -2891,7 +2901,9 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
     lab = label.reshape(-1)[vi]
     pos = ((lab >= 0) & bad[np.maximum(lab, 0)]).nonzero()[0]
     pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal)
-    return _leave_doubted_line(points, label, vi, pos, pr, np.ones(pos.size, dtype=bool), cal)
+    points, label = _leave_doubted_line(points, label, vi, pos, pr,
+                                        np.ones(pos.size, dtype=bool), cal)
+    return kept_where_bounded(points, vi, pos, pr, cal, _UNKNOWN_M, SIGMA_FLOOR_M), label
 
 
 def _off_line_profiles(points: Points, label: np.ndarray, pos: np.ndarray, vi: np.ndarray,

@@ -1,0 +1,183 @@
+"""A reading's θ only as far as its evidence bounds it.
+
+A slope pinned at the drop-out angle is no θ (:func:`clamped_slopes`, called by
+``local_incidence``); a line its counts contradict leaves its members no θ, but their own
+profile may still bound it (:func:`kept_where_bounded`, called by ``counts_disown_lines``);
+a line across a corner of two facets is snapped as two (:func:`split_facets`, called by
+``final_estimate``). Numpy, shared by both estimators. Why and what they measured:
+docs/estimator.md, "Bounded incidence".
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..core import Points, Reason, points_with
+
+CLAMP_SE = 2.0  # a clamped slope allows θ down to atan(|slope| − this many standard errors) …
+CLAMP_TESTED = 4  # … where this many readings tested the profile's straightness (else to 0)
+
+
+def clamped_slopes(cal, counts: np.ndarray, slope: np.ndarray, se: np.ndarray, n: np.ndarray,
+                   unknown_m: float) -> np.ndarray:
+    """Which readings (``counts``) whose own range profile is straight and sloped
+    (``slope``, tan θ, its standard error ``se``, from ``n`` readings) may not take the θ it
+    gives: where atan|slope| reaches the drop-out angle, the θ read is the clamp, not the
+    surface's (a post's three readings, one surface's end and another's start), and the
+    slope only bounds θ from below, at atan(|slope| − ``CLAMP_SE``·se), or at 0 where fewer
+    than ``CLAMP_TESTED`` readings could show the profile bent; such a reading is placed
+    only where that lower bound reads at most ``unknown_m`` longer than the clamp."""
+    t = np.abs(slope)
+    top = cal.max_incidence_rad
+    pinned = np.arctan(t) >= top
+    if not pinned.any():
+        return pinned
+    lo = np.where(n[pinned] >= CLAMP_TESTED,
+                  np.arctan(np.maximum(t[pinned] - CLAMP_SE * se[pinned], 0.0)), 0.0)
+    s = counts[pinned]
+    d_lo, d_top = cal.distance(np.concatenate([s, s]),
+                               np.concatenate([lo, np.full(s.size, top)])).reshape(2, -1)
+    out = np.zeros(t.size, dtype=bool)
+    out[pinned] = ~(d_lo - d_top <= unknown_m)
+    return out
+
+
+def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
+                       unknown_m: float, floor_m: float) -> Points:
+    """The members ``vi[pos]`` of lines their counts contradict that leaving made
+    INCIDENCE_UNKNOWN, valid again at θ = 0 where their own profile (``pr``, profiled over
+    ``pos``), straight (bent neither way), bounds θ to its ``steep`` and θ = 0 reads at
+    most ``unknown_m`` longer than that bound: σ their noise at θ = 0 (at least
+    ``floor_m``) and half that span, as a reading on no line whose θ nothing decides
+    (``local_incidence``). A line across facets
+    square on (one sensor turning in a many-sided room) is contradicted, and its members,
+    met at 0–30°, need no line to be placed within their noise."""
+    at = vi[pos]
+    # a bent profile (a convex corner's tip, a post) bounds nothing by its straight slope
+    lost = ((points.reason.reshape(-1)[at] == Reason.INCIDENCE_UNKNOWN)
+            & ~pr.convex & ~pr.concave)
+    if not lost.any():
+        return points
+    at, s = at[lost], pr.s[pos[lost]]
+    d0, d_steep = cal.distance(np.concatenate([s, s]),
+                               np.concatenate([np.zeros(s.size), pr.steep[lost]])
+                               ).reshape(2, -1)
+    span = d0 - d_steep
+    keep = np.isfinite(span) & (span <= unknown_m) & (d0 >= cal.min_range_m) & (
+        d0 <= points.max_range_m)
+    if not keep.any():
+        return points
+    at, d0, span = at[keep], d0[keep], span[keep]
+    _, b0 = cal._ab0
+    sigma = np.hypot(np.maximum(np.abs(b0) * d0 * pr.sig_s[pos[lost][keep]], floor_m),
+                     0.5 * span)
+    from .estimate import placed_at   # (estimate imports this module)
+    points = placed_at(points, at, d0, 0.0, sigma)
+    valid, reason = points.valid.copy(), np.array(points.reason)
+    valid.reshape(-1)[at] = True
+    reason.reshape(-1)[at] = Reason.OK
+    return points_with(points, valid=valid, reason=reason)
+
+
+SPLIT_MIN = 10      # a line is split only into pieces of at least this many valid members …
+SPLIT_F = 12.0      # … where two lines explain them better by this F (2 and n − 4 dof) …
+SPLIT_TURN_MIN = np.radians(5)  # … whose directions differ by at least this (a corner) …
+SPLIT_ROUNDS = 3    # … in at most this many rounds (a wall of several facets)
+
+
+def _weighted_scatter(x, y, w, group, n):
+    """Per group: summed weight, and the weighted TLS residual (weight × the scatter
+    matrix's smaller eigenvalue) of the points, with its direction (rad)."""
+    sw = np.bincount(group, w, n)
+    safe = np.maximum(sw, 1e-300)
+    mx, my = np.bincount(group, w * x, n) / safe, np.bincount(group, w * y, n) / safe
+    u, v = x - mx[group], y - my[group]
+    cxx = np.bincount(group, w * u * u, n)
+    cyy = np.bincount(group, w * v * v, n)
+    cxy = np.bincount(group, w * u * v, n)
+    lam = 0.5 * (cxx + cyy) - np.hypot(0.5 * (cxx - cyy), cxy)
+    return np.maximum(lam, 0.0), 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
+
+
+def _best_splits(x, y, w, line, n_lines):
+    """For each line (members sorted along it): the weighted TLS χ² of one line, the least
+    of two lines (a prefix and the rest, each ≥ ``SPLIT_MIN``) and where that split lies
+    (its first member of the second piece, in the given order; −1 none), and the angle
+    between the two pieces (rad)."""
+    chi1, alpha = _weighted_scatter(x, y, w, line, n_lines)
+    # along each line, the members in order: prefix sums of the weighted moments
+    t = x * np.cos(alpha[line]) + y * np.sin(alpha[line])
+    order = np.lexsort((t, line))
+    xs, ys, ws, ls = x[order], y[order], w[order], line[order]
+    # moments about each line's own centroid (less cancellation)
+    sw = np.bincount(ls, ws, n_lines)
+    cx = np.bincount(ls, ws * xs, n_lines) / np.maximum(sw, 1e-300)
+    cy = np.bincount(ls, ws * ys, n_lines) / np.maximum(sw, 1e-300)
+    u, v = xs - cx[ls], ys - cy[ls]
+    mom = np.stack([ws, ws * u, ws * v, ws * u * u, ws * v * v, ws * u * v])
+    cum = np.cumsum(mom, axis=1)
+    first = np.searchsorted(ls, np.arange(n_lines))
+    base = np.where(first > 0, cum[:, np.maximum(first - 1, 0)], 0.0)
+    left = cum - base[:, ls]                      # members up to and including this one
+    total = cum[:, np.searchsorted(ls, np.arange(n_lines), side="right") - 1] - base
+    right = total[:, ls] - left
+
+    def chi(m):     # (weighted TLS χ², direction) of each prefix's or rest's moments
+        s = np.maximum(m[0], 1e-300)
+        mu, mv = m[1] / s, m[2] / s
+        cxx, cyy, cxy = m[3] - s * mu * mu, m[4] - s * mv * mv, m[5] - s * mu * mv
+        return (np.maximum(0.5 * (cxx + cyy) - np.hypot(0.5 * (cxx - cyy), cxy), 0.0),
+                0.5 * np.arctan2(2.0 * cxy, cxx - cyy))
+
+    pos = np.arange(ls.size) - first[ls] + 1      # members in the prefix
+    count = np.bincount(ls, minlength=n_lines)
+    fits = (pos >= SPLIT_MIN) & (count[ls] - pos >= SPLIT_MIN)
+    (chi_l, a_l), (chi_r, a_r) = chi(left), chi(right)
+    chi2 = np.where(fits, chi_l + chi_r, np.inf)
+    best = np.full(n_lines, np.inf)
+    np.minimum.at(best, ls, chi2)
+    at = np.full(n_lines, -1)
+    turn = np.zeros(n_lines)
+    hit = fits & (chi2 == best[ls])
+    # the split's second piece starts after the prefix; the pieces' directions' difference
+    at[ls[hit]] = np.minimum(np.arange(ls.size)[hit] + 1, ls.size - 1)
+    turn[ls[hit]] = np.abs(np.angle(np.exp(2j * (a_l[hit] - a_r[hit])))) / 2
+    return chi1, best, at, order, count, turn
+
+
+def split_facets(points: Points, label: np.ndarray) -> np.ndarray:
+    """The lines to snap onto (:func:`snap_to_lines`): each line whose members two lines
+    explain clearly better than one (F ≥ ``SPLIT_F`` on 2 and n − 4 degrees of freedom,
+    each piece ≥ ``SPLIT_MIN`` valid members in order along the line, the members' σ
+    across it as weights, the pieces turned ≥ ``SPLIT_TURN_MIN``: a corner) cut in two,
+    in up to ``SPLIT_ROUNDS`` rounds, the second pieces numbered after the last line. θ
+    stays the line's (docs/estimator.md, "Bounded incidence", says why). ``label`` (S, N)
+    is not changed: the grouping's lines do not know the pieces."""
+    flat = label.reshape(-1)
+    at = ((flat >= 0) & points.valid.reshape(-1)).nonzero()[0]
+    if at.size < 2 * SPLIT_MIN:
+        return label
+    new = flat.copy()
+    n_lines = int(flat.max()) + 1
+    x, y = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
+    w = 1.0 / np.maximum(points.sigma_m.reshape(-1)[at]
+                         * np.cos(points.theta.reshape(-1)[at]), 1e-4) ** 2
+    cuts = 0
+    for _ in range(SPLIT_ROUNDS):
+        line = new[at]
+        chi1, chi2, start, order, count, turn = _best_splits(x, y, w, line, n_lines)
+        tried = (start >= 0) & np.isfinite(chi2) & (turn >= SPLIT_TURN_MIN)
+        f = np.zeros(n_lines)
+        f[tried] = ((chi1[tried] - chi2[tried]) / 2.0
+                    / np.maximum(chi2[tried] / np.maximum(count[tried] - 4, 1), 1e-12))
+        cut = tried & (f >= SPLIT_F)
+        if not cut.any():
+            break
+        # the members from each cut line's split on take a new line number
+        ls = line[order]
+        second = cut[ls] & (np.arange(ls.size) >= start[ls])
+        ids = np.full(n_lines, -1)
+        ids[cut] = n_lines + np.arange(np.count_nonzero(cut))
+        new[at[order[second]]] = ids[ls[second]]
+        n_lines += int(np.count_nonzero(cut))
+        cuts += int(np.count_nonzero(cut))
+    return new.reshape(label.shape) if cuts else label
