@@ -100,47 +100,54 @@ def _weighted_scatter(x, y, w, group, n):
 
 def _best_splits(x, y, w, line, n_lines):
     """For each line (members sorted along it): the weighted TLS χ² of one line, the least
-    of two lines (a prefix and the rest, each ≥ ``SPLIT_MIN``) and where that split lies
-    (its first member of the second piece, in the given order; −1 none), and the angle
-    between the two pieces (rad)."""
+    of two lines (a prefix and the rest, each ≥ ``SPLIT_MIN``), where that split lies (its
+    second piece's first member among the lines' members in ``order``; −1 none), ``order``
+    (the members of lines long enough to split, sorted by line and along it), the lines'
+    member counts and the angle between the two pieces (rad)."""
     chi1, alpha = _weighted_scatter(x, y, w, line, n_lines)
-    # along each line, the members in order: prefix sums of the weighted moments
-    t = x * np.cos(alpha[line]) + y * np.sin(alpha[line])
-    order = np.lexsort((t, line))
+    count = np.bincount(line, minlength=n_lines)
+    best, at, turn = np.full(n_lines, np.inf), np.full(n_lines, -1), np.zeros(n_lines)
+    long_enough = (count >= 2 * SPLIT_MIN)[line]
+    if not long_enough.any():
+        return chi1, best, at, np.zeros(0, np.intp), count, turn
+    sub = long_enough.nonzero()[0]
+    t = x[sub] * np.cos(alpha[line[sub]]) + y[sub] * np.sin(alpha[line[sub]])
+    order = sub[np.lexsort((t, line[sub]))]
     xs, ys, ws, ls = x[order], y[order], w[order], line[order]
-    # moments about each line's own centroid (less cancellation)
+    # prefix sums of the weighted moments about each line's centroid (less cancellation)
     sw = np.bincount(ls, ws, n_lines)
-    cx = np.bincount(ls, ws * xs, n_lines) / np.maximum(sw, 1e-300)
-    cy = np.bincount(ls, ws * ys, n_lines) / np.maximum(sw, 1e-300)
-    u, v = xs - cx[ls], ys - cy[ls]
-    mom = np.stack([ws, ws * u, ws * v, ws * u * u, ws * v * v, ws * u * v])
-    cum = np.cumsum(mom, axis=1)
+    u = xs - (np.bincount(ls, ws * xs, n_lines) / np.maximum(sw, 1e-300))[ls]
+    v = ys - (np.bincount(ls, ws * ys, n_lines) / np.maximum(sw, 1e-300))[ls]
+    cum = np.cumsum(np.stack([ws, ws * u, ws * v, ws * u * u, ws * v * v, ws * u * v]), axis=1)
     first = np.searchsorted(ls, np.arange(n_lines))
+    last = np.searchsorted(ls, np.arange(n_lines), side="right") - 1
     base = np.where(first > 0, cum[:, np.maximum(first - 1, 0)], 0.0)
-    left = cum - base[:, ls]                      # members up to and including this one
-    total = cum[:, np.searchsorted(ls, np.arange(n_lines), side="right") - 1] - base
-    right = total[:, ls] - left
-
-    def chi(m):     # (weighted TLS χ², direction) of each prefix's or rest's moments
-        s = np.maximum(m[0], 1e-300)
-        mu, mv = m[1] / s, m[2] / s
-        cxx, cyy, cxy = m[3] - s * mu * mu, m[4] - s * mv * mv, m[5] - s * mu * mv
-        return (np.maximum(0.5 * (cxx + cyy) - np.hypot(0.5 * (cxx - cyy), cxy), 0.0),
-                0.5 * np.arctan2(2.0 * cxy, cxx - cyy))
-
+    total = cum[:, np.maximum(last, 0)] - base
     pos = np.arange(ls.size) - first[ls] + 1      # members in the prefix
-    count = np.bincount(ls, minlength=n_lines)
-    fits = (pos >= SPLIT_MIN) & (count[ls] - pos >= SPLIT_MIN)
-    (chi_l, a_l), (chi_r, a_r) = chi(left), chi(right)
-    chi2 = np.where(fits, chi_l + chi_r, np.inf)
-    best = np.full(n_lines, np.inf)
-    np.minimum.at(best, ls, chi2)
-    at = np.full(n_lines, -1)
-    turn = np.zeros(n_lines)
-    hit = fits & (chi2 == best[ls])
+    idx = ((pos >= SPLIT_MIN) & (count[ls] - pos >= SPLIT_MIN)).nonzero()[0]
+    if idx.size == 0:
+        return chi1, best, at, order, count, turn
+    li = ls[idx]
+    left = cum[:, idx] - base[:, li]              # members up to and including idx
+    right = total[:, li] - left
+
+    def scatter(m):     # each prefix's or rest's weighted scatter (cxx, cyy, cxy)
+        s = np.maximum(m[0], 1e-300)
+        return m[3] - m[1] * m[1] / s, m[4] - m[2] * m[2] / s, m[5] - m[1] * m[2] / s
+
+    def chi(c):
+        return np.maximum(0.5 * (c[0] + c[1]) - np.hypot(0.5 * (c[0] - c[1]), c[2]), 0.0)
+
+    cl, cr = scatter(left), scatter(right)
+    chi2 = chi(cl) + chi(cr)
+    starts = np.flatnonzero(np.concatenate(([True], li[1:] != li[:-1])))
+    best[li[starts]] = np.minimum.reduceat(chi2, starts)
+    hit = chi2 == best[li]
     # the split's second piece starts after the prefix; the pieces' directions' difference
-    at[ls[hit]] = np.minimum(np.arange(ls.size)[hit] + 1, ls.size - 1)
-    turn[ls[hit]] = np.abs(np.angle(np.exp(2j * (a_l[hit] - a_r[hit])))) / 2
+    at[li[hit]] = idx[hit] + 1
+    a_l = 0.5 * np.arctan2(2.0 * cl[2][hit], cl[0][hit] - cl[1][hit])
+    a_r = 0.5 * np.arctan2(2.0 * cr[2][hit], cr[0][hit] - cr[1][hit])
+    turn[li[hit]] = np.abs(np.angle(np.exp(2j * (a_l - a_r)))) / 2
     return chi1, best, at, order, count, turn
 
 
