@@ -45,22 +45,22 @@ def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
                        unknown_m: float, floor_m: float) -> Points:
     """The members ``vi[pos]`` of lines their counts contradict that leaving made
     INCIDENCE_UNKNOWN, valid again at θ = 0 where their own profile (``pr``, profiled over
-    ``pos``), straight (bent neither way), bounds θ to its ``steep`` and θ = 0 reads at
-    most ``unknown_m`` longer than that bound: σ their noise at θ = 0 (at least
+    ``pos``) bounds θ (its ``steep``; a bent one, only the drop-out angle) and θ = 0 reads
+    at most ``unknown_m`` longer than that bound: σ their noise at θ = 0 (at least
     ``floor_m``) and half that span, as a reading on no line whose θ nothing decides
     (``local_incidence``). A line across facets
     square on (one sensor turning in a many-sided room) is contradicted, and its members,
     met at 0–30°, need no line to be placed within their noise."""
     at = vi[pos]
-    # a bent profile (a convex corner's tip, a post) bounds nothing by its straight slope
-    lost = ((points.reason.reshape(-1)[at] == Reason.INCIDENCE_UNKNOWN)
-            & ~pr.convex & ~pr.concave)
+    lost = points.reason.reshape(-1)[at] == Reason.INCIDENCE_UNKNOWN
     if not lost.any():
         return points
     at, s = at[lost], pr.s[pos[lost]]
+    # a bent profile (a convex corner's tip, a post) bounds θ by nothing but the drop-out
+    steep = np.where(pr.convex[lost] | pr.concave[lost], cal.max_incidence_rad,
+                     pr.steep[lost])
     d0, d_steep = cal.distance(np.concatenate([s, s]),
-                               np.concatenate([np.zeros(s.size), pr.steep[lost]])
-                               ).reshape(2, -1)
+                               np.concatenate([np.zeros(s.size), steep])).reshape(2, -1)
     span = d0 - d_steep
     keep = np.isfinite(span) & (span <= unknown_m) & (d0 >= cal.min_range_m) & (
         d0 <= points.max_range_m)
@@ -78,7 +78,7 @@ def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
     return points_with(points, valid=valid, reason=reason)
 
 
-SPLIT_MIN = 10      # a line is split only into pieces of at least this many valid members …
+SPLIT_MIN = 15      # a line is split only into pieces of at least this many valid members …
 SPLIT_F = 12.0      # … where two lines explain them better by this F (2 and n − 4 dof) …
 SPLIT_TURN_MIN = np.radians(5)  # … whose directions differ by at least this (a corner) …
 SPLIT_ROUNDS = 3    # … in at most this many rounds (a wall of several facets)
@@ -188,3 +188,26 @@ def split_facets(points: Points, label: np.ndarray) -> np.ndarray:
         n_lines += int(np.count_nonzero(cut))
         cuts += int(np.count_nonzero(cut))
     return new.reshape(label.shape) if cuts else label
+
+
+def reread_pieces(points: Points, label: np.ndarray, pieces: np.ndarray, counts: np.ndarray,
+                  cal) -> Points:
+    """The members of lines :func:`split_facets` cut (``pieces`` its labels, ``label`` the
+    lines as they were) re-read once at their piece's direction (θ, d, end point): one
+    step of Table II from the line's θ, which cannot run off as iterating a short far
+    piece did."""
+    flat, new = label.reshape(-1), pieces.reshape(-1)
+    cut = np.unique(flat[(new != flat) & (new >= 0)])
+    at = (np.isin(flat, cut) & points.valid.reshape(-1)).nonzero()[0]
+    if at.size == 0:
+        return points
+    g = new[at]
+    n = int(g.max()) + 1
+    _, alpha = _weighted_scatter(points.x.reshape(-1)[at], points.y.reshape(-1)[at],
+                                 np.ones(at.size), g, n)
+    heading = points.heading.reshape(-1)[at]
+    th = np.arccos(np.clip(np.abs(np.sin(heading - alpha[g])), 0.0, 1.0))
+    d = cal.distance(counts.reshape(-1)[at], th)
+    ok = np.isfinite(d) & (th < cal.max_incidence_rad)
+    from .estimate import placed_at   # (estimate imports this module)
+    return placed_at(points, at[ok], d[ok], th[ok], points.sigma_m.reshape(-1)[at[ok]])

@@ -22,7 +22,7 @@ from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, fallback_thetas
-from .bounds import clamped_slopes, kept_where_bounded, split_facets
+from .bounds import clamped_slopes, kept_where_bounded, reread_pieces, split_facets
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -611,7 +611,10 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         snap_label = (fused_lines(points, label) if read_to_own_range(cal, points.max_range_m)
                       else label)
         # a line across a corner of two facets: each piece snapped onto its own line
-        snap_label = split_facets(points, snap_label)
+        pieces = split_facets(points, snap_label)
+        if pieces is not snap_label:
+            points = reread_pieces(points, snap_label, pieces, counts, cal)
+        snap_label = pieces
         points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
