@@ -81,6 +81,7 @@ def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
 SPLIT_MIN = 15      # a line is split only into pieces of at least this many valid members …
 SPLIT_F = 12.0      # … where two lines explain them better by this F (2 and n − 4 dof) …
 SPLIT_TURN_MIN = np.radians(5)  # … whose directions differ by at least this (a corner) …
+REREAD_TURN_MAX = np.radians(15)  # a piece turned more from its line keeps the line's θ
 SPLIT_ROUNDS = 3    # … in at most this many rounds (a wall of several facets)
 
 
@@ -193,21 +194,24 @@ def split_facets(points: Points, label: np.ndarray) -> np.ndarray:
 def reread_pieces(points: Points, label: np.ndarray, pieces: np.ndarray, counts: np.ndarray,
                   cal) -> Points:
     """The members of lines :func:`split_facets` cut (``pieces`` its labels, ``label`` the
-    lines as they were) re-read once at their piece's direction (θ, d, end point): one
-    step of Table II from the line's θ, which cannot run off as iterating a short far
-    piece did."""
+    lines as they were) re-read once at their piece's direction (θ, d, end point), where
+    that turned at most ``REREAD_TURN_MAX`` from the line's: one step of Table II from the
+    line's θ (docs/estimator.md, "Bounded incidence")."""
     flat, new = label.reshape(-1), pieces.reshape(-1)
     cut = np.unique(flat[(new != flat) & (new >= 0)])
     at = (np.isin(flat, cut) & points.valid.reshape(-1)).nonzero()[0]
     if at.size == 0:
         return points
-    g = new[at]
+    g, parent = new[at], flat[at]
     n = int(g.max()) + 1
-    _, alpha = _weighted_scatter(points.x.reshape(-1)[at], points.y.reshape(-1)[at],
-                                 np.ones(at.size), g, n)
+    x, y = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
+    _, alpha = _weighted_scatter(x, y, np.ones(at.size), g, n)
+    _, alpha0 = _weighted_scatter(x, y, np.ones(at.size), parent, int(parent.max()) + 1)
     heading = points.heading.reshape(-1)[at]
     th = np.arccos(np.clip(np.abs(np.sin(heading - alpha[g])), 0.0, 1.0))
     d = cal.distance(counts.reshape(-1)[at], th)
-    ok = np.isfinite(d) & (th < cal.max_incidence_rad)
+    # a piece turned far from its line (one sensor's few far readings) is not trusted for θ
+    turn = np.abs(np.angle(np.exp(2j * (alpha[g] - alpha0[parent])))) / 2
+    ok = np.isfinite(d) & (th < cal.max_incidence_rad) & (turn <= REREAD_TURN_MAX)
     from .estimate import placed_at   # (estimate imports this module)
     return placed_at(points, at[ok], d[ok], th[ok], points.sigma_m.reshape(-1)[at[ok]])
