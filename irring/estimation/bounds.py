@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core import Points, Reason, points_with
+from ..core import Points, Reason
 
 CLAMP_SE = 2.0  # a clamped slope allows θ down to atan(|slope| − this many standard errors) …
 CLAMP_TESTED = 4  # … where this many readings tested the profile's straightness (else to 0)
@@ -42,9 +42,9 @@ def clamped_slopes(cal, counts: np.ndarray, slope: np.ndarray, se: np.ndarray, n
 
 
 def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
-                       unknown_m: float, floor_m: float) -> Points:
-    """The members ``vi[pos]`` of lines their counts contradict that leaving made
-    INCIDENCE_UNKNOWN, valid again at θ = 0 where their own profile (``pr``, profiled over
+                       unknown_m: float, floor_m: float):
+    """(flat indices, d, σ) of the members ``vi[pos]`` of lines their counts contradict
+    that leaving made INCIDENCE_UNKNOWN, to be placed again at θ = 0 where their own profile (``pr``, profiled over
     ``pos``) bounds θ (its ``steep``; a bent one, only the drop-out angle) and θ = 0 reads
     at most ``unknown_m`` longer than that bound: σ their noise at θ = 0 (at least
     ``floor_m``) and half that span, as a reading on no line whose θ nothing decides
@@ -54,7 +54,7 @@ def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
     at = vi[pos]
     lost = points.reason.reshape(-1)[at] == Reason.INCIDENCE_UNKNOWN
     if not lost.any():
-        return points
+        return None
     at, s = at[lost], pr.s[pos[lost]]
     # a bent profile (a convex corner's tip, a post) bounds θ by nothing but the drop-out
     steep = np.where(pr.convex[lost] | pr.concave[lost], cal.max_incidence_rad,
@@ -65,17 +65,12 @@ def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
     keep = np.isfinite(span) & (span <= unknown_m) & (d0 >= cal.min_range_m) & (
         d0 <= points.max_range_m)
     if not keep.any():
-        return points
+        return None
     at, d0, span = at[keep], d0[keep], span[keep]
     _, b0 = cal._ab0
     sigma = np.hypot(np.maximum(np.abs(b0) * d0 * pr.sig_s[pos[lost][keep]], floor_m),
                      0.5 * span)
-    from .estimate import placed_at   # (estimate imports this module)
-    points = placed_at(points, at, d0, 0.0, sigma)
-    valid, reason = points.valid.copy(), np.array(points.reason)
-    valid.reshape(-1)[at] = True
-    reason.reshape(-1)[at] = Reason.OK
-    return points_with(points, valid=valid, reason=reason)
+    return at, d0, sigma
 
 
 SPLIT_MIN = 15      # a line is split only into pieces of at least this many valid members …
@@ -192,16 +187,16 @@ def split_facets(points: Points, label: np.ndarray) -> np.ndarray:
 
 
 def reread_pieces(points: Points, label: np.ndarray, pieces: np.ndarray, counts: np.ndarray,
-                  cal) -> Points:
-    """The members of lines :func:`split_facets` cut (``pieces`` its labels, ``label`` the
-    lines as they were) re-read once at their piece's direction (θ, d, end point), where
+                  cal):
+    """(flat indices, d, θ) of the members of lines :func:`split_facets` cut (``pieces``
+    its labels, ``label`` the lines as they were) re-read once at their piece's direction, where
     that turned at most ``REREAD_TURN_MAX`` from the line's: one step of Table II from the
     line's θ (docs/estimator.md, "Bounded incidence")."""
     flat, new = label.reshape(-1), pieces.reshape(-1)
     cut = np.unique(flat[(new != flat) & (new >= 0)])
     at = (np.isin(flat, cut) & points.valid.reshape(-1)).nonzero()[0]
     if at.size == 0:
-        return points
+        return None
     g, parent = new[at], flat[at]
     n = int(g.max()) + 1
     x, y = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
@@ -213,5 +208,4 @@ def reread_pieces(points: Points, label: np.ndarray, pieces: np.ndarray, counts:
     # a piece turned far from its line (one sensor's few far readings) is not trusted for θ
     turn = np.abs(np.angle(np.exp(2j * (alpha[g] - alpha0[parent])))) / 2
     ok = np.isfinite(d) & (th < cal.max_incidence_rad) & (turn <= REREAD_TURN_MAX)
-    from .estimate import placed_at   # (estimate imports this module)
-    return placed_at(points, at[ok], d[ok], th[ok], points.sigma_m.reshape(-1)[at[ok]])
+    return at[ok], d[ok], th[ok]

@@ -612,8 +612,11 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                       else label)
         # a line across a corner of two facets: each piece snapped onto its own line
         pieces = split_facets(points, snap_label)
-        if pieces is not snap_label:
-            points = reread_pieces(points, snap_label, pieces, counts, cal)
+        reread = None if pieces is snap_label else reread_pieces(points, snap_label, pieces,
+                                                                  counts, cal)
+        if reread is not None:
+            at, d, theta = reread
+            points = placed_at(points, at, d, theta, points.sigma_m.reshape(-1)[at])
         snap_label = pieces
         points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
@@ -2889,9 +2892,10 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
                         ) -> tuple[Points, np.ndarray]:
     """Every member of a line its members' counts contradict (:func:`counts_contradicted`)
     off it: at its own profile's θ where that is straight and clearly steep, else
-    INCIDENCE_UNKNOWN (:func:`_leave_doubted_line`); shared by both estimators (``judge``:
-    :func:`counts_contradicted_compiled` by default; the oracle passes
-    :func:`counts_contradicted`). Returns the points and ``label``. Why:
+    INCIDENCE_UNKNOWN (:func:`_leave_doubted_line`) but where its profile bounds θ enough
+    for θ = 0 (:func:`irring.estimation.bounds.kept_where_bounded`); shared by both
+    estimators (``judge``: :func:`counts_contradicted_compiled` by default; the oracle
+    passes :func:`counts_contradicted`). Returns the points and ``label``. Why:
     docs/estimator.md ("A line its counts contradict"): a convex corner seen along its
     bisector near the range limit reads, at θ = 0, like a flat wall square on, and the
     iteration settles there."""
@@ -2906,7 +2910,14 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
     pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal)
     points, label = _leave_doubted_line(points, label, vi, pos, pr,
                                         np.ones(pos.size, dtype=bool), cal)
-    return kept_where_bounded(points, vi, pos, pr, cal, _UNKNOWN_M, SIGMA_FLOOR_M), label
+    kept = kept_where_bounded(points, vi, pos, pr, cal, _UNKNOWN_M, SIGMA_FLOOR_M)
+    if kept is not None:     # valid again, at θ = 0 with the doubt in σ
+        at, d0, sigma = kept
+        points = placed_at(points, at, d0, 0.0, sigma)
+        valid, reason = points.valid.copy(), np.array(points.reason)
+        valid.reshape(-1)[at], reason.reshape(-1)[at] = True, Reason.OK
+        points = points_with(points, valid=valid, reason=reason)
+    return points, label
 
 
 def _off_line_profiles(points: Points, label: np.ndarray, pos: np.ndarray, vi: np.ndarray,
