@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from irring import pipeline
-from irring.core import Points, Reason
+from irring.core import Reason
 from irring.estimation import bounds
 from irring.estimation.estimate import estimate
 from irring.scenario import loads
@@ -133,43 +133,6 @@ def test_one_turning_sensor_in_a_many_sided_room_keeps_its_readings():
     assert unknown <= 10
     assert valid >= 655
     assert worst < 0.05
-
-
-def _members(px, py, sigma, label, ox=0.0, oy=0.0):
-    """Points of one row of readings from (ox, oy) ending at (px, py), all valid members
-    of ``label``."""
-    px, py = np.asarray(px, float)[None, :], np.asarray(py, float)[None, :]
-    heading = np.arctan2(py - oy, px - ox)
-    d = np.hypot(px - ox, py - oy)
-    zeros = np.zeros(px.shape)
-    pts = Points(x=px, y=py, d=d, theta=zeros, origin_x=zeros + ox, origin_y=zeros + oy,
-                 heading=heading, sigma_m=zeros + sigma, iterations=np.ones(px.shape, int),
-                 valid=np.ones(px.shape, bool), reason=np.zeros(px.shape, np.uint8),
-                 max_range_m=1.5)
-    return pts, np.full(px.shape, label, dtype=np.intp)
-
-
-def test_a_line_across_a_facet_corner_is_snapped_as_two_a_straight_wall_as_one():
-    rng = np.random.default_rng(61)
-    # 21 readings on a facet 1.1 m away, then 17 on the next, turned 13° at the corner
-    # (1.1, 0.05); noise 8 mm across: the one line's chord lies 20 mm off the corner
-    t1, t2 = np.linspace(-0.42, 0.0, 21), np.linspace(0.025, 0.4, 17)
-    turn = math.radians(13.0)
-    fx = np.concatenate([np.full(21, 1.1), 1.1 - t2 * math.sin(turn)])
-    fy = np.concatenate([0.05 + t1, 0.05 + t2 * math.cos(turn)])
-    nx = rng.normal(0.0, 0.008, fx.size)
-    pts, label = _members(fx + nx, fy, 0.008, 3)
-    out = bounds.split_facets(pts, label)
-    # two pieces, cut within 3 readings (60 mm) of the corner (which keeps the line's
-    # number depends on the line's sense, not on the data)
-    first, second = out[0, 0], out[0, -1]
-    assert {first, second} == {3, 4}
-    cut = int(np.argmax(out[0] == second))
-    assert (out[0, cut:] == second).all() and abs(cut - 21) <= 3
-    # the same noise on one straight wall 1.1 m away: one line
-    pts, label = _members(np.full(fx.size, 1.1) + nx, 0.05 + np.concatenate([t1, t2]),
-                          0.008, 3)
-    assert bounds.split_facets(pts, label) is label
 
 
 def test_the_rules_agree_in_the_oracle_and_the_compiled_estimator():

@@ -22,7 +22,7 @@ from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, fallback_thetas
-from .bounds import clamped_slopes, kept_where_bounded, reread_pieces, split_facets
+from .bounds import clamped_slopes, kept_where_bounded
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -610,14 +610,6 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         # a part read to its own range: the overlapping lines of one wall fitted as one
         snap_label = (fused_lines(points, label) if read_to_own_range(cal, points.max_range_m)
                       else label)
-        # a line across a corner of two facets: each piece snapped onto its own line
-        pieces = split_facets(points, snap_label)
-        reread = None if pieces is snap_label else reread_pieces(points, snap_label, pieces,
-                                                                  counts, cal)
-        if reread is not None:
-            at, d, theta = reread
-            points = placed_at(points, at, d, theta, points.sigma_m.reshape(-1)[at])
-        snap_label = pieces
         points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
