@@ -66,7 +66,8 @@ def test_the_ideal_sensor_maps_a_near_columns_flank_the_noisy_one_maps():
     # every cell of the column a noisy reading placed, an exact one places too, exactly
     # (before: 24 cells, 9 of the noisy 28 missing, 21 readings INCIDENCE_UNKNOWN)
     assert n_cells - i_cells == set()
-    assert (len(n_cells), len(i_cells)) == (28, 38)
+    # (the noisy 31 since the mapper's hit floor stays in its end point's cell; 28 before)
+    assert (len(n_cells), len(i_cells)) == (31, 38)
     assert i_worst < 1e-3 < n_worst
     # its calibration has no θ: nothing it reads has an unknown incidence; what it leaves
     # is the column nearer than the curve's near end
