@@ -129,9 +129,10 @@ def test_one_turning_sensor_in_a_many_sided_room_keeps_its_readings():
         valid += int(np.count_nonzero(p.valid))
         worst = max(worst, float(np.max(np.abs(_along_error_m(sw, p)[p.valid]))))
     # before: 49 of 668 returns INCIDENCE_UNKNOWN (walls met at 0-30°, lines across facets
-    # their counts contradicted, members' profiles not clearly steep)
-    assert unknown <= 10
-    assert valid >= 655
+    # their counts contradicted, members' profiles not clearly steep); 26 where θ = 0 may
+    # read up to KEPT_LONG_MAX_M long (3 with 100 mm, which cost grazing walls accuracy)
+    assert unknown <= 30
+    assert valid >= 640
     assert worst < 0.05
 
 

@@ -22,7 +22,7 @@ from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, fallback_thetas
-from .bounds import clamped_slopes, kept_where_bounded
+from .bounds import KEPT_LONG_MAX_M, clamped_slopes, kept_where_bounded
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -2902,7 +2902,7 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
     pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal)
     points, label = _leave_doubted_line(points, label, vi, pos, pr,
                                         np.ones(pos.size, dtype=bool), cal)
-    kept = kept_where_bounded(points, vi, pos, pr, cal, _UNKNOWN_M, SIGMA_FLOOR_M)
+    kept = kept_where_bounded(points, vi, pos, pr, cal, KEPT_LONG_MAX_M, SIGMA_FLOOR_M)
     if kept is not None:     # valid again, at θ = 0 with the doubt in σ
         at, d0, sigma = kept
         points = placed_at(points, at, d0, 0.0, sigma)
