@@ -500,7 +500,6 @@ def test_visible_wall_is_wall_a_sensor_meets_from_the_front():
     # exact, missed it (recall 0.9957) while the noisy one's scattered end points marked it
     # in every seed (recall 1.000). It is no longer visible wall; both maps are judged alike
     from irring import pipeline
-    from irring.core import Pose
     from irring.maps.mapping import OCCUPIED
     from irring.scenario import loads
     from irring.studies.rooms import ideal

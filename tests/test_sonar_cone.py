@@ -12,7 +12,7 @@ import pytest
 from _synthetic import single_ray
 from irring import pipeline
 from irring.maps import metrics
-from irring.maps.mapping import MapperParams, OccupancyGrid, cone_fan
+from irring.maps.mapping import OccupancyGrid, cone_fan
 from irring.scenario import loads
 
 # a room of our own seen by the 12-transducer sonar ring (its own sensor: no sensor block)

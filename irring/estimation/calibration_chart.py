@@ -60,7 +60,6 @@ def save_png(path: str | Path, fitted: Fitted, title: str) -> Path:
     from ..maps.render import figure   # deferred: matplotlib (no pyplot: the backend stays)
 
     c = chart_data(fitted)
-    cal = fitted.calibration
     fig = figure(*SIZE_IN, dpi=DPI)
     fig.set_layout_engine("constrained")   # the colour bar spans both panels
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(2.2, 1.0))
