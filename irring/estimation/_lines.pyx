@@ -1598,6 +1598,20 @@ def post_groups(const unsigned char[::1] reason, const unsigned char[::1] valid,
             pxy[0], pxy[1])
 
 
+cdef object _rank_of_rows(const idx_t[::1] order):
+    """(S,) intp: each row's place in ``order`` (the S rows in step order); IndexError
+    naming an entry of ``order`` that is no row."""
+    cdef idx_t S = order.shape[0], q, r
+    rank_arr = np.empty(S, dtype=np.intp)
+    cdef idx_t[::1] rank = rank_arr
+    for q in range(S):
+        r = order[q]
+        if r < 0 or r >= S:
+            raise IndexError(f"order[{q}] = {r} is not a row (0 … {S - 1})")
+        rank[r] = q
+    return rank_arr
+
+
 def silent_gaps(const idx_t[::1] index, const double[::1] counts, const idx_t[::1] order,
                 const unsigned char[::1] reason, idx_t n_sensors, unsigned char missing,
                 double dip):
@@ -1615,14 +1629,9 @@ def silent_gaps(const idx_t[::1] index, const double[::1] counts, const idx_t[::
     cut_arr = np.zeros(k, dtype=np.uint8)
     if k < 2:
         return cut_arr
-    rank_arr = np.empty(S, dtype=np.intp)
+    rank_arr = _rank_of_rows(order)
     cdef unsigned char[::1] cut = cut_arr
     cdef idx_t[::1] rank = rank_arr
-    for q in range(S):
-        r = order[q]
-        if r < 0 or r >= S:
-            raise IndexError(f"order[{q}] = {r} is not a row (0 … {S - 1})")
-        rank[r] = q
     for i in range(k):
         if index[i] < 0 or index[i] >= size:
             raise IndexError(f"index[{i}] = {index[i]} is not a reading (0 … {size - 1})")
@@ -1777,13 +1786,8 @@ def trace_pairs(const idx_t[::1] vi, const idx_t[::1] lab, const idx_t[::1] orde
     cdef idx_t k = vi.shape[0], S = order.shape[0], i, q, r, nb, w, n_pairs = 0, step, t
     if not (lab.shape[0] == k and n_sensors >= 1):
         raise lengths_differ("trace_pairs' readings", vi=k, lab=lab.shape[0])
-    rank_arr = np.empty(S, dtype=np.intp)
+    rank_arr = _rank_of_rows(order)
     cdef idx_t[::1] rank = rank_arr
-    for q in range(S):
-        r = order[q]
-        if r < 0 or r >= S:
-            raise IndexError(f"order[{q}] = {r} is not a row (0 … {S - 1})")
-        rank[r] = q
     for i in range(k):
         if vi[i] < 0 or vi[i] >= S * n_sensors:
             raise IndexError(f"vi[{i}] = {vi[i]} is not a reading (0 … {S * n_sensors - 1})")
