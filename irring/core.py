@@ -561,6 +561,12 @@ class Sweep:
         return self.counts.shape
 
 
+def rows_in_step_order(steps: np.ndarray) -> np.ndarray:
+    """(S,) the rows of a sweep (``steps`` (S,): each row's motor step) in step order, rows
+    of one step as they lie."""
+    return np.argsort(np.asarray(steps), kind="stable")
+
+
 def in_turn_order(sweep: Sweep) -> Sweep:
     """``sweep`` with its rows in the order the ring turns through its steps: unchanged when
     its steps rise or fall, else a copy with every per-step row sorted by rising step (a
@@ -570,7 +576,7 @@ def in_turn_order(sweep: Sweep) -> Sweep:
     gaps = np.diff(steps)
     if np.all(gaps > 0) or np.all(gaps < 0):
         return sweep
-    order = np.argsort(steps, kind="stable")
+    order = rows_in_step_order(steps)
     truth = None if sweep.truth is None else Truth(
         **{f.name: np.asarray(getattr(sweep.truth, f.name))[order]
            for f in dataclasses.fields(Truth)})

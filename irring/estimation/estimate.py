@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ..core import (HOUSING_M, UNCERTAIN_SIGMA_M, Points, Reason, Ring, Sweep, beam_geometry,
-                    points_with, reading_stride)
+                    points_with, reading_stride, rows_in_step_order)
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
@@ -90,7 +90,7 @@ class Lines:
 
 def scan_order(steps: np.ndarray, n_sensors: int) -> np.ndarray:
     """Flat indices into (S, N) arrays, sensor-major, each sensor's readings by step."""
-    order = np.argsort(np.asarray(steps), kind="stable")
+    order = rows_in_step_order(steps)
     return (order[None, :] * n_sensors + np.arange(n_sensors)[:, None]).reshape(-1)
 
 
@@ -142,7 +142,7 @@ def silent_gaps_compiled(index: np.ndarray, counts: np.ndarray, steps: np.ndarra
     counts = f(counts, dtype=float)
     return _lines.silent_gaps(
         f(index, dtype=np.intp), counts.reshape(-1),
-        np.argsort(np.asarray(steps), kind="stable"), f(reason, dtype=np.uint8).reshape(-1),
+        rows_in_step_order(steps), f(reason, dtype=np.uint8).reshape(-1),
         counts.shape[1], _MISSING, SILENT_DIP_SIGMAS * sigma_counts).view(bool)
 
 
@@ -662,7 +662,7 @@ def alone_at_an_edge(points: Points, label: np.ndarray, counts: np.ndarray,
     steps = np.asarray(steps)
     # rows in step order (a sweep's rows usually are: then no copies)
     order = (slice(None) if steps.size < 2 or bool((steps[1:] > steps[:-1]).all())
-             else np.argsort(steps, kind="stable"))
+             else rows_in_step_order(steps))
     v, lab_o, d = valid[order], np.where(valid, label, -1)[order], points.d[order]
     # how far each reading can lie: its range where valid, past everything where not (a
     # return: below, as far as the drop-out angle reads it)
@@ -705,7 +705,7 @@ def _line_contradicted(points: Points, counts: np.ndarray, steps: np.ndarray,
     next valid reading, at most ``ACROSS_MAX`` + 3 steps): the beam meets the line in front
     of the emitter within the drop-out angle."""
     n_steps, n_sensors = np.shape(counts)
-    order = np.argsort(np.asarray(steps), kind="stable")
+    order = rows_in_step_order(steps)
     rank = np.empty(n_steps, dtype=np.intp)
     rank[order] = np.arange(n_steps)
     flat = vi[at]
@@ -1034,7 +1034,7 @@ class TraceKernels(TraceSteps):
 
     @staticmethod
     def pairs(vi: np.ndarray, lab: np.ndarray, steps: np.ndarray, n_sensors: int):
-        return _lines.trace_pairs(vi, lab, np.argsort(np.asarray(steps), kind="stable"),
+        return _lines.trace_pairs(vi, lab, rows_in_step_order(steps),
                                   n_sensors, TRACE_SKIP)
 
     @staticmethod
@@ -1286,7 +1286,7 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
         return points
     n_lines, n_sensors = int(label[member].max()) + 1, shape[1]
     rank = np.empty(shape[0], dtype=np.intp)            # each row's place in step order
-    rank[np.argsort(np.asarray(steps), kind="stable")] = np.arange(shape[0])
+    rank[rows_in_step_order(steps)] = np.arange(shape[0])
     row, sensor = member.nonzero()
     pair = label[row, sensor] * n_sensors + sensor       # (line, sensor)
     lo = np.full(n_lines * n_sensors, shape[0], dtype=np.intp)
@@ -1341,7 +1341,7 @@ def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal
     if not (read_to_own_range(cal, max_range_m) and max_range_m >= cal.max_range_m):
         return counts, reason
     shape = counts.shape
-    order = np.argsort(np.asarray(steps), kind="stable")      # rows in step order
+    order = rows_in_step_order(steps)
     s, why = counts[order], reason[order]
     sigma = cal.sigma_counts()
     near = ((s < cal.no_return_counts + (RETURN_SIGMAS + RANGE_SIGMAS) * sigma)
@@ -2320,7 +2320,7 @@ def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     d0[has] = cal.distance(s[has], 0.0)
     ex, ey = np.cos(heading), np.sin(heading)
     rank = np.empty(shape[0], dtype=np.intp)            # each row's place in step order
-    order = np.argsort(np.asarray(steps), kind="stable")
+    order = rows_in_step_order(steps)
     rank[order] = np.arange(shape[0])
     cx0, cy0 = float(np.mean(ox)), float(np.mean(oy))
     log_s = np.log(np.where(has, s, 1.0))
@@ -3420,7 +3420,7 @@ def _beside_a_hidden_edge(p: Points, label: np.ndarray, sweep: Sweep, cal: Calib
     far0 = cal.distance(counts, 0.0)
     # neighbours in step order (a falling or shuffled sweep's rows are not), one stride
     # apart (with step_stride 2 no two readings were 1 step apart: it never fired)
-    order = np.argsort(np.asarray(sweep.steps), kind="stable")
+    order = rows_in_step_order(sweep.steps)
     far0_s, amb_s = far0[order], amb[order]
     nearer_s = np.full(counts.shape, np.inf)   # the nearer undecided neighbour's θ = 0 range
     turn_s = np.zeros(counts.shape)            # … and how far the beam turned to it
@@ -3793,7 +3793,7 @@ def _near_trace_straight(counts: np.ndarray, p: Points, steps: np.ndarray,
     ``_FOLD_TRACE_RATIO`` times the far branch's (NaN, fewer than 5 points: False). A flat
     face 30 mm in front gives a straight near trace; a wall read far a straight far one.
     docs/foldover.md, "Both branches straight"."""
-    order = np.argsort(np.asarray(steps), kind="stable")
+    order = rows_in_step_order(steps)
     rel = cal.sigma_counts() / np.maximum(counts, 1.0)
     chi2 = []
     for d, slope in ((cal.near_distance(counts, 0.0), 1.0),
