@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core import Points, Reason
+from .calibration import range_sigma
 
 CLAMP_SE = 2.0  # a clamped slope allows θ down to atan(|slope| − this many standard errors) …
 CLAMP_TESTED = 4  # … where this many readings tested the profile's straightness (else to 0)
@@ -43,13 +44,12 @@ def clamped_slopes(cal, counts: np.ndarray, slope: np.ndarray, se: np.ndarray, n
     return out
 
 
-def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
-                       unknown_m: float, floor_m: float):
+def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal):
     """(flat indices, d, σ) of the members ``vi[pos]`` of lines their counts contradict
     that leaving made INCIDENCE_UNKNOWN, to be placed again at θ = 0 where their own profile (``pr``, profiled over
     ``pos``) bounds θ (its ``steep``; a bent one, only the drop-out angle) and θ = 0 reads
-    at most ``unknown_m`` longer than that bound: σ their noise at θ = 0 (at least
-    ``floor_m``) and half that span, as a reading on no line whose θ nothing decides
+    at most ``KEPT_LONG_MAX_M`` longer than that bound: σ their noise at θ = 0
+    (:func:`~irring.estimation.calibration.range_sigma`) and half that span, as a reading on no line whose θ nothing decides
     (``local_incidence``). A line across facets
     square on (one sensor turning in a many-sided room) is contradicted, and its members,
     met at 0–30°, need no line to be placed within their noise."""
@@ -64,12 +64,11 @@ def kept_where_bounded(points: Points, vi: np.ndarray, pos: np.ndarray, pr, cal,
     d0, d_steep = cal.distance(np.concatenate([s, s]),
                                np.concatenate([np.zeros(s.size), steep])).reshape(2, -1)
     span = d0 - d_steep
-    keep = np.isfinite(span) & (span <= unknown_m) & (d0 >= cal.min_range_m) & (
+    keep = np.isfinite(span) & (span <= KEPT_LONG_MAX_M) & (d0 >= cal.min_range_m) & (
         d0 <= points.max_range_m)
     if not keep.any():
         return None
     at, d0, span = at[keep], d0[keep], span[keep]
     _, b0 = cal._ab0
-    sigma = np.hypot(np.maximum(np.abs(b0) * d0 * pr.sig_s[pos[lost][keep]], floor_m),
-                     0.5 * span)
+    sigma = np.hypot(range_sigma(b0, d0, pr.sig_s[pos[lost][keep]]), 0.5 * span)
     return at, d0, sigma

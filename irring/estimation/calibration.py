@@ -53,6 +53,14 @@ FALLBACK_NODES = 8   # quadrature nodes for the fallback σ (see _fallback_nodes
 # the paper's sensor curve (models/sensors/gp2d12.yaml): a calibration's default range
 _PAPER_CURVE = gp2.sensor(SENSOR_MODEL)
 
+SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
+
+
+def range_sigma(b, d, rel):
+    """σ (m) of readings at range ``d`` on a curve of exponent ``b`` (Eq. 10: d ∝ S^b) whose
+    counts S have relative noise ``rel`` = σ_S/S: |b|·d·σ_S/S, at least ``SIGMA_FLOOR_M``."""
+    return np.maximum(np.abs(b) * d * rel, SIGMA_FLOOR_M)
+
 
 # --------------------------------------------------------------------------- calibration
 

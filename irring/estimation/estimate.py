@@ -21,8 +21,9 @@ from ..core import (HOUSING_M, UNCERTAIN_SIGMA_M, Points, Reason, Ring, Sweep, b
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
-from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, fallback_thetas
-from .bounds import KEPT_LONG_MAX_M, clamped_slopes, kept_where_bounded
+from .calibration import (RANGE_SIGMAS, RETURN_SIGMAS, SIGMA_FLOOR_M, Calibration,
+                          fallback_thetas, range_sigma)
+from .bounds import clamped_slopes, kept_where_bounded
 
 _iterate = kernel("estimation._iterate")
 _lines = kernel("estimation._lines")
@@ -30,13 +31,6 @@ _lines = kernel("estimation._lines")
 _NO_RETURN, _OUT_OF_RANGE = int(Reason.NO_RETURN), int(Reason.OUT_OF_RANGE)
 _INCIDENCE_UNKNOWN, _MISSING = int(Reason.INCIDENCE_UNKNOWN), int(Reason.MISSING)
 
-SIGMA_FLOOR_M = 0.001  # no reading is trusted better than 1 mm
-
-
-def range_sigma(b, d, rel):
-    """σ (m) of readings at range ``d`` on a curve of exponent ``b`` (Eq. 10: d ∝ S^b) whose
-    counts S have relative noise ``rel`` = σ_S/S: |b|·d·σ_S/S, at least ``SIGMA_FLOOR_M``."""
-    return np.maximum(np.abs(b) * d * rel, SIGMA_FLOOR_M)
 REGROUP_WINDOW = 8  # a third or later grouping only within the first 8 iterations
 CORNER_WINDOW = 14  # corners re-decided at a grouping's first check, later ones only before
 #                     this iteration (a late move left its lines too few iterations to settle)
@@ -2902,7 +2896,7 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
     pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal)
     points, label = _leave_doubted_line(points, label, vi, pos, pr,
                                         np.ones(pos.size, dtype=bool), cal)
-    kept = kept_where_bounded(points, vi, pos, pr, cal, KEPT_LONG_MAX_M, SIGMA_FLOOR_M)
+    kept = kept_where_bounded(points, vi, pos, pr, cal)
     if kept is not None:     # valid again, at θ = 0 with the doubt in σ
         at, d0, sigma = kept
         points = placed_at(points, at, d0, 0.0, sigma)
