@@ -561,6 +561,13 @@ class Sweep:
         return self.counts.shape
 
 
+def score_text(value: float | None, scale: float = 1.0, digits: int = 3) -> str:
+    """A score (or other figure) as people read it, in the printed summary, the map's title
+    and the bench tables alike: ``value`` × ``scale`` to ``digits`` decimals (a score: 0.995,
+    not 0.99), or n/a where it is undefined (None)."""
+    return "n/a" if value is None else f"{value * scale:.{digits}f}"
+
+
 def rows_in_step_order(steps: np.ndarray) -> np.ndarray:
     """(S,) the rows of a sweep (``steps`` (S,): each row's motor step) in step order, rows
     of one step as they lie."""

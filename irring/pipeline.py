@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from . import recording as rec
-from .core import Points, Reason, RingSource, SourceLost, Sweep, in_turn_order
+from .core import Points, Reason, RingSource, SourceLost, Sweep, in_turn_order, score_text
 from .estimation.calibration import CalibrationError, load_calibration, scene_calibration
 from .estimation.estimate import estimate
 from .gp2 import SENSORS
@@ -615,6 +615,6 @@ def _title(result: MapRun) -> str:
     s = result.scores
     if not s:
         return f"{name}: {len(result.sweeps)} sweep(s)"
-    f = metrics.score_text
+    f = score_text
     return (f"{name}: occupied F1 {f(s['occupied_f1'])}, free accuracy {f(s['free_accuracy'])}, "
             f"coverage {f(s['coverage'])}, shadow {f(s['shadow'])}")

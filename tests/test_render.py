@@ -16,6 +16,7 @@ pytest.importorskip("mujoco")
 from irring import pipeline  # noqa: E402
 from irring.maps import render  # noqa: E402
 from irring.scenario import load_scenario  # noqa: E402
+from irring.core import score_text  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -357,19 +358,18 @@ robot: {poses: [{x_mm: 800, y_mm: 210}, {x_mm: 3100, y_mm: 215}]}
 
 def test_map_title_gives_the_scores_as_the_summary_does(t_room_run):
     """map.png's title rounded to two places (F1 0.99) where `irring run` printed 0.995: both
-    now format a score in one place, metrics.score_text."""
+    now format a score in one place, core.score_text."""
     from irring.cli.run import summary_lines
-    from irring.maps import metrics
 
     s = t_room_run.scores
     title = pipeline._title(t_room_run)
     lines = summary_lines(t_room_run, {})
     for key, said in (("occupied_f1", "occupied  F1 {}"), ("free_accuracy", "accuracy {}"),
                       ("coverage", "coverage {}")):
-        text = metrics.score_text(s[key])
+        text = score_text(s[key])
         assert len(text) == 5 and float(text) == round(s[key], 3)   # three decimals
         assert any(said.format(text) in ln for ln in lines), (key, lines)
         assert f"{key.replace('occupied_f1', 'occupied F1').replace('_', ' ')} {text}" in title
     assert s["shadow"] is None and title.endswith("shadow n/a")   # the T-room hides nothing
-    assert [metrics.score_text(v) for v in (0.99549, 0.99551, 1.0, 0.0, None)] == \
+    assert [score_text(v) for v in (0.99549, 0.99551, 1.0, 0.0, None)] == \
         ["0.995", "0.996", "1.000", "0.000", "n/a"]

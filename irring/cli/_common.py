@@ -382,6 +382,3 @@ MAP_COLUMNS = (("occupied_f1", "F1", 1, 3), ("occupied_precision", "prec", 1, 3)
                ("occupied_recall", "rec", 1, 3), ("free_accuracy", "free", 1, 3))
 
 
-def score_text(v, scale: float = 1.0, digits: int = 3) -> str:
-    """A score (or other figure) for a table: n/a where it is undefined (None)."""
-    return "n/a" if v is None else f"{v * scale:.{digits}f}"

@@ -11,7 +11,8 @@ from ..outputs import OutputSet, check_out
 from ..studies.foldover import (MAP_SCORES, MAX_ERROR_M, OUTSIDE_CELLS, OUTSIDE_MARGIN_M,
                                 measure, outside_tolerance_m)
 from ..studies.rooms import print_clip_notes, resolve_rooms
-from ._common import MAP_COLUMNS, add_room_set_options, describe, score_text
+from ..core import score_text
+from ._common import MAP_COLUMNS, add_room_set_options, describe
 
 SCORE_COLUMNS = tuple(c for c in MAP_COLUMNS if c[0] in MAP_SCORES)
 

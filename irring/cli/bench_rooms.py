@@ -10,7 +10,8 @@ import sys
 from .. import errors
 from ..outputs import OutputSet, check_out
 from ..studies.rooms import ROOMS, TARGETS, measure, print_clip_notes, resolve_rooms
-from ._common import MAP_COLUMNS, add_room_set_options, describe, score_text
+from ..core import score_text
+from ._common import MAP_COLUMNS, add_room_set_options, describe
 
 EPILOG = f"""\
 what it prints, per room, for the scene as written ("effects": the bundled rooms have

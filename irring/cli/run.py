@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 from .. import errors, pipeline
+from ..core import score_text
 from ..maps import metrics
 from ..outputs import check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
@@ -109,7 +110,7 @@ def _unnamed_ring(result) -> str:
             f"R {ring.radius_m * 1000:g} mm, turning ±{turn:.1f}°)")
 
 
-_f = metrics.score_text   # the map's title formats its scores the same way
+_f = score_text   # the map's title formats its scores the same way
 
 
 def summary_lines(result, paths: dict) -> list[str]:

@@ -30,12 +30,6 @@ SCORE_KEYS = ("occupied_precision", "occupied_recall", "occupied_f1", "free_accu
               "coverage", "shadow")
 
 
-def score_text(value: float | None) -> str:
-    """A score as people read it, in the printed summary and the map's title alike: three
-    decimals (0.995, not 0.99), or n/a where it has no denominator (None)."""
-    return "n/a" if value is None else f"{value:.3f}"
-
-
 @dataclass(frozen=True)
 class GroundTruth:
     """The scenario on the map's cells; all arrays (ny, nx) like ``OccupancyGrid.log_odds``."""
