@@ -791,7 +791,6 @@ class Dynamics:
         self.belt: BeltDynamicsEffect | None = scenario.effects.get("belt_dynamics")
         self.timing: TimingEffect | None = scenario.effects.get("timing")
         self.motion: MotionEffect | None = scenario.effects.get("motion")
-        self.step_time_s = (self.belt or BeltDynamicsEffect()).step_time_s
         self._physics: BeltPhysics | None = None
         # refuse a belt time step whose physics is not converged (check_timestep); off only
         # for a study that measures convergence itself (studies.dynamics.convergence)
