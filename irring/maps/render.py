@@ -345,7 +345,7 @@ class MapPicture:
 
         # the legend, three columns filled top to bottom, below the x label
         route = None if route is None else np.asarray(route, float).reshape(-1, 2)
-        driven = route is not None and len(route) > 1
+        driven = self.driven = route is not None and len(route) > 1
         # a moving ring's sweeps are no scan poses: its route and where each sweep began
         self.crowded = driven or crowded(poses, ring_radius_m)
         entries = [("patch", UNKNOWN - _CLASS0, "unknown"), ("patch", FREE - _CLASS0, "free"),
@@ -498,7 +498,7 @@ class MapPicture:
             under_ink, under_weight = RANGE, 1.0
             if self.crowded:       # a numbered path: a dot per pose, a line from the last
                 marks.dot(c, 1.5 * pt)
-                if k:
+                if k and not self.driven:   # (a drive's own route is drawn instead)
                     under.line([prev, c], 0.8 * pt)
                     under_ink, under_weight = POSE, 0.7          # red, a little see-through
             else:
