@@ -76,6 +76,11 @@ class Schedule:
     step_time_s: float
     rewind_s: float          # from the sweep's end to the next sweep's start (motion)
 
+    @property
+    def cycle_s(self) -> float:
+        """From one sweep's start to the next's while driving: the sweep and its rewind."""
+        return self.duration_s + self.rewind_s
+
     def motor_at(self, t_s: np.ndarray) -> np.ndarray:
         """Commanded motor angle (rad) at times ``t_s`` (any shape): the move profiles."""
         t = np.asarray(t_s, dtype=float)
@@ -691,12 +696,11 @@ def scene_schedule(scenario: Scenario, steps: np.ndarray) -> Schedule:
 
 
 def sweeps_along(path: Path, sched: Schedule) -> int:
-    """Sweeps taken driving ``path``, one every sweep + rewind (``sched``) from the start:
+    """Sweeps taken driving ``path``, one every ``sched.cycle_s`` (sweep + rewind) from the start:
     each that starts before the robot arrives (at least one). A sweep the arrival cuts is
     taken in full, its remaining steps read standing at the path's end; none starts after
     (docs/dynamics.md, "Where the path ends")."""
-    cycle = sched.duration_s + sched.rewind_s
-    return max(1, int(math.ceil(path.duration_s / cycle - 1e-12)))
+    return max(1, int(math.ceil(path.duration_s / sched.cycle_s - 1e-12)))
 
 
 @dataclass(frozen=True)
@@ -721,7 +725,7 @@ class Drive:
         sched = scene_schedule(scenario, steps)
         path = Path.from_effect(motion)
         n = sweeps_along(path, sched)
-        starts = np.arange(n) * (sched.duration_s + sched.rewind_s)
+        starts = np.arange(n) * sched.cycle_s
         ring = scenario.ring
         return cls(path=path, schedule=sched,
                    poses=path.pose_at(starts[:, None] + sched.read_s[None, :, 0]),
@@ -738,7 +742,7 @@ class Drive:
         the robot arrived during the last sweep (those readings are kept, taken at the end),
         and ``unswept_m``: the path driven after the last read (no sweep started there)."""
         sched, path = self.schedule, self.path
-        first = (self.n_sweeps - 1) * (sched.duration_s + sched.rewind_s) + sched.read_s[:, 0]
+        first = (self.n_sweeps - 1) * sched.cycle_s + sched.read_s[:, 0]
         arrive = path.duration_s
         standing = int(np.count_nonzero(first > arrive))
         speed = path.speed_m_s
@@ -879,7 +883,7 @@ class Dynamics:
         first_read = np.broadcast_to(sched.read_s[:, :1], (len(sched.steps), n))
         start = 0.0
         if self.path is not None:
-            start = index * (sched.duration_s + sched.rewind_s)
+            start = index * sched.cycle_s
         if self.timing is not None:
             clocks = self.clocks
             if clocks is None:
