@@ -248,16 +248,18 @@ def _runs(steps: list[int]) -> list[tuple[int, int]]:
     return runs
 
 
-def _renumbered(scans: list[p.Scan], pos_of: dict[int, int], done_seq: int) -> bool | None:
+def _renumbered(scans: list[p.Scan], ps: _Pass, done_seq: int) -> bool | None:
     """Whether ``scans`` (IRSCN numbered before the pass began) are one numbering of the
-    pass's steps — each seq minus its step's place the same — that the IRDON ``done_seq``
-    ends (its seq is theirs at the place of the last step received or a later one): None if
-    not, else whether they number the steps from the pass's last one (swept reversed)."""
+    pass ``ps``'s steps — each seq minus its step's place in the sending order the same —
+    that the IRDON ``done_seq`` ends (its seq is theirs at the place of the last step
+    received or a later one): None if not, else whether they number the steps from the
+    pass's last one (swept reversed)."""
+    pos_of = ps.index
     if not scans or done_seq < 0 or any(sc.step not in pos_of for sc in scans):
         return None
     n = len(pos_of)
     for reverse in (False, True):
-        places = [n - 1 - pos_of[sc.step] if reverse else pos_of[sc.step] for sc in scans]
+        places = [ps.sent_at(pos_of[sc.step], reverse) for sc in scans]
         bases = {(sc.seq - at) % p.SEQ_MODULO for sc, at in zip(scans, places)}
         if len(bases) == 1 and max(places) <= (done_seq - bases.pop()) % p.SEQ_MODULO < n:
             return reverse
@@ -943,7 +945,7 @@ class SerialRing:
                             take(scan)
                     take(msg)
                 elif isinstance(msg, p.Done):
-                    reverse = None if ps.got else _renumbered(suspects, pos_of, msg.seq)
+                    reverse = None if ps.got else _renumbered(suspects, ps, msg.seq)
                     if reverse is not None:
                         # every IRSCN looked stale, but they and this IRDON number this very
                         # pass: the device numbers from elsewhere (it rebooted between sweeps,
