@@ -376,6 +376,7 @@ def test_the_picture_plots_the_fitted_readings_and_the_calibrations_curve(t_room
     c = chart_data(rig_fit)
     ok = np.isfinite(r.counts)
     assert 0 < used.sum() < ok.sum()        # no-return readings past the drop-out were left
+    assert not (used & ~ok).any()           # the fit uses finite counts only (the chart relies on it)
     np.testing.assert_array_equal(c["counts"], r.counts[used])
     assert c["counts"].size + c["unused_counts"].size == ok.sum()
     true_mm = r.true_distance(cal.emitter_offset_m)[used] * 1e3

@@ -30,7 +30,7 @@ def chart_data(fitted: Fitted) -> dict:
     ok = np.isfinite(r.counts)
     d_true = r.true_distance(cal.emitter_offset_m)
     theta = np.abs(r.beam_angle_rad)
-    used = fitted.used & ok
+    used = fitted.used   # a fit uses finite counts only (calibration.fit)
     model = gp2.sensor(cal.sensor_model)
     d = np.linspace(cal.min_range_m, cal.max_range_m, CURVE_POINTS)
     top = math.degrees(cal.max_incidence_rad)
