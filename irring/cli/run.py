@@ -93,7 +93,7 @@ def report(result, paths: dict, *, as_json: bool, extra: dict | None = None) -> 
         summary["outputs"] = {k: str(v) for k, v in paths.items()}
         print(json.dumps(summary, indent=2))
         return
-    for line in summary_lines(result, paths):
+    for line in summary_lines(result, paths, summary):
         print(line)
 
 
@@ -113,8 +113,9 @@ def _unnamed_ring(result) -> str:
 _f = score_text   # the map's title formats its scores the same way
 
 
-def summary_lines(result, paths: dict) -> list[str]:
-    s = result.summary()
+def summary_lines(result, paths: dict, summary: dict | None = None) -> list[str]:
+    """The readable lines of ``summary`` (``result.summary()``, made here when not given)."""
+    s = result.summary() if summary is None else summary
     sc = result.scenario
     lines = []
     source = result.sweeps[0].source if result.sweeps else ""
