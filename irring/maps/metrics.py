@@ -425,15 +425,15 @@ def _surface_at(cells, surface_point, surface_normal, surface_reflectance):
             (n[:, 0], n[:, 1], surface_reflectance[ty, tx]))
 
 
-def _ranged_in_sight(scenario: Scenario, grid: OccupancyGrid, material: np.ndarray,
+def _ranged_in_sight(the_views: list[View], grid: OccupancyGrid, material: np.ndarray,
                      cells: np.ndarray, surface_point: np.ndarray, ranging) -> np.ndarray:
-    """The surface ``cells`` (bool, on the grid) some sensor of some pose could range (at
-    their ``surface_point``; ``ranging`` without :class:`Returns`) along a clear line from
-    its emitter (no material on the way but within 1 cell of the cell)."""
+    """The surface ``cells`` (bool, on the grid) some sensor of some view (:func:`views`)
+    could range (at their ``surface_point``; ``ranging`` without :class:`Returns`) along a
+    clear line from its emitter (no material on the way but within 1 cell of the cell)."""
     ty, tx = np.nonzero(cells)
     px, py = surface_point[ty, tx, 0], surface_point[ty, tx, 1]
     ok = np.zeros(len(tx), bool)
-    for view in views(scenario, grid) if len(tx) else ():
+    for view in the_views if len(tx) else ():
         for can, ex, ey in _sensor_views(px, py, view, *_windowed(ranging, view)):
             ask = can & ~ok
             if ask.any():
@@ -511,14 +511,27 @@ def _windowed(ranging: tuple, view: View) -> tuple:
     return ranging[:3] + (view.a_lo, view.a_hi) + ranging[5:]
 
 
-def _disc(free: np.ndarray, grid: OccupancyGrid, view: View, reach: float
-          ) -> tuple[np.ndarray, np.ndarray]:
-    """(flat index, distance m) of the ``free`` cells whose centres lie within ``reach`` of
-    the view's centre (only the cells of the disc's bounding box are looked at)."""
+def _box(grid: OccupancyGrid, view: View, reach: float) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1): the cells [x0, x1) × [y0, y1) of the grid in the bounding box of
+    the disc of ``reach`` around the view's centre (empty when x1 <= x0 or y1 <= y0)."""
     (x0, x1), (y0, y1) = grid.cell_of(np.array([view.x_m - reach, view.x_m + reach]),
                                       np.array([view.y_m - reach, view.y_m + reach]))
     ny, nx = grid.shape
-    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1 + 1, nx), min(y1 + 1, ny)
+    return max(x0, 0), max(y0, 0), min(x1 + 1, nx), min(y1 + 1, ny)
+
+
+def _box_cells(grid: OccupancyGrid, view: View, reach: float) -> int:
+    x0, y0, x1, y1 = _box(grid, view, reach)
+    return max(x1 - x0, 0) * max(y1 - y0, 0)
+
+
+def _disc(free: np.ndarray, grid: OccupancyGrid, view: View, reach: float
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """(flat index, distance m) of the ``free`` cells whose centres lie within ``reach`` of
+    the view's centre (only the cells of the disc's bounding box, :func:`_box`, are looked
+    at)."""
+    x0, y0, x1, y1 = _box(grid, view, reach)
+    nx = grid.shape[1]
     if x1 <= x0 or y1 <= y0:
         return np.zeros(0, np.intp), np.zeros(0)
     ty, tx = np.nonzero(free[y0:y1, x0:x1])
@@ -558,8 +571,9 @@ def _in_window(cells: np.ndarray, dist: np.ndarray, grid: OccupancyGrid, view: V
 def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTruth:
     """Rasterise the scenario onto ``grid``'s cells and work out what each view (:func:`views`)
     can see.
-    ``bar``: a progress bar (``reset(total)``, ``update(n)``) counting the cells whose line
-    of sight is walked."""
+    ``bar``: a progress bar (``reset(total)``, ``update(n)``) counting each view's cells (the
+    box around its reach, its surface cells in reach), moving as their lines of sight are
+    walked."""
     res = grid.resolution_m
     origin = grid.origin_xy_m
     ny, nx = grid.shape
@@ -636,8 +650,8 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
         reach_s, ret = _measurable_returning(spx[sub], spy[sub], view, _windowed(ranging, view),
                                              tuple(a[sub] for a in sdir))
         reaching.append((surface_flat[sub[reach_s]], surface_flat[sub[ret]]))
-    if bar is not None:   # (a partial view's cells are counted by its whole disc)
-        bar.reset(total=int(sum(len(_disc(free, grid, v, reach)[0]) + len(s_)
+    if bar is not None:   # a view's free cells counted by its disc's box (what _disc looks at)
+        bar.reset(total=int(sum(_box_cells(grid, v, reach) + len(s_)
                                 for v, (s_, _) in zip(the_views, reaching))))
     coarse = (samples, normals, rho, cells)
     fine = sampled(res / MET_SAMPLES_PER_CELL)
@@ -664,7 +678,7 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
             if bar is not None:
                 bar.update(len(tx[part]))
         if bar is not None:
-            bar.update(len(disc) + len(near_surface) - len(walk))
+            bar.update(_box_cells(grid, view, reach) + len(near_surface) - len(walk))
         clear = walk[first == 0]
         seen.ravel()[clear] = True
         # visible: some of the cell's surface a sensor of this view meets from the front,
@@ -689,7 +703,8 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
     # the paper's shadow is geometry (wall a centre sensor cannot see); a cell the sensor
     # sees too obliquely to return from is not hidden, and not visible either
     shadow = (surface_owner == WALL) & in_range & ~(seen & surface) & (hidden_by_obstacle > 0)
-    shadow_ranged = _ranged_in_sight(scenario, grid, material, shadow, surface_point, geometric)
+    shadow_ranged = _ranged_in_sight(the_views, grid, material, shadow, surface_point,
+                                     geometric)
     return GroundTruth(label=label, surface=surface, surface_owner=surface_owner,
                        surface_point=surface_point, surface_normal=surface_normal,
                        surface_reflectance=surface_reflectance,
@@ -733,13 +748,12 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
         raise ValueError(f"ground truth is {truth.label.shape} cells but the grid is {grid.shape}; "
                          "build it with ground_truth(scenario, grid) for this grid")
     ranged = truth.shadow_ranged
-    theirs = None if mapped_by is None or mapped_by is scenario else \
-        _geometric_ranging(mapped_by)
-    if theirs is not None and (theirs, views(mapped_by, grid)) != (
-            _geometric_ranging(scenario), views(scenario, grid)):   # another ring or other poses
-        material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
-        ranged = _ranged_in_sight(mapped_by, grid, material, truth.shadow,
-                                  truth.surface_point, theirs)
+    if mapped_by is not None and mapped_by is not scenario:
+        theirs = (_geometric_ranging(mapped_by), views(mapped_by, grid))
+        if theirs != (_geometric_ranging(scenario), views(scenario, grid)):   # other ring or poses
+            material = np.where(truth.label > 0, truth.label, 0).astype(np.int16)
+            ranged = _ranged_in_sight(theirs[1], grid, material, truth.shadow,
+                                      truth.surface_point, theirs[0])
     cls = grid.classify()
     occ = cls == OCCUPIED
     free = cls == FREE
