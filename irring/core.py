@@ -104,23 +104,32 @@ def choice(default: Any, choices: tuple, doc: str = "") -> Any:
                                             "doc": doc})
 
 
-_DISPLAY = {"_m": ("_mm", 1e3, "mm"), "_rad": ("_deg", 180 / math.pi, "°"),
-            "_s": ("_ms", 1e3, "ms"), "_v": ("_v", 1.0, "V")}
+# The one table of units in field names, longest suffix first: the SI suffix and its unit,
+# and the other spelling a file may use (None: none), its unit and its factor to SI.
+UNITS = (("_m_s", "m/s", "_mm_s", "mm/s", 1e-3),
+         ("_per_m", "per m", None, None, None),
+         ("_m", "m", "_mm", "mm", 1e-3),
+         ("_rad", "rad", "_deg", "°", math.pi / 180.0),
+         ("_s", "s", "_ms", "ms", 1e-3))
+_SHOWN_SCALED = ("_m", "_rad", "_s")   # SI values a message shows in the file's unit
+
+
+def _display(suf: str) -> tuple[float, str]:
+    """(factor from SI, unit) of the file spelling of SI suffix ``suf``."""
+    _, _, _, unit, to_si = next(row for row in UNITS if row[0] == suf)
+    return 1.0 / to_si, unit
 
 
 def unit_suffix(name: str) -> str | None:
     """The SI suffix of a field name (``_m``, ``_rad``, ``_s``, ``_m_s``, ``_per_m``)."""
-    for suf in ("_m_s", "_per_m", "_m", "_rad", "_s"):
-        if name.endswith(suf):
-            return suf
-    return None
+    return next((si for si, *_ in UNITS if name.endswith(si)), None)
 
 
 def si_name(yaml_name: str) -> str:
     """The SI field name of a YAML spelling (``radius_mm`` → ``radius_m``)."""
-    for alt_suffix, si in (("_mm_s", "_m_s"), ("_mm", "_m"), ("_deg", "_rad"), ("_ms", "_s")):
-        if yaml_name.endswith(alt_suffix):
-            return yaml_name[: -len(alt_suffix)] + si
+    for si, _, alt, _, _ in UNITS:
+        if alt is not None and yaml_name.endswith(alt):
+            return yaml_name[: -len(alt)] + si
     return yaml_name
 
 
@@ -133,8 +142,8 @@ def bounds(cls: type, name: str) -> tuple[Any, Any]:
 def _fmt_range(name: str, lo: float | None, hi: float | None) -> str:
     suf = unit_suffix(name)
     scale, unit = 1.0, ""
-    if suf in ("_m", "_rad", "_s"):
-        _, scale, unit = _DISPLAY[suf]
+    if suf in _SHOWN_SCALED:
+        scale, unit = _display(suf)
     parts = [f"{v * scale:g}" if v is not None else "" for v in (lo, hi)]
     if lo is not None and hi is not None:
         return f"{parts[0]} … {parts[1]}{(' ' + unit) if unit else ''}"
@@ -145,22 +154,20 @@ def _fmt_range(name: str, lo: float | None, hi: float | None) -> str:
 
 def _show(value: Any, si: str) -> str:
     suf = unit_suffix(si)
-    if suf in ("_m", "_rad", "_s") and isinstance(value, float):
-        _, scale, unit = _DISPLAY[suf]
+    if suf in _SHOWN_SCALED and isinstance(value, float):
+        scale, unit = _display(suf)
         return f"{value * scale:g} {unit}"
     text = repr(value)   # bounded: the message must still say what is allowed
     return text if len(text) <= 60 else text[:59] + "…"
 
 
-# the unit a file's key names (longest suffix first), for a number shown as it was written
-_KEY_UNITS = (("_mm_s", "mm/s"), ("_m_s", "m/s"), ("_per_m", "per m"), ("_mm", "mm"),
-              ("_deg", "°"), ("_ms", "ms"), ("_rad", "rad"), ("_m", "m"), ("_s", "s"))
-
-
 def key_unit(path: str) -> str | None:
     """The unit the last key of ``path`` names (``obstacles[0].radius_mm`` → "mm"), if any."""
     key = path.rsplit(".", 1)[-1].split("[", 1)[0]
-    return next((u for suf, u in _KEY_UNITS if key.endswith(suf)), None)
+    # a row's other spelling first: "_mm_s" also ends in "_s", "_ms" in "_s"
+    spellings = ((suf, u) for si, si_unit, alt, alt_unit, _ in UNITS
+                 for suf, u in ((alt, alt_unit), (si, si_unit)) if suf is not None)
+    return next((u for suf, u in spellings if key.endswith(suf)), None)
 
 
 def _number(x: float) -> str:

@@ -26,7 +26,7 @@ from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_CO
                    SEED_MAX, SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error,
                    choice, clip_to_convex, distance_to_outline, first_crossing, first_overlap,
                    first_wall_into, footprint, inside_outline, num, obstacle_distance,
-                   on_one_line, polygon_area, reach_outside, unit_suffix, walls_into)
+                   on_one_line, polygon_area, reach_outside, unit_suffix, UNITS, walls_into)
 from .designs import Design
 from .errors import InputError, brief
 
@@ -232,9 +232,7 @@ class Scenario:
 
 # --------------------------------------------------------------------------- loader
 
-_UNIT_ALIASES = {"_m": (("_mm", 1e-3),), "_rad": (("_deg", math.pi / 180.0),),
-                 "_s": (("_ms", 1e-3),), "_m_s": (("_mm_s", 1e-3),),
-                 "_per_m": ()}
+_UNIT_ALIASES = {si: ((alt, to_si),) if alt is not None else () for si, _, alt, _, to_si in UNITS}
 def _yaml_keys(name: str) -> list[tuple[str, float]]:
     """YAML spellings of a dataclass field and the factor to SI."""
     suf = unit_suffix(name)
