@@ -444,7 +444,43 @@ def _validate_geometry(sc: Scenario, fail) -> None:
     if len(sc.obstacles) > MAX_OBSTACLES:
         raise fail("obstacles", f"{len(sc.obstacles):,} obstacles; at most {MAX_OBSTACLES:,} "
                                 f"are allowed")
+    _validate_ring(sc, fail)
+    centres = np.array([ob.center_m for ob in sc.obstacles], dtype=float).reshape(-1, 2)
+    in_room = inside_outline(centres[:, 0], centres[:, 1], outline)
+    off_wall = distance_to_outline(centres[:, 0], centres[:, 1], outline)
+    # how far each obstacle reaches from its centre: only those near a wall are clipped
+    ob_reach = np.array([ob.radius_m if isinstance(ob, Cylinder) else
+                         math.hypot(*ob.size_m) / 2 for ob in sc.obstacles], dtype=float)
+    for j, ob in enumerate(sc.obstacles):
+        if isinstance(ob, Box) and min(ob.size_m) < 0.002:
+            raise fail(f"obstacles[{j}].size_mm", f"box sides ({ob.size_m[0] * 1e3:g}, "
+                                                  f"{ob.size_m[1] * 1e3:g}) mm must each be ≥ 2 mm")
+        # one reaching through a wall is clipped there (a partition built into it); one
+        # wholly outside is a mistake (nothing of it could be seen)
+        if not in_room[j] and (ob_reach[j] <= off_wall[j] + GEOMETRY_TOL_M
+                               or first_wall_into(ob, outline) is None):
+            what = (f"cylinder (radius {ob.radius_m * 1e3:g} mm)" if isinstance(ob, Cylinder)
+                    else f"box ({ob.size_m[0] * 1e3:g} × {ob.size_m[1] * 1e3:g} mm)")
+            raise fail(f"obstacles[{j}].center_mm",
+                       f"the {what} at ({ob.center_m[0] * 1e3:g}, {ob.center_m[1] * 1e3:g}) mm "
+                       f"lies wholly outside the room; an obstacle must stand at least partly "
+                       f"inside it (what reaches beyond a wall is ignored)")
     ring = sc.ring
+    if ring.min_step > ring.max_step:
+        raise fail("robot.ring.min_step", f"min_step {ring.min_step} > max_step {ring.max_step}")
+    reach = max(abs(ring.min_step), abs(ring.max_step)) * ring.motor_step_rad * ring.gear
+    if reach > ring.joint_limit_rad + 1e-9:
+        raise fail("robot.ring", f"the sweep turns the sensors to ±{math.degrees(reach):g}° "
+                                 f"(steps {ring.min_step} … {ring.max_step} × "
+                                 f"{math.degrees(ring.motor_step_rad):g}° × gear {ring.gear:g}) "
+                                 f"but joint_limit is ±{math.degrees(ring.joint_limit_rad):g}°; "
+                                 f"narrow the steps or raise joint_limit_deg")
+
+
+def _validate_ring(sc: Scenario, fail) -> None:
+    """Where the ring may stand: every scan pose inside the room with the ring and its
+    housing clear of walls and obstacles, the sensors below the walls' tops."""
+    ring, outline = sc.ring, sc.room.outline_m
     clearance = ring.radius_m + HOUSING_M  # sensors plus their housing
     # every pose at once (a scenario may hold 10 000 poses and 10 000 corners)
     px = np.array([pose.x_m for pose in sc.robot.poses])
@@ -471,35 +507,6 @@ def _validate_geometry(sc: Scenario, fail) -> None:
                          f"obstacles[{j}] ({type(ob).__name__.lower()} at "
                          f"({ob.center_m[0] * 1e3:g}, {ob.center_m[1] * 1e3:g}) mm); "
                          f"keep the pose ≥ {clearance * 1e3:g} mm from it")
-    centres = np.array([ob.center_m for ob in sc.obstacles], dtype=float).reshape(-1, 2)
-    in_room = inside_outline(centres[:, 0], centres[:, 1], outline)
-    off_wall = distance_to_outline(centres[:, 0], centres[:, 1], outline)
-    # how far each obstacle reaches from its centre: only those near a wall are clipped
-    ob_reach = np.array([ob.radius_m if isinstance(ob, Cylinder) else
-                         math.hypot(*ob.size_m) / 2 for ob in sc.obstacles], dtype=float)
-    for j, ob in enumerate(sc.obstacles):
-        if isinstance(ob, Box) and min(ob.size_m) < 0.002:
-            raise fail(f"obstacles[{j}].size_mm", f"box sides ({ob.size_m[0] * 1e3:g}, "
-                                                  f"{ob.size_m[1] * 1e3:g}) mm must each be ≥ 2 mm")
-        # one reaching through a wall is clipped there (a partition built into it); one
-        # wholly outside is a mistake (nothing of it could be seen)
-        if not in_room[j] and (ob_reach[j] <= off_wall[j] + GEOMETRY_TOL_M
-                               or first_wall_into(ob, outline) is None):
-            what = (f"cylinder (radius {ob.radius_m * 1e3:g} mm)" if isinstance(ob, Cylinder)
-                    else f"box ({ob.size_m[0] * 1e3:g} × {ob.size_m[1] * 1e3:g} mm)")
-            raise fail(f"obstacles[{j}].center_mm",
-                       f"the {what} at ({ob.center_m[0] * 1e3:g}, {ob.center_m[1] * 1e3:g}) mm "
-                       f"lies wholly outside the room; an obstacle must stand at least partly "
-                       f"inside it (what reaches beyond a wall is ignored)")
-    if ring.min_step > ring.max_step:
-        raise fail("robot.ring.min_step", f"min_step {ring.min_step} > max_step {ring.max_step}")
-    reach = max(abs(ring.min_step), abs(ring.max_step)) * ring.motor_step_rad * ring.gear
-    if reach > ring.joint_limit_rad + 1e-9:
-        raise fail("robot.ring", f"the sweep turns the sensors to ±{math.degrees(reach):g}° "
-                                 f"(steps {ring.min_step} … {ring.max_step} × "
-                                 f"{math.degrees(ring.motor_step_rad):g}° × gear {ring.gear:g}) "
-                                 f"but joint_limit is ±{math.degrees(ring.joint_limit_rad):g}°; "
-                                 f"narrow the steps or raise joint_limit_deg")
     if ring.sensor_height_m >= sc.room.wall_height_m:
         raise fail("robot.ring.sensor_height_mm",
                    f"sensors at {ring.sensor_height_m * 1e3:g} mm would look over the "
@@ -681,7 +688,7 @@ def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
         return sc
     sensor_raw = raw.get("sensor") or {}
     if "model" not in sensor_raw:   # the robot as written: its ring keeps what it gives
-        return dataclasses.replace(apply_design(sc, design), robot=sc.robot)
+        return dataclasses.replace(_with_design(sc, design), robot=sc.robot)
     if sc.sensor.model != design.sensor.kind:
         raise fail("sensor.model", f"{sc.sensor.model!r} does not fit design "
                                    f"{sc.robot.design!r}, which carries a {design.sensor.kind!r} "
@@ -789,8 +796,25 @@ def apply_design(scenario: Scenario, design: Design | str) -> Scenario:
     GP2 designs the scenario's effects stay as they are; for laser and sonar the GP2-specific
     stages (incidence curves, fold-over, volts of noise) are replaced by the design's own
     range noise, so each design is simulated with the sensor it would carry.
+
+    The design's ring must stand where the scene's did as a file's own ring must (scan poses
+    clear of walls and obstacles by its radius and housing, sensors below the walls, a
+    motion path that keeps it clear): else ScenarioError naming the scene and the design.
     """
     d = designs.get(design) if isinstance(design, str) else design
+    sc = _with_design(scenario, d)
+    _validate_ring(sc, _Loader(f"{scenario.source or scenario.name}: design {d.name!r} "
+                               f"in place of its ring").fail)
+    motion = sc.effects.get("motion")
+    if motion is not None:
+        from .simulation.dynamics import Path as DrivePath   # deferred: it imports this module
+
+        DrivePath.from_effect(motion).check_clearance(sc, f" of design {d.name!r}")
+    return sc
+
+
+def _with_design(scenario: Scenario, d: Design) -> Scenario:
+    """:func:`apply_design` without its checks."""
     robot_design = d.name if d.name in designs.DESIGN_BY_NAME else "custom"
     robot = dataclasses.replace(scenario.robot, design=robot_design,
                                 ring=None if robot_design != "custom" else d.ring)

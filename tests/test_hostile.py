@@ -2576,3 +2576,90 @@ def test_the_corpus_script_answers_help_and_typos_before_its_census(argv, status
     else:
         assert err == (f"hostile_corpus.py: unknown argument {argv[0]!r}; allowed: --list, "
                        "--kind=NAME, --help\n")
+
+
+# --------------------------------------------------------------------------- designs in rooms
+
+NARROW_ROOM = """name: narrow
+room:
+  outline_mm: [[0, 0], [2000, 0], [2000, 200], [0, 200]]
+robot:
+  design: custom
+  ring: {radius_mm: 40}
+  poses: [{x_mm: 1000, y_mm: 100}]
+"""
+LOW_ROOM = """name: low
+room:
+  outline_mm: [[0, 0], [1000, 0], [1000, 800], [0, 800]]
+  wall_height_mm: 60
+robot:
+  design: custom
+  ring: {sensor_height_mm: 30}
+  poses: [{x_mm: 500, y_mm: 400}]
+"""
+NEAR_PATH = NARROW_ROOM.replace("[2000, 200], [0, 200]", "[2000, 1500], [0, 1500]").replace(
+    "y_mm: 100}]", "y_mm: 750}]") + """effects:
+  motion:
+    path: [{x_mm: 1000, y_mm: 750}, {x_mm: 1000, y_mm: 120}]
+"""
+
+
+def test_compare_refuses_a_design_whose_ring_the_room_cannot_hold(monkeypatch):
+    """`irring compare --scenario narrow.yaml --design rotating12` put the paper's 150 mm ring
+    at a pose 100 mm from both walls of a 200 mm room (the file's own 40 mm ring fits) and
+    measured it: F1 0.869, free accuracy 0.825, from sensors inside the walls. A 60 mm high
+    room seen by rotating1 (sensors at 100 mm) scored F1 0.000 over the walls. Both are now
+    refused before any run, as the file would be with that ring."""
+    from irring.studies import compare
+
+    monkeypatch.setattr(compare, "run_jobs", lambda *a, **k: pytest.fail("a run started"))
+    with pytest.raises(ScenarioError) as exc:
+        compare.compare([loads(NARROW_ROOM, "narrow.yaml")], ["radial12", "rotating12"])
+    assert str(exc.value) == (
+        "narrow.yaml: design 'radial12' in place of its ring: robot.poses[0]: the ring "
+        "(radius 170 mm with housing) would be inside a wall at (1000, 100) mm; keep the pose "
+        "≥ 170 mm from every wall")
+    with pytest.raises(ScenarioError) as exc:
+        compare.compare([loads(LOW_ROOM, "low.yaml")], ["rotating1"])
+    assert str(exc.value) == (
+        "low.yaml: design 'rotating1' in place of its ring: robot.ring.sensor_height_mm: "
+        "sensors at 100 mm would look over the 60 mm walls (and obstacles, which are as tall); "
+        "allowed: below room.wall_height_mm")
+
+
+def test_a_study_design_the_rooms_cannot_hold_is_refused_at_load(tmp_path):
+    """A study's parametric ring of radius 1000 mm ran in t_room's 900 mm corridor (F1 0.624,
+    free accuracy 0.541, exit 0): a ring no scenario file could hold there."""
+    f = tmp_path / "study.yaml"
+    f.write_text("designs:\n  - {sensors: 12, radius_mm: 1000, sweep_half_angle_deg: 30, "
+                 "step_deg: 1.08, name: huge}\n  - rotating12\nscenarios: [t_room]\n")
+    with pytest.raises(StudyError) as exc:
+        load_study(f)
+    assert str(exc.value) == (
+        f"{f}: designs[0]: {resolve('t_room')}: design 'huge' in place of its ring: "
+        "robot.poses[0]: the ring (radius 1020 mm with housing) would be inside a wall at "
+        "(1920, 450) mm; keep the pose ≥ 1020 mm from every wall")
+
+
+def test_bench_accuracy_refuses_a_design_knob_the_room_cannot_hold(tmp_path):
+    f = tmp_path / "narrow.yaml"
+    f.write_text(NARROW_ROOM)
+    with pytest.raises(ScenarioError, match=r"narrow.yaml: design 'radial12' in place of its "
+                                            r"ring: robot.poses\[0\]: the ring \(radius 170 mm"):
+        jobs_for([str(f)], [Config(), Config("design", "radial12", 1, design="radial12")], 1)
+    assert len(jobs_for([str(f)], [Config()], 2)) == 2   # its own ring fits
+
+
+def test_a_design_whose_ring_the_drive_brings_into_a_wall_says_whose_ring():
+    """Run with the paper's ring, a path 120 mm from a wall was refused mid-run as 'the ring
+    (radius 170 mm …)' of a file whose ring is 40 mm; now before it, naming the design."""
+    from irring.scenario import apply_design
+
+    sc = loads(NEAR_PATH, "path.yaml")
+    with pytest.raises(ScenarioError) as exc:
+        apply_design(sc, "rotating12")
+    assert str(exc.value) == (
+        "path.yaml: effects.motion.path[0] → [1]: at (1000, 165) mm the ring of design "
+        "'rotating12' (radius 170 mm with housing) would hit a wall or obstacle; add a "
+        "waypoint that keeps ≥ 170 mm clear")
+    assert apply_design(sc, "rotating1").ring.radius_m == 0.0   # a ring that fits

@@ -603,9 +603,10 @@ class Path:
         """(..., 3) true pose (x m, y m, yaw rad) at times ``t_s`` from the drive's start."""
         return self.pose_at_arc(np.asarray(t_s, dtype=float) * self.speed_m_s)
 
-    def check_clearance(self, scenario: Scenario) -> None:
+    def check_clearance(self, scenario: Scenario, whose: str = "") -> None:
         """Raise ScenarioError where the ring (radius + 20 mm housing) would touch a wall or
-        an obstacle along the path (the loader checks scan poses, not paths)."""
+        an obstacle along the path (the loader checks scan poses, not paths); ``whose``
+        (" of design 'x'") says whose ring in the message."""
         clearance = scenario.ring.radius_m + HOUSING_M
         n = max(2, int(math.ceil(self.length_m / _PATH_SAMPLE_M)) + 1)
         outline = scenario.room.outline_m
@@ -626,8 +627,8 @@ class Path:
                                   max(len(self.arc_m) - 2, 0)))
                 raise ScenarioError(
                     f"{scenario.source or scenario.name}: effects.motion.path[{seg}] → "
-                    f"[{seg + 1}]: at ({x * 1e3:.0f}, {y * 1e3:.0f}) mm the ring (radius "
-                    f"{clearance * 1e3:g} mm with housing) would hit a wall or obstacle; "
+                    f"[{seg + 1}]: at ({x * 1e3:.0f}, {y * 1e3:.0f}) mm the ring{whose} "
+                    f"(radius {clearance * 1e3:g} mm with housing) would hit a wall or obstacle; "
                     f"add a waypoint that keeps ≥ {clearance * 1e3:g} mm clear")
 
 

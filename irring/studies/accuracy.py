@@ -260,6 +260,8 @@ def jobs_for(scenarios: Sequence, configs: Sequence[Config], seeds: int) -> list
         if text is None:
             raise ValueError(f"scenario {sc.name!r} has no YAML source file; jobs carry the "
                              "scenario as YAML text so any worker can rebuild it")
+        for design in dict.fromkeys(cfg.design for cfg in configs if cfg.design):
+            scenario_lib.apply_design(sc, design)   # before any run: one its room cannot hold
         out += [Job(text, sc.source, cfg, seed) for cfg in configs
                 for seed in counted_seeds(sc, seeds)]
     return out
