@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from irring.designs import PAPER_RING
 from irring.hardware import DeviceDisconnected, DeviceTimeout, SerialRing
 from irring.hardware import protocol as p
 from irring.hardware.emulator import OUT_LIMIT_BYTES, Device, Faults, PtyEmulator, TcpEmulator
@@ -615,3 +616,34 @@ def test_emulate_motor_reversed_is_refused_for_a_ring_not_symmetric_about_step_0
         "irring emulate: error: motor_reversed needs steps symmetric about 0, got -10 … 20: "
         "turned the other way the ring would pass its end\n")
     assert not link.exists()
+
+
+def test_a_ring_whose_irscn_cannot_fit_128_bytes_is_refused_before_serving(tmp_path, capsys,
+                                                                         monkeypatch):
+    """`irring emulate` of a 24-sensor scenario started, then ended its first sweep in a
+    close room in exit 70 ("internal error (ValueError: IRSCN sentence is 144 bytes; the
+    protocol allows 128)"), and the drive on it in "disconnected"; the longest IRSCN the
+    ring can send (every count at the top, seq 65535, clock 2³² − 1 ms) is now checked first."""
+    import dataclasses
+
+    from irring.cli import main
+
+    wide = dataclasses.replace(PAPER_RING, sensors=24)
+    with pytest.raises(ValueError) as exc:
+        Device(FakeSource(lambda pose, steps, k: np.zeros((len(steps), 24)), ring=wide))
+    assert str(exc.value) == (
+        "cannot emulate this ring: 24 sensors with a 12-bit ADC send IRSCN sentences of up to "
+        "154 bytes (every count 4095, seq 65535, clock 4294967295 ms), and IRR protocol v2 "
+        "allows 128: at most 18 sensors at 12 bits fit")
+    fit = dataclasses.replace(PAPER_RING, sensors=18)
+    dev = Device(FakeSource(lambda pose, steps, k: np.zeros((len(steps), 18)), ring=fit))
+    longest = p.Scan(p.SEQ_MODULO - 1, -35, p.CLOCK_MODULO - 1, (4095,) * 18)
+    assert p.longest_scan_bytes(dev.info) == len(p.encode(longest)) == 124   # 19: 129 bytes
+    room = tmp_path / "wide.yaml"
+    room.write_text((Path(__file__).parents[1] / "scenarios" / "t_room.yaml").read_text()
+                    .replace("  design: rotating12\n",
+                             "  design: rotating12\n  ring: {sensors: 24}\n"))
+    monkeypatch.setattr(PtyEmulator, "serve_forever", lambda self: pytest.fail("served"))
+    assert main(["emulate", str(room), "--link", str(tmp_path / "ring.pty")]) == 2
+    assert capsys.readouterr().err == f"irring emulate: error: {exc.value}\n"
+    assert not (tmp_path / "ring.pty").exists()

@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=fixed,
                         protocol=args.protocol)
-    except ValueError as exc:   # --motor-reversed on a ring not symmetric about step 0
+    except ValueError as exc:   # --motor-reversed on an asymmetric ring; IRSCN too long
         print(f"irring emulate: error: {exc}", file=sys.stderr)
         return 2
     if args.tcp is not None:

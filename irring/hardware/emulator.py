@@ -114,6 +114,9 @@ class Device:
         self.source = source
         self.protocol = p.check_version(protocol)   # 1: an old, unreflashed board
         self.info = p.info_for_ring(source.ring, source.adc_bits, firmware, protocol)
+        too_long = p.scan_too_long(self.info)   # else an internal error at its first such sweep
+        if too_long:
+            raise ValueError(f"cannot emulate this ring: {too_long}")
         if faults.motor_reversed and self.info.min_step != -self.info.max_step:
             raise ValueError(f"motor_reversed needs steps symmetric about 0, got "
                              f"{self.info.min_step} … {self.info.max_step}: turned the other "

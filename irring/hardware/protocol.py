@@ -576,6 +576,30 @@ def info_for_ring(ring: Ring, adc_bits: int, firmware: str,
                 gear.numerator, gear.denominator, ring.min_step, ring.max_step, firmware)
 
 
+def longest_scan_bytes(info: Info, sensors: int | None = None) -> int:
+    """Bytes of the longest IRSCN a device of ``info`` (with ``sensors`` in place of its
+    count) can send: every count at the ADC's top, the longest seq, step and clock."""
+    n = info.nsensors if sensors is None else sensors
+    step = max(info.min_step, info.max_step, key=lambda s: len(str(s)))
+    scan = Scan(SEQ_MODULO - 1, step, CLOCK_MODULO - 1, ((1 << info.adc_bits) - 1,) * n)
+    return len(encode(scan, check=False, version=info.proto))
+
+
+def scan_too_long(info: Info) -> str | None:
+    """Why a device of ``info`` could send an IRSCN longer than the protocol allows, naming
+    how many sensors would fit (None: every IRSCN fits)."""
+    longest = longest_scan_bytes(info)
+    if longest <= MAX_SENTENCE_BYTES:
+        return None
+    fit = info.nsensors
+    while fit > 0 and longest_scan_bytes(info, fit) > MAX_SENTENCE_BYTES:
+        fit -= 1
+    return (f"{info.nsensors} sensors with a {info.adc_bits}-bit ADC send IRSCN sentences of "
+            f"up to {longest} bytes (every count {(1 << info.adc_bits) - 1}, seq "
+            f"{SEQ_MODULO - 1}, clock {CLOCK_MODULO - 1} ms), and IRR protocol v{info.proto} "
+            f"allows {MAX_SENTENCE_BYTES}: at most {fit} sensors at {info.adc_bits} bits fit")
+
+
 def _step_mdeg(step_rad: float) -> int:
     """A motor step as IRINF carries it: whole millidegrees."""
     return round(math.degrees(step_rad) * 1000)
