@@ -16,7 +16,7 @@ import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -444,7 +444,7 @@ def _validate_geometry(sc: Scenario, fail) -> None:
     if len(sc.obstacles) > MAX_OBSTACLES:
         raise fail("obstacles", f"{len(sc.obstacles):,} obstacles; at most {MAX_OBSTACLES:,} "
                                 f"are allowed")
-    _validate_ring(sc, fail)
+    check_ring_placement(sc, fail)
     centres = np.array([ob.center_m for ob in sc.obstacles], dtype=float).reshape(-1, 2)
     in_room = inside_outline(centres[:, 0], centres[:, 1], outline)
     off_wall = distance_to_outline(centres[:, 0], centres[:, 1], outline)
@@ -477,9 +477,10 @@ def _validate_geometry(sc: Scenario, fail) -> None:
                                  f"narrow the steps or raise joint_limit_deg")
 
 
-def _validate_ring(sc: Scenario, fail) -> None:
+def check_ring_placement(sc: Scenario, fail: Callable[[str, str], Exception]) -> None:
     """Where the ring may stand: every scan pose inside the room with the ring and its
-    housing clear of walls and obstacles, the sensors below the walls' tops."""
+    housing clear of walls and obstacles, the sensors below the walls' tops; else raises
+    ``fail(path, message)`` for the first pose (in file order) or key that fails."""
     ring, outline = sc.ring, sc.room.outline_m
     clearance = ring.radius_m + HOUSING_M  # sensors plus their housing
     # every pose at once (a scenario may hold 10 000 poses and 10 000 corners)
@@ -803,7 +804,7 @@ def apply_design(scenario: Scenario, design: Design | str) -> Scenario:
     """
     d = designs.get(design) if isinstance(design, str) else design
     sc = _with_design(scenario, d)
-    _validate_ring(sc, _Loader(f"{scenario.source or scenario.name}: design {d.name!r} "
+    check_ring_placement(sc, _Loader(f"{scenario.source or scenario.name}: design {d.name!r} "
                                f"in place of its ring").fail)
     motion = sc.effects.get("motion")
     if motion is not None:

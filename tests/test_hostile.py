@@ -2663,3 +2663,24 @@ def test_a_design_whose_ring_the_drive_brings_into_a_wall_says_whose_ring():
         "'rotating12' (radius 170 mm with housing) would hit a wall or obstacle; add a "
         "waypoint that keeps ≥ 170 mm clear")
     assert apply_design(sc, "rotating1").ring.radius_m == 0.0   # a ring that fits
+
+
+@pytest.mark.parametrize("pose, why", [
+    ("5000,5000", "pose (5000, 5000) mm is outside the room"),
+    ("100,450,30", "the ring (radius 170 mm with housing) would be inside a wall at (100, 450) "
+                   "mm; keep the pose ≥ 170 mm from every wall"),
+    ("2100,300", "the ring (radius 170 mm with housing) at (2100, 300) mm would overlap "
+                 "obstacles[0] (cylinder at (2170, 220) mm); keep the pose ≥ 170 mm from it")])
+def test_drive_refuses_a_pose_the_truth_room_cannot_hold_before_the_port(tmp_path, capsys,
+                                                                         pose, why):
+    """`drive --truth t_room --pose 5000,5000` (outside the room) was swept, mapped and
+    scored against t_room (F1 0.000, exit 0), as were poses in its walls (F1 0.015 at the
+    corner): scores of a ring the room cannot hold. Now a usage error, before the port."""
+    out = tmp_path / "out"
+    assert main(["drive", "--port", str(tmp_path / "no-such-port"), "--truth",
+                 "t_room_cylinder", "--pose", "1920,450", "--pose", pose, "--no-wait",
+                 "--out", str(out)]) == 2
+    x, y, *yaw = pose.split(",")
+    assert capsys.readouterr().err == (f"irring drive: error: --pose {x},{y},{(yaw or [0])[0]} "
+                                       f"with --truth t_room_cylinder: {why}\n")
+    assert not out.exists()

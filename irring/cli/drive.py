@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import math
@@ -14,12 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from .. import errors, pipeline
-from ..core import MAX_SWEEPS, work_bytes, work_refusal
+from ..core import MAX_SWEEPS, Pose, work_bytes, work_refusal
+from ..errors import UsageError
 from ..estimation.calibration import Calibration, CalibrationError, load_calibration
 from ..hardware import DeviceError, SerialRing
 from ..outputs import check_out
 from ..recording import save_recording
-from ..scenario import load_scenario
+from ..scenario import check_ring_placement, load_scenario
 from ._common import (add_mcap_option, add_protocol_v1_option, at_least, between, describe,
                       mcap_beside_outputs, out_path, positive_seconds, serial_port,
                       spare_inputs, warn_protocol)
@@ -95,7 +97,8 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="number of poses to sweep (default: all of --truth's, or of --pose)")
     p.add_argument("--pose", type=_pose, action="append", default=None,
                    metavar="X_MM,Y_MM[,YAW_DEG]",
-                   help="robot pose of the next sweep, repeatable (overrides --truth's)")
+                   help="robot pose of the next sweep, repeatable (overrides --truth's; "
+                        "the ring must fit --truth's room there, as a scan pose must)")
     p.add_argument("--samples", type=at_least(1, 64), default=None, metavar="N",
                    help="readings averaged per step by the device, 1 … 64 (default: --truth's "
                         "scan.samples with averaging, else 1)")
@@ -155,6 +158,15 @@ def run(args: argparse.Namespace) -> int:
             return _error(f"--poses {n} but only {len(poses)} pose(s) known; add --pose "
                           f"X_MM,Y_MM,YAW_DEG for each")
         poses = poses * n  # an unmoved robot swept n times
+    if truth is not None and args.pose:   # scored against --truth's room: it must hold them
+        for x, y, yaw in poses[:n]:
+            placed = dataclasses.replace(truth, robot=dataclasses.replace(
+                truth.robot, poses=(Pose(x, y, yaw),)))
+            try:
+                check_ring_placement(placed, lambda path, msg: UsageError(msg))
+            except UsageError as exc:
+                return _error(f"--pose {x * 1e3:g},{y * 1e3:g},{math.degrees(yaw):g} with "
+                              f"--truth {args.truth}: {exc}")
     samples = args.samples
     if samples is None:
         samples = truth.samples_per_step if truth else 1
