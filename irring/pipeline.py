@@ -23,7 +23,8 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from . import recording as rec
-from .core import Points, Reason, RingSource, SourceLost, Sweep, in_turn_order, score_text
+from .core import (Points, Reason, RingSource, SourceLost, Sweep, in_turn_order, inside_outline,
+                   score_text)
 from .estimation.calibration import CalibrationError, load_calibration, scene_calibration
 from .estimation.estimate import estimate
 from .gp2 import SENSORS
@@ -453,6 +454,24 @@ def run(scenario: Scenario, *, seed: int | None = None, calibration_file: str | 
     return result
 
 
+def _check_room_holds_poses(scenario: Scenario, sweeps: Sequence[Sweep], recording) -> None:
+    """A recorded scenario whose room does not hold the sweeps' poses is another room's:
+    scored against it, the map would be judged on walls the ring never stood among. Every
+    pose of a standing scene lies in its room; a moving one's believed poses may drift
+    (odometry) past a wall, so there only a room holding none is refused."""
+    xy = np.array([np.asarray(sweep.pose, dtype=float)[:2] for sweep in sweeps])
+    inside = inside_outline(xy[:, 0], xy[:, 1], scenario.room.outline_m)
+    moving = scenario.has("motion")
+    if inside.all() or (moving and inside.any()):
+        return
+    k = int(np.argmin(inside))
+    raise rec.RecordingError(
+        f"{recording}: sweep {k + 1}'s pose ({xy[k, 0]:g}, {xy[k, 1]:g}) m lies outside the "
+        f"room of the recorded scenario {scenario.name!r}"
+        f"{', as do all the others' if moving else ''}; the scenario and the sweeps do not "
+        "belong together")
+
+
 def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
            frames_per_sweep: int = 0, score: bool = True,
            progress: bool | None = None) -> MapRun:
@@ -473,6 +492,8 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
             if calibration_file is None and not meta.get("calibration_yaml"):
                 raise
             unscored = str(exc)
+    if scenario is not None:
+        _check_room_holds_poses(scenario, sweeps, recording)
     if calibration_file is not None:
         calibration, cal_text = load_calibration(calibration_file)
     elif meta.get("calibration_yaml") or scenario is None:

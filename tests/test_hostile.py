@@ -2684,3 +2684,52 @@ def test_drive_refuses_a_pose_the_truth_room_cannot_hold_before_the_port(tmp_pat
     assert capsys.readouterr().err == (f"irring drive: error: --pose {x},{y},{(yaw or [0])[0]} "
                                        f"with --truth t_room_cylinder: {why}\n")
     assert not out.exists()
+
+
+MOVING_BOX = """name: moving_box
+room:
+  outline_mm: [[0, 0], [2000, 0], [2000, 1500], [0, 1500]]
+robot:
+  poses: [{x_mm: 700, y_mm: 750}]
+effects:
+  motion:
+    speed_mm_s: 100
+    path: [{x_mm: 700, y_mm: 750}, {x_mm: 1300, y_mm: 750}]
+"""
+
+
+def test_replay_refuses_a_recorded_scenario_whose_room_does_not_hold_the_sweeps(tmp_path,
+                                                                                capsys):
+    """A t_room recording whose sweeps stand at (2.2, 1.6) m, inside the recorded grid but
+    outside the T (its missing corner), was replayed and scored against t_room (F1 0.018,
+    exit 0): a scenario and sweeps that do not belong together, as a grid holding none of
+    the poses already was. A moving scene's believed poses may drift past a wall, so there
+    only a room holding none of them is refused."""
+    assert main(["run", "t_room", "--out", str(tmp_path / "t"), "--no-animation"]) == 0
+    data = (tmp_path / "t" / "sweeps.npz").read_bytes()
+    moved = tmp_path / "moved.npz"
+    moved.write_bytes(_rewrite(data, "sweep001/pose", [2.2, 1.6, 0.0]))
+    capsys.readouterr()
+    assert main(["replay", str(moved), "--out", str(tmp_path / "r"), "--no-animation"]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {moved}: sweep 2's pose (2.2, 1.6) m lies outside the room of "
+        "the recorded scenario 't_room'; the scenario and the sweeps do not belong together\n")
+    assert not (tmp_path / "r").exists()
+
+    room = tmp_path / "moving_box.yaml"
+    room.write_text(MOVING_BOX)
+    assert main(["run", str(room), "--out", str(tmp_path / "m"), "--no-animation"]) == 0
+    data = (tmp_path / "m" / "sweeps.npz").read_bytes()
+    assert len(load_recording(tmp_path / "m" / "sweeps.npz")[0]) == 2
+    drifted = tmp_path / "drifted.npz"
+    drifted.write_bytes(_rewrite(data, "sweep001/pose", [2.05, 0.75, 0.0]))
+    assert main(["replay", str(drifted), "--out", str(tmp_path / "d"), "--no-animation"]) == 0
+    for k in range(2):
+        data = _rewrite(data, f"sweep{k:03d}/pose", [2.05, 0.75, 0.0])
+    drifted.write_bytes(data)
+    capsys.readouterr()
+    assert main(["replay", str(drifted), "--out", str(tmp_path / "e"), "--no-animation"]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {drifted}: sweep 1's pose (2.05, 0.75) m lies outside the room "
+        "of the recorded scenario 'moving_box', as do all the others; the scenario and the "
+        "sweeps do not belong together\n")
