@@ -799,18 +799,14 @@ def apply_design(scenario: Scenario, design: Design | str) -> Scenario:
     range noise, so each design is simulated with the sensor it would carry.
 
     The design's ring must stand where the scene's did as a file's own ring must (scan poses
-    clear of walls and obstacles by its radius and housing, sensors below the walls, a
-    motion path that keeps it clear): else ScenarioError naming the scene and the design.
+    clear of walls and obstacles by its radius and housing, sensors below the walls): else
+    ScenarioError naming the scene and the design. (A motion path is checked where the
+    drive is built; ``studies.accuracy.design_in`` checks it first.)
     """
     d = designs.get(design) if isinstance(design, str) else design
     sc = _with_design(scenario, d)
     check_ring_placement(sc, _Loader(f"{scenario.source or scenario.name}: design {d.name!r} "
-                               f"in place of its ring").fail)
-    motion = sc.effects.get("motion")
-    if motion is not None:
-        from .simulation.dynamics import Path as DrivePath   # deferred: it imports this module
-
-        DrivePath.from_effect(motion).check_clearance(sc, f" of design {d.name!r}")
+                                     f"in place of its ring").fail)
     return sc
 
 

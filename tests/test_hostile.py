@@ -2653,16 +2653,16 @@ def test_bench_accuracy_refuses_a_design_knob_the_room_cannot_hold(tmp_path):
 def test_a_design_whose_ring_the_drive_brings_into_a_wall_says_whose_ring():
     """Run with the paper's ring, a path 120 mm from a wall was refused mid-run as 'the ring
     (radius 170 mm …)' of a file whose ring is 40 mm; now before it, naming the design."""
-    from irring.scenario import apply_design
+    from irring.studies.accuracy import design_in
 
     sc = loads(NEAR_PATH, "path.yaml")
     with pytest.raises(ScenarioError) as exc:
-        apply_design(sc, "rotating12")
+        design_in(sc, "rotating12")
     assert str(exc.value) == (
         "path.yaml: effects.motion.path[0] → [1]: at (1000, 165) mm the ring of design "
         "'rotating12' (radius 170 mm with housing) would hit a wall or obstacle; add a "
         "waypoint that keeps ≥ 170 mm clear")
-    assert apply_design(sc, "rotating1").ring.radius_m == 0.0   # a ring that fits
+    assert design_in(sc, "rotating1").ring.radius_m == 0.0   # a ring that fits
 
 
 @pytest.mark.parametrize("pose, why", [

@@ -107,9 +107,23 @@ def default_value(knob: str, scenario) -> float:
             "resolution": scenario.map.resolution_m * 1e3, "design": 0}.get(knob, 0.0)
 
 
+def design_in(scenario, design):
+    """``scenario_lib.apply_design``, and a motion path that keeps the design's ring clear
+    of walls and obstacles: ScenarioError naming the design for a ring the scene cannot
+    hold, checked before any run (compare, a study, the design knob)."""
+    sc = scenario_lib.apply_design(scenario, design)
+    motion = sc.effects.get("motion")
+    if motion is not None:
+        from ..simulation.dynamics import Path   # deferred: loads MuJoCo (as run_job's)
+
+        name = design if isinstance(design, str) else design.name
+        Path.from_effect(motion).check_clearance(sc, f" of design {name!r}")
+    return sc
+
+
 def apply(scenario, cfg: Config):
     """The scenario with the configuration's sweep, map and design changes."""
-    sc = scenario_lib.apply_design(scenario, cfg.design) if cfg.design else scenario
+    sc = design_in(scenario, cfg.design) if cfg.design else scenario
     scan = {}
     if cfg.step_stride is not None:
         scan["step_stride"] = int(cfg.step_stride)
@@ -261,7 +275,7 @@ def jobs_for(scenarios: Sequence, configs: Sequence[Config], seeds: int) -> list
             raise ValueError(f"scenario {sc.name!r} has no YAML source file; jobs carry the "
                              "scenario as YAML text so any worker can rebuild it")
         for design in dict.fromkeys(cfg.design for cfg in configs if cfg.design):
-            scenario_lib.apply_design(sc, design)   # before any run: one its room cannot hold
+            design_in(sc, design)   # before any run: one its room cannot hold
         out += [Job(text, sc.source, cfg, seed) for cfg in configs
                 for seed in counted_seeds(sc, seeds)]
     return out

@@ -13,8 +13,8 @@ from .. import designs as designs_mod
 from ..designs import Design
 from ..maps.metrics import SCORE_KEYS
 from ..pipeline import progress_bar
-from ..scenario import apply_design, counted_seeds, load_scenario
-from . import study
+from ..scenario import counted_seeds, load_scenario
+from . import accuracy, study
 from .executor import run_jobs
 from .geometry import DEFAULT_DISTANCES_M, Detection, detection
 from .report import mean_of, write_study
@@ -103,7 +103,7 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
     ds = [designs_mod.get(d) if isinstance(d, str) else d for d in design_list]
     for sc in scs:   # before any run: a ring a room cannot hold is refused, never measured
         for d in ds:
-            apply_design(sc, d)
+            accuracy.design_in(sc, d)
     points = [_point(sc, d, seed) for sc in scs for d in ds for seed in counted_seeds(sc, seeds)]
     names = [sc.name for sc in scs for d in ds for k in range(seeds)]
     dist = DEFAULT_DISTANCES_M if detection_distances_m is None else detection_distances_m

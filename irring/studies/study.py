@@ -36,7 +36,7 @@ from ..errors import OutputError, TooBig, brief, printable
 from ..outputs import OutputSet, atomic_file, sole_writer
 from ..pipeline import scenario_text
 from ..resources import installed_version
-from ..scenario import ScenarioError, apply_design, counted_seeds, load_scenario, scenario_file
+from ..scenario import ScenarioError, counted_seeds, load_scenario, scenario_file
 from . import accuracy
 from .accuracy import mark_pareto
 from .report import write_csv
@@ -228,7 +228,7 @@ def parse_study(raw: Any, source: str = "") -> Study:
     for i, d in enumerate(designs):   # before any run: a ring the rooms cannot hold
         for s in scenarios:
             try:
-                apply_design(seed_of[s], d.build())
+                accuracy.design_in(seed_of[s], d.build())
             except ScenarioError as exc:
                 raise _fail(source, f"designs[{i}]", str(exc)) from None
     seeds, count = None, 1
