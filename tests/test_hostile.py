@@ -2733,3 +2733,21 @@ def test_replay_refuses_a_recorded_scenario_whose_room_does_not_hold_the_sweeps(
         f"irring replay: error: {drifted}: sweep 1's pose (2.05, 0.75) m lies outside the room "
         "of the recorded scenario 'moving_box', as do all the others; the scenario and the "
         "sweeps do not belong together\n")
+
+
+@pytest.mark.parametrize("model, vref", [("gp2y0a21", 5.0), ("gp2d12", 3.3)])
+def test_drive_refuses_a_calibration_whose_sensor_the_truth_contradicts(tmp_path, capsys,
+                                                                         model, vref):
+    """`drive --truth t_room --calibration y21.yaml` (a GP2Y0A21's curve, t_room's ring
+    carries GP2D12s) read the emulator's GP2D12 counts through the GP2Y0A21 curve and scored
+    them against t_room (F1 0.789, exit 0), where `irring run` refuses the same pair."""
+    cal = tmp_path / "other.yaml"
+    Calibration.nominal(model, None, 12, vref).save(cal)
+    out = tmp_path / "o"
+    assert main(["drive", "--port", str(tmp_path / "no-such-port"), "--truth", "t_room",
+                 "--calibration", str(cal), "--no-wait", "--out", str(out)]) == 1
+    assert capsys.readouterr().err == (
+        f"irring drive: error: {cal}: the calibration is for a {model} at {vref:g} V, but "
+        "--truth t_room says the ring reads a gp2d12 at 5 V; use a calibration of that sensor "
+        "(irring calibrate), or a --truth whose sensor block names this one\n")
+    assert not out.exists()

@@ -134,6 +134,16 @@ def run(args: argparse.Namespace) -> int:
                       "the IRR protocol reports no robot pose, so a moving scan cannot be mapped from the "
                       "link; map it with `irring run` instead")
     calibration, cal_text = load_calibration(args.calibration)   # a bad file: exit 1
+    if truth is not None and calibration is not None and (
+            calibration.sensor_model != truth.sensor.model
+            or not math.isclose(calibration.vref_v, truth.sensor.vref_v, rel_tol=1e-9)):
+        # the two files contradict each other on the ring's sensor (the ADC is the device's
+        # to say, checked after the handshake); `irring run` refuses the same
+        raise CalibrationError(
+            f"{args.calibration}: the calibration is for a {calibration.sensor_model} at "
+            f"{calibration.vref_v:g} V, but --truth {args.truth} says the ring reads a "
+            f"{truth.sensor.model} at {truth.sensor.vref_v:g} V; use a calibration of that "
+            f"sensor (irring calibrate), or a --truth whose sensor block names this one")
 
     # what the device does not report: the calibration's numbers over the truth scenario's
     # over SerialRing's defaults (the paper's ring and GP2D12)
