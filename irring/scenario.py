@@ -16,7 +16,7 @@ import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -714,6 +714,19 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     except safe_yaml.InputError as exc:
         raise ScenarioError(str(exc)) from None
     return loads(text, str(path))
+
+
+def check_distinct_names(scenarios: Sequence[Scenario]) -> None:
+    """ScenarioError when two scenarios share a ``name:``: compare and bench accuracy report
+    each scene by its name, so two rooms of one name would be averaged as one."""
+    seen: dict[str, Scenario] = {}
+    for sc in scenarios:
+        other = seen.setdefault(sc.name, sc)
+        if other is not sc:
+            raise ScenarioError(
+                f"{sc.source or sc.name}: named {sc.name!r}, as {other.source or other.name} "
+                "is; the results name each scenario by its `name:`, so the two rooms would be "
+                "merged into one; give them different names")
 
 
 def counted_seeds(sc: Scenario, count: int) -> list[int]:

@@ -268,8 +268,9 @@ def run_job(job: Job) -> dict:
 def jobs_for(scenarios: Sequence, configs: Sequence[Config], seeds: int) -> list[Job]:
     """Every configuration × scenario × seed (seeds: scenario.seed, +1, …)."""
     out = []
-    for s in scenarios:
-        sc = load_scenario(s) if isinstance(s, str) else s
+    loaded = [load_scenario(s) if isinstance(s, str) else s for s in scenarios]
+    scenario_lib.check_distinct_names(loaded)
+    for sc in loaded:
         text = scenario_text(sc)
         if text is None:
             raise ValueError(f"scenario {sc.name!r} has no YAML source file; jobs carry the "

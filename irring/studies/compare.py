@@ -13,7 +13,7 @@ from .. import designs as designs_mod
 from ..designs import Design
 from ..maps.metrics import SCORE_KEYS
 from ..pipeline import progress_bar
-from ..scenario import counted_seeds, load_scenario
+from ..scenario import check_distinct_names, counted_seeds, load_scenario
 from . import accuracy, study
 from .executor import run_jobs
 from .geometry import DEFAULT_DISTANCES_M, Detection, detection
@@ -100,6 +100,7 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
     Returns ``{"designs": summarise(...), "runs": [...], "detection": {...}}``.
     """
     scs = [load_scenario(s) if isinstance(s, str) else s for s in scenarios]
+    check_distinct_names(scs)
     ds = [designs_mod.get(d) if isinstance(d, str) else d for d in design_list]
     for sc in scs:   # before any run: a ring a room cannot hold is refused, never measured
         for d in ds:
