@@ -2774,3 +2774,34 @@ def test_compare_and_bench_accuracy_refuse_two_rooms_of_one_name(tmp_path, monke
     assert str(exc.value) == message
     b.write_text(NEAR_PATH.split("effects:")[0])
     assert len(jobs_for([str(a), str(b)], [Config()], 1)) == 2
+
+
+@pytest.mark.parametrize("bits, steps, said", [
+    (10, (-2, 2), ["steps -2 … 2 (t_room's: -35 … 35)", "a 10-bit ADC (t_room's: 12-bit)"]),
+    (12, (-35, 35), [])])
+def test_drive_says_how_the_ring_differs_from_the_truth_and_not_of_a_calibrated_offset(
+        tmp_path, capsys, bits, steps, said):
+    """drive --truth warned 'the device's geometry differs from t_room's ring; using the
+    device's' without saying how (8 sensors of 12? other steps?), said it too of a ring whose
+    IRINF matched t_room's when --calibration's measured d_o (6.94 mm) replaced t_room's 7 mm,
+    and said nothing of a 10-bit ADC where the truth's sensor block says 12 bits."""
+    def device(dev, cmd):   # hd's counts stay below 1024
+        if isinstance(cmd, p_.Hello):
+            dev.send(hd.info(bits=bits, lo=steps[0], hi=steps[1]))
+        else:
+            hd.good(dev, cmd)
+
+    cal = tmp_path / "cal.yaml"
+    dataclasses.replace(Calibration.nominal("gp2d12", None, bits, 5.0),
+                        emitter_offset_m=0.00694).save(cal)
+    dev = hd.HostileDevice(device)
+    try:
+        code = main(["drive", "--port", dev.link, "--truth", "t_room", "--calibration", str(cal),
+                     "--timeout", str(TIMEOUT_S), "--no-wait", "--no-animation", "--out",
+                     str(tmp_path / "o")])
+    finally:
+        dev.close()
+    assert code == 0
+    warned = [line for line in capsys.readouterr().out.splitlines() if "warning" in line]
+    assert warned == ([f"warning: the ring on {dev.link} differs from t_room's: "
+                       f"{', '.join(said)}; using the ring's"] if said else [])

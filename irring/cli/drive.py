@@ -118,6 +118,26 @@ def register(p: argparse.ArgumentParser) -> None:
     p.set_defaults(func=run)
 
 
+def _differences(device, adc_bits: int, truth) -> list[str]:
+    """What the device's IRINF says of its ring that ``truth``'s ring and sensor block do
+    not (its emitter offset is --calibration's or the truth's, never the device's)."""
+    t, name = truth.ring, truth.name
+    out = []
+    if device.sensors != t.sensors:
+        out.append(f"{device.sensors} sensors ({name}'s: {t.sensors})")
+    if (device.min_step, device.max_step) != (t.min_step, t.max_step):
+        out.append(f"steps {device.min_step} … {device.max_step} ({name}'s: {t.min_step} … "
+                   f"{t.max_step})")
+    if device.motor_step_rad != t.motor_step_rad:
+        out.append(f"a {math.degrees(device.motor_step_rad):g}° motor step ({name}'s: "
+                   f"{math.degrees(t.motor_step_rad):g}°)")
+    if device.gear != t.gear:
+        out.append(f"gear {device.gear:g} ({name}'s: {t.gear:g})")
+    if adc_bits != truth.sensor.adc_bits:
+        out.append(f"a {adc_bits}-bit ADC ({name}'s: {truth.sensor.adc_bits}-bit)")
+    return out
+
+
 def _error(msg: str) -> int:
     print(f"irring drive: error: {errors.printable(msg, 2000)}", file=sys.stderr)
     return 2
@@ -220,9 +240,10 @@ def run(args: argparse.Namespace) -> int:
                    f"({exc}): calibrate this ring (irring calibrate) and drive it with "
                    f"--calibration FILE")
             return errors.DEVICE
-    if truth is not None and ring.ring != truth.ring:
-        say(f"warning: the device's geometry differs from {truth.name}'s ring; using the "
-            f"device's")
+    differs = _differences(ring.ring, info.adc_bits, truth) if truth is not None else []
+    if differs:
+        say(f"warning: the ring on {args.port} differs from {truth.name}'s: "
+            f"{', '.join(differs)}; using the ring's")
     stride = truth.scan.step_stride if truth else 1
     steps = np.arange(info.min_step, info.max_step + 1, stride)
     readings = n * len(steps) * info.nsensors
