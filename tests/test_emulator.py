@@ -647,3 +647,31 @@ def test_a_ring_whose_irscn_cannot_fit_128_bytes_is_refused_before_serving(tmp_p
     assert main(["emulate", str(room), "--link", str(tmp_path / "ring.pty")]) == 2
     assert capsys.readouterr().err == f"irring emulate: error: {exc.value}\n"
     assert not (tmp_path / "ring.pty").exists()
+
+
+@pytest.mark.parametrize("ring, said", [
+    ("{motor_step_deg: 0.0104, min_step: -6000, max_step: 6000}",
+     "the ring turns its sensors 0.00624° a motor step (0.0104° × gear 0.6); IRINF, in whole "
+     "millidegrees and a belt ratio of denominator ≤ 10 000, says 0.006° (0.01° × 3/5), 3.85% "
+     "less"),
+    ("{motor_step_deg: 0.9, min_step: -70, max_step: 70}", None)])
+def test_emulate_warns_of_a_ring_its_irinf_cannot_describe(tmp_path, capsys, monkeypatch, ring,
+                                                          said):
+    """A scenario's motor step of 0.0104° goes out in IRINF as 10 millidegrees: `irring drive`
+    without --truth mapped every angle 3.85 % short (a 0.06° step turns 37.4° as 36°), and
+    nothing said so; a step IRINF carries exactly (0.9°) gets no word."""
+    from irring.cli import main
+
+    room = tmp_path / "fine.yaml"
+    room.write_text((Path(__file__).parents[1] / "scenarios" / "t_room.yaml").read_text()
+                    .replace("  design: rotating12\n", f"  design: custom\n  ring: {ring}\n"))
+
+    def stop(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(PtyEmulator, "serve_forever", stop)
+    assert main(["emulate", str(room), "--link", str(tmp_path / "ring.pty"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err == ("" if said is None else
+                   f"irring emulate: warning: {said}: `irring drive` without --truth turns every "
+                   "reading's angle that much off (with --truth it takes the scenario's)\n")

@@ -145,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:   # --motor-reversed on an asymmetric ring; IRSCN too long
         print(f"irring emulate: error: {exc}", file=sys.stderr)
         return 2
+    for warning in _announced_off(source.ring, device.info):   # emulated, yet not as given
+        print(f"irring emulate: warning: {warning}", file=sys.stderr)
     if args.tcp is not None:
         host, port = args.tcp
         if not _loopback(host):
@@ -191,6 +193,27 @@ def run(args: argparse.Namespace) -> int:
               f"{s.sentences_corrupted} corrupted: {s.bytes_corrupted} bytes replaced, "
               f"{s.bits_flipped} bits flipped)", flush=True)
     return 0
+
+
+ANNOUNCED_TOLERANCE = 1e-4   # 0.004° at the paper's 37.8°: below it, nothing said
+
+
+def _announced_off(ring, info) -> list[str]:
+    """The ring's turn a motor step where IRINF cannot carry it (whole millidegrees, a belt
+    ratio of denominator ≤ 10 000) to 0.01 %: a host told only the IRINF would turn every
+    reading's angle by that much too little or too far."""
+    true = math.degrees(ring.motor_step_rad) * ring.gear
+    sent = info.step_mdeg / 1000 * info.gear_num / info.gear_den
+    off = sent / true - 1
+    if abs(off) < ANNOUNCED_TOLERANCE:
+        return []
+    step = math.degrees(ring.motor_step_rad)
+    return [f"the ring turns its sensors {true:.6g}° a motor step ({step:.6g}° × gear "
+            f"{ring.gear:.6g}); IRINF, in whole millidegrees and a belt ratio of "
+            f"denominator ≤ 10 000, says {sent:.6g}° ({info.step_mdeg / 1000:g}° × "
+            f"{info.gear_num}/{info.gear_den}), {abs(off):.2%} {'more' if off > 0 else 'less'}: "
+            f"`irring drive` without --truth turns every reading's angle that much off (with "
+            f"--truth it takes the scenario's)"]
 
 
 def _loopback(host: str) -> bool:
