@@ -2805,3 +2805,24 @@ def test_drive_says_how_the_ring_differs_from_the_truth_and_not_of_a_calibrated_
     warned = [line for line in capsys.readouterr().out.splitlines() if "warning" in line]
     assert warned == ([f"warning: the ring on {dev.link} differs from t_room's: "
                        f"{', '.join(said)}; using the ring's"] if said else [])
+
+
+def test_resuming_a_study_whose_scenario_file_changed_is_refused(tmp_path, capsys):
+    """room.yaml edited after its study ran (the room 600 mm narrower), then `irring study
+    --resume`: 'ran 0 (2 already in the file)' and the old room's scores summarised as the
+    new room's (F1 0.974), exit 0. A comment added changes nothing."""
+    room, spec, out = tmp_path / "room.yaml", tmp_path / "study.yaml", tmp_path / "o"
+    room.write_text(NEAR_PATH.split("effects:")[0])
+    spec.write_text("designs: [rotating1]\nscenarios: [room.yaml, t_room_cylinder]\n")
+    argv = ["study", str(spec), "--out", str(out), "--workers", "1"]
+    assert main(argv) == 0
+    room.write_text(room.read_text() + "# checked\n")
+    assert main(argv + ["--resume"]) == 0
+    capsys.readouterr()
+    room.write_text(room.read_text().replace("[2000, 0], [2000, 1500]", "[1400, 0], [1400, 1500]"))
+    assert main(argv + ["--resume"]) == 1
+    assert capsys.readouterr().err == (
+        f"irring study: error: {out / 'results.csv'}: its 1 run(s) of {room} were made before "
+        "the file changed (another room, ring, effects or knobs); resumed, they would be "
+        "summarised as runs of it: restore the file, save the changed one under another name, "
+        "or choose another --out\n")

@@ -121,7 +121,8 @@ def test_a_failed_write_leaves_the_earlier_outputs_byte_identical(command, input
     assert main(argv(inputs) + ["--out", str(out)]) == 0
     before = _snapshot(out)
     if command == "study":
-        assert set(before) == {"results.csv", "summary.csv", "summary.json", "study.png"}
+        assert set(before) == {"results.csv", "scenarios.json", "summary.csv", "summary.json",
+                               "study.png"}
         # a second seed on --resume: one more row streamed to results.csv, a new summary
         (inputs / "s.yaml").write_text(STUDY.replace("seeds: 1", "seeds: 2"))
         argv_again = argv(inputs) + ["--resume"]
@@ -144,6 +145,7 @@ def test_a_failed_write_leaves_the_earlier_outputs_byte_identical(command, input
     if command == "study":   # the checkpoint streams on (and keeps both rows); the first
         # run's summary went when the new row came (it would count one run of two)
         assert after.pop("results.csv").count(b"\n") == before.pop("results.csv").count(b"\n") + 1
+        assert after.pop("scenarios.json") == before["scenarios.json"]   # the same room
         before = {}
     assert after == before
     assert sorted(os.listdir(tmp_path)) == ["in", "out"]   # no temporaries left

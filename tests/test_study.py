@@ -526,12 +526,12 @@ def test_an_interrupted_study_leaves_no_summary_of_an_earlier_smaller_one(small,
     with pytest.raises(KeyboardInterrupt):
         study.run_study(study.load_study(p), out, resume=True)
     assert len(study.read_results(out / study.RESULTS)) == 3
-    assert sorted(f.name for f in out.iterdir()) == [study.RESULTS]
+    assert sorted(f.name for f in out.iterdir()) == [study.RESULTS, study.SCENARIOS]
     monkeypatch.setattr(study, "run_point", real)
     done = study.run_study(study.load_study(p), out, resume=True)
     assert done["ran"] == len(rows) - 3
-    assert sorted(f.name for f in out.iterdir()) >= sorted(
-        [study.RESULTS, *study.SUMMARY_FILES.values()])
+    assert {f.name for f in out.iterdir()} >= {study.RESULTS, study.SCENARIOS,
+                                               *study.SUMMARY_FILES.values()}
     summary = json.loads((out / "summary.json").read_text())["configurations"]
     assert sum(c["runs"] for c in summary) == len(rows)
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import codecs
 import contextlib
 import csv
+import dataclasses
+import hashlib
 import difflib
 import itertools
 import json
@@ -33,7 +35,7 @@ from .. import designs, gp2, safe_yaml
 from ..core import (MAX_SEEDS, RESULT_ROW_BYTES, RESULT_ROW_TEXT_BYTES, SEED_MAX,
                     SENSOR_MODEL, key_unit, work_refusal)
 from ..errors import OutputError, TooBig, brief, printable
-from ..outputs import OutputSet, atomic_file, sole_writer
+from ..outputs import OutputSet, atomic_file, sole_writer, write_text_atomic
 from ..pipeline import scenario_text
 from ..resources import installed_version
 from ..scenario import ScenarioError, counted_seeds, load_scenario, scenario_file
@@ -569,6 +571,51 @@ def _check_same_designs(path: Path, rows: Sequence[Mapping[str, str]],
                                  "another name, or choose another --out")
 
 
+SCENARIOS = "scenarios.json"   # beside results.csv: what each scenario was when it ran
+
+
+def scenario_digest(sc) -> str:
+    """A scenario's fingerprint: SHA-256 of everything that shapes its runs (not its file's
+    comments, layout, description or path)."""
+    return hashlib.sha256(repr(dataclasses.replace(sc, source="", description=""))
+                          .encode()).hexdigest()
+
+
+def _check_same_scenarios(out: Path, rows: Sequence[Mapping[str, str]],
+                          points: Sequence[Point]) -> None:
+    """:class:`StudyError` for kept rows of a scenario file edited since they ran: resumed,
+    the study ran none of them again and summarised the old room under the file's name.
+    Then records every scenario's fingerprint in ``out``/scenarios.json."""
+    path = out / SCENARIOS
+    recorded: dict = {}
+    if path.exists():
+        try:
+            raw = json.loads(path.read_text())
+            recorded = raw["scenarios"]
+            if not (isinstance(recorded, dict) and all(isinstance(v, str)
+                                                       for v in recorded.values())):
+                raise TypeError
+        except (OSError, UnicodeDecodeError, ValueError, TypeError, KeyError) as exc:
+            raise StudyError(f"{path}: not the record a study keeps of its scenarios "
+                             f"({getattr(exc, 'strerror', None) or 'damaged or edited'}); "
+                             "remove it (its scenarios are then taken as they are now) or "
+                             "choose another --out") from None
+    now = {label: scenario_digest(load_scenario(label))
+           for label in dict.fromkeys(p.scenario for p in points)}
+    kept: dict[str, int] = {}
+    for row in rows:
+        kept[row["scenario"]] = kept.get(row["scenario"], 0) + 1
+    for label, digest in now.items():
+        if kept.get(label) and recorded.get(label, digest) != digest:
+            raise StudyError(f"{path.parent / RESULTS}: its {kept[label]} run(s) of {label} "
+                             "were made before the file changed (another room, ring, effects "
+                             "or knobs); resumed, they would be summarised as runs of it: "
+                             "restore the file, save the changed one under another name, or choose "
+                             "another --out")
+    recorded.update(now)
+    write_text_atomic(path, json.dumps({"format": 1, "scenarios": recorded}, indent=1) + "\n")
+
+
 def row_key(row: Mapping[str, Any]) -> tuple[str, ...]:
     """A row's grid point as text (the same as :attr:`Point.key`)."""
     return (str(row["design"]), str(row["scenario"]), str(row["step_stride"]),
@@ -653,6 +700,7 @@ def _run_study(study, points: list, out: Path, ex, resume: bool, progress, on_st
         raise StudyError(f"{path}: already holds {len(existing)} run(s); pass --resume to run "
                          "only the missing ones, or choose another --out")
     _check_same_designs(path, existing, points)
+    _check_same_scenarios(out, existing, points)
     done = {row_key(r) for r in existing}
     todo = [p for p in points if p.key not in done]
     refusal = work_refusal(    # the kept rows of points no longer in the study are read back too
