@@ -118,10 +118,13 @@ class BeamStage(Stage):
         self.off_axis_rad = half * np.sqrt((i + 0.5) / n)          # α_i
         self.around_rad = i * math.pi * (3.0 - math.sqrt(5.0))     # ψ_i, golden angle
         sigma = params.gaussian_width * half
-        w = np.exp(-0.5 * (self.off_axis_rad / sigma) ** 2) if sigma > 0 else np.ones(n)
-        if not w.sum() > 0:   # a narrow Gaussian underflowed at every ray: the same ratios,
-            z = -0.5 * (self.off_axis_rad / sigma) ** 2   # taken from the ray nearest the axis
+        if sigma > 0:
+            # shifted by the largest exponent (the ray nearest the axis weighs 1): a narrow
+            # Gaussian that underflows at every ray keeps its ratios, not NaN weights
+            z = -0.5 * (self.off_axis_rad / sigma) ** 2
             w = np.exp(z - z.max())
+        else:
+            w = np.ones(n)
         self.weights = w / w.sum()
         # ray = cos α · axis + sin α cos ψ · right + sin α sin ψ · up
         self._coeffs = np.stack([np.cos(self.off_axis_rad),
