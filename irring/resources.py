@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import sys
 from pathlib import Path
 
 from .errors import KernelError
@@ -26,6 +27,14 @@ def _find(name: str) -> Path:
             return candidate
     raise FileNotFoundError(f"irring's bundled '{name}' folder is missing; reinstall irring "
                             f"(looked in {_PACKAGE / '_data'} and {_PACKAGE.parent})")
+
+
+def python_here(code: str) -> list[str]:
+    """The command line ``[python, "-c", code]`` of a child process that imports the irring
+    this process imported. ``-c`` and ``-m`` put the working folder first on ``sys.path``: in
+    a checkout beside a ``pip install .`` the child would import the checkout, whose kernels
+    are not built; here the folder irring came from takes the working folder's place."""
+    return [sys.executable, "-c", f"import sys; sys.path[0] = {str(_PACKAGE.parent)!r}\n{code}"]
 
 
 @functools.lru_cache(maxsize=1)

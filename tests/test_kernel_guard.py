@@ -172,3 +172,19 @@ def test_an_in_place_rebuild_names_the_build_requirements_this_environment_lacks
         "python -m irring.kernel_build: error: an in-place build needs cython>=3.0 in this "
         "environment; `pip install -e .` rebuilds the kernels without them (pip builds in an "
         "environment of its own), or install them first: pip install 'cython>=3.0'\n")
+
+
+def test_a_child_process_imports_this_irring_not_the_working_folders(tmp_path):
+    """bench render and bench study time fresh processes: in a checkout beside a `pip install
+    .`, `python -m`/`-c` imported the checkout (kernels not built) and the bench failed."""
+    from irring.resources import python_here
+
+    (tmp_path / "irring").mkdir()
+    (tmp_path / "irring" / "__init__.py").write_text("raise ImportError('not this irring')\n")
+    bare = subprocess.run([sys.executable, "-c", "import irring"], cwd=tmp_path,
+                          capture_output=True, text=True)
+    assert bare.returncode == 1 and "ImportError: not this irring" in bare.stderr
+    child = subprocess.run(python_here("import irring, sys; print(irring.__file__, sys.argv[1:])")
+                           + ["a", "b"], cwd=tmp_path, capture_output=True, text=True)
+    assert child.returncode == 0, child.stderr
+    assert child.stdout == f"{irring.__file__} ['a', 'b']\n"

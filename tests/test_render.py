@@ -262,9 +262,15 @@ def test_pose_numbers_clear_each_other_when_poses_crowd():
     assert dx == 0 and 0 < dy < 0.15
 
 
-def test_render_bench_times_fresh_processes_and_counts_the_frames(capsys):
+def test_render_bench_times_fresh_processes_and_counts_the_frames(capsys, tmp_path,
+                                                                   monkeypatch):
     from irring.studies import render_bench, report
 
+    # run from a folder holding another irring (a checkout beside `pip install .`): its
+    # fresh processes still run this one (`python -m` ran the folder's, kernels unbuilt)
+    (tmp_path / "irring").mkdir()
+    (tmp_path / "irring" / "__init__.py").write_text("raise ImportError('not this irring')\n")
+    monkeypatch.chdir(tmp_path)
     with pytest.raises(ValueError, match="repeats must be ≥ 1, got 0"):
         render_bench.measure("t_room_cylinder", repeats=0)
     r = render_bench.measure("t_room_cylinder", repeats=1, progress=True)

@@ -20,11 +20,14 @@ import tempfile
 import time
 
 from .. import pipeline
+from ..resources import python_here
 from ..scenario import load_scenario
 from .report import load_average, load_line
 
 KEYS = ("cpu_make_map_s", "wall_make_map_s", "cpu_render_s", "wall_render_s",
         "cpu_load_render_s", "wall_command_s", "cpu_command_s", "peak_memory_mb")
+# `python -m {}` in a fresh process, as resources.python_here starts it
+_RUN_MODULE = "import runpy; runpy.run_module({!r}, run_name='__main__', alter_sys=True)"
 
 
 def one_run(scenario_name: str) -> dict:
@@ -60,8 +63,8 @@ def measure(scenario_name: str, repeats: int = 5, progress: bool | None = None) 
     with pipeline.progress_bar(repeats, "bench render", progress, unit="repeat") as bar:
         for _ in range(repeats):   # the parts and the command in turn: both see the same load
             t = time.perf_counter()
-            out = subprocess.run([sys.executable, "-m", __name__, scenario_name], check=True,
-                                 capture_output=True, text=True)
+            out = subprocess.run(python_here(_RUN_MODULE.format(__name__)) + [scenario_name],
+                                 check=True, capture_output=True, text=True)
             run = json.loads(out.stdout)
             run["wall_process_s"] = time.perf_counter() - t   # interpreter start included
             runs.append(run)
@@ -86,8 +89,9 @@ def _irring_run(scenario_name: str) -> tuple[float, float]:
     with tempfile.TemporaryDirectory() as tmp:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "irring", "run", scenario_name, "--out",
-                        os.path.join(tmp, "out"), "--json"], check=True, capture_output=True)
+        subprocess.run(python_here(_RUN_MODULE.format("irring")) + [
+            "run", scenario_name, "--out", os.path.join(tmp, "out"), "--json"],
+            check=True, capture_output=True)
         wall = time.perf_counter() - t
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -15,6 +14,7 @@ from typing import Sequence
 
 from .. import designs
 from ..pipeline import progress_bar
+from ..resources import python_here
 from .executor import executor
 from .report import load_average, load_line
 from .study import DesignSpec, Study, grid, read_results, run_study
@@ -55,7 +55,7 @@ def _memory(seeds: int, workers: int, tmp: Path) -> dict:
                                     f"scenarios: [{', '.join(s.scenarios)}]\n"
                                     f"seeds: {list(s.seeds)}\n")
     t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, "-c", _CHILD, "study", str(tmp / "study.yaml"),
+    out = subprocess.run([*python_here(_CHILD), "study", str(tmp / "study.yaml"),
                           "--out", str(tmp / "out"), "--workers", str(workers)],
                          check=True, capture_output=True, text=True).stdout
     wall = time.perf_counter() - t0
