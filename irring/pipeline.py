@@ -23,8 +23,8 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from . import recording as rec
-from .core import (Points, Reason, RingSource, SourceLost, Sweep, in_turn_order, inside_outline,
-                   score_text)
+from .core import (Points, Pose, Reason, RingSource, SourceLost, Sweep, in_turn_order,
+                   inside_outline, score_text)
 from .estimation.calibration import CalibrationError, load_calibration, scene_calibration
 from .estimation.estimate import estimate
 from .gp2 import SENSORS
@@ -342,13 +342,29 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
                  frames_per_sweep=int(frames_per_sweep), timings_s=timings)
     if score and scenario is not None:
         t0 = time.perf_counter()
+        judged = swept_scenario(scenario, sweeps)
         if truth is None:
             with progress_bar(0, "score", progress, unit="cell") as bar:
-                truth = metrics.ground_truth(scenario, grid, bar)
+                truth = metrics.ground_truth(judged, grid, bar)
         run.truth = truth
-        run.scores = metrics.score(grid, scenario, run.truth)
+        run.scores = metrics.score(grid, judged, run.truth)
         run.timings_s["score"] = time.perf_counter() - t0
     return run
+
+
+def swept_scenario(scenario: Scenario, sweeps: Sequence[Sweep]) -> Scenario:
+    """``scenario`` with the scan poses its standing ring was swept at (``irring run``'s are
+    its own): a drive given fewer --poses, other --pose or stopped half-way is judged on the
+    wall it could see, not on what the poses never swept would have seen. A moving scene is
+    judged on its drive (``metrics.views``)."""
+    if scenario.has("motion"):
+        return scenario
+    swept = np.array([np.asarray(sweep.pose, dtype=float)[:3] for sweep in sweeps])
+    listed = np.array([(p.x_m, p.y_m, p.yaw_rad) for p in scenario.robot.poses])
+    if swept.shape == listed.shape and np.array_equal(swept, listed):
+        return scenario
+    poses = tuple(Pose(*(float(v) for v in pose)) for pose in swept)
+    return dataclasses.replace(scenario, robot=dataclasses.replace(scenario.robot, poses=poses))
 
 
 def with_cone(points: Points, sweep: Sweep) -> Points:

@@ -2826,3 +2826,22 @@ def test_resuming_a_study_whose_scenario_file_changed_is_refused(tmp_path, capsy
         "the file changed (another room, ring, effects or knobs); resumed, they would be "
         "summarised as runs of it: restore the file, save the changed one under another name, "
         "or choose another --out\n")
+
+
+def test_a_drive_of_fewer_or_other_poses_is_scored_on_what_it_swept(t_room):
+    """`drive --truth t_room --poses 1` (or --pose 1920,450, or a drive stopped after its
+    first pose) swept one pose, yet was scored against the wall t_room's four poses see:
+    recall 0.332, F1 0.498, coverage 0.335, where t_room with that one pose listed scores
+    F1 0.999. The sweeps' own poses judge a standing scene now; `irring run` is unchanged."""
+    from irring.simulation.sim import SimRing
+
+    one = dataclasses.replace(t_room, robot=dataclasses.replace(
+        t_room.robot, poses=t_room.robot.poses[:1]))
+    sweep = SimRing(t_room).sweep(0)
+    cal = Calibration.for_scene(t_room)
+    first = pipeline.map_sweeps([sweep], scenario=t_room, calibration=cal)
+    alone = pipeline.map_sweeps([sweep], scenario=one, calibration=cal)
+    assert first.scores == alone.scores
+    assert first.scores["occupied_recall"] > 0.99
+    every = [SimRing(t_room).sweep(k) for k in range(len(t_room.robot.poses))]
+    assert pipeline.swept_scenario(t_room, every) is t_room   # irring run's: as listed

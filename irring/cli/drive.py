@@ -45,8 +45,9 @@ map_building.gif, map.pgm + map.yaml (ROS map_server), sweeps.npz (for `irring r
 plus link.json (the protocol version and a per-sweep link report: missing steps, checksum
 failures, seq gaps, timeouts).
 
-Poses: with --truth the scenario's scan poses are used (and the map is scored against it);
-otherwise give each pose with --pose X_MM,Y_MM,YAW_DEG (default: one pose at the origin).
+Poses: with --truth the scenario's scan poses are used (and the map is scored against it,
+from the poses swept); otherwise give each pose with --pose X_MM,Y_MM,YAW_DEG (default: one
+pose at the origin).
 Between poses drive waits for Enter when run at a terminal (--no-wait to skip); the emulator
 moves its robot by itself at every full sweep.
 
