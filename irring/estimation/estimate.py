@@ -599,6 +599,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                                             grouping.alpha, grouping.cx, grouping.cy, profiler,
                                             judge)
         points, label = alone_at_an_edge(points, label, counts, steps, cal)
+        # a curved wall's chords on its circle (the lines as the rules above left them)
+        points, label = bowed_lines(points, label, counts, cal)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -2169,6 +2171,269 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
         points = onto_circles(points, at, cid, circ, cal.min_range_m, own_cap_m)
     return points, label
 
+
+
+BOW_MIN = 10            # a line of at least this many valid members is asked for a bow …
+BOW_PRE_F = 10.0        # … where its members as they lie bow by this F already (cheap) …
+BOW_ITERATIONS = 8      # … then read on a parabola by Table II's iteration (at most this
+BOW_SETTLED_RAD = math.radians(0.2)  # many steps, settled to this) and kept where the
+BOW_F = 25.0            # parabola beats the line by this F (1, n − 3), …
+BOW_TURN_RAD = math.radians(3)   # … turns at least this much across the members …
+BOW_RADIUS_M = (0.5, 4.0)        # … at a radius within these (tighter: round_runs')
+BOW_POOL_M = 0.02       # a circle holds the bowed lines whose members lie this near it on average
+BOW_CIRCLES = 3         # at most this many circles a sweep
+BOW_JOIN_MIN = 5        # a line of at least this many valid members takes a circle …
+BOW_MISFIT = ARC_MISFIT  # … that its members, read at the circle's θ, misfit this little
+BOW_DOUBT_RAD = math.radians(3)  # a reading on a circle: σ includes d over θ ± this
+
+
+def _bow_fit(g: np.ndarray, n_g: int, s: np.ndarray, nn: np.ndarray, w: np.ndarray
+             ) -> np.ndarray:
+    """Weighted least-squares parabola nn = a + b·s + c·s² per group: (n_g, 3)."""
+    pw, r = np.empty((5, n_g)), np.empty((n_g, 3, 1))
+    wk = w
+    for k in range(5):
+        pw[k] = np.bincount(g, wk, n_g)
+        if k < 3:
+            r[:, k, 0] = np.bincount(g, wk * nn, n_g)
+        wk = wk * s
+    m = pw[np.add.outer(np.arange(3), np.arange(3))].transpose(2, 0, 1)
+    m[:, [0, 1, 2], [0, 1, 2]] += 1e-12
+    return np.linalg.solve(m, r)[..., 0]
+
+
+def _kasa_circle(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The least-squares (Kåsa) circle through points: centre x, y and radius."""
+    mx, my = x.mean(), y.mean()
+    u, v = x - mx, y - my
+    w = u * u + v * v
+    suu, svv, suv = (u * u).sum(), (v * v).sum(), (u * v).sum()
+    suw, svw = (u * w).sum(), (v * w).sum()
+    det = suu * svv - suv * suv
+    det = det if abs(det) > 1e-18 else 1e-18
+    a = 0.5 * (suw * svv - svw * suv) / det
+    b = 0.5 * (svw * suu - suw * suv) / det
+    return np.array([mx + a, my + b, math.sqrt(a * a + b * b + (suu + svv) / x.size)])
+
+
+def _bow_circles(x: np.ndarray, y: np.ndarray, g: np.ndarray, n_g: int, good: np.ndarray,
+                 strength: np.ndarray) -> np.ndarray:
+    """Circles (3, C: centre x, y, radius) through the groups ``good`` (members ``x``, ``y``
+    of group ``g``): one fitted to them all, refitted to those whose members lie on it within
+    ``BOW_POOL_M`` on average until that holds, then the rest likewise (from the strongest
+    (``strength``) where none lies on the circle of all), at most ``BOW_CIRCLES``."""
+    nm = np.maximum(np.bincount(g, minlength=n_g), 1)
+    left = good.copy()
+    circles = []
+    while left.any() and len(circles) < BOW_CIRCLES:
+        agree = left & False
+        for use in (left, np.arange(n_g) == np.flatnonzero(left)[np.argmax(strength[left])]):
+            for _ in range(4):
+                on = use[g]
+                c = _kasa_circle(x[on], y[on])
+                res = np.abs(np.hypot(x - c[0], y - c[1]) - c[2])
+                agree = left & (np.bincount(g, res, n_g) / nm <= BOW_POOL_M)
+                if not agree.any() or np.array_equal(agree, use):
+                    break
+                use = agree
+            if agree.any():
+                break
+        if not agree.any():
+            break
+        circles.append(c)
+        left &= ~agree
+    return np.stack(circles, axis=1) if circles else np.zeros((3, 0))
+
+
+def bowed_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration
+                ) -> tuple[Points, np.ndarray]:
+    """Line members on a curved wall (a polygonal arc, a round room's many sides) read at
+    the incidence their beams meet its circle; numpy, shared by both estimators.
+
+    A line of at least ``BOW_MIN`` valid members is one chord of such a wall: each member
+    took the chord's θ, wrong by as much as the wall turns along it. Where its members bow
+    (``BOW_PRE_F``), they are read on a parabola in the line's frame by Table II's
+    iteration (fit, re-read each at the incidence its beam meets the curve, until θ
+    settles); the line is bowed where the parabola then beats it by ``BOW_F`` (F test
+    against the parabola's own scatter) and turns by ``BOW_TURN_RAD`` or more at a radius
+    within ``BOW_RADIUS_M``. The bowed lines' members make up to ``BOW_CIRCLES`` circles
+    (:func:`_bow_circles`), and every line of ``BOW_JOIN_MIN`` valid members or more takes
+    the circle its members, read at the θ their beams meet it with, misfit least where that
+    is within ``BOW_MISFIT`` on average (σ², each at most ``ARC_MISS``): a short line read
+    far along the same wall fits its own chord as well, the circle's evidence is the long
+    lines'. Its members leave their line (label −1) at that θ and are put where their beams
+    meet the circle as :func:`snap_to_lines` puts a member on its line (in from behind
+    always, out by at most ``SNAP_SIGMAS`` σ, within the range; σ the circle's there plus
+    ``SNAP_OWN`` of their own: their noise and d over θ ± ``BOW_DOUBT_RAD``). Returns the
+    points and ``label``. Why: docs/estimator.md, "Curved walls"."""
+    flat = label.reshape(-1)
+    valid = points.valid.reshape(-1)
+    idx = ((flat >= 0) & valid).nonzero()[0]
+    if idx.size < BOW_MIN:
+        return points, label
+    lab = flat[idx]
+    ask = np.bincount(lab) >= BOW_MIN
+    if not ask.any():
+        return points, label
+    sel = ask[lab]
+    idx = idx[sel]
+    g = (np.cumsum(ask) - 1)[lab[sel]]
+    n_g = int(np.count_nonzero(ask))
+    nm = np.bincount(g, minlength=n_g).astype(float)
+    ox, oy = points.origin_x.reshape(-1)[idx], points.origin_y.reshape(-1)[idx]
+    h = points.heading.reshape(-1)[idx]
+    ex, ey = np.cos(h), np.sin(h)
+    s_c = np.asarray(counts, dtype=float).reshape(-1)[idx]
+    d_line = points.d.reshape(-1)[idx]
+    x, y = ox + d_line * ex, oy + d_line * ey
+    # each line's frame: its members' TLS line; s along it, n across
+    cx, cy = np.bincount(g, x, n_g) / nm, np.bincount(g, y, n_g) / nm
+    u, v = x - cx[g], y - cy[g]
+    al = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_g), np.bincount(g, u * u - v * v, n_g))
+    ux, uy = np.cos(al)[g], np.sin(al)[g]
+    en = -ex * uy + ey * ux
+    sig_s = cal.sigma_counts() / s_c
+    noise = range_sigma(cal.log_ab(points.theta.reshape(-1)[idx])[1], d_line, sig_s)
+    w = 1.0 / np.maximum(noise * np.abs(en), SIGMA_FLOOR_M) ** 2
+    # asked further only where the members as they lie already bow (one fit)
+    s0, n0 = u * ux + v * uy, -u * uy + v * ux
+    c0 = _bow_fit(g, n_g, s0, n0, w)
+    r0 = n0 - (c0[g, 0] + (c0[g, 1] + c0[g, 2] * s0) * s0)
+    chi0 = np.bincount(g, w * r0 * r0, n_g)
+    pre = ((np.bincount(g, w * n0 * n0, n_g) - chi0)
+           / np.maximum(chi0 / np.maximum(nm - 3, 1), 1.0)) >= BOW_PRE_F
+    if not pre.any():
+        return points, label
+    sel = pre[g]
+    idx, ox, oy, ex, ey, s_c, sig_s, d_line, en, noise, w, ux, uy = (
+        a[sel] for a in (idx, ox, oy, ex, ey, s_c, sig_s, d_line, en, noise, w, ux, uy))
+    cx, cy = cx[pre], cy[pre]
+    g = (np.cumsum(pre) - 1)[g[sel]]
+    n_g = int(np.count_nonzero(pre))
+    nm = nm[pre]
+    es = ex * ux + ey * uy
+    so = (ox - cx[g]) * ux + (oy - cy[g]) * uy
+    no = -(ox - cx[g]) * uy + (oy - cy[g]) * ux
+    log_s = np.log(s_c)
+
+    def meet(coef, t):
+        """Where each beam meets its line's parabola (Newton from t), the incidence there
+        and the curve's slope."""
+        a, b, c = coef[g, 0], coef[g, 1], coef[g, 2]
+        for _ in range(4):
+            ss = so + t * es
+            f = no + t * en - (a + (b + c * ss) * ss)
+            fp = en - (b + 2.0 * c * ss) * es
+            t = t - f / np.where(np.abs(fp) > 1e-9, fp, 1e-9)
+        m = b + 2.0 * c * (so + t * es)
+        cos = np.abs(en - m * es) / np.sqrt(1.0 + m * m)
+        return t, np.arccos(np.clip(cos, 0.0, 1.0)), m
+
+    # the line: its members against it (the held iterations' fixed point)
+    t, _, _ = meet(np.zeros((n_g, 3)), d_line)
+    z = (d_line - t) / noise
+    chi_line = np.bincount(g, z * z, n_g)
+    # the parabola: Table II's iteration with the curve in place of the line
+    d, th = d_line, None
+    settled = np.zeros(n_g, dtype=bool)
+    for _ in range(BOW_ITERATIONS):
+        coef = _bow_fit(g, n_g, so + d * es, no + d * en, w)
+        _, th_new, _ = meet(coef, d)
+        th_new = np.minimum(th_new, cal.max_incidence_rad)
+        settled = (np.bincount(g, np.abs(th_new - th) > BOW_SETTLED_RAD, n_g) == 0
+                   if th is not None else settled)
+        th = th_new
+        la, b = cal.log_ab(th)
+        d = np.exp(la + b * log_s)
+        if settled.all():
+            break
+    coef = _bow_fit(g, n_g, so + d * es, no + d * en, w)
+    t, _, m = meet(coef, d)
+    z = (d - t) / range_sigma(b, d, sig_s)
+    chi_par = np.bincount(g, z * z, n_g)
+    ang = np.arctan(m)
+    lo, hi = np.full(n_g, np.inf), np.full(n_g, -np.inf)
+    np.minimum.at(lo, g, ang)
+    np.maximum.at(hi, g, ang)
+    radius = 1.0 / np.maximum(np.abs(2.0 * coef[:, 2]), 1e-12)
+    F = (chi_line - chi_par) / np.maximum(chi_par / np.maximum(nm - 3, 1), 1.0)
+    good = (settled & (F >= BOW_F) & (hi - lo >= BOW_TURN_RAD) & (radius >= BOW_RADIUS_M[0])
+            & (radius <= BOW_RADIUS_M[1])
+            & (np.bincount(g, ~(np.isfinite(t) & (t > 0)), n_g) == 0))
+    if not good.any():
+        return points, label
+    circ = _bow_circles(ox + d * ex, oy + d * ey, g, n_g, good, F)
+    if circ.shape[1] == 0:
+        return points, label
+    return _onto_bow_circles(points, label, counts, cal, circ)
+
+
+def _onto_bow_circles(points: Points, label: np.ndarray, counts: np.ndarray,
+                      cal: Calibration, circ: np.ndarray) -> tuple[Points, np.ndarray]:
+    """:func:`bowed_lines`' second half: every line of ``BOW_JOIN_MIN`` valid members or more
+    read on the circle ``circ`` (3, C) it fits best, where it fits, and put on it."""
+    flat = label.reshape(-1)
+    idx = ((flat >= 0) & points.valid.reshape(-1)).nonzero()[0]
+    g = np.unique(flat[idx], return_inverse=True)[1]
+    n_g = int(g.max()) + 1
+    nm = np.bincount(g, minlength=n_g)
+    ox, oy = points.origin_x.reshape(-1)[idx], points.origin_y.reshape(-1)[idx]
+    h = points.heading.reshape(-1)[idx]
+    ex, ey = np.cos(h), np.sin(h)
+    s_c = np.asarray(counts, dtype=float).reshape(-1)[idx]
+    sig_s = cal.sigma_counts() / s_c
+    # each beam on each circle: ahead of it, from inside (a room's wall) or outside (a bay)
+    rx, ry = circ[0][:, None] - ox, circ[1][:, None] - oy          # (C, M)
+    along = rx * ex + ry * ey
+    r = circ[2][:, None]
+    inside = rx * rx + ry * ry < r * r
+    disc = along * along - (rx * rx + ry * ry - r * r)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    t = np.where(inside, along + root, along - root)
+    th = np.arccos(np.clip(np.abs((t * ex - rx) * ex + (t * ey - ry) * ey) / r, 0.0, 1.0))
+    meets = (disc > 0.0) & (t > 0.0) & (th <= cal.max_incidence_rad)
+    la, b = cal.log_ab(np.minimum(th, cal.max_incidence_rad))
+    dd = np.exp(la + b * np.log(s_c))
+    noise = range_sigma(b, dd, sig_s)
+    z = (dd - t) / noise
+    mis = np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
+    cost = np.stack([np.bincount(g, m_, n_g) for m_ in mis]) / np.maximum(nm, 1)   # (C, L)
+    best = np.argmin(cost, axis=0)
+    fits = (cost[best, np.arange(n_g)] <= BOW_MISFIT) & (nm >= BOW_JOIN_MIN)
+    taken = fits[g]
+    if not taken.any():
+        return points, label
+    on_circle = taken & meets[best[g], np.arange(idx.size)]
+    # a taken line's members whose beams miss its circle (past the drop-out angle) keep no
+    # θ: theirs came from the line, now on the circle
+    gone = idx[taken & ~on_circle]
+    label = label.copy()
+    label.reshape(-1)[idx[taken]] = -1
+    if gone.size:
+        points = invalidated(points, gone, Reason.INCIDENCE_UNKNOWN)
+    j = on_circle.nonzero()[0]
+    if j.size == 0:
+        return points, label
+    c = best[g[j]]
+    at = idx[j]
+    th_t, d_t, s_t = th[c, j], dd[c, j], s_c[j]
+    lo_d = cal.distance(s_t, np.maximum(th_t - BOW_DOUBT_RAD, 0.0))
+    hi_d = cal.distance(s_t, np.minimum(th_t + BOW_DOUBT_RAD, cal.max_incidence_rad))
+    sig = np.hypot(noise[c, j], 0.5 * np.abs(lo_d - hi_d))
+    points = placed_at(points, at, d_t, th_t, sig)
+    # onto the circle: its uncertainty there from its readings' radial scatter
+    t_c = t[c, j]
+    radial = np.abs(np.hypot(ox[j] + d_t * ex[j] - circ[0][c], oy[j] + d_t * ey[j] - circ[1][c])
+                    - circ[2][c])
+    n_on = np.maximum(np.bincount(c, minlength=circ.shape[1]), 1)
+    rms = np.sqrt(np.bincount(c, radial * radial, circ.shape[1]) / n_on)
+    fit = rms[c] / np.sqrt(n_on[c]) / np.maximum(np.cos(th_t), 0.1)
+    on = ((t_c - d_t <= SNAP_SIGMAS * sig) & (t_c >= cal.min_range_m)
+          & (t_c <= points.max_range_m))
+    if on.any():
+        sig_on = np.maximum(np.hypot(fit, SNAP_OWN * sig), SIGMA_FLOOR_M)
+        points = placed_at(points, at[on], t_c[on], th_t[on], sig_on[on])
+    return points, label
 
 def onto_circles(points: Points, at: np.ndarray, circle: np.ndarray, circles: np.ndarray,
                  min_range_m: float, own_cap_m: float = math.inf) -> Points:
