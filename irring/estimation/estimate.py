@@ -2184,6 +2184,8 @@ BOW_POOL_M = 0.02       # a circle holds the bowed lines whose members lie this 
 BOW_CIRCLES = 3         # at most this many circles a sweep
 BOW_JOIN_MIN = 5        # a line of at least this many valid members takes a circle …
 BOW_MISFIT = ARC_MISFIT  # … that its members, read at the circle's θ, misfit this little
+BOW_WORSE = 1.0         # … and at most this much more than their own line (σ²); the
+BOW_REFITS = 1          # circles refitted to the lines they took this often at most
 BOW_DOUBT_RAD = math.radians(3)  # a reading on a circle: σ includes d over θ ± this
 
 
@@ -2259,9 +2261,13 @@ def bowed_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cali
     within ``BOW_RADIUS_M``. The bowed lines' members make up to ``BOW_CIRCLES`` circles
     (:func:`_bow_circles`), and every line of ``BOW_JOIN_MIN`` valid members or more takes
     the circle its members, read at the θ their beams meet it with, misfit least where that
-    is within ``BOW_MISFIT`` on average (σ², each at most ``ARC_MISS``): a short line read
-    far along the same wall fits its own chord as well, the circle's evidence is the long
-    lines'. Its members leave their line (label −1) at that θ and are put where their beams
+    is within ``BOW_MISFIT`` on average (σ², each at most ``ARC_MISS``) and at most
+    ``BOW_WORSE`` more than their own line (a short line read far along the same wall fits
+    its chord as well: the circle's evidence is the long lines'; an ellipse's lines lie off a
+    circle fitted elsewhere on it); each circle is refitted to the lines it took and asked
+    again, ``BOW_REFITS`` times. A taken line's members whose beams miss the circle are
+    INCIDENCE_UNKNOWN (their θ was the line's). The others leave their line (label −1) at
+    that θ and are put where their beams
     meet the circle as :func:`snap_to_lines` puts a member on its line (in from behind
     always, out by at most ``SNAP_SIGMAS`` σ, within the range; σ the circle's there plus
     ``SNAP_OWN`` of their own: their noise and d over θ ± ``BOW_DOUBT_RAD``). Returns the
@@ -2382,24 +2388,53 @@ def _onto_bow_circles(points: Points, label: np.ndarray, counts: np.ndarray,
     ex, ey = np.cos(h), np.sin(h)
     s_c = np.asarray(counts, dtype=float).reshape(-1)[idx]
     sig_s = cal.sigma_counts() / s_c
-    # each beam on each circle: ahead of it, from inside (a room's wall) or outside (a bay)
-    rx, ry = circ[0][:, None] - ox, circ[1][:, None] - oy          # (C, M)
-    along = rx * ex + ry * ey
-    r = circ[2][:, None]
-    inside = rx * rx + ry * ry < r * r
-    disc = along * along - (rx * rx + ry * ry - r * r)
-    root = np.sqrt(np.maximum(disc, 0.0))
-    t = np.where(inside, along + root, along - root)
-    th = np.arccos(np.clip(np.abs((t * ex - rx) * ex + (t * ey - ry) * ey) / r, 0.0, 1.0))
-    meets = (disc > 0.0) & (t > 0.0) & (th <= cal.max_incidence_rad)
-    la, b = cal.log_ab(np.minimum(th, cal.max_incidence_rad))
-    dd = np.exp(la + b * np.log(s_c))
-    noise = range_sigma(b, dd, sig_s)
-    z = (dd - t) / noise
-    mis = np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
-    cost = np.stack([np.bincount(g, m_, n_g) for m_ in mis]) / np.maximum(nm, 1)   # (C, L)
-    best = np.argmin(cost, axis=0)
-    fits = (cost[best, np.arange(n_g)] <= BOW_MISFIT) & (nm >= BOW_JOIN_MIN)
+    # each line's own misfit: its members against their TLS line where they lie
+    d_now = points.d.reshape(-1)[idx]
+    x, y = ox + d_now * ex, oy + d_now * ey
+    nm_f = np.maximum(nm, 1)
+    mx, my = np.bincount(g, x, n_g) / nm_f, np.bincount(g, y, n_g) / nm_f
+    u, v = x - mx[g], y - my[g]
+    al = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_g), np.bincount(g, u * u - v * v, n_g))
+    nx, ny = -np.sin(al)[g], np.cos(al)[g]
+    cos_b = ex * nx + ey * ny
+    t_line = ((mx[g] - ox) * nx + (my[g] - oy) * ny) / np.where(np.abs(cos_b) > 1e-9, cos_b,
+                                                                1e-9)
+    _, b_now = cal.log_ab(points.theta.reshape(-1)[idx])
+    z_line = (d_now - t_line) / range_sigma(b_now, d_now, sig_s)
+    own = np.bincount(g, np.minimum(z_line * z_line, ARC_MISS), n_g) / nm_f
+    log_s = np.log(s_c)
+    cols = np.arange(n_g)
+    fits = np.zeros(n_g, dtype=bool)
+    for _ in range(BOW_REFITS + 1):
+        # each beam on each circle: ahead of it, from inside (a room's wall) or outside (a bay)
+        rx, ry = circ[0][:, None] - ox, circ[1][:, None] - oy          # (C, M)
+        along = rx * ex + ry * ey
+        r = circ[2][:, None]
+        inside = rx * rx + ry * ry < r * r
+        disc = along * along - (rx * rx + ry * ry - r * r)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        t = np.where(inside, along + root, along - root)
+        th = np.arccos(np.clip(np.abs((t * ex - rx) * ex + (t * ey - ry) * ey) / r, 0.0, 1.0))
+        meets = (disc > 0.0) & (t > 0.0) & (th <= cal.max_incidence_rad)
+        la, b = cal.log_ab(np.minimum(th, cal.max_incidence_rad))
+        dd = np.exp(la + b * log_s)
+        noise = range_sigma(b, dd, sig_s)
+        z = (dd - t) / noise
+        mis = np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
+        cost = np.stack([np.bincount(g, m_, n_g) for m_ in mis]) / nm_f   # (C, L)
+        best = np.argmin(cost, axis=0)
+        c_best = cost[best, cols]
+        # … where it fits, and no worse than its own line (an ellipse's or an irregular
+        # polygon's lines lie off a circle fitted elsewhere on it; a chord fits both alike)
+        now = (c_best <= BOW_MISFIT) & (c_best <= own + BOW_WORSE) & (nm >= BOW_JOIN_MIN)
+        if np.array_equal(now, fits):
+            break
+        fits = now
+        # the circles refitted to the lines they took, read at their θ
+        for k in range(circ.shape[1]):
+            on = (fits & (best == k))[g] & meets[k]
+            if np.count_nonzero(on) >= BOW_MIN:
+                circ[:, k] = _kasa_circle((ox + dd[k] * ex)[on], (oy + dd[k] * ey)[on])
     taken = fits[g]
     if not taken.any():
         return points, label
