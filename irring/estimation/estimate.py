@@ -2201,7 +2201,10 @@ def _bow_fit(g: np.ndarray, n_g: int, s: np.ndarray, nn: np.ndarray, w: np.ndarr
         wk = wk * s
     m = pw[np.add.outer(np.arange(3), np.arange(3))].transpose(2, 0, 1)
     m[:, [0, 1, 2], [0, 1, 2]] += 1e-12
-    return np.linalg.solve(m, r)[..., 0]
+    try:
+        return np.linalg.solve(m, r)[..., 0]
+    except np.linalg.LinAlgError:   # a group whose members share one spot along the line
+        return (np.linalg.pinv(m) @ r)[..., 0]
 
 
 def _kasa_circle(x: np.ndarray, y: np.ndarray) -> np.ndarray:
