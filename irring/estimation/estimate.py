@@ -543,9 +543,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     arcs (:func:`round_runs`); with ``snap`` only (not a fold-over's judging pass): short far
     lines doubted (:func:`doubt_far_lines`), members that a better-held line their sensor's
     trace continues on places moved to it (:func:`rejoin_traces`), then the members of a
-    line their counts contradict (as rejoined) off it (:func:`counts_disown_lines`) and
-    members alone at a nearer surface's edge (:func:`alone_at_an_edge`); line
-    members onto their lines
+    line their counts contradict (as rejoined) off it (:func:`counts_disown_lines`),
+    members alone at a nearer surface's edge (:func:`alone_at_an_edge`) and a curved wall's
+    chords read on its circle (:func:`bowed_lines`); line members onto their lines
     (``snapper``, the compiled :func:`snap_to_lines` by default), members read just past
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
