@@ -2172,7 +2172,6 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     return points, label
 
 
-
 BOW_MIN = 10            # a line of at least this many valid members is asked for a bow …
 BOW_PRE_F = 10.0        # … where its members as they lie bow by this F already (cheap) …
 BOW_ITERATIONS = 8      # … then read on a parabola by Table II's iteration (at most this
@@ -2270,11 +2269,11 @@ def bowed_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cali
     circle fitted elsewhere on it); each circle is refitted to the lines it took and asked
     again, ``BOW_REFITS`` times. A taken line's members whose beams miss the circle are
     INCIDENCE_UNKNOWN (their θ was the line's). The others leave their line (label −1) at
-    that θ and are put where their beams
-    meet the circle as :func:`snap_to_lines` puts a member on its line (in from behind
-    always, out by at most ``SNAP_SIGMAS`` σ, within the range; σ the circle's there plus
-    ``SNAP_OWN`` of their own: their noise and d over θ ± ``BOW_DOUBT_RAD``). Returns the
-    points and ``label``. Why: docs/estimator.md, "Curved walls"."""
+    that θ and are put where their beams meet the circle as :func:`snap_to_lines` puts a
+    member on its line (in from behind always, out by at most ``SNAP_SIGMAS`` σ, within the
+    range; σ the circle's there plus ``SNAP_OWN`` of their own: their noise and d over
+    θ ± ``BOW_DOUBT_RAD``). Returns the points and ``label``. Why: docs/estimator.md,
+    "Curved walls"."""
     flat = label.reshape(-1)
     valid = points.valid.reshape(-1)
     idx = ((flat >= 0) & valid).nonzero()[0]
