@@ -2206,6 +2206,49 @@ def _bow_fit(g: np.ndarray, n_g: int, s: np.ndarray, nn: np.ndarray, w: np.ndarr
         return (np.linalg.pinv(m) @ r)[..., 0]
 
 
+BOW_KINK_SHARE = 0.5   # two straight pieces leave this share of a parabola's misfit or less:
+#                        a corner, not a curve (an arc's two chords fit no better than it) …
+BOW_KINK_RAD = math.radians(20)   # … where the two pieces turn by this much
+
+
+def _kinked(g: np.ndarray, n_g: int, s: np.ndarray, nn: np.ndarray, w: np.ndarray,
+            chi_par: np.ndarray, ask: np.ndarray) -> np.ndarray:
+    """(n_g,) bool: groups ``ask`` whose members (``s`` along, ``nn`` across, weights ``w``)
+    two straight pieces split at one place along ``s`` (at least 3 members each) fit better
+    than a parabola through them: at most ``BOW_KINK_SHARE`` of its weighted misfit
+    ``chi_par``."""
+    out = np.zeros(n_g, dtype=bool)
+    for k in np.flatnonzero(ask):      # (a few bowed lines a sweep)
+        on = g == k
+        order = np.argsort(s[on], kind="stable")
+        ss, yy, ww = s[on][order], nn[on][order], w[on][order]
+        n = ss.size
+        if n < 8:
+            continue
+        m = [np.cumsum(np.concatenate(([0.0], q))) for q in
+             (ww, ww * ss, ww * yy, ww * ss * ss, ww * ss * yy, ww * yy * yy)]
+        tot = [q[-1] for q in m]
+
+        def line_rss(W, S, Y, SS, SY, YY):
+            W = np.maximum(W, 1e-300)
+            vs = SS - S * S / W
+            cov = SY - S * Y / W
+            return np.maximum(YY - Y * Y / W - cov * cov / np.maximum(vs, 1e-300), 0.0)
+        cut = np.arange(3, n - 2)
+        lm = [q[cut] for q in m]
+        rm = [t - q[cut] for t, q in zip(tot, m)]
+        both = line_rss(*lm) + line_rss(*rm)
+        at = int(np.argmin(both))
+        if both[at] > BOW_KINK_SHARE * chi_par[k]:
+            continue
+        # ... turning at least BOW_KINK_RAD there (a polygonal arc's facets turn less)
+        slope = [(q[4][at] - q[1][at] * q[2][at] / max(q[0][at], 1e-300))
+                 / max(q[3][at] - q[1][at] ** 2 / max(q[0][at], 1e-300), 1e-300)
+                 for q in (lm, rm)]
+        out[k] = abs(math.atan(slope[0]) - math.atan(slope[1])) >= BOW_KINK_RAD
+    return out
+
+
 def _kasa_circle(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """The least-squares (Kåsa) circle through points: centre x, y and radius."""
     mx, my = x.mean(), y.mean()
@@ -2313,6 +2356,7 @@ def bowed_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cali
     if not pre.any():
         return points, label
     sel = pre[g]
+    s0_k, n0_k, chi0_k = s0[sel], n0[sel], chi0[pre]   # (as they lie: the corner test's)
     idx, ox, oy, ex, ey, s_c, sig_s, d_line, en, noise, w, ux, uy = (
         a[sel] for a in (idx, ox, oy, ex, ey, s_c, sig_s, d_line, en, noise, w, ux, uy))
     cx, cy = cx[pre], cy[pre]
@@ -2368,6 +2412,9 @@ def bowed_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cali
     good = (settled & (F >= BOW_F) & (hi - lo >= BOW_TURN_RAD) & (radius >= BOW_RADIUS_M[0])
             & (radius <= BOW_RADIUS_M[1])
             & (np.bincount(g, ~(np.isfinite(t) & (t > 0)), n_g) == 0))
+    # a line over a corner bows too: two straight pieces that fit its members clearly
+    # better than the parabola make it a corner, not a curve
+    good &= ~_kinked(g, n_g, s0_k, n0_k, w, chi0_k, good)
     if not good.any():
         return points, label
     circ = _bow_circles(ox + d * ex, oy + d * ey, g, n_g, good, F)
