@@ -1062,6 +1062,84 @@ class TraceKernels(TraceSteps):
                 SIGMA_FLOOR_M, TRACE_ROUNDS, options.min_points, to_corner)
 
 
+VAGUE_RATIO = 2.0   # a far line whose direction standard error is this many times another's …
+VAGUE_MIN_RAD = math.radians(2.0)   # … and at least this (its members tell it no better) …
+VAGUE_TURN_Z = 3.0  # … turned from it by at most this many of their combined errors …
+VAGUE_Z = 2.5       # … whose members, read at that line's θ, lie on it within this many
+#                     standard errors of their mean, joins it whole
+
+
+def vague_far_lines(points: Points, vi: np.ndarray, lab: np.ndarray, reading: np.ndarray,
+                    nbr: np.ndarray, good: np.ndarray, counts: np.ndarray, alpha: np.ndarray,
+                    cx: np.ndarray, cy: np.ndarray, cal: Calibration):
+    """Where a part is read to its own range: the members of each line a that a usable line
+    b its members' traces meet (``reading``, ``nbr``: :meth:`TraceSteps.pairs`) knows the
+    direction of far better, re-read on b. a and b within ``TRACE_CORNER_RAD`` of each
+    other and by at most ``VAGUE_TURN_Z`` of their combined direction standard errors
+    (:func:`direction_se`); a's ≥ ``VAGUE_RATIO`` times b's and ≥ ``VAGUE_MIN_RAD``; a's
+    members, read at the incidence their beams meet b with, lie on b on average (their mean
+    offset across b within ``VAGUE_Z`` standard errors of the mean, from their own noise);
+    of several such b, the one they lie on best. Those members placed within the range and
+    the drop-out angle move.
+    (positions into ``vi``, target lines, d, θ, σ), or None. ``vi``: the valid readings,
+    ``lab`` their lines (−1: none), ``counts`` theirs. Why: docs/estimator.md, "Vague far
+    lines"."""
+    if not read_to_own_range(cal, points.max_range_m):
+        return None
+    a, b = lab[reading], lab[nbr]
+    f = (a >= 0) & (b >= 0) & (a != b)
+    f[f] = good[b[f]]
+    if not f.any():
+        return None
+    n_lines = alpha.size
+    key = np.unique(a[f] * n_lines + b[f])
+    a, b = key // n_lines, key % n_lines
+    near = np.abs(np.sin(alpha[a] - alpha[b])) <= math.sin(TRACE_CORNER_RAD)
+    mem = (lab >= 0).nonzero()[0]          # the members, as positions into vi
+    at = vi[mem]
+    g = lab[mem]
+    theta_now = points.theta.reshape(-1)[at]
+    se = direction_se(points.x.reshape(-1)[at], points.y.reshape(-1)[at],
+                      points.sigma_m.reshape(-1)[at] * np.cos(theta_now), g, n_lines)
+    turn = np.arcsin(np.minimum(np.abs(np.sin(alpha[a] - alpha[b])), 1.0))
+    near &= ((se[a] >= VAGUE_RATIO * se[b]) & (se[a] >= VAGUE_MIN_RAD)
+             & (turn <= VAGUE_TURN_Z * np.hypot(se[a], se[b])))
+    if not near.any():
+        return None
+    a, b = a[near], b[near]
+    # each pair's members of a (m: positions among the members), re-read on b
+    order = np.argsort(g, kind="stable")
+    n_a = np.bincount(g, minlength=n_lines)[a]
+    pair = np.repeat(np.arange(a.size), n_a)
+    first = np.searchsorted(g[order], a)
+    m = order[np.repeat(first - np.cumsum(n_a) + n_a, n_a) + np.arange(pair.size)]
+    bb = b[pair]
+    h = points.heading.reshape(-1)[at[m]]
+    theta = np.arccos(np.minimum(np.abs(np.sin(h - alpha[bb])), 1.0))
+    s = counts[mem[m]]
+    d = cal.distance(s, theta)
+    _, bexp = cal.log_ab(theta)
+    sigma = np.maximum(np.abs(bexp) * d * cal.sigma_counts() / s, SIGMA_FLOOR_M)
+    qx = points.origin_x.reshape(-1)[at[m]] + d * np.cos(h)
+    qy = points.origin_y.reshape(-1)[at[m]] + d * np.sin(h)
+    across = (qy - cy[bb]) * np.cos(alpha[bb]) - (qx - cx[bb]) * np.sin(alpha[bb])
+    s_across = sigma * np.cos(theta)
+    mean = np.bincount(pair, across, a.size) / n_a
+    z = np.abs(mean) / (np.sqrt(np.bincount(pair, s_across * s_across, a.size)) / n_a)
+    z = np.where(np.isfinite(z) & (z <= VAGUE_Z), z, np.inf)
+    # each a into the b it lies on best
+    best = np.lexsort((z, a))
+    best = best[np.concatenate(([True], a[best][1:] != a[best][:-1]))]
+    best = best[np.isfinite(z[best])]
+    if not best.size:
+        return None
+    ok = (np.isin(pair, best) & (theta <= cal.max_incidence_rad) & np.isfinite(d)
+          & (d >= cal.min_range_m) & (d <= points.max_range_m))
+    if not ok.any():
+        return None
+    return mem[m[ok]], bb[ok], d[ok], theta[ok], sigma[ok]
+
+
 def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                   steps: np.ndarray, cal: Calibration, alpha: np.ndarray, cx: np.ndarray,
                   cy: np.ndarray, usable: np.ndarray, options: LineOptions,
@@ -1083,7 +1161,10 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     no line never move. At grazing incidence one sensor's readings beside a corner fit a
     line of their own at a wrong direction (7–25° off the wall, 38–125 mm off), which no
     corner test sees (< 30° from the wall's line); the wall's line, fitted by other
-    sensors' readings, places them. ``label`` (S, N): each reading's line or −1;
+    sensors' readings, places them. Before the traces, where a part is read to its own
+    range, a line whose direction another line knows far better and whose members lie on
+    that one joins it whole (:func:`vague_far_lines`). ``label`` (S, N): each reading's
+    line or −1;
     ``steps`` (S,): each row's motor step; ``alpha``, ``cx``, ``cy``, ``usable``
     (L,): the lines. Why and what it measured: docs/estimator.md ("Traces")."""
     n_sensors = label.shape[1]
@@ -1103,6 +1184,17 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     moved = np.zeros(k, dtype=bool)
     new_d, new_t, new_sig = np.full(k, np.nan), np.full(k, np.nan), np.full(k, np.nan)
     lost = np.zeros(n_lines, dtype=np.intp)     # members each line gave up
+    # far out: a line whose direction another line knows far better, its members lying on
+    # that one read at its θ, joins it whole (docs/estimator.md, "Vague far lines")
+    whole = vague_far_lines(points, vi, lab, reading, nbr, good, counts_at, alpha, cx, cy,
+                            cal)
+    if whole is not None:
+        at, to, d, theta, sigma = whole
+        np.add.at(lost, lab[at], 1)
+        lab[at] = to
+        moved[at] = True
+        new_d[at], new_t[at], new_sig[at] = d, theta, sigma
+        px[at], py[at] = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
     for _ in range(TRACE_ROUNDS):
         # the trace's frontier: a member not moved yet whose neighbour is on another usable line
         front = tracer.round(lab, moved, joined, reading, nbr, good, lost, px, py, ox, oy,
