@@ -1079,8 +1079,8 @@ def vague_far_lines(points: Points, vi: np.ndarray, lab: np.ndarray, reading: np
     (:func:`direction_se`); a's ≥ ``VAGUE_RATIO`` times b's and ≥ ``VAGUE_MIN_RAD``; a's
     members, read at the incidence their beams meet b with, lie on b on average (their mean
     offset across b within ``VAGUE_Z`` standard errors of the mean, from their own noise);
-    of several such b, the one they lie on best. Those members placed within the range and
-    the drop-out angle move.
+    of several such b, the one they lie on best, unless b joins another line itself. Those
+    members placed within the range and the drop-out angle move.
     (positions into ``vi``, target lines, d, θ, σ), or None. ``vi``: the valid readings,
     ``lab`` their lines (−1: none), ``counts`` theirs. Why: docs/estimator.md, "Vague far
     lines"."""
@@ -1131,6 +1131,7 @@ def vague_far_lines(points: Points, vi: np.ndarray, lab: np.ndarray, reading: np
     best = np.lexsort((z, a))
     best = best[np.concatenate(([True], a[best][1:] != a[best][:-1]))]
     best = best[np.isfinite(z[best])]
+    best = best[~np.isin(b[best], a[best])]   # not into a line that joins another itself
     if not best.size:
         return None
     ok = (np.isin(pair, best) & (theta <= cal.max_incidence_rad) & np.isfinite(d)
