@@ -973,3 +973,51 @@ def test_theta_unsupported_takes_only_readings_no_judging_line_placed():
     assert np.all(out.reason[gone] == Reason.INCIDENCE_UNKNOWN)
     # on a line of the judging pass: nothing goes
     assert np.array_equal(_theta_unsupported(p, ~no_first, label, sw, cal).valid, p.valid)
+
+
+# A slot 127 mm wide and 198 mm deep in a wall turned -16.6°, the ring 171 mm from the wall
+# over its mouth: the wall's lines either side, extended past their members (250 mm: they
+# block, 100 mm: a reading lies on them), met across the mouth, and the readings of the
+# sensor looking in (true 241-243 mm) were put on the near branch at 37-40 mm, their far
+# end points on the slot's back, a line two sensors agree on. Nothing seen decides: they
+# are FOLDOVER_AMBIGUOUS now (docs/foldover.md, "Across a niche's mouth").
+SLOT = """
+name: fold_slot
+room: {outline_mm: [[0, 0], [1087.6, -324.7], [1030.8, -515.2], [1152.5, -551.6],
+                    [1209.3, -361.1], [1772.3, -529.2], [2083.5, 513.1], [311.2, 1042.2]]}
+robot: {poses: [{x_mm: 1174.5, y_mm: -170.4, yaw_deg: -17.4}]}
+sensor: {model: gp2d12}
+effects: [incidence, noise, quantization, foldover]
+"""
+# the wall's niche, 160 x 118 mm, the ring 185 mm off the wall (GP2D12, true 156-187 mm)
+NICHE = """
+name: fold_niche
+room: {outline_mm: [[0, 0], [1071, 0], [1071, -118.2], [1231.8, -118.2], [1231.8, 0],
+                    [1688.2, 0], [1688.2, 1155.8], [0, 1155.8]]}
+robot: {poses: [{x_mm: 1072.5, y_mm: 185.1, yaw_deg: 27.2}]}
+sensor: {model: gp2d12}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+@pytest.mark.parametrize("room, seed, before, now", [
+    (SLOT, 630, (11, 114), (0, 103)), (NICHE, 312, (28, 76), (0, 48))], ids=["slot", "niche"])
+def test_a_line_s_extension_across_a_niche_s_mouth_decides_no_near_branch(
+        room, seed, before, now, monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc, sweeps, cal = simulated(room, seed=seed)
+    points = [estimate(sw, cal) for sw in sweeps]
+    assert _long_and_valid(points, sweeps) == now
+    for sw, p in zip(sweeps, points):
+        slow = estimate_numpy.estimate_detail(sw, cal).points
+        np.testing.assert_array_equal(slow.reason, p.reason)
+        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    monkeypatch.setattr(est, "_across_a_gap", lambda blocks, *a: np.zeros(blocks.shape[0], bool))
+    old = [estimate(sw, cal) for sw in sweeps]
+    assert _long_and_valid(old, sweeps) == before
+    for p, q in zip(points, old):
+        took = q.valid & ~p.valid
+        assert np.all(p.reason[took] == Reason.FOLDOVER_AMBIGUOUS)
+        assert np.array_equal(p.valid | took, q.valid)     # nothing made valid
+        np.testing.assert_array_equal(p.d[p.valid], q.d[p.valid])  # nor moved

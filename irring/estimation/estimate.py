@@ -4132,11 +4132,17 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     # the shortest far distance the reading can mean (its θ unknown) and the nearest near one
     far_min = np.minimum(cal.distance(s, 0.0), cal.distance(s, cal.max_incidence_rad))
     near_min = cal.near_distance(s, 0.0)
-    blocked_far = (block_span & (t < far_min[:, None] - tol_far)).any(axis=1)
+    blocks = block_span & (t < far_min[:, None] - tol_far)
+    blocked_far = blocks.any(axis=1)
     blocked_near = (block_span & (t < near_min[:, None] - tol_near)).any(axis=1)
     near_fit = np.where(on_span & seen, np.abs(t - d_near) / tol_near, np.inf)
     near_on = (near_fit <= 1.0).any(axis=1)
-    is_near = blocked_far & near_on & ~blocked_near
+    ocol = (np.where(own >= 0, col[np.maximum(own, 0)], -1) if use.size
+            else np.full(idx.size, -1))
+    gap = _across_a_gap(blocks, (along >= lo) & (along <= hi), ocol, trusted,
+                        ahead & seen & (along >= lo) & (along <= hi)
+                        & (np.abs(t - d_far) <= tol_far), e)
+    is_near = blocked_far & near_on & ~blocked_near & ~gap
     # a near end point on a trusted line anywhere along it (a wall runs on past the stretch
     # seen far: where it passes a sensor closely, only sensors further round see it far)
     # leaves the near branch possible
@@ -4149,8 +4155,6 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     seen_there, between = _seen_there(fit_far <= 1.0, along, mcol, m_along)
     # … and only where the reading's own far trace agrees (a near face read far can land
     # on the wall behind it)
-    ocol = (np.where(own >= 0, col[np.maximum(own, 0)], -1) if use.size
-            else np.full(idx.size, -1))
     # its own line anchored by certainly far members of its own sensor
     own_certain = (ocol >= 0) & (mine[np.maximum(ocol, 0) * n_sensors + sensor] >= _FOLD_ANCHOR)
     fit_far[~seen_there | ~_own_trace_agrees(between, ocol, own_certain, e)] = np.inf
@@ -4190,6 +4194,24 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         out[2].reshape(-1)[idx] = np.where(dist > 0, np.maximum(slope * dist * sig_s,
                                                                  SIGMA_FLOOR_M), 0.0)
     return near, far, out[0], out[1], out[2], use[trusted], doubted
+
+
+def _across_a_gap(blocks: np.ndarray, in_span: np.ndarray, ocol: np.ndarray,
+                  trusted: np.ndarray, far_on: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """(A,): the readings whose beam the lines ``blocks`` (A, L) only past their members'
+    span (``in_span``, (A, L): the crossing between them), while the far end point lies on a
+    line two sensors agree on (``trusted``, (L,)) running within 20° (``_FOLD_OWN_COS``) of
+    such a blocking line (directions ``e``, (L, 2)): the reading's own first-pass line
+    (``ocol``, position among the lines, −1 none) or one it fits between its members
+    (``far_on``, (A, L)). The walls either side of a niche, extended across its mouth,
+    block the beams looking in, whose far end points lie on its back: the mouth may be open,
+    or that line a near wall read far; the near branch is not decided.
+    docs/foldover.md, "Across a niche's mouth"."""
+    holds = ((ocol[:, None] == np.arange(e.shape[0])[None, :]) | far_on) & trusted[None, :]
+    # a niche's back runs along its mouth; a corner's other wall, across it, is often where
+    # a near reading of one wall lands when read far
+    along_it = (holds.astype(float) @ (np.abs(e @ e.T) >= _FOLD_OWN_COS).astype(float)) > 0
+    return (blocks & ~in_span & along_it).any(axis=1) & ~(blocks & in_span).any(axis=1)
 
 
 def _trace_chi2(x: np.ndarray, y: np.ndarray, sigma: np.ndarray, use: np.ndarray,
