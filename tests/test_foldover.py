@@ -975,12 +975,12 @@ def test_theta_unsupported_takes_only_readings_no_judging_line_placed():
     assert np.array_equal(_theta_unsupported(p, ~no_first, label, sw, cal).valid, p.valid)
 
 
-# A slot 127 mm wide and 198 mm deep in a wall turned -16.6°, the ring 171 mm from the wall
+# A slot 127 mm wide and 198 mm deep in a wall turned -16.6°, the ring 173 mm from the wall
 # over its mouth: the wall's lines either side, extended past their members (250 mm: they
 # block, 100 mm: a reading lies on them), met across the mouth, and the readings of the
 # sensor looking in (true 241-243 mm) were put on the near branch at 37-40 mm, their far
-# end points on the slot's back, a line two sensors agree on. Nothing seen decides: they
-# are FOLDOVER_AMBIGUOUS now (docs/foldover.md, "Across a niche's mouth").
+# end points on the slot's back, a line two sensors agree on along the wall. Nothing seen
+# decides: they are FOLDOVER_AMBIGUOUS now (docs/foldover.md, "Across a niche's mouth").
 SLOT = """
 name: fold_slot
 room: {outline_mm: [[0, 0], [1087.6, -324.7], [1030.8, -515.2], [1152.5, -551.6],
