@@ -3624,6 +3624,186 @@ def beam_crossings(ox, oy, ux, uy, c, e, nrm):
     return un, t, ahead, along
 
 
+# --------------------------------------------------------------------------- curved walls
+
+CONCAVE_RADII_M = (0.25, 2.5)  # a curved wall's circle: radii from this to this …
+CONCAVE_ITERATIONS = 8         # … its members read at its incidence and it refitted (at most)
+CONCAVE_FIT_Z = 2.0            # … it fits them within this reduced χ² (their noise) …
+CONCAVE_MIN_LINES = 3          # … and joins at least this many lines (two: a corner's walls) …
+# … and, by BIC, better than its lines: a χ² lower by the log of its members per parameter
+# saved (a circle 3 for 2 per line)
+
+
+def _circle_fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, start) -> tuple | None:
+    """The circle (cx, cy, r) nearest points ``x``, ``y`` (m) with weights ``w`` (1/σ²
+    across it): Gauss–Newton on the geometric distance from ``start`` (cx, cy, r); None
+    where it does not settle."""
+    cx, cy, r = (float(v) for v in start)
+    for _ in range(30):
+        dx, dy = x - cx, y - cy
+        rho = np.maximum(np.hypot(dx, dy), 1e-9)
+        jac = np.stack([-dx / rho, -dy / rho, -np.ones_like(rho)], axis=1)
+        res = rho - r
+        a = jac.T @ (jac * w[:, None])
+        try:
+            step = np.linalg.solve(a, -(jac.T @ (w * res)))
+        except np.linalg.LinAlgError:
+            return None
+        cx, cy, r = cx + step[0], cy + step[1], r + step[2]
+        if not np.all(np.isfinite((cx, cy, r))):
+            return None
+        if np.abs(step).max() < 1e-7:
+            return cx, cy, r
+    return None
+
+
+def _beam_meets_circle(ox, oy, ux, uy, cx, cy, r):
+    """(t, cos θ) where beams from inside a circle meet it going out: distance (m) and the
+    cosine of the incidence (beam against the radius there)."""
+    fx, fy = ox - cx, oy - cy
+    b = fx * ux + fy * uy
+    t = -b + np.sqrt(np.maximum(b * b - (fx * fx + fy * fy - r * r), 0.0))
+    cos = np.abs(ux * (fx + t * ux) + uy * (fy + t * uy)) / r
+    return t, np.clip(cos, 0.0, 1.0)
+
+
+def _read_on_circle(group, ox, oy, ux, uy, s, cal, circle):
+    """Self-consistent circle of readings ``group``: each read at the incidence where its
+    beam meets the circle, the circle refitted to those end points, ``CONCAVE_ITERATIONS``
+    times. Returns (circle, χ², θ) or None where it leaves the radii, the ring or the
+    drop-out angle."""
+    lo, hi = CONCAVE_RADII_M
+    for _ in range(CONCAVE_ITERATIONS):
+        cx, cy, r = circle
+        if np.any(np.hypot(ox[group] - cx, oy[group] - cy) >= r):
+            return None
+        t, cos = _beam_meets_circle(ox[group], oy[group], ux[group], uy[group], cx, cy, r)
+        theta = np.arccos(cos)
+        if np.any(theta > cal.max_incidence_rad):
+            return None
+        d = np.asarray(cal.distance(s[group], theta), dtype=float)
+        _, b = cal.log_ab(theta)
+        sigma = np.maximum(np.abs(b) * d * cal.sigma_counts() / s[group], SIGMA_FLOOR_M) * cos
+        w = 1.0 / np.maximum(sigma, 1e-6) ** 2
+        x, y = ox[group] + d * ux[group], oy[group] + d * uy[group]
+        fit = _circle_fit(x, y, w, circle)
+        if fit is None:
+            return None
+        settled = max(abs(a - b) for a, b in zip(fit, circle)) < 1e-6
+        circle = fit
+        if settled:
+            break
+    cx, cy, r = circle
+    if not lo <= r <= hi or np.any(np.hypot(ox[group] - cx, oy[group] - cy) >= r):
+        return None
+    t, cos = _beam_meets_circle(ox[group], oy[group], ux[group], uy[group], cx, cy, r)
+    theta = np.arccos(cos)
+    if np.any(theta > cal.max_incidence_rad):
+        return None
+    chi2 = float(np.sum(w * (np.hypot(x - cx, y - cy) - r) ** 2))
+    return circle, chi2, theta
+
+
+def _line_chi2(group, ox, oy, ux, uy, s, cal, theta):
+    """χ² of readings ``group`` about their own line, each read at its line's θ (TLS)."""
+    d = np.asarray(cal.distance(s[group], theta[group]), dtype=float)
+    _, b = cal.log_ab(theta[group])
+    sigma = (np.maximum(np.abs(b) * d * cal.sigma_counts() / s[group], SIGMA_FLOOR_M)
+             * np.cos(theta[group]))
+    w = 1.0 / np.maximum(sigma, 1e-6) ** 2
+    x, y = ox[group] + d * ux[group], oy[group] + d * uy[group]
+    mx, my = np.average(x, weights=w), np.average(y, weights=w)
+    u, v = x - mx, y - my
+    alpha = 0.5 * np.arctan2(2.0 * np.sum(w * u * v), np.sum(w * (u * u - v * v)))
+    perp = -u * np.sin(alpha) + v * np.cos(alpha)
+    return float(np.sum(w * perp * perp))
+
+
+def onto_concave_arcs(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration,
+                      own_cap_m: float = math.inf) -> Points:
+    """``p`` with the members of neighbouring lines (``label``, −1 none; lines of at least
+    ``SNAP_MIN`` valid members) that one circle around the ring fits better put on it: a
+    curved wall made of straight pieces (a round room, a bay), which lines fit each over
+    several pieces, their θ 10–30° off the pieces' and their members 20–40 mm long (2–6σ).
+    Lines are joined in the order of their bearing from the ring's centre while their
+    members, each read at the incidence where its beam meets the circle
+    (:func:`_read_on_circle`), fit it within ``CONCAVE_FIT_Z`` reduced χ² and, by BIC,
+    better than the lines did; the circle encloses every emitter (a wall seen from inside,
+    never a post) with a radius within ``CONCAVE_RADII_M``. Each member its own reading at the
+    circle's incidence puts within ``SNAP_SIGMAS`` of it is then put where its beam meets the
+    circle, at that incidence, its σ the circle's uncertainty there with half its own (at
+    most ``own_cap_m``), as :func:`snap_to_lines` puts a line's. ``counts`` (S, N): the counts the lines were read
+    from. numpy, shared by both estimators. docs/foldover.md, "Curved walls"."""
+    member = p.valid & (label >= 0)
+    if not member.any():
+        return p
+    n_lines = int(label[member].max()) + 1
+    size = np.bincount(label[member], minlength=n_lines)
+    lines = (size >= SNAP_MIN).nonzero()[0]
+    if lines.size == 0:
+        return p
+    ox, oy = p.origin_x.reshape(-1), p.origin_y.reshape(-1)
+    ux, uy = np.cos(p.heading).reshape(-1), np.sin(p.heading).reshape(-1)
+    s = np.asarray(counts, dtype=float).reshape(-1)
+    theta = np.asarray(p.theta, dtype=float).reshape(-1)
+    lab = np.where(member, label, -1).reshape(-1)
+    idx = [np.flatnonzero(lab == k) for k in lines]
+    centre = np.array([np.mean(ox), np.mean(oy)])      # the ring's (its emitters' mean)
+    bearing = np.array([math.atan2(np.mean(p.y.reshape(-1)[i]) - centre[1],
+                                   np.mean(p.x.reshape(-1)[i]) - centre[0]) for i in idx])
+    order = np.argsort(bearing)
+    chi_line = np.array([_line_chi2(i, ox, oy, ux, uy, s, cal, theta) for i in idx])
+    taken = []          # (lines, readings, circle, χ², θ) per circle kept
+    k = 0
+    while k < order.size:
+        best = None
+        for stop in range(k + CONCAVE_MIN_LINES, order.size + 1):
+            trial = order[k:stop]
+            group = np.concatenate([idx[j] for j in trial])
+            # from the circle one line fewer took, else the circle about the ring's centre
+            # through the lines' mean range
+            start = best[2] if best is not None else (centre[0], centre[1], float(np.mean(
+                np.hypot(p.x.reshape(-1)[group] - centre[0],
+                         p.y.reshape(-1)[group] - centre[1]))))
+            got = _read_on_circle(group, ox, oy, ux, uy, s, cal, start)
+            if got is None or got[1] / max(group.size - 3, 1) > CONCAVE_FIT_Z:
+                break
+            circle, chi2, th = got
+            n = group.size
+            saved = 2 * trial.size - 3          # parameters the circle saves over the lines
+            lines_chi = float(chi_line[trial].sum())
+            # the noise scale the lines leave (a pooled reading's σ overstates its scatter)
+            scale = max(lines_chi / max(n - 2 * trial.size, 1), 1e-6)
+            if (chi2 - lines_chi) / scale > saved * math.log(n):
+                break
+            best = (trial, group, circle, chi2, th)
+        if best is None:
+            k += 1
+            continue
+        taken.append(best)
+        k += best[0].size
+    if not taken:
+        return p
+    x, y, d, th, sg = (np.array(v, dtype=float).reshape(-1)
+                       for v in (p.x, p.y, p.d, p.theta, p.sigma_m))
+    for trial, group, (cx, cy, r), chi2, theta_c in taken:
+        t, cos = _beam_meets_circle(ox[group], oy[group], ux[group], uy[group], cx, cy, r)
+        own = np.asarray(cal.distance(s[group], theta_c), dtype=float)
+        _, b = cal.log_ab(theta_c)
+        noise = np.maximum(np.abs(b) * own * cal.sigma_counts() / s[group], SIGMA_FLOOR_M)
+        w = 1.0 / np.maximum(noise * cos, 1e-6) ** 2
+        se = math.sqrt(max(chi2 / max(group.size - 3, 1), 1.0) * 3.0 / float(w.sum()))
+        # as onto a line (snap_to_lines): a member its own reading puts within 3σ of it
+        on = np.abs(own - t) <= SNAP_SIGMAS * noise
+        g, t, cos, noise = group[on], t[on], cos[on], noise[on]
+        d[g], th[g] = t, theta_c[on]
+        x[g], y[g] = ox[g] + t * ux[g], oy[g] + t * uy[g]
+        sg[g] = np.hypot(se / np.maximum(cos, 1e-3), np.minimum(SNAP_OWN * noise, own_cap_m))
+    shape = p.valid.shape
+    return points_with(p, x=x.reshape(shape), y=y.reshape(shape), d=d.reshape(shape),
+                       theta=th.reshape(shape), sigma_m=sg.reshape(shape))
+
+
 # --------------------------------------------------------------------------- end points on lines
 
 SNAP_SIGMAS = 3.0   # a member moves out onto its line if that is within 3σ (in from behind: always) …
@@ -3709,7 +3889,8 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
        point lies on a line; certainly far if its near end point would lie inside the
        ring's housing; else ambiguous;
     3. the sweep estimated again without the near and ambiguous readings; the near readings
-       get their near distance at the incidence of the line they lie on.
+       get their near distance at the incidence of the line they lie on, and the lines of a
+       curved wall are read on their circle (:func:`onto_concave_arcs`).
     """
     # the judging pass reads each end point on its own (not snapped onto its line)
     first = run(np.zeros(np.shape(sweep.counts), dtype=bool), True, False)
@@ -3744,6 +3925,13 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     placed = p.theta
     p = _onto_first_lines(p, q, first.lines, second.lines.label,
                           p.valid & q.valid & ~put & ~keep & ~differ)
+    # a curved wall's lines, each fitted over several of its pieces: on their circle
+    counts, _ = held_and_pooled(np.asarray(sweep.counts, dtype=float),
+                                _classify(np.asarray(sweep.counts, dtype=float), sweep, cal),
+                                near | ambiguous, np.asarray(sweep.steps), cal,
+                                min(float(sweep.max_range_m), cal.max_range_m))
+    p = onto_concave_arcs(p, np.where(p.valid & ~put & ~keep & ~differ, second.lines.label, -1),
+                          counts, cal, far_sigma_cap(cal, p.max_range_m))
     # the far readings still read at a short line's θ: θ is as sure as that line's direction
     from_line = ~put & ~keep & ~differ & (p.theta == placed)
     if put.any() or keep.any() or differ.any():
