@@ -523,6 +523,15 @@ def _no_straight_trace(counts, *args):
     return np.zeros(np.shape(counts), bool)
 
 
+def _oracle_agrees(sweeps, points, cal):
+    """The numpy estimator gives each sweep's reasons, and its ranges within 1e-9 m."""
+    from irring.estimation import estimate_numpy
+    for sw, p in zip(sweeps, points):
+        slow = estimate_numpy.estimate_detail(sw, cal).points
+        np.testing.assert_array_equal(slow.reason, p.reason)
+        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+
+
 def _long_and_valid(points, sweeps):
     n = 0
     for sw, p in zip(sweeps, points):
@@ -539,15 +548,12 @@ def _long_and_valid(points, sweeps):
     ids=["stepped-corner", "a21-pilaster-top"])
 def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, now,
                                                           monkeypatch):
-    from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import estimate as est
 
     sc, sweeps, cal = simulated(room, seed=seed)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == now
-    for sw, p in zip(sweeps, points):
-        slow = estimate_numpy.estimate_detail(sw, cal).points
-        np.testing.assert_array_equal(slow.reason, p.reason)
-        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    _oracle_agrees(sweeps, points, cal)
     # the straight-trace test (below) alone leaves none of these valid either: without both
     monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
     with monkeypatch.context() as m:
@@ -598,15 +604,12 @@ effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}, foldover: {}
 
 def test_a_far_decision_its_own_line_does_not_anchor_needs_the_straighter_far_trace(
         monkeypatch):
-    from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import estimate as est
 
     sc, sweeps, cal = simulated(BOX_IN_CORNER, seed=7003)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == (0, 122)
-    for sw, p in zip(sweeps, points):
-        slow = estimate_numpy.estimate_detail(sw, cal).points
-        np.testing.assert_array_equal(slow.reason, p.reason)
-        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    _oracle_agrees(sweeps, points, cal)
     # without the test: 7 readings of the face read far onto the floor wall, ~250 mm off
     monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
     assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (7, 147)
@@ -1004,15 +1007,12 @@ effects: [incidence, noise, quantization, foldover]
     (SLOT, 630, (11, 114), (0, 103)), (NICHE, 312, (28, 76), (0, 48))], ids=["slot", "niche"])
 def test_a_line_s_extension_across_a_niche_s_mouth_decides_no_near_branch(
         room, seed, before, now, monkeypatch):
-    from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import estimate as est
 
     sc, sweeps, cal = simulated(room, seed=seed)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == now
-    for sw, p in zip(sweeps, points):
-        slow = estimate_numpy.estimate_detail(sw, cal).points
-        np.testing.assert_array_equal(slow.reason, p.reason)
-        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    _oracle_agrees(sweeps, points, cal)
     monkeypatch.setattr(est, "_across_a_gap", lambda blocks, *a: np.zeros(blocks.shape[0], bool))
     old = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(old, sweeps) == before

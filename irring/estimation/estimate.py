@@ -1189,13 +1189,17 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
     # that one read at its θ, joins it whole (docs/estimator.md, "Vague far lines")
     whole = vague_far_lines(points, vi, lab, reading, nbr, good, counts_at, alpha, cx, cy,
                             cal)
-    if whole is not None:
-        at, to, d, theta, sigma = whole
+
+    def move(at, to, d, theta, sigma):
+        """Members ``at`` to line ``to``, read at ``d``, ``theta``, ``sigma``."""
         np.add.at(lost, lab[at], 1)
         lab[at] = to
         moved[at] = True
         new_d[at], new_t[at], new_sig[at] = d, theta, sigma
         px[at], py[at] = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
+
+    if whole is not None:
+        move(*whole)
     for _ in range(TRACE_ROUNDS):
         # the trace's frontier: a member not moved yet whose neighbour is on another usable line
         front = tracer.round(lab, moved, joined, reading, nbr, good, lost, px, py, ox, oy,
@@ -1210,12 +1214,7 @@ def rejoin_traces(points: Points, label: np.ndarray, index: np.ndarray, counts: 
             go = tracer.moves(cross, *args, True)
         if go is None:
             break
-        at, to, d, theta, sigma = go
-        np.add.at(lost, lab[at], 1)
-        lab[at] = to
-        moved[at] = True
-        new_d[at], new_t[at], new_sig[at] = d, theta, sigma
-        px[at], py[at] = ox[at] + d * np.cos(h[at]), oy[at] + d * np.sin(h[at])
+        move(*go)
     if not moved.any():
         return points, label
     # a line that gave up more members than it kept gives the rest no θ: INCIDENCE_UNKNOWN
