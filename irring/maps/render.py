@@ -355,7 +355,7 @@ class MapPicture:
         if driven:
             entries.append(("path", POSE, "path driven while sweeping (dots: sweep starts)"))
         elif len(poses) and self.crowded:
-            entries.append(("path", POSE, "scan poses in order (numbered where room)"))
+            entries.append(("path", POSE, "scan poses in order (numbered where a number fits)"))
         elif len(poses):
             entries.append(("ring", POSE, "ring at scan pose (number = order)"))
         if reach_m and len(poses) and not self.crowded:
