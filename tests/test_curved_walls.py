@@ -8,10 +8,14 @@ walls at grazing incidence, noisy, keep their lines bit for bit. Scenes of our o
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from _synthetic import make_sweep, polygon, rectangle
 from irring.designs import PAPER_RING
@@ -74,12 +78,13 @@ def test_straight_walls_at_grazing_keep_their_lines(model, walls, max_range_m, m
     bit. (Splitting such lines where noise bends them broke a held-out grazing set's 60–70°
     bin, 5.5 → 14.7 mm.)"""
     asked = []
-    fit = est._bow_fit
+    pre_f = est._lines.bow_pre_f
 
-    def spy(g, n_g, s, nn, w):
-        asked.append(n_g)
-        return fit(g, n_g, s, nn, w)
-    monkeypatch.setattr(est, "_bow_fit", spy)
+    def spy(*args):
+        out = pre_f(*args)
+        asked.append(out[0].size)
+        return out
+    monkeypatch.setattr(est._lines, "bow_pre_f", spy)
     near = walls[0][0][1]
     sweeps = [_sweep(model, walls, (x, near + off, yaw), seed, max_range_m)[:2]
               for x, off in ((0.9, 0.41), (1.7, 0.22 if model != "gp2y0a02" else 0.31))
@@ -94,8 +99,9 @@ def test_straight_walls_at_grazing_keep_their_lines(model, walls, max_range_m, m
 
 
 def test_the_oracle_reads_the_same_circle():
-    """The rule is numpy shared by both estimators: on the arc (where it takes most lines)
-    kernels and oracle agree to 1e-9."""
+    """The rule is numpy shared by both estimators (the fast one asks a kernel first whether
+    any line may bow): on the arc (where it takes most lines) kernels and oracle agree to
+    1e-9."""
     cal, sweep, _, _ = _sweep("gp2y0a02", _arc(), (R_M - 0.40, 0.05, 0.3), 1, 1.5)
     fast = estimate_detail(sweep, cal)
     slow = oracle.estimate_detail(sweep, cal)
@@ -138,3 +144,94 @@ def test_a_line_over_a_corner_is_kinked_an_arc_is_not():
     assert not _kinked(lambda s: np.interp(s, edges, arc(edges)))
     # a shallow corner (12°) is left to the circle's other tests
     assert not _kinked(lambda s: np.where(s < 0.21, 0.0, -0.21 * (s - 0.21)))
+
+
+@functools.lru_cache(maxsize=1)
+def _bow_states():
+    """What :func:`bowed_lines` was asked in the fast estimator: the faceted arc (lines bow)
+    and two straight corridors (none does), two seeds each."""
+    states = []
+
+    def spy(points, label, counts, cal):
+        states.append((points, label.copy(), np.array(counts, dtype=float), cal))
+        return points, label
+    scenes = [("gp2y0a02", _arc(), (R_M - 0.40, 0.05, 0.3), 1.5)] + [
+        (model, walls, (0.9, walls[0][0][1] + 0.41, -0.7), rng)
+        for model, walls, rng in STRAIGHT[:2]]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(est, "bowed_lines_compiled", spy)
+        for model, walls, pose, rng in scenes:
+            for seed in (1, 2):
+                cal, sweep, _, _ = _sweep(model, walls, pose, seed, rng)
+                estimate(sweep, cal)
+    return states
+
+
+def _kernel_pre_f(points, label, counts, cal):
+    f = np.ascontiguousarray
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return est._lines.bow_pre_f(
+            f(label, dtype=np.intp).reshape(-1), f(points.valid).reshape(-1).view(np.uint8),
+            f(points.origin_x).reshape(-1), f(points.origin_y).reshape(-1),
+            f(points.heading).reshape(-1), f(counts, dtype=float).reshape(-1),
+            f(points.d).reshape(-1), f(points.theta).reshape(-1), cal.sigma_counts(),
+            est.SIGMA_FLOOR_M, f(cal.theta_rad, dtype=float), f(cal._log_a, dtype=float),
+            f(cal.b, dtype=float), est.BOW_MIN)
+
+
+_GATE = {True: 0, False: 0}
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data(), spoil=st.sampled_from([None, "bend", "merge", "unlabel", "nan",
+                                               "zero", "invalid"]))
+def test_the_bow_pre_gate_kernel_agrees_with_its_numpy_statement(data, spoil):
+    """``_lines.bow_pre_f`` against ``_bow_asked``'s F, on the states the fast estimator
+    asked (arc and corridors), with lines' members pushed across onto a parabola (they then
+    bow), lines merged, members taken off their lines or made invalid, NaN θ or zero counts:
+    the same lines asked, each F within ``BOW_PRE_TOL`` × (1 + its scale), +inf only where
+    numpy's is not finite or its fit singular; so every line numpy passes the kernel passes,
+    and ``bowed_lines_compiled`` gives ``bowed_lines``' points and labels bit for bit."""
+    states = _bow_states()
+    points, label, counts, cal = states[data.draw(st.integers(0, len(states) - 1))]
+    rng = np.random.default_rng(data.draw(st.integers(0, 2 ** 31 - 1)))
+    label, counts = label.copy(), counts.copy()
+    pick = rng.random(label.shape) < 0.1
+    if spoil == "bend":                 # members moved along their beams onto a bow
+        k = rng.uniform(-0.4, 0.4)
+        d = points.d + k * (points.d - np.nanmean(points.d)) ** 2 * (label >= 0)
+        points = dataclasses.replace(points, d=d)
+    elif spoil == "merge" and label.max() > 0:
+        label[label == 1] = 0
+    elif spoil == "unlabel":
+        label[pick] = -1
+    elif spoil == "nan":
+        points = dataclasses.replace(points, theta=np.where(pick, np.nan, points.theta))
+    elif spoil == "zero":
+        counts[pick] = 0.0
+    elif spoil == "invalid":
+        points = dataclasses.replace(points, valid=points.valid & ~pick)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        asked = est._bow_asked(points, label, counts, cal)
+    f_kernel, scale = _kernel_pre_f(points, label, counts, cal)
+    f_numpy = np.zeros(0) if asked is None else asked[-1]
+    assert f_kernel.shape == f_numpy.shape
+    sure = np.isfinite(f_kernel)
+    assert np.all(np.abs(f_kernel - f_numpy)[sure] <= est.BOW_PRE_TOL * (1.0 + scale[sure]))
+    gate = f_kernel + est.BOW_PRE_TOL * (1.0 + scale) >= est.BOW_PRE_F
+    assert np.all(gate[f_numpy >= est.BOW_PRE_F])
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        p_slow, l_slow = est.bowed_lines(points, label, counts, cal)
+        p_fast, l_fast = est.bowed_lines_compiled(points, label, counts, cal)
+    np.testing.assert_array_equal(l_fast, l_slow)
+    for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason"):
+        np.testing.assert_array_equal(getattr(p_fast, f), getattr(p_slow, f), err_msg=f)
+    _GATE[bool(gate.any())] += 1
+
+
+def test_the_bow_pre_gate_was_passed_and_not():
+    """Not vacuous: the agreement test above met sweeps where some line may bow and sweeps
+    where none does (run after it, in this file's order)."""
+    if sum(_GATE.values()) == 0:
+        pytest.skip("the agreement test did not run first")
+    assert _GATE[True] > 0 and _GATE[False] > 0

@@ -25,7 +25,7 @@ plus ~5–10 µs of work on ~630 points.
 from cpython.buffer cimport (PyObject_GetBuffer, PyBuffer_Release, PyBUF_C_CONTIGUOUS,
                             PyBUF_FORMAT, PyBUF_WRITABLE)
 from libc.math cimport (sin, cos, sqrt, fabs, hypot, isfinite, exp, log, atan, nearbyint, M_PI,
-                        INFINITY, NAN, asin, tan, fmin, fmax)
+                        INFINITY, NAN, asin, tan, fmin, fmax, atan2)
 from libc.stdlib cimport calloc, free, malloc
 
 import numpy as np
@@ -2280,3 +2280,186 @@ def counts_misfit_any(const idx_t[::1] vi, const idx_t[::1] label, const double[
             if (Z[g] - (1.0 - x)) / sqrt(x) >= z_min:
                 return True
     return False
+
+
+# --------------------------------------------------------------------------- curved walls
+
+cdef bint _solve3(double* m, double* r) noexcept nogil:
+    """m (3×3, row-major) x = r by Gaussian elimination with partial pivoting (LAPACK's
+    dgesv's LU), in place: x in r. False on a zero pivot (numpy raises there)."""
+    cdef int i, j, k, p
+    cdef double t, f
+    for k in range(3):
+        p = k
+        for i in range(k + 1, 3):
+            if fabs(m[3 * i + k]) > fabs(m[3 * p + k]):
+                p = i
+        if m[3 * p + k] == 0.0:
+            return False
+        if p != k:
+            for j in range(3):
+                t = m[3 * k + j]
+                m[3 * k + j] = m[3 * p + j]
+                m[3 * p + j] = t
+            t = r[k]
+            r[k] = r[p]
+            r[p] = t
+        for i in range(k + 1, 3):
+            f = m[3 * i + k] / m[3 * k + k]
+            for j in range(k, 3):
+                m[3 * i + j] = m[3 * i + j] - f * m[3 * k + j]
+            r[i] = r[i] - f * r[k]
+    for k in range(2, -1, -1):
+        t = r[k]
+        for j in range(k + 1, 3):
+            t = t - m[3 * k + j] * r[j]
+        r[k] = t / m[3 * k + k]
+    return True
+
+
+def bow_pre_f(const idx_t[::1] label, const unsigned char[::1] valid,
+              const double[::1] origin_x, const double[::1] origin_y,
+              const double[::1] heading, const double[::1] counts, const double[::1] d,
+              const double[::1] theta, double sigma_counts, double floor_m,
+              const double[::1] xp, const double[::1] node_log_a, const double[::1] node_b,
+              idx_t min_members):
+    """``irring.estimation.estimate.bowed_lines``' pre-gate (its numpy statement:
+    ``_bow_asked``): for each line of ``min_members`` valid members or more, in label
+    order, the F by which a weighted parabola through its members as they lie (in the
+    frame of their TLS line) beats that line, and the scale of its rounding error
+    (Σ w·n² over the F's denominator). Its own sums and 3×3 solve, libm's trig: F within
+    a tolerance of numpy's, not bit for bit (``BOW_PRE_TOL``); +inf where the fit is
+    singular or anything is not finite. Arrays flat (S·N); ``label`` −1 on no line."""
+    cdef idx_t size = label.shape[0], i, f, k, gi, n_g = 0, L = 0, m = 0
+    cdef idx_t n_nodes = xp.shape[0]
+    cdef double inv_dx = 0.0, la, b, h, ex, ey, x, y, u, v, ux, uy, en, noise, wt, s, nn
+    cdef double wk, r0, den, dof, mat[9]
+    cdef double rhs[3]
+    if not (valid.shape[0] == origin_x.shape[0] == origin_y.shape[0] == heading.shape[0]
+            == counts.shape[0] == d.shape[0] == theta.shape[0] == size
+            and node_log_a.shape[0] == node_b.shape[0] == n_nodes):
+        raise lengths_differ("bow_pre_f's arrays", label=size, valid=valid.shape[0],
+                             origin_x=origin_x.shape[0], origin_y=origin_y.shape[0],
+                             heading=heading.shape[0], counts=counts.shape[0], d=d.shape[0],
+                             theta=theta.shape[0], xp=n_nodes,
+                             node_log_a=node_log_a.shape[0], node_b=node_b.shape[0])
+    if n_nodes == 0:
+        raise ValueError("bow_pre_f: the calibration has no nodes")
+    if n_nodes > 1 and xp[n_nodes - 1] > xp[0]:
+        inv_dx = (n_nodes - 1) / (xp[n_nodes - 1] - xp[0])
+    for f in range(size):
+        if valid[f] and label[f] >= L:
+            L = label[f] + 1
+    members_arr = np.zeros(L, dtype=np.intp)
+    rank_arr = np.full(L, -1, dtype=np.intp)
+    cdef idx_t[::1] members = members_arr, rank = rank_arr
+    for f in range(size):
+        if valid[f] and label[f] >= 0:
+            members[label[f]] += 1
+    for k in range(L):
+        if members[k] >= min_members:
+            rank[k] = n_g
+            n_g += 1
+            m += members[k]
+    out = np.zeros((2, n_g))         # F, its error's scale
+    if n_g == 0:
+        return out[0], out[1]
+    # per line: members, Σx, Σy → centre, Σuv, Σ(u²−v²), Σw·s^0..4, Σw·n·s^0..2, Σw·n², χ²
+    grp_arr = np.zeros((15, n_g))
+    row_arr = np.empty((6, m))       # x → u, y → v, cos h, sin h, σ, s
+    at_arr = np.empty(m, dtype=np.intp)
+    cdef double[:, ::1] G = grp_arr, R = row_arr
+    cdef idx_t[::1] at = at_arr
+    bad_arr = np.zeros(n_g, dtype=np.uint8)
+    cdef unsigned char[::1] bad = bad_arr
+    i = 0
+    for f in range(size):
+        if valid[f] and label[f] >= 0 and rank[label[f]] >= 0:
+            gi = rank[label[f]]
+            at[i] = gi
+            h = heading[f]
+            ex = cos(h)
+            ey = sin(h)
+            x = origin_x[f] + d[f] * ex
+            y = origin_y[f] + d[f] * ey
+            R[0, i] = x
+            R[1, i] = y
+            R[2, i] = ex
+            R[3, i] = ey
+            b = NAN
+            if isfinite(theta[f]):
+                _interp_ab(fabs(theta[f]), xp, node_log_a, node_b, inv_dx, &la, &b)
+            noise = fabs(b) * d[f] * (sigma_counts / counts[f])
+            if not isfinite(noise):
+                bad[gi] = 1
+            R[4, i] = fmax(noise, floor_m)
+            G[0, gi] += 1.0
+            G[1, gi] += x
+            G[2, gi] += y
+            i += 1
+    for gi in range(n_g):
+        G[1, gi] = G[1, gi] / G[0, gi]
+        G[2, gi] = G[2, gi] / G[0, gi]
+    for i in range(m):
+        gi = at[i]
+        u = R[0, i] - G[1, gi]
+        v = R[1, i] - G[2, gi]
+        R[0, i] = u
+        R[1, i] = v
+        G[3, gi] += u * v
+        G[4, gi] += u * u - v * v
+    for gi in range(n_g):
+        G[3, gi] = 0.5 * atan2(2.0 * G[3, gi], G[4, gi])       # the line's direction
+    for i in range(m):
+        gi = at[i]
+        ux = cos(G[3, gi])
+        uy = sin(G[3, gi])
+        u = R[0, i]
+        v = R[1, i]
+        en = -R[2, i] * uy + R[3, i] * ux
+        noise = R[4, i] * fabs(en)
+        if not isfinite(noise):
+            bad[gi] = 1
+        noise = fmax(noise, floor_m)
+        wt = 1.0 / (noise * noise)
+        s = u * ux + v * uy
+        nn = -u * uy + v * ux
+        R[4, i] = wt
+        R[5, i] = s
+        R[1, i] = nn
+        wk = wt
+        for k in range(5):
+            G[5 + k, gi] += wk
+            if k < 3:
+                G[10 + k, gi] += wk * nn
+            wk = wk * s
+        G[13, gi] += wt * nn * nn
+    coef_arr = np.empty((n_g, 3))
+    cdef double[:, ::1] C = coef_arr
+    cdef unsigned char[::1] ok
+    ok_arr = np.ones(n_g, dtype=np.uint8)
+    ok = ok_arr
+    for gi in range(n_g):
+        for i in range(3):
+            for k in range(3):
+                mat[3 * i + k] = G[5 + i + k, gi]
+            mat[4 * i] += 1e-12
+            rhs[i] = G[10 + i, gi]
+        ok[gi] = _solve3(mat, rhs)
+        for i in range(3):
+            C[gi, i] = rhs[i]
+    for i in range(m):
+        gi = at[i]
+        s = R[5, i]
+        r0 = R[1, i] - (C[gi, 0] + (C[gi, 1] + C[gi, 2] * s) * s)
+        G[14, gi] += R[4, i] * r0 * r0
+    cdef double[:, ::1] O = out
+    for gi in range(n_g):
+        dof = G[0, gi] - 3.0
+        den = fmax(G[14, gi] / (dof if dof > 1.0 else 1.0), 1.0)
+        O[0, gi] = (G[13, gi] - G[14, gi]) / den
+        O[1, gi] = G[13, gi] / den
+        if bad[gi] or not (ok[gi] and isfinite(O[0, gi]) and isfinite(O[1, gi])):
+            O[0, gi] = INFINITY
+            O[1, gi] = INFINITY
+    return out[0], out[1]

@@ -534,7 +534,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    voter: Callable | None = None, post_grouper: Callable | None = None,
                    gapper: Callable | None = None, raw_counts: np.ndarray | None = None,
                    beside: Callable | None = None, tracer: type[TraceSteps] | None = None,
-                   judge: Callable | None = None) -> Estimate:
+                   judge: Callable | None = None, bower: Callable | None = None
+                   ) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -561,7 +562,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     oracle: :func:`beside_a_return`); ``tracer``: :func:`rejoin_traces`' steps
     (:class:`TraceKernels`; the oracle: :class:`TraceSteps`); ``judge``: the lines their
     counts contradict (:func:`counts_contradicted_compiled`; the oracle:
-    :func:`counts_contradicted`).
+    :func:`counts_contradicted`); ``bower``: a curved wall's chords
+    (:func:`bowed_lines_compiled`; the oracle: :func:`bowed_lines`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -600,7 +602,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                                             judge)
         points, label = alone_at_an_edge(points, label, counts, steps, cal)
         # a curved wall's chords on its circle (the lines as the rules above left them)
-        points, label = bowed_lines(points, label, counts, cal)
+        points, label = (bower or bowed_lines_compiled)(points, label, counts, cal)
     points = censored_lines(points, label, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
@@ -2266,6 +2268,7 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
 
 BOW_MIN = 10            # a line of at least this many valid members is asked for a bow …
 BOW_PRE_F = 10.0        # … where its members as they lie bow by this F already (cheap) …
+BOW_PRE_TOL = 1e-6      # (the compiled pre-gate's F, within this × (1 + Σw·n²/den) of numpy's)
 BOW_ITERATIONS = 8      # … then read on a parabola by Table II's iteration (at most this
 BOW_SETTLED_RAD = math.radians(0.2)  # many steps, settled to this) and kept where the
 BOW_F = 25.0            # parabola beats the line by this F (1, n − 3), …
@@ -2409,44 +2412,11 @@ def bowed_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cali
     range; σ the circle's there plus ``SNAP_OWN`` of their own: their noise and d over
     θ ± ``BOW_DOUBT_RAD``). Returns the points and ``label``. Why: docs/estimator.md,
     "Curved walls"."""
-    flat = label.reshape(-1)
-    valid = points.valid.reshape(-1)
-    idx = ((flat >= 0) & valid).nonzero()[0]
-    if idx.size < BOW_MIN:
+    asked = _bow_asked(points, label, counts, cal)
+    if asked is None or not (pre := asked[-1] >= BOW_PRE_F).any():
         return points, label
-    lab = flat[idx]
-    ask = np.bincount(lab) >= BOW_MIN
-    if not ask.any():
-        return points, label
-    sel = ask[lab]
-    idx = idx[sel]
-    g = (np.cumsum(ask) - 1)[lab[sel]]
-    n_g = int(np.count_nonzero(ask))
-    nm = np.bincount(g, minlength=n_g).astype(float)
-    ox, oy = points.origin_x.reshape(-1)[idx], points.origin_y.reshape(-1)[idx]
-    h = points.heading.reshape(-1)[idx]
-    ex, ey = np.cos(h), np.sin(h)
-    s_c = np.asarray(counts, dtype=float).reshape(-1)[idx]
-    d_line = points.d.reshape(-1)[idx]
-    x, y = ox + d_line * ex, oy + d_line * ey
-    # each line's frame: its members' TLS line; s along it, n across
-    cx, cy = np.bincount(g, x, n_g) / nm, np.bincount(g, y, n_g) / nm
-    u, v = x - cx[g], y - cy[g]
-    al = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_g), np.bincount(g, u * u - v * v, n_g))
-    ux, uy = np.cos(al)[g], np.sin(al)[g]
-    en = -ex * uy + ey * ux
-    sig_s = cal.sigma_counts() / s_c
-    noise = range_sigma(cal.log_ab(points.theta.reshape(-1)[idx])[1], d_line, sig_s)
-    w = 1.0 / np.maximum(noise * np.abs(en), SIGMA_FLOOR_M) ** 2
-    # asked further only where the members as they lie already bow (one fit)
-    s0, n0 = u * ux + v * uy, -u * uy + v * ux
-    c0 = _bow_fit(g, n_g, s0, n0, w)
-    r0 = n0 - (c0[g, 0] + (c0[g, 1] + c0[g, 2] * s0) * s0)
-    chi0 = np.bincount(g, w * r0 * r0, n_g)
-    pre = ((np.bincount(g, w * n0 * n0, n_g) - chi0)
-           / np.maximum(chi0 / np.maximum(nm - 3, 1), 1.0)) >= BOW_PRE_F
-    if not pre.any():
-        return points, label
+    (idx, g, n_g, nm, ox, oy, ex, ey, s_c, sig_s, d_line, en, noise, w, ux, uy, cx, cy, s0,
+     n0, chi0, _) = asked
     sel = pre[g]
     s0_k, n0_k, chi0_k = s0[sel], n0[sel], chi0[pre]   # (as they lie: the corner test's)
     idx, ox, oy, ex, ey, s_c, sig_s, d_line, en, noise, w, ux, uy = (
@@ -2513,6 +2483,75 @@ def bowed_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cali
     if circ.shape[1] == 0:
         return points, label
     return _onto_bow_circles(points, label, counts, cal, circ)
+
+
+def bowed_lines_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
+                         cal: Calibration) -> tuple[Points, np.ndarray]:
+    """:func:`bowed_lines`, whose pre-gate (:func:`_bow_asked`: do a line's members as they
+    lie bow?) is first asked of one compiled call (``irring.estimation._lines.bow_pre_f``,
+    held to it by tests/test_curved_walls.py): where its F, widened by ``BOW_PRE_TOL``,
+    passes no line, neither would numpy's and nothing bows (most sweeps)."""
+    f = np.ascontiguousarray
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        F, scale = _lines.bow_pre_f(
+            f(label, dtype=np.intp).reshape(-1),
+            f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
+            f(points.origin_x, dtype=float).reshape(-1),
+            f(points.origin_y, dtype=float).reshape(-1),
+            f(points.heading, dtype=float).reshape(-1), f(counts, dtype=float).reshape(-1),
+            f(points.d, dtype=float).reshape(-1), f(points.theta, dtype=float).reshape(-1),
+            cal.sigma_counts(), SIGMA_FLOOR_M, f(cal.theta_rad, dtype=float),
+            f(cal._log_a, dtype=float), f(cal.b, dtype=float), BOW_MIN)
+    if not (F + BOW_PRE_TOL * (1.0 + scale) >= BOW_PRE_F).any():
+        return points, label
+    return bowed_lines(points, label, counts, cal)
+
+
+def _bow_asked(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration):
+    """:func:`bowed_lines`' pre-gate: None where no line has ``BOW_MIN`` valid members;
+    else per member of those lines (flat index ``idx``, line ``g``) its beam, where it lies
+    in its line's frame (the TLS line of its members: centre (cx, cy), direction (ux, uy);
+    s0 along, n0 across) and its weight ``w``, and per line the χ² ``chi0`` of a weighted
+    parabola through its members as they lie and the F (the last item) by which it beats
+    that line."""
+    flat = label.reshape(-1)
+    valid = points.valid.reshape(-1)
+    idx = ((flat >= 0) & valid).nonzero()[0]
+    if idx.size < BOW_MIN:
+        return None
+    lab = flat[idx]
+    ask = np.bincount(lab) >= BOW_MIN
+    if not ask.any():
+        return None
+    sel = ask[lab]
+    idx = idx[sel]
+    g = (np.cumsum(ask) - 1)[lab[sel]]
+    n_g = int(np.count_nonzero(ask))
+    nm = np.bincount(g, minlength=n_g).astype(float)
+    ox, oy = points.origin_x.reshape(-1)[idx], points.origin_y.reshape(-1)[idx]
+    h = points.heading.reshape(-1)[idx]
+    ex, ey = np.cos(h), np.sin(h)
+    s_c = np.asarray(counts, dtype=float).reshape(-1)[idx]
+    d_line = points.d.reshape(-1)[idx]
+    x, y = ox + d_line * ex, oy + d_line * ey
+    # each line's frame: its members' TLS line; s along it, n across
+    cx, cy = np.bincount(g, x, n_g) / nm, np.bincount(g, y, n_g) / nm
+    u, v = x - cx[g], y - cy[g]
+    al = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_g), np.bincount(g, u * u - v * v, n_g))
+    ux, uy = np.cos(al)[g], np.sin(al)[g]
+    en = -ex * uy + ey * ux
+    sig_s = cal.sigma_counts() / s_c
+    noise = range_sigma(cal.log_ab(points.theta.reshape(-1)[idx])[1], d_line, sig_s)
+    w = 1.0 / np.maximum(noise * np.abs(en), SIGMA_FLOOR_M) ** 2
+    # asked further only where the members as they lie already bow (one fit)
+    s0, n0 = u * ux + v * uy, -u * uy + v * ux
+    c0 = _bow_fit(g, n_g, s0, n0, w)
+    r0 = n0 - (c0[g, 0] + (c0[g, 1] + c0[g, 2] * s0) * s0)
+    chi0 = np.bincount(g, w * r0 * r0, n_g)
+    F = ((np.bincount(g, w * n0 * n0, n_g) - chi0)
+         / np.maximum(chi0 / np.maximum(nm - 3, 1), 1.0))
+    return (idx, g, n_g, nm, ox, oy, ex, ey, s_c, sig_s, d_line, en, noise, w, ux, uy, cx, cy,
+            s0, n0, chi0, F)
 
 
 def _onto_bow_circles(points: Points, label: np.ndarray, counts: np.ndarray,

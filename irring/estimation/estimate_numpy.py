@@ -16,7 +16,7 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RU
                        POST_SENSORS, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
                        SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
                        LineOptions, Lines, Pieces, TraceSteps, beam_crossings,
-                       beside_a_return, clip_at_corners, counts_contradicted,
+                       beside_a_return, bowed_lines, clip_at_corners, counts_contradicted,
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
                        member_spans, nearest_heard_rows, nominal_calibration, polyline_ids,
                        range_profiles, range_sigma, reach_cos_limit, resolve_foldover,
@@ -1132,6 +1132,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           voter=far_line_vote, post_grouper=post_groups, gapper=silent_gaps,
                           beside=beside_a_return, tracer=TraceSteps,
                           judge=counts_contradicted,
+                          bower=bowed_lines,
                           raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
