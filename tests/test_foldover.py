@@ -1021,3 +1021,45 @@ def test_a_line_s_extension_across_a_niche_s_mouth_decides_no_near_branch(
         assert np.all(p.reason[took] == Reason.FOLDOVER_AMBIGUOUS)
         assert np.array_equal(p.valid | took, q.valid)     # nothing made valid
         np.testing.assert_array_equal(p.d[p.valid], q.d[p.valid])  # nor moved
+
+
+# A 217 mm post, the ring at the housing limit (22 mm from it), a wall 255 mm behind it turned
+# 63°: sensor 10 reads the post's flank 33-54 mm away, drops out at its edge (72-86°) and then
+# meets the wall at 195-215 mm. On the far branch the flank's readings (211-237 mm) continue
+# the wall's on one first-pass line, which runs along the wall's line another sensor sees.
+POST_BEFORE_A_WALL = """
+name: post_before_a_wall
+room: {outline_mm: [[-305.9, -992.7], [799.6, -992.7], [932.0, 1207.3], [-305.9, 1207.3]]}
+obstacles:
+  - {type: cylinder, center_mm: [707.4, 251.1], radius_mm: 108.4}
+robot: {poses: [{x_mm: 594.1, y_mm: 507.3, yaw_deg: 10.1}]}
+sensor: {model: gp2d12, adc_bits: 12}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_line_its_sensor_joins_across_a_silence_does_not_vouch_for_the_far_branch(
+        monkeypatch):
+    from irring.estimation import estimate as est, estimate_numpy
+
+    sc, sweeps, cal = simulated(POST_BEFORE_A_WALL, seed=33033)
+    points = [estimate(sw, cal) for sw in sweeps]
+    assert _long_and_valid(points, sweeps) == (0, 147 - 23)
+    for sw, p in zip(sweeps, points):
+        slow = estimate_numpy.estimate_detail(sw, cal).points
+        np.testing.assert_array_equal(slow.reason, p.reason)
+        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    # without the rule: the silences do not count (main before it)
+    real = est._own_trace_members
+
+    def unsplit(p, *a):
+        return real(replace(p, reason=np.full_like(p.reason, Reason.OK)), *a)
+    monkeypatch.setattr(est, "_own_trace_members", unsplit)
+    old = [estimate(sw, cal) for sw in sweeps]
+    assert _long_and_valid(old, sweeps) == (3, 147)
+    for p, q in zip(points, old):
+        took = q.valid & ~p.valid
+        assert np.all(p.reason[took] == Reason.FOLDOVER_AMBIGUOUS)
+        assert np.array_equal(p.valid | took, q.valid)     # nothing made valid
+        # the second pass holds the taken readings out: the others' lines move them a little
+        assert np.max(np.abs(p.d[p.valid] - q.d[p.valid])) < 0.002

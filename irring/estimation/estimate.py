@@ -4322,14 +4322,8 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
         sure = housing.reshape(-1)[at]
         certain = np.bincount(mcol[sure], minlength=use.size)
         anchored = certain >= _FOLD_ANCHOR
-        # … and those of each (line, sensor): a line two sensors share may be one sensor's
-        # wall and the other's near face read far, lying along it (docs/foldover.md,
-        # "A column read far onto a wall's line; θ that only the second pass gives")
-        mine = np.bincount(mcol[sure] * n_sensors + at[sure] % n_sensors,
-                           minlength=use.size * n_sensors)
     else:
         certain = np.zeros(1, int)
-        mine = np.zeros(n_sensors, int)
         anchored = np.zeros(0, bool)
         at = mcol = np.zeros(0, int)
         m_along = np.zeros(0)
@@ -4381,9 +4375,15 @@ def _fold_branches(first: Estimate, sweep: Sweep, cal: Calibration):
     seen_there, between = _seen_there(fit_far <= 1.0, along, mcol, m_along)
     # … and only where the reading's own far trace agrees (a near face read far can land
     # on the wall behind it)
-    # its own line anchored by certainly far members of its own sensor
-    own_certain = (ocol >= 0) & (mine[np.maximum(ocol, 0) * n_sensors + sensor] >= _FOLD_ANCHOR)
-    fit_far[~seen_there | ~_own_trace_agrees(between, ocol, own_certain, e)] = np.inf
+    # its own line anchored by certainly far members of its own sensor, of its own trace: a
+    # line its sensor's readings join across a silence (a post's flank dropping out, then
+    # the wall beyond) is two surfaces, and the far side's readings vouch for none on the
+    # near side (docs/foldover.md, "A post read far onto the wall its sensor meets next")
+    own_certain, bridged = _own_trace_members(p, np.asarray(sweep.steps), counts, cal, idx,
+                                              ocol, sensor, at, mcol, housing.reshape(-1)[at],
+                                              (c, e, nrm, lo, hi), n_sensors)
+    fit_far[~seen_there | ~_own_trace_agrees(between & ~bridged[:, None], ocol, own_certain,
+                                             e)] = np.inf
     # Two sensors agreeing on a line is no proof it is seen far: two neighbours close to one
     # surface both read it far, and their far end points (curves) can fit one line behind it.
     # A line decides "far" only once it is anchored: _FOLD_ANCHOR members certainly far (near
@@ -4487,6 +4487,69 @@ def _near_trace_straight(counts: np.ndarray, p: Points, steps: np.ndarray,
                                 _FOLD_TRACE_STEPS))
     near, far = chi2
     return near <= _FOLD_TRACE_RATIO * far
+
+
+def _own_trace_members(p: Points, steps: np.ndarray, counts: np.ndarray, cal: Calibration,
+                       idx: np.ndarray, ocol: np.ndarray, sensor: np.ndarray, at: np.ndarray,
+                       mcol: np.ndarray, sure: np.ndarray, lines: tuple, n_sensors: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(own_certain, bridged), each (A,), for the readings ``idx`` (flat) of ``sensor`` on
+    their first-pass lines ``ocol`` (−1 none; members ``at`` of line ``mcol``, ``sure``
+    certainly far; ``lines`` = (c, e, nrm, lo, hi) as in :func:`_fold_branches`).
+    ``bridged``: the line takes readings of the sensor from either side of a silent
+    (NO_RETURN) step of it whose beam would have met the line within its members' span and
+    the drop-out angle, ``CONTRADICT_SIGMAS`` count σ brighter than it read: two surfaces,
+    not one. There ``own_certain`` counts only the certainly far members of the reading's
+    own stretch (between such silences): ``_FOLD_ANCHOR`` of them. A post's flank drops out
+    near 70°, and the wall its beam meets next continues the post's far curve on one line.
+    docs/foldover.md, "A post read far onto the wall its sensor meets next"."""
+    S = counts.shape[0]
+    has = ocol >= 0
+    key = np.where(has, ocol * n_sensors + sensor, 0)
+    pair = mcol * n_sensors + at % n_sensors
+    n_pairs = max(int(max(pair.max(initial=0), key.max(initial=0))) + 1,
+                  lines[0].shape[0] * n_sensors)
+    plain = np.bincount(pair[sure], minlength=n_pairs)
+    own_certain = has & (plain[key] >= _FOLD_ANCHOR)
+    bridged = np.zeros(idx.size, bool)
+    silent = np.asarray(p.reason) == Reason.NO_RETURN
+    if not at.size or not silent.any():
+        return own_certain, bridged
+    # each reading's stretch: the silent steps of its sensor before it, in step order
+    order = rows_in_step_order(steps)
+    seg = np.empty(silent.shape, np.int64)
+    seg[order] = np.cumsum(silent[order], axis=0)
+    seg = seg.reshape(-1)
+    mseg = seg[at]
+    lo_s = np.full(n_pairs, np.iinfo(np.int64).max)
+    hi_s = np.full(n_pairs, -1)
+    np.minimum.at(lo_s, pair, mseg)
+    np.maximum.at(hi_s, pair, mseg)
+    # the silent beams against every line: met ahead, within the span and the drop-out
+    # angle, and the counts it would have returned
+    c, e, nrm, lo, hi = lines
+    g = silent.reshape(-1).nonzero()[0]
+    h = p.heading.reshape(-1)[g]
+    un, t, ahead, along = beam_crossings(p.origin_x.reshape(-1)[g], p.origin_y.reshape(-1)[g],
+                                         np.cos(h), np.sin(h), c, e, nrm)       # (G, L)
+    met = (ahead & (along >= lo) & (along <= hi)
+           & (np.abs(un) > math.cos(cal.max_incidence_rad)))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        expect = cal.counts(np.where(met, t, 1.0), np.arccos(np.minimum(np.abs(un), 1.0)))
+    met &= np.isfinite(expect) & (expect > counts.reshape(-1)[g][:, None]
+                                  + CONTRADICT_SIGMAS * cal.sigma_counts())
+    gk = np.arange(c.shape[0])[None, :] * n_sensors + (g % n_sensors)[:, None]   # (G, L)
+    across = met & (lo_s[gk] < seg[g][:, None]) & (seg[g][:, None] <= hi_s[gk])
+    split = np.bincount(gk[across], minlength=n_pairs) > 0
+    bridged = has & split[key]
+    if bridged.any():
+        rows = S + 1
+        sure_keys = np.sort(pair[sure] * rows + mseg[sure])
+        q = key * rows + seg[idx]
+        n = (np.searchsorted(sure_keys, q, side="right")
+             - np.searchsorted(sure_keys, q, side="left"))
+        own_certain = np.where(bridged, has & (n >= _FOLD_ANCHOR), own_certain)
+    return own_certain, bridged
 
 
 def _own_trace_agrees(between: np.ndarray, ocol: np.ndarray, own_certain: np.ndarray,
