@@ -4529,6 +4529,12 @@ def _own_trace_members(p: Points, steps: np.ndarray, counts: np.ndarray, cal: Ca
     # angle, and the counts it would have returned
     c, e, nrm, lo, hi = lines
     g = silent.reshape(-1).nonzero()[0]
+    gk = np.arange(c.shape[0])[None, :] * n_sensors + (g % n_sensors)[:, None]   # (G, L)
+    across = (lo_s[gk] < seg[g][:, None]) & (seg[g][:, None] <= hi_s[gk])
+    ask = across.any(axis=1)
+    if not ask.any():
+        return own_certain, bridged
+    g, gk, across = g[ask], gk[ask], across[ask]
     h = p.heading.reshape(-1)[g]
     un, t, ahead, along = beam_crossings(p.origin_x.reshape(-1)[g], p.origin_y.reshape(-1)[g],
                                          np.cos(h), np.sin(h), c, e, nrm)       # (G, L)
@@ -4538,9 +4544,7 @@ def _own_trace_members(p: Points, steps: np.ndarray, counts: np.ndarray, cal: Ca
         expect = cal.counts(np.where(met, t, 1.0), np.arccos(np.minimum(np.abs(un), 1.0)))
     met &= np.isfinite(expect) & (expect > counts.reshape(-1)[g][:, None]
                                   + CONTRADICT_SIGMAS * cal.sigma_counts())
-    gk = np.arange(c.shape[0])[None, :] * n_sensors + (g % n_sensors)[:, None]   # (G, L)
-    across = met & (lo_s[gk] < seg[g][:, None]) & (seg[g][:, None] <= hi_s[gk])
-    split = np.bincount(gk[across], minlength=n_pairs) > 0
+    split = np.bincount(gk[across & met], minlength=n_pairs) > 0
     bridged = has & split[key]
     if bridged.any():
         rows = S + 1
