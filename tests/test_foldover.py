@@ -1040,15 +1040,12 @@ effects: [incidence, noise, quantization, foldover]
 
 def test_a_line_its_sensor_joins_across_a_silence_does_not_vouch_for_the_far_branch(
         monkeypatch):
-    from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import estimate as est
 
     sc, sweeps, cal = simulated(POST_BEFORE_A_WALL, seed=33033)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == (0, 147 - 23)
-    for sw, p in zip(sweeps, points):
-        slow = estimate_numpy.estimate_detail(sw, cal).points
-        np.testing.assert_array_equal(slow.reason, p.reason)
-        np.testing.assert_allclose(slow.d, p.d, atol=1e-9, rtol=0)
+    _oracle_agrees(sweeps, points, cal)
     # without the rule: the silences do not count (main before it)
     real = est._own_trace_members
 
