@@ -1121,7 +1121,7 @@ def vague_far_lines(points: Points, vi: np.ndarray, lab: np.ndarray, reading: np
     s = counts[mem[m]]
     d = cal.distance(s, theta)
     _, bexp = cal.log_ab(theta)
-    sigma = np.maximum(np.abs(bexp) * d * cal.sigma_counts() / s, SIGMA_FLOOR_M)
+    sigma = range_sigma(bexp, d, cal.sigma_counts() / s)
     qx = points.origin_x.reshape(-1)[at[m]] + d * np.cos(h)
     qy = points.origin_y.reshape(-1)[at[m]] + d * np.sin(h)
     across = (qy - cy[bb]) * np.cos(alpha[bb]) - (qx - cx[bb]) * np.sin(alpha[bb])
@@ -2306,6 +2306,15 @@ BOW_KINK_SHARE = 0.5   # two straight pieces leave this share of a parabola's mi
 BOW_KINK_RAD = math.radians(20)   # … where the two pieces turn by this much
 
 
+def _line_rss(W, S, Y, SS, SY, YY):
+    """Weighted least-squares misfit of a line y = a + b·s from the sums of w, w·s, w·y,
+    w·s², w·s·y and w·y² (arrays: one per candidate split)."""
+    W = np.maximum(W, 1e-300)
+    vs = SS - S * S / W
+    cov = SY - S * Y / W
+    return np.maximum(YY - Y * Y / W - cov * cov / np.maximum(vs, 1e-300), 0.0)
+
+
 def _kinked(g: np.ndarray, n_g: int, s: np.ndarray, nn: np.ndarray, w: np.ndarray,
             chi_par: np.ndarray, ask: np.ndarray) -> np.ndarray:
     """(n_g,) bool: groups ``ask`` whose members (``s`` along, ``nn`` across, weights ``w``)
@@ -2324,15 +2333,10 @@ def _kinked(g: np.ndarray, n_g: int, s: np.ndarray, nn: np.ndarray, w: np.ndarra
              (ww, ww * ss, ww * yy, ww * ss * ss, ww * ss * yy, ww * yy * yy)]
         tot = [q[-1] for q in m]
 
-        def line_rss(W, S, Y, SS, SY, YY):
-            W = np.maximum(W, 1e-300)
-            vs = SS - S * S / W
-            cov = SY - S * Y / W
-            return np.maximum(YY - Y * Y / W - cov * cov / np.maximum(vs, 1e-300), 0.0)
         cut = np.arange(3, n - 2)
         lm = [q[cut] for q in m]
         rm = [t - q[cut] for t, q in zip(tot, m)]
-        both = line_rss(*lm) + line_rss(*rm)
+        both = _line_rss(*lm) + _line_rss(*rm)
         at = int(np.argmin(both))
         if both[at] > BOW_KINK_SHARE * chi_par[k]:
             continue
@@ -3721,7 +3725,7 @@ def _read_on_circle(group, ox, oy, ux, uy, s, cal, circle):
             return None
         d = np.asarray(cal.distance(s[group], theta), dtype=float)
         _, b = cal.log_ab(theta)
-        sigma = np.maximum(np.abs(b) * d * cal.sigma_counts() / s[group], SIGMA_FLOOR_M) * cos
+        sigma = range_sigma(b, d, cal.sigma_counts() / s[group]) * cos
         w = 1.0 / np.maximum(sigma, 1e-6) ** 2
         x, y = ox[group] + d * ux[group], oy[group] + d * uy[group]
         fit = _circle_fit(x, y, w, circle)
@@ -3746,8 +3750,7 @@ def _line_chi2(group, ox, oy, ux, uy, s, cal, theta):
     """χ² of readings ``group`` about their own line, each read at its line's θ (TLS)."""
     d = np.asarray(cal.distance(s[group], theta[group]), dtype=float)
     _, b = cal.log_ab(theta[group])
-    sigma = (np.maximum(np.abs(b) * d * cal.sigma_counts() / s[group], SIGMA_FLOOR_M)
-             * np.cos(theta[group]))
+    sigma = range_sigma(b, d, cal.sigma_counts() / s[group]) * np.cos(theta[group])
     w = 1.0 / np.maximum(sigma, 1e-6) ** 2
     x, y = ox[group] + d * ux[group], oy[group] + d * uy[group]
     mx, my = np.average(x, weights=w), np.average(y, weights=w)
@@ -3828,7 +3831,7 @@ def onto_concave_arcs(p: Points, label: np.ndarray, counts: np.ndarray, cal: Cal
         t, cos = _beam_meets_circle(ox[group], oy[group], ux[group], uy[group], cx, cy, r)
         own = np.asarray(cal.distance(s[group], theta_c), dtype=float)
         _, b = cal.log_ab(theta_c)
-        noise = np.maximum(np.abs(b) * own * cal.sigma_counts() / s[group], SIGMA_FLOOR_M)
+        noise = range_sigma(b, own, cal.sigma_counts() / s[group])
         w = 1.0 / np.maximum(noise * cos, 1e-6) ** 2
         se = math.sqrt(max(chi2 / max(group.size - 3, 1), 1.0) * 3.0 / float(w.sum()))
         # as onto a line (snap_to_lines): a member its own reading puts within 3σ of it
