@@ -488,6 +488,33 @@ def _check_room_holds_poses(scenario: Scenario, sweeps: Sequence[Sweep], recordi
         "belong together")
 
 
+def _check_no_copied_sweep(scenario: Scenario | None, sweeps: Sequence[Sweep],
+                           recording) -> None:
+    """A sweep equal to an earlier one in pose, steps, counts and timestamps is a copy (a
+    recording saved with its sweeps twice over): mapped, its readings would count twice as
+    evidence. Only a noiseless standing scene that lists one pose twice sweeps it twice
+    alike, so there the recorded scenario's own poses vouch for it."""
+    def key(sweep: Sweep) -> tuple:
+        arrays = (sweep.pose, sweep.steps, sweep.counts, sweep.timestamps_s,
+                  sweep.reading_poses)
+        return tuple(None if a is None else (np.asarray(a).shape, np.asarray(a).tobytes())
+                     for a in arrays)
+
+    listed = ([] if scenario is None or scenario.has("motion") else
+              [(p.x_m, p.y_m, p.yaw_rad) for p in scenario.robot.poses])
+    first: dict[tuple, int] = {}
+    for k, sweep in enumerate(sweeps):
+        i = first.setdefault(key(sweep), k)
+        if i == k or (len(listed) == len(sweeps) and listed[i] == listed[k]):
+            continue
+        told = ("" if scenario is None else
+                f"; the recorded scenario {scenario.name!r} does not list that pose twice")
+        raise rec.RecordingError(
+            f"{recording}: sweep {k + 1} repeats sweep {i + 1} reading for reading (its pose, "
+            f"steps, {np.asarray(sweep.counts).size} counts and timestamps): a copy, whose "
+            f"readings would be mapped twice{told}. Remove the copy")
+
+
 def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
            frames_per_sweep: int = 0, score: bool = True,
            progress: bool | None = None) -> MapRun:
@@ -510,6 +537,7 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
             unscored = str(exc)
     if scenario is not None:
         _check_room_holds_poses(scenario, sweeps, recording)
+    _check_no_copied_sweep(scenario, sweeps, recording)
     if calibration_file is not None:
         calibration, cal_text = load_calibration(calibration_file)
     elif meta.get("calibration_yaml") or scenario is None:

@@ -3,6 +3,7 @@ and one transform per sweep, the map, the true outline — the numbers the run h
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import re
@@ -195,7 +196,9 @@ def test_sweep_times_past_ros_time_are_an_output_error_not_an_internal_one(tmp_p
     sweep = core.Sweep(steps=np.array([0, 1]), sensor_angles=np.zeros((2, 3)),
                        counts=np.full((2, 3), 1500), timestamps_s=np.array([0.0, 0.04]),
                        duration_s=9.99e6, pose=np.array([0.4, 0.3, 0.2]), ring=ring)
-    rec = save_recording(tmp_path / "long.npz", [sweep] * 216)
+    # each at its own pose: one sweep saved 216 times is refused as copies
+    rec = save_recording(tmp_path / "long.npz", [dataclasses.replace(
+        sweep, pose=sweep.pose + [0.001 * k, 0.0, 0.0]) for k in range(216)])
     mcap = tmp_path / "long.mcap"
     code = main(["replay", str(rec), "--out", str(tmp_path / "o"), "--no-animation",
                  "--mcap", str(mcap)])

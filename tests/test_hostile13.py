@@ -1,0 +1,58 @@
+"""Round thirteen of hostile input (FINDINGS13.md): each test names the input that broke and
+asserts what happens now."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from irring.cli import main
+from irring.recording import load_recording, save_recording
+
+NOISELESS_TWICE = """name: twice
+seed: 1
+room:
+  outline_mm: [[0, 0], [2420, 0], [2420, 900], [0, 900]]
+robot:
+  poses:
+    - {x_mm: 1920, y_mm: 450}
+    - {x_mm: 1920, y_mm: 450}
+    - {x_mm: 500, y_mm: 450}
+effects: {}
+"""
+
+
+def test_replay_refuses_a_recording_whose_sweep_is_copied(tmp_path, capsys):
+    """t_room's recording saved with its sweeps twice over (8 sweeps) was replayed as eight
+    poses: 4306 valid readings of 2153, coverage 0.922 -> 0.931, exit 0: every reading
+    counted twice as evidence. A noiseless scene that lists one pose twice sweeps it twice
+    alike, honestly, and is replayed as before."""
+    assert main(["run", "t_room", "--out", str(tmp_path / "t"), "--no-animation"]) == 0
+    sweeps, meta = load_recording(tmp_path / "t" / "sweeps.npz")
+    twice = save_recording(tmp_path / "twice.npz", sweeps + sweeps, meta)
+    one = save_recording(tmp_path / "one.npz", [sweeps[0], sweeps[1], sweeps[0]], meta)
+    capsys.readouterr()
+    assert main(["replay", str(twice), "--out", str(tmp_path / "r"), "--no-animation"]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {twice}: sweep 5 repeats sweep 1 reading for reading (its pose, "
+        "steps, 852 counts and timestamps): a copy, whose readings would be mapped twice; the "
+        "recorded scenario 't_room' does not list that pose twice. Remove the copy\n")
+    assert not (tmp_path / "r").exists()
+    assert main(["replay", str(one), "--out", str(tmp_path / "r"), "--no-animation"]) == 1
+    assert "sweep 3 repeats sweep 1 reading for reading" in capsys.readouterr().err
+
+    room = tmp_path / "twice.yaml"
+    room.write_text(NOISELESS_TWICE)
+    assert main(["run", str(room), "--out", str(tmp_path / "n"), "--no-animation"]) == 0
+    same, _ = load_recording(tmp_path / "n" / "sweeps.npz")
+    assert np.array_equal(same[0].counts, same[1].counts)   # noiseless: alike
+    assert main(["replay", str(tmp_path / "n" / "sweeps.npz"), "--out", str(tmp_path / "m"),
+                 "--no-animation"]) == 0
+    # …but its third sweep copied in place of the second is still a copy
+    sweeps, meta = load_recording(tmp_path / "n" / "sweeps.npz")
+    bad = save_recording(tmp_path / "bad.npz", [sweeps[0], sweeps[2], sweeps[2]], meta)
+    capsys.readouterr()
+    assert main(["replay", str(bad), "--out", str(tmp_path / "b"), "--no-animation"]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {bad}: sweep 3 repeats sweep 2 reading for reading (its pose, "
+        "steps, 852 counts and timestamps): a copy, whose readings would be mapped twice; the "
+        "recorded scenario 'twice' does not list that pose twice. Remove the copy\n")
