@@ -901,6 +901,40 @@ def test_a_silent_device_gets_exactly_retries_plus_one_irstp_before_the_timeout(
     assert [m.TYPE for m in port.sent].count("IRSTP") == retries + 1
 
 
+def test_a_link_that_loses_sentences_is_not_blamed_on_a_silent_board(virtual_time):
+    """A link dropping 30 % of sentences (emulate --drop-rate 0.3) ended a drive with "stopped
+    answering (… 3 IRSTP unanswered). Check power, cable and baud rate (115200); reset the
+    board if it hangs." once the IRDON and every IRSTP answer of one pass were lost, though
+    the sweep had lost 26 IRSCN before it: the board was answering, the link dropping."""
+    seq = iter(range(10**6))   # numbered as sent; every other IRSCN and each IRDON lost
+
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            sent = [p.Scan(next(seq), s, 0, (10, 11))
+                    for s in range(msg.from_step, msg.to_step + 1)]
+            return [scan for scan in sent if scan.seq % 2 == 0]
+        return []
+
+    ring = SerialRing(ScriptPort(script), timeout_s=TIMEOUT_S, retries=2).open()
+    with pytest.raises(DeviceTimeout) as lost:
+        ring.sweep()
+    assert str(lost.value).startswith(
+        "ring on script:// stopped answering (no sentence for 0.1 s during IRSWP,-3,3 after 4 "
+        "of 7 steps; 3 IRSTP unanswered), though this sweep lost 3 IRSCN on the way (their seq "
+        "numbers skipped): a link that drops sentences drops answers too. Check the cable, "
+        "its connectors and noise near it, and the baud rate (115200); reset the board if it "
+        "hangs. ")
+    # a board that falls silent after sending all it sent is told as before
+    ring = SerialRing(ScriptPort(lambda msg: [INFO] if isinstance(msg, p.Hello) else [
+        p.Scan(0, -3, 0, (10, 11))] if isinstance(msg, p.SweepCommand) else []),
+        timeout_s=TIMEOUT_S, retries=0).open()
+    with pytest.raises(DeviceTimeout) as silent:
+        ring.sweep()
+    assert "IRSTP unanswered). Check power, cable and baud rate (115200)" in str(silent.value)
+
+
 def _garbled(msg: p.Message) -> bytes:
     line = bytearray(p.encode(msg))
     line[4] ^= 0x20   # "$IRdON…": the checksum no longer matches

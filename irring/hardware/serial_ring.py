@@ -380,6 +380,7 @@ class SerialRing:
         self._position: int | None = None  # motor step last reported (None: unknown)
         self._dropped: str | None = None  # the sweep's first IRSCN dropped as inconsistent
         self._garbled: str | None = None  # the sweep's first malformed sentence, and why
+        self._sweep_before: dict[str, int] = {}   # the counters when the sweep began
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -495,12 +496,20 @@ class SerialRing:
         self.stats.ignored_bytes += self.decoder.ignored_bytes - before
         return out
 
-    def _lost(self, cls: type[LinkLost], what: str) -> LinkLost:
-        """The error for a lost link; sweep() attaches the partial sweep and report."""
+    def _lost(self, cls: type[LinkLost], what: str, lost_scans: int = 0) -> LinkLost:
+        """The error for a lost link; sweep() attaches the partial sweep and report.
+        ``lost_scans``: IRSCN this sweep lost before the device fell silent, which blames
+        the link (a board that hangs loses nothing on the way first)."""
         if cls is DeviceDisconnected:
             self.stats.disconnects += 1
             msg = (f"ring on {self.port_name} disconnected ({what}). Check the cable and power; "
                    f"if you use the emulator, is `irring emulate` still running?")
+        elif lost_scans:
+            msg = (f"ring on {self.port_name} stopped answering ({what}), though this sweep "
+                   f"lost {lost_scans} IRSCN on the way (their seq numbers skipped): a link "
+                   "that drops sentences drops answers too. Check the cable, its connectors "
+                   f"and noise near it, and the baud rate ({self.baudrate}); reset the board "
+                   "if it hangs.")
         else:
             msg = (f"ring on {self.port_name} stopped answering ({what}). Check power, cable "
                    f"and baud rate ({self.baudrate}); reset the board if it hangs.")
@@ -733,7 +742,7 @@ class SerialRing:
         settle_ms = int(round(settle_s * 1000))
         pose_arr = core.as_pose(pose)
         started = time.monotonic()
-        before = self.stats.as_dict()
+        before = self._sweep_before = self.stats.as_dict()
         self._dropped = self._garbled = None
         passes: list[_Pass] = []
 
@@ -1051,7 +1060,8 @@ class SerialRing:
         the other framing (reflashed or swapped mid-session), which no IRSTP changes."""
         other = self._other_framing - framed
         if other < 3 or other <= self.stats.sentences - accepted:
-            return self._lost(DeviceTimeout, what)
+            lost = self.stats.lost_scans - self._sweep_before.get("lost_scans", 0)
+            return self._lost(DeviceTimeout, what, lost)
         spoken = self.decoder.version
         them = 3 - spoken   # the other of p.PROTOCOL_VERSIONS
         return DeviceChanged(
