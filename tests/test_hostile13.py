@@ -3,10 +3,13 @@ asserts what happens now."""
 
 from __future__ import annotations
 
+import csv
+
 import numpy as np
 
 from irring.cli import main
 from irring.recording import load_recording, save_recording
+from irring.scenario import resolve
 
 NOISELESS_TWICE = """name: twice
 seed: 1
@@ -56,3 +59,36 @@ def test_replay_refuses_a_recording_whose_sweep_is_copied(tmp_path, capsys):
         f"irring replay: error: {bad}: sweep 3 repeats sweep 2 reading for reading (its pose, "
         "steps, 852 counts and timestamps): a copy, whose readings would be mapped twice; the "
         "recorded scenario 'twice' does not list that pose twice. Remove the copy\n")
+
+
+ONE_POSE_BOX = """name: same
+room:
+  outline_mm: [[0, 0], [{w}, 0], [{w}, 1500], [0, 1500]]
+robot:
+  poses:
+    - {{x_mm: 700, y_mm: 750}}
+"""
+
+
+def test_bench_rooms_tells_two_rooms_of_one_name_apart(tmp_path, capsys):
+    """Two folders each holding a room named 'same' (1400 and 2600 mm wide): rooms.json kept
+    each file's source, but rooms.csv and the table said 'same' twice, so which row was
+    which room could not be told (coverage 0.955 and 0.238 of two different rooms)."""
+    for sub, w in (("s1", 1400), ("s2", 2600)):
+        (tmp_path / sub).mkdir()
+        (tmp_path / sub / "room.yaml").write_text(ONE_POSE_BOX.format(w=w))
+    out = tmp_path / "bench"
+    a, b = tmp_path / "s1" / "room.yaml", tmp_path / "s2" / "room.yaml"
+    assert main(["bench", "rooms", str(a.parent), str(b.parent), "narrow_room",
+                 "--out", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split("  ")[0] for line in lines[1:7:2]] == [f"same ({a})", f"same ({b})",
+                                                              "narrow_room"]
+    with open(out / "rooms.csv") as fh:
+        table = list(csv.DictReader(fh))
+    narrow = str(resolve("narrow_room"))
+    assert [(r["room"], r["source"], r["sensor"]) for r in table] == [
+        ("same", str(a), "effects"), ("same", str(a), "ideal"),
+        ("same", str(b), "effects"), ("same", str(b), "ideal"),
+        ("narrow_room", narrow, "effects"), ("narrow_room", narrow, "ideal")]
+    assert table[0]["coverage"] != table[2]["coverage"]

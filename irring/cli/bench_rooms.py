@@ -35,7 +35,8 @@ kept):
 
 Figures are means over --seeds seeds (the first is the scenario's own seed + 0).
 A room file that cannot be loaded or run is listed with its error and the others are scored;
-the command then ends with that error's exit status (1 for a bad file).
+the command then ends with that error's exit status (1 for a bad file). Rooms of one name
+(from two folders) are shown with their files; rooms.csv's source column names each file.
 
 exit status: 0 when every room was scored and holds its targets; {errors.TARGET_MISSED} when a room
 misses a target set for its effects or the ideal sensor is worse somewhere (the table's
@@ -76,13 +77,14 @@ def run(args: argparse.Namespace) -> int:
         with open(tmp / "rooms.csv", "w", newline="") as fh:
             w = csv.writer(fh)
             keys = [c[0] for c in COLUMNS]
-            w.writerow(["room", "sensor", *keys, "error"])
+            w.writerow(["room", "source", "sensor", *keys, "error"])
             for r in rows:
                 if "error" in r:
-                    w.writerow([r["name"], "", *("" for _ in keys), r["error"]])
+                    w.writerow([r["name"], r["source"], "", *("" for _ in keys), r["error"]])
                     continue
                 for variant in ("effects", "ideal"):
-                    w.writerow([r["name"], variant, *(r[variant][k] for k in keys), ""])
+                    w.writerow([r["name"], r["source"], variant,
+                                *(r[variant][k] for k in keys), ""])
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
@@ -100,13 +102,21 @@ def _misses_target(row: dict) -> bool:
     return bool(row["ideal_worse"]) or bool(row["misses"] and not row["beyond_target_effects"])
 
 
+def _labels(rows: list[dict]) -> list[str]:
+    """Each room's name, with its file where another room has the same name."""
+    names = [r["name"] for r in rows]
+    return [f"{r['name']} ({errors.printable(str(r['source']))})" if names.count(r["name"]) > 1
+            else r["name"] for r in rows]
+
+
 def _print_table(rows: list[dict], seeds: int, out) -> None:
-    width = max(len(r["name"]) for r in rows)
+    labels = _labels(rows)
+    width = max(len(label) for label in labels)
     head = "".join(f"{label:>8}" for _, label, _, _ in COLUMNS)
     print(f"{'room':<{width}}  {'sensor':<8}{head}  misses")
-    for r in rows:
+    for r, label in zip(rows, labels):
         if "error" in r:
-            print(f"{r['name']:<{width}}  error: {r['error']}")
+            print(f"{label:<{width}}  error: {r['error']}")
             continue
         for variant in ("effects", "ideal"):
             vals = "".join(f"{score_text(r[variant][k], s, d):>8}" for k, _, s, d in COLUMNS)
@@ -117,7 +127,7 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
                     note += " (with " + ", ".join(r["beyond_target_effects"]) + ")"
                 if r["ideal_worse"]:
                     note += ("; " if note else "") + "ideal< " + ", ".join(r["ideal_worse"])
-            name = r["name"] if variant == "effects" else ""
+            name = label if variant == "effects" else ""
             print(f"{name:<{width}}  {variant:<8}{vals}  {note}")
         print_clip_notes(r)
     scored = [r for r in rows if "error" not in r]
