@@ -51,12 +51,34 @@ def safe_name(name: str, default: str = "scenario") -> str:
     return text[:80].strip("._") or default
 
 
-def check_out(out: str | Path, option: str = "--out", *, held: bool = True) -> Path:
+def _replaceable(path: Path) -> bool:
+    """A file (or a link) an output may replace; a folder, pipe or device is never replaced
+    (the folder swap removed a folder ``map.png/`` and all it held)."""
+    return path.is_symlink() or path.is_file() or not path.exists()
+
+
+def _check_names(out: Path, files, option: str) -> None:
+    """:class:`OutputError` when ``out`` holds one of ``files`` as a folder or other
+    non-file, which the outputs would have to replace."""
+    for name in sorted(files):
+        path = out / name
+        if not _replaceable(path):
+            what = ("is a folder" if path.is_dir() else
+                    "is not a regular file (a pipe, device or socket)")
+            raise OutputError(f"{option} {printable(str(out))}: {name} there {what}; irring "
+                              f"writes a file of that name and never replaces a "
+                              f"{'folder' if path.is_dir() else 'non-file'}: move it away or "
+                              "choose another --out")
+
+
+def check_out(out: str | Path, option: str = "--out", *, held: bool = True,
+              files=()) -> Path:
     """``out`` if it can become a folder of outputs: an existing writable folder, or a path
     whose nearest existing parent is a writable folder. ``held=False``: also refuse a folder
     another irring process holds (a study writing there) for :data:`PROBE_WAIT_S`, as an
-    :class:`OutputSet` commit would after the work. Raises :class:`OutputError` naming
-    the option."""
+    :class:`OutputSet` commit would after the work. ``files``: the names the command writes;
+    one ``out`` holds as a folder (or other non-file) is refused before the work. Raises
+    :class:`OutputError` naming the option."""
     out = Path(out)
     shown = printable(str(out))
     try:
@@ -80,6 +102,8 @@ def check_out(out: str | Path, option: str = "--out", *, held: bool = True) -> P
                           "cannot be made")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise OutputError(f"{option} {shown}: {printable(str(probe))} is not writable")
+    if probe == out:
+        _check_names(out, files, option)
     if not held and probe == out:
         with _holding(out, PROBE_WAIT_S) as free:
             if not free:
@@ -171,9 +195,11 @@ class OutputSet:
 
 
     def _move_in(self, out: Path) -> None:
-        if all(p.name in self.files for p in out.iterdir()) and self._swap():
-            return
         written = {p.name for p in self.tmp.iterdir()}
+        _check_names(out, written, self.option)   # before anything is moved or removed
+        if all(p.name in self.files and _replaceable(p) for p in out.iterdir()) \
+                and self._swap():
+            return
         for name in sorted(self.files - written):
             stale = out / name
             if stale.is_file():

@@ -6,8 +6,10 @@ from __future__ import annotations
 import csv
 
 import numpy as np
+import pytest
 
 from irring.cli import main
+from irring.errors import OutputError
 from irring.recording import load_recording, save_recording
 from irring.scenario import resolve
 
@@ -92,3 +94,48 @@ def test_bench_rooms_tells_two_rooms_of_one_name_apart(tmp_path, capsys):
         ("same", str(b), "effects"), ("same", str(b), "ideal"),
         ("narrow_room", narrow, "effects"), ("narrow_room", narrow, "ideal")]
     assert table[0]["coverage"] != table[2]["coverage"]
+
+
+def test_an_output_name_taken_by_a_folder_is_never_swapped_away(tmp_path, capsys):
+    """`irring run t_room --out o` where o/ held a folder map.png/ (the user's thesis.tex in
+    it) and nothing else: the run swapped o/ whole for its outputs, and map.png/thesis.tex
+    was gone (exit 0). With another file beside it the run did all its work, then exit 4
+    "cannot move the outputs in: Is a directory", naming neither the entry nor the cause."""
+    out = tmp_path / "o"
+    (out / "map.png").mkdir(parents=True)
+    (out / "map.png" / "thesis.tex").write_text("precious")
+    assert main(["run", "t_room", "--out", str(out), "--no-animation"]) == 4
+    assert capsys.readouterr().err == (
+        f"irring run: error: --out {out}: map.png there is a folder; irring writes a file of "
+        "that name and never replaces a folder: move it away or choose another --out\n")
+    assert (out / "map.png" / "thesis.tex").read_text() == "precious"
+    assert sorted(p.name for p in out.iterdir()) == ["map.png"]
+
+    # found only when the files are moved in (a library caller, a study's summary): nothing
+    # moved, nothing removed
+    from irring.outputs import OutputSet
+    (out / "map.yaml").write_text("old")
+    target = OutputSet(out)
+    with pytest.raises(OutputError) as refused:
+        with target as tmp:
+            for name in ("map.yaml", "map.png", "sweeps.npz"):
+                (tmp / name).write_text("new")
+    assert str(refused.value) == (
+        f"--out {out}: map.png there is a folder; irring writes a file of that name and never "
+        "replaces a folder: move it away or choose another --out")
+    assert (out / "map.yaml").read_text() == "old" and not (out / "sweeps.npz").exists()
+    assert (out / "map.png" / "thesis.tex").read_text() == "precious"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".irring-")]
+
+
+def test_bench_rooms_refuses_an_output_folder_whose_csv_is_a_folder(tmp_path, capsys):
+    """`bench rooms --out o` with o/rooms.csv/ a folder: o/ was swapped whole, the folder
+    (and whatever it held) removed, exit 0."""
+    out = tmp_path / "o"
+    (out / "rooms.csv").mkdir(parents=True)
+    (out / "rooms.csv" / "notes.txt").write_text("mine")
+    assert main(["bench", "rooms", "narrow_room", "--out", str(out)]) == 4
+    assert capsys.readouterr().err.endswith(
+        f"--out {out}: rooms.csv there is a folder; irring writes a file of that name and "
+        "never replaces a folder: move it away or choose another --out\n")
+    assert (out / "rooms.csv" / "notes.txt").read_text() == "mine"

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .. import errors
 from ..outputs import check_out
+from ..studies.report import study_files
 from ..pipeline import progress_bar
 from ..studies import accuracy
 from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
@@ -91,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
     named_once(scenarios, "--scenario", scenario_file)
     named_once(args.knob or (), "--knob")
     configs = accuracy.configurations(args.knob)
-    check_out(args.out, held=False)   # a study holding the folder: refused before the work
+    # a study holding the folder, or a folder of an output's name: refused before the work
+    check_out(args.out, held=False, files=study_files("accuracy"))
     total = len(configs) * len(scenarios) * args.seeds
     with progress_bar(total, "bench accuracy", unit="run") as bar, \
             executor(args.workers, args.dask) as ex:

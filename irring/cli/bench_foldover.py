@@ -62,7 +62,7 @@ def register(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     scenarios = resolve_rooms(args.rooms or DEFAULT_ROOMS)
-    out = check_out(args.out, held=False)
+    out = check_out(args.out, held=False, files=OUTPUT_FILES)
     rows = measure(scenarios, args.seeds, debug=args.debug)
     with OutputSet(out, files=OUTPUT_FILES) as tmp:
         (tmp / "foldover.json").write_text(json.dumps(rows, indent=2, allow_nan=False))

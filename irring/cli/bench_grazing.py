@@ -61,7 +61,7 @@ def _x(v) -> str:
 
 def run(args: argparse.Namespace) -> int:
     scenarios = resolve_rooms(args.rooms or DEFAULT_ROOMS)
-    out = check_out(args.out, held=False)
+    out = check_out(args.out, held=False, files=OUTPUT_FILES)
     r = measure(scenarios, args.seeds, debug=args.debug)
     with OutputSet(out, files=OUTPUT_FILES) as tmp:
         (tmp / "grazing.json").write_text(json.dumps(r, indent=2))

@@ -69,7 +69,7 @@ OUTPUT_FILES = ("rooms.json", "rooms.csv")
 
 def run(args: argparse.Namespace) -> int:
     scenarios = resolve_rooms(args.rooms or ROOMS)
-    out = check_out(args.out, held=False)
+    out = check_out(args.out, held=False, files=OUTPUT_FILES)
     rows = measure(scenarios, args.seeds, debug=args.debug)
     failed = [r for r in rows if "error" in r]
     with OutputSet(out, files=OUTPUT_FILES) as tmp:

@@ -8,6 +8,7 @@ import json
 from .. import designs, errors
 from ..designs import DESIGN_BY_NAME
 from ..outputs import check_out
+from ..studies.report import study_files
 from ..pipeline import progress_enabled
 from ..studies import compare
 from ..studies.executor import executor
@@ -85,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     names = args.design or list(designs.DESIGN_BY_NAME)
     named_once(scenarios, "--scenario", scenario_file)
     named_once(names, "--design")
-    check_out(args.out, held=False)   # a study holding the folder: refused before the work
+    # a study holding the folder, or a folder of an output's name: refused before the work
+    check_out(args.out, held=False, files=study_files("compare"))
     with executor(args.workers, args.dask) as ex:
         result = compare.compare(scenarios, names, args.seeds,
                                  detection_distances_m=args.distances_mm, bearings=args.bearings,

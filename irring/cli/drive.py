@@ -19,7 +19,7 @@ from ..core import MAX_SWEEPS, Pose, work_bytes, work_refusal
 from ..errors import UsageError
 from ..estimation.calibration import Calibration, CalibrationError, load_calibration
 from ..hardware import DeviceError, SerialRing
-from ..outputs import check_out
+from ..outputs import RUN_FILES, check_out
 from ..recording import save_recording
 from ..scenario import check_ring_placement, load_scenario
 from ._common import (add_mcap_option, add_protocol_v1_option, at_least, between, describe,
@@ -147,7 +147,7 @@ def _error(msg: str) -> int:
 def run(args: argparse.Namespace) -> int:
     spare_inputs({"--mcap": args.mcap}, {"--truth": args.truth,
                                          "--calibration": args.calibration})
-    check_out(args.out, held=False)
+    check_out(args.out, held=False, files=RUN_FILES)
     mcap_beside_outputs(args.mcap, args.out)
     truth = load_scenario(args.truth) if args.truth else None
     if truth is not None and truth.has("motion"):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .. import pipeline
 from ..errors import UsageError
-from ..outputs import check_out, real_path, safe_name
+from ..outputs import RUN_FILES, check_out, real_path, safe_name
 from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path,
                       spare_inputs)
 from .run import report
@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: holds the recording being replayed ({args.recording}); "
                          "its outputs would replace it, so choose another folder (default: "
                          "out/<recording folder>-replay)")
-    check_out(out, held=False)
+    check_out(out, held=False, files=RUN_FILES)
     mcap_beside_outputs(args.mcap, out)
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.replay(args.recording, calibration_file=args.calibration,

@@ -10,7 +10,7 @@ from pathlib import Path
 from .. import errors, pipeline
 from ..core import score_text
 from ..maps import metrics
-from ..outputs import check_out, safe_name
+from ..outputs import RUN_FILES, check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path, seed,
                       spare_inputs)
@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
                                          "--calibration": args.calibration})
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
     out = check_out(args.out if args.out is not None else Path("out") / safe_name(scenario.name),
-                    held=False)   # a study holding the folder: refused before the run
+                    held=False, files=RUN_FILES)   # a study holding it: refused before the run
     mcap_beside_outputs(args.mcap, out)
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
     result = pipeline.run(scenario, seed=args.seed, calibration_file=args.calibration,

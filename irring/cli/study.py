@@ -71,7 +71,8 @@ def register(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     spec = study.load_study(args.file)
-    out = check_out(args.out if args.out else Path("out") / safe_name(Path(args.file).stem))
+    out = check_out(args.out if args.out else Path("out") / safe_name(Path(args.file).stem),
+                    files=study.SUMMARY_FILES.values())
     t0 = time.perf_counter()
     bar = progress_bar(0, "study", progress_enabled() and not args.json, unit="run")
     counts = {}
