@@ -12,6 +12,7 @@ from irring.cli import main
 from irring.errors import OutputError
 from irring.recording import load_recording, save_recording
 from irring.scenario import resolve
+from irring.studies.study import StudyError, load_study
 
 NOISELESS_TWICE = """name: twice
 seed: 1
@@ -139,3 +140,30 @@ def test_bench_rooms_refuses_an_output_folder_whose_csv_is_a_folder(tmp_path, ca
         f"--out {out}: rooms.csv there is a folder; irring writes a file of that name and "
         "never replaces a folder: move it away or choose another --out\n")
     assert (out / "rooms.csv" / "notes.txt").read_text() == "mine"
+
+
+def test_a_study_path_that_names_two_rooms_is_refused(tmp_path, monkeypatch):
+    """sub/st.yaml lists `room.yaml`; sub/room.yaml lies beside it (the README: paths
+    relative to the study file) and the working folder holds another room.yaml. Run from
+    there, the study ran the working folder's room (coverage 0.238, not 0.955) and said
+    nothing."""
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    (sub / "room.yaml").write_text(ONE_POSE_BOX.format(w=1400))
+    (tmp_path / "room.yaml").write_text(ONE_POSE_BOX.format(w=2600))
+    (sub / "st.yaml").write_text("designs: [rotating12]\nscenarios: [room.yaml]\nseeds: 1\n")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(StudyError) as two:
+        load_study("sub/st.yaml")
+    assert str(two.value) == (
+        "sub/st.yaml: scenarios[0]: 'room.yaml' names two files: sub/room.yaml beside the "
+        "study file and room.yaml in the working folder; write the path of the one you mean "
+        "(e.g. sub/room.yaml)")
+    # one of them alone is taken as before; both one file is no question
+    (tmp_path / "room.yaml").unlink()
+    assert load_study("sub/st.yaml").scenarios == ("sub/room.yaml",)
+    monkeypatch.chdir(sub)
+    assert load_study("st.yaml").scenarios == ("room.yaml",)
+    (sub / "room.yaml").rename(tmp_path / "room.yaml")
+    monkeypatch.chdir(tmp_path)
+    assert load_study("sub/st.yaml").scenarios == ("room.yaml",)

@@ -213,9 +213,14 @@ def parse_study(raw: Any, source: str = "") -> Study:
         path = f"scenarios[{i}]"
         if not isinstance(s, str):
             raise _fail(source, path, f"expected a bundled scenario name or a YAML path, got {s!r}")
-        if not os.path.isabs(s) and source and not Path(s).exists() \
-                and (Path(source).parent / s).exists():
-            s = str(Path(source).parent / s)   # a path relative to the study file
+        beside = Path(source).parent / s if source and not os.path.isabs(s) else None
+        if beside is not None and beside.exists():   # a path relative to the study file
+            if Path(s).exists() and scenario_file(s) != scenario_file(str(beside)):
+                raise _fail(source, path, f"{s!r} names two files: {beside} beside the study "
+                                          f"file and {s} in the working folder; write the "
+                                          f"path of the one you mean (e.g. {beside})")
+            if not Path(s).exists():
+                s = str(beside)
         try:
             loaded = load_scenario(s)
         except ScenarioError as exc:
