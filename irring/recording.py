@@ -19,6 +19,7 @@ from .core import (ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_SAMPLES, MAX_STEPS
                    SEED_MAX, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth, work_bytes, work_refusal)
 from .errors import InputError, IrringError, TooBig, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
+from .safe_yaml import MCAP_MAGIC
 from .scenario import MapSpec, ScenarioError, load_dataclass
 
 FORMAT = "irring-recording/1"
@@ -158,7 +159,6 @@ def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> P
     return path
 
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"   # the first bytes of every MCAP file (mcap.dev/spec)
 
 # Bounds checked before anything sized by the file is allocated.
 MAX_FILE_BYTES = 2 * 2**30        # the .npz on disk

@@ -194,7 +194,12 @@ def load(text: str, source: str = "<string>", what: str = "YAML file") -> Any:
     try:
         # (its reader refuses control characters)
         loader = _StrictLoader(text, source, what, max_values)
-        return loader.get_single_data()
+        data = loader.get_single_data()
+        if (isinstance(data, dict) and _MAP_SERVER_KEYS <= data.keys()
+                and what != "map_server YAML"):
+            raise YamlError(f"{source}: a ROS map_server map (the map.yaml irring writes "
+                            f"beside map.pgm); expected a {what}")
+        return data
     except YamlError:
         raise
     except yaml.reader.ReaderError as exc:
@@ -217,6 +222,17 @@ def load(text: str, source: str = "<string>", what: str = "YAML file") -> Any:
     finally:
         if loader is not None:
             loader.dispose()
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"   # the first bytes of every MCAP file (mcap.dev/spec)
+# the files irring writes that are no text, by their first bytes
+_NOT_YAML = ((b"PK\x03\x04", "a zip archive, as a recording (sweeps.npz) is: `irring replay` "
+                             "reads those"),
+             (b"\x89PNG", "a PNG picture"), (b"GIF8", "a GIF picture"),
+             (b"P5\n", "a PGM picture (as map.pgm is)"),
+             (MCAP_MAGIC, "an MCAP file (what --mcap writes, for viewers such as Foxglove)"))
+# the keys of a ROS map_server map (maps.mapping writes one as map.yaml beside map.pgm)
+_MAP_SERVER_KEYS = frozenset({"image", "resolution", "origin", "occupied_thresh", "free_thresh"})
 
 
 def read_text(path: str | Path, what: str = "file") -> str:
@@ -246,6 +262,9 @@ def read_text(path: str | Path, what: str = "file") -> str:
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
+        kind = next((k for magic, k in _NOT_YAML if data.startswith(magic)), None)
+        if kind:   # irring's own outputs: "save it as UTF-8" is no advice for them
+            raise InputError(f"{path}: {kind}; expected a {what}") from None
         line = data[:exc.start].count(b"\n") + 1
         raise InputError(f"{path}: line {line}: not UTF-8 text (byte {exc.start}); save the "
                          f"{what} as UTF-8") from None

@@ -167,3 +167,36 @@ def test_a_study_path_that_names_two_rooms_is_refused(tmp_path, monkeypatch):
     (sub / "room.yaml").rename(tmp_path / "room.yaml")
     monkeypatch.chdir(tmp_path)
     assert load_study("sub/st.yaml").scenarios == ("room.yaml",)
+
+
+def test_irrings_own_outputs_named_as_input_files_are_told_for_what_they_are(tmp_path, capsys):
+    """A run's own outputs given where a YAML file belongs: sweeps.npz as the scenario (view,
+    drive --truth, compare --scenario) or map.png as --calibration were told "line 1: not
+    UTF-8 text (byte 14); save the scenario file as UTF-8", advice no one can follow for a
+    recording or a picture; map.yaml (the ROS map) as a scenario or calibration got
+    "image: unknown key"."""
+    out = tmp_path / "t"
+    assert main(["run", "t_room", "--out", str(out), "--mcap", str(tmp_path / "t.mcap")]) == 0
+    capsys.readouterr()
+    cases = [
+        (["view", str(out / "sweeps.npz")], out / "sweeps.npz", "a zip archive, as a "
+         "recording (sweeps.npz) is: `irring replay` reads those; expected a scenario file"),
+        (["run", "t_room", "--calibration", str(out / "map.png")], out / "map.png",
+         "a PNG picture; expected a calibration file"),
+        (["run", "t_room", "--calibration", str(out / "map_building.gif")],
+         out / "map_building.gif", "a GIF picture; expected a calibration file"),
+        (["run", str(out / "map.pgm")], out / "map.pgm",
+         "a PGM picture (as map.pgm is); expected a scenario file"),
+        (["run", str(tmp_path / "t.mcap")], tmp_path / "t.mcap",
+         "an MCAP file (what --mcap writes, for viewers such as Foxglove); expected a "
+         "scenario file"),
+        (["run", str(out / "map.yaml")], out / "map.yaml",
+         "a ROS map_server map (the map.yaml irring writes beside map.pgm); expected a "
+         "scenario file"),
+        (["run", "t_room", "--calibration", str(out / "map.yaml")], out / "map.yaml",
+         "a ROS map_server map (the map.yaml irring writes beside map.pgm); expected a "
+         "calibration file"),
+    ]
+    for argv, path, what in cases:
+        assert main(argv + ["--out", str(tmp_path / "o")]) == 1, argv
+        assert capsys.readouterr().err.endswith(f": error: {path}: {what}\n"), argv
