@@ -19,7 +19,7 @@ from .core import (ADC_BITS, MAX_DURATION_S, MAX_RANGE_M, MAX_SAMPLES, MAX_STEPS
                    SEED_MAX, SENSOR_MODEL, VREF_V, Ring, Sweep, Truth, work_bytes, work_refusal)
 from .errors import InputError, IrringError, TooBig, brief
 from .maps.mapping import OFF_AT_INFINITY, MapperParams, check_grid_size
-from .safe_yaml import MCAP_MAGIC
+from .safe_yaml import MCAP_MAGIC, not_text
 from .scenario import MapSpec, ScenarioError, load_dataclass
 
 FORMAT = "irring-recording/1"
@@ -213,7 +213,9 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
 
     try:
         if path.is_dir():
-            raise fail("is a folder; expected a sweeps .npz recording")
+            inside = path / "sweeps.npz"   # a run's --out
+            raise fail("is a folder; expected a sweeps .npz recording" + (
+                f" (this one holds one: irring replay {inside})" if inside.is_file() else ""))
         if not path.exists():
             raise fail("no such recording")
         if not path.is_file():   # a FIFO with no writer blocked here for good
@@ -222,9 +224,12 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
         if path.stat().st_size > MAX_FILE_BYTES:
             raise fail(f"{path.stat().st_size / 2**30:.1f} GB is larger than any recording")
         with open(path, "rb") as f:
-            if f.read(len(MCAP_MAGIC)) == MCAP_MAGIC:   # was "… damaged one: not a zip file"
+            head = f.read(len(MCAP_MAGIC))
+            if head == MCAP_MAGIC:   # was "… damaged one: not a zip file"
                 raise fail("an MCAP file (what --mcap writes for viewers such as Foxglove), "
                            "not a recording; replay the sweeps.npz written beside it")
+            if not_text(head) and not head.startswith(b"PK"):   # a picture of the run's
+                raise fail(f"{not_text(head)}; expected a sweeps .npz recording")
         with zipfile.ZipFile(path) as zf:
             infos = {i.filename: i for i in zf.infolist()}
             if len(infos) < len(zf.infolist()):   # zipfile reads the last of the same name

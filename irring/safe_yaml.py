@@ -231,6 +231,13 @@ _NOT_YAML = ((b"PK\x03\x04", "a zip archive, as a recording (sweeps.npz) is: `ir
              (b"\x89PNG", "a PNG picture"), (b"GIF8", "a GIF picture"),
              (b"P5\n", "a PGM picture (as map.pgm is)"),
              (MCAP_MAGIC, "an MCAP file (what --mcap writes, for viewers such as Foxglove)"))
+
+
+def not_text(head: bytes) -> str | None:
+    """What a file whose first bytes are ``head`` is, if irring wrote it and it is no text."""
+    return next((kind for magic, kind in _NOT_YAML if head.startswith(magic)), None)
+
+
 # the keys of a ROS map_server map (maps.mapping writes one as map.yaml beside map.pgm)
 _MAP_SERVER_KEYS = frozenset({"image", "resolution", "origin", "occupied_thresh", "free_thresh"})
 
@@ -262,7 +269,7 @@ def read_text(path: str | Path, what: str = "file") -> str:
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        kind = next((k for magic, k in _NOT_YAML if data.startswith(magic)), None)
+        kind = not_text(data)
         if kind:   # irring's own outputs: "save it as UTF-8" is no advice for them
             raise InputError(f"{path}: {kind}; expected a {what}") from None
         line = data[:exc.start].count(b"\n") + 1

@@ -200,3 +200,21 @@ def test_irrings_own_outputs_named_as_input_files_are_told_for_what_they_are(tmp
     for argv, path, what in cases:
         assert main(argv + ["--out", str(tmp_path / "o")]) == 1, argv
         assert capsys.readouterr().err.endswith(f": error: {path}: {what}\n"), argv
+
+
+def test_replay_of_a_run_folder_or_its_picture_points_at_the_recording(tmp_path, capsys):
+    """`irring replay out/t` (the run's folder) said "is a folder; expected a sweeps .npz
+    recording" though sweeps.npz lay in it; `replay out/t/map.pgm` said "not an irring
+    recording (.npz), or a damaged one: BadZipFile: File is not a zip file"."""
+    out = tmp_path / "t"
+    assert main(["run", "t_room", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(out), "--out", str(tmp_path / "r")]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {out}: is a folder; expected a sweeps .npz recording (this "
+        f"one holds one: irring replay {out / 'sweeps.npz'})\n")
+    for name, kind in (("map.pgm", "a PGM picture (as map.pgm is)"),
+                       ("map.png", "a PNG picture"), ("map_building.gif", "a GIF picture")):
+        assert main(["replay", str(out / name), "--out", str(tmp_path / "r")]) == 1
+        assert capsys.readouterr().err == (
+            f"irring replay: error: {out / name}: {kind}; expected a sweeps .npz recording\n")
