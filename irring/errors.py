@@ -124,6 +124,13 @@ def describe(exc: BaseException) -> tuple[int, str]:
         return USAGE, printable(f"MUJOCO_GL={value!r} is not a value MuJoCo takes; set "
                                 f"MUJOCO_GL=egl or osmesa (pictures without a display), glfw "
                                 f"(with a display), or unset it")
+    if isinstance(exc, ImportError) and "PYOPENGL_PLATFORM environment variable" in str(exc):
+        # raised by `import mujoco.osmesa` (or .egl) when the user's value names another
+        backend = "egl" if "Cannot use EGL" in str(exc) else "osmesa"
+        value = os.environ.get("PYOPENGL_PLATFORM", "")
+        return USAGE, printable(f"PYOPENGL_PLATFORM={value!r} is not the OpenGL platform "
+                                f"MuJoCo draws this picture with ({backend}); unset it, or set "
+                                f"it (and MUJOCO_GL) to {backend}")
     serial = sys.modules.get("serial")  # not imported: then no pyserial error can be raised
     if serial is not None and isinstance(exc, serial.SerialException):
         return DEVICE, printable(str(exc) or type(exc).__name__)

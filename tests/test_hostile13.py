@@ -218,3 +218,29 @@ def test_replay_of_a_run_folder_or_its_picture_points_at_the_recording(tmp_path,
         assert main(["replay", str(out / name), "--out", str(tmp_path / "r")]) == 1
         assert capsys.readouterr().err == (
             f"irring replay: error: {out / name}: {kind}; expected a sweeps .npz recording\n")
+
+
+def test_a_pyopengl_platform_at_odds_with_the_renderer_is_a_usage_error(tmp_path):
+    """PYOPENGL_PLATFORM=bogus (or egl where MuJoCo draws with OSMesa): `irring view` ended
+    in exit 70, "internal error (ImportError: …); … please report it", for a setting of the
+    user's environment, as MUJOCO_GL=bogus already is told (exit 2)."""
+    import os
+    import subprocess
+    import sys
+
+    from irring.simulation.view import gl_backend
+
+    backend = gl_backend()
+    other = "egl" if backend == "osmesa" else "osmesa"
+    for value in ("bogus", other):
+        env = dict(os.environ, PYOPENGL_PLATFORM=value)
+        env.pop("IRRING_DEBUG", None)
+        done = subprocess.run([sys.executable, "-m", "irring", "view", "t_room", "--out",
+                               str(tmp_path / "v.png")], env=env, capture_output=True,
+                              text=True, timeout=300)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr == (
+            f"irring view: error: PYOPENGL_PLATFORM={value!r} is not the OpenGL platform "
+            f"MuJoCo draws this picture with ({backend}); unset it, or set it (and "
+            f"MUJOCO_GL) to {backend}\n")
+        assert not (tmp_path / "v.png").exists()
