@@ -244,3 +244,41 @@ def test_a_pyopengl_platform_at_odds_with_the_renderer_is_a_usage_error(tmp_path
             f"MuJoCo draws this picture with ({backend}); unset it, or set it (and "
             f"MUJOCO_GL) to {backend}\n")
         assert not (tmp_path / "v.png").exists()
+
+
+def _irring(args, tmp_path, **env):
+    import os
+    import subprocess
+    import sys
+
+    full = dict(os.environ, **env)
+    full.pop("IRRING_DEBUG", None)
+    return subprocess.run([sys.executable, "-m", "irring", *args], env=full, cwd=tmp_path,
+                          capture_output=True, timeout=600)
+
+
+def test_a_bad_mplbackend_does_not_stop_irrings_own_charts(tmp_path):
+    """MPLBACKEND=bogus: `irring calibrate` wrote the calibration, then ended in exit 70
+    "internal error (ValueError: Key backend: 'bogus' is not a valid value …)" without its
+    picture (a study: after every run, without its summary). irring draws its charts on its
+    own Agg canvas and opens no window, so the variable has nothing to choose for it."""
+    done = _irring(["calibrate", "--scenario", "t_room", "--out", "c.yaml"], tmp_path,
+                   MPLBACKEND="bogus")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "c.yaml").is_file() and (tmp_path / "c.png").is_file()
+
+
+def test_a_terminal_that_cannot_show_unicode_gets_escapes_not_an_internal_error(tmp_path):
+    """PYTHONIOENCODING=ascii (or latin-1, as a legacy locale gives): `irring geometry` and
+    `irring run` ended in exit 70 "internal error (UnicodeEncodeError: 'ascii' codec can't
+    encode character '\\u03a6' …)" at their first Φ or —, run after writing nothing."""
+    for encoding in ("ascii", "latin-1"):
+        geometry = _irring(["geometry", "--samples", "1000"], tmp_path,
+                           PYTHONIOENCODING=encoding)
+        assert geometry.returncode == 0, geometry.stderr
+        assert b"\\u03a6" in geometry.stdout or b"\\u0394" in geometry.stdout
+        run = _irring(["run", "t_room", "--out", "o", "--no-animation"], tmp_path,
+                      PYTHONIOENCODING=encoding)
+        assert run.returncode == 0, run.stderr
+        assert b"t_room \\u2014 Paper's inverted-T room" in run.stdout
+        assert (tmp_path / "o" / "map.png").is_file()

@@ -91,11 +91,12 @@ def main(argv: list[str] | None = None) -> int:
     # subcommand's module may load MuJoCo when it is imported)
     word = next((a for a in argv if not a.startswith("-")), "")
     _hold_closed_streams()
+    _escape_what_streams_cannot_encode()
     stdout, sys.stdout = sys.stdout, _NamedStream(sys.stdout, "standard output")
     try:
         # `kill` (SIGTERM) stops a command as Ctrl-C does: killed outright, it left its
         # half-written output folder or file (.irring-*) beside --out
-        with _no_opengl(word != "view"), errors.sigterm_as_interrupt():
+        with _no_opengl(word != "view"), _no_mpl_backend(), errors.sigterm_as_interrupt():
             parser = build_parser()
             args = parser.parse_args(argv)
             if not getattr(args, "func", None):
@@ -201,6 +202,33 @@ def _stdout_gone() -> bool:
         return any(events & select.POLLERR for _, events in poll.poll(0))
     except (AttributeError, OSError, ValueError):   # no poll(), no real stdout
         return False
+
+
+def _escape_what_streams_cannot_encode() -> None:
+    """A terminal or PYTHONIOENCODING that cannot show Φ, θ or — (ascii, latin-1) gets
+    them as \\u escapes, as Python's stderr already does: every report has them, and
+    each ended in exit 70 (UnicodeEncodeError) instead."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            "Φθ—×…".encode(stream.encoding)
+        except (UnicodeEncodeError, LookupError, TypeError, AttributeError):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (AttributeError, ValueError, OSError):   # not a text file of its own
+                pass
+
+
+@contextlib.contextmanager
+def _no_mpl_backend():
+    """irring draws its charts on its own Agg canvas (maps.render.figure) and opens no
+    window, so MPLBACKEND has nothing to choose for it; a value matplotlib does not know
+    made importing it fail, after the work, where a chart was to be drawn."""
+    value = os.environ.pop("MPLBACKEND", None)
+    try:
+        yield
+    finally:
+        if value is not None:
+            os.environ["MPLBACKEND"] = value
 
 
 @contextlib.contextmanager
