@@ -282,3 +282,32 @@ def test_a_terminal_that_cannot_show_unicode_gets_escapes_not_an_internal_error(
         assert run.returncode == 0, run.stderr
         assert b"t_room \\u2014 Paper's inverted-T room" in run.stdout
         assert (tmp_path / "o" / "map.png").is_file()
+
+
+def test_csv_files_are_utf8_whatever_the_locale(tmp_path):
+    """Under an ASCII locale (LC_ALL=C without Python's UTF-8 mode) a study of a design
+    named 'anneau_é' and bench rooms of a room named 'café' ended in exit 70
+    (UnicodeEncodeError) writing results.csv and rooms.csv, which were written in the
+    locale's encoding; a Latin-1 locale would write a results.csv that --resume, reading
+    UTF-8, refuses as 'edited or damaged'."""
+    room = ONE_POSE_BOX.format(w=1400).replace("name: same", "name: café")
+    (tmp_path / "salle.yaml").write_text(room, encoding="utf-8")
+    (tmp_path / "st.yaml").write_text(
+        "designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45, step_deg: 1.08, "
+        "name: anneau_é}]\nscenarios: [salle.yaml]\nseeds: 1\n", encoding="utf-8")
+    ascii_locale = dict(LC_ALL="C", PYTHONUTF8="0", PYTHONCOERCECLOCALE="0")
+    study = _irring(["study", "st.yaml", "--out", "st", "--workers", "1"], tmp_path,
+                    **ascii_locale)
+    assert study.returncode == 0, study.stderr
+    results = (tmp_path / "st" / "results.csv").read_text(encoding="utf-8")
+    assert results.splitlines()[1].startswith("anneau_é,salle.yaml,")
+    again = _irring(["study", "st.yaml", "--out", "st", "--workers", "1", "--resume"],
+                    tmp_path, **ascii_locale)
+    assert again.returncode == 0, again.stderr
+    assert (tmp_path / "st" / "summary.csv").read_text(encoding="utf-8").splitlines()[1] \
+        .startswith("anneau_é,")
+    rooms = _irring(["bench", "rooms", "salle.yaml", "--out", "br"], tmp_path,
+                    **ascii_locale)
+    assert rooms.returncode == 0, rooms.stderr
+    assert (tmp_path / "br" / "rooms.csv").read_text(encoding="utf-8").splitlines()[1] \
+        .startswith("café,")

@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     failed = [r for r in rows if "error" in r]
     with OutputSet(out, files=OUTPUT_FILES) as tmp:
         (tmp / "rooms.json").write_text(json.dumps(rows, indent=2))
-        with open(tmp / "rooms.csv", "w", newline="") as fh:
+        with open(tmp / "rooms.csv", "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             keys = [c[0] for c in COLUMNS]
             w.writerow(["room", "source", "sensor", *keys, "error"])

@@ -35,7 +35,7 @@ def load_line(before, after, cpus: int | None = None) -> str:
 
 def write_csv(path, rows: list[dict], keys) -> None:
     """``rows`` as CSV with the columns ``keys`` (a missing or None value: an empty cell)."""
-    with open(path, "w", newline="") as fh:
+    with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(keys)
         for r in rows:

@@ -630,7 +630,7 @@ def row_key(row: Mapping[str, Any]) -> tuple[str, ...]:
 def _write_sorted(path: Path, rows: list[dict[str, str]]) -> None:
     tmp = path.with_name(path.name + ".tmp")
     try:
-        with open(tmp, "w", newline="") as fh:
+        with open(tmp, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow(COLUMNS)
             for r in rows:
@@ -721,7 +721,7 @@ def _run_study(study, points: list, out: Path, ex, resume: bool, progress, on_st
     new_file = not existing
     kept = len(existing)
     with _results_writes(path, lambda: kept):
-        fh = open(path, "w" if new_file else "a", newline="")
+        fh = open(path, "w" if new_file else "a", newline="", encoding="utf-8")
     try:
         w = csv.writer(fh)
         if new_file:
