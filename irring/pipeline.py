@@ -488,6 +488,19 @@ def _check_room_holds_poses(scenario: Scenario, sweeps: Sequence[Sweep], recordi
         "belong together")
 
 
+def _check_scenario_sensor(scenario: Scenario, sweeps: Sequence[Sweep], recording) -> None:
+    """A recorded scenario whose sensor is not the one its sweeps were read with (run and
+    drive record both from one source) scores the map with another sensor's reach."""
+    for k, sweep in enumerate(sweeps):
+        if (sweep.sensor_model, sweep.vref_v) != (scenario.sensor.model,
+                                                  scenario.sensor.vref_v):
+            raise rec.RecordingError(
+                f"{recording}: sweep {k + 1} was read by a {sweep.sensor_model} at "
+                f"{sweep.vref_v:g} V, but the recorded scenario {scenario.name!r} says its ring "
+                f"reads a {scenario.sensor.model} at {scenario.sensor.vref_v:g} V; the scenario and the sweeps do not belong "
+                "together")
+
+
 def _check_no_copied_sweep(scenario: Scenario | None, sweeps: Sequence[Sweep],
                            recording) -> None:
     """A sweep equal to an earlier one in pose, steps, counts and timestamps is a copy (a
@@ -537,6 +550,7 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
             unscored = str(exc)
     if scenario is not None:
         _check_room_holds_poses(scenario, sweeps, recording)
+        _check_scenario_sensor(scenario, sweeps, recording)
     _check_no_copied_sweep(scenario, sweeps, recording)
     if calibration_file is not None:
         calibration, cal_text = load_calibration(calibration_file)

@@ -311,3 +311,23 @@ def test_csv_files_are_utf8_whatever_the_locale(tmp_path):
     assert rooms.returncode == 0, rooms.stderr
     assert (tmp_path / "br" / "rooms.csv").read_text(encoding="utf-8").splitlines()[1] \
         .startswith("café,")
+
+
+def test_replay_refuses_a_recorded_scenario_of_another_sensor(tmp_path, capsys):
+    """t_room's recording with its scenario's sensor block made a GP2Y0A02 (1500 mm):
+    replayed and scored as that sensor's map ("recall counts wall within 1318 mm (past it
+    one GP2Y0A02 reading …)"), though every sweep says a GP2D12 read it. `irring run` and
+    `irring drive` record the sensor their sweeps were read with, so only an edited or
+    mixed-up file disagrees."""
+    assert main(["run", "t_room", "--out", str(tmp_path / "t"), "--no-animation"]) == 0
+    sweeps, meta = load_recording(tmp_path / "t" / "sweeps.npz")
+    meta["scenario_yaml"] = meta["scenario_yaml"].replace(
+        "model: gp2d12", "model: gp2y0a02").replace("max_range_mm: 624", "max_range_mm: 1500")
+    other = save_recording(tmp_path / "other.npz", sweeps, meta)
+    capsys.readouterr()
+    assert main(["replay", str(other), "--out", str(tmp_path / "r"), "--no-animation"]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {other}: sweep 1 was read by a gp2d12 at 5 V, but the recorded "
+        "scenario 't_room' says its ring reads a gp2y0a02 at 5 V; the scenario and the sweeps "
+        "do not belong together\n")
+    assert not (tmp_path / "r").exists()
