@@ -497,8 +497,8 @@ def _check_scenario_sensor(scenario: Scenario, sweeps: Sequence[Sweep], recordin
             raise rec.RecordingError(
                 f"{recording}: sweep {k + 1} was read by a {sweep.sensor_model} at "
                 f"{sweep.vref_v:g} V, but the recorded scenario {scenario.name!r} says its ring "
-                f"reads a {scenario.sensor.model} at {scenario.sensor.vref_v:g} V; the scenario and the sweeps do not belong "
-                "together")
+                f"reads a {scenario.sensor.model} at {scenario.sensor.vref_v:g} V; the "
+                "scenario and the sweeps do not belong together")
 
 
 def _check_no_copied_sweep(scenario: Scenario | None, sweeps: Sequence[Sweep],
