@@ -136,7 +136,14 @@ class OutputSet:
         self.made = []
         try:
             self.made = _make_folders(self.out.absolute().parent)
-            self.tmp = _hidden_sibling(self.out.absolute(), folder=True)
+            try:
+                self.tmp = _hidden_sibling(self.out.absolute(), folder=True)
+            except OSError as exc:
+                # a writable --out in a folder one may not write (a mount point under
+                # /media/me): the set is written inside it, and each file renamed in
+                if exc.errno not in _WRITE_ERRNOS or not self.out.is_dir():
+                    raise
+                self.tmp = _hidden_sibling(self.out.absolute() / "set", folder=True)
         except OSError as exc:
             _remove_empty(self.made)
             raise OutputError(f"{self.option} {printable(str(self.out))}: cannot write "

@@ -331,3 +331,33 @@ def test_replay_refuses_a_recorded_scenario_of_another_sensor(tmp_path, capsys):
         "scenario 't_room' says its ring reads a gp2y0a02 at 5 V; the scenario and the sweeps "
         "do not belong together\n")
     assert not (tmp_path / "r").exists()
+
+
+def test_a_writable_out_in_a_folder_one_may_not_write_gets_its_outputs(tmp_path, capsys,
+                                                                       monkeypatch):
+    """`--out /media/me/usb` (a writable folder, or a mount point, in a folder the user may
+    not write, as /media/me is for him; reproduced with a tmpfs mounted read-only and another
+    mounted writable on it): run did all its work, then exit 4 "--out …: cannot write there:
+    Read-only file system", though every output could be written into the folder itself."""
+    from irring import outputs
+
+    parent = tmp_path / "media"
+    out = parent / "usb"
+    out.mkdir(parents=True)
+    (out / "notes.txt").write_text("mine")
+    made = outputs._hidden_sibling
+
+    def read_only_parent(path, *, folder):   # what mkdir/open beside `out` meets there
+        if path.parent == parent:
+            raise PermissionError(13, "Permission denied", str(path))
+        return made(path, folder=folder)
+
+    monkeypatch.setattr(outputs, "_hidden_sibling", read_only_parent)
+    assert main(["run", "t_room", "--out", str(out), "--no-animation"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [
+        "map.pgm", "map.png", "map.yaml", "notes.txt", "sweeps.npz"]
+    assert sorted(p.name for p in parent.iterdir()) == ["usb"]
+    # run again: the previous set replaced file by file, nothing of the temporaries left
+    assert main(["run", "t_room", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [
+        "map.pgm", "map.png", "map.yaml", "map_building.gif", "notes.txt", "sweeps.npz"]
