@@ -10,6 +10,7 @@ import pytest
 
 from irring.cli import main
 from irring.errors import OutputError
+from irring.estimation.calibration import CalibrationError
 from irring.recording import load_recording, save_recording
 from irring.scenario import resolve
 from irring.studies.study import StudyError, load_study
@@ -361,3 +362,38 @@ def test_a_writable_out_in_a_folder_one_may_not_write_gets_its_outputs(tmp_path,
     assert main(["run", "t_room", "--out", str(out)]) == 0
     assert sorted(p.name for p in out.iterdir()) == [
         "map.pgm", "map.png", "map.yaml", "map_building.gif", "notes.txt", "sweeps.npz"]
+
+
+def test_a_progress_file_whose_counts_no_reading_backs_is_refused(tmp_path):
+    """A calibration progress file (calibrate --port … --resume FILE) whose step says counts
+    1500 from 0 readings (repeats 0) was resumed and the count fitted as a reading; one with
+    no count (null) from 4 readings likewise passed. A placement's count is the mean of the
+    readings it counts: save_progress writes null exactly where repeats is 0."""
+    import yaml
+
+    from irring.estimation.calibration import (GuidedCalibration, RigReadings,
+                                               load_progress, save_progress)
+
+    guided = GuidedCalibration(read_sweep=None, sweeps=4)
+    place = guided.placements[0]
+    guided.done[0] = RigReadings(
+        counts=np.array([1500.0, np.nan, 1480.0]), beam_angle_rad=np.radians([-1.0, 0.0, 1.0]),
+        wall_distance_m=np.full(3, place.wall_distance_m), spread_counts=np.full(3, 2.0),
+        repeats=np.array([4, 0, 3]), offset=np.full(3, place.purpose == "offset"))
+    path = save_progress(tmp_path / "p.yaml", guided)
+    assert load_progress(path).done[0][1].repeats.tolist() == [4, 0, 3]   # as written
+    raw = yaml.safe_load(path.read_text())
+    for step, counts, repeats, why in (
+            (1, 1500.0, 0, "counts 1500 from 0 readings"),
+            (0, None, 4, "no counts (null) from 4 readings")):
+        edited = yaml.safe_load(path.read_text())
+        edited["read"][0]["counts"][step] = counts
+        edited["read"][0]["repeats"][step] = repeats
+        bad = tmp_path / "bad.yaml"
+        bad.write_text(yaml.safe_dump(edited))
+        with pytest.raises(CalibrationError) as refused:
+            load_progress(bad)
+        assert str(refused.value) == (
+            f"{bad}: read[0]: step {step + 1} says {why}; a step's counts are the mean of "
+            "the readings its repeats count (null where none was read)")
+    assert raw["read"][0]["counts"][1] is None

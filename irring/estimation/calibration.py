@@ -1239,6 +1239,15 @@ def load_progress(path: str | Path) -> Progress:
         sizes = {key: c.size for key, c in cols.items()}
         if len(set(sizes.values())) != 1:
             raise fail(f"read[{j}]", f"its lists differ in length ({sizes}); one value a step")
+        read = cols["repeats"] > 0
+        wrong = np.flatnonzero(np.isfinite(cols["counts"]) != read)
+        if wrong.size:   # collect() averages a step's readings: NaN exactly where none was
+            i = int(wrong[0])
+            said = (f"counts {cols['counts'][i]:g} from 0 readings" if not read[i] else
+                    f"no counts (null) from {int(cols['repeats'][i])} readings")
+            raise fail(f"read[{j}]", f"step {i + 1} says {said}; a step's counts are the mean "
+                                     "of the readings its repeats count (null where none was "
+                                     "read)")
         size = cols["counts"].size
         kept += size
         if kept > PROGRESS_MAX_READINGS:
