@@ -397,3 +397,27 @@ def test_a_progress_file_whose_counts_no_reading_backs_is_refused(tmp_path):
             f"{bad}: read[0]: step {step + 1} says {why}; a step's counts are the mean of "
             "the readings its repeats count (null where none was read)")
     assert raw["read"][0]["counts"][1] is None
+
+
+def test_scenarios_checks_every_file_it_is_given(tmp_path, capsys):
+    """`irring scenarios good.yaml bowtie.yaml flat.yaml box_room` (checking a folder of
+    rooms, as its --help offers): the first bad file ended the command, and neither the good
+    file before it nor the files after it were listed or checked."""
+    good = tmp_path / "good.yaml"
+    good.write_text(ONE_POSE_BOX.format(w=1400))
+    bowtie = tmp_path / "bowtie.yaml"
+    bowtie.write_text(ONE_POSE_BOX.format(w=1400).replace(
+        "[[0, 0], [1400, 0], [1400, 1500], [0, 1500]]", "[[0, 0], [1400, 1500], [1400, 0], "
+        "[0, 1500]]"))
+    flat = tmp_path / "flat.yaml"
+    flat.write_text("name: flat\nroom: {outline_mm: [[0, 0], [1000, 0], [2000, 0]]}\n"
+                    "robot: {poses: [{x_mm: 400, y_mm: 0}]}\n")
+    assert main(["scenarios", str(good), str(bowtie), str(flat), "box_room"]) == 1
+    out, err = capsys.readouterr()
+    assert [line.split()[0] for line in out.splitlines()] == [str(good), "box_room"]
+    assert err == (
+        f"irring scenarios: error: {bowtie}: room.outline_mm: walls 0 and 2 cross: the outline "
+        "must not intersect itself\n"
+        f"irring scenarios: error: {flat}: room.outline_mm: all 3 corners lie on one line, so "
+        "the outline encloses no room; list the corners of an area\n"
+        "irring scenarios: 2 of 4 scenario(s) refused\n")

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from .. import scenario
-from ..errors import printable
+from ..errors import IrringError, printable
 from ._common import describe
 
 
@@ -13,7 +14,7 @@ def register(p: argparse.ArgumentParser) -> None:
     describe(p, "List the bundled scenarios (name, poses, obstacles, "
              "description). Pass a name or a YAML path to other commands. With names or "
              "paths, list those instead: each is loaded and checked as `irring run` would "
-             "(a bad file is an error naming it), and a note names any obstacle the walls "
+             "(a bad file is an error naming it, and the others are still checked), and a note names any obstacle the walls "
              "clip (one reaching through a wall: what lies beyond it is never seen).",
              raw=False)
     p.add_argument("scenario", nargs="*", metavar="SCENARIO",
@@ -25,15 +26,29 @@ def register(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     named = args.scenario
     rows = []
+    failed: list[IrringError] = []
     for name in named or scenario.bundled():
-        sc = scenario.load_scenario(name if named else scenario.bundled()[name])
+        try:
+            sc = scenario.load_scenario(name if named else scenario.bundled()[name])
+        except IrringError as exc:
+            if not named:   # a bundled scenario that does not load: the install is broken
+                raise
+            # each file is checked: one bad file hid the verdict on all the others
+            print(f"irring scenarios: error: {printable(str(exc))}", file=sys.stderr)
+            failed.append(exc)
+            continue
         default = "" if named or name != scenario.DEFAULT_SCENARIO else " (default)"
         rows.append((printable(name) if named else name, f"{len(sc.robot.poses)} pose(s)",
                      f"{len(sc.obstacles)} obstacle(s)", printable(sc.description) + default,
                      [c.note for c in scenario.clipped_obstacles(sc)]))
-    width = max(len(r[0]) for r in rows)
+    width = max((len(r[0]) for r in rows), default=0)
     for name, poses, obstacles, desc, notes in rows:
         print(f"{name:<{width}}  {poses:<9} {obstacles:<13} {desc}".rstrip())
         for note in notes:
             print(f"  note: {note}")
+    if failed:
+        if len(named) > 1:
+            print(f"irring scenarios: {len(failed)} of {len(named)} scenario(s) refused",
+                  file=sys.stderr)
+        return failed[0].status
     return 0
