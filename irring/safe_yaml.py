@@ -195,10 +195,10 @@ def load(text: str, source: str = "<string>", what: str = "YAML file") -> Any:
         # (its reader refuses control characters)
         loader = _StrictLoader(text, source, what, max_values)
         data = loader.get_single_data()
-        if (isinstance(data, dict) and _MAP_SERVER_KEYS <= data.keys()
-                and what != "map_server YAML"):
-            raise YamlError(f"{source}: a ROS map_server map (the map.yaml irring writes "
-                            f"beside map.pgm); expected a {what}")
+        if isinstance(data, dict):
+            kind = _other_kind(data, what)
+            if kind:
+                raise YamlError(f"{source}: {kind}; expected a {what}")
         return data
     except YamlError:
         raise
@@ -238,8 +238,28 @@ def not_text(head: bytes) -> str | None:
     return next((kind for magic, kind in _NOT_YAML if head.startswith(magic)), None)
 
 
-# the keys of a ROS map_server map (maps.mapping writes one as map.yaml beside map.pgm)
-_MAP_SERVER_KEYS = frozenset({"image", "resolution", "origin", "occupied_thresh", "free_thresh"})
+# irring's YAML files by the keys only each has: (what a caller names it, the keys, what it
+# is for); the map_server map is maps.mapping's map.yaml beside map.pgm
+_KINDS = (
+    ("calibration file", {"irring_calibration"},
+     "a calibration file (irring calibrate writes them; give it as --calibration)"),
+    ("calibration progress file", {"irring_calibration_progress"},
+     "a calibration progress file (give it to irring calibrate --port … --resume)"),
+    ("scenario file", {"room", "robot"}, "a scenario file (irring run reads them)"),
+    ("study file", {"designs", "scenarios"}, "a study file (irring study reads them)"),
+    ("map_server YAML", {"image", "resolution", "origin", "occupied_thresh", "free_thresh"},
+     "a ROS map_server map (the map.yaml irring writes beside map.pgm)"),
+)
+
+
+def _other_kind(data: dict, what: str) -> str | None:
+    """What ``data`` is when it has the keys of another kind of irring file than ``what``
+    (one of the kinds; a plain "YAML file" is any)."""
+    if what not in {kind for kind, _, _ in _KINDS} or any(
+            kind == what and keys <= data.keys() for kind, keys, _ in _KINDS):
+        return None
+    return next((told for kind, keys, told in _KINDS if kind != what and keys <= data.keys()),
+                None)
 
 
 def read_text(path: str | Path, what: str = "file") -> str:

@@ -421,3 +421,37 @@ def test_scenarios_checks_every_file_it_is_given(tmp_path, capsys):
         f"irring scenarios: error: {flat}: room.outline_mm: all 3 corners lie on one line, so "
         "the outline encloses no room; list the corners of an area\n"
         "irring scenarios: 2 of 4 scenario(s) refused\n")
+
+
+def test_one_kind_of_irring_file_given_for_another_is_named(tmp_path, capsys):
+    """irring's YAML files given in each other's place: a calibration as the scenario said
+    "irring_calibration: unknown key; allowed here: description, effects, …"; a scenario as
+    --calibration "name: unknown key; allowed: adc_bits, curve, …"; the progress file that
+    calibrate --port leaves as --calibration "irring_calibration_progress: unknown key"; a
+    study as the scenario, a calibration as the study. Each key list was right and no help."""
+    from irring.estimation.calibration import Calibration
+
+    cal = Calibration.nominal("gp2d12", None, 12, 5.0).save(tmp_path / "cal.yaml")
+    study = tmp_path / "st.yaml"
+    study.write_text("designs: [rotating12]\nscenarios: [t_room]\nseeds: 1\n")
+    progress = tmp_path / "progress.yaml"
+    progress.write_text("irring_calibration_progress: 1\nsensor: 0\nread: []\n")
+    room = str(resolve("box_room"))
+    calibration = ("a calibration file (irring calibrate writes them; give it as "
+                   "--calibration)")
+    cases = [
+        (["run", str(cal)], f"{cal}: {calibration}; expected a scenario file"),
+        (["run", str(study)], f"{study}: a study file (irring study reads them); expected a "
+                              "scenario file"),
+        (["run", "t_room", "--calibration", room],
+         f"{room}: a scenario file (irring run reads them); expected a calibration file"),
+        (["run", "t_room", "--calibration", str(progress)],
+         f"{progress}: a calibration progress file (give it to irring calibrate --port … "
+         "--resume); expected a calibration file"),
+        (["study", str(cal)], f"{cal}: {calibration}; expected a study file"),
+        (["calibrate", "--port", str(tmp_path / "no-port"), "--resume", str(cal)],
+         f"{cal}: {calibration}; expected a calibration progress file"),
+    ]
+    for argv, why in cases:
+        assert main(argv + ["--out", str(tmp_path / "o" / "x.yaml")]) == 1, argv
+        assert capsys.readouterr().err.endswith(f": error: {why}\n"), argv
