@@ -23,6 +23,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from .errors import OutputError, printable
+from .safe_yaml import input_kind
 
 try:
     import fcntl
@@ -283,8 +284,22 @@ _WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG,
                            errno.EPERM})
 
 
+def check_replaceable(path: str | Path, option: str | None = None,
+                      writes: str | None = None) -> None:
+    """:class:`OutputError` when ``path`` is an irring input file (a recording, scenario,
+    study, calibration or progress file) of another kind than ``writes``: a slip of the
+    path (``calibrate --out my_room.yaml``) replaced it."""
+    path = Path(path)
+    found = input_kind(path) if path.is_file() else None
+    if found is not None and found[0] != writes:
+        shown = printable(f"{option} {path}" if option else str(path))
+        raise OutputError(f"{shown}: is {found[1]}; writing there would replace it: name "
+                          "another file")
+
+
 @contextlib.contextmanager
-def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
+def atomic_file(path: str | Path, option: str | None = None,
+                writes: str | None = None) -> Iterator[Path]:
     """A hidden temporary file beside ``path`` to write, renamed over ``path`` when the
     block ends without an exception and removed when it ends with one: a reader (or the
     user after Ctrl-C, a full disk, a crash of the writer) sees the old file or the whole
@@ -304,6 +319,7 @@ def atomic_file(path: str | Path, option: str | None = None) -> Iterator[Path]:
     if kind == "other":   # the rename would replace the device node
         raise OutputError(f"{shown}: is not a regular file (a device, pipe or socket); irring "
                           "writes a new file there, so name one")
+    check_replaceable(path, option, writes)
     made: list[Path] = []
     try:
         made = _make_folders(path.absolute().parent)
@@ -412,8 +428,9 @@ def _why(exc: OSError) -> str:
     return exc.strerror or str(exc) or type(exc).__name__
 
 
-def write_text_atomic(path: str | Path, text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` through :func:`atomic_file`."""
-    with atomic_file(path) as tmp:
+def write_text_atomic(path: str | Path, text: str, writes: str | None = None) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through :func:`atomic_file` (``writes``: the kind
+    of irring file it is, which may replace one of its kind)."""
+    with atomic_file(path, writes=writes) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)

@@ -252,6 +252,22 @@ _KINDS = (
 )
 
 
+def input_kind(path: str | Path) -> tuple[str, str] | None:
+    """(kind, what it is) of the irring input file at ``path`` (a recording, scenario,
+    study, calibration or progress file), told from its first bytes and top-level keys;
+    None for anything else (a picture, a map: outputs made again by a run)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(1 << 16)
+    except OSError:
+        return None
+    if head.startswith(b"PK\x03\x04"):
+        return "recording", not_text(head) or ""
+    keys = set(re.findall(r"^([A-Za-z_]\w*)\s*:", head.decode("utf-8", "replace"), re.M))
+    return next(((kind, told) for kind, need, told in _KINDS
+                 if kind != "map_server YAML" and need <= keys), None)
+
+
 def _other_kind(data: dict, what: str) -> str | None:
     """What ``data`` is when it has the keys of another kind of irring file than ``what``
     (one of the kinds; a plain "YAML file" is any)."""

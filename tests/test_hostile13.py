@@ -455,3 +455,37 @@ def test_one_kind_of_irring_file_given_for_another_is_named(tmp_path, capsys):
     for argv, why in cases:
         assert main(argv + ["--out", str(tmp_path / "o" / "x.yaml")]) == 1, argv
         assert capsys.readouterr().err.endswith(f": error: {why}\n"), argv
+
+
+def test_an_output_file_never_replaces_an_irring_input_of_another_kind(tmp_path, capsys):
+    """A slip of the path: `calibrate --out my_room.yaml` (the user's scenario) replaced the
+    scenario with a calibration; `run --mcap sweeps.npz` (another run's recording) and
+    `--mcap st.yaml` (a study file) replaced them with MCAP bytes; each exit 0."""
+    room = tmp_path / "my_room.yaml"
+    room.write_text(ONE_POSE_BOX.format(w=1400))
+    study = tmp_path / "st.yaml"
+    study.write_text("designs: [rotating12]\nscenarios: [t_room]\nseeds: 1\n")
+    assert main(["run", "t_room", "--out", str(tmp_path / "t"), "--no-animation"]) == 0
+    recording = tmp_path / "t" / "sweeps.npz"
+    before = {p: p.read_bytes() for p in (room, study, recording)}
+    capsys.readouterr()
+    scenario = "a scenario file (irring run reads them)"
+    cases = [
+        (["calibrate", "--scenario", "t_room", "--out", str(room)], room, "--out", scenario),
+        (["run", "box_room", "--out", str(tmp_path / "b"), "--mcap", str(recording)],
+         recording, "--mcap", "a zip archive, as a recording (sweeps.npz) is: `irring "
+         "replay` reads those"),
+        (["run", "box_room", "--out", str(tmp_path / "b"), "--mcap", str(study)], study,
+         "--mcap", "a study file (irring study reads them)"),
+    ]
+    for argv, path, option, what in cases:
+        assert main(argv) == 4, argv
+        assert capsys.readouterr().err.endswith(
+            f": error: {option} {path}: is {what}; writing there would replace it: name "
+            "another file\n"), argv
+        assert not (tmp_path / "b").exists()
+    assert {p: p.read_bytes() for p in before} == before
+    # a calibration may be written over one: the file is what it writes
+    cal = tmp_path / "cal.yaml"
+    assert main(["calibrate", "--scenario", "t_room", "--out", str(cal)]) == 0
+    assert main(["calibrate", "--scenario", "t_room", "--out", str(cal), "--seed", "3"]) == 0

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..core import MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
 from ..errors import UsageError, brief
-from ..outputs import RUN_FILES, check_out, real_path
+from ..outputs import RUN_FILES, check_out, check_replaceable, real_path
 
 
 class LazyParser(argparse.ArgumentParser):
@@ -217,6 +217,7 @@ def mcap_beside_outputs(mcap: Path | None, out: Path) -> None:
                          f"{Path(out) / 'map.mcap'})")
     # before the work, as --out is: a read-only folder failed after the whole run
     check_out(mcap.parent, "--mcap")
+    check_replaceable(mcap, "--mcap")
     if mcap.name not in RUN_FILES - {"map.mcap"}:
         return
     if real_path(mcap.absolute().parent) == out_at:

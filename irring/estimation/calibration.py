@@ -432,7 +432,7 @@ class Calibration:
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`to_yaml` to a file."""
-        return write_text_atomic(path, self.to_yaml())
+        return write_text_atomic(path, self.to_yaml(), "calibration file")
 
     @classmethod
     def from_dict(cls, raw: Any, source: str = "<dict>") -> Calibration:
@@ -1118,7 +1118,8 @@ def save_progress(path: str | Path, guided: GuidedCalibration) -> Path:
     # saves while its user waits)
     dumper = yaml.CSafeDumper if yaml.__with_libyaml__ else yaml.SafeDumper
     return write_text_atomic(path, header + yaml.dump(doc, Dumper=dumper, sort_keys=False,
-                                                      default_flow_style=None, width=100))
+                                                      default_flow_style=None, width=100),
+                             "calibration progress file")
 
 
 @dataclass(frozen=True)
