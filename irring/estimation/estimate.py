@@ -1412,6 +1412,17 @@ POOL_BLOCK_M = 0.5  # a wall silences a pooled beam this far past its readings (
 POOL_SIDE_SIGMAS = 2.0
 
 
+def pool_edge_counts(cal: Calibration, max_range_m: float) -> float:
+    """The counts each half of a pool's window must stand clear of: those of a surface
+    square on at ``max_range_m``. A part read to its own range: the no-return level. Read
+    short of the curve's end (``max_range_m`` < ``cal.max_range_m``), a surface past the range
+    reads as that level (the simulator's and the firmware's output with nothing in range)
+    while one just inside reads more, so a half that ran past the range reads below them."""
+    if max_range_m >= cal.max_range_m:
+        return cal.no_return_counts
+    return max(cal.no_return_counts, float(cal.counts(max_range_m, 0.0)))
+
+
 def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal: Calibration,
                   max_range_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(counts, reason), both (S, N), with each reading near the no-return level read as the
@@ -1423,12 +1434,12 @@ def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal
 
     Near the level: below it plus ``RETURN_SIGMAS + RANGE_SIGMAS`` count σ, NO_RETURN,
     OUT_OF_RANGE or OK, and so is every reading of the window (it ends at none: a sweep's
-    first and last steps are not pooled). Only where a part is read to its own range
-    (``max_range_m`` ≥ ``cal.max_range_m``: its counts fall steadily to the no-return level,
-    no surface in range is cut off above it) and that level cuts into it
-    (``cal.silent_range_m`` short of ``max_range_m``); no change elsewhere. Why and what it
-    measured: docs/estimator.md, "Pooled readings"."""
-    if not (read_to_own_range(cal, max_range_m) and max_range_m >= cal.max_range_m):
+    first and last steps are not pooled). Only where the no-return level cuts into the range
+    (``cal.silent_range_m`` short of ``max_range_m``); no change elsewhere. Where the range
+    stops short of the curve's end, each half must stand those standard errors above
+    :func:`pool_edge_counts` instead. Why and what it measured: docs/estimator.md, "Pooled
+    readings" and "Pooled readings where the range is cut short"."""
+    if not read_to_own_range(cal, max_range_m):
         return counts, reason
     shape = counts.shape
     order = rows_in_step_order(steps)
@@ -1445,11 +1456,13 @@ def pooled_counts(counts: np.ndarray, reason: np.ndarray, steps: np.ndarray, cal
     mean = (total[n:] - total[:-n]) / n                        # windows' means, centred rows
     whole = (count[n:] - count[:-n]) == n
     seen = (mean - cal.no_return_counts) * math.sqrt(n) >= RETURN_SIGMAS * sigma
-    # each half (the centre and POOL_STEPS rows one way) must show the surface too
+    # each half (the centre and POOL_STEPS rows one way) must show the surface too, and one
+    # nearer than the range's edge (a wall receding past a range cut reads as nothing there)
+    edge = pool_edge_counts(cal, max_range_m)
     half, rows = POOL_STEPS + 1, shape[0] - 2 * POOL_STEPS
     side = np.minimum(total[half:half + rows] - total[:rows],            # rows i-6 … i
                       total[n:] - total[POOL_STEPS:POOL_STEPS + rows])   # rows i … i+6
-    seen &= (side / half - cal.no_return_counts) * math.sqrt(half) >= POOL_SIDE_SIGMAS * sigma
+    seen &= (side / half - edge) * math.sqrt(half) >= POOL_SIDE_SIGMAS * sigma
     centre = slice(POOL_STEPS, shape[0] - POOL_STEPS)
     pick = near[centre] & whole & seen
     if not pick.any():
