@@ -288,14 +288,55 @@ def test_pooling_follows_the_steps_and_stays_off_where_silence_covers_the_range(
     # read to its silent range, nothing is pooled
     same_c, same_r = fast.pooled_counts(counts, reason, np.arange(20), cal, cal.silent_range_m)
     assert same_c is counts and same_r is reason
-    # nor where the range stops short of the curve's end (the GP2D12 at 624 mm: past it the
-    # simulator and the firmware return nothing, not a fading surface), however noisy
+    # nor, where the range stops short of the curve's end (the GP2D12 at 624 mm: past it the
+    # simulator and the firmware return nothing, not a fading surface), readings no brighter
+    # than a surface at the range would give: their halves stand below its counts
     loud = Calibration.nominal("gp2d12", noise_sigma_v=0.035)
     assert loud.silent_range_m < 0.624 < loud.max_range_m
     counts, reason = _quiet_counts(loud)
+    assert np.median(counts) < fast.pool_edge_counts(loud, 0.624)
     same_c, same_r = fast.pooled_counts(counts, reason, np.arange(20), loud, 0.624)
     assert same_c is counts and same_r is reason
     assert (fast.pooled_counts(counts, reason, np.arange(20), loud, 0.8)[1] != reason).sum() == 4
+
+
+def test_pooling_where_the_range_is_cut_short_of_the_curves_end(monkeypatch):
+    """A GP2Y0A21 read to 750 mm (its curve ends at 800 mm; with 15 mV silence rules a
+    surface out to 638 mm): sensor 0 reads a wall within the range, 2.0-4.0 σ above the
+    no-return level, too weak a reading at a time (21 of 24 are NO_RETURN or OUT_OF_RANGE);
+    its twelve whole windows are pooled (until 2026-11-27 none: pooling was off wherever
+    the range stopped short of the curve's end). Sensor 1 reads it to step 11 and nothing
+    past (a wall receding past the range reads as the no-return level): the halves of steps
+    7-10 stand 2 standard errors above that level but not above a surface at 750 mm
+    (1.52 σ up), so only step 6 pools; against the level alone, 6-10 did."""
+    cal = Calibration.nominal("gp2y0a21", noise_sigma_v=0.015)
+    sigma, low = cal.sigma_counts(), cal.no_return_counts
+    assert cal.silent_range_m < 0.75 < cal.max_range_m
+    wiggle = np.array([0.4, -0.9, 0.7, 0.1, -0.5, 1.0, -0.3, 0.6, -0.8, 0.2, 0.5, -0.4,
+                       0.3, -0.6, 0.8, -0.1, 0.0, -0.7, 0.9, -0.2, 0.4, -0.5, 0.1, 0.6])
+    counts = np.empty((24, 2))
+    counts[:, 0] = low + (3.0 + wiggle) * sigma
+    counts[:, 1] = low + np.where(np.arange(24) < 12, 3.1 + wiggle, -0.2 + 0.3 * wiggle) * sigma
+    level = counts - low
+    reason = np.where(level <= 2.0 * sigma, Reason.NO_RETURN,
+                      np.where(level < RETURN_SIGMAS * sigma, Reason.OUT_OF_RANGE,
+                               Reason.OK)).astype(np.uint8)
+    assert (reason[:, 0] != Reason.OK).sum() == 21
+    out_c, out_r = fast.pooled_counts(counts, reason, np.arange(24), cal, 0.75)
+    moved = out_c != counts
+    assert np.array_equal(np.nonzero(moved[:, 0])[0], np.arange(6, 18))
+    assert np.array_equal(np.nonzero(moved[:, 1])[0], [6])
+    assert np.all(out_r[moved] == Reason.OK)
+    assert (fast.pool_edge_counts(cal, 0.75) - low) / sigma == pytest.approx(1.52, abs=0.005)
+    assert fast.pool_edge_counts(cal, 0.8) == low
+    for row in range(6, 18):
+        assert out_c[row, 0] == pytest.approx(counts[row - 6:row + 7, 0].mean(), rel=1e-12)
+    # the same readings read to the curve's end pool against the level alone
+    own_c, _ = fast.pooled_counts(counts, reason, np.arange(24), cal, 0.8)
+    assert np.array_equal(np.nonzero(own_c[:, 1] != counts[:, 1])[0], [6, 7, 8, 9, 10])
+    monkeypatch.setattr(fast, "pool_edge_counts", lambda cal, max_range_m: cal.no_return_counts)
+    floor_c, _ = fast.pooled_counts(counts, reason, np.arange(24), cal, 0.75)
+    assert np.array_equal(np.nonzero(floor_c[:, 1] != counts[:, 1])[0], [6, 7, 8, 9, 10])
 
 
 def _face_ending_counts(cal):
