@@ -3303,13 +3303,27 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     line, s, sig = line[sel], s[sel], sig[sel]
     beam = tuple(v[sel] for v in beam)
 
+    best = _counts_refit(cal, n_lines, line, s, sig, beam, a, c, asked, COUNTS_FIT_STEPS)[2]
+    z = counts_misfit_z(best[asked] / scale, dof[asked])
+    out[asked] = z >= COUNTS_Z
+    return out
+
+
+def _counts_refit(cal: Calibration, n_lines: int, line: np.ndarray, s: np.ndarray,
+                  sig: np.ndarray, beam: tuple, a: np.ndarray, c: np.ndarray,
+                  asked: np.ndarray, steps: int, settled: tuple | None = None):
+    """Lines (direction ``a``, offset ``c``, (n_lines,)) refitted to their members' counts
+    ``s`` (σ ``sig``; ``line``: each member's line; ``beam``: origin x, y, cos, sin of its
+    heading) by Gauss–Newton, at most ``steps`` steps, only the lines ``asked``: (a, c, χ²)
+    (χ² inf where a member's beam misses its line within the drop-out angle).
+    ``settled`` (rad, m): done once no step moves a line by more than these."""
     def chi2_of(a_, c_):
         e, m = _counts_at(cal, a_[line], c_[line], *beam)
         q = np.bincount(line, weights=((s - e) / sig) ** 2, minlength=n_lines)
         return np.where(np.bincount(line, weights=~m, minlength=n_lines) > 0, np.inf, q), e
 
     best, e0 = chi2_of(a, c)
-    for _ in range(COUNTS_FIT_STEPS):
+    for _ in range(steps):
         # the counts' Jacobian in (direction, offset) by central differences
         ja = (_counts_at(cal, a[line] + _COUNTS_DA, c[line], *beam)[0]
               - _counts_at(cal, a[line] - _COUNTS_DA, c[line], *beam)[0]) / (2 * _COUNTS_DA)
@@ -3325,6 +3339,8 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
             da = np.where(ok, (scc * ga - sac * gc) / det, 0.0)
             dc = np.where(ok, (saa * gc - sac * ga) / det, 0.0)
         # a step that does not lower χ² is halved (up to four times), else not taken
+        small = settled is not None and bool(np.all((np.abs(da) <= settled[0])
+                                                    & (np.abs(dc) <= settled[1])))
         moved = np.zeros(n_lines, dtype=bool)
         for _half in range(5):
             trial, _ = chi2_of(a + da, c + dc)
@@ -3336,12 +3352,10 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
             if not ok.any():
                 break
             da, dc = 0.5 * da, 0.5 * dc
-        if not moved.any():
+        if not moved.any() or small:
             break
         best, e0 = chi2_of(a, c)
-    z = counts_misfit_z(best[asked] / scale, dof[asked])
-    out[asked] = z >= COUNTS_Z
-    return out
+    return a, c, best
 
 
 def counts_contradicted_compiled(points: Points, label: np.ndarray, vi: np.ndarray,
@@ -3393,6 +3407,7 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
     pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal)
     points, label = _leave_doubted_line(points, label, vi, pos, pr,
                                         np.ones(pos.size, dtype=bool), cal)
+    points = counts_pieces(points, vi[pos], lab[pos], counts, cal, pr.convex)
     kept = kept_where_bounded(points, vi, pos, pr, cal)
     if kept is not None:     # valid again, at θ = 0 with the doubt in σ
         at, d0, sigma = kept
@@ -3401,6 +3416,209 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
         valid.reshape(-1)[at], reason.reshape(-1)[at] = True, Reason.OK
         points = points_with(points, valid=valid, reason=reason)
     return points, label
+
+
+PIECE_MIN = COUNTS_MIN_MEMBERS  # a contradicted line's piece: at least this many members …
+PIECE_LEVELS = 4  # … split in two at most this often (pieces of 8-16 of 128 members) …
+PIECE_FIT_STEPS = COUNTS_FIT_STEPS  # … each fitted to its counts from its θ = 0 line;
+PIECE_SETTLED = (1e-4, 1e-5)  # … until no step moves a piece more than this (rad, m)
+PIECE_F = 10.0  # a fitted piece's halves replace it where they fit its counts this much better
+PIECE_BENT_SHARE = 0.25  # a piece whose members' profiles bend away more often is no line
+PIECE_SWITCH = 1.0  # an end member takes the next piece's line where it misfits it this much less
+
+
+def _counts_misfit_one(cal: Calibration, alpha, c, s, sig, ox, oy, ch, sh) -> np.ndarray:
+    """Each reading's squared counts misfit (in count σ ``sig``) to the line (``alpha``,
+    ``c``) given for it; inf where its beam misses the line within the drop-out angle."""
+    with np.errstate(invalid="ignore"):
+        e, met = _counts_at(cal, alpha, c, ox, oy, ch, sh)
+    return np.where(met, ((s - e) / sig) ** 2, np.inf)
+
+
+def _best_halves(x: np.ndarray, y: np.ndarray, lo: int) -> int:
+    """Where the points ``x``, ``y`` (in order) split into two runs of at least ``lo``
+    points whose total-least-squares lines leave the least squared residual: the first
+    point of the second run."""
+    n = x.size
+    px, py = np.cumsum(x - x.mean()), np.cumsum(y - y.mean())
+    pxx, pyy, pxy = (np.cumsum(v) for v in ((x - x.mean()) ** 2, (y - y.mean()) ** 2,
+                                             (x - x.mean()) * (y - y.mean())))
+    k = np.arange(lo, n - lo + 1)
+
+    def rss(m, sx, sy, sxx, syy, sxy):
+        a, b, c = sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m
+        return 0.5 * (a + b) - np.sqrt(0.25 * (a - b) ** 2 + c * c)
+
+    left = rss(k, px[k - 1], py[k - 1], pxx[k - 1], pyy[k - 1], pxy[k - 1])
+    right = rss(n - k, px[-1] - px[k - 1], py[-1] - py[k - 1], pxx[-1] - pxx[k - 1],
+                pyy[-1] - pyy[k - 1], pxy[-1] - pxy[k - 1])
+    return int(k[np.argmin(left + right)])
+
+
+def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.ndarray,
+                  cal: Calibration, bent: np.ndarray) -> Points:
+    """The members ``at`` (flat, in scan order; ``line``: the contradicted line of each)
+    that leaving their line made INCIDENCE_UNKNOWN, placed on a piece of it their counts
+    do explain. One sensor's run of a line's members is a piece; a piece whose counts
+    contradict every line near it (:func:`_counts_refit` about its centroid from its θ = 0
+    TLS line, a half from its whole's line; ``COUNTS_Z`` unscaled) is split in two where two lines fit its θ = 0 end points best,
+    while both halves keep ``PIECE_MIN`` members (``PIECE_LEVELS`` times at most). A lost
+    member of a piece its counts fit is read at the incidence its beam meets the piece's
+    line with (its own counts at that θ), σ its noise there and half the spread of d over
+    θ ± the line's direction error, placed where that σ ≤ ``_AGAIN_SIGMA_M`` and θ is not
+    pinned at the drop-out angle. Numpy, shared by both estimators. Why: one sensor
+    turning in a many-sided room reads several facets as one line (docs/estimator.md,
+    "A contradicted line's pieces")."""
+    lost = points.reason.reshape(-1)[at] == Reason.INCIDENCE_UNKNOWN
+    if not lost.any():
+        return points
+    n_sensors = points.valid.shape[1]
+    key = line * n_sensors + at % n_sensors
+    order = np.argsort(key, kind="stable")        # each run stays in scan order
+    at, key, lost, bent = at[order], key[order], lost[order], bent[order]
+    cut = np.flatnonzero(np.diff(key)) + 1
+    # a run of profiles bent away from the beam is a convex thing's (a box's corner seen
+    # tip on reads like a wall square on), not facets: not asked
+    pieces = [(a, b) for a, b in zip(np.r_[0, cut], np.r_[cut, key.size])
+              if b - a >= PIECE_MIN and lost[a:b].any()
+              and np.count_nonzero(bent[a:b]) <= PIECE_BENT_SHARE * (b - a)]
+    if not pieces:
+        return points
+    # a sensor turning a full turn meets its first step again after its last: a run across
+    # that seam starts after its widest gap in heading instead
+    turn = np.arange(at.size)
+    h = points.heading.reshape(-1)[at]
+    for a, b in pieces:
+        gap = np.mod(np.diff(np.r_[h[a:b], h[a]]), 2 * math.pi)
+        widest = int(np.argmax(gap))
+        if widest < b - a - 1:
+            turn[a:b] = np.roll(turn[a:b], -(widest + 1))
+    at, lost, bent = at[turn], lost[turn], bent[turn]
+    s = np.asarray(counts, dtype=float).reshape(-1)[at]
+    _, b0 = cal._ab0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        d0 = cal.distance(s, 0.0)
+        sig = np.fmax(cal.sigma_counts(), np.minimum(s / (np.abs(b0) * d0),
+                                                     np.finfo(float).max) * COUNTS_FLOOR_M)
+    h = points.heading.reshape(-1)[at]
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
+    ch, sh = np.cos(h), np.sin(h)
+    x0, y0 = ox + d0 * ch, oy + d0 * sh
+    if not (np.isfinite(x0).all() and np.isfinite(y0).all()):
+        return points
+    place = np.zeros(at.size, dtype=bool)
+    dtheta = np.full(at.size, np.nan)
+    line_ac = np.full((2, at.size), np.nan)   # each member's piece's line: direction, offset
+    ends = np.zeros((2, at.size), dtype=np.intp)  # … and that piece's first, last member
+    # (start, end, χ² of the fitted piece it halves, or NaN: none fitted)
+    pieces = [(a, b, np.nan, (np.nan, np.nan)) for a, b in pieces]
+    for level in range(PIECE_LEVELS + 1):
+        n_p = len(pieces)
+        pid = np.full(at.size, -1, dtype=np.intp)
+        for i, (a, b, _, _) in enumerate(pieces):
+            pid[a:b] = i
+        m = (pid >= 0).nonzero()[0]
+        g = pid[m]
+        w = np.bincount(g, minlength=n_p).astype(float)
+        mx, my = (np.bincount(g, weights=v[m], minlength=n_p) / w for v in (x0, y0))
+        ux, uy = x0[m] - mx[g], y0[m] - my[g]
+        sxx, syy, sxy = (np.bincount(g, weights=v, minlength=n_p)
+                         for v in (ux * ux, uy * uy, ux * uy))
+        alpha = 0.5 * np.arctan2(2 * sxy, sxx - syy)
+        c = -np.sin(alpha) * mx + np.cos(alpha) * my
+        # a half starts from the line its whole settled on (nearer than its θ = 0 line)
+        start = np.array([q[3] for q in pieces], dtype=float).reshape(n_p, 2)
+        has = np.isfinite(start[:, 0])
+        alpha, c = np.where(has, start[:, 0], alpha), np.where(has, start[:, 1], c)
+        # fitted about each piece's centroid: offset and direction then hardly couple
+        shift = -np.sin(alpha) * mx + np.cos(alpha) * my
+        beam = (ox[m] - mx[g], oy[m] - my[g], ch[m], sh[m])
+        alpha, c, chi2 = _counts_refit(cal, n_p, g, s[m], sig[m], beam, alpha, c - shift,
+                                       np.ones(n_p, dtype=bool), PIECE_FIT_STEPS,
+                                       PIECE_SETTLED)
+        c = c + (-np.sin(alpha) * mx + np.cos(alpha) * my)
+        beam = (ox[m], oy[m], ch[m], sh[m])
+        with np.errstate(invalid="ignore"):
+            fits = np.isfinite(chi2) & (counts_misfit_z(chi2, w - 2) < COUNTS_Z)
+        # a convex corner's tip fits a line square on: no piece of bent profiles is one
+        fits &= np.bincount(g, weights=bent[m], minlength=n_p) <= PIECE_BENT_SHARE * w
+        # halves of a piece its counts fitted count only where they fit clearly better:
+        # two lines against one, F on (2, n − 4) degrees of freedom (a facet corner)
+        parent = np.array([q[2] for q in pieces])
+        pair = chi2[0::2] + chi2[1::2] if n_p % 2 == 0 else None
+        halved = np.isfinite(parent)
+        if halved.any():
+            both = np.repeat(pair, 2)
+            nn = np.repeat(w[0::2] + w[1::2], 2)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                f_stat = 0.5 * (parent - both) / (both / (nn - 4))
+            better = ~halved | (f_stat >= PIECE_F)
+            fits &= better
+        else:
+            better = np.ones(n_p, dtype=bool)
+        if fits.any():
+            # the direction's standard error from the counts' weighted Jacobian there
+            ja = (_counts_at(cal, alpha[g] + _COUNTS_DA, c[g], *beam)[0]
+                  - _counts_at(cal, alpha[g] - _COUNTS_DA, c[g], *beam)[0]) / (2 * _COUNTS_DA)
+            jc = (_counts_at(cal, alpha[g], c[g] + _COUNTS_DC, *beam)[0]
+                  - _counts_at(cal, alpha[g], c[g] - _COUNTS_DC, *beam)[0]) / (2 * _COUNTS_DC)
+            ja, jc = ja / sig[m], jc / sig[m]
+            saa, sac, scc = (np.bincount(g, weights=v, minlength=n_p)
+                             for v in (ja * ja, ja * jc, jc * jc))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                var_a = scc / (saa * scc - sac * sac) * np.fmax(1.0, chi2 / (w - 2))
+            took = fits[g]
+            mt, gt = m[took], g[took]
+            line_ac[:, mt] = alpha[gt], c[gt]
+            ends[:, mt] = (np.array([q[0] for q in pieces])[gt],
+                           np.array([q[1] for q in pieces])[gt] - 1)
+            dtheta[mt] = np.sqrt(var_a[gt])
+            place[mt] = True
+        if level == PIECE_LEVELS:
+            break
+        halves = []
+        for i in better.nonzero()[0]:     # (a halved piece no better than whole: done)
+            a, b, _, _ = pieces[i]
+            if b - a >= 2 * PIECE_MIN and lost[a:b].any():
+                k = a + _best_halves(x0[a:b], y0[a:b], PIECE_MIN)
+                fitted = chi2[i] if fits[i] else np.nan
+                line_i = (alpha[i], c[i]) if np.isfinite(chi2[i]) else (np.nan, np.nan)
+                halves += [(a, k, fitted, line_i), (k, b, fitted, line_i)]
+        pieces = halves
+        if not pieces:
+            break
+    if not place.any():
+        return points
+    # a piece's end member may be the next piece's: it takes the line of the piece before
+    # or after its own (in its run) whose counts explain its own clearly better
+    best = _counts_misfit_one(cal, line_ac[0], line_ac[1], s, sig, ox, oy, ch, sh)
+    for side, step in ((0, -1), (1, 1)):
+        j = np.clip(ends[side] + step, 0, at.size - 1)
+        ask = place & (key[j] == key) & place[j] & (ends[side] + step == j)
+        if not ask.any():
+            continue
+        r = _counts_misfit_one(cal, line_ac[0, j], line_ac[1, j], s, sig, ox, oy, ch, sh)
+        move = ask & (r < best - PIECE_SWITCH)
+        line_ac[:, move], dtheta[move], best[move] = line_ac[:, j[move]], dtheta[j[move]], r[move]
+    along = ch * -np.sin(line_ac[0]) + sh * np.cos(line_ac[0])
+    theta = np.arccos(np.minimum(np.abs(along), 1.0))
+    place &= lost & np.isfinite(theta) & np.isfinite(dtheta)
+    if not place.any():
+        return points
+    at, s, theta, dtheta = at[place], s[place], theta[place], dtheta[place]
+    lo, hi = np.maximum(theta - dtheta, 0.0), np.minimum(theta + dtheta, cal.max_incidence_rad)
+    d, d_lo, d_hi = cal.distance(np.concatenate([s, s, s]),
+                                 np.concatenate([theta, lo, hi])).reshape(3, -1)
+    sigma, ok = _own_slope_sigma(cal, theta, d, d_lo, d_hi, cal.sigma_counts() / s)
+    ok &= (sigma <= _AGAIN_SIGMA_M) & (theta < cal.max_incidence_rad - PINNED_RAD) & (
+        d <= points.max_range_m)
+    if not ok.any():
+        return points
+    at = at[ok]
+    points = placed_at(points, at, d[ok], theta[ok], sigma[ok])
+    valid, reason = points.valid.copy(), np.array(points.reason)
+    valid.reshape(-1)[at], reason.reshape(-1)[at] = True, Reason.OK
+    return points_with(points, valid=valid, reason=reason)
 
 
 def _off_line_profiles(points: Points, label: np.ndarray, pos: np.ndarray, vi: np.ndarray,
