@@ -3421,7 +3421,7 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
 PIECE_MIN = COUNTS_MIN_MEMBERS  # a contradicted line's piece: at least this many members …
 PIECE_LEVELS = 4  # … split in two at most this often (pieces of 8-16 of 128 members) …
 PIECE_FIT_STEPS = COUNTS_FIT_STEPS  # … each fitted to its counts from its θ = 0 line;
-PIECE_SETTLED = (1e-4, 1e-5)  # … until no step moves a piece more than this (rad, m)
+PIECE_SETTLED = (1e-3, 1e-4)  # … until no step moves a piece more than this (rad, m)
 PIECE_F = 10.0  # a fitted piece's halves replace it where they fit its counts this much better
 PIECE_BENT_SHARE = 0.25  # a piece whose members' profiles bend away more often is no line
 PIECE_SWITCH = 1.0  # an end member takes the next piece's line where it misfits it this much less
