@@ -603,11 +603,15 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label = alone_at_an_edge(points, label, counts, steps, cal)
         # a curved wall's chords on its circle (the lines as the rules above left them)
         points, label = (bower or bowed_lines_compiled)(points, label, counts, cal)
-    points = censored_lines(points, label, counts, steps, cal)
+        # a line over a corner as two pieces (the snap's label; the grouping keeps its lines)
+        points, split = kinked_lines(points, label, counts, cal)
+    else:
+        split = label
+    points = censored_lines(points, split, counts, steps, cal)
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
-        snap_label = (fused_lines(points, label) if read_to_own_range(cal, points.max_range_m)
-                      else label)
+        snap_label = (fused_lines(points, split) if read_to_own_range(cal, points.max_range_m)
+                      else split)
         points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                             far_sigma_cap(cal, points.max_range_m))
     points = drop_beyond_range(points)
@@ -2359,6 +2363,137 @@ def _kinked(g: np.ndarray, n_g: int, s: np.ndarray, nn: np.ndarray, w: np.ndarra
                  for q in (lm, rm)]
         out[k] = abs(math.atan(slope[0]) - math.atan(slope[1])) >= BOW_KINK_RAD
     return out
+
+
+KINK_SIDE = 4           # a line over a corner: each piece holds at least this many members …
+KINK_PRE_F = 10.0       # … two pieces beat the line by this F as its members lie (cheap) …
+KINK_ITERATIONS = 8     # … then each piece is read by Table II's iteration (at most this
+#                         many steps, settled to BOW_SETTLED_RAD) …
+KINK_MISFIT = 1.0       # … where the line misfits its members by this χ² a member or more …
+KINK_F = 10.0           # … the two pieces, so read, beat it by this F …
+KINK_TURN_RAD = BOW_KINK_RAD   # … turn by this much …
+KINK_MEET_M = 0.1       # … and meet within this of both pieces' members
+
+
+def _tls(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float, float]:
+    """Total least-squares line through points: centre x, y and unit normal."""
+    cx, cy = x.mean(), y.mean()
+    u, v = x - cx, y - cy
+    al = 0.5 * math.atan2(2.0 * float((u * v).sum()), float((u * u - v * v).sum()))
+    return cx, cy, -math.sin(al), math.cos(al)
+
+
+def kinked_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration
+                 ) -> tuple[Points, np.ndarray]:
+    """Where a part is read to its own range: a line whose members lie over a corner (two
+    walls, or a wall and a box face, fitted as one) split in two and each piece read by
+    Table II's iteration; numpy, shared by both estimators.
+
+    A line of ≥ ``BOW_MIN`` valid members whose best split along it (≥ ``KINK_SIDE``
+    members a piece, prefix sums of the weighted moments) beats the one line by
+    ``KINK_PRE_F`` as its members lie (F against the pieces' own scatter) is asked: each
+    piece is fitted (total least squares) and its members re-read at the incidence their
+    beams meet it with, until θ settles. Kept where the line misfits its members by
+    ``KINK_MISFIT`` σ² a member or more (their distances against where their beams meet it,
+    in range noise σ), the two pieces so read beat it by ``KINK_F`` (against their own
+    scatter), turn by ``KINK_TURN_RAD`` or more and cross within ``KINK_MEET_M`` of both
+    pieces' members, and no member is read at or past the drop-out angle. Returns the
+    points (each kept piece's members at their θ, σ their noise) and a label (S, N) in which
+    one piece of each kept line has a new number, for the snap (the grouping keeps
+    ``label``). Why: docs/estimator.md, "A line over a corner"."""
+    if not read_to_own_range(cal, points.max_range_m):
+        return points, label
+    asked = _bow_asked(points, label, counts, cal)
+    if asked is None:
+        return points, label
+    (idx, g, n_g, nm, ox, oy, ex, ey, s_c, sig_s, d_line, en, noise, w, ux, uy, cx, cy, s0,
+     n0, _, _) = asked
+    # every split of every line at once: prefix sums of the weighted moments in s order
+    o = np.lexsort((s0, g))
+    gs, ss, yy, ww = g[o], s0[o], n0[o], w[o]
+    sums = [np.concatenate(([0.0], np.cumsum(q))) for q in
+            (ww, ww * ss, ww * yy, ww * ss * ss, ww * ss * yy, ww * yy * yy)]
+    start = np.searchsorted(gs, np.arange(n_g))
+    end = start + nm.astype(np.intp)
+    j = np.arange(gs.size)
+    left = [q[j] - q[start[gs]] for q in sums]
+    right = [q[end[gs]] - q[j] for q in sums]
+    both = _line_rss(*left) + _line_rss(*right)
+    pos = j - start[gs]
+    both[(pos < KINK_SIDE) | (nm[gs] - pos < KINK_SIDE)] = np.inf
+    one = _line_rss(*[q[end] - q[start] for q in sums])
+    best = np.minimum.reduceat(both, start)      # (every line has BOW_MIN members)
+    f_pre = (one - best) / np.maximum(best / np.maximum(nm - 4, 1), 1e-12)
+    # the line against its members: their distances against where their beams meet it
+    den = ex * -uy + ey * ux
+    t_line = (((cx[g] - ox) * -uy + (cy[g] - oy) * ux)
+              / np.where(np.abs(den) > 1e-9, den, 1e-9))
+    chi1 = np.bincount(g, ((d_line - t_line) / noise) ** 2, n_g)
+    ask = np.isfinite(best) & (f_pre >= KINK_PRE_F) & (chi1 >= KINK_MISFIT * nm)
+    if not ask.any():
+        return points, label
+    # the asked lines' members, each line cut at its best split: pieces 2c and 2c + 1
+    first = np.minimum.reduceat(np.where(both == best[gs], j, gs.size), start)
+    keep = ask[gs]
+    mem, gk = o[keep], gs[keep]
+    cand = (np.cumsum(ask) - 1)[gk]
+    n_c = int(np.count_nonzero(ask))
+    piece = 2 * cand + (j[keep] >= first[gk])
+    n_p = 2 * n_c
+    npc = np.bincount(piece, minlength=n_p).astype(float)
+    mex, mey, mox, moy = ex[mem], ey[mem], ox[mem], oy[mem]
+    log_s = np.log(s_c[mem])
+
+    def tls(d):
+        """Each piece's TLS line through its members at ``d``: centre, unit normal."""
+        x, y = mox + d * mex, moy + d * mey
+        px, py = np.bincount(piece, x, n_p) / npc, np.bincount(piece, y, n_p) / npc
+        u, v = x - px[piece], y - py[piece]
+        al = 0.5 * np.arctan2(2.0 * np.bincount(piece, u * v, n_p),
+                              np.bincount(piece, u * u - v * v, n_p))
+        return x, y, px, py, -np.sin(al), np.cos(al)
+
+    # Table II's iteration, each piece its own line
+    d, th = d_line[mem], None
+    settled = np.zeros(n_c, dtype=bool)
+    for _ in range(KINK_ITERATIONS):
+        _, _, _, _, nx, ny = tls(d)
+        th_new = np.arccos(np.clip(np.abs(mex * nx[piece] + mey * ny[piece]), 0.0, 1.0))
+        if th is not None:
+            settled = np.bincount(cand, np.abs(th_new - th) > BOW_SETTLED_RAD, n_c) == 0
+        th = th_new
+        la, b = cal.log_ab(th)
+        d = np.exp(la + b * log_s)
+        if settled.all():
+            break
+    sig = range_sigma(b, d, sig_s[mem])
+    x, y, px, py, nx, ny = tls(d)
+    den = mex * nx[piece] + mey * ny[piece]
+    t = (((px[piece] - mox) * nx[piece] + (py[piece] - moy) * ny[piece])
+         / np.where(np.abs(den) > 1e-9, den, 1e-9))
+    chi2 = np.bincount(cand, ((d - t) / sig) ** 2, n_c)
+    nmc = nm[ask]
+    f = (chi1[ask] - chi2) / np.maximum(chi2 / np.maximum(nmc - 4, 1), 1e-12)
+    # the two pieces' lines: how they turn and where they cross
+    na, nb = np.arange(0, n_p, 2), np.arange(1, n_p, 2)
+    sin = nx[na] * ny[nb] - ny[na] * nx[nb]
+    ca, cb = nx[na] * px[na] + ny[na] * py[na], nx[nb] * px[nb] + ny[nb] * py[nb]
+    s_ = np.where(np.abs(sin) > 1e-12, sin, 1e-12)
+    kx, ky = (ca * ny[nb] - cb * ny[na]) / s_, (nx[na] * cb - nx[nb] * ca) / s_
+    gap = np.full(n_p, np.inf)
+    np.minimum.at(gap, piece, np.hypot(x - kx[cand], y - ky[cand]))
+    past = np.bincount(cand, th >= cal.max_incidence_rad, n_c) > 0
+    split_ok = (settled & ~past & (f >= KINK_F)
+                & (np.arcsin(np.minimum(np.abs(sin), 1.0)) >= KINK_TURN_RAD)
+                & (np.maximum(gap[na], gap[nb]) <= KINK_MEET_M))
+    if not split_ok.any():
+        return points, label
+    take = split_ok[cand]
+    at = idx[mem[take]]
+    split = label.copy()
+    second = take & (piece % 2 == 1)
+    split.reshape(-1)[idx[mem[second]]] = label.max() + 1 + cand[second]
+    return placed_at(points, at, d[take], th[take], sig[take]), split
 
 
 def _kasa_circle(x: np.ndarray, y: np.ndarray) -> np.ndarray:
