@@ -2366,7 +2366,8 @@ def _kinked(g: np.ndarray, n_g: int, s: np.ndarray, nn: np.ndarray, w: np.ndarra
     return out
 
 
-KINK_SIDE = 4           # a line over a corner: each piece holds at least this many members …
+KINK_MIN = 20           # a line over a corner: a line of at least this many valid members …
+KINK_SIDE = 4           # … each piece holds at least this many …
 KINK_PRE_F = 10.0       # … two pieces beat the line by this F as its members lie (cheap) …
 KINK_ITERATIONS = 8     # … then each piece is read by Table II's iteration (at most this
 #                         many steps, settled to BOW_SETTLED_RAD) …
@@ -2390,7 +2391,7 @@ def kinked_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cal
     walls, or a wall and a box face, fitted as one) split in two and each piece read by
     Table II's iteration; numpy, shared by both estimators.
 
-    A line of ≥ ``BOW_MIN`` valid members whose best split along it (≥ ``KINK_SIDE``
+    A line of ≥ ``KINK_MIN`` valid members whose best split along it (≥ ``KINK_SIDE``
     members a piece, prefix sums of the weighted moments) beats the one line by
     ``KINK_PRE_F`` as its members lie (F against the pieces' own scatter) is asked: each
     piece is fitted (total least squares) and its members re-read at the incidence their
@@ -2423,14 +2424,15 @@ def kinked_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cal
     pos = j - start[gs]
     both[(pos < KINK_SIDE) | (nm[gs] - pos < KINK_SIDE)] = np.inf
     one = _line_rss(*[q[end] - q[start] for q in sums])
-    best = np.minimum.reduceat(both, start)      # (every line has BOW_MIN members)
+    # (every line asked has BOW_MIN members: a split of KINK_SIDE a side; else the line)
+    best = np.minimum(np.minimum.reduceat(both, start), one)
     f_pre = (one - best) / np.maximum(best / np.maximum(nm - 4, 1), 1e-12)
     # the line against its members: their distances against where their beams meet it
     den = ex * -uy + ey * ux
     t_line = (((cx[g] - ox) * -uy + (cy[g] - oy) * ux)
               / np.where(np.abs(den) > 1e-9, den, 1e-9))
     chi1 = np.bincount(g, ((d_line - t_line) / noise) ** 2, n_g)
-    ask = np.isfinite(best) & (f_pre >= KINK_PRE_F) & (chi1 >= KINK_MISFIT * nm)
+    ask = (nm >= KINK_MIN) & (f_pre >= KINK_PRE_F) & (chi1 >= KINK_MISFIT * nm)
     if not ask.any():
         return points, label
     # the asked lines' members, each line cut at its best split: pieces 2c and 2c + 1
