@@ -51,14 +51,15 @@ def _close_map_errors(sc, run):
     return tuple(int((m & close).sum()) for m in (truth.visible, missed, false_occ, false_free))
 
 
-def test_ideal_readings_below_100mm_are_refused_and_from_100mm_exact():
-    # the GP2D12's curve is trusted from 100 mm: brighter readings lie where a real part
-    # folds over, so they are refused (never a point), and the ones from 100 mm are exact
+def test_ideal_readings_below_100mm_are_read_on_the_curve_and_exact():
+    # the GP2D12's datasheet range starts at 100 mm, but a scene without `foldover` does not
+    # fold: its curve goes on to the ADC's full scale (43.8 mm), one distance per count, so
+    # the readings brighter than the 100 mm level are read on it (before: FOLDOVER_AMBIGUOUS)
     sc, run, points, truth_d, err = _run("", None)
     below = truth_d < 0.100
     near = (truth_d >= 0.100) & (truth_d <= 0.130)
     assert int(below.sum()) == 41 and float(np.nanmin(truth_d)) == pytest.approx(0.0966, abs=1e-4)
-    assert (points.reason[below] == Reason.FOLDOVER_AMBIGUOUS).all()
+    assert points.valid[below].all() and err[below].max() < 1e-6
     assert int(near.sum()) == 147 and points.valid[near].all()
     assert err[near].max() < 1e-6
     assert _close_map_errors(sc, run) == (117, 0, 0, 0)

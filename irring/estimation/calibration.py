@@ -22,8 +22,8 @@ import numpy as np
 import yaml
 
 from .. import gp2, safe_yaml
-from ..core import (ADC_BITS, MAX_ADC_BITS, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL, VREF_RANGE_V,
-                    VREF_V, Pose, Ring, Sweep, bounds)
+from ..core import (ADC_BITS, HOUSING_M, MAX_ADC_BITS, MAX_STEPS, MAX_SWEEPS, SENSOR_MODEL,
+                    VREF_RANGE_V, VREF_V, Pose, Ring, Sweep, bounds)
 from ..errors import InputError, TooBig, brief
 from ..outputs import write_text_atomic
 from ..resources import kernel
@@ -334,6 +334,15 @@ class Calibration:
         near = self.counts(self.min_range_m, self.theta_rad)
         return float(np.max(near) if self.falling else np.min(near))
 
+    def near_end_m(self) -> float:
+        """The nearest distance a count short of full scale reads at an incidence up to the
+        drop-out angle, and no nearer than the housing (``HOUSING_M``): where a curve that
+        does not fold stops telling distances apart (nearer, every reading is SATURATED)."""
+        rows = np.append(self.theta_rad[self.theta_rad <= self.max_incidence_rad],
+                         self.max_incidence_rad)
+        top = self.full_scale_counts - 0.5   # classify's SATURATED level
+        return max(float(np.min(self.distance(top, rows))), HOUSING_M)
+
     def sigma_counts(self) -> float:
         """1-σ count noise including quantisation (one count, uniform)."""
         return math.sqrt(self.noise_counts ** 2 + 1.0 / 12.0)
@@ -379,7 +388,8 @@ class Calibration:
         scene's sensor curve and ADC; a(θ), b(θ) and the drop-out angle only with the
         ``incidence`` effect (without it the readings do not depend on θ: the θ = 0 row
         alone, no drop-out); the ``noise`` effect's σ (0.1 mV floor without it); the fold-over
-        peak only with the ``foldover`` effect."""
+        peak only with the ``foldover`` effect. A GP2 curve the scene does not fold is read
+        below the datasheet's min range, down to :meth:`near_end_m` (one distance per count)."""
         model = gp2.sensor(scenario.sensor.model)
         sensor = scenario.sensor
         noise = scenario.effects.get("noise")
@@ -390,14 +400,20 @@ class Calibration:
         effects = ", ".join(scenario.effects) or "none"
         incidence = scenario.effects.get("incidence")
         if incidence is None:
-            return replace(cal, theta_rad=cal.theta_rad[:1], a=cal.a[:1], b=cal.b[:1],
-                           max_incidence_rad=None,
-                           source=f"{model.name} curve as scene {scenario.name!r} simulates it "
-                                  f"(effects: {effects}; no incidence: a, b independent of θ)")
-        return replace(cal, max_incidence_rad=min(incidence.drop_out_rad(model),
-                                                  _table_end(cal.theta_rad)),
-            source=f"{model.name} curve as scene {scenario.name!r} simulates it "
-                   f"(effects: {effects})")
+            cal = replace(cal, theta_rad=cal.theta_rad[:1], a=cal.a[:1], b=cal.b[:1],
+                          max_incidence_rad=None,
+                          source=f"{model.name} curve as scene {scenario.name!r} simulates it "
+                                 f"(effects: {effects}; no incidence: a, b independent of θ)")
+        else:
+            cal = replace(cal, max_incidence_rad=min(incidence.drop_out_rad(model),
+                                                     _table_end(cal.theta_rad)),
+                          source=f"{model.name} curve as scene {scenario.name!r} simulates it "
+                                 f"(effects: {effects})")
+        if cal.falling and not cal.folds:
+            # the simulated curve goes on below the datasheet's range without folding: a
+            # reading brighter than its near end has one distance (docs/calibration.md)
+            cal = replace(cal, min_range_m=min(cal.min_range_m, cal.near_end_m()))
+        return cal
 
     @classmethod
     def for_sweep(cls, sweep: Sweep, **kwargs: Any) -> Calibration:
