@@ -343,6 +343,19 @@ class Calibration:
         top = self.full_scale_counts - 0.5   # classify's SATURATED level
         return max(float(np.min(self.distance(top, rows))), HOUSING_M)
 
+    @functools.cached_property
+    def confirm_counts(self) -> float:
+        """Readings brighter than this, the level of the sensor model's datasheet min range
+        square on, are read below that range only where a neighbouring step confirms them
+        (``estimate.unconfirmed_near``): inf where the calibration reads nothing nearer
+        than the datasheet's range (its own range, one that folds, a linear sensor)."""
+        if not self.falling or self.folds or self.sensor_model not in gp2.available():
+            return math.inf
+        datasheet_m = gp2.sensor(self.sensor_model).min_range_m
+        if self.min_range_m >= datasheet_m:
+            return math.inf
+        return float(np.max(self.counts(datasheet_m, self.theta_rad)))
+
     def sigma_counts(self) -> float:
         """1-σ count noise including quantisation (one count, uniform)."""
         return math.sqrt(self.noise_counts ** 2 + 1.0 / 12.0)

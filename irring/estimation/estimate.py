@@ -297,7 +297,9 @@ class Estimate:
 
 def _classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
     """Reasons decided by the counts alone (before any distance is computed; see
-    ``_iterate.classify``), and MISSING for the steps the hardware never delivered."""
+    ``_iterate.classify``), MISSING for the steps the hardware never delivered, and
+    FOLDOVER_AMBIGUOUS for the readings below the datasheet's range nothing confirms
+    (:func:`unconfirmed_near`)."""
     full, near, no_return, _, falling = cal._levels
     reason = np.zeros(counts.shape, dtype=np.uint8)
     _iterate.classify(counts.reshape(-1), reason.reshape(-1), full, near, no_return,
@@ -305,7 +307,42 @@ def _classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
     if sweep.missing_steps:
         rows = np.isin(np.asarray(sweep.steps), np.asarray(sweep.missing_steps))
         reason[rows, :] = Reason.MISSING
+    alone = unconfirmed_near(counts, reason, sweep.steps, cal)
+    if alone is not None:
+        reason[alone] = Reason.FOLDOVER_AMBIGUOUS
     return reason
+
+
+NEAR_AGREE_M = 0.03   # a neighbouring step's θ = 0 distance within this confirms a near reading
+
+
+def unconfirmed_near(counts: np.ndarray, reason: np.ndarray, steps, cal: Calibration
+                     ) -> np.ndarray | None:
+    """(S, N) bool: the readings (``reason`` OK) brighter than ``cal.confirm_counts``, i.e.
+    below the sensor model's datasheet range, that neither neighbouring step of their
+    sensor (by step order) confirms: its θ = 0 distance within ``NEAR_AGREE_M`` of theirs,
+    or at full scale (nearer still). None where nothing is asked (every calibration that
+    reads nothing below the datasheet's range). Shared by both estimators. Why: a surface
+    that near is met by consecutive steps (a step moves the beam ≤ 4 mm across at 0.2 m),
+    a spurious short reading (the `outliers` effect) alone; main refused both."""
+    level = cal.confirm_counts
+    if not math.isfinite(level):
+        return None
+    s = np.asarray(counts, dtype=float)
+    ask = (reason == Reason.OK) & (s > level)
+    if not ask.any():
+        return None
+    order = np.argsort(np.asarray(steps), kind="stable")
+    so = s[order]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d0 = cal.distance(so, 0.0)
+    top = so >= cal.full_scale_counts - 0.5
+    ok = np.zeros(so.shape, dtype=bool)
+    ok[1:] |= (np.abs(d0[1:] - d0[:-1]) <= NEAR_AGREE_M) | top[:-1]
+    ok[:-1] |= (np.abs(d0[:-1] - d0[1:]) <= NEAR_AGREE_M) | top[1:]
+    confirmed = np.empty_like(ok)
+    confirmed[order] = ok
+    return ask & ~confirmed
 
 
 def estimate(sweep: Sweep, calibration: Calibration | None = None, *, max_iterations: int = 20,

@@ -20,7 +20,7 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RU
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
                        member_spans, nearest_heard_rows, nominal_calibration, polyline_ids,
                        range_profiles, range_sigma, reach_cos_limit, resolve_foldover,
-                       scan_order, settled_within_noise, silent_gaps)
+                       scan_order, settled_within_noise, silent_gaps, unconfirmed_near)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -366,6 +366,10 @@ def classify(counts: np.ndarray, sweep: Sweep, cal: Calibration) -> np.ndarray:
     if sweep.missing_steps:
         rows = np.isin(np.asarray(sweep.steps), np.asarray(sweep.missing_steps))
         reason[rows, :] = Reason.MISSING
+    # below the datasheet's range, a reading no neighbouring step confirms
+    alone = unconfirmed_near(counts, reason, sweep.steps, cal)
+    if alone is not None:
+        reason[alone] = Reason.FOLDOVER_AMBIGUOUS
     return reason
 
 
