@@ -134,3 +134,41 @@ def test_a_real_rings_range_is_kept_when_replaced():
     d = sim.sweeps[0].truth.distance_m
     near = np.isfinite(d) & (d < 0.2)
     assert (p.reason[near] == Reason.FOLDOVER_AMBIGUOUS).all()
+
+
+def test_a_near_reading_no_neighbouring_step_confirms_stays_refused():
+    cal = Calibration.for_scene(ideal(loads(POST)))   # near end 100 mm, datasheet 200 mm
+    d = np.array([[0.60, 0.15], [0.15, 0.16], [0.61, 0.17], [0.62, 0.05], [0.63, 0.30]])
+    s = cal.counts(d)
+    s[3, 1] = cal.full_scale_counts                    # nearer than the near end
+    reason = np.where(s >= cal.full_scale_counts - 0.5, Reason.SATURATED, Reason.OK)
+    steps = np.array([7, 3, 9, 11, 5])                 # rows out of step order
+    # in step order (3, 5, 7, 9, 11) sensor 0 reads 0.15 then 0.63, 0.60, 0.61, 0.62 m: its
+    # 0.15 m is alone; sensor 1 reads 0.16, 0.30, 0.15, 0.17 m and full scale: 0.16 m is
+    # alone (0.30 m is 140 mm off), 0.15 m is confirmed by 0.17 m, 0.17 m by full scale
+    # (nearer still); 0.30 m lies within the datasheet range and is not asked
+    alone = est.unconfirmed_near(s, reason.astype(np.uint8), steps, cal)
+    assert list(zip(*alone.nonzero())) == [(1, 0), (1, 1)]
+    assert est.unconfirmed_near(s, reason.astype(np.uint8), steps,
+                                Calibration.nominal("gp2y0a02")) is None
+    folding = Calibration.for_scene(loads(POST.replace("quantization: {}",
+                                                       "quantization: {}, foldover: {}")))
+    assert est.unconfirmed_near(s, reason.astype(np.uint8), steps, folding) is None
+
+
+def test_short_outliers_below_the_datasheet_range_stay_refused(monkeypatch):
+    # the outliers effect's short readings (5 %) read below 200 mm: without the check 9, 14
+    # and 15 of them valid and > 30 mm off (seeds 31-33; precision 0.976, 0.988, 0.931),
+    # with it 0, 0 and 2 (two outliers side by side), precision 0.983, 0.992, 0.969
+    scene = loads(POST.replace("quantization: {}}",
+                               "quantization: {}, outliers: {short_rate: 0.05}}"))
+
+    def far_off(seed):
+        run = pipeline.run(scene, seed=seed, progress=False, score=False)
+        sweep, p = run.sweeps[0], run.points[0]
+        err = np.hypot(p.x - sweep.truth.hit_point[..., 0], p.y - sweep.truth.hit_point[..., 1])
+        return int((p.valid & (p.d < 0.2) & (err > 0.03)).sum())
+
+    assert [far_off(s) for s in (31, 32, 33)] == [0, 0, 2]
+    monkeypatch.setattr(est, "unconfirmed_near", lambda *a, **k: None)
+    assert [far_off(s) for s in (31, 32, 33)] == [9, 14, 15]
