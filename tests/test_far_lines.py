@@ -206,11 +206,12 @@ def test_a_gp2d12_line_across_a_corner_its_members_disown_is_left(monkeypatch):
     err0 = np.hypot(p0.x - hit[..., 0], p0.y - hit[..., 1])[gone]
     assert err0.size == 13 and 0.035 < err0.min() and err0.max() < 0.085
     assert _readings_over_run(before, 0.050) == 10 and _readings_over_run(run, 0.050) == 0
-    # (0.942 and F1 0.950 without the rule since the mapper's hit floor stays in its end
-    # point's cell; 0.94 and +0.03 before)
-    assert before.scores["occupied_precision"] < 0.945
+    # (0.952 and F1 0.955 without the rule since the near wall is read below the GP2D12's
+    # 100 mm, docs/calibration.md; 0.942 and 0.950 since the mapper's hit floor stays in its
+    # end point's cell; 0.94 and +0.03 before)
+    assert before.scores["occupied_precision"] < 0.955
     assert run.scores["occupied_precision"] > 0.99
-    assert run.scores["occupied_f1"] > before.scores["occupied_f1"] + 0.025
+    assert run.scores["occupied_f1"] > before.scores["occupied_f1"] + 0.02
 
 
 def test_lines_of_up_to_25_members_are_asked(monkeypatch):
