@@ -528,11 +528,15 @@ def test_visible_wall_is_wall_a_sensor_meets_from_the_front():
     occupied = metrics._dilate(run.grid.classify() == OCCUPIED)
     assert not (truth.visible & ~occupied).any() and not occupied[y, x]
     exact = score(run.grid, sc, truth)
+    luck = []
     for seed in (5, 6, 7):
         noisy = pipeline.run(sc, seed=seed, progress=False, score=False)
-        assert metrics._dilate(noisy.grid.classify() == OCCUPIED)[y, x]   # its luck
+        luck.append(bool(metrics._dilate(noisy.grid.classify() == OCCUPIED)[y, x]))
         for k, v in score(noisy.grid, sc, truth).items():
             assert v is None or exact[k] >= v, (seed, k, exact[k], v)
+    # the noisy map's luck (every seed until the curve was read below 100 mm, which
+    # moved the post's near readings: docs/calibration.md)
+    assert luck == [True, False, False]
 
 
 # A 220 × 120 mm box turned 88°, north-east of the ring: its north face turned to the ring,
