@@ -62,12 +62,16 @@ def test_a_face_one_pose_meets_past_the_drop_out_keeps_the_box_unmapped_in_eithe
 
 def test_poses_mapped_in_reverse_order_give_the_same_map(box_face_run):
     """Only the clamp at ±4 log-odds between one sweep's returns and the next's depends on
-    the order now: 5 cells change class (before: 99), none without the clamp."""
+    the order now: 27 cells change class (before: 99), none without the clamp. 25 of them
+    lie at the east wall 62 mm from the second pose's ring, read since the curve is read
+    below the GP2D12's 100 mm (docs/calibration.md): 5 before that."""
     scene = box_face_run.scenario
     back = pipeline.map_sweeps(box_face_run.sweeps[::-1], scenario=scene, progress=False,
                                score=False)
     changed = box_face_run.grid.classify() != back.grid.classify()
-    assert 0 < np.count_nonzero(changed) <= 5
+    assert 0 < np.count_nonzero(changed) <= 27
+    x = box_face_run.grid.cell_centers()[0][np.nonzero(changed)[1]]
+    assert np.count_nonzero(changed) - np.count_nonzero(x > 0.92) <= 5
     unclamped = MapperParams(l_min=-1e9, l_max=1e9)
     forward, backward = (OccupancyGrid.for_scenario(scene, unclamped) for _ in range(2))
     forward.insert_run(box_face_run.points)
