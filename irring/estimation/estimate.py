@@ -2414,14 +2414,6 @@ KINK_TURN_RAD = BOW_KINK_RAD   # … turn by this much …
 KINK_MEET_M = 0.1       # … and meet within this of both pieces' members
 
 
-def _tls(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float, float]:
-    """Total least-squares line through points: centre x, y and unit normal."""
-    cx, cy = x.mean(), y.mean()
-    u, v = x - cx, y - cy
-    al = 0.5 * math.atan2(2.0 * float((u * v).sum()), float((u * u - v * v).sum()))
-    return cx, cy, -math.sin(al), math.cos(al)
-
-
 def kinked_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration
                  ) -> tuple[Points, np.ndarray]:
     """Where a part is read to its own range: a line whose members lie over a corner (two
