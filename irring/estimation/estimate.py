@@ -3370,6 +3370,19 @@ def counts_misfit_z(chi2: np.ndarray, dof: np.ndarray) -> np.ndarray:
     return (np.cbrt(np.asarray(chi2, dtype=float) / k) - (1.0 - v)) / np.sqrt(v)
 
 
+def _counts_sigma(cal: Calibration, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(d at θ = 0, count σ) of counts ``s``: the counts' noise, but no smaller than the
+    change ``COUNTS_FLOOR_M`` of range makes there (no reading is trusted better than that in
+    range: the pose, the beam's direction)."""
+    _, b0 = cal._ab0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        d0 = cal.distance(s, 0.0)
+        # (np.nan_to_num's NaN → 0 and ±inf → ±max float, in two cheaper calls)
+        sig = np.fmax(cal.sigma_counts(), np.minimum(s / (np.abs(b0) * d0),
+                                                     np.finfo(float).max) * COUNTS_FLOOR_M)
+    return d0, sig
+
+
 def _counts_at(cal: Calibration, alpha, c, ox, oy, cos_h, sin_h):
     """The counts a line (direction ``alpha``, offset ``c`` along its normal) returns to
     each beam, and whether the beam meets it ahead within the drop-out angle."""
@@ -3408,14 +3421,7 @@ def _counts_asked(points: Points, label: np.ndarray, vi: np.ndarray, counts: np.
     beam = (points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at], np.cos(h),
             np.sin(h))
     s = np.asarray(counts, dtype=float).reshape(-1)[at]
-    # no reading is trusted better than SIGMA_FLOOR_M in range (the pose, the beam's
-    # direction): its counts no better than the change that range makes
-    _, b0 = cal._ab0
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        d0 = cal.distance(s, 0.0)
-        # (np.nan_to_num's NaN → 0 and ±inf → ±max float, in two cheaper calls)
-        sig = np.fmax(cal.sigma_counts(), np.minimum(s / (np.abs(b0) * d0),
-                                                     np.finfo(float).max) * COUNTS_FLOOR_M)
+    sig = _counts_sigma(cal, s)[1]
     a = np.asarray(alpha, dtype=float).copy()
     c = -np.sin(a) * cx + np.cos(a) * cy
     expect, met = _counts_at(cal, a[line], c[line], *beam)
@@ -3476,6 +3482,18 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     return out
 
 
+def _counts_jacobian(cal: Calibration, alpha: np.ndarray, c: np.ndarray, beam: tuple
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The counts' derivatives in a line's direction and offset (per reading, the line
+    ``alpha``, ``c`` given for each; ``beam``: origin x, y, cos, sin of its heading), by
+    central differences of ``_COUNTS_DA`` rad and ``_COUNTS_DC`` m."""
+    ja = (_counts_at(cal, alpha + _COUNTS_DA, c, *beam)[0]
+          - _counts_at(cal, alpha - _COUNTS_DA, c, *beam)[0]) / (2 * _COUNTS_DA)
+    jc = (_counts_at(cal, alpha, c + _COUNTS_DC, *beam)[0]
+          - _counts_at(cal, alpha, c - _COUNTS_DC, *beam)[0]) / (2 * _COUNTS_DC)
+    return ja, jc
+
+
 def _counts_refit(cal: Calibration, n_lines: int, line: np.ndarray, s: np.ndarray,
                   sig: np.ndarray, beam: tuple, a: np.ndarray, c: np.ndarray,
                   asked: np.ndarray, steps: int, settled: tuple | None = None):
@@ -3491,11 +3509,7 @@ def _counts_refit(cal: Calibration, n_lines: int, line: np.ndarray, s: np.ndarra
 
     best, e0 = chi2_of(a, c)
     for _ in range(steps):
-        # the counts' Jacobian in (direction, offset) by central differences
-        ja = (_counts_at(cal, a[line] + _COUNTS_DA, c[line], *beam)[0]
-              - _counts_at(cal, a[line] - _COUNTS_DA, c[line], *beam)[0]) / (2 * _COUNTS_DA)
-        jc = (_counts_at(cal, a[line], c[line] + _COUNTS_DC, *beam)[0]
-              - _counts_at(cal, a[line], c[line] - _COUNTS_DC, *beam)[0]) / (2 * _COUNTS_DC)
+        ja, jc = _counts_jacobian(cal, a[line], c[line], beam)
         res = s - e0
         saa, sac, scc = (np.bincount(line, weights=w, minlength=n_lines)
                          for w in (ja * ja, ja * jc, jc * jc))
@@ -3662,11 +3676,7 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
             turn[a:b] = np.roll(turn[a:b], -(widest + 1))
     at, lost, bent = at[turn], lost[turn], bent[turn]
     s = np.asarray(counts, dtype=float).reshape(-1)[at]
-    _, b0 = cal._ab0
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        d0 = cal.distance(s, 0.0)
-        sig = np.fmax(cal.sigma_counts(), np.minimum(s / (np.abs(b0) * d0),
-                                                     np.finfo(float).max) * COUNTS_FLOOR_M)
+    d0, sig = _counts_sigma(cal, s)
     h = points.heading.reshape(-1)[at]
     ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
     ch, sh = np.cos(h), np.sin(h)
@@ -3725,10 +3735,7 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
             better = np.ones(n_p, dtype=bool)
         if fits.any():
             # the direction's standard error from the counts' weighted Jacobian there
-            ja = (_counts_at(cal, alpha[g] + _COUNTS_DA, c[g], *beam)[0]
-                  - _counts_at(cal, alpha[g] - _COUNTS_DA, c[g], *beam)[0]) / (2 * _COUNTS_DA)
-            jc = (_counts_at(cal, alpha[g], c[g] + _COUNTS_DC, *beam)[0]
-                  - _counts_at(cal, alpha[g], c[g] - _COUNTS_DC, *beam)[0]) / (2 * _COUNTS_DC)
+            ja, jc = _counts_jacobian(cal, alpha[g], c[g], beam)
             ja, jc = ja / sig[m], jc / sig[m]
             saa, sac, scc = (np.bincount(g, weights=v, minlength=n_p)
                              for v in (ja * ja, ja * jc, jc * jc))
