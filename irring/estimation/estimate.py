@@ -2416,22 +2416,15 @@ KINK_MEET_M = 0.1       # … and meet within this of both pieces' members
 
 def kinked_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration
                  ) -> tuple[Points, np.ndarray]:
-    """Where a part is read to its own range: a line whose members lie over a corner (two
-    walls, or a wall and a box face, fitted as one) split in two and each piece read by
-    Table II's iteration; numpy, shared by both estimators.
-
-    A line of ≥ ``KINK_MIN`` valid members whose best split along it (≥ ``KINK_SIDE``
-    members a piece, prefix sums of the weighted moments) beats the one line by
-    ``KINK_PRE_F`` as its members lie (F against the pieces' own scatter) is asked: each
-    piece is fitted (total least squares) and its members re-read at the incidence their
-    beams meet it with, until θ settles. Kept where the line misfits its members by
-    ``KINK_MISFIT`` σ² a member or more (their distances against where their beams meet it,
-    in range noise σ), the two pieces so read beat it by ``KINK_F`` (against their own
-    scatter), turn by ``KINK_TURN_RAD`` or more and cross within ``KINK_MEET_M`` of both
-    pieces' members, and no member is read at or past the drop-out angle. Returns the
-    points (each kept piece's members at their θ, σ their noise) and a label (S, N) in which
-    one piece of each kept line has a new number, for the snap (the grouping keeps
-    ``label``). Why: docs/estimator.md, "A line over a corner"."""
+    """Where a part is read to its own range: a line of ≥ ``KINK_MIN`` valid members over a
+    corner (two walls, or a wall and a box face, fitted as one) split at its best place along
+    it and each piece read by Table II's iteration, kept where the pieces beat the line
+    (``KINK_PRE_F`` as the members lie, ``KINK_MISFIT``, ``KINK_F`` as re-read), turn by
+    ``KINK_TURN_RAD``, meet within ``KINK_MEET_M`` of both and no member reaches the drop-out
+    angle. Returns the points (a kept piece's members at their θ, σ their noise) and a label
+    (S, N) giving one piece of each kept line a new number, for the snap (the grouping keeps
+    ``label``). Numpy, shared by both estimators. Why and the rule in full:
+    docs/estimator.md, "A line over a corner"."""
     if not read_to_own_range(cal, points.max_range_m):
         return points, label
     asked = _bow_asked(points, label, counts, cal)
@@ -3621,9 +3614,9 @@ def _best_halves(x: np.ndarray, y: np.ndarray, lo: int) -> int:
     points whose total-least-squares lines leave the least squared residual: the first
     point of the second run."""
     n = x.size
-    px, py = np.cumsum(x - x.mean()), np.cumsum(y - y.mean())
-    pxx, pyy, pxy = (np.cumsum(v) for v in ((x - x.mean()) ** 2, (y - y.mean()) ** 2,
-                                             (x - x.mean()) * (y - y.mean())))
+    u, v = x - x.mean(), y - y.mean()      # (centred: the running sums lose no digits)
+    px, py = np.cumsum(u), np.cumsum(v)
+    pxx, pyy, pxy = np.cumsum(u * u), np.cumsum(v * v), np.cumsum(u * v)
     k = np.arange(lo, n - lo + 1)
 
     def rss(m, sx, sy, sxx, syy, sxy):
@@ -3638,18 +3631,17 @@ def _best_halves(x: np.ndarray, y: np.ndarray, lo: int) -> int:
 
 def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.ndarray,
                   cal: Calibration, bent: np.ndarray) -> Points:
-    """The members ``at`` (flat, in scan order; ``line``: the contradicted line of each)
-    that leaving their line made INCIDENCE_UNKNOWN, placed on a piece of it their counts
-    do explain. One sensor's run of a line's members is a piece; a piece whose counts
-    contradict every line near it (:func:`_counts_refit` about its centroid from its θ = 0
-    TLS line, a half from its whole's line; ``COUNTS_Z`` unscaled) is split in two where two lines fit its θ = 0 end points best,
-    while both halves keep ``PIECE_MIN`` members (``PIECE_LEVELS`` times at most). A lost
-    member of a piece its counts fit is read at the incidence its beam meets the piece's
-    line with (its own counts at that θ), σ its noise there and half the spread of d over
-    θ ± the line's direction error, placed where that σ ≤ ``_AGAIN_SIGMA_M`` and θ is not
-    pinned at the drop-out angle. Numpy, shared by both estimators. Why: one sensor
-    turning in a many-sided room reads several facets as one line (docs/estimator.md,
-    "A contradicted line's pieces")."""
+    """The members ``at`` (flat, in scan order; ``line``: the contradicted line of each;
+    ``bent``: whether its range profile bends away from its beam) that leaving their line
+    made INCIDENCE_UNKNOWN, placed on a piece of it their counts explain. A piece is one
+    sensor's run of a line's members (not asked where more than ``PIECE_BENT_SHARE`` of it
+    is ``bent``), fitted to its counts (:func:`_counts_refit`) and, where they contradict
+    it (``COUNTS_Z``), halved where two lines fit best (:func:`_best_halves`; ``PIECE_MIN``
+    members a half, ``PIECE_LEVELS`` times at most). A lost member of a piece its counts fit
+    is read at the incidence its beam meets the piece's line with, placed where its σ ≤
+    ``_AGAIN_SIGMA_M`` and θ is not pinned at the drop-out angle. Numpy, shared by both
+    estimators. Why and the rule in full: docs/estimator.md, "A contradicted line's
+    pieces"."""
     lost = points.reason.reshape(-1)[at] == Reason.INCIDENCE_UNKNOWN
     if not lost.any():
         return points
@@ -3722,10 +3714,9 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
         # halves of a piece its counts fitted count only where they fit clearly better:
         # two lines against one, F on (2, n − 4) degrees of freedom (a facet corner)
         parent = np.array([q[2] for q in pieces])
-        pair = chi2[0::2] + chi2[1::2] if n_p % 2 == 0 else None
         halved = np.isfinite(parent)
-        if halved.any():
-            both = np.repeat(pair, 2)
+        if halved.any():     # (past level 0 the pieces come in pairs of halves)
+            both = np.repeat(chi2[0::2] + chi2[1::2], 2)
             nn = np.repeat(w[0::2] + w[1::2], 2)
             with np.errstate(divide="ignore", invalid="ignore"):
                 f_stat = 0.5 * (parent - both) / (both / (nn - 4))
