@@ -1456,8 +1456,8 @@ POOL_SIDE_SIGMAS = 2.0
 
 def pool_edge_counts(cal: Calibration, max_range_m: float) -> float:
     """The counts each half of a pool's window must stand clear of: those of a surface
-    square on at ``max_range_m``. A part read to its own range: the no-return level. Read
-    short of the curve's end (``max_range_m`` < ``cal.max_range_m``), a surface past the range
+    square on at ``max_range_m``. Read to the curve's end (``max_range_m`` ≥
+    ``cal.max_range_m``): the no-return level. Read short of it (``max_range_m`` < ``cal.max_range_m``), a surface past the range
     reads as that level (the simulator's and the firmware's output with nothing in range)
     while one just inside reads more, so a half that ran past the range reads below them."""
     if max_range_m >= cal.max_range_m:
