@@ -3754,8 +3754,10 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
             break
     if not place.any():
         return points
-    # a piece's end member may be the next piece's: it takes the line of the piece before
-    # or after its own (in its run) whose counts explain its own clearly better
+    # a member may belong to the next piece: it takes the line of the piece before or after
+    # its own (in its run) where its counts explain it clearly better. Every member is asked,
+    # not only a piece's ends (measured: ends only, the D-room's RMS 17.0 -> 16.8 mm in one
+    # seed, 20.1 -> 21.5 mm in another)
     best = _counts_misfit_one(cal, line_ac[0], line_ac[1], s, sig, ox, oy, ch, sh)
     for side, step in ((0, -1), (1, 1)):
         j = np.clip(ends[side] + step, 0, at.size - 1)
