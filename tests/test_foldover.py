@@ -1060,3 +1060,45 @@ def test_a_line_its_sensor_joins_across_a_silence_does_not_vouch_for_the_far_bra
         assert np.array_equal(p.valid | took, q.valid)     # nothing made valid
         # the second pass holds the taken readings out: the others' lines move them a little
         assert np.max(np.abs(p.d[p.valid] - q.d[p.valid])) < 0.002
+
+
+# A 432 × 387 mm niche in a 1699 × 1464 mm room, the ring 171 mm from its right jamb (the
+# mouth's convex corner), GP2Y0A21. Sensor 2 sweeps the niche's far side wall at 67-70° (its
+# last three readings before the drop-out, steps −35…−33), is silent for five steps and then
+# reads the room's left wall 570-590 mm away. One line took both: its θ (18-24°) read the
+# steep wall's readings 150-227 mm long. That line would have returned 7-9 count σ more than
+# the silent steps read: the silence says the readings before it are of another surface,
+# and nothing on their side of it says which.
+NICHE_JAMB_A21 = """
+name: niche_jamb_a21
+room: {outline_mm: [[0, 0], [678, 0], [678, -387], [1110, -387], [1110, 0], [1699, 0],
+                    [1699, 1464], [0, 1464]]}
+robot: {poses: [{x_mm: 985.2, y_mm: 115.8, yaw_deg: -44.7}]}
+sensor: {model: gp2y0a21}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+@pytest.mark.parametrize("seed, before, valid", [(4311, 2, 209), (4312, 3, 225)])
+def test_a_lines_few_readings_a_silence_contradicts_leave_it_with_no_other_line(
+        seed, before, valid, monkeypatch):
+    from irring.estimation import estimate as est
+
+    sc, sweeps, cal = simulated(NICHE_JAMB_A21, seed=seed)
+    points = [estimate(sw, cal) for sw in sweeps]
+    assert _long_and_valid(points, sweeps) == (0, valid)
+    _oracle_agrees(sweeps, points, cal)
+    steep = (sweeps[0].steps >= -35) & (sweeps[0].steps <= -33)
+    assert np.all(points[0].reason[steep, 2] == Reason.INCIDENCE_UNKNOWN)
+    # without the rule (main before it: only a run holding another line's readings beside
+    # them moved them)
+    real = est.across_silence
+    monkeypatch.setattr(est, "across_silence",
+                        lambda *a, **k: real(*a, **{**k, "alone": False}))
+    old = [estimate(sw, cal) for sw in sweeps]
+    assert _long_and_valid(old, sweeps) == (before, valid + before)
+    for p, q in zip(points, old):
+        took = q.valid & ~p.valid
+        assert np.array_equal(took.nonzero()[1], np.full(before, 2))   # sensor 2's only
+        assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
+        assert np.array_equal(p.valid | took, q.valid)     # nothing made valid

@@ -614,7 +614,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
-                                   grouping.cx, grouping.cy, gapper)
+                                   grouping.cx, grouping.cy, gapper, alone=snap)
     # short far lines are doubted in the final pass (a fold-over's judging pass keeps its
     # lines whole: they decide the branches; docs/foldover.md, "Short far lines"), judged as
     # fitted, but after round_runs: a column's arc cut into short far lines is a circle's
@@ -783,7 +783,7 @@ ACROSS_MAX = 5  # at most this many readings a line took across a silent gap are
 
 def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                    steps: np.ndarray, cal: Calibration, alpha: np.ndarray, cx: np.ndarray,
-                   cy: np.ndarray, gapper: Callable | None = None
+                   cy: np.ndarray, gapper: Callable | None = None, alone: bool = True
                    ) -> tuple[Points, np.ndarray]:
     """Line members whose membership a silent gap contradicts, moved to the line of their
     side of it; numpy, shared by both estimators.
@@ -826,26 +826,46 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     held = in_run > 0
     r_idx, l_idx = held.nonzero()
     np.add.at(runs_of, (l_idx, sensor[first[np.searchsorted(s_run, r_idx)]]), 1)
+    run_sens = np.zeros(n_runs, dtype=np.intp)
+    run_sens[s_run] = s_sens
     n_s = first.size
     to = np.full(n_s, -1, dtype=np.intp)
-    for side, nb in ((new_run[first], np.arange(1, n_s + 1)),          # a run's first
-                     (np.r_[new_run[1:], True][last], np.arange(-1, n_s - 1))):  # … last
+    off = np.zeros(n_s, dtype=bool)   # … or off their line: no other line beside them
+    for before, side, nb in ((True, new_run[first], np.arange(1, n_s + 1)),   # a run's first
+                             (False, np.r_[new_run[1:], True][last], np.arange(-1, n_s - 1))):
         nb = np.clip(nb, 0, n_s - 1)
         m_lab = s_lab[nb]
-        ok = (side & (s_lab >= 0) & (s_run[nb] == s_run) & (nb != np.arange(n_s))
-              & (m_lab >= 0) & (m_lab != s_lab))
         lab_c, m_c = np.maximum(s_lab, 0), np.maximum(m_lab, 0)
-        ok &= (in_run[s_run, lab_c] == s_len) & (runs_of[lab_c, s_sens] >= 2)
-        ok &= (in_run[s_run, m_c] >= s_len) & (s_len <= ACROSS_MAX)
-        ask = ok.nonzero()[0]
+        few = (side & (s_lab >= 0) & (in_run[s_run, lab_c] == s_len)
+               & (runs_of[lab_c, s_sens] >= 2) & (s_len <= ACROSS_MAX))
+        beside = (s_run[nb] == s_run) & (nb != np.arange(n_s))
+        ok = few & beside & (m_lab >= 0) & (m_lab != s_lab) & (in_run[s_run, m_c] >= s_len)
+        # the run holds nothing else on a line (a steep wall's last readings before its
+        # drop-out, taken across it by the far wall's line: docs/estimator.md, "Silent gaps"),
+        # and the line's members of this sensor go on in the run across the gap
+        adj = np.clip(s_run + (-1 if before else 1), 0, n_runs - 1)
+        lone = (few & ~(beside & (m_lab >= 0)) & alone & (adj != s_run)
+                & (run_sens[adj] == s_sens) & (in_run[adj, lab_c] > 0))
+        ask = (ok | lone).nonzero()[0]
         if ask.size:     # the light test (the costly part) only where the rest holds
-            before = nb[ask] > ask
-            ok[ask] = _line_contradicted(points, counts, steps, cal, vi,
-                                         np.where(before, first[ask], last[ask]), before,
-                                         lab_c[ask], alpha, cx, cy)
-            to = np.where(ok & (to < 0), m_lab, to)
-    if not (to >= 0).any():
+            said = _line_contradicted(points, counts, steps, cal, vi,
+                                      first[ask] if before else last[ask],
+                                      np.full(ask.size, before), lab_c[ask], alpha, cx, cy)
+            hit = np.zeros(n_s, dtype=bool)
+            hit[ask] = said
+            to = np.where(ok & hit & (to < 0), m_lab, to)
+            off |= lone & hit
+    off &= to < 0
+    if not ((to >= 0).any() or off.any()):
         return points, label
+    label = label.copy()
+    if off.any():
+        # nothing on their side of the gap says where they lie (their own profile runs
+        # across it): not placed
+        gone = np.zeros(points.valid.shape, dtype=bool)
+        gone.reshape(-1)[vi[np.repeat(off, s_len)]] = True
+        label[gone] = -1
+        points = invalidated(points, gone, Reason.INCIDENCE_UNKNOWN)
     # (readings their line put past the range are dropped as read: none is made valid)
     move = np.repeat(to >= 0, s_len) & (points.d.reshape(-1)[vi] <= points.max_range_m)
     if not move.any():
@@ -865,7 +885,6 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     d0 = np.exp(la0 + b0 * np.log(s[~met]))
     theta[~met], d[~met], to[~met] = 0.0, d0, -1
     sigma[~met] = theta0_sigma(cal, s[~met], d0, sig_s[~met])
-    label = label.copy()
     label.reshape(-1)[at] = to
     return placed_at(points, at, d, theta, sigma), label
 
