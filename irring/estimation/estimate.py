@@ -737,13 +737,13 @@ def alone_at_an_edge(points: Points, label: np.ndarray, counts: np.ndarray,
 
 def _line_contradicted(points: Points, counts: np.ndarray, steps: np.ndarray,
                        cal: Calibration, vi: np.ndarray, at: np.ndarray, before: np.ndarray,
-                       line: np.ndarray, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray
-                       ) -> np.ndarray:
+                       line: np.ndarray, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+                       need: int = 1) -> np.ndarray:
     """Whether line ``line`` (per reading ``vi[at]``) would have returned
-    ``CONTRADICT_SIGMAS`` count σ more than one of the steps of the gap beside that reading
-    read (the gap before it where ``before``, else after; same sensor; up to the sensor's
-    next valid reading, at most ``ACROSS_MAX`` + 3 steps): the beam meets the line in front
-    of the emitter within the drop-out angle."""
+    ``CONTRADICT_SIGMAS`` count σ more than ``need`` of the steps of the gap beside that
+    reading read (the gap before it where ``before``, else after; same sensor; up to the
+    sensor's next valid reading, at most ``ACROSS_MAX`` + 3 steps): the beam meets the line
+    in front of the emitter within the drop-out angle."""
     n_steps, n_sensors = np.shape(counts)
     order = rows_in_step_order(steps)
     rank = np.empty(n_steps, dtype=np.intp)
@@ -757,7 +757,7 @@ def _line_contradicted(points: Points, counts: np.ndarray, steps: np.ndarray,
     bound = np.where(same, rank[vi[other] // n_sensors], np.where(before, -1, n_steps))
     flat_counts = np.asarray(counts, dtype=float).reshape(-1)
     nx, ny = -np.sin(alpha[line]), np.cos(alpha[line])
-    found = np.zeros(at.size, dtype=bool)
+    found = np.zeros(at.size, dtype=np.intp)
     for j in range(1, ACROSS_MAX + 4):
         r = rank[row] + j * step
         inside = (r >= 0) & (r < n_steps) & ((r - bound) * step < 0)
@@ -772,13 +772,16 @@ def _line_contradicted(points: Points, counts: np.ndarray, steps: np.ndarray,
             expect = cal.counts(t, np.arccos(np.minimum(np.abs(along), 1.0)))
         met = (inside & (t > 0) & (np.abs(along) > math.cos(cal.max_incidence_rad))
                & np.isfinite(expect))
-        found |= met & (expect > flat_counts[g] + CONTRADICT_SIGMAS * cal.sigma_counts())
-    return found
+        found += met & (expect > flat_counts[g] + CONTRADICT_SIGMAS * cal.sigma_counts())
+    return found >= need
 
 
 CONTRADICT_SIGMAS = 5.0  # a line that would have read a silent step this many count σ
 #                          brighter (of up to ACROSS_MAX + 3 steps: 5σ, not 3σ) is not there
 ACROSS_MAX = 5  # at most this many readings a line took across a silent gap are moved
+LONE_GAP_MIN = 2  # … or, with no other line beside them, are taken where this many silent
+#                  steps contradict it (a surface's end drops out over several steps; a
+#                  single silent step in a wall is a flicker)
 
 
 def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
@@ -831,6 +834,11 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     np.add.at(runs_of, (l_idx, sensor[first[np.searchsorted(s_run, r_idx)]]), 1)
     run_sens = np.zeros(n_runs, dtype=np.intp)
     run_sens[s_run] = s_sens
+    # each (line, sensor)'s first and last run holding its members
+    run_lo = np.full((n_lines, n_sensors), n_runs, dtype=np.intp)
+    run_hi = np.full((n_lines, n_sensors), -1, dtype=np.intp)
+    np.minimum.at(run_lo, (lab[mem], sensor[mem]), run[mem])
+    np.maximum.at(run_hi, (lab[mem], sensor[mem]), run[mem])
     n_s = first.size
     to = np.full(n_s, -1, dtype=np.intp)
     off = np.zeros(n_s, dtype=bool)   # … or off their line: no other line beside them
@@ -845,19 +853,25 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
         ok = few & beside & (m_lab >= 0) & (m_lab != s_lab) & (in_run[s_run, m_c] >= s_len)
         # the run holds nothing else on a line (a steep wall's last readings before its
         # drop-out, taken across it by the far wall's line: docs/estimator.md, "Silent gaps"),
-        # and the line's members of this sensor go on in the run across the gap
+        # the line's members of this sensor go on in the run across the gap, and this run is
+        # the last (first) of them: they end the line's trace, not a stretch within it
         adj = np.clip(s_run + (-1 if before else 1), 0, n_runs - 1)
-        lone = (few & ~(beside & (m_lab >= 0)) & alone & (adj != s_run)
+        end = (run_hi if before else run_lo)[lab_c, s_sens] == s_run
+        lone = (few & ~(beside & (m_lab >= 0)) & alone & end & (adj != s_run)
                 & (run_sens[adj] == s_sens) & (in_run[adj, lab_c] > 0))
-        ask = (ok | lone).nonzero()[0]
-        if ask.size:     # the light test (the costly part) only where the rest holds
-            said = _line_contradicted(points, counts, steps, cal, vi,
-                                      first[ask] if before else last[ask],
-                                      np.full(ask.size, before), lab_c[ask], alpha, cx, cy)
+        for sel, need, act in ((ok, 1, "to"), (lone & ~ok, LONE_GAP_MIN, "off")):
+            ask = sel.nonzero()[0]
+            if not ask.size:   # the light test (the costly part) only where the rest holds
+                continue
             hit = np.zeros(n_s, dtype=bool)
-            hit[ask] = said
-            to = np.where(ok & hit & (to < 0), m_lab, to)
-            off |= lone & hit
+            hit[ask] = _line_contradicted(points, counts, steps, cal, vi,
+                                          first[ask] if before else last[ask],
+                                          np.full(ask.size, before), lab_c[ask], alpha, cx,
+                                          cy, need)
+            if act == "to":
+                to = np.where(hit & (to < 0), m_lab, to)
+            else:
+                off |= hit
     off &= to < 0
     if not ((to >= 0).any() or off.any()):
         return points, label
