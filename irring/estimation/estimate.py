@@ -801,8 +801,9 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     where it meets it past the drop-out angle they leave their line, read at θ = 0 with the
     fallback σ (:func:`local_incidence` asks them). With ``alone`` (the final pass), a run
     that holds no other line beside them, where the line's readings of this sensor go on in
-    the run across the gap, has them INCIDENCE_UNKNOWN: nothing on their side says where
-    they lie (their own profile runs across the gap). ``label`` (S, N): each reading's line
+    the run across the gap and nowhere past them, and ``LONE_GAP_MIN`` of the gap's steps
+    contradict the line, has them INCIDENCE_UNKNOWN: nothing on their side says where they
+    lie (their own profile runs across the gap). ``label`` (S, N): each reading's line
     or −1; ``index``: the live readings' flat indices in scan order; ``gapper``: the gaps
     (:func:`silent_gaps_compiled` by default; the oracle passes :func:`silent_gaps`).
     Why: docs/estimator.md ("Silent gaps")."""
