@@ -614,7 +614,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     label = np.full(shape, -1, dtype=np.intp)  # the line each reading took θ from (−1: none)
     label.reshape(-1)[index] = np.where(on_line, grouping.label, -1)
     points, label = across_silence(points, label, index, counts, steps, cal, grouping.alpha,
-                                   grouping.cx, grouping.cy, gapper, alone=snap)
+                                   grouping.cx, grouping.cy, gapper)
     # short far lines are doubted in the final pass (a fold-over's judging pass keeps its
     # lines whole: they decide the branches; docs/foldover.md, "Short far lines"), judged as
     # fitted, but after round_runs: a column's arc cut into short far lines is a circle's
@@ -635,6 +635,11 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label = rejoin_traces(points, label, index, counts, steps, cal,
                                       grouping.alpha, grouping.cx, grouping.cy,
                                       grouping.usable, options, tracer or TraceKernels)
+        # a line's few readings at its trace's end that a silence contradicts, with no other
+        # line beside them (after the traces: those they carry to their own wall stay)
+        points, label = across_silence(points, label, index, counts, steps, cal,
+                                       grouping.alpha, grouping.cx, grouping.cy, gapper,
+                                       alone=True, moves=False)
         points, label = counts_disown_lines(points, label, index, counts, steps, cal,
                                             grouping.alpha, grouping.cx, grouping.cy, profiler,
                                             judge)
@@ -786,8 +791,8 @@ LONE_GAP_MIN = 2  # … or, with no other line beside them, are taken where this
 
 def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                    steps: np.ndarray, cal: Calibration, alpha: np.ndarray, cx: np.ndarray,
-                   cy: np.ndarray, gapper: Callable | None = None, alone: bool = True
-                   ) -> tuple[Points, np.ndarray]:
+                   cy: np.ndarray, gapper: Callable | None = None, alone: bool = False,
+                   moves: bool = True) -> tuple[Points, np.ndarray]:
     """Line members whose membership a silent gap contradicts, moved to the line of their
     side of it; numpy, shared by both estimators.
 
@@ -799,11 +804,12 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     (L,): each line's direction and centroid), took those few across the gap: they move to
     the other line, read at the incidence their beam meets it with the noise σ at that θ;
     where it meets it past the drop-out angle they leave their line, read at θ = 0 with the
-    fallback σ (:func:`local_incidence` asks them). With ``alone`` (the final pass), a run
-    that holds no other line beside them, where the line's readings of this sensor go on in
-    the run across the gap and nowhere past them, and ``LONE_GAP_MIN`` of the gap's steps
-    contradict the line, has them INCIDENCE_UNKNOWN: nothing on their side says where they
-    lie (their own profile runs across the gap). ``label`` (S, N): each reading's line
+    fallback σ (:func:`local_incidence` asks them); ``moves`` False: none of this. With
+    ``alone`` (the final pass, after :func:`rejoin_traces`), a run that holds no other line
+    beside them, where the line's readings of this sensor go on in the run across the gap
+    and nowhere past them, and ``LONE_GAP_MIN`` of the gap's steps contradict the line, has
+    them INCIDENCE_UNKNOWN: nothing on their side says where they lie (their own profile
+    runs across the gap). ``label`` (S, N): each reading's line
     or −1; ``index``: the live readings' flat indices in scan order; ``gapper``: the gaps
     (:func:`silent_gaps_compiled` by default; the oracle passes :func:`silent_gaps`).
     Why: docs/estimator.md ("Silent gaps")."""
@@ -851,7 +857,8 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
         few = (side & (s_lab >= 0) & (in_run[s_run, lab_c] == s_len)
                & (runs_of[lab_c, s_sens] >= 2) & (s_len <= ACROSS_MAX))
         beside = (s_run[nb] == s_run) & (nb != np.arange(n_s))
-        ok = few & beside & (m_lab >= 0) & (m_lab != s_lab) & (in_run[s_run, m_c] >= s_len)
+        ok = (few & beside & (m_lab >= 0) & (m_lab != s_lab) & (in_run[s_run, m_c] >= s_len)
+              & moves)
         # the run holds nothing else on a line (a steep wall's last readings before its
         # drop-out, taken across it by the far wall's line: docs/estimator.md, "Silent gaps"),
         # the line's members of this sensor go on in the run across the gap, and this run is
