@@ -830,6 +830,11 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     last = np.r_[first[1:] - 1, vi.size - 1]
     s_lab, s_run, s_len = lab[first], run[first], last - first + 1
     s_sens = sensor[first]
+    few = (s_lab >= 0) & (s_len <= ACROSS_MAX)
+    if not moves:   # the lone case only: a few members' stretch beside a gap, or nothing
+        cut_end = np.r_[cut[1:], False]
+        if not (few & (cut[first] | cut_end[last])).any():
+            return points, label
     n_lines, n_runs = alpha.size, int(run[-1]) + 1
     mem = lab >= 0
     # members per (run, line) and the runs each (line, sensor) holds members in
@@ -854,18 +859,18 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
         nb = np.clip(nb, 0, n_s - 1)
         m_lab = s_lab[nb]
         lab_c, m_c = np.maximum(s_lab, 0), np.maximum(m_lab, 0)
-        few = (side & (s_lab >= 0) & (in_run[s_run, lab_c] == s_len)
-               & (runs_of[lab_c, s_sens] >= 2) & (s_len <= ACROSS_MAX))
+        few_here = (side & few & (in_run[s_run, lab_c] == s_len)
+                    & (runs_of[lab_c, s_sens] >= 2))
         beside = (s_run[nb] == s_run) & (nb != np.arange(n_s))
-        ok = (few & beside & (m_lab >= 0) & (m_lab != s_lab) & (in_run[s_run, m_c] >= s_len)
-              & moves)
+        ok = (few_here & beside & (m_lab >= 0) & (m_lab != s_lab)
+              & (in_run[s_run, m_c] >= s_len) & moves)
         # the run holds nothing else on a line (a steep wall's last readings before its
         # drop-out, taken across it by the far wall's line: docs/estimator.md, "Silent gaps"),
         # the line's members of this sensor go on in the run across the gap, and this run is
         # the last (first) of them: they end the line's trace, not a stretch within it
         adj = np.clip(s_run + (-1 if before else 1), 0, n_runs - 1)
         end = (run_hi if before else run_lo)[lab_c, s_sens] == s_run
-        lone = (few & ~(beside & (m_lab >= 0)) & alone & end & (adj != s_run)
+        lone = (few_here & ~(beside & (m_lab >= 0)) & alone & end & (adj != s_run)
                 & (run_sens[adj] == s_sens) & (in_run[adj, lab_c] > 0))
         for sel, need, act in ((ok, 1, "to"), (lone & ~ok, LONE_GAP_MIN, "off")):
             ask = sel.nonzero()[0]
