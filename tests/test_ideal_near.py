@@ -12,10 +12,11 @@ import numpy as np
 from irring import pipeline
 from irring.core import Reason
 from irring.estimation import estimate as est
-from irring.estimation import estimate_numpy as oracle
 from irring.estimation.calibration import Calibration
 from irring.scenario import loads
 from irring.studies.rooms import ideal
+
+from _oracle import assert_oracle_agrees
 
 # a GP2D12 ring 80 mm from a column of radius 250 mm (its centre 480 mm right, 27 mm up)
 COLUMN = """name: near_column
@@ -81,17 +82,7 @@ def test_the_ideal_sensor_maps_a_near_columns_flank_the_noisy_one_maps():
 
 def test_the_oracle_agrees_on_the_near_column():
     noisy = loads(COLUMN)
-    for scene in (noisy, ideal(noisy)):
-        sim, _ = pipeline.simulated(scene, progress=False)
-        cal = Calibration.for_scene(scene)
-        for sweep in sim.sweeps:
-            fast = est.estimate_detail(sweep, cal)
-            slow = oracle.estimate_detail(sweep, cal)
-            for f in ("valid", "reason"):
-                np.testing.assert_array_equal(getattr(fast.points, f), getattr(slow.points, f))
-            for f in ("x", "y", "d", "sigma_m"):
-                np.testing.assert_allclose(getattr(fast.points, f), getattr(slow.points, f),
-                                           rtol=0, atol=1e-9)
+    assert_oracle_agrees((noisy, ideal(noisy)))
 
 
 def test_theta_free_only_where_no_incidence_moves_the_distance():

@@ -15,10 +15,11 @@ import pytest
 from irring import pipeline
 from irring.core import HOUSING_M, Reason
 from irring.estimation import estimate as est
-from irring.estimation import estimate_numpy as oracle
 from irring.estimation.calibration import Calibration
 from irring.scenario import loads
 from irring.studies.rooms import ideal
+
+from _oracle import assert_oracle_agrees
 
 # a GP2Y0A02 (datasheet range from 200 mm) 159-200 mm from a post of radius 42 mm
 POST = """name: near_post_a02
@@ -111,17 +112,7 @@ def test_nearer_than_full_scale_saturates_and_nothing_else_is_lost():
 
 def test_the_oracle_agrees_below_the_datasheet_range():
     noisy = loads(POST)
-    for scene in (noisy, ideal(noisy), loads(SLOT)):
-        sim, _ = pipeline.simulated(scene, progress=False)
-        cal = Calibration.for_scene(scene)
-        for sweep in sim.sweeps:
-            fast = est.estimate_detail(sweep, cal)
-            slow = oracle.estimate_detail(sweep, cal)
-            for f in ("valid", "reason"):
-                np.testing.assert_array_equal(getattr(fast.points, f), getattr(slow.points, f))
-            for f in ("x", "y", "d", "sigma_m"):
-                np.testing.assert_allclose(getattr(fast.points, f), getattr(slow.points, f),
-                                           rtol=0, atol=1e-9)
+    assert_oracle_agrees((noisy, ideal(noisy), loads(SLOT)))
 
 
 def test_a_real_rings_range_is_kept_when_replaced():
