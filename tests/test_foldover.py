@@ -1099,8 +1099,6 @@ effects: [incidence, noise, quantization, foldover]
 @pytest.mark.parametrize("seed, before, valid", [(4311, 2, 209), (4312, 3, 225)])
 def test_a_lines_few_readings_a_silence_contradicts_leave_it_with_no_other_line(
         seed, before, valid, monkeypatch):
-    from irring.estimation import estimate as est
-
     sc, sweeps, cal = simulated(NICHE_JAMB_A21, seed=seed)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == (0, valid)
