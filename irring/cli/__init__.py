@@ -50,7 +50,7 @@ EPILOG = """\
 exit status: 0 done; 1 bad input file (scenario, recording, calibration, study), or
 calibrate --port stopped at its prompt (q, end of input); 2 bad option or argument; 3 the device failed (no answer, disconnected, error replies, no progress); 4 an
 output could not be written; 5 refused as too big for memory; 6 a benchmark's target missed
-(bench speed --check, bench effects); 70 internal error (a bug, or a compiled kernel not
+(bench speed --check, effects, rooms, foldover, grazing, link); 70 internal error (a bug, or a compiled kernel not
 built or built from another .pyx: the message says how to rebuild); 130 interrupted.
 Errors are one line; --debug (anywhere on the line, or IRRING_DEBUG=1) adds the traceback.
 Scan poses are numbered 1 … N everywhere (--pose K, map.png, progress)."""
