@@ -12,6 +12,7 @@ import collections.abc
 import dataclasses
 import difflib
 import math
+import re
 import types
 import typing
 from dataclasses import dataclass, field
@@ -272,7 +273,7 @@ class _Loader:
         for key, value in raw.items():
             if key not in allowed:
                 names = ", ".join(sorted(allowed))
-                hint = _close(str(key), allowed)
+                hint = _other_unit(str(key), cls) or _close(str(key), allowed)
                 raise self.fail(_join(path, key), f"unknown key{hint}; allowed here: {names}")
             f, factor = allowed[key]
             if f.name in kwargs:
@@ -399,6 +400,26 @@ def load_dataclass(cls: type, raw: Any, path: str, source: str = "") -> Any:
 
 def _join(path: str, key: Any) -> str:
     return f"{path}.{key}" if path else str(key)
+
+
+# unit words a key may end in (radius_cm, yaw_degrees), not any word (x_offset)
+_UNIT_WORD = re.compile(r"[µukcdm]?m|in(ch(es)?)?|ft|feet|foot|(milli|centi)?met(re|er)s?|"
+                        r"m?rad(ians?|s)?|deg(rees?|s)?|[mµun]?s|m?secs?|(milli)?seconds?|min")
+
+
+def _other_unit(key: str, cls: type) -> str:
+    """' (a unit irring does not read; write `radius_mm` or `radius_m`)' for ``radius_cm``: a
+    known quantity in another unit, where "did you mean `radius_m`" would scale it 100×."""
+    for f in dataclasses.fields(cls):
+        suf = unit_suffix(f.name)
+        if suf is None or f.name in NOT_IN_FILE:
+            continue
+        base = f.name[: -len(suf)] + "_"
+        rest = key[len(base):]
+        if key.startswith(base) and _UNIT_WORD.fullmatch(rest.lower()):
+            spellings = " or ".join(f"`{k}`" for k, _ in reversed(_yaml_keys(f.name)))
+            return f" (a unit irring does not read; write {spellings})"
+    return ""
 
 
 def _close(word: str, options: Mapping | list) -> str:

@@ -39,6 +39,15 @@ BAD = [
     ("typo in a nested key", lambda r: _set(r, "room.wall_heigth_mm", 300),
      [r"room\.wall_heigth_mm: unknown key", r"did you mean `wall_height_mm`",
       r"allowed here: .*wall_height_mm"]),
+    # it said "did you mean `radius_m`": followed, radius_cm: 3 became a 3 m post
+    ("a length in centimetres", lambda r: _set(r, "obstacles", [{"type": "cylinder",
+                                                               "center_mm": [500, 300],
+                                                               "radius_cm": 3}]),
+     [r"obstacles\[0\]\.radius_cm: unknown key \(a unit irring does not read; write "
+      r"`radius_mm` or `radius_m`\); allowed here: center_m, center_mm, radius_m, radius_mm"]),
+    ("an angle spelt out", lambda r: _set(r, "robot.poses.0.yaw_degrees", 30),
+     [r"robot\.poses\[0\]\.yaw_degrees: unknown key \(a unit irring does not read; write "
+      r"`yaw_deg` or `yaw_rad`\)"]),
     ("text where a number belongs", lambda r: _set(r, "seed", "abc"),
      [r"seed: expected a whole number, got 'abc'"]),
     ("true where a number belongs", lambda r: _set(r, "room.wall_height_mm", True),
