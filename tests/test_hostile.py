@@ -1992,6 +1992,18 @@ def test_a_room_too_big_for_memory_is_refused_up_front(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def test_a_room_written_in_mm_under_outline_m_is_shown_in_metres(tmp_path, capsys):
+    # the message advised coarser cells only; the room's span shows the unit slip
+    raw = copy.deepcopy(T_ROOM)
+    raw["room"] = {"outline_m": [[0, 0], [2600, 0], [2600, 1100], [0, 1100]]}
+    (tmp_path / "lab.yaml").write_text(yaml.safe_dump(raw))
+    assert main(["run", str(tmp_path / "lab.yaml"), "--out", str(tmp_path / "o")]) == 5
+    err = capsys.readouterr().err
+    assert err.rstrip().endswith(
+        "or a smaller room (its outline spans 2,600 × 1,100 m; room.outline_m is read in "
+        "metres, outline_mm in millimetres)")
+
+
 def test_an_unexpected_exception_is_one_line_unless_debug(monkeypatch, capsys):
     from irring.cli import scenarios
 

@@ -190,15 +190,15 @@ BYTES_PER_CELL = 60
 
 
 def check_grid_size(ny: int, nx: int, resolution_m: float, where: str = "the map",
-                    advice: str | None = None) -> None:
+                    advice: str | None = None, room: str = "") -> None:
     """Raise :class:`irring.errors.TooBig` (before anything is allocated) for a grid of more
     than :data:`MAX_GRID_CELLS` cells, naming the memory it would need; ``advice`` says
-    what to change (default: a scenario's cells or room)."""
+    what to change (default: a scenario's cells or room, ``room`` said after it)."""
     cells = int(ny) * int(nx)
     if cells > MAX_GRID_CELLS:
         scale = math.sqrt(cells / MAX_GRID_CELLS)
         fix = advice or (f"use coarser cells (map.resolution_mm ≥ "
-                         f"{math.ceil(resolution_m * 1e3 * scale)}) or a smaller room")
+                         f"{math.ceil(resolution_m * 1e3 * scale)}) or a smaller room{room}")
         raise TooBig(f"{where}: a grid of {ny:,} × {nx:,} cells of {resolution_m * 1e3:g} mm "
                      f"would need about {gigabytes(cells * BYTES_PER_CELL)}; at most "
                      f"{MAX_GRID_CELLS:,} cells (~{MAX_GRID_CELLS * BYTES_PER_CELL / 1e9:.1f} GB) "
@@ -229,7 +229,16 @@ def check_covering(lo_xy_m, hi_xy_m, resolution_m: float, where: str,
 def check_scenario_grid(scenario) -> None:
     """:func:`check_grid_size` for the grid :meth:`OccupancyGrid.for_scenario` would build."""
     _, (ny, nx) = _layout(*_scenario_box(scenario), scenario.map.resolution_m)
-    check_grid_size(ny, nx, scenario.map.resolution_m, f"{scenario.source or scenario.name}")
+    # the span shows a room written in mm under outline_m (2600 m for 2.6 m) for what it is
+    w, h = np.ptp(np.asarray(scenario.room.outline_m, dtype=float), axis=0)
+    room = (f" (its outline spans {_metres(w)} × {_metres(h)} m; room.outline_m is read in "
+            f"metres, outline_mm in millimetres)")
+    check_grid_size(ny, nx, scenario.map.resolution_m, f"{scenario.source or scenario.name}",
+                    room=room)
+
+
+def _metres(x: float) -> str:
+    return f"{x:,.0f}" if x >= 100 else f"{x:.3g}"
 
 
 class OccupancyGrid:
