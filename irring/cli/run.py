@@ -51,7 +51,8 @@ def register(p: argparse.ArgumentParser) -> None:
     describe(p, HELP)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
                    help="bundled scenario name or YAML path (default: t_room; "
-                        "`irring scenarios` lists them)")
+                        "`irring scenarios` lists them; writing your own: every key, unit "
+                        "and range in scenarios/README.md)")
     p.add_argument("--out", type=out_path, default=None, metavar="DIR",
                    help="output folder (default: ./out/<scenario>)")
     p.add_argument("--json", action="store_true",

@@ -15,7 +15,8 @@ def register(p: argparse.ArgumentParser) -> None:
              "description). Pass a name or a YAML path to other commands. With names or "
              "paths, list those instead: each is loaded and checked as `irring run` would "
              "(a bad file is an error naming it, and the others are still checked), and a note names any obstacle the walls "
-             "clip (one reaching through a wall: what lies beyond it is never seen).",
+             "clip (one reaching through a wall: what lies beyond it is never seen). "
+             "Writing your own: every key, unit and range in scenarios/README.md.",
              raw=False)
     p.add_argument("scenario", nargs="*", metavar="SCENARIO",
                    help="bundled scenario names or YAML paths to check (default: the bundled "
