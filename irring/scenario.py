@@ -611,6 +611,11 @@ def resolve(name_or_path: str | Path) -> Path:
     if str(name_or_path) in found:
         return found[str(name_or_path)]
     near = _close(p.name, found) if p.parent == Path(".") else ""   # a name, not a path
+    # `irring run my_room` beside my_room.yaml: the file, not the nearest bundled name
+    files = [q for q in ((p.with_name(p.name + ".yaml"), p.with_name(p.name + ".yml"))
+                         if p.name and not p.suffix else ()) if q.is_file()]
+    if files:
+        near = f" (did you mean `{files[0]}`?)"
     raise ScenarioError(f"{name_or_path}: no such file and no bundled scenario of that name"
                         f"{near}; bundled: {', '.join(found)}")
 

@@ -133,6 +133,20 @@ def test_a_mistyped_scenario_name_gets_the_nearest_bundled_one(given, near, caps
         f"name{near}; bundled: angled_walls, ")
 
 
+def test_a_scenario_named_without_yaml_beside_its_file_names_the_file(tmp_path, capsys,
+                                                                     monkeypatch):
+    # it suggested the nearest bundled name (`t_room`) for my_lroom beside my_lroom.yaml
+    (tmp_path / "rooms").mkdir()
+    (tmp_path / "rooms" / "my_lroom.yaml").write_text("name: my_lroom\n")
+    monkeypatch.chdir(tmp_path)
+    assert main(["scenarios", "rooms/my_lroom", "my_lroom"]) == 1
+    err = capsys.readouterr().err
+    assert "rooms/my_lroom: no such file and no bundled scenario of that name (did you mean " \
+        "`rooms/my_lroom.yaml`?); bundled: " in err
+    assert "my_lroom: no such file and no bundled scenario of that name (did you mean " \
+        "`t_room`?)" in err                             # no my_lroom.yaml in this folder
+
+
 # Every range-checked option: a bad value is a usage error (argparse's exit 2, usage line,
 # the option, what was given and what is allowed), never exit 1, which means a failed run.
 BAD_VALUES = [
