@@ -580,3 +580,22 @@ def test_run_help_explains_every_reason_the_readings_line_can_give(capsys, monke
     said = re.findall(r"(?:^|\), |: )([a-z][a-z ]+?) \(", " ".join(readings.split()))
     assert sorted(said) == sorted(r.name.lower().replace("_", " ") for r in Reason
                                   if r != Reason.OK)
+
+
+@pytest.mark.parametrize("argv, near", [
+    (["compare", "--seeds", "1", "--distances-mm", "350,0.25"], "0.25"),  # metres typed as mm
+    (["geometry", "--samples", "1000", "--distances-mm", "500,169"], "169"),
+])
+def test_a_cylinder_inside_the_housing_is_refused_before_the_work(argv, near, capsys):
+    # robot centre to the cylinder's near side: within rotating12's 150 mm ring + 20 mm
+    # housing the cylinder is inside the robot (every bearing read as a miss, exit 0, before)
+    assert main(argv) == errors.USAGE
+    err = capsys.readouterr().err
+    assert f"--distances-mm {near}: a cylinder that near is inside rotating12's housing" in err
+    assert "beyond 170" in err
+
+
+def test_a_cylinder_just_past_the_housing_is_measured(capsys):
+    assert main(["geometry", "--design", "rotating12", "--samples", "1000",
+                 "--distances-mm", "171"]) == 0
+    assert "at    171 mm" in capsys.readouterr().out

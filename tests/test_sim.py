@@ -48,7 +48,7 @@ def analytic_hits(origin_xy: np.ndarray, heading: np.ndarray, sc: scenario.Scena
         e = np.subtract(b, a)
         w = np.asarray(a) - p
         denom = cross(u, e)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # ray ∥ wall
             t = cross(w, e) / denom
             s = cross(w, u) / denom
         ok = (np.abs(denom) > 1e-15) & (t > 0) & (s >= 0) & (s <= 1) & (t < best)

@@ -18,7 +18,7 @@ import urllib.parse
 from collections.abc import Callable
 from pathlib import Path
 
-from ..core import MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
+from ..core import HOUSING_M, MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
 from ..errors import UsageError, brief
 from ..outputs import RUN_FILES, check_out, check_replaceable, real_path
 
@@ -144,6 +144,21 @@ def distances_mm(text: str) -> list[float]:
             f"must be one or more positive distances in mm up to {MAX_DISTANCE_M * 1e3:g}, "
             f"like 250,500,1000; got {text!r}")
     return values
+
+
+def check_distances_clear(distances_m, design_list) -> None:
+    """:class:`UsageError` when a ``--distances-mm`` value (robot centre to the cylinder's
+    near side) puts the cylinder within a design's ring and housing (radius + ``HOUSING_M``):
+    such a cylinder is inside the robot and every bearing would read as a miss."""
+    for design in design_list:
+        reach_m = design.ring.radius_m + HOUSING_M
+        inside = [d for d in distances_m if d <= reach_m]
+        if inside:
+            raise UsageError(
+                f"--distances-mm {inside[0] * 1e3:g}: a cylinder that near is inside "
+                f"{design.name}'s housing (ring radius {design.ring.radius_m * 1e3:g} mm + "
+                f"{HOUSING_M * 1e3:g} mm); give distances in mm beyond {reach_m * 1e3:g}, "
+                "like 250,350,450")
 
 
 def add_pose_option(parser: argparse.ArgumentParser, default: int | None, what: str) -> None:

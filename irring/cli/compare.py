@@ -14,7 +14,8 @@ from ..studies import compare
 from ..studies.executor import executor
 from ..core import MAX_SEEDS
 from ..scenario import scenario_file
-from ._common import (add_executor_options, at_least, describe, distances_mm, named_once,
+from ._common import (add_executor_options, at_least, check_distances_clear, describe,
+                      distances_mm, named_once,
                       out_path, seed_count)
 
 # cylinder bearings a detection curve tries per distance: 3,600 took 20-50 s (0.008° apart
@@ -70,8 +71,10 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="output folder (default: out/compare)")
     p.add_argument("--distances-mm", type=distances_mm, default="250,350,450,550,650,750",
                    metavar="LIST",
-                   help="comma-separated positive distances (mm, robot centre to cylinder) "
-                        "for the detection curve (default: 250,350,450,550,650,750)")
+                   help="comma-separated positive distances (mm, robot centre to the "
+                        "cylinder's near side, beyond every design's ring and housing) for the "
+                        "detection curve "
+                        "(default: 250,350,450,550,650,750)")
     p.add_argument("--bearings", type=at_least(8, MAX_BEARINGS), default=180, metavar="N",
                    help="cylinder bearings tried per distance, over one symmetry period of "
                         f"the design (8 … {MAX_BEARINGS}; default: 180)")
@@ -86,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     names = args.design or list(designs.DESIGN_BY_NAME)
     named_once(scenarios, "--scenario", scenario_file)
     named_once(names, "--design")
+    check_distances_clear(args.distances_mm, [designs.get(n) for n in names])
     # a study holding the folder, or a folder of an output's name: refused before the work
     check_out(args.out, held=False, files=study_files("compare"))
     with executor(args.workers, args.dask) as ex:

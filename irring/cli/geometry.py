@@ -11,7 +11,7 @@ from ..designs import DESIGN_BY_NAME
 from ..errors import UsageError
 from ..pipeline import progress_bar
 from ..studies import geometry
-from ._common import at_least, describe, distances_mm, number_in, seed
+from ._common import at_least, check_distances_clear, describe, distances_mm, number_in, seed
 
 EPILOG = """\
 what it prints:
@@ -53,7 +53,8 @@ def register(p: argparse.ArgumentParser) -> None:
                         "sensor's design range, 686 mm for the GP2D12 as in Table I)")
     p.add_argument("--distances-mm", type=distances_mm, default="250,500,750,1000",
                    metavar="LIST",
-                   help="comma-separated positive distances in mm for the blind spot "
+                   help="comma-separated positive distances in mm (robot centre to the cylinder's "
+                        "near side, beyond the ring and its housing) for the blind spot "
                         "(default: 250,500,750,1000)")
     p.add_argument("--samples", type=at_least(1000, MAX_SAMPLES), default=400_000, metavar="N",
                    help=f"Monte-Carlo points per neighbouring pair (1000 … {MAX_SAMPLES}; "
@@ -68,6 +69,7 @@ def register(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     names = list(designs.DESIGN_BY_NAME) if args.design == "all" else [args.design]
     range_m = None if args.range_mm is None else args.range_mm * 1e-3
+    check_distances_clear(args.distances_mm, [designs.get(n) for n in names])
     pairs = sum(len(geometry.neighbour_pairs(designs.get(n).ring.sensors)) for n in names)
     try:   # the Monte Carlo is the slow part (--samples says how slow): a bar over its pairs
         with progress_bar(pairs, "overlap (Monte Carlo)", unit="pair") as bar:
