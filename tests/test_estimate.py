@@ -124,6 +124,8 @@ def test_a_calibration_file_without_its_range_trusts_its_sensor_curves(tmp_path,
 @pytest.mark.parametrize("mutate, message", [
     (lambda r: r.update(colour="red"), "colour: unknown key"),
     (lambda r: r.update(irring_calibration=7), "expected format 1"),
+    (lambda r: r.update(irring_calibration=True), "expected format 1, got True"),  # YAML true
+    (lambda r: r.update(irring_calibration=1.0), "expected format 1, got 1.0"),
     (lambda r: r.pop("emitter_offset_mm"), "emitter_offset_mm: required"),
     (lambda r: r.update(emitter_offset_mm="seven"), "expected a number"),
     (lambda r: r["curve"][1].update(b=0.5), "a gp2d12 curve d = a"),

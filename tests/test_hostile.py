@@ -2143,6 +2143,8 @@ def test_calibrate_refuses_to_resume_another_procedure(tmp_path, capsys, monkeyp
      "read[1].placement: placement 1 is read twice"),
     (lambda d: d.update(irring_calibration_progress=2), "irring_calibration_progress: "
                                                         "expected format 1"),
+    (lambda d: d.update(irring_calibration_progress=True), "irring_calibration_progress: "
+                                                           "expected format 1"),
     (lambda d: d["read"][0].update(wall_distance_mm=float("nan")),
      "read[0].wall_distance_mm: expected a number"),
     (lambda d: d["read"][0].update(wall_distance_mm=400.0), "cannot resume: its placement 1 "

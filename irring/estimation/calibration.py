@@ -114,6 +114,11 @@ def _source_text(value: Any, fail) -> str:
     return value
 
 
+def _is_format(value: Any, fmt: int) -> bool:
+    """A file's format marker is exactly the whole number ``fmt`` (YAML's ``true`` and ``1.0``
+    equal 1 in Python but mark no irring file)."""
+    return type(value) is int and value == fmt
+
 @dataclass(frozen=True, eq=False)
 class Calibration:
     """Everything the estimator needs to turn ADC counts into distances.
@@ -477,7 +482,7 @@ class Calibration:
             if key not in known:
                 raise fail(str(key), f"unknown key; allowed: {', '.join(sorted(known))}")
         version = raw.get("irring_calibration")
-        if version != CALIBRATION_FORMAT:
+        if not _is_format(version, CALIBRATION_FORMAT):
             raise fail("irring_calibration", f"expected format {CALIBRATION_FORMAT}, got "
                                              f"{version!r} (is this an irring calibration file?)")
         for key in ("sensor_model", "emitter_offset_mm", "curve"):
@@ -1196,7 +1201,8 @@ def load_progress(path: str | Path) -> Progress:
     def fail(key: str, msg: str) -> CalibrationError:
         return CalibrationError(f"{source}: {key}: {msg}")
 
-    if not isinstance(raw, Mapping) or raw.get("irring_calibration_progress") != PROGRESS_FORMAT:
+    if not isinstance(raw, Mapping) or not _is_format(raw.get("irring_calibration_progress"),
+                                                      PROGRESS_FORMAT):
         raise fail("irring_calibration_progress",
                    f"expected format {PROGRESS_FORMAT} (a file `irring calibrate --port` names "
                    f"when it stops early)")
