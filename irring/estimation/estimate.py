@@ -332,7 +332,7 @@ def unconfirmed_near(counts: np.ndarray, reason: np.ndarray, steps, cal: Calibra
     ask = (reason == Reason.OK) & (s > level)
     if not ask.any():
         return None
-    order = np.argsort(np.asarray(steps), kind="stable")
+    order = rows_in_step_order(steps)
     so = s[order]
     with np.errstate(divide="ignore", invalid="ignore"):
         d0 = cal.distance(so, 0.0)
@@ -1504,11 +1504,11 @@ POOL_SIDE_SIGMAS = 2.0
 
 
 def pool_edge_counts(cal: Calibration, max_range_m: float) -> float:
-    """The counts each half of a pool's window must stand clear of: those of a surface
-    square on at ``max_range_m``. Read to the curve's end (``max_range_m`` ≥
-    ``cal.max_range_m``): the no-return level. Read short of it (``max_range_m`` < ``cal.max_range_m``), a surface past the range
-    reads as that level (the simulator's and the firmware's output with nothing in range)
-    while one just inside reads more, so a half that ran past the range reads below them."""
+    """The counts each half of a pool's window must stand clear of. Read to the curve's end
+    (``max_range_m`` ≥ ``cal.max_range_m``): the no-return level. Read short of it: those of
+    a surface square on at ``max_range_m`` (a surface past the range reads as the no-return
+    level, the simulator's and the firmware's output with nothing in range, while one just
+    inside reads more, so a half that ran past the range reads below them)."""
     if max_range_m >= cal.max_range_m:
         return cal.no_return_counts
     return max(cal.no_return_counts, float(cal.counts(max_range_m, 0.0)))
