@@ -174,3 +174,28 @@ def test_table_heads_each_detection_distance_with_its_own_value():
     head, _, row = compare_mod.table([rec]).splitlines()[:3]
     assert head.split()[-3:] == ["r@0.0001mm", "r@250.5mm", "r@750mm"]
     assert row.split()[-3:] == ["miss", "12.1mm", "20.0mm"]
+
+
+def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, monkeypatch):
+    """A room of one's own with posts whose walls lie beyond the sensors' reach: the chart
+    said "no scenario here hides a wall behind a thin post" and the table's "—" went
+    unexplained (newuser15)."""
+    from irring.maps import render
+    from irring.studies import compare as compare_mod
+
+    scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": None}
+    rec = {"design": "rotating12", **scores, "hardware_time_s": 2.72, "compute_time_s": 0.004,
+           "runs": 1, "scenarios": ["lab"], "poses": {"lab": 3},
+           "by_scenario": {"lab": scores}, "min_detectable_radius_m": [0.002]}
+    assert compare_mod.table([rec]).splitlines()[-1] == (
+        "shadow —: n/a, no wall the sensors could range is hidden behind an obstacle "
+        "(in any of these scenarios)")
+    figures = []
+    real_figure = render.figure
+    monkeypatch.setattr(render, "figure", lambda *a, **k: figures.append(real_figure(*a, **k))
+                        or figures[-1])
+    compare_mod.chart({"designs": [rec], "detection_distances_m": [0.35]}, tmp_path / "c.png")
+    texts = [t.get_text() for ax in figures[0].axes for t in ax.texts]
+    assert ("shadow n/a: no wall the sensors could range is hidden behind an obstacle\n"
+            "(in any of these scenarios)") in texts
+    assert "t_room_cylinder's table leg, r = 22 mm" in texts
