@@ -590,3 +590,48 @@ def test_system_deps_takes_flash_and_names_anything_else():
                           capture_output=True, text=True)
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr == "system-deps: unknown argument 'flahs'; allowed: flash (adds avrdude)\n"
+
+
+def _compiler_without_headers(tmp_path) -> Path:
+    """A compiler that runs but finds no header: gcc-avr without avr-libc, cc without
+    libsimavr-dev."""
+    fake = tmp_path / "bin" / "cc-without-headers"
+    fake.parent.mkdir()
+    fake.write_text("#!/bin/sh\necho 'fatal error: no such file' >&2\nexit 1\n")
+    fake.chmod(0o755)
+    return fake
+
+
+@pytest.mark.parametrize("target, variable, header, package, advice", [
+    ("avr", "AVRCC", "avr/io.h", "avr-libc",
+     "Debian gcc-avr, avr-libc, binutils-avr (bash .ci/system-deps installs them)"),
+    ("sim", "HOSTCC", "simavr/sim_avr.h", "libsimavr-dev",
+     "Debian apt install libsimavr-dev (bash .ci/system-deps installs it)"),
+])
+def test_a_missing_library_is_named_with_where_to_get_it(target, variable, header, package,
+                                                         advice, tmp_path):
+    """A compiler without its library failed with the compiler's own "No such file"
+    (newuser15): make names the package, as it does a missing tool."""
+    if shutil.which("make") is None:
+        pytest.skip("make is needed (bash .ci/system-deps installs it)")
+    fake = _compiler_without_headers(tmp_path)
+    done = subprocess.run(["make", "-s", "-C", str(FIRMWARE), target, f"{variable}={fake}",
+                           f"BUILD={tmp_path}"], capture_output=True, text=True)
+    shown = f"{fake} -mmcu=atmega328p" if target == "avr" else str(fake)
+    built = tmp_path / ("irring-atmega328p.elf" if target == "avr" else "irring-simavr")
+    assert done.returncode != 0
+    assert done.stderr.splitlines()[0] == (f"make {built}: needs {package} (<{header}> not "
+                                           f"found by {shown}): {advice}")
+
+
+def test_system_deps_asks_for_avr_libc_when_only_the_compiler_is_there(tmp_path):
+    """`command -v avr-gcc` passed a machine with gcc-avr but no avr-libc, and `make avr`
+    then failed (newuser15). Run where nothing but that compiler is on PATH and there is
+    no apt-get, so the script lists what it would install and installs nothing."""
+    fake = _compiler_without_headers(tmp_path)
+    fake.rename(fake.parent / "avr-gcc")
+    done = subprocess.run(["/bin/bash", str(ROOT / ".ci" / "system-deps")], capture_output=True,
+                          text=True, env={"PATH": str(fake.parent)})
+    assert done.returncode == 0, done.stderr
+    wanted = done.stderr.removeprefix("irring: not a Debian system; install by hand: ").split()
+    assert "avr-libc" in wanted and "gcc-avr" not in wanted and "binutils-avr" not in wanted
