@@ -2463,3 +2463,368 @@ def bow_pre_f(const idx_t[::1] label, const unsigned char[::1] valid,
             O[0, gi] = INFINITY
             O[1, gi] = INFINITY
     return out[0], out[1]
+
+
+# --------------------------------------------------------------------------- counts fits
+
+cdef inline double _np_interp(double x, const double* xp, const double* fp, idx_t n) noexcept nogil:
+    """np.interp(x, xp, fp) for one x (numpy's rule, to the bit: held beyond the ends, a node
+    read as its own value, slope · (x − xp[j]) + fp[j] within, NaN as NaN)."""
+    cdef idx_t lo = 0, hi = n - 1, mid
+    cdef double slope, r
+    if x != x:
+        return x
+    if x > xp[n - 1]:
+        return fp[n - 1]
+    if x < xp[0]:
+        return fp[0]
+    if x == xp[n - 1]:
+        return fp[n - 1]
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    if xp[lo] == x:
+        return fp[lo]
+    slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
+    r = slope * (x - xp[lo]) + fp[lo]
+    if r != r:
+        r = slope * (x - xp[lo + 1]) + fp[lo + 1]
+        if r != r and fp[lo] == fp[lo + 1]:
+            r = fp[lo]
+    return r
+
+
+cdef class _CountsModel:
+    """``estimate._counts_at`` over a batch of beams: each beam's line (direction, offset)
+    and its expected counts, numpy's arccos, log and exp on the batch's rows."""
+    cdef object rows_arr, xp_arr, la_arr, b_arr
+    cdef double[:, ::1] R
+    cdef const double[::1] xp, la, bb
+    cdef double cos_max
+    cdef idx_t cap
+
+    def __init__(self, idx_t cap, xp, node_log_a, node_b, double cos_max):
+        self.xp_arr = np.ascontiguousarray(xp, dtype=float)
+        self.la_arr = np.ascontiguousarray(node_log_a, dtype=float)
+        self.b_arr = np.ascontiguousarray(node_b, dtype=float)
+        if not (self.xp_arr.ndim == self.la_arr.ndim == self.b_arr.ndim == 1
+                and self.xp_arr.shape[0] == self.la_arr.shape[0] == self.b_arr.shape[0] >= 2):
+            raise lengths_differ("the curve's nodes (at least 2)", xp=self.xp_arr.size,
+                                 node_log_a=self.la_arr.size, node_b=self.b_arr.size)
+        self.xp, self.la, self.bb = self.xp_arr, self.la_arr, self.b_arr
+        self.cap = cap if cap > 1 else 1
+        self.rows_arr = np.empty((4, self.cap))   # along, t, |along| → θ, log t → counts
+        self.R = self.rows_arr
+        self.cos_max = cos_max
+
+    cdef void expect(self, idx_t n, const double* al, const double* cl, const double* ox,
+                     const double* oy, const double* ch, const double* sh, double* e,
+                     unsigned char* met):
+        """e[q], met[q] of beam q (origin ox, oy; heading cos ch, sin sh) at the line al[q],
+        cl[q], q < n ≤ cap: ``_counts_at``'s operations in its order."""
+        cdef idx_t q, m = self.xp.shape[0]
+        cdef double nx, ny, along, x, la, b
+        cdef double[:, ::1] R = self.R
+        if n == 0:
+            return
+        for q in range(n):
+            nx = -sin(al[q])
+            ny = cos(al[q])
+            along = ch[q] * nx + sh[q] * ny
+            R[0, q] = along
+            R[1, q] = (cl[q] - ox[q] * nx - oy[q] * ny) / along
+            x = fabs(along)
+            if x > 1.0:          # np.minimum: a NaN stays
+                x = 1.0
+            R[2, q] = x
+        rows = self.rows_arr
+        np.arccos(rows[2, :n], out=rows[2, :n])
+        np.log(rows[1, :n], out=rows[3, :n])
+        for q in range(n):
+            x = fabs(R[2, q])
+            la = _np_interp(x, &self.xp[0], &self.la[0], m)
+            b = _np_interp(x, &self.xp[0], &self.bb[0], m)
+            R[3, q] = (R[3, q] - la) / b
+        np.exp(rows[3, :n], out=rows[3, :n])
+        for q in range(n):
+            x = R[3, q]
+            met[q] = R[1, q] > 0 and fabs(R[0, q]) > self.cos_max and isfinite(x)
+            e[q] = x if met[q] else 0.0
+
+
+def counts_at(const double[::1] alpha, const double[::1] c, const double[::1] ox,
+              const double[::1] oy, const double[::1] cos_h, const double[::1] sin_h, xp,
+              node_log_a, node_b, double cos_max_inc):
+    """``irring.estimation.estimate._counts_at`` (the statement), to the bit: the counts each
+    beam (origin ``ox``, ``oy``; heading ``cos_h``, ``sin_h``) returns from its line
+    (``alpha``, ``c``; one per beam), 0 where it misses it within the drop-out angle
+    (``cos_max_inc``: that angle's cosine), and whether it meets it (bool). The curve:
+    np.interp over ``xp``, ``node_log_a``, ``node_b``; arccos, log, exp numpy's."""
+    cdef idx_t n = alpha.shape[0]
+    if not (c.shape[0] == ox.shape[0] == oy.shape[0] == cos_h.shape[0] == sin_h.shape[0] == n):
+        raise lengths_differ("counts_at's beams", alpha=n, c=c.shape[0], ox=ox.shape[0],
+                             oy=oy.shape[0], cos_h=cos_h.shape[0], sin_h=sin_h.shape[0])
+    cdef _CountsModel model = _CountsModel(n, xp, node_log_a, node_b, cos_max_inc)
+    e_arr = np.zeros(n)
+    met_arr = np.zeros(n, dtype=np.uint8)
+    cdef double[::1] E = e_arr
+    cdef unsigned char[::1] MET = met_arr
+    if n:
+        model.expect(n, &alpha[0], &c[0], &ox[0], &oy[0], &cos_h[0], &sin_h[0], &E[0], &MET[0])
+    return e_arr, met_arr.view(bool)
+
+
+def counts_refit(const idx_t[::1] line, const double[::1] s, const double[::1] sig,
+                 const double[::1] ox, const double[::1] oy, const double[::1] cos_h,
+                 const double[::1] sin_h, const double[::1] a_in, const double[::1] c_in,
+                 const unsigned char[::1] asked, int steps, bint has_settled,
+                 double settled_a, double settled_c, xp, node_log_a, node_b,
+                 double cos_max_inc, double step_a, double step_c):
+    """``irring.estimation.estimate._counts_refit`` (the statement; ``settled`` given as
+    ``has_settled``, ``settled_a``, ``settled_c``), to the bit: (a, c, χ²) of the lines
+    (``a_in``, ``c_in``) refitted by Gauss–Newton to their members' counts (``line``: each
+    member's line, ``s``, ``sig``, its beam ``ox``, ``oy``, ``cos_h``, ``sin_h``), only
+    those ``asked``; the Jacobian by central differences of ``step_a`` rad, ``step_c`` m.
+    The same sums in the same order; only the lines a step still asks about are evaluated,
+    and a line's χ² and counts after a step are those of the trial it took (numpy's
+    re-evaluation gives the same numbers)."""
+    cdef idx_t M = line.shape[0], L = a_in.shape[0], i, q, g, n, it, half, k
+    if not (s.shape[0] == sig.shape[0] == ox.shape[0] == oy.shape[0] == cos_h.shape[0]
+            == sin_h.shape[0] == M and c_in.shape[0] == asked.shape[0] == L):
+        raise lengths_differ("counts_refit's arrays", line=M, s=s.shape[0], sig=sig.shape[0],
+                             ox=ox.shape[0], oy=oy.shape[0], cos_h=cos_h.shape[0],
+                             sin_h=sin_h.shape[0], a=L, c=c_in.shape[0], asked=asked.shape[0])
+    for i in range(M):
+        if line[i] < 0 or line[i] >= L:
+            raise IndexError(f"line[{i}] = {line[i]} is not a line (0 … {L - 1})")
+    a_arr = np.array(a_in, dtype=float)
+    c_arr = np.array(c_in, dtype=float)
+    best_arr = np.zeros(L)
+    cdef double[::1] A = a_arr, C = c_arr, BEST = best_arr
+    if M == 0:
+        return a_arr, c_arr, best_arr
+    cdef _CountsModel model = _CountsModel(4 * M, xp, node_log_a, node_b, cos_max_inc)
+    work = np.empty((8, 4 * M))     # per evaluated beam: al, cl, ox, oy, ch, sh, e; e0 (M)
+    cdef double[:, ::1] W = work
+    who_arr = np.empty(4 * M, dtype=np.intp)
+    cdef idx_t[::1] who = who_arr
+    met_arr = np.empty(4 * M, dtype=np.uint8)
+    cdef unsigned char[::1] MET = met_arr
+    per = np.zeros((12, L))    # unmet, saa, sac, scc, ga, gc, da, dc, trial, ok, moved, q
+    cdef double[:, ::1] P = per
+    cdef double det, r, x, two_a = 2 * step_a, two_c = 2 * step_c
+    cdef double ja, jc, res
+    cdef bint small, any_ok, any_moved
+
+    # best, e0 = chi2_of(a, c): every member
+    for i in range(M):
+        g = line[i]
+        W[0, i] = A[g]
+        W[1, i] = C[g]
+        W[2, i] = ox[i]
+        W[3, i] = oy[i]
+        W[4, i] = cos_h[i]
+        W[5, i] = sin_h[i]
+    model.expect(M, &W[0, 0], &W[1, 0], &W[2, 0], &W[3, 0], &W[4, 0], &W[5, 0], &W[6, 0],
+                 &MET[0])
+    for i in range(M):
+        g = line[i]
+        W[7, i] = W[6, i]
+        r = (s[i] - W[6, i]) / sig[i]
+        P[11, g] += r * r
+        P[0, g] += 0.0 if MET[i] else 1.0
+    for g in range(L):
+        BEST[g] = INFINITY if P[0, g] > 0 else P[11, g]
+
+    for it in range(steps):
+        # the Jacobian at each asked line's members: a ± step_a, c ± step_c in one batch
+        n = 0
+        for i in range(M):
+            g = line[i]
+            if not asked[g]:
+                continue
+            who[n] = i
+            n += 1
+        for q in range(n):
+            i = who[q]
+            g = line[i]
+            for k in range(4):
+                W[0, 4 * q + k] = A[g] + step_a if k == 0 else (A[g] - step_a if k == 1 else A[g])
+                W[1, 4 * q + k] = C[g] + step_c if k == 2 else (C[g] - step_c if k == 3 else C[g])
+                W[2, 4 * q + k] = ox[i]
+                W[3, 4 * q + k] = oy[i]
+                W[4, 4 * q + k] = cos_h[i]
+                W[5, 4 * q + k] = sin_h[i]
+        model.expect(4 * n, &W[0, 0], &W[1, 0], &W[2, 0], &W[3, 0], &W[4, 0], &W[5, 0],
+                     &W[6, 0], &MET[0])
+        for g in range(L):
+            for k in range(1, 6):
+                P[k, g] = 0.0
+        for q in range(n):
+            i = who[q]
+            g = line[i]
+            ja = (W[6, 4 * q] - W[6, 4 * q + 1]) / two_a
+            jc = (W[6, 4 * q + 2] - W[6, 4 * q + 3]) / two_c
+            res = s[i] - W[7, i]
+            P[1, g] += ja * ja
+            P[2, g] += ja * jc
+            P[3, g] += jc * jc
+            P[4, g] += ja * res
+            P[5, g] += jc * res
+        small = has_settled
+        any_ok = False
+        for g in range(L):
+            det = P[1, g] * P[3, g] - P[2, g] * P[2, g]
+            x = P[1, g] * P[3, g]
+            if not (x > 1e-300 or x != x):    # np.maximum: a NaN stays
+                x = 1e-300
+            if asked[g] and isfinite(det) and det > 1e-12 * x:
+                P[9, g] = 1.0
+                any_ok = True
+                P[6, g] = (P[3, g] * P[4, g] - P[2, g] * P[5, g]) / det
+                P[7, g] = (P[1, g] * P[5, g] - P[2, g] * P[4, g]) / det
+            else:
+                P[9, g] = 0.0
+                P[6, g] = 0.0
+                P[7, g] = 0.0
+            if not (fabs(P[6, g]) <= settled_a and fabs(P[7, g]) <= settled_c):
+                small = False
+            P[10, g] = 0.0
+        any_moved = False
+        for half in range(5):
+            if any_ok:     # (none asked: the trial changes nothing)
+                n = 0
+                for i in range(M):
+                    g = line[i]
+                    if P[9, g] == 0.0:
+                        continue
+                    who[n] = i
+                    W[0, n] = A[g] + P[6, g]
+                    W[1, n] = C[g] + P[7, g]
+                    W[2, n] = ox[i]
+                    W[3, n] = oy[i]
+                    W[4, n] = cos_h[i]
+                    W[5, n] = sin_h[i]
+                    n += 1
+                model.expect(n, &W[0, 0], &W[1, 0], &W[2, 0], &W[3, 0], &W[4, 0], &W[5, 0],
+                             &W[6, 0], &MET[0])
+                for g in range(L):
+                    P[0, g] = 0.0
+                    P[8, g] = 0.0
+                for q in range(n):
+                    i = who[q]
+                    g = line[i]
+                    r = (s[i] - W[6, q]) / sig[i]
+                    P[8, g] += r * r
+                    P[0, g] += 0.0 if MET[q] else 1.0
+                for g in range(L):
+                    if P[9, g] == 0.0:
+                        continue
+                    x = INFINITY if P[0, g] > 0 else P[8, g]
+                    if x < BEST[g]:
+                        A[g] = A[g] + P[6, g]
+                        C[g] = C[g] + P[7, g]
+                        BEST[g] = x
+                        P[10, g] = 1.0
+                        P[9, g] = 0.0
+                        any_moved = True
+                for q in range(n):      # the counts it took: e0 of the next step
+                    i = who[q]
+                    if P[10, line[i]] != 0.0 and P[9, line[i]] == 0.0:
+                        W[7, i] = W[6, q]
+            any_ok = False
+            for g in range(L):
+                if P[9, g] != 0.0:
+                    any_ok = True
+            if not any_ok:
+                break
+            for g in range(L):
+                P[6, g] = 0.5 * P[6, g]
+                P[7, g] = 0.5 * P[7, g]
+        if not any_moved or small:
+            break
+    return a_arr, c_arr, best_arr
+
+
+def counts_jacobian(const double[::1] alpha, const double[::1] c, const double[::1] ox,
+                    const double[::1] oy, const double[::1] cos_h, const double[::1] sin_h,
+                    xp, node_log_a, node_b, double cos_max_inc, double step_a, double step_c):
+    """``irring.estimation.estimate._counts_jacobian`` (the statement), to the bit: each
+    beam's counts' derivatives (ja, jc) in its line's direction ``alpha`` and offset ``c``
+    by central differences of ``step_a`` rad and ``step_c`` m (:func:`counts_at`'s model,
+    its four evaluations in one batch)."""
+    cdef idx_t n = alpha.shape[0], q, k
+    if not (c.shape[0] == ox.shape[0] == oy.shape[0] == cos_h.shape[0] == sin_h.shape[0] == n):
+        raise lengths_differ("counts_jacobian's beams", alpha=n, c=c.shape[0], ox=ox.shape[0],
+                             oy=oy.shape[0], cos_h=cos_h.shape[0], sin_h=sin_h.shape[0])
+    ja_arr = np.empty(n)
+    jc_arr = np.empty(n)
+    if n == 0:
+        return ja_arr, jc_arr
+    cdef double[::1] JA = ja_arr, JC = jc_arr
+    cdef _CountsModel model = _CountsModel(4 * n, xp, node_log_a, node_b, cos_max_inc)
+    work = np.empty((7, 4 * n))     # al, cl, ox, oy, ch, sh, e
+    cdef double[:, ::1] W = work
+    met_arr = np.empty(4 * n, dtype=np.uint8)
+    cdef unsigned char[::1] MET = met_arr
+    cdef double two_a = 2 * step_a, two_c = 2 * step_c
+    for q in range(n):
+        for k in range(4):
+            W[0, 4 * q + k] = (alpha[q] + step_a if k == 0 else
+                               (alpha[q] - step_a if k == 1 else alpha[q]))
+            W[1, 4 * q + k] = c[q] + step_c if k == 2 else (c[q] - step_c if k == 3 else c[q])
+            W[2, 4 * q + k] = ox[q]
+            W[3, 4 * q + k] = oy[q]
+            W[4, 4 * q + k] = cos_h[q]
+            W[5, 4 * q + k] = sin_h[q]
+    model.expect(4 * n, &W[0, 0], &W[1, 0], &W[2, 0], &W[3, 0], &W[4, 0], &W[5, 0], &W[6, 0],
+                 &MET[0])
+    for q in range(n):
+        JA[q] = (W[6, 4 * q] - W[6, 4 * q + 1]) / two_a
+        JC[q] = (W[6, 4 * q + 2] - W[6, 4 * q + 3]) / two_c
+    return ja_arr, jc_arr
+
+
+def best_halves(const double[::1] u, const double[::1] v, idx_t lo):
+    """``irring.estimation.estimate._best_halves`` (the statement) on the points already
+    centred (``u``, ``v``: x − mean, y − mean, numpy's), to the bit: the running sums
+    accumulate in order as np.cumsum does, the first least total (a NaN first, as
+    np.argmin) names the first point of the second run."""
+    cdef idx_t n = u.shape[0], i, k, best_k = -1
+    cdef double px = 0.0, py = 0.0, pxx = 0.0, pyy = 0.0, pxy = 0.0, tot, best = 0.0
+    if v.shape[0] != n:
+        raise lengths_differ("best_halves' points", u=n, v=v.shape[0])
+    if lo < 1 or n - lo < lo:
+        raise ValueError(f"best_halves: {n} points hold no two runs of {lo}")
+    sums = np.empty((5, n))
+    cdef double[:, ::1] S = sums
+    for i in range(n):
+        px += u[i]
+        py += v[i]
+        pxx += u[i] * u[i]
+        pyy += v[i] * v[i]
+        pxy += u[i] * v[i]
+        S[0, i] = px
+        S[1, i] = py
+        S[2, i] = pxx
+        S[3, i] = pyy
+        S[4, i] = pxy
+    for k in range(lo, n - lo + 1):
+        tot = (_halves_rss(<double> k, S[0, k - 1], S[1, k - 1], S[2, k - 1], S[3, k - 1],
+                           S[4, k - 1])
+               + _halves_rss(<double> (n - k), S[0, n - 1] - S[0, k - 1],
+                             S[1, n - 1] - S[1, k - 1], S[2, n - 1] - S[2, k - 1],
+                             S[3, n - 1] - S[3, k - 1], S[4, n - 1] - S[4, k - 1]))
+        if best_k < 0 or (best == best and (tot < best or tot != tot)):
+            best, best_k = tot, k
+    return best_k
+
+
+cdef inline double _halves_rss(double m, double sx, double sy, double sxx, double syy,
+                               double sxy) noexcept nogil:
+    """``_best_halves``' rss: the least squared residual of a TLS line through m points."""
+    cdef double a = sxx - sx * sx / m, b = syy - sy * sy / m, c = sxy - sx * sy / m
+    return 0.5 * (a + b) - sqrt(0.25 * ((a - b) * (a - b)) + c * c)

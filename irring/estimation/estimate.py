@@ -571,8 +571,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    voter: Callable | None = None, post_grouper: Callable | None = None,
                    gapper: Callable | None = None, raw_counts: np.ndarray | None = None,
                    beside: Callable | None = None, tracer: type[TraceSteps] | None = None,
-                   judge: Callable | None = None, bower: Callable | None = None
-                   ) -> Estimate:
+                   judge: Callable | None = None, bower: Callable | None = None,
+                   fitter: type[CountsFits] | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -601,7 +601,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     (:class:`TraceKernels`; the oracle: :class:`TraceSteps`); ``judge``: the lines their
     counts contradict (:func:`counts_contradicted_compiled`; the oracle:
     :func:`counts_contradicted`); ``bower``: a curved wall's chords
-    (:func:`bowed_lines_compiled`; the oracle: :func:`bowed_lines`).
+    (:func:`bowed_lines_compiled`; the oracle: :func:`bowed_lines`); ``fitter``: lines fitted
+    to their members' counts (:class:`CountsFitKernels`; the oracle: :class:`CountsFits`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -642,7 +643,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                                        alone=True, moves=False)
         points, label = counts_disown_lines(points, label, index, counts, steps, cal,
                                             grouping.alpha, grouping.cx, grouping.cy, profiler,
-                                            judge)
+                                            judge, fitter)
         points, label = alone_at_an_edge(points, label, counts, steps, cal)
         # a curved wall's chords on its circle (the lines as the rules above left them)
         points, label = (bower or bowed_lines_compiled)(points, label, counts, cal)
@@ -3489,8 +3490,8 @@ def _counts_asked(points: Points, label: np.ndarray, vi: np.ndarray, counts: np.
 
 
 def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, counts: np.ndarray,
-                        cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray
-                        ) -> np.ndarray:
+                        cal: Calibration, alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+                        fits: type[CountsFits] | None = None) -> np.ndarray:
     """The lines (L,) bool whose valid members' counts (``vi``: the valid readings; ``label``
     their lines as fitted: direction ``alpha``, through (``cx``, ``cy``)) no line near it
     explains through the sensor model (each beam's range and incidence at the line,
@@ -3501,7 +3502,7 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     or more and it exceeds 1; only lines that misfit as fitted are refitted). Members the
     fitted line misfits by ``COUNTS_SINGLE`` count σ or more each are left out; lines of
     ``COUNTS_MIN_MEMBERS`` or more such members whose beams all meet the fitted line within
-    the drop-out angle."""
+    the drop-out angle. ``fits``: the refit (:class:`CountsFits`, numpy's, by default)."""
     n_lines = alpha.size
     out = np.zeros(n_lines, dtype=bool)
     first = _counts_asked(points, label, vi, counts, cal, alpha, cx, cy)
@@ -3518,7 +3519,8 @@ def counts_contradicted(points: Points, label: np.ndarray, vi: np.ndarray, count
     line, s, sig = line[sel], s[sel], sig[sel]
     beam = tuple(v[sel] for v in beam)
 
-    best = _counts_refit(cal, n_lines, line, s, sig, beam, a, c, asked, COUNTS_FIT_STEPS)[2]
+    best = (fits or CountsFits).refit(cal, n_lines, line, s, sig, beam, a, c, asked,
+                                      COUNTS_FIT_STEPS)[2]
     z = counts_misfit_z(best[asked] / scale, dof[asked])
     out[asked] = z >= COUNTS_Z
     return out
@@ -3588,7 +3590,7 @@ def counts_contradicted_compiled(points: Points, label: np.ndarray, vi: np.ndarr
     line asked misfit as fitted?) is one compiled call
     (``irring.estimation._lines.counts_misfit_any``, held to it by
     tests/test_count_misfit.py); the rare sweep it answers yes is judged by
-    :func:`counts_contradicted` itself."""
+    :func:`counts_contradicted` itself, its refit compiled (:class:`CountsFitKernels`)."""
     f = np.ascontiguousarray
     la0, b0 = cal._ab0
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -3602,20 +3604,21 @@ def counts_contradicted_compiled(points: Points, label: np.ndarray, vi: np.ndarr
             math.cos(cal.max_incidence_rad), COUNTS_MIN_MEMBERS, COUNTS_SINGLE, COUNTS_Z)
     if not misfit:
         return np.zeros(np.asarray(alpha).size, dtype=bool)
-    return counts_contradicted(points, label, vi, counts, cal, alpha, cx, cy)
+    return counts_contradicted(points, label, vi, counts, cal, alpha, cx, cy, CountsFitKernels)
 
 
 def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
                         counts: np.ndarray, steps: np.ndarray, cal: Calibration,
                         alpha: np.ndarray, cx: np.ndarray, cy: np.ndarray,
-                        profiler: Callable | None = None, judge: Callable | None = None
-                        ) -> tuple[Points, np.ndarray]:
+                        profiler: Callable | None = None, judge: Callable | None = None,
+                        fitter: type[CountsFits] | None = None) -> tuple[Points, np.ndarray]:
     """Every member of a line its members' counts contradict (:func:`counts_contradicted`)
     off it: at its own profile's θ where that is straight and clearly steep, else
     INCIDENCE_UNKNOWN (:func:`_leave_doubted_line`) but where its profile bounds θ enough
     for θ = 0 (:func:`irring.estimation.bounds.kept_where_bounded`); shared by both
     estimators (``judge``: :func:`counts_contradicted_compiled` by default; the oracle
-    passes :func:`counts_contradicted`). Returns the points and ``label``. Why:
+    passes :func:`counts_contradicted`; ``fitter``: :func:`counts_pieces`' fits,
+    :class:`CountsFitKernels` by default). Returns the points and ``label``. Why:
     docs/estimator.md ("A line its counts contradict"): a convex corner seen along its
     bisector near the range limit reads, at θ = 0, like a flat wall square on, and the
     iteration settles there."""
@@ -3630,7 +3633,8 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
     pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal)
     points, label = _leave_doubted_line(points, label, vi, pos, pr,
                                         np.ones(pos.size, dtype=bool), cal)
-    points = counts_pieces(points, vi[pos], lab[pos], counts, cal, pr.convex)
+    points = counts_pieces(points, vi[pos], lab[pos], counts, cal, pr.convex,
+                           fitter or CountsFitKernels)
     kept = kept_where_bounded(points, vi, pos, pr, cal)
     if kept is not None:     # valid again, at θ = 0 with the doubt in σ
         at, d0, sigma = kept
@@ -3678,8 +3682,68 @@ def _best_halves(x: np.ndarray, y: np.ndarray, lo: int) -> int:
     return int(k[np.argmin(left + right)])
 
 
+def _counts_at_compiled(cal: Calibration, alpha, c, ox, oy, cos_h, sin_h):
+    """:func:`_counts_at` in one compiled call (``irring.estimation._lines.counts_at``)."""
+    f = np.ascontiguousarray
+    size = np.asarray(alpha).size
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return _lines.counts_at(*(f(np.broadcast_to(v, size), dtype=float)
+                                  for v in (alpha, c, ox, oy, cos_h, sin_h)),
+                                cal.theta_rad, cal._log_a, cal.b, math.cos(cal.max_incidence_rad))
+
+
+class CountsFits:
+    """Lines fitted to their members' counts through the sensor model, as numpy statements:
+    :func:`_counts_refit`, :func:`_counts_jacobian`, :func:`_counts_misfit_one`, and where
+    a piece splits, :func:`_best_halves` (the oracle's, and the readable statement of
+    :class:`CountsFitKernels`)."""
+    refit = staticmethod(_counts_refit)
+    jacobian = staticmethod(_counts_jacobian)
+    misfit = staticmethod(_counts_misfit_one)
+    halves = staticmethod(_best_halves)
+
+
+class CountsFitKernels(CountsFits):
+    """:class:`CountsFits` in compiled calls (``irring.estimation._lines.counts_refit``,
+    ``counts_jacobian``, ``counts_at``, ``best_halves``; arccos, log, exp numpy's on their
+    rows, the halves' means numpy's), the same numbers to the bit
+    (tests/test_counts_fits.py). Why: docs/speed.md, "A contradicted line's pieces"."""
+
+    @staticmethod
+    def refit(cal: Calibration, n_lines: int, line: np.ndarray, s: np.ndarray, sig: np.ndarray,
+              beam: tuple, a: np.ndarray, c: np.ndarray, asked: np.ndarray, steps: int,
+              settled: tuple | None = None):
+        f = np.ascontiguousarray
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return _lines.counts_refit(
+                f(line, dtype=np.intp), f(s, dtype=float), f(sig, dtype=float),
+                *(f(v, dtype=float) for v in beam), f(a, dtype=float), f(c, dtype=float),
+                f(asked, dtype=bool).view(np.uint8), steps, settled is not None,
+                *(settled or (0.0, 0.0)), cal.theta_rad, cal._log_a, cal.b,
+                math.cos(cal.max_incidence_rad), _COUNTS_DA, _COUNTS_DC)
+
+    @staticmethod
+    def jacobian(cal: Calibration, alpha: np.ndarray, c: np.ndarray, beam: tuple):
+        f = np.ascontiguousarray
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return _lines.counts_jacobian(
+                f(alpha, dtype=float), f(c, dtype=float), *(f(v, dtype=float) for v in beam),
+                cal.theta_rad, cal._log_a, cal.b, math.cos(cal.max_incidence_rad), _COUNTS_DA,
+                _COUNTS_DC)
+
+    @staticmethod
+    def halves(x: np.ndarray, y: np.ndarray, lo: int) -> int:
+        return _lines.best_halves(x - x.mean(), y - y.mean(), lo)
+
+    @staticmethod
+    def misfit(cal: Calibration, alpha, c, s, sig, ox, oy, ch, sh) -> np.ndarray:
+        e, met = _counts_at_compiled(cal, alpha, c, ox, oy, ch, sh)
+        return np.where(met, ((s - e) / sig) ** 2, np.inf)
+
+
 def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.ndarray,
-                  cal: Calibration, bent: np.ndarray) -> Points:
+                  cal: Calibration, bent: np.ndarray, fitter: type[CountsFits] | None = None
+                  ) -> Points:
     """The members ``at`` (flat, in scan order; ``line``: the contradicted line of each;
     ``bent``: whether its range profile bends away from its beam) that leaving their line
     made INCIDENCE_UNKNOWN, placed on a piece of it their counts explain. A piece is one
@@ -3689,11 +3753,12 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
     members a half, ``PIECE_LEVELS`` times at most). A lost member of a piece its counts fit
     is read at the incidence its beam meets the piece's line with, placed where its σ ≤
     ``_AGAIN_SIGMA_M`` and θ is not pinned at the drop-out angle. Numpy, shared by both
-    estimators. Why and the rule in full: docs/estimator.md, "A contradicted line's
-    pieces"."""
+    estimators; ``fitter``: its fits to the counts (:class:`CountsFits`, numpy's, by default).
+    Why and the rule in full: docs/estimator.md, "A contradicted line's pieces"."""
     lost = points.reason.reshape(-1)[at] == Reason.INCIDENCE_UNKNOWN
     if not lost.any():
         return points
+    fitter = fitter or CountsFits
     n_sensors = points.valid.shape[1]
     key = line * n_sensors + at % n_sensors
     order = np.argsort(key, kind="stable")        # each run stays in scan order
@@ -3701,7 +3766,8 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
     cut = np.flatnonzero(np.diff(key)) + 1
     # a run of profiles bent away from the beam is a convex thing's (a box's corner seen
     # tip on reads like a wall square on), not facets: not asked
-    pieces = [(a, b) for a, b in zip(np.r_[0, cut], np.r_[cut, key.size])
+    pieces = [(a, b) for a, b in zip(np.concatenate([[0], cut]).tolist(),
+                                     np.concatenate([cut, [key.size]]).tolist())
               if b - a >= PIECE_MIN and lost[a:b].any()
               and np.count_nonzero(bent[a:b]) <= PIECE_BENT_SHARE * (b - a)]
     if not pieces:
@@ -3711,7 +3777,7 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
     turn = np.arange(at.size)
     h = points.heading.reshape(-1)[at]
     for a, b in pieces:
-        gap = np.mod(np.diff(np.r_[h[a:b], h[a]]), 2 * math.pi)
+        gap = np.mod(np.diff(np.append(h[a:b], h[a])), 2 * math.pi)
         widest = int(np.argmax(gap))
         if widest < b - a - 1:
             turn[a:b] = np.roll(turn[a:b], -(widest + 1))
@@ -3751,9 +3817,8 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
         # fitted about each piece's centroid: offset and direction then hardly couple
         shift = -np.sin(alpha) * mx + np.cos(alpha) * my
         beam = (ox[m] - mx[g], oy[m] - my[g], ch[m], sh[m])
-        alpha, c, chi2 = _counts_refit(cal, n_p, g, s[m], sig[m], beam, alpha, c - shift,
-                                       np.ones(n_p, dtype=bool), PIECE_FIT_STEPS,
-                                       PIECE_SETTLED)
+        alpha, c, chi2 = fitter.refit(cal, n_p, g, s[m], sig[m], beam, alpha, c - shift,
+                                      np.ones(n_p, dtype=bool), PIECE_FIT_STEPS, PIECE_SETTLED)
         c = c + (-np.sin(alpha) * mx + np.cos(alpha) * my)
         beam = (ox[m], oy[m], ch[m], sh[m])
         with np.errstate(invalid="ignore"):
@@ -3775,7 +3840,7 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
             better = np.ones(n_p, dtype=bool)
         if fits.any():
             # the direction's standard error from the counts' weighted Jacobian there
-            ja, jc = _counts_jacobian(cal, alpha[g], c[g], beam)
+            ja, jc = fitter.jacobian(cal, alpha[g], c[g], beam)
             ja, jc = ja / sig[m], jc / sig[m]
             saa, sac, scc = (np.bincount(g, weights=v, minlength=n_p)
                              for v in (ja * ja, ja * jc, jc * jc))
@@ -3794,7 +3859,7 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
         for i in better.nonzero()[0]:     # (a halved piece no better than whole: done)
             a, b, _, _ = pieces[i]
             if b - a >= 2 * PIECE_MIN and lost[a:b].any():
-                k = a + _best_halves(x0[a:b], y0[a:b], PIECE_MIN)
+                k = a + fitter.halves(x0[a:b], y0[a:b], PIECE_MIN)
                 fitted = chi2[i] if fits[i] else np.nan
                 line_i = (alpha[i], c[i]) if np.isfinite(chi2[i]) else (np.nan, np.nan)
                 halves += [(a, k, fitted, line_i), (k, b, fitted, line_i)]
@@ -3807,13 +3872,13 @@ def counts_pieces(points: Points, at: np.ndarray, line: np.ndarray, counts: np.n
     # its own (in its run) where its counts explain it clearly better. Every member is asked,
     # not only a piece's ends (measured: ends only, the D-room's RMS 17.0 -> 16.8 mm in one
     # seed, 20.1 -> 21.5 mm in another)
-    best = _counts_misfit_one(cal, line_ac[0], line_ac[1], s, sig, ox, oy, ch, sh)
+    best = fitter.misfit(cal, line_ac[0], line_ac[1], s, sig, ox, oy, ch, sh)
     for side, step in ((0, -1), (1, 1)):
         j = np.clip(ends[side] + step, 0, at.size - 1)
         ask = place & (key[j] == key) & place[j] & (ends[side] + step == j)
         if not ask.any():
             continue
-        r = _counts_misfit_one(cal, line_ac[0, j], line_ac[1, j], s, sig, ox, oy, ch, sh)
+        r = fitter.misfit(cal, line_ac[0, j], line_ac[1, j], s, sig, ox, oy, ch, sh)
         move = ask & (r < best - PIECE_SWITCH)
         line_ac[:, move], dtheta[move], best[move] = line_ac[:, j[move]], dtheta[j[move]], r[move]
     along = ch * -np.sin(line_ac[0]) + sh * np.cos(line_ac[0])

@@ -14,7 +14,7 @@ from ..core import Points, Reason, Sweep, beam_geometry
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration
 from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RUN_MAX,
                        POST_SENSORS, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
-                       SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate,
+                       SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, CountsFits, Estimate,
                        LineOptions, Lines, Pieces, TraceSteps, beam_crossings,
                        beside_a_return, bowed_lines, clip_at_corners, counts_contradicted,
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
@@ -1136,7 +1136,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           voter=far_line_vote, post_grouper=post_groups, gapper=silent_gaps,
                           beside=beside_a_return, tracer=TraceSteps,
                           judge=counts_contradicted,
-                          bower=bowed_lines,
+                          bower=bowed_lines, fitter=CountsFits,
                           raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
