@@ -13,12 +13,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from irring import pipeline
 from irring.core import Reason
 from irring.estimation import _lines
 from irring.estimation import estimate as est
 from irring.estimation.calibration import Calibration
+from irring.scenario import load_scenario
+from irring.studies.rooms import ideal
 
 CALS = {m: Calibration.nominal(m) for m in ("gp2d12", "gp2y0a21", "gp2y0a02")}
+# an ideal sensor's calibration: one node (θ = 0), its curve the same at every incidence
+CALS["ideal"] = pipeline.scene_calibration(ideal(load_scenario("t_room")))[0]
 NUMPY, KERNELS = est.CountsFits, est.CountsFitKernels
 
 
@@ -109,6 +114,19 @@ def test_best_halves_kernel_is_the_numpy_statement(points, lo):
     assert KERNELS.halves(xy[:, 0], xy[:, 1], lo) == est._best_halves(xy[:, 0], xy[:, 1], lo)
 
 
+def test_one_node_reads_the_same_curve_at_every_incidence():
+    # np.interp over one node gives its value at any θ (a NaN θ too): so does the kernel
+    cal = CALS["ideal"]
+    assert cal.theta_rad.size == 1
+    h = np.array([0.0, 0.4, -0.9, 1.2, np.nan])
+    alpha, c = np.full(h.size, math.pi / 2), np.full(h.size, -0.52)
+    zero = np.zeros(h.size)
+    want = est._counts_at(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
+    got = est._counts_at_compiled(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
+    assert _bits(got[0]) == _bits(want[0]) and np.array_equal(got[1], want[1])
+    assert np.array_equal(got[1], [True, True, True, True, False])
+
+
 def test_counts_at_reads_the_curve_as_np_interp_at_and_beyond_its_nodes():
     # beams meeting a wall 0.43 m away (x = 0.43) at each node's incidence, between nodes,
     # and past the table (held): the compiled interpolation is numpy's to the bit
@@ -151,7 +169,7 @@ def test_kernels_name_what_they_refuse():
     with pytest.raises(ValueError, match="counts_jacobian's beams differ in length"):
         _lines.counts_jacobian(two, one, two, two, two, two, cal.theta_rad, cal._log_a,
                                cal.b, 0.2, 1e-5, 1e-6)
-    with pytest.raises(ValueError, match="the curve's nodes"):
+    with pytest.raises(ValueError, match="the curve's nodes \\(at least 1\\) differ"):
         _lines.counts_at(one, one, one, one, one, one, cal.theta_rad, cal._log_a[:-1],
                          cal.b, 0.2)
 

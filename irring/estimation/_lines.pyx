@@ -2469,9 +2469,12 @@ def bow_pre_f(const idx_t[::1] label, const unsigned char[::1] valid,
 
 cdef inline double _np_interp(double x, const double* xp, const double* fp, idx_t n) noexcept nogil:
     """np.interp(x, xp, fp) for one x (numpy's rule, to the bit: held beyond the ends, a node
-    read as its own value, slope · (x − xp[j]) + fp[j] within, NaN as NaN)."""
+    read as its own value, slope · (x − xp[j]) + fp[j] within, NaN as NaN; one node: its
+    value for every x, NaN too)."""
     cdef idx_t lo = 0, hi = n - 1, mid
     cdef double slope, r
+    if n == 1:
+        return fp[0]
     if x != x:
         return x
     if x > xp[n - 1]:
@@ -2511,8 +2514,8 @@ cdef class _CountsModel:
         self.la_arr = np.ascontiguousarray(node_log_a, dtype=float)
         self.b_arr = np.ascontiguousarray(node_b, dtype=float)
         if not (self.xp_arr.ndim == self.la_arr.ndim == self.b_arr.ndim == 1
-                and self.xp_arr.shape[0] == self.la_arr.shape[0] == self.b_arr.shape[0] >= 2):
-            raise lengths_differ("the curve's nodes (at least 2)", xp=self.xp_arr.size,
+                and self.xp_arr.shape[0] == self.la_arr.shape[0] == self.b_arr.shape[0] >= 1):
+            raise lengths_differ("the curve's nodes (at least 1)", xp=self.xp_arr.size,
                                  node_log_a=self.la_arr.size, node_b=self.b_arr.size)
         self.xp, self.la, self.bb = self.xp_arr, self.la_arr, self.b_arr
         self.cap = cap if cap > 1 else 1
