@@ -723,6 +723,31 @@ def _sensor_for_design(sc: Scenario, raw: Mapping, fail) -> Scenario:
     return sc
 
 
+def folder_files(folder: str | Path) -> list[Path]:
+    """The scenarios a folder holds: its ``*.yaml`` files, sorted by name (ScenarioError
+    when it holds none)."""
+    files = sorted(Path(folder).glob("*.yaml"))
+    if not files:
+        raise ScenarioError(f"{folder}: the folder holds no *.yaml scenario")
+    return files
+
+
+def not_a_scenario_file(path: Path) -> str | None:
+    """Why a ``*.yaml`` found in a folder is not read as a scenario, or None for a regular
+    file (a pipe among the rooms would be waited on for good)."""
+    if path.is_file():
+        return None
+    kind = ("a folder" if path.is_dir() else "a pipe, socket or device" if path.exists()
+            else "a broken link (or a loop of links)")
+    return f"{path}: is {kind}, not a scenario file; a folder's rooms are its regular *.yaml files"
+
+
+def is_folder(name_or_path: str) -> bool:
+    """``name_or_path`` names a folder of scenarios (a bundled name stays a name even where
+    a folder of that name exists, as `--out t_room` makes one)."""
+    return Path(name_or_path).is_dir() and name_or_path not in bundled()
+
+
 def scenario_file(name_or_path: str | Path) -> Path | str:
     """The file a bundled name or a path means (links and ``..`` resolved), or
     ``name_or_path`` itself where it means none: two names of one room compare equal."""

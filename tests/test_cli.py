@@ -599,3 +599,23 @@ def test_a_cylinder_just_past_the_housing_is_measured(capsys):
     assert main(["geometry", "--design", "rotating12", "--samples", "1000",
                  "--distances-mm", "171"]) == 0
     assert "at    171 mm" in capsys.readouterr().out
+
+
+def test_scenarios_checks_every_yaml_in_a_folder(tmp_path, capsys, monkeypatch):
+    """`irring scenarios my_rooms/` was refused ("is a folder"), though `irring bench rooms
+    my_rooms/` and now a study take a folder (newuser15): each *.yaml is checked, a bad
+    one named, the others listed, and the count says how many files were checked."""
+    (tmp_path / "rooms").mkdir()
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "rooms" / "b.yaml").write_text(HALF_THROUGH.replace("[2500, 300]",
+                                                                    "[2270, 300]"))
+    (tmp_path / "rooms" / "a.yaml").write_text("name: a\n")
+    monkeypatch.chdir(tmp_path)
+    assert main(["scenarios", "rooms", "empty", "t_room"]) == 1
+    out, err = capsys.readouterr()
+    assert [line.split()[:3] for line in out.splitlines()] == [
+        ["rooms/b.yaml", "1", "pose(s)"], ["t_room", "4", "pose(s)"]]
+    assert err.splitlines() == [
+        "irring scenarios: error: empty: the folder holds no *.yaml scenario",
+        "irring scenarios: error: rooms/a.yaml: room: required key is missing",
+        "irring scenarios: 2 of 4 scenario(s) refused"]

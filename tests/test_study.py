@@ -570,3 +570,42 @@ def test_sigterm_to_a_pool_parent_ends_like_ctrl_c_and_restores_the_default():
             os.kill(os.getpid(), signal.SIGTERM)
             time.sleep(10)
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
+def test_a_folder_of_rooms_is_its_yaml_files_in_name_order(tmp_path, monkeypatch):
+    """A study over many rooms had to list every file: `scenarios: [rooms/]` was refused
+    ("is a folder; expected a scenario file") where `irring bench rooms rooms/` takes it
+    (newuser15). Relative to the study file, as a file is; a pipe among the rooms, an
+    empty folder and a room listed again beside its folder are refused before any run."""
+    sub = tmp_path / "sub"
+    (sub / "rooms").mkdir(parents=True)
+    (sub / "rooms" / "b_room.yaml").write_text(ROOM.replace("l_room_post", "b_room"))
+    (sub / "rooms" / "a_room.yaml").write_text(ROOM.replace("l_room_post", "a_room")
+                                               .replace("seed: 7", "seed: 40"))
+    (sub / "rooms" / "notes.txt").write_text("not a room")
+    (sub / "st.yaml").write_text("designs: [rotating12]\nscenarios: [rooms, t_room]\nseeds: 2\n")
+    monkeypatch.chdir(tmp_path)
+    s = study.load_study("sub/st.yaml")
+    assert s.scenarios == ("sub/rooms/a_room.yaml", "sub/rooms/b_room.yaml", "t_room")
+    assert [(p.scenario, p.seed) for p in study.grid(s)] == [
+        ("sub/rooms/a_room.yaml", 40), ("sub/rooms/a_room.yaml", 41),
+        ("sub/rooms/b_room.yaml", 7), ("sub/rooms/b_room.yaml", 8), ("t_room", 1), ("t_room", 2)]
+    (sub / "empty").mkdir()
+    (sub / "st.yaml").write_text("designs: [rotating12]\nscenarios: [empty]\n")
+    with pytest.raises(study.StudyError) as empty:
+        study.load_study("sub/st.yaml")
+    assert str(empty.value) == ("sub/st.yaml: scenarios[0]: sub/empty: the folder holds no "
+                                "*.yaml scenario")
+    (sub / "st.yaml").write_text("designs: [rotating12]\n"
+                                 "scenarios: [rooms, rooms/b_room.yaml]\n")
+    with pytest.raises(study.StudyError) as twice:
+        study.load_study("sub/st.yaml")
+    assert str(twice.value) == ("sub/st.yaml: scenarios[1]: scenario 'sub/rooms/b_room.yaml' "
+                                "is listed twice")
+    os.mkfifo(sub / "rooms" / "c_pipe.yaml")
+    (sub / "st.yaml").write_text("designs: [rotating12]\nscenarios: [rooms]\n")
+    with pytest.raises(study.StudyError) as pipe:
+        study.load_study("sub/st.yaml")
+    assert str(pipe.value) == (
+        "sub/st.yaml: scenarios[0]: sub/rooms/c_pipe.yaml: is a pipe, socket or device, not "
+        "a scenario file; a folder's rooms are its regular *.yaml files")

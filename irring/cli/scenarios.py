@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from .. import scenario
 from ..errors import IrringError, printable
@@ -19,8 +20,8 @@ def register(p: argparse.ArgumentParser) -> None:
              "Writing your own: every key, unit and range in scenarios/README.md.",
              raw=False)
     p.add_argument("scenario", nargs="*", metavar="SCENARIO",
-                   help="bundled scenario names or YAML paths to check (default: the bundled "
-                        "scenarios)")
+                   help="bundled scenario names, YAML paths or folders (every *.yaml in "
+                        "them) to check (default: the bundled scenarios)")
     p.set_defaults(func=run)
 
 
@@ -28,15 +29,30 @@ def run(args: argparse.Namespace) -> int:
     named = args.scenario
     rows = []
     failed: list[IrringError] = []
-    for name in named or scenario.bundled():
+
+    def refuse(exc: IrringError) -> None:
+        # each file is checked: one bad file hid the verdict on all the others
+        print(f"irring scenarios: error: {printable(str(exc))}", file=sys.stderr)
+        failed.append(exc)
+
+    listed = []   # (name or path, found in a folder): a folder stands for its *.yaml
+    for given in named:
         try:
+            listed += ([(str(f), True) for f in scenario.folder_files(given)]
+                       if scenario.is_folder(given) else [(given, False)])
+        except IrringError as exc:   # a folder holding no *.yaml
+            refuse(exc)
+    total = len(listed) + len(failed)
+    for name, in_folder in listed if named else [(n, False) for n in scenario.bundled()]:
+        try:
+            why = scenario.not_a_scenario_file(Path(name)) if in_folder else None
+            if why:
+                raise scenario.ScenarioError(why)
             sc = scenario.load_scenario(name if named else scenario.bundled()[name])
         except IrringError as exc:
             if not named:   # a bundled scenario that does not load: the install is broken
                 raise
-            # each file is checked: one bad file hid the verdict on all the others
-            print(f"irring scenarios: error: {printable(str(exc))}", file=sys.stderr)
-            failed.append(exc)
+            refuse(exc)
             continue
         default = "" if named or name != scenario.DEFAULT_SCENARIO else " (default)"
         rows.append((printable(name) if named else name, f"{len(sc.robot.poses)} pose(s)",
@@ -48,8 +64,8 @@ def run(args: argparse.Namespace) -> int:
         for note in notes:
             print(f"  note: {note}")
     if failed:
-        if len(named) > 1:
-            print(f"irring scenarios: {len(failed)} of {len(named)} scenario(s) refused",
+        if total > 1:
+            print(f"irring scenarios: {len(failed)} of {total} scenario(s) refused",
                   file=sys.stderr)
         return failed[0].status
     return 0

@@ -21,7 +21,8 @@ the study file (YAML):
   designs:   [rotating12, radial12, {{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45,
               step_deg: 1.08}}]     named designs (rotating12 radial12 rotating1 laser sonar12)
                                    or parametric rings (optional: sensor, name)
-  scenarios: [t_room, t_room_cylinder, my_room.yaml]   bundled names or paths
+  scenarios: [t_room, t_room_cylinder, my_room.yaml, my_rooms/]   bundled names, paths or
+             folders (every *.yaml in them, in name order)
   seeds:     [1, 2, 3]             explicit seeds, or a count N: each scenario's seed, +1, …
   knobs:     {{step_stride: [1, 2], samples: [1, 4], settle_ms: [0, 40]}}      optional; a
              knob left out keeps the scenario's value. settle_ms only changes the map when

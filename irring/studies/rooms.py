@@ -20,8 +20,8 @@ from ..maps import metrics
 from ..maps.metrics import SCORE_KEYS
 from ..outputs import real_path
 from ..pipeline import progress_bar
-from ..scenario import (Scenario, ScenarioError, clipped_obstacles, counted_seeds, load_scenario,
-                        resolve)
+from ..scenario import (Scenario, ScenarioError, clipped_obstacles, counted_seeds, folder_files,
+                        load_scenario, not_a_scenario_file, resolve)
 from .report import mean_of
 
 # The room set of issue 13 (scenarios/), then the paper's rooms; `irring bench rooms` runs
@@ -134,9 +134,7 @@ def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
     for item in names_or_paths:
         path = Path(item)
         if path.is_dir():
-            files = sorted(path.glob("*.yaml"))
-            if not files:
-                raise ScenarioError(f"{item}: the folder holds no *.yaml scenario")
+            files = folder_files(item)
         else:
             files = [resolve(item)]
         for file in files:
@@ -148,13 +146,9 @@ def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
         paths.extend((file, path.is_dir()) for file in files)
     out: list[Scenario | Unusable] = []
     for path, in_folder in paths:
-        if in_folder and not path.is_file():   # a pipe among the rooms waited for good
-            kind = "a folder" if path.is_dir() else (
-                "a pipe, socket or device" if path.exists() else
-                "a broken link (or a loop of links)")
-            out.append(Unusable(path.stem, str(path), errors.INPUT,
-                                f"{errors.printable(str(path))}: is {kind}, not a scenario "
-                                "file; a folder's rooms are its regular *.yaml files"))
+        why = not_a_scenario_file(path) if in_folder else None
+        if why:
+            out.append(Unusable(path.stem, str(path), errors.INPUT, errors.printable(why)))
             continue
         try:
             out.append(load_scenario(path))

@@ -38,7 +38,8 @@ from ..errors import OutputError, TooBig, brief, printable
 from ..outputs import OutputSet, atomic_file, sole_writer, write_text_atomic
 from ..pipeline import scenario_text
 from ..resources import installed_version
-from ..scenario import ScenarioError, counted_seeds, load_scenario, scenario_file
+from ..scenario import (ScenarioError, counted_seeds, folder_files, is_folder, load_scenario,
+                        not_a_scenario_file, scenario_file)
 from . import accuracy
 from .accuracy import mark_pareto
 from .report import write_csv
@@ -222,16 +223,23 @@ def parse_study(raw: Any, source: str = "") -> Study:
             if not Path(s).exists():
                 s = str(beside)
         try:
-            loaded = load_scenario(s)
+            # a folder stands for its *.yaml, as in `irring bench rooms my_rooms/`
+            in_folder = is_folder(s)
+            files = [str(f) for f in folder_files(s)] if in_folder else [s]
+            for f in files:
+                why = not_a_scenario_file(Path(f)) if in_folder else None
+                if why:
+                    raise ScenarioError(why)
+                seed_of[f] = load_scenario(f)
         except ScenarioError as exc:
             raise _fail(source, path, str(exc)) from None
-        first = seen.setdefault(scenario_file(s), s)
-        if s in scenarios or first != s:   # t_room and scenarios/t_room.yaml: one room
-            raise _fail(source, path, f"scenario {s!r} is listed twice" + (
-                f" (as {first!r}, the same file); it would be run and counted in the means "
-                f"twice" if first != s else ""))
-        scenarios.append(s)
-        seed_of[s] = loaded
+        for s in files:
+            first = seen.setdefault(scenario_file(s), s)
+            if s in scenarios or first != s:   # t_room and scenarios/t_room.yaml: one room
+                raise _fail(source, path, f"scenario {s!r} is listed twice" + (
+                    f" (as {first!r}, the same file); it would be run and counted in the "
+                    f"means twice" if first != s else ""))
+            scenarios.append(s)
     for i, d in enumerate(designs):   # before any run: a ring the rooms cannot hold
         for s in scenarios:
             try:
