@@ -299,7 +299,7 @@ def clock_jump(dev, cmd):
 def interrupt_after(n_scans: int):
     """Sends ``n_scans`` IRSCN of the second sweep, then Ctrl-C reaches the host (its main
     thread gets KeyboardInterrupt) and the device goes quiet."""
-    import _thread
+    import signal
 
     def second(dev, cmd):
         if isinstance(cmd, p.SweepCommand):
@@ -307,7 +307,10 @@ def interrupt_after(n_scans: int):
                 dev.send(scan(dev.seq, step))
                 dev.seq += 1
             time.sleep(0.05)
-            _thread.interrupt_main()
+            # a real SIGINT to the main thread, as a terminal's Ctrl-C: it ends a blocking
+            # read at once (_thread.interrupt_main only set a flag seen after the read's
+            # timeout, so a loaded machine let the host time out and retry first)
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
     second.__name__ = f"interrupt_after_{n_scans}"
     return second
 
