@@ -23,7 +23,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from .errors import OutputError, printable
-from .safe_yaml import input_kind
+from .safe_yaml import MCAP_MAGIC, input_kind, not_text
 
 try:
     import fcntl
@@ -284,17 +284,32 @@ _WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG,
                            errno.EPERM})
 
 
+MCAP_FILE = "MCAP file"   # ``writes`` of an MCAP: it replaces nothing but an MCAP
+
+
 def check_replaceable(path: str | Path, option: str | None = None,
                       writes: str | None = None) -> None:
     """:class:`OutputError` when ``path`` is an irring input file (a recording, scenario,
     study, calibration or progress file) of another kind than ``writes``: a slip of the
-    path (``calibrate --out my_room.yaml``) replaced it."""
+    path (``calibrate --out my_room.yaml``) replaced it. An MCAP (``writes`` MCAP_FILE)
+    replaces only an MCAP or an empty file (``--mcap photo.png`` replaced the photo)."""
     path = Path(path)
     found = input_kind(path) if path.is_file() else None
+    shown = printable(f"{option} {path}" if option else str(path))
     if found is not None and found[0] != writes:
-        shown = printable(f"{option} {path}" if option else str(path))
         raise OutputError(f"{shown}: is {found[1]}; writing there would replace it: name "
                           "another file")
+    if writes == MCAP_FILE and path.is_file():
+        # an MCAP replaces only an MCAP (or an empty file): `--mcap photo.png` lost the photo
+        try:
+            with open(path, "rb") as f:
+                head = f.read(len(MCAP_MAGIC))
+        except OSError:
+            return   # unreadable: the write itself says why
+        if head and not head.startswith(MCAP_MAGIC):
+            what = not_text(head) or "a file"
+            raise OutputError(f"{shown}: is {what}, not an MCAP; writing there would replace "
+                              "it (an MCAP replaces only an MCAP): name another file")
 
 
 @contextlib.contextmanager

@@ -33,7 +33,7 @@ from .maps import metrics
 from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_scenario_grid,
                            RunSilences, classify, returns_of, slice_steps)
 from .maps.mcap_export import write_mcap, write_mcap_to  # noqa: F401  (write_mcap: API)
-from .outputs import OutputError, OutputSet, atomic_file
+from .outputs import MCAP_FILE, OutputError, OutputSet, atomic_file
 from .scenario import Scenario, ScenarioError, clipped_obstacles, loads
 
 FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
@@ -625,7 +625,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     try:
         # Ctrl-C in the 0.16 s the MCAP took after the set (t_room_moving) left the new set
         # beside an earlier run's MCAP
-        with atomic_file(mcap) as tmp:
+        with atomic_file(mcap, writes=MCAP_FILE) as tmp:
             t0 = time.perf_counter()
             write_mcap_to(result, tmp, mcap)
             result.timings_s["mcap"] = time.perf_counter() - t0

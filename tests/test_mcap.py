@@ -22,6 +22,7 @@ from irring.cli import main  # noqa: E402
 from irring.errors import OutputError  # noqa: E402
 from irring.recording import load_recording  # noqa: E402
 from irring.scenario import load_scenario  # noqa: E402
+from irring.safe_yaml import MCAP_MAGIC  # noqa: E402
 
 
 def _messages(path):
@@ -97,7 +98,8 @@ def test_a_failed_mcap_write_leaves_no_partial_file(tmp_path, monkeypatch):
 
     run = pipeline.run(load_scenario("t_room"), progress=False)
     target = tmp_path / "run.mcap"
-    target.write_bytes(b"an earlier run's file")
+    earlier = MCAP_MAGIC + b"an earlier run's file"   # an MCAP replaces only an MCAP
+    target.write_bytes(earlier)
     real, calls = mcap_export.point_cloud, []
 
     def failing(points, t):
@@ -109,7 +111,7 @@ def test_a_failed_mcap_write_leaves_no_partial_file(tmp_path, monkeypatch):
     monkeypatch.setattr(mcap_export, "point_cloud", failing)
     with pytest.raises(OutputError, match=f"^{target}: No space left on device$"):
         mcap_export.write_mcap(run, target)
-    assert target.read_bytes() == b"an earlier run's file"
+    assert target.read_bytes() == earlier
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.mcap"]
 
     monkeypatch.setattr(mcap_export, "point_cloud", real)

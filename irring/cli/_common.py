@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..core import HOUSING_M, MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
 from ..errors import UsageError, brief
-from ..outputs import RUN_FILES, check_out, check_replaceable, real_path
+from ..outputs import MCAP_FILE, RUN_FILES, check_out, check_replaceable, real_path
 
 
 class LazyParser(argparse.ArgumentParser):
@@ -232,13 +232,11 @@ def mcap_beside_outputs(mcap: Path | None, out: Path) -> None:
                          f"{Path(out) / 'map.mcap'})")
     # before the work, as --out is: a read-only folder failed after the whole run
     check_out(mcap.parent, "--mcap")
-    check_replaceable(mcap, "--mcap")
-    if mcap.name not in RUN_FILES - {"map.mcap"}:
-        return
-    if real_path(mcap.absolute().parent) == out_at:
+    if mcap.name in RUN_FILES - {"map.mcap"} and real_path(mcap.absolute().parent) == out_at:
         raise UsageError(f"--mcap {mcap}: is the {mcap.name} this command writes into --out "
                          f"{out}; the MCAP would replace it, so name another file (such as "
                          f"{Path(out) / 'map.mcap'})")
+    check_replaceable(mcap, "--mcap", MCAP_FILE)
 
 
 def mcap_file(text: str) -> Path:

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..core import Cylinder, box_corners
 from ..errors import OutputError
-from ..outputs import atomic_file
+from ..outputs import MCAP_FILE, atomic_file
 
 FRAME = "map"
 ROBOT_FRAME = "base_link"
@@ -142,7 +142,7 @@ def write_mcap(result, path) -> Path:
     Raises ImportError naming the extra when the mcap packages are missing, OutputError
     (outputs.atomic_file) when ``path`` cannot be written or the sweeps' times overflow ROS time."""
     path = Path(path)
-    with atomic_file(path) as tmp:
+    with atomic_file(path, writes=MCAP_FILE) as tmp:
         write_mcap_to(result, tmp, path)
     return path
 
