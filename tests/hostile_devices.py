@@ -33,8 +33,9 @@ def counts_for(step: int, n: int = SENSORS) -> list[int]:
     return [(500 + 37 * k + 11 * step) % 4096 for k in range(n)]
 
 
-def scan(seq: int, step: int, n: int = SENSORS) -> bytes:
-    return line(f"IRSCN,{seq},{step},{1000 + seq},{','.join(map(str, counts_for(step, n)))}")
+def scan(seq: int, step: int, n: int = SENSORS, clock0: int = 1000) -> bytes:
+    """IRSCN ``seq`` of ``step``, read at ``clock0 + seq`` ms of the device clock."""
+    return line(f"IRSCN,{seq},{step},{clock0 + seq},{','.join(map(str, counts_for(step, n)))}")
 
 
 class HostileDevice:
@@ -136,7 +137,7 @@ def good(dev, cmd):
     if isinstance(cmd, p.SweepCommand):
         for step in range(cmd.from_step, cmd.to_step + 1) if cmd.from_step <= cmd.to_step else \
                 range(cmd.from_step, cmd.to_step - 1, -1):
-            dev.send(scan(dev.seq, step))
+            dev.send(scan(dev.seq, step, clock0=getattr(dev, "clock0", 1000)))
             dev.seq += 1
         dev.send(line(f"IRDON,{dev.seq - 1}"))
     elif isinstance(cmd, p.Stop):
@@ -398,7 +399,8 @@ def reboots_between_sweeps(lose_first: bool = False):
         if isinstance(cmd, p.SweepCommand):
             dev.sweeps_seen = getattr(dev, "sweeps_seen", 0) + 1
             if dev.sweeps_seen == 2:
-                dev.seq = 0   # the reboot
+                dev.seq = 0   # the reboot: numbers from 0, its clock from boot
+                dev.clock0 = 40
                 if lose_first:
                     dev.seq = 1
                     cmd = p.SweepCommand(cmd.from_step + 1, cmd.to_step, cmd.samples,

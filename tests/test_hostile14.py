@@ -5,15 +5,17 @@ from __future__ import annotations
 
 import pytest
 
+import hostile_devices as hd
+from irring import pipeline
 from irring.cli import main
-
-pytest.importorskip("mcap_ros2")   # --mcap needs the mcap extra
-
+from irring.hardware import DeviceReplayed, SerialRing
+from irring.hardware import protocol as p
 
 def test_mcap_never_replaces_a_file_that_is_not_an_mcap(tmp_path, capsys):
     """`run box_room --mcap photo.png` (a slip of the path: the user's picture, or another
     run's map.png) replaced the picture with MCAP bytes, exit 0; so did any other file. An
     MCAP, or an empty file, is replaced as before."""
+    pytest.importorskip("mcap_ros2")   # --mcap needs the mcap extra
     photo = tmp_path / "photo.png"
     photo.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
     notes = tmp_path / "notes.txt"
@@ -36,3 +38,43 @@ def test_mcap_never_replaces_a_file_that_is_not_an_mcap(tmp_path, capsys):
     assert main(["run", "box_room", "--out", out, "--no-animation", "--mcap", str(empty),
                  "--seed", "2"]) == 0
     assert empty.read_bytes() != mcap
+
+
+def _replaying(dev, cmd):
+    """A correct device for its first sweep; every later sweep it sends the first one's
+    sentences again, byte for byte (seq, clock and counts)."""
+    if isinstance(cmd, p.SweepCommand) and getattr(dev, "first", None) is not None:
+        dev.send(dev.first)
+        return
+    sent, send = [], dev.send
+    dev.send = lambda data: (sent.append(data), send(data))
+    try:
+        hd.good(dev, cmd)
+    finally:
+        dev.send = send
+    if isinstance(cmd, p.SweepCommand):
+        dev.first = b"".join(sent)
+
+
+def test_a_device_that_replays_its_last_sweep_is_not_read_as_a_new_one(tmp_path):
+    """A device answering pose 2's IRSWP with pose 1's sentences, byte for byte, was taken
+    as a device that rebooted and renumbered: pose 2 got pose 1's readings, 'all 5 steps
+    received; clean link' (a drive at t_room's four poses: F1 0.995 -> 0.658, exit 0). A
+    reboot numbers from 0 again too, but its clock starts anew and its counts are new
+    readings (hd.reboots_between_sweeps, still kept in tests/test_hostile.py)."""
+    dev = hd.HostileDevice(_replaying)
+    try:
+        with SerialRing(dev.link, timeout_s=0.15) as ring:
+            got = pipeline.acquire(ring, [(0.5, 0.4, 0.0), (1.5, 0.4, 0.0)], progress=False)
+    finally:
+        dev.close()
+    assert len(got.sweeps) == 1
+    assert got.sweeps[0].counts.tolist() == [hd.counts_for(s) for s in range(-2, 3)]
+    assert isinstance(got.error, DeviceReplayed)
+    assert str(got.error) == (
+        f"the ring on {dev.link} answered IRSWP,-2,2 with its last sweep again: 5 IRSCN repeat "
+        "that sweep's sentence for sentence (seq 0 … 4, device clock 1000 … 1004 ms, every "
+        "count alike), where a new sweep numbers on and its clock runs on: a firmware "
+        "replaying its buffer, not reading the sensors; not taken. Reset the board and sweep "
+        "this pose again. device replayed its last sweep: 0 of 5 steps received; missing "
+        "steps -2, -1, 0, 1, 2 (not invented, left out of the sweep); 5 stale IRSCN dropped")

@@ -618,8 +618,12 @@ def test_which_way_a_pass_ran_is_settled_by_a_second_irscn_or_the_irdon(reverse,
 def test_a_reversed_device_that_rebooted_between_sweeps_keeps_the_next_sweep():
     """Numbered from 0 again after a reboot, the second sweep's IRSCN look stale; the IRDON
     that ends them confirms them as this sweep's, read 3 → -3."""
+    sweeps = []
+
     def on_sweep(cmd):
-        return [p.Scan(i, 3 - i, i, (53 - i, 7)) for i in range(7)] + [p.Done(6)]
+        sweeps.append(cmd)
+        clock0 = 900 if len(sweeps) == 1 else 0   # the reboot restarts the device clock
+        return [p.Scan(i, 3 - i, clock0 + i, (53 - i, 7)) for i in range(7)] + [p.Done(6)]
     ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
     ring.sweep(resweep=0)
     sweep = ring.sweep(resweep=0)

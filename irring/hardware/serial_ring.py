@@ -124,6 +124,11 @@ class DeviceChanged(LinkLost):
     reflashed or swapped; in a sweep, the readings of the ring it was are in ``partial``."""
 
 
+class DeviceReplayed(LinkLost):
+    """The device answered a sweep with its previous sweep's IRSCN again, sentence for
+    sentence (seq, step, clock and counts): a firmware replaying its buffer, not reading."""
+
+
 class DeviceTimeout(LinkLost):
     """The device stopped answering (no sentence for ``timeout_s``, IRSTP retries unanswered)."""
 
@@ -381,6 +386,7 @@ class SerialRing:
         self._dropped: str | None = None  # the sweep's first IRSCN dropped as inconsistent
         self._garbled: str | None = None  # the sweep's first malformed sentence, and why
         self._sweep_before: dict[str, int] = {}   # the counters when the sweep began
+        self._previous: dict[int, p.Scan] = {}   # the last sweep's IRSCN by step
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -748,6 +754,7 @@ class SerialRing:
 
         def build(complete: bool, reason: str) -> tuple[core.Sweep, SweepReport]:
             sweep = self._assemble(req, passes, samples, settle_ms, pose_arr)
+            self._previous = {step: scan for ps in passes for step, scan in ps.got.items()}
             report = self._report(req, sweep, before, complete, started, reason)
             self.last_report = report
             return sweep, report
@@ -774,6 +781,7 @@ class SerialRing:
             reason = ("device stopped answering" if isinstance(exc, DeviceTimeout) else
                       "device disconnected" if isinstance(exc, DeviceDisconnected) else
                       "device changed" if isinstance(exc, DeviceChanged) else
+                      "device replayed its last sweep" if isinstance(exc, DeviceReplayed) else
                       "device refused" if isinstance(exc, DeviceRejected) else "interrupted")
             sweep, report = build(False, reason)
             exc.partial, exc.report = sweep, report
@@ -955,6 +963,8 @@ class SerialRing:
                     take(msg)
                 elif isinstance(msg, p.Done):
                     reverse = None if ps.got else _renumbered(suspects, ps, msg.seq)
+                    if reverse is not None and self._replayed(suspects):
+                        raise self._replay_error(suspects, lo, hi)
                     if reverse is not None:
                         # every IRSCN looked stale, but they and this IRDON number this very
                         # pass: the device numbers from elsewhere (it rebooted between sweeps,
@@ -1046,6 +1056,22 @@ class SerialRing:
                 self._send(p.Stop())
                 wait_s = self.timeout_s
                 deadline = now + wait_s
+
+    def _replayed(self, scans: list[p.Scan]) -> bool:
+        """``scans`` (two or more) repeat the last sweep's, sentence for sentence: a rebooted
+        device numbers from 0 again too, but its clock starts anew and its counts are new
+        readings, where a replay repeats seq, clock and counts alike."""
+        return len(scans) > 1 and all(self._previous.get(sc.step) == sc for sc in scans)
+
+    def _replay_error(self, scans: list[p.Scan], lo: int, hi: int) -> DeviceReplayed:
+        clocks = sorted(sc.t_ms for sc in scans)
+        return DeviceReplayed(
+            f"the ring on {self.port_name} answered IRSWP,{lo},{hi} with its last sweep "
+            f"again: {len(scans)} IRSCN repeat that sweep's sentence for sentence (seq "
+            f"{scans[0].seq} … {scans[-1].seq}, device clock {clocks[0]} … {clocks[-1]} ms, "
+            "every count alike), where a new sweep numbers on and its clock runs on: a "
+            "firmware replaying its buffer, not reading the sensors; not taken. Reset the "
+            "board and sweep this pose again.")
 
     def _inconsistent(self, why: str, n: int = 1) -> None:
         """Count ``n`` IRSCN dropped as inconsistent; the sweep's report names the first."""
