@@ -423,8 +423,10 @@ def _other_unit(key: str, cls: type) -> str:
 
 
 def _close(word: str, options: Mapping | list) -> str:
-    match = difflib.get_close_matches(word, list(options), n=1)
-    return f" (did you mean `{match[0]}`?)" if match else ""
+    """' (did you mean `t_room`?)' for the option nearest ``word`` in any case (T_ROOM)."""
+    lower = {str(o).lower(): o for o in options}
+    match = difflib.get_close_matches(word.lower(), list(lower), n=1)
+    return f" (did you mean `{lower[match[0]]}`?)" if match else ""
 
 
 # --------------------------------------------------------------------------- geometry checks

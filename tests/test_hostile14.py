@@ -78,3 +78,13 @@ def test_a_device_that_replays_its_last_sweep_is_not_read_as_a_new_one(tmp_path)
         "replaying its buffer, not reading the sensors; not taken. Reset the board and sweep "
         "this pose again. device replayed its last sweep: 0 of 5 steps received; missing "
         "steps -2, -1, 0, 1, 2 (not invented, left out of the sweep); 5 stale IRSCN dropped")
+
+
+def test_a_bundled_name_in_the_wrong_case_gets_a_did_you_mean(capsys, tmp_path, monkeypatch):
+    """`irring run T_ROOM` (caps lock) listed the bundled names without saying which."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "T_ROOM"]) == 1
+    assert capsys.readouterr().err.startswith(
+        "irring run: error: T_ROOM: no such file and no bundled scenario of that name (did "
+        "you mean `t_room`?); bundled: angled_walls, ")
+    assert list(tmp_path.iterdir()) == []
