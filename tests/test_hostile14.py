@@ -80,6 +80,22 @@ def test_a_device_that_replays_its_last_sweep_is_not_read_as_a_new_one(tmp_path)
         "steps -2, -1, 0, 1, 2 (not invented, left out of the sweep); 5 stale IRSCN dropped")
 
 
+def test_a_mistyped_option_before_the_scenario_is_named_alone(capsys, tmp_path, monkeypatch):
+    """`irring run --sed 4 t_room`: argparse took the 4 for the scenario and said
+    "unrecognized arguments: --sed t_room (did you mean --seed?)", blaming the scenario."""
+    monkeypatch.chdir(tmp_path)
+    for argv, said in (
+            (["run", "--sed", "4", "t_room"], "option: --sed (did you mean --seed?)"),
+            (["run", "--sed=4", "t_room", "--jsn"],
+             "options: --sed=4 (did you mean --seed?), --jsn (did you mean --json?)"),
+            (["run", "t_room", "extra"], "arguments: extra")):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 2
+        assert capsys.readouterr().err.endswith(f"\nirring run: error: unrecognized {said}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_bundled_name_in_the_wrong_case_gets_a_did_you_mean(capsys, tmp_path, monkeypatch):
     """`irring run T_ROOM` (caps lock) listed the bundled names without saying which."""
     monkeypatch.chdir(tmp_path)

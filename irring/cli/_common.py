@@ -23,6 +23,14 @@ from ..errors import UsageError, brief
 from ..outputs import MCAP_FILE, RUN_FILES, check_out, check_replaceable, real_path
 
 
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+        return True
+    except ValueError:
+        return False
+
+
 class LazyParser(argparse.ArgumentParser):
     """A subcommand's parser that imports its module and lets it ``register(self)`` (long
     help, arguments, ``func``) the first time it parses, or prints help or usage: building
@@ -40,17 +48,22 @@ class LazyParser(argparse.ArgumentParser):
         self._load()
         namespace, extras = super().parse_known_args(args, namespace)
         if extras:   # else argparse reports them with `irring`'s usage, not this command's
-            self.error(f"unrecognized arguments: {' '.join(extras)}{self._near(extras)}")
+            # an option among them is named alone: in `run --sed 4 t_room` the 4 took the
+            # scenario's place, and "unrecognized arguments: --sed t_room" blamed t_room
+            options = [w for w in extras if w.startswith("-") and not _is_number(w)]
+            if options:
+                self.error(f"unrecognized option{'s' * (len(options) > 1)}: "
+                           f"{', '.join(w + self._near(w) for w in options)}")
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
         return namespace, extras
 
-    def _near(self, extras: list[str]) -> str:
-        """' (did you mean --seed?)' for the first mistyped option among ``extras``."""
+    def _near(self, word: str) -> str:
+        """' (did you mean --seed?)' for a mistyped option ``word`` (--sed, --sed=4)."""
         names = [o[2:] for a in self._actions for o in a.option_strings if o.startswith("--")]
-        for word in extras:
-            if word.startswith("--"):   # compared without the "--" every option shares
-                near = difflib.get_close_matches(word[2:].split("=")[0].lower(), names, n=1)
-                if near:
-                    return f" (did you mean --{near[0]}?)"
+        if word.startswith("--"):   # compared without the "--" every option shares
+            near = difflib.get_close_matches(word[2:].split("=")[0].lower(), names, n=1)
+            if near:
+                return f" (did you mean --{near[0]}?)"
         return ""
 
     def format_usage(self) -> str:
