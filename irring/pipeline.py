@@ -145,6 +145,8 @@ class MapRun:
             "compute_time_s": {**{k: float(v) for k, v in self.timings_s.items()},
                                "total": self.compute_time_s},
             **({"unscored": self.unscored} if self.unscored else {}),
+            **({"stuck_sensors": stuck} if (stuck := stuck_sensors(self.sweeps, self.points))
+               else {}),
             **({"clipped_obstacles": clipped} if clipped else {}),
             **({"drive": drive_ending(sc)} if sc is not None and sc.has("motion") else {}),
         }
@@ -171,6 +173,32 @@ class MapRun:
                      "resolution_m": self.grid.resolution_m},
             "mapper": dataclasses.asdict(self.grid.params),
         }
+
+
+def stuck_sensors(sweeps: Sequence[Sweep], points: Sequence[Points]) -> list[str]:
+    """A warning for each sensor whose every reading, at two or more poses, is one count that
+    the estimator maps as wall: a turning sensor reads the room's changing distances (and its
+    noise), so one count all round is a stuck sensor or a dead ADC channel, whose ring of
+    wall the map would show. Silence all round (no return) is not warned of: a sensor that
+    meets no wall within its reach reads so too, and maps nothing."""
+    poses = {tuple(np.asarray(s.pose, float).round(6)) for s in sweeps}
+    if len(poses) < 2 or len(points) != len(sweeps):
+        return []
+    counts = np.concatenate([np.asarray(s.counts).reshape(len(s.steps), -1) for s in sweeps])
+    valid = np.concatenate([p.valid.reshape(len(s.steps), -1) for s, p in zip(sweeps, points)])
+    d = np.concatenate([p.d.reshape(len(s.steps), -1) for s, p in zip(sweeps, points)])
+    out = []
+    for k in range(counts.shape[1]):
+        col = counts[:, k]
+        if not (col == col[0]).all() or not valid[:, k].any():
+            continue
+        out.append(f"sensor {k} (of 0 … {counts.shape[1] - 1}) read {int(col[0])} counts at "
+                   f"every one of its {col.size} readings, at {len(poses)} poses, where a "
+                   f"turning sensor's counts follow the room: a stuck sensor or a dead ADC "
+                   f"channel reads so. {int(valid[:, k].sum())} of them are mapped as wall "
+                   f"{np.nanmedian(d[:, k]) * 1000:.0f} mm out all round; check the sensor's "
+                   "connector and its ADC channel")
+    return out
 
 
 # --------------------------------------------------------------------------- stages

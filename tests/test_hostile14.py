@@ -3,6 +3,8 @@ asserts what happens now."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 import hostile_devices as hd
@@ -10,6 +12,7 @@ from irring import pipeline
 from irring.cli import main
 from irring.hardware import DeviceReplayed, SerialRing
 from irring.hardware import protocol as p
+from irring.recording import load_recording, save_recording
 
 def test_mcap_never_replaces_a_file_that_is_not_an_mcap(tmp_path, capsys):
     """`run box_room --mcap photo.png` (a slip of the path: the user's picture, or another
@@ -104,3 +107,30 @@ def test_a_bundled_name_in_the_wrong_case_gets_a_did_you_mean(capsys, tmp_path, 
         "irring run: error: T_ROOM: no such file and no bundled scenario of that name (did "
         "you mean `t_room`?); bundled: angled_walls, ")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_sensor_stuck_at_one_count_is_warned_of(tmp_path, capsys):
+    """t_room's recording with sensor 3 stuck at 2000 counts in every reading (a loose pin,
+    a dead ADC channel) was mapped as a ring of wall 100 mm out, precision 0.994 -> 0.927,
+    exit 0, without a word (attack13's leftover). It is mapped as before, and warned of."""
+    assert main(["run", "t_room", "--out", str(tmp_path / "t"), "--no-animation"]) == 0
+    assert "warning" not in capsys.readouterr().out
+    sweeps, meta = load_recording(tmp_path / "t" / "sweeps.npz")
+    for sweep in sweeps:
+        sweep.counts[:, 3] = 2000
+    stuck = save_recording(tmp_path / "stuck.npz", sweeps, meta)
+    assert main(["replay", str(stuck), "--out", str(tmp_path / "r"), "--no-animation"]) == 0
+    said = ("sensor 3 (of 0 … 11) read 2000 counts at every one of its 284 readings, at 4 "
+            "poses, where a turning sensor's counts follow the room: a stuck sensor or a dead "
+            "ADC channel reads so. 284 of them are mapped as wall 102 mm out all round; check "
+            "the sensor's connector and its ADC channel")
+    assert f"\n  warning   {said}\n" in capsys.readouterr().out
+    assert main(["replay", str(stuck), "--out", str(tmp_path / "r"), "--no-animation",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["stuck_sensors"] == [said]
+    # silent all round (no return) maps nothing and is not warned of
+    for sweep in sweeps:
+        sweep.counts[:, 3] = 0
+    silent = save_recording(tmp_path / "silent.npz", sweeps, meta)
+    assert main(["replay", str(silent), "--out", str(tmp_path / "s"), "--no-animation"]) == 0
+    assert "warning" not in capsys.readouterr().out

@@ -133,6 +133,8 @@ def summary_lines(result, paths: dict, summary: dict | None = None) -> list[str]
     lines.append(f"  design {s['design'] or _unnamed_ring(result)}, {where}, "
                  f"{r['total']} readings: {r['valid']} valid"
                  + (f" ({invalid})" if invalid else ""))
+    for stuck in s.get("stuck_sensors", ()):
+        lines.append(f"  warning   {stuck}")
     if drive and drive["note"]:
         lines.append(f"  note      {drive['note']}")
     for clip in s.get("clipped_obstacles", ()):   # a note, not an error: it may be on purpose
