@@ -561,6 +561,40 @@ def _check_no_copied_sweep(scenario: Scenario | None, sweeps: Sequence[Sweep],
             f"{recording}: sweep {k + 1} repeats sweep {i + 1} reading for reading (its pose, "
             f"steps, {np.asarray(sweep.counts).size} counts and timestamps): a copy, whose "
             f"readings would be mapped twice{told}. Remove the copy")
+    _check_no_moved_copy(scenario, sweeps, recording)
+
+
+def _check_no_moved_copy(scenario: Scenario | None, sweeps: Sequence[Sweep],
+                         recording) -> None:
+    """A simulated sweep whose counts repeat an earlier one's, in a scene whose noise moves
+    every reading by a count or more, is a copy whatever pose it was given: the simulator
+    draws new noise for every reading (two sweeps that see nothing differ in nearly all), so
+    only a copy moved to another pose reads alike; mapped, it would draw the earlier pose's
+    walls at this one."""
+    noise = None if scenario is None else scenario.effects.get("noise")
+    if noise is None:
+        return
+    step_v = scenario.sensor.vref_v / (1 << scenario.sensor.adc_bits)
+    if noise.sigma_v < step_v:   # less than a count: quantisation may hide it
+        return
+    first: dict[bytes, int] = {}
+    for k, sweep in enumerate(sweeps):
+        if sweep.source != "sim":
+            continue   # a device's counts: a replaying one is refused by the driver
+        counts = np.ascontiguousarray(sweep.counts)
+        key = hashlib.sha256(np.asarray(sweep.steps).tobytes() + counts.tobytes()).digest()
+        i = first.setdefault(key, k)
+        if i == k or not (np.array_equal(sweeps[i].steps, sweep.steps)
+                          and np.array_equal(sweeps[i].counts, counts)):
+            continue
+        xy = [np.asarray(sweeps[j].pose, float)[:2] for j in (i, k)]
+        raise rec.RecordingError(
+            f"{recording}: sweep {k + 1} (at ({xy[1][0]:g}, {xy[1][1]:g}) m) repeats sweep "
+            f"{i + 1}'s (at ({xy[0][0]:g}, {xy[0][1]:g}) m) {counts.size} counts reading for "
+            f"reading; the recorded scenario {scenario.name!r} adds noise of "
+            f"{noise.sigma_v / step_v:.0f} counts (σ {noise.sigma_v:g} V) to every reading, so "
+            "no two of its sweeps read alike: a copy, whose readings would be mapped twice. "
+            "Remove the copy")
 
 
 def replay(recording: str | Path, *, calibration_file: str | Path | None = None,

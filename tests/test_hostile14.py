@@ -3,6 +3,7 @@ asserts what happens now."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
@@ -134,3 +135,24 @@ def test_a_sensor_stuck_at_one_count_is_warned_of(tmp_path, capsys):
     silent = save_recording(tmp_path / "silent.npz", sweeps, meta)
     assert main(["replay", str(silent), "--out", str(tmp_path / "s"), "--no-animation"]) == 0
     assert "warning" not in capsys.readouterr().out
+
+
+def test_a_simulated_sweep_copied_to_another_pose_is_refused(tmp_path, capsys):
+    """t_room's recording with sweep 1 saved again as sweep 4 at pose 4's place (its counts,
+    another pose) replayed as four poses: F1 0.995 -> 0.794, exit 0 (attack13's leftover:
+    the copy check compared poses). t_room's noise (12 counts) moves every simulated
+    reading, so two sweeps that read alike are a copy wherever they stand; a noiseless
+    scene, whose sweeps may honestly read alike, is replayed as before
+    (test_hostile13's NOISELESS_TWICE)."""
+    assert main(["run", "t_room", "--out", str(tmp_path / "t"), "--no-animation"]) == 0
+    sweeps, meta = load_recording(tmp_path / "t" / "sweeps.npz")
+    moved = dataclasses.replace(sweeps[0], pose=sweeps[3].pose)
+    bad = save_recording(tmp_path / "moved.npz", [*sweeps[:3], moved], meta)
+    capsys.readouterr()
+    assert main(["replay", str(bad), "--out", str(tmp_path / "r"), "--no-animation"]) == 1
+    assert capsys.readouterr().err == (
+        f"irring replay: error: {bad}: sweep 4 (at (1.21, 1.35) m) repeats sweep 1's (at "
+        "(1.92, 0.45) m) 852 counts reading for reading; the recorded scenario 't_room' adds "
+        "noise of 12 counts (σ 0.015 V) to every reading, so no two of its sweeps read alike: "
+        "a copy, whose readings would be mapped twice. Remove the copy\n")
+    assert not (tmp_path / "r").exists()
