@@ -26,7 +26,8 @@ import numpy as np
 from . import recording as rec
 from .core import (Points, Pose, Reason, RingSource, SourceLost, Sweep, in_turn_order,
                    inside_outline, score_text)
-from .estimation.calibration import CalibrationError, load_calibration, scene_calibration
+from .estimation.calibration import (Calibration, CalibrationError, load_calibration,
+                                     scene_calibration)
 from .estimation.estimate import estimate
 from .gp2 import SENSORS
 from .maps import metrics
@@ -347,6 +348,14 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     ``truth``: a ``metrics.GroundTruth`` of this scenario on this grid's cells, to reuse
     across many runs (rasterising it costs more than mapping).
     """
+    if isinstance(sweeps, Sweep):
+        raise TypeError("sweeps: expected a list of Sweep, got one Sweep (write [sweep])")
+    if not len(sweeps) and grid is None and scenario is None:
+        raise ValueError("sweeps: none to map, and no scenario or grid to lay the map out by")
+    if calibration is not None and not isinstance(calibration, Calibration):
+        # a path here failed inside the estimator ('str' object has no attribute 'folds')
+        raise TypeError(f"calibration: expected a Calibration (Calibration.load(path)) or "
+                        f"None, got {type(calibration).__name__} {calibration!r:.80}")
     for i, sweep in enumerate(sweeps):   # before any work: what a replay would refuse
         rec.check_sweep(sweep, f"sweeps[{i}]")
     # rows listed out of step order mapped differently (a reading's neighbours are rows)

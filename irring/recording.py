@@ -124,12 +124,17 @@ _SCALARS: dict[str, tuple[Callable[[Any], bool], str, Any]] = {
 
 def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> Path:
     """Write ``sweeps`` (and a JSON-serialisable ``meta``) to a compressed ``.npz``; a sweep
-    :func:`check_sweep` refuses raises ValueError before anything is written."""
+    :func:`check_sweep` refuses, no sweeps, or a folder as ``path`` raises ValueError before
+    anything is written."""
+    if not 1 <= len(sweeps) <= MAX_SWEEPS:   # what load_recording would refuse
+        raise ValueError(f"a recording holds 1 … {MAX_SWEEPS} sweeps, got {len(sweeps)}")
     for i, sweep in enumerate(sweeps):
         check_sweep(sweep, f"sweeps[{i}]")
     meta_json = json.dumps(meta or {}, default=_json_default)
     _check_meta(json.loads(meta_json), ValueError)   # what load_recording would refuse
     path = Path(path)
+    if path.is_dir():   # else written as the folder's name + .npz, beside it
+        raise ValueError(f"{path}: is a folder; expected the path of a .npz file")
     if path.suffix != ".npz":
         path = path.with_suffix(".npz")
     arrays: dict[str, np.ndarray] = {

@@ -156,3 +156,37 @@ def test_a_simulated_sweep_copied_to_another_pose_is_refused(tmp_path, capsys):
         "noise of 12 counts (σ 0.015 V) to every reading, so no two of its sweeps read alike: "
         "a copy, whose readings would be mapped twice. Remove the copy\n")
     assert not (tmp_path / "r").exists()
+
+
+def test_the_python_api_names_the_bad_argument(tmp_path):
+    """README's Python lines given a slip: map_sweeps(calibration="cal.yaml") failed inside
+    the estimator ("AttributeError: 'str' object has no attribute 'folds'"); map_sweeps([])
+    with numpy's "need at least one array to concatenate"; run(seed=-5) with numpy's
+    "expected non-negative integer", seed=1.5 ran as seed 1; save_recording(a folder) wrote
+    <folder>.npz beside it and save_recording(path, []) a file load_recording refuses."""
+    from irring import SimRing, load_scenario
+    from irring.estimation.calibration import Calibration
+
+    room = load_scenario("box_room")
+    sweep = SimRing(room).sweep(0)
+    with pytest.raises(TypeError) as e:
+        pipeline.map_sweeps([sweep], calibration="cal.yaml")
+    assert str(e.value) == ("calibration: expected a Calibration (Calibration.load(path)) or "
+                            "None, got str 'cal.yaml'")
+    assert Calibration.load.__name__ == "load"   # the method the message names
+    with pytest.raises(TypeError, match=r"^sweeps: expected a list of Sweep, got one Sweep "
+                                        r"\(write \[sweep\]\)$"):
+        pipeline.map_sweeps(sweep)
+    with pytest.raises(ValueError, match="^sweeps: none to map, and no scenario or grid to "
+                                         "lay the map out by$"):
+        pipeline.map_sweeps([])
+    for seed in (-5, 1.5, True, 2**63):
+        with pytest.raises(ValueError) as e:
+            pipeline.run(room, seed=seed, progress=False)
+        assert str(e.value) == f"seed must be a whole number 0 … {2**63 - 1}, got {seed!r}"
+    with pytest.raises(ValueError) as e:
+        save_recording(tmp_path, [sweep])
+    assert str(e.value) == f"{tmp_path}: is a folder; expected the path of a .npz file"
+    with pytest.raises(ValueError, match=r"^a recording holds 1 … 10000 sweeps, got 0$"):
+        save_recording(tmp_path / "none.npz", [])
+    assert list(tmp_path.iterdir()) == [] and not tmp_path.with_suffix(".npz").exists()

@@ -14,7 +14,7 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from ..core import (BYTES_PER_PHYSICS_VALUE, MAX_STEPS, MAX_SWEEPS, Sweep, Truth, as_pose,
+from ..core import (BYTES_PER_PHYSICS_VALUE, MAX_STEPS, MAX_SWEEPS, SEED_MAX, Sweep, Truth, as_pose,
                     check_steps, gigabytes, hardware_duration_s, work_bytes, work_refusal)
 from ..errors import TooBig
 from ..scenario import Scenario
@@ -116,6 +116,10 @@ class SimRing:
     """
 
     def __init__(self, scenario: Scenario, *, seed: int | None = None, pipeline=None):
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
+                                 or not 0 <= seed <= SEED_MAX):
+            # numpy's "expected non-negative integer" named no seed; 1.5 was taken as 1
+            raise ValueError(f"seed must be a whole number 0 … {SEED_MAX}, got {seed!r}")
         self.scenario = scenario
         self.ring = scenario.ring
         self.built = model_lib.build(scenario)
