@@ -44,29 +44,33 @@ def test_mcap_never_replaces_a_file_that_is_not_an_mcap(tmp_path, capsys):
     assert empty.read_bytes() != mcap
 
 
-def _replaying(dev, cmd):
+def _replaying(numbered_on: bool):
     """A correct device for its first sweep; every later sweep it sends the first one's
-    sentences again, byte for byte (seq, clock and counts)."""
-    if isinstance(cmd, p.SweepCommand) and getattr(dev, "first", None) is not None:
-        dev.send(dev.first)
-        return
-    sent, send = [], dev.send
-    dev.send = lambda data: (sent.append(data), send(data))
-    try:
+    readings again: its sentences byte for byte, or (``numbered_on``) with new seq numbers."""
+    def behaviour(dev, cmd):
+        if isinstance(cmd, p.SweepCommand) and getattr(dev, "first", None) is not None:
+            base = dev.seq if numbered_on else dev.first   # the seq of its first IRSCN
+            for i, step in enumerate(range(cmd.from_step, cmd.to_step + 1)):
+                # the first sweep's clock: hd.scan reads at clock0 + seq
+                dev.send(hd.scan(base + i, step, clock0=1000 + dev.first - base))
+            dev.seq += numbered_on * (cmd.to_step - cmd.from_step + 1)
+            dev.send(hd.line(f"IRDON,{dev.seq - 1}"))
+            return
+        if isinstance(cmd, p.SweepCommand):
+            dev.first = dev.seq
         hd.good(dev, cmd)
-    finally:
-        dev.send = send
-    if isinstance(cmd, p.SweepCommand):
-        dev.first = b"".join(sent)
+    return behaviour
 
 
-def test_a_device_that_replays_its_last_sweep_is_not_read_as_a_new_one(tmp_path):
-    """A device answering pose 2's IRSWP with pose 1's sentences, byte for byte, was taken
-    as a device that rebooted and renumbered: pose 2 got pose 1's readings, 'all 5 steps
-    received; clean link' (a drive at t_room's four poses: F1 0.995 -> 0.658, exit 0). A
-    reboot numbers from 0 again too, but its clock starts anew and its counts are new
-    readings (hd.reboots_between_sweeps, still kept in tests/test_hostile.py)."""
-    dev = hd.HostileDevice(_replaying)
+@pytest.mark.parametrize("numbered_on", [False, True])
+def test_a_device_that_replays_its_last_sweep_is_not_read_as_a_new_one(numbered_on):
+    """A device answering pose 2's IRSWP with pose 1's sentences again, byte for byte, was
+    taken as a device that rebooted and renumbered, and with new seq numbers as a sweep:
+    pose 2 got pose 1's readings, 'all 5 steps received; clean link' (a drive at t_room's
+    four poses: F1 0.995 -> 0.658, exit 0). A device's clock runs on from sweep to sweep;
+    a reboot starts it anew with new readings (hd.reboots_between_sweeps, still kept in
+    tests/test_hostile.py)."""
+    dev = hd.HostileDevice(_replaying(numbered_on))
     try:
         with SerialRing(dev.link, timeout_s=0.15) as ring:
             got = pipeline.acquire(ring, [(0.5, 0.4, 0.0), (1.5, 0.4, 0.0)], progress=False)
@@ -76,12 +80,12 @@ def test_a_device_that_replays_its_last_sweep_is_not_read_as_a_new_one(tmp_path)
     assert got.sweeps[0].counts.tolist() == [hd.counts_for(s) for s in range(-2, 3)]
     assert isinstance(got.error, DeviceReplayed)
     assert str(got.error) == (
-        f"the ring on {dev.link} answered IRSWP,-2,2 with its last sweep again: 5 IRSCN repeat "
-        "that sweep's sentence for sentence (seq 0 … 4, device clock 1000 … 1004 ms, every "
-        "count alike), where a new sweep numbers on and its clock runs on: a firmware "
-        "replaying its buffer, not reading the sensors; not taken. Reset the board and sweep "
-        "this pose again. device replayed its last sweep: 0 of 5 steps received; missing "
-        "steps -2, -1, 0, 1, 2 (not invented, left out of the sweep); 5 stale IRSCN dropped")
+        f"the ring on {dev.link} answered the sweep of steps -2 … 2 with its last sweep's "
+        "readings again: 5 IRSCN repeat that sweep's steps, device clock (1000 … 1004 ms) and "
+        "counts, where a new sweep's clock runs on: a firmware replaying its buffer, not "
+        "reading the sensors; not taken. Reset the board and sweep this pose again. device "
+        "replayed its last sweep: 0 of 5 steps received; missing steps -2, -1, 0, 1, 2 (not "
+        "invented, left out of the sweep); 5 stale IRSCN dropped")
 
 
 def test_a_mistyped_option_before_the_scenario_is_named_alone(capsys, tmp_path, monkeypatch):

@@ -814,8 +814,8 @@ def test_stale_irscn_from_an_earlier_sweep_is_dropped():
         if len(sweeps) == 1:
             return [p.Scan(i, s, i, (i, i)) for i, s in enumerate(range(-3, 4))] + [p.Done(6)]
         late = p.Scan(5, 2, 5, (99, 99))  # a leftover of sweep 1 arriving late
-        return [late] + [p.Scan(7 + i, s, i, (i, i)) for i, s in enumerate(range(-3, 4))] \
-            + [p.Done(13)]
+        return [late] + [p.Scan(7 + i, s, 7 + i, (i, i)) for i, s in enumerate(range(-3, 4))] \
+            + [p.Done(13)]   # (its clock runs on: the same clock and counts are a replay)
     ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
     ring.sweep()
     second = ring.sweep()

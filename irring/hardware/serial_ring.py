@@ -773,6 +773,13 @@ class SerialRing:
                 for run in _runs(missing):
                     passes.append(_Pass(run))
                     self._pass(passes[-1], samples, settle_ms)
+            scans = [scan for ps in passes for scan in ps.got.values()]
+            if self._replayed(scans):
+                for ps in passes:
+                    ps.got.clear()   # not taken: the partial sweep holds none of them
+                self.stats.scans -= len(scans)
+                self.stats.stale += len(scans)   # readings of the last sweep, again
+                raise self._replay_error(scans, req)
         except (LinkLost, DeviceRejected, KeyboardInterrupt) as exc:
             # what arrived before the failure (or Ctrl-C) goes with the exception: a caller
             # keeps it (pipeline.acquire) instead of losing the readings
@@ -963,8 +970,6 @@ class SerialRing:
                     take(msg)
                 elif isinstance(msg, p.Done):
                     reverse = None if ps.got else _renumbered(suspects, ps, msg.seq)
-                    if reverse is not None and self._replayed(suspects):
-                        raise self._replay_error(suspects, lo, hi)
                     if reverse is not None:
                         # every IRSCN looked stale, but they and this IRDON number this very
                         # pass: the device numbers from elsewhere (it rebooted between sweeps,
@@ -1058,20 +1063,23 @@ class SerialRing:
                 deadline = now + wait_s
 
     def _replayed(self, scans: list[p.Scan]) -> bool:
-        """``scans`` (two or more) repeat the last sweep's, sentence for sentence: a rebooted
-        device numbers from 0 again too, but its clock starts anew and its counts are new
-        readings, where a replay repeats seq, clock and counts alike."""
-        return len(scans) > 1 and all(self._previous.get(sc.step) == sc for sc in scans)
+        """``scans`` (two or more) repeat the last sweep's readings, step for step, device
+        clock and counts alike (whatever their seq): a device's clock runs on from sweep to
+        sweep, and one that rebooted starts it anew with new readings, so only a firmware
+        sending its buffer again repeats both."""
+        def reading(scan: p.Scan | None) -> tuple | None:
+            return None if scan is None else (scan.t_ms, scan.counts)
+        return len(scans) > 1 and all(reading(self._previous.get(sc.step)) == reading(sc)
+                                      for sc in scans)
 
-    def _replay_error(self, scans: list[p.Scan], lo: int, hi: int) -> DeviceReplayed:
+    def _replay_error(self, scans: list[p.Scan], req: list[int]) -> DeviceReplayed:
         clocks = sorted(sc.t_ms for sc in scans)
         return DeviceReplayed(
-            f"the ring on {self.port_name} answered IRSWP,{lo},{hi} with its last sweep "
-            f"again: {len(scans)} IRSCN repeat that sweep's sentence for sentence (seq "
-            f"{scans[0].seq} … {scans[-1].seq}, device clock {clocks[0]} … {clocks[-1]} ms, "
-            "every count alike), where a new sweep numbers on and its clock runs on: a "
-            "firmware replaying its buffer, not reading the sensors; not taken. Reset the "
-            "board and sweep this pose again.")
+            f"the ring on {self.port_name} answered the sweep of steps {req[0]} … {req[-1]} "
+            f"with its last sweep's readings again: {len(scans)} IRSCN repeat that sweep's "
+            f"steps, device clock ({clocks[0]} … {clocks[-1]} ms) and counts, where a new "
+            "sweep's clock runs on: a firmware replaying its buffer, not reading the sensors; "
+            "not taken. Reset the board and sweep this pose again.")
 
     def _inconsistent(self, why: str, n: int = 1) -> None:
         """Count ``n`` IRSCN dropped as inconsistent; the sweep's report names the first."""
