@@ -285,31 +285,54 @@ _WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG,
 
 
 MCAP_FILE = "MCAP file"   # ``writes`` of an MCAP: it replaces nothing but an MCAP
+CHART_FILE = "calibration chart"   # the picture irring calibrate writes beside its file
+CHART_SOFTWARE = "irring calibrate"   # its PNG's Software field, which tells it
+# what each kind of file irring writes over an existing one (it replaces only its own kind)
+_OWN_KIND = {MCAP_FILE: "an MCAP", CHART_FILE: "a calibration chart",
+             "calibration file": "a calibration file",
+             "calibration progress file": "a calibration progress file"}
+
+
+def _chart(path: Path) -> bool:
+    """A PNG that irring calibrate drew (matplotlib's Software field: one drawn before it
+    named itself)."""
+    from PIL import Image   # deferred: Pillow
+
+    try:
+        with Image.open(path) as im:
+            made_by = str(im.info.get("Software", ""))
+    except Exception:   # not a picture Pillow reads
+        return False
+    return made_by.startswith((CHART_SOFTWARE, "Matplotlib"))
 
 
 def check_replaceable(path: str | Path, option: str | None = None,
                       writes: str | None = None) -> None:
     """:class:`OutputError` when ``path`` is an irring input file (a recording, scenario,
     study, calibration or progress file) of another kind than ``writes``: a slip of the
-    path (``calibrate --out my_room.yaml``) replaced it. An MCAP (``writes`` MCAP_FILE)
-    replaces only an MCAP or an empty file (``--mcap photo.png`` replaced the photo)."""
+    path (``calibrate --out my_room.yaml``) replaced it. A file of a kind in ``_OWN_KIND``
+    (an MCAP, a calibration, its chart, a progress file) replaces only one of its kind or an
+    empty file: ``--mcap photo.png`` and ``calibrate --out notes.txt`` replaced them."""
     path = Path(path)
     found = input_kind(path) if path.is_file() else None
     shown = printable(f"{option} {path}" if option else str(path))
     if found is not None and found[0] != writes:
         raise OutputError(f"{shown}: is {found[1]}; writing there would replace it: name "
                           "another file")
-    if writes == MCAP_FILE and path.is_file():
-        # an MCAP replaces only an MCAP (or an empty file): `--mcap photo.png` lost the photo
-        try:
-            with open(path, "rb") as f:
-                head = f.read(len(MCAP_MAGIC))
-        except OSError:
-            return   # unreadable: the write itself says why
-        if head and not head.startswith(MCAP_MAGIC):
-            what = not_text(head) or "a file"
-            raise OutputError(f"{shown}: is {what}, not an MCAP; writing there would replace "
-                              "it (an MCAP replaces only an MCAP): name another file")
+    own = _OWN_KIND.get(writes)
+    if own is None or not path.is_file():
+        return
+    try:
+        with open(path, "rb") as f:
+            head = f.read(64)
+    except OSError:
+        return   # unreadable: the write itself says why
+    if not head or (head.startswith(MCAP_MAGIC) if writes == MCAP_FILE else
+                    _chart(path) if writes == CHART_FILE else found is not None):
+        return
+    what = not_text(head) or "a file"
+    raise OutputError(f"{shown}: is {what}, not {own}; writing there would replace it ({own} "
+                      f"replaces only {own}): name another file")
 
 
 @contextlib.contextmanager

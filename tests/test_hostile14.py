@@ -194,3 +194,34 @@ def test_the_python_api_names_the_bad_argument(tmp_path):
     with pytest.raises(ValueError, match=r"^a recording holds 1 … 10000 sweeps, got 0$"):
         save_recording(tmp_path / "none.npz", [])
     assert list(tmp_path.iterdir()) == [] and not tmp_path.with_suffix(".npz").exists()
+
+
+def test_calibrate_never_replaces_a_file_that_is_not_its_own_kind(tmp_path, capsys):
+    """`calibrate --out photo.png` replaced the photo with a calibration's YAML (and wrote
+    photo.png.png beside it), `--out notes.txt` the notes, exit 0; `--out rig.yaml` replaced
+    the user's rig.png with its chart. A calibration, its chart and an empty file are
+    replaced as before."""
+    photo = tmp_path / "photo.png"
+    photo.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes\n")
+    rig = tmp_path / "rig.png"
+    rig.write_bytes(photo.read_bytes())
+    before = {p: p.read_bytes() for p in (photo, notes, rig)}
+    for out, what in ((photo, "--out {}: is a PNG picture, not a calibration file"),
+                      (notes, "--out {}: is a file, not a calibration file"),
+                      (tmp_path / "rig.yaml", f"--out {{}}'s picture {rig}: is a PNG picture, "
+                                              "not a calibration chart")):
+        assert main(["calibrate", "--scenario", "t_room", "--out", str(out)]) == 4
+        kind = "a calibration chart" if out.suffix == ".yaml" else "a calibration file"
+        assert capsys.readouterr().err == (
+            f"irring calibrate: error: {what.format(out)}; writing there would replace it "
+            f"({kind} replaces only {kind}): name another file\n")
+    assert {p: p.read_bytes() for p in before} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt", "photo.png", "rig.png"]
+    cal = tmp_path / "cal.yaml"
+    cal.write_bytes(b"")
+    assert main(["calibrate", "--scenario", "t_room", "--out", str(cal)]) == 0
+    first = (cal.read_bytes(), (tmp_path / "cal.png").read_bytes())
+    assert main(["calibrate", "--scenario", "t_room", "--out", str(cal), "--seed", "3"]) == 0
+    assert cal.read_bytes() != first[0] and (tmp_path / "cal.png").read_bytes() != first[1]

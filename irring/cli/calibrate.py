@@ -14,7 +14,7 @@ from .. import errors, gp2
 from ..estimation import calibration_chart
 from ..estimation.calibration import (CalibrationAborted, CalibrationError, GuidedCalibration,
                                       SimulatedRig, load_progress, save_progress)
-from ..outputs import check_out, check_replaceable
+from ..outputs import CHART_FILE, check_out, check_replaceable
 from ..core import MAX_SWEEPS
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ._common import (add_protocol_v1_option, at_least, between, describe, out_path, seed,
@@ -121,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     spare_inputs({"--out": out, "its picture": picture_path(out)},
                  {"--scenario": args.scenario, "--resume": args.resume})
     check_replaceable(out, "--out", "calibration file")   # before the rig, not after
+    check_replaceable(picture_path(out), f"--out {out}'s picture", CHART_FILE)
     scenario = load_scenario(args.scenario)
     why = _cannot_calibrate(scenario, simulated=args.port is None)
     if why:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import gp2
-from ..outputs import atomic_file
+from ..outputs import CHART_FILE, CHART_SOFTWARE, atomic_file
 from .calibration import Fitted
 
 SIZE_IN = (11.0, 8.5)   # the figure (inches) …
@@ -105,6 +105,6 @@ def save_png(path: str | Path, fitted: Fitted, title: str) -> Path:
     bottom.set_xlabel("distance from the sensor to the wall along the beam (mm)")
     bottom.set_xlim(0.0, hi * 1.08)
     fig.suptitle(title, fontsize=11)
-    with atomic_file(path) as tmp:
-        fig.savefig(tmp, dpi=DPI, format="png")
+    with atomic_file(path, writes=CHART_FILE) as tmp:
+        fig.savefig(tmp, dpi=DPI, format="png", metadata={"Software": CHART_SOFTWARE})
     return Path(path)
