@@ -177,28 +177,36 @@ class MapRun:
 
 
 def stuck_sensors(sweeps: Sequence[Sweep], points: Sequence[Points]) -> list[str]:
-    """A warning for each sensor whose every reading, at two or more poses, is one count that
+    """A warning for the sensors whose every reading, at two or more poses, is one count that
     the estimator maps as wall: a turning sensor reads the room's changing distances (and its
     noise), so one count all round is a stuck sensor or a dead ADC channel, whose ring of
-    wall the map would show. Silence all round (no return) is not warned of: a sensor that
-    meets no wall within its reach reads so too, and maps nothing."""
+    wall the map would show (one line for the sensors stuck at one count). Silence all round
+    (no return) is not warned of: a sensor that meets no wall within its reach reads so too,
+    and maps nothing."""
     poses = {tuple(np.asarray(s.pose, float).round(6)) for s in sweeps}
     if len(poses) < 2 or len(points) != len(sweeps):
         return []
     counts = np.concatenate([np.asarray(s.counts).reshape(len(s.steps), -1) for s in sweeps])
     valid = np.concatenate([p.valid.reshape(len(s.steps), -1) for s, p in zip(sweeps, points)])
     d = np.concatenate([p.d.reshape(len(s.steps), -1) for s, p in zip(sweeps, points)])
-    out = []
+    stuck: dict[int, list[int]] = {}   # count → the sensors stuck at it
     for k in range(counts.shape[1]):
         col = counts[:, k]
-        if not (col == col[0]).all() or not valid[:, k].any():
-            continue
-        out.append(f"sensor {k} (of 0 … {counts.shape[1] - 1}) read {int(col[0])} counts at "
-                   f"every one of its {col.size} readings, at {len(poses)} poses, where a "
-                   f"turning sensor's counts follow the room: a stuck sensor or a dead ADC "
-                   f"channel reads so. {int(valid[:, k].sum())} of them are mapped as wall "
-                   f"{np.nanmedian(d[:, k]) * 1000:.0f} mm out all round; check the sensor's "
-                   "connector and its ADC channel")
+        if (col == col[0]).all() and valid[:, k].any():
+            stuck.setdefault(int(col[0]), []).append(k)
+    out = []
+    for count, ks in stuck.items():
+        who = (f"sensor {ks[0]}" if len(ks) == 1 else
+               f"sensors {', '.join(map(str, ks))}")
+        each = "" if len(ks) == 1 else " each"
+        out.append(f"{who} (of 0 … {counts.shape[1] - 1}) read {count} counts at every one "
+                   f"of {'its' if len(ks) == 1 else 'their'} {len(counts)} readings{each}, at "
+                   f"{len(poses)} poses, where a turning sensor's counts follow the room: a "
+                   f"stuck sensor or a dead ADC channel reads so. {int(valid[:, ks].sum())} of "
+                   f"them are mapped as wall {np.nanmedian(d[:, ks]) * 1000:.0f} mm out all "
+                   "round; check " + ("the sensor's connector and its ADC channel" if len(ks) == 1
+                                      else "their connectors, ADC channels and the ADC's "
+                                      "reference"))
     return out
 
 

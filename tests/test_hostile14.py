@@ -133,9 +133,19 @@ def test_a_sensor_stuck_at_one_count_is_warned_of(tmp_path, capsys):
     assert main(["replay", str(stuck), "--out", str(tmp_path / "r"), "--no-animation",
                  "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["stuck_sensors"] == [said]
+    for sweep in sweeps:   # two stuck at one count (say, 1500): one line names both
+        sweep.counts[:, [3, 7]] = 1500
+    two = save_recording(tmp_path / "two.npz", sweeps, meta)
+    assert main(["replay", str(two), "--out", str(tmp_path / "r"), "--no-animation",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["stuck_sensors"] == [
+        "sensors 3, 7 (of 0 … 11) read 1500 counts at every one of their 284 readings each, "
+        "at 4 poses, where a turning sensor's counts follow the room: a stuck sensor or a dead "
+        "ADC channel reads so. 568 of them are mapped as wall 142 mm out all round; check "
+        "their connectors, ADC channels and the ADC's reference"]
     # silent all round (no return) maps nothing and is not warned of
     for sweep in sweeps:
-        sweep.counts[:, 3] = 0
+        sweep.counts[:, [3, 7]] = 0
     silent = save_recording(tmp_path / "silent.npz", sweeps, meta)
     assert main(["replay", str(silent), "--out", str(tmp_path / "s"), "--no-animation"]) == 0
     assert "warning" not in capsys.readouterr().out
