@@ -196,6 +196,7 @@ def _describe_link(link: dict[str, int], dropped: str | None = None,
     names = {"checksum_failures": "checksum failures", "malformed": "malformed sentences",
              "lost_scans": "IRSCN lost", "seq_gaps": "seq gaps", "timeouts": "timeouts",
              "inconsistent": "inconsistent IRSCN dropped", "stale": "stale IRSCN dropped",
+             "out_of_order": "IRSCN late (after a later one)",
              "duplicates": "duplicates", "device_errors": "IRERR answers",
              "resent_commands": "commands resent", "resweeps": "re-sweeps",
              "disconnects": "disconnects", "clock_faults": "device clock faults",
@@ -912,7 +913,9 @@ class SerialRing:
                 return
             gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) % p.SEQ_MODULO
             if gap >= p.SEQ_MODULO // 2:
-                self.stats.out_of_order += 1   # an earlier IRSCN, late: no loss
+                # an earlier IRSCN, late: the gap its seq left counted it lost, but it came
+                self.stats.out_of_order += 1
+                self.stats.lost_scans -= self.stats.lost_scans > 0
             else:
                 if gap:
                     self.stats.seq_gaps += 1
