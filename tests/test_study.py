@@ -609,3 +609,21 @@ def test_a_folder_of_rooms_is_its_yaml_files_in_name_order(tmp_path, monkeypatch
     assert str(pipe.value) == (
         "sub/st.yaml: scenarios[0]: sub/rooms/c_pipe.yaml: is a pipe, socket or device, not "
         "a scenario file; a folder's rooms are its regular *.yaml files")
+
+
+def test_a_resumed_study_says_which_kept_runs_it_left_out_of_the_summary(tmp_path, capsys):
+    """A study cut down and resumed (a design dropped, seeds added) printed "6 run(s) in
+    results.csv: ran 2 (2 already in the file)" above a table of 4 runs: the dropped
+    design's 2 rows stay in the file, unsummarised, and nothing said so (newuser15)."""
+    spec = write(tmp_path, "designs: [radial12, rotating12]\nscenarios: [l_room_post.yaml]\n"
+                           "seeds: [3, 11]\n")
+    out = tmp_path / "out"
+    assert main(["study", str(spec), "--workers", "1", "--out", str(out)]) == 0
+    capsys.readouterr()
+    spec.write_text("designs: [radial12]\nscenarios: [l_room_post.yaml]\nseeds: [3, 11, 12]\n")
+    assert main(["study", str(spec), "--workers", "1", "--out", str(out), "--resume"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert re.fullmatch(
+        rf"5 run\(s\) in {re.escape(str(out / 'results.csv'))}: ran 1 in \d+\.\d s, "
+        rf"\d+\.\d runs/s \(2 already in the file; 2 run\(s\) of grid points no longer in "
+        rf"{re.escape(str(spec))}: kept in the file, left out of the summary\)", first), first

@@ -98,7 +98,13 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(records, indent=2))
         return 0
     ran = result["ran"]
-    kept = f" ({result['done_before']} already in the file)" if result["done_before"] else ""
+    kept = [f"{result['done_before']} already in the file"] if result["done_before"] else []
+    # a resumed study whose file lost a design, room or seed keeps those rows, unsummarised
+    outside = len(result["rows"]) - result["done_before"] - ran
+    if outside:
+        kept.append(f"{outside} run(s) of grid points no longer in "
+                    f"{errors.printable(args.file)}: kept in the file, left out of the summary")
+    kept = f" ({'; '.join(kept)})" if kept else ""
     rate = f", {ran / wall:.1f} runs/s" if ran else ""
     print(f"{len(result['rows'])} run(s) in {errors.printable(str(out / study.RESULTS))}: ran {ran} in {wall:.1f} s"
           f"{rate}{kept}")
