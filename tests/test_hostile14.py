@@ -11,7 +11,7 @@ import pytest
 import hostile_devices as hd
 from irring import pipeline
 from irring.cli import main
-from irring.hardware import DeviceReplayed, SerialRing
+from irring.hardware import DeviceReplayed, HandshakeError, SerialRing
 from irring.hardware import protocol as p
 from irring.recording import load_recording, save_recording
 
@@ -265,3 +265,26 @@ def test_an_irscn_that_arrives_late_is_not_counted_lost():
     assert sweep.counts.tolist() == [hd.counts_for(s) for s in range(-2, 3)]
     assert (report.link["lost_scans"], report.link["out_of_order"]) == (0, 1)
     assert report.message == "all 5 steps received; 1 seq gaps, 1 IRSCN late (after a later one)"
+
+
+def _wrong_baud(dev, cmd):
+    """A ring at another baud rate: each byte of its IRINF arrives as another byte, top bit
+    set (a UART reading a slower line sees each start bit and few of the data bits)."""
+    dev.send(bytes(0x80 | (b >> 1) for b in hd.info()))
+
+
+def test_a_device_at_another_baud_rate_is_told_so():
+    """A ring at another baud rate than the port's answers every IRHLO with bytes that no
+    IRR sentence holds; the handshake said only '… 129 stray bytes seen', among five things
+    to check."""
+    dev = hd.HostileDevice(_wrong_baud)
+    try:
+        with pytest.raises(HandshakeError) as e:
+            SerialRing(dev.link, timeout_s=0.15).open()
+    finally:
+        dev.close()
+    n = 3 * len(hd.info())   # three IRHLO, each answered
+    assert str(e.value).endswith(
+        f"(0 checksum failures, 0 malformed sentences, {n} stray bytes seen). {n} of the {n} "
+        "bytes that came are not printable ASCII, which an IRR sentence never holds: the mark "
+        "of a device at another baud rate than this port's; try the ring's with --baud")

@@ -210,6 +210,8 @@ def _describe_link(link: dict[str, int], dropped: str | None = None,
 # --------------------------------------------------------------------------- driver
 
 
+MISMATCH_MIN_BYTES = 16   # bytes, most of them not ASCII, before a baud mismatch is named
+_SENTENCE_BYTES = bytes(range(0x20, 0x7F)) + b"\r\n"   # all an IRR sentence is made of
 PORT_LOCKED = ("another program has it open and locked (an irring drive or calibrate still "
                "running on it?)")
 
@@ -378,6 +380,7 @@ class SerialRing:
         self._refused_info: p.ProtocolError | None = None  # an intact IRINF out of range
         self._misframed_info: list[bytes] = []  # IRINF answers rejected for their framing
         self._rx_bytes = 0     # bytes read from the port, all told (silence is none arriving)
+        self._not_ascii = 0    # of them, bytes no IRR sentence holds (not printable ASCII)
         self.stats = LinkStats()
         self.info: p.Info | None = None
         self.ring: Ring | None = None
@@ -480,6 +483,7 @@ class SerialRing:
         if not chunk:
             return []
         self._rx_bytes += len(chunk)
+        self._not_ascii += len(chunk.translate(None, _SENTENCE_BYTES))
         before = self.decoder.ignored_bytes
         out = []
         for item in self.decoder.feed(chunk):
@@ -603,7 +607,11 @@ class SerialRing:
             f"({self.stats.checksum_failures} checksum failures, {self.stats.malformed} "
             f"malformed sentences, {self.stats.ignored_bytes} stray bytes seen)."
             + (" Sentences that arrive garbled point at line noise or a loose cable."
-               if self.stats.checksum_failures + self.stats.malformed else ""))
+               if self.stats.checksum_failures + self.stats.malformed else "")
+            + (f" {self._not_ascii} of the {self._rx_bytes} bytes that came are not printable "
+               "ASCII, which an IRR sentence never holds: the mark of a device at another baud rate "
+               "than this port's; try the ring's with --baud"
+               if self._not_ascii * 2 > self._rx_bytes >= MISMATCH_MIN_BYTES else ""))
 
     def _hello_v1(self) -> p.Info | None:
         """IRHLO in v1 framing, after v1-framed sentences answered a v2 one: the IRINF of
