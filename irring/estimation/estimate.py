@@ -652,6 +652,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     else:
         split = label
     points = censored_lines(points, split, counts, steps, cal)
+    snap_label = None
     if snap:
         # a part read to its own range: the overlapping lines of one wall fitted as one
         snap_label = (fused_lines(points, split) if read_to_own_range(cal, points.max_range_m)
@@ -665,8 +666,12 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     pooled = (points.valid & (counts < cal.no_return_counts + cal.return_margin_counts)
               if read_to_own_range(cal, points.max_range_m) else None)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
+    # dim returns beside a line's members put on it once every rule above has decided
+    # (snap_label None: a fold-over's judging pass keeps its lines as fitted)
     if not (detail or silent or (pooled is not None and pooled.any())):
-        return Estimate(points=points, lines=None, theta_history=tuple(history))
+        return Estimate(points=dim_returns_on_lines(points, snap_label, counts, raw_counts,
+                                                    steps, cal),
+                        lines=None, theta_history=tuple(history))
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                          alpha=grouping.alpha, usable=grouping.usable)
     used = index if grouping.uidx is None else index.take(grouping.uidx)
@@ -684,8 +689,123 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
             reach_m = points.reach_m if reach_m is None else np.fmin(points.reach_m, reach_m)
         points = silent_reach(beside(points_with(points, reach_m=reach_m), counts, cal,
                                      options, found.label), cal)
+    points = dim_returns_on_lines(points, snap_label, counts, raw_counts, steps, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
+
+
+DIM_CHAIN = 3      # a dim return this many of its sensor's readings from a line's member …
+DIM_SIGMAS = 1.5   # … whose counts lie within this many count σ of the line's at its beam …
+DIM_REACH_M = 0.1  # … where it meets the line this near that member's end point …
+DIM_INCIDENCE_RAD = math.radians(50)  # … and less steeply than this (steeper, the line's
+#                                       counts fall fast enough to match anything dim)
+
+
+def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.ndarray,
+                         raw_counts: np.ndarray | None, steps: np.ndarray, cal: Calibration
+                         ) -> Points:
+    """``points`` with each dim return put on the line beside it, where a part is read to its
+    own range: a reading OUT_OF_RANGE by its counts alone (between the no-return and the
+    return margins above the no-return level) at most ``DIM_CHAIN`` readings of its sensor
+    (in step order, only such readings between) from a valid member of a line of
+    ≥ ``SNAP_MIN`` (``label`` (S, N), the snap's; None: ``points`` as given), whose beam
+    meets that line (fitted to its members' end points) within range, at less than
+    ``DIM_INCIDENCE_RAD`` (and the drop-out angle) and within ``DIM_REACH_M`` of that
+    member's end point, where the line's counts at that distance and incidence lie within
+    ``DIM_SIGMAS`` count σ of its own (``raw_counts``, else ``counts``). It takes that
+    distance, the incidence and the member's σ. Numpy, shared by both estimators. Why: a far
+    wall's returns near the return level are dropped one by one, most at its ends
+    (docs/estimator.md, "Dim returns beside a line")."""
+    if label is None or not read_to_own_range(cal, points.max_range_m):
+        return points
+    c = np.asarray(counts if raw_counts is None else raw_counts, dtype=float)
+    level = cal.no_return_counts
+    dim = ((points.reason == _OUT_OF_RANGE) & (c > level + cal.no_return_margin_counts)
+           & (c <= level + cal.return_margin_counts))
+    if not dim.any():
+        return points
+    member = points.valid & (label >= 0)
+    if not member.any():
+        return points
+    g = label[member]
+    n = np.bincount(g)
+    member[member] = n[g] >= SNAP_MIN
+    if not member.any():
+        return points
+    g = label[member]
+    n = np.bincount(g)
+    nn = np.maximum(n, 1)
+    x, y = points.x[member], points.y[member]
+    mx, my = np.bincount(g, x) / nn, np.bincount(g, y) / nn
+    u, v = x - mx[g], y - my[g]
+    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n.size),
+                             np.bincount(g, u * u, n.size) - np.bincount(g, v * v, n.size))
+    nx, ny = -np.sin(alpha), np.cos(alpha)
+    # in step order: each dim reading's nearest member either way with only dim readings
+    # between, at most DIM_CHAIN readings away
+    order = rows_in_step_order(steps)
+    lab_o = np.where(member, label, -1)[order]
+    dim_o = dim[order]
+    rows = np.arange(order.size)[:, None]
+    stop = (lab_o >= 0) | ~dim_o
+    best = np.full(dim_o.shape, np.inf)
+    t_best = np.zeros(dim_o.shape)
+    inc_best = np.zeros(dim_o.shape)
+    sig_best = np.zeros(dim_o.shape)
+    ox, oy = points.origin_x[order], points.origin_y[order]
+    px, py, c_o = points.x[order], points.y[order], c[order]
+    ch, sh = np.cos(points.heading[order]), np.sin(points.heading[order])
+    sig_o = points.sigma_m[order]
+    sc = cal.sigma_counts()
+    last = order.size - 1
+    for flip in (False, True):
+        # the nearest stop at or before each row (after it, flipped), its distance in rows
+        st = stop[::-1] if flip else stop
+        near = np.maximum.accumulate(np.where(st, rows, -1), axis=0)
+        gap = rows - near
+        if flip:
+            near = np.where(near >= 0, last - near, -1)[::-1]
+            gap = gap[::-1]
+        cols = np.broadcast_to(np.arange(dim_o.shape[1]), dim_o.shape)
+        j = np.maximum(near, 0)
+        L = lab_o[j, cols]
+        ask = dim_o & (near >= 0) & (L >= 0) & (gap <= DIM_CHAIN)
+        if not ask.any():
+            continue
+        Lk = L[ask]
+        un = ch[ask] * nx[Lk] + sh[ask] * ny[Lk]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((mx[Lk] - ox[ask]) * nx[Lk] + (my[Lk] - oy[ask]) * ny[Lk]) / un
+        inc = np.arccos(np.minimum(np.abs(un), 1.0))
+        at_x, at_y = ox[ask] + t * ch[ask], oy[ask] + t * sh[ask]
+        jr = j[ask]
+        jc = np.nonzero(ask)[1]
+        reach = np.hypot(at_x - px[jr, jc], at_y - py[jr, jc])
+        ok = (np.isfinite(t) & (t >= cal.min_range_m) & (t <= points.max_range_m)
+              & (inc < min(cal.max_incidence_rad, DIM_INCIDENCE_RAD))
+              & (reach <= DIM_REACH_M))
+        miss = np.full(t.shape, np.inf)
+        if ok.any():
+            miss[ok] = np.abs(c_o[ask][ok] - cal.counts(t[ok], inc[ok])) / sc
+        better = ok & (miss <= DIM_SIGMAS) & (miss < best[ask])
+        if better.any():
+            at = tuple(a[better] for a in np.nonzero(ask))
+            best[at] = miss[better]
+            t_best[at], inc_best[at] = t[better], inc[better]
+            sig_best[at] = sig_o[j[at], at[1]]
+    put = np.isfinite(best)
+    if not put.any():
+        return points
+    back = np.empty_like(order)
+    back[order] = np.arange(order.size)
+    put, t_best, inc_best, sig_best = put[back], t_best[back], inc_best[back], sig_best[back]
+    d = np.where(put, t_best, points.d)
+    return points_with(
+        points, d=d, x=np.where(put, points.origin_x + d * np.cos(points.heading), points.x),
+        y=np.where(put, points.origin_y + d * np.sin(points.heading), points.y),
+        theta=np.where(put, inc_best, points.theta),
+        sigma_m=np.where(put, sig_best, points.sigma_m), valid=points.valid | put,
+        reason=np.where(put, Reason.OK, points.reason).astype(points.reason.dtype))
 
 
 EDGE_JUMP_M = 0.10  # a sensor's adjacent reading this much nearer: a nearer surface's edge
