@@ -113,3 +113,50 @@ def test_the_rule_is_off_where_silence_covers_the_range():
 
 def test_both_estimators_put_dim_returns_alike():
     assert_oracle_agrees([loads(DIM_A02)])
+
+
+# A 102 mm column 35 mm from the ring's housing in a 2182 × 1508 mm room, two poses, the
+# GP2Y0A21 read to its 800 mm with the fold-over effect (a fold-over room of our own).
+COLUMN_A21 = """\
+name: dim_column_a21
+seed: 7102
+room:
+  outline_mm: [[0, 0], [2182, 0], [2182, 1508], [0, 1508]]
+obstacles:
+  - {type: cylinder, center_mm: [2031, 706], radius_mm: 51}
+robot:
+  poses:
+    - {x_mm: 1801.7, y_mm: 650.4, yaw_deg: 37}
+    - {x_mm: 1939.3, y_mm: 490.7, yaw_deg: -20}
+sensor: {model: gp2y0a21}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_dim_return_beside_a_nearer_surfaces_edge_stays_out(monkeypatch):
+    """Seed 7102: a reading of the column's flank 0.49 m away at 60° is as dim as the wall
+    behind it at 0.68 m; the wall's line beside it would take it 187 mm long. Its sensor's
+    next valid reading the other way is the column, ``EDGE_JUMP_M`` nearer than where its
+    beam meets the wall's line: it stays OUT_OF_RANGE, and every reading the rule takes
+    lies within 20 mm of its true hit (7 of them)."""
+    scene = loads(COLUMN_A21)
+    cal, _ = pipeline.scene_calibration(scene)
+    sim, _ = pipeline.simulated(scene, progress=False)
+
+    def taken():
+        out = []
+        for sweep in sim.sweeps:
+            on = fast.estimate(sweep, cal)
+            with monkeypatch.context() as m:
+                _off(m)
+                off = fast.estimate(sweep, cal)
+            new = on.valid & ~off.valid
+            hit = sweep.truth.hit_point[new]
+            out += list(np.hypot(on.x[new] - hit[:, 0], on.y[new] - hit[:, 1]))
+        return np.array(out)
+
+    err = taken()
+    assert err.size == 7 and err.max() < 0.020
+    monkeypatch.setattr(fast, "EDGE_JUMP_M", np.inf)
+    err = taken()
+    assert err.size == 8 and 0.18 < err.max() < 0.19

@@ -589,8 +589,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
     oracle passes its numpy statements of both; never past ``cal.silent_range_m``:
-    :func:`silent_reach`) and, with ``detail``, the :class:`Lines`. Line members are first
-    moved out by what the return level cut off their lines (:func:`censored_lines`).
+    :func:`silent_reach`), last (``snap`` only) dim returns beside a line's members put on it
+    (:func:`dim_returns_on_lines`) and, with ``detail``, the :class:`Lines`. Line members are
+    first moved out by what the return level cut off their lines (:func:`censored_lines`).
     ``profiler``: the readings' range profiles (the compiled :func:`profiles_compiled` by
     default; the oracle passes its numpy statement :func:`range_profiles`); ``voter`` and
     ``post_grouper``: the short far lines' vote and the far posts' groups (compiled by
@@ -710,8 +711,9 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
     (in step order, only such readings between) from a valid member of a line of
     ≥ ``SNAP_MIN`` (``label`` (S, N), the snap's; None: ``points`` as given), whose beam
     meets that line (fitted to its members' end points) within range, at less than
-    ``DIM_INCIDENCE_RAD`` (and the drop-out angle) and within ``DIM_REACH_M`` of that
-    member's end point, where the line's counts at that distance and incidence lie within
+    ``DIM_INCIDENCE_RAD`` (and the drop-out angle), within ``DIM_REACH_M`` of that
+    member's end point and not past a valid reading ``EDGE_JUMP_M`` nearer at the first
+    stop the other way (a nearer surface's edge), where the line's counts at that distance and incidence lie within
     ``DIM_SIGMAS`` count σ of its own (``raw_counts``, else ``counts``). It takes that
     distance, the incidence and the member's σ. Numpy, shared by both estimators. Why: a far
     wall's returns near the return level are dropped one by one, most at its ends
@@ -758,6 +760,9 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
     sig_o = points.sigma_m[order]
     sc = cal.sigma_counts()
     last = order.size - 1
+    valid_o, d_o = points.valid[order], points.d[order]
+    cols = np.broadcast_to(np.arange(dim_o.shape[1]), dim_o.shape)
+    sides = []
     for flip in (False, True):
         # the nearest stop at or before each row (after it, flipped), its distance in rows
         st = stop[::-1] if flip else stop
@@ -766,7 +771,13 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
         if flip:
             near = np.where(near >= 0, last - near, -1)[::-1]
             gap = gap[::-1]
-        cols = np.broadcast_to(np.arange(dim_o.shape[1]), dim_o.shape)
+        sides.append((near, gap))
+    for side in (0, 1):
+        near, gap = sides[side]
+        other = np.maximum(sides[1 - side][0], 0)
+        # the stop the other way, where it is a valid reading: no nearer surface's edge
+        other_d = np.where((sides[1 - side][0] >= 0) & valid_o[other, cols],
+                           d_o[other, cols], np.inf)
         j = np.maximum(near, 0)
         L = lab_o[j, cols]
         ask = dim_o & (near >= 0) & (L >= 0) & (gap <= DIM_CHAIN)
@@ -783,7 +794,7 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
         reach = np.hypot(at_x - px[jr, jc], at_y - py[jr, jc])
         ok = (np.isfinite(t) & (t >= cal.min_range_m) & (t <= points.max_range_m)
               & (inc < min(cal.max_incidence_rad, DIM_INCIDENCE_RAD))
-              & (reach <= DIM_REACH_M))
+              & (reach <= DIM_REACH_M) & (other_d[ask] >= t - EDGE_JUMP_M))
         miss = np.full(t.shape, np.inf)
         if ok.any():
             miss[ok] = np.abs(c_o[ask][ok] - cal.counts(t[ok], inc[ok])) / sc
