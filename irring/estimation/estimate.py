@@ -709,7 +709,8 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
     own range: a reading OUT_OF_RANGE by its counts alone (between the no-return and the
     return margins above the no-return level) at most ``DIM_CHAIN`` readings of its sensor
     (in step order, only such readings between) from a valid member of a line of
-    ≥ ``SNAP_MIN`` (``label`` (S, N), the snap's; None: ``points`` as given), whose beam
+    ≥ ``SNAP_MIN`` (``label`` (S, N), the snap's; None, or a scene that folds over:
+    ``points`` as given), whose beam
     meets that line (fitted to its members' end points) within range, at less than
     ``DIM_INCIDENCE_RAD`` (and the drop-out angle), within ``DIM_REACH_M`` of that
     member's end point and not past a valid reading ``EDGE_JUMP_M`` nearer at the first
@@ -718,8 +719,8 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
     distance, the incidence and the member's σ. Numpy, shared by both estimators. Why: a far
     wall's returns near the return level are dropped one by one, most at its ends
     (docs/estimator.md, "Dim returns beside a line")."""
-    if label is None or not read_to_own_range(cal, points.max_range_m):
-        return points
+    if label is None or cal.folds or not read_to_own_range(cal, points.max_range_m):
+        return points     # (where readings may fold over, the branches' lines stay as decided)
     c = np.asarray(counts if raw_counts is None else raw_counts, dtype=float)
     level = cal.no_return_counts
     dim = ((points.reason == _OUT_OF_RANGE) & (c > level + cal.no_return_margin_counts)
