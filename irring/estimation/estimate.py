@@ -664,6 +664,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     if snap:
         # a thin post far away: its few readings, several sensors', fitted as one circle
         points = far_posts(points, label, counts, steps, cal, post_grouper)
+        points = unplaced_alone(points, split)
     pooled = (points.valid & (counts < cal.no_return_counts + cal.return_margin_counts)
               if read_to_own_range(cal, points.max_range_m) else None)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
@@ -818,6 +819,22 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
         theta=np.where(put, inc_best, points.theta),
         sigma_m=np.where(put, sig_best, points.sigma_m), valid=points.valid | put,
         reason=np.where(put, Reason.OK, points.reason).astype(points.reason.dtype))
+
+
+# a reading on no line placed no better than this is not placed: its θ, from its own
+# sensor's neighbours alone, puts it anywhere within several σ (docs/estimator.md, "A reading
+# on no line placed no better than uncertain")
+ALONE_PLACED_SIGMA_M = 2 * UNCERTAIN_SIGMA_M
+
+
+def unplaced_alone(points: Points, label: np.ndarray) -> Points:
+    """``points`` with each valid reading on no line (``label`` (S, N) < 0), placed at a θ
+    its own profile gave (θ ≠ 0: a post's or an undecided reading's θ = 0 keeps its doubt as
+    σ), whose σ exceeds :data:`ALONE_PLACED_SIGMA_M` made INCIDENCE_UNKNOWN."""
+    gone = (points.valid & (np.asarray(label).reshape(points.valid.shape) < 0)
+            & (points.sigma_m > ALONE_PLACED_SIGMA_M) & (points.theta != 0.0))
+    return invalidated(points, gone.reshape(-1).nonzero()[0], Reason.INCIDENCE_UNKNOWN) \
+        if gone.any() else points
 
 
 EDGE_JUMP_M = 0.10  # a sensor's adjacent reading this much nearer: a nearer surface's edge
