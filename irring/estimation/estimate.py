@@ -711,12 +711,12 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
     return margins above the no-return level) at most ``DIM_CHAIN`` readings of its sensor
     (in step order, only such readings between) from a valid member of a line of
     ≥ ``SNAP_MIN`` (``label`` (S, N), the snap's; None, or a scene that folds over:
-    ``points`` as given), whose beam
-    meets that line (fitted to its members' end points) within range, at less than
-    ``DIM_INCIDENCE_RAD`` (and the drop-out angle), within ``DIM_REACH_M`` of that
-    member's end point and not past a valid reading ``EDGE_JUMP_M`` nearer at the first
-    stop the other way (a nearer surface's edge), where the line's counts at that distance and incidence lie within
-    ``DIM_SIGMAS`` count σ of its own (``raw_counts``, else ``counts``). It takes that
+    ``points`` as given), whose beam meets that line (fitted to its members' end points)
+    within range, at less than ``DIM_INCIDENCE_RAD`` (and the drop-out angle), within
+    ``DIM_REACH_M`` of that member's end point and not past a valid reading ``EDGE_JUMP_M``
+    nearer at the first stop the other way (a nearer surface's edge), where the line's
+    counts at that distance and incidence lie within ``DIM_SIGMAS`` count σ of its own
+    (``raw_counts``, else ``counts``). It takes that
     distance, the incidence and the member's σ. Numpy, shared by both estimators. Why: a far
     wall's returns near the return level are dropped one by one, most at its ends
     (docs/estimator.md, "Dim returns beside a line")."""
