@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import os
+import signal
 
 import pytest
 import yaml
@@ -14,6 +15,12 @@ from hypothesis import settings
 settings.register_profile("ci", derandomize=True, deadline=None)
 if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
     settings.load_profile("ci")
+
+# A suite started in the background of a script (`cmd &`) or under nohup inherits SIGINT or
+# SIGHUP ignored, and the tests of Ctrl-C and of a hung-up terminal (test_hostile) then saw
+# neither; they need both as a terminal delivers them, here and in the commands they start
+signal.signal(signal.SIGINT, signal.default_int_handler)
+signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
 from irring import scenario as scenario_lib
 
