@@ -190,10 +190,8 @@ def stuck_sensors(sweeps: Sequence[Sweep], points: Sequence[Points]) -> list[str
     valid = np.concatenate([p.valid.reshape(len(s.steps), -1) for s, p in zip(sweeps, points)])
     d = np.concatenate([p.d.reshape(len(s.steps), -1) for s, p in zip(sweeps, points)])
     stuck: dict[int, list[int]] = {}   # count → the sensors stuck at it
-    for k in range(counts.shape[1]):
-        col = counts[:, k]
-        if (col == col[0]).all() and valid[:, k].any():
-            stuck.setdefault(int(col[0]), []).append(k)
+    for k in np.flatnonzero((counts == counts[0]).all(axis=0) & valid.any(axis=0)):
+        stuck.setdefault(int(counts[0, k]), []).append(int(k))
     out = []
     for count, ks in stuck.items():
         who = (f"sensor {ks[0]}" if len(ks) == 1 else

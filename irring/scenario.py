@@ -750,6 +750,15 @@ def is_folder(name_or_path: str) -> bool:
     return Path(name_or_path).is_dir() and name_or_path not in bundled()
 
 
+def listed(name_or_path: str) -> list[tuple[str, bool]]:
+    """What one argument of a command or study names: a folder's ``*.yaml`` files, each
+    ``(path, True)`` (ScenarioError when it holds none), else ``[(name_or_path, False)]``.
+    A file found in a folder is asked :func:`not_a_scenario_file` before it is read."""
+    if is_folder(name_or_path):
+        return [(str(f), True) for f in folder_files(name_or_path)]
+    return [(name_or_path, False)]
+
+
 def scenario_file(name_or_path: str | Path) -> Path | str:
     """The file a bundled name or a path means (links and ``..`` resolved), or
     ``name_or_path`` itself where it means none: two names of one room compare equal."""

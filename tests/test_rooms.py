@@ -350,3 +350,19 @@ def test_bench_rooms_exits_6_when_a_room_misses_a_target_or_the_ideal_is_worse(
     monkeypatch.setattr(bench_rooms, "measure", ideal_worse)
     assert main(argv) == 6
     assert "ideal< occupied_recall" in capsys.readouterr().out
+
+
+def test_a_bundled_name_stays_a_name_beside_a_folder_of_that_name(tmp_path, monkeypatch):
+    """`--out t_room` makes a folder t_room/; `bench rooms t_room` run there read the folder's
+    rooms (here one other room) where `study` and `scenarios` read the bundled t_room. A
+    folder of another name still stands for its *.yaml, in name order."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "t_room").mkdir()
+    (tmp_path / "t_room" / "narrow.yaml").write_text(S.resolve("narrow_room").read_text())
+    (tmp_path / "mine").mkdir()
+    for name in ("b_far.yaml", "a_l.yaml"):
+        src = "far_walls" if name == "b_far.yaml" else "l_room"
+        (tmp_path / "mine" / name).write_text(S.resolve(src).read_text())
+    (bundled,) = rooms.resolve_rooms(["t_room"])
+    assert bundled.name == "t_room" and len(bundled.robot.poses) == 4
+    assert [sc.name for sc in rooms.resolve_rooms(["mine"])] == ["l_room", "far_walls"]

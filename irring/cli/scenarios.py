@@ -38,8 +38,7 @@ def run(args: argparse.Namespace) -> int:
     listed = []   # (name or path, found in a folder): a folder stands for its *.yaml
     for given in named:
         try:
-            listed += ([(str(f), True) for f in scenario.folder_files(given)]
-                       if scenario.is_folder(given) else [(given, False)])
+            listed += scenario.listed(given)
         except IrringError as exc:   # a folder holding no *.yaml
             refuse(exc)
     total = len(listed) + len(failed)

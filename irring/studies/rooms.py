@@ -20,7 +20,7 @@ from ..maps import metrics
 from ..maps.metrics import SCORE_KEYS
 from ..outputs import real_path
 from ..pipeline import progress_bar
-from ..scenario import (Scenario, ScenarioError, clipped_obstacles, counted_seeds, folder_files,
+from ..scenario import (Scenario, ScenarioError, clipped_obstacles, counted_seeds, listed,
                         load_scenario, not_a_scenario_file, resolve)
 from .report import mean_of
 
@@ -132,18 +132,16 @@ def resolve_rooms(names_or_paths) -> list[Scenario | Unusable]:
     paths: list[tuple[Path, bool]] = []   # (file, found in a folder rather than named)
     given: dict[Path, str] = {}     # each file's real path → the argument that named it
     for item in names_or_paths:
-        path = Path(item)
-        if path.is_dir():
-            files = folder_files(item)
-        else:
-            files = [resolve(item)]
+        named = listed(str(item))   # a bundled name stays a name beside a folder of it
+        in_folder = named[0][1]
+        files = [Path(f) for f, _ in named] if in_folder else [resolve(item)]
         for file in files:
             real = real_path(file)
             if real in given:
                 raise ScenarioError(f"{file}: given twice (by {given[real]} and {item}); it "
                                     "would be scored and listed twice, so name each room once")
             given[real] = str(item)
-        paths.extend((file, path.is_dir()) for file in files)
+        paths.extend((file, in_folder) for file in files)
     out: list[Scenario | Unusable] = []
     for path, in_folder in paths:
         why = not_a_scenario_file(path) if in_folder else None

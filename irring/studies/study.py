@@ -38,7 +38,7 @@ from ..errors import OutputError, TooBig, brief, printable
 from ..outputs import OutputSet, atomic_file, sole_writer, write_text_atomic
 from ..pipeline import scenario_text
 from ..resources import installed_version
-from ..scenario import (ScenarioError, counted_seeds, folder_files, is_folder, load_scenario,
+from ..scenario import (ScenarioError, counted_seeds, listed, load_scenario,
                         not_a_scenario_file, scenario_file)
 from . import accuracy
 from .accuracy import mark_pareto
@@ -224,9 +224,9 @@ def parse_study(raw: Any, source: str = "") -> Study:
                 s = str(beside)
         try:
             # a folder stands for its *.yaml, as in `irring bench rooms my_rooms/`
-            in_folder = is_folder(s)
-            files = [str(f) for f in folder_files(s)] if in_folder else [s]
-            for f in files:
+            named = listed(s)
+            files = [f for f, _ in named]
+            for f, in_folder in named:
                 why = not_a_scenario_file(Path(f)) if in_folder else None
                 if why:
                     raise ScenarioError(why)
