@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib
 import math
 import os
 import sys
@@ -33,7 +34,7 @@ from .gp2 import SENSORS
 from .maps import metrics
 from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_scenario_grid,
                            RunSilences, classify, returns_of, slice_steps)
-from .maps.mcap_export import write_mcap, write_mcap_to  # noqa: F401  (write_mcap: API)
+from .maps.mcap_export import write_mcap_to
 from .outputs import MCAP_FILE, OutputError, OutputSet, atomic_file
 from .scenario import Scenario, ScenarioError, clipped_obstacles, loads
 
@@ -682,7 +683,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     which needs the ``mcap`` extra: written first beside its place and renamed in just
     after the set, so an interruption leaves both as they were; an MCAP that fails (an
     OutputError) still leaves the set written, then raises."""
-    from .maps import render  # noqa: F401  # deferred: Pillow, loaded before the clock
+    importlib.import_module(".maps.render", __package__)  # deferred: Pillow, loaded before the clock
 
     def write_set() -> dict[str, Path]:
         t0 = time.perf_counter()

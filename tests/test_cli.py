@@ -3,7 +3,10 @@ clear errors for bad input."""
 
 from __future__ import annotations
 
+import os
 import re
+import subprocess
+import sys
 
 import pytest
 import serial
@@ -340,8 +343,6 @@ def test_the_docs_index_lists_every_page():
 def test_a_command_loads_only_its_own_module():
     """Building the parser imports no subcommand; `irring run` parses without loading
     what other commands need (the studies, the serial link, Dask, matplotlib charts)."""
-    import subprocess
-    import sys
 
     code = """
 import sys
@@ -361,8 +362,6 @@ print(sorted(m for m in sys.modules if m.startswith(("irring.cli.", "irring.stud
 
 
 def test_bench_loads_only_the_benchmark_asked_for():
-    import sys
-
     parser = build_parser()
     before = {m for m in sys.modules if m.startswith("irring.cli.bench_")}
     args = parser.parse_args(["bench", "render", "--repeats", "2"])
@@ -375,9 +374,6 @@ def test_bench_loads_only_the_benchmark_asked_for():
 def test_commands_that_draw_nothing_with_mujoco_skip_its_opengl_library(users_gl):
     """MuJoCo loads GLFW on import unless MUJOCO_GL says not to: only `irring view` draws
     with OpenGL. The user's own MUJOCO_GL stays as it was, and so does the environment."""
-    import os
-    import subprocess
-    import sys
 
     pytest.importorskip("mujoco")
     code = """
@@ -423,8 +419,6 @@ def test_every_user_error_is_one_line_with_its_exit_status():
 def test_a_reader_that_stops_early_ends_the_command_quietly():
     """`irring geometry --design all | head -1`: when the reader has gone, the command stops
     with status 4 (an output not written) and no error line or traceback on stderr."""
-    import subprocess
-    import sys
 
     proc = subprocess.Popen([sys.executable, "-m", "irring", "geometry", "--design", "all",
                              "--samples", "1000"], stdout=subprocess.PIPE,
@@ -435,12 +429,9 @@ def test_a_reader_that_stops_early_ends_the_command_quietly():
     assert err == b""
 
 
-def _with_closed(fd: int, argv: list[str], cwd) -> "subprocess.CompletedProcess":
+def _with_closed(fd: int, argv: list[str], cwd) -> subprocess.CompletedProcess:
     """`irring ARGV` started with standard stream ``fd`` closed (`>&-`, `2>&-`, `<&-`), the
     others captured (stdin: /dev/null)."""
-    import os
-    import subprocess
-    import sys
 
     return subprocess.run([sys.executable, "-m", "irring", *argv], cwd=cwd,
                           stdin=subprocess.DEVNULL, capture_output=True, text=True,
@@ -458,8 +449,6 @@ def test_a_closed_standard_output_is_an_output_error(tmp_path):
                            "so nothing can be written to it\n")
     probe = ("import os, sys\nfrom irring import cli\ncli._hold_closed_streams()\n"
              "print(os.readlink('/proc/self/fd/1'), file=sys.stderr)")
-    import subprocess
-    import sys
     held = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                           preexec_fn=lambda: __import__("os").close(1), timeout=60)
     assert held.stderr == "/dev/null\n"

@@ -165,6 +165,8 @@ def test_an_mcap_that_cannot_be_written_is_an_output_error_naming_it(tmp_path, c
     """--mcap below a file: exit 4 (an output), one line naming the option and the file in
     the way, before the run (it was exit 1 with mkdir's bare 'File exists', then after the
     run); written from code, the path and the file in the way. A missing folder is made."""
+    from irring.maps import mcap_export
+
     (tmp_path / "taken").write_text("keep")
     bad = tmp_path / "taken" / "run.mcap"
     argv = ["run", "t_room_three_cylinders", "--out", str(tmp_path / "room"), "--no-animation"]
@@ -177,9 +179,9 @@ def test_an_mcap_that_cannot_be_written_is_an_output_error_naming_it(tmp_path, c
     run = pipeline.replay(tmp_path / "room" / "sweeps.npz", progress=False)
     with pytest.raises(OutputError, match=re.escape(
             f"{bad}: {tmp_path / 'taken'} is a file, so the folder cannot be made")):
-        pipeline.write_mcap(run, bad)
+        mcap_export.write_mcap(run, bad)
     made = tmp_path / "new" / "deeper" / "run.mcap"
-    assert pipeline.write_mcap(run, made) == made and made.stat().st_size > 0
+    assert mcap_export.write_mcap(run, made) == made and made.stat().st_size > 0
 
 
 def _umask() -> int:

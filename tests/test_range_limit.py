@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pytest
 
 from _synthetic import PAPER_RING, make_sweep, rectangle
 from irring import pipeline

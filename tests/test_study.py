@@ -3,7 +3,6 @@ after a kill, and the summary."""
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
