@@ -12,6 +12,7 @@ stage; hardware time is what the real ring would spend (sum of ``Sweep.duration_
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import importlib
 import math
@@ -55,15 +56,69 @@ def _in_notebook() -> bool:
     return ip is not None and "IPKernelApp" in getattr(ip, "config", {})
 
 
-def progress_bar(total: int, desc: str, enabled: bool | None = None, *, unit: str = "pose"):
+def progress_bar(total: int, desc: str, enabled: bool | None = None, *, unit: str = "pose",
+                 warmup: int = 0, warmup_note: str = ""):
     """The one progress bar (tqdm.auto: a widget in a notebook, text at a terminal; a
     context manager): shown when ``enabled``, or when None as :func:`progress_enabled`
-    decides; a disabled bar's ``update`` costs nothing."""
+    decides; a disabled bar's ``update`` costs nothing. ``warmup``: the first updates pay a
+    one-time cost (:class:`_WarmupBar`): no ETA (``warmup_note`` in its place) until they
+    are done, then tqdm's ETA from the rate of the updates after them."""
     if not (progress_enabled() if enabled is None else enabled):
         return _NoBar()
     from tqdm.auto import tqdm   # deferred: tqdm, only for a bar that is shown
 
+    if warmup > 0:
+        return _WarmupBar(functools.partial(tqdm, desc=desc, unit=unit, leave=False), total,
+                          warmup, warmup_note)
     return tqdm(total=total, desc=desc, unit=unit, leave=False)
+
+
+class _WarmupBar:
+    """A tqdm bar whose first ``warmup`` updates are slow for a reason the rest do not share
+    (a study's first run on each worker starts the worker): tqdm's rate after the first of
+    them overstates the time left many times over (README, "Sizing it"). Until they are
+    done the bar shows ``note`` where the ETA goes; then it goes on as a tqdm bar started at
+    that count (``initial``), whose rate is that of the updates since."""
+
+    def __init__(self, make: Callable[..., Any], total: int, warmup: int, note: str):
+        self._make, self._warmup = make, warmup
+        self._format = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<?, " + note + "]"
+        self._bar = make(total=total, bar_format=self._format)
+        self.warming = True
+
+    @property
+    def n(self) -> int:
+        return self._bar.n
+
+    @property
+    def total(self) -> int:
+        return self._bar.total
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def reset(self, total: int | None = None) -> None:
+        """Back to 0 (and the warm-up) with ``total``, as tqdm's reset."""
+        total = self._bar.total if total is None else total
+        self._bar.close()
+        self._bar = self._make(total=total, bar_format=self._format)
+        self.warming = True
+
+    def update(self, n: int = 1) -> None:
+        self._bar.update(n)
+        if self.warming and self._bar.n >= self._warmup:
+            old = self._bar
+            old.close()   # first: an open bar would push the new one a line down
+            self._bar = self._make(total=old.total, initial=old.n)
+            self._bar.start_t = old.start_t   # elapsed is the whole time, the rate not
+            self._bar.refresh()
+            self.warming = False
+
+    def close(self) -> None:
+        self._bar.close()
 
 
 class _NoBar:

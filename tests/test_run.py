@@ -169,6 +169,43 @@ def test_a_hidden_progress_bar_does_not_load_tqdm():
     assert done.stdout.split() == ["False", "2", "True"]
 
 
+def test_a_warmup_bar_gives_no_eta_until_the_slow_first_runs_are_done(monkeypatch, capsys):
+    """A study's first run on each of 2 workers takes 4 s, every later one 0.25 s (one at a
+    time): tqdm's own ETA after the first run is 29 × 4 s; the warm-up bar says why it gives
+    none until both first runs are done, then tqdm's from the runs since (27 at 4 runs/s),
+    its elapsed still counted from the start. A fake clock, not a timed test."""
+    import tqdm.std
+
+    now = [0.0]
+    monkeypatch.setattr(tqdm.std, "time", lambda: now[0])
+    monkeypatch.setattr(tqdm.std.tqdm, "monitor_interval", 0)   # its thread reads a real clock
+
+    def states(bar, times) -> list[str]:
+        capsys.readouterr()
+        seen = []
+        for t in times:
+            now[0] = t
+            bar.update()
+            seen.append(capsys.readouterr().err.split("\r")[-1].strip())
+        return seen
+
+    now[0] = 0.0
+    with pipeline.progress_bar(0, "study", True, unit="run") as bar:
+        bar.reset(total=30)
+        assert states(bar, [4.0])[0].endswith("1/30 [00:04<01:56,  4.00s/run]")
+    now[0] = 0.0
+    with pipeline.progress_bar(0, "study", True, unit="run", warmup=2,
+                               warmup_note="ETA after each worker's first run") as bar:
+        bar.reset(total=30)
+        first, second, third = states(bar, [4.0, 4.25, 4.5])
+        assert first.endswith("1/30 [00:04<?, ETA after each worker's first run]")
+        assert second.endswith("2/30 [00:04<?, ?run/s]")
+        assert third.endswith("3/30 [00:04<00:06,  4.00run/s]")
+        assert bar.n == 3 and bar.total == 30
+        bar.reset(total=4)    # back to the warm-up, as tqdm's reset goes back to 0
+        assert states(bar, [5.0])[0].endswith("1/4 [00:00<?, ETA after each worker's first run]")
+
+
 def test_help_explains_units_defaults_and_examples(capsys):
     with pytest.raises(SystemExit):
         main(["run", "--help"])

@@ -13,7 +13,7 @@ from ..core import MAX_RUNS
 from ..outputs import check_out, safe_name
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
-from ..studies.executor import executor
+from ..studies.executor import capacity, executor
 from ._common import add_executor_options, describe, out_path
 
 EPILOG = f"""\
@@ -53,6 +53,11 @@ examples:
 """
 
 
+# a worker's first run starts it (a process, its imports, MuJoCo), the time of many runs
+# (README, "Sizing it"): the bar's ETA waits for each worker's first
+WARMUP_NOTE = "ETA after each worker's first run"
+
+
 def register(p: argparse.ArgumentParser) -> None:
     describe(p, "Run every design of a study file on every scenario, seed and knob "
              "setting; stream one row per run to DIR/results.csv, then summarise "
@@ -75,16 +80,13 @@ def run(args: argparse.Namespace) -> int:
     out = check_out(args.out if args.out else Path("out") / safe_name(Path(args.file).stem),
                     files=study.SUMMARY_FILES.values())
     t0 = time.perf_counter()
-    bar = progress_bar(0, "study", progress_enabled() and not args.json, unit="run")
-    counts = {}
-
-    def start(done: int, todo: int) -> None:
-        counts.update(done=done, todo=todo)
-        bar.reset(total=todo)
-
+    shown = progress_enabled() and not args.json
     try:
-        with bar, executor(args.workers, args.dask) as ex:
-            result = study.run_study(spec, out, ex, resume=args.resume, on_start=start,
+        with executor(args.workers, args.dask) as ex, \
+                progress_bar(0, "study", shown, unit="run", warmup=capacity(ex),
+                             warmup_note=WARMUP_NOTE) as bar:
+            result = study.run_study(spec, out, ex, resume=args.resume,
+                                     on_start=lambda done, todo: bar.reset(total=todo),
                                      progress=lambda _: bar.update())
     except KeyboardInterrupt:
         path = out / study.RESULTS
