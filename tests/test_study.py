@@ -3,6 +3,7 @@ after a kill, and the summary."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -442,6 +443,66 @@ def test_the_chart_leaves_the_users_backend_alone(tmp_path):
     study.chart(recs, tmp_path / "c.png")
     assert matplotlib.get_backend() == "svg"
     assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _grid_rows(seeds: dict[str, list[int]]) -> list[dict]:
+    """2 designs × the rooms of ``seeds`` (room → its seeds) × 2 values of each knob."""
+    rows = []
+    for d, f1, hw in (("ring_a", 0.9, 3.0), ("ring_b", 0.4, 0.5)):
+        for room, room_seeds in seeds.items():
+            for stride, samples, settle in itertools.product("14", "28", ("0.0", "40.0")):
+                for seed in room_seeds:
+                    r = _row(d, f1 - 0.01 * seed, hw * int(stride), seed)
+                    r.update(scenario=room, step_stride=stride, samples=samples,
+                             settle_ms=settle)
+                    rows.append(r)
+    return rows
+
+
+def test_the_chart_is_titled_with_the_study_and_its_legend_is_under_the_panels(tmp_path):
+    """study.png says which study it shows and how many runs of what (in the picture and
+    in the PNG's Title); its legend, beside the panels a sixth of the width and mostly
+    blank, is under them, inside the figure, with 8 knob settings of long labels."""
+    from PIL import Image
+
+    knobs = ["step_stride", "samples", "settle_ms"]
+    rows = _grid_rows({"room_x": [1, 2], "room_y": [2, 3]})
+    title = ("a$b.yaml: 64 runs = 2 designs × 2 rooms × 2 step_stride values × 2 samples "
+             "values × 2 settle_ms values × 2 seeds per room")
+    assert study.study_title("a$b.yaml", rows, knobs) == title
+    assert study.study_title("s.yaml", rows[1:], knobs) == (
+        "s.yaml: 63 runs of 2 designs, 2 rooms, 2 step_stride values, 2 samples values, "
+        "2 settle_ms values, 2 seeds per room")
+    same = _grid_rows({"room_x": [4, 5, 6], "room_y": [4, 5, 6]})
+    assert study.study_title("s.yaml", same, knobs) == (
+        "s.yaml: 96 runs = 2 designs × 2 rooms × 2 step_stride values × 2 samples values × "
+        "2 settle_ms values × 3 seeds (4–6)")
+    assert study.study_title("s.yaml", _grid_rows({"r": [3, 9]}), knobs).endswith(
+        "= 2 designs × 1 room × 2 step_stride values × 2 samples values × 2 settle_ms values "
+        "× 2 seeds (3, 9)")
+
+    paths = study.write_summary(rows, tmp_path / "mine", knobs, "a$b.yaml")
+    assert Image.open(paths["chart"]).text["Title"] == title
+    study.write_summary(rows, tmp_path / "out", knobs)   # from code: named by its folder
+    assert Image.open(tmp_path / "out" / "study.png").text["Title"].startswith(
+        "the study in out: 64 runs = ")
+
+    fig = study.chart(study.summarise(rows, ["design", *knobs]), tmp_path / "c.png",
+                      ["design", *knobs], title)
+    assert fig.get_suptitle() == title.replace("$", r"\$")   # drawn as text, not mathtext
+    renderer = fig.canvas.get_renderer()
+    width = fig.get_figwidth() * fig.dpi
+    lowest_panel = min(ax.get_tightbbox(renderer).y0 for ax in fig.axes)
+    assert len(fig.legends) == 2
+    for legend in fig.legends:
+        box = legend.get_window_extent(renderer)
+        assert 0 <= box.x0 and box.x1 <= width and box.y0 >= 0
+        assert box.y1 <= lowest_panel        # under the panels, below their axis labels
+    assert fig.axes[0].get_position().x0 < 0.1 and fig.axes[1].get_position().x1 > 0.95
+    labels = [[t.get_text() for t in legend.get_texts()] for legend in fig.legends]
+    assert labels[1] == ["ring_a", "ring_b"]           # the designs' row above the markers'
+    assert labels[0][0] == "stride 1, samples 2, settle ms 0.0"
+    assert labels[0][-1] == "Pareto front" and len(labels[0]) == 9
 
 
 def test_parquet_holds_the_csv_rows_typed(small):

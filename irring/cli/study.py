@@ -44,7 +44,8 @@ writes to DIR:
   results.parquet the same, if pyarrow is installed
   summary.csv/.json  per configuration (design × knob values): mean and sd of each score
                   (shadow over the runs in rooms that hide wall behind an obstacle: shadow_runs)
-  study.png       occupied F1 and coverage against hardware time, Pareto front marked
+  study.png       occupied F1 and coverage against hardware time, Pareto front marked;
+                  titled with the study file's name and its runs (designs × rooms × …)
 
 examples:
   irring study designs.yaml --out out/designs --workers 2

@@ -759,7 +759,9 @@ def _run_study(study, points: list, out: Path, ex, resume: bool, progress, on_st
     if pq is not None:
         paths["parquet"] = str(pq)
     in_grid = [r for r in rows if row_key(r) in order]
-    paths.update(write_summary(in_grid, out, [k for k, _ in getattr(study, "knobs", ())]))
+    source = getattr(study, "source", "")
+    paths.update(write_summary(in_grid, out, [k for k, _ in getattr(study, "knobs", ())],
+                               Path(source).name if source else ""))
     return {"rows": rows, "done_before": len(points) - len(todo), "ran": len(todo),
             "paths": paths}
 
@@ -841,12 +843,46 @@ def table(records: Sequence[Mapping[str, Any]], by: Sequence[str] = ("design",))
     return "\n".join(lines)
 
 
+def _counted(n: int, what: str) -> str:
+    return f"{n} {what}" + ("" if n == 1 else "s")
+
+
+def study_title(name: str, rows: Sequence[Mapping[str, str]],
+                knobs: Sequence[str] = ()) -> str:
+    """study.png's title: ``name`` (the study file's), its runs and what they are made of,
+    e.g. "study_ir_rings.yaml: 225 runs = 5 designs × 3 rooms × 3 step_stride values × 5
+    seeds per room" (or "× 3 seeds (1–3)" when every room ran the same seeds)."""
+    if not rows:
+        return f"{name}: no runs"
+    per_room: dict[str, set[int]] = {}
+    for r in rows:
+        per_room.setdefault(r["scenario"], set()).add(int(r["seed"]))
+    counts = [len({r["design"] for r in rows}), len(per_room),
+              *(len({r[k] for r in rows}) for k in knobs)]
+    parts = [_counted(counts[0], "design"), _counted(counts[1], "room"),
+             *(_counted(n, f"{k} value") for n, k in zip(counts[2:], knobs))]
+    sets = list(per_room.values())
+    sizes = sorted({len(x) for x in sets})
+    if all(x == sets[0] for x in sets):
+        seeds = sorted(sets[0])
+        listed = (f"{seeds[0]}–{seeds[-1]}" if len(seeds) > 2 and
+                  seeds == list(range(seeds[0], seeds[-1] + 1)) else ", ".join(map(str, seeds)))
+        parts.append(f"{_counted(len(seeds), 'seed')} ({listed})")
+    else:
+        parts.append(f"{_counted(sizes[0], 'seed')} per room" if len(sizes) == 1 else
+                     f"{sizes[0]}–{sizes[-1]} seeds per room")
+    if len(sizes) == 1 and math.prod(counts) * sizes[0] == len(rows):
+        return f"{name}: {_counted(len(rows), 'run')} = " + " × ".join(parts)
+    return f"{name}: {_counted(len(rows), 'run')} of " + ", ".join(parts)
+
+
 def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
-          by: Sequence[str] = ("design",)) -> None:
+          by: Sequence[str] = ("design",), title: str = ""):
     """Occupied F1 and coverage against hardware time per 360° view (log scale), one point
     per configuration with its spread over runs (±1 sd): colour the design, marker the knob
-    values. The Pareto front is drawn as a staircase and its points ringed. Drawn on
-    ``render.figure`` (no pyplot): the caller's matplotlib backend is left alone."""
+    values. The Pareto front is drawn as a staircase and its points ringed; ``title`` (see
+    :func:`study_title`) above both, and in the PNG's Title. Drawn on ``render.figure`` (no
+    pyplot): the caller's matplotlib backend is left alone. Returns the Figure."""
     # deferred: matplotlib, only for the chart
     from matplotlib.lines import Line2D
 
@@ -860,7 +896,7 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
     marker = {c: markers[i % len(markers)] for i, c in enumerate(combos)}
     fig = figure(12, 5.2)
     axes = fig.subplots(1, 2)
-    for ax, (metric, key, title) in zip(axes, (("f1", "occupied_f1", "occupied F1"),
+    for ax, (metric, key, score) in zip(axes, (("f1", "occupied_f1", "occupied F1"),
                                                ("cov", "coverage", "coverage"))):
         recs = [r for r in records if r[key] is not None]
         for r in recs:
@@ -878,21 +914,33 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
             ax.scatter(xs, ys, s=200, facecolors="none", edgecolors="k", lw=1.3, zorder=3)
         ax.set_xscale("log")
         ax.set_xlabel("hardware time per 360° view (s, log scale)")
-        ax.set_ylabel(f"{title} (mean ± 1 sd over runs)")
+        ax.set_ylabel(f"{score} (mean ± 1 sd over runs)")
         ax.set_ylim(-0.02, 1.05)
         ax.grid(alpha=0.3, which="both")
-        ax.set_title(f"{title} against hardware time (dashed: Pareto front, ringed: on it)",
+        ax.set_title(f"{score} against hardware time (dashed: Pareto front, ringed: on it)",
                      fontsize=9)
-    handles = [Line2D([], [], color=colour[d], marker="o", ls="", label=d) for d in designs]
-    if knobs:
-        short = {"step_stride": "stride", "samples": "samples", "settle_ms": "settle ms"}
-        handles += [Line2D([], [], color="k", marker=marker[c], ls="", mfc="none",
-                           label=", ".join(f"{short[k]} {v}" for k, v in zip(knobs, c)))
-                    for c in combos]
-    handles.append(Line2D([], [], color="0.35", ls="--", label="Pareto front"))
-    fig.legend(handles=handles, loc="center right", fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0, 0.84, 1))
-    fig.savefig(path, dpi=100)
+    by_colour = [Line2D([], [], color=colour[d], marker="o", ls="", label=d) for d in designs]
+    short = {"step_stride": "stride", "samples": "samples", "settle_ms": "settle ms"}
+    by_marker = [Line2D([], [], color="k", marker=marker[c], ls="", mfc="none",
+                        label=", ".join(f"{short[k]} {v}" for k, v in zip(knobs, c)))
+                 for c in combos] if knobs else []
+    by_marker.append(Line2D([], [], color="0.35", ls="--", label="Pareto front"))
+    # under the panels, the designs in a row and the markers in the next, each wrapped
+    # before it passes the figure's width (beside the panels the legend kept a sixth of
+    # the width, mostly blank)
+    y = 0.0
+    for handles in (by_marker, by_colour):   # from the bottom up
+        widest = max(len(h.get_label()) for h in handles)
+        # at 8 pt a character is ~6 px at 100 dpi; the marker and gaps ~50 px
+        cols = max(1, min(len(handles), int(fig.get_figwidth() * 100) // (6 * widest + 50)))
+        fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, y), ncols=cols,
+                   fontsize=8, frameon=False)
+        y += 0.045 * -(-len(handles) // cols)
+    if title:   # a file name's "$" is text, not mathtext
+        fig.suptitle(title.replace("$", r"\$"), fontsize=10)
+    fig.tight_layout(rect=(0, y + 0.01, 1, 1))
+    fig.savefig(path, dpi=100, metadata={"Title": title} if title else None)
+    return fig
 
 
 SUMMARY_CSV_KEYS = ("runs", "hardware_time_s", "compute_ms") + tuple(
@@ -919,10 +967,11 @@ def _drop_summary(out: Path) -> None:
 
 
 def write_summary(rows: Sequence[Mapping[str, str]], out_dir: str | Path,
-                  knobs: Sequence[str] = ()) -> dict[str, str]:
+                  knobs: Sequence[str] = (), name: str = "") -> dict[str, str]:
     """summary.csv and summary.json (one record per configuration: design and the knobs
-    the study varies) and study.png (the chart) in ``out_dir``, all together
-    (:class:`irring.outputs.OutputSet`; results.csv beside them is left alone)."""
+    the study varies) and study.png (the chart, titled with ``name``, the study file's, or
+    "the study in DIR") in ``out_dir``, all together (:class:`irring.outputs.OutputSet`;
+    results.csv beside them is left alone)."""
     by = ("design",) + tuple(knobs)
     records = summarise(rows, by)
     target = OutputSet(out_dir, files=SUMMARY_FILES.values())
@@ -931,7 +980,8 @@ def write_summary(rows: Sequence[Mapping[str, str]], out_dir: str | Path,
         write_csv(paths["summary_csv"], records, by + SUMMARY_CSV_KEYS)
         paths["summary_json"].write_text(json.dumps({"by": list(by), "configurations": records},
                                                     indent=2))
-        chart(records, paths["chart"], by)
+        chart(records, paths["chart"], by,
+              study_title(name or f"the study in {Path(out_dir).resolve().name}", rows, knobs))
     return {k: str(target.out / name) for k, name in SUMMARY_FILES.items()}
 
 
