@@ -199,3 +199,51 @@ def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, monke
     assert ("shadow n/a: no wall the sensors could range is hidden behind an obstacle\n"
             "(in any of these scenarios)") in texts
     assert "t_room_cylinder's table leg, r = 22 mm" in texts
+
+
+def test_a_miss_the_minimum_range_alone_makes_is_too_near():
+    """radial12's sensors sit 150.2 mm out: a cylinder whose near side is 250 mm from the
+    centre is 99.8 mm from the one facing it, inside the GP2D12's 100 mm, so no radius is
+    seen at every bearing there, though 94.7 mm is without the minimum range and 98.2 mm is
+    at 260 mm with it. At 650 mm the miss is the beams' 30° gaps: not too near."""
+    radial = geometry.detection(designs.get("radial12"), (0.25, 0.26, 0.65), bearings=180)
+    assert radial.min_range_m == 0.1
+    assert math.isinf(radial.min_detectable_radius_m[0])
+    assert radial.min_detectable_radius_m[1] == pytest.approx(0.0982, abs=5e-4)
+    assert math.isinf(radial.min_detectable_radius_m[2])
+    assert radial.too_near.tolist() == [True, False, False]
+    free = geometry.detection(designs.get("radial12"), (0.25,), bearings=180, min_range_m=0.0)
+    assert free.min_detectable_radius_m[0] == pytest.approx(0.0947, abs=5e-4)
+    assert free.too_near.tolist() == [False]
+    sonar = geometry.detection(designs.get("sonar12"), (0.25, 0.35), bearings=60)
+    assert sonar.min_range_m == pytest.approx(0.1524) and sonar.too_near.tolist() == [True, False]
+    ring = geometry.detection(designs.get("rotating12"), (0.25,), bearings=180)
+    assert ring.too_near.tolist() == [False] and ring.min_detectable_radius_m[0] < 0.005
+
+
+def test_the_table_and_chart_say_too_near_rather_than_miss(tmp_path, monkeypatch):
+    """compare printed a bare "miss" for radial12 at 250 mm beside 132 mm at 350 mm
+    (newuser15): the table says "too near" and why, with each design's minimum range, and
+    the chart draws a × at 200 mm where the curve has no point."""
+    from irring.maps import render
+
+    scores = {"occupied_f1": 0.2, "free_accuracy": 1.0, "coverage": 0.0, "shadow": 0.0}
+    rec = {"design": "radial12", **scores, "hardware_time_s": 0.038, "compute_time_s": 0.002,
+           "runs": 1, "scenarios": ["lab"], "poses": {"lab": 1}, "by_scenario": {"lab": scores},
+           "detection_distances_m": [0.25, 0.35, 0.65],
+           "min_detectable_radius_m": [None, 0.1324, None], "too_near": [True, False, False],
+           "min_range_m": 0.1}
+    lines = compare.table([rec]).splitlines()
+    assert lines[2].split()[-4:] == ["too", "near", "132.4mm", "miss"]
+    assert lines[-1] == ("too near: none ≤ 200 mm is seen at every bearing only because the "
+                         "near side is within the sensor's minimum range of the sensor facing "
+                         "it (radial12: 100 mm)")
+    figures = []
+    real_figure = render.figure
+    monkeypatch.setattr(render, "figure", lambda *a, **k: figures.append(real_figure(*a, **k))
+                        or figures[-1])
+    compare.chart({"designs": [rec], "detection_distances_m": [0.25, 0.35, 0.65]},
+                  tmp_path / "c.png")
+    crosses = [ln for ax in figures[0].axes for ln in ax.get_lines() if ln.get_marker() == "x"]
+    assert len(crosses) == 1
+    assert crosses[0].get_xdata().tolist() == [250.0] and crosses[0].get_ydata().tolist() == [200.0]

@@ -35,7 +35,9 @@ what it measures, per design (mean over scenarios × seeds):
                       estimator's and mapper's CPU time, the simulator's wall time)
   min_detectable_radius_m
                       smallest cylinder seen at every bearing, per distance from the
-                      robot centre (rays read from each design's built MuJoCo model)
+                      robot centre (rays read from each design's built MuJoCo model);
+                      too_near: none only because the near side is inside the sensor's
+                      minimum range of the sensor facing it (the table: "too near")
 
 designs: rotating12 (the paper's ring), radial12 (the same, held still), rotating1 (one
 GP2 turning 360° at the centre), laser (SICK-like, 0.5°, 8 m), sonar12 (12 ultrasonic

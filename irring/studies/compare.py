@@ -16,7 +16,7 @@ from ..pipeline import progress_bar
 from ..scenario import check_distinct_names, counted_seeds, load_scenario
 from . import accuracy, study
 from .executor import run_jobs
-from .geometry import DEFAULT_DISTANCES_M, Detection, detection
+from .geometry import DEFAULT_DISTANCES_M, MAX_RADIUS_M, Detection, detection
 from .report import mean_of, write_study
 
 # --------------------------------------------------------------------------- scenes
@@ -86,6 +86,8 @@ def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) 
             rec["detection_distances_m"] = det.distances_m.tolist()
             rec["min_detectable_radius_m"] = [None if not math.isfinite(v) else float(v)
                                               for v in det.min_detectable_radius_m]
+            rec["too_near"] = det.too_near.tolist()   # None above, for the minimum range
+            rec["min_range_m"] = det.min_range_m
         out.append(rec)
     return out
 
@@ -131,6 +133,12 @@ TABLE_SCORES = ("occupied_f1", "free_accuracy", "coverage", "shadow")
 SHADOW_NA = "no wall the sensors could range is hidden behind an obstacle"
 
 
+# why a radius column says "too near" rather than "miss" (radial12 at 250 mm: its sensors
+# sit 150 mm out, so the near side is 100 mm from the one facing it, the GP2D12's minimum)
+TOO_NEAR = ("none ≤ 200 mm is seen at every bearing only because the near side is within "
+            "the sensor's minimum range of the sensor facing it")
+
+
 def table(records: list[dict]) -> str:
     """A plain-text table of the per-design records (scores, times, detection)."""
     dists = records[0].get("detection_distances_m", []) if records else []
@@ -150,8 +158,9 @@ def table(records: list[dict]) -> str:
         row += ["—" if r["by_scenario"][sc]["shadow"] is None
                 else f"{r['by_scenario'][sc]['shadow']:.2f}" for sc in shadowed]
         row += [_seconds(r["hardware_time_s"]), f"{r['compute_time_s'] * 1e3:.1f} ms"]
-        row += ["miss" if v is None else f"{v * 1e3:.1f}mm"
-                for v in r.get("min_detectable_radius_m", [])]
+        radii = r.get("min_detectable_radius_m", [])
+        row += [("too near" if near else "miss") if v is None else f"{v * 1e3:.1f}mm"
+                for v, near in zip(radii, r.get("too_near") or [False] * len(radii))]
         rows.append(row)
     widths = [max(len(row[i]) for row in rows) for i in range(len(head))]
     lines = ["  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
@@ -161,6 +170,10 @@ def table(records: list[dict]) -> str:
         lines.append(", ".join(f"{h}: {sc}" for h, sc in zip(shadow_head, shadowed)))
     if any(r["shadow"] is None for r in records):
         lines.append(f"shadow —: n/a, {SHADOW_NA} (in any of these scenarios)")
+    near = [f"{r['design']}: {r['min_range_m'] * 1e3:.0f} mm" for r in records
+            if any(r.get("too_near", ()))]
+    if near:
+        lines.append(f"too near: {TOO_NEAR} ({', '.join(near)})")
     return "\n".join(lines)
 
 
@@ -228,18 +241,25 @@ def chart(result: dict, path) -> None:
     a_time.grid(axis="y", alpha=0.3)
 
     dist = np.asarray(result["detection_distances_m"]) * 1e3
+    nears = 0
     for r in recs:
         if "min_detectable_radius_m" not in r:
             continue
         y = np.array([np.nan if v is None else v * 1e3 for v in r["min_detectable_radius_m"]])
-        a_det.plot(dist, y, marker="o", label=r["design"])
+        line, = a_det.plot(dist, y, marker="o", label=r["design"])
+        near = np.asarray(r.get("too_near") or [False] * len(dist), bool)
+        if near.any():   # a miss the minimum range alone makes, drawn at the 200 mm top,
+            # each design's a little to the right of the last's (radial12 and sonar12 share 250)
+            a_det.plot(dist[near] + 12 * nears, np.full(near.sum(), MAX_RADIUS_M * 1e3),
+                       ls="", marker="x", ms=9, mew=2, color=line.get_color(), clip_on=False)
+            nears += 1
     a_det.axhline(22, color="k", ls=":", lw=1)
     a_det.annotate("t_room_cylinder's table leg, r = 22 mm", (dist[0], 24), fontsize=8)
     a_det.set_yscale("log")
     a_det.set_xlabel("distance from the robot centre to the cylinder (mm)")
     a_det.set_ylabel("radius (mm)")
-    a_det.set_title("Smallest cylinder seen at every bearing (no point: none up to 200 mm)",
-                    fontsize=9)
+    a_det.set_title("Smallest cylinder seen at every bearing (no point: none up to 200 mm;\n"
+                    "× at 200 mm: too near, inside the sensor's minimum range)", fontsize=9)
     if a_det.get_legend_handles_labels()[0]:   # a laser-only compare draws no curve
         a_det.legend(fontsize=8)
     a_det.grid(alpha=0.3, which="both")

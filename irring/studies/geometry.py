@@ -331,8 +331,10 @@ def seen(rays: Rays, centres: np.ndarray, radius_m: float, *, min_range_m: float
 @dataclass(frozen=True)
 class Detection:
     """Per distance (from the robot centre to the cylinder's near side, m): the smallest
-    cylinder radius (m) seen at every bearing (``inf``: not even ``MAX_RADIUS_M``), and the
-    largest radius found missed at some bearing (0: none)."""
+    cylinder radius (m) seen at every bearing (``inf``: not even ``MAX_RADIUS_M``), the
+    largest radius found missed at some bearing (0: none), and ``too_near``: missed (inf)
+    only for the sensor's minimum range ``min_range_m`` (with none, some radius is seen: the
+    near side is inside it, from the sensor facing the cylinder)."""
 
     design: str
     distances_m: np.ndarray
@@ -340,6 +342,8 @@ class Detection:
     max_missed_radius_m: np.ndarray
     bearings: int
     rays: int
+    min_range_m: float
+    too_near: np.ndarray
 
 
 MIN_RADIUS_M = 0.001
@@ -361,21 +365,26 @@ def symmetry_period_rad(design: Design, step_stride: int = 1) -> float:
 
 
 def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int = 360,
-              step_stride: int = 1, rays: Rays | None = None) -> Detection:
+              step_stride: int = 1, rays: Rays | None = None,
+              min_range_m: float | None = None) -> Detection:
     """Smallest detectable cylinder radius versus distance for ``design``.
 
     ``bearings`` cylinder positions are spread over one symmetry period of the design, half
     a spacing off the rays' own symmetry, so the worst place (between two beams) is
     sampled. A radius is "detected" when it is seen at every bearing. Radii 1 … 200 mm are
     tried ~25 % apart; the boundary between the largest missed and the next detected one
-    is then bisected (assumes one boundary in that bracket).
+    is then bisected (assumes one boundary in that bracket). ``min_range_m``: the sensor's
+    (None) or another; a distance where no radius is detected is tried again without it
+    (``Detection.too_near``).
     """
     rays = design_rays(design, step_stride) if rays is None else rays
     period = symmetry_period_rad(design, step_stride)
     b = (np.arange(bearings) + 0.5) / bearings * period
     unit = np.c_[np.cos(b), np.sin(b)]
     sens = design.sensor
-    kw = dict(min_range_m=gp2.sensor(sens.kind).min_range_m, max_range_m=sens.max_range_m,
+    if min_range_m is None:
+        min_range_m = gp2.sensor(sens.kind).min_range_m
+    kw = dict(min_range_m=min_range_m, max_range_m=sens.max_range_m,
               max_incidence_rad=_incidence_limit_rad(design))
     dist = np.asarray(distances_m, dtype=float)
     min_ok = np.full(len(dist), np.inf)
@@ -398,4 +407,11 @@ def detection(design: Design, distances_m=DEFAULT_DISTANCES_M, *, bearings: int 
             mid = math.sqrt(lo * hi)
             lo, hi = (lo, mid) if all_seen(mid) else (mid, hi)
         min_ok[i], max_miss[i] = hi, lo
-    return Detection(design.name, dist, min_ok, max_miss, bearings, len(rays))
+    too_near = np.zeros(len(dist), bool)
+    missed = ~np.isfinite(min_ok)
+    if min_range_m > 0 and missed.any():   # a miss the minimum range alone makes
+        free = detection(design, dist[missed], bearings=bearings, step_stride=step_stride,
+                         rays=rays, min_range_m=0.0)
+        too_near[missed] = np.isfinite(free.min_detectable_radius_m)
+    return Detection(design.name, dist, min_ok, max_miss, bearings, len(rays), min_range_m,
+                     too_near)
