@@ -687,3 +687,27 @@ def test_a_resumed_study_says_which_kept_runs_it_left_out_of_the_summary(tmp_pat
         rf"5 run\(s\) in {re.escape(str(out / 'results.csv'))}: ran 1 in \d+\.\d s, "
         rf"\d+\.\d runs/s \(2 already in the file; 2 run\(s\) of grid points no longer in "
         rf"{re.escape(str(spec))}: kept in the file, left out of the summary\)", first), first
+
+
+def test_study_and_bench_accuracy_bars_wait_for_each_workers_first_run(tmp_path, monkeypatch):
+    """Both commands' bars are told how many first runs pay a worker's start (its ETA
+    waits for them: tests/test_run.py checks the bar): one per worker of the pool."""
+    from irring import pipeline
+    from irring.cli import bench_accuracy as bench_cli
+    from irring.cli import study as study_cli
+
+    asked = []
+
+    def bar(total, desc, enabled=None, **kw):
+        asked.append((desc, kw["warmup"], kw["warmup_note"]))
+        return pipeline.progress_bar(total, desc, False)
+
+    monkeypatch.setattr(study_cli, "progress_bar", bar)
+    monkeypatch.setattr(bench_cli, "progress_bar", bar)
+    p = tmp_path / "one.yaml"
+    p.write_text("designs: [radial12]\nscenarios: [t_room]\nseeds: 1\n")
+    assert main(["study", str(p), "--out", str(tmp_path / "s"), "--workers", "2"]) == 0
+    assert main(["bench", "accuracy", "--scenario", "t_room", "--knob", "resolution",
+                 "--seeds", "1", "--workers", "1", "--out", str(tmp_path / "a")]) == 0
+    note = "ETA after each worker's first run"
+    assert asked == [("study", 2, note), ("bench accuracy", 1, note)]

@@ -12,7 +12,7 @@ from ..studies.report import study_files
 from ..pipeline import progress_bar
 from ..studies import accuracy
 from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
-from ..studies.executor import executor
+from ..studies.executor import WARMUP_NOTE, capacity, executor
 from ..core import MAX_SEEDS
 from ..scenario import scenario_file
 from ._common import add_executor_options, describe, named_once, out_path, seed_count
@@ -95,8 +95,9 @@ def run(args: argparse.Namespace) -> int:
     # a study holding the folder, or a folder of an output's name: refused before the work
     check_out(args.out, held=False, files=study_files("accuracy"))
     total = len(configs) * len(scenarios) * args.seeds
-    with progress_bar(total, "bench accuracy", unit="run") as bar, \
-            executor(args.workers, args.dask) as ex:
+    with executor(args.workers, args.dask) as ex, \
+            progress_bar(total, "bench accuracy", unit="run", warmup=capacity(ex),
+                         warmup_note=WARMUP_NOTE) as bar:
         result = accuracy.measure(scenarios, seeds=args.seeds, configs=configs, ex=ex,
                                   progress=lambda _: bar.update())
     paths = accuracy.write_outputs(result, args.out)

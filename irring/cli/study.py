@@ -13,7 +13,7 @@ from ..core import MAX_RUNS
 from ..outputs import check_out, safe_name
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
-from ..studies.executor import capacity, executor
+from ..studies.executor import WARMUP_NOTE, capacity, executor
 from ._common import add_executor_options, describe, out_path
 
 EPILOG = f"""\
@@ -52,11 +52,6 @@ examples:
   irring study designs.yaml --out out/designs --resume        after an interruption
   irring study designs.yaml --dask tcp://scheduler:8786       on a Dask cluster
 """
-
-
-# a worker's first run starts it (a process, its imports, MuJoCo), the time of many runs
-# (README, "Sizing it"): the bar's ETA waits for each worker's first
-WARMUP_NOTE = "ETA after each worker's first run"
 
 
 def register(p: argparse.ArgumentParser) -> None:

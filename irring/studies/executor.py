@@ -149,6 +149,12 @@ def _stop_workers(pool: ProcessPoolExecutor) -> None:
         proc.join(5)
 
 
+# a worker's first run starts it (a process, its imports, MuJoCo), the time of many runs
+# (README, "Sizing it"): a bar over runs gives its ETA after each worker's first
+# (pipeline.progress_bar's warmup, capacity(ex) runs), and this in its place before
+WARMUP_NOTE = "ETA after each worker's first run"
+
+
 def capacity(ex: Executor | None) -> int:
     """How many jobs ``ex`` runs at once (1 in this process; a Dask cluster's threads)."""
     if ex is None or isinstance(ex, SerialExecutor):
