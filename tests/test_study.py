@@ -711,3 +711,13 @@ def test_study_and_bench_accuracy_bars_wait_for_each_workers_first_run(tmp_path,
                  "--seeds", "1", "--workers", "1", "--out", str(tmp_path / "a")]) == 0
     note = "ETA after each worker's first run"
     assert asked == [("study", 2, note), ("bench accuracy", 1, note)]
+
+
+def test_a_dollar_in_a_design_name_is_drawn_as_text(tmp_path):
+    """A design named "a$\\frac$" (printable, so allowed) made matplotlib parse mathtext and
+    the chart fail after every run; "r$2$" drew a 2 in italics."""
+    recs = study.summarise([_row("a$\\frac$", 0.9, 3.0, 1), _row("r$2$", 0.4, 0.5, 1)])
+    fig = study.chart(recs, tmp_path / "c.png", title="s.yaml: 2 runs")
+    labels = [t.get_text() for legend in fig.legends for t in legend.get_texts()]
+    assert labels == ["Pareto front", "a\\$\\frac\\$", "r\\$2\\$"]
+    assert (tmp_path / "c.png").stat().st_size > 10_000

@@ -876,6 +876,12 @@ def study_title(name: str, rows: Sequence[Mapping[str, str]],
     return f"{name}: {_counted(len(rows), 'run')} of " + ", ".join(parts)
 
 
+def _plain(text: str) -> str:
+    """``text`` drawn as it is: a "$" in a file or design name is not mathtext (a design
+    named ``a$\\frac$`` made the chart, and the study's summary, fail)."""
+    return text.replace("$", r"\$")
+
+
 def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
           by: Sequence[str] = ("design",), title: str = ""):
     """Occupied F1 and coverage against hardware time per 360° view (log scale), one point
@@ -919,7 +925,8 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
         ax.grid(alpha=0.3, which="both")
         ax.set_title(f"{score} against hardware time (dashed: Pareto front, ringed: on it)",
                      fontsize=9)
-    by_colour = [Line2D([], [], color=colour[d], marker="o", ls="", label=d) for d in designs]
+    by_colour = [Line2D([], [], color=colour[d], marker="o", ls="", label=_plain(d))
+                 for d in designs]
     short = {"step_stride": "stride", "samples": "samples", "settle_ms": "settle ms"}
     by_marker = [Line2D([], [], color="k", marker=marker[c], ls="", mfc="none",
                         label=", ".join(f"{short[k]} {v}" for k, v in zip(knobs, c)))
@@ -936,8 +943,8 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
         fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, y), ncols=cols,
                    fontsize=8, frameon=False)
         y += 0.045 * -(-len(handles) // cols)
-    if title:   # a file name's "$" is text, not mathtext
-        fig.suptitle(title.replace("$", r"\$"), fontsize=10)
+    if title:
+        fig.suptitle(_plain(title), fontsize=10)
     fig.tight_layout(rect=(0, y + 0.01, 1, 1))
     fig.savefig(path, dpi=100, metadata={"Title": title} if title else None)
     return fig
