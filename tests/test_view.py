@@ -128,3 +128,64 @@ def test_a_picture_that_cannot_be_written_leaves_no_folder_behind(tmp_path, monk
         assert "No space left on device" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mine"]
     assert not any((tmp_path / "mine").iterdir())
+
+
+def _libraries(monkeypatch, *installed):
+    """ctypes finds only the libraries named (OSMesa, EGL)."""
+    import ctypes.util
+
+    monkeypatch.setattr(ctypes.util, "find_library",
+                        lambda name: f"lib{name}.so.1" if name in installed else None)
+
+
+def test_a_mujoco_gl_naming_a_library_not_installed_says_what_to_install(
+        tmp_path, monkeypatch, capsys):
+    """MUJOCO_GL=osmesa on a machine without OSMesa: `import mujoco` failed inside PyOpenGL
+    and `irring view` said "internal error (AttributeError: 'NoneType' object has no
+    attribute 'glGetError') … please report it" (exit 70)."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MUJOCO_GL", "osmesa")
+    _libraries(monkeypatch, "EGL")
+    assert main(["view", "t_room", "--out", "v.png"]) == 2
+    assert capsys.readouterr().err == (
+        "irring view: error: MUJOCO_GL=osmesa: the OSMesa library is not installed; EGL is: "
+        "set MUJOCO_GL=egl or unset it, or install it (Debian: apt install libosmesa6)\n")
+    monkeypatch.setenv("MUJOCO_GL", "egl")
+    _libraries(monkeypatch)
+    assert main(["view", "t_room", "--out", "v.png"]) == 2
+    assert capsys.readouterr().err == (
+        "irring view: error: MUJOCO_GL=egl: the EGL library is not installed; install it "
+        "(Debian: apt install libegl1 libgl1-mesa-dri)\n")
+    assert not (tmp_path / "v.png").exists()
+
+
+def test_a_backend_that_cannot_make_a_context_says_what_to_use_instead(monkeypatch):
+    """An EGL without a driver for a display-less device (libegl1 without
+    libgl1-mesa-dri): MuJoCo's "Cannot initialize a EGL device display" ended `irring view`
+    as an internal error to report (exit 70)."""
+    import sys
+    import types
+
+    fake = types.ModuleType("mujoco.egl")
+
+    class GLContext:
+        def __init__(self, width, height):
+            raise ImportError("Cannot initialize a EGL device display.")
+
+    fake.GLContext = GLContext
+    monkeypatch.setitem(sys.modules, "mujoco.egl", fake)
+    monkeypatch.setenv("MUJOCO_GL", "egl")
+    scene = view.SceneView(load_scenario("t_room"), pose=0, step=0)
+    with pytest.raises(RuntimeError) as err:
+        view.render(scene, 64, 48)
+    assert str(err.value) == (
+        "EGL cannot make an offscreen OpenGL context here (ImportError: Cannot initialize a "
+        "EGL device display.); OSMesa needs no driver: install it (Debian: apt install "
+        "libosmesa6) and set MUJOCO_GL=osmesa")
+
+    def platform_at_odds(width, height):   # the user's PYOPENGL_PLATFORM: said elsewhere
+        raise ImportError("Cannot use EGL: the PYOPENGL_PLATFORM environment variable …")
+
+    fake.GLContext = platform_at_odds
+    with pytest.raises(ImportError, match="PYOPENGL_PLATFORM environment variable"):
+        view.render(scene, 64, 48)

@@ -48,7 +48,8 @@ it writes; `irring scenarios` lists the bundled scenarios."""
 
 EPILOG = """\
 exit status: 0 done; 1 bad input file (scenario, recording, calibration, study), or
-calibrate --port stopped at its prompt (q, end of input); 2 bad option or argument; 3 the device failed (no answer, disconnected, error replies, no progress); 4 an
+calibrate --port stopped at its prompt (q, end of input), or view found no offscreen OpenGL
+that works; 2 bad option, argument or MUJOCO_GL; 3 the device failed (no answer, disconnected, error replies, no progress); 4 an
 output could not be written; 5 refused as too big for memory; 6 a benchmark's target missed
 (bench speed --check, effects, rooms, foldover, grazing, link); 70 internal error (a bug, or a compiled kernel not
 built or built from another .pyx: the message says how to rebuild); 130 interrupted.
@@ -233,16 +234,22 @@ def _no_mpl_backend():
 
 @contextlib.contextmanager
 def _no_opengl(applies: bool):
-    """Importing MuJoCo loads an OpenGL library (GLFW) unless MUJOCO_GL says not to;
-    only `irring view` draws with it. A MUJOCO_GL of the user's own is kept."""
-    if not applies or "MUJOCO_GL" in os.environ or "mujoco" in sys.modules:
+    """Importing MuJoCo loads the OpenGL library MUJOCO_GL names (GLFW if unset); only
+    `irring view` draws with it, so the others import it with none, whatever the user's
+    MUJOCO_GL (an egl exported on a machine without EGL failed every run). The user's
+    value is back when the command ends."""
+    if not applies or "mujoco" in sys.modules:
         yield
         return
+    users = os.environ.get("MUJOCO_GL")
     os.environ["MUJOCO_GL"] = "disable"
     try:
         yield
     finally:
-        os.environ.pop("MUJOCO_GL", None)
+        if users is None:
+            os.environ.pop("MUJOCO_GL", None)
+        else:
+            os.environ["MUJOCO_GL"] = users
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,11 +10,12 @@ from .. import errors
 from ..errors import OutputError
 from ..outputs import atomic_file, check_out, safe_name
 from ..scenario import DEFAULT_SCENARIO, load_scenario
+from ..simulation import gl
 from ._common import add_pose_option, describe, out_path, pose_index
 
 HELP = """\
 Show the scenario's MuJoCo scene: the room, the obstacles, the ring at one scan pose and
-motor step, and its twelve beams (green to where they hit, a red mark on each hit; grey
+motor step, and its beams, one per sensor (green to where they hit, a red mark on each hit; grey
 where nothing is within the sensor's range).
 
 With --out, or without a display, the picture is rendered offscreen (EGL or OSMesa, no
@@ -46,6 +47,7 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    gl.check_chosen_library()   # importing MuJoCo loads the library MUJOCO_GL names
     from ..simulation import view   # deferred: loads MuJoCo, which --help does not need
 
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)

@@ -9,7 +9,6 @@ instead of a ``MUJOCO_LOG.TXT`` in the working directory.
 from __future__ import annotations
 
 import contextlib
-import ctypes.util
 import math
 import os
 import time
@@ -20,6 +19,7 @@ import mujoco
 import numpy as np
 
 from ..scenario import Scenario
+from .gl import context_failed, gl_backend
 from .sim import SimRing
 
 BEAM_RGBA = (0.1, 0.85, 0.2, 1.0)      # a beam that returns: emitter → hit
@@ -135,30 +135,20 @@ def _add(scene, kind, size, pos, mat, rgba, connect=None) -> None:
 # --------------------------------------------------------------------------- offscreen
 
 
-def gl_backend() -> str:
-    """'egl' or 'osmesa': MUJOCO_GL if it names one, else the first whose library loads.
-    Raises RuntimeError saying what to install when neither is there."""
-    choice = os.environ.get("MUJOCO_GL", "").strip().lower()
-    if choice in ("egl", "osmesa"):
-        return choice
-    # OSMesa first: all software, one library, nothing else to match (EGL also needs a
-    # vendor library and a driver, and a half-installed EGL fails only once in use)
-    if ctypes.util.find_library("OSMesa"):
-        return "osmesa"
-    if ctypes.util.find_library("EGL"):
-        return "egl"
-    raise RuntimeError("no headless OpenGL library found for an offscreen picture: install "
-                       "EGL or OSMesa (Debian: apt install libegl1 libgl1-mesa-dri, or "
-                       "apt install libosmesa6)")
-
-
 def _gl_context(width: int, height: int):
     backend = gl_backend()
-    if backend == "egl":
-        from mujoco.egl import GLContext   # deferred: only the chosen backend can load
-    else:
-        from mujoco.osmesa import GLContext   # deferred: only the chosen backend can load
-    return GLContext(width, height)
+    try:
+        if backend == "egl":
+            from mujoco.egl import GLContext   # deferred: only the chosen backend can load
+        else:
+            from mujoco.osmesa import GLContext   # deferred: only the chosen backend can load
+        ctx = GLContext(width, height)
+        ctx.make_current()
+    except Exception as exc:   # noqa: BLE001 - PyOpenGL's and the driver's, any of them
+        if isinstance(exc, ImportError) and "PYOPENGL_PLATFORM" in str(exc):
+            raise   # the user's PYOPENGL_PLATFORM at odds with it: errors.describe says so
+        raise context_failed(backend, exc) from exc
+    return ctx
 
 
 @contextlib.contextmanager
@@ -180,7 +170,6 @@ def render(view: SceneView, width: int = 1280, height: int = 960) -> np.ndarray:
     model.vis.global_.offheight = max(model.vis.global_.offheight, height)
     with mujoco_warnings():
         ctx = _gl_context(width, height)
-        ctx.make_current()
         try:
             scene = mujoco.MjvScene(model, maxgeom=model.ngeom + 4 * view.sim.ring.sensors + 100)
             con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
