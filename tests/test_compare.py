@@ -247,3 +247,52 @@ def test_the_table_and_chart_say_too_near_rather_than_miss(tmp_path, monkeypatch
     crosses = [ln for ax in figures[0].axes for ln in ax.get_lines() if ln.get_marker() == "x"]
     assert len(crosses) == 1
     assert crosses[0].get_xdata().tolist() == [250.0] and crosses[0].get_ydata().tolist() == [200.0]
+
+
+def test_cli_compare_takes_a_ring_of_ones_own_as_a_study_file_writes_it(tmp_path, capsys):
+    """A designer's own ring (8 GP2s on R = 120 mm, ±45°) could be studied but not compared:
+    `--design` took only the five names ("invalid choice: 'custom'"), so the detection
+    curve and compare.png were out of reach for it."""
+    import json
+
+    from irring.cli import main
+    from irring.studies import study
+
+    ring8 = "{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45, step_deg: 1.08, name: ring8}"
+    out = tmp_path / "cmp"
+    assert main(["compare", "--scenario", "t_room_cylinder", "--design", ring8, "--design",
+                 "radial12", "--seeds", "1", "--workers", "1", "--bearings", "16",
+                 "--distances-mm", "400", "--out", str(out), "--json"]) == 0
+    mine, radial = json.loads(capsys.readouterr().out)
+    assert (mine["design"], radial["design"]) == ("ring8", "radial12")
+    # ±45° in 1.08° steps is rounded to ±42 steps: 85 readings of one GP2 period each
+    assert mine["hardware_time_s"] == pytest.approx(85 * 0.0383)
+    assert mine["min_detectable_radius_m"][0] < 0.01 < radial["min_detectable_radius_m"][0]
+    # the same run as the same ring in a study file
+    spec = study.design_spec("s.yaml", "designs[0]", {
+        "sensors": 8, "radius_mm": 120, "sweep_half_angle_deg": 45, "step_deg": 1.08,
+        "name": "ring8"})
+    from irring.scenario import load_scenario
+
+    sc = load_scenario("t_room_cylinder")
+    row = study.run_point(study.Task(study.point(spec, sc, sc.seed), None, sc.source, sc))
+    assert mine["occupied_f1"] == row["occupied_f1"] and mine["shadow"] == row["shadow"]
+
+
+@pytest.mark.parametrize("given, said", [
+    ("custom", "--design 'custom': not a named design; choose one of: rotating12, radial12, "
+               "rotating1, laser, sonar12, or give a ring of your own as a study file writes "
+               "it: '{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45, step_deg: 1.08, "
+               "name: ring8}'"),
+    ("{sensors: 100, radius_mm: 120, sweep_half_angle_deg: 45, step_deg: 1.08}",
+     "--design.sensors: 100 is out of range; allowed 1 … 64"),
+    ("{sensors: 8, radius: 120, sweep_half_angle_deg: 45, step_deg: 1.08}",
+     "--design.radius: unknown key (did you mean `radius_mm`?); allowed here: sensors, "
+     "radius_mm, sweep_half_angle_deg, step_deg, sensor, name"),
+])
+def test_cli_compare_names_what_a_design_may_be(tmp_path, capsys, given, said):
+    from irring.cli import main
+
+    assert main(["compare", "--design", given, "--out", str(tmp_path / "cmp")]) == 2
+    assert capsys.readouterr().err == f"irring compare: error: {said}\n"
+    assert not (tmp_path / "cmp").exists()

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Mapping
 
-from .. import designs, errors
+from .. import designs, errors, safe_yaml
+from ..errors import UsageError
 from ..designs import DESIGN_BY_NAME
 from ..outputs import check_out
 from ..studies.report import study_files
 from ..pipeline import progress_enabled
-from ..studies import compare
+from ..studies import compare, study
+from ..studies.study import StudyError
 from ..studies.executor import executor
 from ..core import MAX_SEEDS
 from ..scenario import scenario_file
@@ -41,7 +44,9 @@ what it measures, per design (mean over scenarios × seeds):
 
 designs: rotating12 (the paper's ring), radial12 (the same, held still), rotating1 (one
 GP2 turning 360° at the centre), laser (SICK-like, 0.5°, 8 m), sonar12 (12 ultrasonic
-rangers, ±15° cone, nearest echo). Each design carries its own sensor, so a laser is
+rangers, ±15° cone, nearest echo), or a ring of your own as a study file writes it
+(sensors, radius_mm, sweep_half_angle_deg rounded to whole steps of step_deg; optional
+sensor, default gp2d12, and name). Each design carries its own sensor, so a laser is
 simulated as a laser in the same room, poses and effects.
 
 writes to DIR: compare.json (per-design records, every run, detection), compare.csv
@@ -50,6 +55,8 @@ writes to DIR: compare.json (per-design records, every run, detection), compare.
 examples:
   irring compare                                        every design, the three T-rooms, 3 seeds
   irring compare --scenario t_room_cylinder --design rotating12 --design radial12
+  irring compare --design rotating12 --design '{sensors: 16, radius_mm: 150,
+      sweep_half_angle_deg: 0, step_deg: 1.08, name: fixed16}'   the paper's ring vs 16 held still
   irring compare --seeds 1 --json > designs.json
   irring compare --dask tcp://scheduler:8786            the same runs on a Dask cluster
 """
@@ -63,9 +70,11 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", action="append", metavar="S",
                    help="bundled scenario name or YAML path; repeat for several (default: "
                         + ", ".join(DEFAULT_SCENARIOS) + ")")
-    p.add_argument("--design", action="append", metavar="D", choices=list(DESIGN_BY_NAME),
-                   help="design name; repeat for several (default: all: "
-                        + ", ".join(DESIGN_BY_NAME) + ")")
+    p.add_argument("--design", action="append", metavar="D",
+                   help="a design name, or a ring of your own as a study file writes it: "
+                        "'{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45, step_deg: "
+                        "1.08, name: ring8}' (optional: sensor, name); repeat for several "
+                        "(default: all: " + ", ".join(DESIGN_BY_NAME) + ")")
     p.add_argument("--seeds", type=seed_count, default=3, metavar="N",
                    help="runs per scenario and design, seeds scenario.seed, +1, … "
                         f"(1 … {MAX_SEEDS}; default: 3)")
@@ -86,16 +95,39 @@ def register(p: argparse.ArgumentParser) -> None:
     p.set_defaults(func=run)
 
 
+def design_arg(text: str) -> designs.Design:
+    """A ``--design`` value: a named design, or a parametric ring in a study file's YAML
+    mapping (``irring.studies.study.design_spec``). Raises UsageError."""
+    if text in DESIGN_BY_NAME:
+        return designs.get(text)
+    try:
+        raw = safe_yaml.load(text, "--design", "design")
+    except safe_yaml.YamlError as exc:
+        raw, why = None, f" ({exc})"
+    else:
+        why = ""
+    if not isinstance(raw, Mapping):
+        raise UsageError(f"--design {text!r}: not a named design{why}; choose one of: "
+                         f"{', '.join(DESIGN_BY_NAME)}, or give a ring of your own as a study "
+                         "file writes it: '{sensors: 8, radius_mm: 120, sweep_half_angle_deg: "
+                         "45, step_deg: 1.08, name: ring8}'")
+    try:
+        return study.design_spec("", "--design", raw).build()
+    except StudyError as exc:
+        raise UsageError(str(exc)) from None
+
+
 def run(args: argparse.Namespace) -> int:
     scenarios = args.scenario or list(DEFAULT_SCENARIOS)
-    names = args.design or list(designs.DESIGN_BY_NAME)
+    chosen = [design_arg(d) for d in args.design or list(designs.DESIGN_BY_NAME)]
+    names = [d.name for d in chosen]
     named_once(scenarios, "--scenario", scenario_file)
     named_once(names, "--design")
-    check_distances_clear(args.distances_mm, [designs.get(n) for n in names])
+    check_distances_clear(args.distances_mm, chosen)
     # a study holding the folder, or a folder of an output's name: refused before the work
     check_out(args.out, held=False, files=study_files("compare"))
     with executor(args.workers, args.dask) as ex:
-        result = compare.compare(scenarios, names, args.seeds,
+        result = compare.compare(scenarios, chosen, args.seeds,
                                  detection_distances_m=args.distances_mm, bearings=args.bearings,
                                  progress=progress_enabled() and not args.json, ex=ex)
     paths = compare.write_outputs(result, args.out)

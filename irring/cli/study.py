@@ -20,7 +20,8 @@ EPILOG = f"""\
 the study file (YAML):
   designs:   [rotating12, radial12, {{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45,
               step_deg: 1.08}}]     named designs (rotating12 radial12 rotating1 laser sonar12)
-                                   or parametric rings (optional: sensor, name)
+                                   or parametric rings (optional: sensor, name; the
+                                   half-angle is rounded to whole steps)
   scenarios: [t_room, t_room_cylinder, my_room.yaml, my_rooms/]   bundled names, paths or
              folders (every *.yaml in them, in name order)
   seeds:     [1, 2, 3]             explicit seeds, or a count N: each scenario's seed, +1, …

@@ -148,7 +148,9 @@ def _number(source: str, path: str, raw: Any, tp: type, lo: float, hi: float) ->
     return tp(raw)
 
 
-def _design(source: str, path: str, raw: Any) -> DesignSpec:
+def design_spec(source: str, path: str, raw: Any) -> DesignSpec:
+    """A design as a study file writes it (a name, or a parametric ring mapping), checked;
+    raises :class:`StudyError` naming ``source`` and ``path``."""
     if isinstance(raw, str):
         if raw not in designs.DESIGN_BY_NAME:
             raise _fail(source, path, f"{raw!r} is not a named design; choose one of: "
@@ -203,7 +205,7 @@ def parse_study(raw: Any, source: str = "") -> Study:
     for key in ("designs", "scenarios"):
         if key not in raw:
             raise _fail(source, key, "required key is missing")
-    designs = tuple(_design(source, f"designs[{i}]", d)
+    designs = tuple(design_spec(source, f"designs[{i}]", d)
                     for i, d in enumerate(_list(source, "designs", raw["designs"], "designs")))
     labels = [d.label for d in designs]
     for i, label in enumerate(labels):
