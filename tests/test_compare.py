@@ -145,6 +145,27 @@ def test_table_prints_the_shadow_of_one_scan_and_of_four_scans():
     assert legend == "shadow 1 scan: t_room_cylinder, shadow 4 scans: t_room_three_cylinders"
 
 
+def test_table_with_one_room_hiding_wall_prints_its_shadow_once():
+    """A designer's own room beside t_room: the table printed "shadow 0.474" and "shadow 2
+    scans 0.47", the same figure twice, with a legend naming the room for the second."""
+    from irring.studies import compare as compare_mod
+
+    def rec(name, shadow):
+        scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": shadow}
+        return {"design": name, **scores, "hardware_time_s": 2.72, "compute_time_s": 0.004,
+                "scenarios": ["office", "t_room"], "poses": {"office": 2, "t_room": 4},
+                "by_scenario": {"office": scores, "t_room": {**scores, "shadow": None}}}
+
+    head, _, ring, radial, legend = compare_mod.table(
+        [rec("rotating12", 0.4744), rec("radial12", 0.0)]).splitlines()
+    assert head.split()[:6] == ["design", "F1", "occ", "free", "acc", "coverage"]
+    assert head.split().count("shadow") == 1 and "scans" not in head
+    assert ring.split()[:5] == ["rotating12", "0.900", "1.000", "0.800", "0.474"]
+    assert radial.split()[4:6] == ["0.000", "2.72"]
+    assert legend == ("shadow: in office (2 scans), the one scenario here that hides wall "
+                      "behind an obstacle")
+
+
 @pytest.mark.parametrize("design", ["rotating12", "laser"])
 def test_chart_with_nothing_to_label_draws_no_empty_legend(tmp_path, design):
     """t_room hides no wall behind a post (an empty shadow panel) and a laser has no

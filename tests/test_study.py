@@ -721,3 +721,22 @@ def test_a_dollar_in_a_design_name_is_drawn_as_text(tmp_path):
     labels = [t.get_text() for legend in fig.legends for t in legend.get_texts()]
     assert labels == ["Pareto front", "a\\$\\frac\\$", "r\\$2\\$"]
     assert (tmp_path / "c.png").stat().st_size > 10_000
+
+
+def test_the_printed_table_says_what_each_column_measures(tmp_path, capsys):
+    """The summary table's "RMSE mm", "hardware" and "compute" were explained only in the
+    study file's CSV columns (results.csv, --help); a designer reading the table asked which
+    error, which time."""
+    from irring.cli import main
+
+    p = tmp_path / "s.yaml"
+    p.write_text("designs: [radial12]\nscenarios: [t_room_cylinder]\nseeds: 1\n")
+    assert main(["study", str(p), "--out", str(tmp_path / "o"), "--workers", "1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].split()[8:11] == ["RMSE", "mm", "hardware"]
+    assert lines[4] == (
+        "mean ± sd over scenarios × seeds; shadow only over the runs in rooms that hide wall "
+        "behind an obstacle (in k/n: k of the n runs; —: none); RMSE: range error of the valid "
+        "readings against the true range; hardware: one 360° view; compute: estimator + mapper "
+        "CPU per sweep (median); front: on the Pareto front of hardware time against occupied "
+        "F1 (f1), coverage (cov), range RMSE (rmse)")

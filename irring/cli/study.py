@@ -109,7 +109,9 @@ def run(args: argparse.Namespace) -> int:
           f"{rate}{kept}")
     print(study.table(records, by))
     print("mean ± sd over scenarios × seeds; shadow only over the runs in rooms that hide "
-          "wall behind an obstacle (in k/n: k of the n runs; —: none); front: on the Pareto "
+          "wall behind an obstacle (in k/n: k of the n runs; —: none); RMSE: range error of "
+          "the valid readings against the true range; hardware: one 360° view; compute: "
+          "estimator + mapper CPU per sweep (median); front: on the Pareto "
           "front of hardware time against occupied F1 (f1), coverage (cov), range RMSE (rmse)")
     for kind, path in result["paths"].items():
         print(f"  {kind:<13}{errors.printable(str(path))}")

@@ -148,15 +148,17 @@ def table(records: list[dict]) -> str:
                 if any(r["by_scenario"][sc]["shadow"] is not None for r in records)]
     scans = {sc: records[0]["poses"][sc] for sc in shadowed}
     by_count = len(set(scans.values())) == len(scans)
+    # one such scene: its column would repeat the shadow column (0.474 beside 0.47)
+    per_scene = shadowed if len(shadowed) > 1 else []
     shadow_head = [f"shadow {n} scan{'s' if n > 1 else ''}" if by_count else f"shadow {sc}"
-                   for sc, n in scans.items()]
+                   for sc, n in scans.items() if sc in per_scene]
     head = (["design", "F1 occ", "free acc", "coverage", "shadow"] + shadow_head
             + ["360° view", "compute"] + [f"r@{d * 1e3:g}mm" for d in dists])
     rows = [head]
     for r in records:
         row = [r["design"]] + [("—" if r[k] is None else f"{r[k]:.3f}") for k in TABLE_SCORES]
         row += ["—" if r["by_scenario"][sc]["shadow"] is None
-                else f"{r['by_scenario'][sc]['shadow']:.2f}" for sc in shadowed]
+                else f"{r['by_scenario'][sc]['shadow']:.2f}" for sc in per_scene]
         row += [_seconds(r["hardware_time_s"]), f"{r['compute_time_s'] * 1e3:.1f} ms"]
         radii = r.get("min_detectable_radius_m", [])
         row += [("too near" if near else "miss") if v is None else f"{v * 1e3:.1f}mm"
@@ -166,8 +168,12 @@ def table(records: list[dict]) -> str:
     lines = ["  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
                        enumerate(zip(row, widths))) for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    if shadowed and by_count:
-        lines.append(", ".join(f"{h}: {sc}" for h, sc in zip(shadow_head, shadowed)))
+    if per_scene and by_count:
+        lines.append(", ".join(f"{h}: {sc}" for h, sc in zip(shadow_head, per_scene)))
+    elif shadowed and not per_scene:
+        n = scans[shadowed[0]]
+        lines.append(f"shadow: in {shadowed[0]} ({n} scan{'s' if n > 1 else ''}), the one "
+                     "scenario here that hides wall behind an obstacle")
     if any(r["shadow"] is None for r in records):
         lines.append(f"shadow —: n/a, {SHADOW_NA} (in any of these scenarios)")
     near = [f"{r['design']}: {r['min_range_m'] * 1e3:.0f} mm" for r in records
