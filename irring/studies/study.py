@@ -66,6 +66,7 @@ META_COLUMNS = ("poses", "readings", "iterations_mean", "irring_version")
 COLUMNS = (KEY_COLUMNS + DESIGN_COLUMNS + SCORE_COLUMNS + COST_COLUMNS + TIMING_COLUMNS
            + META_COLUMNS)
 RESULTS = "results.csv"
+_HEADER = (",".join(COLUMNS) + "\r\n").encode()   # as csv.writer writes it
 
 
 
@@ -480,6 +481,14 @@ class _Lines:
                     raise StudyError(f"{self.path}: line {number} is longer than "
                                      f"{MAX_LINE_BYTES:,} bytes (a study writes ~500); the file "
                                      "was edited or damaged")
+                if number == 1 and raw and not _HEADER.startswith(
+                        raw.removeprefix(codecs.BOM_UTF8)):
+                    # a kill cuts only what a study wrote; a first line that is not the
+                    # start of its header is someone else's file (a note, a picture)
+                    raise StudyError(f"{self.path}: is not the {RESULTS} irring study writes "
+                                     f"(it begins {brief(raw[:40])}, not with its columns); "
+                                     "choose another --out, or move the file away to start "
+                                     "afresh")
                 self.cut = self.bytes if raw else None
                 return
             start, self.bytes = self.bytes, self.bytes + len(raw)
