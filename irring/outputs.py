@@ -287,15 +287,19 @@ _WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG,
 MCAP_FILE = "MCAP file"   # ``writes`` of an MCAP: it replaces nothing but an MCAP
 CHART_FILE = "calibration chart"   # the picture irring calibrate writes beside its file
 CHART_SOFTWARE = "irring calibrate"   # its PNG's Software field, which tells it
+VIEW_FILE = "view picture"   # the picture irring view writes
+VIEW_SOFTWARE = "irring view"   # its PNG's Software field
 # what each kind of file irring writes over an existing one (it replaces only its own kind)
 _OWN_KIND = {MCAP_FILE: "an MCAP", CHART_FILE: "a calibration chart",
+             VIEW_FILE: "a picture irring view drew",
              "calibration file": "a calibration file",
              "calibration progress file": "a calibration progress file"}
+# the Software field of a PNG of each kind (a chart drawn before it named itself: matplotlib's)
+_DRAWN_BY = {CHART_FILE: (CHART_SOFTWARE, "Matplotlib"), VIEW_FILE: (VIEW_SOFTWARE,)}
 
 
-def _chart(path: Path) -> bool:
-    """A PNG that irring calibrate drew (matplotlib's Software field: one drawn before it
-    named itself)."""
+def _drawn(path: Path, writes: str) -> bool:
+    """A PNG whose Software field says irring drew it as ``writes`` (a key of _DRAWN_BY)."""
     from PIL import Image   # deferred: Pillow
 
     try:
@@ -303,7 +307,7 @@ def _chart(path: Path) -> bool:
             made_by = str(im.info.get("Software", ""))
     except Exception:   # not a picture Pillow reads
         return False
-    return made_by.startswith((CHART_SOFTWARE, "Matplotlib"))
+    return made_by.startswith(_DRAWN_BY[writes])
 
 
 def check_replaceable(path: str | Path, option: str | None = None,
@@ -328,11 +332,13 @@ def check_replaceable(path: str | Path, option: str | None = None,
     except OSError:
         return   # unreadable: the write itself says why
     if not head or (head.startswith(MCAP_MAGIC) if writes == MCAP_FILE else
-                    _chart(path) if writes == CHART_FILE else found is not None):
+                    _drawn(path, writes) if writes in _DRAWN_BY else found is not None):
         return
     what = not_text(head) or "a file"
-    raise OutputError(f"{shown}: is {what}, not {own}; writing there would replace it ({own} "
-                      f"replaces only {own}): name another file")
+    rule = (f"irring view replaces only a picture it drew, which names it in its PNG's "
+            f"Software field" if writes == VIEW_FILE else f"{own} replaces only {own}")
+    raise OutputError(f"{shown}: is {what}, not {own}; writing there would replace it ({rule}): "
+                      "name another file")
 
 
 @contextlib.contextmanager

@@ -43,3 +43,35 @@ def test_a_header_cut_short_by_a_kill_is_still_written_afresh(tmp_path):
     (out / "results.csv").write_bytes(b"\xef\xbb\xbf" + ",".join(study.COLUMNS)[:30].encode())
     result = study.run_study(study.load_study(spec), out, resume=True)
     assert result["ran"] == 1 and len(study.read_results(out / "results.csv")) == 1
+
+
+def test_view_out_replaces_only_a_picture_view_drew(tmp_path, capsys, monkeypatch):
+    """`irring view t_room --out photo.png` (or a run's map.png) replaced the picture, exit 0
+    (round 14's leftover). A FILE.png named by --out is replaced only if irring view drew it
+    (its Software field) or it is empty; view.png in view's own places is replaced as before."""
+    from PIL import Image
+
+    monkeypatch.chdir(tmp_path)
+    photo = tmp_path / "photo.png"
+    Image.new("RGB", (20, 10), (200, 30, 40)).save(photo, format="PNG")
+    before = photo.read_bytes()
+    assert main(["view", "t_room", "--out", str(photo), "--size", "48x32"]) == 4
+    assert capsys.readouterr().err == (
+        f"irring view: error: --out {photo}: is a PNG picture, not a picture irring view drew; "
+        "writing there would replace it (irring view replaces only a picture it drew, which "
+        "names it in its PNG's Software field): name another file\n")
+    assert photo.read_bytes() == before
+    mine = tmp_path / "mine.png"
+    mine.write_bytes(b"")
+    for _ in range(2):   # empty, then its own picture again
+        assert main(["view", "t_room", "--out", str(mine), "--size", "48x32"]) == 0
+        with Image.open(mine) as im:
+            assert im.info["Software"] == "irring view" and im.size == (48, 32)
+    default = tmp_path / "out" / "t_room" / "view.png"
+    default.parent.mkdir(parents=True)
+    Image.new("RGB", (20, 10)).save(default, format="PNG")   # drawn before the marker
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", "t_room", "--size", "48x32"]) == 0
+    with Image.open(default) as im:
+        assert im.size == (48, 32)

@@ -8,7 +8,8 @@ from pathlib import Path
 
 from .. import errors
 from ..errors import OutputError
-from ..outputs import atomic_file, check_out, safe_name
+from ..outputs import (VIEW_FILE, VIEW_SOFTWARE, atomic_file, check_out, check_replaceable,
+                       safe_name)
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ..simulation import gl
 from ._common import add_pose_option, describe, out_path, pose_index
@@ -40,7 +41,8 @@ def register(p: argparse.ArgumentParser) -> None:
                         "default: 0, the sensors facing outwards)")
     p.add_argument("--out", type=out_path, default=None, metavar="FILE.png",
                    help="write the picture here instead of opening the viewer (a name "
-                        "without .png is a folder: view.png inside it)")
+                        "without .png is a folder: view.png inside it); a FILE.png there "
+                        "already is replaced only if irring view drew it")
     p.add_argument("--size", default="1280x960", metavar="WxH",
                    help="picture size in pixels (default: 1280x960)")
     p.set_defaults(func=run)
@@ -73,12 +75,17 @@ def run(args: argparse.Namespace) -> int:
         if problem != "no display":   # a display was named: say why no window opens
             print(f"irring view: {problem}; writing the picture instead", file=sys.stderr)
     out = picture_path(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
+    # a FILE.png named by --out may be anyone's; view.png (in out/<scenario>/ or the --out
+    # folder) is view's by its name
+    named = out == args.out
+    if named:
+        check_replaceable(out, "--out", VIEW_FILE)   # before the rendering, not after
     try:
         image = view.render(scene, width, height)
     except RuntimeError as exc:
         print(f"irring view: error: {exc}", file=sys.stderr)
         return 1
-    path = write_png(image, out)
+    path = write_png(image, out, own=named)
     b = scene.beams
     print(f"wrote {errors.printable(str(path))}: {scenario.name}, pose {args.pose}, motor step {scene.step}; "
           f"{int(b.hits.shape[0])} of {b.distance_m.size} beams hit within "
@@ -106,10 +113,14 @@ def picture_path(out: Path) -> Path:
     return check_out(out) / "view.png"
 
 
-def write_png(image, path: Path) -> Path:
-    """``image`` (H×W×3 uint8) to ``path`` as PNG, whole or not at all. Raises OutputError."""
-    from PIL import Image   # deferred: Pillow, only to save a picture
+def write_png(image, path: Path, own: bool = True) -> Path:
+    """``image`` (H×W×3 uint8) to ``path`` as PNG, whole or not at all, naming irring view in
+    its Software field. With ``own`` it replaces only a picture irring view drew (or an empty
+    file). Raises OutputError."""
+    from PIL import Image, PngImagePlugin   # deferred: Pillow, only to save a picture
 
-    with atomic_file(path, "--out") as tmp:
-        Image.fromarray(image).save(tmp, format="PNG")
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", VIEW_SOFTWARE)
+    with atomic_file(path, "--out", VIEW_FILE if own else None) as tmp:
+        Image.fromarray(image).save(tmp, format="PNG", pnginfo=info)
     return path
