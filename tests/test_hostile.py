@@ -1267,7 +1267,7 @@ def one_run_study(tmp_path_factory):
 
 @pytest.mark.parametrize("edit, message", [
     (lambda row: row.update(occupied_recall="inf"),
-     "line 2, occupied_recall: 'inf' is not allowed; a finite number"),
+     "line 2, occupied_recall: 'inf' is not allowed; a number 0 … 1 or empty (n/a)"),
     (lambda row: row.update(occupied_f1="nan"), "line 2, occupied_f1: 'nan' is not allowed"),
     (lambda row: row.update(hardware_time_s="hello"),
      "line 2, hardware_time_s: 'hello' is not allowed; a finite number"),

@@ -75,3 +75,26 @@ def test_view_out_replaces_only_a_picture_view_drew(tmp_path, capsys, monkeypatc
     assert main(["view", "t_room", "--size", "48x32"]) == 0
     with Image.open(default) as im:
         assert im.size == (48, 32)
+
+
+@pytest.mark.parametrize("column, cell, allowed", [
+    ("occupied_f1", "7.5", "a number 0 … 1 or empty (n/a)"),
+    ("coverage", "-0.2", "a number 0 … 1 or empty (n/a)"),
+    ("range_rmse_m", "-0.004", "a number ≥ 0"),
+])
+def test_a_resumed_score_outside_its_range_is_refused(tmp_path, capsys, column, cell, allowed):
+    """results.csv edited by hand with an F1 of 7.5 was resumed and summarised as 'F1 occ
+    4.245 ± 4.603', exit 0 (a text or a NaN there was already refused)."""
+    spec = tmp_path / "s.yaml"
+    spec.write_text(STUDY.replace("[1]", "[1, 2]"))
+    out = tmp_path / "o"
+    study.run_study(study.load_study(spec), out)
+    rows = study.read_results(out / "results.csv")
+    rows[0][column] = cell
+    study._write_sorted(out / "results.csv", rows)
+    before = (out / "results.csv").read_bytes()
+    assert main(["study", str(spec), "--out", str(out), "--resume", "--workers", "1"]) == 1
+    assert capsys.readouterr().err == (
+        f"irring study: error: {out / 'results.csv'}: line 2, {column}: '{cell}' is not "
+        f"allowed; {allowed}; the file was edited or damaged\n")
+    assert (out / "results.csv").read_bytes() == before

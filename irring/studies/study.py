@@ -552,6 +552,7 @@ def _read_rows(p: Path, lines: _Lines, text: Iterable[str]) -> list[dict[str, st
 _TEXT_COLUMNS = ("design", "scenario", "sensor", "irring_version")
 _WHOLE_COLUMNS = ("step_stride", "samples", "seed", "sensors", "poses", "readings")
 _NAN_COLUMNS = ("worker_peak_mb",)   # NaN where the platform cannot measure it
+_SHARE_COLUMNS = tuple(c for c in SCORE_COLUMNS if "rmse" not in c)   # 0 … 1
 
 
 def _cell_problem(col: str, cell: str) -> str | None:
@@ -567,8 +568,10 @@ def _cell_problem(col: str, cell: str) -> str | None:
         value = float(cell)
     except ValueError:
         value = None
+    if col in _SHARE_COLUMNS:   # a share summarised as one: 7.5 made F1 4.245 ± 4.603
+        return None if value is not None and 0 <= value <= 1 else "a number 0 … 1 or empty (n/a)"
     if value is not None and (math.isfinite(value) or (col in _NAN_COLUMNS and value != value)):
-        return None
+        return None if value >= 0 or value != value else "a number ≥ 0"
     return "a finite number" + (" or empty (n/a)" if col in SCORE_COLUMNS else "")
 
 
