@@ -30,6 +30,7 @@ MAX_DIGITS = 100           # of a whole number: more than any file's field takes
 # which YAML 1.1 reads as text
 _EXPONENT_FLOAT = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9_]+$")
 _FLOAT_TAG = "tag:yaml.org,2002:float"
+_UNKNOWN_TAG = re.compile(r"could not determine a constructor for the tag '(.*)'", re.S)
 
 
 # (bytes, values) a kind of file may have, checked before a value is built (building one
@@ -213,6 +214,13 @@ def load(text: str, source: str = "<string>", what: str = "YAML file") -> Any:
         where = f"line {exc.problem_mark.line + 1}: " if exc.problem_mark else ""
         if "maximum nesting depth" in str(exc.problem):   # libyaml stops at 1,000 levels
             raise YamlError(f"{source}: {where}nested more than {MAX_DEPTH} levels deep") from None
+        tag = _UNKNOWN_TAG.fullmatch(str(exc.problem))
+        if tag:   # PyYAML's message, cut short, read 'could not determine a const...merge'
+            raise YamlError(f"{source}: {where}" + (
+                "YAML merge keys (<<) are not allowed; write the keys out"
+                if tag[1] == "tag:yaml.org,2002:merge" else
+                f"YAML tags ({brief(tag[1])[1:-1]}) are not allowed; write a plain value")
+            ) from None
         raise YamlError(f"{source}: {where}not valid YAML: {brief(exc.problem or str(exc))[1:-1]}"
                         f"{_tab_hint(text, exc.problem_mark)}") from None
     except yaml.YAMLError as exc:

@@ -98,3 +98,19 @@ def test_a_resumed_score_outside_its_range_is_refused(tmp_path, capsys, column, 
         f"irring study: error: {out / 'results.csv'}: line 2, {column}: '{cell}' is not "
         f"allowed; {allowed}; the file was edited or damaged\n")
     assert (out / "results.csv").read_bytes() == before
+
+
+@pytest.mark.parametrize("text, said", [
+    ("name: x\nrobot: {poses: [{<<: {x_mm: 100}, y_mm: 450}]}\n",
+     "line 2: YAML merge keys (<<) are not allowed; write the keys out"),
+    ("name: !!python/object:os.system x\n",
+     "line 1: YAML tags (tag:yaml.org,2002:python/object:os.system) are not allowed; write a "
+     "plain value"),
+])
+def test_a_yaml_merge_key_or_tag_is_named_whole(tmp_path, capsys, text, said):
+    """A merge key (<<) in a scenario said 'not valid YAML: could not determine a
+    const...ag 'tag:yaml.org,2002:merge'', PyYAML's message cut short in the middle."""
+    path = tmp_path / "m.yaml"
+    path.write_text(text)
+    assert main(["scenarios", str(path)]) == 1
+    assert capsys.readouterr().err == f"irring scenarios: error: {path}: {said}\n"
