@@ -238,7 +238,8 @@ def stuck_sensors(sweeps: Sequence[Sweep], points: Sequence[Points]) -> list[str
     noise), so one count all round is a stuck sensor or a dead ADC channel, whose ring of
     wall the map would show (one line for the sensors stuck at one count). Silence all round
     (no return) is not warned of: a sensor that meets no wall within its reach reads so too,
-    and maps nothing."""
+    and maps nothing; 0 counts all round, where another sensor never reads 0, is: a powered
+    GP2 never outputs 0 V, a cut wire does, and its beams map free to its reach."""
     poses = {tuple(np.asarray(s.pose, float).round(6)) for s in sweeps}
     if len(poses) < 2 or len(points) != len(sweeps):
         return []
@@ -261,6 +262,22 @@ def stuck_sensors(sweeps: Sequence[Sweep], points: Sequence[Points]) -> list[str
                    "round; check " + ("the sensor's connector and its ADC channel" if len(ks) == 1
                                       else "their connectors, ADC channels and the ADC's "
                                       "reference"))
+    # 0 V at every reading, where another sensor's silence reads above it: no GP2 outputs
+    # 0 V powered (with nothing in range it reads its no-return level), a cut wire does
+    live = (counts > 0).all(axis=0)
+    dead = np.flatnonzero((counts == 0).all(axis=0)) if live.any() else []
+    if len(dead):
+        who = f"sensor {dead[0]}" if len(dead) == 1 else f"sensors {', '.join(map(str, dead))}"
+        out.append(f"{who} (of 0 … {counts.shape[1] - 1}) read 0 counts at every one of "
+                   f"{'its' if len(dead) == 1 else 'their'} {len(counts)} readings"
+                   f"{'' if len(dead) == 1 else ' each'}, at {len(poses)} poses, where a "
+                   f"powered sensor with nothing in range reads its no-return level (the "
+                   f"others never read below {int(counts[:, live].min())}): a sensor unplugged "
+                   "or its wire cut reads so. "
+                   f"{'Its' if len(dead) == 1 else 'Their'} readings are mapped as no return, "
+                   "free to the sensor's reach, walls or not; check "
+                   + ("the sensor's connector and its ADC channel" if len(dead) == 1 else
+                      "their connectors and ADC channels"))
     return out
 
 

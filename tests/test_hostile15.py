@@ -114,3 +114,27 @@ def test_a_yaml_merge_key_or_tag_is_named_whole(tmp_path, capsys, text, said):
     path.write_text(text)
     assert main(["scenarios", str(path)]) == 1
     assert capsys.readouterr().err == f"irring scenarios: error: {path}: {said}\n"
+
+
+def test_a_sensor_that_reads_0_counts_all_round_is_warned_of(tmp_path, capsys):
+    """t_room's recording with sensor 3 at 0 counts in every reading (its wire cut, the
+    sensor unplugged): mapped as no return, free to its reach through walls (F1 0.995 ->
+    0.989, free accuracy 1.000 -> 0.998), exit 0, without a word (round 14's leftover).
+    Mapped as before, and warned of."""
+    from irring.recording import load_recording, save_recording
+
+    assert main(["run", "t_room", "--out", str(tmp_path / "t"), "--no-animation"]) == 0
+    capsys.readouterr()
+    sweeps, meta = load_recording(tmp_path / "t" / "sweeps.npz")
+    floor = min(int(s.counts.min()) for s in sweeps)
+    for sweep in sweeps:
+        sweep.counts[:, 3] = 0
+    cut = save_recording(tmp_path / "cut.npz", sweeps, meta)
+    assert main(["replay", str(cut), "--out", str(tmp_path / "r"), "--no-animation"]) == 0
+    out = capsys.readouterr().out
+    assert ("\n  warning   sensor 3 (of 0 … 11) read 0 counts at every one of its 284 readings, "
+            "at 4 poses, where a powered sensor with nothing in range reads its no-return "
+            f"level (the others never read below {floor}): a sensor unplugged or its wire cut "
+            "reads so. Its readings are mapped as no return, free to the sensor's reach, walls "
+            "or not; check the sensor's connector and its ADC channel\n") in out
+    assert "F1 0.989" in out
