@@ -616,16 +616,21 @@ def test_which_way_a_pass_ran_is_settled_by_a_second_irscn_or_the_irdon(reverse,
 
 
 def test_a_reversed_device_that_rebooted_between_sweeps_keeps_the_next_sweep():
-    """Numbered from 0 again after a reboot, the second sweep's IRSCN look stale; the IRDON
-    that ends them confirms them as this sweep's, read 3 → -3."""
+    """Numbered from 0 again after a reboot (at step 0, where the ring was turned back to),
+    the second sweep's IRSCN look stale; the IRDON that ends them confirms them as this
+    sweep's, read 3 → -3."""
     sweeps = []
 
     def on_sweep(cmd):
         sweeps.append(cmd)
         clock0 = 900 if len(sweeps) == 1 else 0   # the reboot restarts the device clock
         return [p.Scan(i, 3 - i, clock0 + i, (53 - i, 7)) for i in range(7)] + [p.Done(6)]
-    ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()
+
+    def script(msg):
+        return [p.Position(msg.step)] if isinstance(msg, p.GoTo) else scripted(on_sweep)(msg)
+    ring = SerialRing(ScriptPort(script), timeout_s=TIMEOUT_S).open()
     ring.sweep(resweep=0)
+    ring.goto(0)
     sweep = ring.sweep(resweep=0)
     assert sweep.steps.tolist() == list(range(-3, 4)) and sweep.missing_steps == ()
     assert sweep.counts[:, 0].tolist() == list(range(47, 54))
@@ -652,8 +657,10 @@ def test_an_irscn_dropped_as_inconsistent_is_named_in_the_report(bad, named):
         sweeps.append(cmd)
         if cmd.from_step != -3:   # the re-sweep of the dropped step -2
             return [p.Done(-1)]
-        return [p.Scan(0, -3, 0, (10, 11)), bad if len(sweeps) == 1 else p.Scan(1, -2, 1, (1, 2)),
-                *(p.Scan(2 + i, s, 2 + i, (14, 15)) for i, s in enumerate(range(-1, 4))),
+        t = 100 * len(sweeps)   # the device clock runs on (a rebooted one's starts anew)
+        return [p.Scan(0, -3, t, (10, 11)),
+                bad if len(sweeps) == 1 else p.Scan(1, -2, t + 1, (1, 2)),
+                *(p.Scan(2 + i, s, t + 2 + i, (14, 15)) for i, s in enumerate(range(-1, 4))),
                 p.Done(6)]
 
     ring = SerialRing(ScriptPort(scripted(on_sweep)), timeout_s=TIMEOUT_S).open()

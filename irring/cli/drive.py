@@ -52,7 +52,8 @@ Between poses drive waits for Enter when run at a terminal (--no-wait to skip); 
 moves its robot by itself at every full sweep.
 
 Exit status: 0 all poses swept; 3 no device, or it stopped answering, disconnected, refused
-a sweep or made no progress (what arrived is still mapped and written); 130 Ctrl-C, SIGTERM,
+a sweep, made no progress, or rebooted away from step 0, where it would take another step for
+its step 0 (what arrived before is still mapped and written); 130 Ctrl-C, SIGTERM,
 SIGHUP (the terminal closed) or the input ended at the prompt (the poses swept so far are
 mapped and written); 2 bad arguments; 1 a bad --truth or --calibration file.
 

@@ -10,8 +10,8 @@ backed by the simulator (import it explicitly). The driver's names load on first
 from __future__ import annotations
 
 __all__ = ["SerialRing", "SweepReport", "LinkStats", "DeviceError", "DeviceTimeout",
-           "DeviceChanged", "DeviceDisconnected", "DeviceRejected", "DeviceReplayed",
-           "HandshakeError", "LinkLost", "NoReadings"]
+           "DeviceChanged", "DeviceDisconnected", "DeviceRebooted", "DeviceRejected",
+           "DeviceReplayed", "HandshakeError", "LinkLost", "NoReadings"]
 
 
 def __getattr__(name: str):

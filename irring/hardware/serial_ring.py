@@ -129,6 +129,12 @@ class DeviceReplayed(LinkLost):
     sentence (seq, step, clock and counts): a firmware replaying its buffer, not reading."""
 
 
+class DeviceRebooted(LinkLost):
+    """The device rebooted (its IRSCN numbered and its clock started anew) while the ring
+    stood away from step 0: its firmware takes where it wakes as step 0, so every step it
+    names since is off by where it stood; what it read since is not taken."""
+
+
 class DeviceTimeout(LinkLost):
     """The device stopped answering (no sentence for ``timeout_s``, IRSTP retries unanswered)."""
 
@@ -391,6 +397,10 @@ class SerialRing:
         self._garbled: str | None = None  # the sweep's first malformed sentence, and why
         self._sweep_before: dict[str, int] = {}   # the counters when the sweep began
         self._previous: dict[int, p.Scan] = {}   # the last sweep's IRSCN by step
+        self._clock: int | None = None   # device clock of the latest IRSCN taken (ms)
+        # an IRDON -1 (none sent since power-up) after IRSCN were taken: the device said it
+        # rebooted; the step the ring stood at then (None: unknown)
+        self._woke: tuple[int | None] | None = None
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -625,6 +635,7 @@ class SerialRing:
         return None
 
     def _accept_info(self, info: p.Info) -> p.Info:
+        self._clock = self._woke = None   # a new session: its clock and numbering are new
         if info.proto == 1 and self.decoder.version == 1:
             what = (f"the device on {self.port_name} runs IRR protocol v1 firmware "
                     f"({info.firmware}), whose 8-bit XOR checksum lets two bit errors in one "
@@ -689,6 +700,7 @@ class SerialRing:
             msg = self._await((p.Done,), self.timeout_s)
             if isinstance(msg, p.Done):
                 self._last_seq = msg.seq if msg.seq >= 0 else None   # -1: (re)booted
+                self._said_booted(msg.seq)
                 return msg.seq
         return None
 
@@ -798,6 +810,7 @@ class SerialRing:
                       "device disconnected" if isinstance(exc, DeviceDisconnected) else
                       "device changed" if isinstance(exc, DeviceChanged) else
                       "device replayed its last sweep" if isinstance(exc, DeviceReplayed) else
+                      "device rebooted" if isinstance(exc, DeviceRebooted) else
                       "device refused" if isinstance(exc, DeviceRejected) else "interrupted")
             sweep, report = build(False, reason)
             exc.partial, exc.report = sweep, report
@@ -919,6 +932,12 @@ class SerialRing:
                 self._inconsistent(f"IRSCN {msg.seq} of step {msg.step} came twice with other "
                                    f"counts", 2)
                 return
+            if self._woke is not None and self._went_back(msg):
+                stood, self._woke = self._woke[0], None
+                if stood != 0:
+                    raise self._rebooted(msg, stood, "IRDON -1 (no IRSCN sent since "
+                                         "power-up) ended a sweep after IRSCN had come")
+                self._clock = None   # woken at step 0: its steps are right, its clock new
             gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) % p.SEQ_MODULO
             if gap >= p.SEQ_MODULO // 2:
                 # an earlier IRSCN, late: the gap its seq left counted it lost, but it came
@@ -930,6 +949,8 @@ class SerialRing:
                     self.stats.lost_scans += gap
                 last_seq = msg.seq
             self._position = msg.step
+            if self._clock is None or not self._went_back(msg):
+                self._clock = msg.t_ms
             ps.got[msg.step] = msg
             if first is None:
                 first = msg
@@ -985,8 +1006,15 @@ class SerialRing:
                         # every IRSCN looked stale, but they and this IRDON number this very
                         # pass: the device numbers from elsewhere (it rebooted between sweeps,
                         # or its last IRDON was wrong), so they are this pass's readings
-                        log.info("the device renumbered its IRSCN (rebooted?); %d of this "
-                                 "pass's readings kept", len(suspects))
+                        back = next((sc for sc in suspects if self._went_back(sc)), None)
+                        if back is not None and not self._replayed(suspects):
+                            # numbered and clocked anew, with new readings: it rebooted
+                            if self._position != 0:
+                                raise self._rebooted(back, self._position, "its IRSCN are "
+                                                     "numbered from 0 again")
+                            self._clock = None   # woken at step 0: its steps are right
+                        log.info("the device renumbered its IRSCN; %d of this pass's "
+                                 "readings kept", len(suspects))
                         self.stats.stale -= len(suspects)
                         hint = None
                         ps.reversed = reverse
@@ -1018,6 +1046,7 @@ class SerialRing:
                     # IRDON -1: no IRSCN sent since the device (re)booted; its numbering
                     # starts again at 0, which must not read as stale in the next pass
                     self._last_seq = msg.seq if msg.seq >= 0 else None
+                    self._said_booted(msg.seq)
                     ps.done = True
                     return
                 elif isinstance(msg, p.ErrorReply):
@@ -1091,6 +1120,36 @@ class SerialRing:
             f"steps, device clock ({clocks[0]} … {clocks[-1]} ms) and counts, where a new "
             "sweep's clock runs on: a firmware replaying its buffer, not reading the sensors; "
             "not taken. Reset the board and sweep this pose again.")
+
+    def _said_booted(self, done_seq: int) -> None:
+        """Note an IRDON -1 (none sent since power-up) that came after IRSCN were taken,
+        with the step the ring stood at: a reboot, if the next IRSCN's clock confirms it."""
+        if done_seq < 0 and self._clock is not None and self._woke is None:
+            self._woke = (self._position,)
+
+    def _went_back(self, scan: p.Scan) -> bool:
+        """``scan``'s device clock is earlier than the latest IRSCN's taken (modulo its wrap):
+        a device's clock runs on, and a rebooted one's starts anew."""
+        return self._clock is not None and \
+            0 < (self._clock - scan.t_ms) % p.CLOCK_MODULO < p.CLOCK_MODULO // 2
+
+    def _rebooted(self, scan: p.Scan, stood: int | None, sign: str) -> DeviceRebooted:
+        """The error for a device seen rebooting (``sign``: how its numbering said so; its
+        clock went back to ``scan``'s) while the ring stood at step ``stood``."""
+        info = self.info
+        where = ("at a step not known" if stood is None else f"at step {stood}")
+        deg = 0 if stood is None else \
+            abs(stood) * info.step_mdeg * info.gear_num / info.gear_den / 1000
+        off = ("by an unknown number of steps" if stood is None else
+               f"by {abs(stood)} steps ({deg:.1f}°)")
+        fix = ("turn the ring back to radial by hand" if stood is None else
+               f"turn the ring back to radial (IRGTO,{-stood} turns it there now)")
+        return DeviceRebooted(
+            f"the ring on {self.port_name} rebooted {where}: {sign}, and its clock started "
+            f"anew ({scan.t_ms} ms after {self._clock} ms). Its firmware takes the step it "
+            f"wakes at as step 0, so every step it names since is off {off} and its readings "
+            f"would land beside their walls; none read since is taken. Then {fix}, reset the "
+            "board, and drive the poses not swept again.")
 
     def _inconsistent(self, why: str, n: int = 1) -> None:
         """Count ``n`` IRSCN dropped as inconsistent; the sweep's report names the first."""
