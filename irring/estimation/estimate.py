@@ -650,6 +650,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label = (bower or bowed_lines_compiled)(points, label, counts, cal)
         # a line over a corner as two pieces (the snap's label; the grouping keeps its lines)
         points, split = kinked_lines(points, label, counts, cal)
+        # members whose beam passes another wall first: on that wall, or unplaced
+        points, split = past_other_lines(points, split, counts, cal, options)
     else:
         split = label
     points = censored_lines(points, split, counts, steps, cal)
@@ -819,6 +821,107 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
         theta=np.where(put, inc_best, points.theta),
         sigma_m=np.where(put, sig_best, points.sigma_m), valid=points.valid | put,
         reason=np.where(put, Reason.OK, points.reason).astype(points.reason.dtype))
+
+
+PAST_MIN = 10          # a line of at least this many valid members is a wall a beam stops at …
+PAST_REACH_SHARE = 0.5  # … over its members' extent and past its ends by this share of the
+#                         crossing's range (at least LineOptions.corner_reach_m) …
+PAST_CLEAR_SIGMAS = 3.0  # … where a reading's end point lies this many σ past it (+ 2 cm) …
+PAST_FEW = 4            # … and at most this many of its line's members do
+
+
+def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration,
+                     options: LineOptions) -> tuple[Points, np.ndarray]:
+    """(points, label) with the valid members of a line whose beams meet another line of
+    ≥ ``PAST_MIN`` members first — within its members' extent or past its ends by up to
+    ``PAST_REACH_SHARE`` of the range — ahead of their end points by ``PAST_CLEAR_SIGMAS`` σ
+    + 2 cm, on the side of that line where at most ``PAST_FEW`` of their line's members lie
+    (a corner, not a wall passing behind the other's end): each read on the nearest such
+    line at its incidence where its counts put it there within max(2 cm, 3σ) (label −1:
+    placed, not snapped); the others as they were. ``label`` (S, N): the lines as
+    kinked_lines left them. Why: a wall's last readings at grazing past a corner join the
+    line they continue, read at its θ 100-270 mm long (docs/estimator.md, "A beam that
+    meets another wall first")."""
+    member = points.valid & (label >= 0)
+    if not member.any():
+        return points, label
+    g = label[member]
+    n = np.bincount(g)
+    wall = n >= PAST_MIN
+    if np.count_nonzero(wall) < 2:
+        return points, label
+    nn = np.maximum(n, 1)
+    x, y = points.x[member], points.y[member]
+    mx, my = np.bincount(g, x) / nn, np.bincount(g, y) / nn
+    u, v = x - mx[g], y - my[g]
+    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n.size),
+                             np.bincount(g, u * u, n.size) - np.bincount(g, v * v, n.size))
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    along = u * ca[g] + v * sa[g]
+    lo = np.full(n.size, np.inf)
+    hi = np.full(n.size, -np.inf)
+    np.minimum.at(lo, g, along)
+    np.maximum.at(hi, g, along)
+    # first, the walls' ends: an end seen from the ring past another wall, or none to ask
+    walls = wall.nonzero()[0]
+    cx, cy = float(points.origin_x.mean()), float(points.origin_y.mean())
+    ends = np.concatenate([lo[walls], hi[walls]])
+    owner = np.concatenate([walls, walls])
+    ex, ey = mx[owner] + ends * ca[owner], my[owner] + ends * sa[owner]
+    rng = np.hypot(ex - cx, ey - cy)
+    nrm = np.stack([-sa[walls], ca[walls]], 1)
+    un, t, ahead, at = beam_crossings(np.full(ex.size, cx), np.full(ex.size, cy),
+                                      (ex - cx) / rng, (ey - cy) / rng,
+                                      np.stack([mx[walls], my[walls]], 1),
+                                      np.stack([ca[walls], sa[walls]], 1), nrm)
+    reach = np.maximum(options.corner_reach_m, PAST_REACH_SHARE * t)
+    # (a member past by less than PAST_CLEAR_SIGMAS σ + 2 cm at the σ floor is not asked)
+    pair = (ahead & (t < rng[:, None] - PAST_CLEAR_SIGMAS * SIGMA_FLOOR_M - 0.02)
+            & (at >= lo[walls] - reach)
+            & (at <= hi[walls] + reach) & (owner[:, None] != walls[None, :]))
+    if not pair.any():
+        return points, label
+    # then, per such pair of lines (a few a sweep), the end's line's members past the other
+    idx = member.reshape(-1).nonzero()[0]
+    s_all = np.asarray(counts, dtype=float).reshape(-1)
+    taken = {}
+    for b, c in sorted(set(zip(owner[pair.nonzero()[0]].tolist(),
+                                walls[pair.nonzero()[1]].tolist()))):
+        k = (g == b).nonzero()[0]
+        f = idx[k]
+        h = points.heading.reshape(-1)[f]
+        un_c, t_c, ahead_c, at_c = beam_crossings(
+            points.origin_x.reshape(-1)[f], points.origin_y.reshape(-1)[f], np.cos(h),
+            np.sin(h), np.array([[mx[c], my[c]]]), np.array([[ca[c], sa[c]]]),
+            np.array([[-sa[c], ca[c]]]))
+        un_c, t_c, ahead_c, at_c = un_c[:, 0], t_c[:, 0], ahead_c[:, 0], at_c[:, 0]
+        reach_c = np.maximum(options.corner_reach_m, PAST_REACH_SHARE * t_c)
+        sig = points.sigma_m.reshape(-1)[f]
+        past = (ahead_c & (at_c >= lo[c] - reach_c) & (at_c <= hi[c] + reach_c)
+                & (t_c + PAST_CLEAR_SIGMAS * sig + 0.02 < points.d.reshape(-1)[f]))
+        # a corner: the line's members all on one side of the other's, but these few
+        side = ((x[k] - mx[c]) * -sa[c] + (y[k] - my[c]) * ca[c]) > 0.0
+        few = side if 2 * np.count_nonzero(side) < side.size else ~side
+        past &= few
+        if not past.any() or np.count_nonzero(few) > PAST_FEW:
+            continue
+        theta = np.arccos(np.minimum(np.abs(un_c[past]), 1.0))
+        with np.errstate(invalid="ignore"):
+            d_l = cal.distance(s_all[f[past]], theta)
+        fit = ((theta <= cal.max_incidence_rad) & np.isfinite(d_l)
+               & (np.abs(d_l - t_c[past]) <= np.maximum(0.02, 3.0 * sig[past])))
+        for i, tt, dd, th, ok, sg in zip(f[past].tolist(), t_c[past].tolist(),
+                                         d_l.tolist(), theta.tolist(), fit.tolist(),
+                                         sig[past].tolist()):
+            if ok and (i not in taken or tt < taken[i][0]):
+                taken[i] = (tt, dd, th, sg)
+    if not taken:
+        return points, label
+    flat = np.fromiter(taken, dtype=np.intp)
+    _, d_l, theta, sig = (np.array(v) for v in zip(*taken.values()))
+    new_label = np.array(label)
+    new_label.reshape(-1)[flat] = -1
+    return placed_at(points, flat, d_l, theta, sig), new_label
 
 
 # a reading on no line placed no better than this is not placed: its θ, from its own
