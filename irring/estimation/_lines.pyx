@@ -2831,3 +2831,239 @@ cdef inline double _halves_rss(double m, double sx, double sy, double sxx, doubl
     """``_best_halves``' rss: the least squared residual of a TLS line through m points."""
     cdef double a = sxx - sx * sx / m, b = syy - sy * sy / m, c = sxy - sx * sy / m
     return 0.5 * (a + b) - sqrt(0.25 * ((a - b) * (a - b)) + c * c)
+
+
+# --------------------------------------------------------------------------- past other lines
+
+cdef double _np_sum(const double* a, idx_t n) noexcept nogil:
+    """numpy's sum of a contiguous run (add.reduce: pairwise, 8 lanes below 128), to the bit."""
+    cdef idx_t i, j, n2
+    cdef double r[8]
+    cdef double res
+    if n < 8:
+        res = -0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    if n <= 128:
+        for j in range(8):
+            r[j] = a[j]
+        i = 8
+        while i < n - n % 8:
+            for j in range(8):
+                r[j] += a[i + j]
+            i += 8
+        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        while i < n:
+            res += a[i]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _np_sum(a, n2) + _np_sum(a + n2, n - n2)
+
+
+def np_mean(const double[::1] a):
+    """``float(a.mean())`` of a contiguous array, to the bit (:func:`past_members`' ring
+    centre; exposed for its test)."""
+    return (0.0 + _np_sum(&a[0], a.shape[0])) / a.shape[0] if a.shape[0] else NAN
+
+
+cdef inline bint _crosses(double ox, double oy, double ux, double uy, double mx, double my,
+                          double ca, double sa, double* un, double* t,
+                          double* at) noexcept nogil:
+    """``estimate.beam_crossings`` of one beam and one line (centroid (mx, my), direction
+    (ca, sa)), term by term as numpy forms it: whether the line lies ahead; ``un``, ``t``
+    (0 where not ahead) and the crossing's coordinate ``at`` along it."""
+    un[0] = ux * -sa + uy * ca
+    t[0] = ((mx - ox) * -sa + (my - oy) * ca) / un[0]
+    cdef bint ahead = fabs(un[0]) > 1e-9 and isfinite(t[0]) and t[0] > 0
+    if not ahead:
+        t[0] = 0.0
+    at[0] = (ox + t[0] * ux - mx) * ca + (oy + t[0] * uy - my) * sa
+    return ahead
+
+
+def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
+                 const double[::1] x, const double[::1] y, const double[::1] origin_x,
+                 const double[::1] origin_y, const double[::1] heading, const double[::1] d,
+                 const double[::1] sigma, double cx, double cy, idx_t min_members,
+                 idx_t few_max, double corner_reach, double reach_share, double clear_sigmas,
+                 double clear_m, double floor_clear_m):
+    """``irring.estimation.estimate.past_other_lines``' gates, to the bit: each line's TLS
+    fit and extent over its valid members (the angle from numpy's ``arctan2``), the walls'
+    ends seen from the ring centre (``cx``, ``cy``; NaN: the mean of ``origin_x``,
+    ``origin_y`` as numpy takes it) past another wall, and per such pair of walls (in
+    label order) the few members of the end's wall past the other. None where no pair is
+    asked; else the members found, in that order, as flat index, t, un (``beam_crossings``')
+    and σ: numpy's statement reads them on the other wall. Arrays flat (S·N); ``label`` −1
+    on no line; the scalars are the rule's constants."""
+    cdef idx_t size = label.shape[0], f, i, j, k, b, c, L = 0, nw = 0, m = 0, e, n_side
+    cdef idx_t n_pairs = 0, n_out = 0, lo_k, hi_k
+    cdef double ex, ey, rng, ux, uy, un, t, at, reach, a, ca, sa, mxc, myc
+    cdef bint ahead, few
+    cdef double[:, ::1] CS, O, ND
+    cdef const double[::1] alpha
+    cdef idx_t[::1] OF
+    if not (valid.shape[0] == x.shape[0] == y.shape[0] == origin_x.shape[0]
+            == origin_y.shape[0] == heading.shape[0] == d.shape[0] == sigma.shape[0] == size):
+        raise lengths_differ("past_members' arrays", label=size, valid=valid.shape[0],
+                             x=x.shape[0], y=y.shape[0], origin_x=origin_x.shape[0],
+                             origin_y=origin_y.shape[0], heading=heading.shape[0],
+                             d=d.shape[0], sigma=sigma.shape[0])
+    for f in range(size):
+        if valid[f] and label[f] >= L:
+            L = label[f] + 1
+    if L == 0:
+        return None
+    cdef idx_t* rank = <idx_t*> calloc(L, sizeof(idx_t))
+    cdef idx_t* start = NULL
+    cdef idx_t* at_f = NULL
+    cdef double* W = NULL
+    cdef double* M = NULL
+    cdef unsigned char* pair = NULL
+    try:
+        if rank == NULL:
+            raise MemoryError()
+        for f in range(size):
+            if valid[f] and label[f] >= 0:
+                rank[label[f]] += 1
+        for k in range(L):                 # a wall: a line of min_members or more
+            if rank[k] >= min_members:
+                m += rank[k]
+                rank[k] = nw
+                nw += 1
+            else:
+                rank[k] = -1
+        if nw < 2:
+            return None
+        # per wall: its members' start; rows of W: members, Σx, Σy, mx, my, Σuv, Σuu, Σvv,
+        # lo, hi
+        start = <idx_t*> calloc(nw + 1, sizeof(idx_t))
+        at_f = <idx_t*> malloc(m * sizeof(idx_t))
+        W = <double*> calloc(10 * nw, sizeof(double))
+        M = <double*> malloc(2 * m * sizeof(double))      # each member's u, v
+        pair = <unsigned char*> calloc(nw * nw, 1)
+        if start == NULL or at_f == NULL or W == NULL or M == NULL or pair == NULL:
+            raise MemoryError()
+        for f in range(size):
+            if valid[f] and label[f] >= 0 and rank[label[f]] >= 0:
+                b = rank[label[f]]
+                W[b] += 1.0
+                W[nw + b] += x[f]
+                W[2 * nw + b] += y[f]
+        for b in range(nw):
+            start[b + 1] = start[b] + <idx_t> W[b]
+            W[3 * nw + b] = W[nw + b] / W[b]
+            W[4 * nw + b] = W[2 * nw + b] / W[b]
+            W[8 * nw + b] = INFINITY
+            W[9 * nw + b] = -INFINITY
+        for b in range(nw):                # (a cursor per wall, in W's Σx row, now free)
+            W[nw + b] = <double> start[b]
+        for f in range(size):              # each wall's members in flat order: numpy's sums'
+            if valid[f] and label[f] >= 0 and rank[label[f]] >= 0:
+                b = rank[label[f]]
+                i = <idx_t> W[nw + b]
+                W[nw + b] += 1.0
+                at_f[i] = f
+                M[2 * i] = x[f] - W[3 * nw + b]
+                M[2 * i + 1] = y[f] - W[4 * nw + b]
+                W[5 * nw + b] += M[2 * i] * M[2 * i + 1]
+                W[6 * nw + b] += M[2 * i] * M[2 * i]
+                W[7 * nw + b] += M[2 * i + 1] * M[2 * i + 1]
+        nd_arr = np.empty((2, nw))
+        ND = nd_arr
+        for b in range(nw):
+            ND[0, b] = 2.0 * W[5 * nw + b]
+            ND[1, b] = W[6 * nw + b] - W[7 * nw + b]
+        alpha_arr = 0.5 * _arctan2(nd_arr[0], nd_arr[1])
+        alpha = alpha_arr
+        cs_arr = np.empty((2, nw))
+        CS = cs_arr
+        for b in range(nw):
+            CS[0, b] = cos(alpha[b])
+            CS[1, b] = sin(alpha[b])
+            for i in range(start[b], start[b + 1]):
+                a = M[2 * i] * CS[0, b] + M[2 * i + 1] * CS[1, b]
+                # (np.minimum / np.maximum: a NaN once met stays)
+                if W[8 * nw + b] == W[8 * nw + b] and not (a >= W[8 * nw + b]):
+                    W[8 * nw + b] = a
+                if W[9 * nw + b] == W[9 * nw + b] and not (a <= W[9 * nw + b]):
+                    W[9 * nw + b] = a
+        # first, the walls' ends: an end seen from the ring past another wall, or none to ask
+        if cx != cx or cy != cy:
+            cx = (0.0 + _np_sum(&origin_x[0], size)) / size
+            cy = (0.0 + _np_sum(&origin_y[0], size)) / size
+        for e in range(2 * nw):
+            b = e % nw
+            ca = CS[0, b]
+            sa = CS[1, b]
+            ex = W[3 * nw + b] + W[(8 + e // nw) * nw + b] * ca
+            ey = W[4 * nw + b] + W[(8 + e // nw) * nw + b] * sa
+            rng = hypot(ex - cx, ey - cy)
+            ux = (ex - cx) / rng
+            uy = (ey - cy) / rng
+            for c in range(nw):
+                if c == b or pair[b * nw + c]:
+                    continue
+                ahead = _crosses(cx, cy, ux, uy, W[3 * nw + c], W[4 * nw + c], CS[0, c],
+                                 CS[1, c], &un, &t, &at)
+                reach = reach_share * t
+                if not (reach > corner_reach):
+                    reach = corner_reach
+                if (ahead and t < rng - floor_clear_m - clear_m
+                        and at >= W[8 * nw + c] - reach and at <= W[9 * nw + c] + reach):
+                    pair[b * nw + c] = 1
+                    n_pairs += 1
+        if n_pairs == 0:
+            return None
+        # then, per such pair (a few a sweep), the end's wall's few members past the other
+        out = np.empty((3, few_max * n_pairs))
+        out_f = np.empty(few_max * n_pairs, dtype=np.intp)
+        O = out
+        OF = out_f
+        for b in range(nw):
+            for c in range(nw):
+                if not pair[b * nw + c]:
+                    continue
+                ca = CS[0, c]
+                sa = CS[1, c]
+                mxc = W[3 * nw + c]
+                myc = W[4 * nw + c]
+                # a corner: the wall's members all on one side of the other's, but these few
+                n_side = 0
+                for i in range(start[b], start[b + 1]):
+                    f = at_f[i]
+                    n_side += (x[f] - mxc) * -sa + (y[f] - myc) * ca > 0.0
+                k = start[b + 1] - start[b]
+                few = 2 * n_side < k
+                if (n_side if few else k - n_side) > few_max:
+                    continue
+                j = n_out
+                for i in range(start[b], start[b + 1]):
+                    f = at_f[i]
+                    if ((x[f] - mxc) * -sa + (y[f] - myc) * ca > 0.0) != few:
+                        continue
+                    ahead = _crosses(origin_x[f], origin_y[f], cos(heading[f]),
+                                     sin(heading[f]), mxc, myc, ca, sa, &un, &t, &at)
+                    reach = reach_share * t
+                    if not (reach > corner_reach):
+                        reach = corner_reach
+                    if (ahead and at >= W[8 * nw + c] - reach and at <= W[9 * nw + c] + reach
+                            and t + clear_sigmas * sigma[f] + clear_m < d[f]):
+                        OF[j] = f
+                        O[0, j] = t
+                        O[1, j] = un
+                        O[2, j] = sigma[f]
+                        j += 1
+                n_out = j
+        if n_out == 0:
+            return None
+        return out_f[:n_out], out[0, :n_out], out[1, :n_out], out[2, :n_out]
+    finally:
+        free(rank)
+        free(start)
+        free(at_f)
+        free(W)
+        free(M)
+        free(pair)

@@ -572,7 +572,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    gapper: Callable | None = None, raw_counts: np.ndarray | None = None,
                    beside: Callable | None = None, tracer: type[TraceSteps] | None = None,
                    judge: Callable | None = None, bower: Callable | None = None,
-                   fitter: type[CountsFits] | None = None) -> Estimate:
+                   fitter: type[CountsFits] | None = None, passer: Callable | None = None
+                   ) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -603,7 +604,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     counts contradict (:func:`counts_contradicted_compiled`; the oracle:
     :func:`counts_contradicted`); ``bower``: a curved wall's chords
     (:func:`bowed_lines_compiled`; the oracle: :func:`bowed_lines`); ``fitter``: lines fitted
-    to their members' counts (:class:`CountsFitKernels`; the oracle: :class:`CountsFits`).
+    to their members' counts (:class:`CountsFitKernels`; the oracle: :class:`CountsFits`);
+    ``passer``: a line's few members past another line (:func:`past_other_lines_compiled`;
+    the oracle: :func:`past_other_lines`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -651,7 +654,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         # a line over a corner as two pieces (the snap's label; the grouping keeps its lines)
         points, split = kinked_lines(points, label, counts, cal)
         # members whose beam passes another wall first: on that wall, or unplaced
-        points, split = past_other_lines(points, split, counts, cal, options)
+        points, split = (passer or past_other_lines_compiled)(points, split, counts, cal,
+                                                              options)
     else:
         split = label
     points = censored_lines(points, split, counts, steps, cal)
@@ -883,8 +887,7 @@ def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal:
         return points, label
     # then, per such pair of lines (a few a sweep), the end's line's members past the other
     idx = member.reshape(-1).nonzero()[0]
-    s_all = np.asarray(counts, dtype=float).reshape(-1)
-    taken = {}
+    found = []
     for b, c in sorted(set(zip(owner[pair.nonzero()[0]].tolist(),
                                 walls[pair.nonzero()[1]].tolist()))):
         k = (g == b).nonzero()[0]
@@ -905,16 +908,55 @@ def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal:
         past &= few
         if not past.any() or np.count_nonzero(few) > PAST_FEW:
             continue
-        theta = np.arccos(np.minimum(np.abs(un_c[past]), 1.0))
-        with np.errstate(invalid="ignore"):
-            d_l = cal.distance(s_all[f[past]], theta)
-        fit = ((theta <= cal.max_incidence_rad) & np.isfinite(d_l)
-               & (np.abs(d_l - t_c[past]) <= np.maximum(0.02, 3.0 * sig[past])))
-        for i, tt, dd, th, ok, sg in zip(f[past].tolist(), t_c[past].tolist(),
-                                         d_l.tolist(), theta.tolist(), fit.tolist(),
-                                         sig[past].tolist()):
-            if ok and (i not in taken or tt < taken[i][0]):
-                taken[i] = (tt, dd, th, sg)
+        found.append((f[past], t_c[past], un_c[past], sig[past]))
+    if not found:
+        return points, label
+    return _past_read_on(points, label, counts, cal,
+                         *(np.concatenate(v) for v in zip(*found)))
+
+
+def past_other_lines_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
+                              cal: Calibration, options: LineOptions
+                              ) -> tuple[Points, np.ndarray]:
+    """:func:`past_other_lines`, its gates (each line's fit and ends, the pairs of walls,
+    the few members past the other) in one compiled call
+    (``irring.estimation._lines.past_members``, held to the numpy statement bit for bit by
+    tests/test_past_kernel.py); the members it finds are read as numpy reads them."""
+    f = np.ascontiguousarray
+    ox, oy = points.origin_x, points.origin_y
+    # (the ring centre numpy's way: the kernel sums a contiguous array as np.mean does)
+    centre = ((math.nan, math.nan) if ox.flags.c_contiguous and oy.flags.c_contiguous
+              else (float(ox.mean()), float(oy.mean())))
+    found = _lines.past_members(
+        f(label, dtype=np.intp).reshape(-1),
+        f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
+        f(points.x, dtype=float).reshape(-1), f(points.y, dtype=float).reshape(-1),
+        f(ox, dtype=float).reshape(-1), f(oy, dtype=float).reshape(-1),
+        f(points.heading, dtype=float).reshape(-1), f(points.d, dtype=float).reshape(-1),
+        f(points.sigma_m, dtype=float).reshape(-1), *centre, PAST_MIN, PAST_FEW,
+        options.corner_reach_m, PAST_REACH_SHARE, PAST_CLEAR_SIGMAS, 0.02,
+        PAST_CLEAR_SIGMAS * SIGMA_FLOOR_M)
+    if found is None:
+        return points, label
+    return _past_read_on(points, label, counts, cal, *found)
+
+
+def _past_read_on(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration,
+                  flat: np.ndarray, t: np.ndarray, un: np.ndarray, sig: np.ndarray
+                  ) -> tuple[Points, np.ndarray]:
+    """:func:`past_other_lines`' last step: the members found (flat indices ``flat``, in
+    pair order; the other line ``t`` along their beams, ``un`` their beams · its normal,
+    ``sig`` their σ) read on it where their counts put them there, each at its nearest."""
+    theta = np.arccos(np.minimum(np.abs(un), 1.0))
+    with np.errstate(invalid="ignore"):
+        d_l = cal.distance(np.asarray(counts, dtype=float).reshape(-1)[flat], theta)
+    fit = ((theta <= cal.max_incidence_rad) & np.isfinite(d_l)
+           & (np.abs(d_l - t) <= np.maximum(0.02, 3.0 * sig)))
+    taken = {}
+    for i, tt, dd, th, ok, sg in zip(flat.tolist(), t.tolist(), d_l.tolist(), theta.tolist(),
+                                     fit.tolist(), sig.tolist()):
+        if ok and (i not in taken or tt < taken[i][0]):
+            taken[i] = (tt, dd, th, sg)
     if not taken:
         return points, label
     flat = np.fromiter(taken, dtype=np.intp)
