@@ -2890,20 +2890,22 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
                  const double[::1] sigma, double cx, double cy, idx_t min_members,
                  idx_t few_max, double corner_reach, double reach_share, double clear_sigmas,
                  double clear_m, double floor_clear_m):
-    """``irring.estimation.estimate.past_other_lines``' gates, to the bit: each line's TLS
-    fit and extent over its valid members (the angle from numpy's ``arctan2``), the walls'
-    ends seen from the ring centre (``cx``, ``cy``; NaN: the mean of ``origin_x``,
-    ``origin_y`` as numpy takes it) past another wall, and per such pair of walls (in
-    label order) the few members of the end's wall past the other. None where no pair is
-    asked; else the members found, in that order, as flat index, t, un (``beam_crossings``')
-    and σ: numpy's statement reads them on the other wall. Arrays flat (S·N); ``label`` −1
-    on no line; the scalars are the rule's constants."""
+    """``irring.estimation.estimate.past_members`` (``past_other_lines``' gates), to the
+    bit: each line's TLS fit and extent over its valid members (the angle from numpy's
+    ``arctan2``), the walls' ends seen from the ring centre (``cx``, ``cy``; NaN: the mean
+    of ``origin_x``, ``origin_y`` as numpy takes it) past another wall, and per such pair of
+    walls (in label order) the few members of the end's wall past the other. None where
+    none is found; else the members, in that order, as flat index, t, un
+    (``beam_crossings``') and σ. Arrays flat (S·N); ``label`` −1 on no line; the scalars
+    are the rule's constants (``clear_m``: the 2 cm; ``floor_clear_m``: the clearance at
+    the σ floor)."""
     cdef idx_t size = label.shape[0], f, i, j, k, b, c, L = 0, nw = 0, m = 0, e, n_side
-    cdef idx_t n_pairs = 0, n_out = 0, lo_k, hi_k
+    cdef idx_t room = 0, n_out = 0
     cdef double ex, ey, rng, ux, uy, un, t, at, reach, a, ca, sa, mxc, myc
     cdef bint ahead, few
-    cdef double[:, ::1] CS, O, ND
+    cdef double[:, ::1] O, ND
     cdef const double[::1] alpha
+    cdef double* CS = NULL
     cdef idx_t[::1] OF
     if not (valid.shape[0] == x.shape[0] == y.shape[0] == origin_x.shape[0]
             == origin_y.shape[0] == heading.shape[0] == d.shape[0] == sigma.shape[0] == size):
@@ -2911,6 +2913,8 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
                              x=x.shape[0], y=y.shape[0], origin_x=origin_x.shape[0],
                              origin_y=origin_y.shape[0], heading=heading.shape[0],
                              d=d.shape[0], sigma=sigma.shape[0])
+    if few_max < 0:
+        raise ValueError(f"past_members: few_max {few_max} is negative (at least 0)")
     for f in range(size):
         if valid[f] and label[f] >= L:
             L = label[f] + 1
@@ -2944,7 +2948,9 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
         W = <double*> calloc(10 * nw, sizeof(double))
         M = <double*> malloc(2 * m * sizeof(double))      # each member's u, v
         pair = <unsigned char*> calloc(nw * nw, 1)
-        if start == NULL or at_f == NULL or W == NULL or M == NULL or pair == NULL:
+        CS = <double*> malloc(2 * nw * sizeof(double))    # each wall's cos α, sin α
+        if (start == NULL or at_f == NULL or W == NULL or M == NULL or pair == NULL
+                or CS == NULL):
             raise MemoryError()
         for f in range(size):
             if valid[f] and label[f] >= 0 and rank[label[f]] >= 0:
@@ -2954,8 +2960,8 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
                 W[2 * nw + b] += y[f]
         for b in range(nw):
             start[b + 1] = start[b] + <idx_t> W[b]
-            W[3 * nw + b] = W[nw + b] / W[b]
-            W[4 * nw + b] = W[2 * nw + b] / W[b]
+            W[3 * nw + b] = W[nw + b] / fmax(W[b], 1.0)       # (numpy's: of no member, 0)
+            W[4 * nw + b] = W[2 * nw + b] / fmax(W[b], 1.0)
             W[8 * nw + b] = INFINITY
             W[9 * nw + b] = -INFINITY
         for b in range(nw):                # (a cursor per wall, in W's Σx row, now free)
@@ -2976,15 +2982,12 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
         for b in range(nw):
             ND[0, b] = 2.0 * W[5 * nw + b]
             ND[1, b] = W[6 * nw + b] - W[7 * nw + b]
-        alpha_arr = 0.5 * _arctan2(nd_arr[0], nd_arr[1])
-        alpha = alpha_arr
-        cs_arr = np.empty((2, nw))
-        CS = cs_arr
+        alpha = _arctan2(nd_arr[0], nd_arr[1])
         for b in range(nw):
-            CS[0, b] = cos(alpha[b])
-            CS[1, b] = sin(alpha[b])
+            CS[2 * b] = cos(0.5 * alpha[b])
+            CS[2 * b + 1] = sin(0.5 * alpha[b])
             for i in range(start[b], start[b + 1]):
-                a = M[2 * i] * CS[0, b] + M[2 * i + 1] * CS[1, b]
+                a = M[2 * i] * CS[2 * b] + M[2 * i + 1] * CS[2 * b + 1]
                 # (np.minimum / np.maximum: a NaN once met stays)
                 if W[8 * nw + b] == W[8 * nw + b] and not (a >= W[8 * nw + b]):
                     W[8 * nw + b] = a
@@ -2996,8 +2999,8 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
             cy = (0.0 + _np_sum(&origin_y[0], size)) / size
         for e in range(2 * nw):
             b = e % nw
-            ca = CS[0, b]
-            sa = CS[1, b]
+            ca = CS[2 * b]
+            sa = CS[2 * b + 1]
             ex = W[3 * nw + b] + W[(8 + e // nw) * nw + b] * ca
             ey = W[4 * nw + b] + W[(8 + e // nw) * nw + b] * sa
             rng = hypot(ex - cx, ey - cy)
@@ -3006,28 +3009,29 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
             for c in range(nw):
                 if c == b or pair[b * nw + c]:
                     continue
-                ahead = _crosses(cx, cy, ux, uy, W[3 * nw + c], W[4 * nw + c], CS[0, c],
-                                 CS[1, c], &un, &t, &at)
+                ahead = _crosses(cx, cy, ux, uy, W[3 * nw + c], W[4 * nw + c], CS[2 * c],
+                                 CS[2 * c + 1], &un, &t, &at)
                 reach = reach_share * t
                 if not (reach > corner_reach):
                     reach = corner_reach
                 if (ahead and t < rng - floor_clear_m - clear_m
                         and at >= W[8 * nw + c] - reach and at <= W[9 * nw + c] + reach):
                     pair[b * nw + c] = 1
-                    n_pairs += 1
-        if n_pairs == 0:
+                    # (room for the most it can give: its few, or all its members)
+                    room += min(few_max, start[b + 1] - start[b])
+        if room == 0:
             return None
         # then, per such pair (a few a sweep), the end's wall's few members past the other
-        out = np.empty((3, few_max * n_pairs))
-        out_f = np.empty(few_max * n_pairs, dtype=np.intp)
+        out = np.empty((3, room))
+        out_f = np.empty(room, dtype=np.intp)
         O = out
         OF = out_f
         for b in range(nw):
             for c in range(nw):
                 if not pair[b * nw + c]:
                     continue
-                ca = CS[0, c]
-                sa = CS[1, c]
+                ca = CS[2 * c]
+                sa = CS[2 * c + 1]
                 mxc = W[3 * nw + c]
                 myc = W[4 * nw + c]
                 # a corner: the wall's members all on one side of the other's, but these few
@@ -3067,3 +3071,4 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
         free(W)
         free(M)
         free(pair)
+        free(CS)

@@ -572,8 +572,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    gapper: Callable | None = None, raw_counts: np.ndarray | None = None,
                    beside: Callable | None = None, tracer: type[TraceSteps] | None = None,
                    judge: Callable | None = None, bower: Callable | None = None,
-                   fitter: type[CountsFits] | None = None, passer: Callable | None = None
-                   ) -> Estimate:
+                   fitter: type[CountsFits] | None = None,
+                   past_finder: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -605,8 +605,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     :func:`counts_contradicted`); ``bower``: a curved wall's chords
     (:func:`bowed_lines_compiled`; the oracle: :func:`bowed_lines`); ``fitter``: lines fitted
     to their members' counts (:class:`CountsFitKernels`; the oracle: :class:`CountsFits`);
-    ``passer``: a line's few members past another line (:func:`past_other_lines_compiled`;
-    the oracle: :func:`past_other_lines`).
+    ``past_finder``: the members :func:`past_other_lines` asks
+    (:func:`past_members_compiled`; the oracle: :func:`past_members`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -654,8 +654,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         # a line over a corner as two pieces (the snap's label; the grouping keeps its lines)
         points, split = kinked_lines(points, label, counts, cal)
         # members whose beam passes another wall first: on that wall, or unplaced
-        points, split = (passer or past_other_lines_compiled)(points, split, counts, cal,
-                                                              options)
+        points, split = past_other_lines(points, split, counts, cal, options, past_finder)
     else:
         split = label
     points = censored_lines(points, split, counts, steps, cal)
@@ -835,7 +834,8 @@ PAST_FEW = 4            # … and at most this many of its line's members do
 
 
 def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration,
-                     options: LineOptions) -> tuple[Points, np.ndarray]:
+                     options: LineOptions, finder: Callable | None = None
+                     ) -> tuple[Points, np.ndarray]:
     """(points, label) with the valid members of a line whose beams meet another line of
     ≥ ``PAST_MIN`` members first — within its members' extent or past its ends by up to
     ``PAST_REACH_SHARE`` of the range — ahead of their end points by ``PAST_CLEAR_SIGMAS`` σ
@@ -843,17 +843,48 @@ def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal:
     (a corner, not a wall passing behind the other's end): each read on the nearest such
     line at its incidence where its counts put it there within max(2 cm, 3σ) (label −1:
     placed, not snapped); the others as they were. ``label`` (S, N): the lines as
-    kinked_lines left them. Why: a wall's last readings at grazing past a corner join the
+    kinked_lines left them; ``finder``: the members so asked (the compiled
+    :func:`past_members_compiled` by default; the oracle passes its numpy statement
+    :func:`past_members`). Why: a wall's last readings at grazing past a corner join the
     line they continue, read at its θ 100-270 mm long (docs/estimator.md, "A beam that
     meets another wall first")."""
+    found = (finder or past_members_compiled)(points, label, options)
+    if found is None:
+        return points, label
+    flat, t, un, sig = found
+    theta = np.arccos(np.minimum(np.abs(un), 1.0))
+    with np.errstate(invalid="ignore"):
+        d_l = cal.distance(np.asarray(counts, dtype=float).reshape(-1)[flat], theta)
+    fit = ((theta <= cal.max_incidence_rad) & np.isfinite(d_l)
+           & (np.abs(d_l - t) <= np.maximum(0.02, 3.0 * sig)))
+    taken = {}
+    for i, tt, dd, th, ok, sg in zip(flat.tolist(), t.tolist(), d_l.tolist(), theta.tolist(),
+                                     fit.tolist(), sig.tolist()):
+        if ok and (i not in taken or tt < taken[i][0]):
+            taken[i] = (tt, dd, th, sg)
+    if not taken:
+        return points, label
+    flat = np.fromiter(taken, dtype=np.intp)
+    _, d_l, theta, sig = (np.array(v) for v in zip(*taken.values()))
+    new_label = np.array(label)
+    new_label.reshape(-1)[flat] = -1
+    return placed_at(points, flat, d_l, theta, sig), new_label
+
+
+def past_members(points: Points, label: np.ndarray, options: LineOptions
+                 ) -> tuple[np.ndarray, ...] | None:
+    """:func:`past_other_lines`' gates in numpy: None where none is asked; else the members
+    whose beams meet another line first, per pair of lines (the end's, the other) in label
+    order, as flat indices, the distance ``t`` along their beams to the other line, their
+    beams · its normal ``un`` (:func:`beam_crossings`') and their σ."""
     member = points.valid & (label >= 0)
     if not member.any():
-        return points, label
+        return None
     g = label[member]
     n = np.bincount(g)
     wall = n >= PAST_MIN
     if np.count_nonzero(wall) < 2:
-        return points, label
+        return None
     nn = np.maximum(n, 1)
     x, y = points.x[member], points.y[member]
     mx, my = np.bincount(g, x) / nn, np.bincount(g, y) / nn
@@ -884,7 +915,7 @@ def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal:
             & (at >= lo[walls] - reach)
             & (at <= hi[walls] + reach) & (owner[:, None] != walls[None, :]))
     if not pair.any():
-        return points, label
+        return None
     # then, per such pair of lines (a few a sweep), the end's line's members past the other
     idx = member.reshape(-1).nonzero()[0]
     found = []
@@ -909,25 +940,20 @@ def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal:
         if not past.any() or np.count_nonzero(few) > PAST_FEW:
             continue
         found.append((f[past], t_c[past], un_c[past], sig[past]))
-    if not found:
-        return points, label
-    return _past_read_on(points, label, counts, cal,
-                         *(np.concatenate(v) for v in zip(*found)))
+    return tuple(np.concatenate(v) for v in zip(*found)) if found else None
 
 
-def past_other_lines_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
-                              cal: Calibration, options: LineOptions
-                              ) -> tuple[Points, np.ndarray]:
-    """:func:`past_other_lines`, its gates (each line's fit and ends, the pairs of walls,
-    the few members past the other) in one compiled call
-    (``irring.estimation._lines.past_members``, held to the numpy statement bit for bit by
-    tests/test_past_kernel.py); the members it finds are read as numpy reads them."""
+
+def past_members_compiled(points: Points, label: np.ndarray, options: LineOptions
+                          ) -> tuple[np.ndarray, ...] | None:
+    """:func:`past_members` in one compiled call (``irring.estimation._lines.past_members``,
+    held to it bit for bit by tests/test_past_kernel.py)."""
     f = np.ascontiguousarray
     ox, oy = points.origin_x, points.origin_y
     # (the ring centre numpy's way: the kernel sums a contiguous array as np.mean does)
     centre = ((math.nan, math.nan) if ox.flags.c_contiguous and oy.flags.c_contiguous
               else (float(ox.mean()), float(oy.mean())))
-    found = _lines.past_members(
+    return _lines.past_members(
         f(label, dtype=np.intp).reshape(-1),
         f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
         f(points.x, dtype=float).reshape(-1), f(points.y, dtype=float).reshape(-1),
@@ -936,34 +962,6 @@ def past_other_lines_compiled(points: Points, label: np.ndarray, counts: np.ndar
         f(points.sigma_m, dtype=float).reshape(-1), *centre, PAST_MIN, PAST_FEW,
         options.corner_reach_m, PAST_REACH_SHARE, PAST_CLEAR_SIGMAS, 0.02,
         PAST_CLEAR_SIGMAS * SIGMA_FLOOR_M)
-    if found is None:
-        return points, label
-    return _past_read_on(points, label, counts, cal, *found)
-
-
-def _past_read_on(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration,
-                  flat: np.ndarray, t: np.ndarray, un: np.ndarray, sig: np.ndarray
-                  ) -> tuple[Points, np.ndarray]:
-    """:func:`past_other_lines`' last step: the members found (flat indices ``flat``, in
-    pair order; the other line ``t`` along their beams, ``un`` their beams · its normal,
-    ``sig`` their σ) read on it where their counts put them there, each at its nearest."""
-    theta = np.arccos(np.minimum(np.abs(un), 1.0))
-    with np.errstate(invalid="ignore"):
-        d_l = cal.distance(np.asarray(counts, dtype=float).reshape(-1)[flat], theta)
-    fit = ((theta <= cal.max_incidence_rad) & np.isfinite(d_l)
-           & (np.abs(d_l - t) <= np.maximum(0.02, 3.0 * sig)))
-    taken = {}
-    for i, tt, dd, th, ok, sg in zip(flat.tolist(), t.tolist(), d_l.tolist(), theta.tolist(),
-                                     fit.tolist(), sig.tolist()):
-        if ok and (i not in taken or tt < taken[i][0]):
-            taken[i] = (tt, dd, th, sg)
-    if not taken:
-        return points, label
-    flat = np.fromiter(taken, dtype=np.intp)
-    _, d_l, theta, sig = (np.array(v) for v in zip(*taken.values()))
-    new_label = np.array(label)
-    new_label.reshape(-1)[flat] = -1
-    return placed_at(points, flat, d_l, theta, sig), new_label
 
 
 # a reading on no line placed no better than this is not placed: its θ, from its own

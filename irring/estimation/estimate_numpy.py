@@ -19,7 +19,7 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RU
                        beside_a_return, bowed_lines, clip_at_corners, counts_contradicted,
                        end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
                        member_spans, nearest_heard_rows, nominal_calibration,
-                       past_other_lines, polyline_ids, range_profiles, range_sigma,
+                       past_members, polyline_ids, range_profiles, range_sigma,
                        reach_cos_limit, resolve_foldover, scan_order, settled_within_noise,
                        silent_gaps, unconfirmed_near)
 
@@ -1137,7 +1137,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           voter=far_line_vote, post_grouper=post_groups, gapper=silent_gaps,
                           beside=beside_a_return, tracer=TraceSteps,
                           judge=counts_contradicted,
-                          bower=bowed_lines, fitter=CountsFits, passer=past_other_lines,
+                          bower=bowed_lines, fitter=CountsFits, past_finder=past_members,
                           raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
