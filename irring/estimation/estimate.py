@@ -943,7 +943,6 @@ def past_members(points: Points, label: np.ndarray, options: LineOptions
     return tuple(np.concatenate(v) for v in zip(*found)) if found else None
 
 
-
 def past_members_compiled(points: Points, label: np.ndarray, options: LineOptions
                           ) -> tuple[np.ndarray, ...] | None:
     """:func:`past_members` in one compiled call (``irring.estimation._lines.past_members``,
