@@ -219,10 +219,12 @@ def test_lines_of_up_to_25_members_are_asked(monkeypatch):
     # walls met at 15-32° and, before the gap, 60-61° (two members 61-77 mm short). Asked
     # (up to FAR_LINE_MAX_MEMBERS = 25), its members' profiles disown it: 10 are read at
     # their own slope, 11 are INCIDENCE_UNKNOWN. rejoin_traces, after the doubt, leaves no
-    # reading over 50 mm off, asked or not; without it, as before:
+    # reading over 50 mm off, asked or not; without it (and without past_other_lines, later,
+    # which takes those of the 'before' past the corner as well), as before:
     text = _corner_room(5025, "{x_mm: 538, y_mm: 915, yaw_deg: 120.8}")
     with monkeypatch.context() as m:
         m.setattr(est, "rejoin_traces", lambda points, label, *args: (points, label))
+        m.setattr(est, "past_other_lines", lambda points, label, *args: (points, label))
         run, before, left = _left_and_before(text, m)
         assert len(left) == 21 and {k for k, _ in left} == {0, 1}
         assert sum(placed for _, placed in left) == 10

@@ -653,7 +653,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label = (bower or bowed_lines_compiled)(points, label, counts, cal)
         # a line over a corner as two pieces (the snap's label; the grouping keeps its lines)
         points, split = kinked_lines(points, label, counts, cal)
-        # members whose beam passes another wall first: on that wall, or unplaced
+        # members whose beam meets another wall first: read on that wall
         points, split = past_other_lines(points, split, counts, cal, options, past_finder)
     else:
         split = label
@@ -829,7 +829,8 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
 PAST_MIN = 10          # a line of at least this many valid members is a wall a beam stops at …
 PAST_REACH_SHARE = 0.5  # … over its members' extent and past its ends by this share of the
 #                         crossing's range (at least LineOptions.corner_reach_m) …
-PAST_CLEAR_SIGMAS = 3.0  # … where a reading's end point lies this many σ past it (+ 2 cm) …
+PAST_CLEAR_SIGMAS = 3.0  # … where a reading's end point lies this many σ …
+PAST_CLEAR_M = 0.02      # … and this much past it …
 PAST_FEW = 4            # … and at most this many of its line's members do
 
 
@@ -839,7 +840,7 @@ def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal:
     """(points, label) with the valid members of a line whose beams meet another line of
     ≥ ``PAST_MIN`` members first — within its members' extent or past its ends by up to
     ``PAST_REACH_SHARE`` of the range — ahead of their end points by ``PAST_CLEAR_SIGMAS`` σ
-    + 2 cm, on the side of that line where at most ``PAST_FEW`` of their line's members lie
+    + ``PAST_CLEAR_M``, on the side of that line where at most ``PAST_FEW`` of their line's members lie
     (a corner, not a wall passing behind the other's end): each read on the nearest such
     line at its incidence where its counts put it there within max(2 cm, 3σ) (label −1:
     placed, not snapped); the others as they were. ``label`` (S, N): the lines as
@@ -910,8 +911,8 @@ def past_members(points: Points, label: np.ndarray, options: LineOptions
                                       np.stack([mx[walls], my[walls]], 1),
                                       np.stack([ca[walls], sa[walls]], 1), nrm)
     reach = np.maximum(options.corner_reach_m, PAST_REACH_SHARE * t)
-    # (a member past by less than PAST_CLEAR_SIGMAS σ + 2 cm at the σ floor is not asked)
-    pair = (ahead & (t < rng[:, None] - PAST_CLEAR_SIGMAS * SIGMA_FLOOR_M - 0.02)
+    # (a member past by less than PAST_CLEAR_SIGMAS σ + PAST_CLEAR_M at the σ floor is not asked)
+    pair = (ahead & (t < rng[:, None] - PAST_CLEAR_SIGMAS * SIGMA_FLOOR_M - PAST_CLEAR_M)
             & (at >= lo[walls] - reach)
             & (at <= hi[walls] + reach) & (owner[:, None] != walls[None, :]))
     if not pair.any():
@@ -932,7 +933,7 @@ def past_members(points: Points, label: np.ndarray, options: LineOptions
         reach_c = np.maximum(options.corner_reach_m, PAST_REACH_SHARE * t_c)
         sig = points.sigma_m.reshape(-1)[f]
         past = (ahead_c & (at_c >= lo[c] - reach_c) & (at_c <= hi[c] + reach_c)
-                & (t_c + PAST_CLEAR_SIGMAS * sig + 0.02 < points.d.reshape(-1)[f]))
+                & (t_c + PAST_CLEAR_SIGMAS * sig + PAST_CLEAR_M < points.d.reshape(-1)[f]))
         # a corner: the line's members all on one side of the other's, but these few
         side = ((x[k] - mx[c]) * -sa[c] + (y[k] - my[c]) * ca[c]) > 0.0
         few = side if 2 * np.count_nonzero(side) < side.size else ~side
@@ -959,7 +960,7 @@ def past_members_compiled(points: Points, label: np.ndarray, options: LineOption
         f(ox, dtype=float).reshape(-1), f(oy, dtype=float).reshape(-1),
         f(points.heading, dtype=float).reshape(-1), f(points.d, dtype=float).reshape(-1),
         f(points.sigma_m, dtype=float).reshape(-1), *centre, PAST_MIN, PAST_FEW,
-        options.corner_reach_m, PAST_REACH_SHARE, PAST_CLEAR_SIGMAS, 0.02,
+        options.corner_reach_m, PAST_REACH_SHARE, PAST_CLEAR_SIGMAS, PAST_CLEAR_M,
         PAST_CLEAR_SIGMAS * SIGMA_FLOOR_M)
 
 
