@@ -663,8 +663,10 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         # a part read to its own range: the overlapping lines of one wall fitted as one
         snap_label = (fused_lines(points, split) if read_to_own_range(cal, points.max_range_m)
                       else split)
-        points = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
-                                            far_sigma_cap(cal, points.max_range_m))
+        snapped = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
+                                             far_sigma_cap(cal, points.max_range_m))
+        # a line over a many-sided wall's facets: its members on two pieces
+        points = faceted_lines(points, snap_label, snapped, cal)
     points = drop_beyond_range(points)
     if snap:
         # a thin post far away: its few readings, several sensors', fitted as one circle
@@ -4681,6 +4683,141 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
     shape = points.valid.shape
     x, y, d, sigma = (v.reshape(shape) for v in moved)
     return points_with(points, x=x, y=y, d=d, sigma_m=sigma)
+
+
+FACET_MIN = 12          # a snapped line of at least this many moved members is asked …
+FACET_SIDE = 6          # … for its best split into two pieces of at least this many each …
+FACET_F = 5.0           # … that beat the line by this F (2, n − 4) as the members lie …
+FACET_CHI = 15.0        # … and by this χ² against the members' own σ (pooled far readings
+# share their noise: their scatter is 0.06-0.3 σ², so F alone splits a straight wall there) …
+FACET_TURN_RAD = math.radians(5)   # … and turn by this much (a straight wall's noise: less)
+FACET_ITERATIONS = 4    # each piece then read by Table II's iteration, this many steps
+
+
+def faceted_lines(before: Points, label: np.ndarray, after: Points, cal: Calibration
+                  ) -> Points:
+    """A snapped line over a many-sided wall's facets read as two pieces; numpy, shared by
+    both estimators, after the snap.
+
+    ``before`` and ``after``: the points as :func:`snap_to_lines` took and returned them,
+    ``label`` the lines it fitted. The members the snap moved, of a line of at least
+    ``FACET_MIN`` of them, are split at their best place along the line (``FACET_SIDE`` a
+    piece at least; weighted least squares in the line's frame, every line at once by
+    prefix sums); where the pieces beat the line by ``FACET_F`` (against their scatter) and
+    ``FACET_CHI`` (against their σ) as the members lie and turn by ``FACET_TURN_RAD`` or more,
+    each piece is read by Table II's iteration
+    (``FACET_ITERATIONS`` steps: fit, re-read each member at the incidence its beam meets
+    the piece with) and its members are put where their beams meet it (at most
+    ``SNAP_SIGMAS`` of their own σ from where they were read, within the range; θ and σ as
+    the snap left them). A line over 2–4 facets of a round room, straight through their
+    bends, puts its members up to 20–30 mm off them at 0.6 m: 3–5 cells of 5 mm. Why:
+    docs/estimator.md, "A line over facets"."""
+    flat = label.reshape(-1)
+    d0_all, sig_all = before.d.reshape(-1), before.sigma_m.reshape(-1)
+    with np.errstate(invalid="ignore"):
+        moved = ((flat >= 0) & before.valid.reshape(-1)
+                 & ((after.d.reshape(-1) != d0_all) | (after.sigma_m.reshape(-1) != sig_all)))
+    idx = moved.nonzero()[0]
+    if idx.size < FACET_MIN:
+        return after
+    ask = np.bincount(flat[idx]) >= FACET_MIN
+    if not ask.any():
+        return after
+    idx = idx[ask[flat[idx]]]
+    g = np.unique(flat[idx], return_inverse=True)[1]
+    n_g = int(g.max()) + 1
+    nm = np.bincount(g, minlength=n_g).astype(float)
+    ox, oy = before.origin_x.reshape(-1)[idx], before.origin_y.reshape(-1)[idx]
+    h = before.heading.reshape(-1)[idx]
+    ex, ey = np.cos(h), np.sin(h)
+    d0, sig = d0_all[idx], sig_all[idx]
+    x, y = ox + d0 * ex, oy + d0 * ey
+    cx, cy = np.bincount(g, x, n_g) / nm, np.bincount(g, y, n_g) / nm
+    u, v = x - cx[g], y - cy[g]
+    al = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_g), np.bincount(g, u * u - v * v, n_g))
+    ux, uy = np.cos(al)[g], np.sin(al)[g]
+    s, r = u * ux + v * uy, -u * uy + v * ux
+    order = np.lexsort((s, g))
+    gs, ss, rs = g[order], s[order], r[order]
+    w = 1.0 / np.maximum(sig[order], SIGMA_FLOOR_M) ** 2
+    cum = [np.concatenate(([0.0], np.cumsum(w * q))) for q in
+           (np.ones_like(ss), ss, ss * ss, rs, ss * rs, rs * rs)]
+    start = np.searchsorted(gs, np.arange(n_g))
+    end = np.append(start[1:], gs.size)
+
+    def fit(a, b):
+        """Weighted least-squares line r = c + m·s of sorted members a … b − 1: (χ², m)."""
+        W, S, S2, R, SR, R2 = (q[b] - q[a] for q in cum)
+        den = W * S2 - S * S
+        with np.errstate(divide="ignore", invalid="ignore"):
+            m = np.where(den > 1e-18, (W * SR - S * R) / den, 0.0)
+            c = np.where(W > 0, (R - m * S) / W, 0.0)
+        chi = R2 - 2.0 * c * R - 2.0 * m * SR + c * c * W + 2.0 * c * m * S + m * m * S2
+        return np.maximum(chi, 0.0), m
+
+    # every sorted member as the first of a right-hand piece; the best per line
+    at = np.arange(gs.size)
+    lo, hi = start[gs], end[gs]
+    can = (at - lo >= FACET_SIDE) & (hi - at >= FACET_SIDE)
+    chi_l, m_l = fit(lo, at)
+    chi_r, m_r = fit(at, hi)
+    both = np.where(can, chi_l + chi_r, np.inf)
+    best = np.lexsort((both, gs))[start]            # each line's least χ² split
+    chi0 = fit(start, end)[0]
+    split = both[best]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        F = (chi0 - split) / 2.0 / np.maximum(split / np.maximum(nm - 4, 1), 1e-300)
+    turn = np.abs(np.arctan(m_r[best]) - np.arctan(m_l[best]))
+    good = (np.isfinite(split) & (F >= FACET_F) & (chi0 - split >= FACET_CHI)
+            & (turn >= FACET_TURN_RAD))
+    if not good.any():
+        return after
+    # the pieces (two a good line), each read by Table II's iteration
+    keep = good[gs]
+    piece = 2 * gs + (at >= best[gs])
+    o = order[keep]
+    piece = np.unique(piece[keep], return_inverse=True)[1]
+    n_p = int(piece.max()) + 1
+    gk = g[o]
+    es = ex[o] * ux[o] + ey[o] * uy[o]
+    en = -ex[o] * uy[o] + ey[o] * ux[o]
+    so = (ox[o] - cx[gk]) * ux[o] + (oy[o] - cy[gk]) * uy[o]
+    no = -(ox[o] - cx[gk]) * uy[o] + (oy[o] - cy[gk]) * ux[o]
+    wk = w[keep]
+    la0, b0 = cal.log_ab(before.theta.reshape(-1)[idx[o]])
+    log_s = (np.log(d0[o]) - la0) / b0           # the reading as the estimator read it
+    d = d0[o]
+    for step in range(FACET_ITERATIONS + 1):
+        ps, pr = so + d * es, no + d * en
+        W, S, S2, R, SR = (np.bincount(piece, wk * q, n_p) for q in
+                           (np.ones_like(ps), ps, ps * ps, pr, ps * pr))
+        den = W * S2 - S * S
+        with np.errstate(divide="ignore", invalid="ignore"):
+            m_p = np.where(den > 1e-18, (W * SR - S * R) / den, 0.0)
+            m, c = m_p[piece], ((R - m_p * S) / W)[piece]
+        if step == FACET_ITERATIONS:
+            break
+        cos = np.abs(en - m * es) / np.sqrt(1.0 + m * m)
+        la, b = cal.log_ab(np.minimum(np.arccos(np.clip(cos, 0.0, 1.0)),
+                                      cal.max_incidence_rad))
+        d = np.exp(la + b * log_s)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (c + m * so - no) / (en - m * es)
+    flat_at = idx[o]
+    # (a piece's noise-tilted end read 100 mm off on a straight wall: no member moves more
+    # than the snap would move it out)
+    ok = (np.isfinite(t) & (t >= cal.min_range_m) & (t <= before.max_range_m)
+          & (np.abs(t - d0[o]) <= SNAP_SIGMAS * sig[o]))
+    if not ok.any():
+        return after
+    flat_at, t = flat_at[ok], t[ok]
+    out = {f: np.array(getattr(after, f)) for f in ("x", "y", "d")}
+    out["d"].reshape(-1)[flat_at] = t
+    out["x"].reshape(-1)[flat_at] = before.origin_x.reshape(-1)[flat_at] + t * np.cos(
+        before.heading.reshape(-1)[flat_at])
+    out["y"].reshape(-1)[flat_at] = before.origin_y.reshape(-1)[flat_at] + t * np.sin(
+        before.heading.reshape(-1)[flat_at])
+    return points_with(after, **out)
 
 
 # --------------------------------------------------------------------------- fold-over
