@@ -4746,14 +4746,13 @@ def faceted_lines(before: Points, label: np.ndarray, after: Points, cal: Calibra
     end = np.append(start[1:], gs.size)
 
     def fit(a, b):
-        """Weighted least-squares line r = c + m·s of sorted members a … b − 1: (χ², m)."""
+        """Weighted least-squares line of sorted members a … b − 1: (χ², slope); NaN where
+        they are fewer than two (the split search masks those)."""
         W, S, S2, R, SR, R2 = (q[b] - q[a] for q in cum)
-        den = W * S2 - S * S
         with np.errstate(divide="ignore", invalid="ignore"):
-            m = np.where(den > 1e-18, (W * SR - S * R) / den, 0.0)
-            c = np.where(W > 0, (R - m * S) / W, 0.0)
-        chi = R2 - 2.0 * c * R - 2.0 * m * SR + c * c * W + 2.0 * c * m * S + m * m * S2
-        return np.maximum(chi, 0.0), m
+            sss, ssr = S2 - S * S / W, SR - S * R / W
+            m = ssr / sss
+            return np.maximum(R2 - R * R / W - ssr * m, 0.0), m
 
     # every sorted member as the first of a right-hand piece; the best per line
     at = np.arange(gs.size)
