@@ -59,6 +59,9 @@ def test_a_faceted_arc_is_read_on_its_circle(seed, rms_max_mm, monkeypatch):
 
     after = errors()
     _without_rule(monkeypatch)
+    # (before the later faceted_lines too: alone it splits some of the arc's chords, seed 1
+    # 21.6 -> 19.8 mm)
+    monkeypatch.setattr(est, "faceted_lines", lambda before, label, after, cal: after)
     before = errors()
     assert math.sqrt(np.mean(after ** 2)) <= rms_max_mm * 1e-3
     assert math.sqrt(np.mean(before ** 2)) >= 20e-3
