@@ -55,19 +55,20 @@ def _off(points, sweep):
 
 
 def test_a_line_over_a_round_rooms_facets_is_read_in_two_pieces(monkeypatch):
-    """Seed 1900: of 802 valid readings 209 lie more than 10 mm and 78 more than 20 mm off
+    """Seed 1900: of 826 valid readings 218 lie more than 10 mm and 83 more than 20 mm off
     their true hits with the lines as snapped; with the lines over facets split and
-    re-read, 157 and 37. The numpy oracle reads the sweep the same."""
+    re-read, 164 and 41 of 825 (dim returns beside a line then take one fewer). The numpy
+    oracle reads the sweep the same."""
     sc = loads(ROUND19)
     cal, _ = scene_calibration(sc)
     sweep = pipeline.simulated(sc, seed=sc.seed, progress=False)[0].sweeps[0]
     now = fast.estimate(sweep, cal)
-    assert _off(now, sweep) == (802, 157, 37)
+    assert _off(now, sweep) == (825, 164, 41)
     slow = estimate_numpy.estimate_detail(sweep, cal).points
     np.testing.assert_array_equal(slow.reason, now.reason)
     np.testing.assert_allclose(slow.d, now.d, atol=1e-9, rtol=0)
     monkeypatch.setattr(fast, "FACET_F", math.inf)
-    assert _off(fast.estimate(sweep, cal), sweep) == (802, 209, 78)
+    assert _off(fast.estimate(sweep, cal), sweep) == (826, 218, 83)
 
 
 def test_straight_walls_are_not_split(monkeypatch):
