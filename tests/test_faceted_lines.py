@@ -1,12 +1,19 @@
 """A snapped line over a many-sided wall's facets read as two pieces (docs/estimator.md, "A
 line over facets"): in a 19-sided round room read by the GP2Y0A21 at 0.45-0.7 m, lines of
-2-4 facets, straight through their 19° bends, put their members 15-30 mm off the wall."""
+2-4 facets, straight through their 19° bends, put their members 15-30 mm off the wall. Its
+split search's compiled pre-gate (``_lines.facet_pre``) against its numpy statement
+(``estimate._facet_asked``)."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 
 import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from irring import pipeline
 from irring.estimation import estimate as fast
@@ -90,3 +97,127 @@ def test_straight_walls_are_not_split(monkeypatch):
             if not np.array_equal(fast.estimate(sweep, cal).d, off.d, equal_nan=True):
                 changed.append(seed)
     assert changed == [8205]
+
+
+@functools.lru_cache(maxsize=1)
+def _facet_states():
+    """What :func:`faceted_lines_compiled` was asked in the fast estimator: the round room
+    (lines split) and the rectangle (none does), two seeds each."""
+    states = []
+
+    def spy(before, label, after, cal):
+        states.append((before, label.copy(), after, cal))
+        return after
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(fast, "faceted_lines_compiled", spy)
+        for text in (ROUND19, RECTANGLE):
+            sc = loads(text)
+            cal, _ = scene_calibration(sc)
+            for seed in (sc.seed, sc.seed + 4):
+                fast.estimate(pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps[0],
+                              cal)
+    return states
+
+
+def _kernel(before, label, after):
+    f = np.ascontiguousarray
+    return fast._lines.facet_pre(
+        f(label, dtype=np.intp).reshape(-1), f(before.valid).reshape(-1).view(np.uint8),
+        f(before.d).reshape(-1), f(after.d).reshape(-1), f(before.sigma_m).reshape(-1),
+        f(after.sigma_m).reshape(-1), f(before.origin_x).reshape(-1),
+        f(before.origin_y).reshape(-1), f(before.heading).reshape(-1), fast.SIGMA_FLOOR_M,
+        fast.FACET_MIN, fast.FACET_SIDE, fast.FACET_F, fast.FACET_CHI, fast.FACET_TURN_RAD,
+        fast.FACET_PRE_TOL)
+
+
+def _spoiled(state, spoil, seed):
+    """A state :func:`faceted_lines_compiled` was asked, spoilt as
+    :func:`test_the_facet_pre_gate_kernel_agrees_with_its_numpy_statement` says."""
+    before, label, after, cal = state
+    rng = np.random.default_rng(seed)
+    label = label.copy()
+    pick = rng.random(label.shape) < 0.1
+    if spoil == "kink":                 # members moved along their beams onto a corner
+        k, at, phi = rng.uniform(-0.3, 0.3), rng.uniform(-0.2, 0.2), rng.uniform(0, math.pi)
+        s = math.cos(phi) * before.x + math.sin(phi) * before.y
+        d = before.d + k * np.abs(s - np.nanmedian(s) - at) * (label >= 0)
+        before = dataclasses.replace(before, d=d)
+    elif spoil == "merge" and label.max() > 0:
+        label[label == 1] = 0
+    elif spoil == "unlabel":
+        label[pick] = -1
+    elif spoil == "unmoved":
+        after = dataclasses.replace(after, d=np.where(pick, before.d, after.d),
+                                    sigma_m=np.where(pick, before.sigma_m, after.sigma_m))
+    elif spoil == "nan":
+        before = dataclasses.replace(before, sigma_m=np.where(pick, np.nan, before.sigma_m))
+    elif spoil == "invalid":
+        before = dataclasses.replace(before, valid=before.valid & ~pick)
+    elif spoil == "ties":               # a tenth of the readings at one place and range
+        first = np.flatnonzero(label.reshape(-1) >= 0)[:1]
+        same = lambda a: np.where(pick, a.reshape(-1)[first], a) if first.size else a
+        before = dataclasses.replace(before, d=same(before.d), heading=same(before.heading),
+                                     origin_x=same(before.origin_x),
+                                     origin_y=same(before.origin_y))
+    return before, label, after, cal
+
+
+_GATE = {"split": 0, "may": 0, "none": 0}
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data(), spoil=st.sampled_from([None, "kink", "merge", "unlabel", "unmoved",
+                                               "nan", "invalid", "ties"]))
+def test_the_facet_pre_gate_kernel_agrees_with_its_numpy_statement(data, spoil):
+    """``_lines.facet_pre`` against ``_facet_asked``, on the states the fast estimator asked
+    (round room and rectangle), with members moved along their beams onto a kink (their
+    lines then split), lines merged, members taken off their lines, left where the snap
+    found them (not moved), given NaN σ or made invalid, or put at one place along their
+    line: the same lines asked, F and χ² gain within ``FACET_PRE_TOL`` × (1 + scale) (F
+    relative), the turn no less than numpy's less ``FACET_PRE_TOL``; so every line numpy
+    splits the kernel may, and ``faceted_lines_compiled`` gives ``faceted_lines``' points
+    bit for bit."""
+    states = _facet_states()
+    before, label, after, cal = _spoiled(states[data.draw(st.integers(0, len(states) - 1))],
+                                         spoil, data.draw(st.integers(0, 2 ** 31 - 1)))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        asked = fast._facet_asked(before, label, after)
+    F, gain, turn, scale, may = _kernel(before, label, after)
+    if asked is None:
+        assert F.shape == (0,)
+        good = np.zeros(0, dtype=bool)
+    else:
+        split, F_n, gain_n, turn_n = asked[-4:]
+        assert F.shape == F_n.shape
+        tol = fast.FACET_PRE_TOL * (1.0 + scale)
+        sure = np.isfinite(F_n) & np.isfinite(gain_n)
+        assert np.all(np.abs(F - F_n)[sure] <= (tol * (1.0 + np.abs(F_n)))[sure])
+        assert np.all(np.abs(gain - gain_n)[sure] <= tol[sure])
+        known = sure & np.isfinite(turn_n)
+        assert np.all(turn[known] >= turn_n[known] - fast.FACET_PRE_TOL)
+        good = (np.isfinite(split) & (F_n >= fast.FACET_F) & (gain_n >= fast.FACET_CHI)
+                & (turn_n >= fast.FACET_TURN_RAD))
+    assert np.all(may[good])
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        slow = fast.faceted_lines(before, label, after, cal)
+        now = fast.faceted_lines_compiled(before, label, after, cal)
+    for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason"):
+        np.testing.assert_array_equal(getattr(now, f), getattr(slow, f), err_msg=f)
+    _GATE["split" if good.any() else "may" if may.any() else "none"] += 1
+
+
+def test_the_facet_pre_gate_was_passed_and_not():
+    """Not vacuous: the agreement test above met states where numpy splits some line and
+    states where the kernel lets none through (run after it, in this file's order)."""
+    if sum(_GATE.values()) == 0:
+        pytest.skip("the agreement test did not run first")
+    assert _GATE["split"] > 0 and _GATE["none"] > 0
+
+
+def test_the_facet_pre_gate_names_the_arrays_that_differ():
+    one, two = np.zeros(5), np.zeros(4)
+    with pytest.raises(ValueError, match=r"^facet_pre's arrays differ in length: label 5, "
+                                         r"valid 5, d_before 5, d_after 4, "):
+        fast._lines.facet_pre(np.full(5, -1, dtype=np.intp), np.ones(5, dtype=np.uint8),
+                              one, two, one, one, one, one, one, 0.001, 12, 6, 5.0, 15.0,
+                              0.1, 1e-6)

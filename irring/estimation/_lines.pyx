@@ -2465,6 +2465,270 @@ def bow_pre_f(const idx_t[::1] label, const unsigned char[::1] valid,
     return out[0], out[1]
 
 
+cdef struct _Along:
+    double s        # where a member lies along its line
+    idx_t i         # its place among the line's members in flat order (ties: numpy's)
+
+
+cdef inline bint _along_lt(const _Along* a, const _Along* b) noexcept nogil:
+    """a's s before b's in numpy's sort: ascending, NaN last."""
+    return a.s < b.s or (a.s == a.s and b.s != b.s)
+
+
+cdef void _sort_along(_Along* a, _Along* tmp, idx_t n) noexcept nogil:
+    """Sort a[0 … n − 1] by s as numpy's stable sort does (ties keep their order): runs of
+    8 by insertion, then merged bottom-up (a line seen by several sensors in turn comes in
+    as their runs interleaved)."""
+    cdef idx_t lo, hi, i, j, k, mid, width = 8
+    cdef _Along x
+    cdef _Along* src = a
+    cdef _Along* dst = tmp
+    cdef _Along* swap
+    lo = 0
+    while lo < n:
+        hi = lo + width if lo + width < n else n
+        for i in range(lo + 1, hi):
+            x = a[i]
+            j = i
+            while j > lo and _along_lt(&x, &a[j - 1]):
+                a[j] = a[j - 1]
+                j -= 1
+            a[j] = x
+        lo = hi
+    while width < n:
+        lo = 0
+        while lo < n:
+            mid = lo + width if lo + width < n else n
+            hi = lo + 2 * width if lo + 2 * width < n else n
+            i, j, k = lo, mid, lo
+            while i < mid and j < hi:
+                if _along_lt(&src[j], &src[i]):
+                    dst[k] = src[j]
+                    j += 1
+                else:
+                    dst[k] = src[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                dst[k] = src[i]
+                i += 1
+                k += 1
+            while j < hi:
+                dst[k] = src[j]
+                j += 1
+                k += 1
+            lo = hi
+        swap = src
+        src = dst
+        dst = swap
+        width *= 2
+    if src != a:
+        for i in range(n):
+            a[i] = src[i]
+
+
+cdef inline void _facet_fit(const double* q, idx_t m1, idx_t a, idx_t b, double* chi,
+                            double* slope) noexcept nogil:
+    """``_facet_asked``'s fit of sorted members a … b − 1 from the prefix sums ``q`` (six
+    rows of m1: w, w·s, w·s², w·r, w·s·r, w·r²), its operations in numpy's order."""
+    cdef double W = q[b] - q[a], S = q[m1 + b] - q[m1 + a], S2 = q[2 * m1 + b] - q[2 * m1 + a]
+    cdef double R = q[3 * m1 + b] - q[3 * m1 + a], SR = q[4 * m1 + b] - q[4 * m1 + a]
+    cdef double R2 = q[5 * m1 + b] - q[5 * m1 + a]
+    cdef double sss = S2 - S * S / W, ssr = SR - S * R / W
+    cdef double m = ssr / sss
+    cdef double c = R2 - R * R / W - ssr * m
+    chi[0] = c if (c > 0.0 or c != c) else 0.0       # np.maximum(c, 0): NaN stays
+    slope[0] = m
+
+
+def facet_pre(const idx_t[::1] label, const unsigned char[::1] valid,
+              const double[::1] d_before, const double[::1] d_after,
+              const double[::1] sigma_before, const double[::1] sigma_after,
+              const double[::1] origin_x, const double[::1] origin_y,
+              const double[::1] heading, double floor_m, idx_t min_members, idx_t side,
+              double f_min, double chi_min, double turn_min, double tol):
+    """``irring.estimation.estimate.faceted_lines``' split search (its numpy statement:
+    ``_facet_asked``) as its pre-gate: for each line of ``min_members`` members the snap
+    moved (d or σ changed) or more, in label order, the F and χ² gain of its best split
+    into two pieces of ``side`` members at least, the largest turn (rad) of any split
+    whose χ² is within 2 · ``tol`` · (1 + scale) of the best's, the scale (Σ w·r² of the
+    sorted members up to the line's end: the size of the prefix sums' rounding), and
+    whether the line may pass ``f_min``, ``chi_min`` and ``turn_min`` with each statistic
+    widened by ``tol`` (F by ``tol`` · (1 + scale) · (1 + |F|), the gain by ``tol`` ·
+    (1 + scale), the turn by ``tol``; NaN may). The same sums in the same order as numpy
+    (one prefix sum over every line, no fused multiply-add) but libm's trig: within a
+    tolerance of numpy's, not bit for bit. Arrays flat (S·N); ``label`` −1 on no line."""
+    cdef idx_t size = label.shape[0], f, i, j, k, gi, n_g = 0, L = 0, m = 0, lo, hi, a, n
+    cdef double h, ex, ey, x, y, u, v, ux, uy, sg, wt, chi_l, chi_r, m_l, m_r, both, split
+    cdef double chi0, m0, lim, turn, scale, F, gain, e
+    cdef idx_t m1
+    cdef double[:, ::1] O
+    if not (valid.shape[0] == d_before.shape[0] == d_after.shape[0] == sigma_before.shape[0]
+            == sigma_after.shape[0] == origin_x.shape[0] == origin_y.shape[0]
+            == heading.shape[0] == size):
+        raise lengths_differ("facet_pre's arrays", label=size, valid=valid.shape[0],
+                             d_before=d_before.shape[0], d_after=d_after.shape[0],
+                             sigma_before=sigma_before.shape[0],
+                             sigma_after=sigma_after.shape[0], origin_x=origin_x.shape[0],
+                             origin_y=origin_y.shape[0], heading=heading.shape[0])
+    for f in range(size):
+        if label[f] >= L:
+            L = label[f] + 1
+    cdef idx_t* members = <idx_t*>calloc(L + 1, sizeof(idx_t))
+    if members == NULL:
+        raise MemoryError("facet_pre: no memory for the lines' counts")
+    cdef double* G = NULL          # per line: n, Σx → cx, Σy → cy, Σuv → ux, Σ(u²−v²) → uy, start
+    cdef double* R = NULL          # per member: u → s, v → r, w (flat order)
+    cdef idx_t* at = NULL          # per member: its line
+    cdef _Along* key = NULL        # per sorted place: s, member
+    cdef _Along* tmp = NULL        # the sort's scratch
+    cdef double* cum = NULL        # six prefix sums of m + 1
+    cdef double* buf = NULL        # per sorted place: both, slope left, slope right
+    cdef idx_t* fill = NULL
+    try:
+        for f in range(size):
+            if (label[f] >= 0 and valid[f] and (d_after[f] != d_before[f]
+                                                 or sigma_after[f] != sigma_before[f])):
+                members[label[f]] += 1
+        for k in range(L):
+            if members[k] >= min_members:
+                m += members[k]
+                members[k] = n_g         # now the line's rank
+                n_g += 1
+            else:
+                members[k] = -1
+        out = np.empty((5, n_g))         # F, χ² gain, turn, scale, may (0/1)
+        if n_g == 0:
+            return out[0], out[1], out[2], out[3], out[4].astype(bool)
+        O = out
+        G = <double*>calloc(6 * n_g, sizeof(double))
+        R = <double*>malloc(3 * m * sizeof(double))
+        at = <idx_t*>malloc(m * sizeof(idx_t))
+        key = <_Along*>malloc(m * sizeof(_Along))
+        tmp = <_Along*>malloc(m * sizeof(_Along))
+        m1 = m + 1
+        cum = <double*>malloc(6 * m1 * sizeof(double))
+        buf = <double*>malloc(3 * m * sizeof(double))
+        fill = <idx_t*>calloc(n_g, sizeof(idx_t))
+        if (G == NULL or R == NULL or at == NULL or key == NULL or tmp == NULL or cum == NULL
+                or buf == NULL or fill == NULL):
+            raise MemoryError("facet_pre: no memory for the lines' members")
+        i = 0
+        for f in range(size):
+            if (label[f] >= 0 and members[label[f]] >= 0 and valid[f]
+                    and (d_after[f] != d_before[f] or sigma_after[f] != sigma_before[f])):
+                gi = members[label[f]]
+                at[i] = gi
+                h = heading[f]
+                ex = cos(h)
+                ey = sin(h)
+                x = origin_x[f] + d_before[f] * ex
+                y = origin_y[f] + d_before[f] * ey
+                R[3 * i] = x
+                R[3 * i + 1] = y
+                sg = sigma_before[f]
+                if sg < floor_m:             # np.maximum: NaN stays
+                    sg = floor_m
+                R[3 * i + 2] = 1.0 / (sg * sg)
+                G[6 * gi] += 1.0
+                G[6 * gi + 1] += x
+                G[6 * gi + 2] += y
+                i += 1
+        for gi in range(n_g):
+            G[6 * gi + 1] = G[6 * gi + 1] / G[6 * gi]
+            G[6 * gi + 2] = G[6 * gi + 2] / G[6 * gi]
+            G[6 * gi + 5] = (G[6 * gi - 1] + G[6 * gi - 6]) if gi > 0 else 0.0
+        for i in range(m):
+            gi = at[i]
+            u = R[3 * i] - G[6 * gi + 1]
+            v = R[3 * i + 1] - G[6 * gi + 2]
+            R[3 * i] = u
+            R[3 * i + 1] = v
+            G[6 * gi + 3] += u * v
+            G[6 * gi + 4] += u * u - v * v
+        for gi in range(n_g):
+            h = 0.5 * atan2(2.0 * G[6 * gi + 3], G[6 * gi + 4])      # the line's direction
+            G[6 * gi + 3] = cos(h)
+            G[6 * gi + 4] = sin(h)
+        for i in range(m):
+            gi = at[i]
+            ux = G[6 * gi + 3]
+            uy = G[6 * gi + 4]
+            u = R[3 * i]
+            v = R[3 * i + 1]
+            R[3 * i] = u * ux + v * uy
+            R[3 * i + 1] = -u * uy + v * ux
+            j = <idx_t>G[6 * gi + 5] + fill[gi]
+            fill[gi] += 1
+            key[j].s = R[3 * i]
+            key[j].i = i
+        for gi in range(n_g):
+            _sort_along(&key[<idx_t>G[6 * gi + 5]], tmp, <idx_t>G[6 * gi])
+        # one prefix sum over every line in sorted order, as numpy's cumsum
+        for k in range(6):
+            cum[k * m1] = 0.0
+        for j in range(m):
+            i = key[j].i
+            x = R[3 * i]
+            y = R[3 * i + 1]
+            wt = R[3 * i + 2]
+            cum[j + 1] = cum[j] + wt
+            cum[m1 + j + 1] = cum[m1 + j] + wt * x
+            cum[2 * m1 + j + 1] = cum[2 * m1 + j] + wt * (x * x)
+            cum[3 * m1 + j + 1] = cum[3 * m1 + j] + wt * y
+            cum[4 * m1 + j + 1] = cum[4 * m1 + j] + wt * (x * y)
+            cum[5 * m1 + j + 1] = cum[5 * m1 + j] + wt * (y * y)
+        for gi in range(n_g):
+            n = <idx_t>G[6 * gi]
+            lo = <idx_t>G[6 * gi + 5]
+            hi = lo + n
+            _facet_fit(cum, m1, lo, hi, &chi0, &m0)
+            # the least χ² split, numpy's lexsort's: the first least, NaN never
+            split = INFINITY
+            for a in range(lo + side, hi - side + 1):
+                _facet_fit(cum, m1, lo, a, &chi_l, &m_l)
+                _facet_fit(cum, m1, a, hi, &chi_r, &m_r)
+                both = chi_l + chi_r
+                buf[3 * a] = both
+                buf[3 * a + 1] = m_l
+                buf[3 * a + 2] = m_r
+                if both < split:
+                    split = both
+            scale = cum[5 * m1 + hi]
+            e = tol * (1.0 + scale)
+            turn = NAN
+            if isfinite(split):
+                lim = split + 2.0 * e
+                turn = -INFINITY
+                for a in range(lo + side, hi - side + 1):
+                    if buf[3 * a] <= lim:
+                        h = fabs(atan(buf[3 * a + 2]) - atan(buf[3 * a + 1]))
+                        if h != h:
+                            turn = INFINITY      # not known: it may turn enough
+                        elif h > turn:
+                            turn = h
+            F = (chi0 - split) / 2.0 / fmax(split / (n - 4.0 if n - 4.0 > 1.0 else 1.0),
+                                            1e-300)
+            gain = chi0 - split
+            O[0, gi] = F
+            O[1, gi] = gain
+            O[2, gi] = turn
+            O[3, gi] = scale
+            O[4, gi] = not (F + e * (1.0 + fabs(F)) < f_min or gain + e < chi_min
+                              or turn + tol < turn_min)
+    finally:
+        free(members)
+        free(G)
+        free(R)
+        free(at)
+        free(key)
+        free(tmp)
+        free(cum)
+        free(buf)
+        free(fill)
+    return out[0], out[1], out[2], out[3], out[4].astype(bool)
+
+
 # --------------------------------------------------------------------------- counts fits
 
 cdef inline double _np_interp(double x, const double* xp, const double* fp, idx_t n) noexcept nogil:

@@ -573,7 +573,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    beside: Callable | None = None, tracer: type[TraceSteps] | None = None,
                    judge: Callable | None = None, bower: Callable | None = None,
                    fitter: type[CountsFits] | None = None,
-                   past_finder: Callable | None = None) -> Estimate:
+                   past_finder: Callable | None = None,
+                   faceter: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -606,7 +607,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     (:func:`bowed_lines_compiled`; the oracle: :func:`bowed_lines`); ``fitter``: lines fitted
     to their members' counts (:class:`CountsFitKernels`; the oracle: :class:`CountsFits`);
     ``past_finder``: the members :func:`past_other_lines` asks
-    (:func:`past_members_compiled`; the oracle: :func:`past_members`).
+    (:func:`past_members_compiled`; the oracle: :func:`past_members`);
+    ``faceter``: a line over facets as two pieces (:func:`faceted_lines_compiled`; the
+    oracle: :func:`faceted_lines`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -666,7 +669,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         snapped = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
                                              far_sigma_cap(cal, points.max_range_m))
         # a line over a many-sided wall's facets: its members on two pieces
-        points = faceted_lines(points, snap_label, snapped, cal)
+        points = (faceter or faceted_lines_compiled)(points, snap_label, snapped, cal)
     points = drop_beyond_range(points)
     if snap:
         # a thin post far away: its few readings, several sensors', fitted as one circle
@@ -4692,6 +4695,7 @@ FACET_CHI = 15.0        # … and by this χ² against the members' own σ (pool
 # share their noise: their scatter is 0.06-0.3 σ², so F alone splits a straight wall there) …
 FACET_TURN_RAD = math.radians(5)   # … and turn by this much (a straight wall's noise: less)
 FACET_ITERATIONS = 4    # each piece then read by Table II's iteration, this many steps
+FACET_PRE_TOL = 1e-6    # (the compiled pre-gate's F, gain and turn, within this × (1 + scale))
 
 
 def faceted_lines(before: Points, label: np.ndarray, after: Points, cal: Calibration
@@ -4712,62 +4716,12 @@ def faceted_lines(before: Points, label: np.ndarray, after: Points, cal: Calibra
     the snap left them). A line over 2–4 facets of a round room, straight through their
     bends, puts its members up to 20–30 mm off them at 0.6 m: 3–5 cells of 5 mm. Why:
     docs/estimator.md, "A line over facets"."""
-    flat = label.reshape(-1)
-    d0_all, sig_all = before.d.reshape(-1), before.sigma_m.reshape(-1)
-    with np.errstate(invalid="ignore"):
-        moved = ((flat >= 0) & before.valid.reshape(-1)
-                 & ((after.d.reshape(-1) != d0_all) | (after.sigma_m.reshape(-1) != sig_all)))
-    idx = moved.nonzero()[0]
-    if idx.size < FACET_MIN:
+    asked = _facet_asked(before, label, after)
+    if asked is None:
         return after
-    ask = np.bincount(flat[idx]) >= FACET_MIN
-    if not ask.any():
-        return after
-    idx = idx[ask[flat[idx]]]
-    g = np.unique(flat[idx], return_inverse=True)[1]
-    n_g = int(g.max()) + 1
-    nm = np.bincount(g, minlength=n_g).astype(float)
-    ox, oy = before.origin_x.reshape(-1)[idx], before.origin_y.reshape(-1)[idx]
-    h = before.heading.reshape(-1)[idx]
-    ex, ey = np.cos(h), np.sin(h)
-    d0, sig = d0_all[idx], sig_all[idx]
-    x, y = ox + d0 * ex, oy + d0 * ey
-    cx, cy = np.bincount(g, x, n_g) / nm, np.bincount(g, y, n_g) / nm
-    u, v = x - cx[g], y - cy[g]
-    al = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_g), np.bincount(g, u * u - v * v, n_g))
-    ux, uy = np.cos(al)[g], np.sin(al)[g]
-    s, r = u * ux + v * uy, -u * uy + v * ux
-    order = np.lexsort((s, g))
-    gs, ss, rs = g[order], s[order], r[order]
-    w = 1.0 / np.maximum(sig[order], SIGMA_FLOOR_M) ** 2
-    cum = [np.concatenate(([0.0], np.cumsum(w * q))) for q in
-           (np.ones_like(ss), ss, ss * ss, rs, ss * rs, rs * rs)]
-    start = np.searchsorted(gs, np.arange(n_g))
-    end = np.append(start[1:], gs.size)
-
-    def fit(a, b):
-        """Weighted least-squares line of sorted members a … b − 1: (χ², slope); NaN where
-        they are fewer than two (the split search masks those)."""
-        W, S, S2, R, SR, R2 = (q[b] - q[a] for q in cum)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            sss, ssr = S2 - S * S / W, SR - S * R / W
-            m = ssr / sss
-            return np.maximum(R2 - R * R / W - ssr * m, 0.0), m
-
-    # every sorted member as the first of a right-hand piece; the best per line
-    at = np.arange(gs.size)
-    lo, hi = start[gs], end[gs]
-    can = (at - lo >= FACET_SIDE) & (hi - at >= FACET_SIDE)
-    chi_l, m_l = fit(lo, at)
-    chi_r, m_r = fit(at, hi)
-    both = np.where(can, chi_l + chi_r, np.inf)
-    best = np.lexsort((both, gs))[start]            # each line's least χ² split
-    chi0 = fit(start, end)[0]
-    split = both[best]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        F = (chi0 - split) / 2.0 / np.maximum(split / np.maximum(nm - 4, 1), 1e-300)
-    turn = np.abs(np.arctan(m_r[best]) - np.arctan(m_l[best]))
-    good = (np.isfinite(split) & (F >= FACET_F) & (chi0 - split >= FACET_CHI)
+    (idx, g, ox, oy, ex, ey, d0, sig, cx, cy, ux, uy, order, gs, w, at, best, split, F, gain,
+     turn) = asked
+    good = (np.isfinite(split) & (F >= FACET_F) & (gain >= FACET_CHI)
             & (turn >= FACET_TURN_RAD))
     if not good.any():
         return after
@@ -4817,6 +4771,96 @@ def faceted_lines(before: Points, label: np.ndarray, after: Points, cal: Calibra
     out["y"].reshape(-1)[flat_at] = before.origin_y.reshape(-1)[flat_at] + t * np.sin(
         before.heading.reshape(-1)[flat_at])
     return points_with(after, **out)
+
+
+def faceted_lines_compiled(before: Points, label: np.ndarray, after: Points,
+                           cal: Calibration) -> Points:
+    """:func:`faceted_lines`, whose split search (:func:`_facet_asked`) is first asked of
+    one compiled call (``irring.estimation._lines.facet_pre``, held to it by
+    tests/test_faceted_lines.py): where its F, χ² gain and turn, each widened by
+    ``FACET_PRE_TOL``, pass no line, neither would numpy's and nothing is split (most
+    sweeps); else :func:`faceted_lines` itself."""
+    f = np.ascontiguousarray
+    may = _lines.facet_pre(
+        f(label, dtype=np.intp).reshape(-1),
+        f(before.valid, dtype=bool).reshape(-1).view(np.uint8),
+        f(before.d, dtype=float).reshape(-1), f(after.d, dtype=float).reshape(-1),
+        f(before.sigma_m, dtype=float).reshape(-1), f(after.sigma_m, dtype=float).reshape(-1),
+        f(before.origin_x, dtype=float).reshape(-1), f(before.origin_y, dtype=float).reshape(-1),
+        f(before.heading, dtype=float).reshape(-1), SIGMA_FLOOR_M, FACET_MIN, FACET_SIDE,
+        FACET_F, FACET_CHI, FACET_TURN_RAD, FACET_PRE_TOL)[-1]
+    if not may.any():
+        return after
+    return faceted_lines(before, label, after, cal)
+
+
+def _facet_asked(before: Points, label: np.ndarray, after: Points):
+    """:func:`faceted_lines`' split search, numpy (the statement the compiled pre-gate
+    ``_lines.facet_pre`` is held to): None where no line has ``FACET_MIN`` members the snap
+    moved; else per such member (flat index ``idx``, line ``g``) its beam, reading and σ,
+    its line's centre and direction, the members' order along their lines (``order``,
+    ``gs``: sorted by line then ``s``), their weights ``w`` and sorted places ``at``; and per
+    line its best split (``best``, a sorted place: the first member of the right-hand
+    piece), that split's χ² ``split``, the F and χ² ``gain`` by which it beats the line and
+    how much its pieces ``turn`` (rad)."""
+    flat = label.reshape(-1)
+    d0_all, sig_all = before.d.reshape(-1), before.sigma_m.reshape(-1)
+    with np.errstate(invalid="ignore"):
+        moved = ((flat >= 0) & before.valid.reshape(-1)
+                 & ((after.d.reshape(-1) != d0_all) | (after.sigma_m.reshape(-1) != sig_all)))
+    idx = moved.nonzero()[0]
+    if idx.size < FACET_MIN:
+        return None
+    ask = np.bincount(flat[idx]) >= FACET_MIN
+    if not ask.any():
+        return None
+    idx = idx[ask[flat[idx]]]
+    g = np.unique(flat[idx], return_inverse=True)[1]
+    n_g = int(g.max()) + 1
+    nm = np.bincount(g, minlength=n_g).astype(float)
+    ox, oy = before.origin_x.reshape(-1)[idx], before.origin_y.reshape(-1)[idx]
+    h = before.heading.reshape(-1)[idx]
+    ex, ey = np.cos(h), np.sin(h)
+    d0, sig = d0_all[idx], sig_all[idx]
+    x, y = ox + d0 * ex, oy + d0 * ey
+    cx, cy = np.bincount(g, x, n_g) / nm, np.bincount(g, y, n_g) / nm
+    u, v = x - cx[g], y - cy[g]
+    al = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_g), np.bincount(g, u * u - v * v, n_g))
+    ux, uy = np.cos(al)[g], np.sin(al)[g]
+    s, r = u * ux + v * uy, -u * uy + v * ux
+    order = np.lexsort((s, g))
+    gs, ss, rs = g[order], s[order], r[order]
+    w = 1.0 / np.maximum(sig[order], SIGMA_FLOOR_M) ** 2
+    cum = [np.concatenate(([0.0], np.cumsum(w * q))) for q in
+           (np.ones_like(ss), ss, ss * ss, rs, ss * rs, rs * rs)]
+    start = np.searchsorted(gs, np.arange(n_g))
+    end = np.append(start[1:], gs.size)
+
+    def fit(a, b):
+        """Weighted least-squares line of sorted members a … b − 1: (χ², slope); NaN where
+        they are fewer than two (the split search masks those)."""
+        W, S, S2, R, SR, R2 = (q[b] - q[a] for q in cum)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sss, ssr = S2 - S * S / W, SR - S * R / W
+            m = ssr / sss
+            return np.maximum(R2 - R * R / W - ssr * m, 0.0), m
+
+    # every sorted member as the first of a right-hand piece; the best per line
+    at = np.arange(gs.size)
+    lo, hi = start[gs], end[gs]
+    can = (at - lo >= FACET_SIDE) & (hi - at >= FACET_SIDE)
+    chi_l, m_l = fit(lo, at)
+    chi_r, m_r = fit(at, hi)
+    both = np.where(can, chi_l + chi_r, np.inf)
+    best = np.lexsort((both, gs))[start]            # each line's least χ² split
+    chi0 = fit(start, end)[0]
+    split = both[best]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        F = (chi0 - split) / 2.0 / np.maximum(split / np.maximum(nm - 4, 1), 1e-300)
+        gain = chi0 - split
+    turn = np.abs(np.arctan(m_r[best]) - np.arctan(m_l[best]))
+    return (idx, g, ox, oy, ex, ey, d0, sig, cx, cy, ux, uy, order, gs, w, at, best, split, F,
+            gain, turn)
 
 
 # --------------------------------------------------------------------------- fold-over

@@ -17,11 +17,11 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RU
                        SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, CountsFits, Estimate,
                        LineOptions, Lines, Pieces, TraceSteps, beam_crossings,
                        beside_a_return, bowed_lines, clip_at_corners, counts_contradicted,
-                       end_hide_angle, fallback_spread, final_estimate, held_and_pooled,
-                       member_spans, nearest_heard_rows, nominal_calibration,
-                       past_members, polyline_ids, range_profiles, range_sigma,
-                       reach_cos_limit, resolve_foldover, scan_order, settled_within_noise,
-                       silent_gaps, unconfirmed_near)
+                       end_hide_angle, faceted_lines, fallback_spread, final_estimate,
+                       held_and_pooled, member_spans, nearest_heard_rows,
+                       nominal_calibration, past_members, polyline_ids, range_profiles,
+                       range_sigma, reach_cos_limit, resolve_foldover, scan_order,
+                       settled_within_noise, silent_gaps, unconfirmed_near)
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -1138,6 +1138,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           beside=beside_a_return, tracer=TraceSteps,
                           judge=counts_contradicted,
                           bower=bowed_lines, fitter=CountsFits, past_finder=past_members,
+                          faceter=faceted_lines,
                           raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
