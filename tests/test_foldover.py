@@ -946,8 +946,10 @@ def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, tak
     monkeypatch.setattr(est, "counts_disown_lines", lambda points, label, *a, **k: (points, label))
     _without_lone_across_silence(monkeypatch)   # (likewise)
     # (and the later faceted_lines: with those off it moves seed 9179's far readings too,
-    # 4 > 100 mm off for 2 without _theta_unsupported; the full path is 0 with it or not)
+    # 4 > 100 mm off for 2 without _theta_unsupported; the full path is 0 with it or not),
+    # in the oracle too (it passes the numpy rule as its own faceter)
     monkeypatch.setattr(est, "faceted_lines", lambda before, label, after, cal: after)
+    monkeypatch.setattr(estimate_numpy, "faceted_lines", est.faceted_lines)
 
     def errors():
         (sw,), (p,) = (lambda r: (r.sweeps, r.points))(
