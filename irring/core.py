@@ -622,8 +622,8 @@ class Reason(enum.IntEnum):
     NOT_CONVERGED = 5      # iterative estimation did not settle
     MISSING = 6            # the reading never arrived (hardware)
     INCIDENCE_UNKNOWN = 7  # on no line, too few neighbours to tell θ: the θ = 0 distance
-    #                        could be > 100 mm long (estimate.local_incidence), or σ past
-    #                        60 mm (estimate.unplaced_alone)
+    #                        could be > 100 mm long (arcs.local_incidence), or σ past
+    #                        60 mm (members.unplaced_alone)
 
 
 @dataclass(frozen=True)

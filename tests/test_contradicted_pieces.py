@@ -1,4 +1,4 @@
-"""A line its counts contradict, read as pieces its counts do fit (estimate.counts_pieces):
+"""A line its counts contradict, read as pieces its counts do fit (counts.counts_pieces):
 one sensor turning a full turn in a many-sided room (docs/estimator.md, "A contradicted
 line's pieces")."""
 
@@ -9,7 +9,9 @@ import numpy as np
 from irring import pipeline
 from irring.core import Reason
 from irring.estimation import estimate as fast
-from irring.estimation.estimate import _best_halves, estimate
+from irring.estimation import counts as est_counts
+from irring.estimation.estimate import estimate
+from irring.estimation.counts import _best_halves
 from irring.scenario import loads
 
 # a D-shaped room (part of a 20-gon, radius ~1 m, a flat chord side) seen by one GP2D12
@@ -61,7 +63,7 @@ def test_a_turning_sensor_keeps_the_facets_its_lines_ran_over(monkeypatch):
     assert err.max() < 0.060
     # without the pieces: 91 INCIDENCE_UNKNOWN (the lines' members, their own ±5-step
     # profiles too flat to bound θ), 40 kept at θ = 0
-    monkeypatch.setattr(fast, "counts_pieces", lambda points, *args: points)
+    monkeypatch.setattr(est_counts, "counts_pieces", lambda points, *args: points)
     p = estimate(sw, cal)
     assert np.count_nonzero(p.reason == Reason.INCIDENCE_UNKNOWN) == 91
     assert np.count_nonzero(p.valid) == 40

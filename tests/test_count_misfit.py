@@ -1,4 +1,4 @@
-"""A line its members' counts contradict (estimate.counts_contradicted): a convex corner
+"""A line its members' counts contradict (counts.counts_contradicted): a convex corner
 seen along its bisector near the range limit reads, at θ = 0, like a flat wall square on,
 and the iteration settles on that line; the counts, read back from the line through the
 sensor model, misfit it. docs/estimator.md, "A line its counts contradict"."""
@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from irring import pipeline
 from irring.core import Points, Reason
 from irring.estimation import estimate as est
+from irring.estimation import counts as est_counts
 from irring.estimation.calibration import Calibration
 from irring.scenario import load_scenario
 
@@ -27,7 +28,7 @@ CAL = Calibration.nominal("gp2d12")
 def test_misfit_deviate_matches_chi2_quantiles(dof, chi2):
     # exact upper quantiles of χ² (0.999: z = 3.0902; 0.95 for 10 dof: z = 1.6449)
     exact = 1.6449 if chi2 == 18.307 else 3.0902
-    assert abs(float(est.counts_misfit_z(chi2, dof)) - exact) < 0.03
+    assert abs(float(est_counts.counts_misfit_z(chi2, dof)) - exact) < 0.03
 
 
 def _fan(hit_x, hit_y, counts):
@@ -65,11 +66,11 @@ def test_a_flat_wall_square_on_fits_its_counts_a_corner_tip_does_not():
         rng = np.random.default_rng(seed)
         wall = wall_exact + rng.normal(0.0, sig, phi.size)
         pts, counts = _fan(np.full(phi.size, 0.61), 0.61 * np.tan(phi), wall)
-        walls += est.counts_contradicted(pts, label, vi, counts, CAL, *_wall_line(pts))[0]
+        walls += est_counts.counts_contradicted(pts, label, vi, counts, CAL, *_wall_line(pts))[0]
         corner = corner_exact + rng.normal(0.0, sig, phi.size)
         d0 = CAL.distance(corner, 0.0)  # read at θ = 0: the V of a wall square on
         pts, counts = _fan(d0 * np.cos(phi), d0 * np.sin(phi), corner)
-        corners += est.counts_contradicted(pts, label, vi, counts, CAL, *_wall_line(pts))[0]
+        corners += est_counts.counts_contradicted(pts, label, vi, counts, CAL, *_wall_line(pts))[0]
     assert walls == 0
     assert corners >= 48
 
@@ -86,21 +87,21 @@ def test_members_the_line_misfits_singly_are_left_out_of_the_test():
     two = exact.copy()
     two[[0, 7]] -= 6.0 * sig
     pts, counts = _fan(x, x * np.tan(phi), two)
-    assert not est.counts_contradicted(pts, label, vi, counts, CAL, *_wall_line(pts))[0]
+    assert not est_counts.counts_contradicted(pts, label, vi, counts, CAL, *_wall_line(pts))[0]
     spread = exact + np.where(np.arange(phi.size) % 2 == 0, 2.5, -2.5) * sig
     pts, counts = _fan(x, x * np.tan(phi), spread)
-    assert est.counts_contradicted(pts, label, vi, counts, CAL, *_wall_line(pts))[0]
+    assert est_counts.counts_contradicted(pts, label, vi, counts, CAL, *_wall_line(pts))[0]
 
 
 def test_too_few_members_are_not_asked():
-    phi = np.radians(np.linspace(-5.0, 8.0, est.COUNTS_MIN_MEMBERS - 1))
+    phi = np.radians(np.linspace(-5.0, 8.0, est_counts.COUNTS_MIN_MEMBERS - 1))
     x = np.full(phi.size, 0.5)
     bad = (CAL.counts(0.5 / np.cos(phi), phi)
            + np.where(np.arange(phi.size) % 2 == 0, 3.0, -3.0) * CAL.sigma_counts())
     pts, counts = _fan(x, x * np.tan(phi), bad)
     label = np.zeros((phi.size, 1), dtype=np.intp)
-    assert not est.counts_contradicted(pts, label, np.arange(phi.size), counts, CAL,
-                                       *_wall_line(pts))[0]
+    assert not est_counts.counts_contradicted(pts, label, np.arange(phi.size), counts, CAL,
+                                              *_wall_line(pts))[0]
 
 
 def test_t_room_convex_corner_along_its_bisector_is_not_read_as_a_wall():
@@ -142,11 +143,11 @@ def test_a_sweep_noisier_than_its_calibration_scales_the_test():
                         ("x", "y", "d", "theta", "origin_x", "origin_y", "heading", "sigma_m",
                          "iterations", "valid", "reason")}, max_range_m=0.8)
         cx = np.array([float(np.mean(q.x)) for q in parts])
-        together += est.counts_contradicted(pts, label, np.arange(4 * n), np.concatenate(counts),
-                                            CAL, alpha, cx, np.zeros(4)).any()
-        alone += est.counts_contradicted(parts[0], np.zeros((n, 1), dtype=np.intp),
-                                         np.arange(n), counts[0][:, None], CAL, alpha[:1],
-                                         cx[:1], np.zeros(1))[0]
+        together += est_counts.counts_contradicted(pts, label, np.arange(4 * n), np.concatenate(counts),
+                                                   CAL, alpha, cx, np.zeros(4)).any()
+        alone += est_counts.counts_contradicted(parts[0], np.zeros((n, 1), dtype=np.intp),
+                                                np.arange(n), counts[0][:, None], CAL, alpha[:1],
+                                                cx[:1], np.zeros(1))[0]
     assert together == 0
     assert alone >= 25
 
@@ -156,7 +157,7 @@ def _judged():
     """The arguments of every counts_contradicted question the numpy estimator asks on
     the bundled t_room, far_hexagon and l_room (seed 0) and big_room (seed 1)."""
     from irring.estimation import estimate_numpy
-    states, original = [], est.counts_contradicted
+    states, original = [], est_counts.counts_contradicted
 
     def record(*args):
         states.append(args)
@@ -210,8 +211,8 @@ def test_the_first_counts_question_kernel_agrees_with_its_numpy_statement(data, 
         cal = dataclasses.replace(cal, noise_counts=noise)
     args = (points, label, vi, counts, cal, alpha, cx, cy)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        slow = est._counts_asked(*args) is not None
-        slow_lines = est.counts_contradicted(*args)
+        slow = est_counts._counts_asked(*args) is not None
+        slow_lines = est_counts.counts_contradicted(*args)
     f = np.ascontiguousarray
     la0, b0 = cal._ab0
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -221,10 +222,10 @@ def test_the_first_counts_question_kernel_agrees_with_its_numpy_statement(data, 
             f(points.origin_x, dtype=float).reshape(-1),
             f(points.origin_y, dtype=float).reshape(-1), f(counts).reshape(-1), alpha,
             f(cx, dtype=float), f(cy, dtype=float), float(la0), float(b0),
-            cal.sigma_counts(), est.COUNTS_FLOOR_M, cal.theta_rad, cal._log_a, cal.b,
-            math.cos(cal.max_incidence_rad), est.COUNTS_MIN_MEMBERS, est.COUNTS_SINGLE,
-            est.COUNTS_Z)
-        fast_lines = est.counts_contradicted_compiled(*args)
+            cal.sigma_counts(), est_counts.COUNTS_FLOOR_M, cal.theta_rad, cal._log_a, cal.b,
+            math.cos(cal.max_incidence_rad), est_counts.COUNTS_MIN_MEMBERS, est_counts.COUNTS_SINGLE,
+            est_counts.COUNTS_Z)
+        fast_lines = est_counts.counts_contradicted_compiled(*args)
     assert fast == slow
     np.testing.assert_array_equal(fast_lines, slow_lines)
     _ANSWERS[bool(fast)] += 1

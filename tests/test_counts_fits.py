@@ -1,6 +1,6 @@
-"""Lines fitted to their members' counts, compiled (estimate.CountsFitKernels, irring/
+"""Lines fitted to their members' counts, compiled (counts.CountsFitKernels, irring/
 estimation/_lines.pyx: counts_refit, counts_jacobian, counts_at, best_halves) against their
-numpy statements (estimate.CountsFits): the same numbers to the bit (tolerance 0), on lines
+numpy statements (counts.CountsFits): the same numbers to the bit (tolerance 0), on lines
 and beams hypothesis draws and on a sweep where a contradicted line is read in pieces.
 docs/speed.md, "A contradicted line's pieces"."""
 
@@ -17,6 +17,7 @@ from irring import pipeline
 from irring.core import Reason
 from irring.estimation import _lines
 from irring.estimation import estimate as est
+from irring.estimation import counts as est_counts
 from irring.estimation.calibration import Calibration
 from irring.scenario import load_scenario
 from irring.studies.rooms import ideal
@@ -24,7 +25,7 @@ from irring.studies.rooms import ideal
 CALS = {m: Calibration.nominal(m) for m in ("gp2d12", "gp2y0a21", "gp2y0a02")}
 # an ideal sensor's calibration: one node (θ = 0), its curve the same at every incidence
 CALS["ideal"] = pipeline.scene_calibration(ideal(load_scenario("t_room")))[0]
-NUMPY, KERNELS = est.CountsFits, est.CountsFitKernels
+NUMPY, KERNELS = est.CountsFits, est_counts.CountsFitKernels
 
 
 def _bits(x):
@@ -68,9 +69,9 @@ def _lines_and_beams(draw):
     beam = (np.concatenate(ox), np.concatenate(oy), np.cos(h), np.sin(h))
     s = np.concatenate(s)
     c = -np.sin(a) * (beam[0][0] + 0.0) + np.cos(a) * beam[1][0] + dist * rng.choice([-1, 1])
-    sig = est._counts_sigma(cal, s)[1]
+    sig = est_counts._counts_sigma(cal, s)[1]
     asked = np.asarray(draw(st.lists(st.booleans(), min_size=n_lines, max_size=n_lines)))
-    settled = draw(st.sampled_from([None, est.PIECE_SETTLED, (1e-2, 1e-3)]))
+    settled = draw(st.sampled_from([None, est_counts.PIECE_SETTLED, (1e-2, 1e-3)]))
     order = rng.permutation(s.size) if draw(st.booleans()) else np.arange(s.size)
     return (cal, n_lines, np.asarray(line, dtype=np.intp)[order], s[order], sig[order],
             tuple(v[order] for v in beam), a, c, asked, settled)
@@ -98,7 +99,7 @@ def test_jacobian_and_misfit_kernels_are_the_numpy_statements_to_the_bit(drawn):
     want = NUMPY.misfit(cal, a[line], c[line], s, sig, *beam)
     assert _bits(KERNELS.misfit(cal, a[line], c[line], s, sig, *beam)) == _bits(want)
     # beams past the drop-out angle or behind the sensor: inf, in both
-    e, met = est._counts_at(cal, a[line], c[line], *beam)
+    e, met = est_counts._counts_at(cal, a[line], c[line], *beam)
     assert np.array_equal(np.isinf(want), ~met)
 
 
@@ -111,7 +112,7 @@ def test_best_halves_kernel_is_the_numpy_statement(points, lo):
         with pytest.raises(ValueError, match="no two runs of"):
             KERNELS.halves(xy[:, 0], xy[:, 1], lo)
         return
-    assert KERNELS.halves(xy[:, 0], xy[:, 1], lo) == est._best_halves(xy[:, 0], xy[:, 1], lo)
+    assert KERNELS.halves(xy[:, 0], xy[:, 1], lo) == est_counts._best_halves(xy[:, 0], xy[:, 1], lo)
 
 
 def test_one_node_reads_the_same_curve_at_every_incidence():
@@ -121,8 +122,8 @@ def test_one_node_reads_the_same_curve_at_every_incidence():
     h = np.array([0.0, 0.4, -0.9, 1.2, np.nan])
     alpha, c = np.full(h.size, math.pi / 2), np.full(h.size, -0.52)
     zero = np.zeros(h.size)
-    want = est._counts_at(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
-    got = est._counts_at_compiled(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
+    want = est_counts._counts_at(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
+    got = est_counts._counts_at_compiled(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
     assert _bits(got[0]) == _bits(want[0]) and np.array_equal(got[1], want[1])
     assert np.array_equal(got[1], [True, True, True, True, False])
 
@@ -137,8 +138,8 @@ def test_counts_at_reads_the_curve_as_np_interp_at_and_beyond_its_nodes():
     alpha = np.full(h.size, math.pi / 2)
     c = np.full(h.size, -0.43)      # (direction +y: the normal points to −x, offset −0.43)
     zero = np.zeros(h.size)
-    want = est._counts_at(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
-    got = est._counts_at_compiled(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
+    want = est_counts._counts_at(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
+    got = est_counts._counts_at_compiled(cal, alpha, c, zero, zero, np.cos(h), np.sin(h))
     assert _bits(got[0]) == _bits(want[0]) and np.array_equal(got[1], want[1])
     # within the drop-out angle every beam meets it; past it none does
     assert np.array_equal(got[1], theta < cal.max_incidence_rad)
@@ -185,15 +186,15 @@ def test_pieces_read_with_the_kernels_are_the_numpy_pieces():
         seen["args"] = (points, at, line, counts, cal_, bent)
         return original(points, at, line, counts, cal_, bent, fitter)
 
-    original = est.counts_pieces
-    est.counts_pieces = record
+    original = est_counts.counts_pieces
+    est_counts.counts_pieces = record
     try:
         est.estimate(sw, cal)
     finally:
-        est.counts_pieces = original
+        est_counts.counts_pieces = original
     points, at, line, counts, cal_, bent = seen["args"]
-    want = est.counts_pieces(points, at, line, counts, cal_, bent, NUMPY)
-    got = est.counts_pieces(points, at, line, counts, cal_, bent, KERNELS)
+    want = est_counts.counts_pieces(points, at, line, counts, cal_, bent, NUMPY)
+    got = est_counts.counts_pieces(points, at, line, counts, cal_, bent, KERNELS)
     for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason"):
         assert _bits(getattr(got, f)) == _bits(getattr(want, f))
     placed = (got.reason.reshape(-1)[at] == Reason.OK) & (

@@ -3,7 +3,7 @@ polygonal arc, a many-sided room) seen at 40–70° is cut by the line model int
 each chord's members took its θ, wrong by as much as the wall turns along it (a concave
 wall seen along itself keeps θ nearly constant while a line's θ turns with the beam). Lines
 whose members bow are now read on a parabola, the bowed lines make a circle and every line
-that fits it takes it (estimate.bowed_lines; "Curved walls" in docs/estimator.md). Straight
+that fits it takes it (bends.bowed_lines; "Curved walls" in docs/estimator.md). Straight
 walls at grazing incidence, noisy, keep their lines bit for bit. Scenes of our own."""
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from _synthetic import make_sweep, polygon, rectangle
 from irring.designs import PAPER_RING
 from irring.estimation import estimate as est
+from irring.estimation import bends as est_bends
 from irring.estimation import estimate_numpy as oracle
 from irring.estimation.estimate import Calibration, estimate, estimate_detail
 
@@ -40,7 +41,7 @@ def _sweep(model, walls, pose, seed, max_range_m):
 
 
 def _without_rule(monkeypatch):
-    monkeypatch.setattr(est, "bowed_lines", lambda points, label, counts, cal: (points, label))
+    monkeypatch.setattr(est_bends, "bowed_lines", lambda points, label, counts, cal: (points, label))
 
 
 @pytest.mark.parametrize("seed, rms_max_mm", [(1, 5.0), (2, 5.0), (3, 7.0)])
@@ -61,7 +62,7 @@ def test_a_faceted_arc_is_read_on_its_circle(seed, rms_max_mm, monkeypatch):
     _without_rule(monkeypatch)
     # (before the later faceted_lines too: alone it splits some of the arc's chords, seed 1
     # 21.6 -> 19.8 mm)
-    monkeypatch.setattr(est, "faceted_lines", lambda before, label, after, cal: after)
+    monkeypatch.setattr(est_bends, "faceted_lines", lambda before, label, after, cal: after)
     before = errors()
     assert math.sqrt(np.mean(after ** 2)) <= rms_max_mm * 1e-3
     assert math.sqrt(np.mean(before ** 2)) >= 20e-3
@@ -119,7 +120,7 @@ def test_the_oracle_reads_the_same_circle():
 
 
 def _kinked(curve, noise_m=0.004, seed=5, asked=True):
-    """:func:`estimate._kinked` on one group of 48 members along s ∈ [−0.31, 0.36] m
+    """:func:`bends._kinked` on one group of 48 members along s ∈ [−0.31, 0.36] m
     (asymmetric) lying ``curve(s)`` across plus noise, each member's across σ 25 mm (a far
     GP2Y0A21 wall's), against the misfit of a parabola through them."""
     rng = np.random.default_rng(seed)
@@ -127,10 +128,10 @@ def _kinked(curve, noise_m=0.004, seed=5, asked=True):
     nn = curve(s) + noise_m * rng.standard_normal(s.size)
     w = np.full(s.size, 1.0 / 0.025 ** 2)
     g = np.zeros(s.size, dtype=np.intp)
-    c = est._bow_fit(g, 1, s, nn, w)
+    c = est_bends._bow_fit(g, 1, s, nn, w)
     r = nn - (c[0, 0] + (c[0, 1] + c[0, 2] * s) * s)
-    return bool(est._kinked(g, 1, s, nn, w, np.array([float((w * r * r).sum())]),
-                            np.array([asked]))[0])
+    return bool(est_bends._kinked(g, 1, s, nn, w, np.array([float((w * r * r).sum())]),
+                                  np.array([asked]))[0])
 
 
 def test_a_line_over_a_corner_is_kinked_an_arc_is_not():
@@ -179,7 +180,7 @@ def _kernel_pre_f(points, label, counts, cal):
             f(points.heading).reshape(-1), f(counts, dtype=float).reshape(-1),
             f(points.d).reshape(-1), f(points.theta).reshape(-1), cal.sigma_counts(),
             est.SIGMA_FLOOR_M, f(cal.theta_rad, dtype=float), f(cal._log_a, dtype=float),
-            f(cal.b, dtype=float), est.BOW_MIN)
+            f(cal.b, dtype=float), est_bends.BOW_MIN)
 
 
 _GATE = {True: 0, False: 0}
@@ -215,16 +216,16 @@ def test_the_bow_pre_gate_kernel_agrees_with_its_numpy_statement(data, spoil):
     elif spoil == "invalid":
         points = dataclasses.replace(points, valid=points.valid & ~pick)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        asked = est._bow_asked(points, label, counts, cal)
+        asked = est_bends._bow_asked(points, label, counts, cal)
     f_kernel, scale = _kernel_pre_f(points, label, counts, cal)
     f_numpy = np.zeros(0) if asked is None else asked[-1]
     assert f_kernel.shape == f_numpy.shape
     sure = np.isfinite(f_kernel)
-    assert np.all(np.abs(f_kernel - f_numpy)[sure] <= est.BOW_PRE_TOL * (1.0 + scale[sure]))
-    gate = f_kernel + est.BOW_PRE_TOL * (1.0 + scale) >= est.BOW_PRE_F
-    assert np.all(gate[f_numpy >= est.BOW_PRE_F])
+    assert np.all(np.abs(f_kernel - f_numpy)[sure] <= est_bends.BOW_PRE_TOL * (1.0 + scale[sure]))
+    gate = f_kernel + est_bends.BOW_PRE_TOL * (1.0 + scale) >= est_bends.BOW_PRE_F
+    assert np.all(gate[f_numpy >= est_bends.BOW_PRE_F])
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        p_slow, l_slow = est.bowed_lines(points, label, counts, cal)
+        p_slow, l_slow = est_bends.bowed_lines(points, label, counts, cal)
         p_fast, l_fast = est.bowed_lines_compiled(points, label, counts, cal)
     np.testing.assert_array_equal(l_fast, l_slow)
     for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason"):

@@ -9,6 +9,7 @@ import numpy as np
 from irring import pipeline
 from irring.core import Reason
 from irring.estimation import estimate as fast
+from irring.estimation import members as est_members
 from irring.scenario import loads
 
 from _oracle import assert_oracle_agrees
@@ -85,10 +86,10 @@ def test_counts_that_disagree_with_the_line_stay_out_of_range(monkeypatch):
         _off(m)
         off = fast.estimate(sweep, cal).valid.sum()
     full = fast.estimate(sweep, cal).valid.sum() - off
-    monkeypatch.setattr(fast, "DIM_SIGMAS", 0.2)
+    monkeypatch.setattr(est_members, "DIM_SIGMAS", 0.2)
     tight = fast.estimate(sweep, cal).valid.sum() - off
     assert 0 < tight < full
-    monkeypatch.setattr(fast, "DIM_CHAIN", 0)
+    monkeypatch.setattr(est_members, "DIM_CHAIN", 0)
     assert fast.estimate(sweep, cal).valid.sum() == off
 
 
@@ -161,7 +162,7 @@ def test_a_dim_return_beside_a_nearer_surfaces_edge_stays_out(monkeypatch):
     # without the edge test: past_other_lines already reads the wall line's member truly on
     # the column's flank (164 mm off at 29°) on the column's line (13 mm off at 60°), so
     # the dim reading beside it has no wall member to join; without that rule as well:
-    monkeypatch.setattr(fast, "EDGE_JUMP_M", np.inf)
+    monkeypatch.setattr(est_members, "EDGE_JUMP_M", np.inf)
     assert taken().size == 8
     monkeypatch.setattr(fast, "past_other_lines", lambda points, label, *args: (points, label))
     err = taken()

@@ -1,4 +1,4 @@
-"""A line member alone at a nearer surface's edge (estimate.alone_at_an_edge): a beam
+"""A line member alone at a nearer surface's edge (members.alone_at_an_edge): a beam
 grazing a post's flank returns a dim reading that the far wall's line behind the post
 takes at that wall's θ, 180-250 mm long; its sensor's adjacent steps read the post
 (nearer) or nothing, never the wall. Such a reading is INCIDENCE_UNKNOWN."""
@@ -11,7 +11,7 @@ import numpy as np
 
 from irring import pipeline
 from irring.core import Points, Reason
-from irring.estimation.estimate import EDGE_JUMP_M, alone_at_an_edge
+from irring.estimation.members import EDGE_JUMP_M, alone_at_an_edge
 from irring.scenario import loads
 from _synthetic import stand_in_calibration
 

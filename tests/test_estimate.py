@@ -24,8 +24,10 @@ from irring.core import Reason, beam_geometry, sensor_angles_for_steps
 from irring.estimation.calibration import (Calibration, CalibrationError,
                                       emitter_offset_from_wall, fit_curve)
 from irring.estimation import estimate as estimate_module
-from irring.estimation.estimate import (LineOptions, estimate, estimate_detail, fit_lines,
-                                        no_return_reach)
+from irring.estimation import silence as est_silence
+from irring.estimation.estimate import estimate, estimate_detail
+from irring.estimation.lines import LineOptions, fit_lines
+from irring.estimation.silence import no_return_reach
 from irring.core import Ring
 
 # Hundreds of generated cases per hard case, the same ones every run so CI is reproducible;
@@ -635,7 +637,7 @@ def test_t_room_iterative_halves_the_steep_incidence_error(t_room):
 
 def test_fallback_sigma_covers_the_unknown_incidence():
     """A reading on no line keeps θ = 0, the longest distance its counts can mean, unless
-    its arc gives its θ (estimate.arc_incidence: 50 of these 144); at θ = 0 its θ is
+    its arc gives its θ (arcs.arc_incidence: 50 of these 144); at θ = 0 its θ is
     unknown, so its σ has to cover the error that makes (up to ~6 cm off a table leg's edge):
     nearly every such reading within 3σ of the truth. (σ widened by half the spread to
     θ = 45° left one in nine of them beyond 3σ, up to 5σ.)"""
@@ -737,7 +739,7 @@ def test_silent_beams_past_a_faces_end_do_not_free_the_box_behind_it(noise, monk
     inside_free = {True: [], False: []}
     for rule in (True, False):
         if not rule:
-            monkeypatch.setattr(estimate_module, "end_hide_angle", lambda c, o: math.pi / 2)
+            monkeypatch.setattr(est_silence, "end_hide_angle", lambda c, o: math.pi / 2)
         for seed in range(4):
             sweep, _, _ = make_sweep(cal, walls=walls, pose=(0.0, 0.0, math.radians(-23.0)),
                                      noise_counts=noise, seed=seed, quantize=noise > 0)
@@ -766,14 +768,14 @@ def test_silent_beams_take_the_callers_incidence_margin(monkeypatch):
     default = no_return_reach(p, est.lines, cal, LineOptions())
     # … then bounded beside each beam's nearest return, with the same margin
     counts = np.asarray(sweep.counts, dtype=float)
-    beside = estimate_module.beside_a_return(estimate_module.points_with(p, reach_m=mine),
-                                             counts, cal, wide, est.lines.label).reach_m
+    beside = est_silence.beside_a_return(estimate_module.points_with(p, reach_m=mine),
+                                         counts, cal, wide, est.lines.label).reach_m
     np.testing.assert_array_equal(p.reach_m, beside)
     assert int((beside < np.where(np.isnan(mine), np.inf, mine)).sum()) == 70
     assert np.isfinite(mine).sum() == 69 and np.isfinite(default).sum() == 55
     # the wider margin only adds beams; where both explain one, the nearest line may differ
     assert not (np.isfinite(default) & ~np.isfinite(mine)).any()
-    monkeypatch.setattr(estimate_module, "end_hide_angle", lambda cal, options: math.pi / 2)
+    monkeypatch.setattr(est_silence, "end_hide_angle", lambda cal, options: math.pi / 2)
     mine = no_return_reach(p, est.lines, cal, wide)
     default = no_return_reach(p, est.lines, cal, LineOptions())
     assert np.isfinite(mine).sum() == 23 and np.isfinite(default).sum() == 14

@@ -19,7 +19,8 @@ from _synthetic import PAPER_RING, make_sweep, rectangle, stand_in_calibration
 from irring.estimation import _iterate, _lines
 from irring.core import Reason, beam_geometry
 from irring.estimation.calibration import Calibration
-from irring.estimation.estimate import LineOptions, estimate, estimate_detail
+from irring.estimation.estimate import estimate, estimate_detail
+from irring.estimation.lines import LineOptions
 
 NOMINAL = Calibration.nominal("gp2d12", PAPER_RING)
 FIELDS = ("x", "y", "d", "theta", "sigma_m", "iterations", "valid", "reason")
@@ -88,7 +89,7 @@ def test_single_live_reading_keeps_theta_zero():
 def test_history_follows_the_iterations():
     """θ history: θ = 0 first, then one entry per iteration taken, ending at the final θ
     of every reading that kept its line (the others are read again after the iterations:
-    estimate.local_incidence; here a 5-member line at 59–64° on a wall met at 27–30°, which
+    arcs.local_incidence; here a 5-member line at 59–64° on a wall met at 27–30°, which
     the round-line rule takes off it)."""
     sweep, _, _ = make_sweep(NOMINAL, walls=rectangle(-0.45, -0.35, 0.5, 0.4), noise_counts=1.0)
     est = estimate_detail(sweep, NOMINAL, keep_history=True)

@@ -20,12 +20,12 @@ from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
 from irring.estimation import estimate_numpy as oracle
 from irring.core import Reason
 from irring.estimation import _lines
-from irring.estimation.estimate import (SIGMA_FLOOR_M, LineOptions, _fewer_distinct,
-                                        _profile_inputs, estimate_detail, jump_slope,
-                                        polyline_ids, profiles_compiled, range_profiles,
-                                        scan_order)
-from irring.estimation.estimate import no_return_reach as fast_reach
-from irring.estimation.estimate import snap_to_lines as fast_snap
+from irring.estimation.estimate import SIGMA_FLOOR_M, estimate_detail
+from irring.estimation.arcs import _fewer_distinct
+from irring.estimation.lines import LineOptions, jump_slope, polyline_ids, scan_order
+from irring.estimation.profiles import _profile_inputs, profiles_compiled, range_profiles
+from irring.estimation.silence import no_return_reach as fast_reach
+from irring.estimation.lines import snap_to_lines as fast_snap
 
 TOL = 1e-9
 FLOATS = ("x", "y", "d", "theta", "sigma_m")
@@ -392,7 +392,7 @@ def _vote_inputs(seed: int):
 
 
 def oracle_profile(**fields):
-    """A stand-in ``_Profile`` with the fields the vote reads."""
+    """A stand-in ``Profile`` with the fields the vote reads."""
     return dataclasses.make_dataclass("Profile", list(fields))(**fields)
 
 
@@ -401,7 +401,7 @@ def test_far_line_vote_kernel_agrees_with_its_numpy_statement():
     ``estimate_numpy.far_line_vote`` on 400 random votes: the same lines voted off, exactly
     (tan, log, exp and the curve's interpolation differ from numpy's by an ulp at most, no
     vote here sits on its threshold), and not vacuously: some lines go off, most stay."""
-    from irring.estimation.estimate import _far_line_vote_compiled
+    from irring.estimation.far_lines import _far_line_vote_compiled
     off = stay = 0
     for seed in range(400):
         args = _vote_inputs(seed)
@@ -420,7 +420,7 @@ def test_far_line_vote_kernel_names_a_line_out_of_range():
     args[2] = np.full(args[2].size, 7, dtype=np.intp)        # every reading on line 7
     args[0], args[1], args[7] = members, members, 3
     with np.testing.assert_raises_regex(IndexError, "reading 0 is on line 7, not one of 0 … 2"):
-        from irring.estimation.estimate import _far_line_vote_compiled
+        from irring.estimation.far_lines import _far_line_vote_compiled
         _far_line_vote_compiled(*args)
 
 
@@ -454,7 +454,7 @@ def test_post_group_kernel_agrees_with_its_numpy_statement():
     ``estimate_numpy.post_groups`` on 400 random scenes: both find no group, or the same
     candidates, groups (labelled by their smallest member), qualifying groups and end
     points, bit for bit; not vacuously: groups qualify in some scenes and not in others."""
-    from irring.estimation.estimate import post_groups_compiled
+    from irring.estimation.far_lines import post_groups_compiled
     found = none = 0
     for seed in range(400):
         args = _post_scene(seed)

@@ -1,5 +1,5 @@
 """Line segmentation (split-and-merge, corners, TLS lines) of the compiled kernel
-irring/estimation/_lines.pyx behind irring.estimation.estimate._segment: edge cases, structural invariants of its
+irring/estimation/_lines.pyx behind irring.estimation.lines.segment: edge cases, structural invariants of its
 pieces on generated polylines, TLS lines against an independent eigen-decomposition, and
 the tie-breaking it shares with the numpy code it replaced.
 
@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from irring.estimation import _lines
-from irring.estimation.estimate import LineOptions, Pieces, _segment
+from irring.estimation.lines import LineOptions, Pieces, segment
 
 OPTS = LineOptions()
 HARD = settings(max_examples=200, deadline=None, derandomize=not os.environ.get("IRRING_EXPLORE"),
@@ -31,7 +31,7 @@ def seg(px, py, thr=0.01, sensor=None, prev=None, opts=OPTS):
     thr = np.broadcast_to(np.asarray(thr, float), px.shape).copy()
     sensor = np.zeros(px.size, np.intp) if sensor is None else np.asarray(sensor, np.intp)
     centre = (float(px.mean()), float(py.mean())) if px.size else (0.0, 0.0)
-    return _segment(px, py, thr, sensor, opts, centre, prev)
+    return segment(px, py, thr, sensor, opts, centre, prev)
 
 
 def test_no_points_give_no_pieces():
@@ -155,8 +155,8 @@ def test_inputs_are_converted_once_and_checked_by_the_kernel():
     x = np.linspace(0, 0.3, 12)
     y = 0.2 * x
     ref = seg(x, y)
-    p32 = _segment(x.astype(np.float32).astype(float), y.astype(np.float32).astype(float),
-                   np.full(12, 0.01), np.zeros(12, np.int32), OPTS, (0.15, 0.03))
+    p32 = segment(x.astype(np.float32).astype(float), y.astype(np.float32).astype(float),
+                  np.full(12, 0.01), np.zeros(12, np.int32), OPTS, (0.15, 0.03))
     assert p32.starts.tolist() == ref.starts.tolist()
     with pytest.raises(TypeError):
         _lines.segment(x.astype(np.float32), y, np.full(12, 0.01), np.zeros(12, np.intp),

@@ -2,7 +2,7 @@
 line over facets"): in a 19-sided round room read by the GP2Y0A21 at 0.45-0.7 m, lines of
 2-4 facets, straight through their 19° bends, put their members 15-30 mm off the wall. Its
 split search's compiled pre-gate (``_lines.facet_pre``) against its numpy statement
-(``estimate._facet_asked``)."""
+(``bends._facet_asked``)."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 from irring import pipeline
 from irring.estimation import estimate as fast
+from irring.estimation import bends as est_bends
 from irring.estimation import estimate_numpy
 from irring.estimation.calibration import scene_calibration
 from irring.scenario import loads
@@ -74,7 +75,7 @@ def test_a_line_over_a_round_rooms_facets_is_read_in_two_pieces(monkeypatch):
     slow = estimate_numpy.estimate_detail(sweep, cal).points
     np.testing.assert_array_equal(slow.reason, now.reason)
     np.testing.assert_allclose(slow.d, now.d, atol=1e-9, rtol=0)
-    monkeypatch.setattr(fast, "FACET_F", math.inf)
+    monkeypatch.setattr(est_bends, "FACET_F", math.inf)
     assert _off(fast.estimate(sweep, cal), sweep) == (826, 218, 83)
 
 
@@ -89,11 +90,11 @@ def test_straight_walls_are_not_split(monkeypatch):
         sweep = pipeline.simulated(sc, seed=seed, progress=False)[0].sweeps[0]
         now = fast.estimate(sweep, cal)
         with monkeypatch.context() as m:
-            m.setattr(fast, "FACET_F", math.inf)
+            m.setattr(est_bends, "FACET_F", math.inf)
             off = fast.estimate(sweep, cal)
         np.testing.assert_array_equal(now.d, off.d)
         with monkeypatch.context() as m:
-            m.setattr(fast, "FACET_TURN_RAD", 0.0)
+            m.setattr(est_bends, "FACET_TURN_RAD", 0.0)
             if not np.array_equal(fast.estimate(sweep, cal).d, off.d, equal_nan=True):
                 changed.append(seed)
     assert changed == [8205]
@@ -126,8 +127,8 @@ def _kernel(before, label, after):
         f(before.d).reshape(-1), f(after.d).reshape(-1), f(before.sigma_m).reshape(-1),
         f(after.sigma_m).reshape(-1), f(before.origin_x).reshape(-1),
         f(before.origin_y).reshape(-1), f(before.heading).reshape(-1), fast.SIGMA_FLOOR_M,
-        fast.FACET_MIN, fast.FACET_SIDE, fast.FACET_F, fast.FACET_CHI, fast.FACET_TURN_RAD,
-        fast.FACET_PRE_TOL)
+        est_bends.FACET_MIN, est_bends.FACET_SIDE, est_bends.FACET_F, est_bends.FACET_CHI, est_bends.FACET_TURN_RAD,
+        est_bends.FACET_PRE_TOL)
 
 
 def _spoiled(state, spoil, seed):
@@ -181,7 +182,7 @@ def test_the_facet_pre_gate_kernel_agrees_with_its_numpy_statement(data, spoil):
     before, label, after, cal = _spoiled(states[data.draw(st.integers(0, len(states) - 1))],
                                          spoil, data.draw(st.integers(0, 2 ** 31 - 1)))
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        asked = fast._facet_asked(before, label, after)
+        asked = est_bends._facet_asked(before, label, after)
     F, gain, turn, scale, may = _kernel(before, label, after)
     if asked is None:
         assert F.shape == (0,)
@@ -189,17 +190,17 @@ def test_the_facet_pre_gate_kernel_agrees_with_its_numpy_statement(data, spoil):
     else:
         split, F_n, gain_n, turn_n = asked[-4:]
         assert F.shape == F_n.shape
-        tol = fast.FACET_PRE_TOL * (1.0 + scale)
+        tol = est_bends.FACET_PRE_TOL * (1.0 + scale)
         sure = np.isfinite(F_n) & np.isfinite(gain_n)
         assert np.all(np.abs(F - F_n)[sure] <= (tol * (1.0 + np.abs(F_n)))[sure])
         assert np.all(np.abs(gain - gain_n)[sure] <= tol[sure])
         known = sure & np.isfinite(turn_n)
-        assert np.all(turn[known] >= turn_n[known] - fast.FACET_PRE_TOL)
-        good = (np.isfinite(split) & (F_n >= fast.FACET_F) & (gain_n >= fast.FACET_CHI)
-                & (turn_n >= fast.FACET_TURN_RAD))
+        assert np.all(turn[known] >= turn_n[known] - est_bends.FACET_PRE_TOL)
+        good = (np.isfinite(split) & (F_n >= est_bends.FACET_F) & (gain_n >= est_bends.FACET_CHI)
+                & (turn_n >= est_bends.FACET_TURN_RAD))
     assert np.all(may[good])
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        slow = fast.faceted_lines(before, label, after, cal)
+        slow = est_bends.faceted_lines(before, label, after, cal)
         now = fast.faceted_lines_compiled(before, label, after, cal)
     for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason"):
         np.testing.assert_array_equal(getattr(now, f), getattr(slow, f), err_msg=f)

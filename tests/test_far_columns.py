@@ -3,7 +3,7 @@ gives each sensor an arc of 10–20 readings whose θ = 0 distances lie up to 19
 (the part's a(θ), b(θ) differ most at its far end), so the estimator kept them at θ = 0 with
 the σ of that doubt (60–200 mm) and the mapper, weighing them 0.15–0.5 of a reading, left
 the column's surface unmapped (a held-out workshop's 300 mm column: recall 0.31). One circle
-per sensor's arc gives each reading its θ (estimate.arc_incidence; "Round things seen far
+per sensor's arc gives each reading its θ (arcs.arc_incidence; "Round things seen far
 away" in docs/estimator.md). A room of our own, asymmetric poses and sizes."""
 
 from __future__ import annotations

@@ -13,6 +13,12 @@ import pytest
 from irring import gp2, pipeline
 from irring.core import Reason
 from irring.estimation import estimate as fast
+from irring.estimation import arcs as est_arcs
+from irring.estimation import far_lines as est_far_lines
+from irring.estimation import foldover as est_foldover
+from irring.estimation import lines as est_lines
+from irring.estimation import silence as est_silence
+from irring.estimation import traces as est_traces
 from irring.estimation.calibration import (NO_RETURN_SIGMAS, RETURN_SIGMAS, Calibration,
                                            scene_calibration)
 from irring.maps import metrics
@@ -75,7 +81,7 @@ def _false_free(scene, monkeypatch=None):
 def test_silent_beams_no_longer_free_cells_behind_walls_they_could_not_return_from(monkeypatch):
     """Before, a silent beam freed its cells to 800 mm: 241 cells outside this room were
     mapped free (free accuracy 0.989). (Pooling off: it turns some silent readings OK.)"""
-    monkeypatch.setattr(fast, "pooled_counts", lambda counts, reason, *args: (counts, reason))
+    monkeypatch.setattr(est_silence, "pooled_counts", lambda counts, reason, *args: (counts, reason))
     scene = loads(FAR_A21)
     cal = scene_calibration(scene)[0]
     false_free, run = _false_free(scene)
@@ -85,7 +91,7 @@ def test_silent_beams_no_longer_free_cells_behind_walls_they_could_not_return_fr
     np.testing.assert_array_less(p.reach_m[silent], cal.silent_range_m + 1e-12)
     assert false_free == 0 and run.scores["free_accuracy"] == 1.0
     monkeypatch.setattr(fast, "silent_reach", lambda points, cal: points)
-    monkeypatch.setattr(fast, "end_hide_angle", lambda cal, options: math.pi / 2)
+    monkeypatch.setattr(est_silence, "end_hide_angle", lambda cal, options: math.pi / 2)
     before, _ = _false_free(scene)
     assert before == 241
 
@@ -94,7 +100,7 @@ def test_the_papers_range_is_left_as_it_was(monkeypatch):
     """GP2D12 read to 624 mm with 15 mV of noise: silence rules a surface out to 644 mm,
     past the range, so silent beams keep their reach (None: to the max range; beams past a
     line's end, which a face turned away could hide from, aside)."""
-    monkeypatch.setattr(fast, "end_hide_angle", lambda cal, options: math.pi / 2)
+    monkeypatch.setattr(est_silence, "end_hide_angle", lambda cal, options: math.pi / 2)
     scene = loads(FAR_A21.replace("{model: gp2y0a21, max_range_mm: 800}", "{model: gp2d12}"))
     points = pipeline.run(scene, progress=False).points[0]
     assert int((points.reason == Reason.NO_RETURN).sum()) > 100
@@ -190,7 +196,7 @@ def test_walls_past_the_return_level_are_no_longer_drawn_inside_the_room(monkeyp
     precision 0.948. (Pooling off: it reads most of those walls' beams anew. 108, not 110:
     two readings of a line whose direction its members do not tell, DIRECTION_SE_MAX,
     are INCIDENCE_UNKNOWN.)"""
-    monkeypatch.setattr(fast, "pooled_counts", lambda counts, reason, *args: (counts, reason))
+    monkeypatch.setattr(est_silence, "pooled_counts", lambda counts, reason, *args: (counts, reason))
     # the shift alone: dim returns put on these lines (45 more valid readings) are
     # tests/test_dim_returns.py's
     monkeypatch.setattr(fast, "dim_returns_on_lines", lambda points, *args: points)
@@ -228,10 +234,10 @@ def test_the_bundled_far_hexagon_is_read_to_800_mm_and_frees_nothing_outside(mon
     assert scores["occupied_recall"] > 0.99
     monkeypatch.setattr(fast, "silent_reach", lambda points, cal: points)
     monkeypatch.setattr(fast, "censored_lines", lambda points, *args: points)
-    monkeypatch.setattr(fast, "pooled_counts", lambda counts, reason, *args: (counts, reason))
-    monkeypatch.setattr(fast, "DIRECTION_SE_MAX", math.inf)   # (which came after: 0.931)
-    monkeypatch.setattr(fast, "FUSE_MIN", 10 ** 9)   # nor the fused lines (after: 0.913)
-    monkeypatch.setattr(fast, "end_hide_angle", lambda cal, options: math.pi / 2)
+    monkeypatch.setattr(est_silence, "pooled_counts", lambda counts, reason, *args: (counts, reason))
+    monkeypatch.setattr(est_arcs, "DIRECTION_SE_MAX", math.inf)   # (which came after: 0.931)
+    monkeypatch.setattr(est_far_lines, "FUSE_MIN", 10 ** 9)   # nor the fused lines (after: 0.913)
+    monkeypatch.setattr(est_silence, "end_hide_angle", lambda cal, options: math.pi / 2)
     # (and the mapper as it was then: its floor in front of end points, nothing between
     # steps, which alone take this estimate's precision to 0.927)
     before = pipeline.run(scene, progress=False, params=MapperParams(
@@ -268,7 +274,7 @@ def test_readings_near_the_floor_are_read_as_their_neighbours_mean_where_it_stan
     sensor 0 is below the level, sensor 2's means stand 1.9-2.1 standard errors out."""
     cal = Calibration.nominal("gp2y0a21", noise_sigma_v=0.015)
     counts, reason = _quiet_counts(cal)
-    out_c, out_r = fast.pooled_counts(counts, reason, np.arange(20) + 7, cal, 0.8)
+    out_c, out_r = est_silence.pooled_counts(counts, reason, np.arange(20) + 7, cal, 0.8)
     moved = out_r != reason
     assert moved.sum() == 4 and np.array_equal(np.nonzero(moved[:, 1])[0], [6, 7, 8, 9])
     assert np.all(out_r[moved] == Reason.OK) and np.all(reason[moved] != Reason.OK)
@@ -283,13 +289,13 @@ def test_pooling_follows_the_steps_and_stays_off_where_silence_covers_the_range(
     cal = Calibration.nominal("gp2y0a21", noise_sigma_v=0.015)
     counts, reason = _quiet_counts(cal)
     flip = np.arange(20)[::-1]
-    c_rev, r_rev = fast.pooled_counts(counts[flip], reason[flip], 100 - np.arange(20)[flip],
-                                      cal, 0.8)
-    c_fwd, r_fwd = fast.pooled_counts(counts, reason, 100 - np.arange(20), cal, 0.8)
+    c_rev, r_rev = est_silence.pooled_counts(counts[flip], reason[flip], 100 - np.arange(20)[flip],
+                                             cal, 0.8)
+    c_fwd, r_fwd = est_silence.pooled_counts(counts, reason, 100 - np.arange(20), cal, 0.8)
     np.testing.assert_array_equal(c_rev[flip], c_fwd)
     np.testing.assert_array_equal(r_rev[flip], r_fwd)
     # read to its silent range, nothing is pooled
-    same_c, same_r = fast.pooled_counts(counts, reason, np.arange(20), cal, cal.silent_range_m)
+    same_c, same_r = est_silence.pooled_counts(counts, reason, np.arange(20), cal, cal.silent_range_m)
     assert same_c is counts and same_r is reason
     # nor, where the range stops short of the curve's end (the GP2D12 at 624 mm: past it the
     # simulator and the firmware return nothing, not a fading surface), readings no brighter
@@ -297,10 +303,10 @@ def test_pooling_follows_the_steps_and_stays_off_where_silence_covers_the_range(
     loud = Calibration.nominal("gp2d12", noise_sigma_v=0.035)
     assert loud.silent_range_m < 0.624 < loud.max_range_m
     counts, reason = _quiet_counts(loud)
-    assert np.median(counts) < fast.pool_edge_counts(loud, 0.624)
-    same_c, same_r = fast.pooled_counts(counts, reason, np.arange(20), loud, 0.624)
+    assert np.median(counts) < est_silence.pool_edge_counts(loud, 0.624)
+    same_c, same_r = est_silence.pooled_counts(counts, reason, np.arange(20), loud, 0.624)
     assert same_c is counts and same_r is reason
-    assert (fast.pooled_counts(counts, reason, np.arange(20), loud, 0.8)[1] != reason).sum() == 4
+    assert (est_silence.pooled_counts(counts, reason, np.arange(20), loud, 0.8)[1] != reason).sum() == 4
 
 
 def test_pooling_where_the_range_is_cut_short_of_the_curves_end(monkeypatch):
@@ -325,20 +331,20 @@ def test_pooling_where_the_range_is_cut_short_of_the_curves_end(monkeypatch):
                       np.where(level < RETURN_SIGMAS * sigma, Reason.OUT_OF_RANGE,
                                Reason.OK)).astype(np.uint8)
     assert (reason[:, 0] != Reason.OK).sum() == 21
-    out_c, out_r = fast.pooled_counts(counts, reason, np.arange(24), cal, 0.75)
+    out_c, out_r = est_silence.pooled_counts(counts, reason, np.arange(24), cal, 0.75)
     moved = out_c != counts
     assert np.array_equal(np.nonzero(moved[:, 0])[0], np.arange(6, 18))
     assert np.array_equal(np.nonzero(moved[:, 1])[0], [6])
     assert np.all(out_r[moved] == Reason.OK)
-    assert (fast.pool_edge_counts(cal, 0.75) - low) / sigma == pytest.approx(1.52, abs=0.005)
-    assert fast.pool_edge_counts(cal, 0.8) == low
+    assert (est_silence.pool_edge_counts(cal, 0.75) - low) / sigma == pytest.approx(1.52, abs=0.005)
+    assert est_silence.pool_edge_counts(cal, 0.8) == low
     for row in range(6, 18):
         assert out_c[row, 0] == pytest.approx(counts[row - 6:row + 7, 0].mean(), rel=1e-12)
     # the same readings read to the curve's end pool against the level alone
-    own_c, _ = fast.pooled_counts(counts, reason, np.arange(24), cal, 0.8)
+    own_c, _ = est_silence.pooled_counts(counts, reason, np.arange(24), cal, 0.8)
     assert np.array_equal(np.nonzero(own_c[:, 1] != counts[:, 1])[0], [6, 7, 8, 9, 10])
-    monkeypatch.setattr(fast, "pool_edge_counts", lambda cal, max_range_m: cal.no_return_counts)
-    floor_c, _ = fast.pooled_counts(counts, reason, np.arange(24), cal, 0.75)
+    monkeypatch.setattr(est_silence, "pool_edge_counts", lambda cal, max_range_m: cal.no_return_counts)
+    floor_c, _ = est_silence.pooled_counts(counts, reason, np.arange(24), cal, 0.75)
     assert np.array_equal(np.nonzero(floor_c[:, 1] != counts[:, 1])[0], [6, 7, 8, 9, 10])
 
 
@@ -370,18 +376,18 @@ def test_a_window_straddling_a_surfaces_end_is_not_pooled(monkeypatch):
     cal = Calibration.nominal("gp2y0a02", noise_sigma_v=0.015)
     counts, reason = _face_ending_counts(cal)
     sigma, low = cal.sigma_counts(), cal.no_return_counts
-    assert fast.POOL_SIDE_SIGMAS == 2.0
+    assert est_silence.POOL_SIDE_SIGMAS == 2.0
     z_whole = (counts[6:19, 1].mean() - low) * math.sqrt(13) / sigma
     z_later = (counts[12:19, 1].mean() - low) * math.sqrt(7) / sigma
     assert z_whole == pytest.approx(4.05, abs=0.005) and z_later < 0.0
-    out_c, out_r = fast.pooled_counts(counts, reason, np.arange(24) - 5, cal, 1.5)
+    out_c, out_r = est_silence.pooled_counts(counts, reason, np.arange(24) - 5, cal, 1.5)
     moved = out_r != reason
     assert np.array_equal(np.nonzero(moved[:, 1])[0], [6, 7, 8, 9]) and not moved[:, 0].any()
     for row in range(6, 10):
         assert out_c[row, 1] == pytest.approx(counts[row - 6:row + 7, 1].mean(), rel=1e-12)
     np.testing.assert_array_equal(out_c[~moved], counts[~moved])
-    monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)     # the whole window alone
-    _, before = fast.pooled_counts(counts, reason, np.arange(24) - 5, cal, 1.5)
+    monkeypatch.setattr(est_silence, "POOL_SIDE_SIGMAS", -math.inf)     # the whole window alone
+    _, before = est_silence.pooled_counts(counts, reason, np.arange(24) - 5, cal, 1.5)
     assert np.array_equal(np.nonzero(before[:, 1] != reason[:, 1])[0], [6, 7, 8, 9, 10, 11, 12])
 
 
@@ -430,7 +436,7 @@ def test_no_reading_is_pooled_past_a_faces_end_into_free_space(monkeypatch):
         return out
 
     after = no_hit_and_precision()
-    monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)
+    monkeypatch.setattr(est_silence, "POOL_SIDE_SIGMAS", -math.inf)
     # (noise_past_line_end, which silences such readings too, off: the halves are asked)
     monkeypatch.setattr(fast, "noise_past_line_end", lambda points, *a, **k: points)
     # (and dim_returns_on_lines: with those straddling pools kept it puts one more dim
@@ -450,9 +456,9 @@ def test_both_estimators_pool_alike():
     cal = scene_calibration(scene)[0]
     sweep = SimRing(scene).sweep(0)
     est = assert_agree(sweep, cal)
-    pooled, _ = fast.pooled_counts(np.asarray(sweep.counts, float),
-                                   fast._classify(np.asarray(sweep.counts, float), sweep, cal),
-                                   np.asarray(sweep.steps), cal, 0.8)
+    pooled, _ = est_silence.pooled_counts(np.asarray(sweep.counts, float),
+                                          fast.classify(np.asarray(sweep.counts, float), sweep, cal),
+                                          np.asarray(sweep.steps), cal, 0.8)
     # (162 and 246 before a window straddling a surface's end was left unpooled; 222 valid
     # before noise-level readings past their line's other members were silenced; 211 before
     # 16 dim returns beside lines were put on them)
@@ -480,7 +486,7 @@ def test_a_wall_past_the_return_level_is_found_by_pooling(monkeypatch):
     assert run.points[0].valid.sum() == 211
     assert past_the_return_level(run) == (202, 98)
     assert run.scores["occupied_precision"] > 0.99
-    monkeypatch.setattr(fast, "pooled_counts", lambda counts, reason, *args: (counts, reason))
+    monkeypatch.setattr(est_silence, "pooled_counts", lambda counts, reason, *args: (counts, reason))
     before = pipeline.run(scene, progress=False)
     assert before.points[0].valid.sum() == 108
     assert past_the_return_level(before) == (202, 24)
@@ -595,7 +601,7 @@ def test_a_far_line_members_sigma_is_its_error_not_half_a_readings_noise(monkeyp
         z, err = np.concatenate(z), np.concatenate(err)
         return math.sqrt(np.mean(z ** 2)), err, float(np.mean(precision))
 
-    assert fast.far_sigma_cap(scene_calibration(scene)[0], 1.5) == fast.SNAP_OWN_CAP_M == 0.010
+    assert fast.far_sigma_cap(scene_calibration(scene)[0], 1.5) == est_lines.SNAP_OWN_CAP_M == 0.010
     z_fused, err_fused, precision_fused = measure()
     # (1664 before a profile failing χ² stopped bounding θ: 8 far readings it kept at θ = 0
     # are INCIDENCE_UNKNOWN now; 1656 before a window straddling a surface's end was left
@@ -606,7 +612,7 @@ def test_a_far_line_members_sigma_is_its_error_not_half_a_readings_noise(monkeyp
     # placed by their own slope with σ over 60 mm, are INCIDENCE_UNKNOWN now)
     assert err_fused.size == 1534 and np.sqrt(np.mean(err_fused ** 2)) < 0.010
     assert z_fused < 0.6 and precision_fused > 0.98
-    monkeypatch.setattr(fast, "FUSE_MIN", 10 ** 9)
+    monkeypatch.setattr(est_far_lines, "FUSE_MIN", 10 ** 9)
     z_rms, err, precision = measure()
     assert err.size == 1534      # 1707 before DIRECTION_SE_MAX took some to θ = 0 or unknown
     #                              (1536 before vague_far_lines: RMS 12.0 -> 11.0 mm; 1537
@@ -615,7 +621,7 @@ def test_a_far_line_members_sigma_is_its_error_not_half_a_readings_noise(monkeyp
     assert 0.65 < z_rms < 1.0 and precision > 0.94
     floored = MapperParams(ahead_floor=1.0, between_steps=0.0)   # the mapper as it was
     precision_floored = measure(floored)[2]
-    monkeypatch.setattr(fast, "SNAP_OWN_CAP_M", math.inf)
+    monkeypatch.setattr(est_lines, "SNAP_OWN_CAP_M", math.inf)
     z_rms0, err0, precision0 = measure(floored)
     np.testing.assert_array_equal(err0, err)          # the σ changed, not the end points
     assert z_rms0 < 0.55 and precision0 < precision_floored - 0.02
@@ -673,11 +679,11 @@ def test_direction_se_is_the_angle_error_of_a_least_squares_line():
         expect.append(sigma / math.sqrt(n * (n * n - 1) * step * step / 12.0))
     x, y, sp, line = map(np.concatenate, (x, y, sp, line))
     order = rng.permutation(x.size)                      # members in any order
-    se = fast.direction_se(x[order], y[order], sp[order], line[order], 3)
+    se = est_lines.direction_se(x[order], y[order], sp[order], line[order], 3)
     np.testing.assert_allclose(se, expect, rtol=1e-9)
     # mixed σ: the RMS of the members' σ
     sp2 = np.where(line == 1, np.where(np.arange(x.size) % 2 == 0, 0.010, 0.020), sp)
-    assert fast.direction_se(x, y, sp2, line, 3)[1] == pytest.approx(
+    assert est_lines.direction_se(x, y, sp2, line, 3)[1] == pytest.approx(
         math.sqrt((0.01 ** 2 + 0.02 ** 2) / 2) / 0.013 * expect[1], rel=0.02)
 
 
@@ -702,17 +708,17 @@ def test_a_far_line_whose_members_do_not_tell_its_direction_gives_them_no_theta(
             err.append(np.hypot(p.x - hit[..., 0], p.y - hit[..., 1])[far])
         return np.concatenate(err), run.scores
 
-    assert fast.DIRECTION_SE_MAX == math.radians(6)
+    assert est_arcs.DIRECTION_SE_MAX == math.radians(6)
     err, scores = far_errors()
     assert err.max() < 0.10 and np.sqrt(np.mean(err ** 2)) < 0.012
     assert scores["occupied_precision"] > 0.96
-    monkeypatch.setattr(fast, "DIRECTION_SE_MAX", math.inf)
+    monkeypatch.setattr(est_arcs, "DIRECTION_SE_MAX", math.inf)
     # the short-far-line doubt, on every part since, disowns most of the same lines (one
     # reading stays > 100 mm off with it alone): both off is what main did before either
-    monkeypatch.setattr(fast, "FAR_LINE_Z", math.inf)
+    monkeypatch.setattr(est_far_lines, "FAR_LINE_Z", math.inf)
     # (and vague_far_lines, which alone joins the same lines to their walls' lines: none
     # off by 100 mm, RMS 8.7 mm, precision 0.975, recall 0.998)
-    monkeypatch.setattr(fast, "VAGUE_RATIO", math.inf)
+    monkeypatch.setattr(est_traces, "VAGUE_RATIO", math.inf)
     err0, scores0 = far_errors()
     assert (err0 > 0.10).sum() >= 4 and np.sqrt(np.mean(err0 ** 2)) > 0.012
     assert scores0["occupied_precision"] < scores["occupied_precision"] - 0.005
@@ -726,7 +732,7 @@ def test_a_held_reading_stays_held_through_pooling():
     counts, reason = _quiet_counts(cal)
     hold = np.zeros(reason.shape, bool)
     hold[7, 1] = True                      # pooled to OK when not held
-    free_c, free_r = fast.pooled_counts(counts, reason, np.arange(20), cal, 0.8)
+    free_c, free_r = est_silence.pooled_counts(counts, reason, np.arange(20), cal, 0.8)
     assert free_r[7, 1] == Reason.OK
     held_c, held_r = fast.held_and_pooled(counts, reason, hold, np.arange(20), cal, 0.8)
     assert held_r[7, 1] == Reason.FOLDOVER_AMBIGUOUS
@@ -782,6 +788,7 @@ def test_a_beam_that_dropped_out_on_a_wall_is_not_pooled_onto_the_wall_behind_it
     assert [n for n, _ in after] == [0, 0, 0]
     assert max(over for _, over in after) < 0.0    # no silent beam freed past its wall
     monkeypatch.setattr(fast, "silent_behind_a_wall", lambda points, *a, **k: points)
+    monkeypatch.setattr(est_foldover, "silent_behind_a_wall", lambda points, *a, **k: points)
     monkeypatch.setattr(fast, "noise_past_line_end", lambda points, *a, **k: points)
     before = [_past_the_drop_out(pipeline.run(scene, seed=s, progress=False), cal)[0]
               for s in seeds]
@@ -804,6 +811,7 @@ def test_a_beam_silenced_behind_a_wall_keeps_its_clearance_before_that_wall(monk
         silenced.append((gone, np.where(gone, out.reach_m, np.nan)))
         return out
     monkeypatch.setattr(fast, "silent_behind_a_wall", spy)
+    monkeypatch.setattr(est_foldover, "silent_behind_a_wall", spy)
     # (noise_past_line_end, which silences these two first, off: this rule is asked)
     monkeypatch.setattr(fast, "noise_past_line_end", lambda points, *a, **k: points)
     scene = loads(GRAZE_A21 + "effects: [incidence, noise, quantization]\n")

@@ -12,6 +12,9 @@ import numpy as np
 from irring import pipeline
 from irring.core import Cylinder, Points, Reason
 from irring.estimation import estimate as fast
+from irring.estimation import arcs as est_arcs
+from irring.estimation import far_lines as est_far_lines
+from irring.estimation import traces as est_traces
 from irring.maps import metrics
 from irring.scenario import loads
 
@@ -111,8 +114,8 @@ def test_far_walls_seen_by_several_sensors_come_out_one_line(monkeypatch):
     err, precision = far_errors()
     assert err.size == 586 and np.sqrt(np.mean(err ** 2)) < 0.0090
     assert (np.abs(err) > 0.02).sum() <= 10 and precision > 0.975
-    monkeypatch.setattr(fast, "FUSE_MIN", 10 ** 9)
-    monkeypatch.setattr(fast, "VAGUE_RATIO", math.inf)
+    monkeypatch.setattr(est_far_lines, "FUSE_MIN", 10 ** 9)
+    monkeypatch.setattr(est_traces, "VAGUE_RATIO", math.inf)
     err0, precision0 = far_errors()
     assert err0.size == 585 and np.sqrt(np.mean(err0 ** 2)) > 0.0120
     assert (np.abs(err0) > 0.02).sum() >= 40 and precision0 < 0.955
@@ -253,13 +256,14 @@ def test_a_post_due_west_is_searched_about_its_own_bearing(monkeypatch):
     west = FAR_HALL.replace("{x_mm: 1270, y_mm: 1240, yaw_deg: 17}",
                             "{x_mm: 3520, y_mm: 1662, yaw_deg: 3}")
     circles = []
-    meet = fast._meet_circle
+    meet = est_arcs.meet_circle
 
     def counting(centre, radius, *beams):
         circles.append(np.size(centre[0]))
         return meet(centre, radius, *beams)
 
-    monkeypatch.setattr(fast, "_meet_circle", counting)
+    monkeypatch.setattr(est_arcs, "meet_circle", counting)
+    monkeypatch.setattr(est_far_lines, "meet_circle", counting)
     changed = _record_far_posts(monkeypatch)
     runs = {}
     for name, turn in (("as written", 0.0), ("post due west", math.pi + 1.1527)):

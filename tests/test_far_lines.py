@@ -6,11 +6,11 @@ lines on every sweep (a GP2D12 that does not fold, below).
   left of a far wall's line can be a fragment of 6-16 members whose direction, from a few
   noisy readings, sets θ 5-15° off: its members read 20-50 mm long, cells 30-50 mm outside
   the room. The first pass held the same readings on a line of at least twice the members;
-  they are put where their beams meet it (estimate._onto_first_lines).
+  they are put where their beams meet it (foldover._onto_first_lines).
 - Lines the members disown: a short far line of two sensors can settle 20-45° off the wall
   (its members 100-115 mm long); each member's own range profile (its sensor's neighbouring
   steps) lies on average more than a standard error from the line's θ, and the members
-  leave the line (estimate.doubt_far_lines).
+  leave the line (far_lines.doubt_far_lines).
 
 docs/foldover.md, "Short far lines". Rooms of our own, every pose 171-179 mm from a wall
 but those of the GP2D12 that does not fold (at the end)."""
@@ -25,6 +25,11 @@ import pytest
 from irring import pipeline
 from irring.core import Reason, distance_to_outline, inside_outline
 from irring.estimation import estimate as est
+from irring.estimation import bends as est_bends
+from irring.estimation import counts as est_counts
+from irring.estimation import far_lines as est_far_lines
+from irring.estimation import foldover as est_foldover
+from irring.estimation import profiles as est_profiles
 from irring.estimation.calibration import scene_calibration
 from irring.maps import mapping
 from irring.scenario import loads
@@ -90,7 +95,7 @@ def test_a_fragment_of_a_far_line_is_read_on_the_first_passs_line():
 def test_without_the_first_passs_line_the_fragment_draws_wall_outside(monkeypatch):
     # main before this: a reading 48 mm off, two occupied cells 30-40 mm outside the room
     # (the cells stay inside since a line decides "far" only where it is seen)
-    monkeypatch.setattr(est, "REGAIN_RATIO", math.inf)
+    monkeypatch.setattr(est_foldover, "REGAIN_RATIO", math.inf)
     worst, _ = _worst_reading_and_cells_outside(QUAD)
     assert worst > 0.040
 
@@ -115,10 +120,10 @@ def test_without_the_rule_the_far_line_kept_readings_100_mm_off(monkeypatch):
     # own far trace agrees: its readings are FOLDOVER_AMBIGUOUS)
     seed_9750 = FOLDING.replace("seed: 9732", "seed: 9750")
     assert _readings_over(seed_9750, 0.080) == 0
-    monkeypatch.setattr(est, "FAR_LINE_Z", math.inf)
+    monkeypatch.setattr(est_far_lines, "FAR_LINE_Z", math.inf)
     # (3 of the 6 are FOLDOVER_AMBIGUOUS by the straight-trace test; docs/foldover.md)
     assert _readings_over(seed_9750, 0.080) == 3
-    monkeypatch.setattr(est, "_near_trace_straight",
+    monkeypatch.setattr(est_foldover, "_near_trace_straight",
                         lambda counts, *a: np.zeros(np.shape(counts), bool))
     assert _readings_over(seed_9750, 0.080) == 6
     assert _readings_over(seed_9750, 0.100) == 3
@@ -137,15 +142,15 @@ def test_a_sensor_with_no_incidence_effect_has_no_line_doubted(effects, without_
         return sum(int(np.count_nonzero((p.valid != q.valid) | (p.valid & (p.d != q.d))))
                    for p, q in zip(with_rule, (est.estimate(sw, cal) for sw in sweeps)))
     with_rule = [est.estimate(sw, cal) for sw in sweeps]
-    z = est.FAR_LINE_Z
-    monkeypatch.setattr(est, "FAR_LINE_Z", math.inf)
+    z = est_far_lines.FAR_LINE_Z
+    monkeypatch.setattr(est_far_lines, "FAR_LINE_Z", math.inf)
     assert changed() == 0
     # with noise the slopes do disown a line here (9 readings leave it without the shift
     # test): FAR_LINE_SHIFT_M is what keeps it. Noise-free, the profiles whose window sees
     # their line alone agree with it (those across a corner, which once disowned lines of
     # 37 readings, judge no line that has three others)
-    monkeypatch.setattr(est, "FAR_LINE_Z", z)
-    monkeypatch.setattr(est, "FAR_LINE_SHIFT_M", 0.0)
+    monkeypatch.setattr(est_far_lines, "FAR_LINE_Z", z)
+    monkeypatch.setattr(est_far_lines, "FAR_LINE_SHIFT_M", 0.0)
     assert changed() == without_shift
 
 
@@ -169,7 +174,7 @@ def _left_and_before(text: str, monkeypatch):
     member the rules took off its line: (sensor, placed at its own slope)) of a one-pose
     scene."""
     sc = loads(text, source="<test>")
-    leave, left = est._leave_doubted_line, []
+    leave, left = est_profiles.leave_doubted_line, []
 
     def recording(points, label, vi, pos, *args, **kwargs):
         out = leave(points, label, vi, pos, *args, **kwargs)
@@ -178,10 +183,11 @@ def _left_and_before(text: str, monkeypatch):
         left.extend(zip((at % points.valid.shape[1]).tolist(),
                         out[0].valid.reshape(-1)[at].tolist()))
         return out
-    monkeypatch.setattr(est, "_leave_doubted_line", recording)
+    monkeypatch.setattr(est_counts, "leave_doubted_line", recording)
+    monkeypatch.setattr(est_far_lines, "leave_doubted_line", recording)
     run = pipeline.run(sc, progress=False)
     with monkeypatch.context() as m:
-        m.setattr(est, "FAR_LINE_Z", math.inf)
+        m.setattr(est_far_lines, "FAR_LINE_Z", math.inf)
         before = pipeline.run(sc, progress=False)
     return run, before, left
 
@@ -227,7 +233,7 @@ def test_lines_of_up_to_25_members_are_asked(monkeypatch):
         m.setattr(est, "past_other_lines", lambda points, label, *args: (points, label))
         # (and the later faceted_lines: with rejoin_traces off it splits a line of this
         # sweep and puts one more reading over 50 mm off, 3 for 2)
-        m.setattr(est, "faceted_lines", lambda before, label, after, cal: after)
+        m.setattr(est_bends, "faceted_lines", lambda before, label, after, cal: after)
         run, before, left = _left_and_before(text, m)
         assert len(left) == 21 and {k for k, _ in left} == {0, 1}
         assert sum(placed for _, placed in left) == 10
@@ -237,7 +243,8 @@ def test_lines_of_up_to_25_members_are_asked(monkeypatch):
     assert sum(placed for _, placed in left) == 10
     assert _readings_over_run(before, 0.050) == 0 and _readings_over_run(run, 0.050) == 0
     # with the cap at 16 the line is not asked: the run is the one with no line doubted
-    monkeypatch.setattr(est, "FAR_LINE_MAX_MEMBERS", 16)
+    monkeypatch.setattr(est_far_lines, "FAR_LINE_MAX_MEMBERS", 16)
+    monkeypatch.setattr(est_foldover, "FAR_LINE_MAX_MEMBERS", 16)
     left.clear()
     capped = pipeline.run(loads(text, source="<test>"), progress=False)
     assert not left

@@ -14,7 +14,8 @@ from irring import pipeline
 from irring.maps import mapping
 from irring.core import Reason
 from irring.estimation.calibration import Calibration, scene_calibration
-from irring.estimation.estimate import estimate, resolve_foldover
+from irring.estimation.estimate import estimate
+from irring.estimation.foldover import resolve_foldover
 from irring.core import HOUSING_M, distance_to_outline, inside_outline
 from irring.scenario import loads
 
@@ -350,6 +351,7 @@ sensor: {model: gp2y0a21}
 def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
         room, seed, long_before, taken, monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import foldover as est_foldover
 
     sc, sweeps, cal = simulated(room, seed=seed)
 
@@ -359,7 +361,7 @@ def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
 
     now = [estimate(sw, cal) for sw in sweeps]
     with monkeypatch.context() as m:
-        m.setattr(est, "_behind_a_wall", lambda p, *args: p)
+        m.setattr(est_foldover, "_behind_a_wall", lambda p, *args: p)
         _without_lone_across_silence(m)   # (it takes some of these itself)
         before = [estimate(sw, cal) for sw in sweeps]
     long_now = gone = 0
@@ -389,13 +391,14 @@ sensor: {model: gp2y0a21}
 
 def test_a_line_member_its_own_profile_reads_100_mm_elsewhere_is_not_placed(monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import foldover as est_foldover
 
     # seed 8 (seed 2 showed it until the own-trace rule made the reading's neighbours
     # ambiguous: test_a_far_end_point_needs_the_reading_s_own_far_trace)
     sc, sweeps, cal = simulated(STEEP_CORNER_A21_TURNED, seed=8)
     now = [estimate(sw, cal) for sw in sweeps]
     with monkeypatch.context() as m:
-        m.setattr(est, "_disowned_by_own_profile", lambda p, *args: p)
+        m.setattr(est_foldover, "_disowned_by_own_profile", lambda p, *args: p)
         before = [estimate(sw, cal) for sw in sweeps]
     long_before = long_now = taken = 0
     for sw, p, q in zip(sweeps, now, before):
@@ -420,7 +423,8 @@ def test_a_reading_the_first_pass_put_past_the_range_on_a_line_is_not_read_elsew
     read it on the next wall at 65°: 494 mm, 110 mm off. Where its beam meets the first
     line apart from the second reading (or not ahead of it), it cannot be decided."""
     from irring.core import Points
-    from irring.estimation.estimate import Lines, _past_range_elsewhere
+    from irring.estimation.foldover import _past_range_elsewhere
+    from irring.estimation.lines import Lines
     shape = (2, 3)
     heading = np.array([[0.5, 0.5, -0.5], [0.5, 0.5, 0.5]]) * math.pi
     d = np.array([[0.45, 0.494, 0.52], [0.47, 0.61, 0.50]])
@@ -472,6 +476,10 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
     _theta_unsupported (7 readings 1-5 mm off on second-pass lines at 59-70°); the guard is
     checked with the halves' rule off.)"""
     import irring.estimation.estimate as fast
+    from irring.estimation import foldover as est_foldover
+    from irring.estimation import lines as est_lines
+    from irring.estimation import silence as est_silence
+    from irring.estimation import traces as est_traces
     scene = loads(NEAR_A21, source="<test>")
 
     def off():
@@ -483,10 +491,12 @@ def test_a_beam_the_judging_pass_found_silent_stays_silent(monkeypatch):
         return n, sum(int(p.valid.sum()) for p in run.points)
     # (0, 443) before noise_past_line_end, (0, 438) before own-sensor anchoring
     assert off() == (0, 431)
-    monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)
+    monkeypatch.setattr(est_silence, "POOL_SIDE_SIGMAS", -math.inf)
     assert off() == (0, 437)      # (0, 456) before rejoin_traces and noise_past_line_end
-    keep = fast._unplaced
-    monkeypatch.setattr(fast, "_unplaced", lambda p, gone, why=Reason.INCIDENCE_UNKNOWN:
+    keep = est_lines.unplaced
+    monkeypatch.setattr(est_foldover, "unplaced", lambda p, gone, why=Reason.INCIDENCE_UNKNOWN:
+                        p if why == Reason.NO_RETURN else keep(p, gone, why))
+    monkeypatch.setattr(est_traces, "unplaced", lambda p, gone, why=Reason.INCIDENCE_UNKNOWN:
                         p if why == Reason.NO_RETURN else keep(p, gone, why))
     # with rejoin_traces and noise_past_line_end no reading is 100 mm off even so: the guard
     # is shown without them (its counts are at the noise level, past its new line's members)
@@ -561,25 +571,26 @@ def _long_and_valid(points, sweeps):
 def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, now,
                                                           monkeypatch):
     from irring.estimation import estimate as est
+    from irring.estimation import foldover as est_foldover
 
     sc, sweeps, cal = simulated(room, seed=seed)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == now
     _oracle_agrees(sweeps, points, cal)
     # the straight-trace test (below) alone leaves none of these valid either: without both
-    monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
+    monkeypatch.setattr(est_foldover, "_near_trace_straight", _no_straight_trace)
     with monkeypatch.context() as m:
-        m.setattr(est, "_own_trace_agrees", lambda between, *a: np.ones(between.shape, bool))
+        m.setattr(est_foldover, "_own_trace_agrees", lambda between, *a: np.ones(between.shape, bool))
         assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == before
     if room is STEPPED_CORNER:
         # past the last seen member alone: the readings landing on the wall's seen stretch,
         # their own line across it at 25-47°, stay valid
-        monkeypatch.setattr(est, "_FOLD_OWN_COS", -1.0)
+        monkeypatch.setattr(est_foldover, "_FOLD_OWN_COS", -1.0)
         assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (12, 35)
 
 
 def test_seen_there_tells_between_members_from_past_the_last_one():
-    from irring.estimation.estimate import _own_trace_agrees, _seen_there
+    from irring.estimation.foldover import _own_trace_agrees, _seen_there
 
     # line 0: members at -0.30, -0.12, -0.08 m along it; line 1: one member at 0.21 m
     mcol = np.array([0, 0, 0, 1])
@@ -617,20 +628,21 @@ effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}, foldover: {}
 def test_a_far_decision_its_own_line_does_not_anchor_needs_the_straighter_far_trace(
         monkeypatch):
     from irring.estimation import estimate as est
+    from irring.estimation import foldover as est_foldover
 
     sc, sweeps, cal = simulated(BOX_IN_CORNER, seed=7003)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == (0, 122)
     _oracle_agrees(sweeps, points, cal)
     # without the test: 7 readings of the face read far onto the floor wall, ~250 mm off
-    monkeypatch.setattr(est, "_near_trace_straight", _no_straight_trace)
+    monkeypatch.setattr(est_foldover, "_near_trace_straight", _no_straight_trace)
     assert _long_and_valid([estimate(sw, cal) for sw in sweeps], sweeps) == (7, 147)
 
 
 def test_near_trace_straight_tells_a_close_face_from_a_far_wall():
     from types import SimpleNamespace
 
-    from irring.estimation.estimate import _near_trace_straight
+    from irring.estimation.foldover import _near_trace_straight
 
     cal = scene_calibration(loads(STEPPED_CORNER, source="<test>"))[0]
     steps = 23
@@ -664,12 +676,13 @@ effects: [incidence, noise, quantization, foldover]
 
 def test_a_far_reading_nothing_places_within_30_mm_is_left_unplaced(monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import foldover as est_foldover
     from irring.studies.foldover import cells_outside
 
     sc = loads(WALL_YAW12_A21, source="<test>")
     now = pipeline.run(sc, seed=7104, progress=False, score=False)
     with monkeypatch.context() as m:
-        m.setattr(est, "FOLD_PLACED_SIGMA_M", math.inf)
+        m.setattr(est_foldover, "FOLD_PLACED_SIGMA_M", math.inf)
         before = pipeline.run(sc, seed=7104, progress=False, score=False)
     cal = scene_calibration(sc)[0]
     (sw,), (p,), (q,) = now.sweeps, now.points, before.points
@@ -708,6 +721,7 @@ effects: [incidence, noise, quantization, foldover]
 def test_a_line_member_beside_a_nearer_surface_held_out_is_not_placed(
         seed, far_before, far_now, taken, taken_near, monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import foldover as est_foldover
 
     sc = loads(POST_BY_CORNER, source="<test>")
     cal = scene_calibration(sc)[0]
@@ -718,7 +732,7 @@ def test_a_line_member_beside_a_nearer_surface_held_out_is_not_placed(
 
     sw, p, err_p = errors(pipeline.run(sc, seed=seed, progress=False, score=False))
     with monkeypatch.context() as m:
-        m.setattr(est, "_beside_a_hidden_edge", lambda p, *args: p)
+        m.setattr(est_foldover, "_beside_a_hidden_edge", lambda p, *args: p)
         _without_lone_across_silence(m)   # (it takes some of these itself)
         _, q, err_q = errors(pipeline.run(sc, seed=seed, progress=False, score=False))
     took = q.valid & ~p.valid
@@ -748,6 +762,7 @@ def test_a_line_member_beside_a_nearer_surface_is_found_at_any_step_stride(monke
     rejoin_traces and own-sensor anchoring (either alone) it takes only the 7."""
     from irring.core import reading_stride
     from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import foldover as est_foldover
 
     sc = loads(POST_BY_CORNER_STRIDE_2, source="<test>")
     cal = scene_calibration(sc)[0]
@@ -761,10 +776,10 @@ def test_a_line_member_beside_a_nearer_surface_is_found_at_any_step_stride(monke
         sw, p = run(seed)
         assert reading_stride(sw) == 2 and sw.steps[0] == -34
         with monkeypatch.context() as m:
-            m.setattr(est, "_beside_a_hidden_edge", lambda p, *args: p)
+            m.setattr(est_foldover, "_beside_a_hidden_edge", lambda p, *args: p)
             _, off = run(seed)
         with monkeypatch.context() as m:   # the neighbour one motor step on, as before
-            m.setattr(est, "reading_stride", lambda sweep: 1)
+            m.setattr(est_foldover, "reading_stride", lambda sweep: 1)
             _, old = run(seed)
         before += int(np.sum(off.valid & ~old.valid))
         took = off.valid & ~p.valid
@@ -846,14 +861,15 @@ effects: [incidence, noise, quantization, foldover]
 
 def test_a_short_line_s_direction_error_is_in_its_members_sigma(monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import foldover as est_foldover
     from irring.studies.foldover import cells_outside
 
     sc = loads(POSTS_300_APART, source="<test>")
     now = pipeline.run(sc, seed=8232, progress=False, score=False)
     with monkeypatch.context() as m:     # the σ as widened, none left unplaced for it
-        m.setattr(est, "FOLD_PLACED_SIGMA_M", math.inf)
+        m.setattr(est_foldover, "FOLD_PLACED_SIGMA_M", math.inf)
         wide = pipeline.run(sc, seed=8232, progress=False, score=False)
-        m.setattr(est, "_short_line_sigma", lambda p, *args: p)
+        m.setattr(est_foldover, "_short_line_sigma", lambda p, *args: p)
         before = pipeline.run(sc, seed=8232, progress=False, score=False)
     outline = sc.room.outline_m
     assert (cells_outside(before.grid, outline), cells_outside(now.grid, outline)) == (4, 0)
@@ -872,7 +888,7 @@ def test_a_short_line_s_direction_error_is_in_its_members_sigma(monkeypatch):
     assert round(float(err.max()) * 1e3) == 57
     assert np.all(q.sigma_m[took] < 0.022) and float((err / q.sigma_m[took]).max()) > 2.6
     # the line's direction error in their σ: all of them now within 1.6σ, σ 31-41 mm
-    assert np.all(w.valid[took]) and np.all(w.sigma_m[took] > est.FOLD_PLACED_SIGMA_M)
+    assert np.all(w.valid[took]) and np.all(w.sigma_m[took] > est_foldover.FOLD_PLACED_SIGMA_M)
     assert float((err / w.sigma_m[took]).max()) < 1.6
     np.testing.assert_array_equal(w.sigma_m[w.valid & ~took], q.sigma_m[w.valid & ~took])
     cal = scene_calibration(sc)[0]
@@ -937,6 +953,8 @@ effects: [incidence, noise, quantization, foldover]
 def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, taken,
                                                            monkeypatch):
     from irring.estimation import estimate as est, estimate_numpy
+    from irring.estimation import bends as est_bends
+    from irring.estimation import foldover as est_foldover
 
     sc = loads(A21_FAR_WALLS, source="<test>")
     cal = scene_calibration(sc)[0]
@@ -948,8 +966,8 @@ def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, tak
     # (and the later faceted_lines: with those off it moves seed 9179's far readings too,
     # 4 > 100 mm off for 2 without _theta_unsupported; the full path is 0 with it or not),
     # in the oracle too (it passes the numpy rule as its own faceter)
-    monkeypatch.setattr(est, "faceted_lines", lambda before, label, after, cal: after)
-    monkeypatch.setattr(estimate_numpy, "faceted_lines", est.faceted_lines)
+    monkeypatch.setattr(est_bends, "faceted_lines", lambda before, label, after, cal: after)
+    monkeypatch.setattr(estimate_numpy, "faceted_lines", est_bends.faceted_lines)
 
     def errors():
         (sw,), (p,) = (lambda r: (r.sweeps, r.points))(
@@ -958,7 +976,7 @@ def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, tak
 
     sw, p, err_p = errors()
     with monkeypatch.context() as m:
-        m.setattr(est, "_theta_unsupported", lambda p, *args: p)
+        m.setattr(est_foldover, "_theta_unsupported", lambda p, *args: p)
         _, q, err_q = errors()
     took = q.valid & ~p.valid
     assert np.array_equal(p.valid | took, q.valid)
@@ -975,7 +993,7 @@ def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, tak
 def test_theta_unsupported_takes_only_readings_no_judging_line_placed():
     """A reading pinned at the drop-out angle, or on a second-pass line, 100 mm or more
     from its θ = 0 distance goes; on a first-pass line, or within 100 mm, it stays."""
-    from irring.estimation.estimate import _theta_unsupported
+    from irring.estimation.foldover import _theta_unsupported
 
     sc, sweeps, cal = simulated(ROOM + "effects: [foldover]\n", seed=7)
     sw = sweeps[0]
@@ -1029,12 +1047,13 @@ effects: [incidence, noise, quantization, foldover]
 def test_a_line_s_extension_across_a_niche_s_mouth_decides_no_near_branch(
         room, seed, before, now, monkeypatch):
     from irring.estimation import estimate as est
+    from irring.estimation import foldover as est_foldover
 
     sc, sweeps, cal = simulated(room, seed=seed)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == now
     _oracle_agrees(sweeps, points, cal)
-    monkeypatch.setattr(est, "_across_a_gap", lambda blocks, *a: np.zeros(blocks.shape[0], bool))
+    monkeypatch.setattr(est_foldover, "_across_a_gap", lambda blocks, *a: np.zeros(blocks.shape[0], bool))
     old = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(old, sweeps) == before
     for p, q in zip(points, old):
@@ -1062,17 +1081,18 @@ effects: [incidence, noise, quantization, foldover]
 def test_a_line_its_sensor_joins_across_a_silence_does_not_vouch_for_the_far_branch(
         monkeypatch):
     from irring.estimation import estimate as est
+    from irring.estimation import foldover as est_foldover
 
     sc, sweeps, cal = simulated(POST_BEFORE_A_WALL, seed=33033)
     points = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(points, sweeps) == (0, 147 - 23)
     _oracle_agrees(sweeps, points, cal)
     # without the rule: the silences do not count (main before it)
-    real = est._own_trace_members
+    real = est_foldover._own_trace_members
 
     def unsplit(p, *a):
         return real(replace(p, reason=np.full_like(p.reason, Reason.OK)), *a)
-    monkeypatch.setattr(est, "_own_trace_members", unsplit)
+    monkeypatch.setattr(est_foldover, "_own_trace_members", unsplit)
     _without_lone_across_silence(monkeypatch)   # (it takes the three long ones itself)
     old = [estimate(sw, cal) for sw in sweeps]
     assert _long_and_valid(old, sweeps) == (3, 147)

@@ -10,6 +10,8 @@ import pytest
 
 from irring import pipeline
 from irring.estimation import estimate as est
+from irring.estimation import bends as est_bends
+from irring.estimation import foldover as est_foldover
 from irring.estimation.calibration import scene_calibration
 from irring.scenario import load_scenario, loads
 from irring.studies.foldover import cells_outside, reading_errors
@@ -34,7 +36,7 @@ def _run(text: str, seed: int, arcs: bool, monkeypatch):
     sc = loads(text)
     with monkeypatch.context() as m:
         if not arcs:
-            m.setattr(est, "onto_concave_arcs", lambda p, *a, **k: p)
+            m.setattr(est_foldover, "onto_concave_arcs", lambda p, *a, **k: p)
         run = pipeline.run(sc, seed=seed, progress=False)
     errors = np.concatenate([reading_errors(p, sw.truth) for sw, p in zip(run.sweeps, run.points)])
     return sc, run, errors
@@ -67,7 +69,7 @@ def test_a_polygon_rooms_readings_are_not_moved(name, seeds, monkeypatch):
         for sw in acq.sweeps:
             got = est.estimate(sw, cal)
             with monkeypatch.context() as m:
-                m.setattr(est, "onto_concave_arcs", lambda p, *a, **k: p)
+                m.setattr(est_foldover, "onto_concave_arcs", lambda p, *a, **k: p)
                 lines_only = est.estimate(sw, cal)
             np.testing.assert_array_equal(got.valid, lines_only.valid)
             np.testing.assert_array_equal(got.d[got.valid], lines_only.d[got.valid])
@@ -84,14 +86,14 @@ def test_a_circle_is_refitted_to_its_readings_at_its_own_incidence():
     heading = np.linspace(-1.2, 1.2, 40)
     ox, oy = np.full(40, 0.3), np.full(40, 0.0)
     ux, uy = np.cos(heading), np.sin(heading)
-    t, cos = est._beam_meets_circle(ox, oy, ux, uy, cx, cy, r)
+    t, cos = est_bends._beam_meets_circle(ox, oy, ux, uy, cx, cy, r)
     counts = np.asarray(cal.counts(t, np.arccos(cos)), dtype=float)
-    got = est._read_on_circle(np.arange(40), ox, oy, ux, uy, counts, cal,
-                              (cx + 0.05, cy, r - 0.1))
+    got = est_bends._read_on_circle(np.arange(40), ox, oy, ux, uy, counts, cal,
+                                    (cx + 0.05, cy, r - 0.1))
     assert got is not None
     (fx, fy, fr), chi2, theta = got
     assert abs(fx - cx) < 1e-4 and abs(fy - cy) < 1e-4 and abs(fr - r) < 1e-4
     np.testing.assert_allclose(theta, np.arccos(cos), atol=1e-4)
     # a circle that would hold an emitter outside it (a post seen from outside) is refused
-    assert est._read_on_circle(np.arange(40), ox + 1.0, oy, ux, uy, counts, cal,
-                               (cx, cy, 0.3)) is None
+    assert est_bends._read_on_circle(np.arange(40), ox + 1.0, oy, ux, uy, counts, cal,
+                                     (cx, cy, 0.3)) is None

@@ -15,8 +15,9 @@ from hypothesis import strategies as st
 
 from irring import pipeline
 from irring.estimation.calibration import scene_calibration
-from irring.estimation.estimate import (LineOptions, TraceKernels, TraceSteps, estimate,
-                                        scan_order)
+from irring.estimation.estimate import estimate
+from irring.estimation.lines import LineOptions, scan_order
+from irring.estimation.traces import TraceKernels, TraceSteps
 from irring.scenario import loads
 
 CORRIDOR = """
@@ -65,7 +66,8 @@ def test_line_members_sit_on_their_line_with_the_sigma_the_line_gives():
     import math
 
     from _synthetic import make_sweep, stand_in_calibration
-    from irring.estimation.estimate import LineOptions, _estimate
+    from irring.estimation.estimate import _estimate
+    from irring.estimation.lines import LineOptions
 
     cal = stand_in_calibration(noise_counts=12.0)
     wall = [((-1.0, 0.36), (1.0, 0.36)), ((0.42, -1.0), (0.42, 1.0))]
@@ -171,7 +173,8 @@ def test_a_far_walls_last_readings_hidden_by_the_drop_out_gap_go_back_to_it(monk
         # and no reach, seed 2's trace carries two of the near wall's readings (sensor 8,
         # steps -18 and -17) onto the far wall's line, 145 and 194 mm off
         from irring.estimation import estimate as module
-        m.setattr(module, "VAGUE_RATIO", math.inf)
+        from irring.estimation import traces as est_traces
+        m.setattr(est_traces, "VAGUE_RATIO", math.inf)
         by_traces = off_by(0.0)
     with monkeypatch.context() as m:
         _without_rejoin(m)
@@ -208,7 +211,7 @@ def test_a_member_read_behind_its_line_goes_onto_it_one_read_short_stays():
     from dataclasses import replace
 
     from irring.estimation import estimate_numpy as oracle
-    from irring.estimation.estimate import snap_to_lines
+    from irring.estimation.lines import snap_to_lines
 
     pts, member, d_true = _wall_members()
     d = d_true.copy()
@@ -438,7 +441,7 @@ def test_the_trace_move_kernel_agrees_with_its_numpy_statement(data, ask_share, 
     a corner or not), NaN or zero counts, NaN end points, lines' extents narrowed to
     nothing, any adopt margin: None together, else readings, targets, d, θ and σ exact.
     Not vacuous: the unspoilt rounds move readings (counted below)."""
-    from irring.estimation.estimate import _trace_moves
+    from irring.estimation.traces import _trace_moves
     states = _move_states()
     args = list(states[data.draw(st.integers(0, len(states) - 1))])
     rng = np.random.default_rng(data.draw(st.integers(0, 2 ** 31 - 1)))
@@ -467,7 +470,7 @@ def test_the_trace_move_kernel_agrees_with_its_numpy_statement(data, ask_share, 
 def test_the_recorded_rounds_move_readings():
     """The rounds the move test draws from are not all empty: some move readings, with the
     compiled step as with numpy's."""
-    from irring.estimation.estimate import _trace_moves
+    from irring.estimation.traces import _trace_moves
     moved = 0
     for args in _move_states():
         slow, fast = _trace_moves(*args), TraceKernels.moves(*args)

@@ -1,7 +1,7 @@
 """An ideal sensor's reading (a calibration without θ dependence) is placed by its counts
 alone: the members of a line its counts contradict, or of a doubted far line, that no
 profile places stay at θ = 0 where no incidence moves them beyond their noise, instead of
-INCIDENCE_UNKNOWN (estimate._theta_free; docs/estimator.md, "A line its counts
+INCIDENCE_UNKNOWN (profiles._theta_free; docs/estimator.md, "A line its counts
 contradict"). Before, a column 80 mm from the nearest sensor lost its flank to the ideal
 sensor that the noisy one mapped."""
 
@@ -12,6 +12,7 @@ import numpy as np
 from irring import pipeline
 from irring.core import Reason
 from irring.estimation import estimate as est
+from irring.estimation import profiles as est_profiles
 from irring.estimation.calibration import Calibration
 from irring.scenario import loads
 from irring.studies.rooms import ideal
@@ -94,6 +95,6 @@ def test_theta_free_only_where_no_incidence_moves_the_distance():
                         (noisy_cal, [False] * 6)):
         s = cal.counts(d, 0.0)
         sig_s = cal.sigma_counts() / s
-        free, sigma = est._theta_free(cal, s, cal.distance(s, 0.0), sig_s, 0.8)
+        free, sigma = est_profiles._theta_free(cal, s, cal.distance(s, 0.0), sig_s, 0.8)
         assert free.tolist() == inside
         assert np.all(sigma[free] < 2e-3)

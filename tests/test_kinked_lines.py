@@ -10,6 +10,7 @@ import numpy as np
 
 from irring import pipeline
 from irring.estimation import estimate as fast
+from irring.estimation import bends as est_bends
 from irring.estimation import estimate_numpy
 from irring.estimation.calibration import scene_calibration
 from irring.scenario import loads
@@ -53,9 +54,9 @@ def test_a_far_line_over_a_jutting_corner_is_read_as_two(monkeypatch):
     slow = estimate_numpy.estimate_detail(sweep, cal).points
     np.testing.assert_array_equal(slow.reason, now.reason)
     np.testing.assert_allclose(slow.d, now.d, atol=1e-9, rtol=0)
-    monkeypatch.setattr(fast, "KINK_PRE_F", math.inf)
+    monkeypatch.setattr(est_bends, "KINK_PRE_F", math.inf)
     # (the later faceted_lines off too: alone it splits the corner's line, 21 for 25)
-    monkeypatch.setattr(fast, "faceted_lines", lambda before, label, after, cal: after)
+    monkeypatch.setattr(est_bends, "faceted_lines", lambda before, label, after, cal: after)
     assert _near_corner_off(fast.estimate(sweep, cal), sweep) == (30, 25)
 
 
@@ -84,6 +85,6 @@ def test_a_straight_far_wall_asked_is_kept_whole(monkeypatch):
     assert seen == [0]
     for name, value in (("KINK_MISFIT", 0.0), ("KINK_F", 0.0), ("KINK_TURN_RAD", 0.0),
                         ("KINK_MEET_M", math.inf)):
-        monkeypatch.setattr(fast, name, value)
+        monkeypatch.setattr(est_bends, name, value)
     fast.estimate(sweep, cal)
     assert seen == [0, 1]

@@ -15,6 +15,7 @@ import pytest
 from irring import pipeline
 from irring.core import HOUSING_M, Reason
 from irring.estimation import estimate as est
+from irring.estimation import silence as est_silence
 from irring.estimation.calibration import Calibration
 from irring.scenario import loads
 from irring.studies.rooms import ideal
@@ -138,13 +139,13 @@ def test_a_near_reading_no_neighbouring_step_confirms_stays_refused():
     # 0.15 m is alone; sensor 1 reads 0.16, 0.30, 0.15, 0.17 m and full scale: 0.16 m is
     # alone (0.30 m is 140 mm off), 0.15 m is confirmed by 0.17 m, 0.17 m by full scale
     # (nearer still); 0.30 m lies within the datasheet range and is not asked
-    alone = est.unconfirmed_near(s, reason.astype(np.uint8), steps, cal)
+    alone = est_silence.unconfirmed_near(s, reason.astype(np.uint8), steps, cal)
     assert list(zip(*alone.nonzero())) == [(1, 0), (1, 1)]
-    assert est.unconfirmed_near(s, reason.astype(np.uint8), steps,
-                                Calibration.nominal("gp2y0a02")) is None
+    assert est_silence.unconfirmed_near(s, reason.astype(np.uint8), steps,
+                                        Calibration.nominal("gp2y0a02")) is None
     folding = Calibration.for_scene(loads(POST.replace("quantization: {}",
                                                        "quantization: {}, foldover: {}")))
-    assert est.unconfirmed_near(s, reason.astype(np.uint8), steps, folding) is None
+    assert est_silence.unconfirmed_near(s, reason.astype(np.uint8), steps, folding) is None
 
 
 def test_short_outliers_below_the_datasheet_range_stay_refused(monkeypatch):
@@ -161,5 +162,5 @@ def test_short_outliers_below_the_datasheet_range_stay_refused(monkeypatch):
         return int((p.valid & (p.d < 0.2) & (err > 0.03)).sum())
 
     assert [far_off(s) for s in (31, 32, 33)] == [0, 0, 2]
-    monkeypatch.setattr(est, "unconfirmed_near", lambda *a, **k: None)
+    monkeypatch.setattr(est_silence, "unconfirmed_near", lambda *a, **k: None)
     assert [far_off(s) for s in (31, 32, 33)] == [9, 14, 15]

@@ -1,6 +1,6 @@
 """Readings on no line (issue 13, item 3): a wall seen at 60–70° gives a few readings too
 short for a line; read at θ = 0 they lay 100–190 mm behind it. They take the slope of their
-own sensor's neighbouring steps (estimate.local_incidence), or are INCIDENCE_UNKNOWN when
+own sensor's neighbouring steps (arcs.local_incidence), or are INCIDENCE_UNKNOWN when
 nothing decides θ and θ = 0 could read more than 100 mm long. Rooms of our own, asymmetric;
 before this change they had 10, 5 and 6 valid readings more than 100 mm off over the three
 seeds (worst 171, 187, 139 mm)."""
@@ -81,7 +81,7 @@ def runs_within_100_mm(sc):
 # too: 58 and 110 of them, truly 82-101 mm away at the GP2D12's 90 mm peak, are undecided;
 # the passage 884 -> 870 since a line decides "far" only where the reading's own far trace
 # agrees: right readings past a line's last member whose own line is not anchored; 857 since
-# a reading placed no better than 30 mm is left unplaced: estimate.FOLD_PLACED_SIGMA_M)
+# a reading placed no better than 30 mm is left unplaced: foldover.FOLD_PLACED_SIGMA_M)
 @pytest.mark.parametrize("text, min_valid", [(CLOSE_CORNER, 260), (CLOSE_PASSAGE, 850),
                                              (GRAZING_BOXES, 4300)])
 def test_no_valid_reading_more_than_100_mm_off_and_none_outside_the_room(text, min_valid):
@@ -132,7 +132,7 @@ effects: [incidence, noise, quantization, foldover]
 # 557 and 414 -> 521 and 395 since the own-trace rule: right readings past a line's last
 # member whose own line is not anchored, or whose own line runs > 20° off, are undecided;
 # 521 -> 507 since readings placed no better than 30 mm are left unplaced:
-# estimate.FOLD_PLACED_SIGMA_M; TURNED_M8 391 -> 379 since a short line's direction error
+# foldover.FOLD_PLACED_SIGMA_M; TURNED_M8 391 -> 379 since a short line's direction error
 # is in its far members' σ: 12 readings 1-47 mm off, 6 of them 20 mm or more)
 @pytest.mark.parametrize("text, min_valid", [(TURNED_31, 500), (TURNED_M8, 375)])
 def test_a_far_steep_wall_bent_by_noise_is_not_kept_as_a_post(text, min_valid):
@@ -190,7 +190,7 @@ def test_two_readings_of_a_steep_wall_are_incidence_unknown():
 @pytest.mark.parametrize("radius, cx, cy", [(0.0075, 0.33, 0.012), (0.02, 0.27, -0.008)])
 def test_a_posts_centre_is_read_near_square_on(radius, cx, cy):
     """A post's readings bend away from the beam: the ones that meet it within 25° of
-    square on stay valid at θ = 0 or at their arc's θ (estimate.arc_incidence), never read
+    square on stay valid at θ = 0 or at their arc's θ (arcs.arc_incidence), never read
     steeper than 30°; none is worse than θ = 0 by more than 1 cm; a steep edge reading
     θ = 0 would put > 50 mm long may be flagged."""
     cal = dataclasses.replace(NOMINAL, noise_counts=2.0)
@@ -232,6 +232,7 @@ effects: [incidence, noise, quantization]
 
 def test_a_leg_seen_bent_away_from_the_beam_stays_valid(monkeypatch):
     from irring.estimation import estimate as est
+    from irring.estimation import profiles as est_profiles
 
     sc = loads(CHAIR, source="<test>")
     sweeps = pipeline.simulated(sc, progress=False)[0].sweeps
@@ -240,7 +241,7 @@ def test_a_leg_seen_bent_away_from_the_beam_stays_valid(monkeypatch):
     # two sensors see on one circle (and does, in the same 3 places)
     monkeypatch.setattr(est, "far_posts", lambda points, *args: points)
     kept = [estimate(sw, cal) for sw in sweeps]
-    monkeypatch.setattr(est, "_CONVEX_BELOW_DROP_RAD", 10.0)   # no profile counts as convex
+    monkeypatch.setattr(est_profiles, "_CONVEX_BELOW_DROP_RAD", 10.0)   # no profile counts as convex
     flagged = [estimate(sw, cal) for sw in sweeps]
     added = 0
     for sw, new, old in zip(sweeps, kept, flagged):
@@ -303,16 +304,18 @@ def test_a_face_past_a_corner_takes_the_slope_of_its_own_readings(monkeypatch):
     POOL_SIDE_SIGMAS, those stay silent, the profile is too short and the three stay
     INCIDENCE_UNKNOWN: the asking again is checked with the halves' rule off.)"""
     from irring.estimation import estimate as estimate_module
+    from irring.estimation import arcs as est_arcs
+    from irring.estimation import silence as est_silence
 
     sc = loads(BOX_PAST_CORNER, source="<test>")
     run = pipeline.run(sc, seed=sc.seed, progress=False)
     assert np.all(run.points[0].reason[np.isin(run.sweeps[0].steps, [-3, -2, -1]), 9]
                   == Reason.INCIDENCE_UNKNOWN)
-    monkeypatch.setattr(estimate_module, "POOL_SIDE_SIGMAS", -math.inf)
+    monkeypatch.setattr(est_silence, "POOL_SIDE_SIGMAS", -math.inf)
     face = None
     for asked_again in (True, False):
         if not asked_again:
-            monkeypatch.setattr(estimate_module, "_off_line_profiles", lambda *a, **k: None)
+            monkeypatch.setattr(est_arcs, "off_line_profiles", lambda *a, **k: None)
         run = pipeline.run(sc, seed=sc.seed, progress=False)
         sw, p = run.sweeps[0], run.points[0]
         if face is None:
@@ -356,12 +359,13 @@ def test_a_short_far_line_of_unsure_direction_leaves_its_members_their_own_slope
     (56-58 mm); after, none lies 2σ off, and their RMS error falls by a third or more
     (50 -> 28 mm)."""
     from irring.estimation import estimate as estimate_module
+    from irring.estimation import far_lines as est_far_lines
 
     sc = loads(TWO_FAR_BOXES, source="<test>")
     runs = {}
     for rule in (True, False):
         if not rule:
-            monkeypatch.setattr(estimate_module, "SHORT_LINE_SE_MAX", math.inf)
+            monkeypatch.setattr(est_far_lines, "SHORT_LINE_SE_MAX", math.inf)
         run = pipeline.run(sc, seed=sc.seed, progress=False)
         runs[rule] = [(p.valid, p.d, p.sigma_m, np.hypot(p.x - sw.truth.hit_point[..., 0],
                                                          p.y - sw.truth.hit_point[..., 1]))

@@ -1,5 +1,5 @@
-"""past_other_lines' gates compiled (estimate.past_members_compiled, irring/estimation/
-_lines.pyx: past_members) against their numpy statement (estimate.past_members): the same
+"""past_other_lines' gates compiled (members.past_members_compiled, irring/estimation/
+_lines.pyx: past_members) against their numpy statement (members.past_members): the same
 members, t, un and σ to the bit (tolerance 0), on rooms of our own drawn by hypothesis
 (a wall's readings near a corner adopted by the other wall's line, read too far) and on
 what the fast estimator asked in bundled scenes; and the rule's points and labels the same
@@ -22,6 +22,7 @@ from irring.core import Points, Reason, beam_geometry, sensor_angles_for_steps
 from irring.designs import PAPER_RING
 from irring.estimation import _lines
 from irring.estimation import estimate as est
+from irring.estimation import members as est_members
 from irring.estimation.calibration import Calibration
 from irring.scenario import load_scenario
 
@@ -45,7 +46,7 @@ def _same_found(got, want):
 def _same_rule(points, label, counts, cal, options):
     """The rule with either finder: the same points and labels, bit for bit."""
     p_slow, l_slow = est.past_other_lines(points, label, counts, cal, options,
-                                          est.past_members)
+                                          est_members.past_members)
     p_fast, l_fast = est.past_other_lines(points, label, counts, cal, options)
     assert _bits(l_fast) == _bits(l_slow)
     for f in FIELDS:
@@ -125,11 +126,11 @@ def test_past_members_kernel_is_the_numpy_statement_to_the_bit(seed, model, adop
         label = order(label)
     options = dataclasses.replace(est.LineOptions(), corner_reach_m=reach)
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(est, "PAST_FEW", few)
-        mp.setattr(est, "PAST_MIN", least)
+        mp.setattr(est_members, "PAST_FEW", few)
+        mp.setattr(est_members, "PAST_MIN", least)
         with np.errstate(invalid="ignore", divide="ignore"):
-            _same_found(est.past_members_compiled(points, label, options),
-                        est.past_members(points, label, options))
+            _same_found(est_members.past_members_compiled(points, label, options),
+                        est_members.past_members(points, label, options))
             _same_rule(points, label, counts, cal, options)
 
 
@@ -142,8 +143,8 @@ def test_our_rooms_ask_the_kernel_what_the_rule_is_for():
     for seed in range(40):
         points, label, counts, cal = _room(seed)
         with np.errstate(invalid="ignore", divide="ignore"):
-            want = est.past_members(points, label, options)
-            _same_found(est.past_members_compiled(points, label, options), want)
+            want = est_members.past_members(points, label, options)
+            _same_found(est_members.past_members_compiled(points, label, options), want)
             found += want is not None
             moved += _same_rule(points, label, counts, cal, options) > 0
             assert _same_rule(*_room(seed, relabel=False), options) == 0
@@ -202,8 +203,8 @@ def test_the_kernel_finds_numpys_members_in_the_bundled_scenes():
     assert len(states) == 15
     found = {}
     for k, (points, label, counts, cal, options) in enumerate(states):
-        want = est.past_members(points, label, options)
-        _same_found(est.past_members_compiled(points, label, options), want)
+        want = est_members.past_members(points, label, options)
+        _same_found(est_members.past_members_compiled(points, label, options), want)
         if want is not None:
             found[k] = (want[0].size, _same_rule(points, label, counts, cal, options))
     # (the states in order: t_room 4, t_room_cylinder 1, box_room 2 a seed, far_hexagon 4)

@@ -8,6 +8,7 @@ import pytest
 
 from irring import pipeline
 from irring.estimation import estimate as fast
+from irring.estimation import members as est_members
 from irring.estimation import estimate_numpy
 from irring.estimation.calibration import scene_calibration
 from irring.scenario import load_scenario, loads
@@ -85,7 +86,7 @@ def test_a_wall_running_on_behind_another_lines_end_stays(monkeypatch, offset, n
     cal, _ = scene_calibration(sc)
     sweep = pipeline.simulated(sc, seed=sc.seed + offset, progress=False)[0].sweeps[0]
     kept = fast.estimate(sweep, cal)
-    monkeypatch.setattr(fast, "PAST_FEW", 10 ** 6)
+    monkeypatch.setattr(est_members, "PAST_FEW", 10 ** 6)
     loose = fast.estimate(sweep, cal)
     wrong = _moved(kept, loose)
     assert int(wrong.sum()) == n_wrong

@@ -12,6 +12,8 @@ from _synthetic import PAPER_RING, make_sweep, rectangle
 from irring import pipeline
 from irring.core import Reason, distance_to_outline
 from irring.estimation import estimate as fast
+from irring.estimation import far_lines as est_far_lines
+from irring.estimation import silence as est_silence
 from irring.estimation import estimate_numpy as oracle
 from irring.estimation.calibration import RANGE_SIGMAS, Calibration
 from irring.scenario import load_scenario
@@ -36,6 +38,8 @@ def _sweep(room, seed):
 
 def _estimate(room, seed, margin, monkeypatch):
     monkeypatch.setattr(fast, "RANGE_SIGMAS", margin)
+    monkeypatch.setattr(est_far_lines, "RANGE_SIGMAS", margin)
+    monkeypatch.setattr(est_silence, "RANGE_SIGMAS", margin)
     sweep, d, _ = _sweep(room, seed)
     return fast.estimate(sweep, NOISY), sweep, d
 
@@ -89,6 +93,8 @@ def test_kernels_agree_with_the_oracle_at_the_range_limit(monkeypatch):
         sweep, _, _ = _sweep(NEAR_LIMIT, seed)
         with_margin = assert_agree(sweep, NOISY)
         monkeypatch.setattr(fast, "RANGE_SIGMAS", 0.0)
+        monkeypatch.setattr(est_far_lines, "RANGE_SIGMAS", 0.0)
+        monkeypatch.setattr(est_silence, "RANGE_SIGMAS", 0.0)
         monkeypatch.setattr(oracle, "RANGE_SIGMAS", 0.0)
         without = assert_agree(sweep, NOISY)
         monkeypatch.undo()

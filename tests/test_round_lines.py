@@ -1,7 +1,7 @@
 """Round things cut into short lines (issue 13, item 3): a column's arc seen from 0.4–0.6 m is
 split into short lines that settle on a θ 20–30° too steep, and their readings were placed
 30–130 mm in front of the surface, a false wall the mapper painted. Such a line's members
-leave it and are read as readings on no line (estimate.local_incidence, "Round things" in
+leave it and are read as readings on no line (arcs.local_incidence, "Round things" in
 docs/estimator.md). A room of our own with round things of sizes no held-out room has (a
 220 mm column, a 130 mm post), asymmetric poses. Before this rule (main at 922d3b9), over
 the three seeds: 263 of 401 valid readings on the column and 73 of 142 on the post more

@@ -3,7 +3,7 @@ edge was cut by the line model into three or four straight pieces per sensor, ea
 its chord's θ: near every joint 12–35° too steep, the readings 25–60 mm short with σ of a
 straight wall (z RMS 3–4), a band of false cells in front of the table. A sensor's run cut
 into pieces is now tried as one circle's arc, and the sweep's other runs on that circle take
-it too (estimate.round_runs; "Large round things" in docs/estimator.md). Box corners and
+it too (arcs.round_runs; "Large round things" in docs/estimator.md). Box corners and
 posts keep their lines. Rooms of our own, asymmetric poses and sizes."""
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from irring import pipeline
 from irring.core import Reason
 from irring.designs import PAPER_RING
 from irring.estimation import estimate as est
+from irring.estimation import arcs as est_arcs
 from irring.estimation import estimate_numpy as oracle
 from irring.estimation.estimate import Calibration, estimate, estimate_detail
 from irring.maps import metrics
@@ -50,7 +51,7 @@ def test_a_table_cut_into_lines_is_read_as_one_arc(model, centre, radius, yaw, m
     21.0/27.0/24.4 → 9.7/9.5/12.0 mm, θ p90 19.4/19.0/17.4° → 2.8/1.2/3.7°, short
     25/37/28 → 2/2/2 of 113–115, z RMS 3.26/4.21/3.91 → 0.89/0.83/1.13. Then each reading
     kept its own distance at the arc's θ; now they are put on their circle's radius
-    refitted to all of them (estimate.onto_circles): GP2Y0A21 RMS 11.6/10.1/12.2 →
+    refitted to all of them (arcs.onto_circles): GP2Y0A21 RMS 11.6/10.1/12.2 →
     2.1/3.6/3.2 mm, none > 25 mm short, σ median 10.2–11.0 → 5.3–5.6 mm, z RMS
     0.90/0.84/0.86 → 0.36/0.67/0.54; GP2D12 RMS 9.7/9.5/12.0 → 5.9/4.9/6.8 mm, short 1 a
     seed, σ median 4.9–5.2 mm, z RMS 0.68/0.42/1.10 (σ keeps half the reading's own, as a
@@ -158,12 +159,12 @@ def test_box_corners_posts_and_walls_keep_their_lines(scene, monkeypatch):
     seeds = (31, 37, 20, 22) if scene == "reflex" else (17, 20, 21, 22)
     yaws = (-0.7, 0.1, 1.3) if scene == "reflex" else (0.21, -0.4, 1.1)
     tried = []
-    arc = est.arc_incidence
+    arc = est_arcs.arc_incidence
 
-    def spy(pr, pos, cal, radii=est.ARC_RADII_M):
-        tried.append(radii is est.ROUND_RADII_M)
+    def spy(pr, pos, cal, radii=est_arcs.ARC_RADII_M):
+        tried.append(radii is est_arcs.ROUND_RADII_M)
         return arc(pr, pos, cal, radii)
-    monkeypatch.setattr(est, "arc_incidence", spy)
+    monkeypatch.setattr(est_arcs, "arc_incidence", spy)
     sweeps = [make_sweep(cal, walls=walls, circles=circles, pose=(0.0, 0.0, yaw),
                          noise_counts=cal.sigma_counts(), seed=seed, quantize=True)[0]
               for seed in seeds for yaw in yaws]
@@ -265,7 +266,7 @@ def test_a_far_columns_arc_is_a_circle_before_its_short_lines_are_doubted(doubt_
                                                                           monkeypatch):
     """COLUMN_BY_A_WALL: round_runs reads all 40 of the column's valid readings on one
     circle (RMS 16 mm, max 47 mm off), and they end so, untouched by the doubt of short far
-    lines that runs after it (estimate.doubt_far_lines): F1 0.997, one reading of the sweep
+    lines that runs after it (far_lines.doubt_far_lines): F1 0.997, one reading of the sweep
     > 50 mm off (3 of the column's readings INCIDENCE_UNKNOWN). Doubted first (as the doubt
     once ran, in local_incidence), the arc's short lines lose 13 more readings
     (INCIDENCE_UNKNOWN) and no run is left to try as an arc: 8 of
@@ -340,7 +341,7 @@ def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
     each kept its own distance at the arc's θ, 45-50 mm of noise a reading at 1.3 m: 275
     and 164 of them, RMS 20.9 and 22.0 mm off their true hit, 36 and 24 more than 30 mm
     off, drawn as a ragged band about each table (precision 0.922, 0.896). Put on their
-    circle's radius refitted to all of them (estimate.onto_circles): RMS 5.5 and 13.4 mm,
+    circle's radius refitted to all of them (arcs.onto_circles): RMS 5.5 and 13.4 mm,
     0 and 1 more than 30 mm off, precision 0.951 and 0.912, F1 0.891 → 0.908 and 0.885 →
     0.891. (Precision 0.940 and 0.903 since silent beams are bounded beside their sensor's
     nearest return: those beside the tables' returns no longer clear the cells about them;
@@ -355,14 +356,14 @@ def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
     0.935 (F1 0.960, 0.923), unsnapped 0.939 and 0.913."""
     sc = loads(CANTEEN_A02, source="<test>")
     taken = []
-    onto = est.onto_circles
+    onto = est_arcs.onto_circles
 
     def recording(points, at, circle, circles, *args):
         mask = np.zeros(points.valid.size, dtype=bool)
         mask[at] = True
         taken.append(mask.reshape(points.valid.shape))
         return onto(points, at, circle, circles, *args) if snapped else points
-    monkeypatch.setattr(est, "onto_circles", recording)
+    monkeypatch.setattr(est_arcs, "onto_circles", recording)
     expect = {True: [(412, 0.0090, 0, 0.975), (314, 0.0120, 2, 0.928)],
               False: [(412, 0.0215, 59, 0.940), (314, 0.0185, 30, 0.913)]}[snapped]
     for seed, (n, rms, off, precision) in zip((9201, 9202), expect):

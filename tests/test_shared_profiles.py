@@ -1,4 +1,4 @@
-"""The final pass's shared profile call (estimate._SharedProfiles): the same profiles as
+"""The final pass's shared profile call (profiles.SharedProfiles): the same profiles as
 a call of their own, one kernel call fewer a T-room sweep."""
 
 from __future__ import annotations
@@ -9,8 +9,9 @@ import pytest
 from _synthetic import make_sweep, polygon, stand_in_calibration
 from irring.estimation import _lines
 from irring.estimation import estimate as est
-from irring.estimation.estimate import (_SharedProfiles, estimate_detail, profiles_compiled,
-                                        range_profiles, scan_order)
+from irring.estimation.estimate import estimate_detail
+from irring.estimation.lines import scan_order
+from irring.estimation.profiles import SharedProfiles, profiles_compiled, range_profiles
 
 _FIELDS = ("s", "d0", "sig_s", "n", "slope", "se", "theta", "ok", "convex", "sure",
            "concave", "steep", "chain", "heading", "ox", "oy", "step")
@@ -45,7 +46,7 @@ def test_shared_profiles_are_a_call_of_their_own_while_the_valid_readings_stay(p
 
     extra = np.zeros(p.valid.size, dtype=bool)
     extra[vi[5::7]] = True
-    shared = _SharedProfiles(counting, extra)
+    shared = SharedProfiles(counting, extra)
     first = np.arange(0, vi.size, 3)
     later = (extra[vi]).nonzero()[0][2:]
     _same(shared(p, vi, first, sweep.counts, steps, cal),
@@ -93,7 +94,7 @@ def test_a_first_call_that_asked_nothing_answers_a_later_one_by_a_call_of_its_ow
         calls.append(a[2].size)
         return profiler(*a, **k)
 
-    shared = _SharedProfiles(counting, np.zeros(p.valid.size, dtype=bool))
+    shared = SharedProfiles(counting, np.zeros(p.valid.size, dtype=bool))
     none = np.zeros(0, dtype=np.intp)
     _same(shared(p, vi, none, sweep.counts, steps, cal),
           profiler(p, vi, none, sweep.counts, steps, cal))
@@ -123,7 +124,7 @@ def test_the_t_rooms_final_pass_profiles_once_with_the_same_estimate(monkeypatch
     shared = estimate_detail(sweep, cal).points
     n_shared = len(calls)
     calls.clear()
-    monkeypatch.setattr(est, "_SharedProfiles", lambda profiler, extra: profiler)
+    monkeypatch.setattr(est, "SharedProfiles", lambda profiler, extra: profiler)
     own = estimate_detail(sweep, cal).points
     assert n_shared == len(calls) - 1 >= 1
     for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason"):

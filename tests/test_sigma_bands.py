@@ -10,6 +10,7 @@ import pytest
 
 from irring import pipeline
 from irring.estimation import estimate as fast
+from irring.estimation import silence as est_silence
 from irring.scenario import loads
 from irring.studies import sigma
 
@@ -60,7 +61,7 @@ def test_faces_ending_at_the_far_end_understate_less_without_straddling_pools(mo
         return sigma.band_table(td, err, sig, 1.5, bands=10)[8]
 
     after = band()
-    monkeypatch.setattr(fast, "POOL_SIDE_SIGMAS", -math.inf)
+    monkeypatch.setattr(est_silence, "POOL_SIDE_SIGMAS", -math.inf)
     before = band()
     assert before["z_rms"] > 1.98 and before["beyond_2sigma"] > 0.175
     assert 1.25 < after["z_rms"] < before["z_rms"] - 0.3 and after["beyond_2sigma"] < 0.17

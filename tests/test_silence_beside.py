@@ -15,9 +15,10 @@ from irring import pipeline
 from irring.core import Points, Reason
 from irring.estimation import estimate as fast
 from irring.estimation.calibration import scene_calibration
-from irring.estimation.estimate import (LineOptions, Lines, beside_a_return,
-                                        beside_a_return_compiled, end_hide_angle,
-                                        noise_past_line_end, points_with)
+from irring.estimation.estimate import points_with
+from irring.estimation.lines import LineOptions, Lines
+from irring.estimation.silence import (beside_a_return, beside_a_return_compiled, end_hide_angle,
+                                       noise_past_line_end)
 from irring.scenario import loads
 
 # a GP2Y0A02 (200 mm minimum range) 172-190 mm from a bench's end, which it grazes

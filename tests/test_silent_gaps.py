@@ -2,10 +2,10 @@
 mechanisms a blind run found in the 60-70° bin, reproduced in rooms of our own, turned at odd
 yaws with corners of 120-145°.
 
-1. A line's θ carried across a sensor's silent steps (estimate.across_silence): the first
+1. A line's θ carried across a sensor's silent steps (members.across_silence): the first
    readings after NO_RETURN steps, on a wall at 56-69°, took the θ (3-7°) of the same
    sensor's earlier readings of another wall, 134-237 mm off.
-2. A profile that is not straight bounds nothing (estimate.range_profiles, ``steep``): a
+2. A profile that is not straight bounds nothing (profiles.range_profiles, ``steep``): a
    reading 39° steep whose window crossed a corner was kept at θ = 0, 103-113 mm long,
    because its bent profile's slope + 2 SE (47°) said θ = 0 could not be far off.
 """
@@ -21,8 +21,9 @@ import pytest
 from irring import pipeline
 from irring.core import Reason
 from irring.estimation.calibration import Calibration
-from irring.estimation.estimate import (SILENT_DIP_SIGMAS, profiles_compiled, range_profiles,
-                                        scan_order, silent_gaps, silent_gaps_compiled)
+from irring.estimation.lines import scan_order
+from irring.estimation.members import SILENT_DIP_SIGMAS, silent_gaps, silent_gaps_compiled
+from irring.estimation.profiles import profiles_compiled, range_profiles
 from irring.scenario import loads
 
 # GP2Y0A02 read to 1000 mm: a room's end wall meets a side wall at 103°; the sensor reads

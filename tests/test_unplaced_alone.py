@@ -8,6 +8,7 @@ import numpy as np
 from irring import pipeline
 from irring.core import Reason, points_with
 from irring.estimation import estimate as fast
+from irring.estimation import members as est_members
 from irring.estimation import estimate_numpy
 from irring.estimation.calibration import scene_calibration
 from irring.scenario import loads
@@ -55,7 +56,7 @@ def test_vague_readings_on_no_line_are_not_placed(monkeypatch):
     monkeypatch.setattr(fast, "unplaced_alone", lambda points, label: points)
     before = fast.estimate_detail(sweep, cal)
     vague = (before.points.valid & (before.lines.label < 0) & (before.points.theta != 0)
-             & (before.points.sigma_m > fast.ALONE_PLACED_SIGMA_M))
+             & (before.points.sigma_m > est_members.ALONE_PLACED_SIGMA_M))
     assert (int(before.points.valid.sum()), int(now.valid.sum()), int(vague.sum())) == (
         678, 676, 2)
     np.testing.assert_array_equal(before.points.valid & ~now.valid, vague)
@@ -79,7 +80,7 @@ def test_only_readings_on_no_line_past_the_bound_leave():
     flat = np.flatnonzero((p.valid & (label < 0) & (p.theta == 0)).reshape(-1))[:1]
     member = np.flatnonzero((p.valid & (label >= 0)).reshape(-1))[:1]
     sigma = np.array(p.sigma_m, dtype=float)
-    sigma.reshape(-1)[alone] = (fast.ALONE_PLACED_SIGMA_M, fast.ALONE_PLACED_SIGMA_M + 1e-4)
+    sigma.reshape(-1)[alone] = (est_members.ALONE_PLACED_SIGMA_M, est_members.ALONE_PLACED_SIGMA_M + 1e-4)
     sigma.reshape(-1)[member] = 0.5
     sigma.reshape(-1)[flat] = 0.5
     out = fast.unplaced_alone(points_with(p, sigma_m=sigma), label)

@@ -12,6 +12,7 @@ import numpy as np
 
 from irring import pipeline
 from irring.estimation import estimate as fast
+from irring.estimation import traces as est_traces
 from irring.estimation import estimate_numpy as oracle
 from irring.estimation.calibration import scene_calibration
 from irring.scenario import loads
@@ -50,12 +51,12 @@ def test_a_vague_far_line_joins_the_wall_line_and_lands_on_the_wall(monkeypatch)
     readings more than 20 mm off it, 59 -> 26. The numpy oracle places them alike."""
     sweep, cal = _second_sweep()
     steps = sweep.steps[:, None] >= 12
-    vague_ratio = fast.VAGUE_RATIO
-    monkeypatch.setattr(fast, "VAGUE_RATIO", math.inf)
+    vague_ratio = est_traces.VAGUE_RATIO
+    monkeypatch.setattr(est_traces, "VAGUE_RATIO", math.inf)
     # the join alone (dim returns put on the joined line: 2 readings more, 24)
     monkeypatch.setattr(fast, "dim_returns_on_lines", lambda points, *a, **k: points)
     before = fast.estimate(sweep, cal)
-    monkeypatch.setattr(fast, "VAGUE_RATIO", vague_ratio)
+    monkeypatch.setattr(est_traces, "VAGUE_RATIO", vague_ratio)
     after = fast.estimate(sweep, cal)
     sensor1 = steps & (np.arange(12)[None, :] == 1)
     for p in (before, after):
@@ -82,15 +83,15 @@ def test_only_where_a_part_is_read_to_its_own_range():
     cal = scene_calibration(sc)[0]
     assert not fast.read_to_own_range(cal, 0.624)
     seen = []
-    real = fast.vague_far_lines
+    real = est_traces.vague_far_lines
 
     def spy(points, *args):
         seen.append(real(points, *args))
         return seen[-1]
     try:
-        fast.vague_far_lines = spy
+        est_traces.vague_far_lines = spy
         sweep = pipeline.simulated(sc, seed=8112, progress=False)[0].sweeps[1]
         fast.estimate(sweep, cal)
     finally:
-        fast.vague_far_lines = real
+        est_traces.vague_far_lines = real
     assert seen and all(s is None for s in seen)

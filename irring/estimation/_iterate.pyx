@@ -681,7 +681,7 @@ cdef class Sweep:
 cdef class Grouping:
     """The lines of the current iteration and which reading takes θ from which line.
 
-    Built on split-and-merge pieces (``estimate._segment``) over the usable readings
+    Built on split-and-merge pieces (``lines.segment``) over the usable readings
     (``uidx``: their live indices; None: all of them). ``label`` (live readings): the line
     each reading takes θ from, or −1. The lines start as the pieces' TLS lines (``cx``,
     ``cy``, direction angle ``alpha`` in [0, π), ``usable``) and are refitted to their

@@ -3,7 +3,7 @@
 
 :func:`segment` does all of it over ordered end points: polylines → iterative end-point fit
 (split) → merge of collinear neighbours → corner refinement → each piece's TLS line, who
-owns the corners, which lines are usable. ``irring.estimation.estimate._segment`` wraps it into
+owns the corners, which lines are usable. ``irring.estimation.lines.segment`` wraps it into
 ``Pieces``; the algorithm is explained there and next to each phase below.
 
 Same answers as the numpy code it replaced, bit for bit: the same operations in the same
@@ -534,7 +534,7 @@ def segment(px_arr, py_arr, thr_arr, sensor_arr, double gap2, double cx, double 
     not tile the points are a ValueError); where the polylines differ (as many points), the
     polylines that are the same keep the earlier pieces and the others are split anew. Returns
     (starts, ends, brk, owner, cx, cy, alpha, lmin, lmax, n_points, length_m, usable) as
-    ``irring.estimation.estimate.Pieces`` holds them.
+    ``irring.estimation.lines.Pieces`` holds them.
     """
     cdef Py_buffer views[8]                 # px, py, thr, sensor, prev_* (3), q
     cdef int held = 0                       # how many of them are acquired
@@ -816,7 +816,7 @@ def no_return_reach(const double[::1] heading, const double[::1] ox, const doubl
     label (−1: none), valid, reason (``no_return``: a silent beam). Per line (L,): centroid,
     direction, normal (L, 2) and usable. Lines with ≥ ``min_members`` valid members explain
     beams; their span is the members' extent plus ``block_m``, clipped ``corner_past_m`` past
-    a corner (``irring.estimation.estimate.clip_at_corners``). Past a line's members' end a
+    a corner (``irring.estimation.silence.clip_at_corners``). Past a line's members' end a
     beam stops where a face turned ``end_theta`` + γ from it could hide (γ at most the
     heading gap to the nearest reading ``width`` apart, a step before or after in the same
     sensor's column, that was not silent: ``estimate_numpy.return_gaps``). Returns reach (K,)
@@ -1139,8 +1139,8 @@ cdef inline void _interp_ab(double t, const double[::1] xp, const double[::1] la
 
 def polyline_ids(const double[::1] d, const double[::1] sigma, const double[::1] heading,
                  const idx_t[::1] sensor, double tan_reject, double sigmas):
-    """``irring.estimation.estimate.polyline_ids`` (the statement and the why) bit for bit:
-    readings (k,) in scan order; ``tan_reject`` = ``estimate.jump_slope(reject)``. Returns the
+    """``irring.estimation.lines.polyline_ids`` (the statement and the why) bit for bit:
+    readings (k,) in scan order; ``tan_reject`` = ``lines.jump_slope(reject)``. Returns the
     polyline id of each reading (intp, from 1), as np.cumsum of the cuts."""
     cdef idx_t k = d.shape[0], i, run = 1
     cdef double turn, wrap, far, allowed
@@ -1174,7 +1174,7 @@ def profile_inputs(const double[::1] counts, const double[::1] heading,
                    const idx_t[::1] steps, const idx_t[::1] vi, idx_t n_sensors,
                    double sigma_counts, double la0, double b0, double sigma_floor,
                    double tan_reject, double jump_sigmas):
-    """``irring.estimation.estimate._profile_inputs`` bit for bit in one call (log and exp
+    """``irring.estimation.profiles._profile_inputs`` bit for bit in one call (log and exp
     are numpy's, on this call's rows): per valid reading ``vi`` (flat (S·N) indices in scan
     order) of the flat (S·N) ``counts``, ``heading``, ``origin_x``, ``origin_y`` and the
     (S,) ``steps``. Returns (K,) rows s, h, ox, oy, log s, σ_S/S, d0 (one float block) and
@@ -1237,7 +1237,7 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
              double convex_below, idx_t half, idx_t min_n, double spread_m, double n_se,
              const double[::1] chi2_95, double sigma_floor, double sure_se,
              double bend_min_share):
-    """Each asked reading's range profile: ``irring.estimation.estimate.range_profiles`` (the
+    """Each asked reading's range profile: ``irring.estimation.profiles.range_profiles`` (the
     statement and the why) reading by reading, to within rounding (the sums accumulate in
     window order, θ's curve between nodes as np.interp draws it).
 
@@ -1615,7 +1615,7 @@ cdef object _rank_of_rows(const idx_t[::1] order):
 def silent_gaps(const idx_t[::1] index, const double[::1] counts, const idx_t[::1] order,
                 const unsigned char[::1] reason, idx_t n_sensors, unsigned char missing,
                 double dip):
-    """``irring.estimation.estimate.silent_gaps`` (the statement and the why), exactly:
+    """``irring.estimation.members.silent_gaps`` (the statement and the why), exactly:
     ``index`` (k,) flat (S·N) readings in scan order, ``counts`` and ``reason`` flat (S·N),
     ``order`` (S,) the rows in step order; ``dip`` = SILENT_DIP_SIGMAS × σ of a count.
     Returns (k,) uint8: 1 where a reading follows its sensor's previous one across steps
@@ -1664,7 +1664,7 @@ def beside_a_return(const unsigned char[::1] reason, const unsigned char[::1] va
                     idx_t n_sensors, unsigned char no_return, unsigned char missing,
                     double full_scale, double level, bint falling, double la, double b,
                     double hide, double cos_hide, double limit):
-    """``irring.estimation.estimate.beside_a_return`` (the statement and the why), exactly
+    """``irring.estimation.silence.beside_a_return`` (the statement and the why), exactly
     (log and exp are numpy's, on this call's rows): flat (S·N) arrays; ``label`` read only
     with ``has_label``; ``level`` = the return level; (``la``, ``b``) = log a, b at the
     drop-out angle; ``hide`` = ``end_hide_angle``, ``cos_hide`` = math.cos of it,
@@ -1780,7 +1780,7 @@ def beside_a_return(const unsigned char[::1] reason, const unsigned char[::1] va
 
 def trace_pairs(const idx_t[::1] vi, const idx_t[::1] lab, const idx_t[::1] order,
                 idx_t n_sensors, idx_t skip):
-    """``irring.estimation.estimate.TraceSteps.pairs`` (the statement), exactly: ``vi`` (k,)
+    """``irring.estimation.traces.TraceSteps.pairs`` (the statement), exactly: ``vi`` (k,)
     flat (S·N) readings, ``lab`` their lines (−1: none), ``order`` (S,) the rows in step
     order; ``skip`` = TRACE_SKIP. Returns (joined (k − 1,) uint8, reading, nbr)."""
     cdef idx_t k = vi.shape[0], S = order.shape[0], i, q, r, nb, w, n_pairs = 0, step, t
@@ -1828,7 +1828,7 @@ cdef inline bint _past_corner(double qx, double qy, double ox, double oy, idx_t 
                               const double* mx, const double* my, double reach_m,
                               double reach_share, double min_split_m,
                               double sin_corner) noexcept nogil:
-    """``estimate._past_a_corner`` for one point (qx, qy) put on line b, against line c."""
+    """``traces._past_a_corner`` for one point (qx, qy) put on line b, against line c."""
     cdef double cab = cos(alpha[b]), sab = sin(alpha[b]), cac = cos(alpha[c]), sac = sin(alpha[c])
     cdef double wx = cx[c] - cx[b], wy = cy[c] - cy[b]
     cdef double crs = cab * sac - sab * cac
@@ -1852,7 +1852,7 @@ def trace_round(const idx_t[::1] lab, const unsigned char[::1] moved,
                 const double[::1] oy, const double[::1] alpha, const double[::1] cx,
                 const double[::1] cy, double reach_m, double reach_share, double min_split_m,
                 double loose, double loose_min, double sin_corner):
-    """``irring.estimation.estimate.TraceSteps.round`` (the statement and the why), exactly:
+    """``irring.estimation.traces.TraceSteps.round`` (the statement and the why), exactly:
     per valid reading (k,) ``lab``, ``moved``, end points, emitters; ``joined`` (k − 1,);
     the pairs ``reading``, ``nbr``; per line (L,) ``good``, ``lost``, ``alpha``, ``cx``,
     ``cy``; ``loose`` = TRACE_LOOSE, ``loose_min`` = TRACE_LOOSE_MIN_M, ``sin_corner`` = sin
@@ -1979,7 +1979,7 @@ def trace_moves(const unsigned char[::1] ask, const idx_t[::1] i_in, const idx_t
                 double adopt, double reach_m, double reach_share, double sin_corner,
                 double on_sigmas, double sigma_floor, idx_t max_rounds, idx_t min_points,
                 bint to_corner):
-    """``irring.estimation.estimate._trace_moves`` (the statement and the why), exactly:
+    """``irring.estimation.traces._trace_moves`` (the statement and the why), exactly:
     arccos, the curve's interpolation (np.interp over ``xp``, ``node_log_a``, ``node_b``:
     the calibration's nodes, as ``log_ab``), log and exp are numpy's, on this call's rows;
     the rest the same operations per element. Returns None or (readings, targets, d, θ, σ)."""
@@ -2177,7 +2177,7 @@ def counts_misfit_any(const idx_t[::1] vi, const idx_t[::1] label, const double[
                       const double[::1] cx, const double[::1] cy, double la0, double b0,
                       double sigma_counts, double floor_m, xp, node_log_a, node_b,
                       double cos_max_inc, idx_t min_members, double single, double z_min):
-    """``irring.estimation.estimate._counts_asked(...) is not None`` (the statement; the why:
+    """``irring.estimation.counts._counts_asked(...) is not None`` (the statement; the why:
     ``counts_contradicted``): some line asked misfits its members' counts by ``z_min``
     normal σ before the sweep's noise scale and the refit, exactly (log, exp,
     arccos, the curve's interpolation (np.interp over ``xp``, ``node_log_a``, ``node_b``)
@@ -2323,7 +2323,7 @@ def bow_pre_f(const idx_t[::1] label, const unsigned char[::1] valid,
               const double[::1] theta, double sigma_counts, double floor_m,
               const double[::1] xp, const double[::1] node_log_a, const double[::1] node_b,
               idx_t min_members):
-    """``irring.estimation.estimate.bowed_lines``' pre-gate (its numpy statement:
+    """``irring.estimation.bends.bowed_lines``' pre-gate (its numpy statement:
     ``_bow_asked``): for each line of ``min_members`` valid members or more, in label
     order, the F by which a weighted parabola through its members as they lie (in the
     frame of their TLS line) beats that line, and the scale of its rounding error
@@ -2547,7 +2547,7 @@ def facet_pre(const idx_t[::1] label, const unsigned char[::1] valid,
               const double[::1] origin_x, const double[::1] origin_y,
               const double[::1] heading, double floor_m, idx_t min_members, idx_t side,
               double f_min, double chi_min, double turn_min, double tol):
-    """``irring.estimation.estimate.faceted_lines``' split search (its numpy statement:
+    """``irring.estimation.bends.faceted_lines``' split search (its numpy statement:
     ``_facet_asked``) as its pre-gate: for each line of ``min_members`` members the snap
     moved (d or σ changed) or more, in label order, the F and χ² gain of its best split
     into two pieces of ``side`` members at least, the largest turn (rad) of any split
@@ -2765,7 +2765,7 @@ cdef inline double _np_interp(double x, const double* xp, const double* fp, idx_
 
 
 cdef class _CountsModel:
-    """``estimate._counts_at`` over a batch of beams: each beam's line (direction, offset)
+    """``counts._counts_at`` over a batch of beams: each beam's line (direction, offset)
     and its expected counts, numpy's arccos, log and exp on the batch's rows."""
     cdef object rows_arr, xp_arr, la_arr, b_arr
     cdef double[:, ::1] R
@@ -2825,7 +2825,7 @@ cdef class _CountsModel:
 def counts_at(const double[::1] alpha, const double[::1] c, const double[::1] ox,
               const double[::1] oy, const double[::1] cos_h, const double[::1] sin_h, xp,
               node_log_a, node_b, double cos_max_inc):
-    """``irring.estimation.estimate._counts_at`` (the statement), to the bit: the counts each
+    """``irring.estimation.counts._counts_at`` (the statement), to the bit: the counts each
     beam (origin ``ox``, ``oy``; heading ``cos_h``, ``sin_h``) returns from its line
     (``alpha``, ``c``; one per beam), 0 where it misses it within the drop-out angle
     (``cos_max_inc``: that angle's cosine), and whether it meets it (bool). The curve:
@@ -2850,7 +2850,7 @@ def counts_refit(const idx_t[::1] line, const double[::1] s, const double[::1] s
                  const unsigned char[::1] asked, int steps, bint has_settled,
                  double settled_a, double settled_c, xp, node_log_a, node_b,
                  double cos_max_inc, double step_a, double step_c):
-    """``irring.estimation.estimate._counts_refit`` (the statement; ``settled`` given as
+    """``irring.estimation.counts._counts_refit`` (the statement; ``settled`` given as
     ``has_settled``, ``settled_a``, ``settled_c``), to the bit: (a, c, χ²) of the lines
     (``a_in``, ``c_in``) refitted by Gauss–Newton to their members' counts (``line``: each
     member's line, ``s``, ``sig``, its beam ``ox``, ``oy``, ``cos_h``, ``sin_h``), only
@@ -3019,7 +3019,7 @@ def counts_refit(const idx_t[::1] line, const double[::1] s, const double[::1] s
 def counts_jacobian(const double[::1] alpha, const double[::1] c, const double[::1] ox,
                     const double[::1] oy, const double[::1] cos_h, const double[::1] sin_h,
                     xp, node_log_a, node_b, double cos_max_inc, double step_a, double step_c):
-    """``irring.estimation.estimate._counts_jacobian`` (the statement), to the bit: each
+    """``irring.estimation.counts._counts_jacobian`` (the statement), to the bit: each
     beam's counts' derivatives (ja, jc) in its line's direction ``alpha`` and offset ``c``
     by central differences of ``step_a`` rad and ``step_c`` m (:func:`counts_at`'s model,
     its four evaluations in one batch)."""
@@ -3056,7 +3056,7 @@ def counts_jacobian(const double[::1] alpha, const double[::1] c, const double[:
 
 
 def best_halves(const double[::1] u, const double[::1] v, idx_t lo):
-    """``irring.estimation.estimate._best_halves`` (the statement) on the points already
+    """``irring.estimation.counts._best_halves`` (the statement) on the points already
     centred (``u``, ``v``: x − mean, y − mean, numpy's), to the bit: the running sums
     accumulate in order as np.cumsum does, the first least total (a NaN first, as
     np.argmin) names the first point of the second run."""
@@ -3136,7 +3136,7 @@ def np_mean(const double[::1] a):
 cdef inline bint _crosses(double ox, double oy, double ux, double uy, double mx, double my,
                           double ca, double sa, double* un, double* t,
                           double* at) noexcept nogil:
-    """``estimate.beam_crossings`` of one beam and one line (centroid (mx, my), direction
+    """``silence.beam_crossings`` of one beam and one line (centroid (mx, my), direction
     (ca, sa)), term by term as numpy forms it: whether the line lies ahead; ``un``, ``t``
     (0 where not ahead) and the crossing's coordinate ``at`` along it."""
     un[0] = ux * -sa + uy * ca
@@ -3154,7 +3154,7 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
                  const double[::1] sigma, double cx, double cy, idx_t min_members,
                  idx_t few_max, double corner_reach, double reach_share, double clear_sigmas,
                  double clear_m, double floor_clear_m):
-    """``irring.estimation.estimate.past_members`` (``past_other_lines``' gates), to the
+    """``irring.estimation.members.past_members`` (``past_other_lines``' gates), to the
     bit: each line's TLS fit and extent over its valid members (the angle from numpy's
     ``arctan2``), the walls' ends seen from the ring centre (``cx``, ``cy``; NaN: the mean
     of ``origin_x``, ``origin_y`` as numpy takes it) past another wall, and per such pair of

@@ -352,7 +352,7 @@ class Calibration:
     def confirm_counts(self) -> float:
         """Readings brighter than this, the level of the sensor model's datasheet min range
         square on, are read below that range only where a neighbouring step confirms them
-        (``estimate.unconfirmed_near``): inf where the calibration reads nothing nearer
+        (``silence.unconfirmed_near``): inf where the calibration reads nothing nearer
         than the datasheet's range (its own range, one that folds, a linear sensor)."""
         if not self.falling or self.folds or self.sensor_model not in gp2.available():
             return math.inf

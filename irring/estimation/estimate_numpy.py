@@ -11,17 +11,21 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
-from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration
-from .estimate import (CORNER_WINDOW, MAX_GAIN, PINNED_RAD, POST_LINK_M, POST_RUN_MAX,
-                       POST_SENSORS, REACH_CLEAR_M, REACH_MIN_MEMBERS, REGROUP_WINDOW,
-                       SIGMA_FLOOR_M, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, CountsFits, Estimate,
-                       LineOptions, Lines, Pieces, TraceSteps, beam_crossings,
-                       beside_a_return, bowed_lines, clip_at_corners, counts_contradicted,
-                       end_hide_angle, faceted_lines, fallback_spread, final_estimate,
-                       held_and_pooled, member_spans, nearest_heard_rows,
-                       nominal_calibration, past_members, polyline_ids, range_profiles,
-                       range_sigma, reach_cos_limit, resolve_foldover, scan_order,
-                       settled_within_noise, silent_gaps, unconfirmed_near)
+from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, range_sigma
+from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, final_estimate,
+                       nominal_calibration, settled_within_noise)
+from .bends import bowed_lines, faceted_lines
+from .counts import CountsFits, counts_contradicted
+from .far_lines import POST_LINK_M, POST_RUN_MAX, POST_SENSORS
+from .foldover import resolve_foldover
+from .lines import (PINNED_RAD, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate, LineOptions, Lines,
+                    Pieces, fallback_spread, polyline_ids, scan_order)
+from .members import past_members, silent_gaps
+from .profiles import range_profiles
+from .silence import (REACH_CLEAR_M, REACH_MIN_MEMBERS, beam_crossings, beside_a_return,
+                      clip_at_corners, end_hide_angle, held_and_pooled, member_spans,
+                      nearest_heard_rows, reach_cos_limit, unconfirmed_near)
+from .traces import TraceSteps
 
 _WINDOW = np.arange(-5, 6)   # corner refinement: readings tried either side of a corner
 
@@ -957,9 +961,9 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
     Table II (to show what the control is for). ``hold`` (S, N): readings kept out
     (FOLDOVER_AMBIGUOUS); None with a folding calibration: the fold-over is resolved first
-    (:func:`irring.estimation.estimate.resolve_foldover`, numpy shared with the kernel path).
+    (:func:`irring.estimation.foldover.resolve_foldover`, numpy shared with the kernel path).
     ``snap``: line members' end points onto their lines
-    (:func:`irring.estimation.estimate.snap_to_lines`). ``keep_unconverged``: readings
+    (:func:`irring.estimation.lines.snap_to_lines`). ``keep_unconverged``: readings
     still moving at the cap valid at their last θ.
     """
     cal = calibration if calibration is not None else nominal_calibration(
@@ -1148,7 +1152,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
 
     ``member`` (S, N): the line each reading took θ from (−1: none). Each line is fitted
     (total least squares) to its valid members' final end points (members read a little
-    past the max range included: see :func:`irring.estimation.estimate.drop_beyond_range`);
+    past the max range included: see :func:`irring.estimation.silence.drop_beyond_range`);
     a member's end point moves along its beam to the line if it lies behind the line (the
     beam cannot have passed the surface its line says it met: noise put it there; a
     reading 49 mm past a wall its neighbours put at 470–483 mm drew cells outside a room)
@@ -1159,8 +1163,8 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
     line's uncertainty where its beam meets it, with half its own σ added in quadrature (at
     most ``own_cap_m``: where a part is read to its own range, its far end's noise is 30–55
     mm a reading and that half alone made a snapped point's σ twice its error; final_estimate
-    passes :func:`irring.estimation.estimate.far_sigma_cap`). The statement
-    :func:`irring.estimation.estimate.snap_to_lines` compiles."""
+    passes :func:`irring.estimation.lines.far_sigma_cap`). The statement
+    :func:`irring.estimation.lines.snap_to_lines` compiles."""
     on = (points.valid & (member >= 0)).reshape(-1).nonzero()[0]
     if on.size == 0:
         return points
@@ -1239,7 +1243,7 @@ def no_return_reach(points: Points, found: Lines | None, cal: Calibration,
                     options: LineOptions) -> np.ndarray | None:
     """How far each NO_RETURN beam is known free (S, N, m; NaN: to the max range; None: no
     silent beam meets a line that explains it), from the sweep's lines ``found``: the
-    statement :func:`irring.estimation.estimate.no_return_reach` compiles.
+    statement :func:`irring.estimation.silence.no_return_reach` compiles.
 
     A GP2 returns nothing from a surface met past its drop-out angle, so a silent beam only
     says "no surface I could have seen": one grazing a box's face passes into the box, and
@@ -1337,10 +1341,10 @@ def _scatter(values, index, shape, fill, held: _Held | None = None, mask=None):
 def far_line_vote(at: np.ndarray, sel: np.ndarray, lab: np.ndarray, theta_now: np.ndarray,
                   pr, d: np.ndarray, vi: np.ndarray, n_lines: int, cal: Calibration,
                   half: int, min_n: int, z_max: float, shift_m: float) -> np.ndarray:
-    """Which short far lines their members vote off (``estimate.doubt_far_lines``; docs/
+    """Which short far lines their members vote off (``far_lines.doubt_far_lines``; docs/
     foldover.md, "Short far lines"): (n_lines,) bool. ``at`` (A,): the asked members'
     places among the valid readings ``vi`` (flat indices into ``d``, the distances),
-    ``sel`` (A,) their places among the readings profiled (``pr``, a ``_Profile``); ``lab``,
+    ``sel`` (A,) their places among the readings profiled (``pr``, a ``Profile``); ``lab``,
     ``theta_now`` (K,): each valid reading's line (−1 none) and θ.
 
     A member votes where its profile has ≥ ``min_n`` readings and a slope error, and its
@@ -1373,7 +1377,7 @@ def far_line_vote(at: np.ndarray, sel: np.ndarray, lab: np.ndarray, theta_now: n
 
 
 def post_groups(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration):
-    """The groups of readings that could be one far post (``estimate.far_posts``; docs/
+    """The groups of readings that could be one far post (``far_lines.far_posts``; docs/
     estimator.md, "Far posts"): readings on no line (INCIDENCE_UNKNOWN, or valid with
     ``label`` (S, N) −1) with clear returns (``counts`` (S, N) at least RETURN_SIGMAS +
     RANGE_SIGMAS count σ above the no-return level), whose θ = 0 end points chain within

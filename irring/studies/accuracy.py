@@ -17,7 +17,8 @@ import numpy as np
 
 from .. import pipeline, scenario as scenario_lib
 from ..estimation.calibration import Calibration
-from ..estimation.estimate import LineOptions, estimate
+from ..estimation.estimate import estimate
+from ..estimation.lines import LineOptions
 from ..maps import metrics
 from ..maps.mapping import OccupancyGrid
 from ..pipeline import scenario_text

@@ -1,0 +1,376 @@
+"""Far lines and far posts: short far lines whose direction rests on a few noisy readings,
+doubted where their members' own profiles vote them off (:func:`short_far_lines`,
+:func:`doubt_far_lines`), the overlapping lines of one wall fitted as one where a part is read
+to its own range (:func:`fused_lines`), and a thin post far away, its few readings fitted as
+one circle (:func:`far_posts`). Why and what was measured: docs/foldover.md, "Short far
+lines"; docs/estimator.md, "A short far line's direction", "Far lines fused across sensors",
+"Far posts".
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+from ..core import Points, Reason, points_with, rows_in_step_order
+from ..resources import kernel
+from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, SIGMA_FLOOR_M, Calibration
+from .arcs import ARC_DOUBT_RAD, ARC_MISFIT, ARC_MISS, ARC_ON, meet_circle
+from .lines import direction_se, read_to_own_range
+from .profiles import LOCAL_MIN, LOCAL_STEPS, Profile, leave_doubted_line, profiles_compiled
+
+
+_lines = kernel("estimation._lines")
+# plain ints: an array compared with an IntEnum member takes numpy's slow path (~7 µs)
+_NO_RETURN, _OUT_OF_RANGE = int(Reason.NO_RETURN), int(Reason.OUT_OF_RANGE)
+_INCIDENCE_UNKNOWN, _MISSING = int(Reason.INCIDENCE_UNKNOWN), int(Reason.MISSING)
+
+
+FUSE_MIN = 5            # lines of at least this many valid members are tried together …
+FUSE_Z = 2.5            # … where direction and offset agree within this many standard errors …
+FUSE_OVERLAP_M = 0.05   # … over at least this much of both lines' extents …
+FUSE_TURN_MAX = math.radians(5)  # … and whose directions differ by at most this
+
+
+def fused_lines(points: Points, label: np.ndarray) -> np.ndarray:
+    """``label`` (S, N: each reading's line, −1 none) with lines that are one surface joined:
+    lines of ≥ ``FUSE_MIN`` valid members whose extents overlap by ≥ ``FUSE_OVERLAP_M`` and
+    whose directions, and offsets at the middle of the overlap, differ by at most ``FUSE_Z``
+    of their combined standard errors (total least squares; the members' scatter about
+    their line or, where more, their own noise across it) take the smallest label of their
+    group. Overlapping lines are of different sensors that saw one wall; the snap then fits
+    them as one, which averages their independent offsets. Why: docs/estimator.md, "Far
+    lines fused across sensors"."""
+    label = np.asarray(label)
+    member = points.valid & (label >= 0)
+    if not member.any():
+        return label
+    g = label[member]
+    n_lines = int(label.max()) + 1     # invalid readings may hold the highest labels
+    n = np.bincount(g, minlength=n_lines)
+    cand = (n >= FUSE_MIN).nonzero()[0]
+    if cand.size < 2:
+        return label
+    x, y = points.x[member], points.y[member]
+    nn = np.maximum(n, 1)
+    mx, my = np.bincount(g, x, n_lines) / nn, np.bincount(g, y, n_lines) / nn
+    u, v = x - mx.take(g), y - my.take(g)
+    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_lines),
+                             np.bincount(g, u * u - v * v, n_lines))
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    along = u * ca.take(g) + v * sa.take(g)
+    rel = v * ca.take(g) - u * sa.take(g)
+    # the members' scatter about their line, or their own noise across it where that is
+    # more: pooled readings (13 steps' mean counts) share their noise and scatter less
+    own = points.sigma_m[member] * np.cos(points.theta[member])
+    var_perp = np.maximum(np.bincount(g, rel * rel, n_lines),
+                          np.bincount(g, own * own, n_lines)) / nn
+    spread = np.maximum(np.bincount(g, along * along, n_lines), 1e-12)
+    lo = np.full(n_lines, np.inf)
+    hi = np.full(n_lines, -np.inf)
+    np.minimum.at(lo, g, along)
+    np.maximum.at(hi, g, along)
+    i, j = (a.ravel() for a in np.meshgrid(cand, cand, indexing="ij"))
+    keep = i < j
+    i, j = i[keep], j[keep]
+    # j's extent in i's frame (along i's direction, from i's centroid)
+    dxc, dyc = mx[j] - mx[i], my[j] - my[i]
+    cj = dxc * ca[i] + dyc * sa[i]
+    dot = ca[i] * ca[j] + sa[i] * sa[j]
+    ends = cj + dot * lo[j], cj + dot * hi[j]
+    a = np.maximum(lo[i], np.minimum(*ends))
+    b = np.minimum(hi[i], np.maximum(*ends))
+    s = 0.5 * (a + b)                                   # the overlap's middle, on i
+    px, py = mx[i] + s * ca[i], my[i] + s * sa[i]
+    off = (py - my[j]) * ca[j] - (px - mx[j]) * sa[j]   # j's line from there, across j
+    sj = (px - mx[j]) * ca[j] + (py - my[j]) * sa[j]
+    var_a = var_perp[i] / spread[i] + var_perp[j] / spread[j]
+    var_off = (var_perp[i] / nn[i] + var_perp[i] / spread[i] * s * s
+               + var_perp[j] / nn[j] + var_perp[j] / spread[j] * sj * sj)
+    turn = np.arcsin(np.clip(np.abs(ca[i] * sa[j] - sa[i] * ca[j]), 0.0, 1.0))
+    join = ((b - a >= FUSE_OVERLAP_M) & (turn <= np.minimum(FUSE_Z * np.sqrt(var_a),
+                                                             FUSE_TURN_MAX))
+            & (np.abs(off) <= FUSE_Z * np.sqrt(var_off)))
+    if not join.any():
+        return label
+    root = np.arange(n_lines)
+
+    def find(k):
+        while root[k] != k:
+            root[k] = root[root[k]]
+            k = root[k]
+        return k
+    for p, q in zip(i[join], j[join]):
+        rp, rq = find(p), find(q)
+        if rp != rq:
+            root[max(rp, rq)] = min(rp, rq)
+    top = np.array([find(k) for k in range(n_lines)])
+    out = label.copy()
+    out[label >= 0] = top.take(label[label >= 0])
+    return out
+
+
+FAR_LINE_MAX_MEMBERS = 25  # a line of at most this many members is short: its direction
+#                            rests on a few noisy readings; a short line …
+FAR_LINE_MIN_SHARE = 0.72  # … whose members lie this share of the max range away on average
+#                            (the GP2D12's 0.45 of 0.624 m), …
+FAR_LINE_Z = 1.0           # … whose members' own slopes differ from its θ by this many of
+#                            their standard errors on average (either way) …
+FAR_LINE_SHIFT_M = 0.01    # … and would move them by a map cell on average is doubted
+
+
+SHORT_LINE_MAX_MEMBERS = 9  # elsewhere a far line of at most this many members (unsnapped) …
+SHORT_LINE_SE_MAX = math.radians(4)  # … whose direction is known no better leaves each member
+#                                      its own θ where its own profile is straight …
+SHORT_LINE_OWN_SE = 0.5      # … and its slope this many of its standard errors off the line's
+
+
+POST_RADII_M = np.geomspace(0.01, 0.07, 13)  # a far post is tried as a circle of these radii
+#                                              (the largest fitting best: not a post) …
+POST_LINK_M = 0.12       # … through readings on no line whose θ = 0 end points chain this near …
+POST_RUN_MAX = 5         # … at most this many of one sensor (more: a surface, not a post) …
+POST_SENSORS = 2         # … from at least this many sensors …
+POST_JUMP_M = 0.10       # … each sensor's run flanked by silence or readings this much farther;
+POST_ON_TESTED = 4       # readings on the circle where a flank is itself on no line (not 3)
+POST_BEARING_RAD = 0.0025  # its centre searched on this bearing grid …
+POST_RANGE_M = 0.005     # … and this range grid; a silent flanking beam it meets this far
+POST_SILENT_RAD = math.radians(15)  # inside the drop-out angle (within the return range) misfits
+POST_COARSE = 4          # the search: every 4th radius on a grid 4× as coarse, then fine about it
+
+
+def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
+              cal: Calibration, grouper: Callable | None = None) -> Points:
+    """Readings on no line (valid, or INCIDENCE_UNKNOWN; clear returns only) that are one
+    thin post seen by several sensors, read at the θ at which their beams meet one circle
+    fitted to them all; numpy, shared by both estimators.
+
+    A group: ≥ 3 readings whose θ = 0 end points chain within ``POST_LINK_M``, from
+    ≥ ``POST_SENSORS`` sensors, ≤ ``POST_RUN_MAX`` of each, each sensor's run flanked by a
+    silent beam or a reading ``POST_JUMP_M`` farther (one on no line itself: then
+    ``POST_ON_TESTED`` readings on the circle). Its circle (radius in
+    ``POST_RADII_M``, not the largest) is scored as an arc (:func:`arc_incidence`) plus
+    ``ARC_MISS`` for each flanking silent beam it would have returned; kept at a mean misfit
+    below ``ARC_MISFIT`` with ≥ 3 readings on it (misfit ≤ ``ARC_ON``), which become valid at
+    its θ, at their own distance there, σ as on an arc. ``label`` (S, N): each reading's
+    line (−1 none); ``counts`` (S, N); ``steps`` (S,); ``grouper``: the groups (the compiled
+    :func:`post_groups_compiled` by default; its statement: ``estimate_numpy.post_groups``).
+    Why: docs/estimator.md, "Far posts"."""
+    found = (grouper or post_groups_compiled)(points, label, counts, cal)
+    if found is None:        # most sweeps: no group that could be a post, nothing to fit
+        return points
+    row, col, comp, groups, px, py = found
+    shape = points.valid.shape
+    s = np.asarray(counts, dtype=float).reshape(shape)
+    heading = np.asarray(points.heading, dtype=float)
+    ox, oy = np.asarray(points.origin_x, float), np.asarray(points.origin_y, float)
+    cand = np.zeros(shape, dtype=bool)
+    cand[row, col] = True
+    silent = (points.reason == _NO_RETURN) | (points.reason == _OUT_OF_RANGE)
+    has = s > 0
+    d0 = np.full(shape, np.nan)
+    d0[has] = cal.distance(s[has], 0.0)
+    ex, ey = np.cos(heading), np.sin(heading)
+    rank = np.empty(shape[0], dtype=np.intp)            # each row's place in step order
+    order = rows_in_step_order(steps)
+    rank[order] = np.arange(shape[0])
+    cx0, cy0 = float(np.mean(ox)), float(np.mean(oy))
+    log_s = np.log(np.where(has, s, 1.0))
+    out = None
+    for c in groups:
+        ii, kk = row[comp == c], col[comp == c]
+        flank, standing, tested = [], True, False
+        for k in np.unique(kk):
+            r_k = np.sort(rank[ii[kk == k]])
+            far = np.nanmax(d0[ii[kk == k], k]) + POST_JUMP_M
+            for q in (r_k[0] - 1, r_k[-1] + 1):
+                if not 0 <= q < shape[0]:
+                    continue            # the sweep's end: nothing says either way
+                j = order[q]
+                if silent[j, k]:
+                    flank.append((j, k))
+                elif not d0[j, k] > far:
+                    standing = False
+                elif cand[j, k]:      # on no line itself: the post's grazed edge, or more
+                    tested = True     # of a steep surface; a circle fitted must be tested
+        if not standing:
+            continue
+        fi = np.array([f[0] for f in flank], dtype=np.intp)
+        fk = np.array([f[1] for f in flank], dtype=np.intp)
+        bearing = np.arctan2(py[comp == c] - cy0, px[comp == c] - cx0)
+        if bearing.max() - bearing.min() > math.pi:   # across ±π: the grid not round the ring
+            bearing = np.where(bearing < 0.0, bearing + 2.0 * math.pi, bearing)
+        near_m, far_m = np.nanmin(d0[ii, kk]) - 0.15, np.nanmax(d0[ii, kk]) + 0.05
+
+        def score(radius, a, t):
+            """Each candidate circle's summed misfit and its readings' θ, d, misfit, noise
+            (radius, bearing a and centre range t: (C, 1))."""
+            centre = (cx0 + t * np.cos(a), cy0 + t * np.sin(a))
+            t_i, th_i, meets = meet_circle(centre, radius, ox[ii, kk], oy[ii, kk],
+                                            ex[ii, kk], ey[ii, kk])
+            la, b = cal.log_ab(th_i)
+            d_i = np.exp(la + b * log_s[ii, kk])
+            noise = np.abs(b) * d_i * cal.sigma_counts() / s[ii, kk]
+            z = (d_i - t_i) / noise
+            each = np.where(meets & (th_i <= cal.max_incidence_rad),
+                            np.minimum(z * z, ARC_MISS), ARC_MISS)
+            cost = each.sum(axis=1)
+            if fi.size:
+                t_f, th_f, meets_f = meet_circle(centre, radius, ox[fi, fk], oy[fi, fk],
+                                                  ex[fi, fk], ey[fi, fk])
+                cost = cost + ARC_MISS * np.count_nonzero(
+                    meets_f & (th_f < cal.max_incidence_rad - POST_SILENT_RAD)
+                    & (t_f < cal.return_range_m), axis=1)
+            return cost, th_i, d_i, each, noise
+
+        # coarse (every POST_COARSE-th radius, POST_COARSE-times the grid steps), then fine
+        # about the best: 30× fewer circles than the fine grid (docs/estimator.md, cost)
+        step_a, step_t = POST_COARSE * POST_BEARING_RAD, POST_COARSE * POST_RANGE_M
+        grid_a = np.arange(bearing.min() - 8 * POST_BEARING_RAD,
+                           bearing.max() + 8 * POST_BEARING_RAD + step_a, step_a)
+        cand_r, cand_a, cand_t = [], [], []
+        for radius in POST_RADII_M[::POST_COARSE]:
+            a_g, t_g = np.meshgrid(grid_a, np.arange(near_m + radius, far_m + radius + step_t,
+                                                     step_t))
+            cand_r.append(np.full(a_g.size, radius))
+            cand_a.append(a_g.ravel())
+            cand_t.append(t_g.ravel())
+        r_c, a_c, t_c = (np.concatenate(v).reshape(-1, 1) for v in (cand_r, cand_a, cand_t))
+        q = int(np.argmin(score(r_c, a_c, t_c)[0]))
+        at = int(np.argmin(np.abs(POST_RADII_M - r_c[q, 0])))
+        fine = np.arange(-POST_COARSE, POST_COARSE + 1)
+        r_f, a_f, t_f = np.meshgrid(POST_RADII_M[max(at - POST_COARSE + 1, 0):at + POST_COARSE],
+                                    a_c[q, 0] + fine * POST_BEARING_RAD,
+                                    fine * POST_RANGE_M, indexing="ij")
+        t_f = t_f + t_c[q, 0] - r_c[q, 0] + r_f      # the same surface, each radius behind it
+        r_f, a_f, t_f = (v.reshape(-1, 1) for v in (r_f, a_f, t_f))
+        cost, th, d, each, noise = score(r_f, a_f, t_f)
+        q = int(np.argmin(cost))
+        cost, radius, th, d, each, noise = cost[q], r_f[q, 0], th[q], d[q], each[q], noise[q]
+        if cost > ARC_MISFIT * (ii.size + fi.size) or radius >= POST_RADII_M[-1]:
+            continue
+        on = (each <= ARC_ON) & (d >= cal.min_range_m) & (d <= points.max_range_m)
+        # a circle is three numbers: three readings on it (one more where it must be tested)
+        if np.count_nonzero(on) < (POST_ON_TESTED if tested else 3):
+            continue
+        lo = cal.distance(s[ii, kk], np.maximum(th - ARC_DOUBT_RAD, 0.0))
+        hi = cal.distance(s[ii, kk], np.minimum(th + ARC_DOUBT_RAD, cal.max_incidence_rad))
+        sigma = np.hypot(np.maximum(noise, SIGMA_FLOOR_M), 0.5 * np.abs(lo - hi))
+        if out is None:
+            out = {f: np.array(getattr(points, f))
+                   for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason")}
+        i, k = ii[on], kk[on]
+        out["d"][i, k], out["theta"][i, k], out["sigma_m"][i, k] = d[on], th[on], sigma[on]
+        out["x"][i, k] = ox[i, k] + d[on] * ex[i, k]
+        out["y"][i, k] = oy[i, k] + d[on] * ey[i, k]
+        out["valid"][i, k], out["reason"][i, k] = True, Reason.OK
+    return points if out is None else points_with(points, **out)
+
+
+def post_groups_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
+                         cal: Calibration):
+    """``estimate_numpy.post_groups`` (the statement) in one compiled call
+    (``irring.estimation._lines.post_groups``, held to it by tests/test_estimate_oracle.py)."""
+    f = np.ascontiguousarray
+    la0, b0 = cal._ab0
+    _, _, no_return, sigma_counts, _ = cal._levels      # (cached: the properties cost µs)
+    return _lines.post_groups(
+        f(points.reason, dtype=np.uint8).reshape(-1),
+        f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
+        f(label, dtype=np.intp).reshape(-1), _INCIDENCE_UNKNOWN,
+        f(counts, dtype=float).reshape(-1), f(points.heading, dtype=float).reshape(-1),
+        f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
+        points.valid.shape[1], no_return + (RETURN_SIGMAS + RANGE_SIGMAS) * sigma_counts,
+        la0, b0, POST_LINK_M, POST_SENSORS, POST_RUN_MAX)
+
+
+def short_far_lines(points: Points, label: np.ndarray, index: np.ndarray, cal: Calibration
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The members of short far lines, as fitted (flat (S·N,) masks; None where there are
+    none): those of lines of ``LOCAL_MIN`` to ``FAR_LINE_MAX_MEMBERS`` members lying on
+    average ``FAR_LINE_MIN_SHARE`` of the range away, which their members' profiles vote
+    on, and, unless a part is read to its own range, those of such lines of at most
+    ``SHORT_LINE_MAX_MEMBERS`` whose direction standard error exceeds ``SHORT_LINE_SE_MAX``
+    (:func:`doubt_far_lines` asks both)."""
+    vi = index[points.valid.reshape(-1)[index]]
+    lab = label.reshape(-1)[vi]
+    member = (lab >= 0).nonzero()[0]
+    if member.size == 0:
+        return None
+    line = lab[member]
+    total = np.bincount(line)
+    at = vi[member]
+    far = (np.bincount(line, weights=points.d.reshape(-1)[at], minlength=total.size)
+           >= FAR_LINE_MIN_SHARE * points.max_range_m * total)
+    # fewer than LOCAL_MIN members never outvote their line: not asked
+    doubt = np.zeros(label.size, dtype=bool)
+    doubt[at] = (far & (total >= LOCAL_MIN) & (total <= FAR_LINE_MAX_MEMBERS))[line]
+    loose = np.zeros(label.size, dtype=bool)
+    few_far = far & (total <= SHORT_LINE_MAX_MEMBERS)
+    if few_far.any() and not read_to_own_range(cal, points.max_range_m):
+        sel = few_far[line].nonzero()[0]   # (the directions of those lines' members alone)
+        at_s = at[sel]
+        sigma_perp = (points.sigma_m.reshape(-1)[at_s]
+                      * np.cos(points.theta.reshape(-1)[at_s]))
+        se_dir = direction_se(points.x.reshape(-1)[at_s], points.y.reshape(-1)[at_s],
+                              sigma_perp, line[sel], total.size)
+        loose[at_s] = (se_dir > SHORT_LINE_SE_MAX)[line[sel]]
+    return (doubt, loose) if doubt.any() or loose.any() else None
+
+
+def doubt_far_lines(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
+                    steps: np.ndarray, cal: Calibration, doubt: np.ndarray, loose: np.ndarray,
+                    profiler: Callable | None = None, voter: Callable | None = None
+                    ) -> tuple[Points, np.ndarray]:
+    """The members of short far lines (:func:`short_far_lines`: ``doubt``, ``loose``) their
+    own profiles (:func:`local_incidence`'s) disown, off their lines; numpy, shared by both
+    estimators.
+
+    Where the members of a ``doubt`` line differ from its θ by more than ``FAR_LINE_Z``
+    standard errors on average and would move ``FAR_LINE_SHIFT_M`` on average, every member
+    leaves it, at its own θ where its profile is straight and clearly steep, else
+    INCIDENCE_UNKNOWN; a ``loose`` line loses the members whose own profile is straight and
+    whose slope lies ``SHORT_LINE_OWN_SE`` of its standard error off the line's, at their
+    own θ where that lies within the range. Only members still on their line are asked (not
+    those a circle took: :func:`round_runs`). ``voter``: the vote (compiled by default; the
+    oracle passes ``estimate_numpy.far_line_vote``). Returns the points and ``label``.
+    Why: docs/foldover.md ("Short far lines", "On every sweep"), docs/estimator.md ("A short
+    far line's direction")."""
+    vi = index[points.valid.reshape(-1)[index]]
+    lab = label.reshape(-1)[vi]
+    on = lab >= 0
+    doubt, loose = doubt[vi] & on, loose[vi] & on
+    ask = (doubt | loose).nonzero()[0]
+    if ask.size == 0:
+        return points, label
+    pr = (profiler or profiles_compiled)(points, vi, ask, counts, steps, cal)
+    theta_now = points.theta.reshape(-1)[vi]
+    doubted = np.zeros(ask.size, dtype=bool)
+    asked = doubt[ask]
+    if asked.any():      # the members' own slopes, on average, against the line's θ
+        off_line = (voter or _far_line_vote_compiled)(
+            ask[asked], asked.nonzero()[0], lab, theta_now, pr, points.d.reshape(-1), vi,
+            int(lab.max()) + 1, cal, LOCAL_STEPS, LOCAL_MIN, FAR_LINE_Z, FAR_LINE_SHIFT_M)
+        doubted[asked] = off_line[lab[ask[asked]]]
+    voted = doubted.copy()   # (a line its members voted off: every member leaves it)
+    if loose.any():   # … each member whose own straight slope is clearly not the line's
+        doubted |= loose[ask] & pr.ok & (np.abs(np.tan(theta_now[ask]) - np.abs(pr.slope))
+                                         > SHORT_LINE_OWN_SE * pr.se)
+    if not doubted.any():
+        return points, label
+    return leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal,
+                               stay=loose[ask[doubted]] & ~voted[doubted])
+
+
+def _far_line_vote_compiled(at, sel, lab, theta_now, pr: Profile, d, vi, n_lines: int,
+                            cal: Calibration, half: int, min_n: int, z_max: float,
+                            shift_m: float) -> np.ndarray:
+    """``estimate_numpy.far_line_vote`` (the statement and the why) in one compiled call
+    (``irring.estimation._lines.far_line_vote``, held to it by tests/test_estimate_oracle.py):
+    the lines voted off, (n_lines,) bool."""
+    f = np.ascontiguousarray
+    return _lines.far_line_vote(
+        at, sel, lab, f(theta_now, dtype=float), pr.chain, pr.step, pr.n, pr.se, pr.slope,
+        pr.theta, pr.s, f(d, dtype=float), vi, cal.theta_rad, cal._node_log_a, cal.b,
+        n_lines, half, min_n, z_max, shift_m)
