@@ -234,8 +234,11 @@ def _off_by(sweep, points, rows, sensor):
 
 
 def _without_rejoin(monkeypatch):
+    """rejoin_traces off, and past_other_lines, later, which takes some of the same readings
+    past the corner: the counterfactual states the rule alone."""
     from irring.estimation import estimate as module
     monkeypatch.setattr(module, "rejoin_traces", lambda points, label, *args: (points, label))
+    monkeypatch.setattr(module, "past_other_lines", lambda points, label, *args: (points, label))
 
 
 def test_a_sensors_run_on_a_line_of_its_own_beside_a_corner_goes_to_the_walls_line(monkeypatch):
