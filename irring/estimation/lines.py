@@ -224,6 +224,23 @@ class Estimate:
     theta_history: tuple[np.ndarray, ...] = field(default=())
 
 
+def member_axes(points: Points, member: np.ndarray, label: np.ndarray) -> tuple:
+    """Each line's principal axis through its members' end points (``member`` (S, N) bool,
+    ``label`` (S, N) line index): (g, n, x, y, mx, my, u, v, alpha) — the members' lines
+    and end points, each line's member count, mean point and direction angle (rad), and
+    the members' offsets from their line's mean. Rules that fit the lines as the readings
+    now lie share this one statement of the fit."""
+    g = label[member]
+    n = np.bincount(g)
+    nn = np.maximum(n, 1)
+    x, y = points.x[member], points.y[member]
+    mx, my = np.bincount(g, x) / nn, np.bincount(g, y) / nn
+    u, v = x - mx[g], y - my[g]
+    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n.size),
+                             np.bincount(g, u * u, n.size) - np.bincount(g, v * v, n.size))
+    return g, n, x, y, mx, my, u, v, alpha
+
+
 def invalidated(points: Points, gone: np.ndarray, why: Reason) -> Points:
     """``points`` with the readings ``gone`` (flat (S·N,) indices, or a bool mask of any
     shape) made ``why``: not valid, no end point, distance, θ or σ."""

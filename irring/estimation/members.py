@@ -18,8 +18,8 @@ import numpy as np
 from ..core import UNCERTAIN_SIGMA_M, Points, Reason, points_with, rows_in_step_order
 from ..resources import kernel
 from .calibration import SIGMA_FLOOR_M, Calibration, range_sigma
-from .lines import (SNAP_MIN, LineOptions, invalidated, placed_at, read_to_own_range, scan_order,
-                    theta0_sigma)
+from .lines import (SNAP_MIN, LineOptions, invalidated, member_axes, placed_at,
+                    read_to_own_range, scan_order, theta0_sigma)
 from .silence import beam_crossings
 
 
@@ -121,14 +121,7 @@ def dim_returns_on_lines(points: Points, label: np.ndarray | None, counts: np.nd
     member[member] = n[g] >= SNAP_MIN
     if not member.any():
         return points
-    g = label[member]
-    n = np.bincount(g)
-    nn = np.maximum(n, 1)
-    x, y = points.x[member], points.y[member]
-    mx, my = np.bincount(g, x) / nn, np.bincount(g, y) / nn
-    u, v = x - mx[g], y - my[g]
-    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n.size),
-                             np.bincount(g, u * u, n.size) - np.bincount(g, v * v, n.size))
+    g, n, x, y, mx, my, u, v, alpha = member_axes(points, member, label)
     nx, ny = -np.sin(alpha), np.cos(alpha)
     # in step order: each dim reading's nearest member either way with only dim readings
     # between, at most DIM_CHAIN readings away
@@ -217,18 +210,18 @@ PAST_FEW = 4            # … and at most this many of its line's members do
 def past_other_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration,
                      options: LineOptions, finder: Callable | None = None
                      ) -> tuple[Points, np.ndarray]:
-    """(points, label) with the valid members of a line whose beams meet another line of
-    ≥ ``PAST_MIN`` members first — within its members' extent or past its ends by up to
+    """(points, label) with the valid members of a line whose beams meet another line of ≥
+    ``PAST_MIN`` members first — within its members' extent or past its ends by up to
     ``PAST_REACH_SHARE`` of the range — ahead of their end points by ``PAST_CLEAR_SIGMAS`` σ
-    + ``PAST_CLEAR_M``, on the side of that line where at most ``PAST_FEW`` of their line's members lie
-    (a corner, not a wall passing behind the other's end): each read on the nearest such
-    line at its incidence where its counts put it there within max(2 cm, 3σ) (label −1:
-    placed, not snapped); the others as they were. ``label`` (S, N): the lines as
+    + ``PAST_CLEAR_M``, on the side of that line where at most ``PAST_FEW`` of their line's
+    members lie (a corner, not a wall passing behind the other's end): each read on the
+    nearest such line at its incidence where its counts put it there within max(2 cm, 3σ)
+    (label −1: placed, not snapped); the others as they were. ``label`` (S, N): the lines as
     kinked_lines left them; ``finder``: the members so asked (the compiled
     :func:`past_members_compiled` by default; the oracle passes its numpy statement
     :func:`past_members`). Why: a wall's last readings at grazing past a corner join the
-    line they continue, read at its θ 100-270 mm long (docs/estimator.md, "A beam that
-    meets another wall first")."""
+    line they continue, read at its θ 100-270 mm long (docs/estimator.md, "A beam that meets
+    another wall first")."""
     found = (finder or past_members_compiled)(points, label, options)
     if found is None:
         return points, label
@@ -261,17 +254,10 @@ def past_members(points: Points, label: np.ndarray, options: LineOptions
     member = points.valid & (label >= 0)
     if not member.any():
         return None
-    g = label[member]
-    n = np.bincount(g)
-    wall = n >= PAST_MIN
+    wall = np.bincount(label[member]) >= PAST_MIN
     if np.count_nonzero(wall) < 2:
         return None
-    nn = np.maximum(n, 1)
-    x, y = points.x[member], points.y[member]
-    mx, my = np.bincount(g, x) / nn, np.bincount(g, y) / nn
-    u, v = x - mx[g], y - my[g]
-    alpha = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n.size),
-                             np.bincount(g, u * u, n.size) - np.bincount(g, v * v, n.size))
+    g, n, x, y, mx, my, u, v, alpha = member_axes(points, member, label)
     ca, sa = np.cos(alpha), np.sin(alpha)
     along = u * ca[g] + v * sa[g]
     lo = np.full(n.size, np.inf)
