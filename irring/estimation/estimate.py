@@ -291,9 +291,11 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     trace continues on places moved to it (:func:`rejoin_traces`), then the members of a
     line their counts contradict (as rejoined) off it (:func:`counts_disown_lines`),
     members alone at a nearer surface's edge (:func:`alone_at_an_edge`), a curved wall's
-    chords read on its circle (:func:`bowed_lines`) and a far line over a corner read as two
-    (:func:`kinked_lines`); line members onto their lines
-    (``snapper``, the compiled :func:`snap_to_lines` by default), members read just past
+    chords read on its circle (:func:`bowed_lines`), a far line over a corner read as two
+    (:func:`kinked_lines`) and members whose beams meet another wall first read on it
+    (:func:`past_other_lines`); line members onto their lines
+    (``snapper``, the compiled :func:`snap_to_lines` by default), a line over a many-sided
+    wall's facets read as two pieces (:func:`faceted_lines`), members read just past
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
     oracle passes its numpy statements of both; never past ``cal.silent_range_m``:
