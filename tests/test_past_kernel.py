@@ -151,17 +151,6 @@ def test_our_rooms_ask_the_kernel_what_the_rule_is_for():
     assert (found, moved) == (18, 9)
 
 
-def test_the_ring_centre_is_numpys_mean_to_the_bit():
-    """The kernel's mean of a contiguous array (numpy's pairwise sum: 8 lanes, halves over
-    128) against ``float(a.mean())``, from 1 reading to past numpy's block sizes."""
-    rng = np.random.default_rng(7)
-    for n in list(range(1, 140)) + [255, 256, 257, 852, 1023, 4099, 9001]:
-        a = rng.normal(0.3, 1.0, n) * 10.0 ** rng.uniform(-3, 3)
-        assert _lines.np_mean(a) == float(a.mean()), n
-        assert _lines.np_mean(np.full(n, -0.0)) == float(np.full(n, -0.0).mean())
-    assert math.isnan(_lines.np_mean(np.zeros(0)))
-
-
 def test_past_members_names_arrays_that_differ_in_length():
     n = np.zeros(5)
     with pytest.raises(ValueError, match="past_members' arrays differ in length: label 5, "

@@ -3099,40 +3099,6 @@ cdef inline double _halves_rss(double m, double sx, double sy, double sxx, doubl
 
 # --------------------------------------------------------------------------- past other lines
 
-cdef double _np_sum(const double* a, idx_t n) noexcept nogil:
-    """numpy's sum of a contiguous run (add.reduce: pairwise, 8 lanes below 128), to the bit."""
-    cdef idx_t i, j, n2
-    cdef double r[8]
-    cdef double res
-    if n < 8:
-        res = -0.0
-        for i in range(n):
-            res += a[i]
-        return res
-    if n <= 128:
-        for j in range(8):
-            r[j] = a[j]
-        i = 8
-        while i < n - n % 8:
-            for j in range(8):
-                r[j] += a[i + j]
-            i += 8
-        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        while i < n:
-            res += a[i]
-            i += 1
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _np_sum(a, n2) + _np_sum(a + n2, n - n2)
-
-
-def np_mean(const double[::1] a):
-    """``float(a.mean())`` of a contiguous array, to the bit (:func:`past_members`' ring
-    centre; exposed for its test)."""
-    return (0.0 + _np_sum(&a[0], a.shape[0])) / a.shape[0] if a.shape[0] else NAN
-
-
 cdef inline bint _crosses(double ox, double oy, double ux, double uy, double mx, double my,
                           double ca, double sa, double* un, double* t,
                           double* at) noexcept nogil:
@@ -3156,8 +3122,8 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
                  double clear_m, double floor_clear_m):
     """``irring.estimation.members.past_members`` (``past_other_lines``' gates), to the
     bit: each line's TLS fit and extent over its valid members (the angle from numpy's
-    ``arctan2``), the walls' ends seen from the ring centre (``cx``, ``cy``; NaN: the mean
-    of ``origin_x``, ``origin_y`` as numpy takes it) past another wall, and per such pair of
+    ``arctan2``), the walls' ends seen from the ring centre (``cx``, ``cy``: the caller's
+    numpy mean of the origins, as the numpy statement takes it) past another wall, and per such pair of
     walls (in label order) the few members of the end's wall past the other. None where
     none is found; else the members, in that order, as flat index, t, un
     (``beam_crossings``') and σ. Arrays flat (S·N); ``label`` −1 on no line; the scalars
@@ -3258,9 +3224,6 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
                 if W[9 * nw + b] == W[9 * nw + b] and not (a <= W[9 * nw + b]):
                     W[9 * nw + b] = a
         # first, the walls' ends: an end seen from the ring past another wall, or none to ask
-        if cx != cx or cy != cy:
-            cx = (0.0 + _np_sum(&origin_x[0], size)) / size
-            cy = (0.0 + _np_sum(&origin_y[0], size)) / size
         for e in range(2 * nw):
             b = e % nw
             ca = CS[2 * b]

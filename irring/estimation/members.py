@@ -316,9 +316,9 @@ def past_members_compiled(points: Points, label: np.ndarray, options: LineOption
     held to it bit for bit by tests/test_past_kernel.py)."""
     f = np.ascontiguousarray
     ox, oy = points.origin_x, points.origin_y
-    # (the ring centre numpy's way: the kernel sums a contiguous array as np.mean does)
-    centre = ((math.nan, math.nan) if ox.flags.c_contiguous and oy.flags.c_contiguous
-              else (float(ox.mean()), float(oy.mean())))
+    # (the ring centre by numpy itself, as past_members takes it: a kernel restating numpy's
+    # pairwise sum would hang on numpy's internals)
+    centre = (float(ox.mean()), float(oy.mean()))
     return _lines.past_members(
         f(label, dtype=np.intp).reshape(-1),
         f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
