@@ -8,10 +8,14 @@ posts keep their lines. Rooms of our own, asymmetric poses and sizes."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from _synthetic import make_sweep, polygon, rectangle, stand_in_calibration
 from irring import pipeline
@@ -20,10 +24,11 @@ from irring.designs import PAPER_RING
 from irring.estimation import estimate as est
 from irring.estimation import arcs as est_arcs
 from irring.estimation import estimate_numpy as oracle
+from irring.estimation.calibration import scene_calibration
 from irring.estimation.estimate import Calibration, estimate, estimate_detail
 from irring.maps import metrics
 from irring.maps.mapping import OCCUPIED, MapperParams
-from irring.scenario import loads
+from irring.scenario import load_scenario, loads
 
 FLOORED = MapperParams(ahead_floor=1.0, between_steps=0.0)   # the mapper as it was
 
@@ -170,7 +175,8 @@ def test_box_corners_posts_and_walls_keep_their_lines(scene, monkeypatch):
               for seed in seeds for yaw in yaws]
     with_arcs = [estimate(sweep, cal) for sweep in sweeps]
     assert any(tried)
-    monkeypatch.setattr(est, "round_runs", lambda points, label, *a, **k: (points, label))
+    monkeypatch.setattr(est, "round_runs_compiled", lambda points, label, *a, **k: (points,
+                                                                                   label))
     for sweep, p in zip(sweeps, with_arcs):
         _same(p, estimate(sweep, cal))
 
@@ -272,7 +278,7 @@ def test_a_far_columns_arc_is_a_circle_before_its_short_lines_are_doubted(doubt_
     (INCIDENCE_UNKNOWN) and no run is left to try as an arc: 8 of
     the column's 27 left > 50 mm off, F1 0.908, precision 0.885 (held-out q5_column_gap30:
     F1 0.994 -> 0.955)."""
-    round_runs, doubt = est.round_runs, est.doubt_far_lines
+    round_runs, doubt = est.round_runs_compiled, est.doubt_far_lines
     circled = []
 
     def recording(points, label, index, counts, steps, cal, *args):
@@ -283,7 +289,7 @@ def test_a_far_columns_arc_is_a_circle_before_its_short_lines_are_doubted(doubt_
         out, out_label = round_runs(points, label, index, counts, steps, cal, *args)
         circled.append((out, out.valid & (out_label < 0) & (out.d != points.d)))
         return out, out_label
-    monkeypatch.setattr(est, "round_runs", recording)
+    monkeypatch.setattr(est, "round_runs_compiled", recording)
     if doubt_first:
         monkeypatch.setattr(est, "doubt_far_lines", lambda points, label, *a, **k: (points,
                                                                                      label))
@@ -379,3 +385,119 @@ def test_far_tables_readings_are_put_on_their_circle(snapped, monkeypatch):
         assert int((np.abs(err) > 0.03).sum()) == off, (seed, (np.abs(err) > 0.03).sum())
         p = run.scores["occupied_precision"]
         assert (p > precision) if snapped else (p < precision + 0.001), (seed, p)
+
+
+@functools.lru_cache(maxsize=1)
+def _round_states():
+    """What :func:`arcs.round_runs_compiled` was asked in the fast estimator: the bundled
+    t_room, box_room and far_hexagon (seed 0, every pose; some runs kept, most sweeps none)
+    and the 900 mm table (seed 3: its arcs kept)."""
+    states = []
+    compiled = est.round_runs_compiled
+
+    def spy(points, label, index, counts, steps, cal, *args):
+        states.append((points, label.copy(), index, counts, steps, cal, *args[:3]))
+        return compiled(points, label, index, counts, steps, cal, *args)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(est, "round_runs_compiled", spy)
+        for name in ("t_room", "box_room", "far_hexagon"):
+            sc = load_scenario(name)
+            cal, _ = scene_calibration(sc)
+            for sweep in pipeline.simulated(sc, seed=0, progress=False)[0].sweeps:
+                estimate(sweep, cal)
+        cal, sweep, _, _ = _table(*TABLES[0][:4], TABLES[0][4], 3)
+        estimate(sweep, cal)
+    return states
+
+
+def _spoiled_round(state, spoil, seed):
+    """A state :func:`arcs.round_runs_compiled` was asked, spoilt as
+    :func:`test_the_round_pre_gate_kernel_agrees_with_its_numpy_statement` says."""
+    points, label, index, counts, steps, cal, *lines = state
+    rng = np.random.default_rng(seed)
+    label, counts, steps = label.copy(), np.array(counts, dtype=float), np.array(steps)
+    pick = rng.random(label.shape) < rng.uniform(0.02, 0.3)
+    if spoil == "jitter":               # end points moved about (bulges made and undone)
+        points = dataclasses.replace(points, x=points.x + rng.normal(0, 0.01, label.shape),
+                                     y=points.y + rng.normal(0, 0.01, label.shape))
+    elif spoil == "relabel":            # runs cut into other lines
+        label = np.where(pick, rng.integers(-1, len(lines[0]), label.shape), label)
+    elif spoil == "unlabel":
+        label[pick] = -1
+    elif spoil == "invalid":
+        points = dataclasses.replace(points, valid=points.valid & ~pick)
+    elif spoil == "flat":               # every end point on one straight line: no circle
+        points = dataclasses.replace(points, y=np.full(label.shape, 0.37))
+    elif spoil == "ties":               # a share of the end points at one place
+        points = dataclasses.replace(points, x=np.where(pick, 0.21, points.x),
+                                     y=np.where(pick, -0.13, points.y))
+    elif spoil == "nan":
+        points = dataclasses.replace(points, x=np.where(pick, np.nan, points.x))
+    elif spoil == "counts":             # θ = 0 ranges moved (runs cut at other jumps)
+        counts = counts * rng.uniform(0.9, 1.1, counts.shape)
+    elif spoil == "steps":              # motor steps with gaps, or one step held
+        steps = (np.sort(rng.integers(-40, 40, steps.shape)) if rng.random() < 0.5
+                 else np.zeros_like(steps))
+    return points, label, index, counts, steps, cal, *lines
+
+
+_ROUND_GATE = {"kept": 0, "none": 0}
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data(), spoil=st.sampled_from([None, "jitter", "relabel", "unlabel",
+                                               "invalid", "flat", "ties", "nan", "counts",
+                                               "steps"]))
+def test_the_round_pre_gate_kernel_agrees_with_its_numpy_statement(data, spoil):
+    """``_lines.round_pre`` against ``arcs._round_asked``, to the bit (tolerance 0: the same
+    sums in the same order, numpy's exp, log, cos and sin passed in), on the states the fast
+    estimator asked (bundled rooms, a table), with end points jittered, labels changed or
+    dropped, readings made invalid, every end point on one line, a share of them at one
+    place or NaN, the counts or the motor steps changed: the same runs kept, and
+    ``round_runs_compiled`` gives ``round_runs``' points and labels bit for bit."""
+    states = _round_states()
+    state = _spoiled_round(states[data.draw(st.integers(0, len(states) - 1))], spoil,
+                           data.draw(st.integers(0, 2 ** 31 - 1)))
+    points, label, index, counts, steps, cal = state[:6]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        asked = est_arcs._round_asked(points, label, index, counts, steps, cal)
+        vi = index[points.valid.reshape(-1)[index]]
+        f = np.ascontiguousarray
+        keep = np.zeros(0, dtype=bool)
+        if vi.size >= est_arcs.ROUND_RUN_MIN:
+            la0, b0 = cal._ab0
+            h = points.heading.reshape(-1)[vi]
+            keep = est_arcs._lines.round_pre(
+                f(vi, dtype=np.intp), f(label, dtype=np.intp).reshape(-1),
+                f(steps, dtype=np.intp), points.valid.shape[1],
+                np.exp(la0 + b0 * np.log(counts.reshape(-1)[vi])), np.cos(h), np.sin(h),
+                f(points.x).reshape(-1), f(points.y).reshape(-1),
+                f(points.origin_x).reshape(-1), f(points.origin_y).reshape(-1),
+                est_arcs.ARC_GAP_STEPS, est_arcs.ROUND_JUMP_M, est_arcs.ROUND_RUN_MIN,
+                est_arcs.ROUND_BULGE_M, est_arcs.ROUND_BEHIND, float(est_arcs.ROUND_RADII_M[0]))
+        if asked is None:
+            assert not keep.any()
+        else:
+            np.testing.assert_array_equal(keep.astype(bool), asked.keep)
+        slow = est_arcs.round_runs(*state)
+        now = est_arcs.round_runs_compiled(*state)
+    for f in ("x", "y", "d", "theta", "sigma_m", "valid", "reason"):
+        np.testing.assert_array_equal(getattr(now[0], f), getattr(slow[0], f), err_msg=f)
+    np.testing.assert_array_equal(now[1], slow[1])
+    _ROUND_GATE["kept" if asked is not None else "none"] += 1
+
+
+def test_the_round_pre_gate_was_passed_and_not():
+    """Not vacuous: the agreement test above met states where numpy keeps some run and
+    states where the kernel keeps none (run after it, in this file's order)."""
+    if sum(_ROUND_GATE.values()) == 0:
+        pytest.skip("the agreement test did not run first")
+    assert _ROUND_GATE["kept"] > 0 and _ROUND_GATE["none"] > 0
+
+
+def test_the_round_pre_gate_names_the_arrays_that_differ():
+    one, two = np.zeros(5), np.zeros(4)
+    with pytest.raises(ValueError, match=r"^round_pre's per-reading arrays differ in length: "
+                                         r"vi 5, d0 5, cos_h 4, sin_h 5"):
+        est_arcs._lines.round_pre(np.arange(5), np.full(5, -1), np.zeros(5, dtype=np.intp), 1,
+                                  one, two, one, one, one, one, one, 4, 0.1, 8, 0.01, 0.2, 0.1)

@@ -3299,3 +3299,164 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
         free(M)
         free(pair)
         free(CS)
+
+
+cdef void _bulge(const double* px, const double* py, const double* ox, const double* oy,
+                 const idx_t* first, idx_t n_g, double bulge_m, double behind,
+                 unsigned char* keep, unsigned char* hollow) noexcept nogil:
+    """``arcs._bulging`` per group of the points ``first[g]`` … ``first[g + 1] - 1``: its
+    keep (``keep``) and whether more than ``behind`` of them lie ``bulge_m`` behind the chord
+    (``hollow``), numpy's operations in numpy's order (bincount's sums sequential)."""
+    cdef idx_t g, i, a, z
+    cdef double ux, uy, norm, side, tw, s_tw, n_behind
+    for g in range(n_g):
+        a, z = first[g], first[g + 1] - 1
+        ux, uy = px[z] - px[a], py[z] - py[a]
+        norm = hypot(ux, uy)
+        if norm < 1e-12:             # np.maximum(norm, 1e-12) (NaN stays NaN)
+            norm = 1e-12
+        ux, uy = ux / norm, uy / norm
+        side = (ox[a] - px[a]) * uy - (oy[a] - py[a]) * ux
+        side = (1.0 if side > 0.0 else (-1.0 if side < 0.0 else (0.0 if side == 0.0 else side)))
+        s_tw = 0.0
+        n_behind = 0.0
+        for i in range(a, z + 1):
+            tw = ((px[i] - px[a]) * uy - (py[i] - py[a]) * ux) * side
+            s_tw += tw
+            if tw < -bulge_m:
+                n_behind += 1.0
+        keep[g] = (s_tw >= bulge_m * <double>(z + 1 - a)) and (
+            n_behind <= behind * <double>(z + 1 - a))
+        hollow[g] = n_behind > behind * <double>(z + 1 - a)
+
+
+def round_pre(const idx_t[::1] vi, const idx_t[::1] label, const idx_t[::1] steps,
+              idx_t n_sensors, const double[::1] d0, const double[::1] cos_h,
+              const double[::1] sin_h, const double[::1] x, const double[::1] y,
+              const double[::1] origin_x, const double[::1] origin_y, idx_t gap_steps,
+              double jump_m, idx_t run_min, double bulge_m, double behind, double min_radius):
+    """``irring.estimation.arcs.round_runs``' cheap checks (its numpy statement:
+    ``arcs._round_asked``) as its pre-gate, to the bit: per candidate run (a sensor's run of
+    ``run_min`` valid readings or more holding two labels, in scan order) whether it is
+    kept, bulging as estimated or, hollow as estimated, at θ = 0, and no smaller than
+    ``min_radius`` by its θ = 0 end points' Kåsa circle. ``vi``: the valid readings in scan
+    order (flat indices into ``label``, ``x``, ``y``, ``origin_x``, ``origin_y``, flat
+    S·N; ``steps`` (S,)); ``d0``, ``cos_h``, ``sin_h``: per ``vi``, the θ = 0 range and the
+    heading's cosine and sine, numpy's (its SIMD exp, log, cos and sin)."""
+    cdef idx_t n = vi.shape[0], i, g, k, n_c = 0, m = 0, a, z
+    cdef double cnt, mx, my, u, v, zz, suu, suv, svv, suz, svz, sz, det, ca, cb, r
+    if not (d0.shape[0] == cos_h.shape[0] == sin_h.shape[0] == n):
+        raise lengths_differ("round_pre's per-reading arrays", vi=n, d0=d0.shape[0],
+                             cos_h=cos_h.shape[0], sin_h=sin_h.shape[0])
+    if not (label.shape[0] == x.shape[0] == y.shape[0] == origin_x.shape[0]
+            == origin_y.shape[0] == steps.shape[0] * n_sensors):
+        raise lengths_differ("round_pre's flat arrays", label=label.shape[0], x=x.shape[0],
+                             y=y.shape[0], origin_x=origin_x.shape[0],
+                             origin_y=origin_y.shape[0], steps_times_sensors=steps.shape[0]
+                             * n_sensors)
+    keep_arr = np.zeros(0, dtype=np.uint8)
+    if n == 0:
+        return keep_arr
+    for i in range(n):
+        if vi[i] < 0 or vi[i] >= label.shape[0]:
+            raise IndexError(f"round_pre: vi[{i}] = {vi[i]} outside the {label.shape[0]} "
+                             "readings")
+    # runs: [start[k], start[k + 1]) in vi; a candidate holds run_min readings and a change
+    # of label inside it
+    cdef idx_t* start = <idx_t*>malloc((n + 1) * sizeof(idx_t))
+    cdef idx_t* first = <idx_t*>malloc((n + 1) * sizeof(idx_t))   # candidates' starts (in their readings)
+    cdef double* buf = <double*>malloc(6 * n * sizeof(double) + 1)
+    cdef unsigned char* flags = <unsigned char*>malloc(4 * n + 4)
+    if start == NULL or first == NULL or buf == NULL or flags == NULL:
+        free(start); free(first); free(buf); free(flags)
+        raise MemoryError("round_pre: no memory for the runs")
+    cdef double* px = buf
+    cdef double* py = buf + n
+    cdef double* ex = buf + 2 * n
+    cdef double* ey = buf + 3 * n
+    cdef double* qx = buf + 4 * n
+    cdef double* qy = buf + 5 * n
+    cdef unsigned char* keep = flags
+    cdef unsigned char* hollow = flags + n + 1
+    cdef unsigned char* keep0 = flags + 2 * n + 2
+    cdef unsigned char* unused = flags + 3 * n + 3
+    cdef idx_t n_run = 0, f, fp, s_i, s_p
+    cdef bint change
+    try:
+        with nogil:
+            for i in range(n):
+                f = vi[i]
+                s_i = steps[f // n_sensors]
+                if i == 0:
+                    start[n_run] = 0
+                    n_run += 1
+                    continue
+                fp = vi[i - 1]
+                s_p = steps[fp // n_sensors]
+                if ((f % n_sensors != fp % n_sensors) or (s_i - s_p > gap_steps)
+                        or (s_p - s_i > gap_steps) or (fabs(d0[i] - d0[i - 1]) > jump_m)):
+                    start[n_run] = i
+                    n_run += 1
+            start[n_run] = n
+            for k in range(n_run):
+                a, z = start[k], start[k + 1]
+                if z - a < run_min:
+                    continue
+                change = False
+                for i in range(a + 1, z):
+                    if label[vi[i]] != label[vi[i - 1]]:
+                        change = True
+                        break
+                if not change:
+                    continue
+                first[n_c] = m
+                n_c += 1
+                for i in range(a, z):
+                    f = vi[i]
+                    px[m], py[m] = x[f], y[f]
+                    ex[m], ey[m] = origin_x[f], origin_y[f]
+                    qx[m] = origin_x[f] + d0[i] * cos_h[i]
+                    qy[m] = origin_y[f] + d0[i] * sin_h[i]
+                    m += 1
+            first[n_c] = m
+            # as estimated; those hollow as estimated are asked at θ = 0
+            _bulge(px, py, ex, ey, first, n_c, bulge_m, behind, keep, hollow)
+            _bulge(qx, qy, ex, ey, first, n_c, bulge_m, behind, keep0, unused)
+            for g in range(n_c):
+                keep[g] = keep[g] or (hollow[g] and keep0[g])
+                # the θ = 0 end points' Kåsa circle (arcs._kasa_radii): centred sums
+                a, z = first[g], first[g + 1]
+                cnt = <double>(z - a)
+                mx = 0.0
+                my = 0.0
+                for i in range(a, z):
+                    mx += qx[i]
+                    my += qy[i]
+                mx = mx / cnt
+                my = my / cnt
+                suu = 0.0; suv = 0.0; svv = 0.0; suz = 0.0; svz = 0.0; sz = 0.0
+                for i in range(a, z):
+                    u = qx[i] - mx
+                    v = qy[i] - my
+                    zz = u * u + v * v
+                    suu += u * u
+                    suv += u * v
+                    svv += v * v
+                    suz += u * zz
+                    svz += v * zz
+                    sz += zz
+                det = suu * svv - suv * suv
+                r = suu + svv
+                if det > 1e-12 * (r * r):
+                    ca = 0.5 * (svv * suz - suv * svz) / det
+                    cb = 0.5 * (suu * svz - suv * suz) / det
+                    r = sqrt(ca * ca + cb * cb + sz / cnt)
+                else:
+                    r = INFINITY
+                keep[g] = keep[g] and (r >= min_radius)
+        keep_arr = np.empty(n_c, dtype=np.uint8)
+        for g in range(n_c):
+            keep_arr[g] = keep[g]
+        return keep_arr
+    finally:
+        free(start); free(first); free(buf); free(flags)

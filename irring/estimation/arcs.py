@@ -14,12 +14,15 @@ from typing import Callable
 import numpy as np
 
 from ..core import Points, Reason, points_with
+from ..resources import kernel
 from .calibration import SIGMA_FLOOR_M, Calibration, range_sigma
 from .bounds import clamped_slopes
 from .lines import (SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, direction_se, invalidated, placed_at,
                     read_to_own_range, theta0_sigma)
 from .profiles import (LOCAL_MIN, UNKNOWN_M, Profile, off_line_profiles, own_slope_sigma,
                        placed_surely, profiles_compiled)
+
+_lines = kernel("estimation._lines")
 
 
 ROUND_SHARE = 0.4        # a line is a round thing's when this share of its members' profiles
@@ -306,6 +309,66 @@ def _pieces_misfit(pr: Profile, pos: np.ndarray, lab: np.ndarray, alpha: np.ndar
     return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
 
 
+def _round_asked(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
+                 steps: np.ndarray, cal: Calibration) -> SimpleNamespace | None:
+    """:func:`round_runs`' cheap checks, numpy (the statement the compiled pre-gate
+    ``_lines.round_pre`` is held to): None where no run passes them; else the valid
+    readings ``vi`` in scan order, their labels ``lab``, runs ``run`` (< ``n_run``), the
+    candidate runs' readings (positions ``sel`` into ``vi``, flat indices ``at``, candidate
+    ``gi`` < ``n_c``), the θ = 0 ranges ``d0`` (per ``vi``) and per candidate ``keep`` (it
+    passes) and ``retried`` (it passes at θ = 0, hollow as estimated)."""
+    flat_valid = points.valid.reshape(-1)
+    vi = index[flat_valid[index]]
+    if vi.size < ROUND_RUN_MIN:
+        return None
+    n_sensors = points.valid.shape[1]
+    lab = label.reshape(-1)[vi]
+    sensor = vi % n_sensors
+    step = np.asarray(steps).reshape(-1)[vi // n_sensors]
+    # ranges at θ = 0: a line's θ, wrong where it cuts an arc, makes jumps of its own
+    la0, b0 = cal._ab0
+    d0 = np.exp(la0 + b0 * np.log(np.asarray(counts, dtype=float).reshape(-1)[vi]))
+    cut = np.ones(vi.size, dtype=bool)
+    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
+               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
+    run = np.cumsum(cut) - 1
+    n_run = int(run[-1]) + 1
+    size = np.bincount(run, minlength=n_run)
+    change = np.zeros(vi.size)
+    change[1:] = ~cut[1:] & (lab[1:] != lab[:-1])
+    cand = (size >= ROUND_RUN_MIN) & (np.bincount(run, change, n_run) > 0)
+    if not cand.any():
+        return None
+    sel = cand[run].nonzero()[0]
+    gi = (np.cumsum(cand) - 1)[run[sel]]
+    n_c = int(np.count_nonzero(cand))
+    # the run's end points bulge towards the sensor off the chord between its ends, nowhere
+    # fall behind it (a concave corner), and not by noise alone (a wall cut in two); where
+    # they fall behind it as estimated, their θ = 0 end points are asked: a line read too
+    # steep across an arc pulls its members in and makes the arc look hollow
+    # (docs/estimator.md, "A table's flank taken for a line")
+    at = vi[sel]
+    hh = points.heading.reshape(-1)[at]
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
+    px, py = ox + d0[sel] * np.cos(hh), oy + d0[sel] * np.sin(hh)
+    keep, toward = _bulging(points.x.reshape(-1)[at], points.y.reshape(-1)[at], ox, oy, gi,
+                            n_c)
+    retried = (np.bincount(gi, toward < -ROUND_BULGE_M, n_c)
+               > ROUND_BEHIND * np.bincount(gi, minlength=n_c))
+    if retried.any():
+        retried &= _bulging(px, py, ox, oy, gi, n_c)[0]
+        keep = keep | retried
+    if not keep.any():
+        return None
+    # … and their circle at θ = 0 is a round thing's, not a post's or a box's corner (θ = 0
+    # reads an arc's flanks long: that circle is smooth, if smaller than the arc's)
+    keep &= _kasa_radii(px, py, gi, n_c) >= ROUND_RADII_M[0]
+    if not keep.any():
+        return None
+    return SimpleNamespace(vi=vi, lab=lab, run=run, n_run=n_run, sel=sel, gi=gi, n_c=n_c,
+                           at=at, d0=d0, keep=keep, retried=retried & keep)
+
+
 def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                steps: np.ndarray, cal: Calibration, line_alpha: np.ndarray,
                line_cx: np.ndarray, line_cy: np.ndarray, profiler: Callable | None = None,
@@ -333,55 +396,12 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     then put on their circle (:func:`onto_circles`; ``own_cap_m`` as for
     :func:`snap_to_lines`). Returns the points and ``label``. Why: docs/estimator.md,
     "Large round things"."""
-    flat_valid = points.valid.reshape(-1)
-    vi = index[flat_valid[index]]
-    if vi.size < ROUND_RUN_MIN:
+    asked = _round_asked(points, label, index, counts, steps, cal)
+    if asked is None:
         return points, label
-    n_sensors = points.valid.shape[1]
-    lab = label.reshape(-1)[vi]
-    sensor = vi % n_sensors
-    step = np.asarray(steps).reshape(-1)[vi // n_sensors]
-    # ranges at θ = 0: a line's θ, wrong where it cuts an arc, makes jumps of its own
-    la0, b0 = cal._ab0
-    d0 = np.exp(la0 + b0 * np.log(np.asarray(counts, dtype=float).reshape(-1)[vi]))
-    cut = np.ones(vi.size, dtype=bool)
-    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
-               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
-    run = np.cumsum(cut) - 1
-    n_run = int(run[-1]) + 1
-    size = np.bincount(run, minlength=n_run)
-    change = np.zeros(vi.size)
-    change[1:] = ~cut[1:] & (lab[1:] != lab[:-1])
-    cand = (size >= ROUND_RUN_MIN) & (np.bincount(run, change, n_run) > 0)
-    if not cand.any():
-        return points, label
-    sel = cand[run].nonzero()[0]
-    gi = (np.cumsum(cand) - 1)[run[sel]]
-    n_c = int(np.count_nonzero(cand))
-    # the run's end points bulge towards the sensor off the chord between its ends, nowhere
-    # fall behind it (a concave corner), and not by noise alone (a wall cut in two); where
-    # they fall behind it as estimated, their θ = 0 end points are asked: a line read too
-    # steep across an arc pulls its members in and makes the arc look hollow
-    # (docs/estimator.md, "A table's flank taken for a line")
-    at = vi[sel]
-    hh = points.heading.reshape(-1)[at]
-    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
-    px, py = ox + d0[sel] * np.cos(hh), oy + d0[sel] * np.sin(hh)
-    keep, toward = _bulging(points.x.reshape(-1)[at], points.y.reshape(-1)[at], ox, oy, gi,
-                            n_c)
-    retried = (np.bincount(gi, toward < -ROUND_BULGE_M, n_c)
-               > ROUND_BEHIND * np.bincount(gi, minlength=n_c))
-    if retried.any():
-        retried &= _bulging(px, py, ox, oy, gi, n_c)[0]
-        keep = keep | retried
-    if not keep.any():
-        return points, label
-    # … and their circle at θ = 0 is a round thing's, not a post's or a box's corner (θ = 0
-    # reads an arc's flanks long: that circle is smooth, if smaller than the arc's)
-    keep &= _kasa_radii(px, py, gi, n_c) >= ROUND_RADII_M[0]
-    if not keep.any():
-        return points, label
-    retried &= keep
+    a = asked
+    vi, lab, run, n_run, sel, gi = a.vi, a.lab, a.run, a.n_run, a.sel, a.gi
+    at, d0, keep, retried = a.at, a.d0, a.keep, a.retried
     if retried.any():
         # a run hollow as estimated that one line explains within noise is a wall's (its
         # noise fell behind the chord), not an arc: no circle is tried on it
@@ -435,6 +455,35 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
         points = onto_circles(points, at, cid, circ, cal.min_range_m, own_cap_m)
     return points, label
 
+
+def round_runs_compiled(points: Points, label: np.ndarray, index: np.ndarray,
+                        counts: np.ndarray, steps: np.ndarray, cal: Calibration,
+                        line_alpha: np.ndarray, line_cx: np.ndarray, line_cy: np.ndarray,
+                        profiler: Callable | None = None, snap: bool = False,
+                        own_cap_m: float = math.inf) -> tuple[Points, np.ndarray]:
+    """:func:`round_runs`, whose cheap checks (:func:`_round_asked`) are first asked of one
+    compiled call (``irring.estimation._lines.round_pre``, held to it by
+    tests/test_round_tables.py): where it keeps no run, neither would numpy's and nothing
+    is tried as an arc (most sweeps); else :func:`round_runs` itself."""
+    vi = index[points.valid.reshape(-1)[index]]
+    if vi.size < ROUND_RUN_MIN:
+        return points, label
+    f = np.ascontiguousarray
+    la0, b0 = cal._ab0
+    # numpy's exp, log, cos and sin (SIMD: libm's may differ in the last bit)
+    d0 = np.exp(la0 + b0 * np.log(np.asarray(counts, dtype=float).reshape(-1)[vi]))
+    h = points.heading.reshape(-1)[vi]
+    keep = _lines.round_pre(
+        f(vi, dtype=np.intp), f(label, dtype=np.intp).reshape(-1),
+        f(steps, dtype=np.intp).reshape(-1), points.valid.shape[1], d0, np.cos(h), np.sin(h),
+        f(points.x, dtype=float).reshape(-1), f(points.y, dtype=float).reshape(-1),
+        f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
+        ARC_GAP_STEPS, ROUND_JUMP_M, ROUND_RUN_MIN, ROUND_BULGE_M, ROUND_BEHIND,
+        float(ROUND_RADII_M[0]))
+    if not keep.any():
+        return points, label
+    return round_runs(points, label, index, counts, steps, cal, line_alpha, line_cx, line_cy,
+                      profiler, snap, own_cap_m)
 
 def onto_circles(points: Points, at: np.ndarray, circle: np.ndarray, circles: np.ndarray,
                  min_range_m: float, own_cap_m: float = math.inf) -> Points:

@@ -23,7 +23,7 @@ from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, SIGMA_FLOOR_M, Calibration
-from .arcs import local_incidence, round_runs
+from .arcs import local_incidence, round_runs_compiled
 from .bends import bowed_lines_compiled, faceted_lines_compiled, kinked_lines
 from .counts import CountsFits, counts_disown_lines
 from .far_lines import doubt_far_lines, far_posts, fused_lines, short_far_lines
@@ -280,7 +280,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    judge: Callable | None = None, bower: Callable | None = None,
                    fitter: type[CountsFits] | None = None,
                    past_finder: Callable | None = None,
-                   faceter: Callable | None = None) -> Estimate:
+                   faceter: Callable | None = None,
+                   rounder: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -317,7 +318,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     ``past_finder``: the members :func:`past_other_lines` asks
     (:func:`past_members_compiled`; the oracle: :func:`past_members`);
     ``faceter``: a line over facets as two pieces (:func:`faceted_lines_compiled`; the
-    oracle: :func:`faceted_lines`).
+    oracle: :func:`faceted_lines`); ``rounder``: round things' arcs
+    (:func:`round_runs_compiled`; the oracle: :func:`round_runs`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -340,9 +342,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     profiler = SharedProfiles(profiler or profiles_compiled,
                                None if short is None else short[0] | short[1])
     points, label = local_incidence(points, label, index, counts, steps, cal, profiler)
-    points, label = round_runs(points, label, index, counts, steps, cal, grouping.alpha,
-                               grouping.cx, grouping.cy, profiler, snap,
-                               far_sigma_cap(cal, points.max_range_m))
+    points, label = (rounder or round_runs_compiled)(
+        points, label, index, counts, steps, cal, grouping.alpha, grouping.cx, grouping.cy,
+        profiler, snap, far_sigma_cap(cal, points.max_range_m))
     if short is not None:
         points, label = doubt_far_lines(points, label, index, counts, steps, cal, *short,
                                         profiler, voter)

@@ -14,6 +14,7 @@ from ..core import Points, Reason, Sweep, beam_geometry
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, range_sigma
 from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, final_estimate,
                        nominal_calibration, settled_within_noise)
+from .arcs import round_runs
 from .bends import bowed_lines, faceted_lines
 from .counts import CountsFits, counts_contradicted
 from .far_lines import POST_LINK_M, POST_RUN_MAX, POST_SENSORS
@@ -1142,7 +1143,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           beside=beside_a_return, tracer=TraceSteps,
                           judge=counts_contradicted,
                           bower=bowed_lines, fitter=CountsFits, past_finder=past_members,
-                          faceter=faceted_lines,
+                          faceter=faceted_lines, rounder=round_runs,
                           raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
