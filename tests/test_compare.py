@@ -219,7 +219,55 @@ def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, monke
     texts = [t.get_text() for ax in figures[0].axes for t in ax.texts]
     assert ("shadow n/a: no wall the sensors could range is hidden behind an obstacle\n"
             "(in any of these scenarios)") in texts
-    assert "t_room_cylinder's table leg, r = 22 mm" in texts
+
+
+ROOM_WITHOUT_POSTS = """\
+name: lab_no_posts
+room: {outline_mm: [[0, 0], [1900, 0], [1900, 700], [1200, 1300], [0, 1300]]}
+obstacles: [{type: box, center_mm: [1500, 250], size_mm: [200, 120]}]
+robot: {poses: [{x_mm: 700, y_mm: 500}]}
+"""
+
+
+def test_the_chart_marks_the_compared_rooms_cylinders_and_no_others(tmp_path, monkeypatch):
+    """compare.png drew "t_room_cylinder's table leg, r = 22 mm" whatever rooms were
+    compared (newuser16): it marks the radii of the compared rooms' own cylinders, each
+    once, and nothing in a room without one."""
+    from irring.maps import render
+    from irring.scenario import load_scenario, loads
+
+    own = loads(ROOM_WITHOUT_POSTS, "lab_no_posts.yaml")
+    three = load_scenario("t_room_three_cylinders")   # radii 22, 22 and 70 mm
+    assert compare.cylinders([own]) == []
+    assert compare.cylinders([three, own]) == [
+        {"radius_m": 0.022, "scenarios": ["t_room_three_cylinders"]},
+        {"radius_m": 0.07, "scenarios": ["t_room_three_cylinders"]}]
+    scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": None}
+    rec = {"design": "rotating12", **scores, "hardware_time_s": 2.72, "compute_time_s": 0.004,
+           "runs": 1, "scenarios": ["lab_no_posts"], "poses": {"lab_no_posts": 1},
+           "by_scenario": {"lab_no_posts": scores}, "detection_distances_m": [0.35, 0.65],
+           "min_detectable_radius_m": [0.002, 0.0041]}
+    figures = []
+    real_figure = render.figure
+    monkeypatch.setattr(render, "figure", lambda *a, **k: figures.append(real_figure(*a, **k))
+                        or figures[-1])
+
+    def marks(cyls):
+        compare.chart({"designs": [rec], "detection_distances_m": [0.35, 0.65],
+                       "cylinders": cyls}, tmp_path / "c.png")
+        det = figures[-1].axes[3]
+        level = [ln.get_ydata()[0] for ln in det.get_lines() if ln.get_linestyle() == ":"]
+        return level, [t.get_text() for t in det.texts]
+
+    assert marks(compare.cylinders([own])) == ([], [])
+    assert marks(compare.cylinders([three, own])) == (
+        [22.0, 70.0], ["cylinder r = 22 mm in t_room_three_cylinders",
+                       "cylinder r = 70 mm in t_room_three_cylinders"])
+    # radii closer than LABEL_RATIO share a label; one above the 200 mm axis is not drawn
+    many = [{"radius_m": r, "scenarios": [sc]} for r, sc in
+            ((0.015, "posts"), (0.016, "b"), (0.03, "posts"), (0.25, "posts"))]
+    assert marks(many) == ([15.0, 16.0, 30.0], ["cylinders r = 15, 16 mm in posts, b",
+                                                "cylinder r = 30 mm in posts"])
 
 
 def test_a_miss_the_minimum_range_alone_makes_is_too_near():

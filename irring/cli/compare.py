@@ -49,8 +49,9 @@ rangers, ±15° cone, nearest echo), or a ring of your own as a study file write
 sensor, default gp2d12, and name). Each design carries its own sensor, so a laser is
 simulated as a laser in the same room, poses and effects.
 
-writes to DIR: compare.json (per-design records, every run, detection), compare.csv
-(one row per design), runs.csv (one row per run), compare.png (chart).
+writes to DIR: compare.json (per-design records, every run, detection, the rooms'
+cylinder radii), compare.csv (one row per design), runs.csv (one row per run), compare.png
+(chart; its detection panel marks the compared rooms' cylinder radii, a dotted line each).
 
 examples:
   irring compare                                        every design, the three T-rooms, 3 seeds

@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from .. import designs as designs_mod
+from ..core import Cylinder
 from ..designs import Design
 from ..maps.metrics import SCORE_KEYS
 from ..pipeline import progress_bar
@@ -99,7 +100,8 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
     :func:`irring.studies.executor.executor`; default: this process).
     ``progress``: show a bar (None: only at a terminal, see ``pipeline.progress_enabled``).
 
-    Returns ``{"designs": summarise(...), "runs": [...], "detection": {...}}``.
+    Returns ``{"designs": summarise(...), "runs": [...], "detection_distances_m": [...],
+    "cylinders": cylinders(scenarios)}``.
     """
     scs = [load_scenario(s) if isinstance(s, str) else s for s in scenarios]
     check_distinct_names(scs)
@@ -120,7 +122,18 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
             detections[d.name] = detection(d, dist, bearings=bearings)
             bar.update()
     return {"designs": summarise(runs, detections), "runs": runs,
-            "detection_distances_m": list(map(float, dist))}
+            "detection_distances_m": list(map(float, dist)), "cylinders": cylinders(scs)}
+
+
+def cylinders(scenarios) -> list[dict]:
+    """The cylinders' radii of ``scenarios``, each radius once in increasing order with the
+    scenarios it stands in: ``[{"radius_m": 0.022, "scenarios": ["t_room_cylinder"]}, …]``
+    (the chart marks them on the detection curve; a room with none marks nothing)."""
+    by_radius: dict[float, list[str]] = {}
+    for sc in scenarios:
+        for r in dict.fromkeys(ob.radius_m for ob in sc.obstacles if isinstance(ob, Cylinder)):
+            by_radius.setdefault(float(r), []).append(sc.name)
+    return [{"radius_m": r, "scenarios": by_radius[r]} for r in sorted(by_radius)]
 
 
 # --------------------------------------------------------------------------- outputs
@@ -181,6 +194,29 @@ def table(records: list[dict]) -> str:
     if near:
         lines.append(f"too near: {TOO_NEAR} ({', '.join(near)})")
     return "\n".join(lines)
+
+
+# radii closer than this ratio share one label on the chart's log axis (posts: 35, 40 mm)
+LABEL_RATIO = 1.25
+
+
+def label_groups(cyls: list[dict]) -> list[list[dict]]:
+    """:func:`cylinders`' radii (increasing) in runs whose labels would overlap."""
+    groups: list[list[dict]] = []
+    for c in cyls:
+        if groups and c["radius_m"] < groups[-1][0]["radius_m"] * LABEL_RATIO:
+            groups[-1].append(c)
+        else:
+            groups.append([c])
+    return groups
+
+
+def cylinder_label(group: list[dict]) -> str:
+    """The chart's words for radii of :func:`cylinders` drawn together."""
+    rooms = list(dict.fromkeys(sc for c in group for sc in c["scenarios"]))
+    shown = ", ".join(rooms[:3]) + (f" and {len(rooms) - 3} more" if len(rooms) > 3 else "")
+    radii = ", ".join(f"{c['radius_m'] * 1e3:g}" for c in group)
+    return f"cylinder{'s' if len(group) > 1 else ''} r = {radii} mm in {shown}"
 
 
 def _seconds(s: float) -> str:
@@ -259,8 +295,13 @@ def chart(result: dict, path) -> None:
             a_det.plot(dist[near] + 12 * nears, np.full(near.sum(), MAX_RADIUS_M * 1e3),
                        ls="", marker="x", ms=9, mew=2, color=line.get_color(), clip_on=False)
             nears += 1
-    a_det.axhline(22, color="k", ls=":", lw=1)
-    a_det.annotate("t_room_cylinder's table leg, r = 22 mm", (dist[0], 24), fontsize=8)
+    # the compared rooms' own cylinders on the scale (none above the curve's 200 mm top)
+    cyls = [c for c in result.get("cylinders", ()) if c["radius_m"] <= MAX_RADIUS_M]
+    for group in label_groups(cyls):
+        for c in group:
+            a_det.axhline(c["radius_m"] * 1e3, color="k", ls=":", lw=1)
+        a_det.annotate(cylinder_label(group), (dist[0], group[-1]["radius_m"] * 1e3 * 1.08),
+                       fontsize=8)
     a_det.set_yscale("log")
     a_det.set_xlabel("distance from the robot centre to the cylinder (mm)")
     a_det.set_ylabel("radius (mm)")
