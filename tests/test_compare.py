@@ -270,6 +270,48 @@ def test_the_chart_marks_the_compared_rooms_cylinders_and_no_others(tmp_path, mo
                                                 "cylinder r = 30 mm in posts"])
 
 
+def test_compare_bars_give_no_eta_before_the_first_run_nor_for_the_curves(monkeypatch,
+                                                                          capsys):
+    """compare's one bar said 132 s left after the first of 45 runs, for 10 s (2 workers:
+    a worker's first run starts it), and 0.5 s for the 6 s of detection curves after the
+    runs (fixes17). The runs' bar waits for each worker's first run (here one: this
+    process), the curves' bar gives none. A fake clock: the first run 4 s, the others 1 s,
+    a curve 3 s."""
+    import tqdm.std
+
+    from irring.scenario import loads
+    from irring.studies import study
+
+    now = [0.0]
+    monkeypatch.setattr(tqdm.std, "time", lambda: now[0])
+    monkeypatch.setattr(tqdm.std.tqdm, "monitor_interval", 0)   # its thread reads a real clock
+    real_run, real_curve = study.run_point, compare.detection
+    costs = iter([4.0, 1.0, 1.0, 1.0])
+
+    def run_point(task):
+        row = real_run(task)
+        now[0] += next(costs)
+        return row
+
+    def curve(*args, **kw):
+        det = real_curve(*args, **kw)
+        now[0] += 3.0
+        return det
+
+    monkeypatch.setattr(study, "run_point", run_point)
+    monkeypatch.setattr(compare, "detection", curve)
+    capsys.readouterr()
+    compare.compare([loads(ROOM_WITHOUT_POSTS, "lab_no_posts.yaml")], ["rotating12", "radial12"],
+                    2, detection_distances_m=[0.35], bearings=8, progress=True)
+    states = [s.strip() for s in capsys.readouterr().err.split("\r") if s.strip()]
+    runs = [s for s in states if s.startswith("compare runs:")]
+    curves = [s for s in states if s.startswith("compare detection curves:")]
+    assert runs[1].endswith("1/4 [00:04<?, ETA after each worker's first run]")
+    assert runs[-3].endswith("2/4 [00:05<00:02,  1.00run/s]")   # tqdm's was 00:12 here
+    assert curves[1].endswith("1/2 [00:03<?, no ETA: each design's curve costs its own]")
+    assert all("<?," in s for s in curves)   # tqdm's said 00:03 for radial12's 0.1 s
+
+
 def test_a_miss_the_minimum_range_alone_makes_is_too_near():
     """radial12's sensors sit 150.2 mm out: a cylinder whose near side is 250 mm from the
     centre is 99.8 mm from the one facing it, inside the GP2D12's 100 mm, so no radius is

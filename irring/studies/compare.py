@@ -16,11 +16,14 @@ from ..maps.metrics import SCORE_KEYS
 from ..pipeline import progress_bar
 from ..scenario import check_distinct_names, counted_seeds, load_scenario
 from . import accuracy, study
-from .executor import run_jobs
+from .executor import WARMUP_NOTE, capacity, run_jobs
 from .geometry import DEFAULT_DISTANCES_M, MAX_RADIUS_M, Detection, detection
 from .report import mean_of, write_study
 
 # --------------------------------------------------------------------------- scenes
+
+# in the detection curves' bar, where an ETA would go
+CURVES_NOTE = "no ETA: each design's curve costs its own"
 
 
 def run_scene(scenario, design: Design | str, seed: int | None = None) -> dict:
@@ -113,11 +116,17 @@ def compare(scenarios, design_list, seeds: int = 1, *, detection_distances_m=Non
     names = [sc.name for sc in scs for d in ds for k in range(seeds)]
     dist = DEFAULT_DISTANCES_M if detection_distances_m is None else detection_distances_m
     detections = {}
-    with progress_bar(len(points) + len(ds), "compare", progress, unit="run") as bar:
+    # two bars: the runs' ETA waits for each worker's first (it starts the worker); the
+    # curves, one a design after the runs, differ 30-fold in cost (radial12's 12 rays a
+    # view, rotating12's 852), so their bar gives no ETA rather than a wrong one
+    with progress_bar(len(points), "compare runs", progress, unit="run",
+                      warmup=capacity(ex), warmup_note=WARMUP_NOTE) as bar:
         tasks = study.tasks_for(points, {p.scenario: sc for p, sc in zip(
             points, [sc for sc in scs for d in ds for k in range(seeds)])})
         rows = run_jobs(study.run_point, tasks, ex, progress=lambda _: bar.update())
-        runs = [_record(r, name) for r, name in zip(rows, names)]
+    runs = [_record(r, name) for r, name in zip(rows, names)]
+    with progress_bar(len(ds), "compare detection curves", progress, unit="design",
+                      warmup=len(ds), warmup_note=CURVES_NOTE) as bar:
         for d in ds:
             detections[d.name] = detection(d, dist, bearings=bearings)
             bar.update()
