@@ -316,6 +316,71 @@ def test_a_killed_study_resumes_to_the_uninterrupted_rows(small, tmp_path):
             {study.row_key(k) for k in kept}] == [r["compute_ms"] for r in kept]
 
 
+def _process_state(pid: int) -> tuple[str, int] | None:
+    """(state, parent pid) of a process from /proc, or None when it is gone."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    state, ppid = text[text.rindex(")") + 2:].split()[:2]
+    return state, int(ppid)
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every living process below ``pid`` (zombies are done: left out)."""
+    kids: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        seen = _process_state(int(entry.name)) if entry.name.isdigit() else None
+        if seen is not None and seen[0] != "Z":
+            kids.setdefault(seen[1], []).append(int(entry.name))
+    found, todo = set(), [pid]
+    while todo:
+        for kid in kids.get(todo.pop(), ()):
+            found.add(kid)
+            todo.append(kid)
+    return found
+
+
+def _living(pids) -> list[int]:
+    return sorted(p for p in pids if (_process_state(p) or ("Z",))[0] != "Z")
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads processes from /proc")
+def test_a_sigkilled_study_leaves_no_process_behind(tmp_path):
+    """`irring study --workers 2` killed with SIGKILL left its two workers idle for good,
+    parent 1, and the forkserver and resource tracker they keep alive (FINDINGS15): each
+    worker now ends when its parent does, and the helpers with them. Polled, within 30 s
+    (0.4 s seen)."""
+    p = tmp_path / "long.yaml"
+    p.write_text("designs: [rotating12, radial12]\nscenarios: [t_room]\nseeds: 40\n")
+    results = tmp_path / "out" / study.RESULTS
+    cmd = [sys.executable, "-m", "irring", "study", str(p), "--out", str(tmp_path / "out"),
+           "--workers", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    helpers: set[int] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            helpers = _descendants(proc.pid)   # the tracker, the forkserver, 2 workers
+            if len(helpers) >= 4 and results.exists() and \
+                    results.read_text().count("\n") >= 1 + 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the study finished before it could be killed"
+        assert len(helpers) == 4, helpers
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and _living(helpers):
+            time.sleep(0.05)
+        assert _living(helpers) == []
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for pid in _living(helpers):   # what a failure left: ours, by id
+            os.kill(pid, signal.SIGKILL)
+
+
 def test_an_unreachable_scheduler_is_one_line_within_seconds():
     import socket
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import multiprocessing
+import multiprocessing.connection
 import os
 import signal
 import threading
@@ -121,7 +122,7 @@ def executor(workers: int | None = 1, dask: str | Any | None = None) -> Iterator
     if n <= 1:
         yield SerialExecutor()
         return
-    pool = ProcessPoolExecutor(max_workers=n, initializer=_ignore_sigint,
+    pool = ProcessPoolExecutor(max_workers=n, initializer=_worker_start,
                                mp_context=multiprocessing.get_context(_start_method()))
     try:
         with sigterm_as_interrupt():
@@ -133,10 +134,21 @@ def executor(workers: int | None = 1, dask: str | Any | None = None) -> Iterator
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _ignore_sigint() -> None:
+def _worker_start() -> None:
     """A pool worker leaves Ctrl-C (SIGINT to the whole process group) to the parent, which
-    stops the pool; otherwise each worker prints its own KeyboardInterrupt traceback."""
+    stops the pool; otherwise each worker prints its own KeyboardInterrupt traceback. It
+    ends when its parent does (:func:`_end_with_parent`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_end_with_parent, name="irring-parent-watch", daemon=True).start()
+
+
+def _end_with_parent() -> None:
+    """Wait for the pool's parent to end, then end this worker. A parent killed with SIGKILL
+    never shuts its pool down, and the workers' call queue never closes (each worker holds
+    its ends), so they idled on with the forkserver they keep alive; the parent's sentinel
+    (multiprocessing's, under fork, spawn and forkserver alike) becomes ready when it ends."""
+    multiprocessing.connection.wait([multiprocessing.parent_process().sentinel])
+    os._exit(1)   # the parent is gone: no one to report to, nothing to flush
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
