@@ -5,20 +5,22 @@ command's files into a hidden sibling folder of ``--out`` and moves them in toge
 Ctrl-C, a full disk or a crash leaves the previous files untouched and two runs into one
 folder leave one run's set, never a mix; :func:`atomic_file` does the same for one file
 (--mcap, a study's results.parquet, a calibration). Every command's outputs go through them;
-:func:`safe_name` makes a scenario name one folder name inside its parent; :func:`real_path`
-resolves a path that may be a loop of links.
+:func:`safe_name` makes a name one folder name, :func:`folder_name` the one no other name
+gets (``out/<name>``); :func:`real_path` resolves a path that may be a loop of links.
 """
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import hashlib
 import os
 import re
 import secrets
 import shutil
 import tempfile
 import time
+import unicodedata
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -50,6 +52,37 @@ def safe_name(name: str, default: str = "scenario") -> str:
     text = re.sub(r"[^A-Za-z0-9._-]+", "_", str(name))
     text = re.sub(r"_+", "_", re.sub(r"\.\.+", "_", text))
     return text[:80].strip("._") or default
+
+
+# replay's folder is out/<run>-replay: no other name's folder ends so
+REPLAY_SUFFIX = "-replay"
+_PLAIN = re.compile(r"[a-z0-9._-]+")
+
+
+def folder_name(name: str, default: str = "scenario") -> str:
+    """The folder of ``name`` (a scenario's, a study file's, a recording's) where a command
+    writes without --out: ``name`` itself when it is :func:`safe_name`'s and only lower-case
+    letters, digits and ``._-`` (not ending in ``-replay``), else its safe name, ``~`` and 8
+    hex digits of its SHA-256. So two names never share a folder, even on a file system
+    blind to case (``room`` and ``room 🏠``, ``room a`` and ``room_a``, ``Room`` and
+    ``room``: safe_name makes each pair one); the Unicode forms of one name (NFC, NFD) are
+    one name (``café``: ``cafe~850f7dc4``)."""
+    text = unicodedata.normalize("NFC", str(name))
+    if _PLAIN.fullmatch(text) and safe_name(text) == text and not text.endswith(REPLAY_SUFFIX):
+        return text
+    digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+    ascii_ = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode()  # é → e
+    return f"{safe_name(ascii_, default)[:71]}~{digest}"
+
+
+def folder_note(name: str, folder: str | Path, what: str, suffix: str = "") -> str | None:
+    """The line that says why ``folder`` (:func:`folder_name` of ``what`` ``name``, then
+    ``suffix``) is not the name itself; None when it is."""
+    if Path(folder).name == f"{name}{suffix}":
+        return None
+    return (f"{printable(str(folder))}/ is the folder of {what} {printable(repr(str(name)))}: "
+            "a name of other than lower-case letters, digits and ._- is written with ~ and 8 "
+            "hex digits of its SHA-256, so no other name's outputs replace it")
 
 
 def _replaceable(path: Path) -> bool:

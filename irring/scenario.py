@@ -15,6 +15,7 @@ import math
 import re
 import types
 import typing
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -779,16 +780,18 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
 
 
 def check_distinct_names(scenarios: Sequence[Scenario]) -> None:
-    """ScenarioError when two scenarios share a ``name:``: compare and bench accuracy report
-    each scene by its name, so two rooms of one name would be averaged as one."""
+    """ScenarioError when two scenarios share a ``name:`` (its Unicode forms, NFC and NFD,
+    are one name): compare and bench accuracy report each scene by its name, so two rooms
+    of one name would be averaged as one, or printed as one name twice."""
     seen: dict[str, Scenario] = {}
     for sc in scenarios:
-        other = seen.setdefault(sc.name, sc)
+        other = seen.setdefault(unicodedata.normalize("NFC", sc.name), sc)
         if other is not sc:
+            form = "" if other.name == sc.name else " (in another Unicode form)"
             raise ScenarioError(
                 f"{sc.source or sc.name}: named {sc.name!r}, as {other.source or other.name} "
-                "is; the results name each scenario by its `name:`, so the two rooms would be "
-                "merged into one; give them different names")
+                f"is{form}; the results name each scenario by its `name:`, so the two rooms "
+                "would be merged into one; give them different names")
 
 
 def counted_seeds(sc: Scenario, count: int) -> list[int]:

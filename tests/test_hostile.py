@@ -1961,7 +1961,7 @@ def test_a_scenario_name_never_leaves_the_out_parent(tmp_path, monkeypatch, caps
     monkeypatch.chdir(tmp_path)
     assert main(["run", "evil.yaml", "--no-animation"]) == 0
     made = sorted(p.name for p in (tmp_path / "out").iterdir())
-    assert made == ["escape_x_y"]
+    assert made == ["escape_x_y~c48a397d"]   # its own folder: tests/test_folder_names.py
     assert sorted(os.listdir(tmp_path)) == ["evil.yaml", "out"]
 
 

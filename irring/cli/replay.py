@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .. import pipeline
 from ..errors import UsageError
-from ..outputs import RUN_FILES, check_out, real_path, safe_name
+from ..outputs import REPLAY_SUFFIX, RUN_FILES, check_out, folder_name, folder_note, real_path
 from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path,
                       spare_inputs)
 from .run import report
@@ -24,7 +24,9 @@ one this irring cannot read (from another version) is named, and the map not sco
 Writes into --out the same files as `irring run`: map.png, map_building.gif, map.pgm +
 map.yaml (ROS map_server), and sweeps.npz. Default: ./out/<run>-replay, where <run> is the
 folder of a sweeps.npz (out/t_room/sweeps.npz → out/t_room-replay), else the file's own
-name (lab.npz → out/lab-replay).
+name (lab.npz → out/lab-replay); a name of other than lower-case letters, digits and ._-
+gets ~ and 8 hex digits of its SHA-256 (My Lab.npz → out/My_Lab~8c23cccc-replay), so two
+runs never share a replay folder, nor a replay a run's.
 
 examples:
   irring replay out/t_room/sweeps.npz
@@ -52,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         stem = real_path(args.recording).parent.name if args.recording.stem == "sweeps" \
             else args.recording.stem
-        out = Path("out") / f"{safe_name(stem, 'recording')}-replay"
+        out = Path("out") / f"{folder_name(stem, 'recording')}{REPLAY_SUFFIX}"
     spare_inputs({"--mcap": args.mcap}, {"RECORDING": args.recording,
                                          "--calibration": args.calibration})
     if real_path(out) == real_path(args.recording).parent:
@@ -69,4 +71,8 @@ def run(args: argparse.Namespace) -> int:
     paths = pipeline.write_outputs(result, out, animation=not args.no_animation,
                                    mcap=args.mcap)
     report(result, paths, as_json=args.json)
+    note = None if args.out is not None or args.json else folder_note(
+        stem, out, "the replay of", REPLAY_SUFFIX)
+    if note:
+        print(f"  note      {note}")
     return 0

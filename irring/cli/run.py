@@ -10,7 +10,7 @@ from pathlib import Path
 from .. import errors, pipeline
 from ..core import score_text
 from ..maps import metrics
-from ..outputs import RUN_FILES, check_out, safe_name
+from ..outputs import RUN_FILES, check_out, folder_name, folder_note
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path, seed,
                       spare_inputs)
@@ -20,7 +20,8 @@ Simulate one sweep of the ring at each of the scenario's scan poses, turn the AD
 into end points with the paper's iterative estimator, build the occupancy grid pose by pose
 (10 mm cells by default) and score it against the scenario's ground truth.
 
-Writes into --out (default ./out/<scenario>):
+Writes into --out (default ./out/<scenario>; a name of other than lower-case letters,
+digits and ._- gets ~ and 8 hex digits of its SHA-256, so no two names share a folder):
   map.png            the map: unknown grey, free white, occupied black; true walls in blue,
                      scan poses in red, each pose's sensor reach as a dashed orange circle
   map_building.gif   the map being built, sweep by sweep
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     spare_inputs({"--mcap": args.mcap}, {"SCENARIO": args.scenario,
                                          "--calibration": args.calibration})
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
-    out = check_out(args.out if args.out is not None else Path("out") / safe_name(scenario.name),
+    out = check_out(args.out if args.out is not None else Path("out") / folder_name(scenario.name),
                     held=False, files=RUN_FILES)   # a study holding it: refused before the run
     mcap_beside_outputs(args.mcap, out)
     frames = 0 if args.no_animation else pipeline.FRAMES_PER_SWEEP
@@ -82,6 +83,10 @@ def run(args: argparse.Namespace) -> int:
     paths = pipeline.write_outputs(result, out, animation=not args.no_animation,
                                    mcap=args.mcap)
     report(result, paths, as_json=args.json)
+    note = None if args.out is not None or args.json else \
+        folder_note(scenario.name, out, "the scenario named")
+    if note:
+        print(f"  note      {note}")
     return 0
 
 

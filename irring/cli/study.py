@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .. import errors
 from ..core import MAX_RUNS
-from ..outputs import check_out, safe_name
+from ..outputs import check_out, folder_name, folder_note
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
 from ..studies.executor import WARMUP_NOTE, capacity, executor
@@ -63,7 +63,9 @@ def register(p: argparse.ArgumentParser) -> None:
              EPILOG)
     p.add_argument("file", metavar="FILE.yaml", help="the study file (see below)")
     p.add_argument("--out", type=out_path, default=None, metavar="DIR",
-                   help="output folder (default: out/<file name without .yaml>)")
+                   help="output folder (default: out/<file name without .yaml>, with ~ and "
+                        "8 hex digits of its SHA-256 after a name of other than lower-case "
+                        "letters, digits and ._-)")
     add_executor_options(p)
     p.add_argument("--resume", action="store_true",
                    help="keep the runs already in DIR/results.csv and run only the others")
@@ -74,7 +76,8 @@ def register(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     spec = study.load_study(args.file)
-    out = check_out(args.out if args.out else Path("out") / safe_name(Path(args.file).stem),
+    stem = Path(args.file).stem
+    out = check_out(args.out if args.out else Path("out") / folder_name(stem),
                     files=study.SUMMARY_FILES.values())
     t0 = time.perf_counter()
     shown = progress_enabled() and not args.json
@@ -115,4 +118,7 @@ def run(args: argparse.Namespace) -> int:
           "front of hardware time against occupied F1 (f1), coverage (cov), range RMSE (rmse)")
     for kind, path in result["paths"].items():
         print(f"  {kind:<13}{errors.printable(str(path))}")
+    note = None if args.out else folder_note(stem, out, "the study file")
+    if note:
+        print(f"  note         {note}")
     return 0

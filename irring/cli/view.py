@@ -9,7 +9,7 @@ from pathlib import Path
 from .. import errors
 from ..errors import OutputError
 from ..outputs import (VIEW_FILE, VIEW_SOFTWARE, atomic_file, check_out, check_replaceable,
-                       safe_name)
+                       folder_name, folder_note)
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ..simulation import gl
 from ._common import add_pose_option, describe, out_path, pose_index
@@ -21,9 +21,10 @@ where nothing is within the sensor's range).
 
 With --out, or without a display, the picture is rendered offscreen (EGL or OSMesa, no
 display needed; MUJOCO_GL=egl|osmesa picks one) and written as a PNG (default without a
-display: ./out/<scenario>/view.png). With a display and no --out, MuJoCo's interactive
-viewer opens and plays the sweep, beams drawn, until you close it; a DISPLAY that cannot
-be opened (a forwarded X display gone) is said on stderr and the picture written instead.
+display: ./out/<scenario>/view.png, in the folder `irring run` writes). With a display and
+no --out, MuJoCo's interactive viewer opens and plays the sweep, beams drawn, until you
+close it; a DISPLAY that cannot be opened (a forwarded X display gone) is said on stderr
+and the picture written instead.
 
 examples:
   irring view t_room_cylinder --out cyl.png        # the picture, headless
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
             return 0
         if problem != "no display":   # a display was named: say why no window opens
             print(f"irring view: {problem}; writing the picture instead", file=sys.stderr)
-    out = picture_path(args.out if args.out is not None else Path("out") / safe_name(scenario.name))
+    out = picture_path(args.out if args.out is not None else Path("out") / folder_name(scenario.name))
     # a FILE.png named by --out may be anyone's; view.png (in out/<scenario>/ or the --out
     # folder) is view's by its name
     named = out == args.out
@@ -90,6 +91,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {errors.printable(str(path))}: {scenario.name}, pose {args.pose}, motor step {scene.step}; "
           f"{int(b.hits.shape[0])} of {b.distance_m.size} beams hit within "
           f"{b.max_range_m * 1000:.0f} mm")
+    note = None if args.out is not None else \
+        folder_note(scenario.name, out.parent, "the scenario named")
+    if note:
+        print(f"note: {note}")
     return 0
 
 
