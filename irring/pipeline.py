@@ -239,7 +239,10 @@ def stuck_sensors(sweeps: Sequence[Sweep], points: Sequence[Points]) -> list[str
     wall the map would show (one line for the sensors stuck at one count). Silence all round
     (no return) is not warned of: a sensor that meets no wall within its reach reads so too,
     and maps nothing; 0 counts all round, where another sensor never reads 0, is: a powered
-    GP2 never outputs 0 V, a cut wire does, and its beams map free to its reach."""
+    GP2 never outputs 0 V, a cut wire does, and its beams map free to its reach. Every
+    sensor at 0 counts all round is too (one line): an ADC unpowered or without its
+    reference reads so, and no sensor model's no-return level is 0 counts at any ADC a
+    scenario may have (8 … 16 bits, up to 50 V)."""
     poses = {tuple(np.asarray(s.pose, float).round(6)) for s in sweeps}
     if len(poses) < 2 or len(points) != len(sweeps):
         return []
@@ -265,6 +268,13 @@ def stuck_sensors(sweeps: Sequence[Sweep], points: Sequence[Points]) -> list[str
     # 0 V at every reading, where another sensor's silence reads above it: no GP2 outputs
     # 0 V powered (with nothing in range it reads its no-return level), a cut wire does
     live = (counts > 0).all(axis=0)
+    if not counts.any():
+        out.append(f"every sensor (0 … {counts.shape[1] - 1}) read 0 counts at every one of "
+                   f"their {len(counts)} readings each, at {len(poses)} poses, where a powered "
+                   "sensor with nothing in range reads its no-return level: an ADC unpowered "
+                   "or without its reference reads so. The readings are mapped as no return, "
+                   "free to the sensors' reach, walls or not; check the ADC's supply, "
+                   "reference and wiring")
     dead = np.flatnonzero((counts == 0).all(axis=0)) if live.any() else []
     if len(dead):
         who = f"sensor {dead[0]}" if len(dead) == 1 else f"sensors {', '.join(map(str, dead))}"
@@ -676,6 +686,13 @@ def _check_no_moved_copy(scenario: Scenario | None, sweeps: Sequence[Sweep],
                           and np.array_equal(sweeps[i].counts, counts)):
             continue
         xy = [np.asarray(sweeps[j].pose, float)[:2] for j in (i, k)]
+        if (counts == counts.flat[0]).all():   # not a copy: nothing simulated reads so
+            raise rec.RecordingError(
+                f"{recording}: sweeps {i + 1} and {k + 1} read {counts.flat[0]:g} counts at "
+                f"every one of their {counts.size} readings each; the recorded scenario "
+                f"{scenario.name!r} adds noise of {noise.sigma_v / step_v:.0f} counts (σ "
+                f"{noise.sigma_v:g} V) to every reading, so no sweep it simulates reads one "
+                "count all round: the recording was edited or damaged")
         raise rec.RecordingError(
             f"{recording}: sweep {k + 1} (at ({xy[1][0]:g}, {xy[1][1]:g}) m) repeats sweep "
             f"{i + 1}'s (at ({xy[0][0]:g}, {xy[0][1]:g}) m) {counts.size} counts reading for "
