@@ -992,3 +992,100 @@ def test_a_device_that_only_ever_garbles_its_answer_still_ends_in_a_timeout(virt
         ring.sweep()
     stops = [m.TYPE for m in port.sent].count("IRSTP")
     assert 3 < stops < 200
+
+
+# --------------------------------------------------------------------------- a session's ends
+
+
+class Wire(DevicePort):
+    """The emulated firmware on an in-process port, keeping every byte the host wrote;
+    ``fail`` (an exception) is raised by the first read after ``after`` IRSCN were read."""
+
+    def __init__(self, device: Device, fail: BaseException | None = None, after: int = 5):
+        super().__init__(device)
+        self.written: list[bytes] = []
+        self.fail, self.after, self.scans_read = fail, after, 0
+
+    def write(self, data_: bytes) -> int:
+        self.written.append(bytes(data_))
+        return super().write(data_)
+
+    def read(self, size: int = 1) -> bytes:
+        if self.fail is not None and self.scans_read >= self.after:
+            fail, self.fail = self.fail, None
+            raise fail
+        out = super().read(size)
+        self.scans_read += out.count(b"IRSCN")   # (a read of 1 byte may take the $ alone)
+        return out
+
+
+HELLO, SWEEP = b"$IRHLO*26D0\r\n", b"$IRSWP,-35,35,1,0*52A4\r\n"
+STOP, PARK = b"$IRSTP*39C4\r\n", b"$IRGTO,0*E3DD\r\n"
+
+
+def test_closing_after_a_sweep_turns_the_ring_back_to_step_0(virtual_time):
+    """A sweep ends at its last step (35). The firmware takes where it stands when it starts
+    for step 0, and an Arduino restarts each time its port is opened (DTR): the next
+    session's sweeps were 37.8° off (F1 0.997 -> 0.389, exit 0). Closing turns it back."""
+    device = Device(StandInSource(), realtime=True)
+    port = Wire(device)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    ring.sweep()
+    assert device._position == 35 and port.written == [HELLO, SWEEP]
+    counted = ring.stats.as_dict()
+    ring.close()
+    assert port.written == [HELLO, SWEEP, PARK]
+    assert device._position == 0 and ring.park_failure is None
+    assert ring.stats.as_dict() == counted   # the session's link counters: its sweeps'
+    ring.close()
+    assert port.written == [HELLO, SWEEP, PARK]
+
+
+@pytest.mark.parametrize("fail, sent", [(KeyboardInterrupt(), [STOP, PARK]),
+                                        (RuntimeError("a bug"), [STOP, PARK])])
+def test_ctrl_c_or_an_error_mid_sweep_stops_the_ring_and_turns_it_back(virtual_time, fail,
+                                                                       sent):
+    """Ctrl-C sent one IRSTP and left the ring where it stopped (step -30); any other
+    exception out of a sweep left the device sweeping on to step 35 after irring exited.
+    Ctrl-C's IRSTP is sent at once (close() waits for its IRDON), the other's by close()."""
+    device = Device(StandInSource(), realtime=True)
+    port = Wire(device, fail=fail, after=5)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    with pytest.raises(type(fail)):
+        ring.sweep()
+    assert device._job is not None or port.written[-1] == STOP   # it sweeps on, unless told
+    ring.close()
+    assert port.written == [HELLO, SWEEP, *sent]
+    assert device._job is None and device._position == 0 and ring.park_failure is None
+
+
+def test_a_ring_that_stopped_answering_is_asked_nothing_more_at_close(virtual_time):
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            return [p.Scan(0, msg.from_step, 0, (10, 11))]
+        return []
+
+    port = ScriptPort(script)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S, retries=0).open()
+    with pytest.raises(DeviceTimeout):
+        ring.sweep()
+    before = list(port.sent)
+    ring.close()
+    assert port.sent == before and ring.park_failure is None
+
+
+def test_a_ring_that_does_not_return_to_step_0_is_said_to_stand_elsewhere(virtual_time):
+    ring = SerialRing(ScriptPort(scripted(lambda msg: [
+        *(p.Scan(i, s, i, (10, 11)) for i, s in enumerate(range(-3, 4))), p.Done(6)])),
+        timeout_s=TIMEOUT_S).open()
+    ring.sweep()
+    counted = ring.stats.as_dict()
+    ring.close()
+    assert ring.park_failure == (
+        "the ring on script:// was not turned back to step 0 at the end of the session (no "
+        "IRPOS answered IRGTO,0 within 0.13 s). Its firmware takes the step it stands at when "
+        "it starts for step 0, and an Arduino restarts each time its port is opened: turn the "
+        "ring radial by hand, or send $IRGTO,0*E3DD, before the next session")
+    assert ring.stats.as_dict() == counted   # the wait for IRPOS is no timeout of a sweep

@@ -185,28 +185,35 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
         return errors.USAGE
     guided = None
     try:
-        # Ctrl-C or `kill` stops the procedure, but the placements read are kept
-        with errors.sigterm_as_interrupt(), ring:   # the handshake sets ring.info (or raises)
-            warn_protocol(ring, print)
-            if args.sensor >= ring.info.nsensors:   # before the first placement
-                return _no_such_sensor(args, f"the ring on {args.port}", ring.info.nsensors)
-            guided = GuidedCalibration(
-                read_sweep=lambda: ring.sweep(resweep=1), prompt=input, show=print,
-                sensor_model=scenario.sensor.model, adc_bits=ring.info.adc_bits,
-                vref_v=scenario.sensor.vref_v, sensor=args.sensor, sweeps=args.sweeps or 4,
-                emitter_offset_guess_m=scenario.ring.emitter_offset_m)
-            guided.check_steps(ring.info.max_step - ring.info.min_step + 1)   # before a wall
-            if progress is not None:
-                why = progress.mismatch(guided)
-                if why:
-                    print(f"irring calibrate: error: {args.resume}: cannot resume: {why}",
-                          file=sys.stderr)
-                    return errors.INPUT
-                guided.done.update((i, r) for i, (_, r) in progress.done.items())
-                guided.resumed = len(guided.done)
-                print(f"resuming from {args.resume}: {len(guided.done)} of "
-                      f"{len(guided.placements)} placements read before")
-            cal = guided.run()
+        try:
+            # Ctrl-C or `kill` stops the procedure, but the placements read are kept; the
+            # handshake sets ring.info (or raises)
+            with errors.sigterm_as_interrupt(), ring:
+                warn_protocol(ring, print)
+                if args.sensor >= ring.info.nsensors:   # before the first placement
+                    return _no_such_sensor(args, f"the ring on {args.port}", ring.info.nsensors)
+                guided = GuidedCalibration(
+                    read_sweep=lambda: ring.sweep(resweep=1), prompt=input, show=print,
+                    sensor_model=scenario.sensor.model, adc_bits=ring.info.adc_bits,
+                    vref_v=scenario.sensor.vref_v, sensor=args.sensor, sweeps=args.sweeps or 4,
+                    emitter_offset_guess_m=scenario.ring.emitter_offset_m)
+                # before a wall is placed
+                guided.check_steps(ring.info.max_step - ring.info.min_step + 1)
+                if progress is not None:
+                    why = progress.mismatch(guided)
+                    if why:
+                        print(f"irring calibrate: error: {args.resume}: cannot resume: {why}",
+                              file=sys.stderr)
+                        return errors.INPUT
+                    guided.done.update((i, r) for i, (_, r) in progress.done.items())
+                    guided.resumed = len(guided.done)
+                    print(f"resuming from {args.resume}: {len(guided.done)} of "
+                          f"{len(guided.placements)} placements read before")
+                cal = guided.run()
+        finally:   # the ring stopped and turned back to step 0, or why not
+            if ring.park_failure:
+                print(f"irring calibrate: warning: {errors.printable(ring.park_failure, 2000)}",
+                      file=sys.stderr)
         path = cal.save(out)
     except BaseException as exc:   # noqa: BLE001 - say why, keep what was read, then stop
         status = _say_why(exc, guided)

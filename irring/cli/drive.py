@@ -51,6 +51,11 @@ pose at the origin).
 Between poses drive waits for Enter when run at a terminal (--no-wait to skip); the emulator
 moves its robot by itself at every full sweep.
 
+However it ends (done, an error, Ctrl-C), drive stops a sweep still running (IRSTP) and turns
+the ring back to step 0 (IRGTO,0): its firmware takes where the ring stands when it starts for
+step 0, and an Arduino restarts each time its port is opened. A ring that does not confirm it
+is named in a warning (turn it radial by hand before the next session).
+
 Exit status: 0 all poses swept; 3 no device, or it stopped answering, disconnected, refused
 a sweep, made no progress, or rebooted away from step 0, where it would take another step for
 its step 0 (what arrived before is still mapped and written); 130 Ctrl-C, SIGTERM,
@@ -285,7 +290,10 @@ def run(args: argparse.Namespace) -> int:
             acq = pipeline.acquire(ring, poses[:n], steps=steps, progress=False, before=move,
                                    after=swept, interruptible=True)
     finally:
-        ring.close()
+        ring.close()   # stops the ring if it still turns, and turns it back to step 0
+        if ring.park_failure:
+            _tell(f"irring drive: warning: {errors.printable(ring.park_failure, 2000)}",
+                  file=sys.stderr)
     sweeps, failure = acq.sweeps, acq.error
     stopped = isinstance(failure, (KeyboardInterrupt, EOFError))
     if stopped:

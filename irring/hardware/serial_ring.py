@@ -5,7 +5,8 @@
 
 A step that never arrived is listed in ``Sweep.missing_steps``, never invented; a silent
 device raises :class:`DeviceTimeout`, a closed port :class:`DeviceDisconnected`, both
-holding ``.partial``. Ports, link checks and counters: docs/protocol.md.
+holding ``.partial``. Closing stops a sweep still running and turns the ring back to step 0.
+Ports, link checks, counters and the return to step 0: docs/protocol.md.
 """
 
 from __future__ import annotations
@@ -353,6 +354,11 @@ class SerialRing:
         with :class:`HandshakeError` saying how to reflash it.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
 
+    :meth:`close` ends the session: a sweep or move still running is stopped (IRSTP) and
+    the ring turned back to step 0 (IRGTO,0), where the firmware, reset by the next open,
+    takes it to stand; :attr:`park_failure` says why it could not (None: done or not
+    needed). Skipped after the link was lost, or after the device rebooted or changed.
+
     A :class:`irring.core.RingSource`: ``pipeline.acquire`` drives it as it drives SimRing.
     """
 
@@ -401,6 +407,12 @@ class SerialRing:
         # an IRDON -1 (none sent since power-up) after IRSCN were taken: the device said it
         # rebooted; the step the ring stood at then (None: unknown)
         self._woke: tuple[int | None] | None = None
+        self._running = False       # an IRSWP or IRGTO sent and not yet ended (IRDON, IRPOS)
+        self._stop_sent = False     # an IRSTP sent for it, its IRDON not read yet
+        self._moved = False         # the motor may stand away from step 0
+        self._link_dead = False     # the device stopped answering or the port failed
+        self._position_lost = False  # it rebooted away from step 0, or another ring answered
+        self.park_failure: str | None = None
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -438,12 +450,67 @@ class SerialRing:
         return self
 
     def close(self) -> None:
+        """Stop a sweep or move still running, turn the ring back to step 0, close the port
+        (a second Ctrl-C meanwhile stops the ring where it is, and is not raised)."""
         if self._port is not None:
             try:
-                self._port.close()
-            except (serial.SerialException, OSError):
+                self._park()
+            finally:
+                try:
+                    self._port.close()
+                except (serial.SerialException, OSError):
+                    pass
+                self._port = None
+
+    def _park(self) -> None:
+        """IRSTP if a sweep or move may still run, then IRGTO,0 if the motor may stand
+        elsewhere: a board that resets when its port is next opened (an Arduino) takes the
+        step it stands at for step 0. Not counted in :attr:`stats`; a failure is said in
+        :attr:`park_failure`."""
+        self.park_failure = None
+        if self.info is None or self._link_dead or not (self._running or self._moved):
+            return
+        counted = dataclasses.replace(self.stats)
+        why = None
+        try:
+            if self._running:
+                if not self._stop_sent:
+                    self._send(p.Stop())
+                if self._await((p.Done,), self.timeout_s) is None:
+                    why = f"no IRDON answered IRSTP within {self.timeout_s:g} s"
+                else:
+                    self._running = False
+            if why is None and self._moved and not self._position_lost:
+                info = self.info
+                self._send(p.GoTo(0))
+                travel = info.max_step - info.min_step
+                msg = self._await((p.Position, p.ErrorReply),
+                                  self.timeout_s + travel * MOVE_ALLOWANCE_S)
+                if isinstance(msg, p.Position) and msg.step == 0:
+                    self._running = self._moved = False
+                    self._position = 0
+                else:
+                    why = ("no IRPOS answered IRGTO,0 within "
+                           f"{self.timeout_s + travel * MOVE_ALLOWANCE_S:g} s" if msg is None
+                           else f"it answered IRGTO,0 with {p.encode(msg).decode().strip()}")
+        except KeyboardInterrupt:
+            why = "interrupted: stopped where it stood"
+            try:
+                self._send(p.Stop())
+            except DeviceError:
                 pass
-            self._port = None
+        except DeviceError as exc:
+            why = str(exc)
+        finally:
+            self.stats = counted
+        if why is not None:
+            self.park_failure = (
+                f"the ring on {self.port_name} was not turned back to step 0 at the end of the "
+                f"session ({why}). Its firmware takes the step it stands at when it starts for "
+                f"step 0, and an Arduino restarts each time its port is opened: turn the ring "
+                f"radial by hand, or send {p.encode(p.GoTo(0)).decode().strip()}, before "
+                f"the next session")
+            log.warning("%s", self.park_failure)
 
     def __enter__(self) -> SerialRing:
         return self.open()
@@ -474,6 +541,9 @@ class SerialRing:
     def _send(self, msg: p.Message) -> None:
         line = p.encode(msg, version=self.decoder.version)
         log.debug("host → %r", line)
+        if isinstance(msg, (p.SweepCommand, p.GoTo)):
+            self._running = self._moved = True
+        self._stop_sent = isinstance(msg, p.Stop)
         try:
             self.port.write(line)
         except serial.SerialTimeoutException as exc:
@@ -521,6 +591,8 @@ class SerialRing:
         """The error for a lost link; sweep() attaches the partial sweep and report.
         ``lost_scans``: IRSCN this sweep lost before the device fell silent, which blames
         the link (a board that hangs loses nothing on the way first)."""
+        if cls in (DeviceDisconnected, DeviceTimeout):
+            self._link_dead = True   # nothing more to ask of it (close() parks no ring)
         if cls is DeviceDisconnected:
             self.stats.disconnects += 1
             msg = (f"ring on {self.port_name} disconnected ({what}). Check the cable and power; "
@@ -572,6 +644,7 @@ class SerialRing:
                         refusals.append(msg)
                         if msg.code == p.ERR_BUSY:
                             self._send(p.Stop())
+                            self._moved = True   # an earlier session's sweep: turned away
                         refused = True
             if not refused:
                 self.stats.timeouts += not probed   # a probe that timed out counted itself
@@ -612,8 +685,8 @@ class SerialRing:
                 f"echoes). Check that it is the ring's port and that the ring is powered")
         raise HandshakeError(
             f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
-            f"each. Check the port, the baud rate ({self.baudrate}), that the ring is powered "
-            f"and runs IRR protocol v{p.PROTOCOL_VERSION} firmware (firmware/README.md) "
+            f"each. Check the port, the baud rate ({self.baudrate}), that the ring is "
+            f"powered and runs IRR protocol v{p.PROTOCOL_VERSION} firmware (firmware/README.md) "
             f"({self.stats.checksum_failures} checksum failures, {self.stats.malformed} "
             f"malformed sentences, {self.stats.ignored_bytes} stray bytes seen)."
             + (" Sentences that arrive garbled point at line noise or a loose cable."
@@ -636,6 +709,7 @@ class SerialRing:
 
     def _accept_info(self, info: p.Info) -> p.Info:
         self._clock = self._woke = None   # a new session: its clock and numbering are new
+        self._link_dead = False
         if info.proto == 1 and self.decoder.version == 1:
             what = (f"the device on {self.port_name} runs IRR protocol v1 firmware "
                     f"({info.firmware}), whose 8-bit XOR checksum lets two bit errors in one "
@@ -687,6 +761,7 @@ class SerialRing:
             msg = self._await((p.Position, p.ErrorReply), self.timeout_s)
             if isinstance(msg, p.Position):
                 self._position = msg.step
+                self._running, self._moved = False, msg.step != 0
                 return msg.step
             if isinstance(msg, p.ErrorReply):
                 self._raise_rejected(msg, f"IRGTO,{step}")
@@ -701,6 +776,7 @@ class SerialRing:
             if isinstance(msg, p.Done):
                 self._last_seq = msg.seq if msg.seq >= 0 else None   # -1: (re)booted
                 self._said_booted(msg.seq)
+                self._running = False
                 return msg.seq
         return None
 
@@ -708,6 +784,7 @@ class SerialRing:
         """An IRINF after the handshake: a late answer if it equals the handshake's, else
         :class:`DeviceChanged` (the board was reflashed or swapped)."""
         if info != self.info:
+            self._position_lost = True   # not the ring whose steps this session counted
             raise DeviceChanged(
                 f"the device on {self.port_name} now announces another ring: "
                 f"{_ring_text(info)}, where the handshake said {_ring_text(self.info)}; "
@@ -817,7 +894,7 @@ class SerialRing:
             if isinstance(exc, KeyboardInterrupt):
                 # the ring would turn on to the sweep's end: one IRSTP, not waited for
                 try:
-                    self._send(p.Stop())
+                    self._send(p.Stop())   # (close() waits for its IRDON)
                 except DeviceError:
                     pass
             else:
@@ -1048,6 +1125,7 @@ class SerialRing:
                     self._last_seq = msg.seq if msg.seq >= 0 else None
                     self._said_booted(msg.seq)
                     ps.done = True
+                    self._running = False
                     return
                 elif isinstance(msg, p.ErrorReply):
                     self.stats.device_errors += 1
@@ -1144,6 +1222,7 @@ class SerialRing:
                f"by {abs(stood)} steps ({deg:.1f}°)")
         fix = ("turn the ring back to radial by hand" if stood is None else
                f"turn the ring back to radial (IRGTO,{-stood} turns it there now)")
+        self._position_lost = True   # its step 0 is not radial: close() must not go there
         return DeviceRebooted(
             f"the ring on {self.port_name} rebooted {where}: {sign}, and its clock started "
             f"anew ({scan.t_ms} ms after {self._clock} ms). Its firmware takes the step it "
@@ -1168,6 +1247,7 @@ class SerialRing:
             return self._lost(DeviceTimeout, what, lost)
         spoken = self.decoder.version
         them = 3 - spoken   # the other of p.PROTOCOL_VERSIONS
+        self._position_lost = True
         return DeviceChanged(
             f"the device on {self.port_name} now frames its sentences for IRR protocol "
             f"v{them} ({other} sentences with a {p.CHECK_DIGITS[them]}-digit check field "
