@@ -1089,3 +1089,76 @@ def test_a_ring_that_does_not_return_to_step_0_is_said_to_stand_elsewhere(virtua
         "it starts for step 0, and an Arduino restarts each time its port is opened: turn the "
         "ring radial by hand, or send $IRGTO,0*E3DD, before the next session")
     assert ring.stats.as_dict() == counted   # the wait for IRPOS is no timeout of a sweep
+
+
+class ResettingBoard(DevicePort):
+    """An Arduino Uno behind its USB serial port: opening the port resets it (DTR); it starts
+    up for 65 ms, then optiboot waits 1 s for a programmer, and a byte that is no STK500
+    command sends it to the firmware 16 ms (watchdog) + 65 ms later. Bytes sent before the
+    firmware runs are lost."""
+
+    def __init__(self, device: Device):
+        super().__init__(device, name="/dev/ttyACM0")
+        self.is_open = False
+        self.lost: list[bytes] = []
+        self.written: list[bytes] = []
+
+    def open(self) -> None:
+        self.is_open = True
+        self.opened = time.monotonic()
+        self.runs_at = self.opened + 0.065 + 1.0
+
+    def write(self, data_: bytes) -> int:
+        now = time.monotonic()
+        self.written.append(bytes(data_))
+        if now < self.runs_at:
+            if now >= self.opened + 0.065:   # to the bootloader: on to the firmware
+                self.runs_at = min(self.runs_at, now + 0.016 + 0.065)
+            self.lost.append(bytes(data_))
+            return len(data_)
+        return super().write(data_)
+
+
+@pytest.mark.parametrize("boot_s, took, lost, timeouts", [(0, 2.0, 2, 2), (2.0, 0.5, 2, 0)])
+def test_a_board_that_restarts_when_its_port_opens_is_greeted_until_it_answers(
+        virtual_time, boot_s, took, lost, timeouts):
+    """Without the boot wait, its bootloader took the first IRHLO of a session and a timeout
+    the second: the handshake took 2 s and each drive of an Uno reported 2 timeouts and 2
+    commands resent on a clean link (3 IRHLO of --timeout each were all it had). With it,
+    IRHLO is said again every 0.25 s while the line is silent, and none of that is counted."""
+    board = ResettingBoard(Device(StandInSource()))
+    t0 = virtual_time.now
+    ring = SerialRing(board, timeout_s=1.0, boot_s=boot_s).open()
+    assert virtual_time.now - t0 == pytest.approx(took, abs=0.03)
+    assert board.lost == [HELLO] * lost and set(board.written) == {HELLO}
+    assert (ring.stats.timeouts, ring.stats.resent_commands) == (timeouts, timeouts)
+    assert ring.info.nsensors == 12
+
+
+def test_a_silent_port_that_may_have_reset_its_board_says_how_long_it_was_greeted(virtual_time):
+    ring = SerialRing(ScriptPort(lambda msg: []), timeout_s=0.5, boot_s=2.0)
+    t0 = virtual_time.now
+    with pytest.raises(HandshakeError) as err:
+        ring.open()
+    assert str(err.value).startswith(
+        "no IRINF answer from script:// to 3 IRHLO of 0.5 s each (and 7 more in the first 2 s "
+        "after opening the port, while a board that restarts when its port opens would be "
+        "starting). Check the port,")
+    assert virtual_time.now - t0 == pytest.approx(2.0 + 2 * 0.5, abs=0.1)   # (polls of 0.02 s)
+
+
+def test_only_a_serial_device_is_given_time_to_start(tmp_path):
+    import os
+
+    from irring.hardware.serial_ring import _may_reset
+
+    master, slave = os.openpty()
+    try:
+        pty = os.ttyname(slave)
+        (tmp_path / "ring.pty").symlink_to(pty)
+        assert not _may_reset(pty) and not _may_reset(str(tmp_path / "ring.pty"))
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert not _may_reset("socket://127.0.0.1:5000") and not _may_reset("loop://")
+    assert _may_reset("/dev/ttyACM0") and _may_reset("/dev/ttyUSB0") and _may_reset("COM3")

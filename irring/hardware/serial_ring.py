@@ -6,7 +6,7 @@
 A step that never arrived is listed in ``Sweep.missing_steps``, never invented; a silent
 device raises :class:`DeviceTimeout`, a closed port :class:`DeviceDisconnected`, both
 holding ``.partial``. Closing stops a sweep still running and turns the ring back to step 0.
-Ports, link checks, counters and the return to step 0: docs/protocol.md.
+Ports, link checks, counters, the boot wait and the return to step 0: docs/protocol.md.
 """
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ import dataclasses
 import errno
 import logging
 import math
+import os
+import re
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
@@ -33,6 +35,12 @@ log = logging.getLogger("irring.hardware")
 DEFAULT_BAUD = 115200
 DEFAULT_TIMEOUT_S = 1.0
 MOVE_ALLOWANCE_S = 0.005  # per motor step the ring may travel before a sweep's first reading
+# An Arduino resets when its serial port is opened (DTR) and its bootloader takes the bytes
+# of the next second or so: for BOOT_S after opening a serial device, while the line stays
+# silent, IRHLO is sent again every BOOT_RESEND_S (a stray byte sends optiboot on to the
+# firmware within ~0.1 s), not counted as a timeout or a resent command
+BOOT_S = 2.0
+BOOT_RESEND_S = 0.25
 
 
 # --------------------------------------------------------------------------- errors
@@ -239,6 +247,16 @@ def _open_failure(exc: BaseException) -> str:
     return reason or str(exc)
 
 
+def _may_reset(port: str) -> bool:
+    """Whether opening ``port`` may reset the board behind it: a local serial device (an
+    Arduino's USB serial asserts DTR when opened, which resets it), not a pseudo-terminal
+    (irring emulate, irring-host, irring-simavr) or a network URL."""
+    if "://" in port:
+        return False
+    real = os.path.realpath(port)
+    return not (real.startswith("/dev/pts/") or re.fullmatch(r"/dev/ttys\d+", real))
+
+
 def _check_settings(samples: int, settle_s: float, resweep: int) -> None:
     if not 1 <= samples <= p.MAX_SAMPLES:
         raise ValueError(f"samples must be 1 … {p.MAX_SAMPLES}, got {samples}")
@@ -352,6 +370,10 @@ class SerialRing:
         column pass as changed readings) to a device not yet reflashed for v2, with a
         warning (:attr:`protocol_warning`, logged); by default such a device is refused
         with :class:`HandshakeError` saying how to reflash it.
+    boot_s: seconds after :meth:`open` opens the port in which a silent line is a board
+        still starting (an Arduino resets when its port opens): IRHLO is sent again every
+        BOOT_RESEND_S meanwhile. None: BOOT_S for a serial device path, 0 for a pty, a
+        network URL or a port object.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
 
     :meth:`close` ends the session: a sweep or move still running is stopped (IRSTP) and
@@ -368,9 +390,12 @@ class SerialRing:
                  emitter_offset_m: float | None = None, sensor_model: str = core.SENSOR_MODEL,
                  vref_v: float = core.VREF_V, max_range_m: float = core.MAX_RANGE_M, samples: int = 1,
                  settle_s: float = 0.0, resweep: int = 0, accept_v1: bool = False,
+                 boot_s: float | None = None,
                  opener: Callable[..., serial.SerialBase] = serial.serial_for_url):
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
+        if boot_s is not None and not 0 <= boot_s <= 60:
+            raise ValueError(f"boot_s must be 0 … 60 s, got {boot_s}")
         _check_settings(samples, settle_s, resweep)
         self.samples, self.settle_s, self.resweep = int(samples), float(settle_s), int(resweep)
         self.port_name = port if isinstance(port, str) else getattr(port, "name", None) or "port"
@@ -407,6 +432,9 @@ class SerialRing:
         # an IRDON -1 (none sent since power-up) after IRSCN were taken: the device said it
         # rebooted; the step the ring stood at then (None: unknown)
         self._woke: tuple[int | None] | None = None
+        self.boot_s = boot_s
+        self._boot_window = 0.0     # s after opening in which a silent line is a board starting
+        self._boot_until = 0.0      # host time that window ends
         self._running = False       # an IRSWP or IRGTO sent and not yet ended (IRDON, IRPOS)
         self._stop_sent = False     # an IRSTP sent for it, its IRDON not read yet
         self._moved = False         # the motor may stand away from step 0
@@ -439,11 +467,15 @@ class SerialRing:
                         advice = "which program has it (fuser, lsof) and run this when it is done"
                     raise DeviceError(f"cannot open {self._port_arg}: {why}. "
                                       f"Check {advice}") from exc
+                self._boot_window = self.boot_s if self.boot_s is not None else \
+                    BOOT_S if _may_reset(self._port_arg) else 0.0
             else:
                 self._port = self._port_arg
                 if not self._port.is_open:
                     self._port.open()
                 self._port.timeout = self.poll_s
+                self._boot_window = self.boot_s or 0.0
+            self._boot_until = time.monotonic() + self._boot_window
             self._flush()
         if handshake:
             self.hello()
@@ -621,14 +653,24 @@ class SerialRing:
         every_refused = True
         echoes = 0   # our own IRHLO heard back
         heard = self.stats.sentences + self.stats.checksum_failures + self.stats.malformed
+        boot_hellos = 0   # IRHLO sent again while a board just opened may be starting
         for attempt in range(tries):
             if attempt:
                 self.stats.resent_commands += 1
             self._send(p.Hello())
-            deadline = time.monotonic() + self.timeout_s
+            start = time.monotonic()
+            deadline = start + self.timeout_s
+            booting = attempt == 0 and start < self._boot_until
+            if booting:   # its bootloader may take this IRHLO: say it again while all is quiet
+                deadline = max(deadline, self._boot_until)
+                again, quiet = start + BOOT_RESEND_S, self._rx_bytes
             refused = probed = False
             framed_before = self._other_framing
             while not refused and time.monotonic() < deadline:
+                if booting and self._rx_bytes == quiet and time.monotonic() >= again:
+                    self._send(p.Hello())
+                    boot_hellos += 1
+                    again = time.monotonic() + BOOT_RESEND_S
                 if self._other_framing > framed_before and self.decoder.version != 1:
                     info, probed = self._hello_v1(), True
                     if info is not None:
@@ -683,9 +725,12 @@ class SerialRing:
                 f"s each, only this host's own IRHLO sent back ({echoes} times): the port "
                 f"echoes what it is sent (loop://, a loopback plug, an adapter or terminal that "
                 f"echoes). Check that it is the ring's port and that the ring is powered")
+        booted = (f" (and {boot_hellos} more in the first {self._boot_window:g} s after "
+                  "opening the port, while a board that restarts when its port opens would "
+                  "be starting)" if boot_hellos else "")
         raise HandshakeError(
             f"no IRINF answer from {self.port_name} to {tries} IRHLO of {self.timeout_s:g} s "
-            f"each. Check the port, the baud rate ({self.baudrate}), that the ring is "
+            f"each{booted}. Check the port, the baud rate ({self.baudrate}), that the ring is "
             f"powered and runs IRR protocol v{p.PROTOCOL_VERSION} firmware (firmware/README.md) "
             f"({self.stats.checksum_failures} checksum failures, {self.stats.malformed} "
             f"malformed sentences, {self.stats.ignored_bytes} stray bytes seen)."
