@@ -1059,6 +1059,22 @@ def test_ctrl_c_or_an_error_mid_sweep_stops_the_ring_and_turns_it_back(virtual_t
     assert device._job is None and device._position == 0 and ring.park_failure is None
 
 
+def test_a_second_ctrl_c_while_the_ring_turns_back_stops_it_there_and_is_not_raised(
+        virtual_time):
+    """close() runs where irring drive keeps what the ring delivered: a Ctrl-C raised out of
+    it would lose the drive's readings."""
+    device = Device(StandInSource(), realtime=True)
+    port = Wire(device)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    ring.sweep()
+    port.fail, port.after = KeyboardInterrupt(), 0
+    ring.close()
+    assert port.written == [HELLO, SWEEP, PARK, STOP]
+    assert ring.park_failure.startswith(
+        "the ring on device://emulator was not turned back to step 0 at the end of the session "
+        "(interrupted: stopped where it stood). ")
+
+
 def test_a_ring_that_stopped_answering_is_asked_nothing_more_at_close(virtual_time):
     def script(msg):
         if isinstance(msg, p.Hello):
