@@ -2102,6 +2102,28 @@ def test_calibrate_keeps_the_placements_read_when_it_stops_early(
     assert not out.exists()
 
 
+def test_calibrate_says_when_the_ring_was_not_turned_back_to_step_0(tmp_path, capsys,
+                                                                  monkeypatch):
+    """A calibration ends with the ring where its last sweep left it (step 2 here); an
+    Arduino reset by the next session's open takes that for step 0. close() turns it back;
+    a ring that does not answer IRGTO,0 is named, with what to do."""
+    def never_turns_back(dev, cmd):
+        if not isinstance(cmd, hd.p.GoTo):
+            hd.good(dev, cmd)
+
+    code, link, _, _ = _calibrate(tmp_path, monkeypatch, never_turns_back, 2, "q")
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert (f"irring calibrate: warning: the ring on {link} was not turned back to step 0 at "
+            "the end of the session (no IRPOS answered IRGTO,0 within 1.02 s). Its firmware "
+            "takes the step it stands at when it starts for step 0, and an Arduino restarts "
+            "each time its port is opened: turn the ring radial by hand, or send "
+            "$IRGTO,0*E3DD, before the next session") in err
+    (tmp_path / "good").mkdir()
+    code, _, _, _ = _calibrate(tmp_path / "good", monkeypatch, hd.good, 2, "q")
+    assert code == 1 and "warning" not in capsys.readouterr().err
+
+
 def test_calibrate_resumes_asking_only_for_the_placements_not_read(tmp_path, capsys,
                                                                    monkeypatch):
     code, link, _, out = _calibrate(tmp_path, monkeypatch, hd.good, 4)
