@@ -61,6 +61,17 @@ def test_top_level_help_names_every_bench_that_can_exit_6(capsys, monkeypatch):
     assert [name for name in says_so if not re.search(rf"\b{name}\b", clause)] == []
 
 
+def test_drive_and_calibrate_say_how_they_leave_the_ring(capsys, monkeypatch):
+    # neither said that a session ends with the ring turned back to step 0 (IRGTO,0), which
+    # an Arduino, restarted by the next open, takes for step 0; nor what a warning means
+    for argv in (["drive", "--help"], ["calibrate", "--help"]):
+        text = _help(argv, capsys, monkeypatch)
+        assert "sweep still running" in text and "(IRSTP)" in text
+        assert "back to step 0 (IRGTO,0)" in text
+        assert "an Arduino restarts each time its port is opened" in text
+        assert "A ring that does not confirm it is named in a warning" in text
+
+
 def test_scenarios_lists_every_bundled_scenario_and_marks_the_default(capsys):
     assert main(["scenarios"]) == 0
     lines = capsys.readouterr().out.splitlines()

@@ -41,6 +41,11 @@ what it does:
                   the file does not hold (the printed command repeats --sensor, --scenario
                   and --out; a file of another sensor, model or ADC is refused).
 
+  the ring        However the procedure ends, a sweep still running is stopped (IRSTP) and
+                  the ring turned back to step 0 (IRGTO,0): its firmware takes where it
+                  stands when it starts for step 0, and an Arduino restarts each time its
+                  port is opened. A ring that does not confirm it is named in a warning.
+
   the picture     Beside the file, the same name with .png (calibration.png): the readings
                   (ADC counts and volts against the distance to the wall, coloured by the
                   incidence angle) with the fitted curve through them, how far the curve
