@@ -47,6 +47,9 @@ BYTES_PER_READING = 600             # a reading through simulation, estimate and
 ESTIMATE_BYTES_PER_READING = 2_700  # more for each reading of the sweep being estimated when
                                     # every reading returns (72 × 20 001 did: 3.8 GB, 4.0 GB a run)
 BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
+VIEW_BYTES_PER_PIXEL = 85           # an offscreen picture of `irring view`, beyond VIEW_BASE_BYTES
+VIEW_BASE_BYTES = 300 * 10**6       # (peak RSS, 1280x960 to 4096x3072: OSMesa 83, EGL 63 bytes
+                                    # a pixel over 0.25-0.3 GB; 4096x3072 1.28 and 1.03 GB)
 RESULT_ROW_BYTES = 3_800            # a study's results.csv row read back to summarise
                                     # (measured: 100 000 rows, 377 MB)
 RESULT_ROW_TEXT_BYTES = 500         # the line of such a row (a study writes 340-480 bytes); a

@@ -7,7 +7,8 @@ import sys
 from pathlib import Path
 
 from .. import errors
-from ..errors import OutputError
+from ..core import VIEW_BASE_BYTES, VIEW_BYTES_PER_PIXEL, WORK_MEMORY_BYTES, work_refusal
+from ..errors import OutputError, TooBig
 from ..outputs import (VIEW_FILE, VIEW_SOFTWARE, atomic_file, check_out, check_replaceable,
                        folder_name, folder_note)
 from ..scenario import DEFAULT_SCENARIO, load_scenario
@@ -75,6 +76,9 @@ def run(args: argparse.Namespace) -> int:
             return 0
         if problem != "no display":   # a display was named: say why no window opens
             print(f"irring view: {problem}; writing the picture instead", file=sys.stderr)
+    refusal = size_refusal(width, height)   # the picture's, not the live viewer's window
+    if refusal:
+        raise TooBig(refusal)
     out = picture_path(args.out if args.out is not None else Path("out") / folder_name(scenario.name))
     # a FILE.png named by --out may be anyone's; view.png (in out/<scenario>/ or the --out
     # folder) is view's by its name
@@ -96,6 +100,15 @@ def run(args: argparse.Namespace) -> int:
     if note:
         print(f"note: {note}")
     return 0
+
+
+def size_refusal(width: int, height: int) -> str | None:
+    """Why a ``width`` × ``height`` picture is too big to render (:func:`work_refusal`'s
+    wording), or None."""
+    largest = (WORK_MEMORY_BYTES - VIEW_BASE_BYTES) // VIEW_BYTES_PER_PIXEL
+    return work_refusal(f"--size {width}x{height}: a picture of {width * height:,} pixels",
+                        VIEW_BASE_BYTES + width * height * VIEW_BYTES_PER_PIXEL, "irring view",
+                        f"choose at most {largest:,} pixels (4096x3072 is 12,582,912)")
 
 
 def picture_path(out: Path) -> Path:
