@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -310,6 +311,50 @@ def test_compare_bars_give_no_eta_before_the_first_run_nor_for_the_curves(monkey
     assert runs[-3].endswith("2/4 [00:05<00:02,  1.00run/s]")   # tqdm's was 00:12 here
     assert curves[1].endswith("1/2 [00:03<?, no ETA: each design's curve costs its own]")
     assert all("<?," in s for s in curves)   # tqdm's said 00:03 for radial12's 0.1 s
+
+
+def test_the_table_gives_each_score_its_spread_from_seed_to_seed(tmp_path, monkeypatch):
+    """compare's table had no spread (study's has ± sd): with 3 seeds, ring8's shadow 0.51
+    against the paper ring's 0.47 read as a difference (newuser16). Each score now carries
+    the sd over seeds within a room, pooled over the rooms, not the sd over every run,
+    which counts how the rooms differ (here 0.209 where the seeds move F1 by 0.026)."""
+    def run(room, seed, f1, shadow):
+        return {"scenario": room, "design": "ring8", "seed": seed, "poses": 1,
+                **{k: 0.5 for k in SCORE_KEYS}, "occupied_f1": f1, "shadow": shadow,
+                "hardware_time_s": 1.5, "hardware_time_total_s": 1.5, "compute_time_s": 0.01,
+                "readings": 100}
+
+    runs = [run("lab", 1, 0.90, 0.40), run("lab", 2, 0.92, 0.46),
+            run("hall", 5, 0.50, None), run("hall", 6, 0.56, None), run("hall", 7, 0.53, None)]
+    rec, = compare.summarise(runs)
+    assert rec["occupied_f1"] == pytest.approx(0.682)
+    assert rec["occupied_f1_sd"] == pytest.approx(math.sqrt((0.0002 + 0.0018) / 3))
+    assert np.std([r["occupied_f1"] for r in runs], ddof=1) == pytest.approx(0.209, abs=5e-4)
+    assert rec["shadow_sd"] == pytest.approx(math.sqrt(0.0018))   # lab's two runs alone
+    assert rec["coverage_sd"] == 0.0
+    lines = compare.table([rec]).splitlines()
+    assert re.split(r"\s{2,}", lines[2])[:5] == ["ring8", "0.682 ± 0.026", "0.500 ± 0.000",
+                                        "0.500 ± 0.000", "0.430 ± 0.042"]
+    assert lines[-1] == ("±: the spread from seed to seed (sd within each room, pooled over "
+                         "the rooms): designs closer than that differ by noise; `irring study` "
+                         "runs more seeds")
+    one, = compare.summarise([runs[0], runs[2]])   # one seed a room: no spread to give
+    assert one["occupied_f1_sd"] is None
+    assert "±" not in compare.table([one])
+    # the chart's bars carry the same spread
+    from irring.maps import render
+
+    figures = []
+    real_figure = render.figure
+    monkeypatch.setattr(render, "figure", lambda *a, **k: figures.append(real_figure(*a, **k))
+                        or figures[-1])
+    compare.chart({"designs": [rec], "detection_distances_m": [0.35]}, tmp_path / "c.png")
+    scores = figures[0].axes[0]
+    f1 = [c for c in scores.containers if c.get_label() == "occupied F1"][0]
+    assert f1.errorbar is not None
+    ys = f1.errorbar.lines[2][0].get_segments()[0][:, 1]
+    assert ys.tolist() == pytest.approx([0.682 - rec["occupied_f1_sd"],
+                                         0.682 + rec["occupied_f1_sd"]])
 
 
 def test_a_miss_the_minimum_range_alone_makes_is_too_near():

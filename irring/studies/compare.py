@@ -63,24 +63,41 @@ def _record(row: dict, scenario_name: str) -> dict:
             "readings": row["readings"]}
 
 
+def seed_sd(groups) -> float | None:
+    """The spread of a score from seed to seed: the sample standard deviations of each
+    group's values (one room's seeds; ``None`` left out) pooled by their degrees of freedom,
+    so rooms that score apart add nothing to it; None without a group of two."""
+    vals = [np.array([v for v in g if v is not None], float) for g in groups]
+    dof = sum(len(v) - 1 for v in vals if len(v) > 1)
+    if not dof:
+        return None
+    return float(np.sqrt(sum(((v - v.mean()) ** 2).sum() for v in vals if len(v) > 1) / dof))
+
+
 def summarise(runs: list[dict], detections: dict[str, Detection] | None = None) -> list[dict]:
     """One record per design: run scores averaged over scenarios and seeds (``None`` scores
-    left out of the mean), hardware time of a 360° view, compute time per view, and the
-    detection curve when given."""
+    left out of the mean) with their spread from seed to seed (``<score>_sd``,
+    :func:`seed_sd` over the rooms; per room in ``by_scenario``), hardware time of a 360°
+    view, compute time per view, and the detection curve when given."""
     out = []
     for name in dict.fromkeys(r["design"] for r in runs):
         mine = [r for r in runs if r["design"] == name]
         rec = {"design": name,
                "scenarios": sorted({r["scenario"] for r in mine}),
                "runs": len(mine)}
+        rooms = list(dict.fromkeys(r["scenario"] for r in mine))
         for k in SCORE_KEYS:
             rec[k] = mean_of(r[k] for r in mine)
+            rec[f"{k}_sd"] = seed_sd([r[k] for r in mine if r["scenario"] == sc] for sc in rooms)
             if k != "shadow":
                 continue
             vals = [r[k] for r in mine if r[k] is not None]
             rec["shadow_min"] = float(min(vals)) if vals else None
-        rec["by_scenario"] = {sc: {k: mean_of(r[k] for r in mine if r["scenario"] == sc)
-                                   for k in SCORE_KEYS} for sc in rec["scenarios"]}
+        rec["by_scenario"] = {sc: {**{k: mean_of(r[k] for r in mine if r["scenario"] == sc)
+                                      for k in SCORE_KEYS},
+                                   "shadow_sd": seed_sd([[r["shadow"] for r in mine
+                                                          if r["scenario"] == sc]])}
+                              for sc in rec["scenarios"]}
         rec["poses"] = {sc: next(r["poses"] for r in mine if r["scenario"] == sc)
                         for sc in rec["scenarios"]}
         rec["hardware_time_s"] = float(np.mean([r["hardware_time_s"] for r in mine]))
@@ -178,9 +195,9 @@ def table(records: list[dict]) -> str:
             + ["360° view", "compute"] + [f"r@{d * 1e3:g}mm" for d in dists])
     rows = [head]
     for r in records:
-        row = [r["design"]] + [("—" if r[k] is None else f"{r[k]:.3f}") for k in TABLE_SCORES]
-        row += ["—" if r["by_scenario"][sc]["shadow"] is None
-                else f"{r['by_scenario'][sc]['shadow']:.2f}" for sc in per_scene]
+        row = [r["design"]] + [_spread(r[k], r.get(f"{k}_sd"), 3) for k in TABLE_SCORES]
+        row += [_spread(r["by_scenario"][sc]["shadow"], r["by_scenario"][sc].get("shadow_sd"), 2)
+                for sc in per_scene]
         row += [_seconds(r["hardware_time_s"]), f"{r['compute_time_s'] * 1e3:.1f} ms"]
         radii = r.get("min_detectable_radius_m", [])
         row += [("too near" if near else "miss") if v is None else f"{v * 1e3:.1f}mm"
@@ -198,6 +215,8 @@ def table(records: list[dict]) -> str:
                      "scenario here that hides wall behind an obstacle")
     if any(r["shadow"] is None for r in records):
         lines.append(f"shadow —: n/a, {SHADOW_NA} (in any of these scenarios)")
+    if any(r.get(f"{k}_sd") is not None for r in records for k in TABLE_SCORES):
+        lines.append(f"±: {SPREAD}")
     near = [f"{r['design']}: {r['min_range_m'] * 1e3:.0f} mm" for r in records
             if any(r.get("too_near", ()))]
     if near:
@@ -228,13 +247,24 @@ def cylinder_label(group: list[dict]) -> str:
     return f"cylinder{'s' if len(group) > 1 else ''} r = {radii} mm in {shown}"
 
 
+# what a table's "±" is: noise, where a mean over rooms would count how rooms differ
+SPREAD = ("the spread from seed to seed (sd within each room, pooled over the rooms): "
+          "designs closer than that differ by noise; `irring study` runs more seeds")
+
+
+def _spread(value: float | None, sd: float | None, digits: int) -> str:
+    if value is None:
+        return "—"
+    return f"{value:.{digits}f}" + ("" if sd is None else f" ± {sd:.{digits}f}")
+
+
 def _seconds(s: float) -> str:
     return f"{s * 1e3:.0f} ms" if s < 1 else f"{s:.2f} s"
 
 
 CSV_KEYS = ("design", "runs", "occupied_precision", "occupied_recall", "occupied_f1",
             "free_accuracy", "coverage", "shadow", "shadow_min", "hardware_time_s",
-            "compute_time_s")
+            "compute_time_s") + tuple(f"{k}_sd" for k in SCORE_KEYS)
 
 
 def chart(result: dict, path) -> None:
@@ -249,12 +279,15 @@ def chart(result: dict, path) -> None:
     axes = fig.subplots(2, 2)
     (a_scores, a_shadow), (a_time, a_det) = axes
 
-    def bars(ax, series: dict[str, list], title: str) -> None:
+    def bars(ax, series: dict[str, tuple[list, list]], title: str) -> None:
+        """``series``: label → (values, spreads from seed to seed), one each a design."""
         w = 0.8 / max(len(series), 1)
-        for i, (label, vals) in enumerate(series.items()):
+        for i, (label, (vals, sds)) in enumerate(series.items()):
             vals = np.array([np.nan if v is None else v for v in vals], dtype=float)
+            sds = np.array([np.nan if s is None else s for s in sds], dtype=float)
             xs = x + (i - (len(series) - 1) / 2) * w
-            ax.bar(xs, vals, w, label=label)
+            ax.bar(xs, vals, w, label=label, yerr=None if np.isnan(sds).all() else sds,
+                   capsize=2, error_kw={"lw": 0.8})
             for xi, v in zip(xs, vals):  # say so where a bar is invisible
                 if not v > 0.005:
                     ax.annotate("n/a" if np.isnan(v) else "0", (xi, 0.01), ha="center",
@@ -271,14 +304,19 @@ def chart(result: dict, path) -> None:
         ax.grid(axis="y", alpha=0.3)
 
     runs = recs[0]["runs"] if recs else 0
-    bars(a_scores, {"occupied F1": [r["occupied_f1"] for r in recs],
-                    "free accuracy": [r["free_accuracy"] for r in recs],
-                    "coverage": [r["coverage"] for r in recs]},
-         f"Map scores, mean over {runs} runs per design (scenarios × seeds)")
+    def scores(key: str) -> tuple[list, list]:
+        return [r[key] for r in recs], [r.get(f"{key}_sd") for r in recs]
+
+    bars(a_scores, {"occupied F1": scores("occupied_f1"),
+                    "free accuracy": scores("free_accuracy"), "coverage": scores("coverage")},
+         f"Map scores, mean over {runs} runs per design (scenarios × seeds; "
+         "± sd from seed to seed)")
     with_shadow = [sc for sc in (recs[0]["scenarios"] if recs else [])
                    if any(r["by_scenario"][sc]["shadow"] is not None for r in recs)]
     bars(a_shadow, {f"{sc} ({recs[0]['poses'][sc]} scan{'s' if recs[0]['poses'][sc] > 1 else ''})":
-                    [r["by_scenario"][sc]["shadow"] for r in recs] for sc in with_shadow},
+                    ([r["by_scenario"][sc]["shadow"] for r in recs],
+                     [r["by_scenario"][sc].get("shadow_sd") for r in recs])
+                    for sc in with_shadow},
          "Shadow: share of the wall behind thin posts that the map shows")
 
     hw = [r["hardware_time_s"] for r in recs]
