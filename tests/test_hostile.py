@@ -2358,7 +2358,8 @@ def test_a_device_that_reboots_mid_sweep_keeps_only_the_steps_read_before_it():
     driver once dropped the re-sweep as stale; then it kept it, but a board takes the step it
     wakes at as step 0 (firmware/README.md), so each step read since is off by where the ring
     stood (a drive of t_room whose board reset at step 9 of pose 2: F1 0.997 -> 0.519, exit
-    0; FINDINGS15.md). The steps read before the reboot are kept, none after."""
+    0; FINDINGS15.md). The steps read before the reboot are kept, none after. Reset as it
+    turned on from step -1, the ring stood at -1 or 0: no IRGTO can say which (FINDINGS16.md)."""
     dev = hd.HostileDevice(hd.reboots_in_sweep(21))   # seq ~100 ahead of the new numbering
     try:
         with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:
@@ -2373,13 +2374,13 @@ def test_a_device_that_reboots_mid_sweep_keeps_only_the_steps_read_before_it():
     for step, row in zip(sweep.steps, sweep.counts):
         assert list(row) == hd.counts_for(int(step))
     assert str(err.value).startswith(
-        f"the ring on {dev.link} rebooted at step -1: IRDON -1 (no IRSCN sent since power-up) "
-        "ended a sweep after IRSCN had come, and its clock started anew (1000 ms after 1101 "
-        "ms). Its firmware takes the step it wakes at as step 0, so every step it names since "
-        "is off by 1 steps (1.1°) and its readings would land beside their walls; none read "
-        "since is taken. Then turn the ring back to radial (IRGTO,1 turns it there now), "
-        "reset the board, and drive the poses not swept again. device rebooted: 2 of 5 steps "
-        "received")
+        f"the ring on {dev.link} rebooted while it turned from step -1 to step 0: IRDON -1 (no "
+        "IRSCN sent since power-up) ended a sweep after IRSCN had come, and its clock started "
+        "anew (1000 ms after 1101 ms). Its firmware takes the step it wakes at as step 0, so "
+        "every step it names since is off by the step it stood at, from step -1 to step 0, and "
+        "its readings would land beside their walls; none read since is taken. Then turn the "
+        "ring back to radial by hand (where it stood is not known, so no IRGTO can), reset the "
+        "board, and drive the poses not swept again. device rebooted: 2 of 5 steps received")
 
 
 @pytest.mark.parametrize("lose_first", [False, True])

@@ -60,6 +60,13 @@ CHATTER_LIMIT_BYTES = 32 * p.MAX_SENTENCE_BYTES
 # an IRSTP answered by a garbled sentence was heard: it is sent again this soon, and not
 # counted among the unanswered (the no-progress limit above still bounds the whole pass)
 GARBLED_ANSWER_RETRY_S = 0.1
+# A device clock that runs on advances from one IRSCN to the next about as far as this
+# computer's clock: within CLOCK_RATE_TOLERANCE (a UART keeps 115200 baud only within a few
+# per cent) and CLOCK_LATENCY_S (reading the port, scheduling). One that a reboot restarted
+# advances less, by what it had counted before, whether or not its count goes back: millis()
+# of a board reset 2 s ago says 2000 ms, past the 1500 of its last IRSCN before the reset
+CLOCK_RATE_TOLERANCE = 0.05
+CLOCK_LATENCY_S = 0.1
 
 
 class HandshakeError(DeviceError):
@@ -429,9 +436,11 @@ class SerialRing:
         self._sweep_before: dict[str, int] = {}   # the counters when the sweep began
         self._previous: dict[int, p.Scan] = {}   # the last sweep's IRSCN by step
         self._clock: int | None = None   # device clock of the latest IRSCN taken (ms)
+        self._clock_at: float | None = None   # when it arrived (time.monotonic())
         # an IRDON -1 (none sent since power-up) after IRSCN were taken: the device said it
-        # rebooted; the step the ring stood at then (None: unknown)
-        self._woke: tuple[int | None] | None = None
+        # rebooted; the ring stood then from one step to another (the same: at rest; None:
+        # unknown): a board that resets in a command has turned some way towards its target
+        self._woke: tuple[int | None, int | None] | None = None
         self.boot_s = boot_s
         self._boot_window = 0.0     # s after opening in which a silent line is a board starting
         self._boot_until = 0.0      # host time that window ends
@@ -753,7 +762,8 @@ class SerialRing:
         return None
 
     def _accept_info(self, info: p.Info) -> p.Info:
-        self._clock = self._woke = None   # a new session: its clock and numbering are new
+        # a new session: its clock and numbering are new
+        self._clock = self._clock_at = self._woke = None
         self._link_dead = False
         if info.proto == 1 and self.decoder.version == 1:
             what = (f"the device on {self.port_name} runs IRR protocol v1 firmware "
@@ -820,7 +830,7 @@ class SerialRing:
             msg = self._await((p.Done,), self.timeout_s)
             if isinstance(msg, p.Done):
                 self._last_seq = msg.seq if msg.seq >= 0 else None   # -1: (re)booted
-                self._said_booted(msg.seq)
+                self._said_booted(msg.seq, self._position, self._position)
                 self._running = False
                 return msg.seq
         return None
@@ -990,6 +1000,7 @@ class SerialRing:
         heard = False   # a garbled sentence arrived since the last IRSTP: the device answers
         framed, accepted = self._other_framing, self.stats.sentences
         suspects: list[p.Scan] = []   # IRSCN numbered before `hint`: stale, or a renumbering
+        heard_at: dict[int, float] = {}   # when each suspect arrived, by id
         contradicted: set[int] = set()   # steps read twice with other counts in this pass
         # A device sweeps from → to. One whose IRSCN come to → from, each naming its step,
         # is read as it swept: the step places the reading, the seq only runs the other way.
@@ -1014,8 +1025,9 @@ class SerialRing:
             return not settled and len(ps.got) == 1 and first is not None \
                 and first.step in ps.got
 
-        def take(msg: p.Scan) -> None:
-            """Keep one IRSCN of this pass, counting gaps, duplicates and contradictions."""
+        def take(msg: p.Scan, at: float) -> None:
+            """Keep one IRSCN of this pass (arrived at ``at``, time.monotonic()), counting
+            gaps, duplicates and contradictions."""
             nonlocal base, last_seq, first
             pos = pos_of.get(msg.step)
             if pos is None:
@@ -1054,10 +1066,10 @@ class SerialRing:
                 self._inconsistent(f"IRSCN {msg.seq} of step {msg.step} came twice with other "
                                    f"counts", 2)
                 return
-            if self._woke is not None and self._went_back(msg):
-                stood, self._woke = self._woke[0], None
-                if stood != 0:
-                    raise self._rebooted(msg, stood, "IRDON -1 (no IRSCN sent since "
+            if self._woke is not None and self._restarted(msg, at):
+                stood, self._woke = self._woke, None
+                if stood != (0, 0):
+                    raise self._rebooted(msg, at, stood, "IRDON -1 (no IRSCN sent since "
                                          "power-up) ended a sweep after IRSCN had come")
                 self._clock = None   # woken at step 0: its steps are right, its clock new
             gap = (msg.seq - (base - 1 if last_seq is None else last_seq) - 1) % p.SEQ_MODULO
@@ -1072,7 +1084,7 @@ class SerialRing:
                 last_seq = msg.seq
             self._position = msg.step
             if self._clock is None or not self._went_back(msg):
-                self._clock = msg.t_ms
+                self._clock, self._clock_at = msg.t_ms, at
             ps.got[msg.step] = msg
             if first is None:
                 first = msg
@@ -1111,6 +1123,7 @@ class SerialRing:
                     if hint is not None and (msg.seq - hint) % p.SEQ_MODULO >= p.SEQ_MODULO // 2:
                         self.stats.stale += 1  # numbered before this pass began
                         suspects.append(msg)
+                        heard_at[id(msg)] = now
                         continue
                     if base is None and suspects:
                         # held as stale, yet numbered as this first fresh IRSCN numbers the
@@ -1120,20 +1133,23 @@ class SerialRing:
                         for scan in _numbered_with(suspects, msg, ps):
                             suspects.remove(scan)
                             self.stats.stale -= 1
-                            take(scan)
-                    take(msg)
+                            take(scan, heard_at[id(scan)])
+                    take(msg, now)
                 elif isinstance(msg, p.Done):
                     reverse = None if ps.got else _renumbered(suspects, ps, msg.seq)
                     if reverse is not None:
                         # every IRSCN looked stale, but they and this IRDON number this very
                         # pass: the device numbers from elsewhere (it rebooted between sweeps,
                         # or its last IRDON was wrong), so they are this pass's readings
-                        back = next((sc for sc in suspects if self._went_back(sc)), None)
+                        back = next((sc for sc in suspects
+                                     if self._restarted(sc, heard_at[id(sc)])), None)
                         if back is not None and not self._replayed(suspects):
-                            # numbered and clocked anew, with new readings: it rebooted
+                            # numbered and clocked anew, with new readings: it rebooted,
+                            # at rest where the last pass or move left the ring
                             if self._position != 0:
-                                raise self._rebooted(back, self._position, "its IRSCN are "
-                                                     "numbered from 0 again")
+                                raise self._rebooted(back, heard_at[id(back)],
+                                                     (self._position, self._position),
+                                                     "its IRSCN are numbered from 0 again")
                             self._clock = None   # woken at step 0: its steps are right
                         log.info("the device renumbered its IRSCN; %d of this pass's "
                                  "readings kept", len(suspects))
@@ -1143,7 +1159,7 @@ class SerialRing:
                         if len(suspects) > 1:
                             settle(reverse)
                         for scan in suspects:
-                            take(scan)
+                            take(scan, heard_at[id(scan)])
                         suspects.clear()
                     if (not stops and not ps.got and hint is not None
                             and msg.seq == (hint - 1) % p.SEQ_MODULO):
@@ -1168,7 +1184,7 @@ class SerialRing:
                     # IRDON -1: no IRSCN sent since the device (re)booted; its numbering
                     # starts again at 0, which must not read as stale in the next pass
                     self._last_seq = msg.seq if msg.seq >= 0 else None
-                    self._said_booted(msg.seq)
+                    self._said_booted(msg.seq, *self._turning(ps))
                     ps.done = True
                     self._running = False
                     return
@@ -1244,11 +1260,25 @@ class SerialRing:
             "sweep's clock runs on: a firmware replaying its buffer, not reading the sensors; "
             "not taken. Reset the board and sweep this pose again.")
 
-    def _said_booted(self, done_seq: int) -> None:
+    def _turning(self, ps: _Pass) -> tuple[int | None, int | None]:
+        """Where the ring may stand in pass ``ps``, which an IRDON ends: from the last step
+        heard of to the step the device turns to next (the pass's first, if none of it came;
+        the last step itself once the pass is whole). A board that resets there takes where
+        it stands for step 0."""
+        if self._position is None:
+            return None, None
+        order = [ps.expected[ps.sent_at(i)] for i in range(len(ps.expected))]
+        if not ps.got:
+            return self._position, order[0]
+        at = order.index(self._position) if self._position in order else len(order) - 1
+        return self._position, order[min(at + 1, len(order) - 1)]
+
+    def _said_booted(self, done_seq: int, stood: int | None, toward: int | None) -> None:
         """Note an IRDON -1 (none sent since power-up) that came after IRSCN were taken,
-        with the step the ring stood at: a reboot, if the next IRSCN's clock confirms it."""
+        with where the ring stood (from step ``stood`` to ``toward``, turning): a reboot, if
+        the next IRSCN's clock confirms it."""
         if done_seq < 0 and self._clock is not None and self._woke is None:
-            self._woke = (self._position,)
+            self._woke = (stood, toward) if stood is not None else (None, None)
 
     def _went_back(self, scan: p.Scan) -> bool:
         """``scan``'s device clock is earlier than the latest IRSCN's taken (modulo its wrap):
@@ -1256,21 +1286,47 @@ class SerialRing:
         return self._clock is not None and \
             0 < (self._clock - scan.t_ms) % p.CLOCK_MODULO < p.CLOCK_MODULO // 2
 
-    def _rebooted(self, scan: p.Scan, stood: int | None, sign: str) -> DeviceRebooted:
+    def _ran_short(self, scan: p.Scan, at: float) -> bool:
+        """``scan``'s device clock (arrived at ``at``) advanced from the latest IRSCN taken
+        less than this computer's clock did, beyond CLOCK_RATE_TOLERANCE and
+        CLOCK_LATENCY_S: restarted, though its count need not go back."""
+        if self._clock is None or self._clock_at is None:
+            return False
+        ahead_s = ((scan.t_ms - self._clock) % p.CLOCK_MODULO) / 1000.0
+        here_s = at - self._clock_at
+        return ahead_s < (here_s - CLOCK_LATENCY_S) * (1.0 - CLOCK_RATE_TOLERANCE)
+
+    def _restarted(self, scan: p.Scan, at: float) -> bool:
+        """``scan``'s device clock started anew since the latest IRSCN taken: it went back,
+        or it ran short of the time that passed here."""
+        return self._went_back(scan) or self._ran_short(scan, at)
+
+    def _rebooted(self, scan: p.Scan, at: float, stood: tuple[int | None, int | None],
+                  sign: str) -> DeviceRebooted:
         """The error for a device seen rebooting (``sign``: how its numbering said so; its
-        clock went back to ``scan``'s) while the ring stood at step ``stood``."""
+        clock restarted by ``scan``'s, arrived at ``at``) while the ring stood from step
+        ``stood[0]`` to ``stood[1]`` (turning; None: not known)."""
         info = self.info
-        where = ("at a step not known" if stood is None else f"at step {stood}")
-        deg = 0 if stood is None else \
-            abs(stood) * info.step_mdeg * info.gear_num / info.gear_den / 1000
-        off = ("by an unknown number of steps" if stood is None else
-               f"by {abs(stood)} steps ({deg:.1f}°)")
-        fix = ("turn the ring back to radial by hand" if stood is None else
-               f"turn the ring back to radial (IRGTO,{-stood} turns it there now)")
+        a, b = stood
+        if a is None or b is None:
+            where, off = "at a step not known", "by an unknown number of steps"
+        elif a != b:
+            where = f"while it turned from step {a} to step {b}"
+            off = f"by the step it stood at, from step {a} to step {b},"
+        else:
+            deg = abs(a) * info.step_mdeg * info.gear_num / info.gear_den / 1000
+            where, off = f"at step {a}", f"by {abs(a)} steps ({deg:.1f}°)"
+        fix = (f"turn the ring back to radial (IRGTO,{-a} turns it there now)"
+               if a is not None and a == b else "turn the ring back to radial by hand"
+               + (" (where it stood is not known, so no IRGTO can)" if a is not None else ""))
+        clock = (f"{scan.t_ms} ms after {self._clock} ms" if self._went_back(scan) else
+                 f"it says {scan.t_ms} ms, {(scan.t_ms - self._clock) % p.CLOCK_MODULO} ms on "
+                 f"from the {self._clock} ms of the last IRSCN taken, where this computer's "
+                 f"clock ran {at - self._clock_at:.1f} s")
         self._position_lost = True   # its step 0 is not radial: close() must not go there
         return DeviceRebooted(
             f"the ring on {self.port_name} rebooted {where}: {sign}, and its clock started "
-            f"anew ({scan.t_ms} ms after {self._clock} ms). Its firmware takes the step it "
+            f"anew ({clock}). Its firmware takes the step it "
             f"wakes at as step 0, so every step it names since is off {off} and its readings "
             f"would land beside their walls; none read since is taken. Then {fix}, reset the "
             "board, and drive the poses not swept again.")

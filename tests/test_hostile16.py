@@ -1,0 +1,142 @@
+"""Round sixteen of hostile input (FINDINGS16.md): each test names the input that broke and
+asserts what happens now."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import pytest
+
+import hostile_devices as hd
+from irring.hardware import SerialRing
+from irring.hardware import protocol as p
+from irring.hardware.serial_ring import DeviceRebooted
+
+
+def _millis_board(boot_ms: int, reboot):
+    """A correct board whose clock is real: ms since its own boot (millis()), ``boot_ms`` at
+    the start. ``reboot(dev, cmd, step)`` says, before each step it would send (step None:
+    after a sweep's IRDON), whether it resets there: it then numbers from 0 and its clock
+    starts at 0, and a reset within a sweep leaves it silent (the command forgotten)."""
+    st = {"boot": time.monotonic() - boot_ms / 1000}
+
+    def clock() -> int:
+        return int((time.monotonic() - st["boot"]) * 1000)
+
+    def reset(dev) -> None:
+        st["boot"] = time.monotonic()
+        dev.seq = 0
+        dev.said = False   # no IRSCN sent since power-up: IRSTP gets IRDON -1
+
+    def behaviour(dev, cmd):
+        if isinstance(cmd, p.Hello):
+            dev.send(hd.info())
+        elif isinstance(cmd, p.SweepCommand):
+            dev.sweeps_seen = getattr(dev, "sweeps_seen", 0) + 1
+            d = 1 if cmd.to_step >= cmd.from_step else -1
+            for step in range(cmd.from_step, cmd.to_step + d, d):
+                if reboot(dev, cmd, step):
+                    reset(dev)
+                    return
+                counts = ",".join(map(str, hd.counts_for(step)))
+                dev.send(hd.line(f"IRSCN,{dev.seq},{step},{clock()},{counts}"))
+                dev.seq += 1
+                dev.said = True
+            dev.send(hd.line(f"IRDON,{dev.seq - 1}"))
+            if reboot(dev, cmd, None):
+                reset(dev)
+        elif isinstance(cmd, p.Stop):
+            dev.send(hd.line(f"IRDON,{dev.seq - 1 if getattr(dev, 'said', False) else -1}"))
+        elif isinstance(cmd, p.GoTo):
+            dev.send(hd.line(f"IRPOS,{cmd.step}"))
+    return behaviour
+
+
+def test_a_board_that_reset_between_poses_while_the_robot_was_moved_is_refused():
+    """A board whose clock is millis() browned out after the sweep at pose 1 (the ring at
+    step 2, the sweep's end), while the robot was moved; pose 2 was swept 2 s later. Its
+    clock then said more than at its last IRSCN (2 s since the reset against 1.5 s of its
+    first session), so it did not go back: the renumbered sweep was taken, 2 steps off
+    (37.8° on the real ring: t_room F1 0.997 -> 0.389, FINDINGS15.md), 'all 5 steps'. Its
+    clock ran 0.5 s where 2 s passed: it started anew."""
+    board = _millis_board(1500, lambda dev, cmd, step: step is None and dev.sweeps_seen == 1)
+    dev = hd.HostileDevice(board)
+    try:
+        with SerialRing(dev.link, timeout_s=hd_timeout()) as ring:
+            ring.sweep(resweep=0)
+            time.sleep(2.0)
+            with pytest.raises(DeviceRebooted) as err:
+                ring.sweep(resweep=0)
+    finally:
+        dev.close()
+    assert len(err.value.partial.steps) == 0
+    assert re.fullmatch(
+        rf"the ring on {re.escape(dev.link)} rebooted at step 2: its IRSCN are numbered from 0 "
+        r"again, and its clock started anew \(it says (\d+) ms, (\d+) ms on from the 15\d\d ms "
+        r"of the last IRSCN taken, where this computer's clock ran 2\.\d s\)\. Its firmware "
+        r"takes the step it wakes at as step 0, so every step it names since is off by 2 "
+        r"steps \(2\.2°\) and its readings would land beside their walls; none read since is "
+        r"taken\. Then turn the ring back to radial \(IRGTO,-2 turns it there now\), reset "
+        r"the board, and drive the poses not swept again\. device rebooted: 0 of 5 steps "
+        r"received; .*", str(err.value))
+
+
+def test_a_young_board_that_reset_in_a_sweep_is_refused():
+    """The same board 0.5 s after power-up (an Arduino Uno resets when the port opens)
+    resets as it turns from step -1 to 0 of its first sweep; IRSTP after a 1 s timeout gets
+    IRDON -1, and the re-sweep's first IRSCN says 1 s or so: later than the 0.5 s of the
+    last one, so it was taken as if nothing happened, each step one off."""
+    board = _millis_board(500, lambda dev, cmd, step: dev.sweeps_seen == 1 and step == 0)
+    dev = hd.HostileDevice(board)
+    try:
+        with SerialRing(dev.link, timeout_s=1.0) as ring:
+            with pytest.raises(DeviceRebooted) as err:
+                ring.sweep(resweep=1)
+    finally:
+        dev.close()
+    assert [int(s) for s in err.value.partial.steps] == [-2, -1]
+    assert re.fullmatch(
+        rf"the ring on {re.escape(dev.link)} rebooted while it turned from step -1 to step "
+        r"0: IRDON -1 \(no IRSCN sent since power-up\) ended a sweep after IRSCN had come, "
+        r"and its clock started anew \(it says 1\d\d\d ms, \d+ ms on from the 5\d\d ms of the "
+        r"last IRSCN taken, where this computer's clock ran \d\.\d s\)\. Its firmware takes "
+        r"the step it wakes at as step 0, so every step it names since is off by the step "
+        r"it stood at, from step -1 to step 0, and its readings would land beside their "
+        r"walls; none read since is taken\. Then turn the ring back to radial by hand \(where "
+        r"it stood is not known, so no IRGTO can\), reset the board, and drive the poses not "
+        r"swept again\. device rebooted: 2 of 5 steps received; .*", str(err.value))
+
+
+def test_a_board_that_reset_turning_away_from_step_0_is_refused():
+    """Turned back to step 0 (IRGTO,0) after pose 1, the board reset as the motor started
+    towards the next sweep's first step (a brown-out when the motor starts, firmware/README.md),
+    silent; IRSTP got IRDON -1 and the re-sweep came numbered and clocked anew. The ring
+    stood somewhere from step 0 to -2 when it woke, but the driver took it to have stood at
+    step 0 (the last step it heard of) and kept the sweep: up to 2 steps off, exit 0."""
+    def reboot(dev, cmd, step):
+        return dev.sweeps_seen == 2 and step == cmd.from_step and not getattr(dev, "did", 0) \
+            and setattr(dev, "did", 1) is None
+    dev = hd.HostileDevice(_millis_board(60_000, reboot))
+    try:
+        with SerialRing(dev.link, timeout_s=hd_timeout()) as ring:
+            ring.sweep(resweep=0)
+            assert ring.goto(0) == 0
+            with pytest.raises(DeviceRebooted) as err:
+                ring.sweep(resweep=1)
+    finally:
+        dev.close()
+    assert len(err.value.partial.steps) == 0
+    assert re.fullmatch(
+        rf"the ring on {re.escape(dev.link)} rebooted while it turned from step 0 to step -2: "
+        r"IRDON -1 \(no IRSCN sent since power-up\) ended a sweep after IRSCN had come, and "
+        r"its clock started anew \(\d+ ms after 600\d\d ms\)\. Its firmware takes the step it "
+        r"wakes at as step 0, so every step it names since is off by the step it stood at, "
+        r"from step 0 to step -2, and its readings would land beside their walls; none read "
+        r"since is taken\. Then turn the ring back to radial by hand \(where it stood is not "
+        r"known, so no IRGTO can\), reset the board, and drive the poses not swept again\. "
+        r"device rebooted: 0 of 5 steps received; .*", str(err.value))
+
+
+def hd_timeout() -> float:
+    return 0.15   # test_hostile's: a fake device answers at once
