@@ -322,13 +322,18 @@ CHART_FILE = "calibration chart"   # the picture irring calibrate writes beside 
 CHART_SOFTWARE = "irring calibrate"   # its PNG's Software field, which tells it
 VIEW_FILE = "view picture"   # the picture irring view writes
 VIEW_SOFTWARE = "irring view"   # its PNG's Software field
+# view.png in view's own places (out/<scenario>/, an --out folder): view's by its name, so
+# one drawn before the Software field named it (a PNG naming no program) is replaced too
+VIEW_IN_FOLDER = "view picture in its folder"
 # what each kind of file irring writes over an existing one (it replaces only its own kind)
 _OWN_KIND = {MCAP_FILE: "an MCAP", CHART_FILE: "a calibration chart",
              VIEW_FILE: "a picture irring view drew",
+             VIEW_IN_FOLDER: "a picture irring view drew",
              "calibration file": "a calibration file",
              "calibration progress file": "a calibration progress file"}
 # the Software field of a PNG of each kind (a chart drawn before it named itself: matplotlib's)
-_DRAWN_BY = {CHART_FILE: (CHART_SOFTWARE, "Matplotlib"), VIEW_FILE: (VIEW_SOFTWARE,)}
+_DRAWN_BY = {CHART_FILE: (CHART_SOFTWARE, "Matplotlib"), VIEW_FILE: (VIEW_SOFTWARE,),
+             VIEW_IN_FOLDER: (VIEW_SOFTWARE,)}
 
 
 def _drawn(path: Path, writes: str) -> bool:
@@ -337,10 +342,11 @@ def _drawn(path: Path, writes: str) -> bool:
 
     try:
         with Image.open(path) as im:
-            made_by = str(im.info.get("Software", ""))
+            made_by, fmt = str(im.info.get("Software", "")), im.format
     except Exception:   # not a picture Pillow reads
         return False
-    return made_by.startswith(_DRAWN_BY[writes])
+    return made_by.startswith(_DRAWN_BY[writes]) or (writes == VIEW_IN_FOLDER and
+                                                     not made_by and fmt == "PNG")
 
 
 def check_replaceable(path: str | Path, option: str | None = None,
@@ -368,10 +374,14 @@ def check_replaceable(path: str | Path, option: str | None = None,
                     _drawn(path, writes) if writes in _DRAWN_BY else found is not None):
         return
     what = not_text(head) or "a file"
-    rule = (f"irring view replaces only a picture it drew, which names it in its PNG's "
-            f"Software field" if writes == VIEW_FILE else f"{own} replaces only {own}")
+    rule = ("irring view replaces only a picture it drew, which names it in its PNG's "
+            "Software field" if writes == VIEW_FILE else
+            "in its folder irring view replaces only a PNG whose Software field names it, or "
+            "names no program, as its pictures did before" if writes == VIEW_IN_FOLDER else
+            f"{own} replaces only {own}")
+    other = ("another folder, or a FILE.png" if writes == VIEW_IN_FOLDER else "another file")
     raise OutputError(f"{shown}: is {what}, not {own}; writing there would replace it ({rule}): "
-                      "name another file")
+                      f"name {other}")
 
 
 @contextlib.contextmanager

@@ -140,3 +140,50 @@ def test_a_board_that_reset_turning_away_from_step_0_is_refused():
 
 def hd_timeout() -> float:
     return 0.15   # test_hostile's: a fake device answers at once
+
+
+@pytest.mark.parametrize("kind", ["text", "matplotlib"])
+def test_view_into_a_folder_replaces_no_view_png_another_program_wrote(tmp_path, capsys, kind):
+    """`irring view t_room --out DIR` replaced DIR/view.png whatever it was: a text file of
+    that name, or a chart Matplotlib drew, exit 0 (view.png in view's folders is view's by
+    its name, FINDINGS15.md). Now only a PNG that names irring view or no program (view's
+    pictures before they named it) is replaced there."""
+    from irring.cli import main
+
+    folder = tmp_path / "pics"
+    folder.mkdir()
+    target = folder / "view.png"
+    if kind == "text":
+        target.write_bytes(b"my notes, not a picture\n")
+        what = "a file"
+    else:
+        import matplotlib
+        matplotlib.use("Agg")
+        from matplotlib.figure import Figure
+        Figure(figsize=(1, 1)).savefig(target, format="png")
+        what = "a PNG picture"
+    before = target.read_bytes()
+    assert main(["view", "t_room", "--out", str(folder), "--size", "48x32"]) == 4
+    assert capsys.readouterr().err == (
+        f"irring view: error: --out {target}: is {what}, not a picture irring view drew; "
+        "writing there would replace it (in its folder irring view replaces only a PNG whose "
+        "Software field names it, or names no program, as its pictures did before): name "
+        "another folder, or a FILE.png\n")
+    assert target.read_bytes() == before
+
+
+def test_view_into_a_folder_still_replaces_its_own_pictures_old_and_new(tmp_path, capsys):
+    from PIL import Image
+
+    from irring.cli import main
+
+    folder = tmp_path / "pics"
+    folder.mkdir()
+    target = folder / "view.png"
+    Image.new("RGB", (48, 32), (10, 20, 30)).save(target, format="PNG")   # names no program
+    assert main(["view", "t_room", "--out", str(folder), "--size", "48x32"]) == 0
+    with Image.open(target) as im:
+        assert im.info["Software"] == "irring view"
+    assert main(["view", "t_room", "--out", str(folder), "--size", "64x48"]) == 0
+    with Image.open(target) as im:
+        assert im.size == (64, 48)

@@ -9,8 +9,8 @@ from pathlib import Path
 from .. import errors
 from ..core import VIEW_BASE_BYTES, VIEW_BYTES_PER_PIXEL, WORK_MEMORY_BYTES, work_refusal
 from ..errors import OutputError, TooBig
-from ..outputs import (VIEW_FILE, VIEW_SOFTWARE, atomic_file, check_out, check_replaceable,
-                       folder_name, folder_note)
+from ..outputs import (VIEW_FILE, VIEW_IN_FOLDER, VIEW_SOFTWARE, atomic_file, check_out,
+                       check_replaceable, folder_name, folder_note)
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ..simulation import gl
 from ._common import add_pose_option, describe, out_path, pose_index
@@ -44,7 +44,8 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=out_path, default=None, metavar="FILE.png",
                    help="write the picture here instead of opening the viewer (a name "
                         "without .png is a folder: view.png inside it); a FILE.png there "
-                        "already is replaced only if irring view drew it")
+                        "already is replaced only if irring view drew it, and view.png in a "
+                        "folder only if it is a PNG no other program drew")
     p.add_argument("--size", default="1280x960", metavar="WxH",
                    help="picture size in pixels (default: 1280x960)")
     p.set_defaults(func=run)
@@ -81,10 +82,9 @@ def run(args: argparse.Namespace) -> int:
         raise TooBig(refusal)
     out = picture_path(args.out if args.out is not None else Path("out") / folder_name(scenario.name))
     # a FILE.png named by --out may be anyone's; view.png (in out/<scenario>/ or the --out
-    # folder) is view's by its name
+    # folder) is view's by its name, if a PNG no other program drew
     named = out == args.out
-    if named:
-        check_replaceable(out, "--out", VIEW_FILE)   # before the rendering, not after
+    check_replaceable(out, "--out", VIEW_FILE if named else VIEW_IN_FOLDER)   # before rendering
     try:
         image = view.render(scene, width, height)
     except RuntimeError as exc:
@@ -134,11 +134,11 @@ def picture_path(out: Path) -> Path:
 def write_png(image, path: Path, own: bool = True) -> Path:
     """``image`` (H×W×3 uint8) to ``path`` as PNG, whole or not at all, naming irring view in
     its Software field. With ``own`` it replaces only a picture irring view drew (or an empty
-    file). Raises OutputError."""
+    file); else (view.png in view's folder) also a PNG naming no program. Raises OutputError."""
     from PIL import Image, PngImagePlugin   # deferred: Pillow, only to save a picture
 
     info = PngImagePlugin.PngInfo()
     info.add_text("Software", VIEW_SOFTWARE)
-    with atomic_file(path, "--out", VIEW_FILE if own else None) as tmp:
+    with atomic_file(path, "--out", VIEW_FILE if own else VIEW_IN_FOLDER) as tmp:
         Image.fromarray(image).save(tmp, format="PNG", pnginfo=info)
     return path
