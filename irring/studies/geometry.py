@@ -314,10 +314,22 @@ def _incidence_limit_rad(design: Design) -> float:
     return float(gp2.sensor(design.sensor.kind).max_incidence_rad)
 
 
+# centres × rays in one block of `seen`: its (B, M) arrays stay ~8 MB each, whatever the
+# design (a ring of 8 turning ±180° in 0.01° steps has 288,008 rays: 180 bearings at once
+# asked for over 3 GB)
+SEEN_BLOCK = 1 << 20
+
+
 def seen(rays: Rays, centres: np.ndarray, radius_m: float, *, min_range_m: float,
          max_range_m: float, max_incidence_rad: float) -> np.ndarray:
     """(B,) bool: is a cylinder of ``radius_m`` at each of ``centres`` (B, 2) hit by a ray
     within [min_range_m, max_range_m] at incidence ≤ ``max_incidence_rad``?"""
+    rows = max(1, SEEN_BLOCK // max(1, len(rays)))
+    if len(centres) > rows:
+        return np.concatenate([
+            seen(rays, centres[i:i + rows], radius_m, min_range_m=min_range_m,
+                 max_range_m=max_range_m, max_incidence_rad=max_incidence_rad)
+            for i in range(0, len(centres), rows)])
     rel = centres[:, None, :] - rays.origin[None, :, :]            # (B, M, 2)
     along = np.einsum("bmi,mi->bm", rel, rays.direction)           # to the foot of the centre
     across = rel[..., 1] * rays.direction[:, 0] - rel[..., 0] * rays.direction[:, 1]
