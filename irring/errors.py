@@ -175,6 +175,19 @@ def sigterm_as_interrupt() -> Iterator[None]:
             signal.signal(s, signal.SIG_DFL)
 
 
+def interrupted(exc: BaseException) -> bool:
+    """``exc`` is Ctrl-C (or a SIGTERM, SIGHUP raised as it), or an error it caused: one
+    landing in a C extension's import (MuJoCo's) comes out as ImportError("initialization
+    failed") with the KeyboardInterrupt in its context."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def _leave_terminal() -> None:
     """Point the standard streams that are a (hung-up) terminal at /dev/null: writing a
     message there fails (EIO) before the outputs are written, and input ends."""

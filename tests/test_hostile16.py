@@ -219,3 +219,40 @@ def test_detection_of_a_ring_with_many_rays_holds_its_memory(monkeypatch):
     monkeypatch.setattr(geometry, "SEEN_BLOCK", 1 << 40)   # every bearing at once, as before
     assert got.tolist() == geometry.seen(rays, centres, 0.01, **kw).tolist()
     assert got.sum() == 180
+
+
+def _interrupted_in_an_import(*args, **kwargs):
+    """What `import mujoco` raises when Ctrl-C or SIGTERM (raised as KeyboardInterrupt)
+    lands in its C module's initialisation: pybind11 turns it into an ImportError."""
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        raise ImportError("initialization failed")   # noqa: B904 - as pybind11 does
+
+
+def test_a_study_interrupted_while_mujoco_loads_says_interrupted(tmp_path, capsys,
+                                                                 monkeypatch):
+    """`irring study` killed (SIGTERM, 2.0 and 2.5 s in: its first run importing MuJoCo)
+    ended "internal error (ImportError: initialization failed) … please report it", exit
+    70; Ctrl-C at that moment the same. It is an interruption: exit 130, the runs kept."""
+    from irring.cli import main
+    from irring.studies import accuracy
+
+    spec = tmp_path / "s.yaml"
+    spec.write_text("designs: [radial12]\nscenarios: [box_room]\nseeds: [1, 2]\n")
+    monkeypatch.setattr(accuracy, "run_job", _interrupted_in_an_import)
+    out = tmp_path / "o"
+    assert main(["study", str(spec), "--out", str(out), "--workers", "1"]) == 130
+    assert capsys.readouterr().err == (
+        f"irring: study interrupted; 0 finished run(s) kept in {out / 'results.csv'}: run the "
+        "same command with --resume to run the rest\n")
+
+
+def test_a_run_interrupted_while_mujoco_loads_says_interrupted(tmp_path, capsys,
+                                                               monkeypatch):
+    from irring import pipeline
+    from irring.cli import main
+
+    monkeypatch.setattr(pipeline, "run", _interrupted_in_an_import)
+    assert main(["run", "t_room", "--out", str(tmp_path / "o")]) == 130
+    assert capsys.readouterr().err == "irring run: interrupted\n"

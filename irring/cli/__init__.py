@@ -108,16 +108,14 @@ def main(argv: list[str] | None = None) -> int:
                 args, "bench", None) else [])])
             args.debug = debug   # for commands that report an error and go on (bench rooms)
             return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        if debug:
-            traceback.print_exc()
-        print(f"{command}: interrupted", file=sys.stderr)
-        return errors.INTERRUPTED
     except SystemExit:
         raise
     except BaseException as exc:  # noqa: BLE001 - the one place every error becomes a line
         if debug:
             traceback.print_exc()
+        if errors.interrupted(exc):
+            print(f"{command}: interrupted", file=sys.stderr)
+            return errors.INTERRUPTED
         status, message = errors.describe(exc)
         if isinstance(exc, BrokenPipeError) and _stdout_gone():
             # the reader left (`irring geometry | head`): an output not written, said by the

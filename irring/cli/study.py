@@ -88,12 +88,10 @@ def run(args: argparse.Namespace) -> int:
             result = study.run_study(spec, out, ex, resume=args.resume,
                                      on_start=lambda done, todo: bar.reset(total=todo),
                                      progress=lambda _: bar.update())
-    except KeyboardInterrupt:
-        path = out / study.RESULTS
-        kept = len(study.read_results(path)) if path.exists() else 0
-        print(f"irring: study interrupted; {kept} finished run(s) kept in {errors.printable(str(path))}: run the same "
-              "command with --resume to run the rest", file=sys.stderr)
-        return 130
+    except BaseException as exc:   # Ctrl-C, SIGTERM, or an import they cut short
+        if not errors.interrupted(exc):
+            raise
+        return _interrupted(out)
     wall = time.perf_counter() - t0
     by, records = study.summary_records(out)
     if args.json:
@@ -122,3 +120,13 @@ def run(args: argparse.Namespace) -> int:
     if note:
         print(f"  note         {note}")
     return 0
+
+
+def _interrupted(out: Path) -> int:
+    """Ctrl-C or SIGTERM: say how many runs the file keeps for --resume."""
+    path = out / study.RESULTS
+    kept = len(study.read_results(path)) if path.exists() else 0
+    print(f"irring: study interrupted; {kept} finished run(s) kept in "
+          f"{errors.printable(str(path))}: run the same command with --resume to run the rest",
+          file=sys.stderr)
+    return errors.INTERRUPTED
