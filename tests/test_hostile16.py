@@ -256,3 +256,27 @@ def test_a_run_interrupted_while_mujoco_loads_says_interrupted(tmp_path, capsys,
     monkeypatch.setattr(pipeline, "run", _interrupted_in_an_import)
     assert main(["run", "t_room", "--out", str(tmp_path / "o")]) == 130
     assert capsys.readouterr().err == "irring run: interrupted\n"
+
+
+def test_ctrl_c_while_the_command_starts_is_one_line(tmp_path):
+    """Ctrl-C in the first ~0.8 s of any command (while `irring` imports numpy, before its
+    main() runs) printed Python's KeyboardInterrupt traceback, exit -2 (sig/sigint_run.out).
+    Sent once numpy is being loaded (mapped into the process: irring/__init__.py has run
+    its first lines), it gets the line main() prints, exit 130."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    script = os.path.join(os.path.dirname(sys.executable), "irring")
+    proc = subprocess.Popen([script, "run", "t_room", "--out", str(tmp_path / "o")],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        with open(f"/proc/{proc.pid}/maps") as f:
+            if "numpy" in f.read():
+                break
+        time.sleep(0.002)
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=60)[1].decode()
+    assert (proc.returncode, err) == (130, "irring: interrupted\n")

@@ -13,10 +13,11 @@ import contextlib
 import io
 import os
 import select
+import signal
 import sys
 import traceback
 
-from .. import errors
+from .. import errors, interrupted_starting
 from ..resources import installed_version
 from ._common import HelpFormatter, add_subcommands
 
@@ -84,6 +85,8 @@ class _Version(argparse.Action):
 def main(argv: list[str] | None = None) -> int:
     """Run one `irring` command; every failure ends as one line on stderr and an exit
     status (irring.errors), with a traceback only under --debug or IRRING_DEBUG=1."""
+    if signal.getsignal(signal.SIGINT) is interrupted_starting:
+        signal.signal(signal.SIGINT, signal.default_int_handler)   # ours from here on
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or errors.debug_requested()
     argv = [a for a in argv if a != "--debug"]
