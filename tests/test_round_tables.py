@@ -461,20 +461,7 @@ def test_the_round_pre_gate_kernel_agrees_with_its_numpy_statement(data, spoil):
     points, label, index, counts, steps, cal = state[:6]
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         asked = est_arcs._round_asked(points, label, index, counts, steps, cal)
-        vi = index[points.valid.reshape(-1)[index]]
-        f = np.ascontiguousarray
-        keep = np.zeros(0, dtype=bool)
-        if vi.size >= est_arcs.ROUND_RUN_MIN:
-            la0, b0 = cal._ab0
-            h = points.heading.reshape(-1)[vi]
-            keep = est_arcs._lines.round_pre(
-                f(vi, dtype=np.intp), f(label, dtype=np.intp).reshape(-1),
-                f(steps, dtype=np.intp), points.valid.shape[1],
-                np.exp(la0 + b0 * np.log(counts.reshape(-1)[vi])), np.cos(h), np.sin(h),
-                f(points.x).reshape(-1), f(points.y).reshape(-1),
-                f(points.origin_x).reshape(-1), f(points.origin_y).reshape(-1),
-                est_arcs.ARC_GAP_STEPS, est_arcs.ROUND_JUMP_M, est_arcs.ROUND_RUN_MIN,
-                est_arcs.ROUND_BULGE_M, est_arcs.ROUND_BEHIND, float(est_arcs.ROUND_RADII_M[0]))
+        keep = est_arcs._round_pre(points, label, index, counts, steps, cal)
         if asked is None:
             assert not keep.any()
         else:

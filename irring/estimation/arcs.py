@@ -326,8 +326,7 @@ def _round_asked(points: Points, label: np.ndarray, index: np.ndarray, counts: n
     sensor = vi % n_sensors
     step = np.asarray(steps).reshape(-1)[vi // n_sensors]
     # ranges at θ = 0: a line's θ, wrong where it cuts an arc, makes jumps of its own
-    la0, b0 = cal._ab0
-    d0 = np.exp(la0 + b0 * np.log(np.asarray(counts, dtype=float).reshape(-1)[vi]))
+    d0 = cal.distance(np.asarray(counts, dtype=float).reshape(-1)[vi])
     cut = np.ones(vi.size, dtype=bool)
     cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
                | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
@@ -399,9 +398,9 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     asked = _round_asked(points, label, index, counts, steps, cal)
     if asked is None:
         return points, label
-    a = asked
-    vi, lab, run, n_run, sel, gi = a.vi, a.lab, a.run, a.n_run, a.sel, a.gi
-    at, d0, keep, retried = a.at, a.d0, a.keep, a.retried
+    vi, lab, run, n_run, sel, gi = (asked.vi, asked.lab, asked.run, asked.n_run, asked.sel,
+                                    asked.gi)
+    at, d0, keep, retried = asked.at, asked.d0, asked.keep, asked.retried
     if retried.any():
         # a run hollow as estimated that one line explains within noise is a wall's (its
         # noise fell behind the chord), not an arc: no circle is tried on it
@@ -456,6 +455,26 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     return points, label
 
 
+def _round_pre(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
+               steps: np.ndarray, cal: Calibration) -> np.ndarray:
+    """``_lines.round_pre`` asked :func:`_round_asked`'s question: per candidate run whether
+    it passes (uint8; none where fewer than ``ROUND_RUN_MIN`` readings are valid)."""
+    vi = index[points.valid.reshape(-1)[index]]
+    if vi.size < ROUND_RUN_MIN:
+        return np.zeros(0, dtype=np.uint8)
+    f = np.ascontiguousarray
+    # numpy's exp, log, cos and sin (SIMD: libm's may differ in the last bit)
+    d0 = cal.distance(np.asarray(counts, dtype=float).reshape(-1)[vi])
+    h = points.heading.reshape(-1)[vi]
+    return _lines.round_pre(
+        f(vi, dtype=np.intp), f(label, dtype=np.intp).reshape(-1),
+        f(steps, dtype=np.intp).reshape(-1), points.valid.shape[1], d0, np.cos(h), np.sin(h),
+        f(points.x, dtype=float).reshape(-1), f(points.y, dtype=float).reshape(-1),
+        f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
+        ARC_GAP_STEPS, ROUND_JUMP_M, ROUND_RUN_MIN, ROUND_BULGE_M, ROUND_BEHIND,
+        float(ROUND_RADII_M[0]))
+
+
 def round_runs_compiled(points: Points, label: np.ndarray, index: np.ndarray,
                         counts: np.ndarray, steps: np.ndarray, cal: Calibration,
                         line_alpha: np.ndarray, line_cx: np.ndarray, line_cy: np.ndarray,
@@ -465,25 +484,11 @@ def round_runs_compiled(points: Points, label: np.ndarray, index: np.ndarray,
     compiled call (``irring.estimation._lines.round_pre``, held to it by
     tests/test_round_tables.py): where it keeps no run, neither would numpy's and nothing
     is tried as an arc (most sweeps); else :func:`round_runs` itself."""
-    vi = index[points.valid.reshape(-1)[index]]
-    if vi.size < ROUND_RUN_MIN:
-        return points, label
-    f = np.ascontiguousarray
-    la0, b0 = cal._ab0
-    # numpy's exp, log, cos and sin (SIMD: libm's may differ in the last bit)
-    d0 = np.exp(la0 + b0 * np.log(np.asarray(counts, dtype=float).reshape(-1)[vi]))
-    h = points.heading.reshape(-1)[vi]
-    keep = _lines.round_pre(
-        f(vi, dtype=np.intp), f(label, dtype=np.intp).reshape(-1),
-        f(steps, dtype=np.intp).reshape(-1), points.valid.shape[1], d0, np.cos(h), np.sin(h),
-        f(points.x, dtype=float).reshape(-1), f(points.y, dtype=float).reshape(-1),
-        f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
-        ARC_GAP_STEPS, ROUND_JUMP_M, ROUND_RUN_MIN, ROUND_BULGE_M, ROUND_BEHIND,
-        float(ROUND_RADII_M[0]))
-    if not keep.any():
+    if not _round_pre(points, label, index, counts, steps, cal).any():
         return points, label
     return round_runs(points, label, index, counts, steps, cal, line_alpha, line_cx, line_cy,
                       profiler, snap, own_cap_m)
+
 
 def onto_circles(points: Points, at: np.ndarray, circle: np.ndarray, circles: np.ndarray,
                  min_range_m: float, own_cap_m: float = math.inf) -> Points:
