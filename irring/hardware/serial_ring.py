@@ -522,17 +522,15 @@ class SerialRing:
                 else:
                     self._running = False
             if why is None and self._moved and not self._position_lost:
-                info = self.info
                 self._send(p.GoTo(0))
-                travel = info.max_step - info.min_step
-                msg = self._await((p.Position, p.ErrorReply),
-                                  self.timeout_s + travel * MOVE_ALLOWANCE_S)
+                wait_s = (self.timeout_s
+                          + (self.info.max_step - self.info.min_step) * MOVE_ALLOWANCE_S)
+                msg = self._await((p.Position, p.ErrorReply), wait_s)
                 if isinstance(msg, p.Position) and msg.step == 0:
                     self._running = self._moved = False
                     self._position = 0
                 else:
-                    why = ("no IRPOS answered IRGTO,0 within "
-                           f"{self.timeout_s + travel * MOVE_ALLOWANCE_S:g} s" if msg is None
+                    why = (f"no IRPOS answered IRGTO,0 within {wait_s:g} s" if msg is None
                            else f"it answered IRGTO,0 with {p.encode(msg).decode().strip()}")
         except KeyboardInterrupt:
             why = "interrupted: stopped where it stood"
