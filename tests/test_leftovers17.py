@@ -59,10 +59,10 @@ def test_a_device_whose_every_sensor_read_0_counts_is_warned_of(tmp_path, capsys
 
 
 def test_a_picture_too_big_for_memory_is_refused_before_the_rendering(tmp_path, capsys):
-    """`irring view --size 8192x8192` took 106 s and 5.7 GB at its peak for one picture, with
-    no refusal up front as other commands have (NEWUSER16's leftover). Refused at exit 5
-    past the 2 GB budget (85 bytes a pixel over 0.3 GB: OSMesa's 83 and EGL's 63 measured);
-    4096x3072 (1.28 GB with OSMesa) and anything up to 20 million pixels still drawn."""
+    """`irring view --size 8192x8192` rendered a picture of 5.7 GB at its peak, with no
+    refusal up front as other commands have (NEWUSER16's leftover). Refused at exit 5 past
+    the 2 GB budget (core.VIEW_BYTES_PER_PIXEL over VIEW_BASE_BYTES; the measurements:
+    README, exit status 5); anything up to 20 million pixels is still drawn."""
     from irring.cli.view import size_refusal
 
     out = tmp_path / "big.png"

@@ -349,8 +349,7 @@ def _living(pids) -> list[int]:
 def test_a_sigkilled_study_leaves_no_process_behind(tmp_path):
     """`irring study --workers 2` killed with SIGKILL left its two workers idle for good,
     parent 1, and the forkserver and resource tracker they keep alive (FINDINGS15): each
-    worker now ends when its parent does, and the helpers with them. Polled, within 30 s
-    (0.4 s seen)."""
+    worker now ends when its parent does, and the helpers with them. Polled, within 30 s."""
     p = tmp_path / "long.yaml"
     p.write_text("designs: [rotating12, radial12]\nscenarios: [t_room]\nseeds: 40\n")
     results = tmp_path / "out" / study.RESULTS
