@@ -383,11 +383,6 @@ class SerialRing:
         network URL or a port object.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
 
-    :meth:`close` ends the session: a sweep or move still running is stopped (IRSTP) and
-    the ring turned back to step 0 (IRGTO,0), where the firmware, reset by the next open,
-    takes it to stand; :attr:`park_failure` says why it could not (None: done or not
-    needed). Skipped after the link was lost, or after the device rebooted or changed.
-
     A :class:`irring.core.RingSource`: ``pipeline.acquire`` drives it as it drives SimRing.
     """
 
@@ -491,8 +486,11 @@ class SerialRing:
         return self
 
     def close(self) -> None:
-        """Stop a sweep or move still running, turn the ring back to step 0, close the port
-        (a second Ctrl-C meanwhile stops the ring where it is, and is not raised)."""
+        """Stop a sweep or move still running (IRSTP), turn the ring back to step 0
+        (IRGTO,0), close the port. :attr:`park_failure` says why the ring was not turned
+        back (None: it was, or need not be; not tried after a lost link, a reboot or another
+        ring). A second Ctrl-C meanwhile stops the ring where it is and is not raised. Why:
+        docs/protocol.md."""
         if self._port is not None:
             try:
                 self._park()
@@ -505,8 +503,7 @@ class SerialRing:
 
     def _park(self) -> None:
         """IRSTP if a sweep or move may still run, then IRGTO,0 if the motor may stand
-        elsewhere: a board that resets when its port is next opened (an Arduino) takes the
-        step it stands at for step 0. Not counted in :attr:`stats`; a failure is said in
+        elsewhere; not counted in :attr:`stats`; a failure is said in
         :attr:`park_failure`."""
         self.park_failure = None
         if self.info is None or self._link_dead or not (self._running or self._moved):
