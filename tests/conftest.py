@@ -1,4 +1,5 @@
-"""Shared fixtures: bundled scenarios (loaded once) and their raw YAML for mutating."""
+"""Shared fixtures: bundled scenarios (loaded once) and their raw YAML for mutating, and the
+figures a chart draws."""
 
 from __future__ import annotations
 
@@ -46,3 +47,15 @@ def _t_room_yaml() -> dict:
 def t_room_raw(_t_room_yaml) -> dict:
     """A fresh, mutable copy of ``t_room.yaml`` as parsed YAML (change it, then ``parse``)."""
     return copy.deepcopy(_t_room_yaml)
+
+
+@pytest.fixture
+def figures(monkeypatch) -> list:
+    """Every figure ``irring.maps.render.figure`` makes during the test, in order (a chart's
+    lines and texts, read after it is saved)."""
+    from irring.maps import render
+
+    made: list = []
+    real = render.figure
+    monkeypatch.setattr(render, "figure", lambda *a, **k: made.append(real(*a, **k)) or made[-1])
+    return made

@@ -198,11 +198,10 @@ def test_table_heads_each_detection_distance_with_its_own_value():
     assert row.split()[-3:] == ["miss", "12.1mm", "20.0mm"]
 
 
-def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, monkeypatch):
+def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, figures):
     """A room of one's own with posts whose walls lie beyond the sensors' reach: the chart
     said "no scenario here hides a wall behind a thin post" and the table's "—" went
     unexplained (newuser15)."""
-    from irring.maps import render
     from irring.studies import compare as compare_mod
 
     scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": None}
@@ -212,10 +211,6 @@ def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, monke
     assert compare_mod.table([rec]).splitlines()[-1] == (
         "shadow —: n/a, no wall the sensors could range is hidden behind an obstacle "
         "(in any of these scenarios)")
-    figures = []
-    real_figure = render.figure
-    monkeypatch.setattr(render, "figure", lambda *a, **k: figures.append(real_figure(*a, **k))
-                        or figures[-1])
     compare_mod.chart({"designs": [rec], "detection_distances_m": [0.35]}, tmp_path / "c.png")
     texts = [t.get_text() for ax in figures[0].axes for t in ax.texts]
     assert ("shadow n/a: no wall the sensors could range is hidden behind an obstacle\n"
@@ -230,11 +225,10 @@ robot: {poses: [{x_mm: 700, y_mm: 500}]}
 """
 
 
-def test_the_chart_marks_the_compared_rooms_cylinders_and_no_others(tmp_path, monkeypatch):
+def test_the_chart_marks_the_compared_rooms_cylinders_and_no_others(tmp_path, figures):
     """compare.png drew "t_room_cylinder's table leg, r = 22 mm" whatever rooms were
     compared (newuser16): it marks the radii of the compared rooms' own cylinders, each
     once, and nothing in a room without one."""
-    from irring.maps import render
     from irring.scenario import load_scenario, loads
 
     own = loads(ROOM_WITHOUT_POSTS, "lab_no_posts.yaml")
@@ -248,10 +242,6 @@ def test_the_chart_marks_the_compared_rooms_cylinders_and_no_others(tmp_path, mo
            "runs": 1, "scenarios": ["lab_no_posts"], "poses": {"lab_no_posts": 1},
            "by_scenario": {"lab_no_posts": scores}, "detection_distances_m": [0.35, 0.65],
            "min_detectable_radius_m": [0.002, 0.0041]}
-    figures = []
-    real_figure = render.figure
-    monkeypatch.setattr(render, "figure", lambda *a, **k: figures.append(real_figure(*a, **k))
-                        or figures[-1])
 
     def marks(cyls):
         compare.chart({"designs": [rec], "detection_distances_m": [0.35, 0.65],
@@ -313,7 +303,7 @@ def test_compare_bars_give_no_eta_before_the_first_run_nor_for_the_curves(monkey
     assert all("<?," in s for s in curves)   # tqdm's said 00:03 for radial12's 0.1 s
 
 
-def test_the_table_gives_each_score_its_spread_from_seed_to_seed(tmp_path, monkeypatch):
+def test_the_table_gives_each_score_its_spread_from_seed_to_seed(tmp_path, figures):
     """compare's table had no spread (study's has ± sd): with 3 seeds, ring8's shadow 0.51
     against the paper ring's 0.47 read as a difference (newuser16). Each score now carries
     the sd over seeds within a room, pooled over the rooms, not the sd over every run,
@@ -342,12 +332,6 @@ def test_the_table_gives_each_score_its_spread_from_seed_to_seed(tmp_path, monke
     assert one["occupied_f1_sd"] is None
     assert "±" not in compare.table([one])
     # the chart's bars carry the same spread
-    from irring.maps import render
-
-    figures = []
-    real_figure = render.figure
-    monkeypatch.setattr(render, "figure", lambda *a, **k: figures.append(real_figure(*a, **k))
-                        or figures[-1])
     compare.chart({"designs": [rec], "detection_distances_m": [0.35]}, tmp_path / "c.png")
     scores = figures[0].axes[0]
     f1 = [c for c in scores.containers if c.get_label() == "occupied F1"][0]
@@ -377,12 +361,10 @@ def test_a_miss_the_minimum_range_alone_makes_is_too_near():
     assert ring.too_near.tolist() == [False] and ring.min_detectable_radius_m[0] < 0.005
 
 
-def test_the_table_and_chart_say_too_near_rather_than_miss(tmp_path, monkeypatch):
+def test_the_table_and_chart_say_too_near_rather_than_miss(tmp_path, figures):
     """compare printed a bare "miss" for radial12 at 250 mm beside 132 mm at 350 mm
     (newuser15): the table says "too near" and why, with each design's minimum range, and
     the chart draws a × at 200 mm where the curve has no point."""
-    from irring.maps import render
-
     scores = {"occupied_f1": 0.2, "free_accuracy": 1.0, "coverage": 0.0, "shadow": 0.0}
     rec = {"design": "radial12", **scores, "hardware_time_s": 0.038, "compute_time_s": 0.002,
            "runs": 1, "scenarios": ["lab"], "poses": {"lab": 1}, "by_scenario": {"lab": scores},
@@ -394,10 +376,6 @@ def test_the_table_and_chart_say_too_near_rather_than_miss(tmp_path, monkeypatch
     assert lines[-1] == ("too near: none ≤ 200 mm is seen at every bearing only because the "
                          "near side is within the sensor's minimum range of the sensor facing "
                          "it (radial12: 100 mm)")
-    figures = []
-    real_figure = render.figure
-    monkeypatch.setattr(render, "figure", lambda *a, **k: figures.append(real_figure(*a, **k))
-                        or figures[-1])
     compare.chart({"designs": [rec], "detection_distances_m": [0.25, 0.35, 0.65]},
                   tmp_path / "c.png")
     crosses = [ln for ax in figures[0].axes for ln in ax.get_lines() if ln.get_marker() == "x"]
