@@ -363,7 +363,8 @@ class SerialRing:
         all, each with its own ``timeout_s``) before giving up with :class:`DeviceTimeout`.
         During a sweep, CHATTER_LIMIT_BYTES arriving without a new step count as one such
         silence (a link that talks but delivers nothing); IRHLO and IRGTO wait ``timeout_s``
-        for their answer.
+        for their answer (the first IRHLO at least ``boot_s``; :meth:`close`'s IRGTO,0 also
+        MOVE_ALLOWANCE_S a motor step).
     retries: how often a command is repeated after IRERR 1, busy or a timeout.
     template: the ring design whose numbers the device does not report (radius, emitter
         offset, sensor height, joint limit); IRINF overrides sensors, step, gear, limits.
