@@ -192,9 +192,9 @@ def test_view_into_a_folder_still_replaces_its_own_pictures_old_and_new(tmp_path
 def test_detection_of_a_ring_with_many_rays_holds_its_memory(monkeypatch):
     """`irring compare --design '{sensors: 8, radius_mm: 150, sweep_half_angle_deg: 180,
     step_deg: 0.01}'` passed the run's memory check and then asked for over 3 GB for the
-    detection curve (288,000 rays × 180 bearings at once): "ran out of memory" after 94 s
-    under a 3 GB limit. A tenth of those rays asked for 290 MB a radius tried; now the
-    bearings go in blocks, with the same answer."""
+    detection curve (288,000 rays × 180 bearings at once): "ran out of memory" under a 3 GB
+    limit. A tenth of those rays asked for 290 MB a radius tried; now the bearings go in
+    blocks, with the same answer."""
     import math
     import tracemalloc
 
@@ -232,9 +232,9 @@ def _interrupted_in_an_import(*args, **kwargs):
 
 def test_a_study_interrupted_while_mujoco_loads_says_interrupted(tmp_path, capsys,
                                                                  monkeypatch):
-    """`irring study` killed (SIGTERM, 2.0 and 2.5 s in: its first run importing MuJoCo)
-    ended "internal error (ImportError: initialization failed) … please report it", exit
-    70; Ctrl-C at that moment the same. It is an interruption: exit 130, the runs kept."""
+    """`irring study` killed (SIGTERM while its first run imported MuJoCo) ended "internal
+    error (ImportError: initialization failed) … please report it", exit 70; Ctrl-C at
+    that moment the same. It is an interruption: exit 130, the runs kept."""
     from irring.cli import main
     from irring.studies import accuracy
 
@@ -259,10 +259,10 @@ def test_a_run_interrupted_while_mujoco_loads_says_interrupted(tmp_path, capsys,
 
 
 def test_ctrl_c_while_the_command_starts_is_one_line(tmp_path):
-    """Ctrl-C in the first ~0.8 s of any command (while `irring` imports numpy, before its
-    main() runs) printed Python's KeyboardInterrupt traceback, exit -2 (sig/sigint_run.out).
-    Sent once numpy is being loaded (mapped into the process: irring/__init__.py has run
-    its first lines), it gets the line main() prints, exit 130."""
+    """Ctrl-C as any command starts (while `irring` imports numpy, before its main() runs)
+    printed Python's KeyboardInterrupt traceback, exit -2. Sent once numpy is being loaded
+    (mapped into the process: irring/__init__.py has run its first lines), it gets the line
+    main() prints, exit 130."""
     import os
     import signal
     import subprocess
