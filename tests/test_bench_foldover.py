@@ -36,7 +36,7 @@ def test_a_planted_wrong_branch_reading_is_counted_beyond_100_mm_and_nothing_els
     valid = np.array([[True, True, True], [False, True, True]])
     p, truth = _readings(hx + off, hy, valid, hx, hy)
     truth.hit_point[1, 2] = np.nan   # that beam hit nothing: a valid reading there is off
-    e = foldover.reading_errors(p, truth)
+    e = foldover.reading_errors(p, truth.hit_point)
     assert e.size == 5   # the invalid reading 500 mm off is not judged
     assert e[:4] == pytest.approx([0.030, 0.101, 0.099, 0.0])
     assert e[4] == math.inf
@@ -155,3 +155,47 @@ def test_grazing_cli_names_a_missing_file_and_pools_the_others(tmp_path, capsys)
     assert r["n"] == r["rooms"][1]["n"] == sum(b["n"] for b in r["bins"]) > 1000
     # walls-only corridor: readings out to 60–70°, θ = 0 far worse there
     assert r["bins"][6]["n"] > 0 and r["gain_band"]["gain"] > grazing.GAIN_TARGET
+
+
+# A GP2D12 (624 mm) facing a wall 650 mm from its emitter: the simulated sensor reads only
+# noise from it (the truth has no hit within range), yet the beam does meet it.
+PAST_RANGE_ROOM = """
+name: past_range
+room: {outline_mm: [[-1070, -730], [800, -730], [800, 910], [-1070, 910]]}
+robot: {poses: [{x_mm: 0, y_mm: 0, yaw_deg: 0}]}
+sensor: {model: gp2d12}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_valid_reading_past_the_range_is_judged_against_the_surface_its_beam_meets():
+    from irring.core import points_with
+    from irring.estimation.estimate import estimate
+    from irring.scenario import loads
+    from irring.simulation.sim import SimRing
+
+    sc = loads(PAST_RANGE_ROOM)
+    with SimRing(sc) as sim:
+        sw = sim.sweep(0)
+    s, k = int(np.flatnonzero(np.asarray(sw.steps) == 0)[0]), 0   # sensor 0 faces +x
+    t = sw.truth
+    assert not np.isfinite(t.distance_m[s, k])
+    o, u = t.origin[s, k], t.direction[s, k]
+    wall = (0.800 - o[0]) / u[0]       # how far along the beam it meets the wall at x = 0.8
+    assert 0.624 < wall < 0.660
+    # a reading planted valid on that beam, 0.57 m out: short of the wall by wall - 0.57
+    p = estimate(sw)
+    valid = np.zeros_like(p.valid)
+    valid[s, k] = True
+    x, y = p.x.copy(), p.y.copy()
+    x[s, k], y[s, k] = o[0] + 0.570 * u[0], o[1] + 0.570 * u[1]
+    p = points_with(p, valid=valid, x=x, y=y)
+    assert foldover.reading_errors(p, t.hit_point).tolist() == [math.inf]   # the truth alone
+    hit, n = foldover.hits_past_range(sw, p, sc)
+    assert n == 1
+    assert hit[s, k, :2] == pytest.approx([0.800, o[1] + wall * u[1]], abs=1e-6)
+    assert foldover.reading_errors(p, hit) == pytest.approx([wall - 0.570], abs=1e-6)
+    # every other beam keeps its truth
+    other = np.ones(valid.shape, dtype=bool)
+    other[s, k] = False
+    np.testing.assert_array_equal(hit[other], t.hit_point[other])

@@ -38,7 +38,7 @@ def _run(text: str, seed: int, arcs: bool, monkeypatch):
         if not arcs:
             m.setattr(est_foldover, "onto_concave_arcs", lambda p, *a, **k: p)
         run = pipeline.run(sc, seed=seed, progress=False)
-    errors = np.concatenate([reading_errors(p, sw.truth) for sw, p in zip(run.sweeps, run.points)])
+    errors = np.concatenate([reading_errors(p, sw.truth.hit_point) for sw, p in zip(run.sweeps, run.points)])
     return sc, run, errors
 
 

@@ -27,7 +27,9 @@ housing allows):
   >{MAX_ERROR_M * 1e3:.0f}mm       valid readings more than {MAX_ERROR_M * 1e3:.0f} mm from their true hit (target 0: none
                on the wrong branch); a valid reading whose beam hit nothing counts here
   max mm       the largest error of a valid reading with a true hit (n/a: none); "inf" when a
-               valid reading's beam hit nothing (JSON: no_hit counts them)
+               valid reading's beam hit nothing (JSON: no_hit counts them). A beam whose
+               surface lies past the sensor's range reads only noise; a valid reading of one
+               is judged against that surface (JSON: past_range counts them)
   outside      occupied cells whose centre lies outside the room by more than
                {OUTSIDE_CELLS:g} cells + {OUTSIDE_MARGIN_M * 1e3:.0f} mm ({outside_tolerance_m(0.010) * 1e3:.0f} mm on 10 mm cells; target 0:
                walls never outside)

@@ -13,6 +13,7 @@ from ..core import Reason, distance_to_outline, inside_outline
 from ..maps.mapping import OCCUPIED, OccupancyGrid
 from ..maps.metrics import SCORE_KEYS
 from ..scenario import Scenario, counted_seeds
+from ..simulation.sim import SimRing
 from .rooms import Unusable, each_room
 
 MAX_ERROR_M = 0.100   # a valid reading farther than this from its true hit is on the wrong branch
@@ -30,12 +31,29 @@ def outside_tolerance_m(resolution_m: float) -> float:
     return OUTSIDE_CELLS * resolution_m + OUTSIDE_MARGIN_M
 
 
-def reading_errors(points, truth) -> np.ndarray:
-    """End-point error (m) of each valid reading of a sweep against its true hit, flat; inf
-    for a valid reading whose beam hit nothing or whose end point is not finite."""
-    e = np.hypot(points.x - truth.hit_point[..., 0], points.y - truth.hit_point[..., 1])
+def reading_errors(points, hit_point: np.ndarray) -> np.ndarray:
+    """End-point error (m) of each valid reading of a sweep against its true hit
+    ``hit_point`` (S, N, 3), flat; inf for a valid reading whose beam hit nothing or whose
+    end point is not finite."""
+    e = np.hypot(points.x - hit_point[..., 0], points.y - hit_point[..., 1])
     e = e[points.valid]
     return np.where(np.isfinite(e), e, np.inf)
+
+
+def hits_past_range(sweep, points, scenario: Scenario) -> tuple[np.ndarray, int]:
+    """(the sweep's true hit points (S, N, 3), with the surface each valid reading's beam
+    meets past the sensor's range where it met none within it; how many such readings). The
+    simulated sensor reads only noise from a surface past its range, so such a reading is a
+    noise spike the estimator placed; it is judged by where its beam's surface really is."""
+    truth = sweep.truth
+    past = points.valid & ~np.isfinite(truth.distance_m)
+    if not past.any():
+        return truth.hit_point, 0
+    hit = truth.hit_point.copy()
+    with SimRing(scenario) as sim:
+        hit[past] = sim.cast(truth.origin[past], truth.direction[past],
+                             max_range_m=np.inf).hit_point
+    return hit, int(past.sum())
 
 
 def worst_error(errors: np.ndarray) -> tuple[float | None, int]:
@@ -67,17 +85,25 @@ def check_run(scenario: Scenario, seed: int | None = None) -> dict:
     """One room, one seed, as written: ``seed``, ``valid`` readings, ``ambiguous``
     (FOLDOVER_AMBIGUOUS), ``far`` (valid readings > :data:`MAX_ERROR_M` off),
     ``max_error_m`` (the largest finite error; None without one), ``no_hit`` (valid readings
-    whose beam hit nothing, counted in ``far``), ``cells_outside``, ``nonfinite``, the map
+    whose beam hit nothing, counted in ``far``), ``past_range`` (valid readings whose beam
+    meets its surface only past the sensor's range: judged against that surface,
+    :func:`hits_past_range`), ``cells_outside``, ``nonfinite``, the map
     scores of :data:`MAP_SCORES` (as ``irring run`` and ``irring bench rooms`` score a map;
     None where undefined; not targets here) and ``passed`` (no far reading, no cell outside,
     nothing non-finite)."""
     run = pipeline.run(scenario, seed=seed, progress=False)
-    errs = np.concatenate([reading_errors(p, sw.truth) for sw, p in zip(run.sweeps, run.points)])
+    errs, past_range = [], 0
+    for sw, p in zip(run.sweeps, run.points):
+        hit, n = hits_past_range(sw, p, scenario)
+        errs.append(reading_errors(p, hit))
+        past_range += n
+    errs = np.concatenate(errs)
     row = {"seed": run.seed, "valid": int(errs.size),
            "ambiguous": int(sum((p.reason == Reason.FOLDOVER_AMBIGUOUS).sum()
                                 for p in run.points)),
            "far": int((errs > MAX_ERROR_M).sum()),
            **dict(zip(("max_error_m", "no_hit"), worst_error(errs))),
+           "past_range": past_range,
            "cells_outside": cells_outside(run.grid, scenario.room.outline_m),
            "nonfinite": sum(nonfinite_outputs(p) for p in run.points),
            **{k: run.scores[k] for k in MAP_SCORES}}
