@@ -14,7 +14,7 @@ import os
 import numpy as np
 import pytest
 import yaml
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from _synthetic import (PAPER_RING, T_POSES, T_ROOM, make_sweep, polygon, rectangle,
@@ -456,6 +456,8 @@ def test_out_of_range_readings():
 @HARD
 @given(n_steps=st.integers(1, 3), repeat=st.integers(1, 6), step=st.integers(-35, 35),
        pose=st.sampled_from(T_POSES))
+# two steps read five times each: ten readings of two spots, once taken for a slope (θ 63-65°)
+@example(n_steps=2, repeat=5, step=18, pose=(1.21, 0.45, 0))
 def test_two_point_lines_and_coincident_end_points(n_steps, repeat, step, pose):
     """Sweeps of 1 … 3 steps (lines of ≤ 3 points) and the same step read repeatedly
     (coincident end points): finite, and with no line and fewer than three steps (too few

@@ -1246,7 +1246,7 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
     theta, steep) float arrays and (ok, convex, sure, concave) uint8 arrays, each (M,);
     sure: bent away by ``sure_se`` standard errors; no bend where fewer than ``min_n``
     readings or the curvature term keeps at most ``bend_min_share`` of Σ(v²)²."""
-    cdef idx_t K = ox.shape[0], M = ask.shape[0], i, p, c, w, r, nw, dof, n_ok
+    cdef idx_t K = ox.shape[0], M = ask.shape[0], i, p, c, w, r, nw, dof, n_ok, n_steps, w2
     cdef idx_t W = 2 * half + 1
     cdef double inv_dx = 0.0
     cdef double ux, uy, signed, th, la, b, d, x, y, nn, mu, mv, svv, sl, t, se, chi2, res
@@ -1376,8 +1376,16 @@ def profiles(const double[::1] ox, const double[::1] oy, const double[::1] headi
                 # the curvature term, orthogonal to 1 and v
                 q[w] = q[w] - qm - qdv * v[w]
                 sqq += q[w] * q[w]
-            # readings of one step repeated lie on one spot: they give no slope
-            n_ok = nw if svv >= nw * spread_m * spread_m else 0
+            # readings of one step repeated lie on one spot: they give no slope; nor do fewer
+            # than min_n distinct steps (a step read repeatedly is one spot, however often)
+            n_steps = 0
+            for w in range(nw):
+                for w2 in range(w):
+                    if step[win[w2]] == step[win[w]]:
+                        break
+                else:
+                    n_steps += 1
+            n_ok = nw if (svv >= nw * spread_m * spread_m and n_steps >= min_n) else 0
             # at two spots the curvature term is rounding: no bend (as range_profiles says)
             if n_ok >= min_n and sqq > bend_min_share * q_norm:
                 if sqq < 1e-30:

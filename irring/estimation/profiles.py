@@ -157,8 +157,12 @@ def range_profiles(points: Points, vi: np.ndarray, off: np.ndarray, counts: np.n
     se = np.sqrt(((sig * dv) ** 2).sum(axis=1)) / svv
     res = (du - slope[:, None] * dv) / sig
     chi2 = (res * res).sum(axis=1)
-    # readings of one step repeated lie on one spot: they give no slope
-    n = np.where(svv >= n * _LOCAL_SPREAD_M ** 2, n, 0.0)
+    # readings of one step repeated lie on one spot: they give no slope; nor do fewer than
+    # LOCAL_MIN distinct steps (a step read repeatedly is one spot, however often)
+    sj = np.where(w > 0, step[jc], np.iinfo(np.intp).min)
+    first = ~np.tril(sj[:, :, None] == sj[:, None, :], -1).any(axis=2)   # no earlier equal
+    n_steps = ((w > 0) & first).sum(axis=1)
+    n = np.where((svv >= n * _LOCAL_SPREAD_M ** 2) & (n_steps >= LOCAL_MIN), n, 0.0)
     dof = np.clip(n - 2.0, 1.0, _CHI2_95.size).astype(np.intp)
     # bent: a curvature term (v², orthogonal to 1 and v) clearly off zero; a post's side
     # bends away from the beam (θ changes ~10× faster than the beam turns), a flat wall
