@@ -365,6 +365,14 @@ class Calibration:
         """1-σ count noise including quantisation (one count, uniform)."""
         return math.sqrt(self.noise_counts ** 2 + 1.0 / 12.0)
 
+    @functools.cached_property
+    def theta_free(self) -> bool:
+        """Whether no incidence up to the drop-out angle changes a distance: a(θ), b(θ) the
+        same on every row that reads (a scene without the ``incidence`` effect, the ideal
+        sensor's)."""
+        rows = self.theta_rad <= self.max_incidence_rad + 1e-12
+        return bool(np.all(self.a[rows] == self.a[0]) and np.all(self.b[rows] == self.b[0]))
+
     @property
     def folds(self) -> bool:
         """Whether readings may lie on the fold-over (near) branch."""

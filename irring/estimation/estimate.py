@@ -32,7 +32,7 @@ from .lines import (PINNED_RAD, Estimate, LineOptions, far_sigma_cap, jump_slope
                     read_to_own_range, scan_order, segment, snap_to_lines)
 from .members import (across_silence, alone_at_an_edge, dim_returns_on_lines, past_other_lines,
                       unplaced_alone)
-from .profiles import SharedProfiles, profiles_compiled
+from .profiles import SharedProfiles, profiles_compiled, unknown_theta_free
 from .silence import (beside_a_return_compiled, censored_lines, classify, drop_beyond_range,
                       held_and_pooled, no_return_reach, noise_past_line_end, silent_behind_a_wall,
                       silent_reach)
@@ -298,6 +298,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     (``snapper``, the compiled :func:`snap_to_lines` by default), a line over a many-sided
     wall's facets read as two pieces (:func:`faceted_lines`), members read just past
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
+    (``snap`` only) far posts' circles and readings unplaced alone, INCIDENCE_UNKNOWN readings
+    no θ moves (an ideal sensor's) at θ = 0 (:func:`unknown_theta_free`),
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
     oracle passes its numpy statements of both; never past ``cal.silent_range_m``:
     :func:`silent_reach`), last (``snap`` only) dim returns beside a line's members put on it
@@ -385,6 +387,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         # a thin post far away: its few readings, several sensors', fitted as one circle
         points = far_posts(points, label, counts, steps, cal, post_grouper)
         points = unplaced_alone(points, split)
+    # whichever rule left a reading's incidence unknown, one no θ moves is placed (the ideal
+    # sensor's: no θ dependence)
+    points = unknown_theta_free(points, counts, cal)
     pooled = (points.valid & (counts < cal.no_return_counts + cal.return_margin_counts)
               if read_to_own_range(cal, points.max_range_m) else None)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))

@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..core import Points, Reason
+from ..core import Points, Reason, points_with
 from ..resources import kernel
 from .calibration import SIGMA_FLOOR_M, Calibration, range_sigma
 from .lines import (PINNED_RAD, LineOptions, invalidated, jump_slope, placed_at, polyline_ids,
@@ -21,6 +21,7 @@ from .lines import (PINNED_RAD, LineOptions, invalidated, jump_slope, placed_at,
 
 
 _lines = kernel("estimation._lines")
+_INCIDENCE_UNKNOWN = int(Reason.INCIDENCE_UNKNOWN)
 
 
 LOCAL_STEPS = 5        # a reading on no line looks this many steps either way …
@@ -319,6 +320,33 @@ def leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: n
     if gone.size:
         points = invalidated(points, gone, Reason.INCIDENCE_UNKNOWN)
     return points, label
+
+
+def unknown_theta_free(points: Points, counts: np.ndarray, cal: Calibration) -> Points:
+    """``points`` with its INCIDENCE_UNKNOWN readings valid at θ = 0 with their θ = 0 σ where
+    the calibration has no θ dependence (``cal.theta_free``: the ideal sensor's), within
+    [min range, max range]: whichever rule left them unknown, what θ is cannot move them.
+    ``counts`` (S, N): the counts they were read from (far branch: a calibration that folds
+    is left alone, its branches are the fold-over's to decide). Why: docs/estimator.md,
+    "Readings no θ moves"."""
+    if not cal.theta_free or cal.folds:
+        return points
+    at = (points.reason.reshape(-1) == _INCIDENCE_UNKNOWN).nonzero()[0]
+    if not at.size:
+        return points
+    s = np.asarray(counts, dtype=float).reshape(-1)[at]
+    lit = s > 0.0
+    at, s = at[lit], s[lit]
+    d0 = cal.distance(s, 0.0)
+    sigma = theta0_sigma(cal, s, d0, cal.sigma_counts() / s)
+    free = ((d0 >= cal.min_range_m) & (d0 <= points.max_range_m) & np.isfinite(sigma))
+    if not free.any():
+        return points
+    at = at[free]
+    points = placed_at(points, at, d0[free], 0.0, sigma[free])
+    valid, reason = np.array(points.valid), np.array(points.reason)
+    valid.reshape(-1)[at], reason.reshape(-1)[at] = True, Reason.OK
+    return points_with(points, valid=valid, reason=reason)
 
 
 def _theta_free(cal: Calibration, s: np.ndarray, d0: np.ndarray, sig_s: np.ndarray,
