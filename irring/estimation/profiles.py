@@ -338,8 +338,7 @@ def unknown_theta_free(points: Points, counts: np.ndarray, cal: Calibration) -> 
     lit = s > 0.0
     at, s = at[lit], s[lit]
     d0 = cal.distance(s, 0.0)
-    sigma = theta0_sigma(cal, s, d0, cal.sigma_counts() / s)
-    free = ((d0 >= cal.min_range_m) & (d0 <= points.max_range_m) & np.isfinite(sigma))
+    free, sigma = _theta_free(cal, s, d0, cal.sigma_counts() / s, points.max_range_m)
     if not free.any():
         return points
     at = at[free]
