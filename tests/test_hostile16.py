@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 import time
+from pathlib import Path
 
 import pytest
 
@@ -258,6 +259,7 @@ def test_a_run_interrupted_while_mujoco_loads_says_interrupted(tmp_path, capsys,
     assert capsys.readouterr().err == "irring run: interrupted\n"
 
 
+@pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="reads a process's maps")
 def test_ctrl_c_while_the_command_starts_is_one_line(tmp_path):
     """Ctrl-C as any command starts (while `irring` imports numpy, before its main() runs)
     printed Python's KeyboardInterrupt traceback, exit -2. Sent once numpy is being loaded
