@@ -445,6 +445,9 @@ class SerialRing:
         self._moved = False         # the motor may stand away from step 0
         self._link_dead = False     # the device stopped answering or the port failed
         self._position_lost = False  # it rebooted away from step 0, or another ring answered
+        # why the last sweep lost the link ("device rebooted", …): the device's numbering
+        # and the ring's step are no longer this session's, so no sweep before a handshake
+        self._lost_sweep: str | None = None
         self.park_failure: str | None = None
 
     # ---------------------------------------------------------------- lifecycle
@@ -761,6 +764,7 @@ class SerialRing:
         # a new session: its clock and numbering are new
         self._clock = self._clock_at = self._woke = None
         self._link_dead = False
+        self._lost_sweep = None
         if info.proto == 1 and self.decoder.version == 1:
             what = (f"the device on {self.port_name} runs IRR protocol v1 firmware "
                     f"({info.firmware}), whose 8-bit XOR checksum lets two bit errors in one "
@@ -884,9 +888,18 @@ class SerialRing:
 
         Missing steps are absent from ``counts`` and listed in ``missing_steps``;
         :attr:`last_report` says why. Raises :class:`DeviceTimeout` /
-        :class:`DeviceDisconnected` (with ``.partial``) if the device goes away.
+        :class:`DeviceDisconnected` (with ``.partial``) if the device goes away; after any
+        :class:`LinkLost` out of a sweep, a :class:`DeviceError` until :meth:`hello`.
         """
         info = self._require_info()
+        if self._lost_sweep is not None:
+            then = ("Turn the ring back to radial and reset the board as that error said, then "
+                    "handshake" if self._lost_sweep == "device rebooted" else "Handshake")
+            raise DeviceError(
+                f"the last sweep on {self.port_name} ended with the {self._lost_sweep}: the "
+                "ring's step and the device's IRSCN numbering are no longer this session's, so "
+                f"what it reads now could be placed at the wrong steps. {then} again "
+                "(ring.hello(), or close this SerialRing and open a new one) before sweeping")
         # (1.5 was read as step 1)
         req = [int(s) for s in (self.full_range() if steps is None else
                                 core.check_steps(steps, info.min_step, info.max_step))]
@@ -940,6 +953,8 @@ class SerialRing:
                       "device replayed its last sweep" if isinstance(exc, DeviceReplayed) else
                       "device rebooted" if isinstance(exc, DeviceRebooted) else
                       "device refused" if isinstance(exc, DeviceRejected) else "interrupted")
+            if isinstance(exc, LinkLost):
+                self._lost_sweep = reason
             sweep, report = build(False, reason)
             exc.partial, exc.report = sweep, report
             if isinstance(exc, KeyboardInterrupt):
