@@ -1170,8 +1170,29 @@ def test_only_a_serial_device_is_given_time_to_start(tmp_path):
         pty = os.ttyname(slave)
         (tmp_path / "ring.pty").symlink_to(pty)
         assert not _may_reset(pty) and not _may_reset(str(tmp_path / "ring.pty"))
+        # spy:// and alt:// wrap the device their path names: a pty stays a pty
+        assert not _may_reset(f"spy://{pty}") and not _may_reset(f"alt://{pty}?class=Serial")
     finally:
         os.close(master)
         os.close(slave)
-    assert not _may_reset("socket://127.0.0.1:5000") and not _may_reset("loop://")
+    assert not _may_reset("loop://") and not _may_reset("LOOP://?logging=debug")
     assert _may_reset("/dev/ttyACM0") and _may_reset("/dev/ttyUSB0") and _may_reset("COM3")
+
+
+@pytest.mark.parametrize("url", [
+    "spy:///dev/ttyACM0", "spy://dev/ttyACM0?file=log.txt", "alt:///dev/ttyUSB0?class=Serial",
+    "hwgrep://2341:0043", "rfc2217://ring.local:2217", "socket://ring.local:7000"])
+def test_a_url_that_wraps_a_board_gives_it_time_to_start(virtual_time, url):
+    """The boot wait was skipped for every URL: a spy:// or alt:// of an Uno's /dev/ttyACM0,
+    a hwgrep:// (it finds a local serial device) and a network port served by ser2net or
+    pyserial's rfc2217 server (each opens the board's port when the client connects, DTR
+    up) reset the board as its own path does; its bootloader took the first IRHLO and the
+    handshake took 2 s, 2 timeouts and 2 commands resent on a clean link."""
+    board = ResettingBoard(Device(StandInSource()))
+    board.is_open = True   # (the opener returns it open, as serial_for_url does)
+    board.open()
+    t0 = virtual_time.now
+    ring = SerialRing(url, opener=lambda *a, **k: board, timeout_s=1.0).open()
+    assert virtual_time.now - t0 == pytest.approx(0.5, abs=0.03)
+    assert (ring.stats.timeouts, ring.stats.resent_commands) == (0, 0)
+    assert ring.info.nsensors == 12

@@ -18,6 +18,7 @@ import math
 import os
 import re
 import time
+import urllib.parse
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
@@ -256,10 +257,21 @@ def _open_failure(exc: BaseException) -> str:
 
 def _may_reset(port: str) -> bool:
     """Whether opening ``port`` may reset the board behind it: a local serial device (an
-    Arduino's USB serial asserts DTR when opened, which resets it), not a pseudo-terminal
-    (irring emulate, irring-host, irring-simavr) or a network URL."""
-    if "://" in port:
-        return False
+    Arduino's USB serial asserts DTR when opened, which resets it), also wrapped in a
+    pyserial URL (spy://, alt:// name its path; hwgrep:// finds one) or served on the
+    network (rfc2217://, socket://: ser2net and pyserial's rfc2217 server open the board's
+    port when a client connects); not a pseudo-terminal (irring emulate, irring-host,
+    irring-simavr), plain or wrapped, nor loop://. The wait costs nothing when the device
+    answers."""
+    scheme, sep, rest = port.partition("://")
+    if sep:
+        scheme = scheme.lower()
+        if scheme == "loop":
+            return False
+        if scheme not in ("spy", "alt"):
+            return True
+        parts = urllib.parse.urlsplit(port)
+        port = parts.netloc + parts.path
     real = os.path.realpath(port)
     return not (real.startswith("/dev/pts/") or re.fullmatch(r"/dev/ttys\d+", real))
 
@@ -380,8 +392,9 @@ class SerialRing:
         with :class:`HandshakeError` saying how to reflash it.
     boot_s: seconds after :meth:`open` opens the port in which a silent line is a board
         still starting (an Arduino resets when its port opens): IRHLO is sent again every
-        BOOT_RESEND_S meanwhile. None: BOOT_S for a serial device path, 0 for a pty, a
-        network URL or a port object.
+        BOOT_RESEND_S meanwhile. None: BOOT_S for a serial device path or a URL that may
+        wrap one (spy://, alt://, hwgrep://, rfc2217://, socket://), 0 for a pty, loop:// or
+        a port object.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
 
     A :class:`irring.core.RingSource`: ``pipeline.acquire`` drives it as it drives SimRing.
