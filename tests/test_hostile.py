@@ -1152,9 +1152,10 @@ def test_ctrl_c_in_a_sweep_keeps_the_finished_poses_and_the_steps_that_arrived(t
     warning = next(ln for ln in err.splitlines() if ln.startswith("irring drive: warning:"))
     assert warning.endswith(
         " was not turned back to step 0 at the end of the session (no IRDON answered IRSTP "
-        "within 2 s). Its firmware takes the step it stands at when it starts for step 0, and "
-        "an Arduino restarts each time its port is opened: turn the ring radial by hand, or "
-        "send $IRGTO,0*E3DD, before the next session")
+        "within 2 s, so it may still turn; it was last heard of at step 0). Its firmware "
+        "takes the step it stands at when it starts for step 0, and an Arduino restarts each "
+        "time its port is opened: turn the ring radial by hand, or send $IRGTO,0*E3DD, "
+        "before the next session")
     assert "irring drive: interrupted during pose 2 of 3; the 2 poses swept are mapped" in err
     first, second = _recorded(out)
     assert list(first.steps) == [-2, -1, 0, 1, 2]
@@ -2115,10 +2116,10 @@ def test_calibrate_says_when_the_ring_was_not_turned_back_to_step_0(tmp_path, ca
     err = capsys.readouterr().err
     assert code == 1, err
     assert (f"irring calibrate: warning: the ring on {link} was not turned back to step 0 at "
-            "the end of the session (no IRPOS answered IRGTO,0 within 1.02 s). Its firmware "
-            "takes the step it stands at when it starts for step 0, and an Arduino restarts "
-            "each time its port is opened: turn the ring radial by hand, or send "
-            "$IRGTO,0*E3DD, before the next session") in err
+            "the end of the session (no IRPOS answered IRGTO,0 within 1.02 s: it stands between "
+            "step 2 and step 0). Its firmware takes the step it stands at when it starts for "
+            "step 0, and an Arduino restarts each time its port is opened: turn the ring "
+            "radial by hand, or send $IRGTO,0*E3DD, before the next session") in err
     (tmp_path / "good").mkdir()
     code, _, _, _ = _calibrate(tmp_path / "good", monkeypatch, hd.good, 2, "q")
     assert code == 1 and "warning" not in capsys.readouterr().err

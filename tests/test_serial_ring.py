@@ -1058,20 +1058,22 @@ def test_ctrl_c_or_an_error_mid_sweep_stops_the_ring_and_turns_it_back(virtual_t
     assert device._job is None and device._position == 0 and ring.park_failure is None
 
 
-def test_a_second_ctrl_c_while_the_ring_turns_back_stops_it_there_and_is_not_raised(
+def test_a_second_ctrl_c_while_the_ring_turns_back_waits_for_it_and_is_not_raised(
         virtual_time):
     """close() runs where irring drive keeps what the ring delivered: a Ctrl-C raised out of
-    it would lose the drive's readings."""
+    it would lose the drive's readings. It sent IRSTP and said the ring "stopped where it
+    stood", but IRSTP ends a sweep, not an IRGTO (firmware and emulator alike): the ring
+    turned on to step 0 while the warning told the user to turn it radial by hand. The wait
+    for IRPOS,0 goes on; the interrupt is noted in close_interrupted."""
     device = Device(StandInSource(), realtime=True)
     port = Wire(device)
     ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
     ring.sweep()
     port.fail, port.after = KeyboardInterrupt(), 0
     ring.close()
-    assert port.written == [HELLO, SWEEP, PARK, STOP]
-    assert ring.park_failure.startswith(
-        "the ring on device://emulator was not turned back to step 0 at the end of the session "
-        "(interrupted: stopped where it stood). ")
+    assert port.written == [HELLO, SWEEP, PARK]
+    assert device._position == 0 and ring.stands_at == 0
+    assert ring.park_failure is None and ring.close_interrupted
 
 
 def test_a_ring_that_stopped_answering_is_asked_nothing_more_at_close(virtual_time):
@@ -1100,9 +1102,10 @@ def test_a_ring_that_does_not_return_to_step_0_is_said_to_stand_elsewhere(virtua
     ring.close()
     assert ring.park_failure == (
         "the ring on script:// was not turned back to step 0 at the end of the session (no "
-        "IRPOS answered IRGTO,0 within 0.13 s). Its firmware takes the step it stands at when "
-        "it starts for step 0, and an Arduino restarts each time its port is opened: turn the "
-        "ring radial by hand, or send $IRGTO,0*E3DD, before the next session")
+        "IRPOS answered IRGTO,0 within 0.13 s: it stands between step 3 and step 0). Its "
+        "firmware takes the step it stands at when it starts for step 0, and an Arduino "
+        "restarts each time its port is opened: turn the ring radial by hand, or send "
+        "$IRGTO,0*E3DD, before the next session")
     assert ring.stats.as_dict() == counted   # the wait for IRPOS is no timeout of a sweep
 
 

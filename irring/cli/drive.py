@@ -51,10 +51,11 @@ pose at the origin).
 Between poses drive waits for Enter when run at a terminal (--no-wait to skip); the emulator
 moves its robot by itself at every full sweep.
 
-However it ends (done, an error, Ctrl-C), drive stops a sweep still running (IRSTP) and turns
-the ring back to step 0 (IRGTO,0): its firmware takes where the ring stands when it starts for
-step 0, and an Arduino restarts each time its port is opened. A ring that does not confirm it
-is named in a warning (turn it radial by hand before the next session).
+However it ends (done, an error, Ctrl-C, SIGTERM), drive stops a sweep still running (IRSTP)
+and turns the ring back to step 0 (IRGTO,0): its firmware takes where the ring stands when it
+starts for step 0, and an Arduino restarts each time its port is opened. A ring that does not
+confirm it is named in a warning saying where it may stand (turn it radial by hand before
+the next session); a drive cut short says where the ring stands in its last line.
 
 Exit status: 0 all poses swept; 3 no device, or it stopped answering, disconnected, refused
 a sweep, made no progress, or rebooted away from step 0, where it would take another step for
@@ -226,6 +227,11 @@ def run(args: argparse.Namespace) -> int:
     except DeviceError as exc:
         _error(str(exc))
         return errors.DEVICE
+    except KeyboardInterrupt:   # Ctrl-C, SIGTERM or SIGHUP in the handshake
+        ring.close()   # (stops an earlier session's sweep the handshake found running)
+        _tell(f"irring drive: interrupted during the handshake; nothing was read; "
+              f"{_where(ring)}", file=sys.stderr)
+        return errors.INTERRUPTED
     info = ring.info
     say(f"ring on {args.port}: {info.firmware}, {info.nsensors} sensors, {info.adc_bits}-bit "
         f"ADC, step {info.step_mdeg / 1000:g}° × {info.gear_num}/{info.gear_den}, steps "
@@ -295,15 +301,18 @@ def run(args: argparse.Namespace) -> int:
             _tell(f"irring drive: warning: {errors.printable(ring.park_failure, 2000)}",
                   file=sys.stderr)
     sweeps, failure = acq.sweeps, acq.error
+    if failure is None and ring.close_interrupted:   # as the ring turned back: it is heeded
+        failure = KeyboardInterrupt()
     stopped = isinstance(failure, (KeyboardInterrupt, EOFError))
     if stopped:
         at = len(finished)
         what = (f"input ended before pose {at + 1} of {n}" if isinstance(failure, EOFError)
+                else "interrupted as the ring turned back to step 0" if at == n
                 else f"interrupted during pose {at + 1} of {n}")
         kept = (f"the {len(sweeps)} pose{'s' if len(sweeps) != 1 else ''} swept "
                 f"{'are' if len(sweeps) != 1 else 'is'} mapped and written" if sweeps
                 else "no reading arrived, so nothing was mapped or written")
-        _tell(f"irring drive: {what}; {kept}", file=sys.stderr)
+        _tell(f"irring drive: {what}; {kept}; {_where(ring)}", file=sys.stderr)
         if not sweeps:
             return errors.INTERRUPTED
     elif not sweeps:   # one line: why, and that there is nothing to map
@@ -317,8 +326,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         paths, result, link = _map_and_write(args, sweeps, acq, ring, truth, calibration,
                                              cal_text, failure, stopped)
-    except BaseException:   # a full disk, a second Ctrl-C, a bug: the readings survive
+    except BaseException as exc:   # a full disk, a second Ctrl-C, a bug: the readings survive
         _keep_elsewhere(sweeps, truth, cal_text)
+        if errors.interrupted(exc):
+            _tell(f"irring drive: interrupted while mapping; {_where(ring)}", file=sys.stderr)
         raise
     report(result, paths, as_json=args.json,
            extra={"source": f"serial:{args.port}", "link": link})
@@ -329,6 +340,16 @@ def run(args: argparse.Namespace) -> int:
               f"{t.checksum_failures} checksum failures, {t.malformed} malformed, "
               f"{t.seq_gaps} seq gaps, {t.timeouts} timeouts, {t.resweeps} re-sweeps")
     return 0 if failure is None else errors.INTERRUPTED if stopped else errors.DEVICE
+
+
+def _where(ring: SerialRing) -> str:
+    """Where the ring stands once the session is closed, for a drive cut short."""
+    if ring.park_failure:
+        return "where the ring stands: see the warning above"
+    if ring.stands_at == 0 or ring.stats.scans == 0 and not ring.close_interrupted:
+        return ("the ring stands at step 0" if ring.stands_at == 0 else
+                "the ring was not turned")
+    return "where the ring stands is not known"
 
 
 def _tell(*lines, file, **kw) -> None:

@@ -461,6 +461,11 @@ class SerialRing:
         # why the last sweep lost the link ("device rebooted", …): the device's numbering
         # and the ring's step are no longer this session's, so no sweep before a handshake
         self._lost_sweep: str | None = None
+        self._heard: int | None = None   # the last step the device named (IRSCN, IRPOS)
+        # where the ring stands at rest, as the device last confirmed it (None: not known)
+        self.stands_at: int | None = None
+        # a Ctrl-C (or a SIGTERM raised as one) came while close() turned the ring back
+        self.close_interrupted = False
         self.park_failure: str | None = None
 
     # ---------------------------------------------------------------- lifecycle
@@ -505,9 +510,10 @@ class SerialRing:
     def close(self) -> None:
         """Stop a sweep or move still running (IRSTP), turn the ring back to step 0
         (IRGTO,0), close the port. :attr:`park_failure` says why the ring was not turned
-        back (None: it was, or need not be; not tried after a lost link, a reboot or another
-        ring). A second Ctrl-C meanwhile stops the ring where it is and is not raised. Why:
-        docs/protocol.md."""
+        back and where it stands (None: it was, or need not be; not tried after a lost link,
+        a reboot or another ring). A Ctrl-C (or SIGTERM raised as one) meanwhile does not cut
+        the waits short (IRSTP does not stop an IRGTO: the ring turns on to step 0) and is
+        not raised; :attr:`close_interrupted` says it came. Why: docs/protocol.md."""
         if self._port is not None:
             try:
                 self._park()
@@ -528,35 +534,16 @@ class SerialRing:
         counted = dataclasses.replace(self.stats)
         why = None
         try:
-            if self._running:
-                if not self._stop_sent:
-                    self._send(p.Stop())
-                if self._await((p.Done,), self.timeout_s) is None:
-                    why = f"no IRDON answered IRSTP within {self.timeout_s:g} s"
-                else:
-                    self._running = False
-            if why is None and self._moved and not self._position_lost:
-                self._send(p.GoTo(0))
-                wait_s = (self.timeout_s
-                          + (self.info.max_step - self.info.min_step) * MOVE_ALLOWANCE_S)
-                msg = self._await((p.Position, p.ErrorReply), wait_s)
-                if isinstance(msg, p.Position) and msg.step == 0:
-                    self._running = self._moved = False
-                    self._position = 0
-                else:
-                    why = (f"no IRPOS answered IRGTO,0 within {wait_s:g} s" if msg is None
-                           else f"it answered IRGTO,0 with {p.encode(msg).decode().strip()}")
-        except KeyboardInterrupt:
-            why = "interrupted: stopped where it stood"
-            try:
-                self._send(p.Stop())
-            except DeviceError:
-                pass
+            why = self._turn_back()
+        except KeyboardInterrupt:   # while a command was sent: none of the waits
+            self.close_interrupted = True
+            why = "interrupted"
         except DeviceError as exc:
             why = str(exc)
         finally:
             self.stats = counted
         if why is not None:
+            self.stands_at = None
             self.park_failure = (
                 f"the ring on {self.port_name} was not turned back to step 0 at the end of the "
                 f"session ({why}). Its firmware takes the step it stands at when it starts for "
@@ -564,6 +551,46 @@ class SerialRing:
                 f"radial by hand, or send {p.encode(p.GoTo(0)).decode().strip()}, before "
                 f"the next session")
             log.warning("%s", self.park_failure)
+
+    def _turn_back(self) -> str | None:
+        """The park's exchanges: None when the ring stands at step 0, else why not and
+        where it stands."""
+        heard = ("where it stands is not known" if self._heard is None
+                 else f"it was last heard of at step {self._heard}")
+        if self._running:
+            if not self._stop_sent:
+                self._send(p.Stop())
+            if self._await_through((p.Done,), self.timeout_s) is None:
+                return (f"no IRDON answered IRSTP within {self.timeout_s:g} s, so it may "
+                        f"still turn; {heard}")
+            self._running = False
+        if not self._moved or self._position_lost:
+            return None
+        # from step a, it stands between a (IRSTP abandons the step in progress: or the
+        # sweep's next) and 0 if the move did not end
+        between = ("where it stands is not known" if self._heard is None else
+                   f"it stands between step {self._heard} and step 0" if self._heard else
+                   "it stands at step 0 or one step from it")
+        self._send(p.GoTo(0))
+        wait_s = self.timeout_s + (self.info.max_step - self.info.min_step) * MOVE_ALLOWANCE_S
+        msg = self._await_through((p.Position, p.ErrorReply), wait_s)
+        if isinstance(msg, p.Position) and msg.step == 0:
+            self._running = self._moved = False
+            self._position = self._heard = self.stands_at = 0
+            return None
+        return (f"no IRPOS answered IRGTO,0 within {wait_s:g} s: {between}" if msg is None
+                else f"it answered IRGTO,0 with {p.encode(msg).decode().strip()}: {between}")
+
+    def _await_through(self, kinds: tuple[type, ...], wait_s: float) -> p.AnyMessage | None:
+        """:meth:`_await`, which a KeyboardInterrupt does not cut short: the ring turns on
+        whatever is sent, and only its answer tells where it stands; noted in
+        :attr:`close_interrupted`."""
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                return self._await(kinds, max(0.0, deadline - time.monotonic()))
+            except KeyboardInterrupt:
+                self.close_interrupted = True
 
     def __enter__(self) -> SerialRing:
         return self.open()
@@ -828,7 +855,7 @@ class SerialRing:
             self._send(p.GoTo(int(step)))
             msg = self._await((p.Position, p.ErrorReply), self.timeout_s)
             if isinstance(msg, p.Position):
-                self._position = msg.step
+                self._position = self._heard = self.stands_at = msg.step
                 self._running, self._moved = False, msg.step != 0
                 return msg.step
             if isinstance(msg, p.ErrorReply):
@@ -1106,7 +1133,8 @@ class SerialRing:
                     self.stats.seq_gaps += 1
                     self.stats.lost_scans += gap
                 last_seq = msg.seq
-            self._position = msg.step
+            self._position = self._heard = msg.step
+            self.stands_at = None   # turning
             if self._clock is None or not self._went_back(msg):
                 self._clock, self._clock_at = msg.t_ms, at
             ps.got[msg.step] = msg

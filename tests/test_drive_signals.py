@@ -1,0 +1,112 @@
+"""`kill` (SIGTERM) at each stage of `irring drive`, against a fake device on a pty: what
+was read is mapped and written, the exit status is 130, and the last line says where the
+ring stands."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from irring.recording import load_recording
+
+_STAGES = {
+    # SIGTERM as the device gets IRHLO: nothing read, the ring never turned
+    "handshake": "if isinstance(cmd, p.Hello):\n        kill()\n",
+    # one IRSCN of pose 2, then SIGTERM; the rest of the sweep never comes
+    "sweep": ("if isinstance(cmd, p.SweepCommand):\n"
+              "        dev.n = getattr(dev, 'n', 0) + 1\n"
+              "        if dev.n == 2:\n"
+              "            dev.send(hd.scan(dev.seq, cmd.from_step)); dev.seq += 1\n"
+              "            kill(); time.sleep(0.3); dev.send(hd.line(f'IRDON,{dev.seq - 1}'))\n"
+              "            return\n"),
+    # SIGTERM (twice) as the ring turns back; the move ends 0.3 s later, as IRSTP does not
+    # stop an IRGTO
+    "park": ("if isinstance(cmd, p.GoTo):\n"
+             "        kill(); time.sleep(0.1); kill(); time.sleep(0.2)\n"
+             "        dev.send(hd.line('IRPOS,0')); return\n"),
+    # SIGTERM as the ring turns back, and it never says it got there
+    "park unanswered": "if isinstance(cmd, p.GoTo):\n        kill(); return\n",
+    # SIGTERM while the map is drawn, after the ring was turned back
+    "mapping": "",
+}
+
+
+def _drive(tmp_path, stage: str) -> subprocess.CompletedProcess:
+    kill_in_mapping = stage == "mapping"
+    script = (
+        "import os, signal, sys, time\n"
+        f"sys.path.insert(0, {os.path.dirname(os.path.abspath(__file__))!r})\n"
+        "import hostile_devices as hd\n"
+        "from irring.hardware import protocol as p\n"
+        "def kill():\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "def behaviour(dev, cmd):\n"
+        f"    {_STAGES[stage] or 'pass'}\n"
+        "    hd.good(dev, cmd)\n"
+        + ("import irring.pipeline as pl\n"
+           "real = pl.map_sweeps\n"
+           "def map_sweeps(*a, **k):\n"
+           "    kill()\n"
+           "    return real(*a, **k)\n"
+           "pl.map_sweeps = map_sweeps\n" if kill_in_mapping else "")
+        + "dev = hd.HostileDevice(behaviour)\n"
+        "from irring.cli import main\n"
+        "code = main(['drive', '--port', dev.link, '--pose', '500,450', '--pose', '800,450',\n"
+        "             '--no-wait', '--no-animation', '--timeout', '0.5', '--out', sys.argv[1]])\n"
+        "dev.close()\n"
+        "sys.exit(code)\n")
+    env = dict(os.environ, TMPDIR=str(tmp_path))   # where a drive keeps what --out cannot
+    return subprocess.run([sys.executable, "-c", script, str(tmp_path / "o")],
+                          capture_output=True, text=True, timeout=300, env=env)
+
+
+def _poses_written(tmp_path) -> int | None:
+    path = tmp_path / "o" / "sweeps.npz"
+    if not path.exists():
+        kept = [f for f in os.listdir(tmp_path) if f.startswith("irring-drive-")]
+        if not kept:
+            return None
+        path = tmp_path / kept[0]
+    return len(load_recording(path)[0])
+
+
+@pytest.mark.parametrize("stage, poses, last_line", [
+    ("handshake", None,
+     "irring drive: interrupted during the handshake; nothing was read; the ring was not "
+     "turned"),
+    ("sweep", 1,
+     "irring drive: interrupted during pose 2 of 2; the 1 pose swept is mapped and written; "
+     "the ring stands at step 0"),
+    ("park", 2,
+     "irring drive: interrupted as the ring turned back to step 0; the 2 poses swept are "
+     "mapped and written; the ring stands at step 0"),
+    ("park unanswered", 2,
+     "irring drive: interrupted as the ring turned back to step 0; the 2 poses swept are "
+     "mapped and written; where the ring stands: see the warning above"),
+    ("mapping", 2, "irring drive: interrupted"),
+])
+def test_sigterm_at_each_stage_of_a_drive(tmp_path, stage, poses, last_line):
+    """SIGTERM as the ring turned back at the end (close()'s IRGTO,0) sent IRSTP, said the
+    ring "stopped where it stood … turn the ring radial by hand" while it turned on to
+    step 0 (IRSTP ends a sweep, not an IRGTO), and the drive went on to exit 0 as if no
+    signal had come. Now the wait for IRPOS,0 goes on through the signal, the drive ends
+    as interrupted (130) with every pose read mapped, and says where the ring stands."""
+    done = _drive(tmp_path, stage)
+    assert done.returncode == 130, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert lines[-1] == last_line, done.stderr
+    assert _poses_written(tmp_path) == poses
+    if stage == "park unanswered":
+        assert lines[-2] == (
+            f"irring drive: warning: the ring on {lines[-2].split()[6]} was not turned back to "
+            "step 0 at the end of the session (no IRPOS answered IRGTO,0 within 0.52 s: it "
+            "stands between step 2 and step 0). Its firmware takes the step it stands at when "
+            "it starts for step 0, and an Arduino restarts each time its port is opened: turn "
+            "the ring radial by hand, or send $IRGTO,0*E3DD, before the next session")
+    if stage == "mapping":
+        assert lines[-3].startswith("irring drive: the 2 sweeps are kept in ")
+        assert lines[-2] == "irring drive: interrupted while mapping; the ring stands at step 0"
+    assert "stopped where it stood" not in done.stderr
