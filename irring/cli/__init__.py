@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import logging
 import os
 import select
 import signal
@@ -82,12 +83,18 @@ class _Version(argparse.Action):
         parser.exit()
 
 
+_SILENT = logging.NullHandler()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one `irring` command; every failure ends as one line on stderr and an exit
     status (irring.errors), with a traceback only under --debug or IRRING_DEBUG=1."""
     if signal.getsignal(signal.SIGINT) is interrupted_starting:
         signal.signal(signal.SIGINT, signal.default_int_handler)   # ours from here on
     argv = list(sys.argv[1:] if argv is None else argv)
+    # the library's warnings (a ring not turned back, protocol v1) are the commands' to
+    # print, once: unhandled, Python's last-resort handler printed each a second time
+    logging.getLogger("irring").addHandler(_SILENT)
     debug = "--debug" in argv or errors.debug_requested()
     argv = [a for a in argv if a != "--debug"]
     command = "irring"
