@@ -470,7 +470,14 @@ class Calibration:
         header = ("# irring calibration: d[m] = a(θ)·S^b(θ), S in ADC counts (paper Eq. 10);\n"
                   "# emitter offset d_o (paper Eq. 9) in mm; load with "
                   "irring.estimation.calibration.Calibration.load\n")
-        return header + yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True)
+        data = self.to_dict()
+        rows = [yaml.safe_dump(row, default_flow_style=True, width=math.inf,
+                               sort_keys=False).strip() for row in data.pop("curve")]
+        # the table last and in one [...]: a file cut short anywhere is not YAML (cut in
+        # block style, between rows or inside a number, it loaded with fewer rows or a b
+        # of -1 for -1.175, and mapped unwarned)
+        return (header + yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+                + "curve: [\n" + ",\n".join(f"  {row}" for row in rows) + "]\n")
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`to_yaml` to a file."""
