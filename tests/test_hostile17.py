@@ -32,3 +32,49 @@ def test_a_calibration_file_cut_short_anywhere_is_refused_never_read_as_less(tmp
     with pytest.raises(IrringError, match=r"^<recording's calibration>: line \d+: not valid "
                                           r"YAML: "):
         load_calibration(cut, is_text=True)
+
+
+@pytest.mark.parametrize("edit, said", [
+    (("resolution: 0.010000", "resolution: []"), "resolution: expected a number of metres > 0, "
+                                                 "got []"),
+    (("resolution: 0.010000", "resolution: .nan"), "resolution: expected a number of metres "
+                                                   "> 0, got nan"),
+    (("origin: [-0.105000, -0.105000, 0.000000]", "origin: 7"), "origin: expected [x, y, yaw], "
+                                                                "got 7"),
+    (("image: map.pgm", "image: 7"), "image: expected a file name, got 7"),
+    (("image: map.pgm", "image: gone.pgm"), "image: gone.pgm: No such file or directory"),
+    (("negate: 0", "negate: .inf"), "negate: expected 0 or 1, got inf"),
+    (("free_thresh: 0.196", "free_thresh: {}"), "free_thresh: expected a number 0 … 1, got {}"),
+])
+def test_a_damaged_map_yaml_is_refused_naming_the_file_and_the_key(tmp_path, edit, said):
+    """OccupancyGrid.from_pgm read a map.yaml's values as it found them: TypeError
+    ('float() argument must be … not list', "'int' object is not subscriptable",
+    "unsupported operand type(s) for /: 'PosixPath' and 'int'") or a NaN resolution."""
+    from irring.maps.mapping import OccupancyGrid
+
+    grid = OccupancyGrid((-0.105, -0.105), (7, 11), 0.01)
+    _, yml = grid.to_pgm(tmp_path / "map.pgm")
+    text = yml.read_text()
+    assert edit[0] in text
+    yml.write_text(text.replace(*edit))
+    with pytest.raises(ValueError) as err:
+        OccupancyGrid.from_pgm(yml)
+    assert str(err.value) == f"{yml}: {said}"
+
+
+@pytest.mark.parametrize("cut, said", [
+    (7, "cut short in its header (magic, width, height and maxval, then the pixels)"),
+    (35, "cut short in its header (magic, width, height and maxval, then the pixels)"),
+    (None, "its width b'1x' is not a whole number ≥ 1"),
+])
+def test_a_damaged_map_pgm_header_is_refused_naming_the_file(tmp_path, cut, said):
+    """A PGM cut in its comment or before its maxval: ValueError('subsection not found'),
+    'invalid literal for int() with base 10: b'''."""
+    from irring.maps.mapping import OccupancyGrid, read_pgm
+
+    pgm, _ = OccupancyGrid((-0.105, -0.105), (7, 11), 0.01).to_pgm(tmp_path / "map.pgm")
+    raw = pgm.read_bytes()
+    pgm.write_bytes(raw[:cut] if cut is not None else raw.replace(b"\n11 7\n", b"\n1x 7\n"))
+    with pytest.raises(ValueError) as err:
+        read_pgm(pgm)
+    assert str(err.value) == f"{pgm}: {said}"

@@ -421,14 +421,37 @@ class OccupancyGrid:
         yaml_path = Path(yaml_path)
         meta = safe_yaml.load_file(yaml_path, "map_server YAML")
         missing = {"image", "resolution", "origin", "negate", "occupied_thresh",
-                   "free_thresh"} - set(meta or {})
+                   "free_thresh"} - set(meta if isinstance(meta, dict) else {})
         if missing:
             raise ValueError(f"{yaml_path}: not a map_server YAML, missing {sorted(missing)}")
-        img = read_pgm(yaml_path.parent / meta["image"])
-        occ = float(meta["occupied_thresh"])
-        free = float(meta["free_thresh"])
-        p = img.astype(float) / 255.0 if int(meta["negate"]) else (255.0 - img) / 255.0
-        grid = cls(meta["origin"][:2], img.shape, float(meta["resolution"]), params)
+
+        def number(value, key: str, what: str, ok) -> float:
+            # a damaged or hand-edited file: one line naming it and the key, not a TypeError
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not ok(value):
+                raise ValueError(f"{yaml_path}: {key}: expected {what}, got {value!r}")
+            return float(value)
+
+        origin = meta["origin"]
+        if not (isinstance(origin, list) and len(origin) in (2, 3)):
+            raise ValueError(f"{yaml_path}: origin: expected [x, y, yaw], got {origin!r}")
+        xy = [number(v, "origin", "[x, y, yaw] of finite numbers", math.isfinite)
+              for v in origin]
+        resolution = number(meta["resolution"], "resolution", "a number of metres > 0",
+                            lambda v: math.isfinite(v) and v > 0)
+        occ, free = (number(meta[key], key, "a number 0 … 1", lambda v: 0 <= v <= 1)
+                     for key in ("occupied_thresh", "free_thresh"))
+        if meta["negate"] not in (0, 1) or isinstance(meta["negate"], bool):
+            raise ValueError(f"{yaml_path}: negate: expected 0 or 1, got {meta['negate']!r}")
+        if not isinstance(meta["image"], str) or not meta["image"]:
+            raise ValueError(f"{yaml_path}: image: expected a file name, got {meta['image']!r}")
+        try:
+            img = read_pgm(yaml_path.parent / meta["image"])
+        except OSError as exc:
+            raise ValueError(f"{yaml_path}: image: {meta['image']}: "
+                             f"{exc.strerror or exc}") from None
+        p = img.astype(float) / 255.0 if meta["negate"] else (255.0 - img) / 255.0
+        grid = cls(xy[:2], img.shape, resolution, params)
         lo = np.zeros(img.shape)
         lo[p > occ] = grid.params.l_max
         lo[p < free] = grid.params.l_min
@@ -454,6 +477,9 @@ def read_pgm(path) -> np.ndarray:
     while len(fields) < 4:
         while pos < len(data) and data[pos:pos + 1].isspace():
             pos += 1
+        if pos >= len(data) or data[pos:pos + 1] == b"#" and b"\n" not in data[pos:]:
+            raise ValueError(f"{path}: cut short in its header (magic, width, height and "
+                             f"maxval, then the pixels)")
         if data[pos:pos + 1] == b"#":
             pos = data.index(b"\n", pos) + 1
             continue
@@ -464,6 +490,9 @@ def read_pgm(path) -> np.ndarray:
         pos = end
     if fields[0] != b"P5":
         raise ValueError(f"{path}: not a binary PGM (magic {fields[0]!r}, expected b'P5')")
+    for name, field in zip(("width", "height", "maxval"), fields[1:]):
+        if not field.isdigit() or int(field) == 0:
+            raise ValueError(f"{path}: its {name} {field!r} is not a whole number ≥ 1")
     width, height, maxval = (int(f) for f in fields[1:])
     if maxval != 255:
         raise ValueError(f"{path}: only 8-bit PGM (maxval 255) is supported, got {maxval}")
