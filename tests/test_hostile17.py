@@ -6,6 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from irring.hardware import SerialRing
+from irring.hardware.emulator import Device
+
+from test_serial_ring import HELLO, virtual_time  # noqa: F401 (fixture)
+
 
 def test_a_calibration_file_cut_short_anywhere_is_refused_never_read_as_less(tmp_path):
     """A calibration file cut short (a copy that stopped, a disk that filled elsewhere)
@@ -78,3 +83,28 @@ def test_a_damaged_map_pgm_header_is_refused_naming_the_file(tmp_path, cut, said
     with pytest.raises(ValueError) as err:
         read_pgm(pgm)
     assert str(err.value) == f"{pgm}: {said}"
+
+
+@pytest.mark.parametrize("said", [b"\x00", b"ring firmware starting\r\n"])
+def test_a_board_that_says_something_as_it_starts_is_greeted_until_it_answers(virtual_time,
+                                                                              said):
+    """The boot wait greets a board that restarts when its port opens while the line is
+    silent; one that sent a stray byte as it reset (or a line as its firmware started, at
+    65 ms) stopped the greeting: its handshake waited out the 2 s, with a timeout and a
+    resent IRHLO on its link report, the Uno's trouble the wait was made for."""
+    from test_serial_ring import ResettingBoard, StandInSource
+
+    class Talking(ResettingBoard):
+        def read(self, size: int = 1) -> bytes:
+            if not getattr(self, "spoke", False) and \
+                    virtual_time.monotonic() >= self.opened + 0.065:
+                self.spoke = True
+                return said
+            return super().read(size)
+
+    board = Talking(Device(StandInSource()))
+    t0 = virtual_time.now
+    ring = SerialRing(board, timeout_s=1.0, boot_s=2.0).open()
+    assert virtual_time.now - t0 == pytest.approx(0.59, abs=0.03)
+    assert (ring.stats.timeouts, ring.stats.resent_commands) == (0, 0)
+    assert board.lost == [HELLO] * 2 and ring.info.nsensors == 12

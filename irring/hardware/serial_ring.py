@@ -37,8 +37,8 @@ DEFAULT_BAUD = 115200
 DEFAULT_TIMEOUT_S = 1.0
 MOVE_ALLOWANCE_S = 0.005  # per motor step the ring may travel before a sweep's first reading
 # An Arduino resets when its serial port is opened (DTR) and its bootloader takes the bytes
-# of the next second or so: for BOOT_S after opening a serial device, while the line stays
-# silent, IRHLO is sent again every BOOT_RESEND_S (a stray byte sends optiboot on to the
+# of the next second or so: for BOOT_S after opening a serial device, IRHLO is sent again
+# after each BOOT_RESEND_S in which nothing arrived (a stray byte sends optiboot on to the
 # firmware within ~0.1 s), not counted as a timeout or a resent command
 BOOT_S = 2.0
 BOOT_RESEND_S = 0.25
@@ -390,9 +390,9 @@ class SerialRing:
         column pass as changed readings) to a device not yet reflashed for v2, with a
         warning (:attr:`protocol_warning`, logged); by default such a device is refused
         with :class:`HandshakeError` saying how to reflash it.
-    boot_s: seconds after :meth:`open` opens the port in which a silent line is a board
-        still starting (an Arduino resets when its port opens): IRHLO is sent again every
-        BOOT_RESEND_S meanwhile. None: BOOT_S for a serial device path or a URL that may
+    boot_s: seconds after :meth:`open` opens the port in which the board may still be
+        starting (an Arduino resets when its port opens): IRHLO is sent again after each
+        BOOT_RESEND_S of silence meanwhile. None: BOOT_S for a serial device path or a URL that may
         wrap one (spy://, alt://, hwgrep://, rfc2217://, socket://), 0 for a pty, loop:// or
         a port object.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
@@ -451,7 +451,7 @@ class SerialRing:
         # unknown): a board that resets in a command has turned some way towards its target
         self._woke: tuple[int | None, int | None] | None = None
         self.boot_s = boot_s
-        self._boot_window = 0.0     # s after opening in which a silent line is a board starting
+        self._boot_window = 0.0     # s after opening in which the board may be starting
         self._boot_until = 0.0      # host time that window ends
         self._running = False       # an IRSWP or IRGTO sent and not yet ended (IRDON, IRPOS)
         self._stop_sent = False     # an IRSTP sent for it, its IRDON not read yet
@@ -715,7 +715,11 @@ class SerialRing:
             refused = probed = False
             framed_before = self._other_framing
             while not refused and time.monotonic() < deadline:
-                if booting and self._rx_bytes == quiet and time.monotonic() >= again:
+                if booting and self._rx_bytes != quiet:
+                    # it talks (a boot message, a stray byte as it starts): not an answer,
+                    # and no reason to stop greeting it; again once it has been quiet a while
+                    quiet, again = self._rx_bytes, time.monotonic() + BOOT_RESEND_S
+                elif booting and time.monotonic() >= again:
                     self._send(p.Hello())
                     boot_hellos += 1
                     again = time.monotonic() + BOOT_RESEND_S
