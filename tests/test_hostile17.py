@@ -6,10 +6,105 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from irring.designs import PAPER_RING
 from irring.hardware import SerialRing
-from irring.hardware.emulator import Device
+from irring.hardware.emulator import Device, DevicePort
 
-from test_serial_ring import HELLO, virtual_time  # noqa: F401 (fixture)
+from _fake_source import FakeSource
+from test_serial_ring import HELLO, PARK, STOP, SWEEP, virtual_time  # noqa: F401 (fixture)
+
+TIMEOUT_S = 0.1
+
+
+def _device() -> Device:
+    return Device(FakeSource(lambda pose, steps, k: 1000 + 20 * np.asarray(steps)[:, None]
+                             + 100 * np.arange(PAPER_RING.sensors)), realtime=True)
+
+
+class _Board(DevicePort):
+    """The emulated firmware on an in-process port, every byte the host wrote kept. After
+    ``after`` IRSCN were read, ``event(device)`` happens and the read raises Ctrl-C once
+    (``ctrl_c``)."""
+
+    def __init__(self, device: Device, after: int, event, ctrl_c: bool = True):
+        super().__init__(device)
+        self.written: list[bytes] = []
+        self.after, self.event, self.scans_read, self.ctrl_c = after, event, 0, ctrl_c
+
+    def write(self, data_: bytes) -> int:
+        self.written.append(bytes(data_))
+        return super().write(data_)
+
+    def read(self, size: int = 1) -> bytes:
+        if self.event is not None and self.scans_read >= self.after:
+            event, self.event = self.event, None
+            event(self.device)
+            if self.ctrl_c:
+                raise KeyboardInterrupt
+        out = super().read(size)
+        self.scans_read += out.count(b"IRSCN")
+        return out
+
+
+def _reset(device: Device) -> None:
+    """The board resets where the motor stands: the sweep is forgotten, no IRSCN has been
+    sent since power-up (IRSTP gets IRDON -1), and that step is its step 0 now."""
+    device._job, device._seq, device._position = None, -1, 0
+
+
+def test_a_board_that_reset_in_the_sweep_ctrl_c_ended_is_not_said_to_be_back_at_step_0(
+        virtual_time):
+    """A board that reset in its sweep (a brown-out) went silent; the operator pressed
+    Ctrl-C. close()'s IRSTP got IRDON -1 (none sent since power-up), its IRGTO,0 an IRPOS,0
+    at once (the board's step 0 is where it woke, 32 steps from radial here), and close()
+    said nothing: the next session would read every step off by where it woke."""
+    port = _Board(_device(), after=3, event=_reset)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    with pytest.raises(KeyboardInterrupt):
+        ring.sweep()
+    ring.close()
+    assert port.written == [HELLO, SWEEP, STOP]   # no IRGTO,0: it would turn nowhere useful
+    assert ring.park_failure == (
+        "the ring on device://emulator was not turned back to step 0 at the end of the session "
+        "(an IRSTP was answered IRDON -1, no IRSCN sent since it powered up, though 3 came "
+        "this session: it rebooted, and its firmware took the step it woke at for step 0; it "
+        "was last heard of at step -33). Its firmware takes the step it stands at when it "
+        "starts for step 0, and an Arduino restarts each time its port is opened: turn the "
+        "ring radial by hand (its step 0 is where it woke, so no IRGTO can), then reset the "
+        "board, before the next session")
+
+
+def test_a_board_that_reset_in_the_last_sweep_is_not_turned_to_where_it_woke(virtual_time):
+    """Without re-sweeps (the API's default, drive --resweep 0) a board that reset in the
+    last sweep of a session left it short, its IRSTP answered IRDON -1, and no IRSCN came
+    after to tell by its clock: close() turned the ring 'back to step 0', where it woke."""
+    def reset(device: Device) -> None:
+        _reset(device)
+        device._t0 = virtual_time.monotonic()   # its clock starts anew
+
+    port = _Board(_device(), after=3, event=reset, ctrl_c=False)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    sweep = ring.sweep()
+    assert list(sweep.steps) == [-35, -34, -33] and len(sweep.missing_steps) == 68
+    ring.close()
+    assert port.written == [HELLO, SWEEP, STOP]
+    assert ring.park_failure.startswith(
+        "the ring on device://emulator was not turned back to step 0 at the end of the session "
+        "(an IRSTP was answered IRDON -1, no IRSCN sent since it powered up, though 3 came "
+        "this session: it rebooted, ")
+
+
+def test_a_board_that_never_swept_may_answer_irstp_with_irdon_minus_1_and_is_turned_back(
+        virtual_time):
+    """IRDON -1 is a reboot only after IRSCN came: Ctrl-C before the sweep's first one."""
+    port = _Board(_device(), after=0, event=None)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    port.event = lambda device: None
+    with pytest.raises(KeyboardInterrupt):
+        ring.sweep()
+    ring.close()
+    assert port.written == [HELLO, SWEEP, STOP, PARK] and ring.park_failure is None
+
 
 
 def test_a_calibration_file_cut_short_anywhere_is_refused_never_read_as_less(tmp_path):

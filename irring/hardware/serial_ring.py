@@ -450,6 +450,8 @@ class SerialRing:
         # rebooted; the ring stood then from one step to another (the same: at rest; None:
         # unknown): a board that resets in a command has turned some way towards its target
         self._woke: tuple[int | None, int | None] | None = None
+        self._woke_scans = 0
+        self._woke_at_close = False   # close() saw that reboot (IRGTO,0 would not help)
         self.boot_s = boot_s
         self._boot_window = 0.0     # s after opening in which the board may be starting
         self._boot_until = 0.0      # host time that window ends
@@ -529,6 +531,7 @@ class SerialRing:
         elsewhere; not counted in :attr:`stats`; a failure is said in
         :attr:`park_failure`."""
         self.park_failure = None
+        self._woke_at_close = False
         if self.info is None or self._link_dead or not (self._running or self._moved):
             return
         counted = dataclasses.replace(self.stats)
@@ -544,12 +547,14 @@ class SerialRing:
             self.stats = counted
         if why is not None:
             self.stands_at = None
+            send = (" (its step 0 is where it woke, so no IRGTO can), then reset the board"
+                    if self._woke_at_close else
+                    f", or send {p.encode(p.GoTo(0)).decode().strip()}")
             self.park_failure = (
                 f"the ring on {self.port_name} was not turned back to step 0 at the end of the "
                 f"session ({why}). Its firmware takes the step it stands at when it starts for "
                 f"step 0, and an Arduino restarts each time its port is opened: turn the ring "
-                f"radial by hand, or send {p.encode(p.GoTo(0)).decode().strip()}, before "
-                f"the next session")
+                f"radial by hand{send}, before the next session")
             log.warning("%s", self.park_failure)
 
     def _turn_back(self) -> str | None:
@@ -560,10 +565,20 @@ class SerialRing:
         if self._running:
             if not self._stop_sent:
                 self._send(p.Stop())
-            if self._await_through((p.Done,), self.timeout_s) is None:
+            done = self._await_through((p.Done,), self.timeout_s)
+            if done is None:
                 return (f"no IRDON answered IRSTP within {self.timeout_s:g} s, so it may "
                         f"still turn; {heard}")
             self._running = False
+            self._said_booted(done.seq, None, None)
+        if self._woke not in (None, (0, 0)) and not self._position_lost \
+                and self.stats.scans == self._woke_scans:
+            # IRDON -1 (none sent since power-up) after IRSCN came, and none since to tell by
+            # its clock: it reset, and IRGTO,0 would turn it to where it woke
+            self._position_lost = self._woke_at_close = True
+            return (f"an IRSTP was answered IRDON -1, no IRSCN sent since it powered up, "
+                    f"though {self.stats.scans} came this session: it rebooted, and its "
+                    f"firmware took the step it woke at for step 0; {heard}")
         if not self._moved or self._position_lost:
             return None
         # from step a, it stands between a (IRSTP abandons the step in progress: or the
@@ -1335,6 +1350,7 @@ class SerialRing:
         the next IRSCN's clock confirms it."""
         if done_seq < 0 and self._clock is not None and self._woke is None:
             self._woke = (stood, toward) if stood is not None else (None, None)
+            self._woke_scans = self.stats.scans   # close(): none taken since, none to tell
 
     def _went_back(self, scan: p.Scan) -> bool:
         """``scan``'s device clock is earlier than the latest IRSCN's taken (modulo its wrap):
