@@ -203,3 +203,26 @@ def test_a_board_that_says_something_as_it_starts_is_greeted_until_it_answers(vi
     assert virtual_time.now - t0 == pytest.approx(0.59, abs=0.03)
     assert (ring.stats.timeouts, ring.stats.resent_commands) == (0, 0)
     assert board.lost == [HELLO] * 2 and ring.info.nsensors == 12
+
+
+@pytest.mark.parametrize("theta", ["1e308", "-5.0", "90.0"])
+def test_a_calibration_row_at_an_impossible_angle_is_named_without_a_numpy_warning(theta):
+    """theta_deg: 1e308 in a calibration file: numpy's 'RuntimeWarning: overflow encountered
+    in multiply' (with its source line) came before the error, which showed the row as inf
+    (θ to radians and back)."""
+    import warnings
+
+    from irring.errors import IrringError
+    from irring.estimation.calibration import Calibration, load_calibration
+    from irring.scenario import load_scenario
+
+    text = Calibration.for_scene(load_scenario("t_room")).to_yaml()
+    assert "theta_deg: 5.0," in text
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(IrringError) as err:
+            load_calibration(text.replace("theta_deg: 5.0,", f"theta_deg: {theta},"),
+                             is_text=True)
+    assert str(err.value) == (f"<recording's calibration>: curve[1].theta_deg: "
+                              f"{float(theta)!r} is out of range; allowed 0 … 90 (below 90)")
+

@@ -529,6 +529,9 @@ class Calibration:
             if not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                        and math.isfinite(v) for v in values):
                 raise fail(f"curve[{i}]", f"expected finite numbers, got {brief(row)}")
+            if not 0 <= row["theta_deg"] < 90:   # (1e308° overflowed back to degrees: inf)
+                raise fail(f"curve[{i}].theta_deg", f"{brief(row['theta_deg'])} is out of "
+                                                    "range; allowed 0 … 90 (below 90)")
             rows.append([float(v) for v in values])
         table = np.array(rows)
         # a GP2's output falls with distance (b < 0); the linear laser/sonar curves rise
