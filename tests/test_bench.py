@@ -305,7 +305,7 @@ def test_cli_speed_json(capsys):
 
 def test_the_accuracy_chart_legend_says_what_a_ring_means(tmp_path, figures):
     """accuracy.png ringed the configurations on each Pareto front and said nowhere what a
-    ring meant (study.png's title does; newuser15)."""
+    ring meant (study.png's title does)."""
     accuracy.chart(accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY),
                    tmp_path / "a.png")
     legend = [t.get_text() for t in figures[0].axes[0].get_legend().get_texts()]

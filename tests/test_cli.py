@@ -605,7 +605,7 @@ def test_a_cylinder_just_past_the_housing_is_measured(capsys):
 
 def test_scenarios_checks_every_yaml_in_a_folder(tmp_path, capsys, monkeypatch):
     """`irring scenarios my_rooms/` was refused ("is a folder"), though `irring bench rooms
-    my_rooms/` and now a study take a folder (newuser15): each *.yaml is checked, a bad
+    my_rooms/` and now a study take a folder: each *.yaml is checked, a bad
     one named, the others listed, and the count says how many files were checked."""
     (tmp_path / "rooms").mkdir()
     (tmp_path / "empty").mkdir()

@@ -185,7 +185,7 @@ def test_chart_with_nothing_to_label_draws_no_empty_legend(tmp_path, design):
 
 
 def test_table_heads_each_detection_distance_with_its_own_value():
-    """--distances-mm 0.0001 headed its column "r@0mm" (FINDINGS10); 250.5 read "r@250mm"."""
+    """--distances-mm 0.0001 headed its column "r@0mm"; 250.5 read "r@250mm"."""
     from irring.studies import compare as compare_mod
 
     scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": None}
@@ -201,7 +201,7 @@ def test_table_heads_each_detection_distance_with_its_own_value():
 def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, figures):
     """A room of one's own with posts whose walls lie beyond the sensors' reach: the chart
     said "no scenario here hides a wall behind a thin post" and the table's "—" went
-    unexplained (newuser15)."""
+    unexplained."""
     from irring.studies import compare as compare_mod
 
     scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": None}
@@ -227,7 +227,7 @@ robot: {poses: [{x_mm: 700, y_mm: 500}]}
 
 def test_the_chart_marks_the_compared_rooms_cylinders_and_no_others(tmp_path, figures):
     """compare.png drew "t_room_cylinder's table leg, r = 22 mm" whatever rooms were
-    compared (newuser16): it marks the radii of the compared rooms' own cylinders, each
+    compared: it marks the radii of the compared rooms' own cylinders, each
     once, and nothing in a room without one."""
     from irring.scenario import load_scenario, loads
 
@@ -265,7 +265,7 @@ def test_compare_bars_give_no_eta_before_the_first_run_nor_for_the_curves(monkey
                                                                           capsys):
     """compare's one bar said 132 s left after the first of 45 runs, for 10 s (2 workers:
     a worker's first run starts it), and 0.5 s for the 6 s of detection curves after the
-    runs (fixes17). The runs' bar waits for each worker's first run (here one: this
+    runs. The runs' bar waits for each worker's first run (here one: this
     process), the curves' bar gives none. A fake clock: the first run 4 s, the others 1 s,
     a curve 3 s."""
     import tqdm.std
@@ -305,7 +305,7 @@ def test_compare_bars_give_no_eta_before_the_first_run_nor_for_the_curves(monkey
 
 def test_the_table_gives_each_score_its_spread_from_seed_to_seed(tmp_path, figures):
     """compare's table had no spread (study's has ± sd): with 3 seeds, ring8's shadow 0.51
-    against the paper ring's 0.47 read as a difference (newuser16). Each score now carries
+    against the paper ring's 0.47 read as a difference. Each score now carries
     the sd over seeds within a room, pooled over the rooms, not the sd over every run,
     which counts how the rooms differ (here 0.209 where the seeds move F1 by 0.026)."""
     def run(room, seed, f1, shadow):
@@ -362,9 +362,9 @@ def test_a_miss_the_minimum_range_alone_makes_is_too_near():
 
 
 def test_the_table_and_chart_say_too_near_rather_than_miss(tmp_path, figures):
-    """compare printed a bare "miss" for radial12 at 250 mm beside 132 mm at 350 mm
-    (newuser15): the table says "too near" and why, with each design's minimum range, and
-    the chart draws a × at 200 mm where the curve has no point."""
+    """compare printed a bare "miss" for radial12 at 250 mm beside 132 mm at 350 mm: the
+    table says "too near" and why, with each design's minimum range, and the chart draws
+    a × at 200 mm where the curve has no point."""
     scores = {"occupied_f1": 0.2, "free_accuracy": 1.0, "coverage": 0.0, "shadow": 0.0}
     rec = {"design": "radial12", **scores, "hardware_time_s": 0.038, "compute_time_s": 0.002,
            "runs": 1, "scenarios": ["lab"], "poses": {"lab": 1}, "by_scenario": {"lab": scores},

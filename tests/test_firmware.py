@@ -610,8 +610,8 @@ def _compiler_without_headers(tmp_path) -> Path:
 ])
 def test_a_missing_library_is_named_with_where_to_get_it(target, variable, header, package,
                                                          advice, tmp_path):
-    """A compiler without its library failed with the compiler's own "No such file"
-    (newuser15): make names the package, as it does a missing tool."""
+    """A compiler without its library failed with the compiler's own "No such file": make
+    names the package, as it does a missing tool."""
     if shutil.which("make") is None:
         pytest.skip("make is needed (bash .ci/system-deps installs it)")
     fake = _compiler_without_headers(tmp_path)
@@ -626,7 +626,7 @@ def test_a_missing_library_is_named_with_where_to_get_it(target, variable, heade
 
 def test_system_deps_asks_for_avr_libc_when_only_the_compiler_is_there(tmp_path):
     """`command -v avr-gcc` passed a machine with gcc-avr but no avr-libc, and `make avr`
-    then failed (newuser15). Run where nothing but that compiler is on PATH and there is
+    then failed. Run where nothing but that compiler is on PATH and there is
     no apt-get, so the script lists what it would install and installs nothing."""
     fake = _compiler_without_headers(tmp_path)
     fake.rename(fake.parent / "avr-gcc")

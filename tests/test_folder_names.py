@@ -1,5 +1,5 @@
-"""Where a command writes without --out: one folder a name, never another name's
-(fixes17). safe_name made `room 🏠` and `room`, `room a` and `room_a`, `café` (NFC) and
+"""Where a command writes without --out: one folder a name, never another name's.
+safe_name made `room 🏠` and `room`, `room a` and `room_a`, `café` (NFC) and
 `caf`, one folder, and the second run replaced the first's files, exit 0."""
 
 from __future__ import annotations

@@ -2359,8 +2359,8 @@ def test_a_device_that_reboots_mid_sweep_keeps_only_the_steps_read_before_it():
     driver once dropped the re-sweep as stale; then it kept it, but a board takes the step it
     wakes at as step 0 (firmware/README.md), so each step read since is off by where the ring
     stood (a drive of t_room whose board reset at step 9 of pose 2: F1 0.997 -> 0.519, exit
-    0; FINDINGS15.md). The steps read before the reboot are kept, none after. Reset as it
-    turned on from step -1, the ring stood at -1 or 0: no IRGTO can say which (FINDINGS16.md)."""
+    0). The steps read before the reboot are kept, none after. Reset as it
+    turned on from step -1, the ring stood at -1 or 0: no IRGTO can say which."""
     dev = hd.HostileDevice(hd.reboots_in_sweep(21))   # seq ~100 ahead of the new numbering
     try:
         with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:
@@ -2390,7 +2390,7 @@ def test_a_device_that_reboots_between_sweeps_away_from_step_0_is_refused(lose_f
     once dropped the whole next sweep as stale, then kept it; but the ring stood at the last
     sweep's end (step 2), where the board woke and took step 0, so the sweep read 2 steps off
     (a drive of t_room whose board reset between poses 1 and 2, at step 35: F1 0.997 ->
-    0.389, 'all 71 steps received', exit 0; FINDINGS15.md). Nothing of it is taken."""
+    0.389, 'all 71 steps received', exit 0). Nothing of it is taken."""
     dev = hd.HostileDevice(hd.reboots_between_sweeps(lose_first))
     try:
         with SerialRing(dev.link, timeout_s=TIMEOUT_S) as ring:

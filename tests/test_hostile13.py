@@ -1,4 +1,4 @@
-"""Round thirteen of hostile input (FINDINGS13.md): each test names the input that broke and
+"""Round thirteen of hostile input: each test names the input that broke and
 asserts what happens now."""
 
 from __future__ import annotations

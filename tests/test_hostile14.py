@@ -1,4 +1,4 @@
-"""Round fourteen of hostile input (FINDINGS14.md): each test names the input that broke and
+"""Round fourteen of hostile input: each test names the input that broke and
 asserts what happens now."""
 
 from __future__ import annotations
@@ -117,7 +117,7 @@ def test_a_bundled_name_in_the_wrong_case_gets_a_did_you_mean(capsys, tmp_path, 
 def test_a_sensor_stuck_at_one_count_is_warned_of(tmp_path, capsys):
     """t_room's recording with sensor 3 stuck at 2000 counts in every reading (a loose pin,
     a dead ADC channel) was mapped as a ring of wall 100 mm out, precision 0.994 -> 0.927,
-    exit 0, without a word (attack13's leftover). It is mapped as before, and warned of."""
+    exit 0, without a word. It is mapped as before, and warned of."""
     assert main(["run", "t_room", "--out", str(tmp_path / "t"), "--no-animation"]) == 0
     assert "warning" not in capsys.readouterr().out
     sweeps, meta = load_recording(tmp_path / "t" / "sweeps.npz")
@@ -154,8 +154,8 @@ def test_a_sensor_stuck_at_one_count_is_warned_of(tmp_path, capsys):
 
 def test_a_simulated_sweep_copied_to_another_pose_is_refused(tmp_path, capsys):
     """t_room's recording with sweep 1 saved again as sweep 4 at pose 4's place (its counts,
-    another pose) replayed as four poses: F1 0.995 -> 0.794, exit 0 (attack13's leftover:
-    the copy check compared poses). t_room's noise (12 counts) moves every simulated
+    another pose) replayed as four poses: F1 0.995 -> 0.794, exit 0 (the copy
+    check compared poses). t_room's noise (12 counts) moves every simulated
     reading, so two sweeps that read alike are a copy wherever they stand; a noiseless
     scene, whose sweeps may honestly read alike, is replayed as before
     (test_hostile13's NOISELESS_TWICE)."""

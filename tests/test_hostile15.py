@@ -1,4 +1,4 @@
-"""Round fifteen of hostile input (FINDINGS15.md): each test names the input that broke and
+"""Round fifteen of hostile input: each test names the input that broke and
 asserts what happens now."""
 
 from __future__ import annotations

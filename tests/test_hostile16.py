@@ -1,4 +1,4 @@
-"""Round sixteen of hostile input (FINDINGS16.md): each test names the input that broke and
+"""Round sixteen of hostile input: each test names the input that broke and
 asserts what happens now."""
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ def test_a_board_that_reset_between_poses_while_the_robot_was_moved_is_refused()
     step 2, the sweep's end), while the robot was moved; pose 2 was swept 2 s later. Its
     clock then said more than at its last IRSCN (2 s since the reset against 1.5 s of its
     first session), so it did not go back: the renumbered sweep was taken, 2 steps off
-    (37.8° on the real ring: t_room F1 0.997 -> 0.389, FINDINGS15.md), 'all 5 steps'. Its
+    (37.8° on the real ring: t_room F1 0.997 -> 0.389), 'all 5 steps'. Its
     clock ran 0.5 s where 2 s passed: it started anew."""
     board = _millis_board(1500, lambda dev, cmd, step: step is None and dev.sweeps_seen == 1)
     dev = hd.HostileDevice(board)
@@ -147,7 +147,7 @@ def hd_timeout() -> float:
 def test_view_into_a_folder_replaces_no_view_png_another_program_wrote(tmp_path, capsys, kind):
     """`irring view t_room --out DIR` replaced DIR/view.png whatever it was: a text file of
     that name, or a chart Matplotlib drew, exit 0 (view.png in view's folders is view's by
-    its name, FINDINGS15.md). Now only a PNG that names irring view or no program (view's
+    its name). Now only a PNG that names irring view or no program (view's
     pictures before they named it) is replaced there."""
     from irring.cli import main
 

@@ -1,5 +1,5 @@
-"""Leftovers of earlier rounds (FINDINGS15, NEWUSER16) that fixes17 mended: each test names
-the input and asserts what happens now."""
+"""Leftovers of earlier rounds of hostile input and new users' reports: each test names the
+input and asserts what happens now."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ def test_a_simulated_recording_of_one_count_all_round_is_named_as_edited(tmp_pat
                                                                          count):
     """t_room's recording with every reading set to 0 counts (the ADC unpowered) or 4095
     (full scale) was refused as a copy: "sweep 2 … repeats sweep 1's 852 counts reading for
-    reading … Remove the copy" (FINDINGS15's leftover), the wrong cause and the wrong
+    reading … Remove the copy", the wrong cause and the wrong
     remedy. It says what the sweeps read and why no simulation reads so."""
     from irring.recording import load_recording, save_recording
 
@@ -35,7 +35,7 @@ def test_a_simulated_recording_of_one_count_all_round_is_named_as_edited(tmp_pat
 def test_a_device_whose_every_sensor_read_0_counts_is_warned_of(tmp_path, capsys):
     """From a device, every channel at 0 counts (the ADC unpowered) was mapped as silence,
     free to every sensor's reach, without a word: the cut-wire warning needs one live
-    sensor to compare with (FINDINGS15's leftover). No sensor model's no-return level is 0
+    sensor to compare with. No sensor model's no-return level is 0
     counts at any ADC a scenario may have (8 bits, 50 V: gp2y0a21's 0.415 V is 2 counts)."""
     import dataclasses
 
@@ -60,7 +60,7 @@ def test_a_device_whose_every_sensor_read_0_counts_is_warned_of(tmp_path, capsys
 
 def test_a_picture_too_big_for_memory_is_refused_before_the_rendering(tmp_path, capsys):
     """`irring view --size 8192x8192` rendered a picture of 5.7 GB at its peak, with no
-    refusal up front as other commands have (NEWUSER16's leftover). Refused at exit 5 past
+    refusal up front as other commands have. Refused at exit 5 past
     the 2 GB budget (core.VIEW_BYTES_PER_PIXEL over VIEW_BASE_BYTES; the measurements:
     README, exit status 5); anything up to 20 million pixels is still drawn."""
     from irring.cli.view import size_refusal

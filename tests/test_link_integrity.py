@@ -32,7 +32,7 @@ def test_bench_link_200000_corrupted_scans_and_every_two_bit_error_of_one():
     # a CRC-16 detects every burst of ≤ 16 bits; and no two-bit error got through either
     assert rows[2, "burst16"]["accepted"] == rows[2, "two_bits"]["accepted"] == 0
     v1 = rows[1, "two_bits"]
-    assert 0.015 < v1["accepted"] / v1["trials"] < 0.025   # FINDINGS7's 1.7 % on its scans
+    assert 0.015 < v1["accepted"] / v1["trials"] < 0.025   # 1.7 % was measured on such scans
     assert v1["changed"] == v1["accepted"]                   # each one with changed values
     assert 0 < rows[1, "burst16"]["accepted"] < 100
     assert (rows[1, "every_two_bits"]["trials"], rows[1, "every_two_bits"]["accepted"],

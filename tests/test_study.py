@@ -348,7 +348,7 @@ def _living(pids) -> list[int]:
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads processes from /proc")
 def test_a_sigkilled_study_leaves_no_process_behind(tmp_path):
     """`irring study --workers 2` killed with SIGKILL left its two workers idle for good,
-    parent 1, and the forkserver and resource tracker they keep alive (FINDINGS15): each
+    parent 1, and the forkserver and resource tracker they keep alive: each
     worker now ends when its parent does, and the helpers with them. Polled, within 30 s."""
     p = tmp_path / "long.yaml"
     p.write_text("designs: [rotating12, radial12]\nscenarios: [t_room]\nseeds: 40\n")
@@ -698,8 +698,8 @@ def test_sigterm_to_a_pool_parent_ends_like_ctrl_c_and_restores_the_default():
 
 def test_a_folder_of_rooms_is_its_yaml_files_in_name_order(tmp_path, monkeypatch):
     """A study over many rooms had to list every file: `scenarios: [rooms/]` was refused
-    ("is a folder; expected a scenario file") where `irring bench rooms rooms/` takes it
-    (newuser15). Relative to the study file, as a file is; a pipe among the rooms, an
+    ("is a folder; expected a scenario file") where `irring bench rooms rooms/` takes it.
+    Relative to the study file, as a file is; a pipe among the rooms, an
     empty folder and a room listed again beside its folder are refused before any run."""
     sub = tmp_path / "sub"
     (sub / "rooms").mkdir(parents=True)
@@ -738,7 +738,7 @@ def test_a_folder_of_rooms_is_its_yaml_files_in_name_order(tmp_path, monkeypatch
 def test_a_resumed_study_says_which_kept_runs_it_left_out_of_the_summary(tmp_path, capsys):
     """A study cut down and resumed (a design dropped, seeds added) printed "6 run(s) in
     results.csv: ran 2 (2 already in the file)" above a table of 4 runs: the dropped
-    design's 2 rows stay in the file, unsummarised, and nothing said so (newuser15)."""
+    design's 2 rows stay in the file, unsummarised, and nothing said so."""
     spec = write(tmp_path, "designs: [radial12, rotating12]\nscenarios: [l_room_post.yaml]\n"
                            "seeds: [3, 11]\n")
     out = tmp_path / "out"

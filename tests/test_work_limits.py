@@ -193,7 +193,7 @@ def test_one_sweep_too_big_to_estimate_is_refused_up_front(tmp_path, capsys):
 
 def test_a_grid_far_past_memory_says_its_gigabytes_in_a_few_digits():
     """A 10¹⁵ × 10¹⁵-cell grid (a recording's metadata may say so) read "about
-    600000000000000016777216.0 GB" (FINDINGS10); one decimal stays below a million GB."""
+    600000000000000016777216.0 GB"; one decimal stays below a million GB."""
     from irring.errors import TooBig
     from irring.maps.mapping import BYTES_PER_CELL, check_grid_size
 

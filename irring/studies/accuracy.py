@@ -487,7 +487,7 @@ def chart(result: dict, path) -> None:
                             mfc="none" if few else colour,
                             label="design" if knob == "design" and r is mine[0] else None)
                     notes.append((x, y, _short(r), colour))
-            for r in front:   # the legend says what the ring means (it did not: newuser15)
+            for r in front:   # the legend says what the ring means
                 ax.plot(*xy(r), "o", mfc="none", mec="k", ms=11, mew=1.0, zorder=6,
                         label="ringed: on the front" if r is front[0] else None)
             x, y = xy(default)
