@@ -15,6 +15,10 @@ from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ..simulation import gl
 from ._common import add_pose_option, describe, out_path, pose_index
 
+# --size's bounds: each side, and the pixels in all that fit the memory irring view may use
+SIDE_PIXELS = (16, 8192)
+MAX_PIXELS = (WORK_MEMORY_BYTES - VIEW_BASE_BYTES) // VIEW_BYTES_PER_PIXEL
+
 HELP = """\
 Show the scenario's MuJoCo scene: the room, the obstacles, the ring at one scan pose and
 motor step, and its beams, one per sensor (green to where they hit, a red mark on each hit; grey
@@ -47,7 +51,10 @@ def register(p: argparse.ArgumentParser) -> None:
                         "already is replaced only if irring view drew it, and view.png in a "
                         "folder only if it is a PNG no other program drew")
     p.add_argument("--size", default="1280x960", metavar="WxH",
-                   help="picture size in pixels (default: 1280x960)")
+                   help=f"picture size in pixels, {SIDE_PIXELS[0]} … {SIDE_PIXELS[1]} each "
+                        f"and at most {MAX_PIXELS:,} in all (the "
+                        f"{WORK_MEMORY_BYTES / 1e9:g} GB irring view may use; default: "
+                        "1280x960)")
     p.set_defaults(func=run)
 
 
@@ -56,12 +63,13 @@ def run(args: argparse.Namespace) -> int:
     from ..simulation import view   # deferred: loads MuJoCo, which --help does not need
 
     scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
+    lo, hi = SIDE_PIXELS
     try:
         width, height = (int(v) for v in args.size.lower().split("x"))
-        if not (16 <= width <= 8192 and 16 <= height <= 8192):
+        if not (lo <= width <= hi and lo <= height <= hi):
             raise ValueError
     except ValueError:
-        print(f"irring view: error: --size must be WIDTHxHEIGHT in pixels, 16 … 8192 each, "
+        print(f"irring view: error: --size must be WIDTHxHEIGHT in pixels, {lo} … {hi} each, "
               f"like 1280x960; got {args.size!r}", file=sys.stderr)
         return 2
     pose = pose_index(args.pose, scenario)
@@ -105,10 +113,9 @@ def run(args: argparse.Namespace) -> int:
 def size_refusal(width: int, height: int) -> str | None:
     """Why a ``width`` × ``height`` picture is too big to render (:func:`work_refusal`'s
     wording), or None."""
-    largest = (WORK_MEMORY_BYTES - VIEW_BASE_BYTES) // VIEW_BYTES_PER_PIXEL
     return work_refusal(f"--size {width}x{height}: a picture of {width * height:,} pixels",
                         VIEW_BASE_BYTES + width * height * VIEW_BYTES_PER_PIXEL, "irring view",
-                        f"choose at most {largest:,} pixels (4096x3072 is 12,582,912)")
+                        f"choose at most {MAX_PIXELS:,} pixels (4096x3072 is 12,582,912)")
 
 
 def picture_path(out: Path) -> Path:

@@ -1,0 +1,30 @@
+"""Small leftovers of the last reviews: each test names what was wrong and asserts what
+happens now."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+import irring
+from irring.cli import main
+
+
+def _help(capsys, *argv) -> str:
+    with pytest.raises(SystemExit):
+        main([*argv, "--help"])
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_view_size_help_says_the_pixel_limit_its_refusal_uses(capsys):
+    """`irring view --size`'s help said "picture size in pixels (default: 1280x960)", and
+    nothing of the 16 … 8192 a side or the 20 million pixels past which it is refused."""
+    from irring.cli.view import MAX_PIXELS, size_refusal
+
+    text = _help(capsys, "view")
+    assert ("--size WxH picture size in pixels, 16 … 8192 each and at most 20,000,000 in "
+            "all (the 2 GB irring view may use; default: 1280x960)") in text
+    assert MAX_PIXELS == 20_000_000
+    assert size_refusal(5000, 4000) is None and size_refusal(5000, 4001) is not None
