@@ -28,3 +28,12 @@ def test_view_size_help_says_the_pixel_limit_its_refusal_uses(capsys):
             "all (the 2 GB irring view may use; default: 1280x960)") in text
     assert MAX_PIXELS == 20_000_000
     assert size_refusal(5000, 4000) is None and size_refusal(5000, 4001) is not None
+
+
+def test_compare_help_states_the_spread_as_its_table_does(capsys):
+    """compare's --help said what "±" is in words of its own, beside the table footnote's
+    (studies.compare.SPREAD): the two could drift apart. The help is built from it."""
+    from irring.studies.compare import SPREAD
+
+    assert f"per design (mean over scenarios × seeds; ± is {SPREAD}):" in _help(capsys,
+                                                                             "compare")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import textwrap
 from collections.abc import Mapping
 
 from .. import designs, errors, safe_yaml
@@ -27,9 +28,8 @@ MAX_BEARINGS = 3_600
 
 DEFAULT_SCENARIOS = ("t_room_cylinder", "t_room_three_cylinders", "t_room")
 
-EPILOG = """\
-what it measures, per design (mean over scenarios × seeds; ± the sd from seed to seed
-within a room, pooled over the rooms: designs closer than that differ by noise):
+EPILOG = textwrap.fill(f"what it measures, per design (mean over scenarios × seeds; ± is "
+                       f"{compare.SPREAD}):", 90) + """
   occupied_precision/recall/f1, free_accuracy, coverage, shadow
                       the scores of `irring run`, all designs scored against the same
                       ground truth (the scene as written, with its own design's reach);
