@@ -59,6 +59,12 @@ REPLAY_SUFFIX = "-replay"
 _PLAIN = re.compile(r"[a-z0-9._-]+")
 
 
+def name_key(name: str) -> str:
+    """What makes two names one name: the same text in any Unicode form (NFC and NFD of
+    ``café`` are one name; ``Café`` and ``cafe`` are not)."""
+    return unicodedata.normalize("NFC", str(name))
+
+
 def folder_name(name: str, default: str = "scenario") -> str:
     """The folder of ``name`` (a scenario's, a study file's, a recording's) where a command
     writes without --out: ``name`` itself when it is :func:`safe_name`'s and only lower-case
@@ -67,7 +73,7 @@ def folder_name(name: str, default: str = "scenario") -> str:
     blind to case (``room`` and ``room 🏠``, ``room a`` and ``room_a``, ``Room`` and
     ``room``: safe_name makes each pair one); the Unicode forms of one name (NFC, NFD) are
     one name (``café``: ``cafe~850f7dc4``)."""
-    text = unicodedata.normalize("NFC", str(name))
+    text = name_key(name)
     if _PLAIN.fullmatch(text) and safe_name(text) == text and not text.endswith(REPLAY_SUFFIX):
         return text
     digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:8]

@@ -15,7 +15,6 @@ import math
 import re
 import types
 import typing
-import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -31,6 +30,7 @@ from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_CO
                    on_one_line, polygon_area, reach_outside, unit_suffix, UNITS, walls_into)
 from .designs import Design
 from .errors import InputError, brief
+from .outputs import name_key
 
 # --------------------------------------------------------------------------- errors
 
@@ -785,7 +785,7 @@ def check_distinct_names(scenarios: Sequence[Scenario]) -> None:
     of one name would be averaged as one, or printed as one name twice."""
     seen: dict[str, Scenario] = {}
     for sc in scenarios:
-        other = seen.setdefault(unicodedata.normalize("NFC", sc.name), sc)
+        other = seen.setdefault(name_key(sc.name), sc)
         if other is not sc:
             form = "" if other.name == sc.name else " (in another Unicode form)"
             raise ScenarioError(

@@ -37,3 +37,23 @@ def test_compare_help_states_the_spread_as_its_table_does(capsys):
 
     assert f"per design (mean over scenarios × seeds; ± is {SPREAD}):" in _help(capsys,
                                                                              "compare")
+
+
+def test_one_name_in_any_unicode_form_has_one_home():
+    """Which names are one name (NFC) was decided in outputs.folder_name and again in
+    scenario.check_distinct_names; both now ask outputs.name_key."""
+    from irring import scenario
+    from irring.outputs import folder_name, name_key
+
+    source = Path(irring.__file__).parent
+    homes = [f"{p.relative_to(source)}" for p in source.rglob("*.py")
+             if 'normalize("NFC"' in p.read_text(encoding="utf-8")]
+    assert homes == ["outputs.py"]
+    nfc, nfd = "caf\u00e9", "cafe\u0301"
+    assert name_key(nfd) == name_key(nfc) != name_key("Caf\u00e9")
+    assert folder_name(nfd) == folder_name(nfc)
+    room = "room: {outline_mm: [[0, 0], [900, 0], [900, 800], [0, 800]]}\n" \
+           "robot: {poses: [{x_mm: 450, y_mm: 400}]}\n"
+    a, b = (scenario.loads(f"name: {n}\n{room}", f"{i}.yaml") for i, n in enumerate((nfc, nfd)))
+    with pytest.raises(scenario.ScenarioError, match=re.escape("(in another Unicode form)")):
+        scenario.check_distinct_names([a, b])
