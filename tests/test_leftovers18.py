@@ -57,3 +57,32 @@ def test_one_name_in_any_unicode_form_has_one_home():
     a, b = (scenario.loads(f"name: {n}\n{room}", f"{i}.yaml") for i, n in enumerate((nfc, nfd)))
     with pytest.raises(scenario.ScenarioError, match=re.escape("(in another Unicode form)")):
         scenario.check_distinct_names([a, b])
+
+
+def _record(name: str, shadow):
+    scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": shadow}
+    return {"design": name, **scores, "hardware_time_s": 2.72, "compute_time_s": 0.004,
+            "runs": 1, "scenarios": ["lab"], "poses": {"lab": 1},
+            "by_scenario": {"lab": {**scores, "shadow_sd": 0.01}},
+            "min_detectable_radius_m": [0.002]}
+
+
+@pytest.mark.parametrize("shadow", [None, 0.6])
+def test_the_shadow_panel_stands_its_designs_under_the_scores(tmp_path, figures, shadow):
+    """With no room hiding a wall behind a post, compare.png's shadow panel had nothing to
+    draw, yet kept its axes' 0 … 1 ticks and put the design names at x = 0 and 1 of an
+    empty axis: a lone design's name in the panel's corner, two at its edges, under no
+    bar. An empty panel has no ticks; a drawn one stands each design under the scores'."""
+    from irring.studies import compare
+
+    recs = [_record("rotating12", shadow), _record("radial12", shadow)]
+    compare.chart({"designs": recs, "detection_distances_m": [0.35]}, tmp_path / "c.png")
+    scores, shadows = figures[0].axes[:2]
+    assert shadows.get_title() == "Shadow: share of the wall behind thin posts that the map shows"
+    if shadow is None:
+        assert list(shadows.get_xticks()) == [] and list(shadows.get_yticks()) == []
+        assert shadows.get_ylabel() == ""
+    else:
+        assert [t.get_text() for t in shadows.get_xticklabels()] == ["rotating12", "radial12"]
+        assert list(shadows.get_xticks()) == list(scores.get_xticks()) == [0, 1]
+        assert shadows.get_xlim() == scores.get_xlim() == (-0.5, 1.5)

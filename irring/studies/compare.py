@@ -292,13 +292,17 @@ def chart(result: dict, path) -> None:
                 if not v > 0.005:
                     ax.annotate("n/a" if np.isnan(v) else "0", (xi, 0.01), ha="center",
                                 va="bottom", fontsize=7, rotation=90)
-        ax.set_xticks(x, names)
-        ax.set_ylim(0, 1.0)
-        ax.set_ylabel("score (1 = perfect)")
         ax.set_title(title, fontsize=9)
+        ax.set_xlim(-0.5, len(names) - 0.5)   # the designs under the other panels'
         if series:
+            ax.set_xticks(x, names)
+            ax.set_ylim(0, 1.0)
+            ax.set_ylabel("score (1 = perfect)")
             ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncols=4)
-        else:   # nothing to label (matplotlib warns on an empty legend): say why it is empty
+        else:   # nothing to label (matplotlib warns on an empty legend): say why it is empty;
+            # no ticks (a lone design's name sat in the corner of the empty axes)
+            ax.set_xticks([])
+            ax.set_yticks([])
             ax.text(0.5, 0.5, f"shadow n/a: {SHADOW_NA}\n(in any of these scenarios)",
                     ha="center", va="center", fontsize=9, transform=ax.transAxes)
         ax.grid(axis="y", alpha=0.3)
