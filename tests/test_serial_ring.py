@@ -1109,6 +1109,36 @@ def test_a_ring_that_does_not_return_to_step_0_is_said_to_stand_elsewhere(virtua
     assert ring.stats.as_dict() == counted   # the wait for IRPOS is no timeout of a sweep
 
 
+def test_a_stopped_sweep_that_does_not_return_to_step_0_may_stand_one_step_on(virtual_time):
+    """Ctrl-C at step -1 of a sweep, then no IRPOS to close()'s IRGTO,0: the warning said
+    the ring stood between step -1 and step 0, but IRSTP abandons the step in progress, so
+    it may stand at the sweep's next step."""
+    class Interrupted(ScriptPort):
+        def read(self, size=1):
+            if not self._buf and self.sent[-1].TYPE == "IRSWP":
+                raise KeyboardInterrupt   # once all three IRSCN are read
+            return super().read(size)
+
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            return [p.Scan(i, s, i, (10, 11)) for i, s in enumerate(range(-3, 0))]
+        if isinstance(msg, p.Stop):
+            return [p.Done(2)]
+        return []   # IRGTO: no answer
+
+    ring = SerialRing(Interrupted(script), timeout_s=TIMEOUT_S).open()
+    with pytest.raises(KeyboardInterrupt) as err:
+        ring.sweep()
+    assert [int(s) for s in err.value.partial.steps] == [-3, -2, -1]
+    ring.close()
+    assert ring.park_failure.startswith(
+        "the ring on script:// was not turned back to step 0 at the end of the session (no "
+        f"IRPOS answered IRGTO,0 within {TIMEOUT_S + 6 * 0.005:g} s: it stands between step -1 "
+        "or the sweep's step after it and step 0). ")
+
+
 class ResettingBoard(DevicePort):
     """An Arduino Uno behind its USB serial port: opening the port resets it (DTR); it starts
     up for 65 ms, then optiboot waits 1 s for a programmer, and a byte that is no STK500

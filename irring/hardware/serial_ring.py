@@ -562,6 +562,8 @@ class SerialRing:
         where it stands."""
         heard = ("where it stands is not known" if self._heard is None
                  else f"it was last heard of at step {self._heard}")
+        # IRSTP abandons the step in progress: a stopped sweep may stand one step on
+        past = " or the sweep's step after it" if self._running and self._heard else ""
         if self._running:
             if not self._stop_sent:
                 self._send(p.Stop())
@@ -581,11 +583,10 @@ class SerialRing:
                     f"firmware took the step it woke at for step 0; {heard}")
         if not self._moved or self._position_lost:
             return None
-        # from step a, it stands between a (IRSTP abandons the step in progress: or the
-        # sweep's next) and 0 if the move did not end
+        # if the move did not end, it stands between where it started and step 0
         between = ("where it stands is not known" if self._heard is None else
-                   f"it stands between step {self._heard} and step 0" if self._heard else
-                   "it stands at step 0 or one step from it")
+                   f"it stands between step {self._heard}{past} and step 0" if self._heard
+                   else "it stands at step 0 or one step from it")
         self._send(p.GoTo(0))
         wait_s = self.timeout_s + (self.info.max_step - self.info.min_step) * MOVE_ALLOWANCE_S
         msg = self._await_through((p.Position, p.ErrorReply), wait_s)
