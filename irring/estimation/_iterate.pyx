@@ -81,6 +81,10 @@ SETTLED = 2    # no member's θ moved by the tolerance
 REGROUP = 3    # θ settled coarsely: group the straightened points again
 STEPPED = 4    # one step done (run(..., one_step=True), for the θ history)
 
+# readings × lines re-read at once (settle_corners, adopt): a long sweep's thousands of lines
+# would otherwise hold all its edge readings against all of them (8 bytes twice each)
+cdef Py_ssize_t REREAD_BLOCK = 1 << 18
+
 
 # --------------------------------------------------------------------------- helpers
 
@@ -97,6 +101,10 @@ cdef inline double _max(double a, double b) noexcept nogil:
     if a != a or a >= b:
         return a
     return b
+
+
+cdef inline Py_ssize_t _max_n(Py_ssize_t a, Py_ssize_t b) noexcept nogil:
+    return a if a >= b else b
 
 
 cdef inline double _incidence(double hm, double alpha) noexcept nogil:
@@ -899,14 +907,19 @@ cdef class Grouping:
             return
         self._table()
         L = self.n_use
-        cdef double[::1] d = self._reread(idx[:U], None), th = sw.rr_th, row = sw.dscr[0]
-        for u in range(U):
-            i = idx[u]
-            own = self.t_col[lab[i]]
-            self._residuals(i, 0, L, &d[u * L], &th[u * L], own, &row[0])
-            best = _argmin(&row[0], L)
-            if row[best] <= sw._thr[i] and row[best] < row[own] - sw.corner_sigmas * sw._sigma[i]:
-                lab[i] = self.t_use[best]
+        cdef double[::1] d, th, row = sw.dscr[0]
+        cdef Py_ssize_t u0, per = _max_n(REREAD_BLOCK // _max_n(L, 1), 1)
+        for u0 in range(0, U, per):       # (re-read a block of readings at a time)
+            d = self._reread(idx[u0:min(u0 + per, U)], None)
+            th = sw.rr_th
+            for u in range(min(per, U - u0)):
+                i = idx[u0 + u]
+                own = self.t_col[lab[i]]
+                self._residuals(i, 0, L, &d[u * L], &th[u * L], own, &row[0])
+                best = _argmin(&row[0], L)
+                if (row[best] <= sw._thr[i]
+                        and row[best] < row[own] - sw.corner_sigmas * sw._sigma[i]):
+                    lab[i] = self.t_use[best]
 
     cdef void corner_sides(self):
         """A wall ends at its corner: readings on a line past a corner it makes with another
@@ -953,12 +966,13 @@ cdef class Grouping:
             v = (sw._px[i] - self.t_cx[c]) * self.t_dx[c] + (sw._py[i] - self.t_cy[c]) * self.t_dy[c]
             lo[c] = _min(lo[c], v)
             hi[c] = _max(hi[c], v)
-        # the corners: intersection (X, Y) and the side of it each line's bulk is on
-        cmat = _empty((3, n, n))
-        cdef double[:, :, ::1] cm = cmat
-        kmat = np.zeros((n, n), dtype=_uint8)
-        cdef unsigned char[:, ::1] K = kmat
-        cdef bint any_corner = False
+        # the corners: intersection (X, Y), the side of it each line's bulk is on and
+        # whether the lines are adjacent pieces, kept per corner (lines may be thousands)
+        cdef Py_ssize_t n_cor = 0, e
+        cor_i = _empty(n + 1, dtype=_intp)
+        cor_v = _empty((4, n + 1))
+        cdef Py_ssize_t[::1] ci = cor_i
+        cdef double[:, ::1] cv = cor_v
         cdef double[::1] dx = self.t_dx, dy = self.t_dy, cx = self.t_cx, cy = self.t_cy
         for i in range(n):
             for j in range(i + 1, n):
@@ -978,32 +992,45 @@ cdef class Grouping:
                 if not (adjacent or (s >= lo[i] - reach and s <= hi[i] + reach
                                      and t >= lo[j] - reach and t <= hi[j] + reach)):
                     continue
-                K[i, j] = K[j, i] = 2 if adjacent else 1
-                any_corner = True
-                cm[0, i, j] = cm[0, j, i] = X
-                cm[1, i, j] = cm[1, j, i] = Y
-                cm[2, i, j] = _sign(-s)
-                cm[2, j, i] = _sign(-t)
-        if not any_corner:
+                if n_cor == ci.shape[0]:       # (grown as needed: few corners a line)
+                    cor_i = np.concatenate([cor_i, cor_i])
+                    cor_v = np.concatenate([cor_v, cor_v], axis=1)
+                    ci, cv = cor_i, cor_v
+                ci[n_cor] = i * n + j
+                cv[0, n_cor], cv[1, n_cor] = X, Y
+                cv[2, n_cor], cv[3, n_cor] = _sign(-s), _sign(-t)
+                if adjacent:
+                    ci[n_cor] = -1 - ci[n_cor]
+                n_cor += 1
+        if n_cor == 0:
             return
-        # each line's corner partners in column order (the pair loops visit only them)
-        nbr_arr = _empty(n * n + n + 1, dtype=_intp)
-        cdef Py_ssize_t[::1] nbr = nbr_arr
-        cdef Py_ssize_t[::1] nbr_at = nbr[n * n:]
-        cdef Py_ssize_t n_nbr = 0, t_o
+        # each line's corners as directed entries (line c, partner o) in column order (the
+        # pair loops visit only them): entry 2e is corner e from its first line, 2e + 1
+        # from its second; a stable counting sort by line keeps partners in column order
+        nbr_arr = np.zeros(n + 1, dtype=_intp)
+        ent_arr = _empty(2 * n_cor, dtype=_intp)
+        cdef Py_ssize_t[::1] nbr_at = nbr_arr, ent = ent_arr
+        cdef Py_ssize_t t_o, pair_ij
+        for e in range(n_cor):
+            pair_ij = ci[e] if ci[e] >= 0 else -1 - ci[e]
+            nbr_at[pair_ij // n + 1] += 1
+            nbr_at[pair_ij % n + 1] += 1
         for c in range(n):
-            nbr_at[c] = n_nbr
-            for o in range(n):
-                if K[c, o]:
-                    nbr[n_nbr] = o
-                    n_nbr += 1
-        nbr_at[n] = n_nbr
+            nbr_at[c + 1] += nbr_at[c]
+        fill_arr = nbr_arr[:n].copy()
+        cdef Py_ssize_t[::1] fill = fill_arr
+        for e in range(n_cor):
+            pair_ij = ci[e] if ci[e] >= 0 else -1 - ci[e]
+            ent[fill[pair_ij // n]] = 2 * e
+            fill[pair_ij // n] += 1
+            ent[fill[pair_ij % n]] = 2 * e + 1
+            fill[pair_ij % n] += 1
         # (member, line across) pairs, the member beyond the corner: counted, then listed
         for q in range(2):
             if q == 1:
                 if P == 0:
                     return
-                pairs = _empty((3, P), dtype=_intp)
+                pairs = _empty((4, P), dtype=_intp)
                 vals = _empty((4, P))
                 pv = pairs
                 vv = vals
@@ -1016,16 +1043,18 @@ cdef class Grouping:
                 if c < 0:
                     continue
                 for t_o in range(nbr_at[c], nbr_at[c + 1]):
-                    o = nbr[t_o]
-                    v = ((sw._px[i] - cm[0, c, o]) * dx[c] + (sw._py[i] - cm[1, c, o]) * dy[c]
-                         ) * cm[2, c, o]
+                    e = ent[t_o] >> 1
+                    pair_ij = ci[e] if ci[e] >= 0 else -1 - ci[e]
+                    o = pair_ij % n if ent[t_o] & 1 == 0 else pair_ij // n
+                    v = ((sw._px[i] - cv[0, e]) * dx[c] + (sw._py[i] - cv[1, e]) * dy[c]
+                         ) * cv[2 + (ent[t_o] & 1), e]
                     if not v < 0:
                         continue
                     if q == 1:
-                        pv[0, P], pv[1, P], pv[2, P] = i, o, c
+                        pv[0, P], pv[1, P], pv[2, P], pv[3, P] = i, o, c, ent[t_o]
                         vv[3, P] = v
                     P += 1
-        cdef Py_ssize_t[::1] pm = pv[0], po = pv[1], pc = pv[2]
+        cdef Py_ssize_t[::1] pm = pv[0], po = pv[1], pc = pv[2], pe = pv[3]
         cdef double[::1] dd = vv[0], rr = vv[1]
         # read with the target's θ the reading must lie on the target line ...
         for p in range(P):
@@ -1051,15 +1080,16 @@ cdef class Grouping:
             # a far corner hides the wall's end in the drop-out gap: a reading its target
             # brings closer by more than the split threshold may lie on it up to the corner
             tx = lo[o]
-            if (sw.corner_share * hypot(cm[0, c, o] - sw.cx0, cm[1, c, o] - sw.cy0)
+            e = pe[p] >> 1
+            if (sw.corner_share * hypot(cv[0, e] - sw.cx0, cv[1, e] - sw.cy0)
                     > sw.corner_reach and dd[p] < sw._d[i] - sw._thr[i]):
-                tx = (cm[0, c, o] - cx[o]) * dx[o] + (cm[1, c, o] - cy[o]) * dy[o]
+                tx = (cv[0, e] - cx[o]) * dx[o] + (cv[1, e] - cy[o]) * dy[o]
             if not (r <= sw._thr[i] and t >= _min(lo[o], tx) - m and t <= _max(hi[o], tx) + m):
                 continue
             # ... and on the target's side of the corner
-            side = ((sw.ox[i] + dd[p] * sw.ux[i] - cm[0, c, o]) * dx[o]
-                    + (sw.oy[i] + dd[p] * sw.uy[i] - cm[1, c, o]) * dy[o])
-            left[p] = side * cm[2, o, c] >= 0
+            side = ((sw.ox[i] + dd[p] * sw.ux[i] - cv[0, e]) * dx[o]
+                    + (sw.oy[i] + dd[p] * sw.uy[i] - cv[1, e]) * dy[o])
+            left[p] = side * cv[3 - (pe[p] & 1), e] >= 0     # the side of o's bulk
         # one target per reading (its pairs are consecutive): of those a neighbouring
         # reading of its sensor is on, the one it fits best (the first of equals); else
         # the one it fits best
@@ -1118,7 +1148,7 @@ cdef class Grouping:
             r_own = fabs((sw._py[i] - cy[oc]) * dx[oc] - (sw._px[i] - cx[oc]) * dy[oc])
             near[i] = vv[3, p] >= -sw.corner_past and not (
                 rr[p] < r_own - sw.corner_sigmas * sw._sigma[i])
-            if K[c, o] == 2:
+            if ci[pe[p] >> 1] < 0:      # adjacent pieces of one polyline
                 moved[i] = tgt[i]
                 cand[i] = 0
         # runs (consecutive readings of a sensor on one line with one target) move if their
@@ -1235,15 +1265,19 @@ cdef class Grouping:
             return
         self._table()
         L = self.n_use
-        cdef double[::1] d = self._reread(sel[:U], None), th = sw.rr_th, row = sw.dscr[0]
-        for u in range(U):
-            i = sel[u]
-            self._residuals(i, 0, L, &d[u * L], &th[u * L], -1, &row[0])
-            for j in range(L):
-                row[j] = row[j] / sw._thr[i]
-            best = _argmin(&row[0], L)
-            if row[best] <= 1.0:
-                lab[i] = self.t_use[best]
+        cdef double[::1] d, th, row = sw.dscr[0]
+        cdef Py_ssize_t u0, per = _max_n(REREAD_BLOCK // _max_n(L, 1), 1)
+        for u0 in range(0, U, per):       # (re-read a block of readings at a time)
+            d = self._reread(sel[u0:min(u0 + per, U)], None)
+            th = sw.rr_th
+            for u in range(min(per, U - u0)):
+                i = sel[u0 + u]
+                self._residuals(i, 0, L, &d[u * L], &th[u * L], -1, &row[0])
+                for j in range(L):
+                    row[j] = row[j] / sw._thr[i]
+                best = _argmin(&row[0], L)
+                if row[best] <= 1.0:
+                    lab[i] = self.t_use[best]
 
     cdef void refit(self):
         """The same members, lines refitted at their moved positions (total least squares,

@@ -1507,15 +1507,16 @@ def post_groups(const unsigned char[::1] reason, const unsigned char[::1] valid,
                 const idx_t[::1] label, unsigned char unknown, const double[::1] counts,
                 const double[::1] heading, const double[::1] ox, const double[::1] oy,
                 idx_t n_sensors, double clear_counts, double la0, double b0, double link_m,
-                idx_t min_sensors, idx_t run_max):
+                idx_t min_sensors, idx_t run_max, cells, idx_t reach):
     """``irring.estimation.estimate_numpy.post_groups`` (the statement and the why): of the
     flat (S·N) readings, those on no line (``reason`` ``unknown``, or ``valid`` with
     ``label`` < 0) whose ``counts`` are at least
     ``clear_counts``, their θ = 0 end points (log and exp, cos and sin are numpy's, on this
     call's candidates), the groups chained within ``link_m`` (each labelled by its smallest
     member) and which groups hold ≥ 3 readings of ≥ ``min_sensors`` sensors, ≤ ``run_max``
-    of each. Returns None where no group qualifies, else (row, col, comp, groups) intp and
-    (px, py) float, the candidates in flat order."""
+    of each. ``cells``: ``far_lines.post_cells`` (the candidates by cell; two cells are
+    compared within ``reach`` cells of each other). Returns None where no group qualifies,
+    else (row, col, comp, groups) intp and (px, py) float, the candidates in flat order."""
     cdef idx_t size = counts.shape[0], m = 0, i, j, f, a, b, r, g, k, nk, top
     if not (reason.shape[0] == valid.shape[0] == label.shape[0] == heading.shape[0]
             == ox.shape[0] == oy.shape[0] == size and n_sensors >= 1 and size % n_sensors == 0):
@@ -1561,43 +1562,115 @@ def post_groups(const unsigned char[::1] reason, const unsigned char[::1] valid,
     for j in range(m):
         P[0, j] = ox[flat[j]] + R[2, j] * C[j]
         P[1, j] = oy[flat[j]] + R[2, j] * SN[j]
-    # connected groups (union-find, each group's root its smallest member)
+    # connected groups (union-find, each group's root its smallest member) over the cells
+    # of post_cells: a cell's candidates are all linked; two cells' are compared where
+    # the cells lie within reach, they are not yet one group and not both crowded
     comp_arr = np.arange(m, dtype=np.intp)
     cdef idx_t[::1] comp = comp_arr
-    for i in range(m):
-        for j in range(i + 1, m):
-            if hypot(P[0, i] - P[0, j], P[1, i] - P[1, j]) < link_m:
-                a = i
+    if m <= run_max * n_sensors:    # no cell can be crowded: every pair, as the cells would
+        order_np = start_np = np.zeros(1, dtype=np.intp)
+        crowded_np, key_np, width = np.zeros(0, dtype=np.uint8), np.zeros(0, np.int64), 0
+    else:
+        order_np, start_np, crowded_np, key_np, width = cells(pxy[0], pxy[1], link_m,
+                                                               run_max * n_sensors)
+    cdef idx_t[::1] order = order_np, start = start_np
+    cdef const unsigned char[::1] crowded = crowded_np
+    cdef const long long[::1] key = key_np
+    cdef idx_t n_cells = start.shape[0] - 1, ca, cb, lo, hi, mid, dx, dy
+    cdef long long want, w = width
+    cdef bint linked
+    if m <= run_max * n_sensors:
+        for i in range(m):
+            for j in range(i + 1, m):
+                if hypot(P[0, i] - P[0, j], P[1, i] - P[1, j]) < link_m:
+                    a = i
+                    while comp[a] != a:
+                        a = comp[a]
+                    b = j
+                    while comp[b] != b:
+                        b = comp[b]
+                    if a < b:
+                        comp[b] = a
+                    elif b < a:
+                        comp[a] = b
+    for ca in range(n_cells):
+        for i in range(start[ca] + 1, start[ca + 1]):   # in index order: the first is least
+            comp[order[i]] = order[start[ca]]
+    for ca in range(n_cells):
+        for dx in range(reach + 1):
+            for dy in range(-reach, reach + 1):
+                if dx == 0 and dy <= 0:
+                    continue
+                want = key[ca] + dx * w + dy
+                lo, hi = ca + 1, n_cells          # the cell of key ``want``, if any
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if key[mid] < want:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                cb = lo
+                if cb >= n_cells or key[cb] != want or (crowded[ca] and crowded[cb]):
+                    continue
+                a = order[start[ca]]
                 while comp[a] != a:
                     a = comp[a]
-                b = j
+                b = order[start[cb]]
                 while comp[b] != b:
                     b = comp[b]
-                if a < b:
-                    comp[b] = a
-                elif b < a:
-                    comp[a] = b
+                if a == b:
+                    continue
+                linked = False
+                for i in range(start[ca], start[ca + 1]):
+                    for j in range(start[cb], start[cb + 1]):
+                        if hypot(P[0, order[i]] - P[0, order[j]],
+                                 P[1, order[i]] - P[1, order[j]]) < link_m:
+                            linked = True
+                            break
+                    if linked:
+                        break
+                if linked:
+                    if a < b:
+                        comp[b] = a
+                    else:
+                        comp[a] = b
     for i in range(m):        # members precede in index order: their root is final already
         comp[i] = comp[comp[i]]
-    each_arr = np.zeros((m, n_sensors), dtype=np.intp)
-    cdef idx_t[:, ::1] each = each_arr
+    # per group: members, sensors and the most of one sensor (groups by counting sort; a
+    # group of more than run_max × n_sensors cannot qualify and is not counted by sensor)
+    bound_arr = np.zeros(m + 1, dtype=np.intp)
+    cdef idx_t[::1] bound = bound_arr
     for i in range(m):
-        each[comp[i], flat[i] % n_sensors] += 1
+        bound[comp[i] + 1] += 1
+    for i in range(m):
+        bound[i + 1] += bound[i]
+    member_arr = np.empty(m, dtype=np.intp)
+    cdef idx_t[::1] member = member_arr
+    fill_arr = bound_arr[:m].copy()
+    cdef idx_t[::1] fill = fill_arr
+    for i in range(m):
+        member[fill[comp[i]]] = i
+        fill[comp[i]] += 1
+    each_arr = np.zeros(n_sensors, dtype=np.intp)
+    cdef idx_t[::1] each = each_arr
     ok_arr = np.zeros(m, dtype=np.intp)
     cdef idx_t[::1] ok = ok_arr
     g = 0
     for r in range(m):
-        if comp[r] != r:
+        a = bound[r + 1] - bound[r]
+        if comp[r] != r or a < 3 or a > run_max * n_sensors:
             continue
-        a = 0
         nk = 0
         top = 0
-        for k in range(n_sensors):
-            a += each[r, k]
-            nk += each[r, k] > 0
-            if each[r, k] > top:
-                top = each[r, k]
-        if a >= 3 and nk >= min_sensors and top <= run_max:
+        for i in range(bound[r], bound[r + 1]):
+            k = flat[member[i]] % n_sensors
+            each[k] += 1
+            nk += each[k] == 1
+            if each[k] > top:
+                top = each[k]
+        for i in range(bound[r], bound[r + 1]):
+            each[flat[member[i]] % n_sensors] = 0
+        if nk >= min_sensors and top <= run_max:
             ok[g] = r
             g += 1
     if g == 0:

@@ -123,10 +123,84 @@ def arc_incidence(pr: Profile, pos: np.ndarray, cal: Calibration,
     if not keep.any():
         return theta, dist, sigma, good, misfit, circle
     big = (size >= ARC_MIN).nonzero()[0]
-    row = np.full(ids.size, -1)
+    for runs, width in _arc_batches(size[big]):
+        _fit_arcs(pr, pos, cal, radii, big[runs], width, group, rank, ids.size,
+                  (theta, dist, sigma, good, misfit, circle))
+    return theta, dist, sigma, good, misfit, circle
+
+
+ARC_BLOCK = 1 << 18      # candidate circles × padded readings scored at once (~100 bytes each)
+ARC_PAD = 4              # runs padded to the longest, unless that pads them to more than this
+ARC_PAD_MIN = 1 << 16    # many times their readings, and more than this many places in all
+
+
+def _arc_batches(size: np.ndarray):
+    """The runs (``size``: readings of each) fitted together and the width they are padded
+    to: all at once to the longest (the sums of misfits over a padded row are numpy's, so
+    this keeps them to the last bit), unless that pads them beyond ``ARC_PAD`` times their
+    readings (a long sweep's long run beside many short ones): then runs of like length
+    together, each batch padded at most twice over (its sums may differ in the last bit)."""
+    width = int(size.max())
+    if size.size * width <= max(ARC_PAD * int(size.sum()), ARC_PAD_MIN):
+        return [(np.arange(size.size), width)]
+    order = np.argsort(size, kind="stable")
+    out, first = [], 0
+    total = np.cumsum(size[order])
+    while first < order.size:
+        done = total[first - 1] if first else 0
+        # the longest run of the batch is its last: grow while padding stays within 2×
+        last = first
+        while (last + 1 < order.size
+               and (last + 2 - first) * size[order[last + 1]] <= 2 * (total[last + 1] - done)):
+            last += 1
+        out.append((np.sort(order[first:last + 1]), int(size[order[last]])))
+        first = last + 1
+    return out
+
+
+def _arc_costs(geo, apex: np.ndarray, radius: np.ndarray, cal: Calibration) -> np.ndarray:
+    """:func:`_arc_misfit`'s summed misfit (C, K), scored ``ARC_BLOCK`` circle-readings at a
+    time (whole rows, so each sum is the one numpy makes of all of them)."""
+    n_c, k, n_j = apex.shape[0], apex.shape[1], geo[0].shape[1]
+    if n_c * k * n_j <= ARC_BLOCK:
+        return _arc_misfit(geo, apex, radius, cal)[0]
+    cost = np.empty((n_c, k))
+    per = max(1, ARC_BLOCK // n_j)            # rows of (run, circle) at once
+    rows = n_c * k
+    for lo in range(0, rows, per):
+        r = np.arange(lo, min(lo + per, rows))
+        c, kk = r // k, r % k
+        g = tuple(v[c] for v in geo)
+        cost[c, kk] = _arc_misfit(g, apex[c, kk][:, None], radius[c, kk][:, None], cal)[0][:, 0]
+    return cost
+
+
+def _arc_best(geo, apex: np.ndarray, radius: np.ndarray, cal: Calibration):
+    """θ, d and misfit (C, J) of each run's readings at its one circle (``apex``, ``radius``:
+    (C,)), ``ARC_BLOCK`` places at a time."""
+    n_c, n_j = geo[0].shape
+    th, d, each = (np.empty((n_c, n_j)) for _ in range(3))
+    per = max(1, ARC_BLOCK // n_j)
+    for lo in range(0, n_c, per):
+        c = np.arange(lo, min(lo + per, n_c))
+        _, t, dd, e = _arc_misfit(tuple(v[c] for v in geo), apex[c][:, None],
+                                  radius[c][:, None], cal)
+        th[c], d[c], each[c] = t[:, 0], dd[:, 0], e[:, 0]
+    return th, d, each
+
+
+def _fit_arcs(pr: Profile, pos: np.ndarray, cal: Calibration, radii: np.ndarray,
+              big: np.ndarray, n_j: int, group: np.ndarray, rank: np.ndarray, n_runs: int,
+              out: tuple) -> None:
+    """:func:`arc_incidence` on the runs ``big`` (of ``n_runs``; ``group`` and ``rank``:
+    each reading's run and place in it), padded to ``n_j`` readings: fills its outputs
+    ``out`` (θ, d, σ, good, misfit and circle, per reading) in place."""
+    theta, dist, sigma, good, misfit, circle = out
+    row = np.full(n_runs, -1)
     row[big] = np.arange(big.size)
+    keep = row[group] >= 0
     c, j = row[group[keep]], rank[keep]
-    n_c, n_j = big.size, int(size[big].max())
+    n_c = big.size
     mask = np.zeros((n_c, n_j), dtype=bool)
     mask[c, j] = True
 
@@ -152,7 +226,7 @@ def arc_incidence(pr: Profile, pos: np.ndarray, cal: Calibration,
     k_r = radii.size
     apex1 = np.repeat(apex, k_r, axis=1)
     radius1 = np.tile(radii, (n_c, span.size))
-    cost1 = _arc_misfit(geo, apex1, radius1, cal)[0]
+    cost1 = _arc_costs(geo, apex1, radius1, cal)
     best1 = np.argmin(cost1, axis=1)
     # refine: the best apex and its neighbours, radii between the grid's
     a1 = apex1[np.arange(n_c), best1]
@@ -161,8 +235,16 @@ def arc_incidence(pr: Profile, pos: np.ndarray, cal: Calibration,
                     (n_in - 1)[:, None])
     radius2 = radius1[np.arange(n_c), best1][:, None] * np.exp(
         grid_step * np.tile(ARC_REFINE, 3))[None, :]
-    cost2, th2, d2, mis2 = _arc_misfit(geo, apex2, radius2, cal)
-    best = np.argmin(cost2, axis=1)
+    if n_c * apex2.shape[1] * n_j <= ARC_BLOCK:
+        cost2, th2, d2, mis2 = _arc_misfit(geo, apex2, radius2, cal)
+        best = np.argmin(cost2, axis=1)
+    else:     # each run's best circle's readings computed again, alone (the same numbers)
+        cost2 = _arc_costs(geo, apex2, radius2, cal)
+        best = np.argmin(cost2, axis=1)
+        pick = (np.arange(n_c), best)
+        th2, d2, mis2 = (v[:, None] for v in _arc_best(geo, apex2[pick], radius2[pick], cal))
+        cost2, apex2, radius2 = cost2[pick][:, None], apex2[pick][:, None], radius2[pick][:, None]
+        best = np.zeros(n_c, dtype=np.intp)
     a = apex2[np.arange(n_c), best]
     fits = ((a >= ARC_SIDE) & (a < n_in - ARC_SIDE)
             & (cost2[np.arange(n_c), best] < ARC_MISFIT * n_in))
@@ -183,7 +265,6 @@ def arc_incidence(pr: Profile, pos: np.ndarray, cal: Calibration,
     ox, oy, ex, ey, d_apex = (v[np.arange(n_c), a] for v in geo[:5])
     rad = radius2[np.arange(n_c), best]
     circle[:, at] = np.stack([ox + (d_apex + rad) * ex, oy + (d_apex + rad) * ey, rad])[:, c]
-    return theta, dist, sigma, good, misfit, circle
 
 
 ROUND_RADII_M = np.geomspace(0.1, 1.2, 12)  # a sensor's run cut into lines is tried as an arc

@@ -17,7 +17,7 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, f
 from .arcs import round_runs
 from .bends import bowed_lines, faceted_lines
 from .counts import CountsFits, counts_contradicted
-from .far_lines import POST_LINK_M, POST_RUN_MAX, POST_SENSORS
+from .far_lines import POST_CELL_REACH, POST_LINK_M, POST_RUN_MAX, POST_SENSORS, post_cells
 from .foldover import resolve_foldover
 from .lines import (PINNED_RAD, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate, LineOptions, Lines,
                     Pieces, fallback_spread, polyline_ids, scan_order)
@@ -644,9 +644,12 @@ class _Grouping:
         sw = self.sw
         lab = self.label
         mem = (lab >= 0).nonzero()[0]
-        # (member, entry) pairs of the member's line, the member past the corner
-        pm, pe = (lab.take(mem)[:, None] == line[None, :]).nonzero()
-        pm = mem.take(pm)
+        # (member, entry) pairs of the member's line (entries are in line order: each
+        # member's are a slice), the member past the corner
+        lo_e = np.searchsorted(line, lab.take(mem), side="left")
+        n_e = np.searchsorted(line, lab.take(mem), side="right") - lo_e
+        pm = np.repeat(mem, n_e)
+        pe = np.arange(pm.size) - np.repeat(np.cumsum(n_e) - n_e, n_e) + np.repeat(lo_e, n_e)
         beyond = ((px.take(pm) - X.take(pe)) * dx.take(pe)
                   + (py.take(pm) - Y.take(pe)) * dy.take(pe)) * bulk.take(pe)
         keep = beyond < 0
@@ -1386,7 +1389,8 @@ def post_groups(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cali
     ``POST_RUN_MAX`` of each. Returns None where none does, else (row, col, comp, groups,
     px, py): the candidates (row-major), each one's group (its smallest member's index),
     the groups that qualify and the end points. The compiled ``_lines.post_groups`` is held
-    to this."""
+    to this. Pairs are sought cell by cell (:func:`_chained`), so the cost grows with the
+    candidates, not their square."""
     shape = points.valid.shape
     row, col = ((points.reason == Reason.INCIDENCE_UNKNOWN)
                 | (points.valid & (np.asarray(label).reshape(shape) < 0))).nonzero()
@@ -1401,17 +1405,66 @@ def post_groups(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cali
     heading = np.asarray(points.heading, dtype=float)[row, col]
     px = np.asarray(points.origin_x, dtype=float)[row, col] + d0 * np.cos(heading)
     py = np.asarray(points.origin_y, dtype=float)[row, col] + d0 * np.sin(heading)
-    near = np.hypot(px[:, None] - px[None, :], py[:, None] - py[None, :]) < POST_LINK_M
-    comp = np.arange(row.size)
-    while True:                    # connected groups: each takes its smallest member's index
-        low = np.where(near, comp[None, :], row.size).min(axis=1)
-        if np.array_equal(low, comp):
-            break
-        comp = low
-    each = np.bincount(comp * shape[1] + col, minlength=row.size * shape[1]).reshape(
-        row.size, shape[1])
-    groups = ((each.sum(axis=1) >= 3) & (np.count_nonzero(each, axis=1) >= POST_SENSORS)
-              & (each.max(axis=1) <= POST_RUN_MAX)).nonzero()[0]
+    comp = _chained(px, py, POST_LINK_M, POST_RUN_MAX * shape[1])
+    # per group: members, sensors and the most of one sensor
+    pair, each = np.unique(comp * shape[1] + col, return_counts=True)
+    group = pair // shape[1]
+    total = np.bincount(group, each, row.size)
+    sensors = np.bincount(group, minlength=row.size)
+    top = np.zeros(row.size, dtype=each.dtype)
+    np.maximum.at(top, group, each)
+    groups = ((total >= 3) & (sensors >= POST_SENSORS) & (top <= POST_RUN_MAX)).nonzero()[0]
     if not groups.size:
         return None
     return row, col, comp, groups, px, py
+
+
+def _chained(px: np.ndarray, py: np.ndarray, link_m: float, crowd: int,
+             block: int = 1 << 20) -> np.ndarray:
+    """Each point's group (its smallest member's index) where points ``px``, ``py`` within
+    ``link_m`` of each other are linked, the pairs sought cell by cell (``post_cells``: a
+    cell's points are all linked; two cells more than ``crowd`` points each are not compared,
+    as a group that large fails the far posts' count either way), ``block`` pairs at a time."""
+    order, start, crowded, key, width = post_cells(px, py, link_m, crowd)
+    n_in = np.diff(start)
+    a, b = [order.take(np.repeat(start[:-1], n_in))], [order]   # each with its cell's first
+    cells = np.arange(key.size)
+    for dx in range(POST_CELL_REACH + 1):
+        for dy in range(-POST_CELL_REACH, POST_CELL_REACH + 1):
+            if dx == 0 and dy <= 0:
+                continue
+            want = key + dx * width + dy
+            other = np.minimum(np.searchsorted(key, want), key.size - 1)
+            both = ((key.take(other) == want) & ~(crowded.astype(bool)
+                                                  & crowded.take(other).astype(bool)))
+            ca, cb = cells[both], other[both]
+            pairs = n_in[ca] * n_in[cb]
+            cut = np.searchsorted(np.cumsum(pairs), np.arange(block, pairs.sum(), block))
+            for part in np.split(np.arange(ca.size), cut):
+                i, j = _cell_pairs(start, n_in, ca[part], cb[part])
+                i, j = order.take(i), order.take(j)
+                near = np.hypot(px[i] - px[j], py[i] - py[j]) < link_m
+                a.append(i[near])
+                b.append(j[near])
+    a, b = np.concatenate(a), np.concatenate(b)
+    comp = np.arange(px.size)
+    while True:      # hook each link's larger label onto its smaller, then follow labels
+        low = np.minimum(comp[a], comp[b])
+        nxt = comp.copy()
+        for end in (a, b, comp[a], comp[b]):
+            np.minimum.at(nxt, end, low)
+        while not np.array_equal(nxt[nxt], nxt):
+            nxt = nxt[nxt]
+        if np.array_equal(nxt, comp):
+            return comp
+        comp = nxt
+
+
+def _cell_pairs(start: np.ndarray, n_in: np.ndarray, ca: np.ndarray, cb: np.ndarray):
+    """Every pair of places in cell order of cells ``ca`` and ``cb`` (each cell ``ca[p]``'s
+    places with each of ``cb[p]``'s)."""
+    na, nb = n_in[ca], n_in[cb]
+    per = na * nb
+    p = np.repeat(np.arange(ca.size), per)
+    r = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
+    return start[ca][p] + r // nb[p], start[cb][p] + r % nb[p]

@@ -138,6 +138,34 @@ POST_BEARING_RAD = 0.0025  # its centre searched on this bearing grid …
 POST_RANGE_M = 0.005     # … and this range grid; a silent flanking beam it meets this far
 POST_SILENT_RAD = math.radians(15)  # inside the drop-out angle (within the return range) misfits
 POST_COARSE = 4          # the search: every 4th radius on a grid 4× as coarse, then fine about it
+POST_CELL_REACH = 3      # candidates are paired cell by cell, cells of half POST_LINK_M: a link
+#                          spans at most 2 cells' offset (3 with floor's rounding)
+
+
+def post_cells(px: np.ndarray, py: np.ndarray, link_m: float, crowd: int):
+    """The far posts' candidates (end points ``px``, ``py``) by square cells of side
+    ``link_m`` / 2, so that a cell's candidates are all within ``link_m`` of each other and
+    a link joins cells at most ``POST_CELL_REACH`` apart: (order, start, crowded, key,
+    width): the candidates with finite end points in cell order (by index within a cell),
+    each cell's first place in ``order`` (and one past the last), whether it holds more
+    than ``crowd`` candidates (uint8), its key (int64, ascending; a cell dx, dy across is
+    key + dx·width + dy) and width. One statement for the kernel and its numpy oracle."""
+    finite = (np.isfinite(px) & np.isfinite(py)).nonzero()[0]
+    side = 0.5 * link_m
+    ix = np.floor(px[finite] / side).astype(np.int64)
+    iy = np.floor(py[finite] / side).astype(np.int64)
+    if finite.size:
+        ix -= ix.min()
+        iy += POST_CELL_REACH - iy.min()
+    width = int(iy.max(initial=0)) + POST_CELL_REACH + 1
+    cell = ix * width + iy
+    order = np.argsort(cell, kind="stable")      # (finite is in index order)
+    cell = cell[order]
+    first = np.ones(cell.size, dtype=bool)
+    first[1:] = cell[1:] != cell[:-1]
+    start = np.append(first.nonzero()[0], cell.size).astype(np.intp)
+    crowded = (np.diff(start) > crowd).astype(np.uint8)
+    return finite[order].astype(np.intp), start, crowded, cell[first], width
 
 
 def far_posts(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
@@ -282,7 +310,7 @@ def post_groups_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
         f(counts, dtype=float).reshape(-1), f(points.heading, dtype=float).reshape(-1),
         f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
         points.valid.shape[1], no_return + (RETURN_SIGMAS + RANGE_SIGMAS) * sigma_counts,
-        la0, b0, POST_LINK_M, POST_SENSORS, POST_RUN_MAX)
+        la0, b0, POST_LINK_M, POST_SENSORS, POST_RUN_MAX, post_cells, POST_CELL_REACH)
 
 
 def short_far_lines(points: Points, label: np.ndarray, index: np.ndarray, cal: Calibration
