@@ -16,6 +16,7 @@ BENCHES = {
     "speed": "time per sweep of each stage, vs raw MuJoCo and vs the real ring",
     "effects": "cost of each sensor effect per sweep; an effect that is off costs ~0",
     "estimator": "iterative estimator vs θ = 0: range RMSE at steep incidence",
+    "long": "the estimator's time and memory per reading as a sweep grows to 18,000 steps",
     "dynamics": "belt stretch, physics convergence, settle time vs angle error, mapping on "
                 "the move",
     "rooms": "map scores on a set of rooms, scene effects vs an ideal sensor",

@@ -18,7 +18,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..core import Points, Reason, Ring, Sweep, beam_geometry, points_with
+from ..core import (MAX_ESTIMATED_READINGS, Points, Reason, Ring, Sweep, beam_geometry,
+                    points_with, work_bytes, work_refusal)
+from ..errors import TooBig
 from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
@@ -90,6 +92,7 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
     ``hold`` (S, N): readings kept out (FOLDOVER_AMBIGUOUS); None with a folding
     calibration: resolve the fold-over first (:func:`resolve_foldover`). ``snap``: line
     members' end points onto their lines (:func:`snap_to_lines`)."""
+    check_work(np.shape(sweep.counts))
     cal = calibration if calibration is not None else nominal_calibration(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
     if hold is None and cal.folds and iterate:
@@ -239,6 +242,22 @@ def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int
         max_range_m=max_range)
     return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, detail, history,
                           counts, steps, raw_counts=np.asarray(sweep.counts, dtype=float))
+
+
+def check_work(shape: tuple) -> None:
+    """:class:`TooBig` for a sweep of ``shape`` (steps, sensors) with more readings than
+    the estimator may take (:data:`irring.core.MAX_ESTIMATED_READINGS`: one sweep's
+    :func:`irring.core.work_bytes` within the work budget), before any of its work."""
+    if len(shape) != 2 or shape[0] * shape[1] <= MAX_ESTIMATED_READINGS:
+        return        # (within the budget; a shape no sweep has is the estimator's to name)
+    n = int(shape[0]) * int(shape[1])
+    refusal = work_refusal(
+        f"a sweep of {shape[0]:,} steps × {shape[1]} sensors = {n:,} readings to estimate",
+        work_bytes(n, n), "the estimator",
+        f"estimate at most {MAX_ESTIMATED_READINGS:,} readings a sweep (fewer steps, or the "
+        f"sweep in parts)")
+    if refusal:
+        raise TooBig(refusal)
 
 
 SETTLED_SIGMAS = 1.0  # a reading caught moving reads within this many σ of its converged d

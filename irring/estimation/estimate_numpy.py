@@ -12,8 +12,8 @@ import numpy as np
 
 from ..core import Points, Reason, Sweep, beam_geometry
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, range_sigma
-from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, final_estimate,
-                       nominal_calibration, settled_within_noise)
+from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, check_work,
+                       final_estimate, nominal_calibration, settled_within_noise)
 from .arcs import round_runs
 from .bends import bowed_lines, faceted_lines
 from .counts import CountsFits, counts_contradicted
@@ -970,6 +970,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     (:func:`irring.estimation.lines.snap_to_lines`). ``keep_unconverged``: readings
     still moving at the cap valid at their last θ.
     """
+    check_work(np.shape(sweep.counts))
     cal = calibration if calibration is not None else nominal_calibration(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
     if hold is None and cal.folds and iterate:
