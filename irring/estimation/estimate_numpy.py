@@ -1432,7 +1432,7 @@ def _chained(px: np.ndarray, py: np.ndarray, link_m: float, crowd: int,
     cells = np.arange(key.size)
     for dx in range(POST_CELL_REACH + 1):
         for dy in range(-POST_CELL_REACH, POST_CELL_REACH + 1):
-            if dx == 0 and dy <= 0:
+            if (dx == 0 and dy <= 0) or not key.size:
                 continue
             want = key + dx * width + dy
             other = np.minimum(np.searchsorted(key, want), key.size - 1)
