@@ -13,8 +13,12 @@ import tracemalloc
 
 import numpy as np
 
+from .. import pipeline
 from ..core import (BYTES_PER_READING, ESTIMATE_BYTES_PER_READING, Ring, Sweep,
                     sensor_angles_for_steps)
+from ..estimation import estimate as fast, estimate_numpy as oracle
+from ..estimation.estimate import nominal_calibration
+from ..scenario import load_scenario
 from .report import load_average, load_line
 
 STEPS = (71, 710, 4_500, 9_000, 18_000)
@@ -28,9 +32,6 @@ def room_sweep(steps: int, scenario: str = "t_room", pose: int = 1, seed: int = 
     """(sweep, calibration): ``scenario``'s ``pose``-th scan simulated with its ring's sweep
     (the paper's ±37.8°) read in ``steps`` steps instead of 71 (motor step and belt ratio
     scaled so the motor step stays within a ring's bounds)."""
-    from .. import pipeline
-    from ..scenario import load_scenario
-
     sc = load_scenario(scenario)
     ring = sc.robot.ring or Ring()
     sensor_step = (ring.motor_step_rad * ring.gear * (ring.max_step - ring.min_step)
@@ -52,8 +53,6 @@ def circle_sweep(steps: int, sensors: int = 12, step_deg: float = CIRCLE_STEP_DE
     """(sweep, calibration): a device's sweep of ``steps`` motor steps of ``step_deg``
     (belt ratio 1) centred on step 0, every reading ``CIRCLE_COUNTS``: 36 000 steps of
     0.01° turn each sensor round the full circle (FINDINGS16's device E)."""
-    from ..estimation.estimate import nominal_calibration
-
     lo = -(steps // 2)
     ring = Ring(sensors=sensors, motor_step_rad=math.radians(step_deg), gear=1.0,
                 min_step=lo, max_step=lo + steps - 1, joint_limit_rad=2 * math.pi)
@@ -69,8 +68,6 @@ def measure(kinds=KINDS, steps=STEPS, estimators=("fast",)) -> dict:
     """Per kind, steps and estimator: the estimator's CPU time on the sweep (its second
     run: the first builds the calibration's tables), then its peak memory (tracemalloc, a
     third run), each per reading; plain figures."""
-    from ..estimation import estimate as fast, estimate_numpy as oracle
-
     run = {"fast": fast.estimate_detail, "numpy": oracle.estimate_detail}
     load_before = load_average()
     rows = []
