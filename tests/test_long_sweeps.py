@@ -1,4 +1,4 @@
-"""Long sweeps (FINDINGS16 E): the estimator's cost grows with a sweep's readings, not their
+"""Long sweeps (a device of 12 × 36,000 steps): the estimator's cost grows with a sweep's readings, not their
 square, with the same results; a sweep past the work budget is refused before the work."""
 
 from __future__ import annotations

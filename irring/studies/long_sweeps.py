@@ -52,7 +52,7 @@ def room_sweep(steps: int, scenario: str = "t_room", pose: int = 1, seed: int = 
 def circle_sweep(steps: int, sensors: int = 12, step_deg: float = CIRCLE_STEP_DEG):
     """(sweep, calibration): a device's sweep of ``steps`` motor steps of ``step_deg``
     (belt ratio 1) centred on step 0, every reading ``CIRCLE_COUNTS``: 36 000 steps of
-    0.01° turn each sensor round the full circle (FINDINGS16's device E)."""
+    0.01° turn each sensor round the full circle (a hostile device's)."""
     lo = -(steps // 2)
     ring = Ring(sensors=sensors, motor_step_rad=math.radians(step_deg), gear=1.0,
                 min_step=lo, max_step=lo + steps - 1, joint_limit_rad=2 * math.pi)
