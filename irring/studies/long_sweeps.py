@@ -14,7 +14,7 @@ import tracemalloc
 import numpy as np
 
 from .. import pipeline
-from ..core import (BYTES_PER_READING, ESTIMATE_BYTES_PER_READING, Ring, Sweep,
+from ..core import (BYTES_PER_READING, ESTIMATE_BYTES_PER_READING, Ring, Sweep, bounds,
                     sensor_angles_for_steps)
 from ..estimation import estimate as fast, estimate_numpy as oracle
 from ..estimation.estimate import nominal_calibration
@@ -36,7 +36,7 @@ def room_sweep(steps: int, scenario: str = "t_room", pose: int = 1, seed: int = 
     ring = sc.robot.ring or Ring()
     sensor_step = (ring.motor_step_rad * ring.gear * (ring.max_step - ring.min_step)
                    / (steps - 1))
-    floor = Ring.__dataclass_fields__["motor_step_rad"].metadata["lo"]
+    floor = bounds(Ring, "motor_step_rad")[0]
     k = max(1, math.ceil(floor / (sensor_step / ring.gear) - 1e-9))
     ring = dataclasses.replace(ring, motor_step_rad=sensor_step / ring.gear * k,
                                gear=ring.gear / k, min_step=-(steps // 2),
