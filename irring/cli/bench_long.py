@@ -38,7 +38,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--kind", choices=KINDS, action="append",
                    help="room or circle (repeatable; default: both)")
     p.add_argument("--steps", type=at_least(2, MAX_STEPS), nargs="+", default=list(STEPS),
-                   metavar="N", help="steps a sweep (2 … 100,000; default: "
+                   metavar="N", help=f"steps a sweep (2 … {MAX_STEPS:,}; default: "
                                      f"{' '.join(str(s) for s in STEPS)})")
     p.add_argument("--numpy", action="store_true",
                    help="also the numpy statement of the estimator (estimate_numpy)")
