@@ -45,12 +45,9 @@ WORK_MEMORY_BYTES = 2 * 10**9       # what one command's work may hold: a run's 
 BYTES_PER_READING = 600             # a reading through simulation, estimate and map (measured,
                                     # few beams returning: 72 sensors × 20 001 steps peaked 0.94 GB)
 ESTIMATE_BYTES_PER_READING = 2_700  # more for each reading of the sweep being estimated: the
-# estimator's peak grows with the sweep's readings alone, no pair search or padded block
-# with their square (docs/speed.md, "Long sweeps"; tracemalloc, compiled, every reading
-# returning, round the full circle: 12 × 4 500 steps 2.1 kB a reading, 12 × 36 000 1.5 kB,
-# 72 × 5 000 1.6 kB; the numpy statement 2.5-2.6 kB at 12 × 2 250 … 9 000)
+# estimator's peak grows with the sweep's readings alone (measured: docs/speed.md, "Long sweeps")
 MAX_ESTIMATED_READINGS = WORK_MEMORY_BYTES // (BYTES_PER_READING + ESTIMATE_BYTES_PER_READING)
-#                                   one sweep's readings the estimator takes (606,060)
+#                                   one sweep's readings the estimator takes
 BYTES_PER_PHYSICS_VALUE = 16        # a recorded qpos/qvel double, held twice while assembled
 VIEW_BYTES_PER_PIXEL = 85           # an offscreen picture of `irring view`, beyond VIEW_BASE_BYTES
 VIEW_BASE_BYTES = 300 * 10**6       # (peak RSS, 1280x960 to 4096x3072: OSMesa 83, EGL 63 bytes
