@@ -346,9 +346,10 @@ def _where(ring: SerialRing) -> str:
     """Where the ring stands once the session is closed, for a drive cut short."""
     if ring.park_failure:
         return "where the ring stands: see the warning above"
-    if ring.stands_at == 0 or ring.stats.scans == 0 and not ring.close_interrupted:
-        return ("the ring stands at step 0" if ring.stands_at == 0 else
-                "the ring was not turned")
+    if ring.stands_at == 0:
+        return "the ring stands at step 0"
+    if ring.stats.scans == 0 and not ring.close_interrupted:
+        return "the ring was not turned"
     return "where the ring stands is not known"
 
 
