@@ -256,14 +256,10 @@ def _open_failure(exc: BaseException) -> str:
 
 
 def _may_reset(port: str) -> bool:
-    """Whether opening ``port`` may reset the board behind it: a local serial device (an
-    Arduino's USB serial asserts DTR when opened, which resets it), also wrapped in a
-    pyserial URL (spy://, alt:// name its path; hwgrep:// finds one) or served on the
-    network (rfc2217://, socket://: ser2net and pyserial's rfc2217 server open the board's
-    port when a client connects); not a pseudo-terminal (irring emulate, irring-host,
-    irring-simavr), plain or wrapped, nor loop://. The wait costs nothing when the device
-    answers."""
-    scheme, sep, rest = port.partition("://")
+    """Whether opening ``port`` may reset the board behind it: a serial device path, or a
+    pyserial URL that may open one (any but loop://; spy:// and alt:// only if the path they
+    wrap is no pseudo-terminal). Why these: docs/protocol.md."""
+    scheme, sep, _ = port.partition("://")
     if sep:
         scheme = scheme.lower()
         if scheme == "loop":
@@ -392,9 +388,9 @@ class SerialRing:
         with :class:`HandshakeError` saying how to reflash it.
     boot_s: seconds after :meth:`open` opens the port in which the board may still be
         starting (an Arduino resets when its port opens): IRHLO is sent again after each
-        BOOT_RESEND_S of silence meanwhile. None: BOOT_S for a serial device path or a URL that may
-        wrap one (spy://, alt://, hwgrep://, rfc2217://, socket://), 0 for a pty, loop:// or
-        a port object.
+        BOOT_RESEND_S of silence meanwhile. None: BOOT_S where opening the port may reset a
+        board (a serial device path, or a URL that may open one: docs/protocol.md), 0 for a
+        pty, loop:// or a port object.
     opener: ``serial.serial_for_url``-compatible factory, replaceable in tests.
 
     A :class:`irring.core.RingSource`: ``pipeline.acquire`` drives it as it drives SimRing.
