@@ -228,7 +228,7 @@ def run(args: argparse.Namespace) -> int:
         _error(str(exc))
         return errors.DEVICE
     except KeyboardInterrupt:   # Ctrl-C, SIGTERM or SIGHUP in the handshake
-        ring.close()   # (stops an earlier session's sweep the handshake found running)
+        ring.close()   # the port only: close() turns nothing back before a handshake ends
         _tell(f"irring drive: interrupted during the handshake; nothing was read; "
               f"{_where(ring)}", file=sys.stderr)
         return errors.INTERRUPTED
