@@ -15,6 +15,14 @@ from irring.recording import load_recording
 _STAGES = {
     # SIGTERM as the device gets IRHLO: nothing read, the ring never turned
     "handshake": "if isinstance(cmd, p.Hello):\n        kill()\n",
+    # the board still sweeps for an earlier session (IRERR 5: the handshake stops it with
+    # IRSTP), and SIGTERM comes before IRINF: the ring stands where that sweep left it
+    "handshake busy": ("if isinstance(cmd, p.Hello) and not getattr(dev, 'busy', False):\n"
+                       "        dev.busy = True\n"
+                       "        dev.send(hd.line(f'IRERR,{p.ERR_BUSY},{p.ERROR_TEXT[p.ERR_BUSY]}'))\n"
+                       "        return\n"
+                       "    if isinstance(cmd, p.Stop):\n"
+                       "        kill(); return\n"),
     # one IRSCN of pose 2, then SIGTERM; the rest of the sweep never comes
     "sweep": ("if isinstance(cmd, p.SweepCommand):\n"
               "        dev.n = getattr(dev, 'n', 0) + 1\n"
@@ -77,6 +85,9 @@ def _poses_written(tmp_path) -> int | None:
     ("handshake", None,
      "irring drive: interrupted during the handshake; nothing was read; the ring was not "
      "turned"),
+    ("handshake busy", None,
+     "irring drive: interrupted during the handshake; nothing was read; where the ring "
+     "stands is not known"),
     ("sweep", 1,
      "irring drive: interrupted during pose 2 of 2; the 1 pose swept is mapped and written; "
      "the ring stands at step 0"),

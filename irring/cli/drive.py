@@ -348,7 +348,7 @@ def _where(ring: SerialRing) -> str:
         return "where the ring stands: see the warning above"
     if ring.stands_at == 0:
         return "the ring stands at step 0"
-    if ring.stats.scans == 0 and not ring.close_interrupted:
+    if not ring.moved:
         return "the ring was not turned"
     return "where the ring stands is not known"
 

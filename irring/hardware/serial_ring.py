@@ -626,6 +626,12 @@ class SerialRing:
         self.decoder.reset()
 
     @property
+    def moved(self) -> bool:
+        """Whether the ring may stand away from step 0: a sweep or move was sent this session
+        (or the handshake stopped an earlier session's sweep) and not turned back since."""
+        return self._moved
+
+    @property
     def protocol(self) -> int:
         """The IRR protocol version this link speaks (2, or 1 with ``accept_v1``)."""
         return self.decoder.version
