@@ -880,3 +880,164 @@ def _facet_asked(before: Points, label: np.ndarray, after: Points):
     turn = np.abs(np.arctan(m_r[best]) - np.arctan(m_l[best]))
     return (idx, g, ox, oy, ex, ey, d0, sig, cx, cy, ux, uy, order, gs, w, at, best, split, F,
             gain, turn)
+
+
+REREAD_GRID_RAD = np.radians(np.arange(-30.0, 30.5, 1.0))   # a piece's direction: searched
+REREAD_FINE_RAD = np.radians(np.arange(-1.0, 1.05, 0.1))    # … on this grid, then this one
+REREAD_SURE_RAD = math.radians(5)  # a piece is placed where its χ² rises this far either
+REREAD_SURE_CHI = 4.0   # … side of its direction by this much (2σ: its members orient it)
+REREAD_ROUNDS = 2       # a piece split again this often at most (a line over 3–4 facets)
+
+
+def _reread_table(ox, oy, ux, uy, s, cal, alpha):
+    """Each member read at the incidence a line of direction ``alpha`` (K,) gives its beam:
+    (K, n) offsets along the line's normal, weights (1/σ² across it; 0 past the drop-out
+    angle), θ and distance."""
+    a = np.asarray(alpha, dtype=float)[:, None]
+    nx, ny = -np.sin(a), np.cos(a)
+    cos = np.abs(ux * nx + uy * ny)
+    theta = np.arccos(np.clip(cos, 0.0, 1.0))
+    d = np.asarray(cal.distance(np.broadcast_to(s, theta.shape), theta), dtype=float)
+    _, b = cal.log_ab(theta)
+    sig = range_sigma(b, d, cal.sigma_counts() / s) * cos
+    w = np.where(theta > cal.max_incidence_rad, 0.0, 1.0 / np.maximum(sig, 1e-6) ** 2)
+    return (ox + d * ux) * nx + (oy + d * uy) * ny, w, theta, d
+
+
+def _reread_split(r, w, lo, hi, side):
+    """Best split of sorted members lo … hi − 1 into two pieces of ``side`` at least, every
+    piece's direction its own (the grid row of least χ²): (χ² one line, χ² split, split
+    index, row left, row right), split index None where none fits."""
+    rr, ww = r[:, lo:hi], w[:, lo:hi]
+    zero = np.zeros((rr.shape[0], 1))
+    cw, c1, c2 = (np.concatenate([zero, np.cumsum(q, axis=1)], axis=1)
+                  for q in (ww, ww * rr, ww * rr * rr))
+    cz = np.concatenate([zero, np.cumsum(ww == 0.0, axis=1)], axis=1)
+
+    def chi(a, b):   # (K, m) χ² of pieces a … b − 1 (arrays of indices into the prefix sums)
+        W, S, S2 = cw[:, b] - cw[:, a], c1[:, b] - c1[:, a], c2[:, b] - c2[:, a]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = np.maximum(S2 - S * S / W, 0.0)
+        return np.where((cz[:, b] - cz[:, a] > 0) | ~(W > 0), np.inf, out)
+
+    n = hi - lo
+    one = chi(np.array([0]), np.array([n]))[:, 0]
+    k = np.arange(side, n - side + 1)
+    if k.size == 0:
+        return float(one.min()), math.inf, None, int(np.argmin(one)), 0
+    left, right = chi(np.zeros_like(k), k), chi(k, np.full_like(k, n))
+    tot = left.min(axis=0) + right.min(axis=0)
+    j = int(np.argmin(tot))
+    return (float(one.min()), float(tot[j]), lo + int(k[j]), int(np.argmin(left[:, j])),
+            int(np.argmin(right[:, j])))
+
+
+def _determined(chi, at):
+    """The least rise of a piece's χ² (over the direction grid) ``REREAD_SURE_RAD`` either
+    side of its least, ``at``: how well its own members fix its direction (one sensor's
+    trace alone does not: its range and incidence trade against each other)."""
+    step = int(round(REREAD_SURE_RAD / (REREAD_GRID_RAD[1] - REREAD_GRID_RAD[0])))
+    lo, hi = at - step, at + step
+    rise = [chi[i] - chi[at] for i in (lo, hi) if 0 <= i < chi.size]
+    return min(rise) if rise else 0.0
+
+
+def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration
+                  ) -> Points:
+    """``p`` with the members of a line (``label``, −1 none; lines of at least ``FACET_MIN``
+    valid members) that two pieces, each with its members read at its own incidence, fit
+    better put on those pieces: a line over two or three facets of a round room, whose
+    members, read at the line's θ, fit it as well as its pieces (the members of a tilted
+    facet read long at the line's shallower θ, which straightens the bend), so the split
+    :func:`faceted_lines` asks of the members as they lie is not seen.
+
+    Members are ordered along their line; every split of ``FACET_SIDE`` a piece at least is
+    tried with each piece's direction searched over ``REREAD_GRID_RAD`` about the line's,
+    each member read at the incidence its beam meets the piece with (its counts ``counts``
+    (S, N)), the piece's offset their weighted mean. The best split is kept where it beats
+    the line, read the same way, by ``FACET_F`` (against the pieces' scatter) and
+    ``FACET_CHI`` (against the members' σ) and its pieces turn by ``FACET_TURN_RAD``; each
+    piece is then asked again (``REREAD_ROUNDS``). A piece whose χ² rises less than
+    ``REREAD_SURE_CHI`` ``REREAD_SURE_RAD`` either side of its direction (one sensor's trace:
+    range and incidence trade) leaves its members INCIDENCE_UNKNOWN; of the others, a member
+    its own reading at the piece's θ puts within ``SNAP_SIGMAS`` of it is put where its beam
+    meets it, at that θ (σ as it was). numpy, shared by both estimators (a fold-over's second pass).
+    docs/foldover.md, "A line over facets, its members re-read"."""
+    member = p.valid & (label >= 0)
+    if not member.any():
+        return p
+    lab = np.where(member, label, -1).reshape(-1)
+    size = np.bincount(lab[lab >= 0])
+    lines = (size >= FACET_MIN).nonzero()[0]
+    if lines.size == 0:
+        return p
+    ox, oy = p.origin_x.reshape(-1), p.origin_y.reshape(-1)
+    ux, uy = np.cos(p.heading).reshape(-1), np.sin(p.heading).reshape(-1)
+    s = np.asarray(counts, dtype=float).reshape(-1)
+    x, y, d, th = (np.array(v, dtype=float).reshape(-1) for v in (p.x, p.y, p.d, p.theta))
+    moved, gone = False, []
+    for k in lines:
+        g = np.flatnonzero(lab == k)
+        u, v = x[g] - x[g].mean(), y[g] - y[g].mean()
+        alpha = 0.5 * math.atan2(2.0 * np.sum(u * v), np.sum(u * u - v * v))
+        g = g[np.argsort(u * math.cos(alpha) + v * math.sin(alpha), kind="stable")]
+        r, w, _, _ = _reread_table(ox[g], oy[g], ux[g], uy[g], s[g], cal,
+                                   alpha + REREAD_GRID_RAD)
+        pieces, todo = [], [(0, g.size, 0)]
+        while todo:
+            lo, hi, depth = todo.pop()
+            one, two, at, a, b = _reread_split(r, w, lo, hi, FACET_SIDE)
+            n = hi - lo
+            good = (at is not None and depth < REREAD_ROUNDS and one - two >= FACET_CHI
+                    and (one - two) / 2.0 >= FACET_F * two / max(n - 4, 1)
+                    and abs(REREAD_GRID_RAD[a] - REREAD_GRID_RAD[b]) >= FACET_TURN_RAD)
+            if good:
+                todo += [(lo, at, depth + 1), (at, hi, depth + 1)]
+            else:
+                pieces.append((lo, hi, depth))
+        if len(pieces) < 2:
+            continue
+        for lo, hi, _ in pieces:
+            m = g[lo:hi]
+            rr, ww, _, _ = _reread_table(ox[m], oy[m], ux[m], uy[m], s[m], cal,
+                                         alpha + REREAD_GRID_RAD)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                W = ww.sum(axis=1)
+                c = (ww * rr).sum(axis=1) / W
+                chi = np.where((ww == 0).any(axis=1), np.inf,
+                               (ww * (rr - c[:, None]) ** 2).sum(axis=1))
+            best = int(np.argmin(chi))
+            if not _determined(chi, best) >= REREAD_SURE_CHI:
+                # a piece its own members do not orient: the line's θ is not theirs either
+                gone.append(m)
+                continue
+            a0 = alpha + REREAD_GRID_RAD[best]
+            rr, ww, tt, dd = _reread_table(ox[m], oy[m], ux[m], uy[m], s[m], cal,
+                                           a0 + REREAD_FINE_RAD)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                c = (ww * rr).sum(axis=1) / ww.sum(axis=1)
+                chi = np.where((ww == 0).any(axis=1), np.inf,
+                               (ww * (rr - c[:, None]) ** 2).sum(axis=1))
+            f = int(np.argmin(chi))
+            if not np.isfinite(chi[f]):
+                continue
+            a1 = a0 + REREAD_FINE_RAD[f]
+            nx, ny = -math.sin(a1), math.cos(a1)
+            un = ux[m] * nx + uy[m] * ny
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (c[f] - (ox[m] * nx + oy[m] * ny)) / un
+                _, bb = cal.log_ab(tt[f])
+                noise = range_sigma(bb, dd[f], cal.sigma_counts() / s[m])
+            on = (np.isfinite(t) & (t >= cal.min_range_m) & (t <= p.max_range_m)
+                  & (np.abs(t - dd[f]) <= SNAP_SIGMAS * noise))
+            m, t = m[on], t[on]
+            d[m], th[m] = t, tt[f][on]
+            x[m], y[m] = ox[m] + t * ux[m], oy[m] + t * uy[m]
+            moved = True
+    shape = p.valid.shape
+    if moved:
+        p = points_with(p, x=x.reshape(shape), y=y.reshape(shape), d=d.reshape(shape),
+                        theta=th.reshape(shape))
+    if gone:
+        p = invalidated(p, np.concatenate(gone), Reason.INCIDENCE_UNKNOWN)
+    return p
