@@ -998,9 +998,7 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
         if len(pieces) < 2:
             continue
         for lo, hi, _ in pieces:
-            m = g[lo:hi]
-            rr, ww, _, _ = _reread_table(ox[m], oy[m], ux[m], uy[m], s[m], cal,
-                                         alpha + REREAD_GRID_RAD)
+            m, rr, ww = g[lo:hi], r[:, lo:hi], w[:, lo:hi]
             with np.errstate(divide="ignore", invalid="ignore"):
                 W = ww.sum(axis=1)
                 c = (ww * rr).sum(axis=1) / W
