@@ -924,12 +924,13 @@ def _reread_split(r, w, lo, hi, side):
     one = chi(np.array([0]), np.array([n]))[:, 0]
     k = np.arange(side, n - side + 1)
     if k.size == 0:
-        return float(one.min()), math.inf, None, int(np.argmin(one)), 0
+        return float(one.min()), math.inf, None, int(np.argmin(one)), 0, False
     left, right = chi(np.zeros_like(k), k), chi(k, np.full_like(k, n))
     tot = left.min(axis=0) + right.min(axis=0)
     j = int(np.argmin(tot))
-    return (float(one.min()), float(tot[j]), lo + int(k[j]), int(np.argmin(left[:, j])),
-            int(np.argmin(right[:, j])))
+    a, b = int(np.argmin(left[:, j])), int(np.argmin(right[:, j]))
+    return (float(one.min()), float(tot[j]), lo + int(k[j]), a, b,
+            min(_determined(left[:, j], a), _determined(right[:, j], b)) >= REREAD_SURE_CHI)
 
 
 def _determined(chi, at):
@@ -940,6 +941,22 @@ def _determined(chi, at):
     lo, hi = at - step, at + step
     rise = [chi[i] - chi[at] for i in (lo, hi) if 0 <= i < chi.size]
     return min(rise) if rise else 0.0
+
+
+def _bends_round(left, right, alphas, ox, oy, ux, uy, s, cal, centre):
+    """Whether two pieces (members ``left``, ``right``, each read at its direction of
+    ``alphas``) bend round the ring as a wall seen from inside does (a round room's facets):
+    each piece's members lie on the ring's side of the other piece's line."""
+    pts = []
+    for m, a in zip((left, right), alphas):
+        d = _reread_table(ox[m], oy[m], ux[m], uy[m], s[m], cal, np.array([a]))[3][0]
+        pts.append((ox[m] + d * ux[m], oy[m] + d * uy[m]))
+    for (x0, y0), (x1, y1), a in ((pts[0], pts[1], alphas[0]), (pts[1], pts[0], alphas[1])):
+        nx, ny = -math.sin(a), math.cos(a)
+        c = float(np.mean(x0 * nx + y0 * ny))
+        if (centre[0] * nx + centre[1] * ny - c) * (float(np.mean(x1 * nx + y1 * ny)) - c) <= 0:
+            return False
+    return True
 
 
 def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration
@@ -975,6 +992,7 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
     ux, uy = np.cos(p.heading).reshape(-1), np.sin(p.heading).reshape(-1)
     s = np.asarray(counts, dtype=float).reshape(-1)
     x, y, d, th = (np.array(v, dtype=float).reshape(-1) for v in (p.x, p.y, p.d, p.theta))
+    centre = (float(np.mean(ox)), float(np.mean(oy)))     # the ring's (its emitters' mean)
     moved, gone = False, []
     for k in lines:
         g = np.flatnonzero(lab == k)
@@ -986,11 +1004,14 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
         pieces, todo = [], [(0, g.size, 0)]
         while todo:
             lo, hi, depth = todo.pop()
-            one, two, at, a, b = _reread_split(r, w, lo, hi, FACET_SIDE)
+            one, two, at, a, b, sure = _reread_split(r, w, lo, hi, FACET_SIDE)
             n = hi - lo
             good = (at is not None and depth < REREAD_ROUNDS and one - two >= FACET_CHI
                     and (one - two) / 2.0 >= FACET_F * two / max(n - 4, 1)
-                    and abs(REREAD_GRID_RAD[a] - REREAD_GRID_RAD[b]) >= FACET_TURN_RAD)
+                    and abs(REREAD_GRID_RAD[a] - REREAD_GRID_RAD[b]) >= FACET_TURN_RAD
+                    and (not sure or _bends_round(g[lo:at], g[at:hi],
+                                                  alpha + REREAD_GRID_RAD[[a, b]],
+                                                  ox, oy, ux, uy, s, cal, centre)))
             if good:
                 todo += [(lo, at, depth + 1), (at, hi, depth + 1)]
             else:
