@@ -564,9 +564,11 @@ def _long_and_valid(points, sweeps):
 
 # (the pilaster: (9, 249) and (0, 236) before a pool one half of which saw nothing was left
 # as it was, POOL_SIDE_SIGMAS; (9, 239) and (0, 226) before noise-level readings past their line's other
-# members were silenced, noise_past_line_end)
+# members were silenced, noise_past_line_end; the stepped corner: (42, 74) before a line's
+# piece its own members do not orient was left INCIDENCE_UNKNOWN, facets_reread, which takes
+# 10 of these wrong-branch readings when neither guard is there)
 @pytest.mark.parametrize("room, seed, before, now", [
-    (STEPPED_CORNER, 7021, (42, 74), (0, 19)), (PILASTER_TOP_A21, 7108, (9, 237), (0, 224))],
+    (STEPPED_CORNER, 7021, (32, 64), (0, 19)), (PILASTER_TOP_A21, 7108, (9, 237), (0, 224))],
     ids=["stepped-corner", "a21-pilaster-top"])
 def test_a_far_end_point_needs_the_reading_s_own_far_trace(room, seed, before, now,
                                                           monkeypatch):
