@@ -1,10 +1,11 @@
 """Lines that bend: a curved wall's chords read on its circle (:func:`bowed_lines`, its compiled
 pre-gate :func:`bowed_lines_compiled`), a far line over a corner read as two
-(:func:`kinked_lines`), a snapped line over a many-sided wall's facets read as two
+(:func:`kinked_lines`), a line's members past a wall's shallow bend read on the turned wall
+(:func:`bent_ends`), a snapped line over a many-sided wall's facets read as two
 (:func:`faceted_lines`, its compiled pre-gate :func:`faceted_lines_compiled`), and the
 fold-over's neighbouring lines that are one concave arc (:func:`onto_concave_arcs`). Why and
-what was measured: docs/estimator.md, "Curved walls", "A line over a corner" and "A line over
-facets"; docs/foldover.md, "Curved walls".
+what was measured: docs/estimator.md, "Curved walls", "A line over a corner", "A shallow
+bend" and "A line over facets"; docs/foldover.md, "Curved walls".
 """
 
 from __future__ import annotations
@@ -221,6 +222,215 @@ def kinked_lines(points: Points, label: np.ndarray, counts: np.ndarray, cal: Cal
     second = take & (piece % 2 == 1)
     split.reshape(-1)[idx[mem[second]]] = label.max() + 1 + cand[second]
     return placed_at(points, at, d[take], th[take], sig[take]), split
+
+
+BEND_MIN = 20           # a shallow bend: a line of at least this many valid members …
+BEND_RUN_Z = 2.0        # … whose sensor's last members in step order its θ each reads this
+BEND_Z = 4.0            # many noise σ nearer than the line, this many taken together (z summed
+BEND_NEAR_M = 0.03      # over √n), and each this much (at close range a line's misfit passes
+BEND_EXPLAINED_Z = 2.5  # 4σ), reaching past the end of the members it explains (this many σ)
+BEND_RUN_MIN = 2        # … at least this many such at that end of the line …
+BEND_FIT_CHI2 = 8.0     # … whose other members fit it within this mean z² …
+BEND_PASSES = 2         # (the line fitted this often, each time without the members found)
+BEND_MAX_RAD = math.radians(25)   # … are read on the wall turned by at most this much at the
+BEND_GRID = 101         # line's end (this many turns tried, then refined)
+BEND_DOUBT_RAD = math.radians(3)  # a reading past a bend: σ includes d over θ ± this
+
+
+def _bend_gate(points: Points, shape: tuple, idx: np.ndarray, g: np.ndarray, n_g: int,
+               counts: np.ndarray, steps: np.ndarray, cal: Calibration) -> bool:
+    """Whether :func:`bent_ends` may find a run (cheap, no trigonometry over the members):
+    some sensor's last (or first) member on a line, fitted to all its members, lies
+    ``BEND_NEAR_M`` nearer than the line along its beam, and so does the member before it
+    in that sensor's trace, or it alone lies ``BEND_Z`` σ nearer."""
+    x, y = points.x.reshape(-1)[idx], points.y.reshape(-1)[idx]
+    nm = np.bincount(g, minlength=n_g).astype(float)
+    cx, cy = np.bincount(g, x, n_g) / nm, np.bincount(g, y, n_g) / nm
+    u, v = x - cx[g], y - cy[g]
+    al = 0.5 * np.arctan2(2.0 * np.bincount(g, u * v, n_g), np.bincount(g, u * u - v * v, n_g))
+    nx, ny = -np.sin(al)[g], np.cos(al)[g]
+    ox, oy = points.origin_x.reshape(-1)[idx], points.origin_y.reshape(-1)[idx]
+    en = (x - ox) * nx + (y - oy) * ny     # d × the beam's cosine to the line's normal
+    # how much nearer than the line along its beam: t − d = −(its offset from the line)/cos
+    d = points.d.reshape(-1)[idx]
+    short = -(u * nx + v * ny) * d / np.where(np.abs(en) > 1e-12, en, 1e-12)
+    n_s, n_n = shape
+    rank = np.empty(n_s, dtype=np.intp)
+    rank[np.argsort(np.asarray(steps), kind="stable")] = np.arange(n_s)
+    pos = rank[idx // n_n] * n_n + idx % n_n + n_n      # a row of padding either side
+    line = np.full((n_s + 2) * n_n, -1, dtype=np.intp)
+    line[pos] = g
+    near = np.zeros((n_s + 2) * n_n, dtype=bool)
+    near[pos] = short >= BEND_NEAR_M
+    first, last = line[pos - n_n] != g, line[pos + n_n] != g
+    end = near[pos] & (first | last)
+    if not end.any():
+        return False
+    inner = np.where(last, pos - n_n, pos + n_n)
+    if (end & near[inner] & (line[inner] == g)).any():
+        return True
+    e = end.nonzero()[0]
+    s_c = np.asarray(counts, dtype=float).reshape(-1)[idx[e]]
+    noise = range_sigma(cal.log_ab(points.theta.reshape(-1)[idx[e]])[1], d[e],
+                        cal.sigma_counts() / s_c)
+    return bool((short[e] >= BEND_Z * noise).any())
+
+
+def bent_ends(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.ndarray,
+              cal: Calibration) -> tuple[Points, np.ndarray]:
+    """``points`` and ``label`` (S, N) with the members past a wall's shallow bend read on the
+    turned wall: on a line of ≥ ``BEND_MIN`` valid members, a sensor's run of members at the
+    end of its trace on the line (``steps`` (S,) order) that the line's θ reads nearer than
+    the line (each ``BEND_RUN_Z`` σ, the run ``BEND_Z`` σ over √n), reaching past the end of
+    the members the line explains, are read on the line through that end turned by the
+    least angle (within ``BEND_MAX_RAD``) their counts, at the incidence their beam meets it
+    with, land on; they leave their line (label −1), and one no such wall explains is
+    INCIDENCE_UNKNOWN. The line is fitted again without them and asked once more. Numpy,
+    shared by both estimators. Why: a bend of 4-20° makes no corner, and the line's θ, too
+    steep past it, reads those members short (docs/estimator.md, "A shallow bend")."""
+    flat = label.reshape(-1)
+    valid = points.valid.reshape(-1)
+    idx = ((flat >= 0) & valid).nonzero()[0]
+    if idx.size < BEND_MIN:
+        return points, label
+    lab = flat[idx]
+    ask = np.bincount(lab) >= BEND_MIN
+    if not ask.any():
+        return points, label
+    idx = idx[ask[lab]]
+    g = (np.cumsum(ask) - 1)[flat[idx]]
+    n_g = int(np.count_nonzero(ask))
+    if not _bend_gate(points, label.shape, idx, g, n_g, counts, steps, cal):
+        return points, label
+    ox, oy = points.origin_x.reshape(-1)[idx], points.origin_y.reshape(-1)[idx]
+    h = points.heading.reshape(-1)[idx]
+    ex, ey = np.cos(h), np.sin(h)
+    d = points.d.reshape(-1)[idx]
+    x, y = ox + d * ex, oy + d * ey
+    s_c = np.asarray(counts, dtype=float).reshape(-1)[idx]
+    sig_s = cal.sigma_counts() / s_c
+    noise = range_sigma(cal.log_ab(points.theta.reshape(-1)[idx])[1], d, sig_s)
+    n_sens = label.shape[1]
+    rank = np.empty(label.shape[0], dtype=np.intp)
+    rank[np.argsort(np.asarray(steps), kind="stable")] = np.arange(label.shape[0])
+    r = rank[idx // n_sens]
+    key = g * n_sens + idx % n_sens
+    n_key = n_g * n_sens
+    keep = np.ones(idx.size, dtype=bool)
+    state = None
+    # twice: the readings past a bend pull the line they joined toward them (its beams then
+    # meet it short of where they would), so the line is fitted again without those found
+    for _ in range(BEND_PASSES):
+        w = keep.astype(float)
+        nk = np.maximum(np.bincount(g, w, n_g), 1.0)
+        cx, cy = np.bincount(g, w * x, n_g) / nk, np.bincount(g, w * y, n_g) / nk
+        u, v = x - cx[g], y - cy[g]
+        al = 0.5 * np.arctan2(2.0 * np.bincount(g, w * u * v, n_g),
+                              np.bincount(g, w * (u * u - v * v), n_g))
+        ux, uy = np.cos(al), np.sin(al)
+        # where each beam meets its line, and how much nearer the reading lies (in its noise)
+        den = ex * -uy[g] + ey * ux[g]
+        t = ((cx[g] - ox) * -uy[g] + (cy[g] - oy) * ux[g]) / np.where(np.abs(den) > 1e-9,
+                                                                        den, 1e-9)
+        z = (t - d) / noise
+        # a sensor's run of such at its trace's end, taken together: a bend of 5° met at
+        # 60° reads its members 3-4σ short, each alone within the line's noise
+        lean = (z >= BEND_RUN_Z) & (t - d >= BEND_NEAR_M)
+        if not lean.any():
+            break
+        k_lo = np.full(n_key, np.iinfo(np.intp).max)
+        k_hi = np.full(n_key, -1)
+        np.minimum.at(k_lo, key[~lean], r[~lean])
+        np.maximum.at(k_hi, key[~lean], r[~lean])
+        at_hi, at_lo = lean & (r > k_hi[key]), lean & (r < k_lo[key])
+        run = 2 * key + at_hi
+        end = at_hi | at_lo
+        zs = np.bincount(run[end], z[end], 2 * n_key)
+        nz = np.bincount(run[end], minlength=2 * n_key)
+        near = end & (zs[run] >= BEND_Z * np.sqrt(np.maximum(nz[run], 1)))
+        if not near.any():
+            break
+        # past the end of the members the line explains: beyond their extent along it,
+        # where its beam meets the line (a reading read short at grazing slides back along it)
+        s = u * ux[g] + v * uy[g]
+        s_t = (ox + t * ex - cx[g]) * ux[g] + (oy + t * ey - cy[g]) * uy[g]
+        fit = np.abs(z) < BEND_EXPLAINED_Z
+        s_lo = np.full(n_g, np.inf)
+        s_hi = np.full(n_g, -np.inf)
+        np.minimum.at(s_lo, g[fit], s[fit])
+        np.maximum.at(s_hi, g[fit], s[fit])
+        # a run reaching past that end is taken whole (its first readings, just past the
+        # bend, lie among the other sensors' readings of the line's end)
+        top = np.full(2 * n_key, -np.inf)
+        bot = np.full(2 * n_key, np.inf)
+        np.maximum.at(top, run[near], s_t[near])
+        np.minimum.at(bot, run[near], s_t[near])
+        past_hi = near & (top[run] > s_hi[g])
+        past_lo = near & ~past_hi & (bot[run] < s_lo[g])
+        # a bend's end holds at least BEND_RUN_MIN such readings (one alone: noise)
+        side = 2 * g + past_hi
+        many = np.bincount(side[past_hi | past_lo], minlength=2 * n_g) >= BEND_RUN_MIN
+        # … on a line that fits the rest of its members (a line over a muddle of walls reads
+        # its members anywhere: taking a few leaves the rest to a worse fit)
+        rest = keep & ~(past_hi | past_lo)
+        chi = (np.bincount(g[rest], z[rest] ** 2, n_g)
+               / np.maximum(np.bincount(g[rest], minlength=n_g), 1))
+        asked = (past_hi | past_lo) & many[side] & (chi[g] <= BEND_FIT_CHI2)
+        if not asked.any():
+            break
+        near = asked
+        state = (cx, cy, ux, uy, al, s, near, past_hi, asked)
+        keep = ~asked
+    if state is None:
+        return points, label
+    cx, cy, ux, uy, al, s, near, past_hi, asked = state
+    a = asked.nonzero()[0]
+    ga = g[a]
+    # the bend: where the line's members that lie on it or behind it end on that side
+    e_lo = np.full(n_g, np.inf)
+    e_hi = np.full(n_g, -np.inf)
+    np.minimum.at(e_lo, g[~near], s[~near])
+    np.maximum.at(e_hi, g[~near], s[~near])
+    end = np.where(past_hi[a], e_hi[ga], e_lo[ga])
+    ax, ay = cx[ga] + end * ux[ga], cy[ga] + end * uy[ga]
+    # every turn of the line's direction at once: the reading at the incidence its beam
+    # meets that wall with, and how far off the wall through the end point it then lies
+    turn = np.linspace(-BEND_MAX_RAD, BEND_MAX_RAD, BEND_GRID)
+    phi = al[ga][:, None] + turn[None, :]
+    nx, ny = -np.sin(phi), np.cos(phi)
+    th = np.arccos(np.clip(np.abs(ex[a, None] * nx + ey[a, None] * ny), 0.0, 1.0))
+    la, b = cal.log_ab(th)
+    dd = np.exp(la + b * np.log(s_c[a])[:, None])
+    r = (ox[a, None] + dd * ex[a, None] - ax[:, None]) * nx \
+        + (oy[a, None] + dd * ey[a, None] - ay[:, None]) * ny
+    ok = th < cal.max_incidence_rad
+    # a root between two neighbouring turns, both readable: the least turn
+    root = ok[:, :-1] & ok[:, 1:] & (np.sign(r[:, :-1]) != np.sign(r[:, 1:]))
+    cost = np.where(root, np.abs(turn[:-1] + turn[1:]) * 0.5, np.inf)
+    k = np.argmin(cost, axis=1)
+    found = np.isfinite(cost[np.arange(a.size), k])
+    rows = np.arange(a.size)
+    r0, r1 = r[rows, k], r[rows, k + 1]
+    f = r0 / np.where(r0 != r1, r0 - r1, 1.0)
+    beta = turn[k] + f * (turn[1] - turn[0])
+    ph = al[ga] + beta
+    th_b = np.arccos(np.clip(np.abs(ex[a] * -np.sin(ph) + ey[a] * np.cos(ph)), 0.0, 1.0))
+    lab_b, b_b = cal.log_ab(th_b)
+    log_s = np.log(s_c[a])
+    d_b = np.exp(lab_b + b_b * log_s)
+    lo_t = np.maximum(th_b - BEND_DOUBT_RAD, 0.0)
+    hi_t = np.minimum(th_b + BEND_DOUBT_RAD, cal.max_incidence_rad)
+    la_lo, b_lo = cal.log_ab(lo_t)
+    la_hi, b_hi = cal.log_ab(hi_t)
+    spread = np.abs(np.exp(la_lo + b_lo * log_s) - np.exp(la_hi + b_hi * log_s))
+    sig = range_sigma(b_b, d_b, sig_s[a]) + 0.5 * spread
+    at = idx[a]
+    label = label.copy()
+    label.reshape(-1)[at] = -1
+    points = placed_at(points, at[found], d_b[found], th_b[found], sig[found])
+    if not found.all():
+        points = invalidated(points, at[~found], Reason.INCIDENCE_UNKNOWN)
+    return points, label
 
 
 def _kasa_circle(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -26,7 +26,7 @@ from ..resources import kernel
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, SIGMA_FLOOR_M, Calibration
 from .arcs import local_incidence, round_runs_compiled
-from .bends import bowed_lines_compiled, faceted_lines_compiled, kinked_lines
+from .bends import bent_ends, bowed_lines_compiled, faceted_lines_compiled, kinked_lines
 from .counts import CountsFits, counts_disown_lines
 from .far_lines import doubt_far_lines, far_posts, fused_lines, short_far_lines
 from .foldover import resolve_foldover
@@ -312,8 +312,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     line their counts contradict (as rejoined) off it (:func:`counts_disown_lines`),
     members alone at a nearer surface's edge (:func:`alone_at_an_edge`), a curved wall's
     chords read on its circle (:func:`bowed_lines`), a far line over a corner read as two
-    (:func:`kinked_lines`) and members whose beams meet another wall first read on it
-    (:func:`past_other_lines`); line members onto their lines
+    (:func:`kinked_lines`), members whose beams meet another wall first read on it
+    (:func:`past_other_lines`) and a line's members past a wall's shallow bend read on the
+    turned wall (:func:`bent_ends`); line members onto their lines
     (``snapper``, the compiled :func:`snap_to_lines` by default), a line over a many-sided
     wall's facets read as two pieces (:func:`faceted_lines`), members read just past
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
@@ -389,6 +390,10 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, split = kinked_lines(points, label, counts, cal)
         # members whose beam meets another wall first: read on that wall
         points, split = past_other_lines(points, split, counts, cal, options, past_finder)
+        # a wall's shallow bend: a line's members past its end read on the turned wall
+        points, bent = bent_ends(points, split, counts, steps, cal)
+        label = np.where((bent < 0) & (split >= 0), -1, label)
+        split = bent
     else:
         split = label
     points = censored_lines(points, split, counts, steps, cal)
