@@ -12,8 +12,8 @@ from irring.estimation import estimate_numpy
 from irring.estimation.calibration import scene_calibration
 from irring.scenario import load_scenario, loads
 
-# A room of our own (graze18's twin of a held-out grazing-bends room, gen.py's family drawn
-# with seed 333): a long room 1069 mm wide whose walls bend 4-20° four times, read by the
+# A room of our own (a twin of a held-out grazing-bends room, drawn by the same generator
+# with another seed): a long room 1069 mm wide whose walls bend 4-20° four times, read by the
 # GP2Y0A02 from 300-450 mm off a wall. From the third pose a wall bending 5° toward the ring
 # is met at 55-62°: sensor 0's last four readings, past the bend, took the line of the wall
 # before it (θ 64-67°) and read 66-98 mm short, each only 3-4 noise σ nearer than the line.
