@@ -27,7 +27,7 @@ import numpy as np
 
 from . import recording as rec
 from .core import (Points, Pose, Reason, RingSource, SourceLost, Sweep, in_turn_order,
-                   inside_outline, score_text)
+                   GP2_PERIOD_S, inside_outline, points_with, score_text)
 from .estimation.calibration import (Calibration, CalibrationError, load_calibration,
                                      scene_calibration)
 from .estimation.estimate import estimate
@@ -457,7 +457,8 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:
         for sweep in sweeps:
             t0 = time.perf_counter()
-            points.append(with_cone(estimator(sweep, calibration), sweep))
+            points.append(with_motion_sigma(with_cone(estimator(sweep, calibration), sweep),
+                                            sweep))
             timings["estimate"] += time.perf_counter() - t0
             bar.update()
     t0 = time.perf_counter()
@@ -500,6 +501,34 @@ def with_cone(points: Points, sweep: Sweep) -> Points:
     spec = SENSORS.get(sweep.sensor_model)
     half = spec.beam_half_angle_rad if spec is not None else 0.0
     return dataclasses.replace(points, cone_half_angle_rad=half) if half > 0 else points
+
+
+def with_motion_sigma(points: Points, sweep: Sweep) -> Points:
+    """A moving robot's readings (``sweep.reading_poses``) with σ widened by how far their
+    beam moves in one GP2 period: hypot(σ, (d·|ω| + |v|)·GP2_PERIOD_S), the turn rate ω and
+    speed v of the poses between the sweep's steps (``timestamps_s``; a row's rate is the mean
+    of the steps on either side). A reading carries the pose at its read, but was measured
+    up to a period before it (docs/mapping.md, "Where the ideal sensor still maps worse").
+    A still robot's points are returned as they are."""
+    poses = sweep.reading_poses
+    t = np.asarray(sweep.timestamps_s, dtype=float)
+    if poses is None or t.size < 2 or points.cone_half_angle_rad > 0:
+        return points
+    step = np.diff(np.asarray(poses, dtype=float), axis=0)          # (S − 1, N, 3)
+    turn = np.abs((step[..., 2] + math.pi) % (2 * math.pi) - math.pi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # the pose's change per second between steps (beam sweep m/s at range d)
+        rate_d = turn / np.abs(np.diff(t))[:, None]
+        rate_v = np.hypot(step[..., 0], step[..., 1]) / np.abs(np.diff(t))[:, None]
+    rows_d = np.empty(points.valid.shape)
+    rows_v = np.empty(points.valid.shape)
+    for rows, rate in ((rows_d, rate_d), (rows_v, rate_v)):
+        rows[0], rows[-1] = rate[0], rate[-1]
+        rows[1:-1] = 0.5 * (rate[:-1] + rate[1:])
+    moved = (points.d * rows_d + rows_v) * GP2_PERIOD_S
+    sigma = np.where(points.valid & np.isfinite(moved), np.hypot(points.sigma_m, moved),
+                     points.sigma_m)
+    return points_with(points, sigma_m=sigma)
 
 
 MAX_FRAMES = 400  # a longer animation is thinned (fewer parts per sweep, then fewer sweeps)
