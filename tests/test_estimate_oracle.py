@@ -277,6 +277,10 @@ def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge,
 # a window of two readings, whose curvature term is rounding: 'sure' differed at index 83
 @example(seed=1414, room="columns", strength=1.0, noise=3.0, keep=0.9609375, ask_share=1.0,
          apart_share=0.0)
+# a doubted line's members, some placed at θ = 0 by their counts alone and some not: the σ
+# of all of them was written to the few (ValueError, shapes 6 and 5)
+@example(seed=670, room="posts", strength=0.0, noise=3.0, keep=0.625, ask_share=1.0,
+         apart_share=0.0)
 def test_profile_kernel_agrees_with_its_numpy_statement(seed, room, strength, noise, keep,
                                                         ask_share, apart_share):
     """``_lines.profiles`` (compiled) against ``estimate.range_profiles`` (numpy) on a sweep's

@@ -312,7 +312,7 @@ def leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: n
         at, sigma = _theta_free(cal, pr.s[pos[rest]], pr.d0[pos[rest]], pr.sig_s[pos[rest]],
                                 points.max_range_m)
         if at.any():
-            points = placed_at(points, vi[pos[rest[at]]], pr.d0[pos[rest[at]]], 0.0, sigma)
+            points = placed_at(points, vi[pos[rest[at]]], pr.d0[pos[rest[at]]], 0.0, sigma[at])
             placed[rest[at]] = True
     label = label.copy()
     label.reshape(-1)[vi[pos[leave]]] = -1
