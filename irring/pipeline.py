@@ -509,17 +509,20 @@ def with_motion_sigma(points: Points, sweep: Sweep) -> Points:
     speed v of the poses between the sweep's steps (``timestamps_s``; a row's rate is the mean
     of the steps on either side). A reading carries the pose at its read, but was measured
     up to a period before it (docs/mapping.md, "Where the ideal sensor still maps worse").
-    A still robot's points are returned as they are."""
+    A still robot's points, and a cone sensor's (a sonar's period is not the GP2's), are
+    returned as they are."""
     poses = sweep.reading_poses
     t = np.asarray(sweep.timestamps_s, dtype=float)
     if poses is None or t.size < 2 or points.cone_half_angle_rad > 0:
         return points
     step = np.diff(np.asarray(poses, dtype=float), axis=0)          # (S − 1, N, 3)
     turn = np.abs((step[..., 2] + math.pi) % (2 * math.pi) - math.pi)
+    dt = np.abs(np.diff(t))[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
-        # the pose's change per second between steps (beam sweep m/s at range d)
-        rate_d = turn / np.abs(np.diff(t))[:, None]
-        rate_v = np.hypot(step[..., 0], step[..., 1]) / np.abs(np.diff(t))[:, None]
+        # the pose's change per second between steps: turn (rad/s, times d for the beam's
+        # end point) and travel (m/s)
+        rate_d = turn / dt
+        rate_v = np.hypot(step[..., 0], step[..., 1]) / dt
     rows_d = np.empty(points.valid.shape)
     rows_v = np.empty(points.valid.shape)
     for rows, rate in ((rows_d, rate_d), (rows_v, rate_v)):
