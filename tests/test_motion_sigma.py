@@ -71,6 +71,9 @@ def test_sigma_grows_with_the_turn_and_the_speed_over_one_period():
     assert out.sigma_m[v] == pytest.approx(want, rel=1e-9)
     assert np.array_equal(out.sigma_m[~v], points.sigma_m[~v], equal_nan=True)
     assert np.array_equal(out.x, points.x, equal_nan=True)
+    # a cone sensor (a sonar) keeps its σ: GP2_PERIOD_S is not its period
+    sonar = dataclasses.replace(points, cone_half_angle_rad=0.26)
+    assert pipeline.with_motion_sigma(sonar, moving) is sonar
 
 
 def test_the_ideal_sensor_of_a_turning_robot_maps_no_worse():
