@@ -238,7 +238,7 @@ BEND_DOUBT_RAD = math.radians(3)  # a reading past a bend: σ includes d over θ
 
 
 def _bend_gate(points: Points, shape: tuple, idx: np.ndarray, g: np.ndarray, n_g: int,
-               counts: np.ndarray, steps: np.ndarray, cal: Calibration) -> bool:
+               counts: np.ndarray, rank: np.ndarray, cal: Calibration) -> bool:
     """Whether :func:`bent_ends` may find a run (cheap, no trigonometry over the members):
     some sensor's last (or first) member on a line, fitted to all its members, lies
     ``BEND_NEAR_M`` nearer than the line along its beam, and so does the member before it
@@ -255,8 +255,6 @@ def _bend_gate(points: Points, shape: tuple, idx: np.ndarray, g: np.ndarray, n_g
     d = points.d.reshape(-1)[idx]
     short = -(u * nx + v * ny) * d / np.where(np.abs(en) > 1e-12, en, 1e-12)
     n_s, n_n = shape
-    rank = np.empty(n_s, dtype=np.intp)
-    rank[np.argsort(np.asarray(steps), kind="stable")] = np.arange(n_s)
     pos = rank[idx // n_n] * n_n + idx % n_n + n_n      # a row of padding either side
     line = np.full((n_s + 2) * n_n, -1, dtype=np.intp)
     line[pos] = g
@@ -300,7 +298,9 @@ def bent_ends(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     idx = idx[ask[lab]]
     g = (np.cumsum(ask) - 1)[flat[idx]]
     n_g = int(np.count_nonzero(ask))
-    if not _bend_gate(points, label.shape, idx, g, n_g, counts, steps, cal):
+    rank = np.empty(label.shape[0], dtype=np.intp)     # each row's place in step order
+    rank[np.argsort(np.asarray(steps), kind="stable")] = np.arange(label.shape[0])
+    if not _bend_gate(points, label.shape, idx, g, n_g, counts, rank, cal):
         return points, label
     ox, oy = points.origin_x.reshape(-1)[idx], points.origin_y.reshape(-1)[idx]
     h = points.heading.reshape(-1)[idx]
@@ -311,8 +311,6 @@ def bent_ends(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     sig_s = cal.sigma_counts() / s_c
     noise = range_sigma(cal.log_ab(points.theta.reshape(-1)[idx])[1], d, sig_s)
     n_sens = label.shape[1]
-    rank = np.empty(label.shape[0], dtype=np.intp)
-    rank[np.argsort(np.asarray(steps), kind="stable")] = np.arange(label.shape[0])
     r = rank[idx // n_sens]
     key = g * n_sens + idx % n_sens
     n_key = n_g * n_sens
@@ -1117,7 +1115,8 @@ def _reread_table(ox, oy, ux, uy, s, cal, alpha):
 def _reread_split(r, w, lo, hi, side):
     """Best split of sorted members lo … hi − 1 into two pieces of ``side`` at least, every
     piece's direction its own (the grid row of least χ²): (χ² one line, χ² split, split
-    index, row left, row right), split index None where none fits."""
+    index, row left, row right, whether both pieces' own members orient them
+    (:func:`_determined`)), split index None where none fits."""
     rr, ww = r[:, lo:hi], w[:, lo:hi]
     zero = np.zeros((rr.shape[0], 1))
     cw, c1, c2 = (np.concatenate([zero, np.cumsum(q, axis=1)], axis=1)
@@ -1141,6 +1140,15 @@ def _reread_split(r, w, lo, hi, side):
     a, b = int(np.argmin(left[:, j])), int(np.argmin(right[:, j]))
     return (float(one.min()), float(tot[j]), lo + int(k[j]), a, b,
             min(_determined(left[:, j], a), _determined(right[:, j], b)) >= REREAD_SURE_CHI)
+
+
+def _piece_chi(r, w):
+    """(K,) offset and χ² of one piece's members (``r``, ``w`` (K, m): :func:`_reread_table`'s
+    offsets and weights) at each of K directions; χ² inf where a member is past the drop-out
+    angle."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = (w * r).sum(axis=1) / w.sum(axis=1)
+        return c, np.where((w == 0).any(axis=1), np.inf, (w * (r - c[:, None]) ** 2).sum(axis=1))
 
 
 def _determined(chi, at):
@@ -1229,12 +1237,8 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
         if len(pieces) < 2:
             continue
         for lo, hi, _ in pieces:
-            m, rr, ww = g[lo:hi], r[:, lo:hi], w[:, lo:hi]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                W = ww.sum(axis=1)
-                c = (ww * rr).sum(axis=1) / W
-                chi = np.where((ww == 0).any(axis=1), np.inf,
-                               (ww * (rr - c[:, None]) ** 2).sum(axis=1))
+            m = g[lo:hi]
+            _, chi = _piece_chi(r[:, lo:hi], w[:, lo:hi])
             best = int(np.argmin(chi))
             if not _determined(chi, best) >= REREAD_SURE_CHI:
                 # a piece its own members do not orient: the line's θ is not theirs either
@@ -1243,10 +1247,7 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
             a0 = alpha + REREAD_GRID_RAD[best]
             rr, ww, tt, dd = _reread_table(ox[m], oy[m], ux[m], uy[m], s[m], cal,
                                            a0 + REREAD_FINE_RAD)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                c = (ww * rr).sum(axis=1) / ww.sum(axis=1)
-                chi = np.where((ww == 0).any(axis=1), np.inf,
-                               (ww * (rr - c[:, None]) ** 2).sum(axis=1))
+            c, chi = _piece_chi(rr, ww)
             f = int(np.argmin(chi))
             if not np.isfinite(chi[f]):
                 continue

@@ -117,13 +117,11 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
                                 classify(np.asarray(sweep.counts, dtype=float), sweep, cal),
                                 near | ambiguous, np.asarray(sweep.steps), cal,
                                 min(float(sweep.max_range_m), cal.max_range_m))
-    eligible = p.valid & ~put & ~keep & ~differ
-    arcs = onto_concave_arcs(p, np.where(eligible, second.lines.label, -1), counts, cal,
-                             far_sigma_cap(cal, p.max_range_m))
+    lab2 = np.where(p.valid & ~put & ~keep & ~differ, second.lines.label, -1)
+    arcs = onto_concave_arcs(p, lab2, counts, cal, far_sigma_cap(cal, p.max_range_m))
     # a line over a round room's facets, on no circle: its members re-read on its pieces
     on_arc = np.zeros(p.valid.shape, dtype=bool) if arcs is p else (
         (arcs.d != p.d) | (arcs.theta != p.theta))
-    lab2 = np.where(eligible, second.lines.label, -1)
     lab2 = np.where(np.isin(lab2, lab2[on_arc & (lab2 >= 0)]), -1, lab2)
     p = facets_reread(arcs, lab2, counts, cal)
     # the far readings still read at a short line's θ: θ is as sure as that line's direction
