@@ -1035,11 +1035,13 @@ def test_closing_after_a_sweep_turns_the_ring_back_to_step_0(virtual_time):
     assert device._position == 35 and port.written == [HELLO, SWEEP]
     counted = ring.stats.as_dict()
     ring.close()
-    assert port.written == [HELLO, SWEEP, PARK]
+    # IRSTP first: at rest it is answered IRDON 70, the last seq sent (-1 would be a board
+    # that reset since, test_hostile18), so IRGTO,0 turns the ring back
+    assert port.written == [HELLO, SWEEP, STOP, PARK]
     assert device._position == 0 and ring.park_failure is None
     assert ring.stats.as_dict() == counted   # the session's link counters: its sweeps'
     ring.close()
-    assert port.written == [HELLO, SWEEP, PARK]
+    assert port.written == [HELLO, SWEEP, STOP, PARK]
 
 
 @pytest.mark.parametrize("fail", [KeyboardInterrupt(), RuntimeError("a bug")])
@@ -1071,7 +1073,7 @@ def test_a_second_ctrl_c_while_the_ring_turns_back_waits_for_it_and_is_not_raise
     ring.sweep()
     port.fail, port.after = KeyboardInterrupt(), 0
     ring.close()
-    assert port.written == [HELLO, SWEEP, PARK]
+    assert port.written == [HELLO, SWEEP, STOP, PARK]
     assert device._position == 0 and ring.stands_at == 0
     assert ring.park_failure is None and ring.close_interrupted
 
@@ -1094,9 +1096,16 @@ def test_a_ring_that_stopped_answering_is_asked_nothing_more_at_close(virtual_ti
 
 
 def test_a_ring_that_does_not_return_to_step_0_is_said_to_stand_elsewhere(virtual_time):
-    ring = SerialRing(ScriptPort(scripted(lambda msg: [
-        *(p.Scan(i, s, i, (10, 11)) for i, s in enumerate(range(-3, 4))), p.Done(6)])),
-        timeout_s=TIMEOUT_S).open()
+    def script(msg):
+        if isinstance(msg, p.Hello):
+            return [INFO]
+        if isinstance(msg, p.SweepCommand):
+            return [*(p.Scan(i, s, i, (10, 11)) for i, s in enumerate(range(-3, 4))), p.Done(6)]
+        if isinstance(msg, p.Stop):
+            return [p.Done(6)]   # at rest: the last seq sent, no reset since
+        return []   # IRGTO: no answer
+
+    ring = SerialRing(ScriptPort(script), timeout_s=TIMEOUT_S).open()
     ring.sweep()
     counted = ring.stats.as_dict()
     ring.close()

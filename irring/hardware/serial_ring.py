@@ -448,6 +448,7 @@ class SerialRing:
         self._woke: tuple[int | None, int | None] | None = None
         self._woke_scans = 0
         self._woke_at_close = False   # close() saw that reboot (IRGTO,0 would not help)
+        self._woke_at_rest: int | None = None   # … at rest, at this step (IRGTO,-step helps)
         self.boot_s = boot_s
         self._boot_window = 0.0     # s after opening in which the board may be starting
         self._boot_until = 0.0      # host time that window ends
@@ -506,8 +507,8 @@ class SerialRing:
         return self
 
     def close(self) -> None:
-        """Stop a sweep or move still running (IRSTP), turn the ring back to step 0
-        (IRGTO,0), close the port. :attr:`park_failure` says why the ring was not turned
+        """Stop a sweep or move still running (IRSTP; at rest the same asks whether the
+        board reset), turn the ring back to step 0 (IRGTO,0), close the port. :attr:`park_failure` says why the ring was not turned
         back and where it stands (None: it was, or need not be; not tried after a lost link,
         a reboot or another ring). A Ctrl-C (or SIGTERM raised as one) meanwhile does not cut
         the waits short (IRSTP does not stop an IRGTO: the ring turns on to step 0) and is
@@ -527,7 +528,7 @@ class SerialRing:
         elsewhere; not counted in :attr:`stats`; a failure is said in
         :attr:`park_failure`."""
         self.park_failure = None
-        self._woke_at_close = False
+        self._woke_at_close, self._woke_at_rest = False, None
         if self.info is None or self._link_dead or not (self._running or self._moved):
             return
         counted = dataclasses.replace(self.stats)
@@ -545,6 +546,9 @@ class SerialRing:
             self.stands_at = None
             send = (" (its step 0 is where it woke, so no IRGTO can), then reset the board"
                     if self._woke_at_close else
+                    f", or send {p.encode(p.GoTo(-self._woke_at_rest)).decode().strip()} ("
+                    f"radial is its step {-self._woke_at_rest} now), then reset the board"
+                    if self._woke_at_rest is not None else
                     f", or send {p.encode(p.GoTo(0)).decode().strip()}")
             self.park_failure = (
                 f"the ring on {self.port_name} was not turned back to step 0 at the end of the "
@@ -569,11 +573,27 @@ class SerialRing:
                         f"still turn; {heard}")
             self._running = False
             self._said_booted(done.seq, None, None)
+        elif self._moved and not self._position_lost and self._woke is None \
+                and self._clock is not None and self._position not in (None, 0):
+            # at rest away from step 0, IRSCN taken: IRSTP asks for the last seq sent since
+            # power-up, whose -1 is a board that reset at rest (IRPOS,0 would come at once)
+            self._send(p.Stop())
+            done = self._await_through((p.Done,), self.timeout_s)
+            self._stop_sent = False
+            if done is not None:
+                self._said_booted(done.seq, self._position, self._position)
         if self._woke not in (None, (0, 0)) and not self._position_lost \
                 and self.stats.scans == self._woke_scans:
             # IRDON -1 (none sent since power-up) after IRSCN came, and none since to tell by
             # its clock: it reset, and IRGTO,0 would turn it to where it woke
             self._position_lost = self._woke_at_close = True
+            a, b = self._woke
+            if a is not None and a == b:   # at rest: its step 0 is where it stood
+                self._woke_at_close, self._woke_at_rest = False, a
+                return (f"an IRSTP at rest was answered IRDON -1, no IRSCN sent since it "
+                        f"powered up, though {self.stats.scans} came this session: it "
+                        f"rebooted at rest at step {a}, and its firmware took that step for "
+                        f"step 0")
             return (f"an IRSTP was answered IRDON -1, no IRSCN sent since it powered up, "
                     f"though {self.stats.scans} came this session: it rebooted, and its "
                     f"firmware took the step it woke at for step 0; {heard}")
