@@ -64,8 +64,8 @@ def test_a_faceted_arc_is_read_on_its_circle(seed, rms_max_mm, monkeypatch):
     # 21.6 -> 19.8 mm; and bent_ends, which alone reads a chord's last readings on the next
     # chord, seed 1 10 -> 8 readings more than 50 mm off)
     monkeypatch.setattr(est_bends, "faceted_lines", lambda before, label, after, cal: after)
-    monkeypatch.setattr(est, "bent_ends", lambda points, label, counts, steps, cal:
-                        (points, label))
+    monkeypatch.setattr(est, "bent_ends_compiled",
+                        lambda points, label, counts, steps, cal: (points, label))
     before = errors()
     assert math.sqrt(np.mean(after ** 2)) <= rms_max_mm * 1e-3
     assert math.sqrt(np.mean(before ** 2)) >= 20e-3

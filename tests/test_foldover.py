@@ -976,8 +976,9 @@ def test_a_theta_only_the_second_pass_gives_is_not_trusted(seed, far_before, tak
     # INCIDENCE_UNKNOWN first: a piece of their line its own members do not orient)
     monkeypatch.setattr(est_foldover, "facets_reread", lambda p, *a, **k: p)
     # (and bent_ends: without _theta_unsupported it reads seed 9184's far reading on the wall
-    # turned at its line's end, 0 > 100 mm off)
-    monkeypatch.setattr(est, "bent_ends", lambda points, label, *a: (points, label))
+    # turned at its line's end, 0 > 100 mm off), in the oracle too (its own bender)
+    monkeypatch.setattr(est, "bent_ends_compiled", lambda points, label, *a: (points, label))
+    monkeypatch.setattr(estimate_numpy, "bent_ends", lambda points, label, *a: (points, label))
 
     def errors():
         (sw,), (p,) = (lambda r: (r.sweeps, r.points))(

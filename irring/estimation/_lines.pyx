@@ -3541,3 +3541,164 @@ def round_pre(const idx_t[::1] vi, const idx_t[::1] label, const idx_t[::1] step
         return keep_arr
     finally:
         free(start); free(first); free(buf); free(flags)
+
+
+# --------------------------------------------------------------------------- a wall's shallow bend
+
+_sin = np.sin      # numpy's (SIMD: libm's may differ in the last bit), on the lines' angles
+_cos = np.cos
+
+
+cdef inline idx_t _member_at(const idx_t* flat, idx_t m, idx_t f) noexcept nogil:
+    """Where the flat reading ``f`` lies in the ascending ``flat`` (m,): its place, or −1."""
+    cdef idx_t lo = 0, hi = m, mid
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if flat[mid] < f:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo if lo < m and flat[lo] == f else -1
+
+
+def bend_gate(const idx_t[::1] label, const unsigned char[::1] valid, const idx_t[::1] order,
+              idx_t n_sensors, const double[::1] x, const double[::1] y,
+              const double[::1] origin_x, const double[::1] origin_y, const double[::1] d,
+              const double[::1] theta, const double[::1] counts, double sigma_counts,
+              double floor_m, const double[::1] xp, const double[::1] node_b,
+              idx_t min_members, double near_m, double z):
+    """``irring.estimation.bends.bent_ends``' gate (its numpy statement: the members
+    ``_bend_members`` asks, then ``_bend_gate``), to the bit: on a line of ``min_members``
+    valid members or more, fitted to all of them, whether some sensor's last (or first)
+    member in step order lies ``near_m`` nearer than the line along its beam and so does
+    the member before it in that sensor's trace, or it alone lies ``z`` noise σ nearer.
+    The same sums in numpy's order, numpy's arctan2, sin and cos on the lines' angles,
+    np.interp's b(|θ|) on the nodes ``xp``, ``node_b``. Arrays flat (S·N); ``label`` −1 on
+    no line; ``order`` (S,) the rows in step order."""
+    cdef idx_t size = label.shape[0], S = order.shape[0], n_nodes = xp.shape[0]
+    cdef idx_t f, i, j, k, gi, r, L = 0, n_valid = 0, m = 0, n_g = 0, q, c, pf, nf
+    cdef double en, w, noise
+    cdef bint on_prev, on_next, found = False
+    cdef idx_t* line = NULL
+    cdef idx_t* at = NULL
+    cdef double* buf = NULL
+    cdef double* u
+    cdef double* v
+    cdef double* short
+    cdef idx_t[::1] rank
+    cdef double[:, ::1] G
+    cdef const double[::1] nx, ny
+    if not (valid.shape[0] == x.shape[0] == y.shape[0] == origin_x.shape[0]
+            == origin_y.shape[0] == d.shape[0] == theta.shape[0] == counts.shape[0] == size
+            == S * n_sensors and node_b.shape[0] == n_nodes):
+        raise lengths_differ("bend_gate's arrays", label=size, valid=valid.shape[0],
+                             x=x.shape[0], y=y.shape[0], origin_x=origin_x.shape[0],
+                             origin_y=origin_y.shape[0], d=d.shape[0], theta=theta.shape[0],
+                             counts=counts.shape[0], steps_times_sensors=S * n_sensors,
+                             xp=n_nodes, node_b=node_b.shape[0])
+    if n_nodes == 0:
+        raise ValueError("bend_gate: the calibration has no nodes")
+    rank_arr = _rank_of_rows(order)
+    rank = rank_arr
+    for r in range(S):       # (a row listed twice leaves another's place unset)
+        q = rank[r]
+        if q < 0 or q >= S or order[q] != r:
+            raise ValueError(f"bend_gate: order never lists row {r} (it must hold each of "
+                             f"the {S} rows once, in step order)")
+    for f in range(size):
+        if label[f] >= 0 and valid[f]:
+            n_valid += 1
+            if label[f] >= L:
+                L = label[f] + 1
+    if n_valid < min_members:
+        return False
+    # each label's members (np.bincount), then its line's number among those asked or −1
+    line = <idx_t*>calloc(L, sizeof(idx_t))
+    if line == NULL:
+        raise MemoryError("bend_gate: no memory for the lines' counts")
+    try:
+        for f in range(size):
+            if label[f] >= 0 and valid[f]:
+                line[label[f]] += 1
+        for k in range(L):
+            if line[k] >= min_members:
+                m += line[k]
+                line[k] = n_g
+                n_g += 1
+            else:
+                line[k] = -1
+        if n_g == 0:
+            return False
+        at = <idx_t*>malloc(m * sizeof(idx_t))              # the members' flat indices
+        buf = <double*>malloc(3 * m * sizeof(double))
+        if at == NULL or buf == NULL:
+            raise MemoryError("bend_gate: no memory for the members")
+        u, v, short = buf, buf + m, buf + 2 * m
+        # per line, np.bincount's sums (sequential): members, Σx → cx, Σy → cy, then
+        # 2·Σuv and Σ(u² − v²) of the members about that centre
+        sums_arr = np.zeros((5, n_g))
+        G = sums_arr
+        i = 0
+        for f in range(size):
+            if label[f] >= 0 and valid[f] and line[label[f]] >= 0:
+                at[i] = f
+                gi = line[label[f]]
+                G[0, gi] += 1.0
+                G[1, gi] += x[f]
+                G[2, gi] += y[f]
+                i += 1
+        for gi in range(n_g):
+            G[1, gi] = G[1, gi] / G[0, gi]
+            G[2, gi] = G[2, gi] / G[0, gi]
+        for i in range(m):
+            f = at[i]
+            gi = line[label[f]]
+            u[i] = x[f] - G[1, gi]
+            v[i] = y[f] - G[2, gi]
+            G[3, gi] += u[i] * v[i]
+            G[4, gi] += u[i] * u[i] - v[i] * v[i]
+        for gi in range(n_g):
+            G[3, gi] = 2.0 * G[3, gi]
+        al = 0.5 * _arctan2(sums_arr[3], sums_arr[4])
+        nx_arr = -_sin(al)
+        ny_arr = _cos(al)
+        nx, ny = nx_arr, ny_arr
+        # how much nearer than the line along its beam: t − d = −(its offset)/cos
+        for i in range(m):
+            f = at[i]
+            gi = line[label[f]]
+            en = (x[f] - origin_x[f]) * nx[gi] + (y[f] - origin_y[f]) * ny[gi]
+            w = en if fabs(en) > 1e-12 else 1e-12
+            short[i] = -(u[i] * nx[gi] + v[i] * ny[gi]) * d[f] / w
+        # a near member at its trace's end on its line (the row before or after it in step
+        # order, same sensor, on another line or none): the member inside it near too, or
+        # it alone z σ nearer (an OR over the ends: numpy's two any()s in either order)
+        for i in range(m):
+            if not short[i] >= near_m:
+                continue
+            f = at[i]
+            q = rank[f // n_sensors]
+            c = f % n_sensors
+            pf = order[q - 1] * n_sensors + c if q > 0 else -1
+            nf = order[q + 1] * n_sensors + c if q + 1 < S else -1
+            on_prev = pf >= 0 and valid[pf] and label[pf] == label[f]
+            on_next = nf >= 0 and valid[nf] and label[nf] == label[f]
+            if on_prev and on_next:
+                continue
+            if on_prev or on_next:
+                j = _member_at(at, m, nf if on_next else pf)
+                if short[j] >= near_m:
+                    found = True
+                    break
+            noise = fabs(_np_interp(fabs(theta[f]), &xp[0], &node_b[0], n_nodes)) * d[f] * (
+                sigma_counts / counts[f])
+            if not (noise >= floor_m or noise != noise):     # np.maximum: NaN stays
+                noise = floor_m
+            if short[i] >= z * noise:
+                found = True
+                break
+        return found
+    finally:
+        free(line)
+        free(at)
+        free(buf)

@@ -1,11 +1,12 @@
 """Lines that bend: a curved wall's chords read on its circle (:func:`bowed_lines`, its compiled
 pre-gate :func:`bowed_lines_compiled`), a far line over a corner read as two
 (:func:`kinked_lines`), a line's members past a wall's shallow bend read on the turned wall
-(:func:`bent_ends`), a snapped line over a many-sided wall's facets read as two
-(:func:`faceted_lines`, its compiled pre-gate :func:`faceted_lines_compiled`), and the
-fold-over's neighbouring lines that are one concave arc (:func:`onto_concave_arcs`). Why and
-what was measured: docs/estimator.md, "Curved walls", "A line over a corner", "A shallow
-bend" and "A line over facets"; docs/foldover.md, "Curved walls".
+(:func:`bent_ends`, its compiled gate :func:`bent_ends_compiled`), a snapped line over a
+many-sided wall's facets read as two (:func:`faceted_lines`, its compiled pre-gate
+:func:`faceted_lines_compiled`), and the fold-over's neighbouring lines that are one concave
+arc (:func:`onto_concave_arcs`). Why and what was measured: docs/estimator.md, "Curved
+walls", "A line over a corner", "A shallow bend" and "A line over facets"; docs/foldover.md,
+"Curved walls".
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import math
 
 import numpy as np
 
-from ..core import Points, Reason, points_with
+from ..core import Points, Reason, points_with, rows_in_step_order
 from ..resources import kernel
 from .calibration import SIGMA_FLOOR_M, Calibration, range_sigma
 from .arcs import ARC_MISFIT, ARC_MISS
@@ -237,6 +238,28 @@ BEND_GRID = 101         # line's end (this many turns tried, then refined)
 BEND_DOUBT_RAD = math.radians(3)  # a reading past a bend: σ includes d over θ ± this
 
 
+def _bend_members(points: Points, label: np.ndarray, steps: np.ndarray):
+    """The members :func:`bent_ends` asks: None where no line has ``BEND_MIN`` valid
+    members; else the flat indices ``idx`` of those lines' valid members, their line ``g``
+    (0 … ``n_g`` − 1, in label order), ``n_g``, and each row's place in step order
+    (``rank`` (S,))."""
+    flat = label.reshape(-1)
+    valid = points.valid.reshape(-1)
+    idx = ((flat >= 0) & valid).nonzero()[0]
+    if idx.size < BEND_MIN:
+        return None
+    lab = flat[idx]
+    ask = np.bincount(lab) >= BEND_MIN
+    if not ask.any():
+        return None
+    idx = idx[ask[lab]]
+    g = (np.cumsum(ask) - 1)[flat[idx]]
+    n_g = int(np.count_nonzero(ask))
+    rank = np.empty(label.shape[0], dtype=np.intp)
+    rank[rows_in_step_order(steps)] = np.arange(label.shape[0])
+    return idx, g, n_g, rank
+
+
 def _bend_gate(points: Points, shape: tuple, idx: np.ndarray, g: np.ndarray, n_g: int,
                counts: np.ndarray, rank: np.ndarray, cal: Calibration) -> bool:
     """Whether :func:`bent_ends` may find a run (cheap, no trigonometry over the members):
@@ -283,23 +306,13 @@ def bent_ends(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     the members the line explains, are read on the line through that end turned by the
     least angle (within ``BEND_MAX_RAD``) their counts, at the incidence their beam meets it
     with, land on; they leave their line (label −1), and one no such wall explains is
-    INCIDENCE_UNKNOWN. The line is fitted again without them and asked once more. Numpy,
-    shared by both estimators. Why: a bend of 4-20° makes no corner, and the line's θ, too
+    INCIDENCE_UNKNOWN. The line is fitted again without them and asked once more. Numpy
+    (the fast estimator asks its gate of a kernel first: :func:`bent_ends_compiled`). Why: a bend of 4-20° makes no corner, and the line's θ, too
     steep past it, reads those members short (docs/estimator.md, "A shallow bend")."""
-    flat = label.reshape(-1)
-    valid = points.valid.reshape(-1)
-    idx = ((flat >= 0) & valid).nonzero()[0]
-    if idx.size < BEND_MIN:
+    asked = _bend_members(points, label, steps)
+    if asked is None:
         return points, label
-    lab = flat[idx]
-    ask = np.bincount(lab) >= BEND_MIN
-    if not ask.any():
-        return points, label
-    idx = idx[ask[lab]]
-    g = (np.cumsum(ask) - 1)[flat[idx]]
-    n_g = int(np.count_nonzero(ask))
-    rank = np.empty(label.shape[0], dtype=np.intp)     # each row's place in step order
-    rank[np.argsort(np.asarray(steps), kind="stable")] = np.arange(label.shape[0])
+    idx, g, n_g, rank = asked
     if not _bend_gate(points, label.shape, idx, g, n_g, counts, rank, cal):
         return points, label
     ox, oy = points.origin_x.reshape(-1)[idx], points.origin_y.reshape(-1)[idx]
@@ -429,6 +442,33 @@ def bent_ends(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     if not found.all():
         points = invalidated(points, at[~found], Reason.INCIDENCE_UNKNOWN)
     return points, label
+
+
+def _bend_gate_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
+                        steps: np.ndarray, cal: Calibration) -> bool:
+    """:func:`_bend_gate` over the members :func:`_bend_members` asks (False where it asks
+    none), in one compiled call (``irring.estimation._lines.bend_gate``): the same answer."""
+    f = np.ascontiguousarray
+    return _lines.bend_gate(
+        f(label, dtype=np.intp).reshape(-1),
+        f(points.valid, dtype=bool).reshape(-1).view(np.uint8), rows_in_step_order(steps),
+        label.shape[1], f(points.x, dtype=float).reshape(-1),
+        f(points.y, dtype=float).reshape(-1), f(points.origin_x, dtype=float).reshape(-1),
+        f(points.origin_y, dtype=float).reshape(-1), f(points.d, dtype=float).reshape(-1),
+        f(points.theta, dtype=float).reshape(-1), f(counts, dtype=float).reshape(-1),
+        cal.sigma_counts(), SIGMA_FLOOR_M, f(cal.theta_rad, dtype=float),
+        f(cal.b, dtype=float), BEND_MIN, BEND_NEAR_M, BEND_Z)
+
+
+def bent_ends_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
+                       steps: np.ndarray, cal: Calibration) -> tuple[Points, np.ndarray]:
+    """:func:`bent_ends`, whose gate is first asked of one compiled call
+    (:func:`_bend_gate_compiled`, held to the numpy gate by tests/test_bent_ends.py): where
+    it says no, so would numpy's and nothing moves (most sweeps); else :func:`bent_ends`
+    itself."""
+    if not _bend_gate_compiled(points, label, counts, steps, cal):
+        return points, label
+    return bent_ends(points, label, counts, steps, cal)
 
 
 def _kasa_circle(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -26,7 +26,8 @@ from ..resources import kernel
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, SIGMA_FLOOR_M, Calibration
 from .arcs import local_incidence, round_runs_compiled
-from .bends import bent_ends, bowed_lines_compiled, faceted_lines_compiled, kinked_lines
+from .bends import (bent_ends_compiled, bowed_lines_compiled, faceted_lines_compiled,
+                    kinked_lines)
 from .counts import CountsFits, counts_disown_lines
 from .far_lines import doubt_far_lines, far_posts, fused_lines, short_far_lines
 from .foldover import resolve_foldover
@@ -300,7 +301,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    fitter: type[CountsFits] | None = None,
                    past_finder: Callable | None = None,
                    faceter: Callable | None = None,
-                   rounder: Callable | None = None) -> Estimate:
+                   rounder: Callable | None = None,
+                   bender: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -341,7 +343,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     (:func:`past_members_compiled`; the oracle: :func:`past_members`);
     ``faceter``: a line over facets as two pieces (:func:`faceted_lines_compiled`; the
     oracle: :func:`faceted_lines`); ``rounder``: round things' arcs
-    (:func:`round_runs_compiled`; the oracle: :func:`round_runs`).
+    (:func:`round_runs_compiled`; the oracle: :func:`round_runs`); ``bender``: a line's
+    members past a shallow bend (:func:`bent_ends_compiled`; the oracle: :func:`bent_ends`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -391,7 +394,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         # members whose beam meets another wall first: read on that wall
         points, split = past_other_lines(points, split, counts, cal, options, past_finder)
         # a wall's shallow bend: a line's members past its end read on the turned wall
-        points, bent = bent_ends(points, split, counts, steps, cal)
+        points, bent = (bender or bent_ends_compiled)(points, split, counts, steps, cal)
         label = np.where((bent < 0) & (split >= 0), -1, label)
         split = bent
     else:

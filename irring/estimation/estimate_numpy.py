@@ -15,7 +15,7 @@ from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, range_sigma
 from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, check_work,
                        final_estimate, nominal_calibration, settled_within_noise)
 from .arcs import round_runs
-from .bends import bowed_lines, faceted_lines
+from .bends import bent_ends, bowed_lines, faceted_lines
 from .counts import CountsFits, counts_contradicted
 from .far_lines import POST_CELL_REACH, POST_LINK_M, POST_RUN_MAX, POST_SENSORS, post_cells
 from .foldover import resolve_foldover
@@ -1147,7 +1147,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           beside=beside_a_return, tracer=TraceSteps,
                           judge=counts_contradicted,
                           bower=bowed_lines, fitter=CountsFits, past_finder=past_members,
-                          faceter=faceted_lines, rounder=round_runs,
+                          faceter=faceted_lines, rounder=round_runs, bender=bent_ends,
                           raw_counts=np.asarray(sweep.counts, dtype=float))
 
 
