@@ -3702,3 +3702,86 @@ def bend_gate(const idx_t[::1] label, const unsigned char[::1] valid, const idx_
         free(line)
         free(at)
         free(buf)
+
+
+# --------------------------------------------------------------------------- alone at an edge
+
+def edge_alone(const idx_t[::1] label, const unsigned char[::1] valid, const double[::1] d,
+               const unsigned char[::1] reason, const double[::1] counts,
+               const idx_t[::1] order, idx_t n_sensors, unsigned char not_converged,
+               unsigned char incidence_unknown, double jump_m, far_end):
+    """``irring.estimation.members.alone_at_an_edge``' readings (its numpy statement), to
+    the bit: (S·N,) uint8, 1 where a valid line member has neither of its sensor's adjacent
+    steps (rows ``order`` (S,): in step order) a valid reading of its line or of anything
+    not ``jump_m`` nearer, and one of them nearer by that (valid there, or a return,
+    ``not_converged`` or ``incidence_unknown``, as far as ``far_end`` (numpy's, called on
+    the counts of those returns in step order, once, where there are any) reads it); a
+    sweep's first and last steps left. None where there is no such reading. Arrays flat
+    (S·N); ``label`` −1 on no line."""
+    cdef idx_t size = label.shape[0], S = order.shape[0], q, c, f, a, r, side, n_ret = 0
+    cdef double lim, rn
+    cdef bint near, near_any, alone, found = False
+    cdef double[::1] fe
+    if not (valid.shape[0] == d.shape[0] == reason.shape[0] == counts.shape[0] == size
+            == S * n_sensors):
+        raise lengths_differ("edge_alone's arrays", label=size, valid=valid.shape[0],
+                             d=d.shape[0], reason=reason.shape[0], counts=counts.shape[0],
+                             steps_times_sensors=S * n_sensors)
+    rank_arr = _rank_of_rows(order)
+    cdef idx_t[::1] rank = rank_arr
+    for r in range(S):       # (a row listed twice leaves another's place unset)
+        q = rank[r]
+        if q < 0 or q >= S or order[q] != r:
+            raise ValueError(f"edge_alone: order never lists row {r} (it must hold each of "
+                             f"the {S} rows once, in step order)")
+    out_arr = np.zeros(size, dtype=np.uint8)
+    if S < 3:
+        return None
+    # how far each reading can lie: its range where valid, past everything where not; a
+    # return as far as the drop-out angle reads it (numpy's exp and log, in numpy's order)
+    far_arr = np.empty(size)
+    cdef double[::1] far = far_arr
+    cdef unsigned char[::1] out = out_arr
+    for f in range(size):
+        far[f] = d[f] if valid[f] else INFINITY
+        if reason[f] == not_converged or reason[f] == incidence_unknown:
+            n_ret += 1
+    if n_ret:
+        ret_arr = np.empty(n_ret)
+        fe = ret_arr
+        a = 0
+        for q in range(S):
+            for c in range(n_sensors):
+                f = order[q] * n_sensors + c
+                if reason[f] == not_converged or reason[f] == incidence_unknown:
+                    fe[a] = counts[f]
+                    a += 1
+        fe = np.ascontiguousarray(far_end(ret_arr), dtype=float)
+        if fe.shape[0] != n_ret:
+            raise lengths_differ("edge_alone's far ends", returns=n_ret, far_end=fe.shape[0])
+        a = 0
+        for q in range(S):
+            for c in range(n_sensors):
+                f = order[q] * n_sensors + c
+                if reason[f] == not_converged or reason[f] == incidence_unknown:
+                    far[f] = fe[a] if isfinite(fe[a]) else INFINITY
+                    a += 1
+    for q in range(1, S - 1):
+        for c in range(n_sensors):
+            f = order[q] * n_sensors + c
+            if not (valid[f] and label[f] >= 0):
+                continue
+            lim = d[f] - jump_m
+            alone = True
+            near_any = False
+            for side in range(2):        # the step before it, then the step after
+                a = order[q - 1 + 2 * side] * n_sensors + c
+                rn = far[a]
+                near = rn <= lim
+                near_any = near_any or near
+                if (valid[a] and label[a] == label[f]) or not (near or not valid[a]):
+                    alone = False
+            if alone and near_any:
+                out[f] = 1
+                found = True
+    return out_arr if found else None

@@ -33,8 +33,8 @@ from .far_lines import doubt_far_lines, far_posts, fused_lines, short_far_lines
 from .foldover import resolve_foldover
 from .lines import (PINNED_RAD, Estimate, LineOptions, far_sigma_cap, jump_slope, lines_record,
                     read_to_own_range, scan_order, segment, snap_to_lines)
-from .members import (across_silence, alone_at_an_edge, dim_returns_on_lines, past_other_lines,
-                      unplaced_alone)
+from .members import (across_silence, alone_at_an_edge_compiled, dim_returns_on_lines,
+                      past_other_lines, unplaced_alone)
 from .profiles import SharedProfiles, profiles_compiled, unknown_theta_free
 from .silence import (beside_a_return_compiled, censored_lines, classify, drop_beyond_range,
                       held_and_pooled, no_return_reach, noise_past_line_end, silent_behind_a_wall,
@@ -302,7 +302,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    past_finder: Callable | None = None,
                    faceter: Callable | None = None,
                    rounder: Callable | None = None,
-                   bender: Callable | None = None) -> Estimate:
+                   bender: Callable | None = None,
+                   edger: Callable | None = None) -> Estimate:
     """The estimate from the final points and grouping (either estimator's), in this order:
     a line's few members a silent gap contradicts moved to the line of their side of it
     (:func:`across_silence`),
@@ -344,7 +345,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     ``faceter``: a line over facets as two pieces (:func:`faceted_lines_compiled`; the
     oracle: :func:`faceted_lines`); ``rounder``: round things' arcs
     (:func:`round_runs_compiled`; the oracle: :func:`round_runs`); ``bender``: a line's
-    members past a shallow bend (:func:`bent_ends_compiled`; the oracle: :func:`bent_ends`).
+    members past a shallow bend (:func:`bent_ends_compiled`; the oracle: :func:`bent_ends`);
+    ``edger``: members alone at a nearer surface's edge (:func:`alone_at_an_edge_compiled`;
+    the oracle: :func:`alone_at_an_edge`).
     ``raw_counts`` (S, N): the sweep's counts before pooling (None: ``counts``), which tell a
     pooled reading's own level (:func:`noise_past_line_end`)."""
     shape = points.valid.shape
@@ -386,7 +389,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points, label = counts_disown_lines(points, label, index, counts, steps, cal,
                                             grouping.alpha, grouping.cx, grouping.cy, profiler,
                                             judge, fitter)
-        points, label = alone_at_an_edge(points, label, counts, steps, cal)
+        points, label = (edger or alone_at_an_edge_compiled)(points, label, counts, steps,
+                                                             cal)
         # a curved wall's chords on its circle (the lines as the rules above left them)
         points, label = (bower or bowed_lines_compiled)(points, label, counts, cal)
         # a line over a corner as two pieces (the snap's label; the grouping keeps its lines)

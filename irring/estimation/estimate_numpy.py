@@ -21,7 +21,7 @@ from .far_lines import POST_CELL_REACH, POST_LINK_M, POST_RUN_MAX, POST_SENSORS,
 from .foldover import resolve_foldover
 from .lines import (PINNED_RAD, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate, LineOptions, Lines,
                     Pieces, fallback_spread, polyline_ids, scan_order)
-from .members import past_members, silent_gaps
+from .members import alone_at_an_edge, past_members, silent_gaps
 from .profiles import range_profiles
 from .silence import (REACH_CLEAR_M, REACH_MIN_MEMBERS, beam_crossings, beside_a_return,
                       clip_at_corners, end_hide_angle, held_and_pooled, member_spans,
@@ -1148,6 +1148,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                           judge=counts_contradicted,
                           bower=bowed_lines, fitter=CountsFits, past_finder=past_members,
                           faceter=faceted_lines, rounder=round_runs, bender=bent_ends,
+                          edger=alone_at_an_edge,
                           raw_counts=np.asarray(sweep.counts, dtype=float))
 
 

@@ -357,7 +357,8 @@ def alone_at_an_edge(points: Points, label: np.ndarray, counts: np.ndarray,
     or of anything not ``EDGE_JUMP_M`` nearer, and one of them is nearer by that: valid
     there, or a return (``counts`` (S, N), NOT_CONVERGED or INCIDENCE_UNKNOWN) that even
     the drop-out angle reads nearer (a sweep's first and last steps are left: the beam beside
-    them is another sensor's). Numpy, shared by both estimators. Such a reading lies
+    them is another sensor's). Numpy (the oracle's; the fast estimator's:
+    :func:`alone_at_an_edge_compiled`). Such a reading lies
     at a nearer surface's edge: a beam past the edge onto the line's wall and a beam
     grazing the edge's flank (dim, read far at the wall's θ) give the same counts, and
     nothing of its own sensor vouches for the wall there. Why: docs/estimator.md, "Alone
@@ -374,9 +375,7 @@ def alone_at_an_edge(points: Points, label: np.ndarray, counts: np.ndarray,
     reason = np.asarray(points.reason)[order]
     returned = (reason == Reason.NOT_CONVERGED) | (reason == Reason.INCIDENCE_UNKNOWN)
     if returned.any():
-        with np.errstate(divide="ignore", invalid="ignore"):
-            far_end = cal.distance(np.asarray(counts, dtype=float)[order][returned],
-                                   cal.max_incidence_rad)
+        far_end = _far_end(cal, np.asarray(counts, dtype=float)[order][returned])
         r[returned] = np.where(np.isfinite(far_end), far_end, np.inf)
     prev_v, prev_l, prev_r = v[:-1], lab_o[:-1], r[:-1]    # the step before rows 1…
     next_v, next_l, next_r = v[1:], lab_o[1:], r[1:]       # the step after rows …S−2
@@ -394,6 +393,34 @@ def alone_at_an_edge(points: Points, label: np.ndarray, counts: np.ndarray,
         return points, label
     gone = np.zeros_like(valid)
     gone[order] = alone
+    label = label.copy()
+    label[gone] = -1
+    return invalidated(points, gone, Reason.INCIDENCE_UNKNOWN), label
+
+
+def _far_end(cal: Calibration, counts: np.ndarray) -> np.ndarray:
+    """How far the drop-out angle reads returns of ``counts`` (m; numpy's exp and log)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return cal.distance(counts, cal.max_incidence_rad)
+
+
+def alone_at_an_edge_compiled(points: Points, label: np.ndarray, counts: np.ndarray,
+                              steps: np.ndarray, cal: Calibration
+                              ) -> tuple[Points, np.ndarray]:
+    """:func:`alone_at_an_edge` with its readings found in one compiled call
+    (``irring.estimation._lines.edge_alone``, held to it by tests/test_edge_members.py):
+    the same points and labels, to the bit."""
+    f = np.ascontiguousarray
+    gone = _lines.edge_alone(
+        f(label, dtype=np.intp).reshape(-1),
+        f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
+        f(points.d, dtype=float).reshape(-1), f(points.reason, dtype=np.uint8).reshape(-1),
+        f(counts, dtype=float).reshape(-1), rows_in_step_order(steps),
+        points.valid.shape[1], Reason.NOT_CONVERGED, Reason.INCIDENCE_UNKNOWN, EDGE_JUMP_M,
+        lambda c: _far_end(cal, c))
+    if gone is None:
+        return points, label
+    gone = gone.view(bool).reshape(points.valid.shape)
     label = label.copy()
     label[gone] = -1
     return invalidated(points, gone, Reason.INCIDENCE_UNKNOWN), label
