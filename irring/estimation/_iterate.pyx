@@ -966,12 +966,13 @@ cdef class Grouping:
             v = (sw._px[i] - self.t_cx[c]) * self.t_dx[c] + (sw._py[i] - self.t_cy[c]) * self.t_dy[c]
             lo[c] = _min(lo[c], v)
             hi[c] = _max(hi[c], v)
-        # the corners: intersection (X, Y), the side of it each line's bulk is on and
-        # whether the lines are adjacent pieces, kept per corner (lines may be thousands)
+        # each corner: its two lines (columns i < j) and whether they are adjacent pieces
+        # (0/1), its intersection (X, Y) and the side of it each line's bulk is on (kept per
+        # corner: lines may be thousands)
         cdef Py_ssize_t n_cor = 0, e
-        cor_i = _empty(n + 1, dtype=_intp)
+        cor_i = _empty((3, n + 1), dtype=_intp)
         cor_v = _empty((4, n + 1))
-        cdef Py_ssize_t[::1] ci = cor_i
+        cdef Py_ssize_t[:, ::1] ci = cor_i
         cdef double[:, ::1] cv = cor_v
         cdef double[::1] dx = self.t_dx, dy = self.t_dy, cx = self.t_cx, cy = self.t_cy
         for i in range(n):
@@ -992,15 +993,13 @@ cdef class Grouping:
                 if not (adjacent or (s >= lo[i] - reach and s <= hi[i] + reach
                                      and t >= lo[j] - reach and t <= hi[j] + reach)):
                     continue
-                if n_cor == ci.shape[0]:       # (grown as needed: few corners a line)
-                    cor_i = np.concatenate([cor_i, cor_i])
+                if n_cor == ci.shape[1]:       # (grown as needed: few corners a line)
+                    cor_i = np.concatenate([cor_i, cor_i], axis=1)
                     cor_v = np.concatenate([cor_v, cor_v], axis=1)
                     ci, cv = cor_i, cor_v
-                ci[n_cor] = i * n + j
+                ci[0, n_cor], ci[1, n_cor], ci[2, n_cor] = i, j, adjacent
                 cv[0, n_cor], cv[1, n_cor] = X, Y
                 cv[2, n_cor], cv[3, n_cor] = _sign(-s), _sign(-t)
-                if adjacent:
-                    ci[n_cor] = -1 - ci[n_cor]
                 n_cor += 1
         if n_cor == 0:
             return
@@ -1010,21 +1009,19 @@ cdef class Grouping:
         nbr_arr = np.zeros(n + 1, dtype=_intp)
         ent_arr = _empty(2 * n_cor, dtype=_intp)
         cdef Py_ssize_t[::1] nbr_at = nbr_arr, ent = ent_arr
-        cdef Py_ssize_t t_o, pair_ij
+        cdef Py_ssize_t t_o
         for e in range(n_cor):
-            pair_ij = ci[e] if ci[e] >= 0 else -1 - ci[e]
-            nbr_at[pair_ij // n + 1] += 1
-            nbr_at[pair_ij % n + 1] += 1
+            nbr_at[ci[0, e] + 1] += 1
+            nbr_at[ci[1, e] + 1] += 1
         for c in range(n):
             nbr_at[c + 1] += nbr_at[c]
         fill_arr = nbr_arr[:n].copy()
         cdef Py_ssize_t[::1] fill = fill_arr
         for e in range(n_cor):
-            pair_ij = ci[e] if ci[e] >= 0 else -1 - ci[e]
-            ent[fill[pair_ij // n]] = 2 * e
-            fill[pair_ij // n] += 1
-            ent[fill[pair_ij % n]] = 2 * e + 1
-            fill[pair_ij % n] += 1
+            ent[fill[ci[0, e]]] = 2 * e
+            fill[ci[0, e]] += 1
+            ent[fill[ci[1, e]]] = 2 * e + 1
+            fill[ci[1, e]] += 1
         # (member, line across) pairs, the member beyond the corner: counted, then listed
         for q in range(2):
             if q == 1:
@@ -1044,8 +1041,7 @@ cdef class Grouping:
                     continue
                 for t_o in range(nbr_at[c], nbr_at[c + 1]):
                     e = ent[t_o] >> 1
-                    pair_ij = ci[e] if ci[e] >= 0 else -1 - ci[e]
-                    o = pair_ij % n if ent[t_o] & 1 == 0 else pair_ij // n
+                    o = ci[1 - (ent[t_o] & 1), e]        # the corner's other line
                     v = ((sw._px[i] - cv[0, e]) * dx[c] + (sw._py[i] - cv[1, e]) * dy[c]
                          ) * cv[2 + (ent[t_o] & 1), e]
                     if not v < 0:
@@ -1148,7 +1144,7 @@ cdef class Grouping:
             r_own = fabs((sw._py[i] - cy[oc]) * dx[oc] - (sw._px[i] - cx[oc]) * dy[oc])
             near[i] = vv[3, p] >= -sw.corner_past and not (
                 rr[p] < r_own - sw.corner_sigmas * sw._sigma[i])
-            if ci[pe[p] >> 1] < 0:      # adjacent pieces of one polyline
+            if ci[2, pe[p] >> 1]:       # adjacent pieces of one polyline
                 moved[i] = tgt[i]
                 cand[i] = 0
         # runs (consecutive readings of a sensor on one line with one target) move if their
