@@ -804,3 +804,79 @@ def test_the_printed_table_says_what_each_column_measures(tmp_path, capsys):
         "readings against the true range; hardware: one 360° view; compute: estimator + mapper "
         "CPU per sweep (median); front: on the Pareto front of hardware time against occupied "
         "F1 (f1), coverage (cov), range RMSE (rmse)")
+
+
+def test_a_worker_killed_mid_study_says_how_many_runs_are_kept(small, tmp_path, monkeypatch,
+                                                               capsys):
+    """A pool worker killed under its run (the out-of-memory killer, `kill`) ended the study
+    as "internal error (BrokenProcessPool: …); … please report it", exit 70, and nothing
+    said that the finished runs were kept or that --resume runs the rest."""
+    p, rows = small
+    out = tmp_path / "out"
+    real = study.stream
+
+    def then_a_worker_is_killed(fn, jobs, ex):
+        jobs = list(jobs)
+        yield from real(fn, jobs[:2], ex)
+        yield from real(signal.raise_signal, [signal.SIGKILL], ex)   # on a worker of the pool
+
+    monkeypatch.setattr(study, "stream", then_a_worker_is_killed)
+    assert main(["study", str(p), "--out", str(out), "--workers", "2"]) == errors.INTERRUPTED
+    assert capsys.readouterr().err == (
+        "irring study: error: a worker process ended before its run did (killed: out of "
+        "memory, or `kill`; or it crashed: if again at the same run, please report it with "
+        f"--debug); 2 finished run(s) kept in {out / study.RESULTS}: run the same command "
+        "with --resume to run the rest\n")
+    monkeypatch.setattr(study, "stream", real)
+    assert main(["study", str(p), "--out", str(out), "--resume", "--workers", "1"]) == 0
+    assert deterministic(study.read_results(out / study.RESULTS)) == deterministic(rows)
+
+
+def test_a_job_whose_workers_died_is_worker_lost_on_every_executor():
+    """The pool's BrokenProcessPool and Dask's KilledWorker (a job given up after its
+    workers died under it) are one error; any other exception of a job is its own."""
+    with pytest.raises(executor.WorkerLost) as pool:
+        with executor.executor(2) as ex:
+            executor.run_jobs(signal.raise_signal, [signal.SIGKILL], ex)
+    assert str(pool.value) == executor.WORKER_LOST
+    assert pool.value.status == errors.INTERRUPTED
+    distributed = pytest.importorskip("distributed")
+
+    class Dying(executor.Executor):   # as a Dask client's executor hands back the failure
+        def submit(self, fn, /, *args, **kwargs):
+            f = executor.Future()
+            f.set_exception(distributed.KilledWorker("run_point-3f2a", None, 3))
+            return f
+
+    with pytest.raises(executor.WorkerLost, match=re.escape(executor.WORKER_LOST)):
+        executor.run_jobs(abs, [-3], Dying())
+    with pytest.raises(ZeroDivisionError):
+        executor.run_jobs(abs, [-3], type("Failing", (executor.Executor,), {
+            "submit": lambda self, fn, *a: executor.SerialExecutor().submit(divmod, 1, 0)})())
+
+
+def test_parts_of_a_study_run_apart_merge_into_its_results(small, tmp_path):
+    """A study split by seeds over two machines (README, "Runs made elsewhere merge"):
+    each part's rows appended to one results.csv, the whole study resumed there runs
+    nothing again and holds the rows of the study run whole."""
+    p, rows = small
+    (tmp_path / "l_room_post.yaml").write_text(ROOM)
+    parts = []
+    for seed in (3, 11):
+        part = tmp_path / f"seed{seed}.yaml"
+        part.write_text(STUDY.replace("seeds: [3, 11]", f"seeds: [{seed}]"))
+        parts.append(study.run_study(study.load_study(part), tmp_path / f"out{seed}"))
+    whole = tmp_path / "whole"
+    whole.mkdir()
+    first, second = ((tmp_path / f"out{seed}" / study.RESULTS).read_text().splitlines(True)
+                     for seed in (3, 11))
+    (whole / study.RESULTS).write_text("".join(first + second[1:]))
+    merged = study.run_study(study.load_study(write(tmp_path, name="whole.yaml")), whole,
+                             resume=True)
+    assert (merged["ran"], merged["done_before"]) == (0, 8)
+    # the same rows but the room's path (this test's folder, not the fixture's)
+    assert [r[:1] + r[2:] for r in deterministic(merged["rows"])] == \
+        [r[:1] + r[2:] for r in deterministic(rows)]
+    (whole / study.RESULTS).write_text("".join(first + second[1:] + first[1:2]))
+    with pytest.raises(study.StudyError, match=r"line 10 repeats the run of line 2 "):
+        study.run_study(study.load_study(tmp_path / "whole.yaml"), whole, resume=True)

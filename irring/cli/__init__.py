@@ -54,7 +54,8 @@ calibrate --port stopped at its prompt (q, end of input), or view found no offsc
 that works; 2 bad option, argument or MUJOCO_GL; 3 the device failed (no answer, disconnected, error replies, no progress); 4 an
 output could not be written; 5 refused as too big for memory; 6 a benchmark's target missed
 (bench speed --check, effects, rooms, foldover, grazing, link); 70 internal error (a bug, or a compiled kernel not
-built or built from another .pyx: the message says how to rebuild); 130 interrupted.
+built or built from another .pyx: the message says how to rebuild); 130 interrupted
+(or a worker process killed: out of memory, `kill`).
 Errors are one line; --debug (anywhere on the line, or IRRING_DEBUG=1) adds the traceback.
 Scan poses are numbered 1 … N everywhere (--pose K, map.png, progress)."""
 

@@ -13,7 +13,7 @@ from ..core import MAX_RUNS
 from ..outputs import check_out, folder_name, folder_note
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
-from ..studies.executor import WARMUP_NOTE, capacity, executor
+from ..studies.executor import WARMUP_NOTE, WorkerLost, capacity, executor
 from ._common import add_executor_options, describe, out_path
 
 EPILOG = f"""\
@@ -47,6 +47,12 @@ writes to DIR:
                   (shadow over the runs in rooms that hide wall behind an obstacle: shadow_runs)
   study.png       occupied F1 and coverage against hardware time, Pareto front marked;
                   titled with the study file's name and its runs (designs × rooms × …)
+
+a run that fails stops the study (a worker killed under its run, as by the out-of-memory
+killer: exit 130, with how many runs are kept); the finished runs stay for --resume.
+runs made elsewhere (one study split by seeds over machines) merge: append each part's
+results.csv rows, without the header, to one DIR/results.csv and run the whole study with
+--resume (start each part alike: a room's path as the study file reaches it names its rows).
 
 examples:
   irring study designs.yaml --out out/designs --workers 2
@@ -88,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
             result = study.run_study(spec, out, ex, resume=args.resume,
                                      on_start=lambda done, todo: bar.reset(total=todo),
                                      progress=lambda _: bar.update())
+    except WorkerLost as exc:   # killed from outside as Ctrl-C would stop it: the rows stay
+        raise WorkerLost(f"{exc}; {_kept(out)}") from exc
     except BaseException as exc:   # Ctrl-C, SIGTERM, or an import they cut short
         if not errors.interrupted(exc):
             raise
@@ -122,11 +130,15 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _interrupted(out: Path) -> int:
-    """Ctrl-C or SIGTERM: say how many runs the file keeps for --resume."""
+def _kept(out: Path) -> str:
+    """How many finished runs the file keeps, and how to run the rest."""
     path = out / study.RESULTS
     kept = len(study.read_results(path)) if path.exists() else 0
-    print(f"irring: study interrupted; {kept} finished run(s) kept in "
-          f"{errors.printable(str(path))}: run the same command with --resume to run the rest",
-          file=sys.stderr)
+    return (f"{kept} finished run(s) kept in {errors.printable(str(path))}: run the same "
+            "command with --resume to run the rest")
+
+
+def _interrupted(out: Path) -> int:
+    """Ctrl-C or SIGTERM: say how many runs the file keeps for --resume."""
+    print(f"irring: study interrupted; {_kept(out)}", file=sys.stderr)
     return errors.INTERRUPTED

@@ -15,9 +15,10 @@ import os
 import signal
 import threading
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterator, Sequence
 
-from ..errors import UsageError, sigterm_as_interrupt
+from ..errors import INTERRUPTED, IrringError, UsageError, sigterm_as_interrupt
 
 
 class SerialExecutor(Executor):
@@ -47,6 +48,18 @@ def default_workers() -> int:
 
 class ExecutorError(UsageError, RuntimeError):
     """An executor that cannot start (no Dask installed, scheduler unreachable): one line."""
+
+
+class WorkerLost(IrringError, RuntimeError):
+    """A worker process ended without handing back its job (the pool's BrokenProcessPool,
+    Dask's KilledWorker): killed from outside (the out-of-memory killer, `kill`), like an
+    interruption, or crashed. The jobs in flight are lost; what the caller kept stays."""
+
+    status = INTERRUPTED
+
+
+WORKER_LOST = ("a worker process ended before its run did (killed: out of memory, or `kill`; "
+               "or it crashed: if again at the same run, please report it with --debug)")
 
 
 DASK_CONNECT_TIMEOUT_S = 3.0
@@ -207,10 +220,24 @@ def stream(fn: Callable[[Any], Any], jobs: Sequence[Any], ex: Executor | None = 
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for f in sorted(finished, key=pending.get):
                 i = pending.pop(f)
-                yield i, f.result()
+                yield i, _result(f)
     finally:
         for f in pending:
             f.cancel()
+
+
+def _result(f: Future) -> Any:
+    """``f.result()``; a worker that died under it is :class:`WorkerLost`, not a bug's
+    "internal error" (a pool says only BrokenProcessPool; Dask gives up on a job after
+    its workers died under it three times)."""
+    try:
+        return f.result()
+    except BrokenProcessPool as exc:
+        raise WorkerLost(WORKER_LOST) from exc
+    except Exception as exc:
+        if type(exc).__name__ == "KilledWorker":   # dask.distributed's, not imported here
+            raise WorkerLost(WORKER_LOST) from exc
+        raise
 
 
 def run_jobs(fn: Callable[[Any], Any], jobs: Sequence[Any], ex: Executor | None = None, *,
