@@ -3,6 +3,7 @@ gets SimRing's counts exactly — or, under injected faults, a subset of them, n
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -454,6 +455,30 @@ def test_irring_drive_without_truth_says_which_ring_it_mapped_with(tmp_path, t_r
         "  design not named (no scenario; mapped as 12 gp2d12 sensors on R 150 mm, turning "
         "±37.8°), 1 pose(s), 852 readings: ")
     assert lines[head + 2] == "  (no ground truth: not scored)"
+
+
+def test_irring_drive_without_a_calibration_says_what_reads_the_counts(tmp_path, t_room,
+                                                                      pty_device, capsys):
+    """`irring drive` without --calibration (README's "Calibrate, then drive" skipped) read
+    the counts with the datasheet curve and said nothing of it; with one it says nothing."""
+    from irring.cli import main
+    from irring.estimation.calibration import Calibration
+
+    link = pty_device(Device(SimRing(t_room)))
+    args = ["drive", "--port", link, "--pose", "500,450,0", "--no-animation", "--timeout",
+            "0.5", "--no-wait"]
+    assert main(args + ["--out", str(tmp_path / "bare")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith(f"ring on {link}: ")
+    assert lines[1] == (
+        "note: no --calibration: the counts are read with the gp2d12 datasheet curve and an "
+        f"emitter offset d_o of 7 mm; a real ring's own are measured by `irring calibrate "
+        f"--port {link} --out ring.yaml` (then --calibration ring.yaml)")
+    cal = tmp_path / "ring.yaml"
+    dataclasses.replace(Calibration.nominal("gp2d12"), emitter_offset_m=0.00694).save(cal)
+    assert main(args + ["--out", str(tmp_path / "cal"), "--calibration", str(cal)]) == 0
+    out = capsys.readouterr().out
+    assert "--calibration" not in out and out.startswith(f"ring on {link}: ")
 
 
 def test_irring_drive_survives_a_bad_link_and_says_what_was_lost(tmp_path, t_room, pty_device,

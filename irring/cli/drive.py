@@ -245,7 +245,8 @@ def run(args: argparse.Namespace) -> int:
         return errors.INPUT
     if calibration is None:   # the datasheet curve for the ring's ADC, as map_sweeps takes it
         try:
-            Calibration.nominal(ring.sensor_model, ring.ring, info.adc_bits, ring.vref_v)
+            nominal = Calibration.nominal(ring.sensor_model, ring.ring, info.adc_bits,
+                                          ring.vref_v)
         except CalibrationError as exc:   # found after every pose was swept, as exit 1
             ring.close()
             _error(f"the ring on {args.port} reports a {info.adc_bits}-bit ADC, whose counts the "
@@ -253,6 +254,12 @@ def run(args: argparse.Namespace) -> int:
                    f"({exc}): calibrate this ring (irring calibrate) and drive it with "
                    f"--calibration FILE")
             return errors.DEVICE
+        # a step skipped (README, "Calibrate, then drive"): said, or the map looks final
+        say(f"note: no --calibration: the counts are read with the {ring.sensor_model} "
+            f"datasheet curve and an emitter offset d_o of "
+            f"{nominal.emitter_offset_m * 1000:g} mm; a real ring's own are measured by "
+            f"`irring calibrate --port {errors.printable(args.port)} --out ring.yaml` (then "
+            "--calibration ring.yaml)")
     differs = _differences(ring.ring, info.adc_bits, truth) if truth is not None else []
     if differs:
         say(f"warning: the ring on {args.port} differs from {truth.name}'s: "
