@@ -880,3 +880,20 @@ def test_parts_of_a_study_run_apart_merge_into_its_results(small, tmp_path):
     (whole / study.RESULTS).write_text("".join(first + second[1:] + first[1:2]))
     with pytest.raises(study.StudyError, match=r"line 10 repeats the run of line 2 "):
         study.run_study(study.load_study(tmp_path / "whole.yaml"), whole, resume=True)
+
+
+def test_the_chart_labels_its_time_axis_in_plain_seconds(small, tmp_path):
+    """study.png's log axis read 10⁻¹, 10⁰, 10¹ (and 2×10⁰, 3×10⁰ on a study within one
+    decade): a number to decode before reading the chart. Now 0.5, 1, 2 … as accuracy.png."""
+    p, rows = small
+    by = ("design", "step_stride")
+    records = study.summarise(rows, by)             # 0.9 … 3.3 s: within 1.5 decades
+    held_still = dict(records[0], design="radial12", hardware_time_s=0.0383)
+    for recs, labels in ((records, ["0.4", "0.5", "0.6", "0.8", "1", "1.5", "2", "3", "4"]),
+                         (records + [held_still], ["0.05", "0.1", "0.2", "0.5", "1", "2", "5"])):
+        fig = study.chart(recs, tmp_path / "study.png", by)
+        fig.canvas.draw()
+        for ax in fig.axes[:2]:
+            lo, hi = ax.get_xlim()
+            assert [t.get_text() for t in ax.get_xticklabels()
+                    if t.get_text() and lo <= t.get_position()[0] <= hi] == labels

@@ -46,6 +46,20 @@ def figure(width_in: float, height_in: float, dpi: float = 100):
     return fig
 
 
+def plain_log_x(ax) -> None:
+    """Make ``ax``'s x axis logarithmic, labelled in plain numbers (0.05, 0.1, 0.2 … 10, or
+    1.5, 2, 3, 4 across less than 1.5 decades) where matplotlib writes 10⁻¹, 10⁰ and
+    2×10⁰: read at a glance. Call it after plotting (it reads the axis' span)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # deferred: charts only
+
+    ax.set_xscale("log")
+    lo, hi = ax.get_xlim()
+    subs = (1.0, 2.0, 5.0) if hi / lo >= 10 ** 1.5 else (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
+    ax.xaxis.set_major_locator(LogLocator(subs=subs))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
 def map_rgb(classes: np.ndarray) -> np.ndarray:
     """(ny, nx, 3) float image of a classified grid (row 0 = lowest y)."""
     return _CLASS_RGB[np.asarray(classes, np.intp) - _CLASS0]

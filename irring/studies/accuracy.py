@@ -435,8 +435,6 @@ def chart(result: dict, path) -> None:
     ring marks the configurations on it. A hollow point: the estimator called less than
     half the returns valid, so its RMSE describes few readings.
     """
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter   # deferred: chart only
-
     rows = result["configs"]
     default = next(r for r in rows if r["knob"] == "default")
     defaults = result["meta"]["default_values"]
@@ -445,7 +443,7 @@ def chart(result: dict, path) -> None:
                ("rmse", "range RMSE, mm (lower is better)", 1e3))
     costs = (("hw", "hardware time per 360° scan, s (what the real ring spends)"),
              ("cpu", "compute per sweep, ms CPU (estimator + mapper, this machine)"))
-    from ..maps.render import figure  # deferred: matplotlib (no pyplot: the backend stays)
+    from ..maps.render import figure, plain_log_x  # deferred: matplotlib (no pyplot: the backend stays)
 
     fig = figure(13, 12.5)
     axes = fig.subplots(len(metrics), 2)
@@ -493,10 +491,7 @@ def chart(result: dict, path) -> None:
             x, y = xy(default)
             if np.isfinite(y):
                 ax.plot([x], [y], "s", color="k", ms=7, zorder=5, label="default")
-            ax.set_xscale("log")
-            ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-            ax.xaxis.set_minor_formatter(NullFormatter())
+            plain_log_x(ax)
             _annotate(ax, notes)
             ax.set_xlabel(clabel)
             ax.set_ylabel(mlabel)

@@ -906,7 +906,7 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
     # deferred: matplotlib, only for the chart
     from matplotlib.lines import Line2D
 
-    from ..maps.render import figure
+    from ..maps.render import figure, plain_log_x
 
     knobs = [k for k in by if k != "design"]
     designs = list(dict.fromkeys(r["design"] for r in records))
@@ -932,7 +932,7 @@ def chart(records: Sequence[Mapping[str, Any]], path: str | Path,
             ax.step(xs + [right], ys + [ys[-1]], where="post", color="0.35", lw=1.2, ls="--",
                     zorder=0)
             ax.scatter(xs, ys, s=200, facecolors="none", edgecolors="k", lw=1.3, zorder=3)
-        ax.set_xscale("log")
+        plain_log_x(ax)
         ax.set_xlabel("hardware time per 360° view (s, log scale)")
         ax.set_ylabel(f"{score} (mean ± 1 sd over runs)")
         ax.set_ylim(-0.02, 1.05)
