@@ -100,3 +100,27 @@ def test_the_irring_names_users_read_are_where_the_code_is():
     assert "irring.estimation.calibration.Calibration.load" in _names_in(
         places["calibration file header"])
     assert stale == {}
+
+
+def test_the_readme_layout_names_every_module():
+    """The README's Layout is where a newcomer looks for a module: it left out
+    estimation/bounds.py and `bench long`'s studies/long_sweeps.py. Every module of the
+    package is named there (cli/: "one module per subcommand"), a benchmark's by its
+    `irring bench` name where that is its module's; and docs/estimator.md's "Where the code
+    is" names every rule module beside estimate.py."""
+    block = (ROOT / "README.md").read_text().split("\n## Layout\n", 1)[1].split("```")[1]
+    unnamed = []
+    for f in sorted(PACKAGE.rglob("*")):
+        rel = f.relative_to(PACKAGE)
+        if f.suffix not in (".py", ".pyx") or f.name in ("__init__.py", "__main__.py") \
+                or rel.parts[0] in ("cli", "_data"):
+            continue
+        names = [f.name] + ([f.stem] if rel.parts[0] == "studies" else [])
+        if not any(re.search(rf"(?<![\w.]){re.escape(n)}(?![\w])", block) for n in names):
+            unnamed.append(str(rel))
+    assert unnamed == []
+    table = (ROOT / "docs" / "estimator.md").read_text().split("\n## Where the code is\n")[1]
+    table = table.split("\n## ")[0]
+    rules = {f.name for f in (PACKAGE / "estimation").glob("*.py")} - {
+        "__init__.py", "calibration.py", "calibration_chart.py", "estimate_numpy.py"}
+    assert {r for r in rules if f"| `{r}` |" not in table} == set()

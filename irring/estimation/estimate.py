@@ -2,8 +2,8 @@
 :class:`~irring.estimation.calibration.Calibration` in, end points out.
 
 This module is the schedule (:func:`_estimate`, :func:`final_estimate`); the rules it runs live
-beside it, one module per topic (lines, profiles, arcs, bends, far_lines, traces, counts,
-members, silence, foldover: docs/estimator.md, "Where the code is").
+beside it, one module per topic (lines, bounds, profiles, arcs, bends, far_lines, traces,
+counts, members, silence, foldover: docs/estimator.md, "Where the code is").
 
 How it works, its assumptions and measured figures: docs/estimator.md.
 """
