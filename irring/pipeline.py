@@ -27,7 +27,8 @@ import numpy as np
 
 from . import recording as rec
 from .core import (Points, Pose, Reason, RingSource, SourceLost, Sweep, in_turn_order,
-                   GP2_PERIOD_S, inside_outline, points_with, score_text)
+                   GP2_PERIOD_S, inside_outline, points_with, score_text,
+                   sensor_angles_for_steps)
 from .estimation.calibration import (Calibration, CalibrationError, load_calibration,
                                      scene_calibration)
 from .estimation.estimate import estimate
@@ -40,6 +41,7 @@ from .outputs import MCAP_FILE, OutputError, OutputSet, atomic_file
 from .scenario import Scenario, ScenarioError, clipped_obstacles, loads
 
 FRAMES_PER_SWEEP = 6  # animation frames while one sweep is mapped (the map itself is unaffected)
+ANGLE_TOLERANCE_RAD = 1e-9   # a recorded commanded angle's rounding (its product in any order)
 
 
 def progress_enabled() -> bool:
@@ -660,6 +662,45 @@ def _check_scenario_sensor(scenario: Scenario, sweeps: Sequence[Sweep], recordin
                 "scenario and the sweeps do not belong together")
 
 
+def _check_scenario_ring(scenario: Scenario, sweeps: Sequence[Sweep], recording) -> None:
+    """A simulated sweep whose ring is not the recorded scenario's, which simulated it, was
+    edited: its end points would be placed by another ring's geometry. (A device's ring is its
+    IRINF's, which may differ from the scene's: irring drive warned of it then.)"""
+    ring = scenario.ring
+    for k, sweep in enumerate(sweeps):
+        if sweep.source != "sim":
+            continue
+        for f in dataclasses.fields(ring):
+            have, want = getattr(sweep.ring, f.name), getattr(ring, f.name)
+            if have != want and not math.isclose(have, want, rel_tol=1e-9, abs_tol=1e-12):
+                raise rec.RecordingError(
+                    f"{recording}: sweep {k + 1} was simulated with ring.{f.name} {have:g}, but "
+                    f"the recorded scenario {scenario.name!r}, which simulated it, has "
+                    f"{want:g}; the scenario and the sweeps do not belong together")
+
+
+def _check_commanded_angles(sweeps: Sequence[Sweep], recording) -> None:
+    """irring's simulator and driver record each row's sensor angles as its step commands
+    them (step × motor step × belt ratio, every sensor alike, even of a belt that lags):
+    their sweeps' angles that contradict their steps were edited, and would map each reading
+    at another bearing than it was read at. (A source of another program may record measured
+    angles.)"""
+    for k, sweep in enumerate(sweeps):
+        if sweep.source != "sim" and not sweep.source.startswith("serial:"):
+            continue
+        steps, angles = np.asarray(sweep.steps), np.asarray(sweep.sensor_angles, dtype=float)
+        want = sensor_angles_for_steps(sweep.ring, steps)
+        off = np.abs(angles - want) > ANGLE_TOLERANCE_RAD * (1 + np.abs(want))
+        if off.any():
+            s, n = (int(i) for i in np.argwhere(off)[0])
+            raise rec.RecordingError(
+                f"{recording}: sweep {k + 1}'s sensor {n} at step {int(steps[s])} is at "
+                f"{angles[s, n]:.6g} rad, where its ring turns step {int(steps[s])} to "
+                f"{want[s, n]:.6g} rad (step × motor step × belt ratio, every sensor alike, as "
+                f"irring's simulator and driver record it); the angles and the steps do not "
+                f"belong together")
+
+
 def _check_no_copied_sweep(scenario: Scenario | None, sweeps: Sequence[Sweep],
                            recording) -> None:
     """A sweep equal to an earlier one in pose, steps, counts and timestamps is a copy (a
@@ -757,6 +798,8 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
     if scenario is not None:
         _check_room_holds_poses(scenario, sweeps, recording)
         _check_scenario_sensor(scenario, sweeps, recording)
+        _check_scenario_ring(scenario, sweeps, recording)
+    _check_commanded_angles(sweeps, recording)
     _check_no_copied_sweep(scenario, sweeps, recording)
     if calibration_file is not None:
         calibration, cal_text = load_calibration(calibration_file)

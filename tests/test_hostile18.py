@@ -3,11 +3,16 @@ happens now."""
 
 from __future__ import annotations
 
-import numpy as np
+import json
 
+import numpy as np
+import pytest
+
+from irring import load_scenario, pipeline
 from irring.designs import PAPER_RING
 from irring.hardware import SerialRing
 from irring.hardware.emulator import Device
+from irring.recording import RecordingError
 
 from _fake_source import FakeSource
 from test_firmware import TIMEOUT_S as FIRMWARE_TIMEOUT_S, device, host_binary  # noqa: F401
@@ -64,3 +69,62 @@ def test_the_reference_firmware_answers_irstp_at_rest_with_its_last_seq(device):
     assert len(ring.sweep().steps) == 71
     ring.close()
     assert ring.park_failure is None and ring.stands_at == 0
+
+
+@pytest.fixture(scope="module")
+def t_room_recording(tmp_path_factory) -> dict:
+    """`irring run t_room`'s sweeps.npz, entry by entry."""
+    out = tmp_path_factory.mktemp("run")
+    pipeline.write_outputs(pipeline.run(load_scenario("t_room")), out, animation=False)
+    with np.load(out / "sweeps.npz") as z:
+        return {k: z[k] for k in z.keys()}
+
+
+def _edited(entries: dict, path, **changes):
+    np.savez(path, **{**entries, **changes})
+    return path
+
+
+def test_a_recording_whose_angles_contradict_their_steps_is_refused(t_room_recording, tmp_path):
+    """sweep000's sensor angles moved 10 rows on (each row the angle of the step 10 before,
+    the steps as they were): every reading of that sweep mapped at another bearing than its
+    step, F1 0.995 -> 0.449, exit 0. The driver and the simulator record the commanded angle
+    (step × motor step × belt ratio), so angles that contradict it were edited."""
+    rolled = np.roll(t_room_recording["sweep000/sensor_angles"], 10, axis=0)
+    path = _edited(t_room_recording, tmp_path / "rolled.npz",
+                   **{"sweep000/sensor_angles": rolled})
+    with pytest.raises(RecordingError) as err:
+        pipeline.replay(path)
+    assert str(err.value) == (
+        f"{path}: sweep 1's sensor 0 at step -35 is at 0.490088 rad, where its ring turns step "
+        "-35 to -0.659734 rad (step × motor step × belt ratio, every sensor alike, as irring's "
+        "simulator and driver record it); the angles and the steps do not belong together")
+    # the same rows in another order (steps, angles and counts together) are one sweep
+    order = np.arange(70, -1, -1)
+    rows = {f"sweep000/{name}": t_room_recording[f"sweep000/{name}"][order]
+            for name in ("steps", "sensor_angles", "counts", "timestamps_s")}
+    rows.update({k: v[order] for k, v in t_room_recording.items()
+                 if k.startswith("sweep000/truth/")})
+    same = pipeline.replay(_edited(t_room_recording, tmp_path / "reversed.npz", **rows))
+    assert sum(int(p.valid.sum()) for p in same.points) == 2153
+
+
+def test_a_simulated_sweep_whose_ring_is_not_its_scenarios_is_refused(t_room_recording, tmp_path):
+    """sweep002's ring given a radius of 0.2 m (t_room's ring, which simulated it, is 0.15):
+    its end points placed 50 mm out, F1 0.995 -> 0.679, exit 0. The sensor model was checked
+    against the recorded scenario; the ring was not."""
+    scalars = json.loads(str(t_room_recording["sweep002/scalars"]))
+    scalars["ring"]["radius_m"] = 0.2
+    path = _edited(t_room_recording, tmp_path / "ring.npz",
+                   **{"sweep002/scalars": np.array(json.dumps(scalars))})
+    with pytest.raises(RecordingError) as err:
+        pipeline.replay(path)
+    assert str(err.value) == (
+        f"{path}: sweep 3 was simulated with ring.radius_m 0.2, but the recorded scenario "
+        "'t_room', which simulated it, has 0.15; the scenario and the sweeps do not belong "
+        "together")
+    # a device's ring is its IRINF's, which may differ from the truth scene's: replayed
+    scalars["source"] = "serial:/dev/ttyACM0"
+    device = _edited(t_room_recording, tmp_path / "device.npz",
+                     **{"sweep002/scalars": np.array(json.dumps(scalars))})
+    assert len(pipeline.replay(device).points) == 4
