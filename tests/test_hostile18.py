@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from irring import load_scenario, pipeline
+from irring.cli import main
+from irring.core import MAX_ESTIMATED_READINGS
 from irring.designs import PAPER_RING
 from irring.hardware import SerialRing
 from irring.hardware.emulator import Device
@@ -128,3 +130,17 @@ def test_a_simulated_sweep_whose_ring_is_not_its_scenarios_is_refused(t_room_rec
     device = _edited(t_room_recording, tmp_path / "device.npz",
                      **{"sweep002/scalars": np.array(json.dumps(scalars))})
     assert len(pipeline.replay(device).points) == 4
+
+
+def test_bench_long_refuses_a_sweep_the_estimator_would_refuse_before_measuring_any(capsys):
+    """`irring bench long --steps 71 60000` measured the 71-step sweeps, then the estimator
+    refused 60,000 steps × 12 sensors (exit 5) and the rows measured were not printed: with
+    the default steps first, a minute's work lost, and an advice ("fewer steps, or the sweep
+    in parts") that names no option. 50,505 steps of 12 sensors is the most it takes."""
+    with pytest.raises(SystemExit) as err:
+        main(["bench", "long", "--kind", "circle", "--steps", "71", "50506"])
+    assert err.value.code == 2
+    err_text = capsys.readouterr().err
+    assert err_text.endswith(
+        "irring bench long: error: argument --steps: must be in 2 … 50505, got 50506\n")
+    assert MAX_ESTIMATED_READINGS // 12 == 50505   # the longest sweep it may ask for

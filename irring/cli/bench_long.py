@@ -6,8 +6,8 @@ import argparse
 import json
 
 from .. import errors
-from ..core import MAX_ESTIMATED_READINGS, MAX_STEPS
-from ..studies.long_sweeps import KINDS, STEPS, measure, report
+from ..core import MAX_ESTIMATED_READINGS
+from ..studies.long_sweeps import KINDS, MAX_LONG_STEPS, SENSORS, STEPS, measure, report
 from ._common import at_least, describe
 
 EPILOG = f"""\
@@ -21,7 +21,7 @@ what it prints, per sweep (each estimated twice: timed, then with tracemalloc on
                        the work check's model (core.ESTIMATE_BYTES_PER_READING)
 
 A sweep of more than {MAX_ESTIMATED_READINGS:,} readings is refused by the estimator
-(core.MAX_ESTIMATED_READINGS, exit 5).
+(core.MAX_ESTIMATED_READINGS, exit 5): {MAX_LONG_STEPS:,} steps of {SENSORS} sensors at most here.
 
 examples:
   irring bench long                            both kinds, 71 … 18,000 steps (≈ 1 min)
@@ -37,8 +37,9 @@ def register(p: argparse.ArgumentParser) -> None:
              "reading returns.", EPILOG)
     p.add_argument("--kind", choices=KINDS, action="append",
                    help="room or circle (repeatable; default: both)")
-    p.add_argument("--steps", type=at_least(2, MAX_STEPS), nargs="+", default=list(STEPS),
-                   metavar="N", help=f"steps a sweep (2 … {MAX_STEPS:,}; default: "
+    # a longer sweep would be refused by the estimator after the shorter ones were measured
+    p.add_argument("--steps", type=at_least(2, MAX_LONG_STEPS), nargs="+", default=list(STEPS),
+                   metavar="N", help=f"steps a sweep (2 … {MAX_LONG_STEPS:,}; default: "
                                      f"{' '.join(str(s) for s in STEPS)})")
     p.add_argument("--numpy", action="store_true",
                    help="also the numpy statement of the estimator (estimate_numpy)")

@@ -14,8 +14,8 @@ import tracemalloc
 import numpy as np
 
 from .. import pipeline
-from ..core import (BYTES_PER_READING, ESTIMATE_BYTES_PER_READING, Ring, Sweep, bounds,
-                    sensor_angles_for_steps)
+from ..core import (BYTES_PER_READING, ESTIMATE_BYTES_PER_READING, MAX_ESTIMATED_READINGS, Ring,
+                    Sweep, bounds, sensor_angles_for_steps)
 from ..estimation import estimate as fast, estimate_numpy as oracle
 from ..estimation.estimate import nominal_calibration
 from ..scenario import load_scenario
@@ -26,6 +26,8 @@ KINDS = ("room", "circle")
 CIRCLE_STEP_DEG = 0.01     # the circle's motor step (IRINF's finest) …
 CIRCLE_COUNTS = 1300       # … and every reading's counts (a wall ~0.3 m away all round)
 LARGE = 50_000             # readings from which a sweep's fixed costs are a few per cent
+SENSORS = 12               # both kinds' rings: t_room's (the paper's) and the circle's
+MAX_LONG_STEPS = MAX_ESTIMATED_READINGS // SENSORS   # the longest sweep the estimator takes
 
 
 def room_sweep(steps: int, scenario: str = "t_room", pose: int = 1, seed: int = 0):
@@ -49,7 +51,7 @@ def room_sweep(steps: int, scenario: str = "t_room", pose: int = 1, seed: int = 
     return acq.sweeps[0], cal
 
 
-def circle_sweep(steps: int, sensors: int = 12, step_deg: float = CIRCLE_STEP_DEG):
+def circle_sweep(steps: int, sensors: int = SENSORS, step_deg: float = CIRCLE_STEP_DEG):
     """(sweep, calibration): a device's sweep of ``steps`` motor steps of ``step_deg``
     (belt ratio 1) centred on step 0, every reading ``CIRCLE_COUNTS``: 36 000 steps of
     0.01° turn each sensor round the full circle (a hostile device's)."""
