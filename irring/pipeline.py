@@ -662,14 +662,25 @@ def _check_scenario_sensor(scenario: Scenario, sweeps: Sequence[Sweep], recordin
                 "scenario and the sweeps do not belong together")
 
 
-def _check_scenario_ring(scenario: Scenario, sweeps: Sequence[Sweep], recording) -> None:
-    """A simulated sweep whose ring is not the recorded scenario's, which simulated it, was
-    edited: its end points would be placed by another ring's geometry. (A device's ring is its
-    IRINF's, which may differ from the scene's: irring drive warned of it then.)"""
-    ring = scenario.ring
+def _check_simulated_sweeps(scenario: Scenario, sweeps: Sequence[Sweep], recording) -> None:
+    """A simulated sweep whose ring is not the recorded scenario's, which simulated it, or
+    that carries a pose per reading where the scene stands still (or none where it drives:
+    effects.motion) was edited: its end points would be placed by another ring's geometry,
+    or from other poses. (A device's ring is its IRINF's, which may differ from the scene's:
+    irring drive warned of it then.)"""
+    ring, moving = scenario.ring, scenario.has("motion")
     for k, sweep in enumerate(sweeps):
         if sweep.source != "sim":
             continue
+        if (sweep.reading_poses is not None) != moving:
+            has = ("carries a pose for each reading (a moving robot's)" if not moving else
+                   "carries no pose for each reading")
+            does = ("stands still at each of its poses" if not moving else
+                    "drives while it sweeps (effects.motion)")
+            raise rec.RecordingError(
+                f"{recording}: sweep {k + 1} {has}, but the recorded scenario "
+                f"{scenario.name!r}, which simulated it, {does}; the scenario and the sweeps "
+                "do not belong together")
         for f in dataclasses.fields(ring):
             have, want = getattr(sweep.ring, f.name), getattr(ring, f.name)
             if have != want and not math.isclose(have, want, rel_tol=1e-9, abs_tol=1e-12):
@@ -798,7 +809,7 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
     if scenario is not None:
         _check_room_holds_poses(scenario, sweeps, recording)
         _check_scenario_sensor(scenario, sweeps, recording)
-        _check_scenario_ring(scenario, sweeps, recording)
+        _check_simulated_sweeps(scenario, sweeps, recording)
     _check_commanded_angles(sweeps, recording)
     _check_no_copied_sweep(scenario, sweeps, recording)
     if calibration_file is not None:

@@ -144,3 +144,18 @@ def test_bench_long_refuses_a_sweep_the_estimator_would_refuse_before_measuring_
     assert err_text.endswith(
         "irring bench long: error: argument --steps: must be in 2 … 50505, got 50506\n")
     assert MAX_ESTIMATED_READINGS // 12 == 50505   # the longest sweep it may ask for
+
+
+def test_a_standing_scenes_sweep_with_a_pose_for_each_reading_is_refused(t_room_recording,
+                                                                          tmp_path):
+    """sweep000 given a pose for each reading (all at the origin), as a moving robot's sweep
+    carries: its readings were placed from there, F1 0.995 -> 0.812, exit 0. The simulator
+    writes them only for a scene that drives (effects.motion), and t_room stands."""
+    path = _edited(t_room_recording, tmp_path / "poses.npz",
+                   **{"sweep000/reading_poses": np.zeros((71, 12, 3))})
+    with pytest.raises(RecordingError) as err:
+        pipeline.replay(path)
+    assert str(err.value) == (
+        f"{path}: sweep 1 carries a pose for each reading (a moving robot's), but the recorded "
+        "scenario 't_room', which simulated it, stands still at each of its poses; the "
+        "scenario and the sweeps do not belong together")
