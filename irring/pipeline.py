@@ -37,6 +37,7 @@ from .maps import metrics
 from .maps.mapping import (MapperParams, OccupancyGrid, check_covering, check_scenario_grid,
                            RunSilences, classify, returns_of, slice_steps)
 from .maps.mcap_export import write_mcap_to
+from .errors import printable
 from .outputs import MCAP_FILE, OutputError, OutputSet, atomic_file
 from .scenario import Scenario, ScenarioError, clipped_obstacles, loads
 
@@ -694,10 +695,11 @@ def _check_commanded_angles(sweeps: Sequence[Sweep], recording) -> None:
     """irring's simulator and driver record each row's sensor angles as its step commands
     them (step × motor step × belt ratio, every sensor alike, even of a belt that lags):
     their sweeps' angles that contradict their steps were edited, and would map each reading
-    at another bearing than it was read at. (A source of another program may record measured
-    angles.)"""
+    at another bearing than it was read at. (A source of another program, or a sweep made by
+    hand without the simulator's truth, may hold other angles.)"""
     for k, sweep in enumerate(sweeps):
-        if sweep.source != "sim" and not sweep.source.startswith("serial:"):
+        if not (sweep.source == "sim" and sweep.truth is not None
+                or sweep.source.startswith("serial:")):
             continue
         steps, angles = np.asarray(sweep.steps), np.asarray(sweep.sensor_angles, dtype=float)
         want = sensor_angles_for_steps(sweep.ring, steps)
@@ -857,7 +859,7 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
     stage. ``mcap``: also write the run there as MCAP (``mcap_export``; the "mcap" stage),
     which needs the ``mcap`` extra: written first beside its place and renamed in just
     after the set, so an interruption leaves both as they were; an MCAP that fails (an
-    OutputError) still leaves the set written, then raises."""
+    OutputError) still leaves the set written, then raises, naming it."""
     importlib.import_module(".maps.render", __package__)  # deferred: Pillow, loaded before the clock
 
     def write_set() -> dict[str, Path]:
@@ -884,10 +886,13 @@ def write_outputs(result: MapRun, out_dir: str | Path, *, animation: bool = True
             result.timings_s["mcap"] = time.perf_counter() - t0
             written = True
             paths = write_set()
-    except OutputError:
-        if not written:
-            write_set()   # the run's own files are not lost for the MCAP
-        raise
+    except OutputError as exc:
+        if written:
+            raise
+        paths = write_set()   # the run's own files are not lost for the MCAP, and it says so
+        names = ", ".join(Path(p).name for p in paths.values())
+        raise OutputError(f"{exc}; the run's other outputs were written: "
+                          f"{printable(str(Path(out_dir)))}/: {names}") from None
     return {**paths, "mcap": mcap}
 
 

@@ -14,6 +14,7 @@ from irring.core import MAX_ESTIMATED_READINGS
 from irring.designs import PAPER_RING
 from irring.hardware import SerialRing
 from irring.hardware.emulator import Device
+from irring.outputs import OutputError
 from irring.recording import RecordingError
 
 from _fake_source import FakeSource
@@ -159,3 +160,23 @@ def test_a_standing_scenes_sweep_with_a_pose_for_each_reading_is_refused(t_room_
         f"{path}: sweep 1 carries a pose for each reading (a moving robot's), but the recorded "
         "scenario 't_room', which simulated it, stands still at each of its poses; the "
         "scenario and the sweeps do not belong together")
+
+
+def test_an_mcap_that_cannot_be_written_says_the_runs_own_outputs_were(tmp_path):
+    """`irring run t_room --out o --mcap /proc/x.mcap` (as root, whom the check before the
+    work lets write anywhere): the whole set was written to o/, then "irring run: error:
+    /proc/x.mcap: cannot write there: No such file or directory", exit 4, nothing said of o/
+    (README: "an MCAP that fails still leaves the new set, and says so")."""
+    pytest.importorskip("mcap_ros2")
+    (tmp_path / "notes").write_text("a file, not a folder")
+    result = pipeline.map_sweeps(pipeline.simulated(load_scenario("t_room"), progress=False)[0]
+                                 .sweeps[:1], scenario=load_scenario("t_room"))
+    out = tmp_path / "o"
+    with pytest.raises(OutputError) as err:
+        pipeline.write_outputs(result, out, animation=False, mcap=tmp_path / "notes" / "x.mcap")
+    assert str(err.value) == (
+        f"{tmp_path / 'notes' / 'x.mcap'}: {tmp_path / 'notes'} is a file, so the folder cannot "
+        f"be made; the run's other outputs were written: {out}/: map.png, map.pgm, map.yaml, "
+        "sweeps.npz")
+    assert sorted(p.name for p in out.iterdir()) == ["map.pgm", "map.png", "map.yaml",
+                                                     "sweeps.npz"]
