@@ -180,3 +180,36 @@ def test_an_mcap_that_cannot_be_written_says_the_runs_own_outputs_were(tmp_path)
         "sweeps.npz")
     assert sorted(p.name for p in out.iterdir()) == ["map.pgm", "map.png", "map.yaml",
                                                      "sweeps.npz"]
+
+
+class _ResetsTurningBack(_Board):
+    """The board resets as it turns back to step 0 (close()'s IRGTO,0): the move is lost, no
+    IRPOS comes, and its step 0 is now where it woke."""
+
+    def write(self, data_: bytes) -> int:
+        n = super().write(data_)
+        if data_ == PARK:
+            _reset(self.device)
+            self.device._pending_pos = None   # the move it was making
+        return n
+
+
+def test_a_board_that_reset_as_it_turned_back_is_not_told_to_be_sent_irgto_0(virtual_time):
+    """A board that reset as close() turned it back sent no IRPOS; the warning said "turn
+    the ring radial by hand, or send $IRGTO,0*E3DD": that IRGTO,0 is answered IRPOS,0 at
+    once from where it woke, and the user who sent it was told nothing was wrong. An IRSTP
+    after the silence is answered IRDON -1 by such a board."""
+    port = _ResetsTurningBack(_device(), after=0, event=None)
+    ring = SerialRing(port, timeout_s=TIMEOUT_S).open()
+    ring.sweep()
+    ring.close()
+    assert port.written == [HELLO, SWEEP, STOP, PARK, STOP]
+    assert ring.park_failure == (
+        "the ring on device://emulator was not turned back to step 0 at the end of the session "
+        "(no IRPOS answered IRGTO,0 within 0.45 s, and an IRSTP then was answered IRDON -1, no "
+        "IRSCN sent since it powered up, though 71 came this session: it rebooted as it turned "
+        "back, and its firmware took the step it woke at for step 0; it stands between step 35 "
+        "and step 0). Its firmware takes the step it stands at when it starts for step 0, and "
+        "an Arduino restarts each time its port is opened: turn the ring radial by hand (its "
+        "step 0 is where it woke, so no IRGTO can), then reset the board, before the next "
+        "session")

@@ -610,6 +610,18 @@ class SerialRing:
             self._running = self._moved = False
             self._position = self._heard = self.stands_at = 0
             return None
+        if msg is None and self._clock is not None:
+            # still turning, hung, or reset as it turned: IRSTP (answered at any time, a move
+            # not stopped) gets IRDON -1 from a board that woke on the way
+            self._send(p.Stop())
+            done = self._await_through((p.Done,), self.timeout_s)
+            self._stop_sent = False
+            if done is not None and done.seq < 0:
+                self._position_lost = self._woke_at_close = True
+                return (f"no IRPOS answered IRGTO,0 within {wait_s:g} s, and an IRSTP then was "
+                        f"answered IRDON -1, no IRSCN sent since it powered up, though "
+                        f"{self.stats.scans} came this session: it rebooted as it turned back, "
+                        f"and its firmware took the step it woke at for step 0; {between}")
         return (f"no IRPOS answered IRGTO,0 within {wait_s:g} s: {between}" if msg is None
                 else f"it answered IRGTO,0 with {p.encode(msg).decode().strip()}: {between}")
 
