@@ -213,3 +213,25 @@ def test_a_board_that_reset_as_it_turned_back_is_not_told_to_be_sent_irgto_0(vir
         "an Arduino restarts each time its port is opened: turn the ring radial by hand (its "
         "step 0 is where it woke, so no IRGTO can), then reset the board, before the next "
         "session")
+
+
+@pytest.mark.parametrize("argv, option, what", [
+    (["run", ""], "SCENARIO", "a bundled scenario (irring scenarios lists them) or a YAML file"),
+    (["replay", " "], "RECORDING", "a sweeps .npz recording"),
+    (["run", "t_room", "--calibration", ""], "--calibration", "a calibration file"),
+    (["bench", "rooms", ""], "ROOM", "a bundled scenario (irring scenarios lists them) or a "
+                                     "YAML file, or a folder of them"),
+])
+def test_an_empty_name_is_refused_not_read_as_the_default_or_the_current_folder(
+        argv, option, what, tmp_path, monkeypatch, capsys):
+    """`irring run "$ROOM"` with ROOM unset ran t_room into out/t_room, replacing the run
+    there, exit 0; `--calibration ""` said ".: is a folder"; `bench rooms ""` ": the folder
+    holds no *.yaml scenario" (--out "" was refused so already)."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as err:
+        main(argv)
+    assert err.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"irring {' '.join(argv[:2] if argv[0] == 'bench' else argv[:1])}: error: argument "
+        f"{option}: an empty name; name {what}")
+    assert list(tmp_path.iterdir()) == []

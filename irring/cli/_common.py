@@ -17,6 +17,7 @@ import textwrap
 import urllib.parse
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from ..core import HOUSING_M, MAX_SEEDS, NETWORK_URL_SCHEMES, SEED_MAX
 from ..errors import UsageError, brief
@@ -207,6 +208,24 @@ def named_once(values, option: str, same: Callable = lambda value: value) -> Non
         seen[key] = value
 
 
+def given(what: str, kind: Callable[[str], Any] = str) -> Callable[[str], Any]:
+    """A ``type=`` for a file or scenario a user names: an empty one (``irring run "$ROOM"``
+    with ROOM unset) ran the default scenario into its folder, or read the current folder as
+    ``.``, without a word."""
+    def parse(text: str) -> Any:
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f"an empty name; name {what}")
+        return kind(text)
+
+    parse.__name__ = what
+    return parse
+
+
+scenario_name = given("a bundled scenario (irring scenarios lists them) or a YAML file")
+scenarios_or_folders = given("a bundled scenario (irring scenarios lists them) or a YAML "
+                             "file, or a folder of them")
+
+
 def out_path(text: str) -> Path:
     """``--out``'s value: an empty one (``--out "$DIR"`` with DIR unset) wrote into the
     current folder, or the default, without a word."""
@@ -394,6 +413,7 @@ def add_room_set_options(p: argparse.ArgumentParser, default_rooms: str, seeds: 
     """The options of a bench over a set of rooms: ROOM…, --seeds, --out, --json.
     ``default_rooms`` names what runs without ROOM; ``written`` the files --out receives."""
     p.add_argument("rooms", nargs="*", metavar="ROOM",
+                   type=scenarios_or_folders,
                    help="bundled scenario names, YAML files or folders of them "
                         f"(default: {default_rooms})")
     p.add_argument("--seeds", type=seed_count, default=seeds, metavar="N",

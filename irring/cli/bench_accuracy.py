@@ -15,7 +15,8 @@ from ..studies.accuracy import DEFAULT_SCENARIOS, KNOBS
 from ..studies.executor import WARMUP_NOTE, capacity, executor
 from ..core import MAX_SEEDS
 from ..scenario import scenario_file
-from ._common import add_executor_options, describe, named_once, out_path, seed_count
+from ._common import (add_executor_options, describe, named_once, out_path, scenario_name,
+                      seed_count)
 
 EPILOG = """\
 configurations (one knob changed at a time around the scenario as written, the "default"):
@@ -70,7 +71,7 @@ def register(p: argparse.ArgumentParser) -> None:
              "against hardware time and compute time, mark the Pareto front, write "
              "CSV/JSON and a chart.",
              EPILOG)
-    p.add_argument("--scenario", action="append", metavar="S",
+    p.add_argument("--scenario", action="append", metavar="S", type=scenario_name,
                    help="bundled scenario name or YAML path; repeat for several (default: "
                         + ", ".join(DEFAULT_SCENARIOS) + ")")
     p.add_argument("--knob", action="append", choices=KNOBS, metavar="K",

@@ -17,8 +17,8 @@ from ..estimation.calibration import (CalibrationAborted, CalibrationError, Guid
 from ..outputs import CHART_FILE, check_out, check_replaceable
 from ..core import MAX_SWEEPS
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import (add_protocol_v1_option, at_least, between, describe, out_path, seed,
-                      serial_port, spare_inputs, warn_protocol)
+from ._common import (add_protocol_v1_option, at_least, between, describe, out_path, scenario_name,
+                      seed, serial_port, spare_inputs, warn_protocol)
 
 EPILOG = """\
 what it does:
@@ -79,6 +79,7 @@ def register(p: argparse.ArgumentParser) -> None:
              "flat wall, on the simulated rig (default) or on the real ring (--port).",
              EPILOG)
     p.add_argument("--scenario", default=DEFAULTS["scenario"], metavar="NAME_OR_PATH",
+                   type=scenario_name,
                    help="scenario whose ring, sensor model, ADC and effects are used "
                         f"(default: {DEFAULTS['scenario']})")
     p.add_argument("--out", type=out_path, default=DEFAULTS["out"], metavar="FILE",

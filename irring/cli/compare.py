@@ -19,8 +19,7 @@ from ..studies.executor import executor
 from ..core import MAX_SEEDS
 from ..scenario import scenario_file
 from ._common import (add_executor_options, at_least, check_distances_clear, describe,
-                      distances_mm, named_once,
-                      out_path, seed_count)
+                      distances_mm, named_once, out_path, scenario_name, seed_count)
 
 # cylinder bearings a detection curve tries per distance: 3,600 took 20-50 s (0.008° apart
 # over the paper ring's 30° period); 10^8 ran out of memory
@@ -69,7 +68,7 @@ def register(p: argparse.ArgumentParser) -> None:
              "maps the same scenes (as `irring run` does) over several "
              "seeds; prints a table and writes CSV/JSON and a chart.",
              EPILOG)
-    p.add_argument("--scenario", action="append", metavar="S",
+    p.add_argument("--scenario", action="append", metavar="S", type=scenario_name,
                    help="bundled scenario name or YAML path; repeat for several (default: "
                         + ", ".join(DEFAULT_SCENARIOS) + ")")
     p.add_argument("--design", action="append", metavar="D",

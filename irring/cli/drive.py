@@ -22,8 +22,8 @@ from ..hardware import DeviceError, SerialRing
 from ..outputs import RUN_FILES, check_out
 from ..recording import save_recording
 from ..scenario import check_ring_placement, load_scenario
-from ._common import (add_mcap_option, add_protocol_v1_option, at_least, between, describe,
-                      mcap_beside_outputs, out_path, positive_seconds, serial_port,
+from ._common import (add_mcap_option, add_protocol_v1_option, at_least, between, describe, given,
+                      mcap_beside_outputs, out_path, positive_seconds, scenario_name, serial_port,
                       spare_inputs, warn_protocol)
 from .run import report
 
@@ -95,10 +95,11 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="longest silence tolerated while an answer is due, on top of the "
                         "per-step time, in seconds (default 1.0); a silent device is given up "
                         "after about 4× this")
-    p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+    p.add_argument("--calibration", type=given("a calibration file", Path), default=None,
+                   metavar="FILE",
                    help="calibration YAML from `irring calibrate` (default: the sensor's "
                         "datasheet curve)")
-    p.add_argument("--truth", default=None, metavar="SCENARIO",
+    p.add_argument("--truth", default=None, metavar="SCENARIO", type=scenario_name,
                    help="scenario the ring is standing in (name or YAML): its poses, sensor "
                         "settings and room are used, and the map is scored against it")
     p.add_argument("--poses", type=between(1, MAX_SWEEPS), default=None, metavar="N",

@@ -13,7 +13,7 @@ from ..hardware import protocol
 from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
 from ..scenario import load_scenario
 from ._common import (add_pose_option, at_least, between, describe, host_port, number_in,
-                      pose_index, seed)
+                      pose_index, scenario_name, seed)
 
 STALL_S_MAX = 86_400   # a day: longer is a firmware that never recovers, the default
 
@@ -49,7 +49,7 @@ def register(p: argparse.ArgumentParser) -> None:
              "optional fault injection. Runs until Ctrl-C (or the injected "
              "disconnect).",
              EPILOG)
-    p.add_argument("scenario", nargs="?", default="t_room",
+    p.add_argument("scenario", nargs="?", default="t_room", type=scenario_name,
                    help="bundled scenario name or YAML path (default: t_room)")
     p.add_argument("--link", metavar="PATH", default=None, type=_link_path,
                    help=f"symlink to the pty slave for the host to open (default: {DEFAULT_LINK} "

@@ -8,8 +8,7 @@ from pathlib import Path
 from .. import pipeline
 from ..errors import UsageError
 from ..outputs import REPLAY_SUFFIX, RUN_FILES, check_out, folder_name, folder_note, real_path
-from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path,
-                      spare_inputs)
+from ._common import add_mcap_option, describe, given, mcap_beside_outputs, out_path, spare_inputs
 from .run import report
 
 HELP = """\
@@ -36,9 +35,10 @@ examples:
 
 def register(p: argparse.ArgumentParser) -> None:
     describe(p, HELP)
-    p.add_argument("recording", type=Path, metavar="RECORDING",
+    p.add_argument("recording", type=given("a sweeps .npz recording", Path), metavar="RECORDING",
                    help="a sweeps .npz written by `irring run` or `irring drive`")
-    p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+    p.add_argument("--calibration", type=given("a calibration file", Path), default=None,
+                   metavar="FILE",
                    help="calibration YAML to use instead of the recorded one")
     p.add_argument("--out", type=out_path, default=None, metavar="DIR",
                    help="output folder (default: ./out/<run>-replay, <run> as above)")

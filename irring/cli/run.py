@@ -12,8 +12,8 @@ from ..core import score_text
 from ..maps import metrics
 from ..outputs import RUN_FILES, check_out, folder_name, folder_note
 from ..scenario import DEFAULT_SCENARIO, load_scenario
-from ._common import (add_mcap_option, describe, mcap_beside_outputs, out_path, seed,
-                      spare_inputs)
+from ._common import (add_mcap_option, describe, given, mcap_beside_outputs, out_path,
+                      scenario_name, seed, spare_inputs)
 
 HELP = """\
 Simulate one sweep of the ring at each of the scenario's scan poses, turn the ADC counts
@@ -51,6 +51,7 @@ examples:
 def register(p: argparse.ArgumentParser) -> None:
     describe(p, HELP)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
+                   type=scenario_name,
                    help="bundled scenario name or YAML path (default: t_room; "
                         "`irring scenarios` lists them; writing your own: every key, unit "
                         "and range in scenarios/README.md)")
@@ -60,7 +61,8 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="print a JSON summary on stdout instead of the readable one")
     p.add_argument("--seed", type=seed, default=None,
                    help="noise seed ≥ 0 (default: the scenario's `seed`)")
-    p.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+    p.add_argument("--calibration", type=given("a calibration file", Path), default=None,
+                   metavar="FILE",
                    help="calibration YAML from `irring calibrate` (default: what the scene "
                         "simulates: its sensor curve, a(θ), b(θ) only with `incidence`, its "
                         "noise; docs/calibration.md)")

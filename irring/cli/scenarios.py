@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .. import scenario
 from ..errors import IrringError, printable
-from ._common import describe
+from ._common import describe, scenarios_or_folders
 
 
 def register(p: argparse.ArgumentParser) -> None:
@@ -20,6 +20,7 @@ def register(p: argparse.ArgumentParser) -> None:
              "Writing your own: every key, unit and range in scenarios/README.md.",
              raw=False)
     p.add_argument("scenario", nargs="*", metavar="SCENARIO",
+                   type=scenarios_or_folders,
                    help="bundled scenario names, YAML paths or folders (every *.yaml in "
                         "them) to check (default: the bundled scenarios)")
     p.set_defaults(func=run)

@@ -14,7 +14,7 @@ from ..outputs import check_out, folder_name, folder_note
 from ..pipeline import progress_bar, progress_enabled
 from ..studies import study
 from ..studies.executor import WARMUP_NOTE, WorkerLost, capacity, executor
-from ._common import add_executor_options, describe, out_path
+from ._common import add_executor_options, describe, given, out_path
 
 EPILOG = f"""\
 the study file (YAML):
@@ -67,7 +67,8 @@ def register(p: argparse.ArgumentParser) -> None:
              "(mean and spread per configuration) and chart accuracy against hardware "
              "time with the Pareto front.",
              EPILOG)
-    p.add_argument("file", metavar="FILE.yaml", help="the study file (see below)")
+    p.add_argument("file", metavar="FILE.yaml", type=given("a study file"),
+                   help="the study file (see below)")
     p.add_argument("--out", type=out_path, default=None, metavar="DIR",
                    help="output folder (default: out/<file name without .yaml>, with ~ and "
                         "8 hex digits of its SHA-256 after a name of other than lower-case "

@@ -13,7 +13,7 @@ from ..outputs import (VIEW_FILE, VIEW_IN_FOLDER, VIEW_SOFTWARE, atomic_file, ch
                        check_replaceable, folder_name, folder_note)
 from ..scenario import DEFAULT_SCENARIO, load_scenario
 from ..simulation import gl
-from ._common import add_pose_option, describe, out_path, pose_index
+from ._common import add_pose_option, describe, out_path, pose_index, scenario_name
 
 # --size's bounds: each side, and the pixels in all that fit the memory irring view may use
 SIDE_PIXELS = (16, 8192)
@@ -40,6 +40,7 @@ examples:
 def register(p: argparse.ArgumentParser) -> None:
     describe(p, HELP)
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
+                   type=scenario_name,
                    help="bundled scenario name or YAML path (default: t_room)")
     add_pose_option(p, 1, "where the robot stands")
     p.add_argument("--step", type=int, default=0, metavar="S",
