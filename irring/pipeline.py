@@ -663,6 +663,22 @@ def _check_scenario_sensor(scenario: Scenario, sweeps: Sequence[Sweep], recordin
                 "scenario and the sweeps do not belong together")
 
 
+def _check_one_ring(sweeps: Sequence[Sweep], recording) -> None:
+    """The sweeps of a recording are one ring's (irring run records one scene, irring drive
+    one handshake's IRINF): a sweep of another ring was pieced in or edited, and one of 11
+    sensors among 12's ended the replay in an internal error after its outputs were written
+    (the stuck-sensor check stacks every sweep's readings)."""
+    first = sweeps[0].ring
+    for k, sweep in enumerate(sweeps[1:], start=2):
+        for f in dataclasses.fields(first):
+            have, want = getattr(sweep.ring, f.name), getattr(first, f.name)
+            if have != want:
+                raise rec.RecordingError(
+                    f"{recording}: sweep {k}'s ring has {f.name} {have:g}, sweep 1's {want:g}; "
+                    "the sweeps of one recording are one ring's (irring run and irring drive "
+                    "record one), so these were edited or pieced together")
+
+
 def _check_simulated_sweeps(scenario: Scenario, sweeps: Sequence[Sweep], recording) -> None:
     """A simulated sweep whose ring is not the recorded scenario's, which simulated it, or
     that carries a pose per reading where the scene stands still (or none where it drives:
@@ -808,6 +824,7 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
             if calibration_file is None and not meta.get("calibration_yaml"):
                 raise
             unscored = str(exc)
+    _check_one_ring(sweeps, recording)
     if scenario is not None:
         _check_room_holds_poses(scenario, sweeps, recording)
         _check_scenario_sensor(scenario, sweeps, recording)

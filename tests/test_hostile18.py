@@ -113,38 +113,54 @@ def test_a_recording_whose_angles_contradict_their_steps_is_refused(t_room_recor
 
 
 def test_a_simulated_sweep_whose_ring_is_not_its_scenarios_is_refused(t_room_recording, tmp_path):
-    """sweep002's ring given a radius of 0.2 m (t_room's ring, which simulated it, is 0.15):
-    its end points placed 50 mm out, F1 0.995 -> 0.679, exit 0. The sensor model was checked
-    against the recorded scenario; the ring was not."""
-    scalars = json.loads(str(t_room_recording["sweep002/scalars"]))
-    scalars["ring"]["radius_m"] = 0.2
-    path = _edited(t_room_recording, tmp_path / "ring.npz",
-                   **{"sweep002/scalars": np.array(json.dumps(scalars))})
+    """Every sweep's ring given a radius of 0.2 m (t_room's ring, which simulated them, is
+    0.15): the end points placed 50 mm out. The sensor model was checked against the
+    recorded scenario; the ring was not. (Sweep 3's alone: F1 0.995 -> 0.679, exit 0.)"""
+    def rings(radius_m: float, source: str | None = None) -> dict:
+        out = {}
+        for k in range(4):
+            scalars = json.loads(str(t_room_recording[f"sweep{k:03d}/scalars"]))
+            scalars["ring"]["radius_m"] = radius_m
+            if source is not None:
+                scalars["source"] = source
+            out[f"sweep{k:03d}/scalars"] = np.array(json.dumps(scalars))
+        return out
+
+    path = _edited(t_room_recording, tmp_path / "ring.npz", **rings(0.2))
     with pytest.raises(RecordingError) as err:
         pipeline.replay(path)
     assert str(err.value) == (
-        f"{path}: sweep 3 was simulated with ring.radius_m 0.2, but the recorded scenario "
+        f"{path}: sweep 1 was simulated with ring.radius_m 0.2, but the recorded scenario "
         "'t_room', which simulated it, has 0.15; the scenario and the sweeps do not belong "
         "together")
     # a device's ring is its IRINF's, which may differ from the truth scene's: replayed
-    scalars["source"] = "serial:/dev/ttyACM0"
     device = _edited(t_room_recording, tmp_path / "device.npz",
-                     **{"sweep002/scalars": np.array(json.dumps(scalars))})
+                     **rings(0.2, "serial:/dev/ttyACM0"))
     assert len(pipeline.replay(device).points) == 4
 
 
-def test_bench_long_refuses_a_sweep_the_estimator_would_refuse_before_measuring_any(capsys):
-    """`irring bench long --steps 71 60000` measured the 71-step sweeps, then the estimator
-    refused 60,000 steps × 12 sensors (exit 5) and the rows measured were not printed: with
-    the default steps first, a minute's work lost, and an advice ("fewer steps, or the sweep
-    in parts") that names no option. 50,505 steps of 12 sensors is the most it takes."""
-    with pytest.raises(SystemExit) as err:
-        main(["bench", "long", "--kind", "circle", "--steps", "71", "50506"])
-    assert err.value.code == 2
-    err_text = capsys.readouterr().err
-    assert err_text.endswith(
-        "irring bench long: error: argument --steps: must be in 2 … 50505, got 50506\n")
-    assert MAX_ESTIMATED_READINGS // 12 == 50505   # the longest sweep it may ask for
+def test_a_recording_of_two_rings_is_refused_not_an_internal_error(t_room_recording,
+                                                                    tmp_path, capsys):
+    """A device's recording whose first sweep is of 11 sensors (the last column cut, its ring
+    saying 11) and the others of 12: the replay wrote its outputs, then its stuck-sensor check
+    stacked every sweep's readings: "internal error (ValueError: all the input array
+    dimensions except for the concatenation axis must match exactly …)", exit 70."""
+    edits = {k: v[:, :11] for k, v in t_room_recording.items()
+             if k.startswith("sweep000/") and v.ndim >= 2 and v.shape[1] == 12}
+    for k in range(4):
+        scalars = json.loads(str(t_room_recording[f"sweep{k:03d}/scalars"]))
+        scalars["source"] = "serial:/dev/ttyACM0"
+        if k == 0:
+            scalars["ring"]["sensors"] = 11
+        edits[f"sweep{k:03d}/scalars"] = np.array(json.dumps(scalars))
+    path = _edited(t_room_recording, tmp_path / "two.npz", **edits)
+    out = tmp_path / "o"
+    assert main(["replay", str(path), "--out", str(out), "--no-animation"]) == 1
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"irring replay: error: {path}: sweep 2's ring has sensors 12, sweep 1's 11; the sweeps "
+        "of one recording are one ring's (irring run and irring drive record one), so these "
+        "were edited or pieced together")
+    assert not out.exists()
 
 
 def test_a_standing_scenes_sweep_with_a_pose_for_each_reading_is_refused(t_room_recording,
