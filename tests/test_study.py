@@ -897,3 +897,25 @@ def test_the_chart_labels_its_time_axis_in_plain_seconds(small, tmp_path):
             lo, hi = ax.get_xlim()
             assert [t.get_text() for t in ax.get_xticklabels()
                     if t.get_text() and lo <= t.get_position()[0] <= hi] == labels
+
+
+def test_a_run_that_raises_says_how_many_runs_are_kept(small, tmp_path, monkeypatch, capsys):
+    """A run that raised (a bug in one room or seed) ended the study with the bug's line
+    alone: nothing said the runs before it were kept for --resume."""
+    p, rows = small
+    out = tmp_path / "out"
+    real, ran = study.run_point, []
+
+    def the_third_raises(task):
+        ran.append(task)
+        if len(ran) == 3:
+            raise ValueError("a bug in run 3")
+        return real(task)
+
+    monkeypatch.setattr(study, "run_point", the_third_raises)
+    assert main(["study", str(p), "--out", str(out), "--workers", "1"]) == errors.INTERNAL
+    assert capsys.readouterr().err == (
+        "irring study: error: internal error (ValueError: a bug in run 3); rerun with --debug "
+        f"(or IRRING_DEBUG=1) for the traceback and please report it; 2 finished run(s) kept "
+        f"in {out / study.RESULTS}: run the same command with --resume to run the rest\n")
+    assert len(study.read_results(out / study.RESULTS)) == 2

@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 import time
+import traceback
 from pathlib import Path
 
 from .. import errors
@@ -48,8 +49,8 @@ writes to DIR:
   study.png       occupied F1 and coverage against hardware time, Pareto front marked;
                   titled with the study file's name and its runs (designs × rooms × …)
 
-a run that fails stops the study (a worker killed under its run, as by the out-of-memory
-killer: exit 130, with how many runs are kept); the finished runs stay for --resume.
+a run that fails stops the study, its line ending with how many finished runs are kept for
+--resume (a worker killed under its run, as by the out-of-memory killer: exit 130).
 runs made elsewhere (one study split by seeds over machines) merge: append each part's
 results.csv rows, without the header, to one DIR/results.csv and run the whole study with
 --resume (start each part alike: a room's path as the study file reaches it names its rows).
@@ -88,19 +89,28 @@ def run(args: argparse.Namespace) -> int:
                     files=study.SUMMARY_FILES.values())
     t0 = time.perf_counter()
     shown = progress_enabled() and not args.json
+    started: list[int] = []
     try:
         with executor(args.workers, args.dask) as ex, \
                 progress_bar(0, "study", shown, unit="run", warmup=capacity(ex),
                              warmup_note=WARMUP_NOTE) as bar:
-            result = study.run_study(spec, out, ex, resume=args.resume,
-                                     on_start=lambda done, todo: bar.reset(total=todo),
-                                     progress=lambda _: bar.update())
+            result = study.run_study(
+                spec, out, ex, resume=args.resume,
+                on_start=lambda done, todo: (started.append(todo), bar.reset(total=todo)),
+                progress=lambda _: bar.update())
     except WorkerLost as exc:   # killed from outside as Ctrl-C would stop it: the rows stay
         raise WorkerLost(f"{exc}; {_kept(out)}") from exc
     except BaseException as exc:   # Ctrl-C, SIGTERM, or an import they cut short
-        if not errors.interrupted(exc):
+        if errors.interrupted(exc):
+            return _interrupted(out)
+        if not started or isinstance(exc, errors.IrringError):
             raise
-        return _interrupted(out)
+        # a run that raised (a bug): its line, and that the runs before it are kept
+        if getattr(args, "debug", False):
+            traceback.print_exc()
+        status, message = errors.describe(exc)
+        print(f"irring study: error: {message}; {_kept(out)}", file=sys.stderr)
+        return status
     wall = time.perf_counter() - t0
     by, records = study.summary_records(out)
     if args.json:
