@@ -51,6 +51,7 @@ writes to DIR:
 
 a run that fails stops the study, its line ending with how many finished runs are kept for
 --resume (a worker killed under its run, as by the out-of-memory killer: exit 130).
+
 runs made elsewhere (one study split by seeds over machines) merge: append each part's
 results.csv rows, without the header, to one DIR/results.csv and run the whole study with
 --resume (start each part alike: a room's path as the study file reaches it names its rows).
