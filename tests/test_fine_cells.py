@@ -83,21 +83,35 @@ def test_a_wall_read_by_agreeing_readings_is_drawn_within_a_cell_of_it():
     floor in front (ahead_floor 1) cells of row 118, 10–15 mm in front of the wall's row and
     outside the map's 1-cell tolerance, are occupied where the hits of several sensors'
     beams overlap; without it only the wall's row and the row in front of it. The wall's
-    row between the end points' cells is unbroken only with the hits between steps."""
+    row between the end points' cells is unbroken only with the hits between steps in every
+    cell between (``between_end_cells`` 1, at ½); its end points lie 2–3 cells apart, so the
+    default (0.3 from 2 cells off both ends) maps it as without them, every cell of the row
+    within a cell of an occupied one."""
     pts = wall_sweep(0.0105)
     cols = np.floor(pts.x / RES).astype(int)
     span = np.arange(cols.min(), cols.max() + 1)
-    rows, unbroken = {}, {}
+    rows, unbroken, maps = {}, {}, {}
     for floor, between in ((0.0, 0.5), (1.0, 0.5), (0.0, 0.0)):
         g = OccupancyGrid((0.0, 0.0), (140, 200), RES,
-                          MapperParams(ahead_floor=floor, between_steps=between))
+                          MapperParams(ahead_floor=floor, between_steps=between,
+                                       between_end_cells=1))
         g.insert(pts)
         occ = g.classify() == OCCUPIED
         rows[floor, between] = set(np.nonzero(occ)[0].tolist())
         unbroken[floor, between] = bool(occ[120, span].all())
+        maps[floor, between] = occ
     assert rows[0.0, 0.5] == rows[0.0, 0.0] == {119, 120}
     assert rows[1.0, 0.5] == {118, 119, 120}
     assert unbroken[0.0, 0.5] and not unbroken[0.0, 0.0]
+    default = OccupancyGrid((0.0, 0.0), (140, 200), RES)
+    default.insert(pts)
+    occ = default.classify() == OCCUPIED
+    np.testing.assert_array_equal(occ, maps[0.0, 0.0])
+    near = np.zeros_like(occ)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= np.roll(np.roll(occ, dy, 0), dx, 1)
+    assert near[120, span].all()
 
 
 def two_steps(ys=(0.6025, 0.6025), xs=(0.3113, 0.3371), sigma=(0.010, 0.012)) -> Points:
@@ -116,19 +130,26 @@ def two_steps(ys=(0.6025, 0.6025), xs=(0.3113, 0.3371), sigma=(0.010, 0.012)) ->
 
 
 def test_consecutive_steps_on_one_surface_mark_the_cells_between():
-    """End points at x = 311.3 and 337.1 mm in cell row 120: the cells strictly between
-    their cells (63–66) get half the weaker hit (σ 12 mm: l_occ_min 1.6), 0.8 each, and
-    nothing else; sensor 1's lone reading joins nothing."""
-    params = MapperParams(between_steps=0.5)
+    """End points at x = 311.3 and 337.1 mm in cell row 120 (cells 62 and 67): the cells
+    strictly between them (63–66) get half the weaker hit (σ 12 mm: l_occ_min 1.6), 0.8
+    each, with ``between_end_cells`` 1; by default only those 2 cells or more from both end
+    cells (64, 65), 0.3 of it (0.48, under the occupied threshold's 0.62 alone), and nothing
+    else; sensor 1's lone reading joins nothing."""
     pts = two_steps()
-    iy, ix, w = between_steps(pts, (140, 140), (0.0, 0.0), RES, params)
-    assert iy.tolist() == [120] * 4 and ix.tolist() == [63, 64, 65, 66]
-    np.testing.assert_allclose(w, 0.8)
-    kernel, oracle = both(params, pts, (140, 140))
-    np.testing.assert_allclose(kernel[120, 63:67], 0.8, atol=1e-4)
-    np.testing.assert_allclose(oracle[120, 63:67], 0.8, atol=1e-12)
     off, _ = both(MapperParams(between_steps=0.0), pts, (140, 140))
     np.testing.assert_array_equal(off[120, 63:67], 0.0)
+    for params, cells, w_want in ((MapperParams(between_steps=0.5, between_end_cells=1),
+                                   [63, 64, 65, 66], 0.8),
+                                  (MapperParams(), [64, 65], 0.48)):
+        iy, ix, w = between_steps(pts, (140, 140), (0.0, 0.0), RES, params)
+        assert iy.tolist() == [120] * len(cells) and ix.tolist() == cells
+        np.testing.assert_allclose(w, w_want)
+        kernel, oracle = both(params, pts, (140, 140))
+        np.testing.assert_allclose(kernel[120, cells], w_want, atol=1e-4)
+        np.testing.assert_allclose(oracle[120, cells], w_want, atol=1e-12)
+        rest = np.ones(off.shape, bool)
+        rest[120, cells] = False
+        np.testing.assert_array_equal(kernel[rest], off[rest])
 
 
 def test_steps_that_disagree_or_fit_in_two_cells_join_nothing():
@@ -143,3 +164,51 @@ def test_steps_that_disagree_or_fit_in_two_cells_join_nothing():
     # σ above lone_sigma_m (a θ = 0 fallback) joins nothing
     assert between_steps(two_steps(sigma=(0.010, 0.040)), (140, 140), (0.0, 0.0), RES,
                          params) is None
+
+
+FAR_Y = 1.2013                   # a far wall in cell row 240 (1200–1205 mm)
+
+
+def far_sweep(sigma_m: float, emitters) -> Points:
+    """Sensors at ``emitters`` read every other step (2.16° apart, ``step_stride`` 2) onto
+    the wall y = 1201.3 mm, 10° off square to 9.4° beyond, each end point on the wall (a
+    GP2Y0A02's far wall): its end points 8–9 five-mm cells apart along it."""
+    heading = np.radians(90.0 - 10.0 + 2.16 * np.arange(10))[:, None] + np.zeros(len(emitters))
+    ox = np.array([e[0] for e in emitters]) + np.zeros((10, 1))
+    oy = np.array([e[1] for e in emitters]) + np.zeros((10, 1))
+    d = (FAR_Y - oy) / np.sin(heading)
+    n = heading.shape
+    return Points(x=ox + d * np.cos(heading), y=oy + d * np.sin(heading), d=d,
+                  theta=np.zeros(n), origin_x=ox, origin_y=oy, heading=heading,
+                  sigma_m=np.full(n, sigma_m), iterations=np.ones(n, int),
+                  valid=np.ones(n, bool), reason=np.zeros(n, np.uint8), max_range_m=1.5)
+
+
+def far_gaps(params: MapperParams, points: Points) -> tuple[int, int]:
+    """(cells of the wall's row between the end points farther than a cell from any
+    occupied cell, occupied cells)."""
+    g = OccupancyGrid((0.0, 0.0), (260, 200), RES, params)
+    g.insert(points)
+    occ = g.classify() == OCCUPIED
+    near = np.zeros_like(occ)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= np.roll(np.roll(occ, dy, 0), dx, 1)
+    cols = np.floor(points.x / RES).astype(int)
+    assert set(np.nonzero(occ)[0].tolist()) <= {239, 240}    # nothing off the wall
+    return int((~near[240, cols.min():cols.max() + 1]).sum()), int(occ.sum())
+
+
+def test_a_far_wall_read_every_other_step_is_drawn_between_its_end_points():
+    """A sharp sensor (σ 1 mm, the ideal sensor's) reading a far wall every other step
+    leaves 50 of the wall's cells more than a cell from its hits; the segments between its
+    steps (0.3 of a sharp hit, 0.75, marks a cell alone) leave none. One noisy sensor's
+    segments (σ 12 mm: 0.48) mark nothing alone; two sensors that swept the same stretch of
+    wall agree there and leave none of the 37 gaps."""
+    off = MapperParams(between_steps=0.0)
+    one, two = ((0.4317, 0.0529),), ((0.4317, 0.0529), (0.4391, 0.0502))
+    assert far_gaps(off, far_sweep(0.001, one)) == (50, 21)
+    assert far_gaps(MapperParams(), far_sweep(0.001, one)) == (0, 72)
+    assert far_gaps(MapperParams(), far_sweep(0.012, one)) == far_gaps(off, far_sweep(0.012, one))
+    assert far_gaps(off, far_sweep(0.012, two))[0] == 37
+    assert far_gaps(MapperParams(), far_sweep(0.012, two))[0] == 0

@@ -440,11 +440,12 @@ def _scalars(data: bytes, **changes) -> bytes:
     (lambda d: _scalars(d, missing_steps=[3, 0]),
      "sweep000/scalars.missing_steps: step 3 lies outside the ring's steps -2 … 2"),
     # a recording from an irring whose mapper has another parameter: the message listed
-    # this mapper's 27 parameters and was cut before it said which key was wrong
+    # this mapper's 28 parameters and was cut before it said which key was wrong
     (lambda d: _rewrite(d, "meta", np.array(json.dumps({"mapper": {"l_occ": 2.0,
                                                                    "beam_width": 3.0}}))),
      "meta.mapper.beam_width: a mapper parameter this irring does not have (a recording from "
-     "another irring version?); it maps with ahead_floor, between_steps, cone_l_free, "),
+     "another irring version?); it maps with ahead_floor, between_end_cells, between_steps, "
+     "cone_l_free, "),
     (lambda d: _rewrite(d, "meta", np.array(json.dumps({"mapper": {"l_occ": 2.0,
                                                                    "l_free": "-1.5"}}))),
      "meta.mapper.l_free: expected a finite number -1000 … 1000, got '-1.5'"),

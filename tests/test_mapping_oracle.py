@@ -68,13 +68,13 @@ def prior_map(rng, shape, params):
        hold=st.sampled_from([0.005, 0.02, 0.0]),
        depth=st.sampled_from([1.25, 0.0, 3.0]), jump=st.sampled_from([5.0, 0.0, 20.0]),
        sensors=st.sampled_from([1, 3, 12]), ahead=st.sampled_from([0.0, 1.0, 0.4]),
-       between=st.sampled_from([0.5, 0.0, 1.0]))
+       between=st.sampled_from([0.5, 0.0, 1.0]), gap=st.sampled_from([2, 1, 3]))
 def test_insert_agrees_with_the_numpy_oracle(seed, ny, nx, n, cone, stop, lone, free_sigmas,
-                                             hold, depth, jump, sensors, ahead, between):
+                                             hold, depth, jump, sensors, ahead, between, gap):
     rng = np.random.default_rng(seed)
     params = MapperParams(no_return_stop=stop, lone_sigma_m=lone, free_sigmas=free_sigmas,
                           hold_sigma_m=hold, hit_depth_cells=depth, edge_jump_cells=jump,
-                          ahead_floor=ahead, between_steps=between)
+                          ahead_floor=ahead, between_steps=between, between_end_cells=gap)
     g = OccupancyGrid((0.013, -0.021), (ny, nx), 0.01, params)
     g.log_odds = prior_map(rng, (ny, nx), params)
     pts = drawn_readings(rng, n, (nx * 0.01, ny * 0.01), max_range_m=0.3, cone=cone and n <= 30)

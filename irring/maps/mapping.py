@@ -65,8 +65,13 @@ class MapperParams:
     # point, as before 2026-11-27)
     ahead_floor: float = 0.0
     # hits along the segment between consecutive steps of a sensor whose ranges agree within
-    # explain_sigmas combined σ (σ ≤ lone_sigma_m): this share of the weaker one's (0: off)
-    between_steps: float = 0.0
+    # explain_sigmas combined σ (σ ≤ lone_sigma_m): this share of the weaker one's (0: off;
+    # 0.3: a pair of σ ≤ occ_sigma_m marks a cell alone, a pair of noisier ones needs a
+    # second segment or hit to agree) …
+    between_steps: float = 0.3
+    # … in the segment's cells at least this many cells (Chebyshev) from both end points'
+    # cells: the nearer ones are within a cell of an end point's own hit already
+    between_end_cells: float = 2.0
     hold_sigma_m: float = 0.005   # a cell holding an end point of σ ≤ this is not freed by its batch
     # … and where the next or previous step of its sensor reads ≥ edge_jump_cells farther (or
     # nothing: an occluding edge), the surface behind it weighs l_occ_min this deep (cells)
@@ -115,6 +120,9 @@ class MapperParams:
         if not (math.isfinite(self.between_steps) and 0 <= self.between_steps <= 1):
             raise ValueError(f"need between_steps within 0 … 1 (0: off), got "
                              f"{self.between_steps}")
+        if not (self.between_end_cells in range(1, 1001)):
+            raise ValueError(f"need a whole number 1 … 1000 of between_end_cells (1: every "
+                             f"cell between the end points' own), got {self.between_end_cells}")
         if not self.hold_sigma_m >= 0:
             raise ValueError(f"need hold_sigma_m ≥ 0, got {self.hold_sigma_m}")
         for name in ("hit_depth_cells", "edge_jump_cells"):
@@ -578,8 +586,9 @@ def between_steps(points: Points, shape, origin_xy_m, resolution_m: float,
     """(iy, ix, log-odds) the hits between a sensor's consecutive steps add: for valid
     readings of σ ≤ ``lone_sigma_m`` in consecutive rows (steps) of one column (sensor)
     whose ranges differ by at most ``explain_sigmas`` combined σ (one surface the beam swept
-    from one to the other), every cell the segment between their end points crosses but the
-    two end cells, ``between_steps`` × the weaker :func:`hit_weight` of the two once. None
+    from one to the other), every cell the segment between their end points crosses at least
+    ``between_end_cells`` cells (Chebyshev) from both end cells, ``between_steps`` × the
+    weaker :func:`hit_weight` of the two once. None
     when there is nothing to add (off, a cone, a batch that is not a sweep's rows). Numpy,
     the same for the compiled insert and the oracle (docs/mapping.md, "Fine
     cells")."""
@@ -597,13 +606,15 @@ def between_steps(points: Points, shape, origin_xy_m, resolution_m: float,
         pair = (ok[:-1] & ok[1:] & (np.abs(d[1:] - d[:-1])
                                     <= params.explain_sigmas * np.hypot(sigma[1:], sigma[:-1])))
     r, k = np.nonzero(pair)
-    if r.size:   # (end points in one cell or two sharing a side: no cell between them)
-        with np.errstate(invalid="ignore"):
-            cx = np.floor((x[r, k] - origin_xy_m[0]) / resolution_m)
-            cy = np.floor((y[r, k] - origin_xy_m[1]) / resolution_m)
-            dx = np.abs(np.floor((x[r + 1, k] - origin_xy_m[0]) / resolution_m) - cx)
-            dy = np.abs(np.floor((y[r + 1, k] - origin_xy_m[1]) / resolution_m) - cy)
-        apart = dx + dy > 1
+    gap = params.between_end_cells
+    with np.errstate(invalid="ignore"):
+        cx, cy = (np.floor((c - o) / resolution_m) for c, o in ((x, origin_xy_m[0]),
+                                                                (y, origin_xy_m[1])))
+    if r.size:   # (end points in one cell or two sharing a side: no cell between them; end
+        #           cells under 2·gap − 1 apart: none of them gap cells from both)
+        dx = np.abs(cx[r + 1, k] - cx[r, k])
+        dy = np.abs(cy[r + 1, k] - cy[r, k])
+        apart = (dx + dy > 1) & (np.maximum(dx, dy) >= 2 * gap - 1)
         r, k = r[apart], k[apart]
     if r.size == 0:
         return None
@@ -611,6 +622,10 @@ def between_steps(points: Points, shape, origin_xy_m, resolution_m: float,
                                           hit_weight(sigma[r + 1, k], params))
     v = traverse(x[r, k], y[r, k], x[r + 1, k], y[r + 1, k], origin_xy_m, shape, resolution_m)
     inner = (v.t_enter > 0) & (v.t_exit < 1)     # (the end points' own cells have their hits)
+    if gap > 1:
+        a, b = (r[v.ray], k[v.ray]), (r[v.ray] + 1, k[v.ray])
+        inner &= ((np.maximum(np.abs(v.ix - cx[a]), np.abs(v.iy - cy[a])) >= gap)
+                  & (np.maximum(np.abs(v.ix - cx[b]), np.abs(v.iy - cy[b])) >= gap))
     if not inner.any():
         return None
     return v.iy[inner], v.ix[inner], w[v.ray[inner]]
