@@ -681,6 +681,40 @@ def meet_circle(centre, radius: float, ox, oy, ex, ey):
     return t, np.arccos(cos), (disc > 0.0) & (along > 0.0)
 
 
+def members_on_arcs(points: Points, label: np.ndarray, vi: np.ndarray, pos: np.ndarray,
+                    pr: Profile, cal: Calibration) -> tuple[Points, np.ndarray, np.ndarray]:
+    """Members of lines a rule disowned (``pos``: ascending positions into the valid
+    readings ``vi``; ``pr`` profiles every valid reading) read on a round thing's arc where
+    one fits (:func:`arc_incidence`) and its run's θ = 0 end points bulge towards the
+    sensor (:func:`_bulging`: a convex thing, not a concave wall), in sweeps of one sensor
+    only (``rotating1``); numpy, shared by both estimators. Returns the points (those taken
+    at the arc's θ, d and σ), ``label`` (those taken, −1) and which of ``pos`` were taken.
+    Why, and why one sensor only: docs/estimator.md, "A disowned line on a pillar"."""
+    taken = np.zeros(pos.size, dtype=bool)
+    if points.valid.shape[1] != 1 or pos.size == 0:
+        return points, label, taken
+    th, dist, sig, good, _, _ = arc_incidence(pr, pos, cal)
+    if not good.any():
+        return points, label, taken
+    # the runs arc_incidence fitted (one polyline, steps ARC_GAP_STEPS apart)
+    chain, step = pr.chain[pos], pr.step[pos]
+    cut = np.ones(pos.size, dtype=bool)
+    cut[1:] = (chain[1:] != chain[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
+    group = np.cumsum(cut) - 1
+    h, d0, ox, oy = pr.heading[pos], pr.d0[pos], pr.ox[pos], pr.oy[pos]
+    convex = _bulging(ox + d0 * np.cos(h), oy + d0 * np.sin(h), ox, oy, group,
+                      int(group[-1]) + 1)[0]
+    good &= convex[group]
+    if not good.any():
+        return points, label, taken
+    at = vi[pos[good]]
+    points = placed_at(points, at, dist[good], th[good], sig[good])
+    label = label.copy()
+    label.reshape(-1)[at] = -1
+    taken[good] = True
+    return points, label, taken
+
+
 def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                     steps: np.ndarray, cal: Calibration, profiler: Callable | None = None
                     ) -> tuple[Points, np.ndarray]:

@@ -16,6 +16,7 @@ import numpy as np
 from ..core import Points, Reason, points_with
 from ..resources import kernel
 from .calibration import SIGMA_FLOOR_M, Calibration
+from .arcs import members_on_arcs
 from .bounds import kept_where_bounded
 from .lines import PINNED_RAD, placed_at
 from .profiles import AGAIN_SIGMA_M, leave_doubted_line, own_slope_sigma, profiles_compiled
@@ -256,8 +257,9 @@ def counts_disown_lines(points: Points, label: np.ndarray, index: np.ndarray,
     lab = label.reshape(-1)[vi]
     pos = ((lab >= 0) & bad[np.maximum(lab, 0)]).nonzero()[0]
     pr = (profiler or profiles_compiled)(points, vi, pos, counts, steps, cal)
-    points, label = leave_doubted_line(points, label, vi, pos, pr,
-                                        np.ones(pos.size, dtype=bool), cal)
+    # (one sensor's run across a pillar: on its arc, where one fits)
+    points, label, taken = members_on_arcs(points, label, vi, pos, pr, cal)
+    points, label = leave_doubted_line(points, label, vi, pos[~taken], pr, ~taken, cal)
     points = counts_pieces(points, vi[pos], lab[pos], counts, cal, pr.convex,
                            fitter or CountsFitKernels)
     kept = kept_where_bounded(points, vi, pos, pr, cal)

@@ -17,7 +17,7 @@ import numpy as np
 from ..core import Points, Reason, points_with, rows_in_step_order
 from ..resources import kernel
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, SIGMA_FLOOR_M, Calibration
-from .arcs import ARC_DOUBT_RAD, ARC_MISFIT, ARC_MISS, ARC_ON, meet_circle
+from .arcs import ARC_DOUBT_RAD, ARC_MISFIT, ARC_MISS, ARC_ON, meet_circle, members_on_arcs
 from .lines import direction_se, read_to_own_range
 from .profiles import LOCAL_MIN, LOCAL_STEPS, Profile, leave_doubted_line, profiles_compiled
 
@@ -382,9 +382,14 @@ def doubt_far_lines(points: Points, label: np.ndarray, index: np.ndarray, counts
             int(lab.max()) + 1, cal, LOCAL_STEPS, LOCAL_MIN, FAR_LINE_Z, FAR_LINE_SHIFT_M)
         doubted[asked] = off_line[lab[ask[asked]]]
     voted = doubted.copy()   # (a line its members voted off: every member leaves it)
+    taken = np.zeros(ask.size, dtype=bool)
+    if voted.any():   # (one sensor's run across a pillar: on its arc, where one fits)
+        points, label, taken[voted] = members_on_arcs(points, label, vi, ask[voted], pr, cal)
+        voted &= ~taken
     if loose.any():   # … each member whose own straight slope is clearly not the line's
         doubted |= loose[ask] & pr.ok & (np.abs(np.tan(theta_now[ask]) - np.abs(pr.slope))
                                          > SHORT_LINE_OWN_SE * pr.se)
+    doubted &= ~taken
     if not doubted.any():
         return points, label
     return leave_doubted_line(points, label, vi, ask[doubted], pr, doubted, cal,
