@@ -35,7 +35,8 @@ from .lines import (PINNED_RAD, Estimate, LineOptions, far_sigma_cap, jump_slope
                     read_to_own_range, scan_order, segment, snap_to_lines)
 from .members import (across_silence, alone_at_an_edge_compiled, dim_returns_on_lines,
                       past_other_lines, unplaced_alone)
-from .profiles import SharedProfiles, profiles_compiled, unknown_theta_free
+from .profiles import (SharedProfiles, profiles_compiled, theta_free_in_noise,
+                       unknown_theta_free)
 from .silence import (beside_a_return_compiled, censored_lines, classify, drop_beyond_range,
                       held_and_pooled, no_return_reach, noise_past_line_end, silent_behind_a_wall,
                       silent_reach)
@@ -322,7 +323,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     wall's facets read as two pieces (:func:`faceted_lines`), members read just past
     the max range kept only where their line put them within it (:func:`drop_beyond_range`),
     (``snap`` only) far posts' circles and readings unplaced alone, INCIDENCE_UNKNOWN readings
-    no θ moves (an ideal sensor's) at θ = 0 (:func:`unknown_theta_free`),
+    no θ moves (an ideal sensor's) at θ = 0 (:func:`unknown_theta_free`; last of all,
+    any of them placed past its noise back at θ = 0: :func:`theta_free_in_noise`),
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
     oracle passes its numpy statements of both; never past ``cal.silent_range_m``:
     :func:`silent_reach`), last (``snap`` only) dim returns beside a line's members put on it
@@ -424,11 +426,12 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     pooled = (points.valid & (counts < cal.no_return_counts + cal.return_margin_counts)
               if read_to_own_range(cal, points.max_range_m) else None)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
+    own = counts if raw_counts is None else raw_counts   # (each reading's own, not pooled)
     # dim returns beside a line's members put on it once every rule above has decided
     # (snap_label None: a fold-over's judging pass keeps its lines as fitted)
     if not (detail or silent or (pooled is not None and pooled.any())):
-        return Estimate(points=dim_returns_on_lines(points, snap_label, counts, raw_counts,
-                                                    steps, cal),
+        points = dim_returns_on_lines(points, snap_label, counts, raw_counts, steps, cal)
+        return Estimate(points=theta_free_in_noise(points, own, cal),
                         lines=None, theta_history=tuple(history))
     pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
                          alpha=grouping.alpha, usable=grouping.usable)
@@ -448,6 +451,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = silent_reach(beside(points_with(points, reach_m=reach_m), counts, cal,
                                      options, found.label), cal)
     points = dim_returns_on_lines(points, snap_label, counts, raw_counts, steps, cal)
+    # last: whatever a rule above did, a reading no θ moves stays within its noise
+    points = theta_free_in_noise(points, own, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 

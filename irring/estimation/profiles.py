@@ -348,6 +348,34 @@ def unknown_theta_free(points: Points, counts: np.ndarray, cal: Calibration) -> 
     return points_with(points, valid=valid, reason=reason)
 
 
+THETA_FREE_SIGMAS = 3.0   # a θ-free reading stays within this many of its θ = 0 σ
+
+
+def theta_free_in_noise(points: Points, counts: np.ndarray, cal: Calibration) -> Points:
+    """``points`` with every valid reading placed more than ``THETA_FREE_SIGMAS`` θ = 0 σ
+    from its θ = 0 distance read there, at θ = 0 with that σ, where the calibration has no
+    θ dependence (``cal.theta_free``: the ideal sensor's) and does not fold: its counts
+    alone measure its range, so no line, arc or neighbour moves it past its noise.
+    ``counts`` (S, N): the counts it was read from. Why: docs/estimator.md, "A θ-free
+    reading stays within its noise"."""
+    if not cal.theta_free or cal.folds:
+        return points
+    at = np.asarray(points.valid).reshape(-1).nonzero()[0]
+    s = np.asarray(counts, dtype=float).reshape(-1)[at]
+    lit = s > 0.0
+    at, s = at[lit], s[lit]
+    if not at.size:
+        return points
+    d0 = cal.distance(s, 0.0)
+    free, sigma = _theta_free(cal, s, d0, cal.sigma_counts() / s, points.max_range_m)
+    with np.errstate(invalid="ignore"):
+        off = free & ~(np.abs(np.asarray(points.d, float).reshape(-1)[at] - d0)
+                       <= THETA_FREE_SIGMAS * sigma)
+    if not off.any():
+        return points
+    return placed_at(points, at[off], d0[off], 0.0, sigma[off])
+
+
 def _theta_free(cal: Calibration, s: np.ndarray, d0: np.ndarray, sig_s: np.ndarray,
                 max_range_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(which, σ) of readings (counts ``s``, θ = 0 distance ``d0``, ``sig_s``: σ_S/S) that
