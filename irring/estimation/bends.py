@@ -1135,6 +1135,9 @@ REREAD_FINE_RAD = np.radians(np.arange(-1.0, 1.05, 0.1))    # … on this grid, 
 REREAD_SURE_RAD = math.radians(5)  # a piece is placed where its χ² rises this far either
 REREAD_SURE_CHI = 4.0   # … side of its direction by this much (2σ: its members orient it)
 REREAD_ROUNDS = 2       # a piece split again this often at most (a line over 3–4 facets)
+REREAD_SMALL_MIN = 6    # a line of at least this many members no such split fits is asked
+REREAD_SMALL_SIDE = 3   # again with pieces of this many (a few members of the next facet,
+REREAD_SMALL_CHI = 8.0  # or one sensor's trace) and a gain of this much (FACET_F as before)
 
 
 def _reread_table(ox, oy, ux, uy, s, cal, alpha):
@@ -1243,7 +1246,7 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
         return p
     lab = np.where(member, label, -1).reshape(-1)
     size = np.bincount(lab[lab >= 0])
-    lines = (size >= FACET_MIN).nonzero()[0]
+    lines = (size >= REREAD_SMALL_MIN).nonzero()[0]
     if lines.size == 0:
         return p
     ox, oy = p.origin_x.reshape(-1), p.origin_y.reshape(-1)
@@ -1259,17 +1262,32 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
         g = g[np.argsort(u * math.cos(alpha) + v * math.sin(alpha), kind="stable")]
         r, w, _, _ = _reread_table(ox[g], oy[g], ux[g], uy[g], s[g], cal,
                                    alpha + REREAD_GRID_RAD)
-        pieces, todo = [], [(0, g.size, 0)]
-        while todo:
-            lo, hi, depth = todo.pop()
-            one, two, at, a, b, sure = _reread_split(r, w, lo, hi, FACET_SIDE)
+        def split(lo, hi, side, gain):
+            """The split point of members lo … hi − 1 into pieces of ``side`` at least
+            that beat the line by ``gain`` χ² (and FACET_F, FACET_TURN_RAD, bending round
+            the ring where both are oriented); None where none does."""
+            one, two, at, a, b, sure = _reread_split(r, w, lo, hi, side)
             n = hi - lo
-            good = (at is not None and depth < REREAD_ROUNDS and one - two >= FACET_CHI
+            good = (at is not None and one - two >= gain
                     and (one - two) / 2.0 >= FACET_F * two / max(n - 4, 1)
                     and abs(REREAD_GRID_RAD[a] - REREAD_GRID_RAD[b]) >= FACET_TURN_RAD
                     and (not sure or _bends_round(g[lo:at], g[at:hi],
                                                   alpha + REREAD_GRID_RAD[[a, b]],
                                                   ox, oy, ux, uy, s, cal, centre)))
+            return at if good else None
+
+        pieces, todo = [], [(0, g.size, 0)]
+        while todo:
+            lo, hi, depth = todo.pop()
+            at = None
+            if depth < REREAD_ROUNDS:
+                if depth > 0 or hi - lo >= FACET_MIN:
+                    at = split(lo, hi, FACET_SIDE, FACET_CHI)
+                if at is None:
+                    # a few members of the next facet, or one sensor's trace on it, bend
+                    # a short or weakly split line: their piece is asked for alone
+                    at = split(lo, hi, REREAD_SMALL_SIDE, REREAD_SMALL_CHI)
+            good = at is not None
             if good:
                 todo += [(lo, at, depth + 1), (at, hi, depth + 1)]
             else:
