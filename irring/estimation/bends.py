@@ -1222,8 +1222,8 @@ def _bends_round(left, right, alphas, ox, oy, ux, uy, s, cal, centre):
 
 def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration
                   ) -> Points:
-    """``p`` with the members of a line (``label``, −1 none; lines of at least ``FACET_MIN``
-    valid members) that two pieces, each with its members read at its own incidence, fit
+    """``p`` with the members of a line (``label``, −1 none; lines of at least
+    ``REREAD_SMALL_MIN`` valid members) that two pieces, each with its members read at its own incidence, fit
     better put on those pieces: a line over two or three facets of a round room, whose
     members, read at the line's θ, fit it as well as its pieces (the members of a tilted
     facet read long at the line's shallower θ, which straightens the bend), so the split
@@ -1234,8 +1234,11 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
     each member read at the incidence its beam meets the piece with (its counts ``counts``
     (S, N)), the piece's offset their weighted mean. The best split is kept where it beats
     the line, read the same way, by ``FACET_F`` (against the pieces' scatter) and
-    ``FACET_CHI`` (against the members' σ) and its pieces turn by ``FACET_TURN_RAD``; each
-    piece is then asked again (``REREAD_ROUNDS``). A piece whose χ² rises less than
+    ``FACET_CHI`` (against the members' σ) and its pieces turn by ``FACET_TURN_RAD``; where
+    none does (or the line has under ``FACET_MIN`` members, ``REREAD_SMALL_MIN`` at least),
+    pieces of ``REREAD_SMALL_SIDE`` and a gain of ``REREAD_SMALL_CHI`` are asked (a few
+    members of the next facet at the line's end); each piece is then asked again
+    (``REREAD_ROUNDS``). A piece whose χ² rises less than
     ``REREAD_SURE_CHI`` ``REREAD_SURE_RAD`` either side of its direction (one sensor's trace:
     range and incidence trade) leaves its members INCIDENCE_UNKNOWN; of the others, a member
     its own reading at the piece's θ puts within ``SNAP_SIGMAS`` of it is put where its beam
@@ -1262,6 +1265,7 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
         g = g[np.argsort(u * math.cos(alpha) + v * math.sin(alpha), kind="stable")]
         r, w, _, _ = _reread_table(ox[g], oy[g], ux[g], uy[g], s[g], cal,
                                    alpha + REREAD_GRID_RAD)
+
         def split(lo, hi, side, gain):
             """The split point of members lo … hi − 1 into pieces of ``side`` at least
             that beat the line by ``gain`` χ² (and FACET_F, FACET_TURN_RAD, bending round
