@@ -1136,8 +1136,8 @@ REREAD_SURE_RAD = math.radians(5)  # a piece is placed where its χ² rises this
 REREAD_SURE_CHI = 4.0   # … side of its direction by this much (2σ: its members orient it)
 REREAD_ROUNDS = 2       # a piece split again this often at most (a line over 3–4 facets)
 REREAD_SMALL_MIN = 6    # a line of at least this many members no such split fits is asked
-REREAD_SMALL_SIDE = 3   # again with pieces of this many (a few members of the next facet,
-REREAD_SMALL_CHI = 8.0  # or one sensor's trace) and a gain of this much (FACET_F as before)
+REREAD_SMALL_SIDE = 3   # again for a piece of this many up to FACET_SIDE − 1 (a few members
+REREAD_SMALL_CHI = 8.0  # of the next facet) and a gain of this much (FACET_F as before)
 
 
 def _reread_table(ox, oy, ux, uy, s, cal, alpha):
@@ -1236,8 +1236,9 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
     the line, read the same way, by ``FACET_F`` (against the pieces' scatter) and
     ``FACET_CHI`` (against the members' σ) and its pieces turn by ``FACET_TURN_RAD``; where
     none does (or the line has under ``FACET_MIN`` members, ``REREAD_SMALL_MIN`` at least),
-    pieces of ``REREAD_SMALL_SIDE`` and a gain of ``REREAD_SMALL_CHI`` are asked (a few
-    members of the next facet at the line's end); each piece is then asked again
+    a split with a piece of ``REREAD_SMALL_SIDE`` to ``FACET_SIDE`` − 1 members and a gain of
+    ``REREAD_SMALL_CHI`` is asked (a few members of the next facet at the line's end); each
+    piece is then asked again
     (``REREAD_ROUNDS``). A piece whose χ² rises less than
     ``REREAD_SURE_CHI`` ``REREAD_SURE_RAD`` either side of its direction (one sensor's trace:
     range and incidence trade) leaves its members INCIDENCE_UNKNOWN; of the others, a member
@@ -1266,13 +1267,15 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
         r, w, _, _ = _reread_table(ox[g], oy[g], ux[g], uy[g], s[g], cal,
                                    alpha + REREAD_GRID_RAD)
 
-        def split(lo, hi, side, gain):
+        def split(lo, hi, side, gain, small=False):
             """The split point of members lo … hi − 1 into pieces of ``side`` at least
-            that beat the line by ``gain`` χ² (and FACET_F, FACET_TURN_RAD, bending round
-            the ring where both are oriented); None where none does."""
+            (``small``: one of them under FACET_SIDE) that beat the line by ``gain`` χ² (and
+            FACET_F, FACET_TURN_RAD, bending round the ring where both are oriented); None
+            where none does."""
             one, two, at, a, b, sure = _reread_split(r, w, lo, hi, side)
             n = hi - lo
             good = (at is not None and one - two >= gain
+                    and (not small or min(at - lo, hi - at) < FACET_SIDE)
                     and (one - two) / 2.0 >= FACET_F * two / max(n - 4, 1)
                     and abs(REREAD_GRID_RAD[a] - REREAD_GRID_RAD[b]) >= FACET_TURN_RAD
                     and (not sure or _bends_round(g[lo:at], g[at:hi],
@@ -1290,7 +1293,7 @@ def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibra
                 if at is None:
                     # a few members of the next facet, or one sensor's trace on it, bend
                     # a short or weakly split line: their piece is asked for alone
-                    at = split(lo, hi, REREAD_SMALL_SIDE, REREAD_SMALL_CHI)
+                    at = split(lo, hi, REREAD_SMALL_SIDE, REREAD_SMALL_CHI, small=True)
             good = at is not None
             if good:
                 todo += [(lo, at, depth + 1), (at, hi, depth + 1)]
