@@ -121,6 +121,10 @@ def test_without_the_rule_the_far_line_kept_readings_100_mm_off(monkeypatch):
     seed_9750 = FOLDING.replace("seed: 9732", "seed: 9750")
     assert _readings_over(seed_9750, 0.080) == 0
     monkeypatch.setattr(est_far_lines, "FAR_LINE_Z", math.inf)
+    # facets_reread's split with a piece of 3-5 members takes them too (the line bends over
+    # the two walls); without it as well:
+    assert _readings_over(seed_9750, 0.080) == 0
+    monkeypatch.setattr(est_bends, "REREAD_SMALL_CHI", math.inf)
     # (3 of the 6 are FOLDOVER_AMBIGUOUS by the straight-trace test; docs/foldover.md)
     assert _readings_over(seed_9750, 0.080) == 3
     monkeypatch.setattr(est_foldover, "_near_trace_straight",
