@@ -133,8 +133,10 @@ effects: [incidence, noise, quantization, foldover]
 # member whose own line is not anchored, or whose own line runs > 20° off, are undecided;
 # 521 -> 507 since readings placed no better than 30 mm are left unplaced:
 # foldover.FOLD_PLACED_SIGMA_M; TURNED_M8 391 -> 379 since a short line's direction error
-# is in its far members' σ: 12 readings 1-47 mm off, 6 of them 20 mm or more)
-@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 500), (TURNED_M8, 375)])
+# is in its far members' σ: 12 readings 1-47 mm off, 6 of them 20 mm or more; 379 -> 374
+# since facets_reread's split with a piece of 3-5 members: 5 readings 6-37 mm off, 3 of them
+# 20 mm or more)
+@pytest.mark.parametrize("text, min_valid", [(TURNED_31, 500), (TURNED_M8, 370)])
 def test_a_far_steep_wall_bent_by_noise_is_not_kept_as_a_post(text, min_valid):
     sc = loads(text, source="<test>")
     valid = sum(int(p.valid.sum()) for _, p in runs_within_100_mm(sc))
