@@ -467,6 +467,23 @@ def _line_contradicted(points: Points, counts: np.ndarray, steps: np.ndarray,
     return found >= need
 
 
+def _on_line(points: Points, at: np.ndarray, line: np.ndarray, alpha: np.ndarray,
+             cx: np.ndarray, cy: np.ndarray, cal: Calibration) -> np.ndarray:
+    """Whether each reading ``at`` (flat) lies on its ``line`` (direction ``alpha``, through
+    ``cx``, ``cy``), within ``LONE_ON_SIGMAS`` of its σ plus ``LONE_ON_M`` across it, read
+    at least ``LONE_ON_MARGIN_RAD`` short of the drop-out angle."""
+    x, y = points.x.reshape(-1)[at], points.y.reshape(-1)[at]
+    off = np.abs(-(x - cx[line]) * np.sin(alpha[line]) + (y - cy[line]) * np.cos(alpha[line]))
+    return ((off <= LONE_ON_SIGMAS * points.sigma_m.reshape(-1)[at] + LONE_ON_M)
+            & (points.theta.reshape(-1)[at] <= cal.max_incidence_rad - LONE_ON_MARGIN_RAD))
+
+
+LONE_ON_SIGMAS = 3.0   # the sensor's reading across a gap lies on a line this many σ …
+LONE_ON_M = 0.02       # … plus this across it, …
+LONE_ON_MARGIN_RAD = math.radians(10)   # … read this far short of the drop-out angle, as
+#                                         the few are (a wall read near it falls silent by itself)
+
+
 CONTRADICT_SIGMAS = 5.0  # a line that would have read a silent step this many count σ
 #                          brighter (of up to ACROSS_MAX + 3 steps: 5σ, not 3σ) is not there
 ACROSS_MAX = 5  # at most this many readings a line took across a silent gap are moved
@@ -493,9 +510,11 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     fallback σ (:func:`local_incidence` asks them); ``moves`` False: none of this. With
     ``alone`` (the final pass, after :func:`rejoin_traces`), a run that holds no other line
     beside them, where the line's readings of this sensor go on in the run across the gap
-    and nowhere past them, and ``LONE_GAP_MIN`` of the gap's steps contradict the line, has
-    them INCIDENCE_UNKNOWN: nothing on their side says where they lie (their own profile
-    runs across the gap). ``label`` (S, N): each reading's line
+    (or, another line of the wall having taken them, the sensor's reading across the gap
+    lies on the line: :func:`_on_line`, it and the few read well short of the drop-out
+    angle) and nowhere past them, and ``LONE_GAP_MIN`` of the gap's steps contradict the
+    line, has them INCIDENCE_UNKNOWN: nothing on their side says where they lie (their own
+    profile runs across the gap). ``label`` (S, N): each reading's line
     or −1; ``index``: the live readings' flat indices in scan order; ``gapper``: the gaps
     (:func:`silent_gaps_compiled` by default; the oracle passes :func:`silent_gaps`).
     Why: docs/estimator.md ("Silent gaps")."""
@@ -545,8 +564,8 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
         nb = np.clip(nb, 0, n_s - 1)
         m_lab = s_lab[nb]
         lab_c, m_c = np.maximum(s_lab, 0), np.maximum(m_lab, 0)
-        few_here = (side & few & (in_run[s_run, lab_c] == s_len)
-                    & (runs_of[lab_c, s_sens] >= 2))
+        own = side & few & (in_run[s_run, lab_c] == s_len)
+        few_here = own & (runs_of[lab_c, s_sens] >= 2)
         beside = (s_run[nb] == s_run) & (nb != np.arange(n_s))
         ok = (few_here & beside & (m_lab >= 0) & (m_lab != s_lab)
               & (in_run[s_run, m_c] >= s_len) & moves)
@@ -556,8 +575,17 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
         # the last (first) of them: they end the line's trace, not a stretch within it
         adj = np.clip(s_run + (-1 if before else 1), 0, n_runs - 1)
         end = (run_hi if before else run_lo)[lab_c, s_sens] == s_run
-        lone = (few_here & ~(beside & (m_lab >= 0)) & alone & end & (adj != s_run)
-                & (run_sens[adj] == s_sens) & (in_run[adj, lab_c] > 0))
+        # … or the sensor's reading across the gap lies on the line (another line of the
+        # same wall took the sensor's readings there: two sensors' lines of one far wall),
+        # both it and the few read well short of the drop-out angle
+        at_gap = vi[first if before else last]
+        across = np.clip(first - 1 if before else last + 1, 0, vi.size - 1)
+        on_it = (alone & own & (run[across] == adj) & (sensor[across] == s_sens)
+                 & (points.theta.reshape(-1)[at_gap]
+                    <= cal.max_incidence_rad - LONE_ON_MARGIN_RAD)
+                 & _on_line(points, vi[across], lab_c, alpha, cx, cy, cal))
+        lone = ((few_here | on_it) & ~(beside & (m_lab >= 0)) & alone & end & (adj != s_run)
+                & (run_sens[adj] == s_sens) & ((in_run[adj, lab_c] > 0) | on_it))
         for sel, need, act in ((ok, 1, "to"), (lone & ~ok, LONE_GAP_MIN, "off")):
             ask = sel.nonzero()[0]
             if not ask.size:   # the light test (the costly part) only where the rest holds
