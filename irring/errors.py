@@ -15,7 +15,7 @@ import reprlib
 import signal
 import sys
 import threading
-from typing import Iterator
+from typing import Callable, Iterator
 
 OK = 0             # done
 INPUT = 1          # bad input: a scenario, recording, calibration or sensor-curve file
@@ -173,6 +173,33 @@ def sigterm_as_interrupt() -> Iterator[None]:
     finally:
         for s in mine:
             signal.signal(s, signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def interrupts_noted(note: Callable[[], None]) -> Iterator[None]:
+    """Ctrl-C, SIGTERM and SIGHUP call ``note()`` instead of raising KeyboardInterrupt in
+    the block (their handlers' other work, leaving a hung-up terminal, is done), for a
+    block that must not be cut short: in the main thread, for signals Python handles."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, *_STOP_SIGNALS)}
+    previous = {s: h for s, h in previous.items() if callable(h)}
+
+    def noted(signum, frame):
+        note()
+        try:
+            previous[signum](signum, frame)
+        except KeyboardInterrupt:
+            pass
+
+    for s in previous:
+        signal.signal(s, noted)
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def interrupted(exc: BaseException) -> bool:

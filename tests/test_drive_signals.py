@@ -35,6 +35,10 @@ _STAGES = {
     "park": ("if isinstance(cmd, p.GoTo):\n"
              "        kill(); time.sleep(0.1); kill(); time.sleep(0.2)\n"
              "        dev.send(hd.line('IRPOS,0')); return\n"),
+    # SIGTERM just after IRGTO,0 is written, before the wait for IRPOS begins (the host held
+    # up there until the signal has come, as a loaded machine's scheduler may hold it)
+    "park before the wait": ("if isinstance(cmd, p.GoTo):\n"
+                             "        kill(); dev.killed.set()\n"),
     # SIGTERM as the ring turns back, and it never says it got there
     "park unanswered": "if isinstance(cmd, p.GoTo):\n        kill(); return\n",
     # SIGTERM while the map is drawn, after the ring was turned back
@@ -44,8 +48,12 @@ _STAGES = {
 
 def _drive(tmp_path, stage: str) -> subprocess.CompletedProcess:
     kill_in_mapping = stage == "mapping"
+    hold_after_goto = stage == "park before the wait"
+    # the device answers in every stage but one, so --timeout is only a safety net there (a
+    # loaded machine may take its 0.3 s sleeps well past 0.5 s); "park unanswered" waits it out
+    timeout = "0.5" if stage == "park unanswered" else "30"
     script = (
-        "import os, signal, sys, time\n"
+        "import os, signal, sys, threading, time\n"
         f"sys.path.insert(0, {os.path.dirname(os.path.abspath(__file__))!r})\n"
         "import hostile_devices as hd\n"
         "from irring.hardware import protocol as p\n"
@@ -60,14 +68,23 @@ def _drive(tmp_path, stage: str) -> subprocess.CompletedProcess:
            "    kill()\n"
            "    return real(*a, **k)\n"
            "pl.map_sweeps = map_sweeps\n" if kill_in_mapping else "")
+        + ("import irring.hardware.serial_ring as sr\n"
+           "send = sr.SerialRing._send\n"
+           "def held_send(ring, msg):\n"
+           "    send(ring, msg)\n"
+           "    if isinstance(msg, p.GoTo):\n"
+           "        dev.killed.wait(30)\n"
+           "sr.SerialRing._send = held_send\n" if hold_after_goto else "")
         + "dev = hd.HostileDevice(behaviour)\n"
+        "dev.killed = threading.Event()\n"
         "from irring.cli import main\n"
         "code = main(['drive', '--port', dev.link, '--pose', '500,450', '--pose', '800,450',\n"
-        "             '--no-wait', '--no-animation', '--timeout', '0.5', '--out', sys.argv[1]])\n"
+        "             '--no-wait', '--no-animation', '--timeout', sys.argv[2], '--out',\n"
+        "             sys.argv[1]])\n"
         "dev.close()\n"
         "sys.exit(code)\n")
     env = dict(os.environ, TMPDIR=str(tmp_path))   # where a drive keeps what --out cannot
-    return subprocess.run([sys.executable, "-c", script, str(tmp_path / "o")],
+    return subprocess.run([sys.executable, "-c", script, str(tmp_path / "o"), timeout],
                           capture_output=True, text=True, timeout=300, env=env)
 
 
@@ -92,6 +109,9 @@ def _poses_written(tmp_path) -> int | None:
      "irring drive: interrupted during pose 2 of 2; the 1 pose swept is mapped and written; "
      "the ring stands at step 0"),
     ("park", 2,
+     "irring drive: interrupted as the ring turned back to step 0; the 2 poses swept are "
+     "mapped and written; the ring stands at step 0"),
+    ("park before the wait", 2,
      "irring drive: interrupted as the ring turned back to step 0; the 2 poses swept are "
      "mapped and written; the ring stands at step 0"),
     ("park unanswered", 2,

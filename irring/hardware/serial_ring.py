@@ -27,7 +27,7 @@ import serial
 
 from .. import core
 from ..designs import PAPER_RING
-from ..errors import DeviceError, printable
+from ..errors import DeviceError, interrupts_noted, printable
 from ..core import Ring
 from . import protocol as p
 
@@ -534,10 +534,10 @@ class SerialRing:
         counted = dataclasses.replace(self.stats)
         why = None
         try:
-            why = self._turn_back()
-        except KeyboardInterrupt:   # while a command was sent: none of the waits
-            self.close_interrupted = True
-            why = "interrupted"
+            # noted, not raised: one landing between IRGTO,0 sent and the wait for its IRPOS
+            # gave up on a ring that turned on to step 0
+            with interrupts_noted(self._note_interrupt):
+                why = self._turn_back()
         except DeviceError as exc:
             why = str(exc)
         finally:
@@ -624,6 +624,9 @@ class SerialRing:
                         f"and its firmware took the step it woke at for step 0; {between}")
         return (f"no IRPOS answered IRGTO,0 within {wait_s:g} s: {between}" if msg is None
                 else f"it answered IRGTO,0 with {p.encode(msg).decode().strip()}: {between}")
+
+    def _note_interrupt(self) -> None:
+        self.close_interrupted = True
 
     def _await_through(self, kinds: tuple[type, ...], wait_s: float) -> p.AnyMessage | None:
         """:meth:`_await`, which a KeyboardInterrupt does not cut short: the ring turns on
