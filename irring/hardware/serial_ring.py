@@ -538,6 +538,9 @@ class SerialRing:
             # gave up on a ring that turned on to step 0
             with interrupts_noted(self._note_interrupt):
                 why = self._turn_back()
+        except KeyboardInterrupt:   # raised by other code than a signal's handler (a port's)
+            self.close_interrupted = True
+            why = "interrupted"
         except DeviceError as exc:
             why = str(exc)
         finally:
