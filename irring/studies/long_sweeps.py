@@ -26,7 +26,7 @@ KINDS = ("room", "circle")
 CIRCLE_STEP_DEG = 0.01     # the circle's motor step (IRINF's finest) …
 CIRCLE_COUNTS = 1300       # … and every reading's counts (a wall ~0.3 m away all round)
 LARGE = 50_000             # readings from which a sweep's fixed costs are a few per cent
-SENSORS = 12               # both kinds' rings: t_room's (the paper's) and the circle's
+SENSORS = Ring().sensors   # both kinds' rings: t_room's (the paper's) and the circle's
 MAX_LONG_STEPS = MAX_ESTIMATED_READINGS // SENSORS   # the longest sweep the estimator takes
 
 
