@@ -178,6 +178,25 @@ def test_a_standing_scenes_sweep_with_a_pose_for_each_reading_is_refused(t_room_
         "scenario and the sweeps do not belong together")
 
 
+def test_a_moving_scenes_sweep_stripped_of_its_reading_poses_is_refused(tmp_path):
+    """t_room_moving's sweeps stripped of their pose for each reading were mapped from each
+    sweep's first pose, F1 0.898 -> 0.598, exit 0: the simulator writes them for every sweep
+    of a scene that drives (effects.motion), so one without them was edited."""
+    out = tmp_path / "run"
+    pipeline.write_outputs(pipeline.run(load_scenario("t_room_moving")), out, animation=False)
+    with np.load(out / "sweeps.npz") as z:
+        entries = {k: z[k] for k in z.keys()}
+    assert entries["sweep001/reading_poses"].shape == (71, 12, 3)
+    del entries["sweep001/reading_poses"]
+    path = _edited(entries, tmp_path / "stripped.npz")
+    with pytest.raises(RecordingError) as err:
+        pipeline.replay(path)
+    assert str(err.value) == (
+        f"{path}: sweep 2 carries no pose for each reading, but the recorded scenario "
+        "'t_room_moving', which simulated it, drives while it sweeps (effects.motion); the "
+        "scenario and the sweeps do not belong together")
+
+
 def test_an_mcap_that_cannot_be_written_says_the_runs_own_outputs_were(tmp_path):
     """`irring run t_room --out o --mcap /proc/x.mcap` (as root, whom the check before the
     work lets write anywhere): the whole set was written to o/, then "irring run: error:
