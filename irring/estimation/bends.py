@@ -307,8 +307,9 @@ def bent_ends(points: Points, label: np.ndarray, counts: np.ndarray, steps: np.n
     least angle (within ``BEND_MAX_RAD``) their counts, at the incidence their beam meets it
     with, land on; they leave their line (label −1), and one no such wall explains is
     INCIDENCE_UNKNOWN. The line is fitted again without them and asked once more. Numpy
-    (the fast estimator asks its gate of a kernel first: :func:`bent_ends_compiled`). Why: a bend of 4-20° makes no corner, and the line's θ, too
-    steep past it, reads those members short (docs/estimator.md, "A shallow bend")."""
+    (the fast estimator asks its gate of a kernel first: :func:`bent_ends_compiled`). Why:
+    a bend of 4-20° makes no corner, and the line's θ, too steep past it, reads those
+    members short (docs/estimator.md, "A shallow bend")."""
     asked = _bend_members(points, label, steps)
     if asked is None:
         return points, label
@@ -1223,8 +1224,8 @@ def _bends_round(left, right, alphas, ox, oy, ux, uy, s, cal, centre):
 def facets_reread(p: Points, label: np.ndarray, counts: np.ndarray, cal: Calibration
                   ) -> Points:
     """``p`` with the members of a line (``label``, −1 none; lines of at least
-    ``REREAD_SMALL_MIN`` valid members) that two pieces, each with its members read at its own incidence, fit
-    better put on those pieces: a line over two or three facets of a round room, whose
+    ``REREAD_SMALL_MIN`` valid members) that two pieces, each with its members read at its
+    own incidence, fit better put on those pieces: a line over two or three facets of a round room, whose
     members, read at the line's θ, fit it as well as its pieces (the members of a tilted
     facet read long at the line's shallower θ, which straightens the bend), so the split
     :func:`faceted_lines` asks of the members as they lie is not seen.

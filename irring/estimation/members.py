@@ -541,8 +541,9 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
         if not (few & (cut[first] | cut_end[last])).any():
             return points, label
     n_lines, n_runs = alpha.size, int(run[-1]) + 1
-    rank = np.empty(len(steps), dtype=np.intp)     # each row's place in step order
-    rank[rows_in_step_order(steps)] = np.arange(len(steps))
+    if alone:   # each row's place in step order (the lone case's gap, final pass only)
+        rank = np.empty(len(steps), dtype=np.intp)
+        rank[rows_in_step_order(steps)] = np.arange(len(steps))
     mem = lab >= 0
     # members per (run, line) and the runs each (line, sensor) holds members in
     in_run = np.zeros((n_runs, n_lines), dtype=np.intp)
@@ -581,14 +582,16 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
         # same wall took the sensor's readings there: two sensors' lines of one far wall),
         # both it and the few read well short of the drop-out angle, the gap no longer than
         # the steps that contradict the line are read from (a longer one: an opening)
-        at_gap = vi[first if before else last]
-        across = np.clip(first - 1 if before else last + 1, 0, vi.size - 1)
-        gap = np.abs(rank[vi[across] // n_sensors] - rank[at_gap // n_sensors]) - 1
-        on_it = (alone & own & (run[across] == adj) & (sensor[across] == s_sens)
-                 & (gap <= ACROSS_MAX + 3)
-                 & (points.theta.reshape(-1)[at_gap]
-                    <= cal.max_incidence_rad - LONE_ON_MARGIN_RAD)
-                 & _on_line(points, vi[across], lab_c, alpha, cx, cy, cal))
+        on_it = np.zeros_like(own)
+        if alone:
+            at_gap = vi[first if before else last]
+            across = np.clip(first - 1 if before else last + 1, 0, vi.size - 1)
+            gap = np.abs(rank[vi[across] // n_sensors] - rank[at_gap // n_sensors]) - 1
+            on_it = (own & (run[across] == adj) & (sensor[across] == s_sens)
+                     & (gap <= ACROSS_MAX + 3)
+                     & (points.theta.reshape(-1)[at_gap]
+                        <= cal.max_incidence_rad - LONE_ON_MARGIN_RAD)
+                     & _on_line(points, vi[across], lab_c, alpha, cx, cy, cal))
         lone = ((few_here | on_it) & ~(beside & (m_lab >= 0)) & alone & end & (adj != s_run)
                 & (run_sens[adj] == s_sens) & ((in_run[adj, lab_c] > 0) | on_it))
         for sel, need, act in ((ok, 1, "to"), (lone & ~ok, LONE_GAP_MIN, "off")):
