@@ -27,7 +27,8 @@ what it does:
   ADC counts, θ the incidence angle) by least squares in log–log space.
 
   without --port  the simulated rig: the scenario's ring, sensor and effects in front of
-                  one wall of a generated 4 m × 4 m room (MuJoCo ray casts); takes ~1 s.
+                  one wall of a generated 4 m × 4 m room (MuJoCo ray casts); it takes a
+                  few seconds (README, "Calibrate, then drive").
   with --port     the real ring over a serial port (IRR protocol): you are asked to place
                   the wall for each of 28 placements (distances from the sensor's rotation
                   axis in mm, angles in degrees), the ring sweeps, and the file is written
