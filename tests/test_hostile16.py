@@ -245,7 +245,7 @@ def test_a_study_interrupted_while_mujoco_loads_says_interrupted(tmp_path, capsy
     out = tmp_path / "o"
     assert main(["study", str(spec), "--out", str(out), "--workers", "1"]) == 130
     assert capsys.readouterr().err == (
-        f"irring: study interrupted; 0 finished run(s) kept in {out / 'results.csv'}: run the "
+        f"irring study: interrupted; 0 finished run(s) kept in {out / 'results.csv'}: run the "
         "same command with --resume to run the rest\n")
 
 

@@ -622,7 +622,7 @@ def test_ctrl_c_says_how_many_runs_are_kept_and_how_to_resume(small, tmp_path, m
     monkeypatch.setattr(study, "run_study", interrupted)
     assert main(["study", str(p), "--out", str(out), "--workers", "1", "--resume"]) == 130
     err = capsys.readouterr().err
-    assert err == (f"irring: study interrupted; 2 finished run(s) kept in {out / study.RESULTS}: "
+    assert err == (f"irring study: interrupted; 2 finished run(s) kept in {out / study.RESULTS}: "
                    "run the same command with --resume to run the rest\n")
 
 

@@ -152,5 +152,5 @@ def _kept(out: Path) -> str:
 
 def _interrupted(out: Path) -> int:
     """Ctrl-C or SIGTERM: say how many runs the file keeps for --resume."""
-    print(f"irring: study interrupted; {_kept(out)}", file=sys.stderr)
+    print(f"irring study: interrupted; {_kept(out)}", file=sys.stderr)
     return errors.INTERRUPTED
