@@ -700,3 +700,55 @@ def test_emulate_warns_of_a_ring_its_irinf_cannot_describe(tmp_path, capsys, mon
     assert err == ("" if said is None else
                    f"irring emulate: warning: {said}: `irring drive` without --truth turns every "
                    "reading's angle that much off (with --truth it takes the scenario's)\n")
+
+
+# --------------------------------------------------------------------------- which room
+
+
+def test_an_emulators_irinf_names_its_room_within_the_line(tmp_path, capsys, monkeypatch):
+    """`irring emulate ROOM` says ROOM in IRINF's firmware field (after "irring-emulator-1
+    room "), so drive can tell it from another room's; a name IRR text cannot carry, or a
+    long one, goes as its characters cut to fit, ~ and 8 hex digits of its SHA-256."""
+    from irring.cli import main
+    from irring.hardware.emulator import (ROOM_TAG_MAX, emulated_room, firmware_for,
+                                          room_tag)
+
+    served = []
+    monkeypatch.setattr(PtyEmulator, "serve_forever",
+                        lambda self: served.append(self.device.info) or
+                        (_ for _ in ()).throw(KeyboardInterrupt))
+    assert main(["emulate", "t_room_cylinder", "--link", str(tmp_path / "ring.pty"),
+                 "--quiet"]) == 0
+    assert served[0].firmware == "irring-emulator-1 room t_room_cylinder"
+    assert emulated_room(served[0].firmware) == "t_room_cylinder"
+    assert emulated_room("irring-emulator-1") is None and emulated_room("irring-fw-2.0") is None
+    odd = "my room, v2 $*" + "x" * 60
+    tag = room_tag(odd)
+    assert tag == "my_room__v2___" + "x" * 17 + "~" + tag[-8:] and len(tag) == ROOM_TAG_MAX
+    assert room_tag(odd + "y") != tag and room_tag("a" * 40) == "a" * 40
+    assert room_tag("a" * 41) != room_tag("a" * 42)
+    # the widest IRINF a scenario may ask for still fits the protocol's 128 bytes
+    widest = p.Info(2, 72, 16, 360_000, 10_000, 9_999, -100_000, 100_000, firmware_for(odd))
+    assert len(p.encode(widest)) <= p.MAX_SENTENCE_BYTES
+    assert p.Decoder().feed(p.encode(widest))[0].firmware == firmware_for(odd)
+
+
+def test_drive_refuses_a_truth_of_another_room_than_the_emulators(tmp_path, pty_device,
+                                                                  capsys):
+    """`irring emulate t_room_cylinder` and `irring drive --truth t_room` mapped the
+    cylinder room's readings at t_room's four poses and scored them against t_room (F1
+    0.625, exit 0), nothing said. Now refused after the handshake, before any sweep."""
+    from irring.cli import main
+    from irring.hardware.emulator import firmware_for
+
+    cyl = load_scenario("t_room_cylinder")
+    link = pty_device(Device(SimRing(cyl), firmware=firmware_for(cyl.name)))
+    args = ["drive", "--port", link, "--no-animation", "--no-wait", "--timeout", "2"]
+    assert main(args + ["--truth", "t_room", "--out", str(tmp_path / "wrong")]) == 2
+    out, err = capsys.readouterr()
+    assert err == (f"irring drive: error: --truth t_room: the emulator on {link} simulates "
+                   "t_room_cylinder, not t_room; its readings would be scored against another "
+                   "room: run `irring emulate t_room` there, or leave --truth out\n")
+    assert "room t_room_cylinder, 12 sensors" in out and not (tmp_path / "wrong").exists()
+    assert main(args + ["--truth", "t_room_cylinder", "--out", str(tmp_path / "right")]) == 0
+    assert (tmp_path / "right" / "map.png").exists()

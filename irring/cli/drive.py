@@ -19,6 +19,7 @@ from ..core import MAX_SWEEPS, Pose, work_bytes, work_refusal
 from ..errors import UsageError
 from ..estimation.calibration import Calibration, CalibrationError, load_calibration
 from ..hardware import DeviceError, SerialRing
+from ..hardware.emulator import emulated_room, room_tag
 from ..outputs import RUN_FILES, check_out
 from ..recording import save_recording
 from ..scenario import check_ring_placement, load_scenario
@@ -49,7 +50,8 @@ Poses: with --truth the scenario's scan poses are used (and the map is scored ag
 from the poses swept); otherwise give each pose with --pose X_MM,Y_MM,YAW_DEG (default: one
 pose at the origin).
 Between poses drive waits for Enter when run at a terminal (--no-wait to skip); the emulator
-moves its robot by itself at every full sweep.
+moves its robot by itself at every full sweep. `irring emulate` names its room in its IRINF:
+a --truth of another room is refused before any sweep (exit 2).
 
 However it ends (done, an error, Ctrl-C, SIGTERM), drive stops a sweep still running (IRSTP)
 and turns the ring back to step 0 (IRGTO,0): its firmware takes where the ring stands when it
@@ -61,7 +63,8 @@ Exit status: 0 all poses swept; 3 no device, or it stopped answering, disconnect
 a sweep, made no progress, or rebooted away from step 0, where it would take another step for
 its step 0 (what arrived before is still mapped and written); 130 Ctrl-C, SIGTERM,
 SIGHUP (the terminal closed) or the input ended at the prompt (the poses swept so far are
-mapped and written); 2 bad arguments; 1 a bad --truth or --calibration file.
+mapped and written); 2 bad arguments (or a --truth of another room than the emulator's);
+1 a bad --truth or --calibration file.
 
 examples:
   irring emulate t_room &                               # try it without hardware (ring.pty)
@@ -238,6 +241,13 @@ def run(args: argparse.Namespace) -> int:
         f"ADC, step {info.step_mdeg / 1000:g}° × {info.gear_num}/{info.gear_den}, steps "
         f"{info.min_step} … {info.max_step}; IRR protocol v{ring.protocol}")
     warn_protocol(ring, say)
+    room = emulated_room(info.firmware)
+    if truth is not None and room is not None and room != room_tag(truth.name):
+        ring.close()   # another room's readings would be mapped and scored as --truth's
+        _error(f"--truth {args.truth}: the emulator on {args.port} simulates {room}, not "
+               f"{truth.name}; its readings would be scored against another room: run "
+               f"`irring emulate {args.truth}` there, or leave --truth out")
+        return errors.USAGE
     if calibration is not None and calibration.adc_bits != info.adc_bits:
         ring.close()   # a bad --calibration file for this ring: exit 1, as --help says
         _error(f"{args.calibration}: a calibration for a {calibration.adc_bits}-bit ADC; the "

@@ -10,7 +10,7 @@ import sys
 import time
 
 from ..hardware import protocol
-from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator
+from ..hardware.emulator import Device, Faults, PtyEmulator, TcpEmulator, firmware_for
 from ..scenario import load_scenario
 from ._common import (add_pose_option, at_least, between, describe, host_port, number_in,
                       pose_index, scenario_name, seed)
@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     source = SimRing(scenario, seed=args.seed)
     try:
         device = Device(source, faults=faults, realtime=args.realtime, fixed_pose=fixed,
-                        protocol=args.protocol)
+                        protocol=args.protocol, firmware=firmware_for(scenario.name))
     except ValueError as exc:   # --motor-reversed on an asymmetric ring; IRSCN too long
         print(f"irring emulate: error: {exc}", file=sys.stderr)
         return 2

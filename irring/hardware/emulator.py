@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import hashlib
 import math
 import os
 import select
@@ -26,12 +27,40 @@ from .. import core
 from . import protocol as p
 
 FIRMWARE = "irring-emulator-1"
+# `irring emulate`'s IRINF names its room after FIRMWARE, so `irring drive --truth` can
+# refuse another room's readings; 40 characters keep any IRINF inside the 128-byte line
+ROOM_TAG = " room "
+ROOM_TAG_MAX = 40
 MOVE_S_PER_STEP = 0.002  # stepper time per motor step (500 steps/s) for IRGTO / reaching `from`
 # Output not yet handed to the link, at most: a command that finds this much waiting is
 # dropped unanswered (DeviceStats.commands_dropped), as the board's 32-byte RX buffer
 # overruns while it blocks on a full 64-byte TX buffer (firmware/avr/hal_avr.c). It holds
 # a sweep's IRSCN + IRDON (≤ 2 × 128 bytes), so only a host flooding it meets the bound.
 OUT_LIMIT_BYTES = 2 * p.MAX_SENTENCE_BYTES
+
+
+def room_tag(name: str) -> str:
+    """A scenario's name as `irring emulate`'s IRINF carries it: the name itself when it is
+    at most ROOM_TAG_MAX printable ASCII characters other than space, `$`, `*` and `,`;
+    else those (others as `_`) cut to fit, `~` and 8 hex digits of its SHA-256."""
+    ok = [0x20 < ord(c) <= 0x7E and c not in "$*," for c in name]
+    if len(name) <= ROOM_TAG_MAX and name and all(ok):
+        return name
+    digest = hashlib.sha256(name.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+    kept = "".join(c if good else "_" for c, good in zip(name, ok))
+    return f"{kept[:ROOM_TAG_MAX - 9]}~{digest}"
+
+
+def firmware_for(name: str) -> str:
+    """IRINF's firmware field of an emulator of the scenario named ``name``."""
+    return f"{FIRMWARE}{ROOM_TAG}{room_tag(name)}"
+
+
+def emulated_room(firmware: str) -> str | None:
+    """The room tag an `irring emulate` IRINF names (:func:`firmware_for`), or None: a
+    board, or an emulator that names no room."""
+    head = FIRMWARE + ROOM_TAG
+    return firmware[len(head):] if firmware.startswith(head) else None
 
 
 @dataclass(frozen=True)
