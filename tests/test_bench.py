@@ -308,5 +308,23 @@ def test_the_accuracy_chart_legend_says_what_a_ring_means(tmp_path, figures):
     ring meant (study.png's title does)."""
     accuracy.chart(accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY),
                    tmp_path / "a.png")
-    legend = [t.get_text() for t in figures[0].axes[0].get_legend().get_texts()]
+    legend = [t.get_text() for t in figures[0].axes[2].get_legend().get_texts()]
     assert legend.count("ringed: on the front") == 1 and "Pareto front" in legend
+
+
+def test_the_accuracy_charts_f1_axes_are_stretched_towards_one(tmp_path, figures):
+    """accuracy.png's F1 panels drew the knobs' 0.957 … 0.999 as one crowd at the top of
+    0 … 1, their labels on each other; they are stretched towards 1, and the legend sits
+    where no point does (coverage against hardware time, lower right)."""
+    accuracy.chart(accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY),
+                   tmp_path / "a.png")
+    axes = figures[0].axes
+    for ax in axes[:2]:
+        assert ax.get_yscale() == "function"
+        assert ax.get_ylabel() == "occupied F1 (higher is better;\nscale stretched towards 1)"
+        lo, hi = ax.get_ylim()
+        ticks = [t.get_text() for t in ax.get_yticklabels() if lo <= t.get_position()[1] <= hi]
+        assert ticks[-4:] == ["0.99", "0.995", "0.998", "1"] and hi > 1
+    assert [ax.get_legend() is not None for ax in axes] == [False, False, True, False, False,
+                                                             False]
+    assert all(ax.get_yscale() == "linear" for ax in axes[2:])

@@ -430,3 +430,36 @@ def test_cli_compare_names_what_a_design_may_be(tmp_path, capsys, given, said):
     assert main(["compare", "--design", given, "--out", str(tmp_path / "cmp")]) == 2
     assert capsys.readouterr().err == f"irring compare: error: {said}\n"
     assert not (tmp_path / "cmp").exists()
+
+
+def test_the_time_and_detection_axes_read_in_plain_numbers_and_say_lower_is_better(
+        tmp_path, figures):
+    """compare.png's hardware-time bars sat on a log axis ticked 10⁻¹, 10⁰, 10¹ (2.6×10⁰ …
+    for two rings of 1.65 and 2.72 s, whose bottom cut the 1.65 s bar to a sliver) and the
+    detection panel's radius on 10⁰ … 10²; neither said lower is better."""
+    scores = {"occupied_f1": 0.9, "free_accuracy": 1.0, "coverage": 0.8, "shadow": None}
+
+    def rec(name, hw):
+        return {"design": name, **scores, "hardware_time_s": hw, "compute_time_s": 0.004,
+                "runs": 1, "scenarios": ["lab"], "poses": {"lab": 1},
+                "by_scenario": {"lab": scores}, "detection_distances_m": [0.35, 0.65],
+                "min_detectable_radius_m": [0.0018, 0.13]}
+
+    def labels(ax, axis="y"):
+        ax.figure.canvas.draw()
+        lo, hi = getattr(ax, f"get_{axis}lim")()
+        return [t.get_text() for t in getattr(ax, f"get_{axis}ticklabels")()
+                if lo <= t.get_position()[1] <= hi]
+
+    compare.chart({"designs": [rec("rotating12", 2.72), rec("ring16", 1.65)],
+                   "detection_distances_m": [0.35, 0.65]}, tmp_path / "c.png")
+    hw, det = figures[-1].axes[2], figures[-1].axes[3]
+    assert hw.get_yscale() == "linear" and hw.get_ylim()[0] == 0      # bars from 0
+    assert hw.get_ylabel() == "seconds (lower is better)"
+    assert det.get_yscale() == "log" and det.get_ylabel() == "radius, mm (lower is better)"
+    assert labels(det) == ["2", "5", "10", "20", "50", "100"]
+    compare.chart({"designs": [rec("rotating1", 12.79), rec("laser", 0.027)],
+                   "detection_distances_m": [0.35, 0.65]}, tmp_path / "c.png")
+    hw = figures[-1].axes[2]
+    assert hw.get_yscale() == "log"          # 470× apart: lengths would hide the laser
+    assert labels(hw) == ["0.02", "0.05", "0.1", "0.2", "0.5", "1", "2", "5", "10"]

@@ -919,3 +919,27 @@ def test_a_run_that_raises_says_how_many_runs_are_kept(small, tmp_path, monkeypa
         f"(or IRRING_DEBUG=1) for the traceback and please report it; 2 finished run(s) kept "
         f"in {out / study.RESULTS}: run the same command with --resume to run the rest\n")
     assert len(study.read_results(out / study.RESULTS)) == 2
+
+
+def test_the_f1_axis_is_stretched_towards_one_and_says_which_way_is_better(small, tmp_path):
+    """study.png drew F1 on 0 … 1: rings at 0.995 and 0.998 sat one pixel apart among the
+    top 2 % of the panel (docs/study.png: five rings one blob). The F1 axis is stretched
+    towards 1 and ticked in plain numbers; both panels say higher is better."""
+    p, rows = small
+    by = ("design", "step_stride")
+    base = study.summarise(rows, by)[0]
+    recs = [dict(base, design="a", occupied_f1=0.995, occupied_f1_std=0.0),
+            dict(base, design="b", occupied_f1=0.998, occupied_f1_std=0.0),
+            dict(base, design="held", occupied_f1=0.155, occupied_f1_std=0.0)]
+    fig = study.chart(recs, tmp_path / "study.png", by)
+    fig.canvas.draw()
+    f1, cov = fig.axes[:2]
+    px = [f1.transData.transform((1.0, y))[1] for y in (0.155, 0.995, 0.998)]
+    assert px[2] - px[1] > 20 and px[1] - px[0] > 100    # linear: 0.9 px apart
+    lo, hi = f1.get_ylim()
+    assert [t.get_text() for t in f1.get_yticklabels() if lo <= t.get_position()[1] <= hi] == \
+        ["0", "0.5", "0.8", "0.9", "0.95", "0.98", "0.99", "0.995", "0.998", "1"]
+    assert f1.get_ylabel() == ("occupied F1, higher is better\n(mean ± 1 sd over runs; scale "
+                               "stretched towards 1)")
+    assert cov.get_yscale() == "linear"
+    assert cov.get_ylabel() == "coverage, higher is better\n(mean ± 1 sd over runs)"

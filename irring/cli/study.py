@@ -46,8 +46,9 @@ writes to DIR:
   results.parquet the same, if pyarrow is installed
   summary.csv/.json  per configuration (design × knob values): mean and sd of each score
                   (shadow over the runs in rooms that hide wall behind an obstacle: shadow_runs)
-  study.png       occupied F1 and coverage against hardware time, Pareto front marked;
-                  titled with the study file's name and its runs (designs × rooms × …)
+  study.png       occupied F1 (its axis stretched towards 1) and coverage against hardware
+                  time, Pareto front marked; titled with the study file's name and its runs
+                  (designs × rooms × …)
 
 a run that fails stops the study, its line ending with how many finished runs are kept for
 --resume (a worker killed under its run, as by the out-of-memory killer: exit 130).

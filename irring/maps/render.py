@@ -46,18 +46,49 @@ def figure(width_in: float, height_in: float, dpi: float = 100):
     return fig
 
 
-def plain_log_x(ax) -> None:
-    """Make ``ax``'s x axis logarithmic, labelled in plain numbers (0.05, 0.1, 0.2 … 10, or
-    1.5, 2, 3, 4 across less than 1.5 decades) where matplotlib writes 10⁻¹, 10⁰ and
-    2×10⁰: read at a glance. Call it after plotting (it reads the axis' span)."""
+def plain_log(ax, axis: str = "x") -> None:
+    """Make ``ax``'s ``axis`` ("x" or "y") logarithmic, labelled in plain numbers (0.05, 0.1,
+    0.2 … 10, or 1.5, 2, 3, 4 across less than 1.5 decades) where matplotlib writes 10⁻¹,
+    10⁰ and 2×10⁰: read at a glance. Call it after plotting (it reads the axis' span)."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # deferred: charts only
 
-    ax.set_xscale("log")
-    lo, hi = ax.get_xlim()
+    getattr(ax, f"set_{axis}scale")("log")
+    lo, hi = getattr(ax, f"get_{axis}lim")()
     subs = (1.0, 2.0, 5.0) if hi / lo >= 10 ** 1.5 else (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
-    ax.xaxis.set_major_locator(LogLocator(subs=subs))
-    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-    ax.xaxis.set_minor_formatter(NullFormatter())
+    which = getattr(ax, f"{axis}axis")
+    which.set_major_locator(LogLocator(subs=subs))
+    which.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    which.set_minor_formatter(NullFormatter())
+
+
+# A score that crowds the top of 0 … 1 (F1 0.995 and 0.998 drawn as one dot) is drawn on
+# -log10(1 + STRETCH_EPS - y): 1 at the top, 0.99 two thirds of the way up, 0 at the foot
+STRETCH_EPS = 1e-3
+STRETCH_TICKS = (0.0, 0.5, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995, 0.998, 1.0)
+
+
+def stretch_towards_one(ax) -> None:
+    """Make ``ax``'s y axis (a score of at most 1) spread out near 1, ticked in plain numbers
+    (0, 0.5, 0.8, 0.9, 0.95 … 0.998, 1), its top just above 1, its foot the tick at or below
+    the foot as set."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator  # deferred: charts only
+
+    top = 1.0 + STRETCH_EPS / 2   # a point at 1 is drawn whole, not cut by the frame
+
+    def forward(y):
+        return -np.log10(1.0 + STRETCH_EPS - np.minimum(np.asarray(y, float), top))
+
+    def inverse(t):
+        return 1.0 + STRETCH_EPS - 10.0 ** -np.asarray(t, float)
+
+    # down to a tick at or below the lowest point, so no point lies below the last label
+    lo = ax.get_ylim()[0]
+    lo = min(lo, max(t for t in STRETCH_TICKS if t <= max(lo, 0.0)))
+    ax.set_yscale("function", functions=(forward, inverse))
+    ax.set_ylim(lo, top)
+    ax.yaxis.set_major_locator(FixedLocator([t for t in STRETCH_TICKS if t >= lo]))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_locator(NullLocator())
 
 
 def map_rgb(classes: np.ndarray) -> np.ndarray:
