@@ -149,7 +149,9 @@ def _fmt_range(name: str, lo: float | None, hi: float | None) -> str:
     scale, unit = 1.0, ""
     if suf in _SHOWN_SCALED:
         scale, unit = _display(suf)
-    parts = [f"{v * scale:g}" if v is not None else "" for v in (lo, hi)]
+    # a whole-number bound exactly: %g wrote the seed's 2⁶³ − 1 as 9.22337e+18
+    parts = ["" if v is None else str(v) if isinstance(v, int) and scale == 1.0 else
+             f"{v * scale:g}" for v in (lo, hi)]
     if lo is not None and hi is not None:
         return f"{parts[0]} … {parts[1]}{(' ' + unit) if unit else ''}"
     if lo is not None:

@@ -659,3 +659,17 @@ def test_a_changed_scenario_no_longer_claims_the_text_it_was_loaded_from():
     point = study.point(study.DesignSpec("rotating12"), sc, 3)
     task, = study.tasks_for([point], {point.scenario: rooms.ideal(sc)})
     assert task.scenario_yaml is None and not task.scenario.effects
+
+
+def test_a_whole_number_bound_is_written_exactly(t_room_raw):
+    """`seed: -3` said "allowed 0 … 9.22337e+18" where scenarios/README.md says 0 … 2⁶³−1:
+    %g rounded the bound; a whole-number bound is written as it is."""
+    for path, value, message in [
+            ("seed", -3, "seed: -3 is out of range; allowed 0 … 9223372036854775807"),
+            ("seed", 2 ** 63, "seed: 9223372036854775808 is out of range; allowed 0 … "
+                              "9223372036854775807"),
+            ("robot.ring", {"sensors": 73}, "robot.ring.sensors: 73 is out of range; allowed "
+                                            "1 … 72")]:
+        raw = _set(copy.deepcopy(t_room_raw), path, value)
+        with pytest.raises(ScenarioError, match=f"^{re.escape(message)}$"):
+            parse(raw)
