@@ -273,7 +273,8 @@ class _Loader:
         kwargs: dict[str, Any] = {}
         for key, value in raw.items():
             if key not in allowed:
-                names = ", ".join(sorted(allowed))
+                # an effect without settings (foldover) ended "allowed here:" with nothing
+                names = ", ".join(sorted(allowed)) or "none, write {} for the defaults"
                 hint = _other_unit(str(key), cls) or _close(str(key), allowed)
                 raise self.fail(_join(path, key), f"unknown key{hint}; allowed here: {names}")
             f, factor = allowed[key]

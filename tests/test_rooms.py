@@ -340,6 +340,9 @@ def test_bench_rooms_exits_6_when_a_room_misses_a_target_or_the_ideal_is_worse(
     assert "occupied_f1 0." in line
     monkeypatch.setitem(rooms.TARGETS, "occupied_f1", 0.0)
     assert main(argv) == 0
+    # one room is "1 room" ("1 rooms, 1 seed(s) each" before)
+    assert capsys.readouterr().out.splitlines()[-1].startswith(
+        "1 room, 1 seed(s) each: 0 miss a target, 0 where the ideal sensor is worse")
     real = bench_rooms.measure
 
     def ideal_worse(*a, **k):

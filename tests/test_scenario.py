@@ -673,3 +673,15 @@ def test_a_whole_number_bound_is_written_exactly(t_room_raw):
         raw = _set(copy.deepcopy(t_room_raw), path, value)
         with pytest.raises(ScenarioError, match=f"^{re.escape(message)}$"):
             parse(raw)
+
+
+def test_an_unknown_key_of_an_effect_without_settings_says_none_is_allowed(t_room_raw):
+    """`effects: {foldover: {zz: 1}}` ended "unknown key; allowed here:" with nothing after
+    it: foldover, quantization and averaging take no settings."""
+    for effect in ("foldover", "quantization", "averaging"):
+        raw = copy.deepcopy(t_room_raw)
+        raw["effects"] = {effect: {"zz": 1}}
+        with pytest.raises(ScenarioError, match=re.escape(
+                f"effects.{effect}.zz: unknown key; allowed here: none, write {{}} for the "
+                "defaults") + "$"):
+            parse(raw)

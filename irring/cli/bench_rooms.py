@@ -139,5 +139,6 @@ def _print_table(rows: list[dict], seeds: int, out) -> None:
     # as the exit status counts: a room with more than the default effects is shown, not counted
     beyond = (f", {n_beyond} below one with effects beyond the defaults (shown, not counted)"
               if n_beyond else "")
-    print(f"{len(rows)} rooms, {seeds} seed(s) each: {failed}{n_miss} miss a target{beyond}, "
+    print(f"{len(rows)} room{'' if len(rows) == 1 else 's'}, {seeds} seed(s) each: {failed}"
+          f"{n_miss} miss a target{beyond}, "
           f"{n_worse} where the ideal sensor is worse somewhere; wrote {errors.printable(str(out))}/rooms.json, rooms.csv")
