@@ -411,16 +411,20 @@ _UNIT_WORD = re.compile(r"[µukcdm]?m|in(ch(es)?)?|ft|feet|foot|(milli|centi)?me
 
 def _other_unit(key: str, cls: type) -> str:
     """' (a unit irring does not read; write `radius_mm` or `radius_m`)' for ``radius_cm``: a
-    known quantity in another unit, where "did you mean `radius_m`" would scale it 100×."""
+    known quantity in another unit, where "did you mean `radius_m`" would scale it 100×; for
+    ``radius`` without a unit, ' (a quantity is written with its unit: `radius_mm` or
+    `radius_m`)'."""
     for f in dataclasses.fields(cls):
         suf = unit_suffix(f.name)
         if suf is None or f.name in NOT_IN_FILE:
             continue
         base = f.name[: -len(suf)] + "_"
         rest = key[len(base):]
+        spellings = " or ".join(f"`{k}`" for k, _ in reversed(_yaml_keys(f.name)))
         if key.startswith(base) and _UNIT_WORD.fullmatch(rest.lower()):
-            spellings = " or ".join(f"`{k}`" for k, _ in reversed(_yaml_keys(f.name)))
             return f" (a unit irring does not read; write {spellings})"
+        if key == base[:-1]:   # `radius: 22`: "did you mean `radius_m`" read it as 22 m
+            return f" (a quantity is written with its unit: {spellings})"
     return ""
 
 

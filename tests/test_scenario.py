@@ -45,6 +45,15 @@ BAD = [
                                                                "radius_cm": 3}]),
      [r"obstacles\[0\]\.radius_cm: unknown key \(a unit irring does not read; write "
       r"`radius_mm` or `radius_m`\); allowed here: center_m, center_mm, radius_m, radius_mm"]),
+    # `radius: 22` said "did you mean `radius_m`" (a 22 m post), `x: 500` nothing at all
+    ("a length without its unit", lambda r: _set(r, "obstacles", [{"type": "cylinder",
+                                                                 "center_mm": [500, 300],
+                                                                 "radius": 22}]),
+     [r"obstacles\[0\]\.radius: unknown key \(a quantity is written with its unit: "
+      r"`radius_mm` or `radius_m`\); allowed here: center_m, center_mm, radius_m, radius_mm"]),
+    ("a position without its unit", lambda r: _set(r, "robot.poses", [{"x": 500, "y_mm": 450}]),
+     [r"robot\.poses\[0\]\.x: unknown key \(a quantity is written with its unit: `x_mm` or "
+      r"`x_m`\)"]),
     ("an angle spelt out", lambda r: _set(r, "robot.poses.0.yaw_degrees", 30),
      [r"robot\.poses\[0\]\.yaw_degrees: unknown key \(a unit irring does not read; write "
       r"`yaw_deg` or `yaw_rad`\)"]),
