@@ -283,7 +283,7 @@ def test_a_far_columns_arc_is_a_circle_before_its_short_lines_are_doubted(doubt_
 
     def recording(points, label, index, counts, steps, cal, *args):
         if doubt_first:
-            short = est.short_far_lines(points, label, index, cal)
+            short = est.short_far_lines_compiled(points, label, index, cal)
             if short is not None:
                 points, label = doubt(points, label, index, counts, steps, cal, *short)
         out, out_label = round_runs(points, label, index, counts, steps, cal, *args)

@@ -1503,6 +1503,183 @@ def far_line_vote(const idx_t[::1] at, const idx_t[::1] sel, const idx_t[::1] la
     return off_arr.view(bool)
 
 
+def short_far_lines(const idx_t[::1] index, const unsigned char[::1] valid,
+                    const idx_t[::1] label, const double[::1] d, const double[::1] sigma,
+                    const double[::1] theta, const double[::1] x, const double[::1] y,
+                    double far_m, idx_t min_n, idx_t max_n, idx_t few_n, double se_max,
+                    bint ask_loose):
+    """``irring.estimation.far_lines.short_far_lines`` (the statement and the why) to the
+    bit: the members (in scan order ``index``, flat (S·N) indices) of each line whose
+    members' summed ``d`` reaches ``far_m`` (the share of the max range) times their number;
+    ``doubt`` where it has ``min_n`` … ``max_n`` members; with ``ask_loose``, ``loose``
+    where it has at most ``few_n`` and ``lines.direction_se`` (its sums in scan order,
+    numpy's arctan2, cos and sin) exceeds ``se_max``. Arrays flat (S·N); ``label`` −1 on no
+    line. Returns (doubt, loose) (S·N,) bool, or None where neither holds anywhere."""
+    cdef idx_t k = index.shape[0], size = label.shape[0], i, f, l, L = 0, m = 0, ms = 0
+    cdef bint far, any_doubt = False, any_few = False, any_loose = False
+    cdef double u, v, along
+    if not (valid.shape[0] == d.shape[0] == sigma.shape[0] == theta.shape[0] == x.shape[0]
+            == y.shape[0] == size):
+        raise lengths_differ("short_far_lines' arrays", label=size, valid=valid.shape[0],
+                             d=d.shape[0], sigma=sigma.shape[0], theta=theta.shape[0],
+                             x=x.shape[0], y=y.shape[0])
+    for i in range(k):
+        f = index[i]
+        if f < 0 or f >= size:
+            raise IndexError(f"index[{i}] = {f} is not a reading (0 … {size - 1})")
+        if valid[f] and label[f] >= 0:
+            m += 1
+            if label[f] >= L:
+                L = label[f] + 1
+    if m == 0:
+        return None
+    # per line (np.bincount's sums, in scan order): members, Σd; then the flags
+    # 0 doubt, 1 few and far
+    counts_arr = np.zeros(L, dtype=np.intp)
+    sums_arr = np.zeros((7, L))       # Σd, then the few far lines' Σx, Σy, Σuv, Σ(u²−v²),
+    flags_arr = np.zeros((2, L), dtype=np.uint8)          # Σalong², Σσ⊥²
+    doubt_arr = np.zeros(size, dtype=bool)
+    loose_arr = np.zeros(size, dtype=bool)
+    cdef idx_t[::1] total = counts_arr
+    cdef double[:, ::1] S = sums_arr
+    cdef unsigned char[:, ::1] F = flags_arr
+    cdef unsigned char[::1] doubt = doubt_arr.view(np.uint8)
+    cdef unsigned char[::1] loose = loose_arr.view(np.uint8)
+    cdef const double[::1] ca, sa, cos_t, se
+    cdef idx_t[::1] sel
+    cdef double[::1] ts
+    for i in range(k):
+        f = index[i]
+        if valid[f] and label[f] >= 0:
+            total[label[f]] += 1
+            S[0, label[f]] += d[f]
+    for l in range(L):
+        far = S[0, l] >= far_m * <double>total[l]
+        F[0, l] = far and total[l] >= min_n and total[l] <= max_n
+        F[1, l] = far and total[l] <= few_n
+        any_few = any_few or F[1, l]
+    for i in range(k):
+        f = index[i]
+        if valid[f] and label[f] >= 0:
+            if F[0, label[f]]:
+                doubt[f] = 1
+                any_doubt = True
+            if F[1, label[f]]:
+                ms += 1
+    if any_few and ask_loose:
+        # lines.direction_se over the few far lines' members (the others' rows stay 0)
+        sel_arr = np.empty(ms, dtype=np.intp)
+        theta_sel = np.empty(ms)
+        sel = sel_arr
+        ts = theta_sel
+        ms = 0
+        for i in range(k):
+            f = index[i]
+            if valid[f] and label[f] >= 0 and F[1, label[f]]:
+                sel[ms] = f
+                ts[ms] = theta[f]
+                ms += 1
+                S[1, label[f]] += x[f]
+                S[2, label[f]] += y[f]
+        for l in range(L):
+            if F[1, l]:       # (np.maximum(n, 1): a line of no such member keeps 0 / 1)
+                S[1, l] = S[1, l] / <double>total[l]
+                S[2, l] = S[2, l] / <double>total[l]
+        for i in range(ms):
+            f = sel[i]
+            l = label[f]
+            u = x[f] - S[1, l]
+            v = y[f] - S[2, l]
+            S[3, l] += u * v
+            S[4, l] += u * u - v * v
+        for l in range(L):
+            S[3, l] = 2.0 * S[3, l]
+        al = 0.5 * _arctan2(sums_arr[3], sums_arr[4])
+        ca_arr = np.cos(al)
+        sa_arr = np.sin(al)
+        cos_arr = np.cos(theta_sel)
+        ca, sa, cos_t = ca_arr, sa_arr, cos_arr
+        for i in range(ms):
+            f = sel[i]
+            l = label[f]
+            u = x[f] - S[1, l]
+            v = y[f] - S[2, l]
+            along = u * ca[l] + v * sa[l]
+            S[5, l] += along * along
+            u = sigma[f] * cos_t[i]
+            S[6, l] += u * u
+        for l in range(L):
+            if not (S[5, l] != S[5, l] or S[5, l] >= 1e-12):    # np.maximum: NaN wins
+                S[5, l] = 1e-12
+            v = <double>(total[l] if F[1, l] else 1)
+            S[6, l] = S[6, l] / v / S[5, l]
+        se_arr = np.sqrt(sums_arr[6])
+        se = se_arr
+        for i in range(ms):
+            f = sel[i]
+            if se[label[f]] > se_max:
+                loose[f] = 1
+                any_loose = True
+    if not (any_doubt or any_loose):
+        return None
+    return doubt_arr, loose_arr
+
+
+def own_slope_reads(const double[::1] s, const double[::1] theta, const double[::1] slope,
+                    const double[::1] se, const double[::1] sig_s, const double[::1] xp,
+                    const double[::1] node_log_a, const double[::1] node_b, double max_inc,
+                    double min_range, double sigma_floor):
+    """``irring.estimation.profiles.own_slope_read`` (the statement) to the bit: readings
+    (counts ``s``, σ_S/S ``sig_s``) read at their own profile's ``theta``, ``slope`` and its
+    standard error ``se``: d at θ, σ (the noise at θ with half the spread of d over θ ± the
+    slope's error, ``own_slope_sigma``'s) and whether they are placed. np.interp's log a, b
+    on the nodes ``xp``, ``node_log_a``, ``node_b``; numpy's arctan, log and exp on this
+    call's rows. Returns (d, σ, placed bool)."""
+    cdef idx_t n = s.shape[0], i, j
+    cdef double t, v, la, b
+    if not (theta.shape[0] == slope.shape[0] == se.shape[0] == sig_s.shape[0] == n
+            and node_log_a.shape[0] == node_b.shape[0] == xp.shape[0]):
+        raise lengths_differ("own_slope_reads' arrays", s=n, theta=theta.shape[0],
+                             slope=slope.shape[0], se=se.shape[0], sig_s=sig_s.shape[0],
+                             xp=xp.shape[0], node_log_a=node_log_a.shape[0],
+                             node_b=node_b.shape[0])
+    if xp.shape[0] == 0:
+        raise ValueError("own_slope_reads: the calibration has no nodes")
+    cdef idx_t m = xp.shape[0]
+    rows = np.empty((6, n))     # θ ± the error's bound angles, then log s, then d at θ, lo, hi
+    placed_arr = np.zeros(n, dtype=bool)
+    cdef double[:, ::1] R = rows
+    cdef unsigned char[::1] placed = placed_arr.view(np.uint8)
+    for i in range(n):
+        t = fabs(slope[i])
+        v = t - se[i]
+        R[0, i] = v if (v >= 0.0 or v != v) else 0.0       # np.maximum: NaN wins
+        R[1, i] = t + se[i]
+        R[2, i] = s[i]
+    np.arctan(rows[:2], out=rows[:2])
+    np.log(rows[2], out=rows[2])
+    for i in range(n):
+        v = R[1, i]
+        if not (v <= max_inc or v != v):                     # np.minimum: NaN wins
+            R[1, i] = max_inc
+        for j in range(3):
+            v = fabs(theta[i] if j == 0 else R[j - 1, i])
+            la = _np_interp(v, &xp[0], &node_log_a[0], m)
+            b = _np_interp(v, &xp[0], &node_b[0], m)
+            R[3 + j, i] = la + b * R[2, i]
+    np.exp(rows[3:], out=rows[3:])
+    sigma_arr = np.empty(n)
+    cdef double[::1] sigma = sigma_arr
+    for i in range(n):
+        b = _np_interp(fabs(theta[i]), &xp[0], &node_b[0], m)
+        v = fabs(b) * R[3, i] * sig_s[i]
+        if not (v >= sigma_floor or v != v):
+            v = sigma_floor
+        sigma[i] = hypot(v, 0.5 * fabs(R[4, i] - R[5, i]))
+        placed[i] = isfinite(R[3, i]) and R[3, i] >= min_range and isfinite(sigma[i])
+    return rows[3].copy(), sigma_arr, placed_arr
+
+
 def post_groups(const unsigned char[::1] reason, const unsigned char[::1] valid,
                 const idx_t[::1] label, unsigned char unknown, const double[::1] counts,
                 const double[::1] heading, const double[::1] ox, const double[::1] oy,

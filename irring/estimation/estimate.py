@@ -29,7 +29,7 @@ from .arcs import local_incidence, round_runs_compiled
 from .bends import (bent_ends_compiled, bowed_lines_compiled, faceted_lines_compiled,
                     kinked_lines)
 from .counts import CountsFits, counts_disown_lines
-from .far_lines import doubt_far_lines, far_posts, fused_lines, short_far_lines
+from .far_lines import doubt_far_lines, far_posts, fused_lines, short_far_lines_compiled
 from .foldover import resolve_foldover
 from .lines import (PINNED_RAD, Estimate, LineOptions, far_sigma_cap, jump_slope, lines_record,
                     read_to_own_range, scan_order, segment, snap_to_lines)
@@ -295,7 +295,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                    options: LineOptions, snap: bool, detail: bool, history: list,
                    counts: np.ndarray, steps: np.ndarray, reach: Callable | None = None,
                    snapper: Callable | None = None, profiler: Callable | None = None,
-                   voter: Callable | None = None, post_grouper: Callable | None = None,
+                   voter: Callable | None = None, shorter: Callable | None = None,
+                   post_grouper: Callable | None = None,
                    gapper: Callable | None = None, raw_counts: np.ndarray | None = None,
                    beside: Callable | None = None, tracer: type[TraceSteps] | None = None,
                    judge: Callable | None = None, bower: Callable | None = None,
@@ -334,6 +335,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     default; the oracle passes its numpy statement :func:`range_profiles`); ``voter`` and
     ``post_grouper``: the short far lines' vote and the far posts' groups (compiled by
     default; the oracle passes its numpy ``far_line_vote`` and ``post_groups``);
+    ``shorter``: the short far lines (:func:`short_far_lines_compiled`; the oracle:
+    :func:`short_far_lines`);
     ``gapper``: the silent gaps (:func:`silent_gaps_compiled`; the oracle: :func:`silent_gaps`);
     ``beside``: the silent beams beside a return (:func:`beside_a_return_compiled`; the
     oracle: :func:`beside_a_return`); ``tracer``: :func:`rejoin_traces`' steps
@@ -367,7 +370,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     # lines whole: they decide the branches; docs/foldover.md, "Short far lines"), judged as
     # fitted, but after round_runs: a column's arc cut into short far lines is a circle's
     # first (doubted first, its members made INCIDENCE_UNKNOWN cut the column's runs)
-    short = short_far_lines(points, label, index, cal) if snap else None
+    short = (shorter or short_far_lines_compiled)(points, label, index, cal) if snap else None
     # one profile call for local_incidence, round_runs and the doubt while no reading leaves
     profiler = SharedProfiles(profiler or profiles_compiled,
                                None if short is None else short[0] | short[1])

@@ -17,7 +17,8 @@ from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, c
 from .arcs import round_runs
 from .bends import bent_ends, bowed_lines, faceted_lines
 from .counts import CountsFits, counts_contradicted
-from .far_lines import POST_CELL_REACH, POST_LINK_M, POST_RUN_MAX, POST_SENSORS, post_cells
+from .far_lines import (POST_CELL_REACH, POST_LINK_M, POST_RUN_MAX, POST_SENSORS, post_cells,
+                        short_far_lines)
 from .foldover import resolve_foldover
 from .lines import (PINNED_RAD, SNAP_MIN, SNAP_OWN, SNAP_SIGMAS, Estimate, LineOptions, Lines,
                     Pieces, fallback_spread, polyline_ids, scan_order)
@@ -1143,7 +1144,8 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     return final_estimate(points, grouping, on_line, sw.index, cal, lines, snap, True, history,
                           counts, np.asarray(sweep.steps), reach=no_return_reach,
                           snapper=snap_to_lines, profiler=range_profiles,
-                          voter=far_line_vote, post_grouper=post_groups, gapper=silent_gaps,
+                          voter=far_line_vote, shorter=short_far_lines,
+                          post_grouper=post_groups, gapper=silent_gaps,
                           beside=beside_a_return, tracer=TraceSteps,
                           judge=counts_contradicted,
                           bower=bowed_lines, fitter=CountsFits, past_finder=past_members,

@@ -347,6 +347,21 @@ def short_far_lines(points: Points, label: np.ndarray, index: np.ndarray, cal: C
     return (doubt, loose) if doubt.any() or loose.any() else None
 
 
+def short_far_lines_compiled(points: Points, label: np.ndarray, index: np.ndarray,
+                             cal: Calibration) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`short_far_lines` (the statement) in one compiled call
+    (``irring.estimation._lines.short_far_lines``, held to it by tests/test_far_lines.py)."""
+    f = np.ascontiguousarray
+    return _lines.short_far_lines(
+        f(index, dtype=np.intp), f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
+        f(label, dtype=np.intp).reshape(-1),
+        *(f(getattr(points, k), dtype=float).reshape(-1)
+          for k in ("d", "sigma_m", "theta", "x", "y")),
+        FAR_LINE_MIN_SHARE * points.max_range_m, LOCAL_MIN, FAR_LINE_MAX_MEMBERS,
+        SHORT_LINE_MAX_MEMBERS, SHORT_LINE_SE_MAX, not read_to_own_range(cal,
+                                                                         points.max_range_m))
+
+
 def doubt_far_lines(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                     steps: np.ndarray, cal: Calibration, doubt: np.ndarray, loose: np.ndarray,
                     profiler: Callable | None = None, voter: Callable | None = None

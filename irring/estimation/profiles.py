@@ -261,13 +261,33 @@ def placed_surely(cal: Calibration, s: np.ndarray, theta: np.ndarray, slope: np.
     (``slope`` and its standard error ``se``; ``sig_s``: σ_S/S): σ at most
     ``AGAIN_SIGMA_M`` (θ = 0 would be off by 3σ or more), θ not pinned at the drop-out
     angle (a slope that steep is two surfaces', not one face's)."""
+    _, sigma, placed = own_slope_read(cal, s, theta, slope, se, sig_s)
+    return placed & (sigma <= AGAIN_SIGMA_M) & (theta < cal.max_incidence_rad - PINNED_RAD)
+
+
+def own_slope_read(cal: Calibration, s: np.ndarray, theta: np.ndarray, slope: np.ndarray,
+                   se: np.ndarray, sig_s: np.ndarray):
+    """(d, σ, placed) of readings (counts ``s``, ``sig_s``: σ_S/S) read at their own
+    profile's ``theta`` (``slope`` and its standard error ``se``): d at θ, σ and placed as
+    :func:`own_slope_sigma` gives them from d at θ ± that error. numpy, the statement
+    :func:`own_slope_read_compiled` is held to."""
     t = np.abs(slope)
     lo = np.arctan(np.maximum(t - se, 0.0))
     hi = np.minimum(np.arctan(t + se), cal.max_incidence_rad)
     d, d_lo, d_hi = cal.distance(np.concatenate([s, s, s]),
                                  np.concatenate([theta, lo, hi])).reshape(3, -1)
-    sigma, placed = own_slope_sigma(cal, theta, d, d_lo, d_hi, sig_s)
-    return placed & (sigma <= AGAIN_SIGMA_M) & (theta < cal.max_incidence_rad - PINNED_RAD)
+    return (d, *own_slope_sigma(cal, theta, d, d_lo, d_hi, sig_s))
+
+
+def own_slope_read_compiled(cal: Calibration, s: np.ndarray, theta: np.ndarray,
+                            slope: np.ndarray, se: np.ndarray, sig_s: np.ndarray):
+    """:func:`own_slope_read` in one compiled call (``irring.estimation._lines.
+    own_slope_reads``, held to it by tests/test_far_line_kernels.py)."""
+    f = np.ascontiguousarray
+    return _lines.own_slope_reads(
+        f(s, dtype=float), f(theta, dtype=float), f(slope, dtype=float), f(se, dtype=float),
+        f(sig_s, dtype=float), cal.theta_rad, cal._node_log_a, cal.b, cal.max_incidence_rad,
+        cal.min_range_m, SIGMA_FLOOR_M)
 
 
 def own_slope_sigma(cal: Calibration, theta: np.ndarray, d: np.ndarray, d_lo: np.ndarray,
@@ -293,13 +313,10 @@ def leave_doubted_line(points: Points, label: np.ndarray, vi: np.ndarray, pos: n
     range."""
     placed = pr.ok[doubted].copy()  # only a straight, clearly steep profile places one
     if placed.any():
-        s, theta = pr.s[pos[placed]], pr.theta[doubted][placed]
-        t, e = np.abs(pr.slope[doubted][placed]), pr.se[doubted][placed]
-        lo = np.arctan(np.maximum(t - e, 0.0))
-        hi = np.minimum(np.arctan(t + e), cal.max_incidence_rad)
-        d_new, d_lo, d_hi = cal.distance(np.concatenate([s, s, s]),
-                                         np.concatenate([theta, lo, hi])).reshape(3, -1)
-        sigma, fits = own_slope_sigma(cal, theta, d_new, d_lo, d_hi, pr.sig_s[pos[placed]])
+        theta = pr.theta[doubted][placed]
+        d_new, sigma, fits = own_slope_read_compiled(
+            cal, pr.s[pos[placed]], theta, pr.slope[doubted][placed], pr.se[doubted][placed],
+            pr.sig_s[pos[placed]])
         if stay is not None:     # (a stayer is placed only within the range)
             fits &= ~stay[placed] | (d_new <= points.max_range_m)
         placed[placed] = fits
