@@ -3372,6 +3372,26 @@ cdef inline bint _crosses(double ox, double oy, double ux, double uy, double mx,
     return ahead
 
 
+cdef idx_t _number_lines(const idx_t[::1] label, const unsigned char[::1] valid, idx_t* rank,
+                         idx_t L, idx_t min_members, idx_t* members) noexcept nogil:
+    """Each label's valid members counted in ``rank`` (L, zeroed; np.bincount's), then in
+    its place the line's number among the labels of ``min_members`` members or more, in
+    label order, else −1; ``members``: theirs in all. Returns how many are numbered."""
+    cdef idx_t f, k, n = 0
+    members[0] = 0
+    for f in range(label.shape[0]):
+        if valid[f] and label[f] >= 0:
+            rank[label[f]] += 1
+    for k in range(L):
+        if rank[k] >= min_members:
+            members[0] += rank[k]
+            rank[k] = n
+            n += 1
+        else:
+            rank[k] = -1
+    return n
+
+
 def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
                  const double[::1] x, const double[::1] y, const double[::1] origin_x,
                  const double[::1] origin_y, const double[::1] heading, const double[::1] d,
@@ -3417,16 +3437,7 @@ def past_members(const idx_t[::1] label, const unsigned char[::1] valid,
     try:
         if rank == NULL:
             raise MemoryError()
-        for f in range(size):
-            if valid[f] and label[f] >= 0:
-                rank[label[f]] += 1
-        for k in range(L):                 # a wall: a line of min_members or more
-            if rank[k] >= min_members:
-                m += rank[k]
-                rank[k] = nw
-                nw += 1
-            else:
-                rank[k] = -1
+        nw = _number_lines(label, valid, rank, L, min_members, &m)  # walls: min_members or more
         if nw < 2:
             return None
         # per wall: its members' start; rows of W: members, Σx, Σy, mx, my, Σuv, Σuu, Σvv,
@@ -3794,16 +3805,7 @@ def bend_gate(const idx_t[::1] label, const unsigned char[::1] valid, const idx_
     if line == NULL:
         raise MemoryError("bend_gate: no memory for the lines' counts")
     try:
-        for f in range(size):
-            if label[f] >= 0 and valid[f]:
-                line[label[f]] += 1
-        for k in range(L):
-            if line[k] >= min_members:
-                m += line[k]
-                line[k] = n_g
-                n_g += 1
-            else:
-                line[k] = -1
+        n_g = _number_lines(label, valid, line, L, min_members, &m)
         if n_g == 0:
             return False
         at = <idx_t*>malloc(m * sizeof(idx_t))              # the members' flat indices
