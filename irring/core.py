@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import math
 import sys
 from dataclasses import dataclass, field
@@ -388,6 +389,98 @@ def first_overlap(outline) -> tuple[int, int, float] | None:
             k = int(np.argmax(overlap))
             return int(ii[k]), int(jj[k]), float(shared[k])
     return None
+
+
+def wall_extents(outline, thickness_m: float):
+    """How the simulator builds each wall (simulation.model.wall_boxes): a box of
+    ``thickness_m`` outward of the wall, lengthened by the thickness at each convex corner
+    (closing the outside corner) and not at a reflex one. Rows per wall: (u, outward, ext_a,
+    ext_b, length), u the unit vector from its corner to the next."""
+    pts = np.asarray(outline, dtype=float).reshape(-1, 2)
+    prev, b, nxt = np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0), np.roll(pts, -2, axis=0)
+    ccw = float(np.sum(pts[:, 0] * b[:, 1] - b[:, 0] * pts[:, 1])) > 0
+    d = b - pts
+    length = np.hypot(d[:, 0], d[:, 1])
+    u = d / length[:, None]
+    outward = np.stack([u[:, 1], -u[:, 0]], axis=1) if ccw else np.stack([-u[:, 1], u[:, 0]], axis=1)
+
+    def convex(p, q, r):   # the corner at q turns toward the room
+        cross = (q[:, 0] - p[:, 0]) * (r[:, 1] - q[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - q[:, 0])
+        return (cross > 0) == ccw
+
+    ext_a = np.where(convex(prev, pts, b), thickness_m, 0.0)
+    ext_b = np.where(convex(pts, b, nxt), thickness_m, 0.0)
+    return u, outward, ext_a, ext_b, length
+
+
+def first_wall_intrusion(outline, thickness_m: float,
+                         slack_m: float = OVERLAP_MIN_M) -> tuple[int, int] | None:
+    """The first wall i (row order) whose box (:func:`wall_extents`) another wall j of the
+    outline, not its neighbour, enters by more than ``slack_m`` short of its outer face,
+    (i, j); or None.
+    Wall j there has room on its far side: the simulated wall would stand in the room (two
+    walls closer than the thickness outside the outline, a partition thinner than it)."""
+    a = np.asarray(outline, dtype=float).reshape(-1, 2)
+    n = len(a)
+    b = np.roll(a, -1, axis=0)
+    u, out, ext_a, ext_b, length = wall_extents(a, thickness_m)
+    start = a - u * ext_a[:, None]
+    span = length + ext_a + ext_b
+    corners = np.stack([start, start + u * span[:, None], start + out * thickness_m,
+                        start + u * span[:, None] + out * thickness_m])
+    box_lo, box_hi = corners.min(axis=0), corners.max(axis=0)
+    seg_lo, seg_hi = np.minimum(a, b), np.maximum(a, b)
+    m = slack_m
+    rows = max(1, _CROSS_PAIRS // max(n, 1))
+    for i0 in range(0, n, rows):
+        i = np.arange(i0, min(n, i0 + rows))[:, None]
+        j = np.arange(n)[None, :]
+        # not a wall's neighbours: at a sharp reflex corner (a V notch) the two boxes poke
+        # past each other by a few mm near the corner, whatever their thickness
+        apart = (j != i) & (j != (i + 1) % n) & (j != (i - 1) % n)
+        meet = ((box_lo[i, 0] <= seg_hi[j, 0]) & (seg_lo[j, 0] <= box_hi[i, 0])
+                & (box_lo[i, 1] <= seg_hi[j, 1]) & (seg_lo[j, 1] <= box_hi[i, 1]) & apart)
+        ii, jj = np.nonzero(meet)
+        ii = ii + i0
+        # wall j in box i's frame: s along the box from its start, w outward from the wall
+        p, q = a[jj] - start[ii], b[jj] - start[ii]
+        s0, s1 = np.einsum("ij,ij->i", p, u[ii]), np.einsum("ij,ij->i", q, u[ii])
+        w0, w1 = np.einsum("ij,ij->i", p, out[ii]), np.einsum("ij,ij->i", q, out[ii])
+        enter, leave = np.zeros(len(ii)), np.ones(len(ii))
+        for v0, v1, lo, hi in ((s0, s1, m, span[ii] - m),
+                               (w0, w1, OVERLAP_MIN_M, thickness_m - m)):
+            dv = v1 - v0
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t_lo, t_hi = (lo - v0) / dv, (hi - v0) / dv
+            moving = dv != 0
+            enter = np.where(moving, np.maximum(enter, np.minimum(t_lo, t_hi)), enter)
+            leave = np.where(moving, np.minimum(leave, np.maximum(t_lo, t_hi)), leave)
+            still_out = ~moving & ((v0 <= lo) | (v0 >= hi))
+            leave = np.where(still_out, -1.0, leave)
+        hit = enter < leave
+        if hit.any():
+            k = int(np.argmax(hit))
+            return int(ii[k]), int(jj[k])
+    return None
+
+
+def built_wall_thickness(outline, thickness_m: float) -> float:
+    """How thick the simulator builds a room's walls: ``thickness_m``, or where two walls lie
+    closer than that outside the outline (a partition drawn into it) the most that keeps every
+    wall's box out of the room (within OVERLAP_MIN_M), so the partition is as thick as drawn.
+    A sensor inside the room sees only the walls' inner faces, wherever they stand."""
+    return _built_wall_thickness(tuple(tuple(map(float, p)) for p in outline), float(thickness_m))
+
+
+@functools.lru_cache(maxsize=32)
+def _built_wall_thickness(outline: tuple, thickness_m: float) -> float:
+    if first_wall_intrusion(outline, thickness_m) is None:
+        return thickness_m
+    lo, hi = 0.0, thickness_m
+    for _ in range(40):   # to ~1e-14 m of the thickness
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if first_wall_intrusion(outline, mid) is None else (lo, mid)
+    return lo
 
 
 def on_one_line(outline) -> bool:

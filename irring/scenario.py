@@ -24,9 +24,11 @@ import numpy as np
 from . import designs, gp2, resources, safe_yaml
 from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_COORDINATE_M,
                    MAX_OBSTACLES, MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S,
-                   SEED_MAX, SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds_error,
-                   choice, clip_to_convex, distance_to_outline, first_crossing, first_overlap,
-                   first_wall_into, footprint, inside_outline, num, obstacle_distance,
+                   SEED_MAX, SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds,
+                   bounds_error, built_wall_thickness, choice, clip_to_convex,
+                   distance_to_outline, first_crossing, first_overlap, first_wall_into,
+                   first_wall_intrusion, footprint, inside_outline, num, obstacle_distance,
+                   segment_distance,
                    on_one_line, polygon_area, reach_outside, unit_suffix, UNITS, walls_into)
 from .designs import Design
 from .errors import InputError, brief
@@ -443,6 +445,29 @@ def _wall_mm(outline, k: int) -> str:
     return f"wall {k} (({x1 * 1e3:g}, {y1 * 1e3:g}) → ({x2 * 1e3:g}, {y2 * 1e3:g}) mm)"
 
 
+def _check_wall_thickness(sc: Scenario, fail) -> None:
+    """Refuse two walls closer outside the outline than the thinnest wall: the simulator builds
+    each wall as a box outward of the outline, thinner where two walls lie closer than the
+    room's thickness (core.built_wall_thickness), but never thinner than a file may ask."""
+    outline = sc.room.outline_m
+    least = bounds(Room, "wall_thickness_m")[0]
+    if built_wall_thickness(outline, sc.room.wall_thickness_m) >= least:
+        return
+    hit = first_wall_intrusion(outline, least)
+    if hit is None:   # pragma: no cover - thinner than the least is an intrusion at the least
+        return
+    i, j = hit
+    (ax, ay), (bx, by) = outline[i], outline[(i + 1) % len(outline)]
+    (cx, cy), (dx, dy) = outline[j], outline[(j + 1) % len(outline)]
+    gap = float(min(segment_distance(cx, cy, ax, ay, bx, by), segment_distance(dx, dy, ax, ay, bx, by),
+                    segment_distance(ax, ay, cx, cy, dx, dy), segment_distance(bx, by, cx, cy, dx, dy)))
+    raise fail("room.outline_mm",
+               f"{_wall_mm(outline, i)} and {_wall_mm(outline, j)} lie {gap * 1e3:g} mm apart "
+               f"outside the outline, closer than the thinnest wall ({least * 1e3:g} mm): the "
+               f"wall built outward of one would stand in the room beyond the other; move them "
+               f"apart, or join them into one wall")
+
+
 def _validate_geometry(sc: Scenario, fail) -> None:
     outline = sc.room.outline_m
     n = len(outline)
@@ -468,6 +493,7 @@ def _validate_geometry(sc: Scenario, fail) -> None:
         raise fail("room.outline_mm", f"{_wall_mm(outline, i)} and {_wall_mm(outline, j)} "
                                       f"overlap along {shared * 1e3:g} mm: a wall must not run "
                                       f"back over another")
+    _check_wall_thickness(sc, fail)
     if not sc.robot.poses:
         raise fail("robot.poses", "at least one scan pose is required")
     if len(sc.obstacles) > MAX_OBSTACLES:

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from .. import resources
-from ..core import Box, Cylinder, Ring
+from ..core import Box, Cylinder, Ring, built_wall_thickness, wall_extents
 from ..scenario import Scenario
 
 TEMPLATE = "irring.xml"
@@ -135,8 +135,8 @@ def add_room(spec: mujoco.MjSpec, scenario: Scenario) -> dict[str, float]:
                     type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     reflectance: dict[str, float] = {}
     room = scenario.room
-    for i, (size, pos, yaw) in enumerate(wall_boxes(room.outline_m, room.wall_thickness_m,
-                                                     room.wall_height_m)):
+    thickness = built_wall_thickness(room.outline_m, room.wall_thickness_m)   # a partition's
+    for i, (size, pos, yaw) in enumerate(wall_boxes(room.outline_m, thickness, room.wall_height_m)):
         name = f"wall_{i:02d}"
         world.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=size, pos=pos,
                        quat=_yaw_quat(yaw), group=RAY_GROUP, rgba=WALL_RGBA)
@@ -170,27 +170,15 @@ def wall_boxes(outline: tuple[tuple[float, float], ...], thickness_m: float,
     """
     pts = np.asarray(outline, dtype=float)
     n = len(pts)
-    area2 = float(np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]))
-    ccw = area2 > 0
+    u, outward, ext_a, ext_b, length = wall_extents(pts, thickness_m)
     boxes = []
     for i in range(n):
         a, b = pts[i], pts[(i + 1) % n]
-        prev, nxt = pts[i - 1], pts[(i + 2) % n]
-        d = b - a
-        length = float(np.hypot(*d))
-        u = d / length
-        outward = np.array([u[1], -u[0]]) if ccw else np.array([-u[1], u[0]])
-
-        def convex(p, q, r) -> bool:  # is the corner at q convex (turning toward the room)?
-            cross = (q[0] - p[0]) * (r[1] - q[1]) - (q[1] - p[1]) * (r[0] - q[0])
-            return (cross > 0) == ccw
-
-        ext_a = thickness_m if convex(prev, a, b) else 0.0
-        ext_b = thickness_m if convex(a, b, nxt) else 0.0
-        centre = (a + b) / 2 + u * (ext_b - ext_a) / 2 + outward * thickness_m / 2
-        half = [(length + ext_a + ext_b) / 2, thickness_m / 2, height_m / 2]
-        boxes.append((half, [float(centre[0]), float(centre[1]), height_m / 2],
-                      math.atan2(u[1], u[0])))
+        centre = ((a + b) / 2 + u[i] * (ext_b[i] - ext_a[i]) / 2
+                  + outward[i] * thickness_m / 2)
+        half = [(float(length[i]) + ext_a[i] + ext_b[i]) / 2, thickness_m / 2, height_m / 2]
+        boxes.append(([float(h) for h in half], [float(centre[0]), float(centre[1]), height_m / 2],
+                      math.atan2(u[i][1], u[i][0])))
     return boxes
 
 
