@@ -307,8 +307,10 @@ def segment_distance(px, py, ax, ay, bx, by) -> np.ndarray:
 
 def inside_outline(px, py, outline) -> np.ndarray:
     """Points inside a closed outline (even-odd rule, one pass per edge)."""
-    inside = np.zeros(np.broadcast(px, py).shape, bool)
     n = len(outline)
+    if n > _FEW_WALLS:
+        return _inside_many(px, py, outline)
+    inside = np.zeros(np.broadcast(px, py).shape, bool)
     for i in range(n):
         (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
         if y1 == y2:
@@ -319,13 +321,60 @@ def inside_outline(px, py, outline) -> np.ndarray:
     return inside
 
 
-def distance_to_outline(px, py, outline) -> np.ndarray:
-    """Distance (m) from points to the nearest wall of a closed outline."""
+_FEW_WALLS = 32   # beyond this, each wall is asked only of the points level with it
+
+
+def _inside_many(px, py, outline) -> np.ndarray:
+    """inside_outline for an outline of many walls: each edge flips only the points whose y
+    lies in [its lower y, its upper y), found in the points sorted by y (the same test)."""
+    px, py = np.broadcast_arrays(np.asarray(px, dtype=float), np.asarray(py, dtype=float))
+    x, y = px.ravel(), py.ravel()
+    order = np.argsort(y, kind="stable")
+    sorted_y = y[order]
+    inside = np.zeros(x.shape, bool)
+    n = len(outline)
+    for i in range(n):
+        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % n]
+        if y1 == y2:
+            continue
+        idx = order[np.searchsorted(sorted_y, min(y1, y2), side="left"):
+                    np.searchsorted(sorted_y, max(y1, y2), side="left")]
+        x_at = x1 + (y[idx] - y1) * (x2 - x1) / (y2 - y1)
+        inside[idx] ^= x[idx] < x_at
+    return inside.reshape(px.shape)
+
+
+def distance_to_outline(px, py, outline, within: float | None = None) -> np.ndarray:
+    """Distance (m) from points to the nearest wall of a closed outline. ``within``: only
+    distances up to it are wanted; the others are +inf, and each wall is measured only from
+    the points in its box grown by ``within`` (an outline of thousands of walls on a grid)."""
+    if within is not None:
+        return _distance_within(px, py, outline, within)
     n = len(outline)
     nearest = segment_distance(px, py, *outline[-1], *outline[0])
     for i in range(n - 1):   # a running minimum: memory of one wall's distances, not n
         nearest = np.minimum(nearest, segment_distance(px, py, *outline[i], *outline[i + 1]))
     return nearest
+
+
+def _distance_within(px, py, outline, within: float) -> np.ndarray:
+    """distance_to_outline's values up to ``within`` (the same floats), +inf beyond."""
+    px, py = np.broadcast_arrays(np.asarray(px, dtype=float), np.asarray(py, dtype=float))
+    x, y = px.ravel(), py.ravel()
+    order = np.argsort(x, kind="stable")
+    sorted_x = x[order]
+    nearest = np.full(x.shape, np.inf)
+    n = len(outline)
+    for i in range(n):
+        (ax, ay), (bx, by) = outline[i - 1], outline[i]   # distance_to_outline's order
+        lo = np.searchsorted(sorted_x, min(ax, bx) - within, side="left")
+        hi = np.searchsorted(sorted_x, max(ax, bx) + within, side="right")
+        idx = order[lo:hi]
+        idx = idx[(y[idx] >= min(ay, by) - within) & (y[idx] <= max(ay, by) + within)]
+        if idx.size:
+            nearest[idx] = np.minimum(nearest[idx], segment_distance(x[idx], y[idx], ax, ay, bx, by))
+    nearest[nearest > within] = np.inf
+    return nearest.reshape(px.shape)
 
 
 _CROSS_PAIRS = 4_000_000   # wall pairs :func:`first_crossing` holds at once (~100 MB)

@@ -583,7 +583,7 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
 
     # material at cell centres: walls outward of the outline, obstacles where they stand
     inside = inside_outline(px, py, outline)
-    dist = distance_to_outline(px, py, outline)
+    dist = distance_to_outline(px, py, outline, within=scenario.room.wall_thickness_m)
     eps = 1e-9
     label = np.full(px.shape, EXTERIOR, np.int16)
     label[inside] = FREE_SPACE
