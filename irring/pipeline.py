@@ -650,6 +650,33 @@ def _check_room_holds_poses(scenario: Scenario, sweeps: Sequence[Sweep], recordi
         "belong together")
 
 
+def _check_recorded_grid(scenario: Scenario, grid: dict | None, recording) -> None:
+    """A recorded grid is the one its scenario laid out (run and drive map on
+    OccupancyGrid.for_scenario): one of other cells maps at another resolution than the
+    scenario says, and one that leaves out part of the room drops the readings there and
+    scores the rest as if it were the room."""
+    if grid is None:
+        return
+    res = grid["resolution_m"]
+    if not math.isclose(res, scenario.map.resolution_m, rel_tol=1e-9):
+        raise rec.RecordingError(
+            f"{recording}: meta.grid has cells of {res * 1e3:g} mm, but the recorded scenario "
+            f"{scenario.name!r} maps in cells of {scenario.map.resolution_m * 1e3:g} mm "
+            "(map.resolution_mm); the grid and the scenario do not belong together")
+    lo = np.asarray(grid["origin_xy_m"], dtype=float)
+    hi = lo + res * np.asarray(grid["shape"][::-1], dtype=float)   # shape is rows, columns
+    outline = np.asarray(scenario.room.outline_m, dtype=float)
+    room_lo, room_hi = outline.min(axis=0), outline.max(axis=0)
+    if np.all(lo <= room_lo) and np.all(room_hi <= hi):
+        return
+    raise rec.RecordingError(
+        f"{recording}: meta.grid (x {lo[0]:g} … {hi[0]:g} m, y {lo[1]:g} … {hi[1]:g} m) "
+        f"leaves out part of the room of the recorded scenario {scenario.name!r} (x "
+        f"{room_lo[0]:g} … {room_hi[0]:g} m, y {room_lo[1]:g} … {room_hi[1]:g} m): the "
+        "readings there would be dropped and the rest scored as the room; the grid and the "
+        "scenario do not belong together")
+
+
 def _check_scenario_sensor(scenario: Scenario, sweeps: Sequence[Sweep], recording) -> None:
     """A recorded scenario whose sensor is not the one its sweeps were read with (run and
     drive record both from one source) scores the map with another sensor's reach."""
@@ -827,6 +854,7 @@ def replay(recording: str | Path, *, calibration_file: str | Path | None = None,
     _check_one_ring(sweeps, recording)
     if scenario is not None:
         _check_room_holds_poses(scenario, sweeps, recording)
+        _check_recorded_grid(scenario, meta.get("grid"), recording)
         _check_scenario_sensor(scenario, sweeps, recording)
         _check_simulated_sweeps(scenario, sweeps, recording)
     _check_commanded_angles(sweeps, recording)

@@ -3,10 +3,13 @@ happens now."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from irring import core, scenario
+from irring import core, load_scenario, pipeline, scenario
+from irring.recording import RecordingError
 from irring.simulation import model
 
 # A 2000 x 1000 mm room with a 5 mm partition (plywood) standing 600 mm out of its bottom
@@ -117,3 +120,65 @@ def test_an_outline_of_thousands_of_walls_is_measured_only_where_walls_are(monke
     assert 400 <= within.sum() < len(px) // 4
     assert np.array_equal(fast_near[within], near[within])
     assert np.isinf(fast_near[~within]).all()
+
+
+@pytest.fixture(scope="module")
+def t_room_recording(tmp_path_factory) -> dict:
+    """`irring run t_room`'s sweeps.npz, entry by entry."""
+    out = tmp_path_factory.mktemp("run")
+    pipeline.write_outputs(pipeline.run(load_scenario("t_room")), out, animation=False)
+    with np.load(out / "sweeps.npz") as z:
+        return {k: z[k] for k in z.keys()}
+
+
+def _with_meta(entries: dict, path, edit) -> str:
+    meta = json.loads(str(entries["meta"]))
+    edit(meta)
+    np.savez(path, **{**entries, "meta": np.array(json.dumps(meta))})
+    return str(path)
+
+
+def _halve_columns(meta):
+    meta["grid"]["shape"][1] //= 2
+
+
+def _cells_of_5mm(meta):
+    meta["grid"]["resolution_m"] = 0.005
+    meta["grid"]["shape"] = [2 * n for n in meta["grid"]["shape"]]
+
+
+def _scenario_of_20mm(meta):
+    meta["scenario_yaml"] = meta["scenario_yaml"].replace("resolution_mm: 10", "resolution_mm: 20")
+
+
+@pytest.mark.parametrize("edit, said", [
+    (_halve_columns, "meta.grid (x -0.105 … 1.215 m, y -0.105 … 1.915 m) leaves out part of "
+                     "the room of the recorded scenario 't_room' (x 0 … 2.42 m, y 0 … 1.8 m): "
+                     "the readings there would be dropped and the rest scored as the room; "
+                     "the grid and the scenario do not belong together"),
+    (_cells_of_5mm, "meta.grid has cells of 5 mm, but the recorded scenario 't_room' maps in "
+                    "cells of 10 mm (map.resolution_mm); the grid and the scenario do not "
+                    "belong together"),
+    (_scenario_of_20mm, "meta.grid has cells of 10 mm, but the recorded scenario 't_room' maps "
+                        "in cells of 20 mm (map.resolution_mm); the grid and the scenario do "
+                        "not belong together"),
+])
+def test_a_recorded_grid_that_is_not_its_scenarios_is_refused(t_room_recording, tmp_path, edit,
+                                                               said):
+    """t_room's recording with its grid cut to the left half of the room: replayed, the
+    right half's readings dropped and the left half scored as the room, F1 0.993, exit 0;
+    with 5 mm cells (the scenario says 10): F1 0.995 -> 0.957 (precision 0.918), exit 0.
+    run and drive map on the grid their scenario lays out, so these were edited."""
+    path = _with_meta(t_room_recording, tmp_path / "grid.npz", edit)
+    with pytest.raises(RecordingError) as err:
+        pipeline.replay(path)
+    assert str(err.value) == f"{path}: {said}"
+
+
+def test_a_recording_without_a_grid_is_mapped_on_its_scenarios(t_room_recording, tmp_path):
+    """The control: no meta.grid (a recording of an older irring) lays the map out by the
+    recorded scenario, and maps what the run mapped."""
+    path = _with_meta(t_room_recording, tmp_path / "nogrid.npz", lambda meta: meta.pop("grid"))
+    replayed = pipeline.replay(path)
+    assert replayed.grid.shape == (202, 264)
+    assert sum(int(p.valid.sum()) for p in replayed.points) == 2153
