@@ -567,6 +567,16 @@ def inside_obstacle(ob: Cylinder | Box, px, py) -> np.ndarray:
     return (np.abs(lx) <= ob.size_m[0] / 2) & (np.abs(ly) <= ob.size_m[1] / 2)
 
 
+def obstacle_bounds(ob: Cylinder | Box, pad_m: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) corners of a box around an obstacle's footprint, ``pad_m`` wider on each
+    side than its rounding: no point outside it is :func:`inside_obstacle`."""
+    if isinstance(ob, Cylinder):
+        c = np.asarray(ob.center_m, dtype=float)
+        return c - ob.radius_m - pad_m, c + ob.radius_m + pad_m
+    corners = box_corners(ob)
+    return corners.min(axis=0) - pad_m, corners.max(axis=0) + pad_m
+
+
 def obstacle_distance(ob: Cylinder | Box, px, py) -> np.ndarray:
     """Signed distance (m) from points to an obstacle's surface (negative inside)."""
     if isinstance(ob, Cylinder):

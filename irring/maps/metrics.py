@@ -14,7 +14,8 @@ import numpy as np
 from .mapping import FREE, OCCUPIED, OccupancyGrid, traverse
 from .. import gp2
 from ..core import (GEOMETRY_TOL_M, Cylinder, Ring, box_corners, distance_to_outline,
-                    first_wall_into, inside_obstacle, inside_outline, obstacle_distance)
+                    first_wall_into, inside_obstacle, inside_outline, obstacle_bounds,
+                    obstacle_distance)
 from ..resources import kernel
 from ..estimation.calibration import Calibration
 from ..scenario import ReflectanceEffect, Scenario
@@ -106,8 +107,13 @@ def _outside_obstacles(samples: tuple[np.ndarray, np.ndarray], obstacles
     stands flush against a wall or is built into it, that stretch of wall is no face."""
     points, normals = samples
     keep = np.ones(len(points), bool)
+    order = np.argsort(points[:, 0], kind="stable")   # each obstacle asks the samples near it
+    sorted_x = points[order, 0]
     for ob in obstacles:
-        keep &= obstacle_distance(ob, points[:, 0], points[:, 1]) > GEOMETRY_TOL_M
+        (x0, y0), (x1, y1) = obstacle_bounds(ob)   # wider than GEOMETRY_TOL_M
+        idx = order[np.searchsorted(sorted_x, x0):np.searchsorted(sorted_x, x1, side="right")]
+        idx = idx[(points[idx, 1] >= y0) & (points[idx, 1] <= y1)]
+        keep[idx] &= obstacle_distance(ob, points[idx, 0], points[idx, 1]) > GEOMETRY_TOL_M
     return points[keep], normals[keep]
 
 
@@ -591,8 +597,12 @@ def ground_truth(scenario: Scenario, grid: OccupancyGrid, bar=None) -> GroundTru
     # an obstacle reaching through a wall is clipped there: nothing of it beyond the walls
     # (the scene's walls hide that part, so it is no truth to map)
     through = [first_wall_into(ob, outline) is not None for ob in scenario.obstacles]
-    for j, ob in enumerate(scenario.obstacles):
-        label[inside_obstacle(ob, px, py) & (label != EXTERIOR)] = OBSTACLE0 + j
+    for j, ob in enumerate(scenario.obstacles):   # asked only of the cells around it
+        (x0, y0), (x1, y1) = obstacle_bounds(ob)
+        near = (slice(np.searchsorted(ys, y0), np.searchsorted(ys, y1, side="right")),
+                slice(np.searchsorted(xs, x0), np.searchsorted(xs, x1, side="right")))
+        block = label[near]   # a view: written through
+        block[inside_obstacle(ob, px[near], py[near]) & (block != EXTERIOR)] = OBSTACLE0 + j
 
     # surfaces: sample the outline and obstacle perimeters finely, mark the cells they fall in
     surface_owner = np.zeros(px.shape, np.int16)
