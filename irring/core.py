@@ -372,7 +372,8 @@ def _distance_within(px, py, outline, within: float) -> np.ndarray:
         idx = order[lo:hi]
         idx = idx[(y[idx] >= min(ay, by) - within) & (y[idx] <= max(ay, by) + within)]
         if idx.size:
-            nearest[idx] = np.minimum(nearest[idx], segment_distance(x[idx], y[idx], ax, ay, bx, by))
+            nearest[idx] = np.minimum(nearest[idx],
+                                      segment_distance(x[idx], y[idx], ax, ay, bx, by))
     nearest[nearest > within] = np.inf
     return nearest.reshape(px.shape)
 
@@ -451,10 +452,11 @@ def wall_extents(outline, thickness_m: float):
     d = b - pts
     length = np.hypot(d[:, 0], d[:, 1])
     u = d / length[:, None]
-    outward = np.stack([u[:, 1], -u[:, 0]], axis=1) if ccw else np.stack([-u[:, 1], u[:, 0]], axis=1)
+    outward = np.stack([u[:, 1], -u[:, 0]] if ccw else [-u[:, 1], u[:, 0]], axis=1)
 
     def convex(p, q, r):   # the corner at q turns toward the room
-        cross = (q[:, 0] - p[:, 0]) * (r[:, 1] - q[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - q[:, 0])
+        cross = ((q[:, 0] - p[:, 0]) * (r[:, 1] - q[:, 1])
+                 - (q[:, 1] - p[:, 1]) * (r[:, 0] - q[:, 0]))
         return (cross > 0) == ccw
 
     ext_a = np.where(convex(prev, pts, b), thickness_m, 0.0)

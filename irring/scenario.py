@@ -459,8 +459,10 @@ def _check_wall_thickness(sc: Scenario, fail) -> None:
     i, j = hit
     (ax, ay), (bx, by) = outline[i], outline[(i + 1) % len(outline)]
     (cx, cy), (dx, dy) = outline[j], outline[(j + 1) % len(outline)]
-    gap = float(min(segment_distance(cx, cy, ax, ay, bx, by), segment_distance(dx, dy, ax, ay, bx, by),
-                    segment_distance(ax, ay, cx, cy, dx, dy), segment_distance(bx, by, cx, cy, dx, dy)))
+    gap = float(min(segment_distance(cx, cy, ax, ay, bx, by),
+                    segment_distance(dx, dy, ax, ay, bx, by),
+                    segment_distance(ax, ay, cx, cy, dx, dy),
+                    segment_distance(bx, by, cx, cy, dx, dy)))
     raise fail("room.outline_mm",
                f"{_wall_mm(outline, i)} and {_wall_mm(outline, j)} lie {gap * 1e3:g} mm apart "
                f"outside the outline, closer than the thinnest wall ({least * 1e3:g} mm): the "

@@ -195,8 +195,9 @@ def test_many_obstacles_are_asked_only_of_the_cells_and_samples_around_them(monk
 
     obstacles = [f"  - {{type: cylinder, center_mm: [{130 + 115 * i}, {150 + 630 * j}], "
                  f"radius_mm: {6 + i + 3 * j}}}" for i in range(20) for j in range(2)]
-    obstacles += [f"  - {{type: box, center_mm: [{210 + 1590 * j + 90 * i}, {330 + 170 * (i % 2)}], "
-                  f"size_mm: [{30 + 7 * i}, {12 + 5 * j}], yaw_deg: {17 * i - 9 * j}}}"
+    obstacles += [f"  - {{type: box, center_mm: [{210 + 1590 * j + 90 * i}, "
+                  f"{330 + 170 * (i % 2)}], size_mm: [{30 + 7 * i}, {12 + 5 * j}], "
+                  f"yaw_deg: {17 * i - 9 * j}}}"
                   for i in range(3) for j in range(2)]
     obstacles += ["  - {type: box, center_mm: [1500, 0], size_mm: [300, 80]}",     # into a wall
                   "  - {type: box, center_mm: [2000, 860], size_mm: [150, 80]}",   # flush with one
