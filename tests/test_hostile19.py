@@ -216,3 +216,26 @@ def test_many_obstacles_are_asked_only_of_the_cells_and_samples_around_them(monk
         a, b = np.asarray(getattr(fast, field.name)), np.asarray(getattr(slow, field.name))
         assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), field.name
     assert len(np.unique(fast.label[fast.label >= metrics.OBSTACLE0])) == 49
+
+
+def test_a_calibration_cut_short_while_drawn_leaves_no_picture_of_another(tmp_path,
+                                                                            monkeypatch):
+    """`irring calibrate --out cal.yaml` over an earlier calibration and its cal.png, stopped
+    by SIGTERM while it drew its chart (3.0, 3.4 and 3.8 s in): the new cal.yaml beside the
+    old cal.png, the picture of another calibration, and only "interrupted" said. The old
+    picture now goes with the old file; a picture cut short leaves none."""
+    from irring.cli import main
+    from irring.estimation import calibration_chart
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["calibrate", "--out", "cal.yaml", "--seed", "5", "--sweeps", "1"]) == 0
+    old = (tmp_path / "cal.yaml").read_text()
+    assert (tmp_path / "cal.png").stat().st_size > 0
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(calibration_chart, "save_png", stopped)
+    assert main(["calibrate", "--out", "cal.yaml", "--seed", "6", "--sweeps", "1"]) == 130
+    assert (tmp_path / "cal.yaml").read_text() != old
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cal.yaml"]

@@ -51,6 +51,8 @@ what it does:
                   (ADC counts and volts against the distance to the wall, coloured by the
                   incidence angle) with the fitted curve through them, how far the curve
                   reads each reading from the wall (mm), and the sensor's fold-over peak.
+                  The picture of an earlier calibration there is removed as the file is
+                  written: stopped while drawing, it leaves none rather than another's.
 
   The file is YAML (distances in mm, angles in degrees); pass it to the estimator with
   `irring run --calibration FILE` or irring.estimation.calibration.Calibration.load(FILE).
@@ -149,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     except (CalibrationError, ValueError) as exc:
         print(f"irring calibrate: error: {errors.printable(str(exc))}", file=sys.stderr)
         return errors.INPUT
-    path = fitted.calibration.save(out)
+    path = _save(fitted.calibration, out)
     return _done(fitted, path, f"on the simulated rig ({scenario.name}'s ring)", args.sensor)
 
 
@@ -221,7 +223,7 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
             if ring.park_failure:
                 print(f"irring calibrate: warning: {errors.printable(ring.park_failure, 2000)}",
                       file=sys.stderr)
-        path = cal.save(out)
+        path = _save(cal, out)
     except BaseException as exc:   # noqa: BLE001 - say why, keep what was read, then stop
         status = _say_why(exc, guided)
         if guided is not None:
@@ -236,6 +238,20 @@ def picture_path(out: Path) -> Path:
     """The picture written beside the calibration file ``out``: its name with .png."""
     return out.with_name(out.name + ".png") if out.suffix.lower() == ".png" else \
         out.with_suffix(".png")
+
+
+def _save(cal, out: Path) -> Path:
+    """Write the calibration and remove the picture of the one it replaces, together. The
+    new picture is drawn after that and may be cut short; then there is no picture, never
+    one of another calibration beside the file. (check_replaceable let only a chart irring
+    drew, or an empty file, stand there.)"""
+    stopped: list[bool] = []
+    with errors.interrupts_noted(lambda: stopped.append(True)):
+        path = cal.save(out)
+        picture_path(path).unlink(missing_ok=True)
+    if stopped:
+        raise KeyboardInterrupt
+    return path
 
 
 def _done(fitted, path: Path, where: str, sensor: int) -> int:
