@@ -189,3 +189,33 @@ def test_a_backend_that_cannot_make_a_context_says_what_to_use_instead(monkeypat
     fake.GLContext = platform_at_odds
     with pytest.raises(ImportError, match="PYOPENGL_PLATFORM environment variable"):
         view.render(scene, 64, 48)
+
+
+def test_the_picture_says_what_it_shows(tmp_path, monkeypatch):
+    """view.png had no caption: which room, pose and step, and what green, red and grey
+    mean, were on stdout only. They are in a band along its foot and in the PNG's
+    Description; a picture too small for words gets none."""
+    _offscreen_or_skip()
+    from PIL import Image
+
+    from irring.cli import view as view_cli
+
+    monkeypatch.chdir(tmp_path)
+    said = ("t_room_cylinder, pose 1 (1920, 450) mm, motor step 10 (sensors turned +10.8°): "
+            "beams green to their hits (red), grey where nothing is within 624 mm")
+    assert main(["view", "t_room_cylinder", "--step", "10", "--out", "v.png",
+                 "--size", "640x480"]) == 0
+    png = Image.open(tmp_path / "v.png")
+    assert png.info["Description"] == said
+    img = np.asarray(png.convert("RGB"), int)
+    band = img[-44:]        # two lines of 12 px type 16 px apart, 6 px above and below
+    assert band.max() == 255 and np.count_nonzero(band.min(axis=2) > 200) > 400   # white text
+    assert np.median(band) < 60                    # on a darkened band
+    # the caption alone: the rest of the picture as drawn, a small one left whole
+    plain = np.full((480, 640, 3), 200, np.uint8)
+    captioned = view_cli.caption(plain, said)
+    rows = np.flatnonzero((captioned != plain).any(axis=(1, 2)))
+    assert rows.min() == 480 - 44 and rows.max() == 479
+    assert view_cli.caption(plain[:299], said) is not None
+    assert np.array_equal(view_cli.caption(plain[:299], said), plain[:299])
+    assert np.array_equal(view_cli.caption(plain[:, :399], said), plain[:, :399])

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from .. import errors
 from ..core import VIEW_BASE_BYTES, VIEW_BYTES_PER_PIXEL, WORK_MEMORY_BYTES, work_refusal
@@ -26,7 +29,9 @@ where nothing is within the sensor's range).
 
 With --out, or without a display, the picture is rendered offscreen (EGL or OSMesa, no
 display needed; MUJOCO_GL=egl|osmesa picks one) and written as a PNG (default without a
-display: ./out/<scenario>/view.png, in the folder `irring run` writes). With a display and
+display: ./out/<scenario>/view.png, in the folder `irring run` writes), captioned along its
+foot with the scenario, pose, step and what the colours mean (not under 400 × 300 pixels;
+the caption is also the PNG's Description). With a display and
 no --out, MuJoCo's interactive viewer opens and plays the sweep, beams drawn, until you
 close it; a DISPLAY that cannot be opened (a forwarded X display gone) is said on stderr
 and the picture written instead.
@@ -99,8 +104,15 @@ def run(args: argparse.Namespace) -> int:
     except RuntimeError as exc:
         print(f"irring view: error: {exc}", file=sys.stderr)
         return 1
-    path = write_png(image, out, own=named)
     b = scene.beams
+    ring = scene.sim.ring
+    x, y, _ = scene.sim.pose(scene.pose_index)
+    turned = math.degrees(scene.step * ring.motor_step_rad * ring.gear)
+    said = (f"{scenario.name}, pose {args.pose} ({x * 1e3:.0f}, {y * 1e3:.0f}) mm, motor step "
+            f"{scene.step} (sensors turned {turned:+.1f}°): beams green to their hits (red), "
+            f"grey where nothing is within {b.max_range_m * 1000:.0f} mm")
+    path = write_png(caption(image, errors.printable(said)), out, own=named,
+                     description=said)
     print(f"wrote {errors.printable(str(path))}: {scenario.name}, pose {args.pose}, motor step {scene.step}; "
           f"{int(b.hits.shape[0])} of {b.distance_m.size} beams hit within "
           f"{b.max_range_m * 1000:.0f} mm")
@@ -139,14 +151,56 @@ def picture_path(out: Path) -> Path:
     return check_out(out) / "view.png"
 
 
-def write_png(image, path: Path, own: bool = True) -> Path:
+# a caption needs room: on a smaller picture its words would cover what it shows
+CAPTION_MIN_PX = (400, 300)
+
+
+def caption(image, text: str):
+    """``image`` (H×W×3 uint8) with ``text`` in white on a darkened band along its foot,
+    wrapped to its width (at most a quarter of its height; what does not fit ends in "…"),
+    so the picture read alone says what it shows. One smaller than CAPTION_MIN_PX is
+    returned as it is."""
+    from PIL import Image, ImageDraw   # deferred: Pillow, only to save a picture
+
+    from ..maps.render import font   # deferred: Pillow's fonts, only for a picture
+
+    h, w = image.shape[:2]
+    if w < CAPTION_MIN_PX[0] or h < CAPTION_MIN_PX[1]:
+        return image
+    size = max(12, round(h / 48))          # 20 px on a 960-pixel picture
+    face, pad = font(size), size // 2
+    measure = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    lines: list[str] = []
+    for word in text.split(" "):
+        if lines and measure.textlength(f"{lines[-1]} {word}", font=face) <= w - 2 * pad:
+            lines[-1] += f" {word}"
+        else:
+            lines.append(word)
+    step = round(size * 1.3)
+    fits = max(1, (h // 4 - 2 * pad) // step)
+    if len(lines) > fits:
+        lines = lines[:fits - 1] + [lines[fits - 1] + " …"]
+    band = len(lines) * step + 2 * pad
+    out = np.array(image, copy=True)
+    out[h - band:] = (out[h - band:] * 0.3).astype(out.dtype)
+    picture = Image.fromarray(out)
+    draw = ImageDraw.Draw(picture)
+    for k, line in enumerate(lines):
+        draw.text((pad, h - band + pad + k * step), line, fill=(255, 255, 255), font=face)
+    return np.asarray(picture)
+
+
+def write_png(image, path: Path, own: bool = True, description: str = "") -> Path:
     """``image`` (H×W×3 uint8) to ``path`` as PNG, whole or not at all, naming irring view in
-    its Software field. With ``own`` it replaces only a picture irring view drew (or an empty
-    file); else (view.png in view's folder) also a PNG naming no program. Raises OutputError."""
+    its Software field (and ``description`` in its Description). With ``own`` it replaces
+    only a picture irring view drew (or an empty file); else (view.png in view's folder)
+    also a PNG naming no program. Raises OutputError."""
     from PIL import Image, PngImagePlugin   # deferred: Pillow, only to save a picture
 
     info = PngImagePlugin.PngInfo()
     info.add_text("Software", VIEW_SOFTWARE)
+    if description:
+        info.add_text("Description", description)
     with atomic_file(path, "--out", VIEW_FILE if own else VIEW_IN_FOLDER) as tmp:
         Image.fromarray(image).save(tmp, format="PNG", pnginfo=info)
     return path

@@ -170,7 +170,7 @@ def _palette() -> tuple[bytes, np.ndarray]:
 
 
 @functools.lru_cache(maxsize=None)
-def _font(size_px: float, bold: bool = False):
+def font(size_px: float, bold: bool = False):
     """DejaVu Sans (matplotlib's font, from its package data; found without importing
     matplotlib) at ``size_px``; Pillow's own font if that is missing."""
     name = "DejaVuSans-Bold.ttf" if bold else "DejaVuSans.ttf"
@@ -332,7 +332,7 @@ class MapPicture:
         black = inks[BLACK]
         lw_axes = 0.8 * pt
         black.polygon(self._box_corners(), lw_axes)
-        small, normal = _font(8 * pt), _font(10 * pt)
+        small, normal = font(8 * pt), font(10 * pt)
 
         # ticks (outward) and their labels; the axis labels beyond them
         tick, pad = 3.5 * pt, 3.5 * pt
@@ -556,7 +556,7 @@ class MapPicture:
             if offsets[k] is not None:
                 dx, dy = offsets[k]
                 marks.text((c[0] + dx * self.scale, c[1] - dy * self.scale), str(k + 1),
-                           _font((8 if self.crowded else 10) * pt, bold=True), "mm")
+                           font((8 if self.crowded else 10) * pt, bold=True), "mm")
             c0, r0, c1, r1 = box
             clip = inside[r0:r1, c0:c1]
             flat = (np.arange(r0, r1)[:, None] * self.width + np.arange(c0, c1)[None, :])
