@@ -425,6 +425,18 @@ def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
     return OccupancyGrid.covering(lo, hi, resolution_m, params)
 
 
+def mapper_params(calibration) -> MapperParams:
+    """The mapper's numbers for sweeps read with ``calibration``: the defaults, but a
+    calibration without θ dependence (:attr:`Calibration.theta_free`: a scene without the
+    ``incidence`` effect, whose sensor returns at any incidence) has its silent beams stop
+    only at cells holding an end point (``stop_at_end_cells``). Its silence is no surface
+    met past a drop-out angle, so a hit's spread into the cell in front of it is nothing a
+    silent beam could have met (docs/mapping.md, "Where the ideal sensor still maps worse")."""
+    if calibration is not None and calibration.theta_free:
+        return MapperParams(stop_at_end_cells=1.0)
+    return MapperParams()
+
+
 def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
                grid: OccupancyGrid | None = None, params: MapperParams | None = None,
                calibration=None, frames_per_sweep: int = 0, score: bool = True,
@@ -434,7 +446,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     A sweep :func:`irring.recording.check_sweep` refuses raises ValueError naming it.
 
     ``grid`` defaults to the scenario's (or, without one, a grid around the points), with
-    the mapper ``params`` (a given grid has its own).
+    the mapper ``params`` (a given grid has its own; none: :func:`mapper_params`).
     ``frames_per_sweep > 0`` asks :func:`write_outputs` for an animation with that many
     frames per sweep (:func:`building_frames` replays the inserts; no frame is kept).
     ``truth``: a ``metrics.GroundTruth`` of this scenario on this grid's cells, to reuse
@@ -455,6 +467,8 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     estimator = estimate if estimator is None else estimator
     timings = {"estimate": 0.0, "map": 0.0}
     points: list[Points] = []
+    if params is None and grid is None:
+        params = mapper_params(calibration)
     if grid is None and scenario is not None:
         grid = OccupancyGrid.for_scenario(scenario, params)
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:

@@ -68,24 +68,31 @@ def prior_map(rng, shape, params):
        hold=st.sampled_from([0.005, 0.02, 0.0]),
        depth=st.sampled_from([1.25, 0.0, 3.0]), jump=st.sampled_from([5.0, 0.0, 20.0]),
        sensors=st.sampled_from([1, 3, 12]), ahead=st.sampled_from([0.0, 1.0, 0.4]),
-       between=st.sampled_from([0.5, 0.0, 1.0]), gap=st.sampled_from([2, 1, 3]))
+       between=st.sampled_from([0.5, 0.0, 1.0]), gap=st.sampled_from([2, 1, 3]),
+       ends=st.sampled_from([0.0, 1.0]))
 def test_insert_agrees_with_the_numpy_oracle(seed, ny, nx, n, cone, stop, lone, free_sigmas,
-                                             hold, depth, jump, sensors, ahead, between, gap):
+                                             hold, depth, jump, sensors, ahead, between, gap,
+                                             ends):
     rng = np.random.default_rng(seed)
     params = MapperParams(no_return_stop=stop, lone_sigma_m=lone, free_sigmas=free_sigmas,
                           hold_sigma_m=hold, hit_depth_cells=depth, edge_jump_cells=jump,
-                          ahead_floor=ahead, between_steps=between, between_end_cells=gap)
+                          ahead_floor=ahead, between_steps=between, between_end_cells=gap,
+                          stop_at_end_cells=ends)
     g = OccupancyGrid((0.013, -0.021), (ny, nx), 0.01, params)
     g.log_odds = prior_map(rng, (ny, nx), params)
+    g.end_cells[...] = rng.random((ny, nx)) < 0.3      # end points of earlier batches
+    ends_before = g.end_cells.astype(bool)
     pts = drawn_readings(rng, n, (nx * 0.01, ny * 0.01), max_range_m=0.3, cone=cone and n <= 30)
     if n % sensors == 0 and not cone:       # as a sweep: (steps, sensors), neighbours by step
         pts = Points(**{k: (v.reshape(-1, sensors) if isinstance(v, np.ndarray) else v)
                         for k, v in vars(pts).items()})
+    want_ends = ends_before.copy()
     want = mapping_numpy.add(g.log_odds, pts, g.origin_xy_m, g.resolution_m, params,
-                             params.l_min, params.l_max)
+                             params.l_min, params.l_max, ends=want_ends)
     before = g.log_odds.copy()
     g.insert(pts)
     np.testing.assert_allclose(g.log_odds, want, rtol=0, atol=TOL)
+    np.testing.assert_array_equal(g.end_cells.astype(bool), want_ends)
     # the same cells change (a stop decided differently would change a run of cells)
     assert np.array_equal(np.abs(g.log_odds - before) > 1e-3, np.abs(want - before) > 1e-3)
 
@@ -97,9 +104,11 @@ def test_insert_agrees_with_the_numpy_oracle(seed, ny, nx, n, cone, stop, lone, 
        # (no stop a sum of the weights can equal: at −2.0 rounding, not the rule, decided
        # whether a cell stopped a beam)
        stop=st.sampled_from([1.7, 0.3, -2.3, math.inf]),
-       depth=st.sampled_from([1.25, 0.0]), sensors=st.sampled_from([1, 3]))
+       depth=st.sampled_from([1.25, 0.0]), sensors=st.sampled_from([1, 3]),
+       ends=st.sampled_from([0.0, 1.0]))
 def test_a_run_agrees_with_the_oracle_and_its_silent_beams_with_any_order(seed, ny, nx, sizes,
-                                                                          stop, depth, sensors):
+                                                                          stop, depth, sensors,
+                                                                          ends):
     """insert_run against mapping_numpy.add_run; and without clamps (where the order of
     returns matters) the same batches in reverse order give the same map: a silent beam
     stops at what any batch's returns established."""
@@ -110,7 +119,7 @@ def test_a_run_agrees_with_the_oracle_and_its_silent_beams_with_any_order(seed, 
                              cone=False)
         batches.append(Points(**{k: (v.reshape(-1, sensors) if isinstance(v, np.ndarray)
                                      else v) for k, v in vars(pts).items()}))
-    params = MapperParams(no_return_stop=stop, hit_depth_cells=depth)
+    params = MapperParams(no_return_stop=stop, hit_depth_cells=depth, stop_at_end_cells=ends)
     g = OccupancyGrid((0.013, -0.021), (ny, nx), 0.01, params)
     g.log_odds = prior_map(rng, (ny, nx), params)
     want = mapping_numpy.add_run(g.log_odds, batches, g.origin_xy_m, g.resolution_m, params,

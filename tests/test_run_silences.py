@@ -75,7 +75,8 @@ def _bits(a):
 
 @pytest.mark.parametrize("params", [None, MapperParams(no_return_stop=-0.3),
                                     MapperParams(no_return_stop=float("inf")),
-                                    MapperParams(no_return_stop=0.4, l_no_return=-0.3)])
+                                    MapperParams(no_return_stop=0.4, l_no_return=-0.3),
+                                    MapperParams(stop_at_end_cells=1.0)])
 def test_every_frame_is_insert_run_of_the_sweeps_so_far_as_the_run_places_them(walk, params, monkeypatch):
     monkeypatch.setattr(RunSilences, "RECOUNT_COST", 0.0)     # never walk them all together
     ours, theirs, silences = _frames(walk, params)

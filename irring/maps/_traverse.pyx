@@ -401,7 +401,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
               const unsigned char[::1] no_return, const double[::1] reach_m,
               Py_ssize_t step_stride,
               double max_range_m, double grid_x, double grid_y, double res, params,
-              double lo, double hi):
+              double lo, double hi, unsigned char[:, ::1] ends):
     """Add the log-odds of one batch of readings (flat arrays, metres; ``valid`` and
     ``no_return`` as uint8) to the grid ``log_odds`` (ny, nx; its cell (0, 0) has its corner
     at (grid_x, grid_y)), then clamp the box of cells their beams can reach to [lo, hi]
@@ -419,7 +419,9 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     readings (finite emitter and heading) go along the heading to the max range, or to
     ``reach_m`` where that is finite and shorter (a surface explains the silence; ≤ 0: not
     at all), or to the first cell whose log-odds (the grid's
-    plus this batch's valid readings') exceed ``no_return_stop`` (+inf: never), and add
+    plus this batch's valid readings') exceed ``no_return_stop`` (+inf: never) and, with
+    ``stop_at_end_cells``, that hold an end point (``ends``, uint8 (ny, nx): the grid's
+    record, marked here with this batch's valid end points first), and add
     l_no_return to the cells before it: counted as runs up to the first chunk of SAT_COLUMNS
     columns whose box holds such a cell (a summed-area table of them), walked cell by cell
     from there. Every other reading changes nothing.
@@ -433,6 +435,7 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
     cdef double margin_m = params.free_margin_cells * res
     cdef double free_sigmas = params.free_sigmas, stop_m
     cdef double stop_at = params.no_return_stop, lone_sigma = params.lone_sigma_m
+    cdef bint any_cell = params.stop_at_end_cells == 0   # (0: every cell above the stop stops)
     cdef double hold_sigma = params.hold_sigma_m, l_pass, trust
     cdef double l_depth = min(params.l_occ_min, params.l_occ)
     cdef double depth_m = params.hit_depth_cells * res, jump_m = params.edge_jump_cells * res
@@ -471,6 +474,9 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                              heading=heading.shape[0], x=x.shape[0], y=y.shape[0],
                              sigma_m=sigma_m.shape[0], valid=valid.shape[0],
                              no_return=no_return.shape[0], reach_m=reach_m.shape[0])
+    if ends.shape[0] != ny or ends.shape[1] != nx:
+        raise ValueError(f"ends has shape ({ends.shape[0]}, {ends.shape[1]}), the grid "
+                         f"({ny}, {nx}): one flag per cell")
     if n >= 1 << 31:
         raise ValueError("at most 2^31 − 1 readings per insert (the cell counts are 32-bit)")
     if step_stride < 1:
@@ -589,6 +595,14 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                 ix, iy = lfloor(e[7]) - bx0, lfloor(e[8]) - by0
                 if 0 <= ix < bw and 0 <= iy < bh:
                     held[iy * bw + ix] = 1
+        # the cells holding an end point (the grid's record, with this batch's): with
+        # stop_at_end_cells, the only cells that stop a silent beam
+        for j in range(nv):
+            e = &beams[j, 0]
+            if fabs(e[7]) < FAR_CELLS and fabs(e[8]) < FAR_CELLS:
+                ix, iy = lfloor(e[7]), lfloor(e[8])
+                if 0 <= ix < nx and 0 <= iy < ny:
+                    ends[iy, ix] = 1
         for j in range(nv):                            # valid beams
             e = &beams[j, 0]
             if not clip(e[0], e[1], e[2], e[3], nx, ny, &s):
@@ -684,7 +698,8 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
                 out = &log_odds[by0 + iy, bx0]
                 run = 0
                 for ix in range(bw):
-                    run += out[ix] > stop_at
+                    run += <long long>(out[ix] > stop_at
+                                       and (any_cell or ends[by0 + iy, bx0 + ix] != 0))
                     sat[(iy + 1) * sw + ix + 1] = sat[iy * sw + ix + 1] + <int>run
         for j in range(nv, nb):                        # no-return beams
             e = &beams[j, 0]
@@ -721,11 +736,11 @@ def add_beams(double[:, ::1] log_odds, const double[::1] origin_x, const double[
             for k in range(n_far, s.count):
                 two = column(&c, k, &a, &z, &u_in, &u_mid, &u_out)
                 if cell(&s, k, a, bx0, bx1, by0, by1, &ix, &iy):
-                    if log_odds[iy, ix] > stop_at:
+                    if log_odds[iy, ix] > stop_at and (any_cell or ends[iy, ix] != 0):
                         break
                     passes[(iy - by0) * bw + ix - bx0] += 1
                 if two and cell(&s, k, z, bx0, bx1, by0, by1, &ix, &iy):
-                    if log_odds[iy, ix] > stop_at:
+                    if log_odds[iy, ix] > stop_at and (any_cell or ends[iy, ix] != 0):
                         break
                     passes[(iy - by0) * bw + ix - bx0] += 1
         for j in range(n_deep):                        # the surface's depth

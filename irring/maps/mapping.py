@@ -50,6 +50,9 @@ class MapperParams:
     l_free: float = -1.5          # added to a cell a valid beam clearly passed through
     l_no_return: float = -0.75    # added along a no-return beam, up to the max range …
     no_return_stop: float = 1.7   # … or to the first cell above this (> a lone l_occ_min hit)
+    # 1: … only where that cell holds a valid reading's end point (a sensor that returns at
+    # any incidence: pipeline.mapper_params); 0: any cell above the stop
+    stop_at_end_cells: float = 0.0
     l_min: float = -4.0           # clamp: the most certain "free"
     l_max: float = 4.0            # clamp: the most certain "occupied"
     tail_sigmas: float = 0.25     # the beam is followed to d (+ depth) + tail_sigmas·σ
@@ -115,6 +118,10 @@ class MapperParams:
         if math.isnan(self.no_return_stop):
             raise ValueError("no_return_stop must be a log-odds value or inf (never stop), "
                              "got nan")
+        if self.stop_at_end_cells not in (0, 1):
+            raise ValueError(f"need stop_at_end_cells 0 (any cell above no_return_stop stops a "
+                             f"silent beam) or 1 (only one holding an end point), got "
+                             f"{self.stop_at_end_cells}")
         if not (math.isfinite(self.ahead_floor) and 0 <= self.ahead_floor <= 1):
             raise ValueError(f"need ahead_floor within 0 … 1, got {self.ahead_floor}")
         if not (math.isfinite(self.between_steps) and 0 <= self.between_steps <= 1):
@@ -268,6 +275,9 @@ class OccupancyGrid:
         self.resolution_m = float(resolution_m)
         self.params = params or MapperParams()
         self.log_odds = np.zeros((ny, nx))
+        # the cells holding a valid reading's end point: with stop_at_end_cells, the only
+        # cells that stop a silent beam (a hit's spread into the cell in front of it is not)
+        self.end_cells = np.zeros((ny, nx), np.uint8)
 
     # ---- construction
 
@@ -323,7 +333,7 @@ class OccupancyGrid:
     # ---- updates
 
     def _add(self, log_odds: np.ndarray, points: Points, lo: float, hi: float,
-             placed: bool = False) -> None:
+             placed: bool = False, ends: np.ndarray | None = None) -> None:
         """Add the log-odds of ``points`` to ``log_odds`` (this grid's shape, float64,
         C-contiguous) and clamp the cells their beams can reach to [lo, hi] (the kernel's
         ``add_beams``), with the hits between a sensor's steps (:func:`add_between`). Work
@@ -345,13 +355,13 @@ class OccupancyGrid:
                   else points.reach_m),
             math.prod(np.shape(points.valid)[1:]),       # a step's readings (its sensors)
             float(points.max_range_m), float(self.origin_xy_m[0]), float(self.origin_xy_m[1]),
-            self.resolution_m, params, lo, hi)
+            self.resolution_m, params, lo, hi, self.end_cells if ends is None else ends)
 
     def delta(self, points: Points) -> np.ndarray:
         """The log-odds change (ny, nx) the readings in ``points`` would add to this grid
         (before clamping; no-return beams stop at cells this grid holds occupied)."""
         out = np.array(self.log_odds, dtype=float, order="C")
-        self._add(out, points, -np.inf, np.inf)
+        self._add(out, points, -np.inf, np.inf, ends=self.end_cells.copy())
         return out - self.log_odds
 
     def insert(self, points: Points, placed: bool = False) -> None:
@@ -464,6 +474,7 @@ class OccupancyGrid:
         lo[p > occ] = grid.params.l_max
         lo[p < free] = grid.params.l_min
         grid.log_odds = np.flipud(lo).copy()
+        grid.end_cells[...] = 1        # (which cells hold end points is not kept: any may)
         return grid
 
 
@@ -866,6 +877,7 @@ class RunSilences:
         self._counter = OccupancyGrid(grid.origin_xy_m, grid.shape, grid.resolution_m,
                                       dataclasses.replace(params, l_no_return=-1.0,
                                                           cone_l_no_return=-1.0))
+        self._counter.end_cells[...] = 1      # (its stops are the cells set to +inf)
         stop = self._stop
         self._base = min(0.0, math.floor(stop) - 1.0) if math.isfinite(stop) else 0.0
         self._passes = np.zeros(grid.shape, np.int64)
@@ -883,6 +895,8 @@ class RunSilences:
         smaller than in the call before."""
         if self._incremental:
             above = returns.log_odds > self._stop
+            if self._grid.params.stop_at_end_cells:
+                above &= returns.end_cells != 0
             changed = above != self._above
             stale = []
             if changed.any():
@@ -899,6 +913,7 @@ class RunSilences:
         grid = OccupancyGrid(returns.origin_xy_m, returns.shape, returns.resolution_m,
                              returns.params)
         grid.log_odds = returns.log_odds.copy()
+        grid.end_cells = returns.end_cells.copy()
         for q in silences_of_run(self._batches[:k]):
             grid.insert(q)
         return grid.log_odds

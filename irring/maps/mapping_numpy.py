@@ -173,14 +173,16 @@ def placed(batches, shape, origin_xy_m, resolution_m: float, params: MapperParam
 
 def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
         params: MapperParams, lo: float = -np.inf, hi: float = np.inf,
-        already_placed: bool = False) -> np.ndarray:
+        already_placed: bool = False, ends: np.ndarray | None = None) -> np.ndarray:
     """``log_odds`` (ny, nx) after one batch of readings, clamped to [lo, hi] (a new array).
 
     As :meth:`OccupancyGrid.insert` (with ``lo, hi`` its clamps) and :meth:`~OccupancyGrid.delta`
     (the grid as it is, no clamp: silent beams stop at its cells); readings from a wide cone
     go in as their fan of rays, and pencil beams a sharper surface explains at its range
     (:func:`explained_ranges`), as :func:`placed` places a batch alone (``already_placed``:
-    they are). The kernel clamps only the box of cells
+    they are). ``ends`` (ny, nx) bool: the cells holding an end point before this batch
+    (:attr:`OccupancyGrid.end_cells`), marked with the batch's own (in place; None: none
+    before). The kernel clamps only the box of cells
     its beams reach; on a grid already inside [lo, hi] that is the same.
     """
     shape = np.shape(log_odds)
@@ -206,6 +208,11 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     sharp = sigma[valid] <= p.hold_sigma_m
     inside = sharp & (hx >= 0) & (hx < shape[1]) & (hy >= 0) & (hy < shape[0])
     held[hy[inside].astype(int), hx[inside].astype(int)] = True
+    # cells holding any valid end point: with stop_at_end_cells, the only ones that stop a
+    # silent beam
+    ends = np.zeros(shape, bool) if ends is None else ends
+    inside = (hx >= 0) & (hx < shape[1]) & (hy >= 0) & (hy < shape[0])
+    ends[hy[inside].astype(int), hx[inside].astype(int)] = True
 
     # valid beams: emitter → end point, continued into the surface: by the hit's depth (a
     # sharp end point on an occluding edge) and tail_sigmas·σ
@@ -265,6 +272,8 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     v = traverse(ox[ni], oy[ni], ox[ni] + np.cos(hd[ni]) * far, oy[ni] + np.sin(hd[ni]) * far,
                  origin_xy_m, shape, res)
     blocked = out[v.iy, v.ix] > p.no_return_stop
+    if p.stop_at_end_cells:
+        blocked &= ends[v.iy, v.ix]
     before = np.ones(len(v.ray), bool)
     for ray in np.unique(v.ray[blocked]):
         first = np.flatnonzero((v.ray == ray) & blocked)[0]   # visits run along the ray
@@ -280,9 +289,11 @@ def add_run(log_odds: np.ndarray, batches, origin_xy_m, resolution_m: float,
     placed against the whole run (:func:`placed`), every batch's returns, in order, then
     every batch's silent beams, each :func:`add` clamped to [lo, hi]."""
     out = np.array(log_odds, dtype=float)
+    ends = np.zeros(np.shape(out), bool)
     for points in placed(batches, np.shape(out), origin_xy_m, resolution_m, params):
         out = add(out, returns_of(points), origin_xy_m, resolution_m, params, lo, hi,
-                  already_placed=True)
+                  already_placed=True, ends=ends)
     for points in batches:
-        out = add(out, silences_of(points), origin_xy_m, resolution_m, params, lo, hi)
+        out = add(out, silences_of(points), origin_xy_m, resolution_m, params, lo, hi,
+                  ends=ends)
     return out
