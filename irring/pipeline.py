@@ -425,16 +425,21 @@ def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
     return OccupancyGrid.covering(lo, hi, resolution_m, params)
 
 
-def mapper_params(calibration) -> MapperParams:
-    """The mapper's numbers for sweeps read with ``calibration``: the defaults, but a
+def mapper_params(calibration, sweeps: Sequence[Sweep] = ()) -> MapperParams:
+    """The mapper's numbers for ``sweeps`` read with ``calibration``: the defaults, but a
     calibration without θ dependence (:attr:`Calibration.theta_free`: a scene without the
     ``incidence`` effect, whose sensor returns at any incidence) has its silent beams stop
-    only at cells holding an end point (``stop_at_end_cells``). Its silence is no surface
-    met past a drop-out angle, so a hit's spread into the cell in front of it is nothing a
-    silent beam could have met (docs/mapping.md, "Where the ideal sensor still maps worse")."""
-    if calibration is not None and calibration.theta_free:
+    only at cells holding an end point (``stop_at_end_cells``), and, where no sweep was
+    read moving (``reading_poses``), pass as a valid beam passes (``l_no_return`` =
+    ``l_free``). Its silence is no surface met past a drop-out angle: a hit's spread into
+    the cell in front of it is nothing a silent beam could have met, and a silent beam of
+    a still ring is a clean pass (docs/mapping.md, "Where the ideal sensor still maps
+    worse")."""
+    if calibration is None or not calibration.theta_free:
+        return MapperParams()
+    if any(sweep.reading_poses is not None for sweep in sweeps):
         return MapperParams(stop_at_end_cells=1.0)
-    return MapperParams()
+    return MapperParams(stop_at_end_cells=1.0, l_no_return=MapperParams().l_free)
 
 
 def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
@@ -468,7 +473,7 @@ def map_sweeps(sweeps: Sequence[Sweep], *, scenario: Scenario | None = None,
     timings = {"estimate": 0.0, "map": 0.0}
     points: list[Points] = []
     if params is None and grid is None:
-        params = mapper_params(calibration)
+        params = mapper_params(calibration, sweeps)
     if grid is None and scenario is not None:
         grid = OccupancyGrid.for_scenario(scenario, params)
     with progress_bar(len(sweeps), "estimate + map", progress) as bar:

@@ -70,11 +70,49 @@ def test_a_silent_beam_still_stops_at_an_end_cell_of_an_earlier_sweep():
     np.testing.assert_array_equal(g.log_odds[1:10, 10], g.params.l_no_return)
 
 
-def test_the_pipeline_stops_at_end_cells_only_for_a_calibration_without_theta():
+def test_the_pipeline_reads_silence_so_only_for_a_calibration_without_theta():
+    """End cells only for a θ-free calibration; its silent beams pass as valid ones do only
+    where no sweep was read moving (a moving ring's beam points where it was a period ago)."""
     t_room = load_scenario("t_room")
     noisy = pipeline.scene_calibration(t_room)[0]
     exact = pipeline.scene_calibration(rooms.ideal(t_room))[0]
     assert not noisy.theta_free and exact.theta_free
-    assert pipeline.mapper_params(noisy).stop_at_end_cells == 0.0
-    assert pipeline.mapper_params(exact).stop_at_end_cells == 1.0
+    assert pipeline.mapper_params(noisy) == MapperParams()
     assert pipeline.mapper_params(None) == MapperParams()
+    still = pipeline.mapper_params(exact)
+    assert still.stop_at_end_cells == 1.0 and still.l_no_return == still.l_free == -1.5
+    moving = load_scenario("t_room_moving")
+    sweeps = pipeline.simulated(rooms.ideal(moving), seed=0, progress=False)[0].sweeps
+    assert sweeps[0].reading_poses is not None
+    calibration = pipeline.scene_calibration(rooms.ideal(moving))[0]
+    assert pipeline.mapper_params(calibration, sweeps) == MapperParams(stop_at_end_cells=1.0)
+
+
+def test_an_exact_sensors_silent_beam_takes_a_depth_past_a_corner_to_unknown():
+    """The depth (1.25 cells) of an exact end point on an occluding edge, met by a silent beam
+    of the same sweep: l_occ_min − 0.75 is still occupied, l_occ_min − 1.5 is not."""
+    ox, oy = np.array([[0.0125, 0.2375]]), np.array([[0.2625, 0.0125]])
+    heading = np.array([[0.0, np.pi / 2]])
+    d = np.array([[0.2435, np.nan]])
+    valid = np.array([[True, False]])
+    pts = Points(x=ox + d * np.cos(heading), y=oy + d * np.sin(heading), d=d,
+                 theta=np.zeros((1, 2)), origin_x=ox, origin_y=oy, heading=heading,
+                 sigma_m=np.where(valid, 0.001, np.nan), iterations=np.ones((1, 2), int),
+                 valid=valid, reason=np.where(valid, Reason.OK, Reason.NO_RETURN).astype(np.uint8),
+                 max_range_m=0.45)
+    # the end point's own beam seen alone: its depth reaches column 11 (row 10)
+    alone = OccupancyGrid((0.0, 0.0), (20, 16), RES, MapperParams(stop_at_end_cells=1.0))
+    alone.insert(Points(**{k: (v[:, :1] if isinstance(v, np.ndarray) else v)
+                           for k, v in vars(pts).items()}))
+    assert alone.log_odds[10, 11] == 0.0       # no neighbour step: no edge, no depth
+    # as a sweep of one sensor: step 0 valid, step 1 silent, its beam up column 11
+    steps = Points(**{k: (v.reshape(2, 1) if isinstance(v, np.ndarray) else v)
+                      for k, v in vars(pts).items()})
+    steps = Points(**{**vars(steps), "origin_x": np.array([[0.0125], [0.2875]])})
+    maps = {}
+    for l_nr in (-0.75, -1.5):
+        g = OccupancyGrid((0.0, 0.0), (20, 16), RES,
+                          MapperParams(stop_at_end_cells=1.0, l_no_return=l_nr))
+        g.insert(steps)
+        maps[l_nr] = g.log_odds[10, 11]
+    assert maps[-0.75] > 0.62 > maps[-1.5] > -0.62       # occupied → unknown (map_server)
