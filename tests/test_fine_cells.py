@@ -212,3 +212,58 @@ def test_a_far_wall_read_every_other_step_is_drawn_between_its_end_points():
     assert far_gaps(MapperParams(), far_sweep(0.012, one)) == far_gaps(off, far_sweep(0.012, one))
     assert far_gaps(off, far_sweep(0.012, two))[0] == 37
     assert far_gaps(MapperParams(), far_sweep(0.012, two))[0] == 0
+
+
+def slanted_sweep(sigma_m: float, theta_deg: float) -> Points:
+    """One sensor at (431.7, 52.9) mm reading every other step (2.16° apart) onto a wall
+    800 mm out along its first beam, whose normal points back at it 55° off that beam, the
+    beam turning away from the normal: incidence 55° rising to 70.1° over 8 steps at
+    0.80–1.35 m, each end point on the wall; ``theta_deg`` the estimator's θ for every reading (None: the
+    true incidence)."""
+    o = np.array([0.4317, 0.0529])
+    first = math.radians(57.0)                     # the first beam's heading
+    wall = o + 0.8 * np.array([math.cos(first), math.sin(first)])
+    normal_heading = first + math.pi - math.radians(55.0)
+    n = np.array([math.cos(normal_heading), math.sin(normal_heading)])
+    heading = first + np.radians(2.16 * np.arange(8))[:, None]
+    u = np.stack([np.cos(heading), np.sin(heading)], -1)
+    d = ((wall - o) @ n) / (u @ n)
+    inc = np.arccos(np.abs(u @ n))
+    theta = inc if theta_deg is None else np.full(inc.shape, math.radians(theta_deg))
+    shape = heading.shape
+    return Points(x=o[0] + d * np.cos(heading), y=o[1] + d * np.sin(heading), d=d,
+                  theta=theta, origin_x=np.full(shape, o[0]), origin_y=np.full(shape, o[1]),
+                  heading=heading, sigma_m=np.full(shape, sigma_m),
+                  iterations=np.ones(shape, int), valid=np.ones(shape, bool),
+                  reason=np.zeros(shape, np.uint8), max_range_m=1.5)
+
+
+def test_a_slanted_wall_read_every_other_step_is_one_surface_between_its_steps():
+    """A wall met at 55–70° read every other step: its consecutive ranges differ by 46–127
+    mm, far more than 3 combined σ (σ 5 mm: 21 mm), though it is one flat surface; a flat
+    surface at θ draws the range out by d·Δh·tan θ over the beams' turn Δh, so the pairs
+    allowed that much more (at the smaller θ of the two) are joined: all 7 of them, each at
+    0.3 of a σ-5-mm hit (0.75, a cell alone), 106 cells, each on the wall. Read square on (θ = 0, as a reading on no
+    line is kept), the same ranges allow nothing more and join nothing."""
+    params = MapperParams()
+    pts = slanted_sweep(0.005, None)
+    step = np.abs(np.diff(pts.d[:, 0]))
+    assert 0.046 < step.min() and step.max() < 0.127
+    assert step.min() > 3 * math.hypot(0.005, 0.005)
+    hits = between_steps(pts, (400, 400), (0.0, 0.0), RES, params)
+    assert hits is not None
+    iy, ix, w = hits
+    assert iy.size == 106            # the wall's cells 2 or more from both end cells
+    np.testing.assert_allclose(w, 0.75)
+    # every segment between the 8 end points adds cells, each cell on the wall
+    cx, cy = (ix + 0.5) * RES, (iy + 0.5) * RES
+    wall = np.array([0.4317, 0.0529]) + 0.8 * np.array([math.cos(math.radians(57.0)),
+                                                         math.sin(math.radians(57.0))])
+    nh = math.radians(57.0) + math.pi - math.radians(55.0)
+    off_wall = np.abs((cx - wall[0]) * math.cos(nh) + (cy - wall[1]) * math.sin(nh))
+    assert off_wall.max() < RES * math.sqrt(0.5)
+    ey = np.floor(pts.y[:, 0] / RES)              # (the wall runs 34° off the y axis)
+    between = [((ey[r] < iy) & (iy < ey[r + 1])).any() for r in range(7)]
+    assert between == [True] * 7
+    assert between_steps(slanted_sweep(0.005, 0.0), (400, 400), (0.0, 0.0), RES,
+                         params) is None

@@ -68,9 +68,9 @@ class MapperParams:
     # point, as before 2026-11-27)
     ahead_floor: float = 0.0
     # hits along the segment between consecutive steps of a sensor whose ranges agree within
-    # explain_sigmas combined σ (σ ≤ lone_sigma_m): this share of the weaker one's (0: off;
-    # 0.3: a pair of σ ≤ occ_sigma_m marks a cell alone, a pair of noisier ones needs a
-    # second segment or hit to agree) …
+    # explain_sigmas combined σ beyond a slanted surface's d·Δh·tan θ (σ ≤ lone_sigma_m):
+    # this share of the weaker one's (0: off; 0.3: a pair of σ ≤ occ_sigma_m marks a cell
+    # alone, a pair of noisier ones needs a second segment or hit to agree) …
     between_steps: float = 0.3
     # … in the segment's cells at least this many cells (Chebyshev) from both end points'
     # cells: the nearer ones are within a cell of an end point's own hit already
@@ -596,10 +596,11 @@ def between_steps(points: Points, shape, origin_xy_m, resolution_m: float,
                   params: MapperParams) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(iy, ix, log-odds) the hits between a sensor's consecutive steps add: for valid
     readings of σ ≤ ``lone_sigma_m`` in consecutive rows (steps) of one column (sensor)
-    whose ranges differ by at most ``explain_sigmas`` combined σ (one surface the beam swept
-    from one to the other), every cell the segment between their end points crosses at least
-    ``between_end_cells`` cells (Chebyshev) from both end cells, ``between_steps`` × the
-    weaker :func:`hit_weight` of the two once. None
+    whose ranges differ by at most ``explain_sigmas`` combined σ plus what a flat surface at
+    the smaller of their θ draws the range out by over the beams' turn, d·Δh·tan θ (one
+    surface the beam swept from one to the other), every cell the segment between their end
+    points crosses at least ``between_end_cells`` cells (Chebyshev) from both end cells,
+    ``between_steps`` × the weaker :func:`hit_weight` of the two once. None
     when there is nothing to add (off, a cone, a batch that is not a sweep's rows). Numpy,
     the same for the compiled insert and the oracle (docs/mapping.md, "Fine
     cells")."""
@@ -614,8 +615,17 @@ def between_steps(points: Points, shape, origin_xy_m, resolution_m: float,
     with np.errstate(invalid="ignore"):
         ok = (np.asarray(points.valid, bool) & np.isfinite(x + y + d)
               & (sigma <= params.lone_sigma_m))
+        # a flat surface met at θ draws the range out by about d·Δh·tan θ over a turn of
+        # Δh between the beams: that much more (at the pair's smaller θ, so a square-on
+        # reading beside an edge allows none) is one surface still
+        theta = np.nan_to_num(np.minimum(np.asarray(points.theta, float)[1:],
+                                         np.asarray(points.theta, float)[:-1]))
+        turn = np.diff(np.asarray(points.heading, float), axis=0)
+        turn = np.abs(turn - 2.0 * np.pi * np.round(turn / (2.0 * np.pi)))
+        slant = 0.5 * (d[1:] + d[:-1]) * turn * np.tan(theta)
         pair = (ok[:-1] & ok[1:] & (np.abs(d[1:] - d[:-1])
-                                    <= params.explain_sigmas * np.hypot(sigma[1:], sigma[:-1])))
+                                    <= params.explain_sigmas * np.hypot(sigma[1:], sigma[:-1])
+                                    + slant))
     r, k = np.nonzero(pair)
     gap = params.between_end_cells
     with np.errstate(invalid="ignore"):
