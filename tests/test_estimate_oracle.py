@@ -226,14 +226,15 @@ def test_reach_kernel_agrees_with_its_numpy_statement(seed, room, silent, margin
        sigma_scale=st.floats(0.2, 5.0),
        min_range_m=st.floats(0.0, 0.3),
        own_cap_m=st.sampled_from([math.inf, 0.010, 0.003, 0.0]),
-       unknown=st.sampled_from([0.0, 0.1]))
+       unknown=st.sampled_from([0.0, 0.1]),
+       min_members=st.sampled_from([10, 5, 4]))
 def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge, jitter_m,
                                                      sigma_scale, min_range_m, own_cap_m,
-                                                     unknown):
+                                                     unknown, min_members):
     """``_lines.snap_to_lines`` (compiled) against ``estimate_numpy.snap_to_lines`` on a
     sweep's end points with drawn line labels (some dropped, pairs of lines merged into one
     that fits neither), end points jittered along and across their beams, σ scaled, any
-    minimum range and cap on a member's own σ, a share of σ NaN or +inf (a caller's Points
+    minimum range, cap on a member's own σ and least members of a line, a share of σ NaN or +inf (a caller's Points
     may hold them): the same end points move (exact) and x, y, d, σ agree within 1e-9 m
     (NaN and inf where the other has them)."""
     walls, circles, rng = _scene(seed, room)
@@ -253,17 +254,18 @@ def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge,
         pick = rng.random(label.shape)
         p = dataclasses.replace(p, sigma_m=np.where(pick < unknown / 2, np.inf, np.where(
             pick > 1 - unknown / 2, np.nan, p.sigma_m)))
-    fast = fast_snap(p, label, min_range_m, own_cap_m)
-    slow = oracle.snap_to_lines(p, label, min_range_m, own_cap_m)
+    fast = fast_snap(p, label, min_range_m, own_cap_m, min_members)
+    slow = oracle.snap_to_lines(p, label, min_range_m, own_cap_m, min_members)
     moved = np.nan_to_num(fast.d, nan=-1.0) != np.nan_to_num(p.d, nan=-1.0)
     np.testing.assert_array_equal(
         moved, np.nan_to_num(slow.d, nan=-1.0) != np.nan_to_num(p.d, nan=-1.0))
     for f in ("x", "y", "d", "sigma_m"):
         np.testing.assert_allclose(getattr(fast, f), getattr(slow, f), rtol=0, atol=TOL,
                                    err_msg=f)
-    # not vacuous: something moves wherever a line has 10 members past the minimum range
+    # not vacuous: something moves wherever a line has its least members past the minimum
+    # range
     movable = (label >= 0) & (np.nan_to_num(p.d, nan=0.0) >= min_range_m)
-    assert moved.sum() > 0 or np.bincount(label[movable], minlength=1).max() < 10
+    assert moved.sum() > 0 or np.bincount(label[movable], minlength=1).max() < min_members
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

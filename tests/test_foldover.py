@@ -772,7 +772,9 @@ def test_a_line_member_beside_a_nearer_surface_is_found_at_any_step_stride(monke
     1 step apart). Over seeds 7101-7110 it now takes 8 readings there, 7 of them the post's
     edge on sensor 11 at steps -28 and -24, 105-147 mm off (at stride 1 it takes 14 there,
     102-132 mm off), and the 8th, 23 mm off, is the cost it has at stride 1 too; since
-    rejoin_traces and own-sensor anchoring (either alone) it takes only the 7."""
+    rejoin_traces and own-sensor anchoring (either alone) it takes only the 7, and since a
+    stride-2 line of 5-9 members is snapped (lines.snap_members) 13, all of them that edge's,
+    105-147 mm off."""
     from irring.core import reading_stride
     from irring.estimation import estimate as est, estimate_numpy
     from irring.estimation import foldover as est_foldover
@@ -807,7 +809,7 @@ def test_a_line_member_beside_a_nearer_surface_is_found_at_any_step_stride(monke
                 estimate_numpy.estimate_detail(sw, cal).points.reason, p.reason)
     assert before == 0
     edge = [e for s, k, e in taken if k == 11 and s in (-28, -24)]
-    assert len(taken) == 7 and len(edge) == 7
+    assert len(taken) == 13 and len(edge) == 13
     assert min(edge) == 105 and max(edge) == 147
     assert [e for s, k, e in taken if (s, k) not in ((-28, 11), (-24, 11))] == []
 

@@ -32,7 +32,7 @@ from .counts import CountsFits, counts_disown_lines
 from .far_lines import doubt_far_lines, far_posts, fused_lines, short_far_lines_compiled
 from .foldover import resolve_foldover
 from .lines import (PINNED_RAD, Estimate, LineOptions, far_sigma_cap, jump_slope, lines_record,
-                    read_to_own_range, scan_order, segment, snap_to_lines)
+                    read_to_own_range, scan_order, segment, snap_members, snap_to_lines)
 from .members import (across_silence, alone_at_an_edge_compiled, dim_returns_on_lines,
                       past_other_lines, unplaced_alone)
 from .profiles import (SharedProfiles, profiles_compiled, theta_free_in_noise,
@@ -415,7 +415,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         snap_label = (fused_lines(points, split) if read_to_own_range(cal, points.max_range_m)
                       else split)
         snapped = (snapper or snap_to_lines)(points, snap_label, cal.min_range_m,
-                                             far_sigma_cap(cal, points.max_range_m))
+                                             far_sigma_cap(cal, points.max_range_m),
+                                             snap_members(steps))
         # a line over a many-sided wall's facets: its members on two pieces
         points = (faceter or faceted_lines_compiled)(points, snap_label, snapped, cal)
     points = drop_beyond_range(points)

@@ -1155,7 +1155,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
 
 
 def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
-                  own_cap_m: float = math.inf) -> Points:
+                  own_cap_m: float = math.inf, min_members: int = SNAP_MIN) -> Points:
     """End points of the readings on a line put where their beams meet it.
 
     ``member`` (S, N): the line each reading took θ from (−1: none). Each line is fitted
@@ -1171,7 +1171,9 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
     line's uncertainty where its beam meets it, with half its own σ added in quadrature (at
     most ``own_cap_m``: where a part is read to its own range, its far end's noise is 30–55
     mm a reading and that half alone made a snapped point's σ twice its error; final_estimate
-    passes :func:`irring.estimation.lines.far_sigma_cap`). The statement
+    passes :func:`irring.estimation.lines.far_sigma_cap`). Only lines of at least
+    ``min_members`` (final_estimate passes :func:`irring.estimation.lines.snap_members`:
+    ``SNAP_MIN`` at step_stride 1, fewer where fewer steps are read). The statement
     :func:`irring.estimation.lines.snap_to_lines` compiles."""
     on = (points.valid & (member >= 0)).reshape(-1).nonzero()[0]
     if on.size == 0:
@@ -1179,7 +1181,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
     g = member.reshape(-1).take(on)              # line indices: small, so bincount directly
     x, y = points.x.reshape(-1).take(on), points.y.reshape(-1).take(on)
     n = np.bincount(g)
-    keep = n >= SNAP_MIN
+    keep = n >= min_members
     if not keep.any():
         return points
     nn = np.maximum(n, 1)

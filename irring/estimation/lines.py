@@ -313,17 +313,33 @@ def fallback_spread(cal: Calibration, counts: np.ndarray, d0: np.ndarray) -> np.
 
 
 SNAP_SIGMAS = 3.0   # a member moves out onto its line if that is within 3σ (in from behind: always) …
-SNAP_MIN = 10       # … and the line has at least 10 members (short lines are less sure)
+SNAP_MIN = 10       # … and the line has at least 10 members at step_stride 1 (short lines
+#                     are less sure; :func:`snap_members`)
 SNAP_OWN = 0.5      # share of a member's own σ kept in its σ on the line …
 SNAP_OWN_CAP_M = 0.010  # … at most this where a part is read to its own range (far_sigma_cap)
 
 
+def snap_members(steps: np.ndarray) -> int:
+    """The members a line needs to be snapped to (:func:`snap_to_lines`) in a sweep of these
+    motor ``steps`` (S,): ``SNAP_MIN`` where every step is read, ⌈``SNAP_MIN``/k⌉ where
+    every k-th is (k the greatest common divisor of the steps between its rows), so that a
+    line over the same stretch of wall, with 1/k of the readings, is snapped alike
+    (docs/estimator.md, "Snapped at every stride")."""
+    s = np.asarray(steps).reshape(-1)
+    if s.size < 2:
+        return SNAP_MIN
+    k = abs(int(s[1]) - int(s[0]))
+    if k != 1:   # (one step between two rows: the divisor is 1, no need to look further)
+        k = int(np.gcd.reduce(np.abs(np.diff(s.astype(np.int64)))))
+    return -(-SNAP_MIN // k) if k > 1 else SNAP_MIN
+
+
 def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
-                  own_cap_m: float = math.inf) -> Points:
+                  own_cap_m: float = math.inf, min_members: int = SNAP_MIN) -> Points:
     """End points of the readings on a line put where their beams meet it.
 
     ``member`` (S, N): the line each reading took θ from (−1: none). A valid member of a
-    line with ≥ 10 members moves along its beam onto the line refitted to their end points
+    line with ≥ ``min_members`` members (:func:`snap_members`) moves along its beam onto the line refitted to their end points
     (members read a little past the max range included: see :func:`drop_beyond_range`)
     when the member lies behind it or short of it by no more than 3σ, within [``min_range_m``,
     ``points.max_range_m``]; its σ becomes the line's uncertainty there (half its own σ
@@ -335,7 +351,7 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
         f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
         *(f(getattr(points, k), dtype=float).reshape(-1)
           for k in ("x", "y", "d", "sigma_m", "heading", "origin_x", "origin_y")),
-        SNAP_MIN, SNAP_SIGMAS, SNAP_OWN, float(own_cap_m), SIGMA_FLOOR_M, float(min_range_m),
+        int(min_members), SNAP_SIGMAS, SNAP_OWN, float(own_cap_m), SIGMA_FLOOR_M, float(min_range_m),
         float(points.max_range_m))
     if moved is None:
         return points
