@@ -339,20 +339,20 @@ def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
     """End points of the readings on a line put where their beams meet it.
 
     ``member`` (S, N): the line each reading took θ from (−1: none). A valid member of a
-    line with ≥ ``min_members`` members (:func:`snap_members`) moves along its beam onto the line refitted to their end points
-    (members read a little past the max range included: see :func:`drop_beyond_range`)
-    when the member lies behind it or short of it by no more than 3σ, within [``min_range_m``,
-    ``points.max_range_m``]; its σ becomes the line's uncertainty there (half its own σ
-    added, at most ``own_cap_m``). One compiled call (``irring.estimation._lines.snap_to_lines``);
-    the readable statement and the why: :func:`irring.estimation.estimate_numpy.snap_to_lines`."""
+    line of ≥ ``min_members`` (:func:`snap_members`) moves along its beam onto the line
+    refitted to the members' end points (those a little past the max range too:
+    :func:`drop_beyond_range`) when it lies behind it or ≤ 3σ short of it, within
+    [``min_range_m``, ``points.max_range_m``]; its σ becomes the line's there with half its
+    own added (at most ``own_cap_m``). Compiled; the numpy statement and the why:
+    :func:`irring.estimation.estimate_numpy.snap_to_lines`."""
     f = np.ascontiguousarray
     moved = _lines.snap_to_lines(
         f(member, dtype=np.intp).reshape(-1),
         f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
         *(f(getattr(points, k), dtype=float).reshape(-1)
           for k in ("x", "y", "d", "sigma_m", "heading", "origin_x", "origin_y")),
-        int(min_members), SNAP_SIGMAS, SNAP_OWN, float(own_cap_m), SIGMA_FLOOR_M, float(min_range_m),
-        float(points.max_range_m))
+        int(min_members), SNAP_SIGMAS, SNAP_OWN, float(own_cap_m), SIGMA_FLOOR_M,
+        float(min_range_m), float(points.max_range_m))
     if moved is None:
         return points
     shape = points.valid.shape
