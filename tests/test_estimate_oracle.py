@@ -234,9 +234,9 @@ def test_snap_kernel_agrees_with_its_numpy_statement(seed, room, unlabel, merge,
     """``_lines.snap_to_lines`` (compiled) against ``estimate_numpy.snap_to_lines`` on a
     sweep's end points with drawn line labels (some dropped, pairs of lines merged into one
     that fits neither), end points jittered along and across their beams, σ scaled, any
-    minimum range, cap on a member's own σ and least members of a line, a share of σ NaN or +inf (a caller's Points
-    may hold them): the same end points move (exact) and x, y, d, σ agree within 1e-9 m
-    (NaN and inf where the other has them)."""
+    minimum range, cap on a member's own σ and least members of a line, a share of σ NaN or
+    +inf (a caller's Points may hold them): the same end points move (exact) and x, y, d, σ
+    agree within 1e-9 m (NaN and inf where the other has them)."""
     walls, circles, rng = _scene(seed, room)
     cal = stand_in_calibration()
     sweep, _, _ = make_sweep(cal, walls=walls, circles=circles, noise_counts=0.5, seed=seed,

@@ -218,8 +218,8 @@ def slanted_sweep(sigma_m: float, theta_deg: float) -> Points:
     """One sensor at (431.7, 52.9) mm reading every other step (2.16° apart) onto a wall
     800 mm out along its first beam, whose normal points back at it 55° off that beam, the
     beam turning away from the normal: incidence 55° rising to 70.1° over 8 steps at
-    0.80–1.35 m, each end point on the wall; ``theta_deg`` the estimator's θ for every reading (None: the
-    true incidence)."""
+    0.80–1.35 m, each end point on the wall; ``theta_deg`` the estimator's θ for every
+    reading (None: the true incidence)."""
     o = np.array([0.4317, 0.0529])
     first = math.radians(57.0)                     # the first beam's heading
     wall = o + 0.8 * np.array([math.cos(first), math.sin(first)])
@@ -243,8 +243,9 @@ def test_a_slanted_wall_read_every_other_step_is_one_surface_between_its_steps()
     mm, far more than 3 combined σ (σ 5 mm: 21 mm), though it is one flat surface; a flat
     surface at θ draws the range out by d·Δh·tan θ over the beams' turn Δh, so the pairs
     allowed that much more (at the smaller θ of the two) are joined: all 7 of them, each at
-    0.3 of a σ-5-mm hit (0.75, a cell alone), 106 cells, each on the wall. Read square on (θ = 0, as a reading on no
-    line is kept), the same ranges allow nothing more and join nothing."""
+    0.3 of a σ-5-mm hit (0.75, a cell alone), 106 cells, each on the wall. Read square on
+    (θ = 0, as a reading on no line is kept), the same ranges allow nothing more and join
+    nothing."""
     params = MapperParams()
     pts = slanted_sweep(0.005, None)
     step = np.abs(np.diff(pts.d[:, 0]))

@@ -14,22 +14,24 @@ from irring.simulation import model
 
 # A 2000 x 1000 mm room with a 5 mm partition (plywood) standing 600 mm out of its bottom
 # wall, drawn into the outline; three poses, one each side of it and one above it.
+OUTLINE = ("[[0, 0], [1000, 0], [1000, 600], [1005, 600], [1005, 0], [2000, 0], [2000, 1000], "
+           "[0, 1000]]")
 PARTITION = """\
 name: partition
 room:
-  outline_mm: [[0, 0], [1000, 0], [1000, 600], [1005, 600], [1005, 0], [2000, 0], [2000, 1000], [0, 1000]]
+  outline_mm: %s
 robot:
   poses:
     - {x_mm: 1250, y_mm: 330}
     - {x_mm: 700, y_mm: 380}
     - {x_mm: 1000, y_mm: 820}
-"""
+""" % OUTLINE
 
 
 def _partition(thickness_mm: float | None = None, outline: str | None = None) -> str:
     text = PARTITION
     if outline is not None:
-        text = text.replace(PARTITION.splitlines()[2], f"  outline_mm: {outline}")
+        text = text.replace(OUTLINE, outline)
     if thickness_mm is not None:
         text = text.replace("room:\n", f"room:\n  wall_thickness_mm: {thickness_mm}\n")
     return text

@@ -78,7 +78,8 @@ def test_the_shadow_panel_stands_its_designs_under_the_scores(tmp_path, figures,
     recs = [_record("rotating12", shadow), _record("radial12", shadow)]
     compare.chart({"designs": recs, "detection_distances_m": [0.35]}, tmp_path / "c.png")
     scores, shadows = figures[0].axes[:2]
-    assert shadows.get_title() == "Shadow: share of the wall hidden behind obstacles that the map shows"
+    assert shadows.get_title() == ("Shadow: share of the wall hidden behind obstacles that "
+                                   "the map shows")
     if shadow is None:
         assert list(shadows.get_xticks()) == [] and list(shadows.get_yticks()) == []
         assert shadows.get_ylabel() == ""
