@@ -350,7 +350,8 @@ def short_far_lines(points: Points, label: np.ndarray, index: np.ndarray, cal: C
 def short_far_lines_compiled(points: Points, label: np.ndarray, index: np.ndarray,
                              cal: Calibration) -> tuple[np.ndarray, np.ndarray] | None:
     """:func:`short_far_lines` (the statement) in one compiled call
-    (``irring.estimation._lines.short_far_lines``, held to it by tests/test_far_lines.py)."""
+    (``irring.estimation._lines.short_far_lines``; tests/test_far_line_kernels.py holds it
+    to the statement)."""
     f = np.ascontiguousarray
     return _lines.short_far_lines(
         f(index, dtype=np.intp), f(points.valid, dtype=bool).reshape(-1).view(np.uint8),
