@@ -763,13 +763,21 @@ def in_turn_order(sweep: Sweep) -> Sweep:
         np.asarray(sweep.reading_poses)[order])
 
 
+def step_stride(steps) -> int:
+    """The greatest common divisor of the gaps between distinct motor ``steps`` (any order,
+    repeats allowed): the steps from one reading to the next; 1 with fewer than two."""
+    s = np.asarray(steps, dtype=np.int64).reshape(-1)
+    if s.size < 2 or abs(int(s[1]) - int(s[0])) == 1:   # (one step apart: the divisor is 1)
+        return 1
+    return max(int(np.gcd.reduce(np.abs(np.diff(s)))), 1)
+
+
 def reading_stride(sweep: Sweep) -> int:
     """Motor steps from one of a sweep's readings to the ring's next (``scan.step_stride``):
-    the greatest common divisor of the gaps between its steps, those listed missing with
-    them (so a lost step leaves a wider gap, not a coarser stride); 1 when it has one step."""
-    steps = np.unique(np.concatenate([np.asarray(sweep.steps, dtype=np.int64).reshape(-1),
-                                      np.asarray(sweep.missing_steps, dtype=np.int64)]))
-    return int(np.gcd.reduce(np.diff(steps))) if steps.size > 1 else 1
+    :func:`step_stride` of its steps and those listed missing (so a lost step leaves a wider
+    gap, not a coarser stride)."""
+    return step_stride(np.concatenate([np.asarray(sweep.steps, dtype=np.int64).reshape(-1),
+                                       np.asarray(sweep.missing_steps, dtype=np.int64)]))
 
 
 class Reason(enum.IntEnum):

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import Points, Reason, points_with, rows_in_step_order
+from ..core import Points, Reason, points_with, rows_in_step_order, step_stride
 from ..resources import kernel
 from .calibration import SIGMA_FLOOR_M, Calibration, fallback_thetas, range_sigma
 
@@ -325,13 +325,7 @@ def snap_members(steps: np.ndarray) -> int:
     every k-th is (k the greatest common divisor of the steps between its rows), so that a
     line over the same stretch of wall, with 1/k of the readings, is snapped alike
     (docs/estimator.md, "Snapped at every stride")."""
-    s = np.asarray(steps).reshape(-1)
-    if s.size < 2:
-        return SNAP_MIN
-    k = abs(int(s[1]) - int(s[0]))
-    if k != 1:   # (one step between two rows: the divisor is 1, no need to look further)
-        k = int(np.gcd.reduce(np.abs(np.diff(s.astype(np.int64)))))
-    return -(-SNAP_MIN // k) if k > 1 else SNAP_MIN
+    return -(-SNAP_MIN // step_stride(steps))
 
 
 def snap_to_lines(points: Points, member: np.ndarray, min_range_m: float,
