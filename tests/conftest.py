@@ -49,6 +49,22 @@ def t_room_raw(_t_room_yaml) -> dict:
     return copy.deepcopy(_t_room_yaml)
 
 
+@pytest.fixture(scope="session")
+def t_room_recording(tmp_path_factory, t_room) -> dict:
+    """`irring run t_room`'s sweeps.npz, entry by entry, read-only (a test edits a copy)."""
+    import numpy as np
+
+    from irring import pipeline
+
+    out = tmp_path_factory.mktemp("run")
+    pipeline.write_outputs(pipeline.run(t_room), out, animation=False)
+    with np.load(out / "sweeps.npz") as z:
+        entries = {k: z[k] for k in z.keys()}
+    for v in entries.values():
+        v.flags.writeable = False
+    return entries
+
+
 @pytest.fixture
 def figures(monkeypatch) -> list:
     """Every figure ``irring.maps.render.figure`` makes during the test, in order (a chart's

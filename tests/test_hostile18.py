@@ -74,15 +74,6 @@ def test_the_reference_firmware_answers_irstp_at_rest_with_its_last_seq(device):
     assert ring.park_failure is None and ring.stands_at == 0
 
 
-@pytest.fixture(scope="module")
-def t_room_recording(tmp_path_factory) -> dict:
-    """`irring run t_room`'s sweeps.npz, entry by entry."""
-    out = tmp_path_factory.mktemp("run")
-    pipeline.write_outputs(pipeline.run(load_scenario("t_room")), out, animation=False)
-    with np.load(out / "sweeps.npz") as z:
-        return {k: z[k] for k in z.keys()}
-
-
 def _edited(entries: dict, path, **changes):
     np.savez(path, **{**entries, **changes})
     return path

@@ -124,15 +124,6 @@ def test_an_outline_of_thousands_of_walls_is_measured_only_where_walls_are(monke
     assert np.isinf(fast_near[~within]).all()
 
 
-@pytest.fixture(scope="module")
-def t_room_recording(tmp_path_factory) -> dict:
-    """`irring run t_room`'s sweeps.npz, entry by entry."""
-    out = tmp_path_factory.mktemp("run")
-    pipeline.write_outputs(pipeline.run(load_scenario("t_room")), out, animation=False)
-    with np.load(out / "sweeps.npz") as z:
-        return {k: z[k] for k in z.keys()}
-
-
 def _with_meta(entries: dict, path, edit) -> str:
     meta = json.loads(str(entries["meta"]))
     edit(meta)
