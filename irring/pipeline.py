@@ -426,15 +426,11 @@ def grid_for_points(points: Sequence[Points], resolution_m: float = 0.010,
 
 
 def mapper_params(calibration, sweeps: Sequence[Sweep] = ()) -> MapperParams:
-    """The mapper's numbers for ``sweeps`` read with ``calibration``: the defaults, but a
-    calibration without θ dependence (:attr:`Calibration.theta_free`: a scene without the
-    ``incidence`` effect, whose sensor returns at any incidence) has its silent beams stop
-    only at cells holding an end point (``stop_at_end_cells``), and, where no sweep was
-    read moving (``reading_poses``), pass as a valid beam passes (``l_no_return`` =
-    ``l_free``). Its silence is no surface met past a drop-out angle: a hit's spread into
-    the cell in front of it is nothing a silent beam could have met, and a silent beam of
-    a still ring is a clean pass (docs/mapping.md, "Where the ideal sensor still maps
-    worse")."""
+    """The mapper's numbers for ``sweeps`` read with ``calibration``: the defaults, but for a
+    θ-free calibration (:attr:`Calibration.theta_free`: it returns at any incidence) silent
+    beams stop only at cells holding an end point (``stop_at_end_cells``) and, where no
+    sweep was read moving (``reading_poses``), clear as a valid beam does (``l_no_return``
+    = ``l_free``). Why: docs/mapping.md, "Where the ideal sensor still maps worse"."""
     if calibration is None or not calibration.theta_free:
         return MapperParams()
     if any(sweep.reading_poses is not None for sweep in sweeps):
