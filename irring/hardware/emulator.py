@@ -41,9 +41,9 @@ OUT_LIMIT_BYTES = 2 * p.MAX_SENTENCE_BYTES
 
 def room_tag(name: str) -> str:
     """A scenario's name as `irring emulate`'s IRINF carries it: the name itself when it is
-    at most ROOM_TAG_MAX printable ASCII characters other than space, `$`, `*` and `,`;
+    at most ROOM_TAG_MAX characters IRR text carries (:func:`protocol.text_ok`) but space;
     else those (others as `_`) cut to fit, `~` and 8 hex digits of its SHA-256."""
-    ok = [0x20 < ord(c) <= 0x7E and c not in "$*," for c in name]
+    ok = [c != " " and p.text_ok(c) for c in name]
     if len(name) <= ROOM_TAG_MAX and name and all(ok):
         return name
     digest = hashlib.sha256(name.encode("utf-8", "surrogatepass")).hexdigest()[:8]

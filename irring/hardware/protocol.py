@@ -332,7 +332,8 @@ def frame(body: bytes, version: int = PROTOCOL_VERSION) -> bytes:
     return b"$" + bytes(body) + b"*" + checksum(body, version) + b"\r\n"
 
 
-def _text_ok(text: str) -> bool:
+def text_ok(text: str) -> bool:
+    """Whether an IRR text field can carry ``text``: printable ASCII but ``$``, ``*``, ``,``."""
     return all(0x20 <= ord(c) <= 0x7E and c not in "$*," for c in text)
 
 
@@ -354,7 +355,7 @@ def encode(msg: Message, *, check: bool = True, version: int = PROTOCOL_VERSION)
     parts = [msg.TYPE.encode("ascii")]
     for i, value in enumerate(_field_values(msg)):
         if isinstance(value, str):
-            if check and not _text_ok(value):
+            if check and not text_ok(value):
                 raise ValueError(f"{msg.TYPE} text {value!r}: only printable ASCII without "
                                  f"`$`, `*` or `,` may be sent")
             parts.append(value.encode("ascii"))
