@@ -187,9 +187,14 @@ TINY = [accuracy.Config(), accuracy.Config("step", "step ×4", 4, step_stride=4)
 
 
 @pytest.fixture(scope="module")
-def serial_tiny() -> list[dict]:
-    result = accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY)
-    return [accuracy.deterministic(r) for r in result["runs"]]
+def tiny() -> dict:
+    """accuracy.measure on t_room_cylinder, one seed, TINY's two configurations, in process."""
+    return accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY)
+
+
+@pytest.fixture(scope="module")
+def serial_tiny(tiny) -> list[dict]:
+    return [accuracy.deterministic(r) for r in tiny["runs"]]
 
 
 def test_process_pool_gives_identical_results(serial_tiny):
@@ -303,21 +308,19 @@ def test_cli_speed_json(capsys):
         assert out[key] > 0
 
 
-def test_the_accuracy_chart_legend_says_what_a_ring_means(tmp_path, figures):
+def test_the_accuracy_chart_legend_says_what_a_ring_means(tiny, tmp_path, figures):
     """accuracy.png ringed the configurations on each Pareto front and said nowhere what a
     ring meant (study.png's title does)."""
-    accuracy.chart(accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY),
-                   tmp_path / "a.png")
+    accuracy.chart(tiny, tmp_path / "a.png")
     legend = [t.get_text() for t in figures[0].axes[2].get_legend().get_texts()]
     assert legend.count("ringed: on the front") == 1 and "Pareto front" in legend
 
 
-def test_the_accuracy_charts_f1_axes_are_stretched_towards_one(tmp_path, figures):
+def test_the_accuracy_charts_f1_axes_are_stretched_towards_one(tiny, tmp_path, figures):
     """accuracy.png's F1 panels drew the knobs' 0.957 … 0.999 as one crowd at the top of
     0 … 1, their labels on each other; they are stretched towards 1, and the legend sits
     where no point does (coverage against hardware time, lower right)."""
-    accuracy.chart(accuracy.measure(["t_room_cylinder"], seeds=1, configs=TINY),
-                   tmp_path / "a.png")
+    accuracy.chart(tiny, tmp_path / "a.png")
     axes = figures[0].axes
     for ax in axes[:2]:
         assert ax.get_yscale() == "function"
