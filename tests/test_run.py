@@ -264,3 +264,20 @@ def test_replay_maps_with_the_recorded_mapper_params_on_any_grid(runs, tmp_path)
     want = pipeline.map_sweeps(sweeps, params=params, progress=False)
     assert np.array_equal(replayed.grid.log_odds, want.grid.log_odds)
     assert replayed.grid.log_odds.max() == 2.0
+
+
+def test_the_shadow_line_says_how_many_hidden_cells_a_sensor_could_range(runs):
+    """A shadow of 0 where no sensor could range the hidden wall is all any map can score:
+    the summary says so, with the counts the share is of."""
+    from irring.cli.run import summary_lines
+
+    three = summary_lines(runs["t_room_three_cylinders"], {})
+    assert [ln for ln in three if ln.startswith("  shadow")] == [
+        "  shadow    0.444 of the wall behind obstacles mapped (54 wall cell(s) hidden from "
+        "every pose centre; a sensor could range 24 of them)"]
+    box = summary_lines(pipeline.run(load_scenario("box_room"), progress=False), {})
+    assert [ln for ln in box if ln.startswith("  shadow")] == [
+        "  shadow    0.000 of the wall behind obstacles mapped (7 wall cell(s) hidden from "
+        "every pose centre; a sensor could range none of them)"]
+    plain = summary_lines(runs["t_room"], {})
+    assert "  shadow    n/a (nothing hidden behind an obstacle)" in plain

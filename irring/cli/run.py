@@ -121,6 +121,17 @@ def _unnamed_ring(result) -> str:
 _f = score_text   # the map's title formats its scores the same way
 
 
+def _shadow_cells(truth) -> str:
+    """How many hidden wall cells the shadow is a share of, and how many of them a sensor
+    could range: with none, 0.000 is all any map can score, not a miss."""
+    if truth is None:
+        return ""
+    hidden = int(truth.shadow.sum())
+    ranged = int((truth.shadow_ranged & truth.shadow).sum())
+    return (f" ({hidden} wall cell(s) hidden from every pose centre; a sensor could range "
+            + (f"{ranged} of them)" if ranged else "none of them)"))
+
+
 def summary_lines(result, paths: dict, summary: dict | None = None) -> list[str]:
     """The readable lines of ``summary`` (``result.summary()``, made here when not given)."""
     s = result.summary() if summary is None else summary
@@ -159,7 +170,8 @@ def summary_lines(result, paths: dict, summary: dict | None = None) -> list[str]
                      f"{_f(sc_['coverage'])} of the reachable free area")
         shadow = sc_["shadow"]
         lines.append("  shadow    " + ("n/a (nothing hidden behind an obstacle)" if shadow is None
-                                       else f"{_f(shadow)} of the wall behind obstacles mapped"))
+                                       else f"{_f(shadow)} of the wall behind obstacles mapped"
+                                       + _shadow_cells(result.truth)))
     elif s.get("unscored"):
         lines.append(f"  (not scored: {errors.printable(s['unscored'], 2000)})")
     else:
