@@ -369,3 +369,26 @@ def test_a_bundled_name_stays_a_name_beside_a_folder_of_that_name(tmp_path, monk
     (bundled,) = rooms.resolve_rooms(["t_room"])
     assert bundled.name == "t_room" and len(bundled.robot.poses) == 4
     assert [sc.name for sc in rooms.resolve_rooms(["mine"])] == ["l_room", "far_walls"]
+
+
+def test_cli_notes_a_room_that_lists_no_signal_effect(tmp_path, capsys):
+    """A room file written from scenarios/README.md's smallest example lists no effects: both
+    its rows are the ideal sensor, and the table says so under it (not under a room with
+    effects), with the bundled rooms' defaults; rooms.json lists each room's signal effects."""
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "a_tiny_post.yaml").write_text(SMALL_ROOM)
+    (own / "b_plain.yaml").write_text(SMALL_ROOM.replace("tiny_post", "plain").replace(
+        "effects: [incidence, noise, quantization]\n", ""))
+    out = tmp_path / "bench"
+    assert main(["bench", "rooms", str(own), "--out", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    note = ("  note: its scene lists no sensor-signal effect, so its effects row is the ideal "
+            "sensor too; the bundled rooms' defaults: effects: [incidence, noise, quantization] "
+            "(scenarios/README.md)")
+    at = [i for i, line in enumerate(lines) if line.startswith("plain ")]
+    assert at and lines[at[0] + 1].split()[0] == "ideal" and lines[at[0] + 2] == note
+    assert lines.count(note) == 1
+    rows = json.loads((out / "rooms.json").read_text())
+    assert [r["signal_effects"] for r in rows] == [["incidence", "noise", "quantization"], []]
+    assert rows[1]["effects"] == rows[1]["ideal"]

@@ -204,9 +204,14 @@ def each_room(scenarios: list[Scenario | Unusable], n_seeds: int, measure_room, 
 
 
 def print_clip_notes(row: dict) -> None:
-    """The note lines for a room's obstacles its walls clip (``each_room``'s rows)."""
+    """The note lines for a room's obstacles its walls clip (``each_room``'s rows), and for
+    a room of :func:`measure` whose scene lists no signal effect (its two rows are alike)."""
     for clip in row.get("clipped_obstacles", ()):
         print(f"  note: {clip['note']}")
+    if row.get("signal_effects") == []:   # a room file of the user's that left effects out
+        print("  note: its scene lists no sensor-signal effect, so its effects row is the "
+              "ideal sensor too; the bundled rooms' defaults: effects: [incidence, noise, "
+              "quantization] (scenarios/README.md)")
 
 
 def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
@@ -222,6 +227,7 @@ def _measure_room(sc: Scenario, n_seeds: int, bar) -> dict:
     row["misses"] = {k: row["effects"][k] for k, lim in TARGETS.items()
                      if row["effects"][k] is not None and row["effects"][k] < lim}
     row["beyond_target_effects"] = [k for k in sc.effects if k not in TARGET_EFFECTS]
+    row["signal_effects"] = [k for k in sc.effects if k in SIGNAL_EFFECTS]
     row["ideal_worse"] = _ideal_worse(row["effects"], row["ideal"])
     return row
 
