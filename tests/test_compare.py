@@ -217,6 +217,26 @@ def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, figur
             "(in any of these scenarios)") in texts
 
 
+def test_the_chart_writes_each_score_on_its_bar(tmp_path, figures):
+    """Two rings at F1 0.990 and 0.992 drew bars of one height on the 0 … 1 axis: each bar
+    carries its value (inside a tall bar, above a short one), the shadow's too."""
+    from irring.studies import compare as compare_mod
+
+    def rec(name, f1, cov, shadow):
+        scores = {"occupied_f1": f1, "free_accuracy": 1.0, "coverage": cov, "shadow": shadow}
+        return {"design": name, **scores, "hardware_time_s": 2.72, "compute_time_s": 0.004,
+                "runs": 1, "scenarios": ["lab"], "poses": {"lab": 1},
+                "by_scenario": {"lab": scores}, "min_detectable_radius_m": [0.002]}
+
+    compare_mod.chart({"designs": [rec("a", 0.9904, 0.8763, 0.625), rec("b", 0.9916, 0.083, 0.0)],
+                       "detection_distances_m": [0.35]}, tmp_path / "c.png")
+    scores_ax, shadow_ax = figures[0].axes[:2]
+    got = sorted((t.get_text(), t.get_color()) for t in scores_ax.texts)
+    assert got == sorted([("0.990", "white"), ("1.000", "white"), ("0.876", "white"),
+                          ("0.992", "white"), ("1.000", "white"), ("0.083", "black")])
+    assert sorted(t.get_text() for t in shadow_ax.texts) == ["0", "0.625"]
+
+
 ROOM_WITHOUT_POSTS = """\
 name: lab_no_posts
 room: {outline_mm: [[0, 0], [1900, 0], [1900, 700], [1200, 1300], [0, 1300]]}

@@ -298,6 +298,12 @@ def chart(result: dict, path) -> None:
                 if not v > 0.005:
                     ax.annotate("n/a" if np.isnan(v) else "0", (xi, 0.01), ha="center",
                                 va="bottom", fontsize=7, rotation=90)
+                elif v >= 0.15:   # the value inside its bar: 0.990 and 0.992 look alike
+                    ax.annotate(f"{v:.3f}", (xi, v - 0.01), ha="center", va="top",
+                                fontsize=7, rotation=90, color="white")
+                else:
+                    ax.annotate(f"{v:.3f}", (xi, v + 0.01), ha="center", va="bottom",
+                                fontsize=7, rotation=90)
         ax.set_title(title, fontsize=9)
         ax.set_xlim(-0.5, len(names) - 0.5)   # the designs under the other panels'
         if series:
