@@ -67,12 +67,13 @@ def unconfirmed_near(counts: np.ndarray, reason: np.ndarray, steps, cal: Calibra
         return None
     order = rows_in_step_order(steps)
     so = s[order]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d0 = cal.distance(so, 0.0)
     top = so >= cal.full_scale_counts - 0.5
     ok = np.zeros(so.shape, dtype=bool)
-    ok[1:] |= (np.abs(d0[1:] - d0[:-1]) <= NEAR_AGREE_M) | top[:-1]
-    ok[:-1] |= (np.abs(d0[:-1] - d0[1:]) <= NEAR_AGREE_M) | top[1:]
+    # counts past the curve read inf or NaN (1 V of noise): a neighbour at inf confirms none
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d0 = cal.distance(so, 0.0)
+        ok[1:] |= (np.abs(d0[1:] - d0[:-1]) <= NEAR_AGREE_M) | top[:-1]
+        ok[:-1] |= (np.abs(d0[:-1] - d0[1:]) <= NEAR_AGREE_M) | top[1:]
     confirmed = np.empty_like(ok)
     confirmed[order] = ok
     return ask & ~confirmed
