@@ -79,8 +79,20 @@ def work_bytes(readings: int, largest_sweep: int) -> int:
 def gigabytes(n_bytes: float) -> str:
     """``n_bytes`` in GB as a refusal shows it: one decimal, three significant figures past
     a million GB (a 10³⁰-cell grid read "about 600000000000000016777216.0 GB")."""
-    gb = n_bytes / 1e9
+    try:
+        gb = n_bytes / 1e9
+    except OverflowError:   # an int past a float's range (a drive at 1e-300 mm/s)
+        return f"{count_text(int(n_bytes) // 10**9)} GB"
     return f"{gb:.1f} GB" if gb < 1e6 else f"{gb:.3g} GB"
+
+
+def count_text(n: int) -> str:
+    """Whole number ``n`` with thousands separators, past 10¹⁵ to three figures ("4.22e+300"):
+    a drive at 1e-300 mm/s counted its sweeps in 400 characters."""
+    if n < 10**15:
+        return f"{n:,}"
+    digits = len(str(n))
+    return f"{n // 10 ** (digits - 3) / 100:.2f}e+{digits - 1}"
 
 
 def work_refusal(work: str, need: int, who: str, advice: str) -> str | None:

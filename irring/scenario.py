@@ -23,8 +23,9 @@ import numpy as np
 
 from . import designs, gp2, resources, safe_yaml
 from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_COORDINATE_M,
-                   MAX_OBSTACLES, MAX_OUTLINE_CORNERS, MAX_RANGE_M, MIN_READING_PERIOD_S,
-                   SEED_MAX, SENSOR_MODEL, VREF_V, Box, Cylinder, Pose, Ring, Room, bounds,
+                   MAX_OBSTACLES, MAX_OUTLINE_CORNERS, MAX_RANGE_M, MAX_SWEEPS,
+                   MIN_READING_PERIOD_S, SEED_MAX, SENSOR_MODEL, VREF_V, Box, Cylinder, Pose,
+                   Ring, Room, bounds,
                    bounds_error, built_wall_thickness, choice, clip_to_convex,
                    distance_to_outline, first_crossing, first_overlap, first_wall_into,
                    first_wall_intrusion, footprint, inside_outline, num, obstacle_distance,
@@ -725,6 +726,12 @@ def _validate_effects(sc: Scenario, fail) -> None:
                                               f"{len(motion.path)}")
         if motion.speed_m_s <= 0:
             raise fail("effects.motion.speed_mm_s", "must be > 0 to drive the path")
+        length_m = sum(math.hypot(b.x_m - a.x_m, b.y_m - a.y_m)
+                       for a, b in zip(motion.path, motion.path[1:]))
+        if not math.isfinite(length_m / motion.speed_m_s):   # 1e-320 mm/s: no end in a float
+            raise fail("effects.motion.speed_mm_s",
+                       f"{motion.speed_m_s * 1e3:g} mm/s would never drive the path's "
+                       f"{length_m * 1e3:g} mm; a run takes at most {MAX_SWEEPS:,} sweeps")
 
 
 def _part_range(sc: Scenario, raw: Mapping) -> Scenario:

@@ -6,8 +6,10 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import pytest
 
 from irring import load_scenario
+from irring.cli import main
 from irring.core import Reason
 from irring.estimation.calibration import Calibration
 from irring.estimation.silence import unconfirmed_near
@@ -23,3 +25,36 @@ def test_neighbouring_zero_counts_ask_no_near_reading_with_a_numpy_warning():
         warnings.simplefilter("error")
         alone = unconfirmed_near(counts, reason, np.array([-1, 0, 1, 2]), cal)
     assert alone.tolist() == [[False, False], [False, False], [True, False], [False, False]]
+
+
+MOVING = """\
+name: crawl
+room:
+  outline_mm: [[0, 0], [2420, 0], [2420, 900], [0, 900]]
+robot:
+  poses: [{x_mm: 500, y_mm: 450}]
+effects:
+  motion:
+    path: [{x_mm: 500, y_mm: 450}, {x_mm: 1900, y_mm: 450}]
+    speed_mm_s: SPEED
+"""
+
+
+@pytest.mark.parametrize("speed, said", [
+    # 1400 mm at 1e-300 mm/s: 4.2e302 sweeps, an int past a float's range for the memory
+    ("1e-300", "crawl.yaml: 4.21e+302 sweeps × 71 steps × 12 sensors = 3.59e+305 readings "
+               "(about 2.15e+299 GB): a run takes at most 10,000 sweeps; raise "
+               "effects.motion.speed_mm_s"),
+    # 1e-320 mm/s: the drive's duration is infinite, and math.ceil(inf) raised
+    ("1e-320", "crawl.yaml: effects.motion.speed_mm_s: 9.88131e-321 mm/s would never drive "
+               "the path's 1400 mm; a run takes at most 10,000 sweeps"),
+])
+def test_a_drive_too_slow_for_a_float_is_refused_not_an_internal_error(tmp_path, capsys, speed,
+                                                                        said):
+    (tmp_path / "crawl.yaml").write_text(MOVING.replace("SPEED", speed))
+    status = main(["run", str(tmp_path / "crawl.yaml"), "--out", str(tmp_path / "out"),
+                   "--no-animation"])
+    err = capsys.readouterr().err.strip()
+    assert (status, err.count("\n")) == ((5 if speed == "1e-300" else 1), 0)
+    assert said in err and "internal error" not in err
+    assert not (tmp_path / "out").exists()

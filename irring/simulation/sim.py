@@ -15,7 +15,8 @@ import mujoco.batch
 import numpy as np
 
 from ..core import (BYTES_PER_PHYSICS_VALUE, MAX_STEPS, MAX_SWEEPS, SEED_MAX, Sweep, Truth, as_pose,
-                    check_steps, gigabytes, hardware_duration_s, work_bytes, work_refusal)
+                    check_steps, count_text, gigabytes, hardware_duration_s, work_bytes,
+                    work_refusal)
 from ..errors import TooBig
 from ..scenario import Scenario
 from . import dynamics as dynamics_lib
@@ -70,8 +71,9 @@ def check_work(sim: SimRing) -> None:
     physics_bytes = physics_steps * (sim.model.nq + sim.model.nv) * BYTES_PER_PHYSICS_VALUE
     reading_bytes = work_bytes(readings, steps * sensors)
     need = reading_bytes + physics_bytes
-    work = (f"{sweeps:,} sweeps × {steps:,} steps × {sensors} sensors = {readings:,} readings"
-            + (f" and {physics_steps:,} belt physics steps" if physics_steps else ""))
+    work = (f"{count_text(sweeps)} sweeps × {steps:,} steps × {sensors} sensors = "
+            f"{count_text(readings)} readings"
+            + (f" and {count_text(physics_steps)} belt physics steps" if physics_steps else ""))
     sweep_keys = "narrow robot.ring min_step … max_step or raise scan.step_stride"
     if steps > MAX_STEPS:
         raise TooBig(f"{where}: {work} (about {gigabytes(need)}): a sweep takes at most "
