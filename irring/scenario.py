@@ -683,6 +683,10 @@ def parse(raw: Any, source: str = "") -> Scenario:
         sc = dataclasses.replace(sc, robot=dataclasses.replace(sc.robot, ring_keys=given))
     sc = _part_range(sc, raw)
     sc = _sensor_for_design(sc, raw, loader.fail)
+    try:   # a custom design without a ring: named with the file, like every other key
+        ring_for(sc.robot)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{source}: {exc}" if source else str(exc)) from None
     _validate_geometry(sc, loader.fail)
     _validate_effects(sc, loader.fail)
     return sc

@@ -58,3 +58,14 @@ def test_a_drive_too_slow_for_a_float_is_refused_not_an_internal_error(tmp_path,
     assert (status, err.count("\n")) == ((5 if speed == "1e-300" else 1), 0)
     assert said in err and "internal error" not in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_custom_design_without_a_ring_names_the_file(tmp_path, capsys):
+    # every other key's error starts with the file; this one alone came without it
+    path = tmp_path / "mine.yaml"
+    path.write_text("name: mine\nroom:\n  outline_mm: [[0, 0], [2000, 0], [2000, 1500], "
+                    "[0, 1500]]\nrobot:\n  design: custom\n  poses: [{x_mm: 900, y_mm: 700}]\n")
+    assert main(["scenarios", str(path)]) == 1
+    assert capsys.readouterr().err == (
+        f"irring scenarios: error: {path}: robot.ring: required when robot.design is custom; "
+        "give the ring's numbers (sensors, radius_mm, min_step, max_step, …)\n")
