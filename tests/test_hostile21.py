@@ -69,3 +69,22 @@ def test_a_custom_design_without_a_ring_names_the_file(tmp_path, capsys):
     assert capsys.readouterr().err == (
         f"irring scenarios: error: {path}: robot.ring: required when robot.design is custom; "
         "give the ring's numbers (sensors, radius_mm, min_step, max_step, …)\n")
+
+
+@pytest.mark.parametrize("name", ["''", "' '"])
+def test_an_empty_scenario_name_in_a_study_is_refused_not_read_as_its_folder(tmp_path, capsys,
+                                                                              name):
+    # a study.yml (not *.yaml) beside room.yaml: `scenarios: ['']` ran room.yaml unasked
+    (tmp_path / "room.yaml").write_text(
+        "name: room\nroom:\n  outline_mm: [[0, 0], [2000, 0], [2000, 1500], [0, 1500]]\n"
+        "robot:\n  poses: [{x_mm: 900, y_mm: 700}]\n")
+    (tmp_path / "study.yml").write_text(f"designs: [radial12]\nscenarios: [{name}]\n"
+                                        "seeds: [1]\n")
+    status = main(["study", str(tmp_path / "study.yml"), "--out", str(tmp_path / "out"),
+                   "--workers", "1"])
+    assert status == 1
+    assert capsys.readouterr().err == (
+        f"irring study: error: {tmp_path / 'study.yml'}: scenarios[0]: an empty name "
+        f"({name}); name a bundled scenario, a YAML file or a folder of them (. is the study "
+        "file's folder)\n")
+    assert not (tmp_path / "out").exists()

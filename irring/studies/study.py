@@ -217,6 +217,9 @@ def parse_study(raw: Any, source: str = "") -> Study:
         path = f"scenarios[{i}]"
         if not isinstance(s, str):
             raise _fail(source, path, f"expected a bundled scenario name or a YAML path, got {s!r}")
+        if not s.strip():   # read as the study's folder: every *.yaml beside it ran unasked
+            raise _fail(source, path, f"an empty name ({s!r}); name a bundled scenario, a YAML "
+                                      "file or a folder of them (. is the study file's folder)")
         beside = Path(source).parent / s if source and not os.path.isabs(s) else None
         if beside is not None and beside.exists():   # a path relative to the study file
             if Path(s).exists() and scenario_file(s) != scenario_file(str(beside)):
