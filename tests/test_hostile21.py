@@ -3,6 +3,7 @@ happens now."""
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
@@ -13,6 +14,7 @@ from irring.cli import main
 from irring.core import Reason
 from irring.estimation.calibration import Calibration
 from irring.estimation.silence import unconfirmed_near
+from irring.pipeline import load_calibration
 
 
 def test_neighbouring_zero_counts_ask_no_near_reading_with_a_numpy_warning():
@@ -88,3 +90,24 @@ def test_an_empty_scenario_name_in_a_study_is_refused_not_read_as_its_folder(tmp
         f"({name}); name a bundled scenario, a YAML file or a folder of them (. is the study "
         "file's folder)\n")
     assert not (tmp_path / "out").exists()
+
+
+def test_a_calibration_whose_picture_does_not_fit_says_the_file_is_written(tmp_path):
+    # 10 kB a file: the calibration (~1.6 kB) fits, its picture does not; the line said only
+    # "cal.png: File too large", as if the calibration were lost too
+    import resource
+    import subprocess
+    import sys
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (10_000, 10_000))
+
+    out = tmp_path / "cal.yaml"
+    done = subprocess.run([sys.executable, "-m", "irring", "calibrate", "--out", str(out),
+                           "--sweeps", "1"], preexec_fn=limit, capture_output=True, text=True,
+                          timeout=120)
+    assert (done.returncode, done.stderr) == (4, (
+        f"irring calibrate: error: {tmp_path / 'cal.png'}: cannot write the picture: File too "
+        f"large; the calibration {out} is written whole (it needs no picture)\n"))
+    assert sorted(os.listdir(tmp_path)) == ["cal.yaml"]   # no half picture, no temporaries
+    assert load_calibration(out)[0].sensor_model == "gp2d12"

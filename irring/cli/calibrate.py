@@ -262,7 +262,14 @@ def _done(fitted, path: Path, where: str, sensor: int) -> int:
     print(f"wrote {errors.printable(str(path))}")
     title = (f"Calibration of sensor {sensor} ({cal.sensor_model}) {where}: d_o = "
              f"{cal.emitter_offset_m * 1e3:.2f} mm, noise {cal.noise_counts:.1f} counts")
-    png = calibration_chart.save_png(picture_path(path), fitted, errors.printable(title))
+    try:
+        png = calibration_chart.save_png(picture_path(path), fitted, errors.printable(title))
+    except OSError as exc:   # a full disk said only "cal.png: No space left on device"
+        why = exc.strerror or str(exc).rsplit(": ", 1)[-1]
+        raise errors.OutputError(
+            f"{errors.printable(str(picture_path(path)))}: cannot write the picture: {why}; "
+            f"the calibration {errors.printable(str(path))} is written whole (it needs no "
+            "picture)") from None
     print(f"wrote {errors.printable(str(png))} (the readings, the fitted curve and its errors)")
     return 0
 
