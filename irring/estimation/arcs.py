@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..core import Points, Reason, points_with
+from ..core import Points, Reason, points_with, step_stride
 from ..resources import kernel
 from .calibration import SIGMA_FLOOR_M, Calibration, range_sigma
 from .bounds import clamped_slopes
@@ -278,6 +278,11 @@ ROUND_RETRY_Z = 3.0      # a run hollow as estimated that one line fits as noise
 #                          (χ² within this many of its σ above its n readings) is a wall's
 ROUND_UNEXPLAINED = ARC_MISFIT  # a run's reading on no line costs its pieces this (σ²): no line
 #                                 explains it; a reading that just fits a circle costs as much
+ROUND_SMALL_STRIDE = 2    # in a sweep read every k-th step, k at least this, a run whose θ = 0
+ROUND_SMALL_M = 0.04      # circle is smaller than ROUND_RADII_M but at least this (a pillar of
+#                           95 mm: 64–88 mm, its flanks read long at θ = 0) …
+ROUND_SMALL_RADII_M = ROUND_RADII_M[0] * (ROUND_RADII_M[1] / ROUND_RADII_M[0]) ** np.arange(
+    -4, ROUND_RADII_M.size)  # … is tried at these radii (ROUND_RADII_M's grid, 4 steps down)
 
 
 def _bulging(px: np.ndarray, py: np.ndarray, ox: np.ndarray, oy: np.ndarray,
@@ -441,12 +446,15 @@ def _round_asked(points: Points, label: np.ndarray, index: np.ndarray, counts: n
     if not keep.any():
         return None
     # … and their circle at θ = 0 is a round thing's, not a post's or a box's corner (θ = 0
-    # reads an arc's flanks long: that circle is smooth, if smaller than the arc's)
-    keep &= _kasa_radii(px, py, gi, n_c) >= ROUND_RADII_M[0]
+    # reads an arc's flanks long: that circle is smooth, if smaller than the arc's); read
+    # every other step, one below ROUND_RADII_M too (a pillar's arc cut into steep lines)
+    kasa = _kasa_radii(px, py, gi, n_c)
+    keep &= kasa >= _least_radius(steps)
     if not keep.any():
         return None
     return SimpleNamespace(vi=vi, lab=lab, run=run, n_run=n_run, sel=sel, gi=gi, n_c=n_c,
-                           at=at, d0=d0, keep=keep, retried=retried & keep)
+                           at=at, d0=d0, keep=keep, retried=retried & keep,
+                           small=kasa < ROUND_RADII_M[0])
 
 
 def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
@@ -466,7 +474,10 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     a box's corner), is tried by :func:`arc_incidence` (radii ``ROUND_RADII_M``); its arc is
     kept where it misfits at most ``ROUND_BETTER`` of one line through the run and, by BIC,
     no more than the pieces do, the run's readings on no line counted against them
-    (:func:`_round_wins`). Any other run of ``ARC_MIN`` readings or more then tries the kept
+    (:func:`_round_wins`); in a sweep read every k-th step, k ≥ ``ROUND_SMALL_STRIDE``, a run
+    whose θ = 0 circle is below ``ROUND_RADII_M`` (down to ``ROUND_SMALL_M``) is asked too,
+    at ``ROUND_SMALL_RADII_M`` (:func:`_least_radius`). Any other run of ``ARC_MIN``
+    readings or more then tries the kept
     circles (a sensor that saw one flank only: no apex of its own) and keeps the one it fits
     best where it fits within ``ARC_MISFIT`` (the circle's evidence is another sensor's: its
     own pieces, each a chord read at its θ, fit themselves as well). Each reading taken
@@ -491,7 +502,19 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     pos = sel[keep[gi]]
     pr = (profiler or profiles_compiled)(points, vi, np.zeros(0, dtype=np.intp), counts,
                                          steps, cal)
-    th, dist, sig, good, arc_mis, circle = arc_incidence(pr, pos, cal, ROUND_RADII_M)
+    small = asked.small[gi[keep[gi]]]          # per reading of pos: its run's circle is small
+    th, dist, sig, good, arc_mis, circle = arc_incidence(pr, pos[~small], cal, ROUND_RADII_M)
+    if small.any():
+        fit_small = arc_incidence(pr, pos[small], cal, ROUND_SMALL_RADII_M)
+        merged = []
+        for big_v, small_v in zip((th, dist, sig, good, arc_mis), fit_small[:5]):
+            v = np.empty(pos.size, dtype=big_v.dtype)
+            v[~small], v[small] = big_v, small_v
+            merged.append(v)
+        th, dist, sig, good, arc_mis = merged
+        c = np.empty((3, pos.size))
+        c[:, ~small], c[:, small] = circle, fit_small[5]
+        circle = c
     if not good.any():
         return points, label
     gk = (np.cumsum(keep) - 1)[gi[keep[gi]]]
@@ -536,6 +559,15 @@ def round_runs(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
     return points, label
 
 
+def _least_radius(steps: np.ndarray) -> float:
+    """The least θ = 0 circle (m) a run of a sweep of these motor ``steps`` is asked with:
+    ``ROUND_SMALL_M`` where every k-th step is read, k at least ``ROUND_SMALL_STRIDE`` (the
+    line model cuts a pillar's arc into lines there), else ``ROUND_RADII_M``'s least (at
+    every step a box's corner seen tip on passed for a small arc: docs/estimator.md)."""
+    return float(ROUND_SMALL_M if step_stride(steps) >= ROUND_SMALL_STRIDE
+                 else ROUND_RADII_M[0])
+
+
 def _round_pre(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                steps: np.ndarray, cal: Calibration) -> np.ndarray:
     """``_lines.round_pre`` asked :func:`_round_asked`'s question: per candidate run whether
@@ -553,7 +585,7 @@ def _round_pre(points: Points, label: np.ndarray, index: np.ndarray, counts: np.
         f(points.x, dtype=float).reshape(-1), f(points.y, dtype=float).reshape(-1),
         f(points.origin_x, dtype=float).reshape(-1), f(points.origin_y, dtype=float).reshape(-1),
         ARC_GAP_STEPS, ROUND_JUMP_M, ROUND_RUN_MIN, ROUND_BULGE_M, ROUND_BEHIND,
-        float(ROUND_RADII_M[0]))
+        _least_radius(steps))
 
 
 def round_runs_compiled(points: Points, label: np.ndarray, index: np.ndarray,
