@@ -133,14 +133,14 @@ def test_consecutive_steps_on_one_surface_mark_the_cells_between():
     """End points at x = 311.3 and 337.1 mm in cell row 120 (cells 62 and 67): the cells
     strictly between them (63–66) get half the weaker hit (σ 12 mm: l_occ_min 1.6), 0.8
     each, with ``between_end_cells`` 1; by default only those 2 cells or more from both end
-    cells (64, 65), 0.3 of it (0.48, under the occupied threshold's 0.62 alone), and nothing
-    else; sensor 1's lone reading joins nothing."""
+    cells (64, 65), 0.6 of it (0.96: over the occupied threshold's 0.62 alone), and
+    nothing else; sensor 1's lone reading joins nothing."""
     pts = two_steps()
     off, _ = both(MapperParams(between_steps=0.0), pts, (140, 140))
     np.testing.assert_array_equal(off[120, 63:67], 0.0)
     for params, cells, w_want in ((MapperParams(between_steps=0.5, between_end_cells=1),
                                    [63, 64, 65, 66], 0.8),
-                                  (MapperParams(), [64, 65], 0.48)):
+                                  (MapperParams(), [64, 65], 0.96)):
         iy, ix, w = between_steps(pts, (140, 140), (0.0, 0.0), RES, params)
         assert iy.tolist() == [120] * len(cells) and ix.tolist() == cells
         np.testing.assert_allclose(w, w_want)
@@ -202,14 +202,16 @@ def far_gaps(params: MapperParams, points: Points) -> tuple[int, int]:
 def test_a_far_wall_read_every_other_step_is_drawn_between_its_end_points():
     """A sharp sensor (σ 1 mm, the ideal sensor's) reading a far wall every other step
     leaves 50 of the wall's cells more than a cell from its hits; the segments between its
-    steps (0.3 of a sharp hit, 0.75, marks a cell alone) leave none. One noisy sensor's
-    segments (σ 12 mm: 0.48) mark nothing alone; two sensors that swept the same stretch of
-    wall agree there and leave none of the 37 gaps."""
+    steps leave none. One noisy sensor's segments (σ 12 mm: 0.6 of l_occ_min, 0.96) leave
+    none of its 49 either, where 0.3 of it (0.48) marked nothing alone; two sensors that
+    swept the same stretch of wall leave none of the 37 gaps."""
     off = MapperParams(between_steps=0.0)
     one, two = ((0.4317, 0.0529),), ((0.4317, 0.0529), (0.4391, 0.0502))
     assert far_gaps(off, far_sweep(0.001, one)) == (50, 21)
     assert far_gaps(MapperParams(), far_sweep(0.001, one)) == (0, 72)
-    assert far_gaps(MapperParams(), far_sweep(0.012, one)) == far_gaps(off, far_sweep(0.012, one))
+    assert far_gaps(off, far_sweep(0.012, one)) == (49, 22)
+    assert far_gaps(MapperParams(between_steps=0.3), far_sweep(0.012, one)) == (49, 22)
+    assert far_gaps(MapperParams(), far_sweep(0.012, one)) == (0, 73)
     assert far_gaps(off, far_sweep(0.012, two))[0] == 37
     assert far_gaps(MapperParams(), far_sweep(0.012, two))[0] == 0
 
@@ -243,7 +245,7 @@ def test_a_slanted_wall_read_every_other_step_is_one_surface_between_its_steps()
     mm, far more than 3 combined σ (σ 5 mm: 21 mm), though it is one flat surface; a flat
     surface at θ draws the range out by d·Δh·tan θ over the beams' turn Δh, so the pairs
     allowed that much more (at the smaller θ of the two) are joined: all 7 of them, each at
-    0.3 of a σ-5-mm hit (0.75, a cell alone), 106 cells, each on the wall. Read square on
+    0.6 of a σ-5-mm hit (1.5, a cell alone), 106 cells, each on the wall. Read square on
     (θ = 0, as a reading on no line is kept), the same ranges allow nothing more and join
     nothing."""
     params = MapperParams()
@@ -255,7 +257,7 @@ def test_a_slanted_wall_read_every_other_step_is_one_surface_between_its_steps()
     assert hits is not None
     iy, ix, w = hits
     assert iy.size == 106            # the wall's cells 2 or more from both end cells
-    np.testing.assert_allclose(w, 0.75)
+    np.testing.assert_allclose(w, 1.5)
     # every segment between the 8 end points adds cells, each cell on the wall
     cx, cy = (ix + 0.5) * RES, (iy + 0.5) * RES
     wall = np.array([0.4317, 0.0529]) + 0.8 * np.array([math.cos(math.radians(57.0)),

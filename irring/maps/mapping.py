@@ -69,9 +69,9 @@ class MapperParams:
     ahead_floor: float = 0.0
     # hits along the segment between consecutive steps of a sensor whose ranges agree within
     # explain_sigmas combined σ beyond a slanted surface's d·Δh·tan θ (σ ≤ lone_sigma_m):
-    # this share of the weaker one's (0: off; 0.3: a pair of σ ≤ occ_sigma_m marks a cell
-    # alone, a pair of noisier ones needs a second segment or hit to agree) …
-    between_steps: float = 0.3
+    # this share of the weaker one's (0: off; 0.6: any pair of σ ≤ lone_sigma_m marks a cell
+    # alone, 0.96: at step_stride 2 in 5-8 mm cells one pair is all a gap between hits gets) …
+    between_steps: float = 0.6
     # … in the segment's cells at least this many cells (Chebyshev) from both end points'
     # cells: the nearer ones are within a cell of an end point's own hit already
     between_end_cells: float = 2.0
