@@ -32,6 +32,18 @@ effects: [incidence, noise, quantization]
 """
 
 
+def _bench_beside_small_room(tmp_path, capsys, name: str, old: str, new: str):
+    """`irring bench rooms` on SMALL_ROOM and a copy named ``name`` with ``old`` replaced by
+    ``new``: (its stdout lines, the output folder); the bench must exit 0."""
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "a_tiny_post.yaml").write_text(SMALL_ROOM)
+    (own / f"b_{name}.yaml").write_text(SMALL_ROOM.replace("tiny_post", name).replace(old, new))
+    out = tmp_path / "bench"
+    assert main(["bench", "rooms", str(own), "--out", str(out)]) == 0
+    return capsys.readouterr().out.splitlines(), out
+
+
 def test_room_set_is_bundled_and_every_room_differs_from_the_t_room():
     names = set(S.bundled())
     assert set(rooms.ROOMS) <= names
@@ -120,15 +132,9 @@ def test_cli_notes_an_obstacle_of_ones_own_room_the_walls_clip(tmp_path, capsys)
     """bench rooms (and foldover, grazing) run rooms people write: a box a mistyped centre put
     47 mm through a wall is named under its room's rows and in the JSON (a note: the exit
     status is the scores'); the room beside it, nothing clipped, has neither."""
-    own = tmp_path / "own"
-    own.mkdir()
-    (own / "a_tiny_post.yaml").write_text(SMALL_ROOM)
-    (own / "b_clipped.yaml").write_text(SMALL_ROOM.replace("tiny_post", "clipped").replace(
-        "{type: cylinder, center_mm: [810, 230], radius_mm: 24}",
-        "{type: box, center_mm: [997, 600], size_mm: [160, 80], yaw_deg: 0}"))
-    out = tmp_path / "bench"
-    assert main(["bench", "rooms", str(own), "--out", str(out)]) == 0
-    lines = capsys.readouterr().out.splitlines()
+    lines, out = _bench_beside_small_room(
+        tmp_path, capsys, "clipped", "{type: cylinder, center_mm: [810, 230], radius_mm: 24}",
+        "{type: box, center_mm: [997, 600], size_mm: [160, 80], yaw_deg: 0}")
     note = ("obstacles[0], a 160 × 80 mm box at (997, 600) mm, reaches 47 mm through wall 1 "
             "((1030, 0) → (1030, 810) mm): 29.4% of it lies beyond the walls, clipped (never "
             "seen, not scored)")
@@ -140,7 +146,8 @@ def test_cli_notes_an_obstacle_of_ones_own_room_the_walls_clip(tmp_path, capsys)
     assert rows[1]["clipped_obstacles"] == [{"obstacle": 0, "walls": [1], "reach_mm": 47.0,
                                              "share_clipped": 0.2938, "note": note}]
     for bench, json_file in (("foldover", "foldover.json"), ("grazing", "grazing.json")):
-        main(["bench", bench, str(own), "--seeds", "1", "--out", str(tmp_path / bench)])
+        main(["bench", bench, str(tmp_path / "own"), "--seeds", "1",
+              "--out", str(tmp_path / bench)])
         lines = capsys.readouterr().out.splitlines()
         at = [i for i, line in enumerate(lines) if line.startswith("clipped ")]
         assert at and lines[at[0] + 1] == f"  note: {note}", bench
@@ -375,14 +382,8 @@ def test_cli_notes_a_room_that_lists_no_signal_effect(tmp_path, capsys):
     """A room file written from scenarios/README.md's smallest example lists no effects: both
     its rows are the ideal sensor, and the table says so under it (not under a room with
     effects), with the bundled rooms' defaults; rooms.json lists each room's signal effects."""
-    own = tmp_path / "own"
-    own.mkdir()
-    (own / "a_tiny_post.yaml").write_text(SMALL_ROOM)
-    (own / "b_plain.yaml").write_text(SMALL_ROOM.replace("tiny_post", "plain").replace(
-        "effects: [incidence, noise, quantization]\n", ""))
-    out = tmp_path / "bench"
-    assert main(["bench", "rooms", str(own), "--out", str(out)]) == 0
-    lines = capsys.readouterr().out.splitlines()
+    lines, out = _bench_beside_small_room(
+        tmp_path, capsys, "plain", "effects: [incidence, noise, quantization]\n", "")
     note = ("  note: its scene lists no sensor-signal effect, so its effects row is the ideal "
             "sensor too; the bundled rooms' defaults: effects: [incidence, noise, quantization] "
             "(scenarios/README.md)")
