@@ -5,6 +5,7 @@ even loaded); pose numbers never sit on each other."""
 from __future__ import annotations
 
 import io
+import os
 import subprocess
 import sys
 
@@ -379,3 +380,18 @@ def test_map_title_gives_the_scores_as_the_summary_does(t_room_run):
     assert s["shadow"] is None and title.endswith("shadow n/a")   # the T-room hides nothing
     assert [score_text(v) for v in (0.99549, 0.99551, 1.0, 0.0, None)] == \
         ["0.995", "0.996", "1.000", "0.000", "n/a"]
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="Linux's VmHWM")
+def test_a_fresh_process_peak_is_its_own_not_its_big_parents():
+    """bench render's, study's and the scaling bench's peak memory is the measured process's
+    own: a child started by a process holding ~600 MB (a test session) inherited that as
+    ru_maxrss through exec (the suite's render bench read 1026 MB for one pose)."""
+    big = np.ones(600 * 2**20 // 8)   # ~600 MB, touched
+    code = ("import resource; from irring.studies.report import peak_memory_mb; "
+            "print(peak_memory_mb(), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)")
+    own, inherited = map(float, subprocess.run([sys.executable, "-c", code], check=True,
+                                               capture_output=True, text=True).stdout.split())
+    assert big.sum() == big.size
+    assert inherited > 600          # what ru_maxrss said
+    assert 10 < own < 300           # an interpreter with numpy, not its parent

@@ -23,7 +23,7 @@ import time
 from .. import pipeline
 from ..resources import python_here
 from ..scenario import load_scenario
-from .report import load_average, load_line
+from .report import load_average, load_line, peak_memory_mb
 
 KEYS = ("cpu_make_map_s", "wall_make_map_s", "cpu_render_s", "wall_render_s",
         "cpu_load_render_s", "wall_command_s", "cpu_command_s", "peak_memory_mb")
@@ -44,13 +44,12 @@ def one_run(scenario_name: str) -> dict:
     with tempfile.TemporaryDirectory() as out:
         pipeline.write_outputs(result, out)
     c4, w4 = time.process_time(), time.perf_counter()
-    peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return {"scenario": scenario.name, "poses": len(result.sweeps),
             "frames": pipeline.frame_plan(len(result.sweeps), pipeline.FRAMES_PER_SWEEP)[2],
             "cpu_make_map_s": c2 - c1, "wall_make_map_s": w2 - w1,
             "cpu_load_render_s": c3 - c2, "cpu_render_s": c4 - c3, "wall_render_s": w4 - w3,
             "cpu_command_s": c4 - c0, "wall_command_s": w4 - w0,
-            "peak_memory_mb": peak_kb / 1024, "stages_wall_s": result.timings_s}
+            "peak_memory_mb": peak_memory_mb(), "stages_wall_s": result.timings_s}
 
 
 def measure(scenario_name: str, repeats: int = 5, progress: bool | None = None) -> dict:

@@ -24,6 +24,24 @@ def load_average() -> list[float]:
     return list(os.getloadavg())
 
 
+def peak_memory_mb() -> float:
+    """This process's peak resident memory (MB) since it started its program: Linux's
+    ``VmHWM``, not ``ru_maxrss``, which a process started by a big one (a test session of
+    1 GB) inherits through exec; ``ru_maxrss`` elsewhere, NaN without either."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0   # kB
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import resource
+    except ImportError:   # pragma: no cover - not on POSIX
+        return float("nan")
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # KiB on Linux
+
+
 def load_line(before, after, cpus: int | None = None) -> str:
     """The line a benchmark prints about how busy the machine was (``load_average()``
     before and after its work)."""

@@ -39,10 +39,11 @@ def _timed(seeds: int, workers: int, out: Path, bar) -> dict:
 
 
 # Runs `irring study` in a fresh interpreter and prints its own peak memory (MB) last.
-_CHILD = """import resource, sys
+_CHILD = """import sys
 from irring.cli import main
+from irring.studies.report import peak_memory_mb
 code = main(sys.argv[1:])
-print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+print(peak_memory_mb())
 sys.exit(code)
 """
 

@@ -24,11 +24,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
-try:
-    import resource
-except ImportError:  # pragma: no cover - not on POSIX
-    resource = None
-
 import numpy as np
 
 from .. import designs, gp2, safe_yaml
@@ -42,7 +37,7 @@ from ..scenario import (ScenarioError, counted_seeds, listed, load_scenario,
                         not_a_scenario_file, scenario_file)
 from . import accuracy
 from .accuracy import mark_pareto
-from .report import write_csv
+from .report import peak_memory_mb, write_csv
 from .executor import stream
 
 # knob → (type, lowest, highest, what it sets); the scenario's value when the study has none
@@ -383,10 +378,6 @@ def tasks_for(points: Iterable[Point], scenarios: Mapping[str, Any] | None = Non
     return out
 
 
-def _peak_mb() -> float:
-    if resource is None:  # pragma: no cover - not on POSIX
-        return float("nan")
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # KiB on Linux
 
 
 def design_columns(design) -> dict[str, Any]:
@@ -423,7 +414,7 @@ def run_point(task: Task) -> dict:
     row.update({k: r[k] for k in ("compute_ms", "estimate_ms", "map_ms", "sim_ms",
                                   "poses", "readings", "iterations_mean")})
     row["run_s"] = time.perf_counter() - t0
-    row["worker_peak_mb"] = _peak_mb()
+    row["worker_peak_mb"] = peak_memory_mb()
     row["irring_version"] = installed_version()
     return {k: row[k] for k in COLUMNS}
 
