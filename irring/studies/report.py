@@ -1,11 +1,16 @@
 """The files a study writes (JSON, CSV tables, a chart, all together), the mean its
-tables show, and the load-average line every benchmark prints."""
+tables show, the load-average line every benchmark prints and a process's peak memory."""
 
 from __future__ import annotations
 
 import csv
 import json
 import os
+
+try:
+    import resource
+except ImportError:  # pragma: no cover - not on POSIX
+    resource = None
 
 import numpy as np
 
@@ -35,9 +40,7 @@ def peak_memory_mb() -> float:
                     return int(line.split()[1]) / 1024.0   # kB
     except (OSError, ValueError, IndexError):
         pass
-    try:
-        import resource
-    except ImportError:   # pragma: no cover - not on POSIX
+    if resource is None:  # pragma: no cover - not on POSIX
         return float("nan")
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # KiB on Linux
 
