@@ -208,8 +208,9 @@ def run_job(job: Job) -> dict:
     estimator = functools.partial(estimate, max_iterations=cfg.max_iterations,
                                   tolerance_rad=cfg.tolerance_rad, iterate=cfg.iterate,
                                   lines=lines, keep_unconverged=cfg.knob == "iterations")
-    grid = OccupancyGrid.for_scenario(sc)
     cal = Calibration.for_scene(sc)
+    # the mapper's numbers as irring run picks them (a θ-free calibration's silent beams)
+    grid = OccupancyGrid.for_scenario(sc, pipeline.mapper_params(cal, sweeps))
     result = pipeline.map_sweeps(sweeps, scenario=sc, grid=grid, calibration=cal, score=False,
                                  progress=False, estimator=estimator)
     # every configuration is judged on the default design's ground truth, on its own cells
