@@ -8,9 +8,10 @@ import math
 
 import numpy as np
 
-from irring.core import Points, Reason
+from irring.core import Points, Reason, points_with
 from irring.maps import mapping_numpy
-from irring.maps.mapping import OCCUPIED, MapperParams, OccupancyGrid, between_steps
+from irring.maps.mapping import (OCCUPIED, MapperParams, OccupancyGrid, between_steps,
+                                 mapped_beams)
 
 RES = 0.005                      # 5 mm cells, origin (0, 0): cell k spans [5k, 5k + 5) mm
 EMITTER = (0.0123, 0.0371)       # one beam along +x in cell row 7
@@ -270,3 +271,44 @@ def test_a_slanted_wall_read_every_other_step_is_one_surface_between_its_steps()
     assert between == [True] * 7
     assert between_steps(slanted_sweep(0.005, 0.0), (400, 400), (0.0, 0.0), RES,
                          params) is None
+
+
+def test_the_sigma_floor_is_half_a_cell_on_cells_finer_than_10_mm():
+    """mapped_beams floors σ at min(min_sigma_m, min_sigma_cells · the cell): 2.5 mm on 5 mm
+    cells, 4 mm on 8 mm; 5 mm from 10 mm up; a cone's weights keep the same floor."""
+    beam = one_beam(0.003)
+    for res, floor in ((0.005, 0.0025), (0.008, 0.004), (0.010, 0.005), (0.025, 0.005)):
+        assert mapped_beams(beam, MapperParams(), res)[1].min_sigma_m == floor
+    cone = points_with(beam, cone_half_angle_rad=0.2)
+    assert mapped_beams(cone, MapperParams(), 0.005)[1].min_sigma_m == 0.0025
+    assert mapped_beams(beam, MapperParams(min_sigma_cells=2.0), 0.005)[1].min_sigma_m == 0.005
+
+
+def test_a_sharp_hit_on_5_mm_cells_spreads_by_its_own_sigma_not_by_a_cell():
+    """σ 3 mm, end point at x = 300.1 mm (cell 60, 0.1 mm into it). Cell 58 (290–295 mm) lies
+    5.1 mm in front: with the 5 mm floor (a whole 5 mm cell) each beam added
+    2.5·e^(−½(5.1/5)²) − 1.5·Φ(2.6/5) = +0.44 there and two agreeing beams marked it
+    occupied, two cells in front of the wall; at its own σ each adds
+    2.5·e^(−½(5.1/3)²) − 1.5·Φ(2.6/3) = −0.62. The end point's cell holds as before."""
+    d = 0.3001 - EMITTER[0]
+    s_b = 0.295 - EMITTER[0]
+    two = _two(one_beam(0.003, d))
+    for cells, sigma in ((0.5, 0.003), (1.0, 0.005)):
+        params = MapperParams(min_sigma_cells=cells)
+        kernel, oracle = both(params, two)
+        want = 2 * (2.5 * math.exp(-0.5 * ((d - s_b) / sigma) ** 2)
+                    - 1.5 * phi((d - 0.5 * RES - s_b) / sigma))
+        assert abs(kernel[7, 58] - want) < 1e-4 and abs(oracle[7, 58] - want) < 1e-9
+        assert abs(kernel[7, 60] - 5.0) < 1e-4 and abs(oracle[7, 60] - 5.0) < 1e-9
+    assert round(want, 2) == 0.88              # the old floor: occupied (> 0.62) …
+    assert both(MapperParams(), two)[0][7, 58] < -1.2     # … now not
+    # 10 mm cells: the floor is 5 mm either way, the same map
+    g10 = [OccupancyGrid((0.0, 0.0), (10, 45), 0.010, MapperParams(min_sigma_cells=c))
+           for c in (0.5, 100.0)]
+    np.testing.assert_array_equal(g10[0].delta(two), g10[1].delta(two))
+
+
+def _two(beam: Points) -> Points:
+    """One batch of two copies of a (1, 1) reading: two sensors' agreeing beams."""
+    return Points(**{k: (np.concatenate([v, v], axis=1) if isinstance(v, np.ndarray) else v)
+                     for k, v in vars(beam).items()})

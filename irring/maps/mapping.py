@@ -57,6 +57,9 @@ class MapperParams:
     l_max: float = 4.0            # clamp: the most certain "occupied"
     tail_sigmas: float = 0.25     # the beam is followed to d (+ depth) + tail_sigmas·σ
     min_sigma_m: float = 0.005    # floor on a reading's σ: half a 10 mm cell (finer is not resolved)
+    # … in a beam's update at most this many cells: a finer grid resolves finer (the rules
+    # that place readings keep min_sigma_m)
+    min_sigma_cells: float = 0.5
     default_sigma_m: float = 0.01  # used where a valid reading's sigma_m is NaN (not given)
     free_margin_cells: float = 0.5  # no free evidence within this many cells before the end point
     free_sigmas: float = 0.0      # … nor within this many σ before that (an uncertain reading clears less)
@@ -105,7 +108,8 @@ class MapperParams:
             raise ValueError("need l_occ > 0, l_free < 0 and l_no_return ≤ 0 (log-odds)")
         if not self.l_min < 0 < self.l_max:
             raise ValueError(f"need l_min < 0 < l_max, got {self.l_min}, {self.l_max}")
-        if self.tail_sigmas < 0 or self.min_sigma_m <= 0 or self.default_sigma_m <= 0:
+        if (self.tail_sigmas < 0 or self.min_sigma_m <= 0 or self.default_sigma_m <= 0
+                or not self.min_sigma_cells > 0):
             raise ValueError("tail_sigmas must be ≥ 0 and the σ floors > 0")
         if not (self.cone_step_rad > 0 and self.cone_l_occ > 0 and self.cone_l_free < 0
                 and self.cone_l_no_return <= 0):
@@ -345,7 +349,7 @@ class OccupancyGrid:
             points = self.placed_readings([points])[0]
         # (a sweep's pencil beams, before their clamp; a cone's fan has no steps to join)
         add_between(log_odds, points, self.origin_xy_m, self.resolution_m, self.params)
-        points, params = mapped_beams(points, self.params)
+        points, params = mapped_beams(points, self.params, self.resolution_m)
         _traverse.add_beams(
             log_odds, _flat(points.origin_x), _flat(points.origin_y), _flat(points.heading),
             _flat(points.x), _flat(points.y), _flat(points.sigma_m),
@@ -559,11 +563,17 @@ def known_sigma(points: Points) -> Points:
                        sigma_m=np.where(below, 0.0, sigma))
 
 
-def mapped_beams(points: Points, params: MapperParams) -> tuple[Points, MapperParams]:
-    """The pencil beams a batch of readings is mapped as, and the weights they take:
-    readings from a wide cone (``cone_half_angle_rad`` > 0) as :func:`cone_fan` with the
-    ``cone_*`` weights (an arc holds no cell: no sharp end point; its hit keeps its floor in
-    front of the arc), others as they are."""
+def mapped_beams(points: Points, params: MapperParams, resolution_m: float
+                 ) -> tuple[Points, MapperParams]:
+    """The pencil beams a batch of readings is mapped as, and the weights they take on
+    cells of ``resolution_m``: readings from a wide cone (``cone_half_angle_rad`` > 0) as
+    :func:`cone_fan` with the ``cone_*`` weights (an arc holds no cell: no sharp end point;
+    its hit keeps its floor in front of the arc), others as they are; the σ floor
+    ``min_sigma_m`` at most ``min_sigma_cells`` cells (docs/mapping.md, "A sharp hit on
+    fine cells")."""
+    floor = params.min_sigma_cells * resolution_m
+    if floor < params.min_sigma_m:
+        params = dataclasses.replace(params, min_sigma_m=floor)
     if points.cone_half_angle_rad > 0:
         return cone_fan(points, params.cone_step_rad), dataclasses.replace(
             params, l_occ=params.cone_l_occ, l_free=params.cone_l_free,
@@ -881,7 +891,7 @@ class RunSilences:
         self._incremental = len(kinds) <= 1
         if not self._incremental:
             return
-        self._l_nr = (mapped_beams(self._batches[0], params)[1].l_no_return
+        self._l_nr = (mapped_beams(self._batches[0], params, grid.resolution_m)[1].l_no_return
                       if self._batches else params.l_no_return)
         # passes counted as −1 each, from a base below the stop that they cannot round off
         self._counter = OccupancyGrid(grid.origin_xy_m, grid.shape, grid.resolution_m,

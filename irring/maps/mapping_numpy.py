@@ -189,7 +189,7 @@ def add(log_odds: np.ndarray, points: Points, origin_xy_m, resolution_m: float,
     if not already_placed:
         points = placed([points], shape, origin_xy_m, resolution_m, params)[0]
     given = points
-    points, p = mapped_beams(points, params)
+    points, p = mapped_beams(points, params, resolution_m)
     res = float(resolution_m)
     ox, oy = points.origin_x.ravel().astype(float), points.origin_y.ravel().astype(float)
     px, py = points.x.ravel().astype(float), points.y.ravel().astype(float)
