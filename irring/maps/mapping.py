@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from .. import safe_yaml
-from ..core import UNCERTAIN_SIGMA_M, Points, Reason, gigabytes, points_with
+from ..core import UNCERTAIN_SIGMA_M, Points, Reason, bounds, gigabytes, points_with
 from ..errors import TooBig
 from ..resources import kernel
 
@@ -252,8 +252,14 @@ def check_scenario_grid(scenario) -> None:
     w, h = np.ptp(np.asarray(scenario.room.outline_m, dtype=float), axis=0)
     room = (f" (its outline spans {_metres(w)} × {_metres(h)} m; room.outline_m is read in "
             f"metres, outline_mm in millimetres)")
+    # coarser cells than the schema allows are no remedy: name the room alone then
+    coarsest = bounds(type(scenario.map), "resolution_m")[1]
+    _, (cy, cx) = _layout(*_scenario_box(scenario), coarsest)
+    advice = None if cy * cx <= MAX_GRID_CELLS else (
+        f"use a smaller room{room}; even the coarsest cells (map.resolution_mm "
+        f"{coarsest * 1e3:g}) would be {cy:,} × {cx:,}")
     check_grid_size(ny, nx, scenario.map.resolution_m, f"{scenario.source or scenario.name}",
-                    room=room)
+                    advice=advice, room=room)
 
 
 def _metres(x: float) -> str:
