@@ -87,6 +87,20 @@ def brief(value: object) -> str:
     return printable(_repr.repr(value))
 
 
+# A spreadsheet opening a CSV takes a cell that begins with one of these for a formula and
+# runs it (OWASP's "CSV injection"); a name irring writes into a CSV may not begin so.
+FORMULA_STARTS = "=+-@"
+
+
+def formula_start(name: str) -> str | None:
+    """Why ``name`` (of a design or room, written to CSV files) may not be one, or None."""
+    if name[:1] not in FORMULA_STARTS:
+        return None
+    return (f"{brief(name)} begins with {name[0]!r}, which a spreadsheet opening the CSV "
+            f"files it is written to would run as a formula; begin it with none of "
+            f"{' '.join(FORMULA_STARTS)}")
+
+
 def printable(text: str, limit: int = MAX_MESSAGE) -> str:
     """``text`` on one line, control characters (terminal escapes) shown escaped, cut to
     ``limit`` characters."""

@@ -32,7 +32,7 @@ from .core import (ADC_BITS, GEOMETRY_TOL_M, GP2_PERIOD_S, HOUSING_M, MAX_ABS_CO
                    segment_distance,
                    on_one_line, polygon_area, reach_outside, unit_suffix, UNITS, walls_into)
 from .designs import Design
-from .errors import InputError, brief
+from .errors import InputError, brief, formula_start
 from .outputs import name_key
 
 # --------------------------------------------------------------------------- errors
@@ -675,6 +675,8 @@ def parse(raw: Any, source: str = "") -> Scenario:
     if "\n" in sc.name:   # map.png's title: Pillow's text layout failed on it (exit 70)
         raise loader.fail("name", "a line break is not allowed; a name is one line (the title "
                                   "of map.png, the output folder)")
+    if (why := formula_start(sc.name)) is not None:
+        raise loader.fail("name", why)
     sc = dataclasses.replace(sc, source=source)
     ring_raw = raw["robot"].get("ring") if isinstance(raw.get("robot"), Mapping) else None
     if isinstance(ring_raw, Mapping):

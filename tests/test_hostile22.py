@@ -3,7 +3,11 @@ happens now."""
 
 from __future__ import annotations
 
+import pytest
+
+from irring import load_scenario
 from irring.cli import main
+from irring.studies.study import design_spec
 
 ROOM = """\
 name: vast
@@ -31,3 +35,43 @@ def test_a_room_too_big_for_the_coarsest_cells_is_not_told_to_use_coarser_ones(t
         assert (status, err.count("\n")) == (5, 0), err
         assert said in err
         assert not (tmp_path / "out").exists()
+
+
+FORMULA = "=HYPERLINK(\"http://example.com\",\"ring8\")"
+
+
+@pytest.mark.parametrize("argv, said", [
+    # a study's design name went as-is into results.csv's first column, which a spreadsheet
+    # opening the file ran as a formula
+    (["study", "study.yaml"], "study.yaml: designs[0].name: '=HYPERLINK(\"http://example.com\","
+                              "\"ring8\")' begins with '='"),
+    (["compare", "--design", "{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45, "
+                             "step_deg: 1.08, name: '-2+3'}"],
+     "--design.name: '-2+3' begins with '-'"),
+    # a room's name goes into rooms.csv and compare's runs.csv
+    (["run", "room.yaml"], "room.yaml: name: '@SUM(1+1)' begins with '@'"),
+])
+def test_a_name_a_spreadsheet_would_run_as_a_formula_is_refused(tmp_path, capsys, monkeypatch,
+                                                                argv, said):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "study.yaml").write_text(
+        f"designs: [{{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 45, step_deg: 1.08, "
+        f"name: '{FORMULA}'}}]\nscenarios: [t_room]\nseeds: [1]\n")
+    (tmp_path / "room.yaml").write_text(ROOM.replace("vast", "'@SUM(1+1)'").replace(
+        "SIDE", "2420").replace("DEPTH", "900"))
+    status = main([*argv, "--out", "out"])
+    err = capsys.readouterr().err.strip()
+    assert status in (1, 2) and err.count("\n") == 0, err
+    assert said + (", which a spreadsheet opening the CSV files it is written to would run as "
+                   "a formula; begin it with none of = + - @") in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_name_with_a_formula_sign_after_its_first_character_is_kept(tmp_path):
+    (tmp_path / "room.yaml").write_text(ROOM.replace("vast", "'room =a+b-c@d'").replace(
+        "SIDE", "2420").replace("DEPTH", "900"))
+    spec = design_spec("s.yaml", "designs[0]", {"sensors": 8, "radius_mm": 120,
+                                                 "sweep_half_angle_deg": 45, "step_deg": 1.08,
+                                                 "name": "ring8=a+b-c@d"})
+    assert (load_scenario(tmp_path / "room.yaml").name, spec.label) == ("room =a+b-c@d",
+                                                                         "ring8=a+b-c@d")

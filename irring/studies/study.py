@@ -29,7 +29,7 @@ import numpy as np
 from .. import designs, gp2, safe_yaml
 from ..core import (MAX_SEEDS, RESULT_ROW_BYTES, RESULT_ROW_TEXT_BYTES, SEED_MAX,
                     SENSOR_MODEL, key_unit, work_refusal)
-from ..errors import OutputError, TooBig, brief, printable
+from ..errors import OutputError, TooBig, brief, formula_start, printable
 from ..outputs import OutputSet, atomic_file, sole_writer, write_text_atomic
 from ..pipeline import scenario_text
 from ..resources import installed_version
@@ -181,6 +181,8 @@ def design_spec(source: str, path: str, raw: Any) -> DesignSpec:
     if not label.isprintable():   # printed in the summary table, drawn in study.png
         raise _fail(source, f"{path}.name", f"{brief(label)}: control characters (terminal "
                                             "escapes, line breaks) are not allowed")
+    if (why := formula_start(label)) is not None:
+        raise _fail(source, f"{path}.name", why)
     spec = DesignSpec(str(label), params=params, sensor=sensor)
     try:
         spec.build()
