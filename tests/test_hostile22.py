@@ -75,3 +75,16 @@ def test_a_name_with_a_formula_sign_after_its_first_character_is_kept(tmp_path):
                                                  "name": "ring8=a+b-c@d"})
     assert (load_scenario(tmp_path / "room.yaml").name, spec.label) == ("room =a+b-c@d",
                                                                          "ring8=a+b-c@d")
+
+
+@pytest.mark.parametrize("argv", [["run", "t_room"], ["replay", "sweeps.npz"]])
+def test_an_empty_mcap_path_is_called_empty(tmp_path, capsys, monkeypatch, argv):
+    # --mcap "$FILE" with FILE unset said "argument --mcap: : is a folder or a device"
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as caught:
+        main([*argv, "--out", "out", "--mcap", ""])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert caught.value.code == 2
+    assert err[-1].endswith("error: argument --mcap: an empty path; name a file (such as "
+                            "map.mcap)")
+    assert list(tmp_path.iterdir()) == []

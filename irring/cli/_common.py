@@ -277,6 +277,8 @@ def mcap_file(text: str) -> Path:
     if importlib.util.find_spec("mcap_ros2") is None:
         raise argparse.ArgumentTypeError(
             f"writing {text} needs the mcap extra: pip install 'irring[mcap]'")
+    if not text.strip():   # Path('') is '.', told as 'is a folder' under an empty name
+        raise argparse.ArgumentTypeError("an empty path; name a file (such as map.mcap)")
     path = Path(text)
     try:
         if path.exists() and not path.is_file():
