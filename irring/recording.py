@@ -146,8 +146,10 @@ def save_recording(path, sweeps: Sequence[Sweep], meta: dict | None = None) -> P
         scalars: dict[str, Any] = {}
         for f in dataclasses.fields(sweep):
             value = getattr(sweep, f.name)
-            if isinstance(value, np.ndarray):
-                arrays[f"{key}/{f.name}"] = value
+            # a pose or counts given as a tuple or list (check_sweep takes them) went into the
+            # scalars, and the recording could not be replayed ('pose: missing')
+            if isinstance(value, np.ndarray) or (f.name in _SWEEP_ARRAYS and value is not None):
+                arrays[f"{key}/{f.name}"] = np.asarray(value)
             elif f.name == "truth":
                 if value is not None:
                     for tf in dataclasses.fields(value):

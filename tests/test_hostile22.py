@@ -3,10 +3,15 @@ happens now."""
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
 import pytest
 
 from irring import load_scenario
 from irring.cli import main
+from irring.recording import check_sweep, load_recording, save_recording
+from irring.simulation.sim import SimRing
 from irring.studies.study import design_spec
 
 ROOM = """\
@@ -88,3 +93,16 @@ def test_an_empty_mcap_path_is_called_empty(tmp_path, capsys, monkeypatch, argv)
     assert err[-1].endswith("error: argument --mcap: an empty path; name a file (such as "
                             "map.mcap)")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_sweep_made_in_code_with_a_tuple_pose_and_list_counts_is_recorded_replayably(
+        tmp_path):
+    # check_sweep took them, but save_recording wrote the pose into the sweep's scalars and
+    # load_recording refused the file it had just written: 'sweep000/pose: missing'
+    sweep = SimRing(load_scenario("t_room")).sweep(0)
+    made = dataclasses.replace(sweep, pose=(1.5, 0.25, 0.125), counts=sweep.counts.tolist(),
+                               steps=list(sweep.steps))
+    check_sweep(made)
+    (back,), _ = load_recording(save_recording(tmp_path / "r.npz", [made]))
+    assert back.pose.tolist() == [1.5, 0.25, 0.125]
+    assert np.array_equal(back.counts, sweep.counts) and np.array_equal(back.steps, sweep.steps)
