@@ -2331,12 +2331,13 @@ def test_view_with_a_display_that_cannot_be_opened_writes_the_picture(tmp_path):
 def test_drive_refuses_a_ring_too_big_to_map_before_any_sweep(tmp_path, capsys):
     """A device announcing 72 sensors × 40 001 steps (allowed by the handshake): one sweep
     is 2.9 M readings, about 9.5 GB to estimate; drive would sweep it for 25 min, then run
-    out of memory and lose it."""
+    out of memory and lose it. Here 18 sensors × 8 poses, the same readings: 72 sensors of a
+    12-bit ADC no longer pass the handshake (their IRSCN do not fit a sentence)."""
     asked = []
 
     def big_ring(dev, cmd):
         if isinstance(cmd, p_.Hello):
-            dev.send(hd.info(sensors=72, lo=-20000, hi=20000, step_mdeg=10, num=1, den=100))
+            dev.send(hd.info(sensors=18, lo=-20000, hi=20000, step_mdeg=10, num=1, den=100))
         elif isinstance(cmd, p_.SweepCommand):
             asked.append(cmd)
 
@@ -2344,13 +2345,13 @@ def test_drive_refuses_a_ring_too_big_to_map_before_any_sweep(tmp_path, capsys):
     out = tmp_path / "out"
     try:
         code = main(["drive", "--port", dev.link, "--timeout", str(TIMEOUT_S), "--no-wait",
-                     "--no-animation", "--out", str(out), "--poses", "2"])
+                     "--no-animation", "--out", str(out), "--poses", "8"])
     finally:
         dev.close()
     err = capsys.readouterr().err
     assert code == errors.TOO_BIG, err
-    assert ("2 sweeps × 40,001 steps × 72 sensors (the ring's IRINF) = 5,760,144 readings "
-            "(about 11.2 GB)") in err
+    assert ("8 sweeps × 40,001 steps × 18 sensors (the ring's IRINF) = 5,760,144 readings "
+            "(about 5.4 GB)") in err
     assert "more than the 2 GB" in err and "--poses" in err
     assert asked == [] and not out.exists()
 

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from irring import load_scenario
+import hostile_devices as hd
 from irring.cli import main
+from irring.hardware import protocol as p
 from irring.recording import check_sweep, load_recording, save_recording
 from irring.simulation.sim import SimRing
 from irring.studies.study import design_spec
@@ -106,3 +108,40 @@ def test_a_sweep_made_in_code_with_a_tuple_pose_and_list_counts_is_recorded_repl
     (back,), _ = load_recording(save_recording(tmp_path / "r.npz", [made]))
     assert back.pose.tolist() == [1.5, 0.25, 0.125]
     assert np.array_equal(back.counts, sweep.counts) and np.array_equal(back.steps, sweep.steps)
+
+
+WIDE = 24   # sensors: with a 12-bit ADC an IRSCN of large counts is longer than 128 bytes
+
+
+def _wide_ring(dev, cmd):
+    """Near readings (4-digit counts) at odd steps, far ones (3-digit) at even steps."""
+    if isinstance(cmd, p.Hello):
+        dev.send(hd.info(sensors=WIDE))
+    elif isinstance(cmd, p.SweepCommand):
+        for step in range(cmd.from_step, cmd.to_step + 1):
+            counts = [(3000 if step % 2 else 300) + k for k in range(WIDE)]
+            dev.send(hd.line(f"IRSCN,{dev.seq},{step},{1000 + dev.seq},"
+                             f"{','.join(map(str, counts))}"))
+            dev.seq += 1
+        dev.send(hd.line(f"IRDON,{dev.seq - 1}"))
+    elif isinstance(cmd, p.Stop):
+        dev.send(hd.line(f"IRDON,{dev.seq - 1}"))
+
+
+def test_a_ring_whose_near_readings_do_not_fit_a_sentence_is_refused_before_sweeping(
+        tmp_path, capsys):
+    # its far readings arrived, its near ones were dropped as malformed (longer than 128
+    # bytes): drive mapped 3 of 5 steps, the near ones missing every time, and exited 0
+    dev = hd.HostileDevice(_wide_ring)
+    try:
+        status = main(["drive", "--port", dev.link, "--timeout", "0.3", "--no-wait",
+                       "--no-animation", "--out", str(tmp_path / "out"), "--pose", "0,0,0"])
+    finally:
+        dev.close()
+    err = capsys.readouterr().err.strip()
+    assert (status, err.count("\n")) == (3, 0), err
+    assert (f"irring drive: error: the device on {dev.link} announces a ring whose readings "
+            "do not fit the protocol's sentences: 24 sensors with a 12-bit ADC send IRSCN "
+            "sentences of up to 153 bytes") in err
+    assert "at most 19 sensors at 12 bits fit" in err
+    assert list(tmp_path.iterdir()) == []

@@ -673,25 +673,23 @@ def test_an_irscn_dropped_as_inconsistent_is_named_in_the_report(bad, named):
     assert ring.last_report.message.endswith("all 7 steps received; clean link")
 
 
-def test_a_ring_whose_irscn_do_not_fit_a_sentence_is_told_why_none_arrived():
-    """A 24-sensor ring with a 12-bit ADC (the handshake allows up to 72 sensors): each
-    IRSCN is longer than the protocol's 128 bytes and was dropped as 'malformed', so the
-    sweep ended 'no step of it arrived intact: … 7 malformed sentences', the fault unnamed.
-    The report names the first malformed sentence and what was wrong with it."""
+def test_a_ring_whose_irscn_do_not_fit_a_sentence_is_refused_at_the_handshake():
+    """A 24-sensor ring with a 12-bit ADC (the handshake allows up to 72 sensors): an IRSCN
+    of large counts is longer than the protocol's 128 bytes and is dropped as malformed, one
+    of small counts fits. A sweep ended 'no step of it arrived intact: … malformed' when
+    every count was large; with near readings at odd steps and far ones at even steps,
+    `irring drive` kept the far ones only and mapped them (exit 0). Now refused before any
+    sweep, naming how many sensors fit (tests/test_hostile22.py: the drive)."""
     info = p.Info(2, 24, 12, 1800, 3, 5, -3, 3, "wide")
-    scan = p.frame(b"IRSCN,0,-3,0," + b",".join([b"4000"] * 24))
-
-    def script(msg):
-        if isinstance(msg, p.Hello):
-            return [info]
-        return [scan, p.Done(6)] if isinstance(msg, p.SweepCommand) else [p.Done(-1)]
-
-    ring = SerialRing(ScriptPort(script), timeout_s=TIMEOUT_S).open()
-    with pytest.raises(NoReadings) as err:
-        ring.sweep()
+    ring = SerialRing(ScriptPort(lambda msg: [info] if isinstance(msg, p.Hello) else []),
+                      timeout_s=TIMEOUT_S)
+    with pytest.raises(HandshakeError) as err:
+        ring.open()
     assert str(err.value).endswith(
-        "1 malformed sentences (the first: sentence b'$IRSCN,0,-3,0,4000,4000,4000,4000,4000,"
-        "4...' longer than 128 bytes: no end within 128 bytes)")
+        "announces a ring whose readings do not fit the protocol's sentences: 24 sensors with "
+        "a 12-bit ADC send IRSCN sentences of up to 153 bytes (every count 4095, seq 65535, "
+        "clock 4294967295 ms), and IRR protocol v2 allows 128: at most 19 sensors at 12 bits "
+        "fit")
 
 
 def test_an_irinf_announcing_another_ring_mid_sweep_ends_it_keeping_the_old_rings_readings():

@@ -890,6 +890,11 @@ class SerialRing:
         for fault in _info_faults(info):
             raise HandshakeError(f"the device on {self.port_name} announces {fault}; no ring "
                                  f"has that, so its IRINF is not trusted")
+        # a reading whose IRSCN is too long is dropped as malformed: only the near ones (large
+        # counts, more digits) would be lost, and the map drawn from the far ones (exit 0)
+        if (too_long := p.scan_too_long(info)) is not None:
+            raise HandshakeError(f"the device on {self.port_name} announces a ring whose "
+                                 f"readings do not fit the protocol's sentences: {too_long}")
         self.info = info
         self.ring = p.ring_from_info(info, self.template, radius_m=self.radius_m,
                                      emitter_offset_m=self.emitter_offset_m)
