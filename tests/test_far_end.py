@@ -181,6 +181,51 @@ def test_the_span_is_taken_in_step_order_not_row_order():
     np.testing.assert_allclose(ratio, _mills(4.0 / 11.0) / _mills(3.0 / 10.0), rtol=1e-12)
 
 
+def _full_turn_points(cal, shift):
+    """One sensor turning a full turn in 40 steps of 9° (step k at heading 9°·k + 0.3 rad),
+    every reading silent below the return level but line 0's six members at steps 37, 38, 0,
+    1, 2, 3 (1.10-1.15 m, θ 20°) and step 39 between them lost; the steps relabelled
+    ``shift`` on (mod 40), the same beams."""
+    from irring.core import Points
+    n = 40
+    k = np.arange(n)
+    heading = (0.3 + np.radians(9.0) * k)[:, None]
+    origin_x, origin_y = 0.007 * np.cos(heading), 0.007 * np.sin(heading)
+    d = np.full((n, 1), np.nan)
+    label = np.full((n, 1), -1)
+    rows = np.array([37, 38, 0, 1, 2, 3])
+    d[rows, 0] = 1.10 + 0.01 * np.arange(rows.size)
+    label[rows, 0] = 0
+    valid = np.isfinite(d)
+    theta = np.where(valid, np.radians(20.0), np.nan)
+    reason = np.where(valid, Reason.OK, Reason.NO_RETURN).astype(np.uint8)
+    counts = np.full((n, 1), cal.no_return_counts + 1.0)
+    counts[valid] = cal.counts(d[valid], theta[valid])
+    points = Points(x=origin_x + d * np.cos(heading), y=origin_y + d * np.sin(heading), d=d,
+                    theta=theta, origin_x=origin_x, origin_y=origin_y, heading=heading,
+                    sigma_m=np.where(valid, 0.02, np.nan), iterations=np.ones((n, 1), int),
+                    valid=valid, reason=reason, max_range_m=1.5)
+    return points, label, counts, (k + shift) % n
+
+
+def test_a_line_across_a_full_turns_seam_spans_only_its_own_beams():
+    """A full turn's last step meets its first: line 0 of steps 37-3 lost one beam (step 39),
+    f = 1/7, not the 33 silent steps 4-36 that lie between its first and last step number
+    (λ(33/39) = 1.54 against λ(1/7) = 0.26; a GP2Y0A02 line at 1.1 m was drawn 60 mm long).
+    Relabelled so the line does not cross the seam, its members move the same."""
+    cal = Calibration.nominal("gp2y0a02", noise_sigma_v=0.015)
+    points, label, counts, steps = _full_turn_points(cal, 0)
+    out = fast.censored_lines(points, label, counts, steps, cal)
+    m = label == 0
+    _, b = cal.log_ab(np.radians(20.0))
+    sigma = abs(float(b)) * points.d[m] * cal.sigma_counts() / counts[m]
+    np.testing.assert_allclose(out.d[m] - points.d[m], _mills(1.0 / 7.0) * sigma, rtol=1e-12)
+    assert np.all(out.d[m] - points.d[m] < 0.0092)               # 8.2-9.0 mm
+    _, _, _, moved = _full_turn_points(cal, 5)                   # line 0 at steps 42-8 → 2-8
+    np.testing.assert_array_equal(fast.censored_lines(points, label, counts, moved, cal).d,
+                                  out.d)
+
+
 def test_censored_lines_only_where_the_return_level_cuts_into_the_range():
     """The GP2D12 read to 624 mm: silence rules surfaces out past the range, nothing moves."""
     cal = Calibration.nominal("gp2y0a21", noise_sigma_v=0.015)

@@ -86,7 +86,8 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
     whose counts fell below the return level (``no_return_counts + RETURN_SIGMAS`` count σ;
     NO_RETURN or OUT_OF_RANGE) and σ the member's range noise |b|·d·σ_S/S.
 
-    A line's beams: each sensor's readings from its first to its last member step. Only
+    A line's beams: each sensor's readings from its first to its last member step (round
+    the seam of a sensor turning a full turn, :func:`_across_seam`). Only
     where that level cuts into the range (``cal.silent_range_m`` short of
     ``points.max_range_m``: a part read to its own range); elsewhere ``points`` as given.
     ``label`` (S, N): each reading's line (−1: none); ``counts`` (S, N); ``steps`` (S,).
@@ -108,11 +109,14 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
     hi = np.full(n_lines * n_sensors, -1, dtype=np.intp)
     np.minimum.at(lo, pair, rank[row])
     np.maximum.at(hi, pair, rank[row])
+    lo, hi, seam = _across_seam(points.heading, rank, row, sensor, pair, lo, hi)
     silent = (points.reason == _NO_RETURN) | (points.reason == _OUT_OF_RANGE)
     cut = silent & (s < cal.no_return_counts + RETURN_SIGMAS * cal.sigma_counts())
     c_row, c_sensor = cut.nonzero()
     lo, hi = lo.reshape(n_lines, n_sensors), hi.reshape(n_lines, n_sensors)
-    on = (lo[:, c_sensor] <= rank[c_row]) & (rank[c_row] <= hi[:, c_sensor])   # (L, C)
+    seam = seam.reshape(n_lines, n_sensors)[:, c_sensor]
+    after, before = lo[:, c_sensor] <= rank[c_row], rank[c_row] <= hi[:, c_sensor]
+    on = np.where(seam, after | before, after & before)   # (L, C)
     lost = on.sum(axis=1)
     if not lost.any():
         return points
@@ -127,6 +131,43 @@ def censored_lines(points: Points, label: np.ndarray, counts: np.ndarray, steps:
     d[member] += mills[label[member]] * sigma
     return points_with(points, d=d, x=points.origin_x + d * np.cos(points.heading),
                        y=points.origin_y + d * np.sin(points.heading))
+
+
+def _across_seam(heading: np.ndarray, rank: np.ndarray, row: np.ndarray, sensor: np.ndarray,
+                 pair: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple:
+    """Each (line, sensor) pair's first and last member rank, ``lo`` and ``hi``, and
+    ``seam``: whether its members run across a full turn's seam (then its beams are those
+    from ``lo`` past the last step and on from the first to ``hi``). A sensor turns a full
+    turn where its last step's heading lies within 1.5 median steps of its first's; a run
+    of its members crosses the seam where the widest gap between them (in step order) is
+    not the one from its last member round to its first."""
+    seam = np.zeros(lo.size, dtype=bool)
+    n_rows = heading.shape[0]
+    if n_rows < 3:
+        return lo, hi, seam
+    order = np.argsort(rank)
+    h = heading[order]                                    # (S, N) rows in step order
+    turn = np.abs(np.angle(np.exp(1j * np.diff(h, axis=0))))
+    back = np.abs(np.angle(np.exp(1j * (h[0] - h[-1]))))
+    closed = back <= 1.5 * np.median(turn, axis=0)        # (N,)
+    if not closed[sensor].any():
+        return lo, hi, seam
+    pick = closed[sensor]
+    key = pair[pick] * n_rows + rank[row[pick]]
+    srt = np.sort(key)
+    p, r = srt // n_rows, srt % n_rows
+    new = np.flatnonzero(np.diff(p)) + 1
+    first = np.concatenate([[0], new])
+    last = np.concatenate([new, [p.size]]) - 1
+    gap = np.diff(r)
+    gap[new - 1] = -1                                     # no gap between two pairs
+    wrap = r[first] + n_rows - r[last]
+    for f, e, w in zip(first.tolist(), last.tolist(), wrap.tolist()):   # a few a sweep
+        if e > f and gap[f:e].max() > w:
+            widest = f + int(np.argmax(gap[f:e]))
+            q = p[f]
+            lo[q], hi[q], seam[q] = r[widest + 1], r[widest], True
+    return lo, hi, seam
 
 
 POOL_STEPS = 6   # a reading near the no-return level is pooled with 6 steps either way
