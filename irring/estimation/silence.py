@@ -138,7 +138,8 @@ def _across_seam(heading: np.ndarray, rank: np.ndarray, row: np.ndarray, sensor:
     """Each (line, sensor) pair's first and last member rank, ``lo`` and ``hi``, and
     ``seam``: whether its members run across a full turn's seam (then its beams are those
     from ``lo`` past the last step and on from the first to ``hi``). A sensor turns a full
-    turn where its last step's heading lies within 1.5 median steps of its first's; a run
+    turn where its headings go round (their steps add up to 2π) and its last step's heading
+    lies within 1.5 of its widest step of its first's; a run
     of its members crosses the seam where the widest gap between them (in step order) is
     not the one from its last member round to its first."""
     seam = np.zeros(lo.size, dtype=bool)
@@ -147,9 +148,10 @@ def _across_seam(heading: np.ndarray, rank: np.ndarray, row: np.ndarray, sensor:
         return lo, hi, seam
     order = np.argsort(rank)
     h = heading[order]                                    # (S, N) rows in step order
-    turn = np.abs(np.angle(np.exp(1j * np.diff(h, axis=0))))
-    back = np.abs(np.angle(np.exp(1j * (h[0] - h[-1]))))
-    closed = back <= 1.5 * np.median(turn, axis=0)        # (N,)
+    turn = np.abs(np.mod(np.diff(h, axis=0) + math.pi, 2 * math.pi) - math.pi)
+    back = np.abs(np.mod(h[0] - h[-1] + math.pi, 2 * math.pi) - math.pi)
+    closed = ((back <= 1.5 * turn.max(axis=0))            # (N,)
+              & (turn.sum(axis=0) + back > 1.9 * math.pi))
     if not closed[sensor].any():
         return lo, hi, seam
     pick = closed[sensor]
@@ -159,14 +161,18 @@ def _across_seam(heading: np.ndarray, rank: np.ndarray, row: np.ndarray, sensor:
     new = np.flatnonzero(np.diff(p)) + 1
     first = np.concatenate([[0], new])
     last = np.concatenate([new, [p.size]]) - 1
-    gap = np.diff(r)
+    gap = np.append(np.diff(r), -1)
     gap[new - 1] = -1                                     # no gap between two pairs
-    wrap = r[first] + n_rows - r[last]
-    for f, e, w in zip(first.tolist(), last.tolist(), wrap.tolist()):   # a few a sweep
-        if e > f and gap[f:e].max() > w:
-            widest = f + int(np.argmax(gap[f:e]))
-            q = p[f]
-            lo[q], hi[q], seam[q] = r[widest + 1], r[widest], True
+    widest = np.maximum.reduceat(gap, first)
+    across = widest > r[first] + n_rows - r[last]         # wider than the gap round the seam
+    if not across.any():
+        return lo, hi, seam
+    run = np.repeat(np.arange(first.size), last - first + 1)
+    at = np.flatnonzero((gap == widest[run]) & across[run])
+    _, one = np.unique(run[at], return_index=True)        # the first widest gap of each run
+    at = at[one]
+    q = p[at]
+    lo[q], hi[q], seam[q] = r[at + 1], r[at], True
     return lo, hi, seam
 
 
