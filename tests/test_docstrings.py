@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 import irring
+from _parsed import parsed
 
 PACKAGE = Path(irring.__file__).parent
 MAX_MODULE_DOC_LINES = 9
@@ -17,7 +18,7 @@ NOT_MEASURED = ("38.3 ms",)
 
 
 def _sources() -> dict[str, ast.Module]:
-    return {str(p.relative_to(PACKAGE.parent)): ast.parse(p.read_text())
+    return {str(p.relative_to(PACKAGE.parent)): parsed(p)
             for p in sorted(PACKAGE.rglob("*.py")) if "_data" not in p.parts}
 
 

@@ -10,6 +10,7 @@ import textwrap
 from pathlib import Path
 
 import irring
+from _parsed import parsed
 
 PACKAGE = Path(irring.__file__).parent
 
@@ -61,7 +62,7 @@ def _package_of(path: Path) -> str:
 def _imports(path: Path, modules: set[str], *, nested: bool) -> set[str]:
     """What a file imports when it is imported, or (``nested``) anywhere, inside functions
     too: irring modules by full name, other packages by top-level name."""
-    tree = ast.parse(path.read_text())
+    tree = parsed(path)
     out = set()
     for node in ast.walk(tree) if nested else _module_level(tree):
         if isinstance(node, (ast.Import, ast.ImportFrom)):
@@ -128,7 +129,7 @@ def test_errors_imports_nothing_of_irring_so_every_module_can_raise_its_errors()
 
 def test_core_imports_numpy_and_nothing_else_of_irring():
     assert _graph()["irring.core"] == set()
-    tree = ast.parse((PACKAGE / "core.py").read_text())
+    tree = parsed(PACKAGE / "core.py")
     imported = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)
                 for a in n.names}
     imported |= {n.module.split(".")[0] for n in ast.walk(tree)
@@ -216,7 +217,7 @@ def _function_level_imports() -> list[tuple[str, int, bool, set[str]]]:
     ``# deferred:`` comment explains it, the slow or optional packages it alone loads)."""
     modules = _modules()
     paths = {_module_name(p): p for p in _paths()}
-    trees = {m: ast.parse(p.read_text()) for m, p in paths.items()}
+    trees = {m: parsed(p) for m, p in paths.items()}
     top = {m: [n for n in _module_level(t) if isinstance(n, (ast.Import, ast.ImportFrom))]
            for m, t in trees.items()}
 
@@ -277,7 +278,7 @@ def test_no_module_imports_another_modules_private_name():
     modules = _modules()
     private = []
     for path in _paths():
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(parsed(path)):
             if isinstance(node, ast.ImportFrom) and node.names:
                 targets = _targets(node, _package_of(path), modules)
                 if not any(t.split(".")[0] == "irring" for t in targets):
