@@ -290,7 +290,7 @@ def test_sweep_before_handshake_says_what_to_do():
         ring.sweep()
 
 
-def test_dropped_sentences_leave_steps_missing_never_invented_and_counted():
+def test_dropped_sentences_leave_steps_missing_never_invented_and_counted(virtual_time):
     src = StandInSource()
     ring = ring_on(Device(src, faults=Faults(drop_rate=0.2, seed=1)))
     steps = np.arange(-35, 36)
