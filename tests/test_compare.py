@@ -97,12 +97,17 @@ def test_laser_and_sonar_run_through_the_same_pipeline():
     assert laser["hardware_time_s"] < 0.05 and sonar["hardware_time_s"] == pytest.approx(0.588)
 
 
-def test_cli_compare_writes_table_csv_json_and_chart(tmp_path, capsys):
+def test_cli_compare_writes_table_csv_json_and_chart(tmp_path, capsys, monkeypatch):
     import csv
     import json
 
     from irring.cli import main
+    from irring.studies import compare as compare_mod
 
+    real, results = compare_mod.compare, []   # the runs once: the table prints the same ones
+    monkeypatch.setattr(compare_mod, "compare",
+                        lambda *a, **k: results[0] if results else results.append(
+                            real(*a, **k)) or results[0])
     out = tmp_path / "cmp"
     argv = ["compare", "--scenario", "t_room_cylinder", "--design", "rotating12", "--design",
             "radial12", "--seeds", "1", "--bearings", "16", "--distances-mm", "400",
@@ -120,7 +125,7 @@ def test_cli_compare_writes_table_csv_json_and_chart(tmp_path, capsys):
     assert (out / "compare.png").stat().st_size > 10_000
     assert json.loads((out / "compare.json").read_text())["runs"][0]["scenario"] == \
         "t_room_cylinder"
-    assert main(argv) == 0
+    assert main(argv) == 0 and len(results) == 1
     text = capsys.readouterr().out
     assert "rotating12" in text and "360° view" in text and "2.72 s" in text
 
