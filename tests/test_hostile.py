@@ -17,11 +17,14 @@ import json
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import warnings
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -1237,10 +1240,21 @@ def test_calibrate_on_a_sensor_the_ring_does_not_have_says_so_before_a_placement
     assert list(tmp_path.iterdir()) == []
 
 
-def test_seeds_counted_past_the_largest_seed_are_refused_naming_the_scenario(tmp_path, capsys):
+@pytest.fixture
+def short_tmp():
+    """A temporary folder of a short path (tempfile's): an error line naming it twice stays
+    within errors.MAX_MESSAGE whatever pytest's folder is (an xdist worker's adds popen-gw0/,
+    and the study's line was cut)."""
+    folder = Path(tempfile.mkdtemp(prefix="irring-"))
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_seeds_counted_past_the_largest_seed_are_refused_naming_the_scenario(short_tmp, capsys):
     """A scenario of seed 2^63 - 1 and 2 seeds ran seed 2^63 in study, compare and bench rooms
     (results.csv held it); `irring run --seed` refuses that seed, so the run could not be run
     again by hand."""
+    tmp_path = short_tmp
     text = resolve("t_room").read_text().replace("\nseed: 1\n", "\nseed: 9223372036854775807\n")
     (tmp_path / "top.yaml").write_text(text)
     (tmp_path / "s.yaml").write_text("designs: [rotating12]\nscenarios: [top.yaml]\nseeds: 2\n")
