@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import copy
 import os
+import shutil
 import signal
+import tempfile
+from pathlib import Path
 
 import pytest
 import yaml
@@ -78,3 +81,13 @@ def figures(monkeypatch) -> list:
     real = render.figure
     monkeypatch.setattr(render, "figure", lambda *a, **k: made.append(real(*a, **k)) or made[-1])
     return made
+
+
+@pytest.fixture
+def short_tmp():
+    """A temporary folder of a short path (tempfile's): an error line naming it twice stays
+    within errors.MAX_MESSAGE whatever pytest's folder is (an xdist worker's adds popen-gw0/,
+    and the study's line was cut)."""
+    folder = Path(tempfile.mkdtemp(prefix="irring-"))
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)

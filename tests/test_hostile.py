@@ -17,10 +17,8 @@ import json
 import math
 import os
 import re
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 import warnings
 import zipfile
@@ -1238,16 +1236,6 @@ def test_calibrate_on_a_sensor_the_ring_does_not_have_says_so_before_a_placement
     assert ("irring calibrate: error: --sensor 12: t_room's ring has sensors 0 … 11"
             in capsys.readouterr().err)
     assert list(tmp_path.iterdir()) == []
-
-
-@pytest.fixture
-def short_tmp():
-    """A temporary folder of a short path (tempfile's): an error line naming it twice stays
-    within errors.MAX_MESSAGE whatever pytest's folder is (an xdist worker's adds popen-gw0/,
-    and the study's line was cut)."""
-    folder = Path(tempfile.mkdtemp(prefix="irring-"))
-    yield folder
-    shutil.rmtree(folder, ignore_errors=True)
 
 
 def test_seeds_counted_past_the_largest_seed_are_refused_naming_the_scenario(short_tmp, capsys):

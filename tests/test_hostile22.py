@@ -25,8 +25,9 @@ robot:
 """
 
 
-def test_a_room_too_big_for_the_coarsest_cells_is_not_told_to_use_coarser_ones(tmp_path,
+def test_a_room_too_big_for_the_coarsest_cells_is_not_told_to_use_coarser_ones(short_tmp,
                                                                                 capsys):
+    tmp_path = short_tmp   # the refusal names the file: pytest's folder under -n 2 cut it
     # 100 km square: the refusal said 'use coarser cells (map.resolution_mm ≥ 20001)', which the
     # schema refuses (1 … 500 mm); a 6 km corridor still fits 500 mm cells and keeps that advice
     for side, depth, said in [
