@@ -520,7 +520,7 @@ _OFFSETS = ((4, 3), (4, -10), (-6, 6), (-6, -12), (4, 12), (4, -19))
 def _annotate(ax, notes: list[tuple]) -> None:
     """Label points without letting labels overlap each other or run off the axes."""
     ax.autoscale_view()
-    ax.figure.canvas.draw()   # fix the limits (log axes) so data → pixels is final
+    ax.figure.draw_without_rendering()   # fix the limits (log axes): data → pixels final
     bbox = ax.get_window_extent()
     taken: list[tuple[float, float, float, float]] = []
     px = ax.figure.dpi / 72.0
