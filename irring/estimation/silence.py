@@ -139,9 +139,9 @@ def _across_seam(heading: np.ndarray, rank: np.ndarray, row: np.ndarray, sensor:
     ``seam``: whether its members run across a full turn's seam (then its beams are those
     from ``lo`` past the last step and on from the first to ``hi``). A sensor turns a full
     turn where its headings go round (their steps add up to 2π) and its last step's heading
-    lies within 1.5 of its widest step of its first's; a run
-    of its members crosses the seam where the widest gap between them (in step order) is
-    not the one from its last member round to its first."""
+    lies within 1.5 of its widest step of its first's; a run of its members crosses the seam
+    where the widest gap between them (in step order) is not the one from its last member
+    round to its first."""
     seam = np.zeros(lo.size, dtype=bool)
     n_rows = heading.shape[0]
     if n_rows < 3:
