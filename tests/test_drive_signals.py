@@ -23,13 +23,22 @@ _STAGES = {
                        "        return\n"
                        "    if isinstance(cmd, p.Stop):\n"
                        "        kill(); return\n"),
-    # one IRSCN of pose 2, then SIGTERM; the rest of the sweep never comes
+    # SIGTERM as pose 2's sweep begins; no step of it comes (IRDON answers the host's IRSTP)
     "sweep": ("if isinstance(cmd, p.SweepCommand):\n"
               "        dev.n = getattr(dev, 'n', 0) + 1\n"
               "        if dev.n == 2:\n"
-              "            dev.send(hd.scan(dev.seq, cmd.from_step)); dev.seq += 1\n"
-              "            kill(); time.sleep(0.3); dev.send(hd.line(f'IRDON,{dev.seq - 1}'))\n"
-              "            return\n"),
+              "            kill(); return\n"),
+    # one IRSCN of pose 2, SIGTERM once the host has taken it (not on a timer: on a loaded
+    # machine the signal raced the reading, and which came first decided the pose count)
+    "sweep after a step": ("if isinstance(cmd, p.SweepCommand):\n"
+                           "        dev.n = getattr(dev, 'n', 0) + 1\n"
+                           "        if dev.n == 2:\n"
+                           "            taken = dev.ring.stats.scans + 1\n"
+                           "            dev.send(hd.scan(dev.seq, cmd.from_step)); dev.seq += 1\n"
+                           "            until = time.monotonic() + 30\n"
+                           "            while dev.ring.stats.scans < taken and time.monotonic() < until:\n"
+                           "                time.sleep(0.001)\n"
+                           "            kill(); return\n"),
     # SIGTERM (twice) as the ring turns back; the move ends 0.3 s later, as IRSTP does not
     # stop an IRGTO
     "park": ("if isinstance(cmd, p.GoTo):\n"
@@ -75,6 +84,12 @@ def _drive(tmp_path, stage: str) -> subprocess.CompletedProcess:
            "    if isinstance(msg, p.GoTo):\n"
            "        dev.killed.wait(30)\n"
            "sr.SerialRing._send = held_send\n" if hold_after_goto else "")
+        + ("import irring.hardware.serial_ring as sr\n"
+           "opened = sr.SerialRing.open\n"
+           "def kept_open(ring, *a, **k):\n"
+           "    dev.ring = ring\n"
+           "    return opened(ring, *a, **k)\n"
+           "sr.SerialRing.open = kept_open\n" if stage == "sweep after a step" else "")
         + "dev = hd.HostileDevice(behaviour)\n"
         "dev.killed = threading.Event()\n"
         "from irring.cli import main\n"
@@ -108,6 +123,9 @@ def _poses_written(tmp_path) -> int | None:
     ("sweep", 1,
      "irring drive: interrupted during pose 2 of 2; the 1 pose swept is mapped and written; "
      "the ring stands at step 0"),
+    ("sweep after a step", 2,
+     "irring drive: interrupted during pose 2 of 2; the 1 pose swept and 1 of 5 steps of "
+     "pose 2 are mapped and written; the ring stands at step 0"),
     ("park", 2,
      "irring drive: interrupted as the ring turned back to step 0; the 2 poses swept are "
      "mapped and written; the ring stands at step 0"),

@@ -1158,7 +1158,8 @@ def test_ctrl_c_in_a_sweep_keeps_the_finished_poses_and_the_steps_that_arrived(t
         "takes the step it stands at when it starts for step 0, and an Arduino restarts each "
         "time its port is opened: turn the ring radial by hand, or send $IRGTO,0*E3DD, "
         "before the next session")
-    assert "irring drive: interrupted during pose 2 of 3; the 2 poses swept are mapped" in err
+    assert ("irring drive: interrupted during pose 2 of 3; the 1 pose swept and 3 of 5 steps "
+            "of pose 2 are mapped") in err
     first, second = _recorded(out)
     assert list(first.steps) == [-2, -1, 0, 1, 2]
     assert list(second.steps) == [-2, -1, 0] and second.missing_steps == (1, 2)

@@ -327,8 +327,7 @@ def run(args: argparse.Namespace) -> int:
         what = (f"input ended before pose {at + 1} of {n}" if isinstance(failure, EOFError)
                 else "interrupted as the ring turned back to step 0" if at == n
                 else f"interrupted during pose {at + 1} of {n}")
-        kept = (f"the {len(sweeps)} pose{'s' if len(sweeps) != 1 else ''} swept "
-                f"{'are' if len(sweeps) != 1 else 'is'} mapped and written" if sweeps
+        kept = (f"{_kept(sweeps, len(finished), len(steps))} mapped and written" if sweeps
                 else "no reading arrived, so nothing was mapped or written")
         _tell(f"irring drive: {what}; {kept}; {_where(ring)}", file=sys.stderr)
         if not sweeps:
@@ -358,6 +357,17 @@ def run(args: argparse.Namespace) -> int:
               f"{t.checksum_failures} checksum failures, {t.malformed} malformed, "
               f"{t.seq_gaps} seq gaps, {t.timeouts} timeouts, {t.resweeps} re-sweeps")
     return 0 if failure is None else errors.INTERRUPTED if stopped else errors.DEVICE
+
+
+def _kept(sweeps, whole: int, steps: int) -> str:
+    """What a stopped drive maps: "the 2 poses swept are", or with the pose cut short
+    "the 1 pose swept and 3 of 5 steps of pose 2 are" (a cut pose is not a pose swept)."""
+    parts = [f"the {whole} pose{'s' if whole != 1 else ''} swept"] if whole else []
+    if len(sweeps) > whole:
+        parts.append(f"{len(sweeps[whole].steps)} of {steps} steps of pose {whole + 1}")
+    cut = sweeps[whole] if len(sweeps) > whole else None
+    many = whole > 1 or len(parts) > 1 or (cut is not None and len(cut.steps) > 1)
+    return f"{' and '.join(parts)} {'are' if many else 'is'}"
 
 
 def _where(ring: SerialRing) -> str:

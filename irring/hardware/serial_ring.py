@@ -793,8 +793,10 @@ class SerialRing:
                         self.stats.device_errors += 1
                         refusals.append(msg)
                         if msg.code == p.ERR_BUSY:
+                            # an earlier session's sweep turned it away; known before the
+                            # IRSTP goes, so a Ctrl-C as it is sent cannot lose it
+                            self._moved = True
                             self._send(p.Stop())
-                            self._moved = True   # an earlier session's sweep: turned away
                         refused = True
             if not refused:
                 self.stats.timeouts += not probed   # a probe that timed out counted itself
