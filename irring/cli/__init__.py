@@ -20,7 +20,7 @@ import traceback
 
 from .. import errors, interrupted_starting
 from ..resources import installed_version
-from ._common import HelpFormatter, add_subcommands
+from ._common import HelpFormatter, add_subcommands, glue_negative_values
 
 # Subcommand modules → one-line help, in the order `irring --help` lists them.
 COMMANDS = {
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     # print, once: unhandled, Python's last-resort handler printed each a second time
     logging.getLogger("irring").addHandler(_SILENT)
     debug = "--debug" in argv or errors.debug_requested()
-    argv = [a for a in argv if a != "--debug"]
+    argv = glue_negative_values([a for a in argv if a != "--debug"])
     command = "irring"
     # the first word that is not an option names the subcommand (before parsing: a
     # subcommand's module may load MuJoCo when it is imported)

@@ -13,6 +13,7 @@ import difflib
 import importlib.util
 import math
 import os
+import re
 import textwrap
 import urllib.parse
 from collections.abc import Callable
@@ -112,6 +113,29 @@ def describe(p: argparse.ArgumentParser, description: str, epilog: str | None = 
     p.description, p.epilog = description, epilog
     if raw:
         p.formatter_class = HelpFormatter
+
+
+# a word argparse reads as a number, not an option: -5, -0.5 (its own test); and a word
+# that begins as a negative number but is not one to argparse: -500,450 or -1e3
+_PLAIN_NEGATIVE = re.compile(r"^-\d+$|^-\d*\.\d+$")
+_NEGATIVE_START = re.compile(r"^-\.?\d")
+
+
+def glue_negative_values(argv: list[str]) -> list[str]:
+    """``--pose -500,450`` as ``--pose=-500,450``: argparse took ``-500,450`` (and ``-1e3``)
+    for an option and said only "expected one argument". Only words argparse refused are
+    glued to the option before them; ``--`` ends the options."""
+    out: list[str] = []
+    for i, word in enumerate(argv):
+        if word == "--":
+            return out + argv[i:]
+        before = out[-1] if out else ""
+        if (_NEGATIVE_START.match(word) and not _PLAIN_NEGATIVE.match(word)
+                and before.startswith("--") and before != "--" and "=" not in before):
+            out[-1] = f"{before}={word}"
+        else:
+            out.append(word)
+    return out
 
 
 def _integer(text: str, allowed: str) -> int:
