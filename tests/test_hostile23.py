@@ -27,3 +27,19 @@ def test_a_negative_coordinate_list_is_read_as_the_options_value(capsys):
     # plain negative numbers, values given with '=', and words after `--` are left as they were
     assert glue_negative_values(["view", "--step", "-5", "--pose=-1,2", "--", "--x", "-1,2"]) \
         == ["view", "--step", "-5", "--pose=-1,2", "--", "--x", "-1,2"]
+
+
+def test_an_mcap_written_outside_the_output_folder_is_named_where_it_is(tmp_path, monkeypatch,
+                                                                       capsys):
+    pytest.importorskip("mcap_ros2")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub").mkdir()
+    # `--mcap 'm ü.mcap'` (the current folder) was listed as "wrote o/: map.png, …, m ü.mcap",
+    # so a user looked for it in o/
+    for mcap, said in [("m ü.mcap", "; and ./m ü.mcap"), ("sub/x.mcap", "; and ./sub/x.mcap")]:
+        assert main(["run", "--out", "o", "--mcap", mcap, "--no-animation"]) == 0
+        last = capsys.readouterr().out.splitlines()[-1]
+        assert last == f"  wrote     o/: map.png, map.pgm, map.yaml, sweeps.npz{said}"
+        assert (tmp_path / mcap).stat().st_size > 1000
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == [
+        "map.pgm", "map.png", "map.yaml", "sweeps.npz"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 from pathlib import Path
 
 from .. import errors, pipeline
@@ -182,7 +183,11 @@ def summary_lines(result, paths: dict, summary: dict | None = None) -> list[str]
                  f"compute {t['total']:.2f} s ({stages})")
     if paths:
         folder = Path(next(iter(paths.values()))).parent
-        lines.append(f"  wrote     {errors.printable(str(folder))}/: " + ", ".join(
-            Path(p).name if Path(p).parent == folder else errors.printable(str(p))
-            for p in paths.values()))
+        inside = [Path(p).name for p in paths.values() if Path(p).parent == folder]
+        # `--mcap map.mcap`, listed bare after "o/:", was looked for in o/: a file elsewhere
+        # is named by its path from the current folder (./map.mcap) or from the root
+        elsewhere = [str(p) if Path(p).is_absolute() else f".{os.sep}{p}"
+                     for p in paths.values() if Path(p).parent != folder]
+        lines.append(f"  wrote     {errors.printable(str(folder))}/: " + ", ".join(inside)
+                     + "".join(f"; and {errors.printable(p)}" for p in elsewhere))
     return lines
