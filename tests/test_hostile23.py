@@ -43,3 +43,12 @@ def test_an_mcap_written_outside_the_output_folder_is_named_where_it_is(tmp_path
         assert (tmp_path / mcap).stat().st_size > 1000
     assert sorted(p.name for p in (tmp_path / "o").iterdir()) == [
         "map.pgm", "map.png", "map.yaml", "sweeps.npz"]
+
+
+def test_a_seed_listed_twice_for_the_motion_means_is_refused(capsys):
+    # `bench dynamics --seeds 1 1` averaged seed 1's motion figures twice without a word, where
+    # compare and bench accuracy refuse a repeated --design, --scenario or --knob
+    assert main(["bench", "dynamics", "--seeds", "3", "1", "3", "--sweeps", "1"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "irring bench dynamics: error: --seeds 3: given twice; it would be run and counted in "
+        "the means twice, so name each once")

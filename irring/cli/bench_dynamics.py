@@ -7,7 +7,7 @@ import json
 import math
 
 from ..core import MAX_SWEEPS
-from ._common import at_least, describe, seed
+from ._common import at_least, describe, named_once, seed
 
 EPILOG = """\
 what it prints (the paper's ring in the T-room, pose 0 unless said; angles at the sensor):
@@ -62,6 +62,7 @@ def _deg(x: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    named_once(args.seeds, "--seeds")   # `--seeds 1 1` weighed seed 1 twice in the means
     from ..studies.dynamics import measure   # deferred: loads MuJoCo, which --help does not need
 
     r = measure(sweeps=args.sweeps, seeds=tuple(args.seeds), with_motion=not args.no_motion,
