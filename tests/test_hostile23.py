@@ -3,7 +3,11 @@ what happens now."""
 
 from __future__ import annotations
 
+import errno
+import io
 import math
+import os
+import sys
 
 import pytest
 
@@ -52,3 +56,21 @@ def test_a_seed_listed_twice_for_the_motion_means_is_refused(capsys):
     assert capsys.readouterr().err.strip() == (
         "irring bench dynamics: error: --seeds 3: given twice; it would be run and counted in "
         "the means twice, so name each once")
+
+
+class _FullDisk(io.TextIOBase):
+    """Standard output on a full disk (`> /dev/full`): every write fails."""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["bench", "rooms", "-h"]])
+def test_help_that_cannot_be_written_is_an_output_error(argv, monkeypatch, capsys):
+    # `irring --help > /dev/full` printed nothing and exited 0: argparse drops a write error
+    monkeypatch.setattr(sys, "stdout", _FullDisk())
+    assert main(argv) == 4
+    assert capsys.readouterr().err == "irring: error: standard output: No space left on device\n"

@@ -20,7 +20,7 @@ import traceback
 
 from .. import errors, interrupted_starting
 from ..resources import installed_version
-from ._common import HelpFormatter, add_subcommands, glue_negative_values
+from ._common import HelpFormatter, Parser, add_subcommands, glue_negative_values
 
 # Subcommand modules → one-line help, in the order `irring --help` lists them.
 COMMANDS = {
@@ -61,7 +61,7 @@ Scan poses are numbered 1 … N everywhere (--pose K, map.png, progress)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="irring", description=DESCRIPTION, epilog=EPILOG,
         formatter_class=HelpFormatter)
     parser.add_argument("--version", action=_Version,

@@ -14,6 +14,7 @@ import importlib.util
 import math
 import os
 import re
+import sys
 import textwrap
 import urllib.parse
 from collections.abc import Callable
@@ -33,7 +34,17 @@ def _is_number(word: str) -> bool:
         return False
 
 
-class LazyParser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
+    """argparse's parser whose help, when it cannot be written, is an error: argparse drops
+    the write's error, so `irring --help > /dev/full` printed nothing and exited 0."""
+
+    def print_help(self, file=None) -> None:
+        out = file or sys.stdout
+        out.write(self.format_help())
+        out.flush()
+
+
+class LazyParser(Parser):
     """A subcommand's parser that imports its module and lets it ``register(self)`` (long
     help, arguments, ``func``) the first time it parses, or prints help or usage: building
     ``irring``'s parser then costs one line of help per subcommand, and ``irring run`` does
