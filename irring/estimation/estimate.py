@@ -37,6 +37,7 @@ from .members import (across_silence, alone_at_an_edge_compiled, dim_returns_on_
                       past_other_lines, unplaced_alone)
 from .profiles import (SharedProfiles, profiles_compiled, theta_free_in_noise,
                        unknown_theta_free)
+from .seam import in_sweep_rows, started_at, turn_start
 from .silence import (beside_a_return_compiled, censored_lines, classify, drop_beyond_range,
                       held_and_pooled, no_return_reach, noise_past_line_end, silent_behind_a_wall,
                       silent_reach)
@@ -65,9 +66,9 @@ def estimate(sweep: Sweep, calibration: Calibration | None = None, *, max_iterat
     ``keep_unconverged``: readings still moving after ``max_iterations`` are valid at the θ
     they reached (the estimate after k iterations) instead of NOT_CONVERGED.
     """
-    return _estimate(sweep, calibration, max_iterations, tolerance_rad, iterate, lines,
-                     keep_history=False, damping=True, detail=False,
-                     keep_unconverged=keep_unconverged).points
+    return full_turn(_estimate, sweep, calibration, max_iterations, tolerance_rad, iterate,
+                     lines, keep_history=False, damping=True, detail=False,
+                      keep_unconverged=keep_unconverged).points
 
 
 def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
@@ -80,9 +81,23 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
     Table II (to show what the control is for).
     """
-    return _estimate(sweep, calibration, max_iterations, tolerance_rad, iterate, lines,
-                     keep_history=keep_history, damping=damping, detail=True,
-                     keep_unconverged=keep_unconverged)
+    return full_turn(_estimate, sweep, calibration, max_iterations, tolerance_rad, iterate,
+                     lines, keep_history=keep_history, damping=damping, detail=True,
+                      keep_unconverged=keep_unconverged)
+
+
+def full_turn(run: Callable[..., Estimate], sweep: Sweep, calibration: Calibration | None,
+              *args, **kwargs) -> Estimate:
+    """``run(sweep, calibration, *args, **kwargs)`` on ``sweep`` started where a full turn
+    breaks (:func:`~irring.estimation.seam.turn_start`), its estimate put back in
+    ``sweep``'s rows; ``run`` itself on any other sweep."""
+    cal = calibration if calibration is not None else nominal_calibration(
+        sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
+    rows = turn_start(sweep, cal)
+    if rows is None:
+        return run(sweep, calibration, *args, **kwargs)
+    return in_sweep_rows(run(started_at(sweep, rows), calibration, *args, **kwargs), rows)
+
 
 
 def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int,

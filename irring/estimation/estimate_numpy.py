@@ -5,6 +5,7 @@ An algorithm change goes here first; it is not for speed. The schedule: docs/est
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import replace
 
@@ -13,7 +14,7 @@ import numpy as np
 from ..core import Points, Reason, Sweep, beam_geometry
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, range_sigma
 from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, check_work,
-                       final_estimate, nominal_calibration, settled_within_noise)
+                       final_estimate, full_turn, nominal_calibration, settled_within_noise)
 from .arcs import round_runs
 from .bends import bent_ends, bowed_lines, faceted_lines
 from .counts import CountsFits, counts_contradicted
@@ -961,6 +962,23 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
                     keep_history: bool = False, damping: bool = True,
                     hold: np.ndarray | None = None, snap: bool = True,
                     keep_unconverged: bool = False) -> Estimate:
+    """:func:`_estimate_detail`; a full turn started where it breaks
+    (:func:`irring.estimation.estimate.full_turn`) unless ``hold`` names rows already."""
+    run = functools.partial(_estimate_detail, max_iterations=max_iterations,
+                            tolerance_rad=tolerance_rad, iterate=iterate, lines=lines,
+                            keep_history=keep_history, damping=damping, hold=hold, snap=snap,
+                            keep_unconverged=keep_unconverged)
+    if hold is not None:
+        return run(sweep, calibration)
+    return full_turn(run, sweep, calibration)
+
+
+def _estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
+                     max_iterations: int = 20, tolerance_rad: float = math.radians(0.1),
+                     iterate: bool = True, lines: LineOptions = LineOptions(),
+                     keep_history: bool = False, damping: bool = True,
+                     hold: np.ndarray | None = None, snap: bool = True,
+                     keep_unconverged: bool = False) -> Estimate:
     """:func:`irring.estimation.estimate.estimate_detail` in numpy (always with the lines).
 
     ``damping=False`` switches the step control off: every step is the plain a ← G(a) of
@@ -975,7 +993,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     cal = calibration if calibration is not None else nominal_calibration(
         sweep.sensor_model, sweep.ring, sweep.adc_bits, sweep.vref_v)
     if hold is None and cal.folds and iterate:
-        return resolve_foldover(lambda held, _detail, snap_: estimate_detail(
+        return resolve_foldover(lambda held, _detail, snap_: _estimate_detail(
             sweep, cal, max_iterations=max_iterations, tolerance_rad=tolerance_rad,
             iterate=iterate, lines=lines, keep_history=keep_history, damping=damping,
             hold=held, snap=snap_, keep_unconverged=keep_unconverged), sweep, cal, True,

@@ -19,6 +19,7 @@ from ..core import Points, Reason, Sweep, points_with, rows_in_step_order
 from ..resources import kernel
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration
 from .lines import LineOptions, Lines, invalidated, read_to_own_range
+from .seam import closes_turn
 
 
 _iterate = kernel("estimation._iterate")
@@ -148,10 +149,7 @@ def _across_seam(heading: np.ndarray, rank: np.ndarray, row: np.ndarray, sensor:
         return lo, hi, seam
     order = np.argsort(rank)
     h = heading[order]                                    # (S, N) rows in step order
-    turn = np.abs(np.mod(np.diff(h, axis=0) + math.pi, 2 * math.pi) - math.pi)
-    back = np.abs(np.mod(h[0] - h[-1] + math.pi, 2 * math.pi) - math.pi)
-    closed = ((back <= 1.5 * turn.max(axis=0))            # (N,)
-              & (turn.sum(axis=0) + back > 1.9 * math.pi))
+    closed = closes_turn(h)                               # (N,)
     if not closed[sensor].any():
         return lo, hi, seam
     pick = closed[sensor]
