@@ -337,9 +337,26 @@ def _read(npz, headers: dict, fail) -> tuple[list[Sweep], dict]:
         raise fail(f"holds {len(keys)} sweeps; a recording holds 1 … {MAX_SWEEPS}")
     # by number: from sweep1000 on, names no longer sort as text (sweep1000 < sweep101)
     order = sorted(keys, key=lambda k: int(k[len("sweep"):]))
+    gaps = sorted(set(range(len(keys))) - set(numbers))
+    if gaps:   # a sweep removed, or renumbered by another tool: replayed, it went unsaid
+        absent = [n for n in range(max(numbers)) if n not in numbers]
+        raise fail(f"holds sweeps numbered {_spans(sorted(numbers))}: "
+                   f"{_spans(absent)} {'is' if len(absent) == 1 else 'are'} missing; a "
+                   f"recording numbers its sweeps sweep000, sweep001, … without a gap")
     sweeps = [_load_sweep(npz, headers, key, fail) for key in order]
     _check_grid_holds_poses(meta.get("grid"), sweeps, fail)
     return sweeps, meta
+
+
+def _spans(numbers: list[int]) -> str:
+    """[0, 1, 2, 7, 9, 10] → "0–2, 7, 9–10"."""
+    runs: list[list[int]] = []
+    for n in numbers:
+        if runs and n == runs[-1][1] + 1:
+            runs[-1][1] = n
+        else:
+            runs.append([n, n])
+    return ", ".join(f"{a}" if a == b else f"{a}–{b}" for a, b in runs)
 
 
 def _check_grid_holds_poses(grid: dict | None, sweeps: Sequence[Sweep], fail) -> None:

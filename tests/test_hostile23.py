@@ -9,6 +9,7 @@ import math
 import os
 import sys
 
+import numpy as np
 import pytest
 
 from irring.cli import build_parser, main
@@ -74,3 +75,30 @@ def test_help_that_cannot_be_written_is_an_output_error(argv, monkeypatch, capsy
     monkeypatch.setattr(sys, "stdout", _FullDisk())
     assert main(argv) == 4
     assert capsys.readouterr().err == "irring: error: standard output: No space left on device\n"
+
+
+def test_a_recording_with_a_sweep_removed_is_refused_naming_the_missing(tmp_path):
+    """A recording whose sweeps are numbered 0, 1, 3, 6 (two taken out of the zip, or
+    renumbered by another tool) replayed the four that were left without a word: what the
+    file lacked went unsaid. It is refused naming the numbers present and missing."""
+    import zipfile
+
+    from irring.errors import InputError
+    from irring.recording import load_recording, save_recording
+    from test_recording import make_sweep
+
+    rng = np.random.default_rng(23)
+    sweeps = [make_sweep(rng, truth=False) for _ in range(7)]
+    whole = tmp_path / "whole.npz"
+    save_recording(whole, sweeps, meta={})
+    cut = tmp_path / "cut.npz"
+    with zipfile.ZipFile(whole) as src, zipfile.ZipFile(cut, "w") as dst:
+        for item in src.infolist():
+            if not item.filename.startswith(("sweep002/", "sweep004/", "sweep005/")):
+                dst.writestr(item, src.read(item.filename))
+    assert len(load_recording(whole)[0]) == 7
+    with pytest.raises(InputError) as err:
+        load_recording(cut)
+    assert str(err.value).endswith(
+        "holds sweeps numbered 0–1, 3, 6: 2, 4–5 are missing; a recording numbers its "
+        "sweeps sweep000, sweep001, … without a gap")
