@@ -102,3 +102,13 @@ def test_a_recording_with_a_sweep_removed_is_refused_naming_the_missing(tmp_path
     assert str(err.value).endswith(
         "holds sweeps numbered 0–1, 3, 6: 2, 4–5 are missing; a recording numbers its "
         "sweeps sweep000, sweep001, … without a gap")
+
+
+def test_calibrate_baud_without_a_port_is_refused(tmp_path, capsys):
+    """`irring calibrate --baud 9600` calibrated the simulated rig and ignored the speed
+    without a word, while --resume and --accept-protocol-v1 without --port are refused."""
+    out = tmp_path / "c.yaml"
+    assert main(["calibrate", "--baud", "9600", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "irring calibrate: error: --baud is the real ring's serial speed; give its --port too")
+    assert not out.exists()

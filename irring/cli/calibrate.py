@@ -91,7 +91,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", type=serial_port, metavar="PORT",
                    help="serial port or pyserial URL of the real ring; runs the guided "
                         "procedure instead of the simulated rig")
-    p.add_argument("--baud", type=between(1, 10_000_000), default=DEFAULTS["baud"],
+    p.add_argument("--baud", type=between(1, 10_000_000), default=None,
                    help=f"serial speed with --port (default: {DEFAULTS['baud']})")
     add_protocol_v1_option(p, "with --port: ")
     p.add_argument("--resume", type=Path, default=None, metavar="FILE",
@@ -121,6 +121,10 @@ def run(args: argparse.Namespace) -> int:
     if args.resume is not None and args.port is None:
         print("irring calibrate: error: --resume continues a guided calibration of the real "
               "ring; give its --port too", file=sys.stderr)
+        return errors.USAGE
+    if args.baud is not None and args.port is None:
+        print("irring calibrate: error: --baud is the real ring's serial speed; give its "
+              "--port too", file=sys.stderr)
         return errors.USAGE
     if args.accept_v1 and args.port is None:
         print("irring calibrate: error: --accept-protocol-v1 is for a real ring's old "
@@ -185,7 +189,7 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
 
     progress = load_progress(args.resume) if args.resume is not None else None   # exit 1
     try:
-        ring = SerialRing(args.port, baudrate=args.baud,
+        ring = SerialRing(args.port, baudrate=args.baud or DEFAULTS["baud"],
                           emitter_offset_m=scenario.ring.emitter_offset_m,
                           sensor_model=scenario.sensor.model, vref_v=scenario.sensor.vref_v,
                           max_range_m=scenario.sensor.max_range_m, accept_v1=args.accept_v1)
