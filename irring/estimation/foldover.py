@@ -313,10 +313,11 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
     (``label``: the second pass's, −1 none) whose beam crosses a line ``walls`` of the
     judging pass (indices into ``first``; anywhere along it, not the reading's own) where its
     counts read at that line's incidence put it within 3σ, and ahead of its end point by more
-    than both placements' 3σ together, while at most ``_FOLD_PAST_MAX`` members of its own
-    line lie past that line: a wall's last readings before its drop-out, adopted at the θ of
-    the wall past the corner, land behind the corner on that wall's extension, 100-220 mm
-    long; nothing tells which wall they met. docs/foldover.md, "Past a wall its counts fit"."""
+    than the 3σ of the two placements' difference, while at most ``_FOLD_PAST_MAX`` members of
+    its own line lie past that line: a wall's last readings before its drop-out, adopted at
+    the θ of the wall past the corner, land behind the corner on that wall's extension,
+    100-220 mm long; nothing tells which wall they met. docs/foldover.md, "Past a wall its
+    counts fit"."""
     mem = p.valid & (label >= 0)
     if not walls.size or not mem.any():
         return p
@@ -333,7 +334,7 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
                      * (cal.sigma_counts() / s)[:, None])
     d, sigma = p.d.reshape(-1)[idx][:, None], p.sigma_m.reshape(-1)[idx][:, None]
     fits = (ahead & (theta_l <= cal.max_incidence_rad) & (np.abs(t - d_l) <= tol)
-            & (t + tol < d - 3.0 * sigma)
+            & (d - t > np.hypot(tol, 3.0 * sigma))   # (3σ each: the difference's 3σ)
             & (walls[None, :] != first.label.reshape(-1)[idx][:, None]))
     pa, pw = fits.nonzero()
     if not pa.size:
