@@ -380,11 +380,11 @@ def test_a_wall_s_last_readings_are_not_adopted_past_a_wall_their_counts_fit(
     assert long_now == 0 and gone == taken
 
 
-# A far corner (GP2Y0A02, 1.07 m): a sweep's first reading meets the side wall at 51°, past
-# the corner, but its sensor's line along the far wall took it in at 39°, 110-120 mm long.
-# Its counts read at the side wall's incidence give the crossing within their 3σ (98 mm at
-# that range), its own σ on the line is 11.7 mm: the two placements 110 mm apart cannot both
-# hold (3σ of their difference: 104 mm), though they are within both 3σ summed (133 mm).
+# A far corner (GP2Y0A02, 1.07 m): a sweep's first two readings meet the side wall at 51-53°,
+# past the corner, but their sensor's line along the far wall took them in at 38-39°, 76-120
+# mm long. The first one's counts read at the side wall's incidence give the crossing within
+# their 3σ (98 mm at that range), its own σ on the line is 11.7 mm: placements 110 mm apart
+# cannot both hold (3σ of their difference: 104 mm), though within both 3σ summed (133 mm).
 FAR_CORNER_A02 = """
 name: far_corner_a02
 room: {outline_mm: [[0, 0], [1120, 0], [820, 1300], [0, 1650]]}
@@ -394,7 +394,7 @@ sensor: {model: gp2y0a02}
 """
 
 
-@pytest.mark.parametrize("past_mm, taken", [(110.0, True), (95.0, False)])
+@pytest.mark.parametrize("past_mm, taken", [(110.0, 2), (95.0, 0)])
 def test_a_far_reading_past_a_wall_its_counts_fit_by_3_sigma_of_the_difference_is_not_placed(
         past_mm, taken):
     from types import SimpleNamespace
@@ -404,16 +404,21 @@ def test_a_far_reading_past_a_wall_its_counts_fit_by_3_sigma_of_the_difference_i
 
     cal = scene_calibration(loads(FAR_CORNER_A02, source="<test>"))[0]
     # one sensor's steps from (0.678, 0.917) onto the wall y = 0 (its line 0 in the second
-    # pass, line 1 in the judging pass); the wall x = 0 is the judging pass's line 0
+    # pass, line 1 in the judging pass); the wall x = 0 is the judging pass's line 0. Rows 0
+    # and 1 meet x = 0 first (at 50.8° and 52.5°), the others y = 0
     ox, oy = 0.678, 0.917
-    head = np.radians([-129.2, -126.0, -123.0, -120.0, -117.0])[:, None]
-    t_wall = ox / abs(math.cos(head[0, 0]))             # row 0's beam meets x = 0 first
-    inc = math.acos(abs(math.cos(head[0, 0])))          # at 50.8°
+    head = np.radians([-129.2, -127.5, -123.0, -120.0, -117.0])[:, None]
+    t_wall = ox / np.abs(np.cos(head[:2, 0]))
+    inc = np.arccos(np.abs(np.cos(head[:2, 0])))
     levels = np.arange(300.0, 900.0)
-    k = levels[np.argmin(np.abs(cal.distance(levels, np.full(levels.size, inc)) - t_wall))]
-    assert k == 441.0 and abs(t_wall - 1.0727) < 1e-4   # the crossing its counts fit
-    d = oy / np.abs(np.sin(head))                       # on the wall y = 0 …
-    d[0, 0] = t_wall + past_mm / 1000.0                 # … row 0 past the corner
+    counts = np.full(head.shape, 500.0)
+    for r in (0, 1):    # the counts that read the crossing at the wall's incidence
+        fit = np.abs(cal.distance(levels, np.full(levels.size, inc[r])) - t_wall[r])
+        counts[r, 0] = levels[np.argmin(fit)]
+    assert counts[:2, 0].tolist() == [441.0, 421.0]
+    d = oy / np.abs(np.sin(head))                    # on the wall y = 0 …
+    d[0, 0] = t_wall[0] + past_mm / 1000.0           # … rows 0 and 1 past the corner: row 1
+    d[1, 0] = t_wall[1] + 0.060                      # within the difference's 3σ on its own
     one = np.ones(head.shape)
     p = Points(x=ox + d * np.cos(head), y=oy + d * np.sin(head), d=d, theta=0.5 * one,
                origin_x=ox * one, origin_y=oy * one, heading=head, sigma_m=0.0117 * one,
@@ -427,9 +432,11 @@ def test_a_far_reading_past_a_wall_its_counts_fit_by_3_sigma_of_the_difference_i
                   rms_m=np.array([0.01, 0.01]), usable=np.ones(2, bool),
                   start=np.zeros(2, np.intp), end=np.zeros(2, np.intp))
     out = _behind_a_wall(p, np.zeros(head.shape, dtype=np.intp), first, np.array([0]),
-                         SimpleNamespace(counts=np.full(head.shape, k)), cal)
-    assert out.valid[:, 0].tolist() == [not taken, True, True, True, True]
-    assert out.reason[0, 0] == (Reason.INCIDENCE_UNKNOWN if taken else Reason.OK)
+                         SimpleNamespace(counts=counts), cal)
+    gone = ~out.valid[:, 0]
+    assert gone.tolist() == [taken > 0] * 2 + [False] * 3
+    assert np.all(out.reason[gone] == Reason.INCIDENCE_UNKNOWN)
+    assert np.all(out.reason[~gone] == Reason.OK)
 
 
 # The reverse at the same corner: the far wall's first reading past the corner, taken in by

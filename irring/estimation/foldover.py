@@ -314,10 +314,11 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
     judging pass (indices into ``first``; anywhere along it, not the reading's own) where its
     counts read at that line's incidence put it within 3σ, and ahead of its end point by more
     than the 3σ of the two placements' difference, while at most ``_FOLD_PAST_MAX`` members of
-    its own line lie past that line: a wall's last readings before its drop-out, adopted at
-    the θ of the wall past the corner, land behind the corner on that wall's extension,
-    100-220 mm long; nothing tells which wall they met. docs/foldover.md, "Past a wall its
-    counts fit"."""
+    its own line lie past that line (then also its line's members whose counts fit that line
+    ahead of them by more than their own 3σ): a wall's last readings before its drop-out,
+    adopted at the θ of the wall past the corner, land behind the corner on that wall's
+    extension, 100-220 mm long; nothing tells which wall they met. docs/foldover.md, "Past a
+    wall its counts fit"."""
     mem = p.valid & (label >= 0)
     if not walls.size or not mem.any():
         return p
@@ -333,9 +334,12 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
     tol = np.maximum(0.02, 3.0 * np.abs(cal.ab(theta_l)[1]) * d_l
                      * (cal.sigma_counts() / s)[:, None])
     d, sigma = p.d.reshape(-1)[idx][:, None], p.sigma_m.reshape(-1)[idx][:, None]
-    fits = (ahead & (theta_l <= cal.max_incidence_rad) & (np.abs(t - d_l) <= tol)
-            & (d - t > np.hypot(tol, 3.0 * sigma))   # (3σ each: the difference's 3σ)
-            & (walls[None, :] != first.label.reshape(-1)[idx][:, None]))
+    # past the crossing by more than its own 3σ, where its counts fit that line …
+    behind = (ahead & (theta_l <= cal.max_incidence_rad) & (np.abs(t - d_l) <= tol)
+              & (t < d - 3.0 * sigma)
+              & (walls[None, :] != first.label.reshape(-1)[idx][:, None]))
+    # … and by more than the 3σ of the two placements' difference (each 3σ in quadrature)
+    fits = behind & (d - t > np.hypot(tol, 3.0 * sigma))
     pa, pw = fits.nonzero()
     if not pa.size:
         return p
@@ -354,7 +358,12 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
     side = ((p.x.reshape(-1)[m] - cx) * nx + (p.y.reshape(-1)[m] - cy) * ny
             ) * ((ox[pa[pair]] - cx) * nx + (oy[pa[pair]] - cy) * ny)
     past = np.bincount(pair, weights=side < 0.0, minlength=pa.size)
-    gone = np.unique(idx[pa[past <= _FOLD_PAST_MAX]])
+    ok = past <= _FOLD_PAST_MAX
+    # where one member cannot be on its line past that wall, its line's other members behind
+    # the same wall are not placed either: nothing tells which of the two they met
+    ba, bw = behind.nonzero()
+    both = np.isin(lab[idx[ba]] * walls.size + bw, lab[idx[pa[ok]]] * walls.size + pw[ok])
+    gone = np.unique(np.r_[idx[pa[ok]], idx[ba[both]]])
     if not gone.size:
         return p
     return unplaced(p, gone)
