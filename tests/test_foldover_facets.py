@@ -80,12 +80,14 @@ map: {resolution_mm: 10}
 """
 
 
-def _run11(small: bool, monkeypatch):
+def _run11(small: bool, monkeypatch, behind: bool = False):
     sc = loads(ROOM11)
     with monkeypatch.context() as m:
         if not small:   # the split asked with FACET_SIDE pieces and FACET_CHI only
             m.setattr(bends, "REREAD_SMALL_MIN", bends.FACET_MIN)
             m.setattr(bends, "REREAD_SMALL_CHI", math.inf)
+        if not behind:  # the split alone (the guard past a wall also fixes this room)
+            m.setattr(est_foldover, "_behind_a_wall", lambda p, *args: p)
         run = pipeline.run(sc, seed=19917, progress=False)
     errors = np.concatenate([reading_errors(p, sw.truth.hit_point)
                              for sw, p in zip(run.sweeps, run.points)])
@@ -103,3 +105,7 @@ def test_a_few_members_of_the_next_facet_split_a_short_line(monkeypatch):
     assert out_after == 0
     assert (err_before.size, err_after.size) == (117, 112)
     assert err_after.max() < 0.019
+    # without the split, the guard of a wall their counts fit (its margin the 3σ of the two
+    # placements' difference) leaves as many valid, none outside, the worst within 19 mm
+    out_guard, err_guard = _run11(False, monkeypatch, behind=True)
+    assert out_guard == 0 and err_guard.size == 112 and err_guard.max() < 0.019
