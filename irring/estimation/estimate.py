@@ -68,7 +68,7 @@ def estimate(sweep: Sweep, calibration: Calibration | None = None, *, max_iterat
     """
     return full_turn(_estimate, sweep, calibration, max_iterations, tolerance_rad, iterate,
                      lines, keep_history=False, damping=True, detail=False,
-                      keep_unconverged=keep_unconverged).points
+                     keep_unconverged=keep_unconverged).points
 
 
 def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
@@ -83,7 +83,7 @@ def estimate_detail(sweep: Sweep, calibration: Calibration | None = None, *,
     """
     return full_turn(_estimate, sweep, calibration, max_iterations, tolerance_rad, iterate,
                      lines, keep_history=keep_history, damping=damping, detail=True,
-                      keep_unconverged=keep_unconverged)
+                     keep_unconverged=keep_unconverged)
 
 
 def full_turn(run: Callable[..., Estimate], sweep: Sweep, calibration: Calibration | None,
@@ -97,7 +97,6 @@ def full_turn(run: Callable[..., Estimate], sweep: Sweep, calibration: Calibrati
     if rows is None:
         return run(sweep, calibration, *args, **kwargs)
     return in_sweep_rows(run(started_at(sweep, rows), calibration, *args, **kwargs), rows)
-
 
 
 def _estimate(sweep: Sweep, calibration: Calibration | None, max_iterations: int,
