@@ -337,9 +337,8 @@ def _read(npz, headers: dict, fail) -> tuple[list[Sweep], dict]:
         raise fail(f"holds {len(keys)} sweeps; a recording holds 1 … {MAX_SWEEPS}")
     # by number: from sweep1000 on, names no longer sort as text (sweep1000 < sweep101)
     order = sorted(keys, key=lambda k: int(k[len("sweep"):]))
-    gaps = sorted(set(range(len(keys))) - set(numbers))
-    if gaps:   # a sweep removed, or renumbered by another tool: replayed, it went unsaid
-        absent = [n for n in range(max(numbers)) if n not in numbers]
+    absent = [n for n in range(max(numbers)) if n not in numbers]
+    if absent:   # a sweep removed, or renumbered by another tool: replayed, it went unsaid
         raise fail(f"holds sweeps numbered {_spans(sorted(numbers))}: "
                    f"{_spans(absent)} {'is' if len(absent) == 1 else 'are'} missing; a "
                    f"recording numbers its sweeps sweep000, sweep001, … without a gap")

@@ -363,10 +363,10 @@ def _kept(sweeps, whole: int, steps: int) -> str:
     """What a stopped drive maps: "the 2 poses swept are", or with the pose cut short
     "the 1 pose swept and 3 of 5 steps of pose 2 are" (a cut pose is not a pose swept)."""
     parts = [f"the {whole} pose{'s' if whole != 1 else ''} swept"] if whole else []
-    if len(sweeps) > whole:
-        parts.append(f"{len(sweeps[whole].steps)} of {steps} steps of pose {whole + 1}")
-    cut = sweeps[whole] if len(sweeps) > whole else None
-    many = whole > 1 or len(parts) > 1 or (cut is not None and len(cut.steps) > 1)
+    cut = len(sweeps[whole].steps) if len(sweeps) > whole else 0   # steps of the cut pose
+    if cut:
+        parts.append(f"{cut} of {steps} steps of pose {whole + 1}")
+    many = whole > 1 or len(parts) > 1 or cut > 1
     return f"{' and '.join(parts)} {'are' if many else 'is'}"
 
 
