@@ -34,9 +34,48 @@ def _is_number(word: str) -> bool:
         return False
 
 
+class _StoreOnce(argparse._StoreAction):
+    """argparse's store, refusing an option given twice with other values: argparse kept
+    the last without a word, so `--seeds 2 --seeds 3` ran seed 3 alone and `--seed 3
+    --seed 4` ran 4. The same value twice is harmless and kept."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        given = namespace.__dict__.setdefault(_GIVEN, {})
+        typed = " ".join(getattr(parser, "_typed", ()))
+        if self.dest in given and given[self.dest][1] not in (values, typed):
+            first = given[self.dest][0]
+            if self.nargs in ("+", "*"):
+                hint = f"list every value after one {option_string} ({option_string} " \
+                       f"{first} {typed})"
+            else:
+                hint = "it takes one value, so give it once"
+            raise argparse.ArgumentError(
+                self, f"given twice ({brief(first)}, then {brief(typed)}); {hint}")
+        given[self.dest] = (typed, values)
+        super().__call__(parser, namespace, values, option_string)
+
+
+_GIVEN = "_irring_given"   # the namespace's record of what _StoreOnce stored (removed after)
+
+
 class Parser(argparse.ArgumentParser):
     """argparse's parser whose help, when it cannot be written, is an error: argparse drops
-    the write's error, so `irring --help > /dev/full` printed nothing and exited 0."""
+    the write's error, so `irring --help > /dev/full` printed nothing and exited 0; and
+    whose options refuse a second, other value (:class:`_StoreOnce`)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.register("action", None, _StoreOnce)
+        self.register("action", "store", _StoreOnce)
+
+    def parse_known_args(self, args=None, namespace=None):
+        namespace, extras = super().parse_known_args(args, namespace)
+        namespace.__dict__.pop(_GIVEN, None)
+        return namespace, extras
+
+    def _get_values(self, action, arg_strings):
+        self._typed = arg_strings   # the words as typed, for _StoreOnce's message
+        return super()._get_values(action, arg_strings)
 
     def print_help(self, file=None) -> None:
         out = file or sys.stdout
