@@ -33,3 +33,13 @@ def test_an_option_given_twice_with_the_same_value_is_kept(capsys):
     args = build_parser().parse_args(["run", "--seed", "3", "--json", "--seed", "03", "--json"])
     assert (args.seed, args.json) == (3, True)
     assert "_irring_given" not in vars(args)
+
+
+def test_a_calibration_named_as_its_picture_is_refused(tmp_path, monkeypatch, capsys):
+    # `calibrate --out c.png` wrote the YAML into c.png and the chart as c.png.png
+    monkeypatch.chdir(tmp_path)
+    assert main(["calibrate", "--out", "c ü.PNG", "--sweeps", "1"]) == 2
+    assert capsys.readouterr().err == (
+        "irring calibrate: error: --out c ü.PNG: a calibration is written as YAML, with its "
+        "picture beside it; name the YAML file (--out c ü.yaml writes c ü.yaml and c ü.png)\n")
+    assert list(tmp_path.iterdir()) == []

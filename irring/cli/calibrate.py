@@ -118,6 +118,13 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.is_dir():  # `--out DIR`: the file goes inside, not over the folder
         out = out / "calibration.yaml"
+    elif out.suffix.lower() == ".png":   # `--out c.png` wrote YAML into c.png, the chart
+        # into c.png.png
+        yaml = out.with_suffix(".yaml")
+        raise errors.UsageError(
+            f"--out {errors.printable(str(out))}: a calibration is written as YAML, with its "
+            f"picture beside it; name the YAML file (--out {errors.printable(str(yaml))} "
+            f"writes {errors.printable(yaml.name)} and {picture_path(yaml).name})")
     if args.resume is not None and args.port is None:
         print("irring calibrate: error: --resume continues a guided calibration of the real "
               "ring; give its --port too", file=sys.stderr)
