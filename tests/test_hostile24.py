@@ -43,3 +43,53 @@ def test_a_calibration_named_as_its_picture_is_refused(tmp_path, monkeypatch, ca
         "irring calibrate: error: --out c ü.PNG: a calibration is written as YAML, with its "
         "picture beside it; name the YAML file (--out c ü.yaml writes c ü.yaml and c ü.png)\n")
     assert list(tmp_path.iterdir()) == []
+
+
+def _results(path, **scores):
+    """A results.csv of one run whose cells are ``scores`` (the rest plausible)."""
+    from irring.studies import study
+    row = {c: "" for c in study.COLUMNS}
+    row.update(design="rotating12", scenario="t_room", step_stride="1", samples="1",
+               settle_ms="0.0", seed="1", sensor="gp2d12", sensors="12", radius_mm="150.0",
+               sweep_half_angle_deg="37.8", step_deg="1.8", poses="3", readings="900",
+               hardware_time_s="10.9", hardware_time_total_s="10.9", compute_ms="540.0",
+               estimate_ms="30.0", map_ms="10.0", sim_ms="60.0", run_s="0.6",
+               worker_peak_mb="200.0", iterations_mean="3.0",
+               irring_version="0", **scores)
+    study._write_sorted(path, [row])
+    return path
+
+
+@pytest.mark.parametrize("p, r, f1, said", [
+    # an F1 edited to 0.5 beside precision 0.994 and recall 0.995 went into summary.csv as
+    # 0.745 (round 23's leftover)
+    ("0.9943262411347518", "0.995260663507109", "0.5", "0.5 is not the F1 of the row's "
+     "occupied_precision 0.9943262411347518 and occupied_recall 0.995260663507109, which is "
+     "0.994793"),
+    ("0.9943262411347518", "0.995260663507109", "", "empty is not the F1 of the row's "
+     "occupied_precision 0.9943262411347518 and occupied_recall 0.995260663507109, which is "
+     "0.994793"),
+    ("", "", "0.25", "0.25 is not the F1 of the row's occupied_precision empty and "
+     "occupied_recall empty, which is empty (n/a)"),
+])
+def test_a_resumed_f1_its_precision_and_recall_contradict_is_refused(tmp_path, p, r, f1, said):
+    from irring.studies.study import StudyError, read_results
+    path = _results(tmp_path / "results.csv", occupied_precision=p, occupied_recall=r,
+                    occupied_f1=f1)
+    with pytest.raises(StudyError) as refused:
+        read_results(path)
+    assert str(refused.value) == (f"{path}: line 2, occupied_f1: {said}; the file was edited "
+                                  "or damaged")
+
+
+@pytest.mark.parametrize("p, r, f1", [
+    ("0.994326241134752", "0.995260663507109", "0.994793232892172"),   # a spreadsheet's digits
+    ("", "0.4", "0.0"),   # walls to see, none mapped
+    ("", "", ""),         # no wall in sight
+    ("0.0", "0.0", "0.0"),
+])
+def test_a_resumed_f1_its_precision_and_recall_give_is_kept(tmp_path, p, r, f1):
+    from irring.studies.study import read_results
+    (row,) = read_results(_results(tmp_path / "results.csv", occupied_precision=p,
+                                   occupied_recall=r, occupied_f1=f1))
+    assert (row["occupied_precision"], row["occupied_recall"], row["occupied_f1"]) == (p, r, f1)

@@ -745,6 +745,16 @@ def _share(hit: np.ndarray, of: np.ndarray) -> float | None:
     return float((hit & of).sum()) / n if n else None
 
 
+def f1_score(precision: float | None, recall: float | None) -> float | None:
+    """The occupied F1 of a precision and a recall (shares 0 … 1, None: n/a): None with no
+    wall to see, 0 with walls to see and none mapped."""
+    if recall is None:
+        return None
+    if precision is None:   # walls to see, none mapped
+        return 0.0
+    return 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
+
+
 def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = None, *,
           mapped_by: Scenario | None = None) -> dict:
     """The six map scores (see the module doc): floats in 0…1, or None when undefined.
@@ -770,16 +780,10 @@ def score(grid: OccupancyGrid, scenario: Scenario, truth: GroundTruth | None = N
     occ_near = _dilate(occ)
     precision = _share(_dilate(truth.occupied), occ)
     recall = _share(occ_near, truth.visible)
-    if recall is None:
-        f1 = None
-    elif precision is None:   # walls to see, none mapped
-        f1 = 0.0
-    else:
-        f1 = 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
     return {
         "occupied_precision": precision,
         "occupied_recall": recall,
-        "occupied_f1": f1,
+        "occupied_f1": f1_score(precision, recall),
         "free_accuracy": _share(_dilate(truth.free), free),
         "coverage": _share(free, truth.reachable_free),
         "shadow": _share(occ_near & ranged, truth.shadow),

@@ -30,6 +30,7 @@ from .. import designs, gp2, safe_yaml
 from ..core import (MAX_SEEDS, RESULT_ROW_BYTES, RESULT_ROW_TEXT_BYTES, SEED_MAX,
                     SENSOR_MODEL, key_unit, work_refusal)
 from ..errors import OutputError, TooBig, brief, formula_start, printable
+from ..maps.metrics import f1_score
 from ..outputs import OutputSet, atomic_file, sole_writer, write_text_atomic
 from ..pipeline import scenario_text
 from ..resources import installed_version
@@ -533,6 +534,10 @@ def _read_rows(p: Path, lines: _Lines, text: Iterable[str]) -> list[dict[str, st
                 if want:
                     raise StudyError(f"{p}: line {i}, {col}: {brief(cell)} is not allowed; "
                                      f"{want}; the file was edited or damaged")
+            f1 = _f1_problem(row)
+            if f1:
+                raise StudyError(f"{p}: line {i}, occupied_f1: {f1}; the file was edited or "
+                                 "damaged")
             first = lines_of.setdefault(row_key(row), i)
             if first != i:   # summarised, it would count as one more run
                 raise StudyError(f"{p}: line {i} repeats the run of line {first} "
@@ -569,6 +574,24 @@ def _cell_problem(col: str, cell: str) -> str | None:
     if value is not None and (math.isfinite(value) or (col in _NAN_COLUMNS and value != value)):
         return None if value >= 0 or value != value else "a number ≥ 0"
     return "a finite number" + (" or empty (n/a)" if col in SCORE_COLUMNS else "")
+
+
+def _f1_problem(row: Mapping[str, str]) -> str | None:
+    """Why a row's F1 is not the one its precision and recall give (the cells already
+    checked), or None: an F1 edited to 0.5 beside precision 0.994 and recall 0.995 went
+    into summary.csv. Spreadsheet digits (15 significant) pass."""
+    p, r, f1 = (None if row[c] == "" else float(row[c])
+                for c in ("occupied_precision", "occupied_recall", "occupied_f1"))
+    want = f1_score(p, r)
+    if (f1 is None) == (want is None) and (want is None or math.isclose(
+            f1, want, rel_tol=1e-9, abs_tol=1e-12)):
+        return None
+    def cell(col: str) -> str:
+        return printable(row[col], 30) or "empty"
+
+    return (f"{cell('occupied_f1')} is not the F1 of the row's occupied_precision "
+            f"{cell('occupied_precision')} and occupied_recall {cell('occupied_recall')}, "
+            f"which is {'empty (n/a)' if want is None else f'{want:.6g}'}")
 
 
 def _check_same_designs(path: Path, rows: Sequence[Mapping[str, str]],
