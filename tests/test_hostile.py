@@ -2046,10 +2046,11 @@ def test_dataclass_fields_of_sweep_are_all_checked():
 # --------------------------------------------------------------------------- calibrate --port
 
 
-def _calibrate(tmp_path, monkeypatch, behaviour, stop_at=None, stop=KeyboardInterrupt, *extra):
-    """irring calibrate --port on a hostile device, the person pressing Enter at every
-    prompt and ``stop`` (an exception to raise, or an answer) at placement ``stop_at``'s
-    → (status, link, prompts asked to place the wall, out)."""
+def _calibrate(tmp_path, monkeypatch, behaviour, stop_at=None, stop=KeyboardInterrupt, *extra,
+               sweeps: str | None = "1"):
+    """irring calibrate --port on a hostile device (``--sweeps sweeps``, None: not given), the
+    person pressing Enter at every prompt and ``stop`` (an exception to raise, or an answer)
+    at placement ``stop_at``'s → (status, link, prompts asked to place the wall, out)."""
     placed = []
 
     def person(text):
@@ -2068,8 +2069,8 @@ def _calibrate(tmp_path, monkeypatch, behaviour, stop_at=None, stop=KeyboardInte
     dev = hd.HostileDevice(behaviour)
     out = tmp_path / "ring.yaml"
     try:
-        return (main(["calibrate", "--port", dev.link, "--sweeps", "1", "--out", str(out),
-                      *extra]), dev.link, placed, out)
+        return (main(["calibrate", "--port", dev.link, *["--sweeps", sweeps] * bool(sweeps),
+                      "--out", str(out), *extra]), dev.link, placed, out)
     finally:
         dev.close()
 

@@ -93,3 +93,31 @@ def test_a_resumed_f1_its_precision_and_recall_give_is_kept(tmp_path, p, r, f1):
     (row,) = read_results(_results(tmp_path / "results.csv", occupied_precision=p,
                                    occupied_recall=r, occupied_f1=f1))
     assert (row["occupied_precision"], row["occupied_recall"], row["occupied_f1"]) == (p, r, f1)
+
+
+def test_a_progress_file_resumes_with_its_own_sweeps_or_refuses_others(tmp_path, capsys,
+                                                                      monkeypatch):
+    # an 8-sweep progress file resumed with the default 4: placements averaged over 8 and
+    # over 4 sweeps went into one fit without a word
+    import hostile_devices as hd
+    from irring.estimation.calibration import load_progress
+    from test_hostile import _calibrate, _kept   # calibrate --port on a device, a person
+    assert _calibrate(tmp_path, monkeypatch, hd.good, 3, "q", sweeps="2")[0] == 1
+    saved = _kept(tmp_path).rename(tmp_path / "progress.yaml")
+    capsys.readouterr()
+    code, _, placed, _ = _calibrate(tmp_path, monkeypatch, hd.good, None, None,
+                                    "--resume", str(saved), sweeps="3")
+    assert (code, placed) == (1, [])
+    assert capsys.readouterr().err == (
+        f"irring calibrate: error: {saved}: cannot resume: its placements were read with 2 "
+        "sweeps each; this run asks --sweeps 3: leave --sweeps out (or give 2) to resume with "
+        "the same\n")
+    # without --sweeps it resumes with the file's 2, and keeps them for the next resume
+    code, _, placed, _ = _calibrate(tmp_path, monkeypatch, hd.good, 4, "q",
+                                    "--resume", str(saved), sweeps=None)
+    assert (code, placed) == (1, [3])
+    assert "resuming from" in capsys.readouterr().out
+    (again,) = set((tmp_path / "spare").iterdir())
+    progress = load_progress(again)
+    assert (progress.sweeps, sorted(progress.done)) == (2, [0, 1, 2])
+    assert {int(r.repeats.max()) for _, r in progress.done.values()} == {2}

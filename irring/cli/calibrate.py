@@ -74,6 +74,7 @@ examples:
 # leaves out (_keep)
 DEFAULTS = {"scenario": DEFAULT_SCENARIO, "out": "calibration.yaml", "baud": 115200,
             "sensor": 0, "sweeps": None}
+SIMULATED_SWEEPS, REAL_SWEEPS = 8, 4   # --sweeps when not given (a resumed run: its file's)
 
 
 def register(p: argparse.ArgumentParser) -> None:
@@ -101,8 +102,10 @@ def register(p: argparse.ArgumentParser) -> None:
                    help=f"which sensor faces the wall, ≥ 0: 0 … N−1 of the scenario's ring "
                         f"(default: {DEFAULTS['sensor']})")
     p.add_argument("--sweeps", type=at_least(1, MAX_SWEEPS), default=DEFAULTS["sweeps"],
-                   metavar="N", help=f"sweeps per placement, averaged (1 … {MAX_SWEEPS}, what a "
-                                     f"progress file holds; default: 8 simulated, 4 real)")
+                   metavar="N",
+                   help=f"sweeps per placement, averaged (1 … {MAX_SWEEPS}, what a progress "
+                        f"file holds; default: {SIMULATED_SWEEPS} simulated, {REAL_SWEEPS} real, "
+                        "or as --resume's file)")
     p.add_argument("--seed", type=seed, default=None,
                    help="noise seed ≥ 0 of the simulated rig (default: the scenario's)")
     p.set_defaults(func=run)
@@ -153,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     if args.sensor >= scenario.ring.sensors:
         return _no_such_sensor(args, f"{scenario.name}'s ring", scenario.ring.sensors)
     try:
-        rig = SimulatedRig(scenario, sensor=args.sensor, sweeps=args.sweeps or 8,
+        rig = SimulatedRig(scenario, sensor=args.sensor, sweeps=args.sweeps or SIMULATED_SWEEPS,
                            seed=args.seed)
         print(f"simulated rig: {scenario.name}'s ring and {scenario.sensor.model}, effects: "
               f"{', '.join(k for k in scenario.effects if k != 'motion') or 'none'}; "
@@ -215,7 +218,8 @@ def _guided(args: argparse.Namespace, scenario, out: Path) -> int:
                 guided = GuidedCalibration(
                     read_sweep=lambda: ring.sweep(resweep=1), prompt=input, show=print,
                     sensor_model=scenario.sensor.model, adc_bits=ring.info.adc_bits,
-                    vref_v=scenario.sensor.vref_v, sensor=args.sensor, sweeps=args.sweeps or 4,
+                    vref_v=scenario.sensor.vref_v, sensor=args.sensor, sweeps=args.sweeps or (
+                        progress.sweeps if progress is not None else REAL_SWEEPS),
                     emitter_offset_guess_m=scenario.ring.emitter_offset_m)
                 # before a wall is placed
                 guided.check_steps(ring.info.max_step - ring.info.min_step + 1)

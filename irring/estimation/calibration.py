@@ -1183,6 +1183,7 @@ class Progress:
     adc_bits: int
     vref_v: float
     placements: int
+    sweeps: int   # per placement, averaged
     done: dict   # placement index (0-based) → (Placement, RigReadings)
 
     def mismatch(self, guided: GuidedCalibration) -> str | None:
@@ -1194,6 +1195,10 @@ class Progress:
                     f"{self.adc_bits}-bit ADC at {self.vref_v:g} V; this run calibrates sensor "
                     f"{guided.sensor}, a {guided.sensor_model} with a {guided.adc_bits}-bit ADC "
                     f"at {guided.vref_v:g} V")
+        if self.sweeps != guided.sweeps:   # the placements read before would weigh otherwise
+            return (f"its placements were read with {self.sweeps} sweeps each; this run asks "
+                    f"--sweeps {guided.sweeps}: leave --sweeps out (or give {self.sweeps}) to "
+                    "resume with the same")
         if self.placements != len(guided.placements):
             return (f"it belongs to a procedure of {self.placements} placements; this run has "
                     f"{len(guided.placements)}")
@@ -1315,4 +1320,4 @@ def load_progress(path: str | Path) -> Progress:
     return Progress(sensor=whole(raw, "sensor", 0, bounds(Ring, "sensors")[1] - 1),
                     sensor_model=str(model), adc_bits=bits,
                     vref_v=real(raw, "vref_v", *VREF_RANGE_V), placements=n,
-                    done=done)
+                    done=done, sweeps=sweeps)
