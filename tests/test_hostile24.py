@@ -121,3 +121,27 @@ def test_a_progress_file_resumes_with_its_own_sweeps_or_refuses_others(tmp_path,
     progress = load_progress(again)
     assert (progress.sweeps, sorted(progress.done)) == (2, [0, 1, 2])
     assert {int(r.repeats.max()) for _, r in progress.done.values()} == {2}
+
+
+def test_the_emulator_serves_on_an_ipv6_address(t_room, capsys):
+    # `irring emulate --tcp [::1]:0` said only "Address family for hostname not supported":
+    # the listener was IPv4 alone
+    import socket
+
+    import numpy as np
+
+    from irring.hardware import SerialRing
+    from irring.hardware.emulator import Device, TcpEmulator
+    from irring.simulation.sim import SimRing
+    if not socket.has_ipv6:
+        pytest.skip("no IPv6 on this machine")
+    with TcpEmulator(Device(SimRing(t_room)), host="::1").start_thread() as emu:
+        assert emu.url == f"socket://[::1]:{emu.port}" and emu.port > 0
+        with SerialRing(emu.url, timeout_s=2.0) as ring:
+            assert np.array_equal(ring.sweep().counts, SimRing(t_room).sweep(0).counts)
+    # a name that does not resolve is one line naming the option as it was given
+    assert main(["emulate", "--tcp", "[no:such:host]:0", "--quiet"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()   # the resolver's words differ by system
+    assert line.startswith("irring emulate: error: --tcp [no:such:host]:0: ")
+    assert line.endswith("; name an address of this machine (127.0.0.1, [::1]) or a name it "
+                         "resolves")

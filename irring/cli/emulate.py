@@ -6,6 +6,7 @@ import argparse
 import ipaddress
 import math
 import signal
+import socket
 import sys
 import time
 
@@ -149,17 +150,20 @@ def run(args: argparse.Namespace) -> int:
         print(f"irring emulate: warning: {warning}", file=sys.stderr)
     if args.tcp is not None:
         host, port = args.tcp
-        if not _loopback(host):
-            print(f"irring emulate: warning: --tcp {host}:{port} serves the ring to every "
-                  f"machine that can reach {host}, with no authentication; use 127.0.0.1 to "
-                  f"keep it on this machine", file=sys.stderr)
+        given = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"   # IPv6 in brackets
         try:
             emu = TcpEmulator(device, host=host, port=port, baud=baud)
             where = emu.open()
         except (ValueError, OSError, OverflowError) as exc:
-            print(f"irring emulate: error: --tcp {host}:{port}: "
-                  f"{getattr(exc, 'strerror', None) or exc}", file=sys.stderr)
+            hint = ("; name an address of this machine (127.0.0.1, [::1]) or a name it "
+                    "resolves" if isinstance(exc, socket.gaierror) else "")
+            print(f"irring emulate: error: --tcp {given}: "
+                  f"{getattr(exc, 'strerror', None) or exc}{hint}", file=sys.stderr)
             return 2
+        if not _loopback(host):   # once it listens: a name that fails needs no warning
+            print(f"irring emulate: warning: --tcp {given} serves the ring to every "
+                  f"machine that can reach {host}, with no authentication; use 127.0.0.1 to "
+                  f"keep it on this machine", file=sys.stderr)
     else:
         emu = PtyEmulator(device, link=args.link, baud=baud)
         try:

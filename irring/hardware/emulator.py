@@ -585,13 +585,18 @@ class TcpEmulator(_Server):
 
     @property
     def url(self) -> str:
-        return f"socket://{self.host}:{self.port}"
+        host = f"[{self.host}]" if ":" in self.host else self.host   # IPv6, as URLs write it
+        return f"socket://{host}:{self.port}"
 
     def open(self) -> str:
-        """Bind and listen (port 0: any free port); returns the pyserial URL."""
-        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        """Bind and listen (port 0: any free port) on the host's first address, IPv4 or
+        IPv6 (``::1`` was refused: "Address family for hostname not supported"); returns the
+        pyserial URL. Raises OSError (socket.gaierror for a name that does not resolve)."""
+        family, kind, proto, _, address = socket.getaddrinfo(
+            self.host, self.port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)[0]
+        sock = socket.socket(family, kind, proto)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        sock.bind((self.host, self.port))
+        sock.bind(address)
         sock.listen(1)
         self.port = sock.getsockname()[1]
         self._listener = sock
