@@ -207,6 +207,22 @@ def _npy_header(zf: zipfile.ZipFile, info: zipfile.ZipInfo, fail) -> tuple[tuple
     return shape, dtype
 
 
+_ZIP_END = b"PK\x05\x06"   # the zip's end-of-central-directory record: 22 bytes + comment
+_ZIP_END_BYTES, _ZIP_COMMENT_MAX = 22, 0xFFFF
+
+
+def _bytes_after_zip(path: Path) -> int:
+    """How many bytes of ``path`` follow its zip's end record and comment (0 for a zip as
+    written)."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        f.seek(max(0, size - _ZIP_END_BYTES - _ZIP_COMMENT_MAX))
+        tail = f.read()
+    at = tail.rfind(_ZIP_END)
+    comment = int.from_bytes(tail[at + 20:at + 22], "little")
+    return max(0, len(tail) - at - _ZIP_END_BYTES - comment) if at >= 0 else 0
+
+
 def load_recording(path) -> tuple[list[Sweep], dict]:
     """Read a recording: (sweeps, meta). Raises :class:`RecordingError` (one line naming the
     file and the entry) for anything that is not a well-formed recording of this format:
@@ -252,6 +268,10 @@ def load_recording(path) -> tuple[list[Sweep], dict]:
             if ahead:
                 raise fail(f"{ahead:,} bytes before the recording (two recordings joined into "
                            "one file?); replay each .npz on its own")
+            after = _bytes_after_zip(path)
+            if after:   # zipfile skips them too: `cat a.npz half-of-b.npz` replayed a alone
+                raise fail(f"{after:,} bytes after the recording's end (another file, or part "
+                           "of one, joined to it?); replay each .npz on its own")
             for name in infos:
                 if not name.endswith(".npy"):
                     raise fail(f"{brief(name)}: unknown entry; a recording holds .npy arrays")

@@ -145,3 +145,23 @@ def test_the_emulator_serves_on_an_ipv6_address(t_room, capsys):
     assert line.startswith("irring emulate: error: --tcp [no:such:host]:0: ")
     assert line.endswith("; name an address of this machine (127.0.0.1, [::1]) or a name it "
                          "resolves")
+
+
+@pytest.mark.parametrize("tail", [1000, 37])
+def test_a_recording_with_bytes_joined_after_it_is_refused(tmp_path, t_room_recording, tail):
+    # `cat a.npz b.npz > ab.npz` cut short (b's first half; its end record never written)
+    # replayed a alone without a word: zipfile finds a's end record and skips what follows
+    import numpy as np
+
+    from irring.recording import RecordingError, load_recording
+    whole = tmp_path / "a.npz"
+    np.savez(whole, **t_room_recording)
+    sweeps, _ = load_recording(whole)
+    assert len(sweeps) == 4
+    joined = tmp_path / "ab.npz"
+    joined.write_bytes(whole.read_bytes() + whole.read_bytes()[:tail])
+    with pytest.raises(RecordingError) as refused:
+        load_recording(joined)
+    assert str(refused.value) == (f"{joined}: {tail:,} bytes after the recording's end (another "
+                                  "file, or part of one, joined to it?); replay each .npz on its "
+                                  "own")
