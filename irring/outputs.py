@@ -124,12 +124,15 @@ def check_out(out: str | Path, option: str = "--out", *, held: bool = True,
     try:
         if out.exists() and not out.is_dir():
             raise OutputError(f"{option} {shown}: is a file; expected a folder for the outputs")
-        if out.is_symlink() and not out.exists():   # the move into it failed after the work
-            raise OutputError(f"{option} {shown}: is a link to "
-                              f"{printable(os.readlink(out))}, which does not exist (or a loop "
-                              "of links); make that folder or name another")
         probe = out
         while not probe.exists():
+            # a dangling link here or above: the move into it failed after the work ("File
+            # exists", for a link above --out)
+            if probe.is_symlink():
+                what = "is" if probe == out else f"{printable(str(probe))} is"
+                raise OutputError(f"{option} {shown}: {what} a link to "
+                                  f"{printable(os.readlink(probe))}, which does not exist (or a "
+                                  "loop of links); make that folder or name another")
             if probe.parent == probe:
                 break
             probe = probe.parent

@@ -3,6 +3,8 @@ what happens now."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from irring.cli import main
@@ -165,3 +167,16 @@ def test_a_recording_with_bytes_joined_after_it_is_refused(tmp_path, t_room_reco
     assert str(refused.value) == (f"{joined}: {tail:,} bytes after the recording's end (another "
                                   "file, or part of one, joined to it?); replay each .npz on its "
                                   "own")
+
+
+def test_an_output_folder_below_a_dangling_link_is_refused_before_the_work(tmp_path, capsys,
+                                                                          monkeypatch):
+    # `--out dl/o` with dl a link to a folder that is gone passed the check, ran, then ended
+    # "cannot write there: File exists" (mkdir of dl)
+    monkeypatch.chdir(tmp_path)
+    os.symlink(tmp_path / "gone", "dl")
+    assert main(["run", "--out", "dl/o/p", "--no-animation"]) == 4
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"irring run: error: --out dl/o/p: dl is a link to {tmp_path / 'gone'}, which does not "
+        "exist (or a loop of links); make that folder or name another")
+    assert sorted(os.listdir(tmp_path)) == ["dl"]
