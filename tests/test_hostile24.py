@@ -180,3 +180,31 @@ def test_an_output_folder_below_a_dangling_link_is_refused_before_the_work(tmp_p
         f"irring run: error: --out dl/o/p: dl is a link to {tmp_path / 'gone'}, which does not "
         "exist (or a loop of links); make that folder or name another")
     assert sorted(os.listdir(tmp_path)) == ["dl"]
+
+
+@pytest.mark.parametrize("gone", ["removed", "moved"])
+def test_a_study_whose_results_file_goes_mid_study_stops_saying_so(tmp_path, gone):
+    # `rm -rf OUT` (or `mv OUT elsewhere`) mid-study: the rows went on into the open file no
+    # one could read, every run ran, and the study ended "cannot read the study's results:
+    # No such file or directory" (exit 1, a bad input)
+    from irring.errors import OutputError
+    from irring.studies import study
+    spec = tmp_path / "s.yaml"
+    spec.write_text("designs: [radial12]\nscenarios: [box_room]\nseeds: [1, 2, 3]\n")
+    out, ran = tmp_path / "o", []
+
+    def progress(row):
+        ran.append(row["seed"])
+        if len(ran) == 1:
+            (out / "results.csv").rename(tmp_path / "elsewhere.csv") if gone == "moved" else \
+                (out / "results.csv").unlink()
+
+    with pytest.raises(OutputError) as stopped:
+        study.run_study(study.load_study(spec), out, progress=progress)
+    assert str(stopped.value) == (
+        f"{out / 'results.csv'}: was removed, moved or replaced while the study wrote to it, so "
+        "its rows went where no one reads them; the study stopped: run it again (with --resume "
+        "where the file is whole) to run what is missing")
+    assert ran == [1]   # the second run's row found the file gone; the third never ran
+    if gone == "moved":   # the moved file holds both rows written
+        assert [r["seed"] for r in study.read_results(tmp_path / "elsewhere.csv")] == ["1", "2"]

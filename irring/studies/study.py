@@ -697,6 +697,21 @@ def _results_writes(path: Path, kept: Callable[[], int]):
                           "(free space, then rerun with --resume)") from exc
 
 
+def _still_there(fh, path: Path) -> None:
+    """:class:`OutputError` when ``path`` no longer names the results file ``fh`` appends to
+    (--out removed, moved or replaced mid-study): the rows went on into a file no one could
+    read, and the study ended, after all its runs, "cannot read the study's results"."""
+    mine = os.fstat(fh.fileno())
+    try:
+        now = os.stat(path)
+    except OSError:
+        now = None
+    if now is None or (now.st_ino, now.st_dev) != (mine.st_ino, mine.st_dev):
+        raise OutputError(f"{path}: was removed, moved or replaced while the study wrote to it, "
+                          "so its rows went where no one reads them; the study stopped: run it "
+                          "again (with --resume where the file is whole) to run what is missing")
+
+
 def _write_parquet(csv_path: Path) -> Path | None:
     """results.parquet beside results.csv, if pyarrow is installed (columns typed)."""
     try:
@@ -773,6 +788,7 @@ def _run_study(study, points: list, out: Path, ex, resume: bool, progress, on_st
             with _results_writes(path, lambda: kept):   # not the runs' own OSErrors
                 w.writerow([_cell(row[k]) for k in COLUMNS])
                 fh.flush()   # a killed study keeps every finished row
+                _still_there(fh, path)
             kept += 1
             if progress is not None:
                 progress(row)
