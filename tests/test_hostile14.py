@@ -219,8 +219,11 @@ def test_calibrate_never_replaces_a_file_that_is_not_its_own_kind(tmp_path, caps
     rig = tmp_path / "rig.png"
     rig.write_bytes(photo.read_bytes())
     before = {p: p.read_bytes() for p in (photo, notes, rig)}
-    for out, what in ((photo, "--out {}: is a PNG picture, not a calibration file"),
-                      (notes, "--out {}: is a file, not a calibration file"),
+    # any .png is refused first: a calibration is YAML, its chart is the .png (round 24)
+    assert main(["calibrate", "--scenario", "t_room", "--out", str(photo)]) == 2
+    assert capsys.readouterr().err.startswith(f"irring calibrate: error: --out {photo}: a "
+                                              "calibration is written as YAML")
+    for out, what in ((notes, "--out {}: is a file, not a calibration file"),
                       (tmp_path / "rig.yaml", f"--out {{}}'s picture {rig}: is a PNG picture, "
                                               "not a calibration chart")):
         assert main(["calibrate", "--scenario", "t_room", "--out", str(out)]) == 4
