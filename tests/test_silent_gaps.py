@@ -159,3 +159,51 @@ def test_a_bent_profile_bounds_no_incidence_and_kernel_agrees():
     unbounded = (a.n >= 3) & ~a.ok & ~a.convex & (a.steep == cal.max_incidence_rad)
     assert unbounded.sum() >= 3
     np.testing.assert_allclose(b.steep, a.steep, rtol=0, atol=1e-9)
+
+
+# GP2Y0A21 with fold-over, a concave corner seen from inside: sensor 8 reads a wall at 60-68°
+# (steps -32 … -24), falls silent at 70° (-23, -22) and then reads the far wall at 3°
+FOLD_CORNER = """
+name: fold_yawed_gap
+seed: 618884
+room:
+  outline_mm: [[1390.6, 2056.1], [-123.9, 835.2], [891, 40.7], [1201.1, 269.6]]
+robot:
+  poses:
+    - {x_mm: 469.5, y_mm: 591.8, yaw_deg: 86.3}
+sensor: {model: gp2y0a21, max_range_mm: 800}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_reading_its_own_range_puts_off_a_line_across_a_silent_gap_leaves_it(monkeypatch):
+    """The steep wall's line took the far wall's first reading across the silent steps (the
+    wall falls silent by itself at 70°: the silence contradicts nothing) and read it at 70°,
+    397 mm, 148 mm short of where its beam meets that line: 156 mm off. Its own range moves
+    it to the far wall's line (OFF_BEAM_SIGMAS), the same in both estimators."""
+    from irring.estimation import estimate as est
+    from irring.estimation import estimate_numpy as oracle
+    from irring.estimation import members
+    from tests._oracle import assert_oracle_agrees
+
+    sc = loads(FOLD_CORNER, source="<test>")
+    run = pipeline.run(sc, progress=False)
+    sweep, p = run.sweeps[0], run.points[0]
+    row = int(np.nonzero(sweep.steps == -21)[0][0])
+    at = (row, 8)
+    assert (sweep.steps[row - 2:row] == [-23, -22]).all()
+    assert (p.reason[row - 2:row, 8] == Reason.NO_RETURN).all()
+    assert math.degrees(sweep.truth.incidence_rad[at]) < 5.0       # the far wall
+    assert p.valid[at]
+    assert abs(math.degrees(p.theta[at]) - math.degrees(sweep.truth.incidence_rad[at])) < 3.0
+    assert _end_point_error(sweep, p)[at] < 0.010
+    cal = Calibration.for_scene(sc)
+    for estimator in (est.estimate_detail, oracle.estimate_detail):
+        e = estimator(sweep, cal)
+        assert e.lines.label[at] == e.lines.label[row + 1, 8] >= 0    # the far wall's line
+    assert_oracle_agrees([sc])
+    # without the range test the steep wall's line keeps it, 156 mm off
+    monkeypatch.setattr(members, "OFF_BEAM_SIGMAS", math.inf)
+    p = pipeline.run(sc, progress=False).points[0]
+    assert p.valid[at] and _end_point_error(sweep, p)[at] > 0.150
+

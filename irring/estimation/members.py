@@ -467,6 +467,21 @@ def _line_contradicted(points: Points, counts: np.ndarray, steps: np.ndarray,
     return found >= need
 
 
+def _off_beam(points: Points, at: np.ndarray, line: np.ndarray, alpha: np.ndarray,
+              cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+    """|d − t| / σ of each reading ``at`` (flat): how far its range ``d`` lies from ``t``,
+    where its beam meets ``line`` (direction ``alpha``, through ``cx``, ``cy``), in its σ
+    (inf where the beam runs along the line or meets it behind the emitter)."""
+    h = points.heading.reshape(-1)[at]
+    nx, ny = -np.sin(alpha[line]), np.cos(alpha[line])
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
+    along = np.cos(h) * nx + np.sin(h) * ny
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((cx[line] - ox) * nx + (cy[line] - oy) * ny) / along
+        z = np.abs(points.d.reshape(-1)[at] - t) / points.sigma_m.reshape(-1)[at]
+    return np.where(np.isfinite(z) & (t > 0), z, np.inf)
+
+
 def _on_line(points: Points, at: np.ndarray, line: np.ndarray, alpha: np.ndarray,
              cx: np.ndarray, cy: np.ndarray, cal: Calibration) -> np.ndarray:
     """Whether each reading ``at`` (flat) lies on its ``line`` (direction ``alpha``, through
@@ -487,6 +502,9 @@ LONE_ON_MARGIN_RAD = math.radians(10)   # … read this far short of the drop-ou
 CONTRADICT_SIGMAS = 5.0  # a line that would have read a silent step this many count σ
 #                          brighter (of up to ACROSS_MAX + 3 steps: 5σ, not 3σ) is not there
 ACROSS_MAX = 5  # at most this many readings a line took across a silent gap are moved
+OFF_BEAM_SIGMAS = 4.0  # … or whose every reading, at its line's θ, reads this many σ short
+#                         of (or past) where its beam meets the line: their own ranges
+#                         contradict it (a steep wall that fell silent by itself)
 LONE_GAP_MIN = 2  # … or, with no other line beside them, are taken where this many silent
 #                  steps contradict it (a surface's end drops out over several steps; a
 #                  single silent step in a wall is a flicker)
@@ -504,8 +522,11 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     members of this sensor lie across the gap only, followed (preceded) by at least as many
     members of another line, where the line would have returned clearly more light than a
     silent step beside them read (:func:`_line_contradicted`; ``alpha``, ``cx``, ``cy``
-    (L,): each line's direction and centroid), took those few across the gap: they move to
-    the other line, read at the incidence their beam meets it with the noise σ at that θ;
+    (L,): each line's direction and centroid), or where every one of them lies
+    ``OFF_BEAM_SIGMAS`` σ along its beam from the line (:func:`_off_beam`: a steep wall falls
+    silent by itself), took those few across the gap: they move to
+    the other line, read at the incidence their beam meets it with the noise σ at that θ
+    (moved by their ranges alone, only if they then lie on it within ``OFF_BEAM_SIGMAS``);
     where it meets it past the drop-out angle they leave their line, read at θ = 0 with the
     fallback σ (:func:`local_incidence` asks them); ``moves`` False: none of this. With
     ``alone`` (the final pass, after :func:`rejoin_traces`), a run that holds no other line
@@ -562,6 +583,7 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     n_s = first.size
     to = np.full(n_s, -1, dtype=np.intp)
     off = np.zeros(n_s, dtype=bool)   # … or off their line: no other line beside them
+    by_range = np.zeros(n_s, dtype=bool)   # moved by their own ranges only (not the light)
     for before, side, nb in ((True, new_run[first], np.arange(1, n_s + 1)),   # a run's first
                              (False, np.r_[new_run[1:], True][last], np.arange(-1, n_s - 1))):
         nb = np.clip(nb, 0, n_s - 1)
@@ -604,7 +626,17 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
                                           np.full(ask.size, before), lab_c[ask], alpha, cx,
                                           cy, need)
             if act == "to":
-                to = np.where(hit & (to < 0), m_lab, to)
+                # … or their own ranges contradict their line (a steep wall's own silence
+                # contradicts nothing): every one of them off its beam's meet
+                rep = np.repeat(ask, s_len[ask])
+                j = np.arange(rep.size) - np.repeat(np.cumsum(s_len[ask]) - s_len[ask],
+                                                    s_len[ask])
+                z = _off_beam(points, vi[first[rep] + j], s_lab[rep], alpha, cx, cy)
+                far = np.zeros(n_s, dtype=bool)
+                far[ask] = np.minimum.reduceat(z, np.cumsum(s_len[ask]) - s_len[ask]) \
+                    > OFF_BEAM_SIGMAS
+                by_range |= far & ~hit & (to < 0)
+                to = np.where((hit | far) & (to < 0), m_lab, to)
             else:
                 off |= hit
     off &= to < 0
@@ -631,6 +663,11 @@ def across_silence(points: Points, label: np.ndarray, index: np.ndarray, counts:
     sig_s = cal.sigma_counts() / s
     sigma = range_sigma(b, d, sig_s)
     met = (theta <= cal.max_incidence_rad) & np.isfinite(d) & (d >= cal.min_range_m)
+    # those their own ranges took off their line must lie on the target line there
+    ranged = np.repeat(by_range, s_len)[move]
+    if ranged.any():
+        met[ranged] &= _off_beam(placed_at(points, at, d, theta, sigma), at[ranged],
+                                 to[ranged], alpha, cx, cy) <= OFF_BEAM_SIGMAS
     # a reading the line of its run meets past the drop-out leaves its line for θ = 0 and
     # the fallback σ: local_incidence then asks its own profile
     la0, b0 = cal._ab0
