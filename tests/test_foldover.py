@@ -452,6 +452,7 @@ def test_a_line_member_its_own_profile_reads_100_mm_elsewhere_is_not_placed(monk
     from irring.estimation import bends as est_bends
     from irring.estimation import estimate as est, estimate_numpy
     from irring.estimation import foldover as est_foldover
+    from irring.estimation import members as est_members
 
     # seed 8 (seed 2 showed it until the own-trace rule made the reading's neighbours
     # ambiguous: test_a_far_end_point_needs_the_reading_s_own_far_trace)
@@ -459,6 +460,15 @@ def test_a_line_member_its_own_profile_reads_100_mm_elsewhere_is_not_placed(monk
     # facets_reread's split with a piece of 3-5 members off: it leaves the reading's piece
     # of its line (the reading and two 2-4 mm off) INCIDENCE_UNKNOWN, with the rule or without
     monkeypatch.setattr(est_bends, "REREAD_SMALL_CHI", math.inf)
+    # across_silence's range test now moves the reading (sweep 0, step -24, sensor 1) to its
+    # own wall's line first, at 19.1° (true 18.9°), 1.7 mm off; this rule, its backstop, is
+    # measured without it
+    placed = estimate(sweeps[0], cal)
+    at = (int(np.nonzero(sweeps[0].steps == -24)[0][0]), 1)
+    hit = sweeps[0].truth.hit_point[at]
+    assert placed.valid[at]
+    assert math.hypot(placed.x[at] - hit[0], placed.y[at] - hit[1]) < 0.005
+    monkeypatch.setattr(est_members, "OFF_BEAM_SIGMAS", math.inf)
     now = [estimate(sw, cal) for sw in sweeps]
     with monkeypatch.context() as m:
         m.setattr(est_foldover, "_disowned_by_own_profile", lambda p, *args: p)
