@@ -382,8 +382,9 @@ def test_the_trace_round_kernel_agrees_with_its_numpy_statement(seed, k, n_lines
 
 @pytest.mark.parametrize("name, seed", [("grazing_corridor", 1), ("narrow_room", 2)])
 def test_the_trace_kernels_move_what_the_statement_moves(monkeypatch, name, seed):
-    """Not vacuous: on bundled rooms whose readings rejoin_traces moves (16 and 82 in their
-    sweeps) the compiled steps move the same readings to the same lines as numpy's, to
+    """Not vacuous: on bundled rooms whose readings rejoin_traces moves (15 and 82 in their
+    sweeps; grazing_corridor's 16th, taken across a silent gap, across_silence's range test
+    moves first) the compiled steps move the same readings to the same lines as numpy's, to
     the bit."""
     from irring.estimation import estimate as module
     from irring.scenario import load_scenario
@@ -405,7 +406,7 @@ def test_the_trace_kernels_move_what_the_statement_moves(monkeypatch, name, seed
     monkeypatch.setattr(module, "rejoin_traces", both)
     for sweep in run.sweeps:
         estimate(sweep, cal)
-    assert len(moves) == len(run.sweeps) and sum(moves) == {"grazing_corridor": 16,
+    assert len(moves) == len(run.sweeps) and sum(moves) == {"grazing_corridor": 15,
                                                             "narrow_room": 82}[name]
 
 
