@@ -748,8 +748,8 @@ def members_on_arcs(points: Points, label: np.ndarray, vi: np.ndarray, pos: np.n
 
 
 def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
-                    steps: np.ndarray, cal: Calibration, profiler: Callable | None = None
-                    ) -> tuple[Points, np.ndarray]:
+                    steps: np.ndarray, cal: Calibration, profiler: Callable | None = None,
+                    arcs: list | None = None) -> tuple[Points, np.ndarray]:
     """Readings on no line (``label`` −1, θ = 0), and the members of lines that are a round
     thing's, re-read at the incidence their own sensor's neighbouring steps give; numpy,
     shared by both estimators.
@@ -764,7 +764,9 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     places it surely (:func:`off_line_profiles`). The members of a steep line whose own
     profiles mostly bend away (a column's arc cut into short lines; ``ROUND_*``) leave it
     first and are read the same way (short far lines: :func:`doubt_far_lines`). Returns the
-    points and ``label`` without those members. The why and the measured effects:
+    points and ``label`` without those members; ``arcs`` (a list): the readings taken onto
+    arcs and their circles appended to it, (flat indices, (3, n) centre x, y and radius), for
+    :func:`onto_post_circles`. The why and the measured effects:
     docs/estimator.md ("Readings on no line", "Round things", "A short far line's
     direction"), docs/foldover.md ("Short far lines")."""
     flat_valid = points.valid.reshape(-1)
@@ -875,8 +877,10 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     arc = np.zeros(0, dtype=np.intp)
     if convex.any() and not still:
         on_arc = np.isin(pr.chain[off], np.unique(pr.chain[off[convex]]))
-        th_a, d_a, sig_a, fit, _, _ = arc_incidence(pr, off[on_arc], cal)
+        th_a, d_a, sig_a, fit, mis_a, circle_a = arc_incidence(pr, off[on_arc], cal)
         arc = on_arc.nonzero()[0][fit]
+        if arcs is not None and arc.size:
+            arcs.append(_round_arcs(pr, off[arc], mis_a[fit], circle_a[:, fit], vi, cal))
         th_a, d_a, sig_a = th_a[fit], d_a[fit], sig_a[fit]
         on = np.zeros(off.size, dtype=bool)
         on[arc] = True
@@ -905,3 +909,81 @@ def local_incidence(points: Points, label: np.ndarray, index: np.ndarray, counts
     out["x"].reshape(-1)[at] = points.origin_x.reshape(-1)[at] + d_new * np.cos(hh)
     out["y"].reshape(-1)[at] = points.origin_y.reshape(-1)[at] + d_new * np.sin(hh)
     return points_with(points, **out), label
+
+
+def _round_arcs(pr: Profile, pos: np.ndarray, mis: np.ndarray, circle: np.ndarray,
+                vi: np.ndarray, cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
+    """The readings ``pos`` (into ``vi``) :func:`arc_incidence` took, with their misfits
+    ``mis`` and circles ``circle`` (3, n), as :func:`onto_post_circles` is given them: (flat
+    indices, circles), NaN the circles of runs one line explains nearly as well (the arc's
+    misfit above ``ROUND_BETTER`` of the line's, as :func:`round_runs` asks: a face, not a
+    post)."""
+    _, group = np.unique(circle, axis=1, return_inverse=True)
+    group = group.reshape(-1)
+    n = int(group.max()) + 1
+    line = np.bincount(group, _one_line_misfit(pr, pos, group, n, cal), n)
+    round_ = np.bincount(group, mis, n) <= ROUND_BETTER * line
+    return vi[pos], np.where(round_[group], circle, np.nan)
+
+
+def onto_post_circles(points: Points, label: np.ndarray, index: np.ndarray,
+                      counts: np.ndarray, steps: np.ndarray, cal: Calibration, arcs: list
+                      ) -> tuple[Points, np.ndarray]:
+    """The circles :func:`local_incidence` fitted to posts' arcs (``arcs``: its list) asked
+    by the sweep's other runs (valid readings of one sensor, steps at most
+    ``ARC_GAP_STEPS`` apart, θ = 0 ranges within ``ROUND_JUMP_M``; at least
+    ``ARC_MIN``), on a line or not: a sensor whose sweep ends on a post's flank sees no
+    apex of its own, and its readings there were read at θ = 0 (long at the flank, σ wide),
+    at a slope its few readings gave, or on a line across the flank (too steep, short). A
+    run whose readings misfit their circle at most ``ARC_MISFIT`` on average takes it (each
+    reading of own misfit at most ``ARC_ON``, at or past the least range) as
+    :func:`round_runs`' other runs take its circles; numpy, shared by both estimators.
+    Returns the points and ``label`` (those taken, −1). Why: docs/estimator.md, "A post's
+    circle shared"."""
+    if not arcs:
+        return points, label
+    on_arc = np.concatenate([a for a, _ in arcs])
+    circles = np.concatenate([c for _, c in arcs], axis=1)
+    circles = np.unique(circles[:, np.isfinite(circles[2])], axis=1)
+    if circles.shape[1] == 0:
+        return points, label
+    flat_valid = points.valid.reshape(-1)
+    vi = index[flat_valid[index]]
+    vi = vi[~np.isin(vi, on_arc)]
+    if vi.size < ARC_MIN:
+        return points, label
+    n_sensors = points.valid.shape[1]
+    sensor = vi % n_sensors
+    step = np.asarray(steps).reshape(-1)[vi // n_sensors]
+    s = np.asarray(counts, dtype=float).reshape(-1)[vi]
+    d0 = cal.distance(s)
+    cut = np.ones(vi.size, dtype=bool)
+    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
+               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
+    run = np.cumsum(cut) - 1
+    n_run = int(run[-1]) + 1
+    size = np.bincount(run, minlength=n_run)
+    pos = (size[run] >= ARC_MIN).nonzero()[0]
+    if pos.size == 0:
+        return points, label
+    grp = (np.cumsum(size >= ARC_MIN) - 1)[run[pos]]
+    n_g = int(grp[-1]) + 1
+    lite = SimpleNamespace(ox=points.origin_x.reshape(-1)[vi],
+                           oy=points.origin_y.reshape(-1)[vi],
+                           heading=points.heading.reshape(-1)[vi], s=s, d0=d0,
+                           sig_s=cal.sigma_counts() / s)
+    th, d, sig, mis, _ = _on_circles(lite, pos, grp, n_g, circles, cal)
+    fits = np.bincount(grp, mis, n_g) <= ARC_MISFIT * np.bincount(grp, minlength=n_g)
+    # … and whose θ = 0 end points bulge towards the sensor: a box's face beside a corner
+    # taken for an arc fits such a circle within its noise too, but lies flat
+    h = lite.heading[pos]
+    fits &= _bulging(lite.ox[pos] + d0[pos] * np.cos(h), lite.oy[pos] + d0[pos] * np.sin(h),
+                     lite.ox[pos], lite.oy[pos], grp, n_g)[0]
+    take = (fits[grp] & (mis <= ARC_ON) & np.isfinite(d) & (d >= cal.min_range_m)
+            & np.isfinite(sig))
+    if not take.any():
+        return points, label
+    at = vi[pos[take]]
+    label = label.copy()
+    label.reshape(-1)[at] = -1
+    return placed_at(points, at, d[take], th[take], sig[take]), label

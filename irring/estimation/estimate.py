@@ -25,7 +25,7 @@ from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, SIGMA_FLOOR_M, Calibration
-from .arcs import local_incidence, round_runs_compiled
+from .arcs import local_incidence, onto_post_circles, round_runs_compiled
 from .bends import (bent_ends_compiled, bowed_lines_compiled, faceted_lines_compiled,
                     kinked_lines)
 from .counts import CountsFits, counts_disown_lines
@@ -388,10 +388,13 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     # one profile call for local_incidence, round_runs and the doubt while no reading leaves
     profiler = SharedProfiles(profiler or profiles_compiled,
                                None if short is None else short[0] | short[1])
-    points, label = local_incidence(points, label, index, counts, steps, cal, profiler)
+    arcs: list = []
+    points, label = local_incidence(points, label, index, counts, steps, cal, profiler, arcs)
     points, label = (rounder or round_runs_compiled)(
         points, label, index, counts, steps, cal, grouping.alpha, grouping.cx, grouping.cy,
         profiler, snap, far_sigma_cap(cal, points.max_range_m))
+    # a post's circle, fitted where a sensor saw its arc, read by the flanks others saw
+    points, label = onto_post_circles(points, label, index, counts, steps, cal, arcs)
     if short is not None:
         points, label = doubt_far_lines(points, label, index, counts, steps, cal, *short,
                                         profiler, voter)
