@@ -915,15 +915,17 @@ def _round_arcs(pr: Profile, pos: np.ndarray, mis: np.ndarray, circle: np.ndarra
                 vi: np.ndarray, cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
     """The readings ``pos`` (into ``vi``) :func:`arc_incidence` took, with their misfits
     ``mis`` and circles ``circle`` (3, n), as :func:`onto_post_circles` is given them: (flat
-    indices, circles), NaN the circles of runs one line explains nearly as well (the arc's
-    misfit above ``ROUND_BETTER`` of the line's, as :func:`round_runs` asks: a face, not a
-    post)."""
-    _, group = np.unique(circle, axis=1, return_inverse=True)
-    group = group.reshape(-1)
-    n = int(group.max()) + 1
+    indices, one circle per run (3, runs)), NaN the circles of runs one line explains nearly
+    as well (the arc's misfit above ``ROUND_BETTER`` of the line's, as :func:`round_runs`
+    asks: a face, not a post)."""
+    # (a run's readings are consecutive and share its circle)
+    new = np.ones(pos.size, dtype=bool)
+    new[1:] = (circle[:, 1:] != circle[:, :-1]).any(axis=0)
+    group = np.cumsum(new) - 1
+    n = int(group[-1]) + 1
     line = np.bincount(group, _one_line_misfit(pr, pos, group, n, cal), n)
     round_ = np.bincount(group, mis, n) <= ROUND_BETTER * line
-    return vi[pos], np.where(round_[group], circle, np.nan)
+    return vi[pos], np.where(round_, circle[:, new], np.nan)
 
 
 def onto_post_circles(points: Points, label: np.ndarray, index: np.ndarray,
@@ -944,7 +946,8 @@ def onto_post_circles(points: Points, label: np.ndarray, index: np.ndarray,
         return points, label
     on_arc = np.concatenate([a for a, _ in arcs])
     circles = np.concatenate([c for _, c in arcs], axis=1)
-    circles = np.unique(circles[:, np.isfinite(circles[2])], axis=1)
+    circles = circles[:, np.isfinite(circles[2])]
+    circles = circles[:, np.lexsort(circles[::-1])]      # (in np.unique's order)
     if circles.shape[1] == 0:
         return points, label
     flat_valid = points.valid.reshape(-1)
@@ -966,7 +969,17 @@ def onto_post_circles(points: Points, label: np.ndarray, index: np.ndarray,
     pos = (size[run] >= ARC_MIN).nonzero()[0]
     if pos.size == 0:
         return points, label
-    grp = (np.cumsum(size >= ARC_MIN) - 1)[run[pos]]
+    # a run none of whose beams meets a circle misfits every one (ARC_MISS): not asked
+    h = points.heading.reshape(-1)[vi[pos]]
+    _, th, meets = meet_circle(circles[:2, :, None], circles[2][:, None],
+                               points.origin_x.reshape(-1)[vi[pos]],
+                               points.origin_y.reshape(-1)[vi[pos]], np.cos(h), np.sin(h))
+    asked = np.bincount(run[pos], (meets & (th <= cal.max_incidence_rad)).any(axis=0),
+                        n_run) > 0
+    pos = pos[asked[run[pos]]]
+    if pos.size == 0:
+        return points, label
+    grp = (np.cumsum(asked) - 1)[run[pos]]
     n_g = int(grp[-1]) + 1
     lite = SimpleNamespace(ox=points.origin_x.reshape(-1)[vi],
                            oy=points.origin_y.reshape(-1)[vi],
