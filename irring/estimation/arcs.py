@@ -931,7 +931,8 @@ def _round_arcs(pr: Profile, pos: np.ndarray, mis: np.ndarray, circle: np.ndarra
 def onto_post_circles(points: Points, label: np.ndarray, index: np.ndarray,
                       counts: np.ndarray, steps: np.ndarray, cal: Calibration, arcs: list
                       ) -> tuple[Points, np.ndarray]:
-    """The circles :func:`local_incidence` fitted to posts' arcs (``arcs``: its list) asked
+    """The circles :func:`local_incidence` fitted to posts' arcs (``arcs``: its list, and
+    the readings :func:`round_runs` put on its circles with none, which keep them) asked
     by the sweep's other runs (valid readings of one sensor, steps at most
     ``ARC_GAP_STEPS`` apart, θ = 0 ranges within ``ROUND_JUMP_M``; at least
     ``ARC_MIN``), on a line or not: a sensor whose sweep ends on a post's flank sees no

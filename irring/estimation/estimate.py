@@ -390,9 +390,14 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
                                None if short is None else short[0] | short[1])
     arcs: list = []
     points, label = local_incidence(points, label, index, counts, steps, cal, profiler, arcs)
+    before = points
     points, label = (rounder or round_runs_compiled)(
         points, label, index, counts, steps, cal, grouping.alpha, grouping.cx, grouping.cy,
         profiler, snap, far_sigma_cap(cal, points.max_range_m))
+    if arcs and points is not before:    # (the readings round_runs put on its circles stay)
+        arcs.append((np.flatnonzero(points.valid & ((points.d != before.d)
+                                                    | (points.theta != before.theta))),
+                     np.zeros((3, 0))))
     # a post's circle, fitted where a sensor saw its arc, read by the flanks others saw
     points, label = onto_post_circles(points, label, index, counts, steps, cal, arcs)
     if short is not None:
