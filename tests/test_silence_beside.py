@@ -2,9 +2,9 @@
 (docs/estimator.md, "Silent beams beside a return" and "Pooled readings")."""
 from __future__ import annotations
 
-import math
-
 import dataclasses
+import functools
+import math
 
 import numpy as np
 import pytest
@@ -43,8 +43,20 @@ effects: {incidence: {}, noise: {sigma_v: 0.015}, quantization: {}}
 """
 
 
+@functools.cache
 def _a21_cal():
+    """CORNER_A21's calibration (frozen, so made once and shared: building it parses and
+    checks the scene, most of a hypothesis example's time)."""
     return scene_calibration(loads(CORNER_A21))[0]
+
+
+@functools.cache
+def _a21_rising_cal():
+    """_a21_cal with a linear hook's curve: d = a·S, more counts farther."""
+    cal = _a21_cal()
+    top = 2 ** cal.adc_bits - 1
+    return dataclasses.replace(cal, a=np.full(cal.b.shape, cal.max_range_m / top),
+                               b=np.ones(cal.b.shape))
 
 
 def _column(reason, d, heading_deg, counts_max=0.0):
@@ -123,12 +135,8 @@ def test_the_beside_kernel_agrees_with_its_numpy_statement(seed, steps, sensors,
     hooks), the margin from none to past the drop-out angle: the same reach, bit for bit (NaN
     where the other has NaN), and the points themselves back where nothing is bounded."""
     rng = np.random.default_rng(seed)
-    cal = _a21_cal()
-    if rising:   # a linear hook's curve: d = a·S, more counts farther
-        top = 2 ** cal.adc_bits - 1
-        cal = dataclasses.replace(cal, a=np.full(cal.b.shape, cal.max_range_m / top),
-                                  b=np.ones(cal.b.shape))
-        assert not cal.falling
+    cal = _a21_rising_cal() if rising else _a21_cal()
+    assert cal.falling != rising
     shape = (steps, sensors)
     reason = np.where(rng.random(shape) < silent, np.uint8(Reason.NO_RETURN),
                       rng.choice(_REASONS, shape)).astype(np.uint8)
