@@ -523,7 +523,8 @@ def _grid_rows(seeds: dict[str, list[int]]) -> list[dict]:
     return rows
 
 
-def test_the_chart_is_titled_with_the_study_and_its_legend_is_under_the_panels(tmp_path):
+def test_the_chart_is_titled_with_the_study_and_its_legend_is_under_the_panels(tmp_path,
+                                                                               figures):
     """study.png says which study it shows and how many runs of what (in the picture and
     in the PNG's Title); its legend, beside the panels a sixth of the width and mostly
     blank, is under them, inside the figure, with 8 knob settings of long labels."""
@@ -547,12 +548,13 @@ def test_the_chart_is_titled_with_the_study_and_its_legend_is_under_the_panels(t
 
     paths = study.write_summary(rows, tmp_path / "mine", knobs, "a$b.yaml")
     assert Image.open(paths["chart"]).text["Title"] == title
+    # the figure it saved: study.chart of these rows' summary by design and knobs, so titled
+    fig = figures[0]
     study.write_summary(rows, tmp_path / "out", knobs)   # from code: named by its folder
     assert Image.open(tmp_path / "out" / "study.png").text["Title"].startswith(
         "the study in out: 64 runs = ")
+    assert len(figures) == 2
 
-    fig = study.chart(study.summarise(rows, ["design", *knobs]), tmp_path / "c.png",
-                      ["design", *knobs], title)
     assert fig.get_suptitle() == title.replace("$", r"\$")   # drawn as text, not mathtext
     renderer = fig.canvas.get_renderer()
     width = fig.get_figwidth() * fig.dpi
