@@ -395,6 +395,24 @@ def _pieces_misfit(pr: Profile, pos: np.ndarray, lab: np.ndarray, alpha: np.ndar
     return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS)
 
 
+def _runs_at_zero(vi: np.ndarray, n_sensors: int, steps: np.ndarray, counts: np.ndarray,
+                  cal: Calibration) -> tuple:
+    """The runs of valid readings ``vi`` (flat indices in scan order) that one surface could
+    make: one sensor, steps at most ``ARC_GAP_STEPS`` apart, θ = 0 ranges within
+    ``ROUND_JUMP_M``: their θ = 0 ranges ``d0``, where a run starts ``cut`` (per reading),
+    each reading's run < ``n_run`` and each run's ``size``."""
+    sensor = vi % n_sensors
+    step = np.asarray(steps).reshape(-1)[vi // n_sensors]
+    # ranges at θ = 0: a line's θ, wrong where it cuts an arc, makes jumps of its own
+    d0 = cal.distance(np.asarray(counts, dtype=float).reshape(-1)[vi])
+    cut = np.ones(vi.size, dtype=bool)
+    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
+               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
+    run = np.cumsum(cut) - 1
+    n_run = int(run[-1]) + 1
+    return d0, cut, run, n_run, np.bincount(run, minlength=n_run)
+
+
 def _round_asked(points: Points, label: np.ndarray, index: np.ndarray, counts: np.ndarray,
                  steps: np.ndarray, cal: Calibration) -> SimpleNamespace | None:
     """:func:`round_runs`' cheap checks, numpy (the statement the compiled pre-gate
@@ -407,18 +425,8 @@ def _round_asked(points: Points, label: np.ndarray, index: np.ndarray, counts: n
     vi = index[flat_valid[index]]
     if vi.size < ROUND_RUN_MIN:
         return None
-    n_sensors = points.valid.shape[1]
     lab = label.reshape(-1)[vi]
-    sensor = vi % n_sensors
-    step = np.asarray(steps).reshape(-1)[vi // n_sensors]
-    # ranges at θ = 0: a line's θ, wrong where it cuts an arc, makes jumps of its own
-    d0 = cal.distance(np.asarray(counts, dtype=float).reshape(-1)[vi])
-    cut = np.ones(vi.size, dtype=bool)
-    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
-               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
-    run = np.cumsum(cut) - 1
-    n_run = int(run[-1]) + 1
-    size = np.bincount(run, minlength=n_run)
+    d0, cut, run, n_run, size = _runs_at_zero(vi, points.valid.shape[1], steps, counts, cal)
     change = np.zeros(vi.size)
     change[1:] = ~cut[1:] & (lab[1:] != lab[:-1])
     cand = (size >= ROUND_RUN_MIN) & (np.bincount(run, change, n_run) > 0)
@@ -956,17 +964,7 @@ def onto_post_circles(points: Points, label: np.ndarray, index: np.ndarray,
     vi = vi[~np.isin(vi, on_arc)]
     if vi.size < ARC_MIN:
         return points, label
-    n_sensors = points.valid.shape[1]
-    sensor = vi % n_sensors
-    step = np.asarray(steps).reshape(-1)[vi // n_sensors]
-    s = np.asarray(counts, dtype=float).reshape(-1)[vi]
-    d0 = cal.distance(s)
-    cut = np.ones(vi.size, dtype=bool)
-    cut[1:] = ((sensor[1:] != sensor[:-1]) | (np.abs(step[1:] - step[:-1]) > ARC_GAP_STEPS)
-               | (np.abs(d0[1:] - d0[:-1]) > ROUND_JUMP_M))
-    run = np.cumsum(cut) - 1
-    n_run = int(run[-1]) + 1
-    size = np.bincount(run, minlength=n_run)
+    d0, _, run, n_run, size = _runs_at_zero(vi, points.valid.shape[1], steps, counts, cal)
     pos = (size[run] >= ARC_MIN).nonzero()[0]
     if pos.size == 0:
         return points, label
@@ -982,10 +980,11 @@ def onto_post_circles(points: Points, label: np.ndarray, index: np.ndarray,
         return points, label
     grp = (np.cumsum(asked) - 1)[run[pos]]
     n_g = int(grp[-1]) + 1
+    s_vi = np.asarray(counts, dtype=float).reshape(-1)[vi]
     lite = SimpleNamespace(ox=points.origin_x.reshape(-1)[vi],
                            oy=points.origin_y.reshape(-1)[vi],
-                           heading=points.heading.reshape(-1)[vi], s=s, d0=d0,
-                           sig_s=cal.sigma_counts() / s)
+                           heading=points.heading.reshape(-1)[vi], s=s_vi, d0=d0,
+                           sig_s=cal.sigma_counts() / s_vi)
     th, d, sig, mis, _ = _on_circles(lite, pos, grp, n_g, circles, cal)
     fits = np.bincount(grp, mis, n_g) <= ARC_MISFIT * np.bincount(grp, minlength=n_g)
     # … and whose θ = 0 end points bulge towards the sensor: a box's face beside a corner
