@@ -308,20 +308,33 @@ def test_cli_speed_json(capsys):
         assert out[key] > 0
 
 
-def test_the_accuracy_chart_legend_says_what_a_ring_means(tiny, tmp_path, figures):
+@pytest.fixture(scope="module")
+def tiny_chart(tiny, tmp_path_factory) -> list:
+    """The figures accuracy.chart of ``tiny`` makes (one), drawn once for the tests that
+    read it (each drew the same chart, ~3 s)."""
+    from irring.maps import render
+
+    made: list = []
+    real = render.figure
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(render, "figure", lambda *a, **k: made.append(real(*a, **k)) or made[-1])
+        accuracy.chart(tiny, tmp_path_factory.mktemp("chart") / "a.png")
+    return made
+
+
+def test_the_accuracy_chart_legend_says_what_a_ring_means(tiny_chart):
     """accuracy.png ringed the configurations on each Pareto front and said nowhere what a
     ring meant (study.png's title does)."""
-    accuracy.chart(tiny, tmp_path / "a.png")
-    legend = [t.get_text() for t in figures[0].axes[2].get_legend().get_texts()]
+    legend = [t.get_text() for t in tiny_chart[0].axes[2].get_legend().get_texts()]
     assert legend.count("ringed: on the front") == 1 and "Pareto front" in legend
 
 
-def test_the_accuracy_charts_f1_axes_are_stretched_towards_one(tiny, tmp_path, figures):
+def test_the_accuracy_charts_f1_axes_are_stretched_towards_one(tiny_chart):
     """accuracy.png's F1 panels drew the knobs' 0.957 … 0.999 as one crowd at the top of
     0 … 1, their labels on each other; they are stretched towards 1, and the legend sits
     where no point does (coverage against hardware time, lower right)."""
-    accuracy.chart(tiny, tmp_path / "a.png")
-    axes = figures[0].axes
+    assert len(tiny_chart) == 1
+    axes = tiny_chart[0].axes
     for ax in axes[:2]:
         assert ax.get_yscale() == "function"
         assert ax.get_ylabel() == "occupied F1 (higher is better;\nscale stretched towards 1)"
