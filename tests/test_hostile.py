@@ -2099,7 +2099,7 @@ def test_calibrate_keeps_the_placements_read_when_it_stops_early(
     saved = _kept(tmp_path)
     assert f"irring calibrate: {said}" in err
     assert (f"the 3 placements read (of 28) are kept in {saved}; resume with: irring calibrate "
-            f"--port {link} --resume {saved} --out {out} --sweeps 1") in err
+            f"--port {link} --resume {saved} --out {out} --sweeps 1\n") in err  # no --baud None
     progress = load_progress(saved)
     assert sorted(progress.done) == [0, 1, 2] and progress.sensor == 0
     for place, readings in progress.done.values():   # what the device sent, sensor 0's

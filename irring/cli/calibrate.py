@@ -329,7 +329,8 @@ def _keep(args: argparse.Namespace, guided) -> None:
     again = ["irring", "calibrate", "--port", args.port, "--resume", str(path)]
     for name in ("scenario", "sensor", "out", "sweeps", "baud"):
         value, default = getattr(args, name), DEFAULTS[name]
-        if value != default and str(value) != default:
+        # an option not given is None (--baud's parser default): `--baud None` is refused
+        if value is not None and value != default and str(value) != default:
             again += [f"--{name}", str(value)]
     print(f"irring calibrate: the {n} placement{'s' if n != 1 else ''} read (of {total}) "
           f"{'are' if n != 1 else 'is'} kept in {path}; resume with: "
