@@ -21,7 +21,7 @@ kept):
   F1, prec, rec   occupied F1, precision, recall (1-cell tolerance, see `irring run --help`)
   free            free accuracy: share of the cells mapped free that are really free
   cov             coverage: share of the reachable free floor mapped free
-  shadow          wall behind thin obstacles mapped (n/a: nothing hidden)
+  shadow          wall behind thin obstacles mapped (n/a: no wall hidden from every pose)
   pt mm           end-point RMS: estimated end point to the true hit point, over readings
                   both estimators call valid
   θ=0 mm          the same readings read as if square on (Eq. 10 with a(0), b(0))

@@ -31,8 +31,10 @@ digits and ._- gets ~ and 8 hex digits of its SHA-256, so no two names share a f
 
 Scores (0 … 1, 1-cell tolerance; see irring/maps/metrics.py): occupied precision / recall / F1,
 free accuracy, coverage of the free area the poses can reach, and shadow (share of the wall
-behind obstacles that is mapped). Hardware time is what the real ring would spend (71 steps
-× 38.3 ms per sweep by default); compute time is this machine's, per stage.
+hidden behind obstacles from every pose centre that is mapped; n/a where none is: a wall one
+pose cannot see past a table leg and another pose sees is no shadow). Hardware time is what
+the real ring would spend (71 steps × 38.3 ms per sweep by default); compute time is this
+machine's, per stage.
 
 Readings: "N valid (…)" says why the others are not (irring.core.Reason): no return (nothing
 within range), out of range (outside the sensor's calibrated range), incidence unknown (on
@@ -170,7 +172,10 @@ def summary_lines(result, paths: dict, summary: dict | None = None) -> list[str]
         lines.append(f"  free      accuracy {_f(sc_['free_accuracy'])}, coverage "
                      f"{_f(sc_['coverage'])} of the reachable free area")
         shadow = sc_["shadow"]
-        lines.append("  shadow    " + ("n/a (nothing hidden behind an obstacle)" if shadow is None
+        # n/a says what the share's cells are, as _shadow_cells does: a wedge hidden from one
+        # pose but seen from another is no shadow (l_office: a table leg's, n/a)
+        lines.append("  shadow    " + ("n/a (no wall in range is hidden behind an obstacle from "
+                                       "every pose centre)" if shadow is None
                                        else f"{_f(shadow)} of the wall behind obstacles mapped"
                                        + _shadow_cells(result.truth)))
     elif s.get("unscored"):
