@@ -111,6 +111,10 @@ def test_the_picture_puts_cells_walls_and_poses_where_they_are(t_room_run):
         on = [_near(orange, c, r, r=0) for c, r in far[inside]]
         assert inside.sum() > 100 and 0.5 < np.mean(on) < 0.9    # dashed: not all the way
         assert not _near(red, *pic.to_px(x + 0.5 * ring_r, y - 0.5 * ring_r), r=1)
+    # the legend names the reach's two parts: the GP2D12's 624 mm is not the circle's 774
+    assert pic.legend == ["unknown", "free", "occupied", "true walls / obstacles",
+                          "ring at scan pose (number = order)",
+                          "sensor reach (ring 150 + range 624 mm)"]
     # the title above the axes: dark text, and nothing but white beside it
     band = img[:int(T) - 2, int(L):int(R)].min(axis=2)
     assert np.count_nonzero(band < 100) > 100

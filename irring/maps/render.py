@@ -404,7 +404,11 @@ class MapPicture:
         elif len(poses):
             entries.append(("ring", POSE, "ring at scan pose (number = order)"))
         if reach_m and len(poses) and not self.crowded:
-            entries.append(("dash", RANGE, f"sensor reach ({reach_m * 1000:.0f} mm)"))
+            # from the robot's centre: the ring's radius and the sensor's range, each named
+            # (a bare 774 mm read as the GP2D12's range, which is 624 mm)
+            entries.append(("dash", RANGE, f"sensor reach (ring {ring_radius_m * 1000:.0f} + "
+                                           f"range {(reach_m - ring_radius_m) * 1000:.0f} mm)"))
+        self.legend = [label for _, _, label in entries]
         fs = small.size
         rows = math.ceil(len(entries) / 3)
         columns = [entries[i:i + rows] for i in range(0, len(entries), rows)]
