@@ -218,12 +218,12 @@ def test_an_undefined_shadow_says_why_in_the_table_and_the_chart(tmp_path, figur
            "runs": 1, "scenarios": ["lab"], "poses": {"lab": 3},
            "by_scenario": {"lab": scores}, "min_detectable_radius_m": [0.002]}
     assert compare_mod.table([rec]).splitlines()[-1] == (
-        "shadow —: n/a, no wall the sensors could range is hidden behind an obstacle "
-        "(in any of these scenarios)")
+        "shadow —: n/a, no wall in the sensors' reach is hidden behind an obstacle from every "
+        "pose centre (in any of these scenarios)")
     compare_mod.chart({"designs": [rec], "detection_distances_m": [0.35]}, tmp_path / "c.png")
     texts = [t.get_text() for ax in figures[0].axes for t in ax.texts]
-    assert ("shadow n/a: no wall the sensors could range is hidden behind an obstacle\n"
-            "(in any of these scenarios)") in texts
+    assert ("shadow n/a: no wall in the sensors' reach is hidden behind an\n"
+            "obstacle from every pose centre (in any of these scenarios)") in texts
 
 
 def test_the_chart_writes_each_score_on_its_bar(tmp_path, figures):

@@ -280,5 +280,5 @@ def test_the_shadow_line_says_how_many_hidden_cells_a_sensor_could_range(runs):
         "  shadow    0.000 of the wall behind obstacles mapped (7 wall cell(s) hidden from "
         "every pose centre; a sensor could range none of them)"]
     plain = summary_lines(runs["t_room"], {})
-    assert ("  shadow    n/a (no wall in range is hidden behind an obstacle from every pose "
-            "centre)") in plain
+    assert ("  shadow    n/a (no wall in the sensors' reach is hidden behind an obstacle from "
+            "every pose centre)") in plain

@@ -172,10 +172,7 @@ def summary_lines(result, paths: dict, summary: dict | None = None) -> list[str]
         lines.append(f"  free      accuracy {_f(sc_['free_accuracy'])}, coverage "
                      f"{_f(sc_['coverage'])} of the reachable free area")
         shadow = sc_["shadow"]
-        # n/a says what the share's cells are, as _shadow_cells does: a wedge hidden from one
-        # pose but seen from another is no shadow (l_office: a table leg's, n/a)
-        lines.append("  shadow    " + ("n/a (no wall in range is hidden behind an obstacle from "
-                                       "every pose centre)" if shadow is None
+        lines.append("  shadow    " + (f"n/a ({metrics.SHADOW_NA})" if shadow is None
                                        else f"{_f(shadow)} of the wall behind obstacles mapped"
                                        + _shadow_cells(result.truth)))
     elif s.get("unscored"):

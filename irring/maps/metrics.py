@@ -29,6 +29,10 @@ OBSTACLE0 = 2
 
 SCORE_KEYS = ("occupied_precision", "occupied_recall", "occupied_f1", "free_accuracy",
               "coverage", "shadow")
+# why a shadow is n/a (score's None): GroundTruth.shadow is empty. Wall out of reach, or one
+# pose cannot see past a table leg and another pose sees, is no shadow ("nothing hidden"
+# and "no post here" misled); `irring run`'s summary and `irring compare` say it so
+SHADOW_NA = "no wall in the sensors' reach is hidden behind an obstacle from every pose centre"
 
 
 @dataclass(frozen=True)

@@ -6,13 +6,14 @@ are judged: docs/designs.md."""
 from __future__ import annotations
 
 import math
+import textwrap
 
 import numpy as np
 
 from .. import designs as designs_mod
 from ..core import Cylinder
 from ..designs import Design
-from ..maps.metrics import SCORE_KEYS
+from ..maps.metrics import SCORE_KEYS, SHADOW_NA
 from ..pipeline import progress_bar
 from ..scenario import check_distinct_names, counted_seeds, load_scenario
 from . import accuracy, study
@@ -167,11 +168,6 @@ def cylinders(scenarios) -> list[dict]:
 TABLE_SCORES = ("occupied_f1", "free_accuracy", "coverage", "shadow")
 
 
-# why a design's shadow is n/a ("—"): in a room of one's own with posts, "no post here"
-# was wrong; the walls behind them were only out of the sensors' reach
-SHADOW_NA = "no wall the sensors could range is hidden behind an obstacle"
-
-
 # why a radius column says "too near" rather than "miss" (radial12 at 250 mm: its sensors
 # sit 150 mm out, so the near side is 100 mm from the one facing it, the GP2D12's minimum)
 TOO_NEAR = ("none ≤ 200 mm is seen at every bearing only because the near side is within "
@@ -315,7 +311,8 @@ def chart(result: dict, path) -> None:
             # no ticks (a lone design's name sat in the corner of the empty axes)
             ax.set_xticks([])
             ax.set_yticks([])
-            ax.text(0.5, 0.5, f"shadow n/a: {SHADOW_NA}\n(in any of these scenarios)",
+            ax.text(0.5, 0.5, textwrap.fill(f"shadow n/a: {SHADOW_NA} (in any of these "
+                                            "scenarios)", 64),
                     ha="center", va="center", fontsize=9, transform=ax.transAxes)
         ax.grid(axis="y", alpha=0.3)
 
