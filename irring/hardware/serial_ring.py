@@ -656,12 +656,25 @@ class SerialRing:
 
     # ---------------------------------------------------------------- I/O
 
-    def _flush(self) -> None:
+    def _flush(self, check_ring: bool = False) -> None:
+        """Drop what arrived unasked (late answers, a stopped sweep's tail); with
+        ``check_ring``, an IRINF among it announcing another ring is :class:`DeviceChanged`,
+        as it is mid-sweep (it was dropped without a word between sweeps)."""
+        stale = bytearray()
         try:
+            while check_ring and len(stale) < CHATTER_LIMIT_BYTES:   # a flood: the rest dropped
+                waiting = self.port.in_waiting   # (a socket:// port says 1 while any wait)
+                chunk = self.port.read(waiting) if waiting else b""
+                if not chunk:
+                    break
+                stale += chunk
             self.port.reset_input_buffer()
         except (serial.SerialException, OSError) as exc:
             raise self._lost(DeviceDisconnected, f"flushing failed: {exc}") from exc
+        told = [m for m in self.decoder.feed(bytes(stale)) if isinstance(m, p.Info)]
         self.decoder.reset()
+        for info in told if self.info is not None else ():
+            self._same_ring(info)
 
     @property
     def moved(self) -> bool:
@@ -1100,7 +1113,7 @@ class SerialRing:
                   else max(abs(lo - self._position), abs(hi - self._position)))
         first_wait = self.timeout_s + per_step_s + travel * MOVE_ALLOWANCE_S
         cmd = p.SweepCommand(lo, hi, samples, settle_ms)
-        self._flush()
+        self._flush(check_ring=True)
         self._send(cmd)
         wait_s = first_wait        # the silence allowed now (no byte arriving)
         deadline = time.monotonic() + wait_s
@@ -1227,7 +1240,7 @@ class SerialRing:
                     f"no progress for {now - stalled_since:.1f} s during IRSWP,{lo},{hi}: "
                     f"{len(ps.got)} of {len(ps.expected)} steps arrived, "
                     f"{self.stats.sentences} sentences in all")
-            for msg in msgs:
+            for i, msg in enumerate(msgs):
                 if isinstance(msg, p.Scan):
                     if len(msg.counts) != info.nsensors:
                         self._inconsistent(f"IRSCN {msg.seq} of step {msg.step} carries "
@@ -1306,6 +1319,9 @@ class SerialRing:
                     self._said_booted(msg.seq, *self._turning(ps))
                     ps.done = True
                     self._running = False
+                    for later in msgs[i + 1:]:   # read with the IRDON; the rest is stale
+                        if isinstance(later, p.Info):
+                            self._same_ring(later)
                     return
                 elif isinstance(msg, p.ErrorReply):
                     self.stats.device_errors += 1
