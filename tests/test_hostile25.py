@@ -8,6 +8,7 @@ import time
 import pytest
 
 import hostile_devices as hd
+from irring.cli import main
 from irring.hardware import protocol as p
 
 
@@ -59,3 +60,41 @@ def test_a_late_irinf_of_another_ring_between_sweeps_is_device_changed(delay_s):
     (sweep,) = kept or [changed.value.partial]
     assert [int(s) for s in sweep.steps] == [hd.MIN_STEP + i for i in range(5)]
     assert [list(row) for row in sweep.counts] == [hd.counts_for(s) for s in sweep.steps]
+
+
+@pytest.mark.parametrize("where, said", [
+    ("[fe80::1]:0", "; a link-local address needs its interface ([fe80::1%eth0], as `ip addr` "
+                    "names it), or name an address of this machine (127.0.0.1, [::1]) or a "
+                    "name it resolves"),
+    ("192.0.2.7:0", "; not an address of this machine: name one (127.0.0.1, [::1]) or a name "
+                    "it resolves"),
+])
+def test_an_address_the_emulator_cannot_listen_on_says_what_is_allowed(where, said, capsys):
+    # `irring emulate --tcp [fe80::1]:0` said only "Invalid argument", and an address of
+    # another machine only "Cannot assign requested address"
+    import socket
+    if where.startswith("[") and not socket.has_ipv6:
+        pytest.skip("no IPv6 on this machine")
+    assert main(["emulate", "t_room", "--tcp", where, "--quiet"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"irring emulate: error: --tcp {where}: ") and line.endswith(said)
+
+
+def test_a_port_in_use_and_the_warning_of_an_ipv6_bind_say_what_to_do(capsys):
+    # a port another program listens on said only "Address already in use"; `--tcp [::]:0`
+    # was told "use 127.0.0.1 to keep it on this machine", an address of the other family
+    import socket
+
+    from irring.cli.emulate import _exposed
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        assert main(["emulate", "t_room", "--tcp", f"127.0.0.1:{port}", "--quiet"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"irring emulate: error: --tcp 127.0.0.1:{port}: Address already in use; another "
+        "program listens there: pick another PORT, or 0 for a free one"]
+    assert _exposed("[::]:0", "::") == (
+        "--tcp [::]:0 serves the ring to every machine that can reach ::, with no "
+        "authentication; use [::1] to keep it on this machine")
+    assert _exposed("0.0.0.0:7", "0.0.0.0").endswith("use 127.0.0.1 to keep it on this machine")

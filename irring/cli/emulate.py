@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import ipaddress
 import math
 import signal
@@ -155,15 +156,12 @@ def run(args: argparse.Namespace) -> int:
             emu = TcpEmulator(device, host=host, port=port, baud=baud)
             where = emu.open()
         except (ValueError, OSError, OverflowError) as exc:
-            hint = ("; name an address of this machine (127.0.0.1, [::1]) or a name it "
-                    "resolves" if isinstance(exc, socket.gaierror) else "")
             print(f"irring emulate: error: --tcp {given}: "
-                  f"{getattr(exc, 'strerror', None) or exc}{hint}", file=sys.stderr)
+                  f"{getattr(exc, 'strerror', None) or exc}{_bind_hint(exc, host)}",
+                  file=sys.stderr)
             return 2
         if not _loopback(host):   # once it listens: a name that fails needs no warning
-            print(f"irring emulate: warning: --tcp {given} serves the ring to every "
-                  f"machine that can reach {host}, with no authentication; use 127.0.0.1 to "
-                  f"keep it on this machine", file=sys.stderr)
+            print(f"irring emulate: warning: {_exposed(given, host)}", file=sys.stderr)
     else:
         emu = PtyEmulator(device, link=args.link, baud=baud)
         try:
@@ -218,6 +216,33 @@ def _announced_off(ring, info) -> list[str]:
             f"{info.gear_num}/{info.gear_den}), {abs(off):.2%} {'more' if off > 0 else 'less'}: "
             f"`irring drive` without --truth turns every reading's angle that much off (with "
             f"--truth it takes the scenario's)"]
+
+
+def _exposed(given: str, host: str) -> str:
+    """The warning for a listener on an address other machines may reach."""
+    loopback = "[::1]" if ":" in host else "127.0.0.1"   # the same family: it binds
+    return (f"--tcp {given} serves the ring to every machine that can reach {host}, with no "
+            f"authentication; use {loopback} to keep it on this machine")
+
+
+def _bind_hint(exc: BaseException, host: str) -> str:
+    """What --tcp allows, after the reason a listener could not open there ('' if none)."""
+    local = "name an address of this machine (127.0.0.1, [::1]) or a name it resolves"
+    code = getattr(exc, "errno", None)
+    if isinstance(exc, socket.gaierror):
+        return f"; {local}"
+    if code == errno.EADDRINUSE:
+        return "; another program listens there: pick another PORT, or 0 for a free one"
+    if code == errno.EACCES:
+        return "; ports below 1024 need privileges: pick PORT 1024 … 65535, or 0 for any"
+    if code == errno.EINVAL and host.lower().startswith("fe80:") and "%" not in host:
+        # the kernel cannot tell which interface's fe80::/10 is meant
+        return (f"; a link-local address needs its interface ([{host}%eth0], as `ip addr` "
+                f"names it), or {local}")
+    if code in (errno.EADDRNOTAVAIL, errno.EINVAL):
+        return ("; not an address of this machine: name one (127.0.0.1, [::1]) or a name it "
+                "resolves")
+    return ""
 
 
 def _loopback(host: str) -> bool:
