@@ -98,3 +98,48 @@ def test_a_port_in_use_and_the_warning_of_an_ipv6_bind_say_what_to_do(capsys):
         "--tcp [::]:0 serves the ring to every machine that can reach ::, with no "
         "authentication; use [::1] to keep it on this machine")
     assert _exposed("0.0.0.0:7", "0.0.0.0").endswith("use 127.0.0.1 to keep it on this machine")
+
+
+def _answers_stop_before_its_readings(dev, cmd):
+    """Sweep 1's readings (every count 7), sent 0.6 s late, after its IRDON to the host's
+    IRSTP had said they were sent; silent to sweep 2's first IRSWP, then a correct device."""
+    if isinstance(cmd, p.Hello):
+        dev.send(hd.info())
+    elif isinstance(cmd, p.SweepCommand):
+        dev.sweeps = getattr(dev, "sweeps", 0) + 1
+        if dev.sweeps == 2:
+            return
+        data = b"".join(hd.line(f"IRSCN,{dev.seq + i},{s},{1000 + dev.seq + i},"
+                                + ",".join(["7"] * hd.SENSORS)) if dev.sweeps == 1
+                        else hd.scan(dev.seq + i, s)
+                        for i, s in enumerate(range(cmd.from_step, cmd.to_step + 1)))
+        dev.seq += cmd.to_step - cmd.from_step + 1
+        data += hd.line(f"IRDON,{dev.seq - 1}")
+        if dev.sweeps == 1:
+            import threading
+            threading.Timer(0.6, dev.send, (data,)).start()
+        else:
+            dev.send(data)
+    elif isinstance(cmd, p.Stop):
+        dev.send(hd.line(f"IRDON,{dev.seq - 1}"))
+    elif isinstance(cmd, p.GoTo):
+        dev.send(hd.line(f"IRPOS,{cmd.step}"))
+
+
+def test_readings_late_past_the_irdon_that_said_they_were_sent_are_not_the_next_sweeps():
+    # sweep 1 silent, its IRSTP answered IRDON 4 (seq 0 … 4 sent), then IRSCN 0 … 4 and IRDON
+    # 4 came during sweep 2: taken as a device numbering anew (rebooted between sweeps), so
+    # sweep 2 held sweep 1's readings, "clean link"
+    from irring.hardware.serial_ring import NoReadings, SerialRing
+    dev = hd.HostileDevice(_answers_stop_before_its_readings)
+    try:
+        with SerialRing(dev.link, timeout_s=0.3) as ring:
+            with pytest.raises(NoReadings):
+                ring.sweep(resweep=0)
+            sweep = ring.sweep(resweep=1)
+            report = ring.last_report.message
+    finally:
+        dev.close()
+    assert [int(s) for s in sweep.steps] == [hd.MIN_STEP + i for i in range(5)]
+    assert [list(row) for row in sweep.counts] == [hd.counts_for(s) for s in sweep.steps]
+    assert "6 stale IRSCN dropped" in report

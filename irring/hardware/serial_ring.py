@@ -435,6 +435,8 @@ class SerialRing:
         self.ring: Ring | None = None
         self.last_report: SweepReport | None = None
         self._last_seq: int | None = None  # seq of the device's last IRSCN, from IRDON
+        # (seq, n): the IRDON of a pass n steps short said IRSCN up to seq were sent
+        self._owed: tuple[int, int] | None = None
         self._position: int | None = None  # motor step last reported (None: unknown)
         self._dropped: str | None = None  # the sweep's first IRSCN dropped as inconsistent
         self._garbled: str | None = None  # the sweep's first malformed sentence, and why
@@ -1066,6 +1068,7 @@ class SerialRing:
             # what arrived before the failure (or Ctrl-C) goes with the exception: a caller
             # keeps it (pipeline.acquire) instead of losing the readings
             self._last_seq = None  # the device may still be numbering IRSCN we never saw
+            self._owed = None
             self._position = None
             reason = ("device stopped answering" if isinstance(exc, DeviceTimeout) else
                       "device disconnected" if isinstance(exc, DeviceDisconnected) else
@@ -1268,7 +1271,8 @@ class SerialRing:
                             take(scan, heard_at[id(scan)])
                     take(msg, now)
                 elif isinstance(msg, p.Done):
-                    reverse = None if ps.got else _renumbered(suspects, ps, msg.seq)
+                    reverse = (None if ps.got or self._owed_late(suspects)
+                               else _renumbered(suspects, ps, msg.seq))
                     if reverse is not None:
                         # every IRSCN looked stale, but they and this IRDON number this very
                         # pass: the device numbers from elsewhere (it rebooted between sweeps,
@@ -1316,6 +1320,8 @@ class SerialRing:
                     # IRDON -1: no IRSCN sent since the device (re)booted; its numbering
                     # starts again at 0, which must not read as stale in the next pass
                     self._last_seq = msg.seq if msg.seq >= 0 else None
+                    short = len(pos_of) - len(ps.got)
+                    self._owed = (msg.seq, short) if msg.seq >= 0 and short else None
                     self._said_booted(msg.seq, *self._turning(ps))
                     ps.done = True
                     self._running = False
@@ -1375,6 +1381,15 @@ class SerialRing:
                 self._send(p.Stop())
                 wait_s = self.timeout_s
                 deadline = now + wait_s
+
+    def _owed_late(self, scans: list[p.Scan]) -> bool:
+        """Whether each of ``scans`` (numbered before the pass) carries a seq the last short
+        pass's IRDON said was sent, though it never came: that pass's readings, late (a
+        device answering IRSTP before what it had buffered), not a device numbering anew."""
+        if self._owed is None:
+            return False
+        last, short = self._owed
+        return all((last - sc.seq) % p.SEQ_MODULO < short for sc in scans)
 
     def _replayed(self, scans: list[p.Scan]) -> bool:
         """``scans`` (two or more) repeat the last sweep's readings, step for step, device
