@@ -143,3 +143,17 @@ def test_readings_late_past_the_irdon_that_said_they_were_sent_are_not_the_next_
     assert [int(s) for s in sweep.steps] == [hd.MIN_STEP + i for i in range(5)]
     assert [list(row) for row in sweep.counts] == [hd.counts_for(s) for s in sweep.steps]
     assert "6 stale IRSCN dropped" in report
+
+
+def test_a_room_written_in_mm_under_outline_m_is_refused_by_the_check(tmp_path, capsys):
+    # `irring scenarios my.yaml` listed it as fine, then `irring run my.yaml` refused its
+    # 2,420 km room's grid (exit 5): the check did not check what run checks first
+    from irring.scenario import bundled
+    text = bundled()["t_room"].read_text().replace("outline_mm:", "outline_m:")
+    (tmp_path / "mm.yaml").write_text(text)
+    assert main(["scenarios", str(tmp_path / "mm.yaml")]) == 5
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"irring scenarios: error: {tmp_path / 'mm.yaml'}: a grid of "
+                           "180,022 × 242,022 cells of 10 mm would need about 2614.2 GB")
+    assert line.endswith("(its outline spans 2,420 × 1,800 m; room.outline_m is read in "
+                         "metres, outline_mm in millimetres)")

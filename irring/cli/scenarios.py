@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .. import scenario
 from ..errors import IrringError, printable
+from ..maps.mapping import check_scenario_grid
 from ._common import describe, scenarios_or_folders
 
 
@@ -49,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
             if why:
                 raise scenario.ScenarioError(why)
             sc = scenario.load_scenario(name if named else scenario.bundled()[name])
+            check_scenario_grid(sc)   # `irring run` refuses its map before any work
         except IrringError as exc:
             if not named:   # a bundled scenario that does not load: the install is broken
                 raise
