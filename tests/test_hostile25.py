@@ -157,3 +157,21 @@ def test_a_room_written_in_mm_under_outline_m_is_refused_by_the_check(tmp_path, 
                            "180,022 × 242,022 cells of 10 mm would need about 2614.2 GB")
     assert line.endswith("(its outline spans 2,420 × 1,800 m; room.outline_m is read in "
                          "metres, outline_mm in millimetres)")
+
+
+@pytest.mark.parametrize("step, said", [
+    (60, "60 ° is out of range; allowed 0.006 … 27 °"),
+    (0.005, "0.005 ° is out of range; allowed 0.006 … 27 °"),
+])
+def test_a_design_step_beyond_the_motors_is_refused_in_the_design_files_words(step, said):
+    # step_deg 60 passed the design's check (0.01 … 90) and was refused as
+    # "ring.motor_step_rad: 100 ° is out of range; allowed 0.01 … 45 °": a key and a value the
+    # user never wrote (the sensor step is the motor's times the belt's 0.6)
+    from irring.studies.study import StudyError, design_spec
+    with pytest.raises(StudyError) as refused:
+        design_spec("", "--design", {"sensors": 8, "radius_mm": 120,
+                                     "sweep_half_angle_deg": 45, "step_deg": step})
+    assert str(refused.value) == f"--design.step_deg: {said}"
+    spec = design_spec("", "--design", {"sensors": 8, "radius_mm": 120,
+                                        "sweep_half_angle_deg": 27, "step_deg": 27})
+    assert spec.build().ring.max_step == 1   # the largest step is one motor step of 45°

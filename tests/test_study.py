@@ -112,7 +112,7 @@ BAD = [
     # a number with the unit its key names (a subnormal as written)
     ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 5e-324}]\n"
      "scenarios: [t_room]\n",
-     r"designs\[0\]\.step_deg: 5e-324 ° is out of range; allowed 0\.01 … 90 °$"),
+     r"designs\[0\]\.step_deg: 5e-324 ° is out of range; allowed 0\.006 … 27 °$"),
     ("designs: [{sensors: 8.5, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1}]\n"
      "scenarios: [t_room]\n", r"designs\[0\]\.sensors: expected an integer in 1 … 64, got 8\.5"),
     ("designs: [{sensors: 8, radius_mm: 120, sweep_half_angle_deg: 40, step_deg: 1, "

@@ -28,7 +28,7 @@ import numpy as np
 
 from .. import designs, gp2, safe_yaml
 from ..core import (MAX_SEEDS, RESULT_ROW_BYTES, RESULT_ROW_TEXT_BYTES, SEED_MAX,
-                    SENSOR_MODEL, key_unit, work_refusal)
+                    SENSOR_MODEL, Ring, bounds, key_unit, work_refusal)
 from ..errors import OutputError, TooBig, brief, formula_start, printable
 from ..maps.metrics import f1_score
 from ..outputs import OutputSet, atomic_file, sole_writer, write_text_atomic
@@ -50,6 +50,11 @@ KNOBS: Mapping[str, tuple[type, float, float, str]] = {
 TOP_KEYS = ("designs", "scenarios", "seeds", "knobs")
 PARAMETRIC_KEYS = ("sensors", "radius_mm", "sweep_half_angle_deg", "step_deg")
 PARAMETRIC_OPTIONAL = ("sensor", "name")
+# a sensor step is a motor step times the paper's belt ratio (designs.parametric): the Ring's
+# motor-step bounds in sensor degrees, 0.006 … 27° (step_deg 60 was let through to a
+# "ring.motor_step_rad: 100 °" refusal naming a key no design file has)
+STEP_DEG_RANGE = tuple(round(math.degrees(b) * designs.PAPER_RING.gear, 9)
+                       for b in bounds(Ring, "motor_step_rad"))
 
 KEY_COLUMNS = ("design", "scenario", "step_stride", "samples", "settle_ms", "seed")
 DESIGN_COLUMNS = ("sensor", "sensors", "radius_mm", "sweep_half_angle_deg", "step_deg")
@@ -165,7 +170,7 @@ def design_spec(source: str, path: str, raw: Any) -> DesignSpec:
         if key not in raw:
             raise _fail(source, f"{path}.{key}", "required key is missing")
     limits = {"sensors": (int, 1, 64), "radius_mm": (float, 0.0, 1000.0),
-              "sweep_half_angle_deg": (float, 0.0, 180.0), "step_deg": (float, 0.01, 90.0)}
+              "sweep_half_angle_deg": (float, 0.0, 180.0), "step_deg": (float, *STEP_DEG_RANGE)}
     params = tuple((k, _number(source, f"{path}.{k}", raw[k], *limits[k]))
                    for k in PARAMETRIC_KEYS)
     sensor = raw.get("sensor", SENSOR_MODEL)
