@@ -1240,3 +1240,46 @@ def test_a_lines_few_readings_a_silence_contradicts_leave_it_with_no_other_line(
         assert np.array_equal(took.nonzero()[1], np.full(before, 2))   # sensor 2's only
         assert np.all(p.reason[took] == Reason.INCIDENCE_UNKNOWN)
         assert np.array_equal(p.valid | took, q.valid)     # nothing made valid
+
+
+# A sweep's first six steps of one sensor meet a side wall at 61-66°, then the far wall: the
+# far wall's line took in the first three at its 11-16° (78-117 mm long); the two passes read
+# the next three apart (FOLDOVER_AMBIGUOUS), and the three alone were too few for a profile.
+# (The ring beside an acute corner, as a development room that showed it.)
+ACUTE_START_A21 = """
+name: acute_start_a21
+room: {outline_mm: [[100, 88.2], [1301.9, 0], [1619.6, 625], [1135.1, 1035.4]]}
+robot: {poses: [{x_mm: 1199.7, y_mm: 181.8, yaw_deg: -168.5}]}
+sensor: {model: gp2y0a21, max_range_mm: 800, adc_bits: 12}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_member_s_own_profile_reads_the_readings_the_two_passes_read_apart(monkeypatch):
+    from irring.estimation import estimate_numpy
+    from irring.estimation import foldover as est_foldover
+
+    sc, sweeps, cal = simulated(ACUTE_START_A21, seed=251308)
+    sw = sweeps[0]
+    now = estimate(sw, cal)
+    disowned = est_foldover._disowned_by_own_profile
+    with monkeypatch.context() as m:
+        m.setattr(est_foldover, "_disowned_by_own_profile",
+                  lambda p, label, sweep, cal_, profiler, seen: disowned(p, label, sweep, cal_,
+                                                                         profiler))
+        before = estimate(sw, cal)
+    hit = sw.truth.hit_point
+    err_before = np.hypot(before.x - hit[..., 0], before.y - hit[..., 1])
+    rows = [int(np.nonzero(sw.steps == s)[0][0]) for s in range(-35, -29)]
+    took = before.valid & ~now.valid
+    assert sorted(zip(*np.nonzero(took))) == [(r, 8) for r in rows[:3]]
+    assert np.all(now.reason[took] == Reason.INCIDENCE_UNKNOWN)
+    np.testing.assert_array_less([0.070, 0.090, 0.110], np.sort(err_before[took]))
+    # the next two the two passes read apart; valid readings > 100 mm off 1 -> 0
+    assert np.all(now.reason[rows[3:5], 8] == Reason.FOLDOVER_AMBIGUOUS)
+    assert int(np.sum(err_before[before.valid] > 0.100)) == 1
+    err_now = np.hypot(now.x - hit[..., 0], now.y - hit[..., 1])
+    assert int(np.sum(err_now[now.valid] > 0.100)) == 0
+    assert np.array_equal(now.valid | took, before.valid)
+    np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
+                                  now.reason)

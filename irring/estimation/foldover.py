@@ -47,7 +47,8 @@ _FOLD_PAST_MAX = 6     # a line with at most this many members past a wall its l
 #                        last readings of the steep wall before its drop-out (1-6 seen; a
 #                        wall seen past such a line had 8 or more)
 _FOLD_OWN_Z = 3.0      # a member whose own straight slope is this many standard errors off
-#                        its line's θ, reading it > UNKNOWN_M elsewhere, is not placed
+#                        its line's θ, reading it > 3σ (30 mm at least) elsewhere, is not
+#                        placed
 
 
 # a fold-over's reading whose σ says it is placed no better than this (θ = 0 for want of a
@@ -142,8 +143,11 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
                     iterations=iterations)
     # a far line member behind a wall its counts fit, where its line does not run on past it
     p = _behind_a_wall(p, second.lines.label, first.lines, walls, sweep, cal)
-    # … and one whose own profile reads it more than 100 mm from where its line puts it
-    p = _disowned_by_own_profile(p, second.lines.label, sweep, cal, profiler)
+    # … and one whose own profile reads it more than 100 mm from where its line puts it; the
+    # profile also reads the far readings the two passes disagreed on (their counts are the
+    # wall's all the same): a sweep's first three steps on a steep wall, taken in by the next
+    # wall's line, had only each other, too few to tell the 60° slope from the line's 12°
+    p = _disowned_by_own_profile(p, second.lines.label, sweep, cal, profiler, p.valid | differ)
     # a far reading whose own near trace is as straight as its far one: undecided (it took
     # part in the second pass as a far one, so the other readings are read as before)
     if doubted.any():
@@ -370,25 +374,29 @@ def _behind_a_wall(p: Points, label: np.ndarray, first: Lines, walls: np.ndarray
 
 
 def _disowned_by_own_profile(p: Points, label: np.ndarray, sweep: Sweep, cal: Calibration,
-                             profiler: Callable | None) -> Points:
+                             profiler: Callable | None, seen: np.ndarray | None = None
+                             ) -> Points:
     """``p`` (the fold-over's result) with INCIDENCE_UNKNOWN for each valid member of a line
     (``label``: the second pass's, −1 none) whose own range profile (:func:`range_profiles`;
     ``profiler``, the compiled :func:`profiles_compiled` by default) is straight and clearly
     steep at a θ more than ``_FOLD_OWN_Z`` standard errors from its line's, where the two
-    θ read it more than ``UNKNOWN_M`` apart: the first reading past a corner, taken in by
-    the steep wall's line at 67° (its own slope: 25°), read 135 mm short.
-    docs/foldover.md, "Past a wall its counts fit"."""
+    θ read it more than 3σ apart (30 mm at least): the first reading past a corner, taken in by
+    the steep wall's line at 67° (its own slope: 25°), read 135 mm short. The profiles read
+    the readings ``seen`` (default: the valid ones). docs/foldover.md, "Past a wall its
+    counts fit"."""
     if not (p.valid & (label >= 0)).any():
         return p
+    seen = p.valid if seen is None else seen
     steps = np.asarray(sweep.steps)
     index = scan_order(steps, p.valid.shape[1])
-    vi = index[p.valid.reshape(-1)[index]]
-    ask = (label.reshape(-1)[vi] >= 0).nonzero()[0]
+    vi = index[seen.reshape(-1)[index]]
+    ask = ((label.reshape(-1)[vi] >= 0) & p.valid.reshape(-1)[vi]).nonzero()[0]
     pr = (profiler or profiles_compiled)(p, vi, ask, sweep.counts, steps, cal)
     at = vi[ask]
     with np.errstate(divide="ignore", invalid="ignore"):
         z = (np.tan(p.theta.reshape(-1)[at]) - np.abs(pr.slope)) / pr.se
-    apart = np.abs(p.d.reshape(-1)[at] - cal.distance(pr.s[ask], pr.theta)) > UNKNOWN_M
+    apart = (np.abs(p.d.reshape(-1)[at] - cal.distance(pr.s[ask], pr.theta))
+             > np.maximum(0.03, 3.0 * p.sigma_m.reshape(-1)[at]))
     gone = at[pr.ok & (pr.se > 0) & (np.abs(z) > _FOLD_OWN_Z) & apart]
     if not gone.size:
         return p
