@@ -1242,6 +1242,47 @@ def test_a_lines_few_readings_a_silence_contradicts_leave_it_with_no_other_line(
         assert np.array_equal(p.valid | took, q.valid)     # nothing made valid
 
 
+# A far wall's reading between two steps of its own sensor on that wall's line, taken in by
+# another line 19° off the wall and read at its θ 75 mm short: the wall's line crosses its beam
+# 71 mm past its end point, more than the 3σ of the difference (62 mm).
+LONE_A21 = """
+name: lone_a21
+room: {outline_mm: [[0, 0], [1250, -60], [1560, 560], [1080, 900]]}
+robot: {poses: [{x_mm: 1000, y_mm: 125, yaw_deg: -168}]}
+sensor: {model: gp2y0a21, max_range_mm: 800, adc_bits: 12}
+effects: [incidence, noise, quantization, foldover]
+"""
+
+
+def test_a_lone_member_between_its_sensor_s_steps_on_another_line_is_not_placed(monkeypatch):
+    from irring.estimation import estimate_numpy
+    from irring.estimation import foldover as est_foldover
+
+    sc, sweeps, cal = simulated(LONE_A21, seed=3)
+    sw = sweeps[0]
+    now = estimate(sw, cal)
+    with monkeypatch.context() as m:
+        m.setattr(est_foldover, "_between_another_line", lambda p, *args: p)
+        before = estimate(sw, cal)
+    hit = sw.truth.hit_point
+    err_now = np.hypot(now.x - hit[..., 0], now.y - hit[..., 1])
+    err_before = np.hypot(before.x - hit[..., 0], before.y - hit[..., 1])
+    row = int(np.nonzero(sw.steps == 32)[0][0])
+    took = before.valid & ~now.valid
+    assert list(zip(*np.nonzero(took))) == [(row, 7)]
+    assert now.reason[row, 7] == Reason.INCIDENCE_UNKNOWN
+    assert 0.070 < err_before[row, 7] < 0.080
+    # its neighbours, one step either side, stay on their wall's line within 5 mm
+    assert now.valid[row - 1, 7] and now.valid[row + 1, 7]
+    assert err_now[row - 1, 7] < 0.005 and err_now[row + 1, 7] < 0.005
+    # nothing else moved
+    both = now.valid & before.valid
+    assert np.array_equal(now.valid | took, before.valid)
+    np.testing.assert_array_equal(now.x[both], before.x[both])
+    np.testing.assert_array_equal(estimate_numpy.estimate_detail(sw, cal).points.reason,
+                                  now.reason)
+
+
 # A sweep's first six steps of one sensor meet a side wall at 61-66°, then the far wall: the
 # far wall's line took in the first three at its 11-16° (78-117 mm long); the two passes read
 # the next three apart (FOLDOVER_AMBIGUOUS), and the three alone were too few for a profile.

@@ -148,6 +148,8 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     # wall's all the same): a sweep's first three steps on a steep wall, taken in by the next
     # wall's line, had only each other, too few to tell the 60° slope from the line's 12°
     p = _disowned_by_own_profile(p, second.lines.label, sweep, cal, profiler, p.valid | differ)
+    # … and a lone member between two of its own sensor's readings on another line, far off it
+    p = _between_another_line(p, second.lines, sweep)
     # a far reading whose own near trace is as straight as its far one: undecided (it took
     # part in the second pass as a far one, so the other readings are read as before)
     if doubted.any():
@@ -401,6 +403,49 @@ def _disowned_by_own_profile(p: Points, label: np.ndarray, sweep: Sweep, cal: Ca
     if not gone.size:
         return p
     return unplaced(p, gone)
+
+
+def _between_another_line(p: Points, lines: Lines, sweep: Sweep) -> Points:
+    """``p`` (the fold-over's result) with INCIDENCE_UNKNOWN for each valid member of a line
+    of ``lines`` (the second pass's) whose own sensor's previous and next readings
+    (:func:`~irring.core.reading_stride` motor steps away) are both valid members of one other
+    line, which its beam crosses farther from its end point than the 3σ of the difference
+    (its 3σ, 30 mm at least, and its neighbours' in quadrature): the beams
+    either side met that wall, so a lone reading elsewhere is its noise or an edge narrower
+    than two steps, and nothing tells which (a 3σ count spike, taken in by a line 20° off
+    the wall beside it, read 100 mm short). docs/foldover.md, "A lone reading between
+    another line's"."""
+    label = np.where(p.valid, lines.label, -1)
+    if p.valid.shape[0] < 3 or not (label >= 0).any():
+        return p
+    order = rows_in_step_order(sweep.steps)
+    lab, sig = label[order], p.sigma_m[order]
+    next_to = (np.diff(np.asarray(sweep.steps)[order]) == reading_stride(sweep))[:, None]
+    before = np.full(lab.shape, -1)
+    after = np.full(lab.shape, -1)
+    before[1:] = np.where(next_to, lab[:-1], -1)
+    after[:-1] = np.where(next_to, lab[1:], -1)
+    lone = np.zeros(lab.shape, dtype=bool)
+    lone[order] = (lab >= 0) & (before >= 0) & (before == after) & (before != lab)
+    if not lone.any():
+        return p
+    other, sig_nb = np.empty_like(before), np.zeros(lab.shape)
+    other[order] = before
+    sig_nb[order[1:-1]] = np.fmax(sig[:-2], sig[2:])   # the neighbours' placement's noise
+    at = lone.nonzero()
+    o = other[at]
+    ux, uy = np.cos(p.heading[at]), np.sin(p.heading[at])
+    nx, ny = lines.normal[o, 0], lines.normal[o, 1]
+    across = nx * ux + ny * uy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((lines.centroid[o, 0] - p.origin_x[at]) * nx
+             + (lines.centroid[o, 1] - p.origin_y[at]) * ny) / across
+    # … off by more than the 3σ of the two placements' difference (each 3σ in quadrature)
+    off = (t > 0.0) & (np.abs(t - p.d[at])
+                       > np.hypot(np.maximum(0.03, 3.0 * p.sigma_m[at]), 3.0 * sig_nb[at]))
+    if not off.any():
+        return p
+    return unplaced(p, np.ravel_multi_index(tuple(a[off] for a in at), p.valid.shape))
 
 
 def _onto_first_lines(p: Points, q: Points, first: Lines, label_second: np.ndarray,
