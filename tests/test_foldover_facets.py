@@ -51,12 +51,14 @@ def _run(reread: bool, monkeypatch):
 def test_a_line_over_facets_is_read_on_its_pieces_not_outside_the_room(monkeypatch):
     out_before, err_before = _run(False, monkeypatch)
     out_after, err_after = _run(True, monkeypatch)
-    # read at the line's θ: members up to 51 mm long draw 8 cells outside
-    assert out_before == 8 and err_before.max() > 0.045
+    # read at the line's θ: members up to 51 mm long draw 6 cells outside (8 until their own
+    # profiles read the two passes' discarded readings too and disown past 3σ: two 38-43 mm
+    # long go)
+    assert out_before == 6 and err_before.max() > 0.045
     # on its pieces: none outside, every valid reading within 7 mm; the 18 members of a piece
     # its own members do not orient (one sensor's trace) left INCIDENCE_UNKNOWN
     assert out_after == 0
-    assert (err_before.size, err_after.size) == (87, 69)
+    assert (err_before.size, err_after.size) == (85, 69)
     assert err_after.max() < 0.007
 
 

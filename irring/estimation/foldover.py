@@ -20,7 +20,7 @@ from .far_lines import FAR_LINE_MAX_MEMBERS
 from .lines import (PINNED_RAD, SNAP_MIN, Estimate, LineOptions, Lines, direction_se,
                     far_sigma_cap, jump_slope, read_to_own_range, scan_order, unplaced)
 from .members import CONTRADICT_SIGMAS
-from .profiles import UNKNOWN_M, profiles_compiled
+from .profiles import LOCAL_STEPS, UNKNOWN_M, profiles_compiled
 from .silence import (beam_crossings, classify, clip_at_corners, held_and_pooled, member_spans,
                       silent_behind_a_wall)
 
@@ -409,7 +409,8 @@ def _between_another_line(p: Points, lines: Lines, sweep: Sweep) -> Points:
     """``p`` (the fold-over's result) with INCIDENCE_UNKNOWN for each valid member of a line
     of ``lines`` (the second pass's) whose own sensor's previous and next readings
     (:func:`~irring.core.reading_stride` motor steps away) are both valid members of one other
-    line, which its beam crosses farther from its end point than the 3σ of the difference
+    line, with no other reading of its sensor on its own line within ``LOCAL_STEPS`` rows,
+    where that line crosses its beam farther from its end point than the 3σ of the difference
     (its 3σ, 30 mm at least, and its neighbours' in quadrature): the beams
     either side met that wall, so a lone reading elsewhere is its noise or an edge narrower
     than two steps, and nothing tells which (a 3σ count spike, taken in by a line 20° off
@@ -425,8 +426,14 @@ def _between_another_line(p: Points, lines: Lines, sweep: Sweep) -> Points:
     after = np.full(lab.shape, -1)
     before[1:] = np.where(next_to, lab[:-1], -1)
     after[:-1] = np.where(next_to, lab[1:], -1)
+    # … and no other reading of its sensor within LOCAL_STEPS rows on its line (a far wall
+    # split in two lines 35 mm apart, its sensor's readings alternating, is one wall)
+    alone = (lab >= 0) & (before >= 0) & (before == after) & (before != lab)
+    for k in range(2, LOCAL_STEPS + 1):
+        alone[k:] &= lab[:-k] != lab[k:]
+        alone[:-k] &= lab[k:] != lab[:-k]
     lone = np.zeros(lab.shape, dtype=bool)
-    lone[order] = (lab >= 0) & (before >= 0) & (before == after) & (before != lab)
+    lone[order] = alone
     if not lone.any():
         return p
     other, sig_nb = np.empty_like(before), np.zeros(lab.shape)
