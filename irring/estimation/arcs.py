@@ -1000,3 +1000,181 @@ def onto_post_circles(points: Points, label: np.ndarray, index: np.ndarray,
     label = label.copy()
     label.reshape(-1)[at] = -1
     return placed_at(points, at, d[take], th[take], sig[take]), label
+
+
+COLUMN_RUN_MIN = 3       # a sensor's run of at least this many readings …
+COLUMN_LINK_M = 0.06     # … whose θ = 0 end points come this near another sensor's run's …
+COLUMN_LINE_SHARE = 0.5  # … (its line members: on lines at least this share of whose members
+#                          it holds) …
+COLUMN_RADII_M = np.geomspace(0.03, 0.2, 14)  # … is tried with them as one circle of these radii
+COLUMN_MIN = 12          # … where they hold this many readings (a circle: three parameters) …
+COLUMN_MAX = 48          # … up to this many (more: walls'; each is tried as the apex: cost)
+COLUMN_REACH = 0.95      # … read at θ = 0 within this share of the max range (median) …
+COLUMN_NOISE_M = 0.025   # … with range noise this small (median): within more, a corner fits
+
+
+def columns_across_sensors(points: Points, label: np.ndarray, index: np.ndarray,
+                           counts: np.ndarray, steps: np.ndarray, cal: Calibration,
+                           line_alpha: np.ndarray, line_cx: np.ndarray, line_cy: np.ndarray,
+                           placed: np.ndarray) -> tuple[Points, np.ndarray]:
+    """Several sensors' runs of one round thing read on ONE circle fitted to them all; numpy,
+    shared by both estimators. Where no sensor's own run holds the arc's apex
+    (:func:`arc_incidence`), the flanks each sensor saw were read on lines across them (too
+    steep: short) or at θ = 0 (σ wide).
+
+    Runs as :func:`_runs_at_zero` cuts them, of at least ``COLUMN_RUN_MIN`` readings, none
+    of them ``placed`` (flat indices: on an arc or circle already). A run whose θ = 0 end
+    points bulge towards its sensor (:func:`_bulging`) is linked to every other sensor's run
+    whose end points come within ``COLUMN_LINK_M`` of its own. A group of two sensors or
+    more and ``COLUMN_MIN`` to ``COLUMN_MAX`` readings, read at θ = 0 within
+    ``COLUMN_REACH`` of the max range and ``COLUMN_NOISE_M`` of range noise (medians), none
+    of its runs hollow and none of its readings a member of a line holding less than
+    ``COLUMN_LINE_SHARE`` of its members there (a wall's), is tried as one circle: its
+    nearest point on one reading's beam at its θ = 0 distance, radius of
+    ``COLUMN_RADII_M`` (refined by ``ARC_REFINE``), scored as :func:`_arc_misfit` scores an
+    arc. Kept where each run misfits it at most ``ARC_MISFIT`` on average and, by BIC, no
+    more than the readings' pieces (:func:`_round_wins`); its readings of own misfit at
+    most ``ARC_ON`` leave their lines (label −1) at its θ, their own distance there and σ
+    as on an arc. Returns the points and ``label``. Why: docs/estimator.md, "A column
+    across sensors"."""
+    flat_valid = points.valid.reshape(-1)
+    vi = index[flat_valid[index]]
+    vi = vi[~np.isin(vi, placed)]
+    n_sensors = points.valid.shape[1]
+    if vi.size < 2 * COLUMN_RUN_MIN or n_sensors < 2:
+        return points, label
+    d0, _, run, n_run, size = _runs_at_zero(vi, n_sensors, steps, counts, cal)
+    long_run = size >= COLUMN_RUN_MIN
+    pos = long_run[run].nonzero()[0]
+    if pos.size < 2 * COLUMN_RUN_MIN:
+        return points, label
+    at = vi[pos]
+    h = points.heading.reshape(-1)[at]
+    ex, ey = np.cos(h), np.sin(h)
+    ox, oy = points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at]
+    px, py = ox + d0[pos] * ex, oy + d0[pos] * ey
+    grp = (np.cumsum(long_run) - 1)[run[pos]]
+    n_g = int(grp[-1]) + 1
+    bulge, toward = _bulging(px, py, ox, oy, grp, n_g)
+    hollow = (np.bincount(grp, toward < -ROUND_BULGE_M, n_g)
+              > ROUND_BEHIND * np.bincount(grp, minlength=n_g))
+    seed = bulge & ~hollow
+    if not seed.any():
+        return points, label
+    # a bulging run linked to the other sensors' runs its end points come near: runs whose
+    # boxes do, then their points (a few pairs; every point against every other cost more
+    # than the rest of the estimate on a T-room sweep)
+    sensor = at % n_sensors
+    first = np.searchsorted(grp, np.arange(n_g))
+    box = [f.reduceat(v, first) for f, v in ((np.minimum, px), (np.maximum, px),
+                                            (np.minimum, py), (np.maximum, py))]
+    run_sensor = sensor[first]
+    gap = np.maximum(np.maximum(box[0][:, None] - box[1][None, :],
+                                box[0][None, :] - box[1][:, None]),
+                     np.maximum(box[2][:, None] - box[3][None, :],
+                                box[2][None, :] - box[3][:, None]))
+    # (a run of more readings than a group may hold is a wall's: not linked)
+    small = np.diff(np.append(first, grp.size)) <= COLUMN_MAX - COLUMN_RUN_MIN
+    gi, gj = ((gap <= COLUMN_LINK_M) & (seed & small)[:, None] & small[None, :]
+              & (run_sensor[:, None] != run_sensor[None, :])).nonzero()
+    last = np.append(first[1:], grp.size)
+
+    def near(a, b):
+        """Whether runs a and b come within the link (each one's points in the other's box
+        grown by it: the others cannot)."""
+        pa, pb = slice(first[a], last[a]), slice(first[b], last[b])
+        xa, ya, xb, yb = px[pa], py[pa], px[pb], py[pb]
+        ia = ((xa >= box[0][b] - COLUMN_LINK_M) & (xa <= box[1][b] + COLUMN_LINK_M)
+              & (ya >= box[2][b] - COLUMN_LINK_M) & (ya <= box[3][b] + COLUMN_LINK_M))
+        ib = ((xb >= box[0][a] - COLUMN_LINK_M) & (xb <= box[1][a] + COLUMN_LINK_M)
+              & (yb >= box[2][a] - COLUMN_LINK_M) & (yb <= box[3][a] + COLUMN_LINK_M))
+        return bool(ia.any() and ib.any() and np.hypot(
+            xa[ia, None] - xb[None, ib], ya[ia, None] - yb[None, ib]).min() <= COLUMN_LINK_M)
+    close = np.array([near(a, b) for a, b in zip(gi, gj)], dtype=bool)
+    gi, gj = gi[close], gj[close]
+    if gi.size == 0:
+        return points, label
+    comp = np.arange(n_g)
+    for _ in range(n_g):
+        new = comp.copy()
+        np.minimum.at(new, gi, comp[gj])
+        np.minimum.at(new, gj, comp[gi])
+        new = new[new]
+        if (new == comp).all():
+            break
+        comp = new
+    linked = np.zeros(n_g, dtype=bool)
+    linked[gi] = linked[gj] = True
+    lab = label.reshape(-1)[at]
+    all_lab = label.reshape(-1)[vi]
+    members = np.bincount(all_lab[all_lab >= 0], minlength=int(lab.max(initial=-1)) + 1)
+    _, b0 = cal._ab0
+    s = np.asarray(counts, dtype=float).reshape(-1)[at]
+    sig_s = cal.sigma_counts() / s
+    noise = range_sigma(b0, d0[pos], sig_s)
+    log_s = np.log(s)
+    lite = SimpleNamespace(ox=ox, oy=oy, heading=h, s=s, d0=d0[pos], sig_s=sig_s)
+    step = math.log(COLUMN_RADII_M[1] / COLUMN_RADII_M[0])
+    take_at, take_th, take_d, take_sig = [], [], [], []
+    for c in np.unique(comp[linked]):
+        runs = (comp == c).nonzero()[0]
+        if hollow[runs].any():
+            continue
+        j = np.isin(grp, runs).nonzero()[0]
+        if (not COLUMN_MIN <= j.size <= COLUMN_MAX
+                or np.median(d0[pos][j]) > COLUMN_REACH * points.max_range_m
+                or np.median(noise[j]) > COLUMN_NOISE_M):
+            continue
+        # a line most of whose members lie elsewhere is a wall's, not this thing's chord
+        lines = np.unique(lab[j][lab[j] >= 0])
+        if lines.size and (np.bincount(lab[j][lab[j] >= 0], minlength=members.size)[lines]
+                           < COLUMN_LINE_SHARE * members[lines]).any():
+            continue
+        # every reading as the apex, every radius; then the best one's radius refined
+        k_apex = np.repeat(j, COLUMN_RADII_M.size)
+        k_r = np.tile(COLUMN_RADII_M, j.size)
+        mis = _column_misfit(k_apex, k_r, j, px, py, ex, ey, ox, oy, log_s, noise, cal)[0]
+        best = int(np.argmin(mis.sum(axis=1)))
+        k_r = k_r[best] * np.exp(step * ARC_REFINE)
+        mis, th, d = _column_misfit(np.full(k_r.size, k_apex[best]), k_r, j, px, py, ex, ey,
+                                    ox, oy, log_s, noise, cal)
+        best = int(np.argmin(mis.sum(axis=1)))
+        m, th, d = mis[best], th[best], d[best]
+        g = np.searchsorted(runs, grp[j])
+        if (np.bincount(g, m, runs.size)
+                > ARC_MISFIT * np.bincount(g, minlength=runs.size)).any():
+            continue
+        if not _round_wins(lite, j, lab[j], np.zeros(j.size, dtype=np.intp), 1, m, 3,
+                           line_alpha, line_cx, line_cy, cal)[0]:
+            continue
+        on = (m <= ARC_ON) & np.isfinite(d) & (d >= cal.min_range_m)
+        lo = cal.distance(s[j[on]], np.maximum(th[on] - ARC_DOUBT_RAD, 0.0))
+        hi = cal.distance(s[j[on]], np.minimum(th[on] + ARC_DOUBT_RAD, cal.max_incidence_rad))
+        _, b_th = cal.log_ab(th[on])
+        take_at.append(at[j[on]])
+        take_th.append(th[on])
+        take_d.append(d[on])
+        take_sig.append(np.hypot(range_sigma(b_th, d[on], sig_s[j[on]]), 0.5 * np.abs(lo - hi)))
+    if not take_at:
+        return points, label
+    at = np.concatenate(take_at)
+    if at.size == 0:
+        return points, label
+    label = label.copy()
+    label.reshape(-1)[at] = -1
+    return placed_at(points, at, np.concatenate(take_d), np.concatenate(take_th),
+                     np.concatenate(take_sig)), label
+
+
+def _column_misfit(apex, radius, j, px, py, ex, ey, ox, oy, log_s, noise, cal):
+    """Misfit, θ and d (K, J) of readings ``j`` on the circles (K,) whose nearest point is
+    reading ``apex``'s θ = 0 end point (``px``, ``py``), of ``radius``: as
+    :func:`_arc_misfit` scores an arc's."""
+    cx = (px[apex] + radius * ex[apex])[:, None]
+    cy = (py[apex] + radius * ey[apex])[:, None]
+    t, th, meets = meet_circle((cx, cy), radius[:, None], ox[j], oy[j], ex[j], ey[j])
+    meets &= th <= cal.max_incidence_rad
+    la, b = cal.log_ab(th)
+    d = np.exp(la + b * log_s[j])
+    z = (d - t) / noise[j]
+    return np.where(meets, np.minimum(z * z, ARC_MISS), ARC_MISS), th, d

@@ -25,7 +25,8 @@ from ..resources import kernel
 # Calibration is the estimator's input; calibration files written before 2026-11-26 name
 # it here (irring.estimation.estimate.Calibration.load), so this module exports it too
 from .calibration import RANGE_SIGMAS, SIGMA_FLOOR_M, Calibration
-from .arcs import local_incidence, onto_post_circles, round_runs_compiled
+from .arcs import (columns_across_sensors, local_incidence, onto_post_circles,
+                   round_runs_compiled)
 from .bends import (bent_ends_compiled, bowed_lines_compiled, faceted_lines_compiled,
                     kinked_lines)
 from .counts import CountsFits, counts_disown_lines
@@ -394,12 +395,21 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     points, label = (rounder or round_runs_compiled)(
         points, label, index, counts, steps, cal, grouping.alpha, grouping.cx, grouping.cy,
         profiler, snap, far_sigma_cap(cal, points.max_range_m))
-    if arcs and points is not before:    # (the readings round_runs put on its circles stay)
-        arcs.append((np.flatnonzero(points.valid & ((points.d != before.d)
-                                                    | (points.theta != before.theta))),
-                     np.zeros((3, 0))))
+    rounded = (np.flatnonzero(points.valid & ((points.d != before.d)
+                                              | (points.theta != before.theta)))
+               if points is not before else np.zeros(0, dtype=np.intp))
+    if arcs and rounded.size:    # (the readings round_runs put on its circles stay)
+        arcs.append((rounded, np.zeros((3, 0))))
     # a post's circle, fitted where a sensor saw its arc, read by the flanks others saw
+    shared = points
     points, label = onto_post_circles(points, label, index, counts, steps, cal, arcs)
+    if points is not shared:
+        rounded = np.union1d(rounded, np.flatnonzero(
+            points.valid & ((points.d != shared.d) | (points.theta != shared.theta))))
+    # a round thing no sensor's own run holds the apex of: one circle across the sensors
+    points, label = columns_across_sensors(
+        points, label, index, counts, steps, cal, grouping.alpha, grouping.cx, grouping.cy,
+        np.concatenate([a for a, _ in arcs] + [rounded]))
     if short is not None:
         points, label = doubt_far_lines(points, label, index, counts, steps, cal, *short,
                                         profiler, voter)
