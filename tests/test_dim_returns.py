@@ -36,11 +36,18 @@ def _off(monkeypatch):
     monkeypatch.setattr(fast, "dim_returns_on_lines", lambda points, *a, **k: points)
 
 
+def _alone(monkeypatch):
+    """The rule alone: onto_crossed_lines, which runs after it, would place the same dim
+    returns on the same lines where the rule is off (every one of the 16 here)."""
+    monkeypatch.setattr(fast, "onto_crossed_lines", lambda points, *a, **k: points)
+
+
 def test_dim_returns_beside_a_far_line_go_onto_it(monkeypatch):
     """Seed 5: 16 readings that were OUT_OF_RANGE (too weak one by one) are valid, every one
     on a wall and within 20 mm of its true hit (RMS 7.4 mm); their counts lie in the band
     between the margins; nothing else moves; the map's recall of the far walls rises
     (0.617 → 0.644) and F1 with it (0.744 → 0.758)."""
+    _alone(monkeypatch)
     scene = loads(DIM_A02)
     cal, _ = pipeline.scene_calibration(scene)
     sim, _ = pipeline.simulated(scene, progress=False)
@@ -79,6 +86,7 @@ def test_counts_that_disagree_with_the_line_stay_out_of_range(monkeypatch):
     """The same sweep with DIM_SIGMAS at 0.2 count σ: fewer readings are taken (a line's
     counts must match a dim reading's own), and with DIM_CHAIN 0 none (only readings beside
     a member, through dim readings, are asked)."""
+    _alone(monkeypatch)
     scene = loads(DIM_A02)
     cal, _ = pipeline.scene_calibration(scene)
     sweep = pipeline.simulated(scene, progress=False)[0].sweeps[0]

@@ -8,9 +8,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from irring import pipeline
-from irring.core import Cylinder, Points, Reason
+from irring.core import Cylinder, Points, Reason, points_with
+from irring.estimation.calibration import Calibration
+from irring.estimation.lines import Lines
 from irring.estimation import estimate as fast
 from irring.estimation import arcs as est_arcs
 from irring.estimation import far_lines as est_far_lines
@@ -310,3 +313,66 @@ def test_a_legs_readings_flanked_by_its_own_grazed_edges_are_read_on_its_circle(
                             p.y - sw.truth.hit_point[..., 1])[leg])
     err = np.concatenate(err)
     assert err.size >= 15 and err.max() < 0.025
+
+
+def _crossing_case(model: str):
+    """A wall y = 1.2 m seen by one sensor's line of six members (x 0.05-0.30 m) and four
+    other readings from the origin, INCIDENCE_UNKNOWN: (0) its counts read at the range and
+    incidence where its beam crosses the wall 0.08 m past the members (within the margin),
+    (1) counts 0.30 m long of that, (2) a beam crossing 0.25 m past the members, (3) at the
+    noise level. Returns (calibration, points, lines, counts, crossing range, incidence)."""
+    cal = Calibration.nominal(model)
+    n = 10
+    x = np.r_[np.linspace(0.05, 0.30, 6), np.full(4, np.nan)]
+    y = np.r_[1.2 + np.array([0.004, -0.006, 0.002, 0.009, -0.003, -0.004]), np.full(4, np.nan)]
+    wall_x = np.array([0.38, 0.38, 0.55, 0.38])      # where readings 6-9 meet the wall
+    heading = np.r_[np.arctan2(y[:6], x[:6]), np.arctan2(1.2, wall_x)]
+    rng = np.r_[np.hypot(x[:6], y[:6]), np.hypot(wall_x, 1.2)]
+    theta = np.abs(math.pi / 2 - heading)
+    counts = cal.counts(rng, theta)
+    counts[7] = cal.counts(rng[7] + 0.30, theta[7])
+    counts[9] = cal.no_return_counts + 1.0
+    valid = np.arange(n) < 6
+    col = lambda v: np.asarray(v, float).reshape(n, 1)
+    zeros = col(np.zeros(n))
+    reason = np.where(valid, Reason.OK, Reason.INCIDENCE_UNKNOWN).astype(np.uint8)
+    points = Points(x=col(x), y=col(y), d=col(np.where(valid, rng, np.nan)),
+                    theta=col(np.where(valid, theta, np.nan)), origin_x=zeros,
+                    origin_y=zeros.copy(), heading=col(heading),
+                    sigma_m=col(np.where(valid, 0.03, np.nan)),
+                    iterations=np.ones((n, 1), int), valid=valid.reshape(n, 1),
+                    reason=reason.reshape(n, 1), max_range_m=cal.max_range_m)
+    label = np.where(valid, 0, -1).reshape(n, 1)
+    lines = Lines(label=label, centroid=np.array([[0.175, 1.2]]),
+                  normal=np.array([[0.0, 1.0]]), direction=np.array([[1.0, 0.0]]),
+                  n_points=np.array([6]), length_m=np.array([0.25]), rms_m=np.zeros(1),
+                  usable=np.ones(1, bool), start=np.zeros(1, int), end=np.zeros(1, int))
+    return cal, points, lines, counts.reshape(n, 1), rng, theta
+
+
+def test_an_unplaced_far_return_is_read_on_the_line_its_beam_crosses():
+    """GP2Y0A02: reading 6's counts give the range where its beam crosses another sensor's
+    line (0.08 m past its members): valid there, at the crossing's incidence, with the
+    members' RMS about the line as σ. Reading 7 (counts 0.30 m long: many σ off), 8 (crossing
+    0.25 m past the members) and 9 (no return) stay unplaced; the members do not move."""
+    cal, points, lines, counts, rng, theta = _crossing_case("gp2y0a02")
+    out = est_far_lines.onto_crossed_lines(points, lines, counts, cal)
+    assert out.valid[:, 0].tolist() == [True] * 7 + [False] * 3
+    assert out.reason[6, 0] == Reason.OK and np.all(out.reason[7:, 0] == Reason.INCIDENCE_UNKNOWN)
+    assert out.d[6, 0] == pytest.approx(rng[6], abs=1e-9)
+    assert out.theta[6, 0] == pytest.approx(theta[6], abs=1e-9)
+    assert (out.x[6, 0], out.y[6, 0]) == (pytest.approx(0.38, abs=1e-9), pytest.approx(1.2))
+    residual = np.array([0.004, -0.006, 0.002, 0.009, -0.003, -0.004])
+    residual -= residual.mean()      # about the line through the members' centroid
+    assert out.sigma_m[6, 0] == pytest.approx(math.sqrt(np.mean(residual ** 2)), rel=0.05)
+    np.testing.assert_array_equal(out.x[:6], points.x[:6])
+    assert np.isnan(out.x[7:, 0]).all()
+
+
+def test_a_short_range_part_leaves_its_unplaced_returns_alone():
+    """GP2Y0A21 (rated to 0.8 m): the same case changes nothing (on the short-range parts
+    the rule moved rooms both ways: docs/estimator.md)."""
+    cal, points, lines, counts, _, _ = _crossing_case("gp2y0a21")
+    points = points_with(points, max_range_m=1.5)
+    out = est_far_lines.onto_crossed_lines(points, lines, counts, cal)
+    assert out is points

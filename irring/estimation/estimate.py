@@ -30,10 +30,12 @@ from .arcs import (columns_across_sensors, local_incidence, onto_post_circles,
 from .bends import (bent_ends_compiled, bowed_lines_compiled, faceted_lines_compiled,
                     kinked_lines)
 from .counts import CountsFits, counts_disown_lines
-from .far_lines import doubt_far_lines, far_posts, fused_lines, short_far_lines_compiled
+from .far_lines import (doubt_far_lines, far_posts, fused_lines, onto_crossed_lines,
+                        short_far_lines_compiled, unplaced_returns)
 from .foldover import resolve_foldover
-from .lines import (PINNED_RAD, Estimate, LineOptions, far_sigma_cap, jump_slope, lines_record,
-                    read_to_own_range, scan_order, segment, snap_members, snap_to_lines)
+from .lines import (PINNED_RAD, Estimate, LineOptions, Lines, far_sigma_cap, jump_slope,
+                    lines_record, read_to_own_range, scan_order, segment, snap_members,
+                    snap_to_lines)
 from .members import (across_silence, alone_at_an_edge_compiled, dim_returns_on_lines,
                       past_other_lines, unplaced_alone)
 from .profiles import (SharedProfiles, profiles_compiled, theta_free_in_noise,
@@ -344,7 +346,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     each silent beam's reach (``reach``, the compiled :func:`no_return_reach` by default; the
     oracle passes its numpy statements of both; never past ``cal.silent_range_m``:
     :func:`silent_reach`), last (``snap`` only) dim returns beside a line's members put on it
-    (:func:`dim_returns_on_lines`) and, with ``detail``, the :class:`Lines`. Line members are
+    (:func:`dim_returns_on_lines`), then far returns left unplaced on a line their beam
+    crosses (:func:`onto_crossed_lines`) and, with ``detail``, the :class:`Lines`. Line members are
     first moved out by what the return level cut off their lines (:func:`censored_lines`).
     ``profiler``: the readings' range profiles (the compiled :func:`profiles_compiled` by
     default; the oracle passes its numpy statement :func:`range_profiles`); ``voter`` and
@@ -463,16 +466,22 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
               if read_to_own_range(cal, points.max_range_m) else None)
     silent = bool(np.count_nonzero(points.reason == _NO_RETURN))
     own = counts if raw_counts is None else raw_counts   # (each reading's own, not pooled)
+    def record() -> Lines:
+        pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
+                             alpha=grouping.alpha, usable=grouping.usable)
+        used = index if grouping.uidx is None else index.take(grouping.uidx)
+        return lines_record(pieces_out, label, used)
+
     # dim returns beside a line's members put on it once every rule above has decided
     # (snap_label None: a fold-over's judging pass keeps its lines as fitted)
     if not (detail or silent or (pooled is not None and pooled.any())):
         points = dim_returns_on_lines(points, snap_label, counts, raw_counts, steps, cal)
-        return Estimate(points=theta_free_in_noise(points, own, cal),
-                        lines=None, theta_history=tuple(history))
-    pieces_out = replace(grouping.pieces, cx=grouping.cx, cy=grouping.cy,
-                         alpha=grouping.alpha, usable=grouping.usable)
-    used = index if grouping.uidx is None else index.take(grouping.uidx)
-    found = lines_record(pieces_out, label, used)
+        points = theta_free_in_noise(points, own, cal)
+        if snap and unplaced_returns(points, own, cal).any():
+            # last: unplaced far returns on a line their beam crosses
+            points = onto_crossed_lines(points, record(), own, cal)
+        return Estimate(points=points, lines=None, theta_history=tuple(history))
+    found = record()
     if pooled is not None and pooled.any():
         points = noise_past_line_end(points, found,
                                      counts if raw_counts is None else raw_counts, cal)
@@ -489,6 +498,8 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     points = dim_returns_on_lines(points, snap_label, counts, raw_counts, steps, cal)
     # last: whatever a rule above did, a reading no θ moves stays within its noise
     points = theta_free_in_noise(points, own, cal)
+    if snap:   # then unplaced far returns on a line their beam crosses
+        points = onto_crossed_lines(points, found, own, cal)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 

@@ -16,9 +16,10 @@ import numpy as np
 
 from ..core import Points, Reason, points_with, rows_in_step_order
 from ..resources import kernel
-from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, SIGMA_FLOOR_M, Calibration
+from .calibration import (NO_RETURN_SIGMAS, RANGE_SIGMAS, RETURN_SIGMAS, SIGMA_FLOOR_M,
+                          Calibration, range_sigma)
 from .arcs import ARC_DOUBT_RAD, ARC_MISFIT, ARC_MISS, ARC_ON, meet_circle, members_on_arcs
-from .lines import direction_se, read_to_own_range
+from .lines import direction_se, placed_at, read_to_own_range
 from .profiles import LOCAL_MIN, LOCAL_STEPS, Profile, leave_doubted_line, profiles_compiled
 
 
@@ -423,3 +424,84 @@ def _far_line_vote_compiled(at, sel, lab, theta_now, pr: Profile, d, vi, n_lines
         at, sel, lab, f(theta_now, dtype=float), pr.chain, pr.step, pr.n, pr.se, pr.slope,
         pr.theta, pr.s, f(d, dtype=float), vi, cal.theta_rad, cal._node_log_a, cal.b,
         n_lines, half, min_n, z_max, shift_m)
+
+
+CROSS_RANGE_M = 1.0     # a part rated beyond this (GP2Y0A02: 1.5 m) …
+CROSS_MIN = 5           # … places its unplaced returns on a line of ≥ this many members …
+CROSS_RMS_M = 0.02      # … lying within this RMS of it …
+CROSS_MARGIN_M = 0.10   # … that their beam crosses within this of the members' extent …
+CROSS_Z = 3.0           # … where their counts read that range within this many σ there
+
+
+def unplaced_returns(points: Points, counts: np.ndarray, cal: Calibration) -> np.ndarray:
+    """(S, N) bool: the returns (counts ``NO_RETURN_SIGMAS`` count σ above the no-return level)
+    left INCIDENCE_UNKNOWN or OUT_OF_RANGE, where :func:`onto_crossed_lines` may place them
+    (none but on a part rated beyond ``CROSS_RANGE_M``, read to its own range, whose curve
+    does not fold: a folding sweep's unplaced readings are its fold-over's to judge)."""
+    if (cal.folds or not (cal.max_range_m > CROSS_RANGE_M
+                          and read_to_own_range(cal, points.max_range_m))):
+        return np.zeros(points.valid.shape, dtype=bool)
+    reason = points.reason
+    return (((reason == _INCIDENCE_UNKNOWN) | (reason == _OUT_OF_RANGE))
+            & (counts > cal.no_return_counts + NO_RETURN_SIGMAS * cal.sigma_counts()))
+
+
+def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibration) -> Points:
+    """``points`` with the returns left INCIDENCE_UNKNOWN or OUT_OF_RANGE
+    (:func:`unplaced_returns`) placed on the first line (``lines``:
+    :class:`~irring.estimation.lines.Lines`, often another sensor's) their beam crosses:
+    valid at that crossing's range and incidence, with the line's RMS (at least
+    ``SIGMA_FLOOR_M``) as σ, where the line has ≥ ``CROSS_MIN`` valid members within
+    ``CROSS_RMS_M`` RMS of it, the crossing lies within ``CROSS_MARGIN_M`` of their extent
+    along it and inside the max range and drop-out angle, and the reading's counts
+    (``counts`` (S, N), its own) give that range at that incidence within ``CROSS_Z``
+    count-noise σ. Why and what it measured: docs/estimator.md, "Unplaced far returns on a
+    crossed line"."""
+    cand = unplaced_returns(points, counts, cal)
+    label = lines.label
+    member = points.valid & (label >= 0)
+    n_lines = lines.centroid.shape[0]
+    if n_lines == 0 or not (cand.any() and member.any()):
+        return points
+    g = label[member]
+    n = np.bincount(g, minlength=n_lines)
+    (cx, cy), (ux, uy), (nx, ny) = lines.centroid.T, lines.direction.T, lines.normal.T
+    du, dv = points.x[member] - cx.take(g), points.y[member] - cy.take(g)
+    t = du * ux.take(g) + dv * uy.take(g)
+    lo, hi = np.full(n_lines, np.inf), np.full(n_lines, -np.inf)
+    np.minimum.at(lo, g, t)
+    np.maximum.at(hi, g, t)
+    r = du * nx.take(g) + dv * ny.take(g)
+    rms = np.sqrt(np.bincount(g, r * r, n_lines) / np.maximum(n, 1))
+    at = np.flatnonzero(cand)
+    ox, oy = points.origin_x.reshape(-1)[at, None], points.origin_y.reshape(-1)[at, None]
+    h = points.heading.reshape(-1)[at, None]
+    hx, hy = np.cos(h), np.sin(h)
+    # (readings, lines): the range along each beam to each line, and where along the line
+    cos_in = hx * nx + hy * ny
+    with np.errstate(divide="ignore", invalid="ignore"):   # (a beam along a line: none)
+        rng = ((cx - ox) * nx + (cy - oy) * ny) / cos_in
+        along = (ox + rng * hx - cx) * ux + (oy + rng * hy - cy) * uy
+    theta = np.arccos(np.minimum(np.abs(cos_in), 1.0))
+    crossed = ((n >= CROSS_MIN) & (rms <= CROSS_RMS_M) & (along >= lo - CROSS_MARGIN_M)
+               & (along <= hi + CROSS_MARGIN_M) & (rng > cal.min_range_m)
+               & (theta < cal.max_incidence_rad))
+    rng = np.where(crossed, rng, np.inf)
+    first = np.argmin(rng, axis=1)
+    k = np.arange(at.size)
+    d, th = rng[k, first], theta[k, first]
+    meets = d < points.max_range_m
+    th = np.where(meets, th, 0.0)
+    s = counts.reshape(-1)[at].astype(float)
+    d_s = cal.distance(s, th)
+    _, b = cal.log_ab(th)
+    put = meets & (np.abs(d_s - np.where(meets, d, 0.0))
+                   <= CROSS_Z * range_sigma(b, d_s, cal.sigma_counts() / s))
+    if not put.any():
+        return points
+    line = first[put]
+    placed = placed_at(points, at[put], d[put], th[put], np.maximum(rms[line], SIGMA_FLOOR_M))
+    valid, why = placed.valid.copy(), np.array(placed.reason)
+    valid.reshape(-1)[at[put]] = True
+    why.reshape(-1)[at[put]] = Reason.OK
+    return points_with(placed, valid=valid, reason=why)
