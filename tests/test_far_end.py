@@ -489,6 +489,8 @@ def test_no_reading_is_pooled_past_a_faces_end_into_free_space(monkeypatch):
     monkeypatch.setattr(fast, "dim_returns_on_lines", lambda points, *a, **k: points)
     # (and unplaced_alone: it leaves 3 of seed 4307's such points unplaced, σ over 60 mm)
     monkeypatch.setattr(fast, "unplaced_alone", lambda points, label: points)
+    # (and onto_crossed_lines: it puts 2 and 1 more of those unplaced on the face's line)
+    monkeypatch.setattr(fast, "onto_crossed_lines", lambda points, *a, **k: points)
     before = no_hit_and_precision()
     assert [n for n, _ in before] == [14, 7] and [n for n, _ in after] == [0, 0]
     assert all(a > b + 0.015 for (_, a), (_, b) in zip(after, before))
@@ -629,8 +631,10 @@ def test_a_far_line_members_sigma_is_its_error_not_half_a_readings_noise(monkeyp
     capped σ overstates their error (z RMS 0.51; a 5 mm cap mapped our far rooms worse).
     The precisions of the cap are the mapper's before its floor left the cells in front of
     an end point (docs/mapping.md, "Fine cells"): since, σ twice the error costs 0.003."""
-    # the σ alone (dim returns beside far lines add 115 end points here)
+    # the σ alone (dim returns beside far lines add 115 end points here; unplaced returns
+    # read on the line their beam crosses, onto_crossed_lines, 217)
     monkeypatch.setattr(fast, "dim_returns_on_lines", lambda points, *a, **k: points)
+    monkeypatch.setattr(fast, "onto_crossed_lines", lambda points, *a, **k: points)
     scene = loads(FAR_A02)
 
     def measure(params=None):
