@@ -395,6 +395,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     arcs: list = []
     points, label = local_incidence(points, label, index, counts, steps, cal, profiler, arcs)
     before = points
+    left = points.reason.copy()   # (onto_crossed_lines asks only what no later rule unplaced)
     points, label = (rounder or round_runs_compiled)(
         points, label, index, counts, steps, cal, grouping.alpha, grouping.cx, grouping.cy,
         profiler, snap, far_sigma_cap(cal, points.max_range_m))
@@ -477,9 +478,9 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     if not (detail or silent or (pooled is not None and pooled.any())):
         points = dim_returns_on_lines(points, snap_label, counts, raw_counts, steps, cal)
         points = theta_free_in_noise(points, own, cal)
-        if snap and unplaced_returns(points, own, cal).any():
+        if snap and unplaced_returns(points, own, cal, left).any():
             # last: unplaced far returns on a line their beam crosses
-            points = onto_crossed_lines(points, record(), own, cal)
+            points = onto_crossed_lines(points, record(), own, cal, left)
         return Estimate(points=points, lines=None, theta_history=tuple(history))
     found = record()
     if pooled is not None and pooled.any():
@@ -499,7 +500,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     # last: whatever a rule above did, a reading no θ moves stays within its noise
     points = theta_free_in_noise(points, own, cal)
     if snap:   # then unplaced far returns on a line their beam crosses
-        points = onto_crossed_lines(points, found, own, cal)
+        points = onto_crossed_lines(points, found, own, cal, left)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 

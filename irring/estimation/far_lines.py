@@ -429,35 +429,41 @@ def _far_line_vote_compiled(at, sel, lab, theta_now, pr: Profile, d, vi, n_lines
 CROSS_RANGE_M = 1.0     # a part rated beyond this (GP2Y0A02: 1.5 m) …
 CROSS_MIN = 5           # … places its unplaced returns on a line of ≥ this many members …
 CROSS_RMS_M = 0.02      # … lying within this RMS of it …
-CROSS_MARGIN_M = 0.10   # … that their beam crosses within this of the members' extent …
+CROSS_MARGIN_M = 0.05   # … that their beam crosses within this of the members' extent …
 CROSS_Z = 3.0           # … where their counts read that range within this many σ there
 
 
-def unplaced_returns(points: Points, counts: np.ndarray, cal: Calibration) -> np.ndarray:
+def unplaced_returns(points: Points, counts: np.ndarray, cal: Calibration,
+                     left: np.ndarray | None = None) -> np.ndarray:
     """(S, N) bool: the returns (counts ``NO_RETURN_SIGMAS`` count σ above the no-return level)
-    left INCIDENCE_UNKNOWN or OUT_OF_RANGE, where :func:`onto_crossed_lines` may place them
-    (none but on a part rated beyond ``CROSS_RANGE_M``, read to its own range, whose curve
-    does not fold: a folding sweep's unplaced readings are its fold-over's to judge)."""
+    left INCIDENCE_UNKNOWN, where :func:`onto_crossed_lines` may place them (none but on a
+    part rated beyond ``CROSS_RANGE_M``, read to its own range, whose curve does not fold: a
+    folding sweep's unplaced readings are its fold-over's to judge). ``left`` (S, N) uint8
+    (None: any): each reading's reason as :func:`local_incidence` left it; only one still
+    INCIDENCE_UNKNOWN there is asked (not one a later rule unplaced on purpose). Not
+    OUT_OF_RANGE: counts that weak also fit a nearer surface at a steeper θ, or noise where
+    the beam met nothing (docs/estimator.md)."""
     if (cal.folds or not (cal.max_range_m > CROSS_RANGE_M
                           and read_to_own_range(cal, points.max_range_m))):
         return np.zeros(points.valid.shape, dtype=bool)
     reason = points.reason
-    return (((reason == _INCIDENCE_UNKNOWN) | (reason == _OUT_OF_RANGE))
+    return ((reason == _INCIDENCE_UNKNOWN) & (True if left is None else left == reason)
             & (counts > cal.no_return_counts + NO_RETURN_SIGMAS * cal.sigma_counts()))
 
 
-def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibration) -> Points:
-    """``points`` with the returns left INCIDENCE_UNKNOWN or OUT_OF_RANGE
-    (:func:`unplaced_returns`) placed on the first line (``lines``:
+def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibration,
+                       left: np.ndarray | None = None) -> Points:
+    """``points`` with the returns left INCIDENCE_UNKNOWN (:func:`unplaced_returns`;
+    ``left``: as there) placed on the first line (``lines``:
     :class:`~irring.estimation.lines.Lines`, often another sensor's) their beam crosses:
-    valid at that crossing's range and incidence, with the line's RMS (at least
-    ``SIGMA_FLOOR_M``) as σ, where the line has ≥ ``CROSS_MIN`` valid members within
+    valid at that crossing's range and incidence, with σ the line's valid members' mean σ
+    or their RMS about it, the larger (at least ``SIGMA_FLOOR_M``), where the line has ≥ ``CROSS_MIN`` valid members within
     ``CROSS_RMS_M`` RMS of it, the crossing lies within ``CROSS_MARGIN_M`` of their extent
     along it and inside the max range and drop-out angle, and the reading's counts
     (``counts`` (S, N), its own) give that range at that incidence within ``CROSS_Z``
     count-noise σ. Why and what it measured: docs/estimator.md, "Unplaced far returns on a
     crossed line"."""
-    cand = unplaced_returns(points, counts, cal)
+    cand = unplaced_returns(points, counts, cal, left)
     label = lines.label
     member = points.valid & (label >= 0)
     n_lines = lines.centroid.shape[0]
@@ -473,6 +479,8 @@ def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibrati
     np.maximum.at(hi, g, t)
     r = du * nx.take(g) + dv * ny.take(g)
     rms = np.sqrt(np.bincount(g, r * r, n_lines) / np.maximum(n, 1))
+    # (σ: the members' own on their line, or their RMS about it if more: snapped, ~0)
+    sig = np.bincount(g, points.sigma_m[member], n_lines) / np.maximum(n, 1)
     at = np.flatnonzero(cand)
     ox, oy = points.origin_x.reshape(-1)[at, None], points.origin_y.reshape(-1)[at, None]
     h = points.heading.reshape(-1)[at, None]
@@ -500,7 +508,8 @@ def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibrati
     if not put.any():
         return points
     line = first[put]
-    placed = placed_at(points, at[put], d[put], th[put], np.maximum(rms[line], SIGMA_FLOOR_M))
+    placed = placed_at(points, at[put], d[put], th[put],
+                       np.maximum(np.maximum(sig[line], rms[line]), SIGMA_FLOOR_M))
     valid, why = placed.valid.copy(), np.array(placed.reason)
     valid.reshape(-1)[at[put]] = True
     why.reshape(-1)[at[put]] = Reason.OK
