@@ -320,14 +320,14 @@ def test_a_legs_readings_flanked_by_its_own_grazed_edges_are_read_on_its_circle(
 def _crossing_case(model: str):
     """A wall y = 1.2 m seen by one sensor's line of six members (x 0.05-0.30 m) and four
     other readings from the origin, INCIDENCE_UNKNOWN: (0) its counts read at the range and
-    incidence where its beam crosses the wall 0.08 m past the members (within the margin),
+    incidence where its beam crosses the wall 0.04 m past the members (within the margin),
     (1) counts 0.30 m long of that, (2) a beam crossing 0.25 m past the members, (3) at the
     noise level. Returns (calibration, points, lines, counts, crossing range, incidence)."""
     cal = Calibration.nominal(model)
     n = 10
     x = np.r_[np.linspace(0.05, 0.30, 6), np.full(4, np.nan)]
     y = np.r_[1.2 + np.array([0.004, -0.006, 0.002, 0.009, -0.003, -0.004]), np.full(4, np.nan)]
-    wall_x = np.array([0.38, 0.38, 0.55, 0.38])      # where readings 6-9 meet the wall
+    wall_x = np.array([0.34, 0.38, 0.55, 0.38])      # where readings 6-9 meet the wall
     heading = np.r_[np.arctan2(y[:6], x[:6]), np.arctan2(1.2, wall_x)]
     rng = np.r_[np.hypot(x[:6], y[:6]), np.hypot(wall_x, 1.2)]
     theta = np.abs(math.pi / 2 - heading)
@@ -341,7 +341,7 @@ def _crossing_case(model: str):
     points = Points(x=col(x), y=col(y), d=col(np.where(valid, rng, np.nan)),
                     theta=col(np.where(valid, theta, np.nan)), origin_x=zeros,
                     origin_y=zeros.copy(), heading=col(heading),
-                    sigma_m=col(np.where(valid, 0.03, np.nan)),
+                    sigma_m=col(np.r_[np.linspace(0.02, 0.03, 6), np.full(4, np.nan)]),
                     iterations=np.ones((n, 1), int), valid=valid.reshape(n, 1),
                     reason=reason.reshape(n, 1), max_range_m=cal.max_range_m)
     label = np.where(valid, 0, -1).reshape(n, 1)
@@ -354,8 +354,8 @@ def _crossing_case(model: str):
 
 def test_an_unplaced_far_return_is_read_on_the_line_its_beam_crosses():
     """GP2Y0A02: reading 6's counts give the range where its beam crosses another sensor's
-    line (0.08 m past its members): valid there, at the crossing's incidence, with the
-    members' RMS about the line as σ. Reading 7 (counts 0.30 m long: many σ off), 8 (crossing
+    line (0.04 m past its members): valid there, at the crossing's incidence, with the
+    members' mean σ (25 mm; their RMS about the line, 5 mm, is less) as σ. Reading 7 (counts 0.30 m long: many σ off), 8 (crossing
     0.25 m past the members) and 9 (no return) stay unplaced; the members do not move."""
     cal, points, lines, counts, rng, theta = _crossing_case("gp2y0a02")
     out = est_far_lines.onto_crossed_lines(points, lines, counts, cal)
@@ -363,12 +363,28 @@ def test_an_unplaced_far_return_is_read_on_the_line_its_beam_crosses():
     assert out.reason[6, 0] == Reason.OK and np.all(out.reason[7:, 0] == Reason.INCIDENCE_UNKNOWN)
     assert out.d[6, 0] == pytest.approx(rng[6], abs=1e-9)
     assert out.theta[6, 0] == pytest.approx(theta[6], abs=1e-9)
-    assert (out.x[6, 0], out.y[6, 0]) == (pytest.approx(0.38, abs=1e-9), pytest.approx(1.2))
-    residual = np.array([0.004, -0.006, 0.002, 0.009, -0.003, -0.004])
-    residual -= residual.mean()      # about the line through the members' centroid
-    assert out.sigma_m[6, 0] == pytest.approx(math.sqrt(np.mean(residual ** 2)), rel=0.05)
+    assert (out.x[6, 0], out.y[6, 0]) == (pytest.approx(0.34, abs=1e-9), pytest.approx(1.2))
+    assert out.sigma_m[6, 0] == pytest.approx(0.025, abs=1e-12)
     np.testing.assert_array_equal(out.x[:6], points.x[:6])
     assert np.isnan(out.x[7:, 0]).all()
+
+
+def test_only_a_reading_local_incidence_left_unknown_is_placed():
+    """Reading 6 of that case stays unplaced where it is OUT_OF_RANGE (counts that weak fit a
+    nearer surface at a steeper θ, or noise where the beam met nothing) and where
+    ``left`` says local_incidence placed it (a later rule unplaced it on purpose); left
+    INCIDENCE_UNKNOWN there, it is placed."""
+    cal, points, lines, counts, _, _ = _crossing_case("gp2y0a02")
+    reason = points.reason.copy()
+    reason[6, 0] = Reason.OUT_OF_RANGE
+    out = est_far_lines.onto_crossed_lines(points_with(points, reason=reason), lines, counts,
+                                           cal)
+    assert not out.valid[6:, 0].any() and out.reason[6, 0] == Reason.OUT_OF_RANGE
+    left = points.reason.copy()
+    assert est_far_lines.onto_crossed_lines(points, lines, counts, cal, left).valid[6, 0]
+    left[6, 0] = Reason.OK
+    out = est_far_lines.onto_crossed_lines(points, lines, counts, cal, left)
+    assert not out.valid[6:, 0].any() and out.reason[6, 0] == Reason.INCIDENCE_UNKNOWN
 
 
 def test_a_short_range_part_leaves_its_unplaced_returns_alone():
