@@ -354,9 +354,10 @@ def _crossing_case(model: str):
 
 def test_an_unplaced_far_return_is_read_on_the_line_its_beam_crosses():
     """GP2Y0A02: reading 6's counts give the range where its beam crosses another sensor's
-    line (0.04 m past its members): valid there, at the crossing's incidence, with the
-    members' mean σ (25 mm; their RMS about the line, 5 mm, is less) as σ. Reading 7 (counts 0.30 m long: many σ off), 8 (crossing
-    0.25 m past the members) and 9 (no return) stay unplaced; the members do not move."""
+    line (0.04 m past its members): valid there, at the crossing's incidence, with the members'
+    mean σ (25 mm; their RMS about the line, 5 mm, is less) as σ. Reading 7 (counts 0.30 m long:
+    many σ off), 8 (crossing 0.25 m past the members) and 9 (no return) stay unplaced; the
+    members do not move."""
     cal, points, lines, counts, rng, theta = _crossing_case("gp2y0a02")
     out = est_far_lines.onto_crossed_lines(points, lines, counts, cal)
     assert out.valid[:, 0].tolist() == [True] * 7 + [False] * 3

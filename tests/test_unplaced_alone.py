@@ -49,8 +49,9 @@ def test_vague_readings_on_no_line_are_not_placed(monkeypatch):
     valid readings on no line placed by a slope (θ ≠ 0) with σ > 60 mm, 69 and 135 mm off:
     678 valid, one more than 100 mm off (a line's), RMS 10.8 mm (12.3); the numpy oracle
     reads the sweep the same. (678, 676 and 10.7 mm before onto_crossed_lines placed two
-    readings left INCIDENCE_UNKNOWN, 16 and 3 mm off, in both.) (bent_ends off: the rule alone; bent_ends finds no turned wall
-    for two readings of this sweep past a bend, 126 and 99 mm off, and unplaces them.)"""
+    readings left INCIDENCE_UNKNOWN, 16 and 3 mm off, in both.) (bent_ends off: the rule alone;
+    bent_ends finds no turned wall for two readings of this sweep past a bend, 126 and 99 mm
+    off, and unplaces them.)"""
     monkeypatch.setattr(fast, "bent_ends_compiled", lambda points, label, *a: (points, label))
     # (in the oracle too: it passes the numpy rule as its own bender)
     monkeypatch.setattr(estimate_numpy, "bent_ends", lambda points, label, *a: (points, label))

@@ -456,13 +456,13 @@ def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibrati
     """``points`` with the returns left INCIDENCE_UNKNOWN (:func:`unplaced_returns`;
     ``left``: as there) placed on the first line (``lines``:
     :class:`~irring.estimation.lines.Lines`, often another sensor's) their beam crosses:
-    valid at that crossing's range and incidence, with σ the line's valid members' mean σ
-    or their RMS about it, the larger (at least ``SIGMA_FLOOR_M``), where the line has ≥ ``CROSS_MIN`` valid members within
-    ``CROSS_RMS_M`` RMS of it, the crossing lies within ``CROSS_MARGIN_M`` of their extent
-    along it and inside the max range and drop-out angle, and the reading's counts
-    (``counts`` (S, N), its own) give that range at that incidence within ``CROSS_Z``
-    count-noise σ. Why and what it measured: docs/estimator.md, "Unplaced far returns on a
-    crossed line"."""
+    valid at that crossing's range and incidence, with σ the line's valid members' mean σ or
+    their RMS about it, the larger (at least ``SIGMA_FLOOR_M``), where the line has ≥
+    ``CROSS_MIN`` valid members within ``CROSS_RMS_M`` RMS of it, the crossing lies within
+    ``CROSS_MARGIN_M`` of their extent along it and inside the max range and drop-out angle, and
+    the reading's counts (``counts`` (S, N), its own) give that range at that incidence within
+    ``CROSS_Z`` count-noise σ. Why and what it measured: docs/estimator.md, "Unplaced far
+    returns on a crossed line"."""
     cand = unplaced_returns(points, counts, cal, left)
     label = lines.label
     member = points.valid & (label >= 0)
