@@ -489,8 +489,6 @@ def test_no_reading_is_pooled_past_a_faces_end_into_free_space(monkeypatch):
     monkeypatch.setattr(fast, "dim_returns_on_lines", lambda points, *a, **k: points)
     # (and unplaced_alone: it leaves 3 of seed 4307's such points unplaced, σ over 60 mm)
     monkeypatch.setattr(fast, "unplaced_alone", lambda points, label: points)
-    # (and onto_crossed_lines: it puts 2 and 1 more of those unplaced on the face's line)
-    monkeypatch.setattr(fast, "onto_crossed_lines", lambda points, *a, **k: points)
     before = no_hit_and_precision()
     assert [n for n, _ in before] == [14, 7] and [n for n, _ in after] == [0, 0]
     assert all(a > b + 0.015 for (_, a), (_, b) in zip(after, before))
@@ -632,7 +630,7 @@ def test_a_far_line_members_sigma_is_its_error_not_half_a_readings_noise(monkeyp
     The precisions of the cap are the mapper's before its floor left the cells in front of
     an end point (docs/mapping.md, "Fine cells"): since, σ twice the error costs 0.003."""
     # the σ alone (dim returns beside far lines add 115 end points here; unplaced returns
-    # read on the line their beam crosses, onto_crossed_lines, 217)
+    # read on the line their beam crosses, onto_crossed_lines, 26)
     monkeypatch.setattr(fast, "dim_returns_on_lines", lambda points, *a, **k: points)
     monkeypatch.setattr(fast, "onto_crossed_lines", lambda points, *a, **k: points)
     scene = loads(FAR_A02)
