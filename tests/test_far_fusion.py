@@ -6,6 +6,7 @@ post's few readings from several sensors are fitted as one circle ("Far posts").
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -371,22 +372,92 @@ def test_an_unplaced_far_return_is_read_on_the_line_its_beam_crosses():
     assert np.isnan(out.x[7:, 0]).all()
 
 
-def test_only_a_reading_local_incidence_left_unknown_is_placed():
-    """Reading 6 of that case stays unplaced where it is OUT_OF_RANGE (counts that weak fit a
-    nearer surface at a steeper θ, or noise where the beam met nothing) and where
-    ``left`` says local_incidence placed it (a later rule unplaced it on purpose); left
-    INCIDENCE_UNKNOWN there, it is placed."""
-    cal, points, lines, counts, _, _ = _crossing_case("gp2y0a02")
-    reason = points.reason.copy()
-    reason[6, 0] = Reason.OUT_OF_RANGE
-    out = est_far_lines.onto_crossed_lines(points_with(points, reason=reason), lines, counts,
-                                           cal)
-    assert not out.valid[6:, 0].any() and out.reason[6, 0] == Reason.OUT_OF_RANGE
+def test_only_a_reading_no_rule_unplaced_since_local_incidence_is_placed():
+    """Reading 6 of that case is placed where ``left`` says local_incidence left it as it is
+    (INCIDENCE_UNKNOWN or OUT_OF_RANGE); where ``left`` says local_incidence placed it, a
+    later rule unplaced it on purpose: it stays unplaced."""
+    cal, points, lines, counts, rng, _ = _crossing_case("gp2y0a02")
     left = points.reason.copy()
     assert est_far_lines.onto_crossed_lines(points, lines, counts, cal, left).valid[6, 0]
     left[6, 0] = Reason.OK
     out = est_far_lines.onto_crossed_lines(points, lines, counts, cal, left)
     assert not out.valid[6:, 0].any() and out.reason[6, 0] == Reason.INCIDENCE_UNKNOWN
+    weak = points.reason.copy()
+    weak[6, 0] = Reason.OUT_OF_RANGE
+    out = est_far_lines.onto_crossed_lines(points_with(points, reason=weak), lines, counts, cal,
+                                           weak)
+    assert out.valid[:, 0].tolist() == [True] * 7 + [False] * 3
+    assert out.d[6, 0] == pytest.approx(rng[6], abs=1e-9)
+
+
+def test_a_weak_return_past_a_lines_end_needs_its_sensors_next_steps():
+    """Reading 6 OUT_OF_RANGE, its crossing 0.04 m past the members' end: where its sensor's
+    next two steps read the no-return level less one count σ (a beam past a face's end into
+    nothing), the mean of its counts and theirs stands 1.72 standard errors over the level,
+    under ``CROSS_SIDE_SIGMAS`` = 2.5: unplaced. Where they read a wall going on (the counts
+    of their own crossings, 4.57 and 2.60 count σ over the level), placed. An
+    INCIDENCE_UNKNOWN reading there is placed either way (its counts are a return)."""
+    cal, points, lines, counts, rng, theta = _crossing_case("gp2y0a02")
+    weak = points.reason.copy()
+    weak[6, 0] = Reason.OUT_OF_RANGE
+    points = points_with(points, reason=weak)
+    sigma, level = cal.sigma_counts(), cal.no_return_counts
+    assert est_far_lines.CROSS_SIDE_STEPS == 2 and est_far_lines.CROSS_SIDE_SIGMAS == 2.5
+    nothing = counts.copy()
+    nothing[7:9, 0] = level - sigma
+    z = (nothing[6:9, 0].mean() - level) * math.sqrt(3) / sigma
+    assert z == pytest.approx(1.72, abs=0.005)
+    out = est_far_lines.onto_crossed_lines(points, lines, nothing, cal, weak)
+    assert not out.valid[6:, 0].any() and out.reason[6, 0] == Reason.OUT_OF_RANGE
+    going_on = counts.copy()
+    going_on[7:9, 0] = cal.counts(rng[7:9], theta[7:9])
+    assert ((going_on[7:9, 0] - level) / sigma).round(2).tolist() == [4.57, 2.6]
+    out = est_far_lines.onto_crossed_lines(points, lines, going_on, cal, weak)
+    assert out.valid[:, 0].tolist() == [True] * 7 + [False] * 3
+    unknown = points_with(points, reason=np.where(np.arange(10) < 6, Reason.OK,
+                                                  Reason.INCIDENCE_UNKNOWN)
+                          .astype(np.uint8).reshape(10, 1))
+    assert est_far_lines.onto_crossed_lines(unknown, lines, nothing, cal).valid[6, 0]
+
+
+def _beside_beam(points, row: int, rng: float, off: float) -> tuple[float, float]:
+    """The point ``rng`` m along reading ``row``'s beam and ``off`` m to its left."""
+    h = points.heading[row, 0]
+    return (rng * math.cos(h) - off * math.sin(h), rng * math.sin(h) + off * math.cos(h))
+
+
+def test_a_nearer_surface_keeps_a_far_return_off_the_line_behind_it():
+    """Reading 6's crossing lies 1.247 m out. A valid end point on no line (reading 9 made
+    one) 0.8 m along its beam and 20 mm beside it, inside ``NEAR_WIDTH_M`` = 30 mm, could
+    have returned its counts (a post's flank grazed): unplaced; 40 mm beside it, placed. So
+    does another line crossed within its members' extent 0.8 m out (readings 8 and 9, 0.1 m
+    either side of the beam: neither within 30 mm of it); the same line ending 0.05 m short
+    of the beam does not."""
+    cal, points, lines, counts, _, _ = _crossing_case("gp2y0a02")
+    assert est_far_lines.NEAR_WIDTH_M == 0.03 and est_far_lines.NEAR_GAP_M == 0.06
+
+    def with_points(rows, xy, label=-1):
+        x, y, valid = points.x.copy(), points.y.copy(), points.valid.copy()
+        for row, (px, py) in zip(rows, xy):
+            x[row, 0], y[row, 0], valid[row, 0] = px, py, True
+        lab = lines.label.copy()
+        lab[rows, 0] = label
+        return points_with(points, x=x, y=y, valid=valid), lab
+
+    for off, placed in ((0.02, False), (0.04, True), (-0.02, False)):
+        p, lab = with_points([9], [_beside_beam(points, 6, 0.8, off)])
+        out = est_far_lines.onto_crossed_lines(p, replace(lines, label=lab), counts, cal)
+        assert out.valid[6, 0] == placed
+    h = points.heading[6, 0]
+    for ends, placed in ((0.1, False), (-0.05, True)):
+        ends_xy = [_beside_beam(points, 6, 0.8, -0.1), _beside_beam(points, 6, 0.8, ends)]
+        p, lab = with_points([8, 9], ends_xy, label=1)
+        other = replace(lines, label=lab,
+                        centroid=np.r_[lines.centroid, [np.mean(ends_xy, axis=0)]],
+                        normal=np.r_[lines.normal, [[math.cos(h), math.sin(h)]]],
+                        direction=np.r_[lines.direction, [[-math.sin(h), math.cos(h)]]])
+        out = est_far_lines.onto_crossed_lines(p, other, counts, cal)
+        assert out.valid[6, 0] == placed
 
 
 def test_a_short_range_part_leaves_its_unplaced_returns_alone():

@@ -480,7 +480,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
         points = theta_free_in_noise(points, own, cal)
         if snap and unplaced_returns(points, own, cal, left).any():
             # last: unplaced far returns on a line their beam crosses
-            points = onto_crossed_lines(points, record(), own, cal, left)
+            points = onto_crossed_lines(points, record(), own, cal, left, steps)
         return Estimate(points=points, lines=None, theta_history=tuple(history))
     found = record()
     if pooled is not None and pooled.any():
@@ -500,7 +500,7 @@ def final_estimate(points: Points, grouping, on_line, index: np.ndarray, cal: Ca
     # last: whatever a rule above did, a reading no θ moves stays within its noise
     points = theta_free_in_noise(points, own, cal)
     if snap:   # then unplaced far returns on a line their beam crosses
-        points = onto_crossed_lines(points, found, own, cal, left)
+        points = onto_crossed_lines(points, found, own, cal, left, steps)
     return Estimate(points=points, lines=found if detail else None,
                     theta_history=tuple(history))
 

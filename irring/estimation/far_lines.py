@@ -428,41 +428,52 @@ def _far_line_vote_compiled(at, sel, lab, theta_now, pr: Profile, d, vi, n_lines
 
 CROSS_RANGE_M = 1.0     # a part rated beyond this (GP2Y0A02: 1.5 m) …
 CROSS_MIN = 5           # … places its unplaced returns on a line of ≥ this many members …
-CROSS_RMS_M = 0.02      # … lying within this RMS of it …
+CROSS_RMS_M = 0.012     # … lying within this RMS of it …
 CROSS_MARGIN_M = 0.05   # … that their beam crosses within this of the members' extent …
 CROSS_Z = 3.0           # … where their counts read that range within this many σ there
+CROSS_OUT_MARGIN_M = 0.10   # an OUT_OF_RANGE return: the margin past the members' extent …
+CROSS_SIDE_STEPS = 2        # … where its counts and its sensor's this many steps either way …
+CROSS_SIDE_SIGMAS = 2.5     # … stand this many standard errors over the no-return level
+NEAR_GAP_M = 0.06       # a surface nearer than the crossing by this …
+NEAR_WIDTH_M = 0.03     # … a valid end point within this of the beam, or another line crossed
 
 
 def unplaced_returns(points: Points, counts: np.ndarray, cal: Calibration,
                      left: np.ndarray | None = None) -> np.ndarray:
     """(S, N) bool: the returns (counts ``NO_RETURN_SIGMAS`` count σ above the no-return level)
-    left INCIDENCE_UNKNOWN, where :func:`onto_crossed_lines` may place them (none but on a
-    part rated beyond ``CROSS_RANGE_M``, read to its own range, whose curve does not fold: a
-    folding sweep's unplaced readings are its fold-over's to judge). ``left`` (S, N) uint8
-    (None: any): each reading's reason as :func:`local_incidence` left it; only one still
-    INCIDENCE_UNKNOWN there is asked (not one a later rule unplaced on purpose). Not
-    OUT_OF_RANGE: counts that weak also fit a nearer surface at a steeper θ, or noise where
-    the beam met nothing (docs/estimator.md)."""
+    left INCIDENCE_UNKNOWN or OUT_OF_RANGE, where :func:`onto_crossed_lines` may place them
+    (none but on a part rated beyond ``CROSS_RANGE_M``, read to its own range, whose curve
+    does not fold: a folding sweep's unplaced readings are its fold-over's to judge).
+    ``left`` (S, N) uint8 (None: any): each reading's reason as :func:`local_incidence` left
+    it; only one still with that reason is asked (not one a later rule unplaced on
+    purpose)."""
     if (cal.folds or not (cal.max_range_m > CROSS_RANGE_M
                           and read_to_own_range(cal, points.max_range_m))):
         return np.zeros(points.valid.shape, dtype=bool)
     reason = points.reason
-    return ((reason == _INCIDENCE_UNKNOWN) & (True if left is None else left == reason)
+    return (((reason == _INCIDENCE_UNKNOWN) | (reason == _OUT_OF_RANGE))
+            & (True if left is None else left == reason)
             & (counts > cal.no_return_counts + NO_RETURN_SIGMAS * cal.sigma_counts()))
 
 
 def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibration,
-                       left: np.ndarray | None = None) -> Points:
-    """``points`` with the returns left INCIDENCE_UNKNOWN (:func:`unplaced_returns`;
-    ``left``: as there) placed on the first line (``lines``:
-    :class:`~irring.estimation.lines.Lines`, often another sensor's) their beam crosses:
-    valid at that crossing's range and incidence, with σ the line's valid members' mean σ or
-    their RMS about it, the larger (at least ``SIGMA_FLOOR_M``), where the line has ≥
-    ``CROSS_MIN`` valid members within ``CROSS_RMS_M`` RMS of it, the crossing lies within
-    ``CROSS_MARGIN_M`` of their extent along it and inside the max range and drop-out angle, and
+                       left: np.ndarray | None = None, steps: np.ndarray | None = None
+                       ) -> Points:
+    """``points`` with the returns left unplaced (:func:`unplaced_returns`; ``left``: as
+    there) placed on the first line (``lines``: :class:`~irring.estimation.lines.Lines`, often
+    another sensor's) their beam crosses: valid at that crossing's range and incidence, with
+    σ the line's valid members' mean σ or their RMS about it, the larger (at least
+    ``SIGMA_FLOOR_M``), where the line has ≥ ``CROSS_MIN`` valid members within
+    ``CROSS_RMS_M`` RMS of it, the crossing lies within ``CROSS_MARGIN_M`` of their extent
+    along it (an OUT_OF_RANGE return: ``CROSS_OUT_MARGIN_M``, and past the extent only where
+    its own counts and its sensor's ``CROSS_SIDE_STEPS`` steps on either side each stand
+    ``CROSS_SIDE_SIGMAS`` standard errors over the no-return level; ``steps`` (S,): each
+    row's motor step, None: rows in step order) and inside the max range and drop-out angle,
     the reading's counts (``counts`` (S, N), its own) give that range at that incidence within
-    ``CROSS_Z`` count-noise σ. Why and what it measured: docs/estimator.md, "Unplaced far
-    returns on a crossed line"."""
+    ``CROSS_Z`` count-noise σ, and nothing nearer explains them: no other line of ≥ 2 valid
+    members crossed within their extent and no valid end point (but the line's own) within
+    ``NEAR_WIDTH_M`` of the beam, ``NEAR_GAP_M`` or more before the crossing. Why and what it
+    measured: docs/estimator.md, "Unplaced far returns on a crossed line"."""
     cand = unplaced_returns(points, counts, cal, left)
     label = lines.label
     member = points.valid & (label >= 0)
@@ -491,20 +502,28 @@ def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibrati
         rng = ((cx - ox) * nx + (cy - oy) * ny) / cos_in
         along = (ox + rng * hx - cx) * ux + (oy + rng * hy - cy) * uy
     theta = np.arccos(np.minimum(np.abs(cos_in), 1.0))
-    crossed = ((n >= CROSS_MIN) & (rms <= CROSS_RMS_M) & (along >= lo - CROSS_MARGIN_M)
-               & (along <= hi + CROSS_MARGIN_M) & (rng > cal.min_range_m)
+    weak = points.reason.reshape(-1)[at] == _OUT_OF_RANGE
+    margin = np.where(weak, CROSS_OUT_MARGIN_M, CROSS_MARGIN_M)[:, None]
+    crossed = ((n >= CROSS_MIN) & (rms <= CROSS_RMS_M) & (along >= lo - margin)
+               & (along <= hi + margin) & (rng > cal.min_range_m)
                & (theta < cal.max_incidence_rad))
-    rng = np.where(crossed, rng, np.inf)
-    first = np.argmin(rng, axis=1)
+    first = np.argmin(np.where(crossed, rng, np.inf), axis=1)
     k = np.arange(at.size)
     d, th = rng[k, first], theta[k, first]
-    meets = d < points.max_range_m
-    th = np.where(meets, th, 0.0)
+    meets = crossed[k, first] & (d < points.max_range_m)
+    d, th = np.where(meets, d, 0.0), np.where(meets, th, 0.0)
     s = counts.reshape(-1)[at].astype(float)
     d_s = cal.distance(s, th)
     _, b = cal.log_ab(th)
-    put = meets & (np.abs(d_s - np.where(meets, d, 0.0))
-                   <= CROSS_Z * range_sigma(b, d_s, cal.sigma_counts() / s))
+    put = meets & (np.abs(d_s - d) <= CROSS_Z * range_sigma(b, d_s, cal.sigma_counts() / s))
+    # a weak return past the line's members: a beam past a face's end into nothing reads
+    # noise, its sensor's next steps too (CRATES_A02), where a wall going on returns alike
+    past = (along[k, first] < lo[first]) | (along[k, first] > hi[first])
+    ask = put & weak & past
+    if ask.any():
+        put[ask] = _both_sides_return(at[ask], counts, cal, points.valid.shape, steps)
+    put[put] = ~_nearer_surface(points, label, at[put], first[put], d[put], along[put],
+                                rng[put], n, lo, hi, cal)
     if not put.any():
         return points
     line = first[put]
@@ -514,3 +533,48 @@ def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibrati
     valid.reshape(-1)[at[put]] = True
     why.reshape(-1)[at[put]] = Reason.OK
     return points_with(placed, valid=valid, reason=why)
+
+
+def _both_sides_return(at: np.ndarray, counts: np.ndarray, cal: Calibration, shape,
+                       steps: np.ndarray | None) -> np.ndarray:
+    """(A,) bool: for the flat readings ``at``, whether the mean counts of the reading and its
+    sensor's ``CROSS_SIDE_STEPS`` steps before it, and those of it and the steps after it
+    (each side as far as the sweep goes), both stand ``CROSS_SIDE_SIGMAS`` standard errors
+    (count σ/√n) over the no-return level."""
+    n_rows, n_sensors = shape
+    order = rows_in_step_order(np.arange(n_rows) if steps is None else steps)
+    pos = np.empty(n_rows, dtype=np.intp)
+    pos[order] = np.arange(n_rows)
+    row, col = np.divmod(at, n_sensors)
+    ok = np.ones(at.size, dtype=bool)
+    for side in (-1, 1):
+        q = pos[row][:, None] + side * np.arange(CROSS_SIDE_STEPS + 1)
+        inside = (q >= 0) & (q < n_rows)
+        c = np.where(inside, counts[order[np.clip(q, 0, n_rows - 1)], col[:, None]], 0.0)
+        m = inside.sum(axis=1)
+        ok &= ((c.sum(axis=1) / m - cal.no_return_counts) * np.sqrt(m)
+               >= CROSS_SIDE_SIGMAS * cal.sigma_counts())
+    return ok
+
+
+def _nearer_surface(points: Points, label: np.ndarray, at: np.ndarray, first: np.ndarray,
+                    d: np.ndarray, along: np.ndarray, rng: np.ndarray, n: np.ndarray,
+                    lo: np.ndarray, hi: np.ndarray, cal: Calibration) -> np.ndarray:
+    """(A,) bool: whether something nearer than ``NEAR_GAP_M`` before each beam's crossing at
+    ``d`` (m) on line ``first`` could have returned its counts: another line of ≥ 2 valid
+    members (``n``, their extent ``lo`` … ``hi`` along it) crossed within that extent
+    (``along``, ``rng`` (A, L): where and at what range each beam meets each line), or a valid
+    end point of the sweep, not the crossed line's member, within ``NEAR_WIDTH_M`` of the
+    beam."""
+    before = d[:, None] - NEAR_GAP_M
+    line = ((n >= 2) & (along >= lo) & (along <= hi) & (rng > cal.min_range_m)
+            & (rng < before)).any(axis=1)
+    v = np.flatnonzero(points.valid.reshape(-1))
+    ox, oy = points.origin_x.reshape(-1)[at, None], points.origin_y.reshape(-1)[at, None]
+    h = points.heading.reshape(-1)[at, None]
+    px, py = points.x.reshape(-1)[v] - ox, points.y.reshape(-1)[v] - oy
+    t = px * np.cos(h) + py * np.sin(h)            # along each beam
+    off = np.abs(py * np.cos(h) - px * np.sin(h))  # … and beside it
+    other = label.reshape(-1)[v] != first[:, None]
+    point = (other & (t > cal.min_range_m) & (t < before) & (off < NEAR_WIDTH_M)).any(axis=1)
+    return line | point
