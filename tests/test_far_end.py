@@ -630,7 +630,7 @@ def test_a_far_line_members_sigma_is_its_error_not_half_a_readings_noise(monkeyp
     The precisions of the cap are the mapper's before its floor left the cells in front of
     an end point (docs/mapping.md, "Fine cells"): since, σ twice the error costs 0.003."""
     # the σ alone (dim returns beside far lines add 115 end points here; unplaced returns
-    # read on the line their beam crosses, onto_crossed_lines, 26)
+    # read on the line their beam crosses, onto_crossed_lines, 125)
     monkeypatch.setattr(fast, "dim_returns_on_lines", lambda points, *a, **k: points)
     monkeypatch.setattr(fast, "onto_crossed_lines", lambda points, *a, **k: points)
     scene = loads(FAR_A02)
