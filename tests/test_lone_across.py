@@ -78,19 +78,20 @@ def _figures(points, sweep):
 
 def test_a_steep_walls_last_readings_on_a_far_walls_line_are_not_placed(monkeypatch):
     """The four readings 221-317 mm off are INCIDENCE_UNKNOWN (50-70° RMS 75.8 -> 10.6 mm);
-    the numpy oracle reads the sweep the same."""
+    the numpy oracle reads the sweep the same. (onto_crossed_lines places 4 unplaced far
+    returns of the sweep, 1-14 mm off, before and after: 782 and 786 valid.)"""
     sc = loads(TURNED_END)
     cal, _ = scene_calibration(sc)
     sweep = pipeline.simulated(sc, seed=sc.seed, progress=False)[0].sweeps[0]
     now = fast.estimate(sweep, cal)
-    assert _figures(now, sweep) == (778, 0, 10.6, 16)
+    assert _figures(now, sweep) == (782, 0, 10.6, 16)
     slow = estimate_numpy.estimate_detail(sweep, cal).points
     np.testing.assert_array_equal(slow.reason, now.reason)
     np.testing.assert_allclose(slow.d, now.d, atol=1e-9, rtol=0)
     # before: only a reading across the gap on the same line let the rule ask
     monkeypatch.setattr(members, "_on_line",
                         lambda points, at, *a: np.zeros(np.shape(at), dtype=bool))
-    assert _figures(fast.estimate(sweep, cal), sweep) == (782, 4, 75.8, 12)
+    assert _figures(fast.estimate(sweep, cal), sweep) == (786, 4, 75.8, 12)
 
 
 def test_a_gap_beside_a_reading_near_the_drop_out_contradicts_nothing(monkeypatch):
