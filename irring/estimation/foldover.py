@@ -440,19 +440,27 @@ def _between_another_line(p: Points, lines: Lines, sweep: Sweep) -> Points:
     other[order] = before
     sig_nb[order[1:-1]] = np.fmax(sig[:-2], sig[2:])   # the neighbours' placement's noise
     at = lone.nonzero()
-    o = other[at]
-    ux, uy = np.cos(p.heading[at]), np.sin(p.heading[at])
-    nx, ny = lines.normal[o, 0], lines.normal[o, 1]
-    across = nx * ux + ny * uy
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((lines.centroid[o, 0] - p.origin_x[at]) * nx
-             + (lines.centroid[o, 1] - p.origin_y[at]) * ny) / across
+    _, _, _, t = _paired_crossings(p, at, lines, other[at])
     # … off by more than the 3σ of the two placements' difference (each 3σ in quadrature)
     off = (t > 0.0) & (np.abs(t - p.d[at])
                        > np.hypot(np.maximum(0.03, 3.0 * p.sigma_m[at]), 3.0 * sig_nb[at]))
     if not off.any():
         return p
     return unplaced(p, np.ravel_multi_index(tuple(a[off] for a in at), p.valid.shape))
+
+
+def _paired_crossings(p: Points, at, lines: Lines, line: np.ndarray):
+    """Each reading ``at`` (an index or mask of ``p``'s arrays) against its own ``line`` of
+    ``lines``: its beam's unit direction (ux, uy), beam · the line's normal (``across``) and
+    the distance along the beam to where it meets the line (``t``; inf or NaN where parallel).
+    :func:`silence.beam_crossings` pairs every beam with every line."""
+    ux, uy = np.cos(p.heading[at]), np.sin(p.heading[at])
+    nx, ny = lines.normal[line, 0], lines.normal[line, 1]
+    across = nx * ux + ny * uy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((lines.centroid[line, 0] - p.origin_x[at]) * nx
+             + (lines.centroid[line, 1] - p.origin_y[at]) * ny) / across
+    return ux, uy, across, t
 
 
 def _onto_first_lines(p: Points, q: Points, first: Lines, label_second: np.ndarray,
@@ -473,13 +481,7 @@ def _onto_first_lines(p: Points, q: Points, first: Lines, label_second: np.ndarr
               & (size(lab1) >= REGAIN_RATIO * np.maximum(n2, 1)))
     if not regain.any():
         return p
-    line = lab1[regain]
-    ux, uy = np.cos(p.heading[regain]), np.sin(p.heading[regain])
-    nx, ny = first.normal[line, 0], first.normal[line, 1]
-    across = nx * ux + ny * uy
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((first.centroid[line, 0] - p.origin_x[regain]) * nx
-             + (first.centroid[line, 1] - p.origin_y[regain]) * ny) / across
+    ux, uy, across, t = _paired_crossings(p, regain, first, lab1[regain])
     fits = ((np.abs(across) > 1e-9) & (np.abs(t - q.d[regain]) <= 3.0 * q.sigma_m[regain])
             & (t > 0.0) & (t <= p.max_range_m))   # never a point past the range
     at = tuple(a[fits] for a in np.nonzero(regain))
