@@ -21,6 +21,7 @@ from .calibration import (NO_RETURN_SIGMAS, RANGE_SIGMAS, RETURN_SIGMAS, SIGMA_F
 from .arcs import ARC_DOUBT_RAD, ARC_MISFIT, ARC_MISS, ARC_ON, meet_circle, members_on_arcs
 from .lines import direction_se, placed_at, read_to_own_range
 from .profiles import LOCAL_MIN, LOCAL_STEPS, Profile, leave_doubted_line, profiles_compiled
+from .silence import beam_crossings
 
 
 _lines = kernel("estimation._lines")
@@ -493,14 +494,12 @@ def onto_crossed_lines(points: Points, lines, counts: np.ndarray, cal: Calibrati
     # (σ: the members' own on their line, or their RMS about it if more: snapped, ~0)
     sig = np.bincount(g, points.sigma_m[member], n_lines) / np.maximum(n, 1)
     at = np.flatnonzero(cand)
-    ox, oy = points.origin_x.reshape(-1)[at, None], points.origin_y.reshape(-1)[at, None]
-    h = points.heading.reshape(-1)[at, None]
-    hx, hy = np.cos(h), np.sin(h)
-    # (readings, lines): the range along each beam to each line, and where along the line
-    cos_in = hx * nx + hy * ny
-    with np.errstate(divide="ignore", invalid="ignore"):   # (a beam along a line: none)
-        rng = ((cx - ox) * nx + (cy - oy) * ny) / cos_in
-        along = (ox + rng * hx - cx) * ux + (oy + rng * hy - cy) * uy
+    h = points.heading.reshape(-1)[at]
+    # (readings, lines): the range along each beam to each line (0 where it lies behind or
+    # along the beam: none), and where along the line
+    cos_in, rng, _, along = beam_crossings(
+        points.origin_x.reshape(-1)[at], points.origin_y.reshape(-1)[at], np.cos(h), np.sin(h),
+        lines.centroid, lines.direction, lines.normal)
     theta = np.arccos(np.minimum(np.abs(cos_in), 1.0))
     weak = points.reason.reshape(-1)[at] == _OUT_OF_RANGE
     margin = np.where(weak, CROSS_OUT_MARGIN_M, CROSS_MARGIN_M)[:, None]
