@@ -1094,15 +1094,7 @@ def columns_across_sensors(points: Points, label: np.ndarray, index: np.ndarray,
     gi, gj = gi[close], gj[close]
     if gi.size == 0:
         return points, label
-    comp = np.arange(n_g)
-    for _ in range(n_g):
-        new = comp.copy()
-        np.minimum.at(new, gi, comp[gj])
-        np.minimum.at(new, gj, comp[gi])
-        new = new[new]
-        if (new == comp).all():
-            break
-        comp = new
+    comp = linked_components(n_g, gi, gj)
     linked = np.zeros(n_g, dtype=bool)
     linked[gi] = linked[gj] = True
     lab = label.reshape(-1)[at]
@@ -1164,6 +1156,22 @@ def columns_across_sensors(points: Points, label: np.ndarray, index: np.ndarray,
     label.reshape(-1)[at] = -1
     return placed_at(points, at, np.concatenate(take_d), np.concatenate(take_th),
                      np.concatenate(take_sig)), label
+
+
+def linked_components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n,) each of ``n`` items' component: the smallest index it is linked to, through the
+    pairs (``a[k]``, ``b[k]``) and their chains."""
+    comp = np.arange(n)
+    while True:      # hook each link's larger label onto its smaller, then follow labels
+        low = np.minimum(comp[a], comp[b])
+        nxt = comp.copy()
+        for end in (a, b, comp[a], comp[b]):
+            np.minimum.at(nxt, end, low)
+        while not np.array_equal(nxt[nxt], nxt):
+            nxt = nxt[nxt]
+        if np.array_equal(nxt, comp):
+            return comp
+        comp = nxt
 
 
 def _column_misfit(apex, radius, j, px, py, ex, ey, ox, oy, log_s, noise, cal):

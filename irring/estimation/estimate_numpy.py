@@ -15,7 +15,7 @@ from ..core import Points, Reason, Sweep, beam_geometry
 from .calibration import RANGE_SIGMAS, RETURN_SIGMAS, Calibration, range_sigma
 from .estimate import (CORNER_WINDOW, MAX_GAIN, REGROUP_WINDOW, SIGMA_FLOOR_M, check_work,
                        final_estimate, full_turn, nominal_calibration, settled_within_noise)
-from .arcs import round_runs
+from .arcs import linked_components, round_runs
 from .bends import bent_ends, bowed_lines, faceted_lines
 from .counts import CountsFits, counts_contradicted
 from .far_lines import (POST_CELL_REACH, POST_LINK_M, POST_RUN_MAX, POST_SENSORS, post_cells,
@@ -1470,18 +1470,7 @@ def _chained(px: np.ndarray, py: np.ndarray, link_m: float, crowd: int,
                 near = np.hypot(px[i] - px[j], py[i] - py[j]) < link_m
                 a.append(i[near])
                 b.append(j[near])
-    a, b = np.concatenate(a), np.concatenate(b)
-    comp = np.arange(px.size)
-    while True:      # hook each link's larger label onto its smaller, then follow labels
-        low = np.minimum(comp[a], comp[b])
-        nxt = comp.copy()
-        for end in (a, b, comp[a], comp[b]):
-            np.minimum.at(nxt, end, low)
-        while not np.array_equal(nxt[nxt], nxt):
-            nxt = nxt[nxt]
-        if np.array_equal(nxt, comp):
-            return comp
-        comp = nxt
+    return linked_components(px.size, np.concatenate(a), np.concatenate(b))
 
 
 def _cell_pairs(start: np.ndarray, n_in: np.ndarray, ca: np.ndarray, cb: np.ndarray):
