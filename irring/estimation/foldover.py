@@ -47,8 +47,16 @@ _FOLD_PAST_MAX = 6     # a line with at most this many members past a wall its l
 #                        last readings of the steep wall before its drop-out (1-6 seen; a
 #                        wall seen past such a line had 8 or more)
 _FOLD_OWN_Z = 3.0      # a member whose own straight slope is this many standard errors off
-#                        its line's θ, reading it > 3σ (30 mm at least) elsewhere, is not
-#                        placed
+#                        its line's θ, reading it farther than _placed_apart elsewhere, is
+#                        not placed
+_APART_SIGMAS = 3.0    # two placements of a reading disagree past this many σ …
+_APART_MIN_M = 0.03    # … and this far at least
+
+
+def _placed_apart(sigma):
+    """How far (m) two placements of a reading with σ ``sigma`` (m) may lie before they
+    disagree: ``_APART_SIGMAS`` σ, ``_APART_MIN_M`` at least."""
+    return np.maximum(_APART_MIN_M, _APART_SIGMAS * sigma)
 
 
 # a fold-over's reading whose σ says it is placed no better than this (θ = 0 for want of a
@@ -96,7 +104,7 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
     on_first = q.valid & (first.lines.label >= 0)
 
     def apart(d1, s1, d2, s2):
-        return np.abs(d1 - d2) > np.maximum(0.03, 3.0 * np.fmax(s1, s2))
+        return np.abs(d1 - d2) > _placed_apart(np.fmax(s1, s2))
 
     # … unless the first pass read it on a line of its own elsewhere: the line that decided
     # the branch may be a wall behind the one its beam meets; it cannot be decided
@@ -143,10 +151,11 @@ def resolve_foldover(run: Callable[[np.ndarray, bool, bool], Estimate], sweep: S
                     iterations=iterations)
     # a far line member behind a wall its counts fit, where its line does not run on past it
     p = _behind_a_wall(p, second.lines.label, first.lines, walls, sweep, cal)
-    # … and one whose own profile reads it more than 100 mm from where its line puts it; the
-    # profile also reads the far readings the two passes disagreed on (their counts are the
-    # wall's all the same): a sweep's first three steps on a steep wall, taken in by the next
-    # wall's line, had only each other, too few to tell the 60° slope from the line's 12°
+    # … and one whose own profile reads it farther than its 3σ (30 mm at least) from where
+    # its line puts it; the profile also reads the far readings the two passes disagreed on
+    # (their counts are the wall's all the same): a sweep's first three steps on a steep
+    # wall, taken in by the next wall's line, had only each other, too few to tell the 60°
+    # slope from the line's 12°
     p = _disowned_by_own_profile(p, second.lines.label, sweep, cal, profiler, p.valid | differ)
     # … and a lone member between two of its own sensor's readings on another line, far off it
     p = _between_another_line(p, second.lines, sweep)
@@ -398,7 +407,7 @@ def _disowned_by_own_profile(p: Points, label: np.ndarray, sweep: Sweep, cal: Ca
     with np.errstate(divide="ignore", invalid="ignore"):
         z = (np.tan(p.theta.reshape(-1)[at]) - np.abs(pr.slope)) / pr.se
     apart = (np.abs(p.d.reshape(-1)[at] - cal.distance(pr.s[ask], pr.theta))
-             > np.maximum(0.03, 3.0 * p.sigma_m.reshape(-1)[at]))
+             > _placed_apart(p.sigma_m.reshape(-1)[at]))
     gone = at[pr.ok & (pr.se > 0) & (np.abs(z) > _FOLD_OWN_Z) & apart]
     if not gone.size:
         return p
@@ -443,7 +452,7 @@ def _between_another_line(p: Points, lines: Lines, sweep: Sweep) -> Points:
     _, _, _, t = _paired_crossings(p, at, lines, other[at])
     # … off by more than the 3σ of the two placements' difference (each 3σ in quadrature)
     off = (t > 0.0) & (np.abs(t - p.d[at])
-                       > np.hypot(np.maximum(0.03, 3.0 * p.sigma_m[at]), 3.0 * sig_nb[at]))
+                       > np.hypot(_placed_apart(p.sigma_m[at]), _APART_SIGMAS * sig_nb[at]))
     if not off.any():
         return p
     return unplaced(p, np.ravel_multi_index(tuple(a[off] for a in at), p.valid.shape))
